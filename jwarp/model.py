@@ -1,0 +1,717 @@
+"""Robot model: a tree of frames with DH rows, joints, masses, collision bodies.
+
+`RobotModel` is the single description every kernel and solver reads. It is plain
+Python/numpy (no Warp); :mod:`jwarp.device_model` turns it into device tables.
+
+Conventions (see ``docs/robot_schema.md``):
+
+* DH row ``[d, theta, r, alpha, beta]`` (beta optional, default 0)::
+
+      parent_T_child = Rot_y(beta) Rot_x(alpha) Trans_x(r) Rot_z(theta + q) Trans_z(d)
+
+  A revolute joint adds its value to ``theta``, a prismatic one to ``d``.
+* A ``dh`` frame is driven by one joint, by a linear combination of joints (coupled
+  passive joint) or by none (a fixed DH frame that may still bend elastically).
+* A ``static`` frame has a fixed 4x4 transform relative to its parent.
+* Elastic compliance ``kappa``: array ``(n_frames, 3)`` in rad/(N m) for the axes of
+  ``[alpha, beta, theta]`` of each ``dh`` frame (zero rows for static frames).
+* SI units: m, rad, kg, N m.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+SCHEMA_NAME = "jwarp.robot"
+SCHEMA_VERSION = 1
+FRAME_KINDS = ("dh", "static")
+JOINT_TYPES = ("revolute", "prismatic")
+#: column order of the DH parameters in every ``(..., 5)`` array
+DH_PARAMS = ("d", "theta", "r", "alpha", "beta")
+#: column order of the compliance array ``kappa (n_frames, 3)``
+KAPPA_AXES = ("alpha", "beta", "theta")
+
+
+class RobotModelError(ValueError):
+    """A robot description is malformed; the message names the offending field."""
+
+
+@dataclass
+class Joint:
+    """One actuated joint. ``lower``/``upper`` in rad (revolute) or m (prismatic)."""
+
+    name: str
+    type: str = "revolute"
+    lower: float = -math.pi
+    upper: float = math.pi
+
+
+@dataclass
+class Frame:
+    """One frame of the kinematic tree.
+
+    ``coupling`` lists ``(joint_index, coefficient)``: the frame's joint value is
+    ``sum(c * q[j])``. Empty for static frames and fixed DH frames.
+    """
+
+    name: str
+    parent: int | None
+    kind: str
+    dh: np.ndarray | None = None  # (5,) [d, theta, r, alpha, beta]
+    coupling: list[tuple[int, float]] = field(default_factory=list)
+    transform: np.ndarray | None = None  # (4, 4) for static frames
+
+
+@dataclass
+class Mass:
+    """Point mass ``mass`` [kg] at ``com`` [m] in the coordinates of ``frame``."""
+
+    frame: int
+    mass: float
+    com: np.ndarray
+
+
+@dataclass
+class Sphere:
+    """Collision sphere: centre ``position`` [m] in ``frame``, ``radius`` [m]."""
+
+    frame: int
+    position: np.ndarray
+    radius: float
+
+
+@dataclass
+class Capsule:
+    """Collision capsule: segment ``p0``-``p1`` [m] in ``frame``, ``radius`` [m]."""
+
+    frame: int
+    p0: np.ndarray
+    p1: np.ndarray
+    radius: float
+
+
+@dataclass
+class LinearLimit:
+    """Limit on a linear combination of joints: ``lower <= sum(c_j q_j) <= upper``."""
+
+    joints: list[int]
+    coefficients: list[float]
+    lower: float
+    upper: float
+
+
+@dataclass
+class SelfCollision:
+    """Which frame pairs may collide.
+
+    Frames inside one group never collide with each other, except ``include_pairs``;
+    ``exclude_pairs`` never collide. Everything else may.
+    """
+
+    groups: dict[str, list[int]] = field(default_factory=dict)
+    include_pairs: list[tuple[int, int]] = field(default_factory=list)
+    exclude_pairs: list[tuple[int, int]] = field(default_factory=list)
+
+
+@dataclass
+class RobotModel:
+    """A robot: frames, joints, masses, collision bodies, end-effectors, gravity."""
+
+    name: str
+    joints: list[Joint]
+    frames: list[Frame]
+    description: str = ""
+    gravity: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -9.81]))
+    masses: list[Mass] = field(default_factory=list)
+    spheres: list[Sphere] = field(default_factory=list)
+    capsules: list[Capsule] = field(default_factory=list)
+    self_collision: SelfCollision = field(default_factory=SelfCollision)
+    end_effectors: dict[str, int] = field(default_factory=dict)
+    linear_limits: list[LinearLimit] = field(default_factory=list)
+    kappa: np.ndarray | None = None  # (n_frames, 3) rad/(N m)
+    notes: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.gravity = np.asarray(self.gravity, dtype=np.float64)
+        if self.kappa is None:
+            self.kappa = np.zeros((len(self.frames), 3))
+        self.kappa = np.asarray(self.kappa, dtype=np.float64)
+        validate(self)
+
+    # ----------------------------------------------------------------- sizes
+    @property
+    def n_dof(self) -> int:
+        return len(self.joints)
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.frames)
+
+    @property
+    def joint_names(self) -> list[str]:
+        return [j.name for j in self.joints]
+
+    @property
+    def frame_names(self) -> list[str]:
+        return [f.name for f in self.frames]
+
+    # ------------------------------------------------------------- look-ups
+    def frame_index(self, frame: int | str, argname: str = "frame") -> int:
+        """Index of a frame given by index, frame name or end-effector name."""
+        if isinstance(frame, (bool, np.bool_)):
+            raise TypeError(f"{argname}: expected a frame name or index, got {frame!r}")
+        if isinstance(frame, (int, np.integer)):
+            if not 0 <= int(frame) < self.n_frames:
+                raise ValueError(
+                    f"{argname}: frame index {frame} out of range [0, {self.n_frames}) "
+                    f"for robot '{self.name}'")
+            return int(frame)
+        if isinstance(frame, str):
+            if frame in self.end_effectors:
+                return self.end_effectors[frame]
+            names = self.frame_names
+            if frame in names:
+                return names.index(frame)
+            raise ValueError(
+                f"{argname}: unknown frame '{frame}' for robot '{self.name}'; "
+                f"known: {', '.join(names)}")
+        raise TypeError(f"{argname}: expected a frame name or index, got {type(frame).__name__}")
+
+    def joint_index(self, joint: int | str, argname: str = "joint") -> int:
+        if isinstance(joint, (int, np.integer)) and not isinstance(joint, bool):
+            if not 0 <= int(joint) < self.n_dof:
+                raise ValueError(f"{argname}: joint index {joint} out of range [0, {self.n_dof})")
+            return int(joint)
+        if isinstance(joint, str):
+            if joint in self.joint_names:
+                return self.joint_names.index(joint)
+            raise ValueError(f"{argname}: unknown joint '{joint}' for robot '{self.name}'; "
+                             f"known: {', '.join(self.joint_names)}")
+        raise TypeError(f"{argname}: expected a joint name or index, got {type(joint).__name__}")
+
+    # --------------------------------------------------------- derived data
+    @cached_property
+    def parents(self) -> np.ndarray:
+        """(n_frames,) int32 parent index, -1 for roots."""
+        return np.array([-1 if f.parent is None else f.parent for f in self.frames], np.int32)
+
+    @cached_property
+    def topological_order(self) -> np.ndarray:
+        """(n_frames,) frame indices ordered so that every parent precedes its children."""
+        return np.asarray(_topological_order(self.parents), np.int32)
+
+    @cached_property
+    def depth(self) -> np.ndarray:
+        """(n_frames,) number of ancestors of each frame."""
+        depth = np.zeros(self.n_frames, np.int32)
+        for i in self.topological_order:
+            p = self.parents[i]
+            depth[i] = 0 if p < 0 else depth[p] + 1
+        return depth
+
+    def ancestors(self, frame: int | str) -> list[int]:
+        """Path from the root to ``frame`` (both included), root first."""
+        i = self.frame_index(frame)
+        path = []
+        while i >= 0:
+            path.append(i)
+            i = int(self.parents[i])
+        return path[::-1]
+
+    @cached_property
+    def subtree_mask(self) -> np.ndarray:
+        """(n_frames, n_frames) bool: ``[i, j]`` is True if j is i or a descendant of i."""
+        m = np.eye(self.n_frames, dtype=bool)
+        for j in range(self.n_frames):
+            for i in self.ancestors(j):
+                m[i, j] = True
+        return m
+
+    @cached_property
+    def dh_table(self) -> np.ndarray:
+        """(n_frames, 5) nominal DH rows ``[d, theta, r, alpha, beta]`` (zeros for static)."""
+        t = np.zeros((self.n_frames, 5))
+        for i, f in enumerate(self.frames):
+            if f.kind == "dh":
+                t[i] = f.dh
+        return t
+
+    @cached_property
+    def static_transforms(self) -> np.ndarray:
+        """(n_frames, 4, 4) fixed transforms of static frames (identity for dh frames)."""
+        t = np.tile(np.eye(4), (self.n_frames, 1, 1))
+        for i, f in enumerate(self.frames):
+            if f.kind == "static":
+                t[i] = f.transform
+        return t
+
+    @cached_property
+    def is_dh(self) -> np.ndarray:
+        return np.array([f.kind == "dh" for f in self.frames])
+
+    @cached_property
+    def coupling_matrix(self) -> np.ndarray:
+        """(n_frames, n_dof): the joint value of frame i is ``coupling_matrix[i] @ q``."""
+        c = np.zeros((self.n_frames, self.n_dof))
+        for i, f in enumerate(self.frames):
+            for j, coef in f.coupling:
+                c[i, j] += coef
+        return c
+
+    @cached_property
+    def frame_is_prismatic(self) -> np.ndarray:
+        out = np.zeros(self.n_frames, bool)
+        for i, f in enumerate(self.frames):
+            if f.coupling:
+                out[i] = self.joints[f.coupling[0][0]].type == "prismatic"
+        return out
+
+    @cached_property
+    def joint_limits(self) -> np.ndarray:
+        """(n_dof, 2) [lower, upper]."""
+        return np.array([[j.lower, j.upper] for j in self.joints], np.float64).reshape(-1, 2)
+
+    @cached_property
+    def allowed_collision_pairs(self) -> np.ndarray:
+        """(n_frames, n_frames) symmetric bool: frames i and j are checked for collision."""
+        n = self.n_frames
+        allowed = ~np.eye(n, dtype=bool)
+        for members in self.self_collision.groups.values():
+            for a in members:
+                for b in members:
+                    allowed[a, b] = False
+        for a, b in self.self_collision.include_pairs:
+            allowed[a, b] = allowed[b, a] = True
+        for a, b in self.self_collision.exclude_pairs:
+            allowed[a, b] = allowed[b, a] = False
+        return allowed
+
+    def sphere_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Spheres as arrays: frame (n,), position (n, 3) [m], radius (n,) [m]."""
+        f = np.array([s.frame for s in self.spheres], np.int32)
+        p = np.array([s.position for s in self.spheres], np.float64).reshape(-1, 3)
+        r = np.array([s.radius for s in self.spheres], np.float64)
+        return f, p, r
+
+    def mass_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Masses as arrays: frame (n,), mass (n,) [kg], com (n, 3) [m]."""
+        f = np.array([m.frame for m in self.masses], np.int32)
+        m = np.array([m.mass for m in self.masses], np.float64)
+        c = np.array([m.com for m in self.masses], np.float64).reshape(-1, 3)
+        return f, m, c
+
+    # ------------------------------------------------------------ I/O
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON document of this robot (schema ``jwarp.robot`` version 1)."""
+        return _to_dict(self)
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> "RobotModel":
+        return _from_dict(doc)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "RobotModel":
+        """Read a robot JSON file; errors name the file and the offending field."""
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except OSError as e:
+            raise ValueError(f"path: cannot read robot file '{path}': {e}") from e
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise RobotModelError(f"{path}: not valid JSON: {e}") from e
+        try:
+            return _from_dict(doc)
+        except RobotModelError as e:
+            raise RobotModelError(f"{path}: {e}") from e
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the robot as JSON atomically (temporary file + rename)."""
+        atomic_write_text(path, json.dumps(self.to_dict(), indent=1) + "\n")
+
+    def copy(self, **changes: Any) -> "RobotModel":
+        """A deep copy with some top-level fields replaced (validated again)."""
+        doc = self.to_dict()
+        model = _from_dict(doc)
+        for k, v in changes.items():
+            if not hasattr(model, k):
+                raise TypeError(f"copy: unknown field '{k}'")
+            setattr(model, k, v)
+        for k in list(vars(model)):  # drop cached derived data
+            if k in type(model).__dict__ and isinstance(type(model).__dict__[k], cached_property):
+                del model.__dict__[k]
+        model.__post_init__()
+        return model
+
+    def with_dh(self, dh_table: np.ndarray, kappa: np.ndarray | None = None) -> "RobotModel":
+        """Copy with new DH rows ``(n_frames, 5)`` (static rows ignored) and optionally kappa."""
+        dh_table = np.asarray(dh_table, np.float64)
+        if dh_table.shape != (self.n_frames, 5):
+            raise ValueError(f"dh_table: expected shape ({self.n_frames}, 5), got {dh_table.shape}")
+        m = self.copy()
+        for i, f in enumerate(m.frames):
+            if f.kind == "dh":
+                f.dh = dh_table[i].copy()
+        if kappa is not None:
+            m.kappa = np.asarray(kappa, np.float64)
+        for k in ("dh_table",):
+            m.__dict__.pop(k, None)
+        validate(m)
+        return m
+
+    def summary(self) -> str:
+        """Human-readable multi-line description (used by ``jwarp info``)."""
+        lines = [f"robot {self.name}: {self.n_dof} DoF, {self.n_frames} frames, "
+                 f"{len(self.masses)} masses ({sum(m.mass for m in self.masses):.3f} kg), "
+                 f"{len(self.spheres)} spheres, {len(self.capsules)} capsules"]
+        if self.description:
+            lines.append(f"  {self.description}")
+        lines.append(f"  gravity {self.gravity.tolist()} m/s^2")
+        lines.append("  joints:")
+        for j in self.joints:
+            lines.append(f"    {j.name:<16} {j.type:<9} [{j.lower:+.4f}, {j.upper:+.4f}]")
+        lines.append("  frames:")
+        for i, f in enumerate(self.frames):
+            parent = "-" if f.parent is None else self.frames[f.parent].name
+            if f.kind == "dh":
+                drive = " + ".join(f"{c:g}*{self.joints[j].name}" for j, c in f.coupling) or "fixed"
+                extra = f"dh={np.round(f.dh, 5).tolist()} q={drive}"
+            else:
+                extra = f"static p={np.round(f.transform[:3, 3], 5).tolist()}"
+            lines.append(f"    {i:3d} {f.name:<14} parent={parent:<14} {extra}")
+        if self.end_effectors:
+            eff = ", ".join(f"{k}={self.frames[v].name}" for k, v in self.end_effectors.items())
+            lines.append(f"  end-effectors: {eff}")
+        lines.append(f"  self-collision frame pairs: {int(self.allowed_collision_pairs.sum()) // 2}")
+        return "\n".join(lines)
+
+
+# ====================================================================== helpers
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` via a temporary file in the same folder and a rename."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise ValueError(f"path: folder '{folder}' does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _topological_order(parents: np.ndarray) -> list[int]:
+    n = len(parents)
+    state = np.zeros(n, np.int8)  # 0 new, 1 on stack, 2 done
+    order: list[int] = []
+    for start in range(n):
+        chain = []
+        i = start
+        while i >= 0 and state[i] == 0:
+            state[i] = 1
+            chain.append(i)
+            i = int(parents[i])
+        if i >= 0 and state[i] == 1:
+            cyc = chain[chain.index(i):] if i in chain else [i]
+            raise RobotModelError(f"frames: cycle in the tree through frames {cyc}")
+        for j in reversed(chain):
+            state[j] = 2
+            order.append(j)
+    return order
+
+
+def _finite(x: Any, where: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise RobotModelError(f"{where}: expected numbers, got {x!r}") from e
+    if shape is not None and a.shape != shape:
+        raise RobotModelError(f"{where}: expected shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise RobotModelError(f"{where}: contains NaN or inf: {a.tolist()}")
+    return a
+
+
+def validate(model: RobotModel) -> None:
+    """Check a model; raise :class:`RobotModelError` naming the offending field."""
+    if not isinstance(model.name, str) or not model.name:
+        raise RobotModelError("name: must be a non-empty string")
+    nf, nj = len(model.frames), len(model.joints)
+    if nf == 0:
+        raise RobotModelError("frames: a robot needs at least one frame")
+    _finite(model.gravity, "gravity", (3,))
+    jnames = set()
+    for k, j in enumerate(model.joints):
+        if j.type not in JOINT_TYPES:
+            raise RobotModelError(f"joints[{k}].type: '{j.type}' is not one of {JOINT_TYPES}")
+        if j.name in jnames:
+            raise RobotModelError(f"joints[{k}].name: duplicate joint name '{j.name}'")
+        jnames.add(j.name)
+        lim = _finite([j.lower, j.upper], f"joints[{k}].limits")
+        if lim[0] > lim[1]:
+            raise RobotModelError(f"joints[{k}].limits: lower {lim[0]} > upper {lim[1]}")
+    fnames = set()
+    driven = set()
+    for i, f in enumerate(model.frames):
+        w = f"frames[{i}]"
+        if f.name in fnames:
+            raise RobotModelError(f"{w}.name: duplicate frame name '{f.name}'")
+        fnames.add(f.name)
+        if f.kind not in FRAME_KINDS:
+            raise RobotModelError(f"{w}.kind: '{f.kind}' is not one of {FRAME_KINDS}")
+        if f.parent is not None and not (isinstance(f.parent, (int, np.integer)) and 0 <= f.parent < nf):
+            raise RobotModelError(f"{w}.parent: index {f.parent} out of range [0, {nf})")
+        if f.parent == i:
+            raise RobotModelError(f"{w}.parent: a frame cannot be its own parent")
+        if f.kind == "dh":
+            if f.dh is None:
+                raise RobotModelError(f"{w}.dh: missing DH row for a 'dh' frame")
+            f.dh = _finite(f.dh, f"{w}.dh", (5,))
+            types = set()
+            for j, c in f.coupling:
+                if not (isinstance(j, (int, np.integer)) and 0 <= j < nj):
+                    raise RobotModelError(f"{w}.joint: joint index {j} out of range [0, {nj})")
+                _finite(c, f"{w}.coupled.coefficients")
+                types.add(model.joints[j].type)
+                driven.add(int(j))
+            if len(types) > 1:
+                raise RobotModelError(f"{w}.coupled: mixes revolute and prismatic joints")
+        else:
+            if f.coupling:
+                raise RobotModelError(f"{w}.joint: a 'static' frame cannot be driven by a joint")
+            if f.transform is None:
+                raise RobotModelError(f"{w}.transform: missing 4x4 transform for a 'static' frame")
+            t = _finite(f.transform, f"{w}.transform", (4, 4))
+            if not np.allclose(t[3], [0, 0, 0, 1]):
+                raise RobotModelError(f"{w}.transform: last row must be [0, 0, 0, 1]")
+            if not np.allclose(t[:3, :3] @ t[:3, :3].T, np.eye(3), atol=1e-6):
+                raise RobotModelError(f"{w}.transform: rotation part is not orthonormal")
+            f.transform = t
+    _topological_order(np.array([-1 if f.parent is None else f.parent for f in model.frames]))
+    for k in range(nj):
+        if k not in driven:
+            raise RobotModelError(f"joints[{k}]: joint '{model.joints[k].name}' drives no frame")
+    for k, m in enumerate(model.masses):
+        _check_frame(m.frame, nf, f"masses[{k}].frame")
+        if not np.isfinite(m.mass) or m.mass < 0:
+            raise RobotModelError(f"masses[{k}].mass: must be finite and >= 0, got {m.mass}")
+        m.com = _finite(m.com, f"masses[{k}].com", (3,))
+    for k, s in enumerate(model.spheres):
+        _check_frame(s.frame, nf, f"spheres[{k}].frame")
+        s.position = _finite(s.position, f"spheres[{k}].position", (3,))
+        if not np.isfinite(s.radius) or s.radius < 0:
+            raise RobotModelError(f"spheres[{k}].radius: must be finite and >= 0, got {s.radius}")
+    for k, c in enumerate(model.capsules):
+        _check_frame(c.frame, nf, f"capsules[{k}].frame")
+        c.p0 = _finite(c.p0, f"capsules[{k}].p0", (3,))
+        c.p1 = _finite(c.p1, f"capsules[{k}].p1", (3,))
+        if not np.isfinite(c.radius) or c.radius < 0:
+            raise RobotModelError(f"capsules[{k}].radius: must be finite and >= 0, got {c.radius}")
+    sc = model.self_collision
+    for g, members in sc.groups.items():
+        for m in members:
+            _check_frame(m, nf, f"self_collision.groups.{g}")
+    for key in ("include_pairs", "exclude_pairs"):
+        for k, pair in enumerate(getattr(sc, key)):
+            if len(pair) != 2:
+                raise RobotModelError(f"self_collision.{key}[{k}]: a pair needs 2 frames")
+            for m in pair:
+                _check_frame(m, nf, f"self_collision.{key}[{k}]")
+    for name, idx in model.end_effectors.items():
+        _check_frame(idx, nf, f"end_effectors.{name}")
+    for k, lim in enumerate(model.linear_limits):
+        if len(lim.joints) != len(lim.coefficients) or not lim.joints:
+            raise RobotModelError(f"linear_limits[{k}]: joints and coefficients differ in length")
+        for j in lim.joints:
+            if not 0 <= j < nj:
+                raise RobotModelError(f"linear_limits[{k}].joints: index {j} out of range")
+        if lim.lower > lim.upper:
+            raise RobotModelError(f"linear_limits[{k}].limits: lower > upper")
+    kappa = _finite(model.kappa, "kappa", (nf, 3))
+    if np.any(kappa < 0):
+        raise RobotModelError("kappa: compliances must be >= 0")
+
+
+def _check_frame(idx: Any, nf: int, where: str) -> None:
+    if not (isinstance(idx, (int, np.integer)) and not isinstance(idx, bool) and 0 <= idx < nf):
+        raise RobotModelError(f"{where}: frame index {idx!r} out of range [0, {nf})")
+
+
+# ================================================================ JSON mapping
+def _resolve(value: Any, names: list[str], where: str, what: str) -> int:
+    if isinstance(value, str):
+        if value not in names:
+            raise RobotModelError(f"{where}: unknown {what} '{value}'")
+        return names.index(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise RobotModelError(f"{where}: expected a {what} name or index, got {value!r}")
+    return value
+
+
+def _req(doc: dict, key: str, where: str) -> Any:
+    if not isinstance(doc, dict):
+        raise RobotModelError(f"{where}: expected an object, got {type(doc).__name__}")
+    if key not in doc:
+        raise RobotModelError(f"{where}.{key}: missing")
+    return doc[key]
+
+
+def _from_dict(doc: Any) -> RobotModel:
+    if not isinstance(doc, dict):
+        raise RobotModelError("document: expected a JSON object")
+    schema = doc.get("schema", SCHEMA_NAME)
+    if schema != SCHEMA_NAME:
+        raise RobotModelError(f"schema: expected '{SCHEMA_NAME}', got '{schema}'")
+    version = doc.get("version", SCHEMA_VERSION)
+    if version != SCHEMA_VERSION:
+        raise RobotModelError(f"version: schema version {version} not supported "
+                              f"(this jwarp reads version {SCHEMA_VERSION})")
+    name = _req(doc, "name", "document")
+    jdocs = _req(doc, "joints", "document")
+    fdocs = _req(doc, "frames", "document")
+    if not isinstance(jdocs, list):
+        raise RobotModelError("joints: expected a list")
+    if not isinstance(fdocs, list):
+        raise RobotModelError("frames: expected a list")
+    joints = []
+    for k, jd in enumerate(jdocs):
+        w = f"joints[{k}]"
+        lim = _req(jd, "limits", w) if isinstance(jd, dict) and "limits" in jd else [-math.pi, math.pi]
+        lim = _finite(lim, f"{w}.limits", (2,))
+        joints.append(Joint(name=str(_req(jd, "name", w)), type=jd.get("type", "revolute"),
+                            lower=float(lim[0]), upper=float(lim[1])))
+    jnames = [j.name for j in joints]
+    fnames = [str(_req(fd, "name", f"frames[{k}]")) for k, fd in enumerate(fdocs)]
+    frames = []
+    for k, fd in enumerate(fdocs):
+        w = f"frames[{k}]"
+        kind = _req(fd, "kind", w)
+        parent = fd.get("parent")
+        parent = None if parent is None else _resolve(parent, fnames, f"{w}.parent", "frame")
+        frame = Frame(name=fnames[k], parent=parent, kind=kind)
+        if kind == "dh":
+            row = _finite(_req(fd, "dh", w), f"{w}.dh")
+            if row.ndim != 1 or row.shape[0] not in (4, 5):
+                raise RobotModelError(f"{w}.dh: expected [d, theta, r, alpha(, beta)], "
+                                      f"got {row.shape[0] if row.ndim == 1 else row.shape} values")
+            frame.dh = np.concatenate([row, np.zeros(5 - row.shape[0])])
+            if fd.get("joint") is not None and fd.get("coupled") is not None:
+                raise RobotModelError(f"{w}: give either 'joint' or 'coupled', not both")
+            if fd.get("joint") is not None:
+                frame.coupling = [(_resolve(fd["joint"], jnames, f"{w}.joint", "joint"), 1.0)]
+            elif fd.get("coupled") is not None:
+                cd = fd["coupled"]
+                js = _req(cd, "joints", f"{w}.coupled")
+                cs = _req(cd, "coefficients", f"{w}.coupled")
+                if not isinstance(js, list) or not isinstance(cs, list) or len(js) != len(cs) or not js:
+                    raise RobotModelError(f"{w}.coupled: 'joints' and 'coefficients' must be "
+                                          f"non-empty lists of equal length")
+                frame.coupling = [(_resolve(j, jnames, f"{w}.coupled.joints", "joint"),
+                                   float(_finite(c, f"{w}.coupled.coefficients")))
+                                  for j, c in zip(js, cs)]
+        elif kind == "static":
+            frame.transform = _finite(_req(fd, "transform", w), f"{w}.transform", (4, 4))
+            if fd.get("joint") is not None:
+                raise RobotModelError(f"{w}.joint: a 'static' frame cannot be driven by a joint")
+        frames.append(frame)
+
+    def fidx(v: Any, where: str) -> int:
+        return _resolve(v, fnames, where, "frame")
+
+    masses = [Mass(frame=fidx(_req(m, "frame", f"masses[{k}]"), f"masses[{k}].frame"),
+                   mass=float(_finite(_req(m, "mass", f"masses[{k}]"), f"masses[{k}].mass")),
+                   com=_finite(_req(m, "com", f"masses[{k}]"), f"masses[{k}].com", (3,)))
+              for k, m in enumerate(doc.get("masses", []))]
+    spheres = [Sphere(frame=fidx(_req(s, "frame", f"spheres[{k}]"), f"spheres[{k}].frame"),
+                      position=_finite(_req(s, "position", f"spheres[{k}]"), f"spheres[{k}].position", (3,)),
+                      radius=float(_finite(_req(s, "radius", f"spheres[{k}]"), f"spheres[{k}].radius")))
+               for k, s in enumerate(doc.get("spheres", []))]
+    capsules = [Capsule(frame=fidx(_req(c, "frame", f"capsules[{k}]"), f"capsules[{k}].frame"),
+                        p0=_finite(_req(c, "p0", f"capsules[{k}]"), f"capsules[{k}].p0", (3,)),
+                        p1=_finite(_req(c, "p1", f"capsules[{k}]"), f"capsules[{k}].p1", (3,)),
+                        radius=float(_finite(_req(c, "radius", f"capsules[{k}]"), f"capsules[{k}].radius")))
+                for k, c in enumerate(doc.get("capsules", []))]
+    scd = doc.get("self_collision", {}) or {}
+    sc = SelfCollision(
+        groups={g: [fidx(m, f"self_collision.groups.{g}") for m in ms]
+                for g, ms in (scd.get("groups") or {}).items()},
+        include_pairs=[tuple(fidx(m, f"self_collision.include_pairs[{k}]") for m in p)
+                       for k, p in enumerate(scd.get("include_pairs", []))],
+        exclude_pairs=[tuple(fidx(m, f"self_collision.exclude_pairs[{k}]") for m in p)
+                       for k, p in enumerate(scd.get("exclude_pairs", []))])
+    eff = {str(k): fidx(v, f"end_effectors.{k}") for k, v in (doc.get("end_effectors") or {}).items()}
+    lin = []
+    for k, ld in enumerate(doc.get("linear_limits", [])):
+        lim = _finite(_req(ld, "limits", f"linear_limits[{k}]"), f"linear_limits[{k}].limits", (2,))
+        lin.append(LinearLimit(
+            joints=[_resolve(j, jnames, f"linear_limits[{k}].joints", "joint")
+                    for j in _req(ld, "joints", f"linear_limits[{k}]")],
+            coefficients=[float(c) for c in _req(ld, "coefficients", f"linear_limits[{k}]")],
+            lower=float(lim[0]), upper=float(lim[1])))
+    kappa = doc.get("kappa")
+    if kappa is not None:
+        kappa = _finite(kappa, "kappa", (len(frames), 3))
+    return RobotModel(
+        name=name, description=doc.get("description", ""), joints=joints, frames=frames,
+        gravity=_finite(doc.get("gravity", [0.0, 0.0, -9.81]), "gravity", (3,)),
+        masses=masses, spheres=spheres, capsules=capsules, self_collision=sc,
+        end_effectors=eff, linear_limits=lin, kappa=kappa,
+        notes={str(k): str(v) for k, v in (doc.get("notes") or {}).items()})
+
+
+def _to_dict(m: RobotModel) -> dict[str, Any]:
+    def lst(a: np.ndarray) -> list:
+        return np.asarray(a, np.float64).tolist()
+
+    frames = []
+    for f in m.frames:
+        d: dict[str, Any] = {"name": f.name, "parent": f.parent, "kind": f.kind}
+        if f.kind == "dh":
+            d["dh"] = lst(f.dh)
+            if len(f.coupling) == 1 and f.coupling[0][1] == 1.0:
+                d["joint"] = f.coupling[0][0]
+            elif f.coupling:
+                d["coupled"] = {"joints": [j for j, _ in f.coupling],
+                                "coefficients": [c for _, c in f.coupling]}
+        else:
+            d["transform"] = lst(f.transform)
+        frames.append(d)
+    doc: dict[str, Any] = {
+        "schema": SCHEMA_NAME, "version": SCHEMA_VERSION, "name": m.name,
+        "description": m.description, "gravity": lst(m.gravity),
+        "joints": [{"name": j.name, "type": j.type, "limits": [j.lower, j.upper]} for j in m.joints],
+        "frames": frames,
+        "masses": [{"frame": x.frame, "mass": x.mass, "com": lst(x.com)} for x in m.masses],
+        "spheres": [{"frame": s.frame, "position": lst(s.position), "radius": s.radius}
+                    for s in m.spheres],
+        "capsules": [{"frame": c.frame, "p0": lst(c.p0), "p1": lst(c.p1), "radius": c.radius}
+                     for c in m.capsules],
+        "self_collision": {"groups": m.self_collision.groups,
+                           "include_pairs": [list(p) for p in m.self_collision.include_pairs],
+                           "exclude_pairs": [list(p) for p in m.self_collision.exclude_pairs]},
+        "end_effectors": dict(m.end_effectors),
+        "linear_limits": [{"joints": l.joints, "coefficients": l.coefficients,
+                           "limits": [l.lower, l.upper]} for l in m.linear_limits],
+    }
+    if np.any(m.kappa):
+        doc["kappa"] = lst(m.kappa)
+    if m.notes:
+        doc["notes"] = dict(m.notes)
+    return doc
+
