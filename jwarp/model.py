@@ -122,7 +122,7 @@ class SelfCollision:
     exclude_pairs: list[tuple[int, int]] = field(default_factory=list)
 
 
-@dataclass
+@dataclass(eq=False)
 class RobotModel:
     """A robot: frames, joints, masses, collision bodies, end-effectors, gravity."""
 
@@ -627,8 +627,9 @@ def _from_dict(doc: Any) -> RobotModel:
                                   for j, c in zip(js, cs)]
         elif kind == "static":
             frame.transform = _finite(_req(fd, "transform", w), f"{w}.transform", (4, 4))
-            if fd.get("joint") is not None:
-                raise RobotModelError(f"{w}.joint: a 'static' frame cannot be driven by a joint")
+            for key in ("joint", "coupled"):
+                if fd.get(key) is not None:
+                    raise RobotModelError(f"{w}.{key}: a 'static' frame cannot be driven by a joint")
         frames.append(frame)
 
     def fidx(v: Any, where: str) -> int:

@@ -1,0 +1,152 @@
+"""Array plumbing shared by the public API: numpy / warp / torch in, the same kind out.
+
+Inputs are flattened to a batch ``(B, n)``; outputs are reshaped back to the caller's
+leading batch dimensions. Torch tensors and Warp arrays are shared zero-copy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from jwarp.device_model import numpy_dtype, scalar_type
+
+_INITIALISED = False
+
+
+def init_warp() -> None:
+    """Initialise Warp once, quietly."""
+    global _INITIALISED
+    if not _INITIALISED:
+        wp.config.quiet = True
+        wp.init()
+        _INITIALISED = True
+
+
+def is_torch(x: Any) -> bool:
+    mod = type(x).__module__
+    return mod.startswith("torch") and hasattr(x, "detach")
+
+
+def resolve_device(device: Any, like: Any = None) -> wp.context.Device:
+    """The Warp device: ``device`` if given, else that of ``like`` (warp/torch), else the
+    preferred device (CUDA if present, else CPU)."""
+    init_warp()
+    if device is None:
+        if isinstance(like, wp.array):
+            return like.device
+        if like is not None and is_torch(like):
+            return wp.device_from_torch(like.device)
+        return wp.get_preferred_device()
+    try:
+        return wp.get_device(str(device) if not isinstance(device, wp.context.Device) else device)
+    except Exception as e:  # warp raises RuntimeError/ValueError for unknown devices
+        raise ValueError(f"device: unknown or unavailable device {device!r}: {e}") from e
+
+
+@dataclass
+class Batch:
+    """A validated input flattened to (B, n) on the compute device."""
+
+    array: wp.array            # (B, n) on the compute device, compute dtype
+    lead_shape: tuple          # caller's leading batch dims
+    kind: str                  # "numpy" | "warp" | "torch"
+    torch_tensor: Any = None   # original torch tensor (for autograd)
+
+    @property
+    def size(self) -> int:
+        return self.array.shape[0]
+
+
+def as_batch(x: Any, n: int, name: str, *, device: wp.context.Device, dtype: Any,
+             what: str, validate: bool = True) -> Batch:
+    """Validate ``x`` (shape (..., n)) and bring it to ``device``/``dtype`` as (B, n)."""
+    scalar = scalar_type(dtype)
+    npdt = numpy_dtype(scalar)
+    if isinstance(x, wp.array):
+        shape = tuple(x.shape)
+        _check_shape(shape, n, name, what)
+        if x.dtype != scalar:
+            raise TypeError(f"{name}: warp array dtype {x.dtype.__name__} does not match "
+                            f"dtype {np.dtype(npdt).name}")
+        if validate:
+            _check_finite(x.numpy(), name)
+        arr = x if x.device == device else x.to(device)
+        if not arr.is_contiguous:
+            arr = arr.contiguous()
+        return Batch(arr.reshape((-1, n)), shape[:-1], "warp")
+    if is_torch(x):
+        import torch
+
+        shape = tuple(x.shape)
+        _check_shape(shape, n, name, what)
+        if not x.is_floating_point():
+            raise TypeError(f"{name}: expected a floating point tensor, got {x.dtype}")
+        if validate and not bool(torch.isfinite(x).all()):
+            bad = torch.nonzero(~torch.isfinite(x.reshape(-1, n)).all(dim=1))[:5].flatten().tolist()
+            raise ValueError(f"{name}: contains NaN or inf (batch rows {bad})")
+        t = x.detach().reshape(-1, n).to(dtype=getattr(torch, np.dtype(npdt).name)).contiguous()
+        arr = wp.from_torch(t, dtype=scalar)
+        if arr.device != device:
+            arr = arr.to(device)
+        return Batch(arr, shape[:-1], "torch", torch_tensor=x)
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"{name}: expected an array of numbers, got {type(x).__name__}") from e
+    _check_shape(a.shape, n, name, what)
+    if validate:
+        _check_finite(a, name)
+    a2 = np.ascontiguousarray(a.reshape(-1, n), dtype=npdt)
+    return Batch(wp.array(a2, dtype=scalar, device=device), a.shape[:-1], "numpy")
+
+
+def _check_shape(shape: tuple, n: int, name: str, what: str) -> None:
+    if len(shape) == 0 or shape[-1] != n:
+        raise ValueError(f"{name}: expected shape (..., {n}) ({what}), got {shape}")
+    if int(np.prod(shape[:-1])) == 0:
+        raise ValueError(f"{name}: empty batch, shape {shape}")
+
+
+def _check_finite(a: np.ndarray, name: str) -> None:
+    finite = np.isfinite(a)
+    if not finite.all():
+        rows = np.nonzero(~finite.reshape(-1, a.shape[-1]).all(axis=1))[0][:5].tolist()
+        raise ValueError(f"{name}: contains NaN or inf (batch rows {rows})")
+
+
+def default_dtype(x: Any) -> Any:
+    """float64 for float64 numpy/torch/warp input, else float32."""
+    if isinstance(x, wp.array):
+        return np.float64 if x.dtype == wp.float64 else np.float32
+    if is_torch(x):
+        import torch
+
+        return np.float64 if x.dtype == torch.float64 else np.float32
+    if isinstance(x, np.ndarray) and x.dtype == np.float64:
+        return np.float64
+    return np.float32
+
+
+def to_output(arr: wp.array, batch: Batch, tail: tuple = ()) -> Any:
+    """Return ``arr`` (B, *tail) in the caller's kind with the caller's leading dims.
+
+    Warp callers get Warp arrays (matrix dtypes kept, e.g. ``mat44`` of shape (..., n)),
+    numpy/torch callers get plain arrays with the matrix dims appended, e.g. (..., n, 4, 4).
+    """
+    shape = tuple(batch.lead_shape) + tuple(tail)
+    if not arr.is_contiguous:
+        arr = arr.contiguous()
+    if batch.kind == "warp":
+        return arr.reshape(shape) if shape else arr
+    inner = tuple(getattr(arr.dtype, "_shape_", ()))
+    if batch.kind == "torch":
+        t = wp.to_torch(arr)
+        src = batch.torch_tensor
+        if t.device != src.device:
+            t = t.to(src.device)
+        return t.reshape(shape + inner)
+    return arr.numpy().reshape(shape + inner)

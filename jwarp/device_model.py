@@ -1,0 +1,156 @@
+"""Device tables of a robot (the *Model* the kernels read), per device and scalar type.
+
+:func:`tables` turns a :class:`~jwarp.model.RobotModel` into Warp arrays once and
+caches them (keyed by the model object, device and dtype).
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from jwarp.model import RobotModel
+
+_SCALARS = {np.dtype(np.float32): wp.float32, np.dtype(np.float64): wp.float64}
+
+
+def scalar_type(dtype: object) -> type:
+    """Warp scalar for ``dtype`` (numpy dtype, 'float32'/'float64', or a Warp scalar)."""
+    if dtype in (wp.float32, wp.float64):
+        return dtype  # type: ignore[return-value]
+    try:
+        key = np.dtype(dtype)
+    except TypeError as e:
+        raise TypeError(f"dtype: expected float32 or float64, got {dtype!r}") from e
+    if key not in _SCALARS:
+        raise TypeError(f"dtype: expected float32 or float64, got {key}")
+    return _SCALARS[key]
+
+
+def numpy_dtype(scalar: type) -> np.dtype:
+    return np.dtype(np.float32) if scalar == wp.float32 else np.dtype(np.float64)
+
+
+@dataclass
+class KinematicsTables:
+    """Frame, coupling and mass tables of one robot on one device (see kernels/fk.py)."""
+
+    robot: RobotModel
+    device: wp.context.Device
+    scalar: type
+    order: wp.array
+    parent: wp.array
+    is_dh: wp.array
+    prismatic: wp.array
+    fixed_rot: wp.array
+    fixed_pos: wp.array
+    dh0: wp.array
+    dh0_3d: wp.array  # (1, n_frames, 5) view used as the shared rho0
+    cpl_start: wp.array
+    cpl_joint: wp.array
+    cpl_coef: wp.array
+    mass: wp.array
+    mass_com: wp.array
+    child_start: wp.array
+    child_idx: wp.array
+
+    @property
+    def frame_args(self) -> list:
+        """Model arguments of the FK kernel, in order."""
+        return [self.order, self.parent, self.is_dh, self.prismatic, self.fixed_rot,
+                self.fixed_pos, self.dh0, self.cpl_start, self.cpl_joint, self.cpl_coef]
+
+    def chain(self, frame: int) -> wp.array:
+        """Frames from the root to ``frame`` as an int32 device array (cached)."""
+        cache = self.__dict__.setdefault("_chains", {})
+        if frame not in cache:
+            cache[frame] = wp.array(np.asarray(self.robot.ancestors(frame), np.int32),
+                                    dtype=wp.int32, device=self.device)
+        return cache[frame]
+
+
+_CACHE: "weakref.WeakKeyDictionary[RobotModel, dict]" = weakref.WeakKeyDictionary()
+
+
+def fixed_parts(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
+    """Nominal ``Rot_y(beta) Rot_x(alpha)`` (n, 3, 3) and ``r Rot_y(beta) e_x`` (n, 3) of DH
+    frames; rotation/translation of static frames."""
+    n = robot.n_frames
+    rot = np.zeros((n, 3, 3))
+    pos = np.zeros((n, 3))
+    dh = robot.dh_table
+    static = robot.static_transforms
+    for i, f in enumerate(robot.frames):
+        if f.kind == "dh":
+            _, _, r, a, b = dh[i]
+            ca, sa, cb, sb = np.cos(a), np.sin(a), np.cos(b), np.sin(b)
+            rot[i] = [[cb, sb * sa, sb * ca], [0.0, ca, -sa], [-sb, cb * sa, cb * ca]]
+            pos[i] = r * rot[i][:, 0]
+        else:
+            rot[i] = static[i, :3, :3]
+            pos[i] = static[i, :3, 3]
+    return rot, pos
+
+
+def tables(robot: RobotModel, device: object = None, dtype: object = np.float32) -> KinematicsTables:
+    """Device tables of ``robot`` on ``device`` in ``dtype`` (cached)."""
+    scalar = scalar_type(dtype)
+    dev = wp.get_device(device)
+    per_robot = _CACHE.setdefault(robot, {})
+    key = (str(dev), scalar.__name__)
+    if key in per_robot:
+        return per_robot[key]
+    npdt = numpy_dtype(scalar)
+    n = robot.n_frames
+    vec3 = wp.types.vector(3, scalar)
+    mat33 = wp.types.matrix((3, 3), scalar)
+
+    def arr(a: np.ndarray, dt: object) -> wp.array:
+        return wp.array(a, dtype=dt, device=dev)
+
+    cpl_start = np.zeros(n + 1, np.int32)
+    cpl_joint: list[int] = []
+    cpl_coef: list[float] = []
+    for i, f in enumerate(robot.frames):
+        for j, c in f.coupling:
+            cpl_joint.append(j)
+            cpl_coef.append(c)
+        cpl_start[i + 1] = len(cpl_joint)
+    mass = np.zeros(n)
+    first_moment = np.zeros((n, 3))
+    for m in robot.masses:
+        mass[m.frame] += m.mass
+        first_moment[m.frame] += m.mass * m.com
+    com = np.divide(first_moment, mass[:, None], out=np.zeros_like(first_moment),
+                    where=mass[:, None] > 0)
+    children: list[list[int]] = [[] for _ in range(n)]
+    for i, p in enumerate(robot.parents):
+        if p >= 0:
+            children[p].append(i)
+    child_start = np.cumsum([0] + [len(c) for c in children]).astype(np.int32)
+    child_idx = np.array([c for cs in children for c in cs] or [0], np.int32)
+    rot, pos = fixed_parts(robot)
+    dh0 = robot.dh_table.astype(npdt)
+    t = KinematicsTables(
+        robot=robot, device=dev, scalar=scalar,
+        order=arr(robot.topological_order, wp.int32),
+        parent=arr(robot.parents, wp.int32),
+        is_dh=arr(robot.is_dh.astype(np.int32), wp.int32),
+        prismatic=arr(robot.frame_is_prismatic.astype(np.int32), wp.int32),
+        fixed_rot=arr(rot.astype(npdt), mat33),
+        fixed_pos=arr(pos.astype(npdt), vec3),
+        dh0=arr(dh0, scalar),
+        dh0_3d=arr(dh0[None], scalar),
+        cpl_start=arr(cpl_start, wp.int32),
+        cpl_joint=arr(np.array(cpl_joint or [0], np.int32), wp.int32),
+        cpl_coef=arr(np.array(cpl_coef or [0.0], npdt), scalar),
+        mass=arr(mass.astype(npdt), scalar),
+        mass_com=arr(com.astype(npdt), vec3),
+        child_start=arr(child_start, wp.int32),
+        child_idx=arr(child_idx, wp.int32),
+    )
+    per_robot[key] = t
+    return t

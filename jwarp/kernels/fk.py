@@ -1,0 +1,283 @@
+"""Forward-kinematics and Jacobian kernels (math only; no numpy, no host logic).
+
+All kernels are built per scalar type by :func:`kernels` (float32 or float64) and are
+batched over configurations: one thread per configuration walks the frames in
+topological order.
+
+Frame tables (the *Model*, see :class:`jwarp.device_model.KinematicsTables`):
+
+* ``order``        (n_frames,) int32  frames, parents first
+* ``parent``       (n_frames,) int32  parent index, -1 for a root
+* ``is_dh``        (n_frames,) int32  1 for a DH frame, 0 for a static frame
+* ``prismatic``    (n_frames,) int32  1 if the driving joint(s) are prismatic
+* ``fixed_rot``    (n_frames,) mat33  Rot_y(beta0) Rot_x(alpha0) (DH) or the static rotation
+* ``fixed_pos``    (n_frames,) vec3   r0 * Rot_y(beta0) e_x (DH) or the static translation
+* ``dh0``          (n_frames, 5)      nominal rows [d, theta, r, alpha, beta]
+* ``cpl_start``    (n_frames + 1,) int32, ``cpl_joint``/``cpl_coef``: CSR coupling q -> frame
+
+Per-batch DH rows ``rho`` (calibration, elastic model) have shape (B_rho, n_frames, 5);
+``rho_stride`` is 1 to use row ``b`` for configuration ``b`` and 0 to share row 0.
+``use_rho`` = 0 ignores ``rho`` and uses the precomputed nominal tables (fast path).
+
+DH convention: ``parent_T_child = Rot_y(beta) Rot_x(alpha) Trans_x(r) Rot_z(theta+q) Trans_z(d)``.
+"""
+
+
+import functools
+from types import SimpleNamespace
+
+import warp as wp
+
+
+@functools.cache
+def kernels(scalar: type) -> SimpleNamespace:
+    """Kernels and functions for one scalar type (``wp.float32`` or ``wp.float64``)."""
+    vec3 = wp.types.vector(3, scalar)
+    mat33 = wp.types.matrix((3, 3), scalar)
+    mat44 = wp.types.matrix((4, 4), scalar)
+    zero = scalar(0.0)
+    one = scalar(1.0)
+
+    @wp.func
+    def joint_value(i: int, b: int, q: wp.array2d(dtype=scalar),
+                    cpl_start: wp.array(dtype=wp.int32), cpl_joint: wp.array(dtype=wp.int32),
+                    cpl_coef: wp.array(dtype=scalar)) -> scalar:
+        v = zero
+        for k in range(cpl_start[i], cpl_start[i + 1]):
+            v += cpl_coef[k] * q[b, cpl_joint[k]]
+        return v
+
+    @wp.func
+    def dh_fixed_rot(alpha: scalar, beta: scalar) -> mat33:
+        ca = wp.cos(alpha)
+        sa = wp.sin(alpha)
+        cb = wp.cos(beta)
+        sb = wp.sin(beta)
+        return mat33(cb, sb * sa, sb * ca,
+                     zero, ca, -sa,
+                     -sb, cb * sa, cb * ca)
+
+    @wp.func
+    def local_rot_pos(i: int, b: int, qi: scalar,
+                      use_rho: int, rho: wp.array3d(dtype=scalar), rho_stride: int,
+                      is_dh: wp.array(dtype=wp.int32), prismatic: wp.array(dtype=wp.int32),
+                      fixed_rot: wp.array(dtype=mat33), fixed_pos: wp.array(dtype=vec3),
+                      dh0: wp.array2d(dtype=scalar)):
+        """Local rotation and translation of frame i relative to its parent."""
+        if is_dh[i] == 0:
+            return fixed_rot[i], fixed_pos[i]
+        rb = b * rho_stride
+        d = dh0[i, 0]
+        theta = dh0[i, 1]
+        R = fixed_rot[i]
+        p = fixed_pos[i]
+        if use_rho != 0:
+            d = rho[rb, i, 0]
+            theta = rho[rb, i, 1]
+            r = rho[rb, i, 2]
+            R = dh_fixed_rot(rho[rb, i, 3], rho[rb, i, 4])
+            p = r * vec3(R[0, 0], R[1, 0], R[2, 0])
+        if prismatic[i] != 0:
+            d = d + qi
+        else:
+            theta = theta + qi
+        ct = wp.cos(theta)
+        st = wp.sin(theta)
+        # R * Rot_z(theta): columns c0 = ct a0 + st a1, c1 = -st a0 + ct a1, c2 = a2
+        Rl = mat33(ct * R[0, 0] + st * R[0, 1], -st * R[0, 0] + ct * R[0, 1], R[0, 2],
+                   ct * R[1, 0] + st * R[1, 1], -st * R[1, 0] + ct * R[1, 1], R[1, 2],
+                   ct * R[2, 0] + st * R[2, 1], -st * R[2, 0] + ct * R[2, 1], R[2, 2])
+        pl = p + d * vec3(R[0, 2], R[1, 2], R[2, 2])
+        return Rl, pl
+
+    @wp.func
+    def pack(R: mat33, p: vec3) -> mat44:
+        return mat44(R[0, 0], R[0, 1], R[0, 2], p[0],
+                     R[1, 0], R[1, 1], R[1, 2], p[1],
+                     R[2, 0], R[2, 1], R[2, 2], p[2],
+                     zero, zero, zero, one)
+
+    @wp.func
+    def unpack_rot(T: mat44) -> mat33:
+        return mat33(T[0, 0], T[0, 1], T[0, 2], T[1, 0], T[1, 1], T[1, 2], T[2, 0], T[2, 1], T[2, 2])
+
+    @wp.func
+    def unpack_pos(T: mat44) -> vec3:
+        return vec3(T[0, 3], T[1, 3], T[2, 3])
+
+    @wp.kernel(module="unique")
+    def fk_kernel(
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        rho: wp.array3d(dtype=scalar),
+        rho_stride: int,
+        use_rho: int,
+        # Model:
+        order: wp.array(dtype=wp.int32),
+        parent: wp.array(dtype=wp.int32),
+        is_dh: wp.array(dtype=wp.int32),
+        prismatic: wp.array(dtype=wp.int32),
+        fixed_rot: wp.array(dtype=mat33),
+        fixed_pos: wp.array(dtype=vec3),
+        dh0: wp.array2d(dtype=scalar),
+        cpl_start: wp.array(dtype=wp.int32),
+        cpl_joint: wp.array(dtype=wp.int32),
+        cpl_coef: wp.array(dtype=scalar),
+        # Data out:
+        frames: wp.array2d(dtype=mat44),
+    ):
+        """World transform of every frame: frames[b, i] (4x4)."""
+        b = wp.tid()
+        for k in range(order.shape[0]):
+            i = order[k]
+            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
+            Rl, pl = local_rot_pos(i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                   fixed_rot, fixed_pos, dh0)
+            pi = parent[i]
+            if pi >= 0:
+                Tp = frames[b, pi]
+                Rp = unpack_rot(Tp)
+                frames[b, i] = pack(Rp * Rl, Rp * pl + unpack_pos(Tp))
+            else:
+                frames[b, i] = pack(Rl, pl)
+
+    @wp.kernel(module="unique")
+    def jacobian_kernel(
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        rho: wp.array3d(dtype=scalar),
+        rho_stride: int,
+        use_rho: int,
+        point: vec3,
+        # Model:
+        chain: wp.array(dtype=wp.int32),
+        is_dh: wp.array(dtype=wp.int32),
+        prismatic: wp.array(dtype=wp.int32),
+        fixed_rot: wp.array(dtype=mat33),
+        fixed_pos: wp.array(dtype=vec3),
+        dh0: wp.array2d(dtype=scalar),
+        cpl_start: wp.array(dtype=wp.int32),
+        cpl_joint: wp.array(dtype=wp.int32),
+        cpl_coef: wp.array(dtype=scalar),
+        # Data out:
+        jac: wp.array3d(dtype=scalar),
+    ):
+        """Geometric Jacobian (B, 6, n_dof) of ``point`` (in the last chain frame's
+        coordinates) w.r.t. q: rows [linear; angular] velocity in the base frame.
+        ``chain`` lists the frames from the root to the target. Coupled joints add
+        ``coef * column`` to each driving joint."""
+        b = wp.tid()
+        n_dof = jac.shape[2]
+        for r in range(6):
+            for j in range(n_dof):
+                jac[b, r, j] = zero
+        # pass 1: target point in world coordinates
+        R = wp.identity(3, dtype=scalar)
+        p = vec3(zero, zero, zero)
+        for k in range(chain.shape[0]):
+            i = chain[k]
+            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
+            Rl, pl = local_rot_pos(i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                   fixed_rot, fixed_pos, dh0)
+            p = R * pl + p
+            R = R * Rl
+        target = R * point + p
+        # pass 2: joint axes (z of each driven frame, through its origin)
+        R = wp.identity(3, dtype=scalar)
+        p = vec3(zero, zero, zero)
+        for k in range(chain.shape[0]):
+            i = chain[k]
+            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
+            Rl, pl = local_rot_pos(i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                   fixed_rot, fixed_pos, dh0)
+            p = R * pl + p
+            R = R * Rl
+            if cpl_start[i + 1] > cpl_start[i]:
+                z = vec3(R[0, 2], R[1, 2], R[2, 2])
+                lin = wp.cross(z, target - p)
+                ang = z
+                if prismatic[i] != 0:
+                    lin = z
+                    ang = vec3(zero, zero, zero)
+                for c in range(cpl_start[i], cpl_start[i + 1]):
+                    j = cpl_joint[c]
+                    w = cpl_coef[c]
+                    for r in range(3):
+                        jac[b, r, j] = jac[b, r, j] + w * lin[r]
+                        jac[b, r + 3, j] = jac[b, r + 3, j] + w * ang[r]
+
+    @wp.kernel(module="unique")
+    def jacobian_dh_kernel(
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        rho: wp.array3d(dtype=scalar),
+        rho_stride: int,
+        use_rho: int,
+        point: vec3,
+        # Model:
+        chain: wp.array(dtype=wp.int32),
+        is_dh: wp.array(dtype=wp.int32),
+        prismatic: wp.array(dtype=wp.int32),
+        fixed_rot: wp.array(dtype=mat33),
+        fixed_pos: wp.array(dtype=vec3),
+        dh0: wp.array2d(dtype=scalar),
+        cpl_start: wp.array(dtype=wp.int32),
+        cpl_joint: wp.array(dtype=wp.int32),
+        cpl_coef: wp.array(dtype=scalar),
+        # Data out:
+        jac: wp.array4d(dtype=scalar),
+    ):
+        """Jacobian (B, 6, n_frames, 5) of ``point`` on the chain's last frame w.r.t. the
+        DH rows [d, theta, r, alpha, beta] of every frame (zero off the chain): rows
+        [linear; angular] in the base frame. Caller zero-fills ``jac``."""
+        b = wp.tid()
+        R = wp.identity(3, dtype=scalar)
+        p = vec3(zero, zero, zero)
+        for k in range(chain.shape[0]):
+            i = chain[k]
+            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
+            Rl, pl = local_rot_pos(i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                   fixed_rot, fixed_pos, dh0)
+            p = R * pl + p
+            R = R * Rl
+        target = R * point + p
+        R = wp.identity(3, dtype=scalar)
+        p = vec3(zero, zero, zero)
+        for k in range(chain.shape[0]):
+            i = chain[k]
+            Rp = R
+            pp = p
+            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
+            Rl, pl = local_rot_pos(i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                   fixed_rot, fixed_pos, dh0)
+            p = R * pl + p
+            R = R * Rl
+            if is_dh[i] != 0:
+                beta = dh0[i, 4]
+                if use_rho != 0:
+                    beta = rho[b * rho_stride, i, 4]
+                z = vec3(R[0, 2], R[1, 2], R[2, 2])
+                ax_beta = vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1])
+                ax_alpha = Rp * vec3(wp.cos(beta), zero, -wp.sin(beta))
+                # x axis of Rot_y(beta) Rot_x(alpha) = ax_alpha: direction of r
+                lin_d = z
+                lin_theta = wp.cross(z, target - p)
+                lin_r = ax_alpha
+                lin_alpha = wp.cross(ax_alpha, target - pp)
+                lin_beta = wp.cross(ax_beta, target - pp)
+                for r in range(3):
+                    jac[b, r, i, 0] = lin_d[r]
+                    jac[b, r, i, 1] = lin_theta[r]
+                    jac[b, r + 3, i, 1] = z[r]
+                    jac[b, r, i, 2] = lin_r[r]
+                    jac[b, r, i, 3] = lin_alpha[r]
+                    jac[b, r + 3, i, 3] = ax_alpha[r]
+                    jac[b, r, i, 4] = lin_beta[r]
+                    jac[b, r + 3, i, 4] = ax_beta[r]
+
+    return SimpleNamespace(
+        scalar=scalar, vec3=vec3, mat33=mat33, mat44=mat44,
+        joint_value=joint_value, local_rot_pos=local_rot_pos, pack=pack,
+        unpack_rot=unpack_rot, unpack_pos=unpack_pos,
+        fk=fk_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
+    )

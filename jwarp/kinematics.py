@@ -1,0 +1,375 @@
+"""Public kinematics API: batched FK, Jacobians and elastic (torque-equilibrium) FK.
+
+Every function takes a robot (name or :class:`~jwarp.model.RobotModel`) and joint values
+``q`` of shape ``(..., n_dof)`` as numpy, Warp or torch arrays, and returns the same kind
+with the same leading batch dimensions. ``device`` defaults to CUDA when present, else
+CPU; ``dtype`` defaults to float64 for float64 input, else float32.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+import warp as wp
+
+from jwarp.arrays import Batch, as_batch, default_dtype, init_warp, resolve_device, to_output
+from jwarp.device_model import KinematicsTables, numpy_dtype, tables
+from jwarp.kernels import elastic as elastic_kernels
+from jwarp.kernels import fk as fk_kernels
+from jwarp.model import RobotModel
+from jwarp.registry import robot as get_robot
+
+
+class ElasticFK(NamedTuple):
+    """Result of :func:`fk_elastic`.
+
+    frames (..., n_frames, 4, 4); rho (..., n_frames, 5) equilibrium DH rows
+    [d, theta, r, alpha, beta]; iterations (...,) int torque updates used per configuration;
+    converged (...,) bool: last update changed rho by less than ``tol`` [rad].
+    """
+
+    frames: Any
+    rho: Any
+    iterations: Any
+    converged: Any
+
+
+class ElasticStep(NamedTuple):
+    """Result of :func:`elastic_step`: frames at the given rho, the updated rho, and the
+    largest change of rho per configuration [rad]."""
+
+    frames: Any
+    rho: Any
+    delta: Any
+
+
+def _setup(robot: Any, q: Any, device: Any, dtype: Any, validate: bool = True
+           ) -> tuple[RobotModel, Batch, KinematicsTables]:
+    init_warp()
+    model = get_robot(robot)
+    dev = resolve_device(device, like=q)
+    dt = default_dtype(q) if dtype is None else dtype
+    batch = as_batch(q, model.n_dof, "q", device=dev, dtype=dt,
+                     what=f"robot '{model.name}' has {model.n_dof} joints", validate=validate)
+    return model, batch, tables(model, dev, dt)
+
+
+def _rows(x: Any, model: RobotModel, batch: Batch, t: KinematicsTables, name: str,
+          width: int) -> tuple[wp.array, int]:
+    """Per-frame rows (n_frames, width) shared, or (..., n_frames, width) per configuration,
+    as a (B or 1, n_frames, width) device array and its batch stride."""
+    npdt = numpy_dtype(t.scalar)
+    if isinstance(x, wp.array) or (hasattr(x, "detach") and type(x).__module__.startswith("torch")):
+        x = x.numpy() if isinstance(x, wp.array) else x.detach().cpu().numpy()
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"{name}: expected an array of numbers") from e
+    if a.shape[-2:] != (model.n_frames, width):
+        raise ValueError(f"{name}: expected shape (n_frames={model.n_frames}, {width}) or "
+                         f"(batch..., {model.n_frames}, {width}), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: contains NaN or inf")
+    if a.ndim == 2:
+        return wp.array(a[None].astype(npdt), dtype=t.scalar, device=t.device), 0
+    if a.shape[:-2] != tuple(batch.lead_shape):
+        raise ValueError(f"{name}: batch dims {a.shape[:-2]} do not match q's {tuple(batch.lead_shape)}")
+    a = a.reshape(-1, model.n_frames, width).astype(npdt)
+    return wp.array(a, dtype=t.scalar, device=t.device), 1
+
+
+def kappa_array(model: RobotModel, kappa: Any) -> np.ndarray:
+    """Expand ``kappa`` to (n_frames, 3) or (..., n_frames, 3) [rad/(N m)].
+
+    Accepts a scalar (all three axes of every DH frame), 3 values [alpha, beta, theta]
+    for every DH frame, a (n_frames, 3) table or per-configuration tables.
+    ``None`` uses the robot's own ``kappa``.
+    """
+    if kappa is None:
+        return model.kappa
+    try:
+        k = np.asarray(kappa, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise TypeError("kappa: expected a number or an array of numbers") from e
+    if not np.all(np.isfinite(k)):
+        raise ValueError("kappa: contains NaN or inf")
+    if np.any(k < 0):
+        raise ValueError("kappa: compliances must be >= 0 rad/(N m)")
+    mask = model.is_dh.astype(np.float64)[:, None]
+    if k.ndim == 0:
+        return np.full((model.n_frames, 3), float(k)) * mask
+    if k.shape == (3,):
+        return np.tile(k, (model.n_frames, 1)) * mask
+    if k.shape[-2:] == (model.n_frames, 3):
+        return k
+    raise ValueError(f"kappa: expected a scalar, 3 values [alpha, beta, theta], or shape "
+                     f"(..., {model.n_frames}, 3); got {k.shape}")
+
+
+def fk(robot: Any, q: Any, *, dh: Any = None, device: Any = None, dtype: Any = None,
+       validate: bool = True) -> Any:
+    """Forward kinematics of all frames.
+
+    Args:
+        robot: robot name or RobotModel.
+        q: joint values (..., n_dof) [rad or m].
+        dh: optional DH rows (n_frames, 5) or per configuration (..., n_frames, 5)
+            [d, theta, r, alpha, beta] replacing the nominal ones (calibration).
+        device: "cpu", "cuda:0", ... (default: CUDA if present, else CPU).
+        dtype: float32 or float64 (default: float64 for float64 input, else float32).
+        validate: check q for NaN/inf (costs a pass over q).
+
+    Returns:
+        World transforms (..., n_frames, 4, 4) of every frame in the base frame
+        (Warp input: a Warp ``mat44`` array of shape (..., n_frames)).
+    """
+    model, batch, t = _setup(robot, q, device, dtype, validate)
+    if batch.kind == "torch" and batch.torch_tensor.requires_grad:
+        from jwarp.torch_ops import fk_torch
+
+        return fk_torch(model, batch.torch_tensor, dh=dh, device=t.device, dtype=t.scalar)
+    frames = launch_fk(t, batch.array, dh=None if dh is None else _rows(dh, model, batch, t, "dh", 5))
+    return to_output(frames, batch, (model.n_frames,))
+
+
+def launch_fk(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None = None,
+              frames: wp.array | None = None, frame_major: bool = False) -> wp.array:
+    """Launch the FK kernel on a (B, n_dof) device array; returns frames (B, n_frames) mat44.
+
+    ``frame_major`` stores the output frame-major in memory (a transposed view), which
+    coalesces the stores on CUDA; the returned array is indexed [b, i] either way.
+    """
+    k = fk_kernels.kernels(t.scalar)
+    B = q.shape[0]
+    n = t.robot.n_frames
+    if frames is None:
+        if frame_major:
+            frames = wp.empty((n, B), dtype=k.mat44, device=t.device).transpose()
+        else:
+            frames = wp.empty((B, n), dtype=k.mat44, device=t.device, requires_grad=q.requires_grad)
+    rho, stride = dh if dh is not None else (t.dh0_3d, 0)
+    wp.launch(k.fk, dim=B, inputs=[q, rho, stride, int(dh is not None), *t.frame_args],
+              outputs=[frames], device=t.device)
+    return frames
+
+
+def jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any = None,
+             device: Any = None, dtype: Any = None, validate: bool = True) -> Any:
+    """Geometric Jacobian of a frame (or of a point fixed in it) w.r.t. the joints.
+
+    Returns (..., 6, n_dof): rows [linear velocity; angular velocity] in the base frame.
+    Coupled passive joints are folded into the columns of the joints that drive them.
+    ``point`` (3,) [m] is in the frame's coordinates (default: its origin).
+    """
+    model, batch, t = _setup(robot, q, device, dtype, validate)
+    fi = model.frame_index(frame)
+    pt = _point(point, t)
+    k = fk_kernels.kernels(t.scalar)
+    rho, stride = (t.dh0_3d, 0) if dh is None else _rows(dh, model, batch, t, "dh", 5)
+    jac = wp.empty((batch.size, 6, model.n_dof), dtype=t.scalar, device=t.device)
+    wp.launch(k.jacobian, dim=batch.size,
+              inputs=[batch.array, rho, stride, int(dh is not None), pt, t.chain(fi),
+                      *t.frame_args[2:]], outputs=[jac], device=t.device)
+    return to_output(jac, batch, (6, model.n_dof))
+
+
+def jacobian_dh(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any = None,
+                device: Any = None, dtype: Any = None, validate: bool = True) -> Any:
+    """Jacobian of a frame's pose (or a point in it) w.r.t. every DH parameter.
+
+    Returns (..., 6, n_frames, 5): rows [linear; angular] in the base frame, columns the
+    DH rows [d, theta, r, alpha, beta] of each frame (zero for frames off the chain and
+    for static frames).
+    """
+    model, batch, t = _setup(robot, q, device, dtype, validate)
+    fi = model.frame_index(frame)
+    pt = _point(point, t)
+    k = fk_kernels.kernels(t.scalar)
+    rho, stride = (t.dh0_3d, 0) if dh is None else _rows(dh, model, batch, t, "dh", 5)
+    jac = wp.zeros((batch.size, 6, model.n_frames, 5), dtype=t.scalar, device=t.device)
+    wp.launch(k.jacobian_dh, dim=batch.size,
+              inputs=[batch.array, rho, stride, int(dh is not None), pt, t.chain(fi),
+                      *t.frame_args[2:]], outputs=[jac], device=t.device)
+    return to_output(jac, batch, (6, model.n_frames, 5))
+
+
+def _point(point: Any, t: KinematicsTables) -> Any:
+    vec3 = fk_kernels.kernels(t.scalar).vec3
+    if point is None:
+        return vec3(0.0, 0.0, 0.0)
+    p = np.asarray(point, dtype=np.float64)
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"point: expected 3 finite numbers [m], got {point!r}")
+    return vec3(*p.tolist())
+
+
+# ------------------------------------------------------------------ elastic
+class _ElasticLaunch:
+    """Buffers and launches of the torque-equilibrium iteration for one batch."""
+
+    def __init__(self, t: KinematicsTables, q: wp.array, kappa: tuple[wp.array, int],
+                 rho0: tuple[wp.array, int] | None, lam: float, write_tau: bool = False,
+                 requires_grad: bool = False):
+        self.t, self.q, self.kappa, self.lam = t, q, kappa, lam
+        self.rho0 = rho0 if rho0 is not None else (t.dh0_3d, 0)
+        self.nominal_start = rho0 is None
+        self.k = elastic_kernels.kernels(t.scalar)
+        self.fk = fk_kernels.kernels(t.scalar)
+        B, n = q.shape[0], t.robot.n_frames
+        self.B, self.n = B, n
+        self.write_tau = write_tau
+        self.requires_grad = requires_grad
+        self.tau = wp.zeros((B if write_tau else 1, n, 3), dtype=t.scalar, device=t.device)
+        g = t.robot.gravity
+        self.gravity = self.fk.vec3(float(g[0]), float(g[1]), float(g[2]))
+
+    def step(self, rho: tuple[wp.array, int] | None, frames: wp.array | None = None
+             ) -> tuple[wp.array, wp.array, wp.array]:
+        """One update from ``rho`` (None: the nominal/rho0 rows). Returns frames at rho,
+        the new rho (B, n, 5) and delta (B,)."""
+        t, B, n = self.t, self.B, self.n
+        rg = self.requires_grad
+        if frames is None:
+            frames = wp.empty((B, n), dtype=self.fk.mat44, device=t.device, requires_grad=rg)
+        moments = wp.empty((B, n), dtype=self.k.vec4, device=t.device, requires_grad=rg)
+        rho_out = wp.empty((B, n, 5), dtype=t.scalar, device=t.device, requires_grad=rg)
+        delta = wp.empty(B, dtype=t.scalar, device=t.device)
+        if rho is None:
+            if self.nominal_start:
+                rho_arr, stride, use = t.dh0_3d, 0, 0
+            else:
+                (rho_arr, stride), use = self.rho0, 1
+        else:
+            (rho_arr, stride), use = rho, 1
+        wp.launch(self.k.elastic_step, dim=B,
+                  inputs=[self.q, rho_arr, stride, use, self.rho0[0], self.rho0[1],
+                          self.kappa[0], self.kappa[1], self.lam, self.gravity,
+                          int(self.write_tau), *t.frame_args, t.mass, t.mass_com,
+                          t.child_start, t.child_idx],
+                  outputs=[frames, moments, rho_out, self.tau, delta], device=t.device)
+        return frames, rho_out, delta
+
+    def frames_at(self, rho: tuple[wp.array, int] | None) -> wp.array:
+        if rho is None and not self.nominal_start:
+            rho = self.rho0
+        out = wp.empty((self.B, self.n), dtype=self.fk.mat44, device=self.t.device,
+                       requires_grad=self.requires_grad)
+        return launch_fk(self.t, self.q, dh=rho, frames=out)
+
+
+def _elastic_args(robot: Any, q: Any, kappa: Any, lam: float, max_iter: int, tol: float,
+                  dh: Any, device: Any, dtype: Any, validate: bool):
+    model, batch, t = _setup(robot, q, device, dtype, validate)
+    if not (isinstance(lam, (int, float)) and 0.0 < lam <= 1.0):
+        raise ValueError(f"lam: damping must be in (0, 1], got {lam!r}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 0:
+        raise ValueError(f"max_iter: expected an integer >= 0, got {max_iter!r}")
+    if not (isinstance(tol, (int, float)) and tol >= 0 and np.isfinite(tol)):
+        raise ValueError(f"tol: expected a finite number >= 0 [rad], got {tol!r}")
+    kap = _rows(kappa_array(model, kappa), model, batch, t, "kappa", 3)
+    rho0 = None if dh is None else _rows(dh, model, batch, t, "dh", 5)
+    return model, batch, t, kap, rho0
+
+
+def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_iter: int = 10,
+               tol: float = 1e-9, dh: Any = None, device: Any = None, dtype: Any = None,
+               validate: bool = True) -> ElasticFK:
+    """Elastic forward kinematics: frames in the static torque equilibrium.
+
+    Solves ``rho = rho0 + kappa * tau(F(q, rho))`` (thesis eq. 2.33) by the damped
+    fixed-point iteration (eq. 2.35) started at the geometric rows ``rho0``.
+
+    Args:
+        robot, q, device, dtype, validate: as for :func:`fk`.
+        kappa: compliances [rad/(N m)]: scalar, [alpha, beta, theta], (n_frames, 3) or per
+            configuration (..., n_frames, 3); None uses the robot's ``kappa``.
+        lam: damping lambda in (0, 1]; use < 1 for very soft robots.
+        max_iter: most torque updates (0 gives the rigid FK).
+        tol: stop once no DH angle changes by more than ``tol`` [rad] in an update.
+        dh: geometric DH rows rho0 (n_frames, 5) or (..., n_frames, 5); default nominal.
+
+    Returns:
+        :class:`ElasticFK` (frames, rho, iterations, converged).
+    """
+    model, batch, t, kap, rho0 = _elastic_args(robot, q, kappa, lam, max_iter, tol, dh,
+                                               device, dtype, validate)
+    if batch.kind == "torch" and batch.torch_tensor.requires_grad:
+        from jwarp.torch_ops import fk_elastic_torch
+
+        return fk_elastic_torch(model, batch, t, kap, rho0, lam, max_iter, tol)
+    run = _ElasticLaunch(t, batch.array, kap, rho0, float(lam))
+    rho, frames, iterations, converged = equilibrium(run, max_iter, tol)
+    rho_arr = rho[0] if rho is not None else _rho0_full(run)
+    return ElasticFK(to_output(frames, batch, (model.n_frames,)),
+                     to_output(rho_arr, batch, (model.n_frames, 5)),
+                     _host_out(iterations, batch), _host_out(converged, batch))
+
+
+def equilibrium(run: _ElasticLaunch, max_iter: int, tol: float):
+    """Run the damped iteration; returns (rho or None, frames at rho, iterations, converged)."""
+    iterations = np.zeros(run.B, np.int32)
+    converged = np.zeros(run.B, bool)
+    rho = None
+    for _ in range(max_iter):
+        _, rho_new, delta = run.step(rho)
+        iterations += ~converged
+        rho = (rho_new, 1)
+        converged |= delta.numpy() <= tol
+        if converged.all():
+            break
+    frames = run.frames_at(rho)
+    if max_iter == 0:
+        converged[:] = True
+    return rho, frames, iterations, converged
+
+
+def _rho0_full(run: _ElasticLaunch) -> wp.array:
+    arr, stride = run.rho0
+    if stride:
+        return arr
+    a = np.broadcast_to(arr.numpy(), (run.B, run.n, 5)).copy()
+    return wp.array(a, dtype=run.t.scalar, device=run.t.device)
+
+
+def _host_out(a: np.ndarray, batch: Batch) -> Any:
+    a = a.reshape(tuple(batch.lead_shape))
+    if batch.kind == "torch":
+        import torch
+
+        return torch.from_numpy(a).to(batch.torch_tensor.device)
+    return a
+
+
+def elastic_step(robot: Any, q: Any, rho: Any = None, kappa: Any = None, *, lam: float = 1.0,
+                 dh: Any = None, device: Any = None, dtype: Any = None,
+                 validate: bool = True) -> ElasticStep:
+    """One torque update, as used for compensation inside an optimizer (Fig. 2.11).
+
+    Computes the frames at ``rho`` (None: the geometric rows), the gravity torques of
+    those frames and ``rho_new = (1 - lam) rho + lam (rho0 + kappa tau)``. Planners keep
+    ``rho`` between their iterations and take gradients with ``rho`` fixed.
+
+    Returns :class:`ElasticStep` (frames (..., n_frames, 4, 4), rho (..., n_frames, 5),
+    delta (...,) [rad]).
+    """
+    model, batch, t, kap, rho0 = _elastic_args(robot, q, kappa, lam, 1, 0.0, dh,
+                                               device, dtype, validate)
+    run = _ElasticLaunch(t, batch.array, kap, rho0, float(lam))
+    rho_in = None if rho is None else _rows(rho, model, batch, t, "rho", 5)
+    frames, rho_new, delta = run.step(rho_in)
+    return ElasticStep(to_output(frames, batch, (model.n_frames,)),
+                       to_output(rho_new, batch, (model.n_frames, 5)),
+                       to_output(delta, batch, ()))
+
+
+def gravity_torques(robot: Any, q: Any, *, dh: Any = None, device: Any = None,
+                    dtype: Any = None) -> Any:
+    """Gravity torques (..., n_frames, 3) [N m] about the [alpha, beta, theta] axes of
+    every DH frame at the frames F(q, dh) (rigid; zero rows for static frames)."""
+    model, batch, t = _setup(robot, q, device, dtype)
+    rho = None if dh is None else _rows(dh, model, batch, t, "dh", 5)
+    kap = _rows(np.zeros((model.n_frames, 3)), model, batch, t, "kappa", 3)
+    run = _ElasticLaunch(t, batch.array, kap, None, 1.0, write_tau=True)
+    run.step(rho)
+    return to_output(run.tau, batch, (model.n_frames, 3))
