@@ -663,7 +663,8 @@ def _from_dict(doc: Any) -> RobotModel:
         lin.append(LinearLimit(
             joints=[_resolve(j, jnames, f"linear_limits[{k}].joints", "joint")
                     for j in _req(ld, "joints", f"linear_limits[{k}]")],
-            coefficients=[float(c) for c in _req(ld, "coefficients", f"linear_limits[{k}]")],
+            coefficients=[float(c) for c in _finite(_req(ld, "coefficients", f"linear_limits[{k}]"),
+                                                    f"linear_limits[{k}].coefficients").reshape(-1)],
             lower=float(lim[0]), upper=float(lim[1])))
     kappa = doc.get("kappa")
     if kappa is not None:
