@@ -31,7 +31,7 @@ def is_torch(x: Any) -> bool:
     return mod.startswith("torch") and hasattr(x, "detach")
 
 
-def resolve_device(device: Any, like: Any = None) -> wp.context.Device:
+def resolve_device(device: Any, like: Any = None) -> wp.Device:
     """The Warp device: ``device`` if given, else that of ``like`` (warp/torch), else the
     preferred device (CUDA if present, else CPU)."""
     init_warp()
@@ -42,7 +42,7 @@ def resolve_device(device: Any, like: Any = None) -> wp.context.Device:
             return wp.device_from_torch(like.device)
         return wp.get_preferred_device()
     try:
-        return wp.get_device(str(device) if not isinstance(device, wp.context.Device) else device)
+        return wp.get_device(str(device) if not isinstance(device, wp.Device) else device)
     except Exception as e:  # warp raises RuntimeError/ValueError for unknown devices
         raise ValueError(f"device: unknown or unavailable device {device!r}: {e}") from e
 
@@ -61,7 +61,7 @@ class Batch:
         return self.array.shape[0]
 
 
-def as_batch(x: Any, n: int, name: str, *, device: wp.context.Device, dtype: Any,
+def as_batch(x: Any, n: int, name: str, *, device: wp.Device, dtype: Any,
              what: str, validate: bool = True) -> Batch:
     """Validate ``x`` (shape (..., n)) and bring it to ``device``/``dtype`` as (B, n)."""
     scalar = scalar_type(dtype)

@@ -39,7 +39,7 @@ class KinematicsTables:
     """Frame, coupling and mass tables of one robot on one device (see kernels/fk.py)."""
 
     robot: RobotModel
-    device: wp.context.Device
+    device: wp.Device
     scalar: type
     order: wp.array
     parent: wp.array
