@@ -189,6 +189,9 @@ def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
     os.close(fd)
     try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual file mode
         rec = rr.RecordingStream(application_id)
         rec.save(tmp)
         rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
