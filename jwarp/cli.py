@@ -27,6 +27,8 @@ import numpy as np
 
 #: default compliance of ``fk --elastic`` for a robot without its own kappa [rad/(N m)]
 DEFAULT_KAPPA = 1e-4
+#: default most torque updates of ``--elastic`` (stops earlier once converged)
+DEFAULT_MAX_ITER = 50
 
 
 class CLIError(Exception):
@@ -149,6 +151,17 @@ def dumps(obj: Any, indent: int = 0) -> str:
     return json.dumps(obj)
 
 
+def _elastic_options(args: argparse.Namespace) -> None:
+    """Reject elastic options without --elastic; fill in their defaults."""
+    if not args.elastic:
+        for opt, val in (("--kappa", args.kappa), ("--lam", args.lam),
+                         ("--max-iter", args.max_iter)):
+            if val is not None:
+                raise CLIError(f"{opt}: only meaningful with --elastic")
+    args.lam = 1.0 if args.lam is None else args.lam
+    args.max_iter = DEFAULT_MAX_ITER if args.max_iter is None else args.max_iter
+
+
 def _dtype(name: str) -> Any:
     return {"float64": np.float64, "float32": np.float32}[name]
 
@@ -188,6 +201,7 @@ def _positions(model: Any, frames: np.ndarray) -> dict[str, list[float]]:
 
 def cmd_fk(args: argparse.Namespace) -> int:
     model = _robot(args.robot)
+    _elastic_options(args)
     q = parse_q(args.q, model, args.deg)
     _warn_limits(model, q)
     _quiet_warp()
@@ -225,7 +239,9 @@ def cmd_fk(args: argparse.Namespace) -> int:
     kind = "elastic" if args.elastic else "rigid"
     print(f"robot {model.name}: {kind} FK, {args.dtype} on {args.device}")
     print(f"q [rad/m] = [{', '.join(f'{v:.6g}' for v in q)}]")
-    eff_of = {fi: ee for ee, fi in model.end_effectors.items()}
+    eff_of: dict[int, list[str]] = {}
+    for ee, fi in model.end_effectors.items():
+        eff_of.setdefault(fi, []).append(ee)
     head = f"{'frame':<16} {'x [m]':>10} {'y [m]':>10} {'z [m]':>10}"
     print(head + ("  sag [mm]" if args.elastic else ""))
     for i, name in enumerate(model.frame_names):
@@ -234,7 +250,7 @@ def cmd_fk(args: argparse.Namespace) -> int:
         if args.elastic:
             line += f"  {1e3 * np.linalg.norm(p - rigid[i, :3, 3]):8.3f}"
         if i in eff_of:
-            line += f"  <- {eff_of[i]}" if eff_of[i] != name else "  <- end-effector"
+            line += "  <- end-effector" + "".join(f" {e}" for e in eff_of[i] if e != name)
         print(line)
     if args.elastic:
         ksrc = {"robot": "the robot's own kappa",
@@ -242,6 +258,9 @@ def cmd_fk(args: argparse.Namespace) -> int:
                 "--kappa": f"{out['kappa']} rad/(N m)"}[out["kappa_source"]]
         print(f"elastic: kappa = {ksrc}, lambda = {args.lam:g}, iterations = "
               f"{out['iterations']}, converged = {'yes' if out['converged'] else 'NO'}")
+        if not out["converged"]:
+            print(f"jwarp: warning: the elastic iteration did not converge in {args.max_iter} "
+                  f"updates; raise --max-iter or lower --lam", file=sys.stderr)
         print(f"{'end-effector':<16} {'dx [mm]':>9} {'dy [mm]':>9} {'dz [mm]':>9} {'|sag| [mm]':>11}")
         for ee, s in sags.items():
             print(f"{ee:<16} {s[0]:>9.3f} {s[1]:>9.3f} {s[2]:>9.3f} {np.linalg.norm(s):>11.3f}")
@@ -254,13 +273,12 @@ def cmd_show(args: argparse.Namespace) -> int:
           for k, t in enumerate(args.q or ["zeros"])]
     for q in qs:
         _warn_limits(model, q)
+    _elastic_options(args)
     kappa = None
     if args.elastic:
         kappa, _ = parse_kappa(args.kappa, model)
         if kappa is None:
             kappa = model.kappa
-    elif args.kappa is not None:
-        raise CLIError("--kappa: only meaningful with --elastic")
     _quiet_warp()
     from jwarp.viz import save_robot_rrd
 
@@ -298,10 +316,11 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--kappa", default=None, metavar="K",
                        help="compliance in rad/(N m): one value for all axes or alpha,beta,theta "
                             f"(default: the robot's own kappa, else {DEFAULT_KAPPA:g})")
-        s.add_argument("--lam", type=float, default=1.0, metavar="L",
+        s.add_argument("--lam", type=float, default=None, metavar="L",
                        help="damping of the fixed-point iteration, in (0, 1] (default 1)")
-        s.add_argument("--max-iter", type=int, default=10, metavar="N",
-                       help="most torque updates (default 10)")
+        s.add_argument("--max-iter", type=int, default=None, metavar="N",
+                       help=f"most torque updates (default {DEFAULT_MAX_ITER}; the iteration "
+                            "stops once no DH angle changes by more than 1e-9 rad)")
 
     s = sub.add_parser("fk", help="forward kinematics: every frame's position")
     s.add_argument("robot", help="robot name or path to a robot .json")

@@ -49,6 +49,7 @@ class KinematicsTables:
     fixed_pos: wp.array
     dh0: wp.array
     dh0_3d: wp.array  # (1, n_frames, 5) view used as the shared rho0
+    trig: wp.array  # (n_frames,) vec4 [cos alpha, sin alpha, cos beta, sin beta]
     cpl_start: wp.array
     cpl_joint: wp.array
     cpl_coef: wp.array
@@ -61,7 +62,7 @@ class KinematicsTables:
     def frame_args(self) -> list:
         """Model arguments of the FK kernel, in order."""
         return [self.order, self.parent, self.is_dh, self.prismatic, self.fixed_rot,
-                self.fixed_pos, self.dh0, self.cpl_start, self.cpl_joint, self.cpl_coef]
+                self.fixed_pos, self.dh0, self.trig, self.cpl_start, self.cpl_joint, self.cpl_coef]
 
     def chain(self, frame: int) -> wp.array:
         """Frames from the root to ``frame`` as an int32 device array (cached)."""
@@ -144,6 +145,9 @@ def tables(robot: RobotModel, device: object = None, dtype: object = np.float32)
         fixed_pos=arr(pos.astype(npdt), vec3),
         dh0=arr(dh0, scalar),
         dh0_3d=arr(dh0[None], scalar),
+        trig=arr(np.stack([np.cos(robot.dh_table[:, 3]), np.sin(robot.dh_table[:, 3]),
+                           np.cos(robot.dh_table[:, 4]), np.sin(robot.dh_table[:, 4])], 1).astype(npdt),
+                 wp.types.vector(4, scalar)),
         cpl_start=arr(cpl_start, wp.int32),
         cpl_joint=arr(np.array(cpl_joint or [0], np.int32), wp.int32),
         cpl_coef=arr(np.array(cpl_coef or [0.0], npdt), scalar),

@@ -230,11 +230,21 @@ class _ElasticLaunch:
         the new rho (B, n, 5) and delta (B,)."""
         t, B, n = self.t, self.B, self.n
         rg = self.requires_grad
-        if frames is None:
-            frames = wp.empty((B, n), dtype=self.fk.mat44, device=t.device, requires_grad=rg)
-        moments = wp.empty((B, n), dtype=self.k.vec4, device=t.device, requires_grad=rg)
-        rho_out = wp.empty((B, n, 5), dtype=t.scalar, device=t.device, requires_grad=rg)
-        delta = wp.empty(B, dtype=t.scalar, device=t.device)
+        if rg:  # the tape needs every intermediate kept
+            frames = frames if frames is not None else wp.empty((B, n), dtype=self.fk.mat44,
+                                                                device=t.device, requires_grad=True)
+            moments = wp.empty((B, n), dtype=self.k.vec4, device=t.device, requires_grad=True)
+            rho_out = wp.empty((B, n, 5), dtype=t.scalar, device=t.device, requires_grad=True)
+            delta = wp.empty(B, dtype=t.scalar, device=t.device)
+        else:  # reuse scratch; rho ping-pongs between two buffers
+            if not hasattr(self, "_scratch"):
+                self._scratch = (wp.empty((B, n), dtype=self.fk.mat44, device=t.device),
+                                 wp.empty((B, n), dtype=self.k.vec4, device=t.device),
+                                 [wp.empty((B, n, 5), dtype=t.scalar, device=t.device) for _ in range(2)],
+                                 wp.empty(B, dtype=t.scalar, device=t.device))
+            frames_s, moments, rho_bufs, delta = self._scratch
+            frames = frames if frames is not None else frames_s
+            rho_out = rho_bufs[0] if rho is None or rho[0] is not rho_bufs[0] else rho_bufs[1]
         if rho is None:
             if self.nominal_start:
                 rho_arr, stride, use = t.dh0_3d, 0, 0

@@ -33,10 +33,10 @@ from jwarp.kernels.fk import kernels as fk_kernels
 def kernels(scalar: type) -> SimpleNamespace:
     """Elastic kernels for one scalar type."""
     fk = fk_kernels(scalar)
-    vec3, vec4, mat33, mat44 = fk.vec3, wp.types.vector(4, scalar), fk.mat33, fk.mat44
+    vec3, vec4, mat33, mat44 = fk.vec3, fk.vec4, fk.mat33, fk.mat44
     zero = scalar(0.0)
     one = scalar(1.0)
-    joint_value, local_rot_pos, pack = fk.joint_value, fk.local_rot_pos, fk.pack
+    joint_value, child_rot_pos, pack = fk.joint_value, fk.child_rot_pos, fk.pack
     unpack_rot, unpack_pos = fk.unpack_rot, fk.unpack_pos
 
     @wp.func
@@ -49,6 +49,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         lam: scalar, gravity: vec3,
         order: wp.array(dtype=wp.int32), parent: wp.array(dtype=wp.int32),
         is_dh: wp.array(dtype=wp.int32), dh0: wp.array2d(dtype=scalar),
+        trig: wp.array(dtype=vec4),
         mass: wp.array(dtype=scalar), mass_com: wp.array(dtype=vec3),
         child_start: wp.array(dtype=wp.int32), child_idx: wp.array(dtype=wp.int32),
         moments: wp.array2d(dtype=vec4),
@@ -95,7 +96,9 @@ def kernels(scalar: type) -> SimpleNamespace:
                     prev_r = rho[rb, i, 2]
                     prev_a = rho[rb, i, 3]
                     prev_b = rho[rb, i, 4]
-                ax_alpha = Rp * vec3(wp.cos(prev_b), zero, -wp.sin(prev_b))
+                cs = trig[i]
+                cb, sb = fk.cos_sin_near(prev_b, dh0[i, 4], cs[2], cs[3])
+                ax_alpha = Rp * vec3(cb, zero, -sb)
                 ax_beta = vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1])
                 arm_p = wp.cross(s - mtot * pp, gravity)
                 tau_a = wp.dot(arm_p, ax_alpha)
@@ -145,6 +148,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         fixed_rot: wp.array(dtype=mat33),
         fixed_pos: wp.array(dtype=vec3),
         dh0: wp.array2d(dtype=scalar),
+        trig: wp.array(dtype=fk.vec4),
         cpl_start: wp.array(dtype=wp.int32),
         cpl_joint: wp.array(dtype=wp.int32),
         cpl_coef: wp.array(dtype=scalar),
@@ -165,55 +169,19 @@ def kernels(scalar: type) -> SimpleNamespace:
         for k in range(order.shape[0]):
             i = order[k]
             qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            Rl, pl = local_rot_pos(i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                   fixed_rot, fixed_pos, dh0)
+            Rp = wp.identity(3, dtype=scalar)
+            pp = vec3(zero, zero, zero)
             pi = parent[i]
             if pi >= 0:
                 Tp = frames[b, pi]
                 Rp = unpack_rot(Tp)
-                frames[b, i] = pack(Rp * Rl, Rp * pl + unpack_pos(Tp))
-            else:
-                frames[b, i] = pack(Rl, pl)
+                pp = unpack_pos(Tp)
+            R, p = child_rot_pos(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                 fixed_rot, fixed_pos, dh0, trig)
+            frames[b, i] = pack(R, p)
         delta[b] = torque_update(b, frames, rho, rho_stride, use_rho, rho0, rho0_stride,
                                  kappa, kappa_stride, lam, gravity, order, parent, is_dh, dh0,
-                                 mass, mass_com, child_start, child_idx, moments, rho_out,
+                                 trig, mass, mass_com, child_start, child_idx, moments, rho_out,
                                  tau_out, write_tau)
 
-    @wp.kernel(module="unique")
-    def torque_update_kernel(
-        # Data in:
-        frames: wp.array2d(dtype=mat44),
-        rho: wp.array3d(dtype=scalar),
-        rho_stride: int,
-        use_rho: int,
-        rho0: wp.array3d(dtype=scalar),
-        rho0_stride: int,
-        kappa: wp.array3d(dtype=scalar),
-        kappa_stride: int,
-        lam: scalar,
-        gravity: vec3,
-        write_tau: int,
-        # Model:
-        order: wp.array(dtype=wp.int32),
-        parent: wp.array(dtype=wp.int32),
-        is_dh: wp.array(dtype=wp.int32),
-        dh0: wp.array2d(dtype=scalar),
-        mass: wp.array(dtype=scalar),
-        mass_com: wp.array(dtype=vec3),
-        child_start: wp.array(dtype=wp.int32),
-        child_idx: wp.array(dtype=wp.int32),
-        # Data out:
-        moments: wp.array2d(dtype=vec4),
-        rho_out: wp.array3d(dtype=scalar),
-        tau_out: wp.array3d(dtype=scalar),
-        delta: wp.array(dtype=scalar),
-    ):
-        """The torque update alone, from frames already computed (differentiable)."""
-        b = wp.tid()
-        delta[b] = torque_update(b, frames, rho, rho_stride, use_rho, rho0, rho0_stride,
-                                 kappa, kappa_stride, lam, gravity, order, parent, is_dh, dh0,
-                                 mass, mass_com, child_start, child_idx, moments, rho_out,
-                                 tau_out, write_tau)
-
-    return SimpleNamespace(vec4=vec4, elastic_step=elastic_step_kernel,
-                           torque_update=torque_update_kernel)
+    return SimpleNamespace(vec4=vec4, elastic_step=elastic_step_kernel)

@@ -13,6 +13,7 @@ Frame tables (the *Model*, see :class:`jwarp.device_model.KinematicsTables`):
 * ``fixed_rot``    (n_frames,) mat33  Rot_y(beta0) Rot_x(alpha0) (DH) or the static rotation
 * ``fixed_pos``    (n_frames,) vec3   r0 * Rot_y(beta0) e_x (DH) or the static translation
 * ``dh0``          (n_frames, 5)      nominal rows [d, theta, r, alpha, beta]
+* ``trig``         (n_frames,) vec4   nominal [cos alpha, sin alpha, cos beta, sin beta]
 * ``cpl_start``    (n_frames + 1,) int32, ``cpl_joint``/``cpl_coef``: CSR coupling q -> frame
 
 Per-batch DH rows ``rho`` (calibration, elastic model) have shape (B_rho, n_frames, 5);
@@ -35,6 +36,7 @@ def kernels(scalar: type) -> SimpleNamespace:
     vec3 = wp.types.vector(3, scalar)
     mat33 = wp.types.matrix((3, 3), scalar)
     mat44 = wp.types.matrix((4, 4), scalar)
+    vec4 = wp.types.vector(4, scalar)
     zero = scalar(0.0)
     one = scalar(1.0)
 
@@ -58,37 +60,63 @@ def kernels(scalar: type) -> SimpleNamespace:
                      -sb, cb * sa, cb * ca)
 
     @wp.func
-    def local_rot_pos(i: int, b: int, qi: scalar,
+    def cos_sin_near(x: scalar, x0: scalar, c0: scalar, s0: scalar):
+        """(cos x, sin x) given cos/sin of a nearby x0: for |x - x0| < 0.1 rad the angle
+        sum with a Taylor series of the difference (truncation < 3e-15), else libm."""
+        dx = x - x0
+        if wp.abs(dx) < scalar(0.1):
+            d2 = dx * dx
+            sd = dx * (one - d2 / scalar(6.0) * (one - d2 / scalar(20.0) * (one - d2 / scalar(42.0))))
+            cd = one - d2 / scalar(2.0) * (one - d2 / scalar(12.0) * (one - d2 / scalar(30.0) * (one - d2 / scalar(56.0))))
+            return c0 * cd - s0 * sd, s0 * cd + c0 * sd
+        return wp.cos(x), wp.sin(x)
+
+    @wp.func
+    def child_rot_pos(Rp: mat33, pp: vec3, i: int, b: int, qi: scalar,
                       use_rho: int, rho: wp.array3d(dtype=scalar), rho_stride: int,
                       is_dh: wp.array(dtype=wp.int32), prismatic: wp.array(dtype=wp.int32),
                       fixed_rot: wp.array(dtype=mat33), fixed_pos: wp.array(dtype=vec3),
-                      dh0: wp.array2d(dtype=scalar)):
-        """Local rotation and translation of frame i relative to its parent."""
+                      dh0: wp.array2d(dtype=scalar), trig: wp.array(dtype=vec4)):
+        """World rotation and position of frame i from its parent's (Rp, pp).
+
+        DH frames are composed column by column (Rot_y, Rot_x, Trans_x, Rot_z, Trans_z),
+        which costs about half the multiplications of a full 4x4 product."""
         if is_dh[i] == 0:
-            return fixed_rot[i], fixed_pos[i]
-        rb = b * rho_stride
+            return Rp * fixed_rot[i], Rp * fixed_pos[i] + pp
         d = dh0[i, 0]
         theta = dh0[i, 1]
-        R = fixed_rot[i]
-        p = fixed_pos[i]
+        r = dh0[i, 2]
+        cs = trig[i]
+        ca = cs[0]
+        sa = cs[1]
+        cb = cs[2]
+        sb = cs[3]
         if use_rho != 0:
+            rb = b * rho_stride
             d = rho[rb, i, 0]
             theta = rho[rb, i, 1]
             r = rho[rb, i, 2]
-            R = dh_fixed_rot(rho[rb, i, 3], rho[rb, i, 4])
-            p = r * vec3(R[0, 0], R[1, 0], R[2, 0])
+            ca, sa = cos_sin_near(rho[rb, i, 3], dh0[i, 3], cs[0], cs[1])
+            cb, sb = cos_sin_near(rho[rb, i, 4], dh0[i, 4], cs[2], cs[3])
         if prismatic[i] != 0:
             d = d + qi
         else:
             theta = theta + qi
+        c0 = vec3(Rp[0, 0], Rp[1, 0], Rp[2, 0])
+        c1 = vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1])
+        c2 = vec3(Rp[0, 2], Rp[1, 2], Rp[2, 2])
+        if sb != zero:  # Rot_y(beta)
+            t0 = cb * c0 - sb * c2
+            c2 = sb * c0 + cb * c2
+            c0 = t0
+        n1 = ca * c1 + sa * c2  # Rot_x(alpha)
+        n2 = ca * c2 - sa * c1
+        p = pp + r * c0  # Trans_x(r)
         ct = wp.cos(theta)
         st = wp.sin(theta)
-        # R * Rot_z(theta): columns c0 = ct a0 + st a1, c1 = -st a0 + ct a1, c2 = a2
-        Rl = mat33(ct * R[0, 0] + st * R[0, 1], -st * R[0, 0] + ct * R[0, 1], R[0, 2],
-                   ct * R[1, 0] + st * R[1, 1], -st * R[1, 0] + ct * R[1, 1], R[1, 2],
-                   ct * R[2, 0] + st * R[2, 1], -st * R[2, 0] + ct * R[2, 1], R[2, 2])
-        pl = p + d * vec3(R[0, 2], R[1, 2], R[2, 2])
-        return Rl, pl
+        m0 = ct * c0 + st * n1  # Rot_z(theta + q)
+        m1 = ct * n1 - st * c0
+        return wp.matrix_from_cols(m0, m1, n2), p + d * n2  # Trans_z(d)
 
     @wp.func
     def pack(R: mat33, p: vec3) -> mat44:
@@ -120,6 +148,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         fixed_rot: wp.array(dtype=mat33),
         fixed_pos: wp.array(dtype=vec3),
         dh0: wp.array2d(dtype=scalar),
+        trig: wp.array(dtype=vec4),
         cpl_start: wp.array(dtype=wp.int32),
         cpl_joint: wp.array(dtype=wp.int32),
         cpl_coef: wp.array(dtype=scalar),
@@ -131,15 +160,16 @@ def kernels(scalar: type) -> SimpleNamespace:
         for k in range(order.shape[0]):
             i = order[k]
             qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            Rl, pl = local_rot_pos(i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                   fixed_rot, fixed_pos, dh0)
+            Rp = wp.identity(3, dtype=scalar)
+            pp = vec3(zero, zero, zero)
             pi = parent[i]
             if pi >= 0:
                 Tp = frames[b, pi]
                 Rp = unpack_rot(Tp)
-                frames[b, i] = pack(Rp * Rl, Rp * pl + unpack_pos(Tp))
-            else:
-                frames[b, i] = pack(Rl, pl)
+                pp = unpack_pos(Tp)
+            R, p = child_rot_pos(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                 fixed_rot, fixed_pos, dh0, trig)
+            frames[b, i] = pack(R, p)
 
     @wp.kernel(module="unique")
     def jacobian_kernel(
@@ -156,6 +186,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         fixed_rot: wp.array(dtype=mat33),
         fixed_pos: wp.array(dtype=vec3),
         dh0: wp.array2d(dtype=scalar),
+        trig: wp.array(dtype=vec4),
         cpl_start: wp.array(dtype=wp.int32),
         cpl_joint: wp.array(dtype=wp.int32),
         cpl_coef: wp.array(dtype=scalar),
@@ -177,10 +208,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         for k in range(chain.shape[0]):
             i = chain[k]
             qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            Rl, pl = local_rot_pos(i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                   fixed_rot, fixed_pos, dh0)
-            p = R * pl + p
-            R = R * Rl
+            R, p = child_rot_pos(R, p, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                 fixed_rot, fixed_pos, dh0, trig)
         target = R * point + p
         # pass 2: joint axes (z of each driven frame, through its origin)
         R = wp.identity(3, dtype=scalar)
@@ -188,10 +217,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         for k in range(chain.shape[0]):
             i = chain[k]
             qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            Rl, pl = local_rot_pos(i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                   fixed_rot, fixed_pos, dh0)
-            p = R * pl + p
-            R = R * Rl
+            R, p = child_rot_pos(R, p, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                 fixed_rot, fixed_pos, dh0, trig)
             if cpl_start[i + 1] > cpl_start[i]:
                 z = vec3(R[0, 2], R[1, 2], R[2, 2])
                 lin = wp.cross(z, target - p)
@@ -221,6 +248,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         fixed_rot: wp.array(dtype=mat33),
         fixed_pos: wp.array(dtype=vec3),
         dh0: wp.array2d(dtype=scalar),
+        trig: wp.array(dtype=vec4),
         cpl_start: wp.array(dtype=wp.int32),
         cpl_joint: wp.array(dtype=wp.int32),
         cpl_coef: wp.array(dtype=scalar),
@@ -236,10 +264,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         for k in range(chain.shape[0]):
             i = chain[k]
             qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            Rl, pl = local_rot_pos(i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                   fixed_rot, fixed_pos, dh0)
-            p = R * pl + p
-            R = R * Rl
+            R, p = child_rot_pos(R, p, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                 fixed_rot, fixed_pos, dh0, trig)
         target = R * point + p
         R = wp.identity(3, dtype=scalar)
         p = vec3(zero, zero, zero)
@@ -248,10 +274,8 @@ def kernels(scalar: type) -> SimpleNamespace:
             Rp = R
             pp = p
             qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            Rl, pl = local_rot_pos(i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                   fixed_rot, fixed_pos, dh0)
-            p = R * pl + p
-            R = R * Rl
+            R, p = child_rot_pos(R, p, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                 fixed_rot, fixed_pos, dh0, trig)
             if is_dh[i] != 0:
                 beta = dh0[i, 4]
                 if use_rho != 0:
@@ -277,7 +301,7 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     return SimpleNamespace(
         scalar=scalar, vec3=vec3, mat33=mat33, mat44=mat44,
-        joint_value=joint_value, local_rot_pos=local_rot_pos, pack=pack,
+        vec4=vec4, cos_sin_near=cos_sin_near, joint_value=joint_value, child_rot_pos=child_rot_pos, pack=pack,
         unpack_rot=unpack_rot, unpack_pos=unpack_pos,
         fk=fk_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
     )
