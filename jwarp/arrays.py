@@ -22,6 +22,8 @@ def init_warp() -> None:
     global _INITIALISED
     if not _INITIALISED:
         wp.config.quiet = True
+        if hasattr(wp, "LOG_WARNING"):  # Warp >= 1.1x logs through log_level
+            wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
         wp.init()
         _INITIALISED = True
 

@@ -189,7 +189,7 @@ def cmd_robots(args: argparse.Namespace) -> int:
 def cmd_info(args: argparse.Namespace) -> int:
     m = _robot(args.robot)
     if args.json:
-        print(json.dumps(m.to_dict(), indent=1))
+        print(dumps(m.to_dict()))
     else:
         print(m.summary())
     return 0
@@ -282,8 +282,11 @@ def cmd_show(args: argparse.Namespace) -> int:
     _quiet_warp()
     from jwarp.viz import save_robot_rrd
 
-    path = save_robot_rrd(model, np.stack(qs), args.save, elastic_kappa=kappa, lam=args.lam,
-                          max_iter=args.max_iter)
+    try:
+        path = save_robot_rrd(model, np.stack(qs), args.save, elastic_kappa=kappa, lam=args.lam,
+                              max_iter=args.max_iter)
+    except ImportError as e:
+        raise CLIError(f"show: {e}") from None
     print(f"wrote {path} ({len(qs)} configuration{'s' if len(qs) != 1 else ''} of "
           f"'{model.name}'{', rigid and elastic' if args.elastic else ''}); "
           f"view with: rerun {path}")
