@@ -318,3 +318,34 @@ def test_bad_types_raise_type_errors():
         K.fk("justin19", "zeros")
     with pytest.raises(TypeError, match="dtype"):
         K.fk("justin19", np.zeros(19), dtype=np.int32)
+
+
+def _cuda_available():
+    from jwarp.arrays import init_warp
+
+    init_warp()
+    return wp.is_cuda_available()
+
+
+@pytest.mark.skipif(not _cuda_available(), reason="no CUDA device")
+def test_cuda_matches_cpu_and_torch_autograd_on_cuda():
+    model = jwarp.robot("justin19")
+    q = _sample(model, 256, seed=16)
+    kappa = kappa_uniform(model, KAPPA)
+    np.testing.assert_allclose(K.fk(model, q, device="cuda:0"), ref_fk(model, q), atol=1e-9)
+    np.testing.assert_allclose(K.fk(model, q.astype(np.float32), device="cuda:0"), ref_fk(model, q),
+                               atol=2e-5)
+    # compared with references only: the trimmed Warp of the GPU machine has no CPU compiler
+    jac = K.jacobian(model, q, "right_tcp", device="cuda:0")
+    np.testing.assert_allclose(jac, ref_jacobian_fd(model, q, 13), atol=1e-7)
+    tape = tape_jacobian(model, q[:8], "left_tcp", wrt=("dh",), device="cuda:0")
+    np.testing.assert_allclose(K.jacobian_dh(model, q[:8], "left_tcp", device="cuda:0"), tape["dh"],
+                               atol=1e-10)
+    gpu = K.fk_elastic(model, q, kappa, max_iter=4, tol=0.0, device="cuda:0")
+    np.testing.assert_allclose(gpu.frames, ref_fk_elastic(model, q, kappa, n_iter=4)[0], atol=1e-9)
+    torch = pytest.importorskip("torch")
+    qt = torch.tensor(q, device="cuda", requires_grad=True)
+    frames = K.fk(model, qt)
+    assert frames.is_cuda and frames.shape == (256, 27, 4, 4)
+    frames[:, 13, :3, 3].sum().backward()
+    np.testing.assert_allclose(qt.grad.cpu().numpy(), jac[:, :3].sum(1), atol=1e-9)
