@@ -130,6 +130,8 @@ def test_dh_jacobian_matches_finite_differences(name, frame):
     tape = tape_jacobian(model, q, frame, dh=dh, wrt=("q", "dh"))
     np.testing.assert_allclose(tape["dh"], jac, atol=1e-10)
     np.testing.assert_allclose(tape["q"], K.jacobian(model, q, frame, dh=dh, device="cpu"), atol=1e-10)
+    nominal = tape_jacobian(model, q, frame, wrt=("dh",))  # beta = 0: d/d beta must not vanish
+    np.testing.assert_allclose(nominal["dh"], K.jacobian_dh(model, q, frame, device="cpu"), atol=1e-10)
 
 
 def test_kappa_jacobian_through_the_equilibrium_matches_finite_differences():
