@@ -1,0 +1,687 @@
+#!/usr/bin/env python
+"""Throughput of the jwarp kinematics kernels (configurations per second).
+
+Times the Warp kernel launches of FK, the geometric Jacobian of one TCP and the elastic
+(torque-equilibrium) FK on preallocated Warp arrays, beside a plain vectorized numpy FK
+and (if installed) pinocchio, and prints one fixed-width table. See benchmarks/README.md.
+
+    python benchmarks/bench_kinematics.py                  # CPU, and CUDA if present
+    python benchmarks/bench_kinematics.py --device cpu --dtype float64 --json out.json
+    python benchmarks/bench_kinematics.py --quick --device cpu    # smoke test sizes
+
+How a jwarp row is timed: the library call is made once with its launches recorded
+(``wp.launch`` is wrapped while it runs); the recorded launches, with the very arrays the
+library allocated, are then replayed with ``wp.launch``. Compile time and allocations are
+therefore excluded, while the per-launch Python cost of ``wp.launch`` is included (it is
+what every library call pays). Each measurement repeats the replay until it takes at
+least ``--min-time`` seconds, ends with ``wp.synchronize_device``, runs ``--repeats``
+times, and reports the median (the best is kept in the JSON output).
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import contextlib
+import gc
+import inspect
+import json
+import math
+import os
+import platform
+import statistics
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+import warp as wp
+
+if hasattr(wp.config, "quiet"):  # older Warp
+    wp.config.quiet = True
+if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
+    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+
+from jwarp.arrays import init_warp  # noqa: E402
+from jwarp.device_model import tables  # noqa: E402
+from jwarp.kinematics import (  # noqa: E402
+    _ElasticLaunch, _elastic_args, fk, fk_elastic, jacobian, launch_fk)
+from jwarp.model import RobotModel  # noqa: E402
+from jwarp.registry import robot as get_robot  # noqa: E402
+
+KAPPA = 1e-4            # rad/(N m) on the alpha, beta and theta axes of every DH frame
+ELASTIC_ITERS = (1, 3, 10)
+FULL = dict(cpu=(1, 1_000, 100_000), cuda=(1, 1_000, 100_000, 1_000_000),
+            thread_batch=100_000, pin_batch=1_000, min_time=0.2, repeats=5)
+QUICK = dict(cpu=(1, 100), cuda=(1, 10_000), thread_batch=2_000, pin_batch=20,
+             min_time=0.005, repeats=2)
+
+
+# ====================================================================== timing
+@dataclass
+class Timing:
+    median: float   # s per call
+    best: float     # s per call
+    calls: int      # calls per timed run
+    runs: int
+
+
+def measure(fn: Callable[[], Any], device: Any, min_time: float, repeats: int,
+            max_total: float = 20.0) -> Timing:
+    """Median/best wall time of ``fn`` per call. Warms up first (compiles, first touch),
+    then times runs of ``calls`` back-to-back calls, each closed by a device sync and
+    lasting at least ``min_time`` s; fewer runs (at least 3) if that would exceed
+    ``max_total`` s."""
+    def sync() -> None:
+        if device is not None:
+            wp.synchronize_device(device)
+
+    fn()
+    sync()
+    n, elapsed = 1, 0.0
+    while True:  # calibrate: double until a run takes a tenth of min_time
+        t0 = time.perf_counter()
+        for _ in range(n):
+            fn()
+        sync()
+        elapsed = time.perf_counter() - t0
+        if elapsed >= min_time / 10 or n >= 1 << 20:
+            break
+        n *= 2
+    per_call = max(elapsed / n, 1e-9)
+    calls = max(1, math.ceil(min_time / per_call))
+    runs = repeats
+    if calls * per_call * runs > max_total:
+        runs = max(min(3, repeats), int(max_total / (calls * per_call)))
+    times = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        for _ in range(calls):
+            fn()
+        sync()
+        times.append((time.perf_counter() - t0) / calls)
+    return Timing(statistics.median(times), min(times), calls, runs)
+
+
+# ============================================================ launch recording
+_LAUNCH_SIG = inspect.signature(wp.launch)
+
+
+@contextlib.contextmanager
+def record_launches():
+    """Record every ``wp.launch`` made inside the block (and still perform it)."""
+    original = wp.launch
+    recorded: list[dict] = []
+
+    def spy(*args: Any, **kwargs: Any) -> Any:
+        recorded.append(dict(_LAUNCH_SIG.bind(*args, **kwargs).arguments))
+        return original(*args, **kwargs)
+
+    wp.launch = spy
+    try:
+        yield recorded
+    finally:
+        wp.launch = original
+
+
+def replay(launches: list[dict]) -> Callable[[], None]:
+    """A function that re-issues the recorded launches, on the same arrays, in order."""
+    calls = [dict(l) for l in launches]
+
+    def run() -> None:
+        for c in calls:
+            wp.launch(**c)
+    return run
+
+
+def slice_launches(launches: list[dict], B: int, lo: int, hi: int) -> list[dict]:
+    """The launches restricted to configurations [lo, hi): dim and every array whose first
+    dimension is the batch are sliced (views, no copies); shared tables are kept."""
+    def cut(x: Any) -> Any:
+        if isinstance(x, wp.array) and x.ndim >= 1 and x.shape[0] == B:
+            return x[lo:hi]
+        return x
+
+    out = []
+    for l in launches:
+        dim = l["dim"]
+        if (dim if isinstance(dim, int) else tuple(dim)[0]) != B:
+            raise ValueError("launch is not over the batch")
+        c = dict(l)
+        c["dim"] = hi - lo
+        c["inputs"] = [cut(x) for x in l.get("inputs", [])]
+        c["outputs"] = [cut(x) for x in l.get("outputs", [])]
+        out.append(c)
+    return out
+
+
+def threaded(launches: list[dict], B: int, pool: concurrent.futures.ThreadPoolExecutor,
+             n_threads: int) -> Callable[[], None]:
+    """Run the launches on ``n_threads`` contiguous slices of the batch, one thread each
+    (Warp's CPU kernels are called through ctypes, which releases the GIL)."""
+    bounds = [B * k // n_threads for k in range(n_threads + 1)]
+    parts = [replay(slice_launches(launches, B, bounds[k], bounds[k + 1]))
+             for k in range(n_threads)]
+
+    def run() -> None:
+        for f in [pool.submit(p) for p in parts]:
+            f.result()
+    return run
+
+
+# ================================================================ numpy FK
+class NumpyFK:
+    """Plain vectorized numpy FK: frames in topological order, each composed with its
+    parent by an einsum over the batch. Same DH convention as jwarp::
+
+        parent_T_child = Rot_y(beta) Rot_x(alpha) Trans_x(r) Rot_z(theta + q) Trans_z(d)
+    """
+
+    def __init__(self, model: RobotModel, dtype: Any):
+        self.dtype = np.dtype(dtype)
+        self.order = [int(i) for i in model.topological_order]
+        self.parents = model.parents.astype(int)
+        self.coupling_t = model.coupling_matrix.T.astype(self.dtype)   # (n_dof, n_frames)
+        self.prismatic = model.frame_is_prismatic
+        self.driven = np.abs(model.coupling_matrix).sum(axis=1) > 0
+        self.is_dh = model.is_dh
+        self.n = model.n_frames
+        dh = model.dh_table
+        self.theta0 = dh[:, 1].astype(self.dtype)
+        self.d0 = dh[:, 0].astype(self.dtype)
+        # Rot_y(beta) Rot_x(alpha) Trans_x(r) (DH) or the fixed local transform (static,
+        # fixed DH frames): columns of the first used below.
+        self.pre = np.zeros((self.n, 4, 4))
+        self.const = np.zeros((self.n, 4, 4))
+        for i in range(self.n):
+            if self.is_dh[i]:
+                d, th, r, a, b = dh[i]
+                self.pre[i] = rot_y(b) @ rot_x(a) @ trans(r, 0, 0)
+                self.const[i] = self.pre[i] @ rot_z(th) @ trans(0, 0, d)
+            else:
+                self.const[i] = model.static_transforms[i]
+        self.pre = self.pre.astype(self.dtype)
+        self.const = self.const.astype(self.dtype)
+
+    def alloc(self, B: int) -> tuple[np.ndarray, np.ndarray]:
+        return (np.empty((B, self.n, 4, 4), self.dtype), np.empty((B, 4, 4), self.dtype))
+
+    def __call__(self, q: np.ndarray, out: np.ndarray, local: np.ndarray) -> np.ndarray:
+        qf = q @ self.coupling_t                                         # (B, n_frames)
+        for i in self.order:
+            p = self.parents[i]
+            if self.is_dh[i] and self.driven[i]:
+                A = self.pre[i]
+                if self.prismatic[i]:
+                    th = np.full(q.shape[0], self.theta0[i], self.dtype)
+                    d = self.d0[i] + qf[:, i]
+                else:
+                    th = self.theta0[i] + qf[:, i]
+                    d = np.full(q.shape[0], self.d0[i], self.dtype)
+                c, s = np.cos(th), np.sin(th)
+                # A Rot_z(th) Trans_z(d): columns c*a0 + s*a1, -s*a0 + c*a1, a2, d*a2 + a3
+                local[:, :, 0] = c[:, None] * A[:, 0] + s[:, None] * A[:, 1]
+                local[:, :, 1] = c[:, None] * A[:, 1] - s[:, None] * A[:, 0]
+                local[:, :, 2] = A[:, 2]
+                local[:, :, 3] = d[:, None] * A[:, 2] + A[:, 3]
+                if p < 0:
+                    out[:, i] = local
+                else:
+                    np.einsum("bij,bjk->bik", out[:, p], local, out=out[:, i])
+            else:
+                if p < 0:
+                    out[:, i] = self.const[i]
+                else:
+                    np.einsum("bij,jk->bik", out[:, p], self.const[i], out=out[:, i])
+        return out
+
+
+def rot_x(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1, 0, 0, 0], [0, c, -s, 0], [0, s, c, 0], [0, 0, 0, 1.0]])
+
+
+def rot_y(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1.0]])
+
+
+def rot_z(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+
+
+def trans(x: float, y: float, z: float) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, 3] = (x, y, z)
+    return t
+
+
+# ================================================================ pinocchio
+class PinocchioModel:
+    """A pinocchio model of the same frame tree: every driven DH frame is a revolute-Z (or
+    prismatic-Z) joint after a fixed placement ``Rot_y Rot_x Trans_x(r) Rot_z(theta)
+    Trans_z(d)`` (Trans_z and Rot_z commute with a Z joint); static and fixed DH frames
+    are operational frames. A coupled frame (justin19's torso_4 = -q1 - q2) becomes an
+    independent joint: pinocchio gets q_pin = C q (C: the coupling rows of the driven
+    frames), so its FK is exact and its Jacobian has one column per driven frame
+    (folding J_pin @ C gives jwarp's columns; the fold is not timed)."""
+
+    def __init__(self, model: RobotModel, tcp: str):
+        import pinocchio as pin
+
+        self.pin = pin
+        pm = pin.Model()
+        pm.name = model.name
+        where: dict[int, tuple[int, np.ndarray, int]] = {}  # frame -> (joint, placement, pin frame)
+        rows: list[tuple[int, np.ndarray]] = []
+        self.frame_ids = [0] * model.n_frames
+        for i in (int(k) for k in model.topological_order):
+            f = model.frames[i]
+            p = int(model.parents[i])
+            joint, placement, parent_frame = (0, np.eye(4), 0) if p < 0 else where[p]
+            if f.kind == "dh":
+                d, th, r, a, b = model.dh_table[i]
+                local = rot_y(b) @ rot_x(a) @ trans(r, 0, 0) @ rot_z(th) @ trans(0, 0, d)
+            else:
+                local = model.static_transforms[i]
+            placement = placement @ local
+            if f.coupling:
+                jm = pin.JointModelPZ() if model.frame_is_prismatic[i] else pin.JointModelRZ()
+                joint = pm.addJoint(joint, jm, pin.SE3(placement), f.name + "_joint")
+                rows.append((joint, model.coupling_matrix[i]))
+                placement = np.eye(4)
+            fid = pm.addFrame(pin.Frame(f.name, joint, parent_frame, pin.SE3(placement),
+                                        pin.FrameType.OP_FRAME), False)
+            self.frame_ids[i] = int(fid)
+            where[i] = (joint, placement, fid)
+        self.coupling = np.zeros((pm.nq, model.n_dof))
+        for joint, row in rows:
+            self.coupling[pm.joints[joint].idx_q] = row
+        self.model, self.data = pm, pm.createData()
+        self.tcp = self.frame_ids[model.frame_index(tcp)]
+        self.n_coupled = sum(1 for f in model.frames if len(f.coupling) > 1)
+
+    def q(self, q: np.ndarray) -> list[np.ndarray]:
+        return [np.ascontiguousarray(r) for r in np.asarray(q, np.float64) @ self.coupling.T]
+
+    def fk_loop(self, qs: list[np.ndarray]) -> Callable[[], None]:
+        pin, m, d = self.pin, self.model, self.data
+
+        def run() -> None:
+            for qi in qs:
+                pin.forwardKinematics(m, d, qi)
+                pin.updateFramePlacements(m, d)
+        return run
+
+    def jac_loop(self, qs: list[np.ndarray]) -> Callable[[], None]:
+        pin, m, d, f = self.pin, self.model, self.data, self.tcp
+        ref = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+        def run() -> None:
+            for qi in qs:
+                pin.computeJointJacobians(m, d, qi)
+                pin.getFrameJacobian(m, d, f, ref)
+        return run
+
+    def frame_jac_loop(self, qs: list[np.ndarray]) -> Callable[[], None]:
+        pin, m, d, f = self.pin, self.model, self.data, self.tcp
+        ref = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+        def run() -> None:
+            for qi in qs:
+                pin.computeFrameJacobian(m, d, qi, f, ref)
+        return run
+
+    def check(self, model: RobotModel, q: np.ndarray, tcp: str) -> tuple[float, float]:
+        """Max |difference| to jwarp (float64, CPU) of all frames and of the folded TCP
+        Jacobian over the configurations ``q``."""
+        pin = self.pin
+        ref_frames = fk(model, q.astype(np.float64), device="cpu", dtype=np.float64)
+        ref_jac = jacobian(model, q.astype(np.float64), tcp, device="cpu", dtype=np.float64)
+        ef = ej = 0.0
+        for b, qi in enumerate(self.q(q)):
+            pin.forwardKinematics(self.model, self.data, qi)
+            pin.updateFramePlacements(self.model, self.data)
+            for i, fid in enumerate(self.frame_ids):
+                ef = max(ef, float(np.abs(self.data.oMf[fid].homogeneous - ref_frames[b, i]).max()))
+            pin.computeJointJacobians(self.model, self.data, qi)
+            J = pin.getFrameJacobian(self.model, self.data, self.tcp,
+                                     pin.ReferenceFrame.LOCAL_WORLD_ALIGNED) @ self.coupling
+            ej = max(ej, float(np.abs(J - ref_jac[b]).max()))
+        return ef, ej
+
+
+# ================================================================== table
+@dataclass
+class Row:
+    robot: str
+    op: str
+    device: str
+    batch: int
+    configs_per_s: float
+    time_per_batch_s: float          # median
+    best_time_per_batch_s: float
+    ratio: float | None = None
+    ratio_meaning: str = ""
+    extra: dict = field(default_factory=dict)
+
+
+COLUMNS = (("robot", 9, "<"), ("op", 24, "<"), ("device", 7, "<"), ("batch", 9, ">"),
+           ("configs/s", 10, ">"), ("time/batch", 11, ">"), ("ratio", 8, ">"),
+           ("ratio meaning", 24, "<"))
+
+
+def si(x: float) -> str:
+    for div, suffix in ((1e9, " G"), (1e6, " M"), (1e3, " k")):
+        if x >= div:
+            return f"{x / div:.3g}{suffix}"
+    return f"{x:.3g}"
+
+
+def duration(t: float) -> str:
+    for div, unit in ((1.0, "s"), (1e-3, "ms"), (1e-6, "us")):
+        if t >= div:
+            return f"{t / div:.3g} {unit}"
+    return f"{t / 1e-9:.3g} ns"
+
+
+def header() -> str:
+    head = " ".join(f"{name:{align}{w}}" for name, w, align in COLUMNS)
+    return head + "\n" + " ".join("-" * w for _, w, _ in COLUMNS)
+
+
+def fmt(r: Row) -> str:
+    cells = (r.robot, r.op, r.device, f"{r.batch:,}".replace(",", "_"), si(r.configs_per_s),
+             duration(r.time_per_batch_s), "" if r.ratio is None else f"{r.ratio:.3g}",
+             r.ratio_meaning)
+    return " ".join(f"{c:{align}{w}}" for c, (_, w, align) in zip(cells, COLUMNS))
+
+
+# ================================================================== bench
+class Bench:
+    def __init__(self, args: argparse.Namespace):
+        self.args = args
+        self.sizes = QUICK if args.quick else FULL
+        self.min_time = args.min_time if args.min_time is not None else self.sizes["min_time"]
+        self.repeats = args.repeats if args.repeats is not None else self.sizes["repeats"]
+        self.dtype = np.dtype(args.dtype)
+        # the scalar *type* (np.float32), not the dtype instance: device_model.scalar_type
+        # maps np.dtype('float32') to itself (np.dtype('float32') == wp.float32 is True)
+        self.ftype = self.dtype.type
+        self.rows: list[Row] = []
+        self.notes: list[str] = []
+        self.checks: dict[str, float] = {}
+        self.rng = np.random.default_rng(0)
+
+    # -------------------------------------------------------------- helpers
+    def emit(self, row: Row) -> Row:
+        self.rows.append(row)
+        print(fmt(row), flush=True)
+        return row
+
+    def time_row(self, robot: str, op: str, device: Any, batch: int, fn: Callable[[], Any],
+                 sync_device: Any = None, ratio: float | None = None,
+                 ratio_meaning: str = "", **extra: Any) -> Row:
+        t = measure(fn, sync_device, self.min_time, self.repeats)
+        row = Row(robot, op, str(device), batch, batch / t.median, t.median, t.best,
+                  ratio, ratio_meaning, dict(calls=t.calls, runs=t.runs, **extra))
+        return row
+
+    def configs(self, model: RobotModel, B: int) -> np.ndarray:
+        lo, hi = model.joint_limits.T
+        return (lo + (hi - lo) * self.rng.random((B, model.n_dof))).astype(self.dtype)
+
+    # ------------------------------------------------------------ jwarp ops
+    def jwarp_launches(self, model: RobotModel, q: wp.array, dev: Any) -> dict[str, list[dict]]:
+        """Record the launches of every timed op on batch ``q`` (runs each once)."""
+        t = tables(model, dev, self.ftype)
+        ops: dict[str, list[dict]] = {}
+        with record_launches() as rec:
+            launch_fk(t, q)
+        ops["fk"] = rec
+        if dev.is_cuda:
+            with record_launches() as rec:
+                launch_fk(t, q, frame_major=True)
+            ops["fk (frame-major out)"] = rec
+        with record_launches() as rec:
+            jacobian(model, q, self.args.tcp, device=dev, dtype=self.ftype, validate=False)
+        ops["jacobian"] = rec
+        ops["fk+jacobian"] = ops["fk"] + ops["jacobian"]
+        _, batch, tt, kap, rho0 = _elastic_args(model, q, KAPPA, 1.0, 1, 0.0, None, dev,
+                                                self.ftype, False)
+        for n_iter in ELASTIC_ITERS:
+            run = _ElasticLaunch(tt, batch.array, kap, rho0, 1.0)
+            with record_launches() as rec:
+                rho = None
+                for _ in range(n_iter):   # fixed count: no convergence test
+                    _, rho_new, _ = run.step(rho)
+                    rho = (rho_new, 1)
+                run.frames_at(rho)
+            ops[f"elastic_fk({n_iter})"] = rec
+        # one torque update from per-configuration rows rho (compensation inside an
+        # optimizer keeps rho between its iterations)
+        run = _ElasticLaunch(tt, batch.array, kap, rho0, 1.0)
+        _, rho1, _ = run.step(None)
+        with record_launches() as rec:
+            run.step((rho1, 1))
+        ops["elastic_step"] = rec
+        # the FK part of that step alone: FK at per-configuration DH rows
+        with record_launches() as rec:
+            launch_fk(t, q, dh=(rho1, 1))
+        ops["fk (per-config rho)"] = rec
+        return ops
+
+    def run_device(self, model: RobotModel, dev: Any, batches: tuple[int, ...]) -> dict:
+        """jwarp rows of one robot on one device; returns {batch: {op: Row}}."""
+        name = model.name
+        result: dict[int, dict[str, Row]] = {}
+        for B in batches:
+            q = wp.array(self.configs(model, B), dtype=wp.float32 if self.dtype == np.float32
+                         else wp.float64, device=dev)
+            ops = self.jwarp_launches(model, q, dev)
+            rows: dict[str, Row] = {}
+            fns = {op: replay(launches) for op, launches in ops.items()}
+            # the FK launch pre-packed by Warp (wp.launch(..., record_cmd=True)): what is
+            # left when the Python argument packing of wp.launch is taken out
+            fns["fk (wp.Launch replay)"] = wp.launch(**ops["fk"][0], record_cmd=True).launch
+            for op, fn in fns.items():
+                rows[op] = self.time_row(name, op, dev, B, fn, dev,
+                                         launches=len(ops.get(op, [None])))
+                if op != "fk":
+                    rows[op].ratio = rows[op].time_per_batch_s / rows["fk"].time_per_batch_s
+                    rows[op].ratio_meaning = "x fk time"
+                self.emit(rows[op])
+            del fns
+            del ops
+            # the public API, allocations and host sync included
+            rows["fk api"] = self.time_row(
+                name, "fk api", dev, B,
+                lambda: fk(model, q, device=dev, dtype=self.ftype, validate=False), dev)
+            it = ELASTIC_ITERS[-1]
+            rows[f"elastic_fk({it}) api"] = self.time_row(
+                name, f"elastic_fk({it}) api", dev, B,
+                lambda: fk_elastic(model, q, KAPPA, max_iter=it, tol=0.0, device=dev,
+                                   dtype=self.ftype, validate=False), dev)
+            for op in ("fk api", f"elastic_fk({it}) api"):
+                rows[op].ratio = rows[op].time_per_batch_s / rows["fk"].time_per_batch_s
+                rows[op].ratio_meaning = "x fk time"
+                self.emit(rows[op])
+            result[B] = rows
+            del q
+            gc.collect()
+        return result
+
+    # ------------------------------------------------------------- numpy
+    def run_numpy(self, model: RobotModel, cpu_rows: dict, batches: tuple[int, ...]) -> dict:
+        nfk = NumpyFK(model, self.dtype)
+        q = self.configs(model, 64)
+        out, local = nfk.alloc(64)
+        ref = fk(model, q, device="cpu", dtype=self.ftype)
+        err = float(np.abs(nfk(q, out, local) - ref).max())
+        self.checks[f"{model.name}: |numpy fk - jwarp fk| max"] = err
+        tol = 1e-3 if self.dtype == np.float32 else 1e-9
+        if not err <= tol:
+            raise SystemExit(f"numpy FK disagrees with jwarp FK on {model.name}: {err:.3g}")
+        result = {}
+        for B in batches:
+            q = self.configs(model, B)
+            out, local = nfk.alloc(B)
+            row = self.time_row(model.name, "fk numpy", "cpu", B, lambda: nfk(q, out, local))
+            if B in cpu_rows:
+                row.ratio = row.time_per_batch_s / cpu_rows[B]["fk"].time_per_batch_s
+                row.ratio_meaning = "jwarp fk speedup"
+            self.emit(row)
+            result[B] = row
+            del out, local
+        return result
+
+    # ----------------------------------------------------------- threads
+    def run_threads(self, model: RobotModel, n_threads: int) -> None:
+        B = self.sizes["thread_batch"]
+        dev = wp.get_device("cpu")
+        q = wp.array(self.configs(model, B), dtype=wp.float32 if self.dtype == np.float32
+                     else wp.float64, device=dev)
+        ops = self.jwarp_launches(model, q, dev)
+        with concurrent.futures.ThreadPoolExecutor(n_threads) as pool:
+            # same result either way
+            fk_out = ops["fk"][0]["outputs"][0]
+            replay(ops["fk"])()
+            single = fk_out.numpy().copy()
+            fk_out.zero_()
+            threaded(ops["fk"], B, pool, n_threads)()
+            self.checks[f"{model.name}: |threaded fk - fk| max"] = float(
+                np.abs(fk_out.numpy() - single).max())
+            for op in ("fk", "jacobian", "elastic_step", "elastic_fk(3)"):
+                one = self.time_row(model.name, op, "cpu", B, replay(ops[op]))
+                many = self.time_row(model.name, f"{op} {n_threads} threads", "cpu", B,
+                                     threaded(ops[op], B, pool, n_threads))
+                many.ratio = one.time_per_batch_s / many.time_per_batch_s
+                many.ratio_meaning = "speedup vs 1 thread"
+                many.extra["single_thread_s"] = one.time_per_batch_s
+                self.emit(many)
+
+    # --------------------------------------------------------- pinocchio
+    def run_pinocchio(self, model: RobotModel, cpu_rows: dict) -> None:
+        try:
+            import pinocchio  # noqa: F401
+        except ImportError:
+            if not any("pinocchio not installed" in n for n in self.notes):
+                self.notes.append("pinocchio not installed (pip install pin): no pinocchio rows")
+                print("pinocchio not installed", flush=True)
+            return
+        pm = PinocchioModel(model, self.args.tcp)
+        ef, ej = pm.check(model, self.configs(model, 16), self.args.tcp)
+        self.checks[f"{model.name}: |pinocchio - jwarp| frames max"] = ef
+        self.checks[f"{model.name}: |pinocchio - jwarp| jacobian max"] = ej
+        if pm.n_coupled:
+            self.notes.append(
+                f"pinocchio {model.name}: {pm.n_coupled} coupled frame(s) modelled as "
+                f"independent joints (nq={pm.model.nq} vs {model.n_dof} DoF), fed q_pin = C q")
+        B = self.sizes["pin_batch"]
+        qs = pm.q(self.configs(model, B))
+        # jwarp reference at the same batch (CPU), if measured
+        ref = cpu_rows.get(B) or cpu_rows[min(cpu_rows, key=lambda b: abs(b - B))]
+        for op, fn, jop in (("fk pinocchio", pm.fk_loop(qs), "fk"),
+                            ("jacobian pinocchio", pm.jac_loop(qs), "jacobian"),
+                            ("jacobian pin frameJac", pm.frame_jac_loop(qs), "jacobian")):
+            row = self.time_row(model.name, op, "cpu", B, fn)
+            row.ratio = ref[jop].configs_per_s / row.configs_per_s
+            row.ratio_meaning = f"jwarp {jop} speedup@{ref[jop].batch:g}"
+            self.emit(row)
+
+    # -------------------------------------------------------------- main
+    def run(self) -> None:
+        init_warp()
+        devices = []
+        has_cuda = wp.get_cuda_device_count() > 0
+        if self.args.device in ("all", "cpu"):
+            devices.append(wp.get_device("cpu"))
+        if self.args.device in ("all", "cuda"):
+            if has_cuda:
+                devices.append(wp.get_device("cuda"))
+            elif self.args.device == "cuda":
+                raise SystemExit("--device cuda: no CUDA device available")
+            else:
+                self.notes.append("no CUDA device: CPU rows only")
+        dev_names = ", ".join(f"{d} ({d.name})" for d in devices)
+        print(f"jwarp kinematics benchmark: warp {wp.config.version}, numpy {np.__version__}, "
+              f"{self.dtype.name}, {os.cpu_count()} CPU cores ({platform.processor() or platform.machine()}), "
+              f"devices: {dev_names}; median of {self.repeats} runs of >= {self.min_time:g} s",
+              flush=True)
+        print(header(), flush=True)
+        for name in self.args.robots.split(","):
+            model = get_robot(name)
+            cpu_rows: dict = {}
+            numpy_rows: dict = {}
+            for dev in devices:
+                batches = self.sizes["cuda" if dev.is_cuda else "cpu"]
+                if self.args.batches:
+                    batches = tuple(int(float(b)) for b in self.args.batches.split(","))
+                rows = self.run_device(model, dev, batches)
+                if dev.is_cpu:
+                    cpu_rows = rows
+                    if not self.args.no_numpy:
+                        numpy_rows = self.run_numpy(model, cpu_rows, batches)
+                elif numpy_rows:
+                    big = max(numpy_rows)
+                    for r in rows.values():
+                        r["fk"].ratio = r["fk"].configs_per_s / numpy_rows[big].configs_per_s
+                        r["fk"].ratio_meaning = f"speed / numpy@{big:g}"
+            if cpu_rows and self.args.threads > 1:
+                self.run_threads(model, self.args.threads)
+            if cpu_rows and not self.args.no_pinocchio:
+                self.run_pinocchio(model, cpu_rows)
+        self.finish(devices)
+
+    def finish(self, devices: list) -> None:
+        print()
+        print("checks:")
+        for k, v in self.checks.items():
+            print(f"  {k}: {v:.3g}")
+        for n in self.notes:
+            print(f"note: {n}")
+        if self.args.json:
+            doc = dict(
+                meta=dict(warp=wp.config.version, numpy=np.__version__, python=sys.version.split()[0],
+                          dtype=self.dtype.name, cpu_count=os.cpu_count(),
+                          processor=platform.processor() or platform.machine(),
+                          devices=[f"{d} ({d.name})" for d in devices],
+                          min_time_s=self.min_time, repeats=self.repeats, quick=self.args.quick,
+                          kappa=KAPPA, tcp=self.args.tcp, threads=self.args.threads),
+                rows=[asdict(r) for r in self.rows], checks=self.checks, notes=self.notes)
+            with open(self.args.json, "w") as f:
+                json.dump(doc, f, indent=1)
+            print(f"wrote {self.args.json}")
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--device", choices=("all", "cpu", "cuda"), default="all",
+                   help="devices to time (default: CPU, and CUDA when present)")
+    p.add_argument("--dtype", choices=("float32", "float64"), default="float32")
+    p.add_argument("--robots", default="justin19,arm7", help="comma-separated robot names")
+    p.add_argument("--tcp", default="right_tcp", help="frame of the Jacobian rows")
+    p.add_argument("--batches", default=None,
+                   help="comma-separated batch sizes overriding the defaults of every device")
+    p.add_argument("--threads", type=int, default=2,
+                   help="split the big CPU batch over N Python threads (1: skip)")
+    p.add_argument("--min-time", type=float, default=None,
+                   help="seconds of work per timed run (default 0.2; --quick 0.005)")
+    p.add_argument("--repeats", type=int, default=None, help="timed runs per row (default 5)")
+    p.add_argument("--quick", action="store_true", help="small sizes and short runs (smoke test)")
+    p.add_argument("--no-numpy", action="store_true", help="skip the numpy FK rows")
+    p.add_argument("--no-pinocchio", action="store_true", help="skip the pinocchio rows")
+    p.add_argument("--json", default=None, metavar="PATH", help="also write the rows as JSON")
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    Bench(parse_args(argv)).run()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
