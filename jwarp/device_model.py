@@ -19,7 +19,7 @@ _SCALARS = {np.dtype(np.float32): wp.float32, np.dtype(np.float64): wp.float64}
 
 def scalar_type(dtype: object) -> type:
     """Warp scalar for ``dtype`` (numpy dtype, 'float32'/'float64', or a Warp scalar)."""
-    if dtype in (wp.float32, wp.float64):
+    if dtype is wp.float32 or dtype is wp.float64:
         return dtype  # type: ignore[return-value]
     try:
         key = np.dtype(dtype)
