@@ -36,7 +36,6 @@ def kernels(scalar: type) -> SimpleNamespace:
     vec3, vec4, mat33, mat44 = fk.vec3, fk.vec4, fk.mat33, fk.mat44
     zero = scalar(0.0)
     one = scalar(1.0)
-    joint_value, child_rot_pos, pack = fk.joint_value, fk.child_rot_pos, fk.pack
     unpack_rot, unpack_pos = fk.unpack_rot, fk.unpack_pos
 
     @wp.func
@@ -168,17 +167,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         b = wp.tid()
         for k in range(order.shape[0]):
             i = order[k]
-            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            Rp = wp.identity(3, dtype=scalar)
-            pp = vec3(zero, zero, zero)
-            pi = parent[i]
-            if pi >= 0:
-                Tp = frames[b, pi]
-                Rp = unpack_rot(Tp)
-                pp = unpack_pos(Tp)
-            R, p = child_rot_pos(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                 fixed_rot, fixed_pos, dh0, trig)
-            frames[b, i] = pack(R, p)
+            fk.write_frame(b, i, q, rho, rho_stride, use_rho, parent, is_dh, prismatic, fixed_rot,
+                           fixed_pos, dh0, trig, cpl_start, cpl_joint, cpl_coef, frames)
         delta[b] = torque_update(b, frames, rho, rho_stride, use_rho, rho0, rho0_stride,
                                  kappa, kappa_stride, lam, gravity, order, parent, is_dh, dh0,
                                  trig, mass, mass_com, child_start, child_idx, moments, rho_out,

@@ -133,6 +133,27 @@ def kernels(scalar: type) -> SimpleNamespace:
     def unpack_pos(T: mat44) -> vec3:
         return vec3(T[0, 3], T[1, 3], T[2, 3])
 
+    @wp.func
+    def write_frame(b: int, i: int, q: wp.array2d(dtype=scalar), rho: wp.array3d(dtype=scalar),
+                rho_stride: int, use_rho: int, parent: wp.array(dtype=wp.int32),
+                is_dh: wp.array(dtype=wp.int32), prismatic: wp.array(dtype=wp.int32),
+                fixed_rot: wp.array(dtype=mat33), fixed_pos: wp.array(dtype=vec3),
+                dh0: wp.array2d(dtype=scalar), trig: wp.array(dtype=vec4),
+                cpl_start: wp.array(dtype=wp.int32), cpl_joint: wp.array(dtype=wp.int32),
+                cpl_coef: wp.array(dtype=scalar), frames: wp.array2d(dtype=mat44)):
+        """frames[b, i] from its parent's transform (already written) and the joint values."""
+        qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
+        Rp = wp.identity(3, dtype=scalar)
+        pp = vec3(zero, zero, zero)
+        pi = parent[i]
+        if pi >= 0:
+            Tp = frames[b, pi]
+            Rp = unpack_rot(Tp)
+            pp = unpack_pos(Tp)
+        R, p = child_rot_pos(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                             fixed_rot, fixed_pos, dh0, trig)
+        frames[b, i] = pack(R, p)
+
     @wp.kernel(module="unique")
     def fk_kernel(
         # Data in:
@@ -159,17 +180,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         b = wp.tid()
         for k in range(order.shape[0]):
             i = order[k]
-            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            Rp = wp.identity(3, dtype=scalar)
-            pp = vec3(zero, zero, zero)
-            pi = parent[i]
-            if pi >= 0:
-                Tp = frames[b, pi]
-                Rp = unpack_rot(Tp)
-                pp = unpack_pos(Tp)
-            R, p = child_rot_pos(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                 fixed_rot, fixed_pos, dh0, trig)
-            frames[b, i] = pack(R, p)
+            write_frame(b, i, q, rho, rho_stride, use_rho, parent, is_dh, prismatic, fixed_rot,
+                        fixed_pos, dh0, trig, cpl_start, cpl_joint, cpl_coef, frames)
 
     @wp.kernel(module="unique")
     def jacobian_kernel(
@@ -301,7 +313,7 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     return SimpleNamespace(
         scalar=scalar, vec3=vec3, mat33=mat33, mat44=mat44,
-        vec4=vec4, cos_sin_near=cos_sin_near, joint_value=joint_value, child_rot_pos=child_rot_pos, pack=pack,
+        vec4=vec4, cos_sin_near=cos_sin_near, joint_value=joint_value, write_frame=write_frame, child_rot_pos=child_rot_pos, pack=pack,
         unpack_rot=unpack_rot, unpack_pos=unpack_pos,
         fk=fk_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
     )
