@@ -131,6 +131,7 @@ class RobotModel:
     frames: list[Frame]
     description: str = ""
     gravity: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -9.81]))
+    workspace_dim: int = 3  # 2: a planar robot moving in the x-y plane (2D worlds), else 3
     masses: list[Mass] = field(default_factory=list)
     spheres: list[Sphere] = field(default_factory=list)
     capsules: list[Capsule] = field(default_factory=list)
@@ -456,6 +457,9 @@ def validate(model: RobotModel) -> None:
     if nf == 0:
         raise RobotModelError("frames: a robot needs at least one frame")
     _finite(model.gravity, "gravity", (3,))
+    if isinstance(model.workspace_dim, bool) or model.workspace_dim not in (2, 3):
+        raise RobotModelError(f"workspace_dim: must be 2 (planar, x-y plane) or 3, "
+                              f"got {model.workspace_dim!r}")
     jnames = set()
     for k, j in enumerate(model.joints):
         if j.type not in JOINT_TYPES:
@@ -672,6 +676,7 @@ def _from_dict(doc: Any) -> RobotModel:
     return RobotModel(
         name=name, description=doc.get("description", ""), joints=joints, frames=frames,
         gravity=_finite(doc.get("gravity", [0.0, 0.0, -9.81]), "gravity", (3,)),
+        workspace_dim=doc.get("workspace_dim", 3),
         masses=masses, spheres=spheres, capsules=capsules, self_collision=sc,
         end_effectors=eff, linear_limits=lin, kappa=kappa,
         notes={str(k): str(v) for k, v in (doc.get("notes") or {}).items()})
@@ -697,6 +702,7 @@ def _to_dict(m: RobotModel) -> dict[str, Any]:
     doc: dict[str, Any] = {
         "schema": SCHEMA_NAME, "version": SCHEMA_VERSION, "name": m.name,
         "description": m.description, "gravity": lst(m.gravity),
+        "workspace_dim": m.workspace_dim,
         "joints": [{"name": j.name, "type": j.type, "limits": [j.lower, j.upper]} for j in m.joints],
         "frames": frames,
         "masses": [{"frame": x.frame, "mass": x.mass, "com": lst(x.com)} for x in m.masses],

@@ -558,3 +558,19 @@ def test_from_dict_does_not_mutate_input():
     snapshot = copy.deepcopy(doc)
     RobotModel.from_dict(doc)
     assert doc == snapshot
+
+
+@pytest.mark.parametrize("bad", [1, 4, True, "2"])
+def test_workspace_dim_must_be_2_or_3(bad):
+    doc = tiny()
+    doc["workspace_dim"] = bad
+    _raises(doc, r"workspace_dim: must be 2")
+
+
+def test_workspace_dim_round_trip(tmp_path):
+    doc = tiny()
+    doc["workspace_dim"] = 2
+    m = RobotModel.from_dict(doc)
+    m.save(tmp_path / "r.json")
+    assert RobotModel.load(tmp_path / "r.json").workspace_dim == 2
+    assert RobotModel.from_dict(tiny()).workspace_dim == 3
