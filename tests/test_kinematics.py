@@ -351,3 +351,34 @@ def test_cuda_matches_cpu_and_torch_autograd_on_cuda():
     assert frames.is_cuda and frames.shape == (256, 27, 4, 4)
     frames[:, 13, :3, 3].sum().backward()
     np.testing.assert_allclose(qt.grad.cpu().numpy(), jac[:, :3].sum(1), atol=1e-9)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_kernel_cos_sin_matches_numpy(dtype):
+    """The kernels' cos/sin (a polynomial in float32) against numpy over +-60 rad,
+    including the quadrant boundaries k pi/4 where the fix-up switches branches."""
+    from jwarp.device_model import scalar_type
+    from jwarp.kernels import fk as fk_kernels
+
+    scalar = scalar_type(dtype)
+    k = fk_kernels.kernels(scalar)
+
+    @wp.kernel(module="unique")
+    def eval_cos_sin(x: wp.array(dtype=scalar), c: wp.array(dtype=scalar), s: wp.array(dtype=scalar)):
+        i = wp.tid()
+        ci, si = k.cos_sin(x[i])
+        c[i] = ci
+        s[i] = si
+
+    rng = np.random.default_rng(5)
+    quarter = np.arange(-80, 81) * (np.pi / 4)
+    x = np.concatenate([rng.uniform(-60, 60, 20000), quarter, quarter + 1e-6, quarter - 1e-6,
+                        [0.0, 1e-30, -1e-30]]).astype(dtype)
+    xs = wp.array(x, dtype=scalar, device="cpu")
+    c = wp.empty_like(xs)
+    s = wp.empty_like(xs)
+    wp.launch(eval_cos_sin, dim=len(x), inputs=[xs], outputs=[c, s], device="cpu")
+    x64 = x.astype(np.float64)
+    tol = 3e-7 if dtype == np.float32 else 1e-15
+    np.testing.assert_allclose(c.numpy(), np.cos(x64), rtol=0, atol=tol)
+    np.testing.assert_allclose(s.numpy(), np.sin(x64), rtol=0, atol=tol)
