@@ -97,8 +97,9 @@ def kernels(scalar: type) -> SimpleNamespace:
         dx = x - x0
         if wp.abs(dx) < scalar(0.1):
             d2 = dx * dx
-            sd = dx * (one - d2 / scalar(6.0) * (one - d2 / scalar(20.0) * (one - d2 / scalar(42.0))))
-            cd = one - d2 / scalar(2.0) * (one - d2 / scalar(12.0) * (one - d2 / scalar(30.0) * (one - d2 / scalar(56.0))))
+            # reciprocal constants: a division costs ~10x a multiplication on the CPU
+            sd = dx * (one - d2 * scalar(1.0 / 6.0) * (one - d2 * scalar(1.0 / 20.0) * (one - d2 * scalar(1.0 / 42.0))))
+            cd = one - d2 * scalar(0.5) * (one - d2 * scalar(1.0 / 12.0) * (one - d2 * scalar(1.0 / 30.0) * (one - d2 * scalar(1.0 / 56.0))))
             return c0 * cd - s0 * sd, s0 * cd + c0 * sd
         return cos_sin(x)
 
