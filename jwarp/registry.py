@@ -38,7 +38,12 @@ BUILTIN_ROBOT_MODULES = (
     "jwarp.plugins.robots.sphere2d",
     "jwarp.plugins.robots.hand4",
 )
-BUILTIN_MEASUREMENT_MODULES: tuple[str, ...] = ()
+BUILTIN_MEASUREMENT_MODULES: tuple[str, ...] = (
+    "jwarp.plugins.measurements.cartesian",
+    "jwarp.plugins.measurements.image",
+    "jwarp.plugins.measurements.contact",
+    "jwarp.plugins.measurements.relative",
+)
 
 
 class PluginError(ValueError):
@@ -145,3 +150,18 @@ def robot(name: str | RobotModel) -> RobotModel:
 def measurements() -> list[str]:
     """Names of all registered measurement functions, sorted."""
     return sorted(_collect("jwarp_measurements"))
+
+
+def measurement(name: str) -> Any:
+    """The measurement class (factory) registered under ``name``, e.g. ``"cartesian"``;
+    call it as ``cls(robot, setup_section)``."""
+    if not isinstance(name, str):
+        raise TypeError(f"measurement: expected a measurement name, got {type(name).__name__}")
+    table = _collect("jwarp_measurements")
+    if name not in table:
+        raise ValueError(f"measurement: unknown measurement '{name}'; registered: "
+                         f"{', '.join(sorted(table)) or '(none)'}")
+    plugin, factory = table[name]
+    if not callable(factory):
+        raise PluginError(f"plugin '{plugin}': factory for measurement '{name}' is not callable")
+    return factory
