@@ -1,4 +1,5 @@
-"""Command line interface: ``jwarp robots | info | fk | show``.
+"""Command line interface: ``jwarp robots | info | fk | show`` (kinematics, here), and
+``calibrate | simulate-campaign`` (:mod:`jwarp.cli_calibration`).
 
 Examples::
 
@@ -29,6 +30,8 @@ import numpy as np
 DEFAULT_KAPPA = 1e-4
 #: default most torque updates of ``--elastic`` (stops earlier once converged)
 DEFAULT_MAX_ITER = 50
+#: modules with an ``add_subcommands(subparsers)`` function
+SUBCOMMAND_MODULES = ("jwarp.cli_calibration",)
 
 
 class CLIError(Exception):
@@ -342,6 +345,11 @@ def build_parser() -> argparse.ArgumentParser:
     elastic_opts(s)
     s.add_argument("--save", required=True, metavar="FILE.rrd", help="the recording to write")
     s.set_defaults(func=cmd_show)
+
+    import importlib
+
+    for module in SUBCOMMAND_MODULES:  # calibration, planning: each adds its subcommands
+        importlib.import_module(module).add_subcommands(sub)
     return p
 
 

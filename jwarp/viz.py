@@ -17,10 +17,11 @@ end-effector (``elastic/sag_mm/<end_effector>``, scalar in mm).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -152,6 +153,34 @@ def _q_batch(model: RobotModel, q_list: Any) -> np.ndarray:
     return q
 
 
+@contextlib.contextmanager
+def atomic_recording(path: str | os.PathLike, application_id: str = "jwarp") -> Iterator[Any]:
+    """A rerun RecordingStream saving to a temporary file beside ``path``, renamed to
+    ``path`` when the block ends without error (readers never see a partial file)."""
+    rr = _rerun()
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise ValueError(f"path: folder '{folder}' does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+    os.close(fd)
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual file mode
+        rec = rr.RecordingStream(application_id)
+        rec.save(tmp)
+        rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        yield rec
+        rec.flush()
+        rec.disconnect()
+        os.replace(tmp, target)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
 def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,
                    elastic_kappa: Any = None, *, lam: float = 1.0, max_iter: int = 10,
                    application_id: str = "jwarp") -> Path:
@@ -186,15 +215,7 @@ def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,
         elastic = kinematics.fk_elastic(model, q, elastic_kappa, lam=lam, max_iter=max_iter,
                                         device="cpu", dtype=np.float64)
 
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
-    os.close(fd)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual file mode
-        rec = rr.RecordingStream(application_id)
-        rec.save(tmp)
-        rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    with atomic_recording(target, application_id) as rec:
         rec.log("robot/description", rr.TextDocument(model.summary()), static=True)
         for k in range(len(q)):
             rec.set_time(TIMELINE, sequence=k)
@@ -205,11 +226,102 @@ def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,
                 for ee, fi in model.end_effectors.items():
                     sag = 1e3 * np.linalg.norm(ef[fi, :3, 3] - frames[k, fi, :3, 3])
                     rec.log(f"elastic/sag_mm/{ee}", rr.Scalars(sag))
-        rec.flush()
-        rec.disconnect()
-        os.replace(tmp, target)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
     return target
+
+
+#: timeline on which :func:`save_calibration_rrd` logs the samples
+SAMPLE_TIMELINE = "sample"
+
+
+def _pose(params: Any, p: np.ndarray, prefix: str) -> np.ndarray | None:
+    """4x4 pose of the measurement parameters ``<prefix>_px .. _rz`` (None if absent)."""
+    from scipy.spatial.transform import Rotation
+
+    names = list(params.names)
+    keys = [f"{prefix}_{k}" for k in ("px", "py", "pz", "rx", "ry", "rz")]
+    if not all(k in names for k in keys):
+        return None
+    v = np.array([p[names.index(k)] for k in keys])
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(v[3:]).as_matrix()
+    T[:3, 3] = v[:3]
+    return T
+
+
+def save_calibration_rrd(path: str | os.PathLike, robot: Any, measurement: Any, p: Any,
+                         q: Any, y: Any, meta: Mapping[str, Any] | None = None, *,
+                         p_before: Any = None, robot_before: Any = None,
+                         application_id: str = "jwarp-calibration") -> Path:
+    """Write a rerun recording of a calibration: one time step per sample (timeline
+    ``sample``) with the calibrated robot, the measured and predicted observations and the
+    per-sample errors after (and before) calibration.
+
+    Args:
+        robot, p: calibrated robot and measurement parameters (P,).
+        q (S, n_dof), y (S, m), meta: the samples.
+        p_before, robot_before: the start (nominal robot, initial parameters) for the
+            ``error/before`` series.
+
+    Cartesian markers are drawn in the robot base frame (measured ones mapped through the
+    calibrated tracker pose), image points in an ``image`` 2D view, relative positions from
+    the first end-effector; every plugin gets ``error/after/<group>`` scalars [mm or px].
+    """
+    from jwarp.solvers.calibration.result import (group_norms, model_frames,
+                                                  observation_groups)
+
+    rr = _rerun()
+    model = get_robot(robot)
+    qa = np.asarray(q, np.float64)
+    ya = np.asarray(y, np.float64)
+    if qa.ndim != 2 or qa.shape[1] != model.n_dof:
+        raise ValueError(f"q: expected shape (S, {model.n_dof}), got {qa.shape}")
+    if ya.shape != (qa.shape[0], measurement.n_obs):
+        raise ValueError(f"y: expected shape ({qa.shape[0]}, {measurement.n_obs}), got {ya.shape}")
+    p = np.asarray(p, np.float64)
+    md = None if not meta else {k: np.asarray(v) for k, v in meta.items()}
+    frames = model_frames(model, qa)
+    pred = np.asarray(measurement.predict(frames, p, md))
+    groups = observation_groups(measurement)
+    scale = 1000.0 if measurement.unit == "m" else 1.0
+    unit = "mm" if measurement.unit == "m" else measurement.unit
+    err_after = group_norms(pred - ya, groups) * scale
+    err_before = None
+    if p_before is not None:
+        mb = get_robot(robot_before) if robot_before is not None else model
+        fb = model_frames(mb, qa)
+        pb = np.asarray(measurement.predict(fb, np.asarray(p_before, np.float64), md))
+        err_before = group_norms(pb - ya, groups) * scale
+    T_tracker = _pose(measurement.params, p, "tracker") if measurement.name == "cartesian" else None
+    with atomic_recording(path, application_id) as rec:
+        rec.log("description", rr.TextDocument(
+            f"calibration of '{model.name}' with '{measurement.name}': {len(qa)} samples; "
+            f"errors in {unit}"), static=True)
+        for s in range(len(qa)):
+            rec.set_time(SAMPLE_TIMELINE, sequence=s)
+            log_robot(rec, model, frames[s], path="robot", spheres=False)
+            if measurement.name == "cartesian" and T_tracker is not None:
+                meas_pts = ya[s].reshape(-1, 3) @ T_tracker[:3, :3].T + T_tracker[:3, 3]
+                pred_pts = pred[s].reshape(-1, 3) @ T_tracker[:3, :3].T + T_tracker[:3, 3]
+            elif measurement.name == "relative":
+                base = frames[s, measurement.frames[0], :3, 3]
+                meas_pts = ya[s].reshape(-1, 3) + base
+                pred_pts = pred[s].reshape(-1, 3) + base
+            else:
+                meas_pts = pred_pts = None
+            if meas_pts is not None:
+                rec.log("markers/measured", rr.Points3D(meas_pts, radii=0.01,
+                                                        colors=[(230, 60, 60)] * len(meas_pts)))
+                rec.log("markers/predicted", rr.Points3D(pred_pts, radii=0.01,
+                                                         colors=[(60, 200, 90)] * len(pred_pts)))
+                rec.log("markers/residual", rr.Arrows3D(origins=pred_pts,
+                                                        vectors=meas_pts - pred_pts))
+            if measurement.unit == "px":
+                rec.log("image/measured", rr.Points2D(ya[s].reshape(-1, 2), radii=3.0,
+                                                      colors=[(230, 60, 60)] * (ya.shape[1] // 2)))
+                rec.log("image/predicted", rr.Points2D(pred[s].reshape(-1, 2), radii=3.0,
+                                                       colors=[(60, 200, 90)] * (ya.shape[1] // 2)))
+            for g, (name, _) in enumerate(groups):
+                rec.log(f"error/after/{name}", rr.Scalars(float(err_after[s, g])))
+                if err_before is not None:
+                    rec.log(f"error/before/{name}", rr.Scalars(float(err_before[s, g])))
+    return Path(path)

@@ -1,0 +1,188 @@
+"""Simulated calibration campaigns (thesis 2.6.1): a "true" robot, a rough setup, samples.
+
+The true robot is the nominal one plus uniform DH errors (default +-5 mm on d and r,
++-5 deg on theta and alpha) and compliances; the true measurement parameters are the
+setup's nominal ones. The setup handed to the user (and written to ``setup.json``) is made
+*rough*: the tracker / camera pose is moved by ``rough_position`` metres and
+``rough_rotation`` radians in random directions and the markers by ``rough_marker`` metres,
+as a lab's first guess would be. Observations are the true model's prediction plus Gaussian
+noise of the measurement's ``noise``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from jwarp.model import RobotModel
+from jwarp.plugins.measurements.base import Measurement
+from jwarp.solvers.calibration.files import Samples, Setup, make_measurement, write_samples, \
+    write_setup
+from jwarp.solvers.calibration.params import perturb_robot
+from jwarp.solvers.calibration.result import model_frames
+
+#: A sampler draws (q (n, n_dof), meta {name: (n,)}) candidates; ``accept`` filters them.
+Sampler = Callable[[np.random.Generator, int], tuple[np.ndarray, dict[str, np.ndarray]]]
+
+
+@dataclass
+class Campaign:
+    """A simulated campaign: the truth, the rough setup and the measured samples."""
+
+    robot: RobotModel          # nominal model (what the user calibrates)
+    true_robot: RobotModel     # nominal + DH errors + compliances
+    setup: Setup               # rough setup (as a lab would write it)
+    true_setup: Setup          # the exact measurement setup used to simulate
+    true_params: np.ndarray    # (P,) true measurement parameters
+    samples: Samples
+    noise: float               # noise sigma used [unit of the measurement]
+
+    def write(self, folder: str | os.PathLike, prefix: str = "") -> dict[str, str]:
+        """Write ``<prefix>samples.csv``, ``<prefix>setup.json`` (rough) and
+        ``<prefix>truth.json`` (the true robot) into ``folder`` (atomically)."""
+        folder = os.fspath(folder)
+        os.makedirs(folder, exist_ok=True)
+        paths = {k: os.path.join(folder, f"{prefix}{k}") for k in
+                 ("samples.csv", "setup.json", "truth.json")}
+        meas = make_measurement(self.robot, self.setup)
+        write_samples(paths["samples.csv"], self.robot, meas, self.samples)
+        write_setup(paths["setup.json"], self.setup)
+        self.true_robot.save(paths["truth.json"])
+        return paths
+
+
+def uniform_configurations(robot: RobotModel, rng: np.random.Generator, n: int,
+                           margin: float = 0.0) -> np.ndarray:
+    """(n, n_dof) joint values uniform inside the joint limits (shrunk by ``margin``) that
+    also satisfy the robot's linear (coupled) limits, e.g. justin19's 0 <= q1+q2 <= 2.356."""
+    lim = np.asarray(robot.joint_limits, np.float64)
+    lo, hi = lim[:, 0] + margin, lim[:, 1] - margin
+    out = np.empty((0, robot.n_dof))
+    for _ in range(1000):
+        q = lo + (hi - lo) * rng.random((max(2 * n, 16), robot.n_dof))
+        ok = np.ones(len(q), bool)
+        for ll in robot.linear_limits:
+            v = q[:, ll.joints] @ np.asarray(ll.coefficients)
+            ok &= (v >= ll.lower + margin) & (v <= ll.upper - margin)
+        out = np.concatenate([out, q[ok]])
+        if len(out) >= n:
+            return out[:n]
+    raise ValueError("robot: could not sample configurations inside the linear limits")
+
+
+def _rough_pose(section: dict, key: str, rng: np.random.Generator, dp: float, dr: float) -> None:
+    pose = section.get(key)
+    if not isinstance(pose, dict) or dp == 0 and dr == 0:
+        return
+    u = rng.normal(size=3)
+    pose["position"] = (np.asarray(pose.get("position", [0, 0, 0]), float)
+                        + dp * u / np.linalg.norm(u)).tolist()
+    a = rng.normal(size=3)
+    r = Rotation.from_rotvec(dr * a / np.linalg.norm(a)) * Rotation.from_rotvec(
+        np.asarray(pose.get("rotvec", [0, 0, 0]), float))
+    pose["rotvec"] = r.as_rotvec().tolist()
+
+
+def rough_setup(setup: Setup, rng: np.random.Generator, *, rough_position: float = 0.2,
+                rough_rotation: float = math.radians(20.0), rough_marker: float = 0.01) -> Setup:
+    """A copy of ``setup`` with the tracker/camera pose and the markers moved randomly."""
+    import copy
+
+    sec = copy.deepcopy(setup.section)
+    for key in ("tracker", "camera"):
+        _rough_pose(sec, key, rng, rough_position, rough_rotation)
+    for mk in sec.get("markers", []) or []:
+        if isinstance(mk, dict) and "position" in mk and rough_marker > 0:
+            u = rng.normal(size=3)
+            mk["position"] = (np.asarray(mk["position"], float)
+                              + rough_marker * u / np.linalg.norm(u)).tolist()
+    return Setup(plugin=setup.plugin, section=sec, robot=setup.robot,
+                 description=setup.description)
+
+
+def simulate_campaign(robot: RobotModel, setup: Setup, n: int, *, seed: int = 0,
+                      noise: float | None = None, true_robot: RobotModel | None = None,
+                      dh_groups: tuple[str, ...] = ("theta", "d", "r", "alpha"),
+                      length_error: float = 0.005, angle_error: float = math.radians(5.0),
+                      kappa: tuple[float, float] | None = (0.5e-4, 2e-4),
+                      kappa_groups: tuple[str, ...] = ("kappa_theta", "kappa_alpha"),
+                      rough_position: float = 0.2, rough_rotation: float = math.radians(20.0),
+                      rough_marker: float = 0.01, sampler: Sampler | None = None,
+                      accept: Callable[[Measurement, np.ndarray, np.ndarray, dict], np.ndarray]
+                      | None = None, max_draws: int = 200) -> Campaign:
+    """Simulate ``n`` samples of the measurement ``setup`` on a perturbed ``robot``.
+
+    Args:
+        robot: nominal model; ``setup``: the exact measurement setup of the truth.
+        noise: observation noise sigma [unit of y] (default: the setup's ``noise``).
+        true_robot: use this truth instead of drawing one with :func:`perturb_robot`
+            (``dh_groups``, ``length_error`` [m], ``angle_error`` [rad], ``kappa``
+            (low, high) [rad/(N m)] on ``kappa_groups``; None keeps the nominal kappa).
+        rough_*: how far the written setup is from the truth (see :func:`rough_setup`).
+        sampler: draws candidate (q, meta) (default: uniform in the limits, no meta).
+        accept: (meas, frames, p, meta) -> (k,) bool keeps candidates (e.g. markers visible).
+    """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"n: expected a number of samples >= 1, got {n!r}")
+    rng = np.random.default_rng(seed)
+    if true_robot is None:
+        true_robot = perturb_robot(robot, rng, groups=dh_groups, length_error=length_error,
+                                   angle_error=angle_error, kappa=kappa, kappa_groups=kappa_groups)
+    meas = make_measurement(true_robot, setup)
+    p_true = meas.params.nominal.copy()
+    sigma = float(meas.noise if noise is None else noise)
+    if not (math.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"noise: expected a finite sigma >= 0, got {noise!r}")
+    if sampler is None:
+        if meas.meta_names:
+            raise ValueError(f"sampler: the '{meas.name}' measurement needs per-sample "
+                             f"{meas.meta_names}; pass a sampler")
+
+        def sampler(r: np.random.Generator, k: int) -> tuple[np.ndarray, dict]:
+            return uniform_configurations(robot, r, k), {}
+
+    qs, metas, frames_kept = [], [], []
+    have = 0
+    for _ in range(max_draws):
+        q, meta = sampler(rng, max(n - have, 8))
+        fr = model_frames(true_robot, q)
+        ok = np.ones(len(q), bool) if accept is None else np.asarray(accept(meas, fr, p_true, meta))
+        if ok.any():
+            qs.append(q[ok])
+            metas.append({k: np.asarray(v)[ok] for k, v in meta.items()})
+            frames_kept.append(fr[ok])
+            have += int(ok.sum())
+        if have >= n:
+            break
+    if have < n:
+        raise ValueError(f"accept: only {have} of {n} samples accepted after {max_draws} draws")
+    q = np.concatenate(qs)[:n]
+    meta = {k: np.concatenate([m[k] for m in metas])[:n] for k in metas[0]}
+    fr = np.concatenate(frames_kept)[:n]
+    y = meas.simulate(fr, p_true, sigma, rng, meta or None)
+    rough = rough_setup(setup, rng, rough_position=rough_position,
+                        rough_rotation=rough_rotation, rough_marker=rough_marker)
+    return Campaign(robot=robot, true_robot=true_robot, setup=rough, true_setup=setup,
+                    true_params=p_true, samples=Samples(q=q, y=np.asarray(y), meta=meta),
+                    noise=sigma)
+
+
+def justin_tracker_setup(noise: float = 0.001) -> Setup:
+    """The external-tracker setup of the paper (Table I): a tracker about 2.5 m in front of
+    Agile Justin looking back at it, one marker on each TCP."""
+    section: dict[str, Any] = {
+        "tracker": {"position": [2.5, 0.2, 1.3], "rotvec": [0.0, 0.0, math.pi],
+                    "sigma_position": 1.0, "sigma_rotation": 1.0},
+        "markers": [{"name": "right", "frame": "right_tcp", "position": [0.0, 0.0, 0.05],
+                     "sigma": 0.05},
+                    {"name": "left", "frame": "left_tcp", "position": [0.0, 0.0, 0.05],
+                     "sigma": 0.05}],
+        "noise": noise,
+    }
+    return Setup(plugin="cartesian", section=section, robot="justin19",
+                 description="Agile Justin with an external tracker, markers on both TCPs")

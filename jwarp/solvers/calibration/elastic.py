@@ -1,0 +1,247 @@
+"""Derivatives of the elastic equilibrium (implicit function theorem), numpy float64.
+
+The elastic model (thesis eq. 2.31-2.33) defines the DH rows in the torque equilibrium
+implicitly::
+
+    rho* = rho0 + E^T (kappa o tau(F(q, rho*)))
+
+with ``tau`` the gravity torques (n_frames, 3) about the [alpha, beta, theta] axes of every
+DH frame (see :mod:`jwarp.kernels.elastic`) and ``E^T`` placing the three elastic
+components into the DH columns [alpha -> 3, beta -> 4, theta -> 1]. With ``w = kappa o tau``
+restricted to the K active elastic components, the implicit function theorem gives
+
+    (I - diag(kappa) dtau/drho E^T) dw = diag(tau) dkappa + diag(kappa) dtau/drho drho0,
+    drho* = drho0 + E^T dw,
+
+one K x K linear solve per sample. This module provides ``tau`` and ``dtau/drho`` in
+closed form from the frames at ``rho*``:
+
+* A DH parameter ``(j, c)`` moves the whole subtree of frame j (j included) rigidly by a
+  spatial twist ``(a, w)``: a point ``x`` moves by ``a + w x x`` (base coordinates)
+  (:func:`dh_twists`).
+* Torques of frames inside that subtree rotate with it against the fixed gravity:
+  ``d tau = (g x w) . (axis x c)``; torques of frame j's own lateral axes (whose parent
+  does not move) see only the moved masses; torques of ancestors of j see the moved first
+  moment ``ds = m_j a + w x s_j`` (:func:`torque_jacobian`).
+
+Everything is vectorized over samples S; shapes are documented per function.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from jwarp.model import RobotModel
+
+#: DH column of each elastic axis [alpha, beta, theta] (order of ``kappa`` / ``tau``)
+AXIS_COLUMN = np.array([3, 4, 1])
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis (faster than np.cross for small arrays)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def frame_masses(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
+    """Total point mass per frame (n_frames,) [kg] and its centre of mass (n_frames, 3) [m]
+    in frame coordinates (several masses on one frame are merged)."""
+    n = robot.n_frames
+    mass = np.zeros(n)
+    first = np.zeros((n, 3))
+    for m in robot.masses:
+        mass[m.frame] += m.mass
+        first[m.frame] += m.mass * np.asarray(m.com, np.float64)
+    com = np.divide(first, mass[:, None], out=np.zeros_like(first), where=mass[:, None] > 0)
+    return mass, com
+
+
+@dataclass
+class TorqueState:
+    """Gravity-torque quantities at one set of frames (all float64, base coordinates).
+
+    tau (S, n, 3) [N m] about [alpha, beta, theta]; s (S, n, 3) subtree first moments
+    sum m x [kg m]; m (n,) subtree masses [kg]; origin (S, n, 3); z (S, n, 3) z-axes;
+    p_par (S, n, 3) parent origins; ax_a, ax_b (S, n, 3) alpha / beta torque axes;
+    c_p = s - m p_par, c_t = s - m origin (S, n, 3).
+    """
+
+    tau: np.ndarray
+    s: np.ndarray
+    m: np.ndarray
+    origin: np.ndarray
+    z: np.ndarray
+    p_par: np.ndarray
+    ax_a: np.ndarray
+    ax_b: np.ndarray
+    c_p: np.ndarray
+    c_t: np.ndarray
+
+
+def torque_state(robot: RobotModel, frames: np.ndarray, rho: np.ndarray,
+                 masses: tuple[np.ndarray, np.ndarray] | None = None) -> TorqueState:
+    """Gravity torques of every DH frame at ``frames`` (S, n, 4, 4) with DH rows
+    ``rho`` (S, n, 5) (only beta is read: it tilts the alpha axis). Same model as the
+    elastic kernel; rows of static frames are zero. ``masses`` overrides
+    :func:`frame_masses` (per frame mass (n,), com (n, 3))."""
+    mass, com = frame_masses(robot) if masses is None else masses
+    R = frames[..., :3, :3]
+    o = frames[..., :3, 3]
+    w = np.einsum("snij,nj->sni", R, com) + o
+    sub = robot.subtree_mask.astype(np.float64)  # [i, j]: j in subtree of i
+    s = np.einsum("ij,sjk->sik", sub, mass[None, :, None] * w)
+    mt = sub @ mass
+    S, n = frames.shape[:2]
+    par = robot.parents
+    Rp = np.broadcast_to(np.eye(3), (S, n, 3, 3)).copy()
+    pp = np.zeros((S, n, 3))
+    has = par >= 0
+    Rp[:, has] = R[:, par[has]]
+    pp[:, has] = o[:, par[has]]
+    beta = rho[..., 4]
+    ax_a = np.einsum("snij,snj->sni", Rp,
+                     np.stack([np.cos(beta), np.zeros_like(beta), -np.sin(beta)], -1))
+    ax_b = Rp[..., :, 1]
+    z = R[..., :, 2]
+    g = robot.gravity
+    c_p = s - mt[:, None] * pp
+    c_t = s - mt[:, None] * o
+    arm_p = _cross(c_p, np.broadcast_to(g, c_p.shape))
+    tau = np.stack([np.sum(arm_p * ax_a, -1), np.sum(arm_p * ax_b, -1),
+                    np.sum(_cross(c_t, np.broadcast_to(g, c_t.shape)) * z, -1)], -1)
+    tau *= robot.is_dh[None, :, None]
+    return TorqueState(tau, s, mt, o, z, pp, ax_a, ax_b, c_p, c_t)
+
+
+def dh_twists(robot: RobotModel, st: TorqueState) -> tuple[np.ndarray, np.ndarray]:
+    """Spatial twists of every DH parameter: a change of DH entry ``(j, c)`` moves every
+    point ``x`` of the subtree of frame j by ``a[:, j, c] + w[:, j, c] x x``.
+
+    Returns a, w (S, n, 5, 3) (zero for static frames); columns [d, theta, r, alpha, beta].
+    """
+    S, n = st.z.shape[:2]
+    a = np.zeros((S, n, 5, 3))
+    w = np.zeros((S, n, 5, 3))
+    a[:, :, 0] = st.z                              # d: along z_j
+    w[:, :, 1] = st.z                              # theta: about z_j through o_j
+    a[:, :, 1] = _cross(st.origin, st.z)
+    a[:, :, 2] = st.ax_a                           # r: along Rp Rot_y(beta) e_x
+    w[:, :, 3] = st.ax_a                           # alpha: about that axis through p_par
+    a[:, :, 3] = _cross(st.p_par, st.ax_a)
+    w[:, :, 4] = st.ax_b                           # beta: about Rp e_y through p_par
+    a[:, :, 4] = _cross(st.p_par, st.ax_b)
+    dh = robot.is_dh[None, :, None, None]
+    return a * dh, w * dh
+
+
+def torque_jacobian(robot: RobotModel, st: TorqueState,
+                    twists: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """d tau / d rho (S, n, 3, n, 5): derivative of the gravity torques [alpha, beta, theta]
+    of frame i (axes 1-2) w.r.t. DH entry (j, c) (axes 3-4), frames held at F(q, rho)."""
+    a, w = dh_twists(robot, st) if twists is None else twists
+    S, n = st.z.shape[:2]
+    g = np.broadcast_to(robot.gravity, (S, n, 5, 3))
+    gw = _cross(g, w)                                          # (S, j, c, 3)
+    axes = (st.ax_a, st.ax_b, st.z)
+    arms = (st.c_p, st.c_p, st.c_t)
+    sub = robot.subtree_mask                                    # [j, i]: i in subtree(j)
+    eye = np.eye(n, dtype=bool)
+    rigid = [sub.T & ~eye, sub.T & ~eye, sub.T]                 # [i, j] masks per axis
+    below = (sub & ~eye)                                       # [i, j]: j strictly below i
+    ds = st.m[None, :, None, None] * a + _cross(w, st.s[:, :, None, :])   # (S, j, c, 3)
+    g3 = np.broadcast_to(robot.gravity, st.z.shape)
+    out = np.zeros((S, n, 3, n, 5))
+    for k in range(3):
+        # subtree of j moves rigidly with frame i's axis: (g x w) . (axis_i x c_i)
+        h = _cross(axes[k], arms[k])                            # (S, i, 3)
+        rig = np.einsum("sik,sjck->sijc", h, gw)
+        # j strictly below i: only the moved masses count: ds . (g x axis_i)
+        ga = _cross(g3, axes[k])                                # (S, i, 3)
+        blw = np.einsum("sik,sjck->sijc", ga, ds)
+        out[:, :, k] = rig * rigid[k][None, :, :, None] + blw * below[None, :, :, None]
+    # i == j, lateral axes: the parent (and so the axis, except for beta) stays put
+    v_par = a + _cross(w, st.p_par[:, :, None, :])              # velocity of p_par
+    dc = _cross(w, st.c_p[:, :, None, :]) + st.m[None, :, None, None] * v_par
+    gdc = _cross(dc, g)                                         # (S, j, c, 3)
+    idx = np.arange(n)
+    own_a = np.einsum("sjck,sjk->sjc", gdc, st.ax_a)
+    own_a[:, :, 4] += np.einsum("sjk,sjk->sj", _cross(st.c_p, g3),
+                                _cross(w[:, :, 4], st.ax_a))
+    own_b = np.einsum("sjck,sjk->sjc", gdc, st.ax_b)
+    out[:, idx, 0, idx, :] = own_a
+    out[:, idx, 1, idx, :] = own_b
+    out *= robot.is_dh[None, :, None, None, None]
+    return out
+
+
+@dataclass
+class ElasticComponents:
+    """The K elastic components (frame, axis) that can be nonzero: DH frames whose
+    compliance on that axis is nonzero or free. frame (K,), axis (K,) in [alpha, beta,
+    theta] order, column (K,) the DH column they displace."""
+
+    frame: np.ndarray
+    axis: np.ndarray
+
+    @property
+    def column(self) -> np.ndarray:
+        return AXIS_COLUMN[self.axis]
+
+    @property
+    def size(self) -> int:
+        return int(self.frame.size)
+
+    @classmethod
+    def select(cls, robot: RobotModel, kappa: np.ndarray, free: np.ndarray | None = None
+               ) -> "ElasticComponents":
+        """Components with ``kappa != 0`` or ``free`` (bool (n, 3)) on DH frames."""
+        act = (np.asarray(kappa) != 0)
+        if free is not None:
+            act = act | free
+        act &= robot.is_dh[:, None]
+        fr, ax = np.nonzero(act)
+        return cls(fr.astype(np.int64), ax.astype(np.int64))
+
+
+def equilibrium_jacobian(jy_rho: np.ndarray, dtau: np.ndarray, tau: np.ndarray,
+                         kappa: np.ndarray, comps: ElasticComponents,
+                         dh_frame: np.ndarray, dh_col: np.ndarray,
+                         kap_frame: np.ndarray, kap_axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Total derivative of observations through the equilibrium (adjoint form).
+
+    Args:
+        jy_rho: (S, m, n, 5) dy/drho at the equilibrium rows rho* (frames fixed).
+        dtau: (S, n, 3, n, 5) torque Jacobian at rho* (:func:`torque_jacobian`).
+        tau: (S, n, 3) torques at rho*; kappa (n, 3) compliances [rad/(N m)].
+        comps: active elastic components (must include every free kappa entry).
+        dh_frame, dh_col: (P_dh,) free geometric DH entries (of rho0).
+        kap_frame, kap_axis: (P_k,) free compliance entries.
+
+    Returns:
+        (dy/d rho0[free] (S, m, P_dh), dy/d kappa[free] (S, m, P_k)).
+    """
+    S, m = jy_rho.shape[:2]
+    direct = jy_rho[:, :, dh_frame, dh_col]
+    K = comps.size
+    if K == 0:
+        return direct, np.zeros((S, m, kap_frame.size))
+    fr, ax, col = comps.frame, comps.axis, comps.column
+    kc = kappa[fr, ax]                                        # (K,)
+    t_rows = dtau[:, fr, ax]                                  # (S, K, n, 5)
+    A = np.eye(K)[None] - kc[None, :, None] * t_rows[:, :, fr, col]   # (S, K, K)
+    jy_e = jy_rho[:, :, fr, col]                              # (S, m, K)
+    lam = np.linalg.solve(np.swapaxes(A, 1, 2), np.swapaxes(jy_e, 1, 2))  # (S, K, m)
+    b_dh = kc[None, :, None] * t_rows[:, :, dh_frame, dh_col]            # (S, K, P_dh)
+    d_dh = direct + np.einsum("skm,skp->smp", lam, b_dh)
+    pos = {(int(f), int(a)): k for k, (f, a) in enumerate(zip(fr, ax))}
+    try:
+        rows = np.array([pos[(int(f), int(a))] for f, a in zip(kap_frame, kap_axis)], np.int64)
+    except KeyError as e:
+        raise ValueError(f"comps: free compliance {e.args[0]} is not an active component") from None
+    # b_kap[s, rows[p], p] = tau[s, frame_p, axis_p]
+    t_free = tau[:, kap_frame, kap_axis]                      # (S, P_k)
+    d_kap = lam[:, rows, :].transpose(0, 2, 1) * t_free[:, None, :]      # (S, m, P_k)
+    return d_dh, d_kap

@@ -1,0 +1,378 @@
+"""MAP calibration (thesis eq. 2.5, paper sec. IV-B): whitened least squares with a prior.
+
+The residual vector of :class:`CalibrationProblem` is
+
+    r(x) = [ (h(q_n, x) - y_n) / sigma_noise  for every sample n and observation;
+             (x - x_prior) / sigma_prior      for every free parameter with a prior ]
+
+with ``h`` the measurement applied to the (elastic) forward kinematics: the frames are those
+of the torque equilibrium ``rho* = rho0 + kappa tau(F(q, rho*))`` (float64, CPU) when a
+compliance is free or nonzero, else the rigid FK. Its Jacobian is analytic: the measurement's
+frame twists chained with :func:`jwarp.jacobian_dh` at rho*, and through the equilibrium by
+the implicit function theorem (:mod:`.elastic`).
+
+:func:`calibrate` minimizes ``|r|^2 / 2`` with :func:`scipy.optimize.least_squares`
+(``dogbox``: trf stalls on the flat directions of this problem) from the measurement's
+robust initial guess, optionally from more starts drawn from the prior, and returns a
+:class:`~jwarp.solvers.calibration.result.CalibrationResult`.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Callable, Iterable, Mapping, NamedTuple
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from jwarp import kinematics as K
+from jwarp.arrays import to_output
+from jwarp.model import RobotModel
+from jwarp.registry import robot as get_robot
+from jwarp.solvers.calibration.elastic import (ElasticComponents, equilibrium_jacobian,
+                                               torque_jacobian, torque_state)
+from jwarp.solvers.calibration.params import KIND_DH, KIND_KAPPA, KIND_MEAS, ParameterSpace
+from jwarp.solvers.calibration.result import CalibrationResult, build_result
+
+
+class Progress(NamedTuple):
+    """Passed to the ``callback`` of :func:`calibrate` after every solver iteration."""
+
+    start: int        # 0-based index of the current start
+    n_starts: int
+    iteration: int    # 1-based iteration of this start
+    cost: float       # 0.5 |r|^2 of the whitened problem
+
+
+def check_samples(robot: RobotModel, measurement: Any, q: Any, y: Any,
+                  meta: Mapping[str, Any] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray] | None]:
+    """Validate joint values q (S, n_dof), observations y (S, m) and per-sample meta
+    columns {name: (S,)}; returns float64 copies. Errors name the argument."""
+    try:
+        qa = np.array(q, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError("q: expected an array of joint values") from None
+    if qa.ndim != 2 or qa.shape[1] != robot.n_dof:
+        raise ValueError(f"q: expected shape (S, {robot.n_dof}) for robot '{robot.name}', "
+                         f"got {qa.shape}")
+    if qa.shape[0] == 0:
+        raise ValueError("q: no samples")
+    bad = ~np.all(np.isfinite(qa), axis=1)
+    if bad.any():
+        raise ValueError(f"q: NaN or inf in sample(s) {np.nonzero(bad)[0][:10].tolist()}")
+    m = len(measurement.obs_names)
+    try:
+        ya = np.array(y, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError("y: expected an array of observations") from None
+    if ya.shape != (qa.shape[0], m):
+        raise ValueError(f"y: expected shape ({qa.shape[0]}, {m}) (samples of q x observations "
+                         f"{measurement.obs_names}), got {ya.shape}")
+    bad = ~np.all(np.isfinite(ya), axis=1)
+    if bad.any():
+        raise ValueError(f"y: NaN or inf in sample(s) {np.nonzero(bad)[0][:10].tolist()}")
+    md = None
+    names = list(getattr(measurement, "meta_names", []) or [])
+    if names:
+        if meta is None:
+            raise ValueError(f"meta: measurement '{measurement.name}' needs the per-sample "
+                             f"column(s) {names}")
+        md = {}
+        for k in names:
+            if k not in meta:
+                raise ValueError(f"meta: missing per-sample column '{k}'")
+            a = np.asarray(meta[k])
+            if a.shape != (qa.shape[0],):
+                raise ValueError(f"meta['{k}']: expected shape ({qa.shape[0]},), got {a.shape}")
+            md[k] = a
+    elif meta is not None:
+        md = dict(meta)
+    return qa, ya, md
+
+
+def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: np.ndarray,
+                       lam: float, max_iter: int, tol: float
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Elastic FK (float64, CPU) as :func:`jwarp.fk_elastic`, but accepting compliances of
+    either sign: the optimizer may cross kappa = 0 on its way (the fixed point is just as
+    well defined; only the final model must be physical). q (S, n_dof), dh (n, 5),
+    kappa (n, 3) -> frames (S, n, 4, 4), rho* (S, n, 5), converged (S,)."""
+    model, batch, t = K._setup(robot, q, "cpu", np.float64, False)
+    kap = K._rows(np.asarray(kappa, np.float64), model, batch, t, "kappa", 3)
+    rho0 = K._rows(np.asarray(dh, np.float64), model, batch, t, "dh", 5)
+    run = K._ElasticLaunch(t, batch.array, kap, rho0, float(lam))
+    rho, frames, _, conv = K.equilibrium(run, int(max_iter), float(tol))
+    n = model.n_frames
+    rho_arr = rho[0] if rho is not None else K._rho0_full(run)
+    return (to_output(frames, batch, (n,)), to_output(rho_arr, batch, (n, 5)),
+            np.asarray(conv, bool))
+
+
+def _noise(measurement: Any, noise_sigma: Any) -> np.ndarray:
+    m = len(measurement.obs_names)
+    v = getattr(measurement, "noise", None) if noise_sigma is None else noise_sigma
+    if v is None:
+        raise ValueError("noise_sigma: not given and the measurement has no 'noise'")
+    try:
+        a = np.asarray(v, np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"noise_sigma: expected a number or {m} numbers, got {v!r}") from None
+    if a.ndim == 0:
+        a = np.full(m, float(a))
+    if a.shape != (m,) or not np.all(np.isfinite(a)) or np.any(a <= 0):
+        raise ValueError(f"noise_sigma: expected a finite number > 0 or {m} of them "
+                         f"(one per observation), got {v!r}")
+    return a
+
+
+class CalibrationProblem:
+    """The whitened MAP least-squares problem of one data set.
+
+    Args:
+        robot: nominal robot (name or RobotModel); its DH rows and kappa are the prior means.
+        measurement: a measurement plugin instance (see jwarp.plugins.measurements.base).
+        q: (S, n_dof) joint values [rad, m]; y: (S, m) observations [measurement.unit].
+        free: free groups (list or comma-separated), see :class:`ParameterSpace`.
+        meta: per-sample inputs {name: (S,)} the measurement needs (``meta_names``).
+        noise_sigma: measurement noise std, scalar or (m,) [unit]; default
+            ``measurement.noise``.
+        sigma: prior sigma overrides {group: value}; frames: calibratable DH frames;
+        p_nominal: measurement parameter prior means (default ParamBlock nominal).
+        elastic: True/False; None: elastic iff a compliance is free or nonzero.
+        lam, max_iter, tol: damping, most updates and tolerance [rad] of the equilibrium.
+        bound_kappa: constrain compliances to >= 0 in the solver (see ParameterSpace.build).
+    """
+
+    def __init__(self, robot: Any, measurement: Any, q: Any, y: Any, *,
+                 free: str | Iterable[str], meta: Mapping[str, Any] | None = None,
+                 noise_sigma: Any = None, sigma: Mapping[str, float] | None = None,
+                 frames: Iterable[int | str] | None = None, p_nominal: Any = None,
+                 elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
+                 tol: float = 1e-12, bound_kappa: bool = False) -> None:
+        self.robot = get_robot(robot)
+        self.measurement = measurement
+        if not hasattr(measurement, "jacobians") or not hasattr(measurement, "obs_names"):
+            raise TypeError(f"measurement: expected a measurement plugin instance, got "
+                            f"{type(measurement).__name__}")
+        if getattr(measurement, "robot", self.robot) is not self.robot:
+            mr = measurement.robot
+            if mr.n_frames != self.robot.n_frames or mr.frame_names != self.robot.frame_names:
+                raise ValueError(f"measurement: built for robot '{mr.name}', not '{self.robot.name}'")
+        self.q, self.y, self.meta = check_samples(self.robot, measurement, q, y, meta)
+        self.space = ParameterSpace.build(self.robot, measurement, free, sigma=sigma,
+                                          frames=frames, p_nominal=p_nominal,
+                                          bound_kappa=bound_kappa)
+        self.noise = _noise(measurement, noise_sigma)
+        S, m = self.y.shape
+        P = self.space.size
+        if S * m < P:
+            raise ValueError(f"q, y: {S} samples x {m} observations = {S * m} values is fewer "
+                             f"than the {P} free parameters of groups {self.space.free_groups}; "
+                             f"give more samples or free fewer groups")
+        if not (isinstance(lam, (int, float)) and 0 < lam <= 1):
+            raise ValueError(f"lam: damping must be in (0, 1], got {lam!r}")
+        self.lam, self.max_iter, self.tol = float(lam), int(max_iter), float(tol)
+        kf = self.space.kappa_free
+        if elastic is None:
+            elastic = bool(kf.any() or np.any(self.robot.kappa != 0))
+        self.elastic = bool(elastic)
+        sp = self.space
+        self._dh_idx = np.nonzero(sp.kind == KIND_DH)[0]
+        self._kap_idx = np.nonzero(sp.kind == KIND_KAPPA)[0]
+        self._meas_idx = np.nonzero(sp.kind == KIND_MEAS)[0]
+        self._prior_idx = np.nonzero(sp.has_prior)[0]
+        self._cache: tuple[bytes, Any] | None = None
+        self.n_data = S * m
+        self.n_evaluations = 0
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_samples(self) -> int:
+        return self.y.shape[0]
+
+    @property
+    def n_residuals(self) -> int:
+        return self.n_data + self._prior_idx.size
+
+    # ------------------------------------------------------------- forward
+    def state(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                            np.ndarray, np.ndarray]:
+        """Model at x: (frames (S, n, 4, 4), rho* (S, n, 5), rho0 (n, 5), kappa (n, 3),
+        p (P_meas,), converged (S,) bool). Cached for the last x."""
+        x = self.space.check(x)
+        key = x.tobytes()
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1]
+        dh, kap, p = self.space.unpack(x)
+        S = self.n_samples
+        if self.elastic:
+            frames, rho, conv = signed_equilibrium(self.robot, self.q, dh, kap, self.lam,
+                                                   self.max_iter, self.tol)
+        else:
+            frames = K.fk(self.robot, self.q, dh=dh, device="cpu", dtype=np.float64,
+                          validate=False)
+            rho = np.broadcast_to(dh, (S,) + dh.shape)
+            conv = np.ones(S, bool)
+        out = (frames, rho, dh, kap, p, conv)
+        self._cache = (key, out)
+        self.n_evaluations += 1
+        return out
+
+    def frames(self, x: Any) -> np.ndarray:
+        """World frames (S, n_frames, 4, 4) of the data's configurations at x."""
+        return self.state(x)[0]
+
+    def predict(self, x: Any) -> np.ndarray:
+        """Predicted observations (S, m) at x."""
+        frames, _, _, _, p, _ = self.state(x)
+        return np.asarray(self.measurement.predict(frames, p, self.meta), np.float64)
+
+    def residuals(self, x: Any) -> np.ndarray:
+        """Whitened residual vector (S*m + P_prior,) at x (see module docstring)."""
+        r = (self.predict(x) - self.y) / self.noise
+        return np.concatenate([r.reshape(-1), self.space.prior_residuals(x)])
+
+    def cost(self, x: Any) -> float:
+        """0.5 |r(x)|^2."""
+        r = self.residuals(x)
+        return 0.5 * float(r @ r)
+
+    # ------------------------------------------------------------ Jacobian
+    def data_jacobian_rho(self, frames: np.ndarray, rho: np.ndarray, p: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+        """(dy/drho (S, m, n, 5) at fixed frames, dy/dp (S, m, P_meas)) at rows rho."""
+        meas = self.measurement
+        _, jf, jp = meas.jacobians(frames, p, self.meta)
+        S, m = jf.shape[:2]
+        jy = np.zeros((S, m, self.robot.n_frames, 5))
+        for k, f in enumerate(meas.frames):
+            jdh = K.jacobian_dh(self.robot, self.q, int(f), dh=rho, device="cpu",
+                                dtype=np.float64, validate=False)      # (S, 6, n, 5)
+            jy += np.einsum("smk,sknc->smnc", jf[:, :, k, :], jdh)
+        return jy, np.asarray(jp, np.float64)
+
+    def jacobian(self, x: Any) -> np.ndarray:
+        """Analytic Jacobian dr/dx (S*m + P_prior, P) of :meth:`residuals`."""
+        frames, rho, dh, kap, p, _ = self.state(x)
+        sp = self.space
+        rho_full = np.ascontiguousarray(np.broadcast_to(rho, (self.n_samples,) + dh.shape))
+        jy, jp = self.data_jacobian_rho(frames, rho_full, p)
+        S, m = jy.shape[:2]
+        dh_f, dh_c = sp.frame[self._dh_idx], sp.column[self._dh_idx]
+        kp_f, kp_c = sp.frame[self._kap_idx], sp.column[self._kap_idx]
+        if self.elastic:
+            st = torque_state(self.robot, frames, rho_full)
+            dtau = torque_jacobian(self.robot, st)
+            comps = ElasticComponents.select(self.robot, kap, sp.kappa_free)
+            d_dh, d_kap = equilibrium_jacobian(jy, dtau, st.tau, kap, comps, dh_f, dh_c,
+                                               kp_f, kp_c)
+        else:
+            d_dh = jy[:, :, dh_f, dh_c]
+            d_kap = np.zeros((S, m, kp_f.size))
+        J = np.zeros((self.n_residuals, sp.size))
+        w = (1.0 / self.noise)[None, :, None]
+        J[:self.n_data, self._dh_idx] = (d_dh * w).reshape(S * m, -1)
+        J[:self.n_data, self._kap_idx] = (d_kap * w).reshape(S * m, -1)
+        J[:self.n_data, self._meas_idx] = (jp[:, :, sp.column[self._meas_idx]] * w).reshape(S * m, -1)
+        J[self.n_data + np.arange(self._prior_idx.size), self._prior_idx] = 1.0 / sp.sigma[self._prior_idx]
+        return J
+
+    # ------------------------------------------------------------- starts
+    def initial_x(self, x: np.ndarray | None = None, guess: bool = True) -> np.ndarray:
+        """A start: ``x`` (default the prior mean) with the free measurement parameters
+        replaced by ``measurement.initial_guess`` at the robot of ``x``."""
+        sp = self.space
+        x = sp.nominal.copy() if x is None else np.clip(sp.check(x).copy(), sp.lower, sp.upper)
+        if guess and self._meas_idx.size and hasattr(self.measurement, "initial_guess"):
+            frames, _, _, _, p, _ = self.state(x)
+            p_new = np.asarray(self.measurement.initial_guess(frames, self.y, p, self.meta),
+                               np.float64)
+            if p_new.shape == p.shape and np.all(np.isfinite(p_new)):
+                x[self._meas_idx] = p_new[sp.column[self._meas_idx]]
+        return x
+
+
+def _iteration_callback(start: int, n_starts: int, counter: list[int],
+                        callback: Callable[[Progress], Any] | None) -> Callable[[Any], None]:
+    """least_squares callback (scipy picks the signature by the parameter name)."""
+
+    def cb(intermediate_result: Any) -> None:
+        counter[0] += 1
+        if callback is not None:
+            callback(Progress(start, n_starts, counter[0], float(intermediate_result.cost)))
+
+    return cb
+
+
+def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Iterable[str],
+              meta: Mapping[str, Any] | None = None, noise_sigma: Any = None,
+              sigma: Mapping[str, float] | None = None, frames: Iterable[int | str] | None = None,
+              p_nominal: Any = None, x0: Any = None, initial_guess: bool = True,
+              n_starts: int = 1, seed: int | None = 0, max_nfev: int | None = 200,
+              ftol: float = 1e-8, xtol: float = 1e-8, gtol: float = 1e-8,
+              method: str = "dogbox", elastic: bool | None = None, lam: float = 1.0,
+              max_iter: int = 100, tol: float = 1e-12,
+              callback: Callable[[Progress], Any] | None = None,
+              identifiability_tol: float = 1e-2, moved_sigmas: float = 3.0,
+              warn: bool = True) -> CalibrationResult:
+    """MAP calibration of a robot (and the measurement's own parameters) from samples.
+
+    Args:
+        robot, measurement, q (S, n_dof), y (S, m), free, meta, noise_sigma, sigma, frames,
+            p_nominal, elastic, lam, max_iter, tol: see :class:`CalibrationProblem`.
+        x0: (P,) first start (default: prior mean); ``initial_guess`` then replaces its free
+            measurement parameters by ``measurement.initial_guess`` (e.g. a closed-form
+            alignment of the tracker frame), which makes a rough setup converge.
+        n_starts: number of starts; starts after the first draw the robot parameters from the
+            prior (then the measurement's initial guess); the lowest cost wins.
+        seed: random seed of the prior draws.
+        max_nfev, ftol, xtol, gtol, method: passed to scipy.optimize.least_squares
+            (``method`` "dogbox" or "trf"; ``x_scale`` is the prior sigma).
+        callback: called with :class:`Progress` after every iteration (progress bars).
+        identifiability_tol: a direction of the prior-whitened data information J^T J with
+            eigenvalue below this is reported as not identifiable (data add < ~tol/2 of the
+            prior's information there).
+        moved_sigmas: report parameters that moved more than this many prior sigmas.
+        warn: emit the findings with ``warnings.warn`` (they are always in the result).
+
+    Returns:
+        :class:`~jwarp.solvers.calibration.result.CalibrationResult`.
+    """
+    t0 = time.perf_counter()
+    if isinstance(n_starts, bool) or not isinstance(n_starts, (int, np.integer)) or n_starts < 1:
+        raise ValueError(f"n_starts: expected an integer >= 1, got {n_starts!r}")
+    if method not in ("dogbox", "trf"):
+        raise ValueError(f"method: expected 'dogbox' or 'trf', got {method!r}")
+    if callback is not None and not callable(callback):
+        raise TypeError("callback: expected a callable taking a Progress")
+    prob = CalibrationProblem(robot, measurement, q, y, free=free, meta=meta,
+                              noise_sigma=noise_sigma, sigma=sigma, frames=frames,
+                              p_nominal=p_nominal, elastic=elastic, lam=lam,
+                              max_iter=max_iter, tol=tol)
+    sp = prob.space
+    rng = np.random.default_rng(seed)
+    start0 = prob.initial_x(None if x0 is None else sp.check(x0, "x0"), guess=initial_guess)
+    robot_kinds = (sp.kind == KIND_DH) | (sp.kind == KIND_KAPPA)
+    best = None
+    runs = []
+    for k in range(int(n_starts)):
+        if k == 0:
+            xs = start0
+        else:
+            xs = start0.copy()
+            xs[robot_kinds] = sp.sample_prior(rng)[robot_kinds]
+            xs = prob.initial_x(xs, guess=initial_guess)
+        it = [0]
+        cb = _iteration_callback(k, int(n_starts), it, callback)
+        sol = least_squares(prob.residuals, xs, jac=prob.jacobian, bounds=(sp.lower, sp.upper),
+                            method=method, x_scale=sp.scale, ftol=ftol, xtol=xtol, gtol=gtol,
+                            max_nfev=max_nfev, callback=cb)
+        runs.append({"start": k, "cost": float(sol.cost), "nfev": int(sol.nfev),
+                     "iterations": it[0], "status": int(sol.status), "message": str(sol.message)})
+        if best is None or sol.cost < best[0].cost:
+            best = (sol, xs, it[0])
+    sol, xs, iters = best
+    return build_result(prob, sol, xs, iters, runs, time.perf_counter() - t0,
+                        identifiability_tol=identifiability_tol, moved_sigmas=moved_sigmas,
+                        warn=warn)
