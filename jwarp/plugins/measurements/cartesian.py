@@ -22,7 +22,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from jwarp.model import RobotModel
 from jwarp.plugins.measurements import geometry as g
@@ -132,7 +131,7 @@ class CartesianMeasurement(Measurement):
             raise ValueError(f"initial_guess: {e} (too few distinct marker positions)") from None
         out = p.copy()
         out[:3] = t
-        out[3:6] = Rotation.from_matrix(R).as_rotvec()
+        out[3:6] = g.nearest_rotvec(R, p[3:6])   # the representation next to the prior
         return out
 
 

@@ -48,6 +48,25 @@ def left_jacobian(r: np.ndarray) -> np.ndarray:
     return np.eye(3) + a * k + b * (k @ k)
 
 
+def nearest_rotvec(R: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Rotation vector of R (3, 3) closest to ``ref`` (3,) [rad] among its equivalent
+    representations ``(angle + 2 pi k) axis`` (a rotation near pi has two nearly opposite
+    ones). Keeps a fitted pose next to its prior mean, so the Gaussian prior on the rotation
+    vector measures the actual change."""
+    r = Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_rotvec()
+    ref = np.asarray(ref, dtype=np.float64)
+    th = float(np.linalg.norm(r))
+    if th < 1e-12:
+        nr = float(np.linalg.norm(ref))
+        if nr < 1e-12:
+            return r
+        axis, th = ref / nr, 0.0
+    else:
+        axis = r / th
+    cands = (th + 2.0 * math.pi * np.arange(-2, 3))[:, None] * axis
+    return cands[int(np.argmin(np.linalg.norm(cands - ref, axis=1)))]
+
+
 def pose_matrix(position: np.ndarray, rotvec: np.ndarray) -> np.ndarray:
     """4x4 homogeneous transform from position (3,) [m] and rotation vector (3,) [rad]."""
     T = np.eye(4)

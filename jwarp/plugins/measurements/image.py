@@ -262,7 +262,7 @@ class ImageMeasurement(Measurement):
         rvec, tvec = cv2.solvePnPRefineLM(obj, undist, np.eye(3), None, rvec, tvec)
         Rcf = Rotation.from_rotvec(rvec.ravel()).as_matrix()   # x_cam = Rcf x_F + t
         out = p.copy()
-        out[3:6] = Rotation.from_matrix(Rcf.T).as_rotvec()
+        out[3:6] = g.nearest_rotvec(Rcf.T, p[3:6])   # the representation next to the prior
         out[:3] = -Rcf.T @ tvec.ravel()
         return out
 

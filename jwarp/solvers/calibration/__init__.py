@@ -12,7 +12,7 @@ Typical use::
 
 from jwarp.solvers.calibration.map import CalibrationProblem, Progress, calibrate, check_samples
 from jwarp.solvers.calibration.params import (DEFAULT_SIGMA, ROBOT_GROUPS, ParameterSpace,
-                                              parse_groups)
+                                              influencing_frames, parse_groups, perturb_robot)
 from jwarp.solvers.calibration.result import (CalibrationResult, CalibrationWarning, Direction,
                                               error_stats, errors, model_frames,
                                               observation_groups, predict)
@@ -20,5 +20,6 @@ from jwarp.solvers.calibration.result import (CalibrationResult, CalibrationWarn
 __all__ = [
     "CalibrationProblem", "CalibrationResult", "CalibrationWarning", "DEFAULT_SIGMA", "Direction",
     "ParameterSpace", "Progress", "ROBOT_GROUPS", "calibrate", "check_samples", "error_stats",
-    "errors", "model_frames", "observation_groups", "parse_groups", "predict",
+    "errors", "influencing_frames", "model_frames", "observation_groups", "parse_groups",
+    "perturb_robot", "predict",
 ]

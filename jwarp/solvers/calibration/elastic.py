@@ -154,13 +154,15 @@ def torque_jacobian(robot: RobotModel, st: TorqueState,
     ds = st.m[None, :, None, None] * a + _cross(w, st.s[:, :, None, :])   # (S, j, c, 3)
     g3 = np.broadcast_to(robot.gravity, st.z.shape)
     out = np.zeros((S, n, 3, n, 5))
+    gw_t = gw.reshape(S, n * 5, 3).transpose(0, 2, 1)          # (S, 3, j*c)
+    ds_t = ds.reshape(S, n * 5, 3).transpose(0, 2, 1)
     for k in range(3):
         # subtree of j moves rigidly with frame i's axis: (g x w) . (axis_i x c_i)
         h = _cross(axes[k], arms[k])                            # (S, i, 3)
-        rig = np.einsum("sik,sjck->sijc", h, gw)
+        rig = (h @ gw_t).reshape(S, n, n, 5)
         # j strictly below i: only the moved masses count: ds . (g x axis_i)
         ga = _cross(g3, axes[k])                                # (S, i, 3)
-        blw = np.einsum("sik,sjck->sijc", ga, ds)
+        blw = (ga @ ds_t).reshape(S, n, n, 5)
         out[:, :, k] = rig * rigid[k][None, :, :, None] + blw * below[None, :, :, None]
     # i == j, lateral axes: the parent (and so the axis, except for beta) stays put
     v_par = a + _cross(w, st.p_par[:, :, None, :])              # velocity of p_par
@@ -235,7 +237,7 @@ def equilibrium_jacobian(jy_rho: np.ndarray, dtau: np.ndarray, tau: np.ndarray,
     jy_e = jy_rho[:, :, fr, col]                              # (S, m, K)
     lam = np.linalg.solve(np.swapaxes(A, 1, 2), np.swapaxes(jy_e, 1, 2))  # (S, K, m)
     b_dh = kc[None, :, None] * t_rows[:, :, dh_frame, dh_col]            # (S, K, P_dh)
-    d_dh = direct + np.einsum("skm,skp->smp", lam, b_dh)
+    d_dh = direct + np.swapaxes(lam, 1, 2) @ b_dh
     pos = {(int(f), int(a)): k for k, (f, a) in enumerate(zip(fr, ax))}
     try:
         rows = np.array([pos[(int(f), int(a))] for f, a in zip(kap_frame, kap_axis)], np.int64)

@@ -229,7 +229,12 @@ class CalibrationProblem:
         return np.asarray(self.measurement.predict(frames, p, self.meta), np.float64)
 
     def residuals(self, x: Any) -> np.ndarray:
-        """Whitened residual vector (S*m + P_prior,) at x (see module docstring)."""
+        """Whitened residual vector (S*m + P_prior,) at x (see module docstring). All inf
+        where the elastic equilibrium did not converge for some sample (a trial step with
+        too soft a robot: the solver then shrinks its step)."""
+        frames, _, _, _, _, conv = self.state(x)
+        if not (np.all(conv) and np.all(np.isfinite(frames))):
+            return np.full(self.n_residuals, np.inf)
         r = (self.predict(x) - self.y) / self.noise
         return np.concatenate([r.reshape(-1), self.space.prior_residuals(x)])
 
@@ -249,7 +254,7 @@ class CalibrationProblem:
         for k, f in enumerate(meas.frames):
             jdh = K.jacobian_dh(self.robot, self.q, int(f), dh=rho, device="cpu",
                                 dtype=np.float64, validate=False)      # (S, 6, n, 5)
-            jy += np.einsum("smk,sknc->smnc", jf[:, :, k, :], jdh)
+            jy += (jf[:, :, k, :] @ jdh.reshape(S, 6, -1)).reshape(jy.shape)
         return jy, np.asarray(jp, np.float64)
 
     def jacobian(self, x: Any) -> np.ndarray:
@@ -286,6 +291,8 @@ class CalibrationProblem:
         x = sp.nominal.copy() if x is None else np.clip(sp.check(x).copy(), sp.lower, sp.upper)
         if guess and self._meas_idx.size and hasattr(self.measurement, "initial_guess"):
             frames, _, _, _, p, _ = self.state(x)
+            if not np.all(np.isfinite(frames)):
+                return x
             p_new = np.asarray(self.measurement.initial_guess(frames, self.y, p, self.meta),
                                np.float64)
             if p_new.shape == p.shape and np.all(np.isfinite(p_new)):
@@ -312,7 +319,7 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
               n_starts: int = 1, seed: int | None = 0, max_nfev: int | None = 200,
               ftol: float = 1e-8, xtol: float = 1e-8, gtol: float = 1e-8,
               method: str = "dogbox", elastic: bool | None = None, lam: float = 1.0,
-              max_iter: int = 100, tol: float = 1e-12,
+              max_iter: int = 100, tol: float = 1e-12, bound_kappa: bool = False,
               callback: Callable[[Progress], Any] | None = None,
               identifiability_tol: float = 1e-2, moved_sigmas: float = 3.0,
               warn: bool = True) -> CalibrationResult:
@@ -320,7 +327,8 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
 
     Args:
         robot, measurement, q (S, n_dof), y (S, m), free, meta, noise_sigma, sigma, frames,
-            p_nominal, elastic, lam, max_iter, tol: see :class:`CalibrationProblem`.
+            p_nominal, elastic, lam, max_iter, tol, bound_kappa: see
+            :class:`CalibrationProblem`.
         x0: (P,) first start (default: prior mean); ``initial_guess`` then replaces its free
             measurement parameters by ``measurement.initial_guess`` (e.g. a closed-form
             alignment of the tracker frame), which makes a rough setup converge.
@@ -349,10 +357,14 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
     prob = CalibrationProblem(robot, measurement, q, y, free=free, meta=meta,
                               noise_sigma=noise_sigma, sigma=sigma, frames=frames,
                               p_nominal=p_nominal, elastic=elastic, lam=lam,
-                              max_iter=max_iter, tol=tol)
+                              max_iter=max_iter, tol=tol, bound_kappa=bound_kappa)
     sp = prob.space
     rng = np.random.default_rng(seed)
     start0 = prob.initial_x(None if x0 is None else sp.check(x0, "x0"), guess=initial_guess)
+    if not np.all(np.isfinite(prob.residuals(start0))):
+        raise ValueError(f"x0: the elastic equilibrium does not converge at the start for "
+                         f"{int((~prob.state(start0)[5]).sum())} sample(s) (max_iter={max_iter}, "
+                         f"tol={tol}); lower lam or raise max_iter")
     robot_kinds = (sp.kind == KIND_DH) | (sp.kind == KIND_KAPPA)
     best = None
     runs = []
@@ -363,6 +375,10 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
             xs = start0.copy()
             xs[robot_kinds] = sp.sample_prior(rng)[robot_kinds]
             xs = prob.initial_x(xs, guess=initial_guess)
+            if not np.all(np.isfinite(prob.residuals(xs))):
+                runs.append({"start": k, "cost": float("inf"), "nfev": 0, "iterations": 0,
+                             "status": -1, "message": "no elastic equilibrium at this start"})
+                continue
         it = [0]
         cb = _iteration_callback(k, int(n_starts), it, callback)
         sol = least_squares(prob.residuals, xs, jac=prob.jacobian, bounds=(sp.lower, sp.upper),

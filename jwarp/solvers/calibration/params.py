@@ -59,6 +59,33 @@ def parse_groups(free: str | Iterable[str]) -> list[str]:
     return list(dict.fromkeys(items))
 
 
+def influencing_frames(robot: RobotModel, measured: Iterable[int] | None, elastic: bool
+                       ) -> list[int]:
+    """DH frames whose parameters can change the observations of frames ``measured``.
+
+    Rigid: the DH frames on the paths from the root to the measured frames. Elastic: also
+    every DH frame hanging off those paths with mass in its subtree (e.g. the head of a
+    humanoid measured at the hands: its pose moves a mass that loads the torso joints).
+    ``measured`` None or empty: all DH frames.
+    """
+    dh = robot.is_dh
+    if not measured:
+        return [int(i) for i in np.nonzero(dh)[0]]
+    chain: set[int] = set()
+    for f in measured:
+        chain.update(robot.ancestors(int(f)))
+    use = np.array([i in chain for i in range(robot.n_frames)])
+    if elastic:
+        fm = np.zeros(robot.n_frames)
+        for m in robot.masses:
+            fm[m.frame] += m.mass
+        loaded = robot.subtree_mask.astype(float) @ fm > 0   # mass in the subtree
+        for i in range(robot.n_frames):
+            if not use[i] and loaded[i] and any(a in chain for a in robot.ancestors(i)):
+                use[i] = True
+    return [int(i) for i in np.nonzero(use & dh)[0]]
+
+
 @dataclass
 class ParameterSpace:
     """Map between the free-parameter vector ``x`` (P,) and robot/measurement parameters.
@@ -103,9 +130,11 @@ class ParameterSpace:
                 ``params.groups``), as a list or comma-separated string.
             sigma: per-group prior sigma overrides {group: sigma}; a measurement group given
                 here replaces its ParamBlock sigmas; ``inf`` removes the prior.
-            frames: DH frames whose rows may be calibrated (default: every DH frame on the
-                path from the root to a frame the measurement uses; all DH frames without a
-                measurement).
+            frames: DH frames whose rows may be calibrated (default
+                :func:`influencing_frames`: the DH frames on the paths from the root to the
+                frames the measurement uses, plus, for an elastic model, the mass-carrying
+                DH frames branching off those paths, whose geometry and compliance load the
+                measured chains through their weight).
             p_nominal: (P_meas,) measurement parameter prior means (default ParamBlock
                 nominal).
             bound_kappa: give the compliances the bound kappa >= 0 (default off: bounds
@@ -140,13 +169,9 @@ class ParameterSpace:
                 sig[g] = fv
         # which DH frames
         if frames is None:
-            if measurement is not None and getattr(measurement, "frames", None):
-                chain: set[int] = set()
-                for f in measurement.frames:
-                    chain.update(robot.ancestors(int(f)))
-                dh_frames = [i for i in range(robot.n_frames) if i in chain and robot.is_dh[i]]
-            else:
-                dh_frames = [i for i in range(robot.n_frames) if robot.is_dh[i]]
+            elastic = any(g in KAPPA_GROUPS for g in groups) or bool(np.any(robot.kappa != 0))
+            dh_frames = influencing_frames(robot, getattr(measurement, "frames", None)
+                                           if measurement is not None else None, elastic)
         else:
             dh_frames = []
             for f in frames:
@@ -282,9 +307,10 @@ class ParameterSpace:
 
     def sample_prior(self, rng: np.random.Generator) -> np.ndarray:
         """A random x from the prior (parameters without prior stay at nominal), clipped to
-        the bounds."""
-        x = self.nominal + np.where(self.has_prior, self.sigma, 0.0) * rng.standard_normal(self.size)
-        return np.clip(x, self.lower, self.upper)
+        the bounds; compliances are drawn on the physical side (nominal + |N(0, sigma)|)."""
+        dev = np.where(self.has_prior, self.sigma, 0.0) * rng.standard_normal(self.size)
+        dev = np.where(self.kind == KIND_KAPPA, np.abs(dev), dev)
+        return np.clip(self.nominal + dev, self.lower, self.upper)
 
     @property
     def kappa_free(self) -> np.ndarray:

@@ -122,7 +122,7 @@ class Direction:
     parameters: list[tuple[str, float]]
 
     def describe(self) -> str:
-        comp = ", ".join(f"{w:+.2f} {n}" for n, w in self.parameters)
+        comp = ", ".join(f"{w:+.2g} {n}" for n, w in self.parameters)
         return f"eigenvalue {self.eigenvalue:.2e}: [{comp}]"
 
 
@@ -198,7 +198,7 @@ class CalibrationResult:
             "cost": float(self.cost), "success": bool(self.success), "status": int(self.status),
             "message": self.message, "nfev": int(self.nfev), "iterations": int(self.iterations),
             "time_s": float(self.time_s), "elastic": bool(self.elastic), "unit": self.unit,
-            "starts": self.starts,
+            "starts": [{**r, "cost": f(r["cost"])} for r in self.starts],
             "errors": error_stats(self.errors), "errors_start": error_stats(self.errors_start),
             "measurement_params": dict(zip(self.param_names, map(float, self.params))),
             "parameters": [{"name": n, "group": g, "nominal": float(a), "value": float(b),
