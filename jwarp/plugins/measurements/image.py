@@ -29,7 +29,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -256,6 +255,8 @@ class ImageMeasurement(Measurement):
         obj = np.ascontiguousarray(obj, dtype=np.float64)
         undist = np.ascontiguousarray(undist, dtype=np.float64)
         # SQPnP is globally optimal (no initial guess needed); LM refines the reprojection
+        import cv2  # lazily: importing jwarp (and its plugin registry) needs no OpenCV
+
         ok, rvec, tvec = cv2.solvePnP(obj, undist, np.eye(3), None, flags=cv2.SOLVEPNP_SQPNP)
         if not ok or not np.all(np.isfinite(rvec)) or not np.all(np.isfinite(tvec)):
             raise ValueError("initial_guess: PnP failed (degenerate marker positions)")
