@@ -31,6 +31,9 @@ import numpy as np
 
 #: measurement groups that are free unless --fix names them (poses of sensors, markers)
 ALWAYS_FREE_MEASUREMENT_GROUPS = ("tracker", "camera", "markers", "fixtures")
+#: robots whose simulated truth is elastic by default, and its mean compliance [rad/(N m)]
+ELASTIC_ROBOTS = ("justin19", "arm7")
+DEFAULT_TRUE_KAPPA = 1e-4
 
 
 def _cli_error(msg: str) -> Exception:
@@ -200,7 +203,9 @@ def cmd_simulate_campaign(args: argparse.Namespace) -> int:
     if not robot_name:
         raise _cli_error("--robot: not given and the setup file names no robot")
     model = get_robot(robot_name)
-    kappa = None if args.kappa == 0 else (0.5 * args.kappa, 1.5 * args.kappa)
+    k = args.kappa if args.kappa is not None else (
+        DEFAULT_TRUE_KAPPA if model.name in ELASTIC_ROBOTS else 0.0)
+    kappa = None if k == 0 else (0.5 * k, 1.5 * k)
     camp = simulate_campaign(model, setup, args.samples, seed=args.seed, noise=args.noise,
                              length_error=args.length_error * 1e-3,
                              angle_error=math.radians(args.angle_error), kappa=kappa,
@@ -260,8 +265,9 @@ def add_subcommands(sub: Any) -> None:
                    help="uniform DH length errors +- MM (default 5)")
     s.add_argument("--angle-error", type=float, default=5.0, metavar="DEG",
                    help="uniform DH angle errors +- DEG (default 5)")
-    s.add_argument("--kappa", type=float, default=1e-4, metavar="K",
-                   help="mean true compliance of joint and lateral axes [rad/(N m)] (0: rigid)")
+    s.add_argument("--kappa", type=float, default=None, metavar="K",
+                   help="mean true compliance of joint and lateral axes [rad/(N m)] (0: rigid; "
+                        f"default {DEFAULT_TRUE_KAPPA:g} for {', '.join(ELASTIC_ROBOTS)}, else 0)")
     s.add_argument("--out", required=True, metavar="FOLDER",
                    help="folder for samples.csv, setup.json and truth.json")
     s.add_argument("--json", action="store_true")

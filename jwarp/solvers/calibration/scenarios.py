@@ -130,9 +130,11 @@ def justin_camera_sampler(robot: RobotModel, setup: Setup, *, candidates: int = 
 
     Per sample: torso joints uniform in their limits; per arm, ``candidates`` uniform arm
     configurations of which the first whose TCP marker is ``distance`` [m] from the head
-    and within ``cone`` [rad] of the pole's direction is kept (samples where an arm finds
-    none are dropped); torso poses from which the head cannot look at the pole (pan/tilt
-    within ``margin`` [rad] of their limits) are dropped; the head looks at the mean
+    and within ``cone`` [rad] of the pole's direction is kept (without fixed markers: the
+    first hand 0.2 m in front of and below the head, the next ones within ``cone`` of it;
+    samples where an arm finds none are dropped); torso poses from which the head cannot
+    look at the pole (pan/tilt within ``margin`` [rad] of their limits) are dropped; the
+    head looks at the mean
     direction of the hand and pole markers. The rest (markers inside the image on the true
     robot) is ``accept``'s job. Returns up to k samples per call, no meta."""
     meas = make_measurement(robot, setup)
@@ -199,7 +201,9 @@ def justin_camera_sampler(robot: RobotModel, setup: Setup, *, candidates: int = 
             keep &= has
             dd = d[np.arange(k), first]
             dirs.append(dd / np.linalg.norm(dd, axis=-1, keepdims=True))
-        if ref is not None:
+            if ref is None:   # no pole: the next hand near this one
+                ref = dd
+        if pole is not None:
             dirs.append(ref / np.linalg.norm(ref, axis=-1, keepdims=True))
         look = eye + np.mean(dirs, axis=0)
         q[:, head] = look_at_head_joints(robot, q, look)
