@@ -31,7 +31,7 @@ DEFAULT_KAPPA = 1e-4
 #: default most torque updates of ``--elastic`` (stops earlier once converged)
 DEFAULT_MAX_ITER = 50
 #: modules with an ``add_subcommands(subparsers)`` function
-SUBCOMMAND_MODULES = ("jwarp.cli_calibration",)
+SUBCOMMAND_MODULES = ("jwarp.cli_calibration", "jwarp.cli_planning")
 
 
 class CLIError(Exception):
@@ -107,7 +107,7 @@ def _fix_negative_values(argv: list[str]) -> list[str]:
     i = 0
     while i < len(argv):
         a = argv[i]
-        if a in ("--q", "--kappa") and i + 1 < len(argv):
+        if a in ("--q", "--kappa", "--start", "--goal", "--target") and i + 1 < len(argv):
             nxt = argv[i + 1]
             if nxt.startswith("-") and len(nxt) > 1 and (nxt[1].isdigit() or nxt[1] == "."):
                 out.append(f"{a}={nxt}")

@@ -1,0 +1,276 @@
+"""CLI subcommands ``jwarp plan`` and ``jwarp ik`` (hooked into :mod:`jwarp.cli`).
+
+Examples::
+
+    jwarp plan --robot planar4 --world simplex:seed=3 --start 1.2,0,0,0 --goal -1.2,0,0,0
+    jwarp plan --robot justin19 --world world.npz --start ... --goal ... --starts 16 \\
+        --rerun plan.rrd --json
+    jwarp ik --robot justin19 --frame right_tcp --target 0.6,-0.25,0.8,0,1.5708,0 --json
+
+``--start``/``--goal`` are joint values v1,v2,... [rad, m for prismatic] (``--deg``: revolute
+ones in degrees); ``--target`` is x,y,z [m] and a rotation vector rx,ry,rz [rad] of the
+frame in the robot's base frame. JSON output holds the path (or q), feasibility, costs,
+iterations and wall time. ``--rerun FILE.rrd`` writes a recording: the world's occupied
+voxels, the robot's spheres and the path (end-effector traces) at every logged iteration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from jwarp.cli import CLIError, _dtype, _quiet_warp, _robot, dumps, parse_q
+
+#: log every this many iterations to rerun
+RERUN_EVERY = 5
+
+
+def _world(spec: str | None, model: Any) -> Any:
+    if spec is None:
+        return None
+    from jwarp.world.io import parse_world_spec
+
+    try:
+        return parse_world_spec(spec, robot=model)
+    except (ValueError, TypeError, OSError) as e:
+        raise CLIError(f"--world: {e}") from None
+
+
+def _target(text: str) -> np.ndarray:
+    parts = [p.strip() for p in text.split(",") if p.strip()]
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        raise CLIError(f"--target: expected x,y,z,rx,ry,rz (numbers), got {text!r}") from None
+    if len(vals) not in (3, 6) or not all(math.isfinite(v) for v in vals):
+        raise CLIError(f"--target: expected 3 or 6 finite numbers x,y,z[,rx,ry,rz], got {text!r}")
+    from jwarp.solvers.ik import pose_matrix
+
+    return pose_matrix(vals[:3], vals[3:] if len(vals) == 6 else (0.0, 0.0, 0.0))
+
+
+def _kappa(args: argparse.Namespace, model: Any) -> Any:
+    if not args.elastic:
+        if args.kappa is not None:
+            raise CLIError("--kappa: only meaningful with --elastic")
+        return None
+    from jwarp.cli import parse_kappa
+
+    kappa, _ = parse_kappa(args.kappa, model)
+    return model.kappa if kappa is None else kappa
+
+
+# ------------------------------------------------------------------ rerun
+class _Recorder:
+    """A rerun recording written to a temporary file, renamed on success."""
+
+    def __init__(self, path: str, model: Any, world: Any):
+        from jwarp import viz
+
+        self.rr = viz._rerun()
+        self.target = Path(path)
+        folder = self.target.parent if str(self.target.parent) else Path(".")
+        if not folder.is_dir():
+            raise CLIError(f"--rerun: folder '{folder}' does not exist")
+        fd, self.tmp = tempfile.mkstemp(prefix=f".{self.target.name}.", suffix=".tmp", dir=folder)
+        os.close(fd)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(self.tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual file mode
+        self.model = model
+        self.rec = self.rr.RecordingStream("jwarp-planning")
+        self.rec.save(self.tmp)
+        self.rec.log("/", self.rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        if world is not None:
+            self._log_world(world)
+
+    def _log_world(self, world: Any) -> None:
+        occ = world.occupancy if world.occupancy is not None else world.sdf < 0
+        idx = np.argwhere(occ)
+        pts = np.zeros((len(idx), 3))
+        pts[:, :world.dim] = world.limits[:, 0] + world.voxel_size * idx
+        half = np.full((len(idx), 3), 0.5 * world.voxel_size)
+        if world.dim == 2:
+            half[:, 2] = 0.005
+        self.rec.log("world/occupied", self.rr.Boxes3D(centers=pts, half_sizes=half,
+                                                       colors=[(90, 90, 90, 160)] * len(pts)),
+                     static=True)
+
+    def log_configs(self, timeline: str, step: int, q: np.ndarray, name: str = "robot") -> None:
+        """Spheres (and skeleton of the first configuration) of q (K, n_dof) at one step."""
+        from jwarp.kinematics import fk
+        from jwarp.viz import log_robot, world_spheres
+
+        self.rec.set_time(timeline, sequence=step)
+        frames = np.asarray(fk(self.model, np.asarray(q, np.float64), device="cpu"))
+        log_robot(self.rec, self.model, frames[0], path=name, spheres=False)
+        cs, rs = zip(*(world_spheres(self.model, f) for f in frames))
+        self.rec.log(f"{name}/spheres", self.rr.Points3D(np.concatenate(cs), radii=np.concatenate(rs),
+                                                         colors=[(80, 140, 220, 60)]))
+
+    def log_traces(self, step: int, paths: np.ndarray) -> None:
+        """End-effector (last frame) trace of every path (P, W, n_dof) at one iteration."""
+        from jwarp.kinematics import fk
+
+        P, W, n = paths.shape
+        fi = next(iter(self.model.end_effectors.values()), self.model.n_frames - 1)
+        frames = np.asarray(fk(self.model, paths.reshape(-1, n), device="cpu"))
+        tcp = frames[:, fi, :3, 3].reshape(P, W, 3)
+        self.rec.set_time("iteration", sequence=step)
+        self.rec.log("paths/end_effector", self.rr.LineStrips3D(list(tcp), radii=0.004))
+
+    def close(self) -> Path:
+        self.rec.flush()
+        self.rec.disconnect()
+        os.replace(self.tmp, self.target)
+        return self.target
+
+    def abort(self) -> None:
+        if os.path.exists(self.tmp):
+            os.unlink(self.tmp)
+
+
+# ------------------------------------------------------------------ commands
+def cmd_plan(args: argparse.Namespace) -> int:
+    model = _robot(args.robot)
+    q0 = parse_q(args.start, model, args.deg, option="--start")
+    q1 = parse_q(args.goal, model, args.deg, option="--goal")
+    kappa = _kappa(args, model)
+    _quiet_warp()
+    world = _world(args.world, model)
+    from jwarp.solvers.planner import plan
+
+    rec = _Recorder(args.rerun, model, world) if args.rerun else None
+    callback = None
+    if rec is not None:
+        def callback(it: int, paths: np.ndarray) -> None:
+            if it % RERUN_EVERY == 0:
+                rec.log_traces(it, paths)
+                rec.log_configs("iteration", it, paths[0], name="start0")
+    try:
+        res = plan(model, world, q0, q1, n_starts=args.starts, iterations=args.iterations,
+                   n_waypoints=args.waypoints, n_substeps=args.substeps, step=args.step,
+                   margin=args.margin, seed=args.seed, kappa=kappa, device=args.device,
+                   dtype=_dtype(args.dtype), callback=callback)
+        if rec is not None:
+            for k, q in enumerate(res.path[0]):
+                rec.log_configs("waypoint", k, q[None], name="result")
+            written = rec.close()
+    except (ValueError, TypeError) as e:
+        if rec is not None:
+            rec.abort()
+        raise CLIError(f"plan: {e}") from None
+    except BaseException:
+        if rec is not None:
+            rec.abort()
+        raise
+    out = {"robot": model.name, "world": args.world, "start": q0.tolist(), "goal": q1.tolist(),
+           "elastic": kappa is not None, **res.to_dict(0)}
+    if args.json:
+        print(dumps(out))
+    else:
+        state = "feasible" if res.feasible[0] else "NOT feasible"
+        print(f"robot {model.name}: path of {args.waypoints} waypoints is {state} "
+              f"({res.n_feasible[0]} of {res.all_feasible.shape[1]} starts feasible)")
+        print(f"costs: total {res.cost[0]:.6g}, length {res.length_cost[0]:.6g}, "
+              f"collision {res.collision_cost[0]:.6g}; iterations {res.iterations[0]}; "
+              f"{res.n_substeps} substeps per segment; wall time {res.wall_time:.3f} s")
+        for k, q in enumerate(res.path[0]):
+            print(f"  {k:3d}  [{', '.join(f'{v:+.5f}' for v in q)}]")
+    if rec is not None and not args.json:
+        print(f"wrote {written}; view with: rerun {written}")
+    return 0 if res.feasible[0] else 1
+
+
+def cmd_ik(args: argparse.Namespace) -> int:
+    model = _robot(args.robot)
+    T = _target(args.target)
+    kappa = _kappa(args, model)
+    _quiet_warp()
+    world = _world(args.world, model)
+    from jwarp.solvers.ik import ik
+
+    try:
+        res = ik(model, args.frame, T, world=world, n_starts=args.starts, margin=args.margin,
+                 max_iterations=args.iterations, seed=args.seed, kappa=kappa, device=args.device,
+                 dtype=_dtype(args.dtype))
+        written = None
+        if args.rerun:
+            rec = _Recorder(args.rerun, model, world)
+            try:
+                for k, q in enumerate(res.all_q):
+                    rec.log_configs("start", k, q[None], name="solution")
+                rec.rec.log("target", rec.rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]),
+                            rec.rr.TransformAxes3D(0.1), static=True)
+                written = rec.close()
+            except BaseException:
+                rec.abort()
+                raise
+    except (ValueError, TypeError) as e:
+        raise CLIError(f"ik: {e}") from None
+    out = {"robot": model.name, "frame": args.frame, "target": T.tolist(), "world": args.world,
+           "elastic": kappa is not None, **res.to_dict(0)}
+    if args.json:
+        print(dumps(out))
+    else:
+        state = "feasible" if res.feasible else "NOT feasible"
+        print(f"robot {model.name}: IK of {args.frame} is {state} ({int(res.n_feasible)} of "
+              f"{res.all_q.shape[0]} starts); position error {float(res.pos_err):.3g} m, "
+              f"rotation error {float(res.rot_err):.3g} rad; iterations {int(res.iterations)}; "
+              f"wall time {res.wall_time:.4f} s")
+        print(f"q = [{', '.join(f'{v:+.6f}' for v in res.q)}]")
+        if written:
+            print(f"wrote {written}; view with: rerun {written}")
+    return 0 if res.feasible else 1
+
+
+# ------------------------------------------------------------------ parser
+def add_subcommands(sub: Any) -> None:
+    """Add ``plan`` and ``ik`` to the ``jwarp`` subparsers."""
+    def common(s: argparse.ArgumentParser) -> None:
+        s.add_argument("--robot", required=True, help="robot name or path to a robot .json")
+        s.add_argument("--deg", action="store_true", help="revolute joint values in degrees")
+        s.add_argument("--margin", type=float, default=0.0, metavar="M",
+                       help="required clearance [m] to obstacles and between body parts")
+        s.add_argument("--seed", type=int, default=0, help="random seed of the multi-starts")
+        s.add_argument("--elastic", action="store_true",
+                       help="plan on the elastic model (one torque update per iteration)")
+        s.add_argument("--kappa", default=None, metavar="K",
+                       help="compliance [rad/(N m)] with --elastic (default: the robot's, else 1e-4)")
+        s.add_argument("--rerun", default=None, metavar="FILE.rrd", help="write a rerun recording")
+        s.add_argument("--json", action="store_true", help="print JSON")
+        s.add_argument("--device", default="cpu", help="Warp device (default cpu; e.g. cuda:0)")
+
+    s = sub.add_parser("plan", help="plan a collision-free path (gradient descent on U_path)")
+    common(s)
+    s.add_argument("--world", required=True, metavar="SPEC",
+                   help="simplex:seed=S[,threshold=T,...] or a world .npz file")
+    s.add_argument("--start", required=True, metavar="Q", help="start joint values v1,v2,...")
+    s.add_argument("--goal", required=True, metavar="Q", help="goal joint values v1,v2,...")
+    s.add_argument("--starts", type=int, default=8, metavar="N",
+                   help="multi-starts: the straight line + N-1 random via-point paths (default 8)")
+    s.add_argument("--iterations", type=int, default=200, metavar="N", help="most iterations")
+    s.add_argument("--waypoints", type=int, default=20, metavar="W", help="waypoints (default 20)")
+    s.add_argument("--substeps", type=int, default=None, metavar="N",
+                   help="substeps per segment (default: sized to the voxel size)")
+    s.add_argument("--step", type=float, default=0.01, help="gradient step size (default 0.01)")
+    s.add_argument("--dtype", default="float32", choices=("float64", "float32"))
+    s.set_defaults(func=cmd_plan)
+
+    s = sub.add_parser("ik", help="collision-free inverse kinematics (two-stage, multi-start)")
+    common(s)
+    s.add_argument("--frame", required=True, help="end-effector frame, e.g. right_tcp")
+    s.add_argument("--target", required=True, metavar="X,Y,Z[,RX,RY,RZ]",
+                   help="target position [m] and rotation vector [rad] in the base frame")
+    s.add_argument("--world", default=None, metavar="SPEC",
+                   help="optional world: simplex:seed=S[,...] or a world .npz file")
+    s.add_argument("--starts", type=int, default=16, metavar="N", help="random seeds (default 16)")
+    s.add_argument("--iterations", type=int, default=200, metavar="N", help="most iterations")
+    s.add_argument("--dtype", default="float64", choices=("float64", "float32"))
+    s.set_defaults(func=cmd_ik)

@@ -1,0 +1,612 @@
+"""Collision costs and distances of a sphere robot in a signed-distance world (host API).
+
+Thesis eq. 3.8-3.12: the robot is a set of spheres fixed to its frames
+(``RobotModel.sphere_arrays()``), the world a signed distance field
+(:class:`jwarp.world.World`), and
+
+* ``U_world(q) = sum_s c(D(x_s(q)) - r_s)``                    (eq. 3.8)
+* ``U_self(q)  = sum_(a,b) c(|x_a(q) - x_b(q)| - r_a - r_b)``  (eq. 3.11)
+
+over the sphere pairs whose frames may collide (``RobotModel.allowed_collision_pairs``;
+pairs at a constant positive distance are left out, see :func:`rigid_pairs`),
+with the smooth clip ``c`` of eq. 3.10 (``-d + eps/2`` below 0, ``(d - eps)^2 / (2 eps)``
+up to ``eps``, 0 beyond): a configuration whose spheres all keep ``eps`` from the world
+and from each other costs exactly 0. Path costs (eq. 3.9, 3.12) are sums of these over the
+substep configurations: pass them flattened as one batch.
+
+2D worlds: robots with ``workspace_dim == 2`` (planar4, planar5, sphere2d) move in the
+x-y plane and use the x, y of their spheres; a world of the other dimension is an error.
+
+Fast path for loops (a planner): build a :class:`CollisionModel` once and call
+:meth:`CollisionModel.cost` with Warp arrays (and preallocated outputs); it launches one
+kernel, computes the gradient by hand in the same launch and copies nothing to the host.
+:func:`collision_cost` wraps it for numpy / Warp / torch input (same kind out).
+"""
+
+from __future__ import annotations
+
+import weakref
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from jwarp.arrays import Batch, as_batch, default_dtype, init_warp, resolve_device, to_output
+from jwarp.device_model import KinematicsTables, numpy_dtype, scalar_type, tables
+from jwarp.kernels import collision as ck
+from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.model import RobotModel
+from jwarp.registry import robot as get_robot
+from jwarp.world.sdf import World
+
+__all__ = ["DEFAULT_EPS", "CollisionModel", "collision_model", "collision_cost",
+           "collision_pairs", "rigid_pairs", "sphere_distances", "self_distances", "min_distances",
+           "is_collision_free", "sdf_query", "check_world"]
+
+#: default smoothing distance eps of the clip c (eq. 3.10) [m]
+DEFAULT_EPS = 0.05
+_FAR = 1e30
+
+
+def check_world(robot: RobotModel, world: World | None) -> None:
+    """ValueError unless ``world`` is None or has the robot's workspace dimension."""
+    if world is None:
+        return
+    if not isinstance(world, World):
+        raise TypeError(f"world: expected a jwarp.world.World, got {type(world).__name__}")
+    if world.dim != robot.workspace_dim:
+        raise ValueError(f"world: a {world.dim}D world does not fit robot '{robot.name}', which "
+                         f"moves in {robot.workspace_dim}D (workspace_dim={robot.workspace_dim})")
+
+
+def collision_pairs(robot: Any) -> np.ndarray:
+    """(P, 2) int32 sphere index pairs checked for self-collision, in kernel order:
+    pairs of spheres whose frames are allowed to collide
+    (``RobotModel.allowed_collision_pairs``), grouped by frame pair (sorted), the sphere on
+    the lower frame index first, except the rigid pairs of :func:`rigid_pairs`."""
+    return _robot_tables(get_robot(robot))["pairs"].copy()
+
+
+def rigid_pairs(robot: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Allowed sphere pairs left out of the self-collision check because their surface
+    distance is the same in every configuration and positive: ``(pairs (R, 2) int32,
+    distance (R,) [m])``. (A constant distance <= 0 stays in the check: such a pair
+    always collides, which says the model or its allowed pairs are wrong.)"""
+    rt = _robot_tables(get_robot(robot))
+    return rt["rigid_pairs"].copy(), rt["rigid_distance"].copy()
+
+
+def cell_minimum(grid: np.ndarray) -> np.ndarray:
+    """``out[i, j, k]`` = min of ``grid`` over the corners ``(i..i+1, j..j+1, k..k+1)``
+    (last index clamped; size-1 axes use their single layer): a lower bound of the
+    interpolated field in the cell spanned from (i, j, k)."""
+    g = np.asarray(grid)
+    out = g.copy()
+    for axis in range(g.ndim):
+        if g.shape[axis] > 1:
+            nxt = np.concatenate([np.take(out, np.arange(1, g.shape[axis]), axis=axis),
+                                  np.take(out, [g.shape[axis] - 1], axis=axis)], axis=axis)
+            out = np.minimum(out, nxt)
+    return np.ascontiguousarray(out)
+
+
+_ROBOT_TABLES: "weakref.WeakKeyDictionary[RobotModel, dict]" = weakref.WeakKeyDictionary()
+
+
+def _pair_distance_spread(robot: RobotModel, pairs: np.ndarray, n: int = 32,
+                          seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) surface distance [m] of sphere ``pairs`` (P, 2) over q = 0 and ``n``
+    random configurations within the joint limits (float64)."""
+    from jwarp.kinematics import fk
+
+    f, p, r = robot.sphere_arrays()
+    lim = robot.joint_limits
+    q = np.random.default_rng(seed).uniform(lim[:, 0], lim[:, 1], (n, robot.n_dof))
+    q = np.concatenate([np.zeros((1, robot.n_dof)), q])
+    T = np.asarray(fk(robot, q, dtype=np.float64))[:, f]
+    x = np.einsum("bsij,sj->bsi", T[..., :3, :3], p) + T[..., :3, 3]
+    d = np.linalg.norm(x[:, pairs[:, 0]] - x[:, pairs[:, 1]], axis=-1) - r[pairs[:, 0]] - r[pairs[:, 1]]
+    return d.min(0), d.max(0)
+
+
+def _robot_tables(robot: RobotModel) -> dict:
+    """Sphere, bound and pair tables of a robot (cached). Sphere pairs on allowed frame
+    pairs whose distance cannot change (e.g. a sphere centred on the only joint axis
+    between the two frames) and is positive are left out: they never collide and would
+    only add a constant to the cost (justin19: torso_3 vs right/left_base, 1.5 cm)."""
+    if robot in _ROBOT_TABLES:
+        return _ROBOT_TABLES[robot]
+    f, p, r = robot.sphere_arrays()
+    allowed = np.asarray(robot.allowed_collision_pairs, bool)
+    n = robot.n_frames
+    cand = np.array([(a, b) for a in range(len(f)) for b in range(len(f))
+                     if f[a] < f[b] and allowed[f[a], f[b]]], np.int32).reshape(-1, 2)
+    rigid = np.zeros(len(cand), bool)
+    dmin = np.zeros(len(cand))
+    if len(cand):
+        dmin, dmax = _pair_distance_spread(robot, cand)
+        rigid = (dmax - dmin < 1e-9) & (dmin > 0)
+    groups: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    for (a, b) in cand[~rigid].tolist():
+        groups.setdefault((int(f[a]), int(f[b])), []).append((a, b))
+    fpairs = sorted(groups)
+    start = [0]          # frame pair -> its entries (one per sphere a)
+    ent_sphere: list[int] = []
+    ent_start = [0]      # entry -> its pairs
+    pairs: list[tuple[int, int]] = []
+    for key in fpairs:
+        for a in sorted({a for a, _ in groups[key]}):
+            pairs.extend(sorted(pr for pr in groups[key] if pr[0] == a))
+            ent_sphere.append(a)
+            ent_start.append(len(pairs))
+        start.append(len(ent_sphere))
+    bound_pos = np.zeros((n, 3))
+    bound_rad = np.full(n, -1.0)
+    for i in range(n):
+        m = f == i
+        if m.any():
+            c = 0.5 * ((p[m] - r[m, None]).min(0) + (p[m] + r[m, None]).max(0))
+            bound_pos[i] = c
+            bound_rad[i] = float(np.max(np.linalg.norm(p[m] - c, axis=1) + r[m]))
+    out = dict(
+        sph_frame=f.astype(np.int32), sph_pos=p, sph_rad=r,
+        bound_pos=bound_pos, bound_rad=bound_rad,
+        fpair_a=np.array([k[0] for k in fpairs], np.int32).reshape(-1),
+        fpair_b=np.array([k[1] for k in fpairs], np.int32).reshape(-1),
+        fpair_start=np.array(start, np.int32),
+        ent_sphere=np.array(ent_sphere, np.int32), ent_start=np.array(ent_start, np.int32),
+        pairs=np.array(pairs, np.int32).reshape(-1, 2),
+        rigid_pairs=cand[rigid], rigid_distance=dmin[rigid],
+    )
+    _ROBOT_TABLES[robot] = out
+    return out
+
+
+class CollisionModel:
+    """Device tables of one robot and one world (or none) for the collision kernels,
+    with scratch buffers reused across calls (so one model must not be called from two
+    threads at once).
+
+    Args:
+        robot: name or RobotModel.
+        world: :class:`World` of the robot's workspace dimension, or None (self-collision only).
+            Its SDF is copied to the device once: treat the world as immutable afterwards.
+        device: Warp device (default: CUDA if present, else CPU).
+        dtype: float32 (default) or float64.
+    """
+
+    def __init__(self, robot: Any, world: World | None = None, *, device: Any = None,
+                 dtype: Any = np.float32) -> None:
+        init_warp()
+        self.robot = get_robot(robot)
+        check_world(self.robot, world)
+        self.world = world
+        self.device = resolve_device(device)
+        self.scalar = scalar_type(dtype)
+        self.dtype = numpy_dtype(self.scalar)
+        self.tables: KinematicsTables = tables(self.robot, self.device, self.dtype)
+        self.k = ck.kernels(self.scalar)
+        rt = _robot_tables(self.robot)
+        vec3 = self.k.vec3
+        dev = self.device
+
+        def arr(a: np.ndarray, dt: Any) -> wp.array:
+            a = np.asarray(a)
+            if a.size == 0:  # Warp kernels need non-empty arrays; lengths come from the tables
+                a = np.zeros((1,) + a.shape[1:], a.dtype)
+            return wp.array(a, dtype=dt, device=dev)
+
+        self.n_spheres = len(rt["sph_frame"])
+        self.n_pairs = len(rt["pairs"])
+        self.pairs = rt["pairs"]
+        self.sph_frame = arr(rt["sph_frame"], wp.int32) if self.n_spheres else wp.zeros(0, dtype=wp.int32, device=dev)
+        self.sph_pos = arr(rt["sph_pos"].astype(self.dtype), vec3)
+        self.sph_rad = arr(rt["sph_rad"].astype(self.dtype), self.scalar)
+        self.bound_pos = arr(rt["bound_pos"].astype(self.dtype), vec3)
+        self.bound_rad = arr(rt["bound_rad"].astype(self.dtype), self.scalar)
+        nfp = len(rt["fpair_a"])
+        self.fpair_a = wp.array(rt["fpair_a"], dtype=wp.int32, device=dev) if nfp else wp.zeros(0, dtype=wp.int32, device=dev)
+        self.fpair_b = arr(rt["fpair_b"], wp.int32)
+        self.fpair_start = arr(rt["fpair_start"], wp.int32)
+        self.ent_sphere = arr(rt["ent_sphere"], wp.int32)
+        self.ent_start = arr(rt["ent_start"], wp.int32)
+        self.pair_a = arr(rt["pairs"][:, 0], wp.int32)
+        self.pair_b = arr(rt["pairs"][:, 1], wp.int32)
+        if world is None:
+            grid = np.zeros((2, 2, 1), self.dtype)
+            self.origin = vec3(0.0, 0.0, 0.0)
+            self.inv_h = 1.0
+            self.dim = 3
+        else:
+            g = world.sdf.astype(self.dtype)
+            grid = g if world.dim == 3 else g[:, :, None]
+            o = np.zeros(3)
+            o[:world.dim] = world.limits[:, 0]
+            self.origin = vec3(*o)
+            self.inv_h = 1.0 / world.voxel_size
+            self.dim = world.dim
+        self.grid = wp.array(np.ascontiguousarray(grid), dtype=self.scalar, device=dev)
+        self.cellmin = wp.array(cell_minimum(grid), dtype=self.scalar, device=dev)
+        self._capacity = 0
+        self._scratch: tuple = ()
+        self._launches: dict = {}
+        self._dummy = wp.empty((1, 1), dtype=self.scalar, device=dev)
+
+    # ------------------------------------------------------------ plumbing
+    @property
+    def model_args(self) -> list:
+        """Frame and sphere tables in kernel argument order."""
+        t = self.tables
+        return [*t.frame_args, self.sph_frame, self.sph_pos, self.sph_rad, self.bound_pos,
+                self.bound_rad, self.fpair_a, self.fpair_b, self.fpair_start, self.ent_sphere,
+                self.ent_start, self.pair_b]
+
+    def scratch(self, n: int) -> tuple[wp.array, ...]:
+        """Scratch (frames, xs, force, moment, bc) for at least ``n`` configurations; grown on
+        demand, kept between calls. Frame-major in memory on CUDA (coalesced)."""
+        if n > self._capacity or not self._scratch:
+            cap = max(n, int(self._capacity * 1.5), 1)
+            k = fk_kernels(self.scalar)
+            nf, ns = self.robot.n_frames, max(self.n_spheres, 1)
+            cuda = self.device.is_cuda
+
+            def mk(m: int, dt: Any) -> wp.array:
+                if cuda:
+                    return wp.empty((m, cap), dtype=dt, device=self.device).transpose()
+                return wp.empty((cap, m), dtype=dt, device=self.device)
+
+            self._scratch = (mk(nf, k.mat44), mk(ns, self.k.vec3), mk(nf, self.k.vec3),
+                             mk(nf, self.k.vec3), mk(nf, self.k.vec3))
+            self._capacity = cap
+            self._launches.clear()
+        return self._scratch
+
+    def _rho(self, rho: Any, n: int) -> tuple[wp.array, int, int]:
+        """(rho array, stride, use_rho) for ``rho`` None, (n_frames, 5) or (n, n_frames, 5)."""
+        if rho is None:
+            return self.tables.dh0_3d, 0, 0
+        nf = self.robot.n_frames
+        if isinstance(rho, wp.array):
+            if rho.dtype != self.scalar:
+                raise TypeError(f"rho: warp array dtype {rho.dtype.__name__} does not match "
+                                f"the kernels' {np.dtype(self.dtype).name}")
+            if rho.ndim == 2 and tuple(rho.shape) == (nf, 5):
+                return rho.reshape((1, nf, 5)), 0, 1
+            if rho.ndim == 3 and tuple(rho.shape) == (n, nf, 5):
+                return (rho if rho.device == self.device else rho.to(self.device)), 1, 1
+            raise ValueError(f"rho: expected shape ({nf}, 5) or ({n}, {nf}, 5), got {tuple(rho.shape)}")
+        if hasattr(rho, "detach"):
+            rho = rho.detach().cpu().numpy()
+        a = np.asarray(rho, dtype=np.float64)
+        if a.shape not in ((nf, 5), (n, nf, 5)):
+            raise ValueError(f"rho: expected shape ({nf}, 5) or ({n}, {nf}, 5) (DH rows "
+                             f"[d, theta, r, alpha, beta] per frame), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError("rho: contains NaN or inf")
+        stride = 1 if a.ndim == 3 else 0
+        a = a.reshape(-1, nf, 5).astype(self.dtype)
+        return wp.array(a, dtype=self.scalar, device=self.device), stride, 1
+
+    def _check_q(self, q: wp.array) -> None:
+        if not isinstance(q, wp.array):
+            raise TypeError(f"q: expected a warp array (use collision_cost for numpy/torch), "
+                            f"got {type(q).__name__}")
+        if q.ndim != 2 or q.shape[1] != self.robot.n_dof:
+            raise ValueError(f"q: expected shape (N, {self.robot.n_dof}), got {tuple(q.shape)}")
+        if q.dtype != self.scalar:
+            raise TypeError(f"q: warp array dtype {q.dtype.__name__} does not match the "
+                            f"kernels' {np.dtype(self.dtype).name}")
+        if q.device != self.device:
+            raise ValueError(f"q: on device {q.device}, the collision model on {self.device}")
+
+    def _out(self, out: wp.array | None, shape: tuple, name: str) -> wp.array:
+        if out is None:
+            return wp.empty(shape, dtype=self.scalar, device=self.device)
+        if not isinstance(out, wp.array) or tuple(out.shape) != shape or out.dtype != self.scalar \
+                or out.device != self.device:
+            raise ValueError(f"{name}: expected a warp {np.dtype(self.dtype).name} array of shape "
+                             f"{shape} on {self.device}")
+        return out
+
+    # --------------------------------------------------------------- costs
+    def cost(self, q: wp.array, *, rho: Any = None, w_world: float = 1.0, w_self: float = 1.0,
+             eps: float = DEFAULT_EPS, grad: bool = True, out_cost: wp.array | None = None,
+             out_grad: wp.array | None = None) -> tuple[wp.array, wp.array | None]:
+        """Collision cost and its hand-written gradient in one launch.
+
+        Args:
+            q: (N, n_dof) Warp array on this device and dtype [rad or m].
+            rho: DH rows (n_frames, 5) or per configuration (N, n_frames, 5) (elastic
+                compensation: frames at rho, gradient with rho fixed); None = nominal.
+            w_world, w_self: weights of U_world and U_self (eq. 3.16); a zero weight skips
+                that term. Without a world U_world is 0.
+            eps: smoothing distance of the clip c [m], > 0.
+            grad: also compute d cost / d q.
+            out_cost: optional preallocated (N,) output; out_grad: (N, n_dof).
+
+        Returns:
+            ``(cost (N,), grad (N, n_dof) or None)`` as Warp arrays (no host copies).
+        """
+        self._check_q(q)
+        n = q.shape[0]
+        if not np.isfinite(eps) or eps <= 0:
+            raise ValueError(f"eps: expected a positive distance [m], got {eps}")
+        if not (np.isfinite(w_world) and np.isfinite(w_self)):
+            raise ValueError(f"w_world, w_self: expected finite weights, got {w_world}, {w_self}")
+        cost = self._out(out_cost, (n,), "out_cost")
+        g = self._out(out_grad, (n, self.robot.n_dof), "out_grad") if grad else None
+        rho_a, stride, use_rho = self._rho(rho, n)
+        ww = float(w_world) if self.world is not None and self.n_spheres else 0.0
+        ws = float(w_self) if self.n_pairs else 0.0
+        frames, xs, force, moment, bc = self.scratch(n)
+        gout = g if g is not None else self._dummy
+        inputs = [q, rho_a, stride, use_rho, self.grid, self.cellmin, self.origin, self.inv_h,
+                  self.dim, ww, ws, float(eps), int(grad), *self.model_args,
+                  frames, xs, force, moment, bc]
+        # caller-owned buffers (a planner's loop): replay a recorded launch (cheaper on the host)
+        reuse = out_cost is not None and (rho is None or isinstance(rho, wp.array))
+        if not reuse:
+            wp.launch(self.k.cost, dim=n, inputs=inputs, outputs=[cost, gout], device=self.device)
+            return cost, g
+        key = (id(q), id(rho_a), stride, id(cost), id(g), ww, ws, float(eps), n)
+        hit = self._launches.get(key)
+        if hit is None:
+            if len(self._launches) > 32:
+                self._launches.clear()
+            launch = wp.launch(self.k.cost, dim=n, inputs=inputs, outputs=[cost, gout],
+                               device=self.device, record_cmd=True)
+            hit = (launch, q, rho_a, cost, g)
+            self._launches[key] = hit
+        hit[0].launch()
+        return cost, g
+
+    def cost_tape(self, q: wp.array, *, rho: Any = None, w_world: float = 1.0,
+                  w_self: float = 1.0, eps: float = DEFAULT_EPS) -> tuple[wp.array, wp.array]:
+        """The same cost, its gradient w.r.t. q by ``wp.Tape`` (FK kernel + one thread per
+        sphere and per sphere pair, atomic sums). Slower; a cross-check of the
+        hand-written gradient and the route for derivatives w.r.t. other inputs.
+        Returns ``(cost (N,), grad (N, n_dof))`` Warp arrays."""
+        from jwarp.kinematics import launch_fk
+
+        self._check_q(q)
+        n = q.shape[0]
+        if not np.isfinite(eps) or eps <= 0:
+            raise ValueError(f"eps: expected a positive distance [m], got {eps}")
+        rho_a, stride, use_rho = self._rho(rho, n)
+        qg = wp.clone(q)
+        qg.requires_grad = True
+        k = fk_kernels(self.scalar)
+        frames = wp.zeros((n, self.robot.n_frames), dtype=k.mat44, device=self.device,
+                          requires_grad=True)
+        cost = wp.zeros(n, dtype=self.scalar, device=self.device, requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            launch_fk(self.tables, qg, dh=(rho_a, stride) if use_rho else None, frames=frames)
+            if self.world is not None and self.n_spheres and w_world != 0:
+                wp.launch(self.k.world_cost_spheres, dim=(n, self.n_spheres),
+                          inputs=[frames, self.grid, self.origin, self.inv_h, self.dim,
+                                  float(w_world), float(eps), self.sph_frame, self.sph_pos,
+                                  self.sph_rad], outputs=[cost], device=self.device)
+            if self.n_pairs and w_self != 0:
+                wp.launch(self.k.self_cost_pairs, dim=(n, self.n_pairs),
+                          inputs=[frames, float(w_self), float(eps), self.sph_frame,
+                                  self.sph_pos, self.sph_rad, self.pair_a, self.pair_b],
+                          outputs=[cost], device=self.device)
+        tape.backward(grads={cost: wp.ones(n, dtype=self.scalar, device=self.device)})
+        grad = wp.clone(qg.grad)
+        tape.zero()
+        return cost, grad
+
+    # ----------------------------------------------------------- distances
+    def distances(self, q: wp.array, *, rho: Any = None, spheres: bool = False,
+                  pairs: bool = False, use_world: bool = True, use_self: bool = True
+                  ) -> tuple[wp.array | None, wp.array | None, wp.array]:
+        """Signed surface distances [m] (Warp arrays).
+
+        Returns ``(sphere_dist (N, S) or None, pair_dist (N, P) or None, min_dist (N, 2))``:
+        ``sphere_dist[b, s] = D(x_s) - r_s``; ``pair_dist[b, p] = |x_a - x_b| - r_a - r_b``
+        for the pairs of :func:`collision_pairs`; ``min_dist[b] = [min world, min self]``
+        (1e30 where there is nothing to measure)."""
+        self._check_q(q)
+        n = q.shape[0]
+        rho_a, stride, use_rho = self._rho(rho, n)
+        uw = int(use_world and self.world is not None and self.n_spheres > 0)
+        us = int(use_self and self.n_pairs > 0)
+        sd = wp.empty((n, self.n_spheres), dtype=self.scalar, device=self.device) \
+            if spheres and uw else None
+        pd = wp.empty((n, self.n_pairs), dtype=self.scalar, device=self.device) \
+            if pairs and us else None
+        md = wp.empty((n, 2), dtype=self.scalar, device=self.device)
+        dummy = self._dummy
+        frames, xs = self.scratch(n)[:2]
+        wp.launch(self.k.distance, dim=n,
+                  inputs=[q, rho_a, stride, use_rho, self.grid, self.cellmin, self.origin, self.inv_h,
+                          self.dim, uw, us, int(sd is not None), int(pd is not None),
+                          *self.model_args, _FAR, frames, xs],
+                  outputs=[sd if sd is not None else dummy, pd if pd is not None else dummy, md],
+                  device=self.device)
+        return sd, pd, md
+
+
+# ====================================================================== functional API
+_MODELS: "weakref.WeakKeyDictionary[RobotModel, dict]" = weakref.WeakKeyDictionary()
+
+
+def collision_model(robot: Any, world: World | None = None, *, device: Any = None,
+                    dtype: Any = np.float32) -> CollisionModel:
+    """A cached :class:`CollisionModel` for (robot, world, device, dtype)."""
+    init_warp()
+    model = get_robot(robot)
+    check_world(model, world)
+    dev = resolve_device(device)
+    scalar = scalar_type(dtype)
+    per_robot = _MODELS.setdefault(model, {})
+    key = (id(world), str(dev), scalar.__name__)
+    hit = per_robot.get(key)
+    if hit is not None and hit[0]() is world:
+        return hit[1]
+    cm = CollisionModel(model, world, device=dev, dtype=scalar)
+    # hold the world weakly (None is kept by a dummy strong ref)
+    ref = weakref.ref(world) if world is not None else (lambda: None)
+    if len(per_robot) > 16:
+        per_robot.clear()
+    per_robot[key] = (ref, cm)
+    return cm
+
+
+def _prepare(robot: Any, q: Any, world: World | None, device: Any, dtype: Any,
+             validate: bool) -> tuple[RobotModel, Batch, CollisionModel]:
+    init_warp()
+    model = get_robot(robot)
+    check_world(model, world)
+    dev = resolve_device(device, like=q)
+    dt = default_dtype(q) if dtype is None else dtype
+    batch = as_batch(q, model.n_dof, "q", device=dev, dtype=dt,
+                     what=f"robot '{model.name}' has {model.n_dof} joints", validate=validate)
+    return model, batch, collision_model(model, world, device=dev, dtype=dt)
+
+
+def _rho_arg(rho: Any, batch: Batch, nf: int) -> Any:
+    """Per-configuration rho with the caller's leading dims -> (N, n_frames, 5)."""
+    if rho is None or isinstance(rho, wp.array):
+        if isinstance(rho, wp.array) and rho.ndim > 3:
+            return rho.reshape((-1, nf, 5))
+        return rho
+    if hasattr(rho, "detach"):
+        rho = rho.detach().cpu().numpy()
+    a = np.asarray(rho, dtype=np.float64)
+    if a.ndim > 2:
+        if a.shape[:-2] != tuple(batch.lead_shape):
+            raise ValueError(f"rho: batch dims {a.shape[:-2]} do not match q's {tuple(batch.lead_shape)}")
+        a = a.reshape(-1, *a.shape[-2:])
+    return a
+
+
+def collision_cost(robot: Any, q: Any, world: World | None, *, w_world: float = 1.0,
+                   w_self: float = 1.0, eps: float = DEFAULT_EPS, rho: Any = None,
+                   grad: bool = True, device: Any = None, dtype: Any = None,
+                   tape: bool = False, validate: bool = True) -> tuple[Any, Any]:
+    """Collision cost ``w_world U_world + w_self U_self`` (eq. 3.8, 3.10, 3.11) per
+    configuration and its gradient w.r.t. q.
+
+    Args:
+        robot: name or RobotModel.
+        q: (..., n_dof) joint values (numpy, Warp or torch) [rad or m].
+        world: :class:`World` of the robot's workspace dimension, or None (self only).
+        w_world, w_self: weights; eps: smoothing distance of c [m].
+        rho: optional DH rows (n_frames, 5) or (..., n_frames, 5) (elastic compensation:
+            FK at rho, gradient with rho held fixed).
+        grad: also return the gradient.
+        device, dtype: as in :func:`jwarp.fk` (default float32 unless q is float64).
+        tape: gradient by ``wp.Tape`` instead of the hand-written kernel (slower).
+        validate: check q for NaN/inf (copies Warp/torch input to the host; in a loop pass
+            False, or call :meth:`CollisionModel.cost` directly).
+
+    Returns:
+        ``(cost (...,), grad (..., n_dof) or None)`` in the kind of ``q`` (Warp in, Warp out).
+    """
+    model, batch, cm = _prepare(robot, q, world, device, dtype, validate)
+    rho_b = _rho_arg(rho, batch, model.n_frames)
+    if tape:
+        cost, g = cm.cost_tape(batch.array, rho=rho_b, w_world=w_world, w_self=w_self, eps=eps)
+        if not grad:
+            g = None
+    else:
+        cost, g = cm.cost(batch.array, rho=rho_b, w_world=w_world, w_self=w_self, eps=eps,
+                          grad=grad)
+    out_c = to_output(cost, batch)
+    out_g = None if g is None else to_output(g, batch, (model.n_dof,))
+    return out_c, out_g
+
+
+def sphere_distances(robot: Any, q: Any, world: World, *, rho: Any = None, device: Any = None,
+                     dtype: Any = None, validate: bool = True) -> Any:
+    """(..., n_spheres) signed distance [m] of each sphere's surface to the world:
+    ``D(x_s) - r_s`` (negative = penetration)."""
+    if world is None:
+        raise ValueError("world: required for sphere distances")
+    model, batch, cm = _prepare(robot, q, world, device, dtype, validate)
+    if cm.n_spheres == 0:
+        raise ValueError(f"robot: '{model.name}' has no collision spheres")
+    sd, _, _ = cm.distances(batch.array, rho=_rho_arg(rho, batch, model.n_frames), spheres=True,
+                            use_self=False)
+    return to_output(sd, batch, (cm.n_spheres,))
+
+
+def self_distances(robot: Any, q: Any, *, rho: Any = None, device: Any = None,
+                   dtype: Any = None, validate: bool = True) -> Any:
+    """(..., n_pairs) signed distance [m] between the surfaces of the sphere pairs of
+    :func:`collision_pairs` (negative = penetration)."""
+    model, batch, cm = _prepare(robot, q, None, device, dtype, validate)
+    if cm.n_pairs == 0:
+        raise ValueError(f"robot: '{model.name}' has no self-collision sphere pairs")
+    _, pd, _ = cm.distances(batch.array, rho=_rho_arg(rho, batch, model.n_frames), pairs=True,
+                            use_world=False)
+    return to_output(pd, batch, (cm.n_pairs,))
+
+
+def min_distances(robot: Any, q: Any, world: World | None = None, *, rho: Any = None,
+                  device: Any = None, dtype: Any = None, validate: bool = True) -> Any:
+    """(..., 2) [smallest sphere-to-world, smallest sphere-to-sphere] surface distance [m]
+    per configuration (``inf`` where there is nothing to measure)."""
+    model, batch, cm = _prepare(robot, q, world, device, dtype, validate)
+    _, _, md = cm.distances(batch.array, rho=_rho_arg(rho, batch, model.n_frames))
+    out = to_output(md, batch, (2,))
+    if isinstance(out, np.ndarray):
+        out = np.where(out >= 0.5 * _FAR, np.inf, out)
+    return out
+
+
+def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: float = 0.0, *,
+                      rho: Any = None, device: Any = None, dtype: Any = None,
+                      validate: bool = True) -> np.ndarray:
+    """(...,) bool numpy: every sphere keeps more than ``margin`` [m] from the world and
+    from every sphere it may collide with (joint limits are not checked here)."""
+    if not np.isfinite(margin):
+        raise ValueError(f"margin: expected a finite distance [m], got {margin}")
+    md = min_distances(robot, q, world, rho=rho, device=device, dtype=dtype, validate=validate)
+    if isinstance(md, wp.array):
+        md = md.numpy()
+    elif hasattr(md, "detach"):
+        md = md.detach().cpu().numpy()
+    return np.all(np.asarray(md) > margin, axis=-1)
+
+
+def sdf_query(world: World, points: Any, *, grad: bool = False, device: Any = "cpu"
+              ) -> Any:
+    """Interpolated signed distance [m] of ``world`` at ``points`` (..., dim) [m] (numpy),
+    with the lookup of the cost kernels. Returns (...,) or, with ``grad``, a tuple
+    ``(dist (...,), gradient (..., dim))``."""
+    if not isinstance(world, World):
+        raise TypeError(f"world: expected a jwarp.world.World, got {type(world).__name__}")
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim < 1 or p.shape[-1] != world.dim:
+        raise ValueError(f"points: expected shape (..., {world.dim}) for a {world.dim}D world, "
+                         f"got {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise ValueError("points: contains NaN or inf")
+    init_warp()
+    dev = resolve_device(device)
+    dt = world.sdf.dtype
+    scalar = scalar_type(dt)
+    k = ck.kernels(scalar)
+    lead = p.shape[:-1]
+    flat = p.reshape(-1, world.dim)
+    p3 = np.zeros((len(flat), 3), dt)
+    p3[:, :world.dim] = flat
+    grid = world.sdf if world.dim == 3 else world.sdf[:, :, None]
+    o = np.zeros(3)
+    o[:world.dim] = world.limits[:, 0]
+    n = max(len(flat), 1)
+    dist = wp.empty(n, dtype=scalar, device=dev)
+    g = wp.empty(n, dtype=k.vec3, device=dev)
+    if len(flat):
+        wp.launch(k.sdf_query, dim=len(flat),
+                  inputs=[wp.array(p3, dtype=k.vec3, device=dev),
+                          wp.array(np.ascontiguousarray(grid), dtype=scalar, device=dev),
+                          k.vec3(*o), 1.0 / world.voxel_size, world.dim],
+                  outputs=[dist, g], device=dev)
+    d = dist.numpy()[:len(flat)].reshape(lead)
+    if not grad:
+        return d
+    return d, g.numpy()[:len(flat), :world.dim].reshape(lead + (world.dim,))

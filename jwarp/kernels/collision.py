@@ -1,0 +1,523 @@
+"""Collision kernels: SDF lookup, world and self-collision costs, sphere distances.
+
+Math only; the host side is :mod:`jwarp.collision`. Built per scalar type by
+:func:`kernels` (float32 or float64) and batched over configurations (N = paths x
+substeps flattened): one thread per configuration.
+
+World grid (the *Model* of the world):
+
+* ``grid``   (nx, ny, nz) signed distances [m] at cell centres; a 2D world is stored
+  with nz = 1 and looked up with ``dim = 2`` (bilinear in x, y; z ignored).
+* ``origin`` vec3 [m] centre of cell (0, 0, 0); ``inv_h`` 1 / voxel size [1/m].
+* ``cellmin`` same shape: ``cellmin[i, j, k]`` = smallest grid value over the corners
+  (i..i+1, j..j+1, k..k+1) of the cell spanned from there, a lower bound of the
+  interpolated D inside it (and outside the box, where D only grows); the cost kernel
+  skips the interpolation where this bound already keeps a sphere ``eps`` away.
+
+Lookup (:func:`sdf_sample`): trilinear (bilinear) interpolation of the cell-centre values;
+outside the box of cell centres the point is clamped onto the box and the distance to the
+box is added, ``D(x) = D(clamp(x)) + |x - clamp(x)|``, so the world is free out there and
+the distance grows away from the grid (continuous at the box faces).
+
+Robot tables (see :mod:`jwarp.kernels.fk` for the frame tables):
+
+* ``sph_frame`` (S,) int32, ``sph_pos`` (S,) vec3 [m] in frame coordinates, ``sph_rad`` (S,) [m]
+* ``bound_pos`` (n_frames,) vec3, ``bound_rad`` (n_frames,): a sphere per frame enclosing
+  all its collision spheres (broad phase of the self-collision check)
+* ``fpair_a``, ``fpair_b`` (P_f,) int32 frame pairs allowed to collide (that carry spheres);
+  ``fpair_start`` (P_f + 1,) int32 CSR into the entries: one entry per sphere of frame a
+  with pairs in it, ``ent_sphere`` (E,) int32 that sphere, ``ent_start`` (E + 1,) int32 CSR
+  into ``pair_b`` (P,) int32, its partner spheres on frame b. Sphere pair p is
+  (ent_sphere[e], pair_b[p]) for the entry e holding p.
+
+Self-collision culling (exact): frame pairs whose bounding spheres keep ``eps`` apart are
+skipped, then spheres of frame a whose surface keeps ``eps`` from the bounding sphere of b.
+
+Costs (thesis eq. 3.8-3.12) with the smooth clip ``c`` of eq. 3.10 (:func:`smooth_clip`):
+
+* world: ``U_w(q) = sum_s c(D(x_s(q)) - r_s)``
+* self:  ``U_s(q) = sum_(a, b) c(|x_a(q) - x_b(q)| - r_a - r_b)`` over the allowed pairs
+
+The fused ``cost`` and ``distance`` kernels carry no adjoint (``enable_backward=False``);
+``world_cost_spheres`` and ``self_cost_pairs`` are the plain versions for ``wp.Tape``.
+
+Hand-written gradient (:data:`cost` kernel): each sphere gets a force ``f = dU/dx``;
+per frame the kernel sums ``F_i = sum f`` and ``M_i = sum x x f`` (world coordinates),
+adds every subtree into its root (leaves first), and then for every driven frame i
+``dU/dq_i = z_i . (M_i - o_i x F_i)`` (revolute) or ``z_i . F_i`` (prismatic), spread
+onto the driving joints through the coupling tables. DH rows ``rho`` are held fixed.
+"""
+
+
+import functools
+from types import SimpleNamespace
+
+import warp as wp
+
+from jwarp.kernels.fk import kernels as fk_kernels
+
+
+@wp.kernel(module="unique")
+def mesh_sdf_kernel(
+    # Model:
+    mesh: wp.uint64,
+    origin: wp.vec3,
+    h: float,
+    max_dist: float,
+    # Data out:
+    sdf: wp.array3d(dtype=float),
+):
+    """Signed distance [m] of every cell centre ``origin + h * (i, j, k)`` to a closed
+    (watertight) triangle mesh: negative inside (ray-casting parity)."""
+    i, j, k = wp.tid()
+    p = origin + wp.vec3(float(i), float(j), float(k)) * h
+    query = wp.mesh_query_point_sign_parity(mesh, p, max_dist)
+    d = max_dist
+    if query.result:
+        c = wp.mesh_eval_position(mesh, query.face, query.u, query.v)
+        d = query.sign * wp.length(p - c)
+    sdf[i, j, k] = d
+
+
+@functools.cache
+def kernels(scalar: type) -> SimpleNamespace:
+    """Collision kernels and functions for one scalar type (``wp.float32``/``wp.float64``)."""
+    fk = fk_kernels(scalar)
+    vec3, vec4, mat33, mat44 = fk.vec3, fk.vec4, fk.mat33, fk.mat44
+    zero = scalar(0.0)
+    one = scalar(1.0)
+    half = scalar(0.5)
+    unpack_rot, unpack_pos = fk.unpack_rot, fk.unpack_pos
+
+    @wp.func
+    def smooth_clip(d: scalar, eps: scalar):
+        """Smooth clip c(d) of eq. 3.10 and its derivative c'(d):
+        ``-d + eps/2`` for d < 0, ``(d - eps)^2 / (2 eps)`` for 0 <= d <= eps, 0 beyond."""
+        if d < zero:
+            return -d + half * eps, -one
+        if d < eps:
+            t = d - eps
+            return half * t * t / eps, t / eps
+        return zero, zero
+
+    @wp.func
+    def sdf_sample(grid: wp.array3d(dtype=scalar), origin: vec3, inv_h: scalar, dim: int,
+                   x: vec3):
+        """Signed distance D(x) [m] and its gradient dD/dx (vec3; z = 0 in 2D) at a
+        world point x [m] (module docstring: interpolation and the outside rule)."""
+        nx = grid.shape[0]
+        ny = grid.shape[1]
+        nz = grid.shape[2]
+        h = one / inv_h
+        u = (x - origin) * inv_h
+        cx = wp.clamp(u[0], zero, scalar(nx - 1))
+        cy = wp.clamp(u[1], zero, scalar(ny - 1))
+        cz = zero
+        if dim == 3:
+            cz = wp.clamp(u[2], zero, scalar(nz - 1))
+        ox = (u[0] - cx) * h
+        oy = (u[1] - cy) * h
+        oz = zero
+        if dim == 3:
+            oz = (u[2] - cz) * h
+        i = wp.min(int(cx), nx - 2)
+        j = wp.min(int(cy), ny - 2)
+        fx = cx - scalar(i)
+        fy = cy - scalar(j)
+        gx = zero
+        gy = zero
+        gz = zero
+        v = zero
+        if dim == 3:
+            k = wp.min(int(cz), nz - 2)
+            fz = cz - scalar(k)
+            c000 = grid[i, j, k]
+            c100 = grid[i + 1, j, k]
+            c010 = grid[i, j + 1, k]
+            c110 = grid[i + 1, j + 1, k]
+            c001 = grid[i, j, k + 1]
+            c101 = grid[i + 1, j, k + 1]
+            c011 = grid[i, j + 1, k + 1]
+            c111 = grid[i + 1, j + 1, k + 1]
+            # along x
+            c00 = c000 + fx * (c100 - c000)
+            c10 = c010 + fx * (c110 - c010)
+            c01 = c001 + fx * (c101 - c001)
+            c11 = c011 + fx * (c111 - c011)
+            # along y
+            c0 = c00 + fy * (c10 - c00)
+            c1 = c01 + fy * (c11 - c01)
+            v = c0 + fz * (c1 - c0)
+            gz = c1 - c0
+            gy = (one - fz) * (c10 - c00) + fz * (c11 - c01)
+            d0 = (one - fy) * (c100 - c000) + fy * (c110 - c010)
+            d1 = (one - fy) * (c101 - c001) + fy * (c111 - c011)
+            gx = (one - fz) * d0 + fz * d1
+            if oz != zero:
+                gz = zero
+        else:
+            c00 = grid[i, j, 0]
+            c10 = grid[i + 1, j, 0]
+            c01 = grid[i, j + 1, 0]
+            c11 = grid[i + 1, j + 1, 0]
+            c0 = c00 + fx * (c10 - c00)
+            c1 = c01 + fx * (c11 - c01)
+            v = c0 + fy * (c1 - c0)
+            gy = c1 - c0
+            gx = (one - fy) * (c10 - c00) + fy * (c11 - c01)
+        if ox != zero:
+            gx = zero
+        if oy != zero:
+            gy = zero
+        g = vec3(gx, gy, gz) * inv_h
+        osq = ox * ox + oy * oy + oz * oz
+        if osq > zero:
+            on = wp.sqrt(osq)
+            v = v + on
+            g = g + vec3(ox, oy, oz) / on
+        return v, g
+
+    @wp.func
+    def sdf_lower_bound(cellmin: wp.array3d(dtype=scalar), origin: vec3, inv_h: scalar,
+                        dim: int, x: vec3) -> scalar:
+        """A lower bound of D(x): the smallest of the corner values of the grid cell that
+        holds x (``cellmin``, see module docstring), exact for the interpolation."""
+        nx = cellmin.shape[0]
+        ny = cellmin.shape[1]
+        nz = cellmin.shape[2]
+        u = (x - origin) * inv_h
+        i = wp.min(int(wp.clamp(u[0], zero, scalar(nx - 1))), nx - 2)
+        j = wp.min(int(wp.clamp(u[1], zero, scalar(ny - 1))), ny - 2)
+        k = 0
+        if dim == 3:
+            k = wp.min(int(wp.clamp(u[2], zero, scalar(nz - 1))), nz - 2)
+        return cellmin[i, j, k]
+
+    @wp.func
+    def sphere_centre(frames: wp.array2d(dtype=mat44), b: int, f: int, p: vec3) -> vec3:
+        T = frames[b, f]
+        return unpack_rot(T) * p + unpack_pos(T)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def cost_kernel(
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        rho: wp.array3d(dtype=scalar),
+        rho_stride: int,
+        use_rho: int,
+        grid: wp.array3d(dtype=scalar),
+        cellmin: wp.array3d(dtype=scalar),
+        origin: vec3,
+        inv_h: scalar,
+        dim: int,
+        w_world: scalar,
+        w_self: scalar,
+        eps: scalar,
+        want_grad: int,
+        # Model:
+        order: wp.array(dtype=wp.int32),
+        parent: wp.array(dtype=wp.int32),
+        is_dh: wp.array(dtype=wp.int32),
+        prismatic: wp.array(dtype=wp.int32),
+        fixed_rot: wp.array(dtype=mat33),
+        fixed_pos: wp.array(dtype=vec3),
+        dh0: wp.array2d(dtype=scalar),
+        trig: wp.array(dtype=vec4),
+        cpl_start: wp.array(dtype=wp.int32),
+        cpl_joint: wp.array(dtype=wp.int32),
+        cpl_coef: wp.array(dtype=scalar),
+        sph_frame: wp.array(dtype=wp.int32),
+        sph_pos: wp.array(dtype=vec3),
+        sph_rad: wp.array(dtype=scalar),
+        bound_pos: wp.array(dtype=vec3),
+        bound_rad: wp.array(dtype=scalar),
+        fpair_a: wp.array(dtype=wp.int32),
+        fpair_b: wp.array(dtype=wp.int32),
+        fpair_start: wp.array(dtype=wp.int32),
+        ent_sphere: wp.array(dtype=wp.int32),
+        ent_start: wp.array(dtype=wp.int32),
+        pair_b: wp.array(dtype=wp.int32),
+        # Scratch:
+        frames: wp.array2d(dtype=mat44),
+        xs: wp.array2d(dtype=vec3),
+        force: wp.array2d(dtype=vec3),
+        moment: wp.array2d(dtype=vec3),
+        bc: wp.array2d(dtype=vec3),
+        # Data out:
+        cost: wp.array(dtype=scalar),
+        grad: wp.array2d(dtype=scalar),
+    ):
+        """cost[b] = w_world U_w(q_b) + w_self U_s(q_b) and, if ``want_grad``,
+        grad[b, :] = d cost / d q_b (rho fixed). Scratch: frames (N, n_frames),
+        xs (N, S), force, moment and bounding-sphere centres bc (N, n_frames)."""
+        b = wp.tid()
+        nf = order.shape[0]
+        for k in range(nf):
+            i = order[k]
+            fk.write_frame(b, i, q, rho, rho_stride, use_rho, parent, is_dh, prismatic,
+                           fixed_rot, fixed_pos, dh0, trig, cpl_start, cpl_joint, cpl_coef,
+                           frames)
+            if want_grad != 0:
+                force[b, i] = vec3(zero, zero, zero)
+                moment[b, i] = vec3(zero, zero, zero)
+        hit = int(0)
+        u_world = zero
+        for s in range(sph_frame.shape[0]):
+            fr = sph_frame[s]
+            x = sphere_centre(frames, b, fr, sph_pos[s])
+            xs[b, s] = x
+            if w_world != zero:
+                # cells whose corners all keep eps from the sphere cost nothing: skip them
+                if sdf_lower_bound(cellmin, origin, inv_h, dim, x) - sph_rad[s] < eps:
+                    d, g = sdf_sample(grid, origin, inv_h, dim, x)
+                    c, dc = smooth_clip(d - sph_rad[s], eps)
+                    u_world += c
+                    if want_grad != 0 and dc != zero:
+                        f = (w_world * dc) * g
+                        force[b, fr] = force[b, fr] + f
+                        moment[b, fr] = moment[b, fr] + wp.cross(x, f)
+                        hit = 1
+        u_self = zero
+        if w_self != zero:
+            for i in range(nf):
+                if bound_rad[i] >= zero:
+                    bc[b, i] = sphere_centre(frames, b, i, bound_pos[i])
+            for fp in range(fpair_a.shape[0]):
+                fa = fpair_a[fp]
+                fb = fpair_b[fp]
+                ca = bc[b, fa]
+                cb = bc[b, fb]
+                rb_eps = bound_rad[fb] + eps
+                reach = bound_rad[fa] + rb_eps
+                if wp.length_sq(ca - cb) < reach * reach:
+                    for e in range(fpair_start[fp], fpair_start[fp + 1]):
+                        sa = ent_sphere[e]
+                        xa = xs[b, sa]
+                        ra = sph_rad[sa]
+                        ra_reach = ra + rb_eps
+                        if wp.length_sq(xa - cb) < ra_reach * ra_reach:
+                            for p in range(ent_start[e], ent_start[e + 1]):
+                                sb = pair_b[p]
+                                xb = xs[b, sb]
+                                diff = xa - xb
+                                rsum = ra + sph_rad[sb]
+                                lim = rsum + eps
+                                dsq = wp.length_sq(diff)
+                                if dsq < lim * lim:
+                                    dist = wp.sqrt(dsq)
+                                    c, dc = smooth_clip(dist - rsum, eps)
+                                    u_self += c
+                                    if want_grad != 0 and dist > zero:
+                                        f = (w_self * dc / dist) * diff
+                                        force[b, fa] = force[b, fa] + f
+                                        moment[b, fa] = moment[b, fa] + wp.cross(xa, f)
+                                        force[b, fb] = force[b, fb] - f
+                                        moment[b, fb] = moment[b, fb] - wp.cross(xb, f)
+                                        hit = 1
+        cost[b] = w_world * u_world + w_self * u_self
+        if want_grad != 0:
+            for j in range(grad.shape[1]):
+                grad[b, j] = zero
+            if hit != 0:
+                # subtree sums, leaves to root (children follow parents in ``order``)
+                for kk in range(nf):
+                    i = order[nf - 1 - kk]
+                    pi = parent[i]
+                    if pi >= 0:
+                        force[b, pi] = force[b, pi] + force[b, i]
+                        moment[b, pi] = moment[b, pi] + moment[b, i]
+                for i in range(nf):
+                    m0 = cpl_start[i]
+                    m1 = cpl_start[i + 1]
+                    if m1 > m0:
+                        T = frames[b, i]
+                        z = vec3(T[0, 2], T[1, 2], T[2, 2])
+                        F = force[b, i]
+                        gi = wp.dot(z, F)
+                        if prismatic[i] == 0:
+                            gi = wp.dot(z, moment[b, i] - wp.cross(unpack_pos(T), F))
+                        for m in range(m0, m1):
+                            jm = cpl_joint[m]
+                            grad[b, jm] = grad[b, jm] + cpl_coef[m] * gi
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def distance_kernel(
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        rho: wp.array3d(dtype=scalar),
+        rho_stride: int,
+        use_rho: int,
+        grid: wp.array3d(dtype=scalar),
+        cellmin: wp.array3d(dtype=scalar),
+        origin: vec3,
+        inv_h: scalar,
+        dim: int,
+        use_world: int,
+        use_self: int,
+        write_spheres: int,
+        write_pairs: int,
+        # Model:
+        order: wp.array(dtype=wp.int32),
+        parent: wp.array(dtype=wp.int32),
+        is_dh: wp.array(dtype=wp.int32),
+        prismatic: wp.array(dtype=wp.int32),
+        fixed_rot: wp.array(dtype=mat33),
+        fixed_pos: wp.array(dtype=vec3),
+        dh0: wp.array2d(dtype=scalar),
+        trig: wp.array(dtype=vec4),
+        cpl_start: wp.array(dtype=wp.int32),
+        cpl_joint: wp.array(dtype=wp.int32),
+        cpl_coef: wp.array(dtype=scalar),
+        sph_frame: wp.array(dtype=wp.int32),
+        sph_pos: wp.array(dtype=vec3),
+        sph_rad: wp.array(dtype=scalar),
+        bound_pos: wp.array(dtype=vec3),
+        bound_rad: wp.array(dtype=scalar),
+        fpair_a: wp.array(dtype=wp.int32),
+        fpair_b: wp.array(dtype=wp.int32),
+        fpair_start: wp.array(dtype=wp.int32),
+        ent_sphere: wp.array(dtype=wp.int32),
+        ent_start: wp.array(dtype=wp.int32),
+        pair_b: wp.array(dtype=wp.int32),
+        far: scalar,
+        # Scratch:
+        frames: wp.array2d(dtype=mat44),
+        xs: wp.array2d(dtype=vec3),
+        # Data out:
+        sphere_dist: wp.array2d(dtype=scalar),
+        pair_dist: wp.array2d(dtype=scalar),
+        min_dist: wp.array2d(dtype=scalar),
+    ):
+        """Signed surface distances [m]: sphere_dist[b, s] = D(x_s) - r_s (if
+        ``write_spheres``), pair_dist[b, p] = |x_a - x_b| - r_a - r_b (if ``write_pairs``),
+        min_dist[b] = [min over spheres, min over pairs] (``far`` where none)."""
+        b = wp.tid()
+        nf = order.shape[0]
+        for k in range(nf):
+            fk.write_frame(b, order[k], q, rho, rho_stride, use_rho, parent, is_dh, prismatic,
+                           fixed_rot, fixed_pos, dh0, trig, cpl_start, cpl_joint, cpl_coef,
+                           frames)
+        dmin_w = far
+        for s in range(sph_frame.shape[0]):
+            x = sphere_centre(frames, b, sph_frame[s], sph_pos[s])
+            xs[b, s] = x
+            if use_world != 0:
+                look = write_spheres
+                if look == 0:  # only the minimum: skip cells that cannot lower it
+                    if sdf_lower_bound(cellmin, origin, inv_h, dim, x) - sph_rad[s] < dmin_w:
+                        look = 1
+                if look != 0:
+                    d, g = sdf_sample(grid, origin, inv_h, dim, x)
+                    d = d - sph_rad[s]
+                    dmin_w = wp.min(dmin_w, d)
+                    if write_spheres != 0:
+                        sphere_dist[b, s] = d
+        dmin_s = far
+        if use_self != 0:
+            for fp in range(fpair_a.shape[0]):
+                fa = fpair_a[fp]
+                fb = fpair_b[fp]
+                check = write_pairs
+                if check == 0:  # broad phase: skip if the bounding spheres are farther apart
+                    ca = sphere_centre(frames, b, fa, bound_pos[fa])
+                    cb = sphere_centre(frames, b, fb, bound_pos[fb])
+                    if wp.length(ca - cb) - bound_rad[fa] - bound_rad[fb] < dmin_s:
+                        check = 1
+                if check != 0:
+                    cb = sphere_centre(frames, b, fb, bound_pos[fb])
+                    for e in range(fpair_start[fp], fpair_start[fp + 1]):
+                        sa = ent_sphere[e]
+                        xa = xs[b, sa]
+                        ra = sph_rad[sa]
+                        look = write_pairs
+                        if look == 0:  # skip spheres whose distance to b's bound cannot lower it
+                            if wp.length(xa - cb) - ra - bound_rad[fb] < dmin_s:
+                                look = 1
+                        if look != 0:
+                            for p in range(ent_start[e], ent_start[e + 1]):
+                                sb = pair_b[p]
+                                d = wp.length(xa - xs[b, sb]) - ra - sph_rad[sb]
+                                dmin_s = wp.min(dmin_s, d)
+                                if write_pairs != 0:
+                                    pair_dist[b, p] = d
+        min_dist[b, 0] = dmin_w
+        min_dist[b, 1] = dmin_s
+
+    @wp.kernel(module="unique")
+    def world_cost_spheres(
+        # Data in:
+        frames: wp.array2d(dtype=mat44),
+        grid: wp.array3d(dtype=scalar),
+        origin: vec3,
+        inv_h: scalar,
+        dim: int,
+        w: scalar,
+        eps: scalar,
+        # Model:
+        sph_frame: wp.array(dtype=wp.int32),
+        sph_pos: wp.array(dtype=vec3),
+        sph_rad: wp.array(dtype=scalar),
+        # Data out:
+        cost: wp.array(dtype=scalar),
+    ):
+        """cost[b] += w c(D(x_s) - r_s), one thread per (configuration b, sphere s).
+        Plain code for ``wp.Tape`` (differentiable w.r.t. frames and grid)."""
+        b, s = wp.tid()
+        x = sphere_centre(frames, b, sph_frame[s], sph_pos[s])
+        d, g = sdf_sample(grid, origin, inv_h, dim, x)
+        c, dc = smooth_clip(d - sph_rad[s], eps)
+        wp.atomic_add(cost, b, w * c)
+
+    @wp.kernel(module="unique")
+    def self_cost_pairs(
+        # Data in:
+        frames: wp.array2d(dtype=mat44),
+        w: scalar,
+        eps: scalar,
+        # Model:
+        sph_frame: wp.array(dtype=wp.int32),
+        sph_pos: wp.array(dtype=vec3),
+        sph_rad: wp.array(dtype=scalar),
+        pair_a: wp.array(dtype=wp.int32),
+        pair_b: wp.array(dtype=wp.int32),
+        # Data out:
+        cost: wp.array(dtype=scalar),
+    ):
+        """cost[b] += w c(|x_a - x_b| - r_a - r_b), one thread per (configuration, pair).
+        Plain code for ``wp.Tape``."""
+        b, p = wp.tid()
+        sa = pair_a[p]
+        sb = pair_b[p]
+        xa = sphere_centre(frames, b, sph_frame[sa], sph_pos[sa])
+        xb = sphere_centre(frames, b, sph_frame[sb], sph_pos[sb])
+        diff = xa - xb
+        rsum = sph_rad[sa] + sph_rad[sb]
+        lim = rsum + eps
+        if wp.length_sq(diff) < lim * lim:  # also keeps length() away from 0 in the adjoint
+            c, dc = smooth_clip(wp.length(diff) - rsum, eps)
+            wp.atomic_add(cost, b, w * c)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def sdf_query_kernel(
+        # Data in:
+        points: wp.array(dtype=vec3),
+        grid: wp.array3d(dtype=scalar),
+        origin: vec3,
+        inv_h: scalar,
+        dim: int,
+        # Data out:
+        dist: wp.array(dtype=scalar),
+        grad: wp.array(dtype=vec3),
+    ):
+        """dist[p] = D(points[p]) [m], grad[p] = dD/dx (z = 0 in 2D)."""
+        p = wp.tid()
+        d, g = sdf_sample(grid, origin, inv_h, dim, points[p])
+        dist[p] = d
+        grad[p] = g
+
+    return SimpleNamespace(
+        scalar=scalar, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
+        sphere_centre=sphere_centre, cost=cost_kernel, distance=distance_kernel,
+        world_cost_spheres=world_cost_spheres, self_cost_pairs=self_cost_pairs,
+        sdf_query=sdf_query_kernel,
+    )

@@ -1,0 +1,125 @@
+"""Inverse-kinematics cost kernels (math only; thesis eq. 3.13-3.15, 3.19, 3.21-3.24).
+
+Per configuration ``b`` with the frames ``F = f(q_b)`` (FK output), the geometric Jacobian
+``J (6, n_dof)`` of the end-effector frame ``e`` (rows [linear; angular] in the base frame)
+and a target pose ``T_b`` (4x4):
+
+* ``U_p = 1/2 |Pos(F_e) - Pos(T)|^2``                           (eq. 3.13) [m^2]
+* ``U_r = 1/2 (3 - trace(Rot(F_e) Rot(T)^T))``                   (eq. 3.14)
+* ``U_f = lam_p U_p + lam_r U_r``                                 (eq. 3.15)
+* its gradient ``lam_p J_v^T (p - p_T) - lam_r / 2 J_w^T vee(M - M^T)`` with
+  ``M = Rot(F_e) Rot(T)^T`` and ``vee(A) = (A_21, A_02, A_10)``,
+* the 6D error for the projection step (eq. 3.21-3.23):
+  ``e = [p_T - p; log(Rot(T) Rot(F_e)^T)]`` (rotation vector in the base frame), so that
+  ``q += J^+ e`` moves the frame onto the target; ``pos_err = |e_v|`` [m],
+  ``rot_err = |e_w|`` [rad].
+* ``U_A = lam_l 1/2 |q - q_default|^2 + sum`` of the already weighted collision costs
+  (eq. 3.19) and its gradient.
+"""
+
+
+import functools
+from types import SimpleNamespace
+
+import warp as wp
+
+from jwarp.kernels.fk import kernels as fk_kernels
+
+
+@functools.cache
+def kernels(scalar: type) -> SimpleNamespace:
+    """IK kernels for one scalar type (``wp.float32`` or ``wp.float64``)."""
+    fk = fk_kernels(scalar)
+    vec3, mat33, mat44 = fk.vec3, fk.mat33, fk.mat44
+    zero = scalar(0.0)
+    half = scalar(0.5)
+    two = scalar(2.0)
+
+    @wp.func
+    def rotation_log(M: mat33) -> vec3:
+        """Rotation vector (axis * angle, angle in [0, pi]) of the rotation matrix M."""
+        qt = wp.quat_from_matrix(M)
+        v = vec3(qt[0], qt[1], qt[2])
+        w = qt[3]
+        if w < zero:
+            v = -v
+            w = -w
+        s = wp.length(v)
+        if s < scalar(1e-12):
+            return two * v
+        return v * (two * wp.atan2(s, w) / s)
+
+    @wp.kernel(module="unique")
+    def pose_error_kernel(
+        # Data in:
+        frames: wp.array2d(dtype=mat44),
+        frame: int,
+        target: wp.array(dtype=mat44),
+        jac: wp.array3d(dtype=scalar),
+        lam_p: scalar,
+        lam_r: scalar,
+        # Data out:
+        err: wp.array2d(dtype=scalar),
+        pos_err: wp.array(dtype=scalar),
+        rot_err: wp.array(dtype=scalar),
+        cost: wp.array(dtype=scalar),
+        grad: wp.array2d(dtype=scalar),
+    ):
+        """6D error (B, 6), its norms (B,), U_f (B,) and dU_f/dq (B, n_dof). Launch dim B."""
+        b = wp.tid()
+        F = frames[b, frame]
+        T = target[b]
+        R = fk.unpack_rot(F)
+        Rt = fk.unpack_rot(T)
+        dp = fk.unpack_pos(F) - fk.unpack_pos(T)
+        M = R * wp.transpose(Rt)
+        ev = -dp
+        ew = rotation_log(wp.transpose(M))  # log(Rt R^T)
+        for r in range(3):
+            err[b, r] = ev[r]
+            err[b, r + 3] = ew[r]
+        pos_err[b] = wp.length(ev)
+        rot_err[b] = wp.length(ew)
+        tr = M[0, 0] + M[1, 1] + M[2, 2]
+        cost[b] = lam_p * half * wp.dot(dp, dp) + lam_r * half * (scalar(3.0) - tr)
+        vee = vec3(M[1, 2] - M[2, 1], M[2, 0] - M[0, 2], M[0, 1] - M[1, 0])
+        for j in range(jac.shape[2]):
+            gv = zero
+            gw = zero
+            for r in range(3):
+                gv += jac[b, r, j] * dp[r]
+                gw += jac[b, r + 3, j] * vee[r]
+            grad[b, j] = lam_p * gv - lam_r * half * gw
+
+    @wp.kernel(module="unique")
+    def aux_cost_kernel(
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        q_default: wp.array2d(dtype=scalar),
+        default_stride: int,
+        coll_cost: wp.array(dtype=scalar),
+        coll_grad: wp.array2d(dtype=scalar),
+        use_collision: int,
+        lam_l: scalar,
+        # Data out:
+        cost: wp.array(dtype=scalar),
+        grad: wp.array2d(dtype=scalar),
+    ):
+        """U_A = collision + lam_l/2 |q - q_default|^2 (B,) and dU_A/dq (B, n_dof).
+        ``q_default`` (B or 1, n_dof) with ``default_stride`` 1 or 0. Launch dim B."""
+        b = wp.tid()
+        c = zero
+        if use_collision != 0:
+            c = coll_cost[b]
+        bd = b * default_stride
+        for j in range(q.shape[1]):
+            d = q[b, j] - q_default[bd, j]
+            c += lam_l * half * d * d
+            g = lam_l * d
+            if use_collision != 0:
+                g += coll_grad[b, j]
+            grad[b, j] = g
+        cost[b] = c
+
+    return SimpleNamespace(scalar=scalar, rotation_log=rotation_log, pose_error=pose_error_kernel,
+                           aux_cost=aux_cost_kernel)

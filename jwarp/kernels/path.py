@@ -1,0 +1,242 @@
+"""Path kernels for optimization-based motion planning (math only; thesis 3.3.1-3.3.3).
+
+A batch of ``P`` paths with ``W`` waypoints each is an array ``paths (P, W, n_dof)``.
+The first and last waypoints (start, goal) are fixed; only the interior ones move.
+
+* Substeps (eq. 3.3): each segment ``t`` is split into ``n_sub`` linear substeps
+  ``q_{t,u} = q_t + u / n_sub (q_{t+1} - q_t)``, ``u = 0 .. n_sub - 1``, plus the goal:
+  ``S = (W - 1) n_sub + 1`` distinct configurations per path, stored as rows
+  ``p * S + s`` of ``q_sub (P * S, n_dof)`` with ``s = t n_sub + u`` (``s = S - 1`` is the goal).
+* Length cost (eq. 3.5): ``U_l = (W - 1) / U_1(q_W, q_1) * sum_t U_1(q_{t+1}, q_t)`` with
+  ``U_1(a, b) = 1/2 |a - b|^2``; the normaliser ``U_1(q_W, q_1)`` is floored at ``norm_floor``
+  (rad^2) so a task with start == goal stays finite.
+* Path objective (eq. 3.16): ``U_path = sum_s sub_cost[s] + lam_l U_l`` where ``sub_cost``
+  already holds ``lam_w U_w + lam_s U_s`` of each substep (collision kernels).
+* Gradient w.r.t. an interior waypoint ``t``: the length term
+  ``lam_l K (2 q_t - q_{t-1} - q_{t+1})`` plus the substep gradients scattered with the hat
+  weights ``1 - |s - t n_sub| / n_sub`` of the substeps ``s`` in the two adjacent segments.
+* Limits: a box ``limits (n_dof, 2)`` and linear limits ``lower <= sum_k c_k q_{j_k} <= upper``
+  (CSR tables ``lin_start (L + 1)``, ``lin_joint``, ``lin_coef``, ``lin_bounds (L, 2)``),
+  enforced by alternating projections (box, then each linear half-space pair) ending with
+  the box.
+
+Shapes are in the docstrings; units rad (m for prismatic joints).
+"""
+
+
+import functools
+from types import SimpleNamespace
+
+import warp as wp
+
+#: alternating-projection rounds (box + linear limits); the justin19 torso polygon needs <= 2
+PROJECTION_ROUNDS = 6
+
+
+@functools.cache
+def kernels(scalar: type) -> SimpleNamespace:
+    """Path kernels for one scalar type (``wp.float32`` or ``wp.float64``)."""
+    zero = scalar(0.0)
+    one = scalar(1.0)
+    half = scalar(0.5)
+    n_rounds = PROJECTION_ROUNDS
+
+    @wp.func
+    def length_scale(paths: wp.array3d(dtype=scalar), p: int, norm_floor: scalar) -> scalar:
+        """K = (W - 1) / max(1/2 |q_W - q_1|^2, norm_floor) of path p."""
+        W = paths.shape[1]
+        d2 = zero
+        for j in range(paths.shape[2]):
+            d = paths[p, W - 1, j] - paths[p, 0, j]
+            d2 += d * d
+        return scalar(W - 1) / wp.max(half * d2, norm_floor)
+
+    @wp.func
+    def waypoint_grad(paths: wp.array3d(dtype=scalar), sub_grad: wp.array2d(dtype=scalar),
+                      p: int, t: int, j: int, n_sub: int, lam_l: scalar, k_len: scalar) -> scalar:
+        """dU_path / dQ[p, t, j] for an interior waypoint t (1 <= t <= W - 2)."""
+        W = paths.shape[1]
+        S = (W - 1) * n_sub + 1
+        g = lam_l * k_len * (scalar(2.0) * paths[p, t, j] - paths[p, t - 1, j] - paths[p, t + 1, j])
+        centre = t * n_sub
+        inv = one / scalar(n_sub)
+        for s in range(centre - n_sub + 1, centre + n_sub):
+            w = one - scalar(wp.abs(s - centre)) * inv
+            g += w * sub_grad[p * S + s, j]
+        return g
+
+    @wp.func
+    def project_row(x: wp.array2d(dtype=scalar), row: int, limits: wp.array2d(dtype=scalar),
+                    lin_start: wp.array(dtype=wp.int32), lin_joint: wp.array(dtype=wp.int32),
+                    lin_coef: wp.array(dtype=scalar), lin_bounds: wp.array2d(dtype=scalar)):
+        """Project x[row, :] onto the box and the linear limits (alternating projections)."""
+        n = x.shape[1]
+        n_lin = lin_bounds.shape[0]
+        rounds = 1
+        if n_lin > 0:
+            rounds = n_rounds
+        for _r in range(rounds):
+            for j in range(n):
+                x[row, j] = wp.clamp(x[row, j], limits[j, 0], limits[j, 1])
+            for l in range(n_lin):
+                v = zero
+                c2 = zero
+                for k in range(lin_start[l], lin_start[l + 1]):
+                    c = lin_coef[k]
+                    v += c * x[row, lin_joint[k]]
+                    c2 += c * c
+                excess = zero
+                if v < lin_bounds[l, 0]:
+                    excess = v - lin_bounds[l, 0]
+                if v > lin_bounds[l, 1]:
+                    excess = v - lin_bounds[l, 1]
+                if excess != zero and c2 > zero:
+                    for k in range(lin_start[l], lin_start[l + 1]):
+                        jj = lin_joint[k]
+                        x[row, jj] = x[row, jj] - lin_coef[k] * excess / c2
+        if n_lin > 0:
+            for j in range(n):
+                x[row, j] = wp.clamp(x[row, j], limits[j, 0], limits[j, 1])
+
+    @wp.kernel(module="unique")
+    def substeps_kernel(
+        # Data in:
+        paths: wp.array3d(dtype=scalar),
+        n_sub: int,
+        # Data out:
+        q_sub: wp.array2d(dtype=scalar),
+    ):
+        """Linear substeps (eq. 3.3). Launch dim (P, S); q_sub (P * S, n_dof)."""
+        p, s = wp.tid()
+        W = paths.shape[1]
+        S = (W - 1) * n_sub + 1
+        t = s // n_sub
+        u = s - t * n_sub
+        row = p * S + s
+        if t >= W - 1:  # the goal, exactly
+            for j in range(paths.shape[2]):
+                q_sub[row, j] = paths[p, W - 1, j]
+            return
+        a = scalar(u) / scalar(n_sub)
+        for j in range(paths.shape[2]):
+            q0 = paths[p, t, j]
+            q_sub[row, j] = q0 + a * (paths[p, t + 1, j] - q0)
+
+    @wp.kernel(module="unique")
+    def path_cost_kernel(
+        # Data in:
+        paths: wp.array3d(dtype=scalar),
+        sub_cost: wp.array(dtype=scalar),
+        n_sub: int,
+        lam_l: scalar,
+        norm_floor: scalar,
+        # Data out:
+        length: wp.array(dtype=scalar),
+        collision: wp.array(dtype=scalar),
+        total: wp.array(dtype=scalar),
+        sub_max: wp.array(dtype=scalar),
+    ):
+        """Per path (launch dim P): length cost U_l (eq. 3.5, unweighted), summed substep
+        cost sum_s sub_cost (eq. 3.9 + 3.12, weighted as given), U_path (eq. 3.16) and the
+        largest substep cost max_s sub_cost (a feasibility screen: every term of a substep
+        cost is >= 0, so max_s sub_cost < w c(margin) means no sphere is within margin)."""
+        p = wp.tid()
+        W = paths.shape[1]
+        S = (W - 1) * n_sub + 1
+        k_len = length_scale(paths, p, norm_floor)
+        l = zero
+        for t in range(W - 1):
+            for j in range(paths.shape[2]):
+                d = paths[p, t + 1, j] - paths[p, t, j]
+                l += half * d * d
+        c = zero
+        m = zero
+        for s in range(S):
+            v = sub_cost[p * S + s]
+            c += v
+            m = wp.max(m, v)
+        sub_max[p] = m
+        length[p] = k_len * l
+        collision[p] = c
+        total[p] = c + lam_l * k_len * l
+
+    @wp.kernel(module="unique")
+    def path_grad_kernel(
+        # Data in:
+        paths: wp.array3d(dtype=scalar),
+        sub_grad: wp.array2d(dtype=scalar),
+        n_sub: int,
+        lam_l: scalar,
+        norm_floor: scalar,
+        # Data out:
+        grad: wp.array3d(dtype=scalar),
+    ):
+        """dU_path/dQ (P, W, n_dof), zero at start and goal. Launch dim (P, W)."""
+        p, t = wp.tid()
+        W = paths.shape[1]
+        if t == 0 or t == W - 1:
+            for j in range(paths.shape[2]):
+                grad[p, t, j] = zero
+            return
+        k_len = length_scale(paths, p, norm_floor)
+        for j in range(paths.shape[2]):
+            grad[p, t, j] = waypoint_grad(paths, sub_grad, p, t, j, n_sub, lam_l, k_len)
+
+    @wp.kernel(module="unique")
+    def path_step_kernel(
+        # Data in:
+        paths: wp.array3d(dtype=scalar),
+        sub_grad: wp.array2d(dtype=scalar),
+        n_sub: int,
+        lam_l: scalar,
+        norm_floor: scalar,
+        step: scalar,
+        max_step: scalar,
+        active: wp.array(dtype=wp.int32),
+        # Model:
+        limits: wp.array2d(dtype=scalar),
+        lin_start: wp.array(dtype=wp.int32),
+        lin_joint: wp.array(dtype=wp.int32),
+        lin_coef: wp.array(dtype=scalar),
+        lin_bounds: wp.array2d(dtype=scalar),
+        # Data out:
+        paths_out: wp.array2d(dtype=scalar),
+    ):
+        """One gradient-descent step (eq. 3.18) with per-joint step clamp and projection
+        onto the limits. Launch dim (P, W); paths_out is (P * W, n_dof) (a different buffer
+        than ``paths``). Start, goal and paths with ``active[p] == 0`` are copied."""
+        p, t = wp.tid()
+        W = paths.shape[1]
+        row = p * W + t
+        n = paths.shape[2]
+        if t == 0 or t == W - 1 or active[p] == 0:
+            for j in range(n):
+                paths_out[row, j] = paths[p, t, j]
+            return
+        k_len = length_scale(paths, p, norm_floor)
+        for j in range(n):
+            g = waypoint_grad(paths, sub_grad, p, t, j, n_sub, lam_l, k_len)
+            d = wp.clamp(step * g, -max_step, max_step)
+            paths_out[row, j] = paths[p, t, j] - d
+        project_row(paths_out, row, limits, lin_start, lin_joint, lin_coef, lin_bounds)
+
+    @wp.kernel(module="unique")
+    def project_kernel(
+        # Model:
+        limits: wp.array2d(dtype=scalar),
+        lin_start: wp.array(dtype=wp.int32),
+        lin_joint: wp.array(dtype=wp.int32),
+        lin_coef: wp.array(dtype=scalar),
+        lin_bounds: wp.array2d(dtype=scalar),
+        # Data in/out:
+        q: wp.array2d(dtype=scalar),
+    ):
+        """Project every row of q (B, n_dof) onto the joint limits, in place. Launch dim B."""
+        b = wp.tid()
+        project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
+
+    return SimpleNamespace(
+        scalar=scalar, length_scale=length_scale, waypoint_grad=waypoint_grad,
+        project_row=project_row, substeps=substeps_kernel, path_cost=path_cost_kernel,
+        path_grad=path_grad_kernel, path_step=path_step_kernel, project=project_kernel,
+    )

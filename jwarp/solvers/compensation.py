@@ -1,0 +1,124 @@
+"""Elastic compensation for planning and IK (elastic paper section V, thesis Fig. 2.11).
+
+The elastic robot's frames are ``F(q, rho*)`` at the torque equilibrium
+``rho* = rho0 + kappa tau(F(q, rho*))``. Inside an optimizer loop that equilibrium is not
+solved to convergence: every outer iteration makes **one** damped torque update from the
+DH rows ``rho`` kept from the previous iteration (the configurations move little between
+iterations), and gradients treat ``rho`` as constant (d rho / dq = 0). As the optimizer
+converges, so does ``rho``. :func:`jwarp.solvers.planner.plan` and
+:func:`jwarp.solvers.ik.ik` implement this when given ``kappa``; this module wraps them
+and measures what it costs (:func:`compare_ik`, :func:`iteration_overhead`).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from jwarp.kinematics import fk_elastic, kappa_array
+from jwarp.registry import robot as get_robot
+from jwarp.solvers.ik import IKObjective, IKResult, ik
+from jwarp.solvers.planner import PathObjective, PlanResult, plan
+
+#: compliance of Agile Justin's joints used by the studies [rad/(N m)] (0.1 rad/kNm)
+JUSTIN_KAPPA = 1e-4
+
+
+def _kappa(model: Any, kappa: Any) -> Any:
+    if kappa is None:
+        if not np.any(model.kappa):
+            raise ValueError(f"kappa: robot '{model.name}' has no compliances; pass kappa "
+                             f"[rad/(N m)]")
+        return model.kappa
+    kappa_array(model, kappa)  # validates
+    return kappa
+
+
+def compensated_ik(robot: Any, frame: Any, target: Any, *, kappa: Any = None,
+                   lam: float = 0.7, **kwargs: Any) -> IKResult:
+    """:func:`jwarp.solvers.ik.ik` on the elastic model (kappa default: the robot's)."""
+    model = get_robot(robot)
+    return ik(model, frame, target, kappa=_kappa(model, kappa), lam=lam, **kwargs)
+
+
+def compensated_plan(robot: Any, world: Any, start: Any, goal: Any, *, kappa: Any = None,
+                     lam: float = 0.7, **kwargs: Any) -> PlanResult:
+    """:func:`jwarp.solvers.planner.plan` on the elastic model (kappa default: the robot's)."""
+    model = get_robot(robot)
+    return plan(model, world, start, goal, kappa=_kappa(model, kappa), lam=lam, **kwargs)
+
+
+def equilibrium_pose_error(robot: Any, frame: Any, q: Any, target: Any, kappa: Any
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """Pose error of ``frame`` at q (..., n_dof) on the fully converged elastic model
+    (``fk_elastic`` to 1e-12 rad) against ``target`` (..., 4, 4): (position [m],
+    rotation angle [rad]) per configuration - an independent check of a compensated IK."""
+    from scipy.spatial.transform import Rotation
+
+    model = get_robot(robot)
+    fi = model.frame_index(frame)
+    q = np.asarray(q, np.float64)
+    res = fk_elastic(model, q, kappa, lam=0.7, max_iter=200, tol=1e-12, device="cpu",
+                     dtype=np.float64)
+    F = np.asarray(res.frames)[..., fi, :, :]
+    T = np.asarray(target, np.float64)
+    pos = np.linalg.norm(F[..., :3, 3] - T[..., :3, 3], axis=-1)
+    R = F[..., :3, :3] @ np.swapaxes(T[..., :3, :3], -1, -2)
+    ang = Rotation.from_matrix(R.reshape(-1, 3, 3)).magnitude().reshape(pos.shape)
+    return pos, ang
+
+
+def compare_ik(robot: Any, frame: Any, targets: Any, kappa: Any, *, n_starts: int = 8,
+               seed: int = 0, lam: float = 0.7, **kwargs: Any) -> dict:
+    """Rigid vs compensated IK from the same random seeds (no early stop, so every start
+    runs until it is on the target): mean iterations of the starts that succeed in both,
+    success counts, and the equilibrium error of the compensated solutions."""
+    model = get_robot(robot)
+    common = dict(n_starts=n_starts, seed=seed, stop_when_solved=False, **kwargs)
+    rigid = ik(model, frame, targets, **common)
+    soft = ik(model, frame, targets, kappa=kappa, lam=lam, **common)
+    both = rigid.all_feasible & soft.all_feasible
+    pos, ang = equilibrium_pose_error(model, frame, soft.q, targets, kappa)
+    it_r = float(rigid.all_iterations[both].mean()) if both.any() else float("nan")
+    it_s = float(soft.all_iterations[both].mean()) if both.any() else float("nan")
+    return {"starts_both": int(both.sum()), "rigid_feasible": int(rigid.all_feasible.sum()),
+            "elastic_feasible": int(soft.all_feasible.sum()),
+            "rigid_iterations": it_r, "elastic_iterations": it_s,
+            "iteration_ratio": it_s / it_r if both.any() else float("nan"),
+            "elastic_equilibrium_pos_err_max_m": float(np.max(pos[soft.feasible]))
+            if np.any(soft.feasible) else float("nan"),
+            "elastic_equilibrium_rot_err_max_rad": float(np.max(ang[soft.feasible]))
+            if np.any(soft.feasible) else float("nan")}
+
+
+def iteration_overhead(objective_rigid: Any, objective_elastic: Any, *, repeats: int = 200
+                       ) -> dict:
+    """Time per evaluation (+ step) of a rigid and an elastic objective of the same size
+    (:class:`PathObjective` or :class:`IKObjective`, already filled): seconds per
+    iteration and the relative overhead of the torque update."""
+    def one(obj: Any) -> None:
+        if isinstance(obj, PathObjective):
+            obj.evaluate()
+            obj.step(1e-6, 1e-6)
+        else:
+            obj.evaluate_pose()
+            obj.evaluate_aux()
+
+    out = {}
+    for name, obj in (("rigid", objective_rigid), ("elastic", objective_elastic)):
+        one(obj)
+        best = float("inf")
+        for _ in range(3):
+            t0 = time.perf_counter()
+            for _ in range(repeats):
+                one(obj)
+            best = min(best, (time.perf_counter() - t0) / repeats)
+        out[f"{name}_s"] = best
+    out["overhead"] = out["elastic_s"] / out["rigid_s"] - 1.0
+    return out
+
+
+__all__ = ["JUSTIN_KAPPA", "compare_ik", "compensated_ik", "compensated_plan",
+           "equilibrium_pose_error", "iteration_overhead", "IKObjective", "PathObjective"]

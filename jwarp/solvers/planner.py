@@ -1,0 +1,628 @@
+"""Optimization-based motion planning (OMP): batched gradient descent on U_path.
+
+Thesis 3.3.1-3.3.3 and the IROS'22 paper, section II. A path is ``W`` waypoints
+``Q = [q_1 .. q_W]`` with fixed start ``q_1`` and goal ``q_W``; linear substeps (eq. 3.3)
+between the waypoints make the swept volume explicit. The objective (eq. 3.16)
+
+    U_path(Q) = lam_w U_w(Q) + lam_s U_s(Q) + lam_l U_l(Q)
+
+sums the world and self-collision costs (eq. 3.8-3.12, :mod:`jwarp.collision`) over all
+substeps and adds the normalised length cost (eq. 3.5). Gradient descent with a fixed
+step (eq. 3.18), a per-joint step clamp and a projection onto the joint limits (box plus
+linear limits such as justin19's coupled torso) runs for many paths in one launch per
+stage: substeps -> collision cost + gradient -> path cost -> step.
+
+A path is *feasible* when every substep is collision-free with ``margin`` (world and self)
+and every waypoint is within the limits. Each path stops on its own as soon as it is
+feasible (early stop); :func:`plan` returns per problem the best (lowest U_path) feasible
+path of its multi-starts, or the lowest-cost infeasible one with ``feasible = False``.
+
+With ``kappa`` (elastic compensation, elastic paper section V, Fig. 2.11) the robot is the
+elastic model: every iteration makes one torque update per substep from the DH rows
+``rho`` kept from the previous iteration, and the collision gradient is taken with
+``rho`` fixed.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+import warp as wp
+
+from jwarp.arrays import init_warp, resolve_device
+from jwarp.device_model import numpy_dtype, scalar_type, tables
+from jwarp.kernels import path as path_kernels
+from jwarp.model import RobotModel
+from jwarp.registry import robot as get_robot
+from jwarp.solvers.limits import (describe_violation, limit_tables, sample_within_limits,
+                                  within_limits)
+
+#: floor of the length-cost normaliser 1/2 |q_goal - q_start|^2 [rad^2]
+NORM_FLOOR = 1e-4
+#: feasibility checks use substeps with sphere motion <= voxel / SWEEP_SAFETY
+SWEEP_SAFETY = 2.0
+#: most substeps per segment of the final feasibility check
+MAX_CHECK_SUBSTEPS = 256
+
+
+@dataclass
+class PathWeights:
+    """Weights of eq. 3.16: world collision, self-collision and length."""
+
+    world: float = 1.0
+    self: float = 1.0
+    length: float = 0.01
+
+    def validate(self) -> None:
+        for k in ("world", "self", "length"):
+            v = getattr(self, k)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"weights.{k}: expected a finite number >= 0, got {v!r}")
+
+
+@dataclass
+class PlanResult:
+    """Result of :func:`plan` for B problems (leading dims of start/goal).
+
+    path (B, W, n_dof) best path per problem; feasible (B,) bool; cost (B,) U_path;
+    length_cost (B,) U_l (eq. 3.5, 1 for the straight line); collision_cost (B,) weighted
+    world + self cost summed over substeps; iterations (B,) gradient steps until the chosen
+    path was feasible (or the iteration budget); start_index (B,) which multi-start won;
+    n_feasible (B,) feasible multi-starts; wall_time [s] of the whole call;
+    n_substeps substeps per segment; all_paths (B, n_starts, W, n_dof) final paths of every
+    start, all_feasible (B, n_starts).
+    """
+
+    path: np.ndarray
+    feasible: np.ndarray
+    cost: np.ndarray
+    length_cost: np.ndarray
+    collision_cost: np.ndarray
+    iterations: np.ndarray
+    start_index: np.ndarray
+    n_feasible: np.ndarray
+    wall_time: float
+    n_substeps: int
+    all_paths: np.ndarray = field(repr=False)
+    all_feasible: np.ndarray = field(repr=False)
+    all_iterations: np.ndarray = field(repr=False)
+
+    def to_dict(self, index: int = 0) -> dict:
+        """JSON-ready summary of problem ``index``."""
+        return {"path": self.path[index].tolist(), "feasible": bool(self.feasible[index]),
+                "costs": {"total": float(self.cost[index]),
+                          "length": float(self.length_cost[index]),
+                          "collision": float(self.collision_cost[index])},
+                "iterations": int(self.iterations[index]),
+                "start_index": int(self.start_index[index]),
+                "n_feasible_starts": int(self.n_feasible[index]),
+                "n_substeps": int(self.n_substeps),
+                "wall_time_s": float(self.wall_time)}
+
+
+# ====================================================================== helpers
+def _collision() -> Any:
+    try:
+        from jwarp import collision
+    except ImportError as e:  # pragma: no cover - until the collision module lands
+        raise ImportError("jwarp.solvers.planner needs jwarp.collision") from e
+    return collision
+
+
+def check_world(robot: RobotModel, world: Any) -> None:
+    """TypeError/ValueError unless ``world`` is a World of the robot's workspace dimension."""
+    if world is None:
+        raise ValueError("world: required (a jwarp.world.World)")
+    _collision().check_world(robot, world)
+
+
+def _configs(x: Any, robot: RobotModel, name: str) -> np.ndarray:
+    """(..., n_dof) -> (B, n_dof) float64 with shape/NaN checks naming ``name``."""
+    try:
+        a = np.asarray(x, np.float64)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"{name}: expected joint values (numbers), got {type(x).__name__}") from e
+    if a.ndim == 0 or a.shape[-1] != robot.n_dof or a.size == 0:
+        raise ValueError(f"{name}: expected shape (..., {robot.n_dof}) for robot "
+                         f"'{robot.name}', got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: contains NaN or inf")
+    return a.reshape(-1, robot.n_dof)
+
+
+def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, margin: float,
+                    rho_kappa: Any = None) -> None:
+    """ValueError naming ``name`` (and the row) if a configuration is outside the limits or
+    in collision (closer than ``margin`` to an obstacle or to itself)."""
+    ok = within_limits(robot, q)
+    if not ok.all():
+        i = int(np.nonzero(~ok)[0][0])
+        where = f"{name}[{i}]" if len(q) > 1 else name
+        raise ValueError(f"{where}: outside the joint limits: {describe_violation(robot, q[i])}")
+    free = collision_free(robot, world, q, margin, kappa=rho_kappa)
+    if not free.all():
+        i = int(np.nonzero(~free)[0][0])
+        where = f"{name}[{i}]" if len(q) > 1 else name
+        raise ValueError(f"{where}: configuration is in collision (world or self, margin "
+                         f"{margin:g} m)")
+
+
+def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
+                   kappa: Any = None, rho: Any = None) -> np.ndarray:
+    """(N,) bool: q (N, n_dof) collision-free (world and self) with ``margin`` [m].
+
+    With ``rho`` (N, n_frames, 5) the frames are those DH rows; with ``kappa`` (and no
+    rho) the elastic model in its torque equilibrium."""
+    col = _collision()
+    q = np.ascontiguousarray(q, np.float64)
+    if rho is None and kappa is not None:
+        from jwarp.kinematics import fk_elastic
+
+        rho = fk_elastic(robot, q, kappa, max_iter=30, lam=0.7, device="cpu",
+                         dtype=np.float64).rho
+    return np.asarray(col.is_collision_free(robot, q, world, margin=margin, rho=rho,
+                                            device="cpu", dtype=np.float64), bool).reshape(-1)
+
+
+def substeps(paths: Any, n_substeps: int, *, device: Any = "cpu", dtype: Any = None) -> np.ndarray:
+    """Linear substeps (eq. 3.3) of paths (..., W, n_dof) -> (..., S, n_dof) with
+    S = (W - 1) n_substeps + 1 (every waypoint included, the goal last)."""
+    init_warp()
+    a = np.asarray(paths, np.float64 if dtype is None else dtype)
+    if a.ndim < 2 or a.shape[-2] < 2:
+        raise ValueError(f"paths: expected shape (..., W >= 2, n_dof), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError("paths: contains NaN or inf")
+    n_sub = _check_n_sub(n_substeps)
+    scalar = scalar_type(a.dtype)
+    W, n = a.shape[-2:]
+    flat = a.reshape(-1, W, n)
+    S = (W - 1) * n_sub + 1
+    dev = resolve_device(device)
+    p = wp.array(flat, dtype=scalar, device=dev)
+    out = wp.empty((flat.shape[0] * S, n), dtype=scalar, device=dev)
+    wp.launch(path_kernels.kernels(scalar).substeps, dim=(flat.shape[0], S),
+              inputs=[p, n_sub], outputs=[out], device=dev)
+    return out.numpy().reshape(a.shape[:-2] + (S, n))
+
+
+def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin: float = 0.0,
+                  kappa: Any = None) -> np.ndarray:
+    """Feasibility of paths (..., W, n_dof): every one of the ``n_substeps`` linear substeps
+    per segment collision-free with ``margin`` [m] (world and self; elastic model with
+    ``kappa``) and every waypoint within the joint limits. Returns (...,) bool."""
+    model = get_robot(robot)
+    check_world(model, world)
+    a = np.asarray(paths, np.float64)
+    if a.ndim < 2 or a.shape[-1] != model.n_dof or a.shape[-2] < 2:
+        raise ValueError(f"paths: expected shape (..., W >= 2, {model.n_dof}), got {a.shape}")
+    q = substeps(a, n_substeps)
+    free = collision_free(model, world, q.reshape(-1, model.n_dof), margin, kappa=kappa)
+    free = free.reshape(q.shape[:-1]).all(axis=-1)
+    return free & within_limits(model, a).all(axis=-1)
+
+
+def _check_n_sub(n_substeps: Any) -> int:
+    if isinstance(n_substeps, bool) or not isinstance(n_substeps, (int, np.integer)) or n_substeps < 1:
+        raise ValueError(f"n_substeps: expected an integer >= 1, got {n_substeps!r}")
+    return int(n_substeps)
+
+
+def sphere_centres(robot: RobotModel, q: np.ndarray) -> np.ndarray:
+    """World centres (N, n_spheres, 3) [m] of the collision spheres at q (N, n_dof)."""
+    from jwarp.kinematics import fk
+
+    frames = np.asarray(fk(robot, np.asarray(q, np.float64), device="cpu"))
+    idx, pos, _ = robot.sphere_arrays()
+    f = frames[:, idx]
+    return np.einsum("nsij,sj->nsi", f[..., :3, :3], pos) + f[..., :3, 3]
+
+
+def substeps_for_voxel(robot: RobotModel, paths: Any, voxel_size: float, *,
+                       safety: float = 1.0, max_substeps: int = 64) -> int:
+    """Substeps per segment so that no sphere centre moves more than ``voxel_size / safety``
+    between two substeps of ``paths`` (..., W, n_dof) (thesis 3.3.1: N_u adjusted to the
+    step length and the voxel size). The motion of each segment is measured on a fine
+    (16 per segment) linear interpolation. Clamped to [1, max_substeps]."""
+    if not (isinstance(voxel_size, (int, float)) and voxel_size > 0 and math.isfinite(voxel_size)):
+        raise ValueError(f"voxel_size: expected a number > 0 [m], got {voxel_size!r}")
+    a = np.asarray(paths, np.float64)
+    W, n = a.shape[-2:]
+    fine = 16
+    q = substeps(a.reshape(-1, W, n), fine)                  # (P, (W-1)*16+1, n)
+    P = q.shape[0]
+    x = sphere_centres(robot, q.reshape(-1, n)).reshape(P, q.shape[1], -1, 3)
+    if x.shape[2] == 0:
+        return 1
+    step = np.linalg.norm(np.diff(x, axis=1), axis=-1)       # (P, S-1, n_spheres)
+    seg = step.reshape(P, W - 1, fine, -1).sum(axis=2).max()  # longest sphere arc per segment
+    return int(np.clip(math.ceil(seg * safety / voxel_size), 1, max_substeps))
+
+
+def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: str = "straight",
+                  *, robot: RobotModel | None = None, n_via: tuple[int, int] = (1, 3),
+                  rng: np.random.Generator | None = None, world: Any = None) -> np.ndarray:
+    """Initial guesses (B, W, n_dof) from start/goal (B, n_dof).
+
+    ``kind``: "straight" (the line in joint space) or "random" (1-3 random via points
+    inside the robot's limits, connected linearly with start and goal; the W waypoints are
+    spread evenly along the polyline's joint-space length) - thesis 3.5.1. With ``world``
+    the via points are drawn from collision-free configurations (rejection sampling; plain
+    random ones if none is found).
+    """
+    start = np.asarray(start, np.float64)
+    goal = np.asarray(goal, np.float64)
+    W = n_waypoints
+    s = np.linspace(0.0, 1.0, W)[None, :, None]
+    if kind == "straight":
+        return start[:, None] + s * (goal - start)[:, None]
+    if kind != "random":
+        raise ValueError(f"initial: unknown kind '{kind}' (expected 'straight', 'random', "
+                         f"'mixed' or an array)")
+    if robot is None:
+        raise ValueError("robot: needed for random initial paths")
+    rng = rng or np.random.default_rng()
+    out = np.empty((len(start), W, start.shape[1]))
+    ks = rng.integers(n_via[0], n_via[1] + 1, size=len(start))
+    pool = sample_within_limits(robot, int(ks.sum()), rng)
+    if world is not None:
+        cand = sample_within_limits(robot, max(64, 8 * int(ks.sum())), rng)
+        free = cand[collision_free(robot, world, cand, 0.0)]
+        if len(free):
+            pool = free[rng.integers(0, len(free), size=int(ks.sum()))]
+    used = 0
+    for b in range(len(start)):
+        k = int(ks[b])
+        via = pool[used:used + k]
+        used += k
+        pts = np.vstack([start[b], via, goal[b]])
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        if cum[-1] <= 0:
+            out[b] = start[b]
+            continue
+        tq = np.linspace(0.0, cum[-1], W)
+        for j in range(start.shape[1]):
+            out[b, :, j] = np.interp(tq, cum, pts[:, j])
+        out[b, 0], out[b, -1] = start[b], goal[b]
+    return out
+
+
+# ====================================================================== objective
+class PathObjective:
+    """U_path (eq. 3.16) and its gradient for a batch of P paths on one device.
+
+    Owns the device buffers of one batch shape (P, W, n_dof) and ``n_substeps``; each call
+    launches: substeps -> [one elastic torque update] -> collision cost + gradient ->
+    path cost (-> gradient or step). Arrays are Warp arrays on ``device``.
+    """
+
+    def __init__(self, robot: Any, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
+                 *, weights: PathWeights | None = None, eps: float | None = None,
+                 kappa: Any = None, lam: float = 0.7, device: Any = None, dtype: Any = np.float32):
+        init_warp()
+        self.robot = get_robot(robot)
+        check_world(self.robot, world)
+        self.world = world
+        self.weights = weights or PathWeights()
+        self.weights.validate()
+        if n_waypoints < 2:
+            raise ValueError(f"n_waypoints: expected >= 2, got {n_waypoints}")
+        self.n_sub = _check_n_sub(n_substeps)
+        self.device = resolve_device(device)
+        self.scalar = scalar_type(dtype)
+        self.npdt = numpy_dtype(self.scalar)
+        self.k = path_kernels.kernels(self.scalar)
+        self.P, self.W, self.n = int(n_paths), int(n_waypoints), self.robot.n_dof
+        self.S = (self.W - 1) * self.n_sub + 1
+        self.N = self.P * self.S
+        self.eps = float(eps) if eps is not None else float(max(world.voxel_size, 0.01))
+        if not self.eps > 0:
+            raise ValueError(f"eps: expected > 0 [m], got {eps!r}")
+        self.limits = limit_tables(self.robot, self.device, self.scalar)
+        dev, sc = self.device, self.scalar
+        self.paths = wp.zeros((self.P, self.W, self.n), dtype=sc, device=dev)
+        self._paths_next = wp.zeros((self.P, self.W, self.n), dtype=sc, device=dev)
+        self.q_sub = wp.zeros((self.N, self.n), dtype=sc, device=dev)
+        self.length = wp.zeros(self.P, dtype=sc, device=dev)
+        self.collision = wp.zeros(self.P, dtype=sc, device=dev)
+        self.total = wp.zeros(self.P, dtype=sc, device=dev)
+        self.sub_max = wp.zeros(self.P, dtype=sc, device=dev)
+        self.grad = wp.zeros((self.P, self.W, self.n), dtype=sc, device=dev)
+        self.active = wp.ones(self.P, dtype=wp.int32, device=dev)
+        self.sub_cost = wp.zeros(self.N, dtype=sc, device=dev)
+        self.sub_grad = wp.zeros((self.N, self.n), dtype=sc, device=dev)
+        self.cm = _collision().collision_model(self.robot, world, device=dev, dtype=self.npdt)
+        self.elastic = None
+        self.rho: tuple | None = None
+        if kappa is not None:
+            from jwarp.kinematics import _ElasticLaunch, _rows, kappa_array
+            from jwarp.arrays import Batch
+
+            t = tables(self.robot, dev, self.npdt)
+            batch = Batch(self.q_sub, (self.N,), "warp")
+            kap = _rows(kappa_array(self.robot, kappa), self.robot, batch, t, "kappa", 3)
+            self.elastic = _ElasticLaunch(t, self.q_sub, kap, None, float(lam))
+
+    # ------------------------------------------------------------------ state
+    def set_paths(self, paths: np.ndarray) -> None:
+        """Copy paths (P, W, n_dof) into the device buffer."""
+        a = np.ascontiguousarray(np.asarray(paths, np.float64).reshape(self.P, self.W, self.n),
+                                 dtype=self.npdt)
+        wp.copy(self.paths, wp.array(a, dtype=self.scalar, device=self.device))
+        self.rho = None
+
+    def set_active(self, active: np.ndarray) -> None:
+        wp.copy(self.active, wp.array(np.asarray(active, np.int32), dtype=wp.int32,
+                                      device=self.device))
+
+    # ------------------------------------------------------------------ stages
+    def evaluate(self, grad: bool = True) -> None:
+        """Substeps, (elastic update,) collision cost/gradient and per-path costs of the
+        current paths; fills ``sub_cost`` (N,), ``sub_grad`` (N, n_dof), ``length``,
+        ``collision``, ``total`` (P,)."""
+        k, dev = self.k, self.device
+        wp.launch(k.substeps, dim=(self.P, self.S), inputs=[self.paths, self.n_sub],
+                  outputs=[self.q_sub], device=dev)
+        rho = None
+        if self.elastic is not None:
+            _, rho_new, _ = self.elastic.step(self.rho)  # frames at rho_old -> rho_new
+            self.rho = (rho_new, 1)
+            rho = rho_new
+        w = self.weights
+        self.cm.cost(self.q_sub, rho=rho, w_world=w.world, w_self=w.self, eps=self.eps,
+                     grad=grad, out_cost=self.sub_cost, out_grad=self.sub_grad)
+        wp.launch(k.path_cost, dim=self.P,
+                  inputs=[self.paths, self.sub_cost, self.n_sub, self.scalar(w.length),
+                          self.scalar(NORM_FLOOR)],
+                  outputs=[self.length, self.collision, self.total, self.sub_max], device=dev)
+
+    def gradient(self) -> wp.array:
+        """dU_path/dQ (P, W, n_dof) of the last :meth:`evaluate` (zero at start/goal)."""
+        wp.launch(self.k.path_grad, dim=(self.P, self.W),
+                  inputs=[self.paths, self.sub_grad, self.n_sub, self.scalar(self.weights.length),
+                          self.scalar(NORM_FLOOR)],
+                  outputs=[self.grad], device=self.device)
+        return self.grad
+
+    def step(self, step: float, max_step: float) -> None:
+        """One projected gradient step on the active paths (uses the last evaluate)."""
+        wp.launch(self.k.path_step, dim=(self.P, self.W),
+                  inputs=[self.paths, self.sub_grad, self.n_sub, self.scalar(self.weights.length),
+                          self.scalar(NORM_FLOOR), self.scalar(step), self.scalar(max_step),
+                          self.active, *self.limits.args],
+                  outputs=[self._paths_next.reshape((self.P * self.W, self.n))], device=self.device)
+        self.paths, self._paths_next = self._paths_next, self.paths
+
+    def value_and_grad(self, paths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Host convenience: U_path (P,) and dU/dQ (P, W, n_dof) as numpy."""
+        self.set_paths(paths)
+        self.evaluate(grad=True)
+        return self.total.numpy().astype(np.float64), self.gradient().numpy().astype(np.float64)
+
+
+# ====================================================================== planner
+def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed",
+         n_starts: int = 8, n_waypoints: int = 20, n_substeps: int | None = None,
+         iterations: int = 100, step: float = 0.01, max_step: float = 0.1,
+         weights: PathWeights | None = None, eps: float | None = None, margin: float = 0.0,
+         early_stop: bool = True, stop_when_solved: bool = False, check_all_every: int = 10,
+         free_via: bool = True, kappa: Any = None, lam: float = 0.7, seed: int | None = 0,
+         device: Any = "cpu", dtype: Any = np.float32,
+         callback: Callable[[int, np.ndarray], None] | None = None) -> PlanResult:
+    """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path.
+
+    Args:
+        robot: robot name or RobotModel.
+        world: a :class:`jwarp.world.World` of the robot's workspace dimension.
+        start, goal: (n_dof,) or (B, n_dof) joint values [rad or m] (B problems).
+        initial: "straight", "random" (1-3 random via points), "mixed" (the straight line
+            plus ``n_starts - 1`` random ones) or an array of user guesses (W, n_dof),
+            (n_starts, W, n_dof) or (B, n_starts, W, n_dof) (start/goal rows are replaced
+            by ``start``/``goal``).
+        n_starts: multi-starts per problem (ignored for array ``initial``).
+        n_waypoints: W (20 in the thesis).
+        n_substeps: substeps per segment; None sizes them to the world's voxel size on the
+            initial paths (:func:`substeps_for_voxel`).
+        iterations: most gradient steps per path.
+        step, max_step: step size alpha (eq. 3.18) and the largest change of one joint of
+            one waypoint per step [rad].
+        weights: :class:`PathWeights` (lam_w, lam_s, lam_l).
+        eps: smoothing width of the clipped cost c (eq. 3.10) [m]; default max(voxel, 1 cm).
+            Must be >= ``margin`` (a path with zero collision cost is then feasible).
+        margin: required clearance [m] of every sphere at every substep.
+        free_via: draw the random via points from collision-free configurations.
+        early_stop: freeze each path once it is feasible.
+        stop_when_solved: end as soon as every problem has one feasible path.
+        check_all_every: exact feasibility check of every unfinished path every this many
+            iterations (paths whose largest substep cost is below ``w c(margin)`` are
+            checked every iteration).
+        kappa: elastic compensation with these compliances [rad/(N m)] (see
+            :func:`jwarp.kinematics.fk_elastic`); None plans on the rigid model.
+        lam: damping of the torque update (elastic only).
+        seed: random seed of the random initial paths.
+        device, dtype: Warp device and float type of the optimisation.
+        callback: called as ``callback(iteration, paths (P, W, n_dof))`` after every
+            evaluation (e.g. rerun streaming); slows the loop down.
+
+    Returns:
+        :class:`PlanResult`.
+
+    Raises:
+        ValueError: bad shapes, NaN, start/goal outside the limits or in collision, world
+            and robot dimensions differ, bad options.
+    """
+    t0 = time.perf_counter()
+    init_warp()
+    model = get_robot(robot)
+    check_world(model, world)
+    q0 = _configs(start, model, "start")
+    q1 = _configs(goal, model, "goal")
+    if len(q0) != len(q1):
+        if len(q0) == 1:
+            q0 = np.repeat(q0, len(q1), 0)
+        elif len(q1) == 1:
+            q1 = np.repeat(q1, len(q0), 0)
+        else:
+            raise ValueError(f"start, goal: batch sizes differ ({len(q0)} vs {len(q1)})")
+    B = len(q0)
+    for name, v, lo in (("iterations", iterations, 0), ("n_waypoints", n_waypoints, 2),
+                        ("n_starts", n_starts, 1), ("check_all_every", check_all_every, 1)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+            raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+    for name, v in (("step", step), ("max_step", max_step)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ValueError(f"{name}: expected a number > 0, got {v!r}")
+    if not (isinstance(margin, (int, float)) and math.isfinite(margin) and margin >= 0):
+        raise ValueError(f"margin: expected a number >= 0 [m], got {margin!r}")
+    eps_v = float(eps) if eps is not None else max(float(world.voxel_size), 0.01, float(margin))
+    if not (math.isfinite(eps_v) and eps_v > 0):
+        raise ValueError(f"eps: expected a number > 0 [m], got {eps!r}")
+    if eps_v < margin:
+        raise ValueError(f"eps: must be >= margin ({margin:g} m), got {eps_v:g}")
+    check_endpoints(model, world, q0, "start", margin, kappa)
+    check_endpoints(model, world, q1, "goal", margin, kappa)
+
+    Q = _initial(model, q0, q1, initial, n_starts, n_waypoints, seed, world,
+                 free_via)  # (B, n_starts, W, n)
+    n_starts, W = Q.shape[1], Q.shape[2]
+    P = B * n_starts
+    Qf = Q.reshape(P, W, model.n_dof)
+    if n_substeps is None:
+        n_substeps = substeps_for_voxel(model, Qf, float(world.voxel_size))
+    obj = PathObjective(model, world, P, W, n_substeps, weights=weights, eps=eps_v, kappa=kappa,
+                        lam=lam, device=device, dtype=dtype)
+    obj.set_paths(Qf)
+
+    # screen: a substep whose (weighted, clipped) cost is below w_min c(margin) has no sphere
+    # within margin; such paths get the exact check every iteration, all others every
+    # check_all_every iterations and after the last one
+    w = obj.weights
+    w_min = min([v for v in (w.world, w.self) if v > 0] or [0.0])
+    screen = w_min * (eps_v - margin) ** 2 / (2.0 * eps_v)
+    done = np.zeros(P, bool)
+    feasible = np.zeros(P, bool)
+    iters = np.full(P, iterations, np.int64)
+    final = np.empty((P, W, model.n_dof))
+    costs = np.zeros((P, 3))  # total, length, collision
+    for it in range(iterations + 1):
+        obj.evaluate(grad=it < iterations)
+        if callback is not None:
+            callback(it, obj.paths.numpy())
+        smax = obj.sub_max.numpy()
+        last = it == iterations or (it + 1) % check_all_every == 0
+        cand = np.nonzero(~done & ((smax < screen) | last))[0]
+        if len(cand):
+            ok = _confirm(obj, cand, margin, kappa)
+            newly = cand[ok]
+            if len(newly):
+                feasible[newly] = True
+                iters[newly] = it
+                if early_stop:
+                    _freeze(obj, newly, final, costs)
+                    done[newly] = True
+        if done.all() or (stop_when_solved and feasible.reshape(B, n_starts).any(1).all()):
+            break
+        if it == iterations:
+            break
+        if early_stop:
+            obj.set_active(~done)
+        obj.step(step, max_step)
+    rest = np.nonzero(~done)[0]
+    if len(rest):
+        _freeze(obj, rest, final, costs)
+    return _result(final, feasible, costs, iters, B, n_starts, obj.n_sub,
+                   time.perf_counter() - t0)
+
+
+def _initial(model: RobotModel, q0: np.ndarray, q1: np.ndarray, initial: Any, n_starts: int,
+             W: int, seed: int | None, world: Any = None, free_via: bool = True) -> np.ndarray:
+    B, n = q0.shape
+    rng = np.random.default_rng(seed)
+    if isinstance(initial, str):
+        if initial == "straight":
+            Q = initial_paths(q0, q1, W, "straight")[:, None]
+            return np.repeat(Q, 1, axis=1)
+        if initial in ("random", "mixed"):
+            k = n_starts if initial == "random" else n_starts - 1
+            parts = []
+            if initial == "mixed":
+                parts.append(initial_paths(q0, q1, W, "straight")[:, None])
+            if k > 0:
+                r = initial_paths(np.repeat(q0, k, 0), np.repeat(q1, k, 0), W, "random",
+                                  robot=model, rng=rng, world=world if free_via else None)
+                parts.append(r.reshape(B, k, W, n))
+            return np.concatenate(parts, axis=1)
+        raise ValueError(f"initial: unknown kind '{initial}' (expected 'straight', 'random', "
+                         f"'mixed' or an array of paths)")
+    try:
+        g = np.asarray(initial, np.float64)
+    except (TypeError, ValueError) as e:
+        raise TypeError("initial: expected a kind name or an array of paths") from e
+    if g.ndim == 2:
+        g = g[None, None]
+    elif g.ndim == 3:
+        g = g[None]
+    if g.ndim != 4 or g.shape[-1] != n or g.shape[-2] < 2 or g.shape[0] not in (1, B):
+        raise ValueError(f"initial: expected paths (W, {n}), (n_starts, W, {n}) or "
+                         f"({B}, n_starts, W, {n}), got {np.shape(initial)}")
+    if not np.all(np.isfinite(g)):
+        raise ValueError("initial: contains NaN or inf")
+    g = np.array(np.broadcast_to(g, (B,) + g.shape[1:]))
+    g[:, :, 0] = q0[:, None]
+    g[:, :, -1] = q1[:, None]
+    from jwarp.solvers.limits import project_numpy
+
+    return project_numpy(model, g)
+
+
+def _confirm(obj: PathObjective, cand: np.ndarray, margin: float, kappa: Any) -> np.ndarray:
+    """Exact feasibility of the candidate paths (zero collision cost): every substep
+    collision-free with ``margin`` and every waypoint within the limits."""
+    S, n = obj.S, obj.n
+    q = obj.q_sub.numpy().reshape(obj.P, S, n)[cand].astype(np.float64)
+    rho = None
+    if obj.elastic is not None:
+        rho = obj.rho[0].numpy().reshape(obj.P, S, obj.robot.n_frames, 5)[cand]
+        rho = rho.reshape(-1, obj.robot.n_frames, 5).astype(np.float64)
+    free = collision_free(obj.robot, obj.world, q.reshape(-1, n), margin, rho=rho)
+    paths = obj.paths.numpy()[cand].astype(np.float64)
+    ok = free.reshape(len(cand), S).all(axis=1) & within_limits(obj.robot, paths).all(axis=1)
+    # the paths moved since n_substeps was chosen: re-check the survivors at substeps sized
+    # to their own segments (no sphere centre moves more than half a voxel per substep)
+    for i in np.nonzero(ok)[0]:
+        need = substeps_for_voxel(obj.robot, paths[i], float(obj.world.voxel_size),
+                                  safety=SWEEP_SAFETY, max_substeps=MAX_CHECK_SUBSTEPS)
+        if need > obj.n_sub:
+            ok[i] = path_feasible(obj.robot, obj.world, paths[i], need, margin=margin,
+                                  kappa=kappa)
+    return ok
+
+
+def _freeze(obj: PathObjective, idx: np.ndarray, final: np.ndarray, costs: np.ndarray) -> None:
+    final[idx] = obj.paths.numpy()[idx]
+    costs[idx, 0] = obj.total.numpy()[idx]
+    costs[idx, 1] = obj.length.numpy()[idx]
+    costs[idx, 2] = obj.collision.numpy()[idx]
+
+
+def _result(final: np.ndarray, feasible: np.ndarray, costs: np.ndarray, iters: np.ndarray,
+            B: int, n_starts: int, n_sub: int, wall: float) -> PlanResult:
+    W, n = final.shape[1:]
+    fz = feasible.reshape(B, n_starts)
+    c = costs.reshape(B, n_starts, 3)
+    # feasible first, then the lowest U_path
+    key = np.where(fz, c[..., 0], np.inf)
+    best = np.where(fz.any(1), np.argmin(key, axis=1), np.argmin(c[..., 0], axis=1))
+    rows = np.arange(B)
+    paths = final.reshape(B, n_starts, W, n)
+    it = iters.reshape(B, n_starts)
+    return PlanResult(path=paths[rows, best], feasible=fz[rows, best], cost=c[rows, best, 0],
+                      length_cost=c[rows, best, 1], collision_cost=c[rows, best, 2],
+                      iterations=it[rows, best], start_index=best, n_feasible=fz.sum(1),
+                      wall_time=wall, n_substeps=n_sub, all_paths=paths, all_feasible=fz,
+                      all_iterations=it)

@@ -1,0 +1,164 @@
+"""Feasibility of worlds for a robot (thesis 3.5.1) and robot-fitted world grids.
+
+A world is kept for a robot when at least 200 of 1000 random configurations within the
+joint limits are collision-free (world and self-collision, sphere model):
+:func:`feasible_fraction` measures it, :func:`feasible_simplex_world` searches seeds from
+a start seed until a simplex world passes.
+"""
+
+from __future__ import annotations
+
+import weakref
+from typing import Any
+
+import numpy as np
+
+from jwarp.model import RobotModel
+from jwarp.registry import robot as get_robot
+from jwarp.world.sdf import World, grid_geometry
+
+__all__ = ["random_configurations", "feasible_fraction", "feasible_simplex_world",
+           "fixed_spheres", "robot_reach", "robot_world_grid"]
+
+
+def random_configurations(robot: Any, n: int, seed: int = 0) -> np.ndarray:
+    """(n, n_dof) configurations drawn uniformly within the joint limits and the linear
+    joint limits (rejection sampling), reproducible by ``seed``."""
+    model = get_robot(robot)
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"n: expected a positive integer, got {n!r}")
+    rng = np.random.default_rng(seed)
+    lim = model.joint_limits
+    out = np.empty((0, model.n_dof))
+    for _ in range(1000):
+        q = rng.uniform(lim[:, 0], lim[:, 1], (max(2 * (n - len(out)), 16), model.n_dof))
+        ok = np.ones(len(q), bool)
+        for ll in model.linear_limits:
+            v = q[:, ll.joints] @ np.asarray(ll.coefficients, np.float64)
+            ok &= (v >= ll.lower) & (v <= ll.upper)
+        out = np.concatenate([out, q[ok]])
+        if len(out) >= n:
+            return out[:n]
+    raise ValueError(f"robot: cannot sample configurations of '{model.name}' within its "
+                     f"linear joint limits (acceptance too low)")
+
+
+def feasible_fraction(robot: Any, world: World | None, n: int = 1000, seed: int = 0, *,
+                      margin: float = 0.0, device: Any = None) -> float:
+    """Fraction of ``n`` random configurations (:func:`random_configurations`) whose
+    spheres keep more than ``margin`` [m] from the world and from each other."""
+    from jwarp.collision import is_collision_free
+
+    model = get_robot(robot)
+    q = random_configurations(model, n, seed)
+    free = is_collision_free(model, q, world, margin, device=device, dtype=np.float64)
+    return float(np.mean(free))
+
+
+def fixed_spheres(robot: Any, pad: float = 0.0, device: Any = None) -> list[tuple[np.ndarray, float]]:
+    """Collision spheres on frames that no joint moves (the robot's fixed base), as
+    ``(centre (workspace_dim,) [m], radius + pad [m])`` in the base frame."""
+    from jwarp.kinematics import fk
+
+    model = get_robot(robot)
+    moving = np.zeros(model.n_frames, bool)
+    for i in model.topological_order:
+        p = model.parents[i]
+        moving[i] = bool(model.frames[i].coupling) or (p >= 0 and moving[p])
+    f, pos, rad = model.sphere_arrays()
+    if len(f) == 0:
+        return []
+    T = fk(model, np.zeros((1, model.n_dof)), device=device, dtype=np.float64)[0]
+    out = []
+    for s in range(len(f)):
+        if not moving[f[s]]:
+            c = T[f[s], :3, :3] @ pos[s] + T[f[s], :3, 3]
+            out.append((c[:model.workspace_dim], float(rad[s]) + float(pad)))
+    return out
+
+
+_REACH: "weakref.WeakKeyDictionary[RobotModel, dict]" = weakref.WeakKeyDictionary()
+
+
+def robot_reach(robot: Any, n: int = 2000, seed: int = 0, device: Any = None) -> np.ndarray:
+    """(workspace_dim, 2) [m] box around every collision sphere of ``n`` random
+    configurations (centres -/+ radii): the space a world for this robot must cover.
+    Cached per robot, ``n`` and ``seed``."""
+    from jwarp.kinematics import fk
+
+    model = get_robot(robot)
+    cache = _REACH.setdefault(model, {})
+    if (n, seed) in cache:
+        return cache[(n, seed)].copy()
+    f, pos, rad = model.sphere_arrays()
+    if len(f) == 0:
+        raise ValueError(f"robot: '{model.name}' has no collision spheres")
+    q = random_configurations(model, n, seed)
+    T = fk(model, q, device=device, dtype=np.float64)[:, f]
+    x = np.einsum("bsij,sj->bsi", T[..., :3, :3], pos) + T[..., :3, 3]
+    lo = (x - rad[:, None]).min(axis=(0, 1))
+    hi = (x + rad[:, None]).max(axis=(0, 1))
+    d = model.workspace_dim
+    box = np.stack([lo[:d], hi[:d]], axis=1)
+    cache[(n, seed)] = box
+    return box.copy()
+
+
+def robot_world_grid(robot: Any, cells: int = 64, voxel_size: float | None = None,
+                     pad: float = 0.0) -> tuple[tuple[int, ...], np.ndarray, float]:
+    """A grid covering the robot's reach (:func:`robot_reach`, plus ``pad`` [m]): the
+    longest side gets ``cells`` cells (or the given ``voxel_size``), the others as many
+    cells of the same size as cover them, centred on the reach box.
+    Returns ``(shape, limits (dim, 2), voxel_size)``."""
+    if isinstance(cells, bool) or not isinstance(cells, (int, np.integer)) or cells < 2:
+        raise ValueError(f"cells: expected an integer >= 2, got {cells!r}")
+    box = robot_reach(robot)
+    box = box + np.array([-pad, pad])
+    span = box[:, 1] - box[:, 0]
+    h = float(voxel_size) if voxel_size is not None else float(span.max()) / (cells - 1)
+    if not np.isfinite(h) or h <= 0:
+        raise ValueError(f"voxel_size: expected a positive number [m], got {voxel_size!r}")
+    n = np.ceil(span / h - 1e-9).astype(int) + 1
+    centre = box.mean(axis=1)
+    lower = centre - 0.5 * (n - 1) * h
+    return grid_geometry(len(n), shape=tuple(int(v) for v in n), limits=lower, voxel_size=h)
+
+
+def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200,
+                           n: int = 1000, max_tries: int = 50, cells: int = 64,
+                           voxel_size: float | None = None, clear_base: bool = True,
+                           margin: float = 0.0, dim: int | None = None, device: Any = None,
+                           **noise: Any) -> World:
+    """The first simplex world from ``seed`` on (seed, seed + 1, ...) in which at least
+    ``min_feasible`` of ``n`` random configurations are collision-free (thesis: 200 of 1000).
+
+    The grid covers the robot's reach (:func:`robot_world_grid`); with ``clear_base`` the
+    robot's fixed spheres (plus two voxels) are kept free of obstacles. ``noise``:
+    threshold, frequency, octaves, persistence (see :func:`simplex_world`). The result's
+    ``meta`` records the seed used and the feasible fraction. Raises ValueError when
+    no seed of ``max_tries`` passes (lower the obstacle density: raise ``threshold``).
+    """
+    from jwarp.world.simplex import simplex_world
+
+    model: RobotModel = get_robot(robot)
+    dim = model.workspace_dim if dim is None else dim
+    if dim != model.workspace_dim:
+        raise ValueError(f"dim: robot '{model.name}' needs {model.workspace_dim}D worlds, got {dim}")
+    if not 0 < min_feasible <= n:
+        raise ValueError(f"min_feasible: expected 1..n={n}, got {min_feasible}")
+    if isinstance(max_tries, bool) or not isinstance(max_tries, (int, np.integer)) or max_tries < 1:
+        raise ValueError(f"max_tries: expected a positive integer, got {max_tries!r}")
+    shape, limits, h = robot_world_grid(model, cells=cells, voxel_size=voxel_size)
+    keep = fixed_spheres(model, pad=2 * h, device=device) if clear_base else []
+    fractions = []
+    for s in range(int(seed), int(seed) + int(max_tries)):
+        world = simplex_world(dim, seed=s, shape=shape, limits=limits, keep_free=keep, **noise)
+        frac = feasible_fraction(model, world, n, seed=s, margin=margin, device=device)
+        fractions.append(frac)
+        if frac * n >= min_feasible:
+            world.meta.update(robot=model.name, requested_seed=int(seed),
+                              feasible_fraction=frac, feasible_samples=int(n))
+            return world
+    raise ValueError(f"no simplex world among seeds {seed}..{seed + max_tries - 1} has "
+                     f"{min_feasible}/{n} collision-free configurations for '{model.name}' "
+                     f"(best {max(fractions) * n:.0f}); raise 'threshold' for fewer obstacles")

@@ -1,0 +1,344 @@
+"""Signed distance fields on regular grids: the :class:`World` and its constructors.
+
+Grid convention (used everywhere in jwarp):
+
+* ``sdf[i, j(, k)]`` is the distance [m] at the cell centre
+  ``limits[:, 0] + voxel_size * (i, j(, k))``; ``limits`` (dim, 2) holds the first and the
+  last cell centre per axis, so ``limits[:, 1] = limits[:, 0] + (shape - 1) * voxel_size``.
+* Negative inside obstacles, positive in free space, in metres.
+* Between cell centres the field is interpolated (bi/trilinear, see
+  :mod:`jwarp.kernels.collision`); outside the grid box the world is free: the distance
+  is that at the nearest point of the box plus the distance to that point.
+
+SDF from an occupancy grid (:func:`world_from_occupancy`): an occupied cell is a solid
+cube of side ``voxel_size``, so the obstacle surface lies on the faces between occupied
+and free cells. With scipy's exact Euclidean distance transform over cell centres,
+
+* free cell:     ``D = min |c - c_occ| - voxel_size / 2``   (c_occ: occupied cell centres)
+* occupied cell: ``D = -(min |c - c_free| - voxel_size / 2)``
+
+which is the exact distance to the cube surface along grid axes and overestimates it by
+at most ``(sqrt(dim) - 1) / 2`` voxels diagonally. Interpolation puts D = 0 on the
+faces between occupied and free cells. A grid without any occupied (free) cell gets
+``+`` (``-``) the length of the grid box diagonal plus one voxel everywhere.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+from scipy import ndimage
+
+__all__ = ["World", "grid_geometry", "world_from_occupancy", "world_from_mesh",
+           "world_from_points"]
+
+DEFAULT_CELLS = 64
+
+
+@dataclass(eq=False)
+class World:
+    """Signed distance field on a regular 2D or 3D grid (see the module docstring).
+
+    Attributes:
+        sdf: (nx, ny) or (nx, ny, nz) float32/float64 [m], negative inside obstacles.
+        limits: (dim, 2) [m] first and last cell centre per axis.
+        voxel_size: cell size [m] (the same on every axis).
+        occupancy: bool grid of the same shape when the world came from one, else None.
+        meta: free-form description (generator, seed, ...), saved with the world.
+    """
+
+    sdf: np.ndarray
+    limits: np.ndarray
+    voxel_size: float
+    occupancy: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        sdf = np.asarray(self.sdf)
+        if sdf.dtype not in (np.float32, np.float64):
+            if not np.issubdtype(sdf.dtype, np.number) or np.issubdtype(sdf.dtype, np.complexfloating):
+                raise TypeError(f"sdf: expected a float32/float64 array, got dtype {sdf.dtype}")
+            sdf = sdf.astype(np.float64)
+        if sdf.ndim not in (2, 3):
+            raise ValueError(f"sdf: expected a 2D or 3D grid, got shape {sdf.shape}")
+        if min(sdf.shape) < 2:
+            raise ValueError(f"sdf: every grid size must be >= 2, got shape {sdf.shape}")
+        if not np.all(np.isfinite(sdf)):
+            raise ValueError("sdf: contains NaN or inf")
+        self.sdf = np.ascontiguousarray(sdf)
+        try:
+            h = float(self.voxel_size)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"voxel_size: expected a number, got {self.voxel_size!r}") from e
+        if not np.isfinite(h) or h <= 0:
+            raise ValueError(f"voxel_size: expected a positive number [m], got {self.voxel_size!r}")
+        self.voxel_size = h
+        lim = np.asarray(self.limits, dtype=np.float64)
+        if lim.shape != (sdf.ndim, 2):
+            raise ValueError(f"limits: expected shape ({sdf.ndim}, 2) for a {sdf.ndim}D grid, "
+                             f"got {lim.shape}")
+        if not np.all(np.isfinite(lim)):
+            raise ValueError("limits: contains NaN or inf")
+        expect = lim[:, 0] + (np.array(sdf.shape) - 1) * h
+        if not np.allclose(lim[:, 1], expect, rtol=0.0, atol=1e-6 * h + 1e-9):
+            raise ValueError(f"limits: upper cell centres {lim[:, 1].tolist()} do not match "
+                             f"lower + (shape - 1) * voxel_size = {expect.tolist()}")
+        self.limits = lim
+        if self.occupancy is not None:
+            occ = np.asarray(self.occupancy)
+            if occ.shape != sdf.shape:
+                raise ValueError(f"occupancy: shape {occ.shape} does not match sdf {sdf.shape}")
+            if occ.dtype != bool:
+                raise TypeError(f"occupancy: expected a bool array, got dtype {occ.dtype}")
+            self.occupancy = occ
+        if not isinstance(self.meta, dict):
+            raise TypeError(f"meta: expected a dict, got {type(self.meta).__name__}")
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def dim(self) -> int:
+        """2 or 3."""
+        return self.sdf.ndim
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(self.sdf.shape)
+
+    @property
+    def origin(self) -> np.ndarray:
+        """(dim,) [m] centre of cell 0."""
+        return self.limits[:, 0].copy()
+
+    @property
+    def extent(self) -> np.ndarray:
+        """(dim, 2) [m] outer faces of the grid's cells (limits -/+ half a voxel)."""
+        return self.limits + np.array([-0.5, 0.5]) * self.voxel_size
+
+    def cell_centres(self) -> np.ndarray:
+        """(*shape, dim) [m] coordinates of every cell centre."""
+        axes = [self.limits[d, 0] + self.voxel_size * np.arange(n) for d, n in enumerate(self.shape)]
+        return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+
+    def astype(self, dtype: Any) -> "World":
+        """The same world with the SDF stored as ``dtype`` (float32 or float64)."""
+        return World(self.sdf.astype(dtype), self.limits.copy(), self.voxel_size,
+                     None if self.occupancy is None else self.occupancy.copy(), dict(self.meta))
+
+    # ----------------------------------------------------------------- queries
+    def distance(self, points: Any, *, grad: bool = False, device: Any = "cpu") -> Any:
+        """Interpolated signed distance [m] at ``points`` (..., dim) [m] (and its spatial
+        gradient (..., dim) if ``grad``), with the kernel the cost functions use."""
+        from jwarp.collision import sdf_query
+
+        return sdf_query(self, points, grad=grad, device=device)
+
+    # --------------------------------------------------------------------- I/O
+    def save(self, path: Any) -> None:
+        """Write the world as ``.npz`` atomically (see :mod:`jwarp.world.io`)."""
+        from jwarp.world.io import save_world
+
+        save_world(self, path)
+
+    @classmethod
+    def load(cls, path: Any) -> "World":
+        """Read a world written by :meth:`save`; a malformed file raises ValueError."""
+        from jwarp.world.io import load_world
+
+        return load_world(path)
+
+    def __repr__(self) -> str:
+        return (f"World(dim={self.dim}, shape={self.shape}, voxel_size={self.voxel_size:g} m, "
+                f"limits={np.round(self.limits, 4).tolist()}, meta={self.meta})")
+
+
+# ====================================================================== geometry
+def grid_geometry(dim: int, *, shape: Sequence[int] | None = None, limits: Any = None,
+                  voxel_size: float | None = None) -> tuple[tuple[int, ...], np.ndarray, float]:
+    """Complete a grid from any of ``shape``, ``limits`` (dim, 2) [m] (first/last cell
+    centre) or (dim,) [m] (first cell centre), and ``voxel_size`` [m].
+
+    * shape + limits (dim, 2): voxel from the limits (must be the same on every axis);
+    * limits (dim, 2) + voxel_size: shape = cells that fit (upper limit rounded down);
+    * limits (dim,) + shape + voxel_size: box starting there;
+    * shape + voxel_size: box centred on the origin;
+    * shape alone: the longest side spans [-1, 1] m, centred on the origin;
+    * nothing: ``64`` cells per axis over [-1, 1] m.
+
+    Returns ``(shape, limits (dim, 2), voxel_size)``.
+    """
+    if shape is not None:
+        try:
+            s = tuple(int(v) for v in shape)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"shape: expected a sequence of integers, got {shape!r}") from e
+        if len(s) != dim:
+            raise ValueError(f"shape: expected {dim} grid sizes, got {s}")
+        if min(s) < 2:
+            raise ValueError(f"shape: every grid size must be >= 2, got {s}")
+    else:
+        s = None
+    h = None
+    if voxel_size is not None:
+        try:
+            h = float(voxel_size)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"voxel_size: expected a number, got {voxel_size!r}") from e
+        if not np.isfinite(h) or h <= 0:
+            raise ValueError(f"voxel_size: expected a positive number [m], got {voxel_size!r}")
+    lim = None
+    if limits is not None:
+        lim = np.asarray(limits, dtype=np.float64)
+        if lim.shape not in ((dim, 2), (dim,)):
+            raise ValueError(f"limits: expected shape ({dim}, 2) or ({dim},), got {lim.shape}")
+        if not np.all(np.isfinite(lim)):
+            raise ValueError("limits: contains NaN or inf")
+        if lim.ndim == 2 and np.any(lim[:, 1] <= lim[:, 0]):
+            raise ValueError(f"limits: every upper limit must exceed the lower one, got {lim.tolist()}")
+    if lim is not None and lim.ndim == 2:
+        span = lim[:, 1] - lim[:, 0]
+        if s is not None:
+            hs = span / (np.array(s) - 1)
+            if not np.allclose(hs, hs[0], rtol=1e-6):
+                raise ValueError(f"limits: with shape {s} the voxel sizes per axis {hs.tolist()} "
+                                 f"differ; the grid must be isotropic")
+            if h is not None and not np.isclose(h, hs[0], rtol=1e-6):
+                raise ValueError(f"voxel_size: {h} does not match limits and shape ({hs[0]})")
+            return s, lim, float(hs[0])
+        if h is None:
+            h = float(span.max()) / (DEFAULT_CELLS - 1)
+        n = np.floor(span / h + 1e-6).astype(int) + 1
+        if np.any(n < 2):
+            raise ValueError(f"voxel_size: {h} m leaves fewer than 2 cells on an axis of "
+                             f"limits {lim.tolist()}")
+        lim = np.stack([lim[:, 0], lim[:, 0] + (n - 1) * h], axis=1)
+        return tuple(int(v) for v in n), lim, h
+    if s is None:
+        s = (DEFAULT_CELLS,) * dim
+    if h is None:
+        if lim is not None:
+            raise ValueError("voxel_size: required when limits gives only the lower corner")
+        h = 2.0 / (max(s) - 1)
+    lower = lim if lim is not None else -0.5 * (np.array(s) - 1) * h
+    lim = np.stack([lower, lower + (np.array(s) - 1) * h], axis=1)
+    return s, lim, h
+
+
+def _box_geometry(limits: Any, voxel_size: Any, shape: tuple[int, ...]) -> tuple[np.ndarray, float]:
+    """limits (dim, 2) and voxel_size of a grid of known ``shape``."""
+    _, lim, h = grid_geometry(len(shape), shape=shape, limits=limits, voxel_size=voxel_size)
+    return lim, h
+
+
+# ================================================================ constructors
+def world_from_occupancy(occupancy: Any, limits: Any, voxel_size: float | None = None, *,
+                         dtype: Any = np.float64) -> World:
+    """Signed distance field of a boolean occupancy grid (module docstring convention).
+
+    Args:
+        occupancy: (nx, ny) or (nx, ny, nz) bool (or 0/1 integer) grid, True = obstacle.
+        limits: (dim, 2) [m] first/last cell centre, or (dim,) first cell centre.
+        voxel_size: [m]; may be omitted when ``limits`` is (dim, 2).
+        dtype: float32 or float64 of the SDF.
+    """
+    occ = np.asarray(occupancy)
+    if occ.dtype != bool:
+        if not np.issubdtype(occ.dtype, np.integer) or not np.isin(occ, (0, 1)).all():
+            raise TypeError(f"occupancy: expected a bool (or 0/1 integer) grid, got dtype {occ.dtype}")
+        occ = occ.astype(bool)
+    if occ.ndim not in (2, 3) or min(occ.shape) < 2:
+        raise ValueError(f"occupancy: expected a 2D or 3D grid with sizes >= 2, got shape {occ.shape}")
+    lim, h = _box_geometry(limits, voxel_size, occ.shape)
+    if dtype not in (np.float32, np.float64, "float32", "float64"):
+        raise TypeError(f"dtype: expected float32 or float64, got {dtype!r}")
+    if not occ.any() or occ.all():
+        big = float(np.linalg.norm(lim[:, 1] - lim[:, 0])) + h
+        sdf = np.full(occ.shape, big if not occ.any() else -big)
+    else:
+        d_free = ndimage.distance_transform_edt(~occ, sampling=h)  # free cells -> nearest occupied
+        d_occ = ndimage.distance_transform_edt(occ, sampling=h)    # occupied -> nearest free
+        sdf = np.where(occ, -(d_occ - 0.5 * h), d_free - 0.5 * h)
+    return World(sdf.astype(dtype), lim, h, occ.copy(), {"source": "occupancy"})
+
+
+def world_from_points(points: Any, limits: Any, voxel_size: float | None = None, *,
+                      shape: Sequence[int] | None = None, dtype: Any = np.float64) -> World:
+    """World from a point cloud on obstacle surfaces (e.g. a depth camera).
+
+    Each point marks the cell whose centre is nearest as occupied; the SDF follows as for
+    :func:`world_from_occupancy`. Points outside the grid are dropped (their count is in
+    ``meta["points_outside"]``).
+
+    Args:
+        points: (M, dim) [m].
+        limits, voxel_size, shape: the grid, see :func:`grid_geometry`.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] not in (2, 3) or p.shape[0] == 0:
+        raise ValueError(f"points: expected shape (M, 2) or (M, 3) with M >= 1, got {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise ValueError("points: contains NaN or inf")
+    dim = p.shape[1]
+    s, lim, h = grid_geometry(dim, shape=shape, limits=limits, voxel_size=voxel_size)
+    idx = np.rint((p - lim[:, 0]) / h).astype(np.int64)
+    inside = np.all((idx >= 0) & (idx < np.array(s)), axis=1)
+    occ = np.zeros(s, bool)
+    occ[tuple(idx[inside].T)] = True
+    world = world_from_occupancy(occ, lim, h, dtype=dtype)
+    world.meta.update(source="points", points=int(len(p)), points_outside=int((~inside).sum()))
+    return world
+
+
+def world_from_mesh(mesh: Any, limits: Any, voxel_size: float | None = None, *,
+                    shape: Sequence[int] | None = None, device: Any = "cpu",
+                    dtype: Any = np.float64) -> World:
+    """World from a closed triangle mesh: exact distance of every cell centre to the mesh
+    surface, negative inside (ray-casting parity), via Warp's BVH mesh queries.
+
+    Args:
+        mesh: watertight ``trimesh.Trimesh`` (or a ``(vertices (V, 3), faces (F, 3))``
+            pair) [m]; several closed bodies may be concatenated into one mesh.
+        limits, voxel_size, shape: the 3D grid, see :func:`grid_geometry`.
+        device: Warp device of the queries.
+
+    The distances are computed in float32 (Warp meshes are float32): about 1e-7 relative
+    to the grid size. ``occupancy`` is ``sdf < 0``.
+    """
+    import warp as wp
+
+    from jwarp.arrays import init_warp, resolve_device
+    from jwarp.kernels.collision import mesh_sdf_kernel
+
+    if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+        verts, faces = mesh.vertices, mesh.faces
+    else:
+        try:
+            verts, faces = mesh
+        except (TypeError, ValueError) as e:
+            raise TypeError("mesh: expected a trimesh.Trimesh or a (vertices, faces) pair") from e
+    v = np.asarray(verts, dtype=np.float64)
+    f = np.asarray(faces)
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) < 3:
+        raise ValueError(f"mesh: vertices must have shape (V >= 3, 3), got {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError("mesh: vertices contain NaN or inf")
+    if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or not np.issubdtype(f.dtype, np.integer):
+        raise ValueError(f"mesh: faces must be an integer array of shape (F >= 1, 3), got {f.shape}")
+    if f.min() < 0 or f.max() >= len(v):
+        raise ValueError(f"mesh: face indices out of range [0, {len(v)})")
+    import trimesh
+
+    if not trimesh.Trimesh(v, f, process=True).is_watertight:
+        raise ValueError("mesh: not watertight (closed), so its inside is undefined")
+    s, lim, h = grid_geometry(3, shape=shape, limits=limits, voxel_size=voxel_size)
+    init_warp()
+    dev = resolve_device(device)
+    wmesh = wp.Mesh(points=wp.array(v.astype(np.float32), dtype=wp.vec3, device=dev),
+                    indices=wp.array(f.astype(np.int32).reshape(-1), dtype=wp.int32, device=dev))
+    out = wp.empty(s, dtype=wp.float32, device=dev)
+    max_dist = float(np.linalg.norm(lim[:, 1] - lim[:, 0]) + np.abs(v - lim.mean(1)).max() * 2 + 1.0)
+    wp.launch(mesh_sdf_kernel, dim=s, inputs=[wmesh.id, wp.vec3(*lim[:, 0]), float(h), max_dist],
+              outputs=[out], device=dev)
+    sdf = out.numpy().astype(dtype)
+    return World(sdf, lim, h, sdf < 0, {"source": "mesh", "faces": int(len(f))})

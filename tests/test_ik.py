@@ -1,0 +1,170 @@
+"""Two-stage IK (jwarp/solvers/ik.py, jwarp/kernels/ik.py): costs vs numpy and finite
+differences, targets reached to tolerance, collision-free solutions, clear errors."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import jwarp
+from jwarp import collision
+from jwarp.solvers import ik as IK
+from jwarp.solvers.limits import sample_within_limits, within_limits
+from jwarp.world import world_from_occupancy
+
+
+def shelf_world():
+    """A shelf in front of justin19 / arm7: two boards and a back wall (3D, 4 cm voxels)."""
+    h = 0.04
+    lim = np.array([[-0.2, 1.4], [-1.0, 1.0], [0.0, 1.6]])
+    n = np.round((lim[:, 1] - lim[:, 0]) / h).astype(int) + 1
+    X, Y, Z = np.meshgrid(*[lim[d, 0] + h * np.arange(n[d]) for d in range(3)], indexing="ij")
+    inside_x = (X > 0.7) & (X < 1.1)
+    boards = inside_x & (np.abs(Y) < 0.6) & ((np.abs(Z - 0.55) < 0.03) | (np.abs(Z - 1.05) < 0.03))
+    back = (np.abs(X - 1.12) < 0.03) & (np.abs(Y) < 0.6) & (Z < 1.3)
+    return world_from_occupancy(boards | back, lim, h)
+
+
+def ref_costs(F, T, lam_p, lam_r):
+    dp = F[:3, 3] - T[:3, 3]
+    return 0.5 * lam_p * dp @ dp + 0.5 * lam_r * (3 - np.trace(F[:3, :3] @ T[:3, :3].T))
+
+
+def test_pose_error_and_uik_gradient_match_numpy_and_fd():
+    robot = jwarp.robot("arm7")
+    world = shelf_world()
+    rng = np.random.default_rng(0)
+    q = sample_within_limits(robot, 4, rng)
+    qt = sample_within_limits(robot, 4, rng)
+    T = jwarp.fk(robot, qt, device="cpu")[:, robot.frame_index("tcp")]
+    w = IK.IKWeights(position=2.0, rotation=0.5, world=1.0, self=0.5, default=0.1)
+    qd = rng.uniform(-0.5, 0.5, robot.n_dof)
+    obj = IK.IKObjective(robot, "tcp", 4, world=world, weights=w, eps=0.05, q_default=qd,
+                         device="cpu", dtype=np.float64)
+    u, g = obj.value_and_grad(q, T)
+    F = jwarp.fk(robot, q, device="cpu")[:, robot.frame_index("tcp")]
+    err = obj.err.numpy()
+    for b in range(4):
+        np.testing.assert_allclose(err[b, :3], T[b, :3, 3] - F[b, :3, 3], atol=1e-12)
+        rv = Rotation.from_matrix(T[b, :3, :3] @ F[b, :3, :3].T).as_rotvec()
+        np.testing.assert_allclose(err[b, 3:], rv, atol=1e-9)
+    c, _ = collision.collision_cost(robot, q, world, w_world=1.0, w_self=0.5, eps=0.05,
+                                    dtype=np.float64)
+    ref = [ref_costs(F[b], T[b], 2.0, 0.5) for b in range(4)]
+    ref = np.array(ref) + c + 0.05 * np.sum((q - qd) ** 2, axis=1)
+    np.testing.assert_allclose(u, ref, rtol=1e-10)
+    fd = np.zeros_like(q)
+    h = 1e-6
+    for j in range(robot.n_dof):
+        e = np.zeros(robot.n_dof)
+        e[j] = h
+        fd[:, j] = (obj.value_and_grad(q + e, T)[0] - obj.value_and_grad(q - e, T)[0]) / (2 * h)
+    np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-6)
+
+
+def _check_reached(robot, frame, q, T, tol_p=1e-4, tol_r=1e-3):
+    F = jwarp.fk(robot, q, device="cpu")[..., robot.frame_index(frame), :, :]
+    pos = np.linalg.norm(F[..., :3, 3] - T[..., :3, 3], axis=-1)
+    ang = Rotation.from_matrix((F[..., :3, :3] @ np.swapaxes(T[..., :3, :3], -1, -2))
+                               .reshape(-1, 3, 3)).magnitude()
+    assert np.all(pos < tol_p) and np.all(ang < tol_r), (pos, ang)
+
+
+@pytest.mark.parametrize("name,frame", [("arm7", "tcp"), ("justin19", "right_tcp"),
+                                        ("justin19", "left_tcp")])
+def test_ik_reaches_targets_to_tolerance(name, frame):
+    robot = jwarp.robot(name)
+    rng = np.random.default_rng(1)
+    qt = sample_within_limits(robot, 6, rng)
+    free = collision.is_collision_free(robot, qt)  # targets reachable without self-collision
+    qt = qt[free][:4]
+    T = jwarp.fk(robot, qt, device="cpu")[:, robot.frame_index(frame)]
+    res = IK.ik(robot, frame, T, n_starts=8, seed=2)
+    assert res.q.shape == (len(qt), robot.n_dof) and res.feasible.all()
+    assert np.all(res.pos_err < 1e-4) and np.all(res.rot_err < 1e-3)
+    _check_reached(robot, frame, res.q, T)
+    assert within_limits(robot, res.q).all()
+    assert collision.is_collision_free(robot, res.q).all()
+
+
+def test_planar_ik_uses_x_y_and_yaw():
+    robot = jwarp.robot("planar4")
+    q = np.array([[0.3, -0.4, 0.8, 0.2]])
+    T = jwarp.fk(robot, q, device="cpu")[:, robot.frame_index("tcp")]
+    res = IK.ik(robot, "tcp", T, n_starts=4)
+    assert res.feasible.all()
+    _check_reached(robot, "tcp", res.q, T)
+
+
+def test_collision_free_ik_in_a_shelf():
+    robot = jwarp.robot("justin19")
+    world = shelf_world()
+    # a grasp pose between the two boards, hand (0.35 m of spheres) pointing forward (+x)
+    T = IK.pose_matrix([0.6, -0.25, 0.8], Rotation.from_euler("y", 90, degrees=True).as_rotvec())
+    res = IK.ik(robot, "right_tcp", T, world=world, n_starts=16, margin=0.01, seed=0)
+    assert res.feasible and res.pos_err < 1e-4 and res.rot_err < 1e-3
+    assert res.q.shape == (robot.n_dof,)
+    _check_reached(robot, "right_tcp", res.q, T)
+    assert collision.is_collision_free(robot, res.q[None], world, margin=0.01).all()
+    d = res.to_dict()
+    assert d["feasible"] and len(d["q"]) == 19
+
+
+def test_bad_inputs():
+    robot = jwarp.robot("arm7")
+    T = np.eye(4)
+    with pytest.raises(ValueError, match="frame"):
+        IK.ik(robot, "no_such_frame", T)
+    with pytest.raises(ValueError, match="target"):
+        IK.ik(robot, "tcp", np.eye(3))
+    bad = np.eye(4)
+    bad[:3, :3] *= 2
+    with pytest.raises(ValueError, match="target: rotation"):
+        IK.ik(robot, "tcp", bad)
+    with pytest.raises(ValueError, match="world"):
+        IK.ik("planar4", "tcp", T, world=shelf_world())
+    with pytest.raises(ValueError, match="initial"):
+        IK.ik(robot, "tcp", T, initial=np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="n_starts"):
+        IK.ik(robot, "tcp", T, n_starts=0)
+
+
+def test_torch_uik_matches_numpy_gradient():
+    torch = pytest.importorskip("torch")
+    from jwarp.solvers.torch_costs import u_ik
+
+    robot = jwarp.robot("arm7")
+    world = shelf_world()
+    rng = np.random.default_rng(4)
+    q = sample_within_limits(robot, 3, rng)
+    T = jwarp.fk(robot, sample_within_limits(robot, 3, rng), device="cpu")[:, 8]
+    w = IK.IKWeights(default=0.2)
+    obj = IK.IKObjective(robot, "tcp", 3, world=world, weights=w, device="cpu", dtype=np.float64)
+    u_ref, g_ref = obj.value_and_grad(q, T)
+    qt = torch.tensor(q, requires_grad=True)
+    u = u_ik(qt, torch.tensor(T), robot, "tcp", world=world, weights=w)
+    np.testing.assert_allclose(u.detach().numpy(), u_ref, rtol=1e-12)
+    u.sum().backward()
+    np.testing.assert_allclose(qt.grad.numpy(), g_ref, rtol=1e-12)
+    with pytest.raises(ValueError, match="target"):
+        u_ik(qt, torch.tensor(T[:2]), robot, "tcp")
+
+
+def test_compensated_ik_reaches_the_target_on_the_elastic_model():
+    from jwarp.solvers import compensation as C
+
+    robot = jwarp.robot("justin19")
+    rng = np.random.default_rng(6)
+    qt = sample_within_limits(robot, 10, rng)
+    qt = qt[collision.is_collision_free(robot, qt)][:3]
+    T = jwarp.fk(robot, qt, device="cpu")[:, robot.frame_index("right_tcp")]
+    kappa = C.JUSTIN_KAPPA
+    res = C.compensated_ik(robot, "right_tcp", T, kappa=kappa, n_starts=8, seed=1)
+    assert res.feasible.all()
+    # independent check: the converged elastic model (fk_elastic from rho0) at the solution
+    pos, ang = C.equilibrium_pose_error(robot, "right_tcp", res.q, T, kappa)
+    assert np.all(pos < 1.1e-4) and np.all(ang < 1.1e-3), (pos, ang)
+    # the rigid model at the same q misses the target by the sag (mm to cm)
+    F = jwarp.fk(robot, res.q, device="cpu")[:, robot.frame_index("right_tcp")]
+    assert np.all(np.linalg.norm(F[:, :3, 3] - T[:, :3, 3], axis=1) > 1e-3)
+    with pytest.raises(ValueError, match="kappa"):
+        C.compensated_ik(robot, "right_tcp", T)  # justin19 ships without compliances

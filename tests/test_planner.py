@@ -1,0 +1,207 @@
+"""Planner (jwarp/solvers/planner.py): U_path gradient, substep detection, planning, errors."""
+
+import numpy as np
+import pytest
+
+import jwarp
+from jwarp import collision
+from jwarp.solvers import planner as PL
+from jwarp.solvers.limits import within_limits
+from jwarp.world import world_from_occupancy
+
+N_CELLS = 64
+LIM2 = np.array([[-1.0, 1.0], [-1.0, 1.0]])
+H2 = 2.0 / (N_CELLS - 1)
+
+
+def grid2():
+    xs = LIM2[0, 0] + H2 * np.arange(N_CELLS)
+    return np.meshgrid(xs, xs, indexing="ij")
+
+
+@pytest.fixture(scope="module")
+def block_world():
+    """planar4's workspace with a block in front of the base at x in (0.5, 0.75)."""
+    X, Y = grid2()
+    return world_from_occupancy((X > 0.5) & (X < 0.75) & (np.abs(Y) < 0.12), LIM2, H2)
+
+
+@pytest.fixture(scope="module")
+def wall_world():
+    """A one-voxel wall at x = 0 for sphere2d, open above y = 0.6."""
+    X, Y = grid2()
+    return world_from_occupancy((np.abs(X) < 0.5 * H2) & (Y < 0.6), LIM2, H2)
+
+
+def test_upath_gradient_matches_central_fd(block_world):
+    robot = jwarp.robot("planar4")
+    rng = np.random.default_rng(0)
+    s, g = np.array([1.2, 0.3, 0.0, 0.0]), np.array([-1.2, -0.2, 0.1, 0.0])
+    Q = PL.initial_paths(s[None], g[None], 6, "straight")
+    Q = np.repeat(Q, 2, 0)
+    Q[:, 1:-1] += rng.normal(scale=0.3, size=Q[:, 1:-1].shape)
+    obj = PL.PathObjective(robot, block_world, 2, 6, 3, weights=PL.PathWeights(1.0, 0.7, 0.05),
+                           eps=0.04, device="cpu", dtype=np.float64)
+    u, grad = obj.value_and_grad(Q)
+    coll0, length0 = obj.collision.numpy().copy(), obj.length.numpy().copy()
+    assert np.all(coll0 > 0)  # the straight-ish paths cross the block
+    h = 1e-7
+    fd = np.zeros_like(Q)
+    for t in range(1, 5):
+        for j in range(4):
+            Qp, Qm = Q.copy(), Q.copy()
+            Qp[:, t, j] += h
+            Qm[:, t, j] -= h
+            fd[:, t, j] = (obj.value_and_grad(Qp)[0] - obj.value_and_grad(Qm)[0]) / (2 * h)
+    np.testing.assert_allclose(grad, fd, atol=1e-5 * np.abs(fd).max(), rtol=1e-4)
+    # U_path = collision (independent call on the substeps) + lam_l * length
+    qs = PL.substeps(Q, 3).reshape(-1, 4)
+    c, _ = collision.collision_cost(robot, qs, block_world, w_world=1.0, w_self=0.7, eps=0.04,
+                                    grad=False, dtype=np.float64)
+    np.testing.assert_allclose(coll0, c.reshape(2, -1).sum(1), rtol=1e-10)
+    np.testing.assert_allclose(u, c.reshape(2, -1).sum(1) + 0.05 * length0, rtol=1e-10)
+
+
+def test_substeps_catch_a_thin_wall_that_waypoints_miss(wall_world):
+    robot = jwarp.robot("sphere2d")
+    path = np.array([[-0.5, 0.0], [0.5, 0.0]])
+    assert collision.is_collision_free(robot, path, wall_world).all()  # both waypoints free
+    assert PL.path_feasible(robot, wall_world, path, 1)  # waypoints alone miss the wall
+    n_sub = PL.substeps_for_voxel(robot, path, wall_world.voxel_size)
+    assert n_sub >= 31  # 1 m of motion / 0.032 m voxels
+    assert not PL.path_feasible(robot, wall_world, path, n_sub)
+    # the planner's own check sees it too: the straight line is never reported feasible
+    res = PL.plan(robot, wall_world, path[0], path[1], initial="straight", iterations=0,
+                  n_waypoints=2)
+    assert not res.feasible[0] and res.collision_cost[0] > 0
+
+
+def test_sphere2d_plans_through_the_opening():
+    X, Y = grid2()
+    world = world_from_occupancy((np.abs(X) < 1.5 * H2) & (Y < 0.3), LIM2, H2)
+    robot = jwarp.robot("sphere2d")
+    s, g = np.array([-0.5, 0.0]), np.array([0.5, 0.0])
+    res = PL.plan(robot, world, s, g, initial="mixed", n_starts=8, iterations=200,
+                  step=0.05, n_waypoints=10, seed=1)
+    assert res.feasible[0] and not res.all_feasible[0, 0]  # the straight start failed
+    p = res.path[0]
+    np.testing.assert_array_equal(p[0], s)
+    np.testing.assert_array_equal(p[-1], g)
+    assert p[:, 1].max() > 0.3  # it went over the top of the wall
+    assert PL.path_feasible(robot, world, p, 64)  # independent fine check
+
+
+def test_planar4_plans_around_a_known_obstacle(block_world):
+    robot = jwarp.robot("planar4")
+    s, g = np.array([1.2, 0.0, 0.0, 0.0]), np.array([-1.2, 0.0, 0.0, 0.0])
+    straight = PL.initial_paths(s[None], g[None], 20, "straight")[0]
+    assert not PL.path_feasible(robot, block_world, straight, 16)
+    res = PL.plan(robot, block_world, s, g, initial="mixed", n_starts=16, n_substeps=8,
+                  iterations=300, step=0.05, seed=0)
+    assert res.feasible[0] and res.n_feasible[0] >= 1
+    p = res.path[0]
+    assert p.shape == (20, 4)
+    np.testing.assert_allclose(p[[0, -1]], [s, g], atol=1e-6)
+    assert within_limits(robot, p).all()
+    # checked at substeps sized to the final path (sphere motion <= voxel / 2), not only at
+    # the 8 substeps the optimisation used
+    n_chk = PL.substeps_for_voxel(robot, p, block_world.voxel_size, safety=PL.SWEEP_SAFETY)
+    assert n_chk > 8 and PL.path_feasible(robot, block_world, p, n_chk)
+    assert res.length_cost[0] > 1.0 and res.collision_cost[0] >= 0
+    assert 0 < res.iterations[0] <= 300 and res.wall_time > 0
+    d = res.to_dict()
+    assert d["feasible"] and len(d["path"]) == 20 and "length" in d["costs"]
+
+
+def test_batched_problems_and_user_guess(block_world):
+    robot = jwarp.robot("planar4")
+    s = np.array([[2.0, 1.0, 0.0, 0.0], [2.0, 0.0, 0.5, 0.0]])
+    g = np.array([[2.0, -1.0, 0.0, 0.0], [2.5, 0.3, 0.0, 0.0]])
+    guess = PL.initial_paths(s, g, 8, "straight")[:, None]  # (B, 1, W, n)
+    res = PL.plan(robot, block_world, s, g, initial=guess, iterations=50)
+    assert res.path.shape == (2, 8, 4) and res.feasible.shape == (2,)
+    assert res.feasible.all() and np.all(res.iterations == 0)  # both lines are free already
+    np.testing.assert_allclose(res.path, guess[:, 0], atol=1e-6)
+    np.testing.assert_allclose(res.length_cost, 1.0, rtol=1e-5)
+
+
+def test_bad_inputs_give_clear_errors(block_world, wall_world):
+    robot = jwarp.robot("planar4")
+    ok = np.array([1.2, 0.0, 0.0, 0.0])
+    inside = np.array([0.0, 0.0, 0.0, 0.0])  # arm along +x through the block
+    with pytest.raises(ValueError, match="start.*collision"):
+        PL.plan(robot, block_world, inside, ok)
+    with pytest.raises(ValueError, match="goal.*limits"):
+        PL.plan(robot, block_world, ok, np.array([-1.2, 0.0, 0.0, 3.1]))
+    with pytest.raises(ValueError, match="start: expected shape"):
+        PL.plan(robot, block_world, ok[:3], ok)
+    with pytest.raises(ValueError, match="goal: contains NaN"):
+        PL.plan(robot, block_world, ok, np.full(4, np.nan))
+    with pytest.raises(ValueError, match="world"):
+        PL.plan("arm7", block_world, np.zeros(7), np.zeros(7))
+    with pytest.raises(ValueError, match="initial"):
+        PL.plan(robot, block_world, ok, -ok, initial=np.zeros((5, 3)))
+    with pytest.raises(ValueError, match="initial"):
+        PL.plan(robot, block_world, ok, -ok, initial="zigzag")
+    with pytest.raises(ValueError, match="eps"):
+        PL.plan(robot, block_world, ok, -ok, eps=0.01, margin=0.02)
+    with pytest.raises(ValueError, match="iterations"):
+        PL.plan(robot, block_world, ok, -ok, iterations=-1)
+    with pytest.raises(ValueError, match="start, goal"):
+        PL.plan(robot, block_world, np.stack([ok, ok]), np.stack([-ok, -ok, -ok]))
+
+
+def test_torch_upath_matches_numpy_gradient(block_world):
+    torch = pytest.importorskip("torch")
+    from jwarp.solvers.torch_costs import u_path
+
+    robot = jwarp.robot("planar4")
+    rng = np.random.default_rng(3)
+    s, g = np.array([1.2, 0.3, 0.0, 0.0]), np.array([-1.2, -0.2, 0.1, 0.0])
+    Q = np.repeat(PL.initial_paths(s[None], g[None], 6, "straight"), 3, 0)
+    Q[:, 1:-1] += rng.normal(scale=0.3, size=Q[:, 1:-1].shape)
+    w = PL.PathWeights(1.0, 0.5, 0.1)
+    obj = PL.PathObjective(robot, block_world, 3, 6, 3, weights=w, eps=0.04, device="cpu",
+                           dtype=np.float64)
+    u_ref, g_ref = obj.value_and_grad(Q)
+    qt = torch.tensor(Q, dtype=torch.float64, requires_grad=True)
+    u = u_path(qt, robot, block_world, 3, weights=w, eps=0.04)
+    np.testing.assert_allclose(u.detach().numpy(), u_ref, rtol=1e-12)
+    scale = torch.tensor([1.0, -2.0, 0.5], dtype=torch.float64)
+    (u * scale).sum().backward()
+    np.testing.assert_allclose(qt.grad.numpy(), g_ref * scale.numpy()[:, None, None], rtol=1e-12)
+    with pytest.raises(ValueError, match="paths"):
+        u_path(torch.zeros(2, 5), robot, block_world, 3)
+
+
+def test_cli_plan_and_ik_json(block_world, tmp_path, capsys):
+    import json
+
+    from jwarp.cli import main
+    from jwarp.world.io import save_world
+
+    wfile = tmp_path / "block.npz"
+    save_world(block_world, wfile)
+    rrd = tmp_path / "plan.rrd"
+    rc = main(["plan", "--robot", "planar4", "--world", str(wfile), "--start", "1.2,0,0,0",
+               "--goal", "-1.2,0,0,0", "--starts", "16", "--substeps", "8", "--step", "0.05",
+               "--iterations", "300", "--json", "--rerun", str(rrd)])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["feasible"] and len(out["path"]) == 20
+    assert set(out["costs"]) == {"total", "length", "collision"}
+    assert out["iterations"] > 0 and out["wall_time_s"] > 0
+    assert rrd.stat().st_size > 1000
+    assert PL.path_feasible("planar4", block_world, np.array(out["path"]), 32)
+    from scipy.spatial.transform import Rotation
+
+    F = jwarp.fk("arm7", np.array([0.3, 0.6, 0.0, -1.0, 0.2, 0.5, 0.0]), device="cpu")[8]
+    tgt = np.concatenate([F[:3, 3], Rotation.from_matrix(F[:3, :3]).as_rotvec()])
+    rc = main(["ik", "--robot", "arm7", "--frame", "tcp", "--target",
+               ",".join(f"{v:.12f}" for v in tgt), "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["feasible"] and out["pos_err_m"] < 1e-4 and len(out["q"]) == 7
+    assert main(["plan", "--robot", "planar4", "--world", str(wfile), "--start", "0,0,0,0",
+                 "--goal", "1,0,0,0"]) == 2
+    assert "start: configuration is in collision" in capsys.readouterr().err
+    assert main(["ik", "--robot", "arm7", "--frame", "nope", "--target", "0,0,1"]) == 2
+    assert "unknown frame" in capsys.readouterr().err
