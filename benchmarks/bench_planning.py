@@ -201,14 +201,14 @@ def bench_compensation(args: argparse.Namespace) -> dict:
     objs = [IK.IKObjective(robot, "right_tcp", B, world=world, kappa=k, device=args.device)
             for k in (None, comp.JUSTIN_KAPPA)]
     qs = sample_within_limits(robot, B, rng)
-    T = jwarp.fk(robot, qs, device="cpu")[:, robot.frame_index("right_tcp")]
+    T = jwarp.fk(robot, qs)[:, robot.frame_index("right_tcp")]
     for o in objs:
         o.set_q(qs)
         o.set_target(T)
     out[f"ik_iteration_{B}_configs"] = comp.iteration_overhead(*objs, repeats=args.repeats)
     qt = sample_within_limits(robot, 4 * args.comp_targets, rng)
     qt = qt[collision.is_collision_free(robot, qt)][:args.comp_targets]
-    T = jwarp.fk(robot, qt, device="cpu")[:, robot.frame_index("right_tcp")]
+    T = jwarp.fk(robot, qt)[:, robot.frame_index("right_tcp")]
     limbs = np.full((robot.n_frames, 3), 20 * comp.JUSTIN_KAPPA) * robot.is_dh[:, None]
     torso = [i for i, f in enumerate(robot.frames) if f.name.startswith("torso")]
     limbs[torso] = comp.JUSTIN_KAPPA * robot.is_dh[torso, None]
@@ -218,7 +218,7 @@ def bench_compensation(args: argparse.Namespace) -> dict:
                               ("soft20x_2e-3_theta_only", [0.0, 0.0, 20 * comp.JUSTIN_KAPPA], 0.7)):
         out[f"ik_convergence_{label}"] = comp.compare_ik(robot, "right_tcp", T, kappa, lam=lam,
                                                          n_starts=8, check_every=1,
-                                                         max_iterations=400)
+                                                         max_iterations=400, device=args.device)
     return out
 
 

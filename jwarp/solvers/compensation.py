@@ -50,8 +50,8 @@ def compensated_plan(robot: Any, world: Any, start: Any, goal: Any, *, kappa: An
     return plan(model, world, start, goal, kappa=_kappa(model, kappa), lam=lam, **kwargs)
 
 
-def equilibrium_pose_error(robot: Any, frame: Any, q: Any, target: Any, kappa: Any
-                           ) -> tuple[np.ndarray, np.ndarray]:
+def equilibrium_pose_error(robot: Any, frame: Any, q: Any, target: Any, kappa: Any,
+                           device: Any = None) -> tuple[np.ndarray, np.ndarray]:
     """Pose error of ``frame`` at q (..., n_dof) on the fully converged elastic model
     (``fk_elastic`` to 1e-12 rad) against ``target`` (..., 4, 4): (position [m],
     rotation angle [rad]) per configuration - an independent check of a compensated IK."""
@@ -60,7 +60,7 @@ def equilibrium_pose_error(robot: Any, frame: Any, q: Any, target: Any, kappa: A
     model = get_robot(robot)
     fi = model.frame_index(frame)
     q = np.asarray(q, np.float64)
-    res = fk_elastic(model, q, kappa, lam=0.7, max_iter=200, tol=1e-12, device="cpu",
+    res = fk_elastic(model, q, kappa, lam=0.7, max_iter=200, tol=1e-12, device=device,
                      dtype=np.float64)
     F = np.asarray(res.frames)[..., fi, :, :]
     T = np.asarray(target, np.float64)
@@ -80,7 +80,8 @@ def compare_ik(robot: Any, frame: Any, targets: Any, kappa: Any, *, n_starts: in
     rigid = ik(model, frame, targets, **common)
     soft = ik(model, frame, targets, kappa=kappa, lam=lam, **common)
     both = rigid.all_feasible & soft.all_feasible
-    pos, ang = equilibrium_pose_error(model, frame, soft.q, targets, kappa)
+    pos, ang = equilibrium_pose_error(model, frame, soft.q, targets, kappa,
+                                      device=kwargs.get("device"))
     it_r = float(rigid.all_iterations[both].mean()) if both.any() else float("nan")
     it_s = float(soft.all_iterations[both].mean()) if both.any() else float("nan")
     return {"starts_both": int(both.sum()), "rigid_feasible": int(rigid.all_feasible.sum()),

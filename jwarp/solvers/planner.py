@@ -152,7 +152,7 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
 
 
 def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
-                   kappa: Any = None, rho: Any = None) -> np.ndarray:
+                   kappa: Any = None, rho: Any = None, device: Any = None) -> np.ndarray:
     """(N,) bool: q (N, n_dof) collision-free (world and self) with ``margin`` [m].
 
     With ``rho`` (N, n_frames, 5) the frames are those DH rows; with ``kappa`` (and no
@@ -162,10 +162,10 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
     if rho is None and kappa is not None:
         from jwarp.kinematics import fk_elastic
 
-        rho = fk_elastic(robot, q, kappa, max_iter=30, lam=0.7, device="cpu",
-                         dtype=np.float64).rho
+        rho = np.asarray(fk_elastic(robot, q, kappa, max_iter=30, lam=0.7, device=device,
+                                    dtype=np.float64).rho)
     return np.asarray(col.is_collision_free(robot, q, world, margin=margin, rho=rho,
-                                            device="cpu", dtype=np.float64), bool).reshape(-1)
+                                            device=device, dtype=np.float64), bool).reshape(-1)
 
 
 def substeps(paths: Any, n_substeps: int, *, device: Any = "cpu", dtype: Any = None) -> np.ndarray:
@@ -200,7 +200,7 @@ def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin
     a = np.asarray(paths, np.float64)
     if a.ndim < 2 or a.shape[-1] != model.n_dof or a.shape[-2] < 2:
         raise ValueError(f"paths: expected shape (..., W >= 2, {model.n_dof}), got {a.shape}")
-    q = substeps(a, n_substeps)
+    q = substeps(a, n_substeps, device=None)
     free = collision_free(model, world, q.reshape(-1, model.n_dof), margin, kappa=kappa)
     free = free.reshape(q.shape[:-1]).all(axis=-1)
     return free & within_limits(model, a).all(axis=-1)
@@ -212,11 +212,11 @@ def _check_n_sub(n_substeps: Any) -> int:
     return int(n_substeps)
 
 
-def sphere_centres(robot: RobotModel, q: np.ndarray) -> np.ndarray:
+def sphere_centres(robot: RobotModel, q: np.ndarray, device: Any = None) -> np.ndarray:
     """World centres (N, n_spheres, 3) [m] of the collision spheres at q (N, n_dof)."""
     from jwarp.kinematics import fk
 
-    frames = np.asarray(fk(robot, np.asarray(q, np.float64), device="cpu"))
+    frames = np.asarray(fk(robot, np.asarray(q, np.float64), device=device))
     idx, pos, _ = robot.sphere_arrays()
     f = frames[:, idx]
     return np.einsum("nsij,sj->nsi", f[..., :3, :3], pos) + f[..., :3, 3]
@@ -233,7 +233,10 @@ def substeps_for_voxel(robot: RobotModel, paths: Any, voxel_size: float, *,
     a = np.asarray(paths, np.float64)
     W, n = a.shape[-2:]
     fine = 16
-    q = substeps(a.reshape(-1, W, n), fine)                  # (P, (W-1)*16+1, n)
+    flat = a.reshape(-1, W, n)
+    u = np.arange(fine)[:, None] / fine
+    q = (flat[:, :-1, None] + u * np.diff(flat, axis=1)[:, :, None]).reshape(len(flat), -1, n)
+    q = np.concatenate([q, flat[:, -1:]], axis=1)            # (P, (W-1)*16+1, n)
     P = q.shape[0]
     x = sphere_centres(robot, q.reshape(-1, n)).reshape(P, q.shape[1], -1, 3)
     if x.shape[2] == 0:
