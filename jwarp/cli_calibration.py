@@ -7,7 +7,9 @@ Examples::
         --free theta,d,r,alpha,kappa_theta,kappa_alpha \\
         --calibrate-rows 0:300 --test-rows 300:500 --out run/calibrated.json --json
 
-``calibrate`` frees the robot groups named by ``--free`` and, always, the measurement's
+``calibrate`` frees the robot groups named by ``--free`` (DH entries, compliances, ``mass``:
+the point masses of the robot's mass model that load its compliant joints; ``--out`` then
+writes the calibrated masses too) and, always, the measurement's
 pose and marker groups (tracker, camera, markers, fixtures; ``--fix`` fixes them); other
 measurement groups (intrinsics, radii) are freed by naming them in ``--free``. The table
 compares the nominal robot ("before"; measurement parameters from the plugin's initial
@@ -230,7 +232,8 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--data", required=True, metavar="SAMPLES.csv", help="measured samples")
     s.add_argument("--free", default="theta", metavar="GROUPS",
                    help="parameter groups to calibrate: theta,d,r,alpha,beta,kappa_theta,"
-                        "kappa_alpha,kappa_beta (+ measurement groups such as intrinsics)")
+                        "kappa_alpha,kappa_beta,mass (point masses loading compliant joints; "
+                        "prior 10%% of each mass) (+ measurement groups such as intrinsics)")
     s.add_argument("--fix", default=None, metavar="GROUPS",
                    help="measurement groups to keep at their setup values (e.g. markers)")
     s.add_argument("--calibrate-rows", default=None, metavar="A:B",

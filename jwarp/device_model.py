@@ -6,6 +6,7 @@ caches them (keyed by the model object, device and dtype).
 
 from __future__ import annotations
 
+import dataclasses
 import weakref
 from dataclasses import dataclass
 
@@ -55,8 +56,8 @@ class KinematicsTables:
     cpl_coef: wp.array
     mass: wp.array
     mass_com: wp.array
-    child_start: wp.array
-    child_idx: wp.array
+    dh_info: wp.array  # (n_dh,) vec4i [position in order, frame, subtree end, parent] of DH frames
+    static_idx: wp.array  # (n_static,) int32 static frame indices
 
     @property
     def frame_args(self) -> list:
@@ -96,6 +97,54 @@ def fixed_parts(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
     return rot, pos
 
 
+def frame_mass_model(robot: RobotModel, values: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The mass model the elastic kernel reads: total point mass per frame (n_frames,) [kg]
+    and its centre of mass (n_frames, 3) [m] in frame coordinates (several entries on one
+    frame are merged). ``values`` (len(robot.masses),) [kg] replaces the entries' masses
+    (calibration); default the robot's own."""
+    n = robot.n_frames
+    if values is None:
+        values = np.array([m.mass for m in robot.masses], np.float64)
+    values = np.asarray(values, np.float64)
+    if values.shape != (len(robot.masses),):
+        raise ValueError(f"values: expected shape ({len(robot.masses)},), got {values.shape}")
+    mass = np.zeros(n)
+    first_moment = np.zeros((n, 3))
+    for m, v in zip(robot.masses, values):
+        mass[m.frame] += v
+        first_moment[m.frame] += v * np.asarray(m.com, np.float64)
+    com = np.divide(first_moment, mass[:, None], out=np.zeros_like(first_moment),
+                    where=mass[:, None] != 0)
+    return mass, com
+
+
+def with_frame_masses(t: KinematicsTables, mass: np.ndarray, com: np.ndarray) -> KinematicsTables:
+    """A copy of the tables ``t`` with another mass model: per-frame mass (n_frames,) [kg]
+    and centre of mass (n_frames, 3) [m] (see :func:`frame_mass_model`). Only these two
+    small arrays are uploaded; every other table is shared with ``t``. The copy is not
+    cached (e.g. one per calibration step)."""
+    n = t.robot.n_frames
+    mass = np.asarray(mass, np.float64)
+    com = np.asarray(com, np.float64)
+    if mass.shape != (n,) or com.shape != (n, 3):
+        raise ValueError(f"mass, com: expected shapes ({n},) and ({n}, 3), got {mass.shape} "
+                         f"and {com.shape}")
+    npdt = numpy_dtype(t.scalar)
+    return dataclasses.replace(
+        t, mass=wp.array(mass.astype(npdt), dtype=t.scalar, device=t.device),
+        mass_com=wp.array(com.astype(npdt), dtype=t.mass_com.dtype, device=t.device))
+
+
+def _dh_info(robot: RobotModel) -> np.ndarray:
+    """(n_dh, 4) int32 rows [k, i, subtree_end[k], parent[i]] of the DH frames i at positions
+    k of the topological order (one table load per frame in the elastic torque pass)."""
+    order = robot.topological_order
+    ks = np.nonzero(robot.is_dh[order])[0]
+    i = order[ks]
+    return np.stack([ks, i, robot.subtree_end[ks], robot.parents[i]], 1).astype(np.int32).reshape(-1, 4)
+
+
 def tables(robot: RobotModel, device: object = None, dtype: object = np.float32) -> KinematicsTables:
     """Device tables of ``robot`` on ``device`` in ``dtype`` (cached)."""
     scalar = scalar_type(dtype)
@@ -120,19 +169,7 @@ def tables(robot: RobotModel, device: object = None, dtype: object = np.float32)
             cpl_joint.append(j)
             cpl_coef.append(c)
         cpl_start[i + 1] = len(cpl_joint)
-    mass = np.zeros(n)
-    first_moment = np.zeros((n, 3))
-    for m in robot.masses:
-        mass[m.frame] += m.mass
-        first_moment[m.frame] += m.mass * m.com
-    com = np.divide(first_moment, mass[:, None], out=np.zeros_like(first_moment),
-                    where=mass[:, None] > 0)
-    children: list[list[int]] = [[] for _ in range(n)]
-    for i, p in enumerate(robot.parents):
-        if p >= 0:
-            children[p].append(i)
-    child_start = np.cumsum([0] + [len(c) for c in children]).astype(np.int32)
-    child_idx = np.array([c for cs in children for c in cs] or [0], np.int32)
+    mass, com = frame_mass_model(robot)
     rot, pos = fixed_parts(robot)
     dh0 = robot.dh_table.astype(npdt)
     t = KinematicsTables(
@@ -153,8 +190,8 @@ def tables(robot: RobotModel, device: object = None, dtype: object = np.float32)
         cpl_coef=arr(np.array(cpl_coef or [0.0], npdt), scalar),
         mass=arr(mass.astype(npdt), scalar),
         mass_com=arr(com.astype(npdt), vec3),
-        child_start=arr(child_start, wp.int32),
-        child_idx=arr(child_idx, wp.int32),
+        dh_info=arr(_dh_info(robot), wp.vec4i),
+        static_idx=arr(np.nonzero(~robot.is_dh.astype(bool))[0].astype(np.int32), wp.int32),
     )
     per_robot[key] = t
     return t

@@ -224,6 +224,17 @@ class _ElasticLaunch:
         g = t.robot.gravity
         self.gravity = self.fk.vec3(float(g[0]), float(g[1]), float(g[2]))
 
+    def _rho_buffer(self, requires_grad: bool = False) -> wp.array:
+        """A (B, n, 5) rho buffer whose static-frame rows hold the nominal rows (the step
+        kernel writes only the DH rows)."""
+        t = self.t
+        out = wp.empty((self.B, self.n, 5), dtype=t.scalar, device=t.device,
+                       requires_grad=requires_grad)
+        if t.static_idx.shape[0]:
+            wp.launch(self.k.fill_static_rows, dim=(self.B, t.static_idx.shape[0]),
+                      inputs=[t.dh0, t.static_idx], outputs=[out], device=t.device)
+        return out
+
     def step(self, rho: tuple[wp.array, int] | None, frames: wp.array | None = None
              ) -> tuple[wp.array, wp.array, wp.array]:
         """One update from ``rho`` (None: the nominal/rho0 rows). Returns frames at rho,
@@ -233,16 +244,19 @@ class _ElasticLaunch:
         if rg:  # the tape needs every intermediate kept
             frames = frames if frames is not None else wp.empty((B, n), dtype=self.fk.mat44,
                                                                 device=t.device, requires_grad=True)
-            moments = wp.empty((B, n), dtype=self.k.vec4, device=t.device, requires_grad=True)
-            rho_out = wp.empty((B, n, 5), dtype=t.scalar, device=t.device, requires_grad=True)
+            moments = wp.empty((B, n + 1), dtype=self.k.vec4, device=t.device, requires_grad=True)
+            axes = wp.empty((B, n), dtype=self.fk.vec3, device=t.device, requires_grad=True)
+            rho_out = self._rho_buffer(requires_grad=True)
             delta = wp.empty(B, dtype=t.scalar, device=t.device)
         else:  # reuse scratch; rho ping-pongs between two buffers
             if not hasattr(self, "_scratch"):
+                S = 1 if t.device.is_cpu else B  # CPU threads run configurations in turn
                 self._scratch = (wp.empty((B, n), dtype=self.fk.mat44, device=t.device),
-                                 wp.empty((B, n), dtype=self.k.vec4, device=t.device),
-                                 [wp.empty((B, n, 5), dtype=t.scalar, device=t.device) for _ in range(2)],
+                                 wp.empty((S, n + 1), dtype=self.k.vec4, device=t.device),
+                                 wp.empty((S, n), dtype=self.fk.vec3, device=t.device),
+                                 [self._rho_buffer() for _ in range(2)],
                                  wp.empty(B, dtype=t.scalar, device=t.device))
-            frames_s, moments, rho_bufs, delta = self._scratch
+            frames_s, moments, axes, rho_bufs, delta = self._scratch
             frames = frames if frames is not None else frames_s
             rho_out = rho_bufs[0] if rho is None or rho[0] is not rho_bufs[0] else rho_bufs[1]
         if rho is None:
@@ -255,9 +269,9 @@ class _ElasticLaunch:
         wp.launch(self.k.elastic_step, dim=B,
                   inputs=[self.q, rho_arr, stride, use, self.rho0[0], self.rho0[1],
                           self.kappa[0], self.kappa[1], self.lam, self.gravity,
-                          int(self.write_tau), *t.frame_args, t.mass, t.mass_com,
-                          t.child_start, t.child_idx],
-                  outputs=[frames, moments, rho_out, self.tau, delta], device=t.device)
+                          int(self.write_tau), int(moments.shape[0] > 1), *t.frame_args, t.mass, t.mass_com,
+                          t.dh_info],
+                  outputs=[frames, moments, axes, rho_out, self.tau, delta], device=t.device)
         return frames, rho_out, delta
 
     def frames_at(self, rho: tuple[wp.array, int] | None) -> wp.array:

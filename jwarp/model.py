@@ -207,8 +207,23 @@ class RobotModel:
 
     @cached_property
     def topological_order(self) -> np.ndarray:
-        """(n_frames,) frame indices ordered so that every parent precedes its children."""
+        """(n_frames,) frame indices ordered so that every parent precedes its children:
+        a depth-first preorder, so every subtree is a contiguous run (see :attr:`subtree_end`)."""
         return np.asarray(_topological_order(self.parents), np.int32)
+
+    @cached_property
+    def subtree_end(self) -> np.ndarray:
+        """(n_frames,) int32: for position k of :attr:`topological_order`, the position one past
+        the last descendant of frame ``topological_order[k]`` (its subtree is ``order[k:end]``)."""
+        order = self.topological_order
+        pos = np.empty(self.n_frames, np.int64)
+        pos[order] = np.arange(self.n_frames)
+        end = np.arange(1, self.n_frames + 1)
+        for k in range(self.n_frames - 1, -1, -1):   # children come after their parent
+            p = self.parents[order[k]]
+            if p >= 0:
+                end[pos[p]] = max(end[pos[p]], end[k])
+        return end.astype(np.int32)
 
     @cached_property
     def depth(self) -> np.ndarray:
@@ -370,6 +385,27 @@ class RobotModel:
         validate(m)
         return m
 
+    def with_masses(self, masses: Any) -> "RobotModel":
+        """Copy with new values of the point masses: ``masses`` (len(self.masses),) [kg],
+        one per entry of ``self.masses`` in that order (frames and centres of mass kept).
+        Values must be finite and >= 0."""
+        try:
+            a = np.asarray(masses, np.float64)
+        except (TypeError, ValueError):
+            raise TypeError("masses: expected an array of numbers [kg]") from None
+        if a.shape != (len(self.masses),):
+            raise ValueError(f"masses: expected shape ({len(self.masses)},) (one value per "
+                             f"mass entry of robot '{self.name}'), got {a.shape}")
+        bad = ~np.isfinite(a) | (a < 0)
+        if bad.any():
+            k = int(np.nonzero(bad)[0][0])
+            raise ValueError(f"masses[{k}]: must be finite and >= 0 kg, got {a[k]}")
+        m = self.copy()
+        for entry, v in zip(m.masses, a):
+            entry.mass = float(v)
+        validate(m)
+        return m
+
     def summary(self) -> str:
         """Human-readable multi-line description (used by ``jwarp info``)."""
         lines = [f"robot {self.name}: {self.n_dof} DoF, {self.n_frames} frames, "
@@ -421,9 +457,11 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
 
 
 def _topological_order(parents: np.ndarray) -> list[int]:
+    """Depth-first preorder of the frame tree (roots and children by index): every parent
+    precedes its children and every subtree is one contiguous run of the order (the
+    elastic kernel sums subtree masses by prefix sums over it). Raises on a cycle."""
     n = len(parents)
     state = np.zeros(n, np.int8)  # 0 new, 1 on stack, 2 done
-    order: list[int] = []
     for start in range(n):
         chain = []
         i = start
@@ -434,9 +472,18 @@ def _topological_order(parents: np.ndarray) -> list[int]:
         if i >= 0 and state[i] == 1:
             cyc = chain[chain.index(i):] if i in chain else [i]
             raise RobotModelError(f"frames: cycle in the tree through frames {cyc}")
-        for j in reversed(chain):
+        for j in chain:
             state[j] = 2
-            order.append(j)
+    children: list[list[int]] = [[] for _ in range(n)]
+    for j in range(n):
+        if parents[j] >= 0:
+            children[int(parents[j])].append(j)
+    order: list[int] = []
+    stack = [j for j in range(n) if parents[j] < 0][::-1]
+    while stack:
+        j = stack.pop()
+        order.append(j)
+        stack.extend(reversed(children[j]))
     return order
 
 

@@ -402,13 +402,231 @@ def test_parameter_space_pack_unpack_and_robot_at():
     assert np.all(sp.sigma[:len(used)] == 0.01)
     np.testing.assert_array_equal(sp.sigma[-6:], meas.params.sigma[6:])
     x = sp.nominal + np.arange(sp.size) * 1e-5
-    dh, kap, p = sp.unpack(x)
-    np.testing.assert_allclose(sp.pack(dh, kap, p), x)
+    dh, kap, p, mass = sp.unpack(x)
+    np.testing.assert_allclose(sp.pack(dh, kap, p, mass), x)
+    np.testing.assert_array_equal(mass, [m.mass for m in robot.masses])   # mass not free
     assert np.all(p[:6] == meas.params.nominal[:6])          # tracker not free: nominal
     rob = sp.robot_at(x)
     np.testing.assert_allclose(rob.dh_table, dh)
     np.testing.assert_allclose(rob.kappa, kap)
     assert not np.any(kap[~robot.is_dh])
+
+
+# ------------------------------------------------------------------- masses
+def _extra_mass(robot, frame="right_7", mass=0.4, com=(0.02, -0.01, 0.05)):
+    """robot with a second point mass on ``frame`` (names become <frame>.mass0/.mass1)."""
+    doc = robot.to_dict()
+    doc["masses"].append({"frame": robot.frame_index(frame), "mass": mass, "com": list(com)})
+    return jwarp.RobotModel.from_dict(doc)
+
+
+def _elastic(robot, kappa, axes=(0, 2), seed=0):
+    """robot with compliances U(0.5, 1.5) * kappa on ``axes`` of every DH frame."""
+    rng = np.random.default_rng(seed)
+    kap = np.zeros((robot.n_frames, 3))
+    kap[:, list(axes)] = rng.uniform(0.5 * kappa, 1.5 * kappa, (robot.n_frames, len(axes)))
+    return robot.with_dh(robot.dh_table, kappa=kap * robot.is_dh[:, None])
+
+
+def _masses(robot):
+    return np.array([m.mass for m in robot.masses])
+
+
+def test_mass_torques_are_linear_in_the_masses_and_match_the_kernel():
+    """d tau / d m against the Warp torque kernel of robots with other masses (tau is
+    linear in the masses at fixed frames), two entries on one frame included."""
+    robot = _extra_mass(jwarp.robot("justin19"))
+    rng = np.random.default_rng(13)
+    S = 3
+    q = _q(robot, S, rng)
+    rho = robot.dh_table + 0.03 * rng.standard_normal((S, robot.n_frames, 5)) * robot.is_dh[None, :, None]
+    frames = jwarp.fk(robot, q, dh=rho, device="cpu")
+    st = E.torque_state(robot, frames, rho)
+    D = E.mass_torque_jacobian(robot, frames, st, np.arange(len(robot.masses)))
+    assert D.shape == (S, robot.n_frames, 3, len(robot.masses))
+    m = _masses(robot) * rng.uniform(0.5, 1.5, len(robot.masses))
+    other = robot.with_masses(m)
+    tk = jwarp.gravity_torques(other, q, dh=rho, device="cpu")
+    np.testing.assert_allclose(np.einsum("snkp,p->snk", D, m), tk, rtol=1e-9,
+                               atol=1e-9 * np.abs(tk).max())
+    # one unit mass: only the frames above it feel it
+    e = len(robot.masses) - 1                       # the extra entry on right_7
+    unit = robot.with_masses(np.eye(len(robot.masses))[e])
+    tu = jwarp.gravity_torques(unit, q, dh=rho, device="cpu")
+    np.testing.assert_allclose(D[..., e], tu, atol=1e-12)
+    assert np.abs(D[:, robot.frame_index("left_2"), :, e]).max() == 0
+    assert np.abs(D[:, robot.frame_index("right_2"), :, e]).max() > 1
+    # the per-entry values override the robot's own in torque_state
+    st2 = E.torque_state(robot, frames, rho, E.frame_masses(robot, m))
+    np.testing.assert_allclose(st2.tau, tk, rtol=1e-9, atol=1e-9 * np.abs(tk).max())
+
+
+def test_mass_residual_jacobian_matches_finite_differences():
+    """mass columns through the implicit function theorem, with theta and free compliances
+    on the tree-shaped justin19 (two entries on right_7)."""
+    robot = _extra_mass(jwarp.robot("justin19"))
+    meas = FramePositions(robot, ["right_tcp", "left_tcp"])
+    rng = np.random.default_rng(14)
+    S = 15
+    q = _q(robot, S, rng)
+    y = rng.normal(0, 0.3, (S, 6))
+    prob = CalibrationProblem(robot, meas, q, y, noise_sigma=1e-4, tol=1e-15, max_iter=300,
+                              free="theta,kappa_theta,kappa_alpha,mass")
+    sp = prob.space
+    masses = [n for n in sp.names if ".mass" in n]
+    assert len(masses) == len(robot.masses) == 22        # the root torso_1 carries everything
+    assert "right_7.mass0" in masses and "right_7.mass1" in masses and "head_2.mass" in masses
+    x = sp.nominal + 0.5 * sp.scale * rng.standard_normal(sp.size)
+    kap = sp.kind == 1
+    x[kap] = rng.uniform(0.5, 1.5, kap.sum()) * KAPPA
+    J = prob.jacobian(x)
+    Jfd = _fd_jacobian(prob, x)
+    _assert_jacobian_close(J, Jfd, prob.n_data, col_rtol=5e-6, total_rtol=1e-7)
+    # the masses of x reach the equilibrium: predictions change with them
+    xm = x.copy()
+    xm[sp.index("right_tcp.mass")] *= 1.5
+    assert np.abs(prob.predict(xm) - prob.predict(x)).max() > 1e-5
+
+
+def test_mass_group_selection_names_bounds_and_calibrated_robot():
+    nominal = jwarp.robot("justin19")
+    meas = FramePositions(nominal, ["right_tcp"])
+    right = [i for i in range(nominal.n_frames) if nominal.frames[i].name.startswith("right_")]
+    # compliance only in the right arm: the masses hanging below its compliant frames
+    kap = np.zeros((nominal.n_frames, 3))
+    kap[right, 2] = KAPPA
+    robot = nominal.with_dh(nominal.dh_table, kappa=kap * nominal.is_dh[:, None])
+    sp = ParameterSpace.build(robot, meas, "mass,theta")
+    arm = [f"right_{k}.mass" for k in range(1, 8)] + ["right_tcp.mass"]
+    assert [n for n in sp.names if n.endswith(".mass")] == arm
+    i = sp.index("right_4.mass")
+    m0 = robot.masses[sp.column[i]].mass
+    assert sp.nominal[i] == m0 and sp.sigma[i] == pytest.approx(0.1 * m0)   # relative prior
+    assert sp.lower[i] == 0 and np.all(sp.lower[sp.kind == 0] == -np.inf)
+    # a free kappa group makes the whole chain compliant: torso, left arm and head load it
+    sp_k = ParameterSpace.build(nominal, meas, "kappa_alpha,mass", sigma={"mass": 0.2})
+    assert sum(n.endswith(".mass") for n in sp_k.names) == len(nominal.masses)
+    j = sp_k.index("head_2.mass")
+    assert sp_k.sigma[j] == pytest.approx(0.2 * 3.0)
+    # pack / unpack / robot_at carry the masses
+    x = sp.nominal.copy()
+    x[sp.kind == 3] *= 1.2
+    dh, kp, p, mass = sp.unpack(x)
+    np.testing.assert_allclose(sp.pack(dh, kp, p, mass), x)
+    assert mass[sp.column[i]] == pytest.approx(1.2 * m0)
+    assert nominal.frames[nominal.masses[-1].frame].name == "head_2"
+    assert mass[-1] == nominal.masses[-1].mass                     # not free: nominal
+    cal = sp.robot_at(x)
+    np.testing.assert_allclose(_masses(cal), mass)
+    np.testing.assert_allclose(cal.kappa, robot.kappa)
+    assert _masses(robot)[sp.column[i]] == m0                     # the nominal is untouched
+    # with_masses validates
+    with pytest.raises(ValueError, match=r"masses: expected shape \(21,\)"):
+        robot.with_masses(np.ones(3))
+    with pytest.raises(ValueError, match=r"masses\[2\]: must be finite and >= 0"):
+        robot.with_masses(np.where(np.arange(21) == 2, -1.0, 1.0))
+    # bad input names `free`
+    massless = robot.copy(masses=[])
+    with pytest.raises(ValueError, match="free: group 'mass' selects nothing: robot 'justin19' "
+                                         "has no point masses"):
+        ParameterSpace.build(massless, FramePositions(massless, ["right_tcp"]), "theta,mass")
+    with pytest.raises(ValueError, match="free: group 'mass' selects no masses.*compliant"):
+        ParameterSpace.build(nominal, meas, "mass")              # rigid robot
+    with pytest.raises(ValueError, match="free: group 'mass' selects no masses.*compliant"):
+        ParameterSpace.build(robot, FramePositions(robot, ["left_tcp"]), "mass")  # rigid chain
+    rng = np.random.default_rng(15)
+    q = _q(robot, 10, rng)
+    with pytest.raises(ValueError, match="free: the 'mass' group acts only through the elastic"):
+        CalibrationProblem(robot, meas, q, np.zeros((10, 3)), free="mass", elastic=False)
+    with pytest.raises(ValueError, match=r"sigma\['mass'\]: must be > 0"):
+        ParameterSpace.build(robot, meas, "mass", sigma={"mass": 0})
+
+
+def test_perturb_robot_mass_error_keeps_the_other_draws():
+    robot = jwarp.robot("arm7")
+    a = perturb_robot(robot, np.random.default_rng(3), kappa=(KAPPA, 2 * KAPPA))
+    b = perturb_robot(robot, np.random.default_rng(3), kappa=(KAPPA, 2 * KAPPA), mass_error=0.15)
+    np.testing.assert_array_equal(a.dh_table, b.dh_table)
+    np.testing.assert_array_equal(a.kappa, b.kappa)
+    np.testing.assert_array_equal(_masses(a), _masses(robot))
+    ratio = _masses(b) / _masses(robot)
+    assert np.all(np.abs(ratio - 1) <= 0.15) and np.abs(ratio - 1).max() > 0.05
+    c = perturb_robot(robot, np.random.default_rng(3), frames=["right_2"], mass_error=0.15)
+    changed = _masses(c) != _masses(robot)
+    assert changed.tolist() == [m.frame == robot.frame_index("right_2") for m in robot.masses]
+    with pytest.raises(ValueError, match=r"mass_error: expected a relative error in \[0, 1\)"):
+        perturb_robot(robot, np.random.default_rng(3), mass_error=1.5)
+
+
+def test_mass_calibration_recovers_heavier_truth_with_known_compliance():
+    """Truth: every point mass +15 %, compliances known (the nominal robot has them); only
+    the masses are free. The test error drops from the model error to far below the noise
+    against the noise-free truth, and the masses the data determine are recovered."""
+    nominal = _elastic(jwarp.robot("arm7"), 2 * KAPPA, seed=21)
+    m0 = _masses(nominal)
+    truth = nominal.with_masses(1.15 * m0)
+    meas = FramePositions(nominal, ["right_tcp", 5])
+    noise = 1e-4
+    rng = np.random.default_rng(16)
+    q = _q(nominal, 160, rng)
+    y_clean = meas.predict(model_frames(truth, q), np.zeros(0))
+    y = y_clean + rng.normal(0, noise, y_clean.shape)
+    tr, te = slice(0, 100), slice(100, None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", CalibrationWarning)
+        res = calibrate(nominal, meas, q[tr], y[tr], free="mass", noise_sigma=noise)
+    assert res.success and res.elastic and len(res.names) == len(m0) == 8
+    before = error_stats(errors(nominal, meas, np.zeros(0), q[te], y_clean[te]))
+    after = error_stats(errors(res.robot, meas, np.zeros(0), q[te], y_clean[te]))
+    assert before["mean"] > 10 * noise                   # the wrong masses: ~1 mm
+    assert after["mean"] <= 0.5 * noise                   # vs the noise-free truth
+    m_cal = _masses(res.robot)
+    np.testing.assert_allclose(m_cal, res.x)              # calibrated robot carries them
+    m_true = _masses(truth)
+    determined = res.std < 0.5 * res.sigma                # data, not the prior, decide
+    assert determined.sum() >= 4
+    assert np.all(np.abs(m_cal - m_true)[determined] < 3 * res.std[determined])
+    assert np.all(np.abs(m_cal - m_true) < 3 * res.std)   # the MAP posterior covers all
+    # the best-determined one (the tcp load) lands within a few percent of the truth, and
+    # the total mass error (2.2 kg) shrinks by more than half
+    assert abs(res.value("right_tcp.mass") / m_true[-1] - 1) < 0.03
+    assert abs(m_cal.sum() - m_true.sum()) < 0.5 * abs(m0.sum() - m_true.sum())
+    # nothing else moved: DH rows and compliances are the nominal ones
+    np.testing.assert_array_equal(res.robot.dh_table, nominal.dh_table)
+    np.testing.assert_array_equal(res.robot.kappa, nominal.kappa)
+
+
+def test_masses_and_compliances_free_together_report_their_scaling_direction():
+    """All masses x c with all compliances / c predict the same: without priors the fit is
+    one arbitrary point of that family and the result says so; with priors it is held."""
+    robot = jwarp.robot("arm7")
+    truth = _elastic(robot, 2 * KAPPA, axes=(2,), seed=22)
+    meas = FramePositions(robot, ["right_tcp", 5])
+    rng = np.random.default_rng(17)
+    q = _q(robot, 40, rng)
+    y = meas.predict(model_frames(truth, q), np.zeros(0)) + rng.normal(0, 1e-4, (40, 6))
+    with pytest.warns(CalibrationWarning, match=r"masses and compliances are not separately "
+                                                r"identifiable.*some of them have no prior"):
+        res = calibrate(robot, meas, q, y, free="kappa_theta,mass", noise_sigma=1e-4,
+                        sigma={"mass": math.inf, "kappa_theta": math.inf})
+    assert error_stats(res.errors)["mean"] < 2 * 1.596 * 1e-4      # still fits the data
+    # the flat direction: predictions unchanged when masses x 1.3 and compliances / 1.3
+    sp = res.space
+    x2 = res.x.copy()
+    x2[sp.kind == 3] *= 1.3
+    x2[sp.kind == 1] /= 1.3
+    prob = CalibrationProblem(robot, meas, q, y, free="kappa_theta,mass", noise_sigma=1e-4,
+                              sigma={"mass": math.inf, "kappa_theta": math.inf})
+    np.testing.assert_allclose(prob.predict(x2), prob.predict(res.x), atol=1e-12)
+    with pytest.warns(CalibrationWarning, match="not separately identifiable.*held by the priors"):
+        held = calibrate(robot, meas, q, y, free="kappa_theta,mass", noise_sigma=1e-4)
+    assert np.all(np.isfinite(held.std))
+    assert np.all(np.abs(held.x - held.nominal)[sp.kind == 3] < 3 * held.sigma[sp.kind == 3])
+    # masses alone (compliances known) are no such case
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        calibrate(truth, meas, q, y, free="mass", noise_sigma=1e-4)
+    assert not any("separately identifiable" in str(w.message) for w in caught)
 
 
 # -------------------------------------------------------------- validation

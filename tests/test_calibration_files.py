@@ -203,3 +203,43 @@ def test_cli_calibrate_errors(tmp_path, capsys):
     assert not (tmp_path / "c.json").exists()
     rc = main(["calibrate", "--setup", str(tmp_path / "nope.json"), "--data", str(data)])
     assert rc == 2 and "file not found" in capsys.readouterr().err
+
+
+def test_cli_calibrate_mass_group_writes_calibrated_masses(tmp_path, capsys):
+    """--free mass on a compliant robot file: the saved robot carries the calibrated masses
+    (closer to the heavier truth), DH rows and compliances untouched; a robot without
+    masses or without compliance is an error naming `free`."""
+    nominal = jwarp.robot("justin19")
+    kap = np.zeros((nominal.n_frames, 3))
+    kap[:, [0, 2]] = 1e-4
+    nominal = nominal.with_dh(nominal.dh_table, kappa=kap * nominal.is_dh[:, None])
+    robot_file = tmp_path / "justin_elastic.json"
+    nominal.save(robot_file)
+    m0 = np.array([m.mass for m in nominal.masses])
+    truth = nominal.with_masses(1.15 * m0)
+    camp = simulate_campaign(nominal, justin_tracker_setup(noise=1e-4), 100, seed=6,
+                             true_robot=truth)
+    run = tmp_path / "run"
+    camp.write(run)
+    out = tmp_path / "cal.json"
+    args = ["calibrate", "--robot", str(robot_file), "--setup", str(run / "setup.json"),
+            "--data", str(run / "samples.csv"), "--calibrate-rows", "0:70",
+            "--test-rows", "70:100", "--json", "--quiet"]
+    rc = main(args + ["--free", "mass", "--out", str(out)])
+    res = json.loads(capsys.readouterr().out)
+    assert rc == 0, res
+    assert res["free"][0] == "mass" and res["elastic"]
+    assert res["after"]["test"]["mean"] < 0.5 * res["before"]["test"]["mean"]
+    cal = jwarp.RobotModel.load(out)
+    m_cal = np.array([m.mass for m in cal.masses])
+    assert np.any(m_cal != m0)
+    assert abs(m_cal.sum() - 1.15 * m0.sum()) < 0.5 * abs(m0.sum() - 1.15 * m0.sum())
+    np.testing.assert_allclose(cal.kappa, nominal.kappa)
+    np.testing.assert_allclose(cal.dh_table, nominal.dh_table)
+    # errors name `free`
+    massless = tmp_path / "massless.json"
+    nominal.copy(masses=[]).save(massless)
+    rc = main(args[:1] + ["--robot", str(massless)] + args[3:] + ["--free", "mass"])
+    assert rc == 2 and "free: group 'mass' selects nothing" in capsys.readouterr().err
+    rc = main(args[:1] + ["--robot", "justin19"] + args[3:] + ["--free", "theta,mass"])
+    assert rc == 2 and "free: group 'mass' selects no masses" in capsys.readouterr().err

@@ -382,3 +382,22 @@ def test_kernel_cos_sin_matches_numpy(dtype):
     tol = 3e-7 if dtype == np.float32 else 1e-15
     np.testing.assert_allclose(c.numpy(), np.cos(x64), rtol=0, atol=tol)
     np.testing.assert_allclose(s.numpy(), np.sin(x64), rtol=0, atol=tol)
+
+
+def test_float32_elastic_equilibrium_matches_float64():
+    """The float32 step sums subtree moments as differences of prefix sums over the whole
+    robot: the rows must still agree with float64 to float32 resolution."""
+    model = jwarp.robot("justin19")
+    q = _sample(model, 200, seed=15)
+    kappa = kappa_uniform(model, KAPPA)
+    f64 = K.fk_elastic(model, q, kappa, max_iter=4, tol=0.0, device="cpu")
+    f32 = K.fk_elastic(model, q.astype(np.float32), kappa, max_iter=4, tol=0.0, device="cpu",
+                       dtype=np.float32)
+    assert f32.rho.dtype == np.float32
+    elastic = f64.rho - model.dh_table                 # the deflections, ~1e-3 rad
+    assert np.abs(elastic).max() > 1e-3
+    np.testing.assert_allclose(f32.rho - model.dh_table, elastic, atol=2e-6)
+    np.testing.assert_allclose(f32.frames[..., :3, 3], f64.frames[..., :3, 3], atol=2e-5)
+    static = ~model.is_dh.astype(bool)
+    np.testing.assert_array_equal(f32.rho[:, static], np.broadcast_to(
+        model.dh_table[static].astype(np.float32), f32.rho[:, static].shape))

@@ -574,3 +574,27 @@ def test_workspace_dim_round_trip(tmp_path):
     m.save(tmp_path / "r.json")
     assert RobotModel.load(tmp_path / "r.json").workspace_dim == 2
     assert RobotModel.from_dict(tiny()).workspace_dim == 3
+
+
+@pytest.mark.parametrize("name", ["justin19", "arm7", "hand4", "planar4", "sphere2d"])
+def test_topological_order_is_a_preorder_with_contiguous_subtrees(name):
+    import jwarp
+    robot = jwarp.robot(name)
+    order, end, parents = robot.topological_order, robot.subtree_end, robot.parents
+    assert sorted(order.tolist()) == list(range(robot.n_frames))
+    pos = {int(i): k for k, i in enumerate(order)}
+    for k, i in enumerate(order):
+        if parents[i] >= 0:
+            assert pos[int(parents[i])] < k                      # parents first
+        # the run order[k:end[k]] is exactly frame i and its descendants
+        below = {int(j) for j in np.nonzero(robot.subtree_mask[i])[0]}
+        assert set(order[k:end[k]].tolist()) == below
+
+
+def test_topological_order_of_a_branching_tree_listed_out_of_order():
+    # parents listed after children and two branches interleaved by index
+    parents = np.array([3, 4, 0, -1, 3, 2, 1])
+    order = model_mod._topological_order(parents)
+    assert order == [3, 0, 2, 5, 4, 1, 6]
+    with pytest.raises(RobotModelError, match="cycle"):
+        model_mod._topological_order(np.array([1, 2, 0]))

@@ -14,7 +14,20 @@ Extra model tables (see :mod:`jwarp.kernels.fk` for the frame tables):
 
 * ``mass``      (n_frames,) total point mass attached to each frame [kg]
 * ``mass_com``  (n_frames,) vec3 its centre of mass in frame coordinates [m]
-* ``child_start`` (n_frames + 1,) int32, ``child_idx``: CSR list of each frame's children
+* ``dh_info``   (n_dh,) vec4i per DH frame: [its position k in ``order``, the frame i,
+  ``end``, its parent]; ``order`` is a depth-first preorder, so the subtree of i is
+  ``order[k:end]``
+* ``static_idx`` (n_static,) int32 the static frames (rows the step never writes)
+
+Subtree first moments come from prefix sums over that order: the FK pass writes
+``prefix[k] = sum_{k' < k} [m w; m]`` of the frames before position k (w: centre of mass
+in world coordinates), so the subtree at k sums to ``prefix[end] - prefix[k]``: two loads
+per frame, no per-child loop and no read-back of values just written.
+
+``rho`` rows: only the elastic columns [theta, alpha, beta] of DH frames are updated; ``d`` and
+``r`` are copied; static-frame rows of ``rho_out`` are not written (:func:`fill_static_rows`
+fills them once per buffer). When ``use_rho`` is 0, ``rho`` must hold the nominal rows (the
+shared ``(1, n_frames, 5)`` table with stride 0): the torque pass reads it either way.
 
 ``kappa`` has shape (B_kappa, n_frames, 3) in rad/(N m), axes [alpha, beta, theta];
 ``kappa_stride`` 0 shares row 0. ``rho0`` likewise with ``rho0_stride``.
@@ -42,87 +55,64 @@ def kernels(scalar: type) -> SimpleNamespace:
     def torque_update(
         b: int,
         frames: wp.array2d(dtype=mat44),
-        rho: wp.array3d(dtype=scalar), rho_stride: int, use_rho: int,
+        rho: wp.array3d(dtype=scalar), rho_stride: int,
         rho0: wp.array3d(dtype=scalar), rho0_stride: int,
         kappa: wp.array3d(dtype=scalar), kappa_stride: int,
         lam: scalar, gravity: vec3,
-        order: wp.array(dtype=wp.int32), parent: wp.array(dtype=wp.int32),
-        is_dh: wp.array(dtype=wp.int32), dh0: wp.array2d(dtype=scalar),
-        trig: wp.array(dtype=vec4),
-        mass: wp.array(dtype=scalar), mass_com: wp.array(dtype=vec3),
-        child_start: wp.array(dtype=wp.int32), child_idx: wp.array(dtype=wp.int32),
-        moments: wp.array2d(dtype=vec4),
+        dh_info: wp.array(dtype=wp.vec4i),
+        prefix: wp.array2d(dtype=vec4), axes: wp.array2d(dtype=vec3), sb: int,
         rho_out: wp.array3d(dtype=scalar), tau_out: wp.array3d(dtype=scalar), write_tau: int,
     ) -> scalar:
-        n = order.shape[0]
-        # subtree first moments [sum m w; sum m] (world), leaves to root; each written once
-        for kk in range(n):
-            i = order[n - 1 - kk]
-            T = frames[b, i]
-            w = unpack_rot(T) * mass_com[i] + unpack_pos(T)
-            m = mass[i]
-            acc = vec4(m * w[0], m * w[1], m * w[2], m)
-            for c in range(child_start[i], child_start[i + 1]):
-                acc = acc + moments[b, child_idx[c]]
-            moments[b, i] = acc
+        """Gravity torques of every DH frame from the frames and the moment prefix sums,
+        and the damped update of its rows; returns max |rho_out - rho| [rad]. Rows of
+        static frames in ``rho_out`` and ``tau_out`` are left as they are (the launcher
+        fills them once: :func:`fill_static_rows`)."""
         delta = zero
         rb = b * rho_stride
         r0 = b * rho0_stride
         kb = b * kappa_stride
-        for i in range(n):
-            if is_dh[i] != 0:
-                mo = moments[b, i]
-                s = vec3(mo[0], mo[1], mo[2])
-                mtot = mo[3]
-                T = frames[b, i]
-                p_i = unpack_pos(T)
-                z = vec3(T[0, 2], T[1, 2], T[2, 2])
-                pp = vec3(zero, zero, zero)
-                Rp = wp.identity(3, dtype=scalar)
-                pi = parent[i]
-                if pi >= 0:
-                    Tp = frames[b, pi]
-                    pp = unpack_pos(Tp)
-                    Rp = unpack_rot(Tp)
-                prev_d = dh0[i, 0]
-                prev_t = dh0[i, 1]
-                prev_r = dh0[i, 2]
-                prev_a = dh0[i, 3]
-                prev_b = dh0[i, 4]
-                if use_rho != 0:
-                    prev_d = rho[rb, i, 0]
-                    prev_t = rho[rb, i, 1]
-                    prev_r = rho[rb, i, 2]
-                    prev_a = rho[rb, i, 3]
-                    prev_b = rho[rb, i, 4]
-                cs = trig[i]
-                cb, sb = fk.cos_sin_near(prev_b, dh0[i, 4], cs[2], cs[3])
-                ax_alpha = Rp * vec3(cb, zero, -sb)
-                ax_beta = vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1])
-                arm_p = wp.cross(s - mtot * pp, gravity)
-                tau_a = wp.dot(arm_p, ax_alpha)
-                tau_b = wp.dot(arm_p, ax_beta)
-                tau_t = wp.dot(wp.cross(s - mtot * p_i, gravity), z)
-                if write_tau != 0:
-                    tau_out[b, i, 0] = tau_a
-                    tau_out[b, i, 1] = tau_b
-                    tau_out[b, i, 2] = tau_t
-                new_a = (one - lam) * prev_a + lam * (rho0[r0, i, 3] + kappa[kb, i, 0] * tau_a)
-                new_b = (one - lam) * prev_b + lam * (rho0[r0, i, 4] + kappa[kb, i, 1] * tau_b)
-                new_t = (one - lam) * prev_t + lam * (rho0[r0, i, 1] + kappa[kb, i, 2] * tau_t)
-                delta = wp.max(delta, wp.max(wp.abs(new_a - prev_a),
-                                             wp.max(wp.abs(new_b - prev_b), wp.abs(new_t - prev_t))))
-                rho_out[b, i, 0] = prev_d
-                rho_out[b, i, 1] = new_t
-                rho_out[b, i, 2] = prev_r
-                rho_out[b, i, 3] = new_a
-                rho_out[b, i, 4] = new_b
-            else:
-                for c in range(5):
-                    rho_out[b, i, c] = dh0[i, c]
-                if write_tau != 0:
-                    for c in range(3):
-                        tau_out[b, i, c] = zero
+        for j in range(dh_info.shape[0]):  # static rows of rho_out are not written
+            info = dh_info[j]
+            i = info[1]
+            mo = prefix[sb, info[2]] - prefix[sb, info[0]]
+            s = vec3(mo[0], mo[1], mo[2])
+            mtot = mo[3]
+            T = frames[b, i]
+            p_i = unpack_pos(T)
+            z = vec3(T[0, 2], T[1, 2], T[2, 2])
+            pp = vec3(zero, zero, zero)
+            Rp = wp.identity(3, dtype=scalar)
+            pi = info[3]
+            if pi >= 0:
+                Tp = frames[b, pi]
+                pp = unpack_pos(Tp)
+                Rp = unpack_rot(Tp)
+            # rho holds the nominal rows (stride 0) when use_rho == 0: read it either way
+            prev_d = rho[rb, i, 0]
+            prev_t = rho[rb, i, 1]
+            prev_r = rho[rb, i, 2]
+            prev_a = rho[rb, i, 3]
+            prev_b = rho[rb, i, 4]
+            ax_alpha = axes[sb, i]
+            ax_beta = vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1])
+            arm_p = wp.cross(s - mtot * pp, gravity)
+            tau_a = wp.dot(arm_p, ax_alpha)
+            tau_b = wp.dot(arm_p, ax_beta)
+            tau_t = wp.dot(wp.cross(s - mtot * p_i, gravity), z)
+            if write_tau != 0:
+                tau_out[b, i, 0] = tau_a
+                tau_out[b, i, 1] = tau_b
+                tau_out[b, i, 2] = tau_t
+            # damped update: new = (1 - lam) prev + lam (rho0 + kappa tau)
+            d_a = lam * (rho0[r0, i, 3] + kappa[kb, i, 0] * tau_a - prev_a)
+            d_b = lam * (rho0[r0, i, 4] + kappa[kb, i, 1] * tau_b - prev_b)
+            d_t = lam * (rho0[r0, i, 1] + kappa[kb, i, 2] * tau_t - prev_t)
+            delta = wp.max(delta, wp.max(wp.abs(d_a), wp.max(wp.abs(d_b), wp.abs(d_t))))
+            rho_out[b, i, 0] = prev_d
+            rho_out[b, i, 1] = prev_t + d_t
+            rho_out[b, i, 2] = prev_r
+            rho_out[b, i, 3] = prev_a + d_a
+            rho_out[b, i, 4] = prev_b + d_b
         return delta
 
     @wp.kernel(module="unique")
@@ -139,6 +129,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         lam: scalar,
         gravity: vec3,
         write_tau: int,
+        scratch_stride: int,
         # Model:
         order: wp.array(dtype=wp.int32),
         parent: wp.array(dtype=wp.int32),
@@ -153,25 +144,55 @@ def kernels(scalar: type) -> SimpleNamespace:
         cpl_coef: wp.array(dtype=scalar),
         mass: wp.array(dtype=scalar),
         mass_com: wp.array(dtype=vec3),
-        child_start: wp.array(dtype=wp.int32),
-        child_idx: wp.array(dtype=wp.int32),
+        dh_info: wp.array(dtype=wp.vec4i),
         # Data out:
         frames: wp.array2d(dtype=mat44),
-        moments: wp.array2d(dtype=vec4),
+        prefix: wp.array2d(dtype=vec4),
+        axes: wp.array2d(dtype=vec3),
         rho_out: wp.array3d(dtype=scalar),
         tau_out: wp.array3d(dtype=scalar),
         delta: wp.array(dtype=scalar),
     ):
         """One torque update: frames = F(q, rho); rho_out = damped update from the
-        gravity torques of those frames; delta[b] = max |rho_out - rho| (rad)."""
+        gravity torques of those frames; delta[b] = max |rho_out - rho| (rad).
+        ``prefix`` (S, n_frames + 1) and ``axes`` (S, n_frames) are scratch (moment prefix
+        sums; alpha axes from the FK pass), row ``b * scratch_stride``: stride 0 (S = 1) on
+        the CPU, where configurations run one after another and the row stays in L1
+        instead of streaming ~90 extra bytes per frame to memory; stride 1 (S = B) on
+        CUDA and under a Tape (every row written once)."""
         b = wp.tid()
+        sb = b * scratch_stride
+        acc = vec4(zero, zero, zero, zero)
+        prefix[sb, 0] = acc
         for k in range(order.shape[0]):
             i = order[k]
-            fk.write_frame(b, i, q, rho, rho_stride, use_rho, parent, is_dh, prismatic, fixed_rot,
-                           fixed_pos, dh0, trig, cpl_start, cpl_joint, cpl_coef, frames)
-        delta[b] = torque_update(b, frames, rho, rho_stride, use_rho, rho0, rho0_stride,
-                                 kappa, kappa_stride, lam, gravity, order, parent, is_dh, dh0,
-                                 trig, mass, mass_com, child_start, child_idx, moments, rho_out,
+            R, p, ax = fk.write_frame(b, i, q, rho, rho_stride, use_rho, parent, is_dh,
+                                      prismatic, fixed_rot, fixed_pos, dh0, trig, cpl_start,
+                                      cpl_joint, cpl_coef, frames)
+            axes[sb, i] = ax
+            m = mass[i]
+            if m != zero:  # a fixed pattern per robot: predicted
+                w = R * mass_com[i] + p
+                acc = acc + vec4(m * w[0], m * w[1], m * w[2], m)
+            prefix[sb, k + 1] = acc
+        delta[b] = torque_update(b, frames, rho, rho_stride, rho0, rho0_stride, kappa,
+                                 kappa_stride, lam, gravity, dh_info, prefix, axes, sb, rho_out,
                                  tau_out, write_tau)
 
-    return SimpleNamespace(vec4=vec4, elastic_step=elastic_step_kernel)
+    @wp.kernel(module="unique")
+    def fill_static_rows(
+        # Model:
+        dh0: wp.array2d(dtype=scalar),
+        static_idx: wp.array(dtype=wp.int32),
+        # Data out:
+        rho_out: wp.array3d(dtype=scalar),
+    ):
+        """rho_out[b, i] = dh0[i] for the static frames i (launch dim (B, n_static)): the
+        elastic step never writes those rows."""
+        b, j = wp.tid()
+        i = static_idx[j]
+        for c in range(5):
+            rho_out[b, i, c] = dh0[i, c]
+
+    return SimpleNamespace(vec4=vec4, elastic_step=elastic_step_kernel,
+                           fill_static_rows=fill_static_rows)

@@ -90,31 +90,50 @@ def kernels(scalar: type) -> SimpleNamespace:
             """(cos x, sin x) from libm (float64)."""
             return wp.cos(x), wp.sin(x)
 
-    @wp.func
-    def cos_sin_near(x: scalar, x0: scalar, c0: scalar, s0: scalar):
-        """(cos x, sin x) given cos/sin of a nearby x0: for |x - x0| < 0.1 rad the angle
-        sum with a Taylor series of the difference (truncation < 3e-15), else libm."""
-        dx = x - x0
-        if wp.abs(dx) < scalar(0.1):
-            d2 = dx * dx
-            # reciprocal constants: a division costs ~10x a multiplication on the CPU
-            sd = dx * (one - d2 * scalar(1.0 / 6.0) * (one - d2 * scalar(1.0 / 20.0) * (one - d2 * scalar(1.0 / 42.0))))
-            cd = one - d2 * scalar(0.5) * (one - d2 * scalar(1.0 / 12.0) * (one - d2 * scalar(1.0 / 30.0) * (one - d2 * scalar(1.0 / 56.0))))
-            return c0 * cd - s0 * sd, s0 * cd + c0 * sd
-        return cos_sin(x)
+    if scalar == wp.float32:
+
+        @wp.func
+        def cos_sin_near(x: scalar, x0: scalar, c0: scalar, s0: scalar):
+            """(cos x, sin x) given cos/sin of a nearby x0: for |x - x0| < 0.1 rad the angle
+            sum with a Taylor series of the difference (truncation < 2e-9, below float32
+            resolution), else :func:`cos_sin`."""
+            dx = x - x0
+            if wp.abs(dx) < scalar(0.1):
+                d2 = dx * dx
+                sd = dx * (one - d2 * scalar(1.0 / 6.0) * (one - d2 * scalar(1.0 / 20.0)))
+                cd = one - d2 * scalar(0.5) * (one - d2 * scalar(1.0 / 12.0))
+                return c0 * cd - s0 * sd, s0 * cd + c0 * sd
+            return cos_sin(x)
+
+    else:
+
+        @wp.func
+        def cos_sin_near(x: scalar, x0: scalar, c0: scalar, s0: scalar):
+            """(cos x, sin x) given cos/sin of a nearby x0: for |x - x0| < 0.1 rad the angle
+            sum with a Taylor series of the difference (truncation < 3e-15), else libm."""
+            dx = x - x0
+            if wp.abs(dx) < scalar(0.1):
+                d2 = dx * dx
+                # reciprocal constants: a division costs ~10x a multiplication on the CPU
+                sd = dx * (one - d2 * scalar(1.0 / 6.0) * (one - d2 * scalar(1.0 / 20.0) * (one - d2 * scalar(1.0 / 42.0))))
+                cd = one - d2 * scalar(0.5) * (one - d2 * scalar(1.0 / 12.0) * (one - d2 * scalar(1.0 / 30.0) * (one - d2 * scalar(1.0 / 56.0))))
+                return c0 * cd - s0 * sd, s0 * cd + c0 * sd
+            return cos_sin(x)
 
     @wp.func
-    def child_rot_pos(Rp: mat33, pp: vec3, i: int, b: int, qi: scalar,
-                      use_rho: int, rho: wp.array3d(dtype=scalar), rho_stride: int,
-                      is_dh: wp.array(dtype=wp.int32), prismatic: wp.array(dtype=wp.int32),
-                      fixed_rot: wp.array(dtype=mat33), fixed_pos: wp.array(dtype=vec3),
-                      dh0: wp.array2d(dtype=scalar), trig: wp.array(dtype=vec4)):
-        """World rotation and position of frame i from its parent's (Rp, pp).
+    def child_frame(Rp: mat33, pp: vec3, i: int, b: int, qi: scalar,
+                    use_rho: int, rho: wp.array3d(dtype=scalar), rho_stride: int,
+                    is_dh: wp.array(dtype=wp.int32), prismatic: wp.array(dtype=wp.int32),
+                    fixed_rot: wp.array(dtype=mat33), fixed_pos: wp.array(dtype=vec3),
+                    dh0: wp.array2d(dtype=scalar), trig: wp.array(dtype=vec4)):
+        """World rotation and position of frame i from its parent's (Rp, pp), and the
+        direction of its ``r`` translation (= its alpha axis, ``Rp Rot_y(beta) e_x``; zero
+        for a static frame).
 
         DH frames are composed column by column (Rot_y, Rot_x, Trans_x, Rot_z, Trans_z),
         which costs about half the multiplications of a full 4x4 product."""
         if is_dh[i] == 0:
-            return Rp * fixed_rot[i], Rp * fixed_pos[i] + pp
+            return Rp * fixed_rot[i], Rp * fixed_pos[i] + pp, vec3(zero, zero, zero)
         d = dh0[i, 0]
         theta = dh0[i, 1]
         r = dh0[i, 2]
@@ -147,7 +166,18 @@ def kernels(scalar: type) -> SimpleNamespace:
         ct, st = cos_sin(theta)
         m0 = ct * c0 + st * n1  # Rot_z(theta + q)
         m1 = ct * n1 - st * c0
-        return wp.matrix_from_cols(m0, m1, n2), p + d * n2  # Trans_z(d)
+        return wp.matrix_from_cols(m0, m1, n2), p + d * n2, c0  # Trans_z(d)
+
+    @wp.func
+    def child_rot_pos(Rp: mat33, pp: vec3, i: int, b: int, qi: scalar,
+                      use_rho: int, rho: wp.array3d(dtype=scalar), rho_stride: int,
+                      is_dh: wp.array(dtype=wp.int32), prismatic: wp.array(dtype=wp.int32),
+                      fixed_rot: wp.array(dtype=mat33), fixed_pos: wp.array(dtype=vec3),
+                      dh0: wp.array2d(dtype=scalar), trig: wp.array(dtype=vec4)):
+        """World rotation and position of frame i from its parent's (:func:`child_frame`)."""
+        R, p, ax = child_frame(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                               fixed_rot, fixed_pos, dh0, trig)
+        return R, p
 
     @wp.func
     def pack(R: mat33, p: vec3) -> mat44:
@@ -172,7 +202,8 @@ def kernels(scalar: type) -> SimpleNamespace:
                 dh0: wp.array2d(dtype=scalar), trig: wp.array(dtype=vec4),
                 cpl_start: wp.array(dtype=wp.int32), cpl_joint: wp.array(dtype=wp.int32),
                 cpl_coef: wp.array(dtype=scalar), frames: wp.array2d(dtype=mat44)):
-        """frames[b, i] from its parent's transform (already written) and the joint values."""
+        """frames[b, i] from its parent's transform (already written) and the joint values;
+        returns the frame's world rotation, position and alpha axis (:func:`child_frame`)."""
         qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
         Rp = wp.identity(3, dtype=scalar)
         pp = vec3(zero, zero, zero)
@@ -181,9 +212,10 @@ def kernels(scalar: type) -> SimpleNamespace:
             Tp = frames[b, pi]
             Rp = unpack_rot(Tp)
             pp = unpack_pos(Tp)
-        R, p = child_rot_pos(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                             fixed_rot, fixed_pos, dh0, trig)
+        R, p, ax = child_frame(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                               fixed_rot, fixed_pos, dh0, trig)
         frames[b, i] = pack(R, p)
+        return R, p, ax
 
     @wp.kernel(module="unique")
     def fk_kernel(
@@ -344,7 +376,7 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     return SimpleNamespace(
         scalar=scalar, vec3=vec3, mat33=mat33, mat44=mat44,
-        vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, joint_value=joint_value, write_frame=write_frame, child_rot_pos=child_rot_pos, pack=pack,
+        vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, joint_value=joint_value, write_frame=write_frame, child_frame=child_frame, child_rot_pos=child_rot_pos, pack=pack,
         unpack_rot=unpack_rot, unpack_pos=unpack_pos,
         fk=fk_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
     )

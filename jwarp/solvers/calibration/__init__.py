@@ -10,9 +10,11 @@ Typical use::
     error_stats(errors(res.robot, meas, res.params, q_test, y_test))
 """
 
-from jwarp.solvers.calibration.map import CalibrationProblem, Progress, calibrate, check_samples
+from jwarp.solvers.calibration.map import (CalibrationProblem, ModelState, Progress, calibrate,
+                                           check_samples)
 from jwarp.solvers.calibration.params import (DEFAULT_SIGMA, ROBOT_GROUPS, ParameterSpace,
-                                              influencing_frames, parse_groups, perturb_robot)
+                                              influencing_frames, influencing_masses,
+                                              parse_groups, perturb_robot)
 from jwarp.solvers.calibration.result import (CalibrationResult, CalibrationWarning, Direction,
                                               error_stats, errors, model_frames,
                                               observation_groups, predict)
@@ -20,6 +22,6 @@ from jwarp.solvers.calibration.result import (CalibrationResult, CalibrationWarn
 __all__ = [
     "CalibrationProblem", "CalibrationResult", "CalibrationWarning", "DEFAULT_SIGMA", "Direction",
     "ParameterSpace", "Progress", "ROBOT_GROUPS", "calibrate", "check_samples", "error_stats",
-    "errors", "influencing_frames", "model_frames", "observation_groups", "parse_groups",
+    "errors", "influencing_frames", "influencing_masses", "ModelState", "model_frames", "observation_groups", "parse_groups",
     "perturb_robot", "predict",
 ]

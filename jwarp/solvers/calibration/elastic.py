@@ -10,7 +10,8 @@ DH frame (see :mod:`jwarp.kernels.elastic`) and ``E^T`` placing the three elasti
 components into the DH columns [alpha -> 3, beta -> 4, theta -> 1]. With ``w = kappa o tau``
 restricted to the K active elastic components, the implicit function theorem gives
 
-    (I - diag(kappa) dtau/drho E^T) dw = diag(tau) dkappa + diag(kappa) dtau/drho drho0,
+    (I - diag(kappa) dtau/drho E^T) dw = diag(tau) dkappa + diag(kappa) dtau/drho drho0
+                                         + diag(kappa) dtau/dm dm,
     drho* = drho0 + E^T dw,
 
 one K x K linear solve per sample. This module provides ``tau`` and ``dtau/drho`` in
@@ -23,6 +24,9 @@ closed form from the frames at ``rho*``:
   ``d tau = (g x w) . (axis x c)``; torques of frame j's own lateral axes (whose parent
   does not move) see only the moved masses; torques of ancestors of j see the moved first
   moment ``ds = m_j a + w x s_j`` (:func:`torque_jacobian`).
+* The point masses ``m`` enter only through the torques, linearly at fixed frames: a mass
+  loads every frame whose subtree carries it as a unit mass at its world position would
+  (:func:`mass_torque_jacobian`).
 
 Everything is vectorized over samples S; shapes are documented per function.
 """
@@ -33,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from jwarp.device_model import frame_mass_model
 from jwarp.model import RobotModel
 
 #: DH column of each elastic axis [alpha, beta, theta] (order of ``kappa`` / ``tau``)
@@ -46,17 +51,12 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
-def frame_masses(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
+def frame_masses(robot: RobotModel, values: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """Total point mass per frame (n_frames,) [kg] and its centre of mass (n_frames, 3) [m]
-    in frame coordinates (several masses on one frame are merged)."""
-    n = robot.n_frames
-    mass = np.zeros(n)
-    first = np.zeros((n, 3))
-    for m in robot.masses:
-        mass[m.frame] += m.mass
-        first[m.frame] += m.mass * np.asarray(m.com, np.float64)
-    com = np.divide(first, mass[:, None], out=np.zeros_like(first), where=mass[:, None] > 0)
-    return mass, com
+    in frame coordinates (several masses on one frame are merged); ``values``
+    (len(robot.masses),) [kg] replaces the entries' masses (the ``mass`` group)."""
+    return frame_mass_model(robot, values)
 
 
 @dataclass
@@ -179,6 +179,39 @@ def torque_jacobian(robot: RobotModel, st: TorqueState,
     return out
 
 
+def mass_torque_jacobian(robot: RobotModel, frames: np.ndarray, st: TorqueState,
+                         entries: np.ndarray) -> np.ndarray:
+    """d tau / d m (S, n, 3, P_m): derivative of the gravity torques [alpha, beta, theta] of
+    every frame i w.r.t. the point masses ``entries`` (P_m,) (indices into
+    ``robot.masses``) [N m / kg], frames held at ``frames`` (S, n, 4, 4).
+
+    The torques are linear in each mass: entry e at world position ``w_e = R_f c_e + o_f``
+    adds, to every DH frame i with f in the subtree of i, the torque of a unit mass at
+    ``w_e``: ``((w_e - p_par_i) x g) . axis`` for the lateral axes and
+    ``((w_e - o_i) x g) . z_i`` for the joint axis (the formula of :func:`torque_state`).
+    """
+    entries = np.asarray(entries, np.int64)
+    S, n = st.z.shape[:2]
+    out = np.zeros((S, n, 3, entries.size))
+    if entries.size == 0:
+        return out
+    fr = np.array([robot.masses[e].frame for e in entries], np.int64)
+    com = np.array([robot.masses[e].com for e in entries], np.float64).reshape(-1, 3)
+    T = frames[:, fr]                                               # (S, P_m, 4, 4)
+    w = np.einsum("spij,pj->spi", T[..., :3, :3], com) + T[..., :3, 3]   # (S, P_m, 3)
+    g = np.broadcast_to(robot.gravity, w.shape)
+    wg = _cross(w, g)                                               # w x g (S, P_m, 3)
+    # (x - p) x g = x x g - p x g
+    pg = _cross(st.p_par, np.broadcast_to(robot.gravity, st.p_par.shape))    # (S, n, 3)
+    og = _cross(st.origin, np.broadcast_to(robot.gravity, st.origin.shape))
+    for k, (axis, base) in enumerate(((st.ax_a, pg), (st.ax_b, pg), (st.z, og))):
+        out[:, :, k, :] = (np.einsum("sik,spk->sip", axis, wg)
+                           - np.sum(axis * base, -1)[:, :, None])
+    # only frames whose subtree holds the mass's frame, only DH frames
+    mask = robot.subtree_mask[:, fr] & robot.is_dh[:, None]         # (n, P_m)
+    return out * mask[None, :, None, :]
+
+
 @dataclass
 class ElasticComponents:
     """The K elastic components (frame, axis) that can be nonzero: DH frames whose
@@ -211,8 +244,16 @@ class ElasticComponents:
 def equilibrium_jacobian(jy_rho: np.ndarray, dtau: np.ndarray, tau: np.ndarray,
                          kappa: np.ndarray, comps: ElasticComponents,
                          dh_frame: np.ndarray, dh_col: np.ndarray,
-                         kap_frame: np.ndarray, kap_axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                         kap_frame: np.ndarray, kap_axis: np.ndarray,
+                         dtau_mass: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Total derivative of observations through the equilibrium (adjoint form).
+
+    With ``A = I - diag(kappa) dtau/drho E^T`` (K x K) one adjoint solve
+    ``A^T lam = (dy/drho E^T)^T`` per sample serves every parameter: a parameter whose
+    change moves the elastic components by ``A^-1 b`` contributes ``lam^T b`` with
+    ``b = diag(kappa) dtau/drho0`` (DH entries), ``diag(tau)`` (compliances) or
+    ``diag(kappa) dtau/dm`` (masses, which enter only through the torques).
 
     Args:
         jy_rho: (S, m, n, 5) dy/drho at the equilibrium rows rho* (frames fixed).
@@ -221,23 +262,28 @@ def equilibrium_jacobian(jy_rho: np.ndarray, dtau: np.ndarray, tau: np.ndarray,
         comps: active elastic components (must include every free kappa entry).
         dh_frame, dh_col: (P_dh,) free geometric DH entries (of rho0).
         kap_frame, kap_axis: (P_k,) free compliance entries.
+        dtau_mass: (S, n, 3, P_m) torque derivatives w.r.t. free point masses
+            (:func:`mass_torque_jacobian`) [N m / kg]; None: no free masses.
 
     Returns:
-        (dy/d rho0[free] (S, m, P_dh), dy/d kappa[free] (S, m, P_k)).
+        (dy/d rho0[free] (S, m, P_dh), dy/d kappa[free] (S, m, P_k),
+        dy/d m[free] (S, m, P_m) [unit / kg]).
     """
     S, m = jy_rho.shape[:2]
     direct = jy_rho[:, :, dh_frame, dh_col]
+    P_m = 0 if dtau_mass is None else dtau_mass.shape[-1]
     K = comps.size
     if K == 0:
-        return direct, np.zeros((S, m, kap_frame.size))
+        return direct, np.zeros((S, m, kap_frame.size)), np.zeros((S, m, P_m))
     fr, ax, col = comps.frame, comps.axis, comps.column
     kc = kappa[fr, ax]                                        # (K,)
     t_rows = dtau[:, fr, ax]                                  # (S, K, n, 5)
     A = np.eye(K)[None] - kc[None, :, None] * t_rows[:, :, fr, col]   # (S, K, K)
     jy_e = jy_rho[:, :, fr, col]                              # (S, m, K)
     lam = np.linalg.solve(np.swapaxes(A, 1, 2), np.swapaxes(jy_e, 1, 2))  # (S, K, m)
+    lam_t = np.swapaxes(lam, 1, 2)                            # (S, m, K)
     b_dh = kc[None, :, None] * t_rows[:, :, dh_frame, dh_col]            # (S, K, P_dh)
-    d_dh = direct + np.swapaxes(lam, 1, 2) @ b_dh
+    d_dh = direct + lam_t @ b_dh
     pos = {(int(f), int(a)): k for k, (f, a) in enumerate(zip(fr, ax))}
     try:
         rows = np.array([pos[(int(f), int(a))] for f, a in zip(kap_frame, kap_axis)], np.int64)
@@ -246,4 +292,7 @@ def equilibrium_jacobian(jy_rho: np.ndarray, dtau: np.ndarray, tau: np.ndarray,
     # b_kap[s, rows[p], p] = tau[s, frame_p, axis_p]
     t_free = tau[:, kap_frame, kap_axis]                      # (S, P_k)
     d_kap = lam[:, rows, :].transpose(0, 2, 1) * t_free[:, None, :]      # (S, m, P_k)
-    return d_dh, d_kap
+    if dtau_mass is None:
+        return d_dh, d_kap, np.zeros((S, m, 0))
+    b_m = kc[None, :, None] * dtau_mass[:, fr, ax]            # (S, K, P_m)
+    return d_dh, d_kap, lam_t @ b_m

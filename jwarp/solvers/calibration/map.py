@@ -7,9 +7,11 @@ The residual vector of :class:`CalibrationProblem` is
 
 with ``h`` the measurement applied to the (elastic) forward kinematics: the frames are those
 of the torque equilibrium ``rho* = rho0 + kappa tau(F(q, rho*))`` (float64, CPU) when a
-compliance is free or nonzero, else the rigid FK. Its Jacobian is analytic: the measurement's
-frame twists chained with :func:`jwarp.jacobian_dh` at rho*, and through the equilibrium by
-the implicit function theorem (:mod:`.elastic`).
+compliance is free or nonzero, else the rigid FK. The torques ``tau`` use the point masses
+of ``x`` when the ``mass`` group is free (the device tables are shared, only the per-frame
+mass arrays are replaced). Its Jacobian is analytic: the measurement's frame twists chained
+with :func:`jwarp.jacobian_dh` at rho*, and through the equilibrium by the implicit
+function theorem (:mod:`.elastic`).
 
 :func:`calibrate` minimizes ``|r|^2 / 2`` with :func:`scipy.optimize.least_squares`
 (``dogbox``: trf stalls on the flat directions of this problem) from the measurement's
@@ -27,12 +29,32 @@ from scipy.optimize import least_squares
 
 from jwarp import kinematics as K
 from jwarp.arrays import to_output
+from jwarp.device_model import with_frame_masses
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.calibration.elastic import (ElasticComponents, equilibrium_jacobian,
+                                               frame_masses, mass_torque_jacobian,
                                                torque_jacobian, torque_state)
-from jwarp.solvers.calibration.params import KIND_DH, KIND_KAPPA, KIND_MEAS, ParameterSpace
+from jwarp.solvers.calibration.params import (KIND_DH, KIND_KAPPA, KIND_MASS, KIND_MEAS,
+                                              MASS_GROUP, ParameterSpace, parse_groups)
 from jwarp.solvers.calibration.result import CalibrationResult, build_result
+
+
+class ModelState(NamedTuple):
+    """The model at one x (:meth:`CalibrationProblem.state`).
+
+    frames (S, n, 4, 4) world frames; rho (S, n, 5) equilibrium DH rows (rho0 when rigid);
+    dh (n, 5) geometric rows rho0; kappa (n, 3) [rad/(N m)]; p (P_meas,) measurement
+    parameters; converged (S,) bool; masses (len(robot.masses),) point masses [kg].
+    """
+
+    frames: np.ndarray
+    rho: np.ndarray
+    dh: np.ndarray
+    kappa: np.ndarray
+    p: np.ndarray
+    converged: np.ndarray
+    masses: np.ndarray
 
 
 class Progress(NamedTuple):
@@ -92,13 +114,18 @@ def check_samples(robot: RobotModel, measurement: Any, q: Any, y: Any,
 
 
 def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: np.ndarray,
-                       lam: float, max_iter: int, tol: float
+                       lam: float, max_iter: int, tol: float,
+                       masses: tuple[np.ndarray, np.ndarray] | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elastic FK (float64, CPU) as :func:`jwarp.fk_elastic`, but accepting compliances of
     either sign: the optimizer may cross kappa = 0 on its way (the fixed point is just as
     well defined; only the final model must be physical). q (S, n_dof), dh (n, 5),
-    kappa (n, 3) -> frames (S, n, 4, 4), rho* (S, n, 5), converged (S,)."""
+    kappa (n, 3), optional mass model ``masses`` = (per-frame mass (n,) [kg], centre of
+    mass (n, 3) [m], see :func:`.elastic.frame_masses`) replacing the robot's ->
+    frames (S, n, 4, 4), rho* (S, n, 5), converged (S,)."""
     model, batch, t = K._setup(robot, q, "cpu", np.float64, False)
+    if masses is not None:
+        t = with_frame_masses(t, *masses)
     kap = K._rows(np.asarray(kappa, np.float64), model, batch, t, "kappa", 3)
     rho0 = K._rows(np.asarray(dh, np.float64), model, batch, t, "dh", 5)
     run = K._ElasticLaunch(t, batch.array, kap, rho0, float(lam))
@@ -137,9 +164,11 @@ class CalibrationProblem:
         meta: per-sample inputs {name: (S,)} the measurement needs (``meta_names``).
         noise_sigma: measurement noise std, scalar or (m,) [unit]; default
             ``measurement.noise``.
-        sigma: prior sigma overrides {group: value}; frames: calibratable DH frames;
+        sigma: prior sigma overrides {group: value} (``mass``: relative to each nominal
+            mass, 0.1 = 10 %); frames: calibratable DH frames;
         p_nominal: measurement parameter prior means (default ParamBlock nominal).
-        elastic: True/False; None: elastic iff a compliance is free or nonzero.
+        elastic: True/False; None: elastic iff a compliance is free or nonzero (a free
+            ``mass`` group needs the elastic model: masses act only through its torques).
         lam, max_iter, tol: damping, most updates and tolerance [rad] of the equilibrium.
         bound_kappa: constrain compliances to >= 0 in the solver (see ParameterSpace.build).
     """
@@ -160,6 +189,9 @@ class CalibrationProblem:
             if mr.n_frames != self.robot.n_frames or mr.frame_names != self.robot.frame_names:
                 raise ValueError(f"measurement: built for robot '{mr.name}', not '{self.robot.name}'")
         self.q, self.y, self.meta = check_samples(self.robot, measurement, q, y, meta)
+        if elastic is False and MASS_GROUP in parse_groups(free):
+            raise ValueError(f"free: the '{MASS_GROUP}' group acts only through the elastic "
+                             f"model, but elastic=False was given")
         self.space = ParameterSpace.build(self.robot, measurement, free, sigma=sigma,
                                           frames=frames, p_nominal=p_nominal,
                                           bound_kappa=bound_kappa)
@@ -181,6 +213,7 @@ class CalibrationProblem:
         self._dh_idx = np.nonzero(sp.kind == KIND_DH)[0]
         self._kap_idx = np.nonzero(sp.kind == KIND_KAPPA)[0]
         self._meas_idx = np.nonzero(sp.kind == KIND_MEAS)[0]
+        self._mass_idx = np.nonzero(sp.kind == KIND_MASS)[0]
         self._prior_idx = np.nonzero(sp.has_prior)[0]
         self._cache: tuple[bytes, Any] | None = None
         self.n_data = S * m
@@ -196,25 +229,24 @@ class CalibrationProblem:
         return self.n_data + self._prior_idx.size
 
     # ------------------------------------------------------------- forward
-    def state(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                            np.ndarray, np.ndarray]:
-        """Model at x: (frames (S, n, 4, 4), rho* (S, n, 5), rho0 (n, 5), kappa (n, 3),
-        p (P_meas,), converged (S,) bool). Cached for the last x."""
+    def state(self, x: np.ndarray) -> ModelState:
+        """Model at x (:class:`ModelState`). Cached for the last x."""
         x = self.space.check(x)
         key = x.tobytes()
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1]
-        dh, kap, p = self.space.unpack(x)
+        dh, kap, p, mass = self.space.unpack(x)
         S = self.n_samples
         if self.elastic:
+            fm = frame_masses(self.robot, mass) if self._mass_idx.size else None
             frames, rho, conv = signed_equilibrium(self.robot, self.q, dh, kap, self.lam,
-                                                   self.max_iter, self.tol)
+                                                   self.max_iter, self.tol, masses=fm)
         else:
             frames = K.fk(self.robot, self.q, dh=dh, device="cpu", dtype=np.float64,
                           validate=False)
             rho = np.broadcast_to(dh, (S,) + dh.shape)
             conv = np.ones(S, bool)
-        out = (frames, rho, dh, kap, p, conv)
+        out = ModelState(frames, rho, dh, kap, p, conv, mass)
         self._cache = (key, out)
         self.n_evaluations += 1
         return out
@@ -225,15 +257,15 @@ class CalibrationProblem:
 
     def predict(self, x: Any) -> np.ndarray:
         """Predicted observations (S, m) at x."""
-        frames, _, _, _, p, _ = self.state(x)
-        return np.asarray(self.measurement.predict(frames, p, self.meta), np.float64)
+        st = self.state(x)
+        return np.asarray(self.measurement.predict(st.frames, st.p, self.meta), np.float64)
 
     def residuals(self, x: Any) -> np.ndarray:
         """Whitened residual vector (S*m + P_prior,) at x (see module docstring). All inf
         where the elastic equilibrium did not converge for some sample (a trial step with
         too soft a robot: the solver then shrinks its step)."""
-        frames, _, _, _, _, conv = self.state(x)
-        if not (np.all(conv) and np.all(np.isfinite(frames))):
+        st = self.state(x)
+        if not (np.all(st.converged) and np.all(np.isfinite(st.frames))):
             return np.full(self.n_residuals, np.inf)
         r = (self.predict(x) - self.y) / self.noise
         return np.concatenate([r.reshape(-1), self.space.prior_residuals(x)])
@@ -259,7 +291,7 @@ class CalibrationProblem:
 
     def jacobian(self, x: Any) -> np.ndarray:
         """Analytic Jacobian dr/dx (S*m + P_prior, P) of :meth:`residuals`."""
-        frames, rho, dh, kap, p, _ = self.state(x)
+        frames, rho, dh, kap, p, _, mass = self.state(x)
         sp = self.space
         rho_full = np.ascontiguousarray(np.broadcast_to(rho, (self.n_samples,) + dh.shape))
         jy, jp = self.data_jacobian_rho(frames, rho_full, p)
@@ -267,18 +299,22 @@ class CalibrationProblem:
         dh_f, dh_c = sp.frame[self._dh_idx], sp.column[self._dh_idx]
         kp_f, kp_c = sp.frame[self._kap_idx], sp.column[self._kap_idx]
         if self.elastic:
-            st = torque_state(self.robot, frames, rho_full)
+            st = torque_state(self.robot, frames, rho_full, frame_masses(self.robot, mass))
             dtau = torque_jacobian(self.robot, st)
+            dtau_m = (mass_torque_jacobian(self.robot, frames, st, sp.mass_entries)
+                      if self._mass_idx.size else None)
             comps = ElasticComponents.select(self.robot, kap, sp.kappa_free)
-            d_dh, d_kap = equilibrium_jacobian(jy, dtau, st.tau, kap, comps, dh_f, dh_c,
-                                               kp_f, kp_c)
+            d_dh, d_kap, d_mass = equilibrium_jacobian(jy, dtau, st.tau, kap, comps, dh_f,
+                                                       dh_c, kp_f, kp_c, dtau_m)
         else:
             d_dh = jy[:, :, dh_f, dh_c]
             d_kap = np.zeros((S, m, kp_f.size))
+            d_mass = np.zeros((S, m, self._mass_idx.size))
         J = np.zeros((self.n_residuals, sp.size))
         w = (1.0 / self.noise)[None, :, None]
         J[:self.n_data, self._dh_idx] = (d_dh * w).reshape(S * m, -1)
         J[:self.n_data, self._kap_idx] = (d_kap * w).reshape(S * m, -1)
+        J[:self.n_data, self._mass_idx] = (d_mass * w).reshape(S * m, -1)
         J[:self.n_data, self._meas_idx] = (jp[:, :, sp.column[self._meas_idx]] * w).reshape(S * m, -1)
         J[self.n_data + np.arange(self._prior_idx.size), self._prior_idx] = 1.0 / sp.sigma[self._prior_idx]
         return J
@@ -290,12 +326,12 @@ class CalibrationProblem:
         sp = self.space
         x = sp.nominal.copy() if x is None else np.clip(sp.check(x).copy(), sp.lower, sp.upper)
         if guess and self._meas_idx.size and hasattr(self.measurement, "initial_guess"):
-            frames, _, _, _, p, _ = self.state(x)
-            if not np.all(np.isfinite(frames)):
+            st = self.state(x)
+            if not np.all(np.isfinite(st.frames)):
                 return x
-            p_new = np.asarray(self.measurement.initial_guess(frames, self.y, p, self.meta),
-                               np.float64)
-            if p_new.shape == p.shape and np.all(np.isfinite(p_new)):
+            p_new = np.asarray(self.measurement.initial_guess(st.frames, self.y, st.p,
+                                                              self.meta), np.float64)
+            if p_new.shape == st.p.shape and np.all(np.isfinite(p_new)):
                 x[self._meas_idx] = p_new[sp.column[self._meas_idx]]
         return x
 
@@ -363,9 +399,9 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
     start0 = prob.initial_x(None if x0 is None else sp.check(x0, "x0"), guess=initial_guess)
     if not np.all(np.isfinite(prob.residuals(start0))):
         raise ValueError(f"x0: the elastic equilibrium does not converge at the start for "
-                         f"{int((~prob.state(start0)[5]).sum())} sample(s) (max_iter={max_iter}, "
+                         f"{int((~prob.state(start0).converged).sum())} sample(s) (max_iter={max_iter}, "
                          f"tol={tol}); lower lam or raise max_iter")
-    robot_kinds = (sp.kind == KIND_DH) | (sp.kind == KIND_KAPPA)
+    robot_kinds = (sp.kind == KIND_DH) | (sp.kind == KIND_KAPPA) | (sp.kind == KIND_MASS)
     best = None
     runs = []
     for k in range(int(n_starts)):

@@ -4,7 +4,19 @@ Robot groups (per DH frame on the chains the measurement observes):
 
 * ``theta``, ``d``, ``r``, ``alpha``, ``beta``: geometric DH entries of rho0 [rad, m]
   (``theta`` holds the joint offsets);
-* ``kappa_alpha``, ``kappa_beta``, ``kappa_theta``: compliances [rad/(N m)] (bounded >= 0).
+* ``kappa_alpha``, ``kappa_beta``, ``kappa_theta``: compliances [rad/(N m)] (bounded >= 0
+  with ``bound_kappa``).
+
+and per point mass of the robot's mass model (``robot.masses``):
+
+* ``mass``: the mass [kg] of every entry whose frame lies in the subtree of a compliant DH
+  frame (nonzero or free kappa) on the measured chains -- the masses that load the
+  measured chains' elastic joints, the only way they change a prediction (bounded >= 0).
+  Its prior sigma is **relative**: ``sigma["mass"] = 0.1`` means 10 % of each entry's
+  nominal mass (entries of nominal mass 0 are left out unless the prior is ``inf``).
+  Masses and compliances only act through ``kappa * tau``: freeing both without priors
+  leaves a flat direction (all masses x c, all compliances / c), reported as not
+  identifiable.
 
 Measurement groups come from the measurement's :class:`ParamBlock` (``tracker``,
 ``markers``, ``intrinsics``, ...). Parameters of groups that are not free stay at their
@@ -13,7 +25,8 @@ the least squares as the residual row ``(x - nominal) / sigma`` (thesis eq. 2.5)
 ``inf`` means no prior row.
 
 Names: robot entries are ``"<frame>.<group>"`` (``"right_3.theta"``,
-``"torso_2.kappa_alpha"``), measurement entries keep their ParamBlock names.
+``"torso_2.kappa_alpha"``, ``"right_7.mass"``; ``"<frame>.mass<k>"`` for the k-th of several
+mass entries on one frame), measurement entries keep their ParamBlock names.
 """
 
 from __future__ import annotations
@@ -28,18 +41,22 @@ from jwarp.model import RobotModel
 
 DH_GROUPS = ("d", "theta", "r", "alpha", "beta")          # = DH columns 0..4
 KAPPA_GROUPS = ("kappa_alpha", "kappa_beta", "kappa_theta")  # = kappa axes 0..2
-#: robot parameter groups, in the order they appear in the parameter vector
-ROBOT_GROUPS = ("theta", "d", "r", "alpha", "beta", "kappa_theta", "kappa_alpha", "kappa_beta")
+MASS_GROUP = "mass"                                        # = robot.masses entries
+#: robot parameter groups
+ROBOT_GROUPS = ("theta", "d", "r", "alpha", "beta", "kappa_theta", "kappa_alpha", "kappa_beta",
+                MASS_GROUP)
 
-#: default prior standard deviations of the robot groups [m, rad, rad/(N m)]
+#: default prior standard deviations of the robot groups [m, rad, rad/(N m)]; ``mass`` is
+#: relative to each entry's nominal mass [1] (0.1 = 10 %)
 DEFAULT_SIGMA: dict[str, float] = {
     "d": 0.005, "r": 0.005,
     "theta": math.radians(5.0), "alpha": math.radians(5.0), "beta": math.radians(5.0),
     # the paper's prior on Agile Justin's compliances: 0.1 rad/kNm
     "kappa_theta": 1e-4, "kappa_alpha": 1e-4, "kappa_beta": 1e-4,
+    MASS_GROUP: 0.1,
 }
 
-KIND_DH, KIND_KAPPA, KIND_MEAS = 0, 1, 2
+KIND_DH, KIND_KAPPA, KIND_MEAS, KIND_MASS = 0, 1, 2, 3
 
 
 def parse_groups(free: str | Iterable[str]) -> list[str]:
@@ -57,6 +74,60 @@ def parse_groups(free: str | Iterable[str]) -> list[str]:
     if not items:
         raise ValueError("free: no parameter group given")
     return list(dict.fromkeys(items))
+
+
+def measured_chain(robot: RobotModel, measured: Iterable[int] | None) -> set[int]:
+    """Frames on the paths from the root to the frames ``measured`` (all frames when None
+    or empty)."""
+    if not measured:
+        return set(range(robot.n_frames))
+    chain: set[int] = set()
+    for f in measured:
+        chain.update(robot.ancestors(int(f)))
+    return chain
+
+
+def influencing_masses(robot: RobotModel, measured: Iterable[int] | None,
+                       compliant: np.ndarray) -> list[int]:
+    """Entries of ``robot.masses`` (indices) whose value can change the observations of the
+    frames ``measured``: those in the subtree of a compliant DH frame on the measured chains.
+
+    A mass acts only through gravity torques, i.e. through ``kappa * tau`` of the frames
+    whose subtree carries it; a compliant frame off the measured chains bends only its own
+    subtree, which loads the chains only through a compliant frame on them, whose subtree
+    holds the mass as well.
+
+    Args:
+        robot: the robot.
+        measured: frames the measurement observes (None or empty: all frames).
+        compliant: (n_frames,) bool, DH frames with a nonzero or free compliance.
+    """
+    compliant = np.asarray(compliant, bool) & robot.is_dh
+    chain = measured_chain(robot, measured)
+    roots = [i for i in sorted(chain) if compliant[i]]
+    if not roots or not robot.masses:
+        return []
+    loaded = robot.subtree_mask[roots].any(axis=0)        # (n,): in a compliant subtree
+    return [e for e, m in enumerate(robot.masses) if loaded[m.frame]]
+
+
+def mass_names(robot: RobotModel) -> list[str]:
+    """Parameter names of all entries of ``robot.masses``: ``"<frame>.mass"``, or
+    ``"<frame>.mass<k>"`` (k = 0, 1, ... in file order) on frames with several entries."""
+    per_frame: dict[int, int] = {}
+    for m in robot.masses:
+        per_frame[m.frame] = per_frame.get(m.frame, 0) + 1
+    seen: dict[int, int] = {}
+    out = []
+    for m in robot.masses:
+        name = robot.frames[m.frame].name
+        if per_frame[m.frame] == 1:
+            out.append(f"{name}.{MASS_GROUP}")
+        else:
+            k = seen.get(m.frame, 0)
+            seen[m.frame] = k + 1
+            out.append(f"{name}.{MASS_GROUP}{k}")
+    return out
 
 
 def influencing_frames(robot: RobotModel, measured: Iterable[int] | None, elastic: bool
@@ -86,6 +157,35 @@ def influencing_frames(robot: RobotModel, measured: Iterable[int] | None, elasti
     return [int(i) for i in np.nonzero(use & dh)[0]]
 
 
+def _free_masses(robot: RobotModel, measurement: Any, groups: list[str], dh_frames: list[int],
+                 rel_sigma: float) -> list[int]:
+    """Entries of ``robot.masses`` of the ``mass`` group (see :func:`influencing_masses`);
+    a ValueError naming ``free`` when there are none."""
+    if not robot.masses:
+        raise ValueError(f"free: group '{MASS_GROUP}' selects nothing: robot '{robot.name}' "
+                         f"has no point masses ('masses' in its robot file)")
+    compliant = np.any(robot.kappa != 0, axis=1)
+    free_axes = [KAPPA_GROUPS.index(g) for g in groups if g in KAPPA_GROUPS]
+    if free_axes:
+        compliant[dh_frames] = True
+    measured = getattr(measurement, "frames", None) if measurement is not None else None
+    entries = influencing_masses(robot, measured, compliant)
+    if not entries:
+        raise ValueError(f"free: group '{MASS_GROUP}' selects no masses: masses act only through "
+                         f"the gravity torques of compliant joints, and no DH frame on the "
+                         f"measured chains of robot '{robot.name}' is compliant; free a kappa "
+                         f"group (kappa_theta, kappa_alpha, kappa_beta) or use a robot with "
+                         f"nonzero kappa")
+    if math.isfinite(rel_sigma):
+        kept = [e for e in entries if robot.masses[e].mass > 0]
+        if not kept:
+            raise ValueError(f"free: group '{MASS_GROUP}' selects no masses: the candidate "
+                             f"entries have nominal mass 0, where a relative prior has zero "
+                             f"width; give sigma={{'{MASS_GROUP}': inf}} to free them without prior")
+        entries = kept
+    return entries
+
+
 @dataclass
 class ParameterSpace:
     """Map between the free-parameter vector ``x`` (P,) and robot/measurement parameters.
@@ -95,10 +195,12 @@ class ParameterSpace:
         p_nominal: (P_meas,) all measurement parameters at nominal (fixed ones stay there).
         names, groups: parameter names and groups.
         nominal, sigma: prior means and standard deviations (sigma inf = no prior).
-        kind: 0 DH entry, 1 compliance, 2 measurement parameter.
-        frame, column: robot frame and DH column (kind 0) / kappa axis (kind 1); for kind 2
-            column is the index into the measurement's ParamBlock and frame is -1.
-        lower, upper: bounds (compliances >= 0 with ``bound_kappa``, else unbounded).
+        kind: 0 DH entry, 1 compliance, 2 measurement parameter, 3 point mass.
+        frame, column: robot frame and DH column (kind 0) / kappa axis (kind 1) / index
+            into ``robot.masses`` (kind 3, frame = the mass's frame); for kind 2 column is
+            the index into the measurement's ParamBlock and frame is -1.
+        lower, upper: bounds (masses >= 0; compliances >= 0 with ``bound_kappa``; else
+            unbounded).
         free_groups: the groups that were freed, in the order given.
     """
 
@@ -129,7 +231,8 @@ class ParameterSpace:
             free: group names (see :data:`ROBOT_GROUPS` and the measurement's
                 ``params.groups``), as a list or comma-separated string.
             sigma: per-group prior sigma overrides {group: sigma}; a measurement group given
-                here replaces its ParamBlock sigmas; ``inf`` removes the prior.
+                here replaces its ParamBlock sigmas; ``mass`` is relative to each nominal
+                mass (0.1 = 10 %); ``inf`` removes the prior.
             frames: DH frames whose rows may be calibrated (default
                 :func:`influencing_frames`: the DH frames on the paths from the root to the
                 frames the measurement uses, plus, for an elastic model, the mass-carrying
@@ -140,6 +243,10 @@ class ParameterSpace:
             bound_kappa: give the compliances the bound kappa >= 0 (default off: bounds
                 make dogbox truncate its steps and stall; the optimizer may cross zero
                 and the calibrated robot clips negative compliances).
+
+        The ``mass`` group takes the entries of :func:`influencing_masses` (compliant =
+        nonzero kappa, or a kappa group freed here on the frame); a ValueError naming
+        ``free`` says why when it selects none.
         """
         if not isinstance(robot, RobotModel):
             raise TypeError(f"robot: expected a RobotModel, got {type(robot).__name__}")
@@ -209,6 +316,18 @@ class ParameterSpace:
                     kind.append(KIND_KAPPA if is_k else KIND_DH)
                     frm.append(i)
                     col.append(c)
+            elif g == MASS_GROUP:
+                entries = _free_masses(robot, measurement, groups, dh_frames, sig[g])
+                all_names = mass_names(robot)
+                for e in entries:
+                    m0 = float(robot.masses[e].mass)
+                    names.append(all_names[e])
+                    grp.append(g)
+                    nom.append(m0)
+                    sg.append(sig[g] * m0 if math.isfinite(sig[g]) else math.inf)
+                    kind.append(KIND_MASS)
+                    frm.append(int(robot.masses[e].frame))
+                    col.append(int(e))
             else:
                 for k in block.indices(g):
                     names.append(block.names[k])
@@ -223,6 +342,7 @@ class ParameterSpace:
                              f"on the measured chains?)")
         kind_a = np.array(kind, np.int64)
         lower = np.where((kind_a == KIND_KAPPA) & bool(bound_kappa), 0.0, -np.inf)
+        lower[kind_a == KIND_MASS] = 0.0
         return cls(robot=robot, p_nominal=pn, names=names, groups=grp,
                    nominal=np.array(nom), sigma=np.array(sg), kind=kind_a,
                    frame=np.array(frm, np.int64), column=np.array(col, np.int64),
@@ -261,23 +381,28 @@ class ParameterSpace:
         return a
 
     # ---------------------------------------------------------- x -> model
-    def unpack(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """x (P,) -> (DH rows rho0 (n_frames, 5), kappa (n_frames, 3), measurement p (P_meas,))."""
+    def unpack(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """x (P,) -> (DH rows rho0 (n_frames, 5), kappa (n_frames, 3), measurement p
+        (P_meas,), point masses (len(robot.masses),) [kg]); fixed parts at nominal."""
         x = self.check(x)
         dh = self.robot.dh_table.copy()
         kap = self.robot.kappa.copy()
         p = self.p_nominal.copy()
+        mass = self.nominal_masses
         m = self.kind == KIND_DH
         dh[self.frame[m], self.column[m]] = x[m]
         m = self.kind == KIND_KAPPA
         kap[self.frame[m], self.column[m]] = x[m]
         m = self.kind == KIND_MEAS
         p[self.column[m]] = x[m]
-        return dh, kap, p
+        m = self.kind == KIND_MASS
+        mass[self.column[m]] = x[m]
+        return dh, kap, p, mass
 
     def pack(self, dh: np.ndarray | None = None, kappa: np.ndarray | None = None,
-             p: np.ndarray | None = None) -> np.ndarray:
-        """Inverse of :meth:`unpack` (missing parts at nominal)."""
+             p: np.ndarray | None = None, masses: np.ndarray | None = None) -> np.ndarray:
+        """Inverse of :meth:`unpack` (missing parts at nominal); ``masses``
+        (len(robot.masses),) [kg] as :meth:`RobotModel.mass_arrays` gives them."""
         x = self.nominal.copy()
         if dh is not None:
             m = self.kind == KIND_DH
@@ -288,16 +413,37 @@ class ParameterSpace:
         if p is not None:
             m = self.kind == KIND_MEAS
             x[m] = np.asarray(p, np.float64)[self.column[m]]
+        if masses is not None:
+            a = np.asarray(masses, np.float64)
+            if a.shape != (len(self.robot.masses),):
+                raise ValueError(f"masses: expected shape ({len(self.robot.masses)},), "
+                                 f"got {a.shape}")
+            m = self.kind == KIND_MASS
+            x[m] = a[self.column[m]]
         return x
 
     def robot_at(self, x: Any) -> RobotModel:
-        """A calibrated copy of the robot: DH rows and compliances from ``x``."""
-        dh, kap, _ = self.unpack(x)
-        return self.robot.with_dh(dh, kappa=np.maximum(kap, 0.0))
+        """A calibrated copy of the robot: DH rows, compliances and (when the ``mass``
+        group is free) point masses from ``x``; negative compliances / masses clipped to 0."""
+        dh, kap, _, mass = self.unpack(x)
+        out = self.robot.with_dh(dh, kappa=np.maximum(kap, 0.0))
+        if self.mass_entries.size:
+            out = out.with_masses(np.maximum(mass, 0.0))
+        return out
 
     def measurement_params(self, x: Any) -> np.ndarray:
         """(P_meas,) all measurement parameters (fixed ones at nominal)."""
         return self.unpack(x)[2]
+
+    @property
+    def nominal_masses(self) -> np.ndarray:
+        """(len(robot.masses),) the robot's point masses [kg] (a fresh copy)."""
+        return np.array([m.mass for m in self.robot.masses], np.float64)
+
+    @property
+    def mass_entries(self) -> np.ndarray:
+        """(P_m,) indices into ``robot.masses`` of the free masses, in parameter order."""
+        return self.column[self.kind == KIND_MASS]
 
     def prior_residuals(self, x: Any) -> np.ndarray:
         """((x - nominal) / sigma) for the parameters with a prior, (P_prior,)."""
@@ -326,12 +472,16 @@ def perturb_robot(robot: RobotModel, rng: np.random.Generator, *,
                   length_error: float = 0.005, angle_error: float = math.radians(5.0),
                   kappa: tuple[float, float] | None = None,
                   kappa_groups: Iterable[str] = ("kappa_theta", "kappa_alpha"),
-                  frames: Iterable[int | str] | None = None) -> RobotModel:
+                  frames: Iterable[int | str] | None = None,
+                  mass_error: float | None = None) -> RobotModel:
     """A "true" robot for simulated campaigns (thesis 2.6.1): the nominal DH entries of
     ``groups`` plus uniform errors in [-length_error, length_error] [m] (d, r) or
     [-angle_error, angle_error] [rad] (theta, alpha, beta) on the DH frames ``frames``
-    (default all), and compliances drawn uniformly from ``kappa`` = (low, high)
-    [rad/(N m)] on the axes of ``kappa_groups`` (None: keep the robot's kappa)."""
+    (default all), compliances drawn uniformly from ``kappa`` = (low, high)
+    [rad/(N m)] on the axes of ``kappa_groups`` (None: keep the robot's kappa), and, with
+    ``mass_error`` (relative, e.g. 0.15), every point mass on those frames times
+    ``1 + U(-mass_error, mass_error)`` (None: nominal masses; drawn after everything else,
+    so the other draws do not depend on it)."""
     groups = parse_groups(groups)
     bad = [g for g in groups if g not in DH_GROUPS]
     if bad:
@@ -342,6 +492,13 @@ def perturb_robot(robot: RobotModel, rng: np.random.Generator, *,
         idx = np.array([robot.frame_index(f, "frames") for f in frames], np.int64)
         if not np.all(robot.is_dh[idx]):
             raise ValueError("frames: only DH frames can be perturbed")
+    if mass_error is not None:
+        try:
+            me = float(mass_error)
+        except (TypeError, ValueError):
+            raise ValueError(f"mass_error: expected a number in [0, 1), got {mass_error!r}") from None
+        if not (0.0 <= me < 1.0):
+            raise ValueError(f"mass_error: expected a relative error in [0, 1), got {mass_error!r}")
     dh = robot.dh_table.copy()
     for g in groups:
         c = DH_GROUPS.index(g)
@@ -357,4 +514,11 @@ def perturb_robot(robot: RobotModel, rng: np.random.Generator, *,
                 raise ValueError(f"kappa_groups: unknown group '{g}'; valid: {', '.join(KAPPA_GROUPS)}")
             c = KAPPA_GROUPS.index(g)
             kap[idx, c] = rng.uniform(lo, hi, idx.size)
-    return robot.with_dh(dh, kappa=kap)
+    out = robot.with_dh(dh, kappa=kap)
+    if mass_error is not None and robot.masses:
+        values = np.array([m.mass for m in robot.masses], np.float64)
+        on = np.isin([m.frame for m in robot.masses], idx) if frames is not None \
+            else np.ones(values.size, bool)
+        factor = 1.0 + rng.uniform(-me, me, values.size)
+        out = out.with_masses(np.where(on, values * factor, values))
+    return out

@@ -18,7 +18,7 @@ import numpy as np
 from jwarp import kinematics as K
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
-from jwarp.solvers.calibration.params import KIND_KAPPA, ParameterSpace
+from jwarp.solvers.calibration.params import KIND_KAPPA, KIND_MASS, ParameterSpace
 
 
 class CalibrationWarning(UserWarning):
@@ -244,6 +244,44 @@ def weak_directions(J_data: np.ndarray, scale: np.ndarray, names: list[str], tol
     return out
 
 
+def mass_compliance_scaling(J_data: np.ndarray, sp: ParameterSpace, x: np.ndarray,
+                            tol: float) -> str | None:
+    """The flat direction of free masses together with free compliances, as a finding.
+
+    Masses act only through ``kappa * tau`` and ``tau`` is linear in them, so scaling every
+    free mass by ``c`` and every free compliance by ``1 / c`` changes no prediction when
+    these are all the masses and compliances in play. The direction ``dx = (m, -kappa)``
+    (zero elsewhere) is tested: if its prior-whitened data information (as in
+    :func:`weak_directions`) is below ``tol``, the data cannot separate the two groups.
+
+    Args:
+        J_data: (S*m, P) data rows of the whitened Jacobian at ``x`` (P,).
+        sp: the parameter space; tol: information threshold.
+
+    Returns:
+        the finding's text, or None (one of the groups not free, or the data separate them).
+    """
+    mass = sp.kind == KIND_MASS
+    kap = sp.kind == KIND_KAPPA
+    if not (mass.any() and kap.any()):
+        return None
+    v = np.where(mass, x, 0.0) - np.where(kap, x, 0.0)
+    vs = v / sp.scale
+    nv = float(np.linalg.norm(vs))
+    if nv == 0.0:
+        return None
+    info = float(np.sum((J_data @ (v / nv)) ** 2))
+    if info >= tol:
+        return None
+    held = bool(np.all(sp.has_prior[mass | kap]))
+    return (f"masses and compliances are not separately identifiable from the data "
+            f"(information {info:.1e}): scaling every free mass by c and every free compliance "
+            f"by 1/c leaves the predictions unchanged; "
+            + ("held by the priors of mass and kappa" if held else
+               "some of them have no prior (sigma inf), so their calibrated values are one "
+               "arbitrary point of that family; give them priors or fix one group"))
+
+
 def build_result(prob: Any, sol: Any, x_start: np.ndarray, iterations: int, starts: list[dict],
                  time_s: float, *, identifiability_tol: float, moved_sigmas: float,
                  warn: bool) -> CalibrationResult:
@@ -261,7 +299,7 @@ def build_result(prob: Any, sol: Any, x_start: np.ndarray, iterations: int, star
             moved.append((sp.names[i], float(ns)))
     groups = observation_groups(prob.measurement)
     err = group_norms(prob.predict(x) - prob.y, groups)
-    conv = prob.state(x)[5]
+    conv = prob.state(x).converged
     err0 = group_norms(prob.predict(x_start) - prob.y, groups)
     msgs = []
     if sol.status <= 0:
@@ -273,6 +311,9 @@ def build_result(prob: Any, sol: Any, x_start: np.ndarray, iterations: int, star
     if neg:
         msgs.append(f"{len(neg)} compliance(s) calibrated negative, set to 0 in the calibrated "
                     f"robot: {', '.join(neg[:8])}{' ...' if len(neg) > 8 else ''}")
+    scaling = mass_compliance_scaling(J[:prob.n_data], sp, x, identifiability_tol)
+    if scaling is not None:
+        msgs.append(scaling)
     for d in weak:
         msgs.append(f"parameter direction not identifiable from the data (held by the "
                     f"prior), {d.describe()}")
