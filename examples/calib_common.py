@@ -1,21 +1,90 @@
-"""Shared helpers of the calibration examples (calibrate_*.py): one calibration per table
-row, error statistics against the measured and the noise-free test data, table printing.
+"""Shared helpers of the calibration examples (calibrate_*.py): the common command-line
+options, the train/test split of a simulated campaign, one calibration per table row, error
+statistics against the measured and the noise-free test data, table printing and the
+acceptance checks (printed as ``check: ... PASS|FAIL``; the example exits with
+``report_checks``' status, 1 when any check fails).
 
 Not a library module: the examples import it from their own folder.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
+import sys
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
+import jwarp
 from jwarp.solvers.calibration import CalibrationWarning, calibrate, error_stats, errors
-from jwarp.solvers.calibration.files import Samples
+from jwarp.solvers.calibration.files import Samples, make_measurement
+from jwarp.solvers.calibration.result import model_frames
+
+
+def example_parser(doc: str, *, noise: float, noise_help: str, quick_help: str
+                   ) -> argparse.ArgumentParser:
+    """The options every example has: --samples, --test, --seed, --noise (default ``noise``),
+    --starts, --max-nfev, --quick; the example adds its own and calls ``parse_example``."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--samples", type=int, default=300, help="calibration rows (default 300)")
+    ap.add_argument("--test", type=int, default=200, help="test rows (default 200)")
+    ap.add_argument("--seed", type=int, default=1, help="seed of truth, samples and noise")
+    ap.add_argument("--noise", type=float, default=noise,
+                    help=f"{noise_help} (default {noise:g})")
+    ap.add_argument("--starts", type=int, default=1, help="multi-start count per row")
+    ap.add_argument("--max-nfev", type=int, default=200, help="solver evaluations per row")
+    ap.add_argument("--quick", action="store_true", help=f"smoke run: {quick_help}")
+    return ap
+
+
+def parse_example(ap: argparse.ArgumentParser, argv: list[str] | None,
+                  quick: dict[str, Any], positive: Sequence[str] = ("samples", "test")
+                  ) -> argparse.Namespace:
+    """Parse; with --quick set the options ``quick``; the options ``positive`` must be >= 1
+    and --noise > 0."""
+    args = ap.parse_args(argv)
+    if args.quick:
+        for k, v in quick.items():
+            setattr(args, k, v)
+    if any(getattr(args, k) < 1 for k in positive):
+        ap.error(" and ".join("--" + k.replace("_", "-") for k in positive) + " must be >= 1")
+    if not args.noise > 0:
+        ap.error("--noise must be > 0")
+    return args
+
+
+def start(robot_name: str) -> tuple[Any, float]:
+    """The robot and the start time of the run (the plugin registry and Warp are brought up
+    by a first call before the clock starts)."""
+    jwarp.robot(robot_name)
+    t0 = time.perf_counter()
+    return jwarp.robot(robot_name), t0
+
+
+@dataclass
+class Data:
+    """A simulated campaign split into calibration and test rows."""
+
+    train: Samples
+    test: Samples
+    y_clean: np.ndarray       # the truth's noise-free observations of the test rows
+    truth: Any                # the measurement with the true setup
+
+
+def split_campaign(camp: Any, n_train: int, n_test: int) -> Data:
+    """The first ``n_train`` rows of ``camp.samples`` for calibration, the next ``n_test``
+    for the test, and the true model's noise-free predictions of the test rows."""
+    truth = make_measurement(camp.true_robot, camp.true_setup)
+    train = camp.samples.select(slice(0, n_train))
+    test = camp.samples.select(slice(n_train, n_train + n_test))
+    y_clean = truth.predict(model_frames(camp.true_robot, test.q), camp.true_params,
+                            test.meta or None)
+    return Data(train, test, y_clean, truth)
 
 
 def noise_floor(dim: int, sigma: float) -> float:
@@ -50,6 +119,11 @@ def scaled(stats: dict[str, float], scale: float) -> dict[str, float]:
     return {k: v * scale for k, v in stats.items()}
 
 
+def distance_stats_mm(x: np.ndarray, x_true: np.ndarray) -> dict[str, float]:
+    """error_stats [mm] of the point distances |x - x_true| (arrays (..., 3) in m)."""
+    return scaled(error_stats(np.linalg.norm(x - x_true, axis=-1)), 1000.0)
+
+
 def calibrate_row(label: str, robot: Any, meas: Any, train: Samples, test: Samples,
                   y_clean: np.ndarray, free: Sequence[str], *, scale: float = 1.0,
                   n_starts: int = 1, seed: int = 0, max_nfev: int = 200,
@@ -78,6 +152,25 @@ def calibrate_row(label: str, robot: Any, meas: Any, train: Samples, test: Sampl
     cl = error_stats(errors(model, meas, p, test.q, y_clean, meta_te))
     return Row(label, list(free), scaled(te, scale), scaled(cl, scale), scaled(tr, scale),
                wall, iters, nfev, res, findings)
+
+
+def run_rows(plan: Sequence[tuple[str, Sequence[str] | None]], robot: Any, meas: Any,
+             data: Data, args: argparse.Namespace, unit: str, *, scale: float = 1.0,
+             extra: dict[str, Callable[[Row], dict[str, float]]] | None = None) -> list[Row]:
+    """One ``calibrate_row`` per (label, free groups) of ``plan`` (free ``None``: no fit),
+    with --starts, --seed, --max-nfev of ``args``; ``extra[name](row)`` fills
+    ``row.extra[name]``. Progress per row on stderr."""
+    rows = []
+    for label, free in plan:
+        r = calibrate_row(label, robot, meas, data.train, data.test, data.y_clean, free or [],
+                          scale=scale, n_starts=args.starts, seed=args.seed,
+                          max_nfev=args.max_nfev, fit=free is not None)
+        for name, fn in (extra or {}).items():
+            r.extra[name] = fn(r)
+        rows.append(r)
+        print(f"  {label}: {r.test['mean']:.3f} {unit} ({r.time_s:.1f} s)", file=sys.stderr,
+              flush=True)
+    return rows
 
 
 def print_table(title: str, rows: list[Row], unit: str,
@@ -109,10 +202,51 @@ def print_table(title: str, rows: list[Row], unit: str,
         print(line)
 
 
-def monotone(values: Sequence[float], tol: float = 0.0) -> bool:
-    """True when every value is <= the one before (+ tol)."""
-    return all(b <= a + tol for a, b in zip(values, values[1:]))
+def floor_line(dim: int, sigma: float, unit: str) -> str:
+    """One line saying what the perfect-model floor ``noise_floor(dim, sigma)`` is."""
+    return (f"noise floor = mean norm of {dim}-D Gaussian noise of sigma {sigma:g} {unit} per "
+            f"coordinate = {noise_floor(dim, sigma):.3f} {unit} "
+            f"({noise_floor(dim, 1.0):.2f} sigma): the mean test error of a perfect model on "
+            f"the measured rows; against the noise-free rows ('clean') it is 0")
 
 
-def verdict(ok: bool) -> str:
-    return "PASS" if ok else "FAIL"
+@dataclass
+class Check:
+    """One acceptance check: what was compared (with the run's numbers) and the outcome."""
+
+    text: str
+    ok: bool
+
+
+def accuracy_checks(row: Row, dim: int, sigma: float, unit: str) -> list[Check]:
+    """The acceptance of a model whose truth is inside it: mean test error against the
+    noise-free truth <= 1.5 sigma, and against the measured rows <= 1.5 x the noise floor
+    (the 1.5 sigma of the acceptance, measured from what a perfect model scores there)."""
+    floor = noise_floor(dim, sigma)
+    c, m = row.clean["mean"], row.test["mean"]
+    return [Check(f"mean test error vs noise-free truth {c:.3f} {unit} <= 1.5 sigma = "
+                  f"{1.5 * sigma:.3g} {unit}", c <= 1.5 * sigma),
+            Check(f"mean test error vs measured rows {m:.3f} {unit} <= 1.5 x perfect-model "
+                  f"floor {floor:.3f} {unit} = {1.5 * floor:.3f} {unit}", m <= 1.5 * floor)]
+
+
+def falls_check(text: str, rows: Sequence[Row]) -> Check:
+    """``text`` + the rows' mean test errors: each strictly below the one before."""
+    v = [r.test["mean"] for r in rows]
+    return Check(f"{text} {' > '.join(f'{x:.3f}' for x in v)}",
+                 all(b < a for a, b in zip(v, v[1:])))
+
+
+def report_checks(checks: Sequence[Check], t0: float | None = None, title: str = "acceptance"
+                  ) -> int:
+    """Print ``title``, one ``check: <text>  PASS|FAIL`` line per check (and the total time
+    since ``t0``); return the exit status: 0 when all pass, else 1."""
+    print(f"\n{title}")
+    for c in checks:
+        print(f"check: {c.text}  {'PASS' if c.ok else 'FAIL'}")
+    failed = sum(not c.ok for c in checks)
+    print(f"checks: {len(checks) - failed} of {len(checks)} passed"
+          + (f"; {failed} FAILED, exit status 1" if failed else ""))
+    if t0 is not None:
+        print(f"\ntotal {time.perf_counter() - t0:.1f} s")
+    return 1 if failed else 0

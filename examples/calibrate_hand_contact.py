@@ -18,6 +18,11 @@ the calibration rows, and the task error (eq. 2.46): the error [mm] of the finge
 positions relative to the thumb tip on uniformly random configurations (calibrated vs
 true model); the paper's numbers (real hand) for orientation.
 
+Under the table: the acceptance checks (``check: ... PASS|FAIL``) of ``full DH`` (the truth
+is inside this model): mean test error <= 1.5 sigma against the noise-free distances and
+<= 1.5 x the perfect-model floor (calib_common.noise_floor) against the measured ones; and
+nominal > joint offsets > full DH. Exit status 1 when any check fails, else 0.
+
 Run:  python examples/calibrate_hand_contact.py [--samples 300] [--test 200] [--seed 1]
       python examples/calibrate_hand_contact.py --quick      (< 1 minute)
 """
@@ -31,14 +36,15 @@ import time
 import numpy as np
 
 import jwarp
-from jwarp.solvers.calibration import error_stats
 from jwarp.solvers.calibration.campaign import simulate_campaign, uniform_configurations
 from jwarp.solvers.calibration.files import make_measurement
 from jwarp.solvers.calibration.result import model_frames
 from jwarp.solvers.calibration.scenarios import (HAND_FINGERS, contact_sampler,
                                                  hand_contact_setup)
 
-from calib_common import calibrate_row, noise_floor, print_table, verdict
+from calib_common import (accuracy_checks, distance_stats_mm, example_parser, falls_check,
+                          floor_line, parse_example, print_table, report_checks, run_rows,
+                          split_campaign, start)
 
 # contact paper Table I (real DLR-Hand II): contact distance mean, std, max [mm]; task mean
 PAPER = {"nominal": (6.07, 3.90, 17.70), "joint offsets": (1.04, 0.82, 5.13),
@@ -49,28 +55,15 @@ PAPER_TASK = {"nominal": 8.01, "joint offsets": 1.36, "full DH": 0.89}
 
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--samples", type=int, default=300, help="calibration rows (default 300)")
-    ap.add_argument("--test", type=int, default=200, help="test rows (default 200)")
-    ap.add_argument("--seed", type=int, default=1, help="seed of truth, samples and noise")
-    ap.add_argument("--noise", type=float, default=0.5,
-                    help="distance noise sigma [mm] (default 0.5)")
+    ap = example_parser(__doc__, noise=0.5, noise_help="distance noise sigma [mm]",
+                        quick_help="120 calibration / 60 test rows (< 1 minute)")
     ap.add_argument("--task", type=int, default=500,
                     help="uniform configurations of the task error (default 500)")
     ap.add_argument("--finger-pairs", action="store_true",
                     help="also measure index-middle and middle-ring contacts (all chains "
                          "pairwise connected, as the thesis' all-pairs calibration)")
-    ap.add_argument("--starts", type=int, default=1, help="multi-start count per row")
-    ap.add_argument("--max-nfev", type=int, default=200, help="solver evaluations per row")
-    ap.add_argument("--quick", action="store_true",
-                    help="smoke run: 120 calibration / 60 test rows (< 1 minute)")
-    args = ap.parse_args(argv)
-    if args.quick:
-        args.samples, args.test, args.task = 120, 60, 200
-    if args.samples < 1 or args.test < 1 or args.task < 1:
-        ap.error("--samples, --test and --task must be >= 1")
-    return args
+    return parse_example(ap, argv, {"samples": 120, "test": 60, "task": 200},
+                         positive=("samples", "test", "task"))
 
 
 def tip_positions(robot: jwarp.RobotModel, q: np.ndarray) -> np.ndarray:
@@ -82,9 +75,7 @@ def tip_positions(robot: jwarp.RobotModel, q: np.ndarray) -> np.ndarray:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
-    jwarp.robot("hand4")
-    t_all = time.perf_counter()
-    robot = jwarp.robot("hand4")
+    robot, t_all = start("hand4")
     pairs = THUMB_PAIRS + (FINGER_PAIRS if args.finger_pairs else ())
     setup = hand_contact_setup(noise=args.noise * 1e-3, pairs=pairs)
     sampler = contact_sampler(robot, setup)
@@ -92,10 +83,7 @@ def main(argv: list[str] | None = None) -> int:
                              kappa=None, sampler=sampler)
     t_sim = time.perf_counter() - t_all
     meas = make_measurement(robot, camp.setup)
-    truth = make_measurement(camp.true_robot, camp.true_setup)
-    train = camp.samples.select(slice(0, args.samples))
-    test = camp.samples.select(slice(args.samples, args.samples + args.test))
-    y_clean = truth.predict(model_frames(camp.true_robot, test.q), camp.true_params, test.meta)
+    data = split_campaign(camp, args.samples, args.test)
     rng = np.random.default_rng(args.seed + 1000)
     q_task = uniform_configurations(robot, rng, args.task)
     tips_true = tip_positions(camp.true_robot, q_task)
@@ -104,37 +92,24 @@ def main(argv: list[str] | None = None) -> int:
           f"({', '.join(map(str, counts))} samples): {args.samples} calibration / {args.test} "
           f"test rows, seed {args.seed}, noise {args.noise:g} mm; truth: DH errors +-5 mm / "
           f"+-5 deg; campaign simulated in {t_sim:.1f} s")
-    floor = noise_floor(1, args.noise)
-    print(f"a perfect model's mean test error on the measured rows = {floor:.3f} mm (scalar)")
+    print(floor_line(1, args.noise, "mm"))
+
+    def task_mm(r):
+        model = robot if r.result is None else r.result.robot
+        return distance_stats_mm(tip_positions(model, q_task), tips_true)
 
     plan = [("nominal", None), ("joint offsets", ["theta"]),
             ("full DH", ["theta", "d", "r", "alpha"])]
-    rows = []
-    for label, free in plan:
-        r = calibrate_row(label, robot, meas, train, test, y_clean, free or [], scale=1000.0,
-                          n_starts=args.starts, seed=args.seed, max_nfev=args.max_nfev,
-                          fit=free is not None)
-        model = robot if r.result is None else r.result.robot
-        d = np.linalg.norm(tip_positions(model, q_task) - tips_true, axis=-1)
-        r.extra["task mm"] = {k: v * 1000.0 for k, v in error_stats(d).items()}
-        rows.append(r)
-        print(f"  {label}: {r.test['mean']:.3f} mm ({r.time_s:.1f} s)", file=sys.stderr,
-              flush=True)
+    rows = run_rows(plan, robot, meas, data, args, "mm", scale=1000.0,
+                    extra={"task mm": task_mm})
     print_table("contact paper Table I (simulated): contact distance errors [mm], task "
                 "error [mm]", rows, "mm", PAPER, extra=["task mm"])
     print("paper task error mean [mm]: "
           + ", ".join(f"{k} {v:.2f}" for k, v in PAPER_TASK.items()))
-    full = rows[-1]
-    lim = 1.5 * args.noise
-    print("\nacceptance (full DH: the truth is inside this model)")
-    print(f"  mean test error vs measured distances {full.test['mean']:.3f} mm <= 1.5 sigma = "
-          f"{lim:.3f} mm: {verdict(full.test['mean'] <= lim)}  (perfect model {floor:.3f} mm)")
-    print(f"  mean test error vs noise-free distances {full.clean['mean']:.3f} mm <= 1.5 sigma: "
-          f"{verdict(full.clean['mean'] <= lim)}")
-    print(f"  nominal > joint offsets > full DH: "
-          f"{verdict(rows[0].test['mean'] > rows[1].test['mean'] > full.test['mean'])}")
-    print(f"\ntotal {time.perf_counter() - t_all:.1f} s")
-    return 0
+    checks = [*accuracy_checks(rows[-1], 1, args.noise, "mm"),
+              falls_check("nominal > joint offsets > full DH (test mean, mm)", rows)]
+    return report_checks(checks, t_all, "acceptance of 'full DH' (the truth is inside this "
+                                        "model)")
 
 
 if __name__ == "__main__":

@@ -23,6 +23,11 @@ mount and markers vs the truth, noise-free, on the test configurations) - the ha
 accuracy a grasp needs; paper Table 2.3 (real robot, 640 x 480 camera, no TOW) for
 orientation.
 
+Under the table: the acceptance checks (``check: ... PASS|FAIL``) of ``full + intrinsics``
+(the truth is inside this model): mean test error <= 1.5 sigma against the noise-free pixels
+and <= 1.5 x the perfect-model floor (calib_common.noise_floor) against the measured pixels;
+and freeing the intrinsics lowers the test error. Exit status 1 when any check fails, else 0.
+
 Run:  python examples/calibrate_justin_camera.py [--samples 300] [--test 200] [--seed 1]
       python examples/calibrate_justin_camera.py --quick      (< 1 minute)
 """
@@ -37,13 +42,14 @@ import numpy as np
 
 import jwarp
 from jwarp.plugins.measurements.geometry import pose_matrix
-from jwarp.solvers.calibration import error_stats
 from jwarp.solvers.calibration.campaign import simulate_campaign
 from jwarp.solvers.calibration.files import Setup, make_measurement
 from jwarp.solvers.calibration.result import model_frames
 from jwarp.solvers.calibration.scenarios import scenario
 
-from calib_common import calibrate_row, noise_floor, print_table, verdict
+from calib_common import (Check, accuracy_checks, distance_stats_mm, example_parser,
+                          floor_line, parse_example, print_table, report_checks, run_rows,
+                          split_campaign, start)
 
 ROBOT_GROUPS = ["theta", "d", "r", "alpha", "kappa_theta", "kappa_alpha"]
 DATASHEET = {"focal": [600.0, 600.0], "center": [640.0, 480.0], "xi": 0.0}
@@ -53,22 +59,9 @@ PAPER_MM = {"full, intrinsics fixed": (4.77, 2.29, 11.75), "full + intrinsics": 
 
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--samples", type=int, default=300, help="calibration rows (default 300)")
-    ap.add_argument("--test", type=int, default=200, help="test rows (default 200)")
-    ap.add_argument("--seed", type=int, default=1, help="seed of truth, samples and noise")
-    ap.add_argument("--noise", type=float, default=1.0, help="pixel noise sigma [px] (default 1)")
-    ap.add_argument("--starts", type=int, default=1, help="multi-start count per row")
-    ap.add_argument("--max-nfev", type=int, default=200, help="solver evaluations per row")
-    ap.add_argument("--quick", action="store_true",
-                    help="smoke run: 80 calibration / 40 test rows (< 1 minute)")
-    args = ap.parse_args(argv)
-    if args.quick:
-        args.samples, args.test = 80, 40
-    if args.samples < 1 or args.test < 1:
-        ap.error("--samples and --test must be >= 1")
-    return args
+    ap = example_parser(__doc__, noise=1.0, noise_help="pixel noise sigma [px]",
+                        quick_help="80 calibration / 40 test rows (< 1 minute)")
+    return parse_example(ap, argv, {"samples": 80, "test": 40})
 
 
 def hand_points_camera(robot: jwarp.RobotModel, meas, p: np.ndarray, q: np.ndarray
@@ -93,9 +86,7 @@ def hand_points_camera(robot: jwarp.RobotModel, meas, p: np.ndarray, q: np.ndarr
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
-    jwarp.robot("justin19")
-    t_all = time.perf_counter()
-    robot = jwarp.robot("justin19")
+    robot, t_all = start("justin19")
     setup, sampler, accept = scenario("justin19", "image")
     setup.section["noise"] = args.noise
     camp = simulate_campaign(robot, setup, args.samples + args.test, seed=args.seed,
@@ -104,11 +95,8 @@ def main(argv: list[str] | None = None) -> int:
     rough = dict(camp.setup.section)
     rough["intrinsics"] = dict(rough["intrinsics"], **DATASHEET)
     meas = make_measurement(robot, Setup("image", rough, "justin19"))
-    truth = make_measurement(camp.true_robot, camp.true_setup)
-    train = camp.samples.select(slice(0, args.samples))
-    test = camp.samples.select(slice(args.samples, args.samples + args.test))
-    y_clean = truth.predict(model_frames(camp.true_robot, test.q), camp.true_params)
-    x_true = hand_points_camera(camp.true_robot, truth, camp.true_params, test.q)
+    data = split_campaign(camp, args.samples, args.test)
+    x_true = hand_points_camera(camp.true_robot, data.truth, camp.true_params, data.test.q)
     print(f"justin19 head camera (1280 x 960 px), markers on both hands + 3 on a pole: "
           f"{args.samples} calibration / {args.test} test rows (all markers visible), seed "
           f"{args.seed}, noise {args.noise:g} px; campaign simulated in {t_sim:.1f} s")
@@ -117,42 +105,31 @@ def main(argv: list[str] | None = None) -> int:
     print(f"pixels used: u {u[:, 0::2].min():.0f}..{u[:, 0::2].max():.0f}, "
           f"v {u[:, 1::2].min():.0f}..{u[:, 1::2].max():.0f}; hand markers "
           f"{dist.min():.2f}..{dist.max():.2f} m from the camera")
-    floor = noise_floor(2, args.noise)
-    print(f"a perfect model's mean test error on the measured pixels = {floor:.3f} px (2-D)")
+    print(floor_line(2, args.noise, "px"))
+
+    def hand_mm(r):
+        x_cal = hand_points_camera(r.result.robot, meas, r.result.params, data.test.q)
+        return distance_stats_mm(x_cal, x_true)
 
     plan = [("c (camera, markers)", ["camera", "markers"]),
             ("full, intrinsics fixed", ROBOT_GROUPS + ["camera", "markers"]),
             ("full + intrinsics", ROBOT_GROUPS + ["camera", "markers", "intrinsics"])]
-    rows = []
-    for label, free in plan:
-        r = calibrate_row(label, robot, meas, train, test, y_clean, free, n_starts=args.starts,
-                          seed=args.seed, max_nfev=args.max_nfev)
-        x_cal = hand_points_camera(r.result.robot, meas, r.result.params, test.q)
-        r.extra["hand mm"] = {k: v * 1000.0 for k, v in
-                              error_stats(np.linalg.norm(x_cal - x_true, axis=-1)).items()}
-        rows.append(r)
-        print(f"  {label}: {r.test['mean']:.3f} px ({r.time_s:.1f} s)", file=sys.stderr,
-              flush=True)
+    rows = run_rows(plan, robot, meas, data, args, "px", extra={"hand mm": hand_mm})
     print_table("Table 2.3 (simulated): test errors per marker [px], hand markers in the "
                 "camera frame [mm]", rows, "px", PAPER_PX, extra=["hand mm"], paper_unit="px")
     print("paper Table 2.3 cartesian errors [mm] (mean, std, max; tracker, robot base): "
           + "; ".join(f"{k}: {v[0]:.2f}, {v[1]:.2f}, {v[2]:.2f}" for k, v in PAPER_MM.items()))
-    full = rows[-1]
-    lim = 1.5 * args.noise
-    print("\nacceptance (full + intrinsics: the truth is inside this model)")
-    print(f"  mean test error vs measured pixels {full.test['mean']:.3f} px <= 1.5 sigma = "
-          f"{lim:.3f} px: {verdict(full.test['mean'] <= lim)}  (perfect model {floor:.3f} px)")
-    print(f"  mean test error vs noise-free pixels {full.clean['mean']:.3f} px <= 1.5 sigma: "
-          f"{verdict(full.clean['mean'] <= lim)}")
-    print(f"  freeing the intrinsics helps: {rows[1].test['mean']:.3f} -> "
-          f"{full.test['mean']:.3f} px: {verdict(full.test['mean'] < rows[1].test['mean'])}")
+    full, fixed = rows[-1], rows[1]
     i = meas.params.names.index("intrinsics_fx")
     fmt = lambda v: ", ".join(f"{x:.4g}" for x in v)  # noqa: E731
-    print(f"  intrinsics fx, fy, cx, cy, xi: datasheet [{fmt(meas.params.nominal[i:i + 5])}], "
+    print(f"intrinsics fx, fy, cx, cy, xi: datasheet [{fmt(meas.params.nominal[i:i + 5])}], "
           f"calibrated [{fmt(full.result.params[i:i + 5])}], truth "
           f"[{fmt(camp.true_params[i:i + 5])}]")
-    print(f"\ntotal {time.perf_counter() - t_all:.1f} s")
-    return 0
+    checks = [*accuracy_checks(full, 2, args.noise, "px"),
+              Check(f"freeing the intrinsics lowers the test error: {fixed.test['mean']:.3f} "
+                    f"-> {full.test['mean']:.3f} px", full.test["mean"] < fixed.test["mean"])]
+    return report_checks(checks, t_all, "acceptance of 'full + intrinsics' (the truth is "
+                         "inside this model)")
 
 
 if __name__ == "__main__":

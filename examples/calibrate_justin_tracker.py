@@ -18,6 +18,12 @@ calibration rows, wall time, iterations and the number of weakly identifiable pa
 directions the solver reported (held by the prior); the paper's measured numbers (real
 robot, so not equal: its truth is not inside the model) for orientation.
 
+Under the tables: the acceptance checks (``check: ... PASS|FAIL``): the ladder's test
+errors fall monotonically; the full model's mean test error is <= 1.5 sigma against the
+noise-free truth and <= 1.5 x the perfect-model floor (calib_common.noise_floor) against the
+measured rows; every leave-one-out model is worse than the full one. Exit status 1 when any
+check fails, else 0.
+
 Run:  python examples/calibrate_justin_tracker.py [--samples 300] [--test 200] [--seed 1]
       python examples/calibrate_justin_tracker.py --quick      (small, ladder only, < 1 minute)
 """
@@ -28,15 +34,13 @@ import argparse
 import dataclasses
 import math
 import sys
-import time
 
-
-import jwarp
 from jwarp.solvers.calibration.campaign import justin_tracker_setup, simulate_campaign
 from jwarp.solvers.calibration.files import make_measurement
-from jwarp.solvers.calibration.result import model_frames
 
-from calib_common import calibrate_row, monotone, noise_floor, print_table, verdict
+from calib_common import (Check, accuracy_checks, example_parser, falls_check, floor_line,
+                          parse_example, print_table, report_checks, run_rows, split_campaign,
+                          start)
 
 MEAS_GROUPS = ["tracker", "markers"]
 LADDER = [
@@ -59,93 +63,60 @@ PAPER_II = {"full": (3.12, 1.71, 8.23), "-kappa_theta": (9.09, 4.23, 24.59),
 
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--samples", type=int, default=300, help="calibration rows (default 300)")
-    ap.add_argument("--test", type=int, default=200, help="test rows (default 200)")
-    ap.add_argument("--seed", type=int, default=1, help="seed of truth, samples and noise")
-    ap.add_argument("--noise", type=float, default=1.0, help="tracker noise sigma [mm] (default 1)")
+    ap = example_parser(__doc__, noise=1.0, noise_help="tracker noise sigma [mm]",
+                        quick_help="80 calibration / 40 test rows, ladder only (< 1 minute)")
     ap.add_argument("--length-error", type=float, default=5.0, metavar="MM",
                     help="uniform DH length errors +-MM (default 5)")
     ap.add_argument("--angle-error", type=float, default=5.0, metavar="DEG",
                     help="uniform DH angle errors +-DEG (default 5)")
     ap.add_argument("--kappa", type=float, default=1e-4,
                     help="mean true compliance [rad/(N m)], drawn from [0.5, 1.5] x this")
-    ap.add_argument("--starts", type=int, default=1, help="multi-start count per row")
-    ap.add_argument("--max-nfev", type=int, default=200, help="solver evaluations per row")
     ap.add_argument("--no-loo", action="store_true", help="skip the leave-one-out table")
-    ap.add_argument("--quick", action="store_true",
-                    help="smoke run: 80 calibration / 40 test rows, ladder only (< 1 minute)")
-    args = ap.parse_args(argv)
-    if args.quick:
-        args.samples, args.test, args.no_loo = 80, 40, True
-    if args.samples < 1 or args.test < 1:
-        ap.error("--samples and --test must be >= 1")
-    return args
+    return parse_example(ap, argv, {"samples": 80, "test": 40, "no_loo": True})
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
-    jwarp.robot("justin19")  # plugin registry up (and Warp initialized) before timing
-    t_all = time.perf_counter()
-    robot = jwarp.robot("justin19")
-    sigma = args.noise * 1e-3
+    robot, t_all = start("justin19")
     k = args.kappa
-    camp = simulate_campaign(robot, justin_tracker_setup(noise=sigma), args.samples + args.test,
-                             seed=args.seed, length_error=args.length_error * 1e-3,
+    camp = simulate_campaign(robot, justin_tracker_setup(noise=args.noise * 1e-3),
+                             args.samples + args.test, seed=args.seed,
+                             length_error=args.length_error * 1e-3,
                              angle_error=math.radians(args.angle_error),
                              kappa=None if k == 0 else (0.5 * k, 1.5 * k))
     meas = make_measurement(robot, camp.setup)            # the rough setup
-    truth = make_measurement(camp.true_robot, camp.true_setup)
-    train = camp.samples.select(slice(0, args.samples))
-    test = camp.samples.select(slice(args.samples, args.samples + args.test))
-    y_clean = truth.predict(model_frames(camp.true_robot, test.q), camp.true_params)
+    data = split_campaign(camp, args.samples, args.test)
     print(f"justin19 + external tracker: {args.samples} calibration / {args.test} test rows, "
           f"seed {args.seed}; truth: DH errors +-{args.length_error:g} mm / "
           f"+-{args.angle_error:g} deg, compliances [0.5, 1.5] x {k:g} rad/(N m); tracker "
           f"noise {args.noise:g} mm per coordinate")
-    floor = noise_floor(3, args.noise)
-    print(f"a perfect model's mean test error on the measured rows = E|noise| = {floor:.3f} mm "
-          f"(3-D); against the noise-free rows ('clean') it is 0")
+    print(floor_line(3, args.noise, "mm"))
 
-    rows = []
-    for label, groups in LADDER:
-        rows.append(calibrate_row(label, robot, meas, train, test, y_clean,
-                                  groups + MEAS_GROUPS, scale=1000.0, n_starts=args.starts,
-                                  seed=args.seed, max_nfev=args.max_nfev))
-        print(f"  {label}: {rows[-1].test['mean']:.3f} mm ({rows[-1].time_s:.1f} s)",
-              file=sys.stderr, flush=True)
+    plan = [(label, groups + MEAS_GROUPS) for label, groups in LADDER]
+    rows = run_rows(plan, robot, meas, data, args, "mm", scale=1000.0)
     print_table("Table I ladder: test errors per marker [mm]", rows, "mm", PAPER_I)
-    means = [r.test["mean"] for r in rows]
     full = rows[-1]
+    checks = [falls_check("ladder falls monotonically (test mean, mm)", rows),
+              *accuracy_checks(full, 3, args.noise, "mm")]
 
-    loo = []
     if not args.no_loo:
-        loo.append(dataclasses.replace(full, label="full"))   # the ladder's last row
+        # a leave-one-out model the ladder already calibrated (-kappa_alpha = +kappa_theta)
+        # is taken from there, as the full row
+        done = {frozenset(r.free): r for r in rows}
+        loo = []
         for g in LEAVE_OUT:
-            groups = [x for x in FULL if x != g]
-            loo.append(calibrate_row(f"-{g}", robot, meas, train, test, y_clean,
-                                     groups + MEAS_GROUPS, scale=1000.0, n_starts=args.starts,
-                                     seed=args.seed, max_nfev=args.max_nfev))
-            print(f"  -{g}: {loo[-1].test['mean']:.3f} mm ({loo[-1].time_s:.1f} s)",
-                  file=sys.stderr, flush=True)
-        print_table("Table II leave-one-out: test errors per marker [mm]", loo, "mm", PAPER_II)
-
-    print("\nacceptance")
-    print(f"  ladder falls monotonically (test mean): {verdict(monotone(means))}  "
-          f"[{' > '.join(f'{m:.2f}' for m in means)}]")
-    lim = 1.5 * args.noise
-    print(f"  full model vs noise-free truth: mean {full.clean['mean']:.3f} mm <= 1.5 sigma = "
-          f"{lim:.3f} mm: {verdict(full.clean['mean'] <= lim)}")
-    print(f"  full model vs measured rows: mean {full.test['mean']:.3f} mm "
-          f"(perfect model {floor:.3f} mm = {floor / args.noise:.2f} sigma; <= 1.5 sigma "
-          f"{verdict(full.test['mean'] <= lim)}, <= 1.05 x perfect "
-          f"{verdict(full.test['mean'] <= 1.05 * floor)})")
-    if loo:
-        worse = all(r.test["mean"] >= loo[0].test["mean"] for r in loo[1:])
-        print(f"  every leave-one-out model is worse than the full one: {verdict(worse)}")
-    print(f"\ntotal {time.perf_counter() - t_all:.1f} s")
-    return 0
+            free = [x for x in FULL if x != g] + MEAS_GROUPS
+            r = done.get(frozenset(free))
+            loo += ([dataclasses.replace(r, label=f"-{g}")] if r else
+                    run_rows([(f"-{g}", free)], robot, meas, data, args, "mm", scale=1000.0))
+        print_table("Table II leave-one-out: test errors per marker [mm]",
+                    [dataclasses.replace(full, label="full")] + loo, "mm", PAPER_II)
+        best = min(loo, key=lambda r: r.test["mean"])
+        checks.append(Check(f"every leave-one-out model is worse than the full model: full "
+                            f"{full.test['mean']:.3f} mm < best leave-one-out "
+                            f"{best.test['mean']:.3f} mm ({best.label})",
+                            all(r.test["mean"] > full.test["mean"] for r in loo)))
+    return report_checks(checks, t_all)
 
 
 if __name__ == "__main__":

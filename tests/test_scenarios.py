@@ -175,21 +175,66 @@ def test_cli_simulate_campaign_with_a_scenario(tmp_path, capsys):
     assert s.y.shape == (6, 10)
 
 
+def _run_example(script, *args):
+    env = dict(os.environ, PYTHONWARNINGS="ignore")
+    return subprocess.run([sys.executable, os.path.join(ROOT, "examples", script), *args],
+                          capture_output=True, text=True, timeout=120, env=env, cwd=ROOT)
+
+
 @pytest.mark.parametrize("script, expect", [
     ("calibrate_justin_tracker.py", ["Table I ladder", "+kappa_alpha (full)",
-                                     "ladder falls monotonically (test mean): PASS",
-                                     "full model vs noise-free truth"]),
+                                     "check: ladder falls monotonically",
+                                     "check: mean test error vs noise-free truth",
+                                     "check: mean test error vs measured rows",
+                                     "noise floor = mean norm of 3-D Gaussian noise"]),
     ("calibrate_justin_camera.py", ["Table 2.3 (simulated)", "full + intrinsics",
-                                    "freeing the intrinsics helps", "PASS"]),
+                                    "check: freeing the intrinsics lowers the test error",
+                                    "check: mean test error vs noise-free truth",
+                                    "check: mean test error vs measured rows",
+                                    "noise floor = mean norm of 2-D Gaussian noise"]),
     ("calibrate_hand_contact.py", ["contact paper Table I (simulated)", "full DH",
-                                   "nominal > joint offsets > full DH: PASS"]),
+                                   "check: nominal > joint offsets > full DH",
+                                   "check: mean test error vs noise-free truth",
+                                   "check: mean test error vs measured rows",
+                                   "noise floor = mean norm of 1-D Gaussian noise"]),
 ])
 def test_example_quick(script, expect):
-    env = dict(os.environ, PYTHONWARNINGS="ignore")
-    r = subprocess.run([sys.executable, os.path.join(ROOT, "examples", script), "--quick"],
-                       capture_output=True, text=True, timeout=120, env=env, cwd=ROOT)
-    assert r.returncode == 0, r.stderr[-2000:]
+    """--quick: exit status 0, the table, the floor line and every check line PASS."""
+    r = _run_example(script, "--quick")
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     for text in expect:
         assert text in r.stdout, r.stdout
+    checks = [ln for ln in r.stdout.splitlines() if ln.startswith("check: ")]
+    assert len(checks) == 3 and all(ln.endswith("  PASS") for ln in checks), r.stdout
+    assert "checks: 3 of 3 passed" in r.stdout
     assert "mean" in r.stdout and "paper" in r.stdout
     assert not math.isnan(float(r.stdout.split("total ")[-1].split(" s")[0]))
+
+
+def test_example_failed_check_exits_1():
+    """One solver evaluation per row leaves the full DH model at the nominal one: the
+    accuracy checks fail, are printed as FAIL and the example exits with status 1."""
+    r = _run_example("calibrate_hand_contact.py", "--quick", "--max-nfev", "1")
+    assert r.returncode == 1, r.stdout[-2000:] + r.stderr[-2000:]
+    fails = [ln for ln in r.stdout.splitlines()
+             if ln.startswith("check: ") and ln.endswith("  FAIL")]
+    assert any("vs noise-free truth" in ln for ln in fails), r.stdout
+    assert "FAILED, exit status 1" in r.stdout
+
+
+def test_report_checks_status(capsys):
+    sys.path.insert(0, os.path.join(ROOT, "examples"))
+    try:
+        from calib_common import Check, noise_floor, report_checks
+    finally:
+        sys.path.remove(os.path.join(ROOT, "examples"))
+    assert report_checks([Check("a 1 <= 2", True), Check("b 3 <= 2", False)]) == 1
+    out = capsys.readouterr().out
+    assert "check: a 1 <= 2  PASS" in out and "check: b 3 <= 2  FAIL" in out
+    assert report_checks([Check("a", True)]) == 0
+    # E|noise| of d-dim Gaussian noise vs a Monte-Carlo estimate
+    rng = np.random.default_rng(0)
+    for d, expect in ((1, 0.798), (2, 1.253), (3, 1.596)):
+        assert noise_floor(d, 2.0) == pytest.approx(2 * expect, rel=1e-3)
+        mc = np.linalg.norm(rng.standard_normal((200000, d)), axis=1).mean()
+        assert noise_floor(d, 1.0) == pytest.approx(mc, rel=1e-2)
