@@ -244,16 +244,16 @@ class _ElasticLaunch:
         if rg:  # the tape needs every intermediate kept
             frames = frames if frames is not None else wp.empty((B, n), dtype=self.fk.mat44,
                                                                 device=t.device, requires_grad=True)
-            moments = wp.empty((B, n + 1), dtype=self.k.vec4, device=t.device, requires_grad=True)
-            axes = wp.empty((B, n), dtype=self.fk.vec3, device=t.device, requires_grad=True)
+            moments = wp.empty((n + 1, B), dtype=self.k.vec4, device=t.device, requires_grad=True)
+            axes = wp.empty((n, B), dtype=self.fk.vec3, device=t.device, requires_grad=True)
             rho_out = self._rho_buffer(requires_grad=True)
             delta = wp.empty(B, dtype=t.scalar, device=t.device)
         else:  # reuse scratch; rho ping-pongs between two buffers
             if not hasattr(self, "_scratch"):
                 S = 1 if t.device.is_cpu else B  # CPU threads run configurations in turn
                 self._scratch = (wp.empty((B, n), dtype=self.fk.mat44, device=t.device),
-                                 wp.empty((S, n + 1), dtype=self.k.vec4, device=t.device),
-                                 wp.empty((S, n), dtype=self.fk.vec3, device=t.device),
+                                 wp.empty((n + 1, S), dtype=self.k.vec4, device=t.device),
+                                 wp.empty((n, S), dtype=self.fk.vec3, device=t.device),
                                  [self._rho_buffer() for _ in range(2)],
                                  wp.empty(B, dtype=t.scalar, device=t.device))
             frames_s, moments, axes, rho_bufs, delta = self._scratch
@@ -269,7 +269,7 @@ class _ElasticLaunch:
         wp.launch(self.k.elastic_step, dim=B,
                   inputs=[self.q, rho_arr, stride, use, self.rho0[0], self.rho0[1],
                           self.kappa[0], self.kappa[1], self.lam, self.gravity,
-                          int(self.write_tau), int(moments.shape[0] > 1), *t.frame_args, t.mass, t.mass_com,
+                          int(self.write_tau), int(moments.shape[1] > 1), *t.frame_args, t.mass, t.mass_com,
                           t.dh_info],
                   outputs=[frames, moments, axes, rho_out, self.tau, delta], device=t.device)
         return frames, rho_out, delta

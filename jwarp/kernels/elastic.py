@@ -74,7 +74,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         for j in range(dh_info.shape[0]):  # static rows of rho_out are not written
             info = dh_info[j]
             i = info[1]
-            mo = prefix[sb, info[2]] - prefix[sb, info[0]]
+            mo = prefix[info[2], sb] - prefix[info[0], sb]
             s = vec3(mo[0], mo[1], mo[2])
             mtot = mo[3]
             T = frames[b, i]
@@ -93,7 +93,7 @@ def kernels(scalar: type) -> SimpleNamespace:
             prev_r = rho[rb, i, 2]
             prev_a = rho[rb, i, 3]
             prev_b = rho[rb, i, 4]
-            ax_alpha = axes[sb, i]
+            ax_alpha = axes[i, sb]
             ax_beta = vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1])
             arm_p = wp.cross(s - mtot * pp, gravity)
             tau_a = wp.dot(arm_p, ax_alpha)
@@ -155,26 +155,26 @@ def kernels(scalar: type) -> SimpleNamespace:
     ):
         """One torque update: frames = F(q, rho); rho_out = damped update from the
         gravity torques of those frames; delta[b] = max |rho_out - rho| (rad).
-        ``prefix`` (S, n_frames + 1) and ``axes`` (S, n_frames) are scratch (moment prefix
-        sums; alpha axes from the FK pass), row ``b * scratch_stride``: stride 0 (S = 1) on
-        the CPU, where configurations run one after another and the row stays in L1
-        instead of streaming ~90 extra bytes per frame to memory; stride 1 (S = B) on
-        CUDA and under a Tape (every row written once)."""
+        ``prefix`` (n_frames + 1, S) and ``axes`` (n_frames, S) are scratch (moment prefix
+        sums; alpha axes from the FK pass), column ``b * scratch_stride``: stride 0 (S = 1)
+        on the CPU, where configurations run one after another and the column stays in L1;
+        stride 1 (S = B) on CUDA (frame-major: neighbouring threads touch neighbouring
+        entries) and under a Tape (every entry written once)."""
         b = wp.tid()
         sb = b * scratch_stride
         acc = vec4(zero, zero, zero, zero)
-        prefix[sb, 0] = acc
+        prefix[0, sb] = acc
         for k in range(order.shape[0]):
             i = order[k]
             R, p, ax = fk.write_frame(b, i, q, rho, rho_stride, use_rho, parent, is_dh,
                                       prismatic, fixed_rot, fixed_pos, dh0, trig, cpl_start,
                                       cpl_joint, cpl_coef, frames)
-            axes[sb, i] = ax
+            axes[i, sb] = ax
             m = mass[i]
             if m != zero:  # a fixed pattern per robot: predicted
                 w = R * mass_com[i] + p
                 acc = acc + vec4(m * w[0], m * w[1], m * w[2], m)
-            prefix[sb, k + 1] = acc
+            prefix[k + 1, sb] = acc
         delta[b] = torque_update(b, frames, rho, rho_stride, rho0, rho0_stride, kappa,
                                  kappa_stride, lam, gravity, dh_info, prefix, axes, sb, rho_out,
                                  tau_out, write_tau)
