@@ -447,6 +447,9 @@ class Bench:
                 launch_fk(t, q, frame_major=True)
             ops["fk (frame-major out)"] = rec
         with record_launches() as rec:
+            launch_fk(t, q, component_major=True)
+        ops["fk (component-major out)"] = rec
+        with record_launches() as rec:
             jacobian(model, q, self.args.tcp, device=dev, dtype=self.ftype, validate=False)
         ops["jacobian"] = rec
         ops["fk+jacobian"] = ops["fk"] + ops["jacobian"]

@@ -134,21 +134,31 @@ def fk(robot: Any, q: Any, *, dh: Any = None, device: Any = None, dtype: Any = N
 
 
 def launch_fk(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None = None,
-              frames: wp.array | None = None, frame_major: bool = False) -> wp.array:
+              frames: wp.array | None = None, frame_major: bool = False,
+              component_major: bool = False) -> wp.array:
     """Launch the FK kernel on a (B, n_dof) device array; returns frames (B, n_frames) mat44.
 
     ``frame_major`` stores the output frame-major in memory (a transposed view), which
     coalesces the stores on CUDA; the returned array is indexed [b, i] either way.
+    ``component_major`` returns a scalar (B, n_frames, 4, 4) view of memory laid out
+    (n_frames, 4, 4, B) (the batch index fastest: every warp store is one coalesced line on
+    CUDA); ``wp.to_torch`` gives a strided (B, n_frames, 4, 4) tensor without a copy.
     """
     k = fk_kernels.kernels(t.scalar)
     B = q.shape[0]
     n = t.robot.n_frames
+    rho, stride = dh if dh is not None else (t.dh0_3d, 0)
+    if component_major:
+        if frames is None:
+            frames = wp.empty((n, 4, 4, B), dtype=t.scalar, device=t.device).transpose((3, 0, 1, 2))
+        wp.launch(k.fk_components, dim=B, inputs=[q, rho, stride, int(dh is not None),
+                                                  *t.frame_args], outputs=[frames], device=t.device)
+        return frames
     if frames is None:
         if frame_major:
             frames = wp.empty((n, B), dtype=k.mat44, device=t.device).transpose()
         else:
             frames = wp.empty((B, n), dtype=k.mat44, device=t.device, requires_grad=q.requires_grad)
-    rho, stride = dh if dh is not None else (t.dh0_3d, 0)
     wp.launch(k.fk, dim=B, inputs=[q, rho, stride, int(dh is not None), *t.frame_args],
               outputs=[frames], device=t.device)
     return frames

@@ -401,3 +401,20 @@ def test_float32_elastic_equilibrium_matches_float64():
     static = ~model.is_dh.astype(bool)
     np.testing.assert_array_equal(f32.rho[:, static], np.broadcast_to(
         model.dh_table[static].astype(np.float32), f32.rho[:, static].shape))
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_component_major_fk_layout_matches_fk(dtype):
+    """launch_fk(component_major=True): memory (n_frames, 4, 4, B), viewed (B, n_frames, 4, 4)."""
+    from jwarp.device_model import tables
+    model = jwarp.robot("justin19")
+    q = _sample(model, 64, seed=16)
+    t = tables(model, "cpu", dtype)
+    qa = wp.array(q.astype(dtype), device="cpu")
+    out = K.launch_fk(t, qa, component_major=True)
+    assert out.shape == (64, 27, 4, 4) and out.strides[0] == np.dtype(dtype).itemsize
+    np.testing.assert_allclose(out.numpy(), ref_fk(model, q), atol=1e-12 if dtype == np.float64 else 1e-5)
+    rho = np.repeat(model.dh_table[None], 64, 0) + 1e-3
+    dh = (wp.array(rho.astype(dtype), device="cpu"), 1)
+    np.testing.assert_array_equal(K.launch_fk(t, qa, dh=dh, component_major=True).numpy(),
+                                  K.launch_fk(t, qa, dh=dh).numpy())

@@ -247,6 +247,52 @@ def kernels(scalar: type) -> SimpleNamespace:
                         fixed_pos, dh0, trig, cpl_start, cpl_joint, cpl_coef, frames)
 
     @wp.kernel(module="unique")
+    def fk_components_kernel(
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        rho: wp.array3d(dtype=scalar),
+        rho_stride: int,
+        use_rho: int,
+        # Model:
+        order: wp.array(dtype=wp.int32),
+        parent: wp.array(dtype=wp.int32),
+        is_dh: wp.array(dtype=wp.int32),
+        prismatic: wp.array(dtype=wp.int32),
+        fixed_rot: wp.array(dtype=mat33),
+        fixed_pos: wp.array(dtype=vec3),
+        dh0: wp.array2d(dtype=scalar),
+        trig: wp.array(dtype=vec4),
+        cpl_start: wp.array(dtype=wp.int32),
+        cpl_joint: wp.array(dtype=wp.int32),
+        cpl_coef: wp.array(dtype=scalar),
+        # Data out:
+        frames: wp.array4d(dtype=scalar),
+    ):
+        """:func:`fk_kernel` writing scalars ``frames[b, i, r, c]`` (B, n_frames, 4, 4) of any
+        strides: with the batch index fastest in memory (a component-major view) every
+        store of a warp is one coalesced 128-byte line on CUDA."""
+        b = wp.tid()
+        for k in range(order.shape[0]):
+            i = order[k]
+            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
+            Rp = wp.identity(3, dtype=scalar)
+            pp = vec3(zero, zero, zero)
+            pi = parent[i]
+            if pi >= 0:
+                Rp = mat33(frames[b, pi, 0, 0], frames[b, pi, 0, 1], frames[b, pi, 0, 2],
+                           frames[b, pi, 1, 0], frames[b, pi, 1, 1], frames[b, pi, 1, 2],
+                           frames[b, pi, 2, 0], frames[b, pi, 2, 1], frames[b, pi, 2, 2])
+                pp = vec3(frames[b, pi, 0, 3], frames[b, pi, 1, 3], frames[b, pi, 2, 3])
+            R, p = child_rot_pos(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
+                                 fixed_rot, fixed_pos, dh0, trig)
+            for r in range(3):
+                for c in range(3):
+                    frames[b, i, r, c] = R[r, c]
+                frames[b, i, r, 3] = p[r]
+                frames[b, i, 3, r] = zero
+            frames[b, i, 3, 3] = one
+
+    @wp.kernel(module="unique")
     def jacobian_kernel(
         # Data in:
         q: wp.array2d(dtype=scalar),
@@ -378,5 +424,5 @@ def kernels(scalar: type) -> SimpleNamespace:
         scalar=scalar, vec3=vec3, mat33=mat33, mat44=mat44,
         vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, joint_value=joint_value, write_frame=write_frame, child_frame=child_frame, child_rot_pos=child_rot_pos, pack=pack,
         unpack_rot=unpack_rot, unpack_pos=unpack_pos,
-        fk=fk_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
+        fk=fk_kernel, fk_components=fk_components_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
     )
