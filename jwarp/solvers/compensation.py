@@ -107,14 +107,18 @@ def iteration_overhead(objective_rigid: Any, objective_elastic: Any, *, repeats:
             obj.evaluate_pose()
             obj.evaluate_aux()
 
+    import warp as wp
+
     out = {}
     for name, obj in (("rigid", objective_rigid), ("elastic", objective_elastic)):
         one(obj)
+        wp.synchronize_device(obj.device)
         best = float("inf")
         for _ in range(3):
             t0 = time.perf_counter()
             for _ in range(repeats):
                 one(obj)
+            wp.synchronize_device(obj.device)  # CUDA launches are asynchronous
             best = min(best, (time.perf_counter() - t0) / repeats)
         out[f"{name}_s"] = best
     out["overhead"] = out["elastic_s"] / out["rigid_s"] - 1.0
