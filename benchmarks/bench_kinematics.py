@@ -137,10 +137,16 @@ def replay(launches: list[dict]) -> Callable[[], None]:
 
 def slice_launches(launches: list[dict], B: int, lo: int, hi: int) -> list[dict]:
     """The launches restricted to configurations [lo, hi): dim and every array whose first
-    dimension is the batch are sliced (views, no copies); shared tables are kept."""
-    def cut(x: Any) -> Any:
+    dimension is the batch are sliced (views, no copies); shared input tables are kept.
+    An output that is not batch-sized is per-launch scratch (the elastic step's CPU
+    scratch column): each slice gets its own copy, or concurrent slices would race on it."""
+    own: dict[int, wp.array] = {}
+
+    def cut(x: Any, output: bool = False) -> Any:
         if isinstance(x, wp.array) and x.ndim >= 1 and x.shape[0] == B:
             return x[lo:hi]
+        if output and isinstance(x, wp.array):
+            return own.setdefault(id(x), wp.empty_like(x))
         return x
 
     out = []
@@ -151,7 +157,7 @@ def slice_launches(launches: list[dict], B: int, lo: int, hi: int) -> list[dict]
         c = dict(l)
         c["dim"] = hi - lo
         c["inputs"] = [cut(x) for x in l.get("inputs", [])]
-        c["outputs"] = [cut(x) for x in l.get("outputs", [])]
+        c["outputs"] = [cut(x, output=True) for x in l.get("outputs", [])]
         out.append(c)
     return out
 
@@ -562,6 +568,13 @@ class Bench:
             threaded(ops["fk"], B, pool, n_threads)()
             self.checks[f"{model.name}: |threaded fk - fk| max"] = float(
                 np.abs(fk_out.numpy() - single).max())
+            rho_out = ops["elastic_step"][0]["outputs"][3]      # the step's new rows
+            replay(ops["elastic_step"])()
+            single = rho_out.numpy().copy()
+            rho_out.zero_()
+            threaded(ops["elastic_step"], B, pool, n_threads)()
+            self.checks[f"{model.name}: |threaded elastic_step rho - rho| max"] = float(
+                np.abs(rho_out.numpy() - single).max())
             for op in ("fk", "jacobian", "elastic_step", "elastic_fk(3)"):
                 one = self.time_row(model.name, op, "cpu", B, replay(ops[op]))
                 many = self.time_row(model.name, f"{op} {n_threads} threads", "cpu", B,
