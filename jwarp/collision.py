@@ -237,7 +237,7 @@ class CollisionModel:
     def model_args(self) -> list:
         """Frame and sphere tables in kernel argument order."""
         t = self.tables
-        return [*t.frame_args, self.sph_frame, self.sph_pos, self.sph_rad, self.bound_pos,
+        return [t.frame_struct, self.sph_frame, self.sph_pos, self.sph_rad, self.bound_pos,
                 self.bound_rad, self.fpair_a, self.fpair_b, self.fpair_start, self.ent_sphere,
                 self.ent_start, self.pair_b]
 

@@ -9,11 +9,17 @@ from __future__ import annotations
 import dataclasses
 import weakref
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import warp as wp
 
+from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.model import RobotModel
+
+#: the fields of ``kernels.fk.FrameTables`` (attributes of :class:`KinematicsTables`)
+_FRAME_FIELDS = ("order", "parent", "is_dh", "prismatic", "fixed_rot", "fixed_pos", "dh0",
+                 "trig", "cpl_start", "cpl_joint", "cpl_coef")
 
 _SCALARS = {np.dtype(np.float32): wp.float32, np.dtype(np.float64): wp.float64}
 
@@ -60,10 +66,15 @@ class KinematicsTables:
     static_idx: wp.array  # (n_static,) int32 static frame indices
 
     @property
-    def frame_args(self) -> list:
-        """Model arguments of the FK kernel, in order."""
-        return [self.order, self.parent, self.is_dh, self.prismatic, self.fixed_rot,
-                self.fixed_pos, self.dh0, self.trig, self.cpl_start, self.cpl_joint, self.cpl_coef]
+    def frame_struct(self) -> Any:
+        """The frame tables as one kernel argument (``kernels.fk.FrameTables``; cached)."""
+        st = self.__dict__.get("_frame_struct")
+        if st is None:
+            st = fk_kernels(self.scalar).FrameTables()
+            for name in _FRAME_FIELDS:
+                setattr(st, name, getattr(self, name))
+            self.__dict__["_frame_struct"] = st
+        return st
 
     def chain(self, frame: int) -> wp.array:
         """Frames from the root to ``frame`` as an int32 device array (cached)."""

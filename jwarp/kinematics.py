@@ -152,14 +152,14 @@ def launch_fk(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None 
         if frames is None:
             frames = wp.empty((n, 4, 4, B), dtype=t.scalar, device=t.device).transpose((3, 0, 1, 2))
         wp.launch(k.fk_components, dim=B, inputs=[q, rho, stride, int(dh is not None),
-                                                  *t.frame_args], outputs=[frames], device=t.device)
+                                                  t.frame_struct], outputs=[frames], device=t.device)
         return frames
     if frames is None:
         if frame_major:
             frames = wp.empty((n, B), dtype=k.mat44, device=t.device).transpose()
         else:
             frames = wp.empty((B, n), dtype=k.mat44, device=t.device, requires_grad=q.requires_grad)
-    wp.launch(k.fk, dim=B, inputs=[q, rho, stride, int(dh is not None), *t.frame_args],
+    wp.launch(k.fk, dim=B, inputs=[q, rho, stride, int(dh is not None), t.frame_struct],
               outputs=[frames], device=t.device)
     return frames
 
@@ -179,8 +179,8 @@ def jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any
     rho, stride = (t.dh0_3d, 0) if dh is None else _rows(dh, model, batch, t, "dh", 5)
     jac = wp.empty((batch.size, 6, model.n_dof), dtype=t.scalar, device=t.device)
     wp.launch(k.jacobian, dim=batch.size,
-              inputs=[batch.array, rho, stride, int(dh is not None), pt, t.chain(fi),
-                      *t.frame_args[2:]], outputs=[jac], device=t.device)
+              inputs=[batch.array, rho, stride, int(dh is not None), pt, t.frame_struct,
+                      t.chain(fi)], outputs=[jac], device=t.device)
     return to_output(jac, batch, (6, model.n_dof))
 
 
@@ -199,8 +199,8 @@ def jacobian_dh(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: 
     rho, stride = (t.dh0_3d, 0) if dh is None else _rows(dh, model, batch, t, "dh", 5)
     jac = wp.zeros((batch.size, 6, model.n_frames, 5), dtype=t.scalar, device=t.device)
     wp.launch(k.jacobian_dh, dim=batch.size,
-              inputs=[batch.array, rho, stride, int(dh is not None), pt, t.chain(fi),
-                      *t.frame_args[2:]], outputs=[jac], device=t.device)
+              inputs=[batch.array, rho, stride, int(dh is not None), pt, t.frame_struct,
+                      t.chain(fi)], outputs=[jac], device=t.device)
     return to_output(jac, batch, (6, model.n_frames, 5))
 
 
@@ -279,7 +279,7 @@ class _ElasticLaunch:
         wp.launch(self.k.elastic_step, dim=B,
                   inputs=[self.q, rho_arr, stride, use, self.rho0[0], self.rho0[1],
                           self.kappa[0], self.kappa[1], self.lam, self.gravity,
-                          int(self.write_tau), int(moments.shape[1] > 1), *t.frame_args, t.mass, t.mass_com,
+                          int(self.write_tau), int(moments.shape[1] > 1), t.frame_struct, t.mass, t.mass_com,
                           t.dh_info],
                   outputs=[frames, moments, axes, rho_out, self.tau, delta], device=t.device)
         return frames, rho_out, delta

@@ -215,17 +215,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         eps: scalar,
         want_grad: int,
         # Model:
-        order: wp.array(dtype=wp.int32),
-        parent: wp.array(dtype=wp.int32),
-        is_dh: wp.array(dtype=wp.int32),
-        prismatic: wp.array(dtype=wp.int32),
-        fixed_rot: wp.array(dtype=mat33),
-        fixed_pos: wp.array(dtype=vec3),
-        dh0: wp.array2d(dtype=scalar),
-        trig: wp.array(dtype=vec4),
-        cpl_start: wp.array(dtype=wp.int32),
-        cpl_joint: wp.array(dtype=wp.int32),
-        cpl_coef: wp.array(dtype=scalar),
+        model: fk.FrameTables,
         sph_frame: wp.array(dtype=wp.int32),
         sph_pos: wp.array(dtype=vec3),
         sph_rad: wp.array(dtype=scalar),
@@ -251,12 +241,10 @@ def kernels(scalar: type) -> SimpleNamespace:
         grad[b, :] = d cost / d q_b (rho fixed). Scratch: frames (N, n_frames),
         xs (N, S), force, moment and bounding-sphere centres bc (N, n_frames)."""
         b = wp.tid()
-        nf = order.shape[0]
+        nf = model.order.shape[0]
         for k in range(nf):
-            i = order[k]
-            fk.write_frame(b, i, q, rho, rho_stride, use_rho, parent, is_dh, prismatic,
-                           fixed_rot, fixed_pos, dh0, trig, cpl_start, cpl_joint, cpl_coef,
-                           frames)
+            i = model.order[k]
+            fk.write_frame(model, b, i, q, rho, rho_stride, use_rho, frames)
             if want_grad != 0:
                 force[b, i] = vec3(zero, zero, zero)
                 moment[b, i] = vec3(zero, zero, zero)
@@ -321,24 +309,24 @@ def kernels(scalar: type) -> SimpleNamespace:
             if hit != 0:
                 # subtree sums, leaves to root (children follow parents in ``order``)
                 for kk in range(nf):
-                    i = order[nf - 1 - kk]
-                    pi = parent[i]
+                    i = model.order[nf - 1 - kk]
+                    pi = model.parent[i]
                     if pi >= 0:
                         force[b, pi] = force[b, pi] + force[b, i]
                         moment[b, pi] = moment[b, pi] + moment[b, i]
                 for i in range(nf):
-                    m0 = cpl_start[i]
-                    m1 = cpl_start[i + 1]
+                    m0 = model.cpl_start[i]
+                    m1 = model.cpl_start[i + 1]
                     if m1 > m0:
                         T = frames[b, i]
                         z = vec3(T[0, 2], T[1, 2], T[2, 2])
                         F = force[b, i]
                         gi = wp.dot(z, F)
-                        if prismatic[i] == 0:
+                        if model.prismatic[i] == 0:
                             gi = wp.dot(z, moment[b, i] - wp.cross(unpack_pos(T), F))
                         for m in range(m0, m1):
-                            jm = cpl_joint[m]
-                            grad[b, jm] = grad[b, jm] + cpl_coef[m] * gi
+                            jm = model.cpl_joint[m]
+                            grad[b, jm] = grad[b, jm] + model.cpl_coef[m] * gi
 
     @wp.kernel(module="unique", enable_backward=False)
     def distance_kernel(
@@ -357,17 +345,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         write_spheres: int,
         write_pairs: int,
         # Model:
-        order: wp.array(dtype=wp.int32),
-        parent: wp.array(dtype=wp.int32),
-        is_dh: wp.array(dtype=wp.int32),
-        prismatic: wp.array(dtype=wp.int32),
-        fixed_rot: wp.array(dtype=mat33),
-        fixed_pos: wp.array(dtype=vec3),
-        dh0: wp.array2d(dtype=scalar),
-        trig: wp.array(dtype=vec4),
-        cpl_start: wp.array(dtype=wp.int32),
-        cpl_joint: wp.array(dtype=wp.int32),
-        cpl_coef: wp.array(dtype=scalar),
+        model: fk.FrameTables,
         sph_frame: wp.array(dtype=wp.int32),
         sph_pos: wp.array(dtype=vec3),
         sph_rad: wp.array(dtype=scalar),
@@ -392,11 +370,9 @@ def kernels(scalar: type) -> SimpleNamespace:
         ``write_spheres``), pair_dist[b, p] = |x_a - x_b| - r_a - r_b (if ``write_pairs``),
         min_dist[b] = [min over spheres, min over pairs] (``far`` where none)."""
         b = wp.tid()
-        nf = order.shape[0]
+        nf = model.order.shape[0]
         for k in range(nf):
-            fk.write_frame(b, order[k], q, rho, rho_stride, use_rho, parent, is_dh, prismatic,
-                           fixed_rot, fixed_pos, dh0, trig, cpl_start, cpl_joint, cpl_coef,
-                           frames)
+            fk.write_frame(model, b, model.order[k], q, rho, rho_stride, use_rho, frames)
         dmin_w = far
         for s in range(sph_frame.shape[0]):
             x = sphere_centre(frames, b, sph_frame[s], sph_pos[s])

@@ -131,17 +131,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         write_tau: int,
         scratch_stride: int,
         # Model:
-        order: wp.array(dtype=wp.int32),
-        parent: wp.array(dtype=wp.int32),
-        is_dh: wp.array(dtype=wp.int32),
-        prismatic: wp.array(dtype=wp.int32),
-        fixed_rot: wp.array(dtype=mat33),
-        fixed_pos: wp.array(dtype=vec3),
-        dh0: wp.array2d(dtype=scalar),
-        trig: wp.array(dtype=fk.vec4),
-        cpl_start: wp.array(dtype=wp.int32),
-        cpl_joint: wp.array(dtype=wp.int32),
-        cpl_coef: wp.array(dtype=scalar),
+        model: fk.FrameTables,
         mass: wp.array(dtype=scalar),
         mass_com: wp.array(dtype=vec3),
         dh_info: wp.array(dtype=wp.vec4i),
@@ -164,11 +154,9 @@ def kernels(scalar: type) -> SimpleNamespace:
         sb = b * scratch_stride
         acc = vec4(zero, zero, zero, zero)
         prefix[0, sb] = acc
-        for k in range(order.shape[0]):
-            i = order[k]
-            R, p, ax = fk.write_frame(b, i, q, rho, rho_stride, use_rho, parent, is_dh,
-                                      prismatic, fixed_rot, fixed_pos, dh0, trig, cpl_start,
-                                      cpl_joint, cpl_coef, frames)
+        for k in range(model.order.shape[0]):
+            i = model.order[k]
+            R, p, ax = fk.write_frame(model, b, i, q, rho, rho_stride, use_rho, frames)
             axes[i, sb] = ax
             m = mass[i]
             if m != zero:  # a fixed pattern per robot: predicted

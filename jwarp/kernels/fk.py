@@ -40,13 +40,27 @@ def kernels(scalar: type) -> SimpleNamespace:
     zero = scalar(0.0)
     one = scalar(1.0)
 
+    @wp.struct
+    class FrameTables:
+        """The frame tables of one robot (see the module docstring), one kernel argument."""
+
+        order: wp.array(dtype=wp.int32)
+        parent: wp.array(dtype=wp.int32)
+        is_dh: wp.array(dtype=wp.int32)
+        prismatic: wp.array(dtype=wp.int32)
+        fixed_rot: wp.array(dtype=mat33)
+        fixed_pos: wp.array(dtype=vec3)
+        dh0: wp.array2d(dtype=scalar)
+        trig: wp.array(dtype=vec4)
+        cpl_start: wp.array(dtype=wp.int32)
+        cpl_joint: wp.array(dtype=wp.int32)
+        cpl_coef: wp.array(dtype=scalar)
+
     @wp.func
-    def joint_value(i: int, b: int, q: wp.array2d(dtype=scalar),
-                    cpl_start: wp.array(dtype=wp.int32), cpl_joint: wp.array(dtype=wp.int32),
-                    cpl_coef: wp.array(dtype=scalar)) -> scalar:
+    def joint_value(model: FrameTables, i: int, b: int, q: wp.array2d(dtype=scalar)) -> scalar:
         v = zero
-        for k in range(cpl_start[i], cpl_start[i + 1]):
-            v += cpl_coef[k] * q[b, cpl_joint[k]]
+        for k in range(model.cpl_start[i], model.cpl_start[i + 1]):
+            v += model.cpl_coef[k] * q[b, model.cpl_joint[k]]
         return v
 
     @wp.func
@@ -121,23 +135,20 @@ def kernels(scalar: type) -> SimpleNamespace:
             return cos_sin(x)
 
     @wp.func
-    def child_frame(Rp: mat33, pp: vec3, i: int, b: int, qi: scalar,
-                    use_rho: int, rho: wp.array3d(dtype=scalar), rho_stride: int,
-                    is_dh: wp.array(dtype=wp.int32), prismatic: wp.array(dtype=wp.int32),
-                    fixed_rot: wp.array(dtype=mat33), fixed_pos: wp.array(dtype=vec3),
-                    dh0: wp.array2d(dtype=scalar), trig: wp.array(dtype=vec4)):
+    def child_frame(model: FrameTables, Rp: mat33, pp: vec3, i: int, b: int, qi: scalar,
+                    use_rho: int, rho: wp.array3d(dtype=scalar), rho_stride: int):
         """World rotation and position of frame i from its parent's (Rp, pp), and the
         direction of its ``r`` translation (= its alpha axis, ``Rp Rot_y(beta) e_x``; zero
         for a static frame).
 
         DH frames are composed column by column (Rot_y, Rot_x, Trans_x, Rot_z, Trans_z),
         which costs about half the multiplications of a full 4x4 product."""
-        if is_dh[i] == 0:
-            return Rp * fixed_rot[i], Rp * fixed_pos[i] + pp, vec3(zero, zero, zero)
-        d = dh0[i, 0]
-        theta = dh0[i, 1]
-        r = dh0[i, 2]
-        cs = trig[i]
+        if model.is_dh[i] == 0:
+            return Rp * model.fixed_rot[i], Rp * model.fixed_pos[i] + pp, vec3(zero, zero, zero)
+        d = model.dh0[i, 0]
+        theta = model.dh0[i, 1]
+        r = model.dh0[i, 2]
+        cs = model.trig[i]
         ca = cs[0]
         sa = cs[1]
         cb = cs[2]
@@ -147,9 +158,9 @@ def kernels(scalar: type) -> SimpleNamespace:
             d = rho[rb, i, 0]
             theta = rho[rb, i, 1]
             r = rho[rb, i, 2]
-            ca, sa = cos_sin_near(rho[rb, i, 3], dh0[i, 3], cs[0], cs[1])
-            cb, sb = cos_sin_near(rho[rb, i, 4], dh0[i, 4], cs[2], cs[3])
-        if prismatic[i] != 0:
+            ca, sa = cos_sin_near(rho[rb, i, 3], model.dh0[i, 3], cs[0], cs[1])
+            cb, sb = cos_sin_near(rho[rb, i, 4], model.dh0[i, 4], cs[2], cs[3])
+        if model.prismatic[i] != 0:
             d = d + qi
         else:
             theta = theta + qi
@@ -169,14 +180,10 @@ def kernels(scalar: type) -> SimpleNamespace:
         return wp.matrix_from_cols(m0, m1, n2), p + d * n2, c0  # Trans_z(d)
 
     @wp.func
-    def child_rot_pos(Rp: mat33, pp: vec3, i: int, b: int, qi: scalar,
-                      use_rho: int, rho: wp.array3d(dtype=scalar), rho_stride: int,
-                      is_dh: wp.array(dtype=wp.int32), prismatic: wp.array(dtype=wp.int32),
-                      fixed_rot: wp.array(dtype=mat33), fixed_pos: wp.array(dtype=vec3),
-                      dh0: wp.array2d(dtype=scalar), trig: wp.array(dtype=vec4)):
+    def child_rot_pos(model: FrameTables, Rp: mat33, pp: vec3, i: int, b: int, qi: scalar,
+                      use_rho: int, rho: wp.array3d(dtype=scalar), rho_stride: int):
         """World rotation and position of frame i from its parent's (:func:`child_frame`)."""
-        R, p, ax = child_frame(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                               fixed_rot, fixed_pos, dh0, trig)
+        R, p, ax = child_frame(model, Rp, pp, i, b, qi, use_rho, rho, rho_stride)
         return R, p
 
     @wp.func
@@ -195,25 +202,20 @@ def kernels(scalar: type) -> SimpleNamespace:
         return vec3(T[0, 3], T[1, 3], T[2, 3])
 
     @wp.func
-    def write_frame(b: int, i: int, q: wp.array2d(dtype=scalar), rho: wp.array3d(dtype=scalar),
-                rho_stride: int, use_rho: int, parent: wp.array(dtype=wp.int32),
-                is_dh: wp.array(dtype=wp.int32), prismatic: wp.array(dtype=wp.int32),
-                fixed_rot: wp.array(dtype=mat33), fixed_pos: wp.array(dtype=vec3),
-                dh0: wp.array2d(dtype=scalar), trig: wp.array(dtype=vec4),
-                cpl_start: wp.array(dtype=wp.int32), cpl_joint: wp.array(dtype=wp.int32),
-                cpl_coef: wp.array(dtype=scalar), frames: wp.array2d(dtype=mat44)):
+    def write_frame(model: FrameTables, b: int, i: int, q: wp.array2d(dtype=scalar),
+                    rho: wp.array3d(dtype=scalar), rho_stride: int, use_rho: int,
+                    frames: wp.array2d(dtype=mat44)):
         """frames[b, i] from its parent's transform (already written) and the joint values;
         returns the frame's world rotation, position and alpha axis (:func:`child_frame`)."""
-        qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
+        qi = joint_value(model, i, b, q)
         Rp = wp.identity(3, dtype=scalar)
         pp = vec3(zero, zero, zero)
-        pi = parent[i]
+        pi = model.parent[i]
         if pi >= 0:
             Tp = frames[b, pi]
             Rp = unpack_rot(Tp)
             pp = unpack_pos(Tp)
-        R, p, ax = child_frame(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                               fixed_rot, fixed_pos, dh0, trig)
+        R, p, ax = child_frame(model, Rp, pp, i, b, qi, use_rho, rho, rho_stride)
         frames[b, i] = pack(R, p)
         return R, p, ax
 
@@ -225,26 +227,15 @@ def kernels(scalar: type) -> SimpleNamespace:
         rho_stride: int,
         use_rho: int,
         # Model:
-        order: wp.array(dtype=wp.int32),
-        parent: wp.array(dtype=wp.int32),
-        is_dh: wp.array(dtype=wp.int32),
-        prismatic: wp.array(dtype=wp.int32),
-        fixed_rot: wp.array(dtype=mat33),
-        fixed_pos: wp.array(dtype=vec3),
-        dh0: wp.array2d(dtype=scalar),
-        trig: wp.array(dtype=vec4),
-        cpl_start: wp.array(dtype=wp.int32),
-        cpl_joint: wp.array(dtype=wp.int32),
-        cpl_coef: wp.array(dtype=scalar),
+        model: FrameTables,
         # Data out:
         frames: wp.array2d(dtype=mat44),
     ):
         """World transform of every frame: frames[b, i] (4x4)."""
         b = wp.tid()
-        for k in range(order.shape[0]):
-            i = order[k]
-            write_frame(b, i, q, rho, rho_stride, use_rho, parent, is_dh, prismatic, fixed_rot,
-                        fixed_pos, dh0, trig, cpl_start, cpl_joint, cpl_coef, frames)
+        for k in range(model.order.shape[0]):
+            i = model.order[k]
+            write_frame(model, b, i, q, rho, rho_stride, use_rho, frames)
 
     @wp.kernel(module="unique")
     def fk_components_kernel(
@@ -254,17 +245,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         rho_stride: int,
         use_rho: int,
         # Model:
-        order: wp.array(dtype=wp.int32),
-        parent: wp.array(dtype=wp.int32),
-        is_dh: wp.array(dtype=wp.int32),
-        prismatic: wp.array(dtype=wp.int32),
-        fixed_rot: wp.array(dtype=mat33),
-        fixed_pos: wp.array(dtype=vec3),
-        dh0: wp.array2d(dtype=scalar),
-        trig: wp.array(dtype=vec4),
-        cpl_start: wp.array(dtype=wp.int32),
-        cpl_joint: wp.array(dtype=wp.int32),
-        cpl_coef: wp.array(dtype=scalar),
+        model: FrameTables,
         # Data out:
         frames: wp.array4d(dtype=scalar),
     ):
@@ -272,19 +253,18 @@ def kernels(scalar: type) -> SimpleNamespace:
         strides: with the batch index fastest in memory (a component-major view) every
         store of a warp is one coalesced 128-byte line on CUDA."""
         b = wp.tid()
-        for k in range(order.shape[0]):
-            i = order[k]
-            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
+        for k in range(model.order.shape[0]):
+            i = model.order[k]
+            qi = joint_value(model, i, b, q)
             Rp = wp.identity(3, dtype=scalar)
             pp = vec3(zero, zero, zero)
-            pi = parent[i]
+            pi = model.parent[i]
             if pi >= 0:
                 Rp = mat33(frames[b, pi, 0, 0], frames[b, pi, 0, 1], frames[b, pi, 0, 2],
                            frames[b, pi, 1, 0], frames[b, pi, 1, 1], frames[b, pi, 1, 2],
                            frames[b, pi, 2, 0], frames[b, pi, 2, 1], frames[b, pi, 2, 2])
                 pp = vec3(frames[b, pi, 0, 3], frames[b, pi, 1, 3], frames[b, pi, 2, 3])
-            R, p = child_rot_pos(Rp, pp, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                 fixed_rot, fixed_pos, dh0, trig)
+            R, p = child_rot_pos(model, Rp, pp, i, b, qi, use_rho, rho, rho_stride)
             for r in range(3):
                 for c in range(3):
                     frames[b, i, r, c] = R[r, c]
@@ -301,16 +281,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         use_rho: int,
         point: vec3,
         # Model:
+        model: FrameTables,
         chain: wp.array(dtype=wp.int32),
-        is_dh: wp.array(dtype=wp.int32),
-        prismatic: wp.array(dtype=wp.int32),
-        fixed_rot: wp.array(dtype=mat33),
-        fixed_pos: wp.array(dtype=vec3),
-        dh0: wp.array2d(dtype=scalar),
-        trig: wp.array(dtype=vec4),
-        cpl_start: wp.array(dtype=wp.int32),
-        cpl_joint: wp.array(dtype=wp.int32),
-        cpl_coef: wp.array(dtype=scalar),
         # Data out:
         jac: wp.array3d(dtype=scalar),
     ):
@@ -328,28 +300,26 @@ def kernels(scalar: type) -> SimpleNamespace:
         p = vec3(zero, zero, zero)
         for k in range(chain.shape[0]):
             i = chain[k]
-            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            R, p = child_rot_pos(R, p, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                 fixed_rot, fixed_pos, dh0, trig)
+            qi = joint_value(model, i, b, q)
+            R, p = child_rot_pos(model, R, p, i, b, qi, use_rho, rho, rho_stride)
         target = R * point + p
         # pass 2: joint axes (z of each driven frame, through its origin)
         R = wp.identity(3, dtype=scalar)
         p = vec3(zero, zero, zero)
         for k in range(chain.shape[0]):
             i = chain[k]
-            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            R, p = child_rot_pos(R, p, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                 fixed_rot, fixed_pos, dh0, trig)
-            if cpl_start[i + 1] > cpl_start[i]:
+            qi = joint_value(model, i, b, q)
+            R, p = child_rot_pos(model, R, p, i, b, qi, use_rho, rho, rho_stride)
+            if model.cpl_start[i + 1] > model.cpl_start[i]:
                 z = vec3(R[0, 2], R[1, 2], R[2, 2])
                 lin = wp.cross(z, target - p)
                 ang = z
-                if prismatic[i] != 0:
+                if model.prismatic[i] != 0:
                     lin = z
                     ang = vec3(zero, zero, zero)
-                for c in range(cpl_start[i], cpl_start[i + 1]):
-                    j = cpl_joint[c]
-                    w = cpl_coef[c]
+                for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
+                    j = model.cpl_joint[c]
+                    w = model.cpl_coef[c]
                     for r in range(3):
                         jac[b, r, j] = jac[b, r, j] + w * lin[r]
                         jac[b, r + 3, j] = jac[b, r + 3, j] + w * ang[r]
@@ -363,16 +333,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         use_rho: int,
         point: vec3,
         # Model:
+        model: FrameTables,
         chain: wp.array(dtype=wp.int32),
-        is_dh: wp.array(dtype=wp.int32),
-        prismatic: wp.array(dtype=wp.int32),
-        fixed_rot: wp.array(dtype=mat33),
-        fixed_pos: wp.array(dtype=vec3),
-        dh0: wp.array2d(dtype=scalar),
-        trig: wp.array(dtype=vec4),
-        cpl_start: wp.array(dtype=wp.int32),
-        cpl_joint: wp.array(dtype=wp.int32),
-        cpl_coef: wp.array(dtype=scalar),
         # Data out:
         jac: wp.array4d(dtype=scalar),
     ):
@@ -384,9 +346,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         p = vec3(zero, zero, zero)
         for k in range(chain.shape[0]):
             i = chain[k]
-            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            R, p = child_rot_pos(R, p, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                 fixed_rot, fixed_pos, dh0, trig)
+            qi = joint_value(model, i, b, q)
+            R, p = child_rot_pos(model, R, p, i, b, qi, use_rho, rho, rho_stride)
         target = R * point + p
         R = wp.identity(3, dtype=scalar)
         p = vec3(zero, zero, zero)
@@ -394,11 +355,10 @@ def kernels(scalar: type) -> SimpleNamespace:
             i = chain[k]
             Rp = R
             pp = p
-            qi = joint_value(i, b, q, cpl_start, cpl_joint, cpl_coef)
-            R, p = child_rot_pos(R, p, i, b, qi, use_rho, rho, rho_stride, is_dh, prismatic,
-                                 fixed_rot, fixed_pos, dh0, trig)
-            if is_dh[i] != 0:
-                beta = dh0[i, 4]
+            qi = joint_value(model, i, b, q)
+            R, p = child_rot_pos(model, R, p, i, b, qi, use_rho, rho, rho_stride)
+            if model.is_dh[i] != 0:
+                beta = model.dh0[i, 4]
                 if use_rho != 0:
                     beta = rho[b * rho_stride, i, 4]
                 z = vec3(R[0, 2], R[1, 2], R[2, 2])
@@ -421,7 +381,7 @@ def kernels(scalar: type) -> SimpleNamespace:
                     jac[b, r + 3, i, 4] = ax_beta[r]
 
     return SimpleNamespace(
-        scalar=scalar, vec3=vec3, mat33=mat33, mat44=mat44,
+        scalar=scalar, FrameTables=FrameTables, vec3=vec3, mat33=mat33, mat44=mat44,
         vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, joint_value=joint_value, write_frame=write_frame, child_frame=child_frame, child_rot_pos=child_rot_pos, pack=pack,
         unpack_rot=unpack_rot, unpack_pos=unpack_pos,
         fk=fk_kernel, fk_components=fk_components_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,

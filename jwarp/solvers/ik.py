@@ -242,11 +242,11 @@ class IKObjective:
             self._rho_used = None if self.rho is None else self.rho[0]
             self.rho = (rho_new, 1)
         else:
-            self._launch(("fk",), self.fk.fk, [self.q, t.dh0_3d, 0, 0, *t.frame_args],
+            self._launch(("fk",), self.fk.fk, [self.q, t.dh0_3d, 0, 0, t.frame_struct],
                          [self.frames])
             jac_rho = (t.dh0_3d, 0, 0)
         self._launch(("jac", id(jac_rho[0]), jac_rho[2]), self.fk.jacobian,
-                     [self.q, *jac_rho, self.point, t.chain(self.frame), *t.frame_args[2:]],
+                     [self.q, *jac_rho, self.point, t.frame_struct, t.chain(self.frame)],
                      [self.jac])
         w = self.weights
         self._launch(("pose", w.position, w.rotation), self.kk.pose_error,
