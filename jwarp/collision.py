@@ -236,10 +236,14 @@ class CollisionModel:
     @property
     def model_args(self) -> list:
         """Frame and sphere tables in kernel argument order."""
-        t = self.tables
-        return [t.frame_struct, self.sph_frame, self.sph_pos, self.sph_rad, self.bound_pos,
-                self.bound_rad, self.fpair_a, self.fpair_b, self.fpair_start, self.ent_sphere,
-                self.ent_start, self.pair_b]
+        st = self.__dict__.get("_sphere_struct")
+        if st is None:
+            st = self.k.SphereTables()
+            for name in ("sph_frame", "sph_pos", "sph_rad", "bound_pos", "bound_rad", "fpair_a",
+                         "fpair_b", "fpair_start", "ent_sphere", "ent_start", "pair_b"):
+                setattr(st, name, getattr(self, name))
+            self.__dict__["_sphere_struct"] = st
+        return [self.tables.frame_struct, st]
 
     def scratch(self, n: int) -> tuple[wp.array, ...]:
         """Scratch (frames, xs, force, moment, bc) for at least ``n`` configurations; grown on

@@ -89,6 +89,22 @@ def kernels(scalar: type) -> SimpleNamespace:
     half = scalar(0.5)
     unpack_rot, unpack_pos = fk.unpack_rot, fk.unpack_pos
 
+    @wp.struct
+    class SphereTables:
+        """The collision tables of one robot (see the module docstring), one kernel argument."""
+
+        sph_frame: wp.array(dtype=wp.int32)
+        sph_pos: wp.array(dtype=vec3)
+        sph_rad: wp.array(dtype=scalar)
+        bound_pos: wp.array(dtype=vec3)
+        bound_rad: wp.array(dtype=scalar)
+        fpair_a: wp.array(dtype=wp.int32)
+        fpair_b: wp.array(dtype=wp.int32)
+        fpair_start: wp.array(dtype=wp.int32)
+        ent_sphere: wp.array(dtype=wp.int32)
+        ent_start: wp.array(dtype=wp.int32)
+        pair_b: wp.array(dtype=wp.int32)
+
     @wp.func
     def smooth_clip(d: scalar, eps: scalar):
         """Smooth clip c(d) of eq. 3.10 and its derivative c'(d):
@@ -216,17 +232,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         want_grad: int,
         # Model:
         model: fk.FrameTables,
-        sph_frame: wp.array(dtype=wp.int32),
-        sph_pos: wp.array(dtype=vec3),
-        sph_rad: wp.array(dtype=scalar),
-        bound_pos: wp.array(dtype=vec3),
-        bound_rad: wp.array(dtype=scalar),
-        fpair_a: wp.array(dtype=wp.int32),
-        fpair_b: wp.array(dtype=wp.int32),
-        fpair_start: wp.array(dtype=wp.int32),
-        ent_sphere: wp.array(dtype=wp.int32),
-        ent_start: wp.array(dtype=wp.int32),
-        pair_b: wp.array(dtype=wp.int32),
+        spheres: SphereTables,
         # Scratch:
         frames: wp.array2d(dtype=mat44),
         xs: wp.array2d(dtype=vec3),
@@ -250,15 +256,15 @@ def kernels(scalar: type) -> SimpleNamespace:
                 moment[b, i] = vec3(zero, zero, zero)
         hit = int(0)
         u_world = zero
-        for s in range(sph_frame.shape[0]):
-            fr = sph_frame[s]
-            x = sphere_centre(frames, b, fr, sph_pos[s])
+        for s in range(spheres.sph_frame.shape[0]):
+            fr = spheres.sph_frame[s]
+            x = sphere_centre(frames, b, fr, spheres.sph_pos[s])
             xs[b, s] = x
             if w_world != zero:
                 # cells whose corners all keep eps from the sphere cost nothing: skip them
-                if sdf_lower_bound(cellmin, origin, inv_h, dim, x) - sph_rad[s] < eps:
+                if sdf_lower_bound(cellmin, origin, inv_h, dim, x) - spheres.sph_rad[s] < eps:
                     d, g = sdf_sample(grid, origin, inv_h, dim, x)
-                    c, dc = smooth_clip(d - sph_rad[s], eps)
+                    c, dc = smooth_clip(d - spheres.sph_rad[s], eps)
                     u_world += c
                     if want_grad != 0 and dc != zero:
                         f = (w_world * dc) * g
@@ -268,27 +274,27 @@ def kernels(scalar: type) -> SimpleNamespace:
         u_self = zero
         if w_self != zero:
             for i in range(nf):
-                if bound_rad[i] >= zero:
-                    bc[b, i] = sphere_centre(frames, b, i, bound_pos[i])
-            for fp in range(fpair_a.shape[0]):
-                fa = fpair_a[fp]
-                fb = fpair_b[fp]
+                if spheres.bound_rad[i] >= zero:
+                    bc[b, i] = sphere_centre(frames, b, i, spheres.bound_pos[i])
+            for fp in range(spheres.fpair_a.shape[0]):
+                fa = spheres.fpair_a[fp]
+                fb = spheres.fpair_b[fp]
                 ca = bc[b, fa]
                 cb = bc[b, fb]
-                rb_eps = bound_rad[fb] + eps
-                reach = bound_rad[fa] + rb_eps
+                rb_eps = spheres.bound_rad[fb] + eps
+                reach = spheres.bound_rad[fa] + rb_eps
                 if wp.length_sq(ca - cb) < reach * reach:
-                    for e in range(fpair_start[fp], fpair_start[fp + 1]):
-                        sa = ent_sphere[e]
+                    for e in range(spheres.fpair_start[fp], spheres.fpair_start[fp + 1]):
+                        sa = spheres.ent_sphere[e]
                         xa = xs[b, sa]
-                        ra = sph_rad[sa]
+                        ra = spheres.sph_rad[sa]
                         ra_reach = ra + rb_eps
                         if wp.length_sq(xa - cb) < ra_reach * ra_reach:
-                            for p in range(ent_start[e], ent_start[e + 1]):
-                                sb = pair_b[p]
+                            for p in range(spheres.ent_start[e], spheres.ent_start[e + 1]):
+                                sb = spheres.pair_b[p]
                                 xb = xs[b, sb]
                                 diff = xa - xb
-                                rsum = ra + sph_rad[sb]
+                                rsum = ra + spheres.sph_rad[sb]
                                 lim = rsum + eps
                                 dsq = wp.length_sq(diff)
                                 if dsq < lim * lim:
@@ -346,17 +352,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         write_pairs: int,
         # Model:
         model: fk.FrameTables,
-        sph_frame: wp.array(dtype=wp.int32),
-        sph_pos: wp.array(dtype=vec3),
-        sph_rad: wp.array(dtype=scalar),
-        bound_pos: wp.array(dtype=vec3),
-        bound_rad: wp.array(dtype=scalar),
-        fpair_a: wp.array(dtype=wp.int32),
-        fpair_b: wp.array(dtype=wp.int32),
-        fpair_start: wp.array(dtype=wp.int32),
-        ent_sphere: wp.array(dtype=wp.int32),
-        ent_start: wp.array(dtype=wp.int32),
-        pair_b: wp.array(dtype=wp.int32),
+        spheres: SphereTables,
         far: scalar,
         # Scratch:
         frames: wp.array2d(dtype=mat44),
@@ -374,45 +370,45 @@ def kernels(scalar: type) -> SimpleNamespace:
         for k in range(nf):
             fk.write_frame(model, b, model.order[k], q, rho, rho_stride, use_rho, frames)
         dmin_w = far
-        for s in range(sph_frame.shape[0]):
-            x = sphere_centre(frames, b, sph_frame[s], sph_pos[s])
+        for s in range(spheres.sph_frame.shape[0]):
+            x = sphere_centre(frames, b, spheres.sph_frame[s], spheres.sph_pos[s])
             xs[b, s] = x
             if use_world != 0:
                 look = write_spheres
                 if look == 0:  # only the minimum: skip cells that cannot lower it
-                    if sdf_lower_bound(cellmin, origin, inv_h, dim, x) - sph_rad[s] < dmin_w:
+                    if sdf_lower_bound(cellmin, origin, inv_h, dim, x) - spheres.sph_rad[s] < dmin_w:
                         look = 1
                 if look != 0:
                     d, g = sdf_sample(grid, origin, inv_h, dim, x)
-                    d = d - sph_rad[s]
+                    d = d - spheres.sph_rad[s]
                     dmin_w = wp.min(dmin_w, d)
                     if write_spheres != 0:
                         sphere_dist[b, s] = d
         dmin_s = far
         if use_self != 0:
-            for fp in range(fpair_a.shape[0]):
-                fa = fpair_a[fp]
-                fb = fpair_b[fp]
+            for fp in range(spheres.fpair_a.shape[0]):
+                fa = spheres.fpair_a[fp]
+                fb = spheres.fpair_b[fp]
                 check = write_pairs
                 if check == 0:  # broad phase: skip if the bounding spheres are farther apart
-                    ca = sphere_centre(frames, b, fa, bound_pos[fa])
-                    cb = sphere_centre(frames, b, fb, bound_pos[fb])
-                    if wp.length(ca - cb) - bound_rad[fa] - bound_rad[fb] < dmin_s:
+                    ca = sphere_centre(frames, b, fa, spheres.bound_pos[fa])
+                    cb = sphere_centre(frames, b, fb, spheres.bound_pos[fb])
+                    if wp.length(ca - cb) - spheres.bound_rad[fa] - spheres.bound_rad[fb] < dmin_s:
                         check = 1
                 if check != 0:
-                    cb = sphere_centre(frames, b, fb, bound_pos[fb])
-                    for e in range(fpair_start[fp], fpair_start[fp + 1]):
-                        sa = ent_sphere[e]
+                    cb = sphere_centre(frames, b, fb, spheres.bound_pos[fb])
+                    for e in range(spheres.fpair_start[fp], spheres.fpair_start[fp + 1]):
+                        sa = spheres.ent_sphere[e]
                         xa = xs[b, sa]
-                        ra = sph_rad[sa]
+                        ra = spheres.sph_rad[sa]
                         look = write_pairs
                         if look == 0:  # skip spheres whose distance to b's bound cannot lower it
-                            if wp.length(xa - cb) - ra - bound_rad[fb] < dmin_s:
+                            if wp.length(xa - cb) - ra - spheres.bound_rad[fb] < dmin_s:
                                 look = 1
                         if look != 0:
-                            for p in range(ent_start[e], ent_start[e + 1]):
-                                sb = pair_b[p]
-                                d = wp.length(xa - xs[b, sb]) - ra - sph_rad[sb]
+                            for p in range(spheres.ent_start[e], spheres.ent_start[e + 1]):
+                                sb = spheres.pair_b[p]
+                                d = wp.length(xa - xs[b, sb]) - ra - spheres.sph_rad[sb]
                                 dmin_s = wp.min(dmin_s, d)
                                 if write_pairs != 0:
                                     pair_dist[b, p] = d
@@ -492,7 +488,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         grad[p] = g
 
     return SimpleNamespace(
-        scalar=scalar, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
+        scalar=scalar, SphereTables=SphereTables, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
         sphere_centre=sphere_centre, cost=cost_kernel, distance=distance_kernel,
         world_cost_spheres=world_cost_spheres, self_cost_pairs=self_cost_pairs,
         sdf_query=sdf_query_kernel,
