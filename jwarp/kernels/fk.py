@@ -187,6 +187,20 @@ def kernels(scalar: type) -> SimpleNamespace:
         return R, p
 
     @wp.func
+    def chain_point(model: FrameTables, chain: wp.array(dtype=wp.int32), b: int,
+                    q: wp.array2d(dtype=scalar), use_rho: int, rho: wp.array3d(dtype=scalar),
+                    rho_stride: int, point: vec3) -> vec3:
+        """World position of ``point`` (coordinates of the last frame of ``chain``, the
+        frames from the root to it), walking only that chain."""
+        R = wp.identity(3, dtype=scalar)
+        p = vec3(zero, zero, zero)
+        for k in range(chain.shape[0]):
+            i = chain[k]
+            qi = joint_value(model, i, b, q)
+            R, p = child_rot_pos(model, R, p, i, b, qi, use_rho, rho, rho_stride)
+        return R * point + p
+
+    @wp.func
     def pack(R: mat33, p: vec3) -> mat44:
         return mat44(R[0, 0], R[0, 1], R[0, 2], p[0],
                      R[1, 0], R[1, 1], R[1, 2], p[1],
@@ -295,14 +309,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         for r in range(6):
             for j in range(n_dof):
                 jac[b, r, j] = zero
-        # pass 1: target point in world coordinates
-        R = wp.identity(3, dtype=scalar)
-        p = vec3(zero, zero, zero)
-        for k in range(chain.shape[0]):
-            i = chain[k]
-            qi = joint_value(model, i, b, q)
-            R, p = child_rot_pos(model, R, p, i, b, qi, use_rho, rho, rho_stride)
-        target = R * point + p
+        target = chain_point(model, chain, b, q, use_rho, rho, rho_stride, point)  # pass 1
         # pass 2: joint axes (z of each driven frame, through its origin)
         R = wp.identity(3, dtype=scalar)
         p = vec3(zero, zero, zero)
@@ -342,13 +349,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         DH rows [d, theta, r, alpha, beta] of every frame (zero off the chain): rows
         [linear; angular] in the base frame. Caller zero-fills ``jac``."""
         b = wp.tid()
-        R = wp.identity(3, dtype=scalar)
-        p = vec3(zero, zero, zero)
-        for k in range(chain.shape[0]):
-            i = chain[k]
-            qi = joint_value(model, i, b, q)
-            R, p = child_rot_pos(model, R, p, i, b, qi, use_rho, rho, rho_stride)
-        target = R * point + p
+        target = chain_point(model, chain, b, q, use_rho, rho, rho_stride, point)
         R = wp.identity(3, dtype=scalar)
         p = vec3(zero, zero, zero)
         for k in range(chain.shape[0]):
