@@ -149,6 +149,11 @@ def launch_fk(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None 
     n = t.robot.n_frames
     rho, stride = dh if dh is not None else (t.dh0_3d, 0)
     if component_major:
+        if frames is not None and (frames.ndim != 4 or frames.dtype != t.scalar
+                                   or tuple(frames.shape) != (B, n, 4, 4)):
+            raise ValueError(f"frames: component_major needs a scalar ({B}, {n}, 4, 4) array "
+                             f"of {t.scalar.__name__}, got shape {tuple(frames.shape)} of "
+                             f"{getattr(frames.dtype, '__name__', frames.dtype)}")
         if frames is None:
             frames = wp.empty((n, 4, 4, B), dtype=t.scalar, device=t.device).transpose((3, 0, 1, 2))
         wp.launch(k.fk_components, dim=B, inputs=[q, rho, stride, int(dh is not None),

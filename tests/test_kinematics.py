@@ -418,3 +418,6 @@ def test_component_major_fk_layout_matches_fk(dtype):
     dh = (wp.array(rho.astype(dtype), device="cpu"), 1)
     np.testing.assert_array_equal(K.launch_fk(t, qa, dh=dh, component_major=True).numpy(),
                                   K.launch_fk(t, qa, dh=dh).numpy())
+    with pytest.raises(ValueError, match="frames: component_major"):
+        K.launch_fk(t, qa, frames=wp.empty((64, 27, 4), dtype=t.scalar, device="cpu"),
+                    component_major=True)

@@ -251,7 +251,7 @@ def kernels(scalar: type) -> SimpleNamespace:
             i = model.order[k]
             write_frame(model, b, i, q, rho, rho_stride, use_rho, frames)
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module="unique", enable_backward=False)
     def fk_components_kernel(
         # Data in:
         q: wp.array2d(dtype=scalar),
@@ -265,7 +265,8 @@ def kernels(scalar: type) -> SimpleNamespace:
     ):
         """:func:`fk_kernel` writing scalars ``frames[b, i, r, c]`` (B, n_frames, 4, 4) of any
         strides: with the batch index fastest in memory (a component-major view) every
-        store of a warp is one coalesced 128-byte line on CUDA."""
+        store of a warp is one coalesced 128-byte line on CUDA. Forward only (no Tape):
+        gradients go through :func:`fk_kernel`."""
         b = wp.tid()
         for k in range(model.order.shape[0]):
             i = model.order[k]
