@@ -37,6 +37,7 @@ from jwarp.kernels import collision as ck
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
+from jwarp.elastic_rows import CompensationRows
 from jwarp.world.sdf import World
 
 __all__ = ["DEFAULT_EPS", "CollisionModel", "collision_model", "collision_cost",
@@ -266,18 +267,38 @@ class CollisionModel:
         return self._scratch
 
     def _rho(self, rho: Any, n: int) -> tuple[wp.array, int, int]:
-        """(rho array, stride, use_rho) for ``rho`` None, (n_frames, 5) or (n, n_frames, 5)."""
+        """(rho array, stride, use_rho) for ``rho`` None, (n_frames, 5) or (n, n_frames, 5)
+        (compensation rows: their per-configuration DH rows)."""
+        if isinstance(rho, CompensationRows):
+            self._check_rows(rho, n)
+            rho = rho.rho()
+        return self._rho_or_rows(rho, n)[:3]
+
+    def _check_rows(self, rows: CompensationRows, n: int) -> None:
+        if rows.N != n or rows.t.robot is not self.robot or rows.rows.dtype != self.scalar \
+                or rows.rows.device != self.device:
+            raise ValueError(f"rho: compensation rows for {rows.N} configurations of "
+                             f"'{rows.t.robot.name}' on {rows.rows.device}, expected {n} of "
+                             f"'{self.robot.name}' on {self.device} in this dtype")
+
+    def _rho_or_rows(self, rho: Any, n: int) -> tuple[wp.array, int, int, int, int]:
+        """(rho array, stride, use_rho, rows per path group, substeps) for ``rho`` None,
+        (n_frames, 5), (n, n_frames, 5) or compensation rows
+        (:class:`jwarp.elastic_rows.CompensationRows`, kept per waypoint)."""
         if rho is None:
-            return self.tables.dh0_3d, 0, 0
+            return self.tables.dh0_3d, 0, 0, 1, 1
         nf = self.robot.n_frames
+        if isinstance(rho, CompensationRows):
+            self._check_rows(rho, n)
+            return (rho.rows, 1, 2, *rho.layout)
         if isinstance(rho, wp.array):
             if rho.dtype != self.scalar:
                 raise TypeError(f"rho: warp array dtype {rho.dtype.__name__} does not match "
                                 f"the kernels' {np.dtype(self.dtype).name}")
             if rho.ndim == 2 and tuple(rho.shape) == (nf, 5):
-                return rho.reshape((1, nf, 5)), 0, 1
+                return rho.reshape((1, nf, 5)), 0, 1, 1, 1
             if rho.ndim == 3 and tuple(rho.shape) == (n, nf, 5):
-                return (rho if rho.device == self.device else rho.to(self.device)), 1, 1
+                return (rho if rho.device == self.device else rho.to(self.device)), 1, 1, 1, 1
             raise ValueError(f"rho: expected shape ({nf}, 5) or ({n}, {nf}, 5), got {tuple(rho.shape)}")
         if hasattr(rho, "detach"):
             rho = rho.detach().cpu().numpy()
@@ -289,7 +310,7 @@ class CollisionModel:
             raise ValueError("rho: contains NaN or inf")
         stride = 1 if a.ndim == 3 else 0
         a = a.reshape(-1, nf, 5).astype(self.dtype)
-        return wp.array(a, dtype=self.scalar, device=self.device), stride, 1
+        return wp.array(a, dtype=self.scalar, device=self.device), stride, 1, 1, 1
 
     def _check_q(self, q: wp.array) -> None:
         if not isinstance(q, wp.array):
@@ -339,16 +360,17 @@ class CollisionModel:
             raise ValueError(f"w_world, w_self: expected finite weights, got {w_world}, {w_self}")
         cost = self._out(out_cost, (n,), "out_cost")
         g = self._out(out_grad, (n, self.robot.n_dof), "out_grad") if grad else None
-        rho_a, stride, use_rho = self._rho(rho, n)
+        rho_a, stride, use_rho, group, sub = self._rho_or_rows(rho, n)
         ww = float(w_world) if self.world is not None and self.n_spheres else 0.0
         ws = float(w_self) if self.n_pairs else 0.0
         frames, xs, force, moment, bc = self.scratch(n)
         gout = g if g is not None else self._dummy
-        inputs = [q, rho_a, stride, use_rho, self.grid, self.cellmin, self.origin, self.inv_h,
+        inputs = [q, rho_a, stride, group, sub, use_rho, self.grid, self.cellmin, self.origin, self.inv_h,
                   self.dim, ww, ws, float(eps), int(grad), *self.model_args,
                   frames, xs, force, moment, bc]
         # caller-owned buffers (a planner's loop): replay a recorded launch (cheaper on the host)
-        reuse = out_cost is not None and (rho is None or isinstance(rho, wp.array))
+        reuse = out_cost is not None and (rho is None or isinstance(rho, (wp.array,
+                                                                           CompensationRows)))
         if not reuse:
             wp.launch(self.k.cost, dim=n, inputs=inputs, outputs=[cost, gout], device=self.device)
             return cost, g

@@ -220,6 +220,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
+        rho_group: int,
+        rho_sub: int,
         use_rho: int,
         grid: wp.array3d(dtype=scalar),
         cellmin: wp.array3d(dtype=scalar),
@@ -244,13 +246,16 @@ def kernels(scalar: type) -> SimpleNamespace:
         grad: wp.array2d(dtype=scalar),
     ):
         """cost[b] = w_world U_w(q_b) + w_self U_s(q_b) and, if ``want_grad``,
-        grad[b, :] = d cost / d q_b (rho fixed). Scratch: frames (N, n_frames),
-        xs (N, S), force, moment and bounding-sphere centres bc (N, n_frames)."""
+        grad[b, :] = d cost / d q_b (rho fixed). DH rows: row ``rho_stride *
+        waypoint_row(b, rho_group, rho_sub)`` (:func:`jwarp.kernels.fk.waypoint_row`; 1, 1
+        for a row per configuration). Scratch: frames (N, n_frames), xs (N, S), force,
+        moment and bounding-sphere centres bc (N, n_frames)."""
         b = wp.tid()
         nf = model.order.shape[0]
+        rb = rho_stride * fk.waypoint_row(b, rho_group, rho_sub)
         for k in range(nf):
             i = model.order[k]
-            fk.write_frame(model, b, i, q, rho, rho_stride, use_rho, frames)
+            fk.write_frame(model, b, i, q, rho, rb, use_rho, frames)
             if want_grad != 0:
                 force[b, i] = vec3(zero, zero, zero)
                 moment[b, i] = vec3(zero, zero, zero)
@@ -368,7 +373,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         b = wp.tid()
         nf = model.order.shape[0]
         for k in range(nf):
-            fk.write_frame(model, b, model.order[k], q, rho, rho_stride, use_rho, frames)
+            fk.write_frame(model, b, model.order[k], q, rho, b * rho_stride, use_rho, frames)
         dmin_w = far
         for s in range(spheres.sph_frame.shape[0]):
             x = sphere_centre(frames, b, spheres.sph_frame[s], spheres.sph_pos[s])

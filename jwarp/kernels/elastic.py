@@ -52,6 +52,36 @@ def kernels(scalar: type) -> SimpleNamespace:
     unpack_rot, unpack_pos = fk.unpack_rot, fk.unpack_pos
 
     @wp.func
+    def gravity_torques(mo: vec4, p_i: vec3, z: vec3, pp: vec3, ax_alpha: vec3, ax_beta: vec3,
+                        gravity: vec3) -> vec3:
+        """Gravity torques [N m] (alpha, beta, theta) of a subtree with first moments
+        ``mo`` = [sum m w; sum m] (w: centres of mass in world coordinates): about
+        ``ax_alpha`` and ``ax_beta`` through the parent origin ``pp``, and about the frame's
+        own z-axis ``z`` through its origin ``p_i``."""
+        s = vec3(mo[0], mo[1], mo[2])
+        mtot = mo[3]
+        arm_p = wp.cross(s - mtot * pp, gravity)
+        return vec3(wp.dot(arm_p, ax_alpha), wp.dot(arm_p, ax_beta),
+                    wp.dot(wp.cross(s - mtot * p_i, gravity), z))
+
+    @wp.func
+    def subtree_prefix(model: fk.FrameTables, frames: wp.array2d(dtype=mat44), b: int,
+                       mass: wp.array(dtype=scalar), mass_com: wp.array(dtype=vec3),
+                       prefix: wp.array2d(dtype=vec4), sb: int):
+        """prefix[k, sb] = sum over the frames before position k of ``order`` of
+        [m w; m], from frames already computed."""
+        acc = vec4(zero, zero, zero, zero)
+        prefix[0, sb] = acc
+        for k in range(model.order.shape[0]):
+            i = model.order[k]
+            m = mass[i]
+            if m != zero:
+                T = frames[b, i]
+                w = unpack_rot(T) * mass_com[i] + unpack_pos(T)
+                acc = acc + vec4(m * w[0], m * w[1], m * w[2], m)
+            prefix[k + 1, sb] = acc
+
+    @wp.func
     def torque_update(
         b: int,
         frames: wp.array2d(dtype=mat44),
@@ -75,8 +105,6 @@ def kernels(scalar: type) -> SimpleNamespace:
             info = dh_info[j]
             i = info[1]
             mo = prefix[info[2], sb] - prefix[info[0], sb]
-            s = vec3(mo[0], mo[1], mo[2])
-            mtot = mo[3]
             T = frames[b, i]
             p_i = unpack_pos(T)
             z = vec3(T[0, 2], T[1, 2], T[2, 2])
@@ -93,12 +121,11 @@ def kernels(scalar: type) -> SimpleNamespace:
             prev_r = rho[rb, i, 2]
             prev_a = rho[rb, i, 3]
             prev_b = rho[rb, i, 4]
-            ax_alpha = axes[i, sb]
-            ax_beta = vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1])
-            arm_p = wp.cross(s - mtot * pp, gravity)
-            tau_a = wp.dot(arm_p, ax_alpha)
-            tau_b = wp.dot(arm_p, ax_beta)
-            tau_t = wp.dot(wp.cross(s - mtot * p_i, gravity), z)
+            tau = gravity_torques(mo, p_i, z, pp, axes[i, sb],
+                                  vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1]), gravity)
+            tau_a = tau[0]
+            tau_b = tau[1]
+            tau_t = tau[2]
             if write_tau != 0:
                 tau_out[b, i, 0] = tau_a
                 tau_out[b, i, 1] = tau_b
@@ -156,7 +183,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         prefix[0, sb] = acc
         for k in range(model.order.shape[0]):
             i = model.order[k]
-            R, p, ax = fk.write_frame(model, b, i, q, rho, rho_stride, use_rho, frames)
+            R, p, ax = fk.write_frame(model, b, i, q, rho, b * rho_stride, use_rho, frames)
             axes[i, sb] = ax
             m = mass[i]
             if m != zero:  # a fixed pattern per robot: predicted
@@ -166,6 +193,106 @@ def kernels(scalar: type) -> SimpleNamespace:
         delta[b] = torque_update(b, frames, rho, rho_stride, rho0, rho0_stride, kappa,
                                  kappa_stride, lam, gravity, dh_info, prefix, axes, sb, rho_out,
                                  tau_out, write_tau)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def compensation_update_kernel(
+        # Data in:
+        frames: wp.array2d(dtype=mat44),
+        rows: wp.array3d(dtype=scalar),
+        rho0: wp.array3d(dtype=scalar),
+        rho0_stride: int,
+        kappa: wp.array3d(dtype=scalar),
+        kappa_stride: int,
+        lam: scalar,
+        gravity: vec3,
+        n_waypoints: int,
+        n_sub: int,
+        scratch_stride: int,
+        # Model:
+        model: fk.FrameTables,
+        mass: wp.array(dtype=scalar),
+        mass_com: wp.array(dtype=vec3),
+        dh_info: wp.array(dtype=wp.vec4i),
+        # Scratch:
+        prefix: wp.array2d(dtype=vec4),
+        # Data out:
+        rows_out: wp.array3d(dtype=scalar),
+        delta: wp.array(dtype=scalar),
+    ):
+        """One torque update of compensation rows from frames an optimizer has already
+        computed (elastic paper section V: no extra forward kinematics).
+
+        ``frames`` (N, n_frames) are F(q, rows) of N = P * S configurations, P paths of
+        ``n_waypoints`` waypoints with ``n_sub`` substeps each (S = (W - 1) n_sub + 1;
+        configuration ``p * S + s``; IK: W = n_sub = 1). ``rows`` (P * W, n_frames, 9):
+        one row per waypoint (``use_rho`` = 2 and :func:`jwarp.kernels.fk.waypoint_row`:
+        substeps read their nearest waypoint's). Launch dim P * W: thread u updates the
+        torques at its waypoint and writes ``rows_out[u]``. Only
+        the DH rows of ``rows_out`` are written. delta[u] = max |new - old| [rad] at the
+        waypoint. ``prefix`` (n_frames + 1, S') is scratch, column ``u * scratch_stride``."""
+        u = wp.tid()
+        p = u // n_waypoints
+        wpt = u - p * n_waypoints
+        b = p * ((n_waypoints - 1) * n_sub + 1) + wpt * n_sub
+        sc = u * scratch_stride
+        subtree_prefix(model, frames, b, mass, mass_com, prefix, sc)
+        r0 = b * rho0_stride
+        kb = b * kappa_stride
+        dmax = zero
+        for j in range(dh_info.shape[0]):
+            info = dh_info[j]
+            i = info[1]
+            T = frames[b, i]
+            pp = vec3(zero, zero, zero)
+            Rp = wp.identity(3, dtype=scalar)
+            if info[3] >= 0:
+                Tp = frames[b, info[3]]
+                pp = unpack_pos(Tp)
+                Rp = unpack_rot(Tp)
+            cos_b = rows[u, i, 7]
+            sin_b = rows[u, i, 8]
+            tau = gravity_torques(prefix[info[2], sc] - prefix[info[0], sc], unpack_pos(T),
+                                  vec3(T[0, 2], T[1, 2], T[2, 2]), pp,
+                                  Rp * vec3(cos_b, zero, -sin_b),
+                                  vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1]), gravity)
+            prev_t = rows[u, i, 1]
+            prev_a = rows[u, i, 3]
+            prev_b = rows[u, i, 4]
+            d_a = lam * (rho0[r0, i, 3] + kappa[kb, i, 0] * tau[0] - prev_a)
+            d_b = lam * (rho0[r0, i, 4] + kappa[kb, i, 1] * tau[1] - prev_b)
+            d_t = lam * (rho0[r0, i, 1] + kappa[kb, i, 2] * tau[2] - prev_t)
+            dmax = wp.max(dmax, wp.max(wp.abs(d_a), wp.max(wp.abs(d_b), wp.abs(d_t))))
+            new_a = prev_a + d_a
+            new_b = prev_b + d_b
+            cs = model.trig[i]  # cos/sin from the nominal angles: no drift over iterations
+            ca, sa = fk.cos_sin_near(new_a, model.dh0[i, 3], cs[0], cs[1])
+            cb, sb = fk.cos_sin_near(new_b, model.dh0[i, 4], cs[2], cs[3])
+            rows_out[u, i, 0] = rows[u, i, 0]
+            rows_out[u, i, 1] = prev_t + d_t
+            rows_out[u, i, 2] = rows[u, i, 2]
+            rows_out[u, i, 3] = new_a
+            rows_out[u, i, 4] = new_b
+            rows_out[u, i, 5] = ca
+            rows_out[u, i, 6] = sa
+            rows_out[u, i, 7] = cb
+            rows_out[u, i, 8] = sb
+        delta[u] = dmax
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def fill_rows_kernel(
+        # Model:
+        model: fk.FrameTables,
+        # Data out:
+        rows: wp.array3d(dtype=scalar),
+    ):
+        """rows[b, i] = nominal [dh0 row, cos alpha, sin alpha, cos beta, sin beta] (launch
+        dim (B, n_frames)): compensation rows before the first torque update."""
+        b, i = wp.tid()
+        for c in range(5):
+            rows[b, i, c] = model.dh0[i, c]
+        cs = model.trig[i]
+        for c in range(4):
+            rows[b, i, 5 + c] = cs[c]
 
     @wp.kernel(module="unique")
     def fill_static_rows(
@@ -183,4 +310,6 @@ def kernels(scalar: type) -> SimpleNamespace:
             rho_out[b, i, c] = dh0[i, c]
 
     return SimpleNamespace(vec4=vec4, elastic_step=elastic_step_kernel,
-                           fill_static_rows=fill_static_rows)
+                           fill_static_rows=fill_static_rows,
+                           compensation_update=compensation_update_kernel,
+                           fill_rows=fill_rows_kernel)

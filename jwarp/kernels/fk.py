@@ -18,7 +18,12 @@ Frame tables (the *Model*, see :class:`jwarp.device_model.KinematicsTables`):
 
 Per-batch DH rows ``rho`` (calibration, elastic model) have shape (B_rho, n_frames, 5);
 ``rho_stride`` is 1 to use row ``b`` for configuration ``b`` and 0 to share row 0.
-``use_rho`` = 0 ignores ``rho`` and uses the precomputed nominal tables (fast path).
+``use_rho`` = 0 ignores ``rho`` and uses the precomputed nominal tables (fast path);
+``use_rho`` = 2 reads rows of 9 columns ``[d, theta, r, alpha, beta, cos alpha, sin alpha,
+cos beta, sin beta]`` (the compensation buffers of :mod:`jwarp.kernels.elastic`, whose
+update stores the cos/sin with the angles), so FK at per-configuration rows costs no more
+trigonometry than the nominal fast path. Gradients through a Tape w.r.t. such rows reach
+the cos/sin columns, not alpha/beta: use ``use_rho`` = 1 to differentiate w.r.t. rho.
 
 DH convention: ``parent_T_child = Rot_y(beta) Rot_x(alpha) Trans_x(r) Rot_z(theta+q) Trans_z(d)``.
 """
@@ -135,8 +140,8 @@ def kernels(scalar: type) -> SimpleNamespace:
             return cos_sin(x)
 
     @wp.func
-    def child_frame(model: FrameTables, Rp: mat33, pp: vec3, i: int, b: int, qi: scalar,
-                    use_rho: int, rho: wp.array3d(dtype=scalar), rho_stride: int):
+    def child_frame(model: FrameTables, Rp: mat33, pp: vec3, i: int, rb: int, qi: scalar,
+                    use_rho: int, rho: wp.array3d(dtype=scalar)):
         """World rotation and position of frame i from its parent's (Rp, pp), and the
         direction of its ``r`` translation (= its alpha axis, ``Rp Rot_y(beta) e_x``; zero
         for a static frame).
@@ -154,12 +159,17 @@ def kernels(scalar: type) -> SimpleNamespace:
         cb = cs[2]
         sb = cs[3]
         if use_rho != 0:
-            rb = b * rho_stride
             d = rho[rb, i, 0]
             theta = rho[rb, i, 1]
             r = rho[rb, i, 2]
-            ca, sa = cos_sin_near(rho[rb, i, 3], model.dh0[i, 3], cs[0], cs[1])
-            cb, sb = cos_sin_near(rho[rb, i, 4], model.dh0[i, 4], cs[2], cs[3])
+            if use_rho == 2:  # rows carry their cos/sin (compensation buffers)
+                ca = rho[rb, i, 5]
+                sa = rho[rb, i, 6]
+                cb = rho[rb, i, 7]
+                sb = rho[rb, i, 8]
+            else:
+                ca, sa = cos_sin_near(rho[rb, i, 3], model.dh0[i, 3], cs[0], cs[1])
+                cb, sb = cos_sin_near(rho[rb, i, 4], model.dh0[i, 4], cs[2], cs[3])
         if model.prismatic[i] != 0:
             d = d + qi
         else:
@@ -180,16 +190,16 @@ def kernels(scalar: type) -> SimpleNamespace:
         return wp.matrix_from_cols(m0, m1, n2), p + d * n2, c0  # Trans_z(d)
 
     @wp.func
-    def child_rot_pos(model: FrameTables, Rp: mat33, pp: vec3, i: int, b: int, qi: scalar,
-                      use_rho: int, rho: wp.array3d(dtype=scalar), rho_stride: int):
+    def child_rot_pos(model: FrameTables, Rp: mat33, pp: vec3, i: int, rb: int, qi: scalar,
+                      use_rho: int, rho: wp.array3d(dtype=scalar)):
         """World rotation and position of frame i from its parent's (:func:`child_frame`)."""
-        R, p, ax = child_frame(model, Rp, pp, i, b, qi, use_rho, rho, rho_stride)
+        R, p, ax = child_frame(model, Rp, pp, i, rb, qi, use_rho, rho)
         return R, p
 
     @wp.func
     def chain_point(model: FrameTables, chain: wp.array(dtype=wp.int32), b: int,
                     q: wp.array2d(dtype=scalar), use_rho: int, rho: wp.array3d(dtype=scalar),
-                    rho_stride: int, point: vec3) -> vec3:
+                    rb: int, point: vec3) -> vec3:
         """World position of ``point`` (coordinates of the last frame of ``chain``, the
         frames from the root to it), walking only that chain."""
         R = wp.identity(3, dtype=scalar)
@@ -197,8 +207,17 @@ def kernels(scalar: type) -> SimpleNamespace:
         for k in range(chain.shape[0]):
             i = chain[k]
             qi = joint_value(model, i, b, q)
-            R, p = child_rot_pos(model, R, p, i, b, qi, use_rho, rho, rho_stride)
+            R, p = child_rot_pos(model, R, p, i, rb, qi, use_rho, rho)
         return R * point + p
+
+    @wp.func
+    def waypoint_row(b: int, group: int, n_sub: int) -> int:
+        """Row of configuration b where rows are kept per waypoint: ``group`` = S
+        configurations per path (W waypoints, S = (W - 1) n_sub + 1); a substep reads its
+        nearest waypoint's row (ties: the later one). group = n_sub = 1 gives b."""
+        p = b // group
+        W = (group - 1) // n_sub + 1
+        return p * W + (b - p * group + n_sub // 2) // n_sub
 
     @wp.func
     def pack(R: mat33, p: vec3) -> mat44:
@@ -217,7 +236,7 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.func
     def write_frame(model: FrameTables, b: int, i: int, q: wp.array2d(dtype=scalar),
-                    rho: wp.array3d(dtype=scalar), rho_stride: int, use_rho: int,
+                    rho: wp.array3d(dtype=scalar), rb: int, use_rho: int,
                     frames: wp.array2d(dtype=mat44)):
         """frames[b, i] from its parent's transform (already written) and the joint values;
         returns the frame's world rotation, position and alpha axis (:func:`child_frame`)."""
@@ -229,7 +248,7 @@ def kernels(scalar: type) -> SimpleNamespace:
             Tp = frames[b, pi]
             Rp = unpack_rot(Tp)
             pp = unpack_pos(Tp)
-        R, p, ax = child_frame(model, Rp, pp, i, b, qi, use_rho, rho, rho_stride)
+        R, p, ax = child_frame(model, Rp, pp, i, rb, qi, use_rho, rho)
         frames[b, i] = pack(R, p)
         return R, p, ax
 
@@ -249,7 +268,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         b = wp.tid()
         for k in range(model.order.shape[0]):
             i = model.order[k]
-            write_frame(model, b, i, q, rho, rho_stride, use_rho, frames)
+            write_frame(model, b, i, q, rho, b * rho_stride, use_rho, frames)
 
     @wp.kernel(module="unique", enable_backward=False)
     def fk_components_kernel(
@@ -279,7 +298,7 @@ def kernels(scalar: type) -> SimpleNamespace:
                            frames[b, pi, 1, 0], frames[b, pi, 1, 1], frames[b, pi, 1, 2],
                            frames[b, pi, 2, 0], frames[b, pi, 2, 1], frames[b, pi, 2, 2])
                 pp = vec3(frames[b, pi, 0, 3], frames[b, pi, 1, 3], frames[b, pi, 2, 3])
-            R, p = child_rot_pos(model, Rp, pp, i, b, qi, use_rho, rho, rho_stride)
+            R, p = child_rot_pos(model, Rp, pp, i, b * rho_stride, qi, use_rho, rho)
             for r in range(3):
                 for c in range(3):
                     frames[b, i, r, c] = R[r, c]
@@ -310,14 +329,15 @@ def kernels(scalar: type) -> SimpleNamespace:
         for r in range(6):
             for j in range(n_dof):
                 jac[b, r, j] = zero
-        target = chain_point(model, chain, b, q, use_rho, rho, rho_stride, point)  # pass 1
+        rb = b * rho_stride
+        target = chain_point(model, chain, b, q, use_rho, rho, rb, point)  # pass 1
         # pass 2: joint axes (z of each driven frame, through its origin)
         R = wp.identity(3, dtype=scalar)
         p = vec3(zero, zero, zero)
         for k in range(chain.shape[0]):
             i = chain[k]
             qi = joint_value(model, i, b, q)
-            R, p = child_rot_pos(model, R, p, i, b, qi, use_rho, rho, rho_stride)
+            R, p = child_rot_pos(model, R, p, i, rb, qi, use_rho, rho)
             if model.cpl_start[i + 1] > model.cpl_start[i]:
                 z = vec3(R[0, 2], R[1, 2], R[2, 2])
                 lin = wp.cross(z, target - p)
@@ -350,7 +370,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         DH rows [d, theta, r, alpha, beta] of every frame (zero off the chain): rows
         [linear; angular] in the base frame. Caller zero-fills ``jac``."""
         b = wp.tid()
-        target = chain_point(model, chain, b, q, use_rho, rho, rho_stride, point)
+        rb = b * rho_stride
+        target = chain_point(model, chain, b, q, use_rho, rho, rb, point)
         R = wp.identity(3, dtype=scalar)
         p = vec3(zero, zero, zero)
         for k in range(chain.shape[0]):
@@ -358,11 +379,11 @@ def kernels(scalar: type) -> SimpleNamespace:
             Rp = R
             pp = p
             qi = joint_value(model, i, b, q)
-            R, p = child_rot_pos(model, R, p, i, b, qi, use_rho, rho, rho_stride)
+            R, p = child_rot_pos(model, R, p, i, rb, qi, use_rho, rho)
             if model.is_dh[i] != 0:
                 beta = model.dh0[i, 4]
                 if use_rho != 0:
-                    beta = rho[b * rho_stride, i, 4]
+                    beta = rho[rb, i, 4]
                 z = vec3(R[0, 2], R[1, 2], R[2, 2])
                 ax_beta = vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1])
                 ax_alpha = Rp * vec3(wp.cos(beta), zero, -wp.sin(beta))
@@ -384,7 +405,8 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     return SimpleNamespace(
         scalar=scalar, FrameTables=FrameTables, vec3=vec3, mat33=mat33, mat44=mat44,
-        vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, joint_value=joint_value, write_frame=write_frame, child_frame=child_frame, child_rot_pos=child_rot_pos, pack=pack,
+        vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, joint_value=joint_value,
+        waypoint_row=waypoint_row, write_frame=write_frame, child_frame=child_frame, child_rot_pos=child_rot_pos, pack=pack,
         unpack_rot=unpack_rot, unpack_pos=unpack_pos,
         fk=fk_kernel, fk_components=fk_components_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
     )

@@ -30,13 +30,14 @@ from typing import Any, Callable
 import numpy as np
 import warp as wp
 
-from jwarp.arrays import Batch, init_warp, resolve_device
+from jwarp.arrays import init_warp, resolve_device
 from jwarp.device_model import numpy_dtype, scalar_type, tables
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik as ik_kernels
 from jwarp.kernels import path as path_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
+from jwarp.elastic_rows import CompensationRows
 from jwarp.solvers.limits import limit_tables, sample_within_limits, within_limits
 from jwarp.solvers.planner import _collision, collision_free
 
@@ -175,16 +176,13 @@ class IKObjective:
         self._launches: dict = {}
         self.set_default(q_default)
         self.point = self.fk.vec3(0.0, 0.0, 0.0)
-        self.elastic = None
-        self.rho: tuple | None = None
-        self._rho_used: wp.array | None = None
-        self.delta: wp.array | None = None
+        #: elastic compensation rows (None: the rigid robot)
+        self.compensation: CompensationRows | None = None
+        self._frames_at_rows = False  # self.frames hold F(q, rows) of the last iteration
         if kappa is not None:
-            from jwarp.kinematics import _ElasticLaunch, _rows, kappa_array
-
-            batch = Batch(self.q, (B,), "warp")
-            kap = _rows(kappa_array(self.robot, kappa), self.robot, batch, self.t, "kappa", 3)
-            self.elastic = _ElasticLaunch(self.t, self.q, kap, None, float(lam))
+            self.compensation = CompensationRows(self.t, B, 1, 1, kappa, lam)
+        #: (B,) largest DH row change of the last torque update [rad] (elastic only)
+        self.delta = self.compensation.delta if self.compensation is not None else None
 
     def _launch(self, key: tuple, kernel: Any, inputs: list, outputs: list) -> None:
         """Launch with a recorded command (cuts Warp's per-launch argument packing);
@@ -221,8 +219,9 @@ class IKObjective:
             self.q.numpy()[...] = q  # CPU arrays share memory with numpy
         else:
             wp.copy(self.q, wp.array(q, dtype=self.scalar, device=self.device))
-        if not keep_rho:
-            self.rho = None
+        if not keep_rho and self.compensation is not None:
+            self.compensation.reset()
+            self._frames_at_rows = False
 
     def set_target(self, target: np.ndarray) -> None:
         """target (B, 4, 4) poses of the frame."""
@@ -232,19 +231,16 @@ class IKObjective:
     # ------------------------------------------------------------------ stages
     def evaluate_pose(self) -> None:
         """[Elastic torque update,] FK, Jacobian of the frame and the pose error/costs."""
-        t, dev = self.t, self.device
-        if self.elastic is not None:
-            # frames at the kept rows (one FK pass), then the torque update for next time
-            frames, rho_new, self.delta = self.elastic.step(self.rho, frames=self.frames)
-            rho_arr, stride, use = ((t.dh0_3d, 0, 0) if self.rho is None
-                                    else (self.rho[0], 1, 1))
-            jac_rho = (rho_arr, stride, use)
-            self._rho_used = None if self.rho is None else self.rho[0]
-            self.rho = (rho_new, 1)
-        else:
-            self._launch(("fk",), self.fk.fk, [self.q, t.dh0_3d, 0, 0, t.frame_struct],
-                         [self.frames])
-            jac_rho = (t.dh0_3d, 0, 0)
+        t = self.t
+        comp = self.compensation
+        jac_rho = (t.dh0_3d, 0, 0)
+        if comp is not None:
+            if self._frames_at_rows:  # one torque update from the last iteration's frames
+                self.delta = comp.update(self.frames)
+            jac_rho = (comp.rows, 1, 2)
+        self._launch(("fk", id(jac_rho[0])), self.fk.fk, [self.q, *jac_rho, t.frame_struct],
+                     [self.frames])
+        self._frames_at_rows = True
         self._launch(("jac", id(jac_rho[0]), jac_rho[2]), self.fk.jacobian,
                      [self.q, *jac_rho, self.point, t.frame_struct, t.chain(self.frame)],
                      [self.jac])
@@ -260,7 +256,7 @@ class IKObjective:
         w = self.weights
         use = int(w.world > 0 or w.self > 0)
         if use:
-            rho = self._rho_used if self.elastic is not None else None
+            rho = self.compensation  # the rows of the last evaluate_pose
             self.cm.cost(self.q, rho=rho, w_world=w.world, w_self=w.self, eps=self.eps,
                          grad=True, out_cost=self.coll_cost, out_grad=self.coll_grad)
         self._launch(("aux", id(self.q_default), use, w.default), self.kk.aux_cost,
@@ -384,7 +380,7 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
         pe = np.linalg.norm(err[:, :npos], axis=1)
         re = np.linalg.norm(err[:, npos:], axis=1)
         on = (pe < tol_pos) & (re < tol_rot)
-        if obj.elastic is not None:
+        if obj.compensation is not None:
             on &= obj.delta.numpy() < tol_rho
         cost_a = obj.cost_a.numpy().astype(np.float64)
         coll = obj.coll_cost.numpy()
@@ -424,8 +420,8 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
 def _free(obj: IKObjective, q: np.ndarray, idx: np.ndarray, margin: float) -> np.ndarray:
     """Exact check (world and self, ``margin``) of the configurations ``q`` = rows ``idx``."""
     rho = None
-    if obj.elastic is not None and obj._rho_used is not None:
-        rho = obj._rho_used.numpy()[idx].astype(np.float64)
+    if obj.compensation is not None:
+        rho = obj.compensation.rho()[idx]
     return collision_free(obj.robot, obj.world, q, margin, rho=rho)
 
 

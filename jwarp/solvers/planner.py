@@ -18,9 +18,10 @@ feasible (early stop); :func:`plan` returns per problem the best (lowest U_path)
 path of its multi-starts, or the lowest-cost infeasible one with ``feasible = False``.
 
 With ``kappa`` (elastic compensation, elastic paper section V, Fig. 2.11) the robot is the
-elastic model: every iteration makes one torque update per substep from the DH rows
-``rho`` kept from the previous iteration, and the collision gradient is taken with
-``rho`` fixed.
+elastic model (:mod:`jwarp.elastic_rows`): the collision kernel computes the frames
+at the DH rows kept from the previous iteration, one torque update at every waypoint from
+those frames gives the rows of the next iteration (substeps take their nearest
+waypoint's), and the collision gradient is taken with the rows fixed.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from jwarp.device_model import numpy_dtype, scalar_type, tables
 from jwarp.kernels import path as path_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
+from jwarp.elastic_rows import CompensationRows
 from jwarp.solvers.limits import (describe_violation, limit_tables, sample_within_limits,
                                   within_limits)
 
@@ -300,8 +302,8 @@ class PathObjective:
     """U_path (eq. 3.16) and its gradient for a batch of P paths on one device.
 
     Owns the device buffers of one batch shape (P, W, n_dof) and ``n_substeps``; each call
-    launches: substeps -> [one elastic torque update] -> collision cost + gradient ->
-    path cost (-> gradient or step). Arrays are Warp arrays on ``device``.
+    launches: substeps -> collision cost + gradient [-> elastic torque update at the
+    waypoints] -> path cost (-> gradient or step). Arrays are Warp arrays on ``device``.
     """
 
     def __init__(self, robot: Any, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
@@ -340,16 +342,11 @@ class PathObjective:
         self.sub_cost = wp.zeros(self.N, dtype=sc, device=dev)
         self.sub_grad = wp.zeros((self.N, self.n), dtype=sc, device=dev)
         self.cm = _collision().collision_model(self.robot, world, device=dev, dtype=self.npdt)
-        self.elastic = None
-        self.rho: tuple | None = None
+        #: elastic compensation rows (None: the rigid robot)
+        self.compensation: CompensationRows | None = None
         if kappa is not None:
-            from jwarp.kinematics import _ElasticLaunch, _rows, kappa_array
-            from jwarp.arrays import Batch
-
-            t = tables(self.robot, dev, self.npdt)
-            batch = Batch(self.q_sub, (self.N,), "warp")
-            kap = _rows(kappa_array(self.robot, kappa), self.robot, batch, t, "kappa", 3)
-            self.elastic = _ElasticLaunch(t, self.q_sub, kap, None, float(lam))
+            self.compensation = CompensationRows(tables(self.robot, dev, self.npdt), self.P,
+                                                 self.W, self.n_sub, kappa, lam)
 
     # ------------------------------------------------------------------ state
     def set_paths(self, paths: np.ndarray) -> None:
@@ -357,7 +354,12 @@ class PathObjective:
         a = np.ascontiguousarray(np.asarray(paths, np.float64).reshape(self.P, self.W, self.n),
                                  dtype=self.npdt)
         wp.copy(self.paths, wp.array(a, dtype=self.scalar, device=self.device))
-        self.rho = None
+        self.reset_compensation()
+
+    def reset_compensation(self) -> None:
+        """Start the elastic rows again from the rigid robot (no-op without kappa)."""
+        if self.compensation is not None:
+            self.compensation.reset()
 
     def set_active(self, active: np.ndarray) -> None:
         wp.copy(self.active, wp.array(np.asarray(active, np.int32), dtype=wp.int32,
@@ -371,18 +373,25 @@ class PathObjective:
         k, dev = self.k, self.device
         wp.launch(k.substeps, dim=(self.P, self.S), inputs=[self.paths, self.n_sub],
                   outputs=[self.q_sub], device=dev)
-        rho = None
-        if self.elastic is not None:
-            _, rho_new, _ = self.elastic.step(self.rho)  # frames at rho_old -> rho_new
-            self.rho = (rho_new, 1)
-            rho = rho_new
+        comp = self.compensation
         w = self.weights
-        self.cm.cost(self.q_sub, rho=rho, w_world=w.world, w_self=w.self, eps=self.eps,
+        self.cm.cost(self.q_sub, rho=comp, w_world=w.world, w_self=w.self, eps=self.eps,
                      grad=grad, out_cost=self.sub_cost, out_grad=self.sub_grad)
+        if comp is not None:  # torque update from the cost kernel's frames, for next time
+            comp.update(self._cost_frames())
         wp.launch(k.path_cost, dim=self.P,
                   inputs=[self.paths, self.sub_cost, self.n_sub, self.scalar(w.length),
                           self.scalar(NORM_FLOOR)],
                   outputs=[self.length, self.collision, self.total, self.sub_max], device=dev)
+
+    def _cost_frames(self) -> wp.array:
+        """The collision kernel's frames (N, n_frames) of the last evaluate (a view of its
+        scratch, cached so the recorded torque-update launch is replayed)."""
+        frames = self.cm.scratch(self.N)[0]
+        view = self.__dict__.get("_frames_view")
+        if view is None or view[0] is not frames:
+            view = self._frames_view = (frames, frames[:self.N])
+        return view[1]
 
     def gradient(self) -> wp.array:
         """dU_path/dQ (P, W, n_dof) of the last :meth:`evaluate` (zero at start/goal)."""
@@ -588,11 +597,8 @@ def _confirm(obj: PathObjective, cand: np.ndarray, margin: float, kappa: Any) ->
     collision-free with ``margin`` and every waypoint within the limits."""
     S, n = obj.S, obj.n
     q = obj.q_sub.numpy().reshape(obj.P, S, n)[cand].astype(np.float64)
-    rho = None
-    if obj.elastic is not None:
-        rho = obj.rho[0].numpy().reshape(obj.P, S, obj.robot.n_frames, 5)[cand]
-        rho = rho.reshape(-1, obj.robot.n_frames, 5).astype(np.float64)
-    free = collision_free(obj.robot, obj.world, q.reshape(-1, n), margin, rho=rho)
+    # elastic: the converged torque equilibrium at every substep, not the kept rows
+    free = collision_free(obj.robot, obj.world, q.reshape(-1, n), margin, kappa=kappa)
     paths = obj.paths.numpy()[cand].astype(np.float64)
     ok = free.reshape(len(cand), S).all(axis=1) & within_limits(obj.robot, paths).all(axis=1)
     # the paths moved since n_substeps was chosen: re-check the survivors at substeps sized

@@ -71,7 +71,6 @@ class UPathFunction(torch.autograd.Function):
     def forward(ctx: Any, paths: torch.Tensor, obj: PathObjective) -> torch.Tensor:
         src = wp.from_torch(paths.detach().contiguous(), dtype=obj.scalar)
         wp.copy(obj.paths, src)
-        obj.rho = None
         obj.evaluate(grad=True)
         ctx.save_for_backward(wp.to_torch(obj.gradient()).clone())
         return wp.to_torch(obj.total).clone()
@@ -123,7 +122,6 @@ class UIKFunction(torch.autograd.Function):
         wp.copy(obj.q, wp.from_torch(q.detach().contiguous(), dtype=obj.scalar))
         tgt = target.detach().to(dtype=q.dtype).contiguous()
         wp.copy(obj.target, wp.from_torch(tgt, dtype=obj.fk.mat44))
-        obj.rho = None
         obj.evaluate_pose()
         obj.evaluate_aux()
         g = wp.to_torch(obj.grad_f) + wp.to_torch(obj.grad_a)

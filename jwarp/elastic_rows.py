@@ -1,0 +1,145 @@
+"""Elastic DH rows kept across the iterations of an optimizer (elastic paper section V).
+
+Inside a planner or IK loop the torque equilibrium ``rho* = rho0 + kappa tau(F(q, rho*))``
+is not solved to convergence. Each configuration keeps its rows from the previous
+iteration. The optimizer computes its frames at those rows anyway, for its costs. From
+those same frames, one damped torque update per iteration gives the rows for the next
+iteration. No extra forward kinematics is run, and gradients hold the rows fixed
+(d rho / dq = 0). As the optimizer converges, so do the rows.
+
+The rows have 9 columns ``[d, theta, r, alpha, beta, cos alpha, sin alpha, cos beta,
+sin beta]``. The FK, Jacobian and collision kernels read them with ``use_rho = 2``, so
+forward kinematics at these rows costs what the rigid fast path costs.
+
+Paths: rows are kept per waypoint, and only the waypoints get a torque update. A substep
+reads the rows of its nearest waypoint (:func:`jwarp.kernels.fk.waypoint_row`).
+Deflections change slowly along a segment, and the final feasibility check solves the
+full equilibrium at every substep anyway.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from jwarp.device_model import KinematicsTables, numpy_dtype
+from jwarp.kernels import elastic as elastic_kernels
+from jwarp.kernels import fk as fk_kernels
+from jwarp.kinematics import kappa_array
+
+#: columns of a compensation row (see the module docstring)
+ROW_COLUMNS = 9
+
+
+class CompensationRows:
+    """Ping-pong buffers of compensation rows, one per waypoint, for N = P * S
+    configurations.
+
+    Args:
+        t: the robot's kinematics tables on the optimizer's device and dtype.
+        n_paths, n_waypoints, n_substeps: layout of the configurations: P paths of
+            W waypoints, S = (W - 1) * n_substeps + 1 configurations per path, configuration
+            ``p * S + s``. For IK pass ``n_paths=B``, ``n_waypoints=1``, ``n_substeps=1``.
+        kappa: compliances [rad/(N m)]. Any form :func:`jwarp.kinematics.kappa_array`
+            accepts: shared ``(n_frames, 3)``, or per waypoint ``(P * W, n_frames, 3)``.
+        lam: damping of the update in (0, 1].
+    """
+
+    def __init__(self, t: KinematicsTables, n_paths: int, n_waypoints: int, n_substeps: int,
+                 kappa: Any, lam: float):
+        if not (isinstance(lam, (int, float)) and 0.0 < float(lam) <= 1.0):
+            raise ValueError(f"lam: expected a damping factor in (0, 1], got {lam!r}")
+        robot = t.robot
+        self.t = t
+        self.P, self.W, self.n_sub = int(n_paths), int(n_waypoints), int(n_substeps)
+        self.S = (self.W - 1) * self.n_sub + 1
+        self.N = self.P * self.S
+        self.n_updates = self.P * self.W
+        self.lam = t.scalar(float(lam))
+        self.k = elastic_kernels.kernels(t.scalar)
+        nf = robot.n_frames
+        kap = kappa_array(robot, kappa)  # validates shape and values
+        if kap.ndim == 2:
+            kap, self.kappa_stride = kap[None], 0
+        else:
+            kap = kap.reshape(-1, nf, 3)
+            if len(kap) != self.n_updates:
+                raise ValueError(f"kappa: per-waypoint tables need {self.n_updates} rows "
+                                 f"(paths x waypoints), got {len(kap)}")
+            self.kappa_stride = 1
+        dev = t.device
+        self.kappa = wp.array(np.ascontiguousarray(kap, dtype=numpy_dtype(t.scalar)),
+                              dtype=t.scalar, device=dev)
+        g = robot.gravity
+        self.gravity = fk_kernels.kernels(t.scalar).vec3(float(g[0]), float(g[1]), float(g[2]))
+        self._bufs = [wp.empty((self.n_updates, nf, ROW_COLUMNS), dtype=t.scalar, device=dev)
+                      for _ in range(2)]
+        # CPU threads run one configuration after another: one scratch column stays in L1
+        S = 1 if dev.is_cpu else self.n_updates
+        self._prefix = wp.empty((nf + 1, S), dtype=self.k.vec4, device=dev)
+        self.delta = wp.zeros(self.n_updates, dtype=t.scalar, device=dev)
+        self.iterations = 0
+        self._launches: dict = {}
+        self.reset()
+
+    @property
+    def rows(self) -> wp.array:
+        """The current rows (P * W, n_frames, 9): pass them to a kernel with ``use_rho = 2``
+        and :attr:`layout`."""
+        return self._bufs[0]
+
+    @property
+    def layout(self) -> tuple[int, int]:
+        """(configurations per path S, substeps per segment): the row of configuration b is
+        :func:`jwarp.kernels.fk.waypoint_row` (b, S, n_sub)."""
+        return self.S, self.n_sub
+
+    def config_rows(self) -> np.ndarray:
+        """(N,) int: the row each configuration reads (numpy twin of ``waypoint_row``)."""
+        b = np.arange(self.N)
+        p, s = np.divmod(b, self.S)
+        return p * self.W + (s + self.n_sub // 2) // self.n_sub
+
+    def reset(self) -> None:
+        """Back to the nominal rows (the rigid robot) in both buffers."""
+        for buf in self._bufs:
+            wp.launch(self.k.fill_rows, dim=(self.n_updates, self.t.robot.n_frames),
+                      inputs=[self.t.frame_struct], outputs=[buf], device=self.t.device)
+        self.delta.fill_(1e30)  # no update yet: nothing has converged
+        self.iterations = 0
+
+    def update(self, frames: wp.array) -> wp.array:
+        """One torque update from ``frames`` (N, n_frames) computed at :attr:`rows`; the
+        new rows become :attr:`rows`. Returns delta (P * W,): the largest row change at each
+        waypoint [rad]."""
+        t = self.t
+        if tuple(frames.shape[:2]) != (self.N, t.robot.n_frames):
+            raise ValueError(f"frames: expected shape ({self.N}, {t.robot.n_frames}), got "
+                             f"{tuple(frames.shape)}")
+        src, dst = self._bufs
+        # a recorded launch per (frames, direction): Warp's argument packing costs tens of
+        # microseconds per launch on the host, as much as the update of a whole path
+        key = (id(frames), id(src))
+        hit = self._launches.get(key)
+        if hit is None:
+            if len(self._launches) > 8:
+                self._launches.clear()
+            launch = wp.launch(
+                self.k.compensation_update, dim=self.n_updates,
+                inputs=[frames, src, t.dh0_3d, 0, self.kappa, self.kappa_stride, self.lam,
+                        self.gravity, self.W, self.n_sub, int(self._prefix.shape[1] > 1),
+                        t.frame_struct, t.mass, t.mass_com, t.dh_info, self._prefix],
+                outputs=[dst, self.delta], device=t.device, record_cmd=True)
+            hit = self._launches[key] = (launch, frames)  # keeps frames alive for the id
+        hit[0].launch()
+        self._bufs.reverse()
+        self.iterations += 1
+        return self.delta
+
+    def rho(self, rows: wp.array | None = None) -> np.ndarray:
+        """The DH rows of every configuration (N, n_frames, 5) float64 from ``rows``
+        (default: :attr:`rows`)."""
+        a = (self.rows if rows is None else rows).numpy()
+        return a[self.config_rows(), :, :5].astype(np.float64)
