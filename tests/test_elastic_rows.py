@@ -1,0 +1,129 @@
+"""Compensation rows (jwarp/elastic_rows.py, kernels/elastic.py compensation_update)
+against the numpy reference of the damped torque iteration."""
+
+import numpy as np
+import pytest
+import warp as wp
+
+import jwarp
+from jwarp import collision
+from jwarp.device_model import tables
+from jwarp.elastic_rows import CompensationRows
+from jwarp.kernels import fk as fk_kernels
+from jwarp.solvers import planner as PL
+from jwarp.solvers.limits import sample_within_limits
+from jwarp.world import world_from_occupancy
+
+from reference import kappa_uniform, nominal_dh, ref_fk, ref_fk_elastic, ref_torques
+
+LAM = 0.6
+
+
+def _block_world():
+    """A 30 cm thick block in front of justin19, 5 cm voxels."""
+    h = 0.05
+    lim = np.array([[-0.5, 1.5], [-1.0, 1.0], [0.0, 1.6]])
+    n = np.round((lim[:, 1] - lim[:, 0]) / h).astype(int) + 1
+    X, Y, Z = np.meshgrid(*[lim[d, 0] + h * np.arange(n[d]) for d in range(3)], indexing="ij")
+    return world_from_occupancy((np.abs(X - 0.6) < 0.15) & (Z < 1.0), lim, h)
+
+
+def _frames(model, F):
+    """(N, nf, 4, 4) numpy -> warp mat44 array (N, nf) float64 on the CPU."""
+    return wp.array(np.ascontiguousarray(F), dtype=fk_kernels.kernels(wp.float64).mat44,
+                    device="cpu")
+
+
+def _expected(model, F, prev, kappa):
+    """One damped update of the rows ``prev`` (B, nf, 5) from frames F at those rows."""
+    rho0 = nominal_dh(model)
+    tau = ref_torques(model, F, prev)
+    target = rho0 + np.stack([np.zeros_like(tau[..., 0]), kappa[:, 2] * tau[..., 2],
+                              np.zeros_like(tau[..., 0]), kappa[:, 0] * tau[..., 0],
+                              kappa[:, 1] * tau[..., 1]], axis=-1)
+    return (1 - LAM) * prev + LAM * target
+
+
+@pytest.mark.parametrize("name", ["justin19", "arm7"])
+def test_update_from_given_frames_matches_reference_and_maps_substeps(name):
+    model = jwarp.robot(name)
+    kappa = kappa_uniform(model, 2e-3)
+    P, W, n_sub = 2, 3, 3
+    S = (W - 1) * n_sub + 1
+    q = sample_within_limits(model, P * S, np.random.default_rng(1))
+    rows = CompensationRows(tables(model, "cpu", np.float64), P, W, n_sub, kappa, LAM)
+    assert rows.rows.shape == (P * W, model.n_frames, 9)
+    np.testing.assert_array_equal(rows.delta.numpy(), 1e30)  # nothing converged yet
+    # substep s of a path reads waypoint round(s / n_sub), ties to the later one
+    np.testing.assert_array_equal(rows.config_rows(), [0, 0, 1, 1, 1, 2, 2, 3, 3, 4, 4, 4, 5, 5])
+    wpt = np.array([p * S + w * n_sub for p in range(P) for w in range(W)])
+    prev = np.broadcast_to(nominal_dh(model), (P * W, model.n_frames, 5)).copy()
+    for it in range(3):  # the second and third start from bent rows (beta != 0)
+        F = ref_fk(model, q, rows.rho())  # frames of every configuration at its rows
+        delta = rows.update(_frames(model, F)).numpy()
+        want = _expected(model, F[wpt], prev, kappa)
+        got = rows.rows.numpy()
+        np.testing.assert_allclose(got[..., :5], want, atol=1e-12)
+        np.testing.assert_allclose(got[..., 5:], np.stack(
+            [np.cos(want[..., 3]), np.sin(want[..., 3]), np.cos(want[..., 4]),
+             np.sin(want[..., 4])], -1), atol=1e-12)
+        np.testing.assert_allclose(delta, np.abs(want - prev).max(axis=(1, 2)), atol=1e-12)
+        prev = want
+    assert np.abs(prev - nominal_dh(model)).max() > 1e-3  # the robot does bend
+    with pytest.raises(ValueError, match="frames"):
+        rows.update(_frames(model, F[:3]))
+
+
+def test_rows_converge_to_the_equilibrium_under_a_fixed_path():
+    """With the path held still, each evaluate is one damped iteration at every waypoint:
+    after k evaluates the rows equal the reference iteration's k-th iterate."""
+    model = jwarp.robot("justin19")
+    kappa = kappa_uniform(model, 1e-4)
+    q = sample_within_limits(model, 4, np.random.default_rng(2))
+    Q = PL.initial_paths(q[:2], q[2:], 5, "straight")
+    obj = PL.PathObjective(model, _block_world(), 2, 5, 4, kappa=kappa, lam=LAM, dtype=np.float64,
+                           device="cpu")
+    obj.set_paths(Q)
+    k = 12
+    for _ in range(k):
+        obj.evaluate()
+    _, rho_ref = ref_fk_elastic(model, Q.reshape(-1, model.n_dof), kappa, n_iter=k, lam=LAM)
+    rows = obj.compensation.rows.numpy()[..., :5]
+    np.testing.assert_allclose(rows, rho_ref, atol=1e-10)
+    _, rho_eq = ref_fk_elastic(model, Q.reshape(-1, model.n_dof), kappa, n_iter=40, lam=LAM)
+    assert np.abs(rows - rho_eq).max() < 1e-5
+    obj.set_paths(Q)  # new paths start again from the rigid robot
+    np.testing.assert_array_equal(obj.compensation.rows.numpy()[..., :5],
+                                  np.broadcast_to(nominal_dh(model), rows.shape))
+
+
+def test_cost_at_compensation_rows_equals_cost_at_expanded_rows():
+    """use_rho = 2 (rows with cos/sin, one per waypoint) == use_rho = 1 (per configuration)."""
+    model = jwarp.robot("justin19")
+    world = _block_world()
+    P, W, n_sub = 3, 4, 5
+    S = (W - 1) * n_sub + 1
+    q = sample_within_limits(model, P * S, np.random.default_rng(3))
+    rows = CompensationRows(tables(model, "cpu", np.float64), P, W, n_sub, 3e-3, LAM)
+    for _ in range(2):
+        rows.update(_frames(model, ref_fk(model, q, rows.rho())))
+    cm = collision.collision_model(model, world, device="cpu", dtype=np.float64)
+    qw = wp.array(q, dtype=wp.float64, device="cpu")
+    c2, g2 = (a.numpy() for a in cm.cost(qw, rho=rows, eps=0.05))
+    c1, g1 = (a.numpy() for a in cm.cost(qw, rho=rows.rho(), eps=0.05))
+    c0, _ = cm.cost(qw, eps=0.05)
+    assert np.any(c1 > 0) and np.abs(c1 - c0.numpy()).max() > 1e-6  # the rows matter
+    np.testing.assert_allclose(c2, c1, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(g2, g1, rtol=1e-9, atol=1e-10)
+    with pytest.raises(ValueError, match="rho"):
+        cm.cost(qw[:5], rho=rows, eps=0.05)
+
+
+def test_bad_compensation_arguments():
+    t = tables(jwarp.robot("arm7"), "cpu", np.float64)
+    with pytest.raises(ValueError, match="lam"):
+        CompensationRows(t, 1, 3, 2, 1e-4, 0.0)
+    with pytest.raises(ValueError, match="kappa"):
+        CompensationRows(t, 1, 3, 2, -1e-4, 0.5)
+    with pytest.raises(ValueError, match="kappa"):
+        CompensationRows(t, 2, 3, 2, np.full((5, t.robot.n_frames, 3), 1e-4), 0.5)
