@@ -34,6 +34,7 @@ import warp as wp
 from jwarp.arrays import Batch, as_batch, default_dtype, init_warp, resolve_device, to_output
 from jwarp.device_model import KinematicsTables, numpy_dtype, scalar_type, tables
 from jwarp.kernels import collision as ck
+from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
@@ -232,6 +233,7 @@ class CollisionModel:
         self._scratch: tuple = ()
         self._launches: dict = {}
         self._dummy = wp.empty((1, 1), dtype=self.scalar, device=dev)
+        self._no_update = elastic_kernels(self.scalar).CompensationArgs()  # enabled = 0
 
     # ------------------------------------------------------------ plumbing
     @property
@@ -336,7 +338,8 @@ class CollisionModel:
     # --------------------------------------------------------------- costs
     def cost(self, q: wp.array, *, rho: Any = None, w_world: float = 1.0, w_self: float = 1.0,
              eps: float = DEFAULT_EPS, grad: bool = True, out_cost: wp.array | None = None,
-             out_grad: wp.array | None = None) -> tuple[wp.array, wp.array | None]:
+             out_grad: wp.array | None = None, update_rows: bool = False
+             ) -> tuple[wp.array, wp.array | None]:
         """Collision cost and its hand-written gradient in one launch.
 
         Args:
@@ -348,6 +351,10 @@ class CollisionModel:
             eps: smoothing distance of the clip c [m], > 0.
             grad: also compute d cost / d q.
             out_cost: optional preallocated (N,) output; out_grad: (N, n_dof).
+            update_rows: with compensation rows as ``rho``, also make their torque update
+                from this launch's frames (elastic paper section V): fused into the cost
+                launch on the CPU, a second launch over the waypoints on CUDA (a fused
+                update would stall the other threads of a warp).
 
         Returns:
             ``(cost (N,), grad (N, n_dof) or None)`` as Warp arrays (no host copies).
@@ -361,6 +368,11 @@ class CollisionModel:
         cost = self._out(out_cost, (n,), "out_cost")
         g = self._out(out_grad, (n, self.robot.n_dof), "out_grad") if grad else None
         rho_a, stride, use_rho, group, sub = self._rho_or_rows(rho, n)
+        if update_rows and not isinstance(rho, CompensationRows):
+            raise ValueError("update_rows: needs compensation rows as rho "
+                             "(jwarp.elastic_rows.CompensationRows)")
+        fused = update_rows and self.device.is_cpu
+        comp = rho.args(enabled=fused) if update_rows else self._no_update
         ww = float(w_world) if self.world is not None and self.n_spheres else 0.0
         ws = float(w_self) if self.n_pairs else 0.0
         frames, xs, force, moment, bc = self.scratch(n)
@@ -372,19 +384,34 @@ class CollisionModel:
         reuse = out_cost is not None and (rho is None or isinstance(rho, (wp.array,
                                                                            CompensationRows)))
         if not reuse:
-            wp.launch(self.k.cost, dim=n, inputs=inputs, outputs=[cost, gout], device=self.device)
-            return cost, g
-        key = (id(q), id(rho_a), stride, id(cost), id(g), ww, ws, float(eps), n)
-        hit = self._launches.get(key)
-        if hit is None:
-            if len(self._launches) > 32:
-                self._launches.clear()
-            launch = wp.launch(self.k.cost, dim=n, inputs=inputs, outputs=[cost, gout],
-                               device=self.device, record_cmd=True)
-            hit = (launch, q, rho_a, cost, g)
-            self._launches[key] = hit
-        hit[0].launch()
+            wp.launch(self.k.cost, dim=n, inputs=inputs, outputs=[cost, gout, comp],
+                      device=self.device)
+        else:
+            key = (id(q), id(rho_a), stride, id(cost), id(g), ww, ws, float(eps), n, id(comp))
+            hit = self._launches.get(key)
+            if hit is None:
+                if len(self._launches) > 32:
+                    self._launches.clear()
+                launch = wp.launch(self.k.cost, dim=n, inputs=inputs,
+                                   outputs=[cost, gout, comp], device=self.device,
+                                   record_cmd=True)
+                hit = (launch, q, rho_a, cost, g, comp)
+                self._launches[key] = hit
+            hit[0].launch()
+        if fused:
+            rho.commit()
+        elif update_rows:
+            rho.update(self._frames_view(n))
         return cost, g
+
+    def _frames_view(self, n: int) -> wp.array:
+        """The cost kernel's frames (n, n_frames) of its last launch (a cached view of the
+        scratch, so a recorded launch that reads it is replayed)."""
+        frames = self.scratch(n)[0]
+        view = self.__dict__.get("_frames_n")
+        if view is None or view[0] is not frames or view[1] != n:
+            view = self._frames_n = (frames, n, frames[:n])
+        return view[2]
 
     def cost_tape(self, q: wp.array, *, rho: Any = None, w_world: float = 1.0,
                   w_self: float = 1.0, eps: float = DEFAULT_EPS) -> tuple[wp.array, wp.array]:

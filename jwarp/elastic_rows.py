@@ -82,6 +82,7 @@ class CompensationRows:
         self.delta = wp.zeros(self.n_updates, dtype=t.scalar, device=dev)
         self.iterations = 0
         self._launches: dict = {}
+        self._args: dict = {}
         self.reset()
 
     @property
@@ -110,32 +111,52 @@ class CompensationRows:
         self.delta.fill_(1e30)  # no update yet: nothing has converged
         self.iterations = 0
 
+    def args(self, enabled: bool = True) -> Any:
+        """The kernel argument (``kernels.elastic.CompensationArgs``) of the next update:
+        from :attr:`rows` into the other buffer. A kernel that takes it and runs the update
+        must be followed by :meth:`commit`. ``enabled=False``: a disabled argument."""
+        key = (bool(enabled), id(self._bufs[1]))
+        c = self._args.get(key)
+        if c is None:
+            t = self.t
+            c = self.k.CompensationArgs()
+            c.enabled = int(enabled)
+            c.n_waypoints, c.n_sub = self.W, self.n_sub
+            c.rho0, c.rho0_stride = t.dh0_3d, 0
+            c.kappa, c.kappa_stride = self.kappa, self.kappa_stride
+            c.lam, c.gravity = self.lam, self.gravity
+            c.mass, c.mass_com, c.dh_info = t.mass, t.mass_com, t.dh_info
+            c.prefix, c.scratch_stride = self._prefix, int(self._prefix.shape[1] > 1)
+            c.rows_out, c.delta = self._bufs[1], self.delta
+            self._args[key] = c
+        return c
+
+    def commit(self) -> None:
+        """The rows a kernel has just written through :meth:`args` become :attr:`rows`."""
+        self._bufs.reverse()
+        self.iterations += 1
+
     def update(self, frames: wp.array) -> wp.array:
-        """One torque update from ``frames`` (N, n_frames) computed at :attr:`rows`; the
-        new rows become :attr:`rows`. Returns delta (P * W,): the largest row change at each
-        waypoint [rad]."""
+        """One torque update from ``frames`` (N, n_frames) computed at :attr:`rows` (its own
+        launch over the P * W waypoints); the new rows become :attr:`rows`. Returns delta
+        (P * W,): the largest row change at each waypoint [rad]."""
         t = self.t
         if tuple(frames.shape[:2]) != (self.N, t.robot.n_frames):
             raise ValueError(f"frames: expected shape ({self.N}, {t.robot.n_frames}), got "
                              f"{tuple(frames.shape)}")
-        src, dst = self._bufs
-        # a recorded launch per (frames, direction): Warp's argument packing costs tens of
+        # a recorded launch per (frames, direction): Warp's argument packing costs
         # microseconds per launch on the host, as much as the update of a whole path
-        key = (id(frames), id(src))
+        key = (id(frames), id(self.rows))
         hit = self._launches.get(key)
         if hit is None:
             if len(self._launches) > 8:
                 self._launches.clear()
-            launch = wp.launch(
-                self.k.compensation_update, dim=self.n_updates,
-                inputs=[frames, src, t.dh0_3d, 0, self.kappa, self.kappa_stride, self.lam,
-                        self.gravity, self.W, self.n_sub, int(self._prefix.shape[1] > 1),
-                        t.frame_struct, t.mass, t.mass_com, t.dh_info, self._prefix],
-                outputs=[dst, self.delta], device=t.device, record_cmd=True)
+            launch = wp.launch(self.k.compensation_update, dim=self.n_updates,
+                               inputs=[frames, self.rows, t.frame_struct],
+                               outputs=[self.args()], device=t.device, record_cmd=True)
             hit = self._launches[key] = (launch, frames)  # keeps frames alive for the id
         hit[0].launch()
-        self._bufs.reverse()
-        self.iterations += 1
+        self.commit()
         return self.delta
 
     def rho(self, rows: wp.array | None = None) -> np.ndarray:

@@ -115,8 +115,20 @@ def test_cost_at_compensation_rows_equals_cost_at_expanded_rows():
     assert np.any(c1 > 0) and np.abs(c1 - c0.numpy()).max() > 1e-6  # the rows matter
     np.testing.assert_allclose(c2, c1, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(g2, g1, rtol=1e-9, atol=1e-10)
+    # the update fused into the cost launch equals the update from reference frames
+    twin = CompensationRows(tables(model, "cpu", np.float64), P, W, n_sub, 3e-3, LAM)
+    for _ in range(2):
+        twin.update(_frames(model, ref_fk(model, q, twin.rho())))
+    F = ref_fk(model, q, rows.rho())
+    cm.cost(qw, rho=rows, eps=0.05, update_rows=True)
+    twin.update(_frames(model, F))
+    np.testing.assert_allclose(rows.rows.numpy(), twin.rows.numpy(), atol=1e-12)
+    np.testing.assert_allclose(rows.delta.numpy(), twin.delta.numpy(), atol=1e-12)
+    assert rows.iterations == 3
     with pytest.raises(ValueError, match="rho"):
         cm.cost(qw[:5], rho=rows, eps=0.05)
+    with pytest.raises(ValueError, match="update_rows"):
+        cm.cost(qw, rho=rows.rho(), eps=0.05, update_rows=True)
 
 
 def test_bad_compensation_arguments():

@@ -54,6 +54,7 @@ from types import SimpleNamespace
 
 import warp as wp
 
+from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
 
 
@@ -83,6 +84,7 @@ def mesh_sdf_kernel(
 def kernels(scalar: type) -> SimpleNamespace:
     """Collision kernels and functions for one scalar type (``wp.float32``/``wp.float64``)."""
     fk = fk_kernels(scalar)
+    el = elastic_kernels(scalar)
     vec3, vec4, mat33, mat44 = fk.vec3, fk.vec4, fk.mat33, fk.mat44
     zero = scalar(0.0)
     one = scalar(1.0)
@@ -244,12 +246,16 @@ def kernels(scalar: type) -> SimpleNamespace:
         # Data out:
         cost: wp.array(dtype=scalar),
         grad: wp.array2d(dtype=scalar),
+        comp: el.CompensationArgs,
     ):
         """cost[b] = w_world U_w(q_b) + w_self U_s(q_b) and, if ``want_grad``,
         grad[b, :] = d cost / d q_b (rho fixed). DH rows: row ``rho_stride *
         waypoint_row(b, rho_group, rho_sub)`` (:func:`jwarp.kernels.fk.waypoint_row`; 1, 1
         for a row per configuration). Scratch: frames (N, n_frames), xs (N, S), force,
-        moment and bounding-sphere centres bc (N, n_frames)."""
+        moment and bounding-sphere centres bc (N, n_frames). With ``comp.enabled`` (and
+        compensation rows, ``use_rho`` = 2) waypoint configurations end with one torque
+        update of their row from the frames just computed
+        (:func:`jwarp.kernels.elastic.waypoint_update`)."""
         b = wp.tid()
         nf = model.order.shape[0]
         rb = rho_stride * fk.waypoint_row(b, rho_group, rho_sub)
@@ -338,6 +344,8 @@ def kernels(scalar: type) -> SimpleNamespace:
                         for m in range(m0, m1):
                             jm = model.cpl_joint[m]
                             grad[b, jm] = grad[b, jm] + model.cpl_coef[m] * gi
+        if comp.enabled != 0:
+            el.waypoint_update(model, frames, b, rho, comp)
 
     @wp.kernel(module="unique", enable_backward=False)
     def distance_kernel(

@@ -194,53 +194,43 @@ def kernels(scalar: type) -> SimpleNamespace:
                                  kappa_stride, lam, gravity, dh_info, prefix, axes, sb, rho_out,
                                  tau_out, write_tau)
 
-    @wp.kernel(module="unique", enable_backward=False)
-    def compensation_update_kernel(
-        # Data in:
-        frames: wp.array2d(dtype=mat44),
-        rows: wp.array3d(dtype=scalar),
-        rho0: wp.array3d(dtype=scalar),
-        rho0_stride: int,
-        kappa: wp.array3d(dtype=scalar),
-        kappa_stride: int,
-        lam: scalar,
-        gravity: vec3,
-        n_waypoints: int,
-        n_sub: int,
-        scratch_stride: int,
-        # Model:
-        model: fk.FrameTables,
-        mass: wp.array(dtype=scalar),
-        mass_com: wp.array(dtype=vec3),
-        dh_info: wp.array(dtype=wp.vec4i),
-        # Scratch:
-        prefix: wp.array2d(dtype=vec4),
-        # Data out:
-        rows_out: wp.array3d(dtype=scalar),
-        delta: wp.array(dtype=scalar),
-    ):
-        """One torque update of compensation rows from frames an optimizer has already
-        computed (elastic paper section V: no extra forward kinematics).
+    @wp.struct
+    class CompensationArgs:
+        """Everything one torque update of compensation rows needs besides the frames and
+        the current rows (one kernel argument; see :func:`compensation_update`).
+        ``enabled`` = 0 makes a kernel that takes it skip the update."""
 
-        ``frames`` (N, n_frames) are F(q, rows) of N = P * S configurations, P paths of
-        ``n_waypoints`` waypoints with ``n_sub`` substeps each (S = (W - 1) n_sub + 1;
-        configuration ``p * S + s``; IK: W = n_sub = 1). ``rows`` (P * W, n_frames, 9):
-        one row per waypoint (``use_rho`` = 2 and :func:`jwarp.kernels.fk.waypoint_row`:
-        substeps read their nearest waypoint's). Launch dim P * W: thread u updates the
-        torques at its waypoint and writes ``rows_out[u]``. Only
-        the DH rows of ``rows_out`` are written. delta[u] = max |new - old| [rad] at the
-        waypoint. ``prefix`` (n_frames + 1, S') is scratch, column ``u * scratch_stride``."""
-        u = wp.tid()
-        p = u // n_waypoints
-        wpt = u - p * n_waypoints
-        b = p * ((n_waypoints - 1) * n_sub + 1) + wpt * n_sub
-        sc = u * scratch_stride
-        subtree_prefix(model, frames, b, mass, mass_com, prefix, sc)
-        r0 = b * rho0_stride
-        kb = b * kappa_stride
+        enabled: int
+        n_waypoints: int
+        n_sub: int
+        rho0: wp.array3d(dtype=scalar)
+        rho0_stride: int
+        kappa: wp.array3d(dtype=scalar)
+        kappa_stride: int
+        lam: scalar
+        gravity: vec3
+        mass: wp.array(dtype=scalar)
+        mass_com: wp.array(dtype=vec3)
+        dh_info: wp.array(dtype=wp.vec4i)
+        prefix: wp.array2d(dtype=vec4)
+        scratch_stride: int
+        rows_out: wp.array3d(dtype=scalar)
+        delta: wp.array(dtype=scalar)
+
+    @wp.func
+    def compensation_update(model: fk.FrameTables, frames: wp.array2d(dtype=mat44), b: int,
+                            rows: wp.array3d(dtype=scalar), u: int, c: CompensationArgs):
+        """One torque update of compensation row ``u`` (9 columns) from the frames of
+        configuration b computed at that row: ``c.rows_out[u]`` (DH frames only) and
+        ``c.delta[u]`` = max |new - old| [rad]. Scratch column ``u * c.scratch_stride``."""
+        sc = u * c.scratch_stride
+        subtree_prefix(model, frames, b, c.mass, c.mass_com, c.prefix, sc)
+        r0 = b * c.rho0_stride
+        kb = b * c.kappa_stride
+        lam = c.lam
         dmax = zero
-        for j in range(dh_info.shape[0]):
-            info = dh_info[j]
+        for j in range(c.dh_info.shape[0]):
+            info = c.dh_info[j]
             i = info[1]
             T = frames[b, i]
             pp = vec3(zero, zero, zero)
@@ -249,34 +239,66 @@ def kernels(scalar: type) -> SimpleNamespace:
                 Tp = frames[b, info[3]]
                 pp = unpack_pos(Tp)
                 Rp = unpack_rot(Tp)
-            cos_b = rows[u, i, 7]
-            sin_b = rows[u, i, 8]
-            tau = gravity_torques(prefix[info[2], sc] - prefix[info[0], sc], unpack_pos(T),
+            tau = gravity_torques(c.prefix[info[2], sc] - c.prefix[info[0], sc], unpack_pos(T),
                                   vec3(T[0, 2], T[1, 2], T[2, 2]), pp,
-                                  Rp * vec3(cos_b, zero, -sin_b),
-                                  vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1]), gravity)
+                                  Rp * vec3(rows[u, i, 7], zero, -rows[u, i, 8]),
+                                  vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1]), c.gravity)
             prev_t = rows[u, i, 1]
             prev_a = rows[u, i, 3]
             prev_b = rows[u, i, 4]
-            d_a = lam * (rho0[r0, i, 3] + kappa[kb, i, 0] * tau[0] - prev_a)
-            d_b = lam * (rho0[r0, i, 4] + kappa[kb, i, 1] * tau[1] - prev_b)
-            d_t = lam * (rho0[r0, i, 1] + kappa[kb, i, 2] * tau[2] - prev_t)
+            d_a = lam * (c.rho0[r0, i, 3] + c.kappa[kb, i, 0] * tau[0] - prev_a)
+            d_b = lam * (c.rho0[r0, i, 4] + c.kappa[kb, i, 1] * tau[1] - prev_b)
+            d_t = lam * (c.rho0[r0, i, 1] + c.kappa[kb, i, 2] * tau[2] - prev_t)
             dmax = wp.max(dmax, wp.max(wp.abs(d_a), wp.max(wp.abs(d_b), wp.abs(d_t))))
             new_a = prev_a + d_a
             new_b = prev_b + d_b
             cs = model.trig[i]  # cos/sin from the nominal angles: no drift over iterations
             ca, sa = fk.cos_sin_near(new_a, model.dh0[i, 3], cs[0], cs[1])
             cb, sb = fk.cos_sin_near(new_b, model.dh0[i, 4], cs[2], cs[3])
-            rows_out[u, i, 0] = rows[u, i, 0]
-            rows_out[u, i, 1] = prev_t + d_t
-            rows_out[u, i, 2] = rows[u, i, 2]
-            rows_out[u, i, 3] = new_a
-            rows_out[u, i, 4] = new_b
-            rows_out[u, i, 5] = ca
-            rows_out[u, i, 6] = sa
-            rows_out[u, i, 7] = cb
-            rows_out[u, i, 8] = sb
-        delta[u] = dmax
+            # d and r never change: both buffers hold them from fill_rows
+            c.rows_out[u, i, 1] = prev_t + d_t
+            c.rows_out[u, i, 3] = new_a
+            c.rows_out[u, i, 4] = new_b
+            c.rows_out[u, i, 5] = ca
+            c.rows_out[u, i, 6] = sa
+            c.rows_out[u, i, 7] = cb
+            c.rows_out[u, i, 8] = sb
+        c.delta[u] = dmax
+
+    @wp.func
+    def waypoint_update(model: fk.FrameTables, frames: wp.array2d(dtype=mat44), b: int,
+                        rows: wp.array3d(dtype=scalar), c: CompensationArgs):
+        """:func:`compensation_update` at configuration b if it is a waypoint (fused into a
+        kernel that has just computed the frames of b at its row)."""
+        S = (c.n_waypoints - 1) * c.n_sub + 1
+        p = b // S
+        s = b - p * S
+        if s % c.n_sub == 0:
+            compensation_update(model, frames, b, rows, p * c.n_waypoints + s // c.n_sub, c)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def compensation_update_kernel(
+        # Data in:
+        frames: wp.array2d(dtype=mat44),
+        rows: wp.array3d(dtype=scalar),
+        # Model:
+        model: fk.FrameTables,
+        # Data out:
+        c: CompensationArgs,
+    ):
+        """One torque update of compensation rows from frames an optimizer has already
+        computed (elastic paper section V: no extra forward kinematics).
+
+        ``frames`` (N, n_frames) are F(q, rows) of N = P * S configurations, P paths of
+        ``c.n_waypoints`` waypoints with ``c.n_sub`` substeps each (S = (W - 1) n_sub + 1;
+        configuration ``p * S + s``; IK: W = n_sub = 1). ``rows`` (P * W, n_frames, 9):
+        one row per waypoint (``use_rho`` = 2 and :func:`jwarp.kernels.fk.waypoint_row`:
+        substeps read their nearest waypoint's). Launch dim P * W: thread u updates the
+        torques at its waypoint and writes ``c.rows_out[u]`` and ``c.delta[u]``."""
+        u = wp.tid()
+        p = u // c.n_waypoints
+        b = p * ((c.n_waypoints - 1) * c.n_sub + 1) + (u - p * c.n_waypoints) * c.n_sub
+        compensation_update(model, frames, b, rows, u, c)
 
     @wp.kernel(module="unique", enable_backward=False)
     def fill_rows_kernel(
@@ -311,5 +333,7 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     return SimpleNamespace(vec4=vec4, elastic_step=elastic_step_kernel,
                            fill_static_rows=fill_static_rows,
+                           CompensationArgs=CompensationArgs,
+                           waypoint_update=waypoint_update,
                            compensation_update=compensation_update_kernel,
                            fill_rows=fill_rows_kernel)

@@ -177,7 +177,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         c0 = vec3(Rp[0, 0], Rp[1, 0], Rp[2, 0])
         c1 = vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1])
         c2 = vec3(Rp[0, 2], Rp[1, 2], Rp[2, 2])
-        if sb != zero or use_rho != 0:  # Rot_y(beta); always when differentiable in beta
+        if sb != zero or use_rho == 1:  # Rot_y(beta); always when differentiable in beta
             t0 = cb * c0 - sb * c2
             c2 = sb * c0 + cb * c2
             c0 = t0

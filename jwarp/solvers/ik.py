@@ -178,7 +178,6 @@ class IKObjective:
         self.point = self.fk.vec3(0.0, 0.0, 0.0)
         #: elastic compensation rows (None: the rigid robot)
         self.compensation: CompensationRows | None = None
-        self._frames_at_rows = False  # self.frames hold F(q, rows) of the last iteration
         if kappa is not None:
             self.compensation = CompensationRows(self.t, B, 1, 1, kappa, lam)
         #: (B,) largest DH row change of the last torque update [rad] (elastic only)
@@ -221,7 +220,6 @@ class IKObjective:
             wp.copy(self.q, wp.array(q, dtype=self.scalar, device=self.device))
         if not keep_rho and self.compensation is not None:
             self.compensation.reset()
-            self._frames_at_rows = False
 
     def set_target(self, target: np.ndarray) -> None:
         """target (B, 4, 4) poses of the frame."""
@@ -235,12 +233,9 @@ class IKObjective:
         comp = self.compensation
         jac_rho = (t.dh0_3d, 0, 0)
         if comp is not None:
-            if self._frames_at_rows:  # one torque update from the last iteration's frames
-                self.delta = comp.update(self.frames)
             jac_rho = (comp.rows, 1, 2)
         self._launch(("fk", id(jac_rho[0])), self.fk.fk, [self.q, *jac_rho, t.frame_struct],
                      [self.frames])
-        self._frames_at_rows = True
         self._launch(("jac", id(jac_rho[0]), jac_rho[2]), self.fk.jacobian,
                      [self.q, *jac_rho, self.point, t.frame_struct, t.chain(self.frame)],
                      [self.jac])
@@ -252,13 +247,17 @@ class IKObjective:
 
     def evaluate_aux(self) -> None:
         """U_A (world + self collision + closeness to the default pose) and its gradient at
-        the frames of the last :meth:`evaluate_pose` (elastic: the same DH rows)."""
+        the frames of the last :meth:`evaluate_pose` (elastic: the same DH rows, followed
+        by the iteration's one torque update of the rows)."""
         w = self.weights
         use = int(w.world > 0 or w.self > 0)
-        if use:
-            rho = self.compensation  # the rows of the last evaluate_pose
-            self.cm.cost(self.q, rho=rho, w_world=w.world, w_self=w.self, eps=self.eps,
-                         grad=True, out_cost=self.coll_cost, out_grad=self.coll_grad)
+        comp = self.compensation
+        if use:  # elastic: at the rows of evaluate_pose, then one torque update from them
+            self.cm.cost(self.q, rho=comp, w_world=w.world, w_self=w.self, eps=self.eps,
+                         grad=True, out_cost=self.coll_cost, out_grad=self.coll_grad,
+                         update_rows=comp is not None)
+        elif comp is not None:
+            comp.update(self.frames)
         self._launch(("aux", id(self.q_default), use, w.default), self.kk.aux_cost,
                      [self.q, self.q_default, self.default_stride, self.coll_cost,
                       self.coll_grad, use, self.scalar(w.default)],

@@ -375,23 +375,14 @@ class PathObjective:
                   outputs=[self.q_sub], device=dev)
         comp = self.compensation
         w = self.weights
+        # elastic: frames at the kept rows, and from them one torque update for next time
         self.cm.cost(self.q_sub, rho=comp, w_world=w.world, w_self=w.self, eps=self.eps,
-                     grad=grad, out_cost=self.sub_cost, out_grad=self.sub_grad)
-        if comp is not None:  # torque update from the cost kernel's frames, for next time
-            comp.update(self._cost_frames())
+                     grad=grad, out_cost=self.sub_cost, out_grad=self.sub_grad,
+                     update_rows=comp is not None)
         wp.launch(k.path_cost, dim=self.P,
                   inputs=[self.paths, self.sub_cost, self.n_sub, self.scalar(w.length),
                           self.scalar(NORM_FLOOR)],
                   outputs=[self.length, self.collision, self.total, self.sub_max], device=dev)
-
-    def _cost_frames(self) -> wp.array:
-        """The collision kernel's frames (N, n_frames) of the last evaluate (a view of its
-        scratch, cached so the recorded torque-update launch is replayed)."""
-        frames = self.cm.scratch(self.N)[0]
-        view = self.__dict__.get("_frames_view")
-        if view is None or view[0] is not frames:
-            view = self._frames_view = (frames, frames[:self.N])
-        return view[1]
 
     def gradient(self) -> wp.array:
         """dU_path/dQ (P, W, n_dof) of the last :meth:`evaluate` (zero at start/goal)."""
