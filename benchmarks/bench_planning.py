@@ -214,7 +214,7 @@ def bench_compensation(args: argparse.Namespace) -> dict:
     limbs[torso] = comp.JUSTIN_KAPPA * robot.is_dh[torso, None]
     for label, kappa, lam in (("justin_1e-4", comp.JUSTIN_KAPPA, 0.7),
                               ("soft20x_2e-3_all_axes", 20 * comp.JUSTIN_KAPPA, 0.5),
-                              ("soft20x_2e-3_limbs_only", limbs, 0.5),
+                              ("soft20x_2e-3_limbs_only", limbs, 0.7),
                               ("soft20x_2e-3_theta_only", [0.0, 0.0, 20 * comp.JUSTIN_KAPPA], 0.7)):
         out[f"ik_convergence_{label}"] = comp.compare_ik(robot, "right_tcp", T, kappa, lam=lam,
                                                          n_starts=8, check_every=1,

@@ -139,3 +139,28 @@ def test_bad_compensation_arguments():
         CompensationRows(t, 1, 3, 2, -1e-4, 0.5)
     with pytest.raises(ValueError, match="kappa"):
         CompensationRows(t, 2, 3, 2, np.full((5, t.robot.n_frames, 3), 1e-4), 0.5)
+
+
+def _cuda_available():
+    from jwarp.arrays import init_warp
+
+    init_warp()
+    return wp.is_cuda_available()
+
+
+@pytest.mark.skipif(not _cuda_available(), reason="no CUDA device")
+def test_cuda_update_in_its_own_launch_matches_the_fused_cpu_update():
+    model = jwarp.robot("justin19")
+    world = _block_world()
+    q = sample_within_limits(model, 6, np.random.default_rng(4))
+    Q = PL.initial_paths(q[:3], q[3:], 6, "straight")
+    rows = {}
+    for dev in ("cpu", "cuda:0"):
+        obj = PL.PathObjective(model, world, 3, 6, 4, kappa=1e-3, lam=LAM, dtype=np.float64,
+                               device=dev)
+        obj.set_paths(Q)
+        for _ in range(3):
+            obj.evaluate()
+        rows[dev] = (obj.compensation.rows.numpy(), obj.sub_grad.numpy())
+    np.testing.assert_allclose(rows["cuda:0"][0], rows["cpu"][0], atol=1e-10)
+    np.testing.assert_allclose(rows["cuda:0"][1], rows["cpu"][1], rtol=1e-8, atol=1e-8)

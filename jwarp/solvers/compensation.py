@@ -94,11 +94,12 @@ def compare_ik(robot: Any, frame: Any, targets: Any, kappa: Any, *, n_starts: in
             if np.any(soft.feasible) else float("nan")}
 
 
-def iteration_overhead(objective_rigid: Any, objective_elastic: Any, *, repeats: int = 200
-                       ) -> dict:
+def iteration_overhead(objective_rigid: Any, objective_elastic: Any, *, repeats: int = 200,
+                       rounds: int = 7) -> dict:
     """Time per evaluation (+ step) of a rigid and an elastic objective of the same size
     (:class:`PathObjective` or :class:`IKObjective`, already filled): seconds per
-    iteration and the relative overhead of the torque update."""
+    iteration (the best of ``rounds`` interleaved runs of ``repeats`` iterations each) and
+    the relative overhead of the torque update."""
     def one(obj: Any) -> None:
         if isinstance(obj, PathObjective):
             obj.evaluate()
@@ -109,18 +110,19 @@ def iteration_overhead(objective_rigid: Any, objective_elastic: Any, *, repeats:
 
     import warp as wp
 
-    out = {}
-    for name, obj in (("rigid", objective_rigid), ("elastic", objective_elastic)):
+    objs = {"rigid": objective_rigid, "elastic": objective_elastic}
+    best = dict.fromkeys(objs, float("inf"))
+    for obj in objs.values():
         one(obj)
         wp.synchronize_device(obj.device)
-        best = float("inf")
-        for _ in range(3):
+    for _ in range(rounds):  # interleaved, so both see the same machine load
+        for name, obj in objs.items():
             t0 = time.perf_counter()
             for _ in range(repeats):
                 one(obj)
             wp.synchronize_device(obj.device)  # CUDA launches are asynchronous
-            best = min(best, (time.perf_counter() - t0) / repeats)
-        out[f"{name}_s"] = best
+            best[name] = min(best[name], (time.perf_counter() - t0) / repeats)
+    out = {f"{name}_s": t for name, t in best.items()}
     out["overhead"] = out["elastic_s"] / out["rigid_s"] - 1.0
     return out
 
