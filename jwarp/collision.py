@@ -344,8 +344,9 @@ class CollisionModel:
 
         Args:
             q: (N, n_dof) Warp array on this device and dtype [rad or m].
-            rho: DH rows (n_frames, 5) or per configuration (N, n_frames, 5) (elastic
-                compensation: frames at rho, gradient with rho fixed); None = nominal.
+            rho: DH rows (n_frames, 5) or per configuration (N, n_frames, 5), or
+                :class:`jwarp.elastic_rows.CompensationRows` (elastic compensation: frames
+                at those rows, gradient with the rows fixed); None = nominal.
             w_world, w_self: weights of U_world and U_self (eq. 3.16); a zero weight skips
                 that term. Without a world U_world is 0.
             eps: smoothing distance of the clip c [m], > 0.
