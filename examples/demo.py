@@ -7,7 +7,10 @@
 3. a table of the elastic sag of both TCPs and the iterations of the equilibrium solve,
 4. Jacobians of the right TCP,
 5. a batched run (thousands of configurations per call),
-6. a rerun recording with the frames and collision spheres (rigid and elastic).
+6. elastic compensation in planning: a collision-free path and a collision-free IK
+   solution on the elastic robot in a simplex world, each checked on the converged
+   torque equilibrium,
+7. a rerun recording with the frames and collision spheres (rigid and elastic).
 
 Run:  python examples/demo.py [OUT.rrd] [--seed N]      (view: rerun demo_justin19.rrd)
 """
@@ -25,6 +28,34 @@ import jwarp
 from jwarp import kinematics
 
 KAPPA = 0.1e-3  # 0.1 rad/kNm = 1e-4 rad/(N m), for [alpha, beta, theta] of every DH frame
+
+
+def plan_on_the_elastic_robot(robot: jwarp.RobotModel, rng: np.random.Generator) -> None:
+    """A path and an IK solution on the elastic robot (one torque update per iteration),
+    checked on the converged equilibrium."""
+    from jwarp.solvers import compensation, planner
+    from jwarp.world.io import parse_world_spec
+
+    world = parse_world_spec("simplex:seed=1,feasible=200", robot)
+    q = random_configurations(robot, 200, rng)
+    q = q[planner.collision_free(robot, world, q, 0.0, kappa=KAPPA)][:2]  # elastic robot
+    t0 = time.perf_counter()
+    res = compensation.compensated_plan(robot, world, q[0], q[1], kappa=KAPPA, n_starts=8,
+                                        iterations=100, step=0.2)
+    dt = time.perf_counter() - t0
+    ok = planner.path_feasible(robot, world, res.path[0], 4 * res.n_substeps, kappa=KAPPA)
+    print(f"\nelastic plan in simplex:seed=1 (voxel {100 * world.voxel_size:.1f} cm): "
+          f"feasible {bool(res.feasible[0])}, {int(res.n_feasible[0])} of 8 starts, "
+          f"{int(res.iterations[0])} iterations, {dt:.2f} s; re-checked on the equilibrium "
+          f"at 4x the substeps: {bool(ok)}")
+    T = jwarp.fk(robot, q[1])[robot.frame_index("right_tcp")]
+    t0 = time.perf_counter()
+    sol = compensation.compensated_ik(robot, "right_tcp", T, kappa=KAPPA, world=world)
+    dt = time.perf_counter() - t0
+    pos, ang = compensation.equilibrium_pose_error(robot, "right_tcp", sol.q, T, KAPPA)
+    print(f"elastic IK of right_tcp: feasible {bool(sol.feasible)}, {1e3 * dt:.1f} ms; on the "
+          f"converged equilibrium the hand is {1e3 * float(pos):.3f} mm / "
+          f"{1e3 * float(ang):.3f} mrad off the target")
 
 
 def random_configurations(model: jwarp.RobotModel, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -101,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
         dt = time.perf_counter() - t0
         shape = (out.frames if hasattr(out, "frames") else out).shape
         print(f"batched {label:<10} float32 cpu: {qb.shape} -> {shape} in {1e3 * dt:.1f} ms")
+
+    plan_on_the_elastic_robot(robot, rng)
 
     # rerun recording: frames, skeleton and collision spheres, rigid and elastic
     try:

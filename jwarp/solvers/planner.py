@@ -158,14 +158,14 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
     """(N,) bool: q (N, n_dof) collision-free (world and self) with ``margin`` [m].
 
     With ``rho`` (N, n_frames, 5) the frames are those DH rows; with ``kappa`` (and no
-    rho) the elastic model in its torque equilibrium."""
+    rho) the elastic model in its torque equilibrium (to 1e-7 rad: 0.1 um at 1 m)."""
     col = _collision()
     q = np.ascontiguousarray(q, np.float64)
     if rho is None and kappa is not None:
         from jwarp.kinematics import fk_elastic
 
-        rho = np.asarray(fk_elastic(robot, q, kappa, max_iter=30, lam=0.7, device=device,
-                                    dtype=np.float64).rho)
+        rho = np.asarray(fk_elastic(robot, q, kappa, max_iter=30, lam=0.7, tol=1e-7,
+                                    device=device, dtype=np.float64).rho)
     return np.asarray(col.is_collision_free(robot, q, world, margin=margin, rho=rho,
                                             device=device, dtype=np.float64), bool).reshape(-1)
 
