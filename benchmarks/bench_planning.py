@@ -47,24 +47,12 @@ from jwarp.solvers import compensation as comp  # noqa: E402
 from jwarp.solvers import ik as IK  # noqa: E402
 from jwarp.solvers import planner as PL  # noqa: E402
 from jwarp.solvers.limits import sample_within_limits  # noqa: E402
-from jwarp.world import world_from_occupancy  # noqa: E402
+from jwarp.world import shelf_world  # noqa: E402
 from jwarp.world.io import parse_world_spec  # noqa: E402
 
 ROBOTS = ("planar4", "arm7", "justin19")
 FRAMES = {"planar4": "tcp", "arm7": "tcp", "justin19": "right_tcp"}
 SIMPLEX = "simplex:seed={seed},feasible=200"  # >= 200 of 1000 random configs free
-
-
-def shelf_world() -> Any:
-    """A shelf in front of justin19: two boards and a back wall, 4 cm voxels."""
-    h = 0.04
-    lim = np.array([[-0.2, 1.4], [-1.0, 1.0], [0.0, 1.6]])
-    n = np.round((lim[:, 1] - lim[:, 0]) / h).astype(int) + 1
-    X, Y, Z = np.meshgrid(*[lim[d, 0] + h * np.arange(n[d]) for d in range(3)], indexing="ij")
-    inside_x = (X > 0.7) & (X < 1.1)
-    boards = inside_x & (np.abs(Y) < 0.6) & ((np.abs(Z - 0.55) < 0.03) | (np.abs(Z - 1.05) < 0.03))
-    back = (np.abs(X - 1.12) < 0.03) & (np.abs(Y) < 0.6) & (Z < 1.3)
-    return world_from_occupancy(boards | back, lim, h)
 
 
 def timed(fn: Any, min_time: float, repeats: int = 3) -> float:

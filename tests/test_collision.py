@@ -11,6 +11,7 @@ from jwarp.collision import (CollisionModel, collision_cost, collision_pairs, is
                              min_distances, rigid_pairs, self_distances, sphere_distances)
 from jwarp.world import World, random_configurations, simplex_world, world_from_occupancy
 
+from devices import requires_cuda
 from reference import ref_fk, sample_q
 from test_world import ref_lookup
 
@@ -283,14 +284,7 @@ def test_bad_inputs():
         is_collision_free("planar4", np.zeros((2, 4)), world2, margin=np.nan)
 
 
-def _cuda_available():
-    from jwarp.arrays import init_warp
-
-    init_warp()
-    return wp.is_cuda_available()
-
-
-@pytest.mark.skipif(not _cuda_available(), reason="no CUDA device")
+@requires_cuda
 def test_cuda_matches_reference_and_cpu():
     model = jwarp.robot("justin19")
     world = dense_world(model)

@@ -14,6 +14,7 @@ from jwarp.solvers import planner as PL
 from jwarp.solvers.limits import sample_within_limits
 from jwarp.world import world_from_occupancy
 
+from devices import requires_cuda
 from reference import kappa_uniform, nominal_dh, ref_fk, ref_fk_elastic, ref_torques
 
 LAM = 0.6
@@ -141,14 +142,7 @@ def test_bad_compensation_arguments():
         CompensationRows(t, 2, 3, 2, np.full((5, t.robot.n_frames, 3), 1e-4), 0.5)
 
 
-def _cuda_available():
-    from jwarp.arrays import init_warp
-
-    init_warp()
-    return wp.is_cuda_available()
-
-
-@pytest.mark.skipif(not _cuda_available(), reason="no CUDA device")
+@requires_cuda
 def test_cuda_update_in_its_own_launch_matches_the_reference_iteration():
     """On CUDA the update is a second launch over the waypoints, reading the cost kernel's
     frame-major scratch: after k evaluates the rows are the reference's k-th iterate."""

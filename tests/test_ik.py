@@ -9,19 +9,7 @@ import jwarp
 from jwarp import collision
 from jwarp.solvers import ik as IK
 from jwarp.solvers.limits import sample_within_limits, within_limits
-from jwarp.world import world_from_occupancy
-
-
-def shelf_world():
-    """A shelf in front of justin19 / arm7: two boards and a back wall (3D, 4 cm voxels)."""
-    h = 0.04
-    lim = np.array([[-0.2, 1.4], [-1.0, 1.0], [0.0, 1.6]])
-    n = np.round((lim[:, 1] - lim[:, 0]) / h).astype(int) + 1
-    X, Y, Z = np.meshgrid(*[lim[d, 0] + h * np.arange(n[d]) for d in range(3)], indexing="ij")
-    inside_x = (X > 0.7) & (X < 1.1)
-    boards = inside_x & (np.abs(Y) < 0.6) & ((np.abs(Z - 0.55) < 0.03) | (np.abs(Z - 1.05) < 0.03))
-    back = (np.abs(X - 1.12) < 0.03) & (np.abs(Y) < 0.6) & (Z < 1.3)
-    return world_from_occupancy(boards | back, lim, h)
+from jwarp.world import shelf_world
 
 
 def ref_costs(F, T, lam_p, lam_r):

@@ -8,6 +8,7 @@ import jwarp
 from jwarp import kinematics as K
 from jwarp.autodiff import tape_jacobian
 
+from devices import requires_cuda
 from reference import (kappa_uniform, ref_fk, ref_fk_elastic, ref_jacobian_fd, ref_torques,
                        sample_q)
 
@@ -322,14 +323,7 @@ def test_bad_types_raise_type_errors():
         K.fk("justin19", np.zeros(19), dtype=np.int32)
 
 
-def _cuda_available():
-    from jwarp.arrays import init_warp
-
-    init_warp()
-    return wp.is_cuda_available()
-
-
-@pytest.mark.skipif(not _cuda_available(), reason="no CUDA device")
+@requires_cuda
 def test_cuda_matches_cpu_and_torch_autograd_on_cuda():
     model = jwarp.robot("justin19")
     q = _sample(model, 256, seed=16)

@@ -406,3 +406,18 @@ def test_feasibility_filter_gives_up_and_samples_linear_limits():
     assert np.all((q >= model.joint_limits[:, 0]) & (q <= model.joint_limits[:, 1]))
     with pytest.raises(ValueError, match="no simplex world"):
         feasible_simplex_world("planar4", seed=0, threshold=-0.5, max_tries=2, n=100, min_feasible=50)
+
+
+def test_shelf_world_boards_and_back_wall():
+    from jwarp.world import shelf_world
+
+    w = shelf_world()
+    assert w.voxel_size == pytest.approx(0.04)
+    from jwarp.collision import sdf_query
+
+    d = np.asarray(sdf_query(w, np.array([[0.9, 0.0, 0.55], [0.9, 0.0, 0.8], [1.12, 0.0, 0.3],
+                                          [0.0, 0.0, 0.8]])))
+    assert d[0] < 0 and d[2] < 0  # inside a board and the back wall
+    assert d[1] > 0.15 and d[3] > 0.5  # between the boards, far in front of the shelf
+    with pytest.raises(ValueError, match="voxel_size"):
+        shelf_world(0.0)
