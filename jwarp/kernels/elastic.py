@@ -65,6 +65,15 @@ def kernels(scalar: type) -> SimpleNamespace:
                     wp.dot(wp.cross(s - mtot * p_i, gravity), z))
 
     @wp.func
+    def damped_step(rho0: wp.array3d(dtype=scalar), r0: int, kappa: wp.array3d(dtype=scalar),
+                    kb: int, i: int, tau: vec3, prev: vec3, lam: scalar) -> vec3:
+        """Change of (alpha, beta, theta) of frame i in one damped update:
+        ``lam (rho0 + kappa tau - prev)`` with tau and prev in (alpha, beta, theta) order."""
+        return lam * (vec3(rho0[r0, i, 3], rho0[r0, i, 4], rho0[r0, i, 1])
+                      + wp.cw_mul(vec3(kappa[kb, i, 0], kappa[kb, i, 1], kappa[kb, i, 2]), tau)
+                      - prev)
+
+    @wp.func
     def subtree_prefix(model: fk.FrameTables, frames: wp.array2d(dtype=mat44), b: int,
                        mass: wp.array(dtype=scalar), mass_com: wp.array(dtype=vec3),
                        prefix: wp.array2d(dtype=vec4), sb: int):
@@ -131,9 +140,10 @@ def kernels(scalar: type) -> SimpleNamespace:
                 tau_out[b, i, 1] = tau_b
                 tau_out[b, i, 2] = tau_t
             # damped update: new = (1 - lam) prev + lam (rho0 + kappa tau)
-            d_a = lam * (rho0[r0, i, 3] + kappa[kb, i, 0] * tau_a - prev_a)
-            d_b = lam * (rho0[r0, i, 4] + kappa[kb, i, 1] * tau_b - prev_b)
-            d_t = lam * (rho0[r0, i, 1] + kappa[kb, i, 2] * tau_t - prev_t)
+            dr = damped_step(rho0, r0, kappa, kb, i, tau, vec3(prev_a, prev_b, prev_t), lam)
+            d_a = dr[0]
+            d_b = dr[1]
+            d_t = dr[2]
             delta = wp.max(delta, wp.max(wp.abs(d_a), wp.max(wp.abs(d_b), wp.abs(d_t))))
             rho_out[b, i, 0] = prev_d
             rho_out[b, i, 1] = prev_t + d_t
@@ -246,9 +256,10 @@ def kernels(scalar: type) -> SimpleNamespace:
             prev_t = rows[u, i, 1]
             prev_a = rows[u, i, 3]
             prev_b = rows[u, i, 4]
-            d_a = lam * (c.rho0[r0, i, 3] + c.kappa[kb, i, 0] * tau[0] - prev_a)
-            d_b = lam * (c.rho0[r0, i, 4] + c.kappa[kb, i, 1] * tau[1] - prev_b)
-            d_t = lam * (c.rho0[r0, i, 1] + c.kappa[kb, i, 2] * tau[2] - prev_t)
+            dr = damped_step(c.rho0, r0, c.kappa, kb, i, tau, vec3(prev_a, prev_b, prev_t), lam)
+            d_a = dr[0]
+            d_b = dr[1]
+            d_t = dr[2]
             dmax = wp.max(dmax, wp.max(wp.abs(d_a), wp.max(wp.abs(d_b), wp.abs(d_t))))
             new_a = prev_a + d_a
             new_b = prev_b + d_b
