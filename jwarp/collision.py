@@ -229,6 +229,10 @@ class CollisionModel:
             self.dim = world.dim
         self.grid = wp.array(np.ascontiguousarray(grid), dtype=self.scalar, device=dev)
         self.cellmin = wp.array(cell_minimum(grid), dtype=self.scalar, device=dev)
+        ws = self.k.WorldGrid()  # the world as one argument of the fused kernels
+        ws.grid, ws.cellmin, ws.origin = self.grid, self.cellmin, self.origin
+        ws.inv_h, ws.dim = self.scalar(self.inv_h), int(self.dim)
+        self.world_struct = ws
         self._capacity = 0
         self._scratch: tuple = ()
         self._launches: dict = {}
@@ -378,9 +382,8 @@ class CollisionModel:
         ws = float(w_self) if self.n_pairs else 0.0
         frames, xs, force, moment, bc = self.scratch(n)
         gout = g if g is not None else self._dummy
-        inputs = [q, rho_a, stride, group, sub, use_rho, self.grid, self.cellmin, self.origin, self.inv_h,
-                  self.dim, ww, ws, float(eps), int(grad), *self.model_args,
-                  frames, xs, force, moment, bc]
+        inputs = [q, rho_a, stride, group, sub, use_rho, self.world_struct, ww, ws, float(eps),
+                  int(grad), *self.model_args, frames, xs, force, moment, bc]
         # caller-owned buffers (a planner's loop): replay a recorded launch (cheaper on the host)
         reuse = out_cost is not None and (rho is None or isinstance(rho, (wp.array,
                                                                            CompensationRows)))
@@ -474,8 +477,8 @@ class CollisionModel:
         dummy = self._dummy
         frames, xs = self.scratch(n)[:2]
         wp.launch(self.k.distance, dim=n,
-                  inputs=[q, rho_a, stride, use_rho, self.grid, self.cellmin, self.origin, self.inv_h,
-                          self.dim, uw, us, int(sd is not None), int(pd is not None),
+                  inputs=[q, rho_a, stride, use_rho, self.world_struct, uw, us,
+                          int(sd is not None), int(pd is not None),
                           *self.model_args, _FAR, frames, xs],
                   outputs=[sd if sd is not None else dummy, pd if pd is not None else dummy, md],
                   device=self.device)

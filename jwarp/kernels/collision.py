@@ -4,7 +4,8 @@ Math only; the host side is :mod:`jwarp.collision`. Built per scalar type by
 :func:`kernels` (float32 or float64) and batched over configurations (N = paths x
 substeps flattened): one thread per configuration.
 
-World grid (the *Model* of the world):
+World grid (the *Model* of the world; the fused ``cost`` and ``distance`` kernels take it as
+one :class:`WorldGrid` struct, the plain Tape kernels as separate arrays):
 
 * ``grid``   (nx, ny, nz) signed distances [m] at cell centres; a 2D world is stored
   with nz = 1 and looked up with ``dim = 2`` (bilinear in x, y; z ignored).
@@ -106,6 +107,17 @@ def kernels(scalar: type) -> SimpleNamespace:
         ent_sphere: wp.array(dtype=wp.int32)
         ent_start: wp.array(dtype=wp.int32)
         pair_b: wp.array(dtype=wp.int32)
+
+    @wp.struct
+    class WorldGrid:
+        """The world of the fused kernels (see the module docstring), one kernel argument:
+        ``grid`` and ``cellmin`` (nx, ny, nz), ``origin``, ``inv_h`` and ``dim``."""
+
+        grid: wp.array3d(dtype=scalar)
+        cellmin: wp.array3d(dtype=scalar)
+        origin: vec3
+        inv_h: scalar
+        dim: int
 
     @wp.func
     def smooth_clip(d: scalar, eps: scalar):
@@ -212,6 +224,16 @@ def kernels(scalar: type) -> SimpleNamespace:
         return cellmin[i, j, k]
 
     @wp.func
+    def world_sample(world: WorldGrid, x: vec3):
+        """:func:`sdf_sample` of a :class:`WorldGrid`."""
+        return sdf_sample(world.grid, world.origin, world.inv_h, world.dim, x)
+
+    @wp.func
+    def world_lower_bound(world: WorldGrid, x: vec3) -> scalar:
+        """:func:`sdf_lower_bound` of a :class:`WorldGrid`."""
+        return sdf_lower_bound(world.cellmin, world.origin, world.inv_h, world.dim, x)
+
+    @wp.func
     def sphere_centre(frames: wp.array2d(dtype=mat44), b: int, f: int, p: vec3) -> vec3:
         T = frames[b, f]
         return unpack_rot(T) * p + unpack_pos(T)
@@ -225,11 +247,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         rho_group: int,
         rho_sub: int,
         use_rho: int,
-        grid: wp.array3d(dtype=scalar),
-        cellmin: wp.array3d(dtype=scalar),
-        origin: vec3,
-        inv_h: scalar,
-        dim: int,
+        world: WorldGrid,
         w_world: scalar,
         w_self: scalar,
         eps: scalar,
@@ -273,8 +291,8 @@ def kernels(scalar: type) -> SimpleNamespace:
             xs[b, s] = x
             if w_world != zero:
                 # cells whose corners all keep eps from the sphere cost nothing: skip them
-                if sdf_lower_bound(cellmin, origin, inv_h, dim, x) - spheres.sph_rad[s] < eps:
-                    d, g = sdf_sample(grid, origin, inv_h, dim, x)
+                if world_lower_bound(world, x) - spheres.sph_rad[s] < eps:
+                    d, g = world_sample(world, x)
                     c, dc = smooth_clip(d - spheres.sph_rad[s], eps)
                     u_world += c
                     if want_grad != 0 and dc != zero:
@@ -354,11 +372,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
         use_rho: int,
-        grid: wp.array3d(dtype=scalar),
-        cellmin: wp.array3d(dtype=scalar),
-        origin: vec3,
-        inv_h: scalar,
-        dim: int,
+        world: WorldGrid,
         use_world: int,
         use_self: int,
         write_spheres: int,
@@ -389,10 +403,10 @@ def kernels(scalar: type) -> SimpleNamespace:
             if use_world != 0:
                 look = write_spheres
                 if look == 0:  # only the minimum: skip cells that cannot lower it
-                    if sdf_lower_bound(cellmin, origin, inv_h, dim, x) - spheres.sph_rad[s] < dmin_w:
+                    if world_lower_bound(world, x) - spheres.sph_rad[s] < dmin_w:
                         look = 1
                 if look != 0:
-                    d, g = sdf_sample(grid, origin, inv_h, dim, x)
+                    d, g = world_sample(world, x)
                     d = d - spheres.sph_rad[s]
                     dmin_w = wp.min(dmin_w, d)
                     if write_spheres != 0:
@@ -501,7 +515,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         grad[p] = g
 
     return SimpleNamespace(
-        scalar=scalar, SphereTables=SphereTables, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
+        scalar=scalar, SphereTables=SphereTables, WorldGrid=WorldGrid, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
         sphere_centre=sphere_centre, cost=cost_kernel, distance=distance_kernel,
         world_cost_spheres=world_cost_spheres, self_cost_pairs=self_cost_pairs,
         sdf_query=sdf_query_kernel,
