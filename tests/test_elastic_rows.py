@@ -116,6 +116,20 @@ def test_cost_at_compensation_rows_equals_cost_at_expanded_rows():
     assert np.any(c1 > 0) and np.abs(c1 - c0.numpy()).max() > 1e-6  # the rows matter
     np.testing.assert_allclose(c2, c1, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(g2, g1, rtol=1e-9, atol=1e-10)
+    # the gradient holds the rows fixed: central differences in q at the same rows
+    hit = np.nonzero(c2 > 1e-6)[0][:4]
+    assert len(hit)
+    h = 1e-6
+    for j in range(0, model.n_dof, 3):
+        qp, qm = q.copy(), q.copy()
+        qp[:, j] += h
+        qm[:, j] -= h
+        cp = cm.cost(wp.array(qp, dtype=wp.float64, device="cpu"), rho=rows, eps=0.05,
+                     grad=False)[0].numpy()
+        cmn = cm.cost(wp.array(qm, dtype=wp.float64, device="cpu"), rho=rows, eps=0.05,
+                      grad=False)[0].numpy()
+        np.testing.assert_allclose(g2[hit, j], ((cp - cmn) / (2 * h))[hit], rtol=1e-4,
+                                   atol=1e-6)
     # the update fused into the cost launch equals the update from reference frames
     twin = CompensationRows(tables(model, "cpu", np.float64), P, W, n_sub, 3e-3, LAM)
     for _ in range(2):
