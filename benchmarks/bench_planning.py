@@ -18,7 +18,9 @@ Sections (``--only`` picks some):
 * ``feasibility``: per robot (planar4, arm7, justin19) ``--tasks`` hard tasks (random
   collision-free start/goal in a random simplex world where the straight line is still
   infeasible after 50 iterations), then ``--starts`` random multi-starts (1-3 via points)
-  for 50 iterations: fraction of tasks solved and of single starts feasible.
+  for 50 iterations: fraction of tasks solved and of single starts feasible, over all hard
+  tasks and over the tasks some start solved (the thesis' 50 % is of the latter kind: its
+  dataset kept only solved tasks). Every task world is a distinct simplex world.
 * ``compensation``: time per iteration rigid vs elastic (one torque update) for the
   justin19 path and an IK batch; iterations to converge of compensated IK for kappa =
   1e-4 and 20x softer (2e-3) rad/(N m) vs rigid, from the same seeds.
@@ -148,7 +150,7 @@ def bench_feasibility(args: argparse.Namespace) -> dict:
         t0 = time.perf_counter()
         while hard < args.tasks and tried < 20 * args.tasks:
             world = parse_world_spec(SIMPLEX.format(seed=seed), robot)
-            seed += 1
+            seed = world.meta["seed"] + 1  # the next distinct world (the spec searches up)
             q = free_configs(robot, world, 2 * 8, rng)
             for a, b in zip(q[0::2], q[1::2]):
                 if hard >= args.tasks:
@@ -164,9 +166,13 @@ def bench_feasibility(args: argparse.Namespace) -> dict:
                               n_substeps=line.n_substeps)
                 solved += bool(res.feasible[0])
                 single.append(res.all_feasible[0].mean())
+        on_solved = [r for r in single if r > 0]
         out[name] = {"hard_tasks": hard, "tasks_tried": tried,
                      "solved_rate_multistart": solved / max(hard, 1),
                      "single_start_rate": float(np.mean(single)) if single else None,
+                     # the thesis' figure: its dataset holds only tasks some start solved
+                     "single_start_rate_solved_tasks": float(np.mean(on_solved))
+                     if on_solved else None,
                      "starts": args.starts, "seconds": time.perf_counter() - t0}
     return out
 
