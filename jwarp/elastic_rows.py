@@ -111,16 +111,16 @@ class CompensationRows:
         self.delta.fill_(1e30)  # no update yet: nothing has converged
         self.iterations = 0
 
-    def args(self, enabled: bool = True) -> Any:
+    def args(self) -> Any:
         """The kernel argument (``kernels.elastic.CompensationArgs``) of the next update:
         from :attr:`rows` into the other buffer. A kernel that takes it and runs the update
-        must be followed by :meth:`commit`. ``enabled=False``: a disabled argument."""
-        key = (bool(enabled), id(self._bufs[1]))
+        must be followed by :meth:`commit`."""
+        key = id(self._bufs[1])
         c = self._args.get(key)
         if c is None:
             t = self.t
             c = self.k.CompensationArgs()
-            c.enabled = int(enabled)
+            c.enabled = 1
             c.n_waypoints, c.n_sub = self.W, self.n_sub
             c.rho0, c.rho0_stride = t.dh0_3d, 0
             c.kappa, c.kappa_stride = self.kappa, self.kappa_stride

@@ -157,9 +157,9 @@ def test_bad_compensation_arguments():
 
 
 @requires_cuda
-def test_cuda_update_in_its_own_launch_matches_the_reference_iteration():
-    """On CUDA the update is a second launch over the waypoints, reading the cost kernel's
-    frame-major scratch: after k evaluates the rows are the reference's k-th iterate."""
+def test_cuda_fused_update_matches_the_reference_iteration():
+    """On CUDA (frame-major scratch, one prefix column per waypoint) after k evaluates the
+    rows are the reference's k-th iterate."""
     model = jwarp.robot("justin19")
     kappa = kappa_uniform(model, 1e-3)
     q = sample_within_limits(model, 6, np.random.default_rng(4))
