@@ -30,6 +30,7 @@ DH convention: ``parent_T_child = Rot_y(beta) Rot_x(alpha) Trans_x(r) Rot_z(thet
 
 
 import functools
+from typing import Any
 from types import SimpleNamespace
 
 import warp as wp
@@ -235,21 +236,46 @@ def kernels(scalar: type) -> SimpleNamespace:
         return vec3(T[0, 3], T[1, 3], T[2, 3])
 
     @wp.func
+    def parent_pose(frames: wp.array2d(dtype=mat44), b: int, pi: int):
+        """World rotation and position of frame pi from batch-major frames."""
+        Tp = frames[b, pi]
+        return unpack_rot(Tp), unpack_pos(Tp)
+
+    @wp.func
+    def parent_pose(frames: wp.array4d(dtype=scalar), b: int, pi: int):
+        """World rotation and position of frame pi from scalar frames (any strides)."""
+        return (mat33(frames[b, pi, 0, 0], frames[b, pi, 0, 1], frames[b, pi, 0, 2],
+                      frames[b, pi, 1, 0], frames[b, pi, 1, 1], frames[b, pi, 1, 2],
+                      frames[b, pi, 2, 0], frames[b, pi, 2, 1], frames[b, pi, 2, 2]),
+                vec3(frames[b, pi, 0, 3], frames[b, pi, 1, 3], frames[b, pi, 2, 3]))
+
+    @wp.func
+    def store_pose(frames: wp.array2d(dtype=mat44), b: int, i: int, R: mat33, p: vec3):
+        frames[b, i] = pack(R, p)
+
+    @wp.func
+    def store_pose(frames: wp.array4d(dtype=scalar), b: int, i: int, R: mat33, p: vec3):
+        for r in range(3):
+            for c in range(3):
+                frames[b, i, r, c] = R[r, c]
+            frames[b, i, r, 3] = p[r]
+            frames[b, i, 3, r] = zero
+        frames[b, i, 3, 3] = one
+
+    @wp.func
     def write_frame(model: FrameTables, b: int, i: int, q: wp.array2d(dtype=scalar),
-                    rho: wp.array3d(dtype=scalar), rb: int, use_rho: int,
-                    frames: wp.array2d(dtype=mat44)):
+                    rho: wp.array3d(dtype=scalar), rb: int, use_rho: int, frames: Any):
         """frames[b, i] from its parent's transform (already written) and the joint values;
-        returns the frame's world rotation, position and alpha axis (:func:`child_frame`)."""
+        returns the frame's world rotation, position and alpha axis (:func:`child_frame`).
+        ``frames``: batch-major mat44 (B, n_frames) or scalar (B, n_frames, 4, 4)."""
         qi = joint_value(model, i, b, q)
         Rp = wp.identity(3, dtype=scalar)
         pp = vec3(zero, zero, zero)
         pi = model.parent[i]
         if pi >= 0:
-            Tp = frames[b, pi]
-            Rp = unpack_rot(Tp)
-            pp = unpack_pos(Tp)
+            Rp, pp = parent_pose(frames, b, pi)
         R, p, ax = child_frame(model, Rp, pp, i, rb, qi, use_rho, rho)
-        frames[b, i] = pack(R, p)
+        store_pose(frames, b, i, R, p)
         return R, p, ax
 
     @wp.kernel(module="unique")
@@ -288,23 +314,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         gradients go through :func:`fk_kernel`."""
         b = wp.tid()
         for k in range(model.order.shape[0]):
-            i = model.order[k]
-            qi = joint_value(model, i, b, q)
-            Rp = wp.identity(3, dtype=scalar)
-            pp = vec3(zero, zero, zero)
-            pi = model.parent[i]
-            if pi >= 0:
-                Rp = mat33(frames[b, pi, 0, 0], frames[b, pi, 0, 1], frames[b, pi, 0, 2],
-                           frames[b, pi, 1, 0], frames[b, pi, 1, 1], frames[b, pi, 1, 2],
-                           frames[b, pi, 2, 0], frames[b, pi, 2, 1], frames[b, pi, 2, 2])
-                pp = vec3(frames[b, pi, 0, 3], frames[b, pi, 1, 3], frames[b, pi, 2, 3])
-            R, p = child_rot_pos(model, Rp, pp, i, b * rho_stride, qi, use_rho, rho)
-            for r in range(3):
-                for c in range(3):
-                    frames[b, i, r, c] = R[r, c]
-                frames[b, i, r, 3] = p[r]
-                frames[b, i, 3, r] = zero
-            frames[b, i, 3, 3] = one
+            write_frame(model, b, model.order[k], q, rho, b * rho_stride, use_rho, frames)
 
     @wp.kernel(module="unique")
     def jacobian_kernel(
