@@ -46,7 +46,7 @@ if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
 from jwarp.arrays import init_warp  # noqa: E402
 from jwarp.device_model import tables  # noqa: E402
 from jwarp.kinematics import (  # noqa: E402
-    _ElasticLaunch, _elastic_args, fk, fk_elastic, jacobian, launch_fk)
+    ElasticLaunch, _elastic_args, fk, fk_elastic, jacobian, launch_fk)
 from jwarp.model import RobotModel  # noqa: E402
 from jwarp.registry import robot as get_robot  # noqa: E402
 
@@ -462,7 +462,7 @@ class Bench:
         _, batch, tt, kap, rho0 = _elastic_args(model, q, KAPPA, 1.0, 1, 0.0, None, dev,
                                                 self.ftype, False)
         for n_iter in ELASTIC_ITERS:
-            run = _ElasticLaunch(tt, batch.array, kap, rho0, 1.0)
+            run = ElasticLaunch(tt, batch.array, kap, rho0, 1.0)
             with record_launches() as rec:
                 rho = None
                 for _ in range(n_iter):   # fixed count: no convergence test
@@ -472,7 +472,7 @@ class Bench:
             ops[f"elastic_fk({n_iter})"] = rec
         # one torque update from per-configuration rows rho (compensation inside an
         # optimizer keeps rho between its iterations)
-        run = _ElasticLaunch(tt, batch.array, kap, rho0, 1.0)
+        run = ElasticLaunch(tt, batch.array, kap, rho0, 1.0)
         _, rho1, _ = run.step(None)
         with record_launches() as rec:
             run.step((rho1, 1))

@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from jwarp.kernels import fk as fk_kernels
-from jwarp.kinematics import _ElasticLaunch, _setup, kappa_array, launch_fk
+from jwarp.kinematics import ElasticLaunch, _setup, kappa_array, launch_fk
 
 WRT = ("q", "dh", "kappa")
 
@@ -39,7 +39,7 @@ def record_frames(t: Any, q: wp.array, dh: wp.array, kappa: wp.array | None, lam
         out = wp.empty(q.shape[0:1] + (t.robot.n_frames,), dtype=fk_kernels.kernels(t.scalar).mat44,
                        device=t.device, requires_grad=True)
         return launch_fk(t, q, dh=(dh, 1), frames=out)
-    run = _ElasticLaunch(t, q, (kappa, 1), (dh, 1), lam, requires_grad=True)
+    run = ElasticLaunch(t, q, (kappa, 1), (dh, 1), lam, requires_grad=True)
     rho = None
     for _ in range(iterations):
         _, rho_new, _ = run.step(rho)

@@ -55,10 +55,12 @@ def _setup(robot: Any, q: Any, device: Any, dtype: Any, validate: bool = True
     return model, batch, tables(model, dev, dt)
 
 
-def _rows(x: Any, model: RobotModel, batch: Batch, t: KinematicsTables, name: str,
-          width: int) -> tuple[wp.array, int]:
+def frame_rows(x: Any, model: RobotModel, batch: Batch, t: KinematicsTables, name: str,
+               width: int) -> tuple[wp.array, int]:
     """Per-frame rows (n_frames, width) shared, or (..., n_frames, width) per configuration,
-    as a (B or 1, n_frames, width) device array and its batch stride."""
+    as a (B or 1, n_frames, width) device array and its batch stride (0: shared). Internal
+    building block of the elastic kinematics, shared with torch_ops, autodiff and the
+    calibration; ValueError/TypeError name ``name``."""
     npdt = numpy_dtype(t.scalar)
     if isinstance(x, wp.array) or (hasattr(x, "detach") and type(x).__module__.startswith("torch")):
         x = x.numpy() if isinstance(x, wp.array) else x.detach().cpu().numpy()
@@ -129,7 +131,7 @@ def fk(robot: Any, q: Any, *, dh: Any = None, device: Any = None, dtype: Any = N
         from jwarp.torch_ops import fk_torch
 
         return fk_torch(model, batch.torch_tensor, dh=dh, device=t.device, dtype=t.scalar)
-    frames = launch_fk(t, batch.array, dh=None if dh is None else _rows(dh, model, batch, t, "dh", 5))
+    frames = launch_fk(t, batch.array, dh=None if dh is None else frame_rows(dh, model, batch, t, "dh", 5))
     return to_output(frames, batch, (model.n_frames,))
 
 
@@ -181,7 +183,7 @@ def jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any
     fi = model.frame_index(frame)
     pt = _point(point, t)
     k = fk_kernels.kernels(t.scalar)
-    rho, stride = (t.dh0_3d, 0) if dh is None else _rows(dh, model, batch, t, "dh", 5)
+    rho, stride = (t.dh0_3d, 0) if dh is None else frame_rows(dh, model, batch, t, "dh", 5)
     jac = wp.empty((batch.size, 6, model.n_dof), dtype=t.scalar, device=t.device)
     wp.launch(k.jacobian, dim=batch.size,
               inputs=[batch.array, rho, stride, int(dh is not None), pt, t.frame_struct,
@@ -201,7 +203,7 @@ def jacobian_dh(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: 
     fi = model.frame_index(frame)
     pt = _point(point, t)
     k = fk_kernels.kernels(t.scalar)
-    rho, stride = (t.dh0_3d, 0) if dh is None else _rows(dh, model, batch, t, "dh", 5)
+    rho, stride = (t.dh0_3d, 0) if dh is None else frame_rows(dh, model, batch, t, "dh", 5)
     jac = wp.zeros((batch.size, 6, model.n_frames, 5), dtype=t.scalar, device=t.device)
     wp.launch(k.jacobian_dh, dim=batch.size,
               inputs=[batch.array, rho, stride, int(dh is not None), pt, t.frame_struct,
@@ -220,8 +222,10 @@ def _point(point: Any, t: KinematicsTables) -> Any:
 
 
 # ------------------------------------------------------------------ elastic
-class _ElasticLaunch:
-    """Buffers and launches of the torque-equilibrium iteration for one batch."""
+class ElasticLaunch:
+    """Buffers and launches of the torque-equilibrium iteration for one batch (internal
+    building block of :func:`fk_elastic`, shared with torch_ops, autodiff and the
+    calibration's signed equilibrium; optimizers use :mod:`jwarp.elastic_rows`)."""
 
     def __init__(self, t: KinematicsTables, q: wp.array, kappa: tuple[wp.array, int],
                  rho0: tuple[wp.array, int] | None, lam: float, write_tau: bool = False,
@@ -306,8 +310,8 @@ def _elastic_args(robot: Any, q: Any, kappa: Any, lam: float, max_iter: int, tol
         raise ValueError(f"max_iter: expected an integer >= 0, got {max_iter!r}")
     if not (isinstance(tol, (int, float)) and tol >= 0 and np.isfinite(tol)):
         raise ValueError(f"tol: expected a finite number >= 0 [rad], got {tol!r}")
-    kap = _rows(kappa_array(model, kappa), model, batch, t, "kappa", 3)
-    rho0 = None if dh is None else _rows(dh, model, batch, t, "dh", 5)
+    kap = frame_rows(kappa_array(model, kappa), model, batch, t, "kappa", 3)
+    rho0 = None if dh is None else frame_rows(dh, model, batch, t, "dh", 5)
     return model, batch, t, kap, rho0
 
 
@@ -337,7 +341,7 @@ def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_i
         from jwarp.torch_ops import fk_elastic_torch
 
         return fk_elastic_torch(model, batch, t, kap, rho0, lam, max_iter, tol)
-    run = _ElasticLaunch(t, batch.array, kap, rho0, float(lam))
+    run = ElasticLaunch(t, batch.array, kap, rho0, float(lam))
     rho, frames, iterations, converged = equilibrium(run, max_iter, tol)
     rho_arr = rho[0] if rho is not None else _rho0_full(run)
     return ElasticFK(to_output(frames, batch, (model.n_frames,)),
@@ -345,7 +349,7 @@ def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_i
                      _host_out(iterations, batch), _host_out(converged, batch))
 
 
-def equilibrium(run: _ElasticLaunch, max_iter: int, tol: float):
+def equilibrium(run: ElasticLaunch, max_iter: int, tol: float):
     """Run the damped iteration; returns (rho or None, frames at rho, iterations, converged)."""
     iterations = np.zeros(run.B, np.int32)
     converged = np.zeros(run.B, bool)
@@ -363,7 +367,7 @@ def equilibrium(run: _ElasticLaunch, max_iter: int, tol: float):
     return rho, frames, iterations, converged
 
 
-def _rho0_full(run: _ElasticLaunch) -> wp.array:
+def _rho0_full(run: ElasticLaunch) -> wp.array:
     arr, stride = run.rho0
     if stride:
         return arr
@@ -394,8 +398,8 @@ def elastic_step(robot: Any, q: Any, rho: Any = None, kappa: Any = None, *, lam:
     """
     model, batch, t, kap, rho0 = _elastic_args(robot, q, kappa, lam, 1, 0.0, dh,
                                                device, dtype, validate)
-    run = _ElasticLaunch(t, batch.array, kap, rho0, float(lam))
-    rho_in = None if rho is None else _rows(rho, model, batch, t, "rho", 5)
+    run = ElasticLaunch(t, batch.array, kap, rho0, float(lam))
+    rho_in = None if rho is None else frame_rows(rho, model, batch, t, "rho", 5)
     frames, rho_new, delta = run.step(rho_in)
     return ElasticStep(to_output(frames, batch, (model.n_frames,)),
                        to_output(rho_new, batch, (model.n_frames, 5)),
@@ -407,8 +411,8 @@ def gravity_torques(robot: Any, q: Any, *, dh: Any = None, device: Any = None,
     """Gravity torques (..., n_frames, 3) [N m] about the [alpha, beta, theta] axes of
     every DH frame at the frames F(q, dh) (rigid; zero rows for static frames)."""
     model, batch, t = _setup(robot, q, device, dtype)
-    rho = None if dh is None else _rows(dh, model, batch, t, "dh", 5)
-    kap = _rows(np.zeros((model.n_frames, 3)), model, batch, t, "kappa", 3)
-    run = _ElasticLaunch(t, batch.array, kap, None, 1.0, write_tau=True)
+    rho = None if dh is None else frame_rows(dh, model, batch, t, "dh", 5)
+    kap = frame_rows(np.zeros((model.n_frames, 3)), model, batch, t, "kappa", 3)
+    run = ElasticLaunch(t, batch.array, kap, None, 1.0, write_tau=True)
     run.step(rho)
     return to_output(run.tau, batch, (model.n_frames, 3))

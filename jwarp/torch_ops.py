@@ -57,9 +57,9 @@ def fk_torch(model: RobotModel, q: torch.Tensor, *, dh: Any, device: Any, dtype:
     dh_pair = None
     if dh is not None:
         from jwarp.arrays import Batch
-        from jwarp.kinematics import _rows
+        from jwarp.kinematics import frame_rows
 
-        dh_pair = _rows(dh, model, Batch(None, tuple(q.shape[:-1]), "torch"), t, "dh", 5)
+        dh_pair = frame_rows(dh, model, Batch(None, tuple(q.shape[:-1]), "torch"), t, "dh", 5)
 
     def record(q_w: wp.array) -> wp.array:
         out = wp.empty((q_w.shape[0], model.n_frames), dtype=fk_kernels.kernels(t.scalar).mat44,
@@ -74,14 +74,14 @@ def fk_elastic_torch(model: RobotModel, batch: Any, t: Any, kap: Any, rho0: Any,
                      max_iter: int, tol: float) -> Any:
     """Differentiable elastic FK of a torch tensor: gradients flow through every torque
     update that the iteration performed (exact derivative of the iterated model)."""
-    from jwarp.kinematics import ElasticFK, _ElasticLaunch, _host_out, _rho0_full, equilibrium
+    from jwarp.kinematics import ElasticFK, ElasticLaunch, _host_out, _rho0_full, equilibrium
 
     q = batch.torch_tensor
     qc = _prepare(q, model, t.device, t.scalar)
     info: dict[str, Any] = {}
 
     def record(q_w: wp.array) -> wp.array:
-        run = _ElasticLaunch(t, q_w, kap, rho0, float(lam), requires_grad=True)
+        run = ElasticLaunch(t, q_w, kap, rho0, float(lam), requires_grad=True)
         rho, frames, iterations, converged = equilibrium(run, max_iter, tol)
         info.update(rho=rho[0] if rho is not None else _rho0_full(run),
                     iterations=iterations, converged=converged)

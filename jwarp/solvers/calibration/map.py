@@ -126,9 +126,9 @@ def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: 
     model, batch, t = K._setup(robot, q, "cpu", np.float64, False)
     if masses is not None:
         t = with_frame_masses(t, *masses)
-    kap = K._rows(np.asarray(kappa, np.float64), model, batch, t, "kappa", 3)
-    rho0 = K._rows(np.asarray(dh, np.float64), model, batch, t, "dh", 5)
-    run = K._ElasticLaunch(t, batch.array, kap, rho0, float(lam))
+    kap = K.frame_rows(np.asarray(kappa, np.float64), model, batch, t, "kappa", 3)
+    rho0 = K.frame_rows(np.asarray(dh, np.float64), model, batch, t, "dh", 5)
+    run = K.ElasticLaunch(t, batch.array, kap, rho0, float(lam))
     rho, frames, _, conv = K.equilibrium(run, int(max_iter), float(tol))
     n = model.n_frames
     rho_arr = rho[0] if rho is not None else K._rho0_full(run)
