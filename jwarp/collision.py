@@ -48,6 +48,8 @@ __all__ = ["DEFAULT_EPS", "CollisionModel", "collision_model", "collision_cost",
 #: default smoothing distance eps of the clip c (eq. 3.10) [m]
 DEFAULT_EPS = 0.05
 _FAR = 1e30
+#: row layout of per-configuration (or shared) DH rows: configuration b reads row b
+_ROW_PER_CONFIG = wp.vec3i(1, 1, 1)
 
 
 def check_world(robot: RobotModel, world: World | None) -> None:
@@ -235,6 +237,7 @@ class CollisionModel:
         self.world_struct = ws
         self._capacity = 0
         self._scratch: tuple = ()
+        self._scratch_rows: list = []  # CPU: the single rows behind the stride-0 views
         self._launches: dict = {}
         self._dummy = wp.empty((1, 1), dtype=self.scalar, device=dev)
         self._no_update = elastic_kernels(self.scalar).CompensationArgs()  # enabled = 0
@@ -253,21 +256,29 @@ class CollisionModel:
         return [self.tables.frame_struct, st]
 
     def scratch(self, n: int) -> tuple[wp.array, ...]:
-        """Scratch (frames, xs, force, moment, bc) for at least ``n`` configurations; grown on
-        demand, kept between calls. Frame-major in memory on CUDA (coalesced)."""
+        """Scratch (frames, xs, force, moment, bc), shape (>= n, m) each, kept between calls.
+
+        CUDA: frame-major in memory (coalesced), grown on demand. CPU: Warp runs the
+        configurations of a launch one after another, so every configuration reuses one
+        row (a stride-0 view of a single row, which stays in L1) instead of streaming about
+        3 KB of scratch per configuration through the caches."""
         if n > self._capacity or not self._scratch:
             cap = max(n, int(self._capacity * 1.5), 1)
             k = fk_kernels(self.scalar)
             nf, ns = self.robot.n_frames, max(self.n_spheres, 1)
-            cuda = self.device.is_cuda
+            rows: list = []
 
             def mk(m: int, dt: Any) -> wp.array:
-                if cuda:
+                if self.device.is_cuda:
                     return wp.empty((m, cap), dtype=dt, device=self.device).transpose()
-                return wp.empty((cap, m), dtype=dt, device=self.device)
+                row = wp.empty((1, m), dtype=dt, device=self.device)
+                rows.append(row)  # owns the memory of the view
+                return wp.array(ptr=row.ptr, shape=(cap, m), strides=(0, row.strides[1]),
+                                dtype=dt, device=self.device)
 
             self._scratch = (mk(nf, k.mat44), mk(ns, self.k.vec3), mk(nf, self.k.vec3),
                              mk(nf, self.k.vec3), mk(nf, self.k.vec3))
+            self._scratch_rows = rows
             self._capacity = cap
             self._launches.clear()
         return self._scratch
@@ -287,24 +298,24 @@ class CollisionModel:
                              f"'{rows.t.robot.name}' on {rows.rows.device}, expected {n} of "
                              f"'{self.robot.name}' on {self.device} in this dtype")
 
-    def _rho_or_rows(self, rho: Any, n: int) -> tuple[wp.array, int, int, int, int]:
-        """(rho array, stride, use_rho, rows per path group, substeps) for ``rho`` None,
-        (n_frames, 5), (n, n_frames, 5) or compensation rows
+    def _rho_or_rows(self, rho: Any, n: int) -> tuple[wp.array, int, int, wp.vec3i]:
+        """(rho array, stride, use_rho, row layout of :func:`jwarp.kernels.fk.waypoint_row`)
+        for ``rho`` None, (n_frames, 5), (n, n_frames, 5) or compensation rows
         (:class:`jwarp.elastic_rows.CompensationRows`, kept per waypoint)."""
         if rho is None:
-            return self.tables.dh0_3d, 0, 0, 1, 1
+            return self.tables.dh0_3d, 0, 0, _ROW_PER_CONFIG
         nf = self.robot.n_frames
         if isinstance(rho, CompensationRows):
             self._check_rows(rho, n)
-            return (rho.rows, 1, 2, *rho.layout)
+            return rho.rows, 1, 2, wp.vec3i(*rho.layout)
         if isinstance(rho, wp.array):
             if rho.dtype != self.scalar:
                 raise TypeError(f"rho: warp array dtype {rho.dtype.__name__} does not match "
                                 f"the kernels' {np.dtype(self.dtype).name}")
             if rho.ndim == 2 and tuple(rho.shape) == (nf, 5):
-                return rho.reshape((1, nf, 5)), 0, 1, 1, 1
+                return rho.reshape((1, nf, 5)), 0, 1, _ROW_PER_CONFIG
             if rho.ndim == 3 and tuple(rho.shape) == (n, nf, 5):
-                return (rho if rho.device == self.device else rho.to(self.device)), 1, 1, 1, 1
+                return (rho if rho.device == self.device else rho.to(self.device)), 1, 1, _ROW_PER_CONFIG
             raise ValueError(f"rho: expected shape ({nf}, 5) or ({n}, {nf}, 5), got {tuple(rho.shape)}")
         if hasattr(rho, "detach"):
             rho = rho.detach().cpu().numpy()
@@ -316,7 +327,7 @@ class CollisionModel:
             raise ValueError("rho: contains NaN or inf")
         stride = 1 if a.ndim == 3 else 0
         a = a.reshape(-1, nf, 5).astype(self.dtype)
-        return wp.array(a, dtype=self.scalar, device=self.device), stride, 1, 1, 1
+        return wp.array(a, dtype=self.scalar, device=self.device), stride, 1, _ROW_PER_CONFIG
 
     def _check_q(self, q: wp.array) -> None:
         if not isinstance(q, wp.array):
@@ -371,7 +382,7 @@ class CollisionModel:
             raise ValueError(f"w_world, w_self: expected finite weights, got {w_world}, {w_self}")
         cost = self._out(out_cost, (n,), "out_cost")
         g = self._out(out_grad, (n, self.robot.n_dof), "out_grad") if grad else None
-        rho_a, stride, use_rho, group, sub = self._rho_or_rows(rho, n)
+        rho_a, stride, use_rho, layout = self._rho_or_rows(rho, n)
         if update_rows and not isinstance(rho, CompensationRows):
             raise ValueError("update_rows: needs compensation rows as rho "
                              "(jwarp.elastic_rows.CompensationRows)")
@@ -380,7 +391,7 @@ class CollisionModel:
         ws = float(w_self) if self.n_pairs else 0.0
         frames, xs, force, moment, bc = self.scratch(n)
         gout = g if g is not None else self._dummy
-        inputs = [q, rho_a, stride, group, sub, use_rho, self.world_struct, ww, ws, float(eps),
+        inputs = [q, rho_a, stride, layout, use_rho, self.world_struct, ww, ws, float(eps),
                   int(grad), *self.model_args, frames, xs, force, moment, bc]
         # caller-owned buffers (a planner's loop): replay a recorded launch (cheaper on the host)
         reuse = out_cost is not None and (rho is None or isinstance(rho, (wp.array,

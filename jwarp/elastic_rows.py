@@ -92,10 +92,10 @@ class CompensationRows:
         return self._bufs[0]
 
     @property
-    def layout(self) -> tuple[int, int]:
-        """(configurations per path S, substeps per segment): the row of configuration b is
-        :func:`jwarp.kernels.fk.waypoint_row` (b, S, n_sub)."""
-        return self.S, self.n_sub
+    def layout(self) -> tuple[int, int, int]:
+        """(configurations per path S, substeps per segment, waypoints W): the row of
+        configuration b is :func:`jwarp.kernels.fk.waypoint_row` (b, layout)."""
+        return self.S, self.n_sub, self.W
 
     def config_rows(self) -> np.ndarray:
         """(N,) int: the row each configuration reads (numpy twin of ``waypoint_row``)."""

@@ -1,6 +1,8 @@
 """Compensation rows (jwarp/elastic_rows.py, kernels/elastic.py compensation_update)
 against the numpy reference of the damped torque iteration."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import warp as wp
@@ -39,18 +41,26 @@ def _expected(model, F, prev, kappa):
     """One damped update of the rows ``prev`` (B, nf, 5) from frames F at those rows."""
     rho0 = nominal_dh(model)
     tau = ref_torques(model, F, prev)
-    target = rho0 + np.stack([np.zeros_like(tau[..., 0]), kappa[:, 2] * tau[..., 2],
-                              np.zeros_like(tau[..., 0]), kappa[:, 0] * tau[..., 0],
-                              kappa[:, 1] * tau[..., 1]], axis=-1)
+    target = rho0 + np.stack([np.zeros_like(tau[..., 0]), kappa[..., 2] * tau[..., 2],
+                              np.zeros_like(tau[..., 0]), kappa[..., 0] * tau[..., 0],
+                              kappa[..., 1] * tau[..., 1]], axis=-1)
     return (1 - LAM) * prev + LAM * target
 
 
-@pytest.mark.parametrize("name", ["justin19", "arm7"])
-def test_update_from_given_frames_matches_reference_and_maps_substeps(name):
+@pytest.mark.parametrize("name, gravity, per_waypoint", [
+    ("justin19", None, False), ("arm7", None, False),
+    ("justin19", [1.5, -2.0, -9.5], False),  # gravity off the z-axis: the general torques
+    ("arm7", None, True)])  # a compliance table per waypoint
+def test_update_from_given_frames_matches_reference_and_maps_substeps(name, gravity,
+                                                                      per_waypoint):
     model = jwarp.robot(name)
+    if gravity is not None:
+        model = dataclasses.replace(model, gravity=np.array(gravity))
     kappa = kappa_uniform(model, 2e-3)
     P, W, n_sub = 2, 3, 3
     S = (W - 1) * n_sub + 1
+    if per_waypoint:
+        kappa = kappa * np.linspace(0.5, 2.0, P * W)[:, None, None]
     q = sample_within_limits(model, P * S, np.random.default_rng(1))
     rows = CompensationRows(tables(model, "cpu", np.float64), P, W, n_sub, kappa, LAM)
     assert rows.rows.shape == (P * W, model.n_frames, 9)

@@ -244,8 +244,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
-        rho_group: int,
-        rho_sub: int,
+        rho_layout: wp.vec3i,
         use_rho: int,
         world: WorldGrid,
         w_world: scalar,
@@ -268,15 +267,19 @@ def kernels(scalar: type) -> SimpleNamespace:
     ):
         """cost[b] = w_world U_w(q_b) + w_self U_s(q_b) and, if ``want_grad``,
         grad[b, :] = d cost / d q_b (rho fixed). DH rows: row ``rho_stride *
-        waypoint_row(b, rho_group, rho_sub)`` (:func:`jwarp.kernels.fk.waypoint_row`; 1, 1
+        waypoint_row(b, rho_layout)`` (:func:`jwarp.kernels.fk.waypoint_row`; (1, 1, 1)
         for a row per configuration). Scratch: frames (N, n_frames), xs (N, S), force,
         moment and bounding-sphere centres bc (N, n_frames). With ``comp.enabled`` (and
         compensation rows, ``use_rho`` = 2) waypoint configurations end with one torque
         update of their row from the frames just computed
-        (:func:`jwarp.kernels.elastic.waypoint_update`)."""
+        (:func:`jwarp.kernels.elastic` ``compensation_update_at``)."""
         b = wp.tid()
         nf = model.order.shape[0]
-        rb = rho_stride * fk.waypoint_row(b, rho_group, rho_sub)
+        rb = int(0)
+        on_waypoint = int(0)
+        if use_rho != 0:
+            row, on_waypoint = fk.waypoint_row(b, rho_layout)
+            rb = rho_stride * row
         for k in range(nf):
             i = model.order[k]
             fk.write_frame(model, b, i, q, rho, rb, use_rho, frames)
@@ -362,8 +365,8 @@ def kernels(scalar: type) -> SimpleNamespace:
                         for m in range(m0, m1):
                             jm = model.cpl_joint[m]
                             grad[b, jm] = grad[b, jm] + model.cpl_coef[m] * gi
-        if comp.enabled != 0:
-            el.waypoint_update(model, frames, b, rho, comp)
+        if comp.enabled != 0 and on_waypoint != 0:
+            el.compensation_update_at(model, frames, b, rho, rb, comp)
 
     @wp.kernel(module="unique", enable_backward=False)
     def distance_kernel(

@@ -58,8 +58,17 @@ def kernels(scalar: type) -> SimpleNamespace:
         ``mo`` = [sum m w; sum m] (w: centres of mass in world coordinates): about
         ``ax_alpha`` and ``ax_beta`` through the parent origin ``pp``, and about the frame's
         own z-axis ``z`` through its origin ``p_i``."""
-        s = vec3(mo[0], mo[1], mo[2])
         mtot = mo[3]
+        if gravity[0] == zero and gravity[1] == zero:
+            # gravity along z (a fixed branch per robot): only x and y of the arms matter,
+            # dot(cross(a, g), x) = g_z (a_y x_x - a_x x_y)
+            ax = mo[0] - mtot * pp[0]
+            ay = mo[1] - mtot * pp[1]
+            ix = mo[0] - mtot * p_i[0]
+            iy = mo[1] - mtot * p_i[1]
+            return gravity[2] * vec3(ay * ax_alpha[0] - ax * ax_alpha[1],
+                                     ay * ax_beta[0] - ax * ax_beta[1], iy * z[0] - ix * z[1])
+        s = vec3(mo[0], mo[1], mo[2])
         arm_p = wp.cross(s - mtot * pp, gravity)
         return vec3(wp.dot(arm_p, ax_alpha), wp.dot(arm_p, ax_beta),
                     wp.dot(wp.cross(s - mtot * p_i, gravity), z))
@@ -235,8 +244,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         ``c.delta[u]`` = max |new - old| [rad]. Scratch column ``u * c.scratch_stride``."""
         sc = u * c.scratch_stride
         subtree_prefix(model, frames, b, c.mass, c.mass_com, c.prefix, sc)
-        r0 = b * c.rho0_stride
-        kb = b * c.kappa_stride
+        r0 = u * c.rho0_stride
+        kb = u * c.kappa_stride
         lam = c.lam
         dmax = zero
         for j in range(c.dh_info.shape[0]):
@@ -275,17 +284,6 @@ def kernels(scalar: type) -> SimpleNamespace:
             c.rows_out[u, i, 7] = cb
             c.rows_out[u, i, 8] = sb
         c.delta[u] = dmax
-
-    @wp.func
-    def waypoint_update(model: fk.FrameTables, frames: wp.array2d(dtype=mat44), b: int,
-                        rows: wp.array3d(dtype=scalar), c: CompensationArgs):
-        """:func:`compensation_update` at configuration b if it is a waypoint (fused into a
-        kernel that has just computed the frames of b at its row)."""
-        S = (c.n_waypoints - 1) * c.n_sub + 1
-        p = b // S
-        s = b - p * S
-        if s % c.n_sub == 0:
-            compensation_update(model, frames, b, rows, p * c.n_waypoints + s // c.n_sub, c)
 
     @wp.kernel(module="unique", enable_backward=False)
     def compensation_update_kernel(
@@ -345,6 +343,6 @@ def kernels(scalar: type) -> SimpleNamespace:
     return SimpleNamespace(vec4=vec4, elastic_step=elastic_step_kernel,
                            fill_static_rows=fill_static_rows,
                            CompensationArgs=CompensationArgs,
-                           waypoint_update=waypoint_update,
+                           compensation_update_at=compensation_update,
                            compensation_update=compensation_update_kernel,
                            fill_rows=fill_rows_kernel)

@@ -212,13 +212,21 @@ def kernels(scalar: type) -> SimpleNamespace:
         return R * point + p
 
     @wp.func
-    def waypoint_row(b: int, group: int, n_sub: int) -> int:
-        """Row of configuration b where rows are kept per waypoint: ``group`` = S
-        configurations per path (W waypoints, S = (W - 1) n_sub + 1); a substep reads its
-        nearest waypoint's row (ties: the later one). group = n_sub = 1 gives b."""
+    def waypoint_row(b: int, layout: wp.vec3i):
+        """(row, on_waypoint) of configuration b where rows are kept per waypoint:
+        ``layout`` = (S configurations per path, n_sub substeps per segment, W waypoints),
+        S = (W - 1) n_sub + 1. A substep reads its nearest waypoint's row (ties: the later
+        one); ``on_waypoint`` is 1 where b is that waypoint itself. Layout (1, 1, 1) gives
+        (b, 1) without a division (integer division costs tens of cycles on the CPU, paid
+        by every configuration)."""
+        group = layout[0]
+        if group == 1:
+            return b, 1
+        n_sub = layout[1]
         p = b // group
-        W = (group - 1) // n_sub + 1
-        return p * W + (b - p * group + n_sub // 2) // n_sub
+        s = b - p * group
+        w = (s + (n_sub >> 1)) // n_sub
+        return p * layout[2] + w, int(w * n_sub == s)
 
     @wp.func
     def pack(R: mat33, p: vec3) -> mat44:
