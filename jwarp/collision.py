@@ -48,8 +48,9 @@ __all__ = ["DEFAULT_EPS", "CollisionModel", "collision_model", "collision_cost",
 #: default smoothing distance eps of the clip c (eq. 3.10) [m]
 DEFAULT_EPS = 0.05
 _FAR = 1e30
-#: row layout of per-configuration (or shared) DH rows: configuration b reads row b
-_ROW_PER_CONFIG = wp.vec3i(1, 1, 1)
+#: row layout (:func:`jwarp.kernels.fk.waypoint_thread`) of per-configuration or shared DH
+#: rows: thread b computes configuration b at row b
+_ROW_PER_CONFIG = wp.vec4i(1, 1, 1, 0)
 
 
 def check_world(robot: RobotModel, world: World | None) -> None:
@@ -298,8 +299,8 @@ class CollisionModel:
                              f"'{rows.t.robot.name}' on {rows.rows.device}, expected {n} of "
                              f"'{self.robot.name}' on {self.device} in this dtype")
 
-    def _rho_or_rows(self, rho: Any, n: int) -> tuple[wp.array, int, int, wp.vec3i]:
-        """(rho array, stride, use_rho, row layout of :func:`jwarp.kernels.fk.waypoint_row`)
+    def _rho_or_rows(self, rho: Any, n: int) -> tuple[wp.array, int, int, wp.vec4i]:
+        """(rho array, stride, use_rho, row layout of :func:`jwarp.kernels.fk.waypoint_thread`)
         for ``rho`` None, (n_frames, 5), (n, n_frames, 5) or compensation rows
         (:class:`jwarp.elastic_rows.CompensationRows`, kept per waypoint)."""
         if rho is None:
@@ -307,7 +308,7 @@ class CollisionModel:
         nf = self.robot.n_frames
         if isinstance(rho, CompensationRows):
             self._check_rows(rho, n)
-            return rho.rows, 1, 2, wp.vec3i(*rho.layout)
+            return rho.rows, 1, 2, wp.vec4i(*rho.layout)
         if isinstance(rho, wp.array):
             if rho.dtype != self.scalar:
                 raise TypeError(f"rho: warp array dtype {rho.dtype.__name__} does not match "
@@ -400,7 +401,8 @@ class CollisionModel:
             wp.launch(self.k.cost, dim=n, inputs=inputs, outputs=[cost, gout, comp],
                       device=self.device)
         else:
-            key = (id(q), id(rho_a), stride, id(cost), id(g), ww, ws, float(eps), n, id(comp))
+            key = (id(q), id(rho_a), stride, tuple(layout), id(cost), id(g), ww, ws, float(eps),
+                   n, id(comp))
             hit = self._launches.get(key)
             if hit is None:
                 if len(self._launches) > 32:

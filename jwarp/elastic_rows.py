@@ -12,7 +12,7 @@ sin beta]``. The FK, Jacobian and collision kernels read them with ``use_rho = 2
 forward kinematics at these rows costs what the rigid fast path costs.
 
 Paths: rows are kept per waypoint, and only the waypoints get a torque update. A substep
-reads the rows of its nearest waypoint (:func:`jwarp.kernels.fk.waypoint_row`).
+reads the rows of its nearest waypoint (:func:`jwarp.kernels.fk.waypoint_thread`).
 Deflections change slowly along a segment, and the final feasibility check solves the
 full equilibrium at every substep anyway.
 """
@@ -31,6 +31,10 @@ from jwarp.kinematics import kappa_array
 
 #: columns of a compensation row (see the module docstring)
 ROW_COLUMNS = 9
+#: waypoints run first on CUDA once they fill this many warps per multiprocessor (see
+#: ``CompensationRows.waypoints_first``; H100, 20 waypoints: slower up to 256 paths, faster
+#: at 1000)
+WAYPOINT_WARPS_PER_SM = 4
 
 
 class CompensationRows:
@@ -81,6 +85,13 @@ class CompensationRows:
         self._prefix = wp.empty((nf + 1, S), dtype=self.k.vec4, device=dev)
         self.delta = wp.zeros(self.n_updates, dtype=t.scalar, device=dev)
         self.iterations = 0
+        #: run the waypoints' threads first (:func:`jwarp.kernels.fk.waypoint_thread`).
+        #: On CUDA this keeps the torque update, which only waypoints run, from diverging
+        #: the warps of the substeps; but the waypoint warps then carry the longest
+        #: threads, which only pays once they fill the GPU several times over. The CPU
+        #: keeps the path order (the rows of a path stay in cache).
+        self.waypoints_first = bool(
+            dev.is_cuda and self.n_updates >= WAYPOINT_WARPS_PER_SM * 32 * dev.sm_count)
         self._launches: dict = {}
         self._args: dict = {}
         self.reset()
@@ -92,13 +103,15 @@ class CompensationRows:
         return self._bufs[0]
 
     @property
-    def layout(self) -> tuple[int, int, int]:
-        """(configurations per path S, substeps per segment, waypoints W): the row of
-        configuration b is :func:`jwarp.kernels.fk.waypoint_row` (b, layout)."""
-        return self.S, self.n_sub, self.W
+    def layout(self) -> tuple[int, int, int, int]:
+        """(configurations per path S, substeps per segment, waypoints W, P or 0): the
+        ``layout`` of :func:`jwarp.kernels.fk.waypoint_thread`, which maps a kernel's
+        threads to configurations and their rows; P (waypoints first) where
+        :attr:`waypoints_first`."""
+        return self.S, self.n_sub, self.W, self.P if self.waypoints_first else 0
 
     def config_rows(self) -> np.ndarray:
-        """(N,) int: the row each configuration reads (numpy twin of ``waypoint_row``)."""
+        """(N,) int: the row each configuration reads (numpy twin of ``waypoint_thread``)."""
         b = np.arange(self.N)
         p, s = np.divmod(b, self.S)
         return p * self.W + (s + self.n_sub // 2) // self.n_sub

@@ -169,15 +169,61 @@ def test_bad_compensation_arguments():
 @requires_cuda
 def test_cuda_fused_update_matches_the_reference_iteration():
     """On CUDA (frame-major scratch, one prefix column per waypoint) after k evaluates the
-    rows are the reference's k-th iterate."""
+    rows are the reference's k-th iterate, with the threads in path order and with the
+    waypoints first, which also give the same substep costs and gradients."""
     model = jwarp.robot("justin19")
     kappa = kappa_uniform(model, 1e-3)
     q = sample_within_limits(model, 6, np.random.default_rng(4))
     Q = PL.initial_paths(q[:3], q[3:], 6, "straight")
-    obj = PL.PathObjective(model, _block_world(), 3, 6, 4, kappa=kappa, lam=LAM,
-                           dtype=np.float64, device="cuda:0")
-    obj.set_paths(Q)
-    for _ in range(3):
-        obj.evaluate()
     _, rho_ref = ref_fk_elastic(model, Q.reshape(-1, model.n_dof), kappa, n_iter=3, lam=LAM)
-    np.testing.assert_allclose(obj.compensation.rows.numpy()[..., :5], rho_ref, atol=1e-10)
+    objs = []
+    for first in (False, True):
+        obj = PL.PathObjective(model, _block_world(), 3, 6, 4, kappa=kappa, lam=LAM,
+                               dtype=np.float64, device="cuda:0")
+        obj.compensation.waypoints_first = first
+        obj.set_paths(Q)
+        for _ in range(3):
+            obj.evaluate()
+        np.testing.assert_allclose(obj.compensation.rows.numpy()[..., :5], rho_ref, atol=1e-10)
+        objs.append(obj)
+    assert np.any(objs[0].sub_cost.numpy() > 0)
+    for name in ("sub_cost", "sub_grad"):
+        np.testing.assert_allclose(getattr(objs[1], name).numpy(), getattr(objs[0], name).numpy(),
+                                   rtol=1e-9, atol=1e-11)
+
+
+_waypoint_thread = fk_kernels.kernels(wp.float32).waypoint_thread
+
+
+@wp.kernel
+def _thread_map(layout: wp.vec4i, out: wp.array2d(dtype=wp.int32)):
+    t = wp.tid()
+    b, row, on = _waypoint_thread(t, layout)
+    out[t, 0] = b
+    out[t, 1] = row
+    out[t, 2] = on
+
+
+@pytest.mark.parametrize("P, W, n_sub", [(3, 4, 5), (2, 3, 2), (2, 5, 1), (1, 2, 4)])
+@pytest.mark.parametrize("waypoints_first", [False, True])
+def test_waypoint_thread_maps_threads_to_configurations_and_rows(P, W, n_sub, waypoints_first):
+    """CPU layout: thread b is configuration b. CUDA layout (P given): a permutation with
+    the waypoints first. Either way each configuration reads its nearest waypoint's row."""
+    model = jwarp.robot("planar4")
+    rows = CompensationRows(tables(model, "cpu", np.float32), P, W, n_sub, 1e-3, LAM)
+    layout = rows.layout
+    assert layout == (rows.S, n_sub, W, 0)  # the CPU's
+    if waypoints_first:
+        layout = layout[:3] + (P,)  # the CUDA layout
+    out = wp.zeros((rows.N, 3), dtype=wp.int32, device="cpu")
+    wp.launch(_thread_map, dim=rows.N, inputs=[wp.vec4i(*layout)], outputs=[out],
+              device="cpu")
+    b, row, on = out.numpy().T
+    np.testing.assert_array_equal(np.sort(b), np.arange(rows.N))  # every configuration once
+    np.testing.assert_array_equal(row, rows.config_rows()[b])      # its nearest waypoint's row
+    np.testing.assert_array_equal(on, (b % rows.S) % n_sub == 0)   # the waypoints
+    if waypoints_first:
+        assert on[:P * W].all() and not on[P * W:].any()
+        np.testing.assert_array_equal(row[:P * W], np.arange(P * W))
+    else:
+        np.testing.assert_array_equal(b, np.arange(rows.N))

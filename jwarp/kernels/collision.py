@@ -244,7 +244,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
-        rho_layout: wp.vec3i,
+        rho_layout: wp.vec4i,
         use_rho: int,
         world: WorldGrid,
         w_world: scalar,
@@ -266,32 +266,33 @@ def kernels(scalar: type) -> SimpleNamespace:
         comp: el.CompensationArgs,
     ):
         """cost[b] = w_world U_w(q_b) + w_self U_s(q_b) and, if ``want_grad``,
-        grad[b, :] = d cost / d q_b (rho fixed). DH rows: row ``rho_stride *
-        waypoint_row(b, rho_layout)`` (:func:`jwarp.kernels.fk.waypoint_row`; (1, 1, 1)
-        for a row per configuration). Scratch: frames (N, n_frames), xs (N, S), force,
-        moment and bounding-sphere centres bc (N, n_frames). With ``comp.enabled`` (and
-        compensation rows, ``use_rho`` = 2) waypoint configurations end with one torque
-        update of their row from the frames just computed
-        (:func:`jwarp.kernels.elastic` ``compensation_update_at``)."""
-        b = wp.tid()
-        nf = model.order.shape[0]
+        grad[b, :] = d cost / d q_b (rho fixed). Thread t handles configuration b and DH
+        row ``rho_stride * row`` of :func:`jwarp.kernels.fk.waypoint_thread` (t,
+        rho_layout) (b = row = t for the layout (1, 1, 1, N)). Scratch (row t): frames
+        (N, n_frames), xs (N, S), force, moment and bounding-sphere centres bc
+        (N, n_frames). With ``comp.enabled`` (and compensation rows, ``use_rho`` = 2) the
+        waypoint threads end with one torque update of their row from the frames just
+        computed (:func:`jwarp.kernels.elastic` ``compensation_update_at``)."""
+        t = wp.tid()
+        b = t
         rb = int(0)
         on_waypoint = int(0)
         if use_rho != 0:
-            row, on_waypoint = fk.waypoint_row(b, rho_layout)
+            b, row, on_waypoint = fk.waypoint_thread(t, rho_layout)
             rb = rho_stride * row
+        nf = model.order.shape[0]
         for k in range(nf):
             i = model.order[k]
-            fk.write_frame(model, b, i, q, rho, rb, use_rho, frames)
+            fk.write_frame(model, b, i, q, rho, rb, use_rho, frames, t)
             if want_grad != 0:
-                force[b, i] = vec3(zero, zero, zero)
-                moment[b, i] = vec3(zero, zero, zero)
+                force[t, i] = vec3(zero, zero, zero)
+                moment[t, i] = vec3(zero, zero, zero)
         hit = int(0)
         u_world = zero
         for s in range(spheres.sph_frame.shape[0]):
             fr = spheres.sph_frame[s]
-            x = sphere_centre(frames, b, fr, spheres.sph_pos[s])
-            xs[b, s] = x
+            x = sphere_centre(frames, t, fr, spheres.sph_pos[s])
+            xs[t, s] = x
             if w_world != zero:
                 # cells whose corners all keep eps from the sphere cost nothing: skip them
                 if world_lower_bound(world, x) - spheres.sph_rad[s] < eps:
@@ -300,31 +301,31 @@ def kernels(scalar: type) -> SimpleNamespace:
                     u_world += c
                     if want_grad != 0 and dc != zero:
                         f = (w_world * dc) * g
-                        force[b, fr] = force[b, fr] + f
-                        moment[b, fr] = moment[b, fr] + wp.cross(x, f)
+                        force[t, fr] = force[t, fr] + f
+                        moment[t, fr] = moment[t, fr] + wp.cross(x, f)
                         hit = 1
         u_self = zero
         if w_self != zero:
             for i in range(nf):
                 if spheres.bound_rad[i] >= zero:
-                    bc[b, i] = sphere_centre(frames, b, i, spheres.bound_pos[i])
+                    bc[t, i] = sphere_centre(frames, t, i, spheres.bound_pos[i])
             for fp in range(spheres.fpair_a.shape[0]):
                 fa = spheres.fpair_a[fp]
                 fb = spheres.fpair_b[fp]
-                ca = bc[b, fa]
-                cb = bc[b, fb]
+                ca = bc[t, fa]
+                cb = bc[t, fb]
                 rb_eps = spheres.bound_rad[fb] + eps
                 reach = spheres.bound_rad[fa] + rb_eps
                 if wp.length_sq(ca - cb) < reach * reach:
                     for e in range(spheres.fpair_start[fp], spheres.fpair_start[fp + 1]):
                         sa = spheres.ent_sphere[e]
-                        xa = xs[b, sa]
+                        xa = xs[t, sa]
                         ra = spheres.sph_rad[sa]
                         ra_reach = ra + rb_eps
                         if wp.length_sq(xa - cb) < ra_reach * ra_reach:
                             for p in range(spheres.ent_start[e], spheres.ent_start[e + 1]):
                                 sb = spheres.pair_b[p]
-                                xb = xs[b, sb]
+                                xb = xs[t, sb]
                                 diff = xa - xb
                                 rsum = ra + spheres.sph_rad[sb]
                                 lim = rsum + eps
@@ -335,10 +336,10 @@ def kernels(scalar: type) -> SimpleNamespace:
                                     u_self += c
                                     if want_grad != 0 and dist > zero:
                                         f = (w_self * dc / dist) * diff
-                                        force[b, fa] = force[b, fa] + f
-                                        moment[b, fa] = moment[b, fa] + wp.cross(xa, f)
-                                        force[b, fb] = force[b, fb] - f
-                                        moment[b, fb] = moment[b, fb] - wp.cross(xb, f)
+                                        force[t, fa] = force[t, fa] + f
+                                        moment[t, fa] = moment[t, fa] + wp.cross(xa, f)
+                                        force[t, fb] = force[t, fb] - f
+                                        moment[t, fb] = moment[t, fb] - wp.cross(xb, f)
                                         hit = 1
         cost[b] = w_world * u_world + w_self * u_self
         if want_grad != 0:
@@ -350,23 +351,23 @@ def kernels(scalar: type) -> SimpleNamespace:
                     i = model.order[nf - 1 - kk]
                     pi = model.parent[i]
                     if pi >= 0:
-                        force[b, pi] = force[b, pi] + force[b, i]
-                        moment[b, pi] = moment[b, pi] + moment[b, i]
+                        force[t, pi] = force[t, pi] + force[t, i]
+                        moment[t, pi] = moment[t, pi] + moment[t, i]
                 for i in range(nf):
                     m0 = model.cpl_start[i]
                     m1 = model.cpl_start[i + 1]
                     if m1 > m0:
-                        T = frames[b, i]
+                        T = frames[t, i]
                         z = vec3(T[0, 2], T[1, 2], T[2, 2])
-                        F = force[b, i]
+                        F = force[t, i]
                         gi = wp.dot(z, F)
                         if model.prismatic[i] == 0:
-                            gi = wp.dot(z, moment[b, i] - wp.cross(unpack_pos(T), F))
+                            gi = wp.dot(z, moment[t, i] - wp.cross(unpack_pos(T), F))
                         for m in range(m0, m1):
                             jm = model.cpl_joint[m]
                             grad[b, jm] = grad[b, jm] + model.cpl_coef[m] * gi
         if comp.enabled != 0 and on_waypoint != 0:
-            el.compensation_update_at(model, frames, b, rho, rb, comp)
+            el.compensation_update_at(model, frames, t, rho, rb, comp)
 
     @wp.kernel(module="unique", enable_backward=False)
     def distance_kernel(
@@ -398,7 +399,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         b = wp.tid()
         nf = model.order.shape[0]
         for k in range(nf):
-            fk.write_frame(model, b, model.order[k], q, rho, b * rho_stride, use_rho, frames)
+            fk.write_frame(model, b, model.order[k], q, rho, b * rho_stride, use_rho, frames, b)
         dmin_w = far
         for s in range(spheres.sph_frame.shape[0]):
             x = sphere_centre(frames, b, spheres.sph_frame[s], spheres.sph_pos[s])

@@ -202,7 +202,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         prefix[0, sb] = acc
         for k in range(model.order.shape[0]):
             i = model.order[k]
-            R, p, ax = fk.write_frame(model, b, i, q, rho, b * rho_stride, use_rho, frames)
+            R, p, ax = fk.write_frame(model, b, i, q, rho, b * rho_stride, use_rho, frames, b)
             axes[i, sb] = ax
             m = mass[i]
             if m != zero:  # a fixed pattern per robot: predicted
@@ -301,7 +301,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         ``frames`` (N, n_frames) are F(q, rows) of N = P * S configurations, P paths of
         ``c.n_waypoints`` waypoints with ``c.n_sub`` substeps each (S = (W - 1) n_sub + 1;
         configuration ``p * S + s``; IK: W = n_sub = 1). ``rows`` (P * W, n_frames, 9):
-        one row per waypoint (``use_rho`` = 2 and :func:`jwarp.kernels.fk.waypoint_row`:
+        one row per waypoint (``use_rho`` = 2 and :func:`jwarp.kernels.fk.waypoint_thread`:
         substeps read their nearest waypoint's). Launch dim P * W: thread u updates the
         torques at its waypoint and writes ``c.rows_out[u]`` and ``c.delta[u]``."""
         u = wp.tid()

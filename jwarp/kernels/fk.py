@@ -212,21 +212,39 @@ def kernels(scalar: type) -> SimpleNamespace:
         return R * point + p
 
     @wp.func
-    def waypoint_row(b: int, layout: wp.vec3i):
-        """(row, on_waypoint) of configuration b where rows are kept per waypoint:
-        ``layout`` = (S configurations per path, n_sub substeps per segment, W waypoints),
-        S = (W - 1) n_sub + 1. A substep reads its nearest waypoint's row (ties: the later
-        one); ``on_waypoint`` is 1 where b is that waypoint itself. Layout (1, 1, 1) gives
-        (b, 1) without a division (integer division costs tens of cycles on the CPU, paid
-        by every configuration)."""
-        group = layout[0]
-        if group == 1:
-            return b, 1
+    def waypoint_thread(t: int, layout: wp.vec4i):
+        """(configuration b, its row, on_waypoint) of thread t where rows are kept per
+        waypoint. ``layout`` = (S configurations per path, n_sub substeps per segment,
+        W waypoints, P paths or 0), S = (W - 1) n_sub + 1, configuration ``p * S + s``;
+        a substep reads its nearest waypoint's row (ties: the later one), on_waypoint is 1
+        where b is that waypoint.
+
+        P > 0 (CUDA): threads 0 .. P W - 1 take the waypoints (row t), the rest the
+        substeps in path order, so the torque update that only waypoints run does not
+        diverge the warps of the substeps. P = 0 (the CPU): b = t, so the configurations
+        of a path run one after another and its rows stay in cache.
+        Layout (1, 1, 1, 0) gives (t, t, 1)."""
+        S = layout[0]
+        if S == 1:
+            return t, t, 1
         n_sub = layout[1]
-        p = b // group
-        s = b - p * group
-        w = (s + (n_sub >> 1)) // n_sub
-        return p * layout[2] + w, int(w * n_sub == s)
+        W = layout[2]
+        n_wp = W * layout[3]
+        if n_wp == 0:
+            p = t // S
+            s = t - p * S
+            w = (s + (n_sub >> 1)) // n_sub
+            return t, p * W + w, int(w * n_sub == s)
+        if t < n_wp:
+            p = t // W
+            return p * S + (t - p * W) * n_sub, t, 1
+        k = t - n_wp
+        m = S - W  # substeps per path (n_sub >= 2 here)
+        p = k // m
+        r = k - p * m
+        seg = r // (n_sub - 1)
+        j = r - seg * (n_sub - 1) + 1  # 1 .. n_sub - 1 within the segment
+        return p * S + seg * n_sub + j, p * W + seg + (j + (n_sub >> 1)) // n_sub, 0
 
     @wp.func
     def pack(R: mat33, p: vec3) -> mat44:
@@ -272,18 +290,19 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.func
     def write_frame(model: FrameTables, b: int, i: int, q: wp.array2d(dtype=scalar),
-                    rho: wp.array3d(dtype=scalar), rb: int, use_rho: int, frames: Any):
-        """frames[b, i] from its parent's transform (already written) and the joint values;
-        returns the frame's world rotation, position and alpha axis (:func:`child_frame`).
-        ``frames``: batch-major mat44 (B, n_frames) or scalar (B, n_frames, 4, 4)."""
+                    rho: wp.array3d(dtype=scalar), rb: int, use_rho: int, frames: Any, fb: int):
+        """frames[fb, i] from its parent's transform (already written to row fb) and the
+        joint values of configuration b; returns the frame's world rotation, position and
+        alpha axis (:func:`child_frame`). ``frames``: batch-major mat44 (B, n_frames) or
+        scalar (B, n_frames, 4, 4); ``fb`` is b, or a scratch row of the calling thread."""
         qi = joint_value(model, i, b, q)
         Rp = wp.identity(3, dtype=scalar)
         pp = vec3(zero, zero, zero)
         pi = model.parent[i]
         if pi >= 0:
-            Rp, pp = parent_pose(frames, b, pi)
+            Rp, pp = parent_pose(frames, fb, pi)
         R, p, ax = child_frame(model, Rp, pp, i, rb, qi, use_rho, rho)
-        store_pose(frames, b, i, R, p)
+        store_pose(frames, fb, i, R, p)
         return R, p, ax
 
     @wp.kernel(module="unique")
@@ -302,7 +321,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         b = wp.tid()
         for k in range(model.order.shape[0]):
             i = model.order[k]
-            write_frame(model, b, i, q, rho, b * rho_stride, use_rho, frames)
+            write_frame(model, b, i, q, rho, b * rho_stride, use_rho, frames, b)
 
     @wp.kernel(module="unique", enable_backward=False)
     def fk_components_kernel(
@@ -322,7 +341,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         gradients go through :func:`fk_kernel`."""
         b = wp.tid()
         for k in range(model.order.shape[0]):
-            write_frame(model, b, model.order[k], q, rho, b * rho_stride, use_rho, frames)
+            write_frame(model, b, model.order[k], q, rho, b * rho_stride, use_rho, frames, b)
 
     @wp.kernel(module="unique")
     def jacobian_kernel(
@@ -424,7 +443,7 @@ def kernels(scalar: type) -> SimpleNamespace:
     return SimpleNamespace(
         scalar=scalar, FrameTables=FrameTables, vec3=vec3, mat33=mat33, mat44=mat44,
         vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, joint_value=joint_value,
-        waypoint_row=waypoint_row, write_frame=write_frame, child_frame=child_frame, child_rot_pos=child_rot_pos, pack=pack,
+        waypoint_thread=waypoint_thread, write_frame=write_frame, child_frame=child_frame, child_rot_pos=child_rot_pos, pack=pack,
         unpack_rot=unpack_rot, unpack_pos=unpack_pos,
         fk=fk_kernel, fk_components=fk_components_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
     )
