@@ -50,7 +50,7 @@ DEFAULT_EPS = 0.05
 _FAR = 1e30
 #: row layout (:func:`jwarp.kernels.fk.waypoint_thread`) of per-configuration or shared DH
 #: rows: thread b computes configuration b at row b
-_ROW_PER_CONFIG = wp.vec4i(1, 1, 1, 0)
+_ROW_PER_CONFIG = (1, 1, 1, 0)
 
 
 def check_world(robot: RobotModel, world: World | None) -> None:
@@ -299,7 +299,7 @@ class CollisionModel:
                              f"'{rows.t.robot.name}' on {rows.rows.device}, expected {n} of "
                              f"'{self.robot.name}' on {self.device} in this dtype")
 
-    def _rho_or_rows(self, rho: Any, n: int) -> tuple[wp.array, int, int, wp.vec4i]:
+    def _rho_or_rows(self, rho: Any, n: int) -> tuple[wp.array, int, int, tuple]:
         """(rho array, stride, use_rho, row layout of :func:`jwarp.kernels.fk.waypoint_thread`)
         for ``rho`` None, (n_frames, 5), (n, n_frames, 5) or compensation rows
         (:class:`jwarp.elastic_rows.CompensationRows`, kept per waypoint)."""
@@ -308,7 +308,7 @@ class CollisionModel:
         nf = self.robot.n_frames
         if isinstance(rho, CompensationRows):
             self._check_rows(rho, n)
-            return rho.rows, 1, 2, wp.vec4i(*rho.layout)
+            return rho.rows, 1, 2, rho.layout
         if isinstance(rho, wp.array):
             if rho.dtype != self.scalar:
                 raise TypeError(f"rho: warp array dtype {rho.dtype.__name__} does not match "
@@ -392,22 +392,25 @@ class CollisionModel:
         ws = float(w_self) if self.n_pairs else 0.0
         frames, xs, force, moment, bc = self.scratch(n)
         gout = g if g is not None else self._dummy
-        inputs = [q, rho_a, stride, layout, use_rho, self.world_struct, ww, ws, float(eps),
-                  int(grad), *self.model_args, frames, xs, force, moment, bc]
+
+        def inputs() -> list:
+            return [q, rho_a, stride, wp.vec4i(*layout), use_rho, self.world_struct, ww, ws,
+                    float(eps), int(grad), *self.model_args, frames, xs, force, moment, bc]
+
         # caller-owned buffers (a planner's loop): replay a recorded launch (cheaper on the host)
         reuse = out_cost is not None and (rho is None or isinstance(rho, (wp.array,
                                                                            CompensationRows)))
         if not reuse:
-            wp.launch(self.k.cost, dim=n, inputs=inputs, outputs=[cost, gout, comp],
+            wp.launch(self.k.cost, dim=n, inputs=inputs(), outputs=[cost, gout, comp],
                       device=self.device)
         else:
-            key = (id(q), id(rho_a), stride, tuple(layout), id(cost), id(g), ww, ws, float(eps),
-                   n, id(comp))
+            key = (id(q), id(rho_a), stride, layout, id(cost), id(g), ww, ws, float(eps), n,
+                   id(comp))
             hit = self._launches.get(key)
             if hit is None:
                 if len(self._launches) > 32:
                     self._launches.clear()
-                launch = wp.launch(self.k.cost, dim=n, inputs=inputs,
+                launch = wp.launch(self.k.cost, dim=n, inputs=inputs(),
                                    outputs=[cost, gout, comp], device=self.device,
                                    record_cmd=True)
                 hit = (launch, q, rho_a, cost, g, comp)

@@ -156,3 +156,13 @@ def test_compensated_ik_reaches_the_target_on_the_elastic_model():
     assert np.all(np.linalg.norm(F[:, :3, 3] - T[:, :3, 3], axis=1) > 1e-3)
     with pytest.raises(ValueError, match="kappa"):
         C.compensated_ik(robot, "right_tcp", T)  # justin19 ships without compliances
+
+
+def test_ik_iteration_overhead_times_whole_solver_iterations():
+    from jwarp.solvers import compensation as C
+
+    out = C.ik_iteration_overhead("arm7", "tcp", 1e-3, n_starts=4, iterations=3, rounds=1)
+    assert out["rigid_s"] > 0 and out["elastic_s"] > 0
+    assert out["overhead"] == pytest.approx(out["elastic_s"] / out["rigid_s"] - 1)
+    with pytest.raises(ValueError, match="frame"):
+        C.ik_iteration_overhead("arm7", "no_such_frame", 1e-3, n_starts=2, iterations=1)
