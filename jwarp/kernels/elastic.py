@@ -239,8 +239,9 @@ def kernels(scalar: type) -> SimpleNamespace:
     @wp.func
     def compensation_update(model: fk.FrameTables, frames: wp.array2d(dtype=mat44), b: int,
                             rows: wp.array3d(dtype=scalar), u: int, c: CompensationArgs):
-        """One torque update of compensation row ``u`` (9 columns) from the frames of
-        configuration b computed at that row: ``c.rows_out[u]`` (DH frames only) and
+        """One torque update of compensation row ``u`` (9 columns) from ``frames[b]``, the
+        frames of its configuration computed at that row (b: the row of ``frames`` that
+        holds them, e.g. a thread's scratch row): ``c.rows_out[u]`` (DH frames only) and
         ``c.delta[u]`` = max |new - old| [rad]. Scratch column ``u * c.scratch_stride``."""
         sc = u * c.scratch_stride
         subtree_prefix(model, frames, b, c.mass, c.mass_com, c.prefix, sc)
