@@ -149,25 +149,37 @@ class CompensationRows:
         self._bufs.reverse()
         self.iterations += 1
 
-    def update(self, frames: wp.array) -> wp.array:
+    def update(self, frames: wp.array, per_frame: bool | None = None) -> wp.array:
         """One torque update from ``frames`` (N, n_frames) computed at :attr:`rows` (its own
-        launch over the P * W waypoints); the new rows become :attr:`rows`. Returns delta
-        (P * W,): the largest row change at each waypoint [rad]."""
+        launch); the new rows become :attr:`rows`. Returns delta (P * W,): the largest row
+        change at each waypoint [rad].
+
+        ``per_frame``: one thread per (waypoint, DH frame) instead of one per waypoint.
+        Default: on CUDA, where a thread walking the whole robot sets the duration of a
+        small launch (an IK batch); the CPU runs threads one after another and prefers
+        one per waypoint (no atomics, one pass over the frames)."""
         t = self.t
         if tuple(frames.shape[:2]) != (self.N, t.robot.n_frames):
             raise ValueError(f"frames: expected shape ({self.N}, {t.robot.n_frames}), got "
                              f"{tuple(frames.shape)}")
-        # a recorded launch per (frames, direction): Warp's argument packing costs
+        if per_frame is None:
+            per_frame = t.device.is_cuda
+        # a recorded launch per (frames, direction, kind): Warp's argument packing costs
         # microseconds per launch on the host, as much as the update of a whole path
-        key = (id(frames), id(self.rows))
+        key = (id(frames), id(self.rows), bool(per_frame))
         hit = self._launches.get(key)
         if hit is None:
             if len(self._launches) > 8:
                 self._launches.clear()
-            launch = wp.launch(self.k.compensation_update, dim=self.n_updates,
-                               inputs=[frames, self.rows, t.frame_struct],
+            kernel, dim = self.k.compensation_update, self.n_updates
+            if per_frame:
+                kernel, dim = self.k.compensation_update_per_frame, (self.n_updates,
+                                                                     t.dh_info.shape[0])
+            launch = wp.launch(kernel, dim=dim, inputs=[frames, self.rows, t.frame_struct],
                                outputs=[self.args()], device=t.device, record_cmd=True)
             hit = self._launches[key] = (launch, frames)  # keeps frames alive for the id
+        if per_frame:
+            self.delta.zero_()  # the kernel takes the max over the frames atomically
         hit[0].launch()
         self.commit()
         return self.delta

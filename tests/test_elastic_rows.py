@@ -47,12 +47,13 @@ def _expected(model, F, prev, kappa):
     return (1 - LAM) * prev + LAM * target
 
 
-@pytest.mark.parametrize("name, gravity, per_waypoint", [
-    ("justin19", None, False), ("arm7", None, False),
-    ("justin19", [1.5, -2.0, -9.5], False),  # gravity off the z-axis: the general torques
-    ("arm7", None, True)])  # a compliance table per waypoint
+@pytest.mark.parametrize("name, gravity, per_waypoint, per_frame", [
+    ("justin19", None, False, False), ("arm7", None, False, False),
+    ("justin19", [1.5, -2.0, -9.5], False, False),  # gravity off the z-axis: general torques
+    ("arm7", None, True, False),  # a compliance table per waypoint
+    ("justin19", None, True, True)])  # one thread per (waypoint, DH frame), CUDA's default
 def test_update_from_given_frames_matches_reference_and_maps_substeps(name, gravity,
-                                                                      per_waypoint):
+                                                                      per_waypoint, per_frame):
     model = jwarp.robot(name)
     if gravity is not None:
         model = dataclasses.replace(model, gravity=np.array(gravity))
@@ -71,7 +72,7 @@ def test_update_from_given_frames_matches_reference_and_maps_substeps(name, grav
     prev = np.broadcast_to(nominal_dh(model), (P * W, model.n_frames, 5)).copy()
     for it in range(3):  # the second and third start from bent rows (beta != 0)
         F = ref_fk(model, q, rows.rho())  # frames of every configuration at its rows
-        delta = rows.update(_frames(model, F)).numpy()
+        delta = rows.update(_frames(model, F), per_frame=per_frame).numpy()
         want = _expected(model, F[wpt], prev, kappa)
         got = rows.rows.numpy()
         np.testing.assert_allclose(got[..., :5], want, atol=1e-12)
@@ -227,3 +228,26 @@ def test_waypoint_thread_maps_threads_to_configurations_and_rows(P, W, n_sub, wa
         np.testing.assert_array_equal(row[:P * W], np.arange(P * W))
     else:
         np.testing.assert_array_equal(b, np.arange(rows.N))
+
+
+@requires_cuda
+def test_cuda_ik_update_per_frame_matches_the_reference_iteration():
+    """IK on CUDA updates its rows from its FK frames, one thread per (configuration, DH
+    frame): after k evaluations at fixed q the rows are the reference's k-th iterate."""
+    from jwarp.solvers.ik import IKObjective
+
+    model = jwarp.robot("justin19")
+    kappa = kappa_uniform(model, 1e-3)
+    q = sample_within_limits(model, 5, np.random.default_rng(5))
+    obj = IKObjective(model, "right_tcp", 5, world=_block_world(), kappa=kappa, lam=LAM,
+                      dtype=np.float64, device="cuda:0")
+    obj.set_q(q)
+    obj.set_target(np.repeat(np.eye(4)[None], 5, axis=0))
+    for _ in range(3):
+        obj.evaluate_pose()
+        obj.evaluate_aux()
+    _, rho_ref = ref_fk_elastic(model, q, kappa, n_iter=3, lam=LAM)
+    np.testing.assert_allclose(obj.compensation.rows.numpy()[..., :5], rho_ref, atol=1e-10)
+    _, rho_prev = ref_fk_elastic(model, q, kappa, n_iter=2, lam=LAM)
+    np.testing.assert_allclose(obj.delta.numpy(), np.abs(rho_ref - rho_prev).max(axis=(1, 2)),
+                               atol=1e-10)

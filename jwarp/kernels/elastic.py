@@ -237,6 +237,44 @@ def kernels(scalar: type) -> SimpleNamespace:
         delta: wp.array(dtype=scalar)
 
     @wp.func
+    def frame_update(model: fk.FrameTables, frames: wp.array2d(dtype=mat44), b: int,
+                     rows: wp.array3d(dtype=scalar), u: int, c: CompensationArgs,
+                     info: wp.vec4i, mo: vec4) -> scalar:
+        """The damped update of DH frame ``info[1]`` in compensation row ``u`` from
+        ``frames[b]`` and the first moments ``mo`` of its subtree: writes its entries of
+        ``c.rows_out[u]`` and returns max |new - old| [rad]."""
+        i = info[1]
+        T = frames[b, i]
+        pp = vec3(zero, zero, zero)
+        Rp = wp.identity(3, dtype=scalar)
+        if info[3] >= 0:
+            Tp = frames[b, info[3]]
+            pp = unpack_pos(Tp)
+            Rp = unpack_rot(Tp)
+        tau = gravity_torques(mo, unpack_pos(T), vec3(T[0, 2], T[1, 2], T[2, 2]), pp,
+                              Rp * vec3(rows[u, i, 7], zero, -rows[u, i, 8]),
+                              vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1]), c.gravity)
+        prev_t = rows[u, i, 1]
+        prev_a = rows[u, i, 3]
+        prev_b = rows[u, i, 4]
+        dr = damped_step(c.rho0, u * c.rho0_stride, c.kappa, u * c.kappa_stride, i, tau,
+                         vec3(prev_a, prev_b, prev_t), c.lam)
+        new_a = prev_a + dr[0]
+        new_b = prev_b + dr[1]
+        cs = model.trig[i]  # cos/sin from the nominal angles: no drift over iterations
+        ca, sa = fk.cos_sin_near(new_a, model.dh0[i, 3], cs[0], cs[1])
+        cb, sb = fk.cos_sin_near(new_b, model.dh0[i, 4], cs[2], cs[3])
+        # d and r never change: both buffers hold them from fill_rows
+        c.rows_out[u, i, 1] = prev_t + dr[2]
+        c.rows_out[u, i, 3] = new_a
+        c.rows_out[u, i, 4] = new_b
+        c.rows_out[u, i, 5] = ca
+        c.rows_out[u, i, 6] = sa
+        c.rows_out[u, i, 7] = cb
+        c.rows_out[u, i, 8] = sb
+        return wp.max(wp.abs(dr[0]), wp.max(wp.abs(dr[1]), wp.abs(dr[2])))
+
+    @wp.func
     def compensation_update(model: fk.FrameTables, frames: wp.array2d(dtype=mat44), b: int,
                             rows: wp.array3d(dtype=scalar), u: int, c: CompensationArgs):
         """One torque update of compensation row ``u`` (9 columns) from ``frames[b]``, the
@@ -245,46 +283,19 @@ def kernels(scalar: type) -> SimpleNamespace:
         ``c.delta[u]`` = max |new - old| [rad]. Scratch column ``u * c.scratch_stride``."""
         sc = u * c.scratch_stride
         subtree_prefix(model, frames, b, c.mass, c.mass_com, c.prefix, sc)
-        r0 = u * c.rho0_stride
-        kb = u * c.kappa_stride
-        lam = c.lam
         dmax = zero
         for j in range(c.dh_info.shape[0]):
             info = c.dh_info[j]
-            i = info[1]
-            T = frames[b, i]
-            pp = vec3(zero, zero, zero)
-            Rp = wp.identity(3, dtype=scalar)
-            if info[3] >= 0:
-                Tp = frames[b, info[3]]
-                pp = unpack_pos(Tp)
-                Rp = unpack_rot(Tp)
-            tau = gravity_torques(c.prefix[info[2], sc] - c.prefix[info[0], sc], unpack_pos(T),
-                                  vec3(T[0, 2], T[1, 2], T[2, 2]), pp,
-                                  Rp * vec3(rows[u, i, 7], zero, -rows[u, i, 8]),
-                                  vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1]), c.gravity)
-            prev_t = rows[u, i, 1]
-            prev_a = rows[u, i, 3]
-            prev_b = rows[u, i, 4]
-            dr = damped_step(c.rho0, r0, c.kappa, kb, i, tau, vec3(prev_a, prev_b, prev_t), lam)
-            d_a = dr[0]
-            d_b = dr[1]
-            d_t = dr[2]
-            dmax = wp.max(dmax, wp.max(wp.abs(d_a), wp.max(wp.abs(d_b), wp.abs(d_t))))
-            new_a = prev_a + d_a
-            new_b = prev_b + d_b
-            cs = model.trig[i]  # cos/sin from the nominal angles: no drift over iterations
-            ca, sa = fk.cos_sin_near(new_a, model.dh0[i, 3], cs[0], cs[1])
-            cb, sb = fk.cos_sin_near(new_b, model.dh0[i, 4], cs[2], cs[3])
-            # d and r never change: both buffers hold them from fill_rows
-            c.rows_out[u, i, 1] = prev_t + d_t
-            c.rows_out[u, i, 3] = new_a
-            c.rows_out[u, i, 4] = new_b
-            c.rows_out[u, i, 5] = ca
-            c.rows_out[u, i, 6] = sa
-            c.rows_out[u, i, 7] = cb
-            c.rows_out[u, i, 8] = sb
+            mo = c.prefix[info[2], sc] - c.prefix[info[0], sc]
+            dmax = wp.max(dmax, frame_update(model, frames, b, rows, u, c, info, mo))
         c.delta[u] = dmax
+
+    @wp.func
+    def waypoint_config(u: int, c: CompensationArgs) -> int:
+        """Configuration index of waypoint u (P paths of ``c.n_waypoints`` waypoints with
+        ``c.n_sub`` substeps per segment)."""
+        p = u // c.n_waypoints
+        return p * ((c.n_waypoints - 1) * c.n_sub + 1) + (u - p * c.n_waypoints) * c.n_sub
 
     @wp.kernel(module="unique", enable_backward=False)
     def compensation_update_kernel(
@@ -306,9 +317,35 @@ def kernels(scalar: type) -> SimpleNamespace:
         substeps read their nearest waypoint's). Launch dim P * W: thread u updates the
         torques at its waypoint and writes ``c.rows_out[u]`` and ``c.delta[u]``."""
         u = wp.tid()
-        p = u // c.n_waypoints
-        b = p * ((c.n_waypoints - 1) * c.n_sub + 1) + (u - p * c.n_waypoints) * c.n_sub
-        compensation_update(model, frames, b, rows, u, c)
+        compensation_update(model, frames, waypoint_config(u, c), rows, u, c)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def compensation_update_per_frame_kernel(
+        # Data in:
+        frames: wp.array2d(dtype=mat44),
+        rows: wp.array3d(dtype=scalar),
+        # Model:
+        model: fk.FrameTables,
+        # Data out:
+        c: CompensationArgs,
+    ):
+        """:func:`compensation_update_kernel` with one thread per (waypoint u, DH frame j)
+        (launch dim (P * W, n_dh)): each thread sums the first moments of its own subtree
+        from the frames, so no thread walks the whole robot one frame after another. For
+        small batches on CUDA, where that serial walk sets the launch's duration.
+        ``c.delta`` must be zero before the launch (atomic max over the frames)."""
+        u, j = wp.tid()
+        b = waypoint_config(u, c)
+        info = c.dh_info[j]
+        mo = vec4(zero, zero, zero, zero)
+        for k in range(info[0], info[2]):
+            f = model.order[k]
+            m = c.mass[f]
+            if m != zero:
+                T = frames[b, f]
+                w = unpack_rot(T) * c.mass_com[f] + unpack_pos(T)
+                mo = mo + vec4(m * w[0], m * w[1], m * w[2], m)
+        wp.atomic_max(c.delta, u, frame_update(model, frames, b, rows, u, c, info, mo))
 
     @wp.kernel(module="unique", enable_backward=False)
     def fill_rows_kernel(
@@ -346,4 +383,5 @@ def kernels(scalar: type) -> SimpleNamespace:
                            CompensationArgs=CompensationArgs,
                            compensation_update_at=compensation_update,
                            compensation_update=compensation_update_kernel,
+                           compensation_update_per_frame=compensation_update_per_frame_kernel,
                            fill_rows=fill_rows_kernel)

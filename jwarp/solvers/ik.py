@@ -252,11 +252,16 @@ class IKObjective:
         w = self.weights
         use = int(w.world > 0 or w.self > 0)
         comp = self.compensation
-        if use:  # elastic: at the rows of evaluate_pose, then one torque update from them
+        # elastic: at the rows of evaluate_pose, then one torque update from them: inside
+        # the collision launch on the CPU; on CUDA from evaluate_pose's frames, one thread
+        # per (configuration, DH frame) (H100, 64 configurations: the fused update's serial
+        # walk over the robot cost more than a second launch)
+        fused = comp is not None and self.device.is_cpu
+        if use:
             self.cm.cost(self.q, rho=comp, w_world=w.world, w_self=w.self, eps=self.eps,
                          grad=True, out_cost=self.coll_cost, out_grad=self.coll_grad,
-                         update_rows=comp is not None)
-        elif comp is not None:
+                         update_rows=fused)
+        if comp is not None and not (use and fused):
             comp.update(self.frames)
         self._launch(("aux", id(self.q_default), use, w.default), self.kk.aux_cost,
                      [self.q, self.q_default, self.default_stride, self.coll_cost,
