@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{1e3 * t:>11.3f}{S / t:>13.0f}")
             sys.stdout.flush()
     if args.json:
-        from jwarp.model import atomic_write_text
+        from jwarp.atomic import atomic_write_text
         atomic_write_text(args.json, json.dumps({"rows": rows, "device": args.device,
                                                  "load": load}, indent=1))
     return 0

@@ -266,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(result[name], indent=1, default=float))
         sys.stdout.flush()
     if args.json:
-        from jwarp.model import atomic_write_text
+        from jwarp.atomic import atomic_write_text
 
         atomic_write_text(args.json, json.dumps(result, indent=1, default=float) + "\n")
     return 0

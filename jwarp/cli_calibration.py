@@ -148,7 +148,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.out:
         res.robot.save(args.out)  # atomic
     if args.params_out:
-        from jwarp.model import atomic_write_text
+        from jwarp.atomic import atomic_write_text
 
         atomic_write_text(args.params_out, dumps(res.to_dict(), indent=1) + "\n")
     if args.rerun:

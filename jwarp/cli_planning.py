@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -72,21 +70,15 @@ class _Recorder:
 
     def __init__(self, path: str, model: Any, world: Any):
         from jwarp import viz
+        from jwarp.atomic import AtomicFile
 
         self.rr = viz._rerun()
-        self.target = Path(path)
-        folder = self.target.parent if str(self.target.parent) else Path(".")
-        if not folder.is_dir():
-            raise CLIError(f"--rerun: folder '{folder}' does not exist")
-        fd, self.tmp = tempfile.mkstemp(prefix=f".{self.target.name}.", suffix=".tmp", dir=folder)
-        os.close(fd)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(self.tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual file mode
+        try:
+            self.file = AtomicFile(path)
+        except ValueError as e:
+            raise CLIError(f"--rerun: {e}") from None
         self.model = model
-        self.rec = self.rr.RecordingStream("jwarp-planning")
-        self.rec.save(self.tmp)
-        self.rec.log("/", self.rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self.rec = viz.open_recording(self.file.tmp, "jwarp-planning")
         if world is not None:
             self._log_world(world)
 
@@ -128,12 +120,10 @@ class _Recorder:
     def close(self) -> Path:
         self.rec.flush()
         self.rec.disconnect()
-        os.replace(self.tmp, self.target)
-        return self.target
+        return self.file.commit()
 
     def abort(self) -> None:
-        if os.path.exists(self.tmp):
-            os.unlink(self.tmp)
+        self.file.discard()
 
 
 # ------------------------------------------------------------------ commands

@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping
 
 import numpy as np
 
+from jwarp.atomic import AtomicFile
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 
@@ -153,32 +153,26 @@ def _q_batch(model: RobotModel, q_list: Any) -> np.ndarray:
     return q
 
 
+def open_recording(path: str | os.PathLike, application_id: str = "jwarp") -> Any:
+    """A rerun RecordingStream saving to ``path`` (z up, right-handed); flush and
+    disconnect it when done."""
+    rr = _rerun()
+    rec = rr.RecordingStream(application_id)
+    rec.save(str(path))
+    rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    return rec
+
+
 @contextlib.contextmanager
 def atomic_recording(path: str | os.PathLike, application_id: str = "jwarp") -> Iterator[Any]:
     """A rerun RecordingStream saving to a temporary file beside ``path``, renamed to
     ``path`` when the block ends without error (readers never see a partial file)."""
-    rr = _rerun()
-    target = Path(path)
-    folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        raise ValueError(f"path: folder '{folder}' does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
-    os.close(fd)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual file mode
-        rec = rr.RecordingStream(application_id)
-        rec.save(tmp)
-        rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    _rerun()  # a clear error before any file is made
+    with AtomicFile(path) as f:
+        rec = open_recording(f.tmp, application_id)
         yield rec
         rec.flush()
         rec.disconnect()
-        os.replace(tmp, target)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,

@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from jwarp.atomic import AtomicFile
 from jwarp.world.sdf import World
 
 __all__ = ["FORMAT", "VERSION", "save_world", "load_world", "parse_world_spec", "SPEC_KEYS"]
@@ -38,10 +38,6 @@ def save_world(world: World, path: str | os.PathLike) -> None:
     rename, so readers never see a partial file."""
     if not isinstance(world, World):
         raise TypeError(f"world: expected a World, got {type(world).__name__}")
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise ValueError(f"path: folder '{folder}' does not exist")
     try:
         meta = json.dumps(world.meta)
     except (TypeError, ValueError) as e:
@@ -52,17 +48,11 @@ def save_world(world: World, path: str | os.PathLike) -> None:
         meta=np.array(meta))
     if world.occupancy is not None:
         arrays["occupancy"] = world.occupancy
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as fh:
+    with AtomicFile(path) as f:
+        with open(f.tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def load_world(path: str | os.PathLike) -> World:

@@ -35,7 +35,8 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.model import RobotModel, atomic_write_text
+from jwarp.atomic import atomic_write_text
+from jwarp.model import RobotModel
 from jwarp.plugins.measurements.base import Measurement
 
 SETUP_SCHEMA = "jwarp.calibration_setup"
