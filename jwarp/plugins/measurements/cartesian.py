@@ -48,27 +48,11 @@ class CartesianMeasurement(Measurement):
                                         "sigma_rotation"}, "setup.tracker")
         names, nominal, sigma, groups = g.pose_param_entries("tracker", pos, rv, sp, sr,
                                                              "tracker")
-        markers = g.section(setup, "markers", "setup")
-        if not isinstance(markers, list) or not markers:
-            raise ValueError("setup.markers: expected a non-empty list of markers")
-        self.marker_names: list[str] = []
-        marker_frames: list[int] = []
-        for k, mk in enumerate(markers):
-            where = f"setup.markers[{k}]"
-            g.check_keys(mk, {"name", "frame", "position", "sigma"}, where)
-            nm = g.valid_name(g.section(mk, "name", where), f"{where}.name")
-            if nm in self.marker_names:
-                raise ValueError(f"{where}.name: duplicate marker name '{nm}'")
-            fi = g.robot_frame(robot, g.section(mk, "frame", where), f"{where}.frame")
-            x = g.finite_array(mk.get("position", [0.0, 0.0, 0.0]), f"{where}.position", (3,))
-            s = g.positive(mk.get("sigma", self.DEFAULT_MARKER_SIGMA), f"{where}.sigma",
-                           allow_inf=True)
-            self.marker_names.append(nm)
-            marker_frames.append(fi)
-            names += [f"marker_{nm}_{a}" for a in "xyz"]
-            nominal += list(map(float, x))
-            sigma += [s] * 3
-            groups += ["markers"] * 3
+        self.marker_names, marker_frames, entries = g.parse_markers(
+            setup, robot, default_sigma=self.DEFAULT_MARKER_SIGMA, frame_optional=False,
+            position_required=False)
+        for acc, more in zip((names, nominal, sigma, groups), entries):
+            acc += more
         self.noise = g.positive(setup.get("noise", self.DEFAULT_NOISE), "setup.noise")
         self.marker_frames = np.array(marker_frames, dtype=np.int64)     # (K,)
         self.frames = sorted(set(marker_frames))

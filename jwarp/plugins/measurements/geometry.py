@@ -197,3 +197,41 @@ def pose_param_entries(prefix: str, position: np.ndarray, rotvec: np.ndarray,
     nominal = list(map(float, position)) + list(map(float, rotvec))
     sigma = [sigma_position] * 3 + [sigma_rotation] * 3
     return names, nominal, sigma, [group] * 6
+
+
+def parse_markers(setup: dict, robot: Any, *, default_sigma: float, frame_optional: bool,
+                  position_required: bool
+                  ) -> tuple[list[str], list[int | None], tuple[list[str], list[float],
+                                                                list[float], list[str]]]:
+    """``setup["markers"]``: a non-empty list of ``{"name", "frame", "position" [3] m,
+    "sigma" m}``. Returns (names, frame indices (None for a world-fixed marker where
+    ``frame_optional`` and the frame is null), parameter entries: names
+    ``marker_<name>_x..z``, nominal positions, sigmas, groups ``"markers"``). A missing
+    position is zero unless ``position_required``."""
+    markers = section(setup, "markers", "setup")
+    if not isinstance(markers, list) or not markers:
+        raise ValueError("setup.markers: expected a non-empty list of markers")
+    marker_names: list[str] = []
+    frames: list[int | None] = []
+    names: list[str] = []
+    nominal: list[float] = []
+    sigma: list[float] = []
+    for k, mk in enumerate(markers):
+        where = f"setup.markers[{k}]"
+        check_keys(mk, {"name", "frame", "position", "sigma"}, where)
+        nm = valid_name(section(mk, "name", where), f"{where}.name")
+        if nm in marker_names:
+            raise ValueError(f"{where}.name: duplicate marker name '{nm}'")
+        fr = section(mk, "frame", where)
+        frames.append(None if fr is None and frame_optional
+                      else robot_frame(robot, fr, f"{where}.frame"))
+        x = finite_array(section(mk, "position", where,
+                                 ... if position_required else [0.0, 0.0, 0.0]),
+                         f"{where}.position", (3,))
+        s = positive(mk.get("sigma", default_sigma), f"{where}.sigma", allow_inf=True)
+        marker_names.append(nm)
+        names += [f"marker_{nm}_{a}" for a in "xyz"]
+        nominal += list(map(float, x))
+        sigma += [s] * 3
+    return marker_names, frames, (names, nominal, sigma, ["markers"] * len(names))
+

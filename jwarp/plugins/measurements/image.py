@@ -64,27 +64,11 @@ class ImageMeasurement(Measurement):
                                        default_sigma_rotation=self.DEFAULT_CAMERA_SIGMA[1])
         names, nominal, sigma, groups = g.pose_param_entries("camera", pos, rv, sp, sr, "camera")
 
-        markers = g.section(setup, "markers", "setup")
-        if not isinstance(markers, list) or not markers:
-            raise ValueError("setup.markers: expected a non-empty list of markers")
-        self.marker_names: list[str] = []
-        mframes: list[int | None] = []
-        for k, mk in enumerate(markers):
-            where = f"setup.markers[{k}]"
-            g.check_keys(mk, {"name", "frame", "position", "sigma"}, where)
-            nm = g.valid_name(g.section(mk, "name", where), f"{where}.name")
-            if nm in self.marker_names:
-                raise ValueError(f"{where}.name: duplicate marker name '{nm}'")
-            fr = g.section(mk, "frame", where)
-            mframes.append(None if fr is None else g.robot_frame(robot, fr, f"{where}.frame"))
-            x = g.finite_array(g.section(mk, "position", where), f"{where}.position", (3,))
-            s = g.positive(mk.get("sigma", self.DEFAULT_MARKER_SIGMA), f"{where}.sigma",
-                           allow_inf=True)
-            self.marker_names.append(nm)
-            names += [f"marker_{nm}_{a}" for a in "xyz"]
-            nominal += list(map(float, x))
-            sigma += [s] * 3
-            groups += ["markers"] * 3
+        self.marker_names, mframes, entries = g.parse_markers(
+            setup, robot, default_sigma=self.DEFAULT_MARKER_SIGMA, frame_optional=True,
+            position_required=True)
+        for acc, more in zip((names, nominal, sigma, groups), entries):
+            acc += more
 
         intr = g.section(setup, "intrinsics", "setup")
         g.check_keys(intr, {"focal", "center", "xi", "sigma_focal", "sigma_center", "sigma_xi",
