@@ -166,3 +166,24 @@ def test_ik_iteration_overhead_times_whole_solver_iterations():
     assert out["overhead"] == pytest.approx(out["elastic_s"] / out["rigid_s"] - 1)
     with pytest.raises(ValueError, match="frame"):
         C.ik_iteration_overhead("arm7", "no_such_frame", 1e-3, n_starts=2, iterations=1)
+
+
+@pytest.mark.parametrize("kappa", [None, 1e-3])
+def test_ik_jacobian_from_fk_frames_matches_the_jacobian_kernel(kappa):
+    """The pose-error kernel builds J from the FK frames (coupled torso included); it equals
+    jwarp.jacobian at the same q and DH rows (the compensation rows when elastic)."""
+    from jwarp.kinematics import jacobian
+
+    robot = jwarp.robot("justin19")
+    q = sample_within_limits(robot, 5, np.random.default_rng(8))
+    obj = IK.IKObjective(robot, "right_tcp", 5, kappa=kappa, device="cpu", dtype=np.float64)
+    obj.set_q(q)
+    obj.set_target(np.repeat(np.eye(4)[None], 5, axis=0))
+    for _ in range(2 if kappa else 1):  # elastic: a second pass at bent rows
+        obj.evaluate_pose()
+        obj.evaluate_aux()
+    obj.evaluate_pose()
+    dh = obj.compensation.rho() if kappa else None
+    want = jacobian(robot, q, "right_tcp", dh=dh, device="cpu", dtype=np.float64)
+    np.testing.assert_allclose(obj.jac.numpy(), want, atol=1e-12)
+    assert np.abs(want[:, :, :3]).max() > 0.1  # the torso columns are there

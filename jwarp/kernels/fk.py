@@ -343,6 +343,40 @@ def kernels(scalar: type) -> SimpleNamespace:
         for k in range(model.order.shape[0]):
             write_frame(model, b, model.order[k], q, rho, b * rho_stride, use_rho, frames, b)
 
+    @wp.func
+    def add_axis_columns(model: FrameTables, i: int, z: vec3, p: vec3, target: vec3, b: int,
+                         jac: wp.array3d(dtype=scalar)):
+        """Adds the velocity of ``target`` due to the joint(s) driving frame i (axis z
+        through p) to the columns of jac[b] (rows [linear; angular]; coupled joints add
+        ``coef *`` the column)."""
+        if model.cpl_start[i + 1] > model.cpl_start[i]:
+            lin = wp.cross(z, target - p)
+            ang = z
+            if model.prismatic[i] != 0:
+                lin = z
+                ang = vec3(zero, zero, zero)
+            for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
+                j = model.cpl_joint[c]
+                w = model.cpl_coef[c]
+                for r in range(3):
+                    jac[b, r, j] = jac[b, r, j] + w * lin[r]
+                    jac[b, r + 3, j] = jac[b, r + 3, j] + w * ang[r]
+
+    @wp.func
+    def frames_jacobian(model: FrameTables, chain: wp.array(dtype=wp.int32),
+                        frames: wp.array2d(dtype=mat44), b: int, target: vec3,
+                        jac: wp.array3d(dtype=scalar)):
+        """Geometric Jacobian jac[b] (6, n_dof) of the world point ``target`` moving with
+        the last frame of ``chain``, from frames an FK pass has already computed (no
+        kinematics of its own)."""
+        for j in range(jac.shape[2]):
+            for r in range(6):
+                jac[b, r, j] = zero
+        for k in range(chain.shape[0]):
+            T = frames[b, chain[k]]
+            add_axis_columns(model, chain[k], vec3(T[0, 2], T[1, 2], T[2, 2]),
+                             vec3(T[0, 3], T[1, 3], T[2, 3]), target, b, jac)
+
     @wp.kernel(module="unique")
     def jacobian_kernel(
         # Data in:
@@ -375,19 +409,7 @@ def kernels(scalar: type) -> SimpleNamespace:
             i = chain[k]
             qi = joint_value(model, i, b, q)
             R, p = child_rot_pos(model, R, p, i, rb, qi, use_rho, rho)
-            if model.cpl_start[i + 1] > model.cpl_start[i]:
-                z = vec3(R[0, 2], R[1, 2], R[2, 2])
-                lin = wp.cross(z, target - p)
-                ang = z
-                if model.prismatic[i] != 0:
-                    lin = z
-                    ang = vec3(zero, zero, zero)
-                for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
-                    j = model.cpl_joint[c]
-                    w = model.cpl_coef[c]
-                    for r in range(3):
-                        jac[b, r, j] = jac[b, r, j] + w * lin[r]
-                        jac[b, r + 3, j] = jac[b, r + 3, j] + w * ang[r]
+            add_axis_columns(model, i, vec3(R[0, 2], R[1, 2], R[2, 2]), p, target, b, jac)
 
     @wp.kernel(module="unique")
     def jacobian_dh_kernel(
@@ -443,7 +465,7 @@ def kernels(scalar: type) -> SimpleNamespace:
     return SimpleNamespace(
         scalar=scalar, FrameTables=FrameTables, vec3=vec3, mat33=mat33, mat44=mat44,
         vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, joint_value=joint_value,
-        waypoint_thread=waypoint_thread, write_frame=write_frame, child_frame=child_frame, child_rot_pos=child_rot_pos, pack=pack,
+        waypoint_thread=waypoint_thread, frames_jacobian=frames_jacobian, write_frame=write_frame, child_frame=child_frame, child_rot_pos=child_rot_pos, pack=pack,
         unpack_rot=unpack_rot, unpack_pos=unpack_pos,
         fk=fk_kernel, fk_components=fk_components_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
     )

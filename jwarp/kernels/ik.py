@@ -53,21 +53,26 @@ def kernels(scalar: type) -> SimpleNamespace:
     def pose_error_kernel(
         # Data in:
         frames: wp.array2d(dtype=mat44),
-        frame: int,
         target: wp.array(dtype=mat44),
-        jac: wp.array3d(dtype=scalar),
         lam_p: scalar,
         lam_r: scalar,
+        # Model:
+        model: fk.FrameTables,
+        chain: wp.array(dtype=wp.int32),
         # Data out:
+        jac: wp.array3d(dtype=scalar),
         err: wp.array2d(dtype=scalar),
         pos_err: wp.array(dtype=scalar),
         rot_err: wp.array(dtype=scalar),
         cost: wp.array(dtype=scalar),
         grad: wp.array2d(dtype=scalar),
     ):
-        """6D error (B, 6), its norms (B,), U_f (B,) and dU_f/dq (B, n_dof). Launch dim B."""
+        """Jacobian (B, 6, n_dof) of the frame ``chain[-1]`` (from ``frames``, no FK of
+        its own), 6D error (B, 6), its norms (B,), U_f (B,) and dU_f/dq (B, n_dof).
+        Launch dim B."""
         b = wp.tid()
-        F = frames[b, frame]
+        F = frames[b, chain[chain.shape[0] - 1]]
+        fk.frames_jacobian(model, chain, frames, b, fk.unpack_pos(F), jac)
         T = target[b]
         R = fk.unpack_rot(F)
         Rt = fk.unpack_rot(T)

@@ -175,7 +175,6 @@ class IKObjective:
         self.cm = _collision().collision_model(self.robot, world, device=dev, dtype=self.npdt)
         self._launches: dict = {}
         self.set_default(q_default)
-        self.point = self.fk.vec3(0.0, 0.0, 0.0)
         #: elastic compensation rows (None: the rigid robot)
         self.compensation: CompensationRows | None = None
         if kappa is not None:
@@ -228,22 +227,18 @@ class IKObjective:
 
     # ------------------------------------------------------------------ stages
     def evaluate_pose(self) -> None:
-        """[Elastic torque update,] FK, Jacobian of the frame and the pose error/costs."""
+        """FK (elastic: at the compensation rows), then from those frames the Jacobian of
+        the frame and the pose error/costs."""
         t = self.t
         comp = self.compensation
-        jac_rho = (t.dh0_3d, 0, 0)
-        if comp is not None:
-            jac_rho = (comp.rows, 1, 2)
-        self._launch(("fk", id(jac_rho[0])), self.fk.fk, [self.q, *jac_rho, t.frame_struct],
+        rho = (comp.rows, 1, 2) if comp is not None else (t.dh0_3d, 0, 0)
+        self._launch(("fk", id(rho[0])), self.fk.fk, [self.q, *rho, t.frame_struct],
                      [self.frames])
-        self._launch(("jac", id(jac_rho[0]), jac_rho[2]), self.fk.jacobian,
-                     [self.q, *jac_rho, self.point, t.frame_struct, t.chain(self.frame)],
-                     [self.jac])
         w = self.weights
         self._launch(("pose", w.position, w.rotation), self.kk.pose_error,
-                     [self.frames, self.frame, self.target, self.jac,
-                      self.scalar(w.position), self.scalar(w.rotation)],
-                     [self.err, self.pos_err, self.rot_err, self.cost_f, self.grad_f])
+                     [self.frames, self.target, self.scalar(w.position),
+                      self.scalar(w.rotation), t.frame_struct, t.chain(self.frame)],
+                     [self.jac, self.err, self.pos_err, self.rot_err, self.cost_f, self.grad_f])
 
     def evaluate_aux(self) -> None:
         """U_A (world + self collision + closeness to the default pose) and its gradient at
