@@ -100,8 +100,15 @@ def test_rows_converge_to_the_equilibrium_under_a_fixed_path():
     for _ in range(k):
         obj.evaluate()
     _, rho_ref = ref_fk_elastic(model, Q.reshape(-1, model.n_dof), kappa, n_iter=k, lam=LAM)
-    rows = obj.compensation.rows.numpy()[..., :5]
+    rows_all = obj.compensation.rows.numpy()
+    rows = rows_all[..., :5]
     np.testing.assert_allclose(rows, rho_ref, atol=1e-10)
+    # the last updates are small steps (cos/sin chained from the previous rows'): the
+    # cos/sin columns must still match their angles
+    assert np.abs(obj.compensation.delta.numpy()).max() < 2e-4
+    np.testing.assert_allclose(rows_all[..., 5:], np.stack(
+        [np.cos(rows[..., 3]), np.sin(rows[..., 3]), np.cos(rows[..., 4]),
+         np.sin(rows[..., 4])], -1), rtol=0, atol=1e-14)
     _, rho_eq = ref_fk_elastic(model, Q.reshape(-1, model.n_dof), kappa, n_iter=40, lam=LAM)
     assert np.abs(rows - rho_eq).max() < 1e-5
     obj.set_paths(Q)  # new paths start again from the rigid robot

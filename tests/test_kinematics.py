@@ -378,6 +378,42 @@ def test_kernel_cos_sin_matches_numpy(dtype):
     np.testing.assert_allclose(s.numpy(), np.sin(x64), rtol=0, atol=tol)
 
 
+def test_kernel_cos_sin_step_follows_a_chain_of_steps():
+    """cos_sin_step (the compensation rows' cos/sin after one update) against numpy along
+    2000 chained steps: small steps (the two-term series from the previous cos/sin) must not
+    drift; every 100th step is large (the exact path from the nominal angle)."""
+    from jwarp.kernels import fk as fk_kernels
+
+    k = fk_kernels.kernels(wp.float64)
+
+    @wp.kernel(module="unique")
+    def chain(dx: wp.array(dtype=wp.float64), x0: wp.float64,
+              out: wp.array2d(dtype=wp.float64)):
+        c0 = wp.cos(x0)
+        s0 = wp.sin(x0)
+        cn = c0
+        sn = s0
+        x = x0
+        for j in range(dx.shape[0]):
+            x = x + dx[j]
+            c0, s0 = k.cos_sin_step(x, dx[j], c0, s0, x0, cn, sn)
+            out[j, 0] = x
+            out[j, 1] = c0
+            out[j, 2] = s0
+
+    rng = np.random.default_rng(8)
+    dx = rng.uniform(-1.9e-4, 1.9e-4, 2000)
+    dx[::100] = rng.uniform(-0.05, 0.05, 20)  # larger than the series' range
+    out = wp.zeros((len(dx), 3), dtype=wp.float64, device="cpu")
+    wp.launch(chain, dim=1, inputs=[wp.array(dx, dtype=wp.float64, device="cpu"), 0.7],
+              outputs=[out], device="cpu")
+    x, c, s = out.numpy().T
+    np.testing.assert_allclose(c, np.cos(x), rtol=0, atol=2e-14)
+    np.testing.assert_allclose(s, np.sin(x), rtol=0, atol=2e-14)
+    # a series with the wrong sign or order would be off by >= dx^3/6 ~ 1e-12 per step
+    assert np.abs(c - np.cos(x)).max() < 1e-14
+
+
 def test_float32_elastic_equilibrium_matches_float64():
     """The float32 step sums subtree moments as differences of prefix sums over the whole
     robot: the rows must still agree with float64 to float32 resolution."""

@@ -91,12 +91,13 @@ def kernels(scalar: type) -> SimpleNamespace:
         acc = vec4(zero, zero, zero, zero)
         prefix[0, sb] = acc
         for k in range(model.order.shape[0]):
+            # branch-free (massless frames add zeros): a branch makes the accumulator a
+            # merge of two values, which the CPU code then keeps on the stack (~25% slower)
             i = model.order[k]
             m = mass[i]
-            if m != zero:
-                T = frames[b, i]
-                w = unpack_rot(T) * mass_com[i] + unpack_pos(T)
-                acc = acc + vec4(m * w[0], m * w[1], m * w[2], m)
+            T = frames[b, i]
+            w = unpack_rot(T) * mass_com[i] + unpack_pos(T)
+            acc = acc + vec4(m * w[0], m * w[1], m * w[2], m)
             prefix[k + 1, sb] = acc
 
     @wp.func
@@ -261,9 +262,11 @@ def kernels(scalar: type) -> SimpleNamespace:
                          vec3(prev_a, prev_b, prev_t), c.lam)
         new_a = prev_a + dr[0]
         new_b = prev_b + dr[1]
-        cs = model.trig[i]  # cos/sin from the nominal angles: no drift over iterations
-        ca, sa = fk.cos_sin_near(new_a, model.dh0[i, 3], cs[0], cs[1])
-        cb, sb = fk.cos_sin_near(new_b, model.dh0[i, 4], cs[2], cs[3])
+        cs = model.trig[i]
+        ca, sa = fk.cos_sin_step(new_a, dr[0], rows[u, i, 5], rows[u, i, 6], model.dh0[i, 3],
+                                 cs[0], cs[1])
+        cb, sb = fk.cos_sin_step(new_b, dr[1], rows[u, i, 7], rows[u, i, 8], model.dh0[i, 4],
+                                 cs[2], cs[3])
         # d and r never change: both buffers hold them from fill_rows
         c.rows_out[u, i, 1] = prev_t + dr[2]
         c.rows_out[u, i, 3] = new_a

@@ -126,19 +126,49 @@ def kernels(scalar: type) -> SimpleNamespace:
             return cos_sin(x)
 
     else:
+        # float64 constants must be made here: Warp evaluates a float expression inside a
+        # kernel, e.g. ``scalar(1.0 / 6.0)``, in float32 (a 1e-8 relative error)
+        inv = {n: scalar(1.0 / n) for n in (3, 6, 12, 20, 30, 42, 56)}
+        i3, i6, i12, i20, i30, i42, i56 = (inv[n] for n in (3, 6, 12, 20, 30, 42, 56))
+        near_max = scalar(0.1)
+        step_max = scalar(2e-4)
 
         @wp.func
         def cos_sin_near(x: scalar, x0: scalar, c0: scalar, s0: scalar):
             """(cos x, sin x) given cos/sin of a nearby x0: for |x - x0| < 0.1 rad the angle
             sum with a Taylor series of the difference (truncation < 3e-15), else libm."""
             dx = x - x0
-            if wp.abs(dx) < scalar(0.1):
+            if wp.abs(dx) < near_max:
                 d2 = dx * dx
                 # reciprocal constants: a division costs ~10x a multiplication on the CPU
-                sd = dx * (one - d2 * scalar(1.0 / 6.0) * (one - d2 * scalar(1.0 / 20.0) * (one - d2 * scalar(1.0 / 42.0))))
-                cd = one - d2 * scalar(0.5) * (one - d2 * scalar(1.0 / 12.0) * (one - d2 * scalar(1.0 / 30.0) * (one - d2 * scalar(1.0 / 56.0))))
+                sd = dx * (one - d2 * i6 * (one - d2 * i20 * (one - d2 * i42)))
+                cd = one - d2 * scalar(0.5) * (one - d2 * i12 * (one - d2 * i30 * (one - d2 * i56)))
                 return c0 * cd - s0 * sd, s0 * cd + c0 * sd
             return cos_sin(x)
+
+        @wp.func
+        def cos_sin_step(x: scalar, dx: scalar, c0: scalar, s0: scalar, x0: scalar,
+                         cn: scalar, sn: scalar):
+            """(cos x, sin x) for x = x_prev + dx, given (c0, s0) = cos/sin of x_prev and
+            (cn, sn) = cos/sin of the nominal angle x0. For |dx| < 2e-4 rad the angle sum
+            with a two-term series of dx (truncation dx^4/24 < 7e-17; a short dependency
+            chain, where :func:`cos_sin_near`'s longer series was the torque update's hot
+            spot); rounding adds ~1e-16 per step. Else :func:`cos_sin_near` from x0."""
+            if wp.abs(dx) < step_max:
+                h = scalar(0.5) * dx * dx
+                cd = one - h
+                sd = dx - i3 * h * dx
+                return c0 * cd - s0 * sd, s0 * cd + c0 * sd
+            return cos_sin_near(x, x0, cn, sn)
+
+    if scalar == wp.float32:
+
+        @wp.func
+        def cos_sin_step(x: scalar, dx: scalar, c0: scalar, s0: scalar, x0: scalar,
+                         cn: scalar, sn: scalar):
+            """float32: always :func:`cos_sin_near` from the nominal angle x0 (chained steps
+            would accumulate float32 rounding over the iterations)."""
+            return cos_sin_near(x, x0, cn, sn)
 
     @wp.func
     def child_frame(model: FrameTables, Rp: mat33, pp: vec3, i: int, rb: int, qi: scalar,
@@ -464,7 +494,8 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     return SimpleNamespace(
         scalar=scalar, FrameTables=FrameTables, vec3=vec3, mat33=mat33, mat44=mat44,
-        vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, joint_value=joint_value,
+        vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, cos_sin_step=cos_sin_step,
+        joint_value=joint_value,
         waypoint_thread=waypoint_thread, frames_jacobian=frames_jacobian, write_frame=write_frame, child_frame=child_frame, child_rot_pos=child_rot_pos, pack=pack,
         unpack_rot=unpack_rot, unpack_pos=unpack_pos,
         fk=fk_kernel, fk_components=fk_components_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
