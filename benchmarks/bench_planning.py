@@ -12,7 +12,8 @@ Sections (``--only`` picks some):
 * ``iteration``: one gradient iteration (substeps -> collision cost + gradient -> path
   cost -> projected step, plus the host read of the per-path screen) of one justin19 path
   of 20 waypoints with substeps sized to the voxel size, and of ``--paths`` paths at once.
-  Warp runs CPU kernels on one thread, so the CPU figure is one core.
+  Warp runs CPU kernels on one thread and the script limits numpy's BLAS to one thread,
+  so the CPU figure is one core.
 * ``ik``: wall time of :func:`jwarp.solvers.ik.ik` (random multi-start, stop at the
   first feasible start) for justin19's right hand in a shelf-like world, per target.
 * ``feasibility``: per robot (planar4, arm7, justin19) ``--tasks`` hard tasks (random
@@ -32,13 +33,19 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import platform
 import sys
 import time
 from typing import Any
 
-import numpy as np
-import warp as wp
+# one CPU core: numpy's BLAS (the IK's host step) would otherwise use every core. Set
+# before numpy loads; an exported value wins.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
+import warp as wp  # noqa: E402
 
 if hasattr(wp.config, "quiet"):
     wp.config.quiet = True
