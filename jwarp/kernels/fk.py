@@ -125,11 +125,17 @@ def kernels(scalar: type) -> SimpleNamespace:
                 return c0 * cd - s0 * sd, s0 * cd + c0 * sd
             return cos_sin(x)
 
+        @wp.func
+        def cos_sin_step(x: scalar, dx: scalar, c0: scalar, s0: scalar, x0: scalar,
+                         cn: scalar, sn: scalar):
+            """float32: always :func:`cos_sin_near` from the nominal angle x0 (chained steps
+            would accumulate float32 rounding over the iterations)."""
+            return cos_sin_near(x, x0, cn, sn)
+
     else:
         # float64 constants must be made here: Warp evaluates a float expression inside a
         # kernel, e.g. ``scalar(1.0 / 6.0)``, in float32 (a 1e-8 relative error)
-        inv = {n: scalar(1.0 / n) for n in (3, 6, 12, 20, 30, 42, 56)}
-        i3, i6, i12, i20, i30, i42, i56 = (inv[n] for n in (3, 6, 12, 20, 30, 42, 56))
+        i3, i6, i12, i20, i30, i42, i56 = (scalar(1.0 / n) for n in (3, 6, 12, 20, 30, 42, 56))
         near_max = scalar(0.1)
         step_max = scalar(2e-4)
 
@@ -159,15 +165,6 @@ def kernels(scalar: type) -> SimpleNamespace:
                 cd = one - h
                 sd = dx - i3 * h * dx
                 return c0 * cd - s0 * sd, s0 * cd + c0 * sd
-            return cos_sin_near(x, x0, cn, sn)
-
-    if scalar == wp.float32:
-
-        @wp.func
-        def cos_sin_step(x: scalar, dx: scalar, c0: scalar, s0: scalar, x0: scalar,
-                         cn: scalar, sn: scalar):
-            """float32: always :func:`cos_sin_near` from the nominal angle x0 (chained steps
-            would accumulate float32 rounding over the iterations)."""
             return cos_sin_near(x, x0, cn, sn)
 
     @wp.func
