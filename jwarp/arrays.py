@@ -6,6 +6,7 @@ leading batch dimensions. Torch tensors and Warp arrays are shared zero-copy.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 from typing import Any
 
@@ -87,22 +88,21 @@ def as_batch(x: Any, n: int, name: str, *, device: wp.Device, dtype: Any,
         _check_shape(shape, n, name, what)
         if not x.is_floating_point():
             raise TypeError(f"{name}: expected a floating point tensor, got {x.dtype}")
-        if validate and not bool(torch.isfinite(x).all()):
-            bad = torch.nonzero(~torch.isfinite(x.reshape(-1, n)).all(dim=1))[:5].flatten().tolist()
-            raise ValueError(f"{name}: contains NaN or inf (batch rows {bad})")
         t = x.detach().reshape(-1, n).to(dtype=getattr(torch, np.dtype(npdt).name)).contiguous()
+        if validate and not bool(torch.isfinite(t).all()):  # after the cast (overflow)
+            bad = torch.nonzero(~torch.isfinite(t).all(dim=1))[:5].flatten().tolist()
+            raise ValueError(f"{name}: {_not_finite(bool(torch.isfinite(x).all()), npdt)} "
+                             f"(batch rows {bad})")
         arr = wp.from_torch(t, dtype=scalar)
         if arr.device != device:
             arr = arr.to(device)
         return Batch(arr, shape[:-1], "torch", torch_tensor=x)
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise TypeError(f"{name}: expected an array of numbers, got {type(x).__name__}") from e
+    a = real_array(x, name, float64=False)
     _check_shape(a.shape, n, name, what)
-    if validate:
-        _check_finite(a, name)
-    a2 = np.ascontiguousarray(a.reshape(-1, n), dtype=npdt)
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below
+        a2 = np.ascontiguousarray(a.reshape(-1, n), dtype=npdt)
+    if validate:  # after the cast: 1e39 is finite in float64, inf in float32
+        _check_finite(a2, name, a)
     return Batch(wp.array(a2, dtype=scalar, device=device), a.shape[:-1], "numpy")
 
 
@@ -113,11 +113,91 @@ def _check_shape(shape: tuple, n: int, name: str, what: str) -> None:
         raise ValueError(f"{name}: empty batch, shape {shape}")
 
 
-def _check_finite(a: np.ndarray, name: str) -> None:
+def _not_finite(source_finite: bool, npdt: Any) -> str:
+    if source_finite:
+        return (f"values overflow {np.dtype(npdt).name} (largest magnitude "
+                f"{float(np.finfo(npdt).max):.3g}), the computing dtype")
+    return "contains NaN or inf"
+
+
+def _check_finite(a: np.ndarray, name: str, source: np.ndarray | None = None) -> None:
+    """ValueError naming ``name`` and the first bad batch rows unless ``a`` (..., n) is
+    finite. ``source``: the array ``a`` was cast from (tells overflow from NaN/inf)."""
     finite = np.isfinite(a)
     if not finite.all():
         rows = np.nonzero(~finite.reshape(-1, a.shape[-1]).all(axis=1))[0][:5].tolist()
-        raise ValueError(f"{name}: contains NaN or inf (batch rows {rows})")
+        what = _not_finite(source is not None and bool(np.isfinite(source).all()), a.dtype)
+        raise ValueError(f"{name}: {what} (batch rows {rows})")
+
+
+def real_array(x: Any, name: str, float64: bool = True) -> np.ndarray:
+    """``x`` as a float64 numpy array (no copy for float64 input; ``float64=False`` keeps
+    any integer or float dtype). TypeError naming ``name`` for booleans, complex numbers,
+    strings or anything else that is not real numbers (numpy would silently turn True
+    into 1.0 or drop an imaginary part)."""
+    if is_torch(x):
+        x = x.detach().cpu().numpy()
+    elif isinstance(x, wp.array):
+        x = x.numpy()
+    try:
+        a = np.asarray(x)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"{name}: expected an array of numbers, got {type(x).__name__}") from e
+    kind = a.dtype.kind
+    if kind == "f" and (a.dtype.itemsize == 8 or not float64):
+        return a
+    if kind == "b":
+        raise TypeError(f"{name}: expected numbers, got booleans")
+    if kind == "c":
+        raise TypeError(f"{name}: expected real numbers, got complex values")
+    if kind not in "iuf":
+        if kind == "O" and any(isinstance(v, (bool, np.bool_, complex, np.complexfloating))
+                               for v in a.flat):
+            raise TypeError(f"{name}: expected real numbers, got booleans or complex values")
+        if kind != "O":
+            raise TypeError(f"{name}: expected an array of numbers, got {a.dtype} values")
+    if kind in "iu" and not float64:
+        return a
+    try:
+        return a.astype(np.float64)
+    except (TypeError, ValueError, OverflowError) as e:
+        raise TypeError(f"{name}: expected an array of numbers, got {type(x).__name__}") from e
+
+
+def finite_as(a: np.ndarray, dtype: Any, name: str) -> np.ndarray:
+    """``a`` cast to the computing ``dtype`` (float32/float64), contiguous; ValueError
+    naming ``name`` if it has NaN/inf after the cast (1e39 is finite in float64, inf in
+    float32)."""
+    npdt = np.dtype(dtype)
+    with np.errstate(over="ignore", invalid="ignore"):
+        c = np.ascontiguousarray(a, dtype=npdt)
+    if c.size and not np.isfinite(c).all():
+        raise ValueError(f"{name}: {_not_finite(bool(np.isfinite(a).all()), npdt)}")
+    return c
+
+
+def real_number(v: Any, name: str, dtype: Any = None) -> float:
+    """A real scalar argument (int, float, numpy scalar or 0-d array) as a float. TypeError
+    naming ``name`` for bool, complex, strings and other non-numbers; with ``dtype``,
+    ValueError unless it is finite in that computing dtype. Range checks are the
+    caller's."""
+    if type(v) is not float:  # the common case first (optimizer loops call this)
+        if isinstance(v, np.ndarray) and v.ndim == 0:
+            v = v[()]
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+            raise TypeError(f"{name}: expected a real number, got {type(v).__name__} {v!r}")
+    f = float(v)
+    if dtype is not None:
+        fmax = _FMAX.get(dtype)
+        if fmax is None:
+            fmax = _FMAX.setdefault(dtype, float(np.finfo(dtype).max))
+        if not abs(f) <= fmax:
+            raise ValueError(f"{name}: expected a finite number in {np.dtype(dtype).name}, "
+                             f"got {v!r}")
+    return f
+
+
+_FMAX: dict = {}
 
 
 def default_dtype(x: Any) -> Any:

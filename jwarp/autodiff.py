@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from jwarp.arrays import finite_as, real_array, real_number
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics import ElasticLaunch, _setup, kappa_array, launch_fk
 
@@ -21,7 +22,7 @@ WRT = ("q", "dh", "kappa")
 
 
 def _rows_batched(a: np.ndarray, B: int, n: int, width: int, name: str) -> np.ndarray:
-    a = np.asarray(a, np.float64)
+    a = real_array(a, name)
     if a.shape == (n, width):
         a = np.broadcast_to(a, (B, n, width))
     if a.shape != (B, n, width):
@@ -71,18 +72,24 @@ def tape_jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None,
         raise ValueError(f"wrt: unknown {sorted(bad)}; choose from {WRT}")
     if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
         raise ValueError(f"iterations: expected an integer >= 0, got {iterations!r}")
+    lam = real_number(lam, "lam")
+    if not 0.0 < lam <= 1.0:
+        raise ValueError(f"lam: damping must be in (0, 1], got {lam!r}")
     model, batch, t = _setup(robot, q, device, dtype)
     fi = model.frame_index(frame)
     B, n = batch.size, model.n_frames
     npdt = np.float32 if t.scalar == wp.float32 else np.float64
-    pt = np.zeros(3) if point is None else np.asarray(point, np.float64)
+    pt = np.zeros(3) if point is None else real_array(point, "point")
     if pt.shape != (3,) or not np.all(np.isfinite(pt)):
         raise ValueError(f"point: expected 3 finite numbers [m], got {point!r}")
+    pt = finite_as(pt, npdt, "point").astype(np.float64)
     q_w = wp.array(batch.array.numpy(), dtype=t.scalar, device=t.device, requires_grad=True)
     dh_np = _rows_batched(model.dh_table if dh is None else dh, B, n, 5, "dh")
-    dh_w = wp.array(dh_np.astype(npdt), dtype=t.scalar, device=t.device, requires_grad=True)
+    dh_w = wp.array(finite_as(dh_np, npdt, "dh"), dtype=t.scalar, device=t.device,
+                    requires_grad=True)
     kap_np = _rows_batched(kappa_array(model, kappa), B, n, 3, "kappa")
-    kap_w = wp.array(kap_np.astype(npdt), dtype=t.scalar, device=t.device, requires_grad=True)
+    kap_w = wp.array(finite_as(kap_np, npdt, "kappa"), dtype=t.scalar, device=t.device,
+                     requires_grad=True)
     tape = wp.Tape()
     with tape:
         frames = record_frames(t, q_w, dh_w, kap_w, float(lam), int(iterations))

@@ -11,8 +11,30 @@ Examples::
 
 Joint values ``--q`` are comma-separated, in rad (m for prismatic joints), or ``zeros``;
 ``--deg`` reads revolute joints in degrees. A value starting with a minus sign may follow
-``--q`` directly (``--q -0.5,0,...``). The CLI computes in float64 on the CPU unless told
-otherwise. Errors print ``jwarp: error: ...`` on stderr and exit with status 2.
+``--q`` directly (``--q -0.5,0,...``; any option's negative number, ``-inf`` and ``-nan``
+too). The CLI computes in float64 on the CPU unless told otherwise.
+
+Errors and exit status (:func:`main`):
+
+* 0 success; 1 ``plan``/``ik`` found no feasible path/solution; 2 any error; 130
+  interrupted (Ctrl-C: ``jwarp: interrupted``, no traceback, no partial output file).
+* An error is ONE line ``jwarp: error: <option>: <what is wrong>`` on stderr (argparse's
+  own usage errors, e.g. a missing required option, print the usage lines before it).
+  Option values are checked before any work: numbers must be finite and in range
+  (``--lam`` in (0, 1], counts >= 1, ``--max-iter`` >= 0, ...), sizes are checked against
+  an estimate of the memory they need (:mod:`jwarp.memory`; the error gives the figure),
+  ``--device`` must exist, and every output path (``--save``, ``--rerun``) must be
+  writable (its folder exists, it is not a folder) before the computation starts. Files
+  are written atomically (:class:`jwarp.atomic.AtomicFile`): an error or interrupt leaves
+  no temporary file and the old file as it was.
+* Exceptions reach :func:`main` as one line: :class:`CLIError`, ValueError, TypeError,
+  OSError (files), ``zipfile.BadZipFile`` are input errors and print their message;
+  OverflowError prints ``numeric overflow: ...``, MemoryError (and Warp's RuntimeError
+  "Failed to allocate ...") ``out of memory: ...``. Any other exception (KeyError,
+  IndexError, other RuntimeErrors, ...) is unexpected, possibly a bug: it prints
+  ``jwarp: error: <Type>: <message> (run with JWARP_DEBUG=1 for the traceback)``, also with
+  status 2. With the environment variable ``JWARP_DEBUG=1`` every exception other than
+  CLIError (and --help/--version's exit) is raised with its traceback.
 """
 
 from __future__ import annotations
@@ -21,8 +43,10 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
-from typing import Any, Sequence
+import zipfile
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -44,7 +68,106 @@ class CLIError(Exception):
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # type: ignore[override]
+        # "argument --lam: invalid float value: 'x'" -> "--lam: invalid float value: 'x'"
+        message = re.sub(r"^argument ([^:\s]+?)(?:/[^:\s]+)?: ", r"\1: ", message)
         raise CLIError(message, usage=self.format_usage())
+
+
+# ------------------------------------------------------------------ option types
+def int_arg(option: str, lo: int, hi: int | None = None) -> Callable[[str], int]:
+    """An argparse ``type`` for an integer option in [lo, hi] (hi None: no upper bound);
+    anything else is a :class:`CLIError` naming ``option`` (one line, no usage)."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text.strip())
+        except ValueError:
+            v = None
+        if v is None or v < lo or (hi is not None and v > hi):
+            rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+            raise CLIError(f"{option}: expected an integer {rng}, got {text!r}")
+        return v
+
+    parse.__name__ = "integer"  # argparse names the type in some messages
+    return parse
+
+
+def real_arg(option: str, lo: float = -math.inf, hi: float = math.inf, *,
+             lo_open: bool = False, hi_open: bool = False,
+             unit: str = "") -> Callable[[str], float]:
+    """An argparse ``type`` for a finite real option in the interval from ``lo`` to ``hi``
+    (``lo_open``/``hi_open``: excluding the bound); NaN, inf or out of range is a
+    :class:`CLIError` naming ``option``."""
+    if math.isinf(lo) and math.isinf(hi):
+        what = "a finite number"
+    elif math.isinf(hi):
+        what = f"a number {'>' if lo_open else '>='} {lo:g}"
+    elif math.isinf(lo):
+        what = f"a number {'<' if hi_open else '<='} {hi:g}"
+    else:
+        what = f"a number in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text.strip())
+        except ValueError:
+            v = math.nan
+        above = v > lo if lo_open else v >= lo
+        below = v < hi if hi_open else v <= hi
+        if not (math.isfinite(v) and above and below):
+            raise CLIError(f"{option}: expected {what}{unit}, got {text!r}")
+        return v
+
+    parse.__name__ = "number"
+    return parse
+
+
+def check_dtype_range(values: Any, dtype: Any, option: str) -> None:
+    """CLIError naming ``option`` if finite ``values`` overflow the computing ``dtype``
+    (1e39 is finite in float64, inf in float32)."""
+    a = np.asarray(values, np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        ok = bool(np.all(np.isfinite(a.astype(dtype))))
+    if not ok:
+        raise CLIError(f"{option}: values overflow {np.dtype(dtype).name} (largest magnitude "
+                       f"{float(np.finfo(dtype).max):.3g}); use --dtype float64")
+
+
+def check_device(name: str, option: str = "--device") -> None:
+    """CLIError naming ``option`` unless Warp has the device ``name`` (checked before any
+    work; e.g. ``cuda:0`` on a machine without a GPU)."""
+    from jwarp.arrays import resolve_device
+
+    try:
+        resolve_device(name)
+    except (ValueError, TypeError, RuntimeError) as e:
+        msg = " ".join(str(e).split())
+        raise CLIError(f"{option}: {msg.removeprefix('device: ')}") from None
+
+
+def check_output(path: str, option: str, rerun: bool = False,
+                 inputs: dict[str, str | None] | None = None) -> None:
+    """Check an output path before any work: CLIError naming ``option`` if it is empty, a
+    folder, in a missing or unwritable folder (a temporary file is made there and removed:
+    :class:`jwarp.atomic.AtomicFile`), one of the existing input files ``inputs``
+    ({option: path}), or, with ``rerun``, if rerun-sdk is missing."""
+    from jwarp.atomic import AtomicFile
+
+    if not path or not path.strip():
+        raise CLIError(f"{option}: empty file name")
+    for opt, src in (inputs or {}).items():
+        if src and os.path.isfile(src) and os.path.realpath(src) == os.path.realpath(path):
+            raise CLIError(f"{option}: {path} is also {opt}; give another file")
+    if rerun:
+        from jwarp.viz import _rerun
+
+        try:
+            _rerun()
+        except ImportError as e:
+            raise CLIError(f"{option}: {e}") from None
+    try:
+        AtomicFile(path, option=option).discard()
+    except ValueError as e:
+        raise CLIError(str(e)) from None
 
 
 # ------------------------------------------------------------------ parsing helpers
@@ -101,18 +224,36 @@ def parse_kappa(text: str | None, model: Any) -> tuple[Any, str]:
     return DEFAULT_KAPPA, "default"
 
 
-def _fix_negative_values(argv: list[str]) -> list[str]:
-    """Let ``--q -0.5,0,...`` mean ``--q=-0.5,0,...`` (argparse would take it for an option)."""
+_NEGATIVE = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
+
+
+def _value_options(parser: argparse.ArgumentParser) -> set[str]:
+    """The option strings (``--q``, ``--lam``, ...) of ``parser`` and its subcommands that
+    take a value."""
+    found: set[str] = set()
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                found |= _value_options(sub)
+        elif action.option_strings and action.nargs != 0:
+            found.update(action.option_strings)
+    return found
+
+
+def _fix_negative_values(argv: list[str], options: set[str] | None = None) -> list[str]:
+    """Let ``--q -0.5,0,...`` mean ``--q=-0.5,0,...`` (argparse would take it for an
+    option), for every option in ``options`` (default: the joint value options) and
+    values that start like a negative number, ``-inf`` or ``-nan``."""
+    if options is None:
+        options = {"--q", "--kappa", "--start", "--goal", "--target"}
     out: list[str] = []
     i = 0
     while i < len(argv):
         a = argv[i]
-        if a in ("--q", "--kappa", "--start", "--goal", "--target") and i + 1 < len(argv):
-            nxt = argv[i + 1]
-            if nxt.startswith("-") and len(nxt) > 1 and (nxt[1].isdigit() or nxt[1] == "."):
-                out.append(f"{a}={nxt}")
-                i += 2
-                continue
+        if a in options and i + 1 < len(argv) and _NEGATIVE.match(argv[i + 1]):
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+            continue
         out.append(a)
         i += 1
     return out
@@ -170,16 +311,51 @@ def _dtype(name: str) -> Any:
 
 
 # ------------------------------------------------------------------ commands
+def _plugin_warnings_one_line() -> None:
+    """Show :class:`~jwarp.registry.PluginWarning` as one ``jwarp: warning: ...`` line on
+    stderr (a broken plugin is reported, never a traceback); other warnings as before."""
+    import warnings
+
+    show = warnings.showwarning
+    if getattr(show, "_jwarp_plugin_lines", False):
+        return
+
+    def showwarning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        from jwarp.registry import PluginWarning
+
+        if isinstance(category, type) and issubclass(category, PluginWarning):
+            print(f"jwarp: warning: {message}", file=sys.stderr if file is None else file)
+        else:
+            show(message, category, filename, lineno, file, line)
+
+    showwarning._jwarp_plugin_lines = True  # type: ignore[attr-defined]
+    warnings.showwarning = showwarning
+
+
 def cmd_robots(args: argparse.Namespace) -> int:
-    from jwarp.registry import robots
+    """List the robots; broken plugins and robots whose factory fails are reported as
+    ``jwarp: warning: ...`` lines on stderr (the list itself, also ``--json``, stays a list)."""
+    import warnings
+
+    from jwarp.registry import PluginWarning, plugin_problems, robots
 
     rows = []
-    for name in robots():
-        m = _robot(name)
-        rows.append({"name": name, "dof": m.n_dof, "frames": m.n_frames,
-                     "end_effectors": list(m.end_effectors), "spheres": len(m.spheres),
-                     "capsules": len(m.capsules), "masses": len(m.masses),
-                     "description": m.description})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PluginWarning)  # printed below, each once
+        names = robots()
+        problems = plugin_problems()
+        for name in names:
+            try:
+                m = _robot(name)
+            except Exception as e:  # noqa: BLE001 - a plugin's factory may fail in any way
+                problems.append(" ".join(str(e).split()) + "; not listed")
+                continue
+            rows.append({"name": name, "dof": m.n_dof, "frames": m.n_frames,
+                         "end_effectors": list(m.end_effectors), "spheres": len(m.spheres),
+                         "capsules": len(m.capsules), "masses": len(m.masses),
+                         "description": m.description})
+    for message in problems:
+        print(f"jwarp: warning: {message}", file=sys.stderr)
     if args.json:
         print(dumps(rows))
         return 0
@@ -206,11 +382,16 @@ def cmd_fk(args: argparse.Namespace) -> int:
     model = _robot(args.robot)
     _elastic_options(args)
     q = parse_q(args.q, model, args.deg)
-    _warn_limits(model, q)
+    kappa, source = parse_kappa(args.kappa, model) if args.elastic else (None, "")
+    dtype = _dtype(args.dtype)
+    check_dtype_range(q, dtype, "--q")
+    if kappa is not None:
+        check_dtype_range(kappa, dtype, "--kappa")
     _quiet_warp()
+    check_device(args.device)
+    _warn_limits(model, q)
     from jwarp import kinematics
 
-    dtype = _dtype(args.dtype)
     rigid = np.asarray(kinematics.fk(model, q.astype(dtype), device=args.device, dtype=dtype),
                        np.float64)
     out: dict[str, Any] = {"robot": model.name, "q": q.tolist(), "device": args.device,
@@ -218,7 +399,6 @@ def cmd_fk(args: argparse.Namespace) -> int:
     frames = rigid
     sags: dict[str, np.ndarray] = {}
     if args.elastic:
-        kappa, source = parse_kappa(args.kappa, model)
         res = kinematics.fk_elastic(model, q.astype(dtype), kappa, lam=args.lam,
                                     max_iter=args.max_iter, device=args.device, dtype=dtype)
         frames = np.asarray(res.frames, np.float64)
@@ -274,22 +454,24 @@ def cmd_show(args: argparse.Namespace) -> int:
     model = _robot(args.robot)
     qs = [parse_q(t, model, args.deg, option=f"--q #{k + 1}")
           for k, t in enumerate(args.q or ["zeros"])]
-    for q in qs:
-        _warn_limits(model, q)
     _elastic_options(args)
     kappa = None
     if args.elastic:
         kappa, _ = parse_kappa(args.kappa, model)
         if kappa is None:
             kappa = model.kappa
+    # the output path before any work
+    check_output(args.save, "--save", rerun=True, inputs={"robot": args.robot})
+    for q in qs:
+        _warn_limits(model, q)
     _quiet_warp()
     from jwarp.viz import save_robot_rrd
 
     try:
         path = save_robot_rrd(model, np.stack(qs), args.save, elastic_kappa=kappa, lam=args.lam,
-                              max_iter=args.max_iter)
+                              max_iter=args.max_iter, option="--save")
     except ImportError as e:
-        raise CLIError(f"show: {e}") from None
+        raise CLIError(f"--save: {e}") from None
     print(f"wrote {path} ({len(qs)} configuration{'s' if len(qs) != 1 else ''} of "
           f"'{model.name}'{', rigid and elastic' if args.elastic else ''}); "
           f"view with: rerun {path}")
@@ -322,11 +504,13 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--kappa", default=None, metavar="K",
                        help="compliance in rad/(N m): one value for all axes or alpha,beta,theta "
                             f"(default: the robot's own kappa, else {DEFAULT_KAPPA:g})")
-        s.add_argument("--lam", type=float, default=None, metavar="L",
-                       help="damping of the fixed-point iteration, in (0, 1] (default 1)")
-        s.add_argument("--max-iter", type=int, default=None, metavar="N",
-                       help=f"most torque updates (default {DEFAULT_MAX_ITER}; the iteration "
-                            "stops once no DH angle changes by more than 1e-9 rad)")
+        s.add_argument("--lam", type=real_arg("--lam", 0.0, 1.0, lo_open=True), default=None,
+                       metavar="L", help="damping of the fixed-point iteration, in (0, 1] "
+                                         "(default 1)")
+        s.add_argument("--max-iter", type=int_arg("--max-iter", 0), default=None, metavar="N",
+                       help=f"most torque updates, >= 0 (default {DEFAULT_MAX_ITER}; the "
+                            "iteration stops once no DH angle changes by more than 1e-9 rad; "
+                            "0: the rigid frames, converged only if they are the equilibrium)")
 
     s = sub.add_parser("fk", help="forward kinematics: every frame's position")
     s.add_argument("robot", help="robot name or path to a robot .json")
@@ -353,17 +537,32 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+#: exceptions that report a bad input, file or resource: their message is the error line
+INPUT_ERRORS = (ValueError, TypeError, OSError, OverflowError, zipfile.BadZipFile)
+
+
+def _one_line(e: BaseException) -> str:
+    return " ".join(str(e).split())
+
+
+def _debug() -> bool:
+    return os.environ.get("JWARP_DEBUG", "").strip() not in ("", "0")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI; returns the exit status (0 ok, 2 usage or input error)."""
+    """Run the CLI; returns the exit status: 0 ok, 1 ``plan``/``ik`` not feasible, 2 any
+    error (one line ``jwarp: error: ...`` on stderr), 130 interrupted. See the module
+    docstring for which exceptions count as input errors and ``JWARP_DEBUG=1``."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
+    _plugin_warnings_one_line()
     try:
-        args = parser.parse_args(_fix_negative_values(argv))
+        parser = build_parser()
+        args = parser.parse_args(_fix_negative_values(argv, _value_options(parser)))
         return args.func(args)
     except CLIError as e:
         if e.usage:
             sys.stderr.write(e.usage)
-        print(f"jwarp: error: {e}", file=sys.stderr)
+        print(f"jwarp: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except SystemExit as e:  # --help / --version
         return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
@@ -373,11 +572,39 @@ def main(argv: Sequence[str] | None = None) -> int:
         except OSError:
             pass
         return 0
-    except (ValueError, TypeError, OSError) as e:
-        # jwarp's own validation errors (unknown robot, bad kappa, unknown device, ...)
-        print(f"jwarp: error: {e}", file=sys.stderr)
+    except KeyboardInterrupt:
+        if _debug():
+            raise
+        print("jwarp: interrupted", file=sys.stderr)
+        return 130
+    except INPUT_ERRORS as e:
+        # jwarp's own validation errors (unknown robot, bad kappa, unreadable file, ...)
+        if _debug():
+            raise
+        what = "numeric overflow: " if isinstance(e, OverflowError) else ""
+        print(f"jwarp: error: {what}{_one_line(e) or type(e).__name__}", file=sys.stderr)
+        return 2
+    except (MemoryError, RuntimeError) as e:
+        if _debug():
+            raise
+        msg = _one_line(e)
+        if isinstance(e, MemoryError) or "allocate" in msg.lower():  # Warp: "Failed to allocate"
+            print(f"jwarp: error: out of memory{': ' + msg if msg else ''}", file=sys.stderr)
+        else:
+            print(f"jwarp: error: {type(e).__name__}: {msg} (run with JWARP_DEBUG=1 for the "
+                  f"traceback)", file=sys.stderr)
+        return 2
+    except Exception as e:  # unexpected: possibly a bug; one line, the traceback on request
+        if _debug():
+            raise
+        print(f"jwarp: error: {type(e).__name__}: {_one_line(e)} (run with JWARP_DEBUG=1 for "
+              f"the traceback)", file=sys.stderr)
         return 2
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # run the imported module's main: under ``python -m jwarp.cli`` this file is __main__,
+    # whose CLIError class is not the one the subcommand modules raise (jwarp.cli.CLIError)
+    from jwarp.cli import main as _main
+
+    sys.exit(_main())

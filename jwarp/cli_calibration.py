@@ -16,6 +16,17 @@ compares the nominal robot ("before"; measurement parameters from the plugin's i
 guess on the calibration rows, e.g. the tracker pose by rigid alignment) with the
 calibrated one ("after"), on the calibration and the test rows. Lengths are reported in mm,
 pixels in px.
+
+Safety: option values are checked first (finite, in range; ``--samples`` against an
+estimate of the memory it needs), then every output path (``--out``, ``--params-out``,
+``--rerun``; the ``simulate-campaign`` folder), all before any computation. ``calibrate``
+writes ``--out`` and ``--params-out`` to temporary files (made before the computation) and
+renames them back to back at the end, after the ``--rerun`` recording; the
+``--params-out`` JSON records the SHA-256 of the ``--out`` robot file (``robot_sha256``), so
+a pair cut apart by a kill between the renames is recognisable. ``simulate-campaign``
+replaces its folder as one set (:class:`jwarp.atomic.AtomicFolder`). Test rows that are
+also calibration rows are an error unless ``--allow-overlap``; without
+``--calibrate-rows`` the calibration rows are all rows not in ``--test-rows``.
 """
 
 from __future__ import annotations
@@ -99,27 +110,136 @@ def _free_groups(free: str, meas: Any, fix: str | None) -> list[str]:
     return groups
 
 
+def _check_int(option: str, value: int, minimum: int) -> None:
+    if value < minimum:
+        raise _cli_error(f"{option}: expected an integer >= {minimum}, got {value}")
+
+
+def _check_float(option: str, value: float | None, minimum: float = 0.0,
+                 maximum: float = math.inf, unit: str = "") -> None:
+    """A finite ``value`` in [minimum, maximum] (None: not given, fine)."""
+    if value is None:
+        return
+    if not math.isfinite(value) or not minimum <= value <= maximum:
+        upper = "" if maximum == math.inf else f" and <= {maximum:g}"
+        raise _cli_error(f"{option}: expected a finite number >= {minimum:g}{upper}{unit}, "
+                         f"got {value}")
+
+
+def _reserve_outputs(args: argparse.Namespace, inputs: dict[str, str | None]) -> dict[str, Any]:
+    """Check every output path of ``calibrate`` before any work and hold a temporary file
+    beside ``--out`` and ``--params-out`` (:class:`~jwarp.atomic.AtomicFile`; ``--rerun``
+    is only probed, its recording writes its own): a missing or unwritable folder, a
+    folder given for a file, an output that is an input or another output is an error
+    naming the option."""
+    from jwarp.atomic import AtomicFile
+
+    outs = [(opt, p) for opt, p in (("--out", args.out), ("--params-out", args.params_out),
+                                     ("--rerun", args.rerun)) if p]
+    seen = {os.path.realpath(p): opt for opt, p in inputs.items() if p and os.path.exists(p)}
+    for opt, p in outs:
+        key = os.path.realpath(p)
+        if key in seen:
+            raise _cli_error(f"{opt}: {p} is also {seen[key]}; give another file")
+        seen[key] = opt
+    if args.rerun:
+        from jwarp.viz import _rerun
+
+        try:
+            _rerun()
+        except ImportError as e:
+            raise _cli_error(f"--rerun: {e}") from None
+    reserved: dict[str, Any] = {}
+    try:
+        for opt, p in outs:
+            reserved[opt] = AtomicFile(p, option=opt)
+        if "--rerun" in reserved:
+            reserved.pop("--rerun").discard()
+    except BaseException:
+        for f in reserved.values():
+            f.discard()
+        raise
+    return reserved
+
+
+def _write_tmp(f: Any, text: str) -> None:
+    """Write ``text`` into the temporary file of the AtomicFile ``f``, synced to disk."""
+    with open(f.tmp, "w", encoding="utf-8") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def _rows(args: argparse.Namespace, S: int) -> tuple[np.ndarray, np.ndarray | None, int]:
+    """(calibration row indices, test row indices or None, rows in both)."""
+    from jwarp.solvers.calibration.files import parse_rows
+
+    every = np.arange(S)
+    test = every[parse_rows(args.test_rows, S, "--test-rows")] if args.test_rows else None
+    if args.calibrate_rows is None and test is not None:
+        train = np.setdiff1d(every, test)  # default: the rows that are not test rows
+        if not len(train):
+            raise _cli_error(f"--test-rows: {args.test_rows} covers all {S} rows; none are "
+                             f"left for calibration (give --calibrate-rows)")
+    else:
+        train = every[parse_rows(args.calibrate_rows, S, "--calibrate-rows")]
+    both = 0 if test is None else len(np.intersect1d(train, test))
+    if both and not args.allow_overlap:
+        common = np.intersect1d(train, test)
+        raise _cli_error(f"--test-rows: rows {common[0]}:{common[-1] + 1} are also calibration "
+                         f"rows (--calibrate-rows {args.calibrate_rows}); test rows must not be "
+                         f"fitted: give disjoint ranges, or --allow-overlap to test on fitted "
+                         f"rows anyway")
+    return train, test, both
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from jwarp.cli import _quiet_warp, dumps
+    from jwarp.cli import _quiet_warp
+
+    _check_int("--starts", args.starts, 1)
+    _check_int("--max-nfev", args.max_nfev, 1)
+    _check_int("--seed", args.seed, 0)
+    _quiet_warp()
+    inputs = {"--setup": args.setup, "--data": args.data, "--robot": args.robot}
+    outputs = _reserve_outputs(args, inputs)
+    try:
+        return _calibrate(args, outputs)
+    finally:
+        for f in outputs.values():  # after a commit: nothing left to remove
+            f.discard()
+
+
+def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
+    from jwarp.atomic import commit_all
+    from jwarp.cli import dumps
     from jwarp.registry import robot as get_robot
     from jwarp.solvers.calibration import calibrate, errors
-    from jwarp.solvers.calibration.files import (make_measurement, parse_rows, read_samples,
-                                                 read_setup)
+    from jwarp.solvers.calibration.files import (make_measurement, parse_samples, read_setup,
+                                                 read_text, sha256_hex)
 
-    _quiet_warp()
     setup = read_setup(args.setup)
     robot_name = args.robot or setup.robot
     if not robot_name:
         raise _cli_error("--robot: not given and the setup file names no robot")
     model = get_robot(robot_name)
     meas = make_measurement(model, setup)
-    data = read_samples(args.data, model, meas)
+    text, raw = read_text(args.data, "data")
+    with warnings.catch_warnings(record=True) as read_caught:
+        warnings.simplefilter("always")
+        data = parse_samples(text, model, meas, where=args.data)
+    input_warnings = [str(w.message) for w in read_caught]
+    if setup.samples_sha256 and setup.samples_sha256 != sha256_hex(raw):
+        input_warnings.append(
+            f"--data: {args.data} is not the samples file of the campaign that {args.setup} "
+            f"belongs to (campaign {setup.campaign_id}: the SHA-256 it records differs); "
+            f"are the files of two campaigns mixed up?")
+    for w in input_warnings:
+        print(f"jwarp: warning: {w}", file=sys.stderr)
     S = len(data)
-    train = data.select(parse_rows(args.calibrate_rows, S, "--calibrate-rows"))
-    test = data.select(parse_rows(args.test_rows, S, "--test-rows")) if args.test_rows else None
+    train_rows, test_rows, both = _rows(args, S)
+    train = data.select(train_rows)
+    test = data.select(test_rows) if test_rows is not None else None
     free = _free_groups(args.free, meas, args.fix)
-    if args.out and os.path.isdir(args.out):
-        raise _cli_error(f"--out: {args.out} is a folder; give a file name (calibrated.json)")
     scale, unit = (1000.0, "mm") if meas.unit == "m" else (1.0, meas.unit)
 
     def table_rows(robot: Any, p: np.ndarray) -> dict[str, dict[str, float]]:
@@ -130,8 +250,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     from jwarp.solvers.calibration.result import model_frames
 
-    p_start = meas.initial_guess(model_frames(model, train.q, elastic=False), train.y,
-                                 meas.params.nominal, train.meta or None)
+    try:
+        p_start = meas.initial_guess(model_frames(model, train.q, elastic=False), train.y,
+                                     meas.params.nominal, train.meta or None)
+    except ValueError as e:
+        why = str(e).removeprefix("initial_guess: ")
+        raise _cli_error(f"--calibrate-rows: the initial guess of the '{meas.name}' measurement "
+                         f"fails on {len(train)} calibration row{'s' if len(train) != 1 else ''} "
+                         f"({why}); give more (or more varied) rows") from None
     before = table_rows(model, p_start)
     bar = ProgressBar("calibrate", enabled=not args.quiet)
     t0 = time.perf_counter()
@@ -141,35 +267,48 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             res = calibrate(model, meas, train.q, train.y, free=free, meta=train.meta or None,
                             n_starts=args.starts, seed=args.seed, max_nfev=args.max_nfev,
                             callback=bar)
+        except ValueError as e:
+            if str(e).startswith("q, y: "):  # too few rows for the free parameters
+                raise _cli_error("--calibrate-rows: " + str(e).removeprefix("q, y: ").replace(
+                    "give more samples", "give more rows")) from None
+            raise
         finally:
             bar.close()
     wall = time.perf_counter() - t0
     after = table_rows(res.robot, res.params)
-    if args.out:
-        res.robot.save(args.out)  # atomic
-    if args.params_out:
-        from jwarp.atomic import atomic_write_text
-
-        atomic_write_text(args.params_out, dumps(res.to_dict(), indent=1) + "\n")
-    if args.rerun:
+    # --out and --params-out into their temporary files, renamed back to back at the end
+    robot_text = json.dumps(res.robot.to_dict(), indent=1) + "\n"
+    if "--out" in outputs:
+        _write_tmp(outputs["--out"], robot_text)
+    if "--params-out" in outputs:
+        doc = dict(res.to_dict(), robot_file=args.out, robot_sha256=sha256_hex(robot_text))
+        _write_tmp(outputs["--params-out"], dumps(doc, indent=1) + "\n")
+    if args.rerun:  # atomic on its own; an error here leaves --out and --params-out old
         from jwarp.viz import save_calibration_rrd
 
         save_calibration_rrd(args.rerun, res.robot, meas, res.params, data.q, data.y,
                              data.meta or None, p_before=p_start, robot_before=model)
+    commit_all(outputs[k] for k in ("--params-out", "--out") if k in outputs)
+    fit_warnings = list(res.warnings) + [str(w.message) for w in caught
+                                         if str(w.message) not in res.warnings]
+    if both:
+        fit_warnings.append(f"{both} of the {len(test)} test rows were also calibration rows "
+                            f"(--allow-overlap): their errors are not independent of the fit")
     summary = {
         "robot": model.name, "plugin": meas.name, "unit": unit, "free": free,
-        "samples": {"train": len(train), "test": 0 if test is None else len(test)},
+        "samples": {"train": len(train), "test": 0 if test is None else len(test),
+                    "test_fitted": both},
         "before": before, "after": after, "time_s": wall, "iterations": res.iterations,
         "nfev": res.nfev, "success": bool(res.success), "elastic": bool(res.elastic),
-        "warnings": list(res.warnings) + [str(w.message) for w in caught
-                                          if str(w.message) not in res.warnings],
-        "out": args.out,
+        "warnings": input_warnings + fit_warnings,
+        "out": args.out, "params_out": args.params_out, "rerun": args.rerun,
     }
     if args.json:
         print(dumps(summary, indent=1))
         return 0
     print(f"calibrated '{model.name}' with '{meas.name}': {len(train)} calibration rows, "
-          f"{0 if test is None else len(test)} test rows; free: {', '.join(free)}")
+          f"{0 if test is None else len(test)} test rows"
+          f"{f' ({both} of them fitted too)' if both else ''}; free: {', '.join(free)}")
     print(f"{res.iterations} iterations, {res.nfev} evaluations, {wall:.1f} s"
           f"{', elastic model' if res.elastic else ''}")
     print(f"\n{'rows':<8}{'':8}{'mean':>10}{'std':>10}{'max':>10}   [{unit}]")
@@ -179,19 +318,51 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         for label, d in (("before", before), ("after", after)):
             s = d[rows]
             print(f"{rows:<8}{label:<8}{s['mean']:>10.3f}{s['std']:>10.3f}{s['max']:>10.3f}")
-    for w in summary["warnings"]:
+    for w in fit_warnings:
         print(f"warning: {w}")
-    if args.out:
-        print(f"wrote {args.out}")
+    for path in (args.out, args.params_out, args.rerun):
+        if path:
+            print(f"wrote {path}")
     return 0
 
 
+#: memory of simulate-campaign per sample and robot frame [bytes] (a few 4x4 float64
+#: frame arrays: candidates, kept frames, the elastic solve's copies; measured ~3)
+_BYTES_PER_SAMPLE_FRAME = 4 * 128
+#: ... and per sample and CSV column (the text and its row lists) [bytes]
+_BYTES_PER_SAMPLE_COLUMN = 64
+
+
+def _check_campaign_memory(model: Any, meas: Any, n: int) -> None:
+    """Refuse ``--samples`` whose estimated memory exceeds the available memory."""
+    from jwarp.solvers.calibration.files import columns
+
+    from jwarp.memory import check_memory, format_bytes
+
+    per = (_BYTES_PER_SAMPLE_FRAME * model.n_frames
+           + _BYTES_PER_SAMPLE_COLUMN * len(columns(model, meas)))
+    try:
+        check_memory(n * per, f"{n} samples ({format_bytes(per)} per sample for "
+                              f"'{model.name}')", "simulate fewer samples (or several "
+                     "campaigns with different --seed)")
+    except MemoryError as e:
+        raise _cli_error(f"--samples: {e}") from None
+
+
 def cmd_simulate_campaign(args: argparse.Namespace) -> int:
+    from jwarp.atomic import AtomicFolder
     from jwarp.cli import _quiet_warp
     from jwarp.registry import robot as get_robot
     from jwarp.solvers.calibration.campaign import simulate_campaign
-    from jwarp.solvers.calibration.files import read_setup
+    from jwarp.solvers.calibration.files import make_measurement, read_setup
 
+    _check_int("--samples", args.samples, 1)
+    _check_int("--seed", args.seed, 0)
+    _check_float("--noise", args.noise, unit=" (unit of the measurement)")
+    _check_float("--length-error", args.length_error, unit=" mm")
+    _check_float("--angle-error", args.angle_error, maximum=180.0, unit=" deg")
+    _check_float("--kappa", args.kappa, unit=" rad/(N m)")
+    AtomicFolder(args.out, option="--out").discard()  # the folder can be written: checked
     _quiet_warp()
     if args.setup:
         setup = read_setup(args.setup)
@@ -205,6 +376,7 @@ def cmd_simulate_campaign(args: argparse.Namespace) -> int:
     if not robot_name:
         raise _cli_error("--robot: not given and the setup file names no robot")
     model = get_robot(robot_name)
+    _check_campaign_memory(model, make_measurement(model, setup), args.samples)
     k = args.kappa if args.kappa is not None else (
         DEFAULT_TRUE_KAPPA if model.name in ELASTIC_ROBOTS else 0.0)
     kappa = None if k == 0 else (0.5 * k, 1.5 * k)
@@ -212,14 +384,16 @@ def cmd_simulate_campaign(args: argparse.Namespace) -> int:
                              length_error=args.length_error * 1e-3,
                              angle_error=math.radians(args.angle_error), kappa=kappa,
                              sampler=sampler, accept=accept)
-    paths = camp.write(args.out)
+    paths = camp.write(args.out, option="--out")
     if args.json:
         print(json.dumps({"robot": model.name, "plugin": setup.plugin, "samples": args.samples,
-                          "noise": camp.noise, **paths}, indent=1))
+                          "noise": camp.noise, "campaign_id": camp.campaign_id, **paths},
+                         indent=1))
     else:
         print(f"simulated {args.samples} '{setup.plugin}' samples of '{model.name}' "
               f"(noise {camp.noise:g}): {paths['samples.csv']}, {paths['setup.json']} "
-              f"(rough setup), {paths['truth.json']} (true robot)")
+              f"(rough setup), {paths['truth.json']} (true robot); campaign "
+              f"{camp.campaign_id}")
     return 0
 
 
@@ -237,15 +411,21 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--fix", default=None, metavar="GROUPS",
                    help="measurement groups to keep at their setup values (e.g. markers)")
     s.add_argument("--calibrate-rows", default=None, metavar="A:B",
-                   help="rows used for calibration (default all)")
-    s.add_argument("--test-rows", default=None, metavar="A:B", help="rows for testing only")
+                   help="rows used for calibration (default: all rows not in --test-rows)")
+    s.add_argument("--test-rows", default=None, metavar="A:B",
+                   help="rows for testing only (must not overlap --calibrate-rows)")
+    s.add_argument("--allow-overlap", action="store_true",
+                   help="allow test rows that are also calibration rows (the report counts "
+                        "them; their errors are not independent of the fit)")
     s.add_argument("--out", default=None, metavar="CALIBRATED.json",
                    help="write the calibrated robot (atomically)")
     s.add_argument("--params-out", default=None, metavar="RESULT.json",
-                   help="write parameters, posterior std and findings as JSON")
-    s.add_argument("--starts", type=int, default=1, help="multi-start: number of starts")
-    s.add_argument("--seed", type=int, default=0, help="seed of the multi-start draws")
-    s.add_argument("--max-nfev", type=int, default=200, help="most residual evaluations")
+                   help="write parameters, posterior std and findings as JSON (with the "
+                        "SHA-256 of the --out robot file: robot_sha256)")
+    s.add_argument("--starts", type=int, default=1, help="multi-start: number of starts (>= 1)")
+    s.add_argument("--seed", type=int, default=0, help="seed of the multi-start draws (>= 0)")
+    s.add_argument("--max-nfev", type=int, default=200,
+                   help="most residual evaluations (>= 1)")
     s.add_argument("--rerun", default=None, metavar="FILE.rrd",
                    help="write measured vs predicted markers and residuals per sample")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -260,8 +440,10 @@ def add_subcommands(sub: Any) -> None:
                    help="built-in scenario: cartesian, image, relative (justin19); contact (hand4)")
     s.add_argument("--setup", default=None, metavar="SETUP.json",
                    help="simulate this exact setup instead of a built-in scenario")
-    s.add_argument("--samples", type=int, default=500, help="number of samples")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--samples", type=int, default=500,
+                   help="number of samples (refused when the memory estimate exceeds the "
+                        "available memory)")
+    s.add_argument("--seed", type=int, default=0, help="random seed (>= 0)")
     s.add_argument("--noise", type=float, default=None,
                    help="noise sigma (unit of the measurement; default the setup's)")
     s.add_argument("--length-error", type=float, default=5.0, metavar="MM",
@@ -272,6 +454,7 @@ def add_subcommands(sub: Any) -> None:
                    help="mean true compliance of joint and lateral axes [rad/(N m)] (0: rigid; "
                         f"default {DEFAULT_TRUE_KAPPA:g} for {', '.join(ELASTIC_ROBOTS)}, else 0)")
     s.add_argument("--out", required=True, metavar="FOLDER",
-                   help="folder for samples.csv, setup.json and truth.json")
+                   help="folder for samples.csv, setup.json and truth.json, replaced as one "
+                        "set (its parent folder must exist; its other files are kept)")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_simulate_campaign)

@@ -12,21 +12,59 @@ ones in degrees); ``--target`` is x,y,z [m] and a rotation vector rx,ry,rz [rad]
 frame in the robot's base frame. JSON output holds the path (or q), feasibility, costs,
 iterations and wall time. ``--rerun FILE.rrd`` writes a recording: the world's occupied
 voxels, the robot's spheres and the path (end-effector traces) at every logged iteration.
+
+Before any work (world generation included) every option is checked: finite numbers in
+range, integer counts (``--starts`` >= 1, ``--waypoints`` >= 2, ``--substeps`` >= 1,
+``--iterations`` in [0, 1e9], ``--seed`` >= 0), ``--device``, ``--frame``, the batch size
+against an estimate of its memory (``--starts`` x ``--waypoints`` x ``--substeps``), the
+``--world`` spec (its grid against its memory) and the ``--rerun`` path (writable folder,
+not a folder); an error names the option (``jwarp: error: --starts: ...``). The recording
+is written to a temporary file and renamed at the end; an error or Ctrl-C removes it.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import re
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from jwarp.cli import CLIError, _dtype, _quiet_warp, _robot, dumps, parse_q
+from jwarp.cli import (CLIError, _dtype, _quiet_warp, _robot, check_device, check_output,
+                       dumps, int_arg, parse_q, real_arg)
 
 #: log every this many iterations to rerun
 RERUN_EVERY = 5
+#: the most --iterations (a bound that keeps every counter in range)
+MAX_ITERATIONS = 10**9
+#: the largest --target coordinate [m] or rotation vector component [rad] (squares of
+#: larger ones overflow; no robot reaches 1000 km)
+MAX_TARGET = 1e6
+#: host memory per configuration whose frames are computed in one batch, per frame,
+#: collision sphere and joint [bytes]: float64 4x4 frames, sphere centres and their
+#: temporaries (measured: about 1.5 to 2 times 128 / 40 / 32 B; IK per start, the planner
+#: per sampled point of its substep sizing)
+_CONFIG_BYTES = (2 * 128, 2 * 40, 2 * 32)
+#: the planner samples each segment this many times to size --substeps (when not given)
+_SIZING_SAMPLES = 16
+
+
+def _config_bytes(model: Any) -> int:
+    f, s, j = _CONFIG_BYTES
+    return f * model.n_frames + s * len(model.spheres) + j * model.n_dof
+
+
+def _model(name: str) -> Any:
+    """The robot of ``--robot`` (errors name ``--robot``)."""
+    try:
+        return _robot(name)
+    except (ValueError, TypeError, OSError, KeyError) as e:
+        msg = " ".join(str(e).split())
+        for prefix in ("robot: ", "path: "):
+            msg = msg.removeprefix(prefix)
+        raise CLIError(f"--robot: {msg}") from None
 
 
 def _world(spec: str | None, model: Any) -> Any:
@@ -36,8 +74,64 @@ def _world(spec: str | None, model: Any) -> Any:
 
     try:
         return parse_world_spec(spec, robot=model)
-    except (ValueError, TypeError, OSError) as e:
-        raise CLIError(f"--world: {e}") from None
+    except (ValueError, TypeError, OSError, MemoryError, OverflowError) as e:
+        msg = " ".join(str(e).split())
+        for prefix in ("world: ", "path: "):
+            msg = msg.removeprefix(prefix)
+        raise CLIError(f"--world: {msg}") from None
+
+
+#: names in the solvers' errors -> the CLI options they come from
+_OPTION_OF = {"start": "--start", "goal": "--goal", "target": "--target", "frame": "--frame",
+              "n_starts": "--starts", "n_waypoints": "--waypoints", "n_substeps": "--substeps",
+              "iterations": "--iterations", "max_iterations": "--iterations", "step": "--step",
+              "margin": "--margin", "seed": "--seed", "kappa": "--kappa", "device": "--device",
+              "world": "--world"}
+
+
+def _solver_error(command: str, e: Exception) -> CLIError:
+    """One line naming the option the solver's error is about (``start[0]: ...`` ->
+    ``--start: ...``), else the command (``plan: ...``)."""
+    msg = " ".join(str(e).split())
+    m = re.match(r"^([a-z_]+)(\[\d+\])?: ", msg)
+    if m and m.group(1) in _OPTION_OF:
+        return CLIError(f"{_OPTION_OF[m.group(1)]}: {msg[m.end():]}")
+    return CLIError(f"{command}: {msg}")
+
+
+def _check_memory(need: float, what: str, option: str) -> None:
+    from jwarp.memory import check_memory
+
+    try:
+        check_memory(need, what, f"lower {option}")
+    except MemoryError as e:
+        raise CLIError(f"{option}: {e}") from None
+
+
+def _check_plan_size(args: argparse.Namespace, model: Any) -> None:
+    """Refuse --starts x --waypoints x --substeps that cannot fit in memory (estimate)."""
+    P, W = args.starts, args.waypoints
+    sub = args.substeps if args.substeps is not None else _SIZING_SAMPLES
+    S = (W - 1) * sub + 1
+    item = np.dtype(_dtype(args.dtype)).itemsize
+    n, F, Sph = model.n_dof, model.n_frames, len(model.spheres)
+    per_sub = item * (3 * n + 52 * F + 3 * Sph + 4) + 24 * n   # solver buffers + host checks
+    need = float(P) * S * per_sub + 48.0 * P * W * n
+    if args.substeps is None:  # the sizing of the substeps samples 16 points per segment
+        need += float(P) * ((W - 1) * _SIZING_SAMPLES + 1) * _config_bytes(model)
+    ratios = {"--starts": P / 8, "--waypoints": W / 20,
+              "--substeps": (args.substeps or 0) / 8}
+    option = max(ratios, key=ratios.get)
+    subs = f"{args.substeps} substeps" if args.substeps is not None else "sized substeps"
+    _check_memory(need, f"{P} starts x {W} waypoints x {subs} of '{model.name}'", option)
+
+
+def _check_frame(model: Any, frame: str) -> None:
+    try:
+        model.frame_index(frame)
+    except (ValueError, TypeError, KeyError) as e:
+        msg = " ".join(str(e).split()).removeprefix("frame: ")
+        raise CLIError(f"--frame: {msg}") from None
 
 
 def _target(text: str) -> np.ndarray:
@@ -48,6 +142,8 @@ def _target(text: str) -> np.ndarray:
         raise CLIError(f"--target: expected x,y,z,rx,ry,rz (numbers), got {text!r}") from None
     if len(vals) not in (3, 6) or not all(math.isfinite(v) for v in vals):
         raise CLIError(f"--target: expected 3 or 6 finite numbers x,y,z[,rx,ry,rz], got {text!r}")
+    if not all(abs(v) <= MAX_TARGET for v in vals):
+        raise CLIError(f"--target: expected values within +-{MAX_TARGET:g} (m, rad), got {text!r}")
     from jwarp.solvers.ik import pose_matrix
 
     return pose_matrix(vals[:3], vals[3:] if len(vals) == 6 else (0.0, 0.0, 0.0))
@@ -74,13 +170,21 @@ class _Recorder:
 
         self.rr = viz._rerun()
         try:
-            self.file = AtomicFile(path)
+            self.file = AtomicFile(path, option="--rerun")
         except ValueError as e:
-            raise CLIError(f"--rerun: {e}") from None
+            raise CLIError(str(e)) from None
         self.model = model
-        self.rec = viz.open_recording(self.file.tmp, "jwarp-planning")
+        try:
+            self.rec = viz.open_recording(self.file.tmp, "jwarp-planning")
+        except BaseException:
+            self.file.discard()
+            raise
         if world is not None:
-            self._log_world(world)
+            try:
+                self._log_world(world)
+            except BaseException:
+                self.abort()
+                raise
 
     def _log_world(self, world: Any) -> None:
         occ = world.occupancy if world.occupancy is not None else world.sdf < 0
@@ -123,20 +227,28 @@ class _Recorder:
         return self.file.commit()
 
     def abort(self) -> None:
-        self.file.discard()
+        try:
+            self.rec.disconnect()  # no writer left on the temporary file
+        finally:
+            self.file.discard()
 
 
 # ------------------------------------------------------------------ commands
 def cmd_plan(args: argparse.Namespace) -> int:
-    model = _robot(args.robot)
+    model = _model(args.robot)
     q0 = parse_q(args.start, model, args.deg, option="--start")
     q1 = parse_q(args.goal, model, args.deg, option="--goal")
     kappa = _kappa(args, model)
+    _check_plan_size(args, model)
     _quiet_warp()
+    check_device(args.device)
+    if args.rerun is not None:  # before the world and the plan: no work lost on a bad path
+        check_output(args.rerun, "--rerun", rerun=True,
+                     inputs={"--world": args.world, "--robot": args.robot})
     world = _world(args.world, model)
     from jwarp.solvers.planner import plan
 
-    rec = _Recorder(args.rerun, model, world) if args.rerun else None
+    rec = _Recorder(args.rerun, model, world) if args.rerun is not None else None
     callback = None
     if rec is not None:
         def callback(it: int, paths: np.ndarray) -> None:
@@ -155,7 +267,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     except (ValueError, TypeError) as e:
         if rec is not None:
             rec.abort()
-        raise CLIError(f"plan: {e}") from None
+        raise _solver_error("plan", e) from None
     except BaseException:
         if rec is not None:
             rec.abort()
@@ -179,10 +291,17 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 
 def cmd_ik(args: argparse.Namespace) -> int:
-    model = _robot(args.robot)
+    model = _model(args.robot)
+    _check_frame(model, args.frame)
     T = _target(args.target)
     kappa = _kappa(args, model)
+    _check_memory(float(args.starts) * _config_bytes(model),
+                  f"{args.starts} starts of '{model.name}'", "--starts")
     _quiet_warp()
+    check_device(args.device)
+    if args.rerun is not None:  # before the world and the solve: no work lost on a bad path
+        check_output(args.rerun, "--rerun", rerun=True,
+                     inputs={"--world": args.world, "--robot": args.robot})
     world = _world(args.world, model)
     from jwarp.solvers.ik import ik
 
@@ -191,7 +310,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
                  max_iterations=args.iterations, seed=args.seed, kappa=kappa, device=args.device,
                  dtype=_dtype(args.dtype))
         written = None
-        if args.rerun:
+        if args.rerun is not None:
             rec = _Recorder(args.rerun, model, world)
             try:
                 for k, q in enumerate(res.all_q):
@@ -203,7 +322,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
                 rec.abort()
                 raise
     except (ValueError, TypeError) as e:
-        raise CLIError(f"ik: {e}") from None
+        raise _solver_error("ik", e) from None
     out = {"robot": model.name, "frame": args.frame, "target": T.tolist(), "world": args.world,
            "elastic": kappa is not None, **res.to_dict(0)}
     if args.json:
@@ -226,9 +345,11 @@ def add_subcommands(sub: Any) -> None:
     def common(s: argparse.ArgumentParser) -> None:
         s.add_argument("--robot", required=True, help="robot name or path to a robot .json")
         s.add_argument("--deg", action="store_true", help="revolute joint values in degrees")
-        s.add_argument("--margin", type=float, default=0.0, metavar="M",
-                       help="required clearance [m] to obstacles and between body parts")
-        s.add_argument("--seed", type=int, default=0, help="random seed of the multi-starts")
+        s.add_argument("--margin", type=real_arg("--margin", 0.0, unit=" [m]"), default=0.0,
+                       metavar="M", help="required clearance [m] to obstacles and between "
+                                         "body parts (>= 0)")
+        s.add_argument("--seed", type=int_arg("--seed", 0), default=0,
+                       help="random seed of the multi-starts (>= 0)")
         s.add_argument("--elastic", action="store_true",
                        help="plan on the elastic model (one torque update per iteration)")
         s.add_argument("--kappa", default=None, metavar="K",
@@ -243,13 +364,16 @@ def add_subcommands(sub: Any) -> None:
                    help="simplex:seed=S[,threshold=T,...] or a world .npz file")
     s.add_argument("--start", required=True, metavar="Q", help="start joint values v1,v2,...")
     s.add_argument("--goal", required=True, metavar="Q", help="goal joint values v1,v2,...")
-    s.add_argument("--starts", type=int, default=8, metavar="N",
+    s.add_argument("--starts", type=int_arg("--starts", 1), default=8, metavar="N",
                    help="multi-starts: the straight line + N-1 random via-point paths (default 8)")
-    s.add_argument("--iterations", type=int, default=200, metavar="N", help="most iterations")
-    s.add_argument("--waypoints", type=int, default=20, metavar="W", help="waypoints (default 20)")
-    s.add_argument("--substeps", type=int, default=None, metavar="N",
+    s.add_argument("--iterations", type=int_arg("--iterations", 0, MAX_ITERATIONS), default=200,
+                   metavar="N", help="most iterations (default 200)")
+    s.add_argument("--waypoints", type=int_arg("--waypoints", 2), default=20, metavar="W",
+                   help="waypoints, >= 2 (default 20)")
+    s.add_argument("--substeps", type=int_arg("--substeps", 1), default=None, metavar="N",
                    help="substeps per segment (default: sized to the voxel size)")
-    s.add_argument("--step", type=float, default=0.01, help="gradient step size (default 0.01)")
+    s.add_argument("--step", type=real_arg("--step", 0.0, lo_open=True), default=0.01,
+                   help="gradient step size, > 0 (default 0.01)")
     s.add_argument("--dtype", default="float32", choices=("float64", "float32"))
     s.set_defaults(func=cmd_plan)
 
@@ -260,7 +384,9 @@ def add_subcommands(sub: Any) -> None:
                    help="target position [m] and rotation vector [rad] in the base frame")
     s.add_argument("--world", default=None, metavar="SPEC",
                    help="optional world: simplex:seed=S[,...] or a world .npz file")
-    s.add_argument("--starts", type=int, default=16, metavar="N", help="random seeds (default 16)")
-    s.add_argument("--iterations", type=int, default=200, metavar="N", help="most iterations")
+    s.add_argument("--starts", type=int_arg("--starts", 1), default=16, metavar="N",
+                   help="random seeds (default 16)")
+    s.add_argument("--iterations", type=int_arg("--iterations", 0, MAX_ITERATIONS), default=200,
+                   metavar="N", help="most iterations (default 200)")
     s.add_argument("--dtype", default="float64", choices=("float64", "float32"))
     s.set_defaults(func=cmd_ik)

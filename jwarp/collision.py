@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.arrays import Batch, as_batch, default_dtype, init_warp, resolve_device, to_output
+from jwarp.arrays import (Batch, as_batch, default_dtype, finite_as, init_warp, real_array,
+                          real_number, resolve_device, to_output)
 from jwarp.device_model import KinematicsTables, numpy_dtype, scalar_type, tables
 from jwarp.kernels import collision as ck
 from jwarp.kernels.elastic import kernels as elastic_kernels
@@ -318,16 +319,14 @@ class CollisionModel:
             if rho.ndim == 3 and tuple(rho.shape) == (n, nf, 5):
                 return (rho if rho.device == self.device else rho.to(self.device)), 1, 1, _ROW_PER_CONFIG
             raise ValueError(f"rho: expected shape ({nf}, 5) or ({n}, {nf}, 5), got {tuple(rho.shape)}")
-        if hasattr(rho, "detach"):
-            rho = rho.detach().cpu().numpy()
-        a = np.asarray(rho, dtype=np.float64)
+        a = real_array(rho, "rho")
         if a.shape not in ((nf, 5), (n, nf, 5)):
             raise ValueError(f"rho: expected shape ({nf}, 5) or ({n}, {nf}, 5) (DH rows "
                              f"[d, theta, r, alpha, beta] per frame), got {a.shape}")
         if not np.all(np.isfinite(a)):
             raise ValueError("rho: contains NaN or inf")
         stride = 1 if a.ndim == 3 else 0
-        a = a.reshape(-1, nf, 5).astype(self.dtype)
+        a = finite_as(a.reshape(-1, nf, 5), self.dtype, "rho")
         return wp.array(a, dtype=self.scalar, device=self.device), stride, 1, _ROW_PER_CONFIG
 
     def _check_q(self, q: wp.array) -> None:
@@ -377,10 +376,11 @@ class CollisionModel:
         """
         self._check_q(q)
         n = q.shape[0]
-        if not np.isfinite(eps) or eps <= 0:
+        eps = real_number(eps, "eps", self.dtype)
+        if eps <= 0:
             raise ValueError(f"eps: expected a positive distance [m], got {eps}")
-        if not (np.isfinite(w_world) and np.isfinite(w_self)):
-            raise ValueError(f"w_world, w_self: expected finite weights, got {w_world}, {w_self}")
+        w_world = real_number(w_world, "w_world", self.dtype)
+        w_self = real_number(w_self, "w_self", self.dtype)
         cost = self._out(out_cost, (n,), "out_cost")
         g = self._out(out_grad, (n, self.robot.n_dof), "out_grad") if grad else None
         rho_a, stride, use_rho, layout = self._rho_or_rows(rho, n)
@@ -430,8 +430,11 @@ class CollisionModel:
 
         self._check_q(q)
         n = q.shape[0]
-        if not np.isfinite(eps) or eps <= 0:
+        eps = real_number(eps, "eps", self.dtype)
+        if eps <= 0:
             raise ValueError(f"eps: expected a positive distance [m], got {eps}")
+        w_world = real_number(w_world, "w_world", self.dtype)
+        w_self = real_number(w_self, "w_self", self.dtype)
         rho_a, stride, use_rho = self._rho(rho, n)
         qg = wp.clone(q)
         qg.requires_grad = True
@@ -532,9 +535,7 @@ def _rho_arg(rho: Any, batch: Batch, nf: int) -> Any:
         if isinstance(rho, wp.array) and rho.ndim > 3:
             return rho.reshape((-1, nf, 5))
         return rho
-    if hasattr(rho, "detach"):
-        rho = rho.detach().cpu().numpy()
-    a = np.asarray(rho, dtype=np.float64)
+    a = real_array(rho, "rho")
     if a.ndim > 2:
         if a.shape[:-2] != tuple(batch.lead_shape):
             raise ValueError(f"rho: batch dims {a.shape[:-2]} do not match q's {tuple(batch.lead_shape)}")
@@ -622,6 +623,7 @@ def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: fl
                       validate: bool = True) -> np.ndarray:
     """(...,) bool numpy: every sphere keeps more than ``margin`` [m] from the world and
     from every sphere it may collide with (joint limits are not checked here)."""
+    margin = real_number(margin, "margin")
     if not np.isfinite(margin):
         raise ValueError(f"margin: expected a finite distance [m], got {margin}")
     md = min_distances(robot, q, world, rho=rho, device=device, dtype=dtype, validate=validate)
@@ -639,7 +641,7 @@ def sdf_query(world: World, points: Any, *, grad: bool = False, device: Any = "c
     ``(dist (...,), gradient (..., dim))``."""
     if not isinstance(world, World):
         raise TypeError(f"world: expected a jwarp.world.World, got {type(world).__name__}")
-    p = np.asarray(points, dtype=np.float64)
+    p = real_array(points, "points")
     if p.ndim < 1 or p.shape[-1] != world.dim:
         raise ValueError(f"points: expected shape (..., {world.dim}) for a {world.dim}D world, "
                          f"got {p.shape}")
@@ -653,7 +655,7 @@ def sdf_query(world: World, points: Any, *, grad: bool = False, device: Any = "c
     lead = p.shape[:-1]
     flat = p.reshape(-1, world.dim)
     p3 = np.zeros((len(flat), 3), dt)
-    p3[:, :world.dim] = flat
+    p3[:, :world.dim] = finite_as(flat, dt, "points")
     grid = world.sdf if world.dim == 3 else world.sdf[:, :, None]
     o = np.zeros(3)
     o[:world.dim] = world.limits[:, 0]

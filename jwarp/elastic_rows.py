@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from jwarp.arrays import finite_as, real_number
 from jwarp.device_model import KinematicsTables, numpy_dtype
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kernels import fk as fk_kernels
@@ -53,7 +54,7 @@ class CompensationRows:
 
     def __init__(self, t: KinematicsTables, n_paths: int, n_waypoints: int, n_substeps: int,
                  kappa: Any, lam: float):
-        if not (isinstance(lam, (int, float)) and 0.0 < float(lam) <= 1.0):
+        if not 0.0 < real_number(lam, "lam") <= 1.0:
             raise ValueError(f"lam: expected a damping factor in (0, 1], got {lam!r}")
         robot = t.robot
         self.t = t
@@ -74,7 +75,7 @@ class CompensationRows:
                                  f"(paths x waypoints), got {len(kap)}")
             self.kappa_stride = 1
         dev = t.device
-        self.kappa = wp.array(np.ascontiguousarray(kap, dtype=numpy_dtype(t.scalar)),
+        self.kappa = wp.array(finite_as(kap, numpy_dtype(t.scalar), "kappa"),
                               dtype=t.scalar, device=dev)
         g = robot.gravity
         self.gravity = fk_kernels.kernels(t.scalar).vec3(float(g[0]), float(g[1]), float(g[2]))

@@ -13,12 +13,24 @@ from typing import Any, NamedTuple
 import numpy as np
 import warp as wp
 
-from jwarp.arrays import Batch, as_batch, default_dtype, init_warp, resolve_device, to_output
-from jwarp.device_model import KinematicsTables, numpy_dtype, tables
+from jwarp.arrays import (Batch, as_batch, default_dtype, finite_as, init_warp, real_array,
+                          real_number, resolve_device, to_output)
+from jwarp.device_model import KinematicsTables, numpy_dtype, scalar_type, tables
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kernels import fk as fk_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
+
+#: default tolerance of :func:`fk_elastic` [rad] per computing dtype: float64 stops at
+#: 1e-9 rad; float32 at 4 float32 epsilons (2^-21 = 4.8e-7 rad, two float32 steps of a DH
+#: angle near pi), the resolution its rows can reach (a row of magnitude 2..4 rad moves
+#: in steps of 2.4e-7 rad, so the updates of many configurations never fall below 1e-9)
+ELASTIC_TOL = {np.dtype(np.float64): 1e-9, np.dtype(np.float32): 4 * float(np.finfo(np.float32).eps)}
+
+
+def default_tol(dtype: Any) -> float:
+    """The default tolerance of :func:`fk_elastic` [rad] for the computing ``dtype``."""
+    return ELASTIC_TOL[numpy_dtype(scalar_type(dtype))]
 
 
 class ElasticFK(NamedTuple):
@@ -62,22 +74,15 @@ def frame_rows(x: Any, model: RobotModel, batch: Batch, t: KinematicsTables, nam
     building block of the elastic kinematics, shared with torch_ops, autodiff and the
     calibration; ValueError/TypeError name ``name``."""
     npdt = numpy_dtype(t.scalar)
-    if isinstance(x, wp.array) or (hasattr(x, "detach") and type(x).__module__.startswith("torch")):
-        x = x.numpy() if isinstance(x, wp.array) else x.detach().cpu().numpy()
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise TypeError(f"{name}: expected an array of numbers") from e
+    a = real_array(x, name)
     if a.shape[-2:] != (model.n_frames, width):
         raise ValueError(f"{name}: expected shape (n_frames={model.n_frames}, {width}) or "
                          f"(batch..., {model.n_frames}, {width}), got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name}: contains NaN or inf")
     if a.ndim == 2:
-        return wp.array(a[None].astype(npdt), dtype=t.scalar, device=t.device), 0
+        return wp.array(finite_as(a[None], npdt, name), dtype=t.scalar, device=t.device), 0
     if a.shape[:-2] != tuple(batch.lead_shape):
         raise ValueError(f"{name}: batch dims {a.shape[:-2]} do not match q's {tuple(batch.lead_shape)}")
-    a = a.reshape(-1, model.n_frames, width).astype(npdt)
+    a = finite_as(a.reshape(-1, model.n_frames, width), npdt, name)
     return wp.array(a, dtype=t.scalar, device=t.device), 1
 
 
@@ -90,10 +95,7 @@ def kappa_array(model: RobotModel, kappa: Any) -> np.ndarray:
     """
     if kappa is None:
         return model.kappa
-    try:
-        k = np.asarray(kappa, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise TypeError("kappa: expected a number or an array of numbers") from e
+    k = real_array(kappa, "kappa")
     if not np.all(np.isfinite(k)):
         raise ValueError("kappa: contains NaN or inf")
     if np.any(k < 0):
@@ -215,10 +217,10 @@ def _point(point: Any, t: KinematicsTables) -> Any:
     vec3 = fk_kernels.kernels(t.scalar).vec3
     if point is None:
         return vec3(0.0, 0.0, 0.0)
-    p = np.asarray(point, dtype=np.float64)
+    p = real_array(point, "point")
     if p.shape != (3,) or not np.all(np.isfinite(p)):
         raise ValueError(f"point: expected 3 finite numbers [m], got {point!r}")
-    return vec3(*p.tolist())
+    return vec3(*finite_as(p, numpy_dtype(t.scalar), "point").tolist())
 
 
 # ------------------------------------------------------------------ elastic
@@ -301,22 +303,34 @@ class ElasticLaunch:
         return launch_fk(self.t, self.q, dh=rho, frames=out)
 
 
-def _elastic_args(robot: Any, q: Any, kappa: Any, lam: float, max_iter: int, tol: float,
-                  dh: Any, device: Any, dtype: Any, validate: bool):
-    model, batch, t = _setup(robot, q, device, dtype, validate)
-    if not (isinstance(lam, (int, float)) and 0.0 < lam <= 1.0):
+def _lam_tol(lam: Any, tol: Any, t: KinematicsTables) -> tuple[float, float]:
+    """Validated damping and tolerance as floats; ``tol`` None is :func:`default_tol` of
+    the tables' dtype."""
+    lam = real_number(lam, "lam")
+    if not 0.0 < lam <= 1.0:
         raise ValueError(f"lam: damping must be in (0, 1], got {lam!r}")
-    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 0:
-        raise ValueError(f"max_iter: expected an integer >= 0, got {max_iter!r}")
-    if not (isinstance(tol, (int, float)) and tol >= 0 and np.isfinite(tol)):
+    tol = default_tol(numpy_dtype(t.scalar)) if tol is None else real_number(tol, "tol")
+    if not (tol >= 0 and np.isfinite(tol)):
         raise ValueError(f"tol: expected a finite number >= 0 [rad], got {tol!r}")
+    return lam, tol
+
+
+def _elastic_args(robot: Any, q: Any, kappa: Any, lam: float, max_iter: int, tol: float | None,
+                  dh: Any, device: Any, dtype: Any, validate: bool):
+    """Validated arguments of the elastic functions: (model, batch, tables, kappa rows,
+    rho0 rows or None); lam and tol as :func:`_lam_tol` checks them."""
+    model, batch, t = _setup(robot, q, device, dtype, validate)
+    _lam_tol(lam, tol, t)
+    if isinstance(max_iter, (bool, np.bool_)) or not isinstance(max_iter, (int, np.integer)) \
+            or max_iter < 0:
+        raise ValueError(f"max_iter: expected an integer >= 0, got {max_iter!r}")
     kap = frame_rows(kappa_array(model, kappa), model, batch, t, "kappa", 3)
     rho0 = None if dh is None else frame_rows(dh, model, batch, t, "dh", 5)
     return model, batch, t, kap, rho0
 
 
 def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_iter: int = 10,
-               tol: float = 1e-9, dh: Any = None, device: Any = None, dtype: Any = None,
+               tol: float | None = None, dh: Any = None, device: Any = None, dtype: Any = None,
                validate: bool = True) -> ElasticFK:
     """Elastic forward kinematics: frames in the static torque equilibrium.
 
@@ -328,8 +342,11 @@ def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_i
         kappa: compliances [rad/(N m)]: scalar, [alpha, beta, theta], (n_frames, 3) or per
             configuration (..., n_frames, 3); None uses the robot's ``kappa``.
         lam: damping lambda in (0, 1]; use < 1 for very soft robots.
-        max_iter: most torque updates (0 gives the rigid FK).
-        tol: stop once no DH angle changes by more than ``tol`` [rad] in an update.
+        max_iter: most torque updates (0 gives the rigid FK; ``converged`` then says
+            whether the rigid frames already are the equilibrium to ``tol``).
+        tol: stop once no DH angle changes by more than ``tol`` [rad] in an update;
+            default :func:`default_tol`: 1e-9 rad in float64, 4.8e-7 rad (the rows'
+            resolution) in float32.
         dh: geometric DH rows rho0 (n_frames, 5) or (..., n_frames, 5); default nominal.
 
     Returns:
@@ -337,6 +354,7 @@ def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_i
     """
     model, batch, t, kap, rho0 = _elastic_args(robot, q, kappa, lam, max_iter, tol, dh,
                                                device, dtype, validate)
+    lam, tol = _lam_tol(lam, tol, t)
     if batch.kind == "torch" and batch.torch_tensor.requires_grad:
         from jwarp.torch_ops import fk_elastic_torch
 
@@ -350,7 +368,11 @@ def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_i
 
 
 def equilibrium(run: ElasticLaunch, max_iter: int, tol: float):
-    """Run the damped iteration; returns (rho or None, frames at rho, iterations, converged)."""
+    """Run the damped iteration; returns (rho or None, frames at rho, iterations, converged).
+
+    ``converged``: an update changed no row by more than ``tol``. With ``max_iter`` 0 the
+    frames stay rigid (at rho0) and one update is made only to measure whether rho0 already
+    is the equilibrium to ``tol`` (its result is discarded)."""
     iterations = np.zeros(run.B, np.int32)
     converged = np.zeros(run.B, bool)
     rho = None
@@ -361,9 +383,9 @@ def equilibrium(run: ElasticLaunch, max_iter: int, tol: float):
         converged |= delta.numpy() <= tol
         if converged.all():
             break
-    frames = run.frames_at(rho)
     if max_iter == 0:
-        converged[:] = True
+        converged |= run.step(None)[2].numpy() <= tol
+    frames = run.frames_at(rho)
     return rho, frames, iterations, converged
 
 
@@ -398,7 +420,7 @@ def elastic_step(robot: Any, q: Any, rho: Any = None, kappa: Any = None, *, lam:
     """
     model, batch, t, kap, rho0 = _elastic_args(robot, q, kappa, lam, 1, 0.0, dh,
                                                device, dtype, validate)
-    run = ElasticLaunch(t, batch.array, kap, rho0, float(lam))
+    run = ElasticLaunch(t, batch.array, kap, rho0, real_number(lam, "lam"))
     rho_in = None if rho is None else frame_rows(rho, model, batch, t, "rho", 5)
     frames, rho_new, delta = run.step(rho_in)
     return ElasticStep(to_output(frames, batch, (model.n_frames,)),

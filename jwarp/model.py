@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 import os
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -143,10 +144,10 @@ class RobotModel:
     notes: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.gravity = np.asarray(self.gravity, dtype=np.float64)
+        self.gravity = _finite(self.gravity, "gravity")
         if self.kappa is None:
             self.kappa = np.zeros((len(self.frames), 3))
-        self.kappa = np.asarray(self.kappa, dtype=np.float64)
+        self.kappa = _finite(self.kappa, "kappa")
         validate(self)
 
     # ----------------------------------------------------------------- sizes
@@ -380,7 +381,7 @@ class RobotModel:
             if f.kind == "dh":
                 f.dh = dh_table[i].copy()
         if kappa is not None:
-            m.kappa = np.asarray(kappa, np.float64)
+            m.kappa = _finite(kappa, "kappa", (self.n_frames, 3))
         for k in ("dh_table",):
             m.__dict__.pop(k, None)
         validate(m)
@@ -468,7 +469,21 @@ def _topological_order(parents: np.ndarray) -> list[int]:
     return order
 
 
+def _has_bool(x: Any) -> bool:
+    """Whether ``x`` is a bool or a (nested) list/tuple/array holding one."""
+    if isinstance(x, (bool, np.bool_)):
+        return True
+    if isinstance(x, np.ndarray):
+        return x.dtype == np.bool_ or (x.dtype == object and any(_has_bool(v) for v in x.flat))
+    if isinstance(x, (list, tuple)):
+        return any(_has_bool(v) for v in x)
+    return False
+
+
 def _finite(x: Any, where: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """``x`` as a float64 array of finite numbers (numpy scalars welcome, bools refused)."""
+    if _has_bool(x):
+        raise RobotModelError(f"{where}: expected numbers, got a bool in {x!r}")
     try:
         a = np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError) as e:
@@ -480,38 +495,86 @@ def _finite(x: Any, where: str, shape: tuple[int, ...] | None = None) -> np.ndar
     return a
 
 
+def _number(x: Any, where: str) -> float:
+    """``x`` as a finite Python float (numpy scalars welcome, bools and arrays refused)."""
+    if isinstance(x, (bool, np.bool_)):
+        raise RobotModelError(f"{where}: expected a number, got a bool ({x!r})")
+    if not isinstance(x, numbers.Real):
+        if isinstance(x, np.ndarray) and x.ndim == 0 and x.dtype.kind in "iuf":
+            x = x[()]
+        else:
+            raise RobotModelError(f"{where}: expected a number, got {x!r}")
+    v = float(x)
+    if not math.isfinite(v):
+        raise RobotModelError(f"{where}: must be finite, got {v}")
+    return v
+
+
+def _index(x: Any, where: str, what: str) -> int:
+    """``x`` as a Python int index (numpy integers welcome, bools refused)."""
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, np.integer)):
+        raise RobotModelError(f"{where}: expected a {what} index, got {x!r}")
+    return int(x)
+
+
+def _name(x: Any, where: str) -> str:
+    if not isinstance(x, str) or not x:
+        raise RobotModelError(f"{where}: expected a non-empty string, got {x!r}")
+    return x
+
+
+def _unique(names: Sequence[str], key: str, what: str) -> None:
+    """Duplicate names are reported as such (before anything refers to them by name)."""
+    seen: dict[str, int] = {}
+    for k, n in enumerate(names):
+        if n in seen:
+            raise RobotModelError(f"{key}[{k}].name: duplicate {what} name '{n}' "
+                                  f"(also {key}[{seen[n]}])")
+        seen[n] = k
+
+
 def validate(model: RobotModel) -> None:
-    """Check a model; raise :class:`RobotModelError` naming the offending field."""
+    """Check a model; raise :class:`RobotModelError` naming the offending field.
+
+    Numbers are stored as Python floats/ints (numpy scalars accepted, bools refused), so
+    that a validated model always saves as JSON."""
     if not isinstance(model.name, str) or not model.name:
         raise RobotModelError("name: must be a non-empty string")
     nf, nj = len(model.frames), len(model.joints)
     if nf == 0:
         raise RobotModelError("frames: a robot needs at least one frame")
-    _finite(model.gravity, "gravity", (3,))
-    if isinstance(model.workspace_dim, bool) or model.workspace_dim not in (2, 3):
+    if nj == 0:
+        raise RobotModelError("joints: a robot needs at least one joint (a robot of only fixed "
+                              "frames, 0 DoF, is not supported)")
+    model.gravity = _finite(model.gravity, "gravity", (3,))
+    if isinstance(model.workspace_dim, (bool, np.bool_)) or model.workspace_dim not in (2, 3):
         raise RobotModelError(f"workspace_dim: must be 2 (planar, x-y plane) or 3, "
                               f"got {model.workspace_dim!r}")
-    jnames = set()
+    model.workspace_dim = int(model.workspace_dim)
+    for k, j in enumerate(model.joints):
+        _name(j.name, f"joints[{k}].name")
+    for i, f in enumerate(model.frames):
+        _name(f.name, f"frames[{i}].name")
+    _unique([j.name for j in model.joints], "joints", "joint")
+    _unique([f.name for f in model.frames], "frames", "frame")
     for k, j in enumerate(model.joints):
         if j.type not in JOINT_TYPES:
             raise RobotModelError(f"joints[{k}].type: '{j.type}' is not one of {JOINT_TYPES}")
-        if j.name in jnames:
-            raise RobotModelError(f"joints[{k}].name: duplicate joint name '{j.name}'")
-        jnames.add(j.name)
         lim = _finite([j.lower, j.upper], f"joints[{k}].limits")
         if lim[0] > lim[1]:
             raise RobotModelError(f"joints[{k}].limits: lower {lim[0]} > upper {lim[1]}")
-    fnames = set()
+        j.lower, j.upper = float(lim[0]), float(lim[1])
     driven = set()
     for i, f in enumerate(model.frames):
         w = f"frames[{i}]"
-        if f.name in fnames:
-            raise RobotModelError(f"{w}.name: duplicate frame name '{f.name}'")
-        fnames.add(f.name)
         if f.kind not in FRAME_KINDS:
             raise RobotModelError(f"{w}.kind: '{f.kind}' is not one of {FRAME_KINDS}")
-        if f.parent is not None and not (isinstance(f.parent, (int, np.integer)) and 0 <= f.parent < nf):
-            raise RobotModelError(f"{w}.parent: index {f.parent} out of range [0, {nf})")
+        if f.parent is not None:
+            p = f.parent
+            if isinstance(p, (bool, np.bool_)) or not isinstance(p, (int, np.integer)) \
+                    or not 0 <= p < nf:
+                raise RobotModelError(f"{w}.parent: index {p!r} out of range [0, {nf})")
+            f.parent = int(p)
         if f.parent == i:
             raise RobotModelError(f"{w}.parent: a frame cannot be its own parent")
         if f.kind == "dh":
@@ -519,12 +582,15 @@ def validate(model: RobotModel) -> None:
                 raise RobotModelError(f"{w}.dh: missing DH row for a 'dh' frame")
             f.dh = _finite(f.dh, f"{w}.dh", (5,))
             types = set()
+            coupling = []
             for j, c in f.coupling:
-                if not (isinstance(j, (int, np.integer)) and 0 <= j < nj):
-                    raise RobotModelError(f"{w}.joint: joint index {j} out of range [0, {nj})")
-                _finite(c, f"{w}.coupled.coefficients")
+                if (isinstance(j, (bool, np.bool_)) or not isinstance(j, (int, np.integer))
+                        or not 0 <= j < nj):
+                    raise RobotModelError(f"{w}.joint: joint index {j!r} out of range [0, {nj})")
+                coupling.append((int(j), _number(c, f"{w}.coupled.coefficients")))
                 types.add(model.joints[j].type)
                 driven.add(int(j))
+            f.coupling = coupling
             if len(types) > 1:
                 raise RobotModelError(f"{w}.coupled: mixes revolute and prismatic joints")
         else:
@@ -543,49 +609,66 @@ def validate(model: RobotModel) -> None:
         if k not in driven:
             raise RobotModelError(f"joints[{k}]: joint '{model.joints[k].name}' drives no frame")
     for k, m in enumerate(model.masses):
-        _check_frame(m.frame, nf, f"masses[{k}].frame")
-        if not np.isfinite(m.mass) or m.mass < 0:
+        m.frame = _check_frame(m.frame, nf, f"masses[{k}].frame")
+        m.mass = _number(m.mass, f"masses[{k}].mass")
+        if m.mass < 0:
             raise RobotModelError(f"masses[{k}].mass: must be finite and >= 0, got {m.mass}")
         m.com = _finite(m.com, f"masses[{k}].com", (3,))
     for k, s in enumerate(model.spheres):
-        _check_frame(s.frame, nf, f"spheres[{k}].frame")
+        s.frame = _check_frame(s.frame, nf, f"spheres[{k}].frame")
         s.position = _finite(s.position, f"spheres[{k}].position", (3,))
-        if not np.isfinite(s.radius) or s.radius < 0:
+        s.radius = _number(s.radius, f"spheres[{k}].radius")
+        if s.radius < 0:
             raise RobotModelError(f"spheres[{k}].radius: must be finite and >= 0, got {s.radius}")
     for k, c in enumerate(model.capsules):
-        _check_frame(c.frame, nf, f"capsules[{k}].frame")
+        c.frame = _check_frame(c.frame, nf, f"capsules[{k}].frame")
         c.p0 = _finite(c.p0, f"capsules[{k}].p0", (3,))
         c.p1 = _finite(c.p1, f"capsules[{k}].p1", (3,))
-        if not np.isfinite(c.radius) or c.radius < 0:
+        c.radius = _number(c.radius, f"capsules[{k}].radius")
+        if c.radius < 0:
             raise RobotModelError(f"capsules[{k}].radius: must be finite and >= 0, got {c.radius}")
     sc = model.self_collision
     for g, members in sc.groups.items():
-        for m in members:
-            _check_frame(m, nf, f"self_collision.groups.{g}")
+        sc.groups[g] = [_check_frame(m, nf, f"self_collision.groups.{g}") for m in members]
     for key in ("include_pairs", "exclude_pairs"):
+        pairs = []
         for k, pair in enumerate(getattr(sc, key)):
             if len(pair) != 2:
                 raise RobotModelError(f"self_collision.{key}[{k}]: a pair needs 2 frames")
-            for m in pair:
-                _check_frame(m, nf, f"self_collision.{key}[{k}]")
+            pairs.append(tuple(_check_frame(m, nf, f"self_collision.{key}[{k}]") for m in pair))
+        setattr(sc, key, pairs)
+    frame_names = [f.name for f in model.frames]
     for name, idx in model.end_effectors.items():
-        _check_frame(idx, nf, f"end_effectors.{name}")
+        idx = model.end_effectors[name] = _check_frame(idx, nf, f"end_effectors.{name}")
+        if name in frame_names and frame_names.index(name) != idx:
+            i = frame_names.index(name)
+            raise RobotModelError(f"end_effectors.{name}: the name of frame {i} '{name}', but "
+                                  f"points at frame {idx} '{frame_names[idx]}' (frame "
+                                  f"'{name}' would be ambiguous)")
     for k, lim in enumerate(model.linear_limits):
+        w = f"linear_limits[{k}]"
         if len(lim.joints) != len(lim.coefficients) or not lim.joints:
-            raise RobotModelError(f"linear_limits[{k}]: joints and coefficients differ in length")
+            raise RobotModelError(f"{w}: joints and coefficients differ in length")
+        lim.joints = [_index(j, f"{w}.joints", "joint") for j in lim.joints]
         for j in lim.joints:
             if not 0 <= j < nj:
-                raise RobotModelError(f"linear_limits[{k}].joints: index {j} out of range")
+                raise RobotModelError(f"{w}.joints: index {j} out of range")
+        lim.coefficients = [float(c) for c in _finite(lim.coefficients, f"{w}.coefficients")]
+        lim.lower = _number(lim.lower, f"{w}.limits")
+        lim.upper = _number(lim.upper, f"{w}.limits")
         if lim.lower > lim.upper:
-            raise RobotModelError(f"linear_limits[{k}].limits: lower > upper")
+            raise RobotModelError(f"{w}.limits: lower > upper")
     kappa = _finite(model.kappa, "kappa", (nf, 3))
     if np.any(kappa < 0):
         raise RobotModelError("kappa: compliances must be >= 0")
+    model.kappa = kappa
 
 
-def _check_frame(idx: Any, nf: int, where: str) -> None:
-    if not (isinstance(idx, (int, np.integer)) and not isinstance(idx, bool) and 0 <= idx < nf):
+def _check_frame(idx: Any, nf: int, where: str) -> int:
+    if not (isinstance(idx, (int, np.integer)) and not isinstance(idx, (bool, np.bool_))
+            and 0 <= idx < nf):
         raise RobotModelError(f"{where}: frame index {idx!r} out of range [0, {nf})")
+    return int(idx)
 
 
 # ================================================================ JSON mapping
@@ -594,9 +677,9 @@ def _resolve(value: Any, names: list[str], where: str, what: str) -> int:
         if value not in names:
             raise RobotModelError(f"{where}: unknown {what} '{value}'")
         return names.index(value)
-    if isinstance(value, bool) or not isinstance(value, int):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise RobotModelError(f"{where}: expected a {what} name or index, got {value!r}")
-    return value
+    return int(value)
 
 
 def _req(doc: dict, key: str, where: str) -> Any:
@@ -629,10 +712,14 @@ def _from_dict(doc: Any) -> RobotModel:
         w = f"joints[{k}]"
         lim = _req(jd, "limits", w) if isinstance(jd, dict) and "limits" in jd else [-math.pi, math.pi]
         lim = _finite(lim, f"{w}.limits", (2,))
-        joints.append(Joint(name=str(_req(jd, "name", w)), type=jd.get("type", "revolute"),
+        joints.append(Joint(name=_name(_req(jd, "name", w), f"{w}.name"),
+                            type=jd.get("type", "revolute"),
                             lower=float(lim[0]), upper=float(lim[1])))
     jnames = [j.name for j in joints]
-    fnames = [str(_req(fd, "name", f"frames[{k}]")) for k, fd in enumerate(fdocs)]
+    _unique(jnames, "joints", "joint")
+    fnames = [_name(_req(fd, "name", f"frames[{k}]"), f"frames[{k}].name")
+              for k, fd in enumerate(fdocs)]
+    _unique(fnames, "frames", "frame")
     frames = []
     for k, fd in enumerate(fdocs):
         w = f"frames[{k}]"
@@ -658,7 +745,7 @@ def _from_dict(doc: Any) -> RobotModel:
                     raise RobotModelError(f"{w}.coupled: 'joints' and 'coefficients' must be "
                                           f"non-empty lists of equal length")
                 frame.coupling = [(_resolve(j, jnames, f"{w}.coupled.joints", "joint"),
-                                   float(_finite(c, f"{w}.coupled.coefficients")))
+                                   _number(c, f"{w}.coupled.coefficients"))
                                   for j, c in zip(js, cs)]
         elif kind == "static":
             frame.transform = _finite(_req(fd, "transform", w), f"{w}.transform", (4, 4))
@@ -671,17 +758,18 @@ def _from_dict(doc: Any) -> RobotModel:
         return _resolve(v, fnames, where, "frame")
 
     masses = [Mass(frame=fidx(_req(m, "frame", f"masses[{k}]"), f"masses[{k}].frame"),
-                   mass=float(_finite(_req(m, "mass", f"masses[{k}]"), f"masses[{k}].mass")),
+                   mass=_number(_req(m, "mass", f"masses[{k}]"), f"masses[{k}].mass"),
                    com=_finite(_req(m, "com", f"masses[{k}]"), f"masses[{k}].com", (3,)))
               for k, m in enumerate(doc.get("masses", []))]
     spheres = [Sphere(frame=fidx(_req(s, "frame", f"spheres[{k}]"), f"spheres[{k}].frame"),
                       position=_finite(_req(s, "position", f"spheres[{k}]"), f"spheres[{k}].position", (3,)),
-                      radius=float(_finite(_req(s, "radius", f"spheres[{k}]"), f"spheres[{k}].radius")))
+                      radius=_number(_req(s, "radius", f"spheres[{k}]"), f"spheres[{k}].radius"))
                for k, s in enumerate(doc.get("spheres", []))]
     capsules = [Capsule(frame=fidx(_req(c, "frame", f"capsules[{k}]"), f"capsules[{k}].frame"),
                         p0=_finite(_req(c, "p0", f"capsules[{k}]"), f"capsules[{k}].p0", (3,)),
                         p1=_finite(_req(c, "p1", f"capsules[{k}]"), f"capsules[{k}].p1", (3,)),
-                        radius=float(_finite(_req(c, "radius", f"capsules[{k}]"), f"capsules[{k}].radius")))
+                        radius=_number(_req(c, "radius", f"capsules[{k}]"),
+                                       f"capsules[{k}].radius"))
                 for k, c in enumerate(doc.get("capsules", []))]
     scd = doc.get("self_collision", {}) or {}
     sc = SelfCollision(

@@ -164,20 +164,25 @@ def open_recording(path: str | os.PathLike, application_id: str = "jwarp") -> An
 
 
 @contextlib.contextmanager
-def atomic_recording(path: str | os.PathLike, application_id: str = "jwarp") -> Iterator[Any]:
+def atomic_recording(path: str | os.PathLike, application_id: str = "jwarp",
+                     option: str = "path") -> Iterator[Any]:
     """A rerun RecordingStream saving to a temporary file beside ``path``, renamed to
-    ``path`` when the block ends without error (readers never see a partial file)."""
+    ``path`` when the block ends without error (readers never see a partial file). On an
+    error or interrupt the stream is closed and the temporary file removed; ``path``
+    stays as it was. ``option`` names the path in errors (e.g. ``--save``)."""
     _rerun()  # a clear error before any file is made
-    with AtomicFile(path) as f:
+    with AtomicFile(path, option=option) as f:
         rec = open_recording(f.tmp, application_id)
-        yield rec
-        rec.flush()
-        rec.disconnect()
+        try:
+            yield rec
+            rec.flush()
+        finally:
+            rec.disconnect()  # no writer left on the temporary file before the rename/removal
 
 
 def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,
                    elastic_kappa: Any = None, *, lam: float = 1.0, max_iter: int = 10,
-                   application_id: str = "jwarp") -> Path:
+                   application_id: str = "jwarp", option: str = "path") -> Path:
     """Compute FK for every configuration and write a rerun recording (.rrd) atomically.
 
     Args:
@@ -190,6 +195,7 @@ def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,
             kappa [rad/(N m)]: scalar, [alpha, beta, theta] or (n_frames, 3)) under
             ``elastic/`` and each end-effector's sag under ``elastic/sag_mm/``.
         lam, max_iter: passed to :func:`jwarp.kinematics.fk_elastic`.
+        option: the name errors give ``path`` (e.g. the CLI's ``--save``).
 
     Returns:
         The path written. FK runs in float64 on the CPU.
@@ -200,16 +206,14 @@ def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,
     model = get_robot(robot)
     q = _q_batch(model, q_list)
     target = Path(path)
-    folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        raise ValueError(f"path: folder '{folder}' does not exist")
+    AtomicFile(target, option=option).discard()  # folder missing/unwritable: before the work
     frames = np.asarray(kinematics.fk(model, q, device="cpu", dtype=np.float64))
     elastic = None
     if elastic_kappa is not None:
         elastic = kinematics.fk_elastic(model, q, elastic_kappa, lam=lam, max_iter=max_iter,
                                         device="cpu", dtype=np.float64)
 
-    with atomic_recording(target, application_id) as rec:
+    with atomic_recording(target, application_id, option=option) as rec:
         rec.log("robot/description", rr.TextDocument(model.summary()), static=True)
         for k in range(len(q)):
             rec.set_time(TIMELINE, sequence=k)

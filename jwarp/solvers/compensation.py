@@ -147,7 +147,8 @@ def ik_iteration_overhead(robot: Any, frame: Any, kappa: Any, *, world: Any = No
     of a call; ``*_s`` is the median over ``rounds`` runs, ``overhead`` their ratio - 1
     and ``overhead_per_round`` the ratios of the runs. ``*_setup_s``: the rest of a call's
     wall time (objective, buffers, seeds; median)."""
-    if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 2:
+    if isinstance(iterations, (bool, np.bool_)) or not isinstance(iterations, (int, np.integer)) \
+            or iterations < 2:
         raise ValueError(f"iterations: expected an integer >= 2, got {iterations!r}")
     model = get_robot(robot)
     fi = model.frame_index(frame)

@@ -30,7 +30,7 @@ from typing import Any, Callable
 import numpy as np
 import warp as wp
 
-from jwarp.arrays import init_warp, resolve_device
+from jwarp.arrays import finite_as, init_warp, real_array, real_number, resolve_device
 from jwarp.device_model import numpy_dtype, scalar_type, tables
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik as ik_kernels
@@ -55,7 +55,7 @@ class IKWeights:
     def validate(self) -> None:
         for k in ("position", "rotation", "world", "self", "default"):
             v = getattr(self, k)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            if not (math.isfinite(real_number(v, f"weights.{k}")) and v >= 0):
                 raise ValueError(f"weights.{k}: expected a finite number >= 0, got {v!r}")
 
 
@@ -110,10 +110,7 @@ def pose_matrix(xyz: Any, rotvec: Any = (0.0, 0.0, 0.0)) -> np.ndarray:
 
 
 def _targets(target: Any) -> tuple[np.ndarray, tuple]:
-    try:
-        T = np.asarray(target, np.float64)
-    except (TypeError, ValueError) as e:
-        raise TypeError("target: expected 4x4 pose matrices (numbers)") from e
+    T = real_array(target, "target")
     if T.ndim < 2 or T.shape[-2:] != (4, 4) or T.size == 0:
         raise ValueError(f"target: expected shape (..., 4, 4), got {T.shape}")
     if not np.all(np.isfinite(T)):
@@ -156,7 +153,7 @@ class IKObjective:
         self.kk = ik_kernels.kernels(self.scalar)
         self.pk = path_kernels.kernels(self.scalar)
         self.limits = limit_tables(self.robot, self.device, self.scalar)
-        self.eps = float(eps) if eps is not None else (
+        self.eps = real_number(eps, "eps", self.npdt) if eps is not None else (
             float(max(world.voxel_size, 0.01)) if world is not None else 0.01)
         dev, sc, B, n = self.device, self.scalar, self.B, self.n
         self.q = wp.zeros((B, n), dtype=sc, device=dev)
@@ -201,13 +198,13 @@ class IKObjective:
 
         if q_default is None:
             q_default = project_numpy(self.robot, self.robot.joint_limits.mean(axis=1))
-        a = np.asarray(q_default, np.float64)
+        a = real_array(q_default, "q_default")
         if a.shape not in ((self.n,), (self.B, self.n)) or not np.all(np.isfinite(a)):
             raise ValueError(f"q_default: expected finite values of shape ({self.n},) or "
                              f"({self.B}, {self.n}), got {a.shape}")
-        a = a.reshape(-1, self.n)
+        a = finite_as(a.reshape(-1, self.n), self.npdt, "q_default")
         self.default_stride = int(len(a) > 1)
-        self.q_default = wp.array(a.astype(self.npdt), dtype=self.scalar, device=self.device)
+        self.q_default = wp.array(a, dtype=self.scalar, device=self.device)
 
     def set_q(self, q: np.ndarray, keep_rho: bool = False) -> None:
         """Copy q (B, n_dof) into the batch; ``keep_rho`` keeps the elastic DH rows of the
@@ -334,12 +331,16 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
             raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
     for name, v in (("tol_pos", tol_pos), ("tol_rot", tol_rot), ("step", step),
                     ("max_step", max_step), ("damping", damping), ("tol_rho", tol_rho)):
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+        if not (math.isfinite(real_number(v, name)) and v > 0):
             raise ValueError(f"{name}: expected a number > 0, got {v!r}")
-    if not (isinstance(margin, (int, float)) and math.isfinite(margin) and margin >= 0):
+    tol_pos, tol_rot, step, max_step, damping, tol_rho = (
+        float(v) for v in (tol_pos, tol_rot, step, max_step, damping, tol_rho))
+    margin = real_number(margin, "margin")
+    if not (math.isfinite(margin) and margin >= 0):
         raise ValueError(f"margin: expected a number >= 0 [m], got {margin!r}")
-    eps_v = float(eps) if eps is not None else max(
-        float(world.voxel_size) if world is not None else 0.0, 0.01, float(margin))
+    finite_as(T, numpy_dtype(scalar_type(dtype)), "target")  # finite in the solver's dtype
+    eps_v = real_number(eps, "eps") if eps is not None else max(
+        float(world.voxel_size) if world is not None else 0.0, 0.01, margin)
     if not eps_v >= margin or not eps_v > 0:
         raise ValueError(f"eps: must be > 0 and >= margin ({margin:g} m), got {eps_v:g}")
     nT = len(T)
@@ -348,6 +349,7 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
         q0 = sample_within_limits(model, nT * n_starts, rng).reshape(nT, n_starts, model.n_dof)
     else:
         q0 = _seeds(model, initial, nT)
+        finite_as(q0, numpy_dtype(scalar_type(dtype)), "initial")
         n_starts = q0.shape[1]
     B = nT * n_starts
     obj = IKObjective(model, fi, B, world=world, weights=weights, eps=eps_v, q_default=q_default,
@@ -425,10 +427,7 @@ def _free(obj: IKObjective, q: np.ndarray, idx: np.ndarray, margin: float) -> np
 
 
 def _seeds(model: RobotModel, initial: Any, nT: int) -> np.ndarray:
-    try:
-        a = np.asarray(initial, np.float64)
-    except (TypeError, ValueError) as e:
-        raise TypeError("initial: expected seed configurations (numbers)") from e
+    a = real_array(initial, "initial")
     n = model.n_dof
     if a.ndim == 1:
         a = a[None, None]

@@ -34,7 +34,7 @@ from typing import Any, Callable
 import numpy as np
 import warp as wp
 
-from jwarp.arrays import init_warp, resolve_device
+from jwarp.arrays import finite_as, init_warp, real_array, real_number, resolve_device
 from jwarp.device_model import numpy_dtype, scalar_type, tables
 from jwarp.kernels import path as path_kernels
 from jwarp.model import RobotModel
@@ -49,6 +49,9 @@ NORM_FLOOR = 1e-4
 SWEEP_SAFETY = 2.0
 #: most substeps per segment of the final feasibility check
 MAX_CHECK_SUBSTEPS = 256
+#: the elastic equilibrium of the feasibility checks (:func:`elastic_equilibrium`):
+#: damped updates (lam), most updates, tolerance [rad] (0.1 um at 1 m)
+ELASTIC_CHECK = {"lam": 0.7, "max_iter": 30, "tol": 1e-7}
 
 
 @dataclass
@@ -62,7 +65,7 @@ class PathWeights:
     def validate(self) -> None:
         for k in ("world", "self", "length"):
             v = getattr(self, k)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            if not (math.isfinite(real_number(v, f"weights.{k}")) and v >= 0):
                 raise ValueError(f"weights.{k}: expected a finite number >= 0, got {v!r}")
 
 
@@ -124,10 +127,7 @@ def check_world(robot: RobotModel, world: Any) -> None:
 
 def _configs(x: Any, robot: RobotModel, name: str) -> np.ndarray:
     """(..., n_dof) -> (B, n_dof) float64 with shape/NaN checks naming ``name``."""
-    try:
-        a = np.asarray(x, np.float64)
-    except (TypeError, ValueError) as e:
-        raise TypeError(f"{name}: expected joint values (numbers), got {type(x).__name__}") from e
+    a = real_array(x, name)
     if a.ndim == 0 or a.shape[-1] != robot.n_dof or a.size == 0:
         raise ValueError(f"{name}: expected shape (..., {robot.n_dof}) for robot "
                          f"'{robot.name}', got {a.shape}")
@@ -139,13 +139,25 @@ def _configs(x: Any, robot: RobotModel, name: str) -> np.ndarray:
 def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, margin: float,
                     rho_kappa: Any = None) -> None:
     """ValueError naming ``name`` (and the row) if a configuration is outside the limits or
-    in collision (closer than ``margin`` to an obstacle or to itself)."""
+    in collision (closer than ``margin`` to an obstacle or to itself), or, on the elastic
+    model (``rho_kappa``: compliances), if its torque equilibrium does not converge
+    (:data:`ELASTIC_CHECK`): then nothing can be said about its collisions."""
     ok = within_limits(robot, q)
     if not ok.all():
         i = int(np.nonzero(~ok)[0][0])
         where = f"{name}[{i}]" if len(q) > 1 else name
         raise ValueError(f"{where}: outside the joint limits: {describe_violation(robot, q[i])}")
-    free = collision_free(robot, world, q, margin, kappa=rho_kappa)
+    rho = None
+    if rho_kappa is not None:
+        rho, conv = elastic_equilibrium(robot, q, rho_kappa)
+        if not conv.all():
+            i = int(np.nonzero(~conv)[0][0])
+            where = f"{name}[{i}]" if len(q) > 1 else name
+            c = ELASTIC_CHECK
+            raise ValueError(f"{where}: the elastic equilibrium (kappa) does not converge in "
+                             f"{c['max_iter']} torque updates (lam {c['lam']:g}) to {c['tol']:g} "
+                             f"rad, so its collisions cannot be checked; lower kappa")
+    free = collision_free(robot, world, q, margin, rho=rho)
     if not free.all():
         i = int(np.nonzero(~free)[0][0])
         where = f"{name}[{i}]" if len(q) > 1 else name
@@ -158,27 +170,40 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
     """(N,) bool: q (N, n_dof) collision-free (world and self) with ``margin`` [m].
 
     With ``rho`` (N, n_frames, 5) the frames are those DH rows; with ``kappa`` (and no
-    rho) the elastic model in its torque equilibrium (to 1e-7 rad: 0.1 um at 1 m)."""
+    rho) the elastic model in its torque equilibrium (:func:`elastic_equilibrium`, to
+    1e-7 rad: 0.1 um at 1 m). A configuration whose equilibrium does not converge is not
+    collision-free (its frames are unknown)."""
     col = _collision()
-    q = np.ascontiguousarray(q, np.float64)
+    q = np.ascontiguousarray(real_array(q, "q"))
+    converged = None
     if rho is None and kappa is not None:
-        from jwarp.kinematics import fk_elastic
-
-        rho = np.asarray(fk_elastic(robot, q, kappa, max_iter=30, lam=0.7, tol=1e-7,
-                                    device=device, dtype=np.float64).rho)
-    return np.asarray(col.is_collision_free(robot, q, world, margin=margin, rho=rho,
+        rho, converged = elastic_equilibrium(robot, q, kappa, device=device)
+    free = np.asarray(col.is_collision_free(robot, q, world, margin=margin, rho=rho,
                                             device=device, dtype=np.float64), bool).reshape(-1)
+    return free if converged is None else free & converged.reshape(-1)
+
+
+def elastic_equilibrium(robot: Any, q: np.ndarray, kappa: Any, device: Any = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """The elastic model's equilibrium at q (N, n_dof) as the feasibility checks solve it
+    (:data:`ELASTIC_CHECK`, float64): ``(rho (N, n_frames, 5), converged (N,) bool)``."""
+    from jwarp.kinematics import fk_elastic
+
+    res = fk_elastic(robot, np.asarray(q, np.float64), kappa, device=device, dtype=np.float64,
+                     **ELASTIC_CHECK)
+    return np.asarray(res.rho), np.asarray(res.converged, bool)
 
 
 def substeps(paths: Any, n_substeps: int, *, device: Any = "cpu", dtype: Any = None) -> np.ndarray:
     """Linear substeps (eq. 3.3) of paths (..., W, n_dof) -> (..., S, n_dof) with
     S = (W - 1) n_substeps + 1 (every waypoint included, the goal last)."""
     init_warp()
-    a = np.asarray(paths, np.float64 if dtype is None else dtype)
+    a = real_array(paths, "paths")
     if a.ndim < 2 or a.shape[-2] < 2:
         raise ValueError(f"paths: expected shape (..., W >= 2, n_dof), got {a.shape}")
     if not np.all(np.isfinite(a)):
         raise ValueError("paths: contains NaN or inf")
+    a = finite_as(a, numpy_dtype(scalar_type(np.float64 if dtype is None else dtype)), "paths")
     n_sub = _check_n_sub(n_substeps)
     scalar = scalar_type(a.dtype)
     W, n = a.shape[-2:]
@@ -199,7 +224,7 @@ def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin
     ``kappa``) and every waypoint within the joint limits. Returns (...,) bool."""
     model = get_robot(robot)
     check_world(model, world)
-    a = np.asarray(paths, np.float64)
+    a = real_array(paths, "paths")
     if a.ndim < 2 or a.shape[-1] != model.n_dof or a.shape[-2] < 2:
         raise ValueError(f"paths: expected shape (..., W >= 2, {model.n_dof}), got {a.shape}")
     q = substeps(a, n_substeps, device=None)
@@ -230,9 +255,10 @@ def substeps_for_voxel(robot: RobotModel, paths: Any, voxel_size: float, *,
     between two substeps of ``paths`` (..., W, n_dof) (thesis 3.3.1: N_u adjusted to the
     step length and the voxel size). The motion of each segment is measured on a fine
     (16 per segment) linear interpolation. Clamped to [1, max_substeps]."""
-    if not (isinstance(voxel_size, (int, float)) and voxel_size > 0 and math.isfinite(voxel_size)):
+    voxel_size = real_number(voxel_size, "voxel_size")
+    if not (voxel_size > 0 and math.isfinite(voxel_size)):
         raise ValueError(f"voxel_size: expected a number > 0 [m], got {voxel_size!r}")
-    a = np.asarray(paths, np.float64)
+    a = real_array(paths, "paths")
     W, n = a.shape[-2:]
     fine = 16
     flat = a.reshape(-1, W, n)
@@ -325,7 +351,8 @@ class PathObjective:
         self.P, self.W, self.n = int(n_paths), int(n_waypoints), self.robot.n_dof
         self.S = (self.W - 1) * self.n_sub + 1
         self.N = self.P * self.S
-        self.eps = float(eps) if eps is not None else float(max(world.voxel_size, 0.01))
+        self.eps = real_number(eps, "eps", self.npdt) if eps is not None else float(
+            max(world.voxel_size, 0.01))
         if not self.eps > 0:
             raise ValueError(f"eps: expected > 0 [m], got {eps!r}")
         self.limits = limit_tables(self.robot, self.device, self.scalar)
@@ -351,8 +378,11 @@ class PathObjective:
     # ------------------------------------------------------------------ state
     def set_paths(self, paths: np.ndarray) -> None:
         """Copy paths (P, W, n_dof) into the device buffer."""
-        a = np.ascontiguousarray(np.asarray(paths, np.float64).reshape(self.P, self.W, self.n),
-                                 dtype=self.npdt)
+        a = real_array(paths, "paths")
+        if a.size != self.P * self.W * self.n:
+            raise ValueError(f"paths: expected {self.P} paths of {self.W} waypoints of "
+                             f"{self.n} joints, got shape {a.shape}")
+        a = finite_as(a.reshape(self.P, self.W, self.n), self.npdt, "paths")
         wp.copy(self.paths, wp.array(a, dtype=self.scalar, device=self.device))
         self.reset_compensation()
 
@@ -477,16 +507,22 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
                         ("n_starts", n_starts, 1), ("check_all_every", check_all_every, 1)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
             raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+    npdt = numpy_dtype(scalar_type(dtype))
     for name, v in (("step", step), ("max_step", max_step)):
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+        if not (math.isfinite(real_number(v, name, npdt)) and v > 0):
             raise ValueError(f"{name}: expected a number > 0, got {v!r}")
-    if not (isinstance(margin, (int, float)) and math.isfinite(margin) and margin >= 0):
+    step, max_step = float(step), float(max_step)
+    margin = real_number(margin, "margin")
+    if not (math.isfinite(margin) and margin >= 0):
         raise ValueError(f"margin: expected a number >= 0 [m], got {margin!r}")
-    eps_v = float(eps) if eps is not None else max(float(world.voxel_size), 0.01, float(margin))
+    eps_v = real_number(eps, "eps") if eps is not None else max(float(world.voxel_size), 0.01,
+                                                                 margin)
     if not (math.isfinite(eps_v) and eps_v > 0):
         raise ValueError(f"eps: expected a number > 0 [m], got {eps!r}")
     if eps_v < margin:
         raise ValueError(f"eps: must be >= margin ({margin:g} m), got {eps_v:g}")
+    finite_as(q0, npdt, "start")  # also finite in the optimisation's dtype
+    finite_as(q1, npdt, "goal")
     check_endpoints(model, world, q0, "start", margin, kappa)
     check_endpoints(model, world, q1, "goal", margin, kappa)
 
@@ -562,10 +598,7 @@ def _initial(model: RobotModel, q0: np.ndarray, q1: np.ndarray, initial: Any, n_
             return np.concatenate(parts, axis=1)
         raise ValueError(f"initial: unknown kind '{initial}' (expected 'straight', 'random', "
                          f"'mixed' or an array of paths)")
-    try:
-        g = np.asarray(initial, np.float64)
-    except (TypeError, ValueError) as e:
-        raise TypeError("initial: expected a kind name or an array of paths") from e
+    g = real_array(initial, "initial")
     if g.ndim == 2:
         g = g[None, None]
     elif g.ndim == 3:

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.arrays import real_number
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.world.sdf import World, grid_geometry
@@ -61,6 +62,9 @@ def fixed_spheres(robot: Any, pad: float = 0.0, device: Any = None) -> list[tupl
     from jwarp.kinematics import fk
 
     model = get_robot(robot)
+    pad = real_number(pad, "pad")
+    if not np.isfinite(pad):
+        raise ValueError(f"pad: expected a finite distance [m], got {pad!r}")
     moving = np.zeros(model.n_frames, bool)
     for i in model.topological_order:
         p = model.parents[i]
@@ -112,10 +116,14 @@ def robot_world_grid(robot: Any, cells: int = 64, voxel_size: float | None = Non
     Returns ``(shape, limits (dim, 2), voxel_size)``."""
     if isinstance(cells, bool) or not isinstance(cells, (int, np.integer)) or cells < 2:
         raise ValueError(f"cells: expected an integer >= 2, got {cells!r}")
+    pad = real_number(pad, "pad")
+    if not np.isfinite(pad):
+        raise ValueError(f"pad: expected a finite distance [m], got {pad!r}")
     box = robot_reach(robot)
     box = box + np.array([-pad, pad])
     span = box[:, 1] - box[:, 0]
-    h = float(voxel_size) if voxel_size is not None else float(span.max()) / (cells - 1)
+    h = real_number(voxel_size, "voxel_size") if voxel_size is not None else \
+        float(span.max()) / (cells - 1)
     if not np.isfinite(h) or h <= 0:
         raise ValueError(f"voxel_size: expected a positive number [m], got {voxel_size!r}")
     n = np.ceil(span / h - 1e-9).astype(int) + 1
@@ -144,7 +152,8 @@ def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200
     dim = model.workspace_dim if dim is None else dim
     if dim != model.workspace_dim:
         raise ValueError(f"dim: robot '{model.name}' needs {model.workspace_dim}D worlds, got {dim}")
-    if not 0 < min_feasible <= n:
+    if isinstance(min_feasible, (bool, np.bool_)) or not isinstance(min_feasible, (int, np.integer)) \
+            or not 0 < min_feasible <= n:
         raise ValueError(f"min_feasible: expected 1..n={n}, got {min_feasible}")
     if isinstance(max_tries, bool) or not isinstance(max_tries, (int, np.integer)) or max_tries < 1:
         raise ValueError(f"max_tries: expected a positive integer, got {max_tries!r}")

@@ -17,6 +17,7 @@ or a path to a ``.npz`` file.
 from __future__ import annotations
 
 import json
+import math
 import os
 import zipfile
 from pathlib import Path
@@ -59,13 +60,26 @@ def load_world(path: str | os.PathLike) -> World:
     """Read a world written by :func:`save_world`. Any malformed or unreadable file
     raises ValueError naming the file and the problem."""
     path = Path(path)
+    if not path.exists():
+        raise ValueError(f"path: world file '{path}' does not exist")
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder, not a .npz world file")
     try:
+        with open(path, "rb") as fh:  # OSError if unreadable
+            is_zip = zipfile.is_zipfile(fh)
+        if not is_zip:  # np.load would try .npy and pickles next
+            raise ValueError(f"{path}: not a readable .npz world file (not a zip archive, "
+                             f"or truncated)")
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
-    except FileNotFoundError as e:
-        raise ValueError(f"path: world file '{path}' does not exist") from e
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
+    except ValueError as e:
+        if str(e).startswith(f"{path}: "):
+            raise
         raise ValueError(f"{path}: not a readable .npz world file: {e}") from e
+    except (OSError, EOFError, zipfile.BadZipFile, KeyError, MemoryError,
+            NotImplementedError, RuntimeError) as e:
+        raise ValueError(f"{path}: not a readable .npz world file: "
+                         f"{' '.join(str(e).split()) or type(e).__name__}") from e
     if not isinstance(data, dict) or "format" not in data:
         raise ValueError(f"{path}: not a jwarp world file (no 'format' entry)")
     if str(data["format"]) != FORMAT:
@@ -92,9 +106,11 @@ def load_world(path: str | os.PathLike) -> World:
             raise ValueError(f"voxel_size: expected a scalar, got shape {data['voxel_size'].shape}")
         if data["sdf"].dtype not in (np.float32, np.float64):
             raise ValueError(f"sdf: expected float32 or float64, got {data['sdf'].dtype}")
+        if data["voxel_size"].dtype.kind not in "iuf":
+            raise ValueError(f"voxel_size: expected a number [m], got {data['voxel_size']!r}")
         return World(data["sdf"], data["limits"], float(data["voxel_size"]),
                      data.get("occupancy"), meta)
-    except (TypeError, ValueError) as e:
+    except (TypeError, ValueError, OverflowError) as e:
         raise ValueError(f"{path}: {e}") from e
 
 
@@ -122,6 +138,15 @@ def parse_world_spec(spec: Any, robot: Any = None) -> World:
     With a ``robot`` the grid covers the robot's reach (:func:`robot_world_grid`),
     otherwise [-1, 1] m per axis. ``feasible`` needs a robot. A world of the wrong
     dimension for the robot raises ValueError.
+
+    Raises:
+        ValueError: an unknown or repeated key, a value that is not a number, NaN/inf,
+            out of range (``cells`` >= 2, ``voxel`` > 0, ``seed``/``feasible`` >= 0,
+            ``samples``/``tries`` >= 1, ``clear_base`` 0 or 1), ``cells`` with ``voxel``,
+            ``samples``/``tries`` without ``feasible``; a malformed world file.
+        MemoryError: the grid (about :data:`BYTES_PER_CELL` per cell) or the ``feasible``
+            samples would need more than the available memory; checked before anything
+            is allocated, the message gives the grid and the figure.
     """
     from jwarp.collision import check_world
     from jwarp.registry import robot as get_robot
@@ -147,7 +172,42 @@ def parse_world_spec(spec: Any, robot: Any = None) -> World:
     return world
 
 
+#: peak memory of a simplex world per grid cell [bytes]: the noise's float64 temporaries,
+#: the occupancy, the two distance transforms and the SDF (measured about 250 B in 2D and
+#: 340 B in 3D)
+BYTES_PER_CELL = 400
+#: memory of a ``feasible`` search per sampled configuration [bytes] per robot frame (the
+#: collision check's frames, float64 4x4, and their copies)
+BYTES_PER_SAMPLE_FRAME = 4 * 128
+
+
+def _spec_int(key: str, v: Any, lo: int, hi: int | None = None) -> int:
+    if v < lo or (hi is not None and v > hi):
+        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise ValueError(f"world: {key}: expected an integer {rng}, got {v}")
+    return int(v)
+
+
+def _grid_size(model: Any, dim: int, cells: int | None, voxel: float | None) -> list[float]:
+    """The grid sizes (per axis, as floats: nothing is allocated) a simplex spec makes."""
+    if model is not None and dim == model.workspace_dim:
+        from jwarp.world.feasibility import robot_reach
+
+        span = np.diff(robot_reach(model), axis=1)[:, 0]
+        h = voxel if voxel is not None else float(span.max()) / (cells - 1)
+        return [math.ceil(s / h - 1e-9) + 1.0 for s in span.tolist()]
+    if voxel is not None:
+        return [math.floor(2.0 / voxel + 1e-6) + 1.0] * dim
+    return [float(cells)] * dim
+
+
+def _grid_text(sizes: list[float]) -> str:
+    fmt = [f"{s:.0f}" if s < 1e15 else f"{s:.3g}" for s in sizes]
+    return f"{fmt[0]}^{len(fmt)}" if len(set(fmt)) == 1 else " x ".join(fmt)
+
+
 def _simplex_from_spec(rest: str, model: Any, text: str) -> World:
+    from jwarp.memory import check_memory
     from jwarp.world.feasibility import feasible_simplex_world, fixed_spheres, robot_world_grid
     from jwarp.world.simplex import simplex_world
 
@@ -159,24 +219,45 @@ def _simplex_from_spec(rest: str, model: Any, text: str) -> World:
             raise ValueError(f"world: '{item}' in '{text}' is not key=value")
         if key not in SPEC_KEYS:
             raise ValueError(f"world: unknown key '{key}' in '{text}'; known: {', '.join(SPEC_KEYS)}")
+        if key in opts:
+            raise ValueError(f"world: key '{key}' given twice in '{text}'")
         try:
             opts[key] = SPEC_KEYS[key](value.strip())
         except ValueError as e:
             raise ValueError(f"world: bad value for '{key}' in '{text}': {value!r}") from e
+        if isinstance(opts[key], float) and not math.isfinite(opts[key]):
+            raise ValueError(f"world: {key}: expected a finite number, got {value.strip()}")
     dim = opts.pop("dim", model.workspace_dim if model is not None else 3)
     if dim not in (2, 3):
         raise ValueError(f"world: dim must be 2 or 3, got {dim}")
-    cells = opts.pop("cells", 64)
+    if "cells" in opts and "voxel" in opts:
+        raise ValueError(f"world: give 'cells' or 'voxel', not both, in '{text}'")
+    cells = _spec_int("cells", opts.pop("cells", 64), 2)
     voxel = opts.pop("voxel", None)
-    feasible = opts.pop("feasible", 0)
-    samples = opts.pop("samples", 1000)
-    tries = opts.pop("tries", 50)
-    clear_base = bool(opts.pop("clear_base", 1))
-    seed = opts.pop("seed", 0)
+    if voxel is not None and not voxel > 0:
+        raise ValueError(f"world: voxel: expected a positive size [m], got {voxel:g}")
+    feasible = _spec_int("feasible", opts.pop("feasible", 0), 0)
+    for key in ("samples", "tries"):
+        if key in opts and feasible == 0:
+            raise ValueError(f"world: '{key}' in '{text}' is only meaningful with feasible=N")
+    samples = _spec_int("samples", opts.pop("samples", 1000), 1)
+    tries = _spec_int("tries", opts.pop("tries", 50), 1)
+    if feasible > samples:
+        raise ValueError(f"world: feasible: expected at most samples={samples} "
+                         f"collision-free configurations, got {feasible}")
+    clear_base = bool(_spec_int("clear_base", opts.pop("clear_base", 1), 0, 1))
+    seed = _spec_int("seed", opts.pop("seed", 0), 0)
     noise = opts  # threshold, frequency, octaves, persistence
+    if feasible > 0 and model is None:
+        raise ValueError(f"world: 'feasible' in '{text}' needs a robot")
+    sizes = _grid_size(model, dim, None if voxel is not None else cells, voxel)
+    n_cells = math.prod(sizes)
+    check_memory(n_cells * BYTES_PER_CELL, f"world: '{text}': a {_grid_text(sizes)} grid",
+                 "lower 'cells' (or raise 'voxel')")
     if feasible > 0:
-        if model is None:
-            raise ValueError(f"world: 'feasible' in '{text}' needs a robot")
+        check_memory(samples * model.n_frames * BYTES_PER_SAMPLE_FRAME,
+                     f"world: '{text}': checking {samples} sampled configurations",
+                     "lower 'samples'")
         world = feasible_simplex_world(model, seed=seed, min_feasible=feasible, n=samples,
                                        max_tries=tries, cells=cells, voxel_size=voxel,
                                        clear_base=clear_base, dim=dim, **noise)

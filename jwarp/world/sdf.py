@@ -35,6 +35,7 @@ __all__ = ["World", "grid_geometry", "world_from_occupancy", "world_from_mesh",
            "world_from_points"]
 
 DEFAULT_CELLS = 64
+_F32_MAX = float(np.finfo(np.float32).max)
 
 
 @dataclass(eq=False)
@@ -67,20 +68,30 @@ class World:
             raise ValueError(f"sdf: every grid size must be >= 2, got shape {sdf.shape}")
         if not np.all(np.isfinite(sdf)):
             raise ValueError("sdf: contains NaN or inf")
+        if sdf.dtype == np.float64 and np.abs(sdf).max() > _F32_MAX:
+            raise ValueError(f"sdf: values overflow float32 (largest magnitude {_F32_MAX:.3g}), "
+                             f"the dtype of the collision kernels")
         self.sdf = np.ascontiguousarray(sdf)
         try:
             h = float(self.voxel_size)
         except (TypeError, ValueError) as e:
             raise TypeError(f"voxel_size: expected a number, got {self.voxel_size!r}") from e
-        if not np.isfinite(h) or h <= 0:
-            raise ValueError(f"voxel_size: expected a positive number [m], got {self.voxel_size!r}")
+        if not np.isfinite(h) or h <= 0 or h > _F32_MAX:
+            raise ValueError(f"voxel_size: expected a positive number [m] (finite in float32), "
+                             f"got {self.voxel_size!r}")
         self.voxel_size = h
-        lim = np.asarray(self.limits, dtype=np.float64)
+        try:
+            lim = np.asarray(self.limits, dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"limits: expected ({sdf.ndim}, 2) numbers [m]: {e}") from e
         if lim.shape != (sdf.ndim, 2):
             raise ValueError(f"limits: expected shape ({sdf.ndim}, 2) for a {sdf.ndim}D grid, "
                              f"got {lim.shape}")
         if not np.all(np.isfinite(lim)):
             raise ValueError("limits: contains NaN or inf")
+        if np.abs(lim).max() > _F32_MAX:
+            raise ValueError(f"limits: values overflow float32 (largest magnitude "
+                             f"{_F32_MAX:.3g}), the dtype of the collision kernels")
         expect = lim[:, 0] + (np.array(sdf.shape) - 1) * h
         if not np.allclose(lim[:, 1], expect, rtol=0.0, atol=1e-6 * h + 1e-9):
             raise ValueError(f"limits: upper cell centres {lim[:, 1].tolist()} do not match "

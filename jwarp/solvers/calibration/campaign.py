@@ -7,22 +7,32 @@ setup's nominal ones. The setup handed to the user (and written to ``setup.json`
 ``rough_rotation`` radians in random directions and the markers by ``rough_marker`` metres,
 as a lab's first guess would be. Observations are the true model's prediction plus Gaussian
 noise of the measurement's ``noise``.
+
+:meth:`Campaign.write` writes ``samples.csv``, ``setup.json`` and ``truth.json`` into a
+folder as one set (:class:`~jwarp.atomic.AtomicFolder`: all new or all old, also when the
+process is killed), with a fresh ``campaign_id`` and the SHA-256 of ``samples.csv`` in
+``setup.json`` and in the ``notes`` of ``truth.json``; :func:`read_campaign` reads such a
+folder back and refuses one whose files do not belong together.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
+import uuid
+import warnings
 from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from jwarp.atomic import AtomicFolder, atomic_write_text, clean_stale
 from jwarp.model import RobotModel
 from jwarp.plugins.measurements.base import Measurement
-from jwarp.solvers.calibration.files import Samples, Setup, make_measurement, write_samples, \
-    write_setup
+from jwarp.solvers.calibration.files import Samples, Setup, make_measurement, parse_samples, \
+    read_setup, read_text, samples_text, sha256_hex, write_setup
 from jwarp.solvers.calibration.params import perturb_robot
 from jwarp.solvers.calibration.result import model_frames
 
@@ -41,19 +51,107 @@ class Campaign:
     true_params: np.ndarray    # (P,) true measurement parameters
     samples: Samples
     noise: float               # noise sigma used [unit of the measurement]
+    campaign_id: str | None = None  # id of the last write (None: not written yet)
 
-    def write(self, folder: str | os.PathLike, prefix: str = "") -> dict[str, str]:
+    def write(self, folder: str | os.PathLike, prefix: str = "", option: str = "folder"
+              ) -> dict[str, str]:
         """Write ``<prefix>samples.csv``, ``<prefix>setup.json`` (rough) and
-        ``<prefix>truth.json`` (the true robot) into ``folder`` (atomically)."""
+        ``<prefix>truth.json`` (the true robot) into ``folder`` as one set: the folder is
+        replaced at once (:class:`~jwarp.atomic.AtomicFolder`; its other files are kept),
+        so a reader or a killed write never leaves files of two campaigns side by side.
+        Each write draws a new :attr:`campaign_id`, recorded with the SHA-256 of the
+        samples file in ``setup.json`` and ``truth.json`` (``notes``).
+
+        Args:
+            folder: made if missing; its parent folder must exist.
+            option: the name errors give ``folder`` (e.g. ``--out``).
+
+        Returns:
+            {file name without prefix: path}.
+
+        Raises:
+            ValueError: the parent folder is missing or not writable, ``folder`` is a file.
+        """
         folder = os.fspath(folder)
-        os.makedirs(folder, exist_ok=True)
-        paths = {k: os.path.join(folder, f"{prefix}{k}") for k in
-                 ("samples.csv", "setup.json", "truth.json")}
         meas = make_measurement(self.robot, self.setup)
-        write_samples(paths["samples.csv"], self.robot, meas, self.samples)
-        write_setup(paths["setup.json"], self.setup)
-        self.true_robot.save(paths["truth.json"])
-        return paths
+        text = samples_text(self.robot, meas, self.samples)
+        cid = uuid.uuid4().hex
+        record = {"campaign_id": cid, "samples_sha256": sha256_hex(text)}
+        setup = dataclasses.replace(self.setup, path=None, **record)
+        truth = self.true_robot.copy(notes={**self.true_robot.notes, **record})
+        with AtomicFolder(folder, option=option) as out:
+            atomic_write_text(out.file(f"{prefix}samples.csv"), text)
+            write_setup(out.file(f"{prefix}setup.json"), setup)
+            truth.save(out.file(f"{prefix}truth.json"))
+        self.campaign_id = cid
+        return {k: os.path.join(folder, f"{prefix}{k}") for k in CAMPAIGN_FILES}
+
+
+#: the files of a campaign folder
+CAMPAIGN_FILES = ("samples.csv", "setup.json", "truth.json")
+
+
+@dataclass
+class CampaignFiles:
+    """A campaign folder read back by :func:`read_campaign`."""
+
+    setup: Setup               # the rough setup written
+    truth: RobotModel          # the true robot
+    samples: Samples
+    campaign_id: str | None    # None: files of a jwarp without campaign ids
+    paths: dict[str, str]
+
+
+def read_campaign(folder: str | os.PathLike, robot: RobotModel | None = None,
+                  prefix: str = "") -> CampaignFiles:
+    """Read a folder written by :meth:`Campaign.write` (``jwarp simulate-campaign``) and
+    check that its three files belong to one campaign: ``setup.json`` and ``truth.json``
+    name the same ``campaign_id`` and the SHA-256 they record is the one of
+    ``samples.csv``. Files without any record (older jwarp) are read with a warning.
+    A folder write cut by a kill between its two renames (systems without an atomic
+    exchange) is finished first (:func:`~jwarp.atomic.clean_stale`).
+
+    Args:
+        robot: the robot whose joints name the CSV columns (default: the true robot).
+
+    Raises:
+        ValueError: a file is missing or malformed, or the files are of different
+            campaigns (naming them).
+    """
+    folder = os.fspath(folder)
+    clean_stale(folder)  # finishes a folder swap cut by a kill (see AtomicFolder)
+    paths = {k: os.path.join(folder, f"{prefix}{k}") for k in CAMPAIGN_FILES}
+    missing = [f"{prefix}{k}" for k, p in paths.items() if not os.path.isfile(p)]
+    if missing:
+        raise ValueError(f"{folder}: not a campaign folder: missing {', '.join(missing)}")
+    setup = read_setup(paths["setup.json"])
+    truth = RobotModel.load(paths["truth.json"])
+    text, raw = read_text(paths["samples.csv"], "data")
+    ids = {"setup.json": setup.campaign_id, "truth.json": truth.notes.get("campaign_id")}
+    shas = {"setup.json": setup.samples_sha256, "truth.json": truth.notes.get("samples_sha256")}
+    sha = sha256_hex(raw)
+    names = {k: f"{prefix}{k}" for k in CAMPAIGN_FILES}
+    if not any(ids.values()) and not any(shas.values()):
+        warnings.warn(f"{folder}: no campaign id in {names['setup.json']} and "
+                      f"{names['truth.json']} (written by an older jwarp?): cannot check that "
+                      f"the files belong together", stacklevel=2)
+    else:
+        if len(set(ids.values())) != 1:
+            raise ValueError(
+                f"{folder}: {names['setup.json']} (campaign {ids['setup.json']}) and "
+                f"{names['truth.json']} (campaign {ids['truth.json']}) are not of one "
+                f"campaign; write the folder again (jwarp simulate-campaign)")
+        wrong = [names[k] for k, s in shas.items() if s != sha]
+        if wrong:
+            raise ValueError(
+                f"{folder}: {names['samples.csv']} is not the samples file of campaign "
+                f"{ids['setup.json']} (its SHA-256 differs from the one {' and '.join(wrong)} "
+                f"record{'s' if len(wrong) == 1 else ''}); write the folder again")
+    parse_robot = robot if robot is not None else truth
+    samples = parse_samples(text, parse_robot, make_measurement(parse_robot, setup),
+                            where=paths["samples.csv"])
+    return CampaignFiles(setup=setup, truth=truth, samples=samples,
+                         campaign_id=ids["setup.json"], paths=paths)
 
 
 def uniform_configurations(robot: RobotModel, rng: np.random.Generator, n: int,

@@ -7,6 +7,8 @@ Setup file (JSON object)::
       "version": 1,                          # optional; checked when given
       "robot": "justin19",                   # optional: default robot of the campaign
       "description": "...",                  # optional free text
+      "campaign_id": "...",                  # optional: simulated campaign (see below)
+      "samples_sha256": "...",               # optional: SHA-256 of its samples.csv
       "plugin": "cartesian",                 # the measurement plugin
       ...                                    # the plugin's own keys (docs/measurements.md)
     }
@@ -21,15 +23,25 @@ plugin's per-sample inputs (contact: ``pair``) and the observed columns are the 
 ``<marker>_u,<marker>_v`` in px; contact: ``distance`` in m). Column order is free; every
 column must be present; extra columns are an error. A row with a missing value, NaN/inf or
 the wrong number of fields is rejected with its line number; nothing is dropped silently.
+A joint value far outside the robot's limits (by more than :data:`FAR_OUTSIDE` of the
+joint's range, e.g. degrees written for radians) gives a :class:`DataWarning` naming the
+line. Both files are UTF-8 (a byte order mark, as spreadsheet programs write it, is
+accepted); other bytes are an error naming the file and line.
+
+A simulated campaign (:meth:`~jwarp.solvers.calibration.campaign.Campaign.write`) records
+a ``campaign_id`` and the SHA-256 of its ``samples.csv`` in ``setup.json`` (and in the
+``notes`` of ``truth.json``), so readers can tell files of different campaigns apart.
 """
 
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -41,7 +53,13 @@ from jwarp.plugins.measurements.base import Measurement
 
 SETUP_SCHEMA = "jwarp.calibration_setup"
 SETUP_VERSION = 1
-_FILE_KEYS = ("schema", "version", "robot", "description")
+_FILE_KEYS = ("schema", "version", "robot", "description", "campaign_id", "samples_sha256")
+#: a joint value beyond a limit by more than this fraction of the joint's range warns
+FAR_OUTSIDE = 0.1
+
+
+class DataWarning(UserWarning):
+    """A suspicious but readable value in a data file (e.g. a joint far outside its limits)."""
 
 
 @dataclass
@@ -53,6 +71,8 @@ class Setup:
     robot: str | None = None
     description: str = ""
     path: str | None = None
+    campaign_id: str | None = None     # simulated campaign this setup belongs to
+    samples_sha256: str | None = None  # SHA-256 of that campaign's samples.csv
 
 
 @dataclass
@@ -89,19 +109,47 @@ def setup_from_dict(doc: Any, where: str = "setup") -> Setup:
     robot = doc.get("robot")
     if robot is not None and not isinstance(robot, str):
         raise ValueError(f"{where}: robot: expected a robot name, got {robot!r}")
+    for key in ("campaign_id", "samples_sha256"):
+        if doc.get(key) is not None and not isinstance(doc[key], str):
+            raise ValueError(f"{where}: {key}: expected a string, got {doc[key]!r}")
     section = {k: v for k, v in doc.items() if k not in _FILE_KEYS}
     return Setup(plugin=plugin, section=section, robot=robot,
-                 description=str(doc.get("description", "")))
+                 description=str(doc.get("description", "")),
+                 campaign_id=doc.get("campaign_id"), samples_sha256=doc.get("samples_sha256"))
+
+
+def read_text(path: str | os.PathLike, what: str) -> tuple[str, bytes]:
+    """The text of a UTF-8 file (a leading byte order mark dropped) and its bytes.
+
+    Raises:
+        ValueError: the file is missing or unreadable (named as ``what``: e.g. ``data``),
+            or not UTF-8 (naming the file, line and column of the first bad byte).
+    """
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as f:
+            raw = f.read()
+    except FileNotFoundError:
+        raise ValueError(f"{what}: file not found: {path}") from None
+    except OSError as e:
+        raise ValueError(f"{what}: cannot read {path}: {e.strerror or e}") from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = raw.count(b"\n", 0, e.start) + 1
+        start = raw.rfind(b"\n", 0, e.start) + 1
+        col = len(raw[start:e.start].decode("utf-8", "replace")) + 1  # in characters
+        raise ValueError(f"{path}: line {line}, column {col}: not UTF-8 text (byte "
+                         f"0x{raw[e.start]:02x}); save the file as UTF-8") from None
+    return text, raw
 
 
 def read_setup(path: str | os.PathLike) -> Setup:
     """Read a setup file; malformed JSON or missing keys -> ValueError naming the file."""
     path = os.fspath(path)
+    text, _ = read_text(path, "setup")
     try:
-        with open(path, encoding="utf-8") as f:
-            doc = json.load(f)
-    except FileNotFoundError:
-        raise ValueError(f"setup: file not found: {path}") from None
+        doc = json.loads(text)
     except json.JSONDecodeError as e:
         raise ValueError(f"{path}: malformed JSON at line {e.lineno} column {e.colno}: "
                          f"{e.msg}") from None
@@ -117,6 +165,10 @@ def write_setup(path: str | os.PathLike, setup: Setup) -> None:
         doc["robot"] = setup.robot
     if setup.description:
         doc["description"] = setup.description
+    if setup.campaign_id:
+        doc["campaign_id"] = setup.campaign_id
+    if setup.samples_sha256:
+        doc["samples_sha256"] = setup.samples_sha256
     doc.update(setup.section)
     doc["plugin"] = setup.plugin
     atomic_write_text(os.fspath(path), json.dumps(_jsonable(doc), indent=1) + "\n")
@@ -138,18 +190,16 @@ def columns(robot: RobotModel, meas: Measurement) -> list[str]:
 def read_samples(path: str | os.PathLike, robot: RobotModel, meas: Measurement) -> Samples:
     """Read a samples CSV for ``robot`` and ``meas`` (see the module docstring)."""
     path = os.fspath(path)
-    try:
-        with open(path, newline="", encoding="utf-8") as f:
-            text = f.read()
-    except FileNotFoundError:
-        raise ValueError(f"data: file not found: {path}") from None
+    text, _ = read_text(path, "data")
     return parse_samples(text, robot, meas, where=path)
 
 
 def parse_samples(text: str, robot: RobotModel, meas: Measurement, where: str = "data"
                   ) -> Samples:
     """Parse CSV text (the content of a samples file)."""
-    reader = csv.reader(io.StringIO(text))
+    if text.startswith("\ufeff"):  # byte order mark
+        text = text[1:]
+    reader = csv.reader(io.StringIO(text, newline=""))
     header = None
     for header in reader:
         if header and any(h.strip() for h in header):
@@ -205,13 +255,41 @@ def parse_samples(text: str, robot: RobotModel, meas: Measurement, where: str = 
                                  f"pair index >= 0, got {v[bad]}")
             v = v.astype(np.int64)
         meta[name] = v
-    return Samples(q=a[:, :n].copy(), y=a[:, n + nm:].copy(), meta=meta,
-                   lines=np.asarray(lines, dtype=np.int64))
+    lines_a = np.asarray(lines, dtype=np.int64)
+    _warn_far_outside(robot, a[:, :n], lines_a, where)
+    return Samples(q=a[:, :n].copy(), y=a[:, n + nm:].copy(), meta=meta, lines=lines_a)
+
+
+def _warn_far_outside(robot: RobotModel, q: np.ndarray, lines: np.ndarray, where: str) -> None:
+    """A :class:`DataWarning` per joint with values beyond a limit by more than
+    :data:`FAR_OUTSIDE` of its range, naming the first such line."""
+    lim = np.asarray(robot.joint_limits, np.float64)
+    for j, joint in enumerate(robot.joints):
+        lo, hi = lim[j]
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            continue
+        margin = FAR_OUTSIDE * (hi - lo)
+        bad = np.flatnonzero((q[:, j] < lo - margin) | (q[:, j] > hi + margin))
+        if not len(bad):
+            continue
+        k = int(bad[0])
+        v = q[k, j]
+        hint = (" (degrees instead of radians?)"
+                if joint.type == "revolute" and abs(v) > 2 * math.pi else "")
+        more = f"; {len(bad)} rows in all" if len(bad) > 1 else ""
+        warnings.warn(f"{where}: line {lines[k]} (sample {k}): joint '{joint.name}' = {v:.6g} "
+                      f"is far outside its limits [{lo:.6g}, {hi:.6g}]{hint}{more}",
+                      DataWarning, stacklevel=3)
 
 
 def write_samples(path: str | os.PathLike, robot: RobotModel, meas: Measurement,
                   samples: Samples) -> None:
     """Write ``samples`` as CSV atomically (full float precision)."""
+    atomic_write_text(os.fspath(path), samples_text(robot, meas, samples))
+
+
+def samples_text(robot: RobotModel, meas: Measurement, samples: Samples) -> str:
+    """The CSV text of ``samples`` (what :func:`write_samples` writes)."""
     S = len(samples)
     if samples.y.shape != (S, meas.n_obs):
         raise ValueError(f"samples.y: expected shape ({S}, {meas.n_obs}), got {samples.y.shape}")
@@ -224,7 +302,12 @@ def write_samples(path: str | os.PathLike, robot: RobotModel, meas: Measurement,
         row += [str(int(m[s])) if m.dtype.kind in "iu" else repr(float(m[s])) for m in meta]
         row += [repr(float(v)) for v in samples.y[s]]
         w.writerow(row)
-    atomic_write_text(os.fspath(path), buf.getvalue())
+    return buf.getvalue()
+
+
+def sha256_hex(data: bytes | str) -> str:
+    """The SHA-256 of ``data`` (str: its UTF-8 bytes) in hex, as campaigns record it."""
+    return hashlib.sha256(data.encode("utf-8") if isinstance(data, str) else data).hexdigest()
 
 
 def parse_rows(spec: str | None, n: int, argname: str = "rows") -> slice:
