@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Throughput of the collision kernels (configurations per second).
 
-Times :meth:`jwarp.collision.CollisionModel.cost` (world + self-collision cost, with and
+Times :meth:`jwarp.world.collision.CollisionModel.cost` (world + self-collision cost, with and
 without the hand-written gradient, one launch on preallocated Warp arrays, the way a
 planner calls it in its loop), the ``wp.Tape`` gradient for comparison, and the
 minimum-distance kernel of the feasibility checks, and prints one fixed-width table.
@@ -40,8 +40,8 @@ wp.config.quiet = True
 if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
     wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
 
-from jwarp.arrays import init_warp  # noqa: E402
-from jwarp.collision import DEFAULT_EPS, CollisionModel, is_collision_free  # noqa: E402
+from jwarp.core.arrays import init_warp  # noqa: E402
+from jwarp.world.collision import DEFAULT_EPS, CollisionModel, is_collision_free  # noqa: E402
 from jwarp.registry import robot as get_robot  # noqa: E402
 from jwarp.world import feasible_simplex_world, random_configurations  # noqa: E402
 

@@ -43,10 +43,10 @@ if hasattr(wp.config, "quiet"):  # older Warp
 if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
     wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
 
-from jwarp.arrays import init_warp  # noqa: E402
-from jwarp.device_model import tables  # noqa: E402
+from jwarp.core.arrays import init_warp  # noqa: E402
+from jwarp.core.device import tables  # noqa: E402
 from jwarp.kinematics import (  # noqa: E402
-    ElasticLaunch, _elastic_args, fk, fk_elastic, jacobian, launch_fk)
+    ElasticLaunch, elastic_args, fk, fk_elastic, jacobian, launch_fk)
 from jwarp.model import RobotModel  # noqa: E402
 from jwarp.registry import robot as get_robot  # noqa: E402
 
@@ -459,7 +459,7 @@ class Bench:
             jacobian(model, q, self.args.tcp, device=dev, dtype=self.ftype, validate=False)
         ops["jacobian"] = rec
         ops["fk+jacobian"] = ops["fk"] + ops["jacobian"]
-        _, batch, tt, kap, rho0 = _elastic_args(model, q, KAPPA, 1.0, 1, 0.0, None, dev,
+        _, batch, tt, kap, rho0 = elastic_args(model, q, KAPPA, 1.0, 1, 0.0, None, dev,
                                                 self.ftype, False)
         for n_iter in ELASTIC_ITERS:
             run = ElasticLaunch(tt, batch.array, kap, rho0, 1.0)

@@ -51,12 +51,12 @@ if hasattr(wp.config, "quiet"):
     wp.config.quiet = True
 
 import jwarp  # noqa: E402
-from jwarp import collision  # noqa: E402
-from jwarp.arrays import init_warp  # noqa: E402
+from jwarp.world import collision  # noqa: E402
+from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.solvers import compensation as comp  # noqa: E402
 from jwarp.solvers import ik as IK  # noqa: E402
 from jwarp.solvers import planner as PL  # noqa: E402
-from jwarp.solvers.limits import sample_within_limits  # noqa: E402
+from jwarp.core.limits import sample_within_limits  # noqa: E402
 from jwarp.world import shelf_world  # noqa: E402
 from jwarp.world.io import parse_world_spec  # noqa: E402
 

@@ -1,7 +1,7 @@
 """Robot model: a tree of frames with DH rows, joints, masses, collision bodies.
 
 `RobotModel` is the single description every kernel and solver reads. It is plain
-Python/numpy (no Warp); :mod:`jwarp.device_model` turns it into device tables.
+Python/numpy (no Warp); :mod:`jwarp.core.device` turns it into device tables.
 
 Conventions (see ``docs/robot_schema.md``):
 

@@ -37,7 +37,7 @@ _SPHERE_COLOR = (80, 140, 220, 110)
 _CAPSULE_COLOR = (90, 190, 120, 140)
 
 
-def _rerun() -> Any:
+def rerun_module() -> Any:
     try:
         import rerun as rr
     except ImportError as e:  # pragma: no cover - depends on the machine
@@ -107,7 +107,7 @@ def log_robot(rec: Any, robot: Any, frames: Any, path: str = "robot", spheres: b
         axis_length: length of the drawn frame axes [m].
         color: RGB of the skeleton lines.
     """
-    rr = _rerun()
+    rr = rerun_module()
     model = get_robot(robot)
     f = _frames_array(model, frames)
     path = path.strip("/") or "robot"
@@ -156,7 +156,7 @@ def _q_batch(model: RobotModel, q_list: Any) -> np.ndarray:
 def open_recording(path: str | os.PathLike, application_id: str = "jwarp") -> Any:
     """A rerun RecordingStream saving to ``path`` (z up, right-handed); flush and
     disconnect it when done."""
-    rr = _rerun()
+    rr = rerun_module()
     rec = rr.RecordingStream(application_id)
     rec.save(str(path))
     rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -170,7 +170,7 @@ def atomic_recording(path: str | os.PathLike, application_id: str = "jwarp",
     ``path`` when the block ends without error (readers never see a partial file). On an
     error or interrupt the stream is closed and the temporary file removed; ``path``
     stays as it was. ``option`` names the path in errors (e.g. ``--save``)."""
-    _rerun()  # a clear error before any file is made
+    rerun_module()  # a clear error before any file is made
     with AtomicFile(path, option=option) as f:
         rec = open_recording(f.tmp, application_id)
         try:
@@ -202,7 +202,7 @@ def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,
     """
     from jwarp import kinematics
 
-    rr = _rerun()
+    rr = rerun_module()
     model = get_robot(robot)
     q = _q_batch(model, q_list)
     target = Path(path)
@@ -267,7 +267,7 @@ def save_calibration_rrd(path: str | os.PathLike, robot: Any, measurement: Any, 
     from jwarp.solvers.calibration.result import (group_norms, model_frames,
                                                   observation_groups)
 
-    rr = _rerun()
+    rr = rerun_module()
     model = get_robot(robot)
     qa = np.asarray(q, np.float64)
     ya = np.asarray(y, np.float64)

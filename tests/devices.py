@@ -5,7 +5,7 @@ import warp as wp
 
 
 def cuda_available() -> bool:
-    from jwarp.arrays import init_warp
+    from jwarp.core.arrays import init_warp
 
     init_warp()
     return wp.is_cuda_available()

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.plugins.measurements.base import Measurement, ParamBlock
+from jwarp.measurement import Measurement, ParamBlock
 from jwarp.solvers.calibration import (CalibrationProblem, CalibrationWarning, ParameterSpace,
                                        calibrate, error_stats, errors, observation_groups,
                                        predict)

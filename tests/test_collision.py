@@ -7,7 +7,7 @@ import pytest
 import warp as wp
 
 import jwarp
-from jwarp.collision import (CollisionModel, collision_cost, collision_pairs, is_collision_free,
+from jwarp.world.collision import (CollisionModel, collision_cost, collision_pairs, is_collision_free,
                              min_distances, rigid_pairs, self_distances, sphere_distances)
 from jwarp.world import World, random_configurations, simplex_world, world_from_occupancy
 

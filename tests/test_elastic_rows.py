@@ -8,12 +8,12 @@ import pytest
 import warp as wp
 
 import jwarp
-from jwarp import collision
-from jwarp.device_model import tables
-from jwarp.elastic_rows import CompensationRows
+from jwarp.world import collision
+from jwarp.core.device import tables
+from jwarp.kinematics.compensation import CompensationRows
 from jwarp.kernels import fk as fk_kernels
 from jwarp.solvers import planner as PL
-from jwarp.solvers.limits import sample_within_limits
+from jwarp.core.limits import sample_within_limits
 from jwarp.world import world_from_occupancy
 
 from devices import requires_cuda

@@ -310,7 +310,7 @@ def test_show_interrupt_keeps_old_file(capsys, monkeypatch, tmp_path):
      "jwarp: error: numeric overflow: (34, 'Numerical result out of range')"),
 ])
 def test_unexpected_exceptions_one_line_and_debug_traceback(capsys, monkeypatch, exc, expect):
-    import jwarp.cli as cli
+    import jwarp.cli.kinematics as cli
 
     def boom(args):
         raise exc

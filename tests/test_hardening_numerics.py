@@ -14,11 +14,11 @@ import warp as wp
 
 import jwarp
 from jwarp import kinematics as K
-from jwarp.autodiff import tape_jacobian
+from jwarp.kinematics.autodiff import tape_jacobian
 from jwarp.cli import main
-from jwarp.collision import collision_cost, is_collision_free, min_distances
-from jwarp.device_model import tables
-from jwarp.elastic_rows import CompensationRows
+from jwarp.world.collision import collision_cost, is_collision_free, min_distances
+from jwarp.core.device import tables
+from jwarp.kinematics.compensation import CompensationRows
 from jwarp.solvers import planner as PL
 from jwarp.solvers.ik import ik
 from jwarp.world import world_from_occupancy

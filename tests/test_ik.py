@@ -6,9 +6,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import jwarp
-from jwarp import collision
+from jwarp.world import collision
 from jwarp.solvers import ik as IK
-from jwarp.solvers.limits import sample_within_limits, within_limits
+from jwarp.core.limits import sample_within_limits, within_limits
 from jwarp.world import shelf_world
 
 
@@ -118,7 +118,7 @@ def test_bad_inputs():
 
 def test_torch_uik_matches_numpy_gradient():
     torch = pytest.importorskip("torch")
-    from jwarp.solvers.torch_costs import u_ik
+    from jwarp.learn.torch_costs import u_ik
 
     robot = jwarp.robot("arm7")
     world = shelf_world()

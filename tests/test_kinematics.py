@@ -6,7 +6,7 @@ import warp as wp
 
 import jwarp
 from jwarp import kinematics as K
-from jwarp.autodiff import tape_jacobian
+from jwarp.kinematics.autodiff import tape_jacobian
 
 from devices import requires_cuda
 from reference import (kappa_uniform, ref_fk, ref_fk_elastic, ref_jacobian_fd, ref_torques,
@@ -351,7 +351,7 @@ def test_cuda_matches_cpu_and_torch_autograd_on_cuda():
 def test_kernel_cos_sin_matches_numpy(dtype):
     """The kernels' cos/sin (a polynomial in float32) against numpy over +-60 rad,
     including the quadrant boundaries k pi/4 where the fix-up switches branches."""
-    from jwarp.device_model import scalar_type
+    from jwarp.core.device import scalar_type
     from jwarp.kernels import fk as fk_kernels
 
     scalar = scalar_type(dtype)
@@ -435,7 +435,7 @@ def test_float32_elastic_equilibrium_matches_float64():
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_component_major_fk_layout_matches_fk(dtype):
     """launch_fk(component_major=True): memory (n_frames, 4, 4, B), viewed (B, n_frames, 4, 4)."""
-    from jwarp.device_model import tables
+    from jwarp.core.device import tables
     model = jwarp.robot("justin19")
     q = _sample(model, 64, seed=16)
     t = tables(model, "cpu", dtype)

@@ -460,7 +460,7 @@ def test_relative_same_frame_cancels(hand):
 
 # ------------------------------------------------------ registry, validation
 def test_registry_lists_and_looks_up_plugins(hand):
-    from jwarp.plugins.measurements.base import Measurement
+    from jwarp.measurement import Measurement
     assert {"cartesian", "image", "contact", "relative"} <= set(jwarp.measurements())
     for name in ("cartesian", "image", "contact", "relative"):
         cls = measurement(name)

@@ -5,10 +5,10 @@ import pytest
 import warp as wp
 
 import jwarp
-from jwarp.arrays import init_warp
+from jwarp.core.arrays import init_warp
 from jwarp.kernels import path as PK
 from jwarp.solvers import planner
-from jwarp.solvers.limits import limit_tables, limit_violation, project_numpy, within_limits
+from jwarp.core.limits import limit_tables, limit_violation, project_numpy, within_limits
 
 init_warp()
 F64 = wp.float64

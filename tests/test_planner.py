@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp import collision
+from jwarp.world import collision
 from jwarp.solvers import planner as PL
-from jwarp.solvers.limits import within_limits
+from jwarp.core.limits import within_limits
 from jwarp.world import world_from_occupancy
 
 N_CELLS = 64
@@ -153,7 +153,7 @@ def test_bad_inputs_give_clear_errors(block_world, wall_world):
 
 def test_torch_upath_matches_numpy_gradient(block_world):
     torch = pytest.importorskip("torch")
-    from jwarp.solvers.torch_costs import u_path
+    from jwarp.learn.torch_costs import u_path
 
     robot = jwarp.robot("planar4")
     rng = np.random.default_rng(3)

@@ -413,7 +413,7 @@ def test_shelf_world_boards_and_back_wall():
 
     w = shelf_world()
     assert w.voxel_size == pytest.approx(0.04)
-    from jwarp.collision import sdf_query
+    from jwarp.world.collision import sdf_query
 
     d = np.asarray(sdf_query(w, np.array([[0.9, 0.0, 0.55], [0.9, 0.0, 0.8], [1.12, 0.0, 0.3],
                                           [0.0, 0.0, 0.8]])))

@@ -1,6 +1,6 @@
 """Collision kernels: SDF lookup, world and self-collision costs, sphere distances.
 
-Math only; the host side is :mod:`jwarp.collision`. Built per scalar type by
+Math only; the host side is :mod:`jwarp.world.collision`. Built per scalar type by
 :func:`kernels` (float32 or float64) and batched over configurations (N = paths x
 substeps flattened): one thread per configuration.
 

@@ -4,7 +4,7 @@ All kernels are built per scalar type by :func:`kernels` (float32 or float64) an
 batched over configurations: one thread per configuration walks the frames in
 topological order.
 
-Frame tables (the *Model*, see :class:`jwarp.device_model.KinematicsTables`):
+Frame tables (the *Model*, see :class:`jwarp.core.device.KinematicsTables`):
 
 * ``order``        (n_frames,) int32  frames, parents first
 * ``parent``       (n_frames,) int32  parent index, -1 for a root

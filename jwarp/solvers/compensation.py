@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.kinematics import fk_elastic, kappa_array
+from jwarp.kinematics.equilibrium import fk_elastic
+from jwarp.kinematics.launch import kappa_array
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKResult, ik
 from jwarp.solvers.planner import PathObjective, PlanResult, plan

@@ -30,16 +30,17 @@ from typing import Any, Callable
 import numpy as np
 import warp as wp
 
-from jwarp.arrays import finite_as, init_warp, real_array, real_number, resolve_device
-from jwarp.device_model import numpy_dtype, scalar_type, tables
+from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
+from jwarp.core.device import numpy_dtype, scalar_type, tables
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik as ik_kernels
 from jwarp.kernels import path as path_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
-from jwarp.elastic_rows import CompensationRows
-from jwarp.solvers.limits import limit_tables, sample_within_limits, within_limits
-from jwarp.solvers.planner import _collision, collision_free
+from jwarp.kinematics.compensation import CompensationRows
+from jwarp.core.limits import limit_tables, sample_within_limits, within_limits
+from jwarp.solvers.planner import collision_free
+from jwarp.world import collision
 
 
 @dataclass
@@ -140,7 +141,7 @@ class IKObjective:
         init_warp()
         self.robot = get_robot(robot)
         self.frame = self.robot.frame_index(frame)
-        _collision().check_world(self.robot, world)
+        collision.check_world(self.robot, world)
         self.world = world
         self.weights = weights or IKWeights()
         self.weights.validate()
@@ -169,7 +170,7 @@ class IKObjective:
         self.grad_a = wp.zeros((B, n), dtype=sc, device=dev)
         self.coll_cost = wp.zeros(B, dtype=sc, device=dev)
         self.coll_grad = wp.zeros((B, n), dtype=sc, device=dev)
-        self.cm = _collision().collision_model(self.robot, world, device=dev, dtype=self.npdt)
+        self.cm = collision.collision_model(self.robot, world, device=dev, dtype=self.npdt)
         self._launches: dict = {}
         self.set_default(q_default)
         #: elastic compensation rows (None: the rigid robot)
@@ -194,7 +195,7 @@ class IKObjective:
     def set_default(self, q_default: Any) -> None:
         """Default pose (n_dof,) or per configuration (B, n_dof); None: mid of the limits
         (projected onto the linear limits)."""
-        from jwarp.solvers.limits import project_numpy
+        from jwarp.core.limits import project_numpy
 
         if q_default is None:
             q_default = project_numpy(self.robot, self.robot.joint_limits.mean(axis=1))
@@ -323,7 +324,7 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
     init_warp()
     model = get_robot(robot)
     fi = model.frame_index(frame)
-    _collision().check_world(model, world)
+    collision.check_world(model, world)
     T, lead = _targets(target)
     for name, v, lo in (("n_starts", n_starts, 1), ("max_iterations", max_iterations, 0),
                         ("check_every", check_every, 1)):

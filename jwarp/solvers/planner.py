@@ -6,7 +6,7 @@ between the waypoints make the swept volume explicit. The objective (eq. 3.16)
 
     U_path(Q) = lam_w U_w(Q) + lam_s U_s(Q) + lam_l U_l(Q)
 
-sums the world and self-collision costs (eq. 3.8-3.12, :mod:`jwarp.collision`) over all
+sums the world and self-collision costs (eq. 3.8-3.12, :mod:`jwarp.world.collision`) over all
 substeps and adds the normalised length cost (eq. 3.5). Gradient descent with a fixed
 step (eq. 3.18), a per-joint step clamp and a projection onto the joint limits (box plus
 linear limits such as justin19's coupled torso) runs for many paths in one launch per
@@ -18,7 +18,7 @@ feasible (early stop); :func:`plan` returns per problem the best (lowest U_path)
 path of its multi-starts, or the lowest-cost infeasible one with ``feasible = False``.
 
 With ``kappa`` (elastic compensation, elastic paper section V, Fig. 2.11) the robot is the
-elastic model (:mod:`jwarp.elastic_rows`): the collision kernel computes the frames
+elastic model (:mod:`jwarp.kinematics.compensation`): the collision kernel computes the frames
 at the DH rows kept from the previous iteration, one torque update at every waypoint from
 those frames gives the rows of the next iteration (substeps take their nearest
 waypoint's), and the collision gradient is taken with the rows fixed.
@@ -34,13 +34,14 @@ from typing import Any, Callable
 import numpy as np
 import warp as wp
 
-from jwarp.arrays import finite_as, init_warp, real_array, real_number, resolve_device
-from jwarp.device_model import numpy_dtype, scalar_type, tables
+from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
+from jwarp.core.device import numpy_dtype, scalar_type, tables
+from jwarp.world import collision
 from jwarp.kernels import path as path_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
-from jwarp.elastic_rows import CompensationRows
-from jwarp.solvers.limits import (describe_violation, limit_tables, sample_within_limits,
+from jwarp.kinematics.compensation import CompensationRows
+from jwarp.core.limits import (describe_violation, limit_tables, sample_within_limits,
                                   within_limits)
 
 #: floor of the length-cost normaliser 1/2 |q_goal - q_start|^2 [rad^2]
@@ -110,19 +111,11 @@ class PlanResult:
 
 
 # ====================================================================== helpers
-def _collision() -> Any:
-    try:
-        from jwarp import collision
-    except ImportError as e:  # pragma: no cover - until the collision module lands
-        raise ImportError("jwarp.solvers.planner needs jwarp.collision") from e
-    return collision
-
-
 def check_world(robot: RobotModel, world: Any) -> None:
     """TypeError/ValueError unless ``world`` is a World of the robot's workspace dimension."""
     if world is None:
         raise ValueError("world: required (a jwarp.world.World)")
-    _collision().check_world(robot, world)
+    collision.check_world(robot, world)
 
 
 def _configs(x: Any, robot: RobotModel, name: str) -> np.ndarray:
@@ -173,7 +166,7 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
     rho) the elastic model in its torque equilibrium (:func:`elastic_equilibrium`, to
     1e-7 rad: 0.1 um at 1 m). A configuration whose equilibrium does not converge is not
     collision-free (its frames are unknown)."""
-    col = _collision()
+    col = collision
     q = np.ascontiguousarray(real_array(q, "q"))
     converged = None
     if rho is None and kappa is not None:
@@ -187,7 +180,7 @@ def elastic_equilibrium(robot: Any, q: np.ndarray, kappa: Any, device: Any = Non
                         ) -> tuple[np.ndarray, np.ndarray]:
     """The elastic model's equilibrium at q (N, n_dof) as the feasibility checks solve it
     (:data:`ELASTIC_CHECK`, float64): ``(rho (N, n_frames, 5), converged (N,) bool)``."""
-    from jwarp.kinematics import fk_elastic
+    from jwarp.kinematics.equilibrium import fk_elastic
 
     res = fk_elastic(robot, np.asarray(q, np.float64), kappa, device=device, dtype=np.float64,
                      **ELASTIC_CHECK)
@@ -241,7 +234,7 @@ def _check_n_sub(n_substeps: Any) -> int:
 
 def sphere_centres(robot: RobotModel, q: np.ndarray, device: Any = None) -> np.ndarray:
     """World centres (N, n_spheres, 3) [m] of the collision spheres at q (N, n_dof)."""
-    from jwarp.kinematics import fk
+    from jwarp.kinematics.fk import fk
 
     frames = np.asarray(fk(robot, np.asarray(q, np.float64), device=device))
     idx, pos, _ = robot.sphere_arrays()
@@ -368,7 +361,7 @@ class PathObjective:
         self.active = wp.ones(self.P, dtype=wp.int32, device=dev)
         self.sub_cost = wp.zeros(self.N, dtype=sc, device=dev)
         self.sub_grad = wp.zeros((self.N, self.n), dtype=sc, device=dev)
-        self.cm = _collision().collision_model(self.robot, world, device=dev, dtype=self.npdt)
+        self.cm = collision.collision_model(self.robot, world, device=dev, dtype=self.npdt)
         #: elastic compensation rows (None: the rigid robot)
         self.compensation: CompensationRows | None = None
         if kappa is not None:
@@ -611,7 +604,7 @@ def _initial(model: RobotModel, q0: np.ndarray, q1: np.ndarray, initial: Any, n_
     g = np.array(np.broadcast_to(g, (B,) + g.shape[1:]))
     g[:, :, 0] = q0[:, None]
     g[:, :, -1] = q1[:, None]
-    from jwarp.solvers.limits import project_numpy
+    from jwarp.core.limits import project_numpy
 
     return project_numpy(model, g)
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.arrays import real_number
+from jwarp.core.arrays import real_number
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.world.sdf import World, grid_geometry
@@ -48,7 +48,7 @@ def feasible_fraction(robot: Any, world: World | None, n: int = 1000, seed: int 
                       margin: float = 0.0, device: Any = None) -> float:
     """Fraction of ``n`` random configurations (:func:`random_configurations`) whose
     spheres keep more than ``margin`` [m] from the world and from each other."""
-    from jwarp.collision import is_collision_free
+    from jwarp.world.collision import is_collision_free
 
     model = get_robot(robot)
     q = random_configurations(model, n, seed)
@@ -59,7 +59,7 @@ def feasible_fraction(robot: Any, world: World | None, n: int = 1000, seed: int 
 def fixed_spheres(robot: Any, pad: float = 0.0, device: Any = None) -> list[tuple[np.ndarray, float]]:
     """Collision spheres on frames that no joint moves (the robot's fixed base), as
     ``(centre (workspace_dim,) [m], radius + pad [m])`` in the base frame."""
-    from jwarp.kinematics import fk
+    from jwarp.kinematics.fk import fk
 
     model = get_robot(robot)
     pad = real_number(pad, "pad")
@@ -88,7 +88,7 @@ def robot_reach(robot: Any, n: int = 2000, seed: int = 0, device: Any = None) ->
     """(workspace_dim, 2) [m] box around every collision sphere of ``n`` random
     configurations (centres -/+ radii): the space a world for this robot must cover.
     Cached per robot, ``n`` and ``seed``."""
-    from jwarp.kinematics import fk
+    from jwarp.kinematics.fk import fk
 
     model = get_robot(robot)
     cache = _REACH.setdefault(model, {})

@@ -1,14 +1,6 @@
-"""World files (``.npz``) and the world specification strings of the CLI.
-
-File format ``jwarp.world`` version 1 (numpy ``.npz``, compressed, no pickles):
-
-* ``format``     str  "jwarp.world"
-* ``version``    int  1
-* ``sdf``        (nx, ny[, nz]) float32/float64 [m], negative inside obstacles
-* ``limits``     (dim, 2) float64 [m] first and last cell centre per axis
-* ``voxel_size`` float64 [m]
-* ``occupancy``  bool grid (optional)
-* ``meta``       str  JSON object (optional)
+"""World specification strings of the CLI, and the world files (``.npz``; their format and
+:func:`save_world` / :func:`load_world` live beside :class:`~jwarp.world.sdf.World` in
+:mod:`jwarp.world.sdf`, re-exported here).
 
 World specifications (:func:`parse_world_spec`): ``"simplex:seed=3,threshold=0.4"``
 or a path to a ``.npz`` file.
@@ -16,103 +8,15 @@ or a path to a ``.npz`` file.
 
 from __future__ import annotations
 
-import json
 import math
 import os
-import zipfile
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from jwarp.atomic import AtomicFile
-from jwarp.world.sdf import World
+from jwarp.world.sdf import FORMAT, VERSION, World, load_world, save_world
 
 __all__ = ["FORMAT", "VERSION", "save_world", "load_world", "parse_world_spec", "SPEC_KEYS"]
-
-FORMAT = "jwarp.world"
-VERSION = 1
-
-
-def save_world(world: World, path: str | os.PathLike) -> None:
-    """Write ``world`` to ``path`` (.npz) via a temporary file in the same folder and a
-    rename, so readers never see a partial file."""
-    if not isinstance(world, World):
-        raise TypeError(f"world: expected a World, got {type(world).__name__}")
-    try:
-        meta = json.dumps(world.meta)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"world.meta: not JSON serialisable: {e}") from e
-    arrays: dict[str, np.ndarray] = dict(
-        format=np.array(FORMAT), version=np.array(VERSION, np.int64), sdf=world.sdf,
-        limits=world.limits, voxel_size=np.array(world.voxel_size, np.float64),
-        meta=np.array(meta))
-    if world.occupancy is not None:
-        arrays["occupancy"] = world.occupancy
-    with AtomicFile(path) as f:
-        with open(f.tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-            fh.flush()
-            os.fsync(fh.fileno())
-
-
-def load_world(path: str | os.PathLike) -> World:
-    """Read a world written by :func:`save_world`. Any malformed or unreadable file
-    raises ValueError naming the file and the problem."""
-    path = Path(path)
-    if not path.exists():
-        raise ValueError(f"path: world file '{path}' does not exist")
-    if path.is_dir():
-        raise ValueError(f"{path}: is a folder, not a .npz world file")
-    try:
-        with open(path, "rb") as fh:  # OSError if unreadable
-            is_zip = zipfile.is_zipfile(fh)
-        if not is_zip:  # np.load would try .npy and pickles next
-            raise ValueError(f"{path}: not a readable .npz world file (not a zip archive, "
-                             f"or truncated)")
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except ValueError as e:
-        if str(e).startswith(f"{path}: "):
-            raise
-        raise ValueError(f"{path}: not a readable .npz world file: {e}") from e
-    except (OSError, EOFError, zipfile.BadZipFile, KeyError, MemoryError,
-            NotImplementedError, RuntimeError) as e:
-        raise ValueError(f"{path}: not a readable .npz world file: "
-                         f"{' '.join(str(e).split()) or type(e).__name__}") from e
-    if not isinstance(data, dict) or "format" not in data:
-        raise ValueError(f"{path}: not a jwarp world file (no 'format' entry)")
-    if str(data["format"]) != FORMAT:
-        raise ValueError(f"{path}: format '{data['format']}' is not '{FORMAT}'")
-    try:
-        version = int(data.get("version", -1))
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"{path}: malformed 'version'") from e
-    if version != VERSION:
-        raise ValueError(f"{path}: unsupported world file version {version} (expected {VERSION})")
-    for key in ("sdf", "limits", "voxel_size"):
-        if key not in data:
-            raise ValueError(f"{path}: missing '{key}'")
-    meta: dict = {}
-    if "meta" in data:
-        try:
-            meta = json.loads(str(data["meta"]))
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{path}: 'meta' is not valid JSON: {e}") from e
-        if not isinstance(meta, dict):
-            raise ValueError(f"{path}: 'meta' is not a JSON object")
-    try:
-        if data["voxel_size"].shape != ():
-            raise ValueError(f"voxel_size: expected a scalar, got shape {data['voxel_size'].shape}")
-        if data["sdf"].dtype not in (np.float32, np.float64):
-            raise ValueError(f"sdf: expected float32 or float64, got {data['sdf'].dtype}")
-        if data["voxel_size"].dtype.kind not in "iuf":
-            raise ValueError(f"voxel_size: expected a number [m], got {data['voxel_size']!r}")
-        return World(data["sdf"], data["limits"], float(data["voxel_size"]),
-                     data.get("occupancy"), meta)
-    except (TypeError, ValueError, OverflowError) as e:
-        raise ValueError(f"{path}: {e}") from e
-
 
 #: keys of a ``simplex:`` specification and their types
 SPEC_KEYS = {
@@ -148,7 +52,7 @@ def parse_world_spec(spec: Any, robot: Any = None) -> World:
             samples would need more than the available memory; checked before anything
             is allocated, the message gives the grid and the figure.
     """
-    from jwarp.collision import check_world
+    from jwarp.world.collision import check_world
     from jwarp.registry import robot as get_robot
 
     model = None if robot is None else get_robot(robot)

@@ -21,17 +21,39 @@ which is the exact distance to the cube surface along grid axes and overestimate
 at most ``(sqrt(dim) - 1) / 2`` voxels diagonally. Interpolation puts D = 0 on the
 faces between occupied and free cells. A grid without any occupied (free) cell gets
 ``+`` (``-``) the length of the grid box diagonal plus one voxel everywhere.
+
+File format ``jwarp.world`` version 1 (:func:`save_world`, :func:`load_world`; numpy
+``.npz``, compressed, no pickles):
+
+* ``format``     str  "jwarp.world"
+* ``version``    int  1
+* ``sdf``        (nx, ny[, nz]) float32/float64 [m], negative inside obstacles
+* ``limits``     (dim, 2) float64 [m] first and last cell centre per axis
+* ``voxel_size`` float64 [m]
+* ``occupancy``  bool grid (optional)
+* ``meta``       str  JSON object (optional)
 """
 
 from __future__ import annotations
 
+import json
+import os
+import zipfile
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+import warp as wp
 from scipy import ndimage
 
-__all__ = ["World", "grid_geometry", "world_from_occupancy", "world_from_mesh",
+from jwarp.atomic import AtomicFile
+from jwarp.core.arrays import finite_as, init_warp, real_array, resolve_device
+from jwarp.core.device import scalar_type
+from jwarp.kernels import collision as ck
+
+__all__ = ["FORMAT", "VERSION", "World", "grid_geometry", "load_world", "save_world", "sdf_query",
+           "world_from_occupancy", "world_from_mesh",
            "world_from_points"]
 
 DEFAULT_CELLS = 64
@@ -141,22 +163,16 @@ class World:
     def distance(self, points: Any, *, grad: bool = False, device: Any = "cpu") -> Any:
         """Interpolated signed distance [m] at ``points`` (..., dim) [m] (and its spatial
         gradient (..., dim) if ``grad``), with the kernel the cost functions use."""
-        from jwarp.collision import sdf_query
-
         return sdf_query(self, points, grad=grad, device=device)
 
     # --------------------------------------------------------------------- I/O
     def save(self, path: Any) -> None:
-        """Write the world as ``.npz`` atomically (see :mod:`jwarp.world.io`)."""
-        from jwarp.world.io import save_world
-
+        """Write the world as ``.npz`` atomically (format: module docstring)."""
         save_world(self, path)
 
     @classmethod
     def load(cls, path: Any) -> "World":
         """Read a world written by :meth:`save`; a malformed file raises ValueError."""
-        from jwarp.world.io import load_world
-
         return load_world(path)
 
     def __repr__(self) -> str:
@@ -318,7 +334,7 @@ def world_from_mesh(mesh: Any, limits: Any, voxel_size: float | None = None, *,
     """
     import warp as wp
 
-    from jwarp.arrays import init_warp, resolve_device
+    from jwarp.core.arrays import init_warp, resolve_device
     from jwarp.kernels.collision import mesh_sdf_kernel
 
     if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
@@ -353,3 +369,127 @@ def world_from_mesh(mesh: Any, limits: Any, voxel_size: float | None = None, *,
               outputs=[out], device=dev)
     sdf = out.numpy().astype(dtype)
     return World(sdf, lim, h, sdf < 0, {"source": "mesh", "faces": int(len(f))})
+
+
+FORMAT = "jwarp.world"
+VERSION = 1
+
+
+def save_world(world: World, path: str | os.PathLike) -> None:
+    """Write ``world`` to ``path`` (.npz) via a temporary file in the same folder and a
+    rename, so readers never see a partial file."""
+    if not isinstance(world, World):
+        raise TypeError(f"world: expected a World, got {type(world).__name__}")
+    try:
+        meta = json.dumps(world.meta)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"world.meta: not JSON serialisable: {e}") from e
+    arrays: dict[str, np.ndarray] = dict(
+        format=np.array(FORMAT), version=np.array(VERSION, np.int64), sdf=world.sdf,
+        limits=world.limits, voxel_size=np.array(world.voxel_size, np.float64),
+        meta=np.array(meta))
+    if world.occupancy is not None:
+        arrays["occupancy"] = world.occupancy
+    with AtomicFile(path) as f:
+        with open(f.tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+            fh.flush()
+            os.fsync(fh.fileno())
+
+
+def load_world(path: str | os.PathLike) -> World:
+    """Read a world written by :func:`save_world`. Any malformed or unreadable file
+    raises ValueError naming the file and the problem."""
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"path: world file '{path}' does not exist")
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder, not a .npz world file")
+    try:
+        with open(path, "rb") as fh:  # OSError if unreadable
+            is_zip = zipfile.is_zipfile(fh)
+        if not is_zip:  # np.load would try .npy and pickles next
+            raise ValueError(f"{path}: not a readable .npz world file (not a zip archive, "
+                             f"or truncated)")
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except ValueError as e:
+        if str(e).startswith(f"{path}: "):
+            raise
+        raise ValueError(f"{path}: not a readable .npz world file: {e}") from e
+    except (OSError, EOFError, zipfile.BadZipFile, KeyError, MemoryError,
+            NotImplementedError, RuntimeError) as e:
+        raise ValueError(f"{path}: not a readable .npz world file: "
+                         f"{' '.join(str(e).split()) or type(e).__name__}") from e
+    if not isinstance(data, dict) or "format" not in data:
+        raise ValueError(f"{path}: not a jwarp world file (no 'format' entry)")
+    if str(data["format"]) != FORMAT:
+        raise ValueError(f"{path}: format '{data['format']}' is not '{FORMAT}'")
+    try:
+        version = int(data.get("version", -1))
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{path}: malformed 'version'") from e
+    if version != VERSION:
+        raise ValueError(f"{path}: unsupported world file version {version} (expected {VERSION})")
+    for key in ("sdf", "limits", "voxel_size"):
+        if key not in data:
+            raise ValueError(f"{path}: missing '{key}'")
+    meta: dict = {}
+    if "meta" in data:
+        try:
+            meta = json.loads(str(data["meta"]))
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{path}: 'meta' is not valid JSON: {e}") from e
+        if not isinstance(meta, dict):
+            raise ValueError(f"{path}: 'meta' is not a JSON object")
+    try:
+        if data["voxel_size"].shape != ():
+            raise ValueError(f"voxel_size: expected a scalar, got shape {data['voxel_size'].shape}")
+        if data["sdf"].dtype not in (np.float32, np.float64):
+            raise ValueError(f"sdf: expected float32 or float64, got {data['sdf'].dtype}")
+        if data["voxel_size"].dtype.kind not in "iuf":
+            raise ValueError(f"voxel_size: expected a number [m], got {data['voxel_size']!r}")
+        return World(data["sdf"], data["limits"], float(data["voxel_size"]),
+                     data.get("occupancy"), meta)
+    except (TypeError, ValueError, OverflowError) as e:
+        raise ValueError(f"{path}: {e}") from e
+
+
+def sdf_query(world: World, points: Any, *, grad: bool = False, device: Any = "cpu"
+              ) -> Any:
+    """Interpolated signed distance [m] of ``world`` at ``points`` (..., dim) [m] (numpy),
+    with the lookup of the cost kernels. Returns (...,) or, with ``grad``, a tuple
+    ``(dist (...,), gradient (..., dim))``."""
+    if not isinstance(world, World):
+        raise TypeError(f"world: expected a jwarp.world.World, got {type(world).__name__}")
+    p = real_array(points, "points")
+    if p.ndim < 1 or p.shape[-1] != world.dim:
+        raise ValueError(f"points: expected shape (..., {world.dim}) for a {world.dim}D world, "
+                         f"got {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise ValueError("points: contains NaN or inf")
+    init_warp()
+    dev = resolve_device(device)
+    dt = world.sdf.dtype
+    scalar = scalar_type(dt)
+    k = ck.kernels(scalar)
+    lead = p.shape[:-1]
+    flat = p.reshape(-1, world.dim)
+    p3 = np.zeros((len(flat), 3), dt)
+    p3[:, :world.dim] = finite_as(flat, dt, "points")
+    grid = world.sdf if world.dim == 3 else world.sdf[:, :, None]
+    o = np.zeros(3)
+    o[:world.dim] = world.limits[:, 0]
+    n = max(len(flat), 1)
+    dist = wp.empty(n, dtype=scalar, device=dev)
+    g = wp.empty(n, dtype=k.vec3, device=dev)
+    if len(flat):
+        wp.launch(k.sdf_query, dim=len(flat),
+                  inputs=[wp.array(p3, dtype=k.vec3, device=dev),
+                          wp.array(np.ascontiguousarray(grid), dtype=scalar, device=dev),
+                          k.vec3(*o), 1.0 / world.voxel_size, world.dim],
+                  outputs=[dist, g], device=dev)
+    d = dist.numpy()[:len(flat)].reshape(lead)
+    if not grad:
+        return d
+    return d, g.numpy()[:len(flat), :world.dim].reshape(lead + (world.dim,))

@@ -25,7 +25,7 @@ import numpy as np
 
 from jwarp.model import RobotModel
 from jwarp.plugins.measurements import geometry as g
-from jwarp.plugins.measurements.base import Measurement, ParamBlock
+from jwarp.measurement import Measurement, ParamBlock
 from jwarp.registry import hookimpl
 
 

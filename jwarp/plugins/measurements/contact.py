@@ -49,7 +49,7 @@ import numpy as np
 
 from jwarp.model import RobotModel
 from jwarp.plugins.measurements import geometry as g
-from jwarp.plugins.measurements.base import Measurement, ParamBlock
+from jwarp.measurement import Measurement, ParamBlock
 from jwarp.registry import hookimpl
 
 BODY_KEYS = {"name", "type", "frame", "center", "p0", "p1", "radius", "sigma_radius",

@@ -34,7 +34,7 @@ from scipy.spatial.transform import Rotation
 
 from jwarp.model import RobotModel
 from jwarp.plugins.measurements import geometry as g
-from jwarp.plugins.measurements.base import Measurement, ParamBlock
+from jwarp.measurement import Measurement, ParamBlock
 from jwarp.registry import hookimpl
 
 INTRINSIC_NAMES = ("fx", "fy", "cx", "cy", "xi")

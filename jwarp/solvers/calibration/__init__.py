@@ -10,11 +10,11 @@ Typical use::
     error_stats(errors(res.robot, meas, res.params, q_test, y_test))
 """
 
-from jwarp.solvers.calibration.map import (CalibrationProblem, ModelState, Progress, calibrate,
-                                           check_samples)
+from jwarp.solvers.calibration.map import CalibrationProblem, ModelState, Progress, calibrate
 from jwarp.solvers.calibration.params import (DEFAULT_SIGMA, ROBOT_GROUPS, ParameterSpace,
                                               influencing_frames, influencing_masses,
                                               parse_groups, perturb_robot)
+from jwarp.solvers.calibration.samples import check_samples
 from jwarp.solvers.calibration.result import (CalibrationResult, CalibrationWarning, Direction,
                                               error_stats, errors, model_frames,
                                               observation_groups, predict)

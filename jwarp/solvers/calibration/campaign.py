@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from jwarp.atomic import AtomicFolder, atomic_write_text, clean_stale
 from jwarp.model import RobotModel
-from jwarp.plugins.measurements.base import Measurement
+from jwarp.measurement import Measurement
 from jwarp.solvers.calibration.files import Samples, Setup, make_measurement, parse_samples, \
     read_setup, read_text, samples_text, sha256_hex, write_setup
 from jwarp.solvers.calibration.params import perturb_robot

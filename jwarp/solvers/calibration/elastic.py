@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jwarp.device_model import frame_mass_model
+from jwarp.core.device import frame_mass_model
 from jwarp.model import RobotModel
 
 #: DH column of each elastic axis [alpha, beta, theta] (order of ``kappa`` / ``tau``)

@@ -49,7 +49,7 @@ import numpy as np
 
 from jwarp.atomic import atomic_write_text
 from jwarp.model import RobotModel
-from jwarp.plugins.measurements.base import Measurement
+from jwarp.measurement import Measurement
 
 SETUP_SCHEMA = "jwarp.calibration_setup"
 SETUP_VERSION = 1

@@ -28,8 +28,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from jwarp import kinematics as K
-from jwarp.arrays import to_output
-from jwarp.device_model import with_frame_masses
+from jwarp.core.arrays import to_output
+from jwarp.core.device import with_frame_masses
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.calibration.elastic import (ElasticComponents, equilibrium_jacobian,
@@ -38,6 +38,7 @@ from jwarp.solvers.calibration.elastic import (ElasticComponents, equilibrium_ja
 from jwarp.solvers.calibration.params import (KIND_DH, KIND_KAPPA, KIND_MASS, KIND_MEAS,
                                               MASS_GROUP, ParameterSpace, parse_groups)
 from jwarp.solvers.calibration.result import CalibrationResult, build_result
+from jwarp.solvers.calibration.samples import check_samples
 
 
 class ModelState(NamedTuple):
@@ -66,53 +67,6 @@ class Progress(NamedTuple):
     cost: float       # 0.5 |r|^2 of the whitened problem
 
 
-def check_samples(robot: RobotModel, measurement: Any, q: Any, y: Any,
-                  meta: Mapping[str, Any] | None = None
-                  ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray] | None]:
-    """Validate joint values q (S, n_dof), observations y (S, m) and per-sample meta
-    columns {name: (S,)}; returns float64 copies. Errors name the argument."""
-    try:
-        qa = np.array(q, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise TypeError("q: expected an array of joint values") from None
-    if qa.ndim != 2 or qa.shape[1] != robot.n_dof:
-        raise ValueError(f"q: expected shape (S, {robot.n_dof}) for robot '{robot.name}', "
-                         f"got {qa.shape}")
-    if qa.shape[0] == 0:
-        raise ValueError("q: no samples")
-    bad = ~np.all(np.isfinite(qa), axis=1)
-    if bad.any():
-        raise ValueError(f"q: NaN or inf in sample(s) {np.nonzero(bad)[0][:10].tolist()}")
-    m = len(measurement.obs_names)
-    try:
-        ya = np.array(y, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise TypeError("y: expected an array of observations") from None
-    if ya.shape != (qa.shape[0], m):
-        raise ValueError(f"y: expected shape ({qa.shape[0]}, {m}) (samples of q x observations "
-                         f"{measurement.obs_names}), got {ya.shape}")
-    bad = ~np.all(np.isfinite(ya), axis=1)
-    if bad.any():
-        raise ValueError(f"y: NaN or inf in sample(s) {np.nonzero(bad)[0][:10].tolist()}")
-    md = None
-    names = list(getattr(measurement, "meta_names", []) or [])
-    if names:
-        if meta is None:
-            raise ValueError(f"meta: measurement '{measurement.name}' needs the per-sample "
-                             f"column(s) {names}")
-        md = {}
-        for k in names:
-            if k not in meta:
-                raise ValueError(f"meta: missing per-sample column '{k}'")
-            a = np.asarray(meta[k])
-            if a.shape != (qa.shape[0],):
-                raise ValueError(f"meta['{k}']: expected shape ({qa.shape[0]},), got {a.shape}")
-            md[k] = a
-    elif meta is not None:
-        md = dict(meta)
-    return qa, ya, md
-
-
 def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: np.ndarray,
                        lam: float, max_iter: int, tol: float,
                        masses: tuple[np.ndarray, np.ndarray] | None = None
@@ -123,7 +77,7 @@ def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: 
     kappa (n, 3), optional mass model ``masses`` = (per-frame mass (n,) [kg], centre of
     mass (n, 3) [m], see :func:`.elastic.frame_masses`) replacing the robot's ->
     frames (S, n, 4, 4), rho* (S, n, 5), converged (S,)."""
-    model, batch, t = K._setup(robot, q, "cpu", np.float64, False)
+    model, batch, t = K.setup(robot, q, "cpu", np.float64, False)
     if masses is not None:
         t = with_frame_masses(t, *masses)
     kap = K.frame_rows(np.asarray(kappa, np.float64), model, batch, t, "kappa", 3)
@@ -131,7 +85,7 @@ def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: 
     run = K.ElasticLaunch(t, batch.array, kap, rho0, float(lam))
     rho, frames, _, conv = K.equilibrium(run, int(max_iter), float(tol))
     n = model.n_frames
-    rho_arr = rho[0] if rho is not None else K._rho0_full(run)
+    rho_arr = rho[0] if rho is not None else K.rho0_full(run)
     return (to_output(frames, batch, (n,)), to_output(rho_arr, batch, (n, 5)),
             np.asarray(conv, bool))
 
@@ -158,7 +112,7 @@ class CalibrationProblem:
 
     Args:
         robot: nominal robot (name or RobotModel); its DH rows and kappa are the prior means.
-        measurement: a measurement plugin instance (see jwarp.plugins.measurements.base).
+        measurement: a measurement plugin instance (see jwarp.measurement).
         q: (S, n_dof) joint values [rad, m]; y: (S, m) observations [measurement.unit].
         free: free groups (list or comma-separated), see :class:`ParameterSpace`.
         meta: per-sample inputs {name: (S,)} the measurement needs (``meta_names``).

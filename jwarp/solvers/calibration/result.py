@@ -72,7 +72,7 @@ def predict(robot: Any, measurement: Any, p: Any, q: Any, meta: Mapping[str, Any
             max_iter: int = 100, tol: float = 1e-12) -> np.ndarray:
     """Predicted observations (S, m) of ``measurement`` with parameters ``p`` (P_meas,) for
     joint values ``q`` (S, n_dof) on ``robot`` (elastic as in :func:`model_frames`)."""
-    from jwarp.solvers.calibration.map import check_samples
+    from jwarp.solvers.calibration.samples import check_samples
 
     model = get_robot(robot)
     m = len(measurement.obs_names)
@@ -93,7 +93,7 @@ def errors(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
     ``robot`` is e.g. the nominal or the calibrated model (``result.robot``); ``p`` the
     measurement parameters (``result.params``); elastic as in :func:`model_frames`.
     """
-    from jwarp.solvers.calibration.map import check_samples
+    from jwarp.solvers.calibration.samples import check_samples
 
     model = get_robot(robot)
     qa, ya, md = check_samples(model, measurement, q, y, meta)

@@ -40,7 +40,7 @@ from typing import Any, Callable
 import numpy as np
 
 from jwarp.model import RobotModel
-from jwarp.plugins.measurements.base import Measurement
+from jwarp.measurement import Measurement
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.calibration.campaign import (Sampler, justin_tracker_setup,
                                                 uniform_configurations)
@@ -106,7 +106,7 @@ def look_at_head_joints(robot: RobotModel, q: np.ndarray, target: np.ndarray,
     Returns:
         (S, 2) [pan, tilt] [rad], clipped to the head joint limits when ``clip``.
     """
-    from jwarp import fk
+    from jwarp.kinematics.fk import fk
 
     hb = robot.frame_index("head_base")
     ht = robot.frame_index("head_tcp")
@@ -162,7 +162,7 @@ def justin_camera_sampler(robot: RobotModel, setup: Setup, *, candidates: int = 
         return np.array(sorted(cols - torso), np.int64)
 
     def sampler(rng: np.random.Generator, k: int) -> tuple[np.ndarray, dict]:
-        from jwarp import fk
+        from jwarp.kinematics.fk import fk
 
         q = uniform_configurations(robot, rng, k if pole is None else 4 * k)
         q[:, head] = 0.0
@@ -260,7 +260,7 @@ def contact_distance(robot: RobotModel, meas: Measurement, q: np.ndarray, pair: 
                      p: np.ndarray | None = None) -> np.ndarray:
     """Signed distances (S,) [m] of the pairs ``pair`` (S,) at configurations q (S, n_dof)
     on ``robot`` (rigid FK, float64)."""
-    from jwarp import fk
+    from jwarp.kinematics.fk import fk
 
     F = fk(robot, q, device="cpu", dtype="float64")
     pp = meas.params.nominal if p is None else p

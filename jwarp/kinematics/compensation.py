@@ -24,11 +24,11 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.arrays import finite_as, real_number
-from jwarp.device_model import KinematicsTables, numpy_dtype
+from jwarp.core.arrays import finite_as, real_number
+from jwarp.core.device import KinematicsTables, numpy_dtype
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kernels import fk as fk_kernels
-from jwarp.kinematics import kappa_array
+from jwarp.kinematics.launch import kappa_array
 
 #: columns of a compensation row (see the module docstring)
 ROW_COLUMNS = 9

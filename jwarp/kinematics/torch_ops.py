@@ -49,15 +49,15 @@ def _prepare(q: torch.Tensor, model: RobotModel, device: Any, scalar: type) -> t
 
 def fk_torch(model: RobotModel, q: torch.Tensor, *, dh: Any, device: Any, dtype: type) -> torch.Tensor:
     """Differentiable FK of a torch tensor q (..., n_dof) -> (..., n_frames, 4, 4)."""
-    from jwarp.device_model import tables
-    from jwarp.kinematics import launch_fk
+    from jwarp.core.device import tables
+    from jwarp.kinematics.launch import launch_fk
 
     t = tables(model, device, np.float32 if dtype == wp.float32 else np.float64)
     qc = _prepare(q, model, device, t.scalar)
     dh_pair = None
     if dh is not None:
-        from jwarp.arrays import Batch
-        from jwarp.kinematics import frame_rows
+        from jwarp.core.arrays import Batch
+        from jwarp.kinematics.launch import frame_rows
 
         dh_pair = frame_rows(dh, model, Batch(None, tuple(q.shape[:-1]), "torch"), t, "dh", 5)
 
@@ -74,7 +74,7 @@ def fk_elastic_torch(model: RobotModel, batch: Any, t: Any, kap: Any, rho0: Any,
                      max_iter: int, tol: float) -> Any:
     """Differentiable elastic FK of a torch tensor: gradients flow through every torque
     update that the iteration performed (exact derivative of the iterated model)."""
-    from jwarp.kinematics import ElasticFK, ElasticLaunch, _host_out, _rho0_full, equilibrium
+    from jwarp.kinematics.launch import ElasticFK, ElasticLaunch, equilibrium, host_out, rho0_full
 
     q = batch.torch_tensor
     qc = _prepare(q, model, t.device, t.scalar)
@@ -83,7 +83,7 @@ def fk_elastic_torch(model: RobotModel, batch: Any, t: Any, kap: Any, rho0: Any,
     def record(q_w: wp.array) -> wp.array:
         run = ElasticLaunch(t, q_w, kap, rho0, float(lam), requires_grad=True)
         rho, frames, iterations, converged = equilibrium(run, max_iter, tol)
-        info.update(rho=rho[0] if rho is not None else _rho0_full(run),
+        info.update(rho=rho[0] if rho is not None else rho0_full(run),
                     iterations=iterations, converged=converged)
         return frames
 
@@ -91,4 +91,4 @@ def fk_elastic_torch(model: RobotModel, batch: Any, t: Any, kap: Any, rho0: Any,
     lead = tuple(q.shape[:-1])
     rho = wp.to_torch(info["rho"]).to(q.device).reshape(lead + (model.n_frames, 5))
     return ElasticFK(frames.to(q.device).reshape(lead + (model.n_frames, 4, 4)), rho.detach(),
-                     _host_out(info["iterations"], batch), _host_out(info["converged"], batch))
+                     host_out(info["iterations"], batch), host_out(info["converged"], batch))

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from jwarp.device_model import numpy_dtype, scalar_type
+from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.model import RobotModel
 
 #: slack when checking limits [rad or m] (float32 round-off of a projected value)

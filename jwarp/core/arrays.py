@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.device_model import numpy_dtype, scalar_type
+from jwarp.core.device import numpy_dtype, scalar_type
 
 _INITIALISED = False
 

@@ -31,16 +31,16 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.arrays import (Batch, as_batch, default_dtype, finite_as, init_warp, real_array,
+from jwarp.core.arrays import (Batch, as_batch, default_dtype, finite_as, init_warp, real_array,
                           real_number, resolve_device, to_output)
-from jwarp.device_model import KinematicsTables, numpy_dtype, scalar_type, tables
+from jwarp.core.device import KinematicsTables, numpy_dtype, scalar_type, tables
 from jwarp.kernels import collision as ck
 from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
-from jwarp.elastic_rows import CompensationRows
-from jwarp.world.sdf import World
+from jwarp.kinematics.compensation import CompensationRows
+from jwarp.world.sdf import World, sdf_query
 
 __all__ = ["DEFAULT_EPS", "CollisionModel", "collision_model", "collision_cost",
            "collision_pairs", "rigid_pairs", "sphere_distances", "self_distances", "min_distances",
@@ -103,7 +103,7 @@ def _pair_distance_spread(robot: RobotModel, pairs: np.ndarray, n: int = 32,
                           seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) surface distance [m] of sphere ``pairs`` (P, 2) over q = 0 and ``n``
     random configurations within the joint limits (float64)."""
-    from jwarp.kinematics import fk
+    from jwarp.kinematics.fk import fk
 
     f, p, r = robot.sphere_arrays()
     lim = robot.joint_limits
@@ -303,7 +303,7 @@ class CollisionModel:
     def _rho_or_rows(self, rho: Any, n: int) -> tuple[wp.array, int, int, tuple]:
         """(rho array, stride, use_rho, row layout of :func:`jwarp.kernels.fk.waypoint_thread`)
         for ``rho`` None, (n_frames, 5), (n, n_frames, 5) or compensation rows
-        (:class:`jwarp.elastic_rows.CompensationRows`, kept per waypoint)."""
+        (:class:`jwarp.kinematics.compensation.CompensationRows`, kept per waypoint)."""
         if rho is None:
             return self.tables.dh0_3d, 0, 0, _ROW_PER_CONFIG
         nf = self.robot.n_frames
@@ -360,7 +360,7 @@ class CollisionModel:
         Args:
             q: (N, n_dof) Warp array on this device and dtype [rad or m].
             rho: DH rows (n_frames, 5) or per configuration (N, n_frames, 5), or
-                :class:`jwarp.elastic_rows.CompensationRows` (elastic compensation: frames
+                :class:`jwarp.kinematics.compensation.CompensationRows` (elastic compensation: frames
                 at those rows, gradient with the rows fixed); None = nominal.
             w_world, w_self: weights of U_world and U_self (eq. 3.16); a zero weight skips
                 that term. Without a world U_world is 0.
@@ -386,7 +386,7 @@ class CollisionModel:
         rho_a, stride, use_rho, layout = self._rho_or_rows(rho, n)
         if update_rows and not isinstance(rho, CompensationRows):
             raise ValueError("update_rows: needs compensation rows as rho "
-                             "(jwarp.elastic_rows.CompensationRows)")
+                             "(jwarp.kinematics.compensation.CompensationRows)")
         comp = rho.args() if update_rows else self._no_update
         ww = float(w_world) if self.world is not None and self.n_spheres else 0.0
         ws = float(w_self) if self.n_pairs else 0.0
@@ -426,7 +426,7 @@ class CollisionModel:
         sphere and per sphere pair, atomic sums). Slower; a cross-check of the
         hand-written gradient and the route for derivatives w.r.t. other inputs.
         Returns ``(cost (N,), grad (N, n_dof))`` Warp arrays."""
-        from jwarp.kinematics import launch_fk
+        from jwarp.kinematics.launch import launch_fk
 
         self._check_q(q)
         n = q.shape[0]
@@ -632,43 +632,3 @@ def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: fl
     elif hasattr(md, "detach"):
         md = md.detach().cpu().numpy()
     return np.all(np.asarray(md) > margin, axis=-1)
-
-
-def sdf_query(world: World, points: Any, *, grad: bool = False, device: Any = "cpu"
-              ) -> Any:
-    """Interpolated signed distance [m] of ``world`` at ``points`` (..., dim) [m] (numpy),
-    with the lookup of the cost kernels. Returns (...,) or, with ``grad``, a tuple
-    ``(dist (...,), gradient (..., dim))``."""
-    if not isinstance(world, World):
-        raise TypeError(f"world: expected a jwarp.world.World, got {type(world).__name__}")
-    p = real_array(points, "points")
-    if p.ndim < 1 or p.shape[-1] != world.dim:
-        raise ValueError(f"points: expected shape (..., {world.dim}) for a {world.dim}D world, "
-                         f"got {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise ValueError("points: contains NaN or inf")
-    init_warp()
-    dev = resolve_device(device)
-    dt = world.sdf.dtype
-    scalar = scalar_type(dt)
-    k = ck.kernels(scalar)
-    lead = p.shape[:-1]
-    flat = p.reshape(-1, world.dim)
-    p3 = np.zeros((len(flat), 3), dt)
-    p3[:, :world.dim] = finite_as(flat, dt, "points")
-    grid = world.sdf if world.dim == 3 else world.sdf[:, :, None]
-    o = np.zeros(3)
-    o[:world.dim] = world.limits[:, 0]
-    n = max(len(flat), 1)
-    dist = wp.empty(n, dtype=scalar, device=dev)
-    g = wp.empty(n, dtype=k.vec3, device=dev)
-    if len(flat):
-        wp.launch(k.sdf_query, dim=len(flat),
-                  inputs=[wp.array(p3, dtype=k.vec3, device=dev),
-                          wp.array(np.ascontiguousarray(grid), dtype=scalar, device=dev),
-                          k.vec3(*o), 1.0 / world.voxel_size, world.dim],
-                  outputs=[dist, g], device=dev)
-    d = dist.numpy()[:len(flat)].reshape(lead)
-    if not grad:
-        return d
-    return d, g.numpy()[:len(flat), :world.dim].reshape(lead + (world.dim,))

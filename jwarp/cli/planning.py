@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.cli import (CLIError, _dtype, _quiet_warp, _robot, check_device, check_output,
+from jwarp.cli.common import (CLIError, dtype_of, quiet_warp, load_robot, check_device, check_output,
                        dumps, int_arg, parse_q, real_arg)
 
 #: log every this many iterations to rerun
@@ -59,7 +59,7 @@ def _config_bytes(model: Any) -> int:
 def _model(name: str) -> Any:
     """The robot of ``--robot`` (errors name ``--robot``)."""
     try:
-        return _robot(name)
+        return load_robot(name)
     except (ValueError, TypeError, OSError, KeyError) as e:
         msg = " ".join(str(e).split())
         for prefix in ("robot: ", "path: "):
@@ -113,7 +113,7 @@ def _check_plan_size(args: argparse.Namespace, model: Any) -> None:
     P, W = args.starts, args.waypoints
     sub = args.substeps if args.substeps is not None else _SIZING_SAMPLES
     S = (W - 1) * sub + 1
-    item = np.dtype(_dtype(args.dtype)).itemsize
+    item = np.dtype(dtype_of(args.dtype)).itemsize
     n, F, Sph = model.n_dof, model.n_frames, len(model.spheres)
     per_sub = item * (3 * n + 52 * F + 3 * Sph + 4) + 24 * n   # solver buffers + host checks
     need = float(P) * S * per_sub + 48.0 * P * W * n
@@ -154,7 +154,7 @@ def _kappa(args: argparse.Namespace, model: Any) -> Any:
         if args.kappa is not None:
             raise CLIError("--kappa: only meaningful with --elastic")
         return None
-    from jwarp.cli import parse_kappa
+    from jwarp.cli.common import parse_kappa
 
     kappa, _ = parse_kappa(args.kappa, model)
     return model.kappa if kappa is None else kappa
@@ -168,7 +168,7 @@ class _Recorder:
         from jwarp import viz
         from jwarp.atomic import AtomicFile
 
-        self.rr = viz._rerun()
+        self.rr = viz.rerun_module()
         try:
             self.file = AtomicFile(path, option="--rerun")
         except ValueError as e:
@@ -200,7 +200,7 @@ class _Recorder:
 
     def log_configs(self, timeline: str, step: int, q: np.ndarray, name: str = "robot") -> None:
         """Spheres (and skeleton of the first configuration) of q (K, n_dof) at one step."""
-        from jwarp.kinematics import fk
+        from jwarp.kinematics.fk import fk
         from jwarp.viz import log_robot, world_spheres
 
         self.rec.set_time(timeline, sequence=step)
@@ -212,7 +212,7 @@ class _Recorder:
 
     def log_traces(self, step: int, paths: np.ndarray) -> None:
         """End-effector (last frame) trace of every path (P, W, n_dof) at one iteration."""
-        from jwarp.kinematics import fk
+        from jwarp.kinematics.fk import fk
 
         P, W, n = paths.shape
         fi = next(iter(self.model.end_effectors.values()), self.model.n_frames - 1)
@@ -240,7 +240,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     q1 = parse_q(args.goal, model, args.deg, option="--goal")
     kappa = _kappa(args, model)
     _check_plan_size(args, model)
-    _quiet_warp()
+    quiet_warp()
     check_device(args.device)
     if args.rerun is not None:  # before the world and the plan: no work lost on a bad path
         check_output(args.rerun, "--rerun", rerun=True,
@@ -259,7 +259,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         res = plan(model, world, q0, q1, n_starts=args.starts, iterations=args.iterations,
                    n_waypoints=args.waypoints, n_substeps=args.substeps, step=args.step,
                    margin=args.margin, seed=args.seed, kappa=kappa, device=args.device,
-                   dtype=_dtype(args.dtype), callback=callback)
+                   dtype=dtype_of(args.dtype), callback=callback)
         if rec is not None:
             for k, q in enumerate(res.path[0]):
                 rec.log_configs("waypoint", k, q[None], name="result")
@@ -297,7 +297,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
     kappa = _kappa(args, model)
     _check_memory(float(args.starts) * _config_bytes(model),
                   f"{args.starts} starts of '{model.name}'", "--starts")
-    _quiet_warp()
+    quiet_warp()
     check_device(args.device)
     if args.rerun is not None:  # before the world and the solve: no work lost on a bad path
         check_output(args.rerun, "--rerun", rerun=True,
@@ -308,7 +308,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
     try:
         res = ik(model, args.frame, T, world=world, n_starts=args.starts, margin=args.margin,
                  max_iterations=args.iterations, seed=args.seed, kappa=kappa, device=args.device,
-                 dtype=_dtype(args.dtype))
+                 dtype=dtype_of(args.dtype))
         written = None
         if args.rerun is not None:
             rec = _Recorder(args.rerun, model, world)

@@ -14,9 +14,10 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.arrays import finite_as, real_array, real_number
+from jwarp.core.arrays import finite_as, real_array, real_number
 from jwarp.kernels import fk as fk_kernels
-from jwarp.kinematics import ElasticLaunch, _setup, kappa_array, launch_fk
+from jwarp.kinematics.launch import ElasticLaunch, kappa_array
+from jwarp.kinematics.launch import launch_fk, setup
 
 WRT = ("q", "dh", "kappa")
 
@@ -75,7 +76,7 @@ def tape_jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None,
     lam = real_number(lam, "lam")
     if not 0.0 < lam <= 1.0:
         raise ValueError(f"lam: damping must be in (0, 1], got {lam!r}")
-    model, batch, t = _setup(robot, q, device, dtype)
+    model, batch, t = setup(robot, q, device, dtype)
     fi = model.frame_index(frame)
     B, n = batch.size, model.n_frames
     npdt = np.float32 if t.scalar == wp.float32 else np.float64

@@ -50,7 +50,7 @@ DEFAULT_TRUE_KAPPA = 1e-4
 
 
 def _cli_error(msg: str) -> Exception:
-    from jwarp.cli import CLIError
+    from jwarp.cli.common import CLIError
 
     return CLIError(msg)
 
@@ -143,10 +143,10 @@ def _reserve_outputs(args: argparse.Namespace, inputs: dict[str, str | None]) ->
             raise _cli_error(f"{opt}: {p} is also {seen[key]}; give another file")
         seen[key] = opt
     if args.rerun:
-        from jwarp.viz import _rerun
+        from jwarp.viz import rerun_module
 
         try:
-            _rerun()
+            rerun_module()
         except ImportError as e:
             raise _cli_error(f"--rerun: {e}") from None
     reserved: dict[str, Any] = {}
@@ -194,12 +194,12 @@ def _rows(args: argparse.Namespace, S: int) -> tuple[np.ndarray, np.ndarray | No
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from jwarp.cli import _quiet_warp
+    from jwarp.cli.common import quiet_warp
 
     _check_int("--starts", args.starts, 1)
     _check_int("--max-nfev", args.max_nfev, 1)
     _check_int("--seed", args.seed, 0)
-    _quiet_warp()
+    quiet_warp()
     inputs = {"--setup": args.setup, "--data": args.data, "--robot": args.robot}
     outputs = _reserve_outputs(args, inputs)
     try:
@@ -211,7 +211,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     from jwarp.atomic import commit_all
-    from jwarp.cli import dumps
+    from jwarp.cli.common import dumps
     from jwarp.registry import robot as get_robot
     from jwarp.solvers.calibration import calibrate, errors
     from jwarp.solvers.calibration.files import (make_measurement, parse_samples, read_setup,
@@ -351,7 +351,7 @@ def _check_campaign_memory(model: Any, meas: Any, n: int) -> None:
 
 def cmd_simulate_campaign(args: argparse.Namespace) -> int:
     from jwarp.atomic import AtomicFolder
-    from jwarp.cli import _quiet_warp
+    from jwarp.cli.common import quiet_warp
     from jwarp.registry import robot as get_robot
     from jwarp.solvers.calibration.campaign import simulate_campaign
     from jwarp.solvers.calibration.files import make_measurement, read_setup
@@ -363,7 +363,7 @@ def cmd_simulate_campaign(args: argparse.Namespace) -> int:
     _check_float("--angle-error", args.angle_error, maximum=180.0, unit=" deg")
     _check_float("--kappa", args.kappa, unit=" rad/(N m)")
     AtomicFolder(args.out, option="--out").discard()  # the folder can be written: checked
-    _quiet_warp()
+    quiet_warp()
     if args.setup:
         setup = read_setup(args.setup)
         robot_name = args.robot or setup.robot

@@ -1,0 +1,512 @@
+"""Device-resident IK iteration kernels (math only; thesis 3.3.3 eq. 3.21-3.24).
+
+The solver (:class:`jwarp.solvers.ik.IKSolver`) keeps a batch of ``B = P * S``
+configurations (P problems x S starts, configuration ``b = p * S + s``) on the device. Per
+iteration, after the cost kernels of :mod:`jwarp.kernels.ik` and the collision kernels:
+
+* ``check`` (launch dim B): the configuration's task error norms ``|e_v|`` and ``|e_w|``
+  over the task rows (all 6, or ``[v_x, v_y, w_z]`` of a planar robot: position rows 0, 1
+  and rotation row 5), "on target" (``|e_v| < tol_pos``, ``|e_w| < tol_rot`` and, elastic,
+  the last DH row change ``delta < tol_rho``) and, for on-target configurations that are
+  not done and whose collision cost is below the screen (or on a ``full`` check
+  iteration), the exact feasibility check **in float64**: within the box and linear limits
+  up to ``limit_tol``, every sphere more than ``margin`` from the world and from every
+  sphere it may collide with (the frames recomputed in float64 at the configuration, at its
+  compensation rows when elastic). A feasible configuration is *done*: frozen from then on,
+  its result row written, the counters ``counts = [done configurations, solved problems]``
+  raised atomically.
+* ``step`` (launch dim B): the damped least-squares step in float64 (eq. 3.21-3.24)
+  ``A = J J^T + mu^2 I`` (m x m over the task rows, m = 6 or 3), Cholesky ``A = L L^T``,
+  ``dq = J^T A^-1 e`` and, on target, minus ``alpha (g - J^T A^-1 J g)`` (the U_A gradient
+  ``g`` projected onto the nullspace), the whole step scaled so that no joint moves more
+  than ``max_step``, then projected onto the joint limits (:mod:`jwarp.kernels.path`).
+  Done configurations do not move; once ``counts`` say the solve is over
+  (every configuration done, or every problem solved with ``stop_solved``) nothing moves
+  and ``halt[0]`` becomes 1, which the next ``check`` obeys.
+* ``finalize`` (dim B) writes the result row of the configurations that are not done,
+  ``select`` (dim P) picks per problem the feasible start with the lowest U_A, else the
+  smallest ``|e_v| + 0.1 |e_w|`` (first index on ties, like ``numpy.argmin``).
+
+Result rows ``out (B, n_dof + 5)`` float64: ``[q (n_dof), |e_v|, |e_w|, U_A, feasible,
+iterations]``. ``best (P, 2)`` int32: ``[chosen start, feasible starts]``.
+"""
+
+
+import functools
+from types import SimpleNamespace
+
+import warp as wp
+
+from jwarp.kernels import collision as collision_kernels
+from jwarp.kernels import fk as fk_kernels
+from jwarp.kernels import path as path_kernels
+
+#: result row columns after the n_dof joint values
+COL_POS, COL_ROT, COL_AUX, COL_FEASIBLE, COL_ITERATIONS = range(5)
+#: number of those columns
+N_EXTRA = 5
+
+f64 = wp.float64
+
+
+@functools.cache
+def dls_kernels(scalar: type, planar: bool) -> SimpleNamespace:
+    """The damped least-squares step for one scalar type and task (6 rows, or the 3 rows
+    [v_x, v_y, w_z] of a planar robot). The linear algebra runs in float64 either way."""
+    M = 3 if planar else 6
+    PLANAR = int(planar)
+    matm = wp.types.matrix((M, M), f64)
+    vecm = wp.types.vector(M, f64)
+    zero = f64(0.0)
+    one = f64(1.0)
+    pk = path_kernels.kernels(scalar)
+
+    @wp.func
+    def task_row(r: int) -> int:
+        """Row of the 6D Jacobian/error for task row r ([0, 1, 5] for a planar robot)."""
+        if PLANAR != 0 and r == 2:
+            return 5
+        return r
+
+    @wp.func
+    def dls_solve(jac: wp.array3d(dtype=scalar), err: wp.array2d(dtype=scalar),
+                  grad: wp.array2d(dtype=scalar), b: int, mu2: f64):
+        """(x, y) = (A^-1 e, A^-1 J g) with A = J J^T + mu2 I over the task rows of
+        configuration b, by Cholesky (float64)."""
+        n = jac.shape[2]
+        A = matm()
+        e = vecm()
+        jg = vecm()
+        for r in range(M):
+            rr = task_row(r)
+            e[r] = f64(err[b, rr])
+            s = zero
+            for j in range(n):
+                s += f64(jac[b, rr, j]) * f64(grad[b, j])
+            jg[r] = s
+            for c in range(r + 1):
+                cc = task_row(c)
+                s = zero
+                for j in range(n):
+                    s += f64(jac[b, rr, j]) * f64(jac[b, cc, j])
+                A[r, c] = s
+                A[c, r] = s
+            A[r, r] = A[r, r] + mu2
+        # Cholesky A = L L^T (A is SPD for mu2 > 0; the floor only guards round-off)
+        L = matm()
+        for i in range(M):
+            for j in range(i + 1):
+                s = A[i, j]
+                for k in range(j):
+                    s -= L[i, k] * L[j, k]
+                if i == j:
+                    L[i, i] = wp.sqrt(wp.max(s, mu2 * f64(1e-12)))
+                else:
+                    L[i, j] = s / L[j, j]
+        # forward (L z = rhs) and back (L^T x = z) substitution, both right-hand sides
+        x = vecm()
+        y = vecm()
+        for i in range(M):
+            sx = e[i]
+            sy = jg[i]
+            for k in range(i):
+                sx -= L[i, k] * x[k]
+                sy -= L[i, k] * y[k]
+            x[i] = sx / L[i, i]
+            y[i] = sy / L[i, i]
+        for ii in range(M):
+            i = M - 1 - ii
+            sx = x[i]
+            sy = y[i]
+            for k in range(i + 1, M):
+                sx -= L[k, i] * x[k]
+                sy -= L[k, i] * y[k]
+            x[i] = sx / L[i, i]
+            y[i] = sy / L[i, i]
+        return x, y
+
+    @wp.func
+    def dq_joint(jac: wp.array3d(dtype=scalar), grad: wp.array2d(dtype=scalar), b: int, j: int,
+                 x: vecm, y: vecm, ns: f64) -> f64:
+        """Unscaled step of joint j: (J^T x)_j - ns (g_j - (J^T y)_j)."""
+        d = zero
+        p = zero
+        for r in range(M):
+            rr = task_row(r)
+            jr = f64(jac[b, rr, j])
+            d += jr * x[r]
+            p += jr * y[r]
+        if ns != zero:
+            d -= ns * (f64(grad[b, j]) - p)
+        return d
+
+    @wp.func
+    def step_scale(jac: wp.array3d(dtype=scalar), grad: wp.array2d(dtype=scalar), b: int,
+                   x: vecm, y: vecm, ns: f64, max_step: f64) -> f64:
+        """min(1, max_step / max_j |dq_j|): keeps the direction, bounds every joint's move."""
+        big = zero
+        for j in range(jac.shape[2]):
+            big = wp.max(big, wp.abs(dq_joint(jac, grad, b, j, x, y, ns)))
+        return wp.min(one, max_step / wp.max(big, f64(1e-300)))
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def dls_kernel(
+        # Data in:
+        jac: wp.array3d(dtype=scalar),
+        err: wp.array2d(dtype=scalar),
+        grad: wp.array2d(dtype=scalar),
+        on: wp.array(dtype=wp.int32),
+        mu2: f64,
+        alpha: f64,
+        max_step: f64,
+        # Data out:
+        dq: wp.array2d(dtype=f64),
+    ):
+        """The scaled step dq (B, n_dof) alone (no limits, no state): for tests."""
+        b = wp.tid()
+        x, y = dls_solve(jac, err, grad, b, mu2)
+        ns = zero
+        if on[b] != 0:
+            ns = alpha
+        sc = step_scale(jac, grad, b, x, y, ns, max_step)
+        for j in range(jac.shape[2]):
+            dq[b, j] = sc * dq_joint(jac, grad, b, j, x, y, ns)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def step_kernel(
+        # Data in:
+        jac: wp.array3d(dtype=scalar),
+        err: wp.array2d(dtype=scalar),
+        grad: wp.array2d(dtype=scalar),
+        on: wp.array(dtype=wp.int32),
+        done: wp.array(dtype=wp.int32),
+        counts: wp.array(dtype=wp.int32),
+        stop_solved: int,
+        n_problems: int,
+        mu2: f64,
+        alpha: f64,
+        max_step: f64,
+        # Model:
+        limits: wp.array2d(dtype=scalar),
+        lin_start: wp.array(dtype=wp.int32),
+        lin_joint: wp.array(dtype=wp.int32),
+        lin_coef: wp.array(dtype=scalar),
+        lin_bounds: wp.array2d(dtype=scalar),
+        # Data in/out:
+        q: wp.array2d(dtype=scalar),
+        iterations: wp.array(dtype=wp.int32),
+        halt: wp.array(dtype=wp.int32),
+    ):
+        """One projected DLS step of every configuration that is not done (module
+        docstring); ``iterations[b]`` counts the steps. Launch dim B."""
+        b = wp.tid()
+        stop = int(0)
+        if counts[0] >= q.shape[0]:
+            stop = 1
+        if stop_solved != 0 and counts[1] >= n_problems:
+            stop = 1
+        if b == 0:
+            halt[0] = stop
+        if stop != 0 or done[b] != 0:
+            return
+        x, y = dls_solve(jac, err, grad, b, mu2)
+        ns = zero
+        if on[b] != 0:
+            ns = alpha
+        sc = step_scale(jac, grad, b, x, y, ns, max_step)
+        for j in range(q.shape[1]):
+            q[b, j] = scalar(f64(q[b, j]) + sc * dq_joint(jac, grad, b, j, x, y, ns))
+        pk.project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
+        iterations[b] = iterations[b] + 1
+
+    return SimpleNamespace(scalar=scalar, planar=planar, rows=M, task_row=task_row,
+                           dls_solve=dls_solve, dls=dls_kernel, step=step_kernel)
+
+
+@functools.cache
+def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
+    """Feasibility check, result rows and best-start selection for a solver of one scalar
+    type; the exact check itself runs in float64 (module docstring)."""
+    fk64 = fk_kernels.kernels(f64)
+    ck64 = collision_kernels.kernels(f64)
+    PLANAR = int(planar)
+    NPOS = 2 if planar else 3
+    zero = f64(0.0)
+
+    @wp.func
+    def task_errors(err: wp.array2d(dtype=scalar), b: int):
+        """(|e_v|, |e_w|) over the task rows (float64)."""
+        pe = zero
+        for r in range(NPOS):
+            v = f64(err[b, r])
+            pe += v * v
+        re = zero
+        if PLANAR != 0:
+            v = f64(err[b, 5])
+            re = v * v
+        else:
+            for r in range(3):
+                v = f64(err[b, r + 3])
+                re += v * v
+        return wp.sqrt(pe), wp.sqrt(re)
+
+    @wp.func
+    def within_limits_row(q: wp.array2d(dtype=f64), b: int, limits: wp.array2d(dtype=f64),
+                          lin_start: wp.array(dtype=wp.int32), lin_joint: wp.array(dtype=wp.int32),
+                          lin_coef: wp.array(dtype=f64), lin_bounds: wp.array2d(dtype=f64),
+                          tol: f64) -> int:
+        """1 if q[b] violates no box or linear limit by more than ``tol``
+        (:func:`jwarp.core.limits.within_limits`)."""
+        for j in range(q.shape[1]):
+            if limits[j, 0] - q[b, j] > tol or q[b, j] - limits[j, 1] > tol:
+                return 0
+        for l in range(lin_bounds.shape[0]):
+            s = zero
+            for k in range(lin_start[l], lin_start[l + 1]):
+                s += lin_coef[k] * q[b, lin_joint[k]]
+            if lin_bounds[l, 0] - s > tol or s - lin_bounds[l, 1] > tol:
+                return 0
+        return 1
+
+    @wp.func
+    def collision_free_row(q: wp.array2d(dtype=f64), b: int, rho: wp.array3d(dtype=f64),
+                           use_rho: int, model: fk64.FrameTables, spheres: ck64.SphereTables,
+                           world: ck64.WorldGrid, use_world: int, use_self: int, margin: f64,
+                           frames: wp.array2d(dtype=fk64.mat44),
+                           xs: wp.array2d(dtype=fk64.vec3)) -> int:
+        """1 if every sphere of q[b] keeps more than ``margin`` [m] from the world and from
+        every sphere it may collide with (the decision of
+        :func:`jwarp.world.collision.is_collision_free`, which takes the minimum distance;
+        here the first distance <= margin ends the check). Frames at the rows ``rho[b]``
+        when ``use_rho`` (= 1), else the nominal ones."""
+        nf = model.order.shape[0]
+        for k in range(nf):
+            fk64.write_frame(model, b, model.order[k], q, rho, b, use_rho, frames, b)
+        for s in range(spheres.sph_frame.shape[0]):
+            x = ck64.sphere_centre(frames, b, spheres.sph_frame[s], spheres.sph_pos[s])
+            xs[b, s] = x
+            if use_world != 0:
+                r = spheres.sph_rad[s]
+                if ck64.world_lower_bound(world, x) - r <= margin:
+                    d, g = ck64.world_sample(world, x)
+                    if d - r <= margin:
+                        return 0
+        if use_self != 0:
+            for fp in range(spheres.fpair_a.shape[0]):
+                fa = spheres.fpair_a[fp]
+                fb = spheres.fpair_b[fp]
+                ca = ck64.sphere_centre(frames, b, fa, spheres.bound_pos[fa])
+                cb = ck64.sphere_centre(frames, b, fb, spheres.bound_pos[fb])
+                rfb = spheres.bound_rad[fb]
+                if wp.length(ca - cb) - spheres.bound_rad[fa] - rfb <= margin:
+                    for e in range(spheres.fpair_start[fp], spheres.fpair_start[fp + 1]):
+                        sa = spheres.ent_sphere[e]
+                        xa = xs[b, sa]
+                        ra = spheres.sph_rad[sa]
+                        if wp.length(xa - cb) - ra - rfb <= margin:
+                            for p in range(spheres.ent_start[e], spheres.ent_start[e + 1]):
+                                sb = spheres.pair_b[p]
+                                if wp.length(xa - xs[b, sb]) - ra - spheres.sph_rad[sb] <= margin:
+                                    return 0
+        return 1
+
+    @wp.struct
+    class CheckTables:
+        """Float64 tables of the exact check, one kernel argument."""
+
+        model: fk64.FrameTables
+        spheres: ck64.SphereTables
+        world: ck64.WorldGrid
+        use_world: int
+        use_self: int
+        limits: wp.array2d(dtype=f64)
+        lin_start: wp.array(dtype=wp.int32)
+        lin_joint: wp.array(dtype=wp.int32)
+        lin_coef: wp.array(dtype=f64)
+        lin_bounds: wp.array2d(dtype=f64)
+        limit_tol: f64
+
+    @wp.struct
+    class CheckScratch:
+        """Float64 per-configuration scratch of the exact check, one kernel argument:
+        q64 (B, n_dof), rho64 (B or 1, n_frames, 5), frames (>= B, n_frames), xs (>= B, S)."""
+
+        q64: wp.array2d(dtype=f64)
+        rho64: wp.array3d(dtype=f64)
+        frames: wp.array2d(dtype=fk64.mat44)
+        xs: wp.array2d(dtype=fk64.vec3)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def check_kernel(
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        err: wp.array2d(dtype=scalar),
+        cost_a: wp.array(dtype=scalar),
+        coll_cost: wp.array(dtype=scalar),
+        delta: wp.array(dtype=scalar),
+        rows: wp.array3d(dtype=scalar),
+        use_rows: int,
+        tol_pos: f64,
+        tol_rot: f64,
+        tol_rho: f64,
+        screen: f64,
+        full: int,
+        margin: f64,
+        n_starts: int,
+        halt: wp.array(dtype=wp.int32),
+        iterations: wp.array(dtype=wp.int32),
+        # Model:
+        tables: CheckTables,
+        # Scratch:
+        scratch: CheckScratch,
+        # Data out:
+        on: wp.array(dtype=wp.int32),
+        done: wp.array(dtype=wp.int32),
+        solved: wp.array(dtype=wp.int32),
+        counts: wp.array(dtype=wp.int32),
+        out: wp.array2d(dtype=f64),
+    ):
+        """On-target flags and the exact check of the candidates (module docstring).
+        ``use_rows``: elastic (``delta`` and the compensation ``rows`` (B, n_frames, 9)
+        take part). Launch dim B."""
+        b = wp.tid()
+        if halt[0] != 0 or done[b] != 0:
+            return
+        pe, re = task_errors(err, b)
+        ok = int(0)
+        if pe < tol_pos and re < tol_rot:
+            ok = 1
+        if use_rows != 0:
+            if not (f64(delta[b]) < tol_rho):
+                ok = 0
+        on[b] = ok
+        if ok == 0:
+            return
+        if full == 0 and not (f64(coll_cost[b]) < screen):
+            return
+        n = q.shape[1]
+        q64 = scratch.q64
+        for j in range(n):
+            q64[b, j] = f64(q[b, j])
+        if within_limits_row(q64, b, tables.limits, tables.lin_start, tables.lin_joint,
+                             tables.lin_coef, tables.lin_bounds, tables.limit_tol) == 0:
+            return
+        if use_rows != 0:
+            for i in range(rows.shape[1]):
+                for c in range(5):
+                    scratch.rho64[b, i, c] = f64(rows[b, i, c])
+        if collision_free_row(q64, b, scratch.rho64, use_rows, tables.model, tables.spheres,
+                              tables.world, tables.use_world, tables.use_self, margin,
+                              scratch.frames, scratch.xs) == 0:
+            return
+        done[b] = 1
+        for j in range(n):
+            out[b, j] = q64[b, j]
+        out[b, n + COL_POS] = pe
+        out[b, n + COL_ROT] = re
+        out[b, n + COL_AUX] = f64(cost_a[b])
+        out[b, n + COL_FEASIBLE] = f64(1.0)
+        out[b, n + COL_ITERATIONS] = f64(iterations[b])
+        wp.atomic_add(counts, 0, 1)
+        if wp.atomic_max(solved, b // n_starts, 1) == 0:
+            wp.atomic_add(counts, 1, 1)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def reset_kernel(
+        n_problems: int,
+        # Data out:
+        done: wp.array(dtype=wp.int32),
+        on: wp.array(dtype=wp.int32),
+        iterations: wp.array(dtype=wp.int32),
+        solved: wp.array(dtype=wp.int32),
+        counts: wp.array(dtype=wp.int32),
+        halt: wp.array(dtype=wp.int32),
+    ):
+        """Zero the solver state of a new solve. Launch dim B (>= n_problems)."""
+        b = wp.tid()
+        done[b] = 0
+        on[b] = 0
+        iterations[b] = 0
+        if b < n_problems:
+            solved[b] = 0
+        if b == 0:
+            counts[0] = 0
+            counts[1] = 0
+            halt[0] = 0
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def repeat_targets_kernel(
+        targets: wp.array(dtype=fk_kernels.kernels(scalar).mat44),
+        n_starts: int,
+        # Data out:
+        out: wp.array(dtype=fk_kernels.kernels(scalar).mat44),
+    ):
+        """out[b] = targets[b // n_starts]. Launch dim B."""
+        b = wp.tid()
+        out[b] = targets[b // n_starts]
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def finalize_kernel(
+        q: wp.array2d(dtype=scalar),
+        err: wp.array2d(dtype=scalar),
+        cost_a: wp.array(dtype=scalar),
+        done: wp.array(dtype=wp.int32),
+        max_iterations: int,
+        # Data out:
+        out: wp.array2d(dtype=f64),
+    ):
+        """Result rows of the configurations that are not done: their last q, task error
+        norms and U_A, infeasible, ``max_iterations``. Launch dim B."""
+        b = wp.tid()
+        if done[b] != 0:
+            return
+        n = q.shape[1]
+        for j in range(n):
+            out[b, j] = f64(q[b, j])
+        pe, re = task_errors(err, b)
+        out[b, n + COL_POS] = pe
+        out[b, n + COL_ROT] = re
+        out[b, n + COL_AUX] = f64(cost_a[b])
+        out[b, n + COL_FEASIBLE] = zero
+        out[b, n + COL_ITERATIONS] = f64(max_iterations)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def select_kernel(
+        out: wp.array2d(dtype=f64),
+        n_starts: int,
+        n_dof: int,
+        # Data out:
+        best: wp.array2d(dtype=wp.int32),
+    ):
+        """best[p] = [chosen start, feasible starts] of problem p: the feasible start with
+        the lowest U_A, else the smallest |e_v| + 0.1 |e_w| (first on ties). Launch dim P."""
+        p = wp.tid()
+        n_feas = int(0)
+        best_f = int(-1)
+        val_f = zero
+        best_i = int(0)
+        val_i = zero
+        for s in range(n_starts):
+            b = p * n_starts + s
+            if out[b, n_dof + COL_FEASIBLE] != zero:
+                v = out[b, n_dof + COL_AUX]
+                if n_feas == 0 or v < val_f:
+                    best_f = s
+                    val_f = v
+                n_feas += 1
+            k = out[b, n_dof + COL_POS] + out[b, n_dof + COL_ROT] * f64(0.1)
+            if s == 0 or k < val_i:
+                best_i = s
+                val_i = k
+        if n_feas > 0:
+            best[p, 0] = best_f
+        else:
+            best[p, 0] = best_i
+        best[p, 1] = n_feas
+
+    return SimpleNamespace(
+        scalar=scalar, planar=planar, task_errors=task_errors,
+        within_limits_row=within_limits_row, collision_free_row=collision_free_row,
+        CheckTables=CheckTables, CheckScratch=CheckScratch, check=check_kernel,
+        reset=reset_kernel, repeat_targets=repeat_targets_kernel, finalize=finalize_kernel,
+        select=select_kernel)

@@ -1,0 +1,23 @@
+"""Kinematics: batched FK of all frames, Jacobians, the elastic equilibrium, compensation
+rows for optimizers, torch autograd and Warp-tape differentiation.
+
+Modules (each with one job): :mod:`~jwarp.kinematics.fk` (forward kinematics),
+:mod:`~jwarp.kinematics.jacobians` (joint and DH Jacobians),
+:mod:`~jwarp.kinematics.equilibrium` (elastic FK, one torque update, gravity torques),
+:mod:`~jwarp.kinematics.launch` (the validated batch, device tables and kernel launches they
+share), :mod:`~jwarp.kinematics.compensation` (DH rows kept across optimizer iterations),
+:mod:`~jwarp.kinematics.torch_ops` (torch autograd), :mod:`~jwarp.kinematics.autodiff`
+(Warp tape Jacobians).
+"""
+
+from jwarp.kinematics.equilibrium import elastic_step, fk_elastic, gravity_torques
+from jwarp.kinematics.fk import fk
+from jwarp.kinematics.jacobians import jacobian, jacobian_dh
+from jwarp.kinematics.launch import (ELASTIC_TOL, ElasticFK, ElasticLaunch, ElasticStep,
+                                     default_tol, elastic_args, equilibrium, frame_rows, host_out,
+                                     kappa_array, launch_fk, rho0_full, setup)
+
+__all__ = ["ELASTIC_TOL", "ElasticFK", "ElasticLaunch", "ElasticStep", "default_tol",
+           "elastic_args", "elastic_step", "equilibrium", "fk", "fk_elastic", "frame_rows",
+           "gravity_torques", "host_out", "jacobian", "jacobian_dh", "kappa_array", "launch_fk",
+           "rho0_full", "setup"]

@@ -1,0 +1,85 @@
+"""Elastic kinematics: the frames in the static equilibrium of gravity torques and joint
+compliances (rho = rho0 + kappa tau, a damped fixed-point iteration), one torque update
+(:func:`elastic_step`) and the gravity torques."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from jwarp.core.arrays import (real_number, to_output)
+from jwarp.kinematics.launch import (ElasticFK, ElasticLaunch, ElasticStep, elastic_args, lam_tol,
+                                     equilibrium, frame_rows, host_out, rho0_full, setup)
+
+
+def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_iter: int = 10,
+               tol: float | None = None, dh: Any = None, device: Any = None, dtype: Any = None,
+               validate: bool = True) -> ElasticFK:
+    """Elastic forward kinematics: frames in the static torque equilibrium.
+
+    Solves ``rho = rho0 + kappa * tau(F(q, rho))`` (thesis eq. 2.33) by the damped
+    fixed-point iteration (eq. 2.35) started at the geometric rows ``rho0``.
+
+    Args:
+        robot, q, device, dtype, validate: as for :func:`fk`.
+        kappa: compliances [rad/(N m)]: scalar, [alpha, beta, theta], (n_frames, 3) or per
+            configuration (..., n_frames, 3); None uses the robot's ``kappa``.
+        lam: damping lambda in (0, 1]; use < 1 for very soft robots.
+        max_iter: most torque updates (0 gives the rigid FK; ``converged`` then says
+            whether the rigid frames already are the equilibrium to ``tol``).
+        tol: stop once no DH angle changes by more than ``tol`` [rad] in an update;
+            default :func:`default_tol`: 1e-9 rad in float64, 4.8e-7 rad (the rows'
+            resolution) in float32.
+        dh: geometric DH rows rho0 (n_frames, 5) or (..., n_frames, 5); default nominal.
+
+    Returns:
+        :class:`ElasticFK` (frames, rho, iterations, converged).
+    """
+    model, batch, t, kap, rho0 = elastic_args(robot, q, kappa, lam, max_iter, tol, dh,
+                                               device, dtype, validate)
+    lam, tol = lam_tol(lam, tol, t)
+    if batch.kind == "torch" and batch.torch_tensor.requires_grad:
+        from jwarp.kinematics.torch_ops import fk_elastic_torch
+
+        return fk_elastic_torch(model, batch, t, kap, rho0, lam, max_iter, tol)
+    run = ElasticLaunch(t, batch.array, kap, rho0, float(lam))
+    rho, frames, iterations, converged = equilibrium(run, max_iter, tol)
+    rho_arr = rho[0] if rho is not None else rho0_full(run)
+    return ElasticFK(to_output(frames, batch, (model.n_frames,)),
+                     to_output(rho_arr, batch, (model.n_frames, 5)),
+                     host_out(iterations, batch), host_out(converged, batch))
+
+
+def elastic_step(robot: Any, q: Any, rho: Any = None, kappa: Any = None, *, lam: float = 1.0,
+                 dh: Any = None, device: Any = None, dtype: Any = None,
+                 validate: bool = True) -> ElasticStep:
+    """One torque update, as used for compensation inside an optimizer (Fig. 2.11).
+
+    Computes the frames at ``rho`` (None: the geometric rows), the gravity torques of
+    those frames and ``rho_new = (1 - lam) rho + lam (rho0 + kappa tau)``. Planners keep
+    ``rho`` between their iterations and take gradients with ``rho`` fixed.
+
+    Returns :class:`ElasticStep` (frames (..., n_frames, 4, 4), rho (..., n_frames, 5),
+    delta (...,) [rad]).
+    """
+    model, batch, t, kap, rho0 = elastic_args(robot, q, kappa, lam, 1, 0.0, dh,
+                                               device, dtype, validate)
+    run = ElasticLaunch(t, batch.array, kap, rho0, real_number(lam, "lam"))
+    rho_in = None if rho is None else frame_rows(rho, model, batch, t, "rho", 5)
+    frames, rho_new, delta = run.step(rho_in)
+    return ElasticStep(to_output(frames, batch, (model.n_frames,)),
+                       to_output(rho_new, batch, (model.n_frames, 5)),
+                       to_output(delta, batch, ()))
+
+
+def gravity_torques(robot: Any, q: Any, *, dh: Any = None, device: Any = None,
+                    dtype: Any = None) -> Any:
+    """Gravity torques (..., n_frames, 3) [N m] about the [alpha, beta, theta] axes of
+    every DH frame at the frames F(q, dh) (rigid; zero rows for static frames)."""
+    model, batch, t = setup(robot, q, device, dtype)
+    rho = None if dh is None else frame_rows(dh, model, batch, t, "dh", 5)
+    kap = frame_rows(np.zeros((model.n_frames, 3)), model, batch, t, "kappa", 3)
+    run = ElasticLaunch(t, batch.array, kap, None, 1.0, write_tau=True)
+    run.step(rho)
+    return to_output(run.tau, batch, (model.n_frames, 3))

@@ -1,0 +1,292 @@
+"""Building blocks of the kinematics functions: the validated batch and device tables of a
+call (:func:`setup`), per-frame rows (:func:`frame_rows`), the FK launch, and the elastic
+fixed-point iteration (:class:`ElasticLaunch`, :func:`equilibrium`). Shared by the public
+functions (:mod:`~jwarp.kinematics.fk`, :mod:`~jwarp.kinematics.equilibrium`), torch ops,
+autodiff and the calibration."""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+import warp as wp
+
+from jwarp.core.arrays import (Batch, as_batch, default_dtype, finite_as, init_warp, real_array,
+                               real_number, resolve_device)
+from jwarp.core.device import KinematicsTables, numpy_dtype, scalar_type, tables
+from jwarp.kernels import elastic as elastic_kernels
+from jwarp.kernels import fk as fk_kernels
+from jwarp.model import RobotModel
+from jwarp.registry import robot as get_robot
+
+
+def setup(robot: Any, q: Any, device: Any, dtype: Any, validate: bool = True
+           ) -> tuple[RobotModel, Batch, KinematicsTables]:
+    init_warp()
+    model = get_robot(robot)
+    dev = resolve_device(device, like=q)
+    dt = default_dtype(q) if dtype is None else dtype
+    batch = as_batch(q, model.n_dof, "q", device=dev, dtype=dt,
+                     what=f"robot '{model.name}' has {model.n_dof} joints", validate=validate)
+    return model, batch, tables(model, dev, dt)
+
+
+def frame_rows(x: Any, model: RobotModel, batch: Batch, t: KinematicsTables, name: str,
+               width: int) -> tuple[wp.array, int]:
+    """Per-frame rows (n_frames, width) shared, or (..., n_frames, width) per configuration,
+    as a (B or 1, n_frames, width) device array and its batch stride (0: shared). Internal
+    building block of the elastic kinematics, shared with torch_ops, autodiff and the
+    calibration; ValueError/TypeError name ``name``."""
+    npdt = numpy_dtype(t.scalar)
+    a = real_array(x, name)
+    if a.shape[-2:] != (model.n_frames, width):
+        raise ValueError(f"{name}: expected shape (n_frames={model.n_frames}, {width}) or "
+                         f"(batch..., {model.n_frames}, {width}), got {a.shape}")
+    if a.ndim == 2:
+        return wp.array(finite_as(a[None], npdt, name), dtype=t.scalar, device=t.device), 0
+    if a.shape[:-2] != tuple(batch.lead_shape):
+        raise ValueError(f"{name}: batch dims {a.shape[:-2]} do not match q's {tuple(batch.lead_shape)}")
+    a = finite_as(a.reshape(-1, model.n_frames, width), npdt, name)
+    return wp.array(a, dtype=t.scalar, device=t.device), 1
+
+
+def launch_fk(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None = None,
+              frames: wp.array | None = None, frame_major: bool = False,
+              component_major: bool = False) -> wp.array:
+    """Launch the FK kernel on a (B, n_dof) device array; returns frames (B, n_frames) mat44.
+
+    ``frame_major`` stores the output frame-major in memory (a transposed view), which
+    coalesces the stores on CUDA; the returned array is indexed [b, i] either way.
+    ``component_major`` returns a scalar (B, n_frames, 4, 4) view of memory laid out
+    (n_frames, 4, 4, B) (the batch index fastest: every warp store is one coalesced line on
+    CUDA); ``wp.to_torch`` gives a strided (B, n_frames, 4, 4) tensor without a copy.
+    """
+    k = fk_kernels.kernels(t.scalar)
+    B = q.shape[0]
+    n = t.robot.n_frames
+    rho, stride = dh if dh is not None else (t.dh0_3d, 0)
+    if component_major:
+        if frames is not None and (frames.ndim != 4 or frames.dtype != t.scalar
+                                   or tuple(frames.shape) != (B, n, 4, 4)):
+            raise ValueError(f"frames: component_major needs a scalar ({B}, {n}, 4, 4) array "
+                             f"of {t.scalar.__name__}, got shape {tuple(frames.shape)} of "
+                             f"{getattr(frames.dtype, '__name__', frames.dtype)}")
+        if frames is None:
+            frames = wp.empty((n, 4, 4, B), dtype=t.scalar, device=t.device).transpose((3, 0, 1, 2))
+        wp.launch(k.fk_components, dim=B, inputs=[q, rho, stride, int(dh is not None),
+                                                  t.frame_struct], outputs=[frames], device=t.device)
+        return frames
+    if frames is None:
+        if frame_major:
+            frames = wp.empty((n, B), dtype=k.mat44, device=t.device).transpose()
+        else:
+            frames = wp.empty((B, n), dtype=k.mat44, device=t.device, requires_grad=q.requires_grad)
+    wp.launch(k.fk, dim=B, inputs=[q, rho, stride, int(dh is not None), t.frame_struct],
+              outputs=[frames], device=t.device)
+    return frames
+
+
+#: default tolerance of :func:`fk_elastic` [rad] per computing dtype: float64 stops at
+#: 1e-9 rad; float32 at 4 float32 epsilons (2^-21 = 4.8e-7 rad, two float32 steps of a DH
+#: angle near pi), the resolution its rows can reach (a row of magnitude 2..4 rad moves
+#: in steps of 2.4e-7 rad, so the updates of many configurations never fall below 1e-9)
+ELASTIC_TOL = {np.dtype(np.float64): 1e-9, np.dtype(np.float32): 4 * float(np.finfo(np.float32).eps)}
+
+
+def default_tol(dtype: Any) -> float:
+    """The default tolerance of :func:`fk_elastic` [rad] for the computing ``dtype``."""
+    return ELASTIC_TOL[numpy_dtype(scalar_type(dtype))]
+
+
+class ElasticFK(NamedTuple):
+    """Result of :func:`fk_elastic`.
+
+    frames (..., n_frames, 4, 4); rho (..., n_frames, 5) equilibrium DH rows
+    [d, theta, r, alpha, beta]; iterations (...,) int torque updates used per configuration;
+    converged (...,) bool: last update changed rho by less than ``tol`` [rad].
+    """
+
+    frames: Any
+    rho: Any
+    iterations: Any
+    converged: Any
+
+
+class ElasticStep(NamedTuple):
+    """Result of :func:`elastic_step`: frames at the given rho, the updated rho, and the
+    largest change of rho per configuration [rad]."""
+
+    frames: Any
+    rho: Any
+    delta: Any
+
+
+def kappa_array(model: RobotModel, kappa: Any) -> np.ndarray:
+    """Expand ``kappa`` to (n_frames, 3) or (..., n_frames, 3) [rad/(N m)].
+
+    Accepts a scalar (all three axes of every DH frame), 3 values [alpha, beta, theta]
+    for every DH frame, a (n_frames, 3) table or per-configuration tables.
+    ``None`` uses the robot's own ``kappa``.
+    """
+    if kappa is None:
+        return model.kappa
+    k = real_array(kappa, "kappa")
+    if not np.all(np.isfinite(k)):
+        raise ValueError("kappa: contains NaN or inf")
+    if np.any(k < 0):
+        raise ValueError("kappa: compliances must be >= 0 rad/(N m)")
+    mask = model.is_dh.astype(np.float64)[:, None]
+    if k.ndim == 0:
+        return np.full((model.n_frames, 3), float(k)) * mask
+    if k.shape == (3,):
+        return np.tile(k, (model.n_frames, 1)) * mask
+    if k.shape[-2:] == (model.n_frames, 3):
+        return k
+    raise ValueError(f"kappa: expected a scalar, 3 values [alpha, beta, theta], or shape "
+                     f"(..., {model.n_frames}, 3); got {k.shape}")
+
+
+class ElasticLaunch:
+    """Buffers and launches of the torque-equilibrium iteration for one batch (internal
+    building block of :func:`fk_elastic`, shared with torch_ops, autodiff and the
+    calibration's signed equilibrium; optimizers use :mod:`jwarp.kinematics.compensation`)."""
+
+    def __init__(self, t: KinematicsTables, q: wp.array, kappa: tuple[wp.array, int],
+                 rho0: tuple[wp.array, int] | None, lam: float, write_tau: bool = False,
+                 requires_grad: bool = False):
+        self.t, self.q, self.kappa, self.lam = t, q, kappa, lam
+        self.rho0 = rho0 if rho0 is not None else (t.dh0_3d, 0)
+        self.nominal_start = rho0 is None
+        self.k = elastic_kernels.kernels(t.scalar)
+        self.fk = fk_kernels.kernels(t.scalar)
+        B, n = q.shape[0], t.robot.n_frames
+        self.B, self.n = B, n
+        self.write_tau = write_tau
+        self.requires_grad = requires_grad
+        self.tau = wp.zeros((B if write_tau else 1, n, 3), dtype=t.scalar, device=t.device)
+        g = t.robot.gravity
+        self.gravity = self.fk.vec3(float(g[0]), float(g[1]), float(g[2]))
+
+    def _rho_buffer(self, requires_grad: bool = False) -> wp.array:
+        """A (B, n, 5) rho buffer whose static-frame rows hold the nominal rows (the step
+        kernel writes only the DH rows)."""
+        t = self.t
+        out = wp.empty((self.B, self.n, 5), dtype=t.scalar, device=t.device,
+                       requires_grad=requires_grad)
+        if t.static_idx.shape[0]:
+            wp.launch(self.k.fill_static_rows, dim=(self.B, t.static_idx.shape[0]),
+                      inputs=[t.dh0, t.static_idx], outputs=[out], device=t.device)
+        return out
+
+    def step(self, rho: tuple[wp.array, int] | None, frames: wp.array | None = None
+             ) -> tuple[wp.array, wp.array, wp.array]:
+        """One update from ``rho`` (None: the nominal/rho0 rows). Returns frames at rho,
+        the new rho (B, n, 5) and delta (B,)."""
+        t, B, n = self.t, self.B, self.n
+        rg = self.requires_grad
+        if rg:  # the tape needs every intermediate kept
+            frames = frames if frames is not None else wp.empty((B, n), dtype=self.fk.mat44,
+                                                                device=t.device, requires_grad=True)
+            moments = wp.empty((n + 1, B), dtype=self.k.vec4, device=t.device, requires_grad=True)
+            axes = wp.empty((n, B), dtype=self.fk.vec3, device=t.device, requires_grad=True)
+            rho_out = self._rho_buffer(requires_grad=True)
+            delta = wp.empty(B, dtype=t.scalar, device=t.device)
+        else:  # reuse scratch; rho ping-pongs between two buffers
+            if not hasattr(self, "_scratch"):
+                S = 1 if t.device.is_cpu else B  # CPU threads run configurations in turn
+                self._scratch = (wp.empty((B, n), dtype=self.fk.mat44, device=t.device),
+                                 wp.empty((n + 1, S), dtype=self.k.vec4, device=t.device),
+                                 wp.empty((n, S), dtype=self.fk.vec3, device=t.device),
+                                 [self._rho_buffer() for _ in range(2)],
+                                 wp.empty(B, dtype=t.scalar, device=t.device))
+            frames_s, moments, axes, rho_bufs, delta = self._scratch
+            frames = frames if frames is not None else frames_s
+            rho_out = rho_bufs[0] if rho is None or rho[0] is not rho_bufs[0] else rho_bufs[1]
+        if rho is None:
+            if self.nominal_start:
+                rho_arr, stride, use = t.dh0_3d, 0, 0
+            else:
+                (rho_arr, stride), use = self.rho0, 1
+        else:
+            (rho_arr, stride), use = rho, 1
+        wp.launch(self.k.elastic_step, dim=B,
+                  inputs=[self.q, rho_arr, stride, use, self.rho0[0], self.rho0[1],
+                          self.kappa[0], self.kappa[1], self.lam, self.gravity,
+                          int(self.write_tau), int(moments.shape[1] > 1), t.frame_struct, t.mass, t.mass_com,
+                          t.dh_info],
+                  outputs=[frames, moments, axes, rho_out, self.tau, delta], device=t.device)
+        return frames, rho_out, delta
+
+    def frames_at(self, rho: tuple[wp.array, int] | None) -> wp.array:
+        if rho is None and not self.nominal_start:
+            rho = self.rho0
+        out = wp.empty((self.B, self.n), dtype=self.fk.mat44, device=self.t.device,
+                       requires_grad=self.requires_grad)
+        return launch_fk(self.t, self.q, dh=rho, frames=out)
+
+
+def lam_tol(lam: Any, tol: Any, t: KinematicsTables) -> tuple[float, float]:
+    """Validated damping and tolerance as floats; ``tol`` None is :func:`default_tol` of
+    the tables' dtype."""
+    lam = real_number(lam, "lam")
+    if not 0.0 < lam <= 1.0:
+        raise ValueError(f"lam: damping must be in (0, 1], got {lam!r}")
+    tol = default_tol(numpy_dtype(t.scalar)) if tol is None else real_number(tol, "tol")
+    if not (tol >= 0 and np.isfinite(tol)):
+        raise ValueError(f"tol: expected a finite number >= 0 [rad], got {tol!r}")
+    return lam, tol
+
+
+def elastic_args(robot: Any, q: Any, kappa: Any, lam: float, max_iter: int, tol: float | None,
+                  dh: Any, device: Any, dtype: Any, validate: bool):
+    """Validated arguments of the elastic functions: (model, batch, tables, kappa rows,
+    rho0 rows or None); lam and tol as :func:`lam_tol` checks them."""
+    model, batch, t = setup(robot, q, device, dtype, validate)
+    lam_tol(lam, tol, t)
+    if isinstance(max_iter, (bool, np.bool_)) or not isinstance(max_iter, (int, np.integer)) \
+            or max_iter < 0:
+        raise ValueError(f"max_iter: expected an integer >= 0, got {max_iter!r}")
+    kap = frame_rows(kappa_array(model, kappa), model, batch, t, "kappa", 3)
+    rho0 = None if dh is None else frame_rows(dh, model, batch, t, "dh", 5)
+    return model, batch, t, kap, rho0
+
+
+def equilibrium(run: ElasticLaunch, max_iter: int, tol: float):
+    """Run the damped iteration; returns (rho or None, frames at rho, iterations, converged).
+
+    ``converged``: an update changed no row by more than ``tol``. With ``max_iter`` 0 the
+    frames stay rigid (at rho0) and one update is made only to measure whether rho0 already
+    is the equilibrium to ``tol`` (its result is discarded)."""
+    iterations = np.zeros(run.B, np.int32)
+    converged = np.zeros(run.B, bool)
+    rho = None
+    for _ in range(max_iter):
+        _, rho_new, delta = run.step(rho)
+        iterations += ~converged
+        rho = (rho_new, 1)
+        converged |= delta.numpy() <= tol
+        if converged.all():
+            break
+    if max_iter == 0:
+        converged |= run.step(None)[2].numpy() <= tol
+    frames = run.frames_at(rho)
+    return rho, frames, iterations, converged
+
+
+def rho0_full(run: ElasticLaunch) -> wp.array:
+    arr, stride = run.rho0
+    if stride:
+        return arr
+    a = np.broadcast_to(arr.numpy(), (run.B, run.n, 5)).copy()
+    return wp.array(a, dtype=run.t.scalar, device=run.t.device)
+
+
+def host_out(a: np.ndarray, batch: Batch) -> Any:
+    a = a.reshape(tuple(batch.lead_shape))
+    if batch.kind == "torch":
+        import torch
+
+        return torch.from_numpy(a).to(batch.torch_tensor.device)
+    return a
+
+

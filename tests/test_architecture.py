@@ -1,0 +1,189 @@
+"""The package's import structure: layers point one way (down), no import cycles between
+modules, and no ``_private`` name is used outside its module.
+
+Layers (low to high); a module may import its own layer or any lower one:
+
+    0 host:      jwarp.atomic, jwarp.memory, jwarp.model, jwarp.registry, jwarp.measurement
+    1 kernels:   jwarp.kernels (Warp only)
+    2 core:      jwarp.core (arrays, device model, rows, limits)
+    3 kinematics jwarp.kinematics
+    4 world:     jwarp.world
+    5 plugins:   jwarp.plugins (robots and measurements; loaded by the registry by name)
+    6 solvers:   jwarp.solvers
+    7 learn:     jwarp.learn
+    8 viz:       jwarp.viz
+    9 cli:       jwarp.cli
+
+The facade ``jwarp/__init__.py`` (and ``jwarp/__main__.py``) may import anything.
+Imports inside functions count too (a lazy import is still a dependency), and so do
+cycles through them. A ``_private`` name is private to its module: no other module imports
+or reads it.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1] / "jwarp"
+
+LAYERS = {
+    "jwarp.atomic": 0, "jwarp.memory": 0, "jwarp.model": 0, "jwarp.registry": 0, "jwarp.measurement": 0,
+    "jwarp.kernels": 1, "jwarp.core": 2, "jwarp.kinematics": 3, "jwarp.world": 4,
+    "jwarp.plugins": 5, "jwarp.solvers": 6, "jwarp.learn": 7, "jwarp.viz": 8, "jwarp.cli": 9,
+}
+FACADE = {"jwarp", "jwarp.__main__"}
+
+
+def module_name(path: Path) -> str:
+    rel = path.relative_to(ROOT.parent).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def layer_of(module: str) -> tuple[str, int]:
+    best = ""
+    for prefix in LAYERS:
+        if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > len(best):
+            best = prefix
+    if not best:
+        raise AssertionError(f"module {module} belongs to no layer; add it to LAYERS")
+    return best, LAYERS[best]
+
+
+def package_of(module: str, is_package: bool) -> str:
+    return module if is_package else module.rpartition(".")[0]
+
+
+def modules() -> dict[str, tuple[Path, ast.Module, bool]]:
+    out = {}
+    for path in sorted(ROOT.rglob("*.py")):
+        out[module_name(path)] = (path, ast.parse(path.read_text(), str(path)),
+                                  path.name == "__init__.py")
+    return out
+
+
+MODULES = modules()
+
+
+def resolve(module: str, is_package: bool, node: ast.ImportFrom) -> str:
+    if node.level == 0:
+        return node.module or ""
+    base = package_of(module, is_package).split(".")
+    base = base[:len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def imports(module: str) -> list[tuple[int, str, list[str], bool]]:
+    """(line, imported module, imported names, at module level) of jwarp imports."""
+    path, tree, is_pkg = MODULES[module]
+    top = set(id(n) for n in tree.body)
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name == "jwarp" or a.name.startswith("jwarp."):
+                    found.append((node.lineno, a.name, [], id(node) in top))
+        elif isinstance(node, ast.ImportFrom):
+            target = resolve(module, is_pkg, node)
+            if target == "jwarp" or target.startswith("jwarp."):
+                names = [a.name for a in node.names]
+                # `from jwarp.x import y` where y is a submodule imports jwarp.x.y
+                subs = [f"{target}.{n}" for n in names if f"{target}.{n}" in MODULES]
+                if subs:
+                    for s in subs:
+                        found.append((node.lineno, s, [], id(node) in top))
+                    names = [n for n in names if f"{target}.{n}" not in MODULES]
+                    if not names:
+                        continue
+                found.append((node.lineno, target, names, id(node) in top))
+    return found
+
+
+def test_every_module_has_a_layer():
+    for m in MODULES:
+        if m not in FACADE:
+            layer_of(m)
+
+
+def test_imports_point_down():
+    bad = []
+    for m in MODULES:
+        if m in FACADE:
+            continue
+        _, mine = layer_of(m)
+        for line, target, names, _ in imports(m):
+            if target == "jwarp" and names and all(n.startswith("__") for n in names):
+                continue  # __version__
+            if target == "jwarp":
+                bad.append(f"{m}:{line} imports the facade 'jwarp' (import the module instead)")
+                continue
+            owner, theirs = layer_of(target)
+            if theirs > mine:
+                bad.append(f"{m}:{line} imports {target} (layer {owner}={theirs} > {mine})")
+    assert not bad, "upward imports:\n" + "\n".join(bad)
+
+
+def test_no_import_cycles():
+    graph = {m: sorted({t for _, t, _, _ in imports(m) if t in MODULES and t != m})
+             for m in MODULES}
+    state: dict[str, int] = {}
+    stack: list[str] = []
+    cycles = []
+
+    def visit(m: str) -> None:
+        state[m] = 1
+        stack.append(m)
+        for t in graph[m]:
+            if state.get(t) == 1:
+                cycles.append(" -> ".join(stack[stack.index(t):] + [t]))
+            elif t not in state:
+                visit(t)
+        stack.pop()
+        state[m] = 2
+
+    for m in graph:
+        if m not in state:
+            visit(m)
+    assert not cycles, "import cycles:\n" + "\n".join(cycles)
+
+
+def test_no_private_name_crosses_a_module():
+    bad = []
+    for m, (path, tree, is_pkg) in MODULES.items():
+        aliases: dict[str, str] = {}
+        for line, target, names, _ in imports(m):
+            for n in names:
+                if n.startswith("_") and not n.startswith("__") and target != m:
+                    bad.append(f"{m}:{line} imports {target}.{n}")
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                target = resolve(m, is_pkg, node)
+                for a in node.names:
+                    if f"{target}.{a.name}" in MODULES:
+                        aliases[a.asname or a.name] = f"{target}.{a.name}"
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    if a.name in MODULES and a.asname:
+                        aliases[a.asname] = a.name
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                    and node.value.id in aliases and node.attr.startswith("_")
+                    and not node.attr.startswith("__")):
+                target = aliases[node.value.id]
+                if target != m:
+                    bad.append(f"{m}:{node.lineno} uses {target}.{node.attr}")
+    assert not bad, "private names used across packages:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("name", ["World", "calibrate", "fk", "fk_elastic",
+                                  "ik", "jacobian", "jacobian_dh", "plan", "robot", "robots",
+                                  "RobotModel"])
+def test_facade_exports(name):
+    import jwarp
+
+    assert hasattr(jwarp, name)
