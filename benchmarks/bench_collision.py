@@ -27,10 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
-import statistics
 import sys
-import time
 from typing import Any, Callable
 
 import numpy as np
@@ -43,6 +40,7 @@ if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.world.collision import DEFAULT_EPS, CollisionModel, is_collision_free  # noqa: E402
 from jwarp.registry import robot as get_robot  # noqa: E402
+import timing  # noqa: E402
 from jwarp.world import feasible_simplex_world, random_configurations  # noqa: E402
 
 FULL = dict(cpu=(200, 10_000), cuda=(1_000, 200_000), min_time=0.3, repeats=5, tape_batch=1_000)
@@ -50,27 +48,9 @@ QUICK = dict(cpu=(50,), cuda=(1_000,), min_time=0.01, repeats=2, tape_batch=50)
 
 
 def measure(fn: Callable[[], Any], device: Any, min_time: float, repeats: int) -> tuple[float, float]:
-    """(median, best) seconds per call."""
-    fn()
-    wp.synchronize_device(device)
-    calls = 1
-    while True:
-        t = time.perf_counter()
-        for _ in range(calls):
-            fn()
-        wp.synchronize_device(device)
-        dt = time.perf_counter() - t
-        if dt >= min_time or calls > 1_000_000:
-            break
-        calls = max(calls * 2, int(calls * min_time / max(dt, 1e-9) * 1.2))
-    runs = [dt / calls]
-    for _ in range(repeats - 1):
-        t = time.perf_counter()
-        for _ in range(calls):
-            fn()
-        wp.synchronize_device(device)
-        runs.append((time.perf_counter() - t) / calls)
-    return statistics.median(runs), min(runs)
+    """(median, best) seconds per call (:func:`timing.measure`)."""
+    t = timing.measure(fn, device, min_time, repeats)
+    return t.median, t.best
 
 
 def configurations(model: Any, world: Any, n: int, kind: str, device: Any, seed: int = 0) -> np.ndarray:
@@ -112,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
         devices.remove("cuda")
     dtype = np.float32 if args.dtype == "float32" else np.float64
     rows: list[dict] = []
-    print(f"# jwarp collision kernels, {args.dtype}, {platform.processor() or platform.machine()}, "
+    print(f"# jwarp collision kernels, {args.dtype}, {timing.machine()}, "
           f"warp {wp.config.version}")
     header = f"{'device':<7}{'robot':<10}{'S':>4}{'P':>5}{'configs':<8}{'op':<11}{'batch':>8}" \
              f"{'ms/call':>10}{'us/config':>11}{'Mconfig/s':>11}{'path ms':>9}"

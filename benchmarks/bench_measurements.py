@@ -17,16 +17,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
-import statistics
 import sys
-import time
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 import jwarp
 from jwarp.registry import measurement
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import timing  # noqa: E402
 
 
 def setups() -> list[tuple[str, str, str, dict]]:
@@ -66,24 +66,8 @@ def sample_q(robot, n: int, rng: np.random.Generator) -> np.ndarray:
 
 
 def time_call(fn, min_time: float, repeats: int) -> float:
-    """Median seconds per call."""
-    fn()
-    n, t = 1, 0.0
-    while True:
-        t0 = time.perf_counter()
-        for _ in range(n):
-            fn()
-        t = time.perf_counter() - t0
-        if t >= min_time:
-            break
-        n *= 2
-    runs = [t / n]
-    for _ in range(repeats - 1):
-        t0 = time.perf_counter()
-        for _ in range(n):
-            fn()
-        runs.append((time.perf_counter() - t0) / n)
-    return statistics.median(runs)
+    """Median seconds per call (:func:`timing.measure`)."""
+    return timing.measure(fn, None, min_time, repeats).median
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -99,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     min_time = 0.01 if args.quick else args.min_time
     repeats = 2 if args.quick else args.repeats
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"jwarp measurement plugins: jacobians() throughput | {platform.processor() or platform.machine()}"
+    print(f"jwarp measurement plugins: jacobians() throughput | {timing.machine()}"
           f" | {os.cpu_count()} CPUs | FK on {args.device} | load {load:.2f}")
     print(f"{'plugin':<18}{'robot':<10}{'S':>7}{'m':>4}{'frames':>7}{'P':>4}"
           f"{'ms/call':>11}{'samples/s':>13}")
