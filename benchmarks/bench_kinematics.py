@@ -49,59 +49,21 @@ from jwarp.kinematics import (  # noqa: E402
     ElasticLaunch, elastic_args, fk, fk_elastic, jacobian, launch_fk)
 from jwarp.model import RobotModel  # noqa: E402
 from jwarp.registry import robot as get_robot  # noqa: E402
+import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
+from timing import Timing, measure  # noqa: E402,F401
 
 KAPPA = 1e-4            # rad/(N m) on the alpha, beta and theta axes of every DH frame
 ELASTIC_ITERS = (1, 3, 10)
 FULL = dict(cpu=(1, 1_000, 100_000), cuda=(1, 1_000, 100_000, 1_000_000),
-            thread_batch=100_000, pin_batch=1_000, min_time=0.2, repeats=5)
+            thread_batch=100_000, pin_batch=1_000, min_time=0.2, repeats=5,
+            small_repeats=20_000)
 QUICK = dict(cpu=(1, 100), cuda=(1, 10_000), thread_batch=2_000, pin_batch=20,
-             min_time=0.005, repeats=2)
+             min_time=0.005, repeats=2, small_repeats=200)
 
 
 # ====================================================================== timing
-@dataclass
-class Timing:
-    median: float   # s per call
-    best: float     # s per call
-    calls: int      # calls per timed run
-    runs: int
-
-
-def measure(fn: Callable[[], Any], device: Any, min_time: float, repeats: int,
-            max_total: float = 20.0) -> Timing:
-    """Median/best wall time of ``fn`` per call. Warms up first (compiles, first touch),
-    then times runs of ``calls`` back-to-back calls, each closed by a device sync and
-    lasting at least ``min_time`` s; fewer runs (at least 3) if that would exceed
-    ``max_total`` s."""
-    def sync() -> None:
-        if device is not None:
-            wp.synchronize_device(device)
-
-    fn()
-    sync()
-    n, elapsed = 1, 0.0
-    while True:  # calibrate: double until a run takes a tenth of min_time
-        t0 = time.perf_counter()
-        for _ in range(n):
-            fn()
-        sync()
-        elapsed = time.perf_counter() - t0
-        if elapsed >= min_time / 10 or n >= 1 << 20:
-            break
-        n *= 2
-    per_call = max(elapsed / n, 1e-9)
-    calls = max(1, math.ceil(min_time / per_call))
-    runs = repeats
-    if calls * per_call * runs > max_total:
-        runs = max(min(3, repeats), int(max_total / (calls * per_call)))
-    times = []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        for _ in range(calls):
-            fn()
-        sync()
-        times.append((time.perf_counter() - t0) / calls)
-    return Timing(statistics.median(times), min(times), calls, runs)
+# Timing and measure come from benchmarks/timing.py (the one timing helper of every
+# benchmark script): median/best of repeated runs, each closed by a device sync.
 
 
 # ============================================================ launch recording
@@ -420,6 +382,8 @@ class Bench:
         self.rows: list[Row] = []
         self.notes: list[str] = []
         self.checks: dict[str, float] = {}
+        self.summary: list[str] = []
+        self.ratios: dict[str, float] = {}
         self.rng = np.random.default_rng(0)
 
     # -------------------------------------------------------------- helpers
@@ -502,12 +466,31 @@ class Bench:
                     rows[op].ratio = rows[op].time_per_batch_s / rows["fk"].time_per_batch_s
                     rows[op].ratio_meaning = "x fk time"
                 self.emit(rows[op])
+            kernels = {"fk": fns["fk"], "jacobian": fns["jacobian"]}
             del fns
             del ops
-            # the public API, allocations and host sync included
-            rows["fk api"] = self.time_row(
-                name, "fk api", dev, B,
-                lambda: fk(model, q, device=dev, dtype=self.ftype, validate=False), dev)
+            # the public API, allocations and host sync included: Warp in, a new Warp
+            # array out; then with the output reused (out=); then numpy in, numpy out
+            # (validation on, as a user calls it), fresh and with out=
+            tcp = self.args.tcp
+            fk_out = fk(model, q, device=dev, dtype=self.ftype, validate=False)
+            q_np = np.array(q.numpy())
+            fk_out_np = np.empty((B, model.n_frames, 4, 4), self.dtype)
+            jac_out = jacobian(model, q, tcp, device=dev, dtype=self.ftype, validate=False)
+            kw = dict(device=dev, dtype=self.ftype)
+            api = {
+                "fk api": lambda: fk(model, q, validate=False, **kw),
+                "fk api out=": lambda: fk(model, q, validate=False, out=fk_out, **kw),
+                "fk api numpy": lambda: fk(model, q_np, **kw),
+                "fk api numpy out=": lambda: fk(model, q_np, out=fk_out_np, **kw),
+                "jacobian api": lambda: jacobian(model, q, tcp, validate=False, **kw),
+                "jacobian api out=": lambda: jacobian(model, q, tcp, validate=False, out=jac_out,
+                                                      **kw),
+            }
+            for op, fn in api.items():
+                rows[op] = self.time_row(name, op, dev, B, fn, dev)
+            if B == max(batches):
+                self.side_by_side(name, dev, B, kernels, api)
             # max_iter=10, tol=0: the library still stops early once every configuration's
             # update changed nothing (delta == 0, common in float32); the op name gives the
             # number of torque updates it actually made
@@ -520,14 +503,63 @@ class Bench:
             api_op = f"elastic_fk({done}) api"
             rows[api_op] = self.time_row(name, api_op, dev, B, elastic_api, dev,
                                          max_iter=it, updates=done)
-            for op in ("fk api", api_op):
-                rows[op].ratio = rows[op].time_per_batch_s / rows["fk"].time_per_batch_s
-                rows[op].ratio_meaning = "x fk time"
+            for op in (*api, api_op):
+                kernel = "jacobian" if op.startswith("jacobian") else "fk"
+                rows[op].ratio = rows[op].time_per_batch_s / rows[kernel].time_per_batch_s
+                rows[op].ratio_meaning = f"x {kernel} time"
                 self.emit(rows[op])
             result[B] = rows
-            del q
+            del q, fk_out, fk_out_np, jac_out, q_np, api, kernels
             gc.collect()
         return result
+
+    def side_by_side(self, name: str, dev: Any, B: int, kernels: dict, api: dict) -> None:
+        """Each public call over its kernel alone (the recorded launches replayed), timed
+        interleaved (:func:`timing.side_by_side`: a noisy neighbour slows all alike); the
+        ratios go to the summary under the table and to the JSON."""
+        names = list(kernels) + list(api)
+        fns = list(kernels.values()) + list(api.values())
+        ts = dict(zip(names, timing.side_by_side(fns, dev, self.min_time, rounds=self.repeats)))
+        for op in api:
+            k = ts[op.split()[0]]
+            t = ts[op]
+            self.ratios[f"{name} {dev} batch {B}: {op} / kernel"] = t.median / k.median
+            self.summary.append(
+                f"{name} {dev} batch {B}: {op} / {op.split()[0]} kernel = "
+                f"{t.median / k.median:.3g} (median {duration(t.median)} vs "
+                f"{duration(k.median)}; best {t.best / k.best:.3g}), side by side, "
+                f"{t.runs} rounds")
+
+    # ------------------------------------------------------- small calls
+    def run_small(self, model: RobotModel, dev: Any, rows: dict) -> None:
+        """The public fk/jacobian of ONE configuration (numpy (n_dof,) in, numpy out, as a
+        control loop or an interactive user calls them), every call timed on its own:
+        min and median of ``--small-repeats`` calls after a warm-up."""
+        n = self.sizes["small_repeats"] if self.args.small_repeats is None else self.args.small_repeats
+        q = self.configs(model, 1)[0]
+        tcp = self.args.tcp
+        calls = {
+            "fk api 1 config": lambda: fk(model, q, device=dev, dtype=self.ftype),
+            "jacobian api 1 config": lambda: jacobian(model, q, tcp, device=dev, dtype=self.ftype),
+        }
+        for op, fn in calls.items():
+            for _ in range(max(10, n // 20)):
+                fn()
+            times = []
+            for _ in range(n):
+                t0 = time.perf_counter()
+                fn()
+                times.append(time.perf_counter() - t0)
+            med, best = statistics.median(times), min(times)
+            row = Row(model.name, op, str(dev), 1, 1 / med, med, best,
+                      extra=dict(calls=n, runs=1, min_s=best, median_s=med))
+            kernel = rows.get(1, {}).get("fk (wp.Launch replay)")
+            if kernel is not None:
+                row.ratio = med / kernel.time_per_batch_s
+                row.ratio_meaning = "x fk wp.Launch replay"
+            self.emit(row)
+            self.summary.append(f"{model.name} {dev} {op}: min {duration(best)}, median "
+                                f"{duration(med)} over {n} calls")
 
     # ------------------------------------------------------------- numpy
     def run_numpy(self, model: RobotModel, cpu_rows: dict, batches: tuple[int, ...]) -> dict:
@@ -629,7 +661,7 @@ class Bench:
                 self.notes.append("no CUDA device: CPU rows only")
         dev_names = ", ".join(f"{d} ({d.name})" for d in devices)
         print(f"jwarp kinematics benchmark: warp {wp.config.version}, numpy {np.__version__}, "
-              f"{self.dtype.name}, {os.cpu_count()} CPU cores ({platform.processor() or platform.machine()}), "
+              f"{self.dtype.name}, {timing.machine()}, "
               f"devices: {dev_names}; median of {self.repeats} runs of >= {self.min_time:g} s; "
               f"load average {_loadavg() or 'n/a'}", flush=True)
         print(header(), flush=True)
@@ -642,6 +674,7 @@ class Bench:
                 if self.args.batches:
                     batches = tuple(int(float(b)) for b in self.args.batches.split(","))
                 rows = self.run_device(model, dev, batches)
+                self.run_small(model, dev, rows)
                 if dev.is_cpu:
                     cpu_rows = rows
                     if not self.args.no_numpy:
@@ -659,6 +692,10 @@ class Bench:
 
     def finish(self, devices: list) -> None:
         print()
+        if self.summary:
+            print("public API overhead (small calls; big calls against their kernel):")
+            for line in self.summary:
+                print(f"  {line}")
         if self.checks:
             print("checks:")
             for k, v in self.checks.items():
@@ -672,12 +709,13 @@ class Bench:
             doc = dict(
                 meta=dict(warp=wp.config.version, numpy=np.__version__, python=sys.version.split()[0],
                           dtype=self.dtype.name, cpu_count=os.cpu_count(),
-                          processor=platform.processor() or platform.machine(),
+                          processor=timing.machine(), host=platform.node(),
                           devices=[f"{d} ({d.name})" for d in devices],
                           min_time_s=self.min_time, repeats=self.repeats, quick=self.args.quick,
                           kappa=KAPPA, tcp=self.args.tcp, threads=self.args.threads,
                           load_average_end=_loadavg()),
-                rows=[asdict(r) for r in self.rows], checks=self.checks, notes=self.notes)
+                rows=[asdict(r) for r in self.rows], checks=self.checks, notes=self.notes,
+                summary=self.summary, api_over_kernel=self.ratios)
             with open(self.args.json, "w") as f:
                 json.dump(doc, f, indent=1)
             print(f"wrote {self.args.json}")
@@ -705,6 +743,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--min-time", type=float, default=None,
                    help="seconds of work per timed run (default 0.2; --quick 0.005)")
     p.add_argument("--repeats", type=int, default=None, help="timed runs per row (default 5)")
+    p.add_argument("--small-repeats", type=int, default=None,
+                   help="calls timed one by one for the 1-configuration API rows "
+                        "(default 20000; --quick 200)")
     p.add_argument("--quick", action="store_true", help="small sizes and short runs (smoke test)")
     p.add_argument("--no-numpy", action="store_true", help="skip the numpy FK rows")
     p.add_argument("--no-pinocchio", action="store_true", help="skip the pinocchio rows")

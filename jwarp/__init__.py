@@ -22,6 +22,7 @@ __version__ = "0.1.0"
 LAZY = {
     "World": "jwarp.world.sdf",
     "plan": "jwarp.solvers.planner",
+    "Planner": "jwarp.solvers.planner",
     "ik": "jwarp.solvers.ik",
     "calibrate": "jwarp.solvers.calibration.map",
 }

@@ -181,7 +181,8 @@ def test_no_private_name_crosses_a_module():
 
 
 @pytest.mark.parametrize("name", ["World", "calibrate", "fk", "fk_elastic",
-                                  "ik", "jacobian", "jacobian_dh", "plan", "robot", "robots",
+                                  "ik", "jacobian", "jacobian_dh", "plan", "Planner", "robot",
+                                  "robots",
                                   "RobotModel"])
 def test_facade_exports(name):
     import jwarp

@@ -213,7 +213,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     from jwarp.atomic import commit_all
     from jwarp.cli.common import dumps
     from jwarp.registry import robot as get_robot
-    from jwarp.solvers.calibration import calibrate, errors
+    from jwarp.solvers.calibration import CalibrationOptions, calibrate_with, errors
     from jwarp.solvers.calibration.files import (make_measurement, parse_samples, read_setup,
                                                  read_text, sha256_hex)
 
@@ -264,9 +264,10 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            res = calibrate(model, meas, train.q, train.y, free=free, meta=train.meta or None,
-                            n_starts=args.starts, seed=args.seed, max_nfev=args.max_nfev,
-                            callback=bar)
+            options = CalibrationOptions(free=free, n_starts=args.starts, seed=args.seed,
+                                         max_nfev=args.max_nfev, callback=bar)
+            res = calibrate_with(model, meas, train.q, train.y, options,
+                                 meta=train.meta or None)
         except ValueError as e:
             if str(e).startswith("q, y: "):  # too few rows for the free parameters
                 raise _cli_error("--calibrate-rows: " + str(e).removeprefix("q, y: ").replace(

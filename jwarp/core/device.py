@@ -1,25 +1,62 @@
-"""Device tables of a robot (the *Model* the kernels read), per device and scalar type.
+"""The device *Model* of a robot (what the kernels read) and the *Data* workspaces.
 
-:func:`tables` turns a :class:`~jwarp.model.RobotModel` into Warp arrays once and
-caches them (keyed by the model object, device and dtype).
+Model vs Data (as in MuJoCo Warp):
+
+* **Model** -- :class:`DeviceModel`, built in one place, :func:`put_model` ``(robot, device,
+  dtype)``: every table a kernel reads about the robot, uploaded once and never written by a
+  kernel. The frame tables of FK (``order``, ``parent``, ..., ``trig``, the coupling CSR;
+  one kernel argument ``frame_struct``), the mass model (``mass``, ``mass_com``,
+  ``dh_info``, ``static_idx``), gravity and the robot's default compliances ``kappa``, the
+  joint limits with the linear limits (``limits``: :class:`LimitTables`), the nominal DH
+  rows (``nominal_rows``: :class:`jwarp.core.rows.DHRows`), and, built on first use, the
+  collision spheres and self-collision pairs (``spheres``: :class:`SphereModel`).
+  Models are cached by robot *content* (a hash of the robot's canonical JSON, with device
+  and dtype): two equal :class:`~jwarp.model.RobotModel` objects share one DeviceModel and
+  an edited copy (``copy``, ``with_dh``, ``with_masses``) gets its own. Like the robot's
+  own cached properties, this treats a RobotModel as immutable once it has been used:
+  edit a copy, not the model in place.
+* **Data** -- workspaces that hold every intermediate and output of a computation on one
+  batch shape and are reused across calls (no allocation on a second call of equal
+  shape): :class:`PathData` (the buffers of a batch of paths),
+  :class:`jwarp.world.collision.CollisionData` (collision scratch and outputs). Kernels
+  group their parameters ``# Model:`` / ``# Data in:`` / ``# Data out:``.
+
+``tables(robot, device, dtype)`` and :func:`jwarp.core.limits.limit_tables` are the older
+names of :func:`put_model` and ``put_model(...).limits`` (``KinematicsTables`` is
+:class:`DeviceModel`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
+import threading
 import weakref
+from collections import OrderedDict
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 import warp as wp
 
+from jwarp.core.rows import DHRows
+from jwarp.kernels.collision import kernels as collision_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.model import RobotModel
+from jwarp.registry import robot as get_robot
 
-#: the fields of ``kernels.fk.FrameTables`` (attributes of :class:`KinematicsTables`)
+__all__ = ["DeviceModel", "KinematicsTables", "LimitTables", "SphereModel", "PathData",
+           "put_model", "tables", "content_key", "scalar_type", "numpy_dtype",
+           "frame_mass_model", "with_frame_masses", "fixed_parts", "collision_tables"]
+
+#: the fields of ``kernels.fk.FrameTables`` (attributes of :class:`DeviceModel`)
 _FRAME_FIELDS = ("order", "parent", "is_dh", "prismatic", "fixed_rot", "fixed_pos", "dh0",
                  "trig", "cpl_start", "cpl_joint", "cpl_coef")
+#: the fields of ``kernels.collision.SphereTables`` (attributes of :class:`SphereModel`)
+_SPHERE_FIELDS = ("sph_frame", "sph_pos", "sph_rad", "bound_pos", "bound_rad", "fpair_a",
+                  "fpair_b", "fpair_start", "ent_sphere", "ent_start", "pair_b")
 
 _SCALARS = {np.dtype(np.float32): wp.float32, np.dtype(np.float64): wp.float64}
 
@@ -41,13 +78,81 @@ def numpy_dtype(scalar: type) -> np.dtype:
     return np.dtype(np.float32) if scalar == wp.float32 else np.dtype(np.float64)
 
 
-@dataclass
-class KinematicsTables:
-    """Frame, coupling and mass tables of one robot on one device (see kernels/fk.py)."""
+# ====================================================================== Model
+@dataclass(eq=False)
+class LimitTables:
+    """Joint limits as the path kernels' projection reads them (see kernels/path.py): the
+    box ``limits`` (n_dof, 2) and the linear limits ``lower <= sum_k c_k q_{j_k} <= upper``
+    as CSR rows (``lin_start`` (L + 1,), ``lin_joint``/``lin_coef`` (max(nnz, 1),),
+    ``lin_bounds`` (L, 2))."""
+
+    limits: wp.array
+    lin_start: wp.array
+    lin_joint: wp.array
+    lin_coef: wp.array
+    lin_bounds: wp.array
+
+    @property
+    def args(self) -> list:
+        return [self.limits, self.lin_start, self.lin_joint, self.lin_coef, self.lin_bounds]
+
+
+@dataclass(eq=False)
+class SphereModel:
+    """Collision spheres and self-collision pairs of one robot on one device (the robot
+    tables of :mod:`jwarp.kernels.collision`), from :func:`collision_tables`.
+
+    ``pairs`` (P, 2) int32 host copy of the checked sphere pairs (kernel order);
+    ``rigid_pairs`` (R, 2) and ``rigid_distance`` (R,) [m]: the allowed pairs left out
+    because their distance is constant and positive. Empty tables are padded to one entry
+    (Warp kernels need non-empty arrays); the kernels take their lengths from
+    ``sph_frame`` and ``fpair_a``, which keep their true length."""
+
+    scalar: type
+    n_spheres: int
+    n_pairs: int
+    pairs: np.ndarray
+    rigid_pairs: np.ndarray
+    rigid_distance: np.ndarray
+    sph_frame: wp.array
+    sph_pos: wp.array
+    sph_rad: wp.array
+    bound_pos: wp.array
+    bound_rad: wp.array
+    fpair_a: wp.array
+    fpair_b: wp.array
+    fpair_start: wp.array
+    ent_sphere: wp.array
+    ent_start: wp.array
+    pair_a: wp.array
+    pair_b: wp.array
+
+    @cached_property
+    def struct(self) -> Any:
+        """The tables as one kernel argument (``kernels.collision.SphereTables``)."""
+        st = collision_kernels(self.scalar).SphereTables()
+        for name in _SPHERE_FIELDS:
+            setattr(st, name, getattr(self, name))
+        return st
+
+
+@dataclass(eq=False)
+class DeviceModel:
+    """Every table the kernels read about one robot, on one device in one dtype (see the
+    module docstring). Build it with :func:`put_model`; never written by a kernel.
+
+    Frame tables (``kernels.fk.FrameTables``): ``order``, ``parent``, ``is_dh``,
+    ``prismatic``, ``fixed_rot``, ``fixed_pos``, ``dh0`` (n_frames, 5), ``trig``,
+    ``cpl_start``/``cpl_joint``/``cpl_coef``; ``dh0_3d`` the nominal rows as (1, n_frames, 5).
+    Mass model: ``mass`` (n_frames,) [kg], ``mass_com`` (n_frames,) vec3 [m], ``dh_info``
+    (n_dh,) vec4i, ``static_idx``. ``gravity`` vec3 [m/s^2]; ``kappa`` (1, n_frames, 3) the
+    robot's compliances [rad/(N m)]; ``limits`` :class:`LimitTables`; ``key`` the content
+    key of the robot (:func:`content_key`)."""
 
     robot: RobotModel
     device: wp.Device
     scalar: type
+    key: str
     order: wp.array
     parent: wp.array
     is_dh: wp.array
@@ -64,6 +169,22 @@ class KinematicsTables:
     mass_com: wp.array
     dh_info: wp.array  # (n_dh,) vec4i [position in order, frame, subtree end, parent] of DH frames
     static_idx: wp.array  # (n_static,) int32 static frame indices
+    gravity: Any  # vec3 of the scalar type
+    kappa: wp.array  # (1, n_frames, 3) default compliances
+    limits: LimitTables
+
+    @property
+    def n_frames(self) -> int:
+        return self.robot.n_frames
+
+    @property
+    def n_dof(self) -> int:
+        return self.robot.n_dof
+
+    @property
+    def dtype(self) -> np.dtype:
+        """The numpy dtype of the tables."""
+        return numpy_dtype(self.scalar)
 
     @property
     def frame_struct(self) -> Any:
@@ -76,6 +197,20 @@ class KinematicsTables:
             self.__dict__["_frame_struct"] = st
         return st
 
+    @property
+    def nominal_rows(self) -> DHRows:
+        """The nominal DH rows (:meth:`jwarp.core.rows.DHRows.nominal` of ``dh0_3d``)."""
+        r = self.__dict__.get("_nominal_rows")
+        if r is None:
+            r = self.__dict__["_nominal_rows"] = DHRows.nominal(self.dh0_3d)
+        return r
+
+    @cached_property
+    def spheres(self) -> SphereModel:
+        """Collision spheres and self-collision pairs (built on first use: finding the
+        pairs at a constant distance runs FK at random configurations)."""
+        return _sphere_model(self)
+
     def chain(self, frame: int) -> wp.array:
         """Frames from the root to ``frame`` as an int32 device array (cached)."""
         cache = self.__dict__.setdefault("_chains", {})
@@ -85,8 +220,8 @@ class KinematicsTables:
         return cache[frame]
 
 
-_CACHE: "weakref.WeakKeyDictionary[RobotModel, dict]" = weakref.WeakKeyDictionary()
-
+#: the older name of :class:`DeviceModel`
+KinematicsTables = DeviceModel
 
 def fixed_parts(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
     """Nominal ``Rot_y(beta) Rot_x(alpha)`` (n, 3, 3) and ``r Rot_y(beta) e_x`` (n, 3) of DH
@@ -130,8 +265,8 @@ def frame_mass_model(robot: RobotModel, values: np.ndarray | None = None
     return mass, com
 
 
-def with_frame_masses(t: KinematicsTables, mass: np.ndarray, com: np.ndarray) -> KinematicsTables:
-    """A copy of the tables ``t`` with another mass model: per-frame mass (n_frames,) [kg]
+def with_frame_masses(t: DeviceModel, mass: np.ndarray, com: np.ndarray) -> DeviceModel:
+    """A copy of the model ``t`` with another mass model: per-frame mass (n_frames,) [kg]
     and centre of mass (n_frames, 3) [m] (see :func:`frame_mass_model`). Only these two
     small arrays are uploaded; every other table is shared with ``t``. The copy is not
     cached (e.g. one per calibration step)."""
@@ -142,9 +277,13 @@ def with_frame_masses(t: KinematicsTables, mass: np.ndarray, com: np.ndarray) ->
         raise ValueError(f"mass, com: expected shapes ({n},) and ({n}, 3), got {mass.shape} "
                          f"and {com.shape}")
     npdt = numpy_dtype(t.scalar)
-    return dataclasses.replace(
+    out = dataclasses.replace(
         t, mass=wp.array(mass.astype(npdt), dtype=t.scalar, device=t.device),
         mass_com=wp.array(com.astype(npdt), dtype=t.mass_com.dtype, device=t.device))
+    for name in ("_frame_struct", "_nominal_rows", "_chains", "spheres"):  # mass-free caches
+        if name in t.__dict__:
+            out.__dict__[name] = t.__dict__[name]
+    return out
 
 
 def _dh_info(robot: RobotModel) -> np.ndarray:
@@ -156,18 +295,72 @@ def _dh_info(robot: RobotModel) -> np.ndarray:
     return np.stack([ks, i, robot.subtree_end[ks], robot.parents[i]], 1).astype(np.int32).reshape(-1, 4)
 
 
-def tables(robot: RobotModel, device: object = None, dtype: object = np.float32) -> KinematicsTables:
-    """Device tables of ``robot`` on ``device`` in ``dtype`` (cached)."""
+# ====================================================================== the cache
+#: content key per RobotModel object (the robot's JSON is hashed once per object)
+_KEYS: "weakref.WeakKeyDictionary[RobotModel, str]" = weakref.WeakKeyDictionary()
+#: THE model cache, keyed by (content key, device, scalar): every model still in use ...
+_LIVE: "weakref.WeakValueDictionary[tuple, DeviceModel]" = weakref.WeakValueDictionary()
+#: ... and the most recently used ones kept alive (an fk call does not hold its model)
+_RECENT: "OrderedDict[tuple, DeviceModel]" = OrderedDict()
+_RECENT_MAX = 32
+_LOCK = threading.Lock()
+
+
+def content_key(robot: Any) -> str:
+    """The content key of a robot: a hash of its canonical JSON (``RobotModel.to_dict``,
+    sorted keys). Equal robots have equal keys; computed once per RobotModel object."""
+    model = robot if isinstance(robot, RobotModel) else get_robot(robot)
+    k = _KEYS.get(model)
+    if k is None:
+        doc = json.dumps(model.to_dict(), sort_keys=True, separators=(",", ":"),
+                         default=_json_default)
+        k = hashlib.blake2b(doc.encode(), digest_size=16).hexdigest()
+        _KEYS[model] = k
+    return k
+
+
+def _json_default(o: Any) -> Any:
+    """numpy scalars and arrays in a programmatically built robot (``tolist``)."""
+    if hasattr(o, "tolist"):
+        return o.tolist()
+    raise TypeError(f"robot: cannot hash a {type(o).__name__} value")
+
+
+def put_model(robot: Any, device: object = None, dtype: object = np.float32) -> DeviceModel:
+    """The :class:`DeviceModel` of ``robot`` (name or RobotModel) on ``device`` (default: Warp's
+    default device) in ``dtype`` (float32 or float64): built once per robot content,
+    device and dtype, then shared (see the module docstring)."""
     scalar = scalar_type(dtype)
     dev = wp.get_device(device)
-    per_robot = _CACHE.setdefault(robot, {})
-    key = (str(dev), scalar.__name__)
-    if key in per_robot:
-        return per_robot[key]
+    model = robot if isinstance(robot, RobotModel) else get_robot(robot)
+    k = _KEYS.get(model)
+    if k is None:
+        k = content_key(model)
+    key = (k, str(dev), scalar.__name__)
+    m = _RECENT.get(key)
+    if m is not None:
+        return m
+    with _LOCK:
+        m = _LIVE.get(key)
+        if m is None:
+            m = _build(model, dev, scalar, k)
+            _LIVE[key] = m
+        _RECENT[key] = m
+        while len(_RECENT) > _RECENT_MAX:
+            _RECENT.popitem(last=False)
+    return m
+
+
+def tables(robot: RobotModel, device: object = None, dtype: object = np.float32) -> DeviceModel:
+    """The older name of :func:`put_model`."""
+    return put_model(robot, device, dtype)
+
+
+def _build(robot: RobotModel, dev: wp.Device, scalar: type, key: str) -> DeviceModel:
+    """Upload every table of ``robot`` (the one place where the Model is built)."""
     npdt = numpy_dtype(scalar)
     n = robot.n_frames
-    vec3 = wp.types.vector(3, scalar)
-    mat33 = wp.types.matrix((3, 3), scalar)
+    k = fk_kernels(scalar)
 
     def arr(a: np.ndarray, dt: object) -> wp.array:
         return wp.array(a, dtype=dt, device=dev)
@@ -183,26 +376,215 @@ def tables(robot: RobotModel, device: object = None, dtype: object = np.float32)
     mass, com = frame_mass_model(robot)
     rot, pos = fixed_parts(robot)
     dh0 = robot.dh_table.astype(npdt)
-    t = KinematicsTables(
-        robot=robot, device=dev, scalar=scalar,
+    g = robot.gravity
+    return DeviceModel(
+        robot=robot, device=dev, scalar=scalar, key=key,
         order=arr(robot.topological_order, wp.int32),
         parent=arr(robot.parents, wp.int32),
         is_dh=arr(robot.is_dh.astype(np.int32), wp.int32),
         prismatic=arr(robot.frame_is_prismatic.astype(np.int32), wp.int32),
-        fixed_rot=arr(rot.astype(npdt), mat33),
-        fixed_pos=arr(pos.astype(npdt), vec3),
+        fixed_rot=arr(rot.astype(npdt), k.mat33),
+        fixed_pos=arr(pos.astype(npdt), k.vec3),
         dh0=arr(dh0, scalar),
         dh0_3d=arr(dh0[None], scalar),
         trig=arr(np.stack([np.cos(robot.dh_table[:, 3]), np.sin(robot.dh_table[:, 3]),
                            np.cos(robot.dh_table[:, 4]), np.sin(robot.dh_table[:, 4])], 1).astype(npdt),
-                 wp.types.vector(4, scalar)),
+                 k.vec4),
         cpl_start=arr(cpl_start, wp.int32),
         cpl_joint=arr(np.array(cpl_joint or [0], np.int32), wp.int32),
         cpl_coef=arr(np.array(cpl_coef or [0.0], npdt), scalar),
         mass=arr(mass.astype(npdt), scalar),
-        mass_com=arr(com.astype(npdt), vec3),
+        mass_com=arr(com.astype(npdt), k.vec3),
         dh_info=arr(_dh_info(robot), wp.vec4i),
         static_idx=arr(np.nonzero(~robot.is_dh.astype(bool))[0].astype(np.int32), wp.int32),
+        gravity=k.vec3(float(g[0]), float(g[1]), float(g[2])),
+        kappa=arr(np.asarray(robot.kappa, np.float64).astype(npdt)[None], scalar),
+        limits=_limit_tables(robot, dev, scalar),
     )
-    per_robot[key] = t
-    return t
+
+
+def _limit_tables(robot: RobotModel, dev: wp.Device, scalar: type) -> LimitTables:
+    npdt = numpy_dtype(scalar)
+    start, joint, coef, bounds = [0], [], [], []
+    for lim in robot.linear_limits:
+        joint += list(lim.joints)
+        coef += list(lim.coefficients)
+        start.append(len(joint))
+        bounds.append([lim.lower, lim.upper])
+    return LimitTables(
+        limits=wp.array(robot.joint_limits.astype(npdt), dtype=scalar, device=dev),
+        lin_start=wp.array(np.array(start, np.int32), dtype=wp.int32, device=dev),
+        lin_joint=wp.array(np.array(joint or [0], np.int32), dtype=wp.int32, device=dev),
+        lin_coef=wp.array(np.array(coef or [0.0], npdt), dtype=scalar, device=dev),
+        lin_bounds=wp.array(np.array(bounds, npdt).reshape(-1, 2), dtype=scalar, device=dev),
+    )
+
+
+# ====================================================================== collision tables
+def _pair_distance_spread(host: DeviceModel, pairs: np.ndarray, n: int = 32,
+                          seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) surface distance [m] of sphere ``pairs`` (P, 2) over q = 0 and ``n``
+    random configurations within the joint limits (float64 FK with the model ``host``)."""
+    robot = host.robot
+    f, p, r = robot.sphere_arrays()
+    lim = robot.joint_limits
+    q = np.random.default_rng(seed).uniform(lim[:, 0], lim[:, 1], (n, robot.n_dof))
+    q = np.concatenate([np.zeros((1, robot.n_dof)), q])
+    k = fk_kernels(host.scalar)
+    qw = wp.array(q, dtype=host.scalar, device=host.device)
+    frames = wp.empty((len(q), robot.n_frames), dtype=k.mat44, device=host.device)
+    wp.launch(k.fk, dim=len(q), inputs=[qw, *host.nominal_rows.args, host.frame_struct],
+              outputs=[frames], device=host.device)
+    T = frames.numpy()[:, f]
+    x = np.einsum("bsij,sj->bsi", T[..., :3, :3], p) + T[..., :3, 3]
+    d = np.linalg.norm(x[:, pairs[:, 0]] - x[:, pairs[:, 1]], axis=-1) - r[pairs[:, 0]] - r[pairs[:, 1]]
+    return d.min(0), d.max(0)
+
+
+def collision_tables(robot: Any) -> dict:
+    """Host (numpy) sphere, bound and pair tables of a robot, the source of
+    :class:`SphereModel` (cached with its float64 CPU model). Sphere pairs on allowed
+    frame pairs whose distance cannot change (e.g. a sphere centred on the only joint axis
+    between the two frames) and is positive are left out: they never collide and would
+    only add a constant to the cost (justin19: torso_3 vs right/left_base, 1.5 cm)."""
+    host = put_model(robot, "cpu", wp.float64)
+    out = host.__dict__.get("_collision_tables")
+    if out is None:
+        out = host.__dict__["_collision_tables"] = _collision_tables(host)
+    return out
+
+
+def _collision_tables(host: DeviceModel) -> dict:
+    robot = host.robot
+    f, p, r = robot.sphere_arrays()
+    allowed = np.asarray(robot.allowed_collision_pairs, bool)
+    n = robot.n_frames
+    cand = np.array([(a, b) for a in range(len(f)) for b in range(len(f))
+                     if f[a] < f[b] and allowed[f[a], f[b]]], np.int32).reshape(-1, 2)
+    rigid = np.zeros(len(cand), bool)
+    dmin = np.zeros(len(cand))
+    if len(cand):
+        dmin, dmax = _pair_distance_spread(host, cand)
+        rigid = (dmax - dmin < 1e-9) & (dmin > 0)
+    groups: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    for (a, b) in cand[~rigid].tolist():
+        groups.setdefault((int(f[a]), int(f[b])), []).append((a, b))
+    fpairs = sorted(groups)
+    start = [0]          # frame pair -> its entries (one per sphere a)
+    ent_sphere: list[int] = []
+    ent_start = [0]      # entry -> its pairs
+    pairs: list[tuple[int, int]] = []
+    for key in fpairs:
+        for a in sorted({a for a, _ in groups[key]}):
+            pairs.extend(sorted(pr for pr in groups[key] if pr[0] == a))
+            ent_sphere.append(a)
+            ent_start.append(len(pairs))
+        start.append(len(ent_sphere))
+    bound_pos = np.zeros((n, 3))
+    bound_rad = np.full(n, -1.0)
+    for i in range(n):
+        m = f == i
+        if m.any():
+            c = 0.5 * ((p[m] - r[m, None]).min(0) + (p[m] + r[m, None]).max(0))
+            bound_pos[i] = c
+            bound_rad[i] = float(np.max(np.linalg.norm(p[m] - c, axis=1) + r[m]))
+    return dict(
+        sph_frame=f.astype(np.int32), sph_pos=p, sph_rad=r,
+        bound_pos=bound_pos, bound_rad=bound_rad,
+        fpair_a=np.array([k[0] for k in fpairs], np.int32).reshape(-1),
+        fpair_b=np.array([k[1] for k in fpairs], np.int32).reshape(-1),
+        fpair_start=np.array(start, np.int32),
+        ent_sphere=np.array(ent_sphere, np.int32), ent_start=np.array(ent_start, np.int32),
+        pairs=np.array(pairs, np.int32).reshape(-1, 2),
+        rigid_pairs=cand[rigid], rigid_distance=dmin[rigid],
+    )
+
+
+def _sphere_model(m: DeviceModel) -> SphereModel:
+    rt = collision_tables(m.robot)
+    dev, npdt = m.device, numpy_dtype(m.scalar)
+    vec3 = fk_kernels(m.scalar).vec3
+
+    def arr(a: np.ndarray, dt: Any) -> wp.array:
+        a = np.asarray(a)
+        if a.size == 0:  # Warp kernels need non-empty arrays; lengths come from the tables
+            a = np.zeros((1,) + a.shape[1:], a.dtype)
+        return wp.array(a, dtype=dt, device=dev)
+
+    def counted(a: np.ndarray) -> wp.array:  # keeps its true length (a kernel loop count)
+        return wp.array(a, dtype=wp.int32, device=dev) if len(a) else \
+            wp.zeros(0, dtype=wp.int32, device=dev)
+
+    return SphereModel(
+        scalar=m.scalar, n_spheres=len(rt["sph_frame"]), n_pairs=len(rt["pairs"]),
+        pairs=rt["pairs"], rigid_pairs=rt["rigid_pairs"], rigid_distance=rt["rigid_distance"],
+        sph_frame=counted(rt["sph_frame"]),
+        sph_pos=arr(rt["sph_pos"].astype(npdt), vec3),
+        sph_rad=arr(rt["sph_rad"].astype(npdt), m.scalar),
+        bound_pos=arr(rt["bound_pos"].astype(npdt), vec3),
+        bound_rad=arr(rt["bound_rad"].astype(npdt), m.scalar),
+        fpair_a=counted(rt["fpair_a"]),
+        fpair_b=arr(rt["fpair_b"], wp.int32),
+        fpair_start=arr(rt["fpair_start"], wp.int32),
+        ent_sphere=arr(rt["ent_sphere"], wp.int32),
+        ent_start=arr(rt["ent_start"], wp.int32),
+        pair_a=arr(rt["pairs"][:, 0], wp.int32),
+        pair_b=arr(rt["pairs"][:, 1], wp.int32),
+    )
+
+
+# ====================================================================== Data
+@dataclass(eq=False)
+class PathData:
+    """The device buffers of a batch of P paths of W waypoints with ``n_sub`` substeps per
+    segment (S = (W - 1) n_sub + 1 configurations per path, N = P S in all), reused from
+    one optimisation to the next (:meth:`fits` says whether a batch shape can reuse it).
+
+    ``paths``/``paths_next`` (P, W, n_dof) (a projected step ping-pongs between them),
+    ``q_sub`` (N, n_dof) the substep configurations, ``sub_cost`` (N,) and ``sub_grad``
+    (N, n_dof) their collision cost and gradient, ``length``/``collision``/``total``/
+    ``sub_max`` (P,) per-path costs, ``grad`` (P, W, n_dof) dU/dQ, ``active`` (P,) int32."""
+
+    n_paths: int
+    n_waypoints: int
+    n_substeps: int
+    paths: wp.array
+    paths_next: wp.array
+    q_sub: wp.array
+    sub_cost: wp.array
+    sub_grad: wp.array
+    length: wp.array
+    collision: wp.array
+    total: wp.array
+    sub_max: wp.array
+    grad: wp.array
+    active: wp.array
+
+    @property
+    def n_configs(self) -> int:
+        """N = P * S substep configurations."""
+        return self.n_paths * ((self.n_waypoints - 1) * self.n_substeps + 1)
+
+    @classmethod
+    def make(cls, model: DeviceModel, n_paths: int, n_waypoints: int,
+             n_substeps: int) -> "PathData":
+        """Zeroed buffers (``active`` all ones) for the model's device and dtype."""
+        P, W, n_sub = int(n_paths), int(n_waypoints), int(n_substeps)
+        if P < 1 or W < 2 or n_sub < 1:
+            raise ValueError(f"PathData: expected n_paths >= 1, n_waypoints >= 2 and "
+                             f"n_substeps >= 1, got {n_paths}, {n_waypoints}, {n_substeps}")
+        n, sc, dev = model.n_dof, model.scalar, model.device
+        N = P * ((W - 1) * n_sub + 1)
+
+        def z(shape: Any) -> wp.array:
+            return wp.zeros(shape, dtype=sc, device=dev)
+
+        return cls(P, W, n_sub, paths=z((P, W, n)), paths_next=z((P, W, n)), q_sub=z((N, n)),
+                   sub_cost=z(N), sub_grad=z((N, n)), length=z(P), collision=z(P), total=z(P),
+                   sub_max=z(P), grad=z((P, W, n)),
+                   active=wp.ones(P, dtype=wp.int32, device=dev))
+
+    def fits(self, n_paths: int, n_waypoints: int, n_substeps: int) -> bool:
+        """True where a batch of this shape can reuse these buffers."""
+        return (self.n_paths, self.n_waypoints, self.n_substeps) == (
+            int(n_paths), int(n_waypoints), int(n_substeps))

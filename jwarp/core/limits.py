@@ -2,66 +2,29 @@
 
 The box is ``RobotModel.joint_limits (n_dof, 2)``; linear limits are
 ``RobotModel.linear_limits`` (``lower <= sum_k c_k q_{j_k} <= upper``, e.g. justin19's
-coupled torso ``0 <= q1 + q2 <= 2.356``). :mod:`jwarp.kernels.path` projects onto both.
+coupled torso ``0 <= q1 + q2 <= 2.356``). :mod:`jwarp.kernels.path` projects onto both; the
+device tables it reads (:class:`LimitTables`) are part of the robot's device model
+(:func:`jwarp.core.device.put_model`).
 """
 
 from __future__ import annotations
 
-import weakref
-from dataclasses import dataclass
-
 import numpy as np
-import warp as wp
 
-from jwarp.core.device import numpy_dtype, scalar_type
+from jwarp.core.device import LimitTables, put_model
 from jwarp.model import RobotModel
+
+__all__ = ["LIMIT_TOL", "LimitTables", "limit_tables", "limit_violation", "within_limits",
+           "describe_violation", "sample_within_limits", "project_numpy"]
 
 #: slack when checking limits [rad or m] (float32 round-off of a projected value)
 LIMIT_TOL = 1e-6
 
 
-@dataclass
-class LimitTables:
-    """Device tables read by the path kernels' projection (see kernels/path.py)."""
-
-    limits: wp.array      # (n_dof, 2)
-    lin_start: wp.array   # (L + 1,) int32
-    lin_joint: wp.array   # (max(nnz, 1),) int32
-    lin_coef: wp.array    # (max(nnz, 1),)
-    lin_bounds: wp.array  # (L, 2)
-
-    @property
-    def args(self) -> list:
-        return [self.limits, self.lin_start, self.lin_joint, self.lin_coef, self.lin_bounds]
-
-
-_CACHE: "weakref.WeakKeyDictionary[RobotModel, dict]" = weakref.WeakKeyDictionary()
-
-
 def limit_tables(robot: RobotModel, device: object, dtype: object) -> LimitTables:
-    """Limit tables of ``robot`` on ``device`` in ``dtype`` (cached per robot object)."""
-    scalar = scalar_type(dtype)
-    dev = wp.get_device(device)
-    key = (str(dev), scalar.__name__)
-    per = _CACHE.setdefault(robot, {})
-    if key in per:
-        return per[key]
-    npdt = numpy_dtype(scalar)
-    start, joint, coef, bounds = [0], [], [], []
-    for lim in robot.linear_limits:
-        joint += list(lim.joints)
-        coef += list(lim.coefficients)
-        start.append(len(joint))
-        bounds.append([lim.lower, lim.upper])
-    t = LimitTables(
-        limits=wp.array(robot.joint_limits.astype(npdt), dtype=scalar, device=dev),
-        lin_start=wp.array(np.array(start, np.int32), dtype=wp.int32, device=dev),
-        lin_joint=wp.array(np.array(joint or [0], np.int32), dtype=wp.int32, device=dev),
-        lin_coef=wp.array(np.array(coef or [0.0], npdt), dtype=scalar, device=dev),
-        lin_bounds=wp.array(np.array(bounds, npdt).reshape(-1, 2), dtype=scalar, device=dev),
-    )
-    per[key] = t
-    return t
+    """Limit tables of ``robot`` on ``device`` in ``dtype``: the ``limits`` of its
+    :func:`jwarp.core.device.put_model` (cached by robot content)."""
+    return put_model(robot, device, dtype).limits
 
 
 def limit_violation(robot: RobotModel, q: np.ndarray) -> np.ndarray:

@@ -20,7 +20,8 @@ outside the box of cell centres the point is clamped onto the box and the distan
 box is added, ``D(x) = D(clamp(x)) + |x - clamp(x)|``, so the world is free out there and
 the distance grows away from the grid (continuous at the box faces).
 
-Robot tables (see :mod:`jwarp.kernels.fk` for the frame tables):
+Robot tables (``DeviceModel.spheres`` of :mod:`jwarp.core.device`; see :mod:`jwarp.kernels.fk`
+for the frame tables):
 
 * ``sph_frame`` (S,) int32, ``sph_pos`` (S,) vec3 [m] in frame coordinates, ``sph_rad`` (S,) [m]
 * ``bound_pos`` (n_frames,) vec3, ``bound_rad`` (n_frames,): a sphere per frame enclosing
@@ -56,6 +57,7 @@ from types import SimpleNamespace
 import warp as wp
 
 from jwarp.kernels.elastic import kernels as elastic_kernels
+from jwarp.kernels.fk import ROWS_NOMINAL
 from jwarp.kernels.fk import kernels as fk_kernels
 
 
@@ -245,7 +247,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
         rho_layout: wp.vec4i,
-        use_rho: int,
+        rows_kind: int,
         world: WorldGrid,
         w_world: scalar,
         w_self: scalar,
@@ -270,20 +272,20 @@ def kernels(scalar: type) -> SimpleNamespace:
         row ``rho_stride * row`` of :func:`jwarp.kernels.fk.waypoint_thread` (t,
         rho_layout) (b = row = t for the layout (1, 1, 1, N)). Scratch (row t): frames
         (N, n_frames), xs (N, S), force, moment and bounding-sphere centres bc
-        (N, n_frames). With ``comp.enabled`` (and compensation rows, ``use_rho`` = 2) the
+        (N, n_frames). With ``comp.enabled`` (and compensation rows, ``ROWS_COMPENSATION``) the
         waypoint threads end with one torque update of their row from the frames just
         computed (:func:`jwarp.kernels.elastic` ``compensation_update_at``)."""
         t = wp.tid()
         b = t
         rb = int(0)
         on_waypoint = int(0)
-        if use_rho != 0:
+        if rows_kind != ROWS_NOMINAL:
             b, row, on_waypoint = fk.waypoint_thread(t, rho_layout)
             rb = rho_stride * row
         nf = model.order.shape[0]
         for k in range(nf):
             i = model.order[k]
-            fk.write_frame(model, b, i, q, rho, rb, use_rho, frames, t)
+            fk.write_frame(model, b, i, q, rho, rb, rows_kind, frames, t)
             if want_grad != 0:
                 force[t, i] = vec3(zero, zero, zero)
                 moment[t, i] = vec3(zero, zero, zero)
@@ -375,7 +377,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
-        use_rho: int,
+        rows_kind: int,
         world: WorldGrid,
         use_world: int,
         use_self: int,
@@ -399,7 +401,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         b = wp.tid()
         nf = model.order.shape[0]
         for k in range(nf):
-            fk.write_frame(model, b, model.order[k], q, rho, b * rho_stride, use_rho, frames, b)
+            fk.write_frame(model, b, model.order[k], q, rho, b * rho_stride, rows_kind, frames, b)
         dmin_w = far
         for s in range(spheres.sph_frame.shape[0]):
             x = sphere_centre(frames, b, spheres.sph_frame[s], spheres.sph_pos[s])

@@ -26,8 +26,9 @@ per frame, no per-child loop and no read-back of values just written.
 
 ``rho`` rows: only the elastic columns [theta, alpha, beta] of DH frames are updated; ``d`` and
 ``r`` are copied; static-frame rows of ``rho_out`` are not written (:func:`fill_static_rows`
-fills them once per buffer). When ``use_rho`` is 0, ``rho`` must hold the nominal rows (the
-shared ``(1, n_frames, 5)`` table with stride 0): the torque pass reads it either way.
+fills them once per buffer). With ``rows_kind`` ``ROWS_NOMINAL`` (:mod:`jwarp.kernels.fk`),
+``rho`` must hold the nominal rows (the shared ``(1, n_frames, 5)`` table with stride 0): the
+torque pass reads it either way.
 
 ``kappa`` has shape (B_kappa, n_frames, 3) in rad/(N m), axes [alpha, beta, theta];
 ``kappa_stride`` 0 shares row 0. ``rho0`` likewise with ``rho0_stride``.
@@ -134,7 +135,7 @@ def kernels(scalar: type) -> SimpleNamespace:
                 Tp = frames[b, pi]
                 pp = unpack_pos(Tp)
                 Rp = unpack_rot(Tp)
-            # rho holds the nominal rows (stride 0) when use_rho == 0: read it either way
+            # rho holds the nominal rows (stride 0) for ROWS_NOMINAL: read it either way
             prev_d = rho[rb, i, 0]
             prev_t = rho[rb, i, 1]
             prev_r = rho[rb, i, 2]
@@ -168,7 +169,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
-        use_rho: int,
+        rows_kind: int,
         rho0: wp.array3d(dtype=scalar),
         rho0_stride: int,
         kappa: wp.array3d(dtype=scalar),
@@ -203,7 +204,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         prefix[0, sb] = acc
         for k in range(model.order.shape[0]):
             i = model.order[k]
-            R, p, ax = fk.write_frame(model, b, i, q, rho, b * rho_stride, use_rho, frames, b)
+            R, p, ax = fk.write_frame(model, b, i, q, rho, b * rho_stride, rows_kind, frames, b)
             axes[i, sb] = ax
             m = mass[i]
             if m != zero:  # a fixed pattern per robot: predicted
@@ -316,7 +317,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         ``frames`` (N, n_frames) are F(q, rows) of N = P * S configurations, P paths of
         ``c.n_waypoints`` waypoints with ``c.n_sub`` substeps each (S = (W - 1) n_sub + 1;
         configuration ``p * S + s``; IK: W = n_sub = 1). ``rows`` (P * W, n_frames, 9):
-        one row per waypoint (``use_rho`` = 2 and :func:`jwarp.kernels.fk.waypoint_thread`:
+        one row per waypoint (``ROWS_COMPENSATION`` and :func:`jwarp.kernels.fk.waypoint_thread`:
         substeps read their nearest waypoint's). Launch dim P * W: thread u updates the
         torques at its waypoint and writes ``c.rows_out[u]`` and ``c.delta[u]``."""
         u = wp.tid()

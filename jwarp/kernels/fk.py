@@ -4,7 +4,7 @@ All kernels are built per scalar type by :func:`kernels` (float32 or float64) an
 batched over configurations: one thread per configuration walks the frames in
 topological order.
 
-Frame tables (the *Model*, see :class:`jwarp.core.device.KinematicsTables`):
+Frame tables (part of the *Model*, :class:`jwarp.core.device.DeviceModel`):
 
 * ``order``        (n_frames,) int32  frames, parents first
 * ``parent``       (n_frames,) int32  parent index, -1 for a root
@@ -16,14 +16,20 @@ Frame tables (the *Model*, see :class:`jwarp.core.device.KinematicsTables`):
 * ``trig``         (n_frames,) vec4   nominal [cos alpha, sin alpha, cos beta, sin beta]
 * ``cpl_start``    (n_frames + 1,) int32, ``cpl_joint``/``cpl_coef``: CSR coupling q -> frame
 
-Per-batch DH rows ``rho`` (calibration, elastic model) have shape (B_rho, n_frames, 5);
-``rho_stride`` is 1 to use row ``b`` for configuration ``b`` and 0 to share row 0.
-``use_rho`` = 0 ignores ``rho`` and uses the precomputed nominal tables (fast path);
-``use_rho`` = 2 reads rows of 9 columns ``[d, theta, r, alpha, beta, cos alpha, sin alpha,
-cos beta, sin beta]`` (the compensation buffers of :mod:`jwarp.kernels.elastic`, whose
-update stores the cos/sin with the angles), so FK at per-configuration rows costs no more
-trigonometry than the nominal fast path. Gradients through a Tape w.r.t. such rows reach
-the cos/sin columns, not alpha/beta: use ``use_rho`` = 1 to differentiate w.r.t. rho.
+DH rows ``rho`` (B_rho, n_frames, 5 or 9) and ``rows_kind`` (the host's typed value is
+:class:`jwarp.core.rows.DHRows`); ``rho_stride`` is 1 to use row ``b`` for configuration
+``b`` and 0 to share row 0. ``rows_kind`` is one of
+
+* :data:`ROWS_NOMINAL` (0): ignore ``rho`` and use the precomputed nominal tables (fast
+  path; ``rho`` is the nominal ``(1, n_frames, 5)`` table, which the torque pass reads);
+* :data:`ROWS_DH` (1): rows ``[d, theta, r, alpha, beta]`` (calibration, elastic model),
+  differentiable through a Tape w.r.t. every column;
+* :data:`ROWS_COMPENSATION` (2): rows of 9 columns ``[d, theta, r, alpha, beta, cos alpha,
+  sin alpha, cos beta, sin beta]`` (the compensation buffers of
+  :mod:`jwarp.kernels.elastic`, whose update stores the cos/sin with the angles), so FK at
+  per-configuration rows costs no more trigonometry than the nominal fast path. Gradients
+  through a Tape w.r.t. such rows reach the cos/sin columns, not alpha/beta: use
+  :data:`ROWS_DH` to differentiate w.r.t. rho.
 
 DH convention: ``parent_T_child = Rot_y(beta) Rot_x(alpha) Trans_x(r) Rot_z(theta+q) Trans_z(d)``.
 """
@@ -34,6 +40,11 @@ from typing import Any
 from types import SimpleNamespace
 
 import warp as wp
+
+#: ``rows_kind`` of the kernels (see the module docstring; :class:`jwarp.core.rows.RowsKind`)
+ROWS_NOMINAL = wp.constant(0)
+ROWS_DH = wp.constant(1)
+ROWS_COMPENSATION = wp.constant(2)
 
 
 @functools.cache
@@ -169,7 +180,7 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.func
     def child_frame(model: FrameTables, Rp: mat33, pp: vec3, i: int, rb: int, qi: scalar,
-                    use_rho: int, rho: wp.array3d(dtype=scalar)):
+                    rows_kind: int, rho: wp.array3d(dtype=scalar)):
         """World rotation and position of frame i from its parent's (Rp, pp), and the
         direction of its ``r`` translation (= its alpha axis, ``Rp Rot_y(beta) e_x``; zero
         for a static frame).
@@ -186,11 +197,11 @@ def kernels(scalar: type) -> SimpleNamespace:
         sa = cs[1]
         cb = cs[2]
         sb = cs[3]
-        if use_rho != 0:
+        if rows_kind != ROWS_NOMINAL:
             d = rho[rb, i, 0]
             theta = rho[rb, i, 1]
             r = rho[rb, i, 2]
-            if use_rho == 2:  # rows carry their cos/sin (compensation buffers)
+            if rows_kind == ROWS_COMPENSATION:  # rows carry their cos/sin (compensation buffers)
                 ca = rho[rb, i, 5]
                 sa = rho[rb, i, 6]
                 cb = rho[rb, i, 7]
@@ -205,7 +216,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         c0 = vec3(Rp[0, 0], Rp[1, 0], Rp[2, 0])
         c1 = vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1])
         c2 = vec3(Rp[0, 2], Rp[1, 2], Rp[2, 2])
-        if sb != zero or use_rho == 1:  # Rot_y(beta); always when differentiable in beta
+        if sb != zero or rows_kind == ROWS_DH:  # Rot_y(beta); always when differentiable in beta
             t0 = cb * c0 - sb * c2
             c2 = sb * c0 + cb * c2
             c0 = t0
@@ -219,14 +230,14 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.func
     def child_rot_pos(model: FrameTables, Rp: mat33, pp: vec3, i: int, rb: int, qi: scalar,
-                      use_rho: int, rho: wp.array3d(dtype=scalar)):
+                      rows_kind: int, rho: wp.array3d(dtype=scalar)):
         """World rotation and position of frame i from its parent's (:func:`child_frame`)."""
-        R, p, ax = child_frame(model, Rp, pp, i, rb, qi, use_rho, rho)
+        R, p, ax = child_frame(model, Rp, pp, i, rb, qi, rows_kind, rho)
         return R, p
 
     @wp.func
     def chain_point(model: FrameTables, chain: wp.array(dtype=wp.int32), b: int,
-                    q: wp.array2d(dtype=scalar), use_rho: int, rho: wp.array3d(dtype=scalar),
+                    q: wp.array2d(dtype=scalar), rows_kind: int, rho: wp.array3d(dtype=scalar),
                     rb: int, point: vec3) -> vec3:
         """World position of ``point`` (coordinates of the last frame of ``chain``, the
         frames from the root to it), walking only that chain."""
@@ -235,7 +246,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         for k in range(chain.shape[0]):
             i = chain[k]
             qi = joint_value(model, i, b, q)
-            R, p = child_rot_pos(model, R, p, i, rb, qi, use_rho, rho)
+            R, p = child_rot_pos(model, R, p, i, rb, qi, rows_kind, rho)
         return R * point + p
 
     @wp.func
@@ -317,7 +328,7 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.func
     def write_frame(model: FrameTables, b: int, i: int, q: wp.array2d(dtype=scalar),
-                    rho: wp.array3d(dtype=scalar), rb: int, use_rho: int, frames: Any, fb: int):
+                    rho: wp.array3d(dtype=scalar), rb: int, rows_kind: int, frames: Any, fb: int):
         """frames[fb, i] from its parent's transform (already written to row fb) and the
         joint values of configuration b; returns the frame's world rotation, position and
         alpha axis (:func:`child_frame`). ``frames``: batch-major mat44 (B, n_frames) or
@@ -328,7 +339,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         pi = model.parent[i]
         if pi >= 0:
             Rp, pp = parent_pose(frames, fb, pi)
-        R, p, ax = child_frame(model, Rp, pp, i, rb, qi, use_rho, rho)
+        R, p, ax = child_frame(model, Rp, pp, i, rb, qi, rows_kind, rho)
         store_pose(frames, fb, i, R, p)
         return R, p, ax
 
@@ -338,7 +349,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
-        use_rho: int,
+        rows_kind: int,
         # Model:
         model: FrameTables,
         # Data out:
@@ -348,7 +359,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         b = wp.tid()
         for k in range(model.order.shape[0]):
             i = model.order[k]
-            write_frame(model, b, i, q, rho, b * rho_stride, use_rho, frames, b)
+            write_frame(model, b, i, q, rho, b * rho_stride, rows_kind, frames, b)
 
     @wp.kernel(module="unique", enable_backward=False)
     def fk_components_kernel(
@@ -356,7 +367,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
-        use_rho: int,
+        rows_kind: int,
         # Model:
         model: FrameTables,
         # Data out:
@@ -368,7 +379,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         gradients go through :func:`fk_kernel`."""
         b = wp.tid()
         for k in range(model.order.shape[0]):
-            write_frame(model, b, model.order[k], q, rho, b * rho_stride, use_rho, frames, b)
+            write_frame(model, b, model.order[k], q, rho, b * rho_stride, rows_kind, frames, b)
 
     @wp.func
     def add_axis_columns(model: FrameTables, i: int, z: vec3, p: vec3, target: vec3, b: int,
@@ -410,7 +421,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
-        use_rho: int,
+        rows_kind: int,
         point: vec3,
         # Model:
         model: FrameTables,
@@ -428,14 +439,14 @@ def kernels(scalar: type) -> SimpleNamespace:
             for j in range(n_dof):
                 jac[b, r, j] = zero
         rb = b * rho_stride
-        target = chain_point(model, chain, b, q, use_rho, rho, rb, point)  # pass 1
+        target = chain_point(model, chain, b, q, rows_kind, rho, rb, point)  # pass 1
         # pass 2: joint axes (z of each driven frame, through its origin)
         R = wp.identity(3, dtype=scalar)
         p = vec3(zero, zero, zero)
         for k in range(chain.shape[0]):
             i = chain[k]
             qi = joint_value(model, i, b, q)
-            R, p = child_rot_pos(model, R, p, i, rb, qi, use_rho, rho)
+            R, p = child_rot_pos(model, R, p, i, rb, qi, rows_kind, rho)
             add_axis_columns(model, i, vec3(R[0, 2], R[1, 2], R[2, 2]), p, target, b, jac)
 
     @wp.kernel(module="unique")
@@ -444,7 +455,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
-        use_rho: int,
+        rows_kind: int,
         point: vec3,
         # Model:
         model: FrameTables,
@@ -457,7 +468,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         [linear; angular] in the base frame. Caller zero-fills ``jac``."""
         b = wp.tid()
         rb = b * rho_stride
-        target = chain_point(model, chain, b, q, use_rho, rho, rb, point)
+        target = chain_point(model, chain, b, q, rows_kind, rho, rb, point)
         R = wp.identity(3, dtype=scalar)
         p = vec3(zero, zero, zero)
         for k in range(chain.shape[0]):
@@ -465,10 +476,10 @@ def kernels(scalar: type) -> SimpleNamespace:
             Rp = R
             pp = p
             qi = joint_value(model, i, b, q)
-            R, p = child_rot_pos(model, R, p, i, rb, qi, use_rho, rho)
+            R, p = child_rot_pos(model, R, p, i, rb, qi, rows_kind, rho)
             if model.is_dh[i] != 0:
                 beta = model.dh0[i, 4]
-                if use_rho != 0:
+                if rows_kind != ROWS_NOMINAL:
                     beta = rho[rb, i, 4]
                 z = vec3(R[0, 2], R[1, 2], R[2, 2])
                 ax_beta = vec3(Rp[0, 1], Rp[1, 1], Rp[2, 1])

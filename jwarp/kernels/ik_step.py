@@ -13,8 +13,15 @@ iteration, after the cost kernels of :mod:`jwarp.kernels.ik` and the collision k
   up to ``limit_tol``, every sphere more than ``margin`` from the world and from every
   sphere it may collide with (the frames recomputed in float64 at the configuration, at its
   compensation rows when elastic). A feasible configuration is *done*: frozen from then on,
-  its result row written, the counters ``counts = [done configurations, solved problems]``
-  raised atomically.
+  its result row written, the counters ``counts = [done configurations, solved problems,
+  near]`` raised atomically.
+* ``pose`` (dim B, rigid robot): error and Jacobian of the frame from a walk along its
+  chain (no frames stored), the values of FK + :mod:`jwarp.kernels.ik` ``pose_error``.
+* ``near`` (dim B): the active configurations whose pose is on target, listed in
+  ``idx[:counts[2]]`` before the collision costs; only those need U_A and the check
+  (``gather`` packs them for the collision kernel, ``scatter_aux`` writes their U_A back).
+* Per configuration ``done``: 0 active, 1 done (feasible), 2 frozen (``freeze_solved``: an
+  active configuration of a solved problem stops in ``step``).
 * ``step`` (launch dim B): the damped least-squares step in float64 (eq. 3.21-3.24)
   ``A = J J^T + mu^2 I`` (m x m over the task rows, m = 6 or 3), Cholesky ``A = L L^T``,
   ``dq = J^T A^-1 e`` and, on target, minus ``alpha (g - J^T A^-1 J g)`` (the U_A gradient
@@ -39,6 +46,7 @@ import warp as wp
 
 from jwarp.kernels import collision as collision_kernels
 from jwarp.kernels import fk as fk_kernels
+from jwarp.kernels import ik as ik_cost_kernels
 from jwarp.kernels import path as path_kernels
 
 #: result row columns after the n_dof joint values
@@ -50,13 +58,17 @@ f64 = wp.float64
 
 
 @functools.cache
-def dls_kernels(scalar: type, planar: bool) -> SimpleNamespace:
-    """The damped least-squares step for one scalar type and task (6 rows, or the 3 rows
-    [v_x, v_y, w_z] of a planar robot). The linear algebra runs in float64 either way."""
+def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
+    """The damped least-squares step for one scalar type, task (6 rows, or the 3 rows
+    [v_x, v_y, w_z] of a planar robot) and number of joints (the sizes of the local
+    matrices). The linear algebra runs in float64 either way."""
     M = 3 if planar else 6
+    N = int(n_dof)
     PLANAR = int(planar)
     matm = wp.types.matrix((M, M), f64)
     vecm = wp.types.vector(M, f64)
+    matmn = wp.types.matrix((M, N), f64)
+    vecn = wp.types.vector(N, f64)
     zero = f64(0.0)
     one = f64(1.0)
     pk = path_kernels.kernels(scalar)
@@ -69,30 +81,9 @@ def dls_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         return r
 
     @wp.func
-    def dls_solve(jac: wp.array3d(dtype=scalar), err: wp.array2d(dtype=scalar),
-                  grad: wp.array2d(dtype=scalar), b: int, mu2: f64):
-        """(x, y) = (A^-1 e, A^-1 J g) with A = J J^T + mu2 I over the task rows of
-        configuration b, by Cholesky (float64)."""
-        n = jac.shape[2]
-        A = matm()
-        e = vecm()
-        jg = vecm()
-        for r in range(M):
-            rr = task_row(r)
-            e[r] = f64(err[b, rr])
-            s = zero
-            for j in range(n):
-                s += f64(jac[b, rr, j]) * f64(grad[b, j])
-            jg[r] = s
-            for c in range(r + 1):
-                cc = task_row(c)
-                s = zero
-                for j in range(n):
-                    s += f64(jac[b, rr, j]) * f64(jac[b, cc, j])
-                A[r, c] = s
-                A[c, r] = s
-            A[r, r] = A[r, r] + mu2
-        # Cholesky A = L L^T (A is SPD for mu2 > 0; the floor only guards round-off)
+    def cholesky_solve(A: matm, e: vecm, f: vecm, mu2: f64):
+        """(A^-1 e, A^-1 f) for the SPD A by Cholesky A = L L^T (the pivot floor
+        ``1e-12 mu2`` only guards round-off)."""
         L = matm()
         for i in range(M):
             for j in range(i + 1):
@@ -103,18 +94,17 @@ def dls_kernels(scalar: type, planar: bool) -> SimpleNamespace:
                     L[i, i] = wp.sqrt(wp.max(s, mu2 * f64(1e-12)))
                 else:
                     L[i, j] = s / L[j, j]
-        # forward (L z = rhs) and back (L^T x = z) substitution, both right-hand sides
         x = vecm()
         y = vecm()
-        for i in range(M):
+        for i in range(M):  # L z = rhs
             sx = e[i]
-            sy = jg[i]
+            sy = f[i]
             for k in range(i):
                 sx -= L[i, k] * x[k]
                 sy -= L[i, k] * y[k]
             x[i] = sx / L[i, i]
             y[i] = sy / L[i, i]
-        for ii in range(M):
+        for ii in range(M):  # L^T x = z
             i = M - 1 - ii
             sx = x[i]
             sy = y[i]
@@ -126,28 +116,34 @@ def dls_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         return x, y
 
     @wp.func
-    def dq_joint(jac: wp.array3d(dtype=scalar), grad: wp.array2d(dtype=scalar), b: int, j: int,
-                 x: vecm, y: vecm, ns: f64) -> f64:
-        """Unscaled step of joint j: (J^T x)_j - ns (g_j - (J^T y)_j)."""
-        d = zero
-        p = zero
+    def dls_step(jac: wp.array3d(dtype=scalar), err: wp.array2d(dtype=scalar),
+                 grad: wp.array2d(dtype=scalar), b: int, use_ns: int, mu2: f64, alpha: f64,
+                 max_step: f64) -> vecn:
+        """The scaled step of configuration b (float64): ``J^T A^-1 e`` minus, if
+        ``use_ns``, ``alpha (g - J^T A^-1 J g)``, with ``A = J J^T + mu2 I`` over the task
+        rows, times ``min(1, max_step / max_j |dq_j|)``."""
+        J = matmn()
+        e = vecm()
+        g = vecn()
         for r in range(M):
             rr = task_row(r)
-            jr = f64(jac[b, rr, j])
-            d += jr * x[r]
-            p += jr * y[r]
-        if ns != zero:
-            d -= ns * (f64(grad[b, j]) - p)
-        return d
-
-    @wp.func
-    def step_scale(jac: wp.array3d(dtype=scalar), grad: wp.array2d(dtype=scalar), b: int,
-                   x: vecm, y: vecm, ns: f64, max_step: f64) -> f64:
-        """min(1, max_step / max_j |dq_j|): keeps the direction, bounds every joint's move."""
+            e[r] = f64(err[b, rr])
+            for j in range(N):
+                J[r, j] = f64(jac[b, rr, j])
+        for j in range(N):
+            g[j] = f64(grad[b, j])
+        A = J * wp.transpose(J)
+        for i in range(M):
+            A[i, i] = A[i, i] + mu2
+        x, y = cholesky_solve(A, e, J * g, mu2)
+        Jt = wp.transpose(J)
+        d = Jt * x
+        if use_ns != 0:
+            d = d - alpha * (g - Jt * y)
         big = zero
-        for j in range(jac.shape[2]):
-            big = wp.max(big, wp.abs(dq_joint(jac, grad, b, j, x, y, ns)))
-        return wp.min(one, max_step / wp.max(big, f64(1e-300)))
+        for j in range(N):
+            big = wp.max(big, wp.abs(d[j]))
+        return d * wp.min(one, max_step / wp.max(big, f64(1e-300)))
 
     @wp.kernel(module="unique", enable_backward=False)
     def dls_kernel(
@@ -164,13 +160,9 @@ def dls_kernels(scalar: type, planar: bool) -> SimpleNamespace:
     ):
         """The scaled step dq (B, n_dof) alone (no limits, no state): for tests."""
         b = wp.tid()
-        x, y = dls_solve(jac, err, grad, b, mu2)
-        ns = zero
-        if on[b] != 0:
-            ns = alpha
-        sc = step_scale(jac, grad, b, x, y, ns, max_step)
-        for j in range(jac.shape[2]):
-            dq[b, j] = sc * dq_joint(jac, grad, b, j, x, y, ns)
+        d = dls_step(jac, err, grad, b, on[b], mu2, alpha, max_step)
+        for j in range(N):
+            dq[b, j] = d[j]
 
     @wp.kernel(module="unique", enable_backward=False)
     def step_kernel(
@@ -179,8 +171,9 @@ def dls_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         err: wp.array2d(dtype=scalar),
         grad: wp.array2d(dtype=scalar),
         on: wp.array(dtype=wp.int32),
-        done: wp.array(dtype=wp.int32),
-        counts: wp.array(dtype=wp.int32),
+        solved: wp.array(dtype=wp.int32),
+        n_starts: int,
+        freeze_solved: int,
         stop_solved: int,
         n_problems: int,
         mu2: f64,
@@ -194,11 +187,15 @@ def dls_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         lin_bounds: wp.array2d(dtype=scalar),
         # Data in/out:
         q: wp.array2d(dtype=scalar),
+        done: wp.array(dtype=wp.int32),
+        counts: wp.array(dtype=wp.int32),
         iterations: wp.array(dtype=wp.int32),
         halt: wp.array(dtype=wp.int32),
     ):
-        """One projected DLS step of every configuration that is not done (module
-        docstring); ``iterations[b]`` counts the steps. Launch dim B."""
+        """One projected DLS step of every active configuration (module docstring);
+        ``iterations[b]`` counts the steps. With ``freeze_solved`` an active configuration
+        of a solved problem is frozen instead (``done[b] = 2``, counted in ``counts[0]``).
+        Launch dim B."""
         b = wp.tid()
         stop = int(0)
         if counts[0] >= q.shape[0]:
@@ -207,20 +204,54 @@ def dls_kernels(scalar: type, planar: bool) -> SimpleNamespace:
             stop = 1
         if b == 0:
             halt[0] = stop
+            counts[2] = 0  # the next iteration's near-target count
         if stop != 0 or done[b] != 0:
             return
-        x, y = dls_solve(jac, err, grad, b, mu2)
-        ns = zero
-        if on[b] != 0:
-            ns = alpha
-        sc = step_scale(jac, grad, b, x, y, ns, max_step)
-        for j in range(q.shape[1]):
-            q[b, j] = scalar(f64(q[b, j]) + sc * dq_joint(jac, grad, b, j, x, y, ns))
+        if freeze_solved != 0 and solved[b // n_starts] != 0:
+            done[b] = 2
+            wp.atomic_add(counts, 0, 1)
+            return
+        d = dls_step(jac, err, grad, b, on[b], mu2, alpha, max_step)
+        for j in range(N):
+            q[b, j] = scalar(f64(q[b, j]) + d[j])
         pk.project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
         iterations[b] = iterations[b] + 1
 
-    return SimpleNamespace(scalar=scalar, planar=planar, rows=M, task_row=task_row,
-                           dls_solve=dls_solve, dls=dls_kernel, step=step_kernel)
+    @wp.kernel(module="unique", enable_backward=False)
+    def sample_kernel(
+        seed: int,
+        # Model:
+        limits: wp.array2d(dtype=scalar),
+        lin_start: wp.array(dtype=wp.int32),
+        lin_joint: wp.array(dtype=wp.int32),
+        lin_coef: wp.array(dtype=scalar),
+        lin_bounds: wp.array2d(dtype=scalar),
+        # Data out:
+        q: wp.array2d(dtype=scalar),
+    ):
+        """Random seeds: q[b] uniform in the box, redrawn (up to 20 times) until it meets
+        the linear limits, else projected onto them (the device twin of
+        :func:`jwarp.core.limits.sample_within_limits`; Warp's random stream). Launch dim B."""
+        b = wp.tid()
+        state = wp.rand_init(seed, b)
+        for attempt in range(20):
+            for j in range(N):
+                lo = limits[j, 0]
+                q[b, j] = lo + scalar(wp.randf(state)) * (limits[j, 1] - lo)
+            ok = int(1)
+            for l in range(lin_bounds.shape[0]):
+                v = scalar(0.0)
+                for k in range(lin_start[l], lin_start[l + 1]):
+                    v += lin_coef[k] * q[b, lin_joint[k]]
+                if v < lin_bounds[l, 0] or v > lin_bounds[l, 1]:
+                    ok = 0
+            if ok != 0:
+                return
+        pk.project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
+
+    return SimpleNamespace(scalar=scalar, planar=planar, rows=M, n_dof=N, task_row=task_row,
+                           cholesky_solve=cholesky_solve, dls_step=dls_step, dls=dls_kernel,
+                           step=step_kernel, sample=sample_kernel)
 
 
 @functools.cache
@@ -229,6 +260,8 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
     type; the exact check itself runs in float64 (module docstring)."""
     fk64 = fk_kernels.kernels(f64)
     ck64 = collision_kernels.kernels(f64)
+    fk = fk_kernels.kernels(scalar)
+    ikk = ik_cost_kernels.kernels(scalar)
     PLANAR = int(planar)
     NPOS = 2 if planar else 3
     zero = f64(0.0)
@@ -269,6 +302,19 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         return 1
 
     @wp.func
+    def world_lower_bound(world: ck64.WorldGrid, x: fk64.vec3) -> f64:
+        """A lower bound of the world's D(x): the smallest corner value of the grid cell
+        holding x (``cellmin``, :mod:`jwarp.kernels.collision`)."""
+        cm = world.cellmin
+        u = (x - world.origin) * world.inv_h
+        i = wp.min(int(wp.clamp(u[0], zero, f64(cm.shape[0] - 1))), cm.shape[0] - 2)
+        j = wp.min(int(wp.clamp(u[1], zero, f64(cm.shape[1] - 1))), cm.shape[1] - 2)
+        k = int(0)
+        if world.dim == 3:
+            k = wp.min(int(wp.clamp(u[2], zero, f64(cm.shape[2] - 1))), cm.shape[2] - 2)
+        return cm[i, j, k]
+
+    @wp.func
     def collision_free_row(q: wp.array2d(dtype=f64), b: int, rho: wp.array3d(dtype=f64),
                            use_rho: int, model: fk64.FrameTables, spheres: ck64.SphereTables,
                            world: ck64.WorldGrid, use_world: int, use_self: int, margin: f64,
@@ -287,8 +333,8 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
             xs[b, s] = x
             if use_world != 0:
                 r = spheres.sph_rad[s]
-                if ck64.world_lower_bound(world, x) - r <= margin:
-                    d, g = ck64.world_sample(world, x)
+                if world_lower_bound(world, x) - r <= margin:
+                    d, g = ck64.sdf_sample(world.grid, world.origin, world.inv_h, world.dim, x)
                     if d - r <= margin:
                         return 0
         if use_self != 0:
@@ -412,6 +458,150 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
             wp.atomic_add(counts, 1, 1)
 
     @wp.kernel(module="unique", enable_backward=False)
+    def near_kernel(
+        err: wp.array2d(dtype=scalar),
+        tol_pos: f64,
+        tol_rot: f64,
+        halt: wp.array(dtype=wp.int32),
+        done: wp.array(dtype=wp.int32),
+        # Data out:
+        on: wp.array(dtype=wp.int32),
+        counts: wp.array(dtype=wp.int32),
+        idx: wp.array(dtype=wp.int32),
+    ):
+        """Before the collision costs: the active configurations whose pose is on target
+        (``|e_v| < tol_pos``, ``|e_w| < tol_rot``; the elastic condition comes later, in
+        ``check``) are listed in ``idx[:counts[2]]`` (in no particular order), ``on[b] = 0``
+        for the others: only the listed ones need U_A and the check this iteration.
+        Launch dim B."""
+        b = wp.tid()
+        if halt[0] != 0 or done[b] != 0:
+            return
+        pe, re = task_errors(err, b)
+        if pe < tol_pos and re < tol_rot:
+            idx[wp.atomic_add(counts, 2, 1)] = b
+        else:
+            on[b] = 0
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def gather_kernel(
+        q: wp.array2d(dtype=scalar),
+        idx: wp.array(dtype=wp.int32),
+        counts: wp.array(dtype=wp.int32),
+        # Data out:
+        q_near: wp.array2d(dtype=scalar),
+    ):
+        """q_near[k] = q[idx[k]] for the ``counts[2]`` listed configurations; the rows
+        after them (padding up to the launch size) repeat the first. Launch dim K."""
+        k = wp.tid()
+        kk = k
+        if k >= counts[2]:
+            kk = 0
+        b = idx[kk]
+        for j in range(q.shape[1]):
+            q_near[k, j] = q[b, j]
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def scatter_aux_kernel(
+        q: wp.array2d(dtype=scalar),
+        q_default: wp.array2d(dtype=scalar),
+        default_stride: int,
+        idx: wp.array(dtype=wp.int32),
+        counts: wp.array(dtype=wp.int32),
+        near_cost: wp.array(dtype=scalar),
+        near_grad: wp.array2d(dtype=scalar),
+        use_collision: int,
+        lam_l: scalar,
+        # Data out:
+        coll_cost: wp.array(dtype=scalar),
+        cost: wp.array(dtype=scalar),
+        grad: wp.array2d(dtype=scalar),
+    ):
+        """U_A and dU_A/dq (:mod:`jwarp.kernels.ik` ``aux_cost``, the same arithmetic) of the
+        listed configurations from their collision costs ``near_cost``/``near_grad``
+        (row k of the gathered batch), written to their own rows. Launch dim K."""
+        k = wp.tid()
+        if k >= counts[2]:
+            return
+        b = idx[k]
+        c = scalar(0.0)
+        if use_collision != 0:
+            c = near_cost[k]
+            coll_cost[b] = c
+        bd = b * default_stride
+        for j in range(q.shape[1]):
+            d = q[b, j] - q_default[bd, j]
+            c += lam_l * scalar(0.5) * d * d
+            g = lam_l * d
+            if use_collision != 0:
+                g += near_grad[k, j]
+            grad[b, j] = g
+        cost[b] = c
+
+    @wp.func
+    def axis_columns(model: fk.FrameTables, i: int, z: fk.vec3, p: fk.vec3, target: fk.vec3,
+                     b: int, jac: wp.array3d(dtype=scalar)):
+        """Adds the velocity of ``target`` due to the joint(s) driving frame i (axis z
+        through p) to the columns of jac[b] (:mod:`jwarp.kernels.fk` ``add_axis_columns``)."""
+        if model.cpl_start[i + 1] > model.cpl_start[i]:
+            lin = wp.cross(z, target - p)
+            ang = z
+            if model.prismatic[i] != 0:
+                lin = z
+                ang = fk.vec3(scalar(0.0), scalar(0.0), scalar(0.0))
+            for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
+                j = model.cpl_joint[c]
+                w = model.cpl_coef[c]
+                for r in range(3):
+                    jac[b, r, j] = jac[b, r, j] + w * lin[r]
+                    jac[b, r + 3, j] = jac[b, r + 3, j] + w * ang[r]
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def pose_kernel(
+        q: wp.array2d(dtype=scalar),
+        target: wp.array(dtype=fk.mat44),
+        halt: wp.array(dtype=wp.int32),
+        done: wp.array(dtype=wp.int32),
+        # Model:
+        model: fk.FrameTables,
+        chain: wp.array(dtype=wp.int32),
+        nominal: wp.array3d(dtype=scalar),
+        # Data out:
+        jac: wp.array3d(dtype=scalar),
+        err: wp.array2d(dtype=scalar),
+    ):
+        """The rigid robot's 6D error (B, 6) and Jacobian (B, 6, n_dof) of the frame
+        ``chain[-1]``, walking only its chain (twice: the frame, then the joint axes) with
+        no frames stored: the values of FK + :mod:`jwarp.kernels.ik` ``pose_error`` (the
+        same functions). Configurations that are done keep theirs. Launch dim B."""
+        b = wp.tid()
+        if halt[0] != 0 or done[b] != 0:
+            return
+        R = wp.identity(3, dtype=scalar)
+        p = fk.vec3(scalar(0.0), scalar(0.0), scalar(0.0))
+        for k in range(chain.shape[0]):
+            i = chain[k]
+            R, p = fk.child_rot_pos(model, R, p, i, 0, fk.joint_value(model, i, b, q), 0,
+                                    nominal)
+        T = target[b]
+        M = R * wp.transpose(fk.unpack_rot(T))
+        ev = fk.unpack_pos(T) - p
+        ew = ikk.rotation_log(wp.transpose(M))  # log(Rt R^T)
+        for r in range(3):
+            err[b, r] = ev[r]
+            err[b, r + 3] = ew[r]
+        for j in range(jac.shape[2]):
+            for r in range(6):
+                jac[b, r, j] = scalar(0.0)
+        R2 = wp.identity(3, dtype=scalar)
+        p2 = fk.vec3(scalar(0.0), scalar(0.0), scalar(0.0))
+        for k in range(chain.shape[0]):
+            i = chain[k]
+            R2, p2 = fk.child_rot_pos(model, R2, p2, i, 0, fk.joint_value(model, i, b, q), 0,
+                                      nominal)
+            axis_columns(model, i, fk.vec3(R2[0, 2], R2[1, 2], R2[2, 2]), p2, p, b, jac)
+
+    @wp.kernel(module="unique", enable_backward=False)
     def reset_kernel(
         n_problems: int,
         # Data out:
@@ -432,6 +622,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         if b == 0:
             counts[0] = 0
             counts[1] = 0
+            counts[2] = 0
             halt[0] = 0
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -455,10 +646,10 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         # Data out:
         out: wp.array2d(dtype=f64),
     ):
-        """Result rows of the configurations that are not done: their last q, task error
-        norms and U_A, infeasible, ``max_iterations``. Launch dim B."""
+        """Result rows of the configurations that are not done (feasible): their last q,
+        task error norms and U_A, infeasible, ``max_iterations``. Launch dim B."""
         b = wp.tid()
-        if done[b] != 0:
+        if done[b] == 1:
             return
         n = q.shape[1]
         for j in range(n):
@@ -507,6 +698,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
     return SimpleNamespace(
         scalar=scalar, planar=planar, task_errors=task_errors,
         within_limits_row=within_limits_row, collision_free_row=collision_free_row,
-        CheckTables=CheckTables, CheckScratch=CheckScratch, check=check_kernel,
+        CheckTables=CheckTables, CheckScratch=CheckScratch, check=check_kernel, near=near_kernel,
+        gather=gather_kernel, scatter_aux=scatter_aux_kernel, pose=pose_kernel,
         reset=reset_kernel, repeat_targets=repeat_targets_kernel, finalize=finalize_kernel,
         select=select_kernel)

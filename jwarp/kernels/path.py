@@ -235,8 +235,100 @@ def kernels(scalar: type) -> SimpleNamespace:
         b = wp.tid()
         project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
 
+    @wp.kernel(module="unique")
+    def gather_kernel(
+        # Data in:
+        paths: wp.array3d(dtype=scalar),
+        q_sub: wp.array2d(dtype=scalar),
+        idx: wp.array(dtype=wp.int32),
+        n_sub: int,
+        # Data out:
+        paths_out: wp.array3d(dtype=scalar),
+        q_sub_out: wp.array2d(dtype=scalar),
+    ):
+        """The paths ``idx[k]`` and their substeps, packed: ``paths_out[k] = paths[idx[k]]``
+        (K, W, n_dof) and rows ``k * S + s`` of ``q_sub_out`` (K * S, n_dof). Launch dim
+        (K, S); S >= W."""
+        k, s = wp.tid()
+        p = idx[k]
+        W = paths.shape[1]
+        S = (W - 1) * n_sub + 1
+        for j in range(paths.shape[2]):
+            q_sub_out[k * S + s, j] = q_sub[p * S + s, j]
+        if s < W:
+            for j in range(paths.shape[2]):
+                paths_out[k, s, j] = paths[p, s, j]
+
+    @wp.kernel(module="unique")
+    def keep_kernel(
+        # Data in:
+        paths: wp.array3d(dtype=scalar),
+        total: wp.array(dtype=scalar),
+        length: wp.array(dtype=scalar),
+        collision: wp.array(dtype=scalar),
+        idx: wp.array(dtype=wp.int32),
+        # Data out:
+        final: wp.array3d(dtype=scalar),
+        final_cost: wp.array2d(dtype=scalar),
+    ):
+        """Keep the current paths ``idx[k]`` as their final ones: ``final[p] = paths[p]`` and
+        ``final_cost[p] = (U_path, U_l, collision)``. Launch dim (K, W)."""
+        k, t = wp.tid()
+        p = idx[k]
+        for j in range(paths.shape[2]):
+            final[p, t, j] = paths[p, t, j]
+        if t == 0:
+            final_cost[p, 0] = total[p]
+            final_cost[p, 1] = length[p]
+            final_cost[p, 2] = collision[p]
+
+    @wp.kernel(module="unique")
+    def select_kernel(
+        # Data in:
+        final: wp.array3d(dtype=scalar),
+        final_cost: wp.array2d(dtype=scalar),
+        feasible: wp.array(dtype=wp.int32),
+        n_starts: int,
+        # Data out:
+        best: wp.array(dtype=wp.int32),
+        best_path: wp.array3d(dtype=scalar),
+        best_cost: wp.array2d(dtype=scalar),
+    ):
+        """Per problem b (launch dim B; its starts are paths b * n_starts ...): the best
+        start, feasible ones first, then the lowest U_path (``final_cost[:, 0]``), as numpy's
+        argmin picks it (the first minimum; the first NaN if there is one), its path and
+        costs."""
+        b = wp.tid()
+        p0 = b * n_starts
+        any_feasible = int(0)
+        for i in range(n_starts):
+            if feasible[p0 + i] != 0:
+                any_feasible = 1
+        bi = int(0)
+        bv = zero
+        nan = int(0)
+        for i in range(n_starts):
+            v = final_cost[p0 + i, 0]
+            if any_feasible != 0 and feasible[p0 + i] == 0:
+                v = scalar(wp.inf)
+            if nan == 0:
+                if wp.isnan(v):
+                    bi = i
+                    nan = 1
+                elif i == 0 or v < bv:
+                    bi = i
+                    bv = v
+        best[b] = bi
+        p = p0 + bi
+        for t in range(final.shape[1]):
+            for j in range(final.shape[2]):
+                best_path[b, t, j] = final[p, t, j]
+        for c in range(3):
+            best_cost[b, c] = final_cost[p, c]
+
     return SimpleNamespace(
         scalar=scalar, length_scale=length_scale, waypoint_grad=waypoint_grad,
         project_row=project_row, substeps=substeps_kernel, path_cost=path_cost_kernel,
         path_grad=path_grad_kernel, path_step=path_step_kernel, project=project_kernel,
+        gather=gather_kernel, keep=keep_kernel, select=select_kernel,
     )

@@ -8,8 +8,14 @@ iteration. No extra forward kinematics is run, and gradients hold the rows fixed
 (d rho / dq = 0). As the optimizer converges, so do the rows.
 
 The rows have 9 columns ``[d, theta, r, alpha, beta, cos alpha, sin alpha, cos beta,
-sin beta]``. The FK, Jacobian and collision kernels read them with ``use_rho = 2``, so
+sin beta]``. The FK, Jacobian and collision kernels read them as
+:attr:`jwarp.core.rows.RowsKind.COMPENSATION` rows (:attr:`CompensationRows.dh_rows`), so
 forward kinematics at these rows costs what the rigid fast path costs.
+
+Model vs Data: the robot's tables (frames, masses, gravity, default compliances) come from
+its :class:`jwarp.core.device.DeviceModel`; a :class:`CompensationRows` is the Data of the
+update (the row buffers, the moment scratch, ``delta``), reused from one iteration to the
+next.
 
 Paths: rows are kept per waypoint, and only the waypoints get a torque update. A substep
 reads the rows of its nearest waypoint (:func:`jwarp.kernels.fk.waypoint_thread`).
@@ -25,9 +31,9 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import finite_as, real_number
-from jwarp.core.device import KinematicsTables, numpy_dtype
+from jwarp.core.device import DeviceModel, numpy_dtype
+from jwarp.core.rows import DHRows
 from jwarp.kernels import elastic as elastic_kernels
-from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import kappa_array
 
 #: columns of a compensation row (see the module docstring)
@@ -43,16 +49,18 @@ class CompensationRows:
     configurations.
 
     Args:
-        t: the robot's kinematics tables on the optimizer's device and dtype.
+        t: the robot's :class:`~jwarp.core.device.DeviceModel` on the optimizer's device and
+            dtype (``put_model``; ``tables`` is its older name).
         n_paths, n_waypoints, n_substeps: layout of the configurations: P paths of
             W waypoints, S = (W - 1) * n_substeps + 1 configurations per path, configuration
             ``p * S + s``. For IK pass ``n_paths=B``, ``n_waypoints=1``, ``n_substeps=1``.
         kappa: compliances [rad/(N m)]. Any form :func:`jwarp.kinematics.kappa_array`
-            accepts: shared ``(n_frames, 3)``, or per waypoint ``(P * W, n_frames, 3)``.
+            accepts: shared ``(n_frames, 3)``, or per waypoint ``(P * W, n_frames, 3)``;
+            None: the robot's own (``t.kappa``).
         lam: damping of the update in (0, 1].
     """
 
-    def __init__(self, t: KinematicsTables, n_paths: int, n_waypoints: int, n_substeps: int,
+    def __init__(self, t: DeviceModel, n_paths: int, n_waypoints: int, n_substeps: int,
                  kappa: Any, lam: float):
         if not 0.0 < real_number(lam, "lam") <= 1.0:
             raise ValueError(f"lam: expected a damping factor in (0, 1], got {lam!r}")
@@ -65,20 +73,22 @@ class CompensationRows:
         self.lam = t.scalar(float(lam))
         self.k = elastic_kernels.kernels(t.scalar)
         nf = robot.n_frames
-        kap = kappa_array(robot, kappa)  # validates shape and values
-        if kap.ndim == 2:
-            kap, self.kappa_stride = kap[None], 0
-        else:
-            kap = kap.reshape(-1, nf, 3)
-            if len(kap) != self.n_updates:
-                raise ValueError(f"kappa: per-waypoint tables need {self.n_updates} rows "
-                                 f"(paths x waypoints), got {len(kap)}")
-            self.kappa_stride = 1
         dev = t.device
-        self.kappa = wp.array(finite_as(kap, numpy_dtype(t.scalar), "kappa"),
-                              dtype=t.scalar, device=dev)
-        g = robot.gravity
-        self.gravity = fk_kernels.kernels(t.scalar).vec3(float(g[0]), float(g[1]), float(g[2]))
+        if kappa is None:  # the model's default compliances
+            self.kappa, self.kappa_stride = t.kappa, 0
+        else:
+            kap = kappa_array(robot, kappa)  # validates shape and values
+            if kap.ndim == 2:
+                kap, self.kappa_stride = kap[None], 0
+            else:
+                kap = kap.reshape(-1, nf, 3)
+                if len(kap) != self.n_updates:
+                    raise ValueError(f"kappa: per-waypoint tables need {self.n_updates} rows "
+                                     f"(paths x waypoints), got {len(kap)}")
+                self.kappa_stride = 1
+            self.kappa = wp.array(finite_as(kap, numpy_dtype(t.scalar), "kappa"),
+                                  dtype=t.scalar, device=dev)
+        self.gravity = t.gravity
         self._bufs = [wp.empty((self.n_updates, nf, ROW_COLUMNS), dtype=t.scalar, device=dev)
                       for _ in range(2)]
         # CPU threads run one configuration after another: one scratch column stays in L1
@@ -95,13 +105,23 @@ class CompensationRows:
             dev.is_cuda and self.n_updates >= WAYPOINT_WARPS_PER_SM * 32 * dev.sm_count)
         self._launches: dict = {}
         self._args: dict = {}
+        self._dh_rows: dict = {}
         self.reset()
 
     @property
     def rows(self) -> wp.array:
-        """The current rows (P * W, n_frames, 9): pass them to a kernel with ``use_rho = 2``
-        and :attr:`layout`."""
+        """The current rows (P * W, n_frames, 9) (as kernel arguments: :attr:`dh_rows`)."""
         return self._bufs[0]
+
+    @property
+    def dh_rows(self) -> DHRows:
+        """The current rows as :class:`jwarp.core.rows.DHRows` (kind ``COMPENSATION``, with
+        :attr:`layout`); one value per buffer, made once."""
+        buf = self._bufs[0]
+        r = self._dh_rows.get(id(buf))
+        if r is None or r.layout != self.layout:
+            r = self._dh_rows[id(buf)] = DHRows.compensation(buf, self.layout)
+        return r
 
     @property
     def layout(self) -> tuple[int, int, int, int]:

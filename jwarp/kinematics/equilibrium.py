@@ -8,14 +8,15 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.core.arrays import (real_number, to_output)
+from jwarp.core.arrays import out_view, real_number, to_output
+from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import (ElasticFK, ElasticLaunch, ElasticStep, elastic_args, lam_tol,
                                      equilibrium, frame_rows, host_out, rho0_full, setup)
 
 
 def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_iter: int = 10,
                tol: float | None = None, dh: Any = None, device: Any = None, dtype: Any = None,
-               validate: bool = True) -> ElasticFK:
+               validate: bool = True, out: Any = None) -> ElasticFK:
     """Elastic forward kinematics: frames in the static torque equilibrium.
 
     Solves ``rho = rho0 + kappa * tau(F(q, rho))`` (thesis eq. 2.33) by the damped
@@ -32,6 +33,8 @@ def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_i
             default :func:`default_tol`: 1e-9 rad in float64, 4.8e-7 rad (the rows'
             resolution) in float32.
         dh: geometric DH rows rho0 (n_frames, 5) or (..., n_frames, 5); default nominal.
+        out: optional array the frames are written to (as ``out`` of :func:`fk`); the
+            result's ``frames`` is then ``out``.
 
     Returns:
         :class:`ElasticFK` (frames, rho, iterations, converged).
@@ -40,13 +43,17 @@ def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_i
                                                device, dtype, validate)
     lam, tol = lam_tol(lam, tol, t)
     if batch.kind == "torch" and batch.torch_tensor.requires_grad:
+        if out is not None:
+            raise ValueError("out: not supported when q requires grad (torch autograd)")
         from jwarp.kinematics.torch_ops import fk_elastic_torch
 
         return fk_elastic_torch(model, batch, t, kap, rho0, lam, max_iter, tol)
+    view = None if out is None else out_view(out, batch, (model.n_frames,),
+                                             fk_kernels.kernels(t.scalar).mat44, t.device)
     run = ElasticLaunch(t, batch.array, kap, rho0, float(lam))
-    rho, frames, iterations, converged = equilibrium(run, max_iter, tol)
+    rho, frames, iterations, converged = equilibrium(run, max_iter, tol, view)
     rho_arr = rho[0] if rho is not None else rho0_full(run)
-    return ElasticFK(to_output(frames, batch, (model.n_frames,)),
+    return ElasticFK(to_output(frames, batch, (model.n_frames,), out=out),
                      to_output(rho_arr, batch, (model.n_frames, 5)),
                      host_out(iterations, batch), host_out(converged, batch))
 

@@ -6,13 +6,15 @@ autodiff and the calibration."""
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+import math
+import threading
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import (Batch, as_batch, default_dtype, finite_as, init_warp, real_array,
-                               real_number, resolve_device)
+from jwarp.core.arrays import (Batch, as_batch, default_dtype, empty, finite_as, first_touch,
+                               init_warp, is_torch, real_array, real_number, resolve_device)
 from jwarp.core.device import KinematicsTables, numpy_dtype, scalar_type, tables
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kernels import fk as fk_kernels
@@ -64,26 +66,234 @@ def launch_fk(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None 
     k = fk_kernels.kernels(t.scalar)
     B = q.shape[0]
     n = t.robot.n_frames
-    rho, stride = dh if dh is not None else (t.dh0_3d, 0)
+    inputs = fk_inputs(t, q, dh)
     if component_major:
         if frames is not None and (frames.ndim != 4 or frames.dtype != t.scalar
                                    or tuple(frames.shape) != (B, n, 4, 4)):
             raise ValueError(f"frames: component_major needs a scalar ({B}, {n}, 4, 4) array "
                              f"of {t.scalar.__name__}, got shape {tuple(frames.shape)} of "
                              f"{getattr(frames.dtype, '__name__', frames.dtype)}")
+        done = None
         if frames is None:
-            frames = wp.empty((n, 4, 4, B), dtype=t.scalar, device=t.device).transpose((3, 0, 1, 2))
-        wp.launch(k.fk_components, dim=B, inputs=[q, rho, stride, int(dh is not None),
-                                                  t.frame_struct], outputs=[frames], device=t.device)
+            frames = empty((n, 4, 4, B), t.scalar, t.device).transpose((3, 0, 1, 2))
+            done = first_touch(frames)
+        wp.launch(k.fk_components, dim=B, inputs=inputs, outputs=[frames], device=t.device)
+        if done is not None:
+            done()
         return frames
+    done = None
     if frames is None:
         if frame_major:
-            frames = wp.empty((n, B), dtype=k.mat44, device=t.device).transpose()
+            frames = empty((n, B), k.mat44, t.device).transpose()
         else:
-            frames = wp.empty((B, n), dtype=k.mat44, device=t.device, requires_grad=q.requires_grad)
-    wp.launch(k.fk, dim=B, inputs=[q, rho, stride, int(dh is not None), t.frame_struct],
-              outputs=[frames], device=t.device)
+            frames = empty((B, n), k.mat44, t.device, requires_grad=q.requires_grad)
+        done = first_touch(frames)
+    wp.launch(k.fk, dim=B, inputs=inputs, outputs=[frames], device=t.device)
+    if done is not None:
+        done()
     return frames
+
+
+def fk_inputs(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None) -> list:
+    """Inputs of the FK kernels: q (B, n_dof), DH rows and their batch stride (None: the
+    nominal tables), the frame tables."""
+    rho, stride = dh if dh is not None else (t.dh0_3d, 0)
+    return [q, rho, stride, int(dh is not None), t.frame_struct]
+
+
+def point_vec(point: Any, t: KinematicsTables) -> Any:
+    """A point (3,) [m] in a frame's coordinates as the kernels' vec3 (None: the origin);
+    ValueError naming ``point`` unless 3 finite numbers (in the computing dtype)."""
+    vec3 = fk_kernels.kernels(t.scalar).vec3
+    if point is None:
+        return vec3(0.0, 0.0, 0.0)
+    p = real_array(point, "point")
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"point: expected 3 finite numbers [m], got {point!r}")
+    return vec3(*finite_as(p, numpy_dtype(t.scalar), "point").tolist())
+
+
+#: position of the point among the arguments of the Jacobian kernels (:func:`jacobian_inputs`)
+POINT_ARG = 4
+
+
+def jacobian_inputs(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None,
+                    point: Any, frame: int) -> list:
+    """Inputs of the ``jacobian``/``jacobian_dh`` kernels: q (B, n_dof), DH rows (None: the
+    nominal ones), the point as :func:`point_vec` makes it, the frame index."""
+    rho, stride = dh if dh is not None else (t.dh0_3d, 0)
+    return [q, rho, stride, int(dh is not None), point, t.frame_struct, t.chain(frame)]
+
+
+# ----------------------------------------------------------------- small calls
+#: a call whose result has at most this many bytes may use a :class:`Workspace`
+SMALL_CALL_BYTES = 1 << 18
+#: most workspaces kept per process (the oldest is dropped first)
+SMALL_CALL_WORKSPACES = 32
+_SMALL_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+ORIGIN = (0.0, 0.0, 0.0)
+
+
+class Workspace:
+    """Preallocated buffers and one recorded launch of repeated small calls of one shape:
+    (device tables of a robot, op, batch size). A call copies q into the input buffer,
+    replays the launch (``wp.launch(..., record_cmd=True)``: no argument packing, no
+    allocation) and copies the result out of the output buffer: the caller's array never
+    aliases the workspace. On CUDA the host side goes through pinned staging buffers.
+
+    One call at a time: a call that finds the workspace busy (another thread) returns None
+    and the caller takes the general path, so concurrent calls stay correct."""
+
+    def __init__(self, t: KinematicsTables, B: int, tail: tuple, dtype: Any,
+                 record: Callable[[wp.array, wp.array], Any]):
+        dev = t.device
+        self.t = t
+        self.q = wp.empty((B, t.robot.n_dof), dtype=t.scalar, device=dev)
+        self.out = wp.empty((B,) + tuple(tail), dtype=dtype, device=dev)
+        self.cuda = dev.is_cuda
+        if self.cuda:
+            self.q_stage = wp.empty(self.q.shape, dtype=t.scalar, device="cpu", pinned=True)
+            self.out_stage = wp.empty(self.out.shape, dtype=dtype, device="cpu", pinned=True)
+            self.q_host, self.out_host = self.q_stage.numpy(), self.out_stage.numpy()
+        else:
+            self.q_host, self.out_host = self.q.numpy(), self.out.numpy()
+        self.cmd = record(self.q, self.out)
+        self.point: tuple | None = None   # the point last set on a Jacobian launch
+        self.lock = threading.Lock()
+
+    def run(self, q: np.ndarray, validate: bool, out: np.ndarray | None = None,
+            point: tuple | None = None) -> np.ndarray | None:
+        """The result for q (B, n_dof) as a new array (or copied into ``out``); None when
+        busy or (``validate``) q is not finite after the cast: the general path then
+        reports it. ``point``: the Jacobian's point as 3 floats (checked)."""
+        if not self.lock.acquire(blocking=False):
+            return None
+        try:
+            np.copyto(self.q_host, q, casting="unsafe")
+            # a finite sum means every value is finite; an overflowing sum of finite
+            # values takes the general path, which checks value by value
+            if validate and not math.isfinite(self.q_host.sum()):
+                return None
+            if point is not None and point != self.point:
+                self.cmd.set_param_at_index(POINT_ARG, point_vec(point, self.t))
+                self.point = point
+            if self.cuda:
+                stream = self.t.device.stream
+                wp.copy(self.q, self.q_stage, stream=stream)
+                self.cmd.launch(stream)
+                wp.copy(self.out_stage, self.out, stream=stream)
+                wp.synchronize_stream(stream)
+            else:
+                self.cmd.launch()
+            if out is None:
+                return self.out_host.copy()
+            np.copyto(out, self.out_host.reshape(out.shape))
+            return out
+        finally:
+            self.lock.release()
+
+
+_WORKSPACES: dict = {}
+_WORKSPACES_LOCK = threading.Lock()
+
+
+def workspace(t: KinematicsTables, op: str, B: int, frame: int = -1) -> Workspace:
+    """The cached :class:`Workspace` of ``op`` ("fk", or "jacobian" of ``frame``) for batch
+    size ``B`` on the tables ``t`` (made on first use; per process)."""
+    key = (id(t), op, B, frame)
+    ws = _WORKSPACES.get(key)
+    if ws is not None and ws.t is t:
+        return ws
+    k = fk_kernels.kernels(t.scalar)
+    dev = t.device
+    if op == "fk":
+        def record(q: wp.array, out: wp.array) -> Any:
+            return wp.launch(k.fk, dim=B, inputs=fk_inputs(t, q, None), outputs=[out],
+                             device=dev, record_cmd=True)
+        ws = Workspace(t, B, (t.robot.n_frames,), k.mat44, record)
+    else:
+        def record(q: wp.array, out: wp.array) -> Any:
+            return wp.launch(k.jacobian, dim=B,
+                             inputs=jacobian_inputs(t, q, None, point_vec(None, t), frame),
+                             outputs=[out], device=dev, record_cmd=True)
+        ws = Workspace(t, B, (6, t.robot.n_dof), t.scalar, record)
+        ws.point = ORIGIN
+    with _WORKSPACES_LOCK:
+        _WORKSPACES[key] = ws   # holds t: its id is not reused while the entry lives
+        while len(_WORKSPACES) > SMALL_CALL_WORKSPACES:
+            del _WORKSPACES[next(iter(_WORKSPACES))]
+    return ws
+
+
+def clear_workspaces() -> int:
+    """Drop every cached :class:`Workspace` (their memory is freed once no call uses them);
+    returns how many there were. Later small calls make new ones."""
+    with _WORKSPACES_LOCK:
+        n = len(_WORKSPACES)
+        _WORKSPACES.clear()
+    return n
+
+
+def small_call(op: str, robot: Any, q: Any, device: Any, dtype: Any, validate: bool,
+               out: Any = None, frame: Any = None, point: Any = None) -> Any:
+    """The fast path of :func:`~jwarp.kinematics.fk.fk` (``op`` "fk") and
+    :func:`~jwarp.kinematics.jacobians.jacobian` ("jacobian") for a small batch of float32/
+    float64 numpy q (or a CPU torch tensor without grad), through a cached
+    :class:`Workspace`. Returns None wherever the general path must run instead: other
+    inputs, large results, a busy workspace, a non-finite q, an ``out`` that is not a
+    fitting numpy array (the general path then raises its usual errors)."""
+    if type(q) is np.ndarray:
+        qa, torch_in = q, False
+    elif is_torch(q):
+        if q.requires_grad or q.device.type != "cpu":
+            return None
+        try:
+            qa = q.numpy()
+        except (RuntimeError, TypeError):
+            return None
+        torch_in = True
+    else:
+        return None
+    if qa.dtype not in _SMALL_DTYPES or qa.ndim == 0:
+        return None
+    model = get_robot(robot)
+    n = model.n_dof
+    shape = qa.shape
+    if shape[-1] != n or qa.size == 0:
+        return None
+    B = qa.size // n
+    try:   # any error: the general path raises it, in its order
+        dev = resolve_device(device, like=q)
+        npdt = qa.dtype if dtype is None else numpy_dtype(scalar_type(dtype))
+        tail = (model.n_frames, 4, 4) if op == "fk" else (6, n)
+        if B * (tail[0] * 16 if op == "fk" else 6 * n) * npdt.itemsize > SMALL_CALL_BYTES:
+            return None
+        want = shape[:-1] + tail
+        if out is not None and not (type(out) is np.ndarray and out.shape == want
+                                    and out.dtype == npdt and out.flags.c_contiguous
+                                    and out.flags.writeable):
+            return None
+        t = tables(model, dev, npdt)
+        if op == "fk":
+            ws, pt = workspace(t, "fk", B), None
+        else:
+            ws = workspace(t, "jacobian", B, model.frame_index(frame))
+            pt = ORIGIN if point is None else tuple(point_vec(point, t))
+    except (ValueError, TypeError):
+        return None
+    if npdt.itemsize < qa.itemsize:   # float64 q computed in float32: overflow -> inf
+        with np.errstate(over="ignore", invalid="ignore"):
+            res = ws.run(qa.reshape(B, model.n_dof), validate, out, pt)
+    else:
+        res = ws.run(qa.reshape(B, model.n_dof), validate, out, pt)
+    if res is None or out is not None:
+        return res
+    res = res.reshape(want)
+    if torch_in:
+        import torch
+
+        return torch.from_numpy(res)
+    return res
 
 
 #: default tolerance of :func:`fk_elastic` [rad] per computing dtype: float64 stops at
@@ -171,8 +381,7 @@ class ElasticLaunch:
         """A (B, n, 5) rho buffer whose static-frame rows hold the nominal rows (the step
         kernel writes only the DH rows)."""
         t = self.t
-        out = wp.empty((self.B, self.n, 5), dtype=t.scalar, device=t.device,
-                       requires_grad=requires_grad)
+        out = empty((self.B, self.n, 5), t.scalar, t.device, requires_grad=requires_grad)
         if t.static_idx.shape[0]:
             wp.launch(self.k.fill_static_rows, dim=(self.B, t.static_idx.shape[0]),
                       inputs=[t.dh0, t.static_idx], outputs=[out], device=t.device)
@@ -194,7 +403,7 @@ class ElasticLaunch:
         else:  # reuse scratch; rho ping-pongs between two buffers
             if not hasattr(self, "_scratch"):
                 S = 1 if t.device.is_cpu else B  # CPU threads run configurations in turn
-                self._scratch = (wp.empty((B, n), dtype=self.fk.mat44, device=t.device),
+                self._scratch = (empty((B, n), self.fk.mat44, t.device),
                                  wp.empty((n + 1, S), dtype=self.k.vec4, device=t.device),
                                  wp.empty((n, S), dtype=self.fk.vec3, device=t.device),
                                  [self._rho_buffer() for _ in range(2)],
@@ -217,11 +426,13 @@ class ElasticLaunch:
                   outputs=[frames, moments, axes, rho_out, self.tau, delta], device=t.device)
         return frames, rho_out, delta
 
-    def frames_at(self, rho: tuple[wp.array, int] | None) -> wp.array:
+    def frames_at(self, rho: tuple[wp.array, int] | None, out: wp.array | None = None
+                  ) -> wp.array:
+        """Frames at ``rho`` (None: rho0) into ``out`` (B, n_frames) mat44 (default new)."""
         if rho is None and not self.nominal_start:
             rho = self.rho0
-        out = wp.empty((self.B, self.n), dtype=self.fk.mat44, device=self.t.device,
-                       requires_grad=self.requires_grad)
+        if out is None and self.requires_grad:
+            out = empty((self.B, self.n), self.fk.mat44, self.t.device, requires_grad=True)
         return launch_fk(self.t, self.q, dh=rho, frames=out)
 
 
@@ -251,12 +462,13 @@ def elastic_args(robot: Any, q: Any, kappa: Any, lam: float, max_iter: int, tol:
     return model, batch, t, kap, rho0
 
 
-def equilibrium(run: ElasticLaunch, max_iter: int, tol: float):
+def equilibrium(run: ElasticLaunch, max_iter: int, tol: float, frames: wp.array | None = None):
     """Run the damped iteration; returns (rho or None, frames at rho, iterations, converged).
 
     ``converged``: an update changed no row by more than ``tol``. With ``max_iter`` 0 the
     frames stay rigid (at rho0) and one update is made only to measure whether rho0 already
-    is the equilibrium to ``tol`` (its result is discarded)."""
+    is the equilibrium to ``tol`` (its result is discarded). ``frames``: optional
+    (B, n_frames) mat44 array the final frames are written to."""
     iterations = np.zeros(run.B, np.int32)
     converged = np.zeros(run.B, bool)
     rho = None
@@ -269,7 +481,7 @@ def equilibrium(run: ElasticLaunch, max_iter: int, tol: float):
             break
     if max_iter == 0:
         converged |= run.step(None)[2].numpy() <= tol
-    frames = run.frames_at(rho)
+    frames = run.frames_at(rho, frames)
     return rho, frames, iterations, converged
 
 

@@ -7,12 +7,20 @@ Stage 1 (projection, eq. 3.21-3.23): ``q <- q + J^+ e`` with the 6D error
 (``|e_v| < tol_pos``, ``|e_w| < tol_rot``) it descends ``U_A`` (world + self collision +
 closeness to a default pose, eq. 3.19) inside the Jacobian's nullspace,
 ``q <- q + J^+ e - alpha (I - J^+ J) dU_A/dq``, the ``J^+ e`` term pulling it back onto the
-target manifold. Every step is clamped per joint and projected onto the joint limits.
+target manifold. Every step is scaled so that no joint moves more than ``max_step`` and
+projected onto the joint limits.
 
 A configuration is *feasible* when it is on the target, collision-free with ``margin``
 (world and self) and within the limits; each multi-start stops when feasible. The batch
-holds ``T`` targets x ``n_starts`` random seeds; :func:`ik` returns per target the
-feasible solution with the lowest U_A (or the best infeasible one, flagged).
+holds ``P`` problems (targets) x ``S`` seeds; the solver returns per problem the feasible
+seed with the lowest U_A (or the best infeasible one, flagged).
+
+:class:`IKSolver` keeps everything on the device (:mod:`jwarp.kernels.ik_step`): the damped
+least-squares step, the exact feasibility check of the candidates (float64: limits, world
+and self collision with ``margin``), freezing the solved seeds and the best-seed selection
+run in kernels; the host only reads two counters now and then to decide when to stop
+(every iteration on the CPU, where that is free; every ``check_every`` iterations on CUDA)
+and copies the results once at the end. :func:`ik` is a thin wrapper that builds one.
 
 With ``kappa`` the robot is the elastic model (elastic paper section V): one torque update
 per iteration from the DH rows kept from the previous iteration; frames and Jacobians at
@@ -22,7 +30,9 @@ have converged (largest DH change < ``tol_rho``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import numbers
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -32,14 +42,14 @@ import warp as wp
 
 from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
 from jwarp.core.device import numpy_dtype, scalar_type, tables
+from jwarp.core.limits import LIMIT_TOL, limit_tables, project_numpy, sample_within_limits
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik as ik_kernels
+from jwarp.kernels import ik_step as step_kernels
 from jwarp.kernels import path as path_kernels
+from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
-from jwarp.kinematics.compensation import CompensationRows
-from jwarp.core.limits import limit_tables, sample_within_limits, within_limits
-from jwarp.solvers.planner import collision_free
 from jwarp.world import collision
 
 
@@ -97,6 +107,36 @@ class IKResult:
                 "n_feasible_starts": int(pick(self.n_feasible)),
                 "wall_time_s": float(self.wall_time)}
 
+    @classmethod
+    def from_rows(cls, out: np.ndarray, best: np.ndarray, n_dof: int, P: int, S: int,
+                  wall: float) -> "IKResult":
+        """The result of P problems x S seeds from the solver's result rows ``out``
+        (P * S, n_dof + 5) ``[q, |e_v|, |e_w|, U_A, feasible, iterations]`` and its choice
+        ``best`` (P, 2) ``[chosen seed, feasible seeds]`` (:mod:`jwarp.kernels.ik_step`)."""
+        n, E = n_dof, step_kernels
+        qa = out[:, :n].reshape(P, S, n)
+        e = out[:, n + E.COL_POS:n + E.COL_AUX + 1].reshape(P, S, 3)
+        fz = (out[:, n + E.COL_FEASIBLE] != 0).reshape(P, S)
+        it = out[:, n + E.COL_ITERATIONS].astype(np.int64).reshape(P, S)
+        b = best[:, 0].astype(np.int64)
+        r = np.arange(P)
+        return cls(q=qa[r, b], feasible=fz[r, b], pos_err=e[r, b, 0], rot_err=e[r, b, 1],
+                   cost=e[r, b, 2], iterations=it[r, b], start_index=b,
+                   n_feasible=best[:, 1].astype(np.int64), wall_time=wall, all_q=qa,
+                   all_feasible=fz, all_iterations=it)
+
+    def reshaped(self, lead: tuple, wall: float | None = None) -> "IKResult":
+        """This result of P flat problems with the leading dims ``lead`` (prod = P)
+        instead, and the wall time ``wall`` (None: unchanged)."""
+        def shp(x: np.ndarray) -> np.ndarray:
+            x = np.asarray(x)
+            return x.reshape(tuple(lead) + x.shape[1:])
+
+        return dataclasses.replace(
+            self, wall_time=self.wall_time if wall is None else wall,
+            **{f.name: shp(getattr(self, f.name)) for f in dataclasses.fields(self)
+               if f.name != "wall_time"})
+
 
 def pose_matrix(xyz: Any, rotvec: Any = (0.0, 0.0, 0.0)) -> np.ndarray:
     """4x4 pose from a position [m] and a rotation vector (axis * angle) [rad]."""
@@ -119,12 +159,23 @@ def _targets(target: Any) -> tuple[np.ndarray, tuple]:
     lead = T.shape[:-2]
     T = T.reshape(-1, 4, 4)
     R = T[:, :3, :3]
-    if not np.allclose(R @ np.swapaxes(R, 1, 2), np.eye(3), atol=1e-6) or \
-            not np.allclose(np.linalg.det(R), 1.0, atol=1e-6):
+    # np.allclose(x, y, atol=1e-6) with its default rtol=1e-5, written out (faster)
+    if np.any(np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)) > 1e-6 + 1e-5 * np.eye(3)) or \
+            np.any(np.abs(np.linalg.det(R) - 1.0) > 1e-6 + 1e-5):
         raise ValueError("target: rotation part is not a rotation matrix")
-    if not np.allclose(T[:, 3], [0, 0, 0, 1]):
+    if np.any(np.abs(T[:, 3] - [0, 0, 0, 1]) > 1e-8 + 1e-5 * np.array([0, 0, 0, 1])):
         raise ValueError("target: last row must be [0, 0, 0, 1]")
     return T, lead
+
+
+def batch_array(B: int, tail: tuple, dtype: Any, device: Any, batch_fastest: bool) -> wp.array:
+    """A zeroed Warp array of shape (B, *tail); with ``batch_fastest`` the first index is
+    the fastest in memory (a transposed view), which coalesces a CUDA warp's accesses of
+    ``a[b, ...]`` over consecutive ``b``."""
+    shape = (int(B),) + tuple(int(t) for t in tail)
+    if not batch_fastest or len(shape) == 1:
+        return wp.zeros(shape, dtype=dtype, device=device)
+    return wp.zeros(shape[::-1], dtype=dtype, device=device).transpose()
 
 
 class IKObjective:
@@ -137,7 +188,7 @@ class IKObjective:
     def __init__(self, robot: Any, frame: int | str, n: int, *, world: Any = None,
                  weights: IKWeights | None = None, eps: float | None = None,
                  q_default: Any = None, kappa: Any = None, lam: float = 0.7,
-                 device: Any = None, dtype: Any = np.float64):
+                 device: Any = None, dtype: Any = np.float64, batch_fastest: bool = False):
         init_warp()
         self.robot = get_robot(robot)
         self.frame = self.robot.frame_index(frame)
@@ -157,19 +208,26 @@ class IKObjective:
         self.eps = real_number(eps, "eps", self.npdt) if eps is not None else (
             float(max(world.voxel_size, 0.01)) if world is not None else 0.01)
         dev, sc, B, n = self.device, self.scalar, self.B, self.n
-        self.q = wp.zeros((B, n), dtype=sc, device=dev)
-        self.frames = wp.zeros((B, self.robot.n_frames), dtype=self.fk.mat44, device=dev)
-        self.jac = wp.zeros((B, 6, n), dtype=sc, device=dev)
+        #: per-configuration arrays with the configuration index fastest in memory (CUDA:
+        #: a warp's loads and stores coalesce); the kernels index them [b, ...] either way
+        self.batch_fastest = bool(batch_fastest)
+
+        def batch(tail: tuple, dt: Any) -> wp.array:
+            return batch_array(B, tail, dt, dev, self.batch_fastest)
+
+        self.q = batch((n,), sc)
+        self.frames = batch((self.robot.n_frames,), self.fk.mat44)
+        self.jac = batch((6, n), sc)
         self.target = wp.zeros(B, dtype=self.fk.mat44, device=dev)
-        self.err = wp.zeros((B, 6), dtype=sc, device=dev)
+        self.err = batch((6,), sc)
         self.pos_err = wp.zeros(B, dtype=sc, device=dev)
         self.rot_err = wp.zeros(B, dtype=sc, device=dev)
         self.cost_f = wp.zeros(B, dtype=sc, device=dev)
-        self.grad_f = wp.zeros((B, n), dtype=sc, device=dev)
+        self.grad_f = batch((n,), sc)
         self.cost_a = wp.zeros(B, dtype=sc, device=dev)
-        self.grad_a = wp.zeros((B, n), dtype=sc, device=dev)
+        self.grad_a = batch((n,), sc)
         self.coll_cost = wp.zeros(B, dtype=sc, device=dev)
-        self.coll_grad = wp.zeros((B, n), dtype=sc, device=dev)
+        self.coll_grad = batch((n,), sc)
         self.cm = collision.collision_model(self.robot, world, device=dev, dtype=self.npdt)
         self._launches: dict = {}
         self.set_default(q_default)
@@ -211,7 +269,7 @@ class IKObjective:
         """Copy q (B, n_dof) into the batch; ``keep_rho`` keeps the elastic DH rows of the
         last iteration (compensation: one torque update per iteration)."""
         q = np.ascontiguousarray(q, dtype=self.npdt).reshape(self.B, self.n)
-        if self.device.is_cpu:
+        if self.device.is_cpu and self.q.is_contiguous:
             self.q.numpy()[...] = q  # CPU arrays share memory with numpy
         else:
             wp.copy(self.q, wp.array(q, dtype=self.scalar, device=self.device))
@@ -261,6 +319,18 @@ class IKObjective:
                       self.coll_grad, use, self.scalar(w.default)],
                      [self.cost_a, self.grad_a])
 
+    def reset_rows(self) -> None:
+        """Elastic only: back to the nominal DH rows (a new solve)."""
+        if self.compensation is not None:
+            self.compensation.reset()
+
+    def update_rows(self) -> None:
+        """Elastic only: the iteration's torque update of the rows from the frames of the
+        last :meth:`evaluate_pose`, without U_A (what :meth:`evaluate_aux` would do with
+        it)."""
+        if self.compensation is not None:
+            self.compensation.update(self.frames)
+
     def project_limits(self) -> None:
         self._launch(("project",), self.pk.project, [*self.limits.args], [self.q])
 
@@ -279,6 +349,429 @@ def _task_rows(robot: RobotModel) -> np.ndarray:
     return np.array([0, 1, 5]) if robot.workspace_dim == 2 else np.arange(6)
 
 
+def _positive_int(v: Any, name: str, lo: int) -> int:
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
+        raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+    return int(v)
+
+
+@dataclass
+class IKOptions:
+    """Options of :class:`IKSolver` and :func:`ik` (thesis 3.3.3).
+
+    Attributes:
+        n_starts: random seeds per target when :meth:`IKSolver.solve` gets none (uniform
+            inside the limits).
+        tol_pos, tol_rot: target tolerance [m] and [rad] (thesis: 1e-4 m, 1e-3 rad).
+        margin: required clearance [m] (world and self), >= 0.
+        eps: smoothing width of the collision clip [m], > 0 and >= margin (None: the
+            world's voxel size, at least 0.01 and ``margin``).
+        max_iterations: iterations per seed (projection + nullspace), >= 0.
+        step: nullspace step alpha.
+        max_step: the largest change of one joint per iteration [rad or m]; the whole step
+            is scaled down to it.
+        damping: mu of the damped pseudo-inverse.
+        kappa, lam, tol_rho: elastic compensation (compliances [rad/(N m)] or None for the
+            rigid robot, damping of the torque update in (0, 1], and the largest DH row
+            change [rad] of the last update for a solution to count; module docstring).
+        stop_when_solved: end once every target has a feasible seed (else run every seed
+            until it is feasible or out of iterations).
+        check_every: exact collision check of every on-target seed every this many
+            iterations (seeds whose collision cost is below ``w c(margin)`` are checked at
+            once); on CUDA also how often the host reads the solver's counters.
+        seed: random seed of the starts (None: fresh entropy).
+        weights: :class:`IKWeights` of U_f and U_A (None: the defaults).
+        q_default: default pose of the closeness term, (n_dof,) or per seed
+            (n_problems * n_seeds, n_dof) (None: the middle of the limits).
+        freeze_solved: once a problem has a feasible seed, stop its other seeds (they keep
+            their last state, infeasible). Large batches run much less work, but a problem
+            gets the first feasible seeds found instead of the lowest U_A among those found
+            by the time every problem is solved (off: the thesis' multi-start, :func:`ik`).
+
+    ``validate()`` (also run on construction) raises ValueError/TypeError naming the field.
+    """
+
+    n_starts: int = 16
+    tol_pos: float = 1e-4
+    tol_rot: float = 1e-3
+    margin: float = 0.0
+    eps: float | None = None
+    max_iterations: int = 200
+    step: float = 1.0
+    max_step: float = 0.5
+    damping: float = 1e-3
+    kappa: Any = None
+    lam: float = 0.7
+    tol_rho: float = 1e-6
+    stop_when_solved: bool = True
+    check_every: int = 5
+    seed: int | None = 0
+    weights: IKWeights | None = None
+    q_default: Any = None
+    freeze_solved: bool = False
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Check every field (ValueError/TypeError naming it); numbers become floats."""
+        for name, lo in (("n_starts", 1), ("max_iterations", 0), ("check_every", 1)):
+            setattr(self, name, _positive_int(getattr(self, name), name, lo))
+        for name in ("tol_pos", "tol_rot", "step", "max_step", "damping", "tol_rho"):
+            v = getattr(self, name)
+            if not (math.isfinite(real_number(v, name)) and v > 0):
+                raise ValueError(f"{name}: expected a number > 0, got {v!r}")
+            setattr(self, name, float(v))
+        margin = real_number(self.margin, "margin")
+        if not (math.isfinite(margin) and margin >= 0):
+            raise ValueError(f"margin: expected a number >= 0 [m], got {margin!r}")
+        self.margin = margin
+        if self.eps is not None:
+            eps = real_number(self.eps, "eps")
+            if not (math.isfinite(eps) and eps > 0 and eps >= margin):
+                raise ValueError(f"eps: must be > 0 and >= margin ({margin:g} m), got {eps:g}")
+            self.eps = eps
+        lam = real_number(self.lam, "lam")
+        if not 0.0 < lam <= 1.0:
+            raise ValueError(f"lam: expected a damping factor in (0, 1], got {self.lam!r}")
+        self.lam = lam
+        for name in ("stop_when_solved", "freeze_solved"):
+            v = getattr(self, name)
+            if not isinstance(v, (bool, np.bool_)):
+                raise TypeError(f"{name}: expected a bool, got {v!r}")
+            setattr(self, name, bool(v))
+        if self.seed is not None and (isinstance(self.seed, (bool, np.bool_))
+                                      or not isinstance(self.seed, numbers.Integral)):
+            raise TypeError(f"seed: expected an integer or None, got {self.seed!r}")
+        if self.weights is not None:
+            if not isinstance(self.weights, IKWeights):
+                raise TypeError(f"weights: expected IKWeights, got {type(self.weights).__name__}")
+            self.weights.validate()
+
+    def eps_for(self, world: Any) -> float:
+        """The smoothing width in use: ``eps`` or the default for ``world``."""
+        if self.eps is not None:
+            return self.eps
+        return max(float(world.voxel_size) if world is not None else 0.0, 0.01, self.margin)
+
+
+class IKSolver:
+    """Batched collision-free IK of one frame, resident on one device.
+
+    Holds ``n_problems`` targets x ``n_seeds`` seeds (``options.n_starts`` unless the seeds
+    given to :meth:`solve` say otherwise): the cost buffers (:class:`IKObjective`), the
+    per-seed state and result rows, and the recorded kernel launches. :meth:`solve` reuses
+    all of them while the number of seeds stays the same (a different count reallocates).
+    Options are read once, at construction.
+
+    Per iteration (:mod:`jwarp.kernels.ik_step`): the pose error and Jacobian (rigid robot:
+    one kernel walking the frame's chain; elastic: FK at the compensation rows), the list
+    of active seeds whose pose is on target, U_A of those only (their collision costs in a
+    gathered batch), the exact check of the candidates, and the projected DLS step of the
+    active seeds. The host reads three counters per iteration (on CUDA a small copy and a
+    sync; the elastic model on CUDA evaluates U_A of every seed and reads the counters every
+    ``check_every`` iterations) and copies the result rows once at the end.
+
+    Args:
+        robot: robot name or RobotModel.
+        frame: end-effector frame (name, end-effector alias or index).
+        n_problems: targets per :meth:`solve` (>= 1).
+        options: :class:`IKOptions` (None: the defaults).
+        world: optional :class:`jwarp.world.World` (None: self-collision only).
+        device: Warp device (None: CUDA if present, else the CPU); every kernel and check
+            of the solve runs there.
+        dtype: float type of the iteration (None: float64); the step's linear algebra and
+            the feasibility check are float64 either way.
+    """
+
+    def __init__(self, robot: Any, frame: int | str, n_problems: int,
+                 options: IKOptions | None = None, world: Any = None, device: Any = None,
+                 dtype: Any = None):
+        init_warp()
+        self.robot = get_robot(robot)
+        self.frame = self.robot.frame_index(frame)
+        collision.check_world(self.robot, world)
+        self.world = world
+        self.n_problems = _positive_int(n_problems, "n_problems", 1)
+        if options is None:
+            options = IKOptions()
+        elif not isinstance(options, IKOptions):
+            raise TypeError(f"options: expected IKOptions, got {type(options).__name__}")
+        options = dataclasses.replace(options)  # a copy (validated): later edits do not leak
+        self.options = options
+        self.device = resolve_device(device)
+        self.scalar = scalar_type(np.float64 if dtype is None else dtype)
+        self.npdt = numpy_dtype(self.scalar)
+        self.eps = options.eps_for(world)
+        #: random generator of the seeds (from ``options.seed``); :meth:`reseed` resets it
+        self.rng = np.random.default_rng(options.seed)
+        self.planar = self.robot.workspace_dim == 2
+        self.dk = step_kernels.dls_kernels(self.scalar, self.planar, self.robot.n_dof)
+        self.ck = step_kernels.check_kernels(self.scalar, self.planar)
+        self.limits = limit_tables(self.robot, self.device, self.scalar)
+        self.limits64 = limit_tables(self.robot, self.device, np.float64)
+        self.cm64 = collision.collision_model(self.robot, world, device=self.device,
+                                              dtype=np.float64)
+        w = options.weights or IKWeights()
+        self.weights = w
+        w_min = min([v for v in (w.world, w.self) if v > 0] or [0.0])
+        # screen: a collision cost below w_min c(margin) means no sphere is within margin
+        # (every term is >= 0); those get the exact check at once, the others every
+        # check_every iterations
+        self.screen = w_min * (self.eps - options.margin) ** 2 / (2.0 * self.eps)
+        dev = self.device
+        mat44 = fk_kernels.kernels(self.scalar).mat44
+        self.targets = wp.zeros(self.n_problems, dtype=mat44, device=dev)
+        self.best = wp.zeros((self.n_problems, 2), dtype=wp.int32, device=dev)
+        self.solved = wp.zeros(self.n_problems, dtype=wp.int32, device=dev)
+        #: [done or frozen seeds, solved problems, seeds on target this iteration]
+        self.counts = wp.zeros(3, dtype=wp.int32, device=dev)
+        self._counts_host = (self.counts if dev.is_cpu else
+                             wp.zeros(3, dtype=wp.int32, device="cpu", pinned=True))
+        self.halt = wp.zeros(1, dtype=wp.int32, device=dev)
+        self.n_seeds = 0
+        self.objective: IKObjective | None = None
+        self._allocate(options.n_starts)
+
+    # ------------------------------------------------------------------ buffers
+    def _allocate(self, n_seeds: int) -> None:
+        """Buffers and recorded launches for ``n_seeds`` seeds per problem."""
+        o, dev = self.options, self.device
+        P, S, n = self.n_problems, int(n_seeds), self.robot.n_dof
+        B = P * S
+        self.n_seeds, self.B = S, B
+        fast = dev.is_cuda  # configuration index fastest in memory (coalesced)
+        obj = IKObjective(self.robot, self.frame, B, world=self.world, weights=o.weights,
+                          eps=self.eps, q_default=o.q_default, kappa=o.kappa, lam=o.lam,
+                          device=dev, dtype=self.scalar, batch_fastest=fast)
+        self.objective = obj
+        i32 = wp.int32
+        self.on = wp.zeros(B, dtype=i32, device=dev)
+        #: per seed: 0 active, 1 done (feasible), 2 frozen (``freeze_solved``)
+        self.done = wp.zeros(B, dtype=i32, device=dev)
+        self.iterations = wp.zeros(B, dtype=i32, device=dev)
+        self.out = batch_array(B, (n + step_kernels.N_EXTRA,), wp.float64, dev, fast)
+        # the seeds whose pose is on target, gathered for their collision costs
+        self.idx = wp.zeros(B, dtype=i32, device=dev)
+        self.q_near = batch_array(B, (n,), self.scalar, dev, fast)
+        self.near_cost = wp.zeros(B, dtype=self.scalar, device=dev)
+        self.near_grad = batch_array(B, (n,), self.scalar, dev, fast)
+        self._near_views: dict = {}
+        comp = obj.compensation
+        nf = self.robot.n_frames
+        self._rows = comp.rows if comp is not None else wp.zeros((1, nf, 9), dtype=self.scalar,
+                                                                  device=dev)
+        self._delta = obj.delta if comp is not None else wp.zeros(1, dtype=self.scalar,
+                                                                  device=dev)
+        ck, cm = self.ck, self.cm64
+        tab = ck.CheckTables()
+        tab.model, tab.spheres = cm.model_args
+        tab.world = cm.world_struct
+        tab.use_world = int(self.world is not None and cm.n_spheres > 0)
+        tab.use_self = int(cm.n_pairs > 0)
+        lt = self.limits64
+        tab.limits, tab.lin_start, tab.lin_joint = lt.limits, lt.lin_start, lt.lin_joint
+        tab.lin_coef, tab.lin_bounds = lt.lin_coef, lt.lin_bounds
+        tab.limit_tol = wp.float64(LIMIT_TOL)
+        self._check_tables = tab
+        sc = ck.CheckScratch()
+        k64 = fk_kernels.kernels(wp.float64)
+        sc.q64 = batch_array(B, (n,), wp.float64, dev, fast)
+        sc.rho64 = (batch_array(B, (nf, 5), wp.float64, dev, fast) if comp is not None else
+                    wp.zeros((1, nf, 5), dtype=wp.float64, device=dev))
+        self._scratch_owner: list = []
+        sc.frames = self._scratch(B, nf, k64.mat44)
+        sc.xs = self._scratch(B, max(cm.n_spheres, 1), k64.vec3)
+        self._check_scratch = sc
+        self._launches: dict = {}
+
+    def _scratch(self, B: int, m: int, dtype: Any) -> wp.array:
+        """(B, m) scratch of the check: on CUDA frame-major (coalesced); on the CPU, whose
+        threads run one after another, one row seen by every configuration (stride 0)."""
+        if self.device.is_cuda:
+            return wp.zeros((m, B), dtype=dtype, device=self.device).transpose()
+        row = wp.zeros((1, m), dtype=dtype, device=self.device)
+        self._scratch_owner.append(row)  # owns the memory of the view
+        return wp.array(ptr=row.ptr, shape=(B, m), strides=(0, row.strides[1]), dtype=dtype,
+                        device=self.device)
+
+    def _launch(self, key: Any, kernel: Any, dim: int, inputs: list) -> None:
+        launch = self._launches.get(key)
+        if launch is None:
+            launch = wp.launch(kernel, dim=dim, inputs=inputs, device=self.device,
+                               record_cmd=True)
+            self._launches[key] = launch
+        launch.launch()
+
+    def _read_counts(self) -> np.ndarray:
+        """The counters on the host (CPU: a view; CUDA: a copy, which waits for the
+        device)."""
+        if self.device.is_cpu:
+            return self._counts_host.numpy()
+        wp.copy(self._counts_host, self.counts)
+        wp.synchronize_device(self.device)
+        return self._counts_host.numpy()
+
+    def _pose(self) -> None:
+        """Rigid robot: error and Jacobian of every active seed (one kernel)."""
+        obj = self.objective
+        t = obj.t
+        self._launch("pose", self.ck.pose, self.B, [
+            obj.q, obj.target, self.halt, self.done, t.frame_struct, t.chain(self.frame),
+            t.dh0_3d, obj.jac, obj.err])
+
+    def _near(self) -> None:
+        o, obj = self.options, self.objective
+        self._launch("near", self.ck.near, self.B, [obj.err, o.tol_pos, o.tol_rot, self.halt,
+                                                    self.done, self.on, self.counts,
+                                                    self.idx])
+
+    def _near_aux(self, n_near: int) -> None:
+        """U_A and its gradient of the ``n_near`` listed seeds: their collision costs in a
+        gathered batch (padded to a power of two above 32 seeds, so a few recorded
+        launches serve every count)."""
+        obj, w = self.objective, self.weights
+        K = n_near if self.B <= 32 else min(self.B, 1 << (int(n_near) - 1).bit_length())
+        views = self._near_views.get(K)
+        if views is None:
+            views = self._near_views[K] = (self.q_near[:K], self.near_cost[:K],
+                                           self.near_grad[:K])
+        qk, ck, gk = views
+        use = int(w.world > 0 or w.self > 0)
+        if use:
+            self._launch(("gather", K), self.ck.gather, K, [obj.q, self.idx, self.counts, qk])
+            obj.cm.cost(qk, w_world=w.world, w_self=w.self, eps=obj.eps, grad=True,
+                        out_cost=ck, out_grad=gk)
+        self._launch(("scatter", K), self.ck.scatter_aux, K, [
+            obj.q, obj.q_default, obj.default_stride, self.idx, self.counts, ck, gk, use,
+            self.scalar(w.default), obj.coll_cost, obj.cost_a, obj.grad_a])
+
+    def _check(self, full: bool) -> None:
+        o, obj = self.options, self.objective
+        self._launch(("check", bool(full)), self.ck.check, self.B, [
+            obj.q, obj.err, obj.cost_a, obj.coll_cost, self._delta, self._rows,
+            int(obj.compensation is not None), o.tol_pos, o.tol_rot, o.tol_rho, self.screen,
+            int(full), o.margin, self.n_seeds, self.halt, self.iterations,
+            self._check_tables, self._check_scratch,
+            self.on, self.done, self.solved, self.counts, self.out])
+
+    def _step(self) -> None:
+        o, obj = self.options, self.objective
+        self._launch("step", self.dk.step, self.B, [
+            obj.jac, obj.err, obj.grad_a, self.on, self.solved, self.n_seeds,
+            int(o.freeze_solved), int(o.stop_when_solved), self.n_problems, o.damping ** 2,
+            o.step, o.max_step, *self.limits.args, obj.q, self.done, self.counts,
+            self.iterations, self.halt])
+
+    # ------------------------------------------------------------------ solve
+    def reseed(self, seed: int | None) -> None:
+        """Restart the random seeds' generator from ``seed``."""
+        self.rng = np.random.default_rng(seed)
+
+    def solve(self, targets: Any, seeds: Any = None, *,
+              callback: Callable[[int, np.ndarray], None] | None = None) -> IKResult:
+        """Solve the ``n_problems`` targets.
+
+        Args:
+            targets: poses (n_problems, 4, 4) in the base frame [m], or one pose (4, 4)
+                for every problem; planar robots use x, y and the rotation about z.
+            seeds: initial configurations (n_problems, n_seeds, n_dof) or the same for every
+                problem (n_seeds, n_dof) or (n_dof,); None: ``options.n_starts`` random
+                seeds per problem, drawn on the device (uniform in the box, redrawn for the
+                linear limits; Warp's random stream, seeded from :attr:`rng`). Every seed is
+                projected onto the joint limits first.
+            callback: ``callback(iteration, q (B, n_dof))`` after every evaluation (reads q
+                back every iteration).
+
+        Returns:
+            :class:`IKResult` with the leading dims of ``targets`` (a (4, 4) target with
+            ``n_problems == 1``: no leading dim).
+        """
+        t0 = time.perf_counter()
+        T, lead = _targets(targets)
+        P, model = self.n_problems, self.robot
+        if len(T) != P:
+            if len(T) != 1:
+                raise ValueError(f"target: expected {P} poses (the solver's n_problems) or "
+                                 f"one, got {len(T)}")
+            T = np.broadcast_to(T, (P, 4, 4))
+            lead = (P,)
+        T = finite_as(T, self.npdt, "target")  # finite in the solver's dtype
+        q0 = None
+        S = self.options.n_starts
+        if seeds is not None:
+            q0 = finite_as(_seeds(model, seeds, P, "seeds"), self.npdt, "seeds")
+            S = q0.shape[1]
+        if S != self.n_seeds:
+            self._allocate(S)
+        obj, dev, B = self.objective, self.device, self.B
+        if q0 is None:  # random seeds, drawn on the device
+            obj.reset_rows()
+            wp.launch(self.dk.sample, dim=B, inputs=[int(self.rng.integers(1 << 31)),
+                                                     *self.limits.args],
+                      outputs=[obj.q], device=dev)
+        else:
+            obj.set_q(q0.reshape(B, -1))
+        obj.project_limits()
+        if dev.is_cpu:
+            self.targets.numpy()[...] = T  # CPU arrays share memory with numpy
+        else:
+            wp.copy(self.targets, wp.array(T, dtype=self.targets.dtype, device=dev))
+        self._launch("repeat", self.ck.repeat_targets, B, [self.targets, S, obj.target])
+        self._launch("reset", self.ck.reset, B, [P, self.done, self.on, self.iterations,
+                                                self.solved, self.counts, self.halt])
+        o = self.options
+        rigid = obj.compensation is None
+        # the counters are read every iteration where that is cheap or needed anyway: the
+        # CPU (a view), the rigid robot (its U_A batch size); elastic on CUDA: every
+        # check_every iterations
+        every = dev.is_cpu or rigid
+
+        def over(c: np.ndarray) -> bool:
+            return bool(c[0] >= B or (o.stop_when_solved and c[1] >= P))
+
+        for it in range(o.max_iterations + 1):
+            last = it == o.max_iterations
+            if rigid:
+                self._pose()
+            else:
+                obj.evaluate_pose()
+            near = True
+            if last:  # U_A of every seed: the result rows of the unsolved ones carry it
+                obj.evaluate_aux()
+            elif every:
+                self._near()
+                c = self._read_counts()
+                if not dev.is_cpu and over(c):  # solved at the last check (device halted)
+                    break
+                near = c[2] > 0
+                if near and rigid:
+                    self._near_aux(int(c[2]))
+                elif near:
+                    obj.evaluate_aux()
+                elif not rigid:
+                    obj.update_rows()
+            else:
+                obj.evaluate_aux()
+            if callback is not None:
+                callback(it, obj.q.numpy().astype(np.float64))
+            if near:
+                self._check(it % o.check_every == 0 or last)
+            if last:
+                break
+            if dev.is_cpu or callback is not None or (not every and it % o.check_every == 0):
+                if over(self._read_counts()):
+                    break
+            self._step()
+        self._launch("finalize", self.ck.finalize, B, [obj.q, obj.err, obj.cost_a, self.done,
+                                                       o.max_iterations, self.out])
+        self._launch("select", self.ck.select, P, [self.out, S, model.n_dof, self.best])
+        out = self.out.numpy().copy() if dev.is_cpu else self.out.numpy()
+        best = self.best.numpy().copy() if dev.is_cpu else self.best.numpy()
+        res = IKResult.from_rows(out, best, model.n_dof, P, S, time.perf_counter() - t0)
+        return res.reshaped(lead)
+
+
 def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts: int = 16,
        initial: Any = None, q_default: Any = None, weights: IKWeights | None = None,
        tol_pos: float = 1e-4, tol_rot: float = 1e-3, margin: float = 0.0,
@@ -288,33 +781,18 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
        seed: int | None = 0,
        device: Any = "cpu", dtype: Any = np.float64,
        callback: Callable[[int, np.ndarray], None] | None = None) -> IKResult:
-    """Collision-free IK of ``frame`` onto ``target`` with random multi-starts.
+    """Collision-free IK of ``frame`` onto ``target`` with random multi-starts: one
+    :class:`IKSolver` solve.
 
     Args:
         robot: robot name or RobotModel.
         frame: end-effector frame (name, end-effector alias or index).
-        target: pose(s) (4, 4) or (T, 4, 4) in the base frame [m]; planar robots use x, y
-            and the rotation about z.
+        target: pose(s) (4, 4) or (..., 4, 4) in the base frame [m].
         world: optional :class:`jwarp.world.World` (None: self-collision only).
-        n_starts: random seeds per target (uniform inside the limits).
         initial: seeds (n_dof,), (n_starts, n_dof) or (T, n_starts, n_dof) instead of random.
-        q_default: default pose for the closeness term (default: the middle of the limits).
-        weights: :class:`IKWeights`.
-        tol_pos, tol_rot: target tolerance [m] and [rad] (thesis: 1e-4 m, 1e-3 rad).
-        margin: required clearance [m] (world and self); eps (>= margin) smoothing width.
-        max_iterations: iterations per start (projection + nullspace).
-        step, max_step: nullspace step alpha and the largest change of one joint per
-            iteration [rad].
-        damping: mu of the damped pseudo-inverse.
-        kappa, lam, tol_rho: elastic compensation (see the module docstring).
-        stop_when_solved: end once every target has a feasible start (else run every start
-            until it is feasible or out of iterations).
-        check_every: exact collision check of every on-target start every this many
-            iterations (starts whose collision cost is below ``w c(margin)`` are checked at
-            once).
-        seed: random seed of the starts.
         device, dtype: Warp device and float type.
         callback: ``callback(iteration, q (B, n_dof))`` after every evaluation.
+        The other options are the fields of :class:`IKOptions`.
 
     Raises:
         ValueError: unknown frame, bad target/seed shapes, world dimension mismatch, bad
@@ -326,140 +804,81 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
     fi = model.frame_index(frame)
     collision.check_world(model, world)
     T, lead = _targets(target)
-    for name, v, lo in (("n_starts", n_starts, 1), ("max_iterations", max_iterations, 0),
-                        ("check_every", check_every, 1)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
-    for name, v in (("tol_pos", tol_pos), ("tol_rot", tol_rot), ("step", step),
-                    ("max_step", max_step), ("damping", damping), ("tol_rho", tol_rho)):
-        if not (math.isfinite(real_number(v, name)) and v > 0):
-            raise ValueError(f"{name}: expected a number > 0, got {v!r}")
-    tol_pos, tol_rot, step, max_step, damping, tol_rho = (
-        float(v) for v in (tol_pos, tol_rot, step, max_step, damping, tol_rho))
-    margin = real_number(margin, "margin")
-    if not (math.isfinite(margin) and margin >= 0):
-        raise ValueError(f"margin: expected a number >= 0 [m], got {margin!r}")
-    finite_as(T, numpy_dtype(scalar_type(dtype)), "target")  # finite in the solver's dtype
-    eps_v = real_number(eps, "eps") if eps is not None else max(
-        float(world.voxel_size) if world is not None else 0.0, 0.01, margin)
-    if not eps_v >= margin or not eps_v > 0:
-        raise ValueError(f"eps: must be > 0 and >= margin ({margin:g} m), got {eps_v:g}")
-    nT = len(T)
-    rng = np.random.default_rng(seed)
-    if initial is None:
-        q0 = sample_within_limits(model, nT * n_starts, rng).reshape(nT, n_starts, model.n_dof)
-    else:
-        q0 = _seeds(model, initial, nT)
+    opts = IKOptions(n_starts=n_starts, tol_pos=tol_pos, tol_rot=tol_rot, margin=margin,
+                     eps=eps, max_iterations=max_iterations, step=step, max_step=max_step,
+                     damping=damping, kappa=kappa, lam=lam, tol_rho=tol_rho,
+                     stop_when_solved=stop_when_solved, check_every=check_every, seed=seed,
+                     weights=weights, q_default=q_default)
+    finite_as(T, numpy_dtype(scalar_type(dtype)), "target")  # before the seeds' check
+    n_seeds = opts.n_starts
+    if initial is not None:
+        q0 = _seeds(model, initial, len(T), "initial")
         finite_as(q0, numpy_dtype(scalar_type(dtype)), "initial")
-        n_starts = q0.shape[1]
-    B = nT * n_starts
-    obj = IKObjective(model, fi, B, world=world, weights=weights, eps=eps_v, q_default=q_default,
-                      kappa=kappa, lam=lam, device=device, dtype=dtype)
-    obj.set_q(q0.reshape(B, -1))
-    obj.project_limits()
-    obj.set_target(np.repeat(T, n_starts, axis=0))
-    # screen: a collision cost below w_min c(margin) means no sphere is within margin
-    # (every term is >= 0); those get the exact check at once, the others every
-    # check_every iterations
-    wts = obj.weights
-    w_min = min([v for v in (wts.world, wts.self) if v > 0] or [0.0])
-    screen = w_min * (eps_v - margin) ** 2 / (2.0 * eps_v)
-    rows = _task_rows(model)
-    npos = 2 if model.workspace_dim == 2 else 3
-    done = np.zeros(B, bool)
-    feasible = np.zeros(B, bool)
-    iters = np.full(B, max_iterations, np.int64)
-    q_out = np.zeros((B, model.n_dof))
-    errs = np.zeros((B, 3))  # pos, rot, U_A
-    mu2 = damping ** 2
-    for it in range(max_iterations + 1):
-        obj.evaluate_pose()
-        obj.evaluate_aux()
-        q = obj.q.numpy().astype(np.float64)
-        if callback is not None:
-            callback(it, q)
-        err = obj.err.numpy().astype(np.float64)[:, rows]
-        pe = np.linalg.norm(err[:, :npos], axis=1)
-        re = np.linalg.norm(err[:, npos:], axis=1)
-        on = (pe < tol_pos) & (re < tol_rot)
-        if obj.compensation is not None:
-            on &= obj.delta.numpy() < tol_rho
-        cost_a = obj.cost_a.numpy().astype(np.float64)
-        coll = obj.coll_cost.numpy()
-        full = it % check_every == 0 or it == max_iterations
-        cand = np.nonzero(~done & on & ((coll < screen) | full))[0]
-        if len(cand):
-            ok = within_limits(model, q[cand]) & _free(obj, q[cand], cand, margin)
-            newly = cand[ok]
-            feasible[newly] = True
-            done[newly] = True
-            iters[newly] = it
-            q_out[newly] = q[newly]
-            errs[newly] = np.stack([pe[newly], re[newly], cost_a[newly]], 1)
-        if done.all() or it == max_iterations:
-            break
-        if stop_when_solved and feasible.reshape(nT, n_starts).any(1).all():
-            break
-        J = obj.jac.numpy().astype(np.float64)[:, rows]         # (B, m, n)
-        JJt = J @ np.swapaxes(J, 1, 2) + mu2 * np.eye(len(rows))
-        dq = np.einsum("bmn,bm->bn", J, np.linalg.solve(JJt, err[..., None])[..., 0])
-        ga = obj.grad_a.numpy().astype(np.float64)
-        ns = ga - np.einsum("bmn,bm->bn", J, np.linalg.solve(JJt, (J @ ga[..., None]))[..., 0])
-        dq = np.where(on[:, None], dq - step * ns, dq)
-        # scale the whole step (keeps the Newton direction) so no joint moves > max_step
-        big = np.abs(dq).max(axis=1, keepdims=True)
-        dq *= np.minimum(1.0, max_step / np.maximum(big, 1e-300))
-        dq[done] = 0.0
-        obj.set_q(q + dq, keep_rho=True)
-        obj.project_limits()
-    rest = np.nonzero(~done)[0]
-    if len(rest):
-        q_out[rest] = q[rest]
-        errs[rest] = np.stack([pe[rest], re[rest], cost_a[rest]], 1)
-    return _result(q_out, feasible, errs, iters, nT, n_starts, lead, time.perf_counter() - t0)
+        n_seeds = q0.shape[1]
+    else:  # numpy's random stream (the seeds ik() has always drawn)
+        q0 = sample_within_limits(model, len(T) * n_seeds,
+                                  np.random.default_rng(seed)).reshape(len(T), n_seeds, -1)
+    opts.n_starts = n_seeds
+    key = _solver_key(model, fi, len(T), opts, world, device, dtype)
+    solver = _SOLVERS.pop(key, None) if key is not None else None  # in use: not shared
+    if solver is None:
+        solver = IKSolver(model, fi, len(T), opts, world=world, device=device, dtype=dtype)
+    res = solver.solve(T, q0, callback=callback)
+    if key is not None:
+        _SOLVERS[key] = solver
+        while len(_SOLVERS) > SOLVER_CACHE_SIZE:
+            _SOLVERS.pop(next(iter(_SOLVERS)))
+    return res.reshaped(lead, time.perf_counter() - t0)
 
 
-def _free(obj: IKObjective, q: np.ndarray, idx: np.ndarray, margin: float) -> np.ndarray:
-    """Exact check (world and self, ``margin``) of the configurations ``q`` = rows ``idx``."""
-    rho = None
-    if obj.compensation is not None:
-        rho = obj.compensation.rho()[idx]
-    return collision_free(obj.robot, obj.world, q, margin, rho=rho)
+#: :func:`ik` keeps this many small solvers (<= :data:`SOLVER_CACHE_MAX_BATCH` seeds) for
+#: calls with the same robot, frame, sizes, world, device, dtype and options (a solver's
+#: set-up costs about as much as a small solve on the CPU)
+SOLVER_CACHE_SIZE = 8
+SOLVER_CACHE_MAX_BATCH = 4096
+_SOLVERS: "dict[tuple, IKSolver]" = {}
 
 
-def _seeds(model: RobotModel, initial: Any, nT: int) -> np.ndarray:
-    a = real_array(initial, "initial")
+def _solver_key(model: RobotModel, frame: int, n_problems: int, opts: IKOptions, world: Any,
+                device: Any, dtype: Any) -> tuple | None:
+    """Cache key of a solver for these arguments (None: do not cache). The cached solver
+    holds the robot and the world, so their ids stay theirs while it is cached."""
+    if n_problems * opts.n_starts > SOLVER_CACHE_MAX_BATCH:
+        return None
+
+    def arr(a: Any) -> Any:
+        if a is None:
+            return None
+        a = np.asarray(a, np.float64)
+        return a.shape, a.tobytes()
+
+    w = opts.weights
+    fields = tuple(getattr(opts, f.name) for f in dataclasses.fields(opts)
+                   if f.name not in ("seed", "weights", "kappa", "q_default"))
+    return (id(model), frame, n_problems, fields, id(world), str(resolve_device(device)),
+            scalar_type(dtype).__name__, None if w is None else dataclasses.astuple(w),
+            arr(opts.kappa), arr(opts.q_default))
+
+
+def _seeds(model: RobotModel, initial: Any, nT: int, name: str = "initial") -> np.ndarray:
+    a = real_array(initial, name)
     n = model.n_dof
     if a.ndim == 1:
         a = a[None, None]
     elif a.ndim == 2:
         a = a[None]
     if a.ndim != 3 or a.shape[-1] != n or a.shape[0] not in (1, nT) or a.shape[1] == 0:
-        raise ValueError(f"initial: expected seeds ({n},), (n_starts, {n}) or ({nT}, n_starts, "
+        raise ValueError(f"{name}: expected seeds ({n},), (n_starts, {n}) or ({nT}, n_starts, "
                          f"{n}), got {np.shape(initial)}")
     if not np.all(np.isfinite(a)):
-        raise ValueError("initial: contains NaN or inf")
+        raise ValueError(f"{name}: contains NaN or inf")
     return np.array(np.broadcast_to(a, (nT,) + a.shape[1:]))
 
 
-def _result(q: np.ndarray, feasible: np.ndarray, errs: np.ndarray, iters: np.ndarray, nT: int,
-            S: int, lead: tuple, wall: float) -> IKResult:
-    n = q.shape[1]
-    fz = feasible.reshape(nT, S)
-    e = errs.reshape(nT, S, 3)
-    # feasible first (lowest U_A), else the smallest pose error
-    key_f = np.where(fz, e[..., 2], np.inf)
-    key_i = e[..., 0] + e[..., 1] * 0.1
-    best = np.where(fz.any(1), np.argmin(key_f, axis=1), np.argmin(key_i, axis=1))
-    r = np.arange(nT)
-    qa = q.reshape(nT, S, n)
-    it = iters.reshape(nT, S)
-
-    def shp(x: np.ndarray, tail: tuple = ()) -> np.ndarray:
-        return x.reshape(lead + tail)
-
-    return IKResult(q=shp(qa[r, best], (n,)), feasible=shp(fz[r, best]),
-                    pos_err=shp(e[r, best, 0]), rot_err=shp(e[r, best, 1]),
-                    cost=shp(e[r, best, 2]), iterations=shp(it[r, best]),
-                    start_index=shp(best), n_feasible=shp(fz.sum(1)), wall_time=wall,
-                    all_q=shp(qa, (S, n)), all_feasible=shp(fz, (S,)), all_iterations=shp(it, (S,)))
+def select_best(feasible: np.ndarray, errs: np.ndarray) -> np.ndarray:
+    """Host twin of the device selection (:mod:`jwarp.kernels.ik_step` ``select``):
+    feasible (P, S) bool, errs (P, S, 3) [|e_v|, |e_w|, U_A] -> (P,) chosen seed: the
+    feasible one with the lowest U_A, else the smallest |e_v| + 0.1 |e_w|."""
+    key_f = np.where(feasible, errs[..., 2], np.inf)
+    key_i = errs[..., 0] + errs[..., 1] * 0.1
+    return np.where(feasible.any(1), np.argmin(key_f, axis=1), np.argmin(key_i, axis=1))

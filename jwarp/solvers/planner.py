@@ -14,8 +14,10 @@ stage: substeps -> collision cost + gradient -> path cost -> step.
 
 A path is *feasible* when every substep is collision-free with ``margin`` (world and self)
 and every waypoint is within the limits. Each path stops on its own as soon as it is
-feasible (early stop); :func:`plan` returns per problem the best (lowest U_path) feasible
-path of its multi-starts, or the lowest-cost infeasible one with ``feasible = False``.
+feasible (early stop); :class:`Planner` (a persistent solver: device buffers reused across
+calls, options in :class:`PlanOptions`, seeds from the caller) and its one-call wrapper
+:func:`plan` return per problem the best (lowest U_path) feasible path of its multi-starts,
+chosen on the device, or the lowest-cost infeasible one with ``feasible = False``.
 
 With ``kappa`` (elastic compensation, elastic paper section V, Fig. 2.11) the robot is the
 elastic model (:mod:`jwarp.kinematics.compensation`): the collision kernel computes the frames
@@ -28,7 +30,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -41,8 +43,9 @@ from jwarp.kernels import path as path_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.kinematics.compensation import CompensationRows
-from jwarp.core.limits import (describe_violation, limit_tables, sample_within_limits,
-                                  within_limits)
+from jwarp.kinematics.launch import kappa_array
+from jwarp.core.limits import (describe_violation, limit_tables, project_numpy,
+                              sample_within_limits, within_limits)
 
 #: floor of the length-cost normaliser 1/2 |q_goal - q_start|^2 [rad^2]
 NORM_FLOOR = 1e-4
@@ -72,15 +75,17 @@ class PathWeights:
 
 @dataclass
 class PlanResult:
-    """Result of :func:`plan` for B problems (leading dims of start/goal).
+    """Result of :func:`plan` / :meth:`Planner.plan` for B problems.
 
     path (B, W, n_dof) best path per problem; feasible (B,) bool; cost (B,) U_path;
     length_cost (B,) U_l (eq. 3.5, 1 for the straight line); collision_cost (B,) weighted
     world + self cost summed over substeps; iterations (B,) gradient steps until the chosen
-    path was feasible (or the iteration budget); start_index (B,) which multi-start won;
-    n_feasible (B,) feasible multi-starts; wall_time [s] of the whole call;
-    n_substeps substeps per segment; all_paths (B, n_starts, W, n_dof) final paths of every
-    start, all_feasible (B, n_starts).
+    path was feasible (or the iteration budget); start_index (B,) which multi-start (seed)
+    won; n_feasible (B,) feasible multi-starts; wall_time [s] of the whole call;
+    n_substeps substeps per segment; all_feasible (B, n_starts); all_iterations
+    (B, n_starts); all_paths (B, n_starts, W, n_dof) final paths of every start, read from
+    the device on first use (the best paths are chosen on the device, so a caller that
+    needs only ``path`` never copies the others to the host).
     """
 
     path: np.ndarray
@@ -93,9 +98,21 @@ class PlanResult:
     n_feasible: np.ndarray
     wall_time: float
     n_substeps: int
-    all_paths: np.ndarray = field(repr=False)
     all_feasible: np.ndarray = field(repr=False)
     all_iterations: np.ndarray = field(repr=False)
+    #: every start's final path: a numpy (B, n_starts, W, n_dof) array, or a Warp array
+    #: (B * n_starts, W, n_dof) on the planner's device (its own copy) until first read
+    paths_source: Any = field(default=None, repr=False)
+
+    @property
+    def all_paths(self) -> np.ndarray:
+        """(B, n_starts, W, n_dof) float64: the final path of every start."""
+        src = self.paths_source
+        if isinstance(src, wp.array):
+            B, n_starts = self.all_feasible.shape
+            src = src.numpy().astype(np.float64).reshape((B, n_starts) + self.path.shape[1:])
+            self.paths_source = src
+        return src
 
     def to_dict(self, index: int = 0) -> dict:
         """JSON-ready summary of problem ``index``."""
@@ -130,11 +147,12 @@ def _configs(x: Any, robot: RobotModel, name: str) -> np.ndarray:
 
 
 def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, margin: float,
-                    rho_kappa: Any = None) -> None:
+                    rho_kappa: Any = None, device: Any = None) -> None:
     """ValueError naming ``name`` (and the row) if a configuration is outside the limits or
     in collision (closer than ``margin`` to an obstacle or to itself), or, on the elastic
     model (``rho_kappa``: compliances), if its torque equilibrium does not converge
-    (:data:`ELASTIC_CHECK`): then nothing can be said about its collisions."""
+    (:data:`ELASTIC_CHECK`): then nothing can be said about its collisions. The checks run
+    on ``device`` (None: the preferred device)."""
     ok = within_limits(robot, q)
     if not ok.all():
         i = int(np.nonzero(~ok)[0][0])
@@ -142,7 +160,7 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
         raise ValueError(f"{where}: outside the joint limits: {describe_violation(robot, q[i])}")
     rho = None
     if rho_kappa is not None:
-        rho, conv = elastic_equilibrium(robot, q, rho_kappa)
+        rho, conv = elastic_equilibrium(robot, q, rho_kappa, device=device)
         if not conv.all():
             i = int(np.nonzero(~conv)[0][0])
             where = f"{name}[{i}]" if len(q) > 1 else name
@@ -150,7 +168,7 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
             raise ValueError(f"{where}: the elastic equilibrium (kappa) does not converge in "
                              f"{c['max_iter']} torque updates (lam {c['lam']:g}) to {c['tol']:g} "
                              f"rad, so its collisions cannot be checked; lower kappa")
-    free = collision_free(robot, world, q, margin, rho=rho)
+    free = collision_free(robot, world, q, margin, rho=rho, device=device)
     if not free.all():
         i = int(np.nonzero(~free)[0][0])
         where = f"{name}[{i}]" if len(q) > 1 else name
@@ -211,17 +229,19 @@ def substeps(paths: Any, n_substeps: int, *, device: Any = "cpu", dtype: Any = N
 
 
 def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin: float = 0.0,
-                  kappa: Any = None) -> np.ndarray:
+                  kappa: Any = None, device: Any = None) -> np.ndarray:
     """Feasibility of paths (..., W, n_dof): every one of the ``n_substeps`` linear substeps
     per segment collision-free with ``margin`` [m] (world and self; elastic model with
-    ``kappa``) and every waypoint within the joint limits. Returns (...,) bool."""
+    ``kappa``) and every waypoint within the joint limits. Returns (...,) bool. Runs on
+    ``device`` (None: the preferred device)."""
     model = get_robot(robot)
     check_world(model, world)
     a = real_array(paths, "paths")
     if a.ndim < 2 or a.shape[-1] != model.n_dof or a.shape[-2] < 2:
         raise ValueError(f"paths: expected shape (..., W >= 2, {model.n_dof}), got {a.shape}")
-    q = substeps(a, n_substeps, device=None)
-    free = collision_free(model, world, q.reshape(-1, model.n_dof), margin, kappa=kappa)
+    q = substeps(a, n_substeps, device=device)
+    free = collision_free(model, world, q.reshape(-1, model.n_dof), margin, kappa=kappa,
+                          device=device)
     free = free.reshape(q.shape[:-1]).all(axis=-1)
     return free & within_limits(model, a).all(axis=-1)
 
@@ -243,11 +263,12 @@ def sphere_centres(robot: RobotModel, q: np.ndarray, device: Any = None) -> np.n
 
 
 def substeps_for_voxel(robot: RobotModel, paths: Any, voxel_size: float, *,
-                       safety: float = 1.0, max_substeps: int = 64) -> int:
+                       safety: float = 1.0, max_substeps: int = 64, device: Any = None) -> int:
     """Substeps per segment so that no sphere centre moves more than ``voxel_size / safety``
     between two substeps of ``paths`` (..., W, n_dof) (thesis 3.3.1: N_u adjusted to the
     step length and the voxel size). The motion of each segment is measured on a fine
-    (16 per segment) linear interpolation. Clamped to [1, max_substeps]."""
+    (16 per segment) linear interpolation (its FK on ``device``; None: the preferred
+    device). Clamped to [1, max_substeps]."""
     voxel_size = real_number(voxel_size, "voxel_size")
     if not (voxel_size > 0 and math.isfinite(voxel_size)):
         raise ValueError(f"voxel_size: expected a number > 0 [m], got {voxel_size!r}")
@@ -259,7 +280,7 @@ def substeps_for_voxel(robot: RobotModel, paths: Any, voxel_size: float, *,
     q = (flat[:, :-1, None] + u * np.diff(flat, axis=1)[:, :, None]).reshape(len(flat), -1, n)
     q = np.concatenate([q, flat[:, -1:]], axis=1)            # (P, (W-1)*16+1, n)
     P = q.shape[0]
-    x = sphere_centres(robot, q.reshape(-1, n)).reshape(P, q.shape[1], -1, 3)
+    x = sphere_centres(robot, q.reshape(-1, n), device=device).reshape(P, q.shape[1], -1, 3)
     if x.shape[2] == 0:
         return 1
     step = np.linalg.norm(np.diff(x, axis=1), axis=-1)       # (P, S-1, n_spheres)
@@ -269,14 +290,15 @@ def substeps_for_voxel(robot: RobotModel, paths: Any, voxel_size: float, *,
 
 def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: str = "straight",
                   *, robot: RobotModel | None = None, n_via: tuple[int, int] = (1, 3),
-                  rng: np.random.Generator | None = None, world: Any = None) -> np.ndarray:
+                  rng: np.random.Generator | None = None, world: Any = None,
+                  device: Any = None) -> np.ndarray:
     """Initial guesses (B, W, n_dof) from start/goal (B, n_dof).
 
     ``kind``: "straight" (the line in joint space) or "random" (1-3 random via points
     inside the robot's limits, connected linearly with start and goal; the W waypoints are
     spread evenly along the polyline's joint-space length) - thesis 3.5.1. With ``world``
-    the via points are drawn from collision-free configurations (rejection sampling; plain
-    random ones if none is found).
+    the via points are drawn from collision-free configurations (rejection sampling on
+    ``device``, None: the preferred device; plain random ones if none is found).
     """
     start = np.asarray(start, np.float64)
     goal = np.asarray(goal, np.float64)
@@ -295,24 +317,32 @@ def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: s
     pool = sample_within_limits(robot, int(ks.sum()), rng)
     if world is not None:
         cand = sample_within_limits(robot, max(64, 8 * int(ks.sum())), rng)
-        free = cand[collision_free(robot, world, cand, 0.0)]
+        free = cand[collision_free(robot, world, cand, 0.0, device=device)]
         if len(free):
             pool = free[rng.integers(0, len(free), size=int(ks.sum()))]
     used = 0
     for b in range(len(start)):
         k = int(ks[b])
-        via = pool[used:used + k]
+        out[b] = polyline_path(start[b], pool[used:used + k], goal[b], W)
         used += k
-        pts = np.vstack([start[b], via, goal[b]])
-        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
-        if cum[-1] <= 0:
-            out[b] = start[b]
-            continue
-        tq = np.linspace(0.0, cum[-1], W)
-        for j in range(start.shape[1]):
-            out[b, :, j] = np.interp(tq, cum, pts[:, j])
-        out[b, 0], out[b, -1] = start[b], goal[b]
+    return out
+
+
+def polyline_path(start: np.ndarray, via: np.ndarray, goal: np.ndarray, n_waypoints: int
+                  ) -> np.ndarray:
+    """A path (W, n_dof) through start (n_dof,), the via points (k, n_dof) and goal: the W
+    waypoints spread evenly along the polyline's joint-space length (start and goal exact)."""
+    pts = np.vstack([start, via, goal])
+    out = np.empty((n_waypoints, len(start)))
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    if cum[-1] <= 0:
+        out[:] = start
+        return out
+    tq = np.linspace(0.0, cum[-1], n_waypoints)
+    for j in range(len(start)):
+        out[:, j] = np.interp(tq, cum, pts[:, j])
+    out[0], out[-1] = start, goal
     return out
 
 
@@ -431,7 +461,403 @@ class PathObjective:
         return self.total.numpy().astype(np.float64), self.gradient().numpy().astype(np.float64)
 
 
+# ====================================================================== options
+#: the kinds of multi-starts drawn when no seeds are given (:attr:`PlanOptions.initial`)
+INITIAL_KINDS = ("straight", "random", "mixed")
+
+
+def _check_int(v: Any, name: str, lo: int) -> None:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+        raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+
+
+def _check_flag(v: Any, name: str) -> None:
+    if not (isinstance(v, (bool, np.bool_)) or (isinstance(v, (int, np.integer)) and v in (0, 1))):
+        raise TypeError(f"{name}: expected True or False, got {v!r}")
+
+
+@dataclass
+class PlanOptions:
+    """Options of the planner: of :class:`Planner`, and the keyword options of :func:`plan`
+    (documented here once). :meth:`validate` raises ValueError/TypeError naming the field.
+
+    Attributes:
+        n_starts: multi-starts per problem when no seeds are given ("straight": one).
+        initial: the multi-starts without seeds: "straight" (the line in joint space),
+            "random" (1-3 random via points inside the limits, thesis 3.5.1) or "mixed"
+            (the line plus ``n_starts - 1`` random ones).
+        n_waypoints: W, >= 2 (20 in the thesis); seeds given as paths bring their own W.
+        n_substeps: substeps per segment, >= 1; None sizes them to the world's voxel size
+            on the initial paths of each call (:func:`substeps_for_voxel`).
+        iterations: most gradient steps per path, >= 0.
+        step, max_step: step size alpha (eq. 3.18) and the largest change of one joint of
+            one waypoint per step [rad], both > 0.
+        weights: :class:`PathWeights` (lam_w, lam_s, lam_l); None: the defaults.
+        eps: smoothing width of the clipped cost c (eq. 3.10) [m], > 0 and >= ``margin``
+            (a path of zero collision cost is then feasible); None: max(voxel, 1 cm, margin).
+        margin: required clearance [m] (>= 0) of every sphere at every substep.
+        early_stop: freeze each path once it is feasible.
+        stop_when_solved: end as soon as every problem has one feasible path.
+        check_all_every: exact feasibility check of every unfinished path every this many
+            iterations (>= 1; paths whose largest substep cost is below ``w c(margin)`` are
+            checked every iteration) and after the last one.
+        free_via: draw the random via points from collision-free configurations.
+        kappa: elastic compensation with these compliances [rad/(N m)] (any form of
+            :func:`jwarp.kinematics.kappa_array`); None plans on the rigid model.
+        lam: damping of the torque update in (0, 1] (elastic only).
+        seed: random seed of the random multi-starts (an integer >= 0, a numpy Generator
+            or None for fresh entropy); every call draws from ``default_rng(seed)``.
+        callback: called as ``callback(iteration, paths (P, W, n_dof))`` after every
+            evaluation (e.g. rerun streaming; it reads every path to the host).
+    """
+
+    n_starts: int = 8
+    initial: str = "mixed"
+    n_waypoints: int = 20
+    n_substeps: int | None = None
+    iterations: int = 100
+    step: float = 0.01
+    max_step: float = 0.1
+    weights: PathWeights | None = None
+    eps: float | None = None
+    margin: float = 0.0
+    early_stop: bool = True
+    stop_when_solved: bool = False
+    check_all_every: int = 10
+    free_via: bool = True
+    kappa: Any = None
+    lam: float = 0.7
+    seed: Any = 0
+    callback: Callable[[int, np.ndarray], None] | None = None
+
+    def validate(self, dtype: Any = np.float32) -> None:
+        """ValueError/TypeError naming the first bad field; numbers must be finite in the
+        computing ``dtype``."""
+        npdt = numpy_dtype(scalar_type(dtype))
+        for name, lo in (("iterations", 0), ("n_waypoints", 2), ("n_starts", 1),
+                         ("check_all_every", 1)):
+            _check_int(getattr(self, name), name, lo)
+        for name in ("step", "max_step"):
+            v = getattr(self, name)
+            if not (math.isfinite(real_number(v, name, npdt)) and v > 0):
+                raise ValueError(f"{name}: expected a number > 0, got {v!r}")
+        margin = real_number(self.margin, "margin")
+        if not (math.isfinite(margin) and margin >= 0):
+            raise ValueError(f"margin: expected a number >= 0 [m], got {self.margin!r}")
+        if self.eps is not None:
+            eps = real_number(self.eps, "eps")
+            if not (math.isfinite(eps) and eps > 0):
+                raise ValueError(f"eps: expected a number > 0 [m], got {self.eps!r}")
+            if eps < margin:
+                raise ValueError(f"eps: must be >= margin ({margin:g} m), got {eps:g}")
+            real_number(self.eps, "eps", npdt)
+        if not isinstance(self.initial, str):
+            raise TypeError(f"initial: expected one of {', '.join(map(repr, INITIAL_KINDS))}, "
+                            f"got {type(self.initial).__name__} (give initial paths as seeds)")
+        if self.initial not in INITIAL_KINDS:
+            raise ValueError(f"initial: unknown kind '{self.initial}' (expected 'straight', "
+                             f"'random', 'mixed' or an array of paths)")
+        if self.n_substeps is not None:
+            _check_n_sub(self.n_substeps)
+        if self.weights is not None:
+            if not isinstance(self.weights, PathWeights):
+                raise TypeError(f"weights: expected a PathWeights, got "
+                                f"{type(self.weights).__name__}")
+            self.weights.validate()
+        for name in ("early_stop", "stop_when_solved", "free_via"):
+            _check_flag(getattr(self, name), name)
+        seed = self.seed
+        if not (seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence))):
+            _check_int(seed, "seed", 0)
+        if self.kappa is not None and not 0.0 < real_number(self.lam, "lam") <= 1.0:
+            raise ValueError(f"lam: expected a damping factor in (0, 1], got {self.lam!r}")
+        if self.callback is not None and not callable(self.callback):
+            raise TypeError(f"callback: expected a callable (iteration, paths), got "
+                            f"{type(self.callback).__name__}")
+
+
+@dataclass(frozen=True)
+class ViaPoints:
+    """Seeds of :meth:`Planner.plan` given as via points: ``points`` (k, n_dof),
+    (n_seeds, k, n_dof) or (n_problems, n_seeds, k, n_dof) (k >= 0). Each seed is the
+    path start -> via points -> goal of ``n_waypoints`` waypoints spread evenly along its
+    joint-space length (as the random multi-starts), projected onto the limits."""
+
+    points: Any
+
+
 # ====================================================================== planner
+class _Buffers:
+    """The device buffers of one shape (P paths of W waypoints, n_sub substeps)."""
+
+    def __init__(self, obj: PathObjective, B: int, gather: bool) -> None:
+        P, W, n, S = obj.P, obj.W, obj.n, obj.S
+        dev, sc = obj.device, obj.scalar
+        self.key = (P, W, obj.n_sub)
+        self.objective = obj
+        self.used = False
+        # every buffer is written before it is read
+        self.idx = wp.empty(P, dtype=wp.int32, device=dev)             # path indices
+        self.final = wp.empty((P, W, n), dtype=sc, device=dev)          # kept paths
+        self.final_cost = wp.empty((P, 3), dtype=sc, device=dev)        # U_path, U_l, coll.
+        self.feasible = wp.empty(P, dtype=wp.int32, device=dev)
+        self.best = wp.empty(B, dtype=wp.int32, device=dev)
+        self.best_path = wp.empty((B, W, n), dtype=sc, device=dev)
+        self.best_cost = wp.empty((B, 3), dtype=sc, device=dev)
+        #: candidates of the exact checks gathered on the device (``gather``; else None:
+        #: on the CPU the host reads the arrays in place)
+        self.cand_paths = self.cand_sub = None
+        if gather:
+            self.cand_paths = wp.empty((P, W, n), dtype=sc, device=dev)
+            self.cand_sub = wp.empty((P * S, n), dtype=sc, device=dev)
+
+
+class Planner:
+    """A persistent batched planner (thesis 3.3, gradient descent on U_path eq. 3.16) for
+    ``n_problems`` start/goal pairs at a time on one device.
+
+    Args:
+        robot: robot name or RobotModel.
+        world: a :class:`jwarp.world.World` of the robot's workspace dimension.
+        n_problems: B, the start/goal pairs of every :meth:`plan` call.
+        options: :class:`PlanOptions` (None: the defaults); validated here, and copied.
+        device: Warp device of the optimisation and of every check (collision, limits,
+            elastic equilibrium, substep sizing); None: the preferred device (CUDA if
+            present, else CPU).
+        dtype: float type of the optimisation (None: float32); the exact feasibility
+            checks run in float64.
+
+    The device buffers (paths, substeps, costs, gradients, the kept paths and the
+    per-problem selection) are allocated by the first :meth:`plan` call and reused by
+    every later call of the same shapes (seeds per problem, waypoints, substeps: give
+    ``options.n_substeps`` to keep the shapes fixed; sized substeps follow each call's
+    initial paths). The best start of every problem is chosen on the device; only the
+    per-path screen, the candidates of the exact checks and the chosen paths are read.
+
+    Example::
+
+        planner = Planner("planar4", world, 64, PlanOptions(n_starts=8, n_substeps=8))
+        res = planner.plan(starts, goals)                 # random multi-starts
+        res = planner.plan(starts, goals, seeds=guesses)  # e.g. learned warm starts
+    """
+
+    def __init__(self, robot: Any, world: Any, n_problems: int,
+                 options: PlanOptions | None = None, device: Any = None,
+                 dtype: Any = None) -> None:
+        init_warp()
+        self.robot = get_robot(robot)
+        check_world(self.robot, world)
+        self.world = world
+        _check_int(n_problems, "n_problems", 1)
+        self.n_problems = int(n_problems)
+        if options is None:
+            options = PlanOptions()
+        if not isinstance(options, PlanOptions):
+            raise TypeError(f"options: expected a PlanOptions, got {type(options).__name__}")
+        self.scalar = scalar_type(np.float32 if dtype is None else dtype)
+        self.npdt = numpy_dtype(self.scalar)
+        options.validate(self.npdt)
+        o = replace(options, step=float(options.step), max_step=float(options.max_step),
+                    margin=real_number(options.margin, "margin"))
+        self.options = o
+        self.device = resolve_device(device)
+        #: gather the candidates and keep the final paths with kernels (on a GPU); on the
+        #: CPU the host indexes the device arrays in place (the same numbers, no launches)
+        self._kernel_copies = not self.device.is_cpu
+        #: smoothing width of the collision cost [m] (options.eps or its default)
+        self.eps = (real_number(o.eps, "eps") if o.eps is not None
+                    else max(float(world.voxel_size), 0.01, o.margin))
+        real_number(self.eps, "eps", self.npdt)
+        if o.kappa is not None:
+            kappa_array(self.robot, o.kappa)  # validates, naming kappa
+        self._buffers: _Buffers | None = None
+
+    # ------------------------------------------------------------------ public
+    def plan(self, start: Any, goal: Any, seeds: Any = None) -> PlanResult:
+        """Plan the ``n_problems`` paths from ``start`` to ``goal``.
+
+        Args:
+            start, goal: (n_problems, n_dof) or (n_dof,) joint values [rad or m] (a single
+                configuration is used for every problem). Checked: within the limits,
+                collision-free with ``options.margin`` (and a converged equilibrium on the
+                elastic model).
+            seeds: the initial paths: None draws ``options.n_starts`` multi-starts of kind
+                ``options.initial``; an array of paths (W, n_dof), (n_seeds, W, n_dof) or
+                (n_problems, n_seeds, W, n_dof) (their first/last rows are replaced by
+                start/goal, they are projected onto the limits, and W is theirs), e.g.
+                learned warm starts; or :class:`ViaPoints`.
+
+        Returns:
+            :class:`PlanResult` (``wall_time``: this call).
+        """
+        return self._plan(start, goal, seeds, "seeds")
+
+    @property
+    def objective(self) -> PathObjective | None:
+        """The :class:`PathObjective` (device buffers) of the last call's shapes; None
+        before the first call."""
+        return None if self._buffers is None else self._buffers.objective
+
+    # ------------------------------------------------------------------ steps
+    def _plan(self, start: Any, goal: Any, seeds: Any, seeds_name: str) -> PlanResult:
+        t0 = time.perf_counter()
+        model, o, dev = self.robot, self.options, self.device
+        q0 = self._problems(start, "start")
+        q1 = self._problems(goal, "goal")
+        finite_as(q0, self.npdt, "start")  # also finite in the optimisation's dtype
+        finite_as(q1, self.npdt, "goal")
+        check_endpoints(model, self.world, q0, "start", o.margin, o.kappa, device=dev)
+        check_endpoints(model, self.world, q1, "goal", o.margin, o.kappa, device=dev)
+        if isinstance(seeds, ViaPoints):
+            Q = _via_seeds(model, q0, q1, seeds.points, o.n_waypoints)
+        else:
+            Q = _initial(model, q0, q1, o.initial if seeds is None else seeds, o.n_starts,
+                         o.n_waypoints, o.seed, self.world, o.free_via, device=dev,
+                         name=seeds_name)  # (B, n_starts, W, n)
+        B, n_starts, W = Q.shape[:3]
+        P = B * n_starts
+        Qf = Q.reshape(P, W, model.n_dof)
+        n_sub = o.n_substeps
+        if n_sub is None:
+            n_sub = substeps_for_voxel(model, Qf, float(self.world.voxel_size), device=dev)
+        buf = self._prepare(P, W, n_sub)
+        obj = buf.objective
+        obj.set_paths(Qf)
+        if buf.used:  # the last call left paths inactive
+            obj.set_active(np.ones(P, bool))
+        buf.used = True
+
+        # screen: a substep whose (weighted, clipped) cost is below w_min c(margin) has no
+        # sphere within margin; such paths get the exact check every iteration, all others
+        # every check_all_every iterations and after the last one
+        w = obj.weights
+        w_min = min([v for v in (w.world, w.self) if v > 0] or [0.0])
+        screen = w_min * (self.eps - o.margin) ** 2 / (2.0 * self.eps)
+        done = np.zeros(P, bool)
+        feasible = np.zeros(P, bool)
+        iters = np.full(P, o.iterations, np.int64)
+        for it in range(o.iterations + 1):
+            obj.evaluate(grad=it < o.iterations)
+            if o.callback is not None:
+                o.callback(it, obj.paths.numpy())
+            smax = obj.sub_max.numpy()
+            last = it == o.iterations or (it + 1) % o.check_all_every == 0
+            cand = np.nonzero(~done & ((smax < screen) | last))[0]
+            if len(cand):
+                newly = cand[self._confirm(buf, cand)]
+                if len(newly):
+                    feasible[newly] = True
+                    iters[newly] = it
+                    if o.early_stop:
+                        self._keep(buf, newly)
+                        done[newly] = True
+            if done.all() or (o.stop_when_solved and feasible.reshape(B, n_starts).any(1).all()):
+                break
+            if it == o.iterations:
+                break
+            if o.early_stop:
+                obj.set_active(~done)
+            obj.step(o.step, o.max_step)
+        rest = np.nonzero(~done)[0]
+        if len(rest):
+            self._keep(buf, rest)
+        return self._result(buf, feasible, iters, B, n_starts, time.perf_counter() - t0)
+
+    def _problems(self, x: Any, name: str) -> np.ndarray:
+        q = _configs(x, self.robot, name)
+        if len(q) == 1 and self.n_problems > 1:
+            q = np.repeat(q, self.n_problems, 0)
+        if len(q) != self.n_problems:
+            raise ValueError(f"{name}: expected {self.n_problems} configurations (n_problems) "
+                             f"or one, got {len(q)}")
+        return q
+
+    def _prepare(self, P: int, W: int, n_sub: int) -> _Buffers:
+        """The buffers of this shape: the last call's, else new ones."""
+        buf = self._buffers
+        if buf is not None and buf.key == (P, W, n_sub):
+            return buf
+        self._buffers = None  # free the old ones first
+        o = self.options
+        obj = PathObjective(self.robot, self.world, P, W, n_sub, weights=o.weights,
+                            eps=self.eps, kappa=o.kappa, lam=o.lam, device=self.device,
+                            dtype=self.npdt)
+        self._buffers = _Buffers(obj, self.n_problems, self._kernel_copies)
+        return self._buffers
+
+    def _upload_idx(self, buf: _Buffers, idx: np.ndarray) -> None:
+        host = wp.array(np.ascontiguousarray(idx, np.int32), dtype=wp.int32, device="cpu")
+        wp.copy(buf.idx, host, count=len(idx))
+
+    def _confirm(self, buf: _Buffers, cand: np.ndarray) -> np.ndarray:
+        """Exact feasibility of the candidate paths (zero collision cost): every substep
+        collision-free with ``margin`` and every waypoint within the limits. Only the
+        candidates' paths and substeps are read (gathered on the device)."""
+        obj, o, dev = buf.objective, self.options, self.device
+        S, n, K = obj.S, obj.n, len(cand)
+        if self._kernel_copies:
+            self._upload_idx(buf, cand)
+            wp.launch(obj.k.gather, dim=(K, S),
+                      inputs=[obj.paths, obj.q_sub, buf.idx, obj.n_sub],
+                      outputs=[buf.cand_paths, buf.cand_sub], device=dev)
+            q = buf.cand_sub[:K * S].numpy().astype(np.float64)
+            paths = buf.cand_paths[:K].numpy().astype(np.float64)
+        else:  # CPU: the arrays are host memory
+            q = obj.q_sub.numpy().reshape(obj.P, S, n)[cand].reshape(K * S, n).astype(np.float64)
+            paths = obj.paths.numpy()[cand].astype(np.float64)
+        # elastic: the converged torque equilibrium at every substep, not the kept rows
+        free = collision_free(self.robot, self.world, q, o.margin, kappa=o.kappa, device=dev)
+        ok = free.reshape(K, S).all(axis=1) & within_limits(self.robot, paths).all(axis=1)
+        # the paths moved since n_substeps was chosen: re-check the survivors at substeps
+        # sized to their own segments (no sphere centre moves more than half a voxel per
+        # substep)
+        for i in np.nonzero(ok)[0]:
+            need = substeps_for_voxel(self.robot, paths[i], float(self.world.voxel_size),
+                                      safety=SWEEP_SAFETY, max_substeps=MAX_CHECK_SUBSTEPS,
+                                      device=dev)
+            if need > obj.n_sub:
+                ok[i] = path_feasible(self.robot, self.world, paths[i], need, margin=o.margin,
+                                      kappa=o.kappa, device=dev)
+        return ok
+
+    def _keep(self, buf: _Buffers, idx: np.ndarray) -> None:
+        """Keep the current paths ``idx`` and their costs as final (on the device)."""
+        obj = buf.objective
+        if not self._kernel_copies:  # CPU: the arrays are host memory
+            buf.final.numpy()[idx] = obj.paths.numpy()[idx]
+            cost = buf.final_cost.numpy()
+            for c, a in enumerate((obj.total, obj.length, obj.collision)):
+                cost[idx, c] = a.numpy()[idx]
+            return
+        self._upload_idx(buf, idx)
+        wp.launch(obj.k.keep, dim=(len(idx), obj.W),
+                  inputs=[obj.paths, obj.total, obj.length, obj.collision, buf.idx],
+                  outputs=[buf.final, buf.final_cost], device=self.device)
+
+    def _result(self, buf: _Buffers, feasible: np.ndarray, iters: np.ndarray, B: int,
+                n_starts: int, wall: float) -> PlanResult:
+        """Per problem the best start (feasible first, then the lowest U_path), chosen on
+        the device; reads the chosen paths and costs only."""
+        obj = buf.objective
+        host = wp.array(feasible.astype(np.int32), dtype=wp.int32, device="cpu")
+        wp.copy(buf.feasible, host)
+        wp.launch(obj.k.select, dim=B, inputs=[buf.final, buf.final_cost, buf.feasible,
+                                               n_starts],
+                  outputs=[buf.best, buf.best_path, buf.best_cost], device=self.device)
+        best = buf.best.numpy().astype(np.int64)
+        cost = buf.best_cost.numpy().astype(np.float64)
+        rows = np.arange(B)
+        fz = feasible.reshape(B, n_starts)
+        it = iters.reshape(B, n_starts)
+        return PlanResult(path=buf.best_path.numpy().astype(np.float64), feasible=fz[rows, best],
+                          cost=np.ascontiguousarray(cost[:, 0]),
+                          length_cost=np.ascontiguousarray(cost[:, 1]),
+                          collision_cost=np.ascontiguousarray(cost[:, 2]),
+                          iterations=it[rows, best], start_index=best, n_feasible=fz.sum(1),
+                          wall_time=wall, n_substeps=obj.n_sub, all_feasible=fz,
+                          all_iterations=it, paths_source=wp.clone(buf.final))
+
+
 def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed",
          n_starts: int = 8, n_waypoints: int = 20, n_substeps: int | None = None,
          iterations: int = 100, step: float = 0.01, max_step: float = 0.1,
@@ -440,43 +866,25 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
          free_via: bool = True, kappa: Any = None, lam: float = 0.7, seed: int | None = 0,
          device: Any = "cpu", dtype: Any = np.float32,
          callback: Callable[[int, np.ndarray], None] | None = None) -> PlanResult:
-    """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path.
+    """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path:
+    one call of a :class:`Planner` made for it.
 
     Args:
         robot: robot name or RobotModel.
         world: a :class:`jwarp.world.World` of the robot's workspace dimension.
         start, goal: (n_dof,) or (B, n_dof) joint values [rad or m] (B problems).
-        initial: "straight", "random" (1-3 random via points), "mixed" (the straight line
-            plus ``n_starts - 1`` random ones) or an array of user guesses (W, n_dof),
-            (n_starts, W, n_dof) or (B, n_starts, W, n_dof) (start/goal rows are replaced
-            by ``start``/``goal``).
-        n_starts: multi-starts per problem (ignored for array ``initial``).
-        n_waypoints: W (20 in the thesis).
-        n_substeps: substeps per segment; None sizes them to the world's voxel size on the
-            initial paths (:func:`substeps_for_voxel`).
-        iterations: most gradient steps per path.
-        step, max_step: step size alpha (eq. 3.18) and the largest change of one joint of
-            one waypoint per step [rad].
-        weights: :class:`PathWeights` (lam_w, lam_s, lam_l).
-        eps: smoothing width of the clipped cost c (eq. 3.10) [m]; default max(voxel, 1 cm).
-            Must be >= ``margin`` (a path with zero collision cost is then feasible).
-        margin: required clearance [m] of every sphere at every substep.
-        free_via: draw the random via points from collision-free configurations.
-        early_stop: freeze each path once it is feasible.
-        stop_when_solved: end as soon as every problem has one feasible path.
-        check_all_every: exact feasibility check of every unfinished path every this many
-            iterations (paths whose largest substep cost is below ``w c(margin)`` are
-            checked every iteration).
-        kappa: elastic compensation with these compliances [rad/(N m)] (see
-            :func:`jwarp.kinematics.fk_elastic`); None plans on the rigid model.
-        lam: damping of the torque update (elastic only).
-        seed: random seed of the random initial paths.
-        device, dtype: Warp device and float type of the optimisation.
-        callback: called as ``callback(iteration, paths (P, W, n_dof))`` after every
-            evaluation (e.g. rerun streaming); slows the loop down.
+        initial: a kind of multi-starts (:attr:`PlanOptions.initial`) or an array of user
+            guesses (W, n_dof), (n_starts, W, n_dof) or (B, n_starts, W, n_dof) (the
+            ``seeds`` of :meth:`Planner.plan`; ``n_starts`` and ``n_waypoints`` are then
+            theirs).
+        device, dtype: Warp device of the optimisation and of every check, and its float
+            type (default: CPU, float32).
+        n_starts, n_waypoints, n_substeps, iterations, step, max_step, weights, eps,
+            margin, early_stop, stop_when_solved, check_all_every, free_via, kappa, lam,
+            seed, callback: the fields of :class:`PlanOptions`.
 
     Returns:
-        :class:`PlanResult`.
+        :class:`PlanResult` (``wall_time``: the whole call).
 
     Raises:
         ValueError: bad shapes, NaN, start/goal outside the limits or in collision, world
@@ -495,90 +903,29 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
             q1 = np.repeat(q1, len(q0), 0)
         else:
             raise ValueError(f"start, goal: batch sizes differ ({len(q0)} vs {len(q1)})")
-    B = len(q0)
-    for name, v, lo in (("iterations", iterations, 0), ("n_waypoints", n_waypoints, 2),
-                        ("n_starts", n_starts, 1), ("check_all_every", check_all_every, 1)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
-    npdt = numpy_dtype(scalar_type(dtype))
-    for name, v in (("step", step), ("max_step", max_step)):
-        if not (math.isfinite(real_number(v, name, npdt)) and v > 0):
-            raise ValueError(f"{name}: expected a number > 0, got {v!r}")
-    step, max_step = float(step), float(max_step)
-    margin = real_number(margin, "margin")
-    if not (math.isfinite(margin) and margin >= 0):
-        raise ValueError(f"margin: expected a number >= 0 [m], got {margin!r}")
-    eps_v = real_number(eps, "eps") if eps is not None else max(float(world.voxel_size), 0.01,
-                                                                 margin)
-    if not (math.isfinite(eps_v) and eps_v > 0):
-        raise ValueError(f"eps: expected a number > 0 [m], got {eps!r}")
-    if eps_v < margin:
-        raise ValueError(f"eps: must be >= margin ({margin:g} m), got {eps_v:g}")
-    finite_as(q0, npdt, "start")  # also finite in the optimisation's dtype
-    finite_as(q1, npdt, "goal")
-    check_endpoints(model, world, q0, "start", margin, kappa)
-    check_endpoints(model, world, q1, "goal", margin, kappa)
-
-    Q = _initial(model, q0, q1, initial, n_starts, n_waypoints, seed, world,
-                 free_via)  # (B, n_starts, W, n)
-    n_starts, W = Q.shape[1], Q.shape[2]
-    P = B * n_starts
-    Qf = Q.reshape(P, W, model.n_dof)
-    if n_substeps is None:
-        n_substeps = substeps_for_voxel(model, Qf, float(world.voxel_size))
-    obj = PathObjective(model, world, P, W, n_substeps, weights=weights, eps=eps_v, kappa=kappa,
-                        lam=lam, device=device, dtype=dtype)
-    obj.set_paths(Qf)
-
-    # screen: a substep whose (weighted, clipped) cost is below w_min c(margin) has no sphere
-    # within margin; such paths get the exact check every iteration, all others every
-    # check_all_every iterations and after the last one
-    w = obj.weights
-    w_min = min([v for v in (w.world, w.self) if v > 0] or [0.0])
-    screen = w_min * (eps_v - margin) ** 2 / (2.0 * eps_v)
-    done = np.zeros(P, bool)
-    feasible = np.zeros(P, bool)
-    iters = np.full(P, iterations, np.int64)
-    final = np.empty((P, W, model.n_dof))
-    costs = np.zeros((P, 3))  # total, length, collision
-    for it in range(iterations + 1):
-        obj.evaluate(grad=it < iterations)
-        if callback is not None:
-            callback(it, obj.paths.numpy())
-        smax = obj.sub_max.numpy()
-        last = it == iterations or (it + 1) % check_all_every == 0
-        cand = np.nonzero(~done & ((smax < screen) | last))[0]
-        if len(cand):
-            ok = _confirm(obj, cand, margin, kappa)
-            newly = cand[ok]
-            if len(newly):
-                feasible[newly] = True
-                iters[newly] = it
-                if early_stop:
-                    _freeze(obj, newly, final, costs)
-                    done[newly] = True
-        if done.all() or (stop_when_solved and feasible.reshape(B, n_starts).any(1).all()):
-            break
-        if it == iterations:
-            break
-        if early_stop:
-            obj.set_active(~done)
-        obj.step(step, max_step)
-    rest = np.nonzero(~done)[0]
-    if len(rest):
-        _freeze(obj, rest, final, costs)
-    return _result(final, feasible, costs, iters, B, n_starts, obj.n_sub,
-                   time.perf_counter() - t0)
+    kind = initial if isinstance(initial, str) else "mixed"
+    options = PlanOptions(n_starts=n_starts, initial=kind, n_waypoints=n_waypoints,
+                          n_substeps=n_substeps, iterations=iterations, step=step,
+                          max_step=max_step, weights=weights, eps=eps, margin=margin,
+                          early_stop=early_stop, stop_when_solved=stop_when_solved,
+                          check_all_every=check_all_every, free_via=free_via, kappa=kappa,
+                          lam=lam, seed=seed, callback=callback)
+    planner = Planner(model, world, len(q0), options, device=device, dtype=dtype)
+    res = planner._plan(q0, q1, None if isinstance(initial, str) else initial, "initial")
+    res.wall_time = time.perf_counter() - t0
+    return res
 
 
 def _initial(model: RobotModel, q0: np.ndarray, q1: np.ndarray, initial: Any, n_starts: int,
-             W: int, seed: int | None, world: Any = None, free_via: bool = True) -> np.ndarray:
+             W: int, seed: Any, world: Any = None, free_via: bool = True, device: Any = None,
+             name: str = "initial") -> np.ndarray:
+    """Initial paths (B, n_starts, W, n_dof): of a kind (:data:`INITIAL_KINDS`) or from
+    the caller's guesses ``initial`` (errors name ``name``)."""
     B, n = q0.shape
-    rng = np.random.default_rng(seed)
     if isinstance(initial, str):
+        rng = np.random.default_rng(seed)
         if initial == "straight":
-            Q = initial_paths(q0, q1, W, "straight")[:, None]
-            return np.repeat(Q, 1, axis=1)
+            return initial_paths(q0, q1, W, "straight")[:, None]
         if initial in ("random", "mixed"):
             k = n_starts if initial == "random" else n_starts - 1
             parts = []
@@ -586,69 +933,45 @@ def _initial(model: RobotModel, q0: np.ndarray, q1: np.ndarray, initial: Any, n_
                 parts.append(initial_paths(q0, q1, W, "straight")[:, None])
             if k > 0:
                 r = initial_paths(np.repeat(q0, k, 0), np.repeat(q1, k, 0), W, "random",
-                                  robot=model, rng=rng, world=world if free_via else None)
+                                  robot=model, rng=rng, world=world if free_via else None,
+                                  device=device)
                 parts.append(r.reshape(B, k, W, n))
             return np.concatenate(parts, axis=1)
-        raise ValueError(f"initial: unknown kind '{initial}' (expected 'straight', 'random', "
+        raise ValueError(f"{name}: unknown kind '{initial}' (expected 'straight', 'random', "
                          f"'mixed' or an array of paths)")
-    g = real_array(initial, "initial")
+    g = _seed_array(initial, name, q0.shape, "W", 2)
+    g[:, :, 0] = q0[:, None]
+    g[:, :, -1] = q1[:, None]
+    return project_numpy(model, g)
+
+
+def _seed_array(x: Any, name: str, shape: tuple[int, int], rows: str, min_rows: int
+                ) -> np.ndarray:
+    """Seeds (rows, n), (n_seeds, rows, n) or (B, n_seeds, rows, n) with rows >= min_rows
+    -> (B, n_seeds, rows, n) float64, a copy; errors name ``name``."""
+    B, n = shape
+    g = real_array(x, name)
     if g.ndim == 2:
         g = g[None, None]
     elif g.ndim == 3:
         g = g[None]
-    if g.ndim != 4 or g.shape[-1] != n or g.shape[-2] < 2 or g.shape[0] not in (1, B):
-        raise ValueError(f"initial: expected paths (W, {n}), (n_starts, W, {n}) or "
-                         f"({B}, n_starts, W, {n}), got {np.shape(initial)}")
+    if (g.ndim != 4 or g.shape[-1] != n or g.shape[-2] < min_rows
+            or g.shape[0] not in (1, B)):
+        what = "paths" if rows == "W" else "via points"
+        raise ValueError(f"{name}: expected {what} ({rows}, {n}), (n_starts, {rows}, {n}) or "
+                         f"({B}, n_starts, {rows}, {n}), got {np.shape(x)}")
     if not np.all(np.isfinite(g)):
-        raise ValueError("initial: contains NaN or inf")
-    g = np.array(np.broadcast_to(g, (B,) + g.shape[1:]))
-    g[:, :, 0] = q0[:, None]
-    g[:, :, -1] = q1[:, None]
-    from jwarp.core.limits import project_numpy
-
-    return project_numpy(model, g)
+        raise ValueError(f"{name}: contains NaN or inf")
+    return np.array(np.broadcast_to(g, (B,) + g.shape[1:]), np.float64)
 
 
-def _confirm(obj: PathObjective, cand: np.ndarray, margin: float, kappa: Any) -> np.ndarray:
-    """Exact feasibility of the candidate paths (zero collision cost): every substep
-    collision-free with ``margin`` and every waypoint within the limits."""
-    S, n = obj.S, obj.n
-    q = obj.q_sub.numpy().reshape(obj.P, S, n)[cand].astype(np.float64)
-    # elastic: the converged torque equilibrium at every substep, not the kept rows
-    free = collision_free(obj.robot, obj.world, q.reshape(-1, n), margin, kappa=kappa)
-    paths = obj.paths.numpy()[cand].astype(np.float64)
-    ok = free.reshape(len(cand), S).all(axis=1) & within_limits(obj.robot, paths).all(axis=1)
-    # the paths moved since n_substeps was chosen: re-check the survivors at substeps sized
-    # to their own segments (no sphere centre moves more than half a voxel per substep)
-    for i in np.nonzero(ok)[0]:
-        need = substeps_for_voxel(obj.robot, paths[i], float(obj.world.voxel_size),
-                                  safety=SWEEP_SAFETY, max_substeps=MAX_CHECK_SUBSTEPS)
-        if need > obj.n_sub:
-            ok[i] = path_feasible(obj.robot, obj.world, paths[i], need, margin=margin,
-                                  kappa=kappa)
-    return ok
-
-
-def _freeze(obj: PathObjective, idx: np.ndarray, final: np.ndarray, costs: np.ndarray) -> None:
-    final[idx] = obj.paths.numpy()[idx]
-    costs[idx, 0] = obj.total.numpy()[idx]
-    costs[idx, 1] = obj.length.numpy()[idx]
-    costs[idx, 2] = obj.collision.numpy()[idx]
-
-
-def _result(final: np.ndarray, feasible: np.ndarray, costs: np.ndarray, iters: np.ndarray,
-            B: int, n_starts: int, n_sub: int, wall: float) -> PlanResult:
-    W, n = final.shape[1:]
-    fz = feasible.reshape(B, n_starts)
-    c = costs.reshape(B, n_starts, 3)
-    # feasible first, then the lowest U_path
-    key = np.where(fz, c[..., 0], np.inf)
-    best = np.where(fz.any(1), np.argmin(key, axis=1), np.argmin(c[..., 0], axis=1))
-    rows = np.arange(B)
-    paths = final.reshape(B, n_starts, W, n)
-    it = iters.reshape(B, n_starts)
-    return PlanResult(path=paths[rows, best], feasible=fz[rows, best], cost=c[rows, best, 0],
-                      length_cost=c[rows, best, 1], collision_cost=c[rows, best, 2],
-                      iterations=it[rows, best], start_index=best, n_feasible=fz.sum(1),
-                      wall_time=wall, n_substeps=n_sub, all_paths=paths, all_feasible=fz,
-                      all_iterations=it)
+def _via_seeds(model: RobotModel, q0: np.ndarray, q1: np.ndarray, points: Any, W: int
+               ) -> np.ndarray:
+    """Seed paths (B, n_seeds, W, n_dof) through the via points of :class:`ViaPoints`."""
+    v = _seed_array(points, "seeds", q0.shape, "k", 0)
+    B, K = v.shape[:2]
+    out = np.empty((B, K, W, q0.shape[1]))
+    for b in range(B):
+        for i in range(K):
+            out[b, i] = polyline_path(q0[b], v[b, i], q1[b], W)
+    return project_numpy(model, out)

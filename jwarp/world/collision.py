@@ -18,14 +18,23 @@ substep configurations: pass them flattened as one batch.
 x-y plane and use the x, y of their spheres; a world of the other dimension is an error.
 
 Fast path for loops (a planner): build a :class:`CollisionModel` once and call
-:meth:`CollisionModel.cost` with Warp arrays (and preallocated outputs); it launches one
-kernel, computes the gradient by hand in the same launch and copies nothing to the host.
-:func:`collision_cost` wraps it for numpy / Warp / torch input (same kind out).
+:meth:`CollisionModel.cost` with Warp arrays and a :class:`CollisionData` workspace (or
+preallocated outputs); it launches one kernel, computes the gradient by hand in the same
+launch and copies nothing to the host. :func:`collision_cost` wraps it for numpy / Warp /
+torch input (same kind out).
+
+Model vs Data: the robot's frame and sphere tables are its
+:class:`jwarp.core.device.DeviceModel` (``put_model``, shared by every robot of equal
+content); a :class:`CollisionModel` adds the world (its SDF on the device) and launches the
+kernels. A :class:`CollisionData` holds every intermediate (FK frames, sphere centres,
+forces and moments, bounding-sphere centres) and every output (cost, gradient, distances)
+of one batch size, reused from call to call. DH rows are :class:`jwarp.core.rows.DHRows`.
 """
 
 from __future__ import annotations
 
 import weakref
+from collections import OrderedDict
 from typing import Any
 
 import numpy as np
@@ -33,7 +42,8 @@ import warp as wp
 
 from jwarp.core.arrays import (Batch, as_batch, default_dtype, finite_as, init_warp, real_array,
                           real_number, resolve_device, to_output)
-from jwarp.core.device import KinematicsTables, numpy_dtype, scalar_type, tables
+from jwarp.core.device import DeviceModel, collision_tables, numpy_dtype, put_model, scalar_type
+from jwarp.core.rows import DHRows, RowsKind
 from jwarp.kernels import collision as ck
 from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
@@ -42,16 +52,13 @@ from jwarp.registry import robot as get_robot
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.world.sdf import World, sdf_query
 
-__all__ = ["DEFAULT_EPS", "CollisionModel", "collision_model", "collision_cost",
+__all__ = ["DEFAULT_EPS", "CollisionModel", "CollisionData", "collision_model", "collision_cost",
            "collision_pairs", "rigid_pairs", "sphere_distances", "self_distances", "min_distances",
            "is_collision_free", "sdf_query", "check_world"]
 
 #: default smoothing distance eps of the clip c (eq. 3.10) [m]
 DEFAULT_EPS = 0.05
 _FAR = 1e30
-#: row layout (:func:`jwarp.kernels.fk.waypoint_thread`) of per-configuration or shared DH
-#: rows: thread b computes configuration b at row b
-_ROW_PER_CONFIG = (1, 1, 1, 0)
 
 
 def check_world(robot: RobotModel, world: World | None) -> None:
@@ -70,7 +77,7 @@ def collision_pairs(robot: Any) -> np.ndarray:
     pairs of spheres whose frames are allowed to collide
     (``RobotModel.allowed_collision_pairs``), grouped by frame pair (sorted), the sphere on
     the lower frame index first, except the rigid pairs of :func:`rigid_pairs`."""
-    return _robot_tables(get_robot(robot))["pairs"].copy()
+    return collision_tables(get_robot(robot))["pairs"].copy()
 
 
 def rigid_pairs(robot: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -78,7 +85,7 @@ def rigid_pairs(robot: Any) -> tuple[np.ndarray, np.ndarray]:
     distance is the same in every configuration and positive: ``(pairs (R, 2) int32,
     distance (R,) [m])``. (A constant distance <= 0 stays in the check: such a pair
     always collides, which says the model or its allowed pairs are wrong.)"""
-    rt = _robot_tables(get_robot(robot))
+    rt = collision_tables(get_robot(robot))
     return rt["rigid_pairs"].copy(), rt["rigid_distance"].copy()
 
 
@@ -96,76 +103,68 @@ def cell_minimum(grid: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(out)
 
 
-_ROBOT_TABLES: "weakref.WeakKeyDictionary[RobotModel, dict]" = weakref.WeakKeyDictionary()
+class CollisionData:
+    """The workspace of :meth:`CollisionModel.cost` and :meth:`CollisionModel.distances` for
+    ``n`` configurations (the *Data*): scratch ``frames`` (n, n_frames) mat44, ``xs``
+    (n, n_spheres) sphere centres, ``force``/``moment``/``bc`` (n, n_frames) vec3, and the
+    outputs ``cost`` (n,), ``grad`` (n, n_dof), ``sphere_dist`` (n, n_spheres),
+    ``pair_dist`` (n, n_pairs), ``min_dist`` (n, 2), each made on first use and reused by
+    every later call (so the arrays a call returns are overwritten by the next call with
+    the same data). Make it with :meth:`CollisionModel.make_data`; one data must not be
+    used from two threads at once.
 
+    Scratch layout: CUDA frame-major in memory (coalesced). CPU: Warp runs the
+    configurations of a launch one after another, so every configuration reuses one row (a
+    stride-0 view of a single row, which stays in L1) instead of streaming about 3 KB of
+    scratch per configuration through the caches."""
 
-def _pair_distance_spread(robot: RobotModel, pairs: np.ndarray, n: int = 32,
-                          seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """(min, max) surface distance [m] of sphere ``pairs`` (P, 2) over q = 0 and ``n``
-    random configurations within the joint limits (float64)."""
-    from jwarp.kinematics.fk import fk
+    def __init__(self, cm: "CollisionModel", n: int) -> None:
+        n = int(n)
+        if n < 1:
+            raise ValueError(f"n: expected >= 1 configurations, got {n}")
+        self.n = n
+        self.device, self.scalar, self.n_dof = cm.device, cm.scalar, cm.robot.n_dof
+        self.n_spheres, self.n_pairs = cm.n_spheres, cm.n_pairs
+        self.key = cm.model.key  # the robot content these buffers are sized for
+        k = fk_kernels(self.scalar)
+        vec3 = cm.k.vec3
+        nf, ns = cm.robot.n_frames, max(cm.n_spheres, 1)
+        self._rows: list = []  # CPU: the single rows behind the stride-0 views
+        self.frames = self._scratch(nf, k.mat44)
+        self.xs = self._scratch(ns, vec3)
+        self.force = self._scratch(nf, vec3)
+        self.moment = self._scratch(nf, vec3)
+        self.bc = self._scratch(nf, vec3)
+        self._out: dict = {}
 
-    f, p, r = robot.sphere_arrays()
-    lim = robot.joint_limits
-    q = np.random.default_rng(seed).uniform(lim[:, 0], lim[:, 1], (n, robot.n_dof))
-    q = np.concatenate([np.zeros((1, robot.n_dof)), q])
-    T = np.asarray(fk(robot, q, dtype=np.float64))[:, f]
-    x = np.einsum("bsij,sj->bsi", T[..., :3, :3], p) + T[..., :3, 3]
-    d = np.linalg.norm(x[:, pairs[:, 0]] - x[:, pairs[:, 1]], axis=-1) - r[pairs[:, 0]] - r[pairs[:, 1]]
-    return d.min(0), d.max(0)
+    def _scratch(self, m: int, dt: Any) -> wp.array:
+        if self.device.is_cuda:
+            return wp.empty((m, self.n), dtype=dt, device=self.device).transpose()
+        row = wp.empty((1, m), dtype=dt, device=self.device)
+        self._rows.append(row)  # owns the memory of the view
+        return wp.array(ptr=row.ptr, shape=(self.n, m), strides=(0, row.strides[1]),
+                        dtype=dt, device=self.device)
 
+    @property
+    def scratch(self) -> tuple[wp.array, ...]:
+        """(frames, xs, force, moment, bc)."""
+        return self.frames, self.xs, self.force, self.moment, self.bc
 
-def _robot_tables(robot: RobotModel) -> dict:
-    """Sphere, bound and pair tables of a robot (cached). Sphere pairs on allowed frame
-    pairs whose distance cannot change (e.g. a sphere centred on the only joint axis
-    between the two frames) and is positive are left out: they never collide and would
-    only add a constant to the cost (justin19: torso_3 vs right/left_base, 1.5 cm)."""
-    if robot in _ROBOT_TABLES:
-        return _ROBOT_TABLES[robot]
-    f, p, r = robot.sphere_arrays()
-    allowed = np.asarray(robot.allowed_collision_pairs, bool)
-    n = robot.n_frames
-    cand = np.array([(a, b) for a in range(len(f)) for b in range(len(f))
-                     if f[a] < f[b] and allowed[f[a], f[b]]], np.int32).reshape(-1, 2)
-    rigid = np.zeros(len(cand), bool)
-    dmin = np.zeros(len(cand))
-    if len(cand):
-        dmin, dmax = _pair_distance_spread(robot, cand)
-        rigid = (dmax - dmin < 1e-9) & (dmin > 0)
-    groups: dict[tuple[int, int], list[tuple[int, int]]] = {}
-    for (a, b) in cand[~rigid].tolist():
-        groups.setdefault((int(f[a]), int(f[b])), []).append((a, b))
-    fpairs = sorted(groups)
-    start = [0]          # frame pair -> its entries (one per sphere a)
-    ent_sphere: list[int] = []
-    ent_start = [0]      # entry -> its pairs
-    pairs: list[tuple[int, int]] = []
-    for key in fpairs:
-        for a in sorted({a for a, _ in groups[key]}):
-            pairs.extend(sorted(pr for pr in groups[key] if pr[0] == a))
-            ent_sphere.append(a)
-            ent_start.append(len(pairs))
-        start.append(len(ent_sphere))
-    bound_pos = np.zeros((n, 3))
-    bound_rad = np.full(n, -1.0)
-    for i in range(n):
-        m = f == i
-        if m.any():
-            c = 0.5 * ((p[m] - r[m, None]).min(0) + (p[m] + r[m, None]).max(0))
-            bound_pos[i] = c
-            bound_rad[i] = float(np.max(np.linalg.norm(p[m] - c, axis=1) + r[m]))
-    out = dict(
-        sph_frame=f.astype(np.int32), sph_pos=p, sph_rad=r,
-        bound_pos=bound_pos, bound_rad=bound_rad,
-        fpair_a=np.array([k[0] for k in fpairs], np.int32).reshape(-1),
-        fpair_b=np.array([k[1] for k in fpairs], np.int32).reshape(-1),
-        fpair_start=np.array(start, np.int32),
-        ent_sphere=np.array(ent_sphere, np.int32), ent_start=np.array(ent_start, np.int32),
-        pairs=np.array(pairs, np.int32).reshape(-1, 2),
-        rigid_pairs=cand[rigid], rigid_distance=dmin[rigid],
-    )
-    _ROBOT_TABLES[robot] = out
-    return out
+    def output(self, name: str) -> wp.array:
+        """The output ``name`` (cost, grad, sphere_dist, pair_dist, min_dist), made once."""
+        a = self._out.get(name)
+        if a is None:
+            shape = {"cost": (self.n,), "grad": (self.n, self.n_dof),
+                     "sphere_dist": (self.n, self.n_spheres), "pair_dist": (self.n, self.n_pairs),
+                     "min_dist": (self.n, 2)}[name]
+            a = self._out[name] = wp.empty(shape, dtype=self.scalar, device=self.device)
+        return a
+
+    cost = property(lambda self: self.output("cost"), doc="(n,) collision cost")
+    grad = property(lambda self: self.output("grad"), doc="(n, n_dof) d cost / d q")
+    sphere_dist = property(lambda self: self.output("sphere_dist"), doc="(n, n_spheres) [m]")
+    pair_dist = property(lambda self: self.output("pair_dist"), doc="(n, n_pairs) [m]")
+    min_dist = property(lambda self: self.output("min_dist"), doc="(n, 2) [m]")
 
 
 class CollisionModel:
@@ -190,34 +189,17 @@ class CollisionModel:
         self.device = resolve_device(device)
         self.scalar = scalar_type(dtype)
         self.dtype = numpy_dtype(self.scalar)
-        self.tables: KinematicsTables = tables(self.robot, self.device, self.dtype)
+        #: the robot's device model (frame, mass and sphere tables; shared by content)
+        self.model: DeviceModel = put_model(self.robot, self.device, self.scalar)
+        self.tables = self.model  # older name
         self.k = ck.kernels(self.scalar)
-        rt = _robot_tables(self.robot)
+        sp = self.model.spheres
         vec3 = self.k.vec3
         dev = self.device
-
-        def arr(a: np.ndarray, dt: Any) -> wp.array:
-            a = np.asarray(a)
-            if a.size == 0:  # Warp kernels need non-empty arrays; lengths come from the tables
-                a = np.zeros((1,) + a.shape[1:], a.dtype)
-            return wp.array(a, dtype=dt, device=dev)
-
-        self.n_spheres = len(rt["sph_frame"])
-        self.n_pairs = len(rt["pairs"])
-        self.pairs = rt["pairs"]
-        self.sph_frame = arr(rt["sph_frame"], wp.int32) if self.n_spheres else wp.zeros(0, dtype=wp.int32, device=dev)
-        self.sph_pos = arr(rt["sph_pos"].astype(self.dtype), vec3)
-        self.sph_rad = arr(rt["sph_rad"].astype(self.dtype), self.scalar)
-        self.bound_pos = arr(rt["bound_pos"].astype(self.dtype), vec3)
-        self.bound_rad = arr(rt["bound_rad"].astype(self.dtype), self.scalar)
-        nfp = len(rt["fpair_a"])
-        self.fpair_a = wp.array(rt["fpair_a"], dtype=wp.int32, device=dev) if nfp else wp.zeros(0, dtype=wp.int32, device=dev)
-        self.fpair_b = arr(rt["fpair_b"], wp.int32)
-        self.fpair_start = arr(rt["fpair_start"], wp.int32)
-        self.ent_sphere = arr(rt["ent_sphere"], wp.int32)
-        self.ent_start = arr(rt["ent_start"], wp.int32)
-        self.pair_a = arr(rt["pairs"][:, 0], wp.int32)
-        self.pair_b = arr(rt["pairs"][:, 1], wp.int32)
+        self.n_spheres, self.n_pairs, self.pairs = sp.n_spheres, sp.n_pairs, sp.pairs
+        for name in ("sph_frame", "sph_pos", "sph_rad", "bound_pos", "bound_rad", "fpair_a",
+                     "fpair_b", "fpair_start", "ent_sphere", "ent_start", "pair_a", "pair_b"):
+            setattr(self, name, getattr(sp, name))
         if world is None:
             grid = np.zeros((2, 2, 1), self.dtype)
             self.origin = vec3(0.0, 0.0, 0.0)
@@ -237,9 +219,7 @@ class CollisionModel:
         ws.grid, ws.cellmin, ws.origin = self.grid, self.cellmin, self.origin
         ws.inv_h, ws.dim = self.scalar(self.inv_h), int(self.dim)
         self.world_struct = ws
-        self._capacity = 0
-        self._scratch: tuple = ()
-        self._scratch_rows: list = []  # CPU: the single rows behind the stride-0 views
+        self._work: CollisionData | None = None  # scratch of calls without a data
         self._launches: dict = {}
         self._dummy = wp.empty((1, 1), dtype=self.scalar, device=dev)
         self._no_update = elastic_kernels(self.scalar).CompensationArgs()  # enabled = 0
@@ -248,76 +228,74 @@ class CollisionModel:
     @property
     def model_args(self) -> list:
         """Frame and sphere tables in kernel argument order."""
-        st = self.__dict__.get("_sphere_struct")
-        if st is None:
-            st = self.k.SphereTables()
-            for name in ("sph_frame", "sph_pos", "sph_rad", "bound_pos", "bound_rad", "fpair_a",
-                         "fpair_b", "fpair_start", "ent_sphere", "ent_start", "pair_b"):
-                setattr(st, name, getattr(self, name))
-            self.__dict__["_sphere_struct"] = st
-        return [self.tables.frame_struct, st]
+        return [self.model.frame_struct, self.model.spheres.struct]
+
+    def make_data(self, n: int) -> CollisionData:
+        """A :class:`CollisionData` workspace for ``n`` configurations."""
+        return CollisionData(self, n)
 
     def scratch(self, n: int) -> tuple[wp.array, ...]:
-        """Scratch (frames, xs, force, moment, bc), shape (>= n, m) each, kept between calls.
+        """Scratch (frames, xs, force, moment, bc), shape (>= n, m) each, kept between calls
+        without a data (the internal workspace, grown on demand)."""
+        return self._workspace(n).scratch
 
-        CUDA: frame-major in memory (coalesced), grown on demand. CPU: Warp runs the
-        configurations of a launch one after another, so every configuration reuses one
-        row (a stride-0 view of a single row, which stays in L1) instead of streaming about
-        3 KB of scratch per configuration through the caches."""
-        if n > self._capacity or not self._scratch:
-            cap = max(n, int(self._capacity * 1.5), 1)
-            k = fk_kernels(self.scalar)
-            nf, ns = self.robot.n_frames, max(self.n_spheres, 1)
-            rows: list = []
-
-            def mk(m: int, dt: Any) -> wp.array:
-                if self.device.is_cuda:
-                    return wp.empty((m, cap), dtype=dt, device=self.device).transpose()
-                row = wp.empty((1, m), dtype=dt, device=self.device)
-                rows.append(row)  # owns the memory of the view
-                return wp.array(ptr=row.ptr, shape=(cap, m), strides=(0, row.strides[1]),
-                                dtype=dt, device=self.device)
-
-            self._scratch = (mk(nf, k.mat44), mk(ns, self.k.vec3), mk(nf, self.k.vec3),
-                             mk(nf, self.k.vec3), mk(nf, self.k.vec3))
-            self._scratch_rows = rows
-            self._capacity = cap
+    def _workspace(self, n: int) -> CollisionData:
+        w = self._work
+        if w is None or n > w.n:
+            cap = max(n, int(w.n * 1.5) if w is not None else 1, 1)
+            w = self._work = CollisionData(self, cap)
             self._launches.clear()
-        return self._scratch
+        return w
 
-    def _rho(self, rho: Any, n: int) -> tuple[wp.array, int, int]:
-        """(rho array, stride, use_rho) for ``rho`` None, (n_frames, 5) or (n, n_frames, 5)
-        (compensation rows: their per-configuration DH rows)."""
-        if isinstance(rho, CompensationRows):
-            self._check_rows(rho, n)
-            rho = rho.rho()
-        return self._rho_or_rows(rho, n)[:3]
+    def _data(self, data: CollisionData | None, n: int) -> CollisionData:
+        """``data`` checked for n configurations on this model, or the internal workspace."""
+        if data is None:
+            return self._workspace(n)
+        if not isinstance(data, CollisionData):
+            raise TypeError(f"data: expected a CollisionData (CollisionModel.make_data), got "
+                            f"{type(data).__name__}")
+        if data.n != n or data.device != self.device or data.scalar != self.scalar \
+                or data.key != self.model.key:
+            raise ValueError(f"data: a workspace for {data.n} configurations on {data.device}, "
+                             f"q has {n} on {self.device} (make it with make_data(n) of this "
+                             f"model)")
+        return data
 
     def _check_rows(self, rows: CompensationRows, n: int) -> None:
-        if rows.N != n or rows.t.robot is not self.robot or rows.rows.dtype != self.scalar \
+        if rows.N != n or rows.t.key != self.model.key or rows.rows.dtype != self.scalar \
                 or rows.rows.device != self.device:
             raise ValueError(f"rho: compensation rows for {rows.N} configurations of "
                              f"'{rows.t.robot.name}' on {rows.rows.device}, expected {n} of "
                              f"'{self.robot.name}' on {self.device} in this dtype")
 
-    def _rho_or_rows(self, rho: Any, n: int) -> tuple[wp.array, int, int, tuple]:
-        """(rho array, stride, use_rho, row layout of :func:`jwarp.kernels.fk.waypoint_thread`)
-        for ``rho`` None, (n_frames, 5), (n, n_frames, 5) or compensation rows
-        (:class:`jwarp.kinematics.compensation.CompensationRows`, kept per waypoint)."""
+    def dh_rows(self, rho: Any, n: int, expand: bool = False) -> DHRows:
+        """``rho`` as :class:`jwarp.core.rows.DHRows` for ``n`` configurations: None (the
+        nominal rows), DH rows (n_frames, 5) or (n, n_frames, 5) (numpy, torch or Warp),
+        :class:`DHRows`, or compensation rows
+        (:class:`jwarp.kinematics.compensation.CompensationRows`, kept per waypoint;
+        ``expand``: as their per-configuration 5-column rows, for kernels without a row
+        layout)."""
         if rho is None:
-            return self.tables.dh0_3d, 0, 0, _ROW_PER_CONFIG
+            return self.model.nominal_rows
         nf = self.robot.n_frames
         if isinstance(rho, CompensationRows):
             self._check_rows(rho, n)
-            return rho.rows, 1, 2, rho.layout
+            if not expand:
+                return rho.dh_rows
+            rho = rho.rho()
+        if isinstance(rho, DHRows):
+            if expand and rho.kind == RowsKind.COMPENSATION:
+                raise ValueError("rho: compensation DHRows need their CompensationRows here "
+                                 "(expanded to per-configuration rows)")
+            return rho.check(nf, n, self.scalar, self.device)
         if isinstance(rho, wp.array):
             if rho.dtype != self.scalar:
                 raise TypeError(f"rho: warp array dtype {rho.dtype.__name__} does not match "
                                 f"the kernels' {np.dtype(self.dtype).name}")
             if rho.ndim == 2 and tuple(rho.shape) == (nf, 5):
-                return rho.reshape((1, nf, 5)), 0, 1, _ROW_PER_CONFIG
+                return DHRows.shared(rho if rho.device == self.device else rho.to(self.device))
             if rho.ndim == 3 and tuple(rho.shape) == (n, nf, 5):
-                return (rho if rho.device == self.device else rho.to(self.device)), 1, 1, _ROW_PER_CONFIG
+                return DHRows.per_config(rho if rho.device == self.device else rho.to(self.device))
             raise ValueError(f"rho: expected shape ({nf}, 5) or ({n}, {nf}, 5), got {tuple(rho.shape)}")
         a = real_array(rho, "rho")
         if a.shape not in ((nf, 5), (n, nf, 5)):
@@ -325,9 +303,9 @@ class CollisionModel:
                              f"[d, theta, r, alpha, beta] per frame), got {a.shape}")
         if not np.all(np.isfinite(a)):
             raise ValueError("rho: contains NaN or inf")
-        stride = 1 if a.ndim == 3 else 0
-        a = finite_as(a.reshape(-1, nf, 5), self.dtype, "rho")
-        return wp.array(a, dtype=self.scalar, device=self.device), stride, 1, _ROW_PER_CONFIG
+        arr = wp.array(finite_as(a.reshape(-1, nf, 5), self.dtype, "rho"), dtype=self.scalar,
+                       device=self.device)
+        return DHRows.per_config(arr) if a.ndim == 3 else DHRows.shared(arr)
 
     def _check_q(self, q: wp.array) -> None:
         if not isinstance(q, wp.array):
@@ -353,15 +331,16 @@ class CollisionModel:
     # --------------------------------------------------------------- costs
     def cost(self, q: wp.array, *, rho: Any = None, w_world: float = 1.0, w_self: float = 1.0,
              eps: float = DEFAULT_EPS, grad: bool = True, out_cost: wp.array | None = None,
-             out_grad: wp.array | None = None, update_rows: bool = False
-             ) -> tuple[wp.array, wp.array | None]:
+             out_grad: wp.array | None = None, update_rows: bool = False,
+             data: CollisionData | None = None) -> tuple[wp.array, wp.array | None]:
         """Collision cost and its hand-written gradient in one launch.
 
         Args:
             q: (N, n_dof) Warp array on this device and dtype [rad or m].
-            rho: DH rows (n_frames, 5) or per configuration (N, n_frames, 5), or
-                :class:`jwarp.kinematics.compensation.CompensationRows` (elastic compensation: frames
-                at those rows, gradient with the rows fixed); None = nominal.
+            rho: DH rows (n_frames, 5) or per configuration (N, n_frames, 5), a
+                :class:`jwarp.core.rows.DHRows`, or
+                :class:`jwarp.kinematics.compensation.CompensationRows` (elastic compensation:
+                frames at those rows, gradient with the rows fixed); None = nominal.
             w_world, w_self: weights of U_world and U_self (eq. 3.16); a zero weight skips
                 that term. Without a world U_world is 0.
             eps: smoothing distance of the clip c [m], > 0.
@@ -370,6 +349,9 @@ class CollisionModel:
             update_rows: with compensation rows as ``rho``, also make their torque update
                 from this launch's frames, inside the same launch (elastic paper section V).
                 On the H100 this beat a second launch over the waypoints at 1 to 1000 paths.
+            data: a :class:`CollisionData` for N configurations (:meth:`make_data`): its
+                scratch, and its ``cost``/``grad`` as outputs unless ``out_cost``/``out_grad``
+                are given. Without it the model's own scratch and new outputs are used.
 
         Returns:
             ``(cost (N,), grad (N, n_dof) or None)`` as Warp arrays (no host copies).
@@ -381,31 +363,37 @@ class CollisionModel:
             raise ValueError(f"eps: expected a positive distance [m], got {eps}")
         w_world = real_number(w_world, "w_world", self.dtype)
         w_self = real_number(w_self, "w_self", self.dtype)
+        d = self._work
+        if data is not None or d is None or n > d.n:
+            d = self._data(data, n)
+        if data is not None:
+            out_cost = d.cost if out_cost is None else out_cost
+            out_grad = d.grad if out_grad is None and grad else out_grad
         cost = self._out(out_cost, (n,), "out_cost")
         g = self._out(out_grad, (n, self.robot.n_dof), "out_grad") if grad else None
-        rho_a, stride, use_rho, layout = self._rho_or_rows(rho, n)
+        rows = self.dh_rows(rho, n)
         if update_rows and not isinstance(rho, CompensationRows):
             raise ValueError("update_rows: needs compensation rows as rho "
                              "(jwarp.kinematics.compensation.CompensationRows)")
         comp = rho.args() if update_rows else self._no_update
         ww = float(w_world) if self.world is not None and self.n_spheres else 0.0
         ws = float(w_self) if self.n_pairs else 0.0
-        frames, xs, force, moment, bc = self.scratch(n)
+        frames, xs, force, moment, bc = d.frames, d.xs, d.force, d.moment, d.bc
         gout = g if g is not None else self._dummy
 
         def inputs() -> list:
-            return [q, rho_a, stride, wp.vec4i(*layout), use_rho, self.world_struct, ww, ws,
-                    float(eps), int(grad), *self.model_args, frames, xs, force, moment, bc]
+            return [q, rows.array, rows.stride, rows.layout_vec, int(rows.kind), self.world_struct,
+                    ww, ws, float(eps), int(grad), *self.model_args, frames, xs, force, moment, bc]
 
         # caller-owned buffers (a planner's loop): replay a recorded launch (cheaper on the host)
-        reuse = out_cost is not None and (rho is None or isinstance(rho, (wp.array,
+        reuse = out_cost is not None and (rho is None or isinstance(rho, (wp.array, DHRows,
                                                                            CompensationRows)))
         if not reuse:
             wp.launch(self.k.cost, dim=n, inputs=inputs(), outputs=[cost, gout, comp],
                       device=self.device)
         else:
-            key = (id(q), id(rho_a), stride, layout, id(cost), id(g), ww, ws, float(eps), n,
-                   id(comp))
+            key = (id(q), id(rows.array), rows.stride, int(rows.kind), rows.layout, id(cost),
+                   id(g), ww, ws, float(eps), n, id(comp), id(frames))
             hit = self._launches.get(key)
             if hit is None:
                 if len(self._launches) > 32:
@@ -413,7 +401,7 @@ class CollisionModel:
                 launch = wp.launch(self.k.cost, dim=n, inputs=inputs(),
                                    outputs=[cost, gout, comp], device=self.device,
                                    record_cmd=True)
-                hit = (launch, q, rho_a, cost, g, comp)
+                hit = (launch, q, rows, cost, g, comp, frames)
                 self._launches[key] = hit
             hit[0].launch()
         if update_rows:
@@ -426,8 +414,6 @@ class CollisionModel:
         sphere and per sphere pair, atomic sums). Slower; a cross-check of the
         hand-written gradient and the route for derivatives w.r.t. other inputs.
         Returns ``(cost (N,), grad (N, n_dof))`` Warp arrays."""
-        from jwarp.kinematics.launch import launch_fk
-
         self._check_q(q)
         n = q.shape[0]
         eps = real_number(eps, "eps", self.dtype)
@@ -435,7 +421,7 @@ class CollisionModel:
             raise ValueError(f"eps: expected a positive distance [m], got {eps}")
         w_world = real_number(w_world, "w_world", self.dtype)
         w_self = real_number(w_self, "w_self", self.dtype)
-        rho_a, stride, use_rho = self._rho(rho, n)
+        rows = self.dh_rows(rho, n, expand=True)
         qg = wp.clone(q)
         qg.requires_grad = True
         k = fk_kernels(self.scalar)
@@ -444,7 +430,8 @@ class CollisionModel:
         cost = wp.zeros(n, dtype=self.scalar, device=self.device, requires_grad=True)
         tape = wp.Tape()
         with tape:
-            launch_fk(self.tables, qg, dh=(rho_a, stride) if use_rho else None, frames=frames)
+            wp.launch(k.fk, dim=n, inputs=[qg, *rows.args, self.model.frame_struct],
+                      outputs=[frames], device=self.device)
             if self.world is not None and self.n_spheres and w_world != 0:
                 wp.launch(self.k.world_cost_spheres, dim=(n, self.n_spheres),
                           inputs=[frames, self.grid, self.origin, self.inv_h, self.dim,
@@ -462,58 +449,69 @@ class CollisionModel:
 
     # ----------------------------------------------------------- distances
     def distances(self, q: wp.array, *, rho: Any = None, spheres: bool = False,
-                  pairs: bool = False, use_world: bool = True, use_self: bool = True
+                  pairs: bool = False, use_world: bool = True, use_self: bool = True,
+                  data: CollisionData | None = None
                   ) -> tuple[wp.array | None, wp.array | None, wp.array]:
         """Signed surface distances [m] (Warp arrays).
 
         Returns ``(sphere_dist (N, S) or None, pair_dist (N, P) or None, min_dist (N, 2))``:
         ``sphere_dist[b, s] = D(x_s) - r_s``; ``pair_dist[b, p] = |x_a - x_b| - r_a - r_b``
         for the pairs of :func:`collision_pairs`; ``min_dist[b] = [min world, min self]``
-        (1e30 where there is nothing to measure)."""
+        (1e30 where there is nothing to measure). ``data``: a :class:`CollisionData` for N
+        configurations whose scratch and outputs are used (else new outputs)."""
         self._check_q(q)
         n = q.shape[0]
-        rho_a, stride, use_rho = self._rho(rho, n)
+        rows = self.dh_rows(rho, n, expand=True)
         uw = int(use_world and self.world is not None and self.n_spheres > 0)
         us = int(use_self and self.n_pairs > 0)
-        sd = wp.empty((n, self.n_spheres), dtype=self.scalar, device=self.device) \
-            if spheres and uw else None
-        pd = wp.empty((n, self.n_pairs), dtype=self.scalar, device=self.device) \
-            if pairs and us else None
-        md = wp.empty((n, 2), dtype=self.scalar, device=self.device)
+        d = self._data(data, n)
+        if data is not None:
+            sd = d.sphere_dist if spheres and uw else None
+            pd = d.pair_dist if pairs and us else None
+            md = d.min_dist
+        else:
+            sd = wp.empty((n, self.n_spheres), dtype=self.scalar, device=self.device) \
+                if spheres and uw else None
+            pd = wp.empty((n, self.n_pairs), dtype=self.scalar, device=self.device) \
+                if pairs and us else None
+            md = wp.empty((n, 2), dtype=self.scalar, device=self.device)
         dummy = self._dummy
-        frames, xs = self.scratch(n)[:2]
         wp.launch(self.k.distance, dim=n,
-                  inputs=[q, rho_a, stride, use_rho, self.world_struct, uw, us,
+                  inputs=[q, *rows.args, self.world_struct, uw, us,
                           int(sd is not None), int(pd is not None),
-                          *self.model_args, _FAR, frames, xs],
+                          *self.model_args, _FAR, d.frames, d.xs],
                   outputs=[sd if sd is not None else dummy, pd if pd is not None else dummy, md],
                   device=self.device)
         return sd, pd, md
 
 
 # ====================================================================== functional API
-_MODELS: "weakref.WeakKeyDictionary[RobotModel, dict]" = weakref.WeakKeyDictionary()
+#: CollisionModels by (robot content key, device, dtype, world identity), recent ones first
+_MODELS: "OrderedDict[tuple, tuple]" = OrderedDict()
+_MODELS_MAX = 32
 
 
 def collision_model(robot: Any, world: World | None = None, *, device: Any = None,
                     dtype: Any = np.float32) -> CollisionModel:
-    """A cached :class:`CollisionModel` for (robot, world, device, dtype)."""
+    """A cached :class:`CollisionModel` for (robot, world, device, dtype): robots of equal
+    content share one (their device model is one, :func:`jwarp.core.device.put_model`);
+    worlds are told apart by identity (held weakly; treat a world as immutable)."""
     init_warp()
     model = get_robot(robot)
     check_world(model, world)
     dev = resolve_device(device)
     scalar = scalar_type(dtype)
-    per_robot = _MODELS.setdefault(model, {})
-    key = (id(world), str(dev), scalar.__name__)
-    hit = per_robot.get(key)
+    key = (put_model(model, dev, scalar).key, str(dev), scalar.__name__, id(world))
+    hit = _MODELS.get(key)
     if hit is not None and hit[0]() is world:
+        _MODELS.move_to_end(key)
         return hit[1]
     cm = CollisionModel(model, world, device=dev, dtype=scalar)
     # hold the world weakly (None is kept by a dummy strong ref)
     ref = weakref.ref(world) if world is not None else (lambda: None)
-    if len(per_robot) > 16:
-        per_robot.clear()
-    per_robot[key] = (ref, cm)
+    _MODELS[key] = (ref, cm)
+    while len(_MODELS) > _MODELS_MAX:
+        _MODELS.popitem(last=False)
     return cm
 
 

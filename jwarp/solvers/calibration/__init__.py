@@ -10,7 +10,9 @@ Typical use::
     error_stats(errors(res.robot, meas, res.params, q_test, y_test))
 """
 
-from jwarp.solvers.calibration.map import CalibrationProblem, ModelState, Progress, calibrate
+from jwarp.solvers.calibration.map import (CalibrationProblem, ModelState, Progress, calibrate,
+                                           calibrate_with)
+from jwarp.solvers.calibration.options import CalibrationOptions
 from jwarp.solvers.calibration.params import (DEFAULT_SIGMA, ROBOT_GROUPS, ParameterSpace,
                                               influencing_frames, influencing_masses,
                                               parse_groups, perturb_robot)
@@ -20,8 +22,8 @@ from jwarp.solvers.calibration.result import (CalibrationResult, CalibrationWarn
                                               observation_groups, predict)
 
 __all__ = [
-    "CalibrationProblem", "CalibrationResult", "CalibrationWarning", "DEFAULT_SIGMA", "Direction",
-    "ParameterSpace", "Progress", "ROBOT_GROUPS", "calibrate", "check_samples", "error_stats",
+    "CalibrationOptions", "CalibrationProblem", "CalibrationResult", "CalibrationWarning", "DEFAULT_SIGMA", "Direction",
+    "ParameterSpace", "Progress", "ROBOT_GROUPS", "calibrate", "calibrate_with", "check_samples", "error_stats",
     "errors", "influencing_frames", "influencing_masses", "ModelState", "model_frames", "observation_groups", "parse_groups",
     "perturb_robot", "predict",
 ]

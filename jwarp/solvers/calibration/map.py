@@ -13,7 +13,8 @@ mass arrays are replaced). Its Jacobian is analytic: the measurement's frame twi
 with :func:`jwarp.jacobian_dh` at rho*, and through the equilibrium by the implicit
 function theorem (:mod:`.elastic`).
 
-:func:`calibrate` minimizes ``|r|^2 / 2`` with :func:`scipy.optimize.least_squares`
+:func:`calibrate` (:func:`calibrate_with` given :class:`CalibrationOptions`) minimizes
+``|r|^2 / 2`` with :func:`scipy.optimize.least_squares`
 (``dogbox``: trf stalls on the flat directions of this problem) from the measurement's
 robust initial guess, optionally from more starts drawn from the prior, and returns a
 :class:`~jwarp.solvers.calibration.result.CalibrationResult`.
@@ -22,19 +23,22 @@ robust initial guess, optionally from more starts drawn from the prior, and retu
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any, Callable, Iterable, Mapping, NamedTuple
 
 import numpy as np
+import warp as wp
 from scipy.optimize import least_squares
 
 from jwarp import kinematics as K
-from jwarp.core.arrays import to_output
+from jwarp.core.arrays import init_warp, to_output
 from jwarp.core.device import with_frame_masses
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.calibration.elastic import (ElasticComponents, equilibrium_jacobian,
                                                frame_masses, mass_torque_jacobian,
                                                torque_jacobian, torque_state)
+from jwarp.solvers.calibration.options import CalibrationOptions
 from jwarp.solvers.calibration.params import (KIND_DH, KIND_KAPPA, KIND_MASS, KIND_MEAS,
                                               MASS_GROUP, ParameterSpace, parse_groups)
 from jwarp.solvers.calibration.result import CalibrationResult, build_result
@@ -73,10 +77,11 @@ def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: 
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elastic FK (float64, CPU) as :func:`jwarp.fk_elastic`, but accepting compliances of
     either sign: the optimizer may cross kappa = 0 on its way (the fixed point is just as
-    well defined; only the final model must be physical). q (S, n_dof), dh (n, 5),
-    kappa (n, 3), optional mass model ``masses`` = (per-frame mass (n,) [kg], centre of
-    mass (n, 3) [m], see :func:`.elastic.frame_masses`) replacing the robot's ->
-    frames (S, n, 4, 4), rho* (S, n, 5), converged (S,)."""
+    well defined; only the final model must be physical). q (S, n_dof) (numpy, or a
+    float64 CPU Warp array used as is: no upload), dh (n, 5), kappa (n, 3), optional mass
+    model ``masses`` = (per-frame mass (n,) [kg], centre of mass (n, 3) [m], see
+    :func:`.elastic.frame_masses`) replacing the robot's -> numpy frames (S, n, 4, 4),
+    rho* (S, n, 5), converged (S,)."""
     model, batch, t = K.setup(robot, q, "cpu", np.float64, False)
     if masses is not None:
         t = with_frame_masses(t, *masses)
@@ -86,7 +91,8 @@ def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: 
     rho, frames, _, conv = K.equilibrium(run, int(max_iter), float(tol))
     n = model.n_frames
     rho_arr = rho[0] if rho is not None else K.rho0_full(run)
-    return (to_output(frames, batch, (n,)), to_output(rho_arr, batch, (n, 5)),
+    host = replace(batch, kind="numpy")  # numpy out for Warp input too
+    return (to_output(frames, host, (n,)), to_output(rho_arr, host, (n, 5)),
             np.asarray(conv, bool))
 
 
@@ -143,6 +149,11 @@ class CalibrationProblem:
             if mr.n_frames != self.robot.n_frames or mr.frame_names != self.robot.frame_names:
                 raise ValueError(f"measurement: built for robot '{mr.name}', not '{self.robot.name}'")
         self.q, self.y, self.meta = check_samples(self.robot, measurement, q, y, meta)
+        init_warp()
+        #: the joint values on the CPU device (float64), uploaded once: every evaluation of
+        #: the model and its Jacobian launches on this array (the data do not change)
+        self.q_device = wp.array(np.ascontiguousarray(self.q, np.float64), dtype=wp.float64,
+                                 device="cpu")
         if elastic is False and MASS_GROUP in parse_groups(free):
             raise ValueError(f"free: the '{MASS_GROUP}' group acts only through the elastic "
                              f"model, but elastic=False was given")
@@ -173,6 +184,17 @@ class CalibrationProblem:
         self.n_data = S * m
         self.n_evaluations = 0
 
+    @classmethod
+    def from_options(cls, robot: Any, measurement: Any, q: Any, y: Any,
+                     options: CalibrationOptions, meta: Mapping[str, Any] | None = None
+                     ) -> "CalibrationProblem":
+        """The problem of the data with the problem's fields of ``options`` (free,
+        noise_sigma, sigma, frames, p_nominal, elastic, lam, max_iter, tol, bound_kappa)."""
+        o = options
+        return cls(robot, measurement, q, y, free=o.free, meta=meta, noise_sigma=o.noise_sigma,
+                   sigma=o.sigma, frames=o.frames, p_nominal=o.p_nominal, elastic=o.elastic,
+                   lam=o.lam, max_iter=o.max_iter, tol=o.tol, bound_kappa=o.bound_kappa)
+
     # ------------------------------------------------------------------ sizes
     @property
     def n_samples(self) -> int:
@@ -193,11 +215,11 @@ class CalibrationProblem:
         S = self.n_samples
         if self.elastic:
             fm = frame_masses(self.robot, mass) if self._mass_idx.size else None
-            frames, rho, conv = signed_equilibrium(self.robot, self.q, dh, kap, self.lam,
-                                                   self.max_iter, self.tol, masses=fm)
+            frames, rho, conv = signed_equilibrium(self.robot, self.q_device, dh, kap,
+                                                   self.lam, self.max_iter, self.tol, masses=fm)
         else:
-            frames = K.fk(self.robot, self.q, dh=dh, device="cpu", dtype=np.float64,
-                          validate=False)
+            frames = K.fk(self.robot, self.q_device, dh=dh, device="cpu", dtype=np.float64,
+                          validate=False).numpy()
             rho = np.broadcast_to(dh, (S,) + dh.shape)
             conv = np.ones(S, bool)
         out = ModelState(frames, rho, dh, kap, p, conv, mass)
@@ -238,8 +260,8 @@ class CalibrationProblem:
         S, m = jf.shape[:2]
         jy = np.zeros((S, m, self.robot.n_frames, 5))
         for k, f in enumerate(meas.frames):
-            jdh = K.jacobian_dh(self.robot, self.q, int(f), dh=rho, device="cpu",
-                                dtype=np.float64, validate=False)      # (S, 6, n, 5)
+            jdh = K.jacobian_dh(self.robot, self.q_device, int(f), dh=rho, device="cpu",
+                                dtype=np.float64, validate=False).numpy()  # (S, 6, n, 5)
             jy += (jf[:, :, k, :] @ jdh.reshape(S, 6, -1)).reshape(jy.shape)
         return jy, np.asarray(jp, np.float64)
 
@@ -313,72 +335,90 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
               callback: Callable[[Progress], Any] | None = None,
               identifiability_tol: float = 1e-2, moved_sigmas: float = 3.0,
               warn: bool = True) -> CalibrationResult:
-    """MAP calibration of a robot (and the measurement's own parameters) from samples.
+    """MAP calibration of a robot (and the measurement's own parameters) from samples:
+    :func:`calibrate_with` with these :class:`CalibrationOptions`.
 
     Args:
-        robot, measurement, q (S, n_dof), y (S, m), free, meta, noise_sigma, sigma, frames,
-            p_nominal, elastic, lam, max_iter, tol, bound_kappa: see
-            :class:`CalibrationProblem`.
-        x0: (P,) first start (default: prior mean); ``initial_guess`` then replaces its free
-            measurement parameters by ``measurement.initial_guess`` (e.g. a closed-form
-            alignment of the tracker frame), which makes a rough setup converge.
-        n_starts: number of starts; starts after the first draw the robot parameters from the
-            prior (then the measurement's initial guess); the lowest cost wins.
-        seed: random seed of the prior draws.
-        max_nfev, ftol, xtol, gtol, method: passed to scipy.optimize.least_squares
-            (``method`` "dogbox" or "trf"; ``x_scale`` is the prior sigma).
-        callback: called with :class:`Progress` after every iteration (progress bars).
-        identifiability_tol: a direction of the prior-whitened data information J^T J with
-            eigenvalue below this is reported as not identifiable (data add < ~tol/2 of the
-            prior's information there).
-        moved_sigmas: report parameters that moved more than this many prior sigmas.
-        warn: emit the findings with ``warnings.warn`` (they are always in the result).
+        robot: nominal robot (name or RobotModel); its DH rows and kappa are the prior means.
+        measurement: a measurement plugin instance (see jwarp.measurement).
+        q: (S, n_dof) joint values [rad, m]; y: (S, m) observations [measurement.unit].
+        meta: per-sample inputs {name: (S,)} the measurement needs (``meta_names``).
+        free, noise_sigma, sigma, frames, p_nominal, x0, initial_guess, n_starts, seed,
+            max_nfev, ftol, xtol, gtol, method, elastic, lam, max_iter, tol, bound_kappa,
+            callback, identifiability_tol, moved_sigmas, warn: the fields of
+            :class:`CalibrationOptions`.
 
     Returns:
         :class:`~jwarp.solvers.calibration.result.CalibrationResult`.
     """
     t0 = time.perf_counter()
-    if isinstance(n_starts, bool) or not isinstance(n_starts, (int, np.integer)) or n_starts < 1:
-        raise ValueError(f"n_starts: expected an integer >= 1, got {n_starts!r}")
-    if method not in ("dogbox", "trf"):
-        raise ValueError(f"method: expected 'dogbox' or 'trf', got {method!r}")
-    if callback is not None and not callable(callback):
-        raise TypeError("callback: expected a callable taking a Progress")
-    prob = CalibrationProblem(robot, measurement, q, y, free=free, meta=meta,
-                              noise_sigma=noise_sigma, sigma=sigma, frames=frames,
-                              p_nominal=p_nominal, elastic=elastic, lam=lam,
-                              max_iter=max_iter, tol=tol, bound_kappa=bound_kappa)
+    options = CalibrationOptions(
+        free=free, noise_sigma=noise_sigma, sigma=sigma, frames=frames, p_nominal=p_nominal,
+        x0=x0, initial_guess=initial_guess, n_starts=n_starts, seed=seed, max_nfev=max_nfev,
+        ftol=ftol, xtol=xtol, gtol=gtol, method=method, elastic=elastic, lam=lam,
+        max_iter=max_iter, tol=tol, bound_kappa=bound_kappa, callback=callback,
+        identifiability_tol=identifiability_tol, moved_sigmas=moved_sigmas, warn=warn)
+    return calibrate_with(robot, measurement, q, y, options, meta=meta, t0=t0)
+
+
+def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
+                   *, meta: Mapping[str, Any] | None = None, t0: float | None = None
+                   ) -> CalibrationResult:
+    """MAP calibration of a robot (and the measurement's own parameters) from samples.
+
+    Args:
+        robot, measurement, q (S, n_dof), y (S, m), meta: see :func:`calibrate`.
+        options: :class:`CalibrationOptions` (validated here, naming the bad field).
+        t0: ``time.perf_counter()`` at which the result's wall time starts (default: now).
+
+    Starts: the first from ``options.x0`` (default: the prior mean), whose free measurement
+    parameters ``options.initial_guess`` replaces by ``measurement.initial_guess``; the
+    others draw the robot parameters from the prior. Each runs
+    :func:`scipy.optimize.least_squares` on one :class:`CalibrationProblem` (the joint
+    values uploaded once); the lowest cost wins.
+
+    Returns:
+        :class:`~jwarp.solvers.calibration.result.CalibrationResult`.
+    """
+    t0 = time.perf_counter() if t0 is None else t0
+    if not isinstance(options, CalibrationOptions):
+        raise TypeError(f"options: expected a CalibrationOptions, got {type(options).__name__}")
+    options.validate()
+    o = options
+    callback = o.callback
+    prob = CalibrationProblem.from_options(robot, measurement, q, y, o, meta=meta)
     sp = prob.space
-    rng = np.random.default_rng(seed)
-    start0 = prob.initial_x(None if x0 is None else sp.check(x0, "x0"), guess=initial_guess)
+    rng = np.random.default_rng(o.seed)
+    start0 = prob.initial_x(None if o.x0 is None else sp.check(o.x0, "x0"), guess=o.initial_guess)
     if not np.all(np.isfinite(prob.residuals(start0))):
         raise ValueError(f"x0: the elastic equilibrium does not converge at the start for "
-                         f"{int((~prob.state(start0).converged).sum())} sample(s) (max_iter={max_iter}, "
-                         f"tol={tol}); lower lam or raise max_iter")
+                         f"{int((~prob.state(start0).converged).sum())} sample(s) "
+                         f"(max_iter={o.max_iter}, tol={o.tol}); lower lam or raise max_iter")
     robot_kinds = (sp.kind == KIND_DH) | (sp.kind == KIND_KAPPA) | (sp.kind == KIND_MASS)
+    n_starts = int(o.n_starts)
     best = None
     runs = []
-    for k in range(int(n_starts)):
+    for k in range(n_starts):
         if k == 0:
             xs = start0
         else:
             xs = start0.copy()
             xs[robot_kinds] = sp.sample_prior(rng)[robot_kinds]
-            xs = prob.initial_x(xs, guess=initial_guess)
+            xs = prob.initial_x(xs, guess=o.initial_guess)
             if not np.all(np.isfinite(prob.residuals(xs))):
                 runs.append({"start": k, "cost": float("inf"), "nfev": 0, "iterations": 0,
                              "status": -1, "message": "no elastic equilibrium at this start"})
                 continue
         it = [0]
-        cb = _iteration_callback(k, int(n_starts), it, callback)
+        cb = _iteration_callback(k, n_starts, it, callback)
         sol = least_squares(prob.residuals, xs, jac=prob.jacobian, bounds=(sp.lower, sp.upper),
-                            method=method, x_scale=sp.scale, ftol=ftol, xtol=xtol, gtol=gtol,
-                            max_nfev=max_nfev, callback=cb)
+                            method=o.method, x_scale=sp.scale, ftol=o.ftol, xtol=o.xtol,
+                            gtol=o.gtol, max_nfev=o.max_nfev, callback=cb)
         runs.append({"start": k, "cost": float(sol.cost), "nfev": int(sol.nfev),
                      "iterations": it[0], "status": int(sol.status), "message": str(sol.message)})
         if best is None or sol.cost < best[0].cost:
             best = (sol, xs, it[0])
     sol, xs, iters = best
     return build_result(prob, sol, xs, iters, runs, time.perf_counter() - t0,
-                        identifiability_tol=identifiability_tol, moved_sigmas=moved_sigmas,
-                        warn=warn)
+                        identifiability_tol=o.identifiability_tol, moved_sigmas=o.moved_sigmas,
+                        warn=o.warn)

@@ -1,0 +1,131 @@
+"""The options of a MAP calibration (:func:`jwarp.solvers.calibration.calibrate` and
+:func:`jwarp.solvers.calibration.calibrate_with`), documented once."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, Mapping
+
+import numpy as np
+
+from jwarp.core.arrays import real_number
+from jwarp.solvers.calibration.params import parse_groups
+
+#: least-squares methods (scipy.optimize.least_squares) the calibration accepts
+METHODS = ("dogbox", "trf")
+
+
+def _int(v: Any, name: str, lo: int, none: bool = False) -> None:
+    if v is None and none:
+        return
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
+        raise ValueError(f"{name}: expected an integer >= {lo}{' or None' if none else ''}, "
+                         f"got {v!r}")
+
+
+def _number(v: Any, name: str, lo: float, open_lo: bool = False, none: bool = False) -> None:
+    if v is None and none:
+        return
+    f = real_number(v, name)
+    if not (math.isfinite(f) and (f > lo if open_lo else f >= lo)):
+        raise ValueError(f"{name}: expected a finite number {'>' if open_lo else '>='} {lo:g}"
+                         f"{' or None' if none else ''}, got {v!r}")
+
+
+def _flag(v: Any, name: str, none: bool = False) -> None:
+    if v is None and none:
+        return
+    if not (isinstance(v, (bool, np.bool_)) or (isinstance(v, (int, np.integer)) and v in (0, 1))):
+        raise TypeError(f"{name}: expected True or False{' or None' if none else ''}, got {v!r}")
+
+
+@dataclass
+class CalibrationOptions:
+    """Options of a MAP calibration; :meth:`validate` raises ValueError/TypeError naming
+    the field (the values that need the robot, the measurement or the data - group names,
+    frames, sigma values, noise, x0 - are checked when the problem is built).
+
+    Attributes:
+        free: free parameter groups, a list or comma-separated (required): robot groups
+            (``theta``, ``d``, ``r``, ``alpha``, ``beta``, ``kappa_*``, ``mass``) and the
+            measurement's own (see :class:`~jwarp.solvers.calibration.params.ParameterSpace`).
+        noise_sigma: measurement noise std, scalar or one per observation [unit]; None:
+            ``measurement.noise``.
+        sigma: prior sigma overrides {group: value} (``inf``: no prior; ``mass``: relative
+            to each nominal mass, 0.1 = 10 %).
+        frames: the calibratable DH frames (names or indices); None: the measured chains.
+        p_nominal: measurement parameter prior means; None: the measurement's nominal.
+        x0: (P,) first start (None: the prior mean).
+        initial_guess: replace the start's free measurement parameters by
+            ``measurement.initial_guess`` (e.g. a closed-form tracker alignment), which makes
+            a rough setup converge.
+        n_starts: starts (>= 1); those after the first draw the robot parameters from the
+            prior (then the initial guess); the lowest cost wins.
+        seed: random seed of the prior draws (an integer >= 0, a numpy Generator or None).
+        max_nfev, ftol, xtol, gtol, method: of :func:`scipy.optimize.least_squares`
+            (``method`` "dogbox" or "trf"; ``x_scale`` is the prior sigma).
+        elastic: True/False; None: elastic iff a compliance is free or nonzero.
+        lam, max_iter, tol: damping in (0, 1], most updates and tolerance [rad] of the
+            elastic equilibrium.
+        bound_kappa: constrain compliances to >= 0 in the solver.
+        callback: called with :class:`~jwarp.solvers.calibration.map.Progress` after every
+            solver iteration (progress bars).
+        identifiability_tol: a direction of the prior-whitened data information J^T J with
+            eigenvalue below this is reported as not identifiable.
+        moved_sigmas: report parameters that moved more than this many prior sigmas.
+        warn: emit the findings with ``warnings.warn`` (they are always in the result).
+    """
+
+    free: str | Iterable[str]
+    noise_sigma: Any = None
+    sigma: Mapping[str, float] | None = None
+    frames: Iterable[int | str] | None = None
+    p_nominal: Any = None
+    x0: Any = None
+    initial_guess: bool = True
+    n_starts: int = 1
+    seed: Any = 0
+    max_nfev: int | None = 200
+    ftol: float | None = 1e-8
+    xtol: float | None = 1e-8
+    gtol: float | None = 1e-8
+    method: str = "dogbox"
+    elastic: bool | None = None
+    lam: float = 1.0
+    max_iter: int = 100
+    tol: float = 1e-12
+    bound_kappa: bool = False
+    callback: Callable[[Any], Any] | None = None
+    identifiability_tol: float = 1e-2
+    moved_sigmas: float = 3.0
+    warn: bool = True
+
+    def validate(self) -> None:
+        """ValueError/TypeError naming the first bad field."""
+        if (isinstance(self.n_starts, bool) or not isinstance(self.n_starts, (int, np.integer))
+                or self.n_starts < 1):
+            raise ValueError(f"n_starts: expected an integer >= 1, got {self.n_starts!r}")
+        if self.method not in METHODS:
+            raise ValueError(f"method: expected 'dogbox' or 'trf', got {self.method!r}")
+        if self.callback is not None and not callable(self.callback):
+            raise TypeError("callback: expected a callable taking a Progress")
+        parse_groups(self.free)
+        if self.sigma is not None and not isinstance(self.sigma, Mapping):
+            raise TypeError(f"sigma: expected a mapping {{group: sigma}}, got "
+                            f"{type(self.sigma).__name__}")
+        if not (self.seed is None
+                or isinstance(self.seed, (np.random.Generator, np.random.SeedSequence))):
+            _int(self.seed, "seed", 0)
+        _int(self.max_nfev, "max_nfev", 1, none=True)
+        for name in ("ftol", "xtol", "gtol"):
+            _number(getattr(self, name), name, 0.0, none=True)
+        _flag(self.elastic, "elastic", none=True)
+        if not (isinstance(self.lam, (int, float)) and 0 < self.lam <= 1):
+            raise ValueError(f"lam: damping must be in (0, 1], got {self.lam!r}")
+        _int(self.max_iter, "max_iter", 0)
+        _number(self.tol, "tol", 0.0)
+        for name in ("initial_guess", "bound_kappa", "warn"):
+            _flag(getattr(self, name), name)
+        _number(self.identifiability_tol, "identifiability_tol", 0.0)
+        _number(self.moved_sigmas, "moved_sigmas", 0.0, open_lo=True)

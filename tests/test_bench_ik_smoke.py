@@ -1,0 +1,37 @@
+"""Smoke test of benchmarks/bench_ik.py: the --quick CPU run exits 0 and reports every
+section with the new solver beside the baseline (the numbers themselves are not checked)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = ROOT / "benchmarks" / "bench_ik.py"
+
+
+def test_bench_ik_quick_cpu(tmp_path):
+    out = tmp_path / "bench.json"
+    proc = subprocess.run(
+        [sys.executable, str(SCRIPT), "--quick", "--device", "cpu", "--json", str(out)],
+        cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
+    assert proc.stdout.startswith("machine: "), proc.stdout
+    doc = json.loads(out.read_text())
+    assert doc["machine"] and doc["repeats"] == 2
+    for name in ("a", "b"):
+        sec = doc[name]
+        for k in ("solver", "solver_freeze_solved", "ik", "baseline"):
+            assert sec[k]["solved_targets_per_s"]["median"] > 0, sec
+            assert 0 < sec[k]["solved_rate"]["median"] <= 1
+        assert len(sec["speedup_solver_vs_baseline"]["per_run"]) == 2
+        assert sec["speedup_solver_freeze_solved_vs_baseline"]["of_medians"] > 0
+    c = doc["c"]
+    for k in ("solver", "ik", "baseline"):
+        t = c[k]["time_per_target_ms_median_over_targets"]
+        assert 0 < t["min"] <= t["median"]
+    # the same seeds: the same solutions, so the same iterations
+    assert c["solver"]["iterations_median"] == c["baseline"]["iterations_median"]
+    assert c["speedup_solver_vs_baseline"]["of_medians"] > 0
