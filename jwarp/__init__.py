@@ -24,6 +24,7 @@ LAZY = {
     "plan": "jwarp.solvers.planner",
     "Planner": "jwarp.solvers.planner",
     "ik": "jwarp.solvers.ik",
+    "IKSolver": "jwarp.solvers.ik",
     "calibrate": "jwarp.solvers.calibration.map",
 }
 
