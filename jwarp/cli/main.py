@@ -3,18 +3,8 @@ registered by explicit import: :mod:`jwarp.cli.kinematics` (``robots | info | fk
 :mod:`jwarp.cli.calibration` (``calibrate | simulate-campaign``), :mod:`jwarp.cli.planning`
 (``plan | ik``).
 
-Examples::
-
-    jwarp robots
-    jwarp info justin19 --json
-    jwarp fk justin19 --q zeros --elastic
-    jwarp fk arm7 --q 0,30,0,-60,0,45,0 --deg --json
-    jwarp show justin19 --q zeros --q 0,0,45,... --elastic --save justin.rrd
-
-Joint values ``--q`` are comma-separated, in rad (m for prismatic joints), or ``zeros``;
-``--deg`` reads revolute joints in degrees. A value starting with a minus sign may follow
-``--q`` directly (``--q -0.5,0,...``; any option's negative number, ``-inf`` and ``-nan``
-too). The CLI computes in float64 on the CPU unless told otherwise.
+Examples and the joint-value syntax: :mod:`jwarp.cli.kinematics`. A value starting with a
+minus sign may follow any option directly (``--q -0.5,0,...``, ``-inf``, ``-nan``).
 
 Errors and exit status (:func:`main`):
 
