@@ -86,7 +86,7 @@ def test_update_from_given_frames_matches_reference_and_maps_substeps(name, grav
         rows.update(_frames(model, F[:3]))
 
 
-def test_rows_converge_to_the_equilibrium_under_a_fixed_path():
+def test_rows_converge_to_the_equilibrium_under_a_fixed_path(device):
     """With the path held still, each evaluate is one damped iteration at every waypoint:
     after k evaluates the rows equal the reference iteration's k-th iterate."""
     model = jwarp.robot("justin19")
@@ -94,7 +94,7 @@ def test_rows_converge_to_the_equilibrium_under_a_fixed_path():
     q = sample_within_limits(model, 4, np.random.default_rng(2))
     Q = PL.initial_paths(q[:2], q[2:], 5, "straight")
     obj = PL.PathObjective(model, _block_world(), 2, 5, 4, kappa=kappa, lam=LAM, dtype=np.float64,
-                           device="cpu")
+                           device=device)
     obj.set_paths(Q)
     k = 12
     for _ in range(k):
@@ -116,7 +116,7 @@ def test_rows_converge_to_the_equilibrium_under_a_fixed_path():
                                   np.broadcast_to(nominal_dh(model), rows.shape))
 
 
-def test_cost_at_compensation_rows_equals_cost_at_expanded_rows():
+def test_cost_at_compensation_rows_equals_cost_at_expanded_rows(device):
     """use_rho = 2 (rows with cos/sin, one per waypoint) == use_rho = 1 (per configuration)."""
     model = jwarp.robot("justin19")
     world = _block_world()
@@ -126,8 +126,8 @@ def test_cost_at_compensation_rows_equals_cost_at_expanded_rows():
     rows = CompensationRows(tables(model, "cpu", np.float64), P, W, n_sub, 3e-3, LAM)
     for _ in range(2):
         rows.update(_frames(model, ref_fk(model, q, rows.rho())))
-    cm = collision.collision_model(model, world, device="cpu", dtype=np.float64)
-    qw = wp.array(q, dtype=wp.float64, device="cpu")
+    cm = collision.collision_model(model, world, device=device, dtype=np.float64)
+    qw = wp.array(q, dtype=wp.float64, device=device)
     c2, g2 = (a.numpy() for a in cm.cost(qw, rho=rows, eps=0.05))
     c1, g1 = (a.numpy() for a in cm.cost(qw, rho=rows.rho(), eps=0.05))
     c0, _ = cm.cost(qw, eps=0.05)
@@ -142,9 +142,9 @@ def test_cost_at_compensation_rows_equals_cost_at_expanded_rows():
         qp, qm = q.copy(), q.copy()
         qp[:, j] += h
         qm[:, j] -= h
-        cp = cm.cost(wp.array(qp, dtype=wp.float64, device="cpu"), rho=rows, eps=0.05,
+        cp = cm.cost(wp.array(qp, dtype=wp.float64, device=device), rho=rows, eps=0.05,
                      grad=False)[0].numpy()
-        cmn = cm.cost(wp.array(qm, dtype=wp.float64, device="cpu"), rho=rows, eps=0.05,
+        cmn = cm.cost(wp.array(qm, dtype=wp.float64, device=device), rho=rows, eps=0.05,
                       grad=False)[0].numpy()
         np.testing.assert_allclose(g2[hit, j], ((cp - cmn) / (2 * h))[hit], rtol=1e-4,
                                    atol=1e-6)
@@ -214,7 +214,7 @@ def _thread_map(layout: wp.vec4i, out: wp.array2d(dtype=wp.int32)):
 
 @pytest.mark.parametrize("P, W, n_sub", [(3, 4, 5), (2, 3, 2), (2, 5, 1), (1, 2, 4)])
 @pytest.mark.parametrize("waypoints_first", [False, True])
-def test_waypoint_thread_maps_threads_to_configurations_and_rows(P, W, n_sub, waypoints_first):
+def test_waypoint_thread_maps_threads_to_configurations_and_rows(device, P, W, n_sub, waypoints_first):
     """CPU layout: thread b is configuration b. CUDA layout (P given): a permutation with
     the waypoints first. Either way each configuration reads its nearest waypoint's row."""
     model = jwarp.robot("planar4")
@@ -223,9 +223,9 @@ def test_waypoint_thread_maps_threads_to_configurations_and_rows(P, W, n_sub, wa
     assert layout == (rows.S, n_sub, W, 0)  # the CPU's
     if waypoints_first:
         layout = layout[:3] + (P,)  # the CUDA layout
-    out = wp.zeros((rows.N, 3), dtype=wp.int32, device="cpu")
+    out = wp.zeros((rows.N, 3), dtype=wp.int32, device=device)
     wp.launch(_thread_map, dim=rows.N, inputs=[wp.vec4i(*layout)], outputs=[out],
-              device="cpu")
+              device=device)
     b, row, on = out.numpy().T
     np.testing.assert_array_equal(np.sort(b), np.arange(rows.N))  # every configuration once
     np.testing.assert_array_equal(row, rows.config_rows()[b])      # its nearest waypoint's row

@@ -24,52 +24,52 @@ def _sample(model, n, seed):
 
 
 @pytest.mark.parametrize("name", ROBOTS)
-def test_fk_matches_reference_float64_and_float32(name):
+def test_fk_matches_reference_float64_and_float32(device, name):
     model = jwarp.robot(name)
     q = _sample(model, 1000, seed=1)
     expected = ref_fk(model, q)
-    got64 = K.fk(name, q, device="cpu")
+    got64 = K.fk(name, q, device=device)
     assert got64.shape == (1000, model.n_frames, 4, 4) and got64.dtype == np.float64
     np.testing.assert_allclose(got64, expected, atol=1e-9, rtol=0)
-    got32 = K.fk(name, q.astype(np.float32), device="cpu")
+    got32 = K.fk(name, q.astype(np.float32), device=device)
     assert got32.dtype == np.float32
     np.testing.assert_allclose(got32, expected, atol=1e-5, rtol=0)
 
 
-def test_fk_per_configuration_dh_rows():
+def test_fk_per_configuration_dh_rows(device):
     model = jwarp.robot("justin19")
     q = _sample(model, 20, seed=2)
     rng = np.random.default_rng(3)
     dh = model.dh_table + rng.normal(0, 0.01, (20, model.n_frames, 5)) * model.is_dh[None, :, None]
-    np.testing.assert_allclose(K.fk(model, q, dh=dh, device="cpu"), ref_fk(model, q, dh=dh),
+    np.testing.assert_allclose(K.fk(model, q, dh=dh, device=device), ref_fk(model, q, dh=dh),
                                atol=1e-12)
     shared = dh[0]
-    np.testing.assert_allclose(K.fk(model, q, dh=shared, device="cpu"), ref_fk(model, q, dh=shared),
+    np.testing.assert_allclose(K.fk(model, q, dh=shared, device=device), ref_fk(model, q, dh=shared),
                                atol=1e-12)
 
 
-def test_leading_batch_dims_and_single_configuration():
+def test_leading_batch_dims_and_single_configuration(device):
     model = jwarp.robot("planar4")
     q = _sample(model, 6, seed=4).reshape(2, 3, 4)
-    frames = K.fk(model, q, device="cpu")
+    frames = K.fk(model, q, device=device)
     assert frames.shape == (2, 3, model.n_frames, 4, 4)
-    single = K.fk(model, q[1, 2], device="cpu")
+    single = K.fk(model, q[1, 2], device=device)
     assert single.shape == (model.n_frames, 4, 4)
     np.testing.assert_allclose(single, frames[1, 2])
 
 
-def test_coupled_torso_moves_frame4_by_minus_q1_plus_q2():
+def test_coupled_torso_moves_frame4_by_minus_q1_plus_q2(device):
     model = jwarp.robot("justin19")
     q = np.zeros((3, 19))
     q[:, 1] = [0.3, -0.2, 0.5]
     q[:, 2] = [0.4, 0.7, 0.1]
-    frames = K.fk(model, q, device="cpu")
+    frames = K.fk(model, q, device=device)
     rel = np.linalg.inv(frames[:, 3]) @ frames[:, 4]
     angle = np.arctan2(rel[:, 1, 0], rel[:, 0, 0])
     np.testing.assert_allclose(angle, -(q[:, 1] + q[:, 2]), atol=1e-12)
     # the coupled joint keeps the chest orientation independent of q1, q2 (parallel axes)
     np.testing.assert_allclose(frames[:, 4, :3, :3], frames[:1, 4, :3, :3].repeat(3, 0), atol=1e-12)
-    jac = K.jacobian(model, q, "torso_4", device="cpu")
+    jac = K.jacobian(model, q, "torso_4", device=device)
     np.testing.assert_allclose(jac[:, 3:, 1] + jac[:, 3:, 2], 0.0, atol=1e-12)
 
 
@@ -77,20 +77,20 @@ def test_coupled_torso_moves_frame4_by_minus_q1_plus_q2():
                                         ("justin19", "head_tcp"), ("justin19", "torso_4"),
                                         ("arm7", "right_tcp"), ("planar5", "tcp"),
                                         ("sphere2d", "point"), ("hand4", "index_tip")])
-def test_geometric_jacobian_matches_finite_differences(name, frame):
+def test_geometric_jacobian_matches_finite_differences(device, name, frame):
     model = jwarp.robot(name)
     q = _sample(model, 40, seed=5)
     fi = model.frame_index(frame)
-    jac = K.jacobian(model, q, frame, device="cpu")
+    jac = K.jacobian(model, q, frame, device=device)
     assert jac.shape == (40, 6, model.n_dof)
     np.testing.assert_allclose(jac, ref_jacobian_fd(model, q, fi), atol=1e-7)
 
 
-def test_jacobian_of_a_point_and_float32():
+def test_jacobian_of_a_point_and_float32(device):
     model = jwarp.robot("justin19")
     q = _sample(model, 10, seed=6)
     point = np.array([0.02, -0.01, 0.05])
-    jac = K.jacobian(model, q, "left_tcp", point=point, device="cpu")
+    jac = K.jacobian(model, q, "left_tcp", point=point, device=device)
     eps = 1e-6
     fd = np.zeros((10, 3, 19))
     for j in range(19):
@@ -99,7 +99,7 @@ def test_jacobian_of_a_point_and_float32():
         plus, minus = ref_fk(model, q + dq)[:, 22], ref_fk(model, q - dq)[:, 22]
         fd[:, :, j] = ((plus - minus)[:, :3, :3] @ point + (plus - minus)[:, :3, 3]) / (2 * eps)
     np.testing.assert_allclose(jac[:, :3], fd, atol=1e-7)
-    jac32 = K.jacobian(model, q.astype(np.float32), "left_tcp", point=point, device="cpu")
+    jac32 = K.jacobian(model, q.astype(np.float32), "left_tcp", point=point, device=device)
     np.testing.assert_allclose(jac32, jac, atol=2e-5)
 
 
@@ -118,21 +118,21 @@ def _pose_fd(fn, x, eps=1e-6):
 
 
 @pytest.mark.parametrize("name,frame", [("justin19", "right_tcp"), ("hand4", "thumb_tip")])
-def test_dh_jacobian_matches_finite_differences(name, frame):
+def test_dh_jacobian_matches_finite_differences(device, name, frame):
     model = jwarp.robot(name)
     q = _sample(model, 5, seed=7)
     fi = model.frame_index(frame)
     rng = np.random.default_rng(8)
     dh = model.dh_table + rng.normal(0, 0.02, model.dh_table.shape) * model.is_dh[:, None]
-    jac = K.jacobian_dh(model, q, frame, dh=dh, device="cpu")
+    jac = K.jacobian_dh(model, q, frame, dh=dh, device=device)
     assert jac.shape == (5, 6, model.n_frames, 5)
     fd = _pose_fd(lambda x: ref_fk(model, q, dh=x.reshape(dh.shape))[:, fi], dh.copy())
     np.testing.assert_allclose(jac.reshape(5, 6, -1), fd, atol=1e-7)
     tape = tape_jacobian(model, q, frame, dh=dh, wrt=("q", "dh"))
     np.testing.assert_allclose(tape["dh"], jac, atol=1e-10)
-    np.testing.assert_allclose(tape["q"], K.jacobian(model, q, frame, dh=dh, device="cpu"), atol=1e-10)
+    np.testing.assert_allclose(tape["q"], K.jacobian(model, q, frame, dh=dh, device=device), atol=1e-10)
     nominal = tape_jacobian(model, q, frame, wrt=("dh",))  # beta = 0: d/d beta must not vanish
-    np.testing.assert_allclose(nominal["dh"], K.jacobian_dh(model, q, frame, device="cpu"), atol=1e-10)
+    np.testing.assert_allclose(nominal["dh"], K.jacobian_dh(model, q, frame, device=device), atol=1e-10)
 
 
 def test_kappa_jacobian_through_the_equilibrium_matches_finite_differences():
@@ -172,31 +172,31 @@ def _shift(T, point):
 
 
 @pytest.mark.parametrize("name", ["justin19", "arm7", "hand4"])
-def test_gravity_torques_and_elastic_fk_match_reference(name):
+def test_gravity_torques_and_elastic_fk_match_reference(device, name):
     model = jwarp.robot(name)
     q = _sample(model, 50, seed=10)
-    np.testing.assert_allclose(K.gravity_torques(model, q, device="cpu"),
+    np.testing.assert_allclose(K.gravity_torques(model, q, device=device),
                                ref_torques(model, ref_fk(model, q)), atol=1e-9)
     kappa = kappa_uniform(model, KAPPA * 3)
     frames, rho = ref_fk_elastic(model, q, kappa, n_iter=4, lam=0.7)[:2]
-    res = K.fk_elastic(model, q, kappa, lam=0.7, max_iter=4, tol=0.0, device="cpu")
+    res = K.fk_elastic(model, q, kappa, lam=0.7, max_iter=4, tol=0.0, device=device)
     np.testing.assert_allclose(res.frames, frames, atol=1e-10)
     np.testing.assert_allclose(res.rho, rho, atol=1e-12)
     assert (res.iterations == 4).all()
 
 
-def test_justin_elastic_sag_converges_in_three_iterations(capsys):
+def test_justin_elastic_sag_converges_in_three_iterations(device, capsys):
     model = jwarp.robot("justin19")
     q = np.vstack([np.zeros(19), _sample(model, 200, seed=11)])
     kappa = kappa_uniform(model, KAPPA)
-    rigid = K.fk(model, q, device="cpu")
-    exact = K.fk_elastic(model, q, kappa, max_iter=50, tol=1e-12, device="cpu")
+    rigid = K.fk(model, q, device=device)
+    exact = K.fk_elastic(model, q, kappa, max_iter=50, tol=1e-12, device=device)
     assert exact.converged.all()
     tcp = [model.frame_index("right_tcp"), model.frame_index("left_tcp")]
     sag = np.linalg.norm(exact.frames[:, tcp][..., :3, 3] - rigid[:, tcp][..., :3, 3], axis=-1) * 1e3
     residual = []
     for n in range(5):
-        it = K.fk_elastic(model, q, kappa, max_iter=n, tol=0.0, device="cpu")
+        it = K.fk_elastic(model, q, kappa, max_iter=n, tol=0.0, device=device)
         residual.append(np.linalg.norm(it.frames[:, tcp][..., :3, 3] - exact.frames[:, tcp][..., :3, 3],
                                        axis=-1).max() * 1e3)
     with capsys.disabled():
@@ -210,14 +210,14 @@ def test_justin_elastic_sag_converges_in_three_iterations(capsys):
     # contraction by > 5x per update; after 3 updates every TCP is within 0.5 mm
     assert all(residual[k + 1] < 0.2 * residual[k] for k in range(4))
     assert residual[3] < 0.5
-    coarse = K.fk_elastic(model, q, kappa, tol=1e-4, device="cpu")  # 0.1 mm per metre
+    coarse = K.fk_elastic(model, q, kappa, tol=1e-4, device=device)  # 0.1 mm per metre
     with capsys.disabled():
         print(f"updates to tol 1e-4 rad: median {np.median(coarse.iterations):.0f}, "
               f"max {coarse.iterations.max()}")
     assert coarse.converged.all() and np.median(coarse.iterations) <= 3
 
 
-def test_twenty_times_softer_converges_with_damping(capsys):
+def test_twenty_times_softer_converges_with_damping(device, capsys):
     """20x the compliance: lam = 0.5 converges where lam = 1 oscillates. With 20x on the
     torso's lateral axes too, a few configurations approach buckling (kappa * M g h near 1
     for the upright torso carrying ~40 kg) and converge slowly or not at all."""
@@ -225,11 +225,11 @@ def test_twenty_times_softer_converges_with_damping(capsys):
     q = _sample(model, 100, seed=12)
     soft_limbs = kappa_uniform(model, 20 * KAPPA)
     soft_limbs[:5] = KAPPA  # torso frames at the nominal compliance
-    undamped = K.fk_elastic(model, q, soft_limbs, lam=1.0, max_iter=300, tol=1e-9, device="cpu")
-    res = K.fk_elastic(model, q, soft_limbs, lam=0.5, max_iter=300, tol=1e-9, device="cpu")
+    undamped = K.fk_elastic(model, q, soft_limbs, lam=1.0, max_iter=300, tol=1e-9, device=device)
+    res = K.fk_elastic(model, q, soft_limbs, lam=0.5, max_iter=300, tol=1e-9, device=device)
     everything = K.fk_elastic(model, q, kappa_uniform(model, 20 * KAPPA), lam=0.5, max_iter=300,
-                              tol=1e-6, device="cpu")
-    rigid = K.fk(model, q, device="cpu")
+                              tol=1e-6, device=device)
+    rigid = K.fk(model, q, device=device)
     sag = np.linalg.norm(res.frames[:, [13, 22]][..., :3, 3] - rigid[:, [13, 22]][..., :3, 3], axis=-1)
     with capsys.disabled():
         print(f"\n20x softer limbs, lam=0.5: converged {res.converged.mean():.0%}, iterations median "
@@ -248,30 +248,30 @@ def test_twenty_times_softer_converges_with_damping(capsys):
     assert everything.converged.mean() >= 0.9
 
 
-def test_elastic_step_is_one_update_of_the_iteration():
+def test_elastic_step_is_one_update_of_the_iteration(device):
     model = jwarp.robot("justin19")
     q = _sample(model, 8, seed=13)
     kappa = kappa_uniform(model, KAPPA)
-    first = K.elastic_step(model, q, None, kappa, device="cpu")
+    first = K.elastic_step(model, q, None, kappa, device=device)
     np.testing.assert_allclose(first.frames, ref_fk(model, q), atol=1e-12)
-    second = K.elastic_step(model, q, first.rho, kappa, device="cpu")
-    two = K.fk_elastic(model, q, kappa, max_iter=2, tol=0.0, device="cpu")
+    second = K.elastic_step(model, q, first.rho, kappa, device=device)
+    two = K.fk_elastic(model, q, kappa, max_iter=2, tol=0.0, device=device)
     np.testing.assert_allclose(second.rho, two.rho, atol=1e-14)
     assert second.delta.shape == (8,) and (second.delta < first.delta).all()
 
 
-def test_torch_autograd_matches_jacobian():
+def test_torch_autograd_matches_jacobian(device):
     torch = pytest.importorskip("torch")
     model = jwarp.robot("justin19")
     q_np = _sample(model, 4, seed=14)
     q = torch.tensor(q_np, requires_grad=True)
-    frames = K.fk(model, q, device="cpu")
+    frames = K.fk(model, q, device=device)
     assert isinstance(frames, torch.Tensor) and frames.shape == (4, 27, 4, 4)
     frames[:, 13, :3, 3].sum().backward()
-    jac = K.jacobian(model, q_np, "right_tcp", device="cpu")
+    jac = K.jacobian(model, q_np, "right_tcp", device=device)
     np.testing.assert_allclose(q.grad.numpy(), jac[:, :3].sum(1), atol=1e-12)
     q2 = torch.tensor(q_np, requires_grad=True)
-    res = K.fk_elastic(model, q2, KAPPA, max_iter=4, tol=0.0, device="cpu")
+    res = K.fk_elastic(model, q2, KAPPA, max_iter=4, tol=0.0, device=device)
     res.frames[:, 22, 2, 3].sum().backward()
     kappa = kappa_uniform(model, KAPPA)
     fd = np.zeros_like(q_np)
@@ -282,15 +282,15 @@ def test_torch_autograd_matches_jacobian():
                     - ref_fk_elastic(model, q_np - dq, kappa, n_iter=4)[0][:, 22, 2, 3]) / 2e-6
     np.testing.assert_allclose(q2.grad.numpy(), fd, atol=1e-7)
     q32 = torch.tensor(q_np, dtype=torch.float32)
-    out = K.fk(model, q32, device="cpu")
+    out = K.fk(model, q32, device=device)
     assert out.dtype == torch.float32
     np.testing.assert_allclose(out.numpy(), ref_fk(model, q_np), atol=1e-5)
 
 
-def test_warp_arrays_in_warp_arrays_out():
+def test_warp_arrays_in_warp_arrays_out(device):
     model = jwarp.robot("arm7")
     q_np = _sample(model, 16, seed=15)
-    q = wp.array(q_np, dtype=wp.float64, device="cpu")
+    q = wp.array(q_np, dtype=wp.float64, device=device)
     frames = K.fk(model, q)
     assert isinstance(frames, wp.array) and frames.shape == (16, model.n_frames)
     np.testing.assert_allclose(frames.numpy(), ref_fk(model, q_np), atol=1e-12)
@@ -348,7 +348,7 @@ def test_cuda_matches_cpu_and_torch_autograd_on_cuda():
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-def test_kernel_cos_sin_matches_numpy(dtype):
+def test_kernel_cos_sin_matches_numpy(device, dtype):
     """The kernels' cos/sin (a polynomial in float32) against numpy over +-60 rad,
     including the quadrant boundaries k pi/4 where the fix-up switches branches."""
     from jwarp.core.device import scalar_type
@@ -368,17 +368,17 @@ def test_kernel_cos_sin_matches_numpy(dtype):
     quarter = np.arange(-80, 81) * (np.pi / 4)
     x = np.concatenate([rng.uniform(-60, 60, 20000), quarter, quarter + 1e-6, quarter - 1e-6,
                         [0.0, 1e-30, -1e-30]]).astype(dtype)
-    xs = wp.array(x, dtype=scalar, device="cpu")
+    xs = wp.array(x, dtype=scalar, device=device)
     c = wp.empty_like(xs)
     s = wp.empty_like(xs)
-    wp.launch(eval_cos_sin, dim=len(x), inputs=[xs], outputs=[c, s], device="cpu")
+    wp.launch(eval_cos_sin, dim=len(x), inputs=[xs], outputs=[c, s], device=device)
     x64 = x.astype(np.float64)
     tol = 3e-7 if dtype == np.float32 else 1e-15
     np.testing.assert_allclose(c.numpy(), np.cos(x64), rtol=0, atol=tol)
     np.testing.assert_allclose(s.numpy(), np.sin(x64), rtol=0, atol=tol)
 
 
-def test_kernel_cos_sin_step_follows_a_chain_of_steps():
+def test_kernel_cos_sin_step_follows_a_chain_of_steps(device):
     """cos_sin_step (the compensation rows' cos/sin after one update) against numpy along
     2000 chained steps: small steps (the two-term series from the previous cos/sin) must not
     drift; every 100th step is large (the exact path from the nominal angle)."""
@@ -404,23 +404,23 @@ def test_kernel_cos_sin_step_follows_a_chain_of_steps():
     rng = np.random.default_rng(8)
     dx = rng.uniform(-1.9e-4, 1.9e-4, 2000)
     dx[::100] = rng.uniform(-0.05, 0.05, 20)  # larger than the series' range
-    out = wp.zeros((len(dx), 3), dtype=wp.float64, device="cpu")
-    wp.launch(chain, dim=1, inputs=[wp.array(dx, dtype=wp.float64, device="cpu"), 0.7],
-              outputs=[out], device="cpu")
+    out = wp.zeros((len(dx), 3), dtype=wp.float64, device=device)
+    wp.launch(chain, dim=1, inputs=[wp.array(dx, dtype=wp.float64, device=device), 0.7],
+              outputs=[out], device=device)
     x, c, s = out.numpy().T
     # a series with the wrong sign or order would be off by >= dx^3/6 ~ 1e-12 per step
     np.testing.assert_allclose(c, np.cos(x), rtol=0, atol=1e-14)
     np.testing.assert_allclose(s, np.sin(x), rtol=0, atol=1e-14)
 
 
-def test_float32_elastic_equilibrium_matches_float64():
+def test_float32_elastic_equilibrium_matches_float64(device):
     """The float32 step sums subtree moments as differences of prefix sums over the whole
     robot: the rows must still agree with float64 to float32 resolution."""
     model = jwarp.robot("justin19")
     q = _sample(model, 200, seed=15)
     kappa = kappa_uniform(model, KAPPA)
-    f64 = K.fk_elastic(model, q, kappa, max_iter=4, tol=0.0, device="cpu")
-    f32 = K.fk_elastic(model, q.astype(np.float32), kappa, max_iter=4, tol=0.0, device="cpu",
+    f64 = K.fk_elastic(model, q, kappa, max_iter=4, tol=0.0, device=device)
+    f32 = K.fk_elastic(model, q.astype(np.float32), kappa, max_iter=4, tol=0.0, device=device,
                        dtype=np.float32)
     assert f32.rho.dtype == np.float32
     elastic = f64.rho - model.dh_table                 # the deflections, ~1e-3 rad
@@ -433,20 +433,20 @@ def test_float32_elastic_equilibrium_matches_float64():
 
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
-def test_component_major_fk_layout_matches_fk(dtype):
+def test_component_major_fk_layout_matches_fk(device, dtype):
     """launch_fk(component_major=True): memory (n_frames, 4, 4, B), viewed (B, n_frames, 4, 4)."""
     from jwarp.core.device import tables
     model = jwarp.robot("justin19")
     q = _sample(model, 64, seed=16)
     t = tables(model, "cpu", dtype)
-    qa = wp.array(q.astype(dtype), device="cpu")
+    qa = wp.array(q.astype(dtype), device=device)
     out = K.launch_fk(t, qa, component_major=True)
     assert out.shape == (64, 27, 4, 4) and out.strides[0] == np.dtype(dtype).itemsize
     np.testing.assert_allclose(out.numpy(), ref_fk(model, q), atol=1e-12 if dtype == np.float64 else 1e-5)
     rho = np.repeat(model.dh_table[None], 64, 0) + 1e-3
-    dh = (wp.array(rho.astype(dtype), device="cpu"), 1)
+    dh = (wp.array(rho.astype(dtype), device=device), 1)
     np.testing.assert_array_equal(K.launch_fk(t, qa, dh=dh, component_major=True).numpy(),
                                   K.launch_fk(t, qa, dh=dh).numpy())
     with pytest.raises(ValueError, match="frames: component_major"):
-        K.launch_fk(t, qa, frames=wp.empty((64, 27, 4), dtype=t.scalar, device="cpu"),
+        K.launch_fk(t, qa, frames=wp.empty((64, 27, 4), dtype=t.scalar, device=device),
                     component_major=True)

@@ -74,7 +74,7 @@ def test_substeps_match_numpy(n_sub):
     np.testing.assert_allclose(planner.substeps(Q, n_sub), ref_substeps(Q, n_sub), atol=1e-14)
 
 
-def test_path_cost_matches_numpy():
+def test_path_cost_matches_numpy(device):
     rng = np.random.default_rng(2)
     Q = rng.normal(size=(5, 7, 3))
     Q[4, -1] = Q[4, 0]  # start == goal: the normaliser floor keeps it finite
@@ -82,9 +82,9 @@ def test_path_cost_matches_numpy():
     qs = _sub_arrays(Q, n_sub)
     sub_cost = f_sub(qs)
     P = len(Q)
-    out = [wp.empty(P, dtype=F64, device="cpu") for _ in range(4)]
+    out = [wp.empty(P, dtype=F64, device=device) for _ in range(4)]
     wp.launch(K64.path_cost, dim=P, inputs=[_w(Q), _w(sub_cost), n_sub, lam_l, FLOOR],
-              outputs=out, device="cpu")
+              outputs=out, device=device)
     length, coll, total, smax = (o.numpy() for o in out)
     np.testing.assert_allclose(smax, np.maximum(sub_cost.reshape(P, -1).max(1), 0), rtol=1e-12)
     np.testing.assert_allclose(length, ref_length(Q), rtol=1e-12)
@@ -93,20 +93,20 @@ def test_path_cost_matches_numpy():
     # the straight line has length cost exactly 1 (thesis 3.3.2)
     line = np.linspace(0, 1, 7)[None, :, None] * np.array([1.0, -2.0, 0.5])
     wp.launch(K64.path_cost, dim=1, inputs=[_w(line), _w(np.zeros(25)), n_sub, lam_l, FLOOR],
-              outputs=out[:1] + [wp.empty(1, dtype=F64) for _ in range(3)], device="cpu")
+              outputs=out[:1] + [wp.empty(1, dtype=F64) for _ in range(3)], device=device)
     np.testing.assert_allclose(out[0].numpy()[0], 1.0, rtol=1e-12)
 
 
 @pytest.mark.parametrize("n_sub", [1, 3])
-def test_path_gradient_matches_central_fd(n_sub):
+def test_path_gradient_matches_central_fd(device, n_sub):
     rng = np.random.default_rng(3)
     Q = rng.normal(size=(3, 6, 3))
     lam_l = 0.7
     P, W, n = Q.shape
-    grad = wp.empty((P, W, n), dtype=F64, device="cpu")
+    grad = wp.empty((P, W, n), dtype=F64, device=device)
     sub_grad = df_sub(_sub_arrays(Q, n_sub))
     wp.launch(K64.path_grad, dim=(P, W), inputs=[_w(Q), _w(sub_grad), n_sub, lam_l, FLOOR],
-              outputs=[grad], device="cpu")
+              outputs=[grad], device=device)
     g = grad.numpy()
     fd = np.zeros_like(Q)
     h = 1e-6
@@ -120,7 +120,7 @@ def test_path_gradient_matches_central_fd(n_sub):
     assert np.all(g[:, 0] == 0) and np.all(g[:, -1] == 0)
 
 
-def test_step_kernel_clamps_projects_and_freezes():
+def test_step_kernel_clamps_projects_and_freezes(device):
     robot = jwarp.robot("justin19")
     rng = np.random.default_rng(4)
     P, W, n, n_sub = 3, 5, robot.n_dof, 2
@@ -132,10 +132,10 @@ def test_step_kernel_clamps_projects_and_freezes():
     step, max_step, lam_l = 0.01, 0.3, 0.2
     lim = limit_tables(robot, "cpu", np.float64)
     active = np.array([1, 0, 1], np.int32)
-    out = wp.empty((P * W, n), dtype=F64, device="cpu")
+    out = wp.empty((P * W, n), dtype=F64, device=device)
     wp.launch(K64.path_step, dim=(P, W),
               inputs=[_w(Q), _w(sub_grad), n_sub, lam_l, FLOOR, step, max_step,
-                      wp.array(active, dtype=wp.int32), *lim.args], outputs=[out], device="cpu")
+                      wp.array(active, dtype=wp.int32), *lim.args], outputs=[out], device=device)
     got = out.numpy().reshape(P, W, n)
     # numpy: gradient with hat weights + length term, clamp, projection
     g = np.zeros_like(Q)
@@ -154,20 +154,20 @@ def test_step_kernel_clamps_projects_and_freezes():
     assert np.any(np.abs(got[0, 1:-1, 1] + got[0, 1:-1, 2] - 2.356194490192345) < 1e-9)
 
 
-def test_projection_justin_torso_polygon():
+def test_projection_justin_torso_polygon(device):
     robot = jwarp.robot("justin19")
     rng = np.random.default_rng(5)
     q = rng.uniform(-4, 4, size=(2000, robot.n_dof))
     lim = limit_tables(robot, "cpu", np.float64)
     arr = _w(q)
-    wp.launch(K64.project, dim=len(q), inputs=[*lim.args], outputs=[arr], device="cpu")
+    wp.launch(K64.project, dim=len(q), inputs=[*lim.args], outputs=[arr], device=device)
     got = arr.numpy()
     assert limit_violation(robot, got).max() < 1e-12
     np.testing.assert_allclose(got, project_numpy(robot, q), atol=1e-12)
     # points inside the limits are left alone
     inside = project_numpy(robot, q)
     arr = _w(inside)
-    wp.launch(K64.project, dim=len(q), inputs=[*lim.args], outputs=[arr], device="cpu")
+    wp.launch(K64.project, dim=len(q), inputs=[*lim.args], outputs=[arr], device=device)
     np.testing.assert_array_equal(arr.numpy(), inside)
 
 
