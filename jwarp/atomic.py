@@ -129,7 +129,27 @@ def clean_stale(target: str | os.PathLike) -> list[Path]:
     return removed
 
 
-class AtomicFile:
+class _CommitOnExit:
+    """Context manager of :class:`AtomicFile` and :class:`AtomicFolder`: commits when the
+    block ends without error, discards otherwise."""
+
+    def commit(self) -> Any:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def discard(self) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def __enter__(self) -> Any:
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc_type is None:
+            self.commit()
+        else:
+            self.discard()
+
+
+class AtomicFile(_CommitOnExit):
     """A temporary file beside ``path`` (same folder, so the rename is atomic; the usual
     file mode, not mkstemp's 0600). Write to :attr:`tmp`, then :meth:`commit` renames it
     onto ``path`` or :meth:`discard` removes it. As a context manager it commits when the
@@ -184,14 +204,6 @@ class AtomicFile:
         if self.tmp.exists():
             self.tmp.unlink()
 
-    def __enter__(self) -> "AtomicFile":
-        return self
-
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
-        if exc_type is None:
-            self.commit()
-        else:
-            self.discard()
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
@@ -276,7 +288,7 @@ def _link_tree(src: Path, dst: Path, skip: Iterable[str] = ()) -> None:
                 shutil.copy2(s, d)
 
 
-class AtomicFolder:
+class AtomicFolder(_CommitOnExit):
     """A set of files that replaces the folder ``path`` as one: write the files into
     :attr:`tmp` (a new folder ``.<name>.tmp-<token>`` beside ``path``, e.g. with
     :meth:`file` and :func:`atomic_write_text`), then :meth:`commit` swaps it in; readers
@@ -376,11 +388,3 @@ class AtomicFolder:
         """Remove the temporary folder (the target stays as it was)."""
         _remove(self.tmp)
 
-    def __enter__(self) -> "AtomicFolder":
-        return self
-
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
-        if exc_type is None:
-            self.commit()
-        else:
-            self.discard()

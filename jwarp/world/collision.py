@@ -307,6 +307,17 @@ class CollisionModel:
                        device=self.device)
         return DHRows.per_config(arr) if a.ndim == 3 else DHRows.shared(arr)
 
+    def _cost_args(self, q: Any, eps: Any, w_world: Any, w_self: Any
+                   ) -> tuple[int, float, float, float]:
+        """Checked arguments of :meth:`cost` and :meth:`cost_tape`: batch size, eps > 0 [m]
+        and the two weights, each a real number in the computing dtype."""
+        self._check_q(q)
+        eps = real_number(eps, "eps", self.dtype)
+        if eps <= 0:
+            raise ValueError(f"eps: expected a positive distance [m], got {eps}")
+        return (q.shape[0], eps, real_number(w_world, "w_world", self.dtype),
+                real_number(w_self, "w_self", self.dtype))
+
     def _check_q(self, q: wp.array) -> None:
         if not isinstance(q, wp.array):
             raise TypeError(f"q: expected a warp array (use collision_cost for numpy/torch), "
@@ -356,13 +367,7 @@ class CollisionModel:
         Returns:
             ``(cost (N,), grad (N, n_dof) or None)`` as Warp arrays (no host copies).
         """
-        self._check_q(q)
-        n = q.shape[0]
-        eps = real_number(eps, "eps", self.dtype)
-        if eps <= 0:
-            raise ValueError(f"eps: expected a positive distance [m], got {eps}")
-        w_world = real_number(w_world, "w_world", self.dtype)
-        w_self = real_number(w_self, "w_self", self.dtype)
+        n, eps, w_world, w_self = self._cost_args(q, eps, w_world, w_self)
         d = self._work
         if data is not None or d is None or n > d.n:
             d = self._data(data, n)
@@ -414,13 +419,7 @@ class CollisionModel:
         sphere and per sphere pair, atomic sums). Slower; a cross-check of the
         hand-written gradient and the route for derivatives w.r.t. other inputs.
         Returns ``(cost (N,), grad (N, n_dof))`` Warp arrays."""
-        self._check_q(q)
-        n = q.shape[0]
-        eps = real_number(eps, "eps", self.dtype)
-        if eps <= 0:
-            raise ValueError(f"eps: expected a positive distance [m], got {eps}")
-        w_world = real_number(w_world, "w_world", self.dtype)
-        w_self = real_number(w_self, "w_self", self.dtype)
+        n, eps, w_world, w_self = self._cost_args(q, eps, w_world, w_self)
         rows = self.dh_rows(rho, n, expand=True)
         qg = wp.clone(q)
         qg.requires_grad = True
