@@ -4,12 +4,14 @@ the CUDA half with ``-k cuda``."""
 
 import pytest
 
-from devices import cuda_available
+from devices import cpu_available, cuda_available
 
-DEVICES = ["cpu"] + (["cuda:0"] if cuda_available() else [])
+DEVICES = ((["cpu"] if cpu_available() else [])
+           + (["cuda:0"] if cuda_available() else []))
 
 
 @pytest.fixture(params=DEVICES)
 def device(request) -> str:
-    """A Warp device name: "cpu", then "cuda:0" where present."""
+    """A Warp device name: "cpu" (where Warp's CPU backend is loaded), then "cuda:0"
+    where present."""
     return request.param

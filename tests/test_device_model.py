@@ -227,6 +227,14 @@ def test_fk_from_the_model_tables_matches_numpy(name):
     np.testing.assert_allclose(frames.numpy(), ref_fk(r, q), atol=1e-12)
 
 
+@pytest.mark.parametrize("name", sorted(jwarp.robots()))
+def test_host_frames_match_numpy(name):
+    """The host FK that builds the sphere tables (no Warp CPU compiler needed)."""
+    r = jwarp.robot(name)
+    q = sample_within_limits(r, 8, np.random.default_rng(2))
+    np.testing.assert_allclose(D.host_frames(r, q), ref_fk(r, q), atol=1e-12)
+
+
 def test_frame_masses_copy_shares_every_other_table():
     m = put_model("justin19", "cpu", np.float64)
     _ = m.frame_struct, m.spheres

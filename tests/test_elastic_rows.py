@@ -31,10 +31,10 @@ def _block_world():
     return world_from_occupancy((np.abs(X - 0.6) < 0.15) & (Z < 1.0), lim, h)
 
 
-def _frames(model, F):
-    """(N, nf, 4, 4) numpy -> warp mat44 array (N, nf) float64 on the CPU."""
+def _frames(model, F, device="cpu"):
+    """(N, nf, 4, 4) numpy -> warp mat44 array (N, nf) float64 on ``device``."""
     return wp.array(np.ascontiguousarray(F), dtype=fk_kernels.kernels(wp.float64).mat44,
-                    device="cpu")
+                    device=device)
 
 
 def _expected(model, F, prev, kappa):
@@ -123,9 +123,9 @@ def test_cost_at_compensation_rows_equals_cost_at_expanded_rows(device):
     P, W, n_sub = 3, 4, 5
     S = (W - 1) * n_sub + 1
     q = sample_within_limits(model, P * S, np.random.default_rng(3))
-    rows = CompensationRows(tables(model, "cpu", np.float64), P, W, n_sub, 3e-3, LAM)
+    rows = CompensationRows(tables(model, device, np.float64), P, W, n_sub, 3e-3, LAM)
     for _ in range(2):
-        rows.update(_frames(model, ref_fk(model, q, rows.rho())))
+        rows.update(_frames(model, ref_fk(model, q, rows.rho()), device))
     cm = collision.collision_model(model, world, device=device, dtype=np.float64)
     qw = wp.array(q, dtype=wp.float64, device=device)
     c2, g2 = (a.numpy() for a in cm.cost(qw, rho=rows, eps=0.05))
@@ -149,12 +149,12 @@ def test_cost_at_compensation_rows_equals_cost_at_expanded_rows(device):
         np.testing.assert_allclose(g2[hit, j], ((cp - cmn) / (2 * h))[hit], rtol=1e-4,
                                    atol=1e-6)
     # the update fused into the cost launch equals the update from reference frames
-    twin = CompensationRows(tables(model, "cpu", np.float64), P, W, n_sub, 3e-3, LAM)
+    twin = CompensationRows(tables(model, device, np.float64), P, W, n_sub, 3e-3, LAM)
     for _ in range(2):
-        twin.update(_frames(model, ref_fk(model, q, twin.rho())))
+        twin.update(_frames(model, ref_fk(model, q, twin.rho()), device))
     F = ref_fk(model, q, rows.rho())
     cm.cost(qw, rho=rows, eps=0.05, update_rows=True)
-    twin.update(_frames(model, F))
+    twin.update(_frames(model, F, device))
     np.testing.assert_allclose(rows.rows.numpy(), twin.rows.numpy(), atol=1e-12)
     np.testing.assert_allclose(rows.delta.numpy(), twin.delta.numpy(), atol=1e-12)
     assert rows.iterations == 3
@@ -218,9 +218,10 @@ def test_waypoint_thread_maps_threads_to_configurations_and_rows(device, P, W, n
     """CPU layout: thread b is configuration b. CUDA layout (P given): a permutation with
     the waypoints first. Either way each configuration reads its nearest waypoint's row."""
     model = jwarp.robot("planar4")
-    rows = CompensationRows(tables(model, "cpu", np.float32), P, W, n_sub, 1e-3, LAM)
+    rows = CompensationRows(tables(model, device, np.float32), P, W, n_sub, 1e-3, LAM)
     layout = rows.layout
-    assert layout == (rows.S, n_sub, W, 0)  # the CPU's
+    assert layout[:3] == (rows.S, n_sub, W)
+    layout = layout[:3] + (0,)  # the CPU's
     if waypoints_first:
         layout = layout[:3] + (P,)  # the CUDA layout
     out = wp.zeros((rows.N, 3), dtype=wp.int32, device=device)

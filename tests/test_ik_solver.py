@@ -17,9 +17,8 @@ from jwarp.kernels import ik_step
 from jwarp.solvers import ik as IK
 from jwarp.world import collision, shelf_world
 
-from devices import requires_cuda
+from devices import requires_cpu, requires_cuda
 
-DEVICES = ["cpu", pytest.param("cuda:0", marks=requires_cuda)]
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -52,7 +51,6 @@ def _dls_numpy(J, err, g, on, mu2, alpha, max_step, rows):
     return d * np.minimum(1.0, max_step / np.maximum(np.abs(d).max(1, keepdims=True), 1e-300))
 
 
-@pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("planar", [False, True])
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_dls_kernel_matches_numpy_solve(device, planar, dtype):
@@ -129,6 +127,7 @@ def test_solver_matches_the_host_loop_in_the_shelf():
     np.testing.assert_allclose(new.q, old.q, rtol=0, atol=1e-9)
 
 
+@requires_cpu
 @requires_cuda
 def test_cuda_solver_matches_the_cpu_solver_float64():
     robot = jwarp.robot("justin19")
@@ -145,7 +144,6 @@ def test_cuda_solver_matches_the_cpu_solver_float64():
 
 
 # ------------------------------------------------------------ the device's checks
-@pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_device_feasibility_check_matches_the_host_check(device, dtype):
     """Seeds that sit on their targets are checked at iteration 0: feasible exactly where
@@ -167,7 +165,6 @@ def test_device_feasibility_check_matches_the_host_check(device, dtype):
     assert np.all(res.iterations[res.feasible] == 0)
 
 
-@pytest.mark.parametrize("device", DEVICES)
 def test_best_seed_selection_on_the_device_matches_numpy(device):
     rng = np.random.default_rng(4)
     P, S, n = 40, 7, 5
@@ -188,7 +185,6 @@ def test_best_seed_selection_on_the_device_matches_numpy(device):
 
 
 # ------------------------------------------------------------ reuse, seeds, options
-@pytest.mark.parametrize("device", DEVICES)
 def test_solver_is_reused_without_reallocation(device):
     robot = jwarp.robot("arm7")
     _, T = _free_targets(robot, "tcp", 3, seed=7, device=device)
@@ -209,7 +205,6 @@ def test_solver_is_reused_without_reallocation(device):
     assert solver.n_seeds == 2 and res.all_q.shape == (3, 2, robot.n_dof)
 
 
-@pytest.mark.parametrize("device", DEVICES)
 def test_caller_seeds_are_used(device):
     robot = jwarp.robot("justin19")
     qt, T = _free_targets(robot, "right_tcp", 2, seed=9, device=device)
@@ -282,7 +277,6 @@ def test_ik_reuses_a_cached_solver_with_the_same_answer():
     np.testing.assert_array_equal(warm.all_iterations, cold.all_iterations)
 
 
-@pytest.mark.parametrize("device", DEVICES)
 def test_random_seeds_are_drawn_on_the_device_within_the_limits(device):
     robot = jwarp.robot("justin19")  # box and linear (torso) limits
     far = np.eye(4)
@@ -299,7 +293,6 @@ def test_random_seeds_are_drawn_on_the_device_within_the_limits(device):
     np.testing.assert_array_equal(solver.solve(far).all_q.reshape(-1, robot.n_dof), q)
 
 
-@pytest.mark.parametrize("device", DEVICES)
 def test_freeze_solved_stops_the_other_seeds(device):
     robot = jwarp.robot("arm7")
     _, T = _free_targets(robot, "tcp", 6, seed=13, device=device)
@@ -319,7 +312,6 @@ def test_freeze_solved_stops_the_other_seeds(device):
     assert frozen.n_feasible.sum() <= full.n_feasible.sum()
 
 
-@pytest.mark.parametrize("device", DEVICES)
 def test_elastic_solver_reaches_the_equilibrium_target(device):
     from jwarp.solvers import compensation as C
 

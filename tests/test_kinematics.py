@@ -128,10 +128,10 @@ def test_dh_jacobian_matches_finite_differences(device, name, frame):
     assert jac.shape == (5, 6, model.n_frames, 5)
     fd = _pose_fd(lambda x: ref_fk(model, q, dh=x.reshape(dh.shape))[:, fi], dh.copy())
     np.testing.assert_allclose(jac.reshape(5, 6, -1), fd, atol=1e-7)
-    tape = tape_jacobian(model, q, frame, dh=dh, wrt=("q", "dh"))
+    tape = tape_jacobian(model, q, frame, dh=dh, wrt=("q", "dh"), device=device)
     np.testing.assert_allclose(tape["dh"], jac, atol=1e-10)
     np.testing.assert_allclose(tape["q"], K.jacobian(model, q, frame, dh=dh, device=device), atol=1e-10)
-    nominal = tape_jacobian(model, q, frame, wrt=("dh",))  # beta = 0: d/d beta must not vanish
+    nominal = tape_jacobian(model, q, frame, wrt=("dh",), device=device)  # beta = 0: d/d beta must not vanish
     np.testing.assert_allclose(nominal["dh"], K.jacobian_dh(model, q, frame, device=device), atol=1e-10)
 
 
@@ -438,7 +438,7 @@ def test_component_major_fk_layout_matches_fk(device, dtype):
     from jwarp.core.device import tables
     model = jwarp.robot("justin19")
     q = _sample(model, 64, seed=16)
-    t = tables(model, "cpu", dtype)
+    t = tables(model, device, dtype)
     qa = wp.array(q.astype(dtype), device=device)
     out = K.launch_fk(t, qa, component_major=True)
     assert out.shape == (64, 27, 4, 4) and out.strides[0] == np.dtype(dtype).itemsize

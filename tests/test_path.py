@@ -50,23 +50,24 @@ def ref_upath(Q, n_sub, lam_l):
     return f_sub(qs.reshape(-1, Q.shape[2])).reshape(qs.shape[:2]).sum(1) + lam_l * ref_length(Q)
 
 
-def _w(a, dt=F64):
-    return wp.array(np.ascontiguousarray(a), dtype=dt, device="cpu")
+def _w(a, dt=F64, device="cpu"):
+    return wp.array(np.ascontiguousarray(a), dtype=dt, device=device)
 
 
-def _sub_arrays(Q, n_sub):
+def _sub_arrays(Q, n_sub, device="cpu"):
     P, W, n = Q.shape
     S = (W - 1) * n_sub + 1
-    q_sub = wp.empty((P * S, n), dtype=F64, device="cpu")
-    wp.launch(K64.substeps, dim=(P, S), inputs=[_w(Q), n_sub], outputs=[q_sub], device="cpu")
+    q_sub = wp.empty((P * S, n), dtype=F64, device=device)
+    wp.launch(K64.substeps, dim=(P, S), inputs=[_w(Q, device=device), n_sub], outputs=[q_sub],
+              device=device)
     return q_sub.numpy()
 
 
 # ------------------------------------------------------------------ tests
 @pytest.mark.parametrize("n_sub", [1, 3, 5])
-def test_substeps_match_numpy(n_sub):
+def test_substeps_match_numpy(device, n_sub):
     Q = np.random.default_rng(1).normal(size=(4, 6, 3))
-    got = _sub_arrays(Q, n_sub).reshape(4, -1, 3)
+    got = _sub_arrays(Q, n_sub, device).reshape(4, -1, 3)
     np.testing.assert_allclose(got, ref_substeps(Q, n_sub), atol=1e-14)
     # waypoints are exactly the substeps s = t n_sub
     np.testing.assert_array_equal(got[:, ::n_sub], Q)
@@ -79,11 +80,11 @@ def test_path_cost_matches_numpy(device):
     Q = rng.normal(size=(5, 7, 3))
     Q[4, -1] = Q[4, 0]  # start == goal: the normaliser floor keeps it finite
     n_sub, lam_l = 4, 0.3
-    qs = _sub_arrays(Q, n_sub)
+    qs = _sub_arrays(Q, n_sub, device)
     sub_cost = f_sub(qs)
     P = len(Q)
     out = [wp.empty(P, dtype=F64, device=device) for _ in range(4)]
-    wp.launch(K64.path_cost, dim=P, inputs=[_w(Q), _w(sub_cost), n_sub, lam_l, FLOOR],
+    wp.launch(K64.path_cost, dim=P, inputs=[_w(Q, device=device), _w(sub_cost, device=device), n_sub, lam_l, FLOOR],
               outputs=out, device=device)
     length, coll, total, smax = (o.numpy() for o in out)
     np.testing.assert_allclose(smax, np.maximum(sub_cost.reshape(P, -1).max(1), 0), rtol=1e-12)
@@ -92,8 +93,8 @@ def test_path_cost_matches_numpy(device):
     np.testing.assert_allclose(total, ref_upath(Q, n_sub, lam_l), rtol=1e-12)
     # the straight line has length cost exactly 1 (thesis 3.3.2)
     line = np.linspace(0, 1, 7)[None, :, None] * np.array([1.0, -2.0, 0.5])
-    wp.launch(K64.path_cost, dim=1, inputs=[_w(line), _w(np.zeros(25)), n_sub, lam_l, FLOOR],
-              outputs=out[:1] + [wp.empty(1, dtype=F64) for _ in range(3)], device=device)
+    wp.launch(K64.path_cost, dim=1, inputs=[_w(line, device=device), _w(np.zeros(25), device=device), n_sub, lam_l, FLOOR],
+              outputs=out[:1] + [wp.empty(1, dtype=F64, device=device) for _ in range(3)], device=device)
     np.testing.assert_allclose(out[0].numpy()[0], 1.0, rtol=1e-12)
 
 
@@ -104,8 +105,8 @@ def test_path_gradient_matches_central_fd(device, n_sub):
     lam_l = 0.7
     P, W, n = Q.shape
     grad = wp.empty((P, W, n), dtype=F64, device=device)
-    sub_grad = df_sub(_sub_arrays(Q, n_sub))
-    wp.launch(K64.path_grad, dim=(P, W), inputs=[_w(Q), _w(sub_grad), n_sub, lam_l, FLOOR],
+    sub_grad = df_sub(_sub_arrays(Q, n_sub, device))
+    wp.launch(K64.path_grad, dim=(P, W), inputs=[_w(Q, device=device), _w(sub_grad, device=device), n_sub, lam_l, FLOOR],
               outputs=[grad], device=device)
     g = grad.numpy()
     fd = np.zeros_like(Q)
@@ -130,12 +131,12 @@ def test_step_kernel_clamps_projects_and_freezes(device):
     sub_grad = rng.normal(scale=50.0, size=(P * S, n))
     sub_grad[:, 2] = -400.0  # pushes q2 up: the torso sum q1 + q2 must be projected
     step, max_step, lam_l = 0.01, 0.3, 0.2
-    lim = limit_tables(robot, "cpu", np.float64)
+    lim = limit_tables(robot, device, np.float64)
     active = np.array([1, 0, 1], np.int32)
     out = wp.empty((P * W, n), dtype=F64, device=device)
     wp.launch(K64.path_step, dim=(P, W),
-              inputs=[_w(Q), _w(sub_grad), n_sub, lam_l, FLOOR, step, max_step,
-                      wp.array(active, dtype=wp.int32), *lim.args], outputs=[out], device=device)
+              inputs=[_w(Q, device=device), _w(sub_grad, device=device), n_sub, lam_l, FLOOR, step, max_step,
+                      wp.array(active, dtype=wp.int32, device=device), *lim.args], outputs=[out], device=device)
     got = out.numpy().reshape(P, W, n)
     # numpy: gradient with hat weights + length term, clamp, projection
     g = np.zeros_like(Q)
@@ -158,15 +159,15 @@ def test_projection_justin_torso_polygon(device):
     robot = jwarp.robot("justin19")
     rng = np.random.default_rng(5)
     q = rng.uniform(-4, 4, size=(2000, robot.n_dof))
-    lim = limit_tables(robot, "cpu", np.float64)
-    arr = _w(q)
+    lim = limit_tables(robot, device, np.float64)
+    arr = _w(q, device=device)
     wp.launch(K64.project, dim=len(q), inputs=[*lim.args], outputs=[arr], device=device)
     got = arr.numpy()
     assert limit_violation(robot, got).max() < 1e-12
     np.testing.assert_allclose(got, project_numpy(robot, q), atol=1e-12)
     # points inside the limits are left alone
     inside = project_numpy(robot, q)
-    arr = _w(inside)
+    arr = _w(inside, device=device)
     wp.launch(K64.project, dim=len(q), inputs=[*lim.args], outputs=[arr], device=device)
     np.testing.assert_array_equal(arr.numpy(), inside)
 

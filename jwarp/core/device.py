@@ -421,21 +421,47 @@ def _limit_tables(robot: RobotModel, dev: wp.Device, scalar: type) -> LimitTable
 
 
 # ====================================================================== collision tables
-def _pair_distance_spread(host: DeviceModel, pairs: np.ndarray, n: int = 32,
+def host_frames(robot: RobotModel, q: np.ndarray) -> np.ndarray:
+    """World transforms (B, n_frames, 4, 4) of every frame at joint values ``q`` (B, n_dof)
+    [rad or m], float64 numpy on the host: for tables built once per robot, so that a
+    machine without a CPU compiler for Warp (a GPU-only install) can still build them.
+    DH convention of :mod:`jwarp.kernels.fk`."""
+    q = np.asarray(q, np.float64).reshape(-1, robot.n_dof)
+    qi = q @ robot.coupling_matrix.T                               # (B, n_frames)
+    dh = robot.dh_table
+    pris = robot.frame_is_prismatic
+    d = dh[:, 0] + np.where(pris, qi, 0.0)
+    th = dh[:, 1] + np.where(pris, 0.0, qi)
+    ca, sa, cb, sb = np.cos(dh[:, 3]), np.sin(dh[:, 3]), np.cos(dh[:, 4]), np.sin(dh[:, 4])
+    ct, st = np.cos(th), np.sin(th)
+    one, zero = np.ones_like(ca), np.zeros_like(ca)
+    fixed = np.stack([np.stack([cb, sb * sa, sb * ca], -1),       # Rot_y(beta) Rot_x(alpha)
+                      np.stack([zero, ca, -sa], -1),
+                      np.stack([-sb, cb * sa, cb * ca], -1)], -2)
+    rz = np.zeros(th.shape + (3, 3))
+    rz[..., 0, 0], rz[..., 0, 1], rz[..., 1, 0], rz[..., 1, 1], rz[..., 2, 2] = ct, -st, st, ct, 1
+    local = np.tile(np.eye(4), th.shape + (1, 1))
+    local[..., :3, :3] = fixed @ rz
+    local[..., :3, 3] = (fixed @ np.stack([dh[:, 2], zero, zero], -1)[..., None])[..., 0] \
+        + local[..., :3, 2] * d[..., None]
+    static = ~robot.is_dh
+    local[:, static] = robot.static_transforms[static]
+    out = np.empty_like(local)
+    parents = robot.parents
+    for i in robot.topological_order:
+        out[:, i] = local[:, i] if parents[i] < 0 else out[:, parents[i]] @ local[:, i]
+    return out
+
+
+def _pair_distance_spread(robot: RobotModel, pairs: np.ndarray, n: int = 32,
                           seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) surface distance [m] of sphere ``pairs`` (P, 2) over q = 0 and ``n``
-    random configurations within the joint limits (float64 FK with the model ``host``)."""
-    robot = host.robot
+    random configurations within the joint limits (float64 FK on the host)."""
     f, p, r = robot.sphere_arrays()
     lim = robot.joint_limits
     q = np.random.default_rng(seed).uniform(lim[:, 0], lim[:, 1], (n, robot.n_dof))
     q = np.concatenate([np.zeros((1, robot.n_dof)), q])
-    k = fk_kernels(host.scalar)
-    qw = wp.array(q, dtype=host.scalar, device=host.device)
-    frames = wp.empty((len(q), robot.n_frames), dtype=k.mat44, device=host.device)
-    wp.launch(k.fk, dim=len(q), inputs=[qw, *host.nominal_rows.args, host.frame_struct],
-              outputs=[frames], device=host.device)
-    T = frames.numpy()[:, f]
+    T = host_frames(robot, q)[:, f]
     x = np.einsum("bsij,sj->bsi", T[..., :3, :3], p) + T[..., :3, 3]
     d = np.linalg.norm(x[:, pairs[:, 0]] - x[:, pairs[:, 1]], axis=-1) - r[pairs[:, 0]] - r[pairs[:, 1]]
     return d.min(0), d.max(0)
@@ -464,7 +490,7 @@ def _collision_tables(host: DeviceModel) -> dict:
     rigid = np.zeros(len(cand), bool)
     dmin = np.zeros(len(cand))
     if len(cand):
-        dmin, dmax = _pair_distance_spread(host, cand)
+        dmin, dmax = _pair_distance_spread(robot, cand)
         rigid = (dmax - dmin < 1e-9) & (dmin > 0)
     groups: dict[tuple[int, int], list[tuple[int, int]]] = {}
     for (a, b) in cand[~rigid].tolist():
