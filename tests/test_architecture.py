@@ -196,3 +196,14 @@ def test_api_doc_lists_the_facade():
     text = (ROOT.parent / "docs" / "api.md").read_text()
     missing = [n for n in jwarp.__all__ if f"jwarp.{n}" not in text]
     assert not missing, f"docs/api.md does not list {missing}"
+
+
+def test_tests_mirror_the_packages():
+    """tests/<package>/ for jwarp's packages (and the benchmarks); basenames unique, so that
+    pytest's rootdir-less imports cannot mix two test modules up."""
+    tests = Path(__file__).resolve().parent
+    packages = {p.name for p in ROOT.iterdir() if (p / "__init__.py").exists()} | {"benchmarks"}
+    folders = {p.name for p in tests.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))}
+    assert folders <= packages, f"test folders without a package: {sorted(folders - packages)}"
+    names = [p.name for p in tests.rglob("test_*.py")]
+    assert len(names) == len(set(names)), sorted(n for n in names if names.count(n) > 1)

@@ -574,7 +574,7 @@ def test_docs_setup_examples_build():
     import json
     import re
     from pathlib import Path
-    text = (Path(__file__).resolve().parents[1] / "docs" / "measurements.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "docs" / "measurements.md").read_text()
     blocks = re.findall(r"```json\n(.*?)```", text, re.S)
     assert len(blocks) == 4
     built = set()
@@ -592,7 +592,7 @@ def test_bench_measurements_quick(tmp_path):
     import subprocess
     import sys
     from pathlib import Path
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     out = tmp_path / "bench.json"
     proc = subprocess.run([sys.executable, str(root / "benchmarks" / "bench_measurements.py"),
                            "--quick", "--json", str(out)], cwd=root, capture_output=True,

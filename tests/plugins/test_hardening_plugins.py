@@ -28,7 +28,7 @@ from jwarp.cli import main
 from jwarp.model import Mass, RobotModel, RobotModelError, Sphere
 from jwarp.registry import PluginError, PluginWarning
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 BUILTIN_ROBOTS = {"arm7", "hand4", "justin19", "planar4", "planar5", "sphere2d"}
 BUILTIN_MEASUREMENTS = {"cartesian", "contact", "image", "relative"}
 

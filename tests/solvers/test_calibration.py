@@ -23,7 +23,7 @@ from jwarp.solvers.calibration import elastic as E
 from jwarp.solvers.calibration.params import perturb_robot
 from jwarp.solvers.calibration.result import model_frames
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 KAPPA = 1e-4  # rad/(N m), Agile Justin's order of magnitude
 
 

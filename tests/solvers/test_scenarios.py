@@ -20,7 +20,7 @@ from jwarp.solvers.calibration.result import model_frames
 from jwarp.solvers.calibration.scenarios import (available, contact_sampler, hand_contact_setup,
                                                  look_at_head_joints, scenario)
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def test_available_and_unknown_combination():

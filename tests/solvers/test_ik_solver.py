@@ -19,7 +19,7 @@ from jwarp.world import collision, shelf_world
 
 from devices import requires_cpu, requires_cuda
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _bench():

@@ -28,7 +28,7 @@ from jwarp.solvers.calibration.campaign import (justin_tracker_setup, read_campa
 from jwarp.solvers.calibration.files import (DataWarning, make_measurement, parse_samples,
                                              read_samples, read_setup, sha256_hex)
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
 SIM = ["simulate-campaign", "--robot", "justin19", "--samples", "30"]
 

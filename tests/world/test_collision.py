@@ -335,7 +335,7 @@ def test_bench_collision_quick_cpu(tmp_path):
     import sys
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     out = tmp_path / "bench.json"
     proc = subprocess.run([sys.executable, str(root / "benchmarks" / "bench_collision.py"), "--quick",
                            "--robots", "planar4", "--json", str(out)],
