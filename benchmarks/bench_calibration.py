@@ -13,9 +13,12 @@ model, 3 minutes there).
     python benchmarks/bench_calibration.py --samples 100 --test 100 --quick
     python benchmarks/bench_calibration.py --threads 1     # one CPU core (BLAS threads)
 
-Prints wall time, iterations, function evaluations and the train/test errors [mm] before
-(nominal robot, tracker and markers fitted) and after. ``--device`` is accepted for
-symmetry with the other benchmarks; the calibration runs in float64 on the CPU.
+Prints the machine, the wall time of the calibration (min and median over ``--repeats``
+runs after an untimed warm-up run, through ``benchmarks/timing.py``: every run solves the
+same problem from the same seed), iterations, function evaluations and the train/test
+errors [mm] before (nominal robot, tracker and markers fitted) and after. ``--device`` is
+accepted for symmetry with the other benchmarks; the calibration runs in float64 on the
+CPU.
 """
 
 from __future__ import annotations
@@ -25,10 +28,9 @@ import json
 import math
 import os
 import sys
-import time
 
 
-def _parse() -> argparse.Namespace:
+def _parse(argv: list[str] | None = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--samples", type=int, default=300, help="calibration samples (default 300)")
     ap.add_argument("--test", type=int, default=200, help="test samples (default 200)")
@@ -39,18 +41,29 @@ def _parse() -> argparse.Namespace:
     ap.add_argument("--threads", type=int, default=1,
                     help="BLAS/OpenMP threads (default 1: the one-core figure)")
     ap.add_argument("--device", default="cpu", help="accepted for symmetry; calibration is CPU float64")
-    ap.add_argument("--quick", action="store_true", help="skip the 'before' calibration")
+    ap.add_argument("--repeats", type=int, default=None,
+                    help="timed calibrations, min/median (default 3; --quick 2)")
+    ap.add_argument("--quick", action="store_true", help="skip the 'before' calibration, 2 repeats")
     ap.add_argument("--json", help="write the figures as JSON")
-    return ap.parse_args()
+    return ap.parse_args(argv)
 
 
-def main() -> int:
-    args = _parse()
+def main(argv: list[str] | None = None) -> int:
+    args = _parse(argv)
+    if args.repeats is None:
+        args.repeats = 2 if args.quick else 3
+    if args.repeats < 1:
+        print(f"--repeats: expected >= 1, got {args.repeats}", file=sys.stderr)
+        return 2
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = str(args.threads)
     import warnings
 
     import numpy as np
+
+    # after the BLAS thread count: timing imports warp, which loads numpy
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import timing  # benchmarks/timing.py, beside this script
 
     import jwarp
     from jwarp.plugins.measurements.cartesian import CartesianMeasurement
@@ -86,36 +99,38 @@ def main() -> int:
     y_clean = m_true.predict(model_frames(truth, q), m_true.params.nominal)
     y = y_clean + rng.normal(0.0, args.noise, y_clean.shape)
     tr, te = slice(0, args.samples), slice(args.samples, N)
+    machine = timing.machine()
     print(f"justin19 simulated tracker campaign: {args.samples} train / {args.test} test samples "
-          f"x 2 markers, noise {args.noise * 1e3:.2f} mm, free {args.free}")
+          f"x 2 markers, noise {args.noise * 1e3:.2f} mm, free {args.free}; {machine}; "
+          f"min/median of {args.repeats} runs")
 
-    before = None
+    def timed(free: str, **kw) -> tuple:
+        """(result, caught CalibrationWarnings, Timing) of ``--repeats`` calibrations."""
+        def call() -> tuple:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", CalibrationWarning)
+                r = calibrate(nominal, meas, q[tr], y[tr], free=free, noise_sigma=args.noise, **kw)
+            return r, caught
+        (runs,) = timing.each_run([lambda _: call], args.repeats)
+        return (*runs.results[0], runs.timing)
+
+    before = tb = None
     if not args.quick:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", CalibrationWarning)
-            t = time.perf_counter()
-            b = calibrate(nominal, meas, q[tr], y[tr], free="tracker,markers", noise_sigma=args.noise)
-            tb = time.perf_counter() - t
+        b, _, tb = timed("tracker,markers")
         before = {"train": error_stats(b.errors),
                   "test": error_stats(errors(nominal, meas, b.params, q[te], y[te]))}
-        print(f"before (nominal robot, tracker + markers fitted in {tb:.2f} s): "
+        print(f"before (nominal robot, tracker + markers fitted in {tb.median:.2f} s): "
               f"test mean {before['test']['mean'] * 1e3:.2f} mm, max {before['test']['max'] * 1e3:.2f} mm")
 
-    iters = []
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", CalibrationWarning)
-        t = time.perf_counter()
-        res = calibrate(nominal, meas, q[tr], y[tr], free=args.free, noise_sigma=args.noise,
-                        n_starts=args.starts, seed=args.seed,
-                        callback=lambda p: iters.append((p.start, p.iteration, p.cost)))
-        elapsed = time.perf_counter() - t
+    res, caught, t = timed(args.free, n_starts=args.starts, seed=args.seed)
+    elapsed = t.median
     after = {"train": error_stats(res.errors),
              "test": error_stats(errors(res.robot, meas, res.params, q[te], y[te])),
              "test_vs_truth": error_stats(errors(res.robot, meas, res.params, q[te], y_clean[te]))}
     n_noise = float(np.mean(np.linalg.norm(rng.normal(0, args.noise, (100000, 3)), axis=1)))
-    print(f"full calibration: {len(res.names)} free parameters, {elapsed:.2f} s wall, "
-          f"{res.iterations} iterations, {res.nfev} evaluations, success={res.success} "
-          f"({res.message})")
+    print(f"full calibration: {len(res.names)} free parameters, {elapsed:.2f} s wall "
+          f"(median; min {t.best:.2f} s), {res.iterations} iterations, {res.nfev} evaluations, "
+          f"success={res.success} ({res.message})")
     print(f"  {len(res.unidentifiable)} unidentifiable directions, {len(res.moved)} parameters "
           f"moved > 3 prior sigmas, {len(caught)} CalibrationWarning(s)")
     print(f"{'errors [mm]':<26} {'mean':>8} {'std':>8} {'max':>8}")
@@ -128,9 +143,11 @@ def main() -> int:
         print(f"{name:<26} {st['mean'] * 1e3:>8.3f} {st['std'] * 1e3:>8.3f} {st['max'] * 1e3:>8.3f}")
     print(f"(mean norm of the 3D noise alone: {n_noise * 1e3:.3f} mm)")
     ok = elapsed < 30.0
-    print(f"target < 30 s: {'met' if ok else 'MISSED'} ({elapsed:.2f} s)")
+    print(f"target < 30 s: {'met' if ok else 'MISSED'} ({elapsed:.2f} s median)")
     if args.json:
-        doc = {"time_s": elapsed, "iterations": res.iterations, "nfev": res.nfev,
+        doc = {"time_s": elapsed, "time_min_s": t.best, "runs": t.runs,
+               "before_time_s": tb.figures() if tb else None, "machine": machine,
+               "iterations": res.iterations, "nfev": res.nfev,
                "n_params": len(res.names), "before": before, "after": after,
                "noise_norm_mean": n_noise, "settings": vars(args)}
         with open(args.json, "w") as fh:

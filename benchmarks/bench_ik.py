@@ -17,31 +17,33 @@ Sections (``--only`` picks some):
 * ``b``: justin19 ``right_tcp`` collision-free IK in the shelf world
   (:func:`jwarp.world.scenes.shelf_world`, margin 1 cm): targets = FK of random
   configurations that are collision-free with that margin; solved targets per second.
-* ``c``: one justin19 collision-free IK on one CPU core (16 random seeds, the shelf world
-  and grasp poses of ``bench_planning.py``'s IK figure): median time per target, solved
-  rate; a persistent solver and :func:`jwarp.solvers.ik.ik` beside the baseline, all three
-  from the same numpy seeds (so with the same solutions; drawing them is timed).
+* ``c``: one justin19 collision-free IK on one CPU core (16 random seeds, grasp poses in
+  the shelf world; :func:`shelf_ik`, which ``bench_planning.py``'s ``ik`` section calls
+  too): median time per target, solved rate; a persistent solver and
+  :func:`jwarp.solvers.ik.ik` beside the baseline, all three from the same numpy seeds (so
+  with the same solutions; drawing them is timed).
 
 In a and b the persistent solver draws its seeds on the device (Warp's random stream),
 :func:`ik` and the baseline on the host (numpy's); the solved rates are printed beside
 the rates.
 
-Every figure is the min and median over ``--repeats`` runs; the baseline runs in the same
-process, interleaved with the new solver, and the ratio is baseline time / new time (per
-run, and of the medians). The script prints the machine (CPU model, GPU name) and limits
-numpy's BLAS to one thread (set before numpy loads; an exported value wins).
+Every figure is the min and median over ``--repeats`` runs, timed one solve per run by
+``benchmarks/timing.py`` (:func:`timing.each_run`: an untimed warm-up first, every call
+closed by a device sync); the baseline runs in the same process, interleaved with the new
+solver, and the speedup is baseline time / new time (per run, of the medians and of the
+bests). The script prints the machine (CPU model, GPU name) and limits numpy's BLAS to one
+thread (set before numpy loads; an exported value wins).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
+import math
 import os
-import platform
 import sys
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
@@ -57,6 +59,9 @@ from jwarp.core.limits import sample_within_limits, within_limits  # noqa: E402
 from jwarp.solvers import ik as IK  # noqa: E402
 from jwarp.solvers.planner import collision_free  # noqa: E402
 from jwarp.world import collision  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # also when imported by path
+import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
 
 
 # ====================================================================== the baseline
@@ -174,17 +179,15 @@ def free_configs(robot: Any, world: Any, n: int, margin: float, rng: np.random.G
 
 
 def stats(values: list[float]) -> dict:
+    """min and median of per-run figures that are not times (rates, solved shares)."""
     v = np.asarray(values, float)
     return {"min": float(v.min()), "median": float(np.median(v))}
 
 
-def sync(device: Any) -> None:
-    wp.synchronize_device(device)
-
-
 def batched(args: argparse.Namespace, name: str, robot_name: str, frame: str, world: Any,
             margin: float, batch: int, starts: int) -> dict:
-    """Solved targets per second of one batched solve, new solver vs baseline, interleaved."""
+    """Solved targets per second of one batched solve, new solver vs baseline, interleaved
+    (:func:`timing.each_run`: one solve per variant and run, seeds 1..``--repeats``)."""
     robot = jwarp.robot(robot_name)
     rng = np.random.default_rng(0)
     q = free_configs(robot, world, batch, margin, rng, args.device)
@@ -194,61 +197,40 @@ def batched(args: argparse.Namespace, name: str, robot_name: str, frame: str, wo
     opts = IK.IKOptions(n_starts=starts, margin=margin, max_iterations=args.max_iterations)
     kw = dict(world=world, n_starts=starts, margin=margin, max_iterations=args.max_iterations,
               device=dev, dtype=dt)
-    solver = IK.IKSolver(robot, frame, batch, opts, world=world, device=dev, dtype=dt)
-    frozen = IK.IKSolver(robot, frame, batch, dataclasses.replace(opts, freeze_solved=True),
-                         world=world, device=dev, dtype=dt)
 
-    def run_new(seed: int, s: Any = solver) -> tuple[float, Any]:
-        s.reseed(seed)
-        sync(dev)
-        t0 = time.perf_counter()
-        r = s.solve(T)
-        return time.perf_counter() - t0, r
+    def persistent(s: IK.IKSolver) -> Callable[[int], Callable[[], Any]]:
+        def make(seed: int) -> Callable[[], Any]:
+            s.reseed(seed)  # untimed: the solver's device seeds of this run
+            return lambda: s.solve(T)
+        return make
 
-    def run_frozen(seed: int) -> tuple[float, Any]:
-        return run_new(seed, frozen)
-
-    def run_ik(seed: int) -> tuple[float, Any]:
-        sync(dev)
-        t0 = time.perf_counter()
-        r = IK.ik(robot, frame, T, seed=seed, **kw)
-        return time.perf_counter() - t0, r
-
-    def run_old(seed: int) -> tuple[float, Any]:
-        sync(dev)
-        t0 = time.perf_counter()
-        r = legacy_ik(robot, frame, T, seed=seed, **kw)
-        return time.perf_counter() - t0, r
-
-    runs = {"solver": run_new, "solver_freeze_solved": run_frozen, "ik": run_ik,
-            "baseline": run_old}
+    makes: dict = {
+        "solver": persistent(IK.IKSolver(robot, frame, batch, opts, world=world, device=dev,
+                                         dtype=dt)),
+        "solver_freeze_solved": persistent(IK.IKSolver(
+            robot, frame, batch, dataclasses.replace(opts, freeze_solved=True), world=world,
+            device=dev, dtype=dt)),
+        "ik": lambda seed: lambda: IK.ik(robot, frame, T, seed=seed, **kw),
+        "baseline": lambda seed: lambda: legacy_ik(robot, frame, T, seed=seed, **kw)}
     if args.no_baseline:
-        runs.pop("baseline")
-    for fn in runs.values():  # warm-up: kernel compiles, first touch
-        fn(0)
-    rate: dict = {k: [] for k in runs}
-    solved: dict = {k: [] for k in runs}
-    secs: dict = {k: [] for k in runs}
-    iters: dict = {k: [] for k in runs}
-    for r in range(args.repeats):
-        for k, fn in runs.items():
-            t, res = fn(r + 1)
-            secs[k].append(t)
-            solved[k].append(float(np.mean(res.feasible)))
-            rate[k].append(float(np.sum(res.feasible)) / t)
-            iters[k].append(float(np.max(res.all_iterations)))
+        makes.pop("baseline")
+    runs = dict(zip(makes, timing.each_run(list(makes.values()), args.repeats, dev)))
     out: dict = {"robot": robot_name, "frame": frame, "targets": batch, "starts": starts,
                  "margin_m": margin, "world": "shelf" if world is not None else None,
                  "max_iterations": args.max_iterations, "dtype": np.dtype(dt).name}
-    for k in runs:
-        out[k] = {"solved_targets_per_s": stats(rate[k]), "seconds": stats(secs[k]),
-                  "solved_rate": stats(solved[k]), "iterations_run_max": stats(iters[k])}
+    per_solved: dict = {}  # seconds per solved target, run by run
+    for k, r in runs.items():
+        n_solved = [float(np.sum(res.feasible)) for res in r.results]
+        per_solved[k] = [t / n if n else math.inf for t, n in zip(r.seconds, n_solved)]
+        out[k] = {"solved_targets_per_s": stats([n / t for t, n in zip(r.seconds, n_solved)]),
+                  "seconds": r.timing.figures(),
+                  "solved_rate": stats([float(np.mean(res.feasible)) for res in r.results]),
+                  "iterations_run_max": stats([float(np.max(res.all_iterations))
+                                               for res in r.results])}
     if "baseline" in runs:
         for k in ("solver", "solver_freeze_solved"):
-            per = [n / b for b, n in zip(rate["baseline"], rate[k])]
-            out[f"speedup_{k}_vs_baseline"] = {
-                "per_run": per,
-                "of_medians": float(np.median(rate[k]) / np.median(rate["baseline"]))}
+            out[f"speedup_{k}_vs_baseline"] = timing.speedup(per_solved["baseline"],
+                                                             per_solved[k])
     return out
 
 
@@ -265,8 +247,8 @@ def section_b(args: argparse.Namespace) -> dict:
 
 
 def grasp_targets(n: int, seed: int = 1) -> list[np.ndarray]:
-    """bench_planning.py's IK figure: grasp poses between the shelf's boards, hand pointing
-    into the shelf (+x) with noise."""
+    """Grasp poses between the shelf's boards, hand pointing into the shelf (+x) with noise
+    (the targets of :func:`shelf_ik`)."""
     from scipy.spatial.transform import Rotation
 
     rng = np.random.default_rng(seed)
@@ -279,58 +261,66 @@ def grasp_targets(n: int, seed: int = 1) -> list[np.ndarray]:
     return out
 
 
-def section_c(args: argparse.Namespace) -> dict:
-    """One target at a time on one CPU core (Warp runs CPU kernels on one thread; numpy's
-    BLAS is limited to one thread above)."""
+SHELF_VARIANTS = ("solver", "ik", "baseline")
+
+
+def shelf_ik(n_targets: int, repeats: int, starts: int = 16,
+             variants: Sequence[str] = SHELF_VARIANTS) -> dict:
+    """One justin19 collision-free IK at a time on one CPU core (Warp runs CPU kernels on
+    one thread; numpy's BLAS is limited to one thread above): ``n_targets`` grasp targets
+    (:func:`grasp_targets`) in the shelf world, margin 1 cm, ``starts`` random seeds drawn
+    by numpy from seed = the target's index. Variants (``variants`` picks): ``solver`` (a
+    persistent :class:`IKSolver` given those seeds; drawing them is timed), ``ik``
+    (:func:`jwarp.solvers.ik.ik`) and ``baseline`` (:func:`legacy_ik`), interleaved target
+    by target (:func:`timing.each_run`). Per variant: the median time per target of each
+    of the ``repeats`` passes over the targets, min and median over the passes [ms]; the
+    solved rate and median iterations (first pass); the speedups of the solver and ik()
+    over the baseline. Section c, and bench_planning.py's ``ik`` section."""
     from jwarp.world.scenes import shelf_world
 
     robot = jwarp.robot("justin19")
     world = shelf_world()
-    targets = grasp_targets(args.targets_c)
-    kw = dict(world=world, n_starts=16, margin=0.01, device="cpu", dtype=np.float64)
-    solver = IK.IKSolver(robot, "right_tcp", 1, IK.IKOptions(n_starts=16, margin=0.01),
+    targets = grasp_targets(n_targets)
+    n = len(targets)
+    kw = dict(world=world, n_starts=starts, margin=0.01, device="cpu", dtype=np.float64)
+    solver = IK.IKSolver(robot, "right_tcp", 1, IK.IKOptions(n_starts=starts, margin=0.01),
                          world=world, device="cpu", dtype=np.float64)
 
-    def run_new(T: np.ndarray, seed: int) -> Any:  # ik()'s seeds (numpy), drawn in the timing
-        seeds = sample_within_limits(robot, 16, np.random.default_rng(seed))
-        return solver.solve(T, seeds)
+    def solve_new(T: np.ndarray, seed: int) -> Any:  # ik()'s seeds (numpy), drawn in the timing
+        return solver.solve(T, sample_within_limits(robot, starts, np.random.default_rng(seed)))
 
-    runs = {"solver": run_new,
-            "ik": lambda T, seed: IK.ik(robot, "right_tcp", T, seed=seed, **kw),
-            "baseline": lambda T, seed: legacy_ik(robot, "right_tcp", T, seed=seed, **kw)}
-    if args.no_baseline:
-        runs.pop("baseline")
-    for fn in runs.values():
-        fn(targets[0], 0)
-    med: dict = {k: [] for k in runs}
-    solved: dict = {k: [] for k in runs}
-    iters: dict = {k: [] for k in runs}
-    for _ in range(args.repeats):
-        per: dict = {k: [] for k in runs}
-        for i, T in enumerate(targets):
-            for k, fn in runs.items():  # interleaved per target
-                t0 = time.perf_counter()
-                res = fn(T, i)
-                per[k].append(time.perf_counter() - t0)
-                if len(solved[k]) < len(targets):
-                    solved[k].append(bool(res.feasible))
-                    iters[k].append(int(res.iterations))
-        for k in runs:
-            med[k].append(float(np.median(per[k])))
-    out: dict = {"robot": "justin19", "frame": "right_tcp", "world": "shelf", "starts": 16,
-                 "margin_m": 0.01, "targets": len(targets), "dtype": "float64"}
-    for k in runs:
-        out[k] = {"time_per_target_ms_median_over_targets": {
-            s: 1e3 * v for s, v in stats(med[k]).items()},
-            "solved_rate": float(np.mean(solved[k])),
-            "iterations_median": float(np.median(iters[k]))}
+    solves = {"solver": solve_new,
+              "ik": lambda T, seed: IK.ik(robot, "right_tcp", T, seed=seed, **kw),
+              "baseline": lambda T, seed: legacy_ik(robot, "right_tcp", T, seed=seed, **kw)}
+    solves = {k: solves[k] for k in variants}
+
+    def per_target(solve: Callable) -> Callable[[int], Callable[[], Any]]:
+        def make(r: int) -> Callable[[], Any]:  # run r >= 1: target (r - 1) % n, seed = index
+            i = (r - 1) % n if r else 0
+            return lambda: solve(targets[i], i)
+        return make
+
+    runs = dict(zip(solves, timing.each_run([per_target(f) for f in solves.values()],
+                                            repeats * n)))
+    out: dict = {"robot": "justin19", "frame": "right_tcp", "world": "shelf", "starts": starts,
+                 "margin_m": 0.01, "targets": n, "dtype": "float64"}
+    med: dict = {}  # per pass over the targets: the median seconds per target
+    for k, r in runs.items():
+        med[k] = [float(np.median(r.seconds[j * n:(j + 1) * n])) for j in range(repeats)]
+        first = r.results[:n]
+        out[k] = {"time_per_target_ms_median_over_targets": timing.summarize(med[k]).figures(1e3),
+                  "solved_rate": float(np.mean([bool(res.feasible) for res in first])),
+                  "iterations_median": float(np.median([int(res.iterations) for res in first]))}
     if "baseline" in runs:
-        per_run = [b / n for b, n in zip(med["baseline"], med["solver"])]
-        out["speedup_solver_vs_baseline"] = {
-            "per_run": per_run, "of_medians": float(np.median(med["baseline"]) /
-                                                    np.median(med["solver"]))}
-        out["speedup_ik_vs_baseline"] = float(np.median(med["baseline"]) / np.median(med["ik"]))
+        for k in ("solver", "ik"):
+            if k in runs:
+                out[f"speedup_{k}_vs_baseline"] = timing.speedup(med["baseline"], med[k])
     return out
+
+
+def section_c(args: argparse.Namespace) -> dict:
+    variants = [v for v in SHELF_VARIANTS if not (args.no_baseline and v == "baseline")]
+    return shelf_ik(args.targets_c, args.repeats, variants=variants)
 
 
 # ====================================================================== main
@@ -356,9 +346,6 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", default=None, metavar="FILE", help="also write the figures as JSON")
     args = p.parse_args(argv)
     init_warp()
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-    from timing import machine
-
     cuda = str(args.device).startswith("cuda")
     args.dtype = np.dtype(args.dtype or ("float32" if cuda else "float64")).type
     if args.batch is None:
@@ -369,23 +356,8 @@ def main(argv: list[str] | None = None) -> int:
         args.batch, args.batch_b, args.targets_c, args.repeats = 8, 4, 3, 2
         args.max_iterations = min(args.max_iterations, 30)
     sections = {"a": section_a, "b": section_b, "c": section_c}
-    result: dict = {"device": str(args.device), "machine": machine(args.device),
-                    "cpu": machine("cpu"), "warp": wp.config.version,
-                    "repeats": args.repeats}
-    print(f"machine: {result['machine']}; CPU {result['cpu']}; warp {result['warp']}; "
-          f"repeats {args.repeats} (min/median)")
-    for name in [s.strip() for s in args.only.split(",") if s.strip()]:
-        if name not in sections:
-            p.error(f"--only: unknown section '{name}' (known: {', '.join(sections)})")
-        t0 = time.perf_counter()
-        result[name] = sections[name](args)
-        print(f"== {name} ({time.perf_counter() - t0:.1f} s)")
-        print(json.dumps(result[name], indent=1, default=float))
-        sys.stdout.flush()
-    if args.json:
-        from jwarp.atomic import atomic_write_text
-
-        atomic_write_text(args.json, json.dumps(result, indent=1, default=float) + "\n")
+    timing.run_sections(p, sections, args, f"repeats {args.repeats} (min/median)",
+                        repeats=args.repeats)
     return 0
 
 

@@ -15,7 +15,8 @@ Sections (``--only`` picks some):
   Warp runs CPU kernels on one thread and the script limits numpy's BLAS to one thread,
   so the CPU figure is one core.
 * ``ik``: wall time of :func:`jwarp.solvers.ik.ik` (random multi-start, stop at the
-  first feasible start) for justin19's right hand in a shelf-like world, per target.
+  first feasible start) for justin19's right hand in a shelf-like world, per target:
+  ``bench_ik.py``'s :func:`shelf_ik` (its section c) for ik() alone, imported from there.
 * ``feasibility``: per robot (planar4, arm7, justin19) ``--tasks`` hard tasks (random
   collision-free start/goal in a random simplex world where the straight line is still
   infeasible after 50 iterations), then ``--starts`` random multi-starts (1-3 via points)
@@ -23,20 +24,23 @@ Sections (``--only`` picks some):
   tasks and over the tasks some start solved (the thesis' 50 % is of the latter kind: its
   dataset kept only solved tasks). Every task world is a distinct simplex world.
 * ``compensation``: time per iteration rigid vs elastic (one torque update) for the
-  justin19 path and an IK batch (its kernels, and the whole ``ik()`` iteration with the
-  host step); iterations to converge of compensated IK for kappa =
-  1e-4 and 20x softer (2e-3) rad/(N m) vs rigid, from the same seeds.
+  justin19 path and an IK batch (its kernels, timed side by side here; and the whole
+  ``ik()`` iteration with the host step, timed by
+  :func:`jwarp.solvers.compensation.ik_iteration_overhead` from the solver's per-iteration
+  callbacks); iterations to converge of compensated IK for kappa = 1e-4 and 20x softer
+  (2e-3) rad/(N m) vs rigid, from the same seeds.
+
+Times go through ``benchmarks/timing.py``: min and median over ``--repeats`` runs of at
+least ``--min-time`` seconds each (:func:`timing.measure`), rigid and elastic interleaved
+(:func:`timing.side_by_side`, the overhead a ratio of their medians and of their bests);
+the machine is printed first.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import os
-import platform
 import sys
-import time
 from typing import Any
 
 # one CPU core: numpy's BLAS (the IK's host step) would otherwise use every core. Set
@@ -57,28 +61,14 @@ from jwarp.solvers import compensation as comp  # noqa: E402
 from jwarp.solvers import ik as IK  # noqa: E402
 from jwarp.solvers import planner as PL  # noqa: E402
 from jwarp.core.limits import sample_within_limits  # noqa: E402
-from jwarp.world import shelf_world  # noqa: E402
 from jwarp.world.io import parse_world_spec  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
+from bench_ik import shelf_ik  # noqa: E402  (bench_ik.py owns the IK benchmark)
+
 ROBOTS = ("planar4", "arm7", "justin19")
-FRAMES = {"planar4": "tcp", "arm7": "tcp", "justin19": "right_tcp"}
 SIMPLEX = "simplex:seed={seed},feasible=200"  # >= 200 of 1000 random configs free
-
-
-def timed(fn: Any, min_time: float, repeats: int = 3) -> float:
-    """Best-of-``repeats`` mean seconds per call over runs of at least ``min_time``."""
-    fn()
-    best = math.inf
-    for _ in range(repeats):
-        n, t0 = 0, time.perf_counter()
-        while True:
-            fn()
-            n += 1
-            dt = time.perf_counter() - t0
-            if dt >= min_time:
-                break
-        best = min(best, dt / n)
-    return best
 
 
 def free_configs(robot: Any, world: Any, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -101,7 +91,6 @@ def bench_iteration(args: argparse.Namespace) -> dict:
     n_sub = PL.substeps_for_voxel(robot, Q[:1], world.voxel_size)
     out = {"world_voxel_m": world.voxel_size, "n_substeps": n_sub, "waypoints": 20}
     for P in (1, args.paths):
-        sync = (lambda: wp.synchronize_device(args.device))
         obj = PL.PathObjective(robot, world, P, 20, n_sub, device=args.device, dtype=np.float32)
         obj.set_paths(Q[:P])
 
@@ -110,43 +99,15 @@ def bench_iteration(args: argparse.Namespace) -> dict:
             obj.sub_max.numpy()  # the host read of the feasibility screen (a sync)
             obj.step(1e-4, 1e-3)
 
-        def many() -> None:
-            for _ in range(10):
-                one()
-            sync()
-
-        t = timed(many, args.min_time) / 10
-        out[f"iteration_ms_{P}_paths"] = 1e3 * t
+        t = timing.measure(one, args.device, args.min_time, args.repeats)
+        out[f"iteration_ms_{P}_paths"] = t.figures(1e3)
         out[f"substep_configs_{P}_paths"] = obj.N
     return out
 
 
-def bench_ik(args: argparse.Namespace) -> dict:
-    from scipy.spatial.transform import Rotation
-
-    robot = jwarp.robot("justin19")
-    world = shelf_world()
-    rng = np.random.default_rng(1)
-    times, iters, ok = [], [], []
-    for k in range(args.ik_targets):
-        # grasp poses between the boards, hand pointing into the shelf (+x) with noise
-        p = [rng.uniform(0.5, 0.62), rng.uniform(-0.5, 0.1), rng.uniform(0.72, 0.88)]
-        r = (Rotation.from_euler("y", 90, degrees=True)
-             * Rotation.from_rotvec(rng.normal(scale=0.15, size=3))).as_rotvec()
-        T = IK.pose_matrix(p, r)
-        if k == 0:  # warm-up (kernel compiles)
-            IK.ik(robot, "right_tcp", T, world=world, n_starts=args.ik_starts, margin=0.01)
-        res = IK.ik(robot, "right_tcp", T, world=world, n_starts=args.ik_starts, margin=0.01,
-                    seed=k)
-        times.append(res.wall_time)
-        iters.append(int(res.iterations))
-        ok.append(bool(res.feasible))
-    t = np.array(times)
-    ok = np.array(ok)
-    return {"targets": len(t), "starts": args.ik_starts, "feasible_rate": float(ok.mean()),
-            "time_ms_median": 1e3 * float(np.median(t)), "time_ms_mean": 1e3 * float(t.mean()),
-            "time_ms_median_feasible": 1e3 * float(np.median(t[ok])) if ok.any() else None,
-            "iterations_median": float(np.median(iters))}
+def bench_shelf_ik(args: argparse.Namespace) -> dict:
+    """bench_ik.py's section c for :func:`jwarp.solvers.ik.ik` alone (CPU, float64)."""
+    return shelf_ik(args.ik_targets, args.repeats, args.ik_starts, variants=("ik",))
 
 
 def bench_feasibility(args: argparse.Namespace) -> dict:
@@ -155,7 +116,7 @@ def bench_feasibility(args: argparse.Namespace) -> dict:
         robot = jwarp.robot(name)
         rng = np.random.default_rng(2)
         hard, solved, single, tried, seed = 0, 0, [], 0, 0
-        t0 = time.perf_counter()
+        elapsed = timing.stopwatch()  # the study's duration, not a timed figure
         while hard < args.tasks and tried < 20 * args.tasks:
             world = parse_world_spec(SIMPLEX.format(seed=seed), robot)
             seed = world.meta["seed"] + 1  # the next distinct world (the spec searches up)
@@ -181,8 +142,29 @@ def bench_feasibility(args: argparse.Namespace) -> dict:
                      # the thesis' figure: its dataset holds only tasks some start solved
                      "single_start_rate_solved_tasks": float(np.mean(on_solved))
                      if on_solved else None,
-                     "starts": args.starts, "seconds": time.perf_counter() - t0}
+                     "starts": args.starts, "seconds": elapsed()}
     return out
+
+
+def iteration(obj: Any) -> None:
+    """One iteration of a filled objective's kernels: evaluate (+ a tiny step of a path)."""
+    if isinstance(obj, PL.PathObjective):
+        obj.evaluate()
+        obj.step(1e-6, 1e-6)
+    else:
+        obj.evaluate_pose()
+        obj.evaluate_aux()
+
+
+def rigid_vs_elastic(args: argparse.Namespace, rigid: Any, elastic: Any) -> dict:
+    """Seconds per :func:`iteration` of the rigid and the elastic objective, side by side
+    (``--repeats`` rounds of >= ``--min-time`` s each): medians (``*_s``), bests
+    (``*_best_s``) and the overhead of the torque update (elastic / rigid - 1) of both."""
+    r, e = timing.side_by_side([lambda: iteration(rigid), lambda: iteration(elastic)],
+                               args.device, args.min_time, rounds=args.repeats)
+    return {"rigid_s": r.median, "elastic_s": e.median, "overhead": e.median / r.median - 1.0,
+            "rigid_best_s": r.best, "elastic_best_s": e.best,
+            "overhead_of_bests": e.best / r.best - 1.0, "rounds": r.runs}
 
 
 def bench_compensation(args: argparse.Namespace) -> dict:
@@ -198,7 +180,7 @@ def bench_compensation(args: argparse.Namespace) -> dict:
                 for k in (None, comp.JUSTIN_KAPPA)]
         for o in objs:
             o.set_paths(Q[:P])
-        out[f"path_iteration_{P}_paths"] = comp.iteration_overhead(*objs, repeats=args.repeats)
+        out[f"path_iteration_{P}_paths"] = rigid_vs_elastic(args, *objs)
     B = 64
     objs = [IK.IKObjective(robot, "right_tcp", B, world=world, kappa=k, device=args.device)
             for k in (None, comp.JUSTIN_KAPPA)]
@@ -207,7 +189,7 @@ def bench_compensation(args: argparse.Namespace) -> dict:
     for o in objs:
         o.set_q(qs)
         o.set_target(T)
-    out[f"ik_iteration_{B}_configs"] = comp.iteration_overhead(*objs, repeats=args.repeats)
+    out[f"ik_iteration_{B}_configs"] = rigid_vs_elastic(args, *objs)
     # the whole solver iteration (kernels + host step), the figure a user of ik() sees
     out[f"ik_solver_iteration_{B}_starts"] = comp.ik_iteration_overhead(
         robot, "right_tcp", comp.JUSTIN_KAPPA, world=world, n_starts=B,
@@ -243,8 +225,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--ik-targets", type=int, default=20)
     p.add_argument("--ik-starts", type=int, default=16)
     p.add_argument("--comp-targets", type=int, default=10)
-    p.add_argument("--min-time", type=float, default=0.3)
-    p.add_argument("--repeats", type=int, default=100)
+    p.add_argument("--min-time", type=float, default=0.3,
+                   help="seconds of work per timed run (default 0.3; --quick 0.01)")
+    p.add_argument("--repeats", type=int, default=5,
+                   help="timed runs per figure, min/median (default 5; --quick 3)")
     p.add_argument("--only", default="iteration,ik,feasibility,compensation")
     p.add_argument("--quick", action="store_true", help="tiny sizes (smoke test)")
     p.add_argument("--json", default=None, metavar="FILE", help="also write the figures as JSON")
@@ -260,22 +244,11 @@ def main(argv: list[str] | None = None) -> int:
         args.paths, args.tasks, args.starts = min(args.paths, 4), 1, 3
         args.ik_targets, args.comp_targets, args.min_time, args.repeats = 2, 2, 0.01, 3
         args.robots = ["planar4"]
-    sections = {"iteration": bench_iteration, "ik": bench_ik,
+    sections = {"iteration": bench_iteration, "ik": bench_shelf_ik,
                 "feasibility": bench_feasibility, "compensation": bench_compensation}
-    result: dict = {"device": str(args.device), "machine": platform.processor() or platform.machine(),
-                    "warp": wp.config.version}
-    for name in [s.strip() for s in args.only.split(",") if s.strip()]:
-        if name not in sections:
-            p.error(f"--only: unknown section '{name}' (known: {', '.join(sections)})")
-        t0 = time.perf_counter()
-        result[name] = sections[name](args)
-        print(f"== {name} ({time.perf_counter() - t0:.1f} s)")
-        print(json.dumps(result[name], indent=1, default=float))
-        sys.stdout.flush()
-    if args.json:
-        from jwarp.atomic import atomic_write_text
-
-        atomic_write_text(args.json, json.dumps(result, indent=1, default=float) + "\n")
+    timing.run_sections(p, sections, args,
+                        f"min/median of {args.repeats} runs of >= {args.min_time:g} s",
+                        min_time_s=args.min_time, repeats=args.repeats)
     return 0
 
 

@@ -200,11 +200,11 @@ class _Recorder:
 
     def log_configs(self, timeline: str, step: int, q: np.ndarray, name: str = "robot") -> None:
         """Spheres (and skeleton of the first configuration) of q (K, n_dof) at one step."""
-        from jwarp.kinematics.fk import fk
+        from jwarp.core.device import host_frames
         from jwarp.viz import log_robot, world_spheres
 
         self.rec.set_time(timeline, sequence=step)
-        frames = np.asarray(fk(self.model, np.asarray(q, np.float64), device="cpu"))
+        frames = host_frames(self.model, q)  # host FK: any --device, no Warp CPU backend needed
         log_robot(self.rec, self.model, frames[0], path=name, spheres=False)
         cs, rs = zip(*(world_spheres(self.model, f) for f in frames))
         self.rec.log(f"{name}/spheres", self.rr.Points3D(np.concatenate(cs), radii=np.concatenate(rs),
@@ -212,11 +212,11 @@ class _Recorder:
 
     def log_traces(self, step: int, paths: np.ndarray) -> None:
         """End-effector (last frame) trace of every path (P, W, n_dof) at one iteration."""
-        from jwarp.kinematics.fk import fk
+        from jwarp.core.device import host_frames
 
         P, W, n = paths.shape
         fi = next(iter(self.model.end_effectors.values()), self.model.n_frames - 1)
-        frames = np.asarray(fk(self.model, paths.reshape(-1, n), device="cpu"))
+        frames = host_frames(self.model, paths.reshape(-1, n))
         tcp = frames[:, fi, :3, 3].reshape(P, W, 3)
         self.rec.set_time("iteration", sequence=step)
         self.rec.log("paths/end_effector", self.rr.LineStrips3D(list(tcp), radii=0.004))

@@ -522,7 +522,9 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     return SimpleNamespace(
         scalar=scalar, SphereTables=SphereTables, WorldGrid=WorldGrid, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
-        sphere_centre=sphere_centre, cost=cost_kernel, distance=distance_kernel,
+        sdf_lower_bound=sdf_lower_bound, world_sample=world_sample,
+        world_lower_bound=world_lower_bound, sphere_centre=sphere_centre, cost=cost_kernel,
+        distance=distance_kernel,
         world_cost_spheres=world_cost_spheres, self_cost_pairs=self_cost_pairs,
         sdf_query=sdf_query_kernel,
     )

@@ -236,17 +236,35 @@ def kernels(scalar: type) -> SimpleNamespace:
         return R, p
 
     @wp.func
+    def chain_link(model: FrameTables, chain: wp.array(dtype=wp.int32), k: int, b: int,
+                   q: wp.array2d(dtype=scalar), rows_kind: int, rho: wp.array3d(dtype=scalar),
+                   rb: int, Rp: mat33, pp: vec3):
+        """One step of a walk along ``chain`` (the frames from the root to its last one) at
+        configuration b: the index i = chain[k] and the world rotation and position of
+        frame i from (Rp, pp), those of chain[k - 1] (identity and origin for k = 0)."""
+        i = chain[k]
+        R, p = child_rot_pos(model, Rp, pp, i, rb, joint_value(model, i, b, q), rows_kind, rho)
+        return i, R, p
+
+    @wp.func
+    def chain_pose(model: FrameTables, chain: wp.array(dtype=wp.int32), b: int,
+                   q: wp.array2d(dtype=scalar), rows_kind: int, rho: wp.array3d(dtype=scalar),
+                   rb: int):
+        """World rotation and position of the last frame of ``chain`` (the frames from the
+        root to it) at configuration b, walking only that chain (no frames stored)."""
+        R = wp.identity(3, dtype=scalar)
+        p = vec3(zero, zero, zero)
+        for k in range(chain.shape[0]):
+            i, R, p = chain_link(model, chain, k, b, q, rows_kind, rho, rb, R, p)
+        return R, p
+
+    @wp.func
     def chain_point(model: FrameTables, chain: wp.array(dtype=wp.int32), b: int,
                     q: wp.array2d(dtype=scalar), rows_kind: int, rho: wp.array3d(dtype=scalar),
                     rb: int, point: vec3) -> vec3:
         """World position of ``point`` (coordinates of the last frame of ``chain``, the
-        frames from the root to it), walking only that chain."""
-        R = wp.identity(3, dtype=scalar)
-        p = vec3(zero, zero, zero)
-        for k in range(chain.shape[0]):
-            i = chain[k]
-            qi = joint_value(model, i, b, q)
-            R, p = child_rot_pos(model, R, p, i, rb, qi, rows_kind, rho)
+        frames from the root to it), walking only that chain (:func:`chain_pose`)."""
+        R, p = chain_pose(model, chain, b, q, rows_kind, rho, rb)
         return R * point + p
 
     @wp.func
@@ -401,15 +419,35 @@ def kernels(scalar: type) -> SimpleNamespace:
                     jac[b, r + 3, j] = jac[b, r + 3, j] + w * ang[r]
 
     @wp.func
+    def clear_jacobian(jac: wp.array3d(dtype=scalar), b: int):
+        """jac[b] (6, n_dof) = 0."""
+        for j in range(jac.shape[2]):
+            for r in range(6):
+                jac[b, r, j] = zero
+
+    @wp.func
+    def chain_jacobian(model: FrameTables, chain: wp.array(dtype=wp.int32), b: int,
+                       q: wp.array2d(dtype=scalar), rows_kind: int,
+                       rho: wp.array3d(dtype=scalar), rb: int, target: vec3,
+                       jac: wp.array3d(dtype=scalar)):
+        """Geometric Jacobian jac[b] (6, n_dof) of the world point ``target`` moving with
+        the last frame of ``chain``: the chain walked again (as :func:`chain_pose`), each
+        frame adding its joint axis (z through its origin, :func:`add_axis_columns`)."""
+        clear_jacobian(jac, b)
+        R = wp.identity(3, dtype=scalar)
+        p = vec3(zero, zero, zero)
+        for k in range(chain.shape[0]):
+            i, R, p = chain_link(model, chain, k, b, q, rows_kind, rho, rb, R, p)
+            add_axis_columns(model, i, vec3(R[0, 2], R[1, 2], R[2, 2]), p, target, b, jac)
+
+    @wp.func
     def frames_jacobian(model: FrameTables, chain: wp.array(dtype=wp.int32),
                         frames: wp.array2d(dtype=mat44), b: int, target: vec3,
                         jac: wp.array3d(dtype=scalar)):
         """Geometric Jacobian jac[b] (6, n_dof) of the world point ``target`` moving with
         the last frame of ``chain``, from frames an FK pass has already computed (no
         kinematics of its own)."""
-        for j in range(jac.shape[2]):
-            for r in range(6):
-                jac[b, r, j] = zero
+        clear_jacobian(jac, b)
         for k in range(chain.shape[0]):
             T = frames[b, chain[k]]
             add_axis_columns(model, chain[k], vec3(T[0, 2], T[1, 2], T[2, 2]),
@@ -434,20 +472,9 @@ def kernels(scalar: type) -> SimpleNamespace:
         ``chain`` lists the frames from the root to the target. Coupled joints add
         ``coef * column`` to each driving joint."""
         b = wp.tid()
-        n_dof = jac.shape[2]
-        for r in range(6):
-            for j in range(n_dof):
-                jac[b, r, j] = zero
         rb = b * rho_stride
         target = chain_point(model, chain, b, q, rows_kind, rho, rb, point)  # pass 1
-        # pass 2: joint axes (z of each driven frame, through its origin)
-        R = wp.identity(3, dtype=scalar)
-        p = vec3(zero, zero, zero)
-        for k in range(chain.shape[0]):
-            i = chain[k]
-            qi = joint_value(model, i, b, q)
-            R, p = child_rot_pos(model, R, p, i, rb, qi, rows_kind, rho)
-            add_axis_columns(model, i, vec3(R[0, 2], R[1, 2], R[2, 2]), p, target, b, jac)
+        chain_jacobian(model, chain, b, q, rows_kind, rho, rb, target, jac)  # pass 2: axes
 
     @wp.kernel(module="unique")
     def jacobian_dh_kernel(
@@ -472,11 +499,9 @@ def kernels(scalar: type) -> SimpleNamespace:
         R = wp.identity(3, dtype=scalar)
         p = vec3(zero, zero, zero)
         for k in range(chain.shape[0]):
-            i = chain[k]
             Rp = R
             pp = p
-            qi = joint_value(model, i, b, q)
-            R, p = child_rot_pos(model, R, p, i, rb, qi, rows_kind, rho)
+            i, R, p = chain_link(model, chain, k, b, q, rows_kind, rho, rb, Rp, pp)
             if model.is_dh[i] != 0:
                 beta = model.dh0[i, 4]
                 if rows_kind != ROWS_NOMINAL:
@@ -503,8 +528,10 @@ def kernels(scalar: type) -> SimpleNamespace:
     return SimpleNamespace(
         scalar=scalar, FrameTables=FrameTables, vec3=vec3, mat33=mat33, mat44=mat44,
         vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, cos_sin_step=cos_sin_step,
-        joint_value=joint_value,
-        waypoint_thread=waypoint_thread, frames_jacobian=frames_jacobian, write_frame=write_frame, child_frame=child_frame, child_rot_pos=child_rot_pos, pack=pack,
-        unpack_rot=unpack_rot, unpack_pos=unpack_pos,
+        joint_value=joint_value, waypoint_thread=waypoint_thread, write_frame=write_frame,
+        child_frame=child_frame, child_rot_pos=child_rot_pos, chain_link=chain_link,
+        chain_pose=chain_pose, chain_point=chain_point, add_axis_columns=add_axis_columns,
+        clear_jacobian=clear_jacobian, chain_jacobian=chain_jacobian,
+        frames_jacobian=frames_jacobian, pack=pack, unpack_rot=unpack_rot, unpack_pos=unpack_pos,
         fk=fk_kernel, fk_components=fk_components_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
     )

@@ -96,6 +96,23 @@ def kernels(scalar: type) -> SimpleNamespace:
                 gw += jac[b, r + 3, j] * vee[r]
             grad[b, j] = lam_p * gv - lam_r * half * gw
 
+    @wp.func
+    def aux_row(q: wp.array2d(dtype=scalar), b: int, q_default: wp.array2d(dtype=scalar),
+                bd: int, c0: scalar, coll_grad: wp.array2d(dtype=scalar), gk: int,
+                use_collision: int, lam_l: scalar, grad: wp.array2d(dtype=scalar)) -> scalar:
+        """U_A of configuration b: ``c0`` (its collision cost, or 0) + lam_l/2
+        |q[b] - q_default[bd]|^2, returned; dU_A/dq written to grad[b] (with the collision
+        gradient of row gk of ``coll_grad`` when ``use_collision``)."""
+        c = c0
+        for j in range(q.shape[1]):
+            d = q[b, j] - q_default[bd, j]
+            c += lam_l * half * d * d
+            g = lam_l * d
+            if use_collision != 0:
+                g += coll_grad[gk, j]
+            grad[b, j] = g
+        return c
+
     @wp.kernel(module="unique")
     def aux_cost_kernel(
         # Data in:
@@ -116,15 +133,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         c = zero
         if use_collision != 0:
             c = coll_cost[b]
-        bd = b * default_stride
-        for j in range(q.shape[1]):
-            d = q[b, j] - q_default[bd, j]
-            c += lam_l * half * d * d
-            g = lam_l * d
-            if use_collision != 0:
-                g += coll_grad[b, j]
-            grad[b, j] = g
-        cost[b] = c
+        cost[b] = aux_row(q, b, q_default, b * default_stride, c, coll_grad, b, use_collision,
+                          lam_l, grad)
 
-    return SimpleNamespace(scalar=scalar, rotation_log=rotation_log, pose_error=pose_error_kernel,
-                           aux_cost=aux_cost_kernel)
+    return SimpleNamespace(scalar=scalar, rotation_log=rotation_log, aux_row=aux_row,
+                           pose_error=pose_error_kernel, aux_cost=aux_cost_kernel)

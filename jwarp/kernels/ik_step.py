@@ -48,6 +48,7 @@ from jwarp.kernels import collision as collision_kernels
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik as ik_cost_kernels
 from jwarp.kernels import path as path_kernels
+from jwarp.kernels.fk import ROWS_NOMINAL
 
 #: result row columns after the n_dof joint values
 COL_POS, COL_ROT, COL_AUX, COL_FEASIBLE, COL_ITERATIONS = range(5)
@@ -238,14 +239,8 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
             for j in range(N):
                 lo = limits[j, 0]
                 q[b, j] = lo + scalar(wp.randf(state)) * (limits[j, 1] - lo)
-            ok = int(1)
-            for l in range(lin_bounds.shape[0]):
-                v = scalar(0.0)
-                for k in range(lin_start[l], lin_start[l + 1]):
-                    v += lin_coef[k] * q[b, lin_joint[k]]
-                if v < lin_bounds[l, 0] or v > lin_bounds[l, 1]:
-                    ok = 0
-            if ok != 0:
+            if pk.within_linear_limits(q, b, lin_start, lin_joint, lin_coef, lin_bounds,
+                                       scalar(0.0)) != 0:
                 return
         pk.project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
 
@@ -260,6 +255,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
     type; the exact check itself runs in float64 (module docstring)."""
     fk64 = fk_kernels.kernels(f64)
     ck64 = collision_kernels.kernels(f64)
+    pk64 = path_kernels.kernels(f64)
     fk = fk_kernels.kernels(scalar)
     ikk = ik_cost_kernels.kernels(scalar)
     PLANAR = int(planar)
@@ -284,37 +280,6 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         return wp.sqrt(pe), wp.sqrt(re)
 
     @wp.func
-    def within_limits_row(q: wp.array2d(dtype=f64), b: int, limits: wp.array2d(dtype=f64),
-                          lin_start: wp.array(dtype=wp.int32), lin_joint: wp.array(dtype=wp.int32),
-                          lin_coef: wp.array(dtype=f64), lin_bounds: wp.array2d(dtype=f64),
-                          tol: f64) -> int:
-        """1 if q[b] violates no box or linear limit by more than ``tol``
-        (:func:`jwarp.core.limits.within_limits`)."""
-        for j in range(q.shape[1]):
-            if limits[j, 0] - q[b, j] > tol or q[b, j] - limits[j, 1] > tol:
-                return 0
-        for l in range(lin_bounds.shape[0]):
-            s = zero
-            for k in range(lin_start[l], lin_start[l + 1]):
-                s += lin_coef[k] * q[b, lin_joint[k]]
-            if lin_bounds[l, 0] - s > tol or s - lin_bounds[l, 1] > tol:
-                return 0
-        return 1
-
-    @wp.func
-    def world_lower_bound(world: ck64.WorldGrid, x: fk64.vec3) -> f64:
-        """A lower bound of the world's D(x): the smallest corner value of the grid cell
-        holding x (``cellmin``, :mod:`jwarp.kernels.collision`)."""
-        cm = world.cellmin
-        u = (x - world.origin) * world.inv_h
-        i = wp.min(int(wp.clamp(u[0], zero, f64(cm.shape[0] - 1))), cm.shape[0] - 2)
-        j = wp.min(int(wp.clamp(u[1], zero, f64(cm.shape[1] - 1))), cm.shape[1] - 2)
-        k = int(0)
-        if world.dim == 3:
-            k = wp.min(int(wp.clamp(u[2], zero, f64(cm.shape[2] - 1))), cm.shape[2] - 2)
-        return cm[i, j, k]
-
-    @wp.func
     def collision_free_row(q: wp.array2d(dtype=f64), b: int, rho: wp.array3d(dtype=f64),
                            use_rho: int, model: fk64.FrameTables, spheres: ck64.SphereTables,
                            world: ck64.WorldGrid, use_world: int, use_self: int, margin: f64,
@@ -333,8 +298,8 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
             xs[b, s] = x
             if use_world != 0:
                 r = spheres.sph_rad[s]
-                if world_lower_bound(world, x) - r <= margin:
-                    d, g = ck64.sdf_sample(world.grid, world.origin, world.inv_h, world.dim, x)
+                if ck64.world_lower_bound(world, x) - r <= margin:
+                    d, g = ck64.world_sample(world, x)
                     if d - r <= margin:
                         return 0
         if use_self != 0:
@@ -434,8 +399,8 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         q64 = scratch.q64
         for j in range(n):
             q64[b, j] = f64(q[b, j])
-        if within_limits_row(q64, b, tables.limits, tables.lin_start, tables.lin_joint,
-                             tables.lin_coef, tables.lin_bounds, tables.limit_tol) == 0:
+        if pk64.within_limits_row(q64, b, tables.limits, tables.lin_start, tables.lin_joint,
+                                  tables.lin_coef, tables.lin_bounds, tables.limit_tol) == 0:
             return
         if use_rows != 0:
             for i in range(rows.shape[1]):
@@ -517,7 +482,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         cost: wp.array(dtype=scalar),
         grad: wp.array2d(dtype=scalar),
     ):
-        """U_A and dU_A/dq (:mod:`jwarp.kernels.ik` ``aux_cost``, the same arithmetic) of the
+        """U_A and dU_A/dq (:mod:`jwarp.kernels.ik` ``aux_row``, as ``aux_cost``) of the
         listed configurations from their collision costs ``near_cost``/``near_grad``
         (row k of the gathered batch), written to their own rows. Launch dim K."""
         k = wp.tid()
@@ -528,33 +493,8 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         if use_collision != 0:
             c = near_cost[k]
             coll_cost[b] = c
-        bd = b * default_stride
-        for j in range(q.shape[1]):
-            d = q[b, j] - q_default[bd, j]
-            c += lam_l * scalar(0.5) * d * d
-            g = lam_l * d
-            if use_collision != 0:
-                g += near_grad[k, j]
-            grad[b, j] = g
-        cost[b] = c
-
-    @wp.func
-    def axis_columns(model: fk.FrameTables, i: int, z: fk.vec3, p: fk.vec3, target: fk.vec3,
-                     b: int, jac: wp.array3d(dtype=scalar)):
-        """Adds the velocity of ``target`` due to the joint(s) driving frame i (axis z
-        through p) to the columns of jac[b] (:mod:`jwarp.kernels.fk` ``add_axis_columns``)."""
-        if model.cpl_start[i + 1] > model.cpl_start[i]:
-            lin = wp.cross(z, target - p)
-            ang = z
-            if model.prismatic[i] != 0:
-                lin = z
-                ang = fk.vec3(scalar(0.0), scalar(0.0), scalar(0.0))
-            for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
-                j = model.cpl_joint[c]
-                w = model.cpl_coef[c]
-                for r in range(3):
-                    jac[b, r, j] = jac[b, r, j] + w * lin[r]
-                    jac[b, r + 3, j] = jac[b, r + 3, j] + w * ang[r]
+        cost[b] = ikk.aux_row(q, b, q_default, b * default_stride, c, near_grad, k,
+                              use_collision, lam_l, grad)
 
     @wp.kernel(module="unique", enable_backward=False)
     def pose_kernel(
@@ -571,18 +511,14 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         err: wp.array2d(dtype=scalar),
     ):
         """The rigid robot's 6D error (B, 6) and Jacobian (B, 6, n_dof) of the frame
-        ``chain[-1]``, walking only its chain (twice: the frame, then the joint axes) with
-        no frames stored: the values of FK + :mod:`jwarp.kernels.ik` ``pose_error`` (the
-        same functions). Configurations that are done keep theirs. Launch dim B."""
+        ``chain[-1]``, walking only its chain (twice: the frame, then the joint axes,
+        :mod:`jwarp.kernels.fk` ``chain_pose`` and ``chain_jacobian``) with no frames
+        stored: the values of FK + :mod:`jwarp.kernels.ik` ``pose_error`` (the same
+        functions). Configurations that are done keep theirs. Launch dim B."""
         b = wp.tid()
         if halt[0] != 0 or done[b] != 0:
             return
-        R = wp.identity(3, dtype=scalar)
-        p = fk.vec3(scalar(0.0), scalar(0.0), scalar(0.0))
-        for k in range(chain.shape[0]):
-            i = chain[k]
-            R, p = fk.child_rot_pos(model, R, p, i, 0, fk.joint_value(model, i, b, q), 0,
-                                    nominal)
+        R, p = fk.chain_pose(model, chain, b, q, ROWS_NOMINAL, nominal, 0)
         T = target[b]
         M = R * wp.transpose(fk.unpack_rot(T))
         ev = fk.unpack_pos(T) - p
@@ -590,16 +526,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         for r in range(3):
             err[b, r] = ev[r]
             err[b, r + 3] = ew[r]
-        for j in range(jac.shape[2]):
-            for r in range(6):
-                jac[b, r, j] = scalar(0.0)
-        R2 = wp.identity(3, dtype=scalar)
-        p2 = fk.vec3(scalar(0.0), scalar(0.0), scalar(0.0))
-        for k in range(chain.shape[0]):
-            i = chain[k]
-            R2, p2 = fk.child_rot_pos(model, R2, p2, i, 0, fk.joint_value(model, i, b, q), 0,
-                                      nominal)
-            axis_columns(model, i, fk.vec3(R2[0, 2], R2[1, 2], R2[2, 2]), p2, p, b, jac)
+        fk.chain_jacobian(model, chain, b, q, ROWS_NOMINAL, nominal, 0, p, jac)
 
     @wp.kernel(module="unique", enable_backward=False)
     def reset_kernel(
@@ -697,7 +624,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     return SimpleNamespace(
         scalar=scalar, planar=planar, task_errors=task_errors,
-        within_limits_row=within_limits_row, collision_free_row=collision_free_row,
+        within_limits_row=pk64.within_limits_row, collision_free_row=collision_free_row,
         CheckTables=CheckTables, CheckScratch=CheckScratch, check=check_kernel, near=near_kernel,
         gather=gather_kernel, scatter_aux=scatter_aux_kernel, pose=pose_kernel,
         reset=reset_kernel, repeat_targets=repeat_targets_kernel, finalize=finalize_kernel,

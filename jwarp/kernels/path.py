@@ -18,7 +18,8 @@ The first and last waypoints (start, goal) are fixed; only the interior ones mov
 * Limits: a box ``limits (n_dof, 2)`` and linear limits ``lower <= sum_k c_k q_{j_k} <= upper``
   (CSR tables ``lin_start (L + 1)``, ``lin_joint``, ``lin_coef``, ``lin_bounds (L, 2)``),
   enforced by alternating projections (box, then each linear half-space pair) ending with
-  the box.
+  the box (``project_row``); ``within_limits_row`` / ``within_linear_limits`` check them up
+  to a tolerance (the IK solver's feasibility check and seed sampling use them).
 
 Shapes are in the docstrings; units rad (m for prismatic joints).
 """
@@ -66,6 +67,46 @@ def kernels(scalar: type) -> SimpleNamespace:
         return g
 
     @wp.func
+    def linear_value(x: wp.array2d(dtype=scalar), row: int, l: int,
+                     lin_start: wp.array(dtype=wp.int32), lin_joint: wp.array(dtype=wp.int32),
+                     lin_coef: wp.array(dtype=scalar)):
+        """(v, c2): the value ``v = sum_k c_k x[row, j_k]`` of linear limit l and
+        ``c2 = sum_k c_k^2`` (the squared norm of its row, for the projection)."""
+        v = zero
+        c2 = zero
+        for k in range(lin_start[l], lin_start[l + 1]):
+            c = lin_coef[k]
+            v += c * x[row, lin_joint[k]]
+            c2 += c * c
+        return v, c2
+
+    @wp.func
+    def within_linear_limits(x: wp.array2d(dtype=scalar), row: int,
+                             lin_start: wp.array(dtype=wp.int32),
+                             lin_joint: wp.array(dtype=wp.int32),
+                             lin_coef: wp.array(dtype=scalar),
+                             lin_bounds: wp.array2d(dtype=scalar), tol: scalar) -> int:
+        """1 if x[row] violates no linear limit by more than ``tol`` (``tol`` = 0: every
+        ``lower <= v <= upper``), else 0."""
+        for l in range(lin_bounds.shape[0]):
+            v, c2 = linear_value(x, row, l, lin_start, lin_joint, lin_coef)
+            if lin_bounds[l, 0] - v > tol or v - lin_bounds[l, 1] > tol:
+                return 0
+        return 1
+
+    @wp.func
+    def within_limits_row(x: wp.array2d(dtype=scalar), row: int,
+                          limits: wp.array2d(dtype=scalar), lin_start: wp.array(dtype=wp.int32),
+                          lin_joint: wp.array(dtype=wp.int32), lin_coef: wp.array(dtype=scalar),
+                          lin_bounds: wp.array2d(dtype=scalar), tol: scalar) -> int:
+        """1 if x[row] violates no box or linear limit by more than ``tol``
+        (:func:`jwarp.core.limits.within_limits`), else 0."""
+        for j in range(x.shape[1]):
+            if limits[j, 0] - x[row, j] > tol or x[row, j] - limits[j, 1] > tol:
+                return 0
+        return within_linear_limits(x, row, lin_start, lin_joint, lin_coef, lin_bounds, tol)
+
+    @wp.func
     def project_row(x: wp.array2d(dtype=scalar), row: int, limits: wp.array2d(dtype=scalar),
                     lin_start: wp.array(dtype=wp.int32), lin_joint: wp.array(dtype=wp.int32),
                     lin_coef: wp.array(dtype=scalar), lin_bounds: wp.array2d(dtype=scalar)):
@@ -79,12 +120,7 @@ def kernels(scalar: type) -> SimpleNamespace:
             for j in range(n):
                 x[row, j] = wp.clamp(x[row, j], limits[j, 0], limits[j, 1])
             for l in range(n_lin):
-                v = zero
-                c2 = zero
-                for k in range(lin_start[l], lin_start[l + 1]):
-                    c = lin_coef[k]
-                    v += c * x[row, lin_joint[k]]
-                    c2 += c * c
+                v, c2 = linear_value(x, row, l, lin_start, lin_joint, lin_coef)
                 excess = zero
                 if v < lin_bounds[l, 0]:
                     excess = v - lin_bounds[l, 0]
@@ -328,7 +364,8 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     return SimpleNamespace(
         scalar=scalar, length_scale=length_scale, waypoint_grad=waypoint_grad,
-        project_row=project_row, substeps=substeps_kernel, path_cost=path_cost_kernel,
-        path_grad=path_grad_kernel, path_step=path_step_kernel, project=project_kernel,
-        gather=gather_kernel, keep=keep_kernel, select=select_kernel,
+        linear_value=linear_value, within_linear_limits=within_linear_limits,
+        within_limits_row=within_limits_row, project_row=project_row, substeps=substeps_kernel,
+        path_cost=path_cost_kernel, path_grad=path_grad_kernel, path_step=path_step_kernel,
+        project=project_kernel, gather=gather_kernel, keep=keep_kernel, select=select_kernel,
     )

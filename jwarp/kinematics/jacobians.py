@@ -7,9 +7,36 @@ from typing import Any
 
 import warp as wp
 
-from jwarp.core.arrays import empty, first_touch, out_view, to_output, zeros
+from jwarp.core.arrays import Batch, empty, finite_as, first_touch, out_view, to_output, zeros
+from jwarp.core.device import KinematicsTables
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import frame_rows, jacobian_inputs, point_vec, setup, small_call
+from jwarp.model import RobotModel
+
+
+def _dh_rows(dh: Any, model: RobotModel, batch: Batch, t: KinematicsTables,
+             validate: bool) -> tuple[wp.array, int] | None:
+    """The ``dh`` argument as (device rows (B or 1, n_frames, 5), batch stride): None for
+    the nominal rows; a contiguous Warp array of the computing dtype on the computing device
+    is used as is (no upload: a caller evaluating several frames at the same rows uploads
+    them once), checked finite when ``validate``; anything else is uploaded
+    (:func:`~jwarp.kinematics.launch.frame_rows`)."""
+    if dh is None:
+        return None
+    if not (isinstance(dh, wp.array) and dh.dtype == t.scalar and dh.device == t.device
+            and dh.is_contiguous):
+        return frame_rows(dh, model, batch, t, "dh", 5)
+    n = model.n_frames
+    shape = tuple(dh.shape)
+    if shape[-2:] != (n, 5) or (len(shape) > 2 and shape[:-2] != tuple(batch.lead_shape)):
+        raise ValueError(f"dh: expected shape (n_frames={n}, 5) or (batch..., {n}, 5) with "
+                         f"q's batch dims {tuple(batch.lead_shape)}, got {shape}")
+    if validate:
+        a = dh.numpy()
+        finite_as(a, a.dtype, "dh")
+    if len(shape) == 2:
+        return dh.reshape((1, n, 5)), 0
+    return (dh if len(shape) == 3 else dh.reshape((-1, n, 5))), 1
 
 
 def jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any = None,
@@ -20,6 +47,8 @@ def jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any
     Returns (..., 6, n_dof): rows [linear velocity; angular velocity] in the base frame.
     Coupled passive joints are folded into the columns of the joints that drive them.
     ``point`` (3,) [m] is in the frame's coordinates (default: its origin).
+    ``dh``: DH rows (n_frames, 5) or (..., n_frames, 5) instead of the nominal ones; a
+    contiguous Warp array of the computing dtype on the device is used without a copy.
     ``out``: optional array (..., 6, n_dof) (numpy, torch or Warp) in the computing dtype
     the Jacobians are written to, and returned (as for :func:`~jwarp.kinematics.fk.fk`).
     Small calls reuse per-process buffers and a recorded launch, as
@@ -33,7 +62,7 @@ def jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any
     fi = model.frame_index(frame)
     pt = point_vec(point, t)
     k = fk_kernels.kernels(t.scalar)
-    rows = None if dh is None else frame_rows(dh, model, batch, t, "dh", 5)
+    rows = _dh_rows(dh, model, batch, t, validate)
     tail = (6, model.n_dof)
     jac = None if out is None else out_view(out, batch, tail, t.scalar, t.device)
     done = None
@@ -53,13 +82,14 @@ def jacobian_dh(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: 
 
     Returns (..., 6, n_frames, 5): rows [linear; angular] in the base frame, columns the
     DH rows [d, theta, r, alpha, beta] of each frame (zero for frames off the chain and
-    for static frames).
+    for static frames). ``dh`` as for :func:`jacobian` (a Warp array on the device is used
+    without a copy: evaluating several frames at the same rows uploads them once).
     """
     model, batch, t = setup(robot, q, device, dtype, validate)
     fi = model.frame_index(frame)
     pt = point_vec(point, t)
     k = fk_kernels.kernels(t.scalar)
-    rows = None if dh is None else frame_rows(dh, model, batch, t, "dh", 5)
+    rows = _dh_rows(dh, model, batch, t, validate)
     jac = zeros((batch.size, 6, model.n_frames, 5), t.scalar, t.device)
     done = first_touch(jac)
     wp.launch(k.jacobian_dh, dim=batch.size, inputs=jacobian_inputs(t, batch.array, rows, pt, fi),

@@ -16,10 +16,15 @@ import numpy as np
 import torch
 import warp as wp
 
+from jwarp.core.device import content_key
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKWeights
 from jwarp.solvers.planner import PathObjective, PathWeights
 
+#: objectives by (kind, robot content key (:func:`jwarp.core.device.content_key`: equal
+#: robots share one, an edited copy gets its own), id of the world (the objective holds
+#: its world, so that id is not reused while the entry lives), sizes, weights, device,
+#: dtype); an entry lives as long as its objective
 _OBJECTIVES: "weakref.WeakValueDictionary[tuple, Any]" = weakref.WeakValueDictionary()
 _KEEP: list = []  # the last few objectives stay alive between calls
 
@@ -52,10 +57,11 @@ def _check(t: Any, name: str, tail: tuple) -> None:
 def path_objective(robot: Any, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
                    *, weights: PathWeights | None = None, eps: float | None = None,
                    device: Any = "cpu", dtype: Any = np.float32) -> PathObjective:
-    """A cached :class:`PathObjective` for these sizes (rebuilt when anything differs)."""
+    """A cached :class:`PathObjective` for these sizes (rebuilt when anything differs:
+    robots count as equal by content)."""
     model = get_robot(robot)
     w = weights or PathWeights()
-    key = ("path", id(model), id(world), n_paths, n_waypoints, n_substeps,
+    key = ("path", content_key(model), id(world), n_paths, n_waypoints, n_substeps,
            (w.world, w.self, w.length), eps, str(device), np.dtype(dtype).name)
     obj = _OBJECTIVES.get(key)
     if obj is None:
@@ -100,10 +106,11 @@ def ik_objective(robot: Any, frame: Any, n: int, *, world: Any = None,
                  weights: IKWeights | None = None, eps: float | None = None,
                  q_default: Any = None, device: Any = "cpu", dtype: Any = np.float32
                  ) -> IKObjective:
-    """A cached :class:`IKObjective` for this batch size (q_default is (re)set each call)."""
+    """A cached :class:`IKObjective` for this batch size (q_default is (re)set each call;
+    robots count as equal by content)."""
     model = get_robot(robot)
     w = weights or IKWeights()
-    key = ("ik", id(model), model.frame_index(frame), id(world), n,
+    key = ("ik", content_key(model), model.frame_index(frame), id(world), n,
            (w.position, w.rotation, w.world, w.self, w.default), eps, str(device),
            np.dtype(dtype).name)
     obj = _OBJECTIVES.get(key)

@@ -8,12 +8,14 @@ a start seed until a simplex world passes.
 
 from __future__ import annotations
 
-import weakref
+import threading
+from collections import OrderedDict
 from typing import Any
 
 import numpy as np
 
 from jwarp.core.arrays import real_number
+from jwarp.core.device import content_key
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.world.sdf import World, grid_geometry
@@ -81,19 +83,27 @@ def fixed_spheres(robot: Any, pad: float = 0.0, device: Any = None) -> list[tupl
     return out
 
 
-_REACH: "weakref.WeakKeyDictionary[RobotModel, dict]" = weakref.WeakKeyDictionary()
+#: reach boxes by (robot content key, n, seed): equal robots share one, an edited copy
+#: (other limits, DH rows, spheres) has another key; the most recently used are kept
+_REACH: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
+_REACH_MAX = 64
+_REACH_LOCK = threading.Lock()
 
 
 def robot_reach(robot: Any, n: int = 2000, seed: int = 0, device: Any = None) -> np.ndarray:
     """(workspace_dim, 2) [m] box around every collision sphere of ``n`` random
     configurations (centres -/+ radii): the space a world for this robot must cover.
-    Cached per robot, ``n`` and ``seed``."""
+    Cached per robot content (:func:`jwarp.core.device.content_key`), ``n`` and ``seed``
+    (the last 64 of them)."""
     from jwarp.kinematics.fk import fk
 
     model = get_robot(robot)
-    cache = _REACH.setdefault(model, {})
-    if (n, seed) in cache:
-        return cache[(n, seed)].copy()
+    key = (content_key(model), n, seed)
+    with _REACH_LOCK:
+        box = _REACH.get(key)
+        if box is not None:
+            _REACH.move_to_end(key)
+            return box.copy()
     f, pos, rad = model.sphere_arrays()
     if len(f) == 0:
         raise ValueError(f"robot: '{model.name}' has no collision spheres")
@@ -104,22 +114,26 @@ def robot_reach(robot: Any, n: int = 2000, seed: int = 0, device: Any = None) ->
     hi = (x + rad[:, None]).max(axis=(0, 1))
     d = model.workspace_dim
     box = np.stack([lo[:d], hi[:d]], axis=1)
-    cache[(n, seed)] = box
+    with _REACH_LOCK:
+        _REACH[key] = box
+        while len(_REACH) > _REACH_MAX:
+            _REACH.popitem(last=False)
     return box.copy()
 
 
 def robot_world_grid(robot: Any, cells: int = 64, voxel_size: float | None = None,
-                     pad: float = 0.0) -> tuple[tuple[int, ...], np.ndarray, float]:
-    """A grid covering the robot's reach (:func:`robot_reach`, plus ``pad`` [m]): the
-    longest side gets ``cells`` cells (or the given ``voxel_size``), the others as many
-    cells of the same size as cover them, centred on the reach box.
+                     pad: float = 0.0, device: Any = None
+                     ) -> tuple[tuple[int, ...], np.ndarray, float]:
+    """A grid covering the robot's reach (:func:`robot_reach`, plus ``pad`` [m]; its FK on
+    ``device``): the longest side gets ``cells`` cells (or the given ``voxel_size``), the
+    others as many cells of the same size as cover them, centred on the reach box.
     Returns ``(shape, limits (dim, 2), voxel_size)``."""
     if isinstance(cells, bool) or not isinstance(cells, (int, np.integer)) or cells < 2:
         raise ValueError(f"cells: expected an integer >= 2, got {cells!r}")
     pad = real_number(pad, "pad")
     if not np.isfinite(pad):
         raise ValueError(f"pad: expected a finite distance [m], got {pad!r}")
-    box = robot_reach(robot)
+    box = robot_reach(robot, device=device)
     box = box + np.array([-pad, pad])
     span = box[:, 1] - box[:, 0]
     h = real_number(voxel_size, "voxel_size") if voxel_size is not None else \
@@ -157,7 +171,8 @@ def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200
         raise ValueError(f"min_feasible: expected 1..n={n}, got {min_feasible}")
     if isinstance(max_tries, bool) or not isinstance(max_tries, (int, np.integer)) or max_tries < 1:
         raise ValueError(f"max_tries: expected a positive integer, got {max_tries!r}")
-    shape, limits, h = robot_world_grid(model, cells=cells, voxel_size=voxel_size)
+    shape, limits, h = robot_world_grid(model, cells=cells, voxel_size=voxel_size,
+                                        device=device)
     keep = fixed_spheres(model, pad=2 * h, device=device) if clear_base else []
     fractions = []
     for s in range(int(seed), int(seed) + int(max_tries)):

@@ -26,7 +26,7 @@ SPEC_KEYS = {
 }
 
 
-def parse_world_spec(spec: Any, robot: Any = None) -> World:
+def parse_world_spec(spec: Any, robot: Any = None, device: Any = None) -> World:
     """A world from a specification (the CLI's ``--world``).
 
     * a :class:`World` passes through;
@@ -42,6 +42,11 @@ def parse_world_spec(spec: Any, robot: Any = None) -> World:
     With a ``robot`` the grid covers the robot's reach (:func:`robot_world_grid`),
     otherwise [-1, 1] m per axis. ``feasible`` needs a robot. A world of the wrong
     dimension for the robot raises ValueError.
+
+    ``device``: the Warp device of the robot computations that build a ``simplex`` world
+    (its reach, fixed spheres and the ``feasible`` collision checks; None: Warp's default
+    device, as before). A world itself is host data (numpy); files and World objects
+    need no device.
 
     Raises:
         ValueError: an unknown or repeated key, a value that is not a number, NaN/inf,
@@ -62,7 +67,7 @@ def parse_world_spec(spec: Any, robot: Any = None) -> World:
         text = os.fspath(spec).strip()
         head, _, rest = text.partition(":")
         if head.lower() == "simplex":
-            world = _simplex_from_spec(rest, model, text)
+            world = _simplex_from_spec(rest, model, text, device)
         else:
             if not text.lower().endswith(".npz"):
                 raise ValueError(f"world: expected 'simplex[:key=value,...]' or a .npz file, "
@@ -92,12 +97,13 @@ def _spec_int(key: str, v: Any, lo: int, hi: int | None = None) -> int:
     return int(v)
 
 
-def _grid_size(model: Any, dim: int, cells: int | None, voxel: float | None) -> list[float]:
+def _grid_size(model: Any, dim: int, cells: int | None, voxel: float | None,
+               device: Any = None) -> list[float]:
     """The grid sizes (per axis, as floats: nothing is allocated) a simplex spec makes."""
     if model is not None and dim == model.workspace_dim:
         from jwarp.world.feasibility import robot_reach
 
-        span = np.diff(robot_reach(model), axis=1)[:, 0]
+        span = np.diff(robot_reach(model, device=device), axis=1)[:, 0]
         h = voxel if voxel is not None else float(span.max()) / (cells - 1)
         return [math.ceil(s / h - 1e-9) + 1.0 for s in span.tolist()]
     if voxel is not None:
@@ -110,7 +116,7 @@ def _grid_text(sizes: list[float]) -> str:
     return f"{fmt[0]}^{len(fmt)}" if len(set(fmt)) == 1 else " x ".join(fmt)
 
 
-def _simplex_from_spec(rest: str, model: Any, text: str) -> World:
+def _simplex_from_spec(rest: str, model: Any, text: str, device: Any = None) -> World:
     from jwarp.memory import check_memory
     from jwarp.world.feasibility import feasible_simplex_world, fixed_spheres, robot_world_grid
     from jwarp.world.simplex import simplex_world
@@ -154,7 +160,7 @@ def _simplex_from_spec(rest: str, model: Any, text: str) -> World:
     noise = opts  # threshold, frequency, octaves, persistence
     if feasible > 0 and model is None:
         raise ValueError(f"world: 'feasible' in '{text}' needs a robot")
-    sizes = _grid_size(model, dim, None if voxel is not None else cells, voxel)
+    sizes = _grid_size(model, dim, None if voxel is not None else cells, voxel, device)
     n_cells = math.prod(sizes)
     check_memory(n_cells * BYTES_PER_CELL, f"world: '{text}': a {_grid_text(sizes)} grid",
                  "lower 'cells' (or raise 'voxel')")
@@ -164,11 +170,12 @@ def _simplex_from_spec(rest: str, model: Any, text: str) -> World:
                      "lower 'samples'")
         world = feasible_simplex_world(model, seed=seed, min_feasible=feasible, n=samples,
                                        max_tries=tries, cells=cells, voxel_size=voxel,
-                                       clear_base=clear_base, dim=dim, **noise)
+                                       clear_base=clear_base, dim=dim, device=device, **noise)
     else:
         if model is not None and dim == model.workspace_dim:
-            shape, limits, h = robot_world_grid(model, cells=cells, voxel_size=voxel)
-            keep = fixed_spheres(model, pad=2 * h) if clear_base else []
+            shape, limits, h = robot_world_grid(model, cells=cells, voxel_size=voxel,
+                                                device=device)
+            keep = fixed_spheres(model, pad=2 * h, device=device) if clear_base else []
             world = simplex_world(dim, seed=seed, shape=shape, limits=limits, keep_free=keep,
                                   **noise)
         else:

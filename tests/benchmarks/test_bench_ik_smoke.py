@@ -34,4 +34,6 @@ def test_bench_ik_quick_cpu(tmp_path):
         assert 0 < t["min"] <= t["median"]
     # the same seeds: the same solutions, so the same iterations
     assert c["solver"]["iterations_median"] == c["baseline"]["iterations_median"]
-    assert c["speedup_solver_vs_baseline"]["of_medians"] > 0
+    for k in ("solver", "ik"):  # timing.speedup: per run, of the medians, of the bests
+        sp = c[f"speedup_{k}_vs_baseline"]
+        assert len(sp["per_run"]) == 2 and sp["of_medians"] > 0 and sp["of_bests"] > 0

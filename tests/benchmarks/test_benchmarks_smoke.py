@@ -1,5 +1,6 @@
-"""Smoke test of benchmarks/bench_kinematics.py: the --quick CPU run exits 0 and prints
-the FK rows of both robots (the numbers themselves are not checked)."""
+"""Smoke tests of the benchmark scripts' --quick CPU runs (bench_kinematics.py,
+bench_planning.py, bench_calibration.py; bench_ik.py in test_bench_ik_smoke.py): exit 0,
+rows and the JSON's timing fields present (the numbers themselves are not checked)."""
 
 from __future__ import annotations
 
@@ -35,3 +36,43 @@ def test_bench_kinematics_quick_cpu(tmp_path):
     # the numpy FK written in the benchmark agrees with jwarp's
     for robot in ("justin19", "arm7"):
         assert doc["checks"][f"{robot}: |numpy fk - jwarp fk| max"] < 1e-3
+
+
+def test_bench_planning_quick_cpu(tmp_path):
+    """bench_planning.py --quick: every section runs; its times are min/median figures
+    (benchmarks/timing.py) and its IK section is bench_ik.py's shelf IK (ik() alone)."""
+    out = tmp_path / "planning.json"
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "bench_planning.py"), "--quick",
+         "--json", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
+    assert proc.stdout.startswith("machine: "), proc.stdout
+    doc = json.loads(out.read_text())
+    assert doc["machine"] and doc["repeats"] == 3
+    for P in (1, 4):
+        t = doc["iteration"][f"iteration_ms_{P}_paths"]
+        assert 0 < t["min"] <= t["median"]
+    ik = doc["ik"]
+    assert set(ik) >= {"ik", "targets", "starts"} and "baseline" not in ik
+    t = ik["ik"]["time_per_target_ms_median_over_targets"]
+    assert 0 < t["min"] <= t["median"] and 0 <= ik["ik"]["solved_rate"] <= 1
+    assert doc["feasibility"]["planar4"]["hard_tasks"] >= 0
+    comp = doc["compensation"]
+    for key in ("path_iteration_1_paths", "path_iteration_4_paths", "ik_iteration_64_configs"):
+        c = comp[key]
+        assert 0 < c["rigid_best_s"] <= c["rigid_s"] and 0 < c["elastic_best_s"] <= c["elastic_s"]
+        assert c["rounds"] == 3
+        assert abs(c["overhead"] - (c["elastic_s"] / c["rigid_s"] - 1)) < 1e-12
+
+
+def test_bench_calibration_quick_cpu(tmp_path):
+    """bench_calibration.py --quick: the calibration time is min/median over 2 runs."""
+    out = tmp_path / "calibration.json"
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "bench_calibration.py"), "--quick",
+         "--samples", "40", "--test", "20", "--free", "theta,d,kappa_theta,tracker,markers",
+         "--json", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
+    assert "full calibration:" in proc.stdout and "after test" in proc.stdout
+    doc = json.loads(out.read_text())
+    assert doc["runs"] == 2 and 0 < doc["time_min_s"] <= doc["time_s"] and doc["machine"]

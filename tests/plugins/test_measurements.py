@@ -13,14 +13,15 @@ from scipy.spatial.transform import Rotation
 import jwarp
 from jwarp.registry import measurement
 
+from devices import requires_cpu
 from reference import sample_q
 
 EPS = 1e-6
 
 
 # ----------------------------------------------------------------- helpers
-def fk64(robot, q):
-    return np.asarray(jwarp.fk(robot, q, device="cpu", dtype="float64"))
+def fk64(robot, q, device):
+    return np.asarray(jwarp.fk(robot, q, device=device, dtype="float64"))
 
 
 def pose(pos, rv):
@@ -71,19 +72,19 @@ def check_jacobians(m, frames, p, meta=None, tol=1e-6):
     np.testing.assert_allclose(jp, fd_params(m, frames, p, meta), atol=tol * scale)
 
 
-def check_chain_rule(m, robot, q, p, meta=None, tol=1e-6):
+def check_chain_rule(m, robot, q, p, meta=None, tol=1e-6, *, device):
     """dy/dq = sum_f J_frames[f] @ jacobian(robot, q, frame f) equals FD of predict(fk(q))."""
-    _, jf, _ = m.jacobians(fk64(robot, q), p, meta)
+    _, jf, _ = m.jacobians(fk64(robot, q, device), p, meta)
     dydq = np.zeros((q.shape[0], m.n_obs, robot.n_dof))
     for k, fi in enumerate(m.frames):
-        Jq = np.asarray(jwarp.jacobian(robot, q, fi, device="cpu", dtype="float64"))
+        Jq = np.asarray(jwarp.jacobian(robot, q, fi, device=device, dtype="float64"))
         dydq += jf[:, :, k, :] @ Jq
     fd = np.zeros_like(dydq)
     for j in range(robot.n_dof):
         dq = np.zeros(robot.n_dof)
         dq[j] = EPS
-        fd[:, :, j] = (m.predict(fk64(robot, q + dq), p, meta)
-                       - m.predict(fk64(robot, q - dq), p, meta)) / (2 * EPS)
+        fd[:, :, j] = (m.predict(fk64(robot, q + dq, device), p, meta)
+                       - m.predict(fk64(robot, q - dq, device), p, meta)) / (2 * EPS)
     np.testing.assert_allclose(dydq, fd, atol=tol * max(1.0, np.abs(fd).max()))
 
 
@@ -114,7 +115,7 @@ CART = {"plugin": "cartesian",
         "noise": 0.001}
 
 
-def test_cartesian_predict_matches_numpy(justin):
+def test_cartesian_predict_matches_numpy(device, justin):
     m = measurement("cartesian")(justin, CART)
     assert m.obs_names == ["right_x", "right_y", "right_z", "left_x", "left_y", "left_z",
                            "right2_x", "right2_y", "right2_z"]
@@ -122,7 +123,7 @@ def test_cartesian_predict_matches_numpy(justin):
                                   "tracker_rx", "tracker_ry", "tracker_rz"]
     assert m.params.groups.count("tracker") == 6 and m.params.groups.count("markers") == 9
     q = justin_q(justin, 5, seed=0)
-    F = fk64(justin, q)
+    F = fk64(justin, q, device)
     y = m.predict(F, m.params.nominal)
     Tinv = np.linalg.inv(pose(CART["tracker"]["position"], CART["tracker"]["rotvec"]))
     for s in range(5):
@@ -131,18 +132,18 @@ def test_cartesian_predict_matches_numpy(justin):
             np.testing.assert_allclose(y[s, 3 * k:3 * k + 3], x[:3], atol=1e-12)
 
 
-def test_cartesian_jacobians_fd_and_chain_rule(justin):
+def test_cartesian_jacobians_fd_and_chain_rule(device, justin):
     m = measurement("cartesian")(justin, CART)
     q = justin_q(justin, 4, seed=1)
     p = m.params.nominal + np.random.default_rng(0).normal(0, 0.01, m.params.size)
-    check_jacobians(m, fk64(justin, q), p)
-    check_chain_rule(m, justin, q, p)
+    check_jacobians(m, fk64(justin, q, device), p)
+    check_chain_rule(m, justin, q, p, device=device)
 
 
-def test_cartesian_initial_guess_recovers_tracker(justin):
+def test_cartesian_initial_guess_recovers_tracker(device, justin):
     m = measurement("cartesian")(justin, CART)
     q = justin_q(justin, 30, seed=2)
-    F = fk64(justin, q)
+    F = fk64(justin, q, device)
     p_true = m.params.nominal.copy()
     y = m.simulate(F, p_true, 0.0005, np.random.default_rng(1))
     p0 = p_true.copy()
@@ -158,9 +159,9 @@ def test_cartesian_initial_guess_recovers_tracker(justin):
     assert np.abs(m.predict(F, p1) - y).mean() < 0.002 < err0
 
 
-def test_cartesian_simulate_noise(justin):
+def test_cartesian_simulate_noise(device, justin):
     m = measurement("cartesian")(justin, CART)
-    F = fk64(justin, justin_q(justin, 400, seed=3))
+    F = fk64(justin, justin_q(justin, 400, seed=3), device)
     y = m.simulate(F, m.params.nominal, 0.002, np.random.default_rng(5))
     r = y - m.predict(F, m.params.nominal)
     assert abs(r.std() - 0.002) < 2e-4
@@ -195,9 +196,9 @@ def image_setup(fixed: bool, xi: float = 0.08) -> dict:
             "noise": 1.0}
 
 
-def visible_q(robot, m, n, seed):
+def visible_q(robot, m, n, seed, device):
     q = justin_q(robot, 100 * n, seed=seed)
-    ok = m.visible(fk64(robot, q), m.params.nominal).all(axis=1)
+    ok = m.visible(fk64(robot, q, device), m.params.nominal).all(axis=1)
     assert ok.sum() >= n, "too few configurations with all markers in view"
     return q[ok][:n]
 
@@ -208,14 +209,14 @@ def camera_pose(m, F, p):
 
 
 @pytest.mark.parametrize("fixed", [True, False])
-def test_image_predict_matches_numpy(justin, fixed):
+def test_image_predict_matches_numpy(device, justin, fixed):
     setup = image_setup(fixed)
     m = measurement("image")(justin, setup)
     assert m.unit == "px" and m.obs_names[:4] == ["right_u", "right_v", "left_u", "left_v"]
     assert m.params.names[-5:] == [f"intrinsics_{k}" for k in ("fx", "fy", "cx", "cy", "xi")]
     assert m.params.groups.count("intrinsics") == 5 and m.params.groups.count("camera") == 6
-    q = visible_q(justin, m, 6, seed=10)
-    F = fk64(justin, q)
+    q = visible_q(justin, m, 6, seed=10, device=device)
+    F = fk64(justin, q, device)
     y = m.predict(F, m.params.nominal)
     Tc = camera_pose(m, F, m.params.nominal)
     fx, fy = INTR["focal"]
@@ -230,11 +231,11 @@ def test_image_predict_matches_numpy(justin, fixed):
                                        atol=1e-9)
 
 
-def test_image_matches_opencv_without_distortion(justin):
+def test_image_matches_opencv_without_distortion(device, justin):
     cv2 = pytest.importorskip("cv2")
     m = measurement("image")(justin, image_setup(True, xi=0.0))
-    q = visible_q(justin, m, 5, seed=11)
-    F = fk64(justin, q)
+    q = visible_q(justin, m, 5, seed=11, device=device)
+    F = fk64(justin, q, device)
     p = m.params.nominal
     y = m.predict(F, p).reshape(5, -1, 2)
     Rc = Rotation.from_rotvec(p[3:6]).as_matrix()
@@ -250,24 +251,24 @@ def test_image_matches_opencv_without_distortion(justin):
 
 
 @pytest.mark.parametrize("fixed", [True, False])
-def test_image_jacobians_fd_and_chain_rule(justin, fixed):
+def test_image_jacobians_fd_and_chain_rule(device, justin, fixed):
     m = measurement("image")(justin, image_setup(fixed))
-    q = visible_q(justin, m, 4, seed=12)
+    q = visible_q(justin, m, 4, seed=12, device=device)
     p = m.params.nominal + np.random.default_rng(1).normal(0, 1e-3, m.params.size)
-    check_jacobians(m, fk64(justin, q), p, tol=1e-6)
-    check_chain_rule(m, justin, q, p, tol=1e-6)
+    check_jacobians(m, fk64(justin, q, device), p, tol=1e-6)
+    check_chain_rule(m, justin, q, p, tol=1e-6, device=device)
     if not fixed:  # closed loop: both the camera frame and the hand frames appear
         assert set(m.frames) == {justin.frame_index(f) for f in ("head_tcp", "right_tcp", "left_tcp")}
         # the visor marker rides on the camera frame: its pixels do not depend on that frame
-        _, jf, _ = m.jacobians(fk64(justin, q), p)
+        _, jf, _ = m.jacobians(fk64(justin, q, device), p)
         np.testing.assert_allclose(jf[:, 4:6], 0.0, atol=1e-9)
 
 
 @pytest.mark.parametrize("fixed", [True, False])
-def test_image_initial_guess_recovers_camera(justin, fixed):
+def test_image_initial_guess_recovers_camera(device, justin, fixed):
     m = measurement("image")(justin, image_setup(fixed))
-    q = visible_q(justin, m, 20, seed=13)
-    F = fk64(justin, q)
+    q = visible_q(justin, m, 20, seed=13, device=device)
+    F = fk64(justin, q, device)
     p_true = m.params.nominal.copy()
     y = m.simulate(F, p_true, 0.5, np.random.default_rng(2))
     p0 = p_true.copy()
@@ -322,13 +323,13 @@ def hand_contact(extra_bodies=(), extra_pairs=()):
             "pairs": HAND_PAIRS + list(extra_pairs), "noise": 0.0005}
 
 
-def test_contact_capsules_match_relative_frame_reference(hand):
+def test_contact_capsules_match_relative_frame_reference(device, hand):
     m = measurement("contact")(hand, hand_contact())
     assert m.obs_names == ["distance"] and m.meta_names == ["pair"]
     assert m.params.names == [f"{t}_radius" for t in TIPS]
     np.testing.assert_allclose(m.params.nominal, 0.009)
     q = sample_q(hand, 12, seed=4)
-    F = fk64(hand, q)
+    F = fk64(hand, q, device)
     meta = {"pair": np.arange(12) % len(HAND_PAIRS)}
     y = m.predict(F, m.params.nominal, meta)
     caps = {hand.frames[c.frame].name: c for c in hand.capsules}
@@ -343,13 +344,13 @@ def test_contact_capsules_match_relative_frame_reference(hand):
         assert abs(y[s, 0] - ref) < 1e-7
 
 
-def test_contact_capsules_jacobians_fd_and_chain_rule(hand):
+def test_contact_capsules_jacobians_fd_and_chain_rule(device, hand):
     m = measurement("contact")(hand, hand_contact())
     q = sample_q(hand, 12, seed=5)
     meta = {"pair": (np.arange(12) * 5) % len(HAND_PAIRS)}
     p = m.params.nominal + np.array([0.001, -0.0005, 0.0, 0.0007])
-    check_jacobians(m, fk64(hand, q), p, meta)
-    check_chain_rule(m, hand, q, p, meta)
+    check_jacobians(m, fk64(hand, q, device), p, meta)
+    check_chain_rule(m, hand, q, p, meta, device=device)
 
 
 BOX = {"name": "block", "type": "mesh", "frame": None, "box": [0.04, 0.06, 0.03],
@@ -364,13 +365,13 @@ def box_sd(x, half):
     return np.linalg.norm(np.maximum(d, 0), axis=-1) + np.minimum(d.max(axis=-1), 0)
 
 
-def test_contact_mesh_fixture_matches_analytic_box(hand):
+def test_contact_mesh_fixture_matches_analytic_box(device, hand):
     pytest.importorskip("trimesh")
     setup = hand_contact([BOX, BALL], [["block", "thumb"], ["ball", "block"], ["index", "ball"]])
     m = measurement("contact")(hand, setup)
     assert m.params.groups.count("fixtures") == 6 and "ball_radius" in m.params.names
     q = sample_q(hand, 9, seed=6)
-    F = fk64(hand, q)
+    F = fk64(hand, q, device)
     meta = {"pair": np.array([6, 7, 8] * 3)}
     p = m.params.nominal
     y = m.predict(F, p, meta)
@@ -394,15 +395,15 @@ def test_contact_mesh_fixture_matches_analytic_box(hand):
             assert abs(y[s, 0] - (ref - idx.radius - BALL["radius"])) < 1e-9
 
 
-def test_contact_mesh_jacobians_fd_and_chain_rule(hand):
+def test_contact_mesh_jacobians_fd_and_chain_rule(device, hand):
     pytest.importorskip("trimesh")
     setup = hand_contact([BOX, BALL], [["block", "thumb"], ["ball", "block"]])
     m = measurement("contact")(hand, setup)
     q = sample_q(hand, 6, seed=7)
     meta = {"pair": np.array([6, 7] * 3)}
     p = m.params.nominal
-    check_jacobians(m, fk64(hand, q), p, meta, tol=2e-5)
-    check_chain_rule(m, hand, q, p, meta, tol=2e-5)
+    check_jacobians(m, fk64(hand, q, device), p, meta, tol=2e-5)
+    check_chain_rule(m, hand, q, p, meta, tol=2e-5, device=device)
 
 
 def test_mesh_signed_distance_box_inside_and_outside():
@@ -428,13 +429,13 @@ REL = {"plugin": "relative",
 
 
 @pytest.mark.parametrize("free", [False, True])
-def test_relative_predict_and_jacobians(hand, free):
+def test_relative_predict_and_jacobians(device, hand, free):
     m = measurement("relative")(hand, dict(REL, free_offsets=free))
     assert m.obs_names == ["index_x", "index_y", "index_z", "middle_x", "middle_y", "middle_z",
                            "ring_tip_x", "ring_tip_y", "ring_tip_z"]
     assert m.params.size == (12 if free else 0)
     q = sample_q(hand, 5, seed=9)
-    F = fk64(hand, q)
+    F = fk64(hand, q, device)
     p = m.params.nominal
     y = m.predict(F, p)
     offs = [[0, 0, 0], [0.001, 0.0, -0.002], [0, 0, 0], [0.0, 0.003, 0.0]]
@@ -446,13 +447,13 @@ def test_relative_predict_and_jacobians(hand, free):
     if free:
         p = p + np.random.default_rng(2).normal(0, 0.002, p.size)
     check_jacobians(m, F, p)
-    check_chain_rule(m, hand, q, p)
+    check_chain_rule(m, hand, q, p, device=device)
 
 
-def test_relative_same_frame_cancels(hand):
+def test_relative_same_frame_cancels(device, hand):
     m = measurement("relative")(hand, {"plugin": "relative", "end_effectors": [
         "index_tip", {"name": "b", "frame": "index_tip", "position": [0.01, 0, 0]}]})
-    F = fk64(hand, sample_q(hand, 3, seed=1))
+    F = fk64(hand, sample_q(hand, 3, seed=1), device)
     _, jf, _ = m.jacobians(F, m.params.nominal)
     np.testing.assert_allclose(jf[..., :3], 0.0, atol=1e-15)   # translation cancels
     check_jacobians(m, F, m.params.nominal)
@@ -538,9 +539,9 @@ def test_contact_setup_validation(hand, mutate, match):
         measurement("contact")(hand, s)
 
 
-def test_input_validation(hand):
+def test_input_validation(device, hand):
     m = measurement("contact")(hand, hand_contact())
-    F = fk64(hand, sample_q(hand, 3, seed=0))
+    F = fk64(hand, sample_q(hand, 3, seed=0), device)
     p = m.params.nominal
     with pytest.raises(ValueError, match="needs the per-sample column 'pair'"):
         m.predict(F, p)
@@ -587,7 +588,9 @@ def test_docs_setup_examples_build():
     assert built == {"cartesian", "image", "contact", "relative"}
 
 
+@requires_cpu
 def test_bench_measurements_quick(tmp_path):
+    """The benchmark on its default device, the CPU."""
     import json
     import subprocess
     import sys

@@ -1,6 +1,8 @@
 """MAP calibration (jwarp.solvers.calibration): torque derivatives, the analytic residual
 Jacobian through the elastic equilibrium, recovery of a simulated truth, identifiability
-warnings, result I/O and input validation. All float64 on the CPU, small sample counts."""
+warnings, result I/O and input validation. All float64, small sample counts. The solver
+evaluates its model on the CPU (it takes no device): those tests need Warp's CPU backend
+(``requires_cpu``); the torque derivatives are checked against the kernels on every device."""
 
 from __future__ import annotations
 
@@ -22,6 +24,8 @@ from jwarp.solvers.calibration import (CalibrationProblem, CalibrationWarning, P
 from jwarp.solvers.calibration import elastic as E
 from jwarp.solvers.calibration.params import perturb_robot
 from jwarp.solvers.calibration.result import model_frames
+
+from devices import requires_cpu
 
 ROOT = Path(__file__).resolve().parents[2]
 KAPPA = 1e-4  # rad/(N m), Agile Justin's order of magnitude
@@ -106,20 +110,20 @@ def _assert_jacobian_close(J, Jfd, n_data, col_rtol, total_rtol):
 
 
 # ------------------------------------------------------------ torque derivatives
-def test_torques_twists_and_torque_jacobian_match_kernels_and_finite_differences():
+def test_torques_twists_and_torque_jacobian_match_kernels_and_finite_differences(device):
     robot = jwarp.robot("justin19")
     rng = np.random.default_rng(1)
     S = 3
     q = _q(robot, S, rng)
     rho = robot.dh_table + 0.03 * rng.standard_normal((S, robot.n_frames, 5)) * robot.is_dh[None, :, None]
-    frames = jwarp.fk(robot, q, dh=rho, device="cpu")
+    frames = jwarp.fk(robot, q, dh=rho, device=device)
     st = E.torque_state(robot, frames, rho)
-    tk = jwarp.gravity_torques(robot, q, dh=rho, device="cpu")
+    tk = jwarp.gravity_torques(robot, q, dh=rho, device=device)
     np.testing.assert_allclose(st.tau, tk, rtol=1e-9, atol=1e-9 * np.abs(tk).max())
     # the twist of DH entry (j, c) moves frame j's origin like jacobian_dh of frame j says
     a, w = E.dh_twists(robot, st)
     for j in (1, 2, 4, 8, 12, 17, 25):
-        jac = jwarp.jacobian_dh(robot, q, j, dh=rho, device="cpu")      # (S, 6, n, 5)
+        jac = jwarp.jacobian_dh(robot, q, j, dh=rho, device=device)     # (S, 6, n, 5)
         v = a[:, j] + np.cross(w[:, j], frames[:, j, None, :3, 3])
         np.testing.assert_allclose(v, jac[:, :3, j, :].transpose(0, 2, 1), atol=1e-12)
         np.testing.assert_allclose(w[:, j], jac[:, 3:, j, :].transpose(0, 2, 1), atol=1e-12)
@@ -131,13 +135,14 @@ def test_torques_twists_and_torque_jacobian_match_kernels_and_finite_differences
             rp, rm = rho.copy(), rho.copy()
             rp[:, j, c] += eps
             rm[:, j, c] -= eps
-            fd = (jwarp.gravity_torques(robot, q, dh=rp, device="cpu")
-                  - jwarp.gravity_torques(robot, q, dh=rm, device="cpu")) / (2 * eps)
+            fd = (jwarp.gravity_torques(robot, q, dh=rp, device=device)
+                  - jwarp.gravity_torques(robot, q, dh=rm, device=device)) / (2 * eps)
             np.testing.assert_allclose(D[:, :, :, j, c], fd, atol=1e-6 * max(1.0, np.abs(fd).max()),
                                        err_msg=f"frame {j} column {c}")
 
 
 # ----------------------------------------------------------- residual Jacobian
+@requires_cpu
 def test_elastic_residual_jacobian_matches_finite_differences():
     """All DH groups, all three compliance axes, tracker and markers on the tree-shaped
     justin19 (torques couple both arms through the torso)."""
@@ -160,6 +165,7 @@ def test_elastic_residual_jacobian_matches_finite_differences():
     _assert_jacobian_close(J, Jfd, prob.n_data, col_rtol=2e-6, total_rtol=1e-7)
 
 
+@requires_cpu
 def test_rigid_residual_jacobian_matches_finite_differences():
     robot = jwarp.robot("arm7")
     meas = FramePositions(robot, ["right_tcp", 5])
@@ -174,6 +180,7 @@ def test_rigid_residual_jacobian_matches_finite_differences():
                            col_rtol=1e-6, total_rtol=1e-7)
 
 
+@requires_cpu
 def test_diverged_equilibrium_gives_infinite_residuals_not_an_error():
     robot = jwarp.robot("arm7")
     meas = FramePositions(robot, ["right_tcp"])
@@ -188,6 +195,7 @@ def test_diverged_equilibrium_gives_infinite_residuals_not_an_error():
 
 
 # ---------------------------------------------------------------- recovery
+@requires_cpu
 def test_full_elastic_calibration_recovers_simulated_truth_with_cartesian_plugin():
     """Truth inside the model: +-5 mm / +-5 deg errors on theta, d, r, alpha of every DH
     frame, kappa_theta and kappa_alpha; rough tracker (0.4 m, 20 deg off) and markers."""
@@ -229,6 +237,7 @@ def test_full_elastic_calibration_recovers_simulated_truth_with_cartesian_plugin
     assert np.all(np.isfinite(res.std)) and np.all(res.std > 0)
 
 
+@requires_cpu
 def test_position_measurement_recovers_subset_errors_and_joint_compliance():
     nominal = jwarp.robot("arm7")
     rng = np.random.default_rng(5)
@@ -253,6 +262,7 @@ def test_position_measurement_recovers_subset_errors_and_joint_compliance():
     assert error_stats(errors(rigid.robot, meas, rigid.params, q[60:], y_clean[60:]))["mean"] > 3 * test["mean"]
 
 
+@requires_cpu
 def test_rough_tracker_near_half_turn_converges_without_biasing_the_robot():
     """A tracker looking back at the robot (rotation ~ pi, where the rotation vector has two
     representations): the initial alignment must keep the representation next to the rough
@@ -294,6 +304,7 @@ def test_nearest_rotvec_picks_the_representation_next_to_the_reference():
 
 
 # ------------------------------------------------------------ identifiability
+@requires_cpu
 def test_identifiability_warning_names_tracker_redundant_with_first_joint_offset():
     robot = jwarp.robot("justin19")
     meas = _cartesian(robot)
@@ -309,6 +320,7 @@ def test_identifiability_warning_names_tracker_redundant_with_first_joint_offset
     assert abs(res.value("torso_1.theta")) < 1e-3
 
 
+@requires_cpu
 def test_identifiability_warning_for_d_of_consecutive_parallel_axes():
     robot = jwarp.robot("justin19")
     meas = FramePositions(robot, ["right_tcp", "left_tcp"])
@@ -327,6 +339,7 @@ def test_identifiability_warning_for_d_of_consecutive_parallel_axes():
     assert ok.unidentifiable == [] and ok.warnings == []
 
 
+@requires_cpu
 def test_moved_parameters_are_reported():
     robot = jwarp.robot("arm7")
     truth = robot.with_dh(robot.dh_table + np.where(np.arange(robot.n_frames)[:, None] == 3,
@@ -343,6 +356,7 @@ def test_moved_parameters_are_reported():
 
 
 # ---------------------------------------------------------------- results
+@requires_cpu
 def test_result_robot_saves_and_loads_and_errors_match_numpy(tmp_path):
     robot = jwarp.robot("arm7")
     meas = FramePositions(robot, ["right_tcp"])
@@ -432,7 +446,7 @@ def _masses(robot):
     return np.array([m.mass for m in robot.masses])
 
 
-def test_mass_torques_are_linear_in_the_masses_and_match_the_kernel():
+def test_mass_torques_are_linear_in_the_masses_and_match_the_kernel(device):
     """d tau / d m against the Warp torque kernel of robots with other masses (tau is
     linear in the masses at fixed frames), two entries on one frame included."""
     robot = _extra_mass(jwarp.robot("justin19"))
@@ -440,19 +454,19 @@ def test_mass_torques_are_linear_in_the_masses_and_match_the_kernel():
     S = 3
     q = _q(robot, S, rng)
     rho = robot.dh_table + 0.03 * rng.standard_normal((S, robot.n_frames, 5)) * robot.is_dh[None, :, None]
-    frames = jwarp.fk(robot, q, dh=rho, device="cpu")
+    frames = jwarp.fk(robot, q, dh=rho, device=device)
     st = E.torque_state(robot, frames, rho)
     D = E.mass_torque_jacobian(robot, frames, st, np.arange(len(robot.masses)))
     assert D.shape == (S, robot.n_frames, 3, len(robot.masses))
     m = _masses(robot) * rng.uniform(0.5, 1.5, len(robot.masses))
     other = robot.with_masses(m)
-    tk = jwarp.gravity_torques(other, q, dh=rho, device="cpu")
+    tk = jwarp.gravity_torques(other, q, dh=rho, device=device)
     np.testing.assert_allclose(np.einsum("snkp,p->snk", D, m), tk, rtol=1e-9,
                                atol=1e-9 * np.abs(tk).max())
     # one unit mass: only the frames above it feel it
     e = len(robot.masses) - 1                       # the extra entry on right_7
     unit = robot.with_masses(np.eye(len(robot.masses))[e])
-    tu = jwarp.gravity_torques(unit, q, dh=rho, device="cpu")
+    tu = jwarp.gravity_torques(unit, q, dh=rho, device=device)
     np.testing.assert_allclose(D[..., e], tu, atol=1e-12)
     assert np.abs(D[:, robot.frame_index("left_2"), :, e]).max() == 0
     assert np.abs(D[:, robot.frame_index("right_2"), :, e]).max() > 1
@@ -461,6 +475,7 @@ def test_mass_torques_are_linear_in_the_masses_and_match_the_kernel():
     np.testing.assert_allclose(st2.tau, tk, rtol=1e-9, atol=1e-9 * np.abs(tk).max())
 
 
+@requires_cpu
 def test_mass_residual_jacobian_matches_finite_differences():
     """mass columns through the implicit function theorem, with theta and free compliances
     on the tree-shaped justin19 (two entries on right_7)."""
@@ -558,6 +573,7 @@ def test_perturb_robot_mass_error_keeps_the_other_draws():
         perturb_robot(robot, np.random.default_rng(3), mass_error=1.5)
 
 
+@requires_cpu
 def test_mass_calibration_recovers_heavier_truth_with_known_compliance():
     """Truth: every point mass +15 %, compliances known (the nominal robot has them); only
     the masses are free. The test error drops from the model error to far below the noise
@@ -596,6 +612,7 @@ def test_mass_calibration_recovers_heavier_truth_with_known_compliance():
     np.testing.assert_array_equal(res.robot.kappa, nominal.kappa)
 
 
+@requires_cpu
 def test_masses_and_compliances_free_together_report_their_scaling_direction():
     """All masses x c with all compliances / c predict the same: without priors the fit is
     one arbitrary point of that family and the result says so; with priors it is held."""
@@ -670,6 +687,7 @@ def test_input_validation_names_the_argument():
         calibrate(robot, meas, q, y, free="theta", x0=np.zeros(3))
 
 
+@requires_cpu
 def test_benchmark_script_quick_run():
     proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_calibration.py"),
                            "--samples", "40", "--test", "20", "--quick",

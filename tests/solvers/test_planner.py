@@ -9,6 +9,8 @@ from jwarp.solvers import planner as PL
 from jwarp.core.limits import within_limits
 from jwarp.world import world_from_occupancy
 
+from devices import requires_cpu
+
 N_CELLS = 64
 LIM2 = np.array([[-1.0, 1.0], [-1.0, 1.0]])
 H2 = 2.0 / (N_CELLS - 1)
@@ -33,7 +35,7 @@ def wall_world():
     return world_from_occupancy((np.abs(X) < 0.5 * H2) & (Y < 0.6), LIM2, H2)
 
 
-def test_upath_gradient_matches_central_fd(block_world):
+def test_upath_gradient_matches_central_fd(device, block_world):
     robot = jwarp.robot("planar4")
     rng = np.random.default_rng(0)
     s, g = np.array([1.2, 0.3, 0.0, 0.0]), np.array([-1.2, -0.2, 0.1, 0.0])
@@ -41,7 +43,7 @@ def test_upath_gradient_matches_central_fd(block_world):
     Q = np.repeat(Q, 2, 0)
     Q[:, 1:-1] += rng.normal(scale=0.3, size=Q[:, 1:-1].shape)
     obj = PL.PathObjective(robot, block_world, 2, 6, 3, weights=PL.PathWeights(1.0, 0.7, 0.05),
-                           eps=0.04, device="cpu", dtype=np.float64)
+                           eps=0.04, device=device, dtype=np.float64)
     u, grad = obj.value_and_grad(Q)
     coll0, length0 = obj.collision.numpy().copy(), obj.length.numpy().copy()
     assert np.all(coll0 > 0)  # the straight-ish paths cross the block
@@ -55,49 +57,49 @@ def test_upath_gradient_matches_central_fd(block_world):
             fd[:, t, j] = (obj.value_and_grad(Qp)[0] - obj.value_and_grad(Qm)[0]) / (2 * h)
     np.testing.assert_allclose(grad, fd, atol=1e-5 * np.abs(fd).max(), rtol=1e-4)
     # U_path = collision (independent call on the substeps) + lam_l * length
-    qs = PL.substeps(Q, 3).reshape(-1, 4)
+    qs = PL.substeps(Q, 3, device=device).reshape(-1, 4)
     c, _ = collision.collision_cost(robot, qs, block_world, w_world=1.0, w_self=0.7, eps=0.04,
-                                    grad=False, dtype=np.float64)
+                                    grad=False, device=device, dtype=np.float64)
     np.testing.assert_allclose(coll0, c.reshape(2, -1).sum(1), rtol=1e-10)
     np.testing.assert_allclose(u, c.reshape(2, -1).sum(1) + 0.05 * length0, rtol=1e-10)
 
 
-def test_substeps_catch_a_thin_wall_that_waypoints_miss(wall_world):
+def test_substeps_catch_a_thin_wall_that_waypoints_miss(device, wall_world):
     robot = jwarp.robot("sphere2d")
     path = np.array([[-0.5, 0.0], [0.5, 0.0]])
-    assert collision.is_collision_free(robot, path, wall_world).all()  # both waypoints free
-    assert PL.path_feasible(robot, wall_world, path, 1)  # waypoints alone miss the wall
-    n_sub = PL.substeps_for_voxel(robot, path, wall_world.voxel_size)
+    assert collision.is_collision_free(robot, path, wall_world, device=device).all()  # both free
+    assert PL.path_feasible(robot, wall_world, path, 1, device=device)  # waypoints miss the wall
+    n_sub = PL.substeps_for_voxel(robot, path, wall_world.voxel_size, device=device)
     assert n_sub >= 31  # 1 m of motion / 0.032 m voxels
-    assert not PL.path_feasible(robot, wall_world, path, n_sub)
+    assert not PL.path_feasible(robot, wall_world, path, n_sub, device=device)
     # the planner's own check sees it too: the straight line is never reported feasible
     res = PL.plan(robot, wall_world, path[0], path[1], initial="straight", iterations=0,
-                  n_waypoints=2)
+                  n_waypoints=2, device=device)
     assert not res.feasible[0] and res.collision_cost[0] > 0
 
 
-def test_sphere2d_plans_through_the_opening():
+def test_sphere2d_plans_through_the_opening(device):
     X, Y = grid2()
     world = world_from_occupancy((np.abs(X) < 1.5 * H2) & (Y < 0.3), LIM2, H2)
     robot = jwarp.robot("sphere2d")
     s, g = np.array([-0.5, 0.0]), np.array([0.5, 0.0])
     res = PL.plan(robot, world, s, g, initial="mixed", n_starts=8, iterations=200,
-                  step=0.05, n_waypoints=10, seed=1)
+                  step=0.05, n_waypoints=10, seed=1, device=device)
     assert res.feasible[0] and not res.all_feasible[0, 0]  # the straight start failed
     p = res.path[0]
     np.testing.assert_array_equal(p[0], s)
     np.testing.assert_array_equal(p[-1], g)
     assert p[:, 1].max() > 0.3  # it went over the top of the wall
-    assert PL.path_feasible(robot, world, p, 64)  # independent fine check
+    assert PL.path_feasible(robot, world, p, 64, device=device)  # independent fine check
 
 
-def test_planar4_plans_around_a_known_obstacle(block_world):
+def test_planar4_plans_around_a_known_obstacle(device, block_world):
     robot = jwarp.robot("planar4")
     s, g = np.array([1.2, 0.0, 0.0, 0.0]), np.array([-1.2, 0.0, 0.0, 0.0])
     straight = PL.initial_paths(s[None], g[None], 20, "straight")[0]
-    assert not PL.path_feasible(robot, block_world, straight, 16)
+    assert not PL.path_feasible(robot, block_world, straight, 16, device=device)
     res = PL.plan(robot, block_world, s, g, initial="mixed", n_starts=16, n_substeps=8,
-                  iterations=300, step=0.05, seed=0)
+                  iterations=300, step=0.05, seed=0, device=device)
     assert res.feasible[0] and res.n_feasible[0] >= 1
     p = res.path[0]
     assert p.shape == (20, 4)
@@ -105,53 +107,55 @@ def test_planar4_plans_around_a_known_obstacle(block_world):
     assert within_limits(robot, p).all()
     # checked at substeps sized to the final path (sphere motion <= voxel / 2), not only at
     # the 8 substeps the optimisation used
-    n_chk = PL.substeps_for_voxel(robot, p, block_world.voxel_size, safety=PL.SWEEP_SAFETY)
-    assert n_chk > 8 and PL.path_feasible(robot, block_world, p, n_chk)
+    n_chk = PL.substeps_for_voxel(robot, p, block_world.voxel_size, safety=PL.SWEEP_SAFETY,
+                                  device=device)
+    assert n_chk > 8 and PL.path_feasible(robot, block_world, p, n_chk, device=device)
     assert res.length_cost[0] > 1.0 and res.collision_cost[0] >= 0
     assert 0 < res.iterations[0] <= 300 and res.wall_time > 0
     d = res.to_dict()
     assert d["feasible"] and len(d["path"]) == 20 and "length" in d["costs"]
 
 
-def test_batched_problems_and_user_guess(block_world):
+def test_batched_problems_and_user_guess(device, block_world):
     robot = jwarp.robot("planar4")
     s = np.array([[2.0, 1.0, 0.0, 0.0], [2.0, 0.0, 0.5, 0.0]])
     g = np.array([[2.0, -1.0, 0.0, 0.0], [2.5, 0.3, 0.0, 0.0]])
     guess = PL.initial_paths(s, g, 8, "straight")[:, None]  # (B, 1, W, n)
-    res = PL.plan(robot, block_world, s, g, initial=guess, iterations=50)
+    res = PL.plan(robot, block_world, s, g, initial=guess, iterations=50, device=device)
     assert res.path.shape == (2, 8, 4) and res.feasible.shape == (2,)
     assert res.feasible.all() and np.all(res.iterations == 0)  # both lines are free already
     np.testing.assert_allclose(res.path, guess[:, 0], atol=1e-6)
     np.testing.assert_allclose(res.length_cost, 1.0, rtol=1e-5)
 
 
-def test_bad_inputs_give_clear_errors(block_world, wall_world):
+def test_bad_inputs_give_clear_errors(device, block_world, wall_world):
+    """Some are found by the endpoint checks' collision kernels: on the device."""
     robot = jwarp.robot("planar4")
     ok = np.array([1.2, 0.0, 0.0, 0.0])
     inside = np.array([0.0, 0.0, 0.0, 0.0])  # arm along +x through the block
     with pytest.raises(ValueError, match="start.*collision"):
-        PL.plan(robot, block_world, inside, ok)
+        PL.plan(robot, block_world, inside, ok, device=device)
     with pytest.raises(ValueError, match="goal.*limits"):
-        PL.plan(robot, block_world, ok, np.array([-1.2, 0.0, 0.0, 3.1]))
+        PL.plan(robot, block_world, ok, np.array([-1.2, 0.0, 0.0, 3.1]), device=device)
     with pytest.raises(ValueError, match="start: expected shape"):
-        PL.plan(robot, block_world, ok[:3], ok)
+        PL.plan(robot, block_world, ok[:3], ok, device=device)
     with pytest.raises(ValueError, match="goal: contains NaN"):
-        PL.plan(robot, block_world, ok, np.full(4, np.nan))
+        PL.plan(robot, block_world, ok, np.full(4, np.nan), device=device)
     with pytest.raises(ValueError, match="world"):
-        PL.plan("arm7", block_world, np.zeros(7), np.zeros(7))
+        PL.plan("arm7", block_world, np.zeros(7), np.zeros(7), device=device)
     with pytest.raises(ValueError, match="initial"):
-        PL.plan(robot, block_world, ok, -ok, initial=np.zeros((5, 3)))
+        PL.plan(robot, block_world, ok, -ok, initial=np.zeros((5, 3)), device=device)
     with pytest.raises(ValueError, match="initial"):
-        PL.plan(robot, block_world, ok, -ok, initial="zigzag")
+        PL.plan(robot, block_world, ok, -ok, initial="zigzag", device=device)
     with pytest.raises(ValueError, match="eps"):
-        PL.plan(robot, block_world, ok, -ok, eps=0.01, margin=0.02)
+        PL.plan(robot, block_world, ok, -ok, eps=0.01, margin=0.02, device=device)
     with pytest.raises(ValueError, match="iterations"):
-        PL.plan(robot, block_world, ok, -ok, iterations=-1)
+        PL.plan(robot, block_world, ok, -ok, iterations=-1, device=device)
     with pytest.raises(ValueError, match="start, goal"):
-        PL.plan(robot, block_world, np.stack([ok, ok]), np.stack([-ok, -ok, -ok]))
+        PL.plan(robot, block_world, np.stack([ok, ok]), np.stack([-ok, -ok, -ok]), device=device)
 
 
-def test_torch_upath_matches_numpy_gradient(block_world):
+def test_torch_upath_matches_numpy_gradient(device, block_world):
     torch = pytest.importorskip("torch")
     from jwarp.learn.torch_costs import u_path
 
@@ -161,20 +165,24 @@ def test_torch_upath_matches_numpy_gradient(block_world):
     Q = np.repeat(PL.initial_paths(s[None], g[None], 6, "straight"), 3, 0)
     Q[:, 1:-1] += rng.normal(scale=0.3, size=Q[:, 1:-1].shape)
     w = PL.PathWeights(1.0, 0.5, 0.1)
-    obj = PL.PathObjective(robot, block_world, 3, 6, 3, weights=w, eps=0.04, device="cpu",
+    obj = PL.PathObjective(robot, block_world, 3, 6, 3, weights=w, eps=0.04, device=device,
                            dtype=np.float64)
     u_ref, g_ref = obj.value_and_grad(Q)
-    qt = torch.tensor(Q, dtype=torch.float64, requires_grad=True)
+    # u_path runs on the paths' device
+    qt = torch.tensor(Q, dtype=torch.float64, requires_grad=True, device=device)
     u = u_path(qt, robot, block_world, 3, weights=w, eps=0.04)
-    np.testing.assert_allclose(u.detach().numpy(), u_ref, rtol=1e-12)
-    scale = torch.tensor([1.0, -2.0, 0.5], dtype=torch.float64)
+    np.testing.assert_allclose(u.detach().cpu().numpy(), u_ref, rtol=1e-12)
+    scale = torch.tensor([1.0, -2.0, 0.5], dtype=torch.float64, device=device)
     (u * scale).sum().backward()
-    np.testing.assert_allclose(qt.grad.numpy(), g_ref * scale.numpy()[:, None, None], rtol=1e-12)
+    np.testing.assert_allclose(qt.grad.cpu().numpy(), g_ref * scale.cpu().numpy()[:, None, None],
+                               rtol=1e-12)
     with pytest.raises(ValueError, match="paths"):
-        u_path(torch.zeros(2, 5), robot, block_world, 3)
+        u_path(torch.zeros(2, 5, device=device), robot, block_world, 3)
 
 
+@requires_cpu
 def test_cli_plan_and_ik_json(block_world, tmp_path, capsys):
+    """The CLI on its default device, the CPU."""
     import json
 
     from jwarp.cli import main

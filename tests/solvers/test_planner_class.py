@@ -10,6 +10,8 @@ import jwarp
 from jwarp.solvers import planner as PL
 from jwarp.world import world_from_occupancy
 
+from devices import requires_cpu
+
 N_CELLS = 64
 LIM2 = np.array([[-1.0, 1.0], [-1.0, 1.0]])
 H2 = 2.0 / (N_CELLS - 1)
@@ -35,9 +37,9 @@ def assert_same(a, b):
     assert a.n_substeps == b.n_substeps
 
 
-def test_planner_reuses_its_buffers_and_matches_plan(block_world):
+def test_planner_reuses_its_buffers_and_matches_plan(device, block_world):
     opts = PL.PlanOptions(n_starts=6, n_substeps=8, iterations=150, step=0.05, seed=2)
-    planner = PL.Planner("planar4", block_world, 2, opts, device="cpu")
+    planner = PL.Planner("planar4", block_world, 2, opts, device=device)
     assert planner.objective is None  # allocated by the first call
     starts = np.array([S4, [2.0, 1.0, 0.0, 0.0]])
     goals = np.array([G4, [2.0, -1.0, 0.0, 0.0]])
@@ -56,7 +58,7 @@ def test_planner_reuses_its_buffers_and_matches_plan(block_world):
                                                 obj.total)))
     assert_same(first, again)
     ref = PL.plan("planar4", block_world, starts, goals, n_starts=6, n_substeps=8,
-                  iterations=150, step=0.05, seed=2)
+                  iterations=150, step=0.05, seed=2, device=device)
     assert_same(first, ref)
     assert first.feasible.all() and first.path.shape == (2, 20, 4)
     # a single start/goal is used for every problem
@@ -64,9 +66,11 @@ def test_planner_reuses_its_buffers_and_matches_plan(block_world):
     np.testing.assert_allclose(one.path[:, [0, -1]], [[S4, G4]] * 2, atol=1e-6)
 
 
+@requires_cpu
 def test_device_copies_give_the_host_path_numbers(block_world):
     """The kernels that gather the candidates and keep the final paths (used on a GPU)
-    give the numbers of the host's in-place reads (used on the CPU)."""
+    give the numbers of the host's in-place reads (used on the CPU). CPU only: the host's
+    in-place reads exist only there."""
     opts = PL.PlanOptions(n_starts=8, n_substeps=8, iterations=120, step=0.05,
                           check_all_every=3)
     starts = np.array([S4, [2.0, 1.0, 0.0, 0.0]])
@@ -79,23 +83,23 @@ def test_device_copies_give_the_host_path_numbers(block_world):
     assert kern._buffers.cand_sub is not None and host._buffers.cand_sub is None
 
 
-def test_elastic_planner_reuse_restarts_the_compensation_rows(block_world):
+def test_elastic_planner_reuse_restarts_the_compensation_rows(device, block_world):
     opts = PL.PlanOptions(n_starts=4, n_substeps=6, iterations=60, step=0.05, kappa=1e-3)
-    planner = PL.Planner("planar4", block_world, 1, opts, device="cpu")
+    planner = PL.Planner("planar4", block_world, 1, opts, device=device)
     a = planner.plan(S4, G4)
     b = planner.plan(S4, G4)
     assert_same(a, b)
     assert_same(a, PL.plan("planar4", block_world, S4, G4, n_starts=4, n_substeps=6,
-                           iterations=60, step=0.05, kappa=1e-3))
+                           iterations=60, step=0.05, kappa=1e-3, device=device))
 
 
-def test_caller_seeds_paths_and_via_points(block_world):
+def test_caller_seeds_paths_and_via_points(device, block_world):
     robot = jwarp.robot("planar4")
     s = np.array([[2.0, 1.0, 0.0, 0.0], [2.0, 0.0, 0.5, 0.0]])
     g = np.array([[2.0, -1.0, 0.0, 0.0], [2.5, 0.3, 0.0, 0.0]])
     line = PL.initial_paths(s, g, 8, "straight")
     seeds = np.stack([line, line + 0.05, line - 0.05], axis=1)  # (B, 3 seeds, W, n)
-    planner = PL.Planner(robot, block_world, 2, PL.PlanOptions(iterations=30), device="cpu")
+    planner = PL.Planner(robot, block_world, 2, PL.PlanOptions(iterations=30), device=device)
     res = planner.plan(s, g, seeds=seeds)
     assert res.path.shape == (2, 8, 4) and res.all_feasible.shape == (2, 3)
     assert res.feasible.all()
@@ -105,7 +109,7 @@ def test_caller_seeds_paths_and_via_points(block_world):
     res = planner.plan(s, g, seeds=via)  # (B, 1 seed, 1 via point, n)
     assert res.path.shape == (2, 20, 4) and res.all_feasible.shape == (2, 1)
     as_is = PL.Planner(robot, block_world, 2, PL.PlanOptions(iterations=0, n_waypoints=9),
-                       device="cpu").plan(s, g, seeds=via)
+                       device=device).plan(s, g, seeds=via)
     expect = PL.polyline_path(s[0], np.array([[1.6, 0.0, 0.0, 0.0]]), g[0], 9)
     np.testing.assert_allclose(as_is.path[0], expect, atol=1e-6)
     assert np.abs(np.diff(np.linalg.norm(np.diff(expect, axis=0), axis=1))).max() < 1e-9
@@ -117,17 +121,17 @@ def test_caller_seeds_paths_and_via_points(block_world):
         planner.plan(s, g, seeds=PL.ViaPoints(np.zeros((2, 3))))
 
 
-def test_best_start_is_chosen_on_the_device_and_all_paths_read_on_demand(block_world):
+def test_best_start_is_chosen_on_the_device_and_all_paths_read_on_demand(device, block_world):
     planner = PL.Planner("planar4", block_world, 1,
                          PL.PlanOptions(n_starts=8, n_substeps=8, iterations=200, step=0.05),
-                         device="cpu")
+                         device=device)
     res = planner.plan(S4, G4)
     assert isinstance(res.paths_source, wp.array)  # not read yet
     all_paths = res.all_paths
     assert isinstance(res.paths_source, np.ndarray) and res.all_paths is all_paths
     assert all_paths.shape == (1, 8, 20, 4) and all_paths.dtype == np.float64
     # the device's choice is numpy's: feasible first, then the lowest U_path
-    obj = PL.PathObjective("planar4", block_world, 1, 20, 8, eps=planner.eps, device="cpu")
+    obj = PL.PathObjective("planar4", block_world, 1, 20, 8, eps=planner.eps, device=device)
     costs = np.array([obj.value_and_grad(p[None])[0][0] for p in all_paths[0]])
     feas = res.all_feasible[0]
     best = int(np.argmin(np.where(feas, costs, np.inf)) if feas.any() else np.argmin(costs))
@@ -140,7 +144,7 @@ def test_best_start_is_chosen_on_the_device_and_all_paths_read_on_demand(block_w
     np.testing.assert_array_equal(res2.all_paths, all_paths)
 
 
-def test_options_are_validated_naming_the_field(block_world):
+def test_options_are_validated_naming_the_field(device, block_world):
     P = PL.PlanOptions
     bad = [(P(n_starts=0), ValueError, "n_starts"),
            (P(iterations=-1), ValueError, "iterations"),
@@ -160,7 +164,7 @@ def test_options_are_validated_naming_the_field(block_world):
         with pytest.raises(err, match=f"^{name}"):
             opts.validate()
         with pytest.raises(err, match=f"^{name}"):
-            PL.Planner("planar4", block_world, 1, opts, device="cpu")
+            PL.Planner("planar4", block_world, 1, opts, device=device)
     P(step=1e39).validate(np.float64)  # finite in float64
     with pytest.raises(TypeError, match="options"):
         PL.Planner("planar4", block_world, 1, {"n_starts": 2})
@@ -168,13 +172,14 @@ def test_options_are_validated_naming_the_field(block_world):
         PL.Planner("planar4", block_world, 0)
     with pytest.raises(ValueError, match="kappa"):
         PL.Planner("planar4", block_world, 1, P(kappa=-1.0))
-    planner = PL.Planner("planar4", block_world, 2, device="cpu")
+    planner = PL.Planner("planar4", block_world, 2, device=device)
     with pytest.raises(ValueError, match="start: expected 2 configurations"):
         planner.plan(np.zeros((3, 4)), G4)
     with pytest.raises(ValueError, match="goal.*collision"):
-        planner.plan(S4, np.zeros(4))
+        planner.plan(S4, np.zeros(4))  # the collision check runs on the device
 
 
+@requires_cpu
 def test_plan_on_cpu_runs_every_check_on_the_cpu(block_world, monkeypatch):
     """plan(device="cpu") passes its device to every check (collision, limits, elastic
     equilibrium, substep sizing, via-point sampling): none of them falls back to the

@@ -11,7 +11,7 @@ from jwarp.world.collision import (CollisionModel, collision_cost, collision_pai
                              min_distances, rigid_pairs, self_distances, sphere_distances)
 from jwarp.world import World, random_configurations, simplex_world, world_from_occupancy
 
-from devices import requires_cuda
+from devices import requires_cpu, requires_cuda
 from reference import ref_fk, sample_q
 from test_world import ref_lookup
 
@@ -100,7 +100,7 @@ def perturbed_rho(model, n, seed):
 
 
 # ===================================================================== tests
-def test_pairs_match_allowed_matrix():
+def test_pairs_match_allowed_matrix(device):
     for name in ROBOTS:
         model = jwarp.robot(name)
         got = collision_pairs(model)
@@ -120,27 +120,27 @@ def test_pairs_match_allowed_matrix():
     np.testing.assert_allclose(np.sort(rd), np.sort(dist[rigid]), atol=1e-9)
     assert len(rp) >= 2 and rd.min() < EPS and len(collision_pairs(model)) == 906 - len(rp)
     q = sample(model, 500, seed=3)
-    c, _ = collision_cost(model, q, None, device="cpu", dtype=np.float64, grad=False)
+    c, _ = collision_cost(model, q, None, device=device, dtype=np.float64, grad=False)
     assert (c == 0).sum() > 20  # free configurations cost exactly 0
 
 
 @pytest.mark.parametrize("name", ROBOTS)
-def test_cost_matches_numpy_reference(name):
+def test_cost_matches_numpy_reference(device, name):
     model = jwarp.robot(name)
     world = dense_world(model)
     q = sample(model, 64, seed=1)
     rho = perturbed_rho(model, 64, seed=2)
     for kw in (dict(), dict(w_world=2.5, w_self=0.3, eps=0.08), dict(rho=rho)):
         ref = ref_cost(model, q, world, **kw)
-        cost, grad = collision_cost(model, q, world, device="cpu", dtype=np.float64, grad=False, **kw)
+        cost, grad = collision_cost(model, q, world, device=device, dtype=np.float64, grad=False, **kw)
         assert grad is None
         np.testing.assert_allclose(cost, ref, rtol=1e-10, atol=1e-12)
     assert (ref > 0).sum() >= 8  # the dense world does collide
-    c32, _ = collision_cost(model, q.astype(np.float32), world, device="cpu", grad=False)
+    c32, _ = collision_cost(model, q.astype(np.float32), world, device=device, grad=False)
     assert c32.dtype == np.float32
     np.testing.assert_allclose(c32, ref_cost(model, q, world), rtol=2e-4, atol=2e-4)
     # self-collision only (no world)
-    np.testing.assert_allclose(collision_cost(model, q, None, device="cpu", dtype=np.float64,
+    np.testing.assert_allclose(collision_cost(model, q, None, device=device, dtype=np.float64,
                                               grad=False)[0], ref_cost(model, q, None), atol=1e-12)
 
 
@@ -152,19 +152,19 @@ def off_kinks(model, q, world, rho=None):
     return np.abs(u - np.round(u)).min(axis=(1, 2)) > 1e-3
 
 
-def fd_grad(model, q, world, h=1e-6, **kw):
+def fd_grad(model, q, world, device, h=1e-6, **kw):
     g = np.zeros_like(q)
     for j in range(model.n_dof):
         dq = np.zeros(model.n_dof)
         dq[j] = h
-        cp = collision_cost(model, q + dq, world, device="cpu", dtype=np.float64, grad=False, **kw)[0]
-        cm = collision_cost(model, q - dq, world, device="cpu", dtype=np.float64, grad=False, **kw)[0]
+        cp = collision_cost(model, q + dq, world, device=device, dtype=np.float64, grad=False, **kw)[0]
+        cm = collision_cost(model, q - dq, world, device=device, dtype=np.float64, grad=False, **kw)[0]
         g[:, j] = (cp - cm) / (2 * h)
     return g
 
 
 @pytest.mark.parametrize("name", ROBOTS)
-def test_gradients_hand_and_tape_match_finite_differences(name):
+def test_gradients_hand_and_tape_match_finite_differences(device, name):
     model = jwarp.robot(name)
     world = dense_world(model)
     q = sample(model, 12, seed=5)
@@ -173,74 +173,74 @@ def test_gradients_hand_and_tape_match_finite_differences(name):
     q, rho = q[keep], rho[keep]
     assert len(q) >= 8
     for kw in (dict(w_world=1.5, w_self=0.7), dict(rho=rho)):
-        fd = fd_grad(model, q, world, **kw)
+        fd = fd_grad(model, q, world, device, **kw)
         assert np.abs(fd).max() > 0.1  # the configurations do touch something
         for tape in (False, True):
-            cost, grad = collision_cost(model, q, world, device="cpu", dtype=np.float64,
+            cost, grad = collision_cost(model, q, world, device=device, dtype=np.float64,
                                         tape=tape, **kw)
             np.testing.assert_allclose(cost, ref_cost(model, q, world, **kw), atol=1e-12)
             np.testing.assert_allclose(grad, fd, rtol=0, atol=1e-6 * max(1.0, np.abs(fd).max()))
 
 
-def test_coupled_torso_gradient_and_float32():
+def test_coupled_torso_gradient_and_float32(device):
     """justin19's torso_3 frame follows q1 + q2 (coupling): the hand-written gradient
     spreads its moment on both joints."""
     model = jwarp.robot("justin19")
     world = dense_world(model, seed=8)
     q = sample(model, 40, seed=9)
     q = q[off_kinks(model, q, world)]
-    c64, g64 = collision_cost(model, q, world, device="cpu", dtype=np.float64)
-    fd = fd_grad(model, q, world)
+    c64, g64 = collision_cost(model, q, world, device=device, dtype=np.float64)
+    fd = fd_grad(model, q, world, device)
     np.testing.assert_allclose(g64, fd, atol=1e-6 * np.abs(fd).max())
-    c32, g32 = collision_cost(model, q.astype(np.float32), world.astype(np.float32), device="cpu")
+    c32, g32 = collision_cost(model, q.astype(np.float32), world.astype(np.float32), device=device)
     assert g32.dtype == np.float32
     scale = np.abs(g64).max()
     np.testing.assert_allclose(g32, g64, atol=2e-3 * scale)
 
 
-def test_zero_cost_when_far_and_outside_grid():
+def test_zero_cost_when_far_and_outside_grid(device):
     model = jwarp.robot("sphere2d")
     occ = np.zeros((11, 11), bool)
     occ[5, 5] = True
     world = world_from_occupancy(occ, np.array([[-0.25, 0.25], [-0.25, 0.25]]))  # voxel 0.05
     q = np.array([[0.0, 0.0], [0.9, 0.9], [0.0, 0.126], [0.0, 0.2]])
-    cost, grad = collision_cost(model, q, world, device="cpu", dtype=np.float64)
+    cost, grad = collision_cost(model, q, world, device=device, dtype=np.float64)
     # centre inside the voxel: D = -0.025 - r; at 0.126: surface 0.101 - 0.05 > eps
     d0 = -0.025 - 0.05
     np.testing.assert_allclose(cost, [-d0 + EPS / 2, 0.0, 0.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(grad[1:], 0.0)
 
 
-def test_distances_and_collision_free():
+def test_distances_and_collision_free(device):
     model = jwarp.robot("arm7")
     world = dense_world(model)
     q = sample(model, 50, seed=3)
-    sd = sphere_distances(model, q, world, device="cpu", dtype=np.float64)
+    sd = sphere_distances(model, q, world, device=device, dtype=np.float64)
     np.testing.assert_allclose(sd, ref_world_dist(model, q, world), atol=1e-12)
     pairs = collision_pairs(model)
-    pd = self_distances(model, q, device="cpu", dtype=np.float64)
+    pd = self_distances(model, q, device=device, dtype=np.float64)
     np.testing.assert_allclose(pd, ref_self_dist(model, q, pairs), atol=1e-12)
-    md = min_distances(model, q, world, device="cpu", dtype=np.float64)
+    md = min_distances(model, q, world, device=device, dtype=np.float64)
     np.testing.assert_allclose(md[:, 0], sd.min(1), atol=1e-12)
     np.testing.assert_allclose(md[:, 1], pd.min(1), atol=1e-12)
     for margin in (0.0, 0.05):
-        free = is_collision_free(model, q, world, margin, device="cpu")
+        free = is_collision_free(model, q, world, margin, device=device)
         np.testing.assert_array_equal(free, (sd.min(1) > margin) & (pd.min(1) > margin))
     # a robot without self-collision pairs: min self distance is inf
-    md2 = min_distances("sphere2d", np.zeros((2, 2)), None, device="cpu")
+    md2 = min_distances("sphere2d", np.zeros((2, 2)), None, device=device)
     assert np.all(np.isinf(md2))
     # batch dims are kept
-    assert sphere_distances(model, q.reshape(5, 10, 7), world, device="cpu").shape == (5, 10, 14)
+    assert sphere_distances(model, q.reshape(5, 10, 7), world, device=device).shape == (5, 10, 14)
 
 
-def test_warp_in_warp_out_and_preallocated_reuse():
+def test_warp_in_warp_out_and_preallocated_reuse(device):
     model = jwarp.robot("justin19")
     world = dense_world(model)
-    cm = CollisionModel(model, world, device="cpu", dtype=np.float32)
+    cm = CollisionModel(model, world, device=device, dtype=np.float32)
     q_np = sample(model, 30, seed=4).astype(np.float32)
-    q = wp.array(q_np, dtype=wp.float32, device="cpu")
-    cost = wp.empty(30, dtype=wp.float32, device="cpu")
-    grad = wp.empty((30, 19), dtype=wp.float32, device="cpu")
+    q = wp.array(q_np, dtype=wp.float32, device=device)
+    cost = wp.empty(30, dtype=wp.float32, device=device)
+    grad = wp.empty((30, 19), dtype=wp.float32, device=device)
     c1, g1 = cm.cost(q, out_cost=cost, out_grad=grad)
     assert c1 is cost and g1 is grad
     ref1 = ref_cost(model, q_np.astype(np.float64), world)
@@ -251,12 +251,12 @@ def test_warp_in_warp_out_and_preallocated_reuse():
     np.testing.assert_allclose(cost.numpy(), ref_cost(model, q_np2.astype(np.float64), world),
                                rtol=2e-4, atol=2e-4)
     # the functional API returns Warp arrays for Warp input
-    c, g = collision_cost(model, q, world, device="cpu")
+    c, g = collision_cost(model, q, world, device=device)
     assert isinstance(c, wp.array) and isinstance(g, wp.array) and g.shape == (30, 19)
     with pytest.raises(ValueError, match="out_cost"):
-        cm.cost(q, out_cost=wp.empty(3, dtype=wp.float32, device="cpu"))
+        cm.cost(q, out_cost=wp.empty(3, dtype=wp.float32, device=device))
     with pytest.raises(TypeError, match="q"):
-        cm.cost(wp.array(q_np.astype(np.float64), dtype=wp.float64, device="cpu"))
+        cm.cost(wp.array(q_np.astype(np.float64), dtype=wp.float64, device=device))
 
 
 def test_bad_inputs():
@@ -328,8 +328,10 @@ def test_cuda_matches_reference_and_cpu():
     np.testing.assert_allclose(grad.numpy(), g32, rtol=1e-4, atol=1e-4 * np.abs(g32).max())
 
 
+@requires_cpu
 def test_bench_collision_quick_cpu(tmp_path):
-    """Smoke test of benchmarks/bench_collision.py (exit 0, rows and JSON written)."""
+    """Smoke test of benchmarks/bench_collision.py (exit 0, rows and JSON written) on its
+    default device, the CPU."""
     import json
     import subprocess
     import sys

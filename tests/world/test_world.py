@@ -178,14 +178,14 @@ def test_sdf_from_occupancy_equals_brute_force(shape):
     assert np.isclose(w2.voxel_size, h)
 
 
-def test_sdf_single_voxel_surface_on_faces_and_empty_grids():
+def test_sdf_single_voxel_surface_on_faces_and_empty_grids(device):
     occ = np.zeros((9, 9, 9), bool)
     occ[4, 4, 4] = True
     w = world_from_occupancy(occ, np.zeros(3), 0.1)
     np.testing.assert_allclose(w.sdf[4, 4, 4], -0.05)
     np.testing.assert_allclose(w.sdf[4 + np.arange(1, 5), 4, 4], 0.1 * np.arange(1, 5) - 0.05)
     # interpolation puts the surface on the cube's face, half a voxel from the centre
-    assert abs(w.distance(np.array([0.45, 0.4, 0.4]))) < 1e-12
+    assert abs(w.distance(np.array([0.45, 0.4, 0.4]), device=device)) < 1e-12
     empty = world_from_occupancy(np.zeros((5, 6), bool), np.zeros(2), 0.1)
     full = world_from_occupancy(np.ones((5, 6), bool), np.zeros(2), 0.1)
     assert np.all(empty.sdf > 0.6) and np.all(full.sdf < -0.6)
@@ -196,24 +196,24 @@ def box_sdf(p, centre, half):
     return np.linalg.norm(np.maximum(q, 0), axis=-1) + np.minimum(q.max(-1), 0)
 
 
-def test_mesh_sdf_box_and_sphere_closed_form():
+def test_mesh_sdf_box_and_sphere_closed_form(device):
     lim = np.array([[-0.5, 0.5], [-0.5, 0.5], [-0.4, 0.6]])
     box = trimesh.creation.box(extents=(0.4, 0.3, 0.5))
     box.apply_translation((0.05, -0.02, 0.1))
-    w = world_from_mesh(box, lim, 0.05)
+    w = world_from_mesh(box, lim, 0.05, device=device)
     assert w.shape == (21, 21, 21)
     ref = box_sdf(w.cell_centres(), np.array([0.05, -0.02, 0.1]), np.array([0.2, 0.15, 0.25]))
     np.testing.assert_allclose(w.sdf, ref, atol=2e-6)
     assert (w.sdf < 0).sum() > 0 and np.array_equal(w.occupancy, w.sdf < 0)
     ball = trimesh.creation.icosphere(subdivisions=4, radius=0.3)
-    w = world_from_mesh((ball.vertices, ball.faces), lim, shape=(21, 21, 21))
+    w = world_from_mesh((ball.vertices, ball.faces), lim, shape=(21, 21, 21), device=device)
     ref = np.linalg.norm(w.cell_centres(), axis=-1) - 0.3
     np.testing.assert_allclose(w.sdf, ref, atol=2.5e-3)  # facets vs the true sphere
     np.testing.assert_array_equal(np.sign(w.sdf[np.abs(ref) > 3e-3]), np.sign(ref[np.abs(ref) > 3e-3]))
     with pytest.raises(ValueError, match="mesh"):
-        world_from_mesh((ball.vertices, ball.faces + 10_000), lim, 0.05)
+        world_from_mesh((ball.vertices, ball.faces + 10_000), lim, 0.05, device=device)
     with pytest.raises(ValueError, match="watertight"):
-        world_from_mesh((ball.vertices, ball.faces[1:]), lim, 0.05)
+        world_from_mesh((ball.vertices, ball.faces[1:]), lim, 0.05, device=device)
 
 
 def test_world_from_points():
@@ -243,13 +243,13 @@ def ref_lookup(world, x):
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-def test_lookup_matches_scipy_interpolation_and_fd_gradient(dim):
+def test_lookup_matches_scipy_interpolation_and_fd_gradient(device, dim):
     w = simplex_world(dim, seed=4, shape=(13, 11, 9)[:dim], limits=np.array([[-1, 1.4], [0, 2], [0.5, 2.1]][:dim]),
                       threshold=0.2)
     rng = np.random.default_rng(3)
     lo, hi = w.limits[:, 0] - 0.5, w.limits[:, 1] + 0.5  # also outside the grid
     x = rng.uniform(lo, hi, (500, dim))
-    d, g = w.distance(x, grad=True)
+    d, g = w.distance(x, grad=True, device=device)
     np.testing.assert_allclose(d, ref_lookup(w, x), rtol=0, atol=1e-12)
     h = 1e-7
     fd = np.stack([(ref_lookup(w, x + h * e) - ref_lookup(w, x - h * e)) / (2 * h)
@@ -259,21 +259,21 @@ def test_lookup_matches_scipy_interpolation_and_fd_gradient(dim):
     smooth = np.all(np.abs(u - np.round(u)) > 1e-4, axis=1)
     np.testing.assert_allclose(g[smooth], fd[smooth], rtol=0, atol=1e-6)
     # float32 field: the same within float32 precision
-    d32 = w.astype(np.float32).distance(x)
+    d32 = w.astype(np.float32).distance(x, device=device)
     np.testing.assert_allclose(d32, d, atol=1e-5)
 
 
-def test_lookup_far_outside_grows():
+def test_lookup_far_outside_grows(device):
     w = simplex_world(2, seed=1, shape=(16, 16))
     far = np.array([[10.0, 0.0], [20.0, 0.0]])
-    d = w.distance(far)
+    d = w.distance(far, device=device)
     assert d[1] - d[0] == pytest.approx(10.0, abs=1e-9)
     with pytest.raises(ValueError, match="points"):
-        w.distance(np.zeros((4, 3)))
+        w.distance(np.zeros((4, 3)), device=device)
 
 
 # ================================================================ files
-def test_npz_round_trip(tmp_path):
+def test_npz_round_trip(tmp_path, device):
     w = simplex_world(3, seed=2, shape=(10, 12, 8)).astype(np.float32)
     w.meta["note"] = "hello"
     path = tmp_path / "w.npz"
@@ -285,7 +285,8 @@ def test_npz_round_trip(tmp_path):
     np.testing.assert_array_equal(r.occupancy, w.occupancy)
     np.testing.assert_array_equal(r.limits, w.limits)
     assert r.voxel_size == w.voxel_size and r.meta == w.meta
-    m = world_from_mesh(trimesh.creation.box(extents=(0.2, 0.2, 0.2)), np.array([[-0.3, 0.3]] * 3), 0.1)
+    m = world_from_mesh(trimesh.creation.box(extents=(0.2, 0.2, 0.2)), np.array([[-0.3, 0.3]] * 3), 0.1,
+                        device=device)
     m.occupancy = None
     save_world(m, tmp_path / "m.npz")
     assert load_world(tmp_path / "m.npz").occupancy is None
@@ -341,14 +342,14 @@ def test_world_validation():
         world_from_occupancy(np.zeros((4, 5), bool), np.array([[0, 0.3], [0, 0.3]]))
 
 
-def test_parse_world_spec(tmp_path):
+def test_parse_world_spec(tmp_path, device):
     w = parse_world_spec("simplex:seed=3,threshold=0.5,dim=2,cells=20")
     assert w.dim == 2 and w.shape == (20, 20) and w.meta["seed"] == 3
     np.testing.assert_array_equal(w.sdf, simplex_world(2, seed=3, shape=(20, 20), threshold=0.5).sdf)
     w.save(tmp_path / "a.npz")
     np.testing.assert_array_equal(parse_world_spec(str(tmp_path / "a.npz")).sdf, w.sdf)
     assert parse_world_spec(w) is w
-    r = parse_world_spec("simplex:seed=1,cells=24", robot="planar4")
+    r = parse_world_spec("simplex:seed=1,cells=24", robot="planar4", device=device)  # its reach: FK
     assert r.dim == 2 and max(r.shape) == 24
     assert np.all(r.limits[:, 0] < -0.9) and np.all(r.limits[:, 1] > 0.9)  # covers the reach
     with pytest.raises(ValueError, match="unknown key 'colour'"):
@@ -385,30 +386,32 @@ def ref_feasible(model, q, world):
 
 
 @pytest.mark.parametrize("name", ["planar4", "justin19"])
-def test_feasibility_filter_default_world(name):
+def test_feasibility_filter_default_world(device, name):
     model = jwarp.robot(name)
-    w = feasible_simplex_world(model, seed=0)
+    w = feasible_simplex_world(model, seed=0, device=device)
     assert w.dim == model.workspace_dim
     q = random_configurations(model, 1000, seed=w.meta["seed"])
     free = ref_feasible(model, q, w)
     assert free.sum() >= 200
-    assert feasible_fraction(model, w, 1000, seed=w.meta["seed"]) == pytest.approx(free.mean(), abs=2e-3)
-    for centre, radius in fixed_spheres(model):  # the fixed base stays free
-        assert w.distance(centre) >= radius
-    assert feasible_fraction(model, None) > 0.3  # self-collision alone
+    assert feasible_fraction(model, w, 1000, seed=w.meta["seed"],
+                             device=device) == pytest.approx(free.mean(), abs=2e-3)
+    for centre, radius in fixed_spheres(model, device=device):  # the fixed base stays free
+        assert w.distance(centre, device=device) >= radius
+    assert feasible_fraction(model, None, device=device) > 0.3  # self-collision alone
 
 
-def test_feasibility_filter_gives_up_and_samples_linear_limits():
+def test_feasibility_filter_gives_up_and_samples_linear_limits(device):
     model = jwarp.robot("justin19")
     q = random_configurations(model, 500, seed=1)
     s = q[:, 1] + q[:, 2]
     assert np.all((s >= 0) & (s <= np.deg2rad(135) + 1e-12))
     assert np.all((q >= model.joint_limits[:, 0]) & (q <= model.joint_limits[:, 1]))
     with pytest.raises(ValueError, match="no simplex world"):
-        feasible_simplex_world("planar4", seed=0, threshold=-0.5, max_tries=2, n=100, min_feasible=50)
+        feasible_simplex_world("planar4", seed=0, threshold=-0.5, max_tries=2, n=100, min_feasible=50,
+                               device=device)
 
 
-def test_shelf_world_boards_and_back_wall():
+def test_shelf_world_boards_and_back_wall(device):
     from jwarp.world import shelf_world
 
     w = shelf_world()
@@ -416,7 +419,7 @@ def test_shelf_world_boards_and_back_wall():
     from jwarp.world.collision import sdf_query
 
     d = np.asarray(sdf_query(w, np.array([[0.9, 0.0, 0.55], [0.9, 0.0, 0.8], [1.12, 0.0, 0.3],
-                                          [0.0, 0.0, 0.8]])))
+                                          [0.0, 0.0, 0.8]]), device=device))
     assert d[0] < 0 and d[2] < 0  # inside a board and the back wall
     assert d[1] > 0.15 and d[3] > 0.5  # between the boards, far in front of the shelf
     with pytest.raises(ValueError, match="voxel_size"):

@@ -31,7 +31,7 @@ import warp as wp
 from scipy.optimize import least_squares
 
 from jwarp import kinematics as K
-from jwarp.core.arrays import init_warp, to_output
+from jwarp.core.arrays import finite_as, init_warp, to_output
 from jwarp.core.device import with_frame_masses
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
@@ -254,13 +254,15 @@ class CalibrationProblem:
     # ------------------------------------------------------------ Jacobian
     def data_jacobian_rho(self, frames: np.ndarray, rho: np.ndarray, p: np.ndarray
                           ) -> tuple[np.ndarray, np.ndarray]:
-        """(dy/drho (S, m, n, 5) at fixed frames, dy/dp (S, m, P_meas)) at rows rho."""
+        """(dy/drho (S, m, n, 5) at fixed frames, dy/dp (S, m, P_meas)) at rows rho
+        (S, n, 5), uploaded once for the DH Jacobians of all the measurement's frames."""
         meas = self.measurement
         _, jf, jp = meas.jacobians(frames, p, self.meta)
         S, m = jf.shape[:2]
         jy = np.zeros((S, m, self.robot.n_frames, 5))
+        rows = wp.array(finite_as(rho, np.float64, "dh"), dtype=wp.float64, device="cpu")
         for k, f in enumerate(meas.frames):
-            jdh = K.jacobian_dh(self.robot, self.q_device, int(f), dh=rho, device="cpu",
+            jdh = K.jacobian_dh(self.robot, self.q_device, int(f), dh=rows, device="cpu",
                                 dtype=np.float64, validate=False).numpy()  # (S, 6, n, 5)
             jy += (jf[:, :, k, :] @ jdh.reshape(S, 6, -1)).reshape(jy.shape)
         return jy, np.asarray(jp, np.float64)
