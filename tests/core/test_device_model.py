@@ -215,15 +215,15 @@ def test_sphere_tables_match_the_robot(name):
 
 
 @pytest.mark.parametrize("name", ["justin19", "hand4"])
-def test_fk_from_the_model_tables_matches_numpy(name):
+def test_fk_from_the_model_tables_matches_numpy(device, name):
     r = jwarp.robot(name)
-    m = put_model(r, "cpu", np.float64)
+    m = put_model(r, device, np.float64)
     q = sample_within_limits(r, 16, np.random.default_rng(1))
     k = fk_kernels.kernels(wp.float64)
-    frames = wp.empty((16, r.n_frames), dtype=k.mat44, device="cpu")
-    wp.launch(k.fk, dim=16, inputs=[wp.array(q, dtype=wp.float64, device="cpu"),
+    frames = wp.empty((16, r.n_frames), dtype=k.mat44, device=device)
+    wp.launch(k.fk, dim=16, inputs=[wp.array(q, dtype=wp.float64, device=device),
                                     *m.nominal_rows.args, m.frame_struct],
-              outputs=[frames], device="cpu")
+              outputs=[frames], device=device)
     np.testing.assert_allclose(frames.numpy(), ref_fk(r, q), atol=1e-12)
 
 

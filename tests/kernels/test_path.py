@@ -72,7 +72,7 @@ def test_substeps_match_numpy(device, n_sub):
     # waypoints are exactly the substeps s = t n_sub
     np.testing.assert_array_equal(got[:, ::n_sub], Q)
     # the host wrapper agrees and keeps leading dims
-    np.testing.assert_allclose(planner.substeps(Q, n_sub), ref_substeps(Q, n_sub), atol=1e-14)
+    np.testing.assert_allclose(planner.substeps(Q, n_sub, device=device), ref_substeps(Q, n_sub), atol=1e-14)
 
 
 def test_path_cost_matches_numpy(device):
