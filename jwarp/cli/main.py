@@ -1,7 +1,7 @@
 """Command line interface: the parser and :func:`main`. Command groups, one module each,
 registered by explicit import: :mod:`jwarp.cli.kinematics` (``robots | info | fk | show``),
 :mod:`jwarp.cli.calibration` (``calibrate | simulate-campaign``), :mod:`jwarp.cli.planning`
-(``plan | ik``).
+(``plan | ik``), :mod:`jwarp.cli.learning` (``train ik | eval ik``).
 
 Examples and the joint-value syntax: :mod:`jwarp.cli.kinematics`. A value starting with a
 minus sign may follow any option directly (``--q -0.5,0,...``, ``-inf``, ``-nan``).
@@ -37,7 +37,7 @@ import sys
 import zipfile
 from typing import Sequence
 
-from jwarp.cli import calibration, kinematics, planning
+from jwarp.cli import calibration, kinematics, learning, planning
 from jwarp.cli.common import (CLIError, Parser, fix_negative_values, plugin_warnings_one_line,
                                value_options)
 
@@ -51,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     sub.required = True
 
-    for group in (kinematics, calibration, planning):
+    for group in (kinematics, calibration, planning, learning):
         group.add_subcommands(sub)
     return p
 

@@ -6,6 +6,12 @@ Examples::
     jwarp plan --robot justin19 --world world.npz --start ... --goal ... --starts 16 \\
         --rerun plan.rrd --json
     jwarp ik --robot justin19 --frame right_tcp --target 0.6,-0.25,0.8,0,1.5708,0 --json
+    jwarp ik --robot justin19 --frame right_tcp --target ... --world shelf.npz \
+        --warm-start model.pt [--starts 4]
+
+``--warm-start MODEL.pt`` (``ik``) starts the solver from a trained IK network's
+prediction (a ``jwarp train ik`` checkpoint for this robot and frame; twin heads: 2 seeds)
+followed by ``--starts`` random seeds (default 0 with a warm start, 16 without).
 
 ``--start``/``--goal`` are joint values v1,v2,... [rad, m for prismatic] (``--deg``: revolute
 ones in degrees); ``--target`` is x,y,z [m] and a rotation vector rx,ry,rz [rad] of the
@@ -86,7 +92,8 @@ _OPTION_OF = {"start": "--start", "goal": "--goal", "target": "--target", "frame
               "n_starts": "--starts", "n_waypoints": "--waypoints", "n_substeps": "--substeps",
               "iterations": "--iterations", "max_iterations": "--iterations", "step": "--step",
               "margin": "--margin", "seed": "--seed", "kappa": "--kappa", "device": "--device",
-              "world": "--world"}
+              "world": "--world", "warm_start": "--warm-start",
+              "n_random_with_warm_start": "--starts"}
 
 
 def _solver_error(command: str, e: Exception) -> CLIError:
@@ -290,25 +297,60 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return 0 if res.feasible[0] else 1
 
 
+def _warm_start(path: str | None, model: Any, frame: str, device: str) -> Any:
+    """The IK network of ``--warm-start`` (errors name ``--warm-start``): a checkpoint for
+    ``model`` predicting ``frame``."""
+    if path is None:
+        return None
+    try:
+        from jwarp.learn.checkpoint import load_checkpoint
+    except ImportError as e:  # torch missing
+        raise CLIError(f"--warm-start: the IK networks need torch ({e})") from None
+    try:
+        net = load_checkpoint(path, robot=model, device="cpu")
+    except (ValueError, TypeError, OSError, KeyError) as e:
+        msg = " ".join(str(e).split()).removeprefix("checkpoint: ")
+        raise CLIError(f"--warm-start: {msg}") from None
+    cfg = getattr(net, "config", None)
+    net_frame = getattr(cfg, "frame", None)
+    if net_frame is not None and model.frame_index(net_frame) != model.frame_index(frame):
+        raise CLIError(f"--warm-start: the network predicts frame '{net_frame}' of "
+                       f"'{model.name}', not --frame {frame}")
+    return net
+
+
 def cmd_ik(args: argparse.Namespace) -> int:
     model = _model(args.robot)
     _check_frame(model, args.frame)
     T = _target(args.target)
     kappa = _kappa(args, model)
-    _check_memory(float(args.starts) * _config_bytes(model),
+    if args.starts is None:  # random seeds: 16, or none beside a warm start
+        args.starts = 0 if args.warm_start is not None else 16
+    elif args.starts < 1 and args.warm_start is None:
+        raise CLIError(f"--starts: expected an integer >= 1, got '{args.starts}'")
+    heads = 2 if args.warm_start is not None else 0  # a twin network's seeds
+    _check_memory(float(args.starts + heads) * _config_bytes(model),
                   f"{args.starts} starts of '{model.name}'", "--starts")
     quiet_warp()
     check_device(args.device)
     if args.rerun is not None:  # before the world and the solve: no work lost on a bad path
         check_output(args.rerun, "--rerun", rerun=True,
-                     inputs={"--world": args.world, "--robot": args.robot})
+                     inputs={"--world": args.world, "--robot": args.robot,
+                             "--warm-start": args.warm_start})
+    net = _warm_start(args.warm_start, model, args.frame, args.device)
     world = _world(args.world, model)
     from jwarp.solvers.ik import ik
 
     try:
-        res = ik(model, args.frame, T, world=world, n_starts=args.starts, margin=args.margin,
-                 max_iterations=args.iterations, seed=args.seed, kappa=kappa, device=args.device,
-                 dtype=dtype_of(args.dtype))
+        if net is not None:
+            res = ik(model, args.frame, T, world=world, margin=args.margin,
+                     max_iterations=args.iterations, seed=args.seed, kappa=kappa,
+                     device=args.device, dtype=dtype_of(args.dtype), warm_start=net,
+                     n_random_with_warm_start=args.starts)
+        else:
+            res = ik(model, args.frame, T, world=world, n_starts=args.starts,
+                     margin=args.margin, max_iterations=args.iterations, seed=args.seed,
+                     kappa=kappa, device=args.device, dtype=dtype_of(args.dtype))
         written = None
         if args.rerun is not None:
             rec = _Recorder(args.rerun, model, world)
@@ -325,6 +367,8 @@ def cmd_ik(args: argparse.Namespace) -> int:
         raise _solver_error("ik", e) from None
     out = {"robot": model.name, "frame": args.frame, "target": T.tolist(), "world": args.world,
            "elastic": kappa is not None, **res.to_dict(0)}
+    if net is not None:
+        out["warm_start"] = args.warm_start
     if args.json:
         print(dumps(out))
     else:
@@ -384,9 +428,12 @@ def add_subcommands(sub: Any) -> None:
                    help="target position [m] and rotation vector [rad] in the base frame")
     s.add_argument("--world", default=None, metavar="SPEC",
                    help="optional world: simplex:seed=S[,...] or a world .npz file")
-    s.add_argument("--starts", type=int_arg("--starts", 1), default=16, metavar="N",
-                   help="random seeds (default 16)")
+    s.add_argument("--starts", type=int_arg("--starts", 0), default=None, metavar="N",
+                   help="random seeds, >= 1 (default 16); with --warm-start the random seeds "
+                        "after the network's, >= 0 (default 0)")
     s.add_argument("--iterations", type=int_arg("--iterations", 0, MAX_ITERATIONS), default=200,
                    metavar="N", help="most iterations (default 200)")
     s.add_argument("--dtype", default="float64", choices=("float64", "float32"))
+    s.add_argument("--warm-start", default=None, metavar="MODEL.pt",
+                   help="start from a trained IK network's prediction (jwarp train ik)")
     s.set_defaults(func=cmd_ik)

@@ -387,6 +387,9 @@ class IKOptions:
             their last state, infeasible). Large batches run much less work, but a problem
             gets the first feasible seeds found instead of the lowest U_A among those found
             by the time every problem is solved (off: the thesis' multi-start, :func:`ik`).
+        n_random_with_warm_start: random seeds per target (uniform inside the limits, from
+            the solver's :attr:`IKSolver.rng`) added after a warm start's seeds, >= 0
+            (:class:`IKSolver` ``warm_start``; unused without one).
 
     ``validate()`` (also run on construction) raises ValueError/TypeError naming the field.
     """
@@ -409,13 +412,15 @@ class IKOptions:
     weights: IKWeights | None = None
     q_default: Any = None
     freeze_solved: bool = False
+    n_random_with_warm_start: int = 0
 
     def __post_init__(self) -> None:
         self.validate()
 
     def validate(self) -> None:
         """Check every field (ValueError/TypeError naming it); numbers become floats."""
-        for name, lo in (("n_starts", 1), ("max_iterations", 0), ("check_every", 1)):
+        for name, lo in (("n_starts", 1), ("max_iterations", 0), ("check_every", 1),
+                         ("n_random_with_warm_start", 0)):
             setattr(self, name, _positive_int(getattr(self, name), name, lo))
         for name in ("tol_pos", "tol_rot", "step", "max_step", "damping", "tol_rho"):
             v = getattr(self, name)
@@ -482,12 +487,21 @@ class IKSolver:
             of the solve runs there.
         dtype: float type of the iteration (None: float64); the step's linear algebra and
             the feasibility check are float64 either way.
+        warm_start: optional learned warm start (thesis 3.4): any object with a callable
+            ``seeds(targets (P, 4, 4) numpy, world) -> (P, H, n_dof)`` (e.g. a loaded
+            ``jwarp.learn`` IK network: H = 2 for twin heads). :meth:`solve` without
+            ``seeds`` then starts from its H seeds per target followed by
+            ``options.n_random_with_warm_start`` random ones (from :attr:`rng`); seeds given
+            to :meth:`solve` win. A TypeError (no callable ``seeds``) or ValueError (its
+            output is not (P, H, n_dof) finite values) names ``warm_start``.
     """
 
     def __init__(self, robot: Any, frame: int | str, n_problems: int,
                  options: IKOptions | None = None, world: Any = None, device: Any = None,
-                 dtype: Any = None):
+                 dtype: Any = None, warm_start: Any = None):
         init_warp()
+        #: the warm start (None: random seeds); see the class docstring
+        self.warm_start = check_warm_start(warm_start)
         self.robot = get_robot(robot)
         self.frame = self.robot.frame_index(frame)
         collision.check_world(self.robot, world)
@@ -676,9 +690,11 @@ class IKSolver:
             targets: poses (n_problems, 4, 4) in the base frame [m], or one pose (4, 4)
                 for every problem; planar robots use x, y and the rotation about z.
             seeds: initial configurations (n_problems, n_seeds, n_dof) or the same for every
-                problem (n_seeds, n_dof) or (n_dof,); None: ``options.n_starts`` random
-                seeds per problem, drawn on the device (uniform in the box, redrawn for the
-                linear limits; Warp's random stream, seeded from :attr:`rng`). Every seed is
+                problem (n_seeds, n_dof) or (n_dof,); None: with a ``warm_start``, its H
+                seeds per problem and ``options.n_random_with_warm_start`` random ones
+                (numpy, from :attr:`rng`); without, ``options.n_starts`` random seeds per
+                problem, drawn on the device (uniform in the box, redrawn for the linear
+                limits; Warp's random stream, seeded from :attr:`rng`). Every seed is
                 projected onto the joint limits first.
             callback: ``callback(iteration, q (B, n_dof))`` after every evaluation (reads q
                 back every iteration).
@@ -701,6 +717,11 @@ class IKSolver:
         S = self.options.n_starts
         if seeds is not None:
             q0 = finite_as(_seeds(model, seeds, P, "seeds"), self.npdt, "seeds")
+            S = q0.shape[1]
+        elif self.warm_start is not None:
+            q0 = finite_as(warm_start_seeds(model, self.warm_start, T, self.world,
+                                            self.options.n_random_with_warm_start, self.rng),
+                           self.npdt, "warm_start")
             S = q0.shape[1]
         if S != self.n_seeds:
             self._allocate(S)
@@ -780,7 +801,8 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
        tol_rho: float = 1e-6, stop_when_solved: bool = True, check_every: int = 5,
        seed: int | None = 0,
        device: Any = "cpu", dtype: Any = np.float64,
-       callback: Callable[[int, np.ndarray], None] | None = None) -> IKResult:
+       callback: Callable[[int, np.ndarray], None] | None = None,
+       warm_start: Any = None, n_random_with_warm_start: int = 0) -> IKResult:
     """Collision-free IK of ``frame`` onto ``target`` with random multi-starts: one
     :class:`IKSolver` solve.
 
@@ -792,14 +814,20 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
         initial: seeds (n_dof,), (n_starts, n_dof) or (T, n_starts, n_dof) instead of random.
         device, dtype: Warp device and float type.
         callback: ``callback(iteration, q (B, n_dof))`` after every evaluation.
+        warm_start: optional learned warm start (:class:`IKSolver`'s ``warm_start``: an
+            object with ``seeds(targets (T, 4, 4), world) -> (T, H, n_dof)``): the seeds
+            are its H per target followed by ``n_random_with_warm_start`` random ones
+            (numpy, from ``seed``) instead of ``n_starts`` random ones; ``initial`` wins.
         The other options are the fields of :class:`IKOptions`.
 
     Raises:
         ValueError: unknown frame, bad target/seed shapes, world dimension mismatch, bad
-            options.
+            options, a warm start's output that is not (T, H, n_dof) finite values.
+        TypeError: a ``warm_start`` without a callable ``seeds``.
     """
     t0 = time.perf_counter()
     init_warp()
+    check_warm_start(warm_start)
     model = get_robot(robot)
     fi = model.frame_index(frame)
     collision.check_world(model, world)
@@ -808,12 +836,18 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
                      eps=eps, max_iterations=max_iterations, step=step, max_step=max_step,
                      damping=damping, kappa=kappa, lam=lam, tol_rho=tol_rho,
                      stop_when_solved=stop_when_solved, check_every=check_every, seed=seed,
-                     weights=weights, q_default=q_default)
+                     weights=weights, q_default=q_default,
+                     n_random_with_warm_start=n_random_with_warm_start)
     finite_as(T, numpy_dtype(scalar_type(dtype)), "target")  # before the seeds' check
     n_seeds = opts.n_starts
     if initial is not None:
         q0 = _seeds(model, initial, len(T), "initial")
         finite_as(q0, numpy_dtype(scalar_type(dtype)), "initial")
+        n_seeds = q0.shape[1]
+    elif warm_start is not None:  # its seeds, then random ones from numpy's stream
+        q0 = warm_start_seeds(model, warm_start, T, world, opts.n_random_with_warm_start,
+                              np.random.default_rng(seed))
+        finite_as(q0, numpy_dtype(scalar_type(dtype)), "warm_start")
         n_seeds = q0.shape[1]
     else:  # numpy's random stream (the seeds ik() has always drawn)
         q0 = sample_within_limits(model, len(T) * n_seeds,
@@ -873,6 +907,49 @@ def _seeds(model: RobotModel, initial: Any, nT: int, name: str = "initial") -> n
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name}: contains NaN or inf")
     return np.array(np.broadcast_to(a, (nT,) + a.shape[1:]))
+
+
+# ------------------------------------------------------------------ warm starts
+def check_warm_start(warm_start: Any, name: str = "warm_start") -> Any:
+    """``warm_start`` itself if it is None or has a callable ``seeds``, else a TypeError
+    naming ``name``. A warm start (duck-typed; e.g. ``jwarp.learn.ik_net.IKNet``) is any
+    object with ``seeds(targets (P, 4, 4) numpy float64, world) -> (P, H, n_dof)``: H
+    initial configurations per target (a twin-headed network: 2)."""
+    if warm_start is not None and not callable(getattr(warm_start, "seeds", None)):
+        raise TypeError(f"{name}: expected an object with a callable seeds(targets, world) "
+                        f"(e.g. a loaded IK network), got {type(warm_start).__name__}")
+    return warm_start
+
+
+def warm_start_seeds(model: RobotModel, warm_start: Any, targets: np.ndarray, world: Any,
+                     n_random: int = 0, rng: np.random.Generator | None = None,
+                     name: str = "warm_start") -> np.ndarray:
+    """Seeds (P, H + n_random, n_dof) for the targets (P, 4, 4): the warm start's H per
+    target (checked: shape (P, H, n_dof), H >= 1, finite; a ValueError naming ``name``
+    otherwise), then ``n_random`` uniform ones inside the limits drawn from ``rng``."""
+    check_warm_start(warm_start, name)
+    T = np.ascontiguousarray(targets, dtype=np.float64).reshape(-1, 4, 4)
+    P, n = len(T), model.n_dof
+    raw = warm_start.seeds(T.copy(), world)
+    if hasattr(raw, "detach") and hasattr(raw, "cpu"):  # a torch tensor
+        raw = raw.detach().cpu().numpy()
+    try:
+        a = np.asarray(raw, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name}: seeds() returned {type(raw).__name__}, not an array of "
+                         f"numbers ({e})") from None
+    if a.ndim == 2 and a.shape == (P, n):  # one seed per target
+        a = a[:, None]
+    if a.ndim != 3 or a.shape[0] != P or a.shape[2] != n or a.shape[1] == 0:
+        raise ValueError(f"{name}: seeds() must return ({P}, H, {n}) joint values for {P} "
+                         f"targets of '{model.name}', got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: seeds() returned NaN or inf")
+    if n_random:
+        rng = np.random.default_rng() if rng is None else rng
+        extra = sample_within_limits(model, P * int(n_random), rng).reshape(P, int(n_random), n)
+        a = np.concatenate([a, extra], axis=1)
+    return np.ascontiguousarray(a)
 
 
 def select_best(feasible: np.ndarray, errs: np.ndarray) -> np.ndarray:

@@ -1,0 +1,401 @@
+"""CLI subcommands ``jwarp train ik`` and ``jwarp eval ik`` (hooked into :mod:`jwarp.cli`):
+learned warm starts for the collision-free IK (thesis 3.4.4, 3.5.3).
+
+Examples::
+
+    jwarp train ik --robot planar5 --world random --epochs 20 --out planar5.pt
+    jwarp train ik --robot justin19 --frame right_tcp --world shelf --epochs 50 \\
+        --steps-per-epoch 200 --batch 512 --device cuda --out justin19.pt --rerun curves.rrd
+    jwarp train ik --robot justin19 --world shelf --epochs 80 --out justin19.pt --resume
+    jwarp eval ik --robot planar5 --world random --model planar5.pt --model sup.pt
+    jwarp eval ik --robot justin19 --world shelf --model justin19.pt --targets 200 --json
+    jwarp ik --robot justin19 --frame right_tcp --target ... --warm-start justin19.pt
+
+``train ik`` trains an IK network (:func:`jwarp.learn.train_ik.train_ik`; ``--supervised``:
+the supervised baseline, :func:`~jwarp.learn.train_ik.train_ik_supervised`) with a
+progress bar and one line per epoch (loss terms, hard-set size, validation cost and
+feasibility, samples/s), writing the checkpoint ``--out`` after every epoch (atomically;
+``--resume`` continues from it). ``--rerun FILE.rrd`` streams the per-epoch curves
+(every number of the epoch line) to a rerun recording (timeline ``epoch``). Switches of
+the ablation (Table 3.4): ``--no-twin``, ``--no-unit-vectors``, ``--no-boosting``;
+``--n-bps N`` > 0 makes the network world-aware (basis point set of N points).
+
+``eval ik`` prints the Table 3.5 analogue (:func:`jwarp.learn.evaluate.evaluate_ik`) on
+unseen targets (and, for random worlds, unseen worlds): the Random row always, then one
+row per ``--model``; ``--ablation`` adds Table 3.4 (feasibility after 10 solver
+iterations) of the models.
+
+Every option is checked before any work (data generation, training): counts and numbers
+in range, ``--device``, the output paths (``--out``, ``--rerun``: writable folder, not a
+folder, not the same file) and, with ``--resume``, that ``--out`` exists; errors name the
+option (``jwarp: error: --batch: ...``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from jwarp.cli.common import CLIError, check_device, check_output, dumps, int_arg, quiet_warp, real_arg
+
+#: the options' names in the training options' errors
+_TRAIN_OPTION_OF = {"robot": "--robot", "frame": "--frame", "world": "--world",
+                    "n_worlds": "--n-worlds", "n_targets": "--targets-per-world",
+                    "n_val": "--val-targets", "n_bps": "--n-bps", "hidden": "--hidden",
+                    "batch_size": "--batch", "epochs": "--epochs",
+                    "steps_per_epoch": "--steps-per-epoch", "lr": "--lr", "device": "--device",
+                    "seed": "--seed", "checkpoint": "--out", "resume": "--resume"}
+
+
+def _model(name: str) -> Any:
+    from jwarp.cli.common import load_robot
+
+    try:
+        return load_robot(name)
+    except (ValueError, TypeError, OSError, KeyError) as e:
+        msg = " ".join(str(e).split())
+        for prefix in ("robot: ", "path: "):
+            msg = msg.removeprefix(prefix)
+        raise CLIError(f"--robot: {msg}") from None
+
+
+def _frame(model: Any, frame: str | None) -> str:
+    """``--frame`` checked, or the robot's first end effector."""
+    if frame is None:
+        if not model.end_effectors:
+            raise CLIError(f"--frame: robot '{model.name}' names no end effector; give --frame")
+        return next(iter(model.end_effectors))
+    try:
+        model.frame_index(frame)
+    except (ValueError, TypeError, KeyError) as e:
+        raise CLIError(f"--frame: {' '.join(str(e).split()).removeprefix('frame: ')}") from None
+    return frame
+
+
+def _check_world_kind(model: Any, kind: str) -> None:
+    if kind == "shelf" and model.workspace_dim != 3:
+        raise CLIError(f"--world: the shelf is a 3D scene; '{model.name}' is planar (use random "
+                       f"or none)")
+
+
+def _torch_device(name: str) -> None:
+    """``--device`` for torch and Warp (checked before any work)."""
+    try:
+        import torch
+    except ImportError as e:  # pragma: no cover - torch is a dependency of jwarp.learn
+        raise CLIError(f"--device: the IK networks need torch ({e})") from None
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, ValueError) as e:
+        raise CLIError(f"--device: {' '.join(str(e).split())}") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise CLIError(f"--device: {name} requested but torch sees no CUDA device")
+    if dev.type not in ("cpu", "cuda"):
+        raise CLIError(f"--device: expected cpu or cuda[:N], got {name!r}")
+    check_device(name)
+
+
+def _option_error(e: Exception, mapping: dict, command: str) -> CLIError:
+    msg = " ".join(str(e).split())
+    m = re.match(r"^([a-z_]+): ", msg)
+    if m and m.group(1) in mapping:
+        return CLIError(f"{mapping[m.group(1)]}: {msg[m.end():]}")
+    return CLIError(f"{command}: {msg}")
+
+
+def _load_model(path: str, model: Any, device: str = "cpu") -> Any:
+    try:
+        from jwarp.learn.checkpoint import load_checkpoint
+    except ImportError as e:  # pragma: no cover
+        raise CLIError(f"--model: the IK networks need torch ({e})") from None
+    try:
+        return load_checkpoint(path, robot=model, device=device)
+    except (ValueError, TypeError, OSError, KeyError) as e:
+        raise CLIError(f"--model: {' '.join(str(e).split()).removeprefix('checkpoint: ')}") \
+            from None
+
+
+def _worlds_per_batch(batch: int, n_worlds: int, kind: str) -> int:
+    """Worlds per training batch: up to 4 (random worlds), dividing ``batch``."""
+    if kind != "random":
+        return 1
+    for w in range(min(4, n_worlds), 0, -1):
+        if batch % w == 0:
+            return w
+    return 1
+
+
+# ------------------------------------------------------------------ rerun curves
+class _Curves:
+    """Training curves in a rerun recording (temporary file renamed at the end)."""
+
+    def __init__(self, path: str):
+        from jwarp import viz
+        from jwarp.atomic import AtomicFile
+
+        self.rr = viz.rerun_module()
+        try:
+            self.file = AtomicFile(path, option="--rerun")
+        except ValueError as e:
+            raise CLIError(str(e)) from None
+        try:
+            self.rec = viz.open_recording(self.file.tmp, "jwarp-train-ik")
+        except BaseException:
+            self.file.discard()
+            raise
+
+    def log(self, rec: dict) -> None:
+        self.rec.set_time("epoch", sequence=int(rec.get("epoch", 0)))
+        for k, v in rec.items():
+            if k == "epoch" or isinstance(v, bool) or not isinstance(v, (int, float)):
+                continue
+            if math.isfinite(float(v)):
+                self.rec.log(f"train/{k}", self.rr.Scalars(float(v)))
+
+    def close(self) -> Path:
+        self.rec.flush()
+        self.rec.disconnect()
+        return self.file.commit()
+
+    def abort(self) -> None:
+        try:
+            self.rec.disconnect()
+        finally:
+            self.file.discard()
+
+
+# ------------------------------------------------------------------ commands
+def cmd_train_ik(args: argparse.Namespace) -> int:
+    model = _model(args.robot)
+    frame = _frame(model, args.frame)
+    _check_world_kind(model, args.world)
+    if args.world != "random" and args.n_worlds is not None:
+        raise CLIError(f"--n-worlds: only meaningful with --world random (got --world "
+                       f"{args.world})")
+    if args.supervised and args.no_boosting:
+        raise CLIError("--no-boosting: the supervised baseline never boosts; drop it")
+    quiet_warp()
+    _torch_device(args.device)
+    check_output(args.out, "--out", inputs={"--rerun": args.rerun})
+    if args.resume and not Path(args.out).is_file():
+        raise CLIError(f"--resume: no checkpoint {args.out} to resume from (--out)")
+    if args.rerun is not None:
+        check_output(args.rerun, "--rerun", rerun=True, inputs={"--out": args.out})
+        if Path(args.rerun).resolve() == Path(args.out).resolve():
+            raise CLIError(f"--rerun: {args.rerun} is also --out; give another file")
+    from jwarp.core.arrays import init_warp
+    from jwarp.learn.train_ik import TrainIKOptions, train_ik, train_ik_supervised
+
+    n_worlds = args.n_worlds if args.n_worlds is not None else 8
+    fields = dict(robot=model.name, frame=frame, world=args.world, n_worlds=n_worlds,
+                  n_targets=args.targets_per_world, n_val=args.val_targets, n_bps=args.n_bps,
+                  hidden=args.hidden, twin=not args.no_twin,
+                  unit_vectors=not args.no_unit_vectors, boosting=not args.no_boosting,
+                  batch_size=args.batch,
+                  worlds_per_batch=_worlds_per_batch(args.batch, n_worlds, args.world),
+                  epochs=args.epochs, steps_per_epoch=args.steps_per_epoch, lr=args.lr,
+                  device=args.device, seed=args.seed, checkpoint=args.out, resume=args.resume)
+    if args.world != "random":
+        fields["n_val_worlds"] = 1
+    try:
+        options = TrainIKOptions(**fields)
+    except (ValueError, TypeError) as e:
+        raise _option_error(e, _TRAIN_OPTION_OF, "train ik") from None
+    init_warp()
+    curves = _Curves(args.rerun) if args.rerun is not None else None
+
+    def callback(rec: Any, net: Any = None) -> None:
+        if curves is not None and isinstance(rec, dict):
+            curves.log(rec)
+
+    run = train_ik_supervised if args.supervised else train_ik
+    try:
+        net, history = run(options, progress=not args.quiet, callback=callback)
+        written = curves.close() if curves is not None else None
+    except BaseException:
+        if curves is not None:
+            curves.abort()
+        raise
+    last = history[-1] if history else {}
+    kind = "supervised" if args.supervised else "unsupervised"
+    print(f"trained {kind} IK network for {model.name} {frame} ({args.world} worlds): epoch "
+          f"{last.get('epoch', 0)}/{args.epochs}, validation feasibility "
+          f"{100 * last.get('val_feasible', math.nan):.1f}% after "
+          f"{options.val_iterations} solver iterations")
+    if Path(args.out).is_file():
+        print(f"wrote {args.out}; use with: jwarp ik --robot {model.name} --frame {frame} "
+              f"--target ... --warm-start {args.out}")
+    if written is not None:
+        print(f"wrote {written}; view with: rerun {written}")
+    return 0
+
+
+def _eval_data(model: Any, frame: str, kind: str, n_worlds: int, n_targets: int,
+               seed: int) -> tuple[list, list]:
+    """Unseen test worlds and targets (seeds offset from training (seed + 100 i) and
+    validation (seed + 100000))."""
+    from jwarp.learn.ik_data import make_worlds, sample_targets
+
+    worlds = make_worlds(model, kind, n_worlds, seed=seed + 200000)
+    targets = [sample_targets(model, frame, n_targets, w, seed=seed * 7919 + 200000 + i)[0]
+               for i, w in enumerate(worlds)]
+    return worlds, targets
+
+
+def cmd_eval_ik(args: argparse.Namespace) -> int:
+    model = _model(args.robot)
+    quiet_warp()
+    check_device(args.device)
+    nets = [(p, _load_model(p, model)) for p in (args.model or [])]
+    if args.ablation and not nets:
+        raise CLIError("--ablation: needs at least one --model")
+    frames = {str(n.config.frame) for _, n in nets}
+    if args.frame is None and len(frames) == 1:
+        frame = frames.pop()
+    else:
+        frame = _frame(model, args.frame)
+    for p, n in nets:
+        if model.frame_index(n.config.frame) != model.frame_index(frame):
+            raise CLIError(f"--model: {p} predicts frame '{n.config.frame}', not {frame}")
+    kind = args.world
+    if kind is None:
+        kinds = {str((n.meta.get("training") or {}).get("world", "")) for _, n in nets} - {""}
+        kind = kinds.pop() if len(kinds) == 1 else ("shelf" if model.workspace_dim == 3
+                                                      else "random")
+    _check_world_kind(model, kind)
+    for p, n in nets:
+        if getattr(n.config, "n_bps", 0) and kind == "none":
+            raise CLIError(f"--world: {p} is world-aware; evaluate it in worlds (random, shelf)")
+    n_worlds = args.n_worlds if kind == "random" else 1
+    from jwarp.learn.evaluate import (ablation_table, evaluate_ik, format_table_34,
+                                      format_table_35)
+
+    worlds, targets = _eval_data(model, frame, kind, n_worlds, args.targets, args.seed)
+    common = dict(max_iterations=args.iterations, seed=args.seed, device=args.device)
+    rows = [evaluate_ik(model, frame, worlds, targets, n_random=args.random_starts,
+                        name="Random", **common)]
+    for p, n in nets:
+        sup = bool((n.meta.get("training") or {}).get("supervised", False))
+        name = f"{Path(p).stem} ({'supervised' if sup else 'unsupervised'})"
+        rows.append(evaluate_ik(model, frame, worlds, targets, warm_start=n,
+                                n_random=args.random_starts, name=name, **common))
+    ablation = None
+    if args.ablation:
+        ablation = ablation_table(model, frame, worlds, targets,
+                                  [(Path(p).stem, n) for p, n in nets],
+                                  iterations=args.ablation_iterations, seed=args.seed,
+                                  device=args.device)
+    where = f"{kind} world{'s' if len(worlds) > 1 else ''}" if kind != "none" else "no world"
+    if args.json:
+        out = {"robot": model.name, "frame": frame, "world": kind, "n_worlds": len(worlds),
+               "targets_per_world": args.targets, "models": [p for p, _ in nets],
+               "table_3_5": rows}
+        if ablation is not None:
+            out["table_3_4"] = ablation
+        print(dumps(_plain(out)))
+    else:
+        print(format_table_35(rows, f"Table 3.5 analogue: {model.name} {frame}, {where} "
+                                    f"(unseen targets)"))
+        if ablation is not None:
+            print()
+            print(format_table_34(ablation, f"Table 3.4 analogue: {model.name} {frame}, "
+                                            f"{where}"))
+    return 0
+
+
+def _plain(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {k: _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return None if not math.isfinite(float(x)) else float(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+# ------------------------------------------------------------------ parser
+def add_subcommands(sub: Any) -> None:
+    """Add ``train ik`` and ``eval ik`` to the ``jwarp`` subparsers."""
+    from jwarp.cli.common import Parser
+
+    train = sub.add_parser("train", help="train a learned model (train ik: IK warm starts)")
+    tsub = train.add_subparsers(dest="what", metavar="WHAT", parser_class=Parser)
+    tsub.required = True
+    s = tsub.add_parser("ik", help="train an IK network (learned warm starts of the IK solver)")
+    s.add_argument("--robot", required=True, help="robot name or path to a robot .json")
+    s.add_argument("--frame", default=None, help="end-effector frame (default: the robot's "
+                                                 "first end effector)")
+    s.add_argument("--world", default="random", choices=("random", "shelf", "none"),
+                   help="training worlds: random simplex worlds, the shelf scene or none "
+                        "(default random)")
+    s.add_argument("--n-worlds", type=int_arg("--n-worlds", 1), default=None, metavar="N",
+                   help="random training worlds (default 8)")
+    s.add_argument("--targets-per-world", type=int_arg("--targets-per-world", 1), default=2000,
+                   metavar="N", help="training targets per world (default 2000)")
+    s.add_argument("--val-targets", type=int_arg("--val-targets", 1), default=128, metavar="N",
+                   help="validation targets per validation world (default 128)")
+    s.add_argument("--epochs", type=int_arg("--epochs", 1, 10**6), required=True, metavar="N",
+                   help="epochs in all (counting resumed ones)")
+    s.add_argument("--steps-per-epoch", type=int_arg("--steps-per-epoch", 1, 10**9),
+                   default=100, metavar="N", help="optimizer steps per epoch (default 100)")
+    s.add_argument("--batch", type=int_arg("--batch", 1, 10**7), default=256, metavar="N",
+                   help="targets per step (default 256)")
+    s.add_argument("--lr", type=real_arg("--lr", 0.0, lo_open=True), default=1e-3,
+                   help="learning rate, > 0 (default 1e-3)")
+    s.add_argument("--hidden", type=int_arg("--hidden", 1, 1 << 16), default=128, metavar="N",
+                   help="hidden width (default 128)")
+    s.add_argument("--n-bps", type=int_arg("--n-bps", 0, 1 << 20), default=0, metavar="N",
+                   help="basis points of the world encoding; 0: world-unaware (default 0)")
+    s.add_argument("--no-twin", action="store_true", help="one head instead of twin heads")
+    s.add_argument("--no-unit-vectors", action="store_true",
+                   help="plain joint values instead of (sin, cos) unit vectors")
+    s.add_argument("--no-boosting", action="store_true", help="no hard-sample boosting")
+    s.add_argument("--supervised", action="store_true",
+                   help="the supervised baseline (labels from the IK solver)")
+    s.add_argument("--device", default="cpu", help="torch/Warp device (default cpu; e.g. cuda)")
+    s.add_argument("--out", default="model.pt", metavar="MODEL.pt",
+                   help="checkpoint, written after every epoch (default model.pt)")
+    s.add_argument("--resume", action="store_true", help="continue from the checkpoint --out")
+    s.add_argument("--rerun", default=None, metavar="FILE.rrd",
+                   help="stream the training curves to a rerun recording")
+    s.add_argument("--seed", type=int_arg("--seed", 0, 2**31 - 1), default=0,
+                   help="random seed (data, initialisation; >= 0)")
+    s.add_argument("--quiet", action="store_true", help="no progress bar or epoch lines")
+    s.set_defaults(func=cmd_train_ik)
+
+    ev = sub.add_parser("eval", help="evaluate a learned model (eval ik: Tables 3.4/3.5)")
+    esub = ev.add_subparsers(dest="what", metavar="WHAT", parser_class=Parser)
+    esub.required = True
+    s = esub.add_parser("ik", help="Table 3.5 analogue: random vs learned IK warm starts")
+    s.add_argument("--robot", required=True, help="robot name or path to a robot .json")
+    s.add_argument("--frame", default=None,
+                   help="end-effector frame (default: the models', else the first end effector)")
+    s.add_argument("--world", default=None, choices=("random", "shelf", "none"),
+                   help="test worlds (default: the models' training worlds)")
+    s.add_argument("--model", action="append", default=None, metavar="MODEL.pt",
+                   help="a checkpoint of jwarp train ik (repeatable; one row each)")
+    s.add_argument("--targets", type=int_arg("--targets", 1, 10**7), default=100, metavar="N",
+                   help="unseen targets per world (default 100)")
+    s.add_argument("--n-worlds", type=int_arg("--n-worlds", 1, 10**5), default=4, metavar="N",
+                   help="unseen random worlds (--world random; default 4)")
+    s.add_argument("--random-starts", type=int_arg("--random-starts", 1, 10**5), default=50,
+                   metavar="N", help="random seeds tried one after the other: the cap of the "
+                                     "multi-starts (default 50)")
+    s.add_argument("--iterations", type=int_arg("--iterations", 0, 10**6), default=200,
+                   metavar="N", help="solver iterations per seed (default 200)")
+    s.add_argument("--ablation", action="store_true",
+                   help="also Table 3.4: feasibility of each model after --ablation-iterations")
+    s.add_argument("--ablation-iterations", type=int_arg("--ablation-iterations", 0, 10**6),
+                   default=10, metavar="N", help="solver iterations of --ablation (default 10)")
+    s.add_argument("--seed", type=int_arg("--seed", 0, 2**31 - 1), default=0,
+                   help="seed of the test worlds, targets and random seeds")
+    s.add_argument("--device", default="cpu", help="Warp device of the solver (default cpu)")
+    s.add_argument("--json", action="store_true", help="print JSON")
+    s.set_defaults(func=cmd_eval_ik)

@@ -1,0 +1,146 @@
+"""IK network checkpoints ("jwarp-ik-net" files, version 1; docs/learning.md,
+"Checkpoint format").
+
+A checkpoint is a ``torch.save`` of a plain dict (loadable with
+``torch.load(weights_only=True)``: only dicts, lists, strings, numbers, bools, None and
+tensors)::
+
+    format            "jwarp-ik-net"
+    version           1
+    config            IKNetConfig as a dict
+    state_dict        the network's weights and buffers
+    robot             robot name
+    kinematics_hash   jwarp.core.device.content_key(robot) (a hash of the robot's content)
+    bps               BasisPointSet.to_dict() (world-aware networks) or None
+    world_distribution  str or dict: what worlds the network was trained on
+    training          TrainIKOptions as a dict (or {})
+    jwarp_version, torch_version
+    metrics           dict (last validation numbers, history)
+    epoch             last finished epoch (0: untrained)
+    optimizer_state   optimizer.state_dict() or None (for resuming)
+    training_state    dict or None (the trainer's state besides the optimizer: hard set)
+
+Files are written atomically (:class:`jwarp.atomic.AtomicFile`).
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from jwarp.atomic import AtomicFile
+from jwarp.core.device import content_key
+from jwarp.learn.ik_net import IKNet, IKNetConfig
+from jwarp.registry import robot as get_robot
+
+__all__ = ["FORMAT", "VERSION", "save_checkpoint", "load_checkpoint", "read_checkpoint"]
+
+FORMAT = "jwarp-ik-net"
+VERSION = 1
+
+
+def _plain(x: Any) -> Any:
+    """``x`` with numpy values turned into lists/floats (weights_only-loadable)."""
+    import numpy as np
+
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, torch.Tensor):
+        return x.detach().cpu()
+    if x is None or isinstance(x, (str, int, float, bool)):
+        return x
+    return str(x)
+
+
+def save_checkpoint(path: str | os.PathLike, net: IKNet, *, world_distribution: Any = "",
+                    training: dict | None = None, metrics: dict | None = None,
+                    epoch: int = 0, optimizer_state: dict | None = None,
+                    training_state: dict | None = None) -> Path:
+    """Write ``net`` and what it is valid for to ``path`` (atomically); returns the path."""
+    from jwarp import __version__ as jwarp_version
+
+    doc = {
+        "format": FORMAT, "version": VERSION,
+        "config": _plain(net.config.to_dict()),
+        "state_dict": {k: v.detach().cpu() for k, v in net.state_dict().items()},
+        "robot": net.robot.name,
+        "kinematics_hash": content_key(net.robot),
+        "bps": _plain(net.bps.to_dict()) if net.bps is not None else None,
+        "world_distribution": _plain(world_distribution),
+        "training": _plain(training or {}),
+        "jwarp_version": str(jwarp_version),
+        "torch_version": str(torch.__version__),
+        "metrics": _plain(metrics or {}),
+        "epoch": int(epoch),
+        "optimizer_state": optimizer_state,
+        "training_state": _plain(training_state) if training_state is not None else None,
+    }
+    with AtomicFile(path) as f:
+        torch.save(doc, f.tmp)
+    return Path(path)
+
+
+def read_checkpoint(path: str | os.PathLike) -> dict:
+    """The checkpoint dict of ``path`` (checked to be a jwarp-ik-net file); ValueError
+    for anything else."""
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"checkpoint: '{p}' does not exist or is not a file")
+    try:
+        doc = torch.load(p, map_location="cpu", weights_only=True)
+    except (pickle.UnpicklingError, RuntimeError, EOFError, OSError, ValueError,
+            AttributeError, ImportError, IndexError, KeyError, TypeError) as e:
+        raise ValueError(f"checkpoint: '{p}' is not a jwarp IK network checkpoint "
+                         f"(cannot be read by torch.load: {type(e).__name__}: "
+                         f"{str(e).splitlines()[0] if str(e) else ''})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ValueError(f"checkpoint: '{p}' is not a jwarp IK network checkpoint "
+                         f"(format field {doc.get('format') if isinstance(doc, dict) else None!r}, "
+                         f"expected {FORMAT!r})")
+    if doc.get("version") != VERSION:
+        raise ValueError(f"checkpoint: '{p}' has format version {doc.get('version')!r}; this "
+                         f"jwarp reads version {VERSION}")
+    for k in ("config", "state_dict", "robot", "kinematics_hash"):
+        if k not in doc:
+            raise ValueError(f"checkpoint: '{p}' lacks the field '{k}'")
+    return doc
+
+
+def load_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = "cpu") -> IKNet:
+    """The :class:`IKNet` of a checkpoint, on ``device`` in eval mode, with ``.meta`` (every
+    field but the weights and the optimizer state).
+
+    ``robot`` (name or RobotModel; None: the checkpoint's robot from the registry): the
+    robot the network is meant for; a different name or kinematics hash raises ValueError
+    naming both.
+    """
+    doc = read_checkpoint(path)
+    model = get_robot(doc["robot"] if robot is None else robot)
+    key = content_key(model)
+    if model.name != doc["robot"] or key != doc["kinematics_hash"]:
+        raise ValueError(f"checkpoint: '{path}' is for robot '{doc['robot']}' (kinematics "
+                         f"hash {doc['kinematics_hash']}), not for robot '{model.name}' "
+                         f"(kinematics hash {key})")
+    bps = None
+    if doc.get("bps") is not None:
+        from jwarp.learn.bps import BasisPointSet
+        bps = BasisPointSet.from_dict(doc["bps"])
+    config = IKNetConfig.from_dict(doc["config"])
+    net = IKNet(config, bps=bps)
+    net.robot = model
+    net.load_state_dict(doc["state_dict"])
+    net.to(device)
+    net.eval()
+    net.meta = {k: v for k, v in doc.items() if k not in ("state_dict", "optimizer_state")}
+    net.meta["path"] = str(path)
+    return net

@@ -1,0 +1,149 @@
+"""Training data of the IK networks, without labels (thesis 3.4.4, 3.5.1).
+
+Targets are FK poses of random configurations that are collision-free in their world
+(world and self-collision, sphere model; inside the joint limits, coupled limits
+included), so every target is reachable. :func:`sample_targets` mixes three kinds
+(fractions ``mix``, default 60/20/20 %):
+
+- ``uniform``: random collision-free configurations;
+- ``near obstacles``: of a pool of ``pool`` x as many collision-free configurations, those
+  whose smallest sphere-to-world distance is smallest (the hard regions next to
+  obstacles; without a world: the smallest self distance);
+- ``border``: of the pool, those whose end-effector is farthest from the base frame's
+  origin (the border of the workspace, reached only stretched out).
+
+Worlds (:func:`make_worlds`): ``"random"``: simplex worlds fitted to the robot
+(:func:`jwarp.world.feasibility.feasible_simplex_world`, seeds ``seed + 100 i``, each with
+at least 200 of 1000 random configurations collision-free); ``"shelf"``: the fixed shelf
+scene (3D robots); ``"none"``: no world (self-collision only). The validation set
+(:func:`make_ik_data`) uses its own worlds (random: seeds from ``seed + 100000``, unseen in
+training) and targets, fixed by the seed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from jwarp.kinematics.fk import fk
+from jwarp.registry import robot as get_robot
+from jwarp.world.collision import is_collision_free, min_distances
+from jwarp.world.feasibility import feasible_simplex_world, random_configurations
+from jwarp.world.scenes import shelf_world
+
+__all__ = ["sample_targets", "make_worlds", "IKData", "make_ik_data", "DEFAULT_MIX"]
+
+DEFAULT_MIX = (0.6, 0.2, 0.2)  # uniform, near obstacles, workspace border
+
+
+def _free_configurations(model: Any, n: int, world: Any, rng: np.random.Generator,
+                         device: Any) -> np.ndarray:
+    out = np.empty((0, model.n_dof))
+    for _ in range(200):
+        q = random_configurations(model, max(2 * (n - len(out)), 64),
+                                  seed=int(rng.integers(1 << 31)))
+        free = is_collision_free(model, q, world, 0.0, device=device, dtype=np.float64)
+        out = np.concatenate([out, q[free]])
+        if len(out) >= n:
+            return out[:n]
+    raise ValueError(f"world: too few collision-free configurations of '{model.name}' "
+                     f"({len(out)} of {n} found)")
+
+
+def sample_targets(robot: Any, frame: Any, n: int, world: Any = None, *, seed: int = 0,
+                   mix: tuple = DEFAULT_MIX, pool: int = 4, device: Any = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` reachable targets (module docstring): returns ``(targets (n, 4, 4),
+    q (n, n_dof))`` float64, q the collision-free configuration each target came from."""
+    model = get_robot(robot)
+    f = model.frame_index(frame)
+    mix = np.asarray(mix, np.float64)
+    if mix.shape != (3,) or (mix < 0).any() or mix.sum() <= 0:
+        raise ValueError(f"mix: expected 3 fractions >= 0 (uniform, near obstacles, border), got {mix}")
+    mix = mix / mix.sum()
+    rng = np.random.default_rng(seed)
+    n_near = int(round(n * mix[1]))
+    n_border = int(round(n * mix[2]))
+    n_uni = n - n_near - n_border
+    parts = [_free_configurations(model, n_uni, world, rng, device)] if n_uni > 0 else []
+    if n_near + n_border > 0:
+        cand = _free_configurations(model, max(pool * (n_near + n_border), 16), world, rng,
+                                    device)
+        used = np.zeros(len(cand), bool)
+        if n_near:
+            md = min_distances(model, cand, world, device=device, dtype=np.float64)
+            d = md[:, 0] if world is not None else md[:, 1]
+            pick = np.argsort(d, kind="stable")[:n_near]
+            used[pick] = True
+            parts.append(cand[pick])
+        if n_border:
+            T = fk(model, cand, device=device, dtype=np.float64)[:, f]
+            r = np.linalg.norm(T[:, :model.workspace_dim, 3], axis=1)
+            r[used] = -np.inf
+            parts.append(cand[np.argsort(-r, kind="stable")[:n_border]])
+    q = np.concatenate(parts)[rng.permutation(n)]
+    T = fk(model, q, device=device, dtype=np.float64)[:, f]
+    return np.ascontiguousarray(T), q
+
+
+def make_worlds(robot: Any, kind: str, n: int, *, seed: int = 0, device: Any = None) -> list:
+    """``n`` worlds of ``kind`` ("random", "shelf", "none"; module docstring); "shelf" and
+    "none" give one world (or None) whatever ``n``."""
+    model = get_robot(robot)
+    if kind == "random":
+        return [feasible_simplex_world(model, seed=int(seed) + 100 * i, device=device)
+                for i in range(int(n))]
+    if kind == "shelf":
+        if model.workspace_dim != 3:
+            raise ValueError(f"world: the shelf is a 3D scene; '{model.name}' is planar "
+                             f"(use 'random' or 'none')")
+        return [shelf_world()]
+    if kind == "none":
+        return [None]
+    raise ValueError(f"world: expected 'random', 'shelf' or 'none', got {kind!r}")
+
+
+@dataclass
+class IKData:
+    """Training and validation targets, grouped by world.
+
+    worlds / val_worlds: lists of World (or [None]); targets[i] (N, 4, 4) and q[i] (N, n_dof)
+    of worlds[i]; val_targets[j] (M, 4, 4), val_q[j] of val_worlds[j]; distribution: a
+    description of the world distribution (saved in checkpoints)."""
+
+    worlds: list
+    targets: list
+    q: list
+    val_worlds: list
+    val_targets: list
+    val_q: list
+    distribution: dict
+
+
+def make_ik_data(robot: Any, frame: Any, world: str = "random", *, n_worlds: int = 8,
+                 n_targets: int = 1000, n_val_worlds: int = 2, n_val: int = 128,
+                 seed: int = 0, mix: tuple = DEFAULT_MIX, device: Any = None) -> IKData:
+    """Worlds and targets for training (``n_targets`` per world) and a validation set
+    (``n_val`` targets per validation world), reproducible by ``seed``. With "shelf" and
+    "none" the validation worlds are the training world (unseen targets)."""
+    model = get_robot(robot)
+    worlds = make_worlds(model, world, n_worlds, seed=seed, device=device)
+    val_worlds = (make_worlds(model, world, n_val_worlds, seed=seed + 100000, device=device)
+                  if world == "random" else list(worlds))
+    tr = [sample_targets(model, frame, n_targets, w, seed=seed * 7919 + i, mix=mix, device=device)
+          for i, w in enumerate(worlds)]
+    va = [sample_targets(model, frame, n_val, w, seed=seed * 7919 + 50000 + j, mix=mix,
+                         device=device) for j, w in enumerate(val_worlds)]
+    dist: dict = {"kind": world, "mix": {"uniform": mix[0], "near_obstacles": mix[1],
+                                         "border": mix[2]}}
+    if world == "random":
+        dist.update(generator="feasible_simplex_world", n_worlds=int(n_worlds),
+                    seeds=[int(w.meta.get("seed", -1)) for w in worlds],
+                    grid_shape=list(worlds[0].shape), voxel_size=float(worlds[0].voxel_size))
+    elif world == "shelf":
+        dist.update(scene="shelf_world", voxel_size=float(worlds[0].voxel_size))
+    return IKData(worlds=worlds, targets=[t for t, _ in tr], q=[q for _, q in tr],
+                  val_worlds=val_worlds, val_targets=[t for t, _ in va],
+                  val_q=[q for _, q in va], distribution=dist)
