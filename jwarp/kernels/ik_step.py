@@ -18,8 +18,9 @@ iteration, after the cost kernels of :mod:`jwarp.kernels.ik` and the collision k
 * ``pose`` (dim B, rigid robot): error and Jacobian of the frame from a walk along its
   chain (no frames stored), the values of FK + :mod:`jwarp.kernels.ik` ``pose_error``.
 * ``near`` (dim B): the active configurations whose pose is on target, listed in
-  ``idx[:counts[2]]`` before the collision costs; only those need U_A and the check
-  (``gather`` packs them for the collision kernel, ``scatter_aux`` writes their U_A back).
+  ``idx[:counts[2]]`` (at most ``cap`` of them, the size of the gathered launch; the
+  others wait) before the collision costs; only those need U_A and the check (``gather``
+  packs them for the collision kernel, ``scatter_aux`` writes their U_A back).
 * Per configuration ``done``: 0 active, 1 done (feasible), 2 frozen (``freeze_solved``: an
   active configuration of a solved problem stops in ``step``).
 * ``step`` (launch dim B): the damped least-squares step in float64 (eq. 3.21-3.24)
@@ -427,24 +428,38 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         err: wp.array2d(dtype=scalar),
         tol_pos: f64,
         tol_rot: f64,
+        cap: int,
         halt: wp.array(dtype=wp.int32),
         done: wp.array(dtype=wp.int32),
         # Data out:
         on: wp.array(dtype=wp.int32),
         counts: wp.array(dtype=wp.int32),
         idx: wp.array(dtype=wp.int32),
+        coll_cost: wp.array(dtype=scalar),
+        cost: wp.array(dtype=scalar),
+        grad: wp.array2d(dtype=scalar),
     ):
         """Before the collision costs: the active configurations whose pose is on target
         (``|e_v| < tol_pos``, ``|e_w| < tol_rot``; the elastic condition comes later, in
-        ``check``) are listed in ``idx[:counts[2]]`` (in no particular order), ``on[b] = 0``
-        for the others: only the listed ones need U_A and the check this iteration.
-        Launch dim B."""
+        ``check``) are listed in ``idx[:min(counts[2], cap)]`` (in no particular order),
+        ``on[b] = 0`` for the others: only the listed ones need U_A and the check this
+        iteration. ``cap``: the size of the gathered U_A launch; an on-target configuration
+        beyond it (``counts[2]`` still counts it) is deferred to a later iteration: its U_A
+        and gradient are zeroed (a pose-only step) and its collision cost set above any
+        screen (no exact check before a ``full`` one). Launch dim B."""
         b = wp.tid()
         if halt[0] != 0 or done[b] != 0:
             return
         pe, re = task_errors(err, b)
         if pe < tol_pos and re < tol_rot:
-            idx[wp.atomic_add(counts, 2, 1)] = b
+            k = wp.atomic_add(counts, 2, 1)
+            if k < cap:
+                idx[k] = b
+            else:
+                coll_cost[b] = scalar(1.0e30)
+                cost[b] = scalar(0.0)
+                for j in range(grad.shape[1]):
+                    grad[b, j] = scalar(0.0)
         else:
             on[b] = 0
 

@@ -18,7 +18,7 @@ seed with the lowest U_A (or the best infeasible one, flagged).
 :class:`IKSolver` keeps everything on the device (:mod:`jwarp.kernels.ik_step`): the damped
 least-squares step, the exact feasibility check of the candidates (float64: limits, world
 and self collision with ``margin``), freezing the solved seeds and the best-seed selection
-run in kernels; the host only reads two counters now and then to decide when to stop
+run in kernels; the host only reads three counters now and then to decide when to stop
 (every iteration on the CPU, where that is free; every ``check_every`` iterations on CUDA)
 and copies the results once at the end. :func:`ik` is a thin wrapper that builds one.
 
@@ -378,7 +378,13 @@ class IKOptions:
             until it is feasible or out of iterations).
         check_every: exact collision check of every on-target seed every this many
             iterations (seeds whose collision cost is below ``w c(margin)`` are checked at
-            once); on CUDA also how often the host reads the solver's counters.
+            once).
+        read_every: how often the host reads the solver's counters (to stop, and to size
+            the gathered U_A launch), >= 1; None: every iteration on the CPU (a view, free),
+            every ``check_every`` iterations on CUDA (a copy and a sync). Between reads
+            the rigid robot's gathered launch keeps the last size with headroom (seeds
+            beyond it take pose-only steps for an iteration), the elastic robot evaluates U_A
+            of every seed; results may differ slightly, every returned solution is checked.
         seed: random seed of the starts (None: fresh entropy).
         weights: :class:`IKWeights` of U_f and U_A (None: the defaults).
         q_default: default pose of the closeness term, (n_dof,) or per seed
@@ -408,6 +414,7 @@ class IKOptions:
     tol_rho: float = 1e-6
     stop_when_solved: bool = True
     check_every: int = 5
+    read_every: int | None = None
     seed: int | None = 0
     weights: IKWeights | None = None
     q_default: Any = None
@@ -422,6 +429,8 @@ class IKOptions:
         for name, lo in (("n_starts", 1), ("max_iterations", 0), ("check_every", 1),
                          ("n_random_with_warm_start", 0)):
             setattr(self, name, _positive_int(getattr(self, name), name, lo))
+        if self.read_every is not None:
+            self.read_every = _positive_int(self.read_every, "read_every", 1)
         for name in ("tol_pos", "tol_rot", "step", "max_step", "damping", "tol_rho"):
             v = getattr(self, name)
             if not (math.isfinite(real_number(v, name)) and v > 0):
@@ -473,9 +482,12 @@ class IKSolver:
     one kernel walking the frame's chain; elastic: FK at the compensation rows), the list
     of active seeds whose pose is on target, U_A of those only (their collision costs in a
     gathered batch), the exact check of the candidates, and the projected DLS step of the
-    active seeds. The host reads three counters per iteration (on CUDA a small copy and a
-    sync; the elastic model on CUDA evaluates U_A of every seed and reads the counters every
-    ``check_every`` iterations) and copies the result rows once at the end.
+    active seeds. The host reads three counters (done seeds, solved problems, seeds on
+    target) every iteration on the CPU (a view, free) and every ``check_every`` iterations
+    on CUDA (a small copy and a sync): between two reads the rigid robot's gathered U_A
+    launch keeps the size of the last read count with headroom (seeds beyond it wait an
+    iteration), the elastic model evaluates U_A of every seed. The result rows are copied
+    once at the end.
 
     Args:
         robot: robot name or RobotModel.
@@ -634,18 +646,24 @@ class IKSolver:
             obj.q, obj.target, self.halt, self.done, t.frame_struct, t.chain(self.frame),
             t.dh0_3d, obj.jac, obj.err])
 
-    def _near(self) -> None:
+    def _near(self, cap: int) -> None:
+        """List the on-target seeds, at most ``cap`` of them (the others wait)."""
         o, obj = self.options, self.objective
-        self._launch("near", self.ck.near, self.B, [obj.err, o.tol_pos, o.tol_rot, self.halt,
-                                                    self.done, self.on, self.counts,
-                                                    self.idx])
+        self._launch(("near", cap), self.ck.near, self.B, [
+            obj.err, o.tol_pos, o.tol_rot, cap, self.halt, self.done, self.on, self.counts,
+            self.idx, obj.coll_cost, obj.cost_a, obj.grad_a])
+
+    def _gather_size(self, n_near: int) -> int:
+        """Size of the gathered U_A launch for ``n_near`` seeds: a power of two above 32
+        seeds (so a few recorded launches serve every count), at most B."""
+        n_near = max(int(n_near), 1)
+        return min(self.B, n_near if self.B <= 32 else 1 << (n_near - 1).bit_length())
 
     def _near_aux(self, n_near: int) -> None:
-        """U_A and its gradient of the ``n_near`` listed seeds: their collision costs in a
-        gathered batch (padded to a power of two above 32 seeds, so a few recorded
-        launches serve every count)."""
+        """U_A and its gradient of the ``n_near`` listed seeds (at most :meth:`_gather_size`
+        of them): their collision costs in a gathered batch."""
         obj, w = self.objective, self.weights
-        K = n_near if self.B <= 32 else min(self.B, 1 << (int(n_near) - 1).bit_length())
+        K = self._gather_size(n_near)
         views = self._near_views.get(K)
         if views is None:
             views = self._near_views[K] = (self.q_near[:K], self.near_cost[:K],
@@ -743,16 +761,21 @@ class IKSolver:
                                                 self.solved, self.counts, self.halt])
         o = self.options
         rigid = obj.compensation is None
-        # the counters are read every iteration where that is cheap or needed anyway: the
-        # CPU (a view), the rigid robot (its U_A batch size); elastic on CUDA: every
-        # check_every iterations
-        every = dev.is_cpu or rigid
+        # the counters are read every iteration on the CPU (a view: free) and on CUDA every
+        # check_every iterations (a copy that waits for the device). Between two reads the
+        # rigid robot gathers the on-target seeds into a launch sized from the last read
+        # count with headroom (seeds beyond it wait an iteration); the elastic robot
+        # evaluates U_A of every seed
+        k_read = o.read_every or (1 if dev.is_cpu else o.check_every)
+        every = k_read == 1 or (rigid and callback is not None)
+        cap = self.B if every else self._gather_size(2 * 32)
 
         def over(c: np.ndarray) -> bool:
             return bool(c[0] >= B or (o.stop_when_solved and c[1] >= P))
 
         for it in range(o.max_iterations + 1):
             last = it == o.max_iterations
+            read = every or it % k_read == 0
             if rigid:
                 self._pose()
             else:
@@ -760,17 +783,25 @@ class IKSolver:
             near = True
             if last:  # U_A of every seed: the result rows of the unsolved ones carry it
                 obj.evaluate_aux()
+            elif rigid:
+                self._near(self.B if read else cap)
+                if read:
+                    c = self._read_counts()
+                    if not every and over(c):  # solved at the last check (device halted)
+                        break
+                    near = c[2] > 0
+                    if near:
+                        self._near_aux(int(c[2]))
+                    cap = self._gather_size(2 * max(int(c[2]), 32))
+                else:
+                    self._near_aux(cap)
             elif every:
-                self._near()
+                self._near(self.B)
                 c = self._read_counts()
-                if not dev.is_cpu and over(c):  # solved at the last check (device halted)
-                    break
                 near = c[2] > 0
-                if near and rigid:
-                    self._near_aux(int(c[2]))
-                elif near:
+                if near:
                     obj.evaluate_aux()
-                elif not rigid:
+                else:
                     obj.update_rows()
             else:
                 obj.evaluate_aux()
@@ -780,7 +811,7 @@ class IKSolver:
                 self._check(it % o.check_every == 0 or last)
             if last:
                 break
-            if dev.is_cpu or callback is not None or (not every and it % o.check_every == 0):
+            if every or callback is not None or (not rigid and read):
                 if over(self._read_counts()):
                     break
             self._step()

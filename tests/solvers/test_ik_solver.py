@@ -134,7 +134,7 @@ def test_cuda_solver_matches_the_cpu_solver_float64():
     world = shelf_world()
     _, T = _free_targets(robot, "right_tcp", 4, seed=5, world=world, margin=0.01)
     seeds = sample_within_limits(robot, 32, np.random.default_rng(3)).reshape(4, 8, -1)
-    opts = IK.IKOptions(n_starts=8, margin=0.01)
+    opts = IK.IKOptions(n_starts=8, margin=0.01, read_every=1)  # CUDA's default is sparser
     res = [IK.IKSolver(robot, "right_tcp", len(T), opts, world=world, device=d,
                        dtype=np.float64).solve(T, seeds) for d in ("cpu", "cuda:0")]
     np.testing.assert_array_equal(res[0].all_feasible, res[1].all_feasible)
@@ -323,3 +323,77 @@ def test_elastic_solver_reaches_the_equilibrium_target(device):
     pos, ang = C.equilibrium_pose_error(robot, "right_tcp", res.q, T, C.JUSTIN_KAPPA,
                                         device=device)
     assert np.all(pos < 1.1e-4) and np.all(ang < 1.1e-3), (pos, ang)
+
+
+# ------------------------------------------------------ sparse counter reads (CUDA default)
+def test_near_kernel_defers_the_seeds_beyond_its_cap(device):
+    """``near`` lists at most ``cap`` on-target seeds; the others are counted, their U_A and
+    gradient zeroed and their collision cost set above any screen; off-target seeds are
+    switched off."""
+    B, n, cap = 8, 3, 2
+    k = ik_step.check_kernels(wp.float64, False)
+    err = np.zeros((B, 6))
+    err[[1, 5], 0] = 0.5                       # off target
+    done = np.zeros(B, np.int32)
+    done[2] = 1                                # done: untouched
+    arr = lambda a, dt=wp.float64: wp.array(a, dtype=dt, device=device)  # noqa: E731
+    on = arr(np.ones(B, np.int32), wp.int32)
+    counts = arr(np.zeros(3, np.int32), wp.int32)
+    idx = arr(np.full(B, -1, np.int32), wp.int32)
+    coll, cost, grad = arr(np.full(B, 0.25)), arr(np.full(B, 0.5)), arr(np.ones((B, n)))
+    wp.launch(k.near, dim=B, inputs=[arr(err), 1e-4, 1e-3, cap,
+                                     arr(np.zeros(1, np.int32), wp.int32),
+                                     arr(done, wp.int32)],
+              outputs=[on, counts, idx, coll, cost, grad], device=device)
+    on_target = [0, 3, 4, 6, 7]
+    assert counts.numpy()[2] == len(on_target)
+    listed = idx.numpy()[:cap]
+    assert set(listed) <= set(on_target) and len(set(listed)) == cap
+    assert np.all(idx.numpy()[cap:] == -1)
+    deferred = sorted(set(on_target) - set(listed))
+    np.testing.assert_array_equal(coll.numpy()[deferred], 1e30)
+    np.testing.assert_array_equal(cost.numpy()[deferred], 0.0)
+    np.testing.assert_array_equal(grad.numpy()[deferred], 0.0)
+    kept = sorted(set(range(B)) - set(deferred))
+    np.testing.assert_array_equal(coll.numpy()[kept], 0.25)
+    np.testing.assert_array_equal(grad.numpy()[kept], 1.0)
+    np.testing.assert_array_equal(on.numpy(), [1, 0, 1, 1, 1, 0, 1, 1])
+
+
+@pytest.mark.parametrize("read_every", [4, 7])
+def test_sparse_counter_reads_still_solve_and_check_everything(device, read_every):
+    """Reading the counters every k iterations (CUDA's default) with a gathered U_A launch
+    too small for the on-target seeds between reads (arm7 in the shelf world, 48 x 8 seeds
+    near the solutions: ~384 seeds reach the target at once, the launch starts at 64): the
+    seeds beyond it wait, every problem is still solved, and every reported solution is on
+    target, within the limits and collision-free by the independent host checks."""
+    robot = jwarp.robot("arm7")
+    world = shelf_world()
+    qt, T = _free_targets(robot, "tcp", 48, seed=5, world=world, margin=0.01, device=device)
+    rng = np.random.default_rng(4)
+    seeds = qt[:, None] + rng.normal(scale=2e-3, size=(len(T), 8, robot.n_dof))
+    kw = dict(margin=0.01, stop_when_solved=False, seed=3)
+    dense = IK.IKSolver(robot, "tcp", len(T), IK.IKOptions(read_every=1, **kw), world=world,
+                        device=device, dtype=np.float64).solve(T, seeds)
+    solver = IK.IKSolver(robot, "tcp", len(T), IK.IKOptions(read_every=read_every, **kw),
+                         world=world, device=device, dtype=np.float64)
+    seen = []  # (launch size, seeds on target) of every near pass
+    near = solver._near
+
+    def spy(cap):
+        near(cap)
+        seen.append((cap, int(solver.counts.numpy()[2])))
+    solver._near = spy
+    sparse = solver.solve(T, seeds)
+    assert any(n > cap for cap, n in seen), seen  # the deferral did happen
+    assert dense.feasible.all() and sparse.feasible.all()
+    assert sparse.all_feasible.sum() == dense.all_feasible.sum() == len(T) * 8
+    q = sparse.all_q[sparse.all_feasible]
+    tcp = jwarp.fk(robot, q, device=device, dtype=np.float64)[:, robot.frame_index("tcp")]
+    want = np.repeat(T, 8, axis=0)[sparse.all_feasible.reshape(-1)]
+    assert np.abs(tcp[:, :3, 3] - want[:, :3, 3]).max() < 1e-4
+    assert within_limits(robot, q, tol=1e-9).all()
+    assert collision.is_collision_free(robot, q, world, 0.01, device=device,
+                                       dtype=np.float64).all()
+    with pytest.raises(ValueError, match="^read_every"):
+        IK.IKOptions(read_every=0)
