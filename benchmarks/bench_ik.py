@@ -248,17 +248,10 @@ def section_b(args: argparse.Namespace) -> dict:
 
 def grasp_targets(n: int, seed: int = 1) -> list[np.ndarray]:
     """Grasp poses between the shelf's boards, hand pointing into the shelf (+x) with noise
-    (the targets of :func:`shelf_ik`)."""
-    from scipy.spatial.transform import Rotation
+    (:func:`jwarp.world.scenes.shelf_grasp_poses`; the targets of :func:`shelf_ik`)."""
+    from jwarp.world.scenes import shelf_grasp_poses
 
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(n):
-        p = [rng.uniform(0.5, 0.62), rng.uniform(-0.5, 0.1), rng.uniform(0.72, 0.88)]
-        r = (Rotation.from_euler("y", 90, degrees=True)
-             * Rotation.from_rotvec(rng.normal(scale=0.15, size=3))).as_rotvec()
-        out.append(IK.pose_matrix(p, r))
-    return out
+    return list(shelf_grasp_poses(n, seed))
 
 
 SHELF_VARIANTS = ("solver", "ik", "baseline")

@@ -5,7 +5,10 @@
 Trains (unsupervised, twin heads, unit vectors, boosting) a world-aware planar5 network on
 random simplex worlds (BPS of 256 points) and a justin19 network for the shelf world, and
 keeps for each the epoch with the best validation feasibility (after 10 solver
-iterations). ``--quick`` shrinks everything (a smoke run, not a useful model).
+iterations). ``--only supervised`` trains the supervised baselines of Table 3.5 and
+``--only ablation`` the 8 justin19 variants of Table 3.4 (reduced sizes); evaluate them with
+``jwarp eval ik`` (docs/learning.md). ``--quick`` shrinks everything (a smoke run, not a
+useful model).
 """
 
 from __future__ import annotations
@@ -18,25 +21,46 @@ from pathlib import Path
 
 from jwarp.core.arrays import init_warp
 from jwarp.learn.checkpoint import save_checkpoint
-from jwarp.learn.train_ik import TrainIKOptions, train_ik
+from jwarp.learn.train_ik import TrainIKOptions, train_ik, train_ik_supervised
 
 RUNS = {
     "planar5_random": dict(robot="planar5", frame="tcp", world="random", n_worlds=64,
                            n_targets=512, n_bps=256, hidden=256, n_blocks=4,
                            batch_size=1024, worlds_per_batch=8, epochs=20, steps_per_epoch=200,
                            lr=1e-3, lr_decay=0.85),
+    # 50 % of the targets are the shelf's grasp poses (the task the network serves:
+    # jwarp.world.scenes.shelf_grasp_poses), the rest reachable poses of the whole workspace
     "justin19_shelf": dict(robot="justin19", frame="right_tcp", world="shelf", n_worlds=1,
                            n_targets=20000, n_bps=0, hidden=256, n_blocks=4,
+                           mix=(0.3, 0.1, 0.1, 0.5),
                            batch_size=1024, worlds_per_batch=1, epochs=20, steps_per_epoch=200,
                            lr=1e-3, lr_decay=0.85),
 }
+#: the networks shipped in jwarp/learn/models
+SHIPPED = ("planar5_random", "justin19_shelf")
+#: Table 3.5's second row: the supervised baseline on the same targets (labels from the
+#: IK solver, 16 starts, 200 iterations)
+for _name in SHIPPED:
+    RUNS[_name + "_supervised"] = dict(RUNS[_name], supervised=True)
+#: Table 3.4 (reduced: 8 epochs of 150 steps): justin19 in the shelf, boosting x twin heads
+#: x unit vectors
+for _b in (True, False):
+    for _t in (True, False):
+        for _u in (True, False):
+            RUNS["justin19_ablation_" + "".join("1" if v else "0" for v in (_b, _t, _u))] = dict(
+                RUNS["justin19_shelf"], boosting=_b, twin=_t, unit_vectors=_u, epochs=8,
+                steps_per_epoch=150)
+GROUPS = {"shipped": SHIPPED, "supervised": tuple(n + "_supervised" for n in SHIPPED),
+          "ablation": tuple(n for n in RUNS if "_ablation_" in n)}
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--out-dir", default="jwarp/learn/models")
-    ap.add_argument("--only", default=",".join(RUNS), help="comma-separated run names")
+    ap.add_argument("--only", default="shipped",
+                    help="comma-separated run names or groups (shipped, supervised, ablation; "
+                         "default shipped)")
     ap.add_argument("--epochs", type=int, default=None)
     ap.add_argument("--quick", action="store_true")
     a = ap.parse_args(argv)
@@ -44,10 +68,14 @@ def main(argv: list[str] | None = None) -> int:
     if out_dir.exists() and not out_dir.is_dir():
         ap.error(f"--out-dir: {out_dir} is not a folder")
     init_warp()
+    names: list[str] = []
     for name in a.only.split(","):
-        if name not in RUNS:
-            ap.error(f"--only: unknown run {name!r} (known: {', '.join(RUNS)})")
+        if name not in RUNS and name not in GROUPS:
+            ap.error(f"--only: unknown run {name!r} (known: {', '.join([*GROUPS, *RUNS])})")
+        names += GROUPS.get(name, (name,))
+    for name in names:
         kw = dict(RUNS[name], device=a.device)
+        supervised = kw.pop("supervised", False)
         if a.epochs:
             kw["epochs"] = a.epochs
         if a.quick:
@@ -56,15 +84,17 @@ def main(argv: list[str] | None = None) -> int:
         tmp = Path(tempfile.mkdtemp())
         best = {"val_feasible": -1.0}
 
-        def keep_best(rec: dict, net, tmp=tmp, best=best) -> None:
+        def keep_best(rec: dict, net, tmp=tmp, best=best, kw=kw, supervised=supervised) -> None:
             if rec["epoch"] > 0 and rec["val_feasible"] > best["val_feasible"]:
                 best.update(rec)
                 save_checkpoint(tmp / "best.pt", net, world_distribution=kw["world"],
-                                training=TrainIKOptions(**kw).to_dict(),
+                                training={**TrainIKOptions(**kw).to_dict(),
+                                          "supervised": supervised},
                                 metrics={k: v for k, v in rec.items() if k != "epoch"},
                                 epoch=int(rec["epoch"]))
 
-        train_ik(TrainIKOptions(**kw, checkpoint=str(tmp / "last.pt")), callback=keep_best)
+        train = train_ik_supervised if supervised else train_ik
+        train(TrainIKOptions(**kw, checkpoint=str(tmp / "last.pt")), callback=keep_best)
         out_dir.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(tmp / "best.pt", out_dir / f"{name}.pt")
         print(f"{name}: kept epoch {best['epoch']} (val_feasible "

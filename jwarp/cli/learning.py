@@ -43,8 +43,11 @@ import numpy as np
 
 from jwarp.cli.common import CLIError, check_device, check_output, dumps, int_arg, quiet_warp, real_arg
 
+#: the test targets of ``eval ik`` without ``--mix`` (as in training by default)
+DEFAULT_EVAL_MIX = (0.6, 0.2, 0.2, 0.0)
+
 #: the options' names in the training options' errors
-_TRAIN_OPTION_OF = {"robot": "--robot", "frame": "--frame", "world": "--world",
+_TRAIN_OPTION_OF = {"mix": "--mix", "robot": "--robot", "frame": "--frame", "world": "--world",
                     "n_worlds": "--n-worlds", "n_targets": "--targets-per-world",
                     "n_val": "--val-targets", "n_bps": "--n-bps", "hidden": "--hidden",
                     "batch_size": "--batch", "epochs": "--epochs",
@@ -174,6 +177,7 @@ def cmd_train_ik(args: argparse.Namespace) -> int:
     model = _model(args.robot)
     frame = _frame(model, args.frame)
     _check_world_kind(model, args.world)
+    _check_mix_world(args.mix, args.world)
     if args.world != "random" and args.n_worlds is not None:
         raise CLIError(f"--n-worlds: only meaningful with --world random (got --world "
                        f"{args.world})")
@@ -196,7 +200,7 @@ def cmd_train_ik(args: argparse.Namespace) -> int:
                   n_targets=args.targets_per_world, n_val=args.val_targets, n_bps=args.n_bps,
                   hidden=args.hidden, twin=not args.no_twin,
                   unit_vectors=not args.no_unit_vectors, boosting=not args.no_boosting,
-                  batch_size=args.batch,
+                  batch_size=args.batch, mix=args.mix,
                   worlds_per_batch=_worlds_per_batch(args.batch, n_worlds, args.world),
                   epochs=args.epochs, steps_per_epoch=args.steps_per_epoch, lr=args.lr,
                   device=args.device, seed=args.seed, checkpoint=args.out, resume=args.resume)
@@ -236,15 +240,37 @@ def cmd_train_ik(args: argparse.Namespace) -> int:
 
 
 def _eval_data(model: Any, frame: str, kind: str, n_worlds: int, n_targets: int,
-               seed: int) -> tuple[list, list]:
+               seed: int, mix: tuple) -> tuple[list, list]:
     """Unseen test worlds and targets (seeds offset from training (seed + 100 i) and
     validation (seed + 100000))."""
-    from jwarp.learn.ik_data import make_worlds, sample_targets
+    from jwarp.learn.ik_data import SCENE_TASKS, make_worlds, sample_targets
 
     worlds = make_worlds(model, kind, n_worlds, seed=seed + 200000)
-    targets = [sample_targets(model, frame, n_targets, w, seed=seed * 7919 + 200000 + i)[0]
+    targets = [sample_targets(model, frame, n_targets, w, seed=seed * 7919 + 200000 + i,
+                              mix=mix, tasks=SCENE_TASKS.get(kind))[0]
                for i, w in enumerate(worlds)]
     return worlds, targets
+
+
+def _mix_arg(text: str) -> tuple:
+    """argparse type of ``--mix``: 3 or 4 comma-separated fractions (CLIError naming it)."""
+    from jwarp.learn.ik_data import check_mix
+
+    try:
+        mix = tuple(float(v) for v in text.split(","))
+        check_mix(mix)
+    except ValueError:
+        raise CLIError(f"--mix: expected 3 or 4 comma-separated fractions >= 0 (uniform, near "
+                       f"obstacles, border[, scene tasks]), got {text!r}") from None
+    return mix
+
+
+def _check_mix_world(mix: tuple, kind: str) -> None:
+    from jwarp.learn.ik_data import SCENE_TASKS
+
+    if len(mix) == 4 and mix[3] > 0 and kind not in SCENE_TASKS:
+        raise CLIError(f"--mix: scene tasks need a world with a task distribution "
+                       f"({', '.join(SCENE_TASKS)}), got --world {kind}")
 
 
 def cmd_eval_ik(args: argparse.Namespace) -> int:
@@ -275,7 +301,9 @@ def cmd_eval_ik(args: argparse.Namespace) -> int:
     from jwarp.learn.evaluate import (ablation_table, evaluate_ik, format_table_34,
                                       format_table_35)
 
-    worlds, targets = _eval_data(model, frame, kind, n_worlds, args.targets, args.seed)
+    mix = args.mix if args.mix is not None else DEFAULT_EVAL_MIX
+    _check_mix_world(mix, kind)
+    worlds, targets = _eval_data(model, frame, kind, n_worlds, args.targets, args.seed, mix)
     common = dict(max_iterations=args.iterations, seed=args.seed, device=args.device)
     rows = [evaluate_ik(model, frame, worlds, targets, n_random=args.random_starts,
                         name="Random", **common)]
@@ -353,6 +381,9 @@ def add_subcommands(sub: Any) -> None:
                    help="hidden width (default 128)")
     s.add_argument("--n-bps", type=int_arg("--n-bps", 0, 1 << 20), default=0, metavar="N",
                    help="basis points of the world encoding; 0: world-unaware (default 0)")
+    s.add_argument("--mix", type=_mix_arg, default=(0.6, 0.2, 0.2, 0.0), metavar="U,N,B[,T]",
+                   help="fractions of the training targets: uniform, near obstacles, workspace "
+                        "border, scene tasks (the shelf's grasp poses; default 0.6,0.2,0.2,0)")
     s.add_argument("--no-twin", action="store_true", help="one head instead of twin heads")
     s.add_argument("--no-unit-vectors", action="store_true",
                    help="plain joint values instead of (sin, cos) unit vectors")
@@ -390,6 +421,9 @@ def add_subcommands(sub: Any) -> None:
                                      "multi-starts (default 50)")
     s.add_argument("--iterations", type=int_arg("--iterations", 0, 10**6), default=200,
                    metavar="N", help="solver iterations per seed (default 200)")
+    s.add_argument("--mix", type=_mix_arg, default=None, metavar="U,N,B[,T]",
+                   help="fractions of the test targets: uniform, near obstacles, workspace "
+                        "border, scene tasks (default 0.6,0.2,0.2,0)")
     s.add_argument("--ablation", action="store_true",
                    help="also Table 3.4: feasibility of each model after --ablation-iterations")
     s.add_argument("--ablation-iterations", type=int_arg("--ablation-iterations", 0, 10**6),

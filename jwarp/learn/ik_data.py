@@ -2,15 +2,19 @@
 
 Targets are FK poses of random configurations that are collision-free in their world
 (world and self-collision, sphere model; inside the joint limits, coupled limits
-included), so every target is reachable. :func:`sample_targets` mixes three kinds
-(fractions ``mix``, default 60/20/20 %):
+included), so every target is reachable. :func:`sample_targets` mixes up to four kinds
+(fractions ``mix``, default 60/20/20/0 %):
 
 - ``uniform``: random collision-free configurations;
 - ``near obstacles``: of a pool of ``pool`` x as many collision-free configurations, those
   whose smallest sphere-to-world distance is smallest (the hard regions next to
   obstacles; without a world: the smallest self distance);
 - ``border``: of the pool, those whose end-effector is farthest from the base frame's
-  origin (the border of the workspace, reached only stretched out).
+  origin (the border of the workspace, reached only stretched out);
+- ``scene tasks``: poses drawn from the scene's task distribution (the shelf:
+  :func:`jwarp.world.scenes.shelf_grasp_poses`, tool poses between its boards, hand into the
+  shelf), for a network that serves that task. Not every such pose is reachable (the
+  unsupervised loss needs no label; their ``q`` rows are NaN).
 
 Worlds (:func:`make_worlds`): ``"random"``: simplex worlds fitted to the robot
 (:func:`jwarp.world.feasibility.feasible_simplex_world`, seeds ``seed + 100 i``, each with
@@ -23,7 +27,7 @@ training) and targets, fixed by the seed.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -31,11 +35,14 @@ from jwarp.kinematics.fk import fk
 from jwarp.registry import robot as get_robot
 from jwarp.world.collision import is_collision_free, min_distances
 from jwarp.world.feasibility import feasible_simplex_world, random_configurations
-from jwarp.world.scenes import shelf_world
+from jwarp.world.scenes import shelf_grasp_poses, shelf_world
 
-__all__ = ["sample_targets", "make_worlds", "IKData", "make_ik_data", "DEFAULT_MIX"]
+__all__ = ["sample_targets", "make_worlds", "IKData", "make_ik_data", "DEFAULT_MIX",
+           "SCENE_TASKS", "check_mix"]
 
-DEFAULT_MIX = (0.6, 0.2, 0.2)  # uniform, near obstacles, workspace border
+DEFAULT_MIX = (0.6, 0.2, 0.2, 0.0)  # uniform, near obstacles, workspace border, scene tasks
+#: the task distribution of a world kind (:func:`make_worlds`), if it has one
+SCENE_TASKS = {"shelf": shelf_grasp_poses}
 
 
 def _free_configurations(model: Any, n: int, world: Any, rng: np.random.Generator,
@@ -53,20 +60,25 @@ def _free_configurations(model: Any, n: int, world: Any, rng: np.random.Generato
 
 
 def sample_targets(robot: Any, frame: Any, n: int, world: Any = None, *, seed: int = 0,
-                   mix: tuple = DEFAULT_MIX, pool: int = 4, device: Any = None
+                   mix: tuple = DEFAULT_MIX, pool: int = 4, device: Any = None,
+                   tasks: Callable[[int, np.random.Generator], np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` reachable targets (module docstring): returns ``(targets (n, 4, 4),
-    q (n, n_dof))`` float64, q the collision-free configuration each target came from."""
+    """``n`` targets (module docstring): returns ``(targets (n, 4, 4), q (n, n_dof))``
+    float64, q the collision-free configuration each target came from (NaN for scene
+    tasks). ``mix``: 3 or 4 fractions >= 0 (uniform, near obstacles, border[, scene
+    tasks]); ``tasks(k, rng) -> (k, 4, 4)``: the scene's task poses (needed when the
+    fourth fraction is > 0)."""
     model = get_robot(robot)
     f = model.frame_index(frame)
-    mix = np.asarray(mix, np.float64)
-    if mix.shape != (3,) or (mix < 0).any() or mix.sum() <= 0:
-        raise ValueError(f"mix: expected 3 fractions >= 0 (uniform, near obstacles, border), got {mix}")
-    mix = mix / mix.sum()
+    mix = check_mix(mix)
+    if mix[3] > 0 and tasks is None:
+        raise ValueError("mix: a scene-task fraction needs a world with a task distribution "
+                         f"(world kinds: {', '.join(SCENE_TASKS)})")
     rng = np.random.default_rng(seed)
     n_near = int(round(n * mix[1]))
     n_border = int(round(n * mix[2]))
-    n_uni = n - n_near - n_border
+    n_task = int(round(n * mix[3]))
+    n_uni = n - n_near - n_border - n_task
     parts = [_free_configurations(model, n_uni, world, rng, device)] if n_uni > 0 else []
     if n_near + n_border > 0:
         cand = _free_configurations(model, max(pool * (n_near + n_border), 16), world, rng,
@@ -83,9 +95,30 @@ def sample_targets(robot: Any, frame: Any, n: int, world: Any = None, *, seed: i
             r = np.linalg.norm(T[:, :model.workspace_dim, 3], axis=1)
             r[used] = -np.inf
             parts.append(cand[np.argsort(-r, kind="stable")[:n_border]])
-    q = np.concatenate(parts)[rng.permutation(n)]
-    T = fk(model, q, device=device, dtype=np.float64)[:, f]
-    return np.ascontiguousarray(T), q
+    q = np.concatenate(parts) if parts else np.empty((0, model.n_dof))
+    T = fk(model, q, device=device, dtype=np.float64)[:, f] if len(q) else np.empty((0, 4, 4))
+    if n_task:
+        Tt = np.asarray(tasks(n_task, rng), np.float64)
+        if Tt.shape != (n_task, 4, 4) or not np.all(np.isfinite(Tt)):
+            raise ValueError(f"tasks: expected {n_task} finite poses (k, 4, 4), got shape "
+                             f"{Tt.shape}")
+        T = np.concatenate([T, Tt])
+        q = np.concatenate([q, np.full((n_task, model.n_dof), np.nan)])
+    order = rng.permutation(n)
+    return np.ascontiguousarray(T[order]), q[order]
+
+
+def check_mix(mix: Any) -> np.ndarray:
+    """``mix`` as 4 fractions summing to 1 (a 3-entry mix has no scene tasks); ValueError
+    naming ``mix`` unless 3 or 4 finite numbers >= 0 with a positive sum."""
+    m = np.asarray(mix, np.float64).reshape(-1)
+    if m.shape not in ((3,), (4,)) or not np.all(np.isfinite(m)) or (m < 0).any() \
+            or m.sum() <= 0:
+        raise ValueError(f"mix: expected 3 or 4 fractions >= 0 (uniform, near obstacles, "
+                         f"border, scene tasks), got {mix!r}")
+    if len(m) == 3:
+        m = np.append(m, 0.0)
+    return m / m.sum()
 
 
 def make_worlds(robot: Any, kind: str, n: int, *, seed: int = 0, device: Any = None) -> list:
@@ -132,12 +165,16 @@ def make_ik_data(robot: Any, frame: Any, world: str = "random", *, n_worlds: int
     worlds = make_worlds(model, world, n_worlds, seed=seed, device=device)
     val_worlds = (make_worlds(model, world, n_val_worlds, seed=seed + 100000, device=device)
                   if world == "random" else list(worlds))
-    tr = [sample_targets(model, frame, n_targets, w, seed=seed * 7919 + i, mix=mix, device=device)
-          for i, w in enumerate(worlds)]
-    va = [sample_targets(model, frame, n_val, w, seed=seed * 7919 + 50000 + j, mix=mix,
-                         device=device) for j, w in enumerate(val_worlds)]
-    dist: dict = {"kind": world, "mix": {"uniform": mix[0], "near_obstacles": mix[1],
-                                         "border": mix[2]}}
+    m = check_mix(mix)
+    tasks = SCENE_TASKS.get(world)
+    tr = [sample_targets(model, frame, n_targets, w, seed=seed * 7919 + i, mix=m,
+                         device=device, tasks=tasks) for i, w in enumerate(worlds)]
+    va = [sample_targets(model, frame, n_val, w, seed=seed * 7919 + 50000 + j, mix=m,
+                         device=device, tasks=tasks) for j, w in enumerate(val_worlds)]
+    dist: dict = {"kind": world, "mix": {"uniform": m[0], "near_obstacles": m[1],
+                                         "border": m[2], "scene_tasks": m[3]}}
+    if m[3] > 0:
+        dist["scene_tasks"] = tasks.__name__
     if world == "random":
         dist.update(generator="feasible_simplex_world", n_worlds=int(n_worlds),
                     seeds=[int(w.meta.get("seed", -1)) for w in worlds],

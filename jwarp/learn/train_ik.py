@@ -49,7 +49,7 @@ import warp as wp
 
 from jwarp.core.arrays import init_warp
 from jwarp.learn.checkpoint import read_checkpoint, save_checkpoint
-from jwarp.learn.ik_data import DEFAULT_MIX, IKData, make_ik_data
+from jwarp.learn.ik_data import DEFAULT_MIX, IKData, check_mix, make_ik_data
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.torch_costs import ik_objective, u_ik
 from jwarp.registry import robot as get_robot
@@ -64,7 +64,8 @@ class TrainIKOptions:
 
     Data: robot, frame, world ("random" | "shelf" | "none"), n_worlds (random worlds for
     training), n_targets (per training world), n_val_worlds, n_val (targets per validation
-    world), mix (uniform / near obstacles / border fractions, :mod:`jwarp.learn.ik_data`).
+    world), mix (uniform / near obstacles / border [/ scene tasks] fractions,
+    :mod:`jwarp.learn.ik_data`).
     Network: n_bps (0: world-unaware), hidden, n_blocks, twin, unit_vectors.
     Optimisation: batch_size (targets per step, split evenly over worlds_per_batch worlds),
     epochs (total, counting resumed ones), steps_per_epoch, lr, lr_decay (per epoch).
@@ -143,6 +144,7 @@ class TrainIKOptions:
         for name in ("twin", "unit_vectors", "boosting", "resume"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise TypeError(f"{name}: expected a bool, got {getattr(self, name)!r}")
+        check_mix(self.mix)  # ValueError naming mix
         self.mix = tuple(float(v) for v in self.mix)
 
     def net_config(self) -> IKNetConfig:
@@ -252,7 +254,9 @@ class IKTrainer:
                 n_starts=n_starts, max_iterations=max_iterations, seed=o.seed),
                 world=w, device=self.wdev)
             r = s.solve(T)
-            q = np.where(r.feasible[:, None], r.q, q0)
+            # unsolved: the configuration the target came from (scene tasks have none:
+            # the solver's best infeasible answer)
+            q = np.where(r.feasible[:, None] | np.isnan(q0), r.q, q0)
             feas.append(np.asarray(r.feasible, bool))
             out.append(torch.as_tensor(q, dtype=self.tdt, device=self.tdev))
         #: fraction of training targets the solver labelled (the others: their sample)

@@ -141,6 +141,10 @@ def test_ik_warm_start_errors(model_path, capsys, tmp_path):
     (["--epochs", "1", "--device", "tpu"], "--device"),
     (["--epochs", "1", "--world", "moon"], "--world"),
     (["--epochs", "1", "--frame", "nope"], "--frame"),
+    (["--epochs", "1", "--mix", "1,x,0"], "--mix"),
+    (["--epochs", "1", "--mix", "1,-1,0"], "--mix"),
+    (["--epochs", "1", "--mix", "1,0"], "--mix"),
+    (["--epochs", "1", "--mix", "0.5,0,0,0.5"], "--mix"),  # random worlds: no scene tasks
 ])
 def test_train_option_errors(capsys, tmp_path, extra, option):
     argv = ["train", "ik", "--robot", "planar5", "--out", tmp_path / "m.pt", *extra]
@@ -177,6 +181,7 @@ def test_eval_option_errors(capsys, tmp_path, model_path):
     one_line_error(capsys, base + ["--ablation"], "--ablation")
     one_line_error(capsys, base + ["--world", "shelf"], "--world")
     one_line_error(capsys, base + ["--device", "cuda:9"], "--device")
+    one_line_error(capsys, base + ["--mix", "0,0,0,1"], "--mix")
 
 
 def test_train_and_eval_need_a_subcommand(capsys):

@@ -278,3 +278,35 @@ def test_supervised_baseline_and_ablation_switches(planar_data):
     assert net.n_heads == 1 and net.codec.size == 5
     assert hist[1]["hard_set"] == 0 and hist[1]["head"] == 0.0
     assert net.seeds(planar_data.targets[0][:3]).shape == (3, 1, 5)
+
+
+def test_scene_task_targets_come_from_the_shelf_distribution():
+    """A fourth mix fraction draws the shelf's grasp poses (no configuration: NaN rows);
+    the other targets stay reachable; bad mixes and task-less worlds are named errors."""
+    from jwarp.learn.ik_data import SCENE_TASKS, check_mix
+    from jwarp.world.scenes import SHELF_GRASP_REGION, shelf_grasp_poses, shelf_world
+
+    w = shelf_world()
+    T, q = sample_targets("justin19", "right_tcp", 40, w, seed=2, mix=(0.5, 0, 0, 0.5),
+                          tasks=SCENE_TASKS["shelf"])
+    task = np.isnan(q).all(1)
+    assert task.sum() == 20 and not np.isnan(q[~task]).any()
+    lo, hi = np.array(SHELF_GRASP_REGION).T
+    p = T[task, :3, 3]
+    assert ((p >= lo) & (p <= hi)).all()
+    # the hand points into the shelf (+x) up to the spread of the orientation noise
+    assert (T[task, 0, 2] > np.cos(0.6)).all()
+    from jwarp.kinematics.fk import fk
+    f = get_robot("justin19").frame_index("right_tcp")
+    assert np.allclose(fk("justin19", q[~task], device="cpu", dtype=np.float64)[:, f], T[~task])
+    # the benchmark's grasp targets are these poses
+    assert np.allclose(shelf_grasp_poses(3, 1)[0][:3, 3], shelf_grasp_poses(1, 1)[0][:3, 3])
+    np.testing.assert_allclose(check_mix((1, 1, 2)), [0.25, 0.25, 0.5, 0.0])
+    with pytest.raises(ValueError, match="^mix"):
+        sample_targets("justin19", "right_tcp", 4, w, mix=(0, 0, 0, 1))  # no tasks given
+    with pytest.raises(ValueError, match="^mix"):
+        check_mix((1, -1, 0))
+    with pytest.raises(ValueError, match="^mix"):
+        TrainIKOptions(mix=(1, 2))
+    with pytest.raises(ValueError, match="^n"):
+        shelf_grasp_poses(-1)
