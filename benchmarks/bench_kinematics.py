@@ -46,7 +46,8 @@ if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.core.device import tables  # noqa: E402
 from jwarp.kinematics import (  # noqa: E402
-    ElasticLaunch, elastic_args, fk, fk_elastic, jacobian, launch_fk)
+    ElasticLaunch, KinematicsData, elastic_args, fk, fk_elastic, forward_kinematics,
+    frame_jacobian, jacobian, launch_fk)
 from jwarp.model import RobotModel  # noqa: E402
 from jwarp.registry import robot as get_robot  # noqa: E402
 import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
@@ -471,8 +472,12 @@ class Bench:
             del ops
             # the public API, allocations and host sync included: Warp in, a new Warp
             # array out; then with the output reused (out=); then numpy in, numpy out
-            # (validation on, as a user calls it), fresh and with out=
+            # (validation on, as a user calls it), fresh and with out=; then the
+            # KinematicsData path: Warp q copied into a reused data, its recorded launch
+            # replayed, the data's own buffer returned (pinocchio-style Model/Data)
             tcp = self.args.tcp
+            m_dev = tables(model, dev, self.ftype)
+            kdata = KinematicsData(m_dev, B)
             fk_out = fk(model, q, device=dev, dtype=self.ftype, validate=False)
             q_np = np.array(q.numpy())
             fk_out_np = np.empty((B, model.n_frames, 4, 4), self.dtype)
@@ -486,6 +491,9 @@ class Bench:
                 "jacobian api": lambda: jacobian(model, q, tcp, validate=False, **kw),
                 "jacobian api out=": lambda: jacobian(model, q, tcp, validate=False, out=jac_out,
                                                       **kw),
+                "fk KinematicsData": lambda: forward_kinematics(m_dev, kdata, q, validate=False),
+                "jacobian KinematicsData": lambda: frame_jacobian(m_dev, kdata, tcp, q,
+                                                                  validate=False),
             }
             for op, fn in api.items():
                 rows[op] = self.time_row(name, op, dev, B, fn, dev)
@@ -509,7 +517,7 @@ class Bench:
                 rows[op].ratio_meaning = f"x {kernel} time"
                 self.emit(rows[op])
             result[B] = rows
-            del q, fk_out, fk_out_np, jac_out, q_np, api, kernels
+            del q, fk_out, fk_out_np, jac_out, q_np, api, kernels, kdata
             gc.collect()
         return result
 

@@ -18,7 +18,11 @@ Model vs Data (as in MuJoCo Warp):
 * **Data** -- workspaces that hold every intermediate and output of a computation on one
   batch shape and are reused across calls (no allocation on a second call of equal
   shape): :class:`PathData` (the buffers of a batch of paths),
-  :class:`jwarp.world.collision.CollisionData` (collision scratch and outputs). Kernels
+  :class:`jwarp.world.collision.CollisionData` (collision scratch and outputs),
+  :class:`jwarp.kinematics.data.KinematicsData` ``(model, batch)`` (joint values, frames,
+  frame Jacobians and their recorded launches; filled by
+  :func:`jwarp.kinematics.forward_kinematics` ``(m, d, q)`` and
+  :func:`jwarp.kinematics.frame_jacobian` ``(m, d, frame, q, point)``). Kernels
   group their parameters ``# Model:`` / ``# Data in:`` / ``# Data out:``.
 
 ``tables(robot, device, dtype)`` and :func:`jwarp.core.limits.limit_tables` are the older

@@ -4,12 +4,15 @@ rows for optimizers, torch autograd and Warp-tape differentiation.
 Modules (each with one job): :mod:`~jwarp.kinematics.fk` (forward kinematics),
 :mod:`~jwarp.kinematics.jacobians` (joint and DH Jacobians),
 :mod:`~jwarp.kinematics.equilibrium` (elastic FK, one torque update, gravity torques),
+:mod:`~jwarp.kinematics.data` (:class:`KinematicsData`, the reusable workspace of one batch
+size, with :func:`forward_kinematics` and :func:`frame_jacobian`),
 :mod:`~jwarp.kinematics.launch` (the validated batch, device tables and kernel launches they
 share), :mod:`~jwarp.kinematics.compensation` (DH rows kept across optimizer iterations),
 :mod:`~jwarp.kinematics.torch_ops` (torch autograd), :mod:`~jwarp.kinematics.autodiff`
 (Warp tape Jacobians).
 """
 
+from jwarp.kinematics.data import KinematicsData, forward_kinematics, frame_jacobian
 from jwarp.kinematics.equilibrium import elastic_step, fk_elastic, gravity_torques
 from jwarp.kinematics.fk import fk
 from jwarp.kinematics.jacobians import jacobian, jacobian_dh
@@ -17,7 +20,7 @@ from jwarp.kinematics.launch import (ELASTIC_TOL, ElasticFK, ElasticLaunch, Elas
                                      default_tol, elastic_args, equilibrium, frame_rows, host_out,
                                      kappa_array, launch_fk, rho0_full, setup)
 
-__all__ = ["ELASTIC_TOL", "ElasticFK", "ElasticLaunch", "ElasticStep", "default_tol",
-           "elastic_args", "elastic_step", "equilibrium", "fk", "fk_elastic", "frame_rows",
-           "gravity_torques", "host_out", "jacobian", "jacobian_dh", "kappa_array", "launch_fk",
-           "rho0_full", "setup"]
+__all__ = ["ELASTIC_TOL", "ElasticFK", "ElasticLaunch", "ElasticStep", "KinematicsData",
+           "default_tol", "elastic_args", "elastic_step", "equilibrium", "fk", "fk_elastic",
+           "forward_kinematics", "frame_jacobian", "frame_rows", "gravity_torques", "host_out",
+           "jacobian", "jacobian_dh", "kappa_array", "launch_fk", "rho0_full", "setup"]

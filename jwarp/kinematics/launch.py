@@ -1,14 +1,18 @@
 """Building blocks of the kinematics functions: the validated batch and device tables of a
-call (:func:`setup`), per-frame rows (:func:`frame_rows`), the FK launch, and the elastic
-fixed-point iteration (:class:`ElasticLaunch`, :func:`equilibrium`). Shared by the public
-functions (:mod:`~jwarp.kinematics.fk`, :mod:`~jwarp.kinematics.equilibrium`), torch ops,
-autodiff and the calibration."""
+call (:func:`setup`), per-frame rows (:func:`frame_rows`), the FK launch, the small-call
+path of fk/jacobian (:func:`small_call`: a cached :class:`Workspace` around a
+:class:`~jwarp.kinematics.data.KinematicsData`), and the elastic fixed-point iteration
+(:class:`ElasticLaunch`, :func:`equilibrium`). Shared by the public functions
+(:mod:`~jwarp.kinematics.fk`, :mod:`~jwarp.kinematics.equilibrium`), torch ops, autodiff
+and the calibration. The kernel argument lists (``fk_inputs``, ``jacobian_inputs``,
+``point_vec``, ``POINT_ARG``) live in :mod:`~jwarp.kinematics.data` and are re-exported
+here."""
 
 from __future__ import annotations
 
 import math
 import threading
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import warp as wp
@@ -18,6 +22,8 @@ from jwarp.core.arrays import (Batch, as_batch, default_dtype, empty, finite_as,
 from jwarp.core.device import KinematicsTables, numpy_dtype, scalar_type, tables
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kernels import fk as fk_kernels
+from jwarp.kinematics.data import (  # noqa: F401  (POINT_ARG, jacobian_inputs: re-exported)
+    ORIGIN, POINT_ARG, KinematicsData, fk_inputs, jacobian_inputs, point_vec)
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 
@@ -94,100 +100,74 @@ def launch_fk(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None 
     return frames
 
 
-def fk_inputs(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None) -> list:
-    """Inputs of the FK kernels: q (B, n_dof), DH rows and their batch stride (None: the
-    nominal tables), the frame tables."""
-    rho, stride = dh if dh is not None else (t.dh0_3d, 0)
-    return [q, rho, stride, int(dh is not None), t.frame_struct]
-
-
-def point_vec(point: Any, t: KinematicsTables) -> Any:
-    """A point (3,) [m] in a frame's coordinates as the kernels' vec3 (None: the origin);
-    ValueError naming ``point`` unless 3 finite numbers (in the computing dtype)."""
-    vec3 = fk_kernels.kernels(t.scalar).vec3
-    if point is None:
-        return vec3(0.0, 0.0, 0.0)
-    p = real_array(point, "point")
-    if p.shape != (3,) or not np.all(np.isfinite(p)):
-        raise ValueError(f"point: expected 3 finite numbers [m], got {point!r}")
-    return vec3(*finite_as(p, numpy_dtype(t.scalar), "point").tolist())
-
-
-#: position of the point among the arguments of the Jacobian kernels (:func:`jacobian_inputs`)
-POINT_ARG = 4
-
-
-def jacobian_inputs(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None,
-                    point: Any, frame: int) -> list:
-    """Inputs of the ``jacobian``/``jacobian_dh`` kernels: q (B, n_dof), DH rows (None: the
-    nominal ones), the point as :func:`point_vec` makes it, the frame index."""
-    rho, stride = dh if dh is not None else (t.dh0_3d, 0)
-    return [q, rho, stride, int(dh is not None), point, t.frame_struct, t.chain(frame)]
-
-
 # ----------------------------------------------------------------- small calls
 #: a call whose result has at most this many bytes may use a :class:`Workspace`
 SMALL_CALL_BYTES = 1 << 18
 #: most workspaces kept per process (the oldest is dropped first)
 SMALL_CALL_WORKSPACES = 32
 _SMALL_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
-ORIGIN = (0.0, 0.0, 0.0)
 
 
 class Workspace:
-    """Preallocated buffers and one recorded launch of repeated small calls of one shape:
-    (device tables of a robot, op, batch size). A call copies q into the input buffer,
-    replays the launch (``wp.launch(..., record_cmd=True)``: no argument packing, no
-    allocation) and copies the result out of the output buffer: the caller's array never
-    aliases the workspace. On CUDA the host side goes through pinned staging buffers.
+    """A :class:`~jwarp.kinematics.data.KinematicsData` (device buffers and recorded
+    launches) of one (device tables of a robot, batch size) serving repeated small calls:
+    a call copies q into the data's input buffer, replays its recorded launch (FK, or the
+    Jacobian of a frame: no argument packing, no allocation) and copies the result out:
+    the caller's array never aliases the workspace. On CUDA the host side goes through
+    pinned staging buffers.
 
     One call at a time: a call that finds the workspace busy (another thread) returns None
     and the caller takes the general path, so concurrent calls stay correct."""
 
-    def __init__(self, t: KinematicsTables, B: int, tail: tuple, dtype: Any,
-                 record: Callable[[wp.array, wp.array], Any]):
-        dev = t.device
+    def __init__(self, t: KinematicsTables, B: int):
         self.t = t
-        self.q = wp.empty((B, t.robot.n_dof), dtype=t.scalar, device=dev)
-        self.out = wp.empty((B,) + tuple(tail), dtype=dtype, device=dev)
-        self.cuda = dev.is_cuda
-        if self.cuda:
-            self.q_stage = wp.empty(self.q.shape, dtype=t.scalar, device="cpu", pinned=True)
-            self.out_stage = wp.empty(self.out.shape, dtype=dtype, device="cpu", pinned=True)
-            self.q_host, self.out_host = self.q_stage.numpy(), self.out_stage.numpy()
-        else:
-            self.q_host, self.out_host = self.q.numpy(), self.out.numpy()
-        self.cmd = record(self.q, self.out)
-        self.point: tuple | None = None   # the point last set on a Jacobian launch
+        self.data = KinematicsData(t, B)
+        self.cuda = t.device.is_cuda
+        self.q_host = self.data.q_staging()   # CUDA: pinned; CPU: the data's q itself
+        # op -> (device output, its host side, CUDA: the pinned staging of it)
+        self.outs: dict[str, tuple[wp.array, np.ndarray, wp.array | None]] = {}
         self.lock = threading.Lock()
 
-    def run(self, q: np.ndarray, validate: bool, out: np.ndarray | None = None,
-            point: tuple | None = None) -> np.ndarray | None:
-        """The result for q (B, n_dof) as a new array (or copied into ``out``); None when
-        busy or (``validate``) q is not finite after the cast: the general path then
-        reports it. ``point``: the Jacobian's point as 3 floats (checked)."""
+    def _out(self, op: str) -> tuple[wp.array, np.ndarray, wp.array | None]:
+        """The device output of ``op``, its host side and staging (made on first use)."""
+        dev_out = self.data.frames if op == "fk" else self.data.jacobian
+        stage = None
+        if self.cuda:
+            stage = wp.empty(dev_out.shape, dtype=dev_out.dtype, device="cpu", pinned=True)
+            host = stage.numpy()
+        else:
+            host = dev_out.numpy()
+        res = self.outs[op] = (dev_out, host, stage)
+        return res
+
+    def run(self, op: str, q: np.ndarray, validate: bool, out: np.ndarray | None = None,
+            frame: int = -1, point: tuple | None = None) -> np.ndarray | None:
+        """The result of ``op`` ("fk", or "jacobian" of frame index ``frame`` at ``point``,
+        3 floats from :func:`point_vec`, None: the origin) for q (B, n_dof) as a new array
+        (or copied into ``out``); None when busy or (``validate``) q is not finite after
+        the cast: the general path then reports it."""
         if not self.lock.acquire(blocking=False):
             return None
         try:
+            d = self.data
+            cmd = d.fk_launch() if op == "fk" else d.jacobian_launch(frame, point)
+            dev_out, out_host, stage = self.outs.get(op) or self._out(op)
             np.copyto(self.q_host, q, casting="unsafe")
             # a finite sum means every value is finite; an overflowing sum of finite
             # values takes the general path, which checks value by value
             if validate and not math.isfinite(self.q_host.sum()):
                 return None
-            if point is not None and point != self.point:
-                self.cmd.set_param_at_index(POINT_ARG, point_vec(point, self.t))
-                self.point = point
             if self.cuda:
                 stream = self.t.device.stream
-                wp.copy(self.q, self.q_stage, stream=stream)
-                self.cmd.launch(stream)
-                wp.copy(self.out_stage, self.out, stream=stream)
+                d.upload_q(stream, fence=False)   # synchronized below
+                cmd.launch(stream)
+                wp.copy(stage, dev_out, stream=stream)
                 wp.synchronize_stream(stream)
             else:
-                self.cmd.launch()
+                cmd.launch()
             if out is None:
-                return self.out_host.copy()
-            np.copyto(out, self.out_host.reshape(out.shape))
+                return out_host.copy()
+            np.copyto(out, out_host.reshape(out.shape))
             return out
         finally:
             self.lock.release()
@@ -197,27 +177,14 @@ _WORKSPACES: dict = {}
 _WORKSPACES_LOCK = threading.Lock()
 
 
-def workspace(t: KinematicsTables, op: str, B: int, frame: int = -1) -> Workspace:
-    """The cached :class:`Workspace` of ``op`` ("fk", or "jacobian" of ``frame``) for batch
-    size ``B`` on the tables ``t`` (made on first use; per process)."""
-    key = (id(t), op, B, frame)
+def workspace(t: KinematicsTables, B: int) -> Workspace:
+    """The cached :class:`Workspace` for batch size ``B`` on the tables ``t`` (made on
+    first use; per process)."""
+    key = (id(t), B)
     ws = _WORKSPACES.get(key)
     if ws is not None and ws.t is t:
         return ws
-    k = fk_kernels.kernels(t.scalar)
-    dev = t.device
-    if op == "fk":
-        def record(q: wp.array, out: wp.array) -> Any:
-            return wp.launch(k.fk, dim=B, inputs=fk_inputs(t, q, None), outputs=[out],
-                             device=dev, record_cmd=True)
-        ws = Workspace(t, B, (t.robot.n_frames,), k.mat44, record)
-    else:
-        def record(q: wp.array, out: wp.array) -> Any:
-            return wp.launch(k.jacobian, dim=B,
-                             inputs=jacobian_inputs(t, q, None, point_vec(None, t), frame),
-                             outputs=[out], device=dev, record_cmd=True)
-        ws = Workspace(t, B, (6, t.robot.n_dof), t.scalar, record)
-        ws.point = ORIGIN
+    ws = Workspace(t, B)
     with _WORKSPACES_LOCK:
         _WORKSPACES[key] = ws   # holds t: its id is not reused while the entry lives
         while len(_WORKSPACES) > SMALL_CALL_WORKSPACES:
@@ -275,17 +242,18 @@ def small_call(op: str, robot: Any, q: Any, device: Any, dtype: Any, validate: b
             return None
         t = tables(model, dev, npdt)
         if op == "fk":
-            ws, pt = workspace(t, "fk", B), None
+            fi, pt = -1, None
         else:
-            ws = workspace(t, "jacobian", B, model.frame_index(frame))
+            fi = model.frame_index(frame)
             pt = ORIGIN if point is None else tuple(point_vec(point, t))
+        ws = workspace(t, B)
     except (ValueError, TypeError):
         return None
     if npdt.itemsize < qa.itemsize:   # float64 q computed in float32: overflow -> inf
         with np.errstate(over="ignore", invalid="ignore"):
-            res = ws.run(qa.reshape(B, model.n_dof), validate, out, pt)
+            res = ws.run(op, qa.reshape(B, model.n_dof), validate, out, fi, pt)
     else:
-        res = ws.run(qa.reshape(B, model.n_dof), validate, out, pt)
+        res = ws.run(op, qa.reshape(B, model.n_dof), validate, out, fi, pt)
     if res is None or out is not None:
         return res
     res = res.reshape(want)
