@@ -49,6 +49,19 @@ def kernels(scalar: type) -> SimpleNamespace:
             return two * v
         return v * (two * wp.atan2(s, w) / s)
 
+    @wp.func
+    def pose_error_row(R: mat33, p: vec3, T: mat44, b: int, err: wp.array2d(dtype=scalar)):
+        """The 6D error of the frame (R, p) to the target T, written to err[b] (6,):
+        ``e = [Pos(T) - p; log(Rot(T) R^T)]``; returns ``(M, e_v, e_w)`` with
+        ``M = R Rot(T)^T``. Shared by ``pose_error`` and the IK solver's pose kernel."""
+        M = R * wp.transpose(fk.unpack_rot(T))
+        ev = fk.unpack_pos(T) - p
+        ew = rotation_log(wp.transpose(M))  # log(Rt R^T)
+        for r in range(3):
+            err[b, r] = ev[r]
+            err[b, r + 3] = ew[r]
+        return M, ev, ew
+
     @wp.kernel(module="unique")
     def pose_error_kernel(
         # Data in:
@@ -74,15 +87,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         F = frames[b, chain[chain.shape[0] - 1]]
         fk.frames_jacobian(model, chain, frames, b, fk.unpack_pos(F), jac)
         T = target[b]
-        R = fk.unpack_rot(F)
-        Rt = fk.unpack_rot(T)
         dp = fk.unpack_pos(F) - fk.unpack_pos(T)
-        M = R * wp.transpose(Rt)
-        ev = -dp
-        ew = rotation_log(wp.transpose(M))  # log(Rt R^T)
-        for r in range(3):
-            err[b, r] = ev[r]
-            err[b, r + 3] = ew[r]
+        M, ev, ew = pose_error_row(fk.unpack_rot(F), fk.unpack_pos(F), T, b, err)
         pos_err[b] = wp.length(ev)
         rot_err[b] = wp.length(ew)
         tr = M[0, 0] + M[1, 1] + M[2, 2]
@@ -136,5 +142,6 @@ def kernels(scalar: type) -> SimpleNamespace:
         cost[b] = aux_row(q, b, q_default, b * default_stride, c, coll_grad, b, use_collision,
                           lam_l, grad)
 
-    return SimpleNamespace(scalar=scalar, rotation_log=rotation_log, aux_row=aux_row,
+    return SimpleNamespace(scalar=scalar, rotation_log=rotation_log,
+                           pose_error_row=pose_error_row, aux_row=aux_row,
                            pose_error=pose_error_kernel, aux_cost=aux_cost_kernel)

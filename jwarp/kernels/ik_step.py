@@ -281,6 +281,20 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         return wp.sqrt(pe), wp.sqrt(re)
 
     @wp.func
+    def write_result(out: wp.array2d(dtype=f64), b: int, q: wp.array2d(dtype=scalar),
+                     pe: f64, re: f64, aux: f64, feasible: f64, iterations: f64):
+        """Result row out[b] (module docstring): q[b] (in float64), |e_v|, |e_w|, U_A,
+        feasible (1 or 0) and the iterations."""
+        n = q.shape[1]
+        for j in range(n):
+            out[b, j] = f64(q[b, j])
+        out[b, n + COL_POS] = pe
+        out[b, n + COL_ROT] = re
+        out[b, n + COL_AUX] = aux
+        out[b, n + COL_FEASIBLE] = feasible
+        out[b, n + COL_ITERATIONS] = iterations
+
+    @wp.func
     def collision_free_row(q: wp.array2d(dtype=f64), b: int, rho: wp.array3d(dtype=f64),
                            use_rho: int, model: fk64.FrameTables, spheres: ck64.SphereTables,
                            world: ck64.WorldGrid, use_world: int, use_self: int, margin: f64,
@@ -412,13 +426,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
                               scratch.frames, scratch.xs) == 0:
             return
         done[b] = 1
-        for j in range(n):
-            out[b, j] = q64[b, j]
-        out[b, n + COL_POS] = pe
-        out[b, n + COL_ROT] = re
-        out[b, n + COL_AUX] = f64(cost_a[b])
-        out[b, n + COL_FEASIBLE] = f64(1.0)
-        out[b, n + COL_ITERATIONS] = f64(iterations[b])
+        write_result(out, b, q, pe, re, f64(cost_a[b]), f64(1.0), f64(iterations[b]))
         wp.atomic_add(counts, 0, 1)
         if wp.atomic_max(solved, b // n_starts, 1) == 0:
             wp.atomic_add(counts, 1, 1)
@@ -529,18 +537,12 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         ``chain[-1]``, walking only its chain (twice: the frame, then the joint axes,
         :mod:`jwarp.kernels.fk` ``chain_pose`` and ``chain_jacobian``) with no frames
         stored: the values of FK + :mod:`jwarp.kernels.ik` ``pose_error`` (the same
-        functions). Configurations that are done keep theirs. Launch dim B."""
+        functions, ``pose_error_row`` included). Configurations that are done keep theirs. Launch dim B."""
         b = wp.tid()
         if halt[0] != 0 or done[b] != 0:
             return
         R, p = fk.chain_pose(model, chain, b, q, ROWS_NOMINAL, nominal, 0)
-        T = target[b]
-        M = R * wp.transpose(fk.unpack_rot(T))
-        ev = fk.unpack_pos(T) - p
-        ew = ikk.rotation_log(wp.transpose(M))  # log(Rt R^T)
-        for r in range(3):
-            err[b, r] = ev[r]
-            err[b, r + 3] = ew[r]
+        ikk.pose_error_row(R, p, target[b], b, err)
         fk.chain_jacobian(model, chain, b, q, ROWS_NOMINAL, nominal, 0, p, jac)
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -593,15 +595,8 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         b = wp.tid()
         if done[b] == 1:
             return
-        n = q.shape[1]
-        for j in range(n):
-            out[b, j] = f64(q[b, j])
         pe, re = task_errors(err, b)
-        out[b, n + COL_POS] = pe
-        out[b, n + COL_ROT] = re
-        out[b, n + COL_AUX] = f64(cost_a[b])
-        out[b, n + COL_FEASIBLE] = zero
-        out[b, n + COL_ITERATIONS] = f64(max_iterations)
+        write_result(out, b, q, pe, re, f64(cost_a[b]), zero, f64(max_iterations))
 
     @wp.kernel(module="unique", enable_backward=False)
     def select_kernel(
@@ -638,7 +633,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         best[p, 1] = n_feas
 
     return SimpleNamespace(
-        scalar=scalar, planar=planar, task_errors=task_errors,
+        scalar=scalar, planar=planar, task_errors=task_errors, write_result=write_result,
         within_limits_row=pk64.within_limits_row, collision_free_row=collision_free_row,
         CheckTables=CheckTables, CheckScratch=CheckScratch, check=check_kernel, near=near_kernel,
         gather=gather_kernel, scatter_aux=scatter_aux_kernel, pose=pose_kernel,
