@@ -1,6 +1,6 @@
 """Shared pieces of the command line: the error type, the argument parser class, option
-value types that check ranges, joint-value and compliance parsing, output-path and device
-checks, JSON printing. See :mod:`jwarp.cli.main` for the error policy."""
+value types that check ranges, joint-value and compliance parsing, the ``--robot`` loader,
+output-path and device checks, the ``--rerun`` recording, JSON printing. See :mod:`jwarp.cli.main` for the error policy."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import math
 import os
 import re
 import sys
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -132,11 +133,56 @@ def check_output(path: str, option: str, rerun: bool = False,
         raise CLIError(str(e)) from None
 
 
+class RerunRecording:
+    """A rerun recording of ``--rerun`` written to a temporary file
+    (:class:`jwarp.atomic.AtomicFile`): :meth:`close` renames it to the path, :meth:`abort`
+    (or a failure to open it) removes it. ``rr`` is the rerun module, ``rec`` the
+    recording (application id ``app``)."""
+
+    def __init__(self, path: str, app: str):
+        from jwarp import viz
+        from jwarp.atomic import AtomicFile
+
+        self.rr = viz.rerun_module()
+        try:
+            self.file = AtomicFile(path, option="--rerun")
+        except ValueError as e:
+            raise CLIError(str(e)) from None
+        try:
+            self.rec = viz.open_recording(self.file.tmp, app)
+        except BaseException:
+            self.file.discard()
+            raise
+
+    def close(self) -> Path:
+        self.rec.flush()
+        self.rec.disconnect()
+        return self.file.commit()
+
+    def abort(self) -> None:
+        try:
+            self.rec.disconnect()  # no writer left on the temporary file
+        finally:
+            self.file.discard()
+
+
 # ------------------------------------------------------------------ parsing helpers
 def load_robot(name: str):
     from jwarp.registry import robot
 
     return robot(name)
+
+
+def robot_option(name: str, option: str = "--robot") -> Any:
+    """The robot of ``--robot`` (:func:`load_robot`); its errors as a :class:`CLIError`
+    naming ``option``."""
+    try:
+        return load_robot(name)
+    except (ValueError, TypeError, OSError, KeyError) as e:
+        msg = " ".join(str(e).split())
+        for prefix in ("robot: ", "path: "):
+            msg = msg.removeprefix(prefix)
+        raise CLIError(f"{option}: {msg}") from None
 
 
 def parse_q(text: str, model: Any, deg: bool = False, option: str = "--q") -> np.ndarray:

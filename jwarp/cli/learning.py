@@ -41,7 +41,8 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.cli.common import CLIError, check_device, check_output, dumps, int_arg, quiet_warp, real_arg
+from jwarp.cli.common import (CLIError, RerunRecording, check_device, check_output, dumps, int_arg,
+                              quiet_warp, real_arg, robot_option)
 
 #: the test targets of ``eval ik`` without ``--mix`` (as in training by default)
 DEFAULT_EVAL_MIX = (0.6, 0.2, 0.2, 0.0)
@@ -53,18 +54,6 @@ _TRAIN_OPTION_OF = {"mix": "--mix", "robot": "--robot", "frame": "--frame", "wor
                     "batch_size": "--batch", "epochs": "--epochs",
                     "steps_per_epoch": "--steps-per-epoch", "lr": "--lr", "device": "--device",
                     "seed": "--seed", "checkpoint": "--out", "resume": "--resume"}
-
-
-def _model(name: str) -> Any:
-    from jwarp.cli.common import load_robot
-
-    try:
-        return load_robot(name)
-    except (ValueError, TypeError, OSError, KeyError) as e:
-        msg = " ".join(str(e).split())
-        for prefix in ("robot: ", "path: "):
-            msg = msg.removeprefix(prefix)
-        raise CLIError(f"--robot: {msg}") from None
 
 
 def _frame(model: Any, frame: str | None) -> str:
@@ -134,23 +123,11 @@ def _worlds_per_batch(batch: int, n_worlds: int, kind: str) -> int:
 
 
 # ------------------------------------------------------------------ rerun curves
-class _Curves:
+class _Curves(RerunRecording):
     """Training curves in a rerun recording (temporary file renamed at the end)."""
 
     def __init__(self, path: str):
-        from jwarp import viz
-        from jwarp.atomic import AtomicFile
-
-        self.rr = viz.rerun_module()
-        try:
-            self.file = AtomicFile(path, option="--rerun")
-        except ValueError as e:
-            raise CLIError(str(e)) from None
-        try:
-            self.rec = viz.open_recording(self.file.tmp, "jwarp-train-ik")
-        except BaseException:
-            self.file.discard()
-            raise
+        super().__init__(path, "jwarp-train-ik")
 
     def log(self, rec: dict) -> None:
         self.rec.set_time("epoch", sequence=int(rec.get("epoch", 0)))
@@ -160,21 +137,10 @@ class _Curves:
             if math.isfinite(float(v)):
                 self.rec.log(f"train/{k}", self.rr.Scalars(float(v)))
 
-    def close(self) -> Path:
-        self.rec.flush()
-        self.rec.disconnect()
-        return self.file.commit()
-
-    def abort(self) -> None:
-        try:
-            self.rec.disconnect()
-        finally:
-            self.file.discard()
-
 
 # ------------------------------------------------------------------ commands
 def cmd_train_ik(args: argparse.Namespace) -> int:
-    model = _model(args.robot)
+    model = robot_option(args.robot)
     frame = _frame(model, args.frame)
     _check_world_kind(model, args.world)
     _check_mix_world(args.mix, args.world)
@@ -274,7 +240,7 @@ def _check_mix_world(mix: tuple, kind: str) -> None:
 
 
 def cmd_eval_ik(args: argparse.Namespace) -> int:
-    model = _model(args.robot)
+    model = robot_option(args.robot)
     quiet_warp()
     check_device(args.device)
     nets = [(p, _load_model(p, model)) for p in (args.model or [])]

@@ -33,13 +33,12 @@ from __future__ import annotations
 import argparse
 import math
 import re
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from jwarp.cli.common import (CLIError, dtype_of, quiet_warp, load_robot, check_device, check_output,
-                       dumps, int_arg, parse_q, real_arg)
+from jwarp.cli.common import (CLIError, RerunRecording, dtype_of, quiet_warp, check_device,
+                              check_output, dumps, int_arg, parse_q, real_arg, robot_option)
 
 #: log every this many iterations to rerun
 RERUN_EVERY = 5
@@ -60,17 +59,6 @@ _SIZING_SAMPLES = 16
 def _config_bytes(model: Any) -> int:
     f, s, j = _CONFIG_BYTES
     return f * model.n_frames + s * len(model.spheres) + j * model.n_dof
-
-
-def _model(name: str) -> Any:
-    """The robot of ``--robot`` (errors name ``--robot``)."""
-    try:
-        return load_robot(name)
-    except (ValueError, TypeError, OSError, KeyError) as e:
-        msg = " ".join(str(e).split())
-        for prefix in ("robot: ", "path: "):
-            msg = msg.removeprefix(prefix)
-        raise CLIError(f"--robot: {msg}") from None
 
 
 def _world(spec: str | None, model: Any) -> Any:
@@ -168,24 +156,12 @@ def _kappa(args: argparse.Namespace, model: Any) -> Any:
 
 
 # ------------------------------------------------------------------ rerun
-class _Recorder:
+class _Recorder(RerunRecording):
     """A rerun recording written to a temporary file, renamed on success."""
 
     def __init__(self, path: str, model: Any, world: Any):
-        from jwarp import viz
-        from jwarp.atomic import AtomicFile
-
-        self.rr = viz.rerun_module()
-        try:
-            self.file = AtomicFile(path, option="--rerun")
-        except ValueError as e:
-            raise CLIError(str(e)) from None
+        super().__init__(path, "jwarp-planning")
         self.model = model
-        try:
-            self.rec = viz.open_recording(self.file.tmp, "jwarp-planning")
-        except BaseException:
-            self.file.discard()
-            raise
         if world is not None:
             try:
                 self._log_world(world)
@@ -228,21 +204,10 @@ class _Recorder:
         self.rec.set_time("iteration", sequence=step)
         self.rec.log("paths/end_effector", self.rr.LineStrips3D(list(tcp), radii=0.004))
 
-    def close(self) -> Path:
-        self.rec.flush()
-        self.rec.disconnect()
-        return self.file.commit()
-
-    def abort(self) -> None:
-        try:
-            self.rec.disconnect()  # no writer left on the temporary file
-        finally:
-            self.file.discard()
-
 
 # ------------------------------------------------------------------ commands
 def cmd_plan(args: argparse.Namespace) -> int:
-    model = _model(args.robot)
+    model = robot_option(args.robot)
     q0 = parse_q(args.start, model, args.deg, option="--start")
     q1 = parse_q(args.goal, model, args.deg, option="--goal")
     kappa = _kappa(args, model)
@@ -320,7 +285,7 @@ def _warm_start(path: str | None, model: Any, frame: str, device: str) -> Any:
 
 
 def cmd_ik(args: argparse.Namespace) -> int:
-    model = _model(args.robot)
+    model = robot_option(args.robot)
     _check_frame(model, args.frame)
     T = _target(args.target)
     kappa = _kappa(args, model)
