@@ -95,10 +95,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--worlds", default="1,64", help="worlds per call (comma-separated)")
     p.add_argument("--min-time", type=float, default=0.2, help="seconds per timed run")
     p.add_argument("--repeats", type=int, default=5, help="interleaved rounds (min/median)")
-    p.add_argument("--only", default="2d,3d")
     p.add_argument("--no-baseline", action="store_true", help="skip the sdf_query loop")
-    p.add_argument("--quick", action="store_true", help="tiny sizes (smoke test)")
-    p.add_argument("--json", default=None, metavar="FILE", help="also write the figures as JSON")
+    timing.section_options(p, "2d,3d")
     args = p.parse_args(argv)
     init_warp()
     if args.device == "cuda":

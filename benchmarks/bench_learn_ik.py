@@ -188,9 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--train-steps", type=int, default=50, help="steps per epoch (train)")
     p.add_argument("--train-targets", type=int, default=2000, help="training targets (train)")
     p.add_argument("--repeats", type=int, default=5, help="timed passes (min/median)")
-    p.add_argument("--only", default="ik,inference,train")
-    p.add_argument("--quick", action="store_true", help="tiny sizes (smoke test)")
-    p.add_argument("--json", default=None, metavar="FILE", help="also write the figures as JSON")
+    timing.section_options(p, "ik,inference,train")
     args = p.parse_args(argv)
     if args.quick:
         args.targets, args.repeats = min(args.targets, 4), 2

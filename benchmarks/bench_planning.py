@@ -229,9 +229,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="seconds of work per timed run (default 0.3; --quick 0.01)")
     p.add_argument("--repeats", type=int, default=5,
                    help="timed runs per figure, min/median (default 5; --quick 3)")
-    p.add_argument("--only", default="iteration,ik,feasibility,compensation")
-    p.add_argument("--quick", action="store_true", help="tiny sizes (smoke test)")
-    p.add_argument("--json", default=None, metavar="FILE", help="also write the figures as JSON")
+    timing.section_options(p, "iteration,ik,feasibility,compensation")
     args = p.parse_args(argv)
     init_warp()
     cuda = str(args.device).startswith("cuda")

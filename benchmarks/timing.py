@@ -13,7 +13,8 @@ are timed one call per run with :func:`each_run` (interleaved like :func:`side_b
 each call prepared untimed and closed by a device sync); :func:`summarize` and
 :func:`speedup` turn such per-run seconds into median/min and ratios. :func:`stopwatch`
 is for the duration of a whole study or section run once (progress, not a figure), and
-:func:`run_sections` runs the sections of a script that prints its figures as JSON.
+:func:`run_sections` runs the sections of a script that prints its figures as JSON
+(its options added by :func:`section_options`).
 """
 
 from __future__ import annotations
@@ -148,6 +149,16 @@ def stopwatch() -> Callable[[], float]:
     once (a whole study, a section), not a benchmark figure."""
     t0 = time.perf_counter()
     return lambda: time.perf_counter() - t0
+
+
+def section_options(parser: Any, sections: str) -> None:
+    """Add the options :func:`run_sections` reads to a script's ``parser``: ``--only``
+    (comma-separated sections, default ``sections``), ``--quick`` (tiny sizes: the smoke
+    test; the script applies them) and ``--json FILE``."""
+    parser.add_argument("--only", default=sections)
+    parser.add_argument("--quick", action="store_true", help="tiny sizes (smoke test)")
+    parser.add_argument("--json", default=None, metavar="FILE",
+                        help="also write the figures as JSON")
 
 
 def run_sections(parser: Any, sections: dict, args: Any, note: str, **fields: Any) -> dict:

@@ -2,23 +2,10 @@
 with every row (the numbers themselves are not checked, except that the encoding agrees with
 the SDF lookup)."""
 
-import json
-import subprocess
-import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "benchmarks" / "bench_bps.py"
-
-
-def test_bench_bps_quick_cpu(tmp_path):
-    out = tmp_path / "bench.json"
-    proc = subprocess.run(
-        [sys.executable, str(SCRIPT), "--quick", "--device", "cpu", "--json", str(out)],
-        cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
-    assert proc.stdout.startswith("machine: "), proc.stdout
-    doc = json.loads(out.read_text())
+def test_bench_bps_quick_cpu(run_bench):
+    stdout, doc = run_bench("bench_bps.py", "--quick", "--device", "cpu")
+    assert stdout.startswith("machine: "), stdout
     assert doc["machine"] and doc["repeats"] == 2
     for name, dim in (("2d", 2), ("3d", 3)):
         sec = doc[name]

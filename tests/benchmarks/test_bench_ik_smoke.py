@@ -3,23 +3,10 @@ section with the new solver beside the baseline (the numbers themselves are not 
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "benchmarks" / "bench_ik.py"
-
-
-def test_bench_ik_quick_cpu(tmp_path):
-    out = tmp_path / "bench.json"
-    proc = subprocess.run(
-        [sys.executable, str(SCRIPT), "--quick", "--device", "cpu", "--json", str(out)],
-        cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
-    assert proc.stdout.startswith("machine: "), proc.stdout
-    doc = json.loads(out.read_text())
+def test_bench_ik_quick_cpu(run_bench):
+    stdout, doc = run_bench("bench_ik.py", "--quick", "--device", "cpu")
+    assert stdout.startswith("machine: "), stdout
     assert doc["machine"] and doc["repeats"] == 2
     for name in ("a", "b"):
         sec = doc[name]

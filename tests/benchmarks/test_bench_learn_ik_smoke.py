@@ -3,22 +3,10 @@ first, no --model) exits 0 and reports every section (the numbers are not checke
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "benchmarks" / "bench_learn_ik.py"
-
-
-def test_bench_learn_ik_quick_cpu(tmp_path):
-    out = tmp_path / "bench.json"
-    proc = subprocess.run([sys.executable, str(SCRIPT), "--quick", "--json", str(out)],
-                          cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
-    assert "no --model given: trained a tiny network first" in proc.stdout
-    doc = json.loads(out.read_text())
+def test_bench_learn_ik_quick_cpu(run_bench):
+    stdout, doc = run_bench("bench_learn_ik.py", "--quick")
+    assert "no --model given: trained a tiny network first" in stdout
     assert doc["machine"] and doc["repeats"] == 2 and doc["model"] is None
     ik = doc["ik"]
     for k in ("learned", "random"):

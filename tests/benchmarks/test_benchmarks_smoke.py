@@ -4,31 +4,18 @@ rows and the JSON's timing fields present (the numbers themselves are not checke
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "benchmarks" / "bench_kinematics.py"
-
-
-def test_bench_kinematics_quick_cpu(tmp_path):
-    out = tmp_path / "bench.json"
-    proc = subprocess.run(
-        [sys.executable, str(SCRIPT), "--quick", "--device", "cpu", "--json", str(out)],
-        cwd=ROOT, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
-    lines = proc.stdout.splitlines()
-    assert any(line.split()[:2] == ["robot", "op"] for line in lines), proc.stdout
+def test_bench_kinematics_quick_cpu(run_bench):
+    stdout, doc = run_bench("bench_kinematics.py", "--quick", "--device", "cpu", timeout=300)
+    lines = stdout.splitlines()
+    assert any(line.split()[:2] == ["robot", "op"] for line in lines), stdout
     for robot in ("justin19", "arm7"):
         for op in (["fk"], ["jacobian"], ["elastic_fk(10)"], ["elastic_step"], ["fk", "numpy"]):
             assert any(line.split()[:len(op) + 1] == [robot, *op] for line in lines), \
-                f"no '{robot} {' '.join(op)}' row in:\n{proc.stdout}"
-    assert ("pinocchio not installed" in proc.stdout
-            or any("fk pinocchio" in line for line in lines)), proc.stdout
+                f"no '{robot} {' '.join(op)}' row in:\n{stdout}"
+    assert ("pinocchio not installed" in stdout
+            or any("fk pinocchio" in line for line in lines)), stdout
 
-    doc = json.loads(out.read_text())
     rows = doc["rows"]
     fk_rows = [r for r in rows if r["op"] == "fk" and r["device"] == "cpu"]
     assert {r["robot"] for r in fk_rows} == {"justin19", "arm7"}
@@ -38,16 +25,11 @@ def test_bench_kinematics_quick_cpu(tmp_path):
         assert doc["checks"][f"{robot}: |numpy fk - jwarp fk| max"] < 1e-3
 
 
-def test_bench_planning_quick_cpu(tmp_path):
+def test_bench_planning_quick_cpu(run_bench):
     """bench_planning.py --quick: every section runs; its times are min/median figures
     (benchmarks/timing.py) and its IK section is bench_ik.py's shelf IK (ik() alone)."""
-    out = tmp_path / "planning.json"
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "bench_planning.py"), "--quick",
-         "--json", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
-    assert proc.stdout.startswith("machine: "), proc.stdout
-    doc = json.loads(out.read_text())
+    stdout, doc = run_bench("bench_planning.py", "--quick", timeout=300)
+    assert stdout.startswith("machine: "), stdout
     assert doc["machine"] and doc["repeats"] == 3
     for P in (1, 4):
         t = doc["iteration"][f"iteration_ms_{P}_paths"]
@@ -65,14 +47,9 @@ def test_bench_planning_quick_cpu(tmp_path):
         assert abs(c["overhead"] - (c["elastic_s"] / c["rigid_s"] - 1)) < 1e-12
 
 
-def test_bench_calibration_quick_cpu(tmp_path):
+def test_bench_calibration_quick_cpu(run_bench):
     """bench_calibration.py --quick: the calibration time is min/median over 2 runs."""
-    out = tmp_path / "calibration.json"
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "bench_calibration.py"), "--quick",
-         "--samples", "40", "--test", "20", "--free", "theta,d,kappa_theta,tracker,markers",
-         "--json", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
-    assert "full calibration:" in proc.stdout and "after test" in proc.stdout
-    doc = json.loads(out.read_text())
+    stdout, doc = run_bench("bench_calibration.py", "--quick", "--samples", "40", "--test", "20",
+                            "--free", "theta,d,kappa_theta,tracker,markers", timeout=300)
+    assert "full calibration:" in stdout and "after test" in stdout
     assert doc["runs"] == 2 and 0 < doc["time_min_s"] <= doc["time_s"] and doc["machine"]
