@@ -20,6 +20,7 @@ from jwarp.world import collision
 from jwarp.world.collision import CollisionData, CollisionModel
 
 from reference import coupling_matrix, nominal_dh, parent_first_order, prismatic_mask, ref_fk
+from worlds import block_world
 
 ROBOTS = ["justin19", "arm7", "planar4", "hand4", "sphere2d"]
 
@@ -247,19 +248,9 @@ def test_frame_masses_copy_shares_every_other_table():
 
 
 # ================================================================ Data workspaces
-def _block_world():
-    from jwarp.world import world_from_occupancy
-
-    h = 0.05
-    lim = np.array([[-0.5, 1.5], [-1.0, 1.0], [0.0, 1.6]])
-    n = np.round((lim[:, 1] - lim[:, 0]) / h).astype(int) + 1
-    X, Y, Z = np.meshgrid(*[lim[d, 0] + h * np.arange(n[d]) for d in range(3)], indexing="ij")
-    return world_from_occupancy((np.abs(X - 0.6) < 0.15) & (Z < 1.0), lim, h)
-
-
 def test_collision_data_is_reused_and_gives_the_same_numbers():
     r = jwarp.robot("justin19")
-    cm = collision.collision_model(r, _block_world(), device="cpu", dtype=np.float64)
+    cm = collision.collision_model(r, block_world(), device="cpu", dtype=np.float64)
     q = sample_within_limits(r, 40, np.random.default_rng(2))
     qw = wp.array(q, dtype=wp.float64, device="cpu")
     c_ref, g_ref = (a.numpy() for a in cm.cost(qw))
@@ -394,7 +385,7 @@ def test_collision_model_takes_every_kind_of_rows():
     """None, a numpy table, shared/per-configuration Warp rows and DHRows give the frames
     of those rows (costs equal to the expanded per-configuration rows)."""
     r = jwarp.robot("justin19")
-    cm = collision.collision_model(r, _block_world(), device="cpu", dtype=np.float64)
+    cm = collision.collision_model(r, block_world(), device="cpu", dtype=np.float64)
     q = sample_within_limits(r, 12, np.random.default_rng(4))
     qw = wp.array(q, dtype=wp.float64, device="cpu")
     dh = r.dh_table.copy()

@@ -14,21 +14,12 @@ from jwarp.kinematics.compensation import CompensationRows
 from jwarp.kernels import fk as fk_kernels
 from jwarp.solvers import planner as PL
 from jwarp.core.limits import sample_within_limits
-from jwarp.world import world_from_occupancy
 
 from devices import requires_cuda
 from reference import kappa_uniform, nominal_dh, ref_fk, ref_fk_elastic, ref_torques
+from worlds import block_world
 
 LAM = 0.6
-
-
-def _block_world():
-    """A 30 cm thick block in front of justin19, 5 cm voxels."""
-    h = 0.05
-    lim = np.array([[-0.5, 1.5], [-1.0, 1.0], [0.0, 1.6]])
-    n = np.round((lim[:, 1] - lim[:, 0]) / h).astype(int) + 1
-    X, Y, Z = np.meshgrid(*[lim[d, 0] + h * np.arange(n[d]) for d in range(3)], indexing="ij")
-    return world_from_occupancy((np.abs(X - 0.6) < 0.15) & (Z < 1.0), lim, h)
 
 
 def _frames(model, F, device="cpu"):
@@ -93,7 +84,7 @@ def test_rows_converge_to_the_equilibrium_under_a_fixed_path(device):
     kappa = kappa_uniform(model, 1e-4)
     q = sample_within_limits(model, 4, np.random.default_rng(2))
     Q = PL.initial_paths(q[:2], q[2:], 5, "straight")
-    obj = PL.PathObjective(model, _block_world(), 2, 5, 4, kappa=kappa, lam=LAM, dtype=np.float64,
+    obj = PL.PathObjective(model, block_world(), 2, 5, 4, kappa=kappa, lam=LAM, dtype=np.float64,
                            device=device)
     obj.set_paths(Q)
     k = 12
@@ -119,7 +110,7 @@ def test_rows_converge_to_the_equilibrium_under_a_fixed_path(device):
 def test_cost_at_compensation_rows_equals_cost_at_expanded_rows(device):
     """use_rho = 2 (rows with cos/sin, one per waypoint) == use_rho = 1 (per configuration)."""
     model = jwarp.robot("justin19")
-    world = _block_world()
+    world = block_world()
     P, W, n_sub = 3, 4, 5
     S = (W - 1) * n_sub + 1
     q = sample_within_limits(model, P * S, np.random.default_rng(3))
@@ -186,7 +177,7 @@ def test_cuda_fused_update_matches_the_reference_iteration():
     _, rho_ref = ref_fk_elastic(model, Q.reshape(-1, model.n_dof), kappa, n_iter=3, lam=LAM)
     objs = []
     for first in (False, True):
-        obj = PL.PathObjective(model, _block_world(), 3, 6, 4, kappa=kappa, lam=LAM,
+        obj = PL.PathObjective(model, block_world(), 3, 6, 4, kappa=kappa, lam=LAM,
                                dtype=np.float64, device="cuda:0")
         obj.compensation.waypoints_first = first
         obj.set_paths(Q)
@@ -247,7 +238,7 @@ def test_cuda_ik_update_per_frame_matches_the_reference_iteration():
     model = jwarp.robot("justin19")
     kappa = kappa_uniform(model, 1e-3)
     q = sample_within_limits(model, 5, np.random.default_rng(5))
-    obj = IKObjective(model, "right_tcp", 5, world=_block_world(), kappa=kappa, lam=LAM,
+    obj = IKObjective(model, "right_tcp", 5, world=block_world(), kappa=kappa, lam=LAM,
                       dtype=np.float64, device="cuda:0")
     obj.set_q(q)
     obj.set_target(np.repeat(np.eye(4)[None], 5, axis=0))
