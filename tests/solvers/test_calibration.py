@@ -97,6 +97,28 @@ def _fd_jacobian(prob, x, rel_step=1e-4):
     return J
 
 
+def _torque_state(robot, rng, S, device):
+    """S random configurations of ``robot`` with DH rows 3 cm/rad off the nominal ones,
+    their frames (Warp FK on ``device``) and torque state: (q, rho, frames, state)."""
+    q = _q(robot, S, rng)
+    rho = robot.dh_table + 0.03 * rng.standard_normal((S, robot.n_frames, 5)) * robot.is_dh[None, :, None]
+    frames = jwarp.fk(robot, q, dh=rho, device=device)
+    return q, rho, frames, E.torque_state(robot, frames, rho)
+
+
+def _assert_jacobian_matches_fd(prob, rng, col_rtol, total_rtol=1e-7):
+    """The analytic residual Jacobian of ``prob`` equals central differences at a random
+    point about its prior (compliances in [0.5, 1.5] KAPPA); returns that point."""
+    sp = prob.space
+    x = sp.nominal + 0.5 * sp.scale * rng.standard_normal(sp.size)
+    kap = sp.kind == 1
+    x[kap] = rng.uniform(0.5, 1.5, kap.sum()) * KAPPA
+    J = prob.jacobian(x)
+    Jfd = _fd_jacobian(prob, x)
+    _assert_jacobian_close(J, Jfd, prob.n_data, col_rtol=col_rtol, total_rtol=total_rtol)
+    return x
+
+
 def _assert_jacobian_close(J, Jfd, n_data, col_rtol, total_rtol):
     """Per column: |J - Jfd| / max(|Jfd|, 1e-3 median column norm) < col_rtol; overall
     Frobenius relative error < total_rtol; prior rows exact."""
@@ -113,11 +135,7 @@ def _assert_jacobian_close(J, Jfd, n_data, col_rtol, total_rtol):
 def test_torques_twists_and_torque_jacobian_match_kernels_and_finite_differences(device):
     robot = jwarp.robot("justin19")
     rng = np.random.default_rng(1)
-    S = 3
-    q = _q(robot, S, rng)
-    rho = robot.dh_table + 0.03 * rng.standard_normal((S, robot.n_frames, 5)) * robot.is_dh[None, :, None]
-    frames = jwarp.fk(robot, q, dh=rho, device=device)
-    st = E.torque_state(robot, frames, rho)
+    q, rho, frames, st = _torque_state(robot, rng, 3, device)
     tk = jwarp.gravity_torques(robot, q, dh=rho, device=device)
     np.testing.assert_allclose(st.tau, tk, rtol=1e-9, atol=1e-9 * np.abs(tk).max())
     # the twist of DH entry (j, c) moves frame j's origin like jacobian_dh of frame j says
@@ -155,14 +173,8 @@ def test_elastic_residual_jacobian_matches_finite_differences():
     prob = CalibrationProblem(robot, meas, q, y, noise_sigma=1e-4, tol=1e-15, max_iter=300,
                               free="theta,d,r,alpha,beta,kappa_theta,kappa_alpha,kappa_beta,"
                                    "tracker,markers")
-    sp = prob.space
     assert prob.elastic
-    x = sp.nominal + 0.5 * sp.scale * rng.standard_normal(sp.size)
-    kap = sp.kind == 1
-    x[kap] = rng.uniform(0.5, 1.5, kap.sum()) * KAPPA
-    J = prob.jacobian(x)
-    Jfd = _fd_jacobian(prob, x)
-    _assert_jacobian_close(J, Jfd, prob.n_data, col_rtol=2e-6, total_rtol=1e-7)
+    _assert_jacobian_matches_fd(prob, rng, col_rtol=2e-6)
 
 
 @requires_cpu
@@ -452,10 +464,7 @@ def test_mass_torques_are_linear_in_the_masses_and_match_the_kernel(device):
     robot = _extra_mass(jwarp.robot("justin19"))
     rng = np.random.default_rng(13)
     S = 3
-    q = _q(robot, S, rng)
-    rho = robot.dh_table + 0.03 * rng.standard_normal((S, robot.n_frames, 5)) * robot.is_dh[None, :, None]
-    frames = jwarp.fk(robot, q, dh=rho, device=device)
-    st = E.torque_state(robot, frames, rho)
+    q, rho, frames, st = _torque_state(robot, rng, S, device)
     D = E.mass_torque_jacobian(robot, frames, st, np.arange(len(robot.masses)))
     assert D.shape == (S, robot.n_frames, 3, len(robot.masses))
     m = _masses(robot) * rng.uniform(0.5, 1.5, len(robot.masses))
@@ -491,12 +500,7 @@ def test_mass_residual_jacobian_matches_finite_differences():
     masses = [n for n in sp.names if ".mass" in n]
     assert len(masses) == len(robot.masses) == 22        # the root torso_1 carries everything
     assert "right_7.mass0" in masses and "right_7.mass1" in masses and "head_2.mass" in masses
-    x = sp.nominal + 0.5 * sp.scale * rng.standard_normal(sp.size)
-    kap = sp.kind == 1
-    x[kap] = rng.uniform(0.5, 1.5, kap.sum()) * KAPPA
-    J = prob.jacobian(x)
-    Jfd = _fd_jacobian(prob, x)
-    _assert_jacobian_close(J, Jfd, prob.n_data, col_rtol=5e-6, total_rtol=1e-7)
+    x = _assert_jacobian_matches_fd(prob, rng, col_rtol=5e-6)
     # the masses of x reach the equilibrium: predictions change with them
     xm = x.copy()
     xm[sp.index("right_tcp.mass")] *= 1.5
