@@ -158,15 +158,17 @@ def worlds_3d():
             simplex_world(3, seed=1, shape=(20, 30, 25))]
 
 
-def reference(worlds, points):
-    return np.stack([sdf_query(w, points) for w in worlds])
+def reference(worlds, points, device):
+    """SDF lookups of the points in every world, on ``device`` (the CUDA test machine has
+    no CPU compiler)."""
+    return np.stack([sdf_query(w, points, device=device) for w in worlds])
 
 
 def test_encode_equals_sdf_lookup_2d(device, worlds_2d):
     bps = basis_points("planar5", 1024)
     e = bps.encode(worlds_2d, device=device)
     assert isinstance(e, np.ndarray) and e.dtype == np.float32 and e.shape == (3, bps.size)
-    ref = reference(worlds_2d, bps.points)
+    ref = reference(worlds_2d, bps.points, device)
     assert np.abs(e - ref).max() < 1e-6
     assert (e < 0).any() and (e > 0).any()  # obstacles and free space among the points
     one = bps.encode(worlds_2d[1], device=device)  # a single world
@@ -176,10 +178,10 @@ def test_encode_equals_sdf_lookup_2d(device, worlds_2d):
 def test_encode_equals_sdf_lookup_3d(device, worlds_3d):
     bps = basis_points("justin19", 1024)
     e = bps_encode(worlds_3d, bps, device=device)
-    ref = reference(worlds_3d, bps.points)
+    ref = reference(worlds_3d, bps.points, device)
     assert e.shape == (3, bps.size) and np.abs(e - ref).max() < 1e-6
     assert (e[0] < 0).any()  # some points inside the shelf's boards
-    assert np.allclose(e[0], worlds_3d[0].distance(bps.points), atol=1e-6)
+    assert np.allclose(e[0], worlds_3d[0].distance(bps.points, device=device), atol=1e-6)
 
 
 def test_encode_into_torch_zero_copy(device, worlds_3d):
@@ -189,7 +191,7 @@ def test_encode_into_torch_zero_copy(device, worlds_3d):
     ptr = out.data_ptr()
     r = bps.encode(worlds_3d, out=out)
     assert r is out and out.data_ptr() == ptr
-    assert np.abs(out.cpu().numpy() - reference(worlds_3d, bps.points)).max() < 1e-6
+    assert np.abs(out.cpu().numpy() - reference(worlds_3d, bps.points, device)).max() < 1e-6
     r = bps.encode(worlds_3d, out=out, device=device)  # the same device named: fine
     assert r is out
 
