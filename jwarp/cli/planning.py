@@ -370,7 +370,7 @@ def add_subcommands(sub: Any) -> None:
     s = sub.add_parser("plan", help="plan a collision-free path (gradient descent on U_path)")
     common(s)
     s.add_argument("--world", required=True, metavar="SPEC",
-                   help="simplex:seed=S[,threshold=T,...] or a world .npz file")
+                   help="simplex:seed=S[,threshold=T,...], shelf[:voxel=V] or a world .npz file")
     s.add_argument("--start", required=True, metavar="Q", help="start joint values v1,v2,...")
     s.add_argument("--goal", required=True, metavar="Q", help="goal joint values v1,v2,...")
     s.add_argument("--starts", type=int_arg("--starts", 1), default=8, metavar="N",
@@ -392,7 +392,7 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--target", required=True, metavar="X,Y,Z[,RX,RY,RZ]",
                    help="target position [m] and rotation vector [rad] in the base frame")
     s.add_argument("--world", default=None, metavar="SPEC",
-                   help="optional world: simplex:seed=S[,...] or a world .npz file")
+                   help="optional world: simplex:seed=S[,...], shelf or a world .npz file")
     s.add_argument("--starts", type=int_arg("--starts", 0), default=None, metavar="N",
                    help="random seeds, >= 1 (default 16); with --warm-start the random seeds "
                         "after the network's, >= 0 (default 0)")

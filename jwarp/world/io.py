@@ -37,7 +37,9 @@ def parse_world_spec(spec: Any, robot: Any = None, device: Any = None) -> World:
       ``cells`` (64: cells along the longest axis), ``voxel`` [m] (instead of cells),
       ``feasible`` (0: if > 0, search seeds from ``seed`` on until that many of
       ``samples`` (1000) random configurations are collision-free, at most ``tries`` (50)
-      seeds), ``clear_base`` (1: keep the robot's fixed spheres free of obstacles).
+      seeds), ``clear_base`` (1: keep the robot's fixed spheres free of obstacles);
+    * ``"shelf"`` or ``"shelf:voxel=V"``: the shelf scene
+      (:func:`jwarp.world.scenes.shelf_world`, voxel size V [m], default 0.04; 3D robots).
 
     With a ``robot`` the grid covers the robot's reach (:func:`robot_world_grid`),
     otherwise [-1, 1] m per axis. ``feasible`` needs a robot. A world of the wrong
@@ -68,10 +70,12 @@ def parse_world_spec(spec: Any, robot: Any = None, device: Any = None) -> World:
         head, _, rest = text.partition(":")
         if head.lower() == "simplex":
             world = _simplex_from_spec(rest, model, text, device)
+        elif head.lower() == "shelf":
+            world = _shelf_from_spec(rest, text)
         else:
             if not text.lower().endswith(".npz"):
-                raise ValueError(f"world: expected 'simplex[:key=value,...]' or a .npz file, "
-                                 f"got '{text}'")
+                raise ValueError(f"world: expected 'simplex[:key=value,...]', "
+                                 f"'shelf[:voxel=V]' or a .npz file, got '{text}'")
             world = load_world(text)
     else:
         raise TypeError(f"world: expected a specification string, path or World, got "
@@ -79,6 +83,25 @@ def parse_world_spec(spec: Any, robot: Any = None, device: Any = None) -> World:
     if model is not None:
         check_world(model, world)
     return world
+
+
+def _shelf_from_spec(rest: str, text: str) -> World:
+    """The shelf scene of ``shelf[:voxel=V]``."""
+    from jwarp.world.scenes import shelf_world
+
+    voxel = 0.04
+    if rest.strip():
+        key, eq, value = rest.strip().partition("=")
+        if key.strip() != "voxel" or not eq:
+            raise ValueError(f"world: shelf takes only voxel=V [m], got '{text}'")
+        try:
+            voxel = float(value)
+        except ValueError:
+            raise ValueError(f"world: voxel: expected a number [m], got '{value}'") from None
+    try:
+        return shelf_world(voxel)
+    except ValueError as e:
+        raise ValueError(f"world: {e}") from None
 
 
 #: peak memory of a simplex world per grid cell [bytes]: the noise's float64 temporaries,

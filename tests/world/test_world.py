@@ -366,6 +366,16 @@ def test_parse_world_spec(tmp_path, device):
         parse_world_spec(w, robot="justin19")
     with pytest.raises(ValueError, match="3D world"):
         parse_world_spec("simplex:dim=3,cells=8", robot="planar4")
+    # the shelf scene by name
+    from jwarp.world.scenes import shelf_world
+    np.testing.assert_array_equal(parse_world_spec("shelf", robot="justin19").sdf,
+                                  shelf_world().sdf)
+    assert parse_world_spec("shelf:voxel=0.05").voxel_size == pytest.approx(0.05)
+    for bad in ("shelf:cells=3", "shelf:voxel=x", "shelf:voxel=-1"):
+        with pytest.raises(ValueError, match="^world"):
+            parse_world_spec(bad)
+    with pytest.raises(ValueError, match="3D world"):
+        parse_world_spec("shelf", robot="planar4")
 
 
 # ============================================================ feasibility
