@@ -523,6 +523,11 @@ class PathDataset(IterableDataset):
         self._db: PathDB | None = None
         self._cache: OrderedDict[int, dict] = OrderedDict()
 
+    def __getstate__(self) -> dict:  # DataLoader workers started by spawn: no connection
+        state = dict(self.__dict__)
+        state["_db"], state["_cache"] = None, OrderedDict()
+        return state
+
     def set_epoch(self, epoch: int) -> None:
         """Another shuffled order per epoch (same ``seed``)."""
         self.epoch = int(epoch)

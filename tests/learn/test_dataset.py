@@ -188,3 +188,13 @@ def test_export_npz(tmp_path):
         assert z["worlds"].tolist() == [0, 1, 2] and z["world_occupancy"].shape == (3, 12, 10)
         assert '"robot":"planar5"' in str(z["meta"])
     assert [x.name for x in tmp_path.iterdir() if x.name.startswith(".")] == []
+
+
+def test_reader_pickles_without_its_connection(tmp_path):
+    import pickle
+
+    p = filled(tmp_path / "d.sqlite", seeds=(0, 1), n=3)
+    ds = PathDataset(p, batch_size=4, occupancy=True)
+    first = [b["start"] for b in ds]
+    again = pickle.loads(pickle.dumps(ds))  # after use: it holds a connection and a cache
+    assert all(torch.equal(x, y["start"]) for x, y in zip(first, again))
