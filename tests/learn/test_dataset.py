@@ -198,3 +198,24 @@ def test_reader_pickles_without_its_connection(tmp_path):
     first = [b["start"] for b in ds]
     again = pickle.loads(pickle.dumps(ds))  # after use: it holds a connection and a cache
     assert all(torch.equal(x, y["start"]) for x, y in zip(first, again))
+
+
+def test_writer_killed_mid_transaction(tmp_path):
+    """A writer killed (os._exit) in the middle of a world's transaction: the next open
+    rolls the half world back (SQLite's journal); the complete worlds are all there."""
+    import subprocess
+    import sys
+
+    p = filled(tmp_path / "d.sqlite")
+    code = ("import os, sqlite3; con = sqlite3.connect(%r, isolation_level=None); "
+            "con.execute('BEGIN IMMEDIATE'); "
+            "con.execute(\"INSERT INTO worlds(world_id, dim, shape, limits, voxel_size, "
+            "sdf_dtype, meta, n_paths) VALUES (9, 2, '[2,2]', x'00', 0.1, 'float64', '{}', 5)\"); "
+            "con.execute(\"INSERT INTO paths(world_id, task, start, goal, waypoints, "
+            "n_waypoints, cost, feasible, hard) VALUES (9, 0, x'00', x'00', x'00', 1, 0, 0, 0)\"); "
+            "os._exit(1)") % str(p)
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 1
+    with PathDB(p, "planar5") as db:
+        assert db.complete_worlds() == {0, 1, 2} and db.n_paths() == 15
+        assert db.add_world(record(9))
+        assert db.complete_worlds() == {0, 1, 2, 9}

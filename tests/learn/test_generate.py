@@ -121,6 +121,24 @@ def test_label_chunk_is_pure():
 
 
 # ---------------------------------------------------------------------- Ray
+def test_ray_started_and_stopped_by_generate(tmp_path, monkeypatch):
+    """``ray=True`` without a running instance: generate starts a local one (2 CPUs, its
+    workers import this jwarp and, through PYTHONPATH, this test module) and stops it."""
+    ray = pytest.importorskip("ray", reason="the optional extra 'distributed' (ray) is absent")
+    if ray.is_initialized():
+        pytest.skip("a Ray instance of another test is running")
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH",
+                                                                                "")]))
+    t = time.perf_counter()
+    rep = generate("planar5", 4, 3, tmp_path / "own.sqlite", chunk=2, ray=True, num_cpus=2,
+                   **FAKE)
+    print(f"ray own instance {time.perf_counter() - t:.1f} s")
+    assert rep.worlds_written == 4 and not ray.is_initialized()
+    generate("planar5", 4, 3, tmp_path / "ref.sqlite", **FAKE)
+    with PathDB(tmp_path / "own.sqlite") as a, PathDB(tmp_path / "ref.sqlite") as b:
+        assert a.rows() == b.rows()
+
+
 @pytest.fixture(scope="module")
 def ray_local():
     ray = pytest.importorskip("ray", reason="the optional extra 'distributed' (ray) is absent")
