@@ -80,6 +80,15 @@ def cmd_generate(args: argparse.Namespace) -> int:
         options = gen.default_options(**kw)
     except ImportError as e:
         raise CLIError(f"data generate: {e}") from None
+    if os.path.isfile(args.db) and os.path.getsize(args.db) > 0:
+        from jwarp.learn.dataset import PathDB
+
+        with PathDB(args.db, model, timeout=args.timeout) as db:
+            try:
+                gen.check_settings(db, options, args.paths_per_world)
+            except ValueError as e:
+                raise CLIError(f"--db: {' '.join(str(e).split()).removeprefix('generate: ')}") \
+                    from None
     report = gen.generate(model, args.worlds, args.paths_per_world, args.db,
                           first_seed=args.first_seed, chunk=args.chunk, options=options,
                           ray=args.ray, ray_address=args.ray_address, num_gpus=args.num_gpus,

@@ -33,7 +33,7 @@ from typing import Any, Callable, Sequence
 
 from jwarp.learn.dataset import PathDB, WorldRecord, world_record
 
-__all__ = ["GenerateReport", "default_labeler", "default_options", "default_world_maker",
+__all__ = ["GenerateReport", "check_settings", "default_labeler", "default_options", "default_world_maker",
            "generate", "label_chunk", "options_dict", "ray_module"]
 
 #: world seeds per chunk (one Ray task) when not given
@@ -132,10 +132,41 @@ def label_chunk(robot: Any, seeds: Sequence[int], paths_per_world: int, options:
         world = _call_world_maker(world_maker, model, int(seed), options)
         labels = labeler(model, world, int(paths_per_world), int(seed), options)
         rec = world_record(int(seed), world, labels)
-        rec["settings"] = {**options_dict(options), **rec["settings"],
-                           "paths_per_world": int(paths_per_world)}
+        rec["settings"] = {"options": options_dict(options),
+                           "paths_per_world": int(paths_per_world),
+                           "labels": rec["settings"]}
         out.append(rec)
     return out
+
+
+def _plain_json(v: Any) -> Any:
+    import json
+
+    return json.loads(json.dumps(v, default=lambda o: o.tolist() if hasattr(o, "tolist")
+                                 else str(o)))
+
+
+#: settings that may differ between the runs filling one database (not the labels' meaning)
+NEUTRAL_SETTINGS = ("device",)
+
+
+def check_settings(db: PathDB, options: Any, paths_per_world: int) -> None:
+    """ValueError if ``db`` holds paths made with other options or another number of
+    paths per world than this run (resuming would mix them); option keys absent on either
+    side and :data:`NEUTRAL_SETTINGS` are not compared."""
+    want = _plain_json(options_dict(options))
+    for stored in db.settings():
+        diff = []
+        if stored.get("paths_per_world", paths_per_world) != paths_per_world:
+            diff.append(f"paths_per_world: {stored['paths_per_world']!r} in the file, "
+                        f"{paths_per_world!r} now")
+        old = stored.get("options", {})
+        diff += [f"{k}: {old[k]!r} in the file, {v!r} now" for k, v in want.items()
+                 if k in old and k not in NEUTRAL_SETTINGS and old[k] != v]
+        if diff:
+            raise ValueError(f"generate: '{db.path}' holds paths made with other settings "
+                             f"({'; '.join(diff)}); resuming would mix them: use the same "
+                             f"options or another database")
 
 
 # ====================================================================== driver
@@ -175,6 +206,7 @@ def generate(robot: Any, n_worlds: int, paths_per_world: int, db: str | os.PathL
     pdb = PathDB(db, robot, bps=bps, create=True, timeout=timeout) if own else db
     report = GenerateReport(db=str(pdb.path), backend="ray" if rmod else "in-process")
     try:
+        check_settings(pdb, options, paths_per_world)
         done = pdb.complete_worlds()
         seeds = [s for s in range(first_seed, first_seed + n_worlds) if s not in done]
         report.worlds_skipped = n_worlds - len(seeds)

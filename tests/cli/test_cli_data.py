@@ -72,7 +72,7 @@ def test_generate_info_export(capsys, tmp_path, fake):
     code, out, _ = run(capsys, ["data", "info", db, "--json"])
     info = json.loads(out)
     assert code == 0 and info["worlds"] == 5 and info["paths"] == 15 and info["robot"] == "planar5"
-    assert info["settings"][0]["n_waypoints"] == 4
+    assert info["settings"][0]["options"]["n_waypoints"] == 4
     code, out, _ = run(capsys, ["data", "export", db, "--npz", tmp_path / "d.npz"])
     assert code == 0 and "15 paths" in out
     with np.load(tmp_path / "d.npz") as z:
@@ -99,6 +99,8 @@ def test_generate_option_errors(capsys, tmp_path, fake, monkeypatch):
     line = one_line_error(capsys, ["data", "generate", "--robot", "planar4", "--worlds", 2,
                                    "--paths-per-world", 3, "--db", db], "--db")
     assert "planar5" in line and "planar4" in line
+    line = one_line_error(capsys, base + ["--db", db, "--n-waypoints", 9], "--db")
+    assert "n_waypoints: 5 in the file, 9 now" in line
     with PathDB(db) as d:
         assert d.n_paths() == 6
 

@@ -75,7 +75,8 @@ def test_in_process(tmp_path):
     assert rep.worlds_written == 5 and rep.paths_written == 35 and rep.worlds_skipped == 0
     with PathDB(tmp_path / "a.sqlite", "planar5") as db:
         assert db.complete_worlds() == {3, 4, 5, 6, 7} and db.n_paths() == 35
-        assert db.settings() == [{"fake": 1, "n_waypoints": 6, "paths_per_world": 7}]
+        assert db.settings() == [{"options": {"n_waypoints": 6}, "paths_per_world": 7,
+                                  "labels": {"fake": 1}}]
         a = db.paths_of([5])
         model = __import__("jwarp").robot("planar5")
         lab = fake_labeler(model, fake_world_maker(model, 5), 7, 5)
@@ -102,6 +103,19 @@ def test_interrupted_run_resumes_without_duplicates(tmp_path):
     generate("planar5", 6, 5, tmp_path / "ref.sqlite", **FAKE)
     with PathDB(db) as d, PathDB(tmp_path / "ref.sqlite") as ref:
         assert d.rows() == ref.rows() and d.n_paths() == 30
+
+
+def test_resume_with_other_settings_refused(tmp_path):
+    db = tmp_path / "s.sqlite"
+    generate("planar5", 2, 5, db, **FAKE)
+    with pytest.raises(ValueError, match=r"paths_per_world: 5 in the file, 7 now"):
+        generate("planar5", 4, 7, db, **FAKE)
+    with pytest.raises(ValueError, match=r"n_waypoints: 6 in the file, 8 now"):
+        generate("planar5", 4, 5, db, **dict(FAKE, options={"n_waypoints": 8}))
+    # the device is not a setting of the labels; more worlds with the same settings are fine
+    rep = generate("planar5", 4, 5, db, **dict(FAKE, options={"n_waypoints": 6,
+                                                               "device": "cuda"}))
+    assert rep.worlds_written == 2 and rep.worlds_skipped == 2
 
 
 def test_bad_arguments(tmp_path):
@@ -213,7 +227,7 @@ def test_real_labeler_integration(tmp_path):
         w = db.world(1)
         ref = plan_data.world_for(__import__("jwarp").robot("planar5"), 1, device="cpu")
         np.testing.assert_array_equal(w.occupancy, ref.occupancy)
-        assert db.settings()[0]["n_waypoints"] == 8
+        assert db.settings()[0]["options"]["n_waypoints"] == 8
 
 
 def test_ray_missing_names_the_extra(tmp_path, monkeypatch):
