@@ -42,14 +42,15 @@ import sqlite3
 import time
 import zlib
 from collections import OrderedDict
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any
 
 import numpy as np
 from torch.utils.data import IterableDataset
 
 __all__ = ["FORMAT", "SCHEMA_VERSION", "PathDB", "PathDBError", "PathDataset", "WorldRecord",
-           "export_npz", "world_record", "world_from_record"]
+           "export_npz", "world_from_record", "world_record"]
 
 FORMAT = "jwarp-path-db"
 SCHEMA_VERSION = 1
@@ -298,10 +299,10 @@ class PathDB:
     def close(self) -> None:
         self.con.close()
 
-    def __enter__(self) -> "PathDB":
+    def __enter__(self) -> PathDB:
         return self
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # ------------------------------------------------------------------ writing
@@ -479,9 +480,8 @@ def export_npz(db: str | os.PathLike | PathDB, out: str | os.PathLike, *,
     finally:
         if own:
             d.close()
-    with AtomicFile(out) as f:
-        with open(f.tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+    with AtomicFile(out) as f, open(f.tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
     return Path(out)
 
 
