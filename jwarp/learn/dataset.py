@@ -492,8 +492,9 @@ class PathDataset(IterableDataset):
     Each item is a dict of tensors for ``batch_size`` paths: ``start`` (B, n_dof),
     ``goal``, ``path`` (B, W, n_dof) float32, ``cost`` (B,) float32, ``feasible``,
     ``hard`` (B,) bool, ``world_id`` (B,) int64; with ``occupancy=True`` also
-    ``occupancy`` (B, *shape) bool (the worlds' grids, read once per world and cached:
-    ``cache_worlds`` of them). Use ``DataLoader(ds, batch_size=None, num_workers=k)``:
+    ``occupancy`` (K, *shape) bool, the grids of the K distinct worlds of the batch, and
+    ``world_index`` (B,) int64, each path's row in it (``occupancy[world_index]`` is the
+    grid per path; grids are read once per world and cached: ``cache_worlds`` of them). Use ``DataLoader(ds, batch_size=None, num_workers=k)``:
     every worker opens its own connection and reads every k-th world.
 
     ``shuffle``: worlds in a random order (``seed`` + :meth:`set_epoch`), paths shuffled
@@ -591,10 +592,12 @@ class PathDataset(IterableDataset):
                "feasible": torch.from_numpy(np.array(a["feasible"][s])),
                "hard": torch.from_numpy(np.array(a["hard"][s])),
                "world_id": torch.from_numpy(np.array(a["world_id"][s]))}
-        if self.occupancy:
-            grids = [self.world(int(w))["occupancy"] for w in a["world_id"][s]]
+        if self.occupancy:  # each world of the batch once
+            uniq, index = np.unique(a["world_id"][s], return_inverse=True)
+            grids = [self.world(int(w))["occupancy"] for w in uniq]
             if any(g is None for g in grids):
                 raise ValueError(f"database: '{self.path}': a world without occupancy grid "
                                  f"(occupancy=True needs one)")
             out["occupancy"] = torch.from_numpy(np.stack(grids))
+            out["world_index"] = torch.from_numpy(index.reshape(-1).astype(np.int64))
         return out

@@ -161,9 +161,10 @@ def test_torch_reader(tmp_path):
     assert [len(b["task"] if "task" in b else b["cost"]) for b in batches] == [6, 6, 6, 2]
     b = batches[0]
     assert b["start"].shape == (6, N_DOF) and b["path"].shape == (6, 4, N_DOF)
-    assert b["path"].dtype == torch.float32 and b["occupancy"].shape == (6, 12, 10)
-    assert b["world_id"].tolist() == [0] * 5 + [1]
-    np.testing.assert_array_equal(b["occupancy"][5].numpy(), fake_world(1).occupancy)
+    assert b["path"].dtype == torch.float32 and b["occupancy"].shape == (2, 12, 10)
+    assert b["world_id"].tolist() == [0] * 5 + [1] and b["world_index"].tolist() == [0] * 5 + [1]
+    np.testing.assert_array_equal(b["occupancy"][b["world_index"][5]].numpy(),
+                                  fake_world(1).occupancy)
     starts = torch.cat([x["start"] for x in batches])
     with PathDB(p) as db:
         np.testing.assert_array_equal(starts.numpy(), db.paths_of(range(4))["start"])
