@@ -227,6 +227,7 @@ def test_real_labeler_integration(tmp_path):
         w = db.world(1)
         ref = plan_data.world_for(__import__("jwarp").robot("planar5"), 1, device="cpu")
         np.testing.assert_array_equal(w.occupancy, ref.occupancy)
+        np.testing.assert_array_equal(w.sdf, ref.sdf)  # recomputed exactly from the grid
         assert db.settings()[0]["options"]["n_waypoints"] == 8
 
 
