@@ -134,3 +134,20 @@ def test_info_export_errors(capsys, tmp_path, fake):
     assert code == 2 and "locked" in err and "d.sqlite" in err
     with PathDB(db) as d:
         assert d.n_paths() == 3
+
+
+def test_interrupted_generate_keeps_worlds_and_resumes(capsys, tmp_path, fake, monkeypatch):
+    def interrupted(robot, world, n_tasks, seed, options=None):
+        if seed == 2:
+            raise KeyboardInterrupt  # Ctrl-C while labelling world 2
+        return fake_labeler(robot, world, n_tasks, seed, options)
+
+    db = tmp_path / "d.sqlite"
+    monkeypatch.setattr(gen, "default_labeler", lambda: interrupted)
+    code, out, err = run(capsys, GEN + ["--worlds", 4, "--db", db])
+    assert code == 130 and "jwarp: interrupted" in err
+    with PathDB(db) as d:
+        assert d.complete_worlds() == {0, 1}
+    monkeypatch.setattr(gen, "default_labeler", lambda: fake_labeler)
+    code, out, err = run(capsys, GEN + ["--worlds", 4, "--db", db])
+    assert code == 0 and "2 worlds (6 paths) written, 2 already there" in out
