@@ -21,6 +21,10 @@ tensors)::
     training_state    dict or None (the trainer's state besides the optimizer: hard set)
 
 Files are written atomically (:class:`jwarp.atomic.AtomicFile`).
+
+Motion-planning networks (:class:`jwarp.learn.plan_net.PlanNet`) are written by the same
+:func:`save_checkpoint` with ``format`` ``"jwarp-plan-net"`` (``config``: PlanNetConfig)
+and read by :func:`load_plan_checkpoint`; each loader refuses the other's files.
 """
 
 from __future__ import annotations
@@ -35,12 +39,18 @@ import torch
 from jwarp.atomic import AtomicFile
 from jwarp.core.device import content_key
 from jwarp.learn.ik_net import IKNet, IKNetConfig
+from jwarp.learn.plan_net import PlanNet, PlanNetConfig
 from jwarp.registry import robot as get_robot
 
-__all__ = ["FORMAT", "VERSION", "save_checkpoint", "load_checkpoint", "read_checkpoint"]
+__all__ = ["FORMAT", "PLAN_FORMAT", "VERSION", "save_checkpoint", "load_checkpoint",
+           "load_plan_checkpoint", "read_checkpoint"]
 
 FORMAT = "jwarp-ik-net"
+#: the format of motion-planning network checkpoints
+PLAN_FORMAT = "jwarp-plan-net"
 VERSION = 1
+#: what each format holds, in the loaders' errors
+_WHAT = {FORMAT: "jwarp IK network", PLAN_FORMAT: "jwarp motion-planning network"}
 
 
 def _plain(x: Any) -> Any:
@@ -62,15 +72,16 @@ def _plain(x: Any) -> Any:
     return str(x)
 
 
-def save_checkpoint(path: str | os.PathLike, net: IKNet, *, world_distribution: Any = "",
+def save_checkpoint(path: str | os.PathLike, net: IKNet | PlanNet, *, world_distribution: Any = "",
                     training: dict | None = None, metrics: dict | None = None,
                     epoch: int = 0, optimizer_state: dict | None = None,
                     training_state: dict | None = None) -> Path:
-    """Write ``net`` and what it is valid for to ``path`` (atomically); returns the path."""
+    """Write ``net`` (an IKNet or a PlanNet) and what it is valid for to ``path``
+    (atomically); returns the path."""
     from jwarp import __version__ as jwarp_version
 
     doc = {
-        "format": FORMAT, "version": VERSION,
+        "format": PLAN_FORMAT if isinstance(net, PlanNet) else FORMAT, "version": VERSION,
         "config": _plain(net.config.to_dict()),
         "state_dict": {k: v.detach().cpu() for k, v in net.state_dict().items()},
         "robot": net.robot.name,
@@ -90,9 +101,10 @@ def save_checkpoint(path: str | os.PathLike, net: IKNet, *, world_distribution: 
     return Path(path)
 
 
-def read_checkpoint(path: str | os.PathLike) -> dict:
-    """The checkpoint dict of ``path`` (checked to be a jwarp-ik-net file); ValueError
-    for anything else."""
+def read_checkpoint(path: str | os.PathLike, fmt: str = FORMAT) -> dict:
+    """The checkpoint dict of ``path`` (checked to be a file of format ``fmt``: a
+    jwarp-ik-net file by default); ValueError for anything else."""
+    what = _WHAT[fmt]
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"checkpoint: '{p}' does not exist or is not a file")
@@ -100,13 +112,13 @@ def read_checkpoint(path: str | os.PathLike) -> dict:
         doc = torch.load(p, map_location="cpu", weights_only=True)
     except (pickle.UnpicklingError, RuntimeError, EOFError, OSError, ValueError,
             AttributeError, ImportError, IndexError, KeyError, TypeError) as e:
-        raise ValueError(f"checkpoint: '{p}' is not a jwarp IK network checkpoint "
+        raise ValueError(f"checkpoint: '{p}' is not a {what} checkpoint "
                          f"(cannot be read by torch.load: {type(e).__name__}: "
                          f"{str(e).splitlines()[0] if str(e) else ''})") from None
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise ValueError(f"checkpoint: '{p}' is not a jwarp IK network checkpoint "
+    if not isinstance(doc, dict) or doc.get("format") != fmt:
+        raise ValueError(f"checkpoint: '{p}' is not a {what} checkpoint "
                          f"(format field {doc.get('format') if isinstance(doc, dict) else None!r}, "
-                         f"expected {FORMAT!r})")
+                         f"expected {fmt!r})")
     if doc.get("version") != VERSION:
         raise ValueError(f"checkpoint: '{p}' has format version {doc.get('version')!r}; this "
                          f"jwarp reads version {VERSION}")
@@ -125,6 +137,23 @@ def load_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = "c
     naming both.
     """
     doc = read_checkpoint(path)
+    model, bps = _robot_and_bps(doc, path, robot)
+    config = IKNetConfig.from_dict(doc["config"])
+    net = IKNet(config, bps=bps)
+    return _finish(net, model, doc, path, device)
+
+
+def load_plan_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = "cpu"
+                         ) -> PlanNet:
+    """The :class:`PlanNet` of a ``"jwarp-plan-net"`` checkpoint, as :func:`load_checkpoint`
+    (ValueError for another robot or kinematics hash, or a file of another format)."""
+    doc = read_checkpoint(path, PLAN_FORMAT)
+    model, bps = _robot_and_bps(doc, path, robot)
+    net = PlanNet(PlanNetConfig.from_dict(doc["config"]), bps=bps)
+    return _finish(net, model, doc, path, device)
+
+
+def _robot_and_bps(doc: dict, path: Any, robot: Any) -> tuple[Any, Any]:
     model = get_robot(doc["robot"] if robot is None else robot)
     key = content_key(model)
     if model.name != doc["robot"] or key != doc["kinematics_hash"]:
@@ -135,8 +164,10 @@ def load_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = "c
     if doc.get("bps") is not None:
         from jwarp.learn.bps import BasisPointSet
         bps = BasisPointSet.from_dict(doc["bps"])
-    config = IKNetConfig.from_dict(doc["config"])
-    net = IKNet(config, bps=bps)
+    return model, bps
+
+
+def _finish(net: Any, model: Any, doc: dict, path: Any, device: Any) -> Any:
     net.robot = model
     net.load_state_dict(doc["state_dict"])
     net.to(device)

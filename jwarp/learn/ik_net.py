@@ -29,7 +29,7 @@ from jwarp.learn.encoding import JointCodec, feature_size, frame_features, frame
 from jwarp.registry import robot as get_robot
 from jwarp.world.feasibility import robot_reach
 
-__all__ = ["IKNetConfig", "IKNet", "world_key"]
+__all__ = ["IKNetConfig", "IKNet", "DenseBlock", "world_key"]
 
 
 @dataclass
@@ -77,7 +77,7 @@ def world_key(world: Any) -> str:
     return h.hexdigest()
 
 
-class _Block(nn.Module):
+class DenseBlock(nn.Module):
     def __init__(self, n_in: int, width: int):
         super().__init__()
         self.l1 = nn.Linear(n_in, width)
@@ -135,7 +135,7 @@ class IKNet(nn.Module):
         width = F + n_bps
         self.blocks = nn.ModuleList()
         for _ in range(int(config.n_blocks)):
-            self.blocks.append(_Block(width, int(config.hidden)))
+            self.blocks.append(DenseBlock(width, int(config.hidden)))
             width += int(config.hidden)
         self.out = nn.Linear(width, self.n_heads * self.codec.size)
         with torch.no_grad():  # start near the middle of the limits (angle 0: sin 0, cos 1)

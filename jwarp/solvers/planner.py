@@ -626,6 +626,13 @@ class Planner:
             present, else CPU).
         dtype: float type of the optimisation (None: float32); the exact feasibility
             checks run in float64.
+        warm_start: optional learned warm start (thesis 3.4.3): any object with a callable
+            ``paths(starts (B, n_dof), goals (B, n_dof), world) -> (B, H, W, n_dof)``
+            (e.g. ``jwarp.learn.plan_net.PlanNet``). A :meth:`plan` call without seeds then
+            starts from its H paths per problem, followed by ``options.n_starts - H``
+            multi-starts of kind ``options.initial`` (none if ``n_starts <= H``) of the
+            network's W waypoints; explicit seeds win. TypeError naming ``warm_start`` if
+            it has no callable ``paths``.
 
     The device buffers (paths, substeps, costs, gradients, the kept paths and the
     per-problem selection) are allocated by the first :meth:`plan` call and reused by
@@ -643,8 +650,13 @@ class Planner:
 
     def __init__(self, robot: Any, world: Any, n_problems: int,
                  options: PlanOptions | None = None, device: Any = None,
-                 dtype: Any = None) -> None:
+                 dtype: Any = None, warm_start: Any = None) -> None:
         init_warp()
+        if warm_start is not None and not callable(getattr(warm_start, "paths", None)):
+            raise TypeError(f"warm_start: expected an object with a callable paths(starts, "
+                            f"goals, world) (e.g. a loaded planning network), got "
+                            f"{type(warm_start).__name__}")
+        self.warm_start = warm_start
         self.robot = get_robot(robot)
         check_world(self.robot, world)
         self.world = world
@@ -682,7 +694,7 @@ class Planner:
                 collision-free with ``options.margin`` (and a converged equilibrium on the
                 elastic model).
             seeds: the initial paths: None draws ``options.n_starts`` multi-starts of kind
-                ``options.initial``; an array of paths (W, n_dof), (n_seeds, W, n_dof) or
+                ``options.initial`` (with a ``warm_start``: its paths first); an array of paths (W, n_dof), (n_seeds, W, n_dof) or
                 (n_problems, n_seeds, W, n_dof) (their first/last rows are replaced by
                 start/goal, they are projected onto the limits, and W is theirs), e.g.
                 learned warm starts; or :class:`ViaPoints`.
@@ -690,7 +702,28 @@ class Planner:
         Returns:
             :class:`PlanResult` (``wall_time``: this call).
         """
+        if seeds is None and self.warm_start is not None:
+            seeds = self._warm_seeds(start, goal)
         return self._plan(start, goal, seeds, "seeds")
+
+    def _warm_seeds(self, start: Any, goal: Any) -> np.ndarray:
+        """The warm start's paths (B, H, W, n_dof), then ``n_starts - H`` multi-starts."""
+        q0, q1 = self._problems(start, "start"), self._problems(goal, "goal")
+        raw = self.warm_start.paths(q0.copy(), q1.copy(), self.world)
+        if hasattr(raw, "detach") and hasattr(raw, "cpu"):  # a torch tensor
+            raw = raw.detach().cpu().numpy()
+        g = np.asarray(raw, dtype=np.float64)
+        if g.ndim != 4 or g.shape[0] != len(q0) or g.shape[3] != self.robot.n_dof \
+                or g.shape[1] == 0 or g.shape[2] < 2 or not np.all(np.isfinite(g)):
+            raise ValueError(f"warm_start: paths() returned shape {g.shape}, expected "
+                             f"({len(q0)}, H, W, {self.robot.n_dof}) finite values")
+        o = self.options
+        extra = o.n_starts - g.shape[1]
+        if extra > 0:
+            r = _initial(self.robot, q0, q1, o.initial, extra, g.shape[2], o.seed, self.world,
+                         o.free_via, device=self.device)
+            g = np.concatenate([g, r], axis=1)
+        return g
 
     @property
     def objective(self) -> PathObjective | None:
