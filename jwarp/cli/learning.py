@@ -1,5 +1,6 @@
-"""CLI subcommands ``jwarp train ik`` and ``jwarp eval ik`` (hooked into :mod:`jwarp.cli`):
-learned warm starts for the collision-free IK (thesis 3.4.4, 3.5.3).
+"""CLI subcommands ``jwarp train ik|plan`` and ``jwarp eval ik|plan`` (hooked into
+:mod:`jwarp.cli`): learned warm starts for the collision-free IK (thesis 3.4.4, 3.5.3) and
+the motion planner (3.4.3, 3.5.2).
 
 Examples::
 
@@ -19,6 +20,21 @@ feasibility, samples/s), writing the checkpoint ``--out`` after every epoch (ato
 (every number of the epoch line) to a rerun recording (timeline ``epoch``). Switches of
 the ablation (Table 3.4): ``--no-twin``, ``--no-unit-vectors``, ``--no-boosting``;
 ``--n-bps N`` > 0 makes the network world-aware (basis point set of N points).
+
+``train plan`` trains the motion-planning network (thesis 3.4.3;
+:func:`jwarp.learn.train_plan.train_plan`) on random simplex worlds whose random (``--hard``:
+only tasks the straight line does not solve) tasks are labelled by the planner's
+multi-starts; switches ``--no-time-reversal``, ``--no-axis-symmetry``, ``--boosting``;
+``--cleans N`` / ``--extend F`` add Algorithm 1's rounds (clean the labels with the
+network + planner, add ``F`` x the set of new tasks the network does worst on). ``eval
+plan`` prints the feasibility table (:func:`jwarp.learn.evaluate_plan.evaluate_plan`:
+network alone, network + k planner iterations, random multi-starts 1 and best of N,
+straight line) on unseen worlds. ``jwarp plan --warm-start MODEL.pt`` plans from the
+network's paths.
+
+    jwarp train plan --robot planar4 --n-worlds 8 --tasks-per-world 60 --hard --epochs 10 \
+        --out plan4.pt
+    jwarp eval plan --robot planar4 --model plan4.pt --hard --ks 0,10,50
 
 ``eval ik`` prints the Table 3.5 analogue (:func:`jwarp.learn.evaluate.evaluate_ik`) on
 unseen targets (and, for random worlds, unseen worlds): the Random row always, then one
@@ -302,6 +318,129 @@ def cmd_eval_ik(args: argparse.Namespace) -> int:
     return 0
 
 
+# ------------------------------------------------------------------ planning network
+_TRAIN_PLAN_OPTION_OF = {"robot": "--robot", "n_bps": "--n-bps", "n_waypoints": "--waypoints",
+                         "hidden": "--hidden", "n_blocks": "--blocks", "n_heads": "--heads",
+                         "epochs": "--epochs", "steps_per_epoch": "--steps-per-epoch",
+                         "batch_size": "--batch", "lr": "--lr", "device": "--device",
+                         "seed": "--seed", "checkpoint": "--out", "n_substeps": "--substeps"}
+
+
+def _plan_worlds(model: Any, n: int, seed: int) -> list:
+    from jwarp.world.feasibility import feasible_simplex_world
+
+    return [feasible_simplex_world(model, seed=seed + 7 * i) for i in range(n)]
+
+
+def _load_plan_model(path: str, model: Any, option: str = "--model") -> Any:
+    try:
+        from jwarp.learn.checkpoint import load_plan_checkpoint
+    except ImportError as e:  # pragma: no cover
+        raise CLIError(f"{option}: the planning networks need torch ({e})") from None
+    try:
+        return load_plan_checkpoint(path, robot=model)
+    except (ValueError, TypeError, OSError, KeyError) as e:
+        raise CLIError(f"{option}: {' '.join(str(e).split()).removeprefix('checkpoint: ')}") \
+            from None
+
+
+def cmd_train_plan(args: argparse.Namespace) -> int:
+    model = robot_option(args.robot)
+    if model.workspace_dim not in (2, 3):  # pragma: no cover - every robot is 2D or 3D
+        raise CLIError(f"--robot: unsupported workspace dimension {model.workspace_dim}")
+    quiet_warp()
+    _torch_device(args.device)
+    check_output(args.out, "--out")
+    from jwarp.core.arrays import init_warp
+    from jwarp.learn.train_plan import TrainPlanOptions, improve, make_plan_data, train_plan
+
+    try:
+        options = TrainPlanOptions(robot=model.name, n_bps=args.n_bps, n_waypoints=args.waypoints,
+                                   hidden=args.hidden, n_blocks=args.blocks, n_heads=args.heads,
+                                   epochs=args.epochs, steps_per_epoch=args.steps_per_epoch,
+                                   batch_size=args.batch, lr=args.lr,
+                                   time_reversal=not args.no_time_reversal,
+                                   axis_symmetry=not args.no_axis_symmetry,
+                                   boosting=args.boosting, device=args.device, seed=args.seed,
+                                   checkpoint=args.out)
+        options.validate()
+        from jwarp.learn.plan_net import axis_symmetries
+        axis_symmetries(model)
+    except (ValueError, TypeError) as e:
+        raise _option_error(e, _TRAIN_PLAN_OPTION_OF, "train plan") from None
+    init_warp()
+    worlds = _plan_worlds(model, args.n_worlds, args.seed * 1000 + 1)
+    val_worlds = _plan_worlds(model, args.val_worlds, args.seed * 1000 + 100001)
+    common = dict(n_waypoints=args.waypoints, n_starts=args.label_starts,
+                  iterations=args.label_iterations, hard=args.hard)
+    data = make_plan_data(model, worlds, args.tasks_per_world, seed=args.seed, **common)
+    val = make_plan_data(model, val_worlds, args.val_tasks, seed=args.seed + 1, **common)
+    if not len(data):
+        raise CLIError("train plan: the planner labelled no task feasibly (raise "
+                       "--label-starts or --label-iterations)")
+    if not args.quiet:
+        print(f"data: {len(data)} training tasks in {len(worlds)} worlds, {len(val)} "
+              f"validation tasks in {len(val_worlds)} unseen worlds")
+    rounds = max(args.cleans, 1 if args.extend > 0 else 0)
+    if rounds:
+        net, data, log = improve(options, data, val if len(val) else None, rounds=rounds,
+                                 n_cleans=args.cleans, extend_fraction=args.extend,
+                                 progress=not args.quiet)
+        mse = log[-1]["val_mse"]
+    else:
+        net, hist = train_plan(options, data, val if len(val) else None,
+                               progress=not args.quiet)
+        mse = hist[-1]["val_mse"]
+    print(f"trained planning network for {model.name}: {len(data)} tasks, validation MSE "
+          f"{mse:.5g}")
+    print(f"wrote {args.out}; use with: jwarp plan --robot {model.name} --world ... --start ... "
+          f"--goal ... --warm-start {args.out}")
+    return 0
+
+
+def cmd_eval_plan(args: argparse.Namespace) -> int:
+    model = robot_option(args.robot)
+    quiet_warp()
+    try:
+        ks = tuple(sorted({int(v) for v in args.ks.split(",")}))
+        if not ks or ks[0] < 0:
+            raise ValueError
+    except ValueError:
+        raise CLIError(f"--ks: expected comma-separated iteration counts >= 0, got "
+                       f"{args.ks!r}") from None
+    nets = [(p, _load_plan_model(p, model)) for p in (args.model or [])]
+    from jwarp.learn.evaluate_plan import evaluate_plan, format_plan_table
+    from jwarp.learn.train_plan import hard_tasks, sample_tasks
+
+    W = nets[0][1].n_waypoints if nets else 20
+    worlds = _plan_worlds(model, args.n_worlds, args.seed * 1000 + 200001)
+    rng = np.random.default_rng(args.seed + 200000)
+    S, G, I = [], [], []
+    for i, w in enumerate(worlds):
+        if args.hard:
+            q0, q1 = hard_tasks(model, w, args.tasks, rng, n_waypoints=W)
+        else:
+            q0, q1 = sample_tasks(model, w, args.tasks, rng)
+        S.append(q0)
+        G.append(q1)
+        I.append(np.full(len(q0), i))
+    starts, goals, index = np.concatenate(S), np.concatenate(G), np.concatenate(I)
+    if not len(starts):
+        raise CLIError("--hard: no hard task found in the test worlds")
+    rows = evaluate_plan(model, worlds, starts, goals, index,
+                         nets=[(Path(p).stem, n) for p, n in nets], ks=ks,
+                         n_random=args.random_starts, n_waypoints=W, seed=args.seed)
+    if args.json:
+        print(dumps(_plain({"robot": model.name, "n_worlds": len(worlds), "tasks": len(starts),
+                            "hard": args.hard, "ks": list(ks), "models": [p for p, _ in nets],
+                            "rows": [{**r, "feasible": {str(k): v for k, v in
+                                                        r["feasible"].items()}} for r in rows]})))
+    else:
+        print(format_plan_table(rows, f"{model.name}: {len(starts)} {'hard ' if args.hard else ''}"
+                                      f"tasks in {len(worlds)} unseen random worlds"))
+    return 0
+
+
 def _plain(x: Any) -> Any:
     if isinstance(x, dict):
         return {k: _plain(v) for k, v in x.items()}
@@ -316,7 +455,7 @@ def _plain(x: Any) -> Any:
 
 # ------------------------------------------------------------------ parser
 def add_subcommands(sub: Any) -> None:
-    """Add ``train ik`` and ``eval ik`` to the ``jwarp`` subparsers."""
+    """Add ``train ik|plan`` and ``eval ik|plan`` to the ``jwarp`` subparsers."""
     from jwarp.cli.common import Parser
 
     train = sub.add_parser("train", help="train a learned model (train ik: IK warm starts)")
@@ -367,6 +506,60 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--quiet", action="store_true", help="no progress bar or epoch lines")
     s.set_defaults(func=cmd_train_ik)
 
+    s = tsub.add_parser("plan", help="train a motion-planning network (learned warm starts "
+                                     "of the planner)")
+    s.add_argument("--robot", required=True, help="robot name or path to a robot .json")
+    s.add_argument("--n-worlds", type=int_arg("--n-worlds", 1, 10**6), default=8, metavar="N",
+                   help="random training worlds (default 8)")
+    s.add_argument("--tasks-per-world", type=int_arg("--tasks-per-world", 1, 10**7), default=50,
+                   metavar="N", help="labelled tasks per training world (default 50)")
+    s.add_argument("--val-worlds", type=int_arg("--val-worlds", 0, 10**6), default=2,
+                   metavar="N", help="unseen validation worlds (default 2)")
+    s.add_argument("--val-tasks", type=int_arg("--val-tasks", 1, 10**7), default=20,
+                   metavar="N", help="tasks per validation world (default 20)")
+    s.add_argument("--hard", action="store_true",
+                   help="only tasks whose straight line the planner does not solve")
+    s.add_argument("--label-starts", type=int_arg("--label-starts", 1, 10**5), default=16,
+                   metavar="N", help="planner multi-starts per label (default 16)")
+    s.add_argument("--label-iterations", type=int_arg("--label-iterations", 1, 10**6),
+                   default=200, metavar="N", help="planner iterations per label (default 200)")
+    s.add_argument("--waypoints", type=int_arg("--waypoints", 3, 10**4), default=20,
+                   metavar="W", help="waypoints of the predicted paths (default 20)")
+    s.add_argument("--n-bps", type=int_arg("--n-bps", 0, 1 << 20), default=128, metavar="N",
+                   help="basis points of the world encoding (default 128; 0: world-unaware)")
+    s.add_argument("--hidden", type=int_arg("--hidden", 1, 1 << 16), default=256, metavar="N",
+                   help="hidden width (default 256)")
+    s.add_argument("--blocks", type=int_arg("--blocks", 1, 64), default=3, metavar="N",
+                   help="dense blocks (default 3)")
+    s.add_argument("--heads", type=int_arg("--heads", 1, 64), default=1, metavar="N",
+                   help="paths per task (default 1)")
+    s.add_argument("--epochs", type=int_arg("--epochs", 1, 10**6), required=True, metavar="N",
+                   help="epochs (per round of --cleans/--extend)")
+    s.add_argument("--steps-per-epoch", type=int_arg("--steps-per-epoch", 1, 10**9),
+                   default=100, metavar="N", help="optimizer steps per epoch (default 100)")
+    s.add_argument("--batch", type=int_arg("--batch", 1, 10**7), default=128, metavar="N",
+                   help="samples per step (default 128)")
+    s.add_argument("--lr", type=real_arg("--lr", 0.0, lo_open=True), default=1e-3,
+                   help="learning rate, > 0 (default 1e-3)")
+    s.add_argument("--no-time-reversal", action="store_true",
+                   help="no time-reversal augmentation")
+    s.add_argument("--no-axis-symmetry", action="store_true",
+                   help="no augmentation by the robot's axis symmetries")
+    s.add_argument("--boosting", action="store_true",
+                   help="oversample the tasks the network does worst on (Algorithm 1's boost)")
+    s.add_argument("--cleans", type=int_arg("--cleans", 0, 1000), default=0, metavar="N",
+                   help="rounds of label cleaning by network + planner (default 0)")
+    s.add_argument("--extend", type=real_arg("--extend", 0.0, 10.0), default=0.0, metavar="F",
+                   help="per round, add F x the set of new tasks the network does worst on "
+                        "(default 0)")
+    s.add_argument("--device", default="cpu", help="torch device (default cpu)")
+    s.add_argument("--out", default="plan_model.pt", metavar="MODEL.pt",
+                   help="checkpoint, written after every epoch (default plan_model.pt)")
+    s.add_argument("--seed", type=int_arg("--seed", 0, 2**31 - 1), default=0,
+                   help="random seed (worlds, tasks, initialisation; >= 0)")
+    s.add_argument("--quiet", action="store_true", help="no epoch lines")
+    s.set_defaults(func=cmd_train_plan)
+
     ev = sub.add_parser("eval", help="evaluate a learned model (eval ik: Tables 3.4/3.5)")
     esub = ev.add_subparsers(dest="what", metavar="WHAT", parser_class=Parser)
     esub.required = True
@@ -399,3 +592,23 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--device", default="cpu", help="Warp device of the solver (default cpu)")
     s.add_argument("--json", action="store_true", help="print JSON")
     s.set_defaults(func=cmd_eval_ik)
+
+    s = esub.add_parser("plan", help="feasibility of learned vs random planner starts "
+                                     "(thesis Fig. 3.24, Table 3.3)")
+    s.add_argument("--robot", required=True, help="robot name or path to a robot .json")
+    s.add_argument("--model", action="append", default=None, metavar="MODEL.pt",
+                   help="a checkpoint of jwarp train plan (repeatable; one row each)")
+    s.add_argument("--n-worlds", type=int_arg("--n-worlds", 1, 10**5), default=4, metavar="N",
+                   help="unseen random worlds (default 4)")
+    s.add_argument("--tasks", type=int_arg("--tasks", 1, 10**6), default=25, metavar="N",
+                   help="tasks per world (default 25)")
+    s.add_argument("--hard", action="store_true",
+                   help="only tasks whose straight line the planner does not solve")
+    s.add_argument("--ks", default="0,10,50", metavar="K,K,...",
+                   help="planner iterations at which feasibility is counted (default 0,10,50)")
+    s.add_argument("--random-starts", type=int_arg("--random-starts", 1, 10**4), default=10,
+                   metavar="N", help="the random multi-starts of the best-of row (default 10)")
+    s.add_argument("--seed", type=int_arg("--seed", 0, 2**31 - 1), default=0,
+                   help="seed of the test worlds and tasks")
+    s.add_argument("--json", action="store_true", help="print JSON")
+    s.set_defaults(func=cmd_eval_plan)

@@ -13,6 +13,10 @@ Examples::
 prediction (a ``jwarp train ik`` checkpoint for this robot and frame; twin heads: 2 seeds)
 followed by ``--starts`` random seeds (default 0 with a warm start, 16 without).
 
+``--warm-start MODEL.pt`` (``plan``) starts the planner from a trained motion-planning
+network's paths (a ``jwarp train plan`` checkpoint for this robot; its waypoints) followed
+by multi-starts up to ``--starts`` (default: the network's paths only).
+
 ``--start``/``--goal`` are joint values v1,v2,... [rad, m for prismatic] (``--deg``: revolute
 ones in degrees); ``--target`` is x,y,z [m] and a rotation vector rx,ry,rz [rad] of the
 frame in the robot's base frame. JSON output holds the path (or q), feasibility, costs,
@@ -211,14 +215,28 @@ def cmd_plan(args: argparse.Namespace) -> int:
     q0 = parse_q(args.start, model, args.deg, option="--start")
     q1 = parse_q(args.goal, model, args.deg, option="--goal")
     kappa = _kappa(args, model)
+    net = _plan_warm_start(args.warm_start, model)
+    if net is not None:
+        if args.waypoints is not None and args.waypoints != net.n_waypoints:
+            raise CLIError(f"--waypoints: the network of --warm-start predicts "
+                           f"{net.n_waypoints} waypoints; drop --waypoints or give "
+                           f"{net.n_waypoints}")
+        args.waypoints = net.n_waypoints
+        if args.starts is None:
+            args.starts = net.n_heads
+    if args.starts is None:
+        args.starts = 8
+    if args.waypoints is None:
+        args.waypoints = 20
     _check_plan_size(args, model)
     quiet_warp()
     check_device(args.device)
     if args.rerun is not None:  # before the world and the plan: no work lost on a bad path
         check_output(args.rerun, "--rerun", rerun=True,
-                     inputs={"--world": args.world, "--robot": args.robot})
+                     inputs={"--world": args.world, "--robot": args.robot,
+                             "--warm-start": args.warm_start})
     world = _world(args.world, model)
-    from jwarp.solvers.planner import plan
+    from jwarp.solvers.planner import PlanOptions, Planner, plan
 
     rec = _Recorder(args.rerun, model, world) if args.rerun is not None else None
     callback = None
@@ -228,10 +246,18 @@ def cmd_plan(args: argparse.Namespace) -> int:
                 rec.log_traces(it, paths)
                 rec.log_configs("iteration", it, paths[0], name="start0")
     try:
-        res = plan(model, world, q0, q1, n_starts=args.starts, iterations=args.iterations,
-                   n_waypoints=args.waypoints, n_substeps=args.substeps, step=args.step,
-                   margin=args.margin, seed=args.seed, kappa=kappa, device=args.device,
-                   dtype=dtype_of(args.dtype), callback=callback)
+        if net is not None:
+            opts = PlanOptions(n_starts=args.starts, iterations=args.iterations,
+                               n_waypoints=args.waypoints, n_substeps=args.substeps,
+                               step=args.step, margin=args.margin, seed=args.seed, kappa=kappa,
+                               callback=callback)
+            res = Planner(model, world, 1, opts, device=args.device, dtype=dtype_of(args.dtype),
+                          warm_start=net).plan(q0, q1)
+        else:
+            res = plan(model, world, q0, q1, n_starts=args.starts, iterations=args.iterations,
+                       n_waypoints=args.waypoints, n_substeps=args.substeps, step=args.step,
+                       margin=args.margin, seed=args.seed, kappa=kappa, device=args.device,
+                       dtype=dtype_of(args.dtype), callback=callback)
         if rec is not None:
             for k, q in enumerate(res.path[0]):
                 rec.log_configs("waypoint", k, q[None], name="result")
@@ -260,6 +286,21 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if rec is not None and not args.json:
         print(f"wrote {written}; view with: rerun {written}")
     return 0 if res.feasible[0] else 1
+
+
+def _plan_warm_start(path: str | None, model: Any) -> Any:
+    """The planning network of ``plan --warm-start`` (errors name ``--warm-start``)."""
+    if path is None:
+        return None
+    try:
+        from jwarp.learn.checkpoint import load_plan_checkpoint
+    except ImportError as e:  # torch missing
+        raise CLIError(f"--warm-start: the planning networks need torch ({e})") from None
+    try:
+        return load_plan_checkpoint(path, robot=model, device="cpu")
+    except (ValueError, TypeError, OSError, KeyError) as e:
+        msg = " ".join(str(e).split()).removeprefix("checkpoint: ")
+        raise CLIError(f"--warm-start: {msg}") from None
 
 
 def _warm_start(path: str | None, model: Any, frame: str, device: str) -> Any:
@@ -373,12 +414,15 @@ def add_subcommands(sub: Any) -> None:
                    help="simplex:seed=S[,threshold=T,...], shelf[:voxel=V] or a world .npz file")
     s.add_argument("--start", required=True, metavar="Q", help="start joint values v1,v2,...")
     s.add_argument("--goal", required=True, metavar="Q", help="goal joint values v1,v2,...")
-    s.add_argument("--starts", type=int_arg("--starts", 1), default=8, metavar="N",
-                   help="multi-starts: the straight line + N-1 random via-point paths (default 8)")
+    s.add_argument("--starts", type=int_arg("--starts", 1), default=None, metavar="N",
+                   help="multi-starts: the straight line + N-1 random via-point paths (default "
+                        "8); with --warm-start the network's paths count (default: only them)")
     s.add_argument("--iterations", type=int_arg("--iterations", 0, MAX_ITERATIONS), default=200,
                    metavar="N", help="most iterations (default 200)")
-    s.add_argument("--waypoints", type=int_arg("--waypoints", 2), default=20, metavar="W",
-                   help="waypoints, >= 2 (default 20)")
+    s.add_argument("--waypoints", type=int_arg("--waypoints", 2), default=None, metavar="W",
+                   help="waypoints, >= 2 (default 20; with --warm-start the network's)")
+    s.add_argument("--warm-start", default=None, metavar="MODEL.pt",
+                   help="start from a motion-planning network (a jwarp train plan checkpoint)")
     s.add_argument("--substeps", type=int_arg("--substeps", 1), default=None, metavar="N",
                    help="substeps per segment (default: sized to the voxel size)")
     s.add_argument("--step", type=real_arg("--step", 0.0, lo_open=True), default=0.01,

@@ -43,6 +43,7 @@ from jwarp.registry import robot as get_robot
 from jwarp.solvers.planner import PlanOptions, Planner, collision_free
 
 __all__ = ["PlanSamples", "TrainPlanOptions", "make_plan_data", "label_tasks", "sample_tasks",
+           "hard_tasks",
            "path_costs", "prediction_costs", "augment", "boost_weights", "train_plan",
            "validation_mse", "clean", "extend", "improve"]
 
@@ -126,6 +127,27 @@ def sample_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator,
     return pool[a], pool[b]
 
 
+def hard_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator, *,
+               iterations: int = 200, n_waypoints: int = 20, n_substeps: int = 4,
+               rounds: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """Up to ``n`` random tasks whose straight line does not become feasible within
+    ``iterations`` planner steps (the thesis' hard tasks; 3 n candidates per round, at
+    most ``rounds`` rounds)."""
+    model = get_robot(robot)
+    S, G, got = [], [], 0
+    for _ in range(rounds):
+        q0, q1 = sample_tasks(model, world, 3 * (n - got), rng)
+        opts = PlanOptions(n_starts=1, initial="straight", n_waypoints=n_waypoints,
+                           n_substeps=n_substeps, iterations=iterations)
+        easy = Planner(model, world, len(q0), opts, device="cpu").plan(q0, q1).feasible
+        S.append(q0[~easy][:n - got])
+        G.append(q1[~easy][:n - got])
+        got += len(S[-1])
+        if got >= n:
+            break
+    return np.concatenate(S), np.concatenate(G)
+
+
 def label_tasks(robot: Any, world: Any, starts: np.ndarray, goals: np.ndarray, *,
                 n_waypoints: int = 20, n_starts: int = 16, iterations: int = 200,
                 n_substeps: int = 4, seed: int = 0
@@ -155,14 +177,13 @@ def make_plan_data(robot: Any, worlds: list, n_per_world: int, *, seed: int = 0,
         while got < n_per_world and rounds < (20 if hard else 1):
             rounds += 1
             need = n_per_world - got
-            q0, q1 = sample_tasks(model, world, need * (3 if hard else 1), rng)
             if hard:
-                opts = PlanOptions(n_starts=1, initial="straight", n_waypoints=n_waypoints,
-                                   n_substeps=n_substeps, iterations=iterations)
-                easy = Planner(model, world, len(q0), opts, device="cpu").plan(q0, q1).feasible
-                q0, q1 = q0[~easy][:need], q1[~easy][:need]
+                q0, q1 = hard_tasks(model, world, need, rng, iterations=iterations,
+                                    n_waypoints=n_waypoints, n_substeps=n_substeps, rounds=1)
                 if not len(q0):
                     continue
+            else:
+                q0, q1 = sample_tasks(model, world, need, rng)
             if labeler is None:
                 P, ok, c = label_tasks(model, world, q0, q1, n_waypoints=n_waypoints,
                                        n_starts=n_starts, iterations=iterations,

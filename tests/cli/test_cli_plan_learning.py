@@ -1,0 +1,123 @@
+"""``jwarp train plan``, ``jwarp eval plan`` and ``jwarp plan --warm-start``
+(jwarp/cli/learning.py, jwarp/cli/planning.py): a tiny planar4 training with its checkpoint,
+the evaluation table (text and JSON), the warm-started plan, and the option errors (one
+line naming the option)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from jwarp.cli import main
+
+TINY = ["--robot", "planar4", "--n-worlds", "1", "--tasks-per-world", "6", "--val-worlds", "1",
+        "--val-tasks", "3", "--label-starts", "2", "--label-iterations", "30", "--n-bps", "16",
+        "--hidden", "16", "--blocks", "1", "--steps-per-epoch", "3", "--batch", "8", "--quiet"]
+START, GOAL = "1.2,0,0,0", "-1.2,0,0,0"
+
+
+def run(capsys, argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def one_line_error(capsys, argv, option):
+    code, out, err = run(capsys, argv)
+    lines = [ln for ln in err.splitlines() if not ln.startswith("Warp CUDA warning")]
+    assert code == 2, (code, out, err)
+    assert lines[-1].startswith(f"jwarp: error: {option}: "), lines[-1]
+    return lines[-1]
+
+
+@pytest.fixture(scope="module")
+def model_path(tmp_path_factory):
+    out = tmp_path_factory.mktemp("train") / "p4.pt"
+    assert main(["train", "plan", *TINY, "--epochs", "1", "--boosting", "--out", str(out)]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def block(tmp_path_factory):
+    from jwarp.world import save_world, world_from_occupancy
+
+    lim = np.array([[-1.0, 1.0], [-1.0, 1.0]])
+    h = 2.0 / 63
+    X, Y = np.meshgrid(*[lim[d, 0] + h * np.arange(64) for d in range(2)], indexing="ij")
+    world = world_from_occupancy((X > 0.5) & (X < 0.75) & (np.abs(Y) < 0.12), lim, h)
+    path = tmp_path_factory.mktemp("world") / "block.npz"
+    save_world(world, path)
+    return path
+
+
+def test_train_plan_writes_a_checkpoint(model_path):
+    from jwarp.learn.checkpoint import load_plan_checkpoint
+
+    net = load_plan_checkpoint(model_path)
+    assert net.config.n_bps == 16 and net.meta["epoch"] == 1
+    assert net.meta["training"]["boosting"] is True
+
+
+def test_eval_plan_table_and_json(model_path, capsys):
+    argv = ["eval", "plan", "--robot", "planar4", "--model", model_path, "--n-worlds", "1",
+            "--tasks", "3", "--ks", "0,5", "--random-starts", "2"]
+    code, out, err = run(capsys, argv)
+    assert code == 0, err
+    assert "k=5" in out and "p4" in out and "random (best of 2)" in out
+    code, out, err = run(capsys, [*argv, "--json"])
+    doc = json.loads(out)
+    assert [r["name"] for r in doc["rows"]][0] == "p4" and doc["ks"] == [0, 5]
+
+
+def test_plan_warm_start(model_path, block, capsys):
+    argv = ["plan", "--robot", "planar4", "--world", block, "--start", START, f"--goal={GOAL}",
+            "--iterations", "5", "--substeps", "2", "--warm-start", model_path, "--json"]
+    code, out, err = run(capsys, argv)
+    assert code in (0, 1), err
+    doc = json.loads(out)
+    assert len(doc["path"]) == 20
+    code, out, err = run(capsys, [*argv[:-1], "--starts", "3"])
+    assert "of 3 starts" in out
+
+
+def test_plan_warm_start_errors(model_path, block, capsys, tmp_path):
+    import torch
+
+    from jwarp.learn.checkpoint import save_checkpoint
+    from jwarp.learn.plan_net import PlanNet, PlanNetConfig
+
+    torch.manual_seed(0)
+    other = save_checkpoint(tmp_path / "p5.pt", PlanNet(PlanNetConfig(robot="planar5", n_bps=0,
+                                                                       hidden=8)))
+    base = ["plan", "--robot", "planar4", "--world", block, "--start", START, f"--goal={GOAL}"]
+    msg = one_line_error(capsys, [*base, "--warm-start", other], "--warm-start")
+    assert "planar5" in msg
+    one_line_error(capsys, [*base, "--warm-start", tmp_path / "missing.pt"], "--warm-start")
+    one_line_error(capsys, [*base, "--warm-start", model_path, "--waypoints", "7"],
+                   "--waypoints")
+
+
+@pytest.mark.parametrize("extra, option", [
+    (["--epochs", "0"], "--epochs"),
+    (["--epochs", "1", "--waypoints", "2"], "--waypoints"),
+    (["--epochs", "1", "--lr", "-1"], "--lr"),
+    (["--epochs", "1", "--extend", "nan"], "--extend"),
+    (["--epochs", "1", "--device", "tpu"], "--device"),
+])
+def test_train_plan_option_errors(capsys, tmp_path, extra, option):
+    one_line_error(capsys, ["train", "plan", *TINY, "--out", tmp_path / "m.pt", *extra], option)
+    assert not (tmp_path / "m.pt").exists()
+
+
+def test_train_plan_out_is_checked_first(capsys, tmp_path):
+    one_line_error(capsys, ["train", "plan", *TINY, "--epochs", "1", "--out", tmp_path], "--out")
+
+
+def test_eval_plan_option_errors(capsys, tmp_path, model_path):
+    base = ["eval", "plan", "--robot", "planar4", "--n-worlds", "1", "--tasks", "2"]
+    one_line_error(capsys, [*base, "--model", tmp_path / "none.pt"], "--model")
+    one_line_error(capsys, [*base, "--model", model_path, "--robot", "planar5"], "--model")
+    one_line_error(capsys, [*base, "--ks", "a,b"], "--ks")
+    one_line_error(capsys, [*base, "--ks", "-1"], "--ks")
