@@ -383,12 +383,12 @@ def cmd_train_plan(args: argparse.Namespace) -> int:
               f"validation tasks in {len(val_worlds)} unseen worlds")
     rounds = max(args.cleans, 1 if args.extend > 0 else 0)
     if rounds:
-        net, data, log = improve(options, data, val if len(val) else None, rounds=rounds,
+        _, data, log = improve(options, data, val if len(val) else None, rounds=rounds,
                                  n_cleans=args.cleans, extend_fraction=args.extend,
                                  progress=not args.quiet)
         mse = log[-1]["val_mse"]
     else:
-        net, hist = train_plan(options, data, val if len(val) else None,
+        _, hist = train_plan(options, data, val if len(val) else None,
                                progress=not args.quiet)
         mse = hist[-1]["val_mse"]
     print(f"trained planning network for {model.name}: {len(data)} tasks, validation MSE "

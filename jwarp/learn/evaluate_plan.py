@@ -37,12 +37,13 @@ def _run(model: Any, world: Any, q0: np.ndarray, q1: np.ndarray, K: int, *, seed
 def evaluate_plan(robot: Any, worlds: list, starts: np.ndarray, goals: np.ndarray,
                   world_index: np.ndarray, *, nets: list | tuple = (), ks: tuple = (0, 10, 50),
                   n_random: int = 10, n_waypoints: int = 20, n_substeps: int = 4,
-                  seed: int = 0) -> list[dict]:
+                  seed: int = 0, baselines: bool = True) -> list[dict]:
     """Rows of the table: per ``(name, net)`` in ``nets`` (a network's heads as the
     starts; "network alone" is the k = 0 column), then "random (1)" (one random multi-start:
     1-3 random via points), "random (best of n_random)" and "straight line". Each row:
     ``name``, ``feasible`` {k: fraction of tasks feasible after k iterations}, ``cost``
-    (mean U_path of the feasible ones after max(ks)), ``n_tasks``."""
+    (mean U_path of the feasible ones after max(ks)), ``n_tasks``. ``baselines=False``:
+    the networks' rows only."""
     model = get_robot(robot)
     starts = np.asarray(starts, np.float64)
     goals = np.asarray(goals, np.float64)
@@ -50,7 +51,7 @@ def evaluate_plan(robot: Any, worlds: list, starts: np.ndarray, goals: np.ndarra
     ks = tuple(sorted(int(k) for k in ks))
     K = ks[-1]
     kinds: list[tuple[str, dict]] = [(name, {"net": net}) for name, net in nets]
-    kinds += [("random (1)", {"n_starts": 1, "initial": "random"}),
+    kinds += [] if not baselines else [("random (1)", {"n_starts": 1, "initial": "random"}),
               (f"random (best of {n_random})", {"n_starts": n_random, "initial": "random"}),
               ("straight line", {"n_starts": 1, "initial": "straight"})]
     rows = []

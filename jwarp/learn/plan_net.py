@@ -129,7 +129,7 @@ def decode_paths(dev: np.ndarray, starts: np.ndarray, goals: np.ndarray, lower: 
     dev = np.asarray(dev, np.float64)
     heads = dev.ndim == 4
     d = dev if heads else dev[:, None]
-    N, H, Wi, n = d.shape
+    H, Wi = d.shape[1:3]
     line = straight_paths(starts, goals, Wi + 2)[:, None]
     out = np.repeat(line, H, axis=1)
     out[:, :, 1:-1] += d * (np.asarray(upper) - np.asarray(lower))

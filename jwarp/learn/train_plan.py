@@ -37,8 +37,8 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
-from jwarp.learn.plan_net import (PlanNet, PlanNetConfig, axis_symmetries, decode_paths,
-                                  encode_paths, symmetric_bps)
+from jwarp.learn.plan_net import (PlanNet, PlanNetConfig, axis_symmetries, encode_paths,
+                                  symmetric_bps)
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.planner import PlanOptions, Planner, collision_free
 
@@ -163,19 +163,21 @@ def label_tasks(robot: Any, world: Any, starts: np.ndarray, goals: np.ndarray, *
 
 def make_plan_data(robot: Any, worlds: list, n_per_world: int, *, seed: int = 0,
                    n_waypoints: int = 20, n_starts: int = 16, iterations: int = 200,
-                   n_substeps: int = 4, hard: bool = False,
+                   n_substeps: int = 4, hard: bool = False, rounds: int = 3,
                    labeler: Callable | None = None) -> PlanSamples:
     """Random tasks in every world labelled by ``labeler(robot, world, starts, goals)
     -> (paths, feasible, cost)`` (default :func:`label_tasks`); only feasible labels are
-    kept. ``hard``: keep only tasks whose straight line does not become feasible within
-    ``iterations`` (the thesis' hard dataset; drawn until ``n_per_world`` or 20 rounds)."""
+    kept, so a world may give fewer than ``n_per_world`` (with ``hard``, new tasks are
+    drawn for the missing ones up to ``rounds`` times). ``hard``: keep only tasks whose
+    straight line does not become feasible within ``iterations`` (the thesis' hard
+    dataset)."""
     model = get_robot(robot)
     rng = np.random.default_rng(seed)
     parts = []
     for wi, world in enumerate(worlds):
-        got, rounds = 0, 0
-        while got < n_per_world and rounds < (20 if hard else 1):
-            rounds += 1
+        got, done = 0, 0
+        while got < n_per_world and done < (rounds if hard else 1):
+            done += 1
             need = n_per_world - got
             if hard:
                 q0, q1 = hard_tasks(model, world, need, rng, iterations=iterations,

@@ -15,7 +15,7 @@ from jwarp.learn.checkpoint import load_checkpoint, load_plan_checkpoint, save_c
 from jwarp.learn.evaluate_plan import evaluate_plan, format_plan_table
 from jwarp.learn.plan_net import (AXIS_SYMMETRIES, PlanNet, PlanNetConfig, axis_symmetries,
                                   decode_paths, encode_paths, straight_paths, symmetric_bps)
-from jwarp.learn.train_plan import (PlanSamples, TrainPlanOptions, augment, boost_weights,
+from jwarp.learn.train_plan import (TrainPlanOptions, augment, boost_weights,
                                     clean, extend, make_plan_data, path_costs, plan_loss,
                                     train_plan, validation_mse)
 from jwarp.solvers.planner import PlanOptions, Planner, path_feasible
@@ -179,7 +179,7 @@ def test_boost_clean_extend(samples, worlds):
 
 
 def test_evaluate_plan_table(samples):
-    data, val = samples
+    _, val = samples
     net = small_net()
     rows = evaluate_plan(ROBOT, val.worlds, val.starts[:6], val.goals[:6], val.world_index[:6],
                          nets=[("net", net)], ks=(0, 20), n_random=3)
