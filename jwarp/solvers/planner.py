@@ -507,6 +507,14 @@ class PlanOptions:
         lam: damping of the torque update in (0, 1] (elastic only).
         seed: random seed of the random multi-starts (an integer >= 0, a numpy Generator
             or None for fresh entropy); every call draws from ``default_rng(seed)``.
+        converge: keep optimizing feasible paths until their length cost converges
+            (labels of thesis 3.5.1): a feasible path is re-checked every
+            ``check_all_every`` iterations; each feasible iterate is kept (so the result
+            is the last feasible one), and the path stops when the relative change of
+            U_l between two kept iterates is <= ``converge_tol`` (or the iterations run
+            out). ``iterations`` of the result is then the iteration of the kept iterate.
+            False (default): ``early_stop`` decides.
+        converge_tol: relative change of U_l that counts as converged, > 0.
         callback: called as ``callback(iteration, paths (P, W, n_dof))`` after every
             evaluation (e.g. rerun streaming; it reads every path to the host).
     """
@@ -529,6 +537,8 @@ class PlanOptions:
     lam: float = 0.7
     seed: Any = 0
     callback: Callable[[int, np.ndarray], None] | None = None
+    converge: bool = False
+    converge_tol: float = 1e-3
 
     def validate(self, dtype: Any = np.float32) -> None:
         """ValueError/TypeError naming the first bad field; numbers must be finite in the
@@ -564,7 +574,10 @@ class PlanOptions:
                 raise TypeError(f"weights: expected a PathWeights, got "
                                 f"{type(self.weights).__name__}")
             self.weights.validate()
-        for name in ("early_stop", "stop_when_solved", "free_via"):
+        tol = real_number(self.converge_tol, "converge_tol")
+        if not (math.isfinite(tol) and tol > 0):
+            raise ValueError(f"converge_tol: expected a number > 0, got {self.converge_tol!r}")
+        for name in ("early_stop", "stop_when_solved", "free_via", "converge"):
             _check_flag(getattr(self, name), name)
         seed = self.seed
         if not (seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence))):
@@ -769,12 +782,25 @@ class Planner:
         done = np.zeros(P, bool)
         feasible = np.zeros(P, bool)
         iters = np.full(P, o.iterations, np.int64)
+        kept_len = np.full(P, np.inf)  # converge: U_l of the last kept feasible iterate
         for it in range(o.iterations + 1):
             obj.evaluate(grad=it < o.iterations)
             if o.callback is not None:
                 o.callback(it, obj.paths.numpy())
             smax = obj.sub_max.numpy()
             last = it == o.iterations or (it + 1) % o.check_all_every == 0
+            if o.converge:
+                self._converge_check(buf, it, last, smax < screen, done, feasible, iters,
+                                     kept_len)
+                if done.all() or (o.stop_when_solved
+                                  and (done & feasible).reshape(B, n_starts).any(1).all()):
+                    break
+                if it == o.iterations:
+                    break
+                if o.early_stop:
+                    obj.set_active(~done)
+                obj.step(o.step, o.max_step)
+                continue
             cand = np.nonzero(~done & ((smax < screen) | last))[0]
             if len(cand):
                 newly = cand[self._confirm(buf, cand)]
@@ -791,10 +817,36 @@ class Planner:
             if o.early_stop:
                 obj.set_active(~done)
             obj.step(o.step, o.max_step)
-        rest = np.nonzero(~done)[0]
+        # converge: a feasible path's final is its last feasible iterate, already kept
+        rest = np.nonzero(~done & ~feasible)[0] if o.converge else np.nonzero(~done)[0]
         if len(rest):
             self._keep(buf, rest)
         return self._result(buf, feasible, iters, B, n_starts, time.perf_counter() - t0)
+
+    def _converge_check(self, buf: _Buffers, it: int, last: bool, screened: np.ndarray,
+                        done: np.ndarray, feasible: np.ndarray, iters: np.ndarray,
+                        kept_len: np.ndarray) -> None:
+        """One iteration's checks of :attr:`PlanOptions.converge` (arrays (P,) updated in
+        place): paths not yet feasible are checked as without ``converge``; feasible ones
+        every ``check_all_every`` iterations. Every confirmed iterate is kept; a feasible
+        path whose U_l changed by <= ``converge_tol`` (relative) since its last kept
+        iterate is done. A feasible path that left feasibility goes on; its last feasible
+        iterate stays kept."""
+        cand = np.nonzero(~done & np.where(feasible, last, screened | last))[0]
+        if not len(cand):
+            return
+        good = cand[self._confirm(buf, cand)]
+        if not len(good):
+            return
+        length = buf.objective.length.numpy().astype(np.float64)[good]
+        again = feasible[good]
+        change = np.abs(length - kept_len[good])
+        stop = good[again & (change <= self.options.converge_tol * np.abs(kept_len[good]))]
+        feasible[good] = True
+        iters[good] = it
+        kept_len[good] = length
+        self._keep(buf, good)
+        done[stop] = True
 
     def _problems(self, x: Any, name: str) -> np.ndarray:
         q = _configs(x, self.robot, name)
@@ -898,7 +950,8 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
          early_stop: bool = True, stop_when_solved: bool = False, check_all_every: int = 10,
          free_via: bool = True, kappa: Any = None, lam: float = 0.7, seed: int | None = 0,
          device: Any = "cpu", dtype: Any = np.float32,
-         callback: Callable[[int, np.ndarray], None] | None = None) -> PlanResult:
+         callback: Callable[[int, np.ndarray], None] | None = None,
+         converge: bool = False, converge_tol: float = 1e-3) -> PlanResult:
     """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path:
     one call of a :class:`Planner` made for it.
 
@@ -914,7 +967,7 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
             type (default: CPU, float32).
         n_starts, n_waypoints, n_substeps, iterations, step, max_step, weights, eps,
             margin, early_stop, stop_when_solved, check_all_every, free_via, kappa, lam,
-            seed, callback: the fields of :class:`PlanOptions`.
+            seed, callback, converge, converge_tol: the fields of :class:`PlanOptions`.
 
     Returns:
         :class:`PlanResult` (``wall_time``: the whole call).
@@ -942,7 +995,8 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
                           max_step=max_step, weights=weights, eps=eps, margin=margin,
                           early_stop=early_stop, stop_when_solved=stop_when_solved,
                           check_all_every=check_all_every, free_via=free_via, kappa=kappa,
-                          lam=lam, seed=seed, callback=callback)
+                          lam=lam, seed=seed, callback=callback, converge=converge,
+                          converge_tol=converge_tol)
     planner = Planner(model, world, len(q0), options, device=device, dtype=dtype)
     res = planner._plan(q0, q1, None if isinstance(initial, str) else initial, "initial")
     res.wall_time = time.perf_counter() - t0

@@ -150,11 +150,13 @@ def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200
                            n: int = 1000, max_tries: int = 50, cells: int = 64,
                            voxel_size: float | None = None, clear_base: bool = True,
                            margin: float = 0.0, dim: int | None = None, device: Any = None,
-                           **noise: Any) -> World:
+                           extent: float | None = None, **noise: Any) -> World:
     """The first simplex world from ``seed`` on (seed, seed + 1, ...) in which at least
     ``min_feasible`` of ``n`` random configurations are collision-free (thesis: 200 of 1000).
 
-    The grid covers the robot's reach (:func:`robot_world_grid`); with ``clear_base`` the
+    The grid covers the robot's reach (:func:`robot_world_grid`), or, with ``extent`` [m],
+    a cube (square) of that side with ``cells`` cells per axis centred on the reach box
+    (the worlds of thesis Table 3.2: e.g. 64 x 64 over 1 x 1 m); with ``clear_base`` the
     robot's fixed spheres (plus two voxels) are kept free of obstacles. ``noise``:
     threshold, frequency, octaves, persistence (see :func:`simplex_world`). The result's
     ``meta`` records the seed used and the feasible fraction. Raises ValueError when
@@ -171,8 +173,22 @@ def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200
         raise ValueError(f"min_feasible: expected 1..n={n}, got {min_feasible}")
     if isinstance(max_tries, bool) or not isinstance(max_tries, (int, np.integer)) or max_tries < 1:
         raise ValueError(f"max_tries: expected a positive integer, got {max_tries!r}")
-    shape, limits, h = robot_world_grid(model, cells=cells, voxel_size=voxel_size,
-                                        device=device)
+    if extent is None:
+        shape, limits, h = robot_world_grid(model, cells=cells, voxel_size=voxel_size,
+                                            device=device)
+    else:
+        side = real_number(extent, "extent")
+        if not (np.isfinite(side) and side > 0):
+            raise ValueError(f"extent: expected a side length > 0 [m], got {extent!r}")
+        if voxel_size is not None:
+            raise ValueError("voxel_size: give cells or voxel_size with extent, not both")
+        if isinstance(cells, bool) or not isinstance(cells, (int, np.integer)) or cells < 2:
+            raise ValueError(f"cells: expected an integer >= 2, got {cells!r}")
+        h = side / cells  # cells of h fill the side; limits are the first/last centres
+        centre = robot_reach(model, device=device).mean(axis=1)
+        lower = centre - 0.5 * (cells - 1) * h
+        shape, limits, h = grid_geometry(dim, shape=(int(cells),) * dim, limits=lower,
+                                         voxel_size=h)
     keep = fixed_spheres(model, pad=2 * h, device=device) if clear_base else []
     fractions = []
     for s in range(int(seed), int(seed) + int(max_tries)):

@@ -1,0 +1,254 @@
+"""Hard-task motion-planning labels (thesis 3.5.1, "Motion Planning Dataset", Table 3.2).
+
+Per world: random collision-free start/goal pairs. The straight line in joint space is
+optimized first (:class:`jwarp.solvers.planner.Planner`, gradient descent on U_path with a
+fixed step); a task is *easy* when it converges to a feasible path and *hard* otherwise.
+A hard task gets up to ``max_starts`` multi-starts through 1-3 random via points, all
+optimized in one batch, and its label is the best (lowest U_path, so in practice the
+shortest) feasible one. Labels are *converged* paths (:attr:`PlanOptions.converge`):
+feasible paths keep being optimized, staying feasible, until their length cost settles.
+Easy tasks keep their straight-line result as a separate set (Table 3.3's first row);
+tasks no start solves are reported with ``feasible = False``.
+
+:func:`world_for` builds the simplex world of Table 3.2 for a robot and a seed (planar
+robots: 64 x 64 cells over 1 x 1 m; 3D arms: 64^3 over 1.2^3 m; justin19: 64^3 over 3^3 m;
+each box centred on the robot's reach), kept only when >= 200 of 1000 random
+configurations are collision-free (:func:`jwarp.world.feasibility.feasible_simplex_world`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from jwarp.core.arrays import real_number
+from jwarp.core.device import numpy_dtype, scalar_type
+from jwarp.core.limits import sample_within_limits
+from jwarp.model import RobotModel
+from jwarp.registry import robot as get_robot
+from jwarp.solvers.planner import PathWeights, PlanOptions, Planner, check_world, collision_free
+from jwarp.world.feasibility import feasible_simplex_world
+
+__all__ = ["PlanDataOptions", "WorldLabels", "world_for", "label_world", "world_extent"]
+
+#: side of the cubic (square) world of Table 3.2 [m] per robot; other robots: by their
+#: workspace dimension (2D: 1 m, 3D: 1.2 m)
+WORLD_EXTENT = {"planar4": 1.0, "planar5": 1.0, "arm7": 1.2, "justin19": 3.0}
+#: cells per axis of the worlds of Table 3.2
+WORLD_CELLS = 64
+
+
+@dataclass
+class PlanDataOptions:
+    """Options of :func:`label_world`; :meth:`validate` raises ValueError/TypeError naming
+    the field.
+
+    Attributes:
+        n_waypoints: W, waypoints per path (20 in the thesis), >= 3.
+        max_starts: random multi-starts (1-3 via points) per hard task, >= 1 (thesis: 100).
+        iterations: most gradient steps per path, >= 1.
+        step, max_step: step size (eq. 3.18) and the largest change of one joint of one
+            waypoint per step [rad], > 0.
+        n_substeps: substeps per segment (None: sized to the world's voxel per call).
+        check_all_every: exact feasibility checks every this many iterations, >= 1.
+        length_weight: lam_l of eq. 3.16 (world and self-collision weights are 1), >= 0.
+        margin: required clearance [m] of the labels, >= 0.
+        converge: keep optimizing feasible paths until the length cost converges.
+        converge_tol: relative change of U_l between checks that counts as converged.
+        device: Warp device of the optimisation ("cpu", "cuda", "cuda:0", ...).
+        dtype: "float32" or "float64", the optimisation's float type.
+    """
+
+    n_waypoints: int = 20
+    max_starts: int = 100
+    iterations: int = 300
+    step: float = 0.01
+    max_step: float = 0.1
+    n_substeps: int | None = None
+    check_all_every: int = 10
+    length_weight: float = 0.01
+    margin: float = 0.0
+    converge: bool = True
+    converge_tol: float = 1e-3
+    device: str = "cpu"
+    dtype: str = "float32"
+
+    def validate(self) -> None:
+        for name, lo in (("n_waypoints", 3), ("max_starts", 1), ("iterations", 1),
+                         ("check_all_every", 1)):
+            v = getattr(self, name)
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
+                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+        if self.n_substeps is not None:
+            v = self.n_substeps
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"n_substeps: expected None or an integer >= 1, got {v!r}")
+        for name, strict in (("step", True), ("max_step", True), ("converge_tol", True),
+                             ("length_weight", False), ("margin", False)):
+            v = getattr(self, name)
+            x = real_number(v, name)
+            if not math.isfinite(x) or x < 0 or (strict and x == 0):
+                raise ValueError(f"{name}: expected a finite number {'>' if strict else '>='} 0, "
+                                 f"got {v!r}")
+        if not isinstance(self.converge, (bool, np.bool_)):
+            raise TypeError(f"converge: expected True or False, got {self.converge!r}")
+        if not isinstance(self.device, str):
+            raise TypeError(f"device: expected a device name (str), got "
+                            f"{type(self.device).__name__}")
+        if self.dtype not in ("float32", "float64"):
+            raise ValueError(f"dtype: expected 'float32' or 'float64', got {self.dtype!r}")
+
+    def plan_options(self, initial: str, n_starts: int, seed: int) -> PlanOptions:
+        """The :class:`PlanOptions` of one stage (straight line or multi-starts)."""
+        return PlanOptions(n_starts=n_starts, initial=initial, n_waypoints=self.n_waypoints,
+                           n_substeps=self.n_substeps, iterations=self.iterations,
+                           step=self.step, max_step=self.max_step,
+                           weights=PathWeights(length=float(self.length_weight)),
+                           margin=float(self.margin), check_all_every=self.check_all_every,
+                           converge=bool(self.converge), converge_tol=float(self.converge_tol),
+                           seed=int(seed))
+
+
+@dataclass
+class WorldLabels:
+    """Labels of one world for N tasks (:func:`label_world`).
+
+    starts, goals (N, n_dof) float32 [rad or m]; paths (N, W, n_dof) float32: the label
+    (the converged best feasible multi-start path of a hard task, the straight-line
+    result of an easy one; the lowest-cost infeasible path when nothing was feasible);
+    cost (N,) U_path (eq. 3.16) of the label; feasible (N,) bool; hard (N,) bool (False:
+    an easy task, kept separately); settings: the options that made them (JSON-able);
+    length_cost (N,) U_l (eq. 3.5, 1 for the straight line) of the label; n_feasible_starts
+    (N,) feasible multi-starts of a hard task (0 for easy ones); n_starts (N,) multi-starts
+    run (0 for easy tasks).
+    """
+
+    starts: np.ndarray
+    goals: np.ndarray
+    paths: np.ndarray
+    cost: np.ndarray
+    feasible: np.ndarray
+    hard: np.ndarray
+    settings: dict
+    length_cost: np.ndarray = field(default=None, repr=False)
+    n_feasible_starts: np.ndarray = field(default=None, repr=False)
+    n_starts: np.ndarray = field(default=None, repr=False)
+
+    def __len__(self) -> int:
+        return len(self.starts)
+
+    @property
+    def single_start_rate(self) -> float:
+        """Fraction of feasible multi-starts over the hard tasks some start solved (the
+        thesis' "Avg. Feas." of Table 3.2: its dataset holds only solved tasks); NaN if
+        none."""
+        m = self.hard & self.feasible
+        if not m.any():
+            return float("nan")
+        return float(self.n_feasible_starts[m].sum() / self.n_starts[m].sum())
+
+
+def world_extent(robot: Any) -> float:
+    """Side [m] of the Table 3.2 world of ``robot``."""
+    model = get_robot(robot)
+    return float(WORLD_EXTENT.get(model.name, 1.0 if model.workspace_dim == 2 else 1.2))
+
+
+def world_for(robot: Any, world_seed: int, *, device: Any = None, **noise: Any) -> Any:
+    """The Table 3.2 simplex world of ``world_seed`` for ``robot``: ``WORLD_CELLS`` cells
+    per axis over a cube (square) of :func:`world_extent` [m] centred on the robot's
+    reach, the first seed from ``world_seed`` on with >= 200 of 1000 random
+    configurations collision-free (:func:`jwarp.world.feasibility.feasible_simplex_world`).
+    Deterministic in the seed. ``noise``: threshold, frequency, ... of the simplex noise."""
+    model = get_robot(robot)
+    if isinstance(world_seed, (bool, np.bool_)) or not isinstance(world_seed, (int, np.integer)) \
+            or world_seed < 0:
+        raise ValueError(f"world_seed: expected an integer >= 0, got {world_seed!r}")
+    return feasible_simplex_world(model, seed=int(world_seed), cells=WORLD_CELLS,
+                                  extent=world_extent(model), device=device, **noise)
+
+
+def _task_pairs(model: RobotModel, world: Any, n: int, margin: float,
+                rng: np.random.Generator, device: Any) -> tuple[np.ndarray, np.ndarray]:
+    """n collision-free (start, goal) pairs, drawn uniformly within the limits."""
+    out: list[np.ndarray] = []
+    have = 0
+    for _ in range(200):
+        q = sample_within_limits(model, max(64, 4 * (2 * n - have)), rng)
+        q = q[collision_free(model, world, q, margin, device=device)]
+        out.append(q)
+        have += len(q)
+        if have >= 2 * n:
+            q = np.concatenate(out)[:2 * n]
+            return q[0::2], q[1::2]
+    raise ValueError(f"world: fewer than {2 * n} collision-free configurations of "
+                     f"'{model.name}' found")
+
+
+def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
+                options: PlanDataOptions | None = None) -> WorldLabels:
+    """Label ``n_tasks`` random tasks of one world (module docstring).
+
+    Args:
+        robot: robot name or RobotModel.
+        world: a :class:`jwarp.world.World` of the robot (e.g. :func:`world_for`).
+        n_tasks: N, start/goal pairs (>= 1).
+        seed: integer >= 0; the tasks and the multi-starts follow from it, so the labels
+            are deterministic for (robot, world, n_tasks, seed, options) on one device.
+        options: :class:`PlanDataOptions` (None: the defaults).
+
+    Returns:
+        :class:`WorldLabels`.
+    """
+    model = get_robot(robot)
+    check_world(model, world)
+    if isinstance(n_tasks, (bool, np.bool_)) or not isinstance(n_tasks, (int, np.integer)) \
+            or n_tasks < 1:
+        raise ValueError(f"n_tasks: expected an integer >= 1, got {n_tasks!r}")
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
+    if options is None:
+        options = PlanDataOptions()
+    if not isinstance(options, PlanDataOptions):
+        raise TypeError(f"options: expected a PlanDataOptions, got {type(options).__name__}")
+    options.validate()
+    o = options
+    n_tasks = int(n_tasks)
+    dtype = numpy_dtype(scalar_type(o.dtype))
+    rng = np.random.default_rng([int(seed), 0x6A77])
+    q0, q1 = _task_pairs(model, world, n_tasks, float(o.margin), rng, o.device)
+    start_seed = int(rng.integers(0, 2**31 - 1))
+
+    line = Planner(model, world, n_tasks, o.plan_options("straight", 1, 0), device=o.device,
+                   dtype=dtype).plan(q0, q1)
+    W, n = o.n_waypoints, model.n_dof
+    paths = line.path.copy()
+    cost = line.cost.copy()
+    length = line.length_cost.copy()
+    feasible = line.feasible.copy()
+    hard = ~line.feasible
+    n_feasible = np.zeros(n_tasks, np.int64)
+    n_starts = np.zeros(n_tasks, np.int64)
+    h = np.nonzero(hard)[0]
+    if len(h):
+        res = Planner(model, world, len(h), o.plan_options("random", o.max_starts, start_seed),
+                      device=o.device, dtype=dtype).plan(q0[h], q1[h])
+        paths[h] = res.path
+        cost[h] = res.cost
+        length[h] = res.length_cost
+        feasible[h] = res.feasible
+        n_feasible[h] = res.n_feasible
+        n_starts[h] = o.max_starts
+    settings = {"robot": model.name, "n_tasks": n_tasks, "seed": int(seed),
+                "world": {k: v for k, v in world.meta.items()
+                          if isinstance(v, (int, float, str, bool))},
+                "options": asdict(o)}
+    return WorldLabels(starts=q0.astype(np.float32), goals=q1.astype(np.float32),
+                       paths=paths.reshape(n_tasks, W, n).astype(np.float32),
+                       cost=cost.astype(np.float64), feasible=feasible.astype(bool),
+                       hard=hard.astype(bool), settings=settings,
+                       length_cost=length.astype(np.float64), n_feasible_starts=n_feasible,
+                       n_starts=n_starts)
