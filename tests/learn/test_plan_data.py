@@ -1,0 +1,119 @@
+"""jwarp.learn.plan_data: Table 3.2 worlds and hard-task labels (thesis 3.5.1)."""
+
+import numpy as np
+import pytest
+
+import jwarp
+from jwarp.learn.plan_data import PlanDataOptions, WorldLabels, label_world, world_for
+from jwarp.solvers import planner as PL
+from jwarp.world import world_from_occupancy
+
+N = 64
+LIM = np.array([[-1.0, 1.0], [-1.0, 1.0]])
+H = 2.0 / (N - 1)
+FAST = PlanDataOptions(n_waypoints=12, max_starts=6, iterations=150, step=0.05,
+                       n_substeps=6)
+
+
+@pytest.fixture(scope="module")
+def world():
+    """planar4's workspace with two blocks: some straight lines cross them."""
+    xs = LIM[0, 0] + H * np.arange(N)
+    X, Y = np.meshgrid(xs, xs, indexing="ij")
+    occ = ((X > 0.5) & (X < 0.75) & (np.abs(Y) < 0.3)) | ((Y > 0.45) & (Y < 0.6) & (X < 0.2))
+    return world_from_occupancy(occ, LIM, H)
+
+
+@pytest.fixture(scope="module")
+def labels(world):
+    return label_world("planar4", world, 12, 5, FAST)
+
+
+def independent_feasible(robot, world, path):
+    n_sub = PL.substeps_for_voxel(robot, path, world.voxel_size, safety=2.0, max_substeps=256)
+    return bool(PL.path_feasible(robot, world, path, n_sub)[()])
+
+
+def test_shapes_and_settings(labels):
+    L = labels
+    assert isinstance(L, WorldLabels) and len(L) == 12
+    assert L.starts.shape == L.goals.shape == (12, 4) and L.starts.dtype == np.float32
+    assert L.paths.shape == (12, 12, 4) and L.paths.dtype == np.float32
+    for a in (L.cost, L.feasible, L.hard, L.length_cost):
+        assert a.shape == (12,)
+    assert L.feasible.dtype == bool and L.hard.dtype == bool
+    np.testing.assert_allclose(L.paths[:, 0], L.starts, atol=1e-6)
+    np.testing.assert_allclose(L.paths[:, -1], L.goals, atol=1e-6)
+    import json
+    json.dumps(L.settings)
+    assert L.settings["options"]["max_starts"] == 6 and L.settings["seed"] == 5
+    assert L.hard.any() and (~L.hard).any()  # both kinds in this world
+
+
+def test_deterministic(world, labels):
+    again = label_world("planar4", world, 12, 5, FAST)
+    for k in ("starts", "goals", "paths", "cost", "feasible", "hard"):
+        np.testing.assert_array_equal(getattr(again, k), getattr(labels, k))
+    other = label_world("planar4", world, 12, 6, FAST)
+    assert not np.array_equal(other.starts, labels.starts)
+
+
+def test_labels_feasible_by_independent_check(world, labels):
+    robot = jwarp.robot("planar4")
+    assert labels.feasible.any()
+    for i in np.nonzero(labels.feasible)[0]:
+        assert independent_feasible(robot, world, labels.paths[i].astype(np.float64)), i
+
+
+def test_easy_hard_consistent_with_straight_line(world, labels):
+    o = FAST.plan_options("straight", 1, 0)
+    line = PL.Planner("planar4", world, len(labels), o, device="cpu").plan(
+        labels.starts.astype(np.float64), labels.goals.astype(np.float64))
+    np.testing.assert_array_equal(labels.hard, ~line.feasible)
+    easy = ~labels.hard
+    assert labels.feasible[easy].all() and np.all(labels.n_starts[easy] == 0)
+    assert np.all(labels.n_starts[labels.hard] == 6)
+    assert np.all(labels.n_feasible_starts[labels.hard & ~labels.feasible] == 0)
+
+
+def test_converged_labels_shorter(world, labels):
+    from dataclasses import replace
+
+    early = label_world("planar4", world, 12, 5, replace(FAST, converge=False))
+    both = labels.feasible & early.feasible
+    assert both.any()
+    # per task another start may win (the lowest U_path), so compare the hard labels' mean
+    h = both & labels.hard
+    assert h.any()
+    assert labels.length_cost[h].mean() < early.length_cost[h].mean()
+
+
+def test_world_for_table_3_2():
+    w = world_for("planar4", 3)
+    assert w.shape == (64, 64)
+    side = (np.asarray(w.limits)[:, 1] - np.asarray(w.limits)[:, 0] + w.voxel_size)
+    np.testing.assert_allclose(side, [1.0, 1.0], rtol=1e-9)
+    assert w.meta["feasible_fraction"] >= 0.2 and w.meta["requested_seed"] == 3
+    w2 = world_for("planar4", 3)
+    np.testing.assert_array_equal(w.occupancy, w2.occupancy)
+
+
+@pytest.mark.parametrize("field,value,exc", [
+    ("n_waypoints", 2, ValueError), ("max_starts", 0, ValueError), ("iterations", 1.5, ValueError),
+    ("step", 0.0, ValueError), ("max_step", -1.0, ValueError), ("margin", float("nan"), ValueError),
+    ("converge_tol", 0.0, ValueError), ("converge", 1, TypeError), ("dtype", "int8", ValueError),
+    ("device", 3, TypeError), ("n_substeps", 0, ValueError), ("length_weight", -1.0, ValueError)])
+def test_option_errors_name_the_field(field, value, exc):
+    with pytest.raises(exc, match=field):
+        PlanDataOptions(**{field: value}).validate()
+
+
+def test_argument_errors(world):
+    with pytest.raises(ValueError, match="n_tasks"):
+        label_world("planar4", world, 0, 0, FAST)
+    with pytest.raises(ValueError, match="seed"):
+        label_world("planar4", world, 2, -1, FAST)
+    with pytest.raises(TypeError, match="options"):
+        label_world("planar4", world, 2, 0, {"max_starts": 2})
+    with pytest.raises(ValueError, match="world_seed"):
+        world_for("planar4", -1)
