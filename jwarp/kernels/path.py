@@ -369,3 +369,127 @@ def kernels(scalar: type) -> SimpleNamespace:
         path_cost=path_cost_kernel, path_grad=path_grad_kernel, path_step=path_step_kernel,
         project=project_kernel, gather=gather_kernel, keep=keep_kernel, select=select_kernel,
     )
+
+
+@functools.cache
+def cartesian_kernels(scalar: type) -> SimpleNamespace:
+    """Kernels of the Cartesian length cost (thesis eqs. 3.6-3.7) summed over every
+    collision sphere ("the motion of all body parts") at the waypoints:
+
+    ``U_c(Q) = (W - 1) / max(U_c1(q_W, q_1), norm_floor) * sum_t U_c1(q_{t+1}, q_t)`` with
+    ``U_c1(a, b) = 1/2 sum_s |x_s(a) - x_s(b)|^2`` [m^2] (x_s: sphere centres). Its gradient
+    w.r.t. an interior waypoint t is ``J_s(q_t)^T f_s`` summed over the spheres with the
+    force ``f_s = K (2 x_s(q_t) - x_s(q_{t-1}) - x_s(q_{t+1}))``, mapped onto the joints as
+    the collision kernels map their forces (subtree sums of force and moment, projected
+    on each joint axis). Waypoint frames ``frames (P * W, n_frames)`` come from the FK
+    kernel on the paths as rows ``p * W + t``.
+    """
+    from jwarp.kernels import fk as fk_kernels
+
+    fk = fk_kernels.kernels(scalar)
+    vec3, mat44, FrameTables = fk.vec3, fk.mat44, fk.FrameTables
+    zero = scalar(0.0)
+    half = scalar(0.5)
+
+    @wp.func
+    def centre(frames: wp.array2d(dtype=mat44), row: int, f: int, pos: vec3) -> vec3:
+        T = frames[row, f]
+        return vec3(T[0, 0] * pos[0] + T[0, 1] * pos[1] + T[0, 2] * pos[2] + T[0, 3],
+                    T[1, 0] * pos[0] + T[1, 1] * pos[1] + T[1, 2] * pos[2] + T[1, 3],
+                    T[2, 0] * pos[0] + T[2, 1] * pos[1] + T[2, 2] * pos[2] + T[2, 3])
+
+    @wp.func
+    def scale(xs: wp.array2d(dtype=vec3), p: int, W: int, norm_floor: scalar) -> scalar:
+        """K = (W - 1) / max(U_c1(q_W, q_1), norm_floor) of path p."""
+        d2 = zero
+        for s in range(xs.shape[1]):
+            d = xs[p * W + W - 1, s] - xs[p * W, s]
+            d2 += wp.dot(d, d)
+        return scalar(W - 1) / wp.max(half * d2, norm_floor)
+
+    @wp.kernel(module="unique")
+    def centres_kernel(
+        frames: wp.array2d(dtype=mat44),
+        sph_frame: wp.array(dtype=wp.int32),
+        sph_pos: wp.array(dtype=vec3),
+        xs: wp.array2d(dtype=vec3),
+    ):
+        """Sphere centres xs (P * W, n_spheres) [m]. Launch dim (P * W, n_spheres)."""
+        r, s = wp.tid()
+        xs[r, s] = centre(frames, r, sph_frame[s], sph_pos[s])
+
+    @wp.kernel(module="unique")
+    def cost_kernel(
+        xs: wp.array2d(dtype=vec3),
+        W: int,
+        lam_c: scalar,
+        norm_floor: scalar,
+        cart: wp.array(dtype=scalar),
+        total: wp.array(dtype=scalar),
+    ):
+        """cart[p] = U_c (unweighted) and total[p] += lam_c U_c. Launch dim P."""
+        p = wp.tid()
+        k = scale(xs, p, W, norm_floor)
+        u = zero
+        for t in range(W - 1):
+            for s in range(xs.shape[1]):
+                d = xs[p * W + t + 1, s] - xs[p * W + t, s]
+                u += half * wp.dot(d, d)
+        cart[p] = k * u
+        total[p] = total[p] + lam_c * k * u
+
+    @wp.kernel(module="unique")
+    def grad_kernel(
+        frames: wp.array2d(dtype=mat44),
+        xs: wp.array2d(dtype=vec3),
+        W: int,
+        n_sub: int,
+        lam_c: scalar,
+        norm_floor: scalar,
+        model: FrameTables,
+        sph_frame: wp.array(dtype=wp.int32),
+        force: wp.array2d(dtype=vec3),
+        moment: wp.array2d(dtype=vec3),
+        sub_grad: wp.array2d(dtype=scalar),
+    ):
+        """Adds lam_c dU_c/dq_t to the substep gradient row ``p * S + t * n_sub`` of every
+        interior waypoint t (that row enters waypoint t's gradient with weight 1 and no
+        other waypoint's). Launch dim (P, W); scratch force, moment (P * W, n_frames)."""
+        p, t = wp.tid()
+        if t == 0 or t == W - 1:
+            return
+        r = p * W + t
+        nf = model.order.shape[0]
+        for i in range(nf):
+            force[r, i] = vec3(zero, zero, zero)
+            moment[r, i] = vec3(zero, zero, zero)
+        k = lam_c * scale(xs, p, W, norm_floor)
+        for s in range(xs.shape[1]):
+            x = xs[r, s]
+            f = k * (scalar(2.0) * x - xs[r - 1, s] - xs[r + 1, s])
+            fr = sph_frame[s]
+            force[r, fr] = force[r, fr] + f
+            moment[r, fr] = moment[r, fr] + wp.cross(x, f)
+        for kk in range(nf):  # subtree sums, leaves to root
+            i = model.order[nf - 1 - kk]
+            pi = model.parent[i]
+            if pi >= 0:
+                force[r, pi] = force[r, pi] + force[r, i]
+                moment[r, pi] = moment[r, pi] + moment[r, i]
+        S = (W - 1) * n_sub + 1
+        row = p * S + t * n_sub
+        for i in range(nf):
+            m0 = model.cpl_start[i]
+            m1 = model.cpl_start[i + 1]
+            if m1 > m0:
+                T = frames[r, i]
+                z = vec3(T[0, 2], T[1, 2], T[2, 2])
+                F = force[r, i]
+                gi = wp.dot(z, F)
+                if model.prismatic[i] == 0:
+                    gi = wp.dot(z, moment[r, i] - wp.cross(vec3(T[0, 3], T[1, 3], T[2, 3]), F))
+                for m in range(m0, m1):
+                    jm = model.cpl_joint[m]
+                    sub_grad[row, jm] = sub_grad[row, jm] + model.cpl_coef[m] * gi
+
+    return SimpleNamespace(fk=fk, centres=centres_kernel, cost=cost_kernel, grad=grad_kernel)

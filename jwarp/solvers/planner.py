@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
+from types import SimpleNamespace
 from typing import Any, Callable
 
 import numpy as np
@@ -60,14 +61,18 @@ ELASTIC_CHECK = {"lam": 0.7, "max_iter": 30, "tol": 1e-7}
 
 @dataclass
 class PathWeights:
-    """Weights of eq. 3.16: world collision, self-collision and length."""
+    """Weights of eq. 3.16: world collision, self-collision and length (joint space, eq.
+    3.5); ``cartesian``: the Cartesian length cost (eqs. 3.6-3.7, the motion of every
+    collision sphere between waypoints, normalised by the direct start-goal motion; rigid
+    kinematics), 0 (default) leaves it out."""
 
     world: float = 1.0
     self: float = 1.0
     length: float = 0.01
+    cartesian: float = 0.0
 
     def validate(self) -> None:
-        for k in ("world", "self", "length"):
+        for k in ("world", "self", "length", "cartesian"):
             v = getattr(self, k)
             if not (math.isfinite(real_number(v, f"weights.{k}")) and v >= 0):
                 raise ValueError(f"weights.{k}: expected a finite number >= 0, got {v!r}")
@@ -397,6 +402,18 @@ class PathObjective:
         if kappa is not None:
             self.compensation = CompensationRows(tables(self.robot, dev, self.npdt), self.P,
                                                  self.W, self.n_sub, kappa, lam)
+        #: Cartesian length cost U_c (P,) (eq. 3.7, unweighted; zeros without it)
+        self.cartesian = wp.zeros(self.P, dtype=sc, device=dev)
+        self._cart = None
+        if self.weights.cartesian > 0 and self.cm.n_spheres:
+            ck = path_kernels.cartesian_kernels(sc)
+            nf, PW = self.robot.n_frames, self.P * self.W
+            self._cart = SimpleNamespace(
+                k=ck, frames=wp.zeros((PW, nf), dtype=ck.fk.mat44, device=dev),
+                xs=wp.zeros((PW, self.cm.n_spheres), dtype=ck.fk.vec3, device=dev),
+                force=wp.zeros((PW, nf), dtype=ck.fk.vec3, device=dev),
+                moment=wp.zeros((PW, nf), dtype=ck.fk.vec3, device=dev),
+                rows=self.cm.dh_rows(None, PW))
 
     # ------------------------------------------------------------------ state
     def set_paths(self, paths: np.ndarray) -> None:
@@ -436,6 +453,28 @@ class PathObjective:
                   inputs=[self.paths, self.sub_cost, self.n_sub, self.scalar(w.length),
                           self.scalar(NORM_FLOOR)],
                   outputs=[self.length, self.collision, self.total, self.sub_max], device=dev)
+        if self._cart is not None:
+            self._cartesian_length(grad)
+
+    def _cartesian_length(self, grad: bool) -> None:
+        """U_c (eq. 3.7) into ``cartesian`` and ``total``; with ``grad`` its gradient into
+        the waypoint rows of ``sub_grad`` (rigid frames at the waypoints)."""
+        c, dev, PW = self._cart, self.device, self.P * self.W
+        lam = self.scalar(self.weights.cartesian)
+        floor = self.scalar(NORM_FLOOR * 1e-2)  # [m^2]
+        wp.launch(c.k.fk.fk, dim=PW, inputs=[self.paths.reshape((PW, self.n)), *c.rows.args,
+                                             self.cm.model.frame_struct],
+                  outputs=[c.frames], device=dev)
+        wp.launch(c.k.centres, dim=(PW, self.cm.n_spheres),
+                  inputs=[c.frames, self.cm.sph_frame, self.cm.sph_pos], outputs=[c.xs],
+                  device=dev)
+        wp.launch(c.k.cost, dim=self.P, inputs=[c.xs, self.W, lam, floor],
+                  outputs=[self.cartesian, self.total], device=dev)
+        if grad:
+            wp.launch(c.k.grad, dim=(self.P, self.W),
+                      inputs=[c.frames, c.xs, self.W, self.n_sub, lam, floor,
+                              self.cm.model.frame_struct, self.cm.sph_frame, c.force, c.moment],
+                      outputs=[self.sub_grad], device=dev)
 
     def gradient(self) -> wp.array:
         """dU_path/dQ (P, W, n_dof) of the last :meth:`evaluate` (zero at start/goal)."""

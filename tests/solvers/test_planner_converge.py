@@ -80,3 +80,63 @@ def test_default_unchanged(block_world):
 def test_option_errors_name_the_field(field, value, exc):
     with pytest.raises(exc, match=field):
         PL.PlanOptions(**{field: value}).validate()
+
+
+# ---------------------------------------------------------------- Cartesian length cost
+def cartesian_reference(robot, Q):
+    """Eq. 3.7 summed over every collision sphere, in numpy (host FK)."""
+    P, W, n = Q.shape
+    x = PL.sphere_centres(robot, Q.reshape(-1, n)).reshape(P, W, -1, 3)
+    step = 0.5 * (np.diff(x, axis=1) ** 2).sum((-1, -2, -3))
+    direct = 0.5 * ((x[:, -1] - x[:, 0]) ** 2).sum((-1, -2))
+    return (W - 1) * step / direct
+
+
+@pytest.mark.parametrize("name", ["planar4", "arm7", "justin19"])
+def test_cartesian_length_value_and_gradient(name):
+    robot = jwarp.robot(name)
+    rng = np.random.default_rng(1)
+    lim = robot.joint_limits
+    s = rng.uniform(lim[:, 0], lim[:, 1]) * 0.5
+    g = rng.uniform(lim[:, 0], lim[:, 1]) * 0.5
+    Q = np.repeat(PL.initial_paths(s[None], g[None], 5, "straight"), 2, 0)
+    Q[:, 1:-1] += rng.normal(scale=0.1, size=Q[:, 1:-1].shape)
+    d = robot.workspace_dim
+    occ = np.zeros((8,) * d, bool)  # an empty world: only the length terms
+    from jwarp.world import world_from_occupancy
+    world = world_from_occupancy(occ, np.array([[-3.0, 3.0]] * d), 6.0 / 7)
+    w = PL.PathWeights(world=0.0, self=0.0, length=0.0, cartesian=0.7)
+    obj = PL.PathObjective(robot, world, 2, 5, 2, weights=w, device="cpu", dtype=np.float64)
+    u, grad = obj.value_and_grad(Q)
+    ref = cartesian_reference(robot, Q)
+    np.testing.assert_allclose(obj.cartesian.numpy(), ref, rtol=1e-10)
+    np.testing.assert_allclose(u, 0.7 * ref, rtol=1e-10)
+    h = 1e-6
+    fd = np.zeros_like(Q)
+    for t in range(1, 4):
+        for j in range(robot.n_dof):
+            Qp, Qm = Q.copy(), Q.copy()
+            Qp[:, t, j] += h
+            Qm[:, t, j] -= h
+            fd[:, t, j] = (obj.value_and_grad(Qp)[0] - obj.value_and_grad(Qm)[0]) / (2 * h)
+    np.testing.assert_allclose(grad, fd, atol=1e-6 * np.abs(fd).max(), rtol=1e-5)
+    assert np.all(grad[:, [0, -1]] == 0)
+
+
+def test_cartesian_weight_default_zero(block_world):
+    assert PL.PathWeights().cartesian == 0.0
+    with pytest.raises(ValueError, match="weights.cartesian"):
+        PL.PathWeights(cartesian=-1.0).validate()
+
+
+def test_cartesian_length_shortens_workspace_motion(block_world):
+    """Planning with the Cartesian term gives paths whose spheres move less."""
+    robot = jwarp.robot("planar4")
+    plain = run(block_world, True)
+    cart = PL.Planner(robot, block_world, 1, PL.PlanOptions(
+        initial="mixed", n_starts=8, iterations=300, step=0.05, seed=0, n_substeps=8,
+        converge=True, weights=PL.PathWeights(length=0.05, cartesian=0.05)),
+        device="cpu").plan(START, GOAL)
+    assert cart.feasible[0]
+    assert independent_feasible(robot, block_world, cart.path[0])
+    assert cartesian_reference(robot, cart.path) < cartesian_reference(robot, plain.path)
