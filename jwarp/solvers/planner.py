@@ -277,6 +277,18 @@ def substeps_for_voxel(robot: RobotModel, paths: Any, voxel_size: float, *,
     voxel_size = real_number(voxel_size, "voxel_size")
     if not (voxel_size > 0 and math.isfinite(voxel_size)):
         raise ValueError(f"voxel_size: expected a number > 0 [m], got {voxel_size!r}")
+    return int(substeps_per_path(robot, paths, voxel_size, safety=safety,
+                                 max_substeps=max_substeps, device=device).max(initial=1))
+
+
+def substeps_per_path(robot: RobotModel, paths: Any, voxel_size: float, *,
+                      safety: float = 1.0, max_substeps: int = 64, device: Any = None
+                      ) -> np.ndarray:
+    """:func:`substeps_for_voxel` of each path of ``paths`` (..., W, n_dof) on its own:
+    (P,) int, P the number of paths (one FK call for all of them)."""
+    voxel_size = real_number(voxel_size, "voxel_size")
+    if not (voxel_size > 0 and math.isfinite(voxel_size)):
+        raise ValueError(f"voxel_size: expected a number > 0 [m], got {voxel_size!r}")
     a = real_array(paths, "paths")
     W, n = a.shape[-2:]
     fine = 16
@@ -287,10 +299,11 @@ def substeps_for_voxel(robot: RobotModel, paths: Any, voxel_size: float, *,
     P = q.shape[0]
     x = sphere_centres(robot, q.reshape(-1, n), device=device).reshape(P, q.shape[1], -1, 3)
     if x.shape[2] == 0:
-        return 1
+        return np.ones(P, np.int64)
     step = np.linalg.norm(np.diff(x, axis=1), axis=-1)       # (P, S-1, n_spheres)
-    seg = step.reshape(P, W - 1, fine, -1).sum(axis=2).max()  # longest sphere arc per segment
-    return int(np.clip(math.ceil(seg * safety / voxel_size), 1, max_substeps))
+    # longest sphere arc per segment, per path
+    seg = step.reshape(P, W - 1, fine, -1).sum(axis=2).max(axis=(1, 2))
+    return np.clip(np.ceil(seg * safety / voxel_size), 1, max_substeps).astype(np.int64)
 
 
 def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: str = "straight",
@@ -935,13 +948,15 @@ class Planner:
         # the paths moved since n_substeps was chosen: re-check the survivors at substeps
         # sized to their own segments (no sphere centre moves more than half a voxel per
         # substep)
-        for i in np.nonzero(ok)[0]:
-            need = substeps_for_voxel(self.robot, paths[i], float(self.world.voxel_size),
-                                      safety=SWEEP_SAFETY, max_substeps=MAX_CHECK_SUBSTEPS,
-                                      device=dev)
-            if need > obj.n_sub:
-                ok[i] = path_feasible(self.robot, self.world, paths[i], need, margin=o.margin,
-                                      kappa=o.kappa, device=dev)
+        surv = np.nonzero(ok)[0]
+        if len(surv):  # every survivor's own count, checked in one call per count
+            need = substeps_per_path(self.robot, paths[surv], float(self.world.voxel_size),
+                                     safety=SWEEP_SAFETY, max_substeps=MAX_CHECK_SUBSTEPS,
+                                     device=dev)
+            for k in np.unique(need[need > obj.n_sub]):
+                sel = surv[need == k]
+                ok[sel] = path_feasible(self.robot, self.world, paths[sel], int(k),
+                                        margin=o.margin, kappa=o.kappa, device=dev)
         return ok
 
     def _keep(self, buf: _Buffers, idx: np.ndarray) -> None:
