@@ -38,7 +38,6 @@ if hasattr(wp.config, "quiet"):
 
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.learn.plan_data import PlanDataOptions, label_world, world_for  # noqa: E402
-from jwarp.world.feasibility import feasible_simplex_world  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
@@ -53,10 +52,9 @@ def options(args: argparse.Namespace) -> PlanDataOptions:
                            device=args.device)
 
 
-def make_world(robot: str, seed: int, kind: str, device: str):
-    if kind == "table":
-        return world_for(robot, seed, device=device)
-    return feasible_simplex_world(robot, seed=seed, device=device)
+def make_world(robot: str, seed: int, kind: str, device: str, frequency: float):
+    return world_for(robot, seed, device=device, extent=None if kind == "table" else "reach",
+                     frequency=frequency)
 
 
 def bench_fidelity(args: argparse.Namespace) -> dict:
@@ -67,7 +65,7 @@ def bench_fidelity(args: argparse.Namespace) -> dict:
         tasks = hard = solved = 0
         rates_solved, rates_all, lengths = [], [], []
         for k in range(args.worlds):
-            world = make_world(name, 1000 * k, args.world, args.device)
+            world = make_world(name, 1000 * k, args.world, args.device, args.frequency)
             lab = label_world(name, world, args.tasks, k, o)
             tasks += len(lab)
             h = lab.hard
@@ -78,7 +76,8 @@ def bench_fidelity(args: argparse.Namespace) -> dict:
             rates_solved += list(r[lab.feasible[h]])
             lengths += list(lab.length_cost[h & lab.feasible])
         phi, u = THESIS.get(name, (None, None))
-        fig = {"worlds": args.worlds, "world": args.world, "tasks": tasks, "hard": hard,
+        fig = {"worlds": args.worlds, "world": args.world, "frequency": args.frequency,
+               "tasks": tasks, "hard": hard,
                "hard_solved": solved, "starts": args.starts,
                "single_start_rate_solved_pct": 100 * float(np.mean(rates_solved))
                if rates_solved else None,
@@ -96,7 +95,7 @@ def bench_fidelity(args: argparse.Namespace) -> dict:
 def bench_speed(args: argparse.Namespace) -> dict:
     o = options(args)
     name = args.speed_robot
-    world = make_world(name, 0, args.world, args.device)
+    world = make_world(name, 0, args.world, args.device, args.frequency)
     label_world(name, world, 2, 99, PlanDataOptions(max_starts=2, iterations=2,
                                                     device=args.device))  # compile, warm up
     wp.synchronize_device(args.device)
@@ -127,6 +126,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--step", type=float, default=0.01)
     p.add_argument("--world", choices=("table", "reach"), default="table",
                    help="Table 3.2 worlds (world_for) or grids fitted to the robot's reach")
+    p.add_argument("--frequency", type=float, default=2.0,
+                   help="simplex noise periods across the world (2: the simplex default)")
     p.add_argument("--speed-robot", default="justin19")
     p.add_argument("--repeats", type=int, default=3, help="timed runs of the speed section")
     timing.section_options(p, "fidelity,speed")

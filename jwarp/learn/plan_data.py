@@ -160,18 +160,28 @@ def world_extent(robot: Any) -> float:
     return float(WORLD_EXTENT.get(model.name, 1.0 if model.workspace_dim == 2 else 1.2))
 
 
-def world_for(robot: Any, world_seed: int, *, device: Any = None, **noise: Any) -> Any:
+def world_for(robot: Any, world_seed: int, *, device: Any = None, extent: Any = None,
+              **noise: Any) -> Any:
     """The Table 3.2 simplex world of ``world_seed`` for ``robot``: ``WORLD_CELLS`` cells
     per axis over a cube (square) of :func:`world_extent` [m] centred on the robot's
     reach, the first seed from ``world_seed`` on with >= 200 of 1000 random
     configurations collision-free (:func:`jwarp.world.feasibility.feasible_simplex_world`).
-    Deterministic in the seed. ``noise``: threshold, frequency, ... of the simplex noise."""
+    Deterministic in the seed. ``extent``: another side [m], or "reach" for the grid
+    fitted to the robot's reach (the longest side ``WORLD_CELLS`` cells). ``noise``:
+    threshold, frequency, ... of the simplex noise (defaults of
+    :func:`jwarp.world.simplex.simplex_world`)."""
     model = get_robot(robot)
     if isinstance(world_seed, (bool, np.bool_)) or not isinstance(world_seed, (int, np.integer)) \
             or world_seed < 0:
         raise ValueError(f"world_seed: expected an integer >= 0, got {world_seed!r}")
+    if isinstance(extent, str):
+        if extent != "reach":
+            raise ValueError(f"extent: expected a side [m], None or 'reach', got {extent!r}")
+        extent = None
+    else:
+        extent = world_extent(model) if extent is None else extent
     return feasible_simplex_world(model, seed=int(world_seed), cells=WORLD_CELLS,
-                                  extent=world_extent(model), device=device, **noise)
+                                  extent=extent, device=device, **noise)
 
 
 def _task_pairs(model: RobotModel, world: Any, n: int, margin: float,

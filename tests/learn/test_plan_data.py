@@ -117,3 +117,14 @@ def test_argument_errors(world):
         label_world("planar4", world, 2, 0, {"max_starts": 2})
     with pytest.raises(ValueError, match="world_seed"):
         world_for("planar4", -1)
+
+
+def test_world_for_reach_grid_and_extent_errors():
+    w = world_for("planar4", 3, extent="reach", frequency=1.0)
+    assert max(w.shape) == 64 and w.meta["frequency"] == 1.0
+    side = np.asarray(w.limits)[:, 1] - np.asarray(w.limits)[:, 0]
+    assert side.max() > 1.5  # planar4 reaches 1 m: the fitted grid is about 2 m wide
+    with pytest.raises(ValueError, match="extent"):
+        world_for("planar4", 3, extent="table")
+    with pytest.raises(ValueError, match="extent"):
+        world_for("planar4", 3, extent=-1.0)
