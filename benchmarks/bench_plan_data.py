@@ -52,9 +52,10 @@ def options(args: argparse.Namespace) -> PlanDataOptions:
                            device=args.device)
 
 
-def make_world(robot: str, seed: int, kind: str, device: str, frequency: float):
-    return world_for(robot, seed, device=device, extent=None if kind == "table" else "reach",
-                     frequency=frequency)
+def make_world(robot: str, seed: int, args: argparse.Namespace):
+    return world_for(robot, seed, device=args.device,
+                     extent=None if args.world == "table" else "reach",
+                     frequency=args.frequency, threshold=args.threshold)
 
 
 def bench_fidelity(args: argparse.Namespace) -> dict:
@@ -65,7 +66,7 @@ def bench_fidelity(args: argparse.Namespace) -> dict:
         tasks = hard = solved = 0
         rates_solved, rates_all, lengths = [], [], []
         for k in range(args.worlds):
-            world = make_world(name, 1000 * k, args.world, args.device, args.frequency)
+            world = make_world(name, 1000 * k, args)
             lab = label_world(name, world, args.tasks, k, o)
             tasks += len(lab)
             h = lab.hard
@@ -77,6 +78,7 @@ def bench_fidelity(args: argparse.Namespace) -> dict:
             lengths += list(lab.length_cost[h & lab.feasible])
         phi, u = THESIS.get(name, (None, None))
         fig = {"worlds": args.worlds, "world": args.world, "frequency": args.frequency,
+               "threshold": args.threshold,
                "tasks": tasks, "hard": hard,
                "hard_solved": solved, "starts": args.starts,
                "single_start_rate_solved_pct": 100 * float(np.mean(rates_solved))
@@ -95,7 +97,7 @@ def bench_fidelity(args: argparse.Namespace) -> dict:
 def bench_speed(args: argparse.Namespace) -> dict:
     o = options(args)
     name = args.speed_robot
-    world = make_world(name, 0, args.world, args.device, args.frequency)
+    world = make_world(name, 0, args)
     label_world(name, world, 2, 99, PlanDataOptions(max_starts=2, iterations=2,
                                                     device=args.device))  # compile, warm up
     wp.synchronize_device(args.device)
@@ -128,6 +130,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="Table 3.2 worlds (world_for) or grids fitted to the robot's reach")
     p.add_argument("--frequency", type=float, default=2.0,
                    help="simplex noise periods across the world (2: the simplex default)")
+    p.add_argument("--threshold", type=float, default=0.6,
+                   help="simplex occupancy threshold (lower: more obstacles; 0.6 the default)")
     p.add_argument("--speed-robot", default="justin19")
     p.add_argument("--repeats", type=int, default=3, help="timed runs of the speed section")
     timing.section_options(p, "fidelity,speed")
