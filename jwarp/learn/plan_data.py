@@ -54,12 +54,15 @@ class PlanDataOptions:
             waypoint per step [rad], > 0.
         n_substeps: substeps per segment (None: sized to the world's voxel per call).
         check_all_every: exact feasibility checks every this many iterations, >= 1.
-        length_weight: lam_l of eq. 3.16 (world and self-collision weights are 1), >= 0;
-            0.1, not the planner's 0.01: with 0.01 converging hardly shortens the paths
-            (measured on planar4: hard labels' U_l 1.84/2.54/3.16 early-stopped vs
-            1.80/2.53/3.18 converged; with 0.1: 1.60/2.16/2.36).
+        length_weight: lam_l of eq. 3.16 while converging the feasible paths (world and
+            self-collision weights are 1), >= 0; the search uses the planner's 0.01. 0.1:
+            with 0.01 converging hardly shortens the paths (planar4: hard labels' U_l
+            1.84/2.54/3.16 early-stopped vs 1.80/2.53/3.18 converged; with 0.1:
+            1.60/2.16/2.36), and searching with 0.1 finds far fewer feasible paths.
         margin: required clearance [m] of the labels, >= 0.
-        converge: keep optimizing feasible paths until the length cost converges.
+        converge: converge the feasible paths (the best ``refine`` of each task) until
+            the length cost settles; False: the labels are the early-stopped paths.
+        refine: feasible multi-starts per hard task converged for its label, >= 1.
         converge_tol: relative change of U_l between checks that counts as converged.
         device: Warp device of the optimisation ("cpu", "cuda", "cuda:0", ...).
         dtype: "float32" or "float64", the optimisation's float type.
@@ -75,13 +78,14 @@ class PlanDataOptions:
     length_weight: float = 0.1
     margin: float = 0.0
     converge: bool = True
+    refine: int = 4
     converge_tol: float = 1e-4
     device: str = "cpu"
     dtype: str = "float32"
 
     def validate(self) -> None:
         for name, lo in (("n_waypoints", 3), ("max_starts", 1), ("iterations", 1),
-                         ("check_all_every", 1)):
+                         ("check_all_every", 1), ("refine", 1)):
             v = getattr(self, name)
             if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
                 raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
@@ -104,14 +108,18 @@ class PlanDataOptions:
         if self.dtype not in ("float32", "float64"):
             raise ValueError(f"dtype: expected 'float32' or 'float64', got {self.dtype!r}")
 
-    def plan_options(self, initial: str, n_starts: int, seed: int) -> PlanOptions:
-        """The :class:`PlanOptions` of one stage (straight line or multi-starts)."""
+    def plan_options(self, initial: str, n_starts: int, seed: int,
+                     refine: bool = False) -> PlanOptions:
+        """The :class:`PlanOptions` of one stage: the search (straight line or
+        multi-starts: the planner's length weight, each path stopping once feasible) or,
+        with ``refine``, the convergence of feasible seeds (``length_weight``,
+        ``converge``)."""
+        w = PathWeights(length=float(self.length_weight)) if refine else PathWeights()
         return PlanOptions(n_starts=n_starts, initial=initial, n_waypoints=self.n_waypoints,
                            n_substeps=self.n_substeps, iterations=self.iterations,
-                           step=self.step, max_step=self.max_step,
-                           weights=PathWeights(length=float(self.length_weight)),
+                           step=self.step, max_step=self.max_step, weights=w,
                            margin=float(self.margin), check_all_every=self.check_all_every,
-                           converge=bool(self.converge), converge_tol=float(self.converge_tol),
+                           converge=bool(refine), converge_tol=float(self.converge_tol),
                            seed=int(seed))
 
 
@@ -245,6 +253,7 @@ def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
     hard = ~line.feasible
     n_feasible = np.zeros(n_tasks, np.int64)
     n_starts = np.zeros(n_tasks, np.int64)
+    seeds = [paths[i:i + 1] for i in range(n_tasks)]  # feasible paths to converge
     h = np.nonzero(hard)[0]
     if len(h):
         res = Planner(model, world, len(h), o.plan_options("random", o.max_starts, start_seed),
@@ -255,6 +264,15 @@ def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
         feasible[h] = res.feasible
         n_feasible[h] = res.n_feasible
         n_starts[h] = o.max_starts
+        if o.converge and res.feasible.any():
+            allp, fz = res.all_paths, res.all_feasible
+            for k, i in enumerate(h):
+                f = np.nonzero(fz[k])[0]
+                if len(f):  # the shortest feasible starts (joint-space U_l)
+                    lk = 0.5 * (np.diff(allp[k, f], axis=1) ** 2).sum((1, 2))
+                    seeds[i] = allp[k, f[np.argsort(lk, kind="stable")[:o.refine]]]
+    if o.converge:
+        _refine(model, world, o, dtype, q0, q1, seeds, feasible, paths, cost, length)
     settings = {"robot": model.name, "n_tasks": n_tasks, "seed": int(seed),
                 "world": {k: v for k, v in world.meta.items()
                           if isinstance(v, (int, float, str, bool))},
@@ -265,3 +283,26 @@ def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
                        hard=hard.astype(bool), settings=settings,
                        length_cost=length.astype(np.float64), n_feasible_starts=n_feasible,
                        n_starts=n_starts)
+
+
+def _refine(model: RobotModel, world: Any, o: PlanDataOptions, dtype: Any, q0: np.ndarray,
+            q1: np.ndarray, seeds: list, feasible: np.ndarray, paths: np.ndarray,
+            cost: np.ndarray, length: np.ndarray) -> None:
+    """Converge the feasible seeds of every solved task (one batch, ``o.refine`` seeds a
+    task, fewer repeated) and keep per task the best converged feasible path (lowest
+    U_path with ``length_weight``, i.e. about the shortest) where its U_l is below the
+    search's. ``cost`` becomes its U_path with the search's weights (arrays updated in
+    place)."""
+    idx = np.nonzero(feasible)[0]
+    if not len(idx):
+        return
+    K = o.refine
+    batch = np.stack([np.concatenate([seeds[i]] * K)[:K] for i in idx])  # (B, K, W, n)
+    res = Planner(model, world, len(idx), o.plan_options("random", K, 0, refine=True),
+                  device=o.device, dtype=dtype).plan(q0[idx], q1[idx], seeds=batch)
+    lam = PathWeights().length
+    better = res.feasible & (res.length_cost <= length[idx])
+    i = idx[better]
+    paths[i] = res.path[better]
+    length[i] = res.length_cost[better]
+    cost[i] = res.collision_cost[better] + lam * res.length_cost[better]

@@ -884,6 +884,7 @@ class Planner:
         path whose U_l changed by <= ``converge_tol`` (relative) since its last kept
         iterate is done. A feasible path that left feasibility goes on; its last feasible
         iterate stays kept."""
+        last = last or it == 0  # converge: every path is checked once at the start
         cand = np.nonzero(~done & np.where(feasible, last, screened | last))[0]
         if not len(cand):
             return
