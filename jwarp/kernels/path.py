@@ -492,4 +492,24 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
                     jm = model.cpl_joint[m]
                     sub_grad[row, jm] = sub_grad[row, jm] + model.cpl_coef[m] * gi
 
-    return SimpleNamespace(fk=fk, centres=centres_kernel, cost=cost_kernel, grad=grad_kernel)
+    @wp.kernel(module="unique")
+    def arcs_kernel(
+        xs: wp.array2d(dtype=vec3),
+        S: int,
+        fine: int,
+        arc: wp.array(dtype=scalar),
+    ):
+        """The longest sphere arc of each path (the sweep check's substep count):
+        ``arc[p] = max over segments t and spheres s of sum_k |x_s(row k+1) - x_s(row k)|``
+        over the ``fine`` rows of segment t, rows ``p * S + t * fine + k`` of ``xs`` (S rows
+        per path: W - 1 segments of ``fine`` rows and the last waypoint). ``arc`` must be
+        zero before. Launch dim (P, W - 1, n_spheres)."""
+        p, t, s = wp.tid()
+        base = p * S + t * fine
+        a = zero
+        for k in range(fine):
+            a += wp.length(xs[base + k + 1, s] - xs[base + k, s])
+        wp.atomic_max(arc, p, a)
+
+    return SimpleNamespace(fk=fk, centres=centres_kernel, cost=cost_kernel, grad=grad_kernel,
+                           arcs=arcs_kernel)

@@ -296,14 +296,34 @@ def substeps_per_path(robot: RobotModel, paths: Any, voxel_size: float, *,
     u = np.arange(fine)[:, None] / fine
     q = (flat[:, :-1, None] + u * np.diff(flat, axis=1)[:, :, None]).reshape(len(flat), -1, n)
     q = np.concatenate([q, flat[:, -1:]], axis=1)            # (P, (W-1)*16+1, n)
-    P = q.shape[0]
-    x = sphere_centres(robot, q.reshape(-1, n), device=device).reshape(P, q.shape[1], -1, 3)
-    if x.shape[2] == 0:
-        return np.ones(P, np.int64)
-    step = np.linalg.norm(np.diff(x, axis=1), axis=-1)       # (P, S-1, n_spheres)
-    # longest sphere arc per segment, per path
-    seg = step.reshape(P, W - 1, fine, -1).sum(axis=2).max(axis=(1, 2))
+    seg = _longest_arcs(get_robot(robot), q, fine, device)   # per path, on the device
     return np.clip(np.ceil(seg * safety / voxel_size), 1, max_substeps).astype(np.int64)
+
+
+def _longest_arcs(robot: RobotModel, q: np.ndarray, fine: int, device: Any) -> np.ndarray:
+    """Per path of ``q`` (P, S, n_dof) (S = (W - 1) fine + 1 rows): the longest arc of a
+    sphere centre over one segment [m] (float64 FK, sphere centres and the sums in three
+    launches on ``device``; no spheres: 0)."""
+    P, S, n = q.shape
+    init_warp()
+    dev = resolve_device(device)
+    m = tables(robot, dev, np.float64)
+    sph = m.spheres
+    if sph.n_spheres == 0 or S < 2:
+        return np.zeros(P)
+    from jwarp.kinematics.launch import launch_fk
+
+    k = path_kernels.cartesian_kernels(wp.float64)
+    N = P * S
+    frames = launch_fk(m, wp.array(np.ascontiguousarray(q.reshape(N, n), np.float64),
+                                   dtype=wp.float64, device=dev))
+    xs = wp.empty((N, sph.n_spheres), dtype=k.fk.vec3, device=dev)
+    wp.launch(k.centres, dim=(N, sph.n_spheres), inputs=[frames, sph.sph_frame, sph.sph_pos],
+              outputs=[xs], device=dev)
+    arc = wp.zeros(P, dtype=wp.float64, device=dev)
+    wp.launch(k.arcs, dim=(P, (S - 1) // fine, sph.n_spheres), inputs=[xs, S, fine],
+              outputs=[arc], device=dev)
+    return arc.numpy()
 
 
 def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: str = "straight",
