@@ -29,28 +29,22 @@ from jwarp.learn.encoding import JointCodec, feature_size, frame_features, frame
 from jwarp.registry import robot as get_robot
 from jwarp.world.feasibility import robot_reach
 
-__all__ = ["IKNetConfig", "IKNet", "DenseBlock", "world_key"]
+__all__ = ["IKNetConfig", "IKNet", "DenseBlock", "NetConfig", "world_key"]
 
 
-@dataclass
-class IKNetConfig:
-    """What an :class:`IKNet` is: robot name, end-effector frame, BPS size (0: the
-    world-unaware network), hidden width, number of dense blocks (2 layers each), twin
-    heads, unit-vector output."""
+class NetConfig:
+    """Shared behaviour of the network configurations (dataclasses): ``to_dict``,
+    ``from_dict`` (ValueError naming unknown fields) and ``validate``, which checks that
+    ``robot`` is a name and that each field of :attr:`INT_FIELDS` ((name, lower bound))
+    is an integer at or above its bound (errors name the field)."""
 
-    robot: str = "planar5"
-    frame: str | int = "tcp"
-    n_bps: int = 0
-    hidden: int = 128
-    n_blocks: int = 3
-    twin: bool = True
-    unit_vectors: bool = True
+    INT_FIELDS: tuple = ()
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict) -> "IKNetConfig":
+    def from_dict(cls, d: dict) -> Any:
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = set(d) - names
         if unknown:
@@ -60,10 +54,27 @@ class IKNetConfig:
     def validate(self) -> None:
         if not isinstance(self.robot, str):
             raise TypeError(f"robot: expected a robot name, got {type(self.robot).__name__}")
-        for name, lo in (("n_bps", 0), ("hidden", 1), ("n_blocks", 1)):
+        for name, lo in self.INT_FIELDS:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
                 raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+
+
+@dataclass
+class IKNetConfig(NetConfig):
+    """What an :class:`IKNet` is: robot name, end-effector frame, BPS size (0: the
+    world-unaware network), hidden width, number of dense blocks (2 layers each), twin
+    heads, unit-vector output."""
+
+    INT_FIELDS = (("n_bps", 0), ("hidden", 1), ("n_blocks", 1))
+
+    robot: str = "planar5"
+    frame: str | int = "tcp"
+    n_bps: int = 0
+    hidden: int = 128
+    n_blocks: int = 3
+    twin: bool = True
+    unit_vectors: bool = True
 
 
 def world_key(world: Any) -> str:

@@ -38,7 +38,7 @@ import torch
 from torch import nn
 
 from jwarp.learn.encoding import JointCodec
-from jwarp.learn.ik_net import DenseBlock, world_key
+from jwarp.learn.ik_net import DenseBlock, NetConfig, world_key
 from jwarp.registry import robot as get_robot
 from jwarp.world.feasibility import robot_reach
 
@@ -141,10 +141,13 @@ def decode_paths(dev: np.ndarray, starts: np.ndarray, goals: np.ndarray, lower: 
 
 # ====================================================================== network
 @dataclass
-class PlanNetConfig:
+class PlanNetConfig(NetConfig):
     """What a :class:`PlanNet` is: robot name, BPS size (0: world-unaware), waypoints N_t
     of the predicted paths (start and goal included), hidden width, dense blocks (2 layers
     each), heads (paths per task)."""
+
+    INT_FIELDS = (("n_bps", 0), ("n_waypoints", 3), ("hidden", 1), ("n_blocks", 1),
+                  ("n_heads", 1))
 
     robot: str = "planar4"
     n_bps: int = 128
@@ -152,26 +155,6 @@ class PlanNetConfig:
     hidden: int = 256
     n_blocks: int = 3
     n_heads: int = 1
-
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "PlanNetConfig":
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(d) - names
-        if unknown:
-            raise ValueError(f"config: unknown fields {sorted(unknown)}")
-        return cls(**d)
-
-    def validate(self) -> None:
-        if not isinstance(self.robot, str):
-            raise TypeError(f"robot: expected a robot name, got {type(self.robot).__name__}")
-        for name, lo in (("n_bps", 0), ("n_waypoints", 3), ("hidden", 1), ("n_blocks", 1),
-                         ("n_heads", 1)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
 
 
 class PlanNet(nn.Module):
