@@ -24,6 +24,10 @@ Algorithm 1's other steps work between training rounds: :func:`clean` (plan from
 network's prediction; a cheaper feasible path replaces the label) and :func:`extend`
 (sample new tasks, keep those whose predicted path costs most, label them with a
 caller-supplied labeler, default :func:`label_tasks`). :func:`improve` runs the loop.
+
+Data at scale come from a path database (:class:`jwarp.learn.dataset.PathDB`, written by
+``jwarp data generate``): :func:`samples_from_db` reads its labels (worlds rebuilt from the
+stored occupancy) and :func:`split_by_world` keeps unseen worlds for validation.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -45,7 +50,8 @@ from jwarp.solvers.planner import PlanOptions, Planner, collision_free
 __all__ = ["PlanSamples", "TrainPlanOptions", "make_plan_data", "label_tasks", "sample_tasks",
            "hard_tasks",
            "path_costs", "prediction_costs", "augment", "boost_weights", "train_plan",
-           "validation_mse", "clean", "extend", "improve"]
+           "validation_mse", "clean", "extend", "improve", "samples_from_db",
+           "split_by_world", "data_description"]
 
 
 # ====================================================================== data
@@ -53,7 +59,9 @@ __all__ = ["PlanSamples", "TrainPlanOptions", "make_plan_data", "label_tasks", "
 class PlanSamples:
     """Training samples of the planning network (plain arrays): starts, goals (N, n_dof),
     paths (N, W, n_dof) labels, world_index (N,) into ``worlds``, cost (N,) the labels'
-    U_path (None: not computed yet)."""
+    U_path (None: not computed yet); optionally ``world_ids`` (one per world: the ids of
+    a path database) and ``source`` (a dict saying where the labels come from, e.g. the
+    database; recorded in the checkpoint)."""
 
     starts: np.ndarray
     goals: np.ndarray
@@ -61,6 +69,8 @@ class PlanSamples:
     world_index: np.ndarray
     worlds: list
     cost: np.ndarray | None = None
+    world_ids: list | None = None
+    source: dict | None = None
 
     def __post_init__(self) -> None:
         self.starts = np.asarray(self.starts, np.float64)
@@ -78,6 +88,11 @@ class PlanSamples:
             raise ValueError(f"world_index: expected indices into {len(self.worlds)} worlds")
         if self.cost is not None:
             self.cost = np.asarray(self.cost, np.float64)
+        if self.world_ids is not None:
+            self.world_ids = [int(i) for i in self.world_ids]
+            if len(self.world_ids) != len(self.worlds):
+                raise ValueError(f"world_ids: expected one per world ({len(self.worlds)}), "
+                                 f"got {len(self.world_ids)}")
 
     def __len__(self) -> int:
         return len(self.starts)
@@ -85,7 +100,19 @@ class PlanSamples:
     def subset(self, idx: Any) -> "PlanSamples":
         return PlanSamples(self.starts[idx], self.goals[idx], self.paths[idx],
                            self.world_index[idx], self.worlds,
-                           None if self.cost is None else self.cost[idx])
+                           None if self.cost is None else self.cost[idx], self.world_ids,
+                           self.source)
+
+    def compact(self) -> "PlanSamples":
+        """The same samples with only the worlds they use (in order of first use by world
+        index; ``world_index`` renumbered)."""
+        used = np.unique(self.world_index)
+        remap = np.full(max(len(self.worlds), 1), -1, np.int64)
+        remap[used] = np.arange(len(used))
+        return PlanSamples(self.starts, self.goals, self.paths, remap[self.world_index],
+                           [self.worlds[i] for i in used], self.cost,
+                           None if self.world_ids is None else
+                           [self.world_ids[i] for i in used], self.source)
 
     def append(self, other: "PlanSamples") -> "PlanSamples":
         """This set and ``other`` (same worlds list or its extension)."""
@@ -94,11 +121,12 @@ class PlanSamples:
         cost = None
         if self.cost is not None and other.cost is not None:
             cost = np.concatenate([self.cost, other.cost])
+        ids = self.world_ids if len(other.worlds) == len(self.worlds) else other.world_ids
         return PlanSamples(np.concatenate([self.starts, other.starts]),
                            np.concatenate([self.goals, other.goals]),
                            np.concatenate([self.paths, other.paths]),
                            np.concatenate([self.world_index, other.world_index]),
-                           other.worlds, cost)
+                           other.worlds, cost, ids, self.source)
 
 
 def sample_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator,
@@ -202,6 +230,98 @@ def make_plan_data(robot: Any, worlds: list, n_per_world: int, *, seed: int = 0,
                            np.empty(0, np.int64), worlds, np.empty(0))
     return PlanSamples(*[np.concatenate([p[k] for p in parts]) for k in range(4)],
                        worlds=worlds, cost=np.concatenate([p[4] for p in parts]))
+
+
+def samples_from_db(db: Any, robot: Any, *, world_ids: Any = None, hard_only: bool = True,
+                    feasible_only: bool = True, n_waypoints: int | None = None) -> PlanSamples:
+    """The stored labels of a path database (a path or an open
+    :class:`jwarp.learn.dataset.PathDB`) as :class:`PlanSamples`: starts, goals, paths (the
+    stored float32 values) of the worlds ``world_ids`` (None: all; in that order, tasks in
+    order), each world rebuilt from its stored occupancy (:meth:`PathDB.world`); only the
+    worlds with a selected path are in ``worlds`` (``world_ids`` their database ids).
+    ``hard_only``/``feasible_only``: only the rows flagged hard / feasible. ``cost`` is left
+    None (recomputed with the trainer's settings when needed). ``source`` names the file,
+    robot and kinematics hash.
+
+    Errors (ValueError): a database of another robot (:class:`PathDBError` naming the
+    file), a world id not in it, stored paths whose waypoint count is not ``n_waypoints``
+    (None: not checked), no selected row (naming the database)."""
+    from jwarp.core.device import content_key
+    from jwarp.learn.dataset import PathDB, PathDBError
+
+    model = get_robot(robot)
+    own = not isinstance(db, PathDB)
+    d = PathDB(db, model) if own else db
+    try:
+        if not own and (d.robot != model.name or d.kinematics_hash != content_key(model)):
+            raise PathDBError(f"database: '{d.path}' holds paths of robot '{d.robot}' "
+                              f"(kinematics hash {d.kinematics_hash}), not of robot "
+                              f"'{model.name}' (kinematics hash {content_key(model)})")
+        stored = d.world_ids()
+        ids = stored if world_ids is None else [int(i) for i in world_ids]
+        missing = sorted(set(ids) - set(stored))
+        if missing:
+            raise ValueError(f"world_ids: database '{d.path}' has no world "
+                             f"{', '.join(map(str, missing[:5]))}"
+                             f"{' ...' if len(missing) > 5 else ''}")
+        try:
+            a = d.paths_of(ids)
+        except ValueError as e:
+            if "waypoints" not in str(e):
+                raise
+            raise ValueError(f"n_waypoints: database '{d.path}' mixes paths with different "
+                             f"numbers of waypoints; select worlds of one setting "
+                             f"(world_ids)") from None
+        keep = np.ones(len(a["task"]), bool)
+        if feasible_only:
+            keep &= a["feasible"]
+        if hard_only:
+            keep &= a["hard"]
+        if not keep.any():
+            what = " and ".join(w for w, on in (("hard", hard_only), ("feasible", feasible_only))
+                                if on) or "any"
+            raise ValueError(f"database: '{d.path}' has no {what} path in the "
+                             f"{len(ids)} selected worlds ({len(a['task'])} paths in all)")
+        a = {k: v[keep] for k, v in a.items()}
+        W = a["path"].shape[1]
+        if n_waypoints is not None and W != int(n_waypoints):
+            raise ValueError(f"n_waypoints: database '{d.path}' stores paths of {W} "
+                             f"waypoints, the network is configured for {n_waypoints}")
+        # worlds in order of first appearance (the order of ``world_ids``)
+        order = {w: i for i, w in enumerate(dict.fromkeys(a["world_id"].tolist()))}
+        first = [int(w) for w in order]
+        index = np.array([order[w] for w in a["world_id"].tolist()], np.int64)
+        worlds = [d.world(w) for w in first]
+        source = {"source": "path-db", "path": str(Path(d.path).resolve()),
+                  "robot": d.robot, "kinematics_hash": d.kinematics_hash,
+                  "hard_only": bool(hard_only), "feasible_only": bool(feasible_only)}
+    finally:
+        if own:
+            d.close()
+    return PlanSamples(a["start"], a["goal"], a["path"], index, worlds, None, first, source)
+
+
+def split_by_world(samples: PlanSamples, val_fraction: float = 0.1, seed: int = 0
+                   ) -> tuple[PlanSamples, PlanSamples]:
+    """(train, val): a random ``val_fraction`` of the worlds (rounded, at least one when
+    ``val_fraction`` > 0) and all their samples go to validation, so validation worlds are
+    unseen in training; each part keeps only its worlds (:meth:`PlanSamples.compact`).
+    ``val_fraction`` 0: val is empty. ValueError for a fraction outside [0, 1) or fewer
+    than two worlds to split."""
+    if not (isinstance(val_fraction, (int, float)) and 0.0 <= val_fraction < 1.0):
+        raise ValueError(f"val_fraction: expected a number in [0, 1), got {val_fraction!r}")
+    used = np.unique(samples.world_index)
+    if val_fraction == 0:
+        return samples.compact(), samples.subset(np.zeros(0, np.int64)).compact()
+    if len(used) < 2:
+        raise ValueError(f"val_fraction: the samples have {len(used)} world(s); a split by "
+                         f"world needs at least 2 (or val_fraction 0)")
+    n_val = min(max(1, int(round(val_fraction * len(used)))), len(used) - 1)
+    rng = np.random.default_rng(seed)
+    val_worlds = rng.permutation(used)[:n_val]
+    is_val = np.isin(samples.world_index, val_worlds)
+    return (samples.subset(np.flatnonzero(~is_val)).compact(),
+            samples.subset(np.flatnonzero(is_val)).compact())
 
 
 def path_costs(robot: Any, world: Any, paths: np.ndarray, n_substeps: int = 4) -> np.ndarray:
@@ -430,17 +550,31 @@ def train_plan(options: TrainPlanOptions, data: PlanSamples, val: PlanSamples | 
             print(f"epoch {e}/{options.epochs}: loss {rec['loss']:.5g} val_mse "
                   f"{rec['val_mse']:.5g} hard {n_hard} ({rec['seconds']:.1f} s)")
         if options.checkpoint:
-            _save(net, options, history)
+            _save(net, options, history, data)
         if callback is not None:
             callback(rec, net)
     net.eval()
     return net, history
 
 
-def _save(net: PlanNet, options: TrainPlanOptions, history: list) -> None:
+def data_description(data: PlanSamples) -> Any:
+    """What a network trained on ``data`` is valid for (the checkpoint's
+    ``world_distribution``): ``"samples"``, or for labels of a path database its source
+    (path, robot, kinematics hash) with the numbers of worlds and paths trained on and the
+    world ids."""
+    if data.source is None:
+        return "samples"
+    used = np.unique(data.world_index)
+    out = {**data.source, "worlds": int(len(used)), "paths": int(len(data))}
+    if data.world_ids is not None:
+        out["world_ids"] = [data.world_ids[i] for i in used]
+    return out
+
+
+def _save(net: PlanNet, options: TrainPlanOptions, history: list, data: PlanSamples) -> None:
     from jwarp.learn.checkpoint import save_checkpoint
 
-    save_checkpoint(options.checkpoint, net, world_distribution="samples",
+    save_checkpoint(options.checkpoint, net, world_distribution=data_description(data),
                     training=options.to_dict(), metrics={**history[-1], "history": history},
                     epoch=int(history[-1]["epoch"]))
 
@@ -468,7 +602,8 @@ def clean(net: PlanNet, data: PlanSamples, *, iterations: int = 100, n_substeps:
         paths[idx[better]] = res.path[better]
         cost[idx[better]] = c[better]
         n_rep += int(better.sum())
-    out = PlanSamples(data.starts, data.goals, paths, data.world_index, data.worlds, cost)
+    out = PlanSamples(data.starts, data.goals, paths, data.world_index, data.worlds, cost,
+                      data.world_ids, data.source)
     return out, n_rep
 
 
@@ -512,7 +647,8 @@ def extend(net: PlanNet, data: PlanSamples, n_new: int, *, n_candidates: int | N
                                  all_worlds, np.asarray(c, np.float64)[ok]))
     label_costs(data, net.robot, n_substeps)
     out = PlanSamples(data.starts, data.goals, data.paths, data.world_index, all_worlds,
-                      data.cost)
+                      data.cost, data.world_ids if len(all_worlds) == len(data.worlds) else None,
+                      data.source)
     added = 0
     for p in parts:
         out = out.append(p)
