@@ -344,6 +344,35 @@ def _load_plan_model(path: str, model: Any, option: str = "--model") -> Any:
             from None
 
 
+def _plan_db_samples(args: argparse.Namespace, model: Any) -> tuple[Any, Any]:
+    """(train, val) of ``--data`` (split by world, ``--val-fraction``); one-line CLIErrors
+    naming ``--data``, ``--waypoints`` or ``--val-fraction``."""
+    from jwarp.learn.dataset import PathDB
+    from jwarp.learn.train_plan import samples_from_db, split_by_world
+
+    def clean(e: Exception) -> str:
+        return " ".join(str(e).split()).removeprefix("database: ")
+
+    try:
+        db = PathDB(args.data, model)
+    except ValueError as e:  # PathDBError: missing, not a database, another robot, corrupt
+        raise CLIError(f"--data: {clean(e)}") from None
+    try:
+        samples = samples_from_db(db, model, hard_only=not args.all_paths,
+                                  n_waypoints=args.waypoints)
+    except ValueError as e:
+        msg = clean(e)
+        if msg.startswith("n_waypoints: "):
+            raise CLIError(f"--waypoints: {msg.removeprefix('n_waypoints: ')}") from None
+        raise CLIError(f"--data: {msg}") from None
+    finally:
+        db.close()
+    try:
+        return split_by_world(samples, args.val_fraction, args.seed)
+    except ValueError as e:
+        raise CLIError(f"--val-fraction: {clean(e).removeprefix('val_fraction: ')}") from None
+
+
 def cmd_train_plan(args: argparse.Namespace) -> int:
     model = robot_option(args.robot)
     if model.workspace_dim not in (2, 3):  # pragma: no cover - every robot is 2D or 3D
@@ -354,6 +383,9 @@ def cmd_train_plan(args: argparse.Namespace) -> int:
     from jwarp.core.arrays import init_warp
     from jwarp.learn.train_plan import TrainPlanOptions, improve, make_plan_data, train_plan
 
+    db_data = _plan_db_samples(args, model) if args.data is not None else None
+    if args.waypoints is None:
+        args.waypoints = db_data[0].paths.shape[1] if db_data is not None else 20
     try:
         options = TrainPlanOptions(robot=model.name, n_bps=args.n_bps, n_waypoints=args.waypoints,
                                    hidden=args.hidden, n_blocks=args.blocks, n_heads=args.heads,
@@ -369,18 +401,24 @@ def cmd_train_plan(args: argparse.Namespace) -> int:
     except (ValueError, TypeError) as e:
         raise _option_error(e, _TRAIN_PLAN_OPTION_OF, "train plan") from None
     init_warp()
-    worlds = _plan_worlds(model, args.n_worlds, args.seed * 1000 + 1)
-    val_worlds = _plan_worlds(model, args.val_worlds, args.seed * 1000 + 100001)
-    common = dict(n_waypoints=args.waypoints, n_starts=args.label_starts,
-                  iterations=args.label_iterations, hard=args.hard)
-    data = make_plan_data(model, worlds, args.tasks_per_world, seed=args.seed, **common)
-    val = make_plan_data(model, val_worlds, args.val_tasks, seed=args.seed + 1, **common)
+    if db_data is not None:
+        data, val = db_data
+        n_train_worlds, n_val_worlds = len(data.worlds), len(val.worlds)
+    else:
+        worlds = _plan_worlds(model, args.n_worlds, args.seed * 1000 + 1)
+        val_worlds = _plan_worlds(model, args.val_worlds, args.seed * 1000 + 100001)
+        common = dict(n_waypoints=args.waypoints, n_starts=args.label_starts,
+                      iterations=args.label_iterations, hard=args.hard)
+        data = make_plan_data(model, worlds, args.tasks_per_world, seed=args.seed, **common)
+        val = make_plan_data(model, val_worlds, args.val_tasks, seed=args.seed + 1, **common)
+        n_train_worlds, n_val_worlds = len(worlds), len(val_worlds)
     if not len(data):
         raise CLIError("train plan: the planner labelled no task feasibly (raise "
                        "--label-starts or --label-iterations)")
     if not args.quiet:
-        print(f"data: {len(data)} training tasks in {len(worlds)} worlds, {len(val)} "
-              f"validation tasks in {len(val_worlds)} unseen worlds")
+        src = f" from {args.data}" if args.data is not None else ""
+        print(f"data{src}: {len(data)} training tasks in {n_train_worlds} worlds, {len(val)} "
+              f"validation tasks in {n_val_worlds} unseen worlds")
     rounds = max(args.cleans, 1 if args.extend > 0 else 0)
     if rounds:
         _, data, log = improve(options, data, val if len(val) else None, rounds=rounds,
@@ -523,8 +561,20 @@ def add_subcommands(sub: Any) -> None:
                    metavar="N", help="planner multi-starts per label (default 16)")
     s.add_argument("--label-iterations", type=int_arg("--label-iterations", 1, 10**6),
                    default=200, metavar="N", help="planner iterations per label (default 200)")
-    s.add_argument("--waypoints", type=int_arg("--waypoints", 3, 10**4), default=20,
-                   metavar="W", help="waypoints of the predicted paths (default 20)")
+    s.add_argument("--waypoints", type=int_arg("--waypoints", 3, 10**4), default=None,
+                   metavar="W", help="waypoints of the predicted paths (default 20; with "
+                                     "--data: the database's, which it must match)")
+    s.add_argument("--data", default=None, metavar="DB.sqlite",
+                   help="train on the labels of a path database (jwarp data generate) instead "
+                        "of generating tasks (--n-worlds, --tasks-per-world, --val-worlds, "
+                        "--val-tasks, --hard, --label-* are then unused)")
+    s.add_argument("--val-fraction", type=real_arg("--val-fraction", 0.0, 1.0, hi_open=True),
+                   default=0.1, metavar="F",
+                   help="with --data: fraction of its worlds held out for validation, unseen "
+                        "in training (default 0.1; 0: no validation)")
+    s.add_argument("--all-paths", action="store_true",
+                   help="with --data: also the paths not flagged hard (default: hard only; "
+                        "infeasible paths are always left out)")
     s.add_argument("--n-bps", type=int_arg("--n-bps", 0, 1 << 20), default=128, metavar="N",
                    help="basis points of the world encoding (default 128; 0: world-unaware)")
     s.add_argument("--hidden", type=int_arg("--hidden", 1, 1 << 16), default=256, metavar="N",

@@ -121,3 +121,67 @@ def test_eval_plan_option_errors(capsys, tmp_path, model_path):
     one_line_error(capsys, [*base, "--model", model_path, "--robot", "planar5"], "--model")
     one_line_error(capsys, [*base, "--ks", "a,b"], "--ks")
     one_line_error(capsys, [*base, "--ks", "-1"], "--ks")
+
+
+# ------------------------------------------------------------------ --data DB.sqlite
+DB_TINY = ["--robot", "planar4", "--n-bps", "8", "--hidden", "8", "--blocks", "1",
+           "--steps-per-epoch", "2", "--batch", "4", "--epochs", "1", "--quiet"]
+
+
+def _db_world(robot, seed, device=None):
+    from jwarp.world import world_from_occupancy
+
+    occ = np.random.default_rng(seed).random((16, 16)) < 0.08
+    return world_from_occupancy(occ, np.array([[-1.0, 1.0], [-1.0, 1.0]]), 2.0 / 15)
+
+
+def _db_labeler(robot, world, n_tasks, seed, options=None):
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(seed)
+    s = rng.uniform(-1, 1, (n_tasks, robot.n_dof)).astype(np.float32)
+    g = rng.uniform(-1, 1, (n_tasks, robot.n_dof)).astype(np.float32)
+    c = np.linalg.norm(g - s, axis=1)
+    return SimpleNamespace(starts=s, goals=g, paths=np.linspace(s, g, 6, axis=1), cost=c,
+                           feasible=np.ones(n_tasks, bool), hard=np.ones(n_tasks, bool),
+                           settings={})
+
+
+def _make_db(path, robot="planar4"):
+    from jwarp.learn.generate import generate
+
+    generate(robot, 4, 5, path, labeler=_db_labeler, world_maker=_db_world, progress=False,
+             options={"n_waypoints": 6})
+    return path
+
+
+def test_train_plan_from_a_database(tmp_path, capsys):
+    from jwarp.learn.checkpoint import load_plan_checkpoint
+
+    db = _make_db(tmp_path / "p4.sqlite")
+    out = tmp_path / "m.pt"
+    code, stdout, err = run(capsys, ["train", "plan", *DB_TINY, "--data", db,
+                                     "--val-fraction", "0.25", "--out", out])
+    assert code == 0, err
+    assert "15 tasks" in stdout
+    net = load_plan_checkpoint(out)
+    assert net.n_waypoints == 6  # the database's waypoints by default
+    src = net.meta["world_distribution"]
+    assert src["source"] == "path-db" and src["path"] == str(db.resolve())
+    assert src["robot"] == "planar4" and src["worlds"] == 3 and src["paths"] == 15
+
+
+def test_train_plan_data_errors(tmp_path, capsys):
+    db = _make_db(tmp_path / "p4.sqlite")
+    other = _make_db(tmp_path / "p5.sqlite", robot="planar5")
+    junk = tmp_path / "junk.sqlite"
+    junk.write_bytes(b"not a database at all" * 100)
+    base = ["train", "plan", *DB_TINY, "--out", tmp_path / "m.pt"]
+    for path, words in ((tmp_path / "none.sqlite", "does not exist"), (other, "planar5"),
+                        (junk, "junk.sqlite")):
+        msg = one_line_error(capsys, [*base, "--data", path], "--data")
+        assert words in msg
+    msg = one_line_error(capsys, [*base, "--data", db, "--waypoints", "20"], "--waypoints")
+    assert "6 waypoints" in msg
+    one_line_error(capsys, [*base, "--data", db, "--val-fraction", "1"], "--val-fraction")
+    assert not (tmp_path / "m.pt").exists()
