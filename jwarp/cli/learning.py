@@ -26,13 +26,18 @@ the ablation (Table 3.4): ``--no-twin``, ``--no-unit-vectors``, ``--no-boosting`
 only tasks the straight line does not solve) tasks are labelled by the planner's
 multi-starts; switches ``--no-time-reversal``, ``--no-axis-symmetry``, ``--boosting``;
 ``--cleans N`` / ``--extend F`` add Algorithm 1's rounds (clean the labels with the
-network + planner, add ``F`` x the set of new tasks the network does worst on). ``eval
+network + planner, add ``F`` x the set of new tasks the network does worst on).
+``--data DB.sqlite`` trains on the labels of a path database instead
+(:func:`jwarp.learn.train_plan.samples_from_db`; ``--val-fraction F`` of its worlds held
+out, :func:`jwarp.learn.train_plan.split_by_world`). ``eval
 plan`` prints the feasibility table (:func:`jwarp.learn.evaluate_plan.evaluate_plan`:
 network alone, network + k planner iterations, random multi-starts 1 and best of N,
 straight line) on unseen worlds. ``jwarp plan --warm-start MODEL.pt`` plans from the
 network's paths.
 
     jwarp train plan --robot planar4 --n-worlds 8 --tasks-per-world 60 --hard --epochs 10 \
+        --out plan4.pt
+    jwarp train plan --robot planar4 --data p4.sqlite --val-fraction 0.1 --epochs 10 \
         --out plan4.pt
     jwarp eval plan --robot planar4 --model plan4.pt --hard --ks 0,10,50
 
