@@ -316,7 +316,7 @@ def split_by_world(samples: PlanSamples, val_fraction: float = 0.1, seed: int = 
     if len(used) < 2:
         raise ValueError(f"val_fraction: the samples have {len(used)} world(s); a split by "
                          f"world needs at least 2 (or val_fraction 0)")
-    n_val = min(max(1, int(round(val_fraction * len(used)))), len(used) - 1)
+    n_val = min(max(1, round(val_fraction * len(used))), len(used) - 1)
     rng = np.random.default_rng(seed)
     val_worlds = rng.permutation(used)[:n_val]
     is_val = np.isin(samples.world_index, val_worlds)

@@ -91,7 +91,7 @@ def test_split_keeps_worlds_disjoint(db):
     key = {tuple(np.r_[a, b]) for a, b in zip(s.starts, s.goals)}
     assert {tuple(np.r_[a, b]) for a, b in zip(train.starts, train.goals)} | \
         {tuple(np.r_[a, b]) for a, b in zip(val.starts, val.goals)} == key
-    t2, v2 = split_by_world(s, 0.4, seed=1)
+    t2, _ = split_by_world(s, 0.4, seed=1)
     assert t2.world_ids == train.world_ids  # deterministic per seed
     t0, v0 = split_by_world(s, 0.0)
     assert len(t0) == len(s) and len(v0) == 0
