@@ -29,7 +29,7 @@ from jwarp.learn.encoding import JointCodec, feature_size, frame_features, frame
 from jwarp.registry import robot as get_robot
 from jwarp.world.feasibility import robot_reach
 
-__all__ = ["IKNetConfig", "IKNet", "DenseBlock", "NetConfig", "world_key"]
+__all__ = ["IKNetConfig", "IKNet", "DenseBlock", "NetConfig", "network_bps", "world_key"]
 
 
 class NetConfig:
@@ -75,6 +75,21 @@ class IKNetConfig(NetConfig):
     n_blocks: int = 3
     twin: bool = True
     unit_vectors: bool = True
+
+
+def network_bps(model: Any, n_bps: int, bps: Any = None) -> Any:
+    """The basis point set of a network with ``n_bps`` points (0: None, world-unaware):
+    ``bps`` if given (ValueError naming ``bps`` unless it has ``n_bps`` points), else
+    ``basis_points(model, n_bps)``."""
+    n_bps = int(n_bps)
+    if n_bps <= 0:
+        return None
+    if bps is None:
+        from jwarp.learn.bps import basis_points
+        bps = basis_points(model, n_bps)
+    if int(bps.size) != n_bps:
+        raise ValueError(f"bps: has {bps.size} points, config.n_bps is {n_bps}")
+    return bps
 
 
 def world_key(world: Any) -> str:
@@ -125,15 +140,7 @@ class IKNet(nn.Module):
         self.n_dof = model.n_dof
         self.meta: dict = {}
         F = feature_size(self.dim)
-        self.bps = None
-        n_bps = int(config.n_bps)
-        if n_bps > 0:
-            if bps is None:
-                from jwarp.learn.bps import basis_points
-                bps = basis_points(model, n_bps)
-            if int(bps.size) != n_bps:
-                raise ValueError(f"bps: has {bps.size} points, config.n_bps is {n_bps}")
-            self.bps = bps
+        self.bps = network_bps(model, config.n_bps, bps)
         box = robot_reach(model)[:self.dim]
         centre, half = box.mean(axis=1), 0.5 * (box[:, 1] - box[:, 0])
         shift = np.zeros(F, np.float32)
@@ -143,7 +150,7 @@ class IKNet(nn.Module):
         self.register_buffer("in_shift", torch.as_tensor(shift))
         self.register_buffer("in_scale", torch.as_tensor(scale))
         self.register_buffer("bps_scale", torch.tensor(1.0 / float(max(half.max(), 1e-3))))
-        width = F + n_bps
+        width = F + int(config.n_bps)
         self.blocks = nn.ModuleList()
         for _ in range(int(config.n_blocks)):
             self.blocks.append(DenseBlock(width, int(config.hidden)))

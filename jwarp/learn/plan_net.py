@@ -38,7 +38,7 @@ import torch
 from torch import nn
 
 from jwarp.learn.encoding import JointCodec
-from jwarp.learn.ik_net import DenseBlock, NetConfig, world_key
+from jwarp.learn.ik_net import DenseBlock, NetConfig, network_bps, world_key
 from jwarp.registry import robot as get_robot
 from jwarp.world.feasibility import robot_reach
 
@@ -185,20 +185,12 @@ class PlanNet(nn.Module):
         self.n_waypoints = int(config.n_waypoints)
         self.lower, self.upper = self.codec.lower, self.codec.upper
         self.meta: dict = {}
-        self.bps = None
-        n_bps = int(config.n_bps)
-        if n_bps > 0:
-            if bps is None:
-                from jwarp.learn.bps import basis_points
-                bps = basis_points(model, n_bps)
-            if int(bps.size) != n_bps:
-                raise ValueError(f"bps: has {bps.size} points, config.n_bps is {n_bps}")
-            self.bps = bps
+        self.bps = network_bps(model, config.n_bps, bps)
         box = robot_reach(model)[:model.workspace_dim]
         half = 0.5 * (box[:, 1] - box[:, 0])
         self.register_buffer("bps_scale", torch.tensor(1.0 / float(max(half.max(), 1e-3))))
         self.n_out = (self.n_waypoints - 2) * self.n_dof
-        width = 2 * self.codec.size + n_bps
+        width = 2 * self.codec.size + int(config.n_bps)
         self.blocks = nn.ModuleList()
         for _ in range(int(config.n_blocks)):
             self.blocks.append(DenseBlock(width, int(config.hidden)))

@@ -12,10 +12,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from jwarp.cli import main
 from jwarp.learn import generate as gen
 from jwarp.learn.dataset import PathDB
 from jwarp.world.sdf import world_from_occupancy
+from cli_helpers import one_line_error, run  # noqa: F401  (tests/cli_helpers.py)
 
 
 def fake_world_maker(robot, seed, device=None):
@@ -39,23 +39,6 @@ def fake(monkeypatch):
     monkeypatch.setattr(gen, "default_world_maker", lambda: fake_world_maker)
     monkeypatch.setattr(gen, "default_options",
                         lambda **kw: {"n_waypoints": 5, "device": "cpu", **kw})
-
-
-def run(capsys, argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def one_line_error(capsys, argv, option):
-    code, out, err = run(capsys, argv)
-    lines = [ln for ln in err.splitlines() if not ln.startswith("Warp CUDA warning")]
-    assert code == 2, (code, out, err)
-    assert out == ""
-    if len(lines) > 1:
-        assert lines[0].startswith("usage:"), err
-    assert lines[-1].startswith(f"jwarp: error: {option}: "), lines[-1]
-    return lines[-1]
 
 
 GEN = ["data", "generate", "--robot", "planar5", "--paths-per-world", 3, "--quiet"]

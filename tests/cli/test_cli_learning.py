@@ -10,27 +10,11 @@ import json
 import pytest
 
 from jwarp.cli import main
+from cli_helpers import one_line_error, run  # noqa: F401  (tests/cli_helpers.py)
 
 TINY = ["--robot", "planar5", "--world", "random", "--n-worlds", "2", "--targets-per-world",
         "48", "--val-targets", "12", "--steps-per-epoch", "3", "--batch", "32", "--hidden", "32",
         "--quiet"]
-
-
-def run(capsys, argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def one_line_error(capsys, argv, option):
-    code, out, err = run(capsys, argv)
-    lines = [ln for ln in err.splitlines() if not ln.startswith("Warp CUDA warning")]
-    assert code == 2, (code, out, err)
-    assert out == ""
-    if len(lines) > 1:  # argparse's own errors (a bad choice) print the usage first
-        assert lines[0].startswith("usage:"), err
-    assert lines[-1].startswith(f"jwarp: error: {option}: "), lines[-1]
-    return lines[-1]
 
 
 @pytest.fixture(scope="module")

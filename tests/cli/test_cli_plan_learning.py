@@ -11,25 +11,12 @@ import numpy as np
 import pytest
 
 from jwarp.cli import main
+from cli_helpers import one_line_error, run  # noqa: F401  (tests/cli_helpers.py)
 
 TINY = ["--robot", "planar4", "--n-worlds", "1", "--tasks-per-world", "6", "--val-worlds", "1",
         "--val-tasks", "3", "--label-starts", "2", "--label-iterations", "30", "--n-bps", "16",
         "--hidden", "16", "--blocks", "1", "--steps-per-epoch", "3", "--batch", "8", "--quiet"]
 START, GOAL = "1.2,0,0,0", "-1.2,0,0,0"
-
-
-def run(capsys, argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def one_line_error(capsys, argv, option):
-    code, out, err = run(capsys, argv)
-    lines = [ln for ln in err.splitlines() if not ln.startswith("Warp CUDA warning")]
-    assert code == 2, (code, out, err)
-    assert lines[-1].startswith(f"jwarp: error: {option}: "), lines[-1]
-    return lines[-1]
 
 
 @pytest.fixture(scope="module")
