@@ -497,6 +497,20 @@ def _plain(x: Any) -> Any:
 
 
 # ------------------------------------------------------------------ parser
+def _optimizer_options(s: argparse.ArgumentParser, epochs_help: str, batch: int,
+                       item: str) -> None:
+    """--epochs (required), --steps-per-epoch, --batch (default ``batch`` ``item``s per
+    step) and --lr of a training command."""
+    s.add_argument("--epochs", type=int_arg("--epochs", 1, 10**6), required=True, metavar="N",
+                   help=epochs_help)
+    s.add_argument("--steps-per-epoch", type=int_arg("--steps-per-epoch", 1, 10**9),
+                   default=100, metavar="N", help="optimizer steps per epoch (default 100)")
+    s.add_argument("--batch", type=int_arg("--batch", 1, 10**7), default=batch, metavar="N",
+                   help=f"{item} per step (default {batch})")
+    s.add_argument("--lr", type=real_arg("--lr", 0.0, lo_open=True), default=1e-3,
+                   help="learning rate, > 0 (default 1e-3)")
+
+
 def add_subcommands(sub: Any) -> None:
     """Add ``train ik|plan`` and ``eval ik|plan`` to the ``jwarp`` subparsers."""
     from jwarp.cli.common import Parser
@@ -517,14 +531,7 @@ def add_subcommands(sub: Any) -> None:
                    metavar="N", help="training targets per world (default 2000)")
     s.add_argument("--val-targets", type=int_arg("--val-targets", 1), default=128, metavar="N",
                    help="validation targets per validation world (default 128)")
-    s.add_argument("--epochs", type=int_arg("--epochs", 1, 10**6), required=True, metavar="N",
-                   help="epochs in all (counting resumed ones)")
-    s.add_argument("--steps-per-epoch", type=int_arg("--steps-per-epoch", 1, 10**9),
-                   default=100, metavar="N", help="optimizer steps per epoch (default 100)")
-    s.add_argument("--batch", type=int_arg("--batch", 1, 10**7), default=256, metavar="N",
-                   help="targets per step (default 256)")
-    s.add_argument("--lr", type=real_arg("--lr", 0.0, lo_open=True), default=1e-3,
-                   help="learning rate, > 0 (default 1e-3)")
+    _optimizer_options(s, "epochs in all (counting resumed ones)", 256, "targets")
     s.add_argument("--hidden", type=int_arg("--hidden", 1, 1 << 16), default=128, metavar="N",
                    help="hidden width (default 128)")
     s.add_argument("--n-bps", type=int_arg("--n-bps", 0, 1 << 20), default=0, metavar="N",
@@ -588,14 +595,7 @@ def add_subcommands(sub: Any) -> None:
                    help="dense blocks (default 3)")
     s.add_argument("--heads", type=int_arg("--heads", 1, 64), default=1, metavar="N",
                    help="paths per task (default 1)")
-    s.add_argument("--epochs", type=int_arg("--epochs", 1, 10**6), required=True, metavar="N",
-                   help="epochs (per round of --cleans/--extend)")
-    s.add_argument("--steps-per-epoch", type=int_arg("--steps-per-epoch", 1, 10**9),
-                   default=100, metavar="N", help="optimizer steps per epoch (default 100)")
-    s.add_argument("--batch", type=int_arg("--batch", 1, 10**7), default=128, metavar="N",
-                   help="samples per step (default 128)")
-    s.add_argument("--lr", type=real_arg("--lr", 0.0, lo_open=True), default=1e-3,
-                   help="learning rate, > 0 (default 1e-3)")
+    _optimizer_options(s, "epochs (per round of --cleans/--extend)", 128, "samples")
     s.add_argument("--no-time-reversal", action="store_true",
                    help="no time-reversal augmentation")
     s.add_argument("--no-axis-symmetry", action="store_true",

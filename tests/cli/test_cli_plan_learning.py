@@ -26,19 +26,6 @@ def model_path(tmp_path_factory):
     return out
 
 
-@pytest.fixture(scope="module")
-def block(tmp_path_factory):
-    from jwarp.world import save_world, world_from_occupancy
-
-    lim = np.array([[-1.0, 1.0], [-1.0, 1.0]])
-    h = 2.0 / 63
-    X, Y = np.meshgrid(*[lim[d, 0] + h * np.arange(64) for d in range(2)], indexing="ij")
-    world = world_from_occupancy((X > 0.5) & (X < 0.75) & (np.abs(Y) < 0.12), lim, h)
-    path = tmp_path_factory.mktemp("world") / "block.npz"
-    save_world(world, path)
-    return path
-
-
 def test_train_plan_writes_a_checkpoint(model_path):
     from jwarp.learn.checkpoint import load_plan_checkpoint
 

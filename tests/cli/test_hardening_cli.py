@@ -19,20 +19,6 @@ P4 = ["--robot", "planar4"]
 START, GOAL = "1.2,0,0,0", "-1.2,0,0,0"
 
 
-@pytest.fixture(scope="module")
-def block(tmp_path_factory) -> Path:
-    """README's 2D block world for planar4, as a .npz file."""
-    from jwarp.world import save_world, world_from_occupancy
-
-    lim = np.array([[-1.0, 1.0], [-1.0, 1.0]])
-    h = 2.0 / 63
-    X, Y = np.meshgrid(*[lim[d, 0] + h * np.arange(64) for d in range(2)], indexing="ij")
-    world = world_from_occupancy((X > 0.5) & (X < 0.75) & (np.abs(Y) < 0.12), lim, h)
-    path = tmp_path_factory.mktemp("world") / "block.npz"
-    save_world(world, path)
-    return path
-
-
 def plan_args(block: Path, *extra: str) -> list[str]:
     return ["plan", *P4, "--world", str(block), "--start", START, f"--goal={GOAL}",
             "--starts", "2", "--iterations", "2", "--waypoints", "4", "--substeps", "2", *extra]
