@@ -864,25 +864,19 @@ class Planner:
             if o.converge:
                 self._converge_check(buf, it, last, smax < screen, done, feasible, iters,
                                      kept_len)
-                if done.all() or (o.stop_when_solved
-                                  and (done & feasible).reshape(B, n_starts).any(1).all()):
-                    break
-                if it == o.iterations:
-                    break
-                if o.early_stop:
-                    obj.set_active(~done)
-                obj.step(o.step, o.max_step)
-                continue
-            cand = np.nonzero(~done & ((smax < screen) | last))[0]
-            if len(cand):
-                newly = cand[self._confirm(buf, cand)]
-                if len(newly):
-                    feasible[newly] = True
-                    iters[newly] = it
-                    if o.early_stop:
-                        self._keep(buf, newly)
-                        done[newly] = True
-            if done.all() or (o.stop_when_solved and feasible.reshape(B, n_starts).any(1).all()):
+                solved = done & feasible
+            else:
+                cand = np.nonzero(~done & ((smax < screen) | last))[0]
+                if len(cand):
+                    newly = cand[self._confirm(buf, cand)]
+                    if len(newly):
+                        feasible[newly] = True
+                        iters[newly] = it
+                        if o.early_stop:
+                            self._keep(buf, newly)
+                            done[newly] = True
+                solved = feasible
+            if done.all() or (o.stop_when_solved and solved.reshape(B, n_starts).any(1).all()):
                 break
             if it == o.iterations:
                 break
