@@ -96,6 +96,38 @@ def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: 
             np.asarray(conv, bool))
 
 
+def _whitener(covariance: Any, S: int, m: int) -> np.ndarray | None:
+    """(S, m, m) inverse Cholesky factors ``L_s^-1`` of a per-sample covariance
+    ``Lambda_s = L_s L_s^T`` (S, m, m) or one (m, m) for every sample [unit^2]; None -> None.
+    Raises ValueError naming ``covariance`` (and the first bad sample)."""
+    if covariance is None:
+        return None
+    try:
+        c = np.asarray(covariance, np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"covariance: expected an array (S, m, m), got {type(covariance).__name__}") from None
+    if c.shape == (m, m):
+        c = np.broadcast_to(c, (S, m, m))
+    if c.shape != (S, m, m):
+        raise ValueError(f"covariance: expected shape ({S}, {m}, {m}) (one m x m block per "
+                         f"sample) or ({m}, {m}), got {c.shape}")
+    bad = ~np.all(np.isfinite(c), axis=(1, 2))
+    if bad.any():
+        raise ValueError(f"covariance: NaN or inf in sample {int(np.flatnonzero(bad)[0])}")
+    asym = np.abs(c - np.swapaxes(c, 1, 2)).max(axis=(1, 2)) > 1e-9 * np.abs(c).max(axis=(1, 2))
+    if asym.any():
+        raise ValueError(f"covariance: block of sample {int(np.flatnonzero(asym)[0])} is not "
+                         f"symmetric")
+    try:
+        L = np.linalg.cholesky(c)
+    except np.linalg.LinAlgError:
+        ev = np.linalg.eigvalsh(c).min(axis=1)
+        raise ValueError(f"covariance: block of sample {int(np.argmin(ev))} is not positive "
+                         f"definite (smallest eigenvalue {ev.min():.3g})") from None
+    eye = np.broadcast_to(np.eye(m), (S, m, m))
+    return np.linalg.solve(L, eye)   # L^-1, lower triangular
+
+
 def _noise(measurement: Any, noise_sigma: Any) -> np.ndarray:
     m = len(measurement.obs_names)
     v = getattr(measurement, "noise", None) if noise_sigma is None else noise_sigma
@@ -131,6 +163,11 @@ class CalibrationProblem:
             ``mass`` group needs the elastic model: masses act only through its torques).
         lam, max_iter, tol: damping, most updates and tolerance [rad] of the equilibrium.
         bound_kappa: constrain compliances to >= 0 in the solver (see ParameterSpace.build).
+        covariance: per-sample measurement covariance (S, m, m) with full blocks (or one
+            (m, m) for all samples) [unit^2], e.g. with task-oriented weighting or virtual
+            noise (:mod:`.tow`, :mod:`.virtual_noise`); the data residuals and their
+            Jacobian are whitened by ``L_s^-1`` (``Lambda_s = L_s L_s^T``, Cholesky) instead
+            of ``1 / noise_sigma``, which it replaces. None: the diagonal ``noise_sigma``.
     """
 
     def __init__(self, robot: Any, measurement: Any, q: Any, y: Any, *,
@@ -138,7 +175,8 @@ class CalibrationProblem:
                  noise_sigma: Any = None, sigma: Mapping[str, float] | None = None,
                  frames: Iterable[int | str] | None = None, p_nominal: Any = None,
                  elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
-                 tol: float = 1e-12, bound_kappa: bool = False) -> None:
+                 tol: float = 1e-12, bound_kappa: bool = False,
+                 covariance: Any = None) -> None:
         self.robot = get_robot(robot)
         self.measurement = measurement
         if not hasattr(measurement, "jacobians") or not hasattr(measurement, "obs_names"):
@@ -162,6 +200,8 @@ class CalibrationProblem:
                                           bound_kappa=bound_kappa)
         self.noise = _noise(measurement, noise_sigma)
         S, m = self.y.shape
+        #: (S, m, m) inverse Cholesky factors of ``covariance`` (None: diagonal noise)
+        self.whitener = _whitener(covariance, S, m)
         P = self.space.size
         if S * m < P:
             raise ValueError(f"q, y: {S} samples x {m} observations = {S * m} values is fewer "
@@ -189,11 +229,13 @@ class CalibrationProblem:
                      options: CalibrationOptions, meta: Mapping[str, Any] | None = None
                      ) -> "CalibrationProblem":
         """The problem of the data with the problem's fields of ``options`` (free,
-        noise_sigma, sigma, frames, p_nominal, elastic, lam, max_iter, tol, bound_kappa)."""
+        noise_sigma, sigma, frames, p_nominal, elastic, lam, max_iter, tol, bound_kappa,
+        covariance)."""
         o = options
         return cls(robot, measurement, q, y, free=o.free, meta=meta, noise_sigma=o.noise_sigma,
                    sigma=o.sigma, frames=o.frames, p_nominal=o.p_nominal, elastic=o.elastic,
-                   lam=o.lam, max_iter=o.max_iter, tol=o.tol, bound_kappa=o.bound_kappa)
+                   lam=o.lam, max_iter=o.max_iter, tol=o.tol, bound_kappa=o.bound_kappa,
+                   covariance=o.covariance)
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -243,8 +285,17 @@ class CalibrationProblem:
         st = self.state(x)
         if not (np.all(st.converged) and np.all(np.isfinite(st.frames))):
             return np.full(self.n_residuals, np.inf)
-        r = (self.predict(x) - self.y) / self.noise
+        r = self.whiten(self.predict(x) - self.y)
         return np.concatenate([r.reshape(-1), self.space.prior_residuals(x)])
+
+    def whiten(self, d: np.ndarray) -> np.ndarray:
+        """Whitened data residuals or Jacobian blocks: d (S, m) or (S, m, k) -> the same
+        shape, divided by ``noise`` or multiplied by the per-sample ``L_s^-1``."""
+        if self.whitener is None:
+            return d / self.noise if d.ndim == 2 else d * (1.0 / self.noise)[None, :, None]
+        if d.ndim == 2:
+            return np.einsum("sij,sj->si", self.whitener, d)
+        return self.whitener @ d
 
     def cost(self, x: Any) -> float:
         """0.5 |r(x)|^2."""
@@ -289,11 +340,11 @@ class CalibrationProblem:
             d_kap = np.zeros((S, m, kp_f.size))
             d_mass = np.zeros((S, m, self._mass_idx.size))
         J = np.zeros((self.n_residuals, sp.size))
-        w = (1.0 / self.noise)[None, :, None]
-        J[:self.n_data, self._dh_idx] = (d_dh * w).reshape(S * m, -1)
-        J[:self.n_data, self._kap_idx] = (d_kap * w).reshape(S * m, -1)
-        J[:self.n_data, self._mass_idx] = (d_mass * w).reshape(S * m, -1)
-        J[:self.n_data, self._meas_idx] = (jp[:, :, sp.column[self._meas_idx]] * w).reshape(S * m, -1)
+        wh = self.whiten
+        J[:self.n_data, self._dh_idx] = wh(d_dh).reshape(S * m, -1)
+        J[:self.n_data, self._kap_idx] = wh(d_kap).reshape(S * m, -1)
+        J[:self.n_data, self._mass_idx] = wh(d_mass).reshape(S * m, -1)
+        J[:self.n_data, self._meas_idx] = wh(jp[:, :, sp.column[self._meas_idx]]).reshape(S * m, -1)
         J[self.n_data + np.arange(self._prior_idx.size), self._prior_idx] = 1.0 / sp.sigma[self._prior_idx]
         return J
 
@@ -334,7 +385,7 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
               ftol: float = 1e-8, xtol: float = 1e-8, gtol: float = 1e-8,
               method: str = "dogbox", elastic: bool | None = None, lam: float = 1.0,
               max_iter: int = 100, tol: float = 1e-12, bound_kappa: bool = False,
-              callback: Callable[[Progress], Any] | None = None,
+              covariance: Any = None, callback: Callable[[Progress], Any] | None = None,
               identifiability_tol: float = 1e-2, moved_sigmas: float = 3.0,
               warn: bool = True) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples:
@@ -347,7 +398,7 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
         meta: per-sample inputs {name: (S,)} the measurement needs (``meta_names``).
         free, noise_sigma, sigma, frames, p_nominal, x0, initial_guess, n_starts, seed,
             max_nfev, ftol, xtol, gtol, method, elastic, lam, max_iter, tol, bound_kappa,
-            callback, identifiability_tol, moved_sigmas, warn: the fields of
+            covariance, callback, identifiability_tol, moved_sigmas, warn: the fields of
             :class:`CalibrationOptions`.
 
     Returns:
@@ -358,7 +409,8 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
         free=free, noise_sigma=noise_sigma, sigma=sigma, frames=frames, p_nominal=p_nominal,
         x0=x0, initial_guess=initial_guess, n_starts=n_starts, seed=seed, max_nfev=max_nfev,
         ftol=ftol, xtol=xtol, gtol=gtol, method=method, elastic=elastic, lam=lam,
-        max_iter=max_iter, tol=tol, bound_kappa=bound_kappa, callback=callback,
+        max_iter=max_iter, tol=tol, bound_kappa=bound_kappa, covariance=covariance,
+        callback=callback,
         identifiability_tol=identifiability_tol, moved_sigmas=moved_sigmas, warn=warn)
     return calibrate_with(robot, measurement, q, y, options, meta=meta, t0=t0)
 

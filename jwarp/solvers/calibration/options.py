@@ -69,6 +69,10 @@ class CalibrationOptions:
         lam, max_iter, tol: damping in (0, 1], most updates and tolerance [rad] of the
             elastic equilibrium.
         bound_kappa: constrain compliances to >= 0 in the solver.
+        covariance: per-sample measurement covariance (S, m, m) with full blocks, or one
+            (m, m) for all samples [unit^2] (task-oriented weighting, virtual noise: see
+            :mod:`~jwarp.solvers.calibration.tow`); replaces ``noise_sigma`` in the
+            whitening (its shape and positive definiteness are checked with the data).
         callback: called with :class:`~jwarp.solvers.calibration.map.Progress` after every
             solver iteration (progress bars).
         identifiability_tol: a direction of the prior-whitened data information J^T J with
@@ -96,6 +100,7 @@ class CalibrationOptions:
     max_iter: int = 100
     tol: float = 1e-12
     bound_kappa: bool = False
+    covariance: Any = None
     callback: Callable[[Any], Any] | None = None
     identifiability_tol: float = 1e-2
     moved_sigmas: float = 3.0
