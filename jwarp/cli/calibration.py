@@ -193,6 +193,33 @@ def _rows(args: argparse.Namespace, S: int) -> tuple[np.ndarray, np.ndarray | No
     return train, test, both
 
 
+def _tow_covariance(args: argparse.Namespace, setup: Any, model: Any, meas: Any, train: Any,
+                    free: list[str]) -> np.ndarray | None:
+    """Per-sample covariance of the calibration rows: the setup's ``tow`` section (eq. 2.11,
+    linearized at the start: nominal robot, initial guess of the measurement) plus
+    ``--virtual-noise`` (eq. 2.7); None when neither is given."""
+    from jwarp.solvers.calibration import CalibrationProblem
+    from jwarp.solvers.calibration.tow import tow_covariance, tow_from_dict
+    from jwarp.solvers.calibration.virtual_noise import add_virtual_noise
+
+    if setup.tow is None and args.virtual_noise is None:
+        return None
+    if args.virtual_noise is not None:
+        _check_float("--virtual-noise", args.virtual_noise, 0.0)
+    m = meas.n_obs
+    cov = np.broadcast_to(np.diag(np.broadcast_to(np.asarray(meas.noise, float) ** 2, (m,))),
+                          (len(train), m, m))
+    if setup.tow is not None:
+        spec = tow_from_dict(setup.tow, model, where=f"{args.setup}: tow")
+        prob = CalibrationProblem(model, meas, train.q, train.y, free=free,
+                                  meta=train.meta or None)
+        st = prob.state(prob.initial_x())
+        cov = tow_covariance(meas, spec, st.frames, st.p, meta=train.meta or None)
+    if args.virtual_noise is not None:
+        cov = add_virtual_noise(cov, args.virtual_noise)
+    return cov
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from jwarp.cli.common import quiet_warp
 
@@ -259,13 +286,15 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                          f"fails on {len(train)} calibration row{'s' if len(train) != 1 else ''} "
                          f"({why}); give more (or more varied) rows") from None
     before = table_rows(model, p_start)
+    covariance = _tow_covariance(args, setup, model, meas, train, free)
     bar = ProgressBar("calibrate", enabled=not args.quiet)
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             options = CalibrationOptions(free=free, n_starts=args.starts, seed=args.seed,
-                                         max_nfev=args.max_nfev, callback=bar)
+                                         max_nfev=args.max_nfev, callback=bar,
+                                         covariance=covariance)
             res = calibrate_with(model, meas, train.q, train.y, options,
                                  meta=train.meta or None)
         except ValueError as e:
@@ -423,6 +452,10 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--params-out", default=None, metavar="RESULT.json",
                    help="write parameters, posterior std and findings as JSON (with the "
                         "SHA-256 of the --out robot file: robot_sha256)")
+    s.add_argument("--virtual-noise", type=float, default=None, metavar="SIGMA",
+                   help="virtual noise std [measurement unit] added to every observation "
+                        "for the systematic error (thesis eq. 2.7; the setup's tow section "
+                        "adds task-oriented weighting)")
     s.add_argument("--starts", type=int, default=1, help="multi-start: number of starts (>= 1)")
     s.add_argument("--seed", type=int, default=0, help="seed of the multi-start draws (>= 0)")
     s.add_argument("--max-nfev", type=int, default=200,

@@ -11,7 +11,8 @@ Setup file (JSON object)::
       "samples_sha256": "...",               # optional: SHA-256 of its samples.csv
       "plugin": "cartesian",                 # the measurement plugin
       ...                                    # the plugin's own keys (docs/measurements.md)
-    }
+      "tow": {...}                           # optional: task-oriented weighting
+    }                                        # (docs/task_weighting.md)
 
 Samples file (CSV, comma separated, one header row, one row per sample)::
 
@@ -53,7 +54,8 @@ from jwarp.measurement import Measurement
 
 SETUP_SCHEMA = "jwarp.calibration_setup"
 SETUP_VERSION = 1
-_FILE_KEYS = ("schema", "version", "robot", "description", "campaign_id", "samples_sha256")
+_FILE_KEYS = ("schema", "version", "robot", "description", "campaign_id", "samples_sha256",
+              "tow")
 #: a joint value beyond a limit by more than this fraction of the joint's range warns
 FAR_OUTSIDE = 0.1
 
@@ -73,6 +75,7 @@ class Setup:
     path: str | None = None
     campaign_id: str | None = None     # simulated campaign this setup belongs to
     samples_sha256: str | None = None  # SHA-256 of that campaign's samples.csv
+    tow: dict[str, Any] | None = None  # task-oriented weighting section (calibration.tow)
 
 
 @dataclass
@@ -112,10 +115,15 @@ def setup_from_dict(doc: Any, where: str = "setup") -> Setup:
     for key in ("campaign_id", "samples_sha256"):
         if doc.get(key) is not None and not isinstance(doc[key], str):
             raise ValueError(f"{where}: {key}: expected a string, got {doc[key]!r}")
+    tow = doc.get("tow")
+    if tow is not None and not isinstance(tow, dict):
+        raise ValueError(f"{where}: tow: expected a JSON object (task, virtual_noise, ...), "
+                         f"got {type(tow).__name__}")
     section = {k: v for k, v in doc.items() if k not in _FILE_KEYS}
     return Setup(plugin=plugin, section=section, robot=robot,
                  description=str(doc.get("description", "")),
-                 campaign_id=doc.get("campaign_id"), samples_sha256=doc.get("samples_sha256"))
+                 campaign_id=doc.get("campaign_id"), samples_sha256=doc.get("samples_sha256"),
+                 tow=tow)
 
 
 def read_text(path: str | os.PathLike, what: str) -> tuple[str, bytes]:
@@ -171,6 +179,8 @@ def write_setup(path: str | os.PathLike, setup: Setup) -> None:
         doc["samples_sha256"] = setup.samples_sha256
     doc.update(setup.section)
     doc["plugin"] = setup.plugin
+    if setup.tow is not None:
+        doc["tow"] = setup.tow
     atomic_write_text(os.fspath(path), json.dumps(_jsonable(doc), indent=1) + "\n")
 
 
