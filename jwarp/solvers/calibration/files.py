@@ -9,6 +9,8 @@ Setup file (JSON object)::
       "description": "...",                  # optional free text
       "campaign_id": "...",                  # optional: simulated campaign (see below)
       "samples_sha256": "...",               # optional: SHA-256 of its samples.csv
+      "cameras": [...],                      # optional: tracker cameras for pose sampling
+      "marker_normals": {...},               # optional: marker normals (docs/pose_sampling.md)
       "plugin": "cartesian",                 # the measurement plugin
       ...                                    # the plugin's own keys (docs/measurements.md)
       "tow": {...}                           # optional: task-oriented weighting
@@ -55,7 +57,7 @@ from jwarp.measurement import Measurement
 SETUP_SCHEMA = "jwarp.calibration_setup"
 SETUP_VERSION = 1
 _FILE_KEYS = ("schema", "version", "robot", "description", "campaign_id", "samples_sha256",
-              "tow")
+              "tow", "cameras", "marker_normals")
 #: a joint value beyond a limit by more than this fraction of the joint's range warns
 FAR_OUTSIDE = 0.1
 
@@ -76,6 +78,8 @@ class Setup:
     campaign_id: str | None = None     # simulated campaign this setup belongs to
     samples_sha256: str | None = None  # SHA-256 of that campaign's samples.csv
     tow: dict[str, Any] | None = None  # task-oriented weighting section (calibration.tow)
+    cameras: list | None = None        # tracker cameras of the pose sampler (poses.py)
+    marker_normals: dict | None = None  # {marker: normal in its frame} (poses.py)
 
 
 @dataclass
@@ -119,11 +123,16 @@ def setup_from_dict(doc: Any, where: str = "setup") -> Setup:
     if tow is not None and not isinstance(tow, dict):
         raise ValueError(f"{where}: tow: expected a JSON object (task, virtual_noise, ...), "
                          f"got {type(tow).__name__}")
+    if doc.get("cameras") is not None and not isinstance(doc["cameras"], list):
+        raise ValueError(f"{where}: cameras: expected a list of cameras, got {doc['cameras']!r}")
+    if doc.get("marker_normals") is not None and not isinstance(doc["marker_normals"], dict):
+        raise ValueError(f"{where}: marker_normals: expected an object {{marker: [x, y, z]}}, "
+                         f"got {doc['marker_normals']!r}")
     section = {k: v for k, v in doc.items() if k not in _FILE_KEYS}
     return Setup(plugin=plugin, section=section, robot=robot,
                  description=str(doc.get("description", "")),
                  campaign_id=doc.get("campaign_id"), samples_sha256=doc.get("samples_sha256"),
-                 tow=tow)
+                 tow=tow, cameras=doc.get("cameras"), marker_normals=doc.get("marker_normals"))
 
 
 def read_text(path: str | os.PathLike, what: str) -> tuple[str, bytes]:
@@ -177,6 +186,10 @@ def write_setup(path: str | os.PathLike, setup: Setup) -> None:
         doc["campaign_id"] = setup.campaign_id
     if setup.samples_sha256:
         doc["samples_sha256"] = setup.samples_sha256
+    if setup.cameras is not None:
+        doc["cameras"] = setup.cameras
+    if setup.marker_normals is not None:
+        doc["marker_normals"] = setup.marker_normals
     doc.update(setup.section)
     doc["plugin"] = setup.plugin
     if setup.tow is not None:
