@@ -43,8 +43,13 @@ def cmd_sample_poses(args: argparse.Namespace) -> int:
                       single_marker=args.single_marker, require=args.require,
                       batch_size=args.batch_size, max_tries=args.max_tries, seed=args.seed,
                       device=device)
+    draw = None
+    if setup.plugin == "contact":   # configurations on the contact manifold (nominal model)
+        from jwarp.solvers.calibration.scenarios import contact_sampler
+
+        draw = contact_sampler(robot, setup)
     try:
-        sampler = PoseSampler(robot, setup, opt)
+        sampler = PoseSampler(robot, setup, opt, draw)
     except ValueError as e:
         msg = " ".join(str(e).split())
         for key, option in (("k_of_n", "--k-of-n"), ("single_marker", "--single-marker"),

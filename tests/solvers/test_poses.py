@@ -205,12 +205,16 @@ def test_too_strict_reports_counts(justin):
 
 
 def test_contact_poses_on_the_manifold():
-    from jwarp.solvers.calibration.scenarios import contact_distance, hand_contact_setup
+    from jwarp.solvers.calibration.scenarios import (contact_distance, contact_sampler,
+                                                     hand_contact_setup)
     from jwarp.solvers.calibration.files import make_measurement
 
     hand = get_robot("hand4")
     s = hand_contact_setup()
-    res = PoseSampler(hand, s, PoseOptions(margin=0.0, dtype="float64", seed=1)).sample(12)
+    opt = PoseOptions(margin=0.0, dtype="float64", seed=1)
+    with pytest.raises(ValueError, match="draw: contact setups need a contact search"):
+        PoseSampler(hand, s, opt).sample(3)
+    res = PoseSampler(hand, s, opt, draw=contact_sampler(hand, s)).sample(12)
     assert res.q.shape == (12, hand.n_dof) and res.meta["pair"].shape == (12,)
     d = contact_distance(hand, make_measurement(hand, s), res.q, res.meta["pair"])
     assert np.max(np.abs(d)) < 1e-6

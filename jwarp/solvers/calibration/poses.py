@@ -9,9 +9,9 @@ batches by Warp kernels (:mod:`jwarp.kernels.visibility`) on the CPU or a CUDA d
   cone, facing the camera within ``max_angle`` and not occluded by the robot's spheres,
   for at least ``k_of_n`` cameras; at least one marker (``require="any"``) or all of them;
   with ``single_marker`` no second marker visible to any camera,
-* contact setups: configurations on the contact manifold of the nominal model
-  (:func:`jwarp.solvers.calibration.scenarios.contact_sampler`), then limits and
-  self-collision with the contact bodies' own frame pairs left out.
+* contact setups: configurations on the contact manifold of the nominal model from a
+  contact search passed as ``draw`` (:func:`jwarp.solvers.calibration.scenarios.contact_sampler`),
+  then limits and self-collision with the contact bodies' own frame pairs left out.
 
 Camera entries (file-level ``cameras`` list of a setup file, docs/pose_sampling.md)::
 
@@ -254,6 +254,10 @@ class PoseSampler:
         setup: the measurement setup (its ``cameras`` switch the visibility checks on;
             contact setups search the contact manifold), or None: limits and self-collision.
         options: :class:`PoseOptions` (validated here).
+        draw: ``(rng, k) -> (q (<=k, n_dof), meta)`` candidates for setups that are not
+            drawn uniformly in the limits; contact setups need one, e.g.
+            :func:`~jwarp.solvers.calibration.scenarios.contact_sampler` (the contact
+            search), whose candidates :meth:`sample` then checks.
 
     Raises:
         ValueError: bad options or setup (naming the key), ``k_of_n`` above the number of
@@ -261,9 +265,10 @@ class PoseSampler:
     """
 
     def __init__(self, robot: RobotModel, setup: Setup | None = None,
-                 options: PoseOptions | None = None) -> None:
+                 options: PoseOptions | None = None, draw: Any = None) -> None:
         init_warp()
         self.robot = robot
+        self.draw = draw
         self.setup = setup
         self.options = opt = (options or PoseOptions()).validate()
         self.device = resolve_device(opt.device)
@@ -415,8 +420,11 @@ class PoseSampler:
         """
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"n: expected a number of poses >= 1, got {n!r}")
+        if self.draw is not None:
+            return self._sample_drawn(int(n))
         if self.contact:
-            return self._sample_contact(int(n), progress)
+            raise ValueError("draw: contact setups need a contact search as draw (e.g. "
+                             "jwarp.solvers.calibration.scenarios.contact_sampler(robot, setup))")
         opt, dev = self.options, self.device
         bs = int(min(opt.batch_size, opt.max_tries))
         nd = self.robot.n_dof
@@ -471,33 +479,32 @@ class PoseSampler:
                              f"--k-of-n, --max-angle, cameras) or raise max_tries")
         return PoseSample(q=np.concatenate(got_q)[:n], tried=tried, counts=counts_d)
 
-    def _sample_contact(self, n: int, progress: bool) -> PoseSample:
-        """Contact setups: the contact search of
-        :func:`~jwarp.solvers.calibration.scenarios.contact_sampler` (nominal model), then
-        limits and self-collision (contact bodies' frame pairs left out)."""
-        from jwarp.solvers.calibration.scenarios import contact_sampler
-
+    def _sample_drawn(self, n: int) -> PoseSample:
+        """Candidates of ``draw`` (contact: on the contact manifold of the nominal model),
+        checked for limits, visibility and self-collision (contact bodies' frame pairs
+        left out)."""
         opt = self.options
         rng = np.random.default_rng(opt.seed)
-        sampler = contact_sampler(self.robot, self.setup)
-        qs, pairs = [], []
+        qs, metas = [], []
         have, tried = 0, 0
         total = np.zeros(vk.N_CODES, np.int64)
         while have < n and tried < opt.max_tries:
-            q, meta = sampler(rng, max(n - have, 8))
+            q, meta = self.draw(rng, max(n - have, 8))
             tried += len(q)
+            if len(q) == 0:
+                continue
             code, _ = self.check(q)
             total += np.bincount(code, minlength=vk.N_CODES)
             ok = code == 0
             qs.append(q[ok])
-            pairs.append(np.asarray(meta["pair"])[ok])
+            metas.append({k: np.asarray(v)[ok] for k, v in meta.items()})
             have += int(ok.sum())
         counts_d = {nm: int(total[i]) for i, nm in enumerate(CODE_NAMES)}
         if have < n:
-            raise ValueError(f"n: only {have} of {n} contact poses accepted in {tried} "
+            raise ValueError(f"n: only {have} of {n} poses accepted in {tried} drawn "
                              f"candidates ({_fmt_counts(counts_d)})")
-        return PoseSample(q=np.concatenate(qs)[:n], meta={"pair": np.concatenate(pairs)[:n]},
-                          tried=tried, counts=counts_d)
+        meta = {k: np.concatenate([m[k] for m in metas])[:n] for k in metas[0]} if metas else {}
+        return PoseSample(q=np.concatenate(qs)[:n], meta=meta, tried=tried, counts=counts_d)
 
 
 def _fmt_counts(counts: dict[str, int]) -> str:
@@ -505,9 +512,10 @@ def _fmt_counts(counts: dict[str, int]) -> str:
 
 
 def sample_poses(robot: RobotModel, setup: Setup | None, n: int,
-                 options: PoseOptions | None = None, progress: bool = False) -> PoseSample:
-    """``PoseSampler(robot, setup, options).sample(n)``."""
-    return PoseSampler(robot, setup, options).sample(n, progress=progress)
+                 options: PoseOptions | None = None, progress: bool = False,
+                 draw: Any = None) -> PoseSample:
+    """``PoseSampler(robot, setup, options, draw).sample(n)``."""
+    return PoseSampler(robot, setup, options, draw).sample(n, progress=progress)
 
 
 def plan_text(robot: RobotModel, q: np.ndarray, meta: dict[str, np.ndarray] | None = None
