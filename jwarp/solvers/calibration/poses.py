@@ -425,20 +425,9 @@ class PoseSampler:
         if self.contact:
             raise ValueError("draw: contact setups need a contact search as draw (e.g. "
                              "jwarp.solvers.calibration.scenarios.contact_sampler(robot, setup))")
-        opt, dev = self.options, self.device
-        bs = int(min(opt.batch_size, opt.max_tries))
-        nd = self.robot.n_dof
-        qbuf, _r0 = _scratch(dev, bs, nd, self.scalar)
-        frames, _r1 = _scratch(dev, bs, self.robot.n_frames, self.k.mat44)
-        xs, _r2 = _scratch(dev, bs, max(self.model.spheres.n_spheres, 1), self.k.vec3)
-        dummy = wp.zeros((1, 1), dtype=wp.int32, device=dev)
-        cap = int(n)
-        out_q = wp.empty((cap, nd), dtype=self.scalar, device=dev)
-        out_idx = wp.empty(cap, dtype=wp.int32, device=dev)
-        count = wp.zeros(1, dtype=wp.int32, device=dev)
-        counts = wp.zeros((vk.COUNT_ROWS, vk.N_CODES), dtype=wp.int32, device=dev)
+        opt = self.options
         got_q: list[np.ndarray] = []
-        have, tried, batch = 0, 0, 0
+        have, tried = 0, 0
         ss = np.random.SeedSequence(opt.seed)
         bar = None
         if progress:
@@ -447,28 +436,16 @@ class PoseSampler:
         total_counts = np.zeros(vk.N_CODES, np.int64)
         try:
             while have < n and tried < opt.max_tries:
-                k = min(bs, opt.max_tries - tried)
+                k = int(min(opt.batch_size, opt.max_tries - tried))
                 seed = int(ss.spawn(1)[0].generate_state(1, np.uint32)[0] & 0x7FFFFFFF)
-                count.zero_()
-                counts.zero_()
-                wp.launch(self.k.sample, dim=k,
-                          inputs=[seed, self.lower_w, self.upper_w, self.checks,
-                                  *self._model_args(), qbuf, frames, xs, dummy],
-                          outputs=[count, out_q, out_idx, counts], device=dev)
-                c = int(count.numpy()[0])
-                total_counts += counts.numpy().sum(axis=0)
+                qq, counts = self.run_batch(k, seed, capacity=n - have)
+                total_counts += counts
                 tried += k
-                batch += 1
-                if c:
-                    m = min(c, cap)
-                    idx = out_idx.numpy()[:m]
-                    qq = out_q.numpy()[:m].astype(np.float64)
-                    qq = qq[np.argsort(idx, kind="stable")]   # the launch's order: reproducible
-                    take = qq[:n - have] if c <= cap else qq[:n - have]
-                    got_q.append(take)
-                    have += len(take)
+                if len(qq):
+                    got_q.append(qq)
+                    have += len(qq)
                     if bar is not None:
-                        bar.update(len(take))
+                        bar.update(len(qq))
         finally:
             if bar is not None:
                 bar.close()
@@ -478,6 +455,50 @@ class PoseSampler:
                              f"({_fmt_counts(counts_d)}); relax the constraints (--margin, "
                              f"--k-of-n, --max-angle, cameras) or raise max_tries")
         return PoseSample(q=np.concatenate(got_q)[:n], tried=tried, counts=counts_d)
+
+    def run_batch(self, k: int, seed: int, capacity: int | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """One launch: ``k`` candidates drawn uniformly in the (shrunk) box limits by
+        Warp's RNG (stream ``seed``), checked on the device.
+
+        Returns:
+            (the accepted configurations (<= capacity, n_dof) float64 in candidate order,
+            verdict counts (N_CODES,) int64 of all k candidates). Buffers are kept for
+            the next call of the same size. Accepted candidates beyond ``capacity``
+            are dropped; on CUDA which ones is not reproducible (threads take the output
+            slots in any order), on the CPU the first ones are kept.
+        """
+        dev, nd = self.device, self.robot.n_dof
+        cap = max(int(k if capacity is None else min(capacity, k)), 1)
+        ws = getattr(self, "_ws", None)
+        if ws is None or ws["k"] < k or ws["cap"] < cap:
+            ws = self._ws = {"k": int(k), "cap": cap, "rows": []}
+            for name, m, dt in (("qbuf", nd, self.scalar), ("frames", self.robot.n_frames,
+                                                           self.k.mat44),
+                                ("xs", max(self.model.spheres.n_spheres, 1), self.k.vec3)):
+                ws[name], row = _scratch(dev, int(k), m, dt)
+                ws["rows"].append(row)
+            ws["dummy"] = wp.zeros((1, 1), dtype=wp.int32, device=dev)
+            ws["out_q"] = wp.empty((cap, nd), dtype=self.scalar, device=dev)
+            ws["out_idx"] = wp.empty(cap, dtype=wp.int32, device=dev)
+            ws["count"] = wp.zeros(1, dtype=wp.int32, device=dev)
+            ws["counts"] = wp.zeros((vk.COUNT_ROWS, vk.N_CODES), dtype=wp.int32, device=dev)
+        ws["count"].zero_()
+        ws["counts"].zero_()
+        out_q = ws["out_q"][:cap]
+        wp.launch(self.k.sample, dim=int(k),
+                  inputs=[int(seed), self.lower_w, self.upper_w, self.checks,
+                          *self._model_args(), ws["qbuf"], ws["frames"], ws["xs"],
+                          ws["dummy"]],
+                  outputs=[ws["count"], out_q, ws["out_idx"], ws["counts"]], device=dev)
+        c = int(ws["count"].numpy()[0])
+        counts = ws["counts"].numpy().sum(axis=0).astype(np.int64)
+        if c == 0:
+            return np.zeros((0, nd)), counts
+        m = min(c, cap)
+        idx = ws["out_idx"].numpy()[:m]
+        qq = out_q.numpy()[:m].astype(np.float64)
+        return qq[np.argsort(idx, kind="stable")], counts
 
     def _sample_drawn(self, n: int) -> PoseSample:
         """Candidates of ``draw`` (contact: on the contact manifold of the nominal model),
