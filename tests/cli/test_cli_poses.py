@@ -70,3 +70,18 @@ def test_sample_poses_errors(tmp_path, capsys):
                                    "--k-of-n", 6, "--max-tries", 100, "--quiet"], "--n")
     assert "only" in line
     assert not out.exists()
+
+
+def test_sample_poses_contact_plan_has_pairs(tmp_path, capsys):
+    from jwarp.solvers.calibration.scenarios import hand_contact_setup
+
+    path = tmp_path / "hand.json"
+    write_setup(path, hand_contact_setup())
+    out = tmp_path / "plan.csv"
+    code, stdout, _ = run(capsys, ["sample-poses", "--setup", path, "--n", 6, "--out", out,
+                                   "--margin", 0, "--quiet"])
+    assert code == 0, stdout
+    lines = out.read_text().splitlines()
+    assert lines[0].split(",")[-1] == "pair" and len(lines) == 7
+    pairs = [int(ln.split(",")[-1]) for ln in lines[1:]]
+    assert set(pairs) <= {0, 1, 2}
