@@ -17,6 +17,7 @@ from jwarp.solvers.calibration.poses import (CONTAIN_TOL, PoseOptions, PoseSampl
                                              parse_cameras, plan_text, write_plan)
 from jwarp.solvers.calibration.tour import order_poses, path_length
 from jwarp.world.collision import collision_pairs
+from reference import ref_fk
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +43,7 @@ def ref_check(robot, setup, q, opt):
     """(code (N,), seen (N, M)) by plain numpy, the kernel's rules (module docstring of
     jwarp.kernels.visibility) re-derived: 0 ok, 1 limits, 2 not seen, 3 many, 4 self."""
     cams = parse_cameras(setup.cameras) if setup.cameras else []
-    F = fk(robot, q, device="cpu", dtype="float64")                      # (N, nf, 4, 4)
+    F = ref_fk(robot, q)                                                # (N, nf, 4, 4)
     sf, sp, sr = (np.asarray(a) for a in robot.sphere_arrays())
     Fs = F[:, sf]                                                       # (N, S, 4, 4)
     xs = np.einsum("nsij,sj->nsi", Fs[..., :3, :3], sp) + Fs[..., :3, 3]
@@ -158,12 +159,12 @@ def test_occlusion_by_torso_known_answer(justin):
 
 # ----------------------------------------------------------- random vs reference
 @pytest.mark.parametrize("single,require", [(False, "any"), (True, "any"), (False, "all")])
-def test_check_matches_numpy_reference(justin, single, require):
+def test_check_matches_numpy_reference(justin, single, require, device):
     rng = np.random.default_rng(3)
     q = random_q(justin, rng, 1500)
     s = tracker_setup(ring_cameras())
     opt = PoseOptions(k_of_n=3, max_angle=70.0, single_marker=single, require=require,
-                      margin=0.02, dtype="float64")
+                      margin=0.02, dtype="float64", device=device)
     code, seen = PoseSampler(justin, s, opt).check(q)
     rcode, rseen = ref_check(justin, s, q, opt)
     assert np.array_equal(seen, rseen)
@@ -174,19 +175,21 @@ def test_check_matches_numpy_reference(justin, single, require):
     assert np.mean(c32 == rcode) > 0.99
 
 
-def test_sampled_poses_satisfy_every_constraint(justin):
+def test_sampled_poses_satisfy_every_constraint(justin, device):
     s = tracker_setup(ring_cameras(), {"right": [1, 0, 0]})
     opt = PoseOptions(k_of_n=4, max_angle=75.0, margin=0.03, single_marker=True,
-                      dtype="float64", batch_size=20000, seed=5)
+                      dtype="float64", batch_size=20000, seed=5, device=device)
     res = PoseSampler(justin, s, opt).sample(40)
     assert res.q.shape == (40, justin.n_dof)
     code, seen = ref_check(justin, s, res.q, opt)
     assert np.all(code == 0)
     assert np.all(((seen >= 4).sum(1) == 1) & ((seen > 0).sum(1) == 1))
     assert res.counts["ok"] >= 40 and sum(res.counts.values()) == res.tried
-    # reproducible with the seed, different with another
+    # reproducible with the seed (on the CPU: on CUDA the accepted rows of a batch are
+    # appended in thread order), different with another
     again = PoseSampler(justin, s, opt).sample(40)
-    assert np.array_equal(again.q, res.q)
+    if device == "cpu":
+        assert np.array_equal(again.q, res.q)
     other = PoseSampler(justin, s, PoseOptions(**{**opt.__dict__, "seed": 6})).sample(40)
     assert not np.array_equal(other.q, res.q)
 
