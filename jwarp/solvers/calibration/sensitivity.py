@@ -145,7 +145,8 @@ def _eig(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     P = J.shape[1]
     if J.shape[0] == 0:
         return np.zeros(P), np.eye(P)
-    _, s, Vt = np.linalg.svd(J, full_matrices=True)
+    # a full V only when it is not square already (rows < P); never the big U
+    _, s, Vt = np.linalg.svd(J, full_matrices=J.shape[0] < P)
     ev = np.zeros(P)
     ev[:s.size] = s ** 2
     return ev, Vt.T
