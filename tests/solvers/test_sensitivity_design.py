@@ -190,7 +190,15 @@ def test_logdet_updates_match_slogdet(m):
     for i, d in zip(chosen, rem):
         assert np.isclose(d, criterion(U, prior, L, [j for j in chosen if j != i]) - base,
                           atol=1e-10)
-    # plain D-optimality (L = None): c = log det A
+    # plain D-optimality (L = None, the square-L shortcut): c = log det A
+    full = _State(U, prior, np.eye(5), refresh=1000)
+    for i in chosen:
+        full.apply(i, +1)
+    for eps, idx in ((+1, rest), (-1, np.array(chosen))):
+        for i, d in zip(idx, full.deltas(idx, eps)):
+            after = chosen + [int(i)] if eps > 0 else [j for j in chosen if j != i]
+            assert np.isclose(d, criterion(U, prior, None, after)
+                              - criterion(U, prior, None, chosen), atol=1e-10)
     A = np.diag(prior) + sum(U[i].T @ U[i] for i in chosen)
     assert np.isclose(criterion(U, prior, None, chosen), np.linalg.slogdet(A)[1])
 
