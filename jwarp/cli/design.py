@@ -181,8 +181,9 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
                           whiten=args.whiten, rtol=args.rtol, atol=args.atol)
     except ValueError as e:
         msg = " ".join(str(e).split())
-        if msg.startswith("free: "):
-            raise CLIError("--free: " + msg.removeprefix("free: ")) from None
+        for prefix, opt in (("free: ", "--free"), ("rtol, atol: ", "--rtol, --atol")):
+            if msg.startswith(prefix):
+                raise CLIError(f"{opt}: {msg.removeprefix(prefix)}") from None
         raise
     wall = time.perf_counter() - t0
     labels = (f"actual ({meas.name})", f"task ({task.name})")

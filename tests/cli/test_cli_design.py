@@ -79,6 +79,8 @@ def test_design_errors(capsys, files, tmp_path):
                             "--out", tmp_path / "p.csv"], "--write-candidates")
     one_line_error(capsys, ["sensitivity", "--setup", d / "one.json", "--task-setup",
                             d / "rel2.json", "--n", 30, "--free", "theta,bogus"], "--free")
+    one_line_error(capsys, ["sensitivity", "--setup", d / "one.json", "--task-setup",
+                            d / "rel2.json", "--n", 30, "--rtol", 0], "--rtol, --atol")
     one_line_error(capsys, ["sensitivity", "--setup", tmp_path / "none.json", "--task-setup",
                             d / "rel2.json"], "--setup")
     assert not (tmp_path / "p.csv").exists()

@@ -152,6 +152,8 @@ def test_sensitivity_errors(hand):
         sensitivity(hand, meas, q, meas, q, "theta,bogus")
     with pytest.raises(ValueError, match=r"q: expected shape"):
         sensitivity(hand, meas, q[:, :3], meas, q, "theta")
+    with pytest.raises(ValueError, match="free: unknown parameter group"):
+        stacked_jacobian(hand, meas, q, "theta,radii")    # a group of another plugin
     with pytest.raises(ValueError, match="q: contains NaN"):
         stacked_jacobian(hand, meas, np.full((2, hand.n_dof), np.nan), "theta")
 

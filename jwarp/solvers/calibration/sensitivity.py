@@ -235,7 +235,7 @@ def stacked_jacobian(robot: Any, measurement: Any, q: Any, free: str | Iterable[
     Args:
         robot: robot name or RobotModel (nominal: the point of linearization).
         measurement: measurement plugin instance; meta: its per-sample columns.
-        free: groups (robot groups and the measurement's own groups).
+        free: groups (robot groups and the measurement's own groups; others are an error).
         x: (P,) parameters to linearize at (default the nominal / prior mean).
         whiten: divide the rows by the measurement's noise sigma (default: unwhitened, in
             the measurement's unit per parameter unit).
@@ -252,10 +252,7 @@ def stacked_jacobian(robot: Any, measurement: Any, q: Any, free: str | Iterable[
         raise ValueError("q: no configurations")
     if not np.all(np.isfinite(qa)):
         raise ValueError("q: contains NaN or inf")
-    groups = _groups_for(measurement, parse_groups(free))
-    if not groups:
-        raise ValueError(f"free: none of {parse_groups(free)} is a robot group or a group of "
-                         f"the '{measurement.name}' measurement")
+    groups = parse_groups(free)   # unknown groups: ParameterSpace.build names them
     # the Jacobian does not depend on the observations: y = 0 only builds the problem
     y = np.zeros((qa.shape[0], len(measurement.obs_names)))
     space_args = {k: problem[k] for k in ("sigma", "frames", "p_nominal", "bound_kappa")
@@ -312,10 +309,10 @@ def sensitivity(robot: Any, actual: Any, q_actual: Any, task: Any, q_task: Any,
         raise ValueError(f"free: unknown parameter group(s) {bad}; robot groups: "
                          f"{', '.join(ROBOT_GROUPS)}; '{actual.name}': {', '.join(own_a) or '-'}; "
                          f"'{task.name}': {', '.join(own_t) or '-'}")
-    Ja, na = stacked_jacobian(robot, actual, q_actual, groups, meta=meta_actual, whiten=whiten,
-                              **problem)
-    Jt, nt = stacked_jacobian(robot, task, q_task, groups, meta=meta_task, whiten=whiten,
-                              **problem)
+    Ja, na = stacked_jacobian(robot, actual, q_actual, _groups_for(actual, groups),
+                              meta=meta_actual, whiten=whiten, **problem)
+    Jt, nt = stacked_jacobian(robot, task, q_task, _groups_for(task, groups), meta=meta_task,
+                              whiten=whiten, **problem)
     union = list(dict.fromkeys(na + nt))
     Ja, Jt = align(Ja, na, union), align(Jt, nt, union)
     included, breaking = kernel_inclusion(Ja, Jt, union, rtol=rtol, atol=atol, top=top)
