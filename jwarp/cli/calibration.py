@@ -42,8 +42,6 @@ from typing import Any
 
 import numpy as np
 
-#: measurement groups that are free unless --fix names them (poses of sensors, markers)
-ALWAYS_FREE_MEASUREMENT_GROUPS = ("tracker", "camera", "markers", "fixtures")
 #: robots whose simulated truth is elastic by default, and its mean compliance [rad/(N m)]
 ELASTIC_ROBOTS = ("justin19", "arm7")
 DEFAULT_TRUE_KAPPA = 1e-4
@@ -95,19 +93,17 @@ def _stats(err: np.ndarray, scale: float) -> dict[str, float]:
 
 
 def _free_groups(free: str, meas: Any, fix: str | None) -> list[str]:
-    from jwarp.solvers.calibration import parse_groups
+    """``--free`` plus the measurement's pose and marker groups not in ``--fix``
+    (:func:`jwarp.solvers.calibration.params.with_pose_groups`, what ``calibrate()`` frees
+    by default)."""
+    from jwarp.solvers.calibration.params import with_pose_groups
 
-    groups = parse_groups(free) if free else []
-    fixed = set(parse_groups(fix)) if fix else set()
-    meas_groups = meas.params.group_names()
-    unknown_fix = sorted(fixed - set(meas_groups))
-    if unknown_fix:
-        raise _cli_error(f"--fix: {unknown_fix} are not groups of the '{meas.name}' "
-                         f"measurement (its groups: {', '.join(meas_groups) or 'none'})")
-    for g in meas_groups:
-        if g in ALWAYS_FREE_MEASUREMENT_GROUPS and g not in fixed and g not in groups:
-            groups.append(g)
-    return groups
+    try:
+        return with_pose_groups(meas, free or "", fix)
+    except ValueError as e:
+        msg = str(e)
+        opt = "--fix" if msg.startswith("fix:") else "--free"
+        raise _cli_error(f"{opt}: {msg.split(': ', 1)[1]}") from None
 
 
 def _check_int(option: str, value: int, minimum: int) -> None:
@@ -292,8 +288,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            options = CalibrationOptions(free=free, n_starts=args.starts, seed=args.seed,
-                                         max_nfev=args.max_nfev, callback=bar,
+            options = CalibrationOptions(free=free, free_poses=False, n_starts=args.starts,
+                                         seed=args.seed, max_nfev=args.max_nfev, callback=bar,
                                          covariance=covariance)
             res = calibrate_with(model, meas, train.q, train.y, options,
                                  meta=train.meta or None)

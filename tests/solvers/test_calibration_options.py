@@ -4,6 +4,7 @@ uploaded once (CalibrationProblem.q_device)."""
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -86,6 +87,11 @@ def test_calibrate_with_options_is_calibrate():
     np.testing.assert_array_equal(a.x, b.x)
     assert a.iterations == b.iterations and a.nfev == b.nfev and len(progress) >= a.iterations
     prob = CalibrationProblem.from_options(robot, meas, q, y, opts)
+    # the measurement's pose and marker groups are freed by default, as the CLI does
+    assert prob.space.free_groups == ["theta", "d", "tracker", "markers"]
+    prob = CalibrationProblem.from_options(robot, meas, q, y, replace(opts, fix="markers"))
+    assert prob.space.free_groups == ["theta", "d", "tracker"]
+    prob = CalibrationProblem.from_options(robot, meas, q, y, replace(opts, free_poses=False))
     assert prob.space.free_groups == ["theta", "d", "tracker"]
 
 

@@ -138,9 +138,15 @@ def dh_twists(robot: RobotModel, st: TorqueState) -> tuple[np.ndarray, np.ndarra
 
 
 def torque_jacobian(robot: RobotModel, st: TorqueState,
-                    twists: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+                    twists: tuple[np.ndarray, np.ndarray] | None = None,
+                    rows: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """d tau / d rho (S, n, 3, n, 5): derivative of the gravity torques [alpha, beta, theta]
-    of frame i (axes 1-2) w.r.t. DH entry (j, c) (axes 3-4), frames held at F(q, rho)."""
+    of frame i (axes 1-2) w.r.t. DH entry (j, c) (axes 3-4), frames held at F(q, rho).
+
+    ``rows`` = (frame (K,), axis (K,)): only those torque components, returned as
+    (S, K, n, 5) (= the full result's ``[:, frame, axis]``; e.g. the active elastic
+    components of :class:`ElasticComponents`, all :func:`equilibrium_jacobian` reads:
+    a fraction of the work and memory of the full array)."""
     a, w = dh_twists(robot, st) if twists is None else twists
     S, n = st.z.shape[:2]
     g = np.broadcast_to(robot.gravity, (S, n, 5, 3))
@@ -153,29 +159,52 @@ def torque_jacobian(robot: RobotModel, st: TorqueState,
     below = (sub & ~eye)                                       # [i, j]: j strictly below i
     ds = st.m[None, :, None, None] * a + _cross(w, st.s[:, :, None, :])   # (S, j, c, 3)
     g3 = np.broadcast_to(robot.gravity, st.z.shape)
-    out = np.zeros((S, n, 3, n, 5))
-    gw_t = gw.reshape(S, n * 5, 3).transpose(0, 2, 1)          # (S, 3, j*c)
-    ds_t = ds.reshape(S, n * 5, 3).transpose(0, 2, 1)
+    if rows is None:
+        r_frame = np.tile(np.arange(n), 3)
+        r_axis = np.repeat(np.arange(3), n)
+    else:
+        r_frame = np.asarray(rows[0], np.int64)
+        r_axis = np.asarray(rows[1], np.int64)
+    K = r_frame.size
+    out = np.zeros((S, K, n, 5))
+    # contiguous (S, 3, j*c): numpy's batched matmul is 2x faster than on the transposed view
+    gw_t = np.ascontiguousarray(gw.reshape(S, n * 5, 3).transpose(0, 2, 1))
+    ds_t = np.ascontiguousarray(ds.reshape(S, n * 5, 3).transpose(0, 2, 1))
     for k in range(3):
+        sel = np.nonzero(r_axis == k)[0]
+        if sel.size == 0:
+            continue
+        fi = r_frame[sel]
+        ax_k, arm_k = axes[k][:, fi], arms[k][:, fi]
         # subtree of j moves rigidly with frame i's axis: (g x w) . (axis_i x c_i)
-        h = _cross(axes[k], arms[k])                            # (S, i, 3)
-        rig = (h @ gw_t).reshape(S, n, n, 5)
+        h = _cross(ax_k, arm_k)                                 # (S, i, 3)
+        rig = (h @ gw_t).reshape(S, sel.size, n, 5)
+        rig *= rigid[k][fi][None, :, :, None]
         # j strictly below i: only the moved masses count: ds . (g x axis_i)
-        ga = _cross(g3, axes[k])                                # (S, i, 3)
-        blw = (ga @ ds_t).reshape(S, n, n, 5)
-        out[:, :, k] = rig * rigid[k][None, :, :, None] + blw * below[None, :, :, None]
+        ga = _cross(g3[:, fi], ax_k)                            # (S, i, 3)
+        blw = (ga @ ds_t).reshape(S, sel.size, n, 5)
+        blw *= below[fi][None, :, :, None]
+        rig += blw
+        out[:, sel] = rig
     # i == j, lateral axes: the parent (and so the axis, except for beta) stays put
-    v_par = a + _cross(w, st.p_par[:, :, None, :])              # velocity of p_par
-    dc = _cross(w, st.c_p[:, :, None, :]) + st.m[None, :, None, None] * v_par
-    gdc = _cross(dc, g)                                         # (S, j, c, 3)
-    idx = np.arange(n)
-    own_a = np.einsum("sjck,sjk->sjc", gdc, st.ax_a)
-    own_a[:, :, 4] += np.einsum("sjk,sjk->sj", _cross(st.c_p, g3),
-                                _cross(w[:, :, 4], st.ax_a))
-    own_b = np.einsum("sjck,sjk->sjc", gdc, st.ax_b)
-    out[:, idx, 0, idx, :] = own_a
-    out[:, idx, 1, idx, :] = own_b
-    out *= robot.is_dh[None, :, None, None, None]
+    lat = np.nonzero(r_axis < 2)[0]
+    if lat.size:
+        fl = r_frame[lat]
+        a_l, w_l = a[:, fl], w[:, fl]                           # (S, L, 5, 3)
+        v_par = a_l + _cross(w_l, st.p_par[:, fl, None, :])     # velocity of p_par
+        dc = _cross(w_l, st.c_p[:, fl, None, :]) + st.m[None, fl, None, None] * v_par
+        gdc = _cross(dc, np.broadcast_to(robot.gravity, dc.shape))  # (S, L, c, 3)
+        is_a = r_axis[lat] == 0
+        axis_l = np.where(is_a[None, :, None], st.ax_a[:, fl], st.ax_b[:, fl])
+        own = np.sum(gdc * axis_l[:, :, None, :], axis=-1)    # (S, L, c)
+        extra = np.sum(_cross(st.c_p[:, fl], g3[:, fl]) * _cross(w_l[:, :, 4], st.ax_a[:, fl]),
+                       axis=-1)
+        own[:, :, 4] += np.where(is_a[None, :], extra, 0.0)
+        out[:, lat, fl, :] = own
+    if not np.all(robot.is_dh[r_frame]):
+        out *= robot.is_dh[r_frame][None, :, None, None]
+    if rows is None:
+        return out.reshape(S, 3, n, n, 5).transpose(0, 2, 1, 3, 4)
     return out
 
 
@@ -257,7 +286,8 @@ def equilibrium_jacobian(jy_rho: np.ndarray, dtau: np.ndarray, tau: np.ndarray,
 
     Args:
         jy_rho: (S, m, n, 5) dy/drho at the equilibrium rows rho* (frames fixed).
-        dtau: (S, n, 3, n, 5) torque Jacobian at rho* (:func:`torque_jacobian`).
+        dtau: (S, n, 3, n, 5) torque Jacobian at rho* (:func:`torque_jacobian`), or its
+            rows of the components ``comps`` only, (S, K, n, 5) (``rows=`` there).
         tau: (S, n, 3) torques at rho*; kappa (n, 3) compliances [rad/(N m)].
         comps: active elastic components (must include every free kappa entry).
         dh_frame, dh_col: (P_dh,) free geometric DH entries (of rho0).
@@ -277,13 +307,17 @@ def equilibrium_jacobian(jy_rho: np.ndarray, dtau: np.ndarray, tau: np.ndarray,
         return direct, np.zeros((S, m, kap_frame.size)), np.zeros((S, m, P_m))
     fr, ax, col = comps.frame, comps.axis, comps.column
     kc = kappa[fr, ax]                                        # (K,)
-    t_rows = dtau[:, fr, ax]                                  # (S, K, n, 5)
-    A = np.eye(K)[None] - kc[None, :, None] * t_rows[:, :, fr, col]   # (S, K, K)
-    jy_e = jy_rho[:, :, fr, col]                              # (S, m, K)
+    t_rows = dtau if dtau.ndim == 4 else dtau[:, fr, ax]      # (S, K, n, 5)
+    # gathers along the flattened (frame, column) axis: np.take of one contiguous axis is
+    # several times faster than 2-D fancy indexing on these (S, K, n * 5) arrays
+    t_flat = t_rows.reshape(S, K, -1)
+    n5 = t_flat.shape[-1] // 5
+    A = np.eye(K)[None] - kc[None, :, None] * np.take(t_flat, fr * 5 + col, axis=2)  # (S, K, K)
+    jy_e = np.take(jy_rho.reshape(S, m, n5 * 5), fr * 5 + col, axis=2)  # (S, m, K)
     lam = np.linalg.solve(np.swapaxes(A, 1, 2), np.swapaxes(jy_e, 1, 2))  # (S, K, m)
     lam_t = np.swapaxes(lam, 1, 2)                            # (S, m, K)
-    b_dh = kc[None, :, None] * t_rows[:, :, dh_frame, dh_col]            # (S, K, P_dh)
-    d_dh = direct + lam_t @ b_dh
+    b_dh = np.take(t_flat, np.asarray(dh_frame) * 5 + np.asarray(dh_col), axis=2)  # (S, K, P_dh)
+    d_dh = direct + (lam_t * kc[None, None, :]) @ b_dh
     pos = {(int(f), int(a)): k for k, (f, a) in enumerate(zip(fr, ax))}
     try:
         rows = np.array([pos[(int(f), int(a))] for f, a in zip(kap_frame, kap_axis)], np.int64)

@@ -28,7 +28,7 @@ from typing import Any, Callable, Iterable, Mapping, NamedTuple
 
 import numpy as np
 import warp as wp
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 
 from jwarp import kinematics as K
 from jwarp.core.arrays import finite_as, init_warp, to_output
@@ -40,7 +40,8 @@ from jwarp.solvers.calibration.elastic import (ElasticComponents, equilibrium_ja
                                                torque_jacobian, torque_state)
 from jwarp.solvers.calibration.options import CalibrationOptions
 from jwarp.solvers.calibration.params import (KIND_DH, KIND_KAPPA, KIND_MASS, KIND_MEAS,
-                                              MASS_GROUP, ParameterSpace, parse_groups)
+                                              MASS_GROUP, ParameterSpace, parse_groups,
+                                              with_pose_groups)
 from jwarp.solvers.calibration.result import CalibrationResult, build_result
 from jwarp.solvers.calibration.samples import check_samples
 
@@ -228,11 +229,13 @@ class CalibrationProblem:
     def from_options(cls, robot: Any, measurement: Any, q: Any, y: Any,
                      options: CalibrationOptions, meta: Mapping[str, Any] | None = None
                      ) -> "CalibrationProblem":
-        """The problem of the data with the problem's fields of ``options`` (free,
-        noise_sigma, sigma, frames, p_nominal, elastic, lam, max_iter, tol, bound_kappa,
-        covariance)."""
+        """The problem of the data with the problem's fields of ``options`` (free - with
+        the measurement's pose groups when ``free_poses``, see
+        :func:`~jwarp.solvers.calibration.params.with_pose_groups` -, noise_sigma, sigma,
+        frames, p_nominal, elastic, lam, max_iter, tol, bound_kappa, covariance)."""
         o = options
-        return cls(robot, measurement, q, y, free=o.free, meta=meta, noise_sigma=o.noise_sigma,
+        free = with_pose_groups(measurement, o.free, o.fix) if o.free_poses else o.free
+        return cls(robot, measurement, q, y, free=free, meta=meta, noise_sigma=o.noise_sigma,
                    sigma=o.sigma, frames=o.frames, p_nominal=o.p_nominal, elastic=o.elastic,
                    lam=o.lam, max_iter=o.max_iter, tol=o.tol, bound_kappa=o.bound_kappa,
                    covariance=o.covariance)
@@ -329,10 +332,10 @@ class CalibrationProblem:
         kp_f, kp_c = sp.frame[self._kap_idx], sp.column[self._kap_idx]
         if self.elastic:
             st = torque_state(self.robot, frames, rho_full, frame_masses(self.robot, mass))
-            dtau = torque_jacobian(self.robot, st)
+            comps = ElasticComponents.select(self.robot, kap, sp.kappa_free)
+            dtau = torque_jacobian(self.robot, st, rows=(comps.frame, comps.axis))
             dtau_m = (mass_torque_jacobian(self.robot, frames, st, sp.mass_entries)
                       if self._mass_idx.size else None)
-            comps = ElasticComponents.select(self.robot, kap, sp.kappa_free)
             d_dh, d_kap, d_mass = equilibrium_jacobian(jy, dtau, st.tau, kap, comps, dh_f,
                                                        dh_c, kp_f, kp_c, dtau_m)
         else:
@@ -377,6 +380,122 @@ def _iteration_callback(start: int, n_starts: int, counter: list[int],
     return cb
 
 
+#: most unbounded solves of one start in the compliance active set (:func:`solve_start`)
+MAX_ACTIVE_SET_ROUNDS = 6
+#: iterations over which ``stall_tol`` measures the cost decrease
+STALL_WINDOW = 5
+
+
+def _least_squares(prob: CalibrationProblem, x: np.ndarray, moving: np.ndarray,
+                   lower: np.ndarray, o: CalibrationOptions, max_nfev: int | None,
+                   cb: Callable[[Any], None]) -> Any:
+    """scipy's least_squares over the entries ``moving`` (bool (P,)) of x, the others held;
+    stopped (status 2) when the cost fell by less than ``o.stall_tol`` over the last
+    :data:`STALL_WINDOW` iterations."""
+    sp = prob.space
+    idx = np.nonzero(moving)[0]
+    if idx.size == sp.size:
+        fun, jac = prob.residuals, prob.jacobian
+    else:
+        def full(z: np.ndarray) -> np.ndarray:
+            xx = x.copy()
+            xx[idx] = z
+            return xx
+
+        def fun(z: np.ndarray) -> np.ndarray:
+            return prob.residuals(full(z))
+
+        def jac(z: np.ndarray) -> np.ndarray:
+            return prob.jacobian(full(z))[:, idx]
+    costs: list[float] = []
+
+    def callback(intermediate_result: Any) -> None:
+        cb(intermediate_result)
+        costs.append(float(intermediate_result.cost))
+        if (o.stall_tol is not None and len(costs) > STALL_WINDOW
+                and costs[-1 - STALL_WINDOW] - costs[-1] < o.stall_tol):
+            raise StopIteration
+
+    sol = least_squares(fun, x[idx], jac=jac, bounds=(lower[idx], sp.upper[idx]),
+                        method=o.method, x_scale=sp.scale[idx], ftol=o.ftol, xtol=o.xtol,
+                        gtol=o.gtol, max_nfev=max_nfev, callback=callback)
+    if sol.status == -2:  # our StopIteration: converged for all practical purposes
+        sol.status, sol.success = 2, True
+        sol.message = (f"the cost fell by less than stall_tol={o.stall_tol:g} over the last "
+                       f"{STALL_WINDOW} iterations")
+    return sol
+
+
+def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
+                cb: Callable[[Any], None] | None = None) -> OptimizeResult:
+    """Minimize ``prob.cost`` from the start ``xs`` (P,) with the solver options of ``o``.
+
+    Without ``o.bound_kappa`` (or no free compliance): one
+    :func:`scipy.optimize.least_squares` run with the space's bounds. With it, the
+    compliances' bound kappa >= 0 is kept by an active set around *unbounded* runs
+    (scipy's box bounds make dogbox truncate every step at a start on the bound kappa = 0
+    and stall there, and trf crawl; docs/calibration_robustness.md): after each run the
+    compliances that ended negative are set to 0 and held, and the others solved again
+    from there; a held one whose cost gradient points inside (d cost / d kappa < 0) is
+    released. At most :data:`MAX_ACTIVE_SET_ROUNDS` runs share ``o.max_nfev``.
+
+    Guard: the returned x is the lowest-cost feasible point seen, the start included, so
+    the cost never ends above the start's (``xs`` must be feasible: compliances >= 0 with
+    ``bound_kappa``, finite residuals).
+
+    Returns:
+        an OptimizeResult with x, cost, nfev (all runs), status and message (of the last
+        run; a note when the guard kept an earlier point), rounds (runs made) and held
+        (bool (P,), the compliances held at 0 at the end).
+    """
+    sp = prob.space
+    cb = cb if cb is not None else (lambda _r: None)
+    kap = sp.kind == KIND_KAPPA
+    bounded = bool(o.bound_kappa) and bool(kap.any())
+    lower = np.where(kap, -np.inf, sp.lower) if bounded else sp.lower
+    best_x, best_cost = xs.copy(), prob.cost(xs)
+    x = xs.copy()
+    held = np.zeros(sp.size, bool)
+    nfev, rounds, status, message = 0, 0, 0, "no solver run"
+    for rounds in range(1, (MAX_ACTIVE_SET_ROUNDS if bounded else 1) + 1):
+        left = None if o.max_nfev is None else o.max_nfev - nfev
+        if left is not None and left < 1:
+            break
+        sol = _least_squares(prob, x, ~held, lower, o, left, cb)
+        nfev += int(sol.nfev)
+        status, message = int(sol.status), str(sol.message)
+        x[~held] = sol.x
+        if not bounded:
+            break
+        neg = kap & (x < 0)
+        if neg.any():                       # hold the negative ones at the bound
+            x[neg] = 0.0
+            held |= neg
+        if np.all(x[kap] >= 0):
+            c = prob.cost(x)
+            if np.isfinite(c) and c <= best_cost:
+                best_x, best_cost = x.copy(), c
+        if neg.any():
+            continue
+        if not held.any():
+            break
+        r = prob.residuals(x)
+        g = prob.jacobian(x).T @ r          # d cost / dx
+        release = held & (g * sp.scale < -max(o.gtol or 0.0, 1e-10) * max(float(r @ r), 1.0))
+        if not release.any():
+            break
+        held &= ~release
+    if not bounded:
+        x_end = x
+        c_end = prob.cost(x)
+        if np.isfinite(c_end) and c_end <= best_cost:
+            best_x, best_cost = x_end, c_end
+    if best_cost < prob.cost(x):
+        message += " (the guard kept the best feasible point seen)"
+    return OptimizeResult(x=best_x, cost=float(best_cost), nfev=nfev, status=status,
+                          message=message, rounds=rounds, held=held & (best_x == 0.0))
+
+
 def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Iterable[str],
               meta: Mapping[str, Any] | None = None, noise_sigma: Any = None,
               sigma: Mapping[str, float] | None = None, frames: Iterable[int | str] | None = None,
@@ -384,8 +503,10 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
               n_starts: int = 1, seed: int | None = 0, max_nfev: int | None = 200,
               ftol: float = 1e-8, xtol: float = 1e-8, gtol: float = 1e-8,
               method: str = "dogbox", elastic: bool | None = None, lam: float = 1.0,
-              max_iter: int = 100, tol: float = 1e-12, bound_kappa: bool = False,
-              covariance: Any = None, callback: Callable[[Progress], Any] | None = None,
+              max_iter: int = 100, tol: float = 1e-12, bound_kappa: bool = True,
+              covariance: Any = None, free_poses: bool = True,
+              fix: str | Iterable[str] | None = None, stall_tol: float | None = 1.0,
+              callback: Callable[[Progress], Any] | None = None,
               identifiability_tol: float = 1e-2, moved_sigmas: float = 3.0,
               warn: bool = True) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples:
@@ -398,8 +519,11 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
         meta: per-sample inputs {name: (S,)} the measurement needs (``meta_names``).
         free, noise_sigma, sigma, frames, p_nominal, x0, initial_guess, n_starts, seed,
             max_nfev, ftol, xtol, gtol, method, elastic, lam, max_iter, tol, bound_kappa,
-            covariance, callback, identifiability_tol, moved_sigmas, warn: the fields of
-            :class:`CalibrationOptions`.
+            covariance, free_poses, fix, stall_tol, callback, identifiability_tol,
+            moved_sigmas, warn: the fields of :class:`CalibrationOptions`. By default the
+            measurement's pose and marker groups (tracker, camera, markers, fixtures) are
+            freed as well (``free_poses=False`` or ``fix`` to keep them), and compliances
+            stay >= 0 (``bound_kappa``).
 
     Returns:
         :class:`~jwarp.solvers.calibration.result.CalibrationResult`.
@@ -410,7 +534,7 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
         x0=x0, initial_guess=initial_guess, n_starts=n_starts, seed=seed, max_nfev=max_nfev,
         ftol=ftol, xtol=xtol, gtol=gtol, method=method, elastic=elastic, lam=lam,
         max_iter=max_iter, tol=tol, bound_kappa=bound_kappa, covariance=covariance,
-        callback=callback,
+        free_poses=free_poses, fix=fix, stall_tol=stall_tol, callback=callback,
         identifiability_tol=identifiability_tol, moved_sigmas=moved_sigmas, warn=warn)
     return calibrate_with(robot, measurement, q, y, options, meta=meta, t0=t0)
 
@@ -465,11 +589,10 @@ def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
                 continue
         it = [0]
         cb = _iteration_callback(k, n_starts, it, callback)
-        sol = least_squares(prob.residuals, xs, jac=prob.jacobian, bounds=(sp.lower, sp.upper),
-                            method=o.method, x_scale=sp.scale, ftol=o.ftol, xtol=o.xtol,
-                            gtol=o.gtol, max_nfev=o.max_nfev, callback=cb)
+        sol = solve_start(prob, xs, o, cb)
         runs.append({"start": k, "cost": float(sol.cost), "nfev": int(sol.nfev),
-                     "iterations": it[0], "status": int(sol.status), "message": str(sol.message)})
+                     "iterations": it[0], "status": int(sol.status), "message": str(sol.message),
+                     "held_at_bound": int(sol.held.sum())})
         if best is None or sol.cost < best[0].cost:
             best = (sol, xs, it[0])
     sol, xs, iters = best

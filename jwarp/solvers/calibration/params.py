@@ -58,6 +58,11 @@ DEFAULT_SIGMA: dict[str, float] = {
 
 KIND_DH, KIND_KAPPA, KIND_MEAS, KIND_MASS = 0, 1, 2, 3
 
+#: measurement groups that hold the poses of the sensors and markers (the calibration
+#: frames ``c`` of the paper): freed by default (:func:`with_pose_groups`), as the
+#: measurement loop is not closed without them
+POSE_GROUPS = ("tracker", "camera", "markers", "fixtures")
+
 
 def parse_groups(free: str | Iterable[str]) -> list[str]:
     """``"theta,d,tracker"`` or an iterable of names -> list of group names (stripped,
@@ -74,6 +79,53 @@ def parse_groups(free: str | Iterable[str]) -> list[str]:
     if not items:
         raise ValueError("free: no parameter group given")
     return list(dict.fromkeys(items))
+
+
+def with_pose_groups(measurement: Any, free: str | Iterable[str],
+                     fix: str | Iterable[str] | None = None) -> list[str]:
+    """The groups ``free`` plus the measurement's pose and marker groups
+    (:data:`POSE_GROUPS` it has: tracker, camera, markers, fixtures) not named in ``fix``.
+
+    This is what ``jwarp calibrate`` frees (its ``--fix`` is ``fix``), and what
+    :func:`~jwarp.solvers.calibration.calibrate` frees by default: without them the
+    measurement loop is closed by the rough setup, and every robot parameter bends to
+    absorb the setup's error (e.g. 35 mm instead of 3.8 mm on Agile Justin's tracker data).
+
+    Args:
+        measurement: a measurement plugin (its ``params.group_names()``), or None (robot
+            groups only: ``free`` is returned parsed).
+        free: group names, a list or comma-separated (may be empty when the measurement has
+            pose groups to free).
+        fix: measurement groups kept at their nominal values (a list or comma-separated);
+            each must be a group of the measurement (ValueError naming ``fix``).
+
+    Returns:
+        the group names, ``free`` first in its order, then the added pose groups.
+    """
+    groups = [] if isinstance(free, str) and not free.strip() else parse_groups(free)
+    block = getattr(measurement, "params", None) if measurement is not None else None
+    meas_groups = block.group_names() if block is not None else []
+    fixed: list[str] = []
+    if fix is not None and not (isinstance(fix, str) and not fix.strip()):
+        try:
+            fixed = parse_groups(fix)
+        except (TypeError, ValueError) as e:
+            raise type(e)(str(e).replace("free:", "fix:", 1)) from None
+    unknown = [g for g in fixed if g not in meas_groups]
+    if unknown:
+        name = getattr(measurement, "name", type(measurement).__name__)
+        raise ValueError(f"fix: {unknown} are not groups of the '{name}' measurement (its "
+                         f"groups: {', '.join(meas_groups) or 'none'})")
+    clash = [g for g in fixed if g in groups]
+    if clash:
+        raise ValueError(f"fix: {clash} are also named in free; a group is either free or fixed")
+    for g in meas_groups:
+        if g in POSE_GROUPS and g not in fixed and g not in groups:
+            groups.append(g)
+    if not groups:
+        raise ValueError("free: no parameter group given (and the measurement has no pose "
+                         "groups to free)")
+    return groups
 
 
 def measured_chain(robot: RobotModel, measured: Iterable[int] | None) -> set[int]:
@@ -240,9 +292,11 @@ class ParameterSpace:
                 measured chains through their weight).
             p_nominal: (P_meas,) measurement parameter prior means (default ParamBlock
                 nominal).
-            bound_kappa: give the compliances the bound kappa >= 0 (default off: bounds
-                make dogbox truncate its steps and stall; the optimizer may cross zero
-                and the calibrated robot clips negative compliances).
+            bound_kappa: give the compliances the bound kappa >= 0 (``lower``). The MAP
+                solver keeps it by an active set around unbounded solves (scipy's box
+                bounds make dogbox/trf stall at a start on the bound, see
+                docs/calibration_robustness.md); without it the optimizer may cross
+                zero and the calibrated robot clips negative compliances.
 
         The ``mass`` group takes the entries of :func:`influencing_masses` (compliant =
         nonzero kappa, or a kappa group freed here on the frame); a ValueError naming
