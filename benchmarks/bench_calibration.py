@@ -12,6 +12,15 @@ model, 3 minutes there).
     python benchmarks/bench_calibration.py                 # 300 train + 200 test samples
     python benchmarks/bench_calibration.py --samples 100 --test 100 --quick
     python benchmarks/bench_calibration.py --threads 1     # one CPU core (BLAS threads)
+    python benchmarks/bench_calibration.py --case systematic   # the data the model cannot fit
+
+Section ``systematic`` (issue 16's speed acceptance: <= 10 s on one CPU core): the truth is
+*outside* the calibration model, as a real robot is (:func:`systematic_truth`): smaller DH
+errors (+-1 mm, +-0.25 deg, on beta too), kappa_theta and kappa_alpha as above, *lateral*
+compliance kappa_beta of the same size (not free in the full model), and joint transmission
+errors: two harmonics of every joint angle, amplitude up to ``--harmonic`` rad, applied to
+q before the forward kinematics (:func:`transmission_error`). The MAP fit then ends with a
+residual far above the noise and takes several times the iterations of clean data.
 
 Prints the machine, the wall time of the calibration (min and median over ``--repeats``
 runs after an untimed warm-up run, through ``benchmarks/timing.py``: every run solves the
@@ -44,8 +53,40 @@ def _parse(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--repeats", type=int, default=None,
                     help="timed calibrations, min/median (default 3; --quick 2)")
     ap.add_argument("--quick", action="store_true", help="skip the 'before' calibration, 2 repeats")
+    ap.add_argument("--case", choices=("clean", "systematic", "both"), default="both",
+                    help="clean: truth inside the model; systematic: truth outside it "
+                         "(lateral compliance, joint harmonics); default both")
+    ap.add_argument("--harmonic", type=float, default=1e-3,
+                    help="systematic case: largest joint transmission error amplitude [rad] "
+                         "(default 1 mrad)")
     ap.add_argument("--json", help="write the figures as JSON")
     return ap.parse_args(argv)
+
+
+def systematic_truth(nominal, rng, *, length_error: float = 0.001,
+                     angle_error: float = math.radians(0.25),
+                     kappa: tuple[float, float] = (0.5e-4, 1.5e-4)):
+    """A true justin19 the full calibration model cannot represent: DH errors on theta, d,
+    r, alpha and beta (uniform +-``length_error`` [m] / +-``angle_error`` [rad]), joint
+    and lateral compliances kappa_theta, kappa_alpha *and kappa_beta* drawn from ``kappa``
+    [rad/(N m)] (kappa_beta is left out of the default free groups: unmodeled)."""
+    from jwarp.solvers.calibration.params import perturb_robot
+
+    return perturb_robot(nominal, rng, groups=("theta", "d", "r", "alpha", "beta"),
+                         length_error=length_error, angle_error=angle_error, kappa=kappa,
+                         kappa_groups=("kappa_theta", "kappa_alpha", "kappa_beta"))
+
+
+def transmission_error(q, rng, amplitude: float, harmonics: int = 2):
+    """Joint values the true robot reaches for commanded ``q`` (S, n_dof): q plus
+    ``sum_k a_jk sin(k q_j + phi_jk)`` for k = 1..``harmonics`` with a_jk uniform in
+    +-``amplitude`` [rad] and random phases (a gear's transmission error; unmodeled)."""
+    import numpy as np
+
+    n = q.shape[1]
+    a = amplitude * rng.uniform(-1.0, 1.0, (harmonics, n))
+    phase = rng.uniform(0.0, 2.0 * np.pi, (harmonics, n))
+    return q + sum(a[k] * np.sin((k + 1) * q + phase[k]) for k in range(harmonics))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,8 +119,6 @@ def main(argv: list[str] | None = None) -> int:
         print("note: the calibration solver runs in float64 on the CPU; --device ignored")
     rng = np.random.default_rng(args.seed)
     nominal = jwarp.robot("justin19")
-    truth = perturb_robot(nominal, rng, groups=("theta", "d", "r", "alpha"),
-                          kappa=(0.5e-4, 1.5e-4), kappa_groups=("kappa_theta", "kappa_alpha"))
     true_setup = {"plugin": "cartesian",
                   "tracker": {"position": [3.0, 0.2, 1.0], "rotvec": [0.0, 0.0, math.pi]},
                   "markers": [{"name": "right", "frame": "right_tcp", "position": [0.0, 0.02, 0.05]},
@@ -91,20 +130,14 @@ def main(argv: list[str] | None = None) -> int:
     for mk in rough["markers"]:
         mk["position"] = [0.0, 0.0, 0.03]
         mk["sigma"] = 0.05
-    m_true = CartesianMeasurement(truth, true_setup)
     meas = CartesianMeasurement(nominal, rough)
     lim = nominal.joint_limits
     N = args.samples + args.test
-    q = rng.uniform(lim[:, 0], lim[:, 1], (N, nominal.n_dof))
-    y_clean = m_true.predict(model_frames(truth, q), m_true.params.nominal)
-    y = y_clean + rng.normal(0.0, args.noise, y_clean.shape)
     tr, te = slice(0, args.samples), slice(args.samples, N)
     machine = timing.machine()
-    print(f"justin19 simulated tracker campaign: {args.samples} train / {args.test} test samples "
-          f"x 2 markers, noise {args.noise * 1e3:.2f} mm, free {args.free}; {machine}; "
-          f"min/median of {args.repeats} runs")
+    doc: dict = {"machine": machine, "settings": vars(args)}
 
-    def timed(free: str, **kw) -> tuple:
+    def timed(q, y, free: str, **kw) -> tuple:
         """(result, caught CalibrationWarnings, Timing) of ``--repeats`` calibrations."""
         def call() -> tuple:
             with warnings.catch_warnings(record=True) as caught:
@@ -114,42 +147,72 @@ def main(argv: list[str] | None = None) -> int:
         (runs,) = timing.each_run([lambda _: call], args.repeats)
         return (*runs.results[0], runs.timing)
 
-    before = tb = None
-    if not args.quick:
-        b, _, tb = timed("tracker,markers")
-        before = {"train": error_stats(b.errors),
-                  "test": error_stats(errors(nominal, meas, b.params, q[te], y[te]))}
-        print(f"before (nominal robot, tracker + markers fitted in {tb.median:.2f} s): "
-              f"test mean {before['test']['mean'] * 1e3:.2f} mm, max {before['test']['max'] * 1e3:.2f} mm")
+    def section(label: str, truth, q, q_true) -> dict:
+        """Simulate y on ``truth`` at the joint values ``q_true`` reached for the commanded
+        ``q``, calibrate, print and return the figures."""
+        m_true = CartesianMeasurement(truth, true_setup)
+        y_clean = m_true.predict(model_frames(truth, q_true), m_true.params.nominal)
+        y = y_clean + rng.normal(0.0, args.noise, y_clean.shape)
+        print(f"\n[{label}] justin19 simulated tracker campaign: {args.samples} train / "
+              f"{args.test} test samples x 2 markers, noise {args.noise * 1e3:.2f} mm, free "
+              f"{args.free}; {machine}; min/median of {args.repeats} runs")
+        before = tb = None
+        if not args.quick:
+            b, _, tb = timed(q, y, "tracker,markers")
+            before = {"train": error_stats(b.errors),
+                      "test": error_stats(errors(nominal, meas, b.params, q[te], y[te]))}
+            print(f"before (nominal robot, tracker + markers fitted in {tb.median:.2f} s): "
+                  f"test mean {before['test']['mean'] * 1e3:.2f} mm, max "
+                  f"{before['test']['max'] * 1e3:.2f} mm")
+        res, caught, t = timed(q, y, args.free, n_starts=args.starts, seed=args.seed)
+        elapsed = t.median
+        after = {"train": error_stats(res.errors),
+                 "test": error_stats(errors(res.robot, meas, res.params, q[te], y[te])),
+                 "test_vs_truth": error_stats(errors(res.robot, meas, res.params, q[te],
+                                                     y_clean[te]))}
+        held = sum(int(r.get("held_at_bound", 0)) for r in res.starts)
+        print(f"full calibration: {len(res.names)} free parameters, {elapsed:.2f} s wall "
+              f"(median; min {t.best:.2f} s), {res.iterations} iterations, {res.nfev} "
+              f"evaluations, success={res.success} ({res.message})")
+        print(f"  {len(res.unidentifiable)} unidentifiable directions, {len(res.moved)} "
+              f"parameters moved > 3 prior sigmas, {held} compliance(s) held at 0, "
+              f"{len(caught)} CalibrationWarning(s)")
+        print(f"{'errors [mm]':<26} {'mean':>8} {'std':>8} {'max':>8}")
+        rows = []
+        if before:
+            rows += [("before train", before["train"]), ("before test", before["test"])]
+        rows += [("after train", after["train"]), ("after test", after["test"]),
+                 ("after test vs noise-free", after["test_vs_truth"])]
+        for name, st in rows:
+            print(f"{name:<26} {st['mean'] * 1e3:>8.3f} {st['std'] * 1e3:>8.3f} "
+                  f"{st['max'] * 1e3:>8.3f}")
+        return {"time_s": elapsed, "time_min_s": t.best, "runs": t.runs,
+                "before_time_s": tb.figures() if tb else None,
+                "iterations": res.iterations, "nfev": res.nfev, "held_at_bound": held,
+                "n_params": len(res.names), "before": before, "after": after}
 
-    res, caught, t = timed(args.free, n_starts=args.starts, seed=args.seed)
-    elapsed = t.median
-    after = {"train": error_stats(res.errors),
-             "test": error_stats(errors(res.robot, meas, res.params, q[te], y[te])),
-             "test_vs_truth": error_stats(errors(res.robot, meas, res.params, q[te], y_clean[te]))}
     n_noise = float(np.mean(np.linalg.norm(rng.normal(0, args.noise, (100000, 3)), axis=1)))
-    print(f"full calibration: {len(res.names)} free parameters, {elapsed:.2f} s wall "
-          f"(median; min {t.best:.2f} s), {res.iterations} iterations, {res.nfev} evaluations, "
-          f"success={res.success} ({res.message})")
-    print(f"  {len(res.unidentifiable)} unidentifiable directions, {len(res.moved)} parameters "
-          f"moved > 3 prior sigmas, {len(caught)} CalibrationWarning(s)")
-    print(f"{'errors [mm]':<26} {'mean':>8} {'std':>8} {'max':>8}")
-    rows = []
-    if before:
-        rows += [("before train", before["train"]), ("before test", before["test"])]
-    rows += [("after train", after["train"]), ("after test", after["test"]),
-             ("after test vs noise-free", after["test_vs_truth"])]
-    for name, st in rows:
-        print(f"{name:<26} {st['mean'] * 1e3:>8.3f} {st['std'] * 1e3:>8.3f} {st['max'] * 1e3:>8.3f}")
-    print(f"(mean norm of the 3D noise alone: {n_noise * 1e3:.3f} mm)")
-    ok = elapsed < 30.0
-    print(f"target < 30 s: {'met' if ok else 'MISSED'} ({elapsed:.2f} s median)")
+    if args.case in ("clean", "both"):
+        truth = perturb_robot(nominal, rng, groups=("theta", "d", "r", "alpha"),
+                              kappa=(0.5e-4, 1.5e-4), kappa_groups=("kappa_theta", "kappa_alpha"))
+        q = rng.uniform(lim[:, 0], lim[:, 1], (N, nominal.n_dof))
+        fig = section("clean", truth, q, q)
+        print(f"(mean norm of the 3D noise alone: {n_noise * 1e3:.3f} mm)")
+        ok = fig["time_s"] < 30.0
+        print(f"target < 30 s: {'met' if ok else 'MISSED'} ({fig['time_s']:.2f} s median)")
+        doc.update(fig)  # the clean figures at the top level, as before
+        doc["noise_norm_mean"] = n_noise
+    if args.case in ("systematic", "both"):
+        srng = np.random.default_rng(args.seed + 1000)
+        truth = systematic_truth(nominal, srng)
+        q = srng.uniform(lim[:, 0], lim[:, 1], (N, nominal.n_dof))
+        fig = section(f"systematic: kappa_beta and joint harmonics <= {args.harmonic:g} rad "
+                      f"in the truth only", truth, q, transmission_error(q, srng, args.harmonic))
+        ok = fig["time_s"] <= 10.0
+        print(f"target <= 10 s on one core: {'met' if ok else 'MISSED'} "
+              f"({fig['time_s']:.2f} s median)")
+        doc["systematic"] = fig
     if args.json:
-        doc = {"time_s": elapsed, "time_min_s": t.best, "runs": t.runs,
-               "before_time_s": tb.figures() if tb else None, "machine": machine,
-               "iterations": res.iterations, "nfev": res.nfev,
-               "n_params": len(res.names), "before": before, "after": after,
-               "noise_norm_mean": n_noise, "settings": vars(args)}
         with open(args.json, "w") as fh:
             json.dump(doc, fh, indent=1)
     return 0

@@ -375,7 +375,7 @@ def _iteration_callback(start: int, n_starts: int, counter: list[int],
     def cb(intermediate_result: Any) -> None:
         counter[0] += 1
         if callback is not None:
-            callback(Progress(start, n_starts, counter[0], float(intermediate_result.cost)))
+            callback(Progress(start, n_starts, counter[0], _accepted_cost(intermediate_result)))
 
     return cb
 
@@ -384,14 +384,23 @@ def _iteration_callback(start: int, n_starts: int, counter: list[int],
 MAX_ACTIVE_SET_ROUNDS = 6
 #: iterations over which ``stall_tol`` measures the cost decrease
 STALL_WINDOW = 5
+#: ... and the relative decrease over them below which a run has stalled as well
+STALL_RTOL = 1e-5
+
+
+def _accepted_cost(intermediate_result: Any) -> float:
+    """0.5 |r|^2 at the solver's current (accepted) x: scipy's ``cost`` field is that of
+    the last *trial* step, rejected ones included (dogbox 1.17), so it can go up."""
+    f = np.asarray(intermediate_result.fun, np.float64)
+    return 0.5 * float(f @ f)
 
 
 def _least_squares(prob: CalibrationProblem, x: np.ndarray, moving: np.ndarray,
                    lower: np.ndarray, o: CalibrationOptions, max_nfev: int | None,
                    cb: Callable[[Any], None]) -> Any:
     """scipy's least_squares over the entries ``moving`` (bool (P,)) of x, the others held;
-    stopped (status 2) when the cost fell by less than ``o.stall_tol`` over the last
-    :data:`STALL_WINDOW` iterations."""
+    stopped (status 2) when the cost fell by less than ``o.stall_tol`` (or
+    :data:`STALL_RTOL` of itself) over the last :data:`STALL_WINDOW` iterations."""
     sp = prob.space
     idx = np.nonzero(moving)[0]
     if idx.size == sp.size:
@@ -411,9 +420,9 @@ def _least_squares(prob: CalibrationProblem, x: np.ndarray, moving: np.ndarray,
 
     def callback(intermediate_result: Any) -> None:
         cb(intermediate_result)
-        costs.append(float(intermediate_result.cost))
-        if (o.stall_tol is not None and len(costs) > STALL_WINDOW
-                and costs[-1 - STALL_WINDOW] - costs[-1] < o.stall_tol):
+        costs.append(_accepted_cost(intermediate_result))
+        if (o.stall_tol is not None and len(costs) > STALL_WINDOW and costs[-1 - STALL_WINDOW]
+                - costs[-1] < max(o.stall_tol, STALL_RTOL * costs[-1])):
             raise StopIteration
 
     sol = least_squares(fun, x[idx], jac=jac, bounds=(lower[idx], sp.upper[idx]),
@@ -421,8 +430,8 @@ def _least_squares(prob: CalibrationProblem, x: np.ndarray, moving: np.ndarray,
                         gtol=o.gtol, max_nfev=max_nfev, callback=callback)
     if sol.status == -2:  # our StopIteration: converged for all practical purposes
         sol.status, sol.success = 2, True
-        sol.message = (f"the cost fell by less than stall_tol={o.stall_tol:g} over the last "
-                       f"{STALL_WINDOW} iterations")
+        sol.message = (f"the cost fell by less than stall_tol={o.stall_tol:g} (or "
+                       f"{STALL_RTOL:g} of itself) over the last {STALL_WINDOW} iterations")
     return sol
 
 

@@ -82,7 +82,8 @@ class CalibrationOptions:
             result reports. False: the solver may end with negative compliances, which the
             calibrated robot clips to 0 (a finding says how much that costs).
         stall_tol: stop a solver run when its cost (0.5 chi^2 of the whitened residuals)
-            fell by less than this over the last 5 iterations (None: off). With systematic
+            fell by less than this (or 1e-5 of the cost) over the last 5 iterations
+            (None: off). With systematic
             error in the data Gauss-Newton converges only linearly along weakly determined
             directions and crawls on for tens of iterations, each gaining ~0.1; the default
             1.0 (a chi^2 change of 2 in 5 iterations) ends that crawl, far below what a test
