@@ -477,13 +477,11 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
         if not bounded:
             break
         neg = kap & (x < 0)
-        if neg.any():                       # hold the negative ones at the bound
-            x[neg] = 0.0
-            held |= neg
-        if np.all(x[kap] >= 0):
-            c = prob.cost(x)
-            if np.isfinite(c) and c <= best_cost:
-                best_x, best_cost = x.copy(), c
+        x[neg] = 0.0                        # hold the negative ones at the bound
+        held |= neg
+        c = prob.cost(x)                    # x is feasible now
+        if np.isfinite(c) and c <= best_cost:
+            best_x, best_cost = x.copy(), c
         if neg.any():
             continue
         if not held.any():
@@ -495,10 +493,9 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
             break
         held &= ~release
     if not bounded:
-        x_end = x
         c_end = prob.cost(x)
         if np.isfinite(c_end) and c_end <= best_cost:
-            best_x, best_cost = x_end, c_end
+            best_x, best_cost = x.copy(), c_end
     if best_cost < prob.cost(x):
         message += " (the guard kept the best feasible point seen)"
     return OptimizeResult(x=best_x, cost=float(best_cost), nfev=nfev, status=status,
