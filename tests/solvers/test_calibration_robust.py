@@ -165,7 +165,8 @@ def _small_problem(bound_kappa: bool = True, seed: int = 3):
     rng = np.random.default_rng(seed)
     lim = robot.joint_limits
     q = rng.uniform(lim[:, 0], lim[:, 1], (40, robot.n_dof))
-    y = meas.predict(model_frames(robot, q), meas.params.nominal) + rng.normal(0, 3 * NOISE, (40, 3))
+    y = (meas.predict(model_frames(robot, q), meas.params.nominal)
+         + rng.normal(0, 3 * NOISE, (40, 3)))
     opts = CalibrationOptions(free="theta,kappa_theta,kappa_alpha", noise_sigma=NOISE,
                               bound_kappa=bound_kappa, sigma={"kappa_theta": 1e-3,
                                                               "kappa_alpha": 1e-3})
@@ -219,7 +220,8 @@ def test_stall_stop_ends_the_crawl_without_changing_the_fit(camp):
     stop = _fit(camp, FULL, bound_kappa=False)
     assert stop.nfev < crawl.nfev
     assert stop.cost <= crawl.cost * (1 + 1e-3)
-    a, b = _mean_mm(_fit_model_test_errors(camp, stop)), _mean_mm(_fit_model_test_errors(camp, crawl))
+    a = _mean_mm(_fit_model_test_errors(camp, stop))
+    b = _mean_mm(_fit_model_test_errors(camp, crawl))
     assert abs(a - b) <= 0.02 * b, (a, b)
 
 
@@ -227,7 +229,8 @@ def test_progress_reports_the_accepted_cost(camp):
     """scipy's callback carries the last *trial* cost (rejected steps too); Progress gives
     the cost at the solver's x, which never rises within a run."""
     costs = []
-    res = _fit(camp, FULL, bound_kappa=False, stall_tol=None, callback=lambda p: costs.append(p.cost))
+    res = _fit(camp, FULL, bound_kappa=False, stall_tol=None,
+               callback=lambda p: costs.append(p.cost))
     assert res.nfev > res.iterations            # some steps were rejected
     assert np.all(np.diff(costs) <= 1e-9 * costs[0])
     assert costs[-1] == pytest.approx(res.cost, rel=1e-12)
@@ -258,7 +261,8 @@ def test_calibrate_frees_the_pose_groups_by_default_as_the_cli():
     lim = robot.joint_limits
     q = rng.uniform(lim[:, 0], lim[:, 1], (60, robot.n_dof))
     m_true = CartesianMeasurement(truth, TRUE_SETUP)
-    y = m_true.predict(model_frames(truth, q), m_true.params.nominal) + rng.normal(0, NOISE, (60, 6))
+    y = (m_true.predict(model_frames(truth, q), m_true.params.nominal)
+         + rng.normal(0, NOISE, (60, 6)))
     meas = CartesianMeasurement(robot, ROUGH_SETUP)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", CalibrationWarning)
