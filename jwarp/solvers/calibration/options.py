@@ -83,11 +83,11 @@ class CalibrationOptions:
             calibrated robot clips to 0 (a finding says how much that costs).
         stall_tol: stop a solver run when its cost (0.5 chi^2 of the whitened residuals)
             fell by less than this (or 1e-5 of the cost) over the last 5 iterations
-            (None: off). With systematic
-            error in the data Gauss-Newton converges only linearly along weakly determined
-            directions and crawls on for tens of iterations, each gaining ~0.1; the default
-            1.0 (a chi^2 change of 2 in 5 iterations) ends that crawl, far below what a test
-            error shows. Clean data converge by ``ftol`` first.
+            (None: off). With systematic error in the data Gauss-Newton converges only
+            linearly along weakly determined directions and crawls on for tens of
+            iterations, each gaining ~0.1; the default 1.0 (a chi^2 change of 2 in 5
+            iterations) ends that crawl, far below what a test error shows. Clean data
+            converge by ``ftol`` first.
         covariance: per-sample measurement covariance (S, m, m) with full blocks, or one
             (m, m) for all samples [unit^2] (task-oriented weighting, virtual noise: see
             :mod:`~jwarp.solvers.calibration.tow`); replaces ``noise_sigma`` in the
