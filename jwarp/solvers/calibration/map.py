@@ -17,7 +17,11 @@ function theorem (:mod:`.elastic`).
 ``|r|^2 / 2`` with :func:`scipy.optimize.least_squares`
 (``dogbox``: trf stalls on the flat directions of this problem) from the measurement's
 robust initial guess, optionally from more starts drawn from the prior, and returns a
-:class:`~jwarp.solvers.calibration.result.CalibrationResult`.
+:class:`~jwarp.solvers.calibration.result.CalibrationResult`. Each start runs
+:func:`solve_start`: compliances kept >= 0 by an active set around unbounded runs (the
+calibrated robot cannot hold a negative one), a run stopped when its cost stalls, and the
+lowest-cost feasible point returned, never one above the start (see
+docs/calibration_robustness.md).
 """
 
 from __future__ import annotations
