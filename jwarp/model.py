@@ -15,6 +15,12 @@ Conventions (see ``docs/robot_schema.md``):
 * A ``static`` frame has a fixed 4x4 transform relative to its parent.
 * Elastic compliance ``kappa``: array ``(n_frames, 3)`` in rad/(N m) for the axes of
   ``[alpha, beta, theta]`` of each ``dh`` frame (zero rows for static frames).
+* Non-geometric extras (both optional, absent = zero; see ``docs/nongeometric.md``):
+  ``harmonic`` ``(n_dof, K, 2)`` joint transmission errors: joint j acts as
+  ``q_j + sum_k a_jk sin(k q_j) + b_jk cos(k q_j)`` (k = 1..K, ``[..., 0]`` = a,
+  ``[..., 1]`` = b) [rad, or m for a prismatic joint]; ``kappa_nonlinear`` ``(n_frames,)``
+  [rad/(N m)^3] torque-dependent joint compliance: the theta axis of a DH frame bends by
+  ``(kappa_theta + kappa_nonlinear tau^2) tau`` (negative = stiffening, as harmonic drives).
 * SI units: m, rad, kg, N m.
 """
 
@@ -142,12 +148,20 @@ class RobotModel:
     linear_limits: list[LinearLimit] = field(default_factory=list)
     kappa: np.ndarray | None = None  # (n_frames, 3) rad/(N m)
     notes: dict[str, str] = field(default_factory=dict)
+    harmonic: np.ndarray | None = None  # (n_dof, K, 2) [rad or m]; None: K = 0
+    kappa_nonlinear: np.ndarray | None = None  # (n_frames,) rad/(N m)^3
 
     def __post_init__(self) -> None:
         self.gravity = _finite(self.gravity, "gravity")
         if self.kappa is None:
             self.kappa = np.zeros((len(self.frames), 3))
         self.kappa = _finite(self.kappa, "kappa")
+        if self.harmonic is None:
+            self.harmonic = np.zeros((len(self.joints), 0, 2))
+        self.harmonic = _finite(self.harmonic, "harmonic")
+        if self.kappa_nonlinear is None:
+            self.kappa_nonlinear = np.zeros(len(self.frames))
+        self.kappa_nonlinear = _finite(self.kappa_nonlinear, "kappa_nonlinear")
         validate(self)
 
     # ----------------------------------------------------------------- sizes
@@ -292,6 +306,35 @@ class RobotModel:
             if f.coupling:
                 out[i] = self.joints[f.coupling[0][0]].type == "prismatic"
         return out
+
+    @property
+    def has_harmonic(self) -> bool:
+        """Whether any joint transmission error (``harmonic``) is nonzero."""
+        return bool(np.any(self.harmonic))
+
+    def joint_transmission(self, q: np.ndarray, harmonic: np.ndarray | None = None
+                           ) -> np.ndarray:
+        """The joint values the links see, ``q + dq(q)`` (..., n_dof) (numpy float64),
+        ``dq_j = sum_k a_jk sin(k q_j) + b_jk cos(k q_j)``; ``harmonic`` (n_dof, K, 2)
+        replaces the robot's own."""
+        h = self.harmonic if harmonic is None else np.asarray(harmonic, np.float64)
+        q = np.asarray(q, np.float64)
+        if h.shape[1] == 0:
+            return q.copy()
+        k = np.arange(1, h.shape[1] + 1)
+        kq = q[..., :, None] * k                      # (..., n_dof, K)
+        return q + np.sum(h[:, :, 0] * np.sin(kq) + h[:, :, 1] * np.cos(kq), axis=-1)
+
+    def joint_transmission_slope(self, q: np.ndarray) -> np.ndarray:
+        """d(q + dq(q))/dq (..., n_dof): the diagonal chain-rule factor of
+        :meth:`joint_transmission` (1 without transmission errors)."""
+        h = self.harmonic
+        q = np.asarray(q, np.float64)
+        if h.shape[1] == 0:
+            return np.ones_like(q)
+        k = np.arange(1, h.shape[1] + 1)
+        kq = q[..., :, None] * k
+        return 1.0 + np.sum(k * (h[:, :, 0] * np.cos(kq) - h[:, :, 1] * np.sin(kq)), axis=-1)
 
     @cached_property
     def joint_limits(self) -> np.ndarray:
@@ -662,6 +705,15 @@ def validate(model: RobotModel) -> None:
     if np.any(kappa < 0):
         raise RobotModelError("kappa: compliances must be >= 0")
     model.kappa = kappa
+    harm = _finite(model.harmonic, "harmonic")
+    if harm.ndim != 3 or harm.shape[0] != nj or harm.shape[2] != 2:
+        raise RobotModelError(f"harmonic: expected shape (n_dof={nj}, K, 2) "
+                              f"([a_k, b_k] per joint and harmonic k = 1..K), got {harm.shape}")
+    model.harmonic = harm
+    knl = _finite(model.kappa_nonlinear, "kappa_nonlinear", (nf,))
+    if np.any(knl[~model.is_dh]):
+        raise RobotModelError("kappa_nonlinear: must be 0 on static frames")
+    model.kappa_nonlinear = knl
 
 
 def _check_frame(idx: Any, nf: int, where: str) -> int:
@@ -792,13 +844,39 @@ def _from_dict(doc: Any) -> RobotModel:
     kappa = doc.get("kappa")
     if kappa is not None:
         kappa = _finite(kappa, "kappa", (len(frames), 3))
+    harmonic = doc.get("harmonic")
+    if harmonic is not None:
+        harmonic = _harmonic_from_doc(harmonic, jnames)
+    knl = doc.get("kappa_nonlinear")
+    if knl is not None:
+        knl = _finite(knl, "kappa_nonlinear", (len(frames),))
     return RobotModel(
         name=name, description=doc.get("description", ""), joints=joints, frames=frames,
         gravity=_finite(doc.get("gravity", [0.0, 0.0, -9.81]), "gravity", (3,)),
         workspace_dim=doc.get("workspace_dim", 3),
         masses=masses, spheres=spheres, capsules=capsules, self_collision=sc,
-        end_effectors=eff, linear_limits=lin, kappa=kappa,
-        notes={str(k): str(v) for k, v in (doc.get("notes") or {}).items()})
+        end_effectors=eff, linear_limits=lin, kappa=kappa, harmonic=harmonic,
+        kappa_nonlinear=knl, notes={str(k): str(v) for k, v in (doc.get("notes") or {}).items()})
+
+
+def _harmonic_from_doc(value: Any, jnames: list[str]) -> np.ndarray:
+    """``harmonic``: {joint name: [[a_1, b_1], ..., [a_K, b_K]]} (joints left out: zero;
+    lists may differ in length, shorter ones are padded with zeros) -> (n_dof, K, 2)."""
+    if not isinstance(value, dict):
+        raise RobotModelError("harmonic: expected an object {joint name: [[a_1, b_1], ...]}")
+    rows = {}
+    for name, v in value.items():
+        j = _resolve(name, jnames, "harmonic", "joint")
+        a = _finite(v, f"harmonic.{name}")
+        if a.ndim != 2 or a.shape[1] != 2:
+            raise RobotModelError(f"harmonic.{name}: expected [[a_1, b_1], ..., [a_K, b_K]], "
+                                  f"got shape {a.shape}")
+        rows[j] = a
+    K = max([a.shape[0] for a in rows.values()], default=0)
+    out = np.zeros((len(jnames), K, 2))
+    for j, a in rows.items():
+        out[j, :a.shape[0]] = a
+    return out
 
 
 def _to_dict(m: RobotModel) -> dict[str, Any]:
@@ -838,6 +916,11 @@ def _to_dict(m: RobotModel) -> dict[str, Any]:
     }
     if np.any(m.kappa):
         doc["kappa"] = lst(m.kappa)
+    if m.has_harmonic:
+        doc["harmonic"] = {m.joints[j].name: lst(m.harmonic[j])
+                           for j in range(m.n_dof) if np.any(m.harmonic[j])}
+    if np.any(m.kappa_nonlinear):
+        doc["kappa_nonlinear"] = lst(m.kappa_nonlinear)
     if m.notes:
         doc["notes"] = dict(m.notes)
     return doc

@@ -53,7 +53,7 @@ from jwarp.registry import robot as get_robot
 
 __all__ = ["DeviceModel", "KinematicsTables", "LimitTables", "SphereModel", "PathData",
            "put_model", "tables", "content_key", "scalar_type", "numpy_dtype",
-           "frame_mass_model", "with_frame_masses", "fixed_parts", "collision_tables"]
+           "frame_mass_model", "with_frame_masses", "with_kappa_nonlinear", "fixed_parts", "collision_tables"]
 
 #: the fields of ``kernels.fk.FrameTables`` (attributes of :class:`DeviceModel`)
 _FRAME_FIELDS = ("order", "parent", "is_dh", "prismatic", "fixed_rot", "fixed_pos", "dh0",
@@ -150,7 +150,8 @@ class DeviceModel:
     ``cpl_start``/``cpl_joint``/``cpl_coef``; ``dh0_3d`` the nominal rows as (1, n_frames, 5).
     Mass model: ``mass`` (n_frames,) [kg], ``mass_com`` (n_frames,) vec3 [m], ``dh_info``
     (n_dh,) vec4i, ``static_idx``. ``gravity`` vec3 [m/s^2]; ``kappa`` (1, n_frames, 3) the
-    robot's compliances [rad/(N m)]; ``limits`` :class:`LimitTables`; ``key`` the content
+    robot's compliances [rad/(N m)]; ``kappa_nl`` (n_frames,) its ``kappa_nonlinear``
+    [rad/(N m)^3] (the theta axis bends by ``kappa tau + kappa_nl tau^3``); ``limits`` :class:`LimitTables`; ``key`` the content
     key of the robot (:func:`content_key`)."""
 
     robot: RobotModel
@@ -176,6 +177,7 @@ class DeviceModel:
     gravity: Any  # vec3 of the scalar type
     kappa: wp.array  # (1, n_frames, 3) default compliances
     limits: LimitTables
+    kappa_nl: wp.array  # (n_frames,) torque-dependent joint compliance [rad/(N m)^3]
 
     @property
     def n_frames(self) -> int:
@@ -285,6 +287,22 @@ def with_frame_masses(t: DeviceModel, mass: np.ndarray, com: np.ndarray) -> Devi
         t, mass=wp.array(mass.astype(npdt), dtype=t.scalar, device=t.device),
         mass_com=wp.array(com.astype(npdt), dtype=t.mass_com.dtype, device=t.device))
     for name in ("_frame_struct", "_nominal_rows", "_chains", "spheres"):  # mass-free caches
+        if name in t.__dict__:
+            out.__dict__[name] = t.__dict__[name]
+    return out
+
+
+def with_kappa_nonlinear(t: DeviceModel, kappa_nl: np.ndarray) -> DeviceModel:
+    """A copy of the model ``t`` with another torque-dependent joint compliance
+    ``kappa_nl`` (n_frames,) [rad/(N m)^3] (calibration of the ``kappa_nonlinear`` group);
+    only that array is uploaded, the rest is shared. Not cached."""
+    n = t.robot.n_frames
+    a = np.asarray(kappa_nl, np.float64)
+    if a.shape != (n,):
+        raise ValueError(f"kappa_nl: expected shape ({n},), got {a.shape}")
+    out = dataclasses.replace(t, kappa_nl=wp.array(a.astype(numpy_dtype(t.scalar)),
+                                                   dtype=t.scalar, device=t.device))
+    for name in ("_frame_struct", "_nominal_rows", "_chains", "spheres"):
         if name in t.__dict__:
             out.__dict__[name] = t.__dict__[name]
     return out
@@ -404,6 +422,7 @@ def _build(robot: RobotModel, dev: wp.Device, scalar: type, key: str) -> DeviceM
         gravity=k.vec3(float(g[0]), float(g[1]), float(g[2])),
         kappa=arr(np.asarray(robot.kappa, np.float64).astype(npdt)[None], scalar),
         limits=_limit_tables(robot, dev, scalar),
+        kappa_nl=arr(np.asarray(robot.kappa_nonlinear, np.float64).astype(npdt), scalar),
     )
 
 

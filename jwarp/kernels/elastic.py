@@ -31,7 +31,9 @@ fills them once per buffer). With ``rows_kind`` ``ROWS_NOMINAL`` (:mod:`jwarp.ke
 torque pass reads it either way.
 
 ``kappa`` has shape (B_kappa, n_frames, 3) in rad/(N m), axes [alpha, beta, theta];
-``kappa_stride`` 0 shares row 0. ``rho0`` likewise with ``rho0_stride``.
+``kappa_stride`` 0 shares row 0. ``rho0`` likewise with ``rho0_stride``. ``kappa_nl``
+(n_frames,) [rad/(N m)^3] is the torque-dependent part of the joint compliance: the theta
+target is ``rho0 + kappa tau + kappa_nl tau^3`` (compliance ``kappa + kappa_nl tau^2``).
 """
 
 
@@ -76,10 +78,12 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.func
     def damped_step(rho0: wp.array3d(dtype=scalar), r0: int, kappa: wp.array3d(dtype=scalar),
-                    kb: int, i: int, tau: vec3, prev: vec3, lam: scalar) -> vec3:
+                    kb: int, i: int, tau: vec3, prev: vec3, lam: scalar, knl: scalar) -> vec3:
         """Change of (alpha, beta, theta) of frame i in one damped update:
-        ``lam (rho0 + kappa tau - prev)`` with tau and prev in (alpha, beta, theta) order."""
-        return lam * (vec3(rho0[r0, i, 3], rho0[r0, i, 4], rho0[r0, i, 1])
+        ``lam (rho0 + kappa tau + [0, 0, knl tau_theta^3] - prev)`` with tau and prev in
+        (alpha, beta, theta) order (``knl``: the frame's ``kappa_nl``)."""
+        tt = tau[2]
+        return lam * (vec3(rho0[r0, i, 3], rho0[r0, i, 4], rho0[r0, i, 1] + knl * tt * tt * tt)
                       + wp.cw_mul(vec3(kappa[kb, i, 0], kappa[kb, i, 1], kappa[kb, i, 2]), tau)
                       - prev)
 
@@ -108,6 +112,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         rho: wp.array3d(dtype=scalar), rho_stride: int,
         rho0: wp.array3d(dtype=scalar), rho0_stride: int,
         kappa: wp.array3d(dtype=scalar), kappa_stride: int,
+        kappa_nl: wp.array(dtype=scalar),
         lam: scalar, gravity: vec3,
         dh_info: wp.array(dtype=wp.vec4i),
         prefix: wp.array2d(dtype=vec4), axes: wp.array2d(dtype=vec3), sb: int,
@@ -151,7 +156,8 @@ def kernels(scalar: type) -> SimpleNamespace:
                 tau_out[b, i, 1] = tau_b
                 tau_out[b, i, 2] = tau_t
             # damped update: new = (1 - lam) prev + lam (rho0 + kappa tau)
-            dr = damped_step(rho0, r0, kappa, kb, i, tau, vec3(prev_a, prev_b, prev_t), lam)
+            dr = damped_step(rho0, r0, kappa, kb, i, tau, vec3(prev_a, prev_b, prev_t), lam,
+                             kappa_nl[i])
             d_a = dr[0]
             d_b = dr[1]
             d_t = dr[2]
@@ -183,6 +189,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         mass: wp.array(dtype=scalar),
         mass_com: wp.array(dtype=vec3),
         dh_info: wp.array(dtype=wp.vec4i),
+        kappa_nl: wp.array(dtype=scalar),
         # Data out:
         frames: wp.array2d(dtype=mat44),
         prefix: wp.array2d(dtype=vec4),
@@ -212,7 +219,7 @@ def kernels(scalar: type) -> SimpleNamespace:
                 acc = acc + vec4(m * w[0], m * w[1], m * w[2], m)
             prefix[k + 1, sb] = acc
         delta[b] = torque_update(b, frames, rho, rho_stride, rho0, rho0_stride, kappa,
-                                 kappa_stride, lam, gravity, dh_info, prefix, axes, sb, rho_out,
+                                 kappa_stride, kappa_nl, lam, gravity, dh_info, prefix, axes, sb, rho_out,
                                  tau_out, write_tau)
 
     @wp.struct
@@ -228,6 +235,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         rho0_stride: int
         kappa: wp.array3d(dtype=scalar)
         kappa_stride: int
+        kappa_nl: wp.array(dtype=scalar)
         lam: scalar
         gravity: vec3
         mass: wp.array(dtype=scalar)
@@ -260,7 +268,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         prev_a = rows[u, i, 3]
         prev_b = rows[u, i, 4]
         dr = damped_step(c.rho0, u * c.rho0_stride, c.kappa, u * c.kappa_stride, i, tau,
-                         vec3(prev_a, prev_b, prev_t), c.lam)
+                         vec3(prev_a, prev_b, prev_t), c.lam, c.kappa_nl[i])
         new_a = prev_a + dr[0]
         new_b = prev_b + dr[1]
         cs = model.trig[i]

@@ -16,6 +16,7 @@ from jwarp.kinematics.data import KinematicsData, forward_kinematics, frame_jaco
 from jwarp.kinematics.equilibrium import elastic_step, fk_elastic, gravity_torques
 from jwarp.kinematics.fk import fk
 from jwarp.kinematics.jacobians import jacobian, jacobian_dh
+from jwarp.kinematics.transmission import transmitted, without_transmission
 from jwarp.kinematics.launch import (ELASTIC_TOL, ElasticFK, ElasticLaunch, ElasticStep,
                                      default_tol, elastic_args, equilibrium, frame_rows, host_out,
                                      kappa_array, launch_fk, rho0_full, setup)
@@ -23,4 +24,5 @@ from jwarp.kinematics.launch import (ELASTIC_TOL, ElasticFK, ElasticLaunch, Elas
 __all__ = ["ELASTIC_TOL", "ElasticFK", "ElasticLaunch", "ElasticStep", "KinematicsData",
            "default_tol", "elastic_args", "elastic_step", "equilibrium", "fk", "fk_elastic",
            "forward_kinematics", "frame_jacobian", "frame_rows", "gravity_torques", "host_out",
-           "jacobian", "jacobian_dh", "kappa_array", "launch_fk", "rho0_full", "setup"]
+           "jacobian", "jacobian_dh", "kappa_array", "launch_fk", "rho0_full", "setup",
+           "transmitted", "without_transmission"]

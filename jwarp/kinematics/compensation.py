@@ -158,6 +158,7 @@ class CompensationRows:
             c.n_waypoints, c.n_sub = self.W, self.n_sub
             c.rho0, c.rho0_stride = t.dh0_3d, 0
             c.kappa, c.kappa_stride = self.kappa, self.kappa_stride
+            c.kappa_nl = t.kappa_nl
             c.lam, c.gravity = self.lam, self.gravity
             c.mass, c.mass_com, c.dh_info = t.mass, t.mass_com, t.dh_info
             c.prefix, c.scratch_stride = self._prefix, int(self._prefix.shape[1] > 1)

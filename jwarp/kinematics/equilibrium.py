@@ -10,6 +10,8 @@ import numpy as np
 
 from jwarp.core.arrays import out_view, real_number, to_output
 from jwarp.kernels import fk as fk_kernels
+from jwarp.kinematics.transmission import transmitted
+from jwarp.registry import robot as get_robot
 from jwarp.kinematics.launch import (ElasticFK, ElasticLaunch, ElasticStep, elastic_args, lam_tol,
                                      equilibrium, frame_rows, host_out, rho0_full, setup)
 
@@ -36,9 +38,15 @@ def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_i
         out: optional array the frames are written to (as ``out`` of :func:`fk`); the
             result's ``frames`` is then ``out``.
 
+    The robot's non-geometric extras act too: ``kappa_nonlinear`` (the joint axis bends
+    by ``kappa tau + kappa_nonlinear tau^3``, in the kernel) and the joint transmission
+    errors ``harmonic`` (the kernel runs at ``q + dq(q)``, exact; host side).
+
     Returns:
         :class:`ElasticFK` (frames, rho, iterations, converged).
     """
+    robot = get_robot(robot)
+    q = transmitted(robot, q)
     model, batch, t, kap, rho0 = elastic_args(robot, q, kappa, lam, max_iter, tol, dh,
                                                device, dtype, validate)
     lam, tol = lam_tol(lam, tol, t)
@@ -68,8 +76,10 @@ def elastic_step(robot: Any, q: Any, rho: Any = None, kappa: Any = None, *, lam:
     ``rho`` between their iterations and take gradients with ``rho`` fixed.
 
     Returns :class:`ElasticStep` (frames (..., n_frames, 4, 4), rho (..., n_frames, 5),
-    delta (...,) [rad]).
+    delta (...,) [rad]). Transmission errors as in :func:`fk_elastic`.
     """
+    robot = get_robot(robot)
+    q = transmitted(robot, q)
     model, batch, t, kap, rho0 = elastic_args(robot, q, kappa, lam, 1, 0.0, dh,
                                                device, dtype, validate)
     run = ElasticLaunch(t, batch.array, kap, rho0, real_number(lam, "lam"))
@@ -84,7 +94,8 @@ def gravity_torques(robot: Any, q: Any, *, dh: Any = None, device: Any = None,
                     dtype: Any = None) -> Any:
     """Gravity torques (..., n_frames, 3) [N m] about the [alpha, beta, theta] axes of
     every DH frame at the frames F(q, dh) (rigid; zero rows for static frames)."""
-    model, batch, t = setup(robot, q, device, dtype)
+    robot = get_robot(robot)
+    model, batch, t = setup(robot, transmitted(robot, q), device, dtype)
     rho = None if dh is None else frame_rows(dh, model, batch, t, "dh", 5)
     kap = frame_rows(np.zeros((model.n_frames, 3)), model, batch, t, "kappa", 3)
     run = ElasticLaunch(t, batch.array, kap, None, 1.0, write_tau=True)

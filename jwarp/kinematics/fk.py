@@ -13,6 +13,8 @@ from typing import Any
 from jwarp.core.arrays import out_view, to_output
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import frame_rows, launch_fk, setup, small_call
+from jwarp.kinematics.transmission import transmitted
+from jwarp.registry import robot as get_robot
 
 
 def fk(robot: Any, q: Any, *, dh: Any = None, device: Any = None, dtype: Any = None,
@@ -34,6 +36,9 @@ def fk(robot: Any, q: Any, *, dh: Any = None, device: Any = None, dtype: Any = N
             of fresh memory (a large new CPU output is faulted in on a second core while the
             kernel runs, see :func:`jwarp.core.arrays.first_touch`).
 
+    A robot with joint transmission errors (``harmonic``) is evaluated at
+    ``q + dq(q)`` (:mod:`jwarp.kinematics.transmission`).
+
     Returns:
         World transforms (..., n_frames, 4, 4) of every frame in the base frame
         (Warp input: a Warp ``mat44`` array of shape (..., n_frames)); ``out`` if given.
@@ -45,11 +50,13 @@ def fk(robot: Any, q: Any, *, dh: Any = None, device: Any = None, dtype: Any = N
     ``out``), never overwritten by a later call. The buffers serve one call at a time; a
     concurrent call from another thread takes the general path (correct, just slower).
     """
+    model = get_robot(robot)
+    q = transmitted(model, q)   # joint transmission errors (host side, exact)
     if dh is None:
-        res = small_call("fk", robot, q, device, dtype, validate, out)
+        res = small_call("fk", model, q, device, dtype, validate, out)
         if res is not None:
             return res
-    model, batch, t = setup(robot, q, device, dtype, validate)
+    model, batch, t = setup(model, q, device, dtype, validate)
     if batch.kind == "torch" and batch.torch_tensor.requires_grad:
         if out is not None:
             raise ValueError("out: not supported when q requires grad (torch autograd)")

@@ -5,13 +5,17 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import Batch, empty, finite_as, first_touch, out_view, to_output, zeros
+from jwarp.core.arrays import is_torch, Batch, empty, finite_as, first_touch, out_view, to_output, zeros
 from jwarp.core.device import KinematicsTables
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import frame_rows, jacobian_inputs, point_vec, setup, small_call
+from jwarp.kinematics.transmission import (transmission_slope, transmitted,
+                                         without_transmission)
 from jwarp.model import RobotModel
+from jwarp.registry import robot as get_robot
 
 
 def _dh_rows(dh: Any, model: RobotModel, batch: Batch, t: KinematicsTables,
@@ -39,6 +43,22 @@ def _dh_rows(dh: Any, model: RobotModel, batch: Batch, t: KinematicsTables,
     return (dh if len(shape) == 3 else dh.reshape((-1, n, 5))), 1
 
 
+def _scaled(jac: Any, slope: np.ndarray) -> Any:
+    """Joint Jacobian (..., 6, n_dof) with its columns times ``slope`` (..., n_dof), in
+    place where possible, in the kind of ``jac``."""
+    if is_torch(jac):
+        import torch
+
+        jac.mul_(torch.as_tensor(slope[..., None, :], dtype=jac.dtype, device=jac.device))
+        return jac
+    if isinstance(jac, wp.array):
+        a = jac.numpy()
+        jac.assign((a * slope.reshape(a.shape[:-2] + a.shape[-1:])[..., None, :]).astype(a.dtype))
+        return jac
+    jac *= slope[..., None, :]
+    return jac
+
+
 def jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any = None,
              device: Any = None, dtype: Any = None, validate: bool = True,
              out: Any = None) -> Any:
@@ -52,8 +72,16 @@ def jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any
     ``out``: optional array (..., 6, n_dof) (numpy, torch or Warp) in the computing dtype
     the Jacobians are written to, and returned (as for :func:`~jwarp.kinematics.fk.fk`).
     Small calls reuse per-process buffers and a recorded launch, as
-    :func:`~jwarp.kinematics.fk.fk` describes (same thread-safety).
+    :func:`~jwarp.kinematics.fk.fk` describes (same thread-safety). A robot with joint
+    transmission errors (``harmonic``) is evaluated at ``q + dq(q)`` and its columns are
+    scaled by ``dq'/dq`` (:mod:`jwarp.kinematics.transmission`).
     """
+    model = get_robot(robot)
+    if model.has_harmonic:
+        return _scaled(jacobian(without_transmission(model), transmitted(model, q), frame,
+                                point=point, dh=dh, device=device, dtype=dtype,
+                                validate=validate, out=out),
+                       transmission_slope(model, q))
     if dh is None:
         res = small_call("jacobian", robot, q, device, dtype, validate, out, frame, point)
         if res is not None:
@@ -84,8 +112,10 @@ def jacobian_dh(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: 
     DH rows [d, theta, r, alpha, beta] of each frame (zero for frames off the chain and
     for static frames). ``dh`` as for :func:`jacobian` (a Warp array on the device is used
     without a copy: evaluating several frames at the same rows uploads them once).
+    Transmission errors as in :func:`jacobian` (at ``q + dq(q)``; DH columns need no factor).
     """
-    model, batch, t = setup(robot, q, device, dtype, validate)
+    model = get_robot(robot)
+    model, batch, t = setup(model, transmitted(model, q), device, dtype, validate)
     fi = model.frame_index(frame)
     pt = point_vec(point, t)
     k = fk_kernels.kernels(t.scalar)

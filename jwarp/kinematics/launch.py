@@ -390,7 +390,7 @@ class ElasticLaunch:
                   inputs=[self.q, rho_arr, stride, use, self.rho0[0], self.rho0[1],
                           self.kappa[0], self.kappa[1], self.lam, self.gravity,
                           int(self.write_tau), int(moments.shape[1] > 1), t.frame_struct, t.mass, t.mass_com,
-                          t.dh_info],
+                          t.dh_info, t.kappa_nl],
                   outputs=[frames, moments, axes, rho_out, self.tau, delta], device=t.device)
         return frames, rho_out, delta
 

@@ -3,7 +3,7 @@
 The elastic model (thesis eq. 2.31-2.33) defines the DH rows in the torque equilibrium
 implicitly::
 
-    rho* = rho0 + E^T (kappa o tau(F(q, rho*)))
+    rho* = rho0 + E^T (kappa o tau(F(q, rho*)) + kappa_nl o tau_theta^3)
 
 with ``tau`` the gravity torques (n_frames, 3) about the [alpha, beta, theta] axes of every
 DH frame (see :mod:`jwarp.kernels.elastic`) and ``E^T`` placing the three elastic
@@ -14,7 +14,9 @@ restricted to the K active elastic components, the implicit function theorem giv
                                          + diag(kappa) dtau/dm dm,
     drho* = drho0 + E^T dw,
 
-one K x K linear solve per sample. This module provides ``tau`` and ``dtau/drho`` in
+one K x K linear solve per sample. With the torque-dependent joint compliance
+``kappa_nonlinear`` the ``diag(kappa)`` above is the local compliance
+``kappa + 3 kappa_nl tau^2`` (:func:`effective_kappa`) and ``d w / d kappa_nl = tau^3``. This module provides ``tau`` and ``dtau/drho`` in
 closed form from the frames at ``rho*``:
 
 * A DH parameter ``(j, c)`` moves the whole subtree of frame j (j included) rigidly by a
@@ -270,11 +272,39 @@ class ElasticComponents:
         return cls(fr.astype(np.int64), ax.astype(np.int64))
 
 
+def effective_kappa(kappa: np.ndarray, kappa_nl: np.ndarray | None, tau: np.ndarray
+                    ) -> np.ndarray:
+    """The local compliance d(kappa o tau + kappa_nl tau_theta^3)/d tau per sample
+    (S, n, 3): ``kappa`` (n, 3), on the theta axis plus ``3 kappa_nl tau_theta^2``
+    (``kappa_nl`` (n,) [rad/(N m)^3], None: ``kappa`` broadcast); tau (S, n, 3)."""
+    out = np.broadcast_to(np.asarray(kappa, np.float64), tau.shape).copy()
+    if kappa_nl is not None:
+        out[..., 2] += 3.0 * np.asarray(kappa_nl, np.float64) * tau[..., 2] ** 2
+    return out
+
+
+def nonlinear_b(comps: "ElasticComponents", tau: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """(S, K, P) right-hand sides of the nonlinear compliances of DH ``frames`` (P,):
+    d w / d kappa_nl_i = tau_theta_i^3 on the theta component of frame i (which must be
+    active in ``comps``)."""
+    frames = np.asarray(frames, np.int64)
+    S = tau.shape[0]
+    out = np.zeros((S, comps.size, frames.size))
+    pos = {(int(f), int(a)): k for k, (f, a) in enumerate(zip(comps.frame, comps.axis))}
+    for p, i in enumerate(frames):
+        k = pos.get((int(i), 2))
+        if k is None:
+            raise ValueError(f"comps: the theta component of frame {int(i)} is not active")
+        out[:, k, p] = tau[:, i, 2] ** 3
+    return out
+
+
 def equilibrium_jacobian(jy_rho: np.ndarray, dtau: np.ndarray, tau: np.ndarray,
                          kappa: np.ndarray, comps: ElasticComponents,
                          dh_frame: np.ndarray, dh_col: np.ndarray,
                          kap_frame: np.ndarray, kap_axis: np.ndarray,
-                         dtau_mass: np.ndarray | None = None
+                         dtau_mass: np.ndarray | None = None,
+                         extra_b: np.ndarray | None = None
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Total derivative of observations through the equilibrium (adjoint form).
 
@@ -288,36 +318,43 @@ def equilibrium_jacobian(jy_rho: np.ndarray, dtau: np.ndarray, tau: np.ndarray,
         jy_rho: (S, m, n, 5) dy/drho at the equilibrium rows rho* (frames fixed).
         dtau: (S, n, 3, n, 5) torque Jacobian at rho* (:func:`torque_jacobian`), or its
             rows of the components ``comps`` only, (S, K, n, 5) (``rows=`` there).
-        tau: (S, n, 3) torques at rho*; kappa (n, 3) compliances [rad/(N m)].
+        tau: (S, n, 3) torques at rho*; kappa (n, 3) compliances [rad/(N m)], or the
+            local compliances (S, n, 3) of a torque-dependent model
+            (:func:`effective_kappa`).
         comps: active elastic components (must include every free kappa entry).
         dh_frame, dh_col: (P_dh,) free geometric DH entries (of rho0).
         kap_frame, kap_axis: (P_k,) free compliance entries.
         dtau_mass: (S, n, 3, P_m) torque derivatives w.r.t. free point masses
             (:func:`mass_torque_jacobian`) [N m / kg]; None: no free masses.
+        extra_b: (S, K, P_x) right-hand sides ``d w / d x`` of further parameters that
+            enter only through the elastic components (e.g. :func:`nonlinear_b`); their
+            derivatives ``lam^T b`` are appended to the third output after the masses.
 
     Returns:
         (dy/d rho0[free] (S, m, P_dh), dy/d kappa[free] (S, m, P_k),
-        dy/d m[free] (S, m, P_m) [unit / kg]).
+        dy/d m[free] (S, m, P_m) [unit / kg], followed by the P_x columns of ``extra_b``).
     """
     S, m = jy_rho.shape[:2]
     direct = jy_rho[:, :, dh_frame, dh_col]
     P_m = 0 if dtau_mass is None else dtau_mass.shape[-1]
+    P_m += 0 if extra_b is None else extra_b.shape[-1]
     K = comps.size
     if K == 0:
         return direct, np.zeros((S, m, kap_frame.size)), np.zeros((S, m, P_m))
     fr, ax, col = comps.frame, comps.axis, comps.column
-    kc = kappa[fr, ax]                                        # (K,)
+    kc = np.asarray(kappa)[..., fr, ax]                       # (K,) or (S, K)
+    kc = np.broadcast_to(kc, (S, K))[:, :, None]              # (S, K, 1)
     t_rows = dtau if dtau.ndim == 4 else dtau[:, fr, ax]      # (S, K, n, 5)
     # gathers along the flattened (frame, column) axis: np.take of one contiguous axis is
     # several times faster than 2-D fancy indexing on these (S, K, n * 5) arrays
     t_flat = t_rows.reshape(S, K, -1)
     n5 = t_flat.shape[-1] // 5
-    A = np.eye(K)[None] - kc[None, :, None] * np.take(t_flat, fr * 5 + col, axis=2)  # (S, K, K)
+    A = np.eye(K)[None] - kc * np.take(t_flat, fr * 5 + col, axis=2)  # (S, K, K)
     jy_e = np.take(jy_rho.reshape(S, m, n5 * 5), fr * 5 + col, axis=2)  # (S, m, K)
     lam = np.linalg.solve(np.swapaxes(A, 1, 2), np.swapaxes(jy_e, 1, 2))  # (S, K, m)
     lam_t = np.swapaxes(lam, 1, 2)                            # (S, m, K)
-    b_dh = np.take(t_flat, np.asarray(dh_frame) * 5 + np.asarray(dh_col), axis=2)  # (S, K, P_dh)
-    d_dh = direct + (lam_t * kc[None, None, :]) @ b_dh
+    b_dh = kc * np.take(t_flat, np.asarray(dh_frame) * 5 + np.asarray(dh_col), axis=2)  # (S, K, P_dh)
+    d_dh = direct + lam_t @ b_dh
     pos = {(int(f), int(a)): k for k, (f, a) in enumerate(zip(fr, ax))}
     try:
         rows = np.array([pos[(int(f), int(a))] for f, a in zip(kap_frame, kap_axis)], np.int64)
@@ -326,7 +363,7 @@ def equilibrium_jacobian(jy_rho: np.ndarray, dtau: np.ndarray, tau: np.ndarray,
     # b_kap[s, rows[p], p] = tau[s, frame_p, axis_p]
     t_free = tau[:, kap_frame, kap_axis]                      # (S, P_k)
     d_kap = lam[:, rows, :].transpose(0, 2, 1) * t_free[:, None, :]      # (S, m, P_k)
-    if dtau_mass is None:
-        return d_dh, d_kap, np.zeros((S, m, 0))
-    b_m = kc[None, :, None] * dtau_mass[:, fr, ax]            # (S, K, P_m)
+    b_m = np.zeros((S, K, 0)) if dtau_mass is None else kc * dtau_mass[:, fr, ax]
+    if extra_b is not None:
+        b_m = np.concatenate([b_m, extra_b], axis=2)
     return d_dh, d_kap, lam_t @ b_m

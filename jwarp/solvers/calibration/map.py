@@ -36,16 +36,17 @@ from scipy.optimize import OptimizeResult, least_squares
 
 from jwarp import kinematics as K
 from jwarp.core.arrays import finite_as, init_warp, to_output
-from jwarp.core.device import with_frame_masses
+from jwarp.core.device import with_frame_masses, with_kappa_nonlinear
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
-from jwarp.solvers.calibration.elastic import (ElasticComponents, equilibrium_jacobian,
-                                               frame_masses, mass_torque_jacobian,
+from jwarp.solvers.calibration.elastic import (ElasticComponents, effective_kappa,
+                                               equilibrium_jacobian, frame_masses,
+                                               mass_torque_jacobian, nonlinear_b,
                                                torque_jacobian, torque_state)
 from jwarp.solvers.calibration.options import CalibrationOptions
-from jwarp.solvers.calibration.params import (KIND_DH, KIND_KAPPA, KIND_MASS, KIND_MEAS,
-                                              MASS_GROUP, ParameterSpace, parse_groups,
-                                              with_pose_groups)
+from jwarp.solvers.calibration.params import (KIND_DH, KIND_HARMONIC, KIND_KAPPA,
+                                              KIND_KAPPA_NL, KIND_MASS, KIND_MEAS, MASS_GROUP,
+                                              ParameterSpace, parse_groups, with_pose_groups)
 from jwarp.solvers.calibration.result import CalibrationResult, build_result
 from jwarp.solvers.calibration.samples import check_samples
 
@@ -78,18 +79,23 @@ class Progress(NamedTuple):
 
 def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: np.ndarray,
                        lam: float, max_iter: int, tol: float,
-                       masses: tuple[np.ndarray, np.ndarray] | None = None
+                       masses: tuple[np.ndarray, np.ndarray] | None = None,
+                       kappa_nl: np.ndarray | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elastic FK (float64, CPU) as :func:`jwarp.fk_elastic`, but accepting compliances of
     either sign: the optimizer may cross kappa = 0 on its way (the fixed point is just as
     well defined; only the final model must be physical). q (S, n_dof) (numpy, or a
     float64 CPU Warp array used as is: no upload), dh (n, 5), kappa (n, 3), optional mass
     model ``masses`` = (per-frame mass (n,) [kg], centre of mass (n, 3) [m], see
-    :func:`.elastic.frame_masses`) replacing the robot's -> numpy frames (S, n, 4, 4),
-    rho* (S, n, 5), converged (S,)."""
+    :func:`.elastic.frame_masses`) replacing the robot's, optional nonlinear joint
+    compliances ``kappa_nl`` (n,) [rad/(N m)^3] replacing the robot's -> numpy frames
+    (S, n, 4, 4), rho* (S, n, 5), converged (S,). ``q`` are the joint values the links
+    see (transmission errors already applied)."""
     model, batch, t = K.setup(robot, q, "cpu", np.float64, False)
     if masses is not None:
         t = with_frame_masses(t, *masses)
+    if kappa_nl is not None:
+        t = with_kappa_nonlinear(t, kappa_nl)
     kap = K.frame_rows(np.asarray(kappa, np.float64), model, batch, t, "kappa", 3)
     rho0 = K.frame_rows(np.asarray(dh, np.float64), model, batch, t, "dh", 5)
     run = K.ElasticLaunch(t, batch.array, kap, rho0, float(lam))
@@ -216,10 +222,19 @@ class CalibrationProblem:
             raise ValueError(f"lam: damping must be in (0, 1], got {lam!r}")
         self.lam, self.max_iter, self.tol = float(lam), int(max_iter), float(tol)
         kf = self.space.kappa_free
-        if elastic is None:
-            elastic = bool(kf.any() or np.any(self.robot.kappa != 0))
-        self.elastic = bool(elastic)
         sp = self.space
+        self._harm_idx = np.nonzero(sp.kind == KIND_HARMONIC)[0]
+        self._knl_idx = np.nonzero(sp.kind == KIND_KAPPA_NL)[0]
+        if elastic is None:
+            elastic = bool(kf.any() or np.any(self.robot.kappa != 0) or self._knl_idx.size
+                           or np.any(self.robot.kappa_nonlinear))
+        self.elastic = bool(elastic)
+        #: the raw joint values and whether the links see other ones (transmission errors)
+        self.q_device_raw = self.q_device
+        self.transmission = bool(self._harm_idx.size or self.robot.has_harmonic)
+        #: the robot the kinematics launches see: transmission errors are applied here
+        #: (``q_device``), not again by the public kinematics functions
+        self.kin_robot = K.without_transmission(self.robot)
         self._dh_idx = np.nonzero(sp.kind == KIND_DH)[0]
         self._kap_idx = np.nonzero(sp.kind == KIND_KAPPA)[0]
         self._meas_idx = np.nonzero(sp.kind == KIND_MEAS)[0]
@@ -262,12 +277,17 @@ class CalibrationProblem:
             return self._cache[1]
         dh, kap, p, mass = self.space.unpack(x)
         S = self.n_samples
+        if self.transmission:   # the links see q + dq(q): every launch below uses it
+            q_eff = self.robot.joint_transmission(self.q, self.space.harmonic_at(x))
+            self.q_device = wp.array(q_eff, dtype=wp.float64, device="cpu")
         if self.elastic:
             fm = frame_masses(self.robot, mass) if self._mass_idx.size else None
+            knl = self.space.kappa_nonlinear_at(x) if self._knl_idx.size else None
             frames, rho, conv = signed_equilibrium(self.robot, self.q_device, dh, kap,
-                                                   self.lam, self.max_iter, self.tol, masses=fm)
+                                                   self.lam, self.max_iter, self.tol, masses=fm,
+                                                   kappa_nl=knl)
         else:
-            frames = K.fk(self.robot, self.q_device, dh=dh, device="cpu", dtype=np.float64,
+            frames = K.fk(self.kin_robot, self.q_device, dh=dh, device="cpu", dtype=np.float64,
                           validate=False).numpy()
             rho = np.broadcast_to(dh, (S,) + dh.shape)
             conv = np.ones(S, bool)
@@ -320,7 +340,7 @@ class CalibrationProblem:
         jy = np.zeros((S, m, self.robot.n_frames, 5))
         rows = wp.array(finite_as(rho, np.float64, "dh"), dtype=wp.float64, device="cpu")
         for k, f in enumerate(meas.frames):
-            jdh = K.jacobian_dh(self.robot, self.q_device, int(f), dh=rows, device="cpu",
+            jdh = K.jacobian_dh(self.kin_robot, self.q_device, int(f), dh=rows, device="cpu",
                                 dtype=np.float64, validate=False).numpy()  # (S, 6, n, 5)
             jy += (jf[:, :, k, :] @ jdh.reshape(S, 6, -1)).reshape(jy.shape)
         return jy, np.asarray(jp, np.float64)
@@ -334,26 +354,78 @@ class CalibrationProblem:
         S, m = jy.shape[:2]
         dh_f, dh_c = sp.frame[self._dh_idx], sp.column[self._dh_idx]
         kp_f, kp_c = sp.frame[self._kap_idx], sp.column[self._kap_idx]
+        # transmission errors act as offsets of the driven frames' joint columns
+        n_dh = dh_f.size
+        hq_f, hq_c, hq_w = self._joint_columns()
+        dh_f, dh_c = np.concatenate([dh_f, hq_f]), np.concatenate([dh_c, hq_c])
+        knl_f = sp.frame[self._knl_idx]
         if self.elastic:
             st = torque_state(self.robot, frames, rho_full, frame_masses(self.robot, mass))
-            comps = ElasticComponents.select(self.robot, kap, sp.kappa_free)
+            free = np.array(sp.kappa_free, copy=True)
+            knl = sp.kappa_nonlinear_at(x)
+            free[:, 2] |= sp.kappa_nonlinear_free | (knl != 0)
+            comps = ElasticComponents.select(self.robot, kap, free)
             dtau = torque_jacobian(self.robot, st, rows=(comps.frame, comps.axis))
             dtau_m = (mass_torque_jacobian(self.robot, frames, st, sp.mass_entries)
                       if self._mass_idx.size else None)
-            d_dh, d_kap, d_mass = equilibrium_jacobian(jy, dtau, st.tau, kap, comps, dh_f,
-                                                       dh_c, kp_f, kp_c, dtau_m)
+            kap_eff = effective_kappa(kap, knl, st.tau) if np.any(knl) \
+                else kap
+            b_nl = nonlinear_b(comps, st.tau, knl_f) if knl_f.size else None
+            d_dh, d_kap, d_mass = equilibrium_jacobian(jy, dtau, st.tau, kap_eff, comps, dh_f,
+                                                       dh_c, kp_f, kp_c, dtau_m, b_nl)
+            n_m = self._mass_idx.size
+            d_mass, d_knl = d_mass[:, :, :n_m], d_mass[:, :, n_m:]
         else:
             d_dh = jy[:, :, dh_f, dh_c]
             d_kap = np.zeros((S, m, kp_f.size))
             d_mass = np.zeros((S, m, self._mass_idx.size))
+            d_knl = np.zeros((S, m, 0))
+        d_dh, d_joint = d_dh[:, :, :n_dh], d_dh[:, :, n_dh:] @ hq_w   # (S, m, n_dof_h)
+        d_harm = self._harmonic_columns(d_joint)
         J = np.zeros((self.n_residuals, sp.size))
         wh = self.whiten
         J[:self.n_data, self._dh_idx] = wh(d_dh).reshape(S * m, -1)
         J[:self.n_data, self._kap_idx] = wh(d_kap).reshape(S * m, -1)
         J[:self.n_data, self._mass_idx] = wh(d_mass).reshape(S * m, -1)
+        J[:self.n_data, self._knl_idx] = wh(d_knl).reshape(S * m, -1)
+        J[:self.n_data, self._harm_idx] = wh(d_harm).reshape(S * m, -1)
         J[:self.n_data, self._meas_idx] = wh(jp[:, :, sp.column[self._meas_idx]]).reshape(S * m, -1)
         J[self.n_data + np.arange(self._prior_idx.size), self._prior_idx] = 1.0 / sp.sigma[self._prior_idx]
         return J
+
+    def _joint_columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The DH entries a joint of the ``harmonic`` group drives: frames (E,), columns
+        (E,) (theta, or d for a prismatic frame) and the coupling weights (E, J_h) that sum
+        their derivatives into d/dq of the J_h joints (``self._harm_joints``)."""
+        sp = self.space
+        joints = np.unique(sp.frame[self._harm_idx])
+        self._harm_joints = joints
+        fr, co, wt = [], [], []
+        pris = self.robot.frame_is_prismatic
+        for i, f in enumerate(self.robot.frames):
+            for j, c in f.coupling:
+                hit = np.nonzero(joints == j)[0]
+                if hit.size:
+                    fr.append(i)
+                    co.append(0 if pris[i] else 1)
+                    row = np.zeros(joints.size)
+                    row[hit[0]] = c
+                    wt.append(row)
+        return (np.array(fr, np.int64), np.array(co, np.int64),
+                np.array(wt, np.float64).reshape(len(fr), joints.size))
+
+    def _harmonic_columns(self, d_joint: np.ndarray) -> np.ndarray:
+        """(S, m, P_h) dy/d(a_jk, b_jk) = dy/dq'_j sin(k q_j) or cos(k q_j) (raw q) from
+        dy/dq'_j ``d_joint`` (S, m, J_h)."""
+        sp = self.space
+        idx = self._harm_idx
+        if idx.size == 0:
+            return np.zeros(d_joint.shape[:2] + (0,))
+        pos = np.searchsorted(self._harm_joints, sp.frame[idx])
+        k = (sp.column[idx] // 2 + 1).astype(np.float64)
+        kq = self.q[:, sp.frame[idx]] * k                       # (S, P_h)
+        basis = np.where(sp.column[idx] % 2 == 0, np.sin(kq), np.cos(kq))
+        return d_joint[:, :, pos] * basis[:, None, :]
 
     # ------------------------------------------------------------- starts
     def initial_x(self, x: np.ndarray | None = None, guess: bool = True) -> np.ndarray:

@@ -7,6 +7,16 @@ Robot groups (per DH frame on the chains the measurement observes):
 * ``kappa_alpha``, ``kappa_beta``, ``kappa_theta``: compliances [rad/(N m)] (bounded >= 0
   with ``bound_kappa``).
 
+non-geometric extras (``docs/nongeometric.md``):
+
+* ``harmonic``: joint transmission errors, per joint j driving a DH frame on those chains
+  and per harmonic k = 1..K (K = max(:data:`HARMONIC_ORDER`, the robot's own K)) the
+  coefficients a_jk, b_jk of ``dq_j = sum_k a_jk sin(k q_j) + b_jk cos(k q_j)`` [rad, m
+  for a prismatic joint]; names ``"<joint>.harmonic_a<k>"``, ``"<joint>.harmonic_b<k>"``;
+* ``kappa_nonlinear``: torque-dependent joint compliance [rad/(N m)^3] per DH frame (the
+  theta axis bends by ``kappa_theta tau + kappa_nonlinear tau^3``), unbounded (negative =
+  stiffening);
+
 and per point mass of the robot's mass model (``robot.masses``):
 
 * ``mass``: the mass [kg] of every entry whose frame lies in the subtree of a compliant DH
@@ -42,9 +52,13 @@ from jwarp.model import RobotModel
 DH_GROUPS = ("d", "theta", "r", "alpha", "beta")          # = DH columns 0..4
 KAPPA_GROUPS = ("kappa_alpha", "kappa_beta", "kappa_theta")  # = kappa axes 0..2
 MASS_GROUP = "mass"                                        # = robot.masses entries
+HARMONIC_GROUP = "harmonic"                                # = robot.harmonic entries
+KAPPA_NL_GROUP = "kappa_nonlinear"                         # = robot.kappa_nonlinear
+#: the number of harmonics the ``harmonic`` group frees (at least; more if the robot has)
+HARMONIC_ORDER = 2
 #: robot parameter groups
 ROBOT_GROUPS = ("theta", "d", "r", "alpha", "beta", "kappa_theta", "kappa_alpha", "kappa_beta",
-                MASS_GROUP)
+                MASS_GROUP, HARMONIC_GROUP, KAPPA_NL_GROUP)
 
 #: default prior standard deviations of the robot groups [m, rad, rad/(N m)]; ``mass`` is
 #: relative to each entry's nominal mass [1] (0.1 = 10 %)
@@ -54,9 +68,13 @@ DEFAULT_SIGMA: dict[str, float] = {
     # the paper's prior on Agile Justin's compliances: 0.1 rad/kNm
     "kappa_theta": 1e-4, "kappa_alpha": 1e-4, "kappa_beta": 1e-4,
     MASS_GROUP: 0.1,
+    # transmission errors of harmonic drives are a few arcmin: 1e-3 rad = 3.4 arcmin
+    HARMONIC_GROUP: 1e-3,
+    # 1e-9 rad/(N m)^3 bends a joint by 1e-3 rad more at 100 N m (kappa_theta 1e-4: 1 %)
+    KAPPA_NL_GROUP: 1e-9,
 }
 
-KIND_DH, KIND_KAPPA, KIND_MEAS, KIND_MASS = 0, 1, 2, 3
+KIND_DH, KIND_KAPPA, KIND_MEAS, KIND_MASS, KIND_HARMONIC, KIND_KAPPA_NL = 0, 1, 2, 3, 4, 5
 
 #: measurement groups that hold the poses of the sensors and markers (the calibration
 #: frames ``c`` of the paper): freed by default (:func:`with_pose_groups`), as the
@@ -209,6 +227,14 @@ def influencing_frames(robot: RobotModel, measured: Iterable[int] | None, elasti
     return [int(i) for i in np.nonzero(use & dh)[0]]
 
 
+def harmonic_joints(robot: RobotModel, dh_frames: Iterable[int]) -> list[int]:
+    """Joints (sorted indices) that drive at least one of the DH frames ``dh_frames``."""
+    out: set[int] = set()
+    for i in dh_frames:
+        out.update(int(j) for j, _ in robot.frames[int(i)].coupling)
+    return sorted(out)
+
+
 def _free_masses(robot: RobotModel, measurement: Any, groups: list[str], dh_frames: list[int],
                  rel_sigma: float) -> list[int]:
     """Entries of ``robot.masses`` of the ``mass`` group (see :func:`influencing_masses`);
@@ -247,10 +273,13 @@ class ParameterSpace:
         p_nominal: (P_meas,) all measurement parameters at nominal (fixed ones stay there).
         names, groups: parameter names and groups.
         nominal, sigma: prior means and standard deviations (sigma inf = no prior).
-        kind: 0 DH entry, 1 compliance, 2 measurement parameter, 3 point mass.
+        kind: 0 DH entry, 1 compliance, 2 measurement parameter, 3 point mass, 4 joint
+            transmission coefficient (``harmonic``), 5 nonlinear compliance.
         frame, column: robot frame and DH column (kind 0) / kappa axis (kind 1) / index
             into ``robot.masses`` (kind 3, frame = the mass's frame); for kind 2 column is
-            the index into the measurement's ParamBlock and frame is -1.
+            the index into the measurement's ParamBlock and frame is -1; kind 4: frame is
+            the *joint* index and column ``2 (k - 1) + (0 for a, 1 for b)``; kind 5: the DH
+            frame and column 2 (the theta axis).
         lower, upper: bounds (masses >= 0; compliances >= 0 with ``bound_kappa``; else
             unbounded).
         free_groups: the groups that were freed, in the order given.
@@ -277,7 +306,8 @@ class ParameterSpace:
         """Parameter space of the free groups.
 
         Args:
-            robot: nominal robot (prior means of DH rows and compliances).
+            robot: nominal robot (prior means of DH rows, compliances and the non-geometric
+            extras ``harmonic`` and ``kappa_nonlinear``).
             measurement: a Measurement (needs ``frames`` and ``params``), or None for
                 robot groups only.
             free: group names (see :data:`ROBOT_GROUPS` and the measurement's
@@ -330,7 +360,8 @@ class ParameterSpace:
                 sig[g] = fv
         # which DH frames
         if frames is None:
-            elastic = any(g in KAPPA_GROUPS for g in groups) or bool(np.any(robot.kappa != 0))
+            elastic = (any(g in KAPPA_GROUPS or g == KAPPA_NL_GROUP for g in groups)
+                       or bool(np.any(robot.kappa != 0)) or bool(np.any(robot.kappa_nonlinear)))
             dh_frames = influencing_frames(robot, getattr(measurement, "frames", None)
                                            if measurement is not None else None, elastic)
         else:
@@ -382,6 +413,28 @@ class ParameterSpace:
                     kind.append(KIND_MASS)
                     frm.append(int(robot.masses[e].frame))
                     col.append(int(e))
+            elif g == HARMONIC_GROUP:
+                K = max(HARMONIC_ORDER, robot.harmonic.shape[1])
+                for j in harmonic_joints(robot, dh_frames):
+                    for k in range(K):
+                        for ab in range(2):
+                            names.append(f"{robot.joints[j].name}.harmonic_{'ab'[ab]}{k + 1}")
+                            grp.append(g)
+                            nom.append(float(robot.harmonic[j, k, ab])
+                                       if k < robot.harmonic.shape[1] else 0.0)
+                            sg.append(sig[g])
+                            kind.append(KIND_HARMONIC)
+                            frm.append(j)
+                            col.append(2 * k + ab)
+            elif g == KAPPA_NL_GROUP:
+                for i in dh_frames:
+                    names.append(f"{robot.frames[i].name}.{g}")
+                    grp.append(g)
+                    nom.append(float(robot.kappa_nonlinear[i]))
+                    sg.append(sig[g])
+                    kind.append(KIND_KAPPA_NL)
+                    frm.append(i)
+                    col.append(2)
             else:
                 for k in block.indices(g):
                     names.append(block.names[k])
@@ -483,6 +536,36 @@ class ParameterSpace:
         out = self.robot.with_dh(dh, kappa=np.maximum(kap, 0.0))
         if self.mass_entries.size:
             out = out.with_masses(np.maximum(mass, 0.0))
+        if np.any(self.kind == KIND_HARMONIC) or np.any(self.kind == KIND_KAPPA_NL):
+            out = out.copy(harmonic=self.harmonic_at(x),
+                           kappa_nonlinear=self.kappa_nonlinear_at(x))
+        return out
+
+    def harmonic_at(self, x: Any) -> np.ndarray:
+        """(n_dof, K, 2) joint transmission coefficients at ``x`` (fixed ones at the
+        robot's; K as the ``harmonic`` group frees, or the robot's own)."""
+        x = self.check(x)
+        m = self.kind == KIND_HARMONIC
+        h0 = self.robot.harmonic
+        K = max(h0.shape[1], int(self.column[m].max()) // 2 + 1 if m.any() else 0)
+        h = np.zeros((self.robot.n_dof, K, 2))
+        h[:, :h0.shape[1]] = h0
+        h[self.frame[m], self.column[m] // 2, self.column[m] % 2] = x[m]
+        return h
+
+    def kappa_nonlinear_at(self, x: Any) -> np.ndarray:
+        """(n_frames,) nonlinear joint compliances [rad/(N m)^3] at ``x``."""
+        x = self.check(x)
+        out = self.robot.kappa_nonlinear.copy()
+        m = self.kind == KIND_KAPPA_NL
+        out[self.frame[m]] = x[m]
+        return out
+
+    @property
+    def kappa_nonlinear_free(self) -> np.ndarray:
+        """(n_frames,) bool: frames whose nonlinear compliance is free."""
+        out = np.zeros(self.robot.n_frames, bool)
+        out[self.frame[self.kind == KIND_KAPPA_NL]] = True
         return out
 
     def measurement_params(self, x: Any) -> np.ndarray:
