@@ -35,6 +35,7 @@ from jwarp.solvers.calibration.files import Samples, Setup, make_measurement, pa
     read_setup, read_text, samples_text, sha256_hex, write_setup
 from jwarp.solvers.calibration.params import perturb_robot
 from jwarp.solvers.calibration.result import model_frames
+from jwarp.solvers.calibration.unmodeled import Unmodeled, add_unmodeled, parse_unmodeled
 
 #: A sampler draws (q (n, n_dof), meta {name: (n,)}) candidates; ``accept`` filters them.
 Sampler = Callable[[np.random.Generator, int], tuple[np.ndarray, dict[str, np.ndarray]]]
@@ -207,14 +208,15 @@ def rough_setup(setup: Setup, rng: np.random.Generator, *, rough_position: float
 def simulate_campaign(robot: RobotModel, setup: Setup, n: int, *, seed: int = 0,
                       noise: float | None = None, true_robot: RobotModel | None = None,
                       dh_groups: tuple[str, ...] = ("theta", "d", "r", "alpha"),
-                      length_error: float = 0.005, angle_error: float = math.radians(5.0),
-                      kappa: tuple[float, float] | None = (0.5e-4, 2e-4),
+                      length_error: float = 0.002, angle_error: float = math.radians(0.5),
+                      kappa: tuple[float, float] | None = (2.5e-5, 7.5e-5),
                       kappa_groups: tuple[str, ...] = ("kappa_theta", "kappa_alpha"),
                       rough_position: float = 0.2, rough_rotation: float = math.radians(20.0),
                       rough_marker: float = 0.01, sampler: Sampler | None = None,
                       accept: Callable[[Measurement, np.ndarray, np.ndarray, dict], np.ndarray]
                       | None = None, max_draws: int = 200,
-                      collision_margin: float | None = 0.02) -> Campaign:
+                      collision_margin: float | None = 0.02,
+                      unmodeled: Unmodeled | str | None = None) -> Campaign:
     """Simulate ``n`` samples of the measurement ``setup`` on a perturbed ``robot``.
 
     Args:
@@ -232,13 +234,24 @@ def simulate_campaign(robot: RobotModel, setup: Setup, n: int, *, seed: int = 0,
             ``accept``; None draws without these checks (then about 34-40 % of the
             tracker rows and 54 % of the camera rows self-collide). Contact setups use
             margin 0 (the fingers touch by design; 2 cm would reject almost every contact).
+        unmodeled: effects added to the truth that the calibration model lacks (joint
+            transmission errors, torque-dependent stiffness, lateral compliance;
+            :mod:`.unmodeled`, e.g. ``"harmonic,kappa_nonlinear,kappa_beta"`` or ``"all"``),
+            drawn from their own stream of ``seed`` (the other draws do not change) and
+            stored in the true robot (``harmonic``, ``kappa_nonlinear``, ``kappa``), so
+            the written truth reproduces the data. Default None: no systematic error.
     """
+    unmodeled = parse_unmodeled(unmodeled)
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise ValueError(f"n: expected a number of samples >= 1, got {n!r}")
     rng = np.random.default_rng(seed)
     if true_robot is None:
         true_robot = perturb_robot(robot, rng, groups=dh_groups, length_error=length_error,
                                    angle_error=angle_error, kappa=kappa, kappa_groups=kappa_groups)
+    if unmodeled:
+        urng = np.random.default_rng([int(seed), 0x756e6d])   # own stream ("unm")
+        q_ref = uniform_configurations(robot, urng, 500)
+        true_robot = add_unmodeled(true_robot, unmodeled, urng, q_ref)
     meas = make_measurement(true_robot, setup)
     p_true = meas.params.nominal.copy()
     sigma = float(meas.noise if noise is None else noise)
