@@ -45,7 +45,7 @@ import numpy as np
 
 #: robots whose simulated truth is elastic by default, and its mean compliance [rad/(N m)]
 ELASTIC_ROBOTS = ("justin19", "arm7")
-DEFAULT_TRUE_KAPPA = 5e-5
+DEFAULT_TRUE_KAPPA = 6e-5
 
 
 def _cli_error(msg: str) -> Exception:
@@ -412,7 +412,9 @@ def cmd_simulate_campaign(args: argparse.Namespace) -> int:
     _check_campaign_memory(model, make_measurement(model, setup), args.samples)
     k = args.kappa if args.kappa is not None else (
         DEFAULT_TRUE_KAPPA if model.name in ELASTIC_ROBOTS else 0.0)
-    kappa = None if k == 0 else (0.5 * k, 1.5 * k)
+    # joint compliance U(0.5, 1.5) K, lateral (alpha) a third of it (as DEFAULT_KAPPA)
+    kappa = None if k == 0 else {"kappa_theta": (0.5 * k, 1.5 * k),
+                                 "kappa_alpha": (k / 6, k / 2)}
     camp = simulate_campaign(model, setup, args.samples, seed=args.seed, noise=args.noise,
                              length_error=args.length_error * 1e-3,
                              angle_error=math.radians(args.angle_error), kappa=kappa,
@@ -483,14 +485,15 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--seed", type=int, default=0, help="random seed (>= 0)")
     s.add_argument("--noise", type=float, default=None,
                    help="noise sigma (unit of the measurement; default the setup's)")
-    s.add_argument("--length-error", type=float, default=2.0, metavar="MM",
-                   help="uniform DH length errors +- MM (default 2; with the default angle "
+    s.add_argument("--length-error", type=float, default=1.0, metavar="MM",
+                   help="uniform DH length errors +- MM (default 1; with the default angle "
                         "errors and compliances justin19's nominal model is ~20 mm off at "
                         "the TCPs, as Agile Justin's)")
-    s.add_argument("--angle-error", type=float, default=0.5, metavar="DEG",
-                   help="uniform DH angle errors +- DEG (default 0.5)")
+    s.add_argument("--angle-error", type=float, default=0.3, metavar="DEG",
+                   help="uniform DH angle errors +- DEG (default 0.3)")
     s.add_argument("--kappa", type=float, default=None, metavar="K",
-                   help="mean true compliance of joint and lateral axes [rad/(N m)] (0: rigid; "
+                   help="mean true joint compliance [rad/(N m)], U(0.5 K, 1.5 K); the lateral "
+                        "(alpha) axes get a third of it (0: rigid; "
                         f"default {DEFAULT_TRUE_KAPPA:g} for {', '.join(ELASTIC_ROBOTS)}, else 0)")
     s.add_argument("--unmodeled", default=None, metavar="EFFECTS",
                    help="effects in the truth outside the calibration model: "

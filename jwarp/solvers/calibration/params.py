@@ -607,7 +607,7 @@ class ParameterSpace:
 def perturb_robot(robot: RobotModel, rng: np.random.Generator, *,
                   groups: Iterable[str] = ("theta", "d", "r", "alpha"),
                   length_error: float = 0.005, angle_error: float = math.radians(5.0),
-                  kappa: tuple[float, float] | None = None,
+                  kappa: tuple[float, float] | Mapping[str, tuple[float, float]] | None = None,
                   kappa_groups: Iterable[str] = ("kappa_theta", "kappa_alpha"),
                   frames: Iterable[int | str] | None = None,
                   mass_error: float | None = None) -> RobotModel:
@@ -615,7 +615,9 @@ def perturb_robot(robot: RobotModel, rng: np.random.Generator, *,
     ``groups`` plus uniform errors in [-length_error, length_error] [m] (d, r) or
     [-angle_error, angle_error] [rad] (theta, alpha, beta) on the DH frames ``frames``
     (default all), compliances drawn uniformly from ``kappa`` = (low, high)
-    [rad/(N m)] on the axes of ``kappa_groups`` (None: keep the robot's kappa), and, with
+    [rad/(N m)] on the axes of ``kappa_groups``, or from per-group ranges ``kappa`` =
+    {group: (low, high)} (then ``kappa_groups`` is ignored; drawn in the order given;
+    None: keep the robot's kappa), and, with
     ``mass_error`` (relative, e.g. 0.15), every point mass on those frames times
     ``1 + U(-mass_error, mass_error)`` (None: nominal masses; drawn after everything else,
     so the other draws do not depend on it)."""
@@ -643,12 +645,21 @@ def perturb_robot(robot: RobotModel, rng: np.random.Generator, *,
         dh[idx, c] += rng.uniform(-err, err, idx.size)
     kap = robot.kappa.copy()
     if kappa is not None:
-        lo, hi = map(float, kappa)
-        if not (0 <= lo <= hi):
-            raise ValueError(f"kappa: expected 0 <= low <= high, got {kappa!r}")
-        for g in parse_groups(kappa_groups):
+        if isinstance(kappa, Mapping):
+            ranges = dict(kappa)
+            where = "kappa"
+        else:
+            ranges = {g: kappa for g in parse_groups(kappa_groups)}
+            where = "kappa_groups"
+        for g, rg in ranges.items():
+            try:
+                lo, hi = map(float, rg)
+            except (TypeError, ValueError):
+                raise ValueError(f"kappa: expected (low, high), got {rg!r}") from None
+            if not (0 <= lo <= hi):
+                raise ValueError(f"kappa: expected 0 <= low <= high, got {rg!r}")
             if g not in KAPPA_GROUPS:
-                raise ValueError(f"kappa_groups: unknown group '{g}'; valid: {', '.join(KAPPA_GROUPS)}")
+                raise ValueError(f"{where}: unknown group '{g}'; valid: {', '.join(KAPPA_GROUPS)}")
             c = KAPPA_GROUPS.index(g)
             kap[idx, c] = rng.uniform(lo, hi, idx.size)
     out = robot.with_dh(dh, kappa=kap)
