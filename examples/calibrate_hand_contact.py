@@ -30,6 +30,7 @@ Run:  python examples/calibrate_hand_contact.py [--samples 300] [--test 200] [--
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 
@@ -80,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     setup = hand_contact_setup(noise=args.noise * 1e-3, pairs=pairs)
     sampler = contact_sampler(robot, setup)
     camp = simulate_campaign(robot, setup, args.samples + args.test, seed=args.seed,
+                             length_error=0.005, angle_error=math.radians(5.0),  # thesis 2.6.1
                              kappa=None, sampler=sampler)
     t_sim = time.perf_counter() - t_all
     meas = make_measurement(robot, camp.setup)

@@ -35,6 +35,7 @@ Run:  python examples/calibrate_justin_camera.py [--samples 300] [--test 200] [-
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 
@@ -90,6 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     setup, sampler, accept = scenario("justin19", "image")
     setup.section["noise"] = args.noise
     camp = simulate_campaign(robot, setup, args.samples + args.test, seed=args.seed,
+                             length_error=0.005, angle_error=math.radians(5.0),  # thesis 2.6.1
                              kappa=(0.5e-4, 1.5e-4), sampler=sampler, accept=accept)
     t_sim = time.perf_counter() - t_all
     rough = dict(camp.setup.section)
