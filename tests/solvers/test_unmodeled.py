@@ -104,13 +104,13 @@ def test_default_truth_is_sized_like_agile_justin():
 def test_standard_groups_reach_noise_without_and_not_with_unmodeled_effects():
     robot = jwarp.robot("justin19")
     setup = justin_tracker_setup(noise=1e-4)
-    free = "theta,d,r,alpha,kappa_theta,kappa_alpha,tracker,markers"
+    free = "theta,kappa_theta,kappa_alpha,tracker,markers"   # the truth's groups
     mean = {}
     for spec in (None, "all"):
-        camp = simulate_campaign(robot, setup, 150, seed=2, unmodeled=spec)
+        camp = simulate_campaign(robot, setup, 100, seed=2, unmodeled=spec, dh_groups=("theta",))
         meas = make_measurement(robot, camp.setup)
-        res = calibrate(robot, meas, camp.samples.q, camp.samples.y, free=free, max_nfev=60,
-                        warn=False)
+        res = calibrate(robot, meas, camp.samples.q, camp.samples.y, free=free, warn=False)
+        assert res.status > 0, res.message          # converged, not cut by max_nfev
         mean[spec] = error_stats(res.errors)["mean"]
     floor = 1e-4 * math.sqrt(2) * math.gamma(2) / math.gamma(1.5)     # 3-D noise: 1.6 sigma
     assert mean[None] < 1.3 * floor
