@@ -217,3 +217,31 @@ def test_parameter_space_sigma_and_validation():
     assert np.all(sp.sigma[~h] == 1e-9)
     with pytest.raises(ValueError, match=r"sigma\['kappa_nonlinear'\]"):
         ParameterSpace.build(robot, None, "kappa_nonlinear", sigma={"kappa_nonlinear": -1})
+
+
+@requires_cpu
+def test_optimizer_compensation_rows_see_the_nonlinear_compliance():
+    """The rows IK and the planner keep across iterations (CompensationRows: one torque
+    update per iteration from frames at the rows) converge to fk_elastic's equilibrium
+    with kappa_nonlinear; the same robot without it converges elsewhere."""
+    from jwarp.core.device import put_model
+    from jwarp.kinematics.compensation import CompensationRows
+
+    model = _nongeo(jwarp.robot("justin19"), knl=5e-9).copy(harmonic=None)
+    q = _q(model, 3, np.random.default_rng(7))
+    ref = jwarp.fk_elastic(model, q, max_iter=200, device="cpu", dtype=np.float64)
+    t = put_model(model, "cpu", np.float64)
+    rows = CompensationRows(t, 3, 1, 1, None, lam=1.0)
+    for _ in range(60):
+        frames = jwarp.fk(model, wp_q(q), dh=rows.rho(), device="cpu", dtype=np.float64)
+        rows.update(frames)
+    np.testing.assert_allclose(rows.rho(), ref.rho, atol=1e-9)
+    plain = jwarp.fk_elastic(model.copy(kappa_nonlinear=None), q, max_iter=200, device="cpu",
+                             dtype=np.float64)
+    assert np.abs(plain.rho - ref.rho).max() > 1e-4
+
+
+def wp_q(q):
+    import warp as wp
+
+    return wp.array(np.ascontiguousarray(q, np.float64), dtype=wp.float64, device="cpu")

@@ -57,10 +57,12 @@ def model_frames(robot: RobotModel, q: np.ndarray, *, kappa: Any = None,
                  elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
                  tol: float = 1e-12) -> np.ndarray:
     """World frames (S, n_frames, 4, 4) float64 on CPU: elastic equilibrium with ``kappa``
-    (default the robot's) when elastic (default: iff kappa is nonzero), else rigid FK."""
+    (default the robot's) when elastic (default: iff kappa or the robot's
+    ``kappa_nonlinear`` is nonzero), else rigid FK (both with the robot's joint
+    transmission errors, if any)."""
     kap = K.kappa_array(robot, kappa)
     if elastic is None:
-        elastic = bool(np.any(kap != 0))
+        elastic = bool(np.any(kap != 0) or np.any(get_robot(robot).kappa_nonlinear))
     if elastic:
         return K.fk_elastic(robot, q, kap, lam=lam, max_iter=max_iter, tol=tol, device="cpu",
                             dtype=np.float64).frames
