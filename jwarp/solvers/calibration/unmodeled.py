@@ -17,7 +17,7 @@ effects, each drawn once per true robot (seeded) and written into the true robot
   [rad/(N m)^3]; frames without joint compliance, and joints whose ``tau_ref`` is below
   1 % of the largest (a vertical pan axis), get none.
 * ``kappa_beta`` -- lateral compliance about the DH beta axes, U(``min``, ``max``)
-  [rad/(N m)] on every DH frame (default 1e-5 .. 3e-5, 40 % of the default joint
+  [rad/(N m)] on every DH frame (default 1e-5 .. 3e-5, a third of the default joint
   compliances of :func:`~.campaign.simulate_campaign`; the standard calibration groups
   leave it out).
 
