@@ -310,7 +310,8 @@ class RobotModel:
     @property
     def has_harmonic(self) -> bool:
         """Whether any joint transmission error (``harmonic``) is nonzero."""
-        return bool(np.any(self.harmonic))
+        h = self.harmonic
+        return h.shape[1] != 0 and bool(np.any(h))   # shape first: the common K = 0 is cheap
 
     def joint_transmission(self, q: np.ndarray, harmonic: np.ndarray | None = None
                            ) -> np.ndarray:
