@@ -9,8 +9,11 @@ Jacobian gains the diagonal chain-rule factor ``dq'_j/dq_j``
 :func:`~jwarp.kinematics.equilibrium.elastic_step`,
 :func:`~jwarp.kinematics.jacobians.jacobian`, ``jacobian_dh``) call :func:`transmitted`
 first; robots without transmission errors pass through untouched (one attribute check).
-The IK and planner kernels read joint values on the device directly and do **not** see
-transmission errors (see ``docs/nongeometric.md``).
+The IK and planner kernels read joint values on the device directly; the solvers
+(:class:`~jwarp.solvers.ik.IKSolver`, :class:`~jwarp.solvers.planner.Planner`) therefore
+work in the links' joint space: their inputs (seeds, start, goal, warm starts) go through
+:func:`transmitted` and their results come back through :func:`untransmitted`, so a
+solution is exact for the commanded joint values (see ``docs/nongeometric.md``).
 """
 
 from __future__ import annotations
@@ -78,3 +81,26 @@ def without_transmission(model: RobotModel) -> RobotModel:
     if out is None:
         out = model.__dict__["_without_transmission"] = model.copy(harmonic=None)
     return out
+
+
+def untransmitted(model: RobotModel, q_link: np.ndarray, *, tol: float = 1e-13,
+                  max_iter: int = 30) -> np.ndarray:
+    """The joint values ``q`` whose links see ``q_link`` (..., n_dof): the inverse of
+    :func:`transmitted` by Newton's method per joint (float64 numpy; ``q_link`` itself
+    without transmission errors). Converges when ``dq'/dq > 0`` (a transmission error
+    smaller than the joint's own motion: |sum k (|a_k| + |b_k|)| < 1); raises ValueError
+    naming ``harmonic`` when it does not."""
+    a = np.asarray(q_link, np.float64)
+    if not model.has_harmonic:
+        return a.copy()
+    q = a.copy()
+    for _ in range(max_iter):
+        r = model.joint_transmission(q) - a
+        if np.all(np.abs(r) <= tol * (1.0 + np.abs(a))):
+            return q
+        q = q - r / model.joint_transmission_slope(q)
+    r = model.joint_transmission(q) - a
+    if np.all(np.abs(r) <= 1e-9 * (1.0 + np.abs(a))):
+        return q
+    raise ValueError(f"harmonic: the transmission errors of '{model.name}' are not invertible "
+                     f"at some joint values (residual {np.abs(r).max():.3g} rad)")

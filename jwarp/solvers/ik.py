@@ -48,6 +48,7 @@ from jwarp.kernels import ik as ik_kernels
 from jwarp.kernels import ik_step as step_kernels
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.compensation import CompensationRows
+from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.world import collision
@@ -741,6 +742,8 @@ class IKSolver:
                                             self.options.n_random_with_warm_start, self.rng),
                            self.npdt, "warm_start")
             S = q0.shape[1]
+        if q0 is not None and model.has_harmonic:  # the kernels work in the links' joint space
+            q0 = transmitted(model, q0)
         if S != self.n_seeds:
             self._allocate(S)
         obj, dev, B = self.objective, self.device, self.B
@@ -821,6 +824,9 @@ class IKSolver:
         out = self.out.numpy().copy() if dev.is_cpu else self.out.numpy()
         best = self.best.numpy().copy() if dev.is_cpu else self.best.numpy()
         res = IKResult.from_rows(out, best, model.n_dof, P, S, time.perf_counter() - t0)
+        if model.has_harmonic:  # back to the commanded joint values
+            res = dataclasses.replace(res, q=untransmitted(model, res.q),
+                                      all_q=untransmitted(model, res.all_q))
         return res.reshaped(lead)
 
 

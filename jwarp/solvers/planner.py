@@ -44,6 +44,7 @@ from jwarp.kernels import path as path_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.kinematics.compensation import CompensationRows
+from jwarp.kinematics.transmission import transmitted, untransmitted, without_transmission
 from jwarp.kinematics.launch import kappa_array
 from jwarp.core.limits import (describe_violation, limit_tables, project_numpy,
                               sample_within_limits, within_limits)
@@ -205,8 +206,9 @@ def elastic_equilibrium(robot: Any, q: np.ndarray, kappa: Any, device: Any = Non
     (:data:`ELASTIC_CHECK`, float64): ``(rho (N, n_frames, 5), converged (N,) bool)``."""
     from jwarp.kinematics.equilibrium import fk_elastic
 
-    res = fk_elastic(robot, np.asarray(q, np.float64), kappa, device=device, dtype=np.float64,
-                     **ELASTIC_CHECK)
+    # the checks see the links' joint values (transmission errors already applied)
+    res = fk_elastic(without_transmission(get_robot(robot)), np.asarray(q, np.float64), kappa,
+                     device=device, dtype=np.float64, **ELASTIC_CHECK)
     return np.asarray(res.rho), np.asarray(res.converged, bool)
 
 
@@ -789,7 +791,23 @@ class Planner:
         """
         if seeds is None and self.warm_start is not None:
             seeds = self._warm_seeds(start, goal)
-        return self._plan(start, goal, seeds, "seeds")
+        model = self.robot
+        if not model.has_harmonic:
+            return self._plan(start, goal, seeds, "seeds")
+        # transmission errors: the kernels and checks work in the links' joint space; the
+        # endpoints and seeds go in through q' = q + dq(q), the paths come back through its
+        # inverse (waypoints exact; between them the links follow the straight segment in
+        # q', which differs from the one in q by the change of dq along it)
+        q0 = transmitted(model, self._problems(start, "start"))
+        q1 = transmitted(model, self._problems(goal, "goal"))
+        if seeds is not None and not isinstance(seeds, (str, ViaPoints)):
+            seeds = transmitted(model, real_array(seeds, "seeds"))
+        elif isinstance(seeds, ViaPoints):
+            seeds = ViaPoints(transmitted(model, real_array(seeds.points, "seeds")))
+        res = self._plan(q0, q1, seeds, "seeds")
+        res.path = untransmitted(model, res.path)
+        res.paths_source = untransmitted(model, res.all_paths)
+        return res
 
     def _warm_seeds(self, start: Any, goal: Any) -> np.ndarray:
         """The warm start's paths (B, H, W, n_dof), then ``n_starts - H`` multi-starts."""
