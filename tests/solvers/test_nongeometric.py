@@ -87,28 +87,27 @@ def test_robot_file_round_trip_and_backward_compatibility(tmp_path):
         base.copy(kappa_nonlinear=k)
 
 
-@requires_cpu
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
-def test_fk_elastic_and_fk_match_numpy_reference_with_the_new_terms(dtype):
+def test_fk_elastic_and_fk_match_numpy_reference_with_the_new_terms(dtype, device):
     """One kernel source for float32 and float64: both dtypes against the numpy reference
     (float32 to its resolution)."""
     model = _nongeo(jwarp.robot("justin19"), knl=5e-9)
     rng = np.random.default_rng(1)
     q = _q(model, 6, rng)
     F_ref, rho_ref = _ref_elastic(model, q)
-    res = jwarp.fk_elastic(model, q.astype(dtype), max_iter=200, device="cpu", dtype=dtype)
+    res = jwarp.fk_elastic(model, q.astype(dtype), max_iter=200, device=device, dtype=dtype)
     tol = 1e-10 if dtype == np.float64 else 2e-5
     assert res.converged.all()
     np.testing.assert_allclose(res.frames, F_ref, atol=tol)
     np.testing.assert_allclose(res.rho[..., 1], rho_ref[..., 1], atol=tol)
     # the new terms matter at this size: without them the frames differ by millimetres
     plain = model.copy(harmonic=None, kappa_nonlinear=None)
-    other = jwarp.fk_elastic(plain, q.astype(dtype), max_iter=200, device="cpu", dtype=dtype)
+    other = jwarp.fk_elastic(plain, q.astype(dtype), max_iter=200, device=device, dtype=dtype)
     assert np.abs(other.frames[..., :3, 3] - F_ref[..., :3, 3]).max() > 1e-3
     # rigid FK sees the transmission errors; the joint Jacobian has the chain-rule factor
-    np.testing.assert_allclose(jwarp.fk(model, q, device="cpu", dtype=np.float64),
+    np.testing.assert_allclose(jwarp.fk(model, q, device=device, dtype=np.float64),
                                ref_fk(model, _ref_transmission(model.harmonic, q)), atol=1e-12)
-    J = jwarp.jacobian(model, q, "right_tcp", device="cpu", dtype=np.float64)
+    J = jwarp.jacobian(model, q, "right_tcp", device=device, dtype=np.float64)
     tcp = model.frame_index("right_tcp")
     eps = 1e-6
     for j in (3, 6):
