@@ -1,7 +1,6 @@
 """Transmission errors (the robot's ``harmonic`` field) in the IK solver and the planner:
 both work in the links' joint space and return commanded joint values, checked here with
-the kinematics functions that apply the errors (``jwarp.fk``) and an independent numpy
-transmission."""
+the numpy reference FK of the links' joint values (an independent numpy transmission)."""
 
 import numpy as np
 import pytest
@@ -11,6 +10,7 @@ from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.solvers import planner as PL
 from jwarp.solvers.ik import IKOptions, IKSolver
 
+from reference import ref_fk
 from worlds import block_world_2d
 
 AMP = 0.03  # rad: large, so that ignoring it would miss the targets by centimetres
@@ -51,18 +51,17 @@ def test_ik_solutions_reach_the_target_with_the_transmission(device):
     robot = with_harmonic(plain)
     rng = np.random.default_rng(2)
     q_true = rng.uniform(-1.5, 1.5, (16, robot.n_dof))
-    T = np.asarray(jwarp.fk(robot, q_true, device="cpu", dtype="float64"))[:, -1]
+    T = ref_fk(plain, ref_transmission(robot, q_true))[:, -1]
     frame = robot.n_frames - 1
     opts = IKOptions(n_starts=8, max_iterations=200)
     res = IKSolver(robot, frame, 16, opts, device=device, dtype=np.float64).solve(T)
     assert res.feasible.sum() >= 8  # (some random targets self-collide)
     ok = res.feasible
     # FK with the transmission applied (numpy transmission, then the plain robot's FK)
-    got = np.asarray(jwarp.fk(plain, ref_transmission(robot, res.q[ok]), device="cpu",
-                              dtype="float64"))[:, frame]
+    got = ref_fk(plain, ref_transmission(robot, res.q[ok]))[:, frame]
     assert np.abs(got[:, :3, 3] - T[ok, :3, 3]).max() < 1e-3
     # the commanded values differ from the links' (the errors matter at this size)
-    wrong = np.asarray(jwarp.fk(plain, res.q[ok], device="cpu", dtype="float64"))[:, frame]
+    wrong = ref_fk(plain, res.q[ok])[:, frame]
     assert np.abs(wrong[:, :3, 3] - T[ok, :3, 3]).max() > 5e-3
     np.testing.assert_allclose(res.all_q[ok, res.start_index[ok]], res.q[ok])
 
