@@ -217,31 +217,24 @@ def read_samples(path: str | os.PathLike, robot: RobotModel, meas: Measurement) 
     return parse_samples(text, robot, meas, where=path)
 
 
-def parse_samples(text: str, robot: RobotModel, meas: Measurement, where: str = "data"
-                  ) -> Samples:
-    """Parse CSV text (the content of a samples file)."""
-    if text.startswith("\ufeff"):  # byte order mark
-        text = text[1:]
-    reader = csv.reader(io.StringIO(text, newline=""))
+
+def read_header(reader: Any, where: str, expect: str) -> tuple[list[str], int]:
+    """The first non-blank row of a ``csv.reader`` (stripped names) and its line number;
+    an empty file is a ValueError ``<where>: empty file (<expect>)``."""
     header = None
     for header in reader:
         if header and any(h.strip() for h in header):
             break
     if not header:
-        raise ValueError(f"{where}: empty file (expected a header row)")
-    header = [h.strip() for h in header]
-    header_line = reader.line_num
-    expected = columns(robot, meas)
-    dup = sorted({h for h in header if header.count(h) > 1})
-    if dup:
-        raise ValueError(f"{where}: duplicate column(s) {dup}")
-    missing = [c for c in expected if c not in header]
-    if missing:
-        raise ValueError(f"{where}: missing column(s) {missing}; expected {expected}")
-    extra = [c for c in header if c not in expected]
-    if extra:
-        raise ValueError(f"{where}: unknown column(s) {extra}; expected {expected}")
-    col = [header.index(c) for c in expected]
+        raise ValueError(f"{where}: empty file ({expect})")
+    return [h.strip() for h in header], reader.line_num
+
+
+def numeric_rows(reader: Any, header: list[str], col: list[int], where: str,
+                 header_line: int) -> tuple[list[list[float]], list[int]]:
+    """The columns ``col`` of every further non-blank row as finite floats, and the rows'
+    line numbers. A row with another field count than the header, a field that is not a
+    number, or NaN/inf is a ValueError naming ``where``, the line and the column."""
     values, lines = [], []
     for fields in reader:
         line = reader.line_num
@@ -264,6 +257,27 @@ def parse_samples(text: str, robot: RobotModel, meas: Measurement, where: str = 
             row.append(v)
         values.append(row)
         lines.append(line)
+    return values, lines
+
+def parse_samples(text: str, robot: RobotModel, meas: Measurement, where: str = "data"
+                  ) -> Samples:
+    """Parse CSV text (the content of a samples file)."""
+    if text.startswith("\ufeff"):  # byte order mark
+        text = text[1:]
+    reader = csv.reader(io.StringIO(text, newline=""))
+    header, header_line = read_header(reader, where, "expected a header row")
+    expected = columns(robot, meas)
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise ValueError(f"{where}: duplicate column(s) {dup}")
+    missing = [c for c in expected if c not in header]
+    if missing:
+        raise ValueError(f"{where}: missing column(s) {missing}; expected {expected}")
+    extra = [c for c in header if c not in expected]
+    if extra:
+        raise ValueError(f"{where}: unknown column(s) {extra}; expected {expected}")
+    col = [header.index(c) for c in expected]
+    values, lines = numeric_rows(reader, header, col, where, header_line)
     if not values:
         raise ValueError(f"{where}: no sample rows after the header")
     a = np.asarray(values, dtype=np.float64)

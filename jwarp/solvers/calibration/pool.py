@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import csv
 import io
-import math
 import os
 
 import numpy as np
@@ -21,7 +20,7 @@ import numpy as np
 from jwarp.atomic import atomic_write_text
 from jwarp.measurement import Measurement
 from jwarp.model import RobotModel
-from jwarp.solvers.calibration.files import Samples, read_text
+from jwarp.solvers.calibration.files import Samples, numeric_rows, read_header, read_text
 
 
 def pool_columns(robot: RobotModel, meas: Measurement) -> list[str]:
@@ -44,14 +43,8 @@ def parse_configurations(text: str, robot: RobotModel, meas: Measurement,
     if text.startswith("\ufeff"):
         text = text[1:]
     reader = csv.reader(io.StringIO(text, newline=""))
-    header = None
-    for header in reader:
-        if header and any(h.strip() for h in header):
-            break
-    if not header:
-        raise ValueError(f"{label}: empty file (expected a header row with the columns "
-                         f"{pool_columns(robot, meas)})")
-    header = [h.strip() for h in header]
+    header, header_line = read_header(reader, label, f"expected a header row with the columns "
+                                                    f"{pool_columns(robot, meas)}")
     need = pool_columns(robot, meas)
     dup = sorted({h for h in header if header.count(h) > 1})
     if dup:
@@ -66,27 +59,7 @@ def parse_configurations(text: str, robot: RobotModel, meas: Measurement,
         raise ValueError(f"{label}: unknown column '{extra[0]}' (expected {need}, "
                          f"optionally the observed columns {list(meas.obs_names)})")
     col = [header.index(c) for c in need]
-    values, lines = [], []
-    for fields in reader:
-        line = reader.line_num
-        if not fields or (len(fields) == 1 and not fields[0].strip()):
-            continue
-        if len(fields) != len(header):
-            raise ValueError(f"{label}: line {line}: {len(fields)} fields, the header has "
-                             f"{len(header)}")
-        row = []
-        for k in col:
-            s = fields[k].strip()
-            try:
-                v = float(s)
-            except ValueError:
-                raise ValueError(f"{label}: line {line}, column '{header[k]}': not a number: "
-                                 f"{s!r}") from None
-            if not math.isfinite(v):
-                raise ValueError(f"{label}: line {line}, column '{header[k]}': {s} (NaN/inf)")
-            row.append(v)
-        values.append(row)
-        lines.append(line)
+    values, lines = numeric_rows(reader, header, col, label, header_line)
     if not values:
         raise ValueError(f"{label}: no configuration rows after the header")
     a = np.asarray(values, np.float64)
