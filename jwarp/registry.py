@@ -336,12 +336,13 @@ def robots() -> list[str]:
 
 def _looks_like_path(name: str) -> bool:
     seps = {"/", os.sep} | ({os.altsep} if os.altsep else set())
-    return name.lower().endswith(".json") or any(s in name for s in seps)
+    return name.lower().endswith((".json", ".urdf")) or any(s in name for s in seps)
 
 
 def robot(name: str | os.PathLike | RobotModel) -> RobotModel:
     """The robot registered under ``name`` (a RobotModel passes through; a path to a robot
-    file, a name ending in ``.json`` or containing a ``/``, is loaded)."""
+    file, a name ending in ``.json`` or ``.urdf`` or containing a ``/``, is loaded; a
+    ``.urdf`` file is imported by :meth:`RobotModel.from_urdf`)."""
     if isinstance(name, RobotModel):
         return name
     if not isinstance(name, (str, os.PathLike)):
@@ -360,6 +361,8 @@ def robot(name: str | os.PathLike | RobotModel) -> RobotModel:
     if name not in table.found:
         if _looks_like_path(name):
             if os.path.exists(name):
+                if name.lower().endswith(".urdf"):
+                    return RobotModel.from_urdf(name)
                 return RobotModel.load(name)
             raise ValueError(f"robot: file not found: '{name}' (read as a path to a robot "
                              f"file; no robot is registered under that name either)")

@@ -3,7 +3,8 @@ modules, and no ``_private`` name is used outside its module.
 
 Layers (low to high); a module may import its own layer or any lower one:
 
-    0 host:      jwarp.atomic, jwarp.memory, jwarp.model, jwarp.registry, jwarp.measurement
+    0 host:      jwarp.atomic, jwarp.memory, jwarp.model, jwarp.registry, jwarp.measurement,
+                 jwarp.importers (URDF; model and atomic only, plus third-party libs)
     1 kernels:   jwarp.kernels (Warp only)
     2 core:      jwarp.core (arrays, device model, rows, limits)
     3 kinematics jwarp.kinematics
@@ -31,6 +32,7 @@ ROOT = Path(__file__).resolve().parents[1] / "jwarp"
 
 LAYERS = {
     "jwarp.atomic": 0, "jwarp.memory": 0, "jwarp.model": 0, "jwarp.registry": 0, "jwarp.measurement": 0,
+    "jwarp.importers": 0,
     "jwarp.kernels": 1, "jwarp.core": 2, "jwarp.kinematics": 3, "jwarp.world": 4,
     "jwarp.plugins": 5, "jwarp.solvers": 6, "jwarp.learn": 7, "jwarp.viz": 8, "jwarp.cli": 9,
 }

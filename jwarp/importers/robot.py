@@ -1,0 +1,48 @@
+"""URDF -> :class:`~jwarp.model.RobotModel` with the links' collision geometry.
+
+:func:`load_urdf` is what ``RobotModel.from_urdf``, ``jwarp.robot("x.urdf")`` and
+``jwarp import-urdf`` use (docs/urdf.md).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+from jwarp.importers.urdf import CollisionGeometry, UrdfImport, UrdfOptions, read_urdf
+from jwarp.model import RobotModel, RobotModelError
+
+
+@dataclass
+class UrdfRobot:
+    """An imported URDF: the ``model``, the collision ``geometries`` of its links (frames of
+    the same names), and the raw import (``source``: document, link and joint frames)."""
+
+    model: RobotModel
+    geometries: list[CollisionGeometry]
+    source: UrdfImport
+
+    def geometries_of(self, link: str) -> list[CollisionGeometry]:
+        """The collision geometry of one link (ValueError for an unknown link)."""
+        if link not in self.source.link_frames:
+            raise ValueError(f"link: unknown link '{link}'; known: "
+                             f"{', '.join(self.source.link_frames)}")
+        return [g for g in self.geometries if g.link == link]
+
+
+def load_urdf(path: str | os.PathLike, *, end_effectors: Mapping[str, str] | None = None,
+              package_dirs: Sequence[str | os.PathLike] = (), **options: Any) -> UrdfRobot:
+    """Import a URDF file. ``end_effectors``, ``package_dirs`` and ``options`` are the fields
+    of :class:`~jwarp.importers.urdf.UrdfOptions`. ValueError naming the file and the
+    element for a malformed URDF."""
+    try:
+        opt = UrdfOptions(end_effectors=end_effectors, package_dirs=package_dirs, **options)
+    except TypeError as e:
+        raise TypeError(f"load_urdf: {e}") from None
+    imp = read_urdf(path, opt)
+    try:
+        model = RobotModel.from_dict(imp.document)
+    except RobotModelError as e:
+        raise RobotModelError(f"{os.fspath(path)}: imported robot is invalid: {e}") from None
+    return UrdfRobot(model=model, geometries=imp.geometries, source=imp)
