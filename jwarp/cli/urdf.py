@@ -1,0 +1,96 @@
+"""CLI subcommand ``jwarp import-urdf``: a URDF file -> a jwarp robot JSON (docs/urdf.md)::
+
+    jwarp import-urdf panda.urdf --out panda.json --end-effector tcp=panda_hand_tcp \\
+        --package-dir /opt/ros/share
+
+``--out`` is checked before the import; the file is written atomically. The summary line
+gives the joints, frames, masses and collision geometry found (``--json``: as JSON).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from typing import Any
+
+from jwarp.cli.common import CLIError, check_output
+
+
+def _end_effectors(items: list[str] | None) -> dict[str, str] | None:
+    if not items:
+        return None
+    out = {}
+    for item in items:
+        alias, sep, link = item.partition("=")
+        if not sep or not alias.strip() or not link.strip():
+            raise CLIError(f"--end-effector: expected NAME=LINK, got '{item}'")
+        if alias.strip() in out:
+            raise CLIError(f"--end-effector: '{alias.strip()}' given twice")
+        out[alias.strip()] = link.strip()
+    return out
+
+
+def cmd_import_urdf(args: argparse.Namespace) -> int:
+    from jwarp.importers.robot import load_urdf
+
+    check_output(args.out, "--out", inputs={"URDF": args.urdf})
+    if not os.path.isfile(args.urdf):
+        raise CLIError(f"URDF: file not found: '{args.urdf}'")
+    for d in args.package_dir or []:
+        if not os.path.isdir(d):
+            raise CLIError(f"--package-dir: not a folder: '{d}'")
+    eff = _end_effectors(args.end_effector)
+    limit = args.continuous_limit
+    if not (limit > 0 and limit < float("inf")):
+        raise CLIError(f"--continuous-limit: expected a finite number > 0 [rad], got {limit}")
+    try:
+        imported = load_urdf(args.urdf, end_effectors=eff, package_dirs=args.package_dir or [],
+                             continuous_limit=limit, name=args.name,
+                             require_meshes=args.require_meshes)
+    except ValueError as e:
+        msg = " ".join(str(e).split())
+        if msg.startswith("end_effectors."):
+            raise CLIError(f"--end-effector: {msg.partition(': ')[2]}") from None
+        raise CLIError(f"URDF: {msg}") from None
+    model = imported.model
+    model.save(args.out)
+    kinds: dict[str, int] = {}
+    for g in imported.geometries:
+        kinds[g.kind] = kinds.get(g.kind, 0) + 1
+    missing = [g.mesh_uri for g in imported.geometries if g.kind == "mesh" and g.mesh_path is None]
+    summary: dict[str, Any] = {
+        "robot": model.name, "dof": model.n_dof, "frames": model.n_frames,
+        "masses": len(model.masses), "mass_kg": sum(m.mass for m in model.masses),
+        "spheres": len(model.spheres), "collision_geometry": kinds,
+        "missing_meshes": missing, "end_effectors": sorted(model.end_effectors), "out": args.out}
+    if args.json:
+        print(json.dumps(summary, indent=1))
+    else:
+        print(f"{model.name}: {model.n_dof} joints, {model.n_frames} frames, "
+              f"{len(model.masses)} masses ({summary['mass_kg']:.3f} kg), "
+              f"{len(model.spheres)} spheres; collision geometry "
+              f"{', '.join(f'{k} {v}' for k, v in sorted(kinds.items())) or 'none'}"
+              + (f" ({len(missing)} mesh files not found)" if missing else ""))
+        print(f"end-effectors: {', '.join(sorted(model.end_effectors))}")
+        print(f"robot: {args.out}")
+    return 0
+
+
+def add_subcommands(sub: Any) -> None:
+    """Register ``import-urdf`` on the CLI's subparsers."""
+    s = sub.add_parser("import-urdf", help="import a URDF robot into a jwarp robot JSON "
+                                           "(links as frames, mimic joints coupled, masses)")
+    s.add_argument("urdf", metavar="URDF", help="the URDF file")
+    s.add_argument("--out", required=True, metavar="ROBOT.json", help="robot file to write")
+    s.add_argument("--end-effector", action="append", metavar="NAME=LINK",
+                   help="named end-effector (repeatable; default: every tip link)")
+    s.add_argument("--package-dir", action="append", metavar="DIR",
+                   help="folder searched for package:// mesh paths (repeatable)")
+    s.add_argument("--continuous-limit", type=float, default=3.141592653589793,
+                   metavar="RAD", help="limits [-x, x] of continuous joints (pi)")
+    s.add_argument("--name", default=None, help="robot name (default: the URDF's)")
+    s.add_argument("--require-meshes", action="store_true",
+                   help="fail if a collision mesh file is not found")
+    s.add_argument("--json", action="store_true", help="print the summary as JSON")
+    s.set_defaults(func=cmd_import_urdf)
