@@ -7,8 +7,9 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 from jwarp.importers.urdf import CollisionGeometry, UrdfImport, UrdfOptions, read_urdf
 from jwarp.model import RobotModel, RobotModelError

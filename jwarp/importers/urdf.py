@@ -33,9 +33,10 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -260,6 +261,10 @@ def _check_elements(path: str, root: Any) -> None:
             sub = el.find(tag)
             if sub is None or not sub.get("link"):
                 raise UrdfError(f"{path}: joint '{name}': missing <{tag} link=\"...\"/>")
+        _origin(el.find("origin"), f"{path}: joint '{name}'")
+        axis = el.find("axis")
+        if axis is not None:
+            _numbers(axis.get("xyz"), 3, f"{path}: joint '{name}' <axis xyz>", (1.0, 0.0, 0.0))
         mimic = el.find("mimic")
         if mimic is not None and not mimic.get("joint"):
             raise UrdfError(f"{path}: joint '{name}': <mimic> has no 'joint' attribute")
@@ -306,8 +311,7 @@ def resolve_mesh(uri: str, urdf_path: str, package_dirs: Sequence[str | os.PathL
             if c.is_file():
                 return str(c)
         return None
-    if uri.startswith("file://"):
-        uri = uri[len("file://"):]
+    uri = uri.removeprefix("file://")
     p = Path(uri)
     p = p if p.is_absolute() else here / p
     return str(p) if p.is_file() else None
