@@ -30,11 +30,10 @@ import json
 import math
 import numbers
 import os
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -378,11 +377,11 @@ class RobotModel:
         return _to_dict(self)
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> RobotModel:
+    def from_dict(cls, doc: dict[str, Any]) -> "RobotModel":
         return _from_dict(doc)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> RobotModel:
+    def load(cls, path: str | os.PathLike) -> "RobotModel":
         """Read a robot JSON file; errors name the file and the offending field."""
         path = Path(path)
         try:
@@ -401,7 +400,7 @@ class RobotModel:
     @classmethod
     def from_urdf(cls, path: str | os.PathLike, *, end_effectors: dict[str, str] | None = None,
                   package_dirs: Sequence[str | os.PathLike] = (), **options: Any
-                  ) -> RobotModel:
+                  ) -> "RobotModel":
         """Import a URDF file (docs/urdf.md): links are frames of the same names, moving
         joints are ``dh`` frames (mimic joints coupled), inertials point masses, sphere
         collision geometry the robot's spheres. ``end_effectors`` ``{alias: link}``
@@ -423,7 +422,7 @@ class RobotModel:
         """Write the robot as JSON atomically (temporary file + rename)."""
         atomic_write_text(path, json.dumps(self.to_dict(), indent=1) + "\n")
 
-    def copy(self, **changes: Any) -> RobotModel:
+    def copy(self, **changes: Any) -> "RobotModel":
         """A deep copy with some top-level fields replaced (validated again)."""
         doc = self.to_dict()
         model = _from_dict(doc)
@@ -437,7 +436,7 @@ class RobotModel:
         model.__post_init__()
         return model
 
-    def with_dh(self, dh_table: np.ndarray, kappa: np.ndarray | None = None) -> RobotModel:
+    def with_dh(self, dh_table: np.ndarray, kappa: np.ndarray | None = None) -> "RobotModel":
         """Copy with new DH rows ``(n_frames, 5)`` (static rows ignored) and optionally kappa."""
         dh_table = np.asarray(dh_table, np.float64)
         if dh_table.shape != (self.n_frames, 5):
@@ -453,7 +452,7 @@ class RobotModel:
         validate(m)
         return m
 
-    def with_masses(self, masses: Any) -> RobotModel:
+    def with_masses(self, masses: Any) -> "RobotModel":
         """Copy with new values of the point masses: ``masses`` (len(self.masses),) [kg],
         one per entry of ``self.masses`` in that order (frames and centres of mass kept).
         Values must be finite and >= 0."""

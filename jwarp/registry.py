@@ -29,9 +29,8 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import pluggy
 
@@ -376,7 +375,7 @@ def robot(name: str | os.PathLike | RobotModel) -> RobotModel:
     elif isinstance(factory, (str, os.PathLike)) or callable(factory):
         try:
             model = RobotModel.load(factory) if not callable(factory) else factory()
-        except Exception as e:
+        except Exception as e:  # noqa: BLE001 - a plugin's factory may fail in any way
             raise PluginError(f"robot: {who}: the factory of robot '{name}' raised "
                               f"{_one_line(e)}{_hint([plugin])}") from e
     else:
