@@ -13,7 +13,7 @@ stop the import). Mapping (docs/urdf.md):
   about (revolute, continuous: theta) or slides along (prismatic: d) its z-axis, followed,
   when ``R_align != I``, by a static ``R_align^T`` so that the child frame is URDF's
   link frame. ``T @ R_align`` is folded into the DH row when it is one exactly
-  (``Rot_y(beta) Rot_x(alpha) Trans_x(r) Rot_z(theta) Trans_z(d)``, to 1e-12), else it is
+  (``Rot_y(beta) Rot_x(alpha) Trans_x(r) Rot_z(theta) Trans_z(d)``, to 4e-15), else it is
   a static frame ``<joint>_origin``. The dh frame is the child link's frame (named after
   the link) when ``R_align = I``, else it is named after the joint;
 * ``mimic`` joints are coupled frames: ``q_frame = multiplier * q[joint]``, the offset
@@ -31,6 +31,7 @@ This module does not import :mod:`jwarp.model` (the model imports it lazily for
 
 from __future__ import annotations
 
+import io
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -44,8 +45,11 @@ import numpy as np
 SUPPORTED_JOINTS = ("revolute", "continuous", "prismatic", "fixed")
 UNSUPPORTED_JOINTS = ("planar", "floating")
 GEOMETRY_KINDS = ("sphere", "box", "cylinder", "capsule", "mesh")
-#: tolerance of "is a DH row" and "axis is +-z" tests
+#: tolerance of the "axis is +-x, +-y, +-z" tests
 EXACT = 1e-12
+#: a joint origin is folded into a DH row only if the row reproduces it to this (times
+#: max(1, |translation| / m)): a few roundoffs, so folding never changes the kinematics
+FOLD_TOL = 4e-15
 
 
 class UrdfError(ValueError):
@@ -175,7 +179,7 @@ def align_z(axis: np.ndarray) -> np.ndarray:
 
 def dh_of(T: np.ndarray) -> np.ndarray | None:
     """``[d, theta, r, alpha, beta]`` with ``Rot_y(beta) Rot_x(alpha) Trans_x(r) Rot_z(theta)
-    Trans_z(d) == T`` (to :data:`EXACT`), or None when T is not of that form."""
+    Trans_z(d) == T`` (to :data:`FOLD_TOL`), or None when T is not of that form."""
     R, t = T[:3, :3], T[:3, 3]
     zc = R[:, 2]
     sa = -zc[1]
@@ -192,7 +196,8 @@ def dh_of(T: np.ndarray) -> np.ndarray | None:
     r = u[0]
     d = -u[1] * math.sin(alpha) + u[2] * math.cos(alpha)
     row = np.array([d, theta, r, alpha, beta])
-    return row if np.max(np.abs(dh_matrix(row) - T)) <= EXACT else None
+    tol = FOLD_TOL * max(1.0, float(np.linalg.norm(t)))
+    return row if np.max(np.abs(dh_matrix(row) - T)) <= tol else None
 
 
 def dh_matrix(row: np.ndarray) -> np.ndarray:
@@ -376,24 +381,21 @@ def read_urdf(path: str | os.PathLike, options: UrdfOptions | None = None) -> Ur
         raise UrdfError(f"path: URDF file not found: '{path}'")
     root = _xml_root(path)
     _check_elements(path, root)
+    geometries = _collisions(path, root, opt.package_dirs, opt.require_meshes)
     import yourdfpy
+    from lxml import etree
 
     # visuals and collisions are not needed from yourdfpy (collisions are read above);
     # dropping them keeps unknown geometry tags (capsule) from failing its parser
     for tag in ("visual", "collision"):
         for el in root.findall(f"link/{tag}"):
             el.getparent().remove(el)
-    import io
-
-    from lxml import etree
-
     try:
         urdf = yourdfpy.URDF.load(io.BytesIO(etree.tostring(root)), build_scene_graph=False,
                                   load_meshes=False, build_collision_scene_graph=False,
                                   load_collision_meshes=False)
     except (KeyError, AttributeError, ValueError, TypeError, IndexError) as e:
         raise UrdfError(f"{path}: yourdfpy could not parse it: {type(e).__name__}: {e}") from None
-    geometries = _collisions(path, _xml_root(path), opt.package_dirs, opt.require_meshes)
     return _build(path, urdf.robot, geometries, opt)
 
 
