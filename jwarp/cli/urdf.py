@@ -11,10 +11,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 from typing import Any
 
-from jwarp.cli.common import CLIError, check_output
+from jwarp.cli.common import CLIError, check_output, real_arg
 
 
 def _end_effectors(items: list[str] | None) -> dict[str, str] | None:
@@ -41,12 +42,9 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
         if not os.path.isdir(d):
             raise CLIError(f"--package-dir: not a folder: '{d}'")
     eff = _end_effectors(args.end_effector)
-    limit = args.continuous_limit
-    if not (limit > 0 and limit < float("inf")):
-        raise CLIError(f"--continuous-limit: expected a finite number > 0 [rad], got {limit}")
     try:
         imported = load_urdf(args.urdf, end_effectors=eff, package_dirs=args.package_dir or [],
-                             continuous_limit=limit, name=args.name,
+                             continuous_limit=args.continuous_limit, name=args.name,
                              require_meshes=args.require_meshes)
     except ValueError as e:
         msg = " ".join(str(e).split())
@@ -87,7 +85,8 @@ def add_subcommands(sub: Any) -> None:
                    help="named end-effector (repeatable; default: every tip link)")
     s.add_argument("--package-dir", action="append", metavar="DIR",
                    help="folder searched for package:// mesh paths (repeatable)")
-    s.add_argument("--continuous-limit", type=float, default=3.141592653589793,
+    s.add_argument("--continuous-limit", type=real_arg("--continuous-limit", 0.0, lo_open=True,
+                                                        unit=" rad"), default=math.pi,
                    metavar="RAD", help="limits [-x, x] of continuous joints (pi)")
     s.add_argument("--name", default=None, help="robot name (default: the URDF's)")
     s.add_argument("--require-meshes", action="store_true",

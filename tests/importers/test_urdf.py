@@ -422,6 +422,11 @@ def test_cli_import_urdf(tmp_path, capsys):
     one_line_error(capsys, ["import-urdf", src, "--out", tmp_path / "no" / "x.json"], "--out")
     one_line_error(capsys, ["import-urdf", src, "--out", out, "--end-effector", "tcp"],
                    "--end-effector")
+    one_line_error(capsys, ["import-urdf", src, "--out", out, "--continuous-limit", "nan"],
+                   "--continuous-limit")
+    one_line_error(capsys, ["import-urdf", src, "--out", out, "--package-dir", tmp_path / "no"],
+                   "--package-dir")
+    one_line_error(capsys, ["import-urdf", tmp_path / "none.urdf", "--out", out], "URDF")
     one_line_error(capsys, ["import-urdf", src, "--out", out, "--end-effector", "tcp=nope"],
                    "--end-effector")
     bad = write(tmp_path, urdf(joint("j", "base", "a", "planar"), links=LINKS3[:2]), "bad.urdf")
