@@ -406,7 +406,7 @@ def test_missing_file_and_bad_options(tmp_path):
 
 # ------------------------------------------------------------------ CLI
 def test_cli_import_urdf(tmp_path, capsys):
-    from tests.cli_helpers import one_line_error, run
+    from cli_helpers import one_line_error, run  # tests/cli_helpers.py
 
     src = _robots_dir() / ARMS["ur5"]
     out = tmp_path / "ur5.json"
