@@ -1,9 +1,11 @@
-"""Importers of robot descriptions from other formats into jwarp's robot schema.
+"""Robot description formats in and out of jwarp (host side, numpy).
 
 * :mod:`jwarp.importers.urdf`: URDF (through ``yourdfpy``) -> a ``jwarp.robot`` document
   plus the links' collision geometry (:func:`~jwarp.importers.urdf.read_urdf`).
 * :mod:`jwarp.importers.robot`: the same as a validated :class:`~jwarp.model.RobotModel`
   (:func:`~jwarp.importers.robot.load_urdf`, :class:`~jwarp.importers.robot.UrdfRobot`).
+* :mod:`jwarp.importers.urdf_export`: a jwarp robot -> URDF (+ a side file for what URDF
+  cannot hold).
 
-See docs/urdf.md.
+See docs/urdf.md and docs/urdf_export.md.
 """
