@@ -44,9 +44,11 @@ from jwarp.solvers.calibration.elastic import (ElasticComponents, effective_kapp
                                                mass_torque_jacobian, nonlinear_b,
                                                torque_jacobian, torque_state)
 from jwarp.solvers.calibration.options import CalibrationOptions
+from jwarp.solvers.calibration.origin import ORIGIN_GROUP, origin_twists, with_static_transforms
 from jwarp.solvers.calibration.params import (KIND_DH, KIND_HARMONIC, KIND_KAPPA,
-                                              KIND_KAPPA_NL, KIND_MASS, KIND_MEAS, MASS_GROUP,
-                                              ParameterSpace, parse_groups, with_pose_groups)
+                                              KIND_KAPPA_NL, KIND_MASS, KIND_MEAS, KIND_ORIGIN,
+                                              MASS_GROUP, ParameterSpace, parse_groups,
+                                              with_pose_groups)
 from jwarp.solvers.calibration.result import CalibrationResult, build_result
 from jwarp.solvers.calibration.samples import check_samples
 
@@ -229,6 +231,14 @@ class CalibrationProblem:
             elastic = bool(kf.any() or np.any(self.robot.kappa != 0) or self._knl_idx.size
                            or np.any(self.robot.kappa_nonlinear))
         self.elastic = bool(elastic)
+        self._org_idx = np.nonzero(sp.kind == KIND_ORIGIN)[0]
+        if self._org_idx.size and self.elastic:
+            raise ValueError(f"free: the '{ORIGIN_GROUP}' group needs a rigid problem (the "
+                             f"elastic equilibrium takes the robot's own static transforms): "
+                             f"robot '{self.robot.name}' has nonzero compliances or a "
+                             f"compliance group is free; give elastic=False or calibrate "
+                             f"the origins of a rigid robot")
+        self._kin_cache: tuple[bytes, RobotModel] | None = None
         #: the raw joint values and whether the links see other ones (transmission errors)
         self.q_device_raw = self.q_device
         self.transmission = bool(self._harm_idx.size or self.robot.has_harmonic)
@@ -287,14 +297,26 @@ class CalibrationProblem:
                                                    self.lam, self.max_iter, self.tol, masses=fm,
                                                    kappa_nl=knl)
         else:
-            frames = K.fk(self.kin_robot, self.q_device, dh=dh, device="cpu", dtype=np.float64,
-                          validate=False).numpy()
+            frames = K.fk(self.kin_robot_at(x), self.q_device, dh=dh, device="cpu",
+                          dtype=np.float64, validate=False).numpy()
             rho = np.broadcast_to(dh, (S,) + dh.shape)
             conv = np.ones(S, bool)
         out = ModelState(frames, rho, dh, kap, p, conv, mass)
         self._cache = (key, out)
         self.n_evaluations += 1
         return out
+
+    def kin_robot_at(self, x: Any) -> RobotModel:
+        """The robot the kinematics launches see at x: :attr:`kin_robot` with the static
+        transforms of the ``origin`` group at x (cached for the last x)."""
+        if not self._org_idx.size:
+            return self.kin_robot
+        x = self.space.check(x)
+        key = x[self._org_idx].tobytes()
+        if self._kin_cache is None or self._kin_cache[0] != key:
+            self._kin_cache = (key, with_static_transforms(
+                self.kin_robot, self.space.static_transforms_at(x)))
+        return self._kin_cache[1]
 
     def frames(self, x: Any) -> np.ndarray:
         """World frames (S, n_frames, 4, 4) of the data's configurations at x."""
@@ -330,17 +352,21 @@ class CalibrationProblem:
         return 0.5 * float(r @ r)
 
     # ------------------------------------------------------------ Jacobian
-    def data_jacobian_rho(self, frames: np.ndarray, rho: np.ndarray, p: np.ndarray
+    def data_jacobian_rho(self, frames: np.ndarray, rho: np.ndarray, p: np.ndarray,
+                          robot: RobotModel | None = None
                           ) -> tuple[np.ndarray, np.ndarray]:
         """(dy/drho (S, m, n, 5) at fixed frames, dy/dp (S, m, P_meas)) at rows rho
-        (S, n, 5), uploaded once for the DH Jacobians of all the measurement's frames."""
+        (S, n, 5), uploaded once for the DH Jacobians of all the measurement's frames;
+        ``robot``: the kinematics robot (default :attr:`kin_robot`; :meth:`kin_robot_at`
+        with free origins)."""
         meas = self.measurement
+        robot = self.kin_robot if robot is None else robot
         _, jf, jp = meas.jacobians(frames, p, self.meta)
         S, m = jf.shape[:2]
         jy = np.zeros((S, m, self.robot.n_frames, 5))
         rows = wp.array(finite_as(rho, np.float64, "dh"), dtype=wp.float64, device="cpu")
         for k, f in enumerate(meas.frames):
-            jdh = K.jacobian_dh(self.kin_robot, self.q_device, int(f), dh=rows, device="cpu",
+            jdh = K.jacobian_dh(robot, self.q_device, int(f), dh=rows, device="cpu",
                                 dtype=np.float64, validate=False).numpy()  # (S, 6, n, 5)
             jy += (jf[:, :, k, :] @ jdh.reshape(S, 6, -1)).reshape(jy.shape)
         return jy, np.asarray(jp, np.float64)
@@ -350,7 +376,7 @@ class CalibrationProblem:
         frames, rho, dh, kap, p, _, mass = self.state(x)
         sp = self.space
         rho_full = np.ascontiguousarray(np.broadcast_to(rho, (self.n_samples,) + dh.shape))
-        jy, jp = self.data_jacobian_rho(frames, rho_full, p)
+        jy, jp = self.data_jacobian_rho(frames, rho_full, p, self.kin_robot_at(x))
         S, m = jy.shape[:2]
         dh_f, dh_c = sp.frame[self._dh_idx], sp.column[self._dh_idx]
         kp_f, kp_c = sp.frame[self._kap_idx], sp.column[self._kap_idx]
@@ -390,8 +416,39 @@ class CalibrationProblem:
         J[:self.n_data, self._knl_idx] = wh(d_knl).reshape(S * m, -1)
         J[:self.n_data, self._harm_idx] = wh(d_harm).reshape(S * m, -1)
         J[:self.n_data, self._meas_idx] = wh(jp[:, :, sp.column[self._meas_idx]]).reshape(S * m, -1)
+        if self._org_idx.size:
+            J[:self.n_data, self._org_idx] = wh(self._origin_columns(x, frames, p)).reshape(
+                S * m, -1)
         J[self.n_data + np.arange(self._prior_idx.size), self._prior_idx] = 1.0 / sp.sigma[self._prior_idx]
         return J
+
+    def _origin_columns(self, x: np.ndarray, frames: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """(S, m, P_o) dy/d(origin parameters): the twists of the measured frames below
+        each freed static frame (:func:`.origin.origin_twists`) through the measurement's
+        frame Jacobian."""
+        sp = self.space
+        meas = self.measurement
+        _, jf, _ = meas.jacobians(frames, p, self.meta)         # (S, m, K, 6)
+        mframes = np.array([int(f) for f in meas.frames], np.int64)
+        sub = self.robot.subtree_mask
+        S, m = jf.shape[:2]
+        out = np.zeros((S, m, self._org_idx.size))
+        idx = self._org_idx
+        x = sp.check(x)
+        for s in np.unique(sp.frame[idx]):
+            cols = np.nonzero(sp.frame[idx] == s)[0]            # positions in _org_idx
+            below = np.nonzero(sub[s, mframes])[0]              # measured slots below s
+            if not below.size:
+                continue
+            delta = np.zeros(6)
+            delta[sp.column[idx[cols]]] = x[idx[cols]]
+            par = self.robot.frames[int(s)].parent
+            pf = (np.broadcast_to(np.eye(4), (S, 4, 4)) if par is None else frames[:, par])
+            tw = origin_twists(frames[:, s], pf, self.robot.frames[int(s)].transform, delta,
+                               frames[:, mframes[below]][:, :, :3, 3])   # (S, k, 6, 6)
+            dy = np.einsum("smkt,sktc->smc", jf[:, :, below, :], tw)  # (S, m, 6)
+            out[:, :, cols] = dy[:, :, sp.column[idx[cols]]]
+        return out
 
     def _joint_columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The DH entries a joint of the ``harmonic`` group drives: frames (E,), columns
@@ -654,7 +711,8 @@ def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
         raise ValueError(f"x0: the elastic equilibrium does not converge at the start for "
                          f"{int((~prob.state(start0).converged).sum())} sample(s) "
                          f"(max_iter={o.max_iter}, tol={o.tol}); lower lam or raise max_iter")
-    robot_kinds = (sp.kind == KIND_DH) | (sp.kind == KIND_KAPPA) | (sp.kind == KIND_MASS)
+    robot_kinds = ((sp.kind == KIND_DH) | (sp.kind == KIND_KAPPA) | (sp.kind == KIND_MASS)
+                   | (sp.kind == KIND_ORIGIN))
     n_starts = int(o.n_starts)
     best = None
     runs = []

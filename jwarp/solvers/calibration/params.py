@@ -5,7 +5,12 @@ Robot groups (per DH frame on the chains the measurement observes):
 * ``theta``, ``d``, ``r``, ``alpha``, ``beta``: geometric DH entries of rho0 [rad, m]
   (``theta`` holds the joint offsets);
 * ``kappa_alpha``, ``kappa_beta``, ``kappa_theta``: compliances [rad/(N m)] (bounded >= 0
-  with ``bound_kappa``).
+  with ``bound_kappa``);
+* ``origin``: a 6-parameter pose error ``(x, y, z [m], rx, ry, rz [rad])`` per static frame
+  that precedes a joint frame on those chains (the joint origins of an imported URDF; any
+  static frame with ``frames=``), applied as ``T <- T @ Trans(v) @ Rot(w)``
+  (:mod:`.origin`); names ``"<frame>.origin_x"`` ... ``"<frame>.origin_rz"``; rigid
+  problems only.
 
 non-geometric extras (``docs/nongeometric.md``):
 
@@ -48,6 +53,8 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from jwarp.model import RobotModel
+from jwarp.solvers.calibration.origin import (ORIGIN_AXES, ORIGIN_GROUP, delta_transform,
+                                              origin_frames, with_static_transforms)
 
 DH_GROUPS = ("d", "theta", "r", "alpha", "beta")          # = DH columns 0..4
 KAPPA_GROUPS = ("kappa_alpha", "kappa_beta", "kappa_theta")  # = kappa axes 0..2
@@ -58,7 +65,7 @@ KAPPA_NL_GROUP = "kappa_nonlinear"                         # = robot.kappa_nonli
 HARMONIC_ORDER = 2
 #: robot parameter groups
 ROBOT_GROUPS = ("theta", "d", "r", "alpha", "beta", "kappa_theta", "kappa_alpha", "kappa_beta",
-                MASS_GROUP, HARMONIC_GROUP, KAPPA_NL_GROUP)
+                MASS_GROUP, HARMONIC_GROUP, KAPPA_NL_GROUP, ORIGIN_GROUP)
 
 #: default prior standard deviations of the robot groups [m, rad, rad/(N m)]; ``mass`` is
 #: relative to each entry's nominal mass [1] (0.1 = 10 %)
@@ -72,9 +79,12 @@ DEFAULT_SIGMA: dict[str, float] = {
     HARMONIC_GROUP: 1e-3,
     # 1e-9 rad/(N m)^3 bends a joint by 1e-3 rad more at 100 N m (kappa_theta 1e-4: 1 %)
     KAPPA_NL_GROUP: 1e-9,
+    # joint origin errors: 1 mm and 1 mrad (one sigma for the six entries of a frame)
+    ORIGIN_GROUP: 1e-3,
 }
 
 KIND_DH, KIND_KAPPA, KIND_MEAS, KIND_MASS, KIND_HARMONIC, KIND_KAPPA_NL = 0, 1, 2, 3, 4, 5
+KIND_ORIGIN = 6
 
 #: measurement groups that hold the poses of the sensors and markers (the calibration
 #: frames ``c`` of the paper): freed by default (:func:`with_pose_groups`), as the
@@ -274,12 +284,14 @@ class ParameterSpace:
         names, groups: parameter names and groups.
         nominal, sigma: prior means and standard deviations (sigma inf = no prior).
         kind: 0 DH entry, 1 compliance, 2 measurement parameter, 3 point mass, 4 joint
-            transmission coefficient (``harmonic``), 5 nonlinear compliance.
+            transmission coefficient (``harmonic``), 5 nonlinear compliance, 6 joint
+            origin pose error (``origin``).
         frame, column: robot frame and DH column (kind 0) / kappa axis (kind 1) / index
             into ``robot.masses`` (kind 3, frame = the mass's frame); for kind 2 column is
             the index into the measurement's ParamBlock and frame is -1; kind 4: frame is
             the *joint* index and column ``2 (k - 1) + (0 for a, 1 for b)``; kind 5: the DH
-            frame and column 2 (the theta axis).
+            frame and column 2 (the theta axis); kind 6: the static frame and column
+            0..5 (:data:`~.origin.ORIGIN_AXES`).
         lower, upper: bounds (masses >= 0; compliances >= 0 with ``bound_kappa``; else
             unbounded).
         free_groups: the groups that were freed, in the order given.
@@ -315,7 +327,9 @@ class ParameterSpace:
             sigma: per-group prior sigma overrides {group: sigma}; a measurement group given
                 here replaces its ParamBlock sigmas; ``mass`` is relative to each nominal
                 mass (0.1 = 10 %); ``inf`` removes the prior.
-            frames: DH frames whose rows may be calibrated (default
+            frames: DH frames whose rows may be calibrated, and static frames whose pose
+                the ``origin`` group frees (default for ``origin``: the static frames
+                preceding a joint frame on the measured chains; default for the DH groups
                 :func:`influencing_frames`: the DH frames on the paths from the root to the
                 frames the measurement uses, plus, for an elastic model, the mass-carrying
                 DH frames branching off those paths, whose geometry and compliance load the
@@ -358,22 +372,28 @@ class ParameterSpace:
                 if not (fv > 0) or math.isnan(fv):
                     raise ValueError(f"sigma['{g}']: must be > 0 (inf = no prior), got {v!r}")
                 sig[g] = fv
-        # which DH frames
+        # which DH frames (and static frames of the origin group)
+        static_frames: list[int] | None = None
         if frames is None:
             elastic = (any(g in KAPPA_GROUPS or g == KAPPA_NL_GROUP for g in groups)
                        or bool(np.any(robot.kappa != 0)) or bool(np.any(robot.kappa_nonlinear)))
             dh_frames = influencing_frames(robot, getattr(measurement, "frames", None)
                                            if measurement is not None else None, elastic)
         else:
-            dh_frames = []
+            dh_frames, static_frames = [], []
             for f in frames:
                 i = robot.frame_index(f, "frames")
                 if not robot.is_dh[i]:
-                    raise ValueError(f"frames: frame '{robot.frames[i].name}' is static; "
-                                     f"only DH frames have calibratable rows")
-                if i not in dh_frames:
+                    if ORIGIN_GROUP not in groups:
+                        raise ValueError(f"frames: frame '{robot.frames[i].name}' is static; "
+                                         f"only DH frames have calibratable rows (static "
+                                         f"frames: free the '{ORIGIN_GROUP}' group)")
+                    if i not in static_frames:
+                        static_frames.append(i)
+                elif i not in dh_frames:
                     dh_frames.append(i)
             dh_frames.sort()
+            static_frames.sort()
         if block is not None:
             pn = block.nominal.copy() if p_nominal is None else np.asarray(p_nominal, np.float64)
             if pn.shape != (block.size,):
@@ -426,6 +446,25 @@ class ParameterSpace:
                             kind.append(KIND_HARMONIC)
                             frm.append(j)
                             col.append(2 * k + ab)
+            elif g == ORIGIN_GROUP:
+                if static_frames is None:
+                    measured = (getattr(measurement, "frames", None)
+                                if measurement is not None else None)
+                    static_frames = origin_frames(robot, measured_chain(robot, measured))
+                if not static_frames:
+                    raise ValueError(f"free: group '{ORIGIN_GROUP}' selects no frames: robot "
+                                     f"'{robot.name}' has no static frame preceding a joint "
+                                     f"frame on the measured chains (name static frames "
+                                     f"with frames=)")
+                for i in static_frames:
+                    for c, ax in enumerate(ORIGIN_AXES):
+                        names.append(f"{robot.frames[i].name}.{g}_{ax}")
+                        grp.append(g)
+                        nom.append(0.0)
+                        sg.append(sig[g])
+                        kind.append(KIND_ORIGIN)
+                        frm.append(i)
+                        col.append(c)
             elif g == KAPPA_NL_GROUP:
                 for i in dh_frames:
                     names.append(f"{robot.frames[i].name}.{g}")
@@ -539,6 +578,21 @@ class ParameterSpace:
         if np.any(self.kind == KIND_HARMONIC) or np.any(self.kind == KIND_KAPPA_NL):
             out = out.copy(harmonic=self.harmonic_at(x),
                            kappa_nonlinear=self.kappa_nonlinear_at(x))
+        if np.any(self.kind == KIND_ORIGIN):
+            out = with_static_transforms(out, self.static_transforms_at(x))
+        return out
+
+    def static_transforms_at(self, x: Any) -> dict[int, np.ndarray]:
+        """{static frame: (4, 4) transform ``T0 @ Trans(v) @ Rot(w)``} of the frames of
+        the ``origin`` group at ``x`` (empty when the group is not free)."""
+        x = self.check(x)
+        m = self.kind == KIND_ORIGIN
+        out = {}
+        for i in np.unique(self.frame[m]):
+            delta = np.zeros(6)
+            sel = m & (self.frame == i)
+            delta[self.column[sel]] = x[sel]
+            out[int(i)] = self.robot.frames[int(i)].transform @ delta_transform(delta)
         return out
 
     def harmonic_at(self, x: Any) -> np.ndarray:
