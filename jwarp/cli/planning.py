@@ -65,7 +65,14 @@ def _config_bytes(model: Any) -> int:
     return f * model.n_frames + s * len(model.spheres) + j * model.n_dof
 
 
-def _world(spec: str | None, model: Any) -> Any:
+def _world(spec: str | None, model: Any, args: argparse.Namespace | None = None,
+           scene: Any = None) -> Any:
+    if scene is not None:
+        return _scene_world(scene, model, args)
+    if args is not None and getattr(args, "voxel", None) is not None:
+        raise CLIError("--voxel: only with --scene (a simplex world takes voxel= in --world)")
+    if args is not None and getattr(args, "extent", None) is not None:
+        raise CLIError("--extent: only with --scene")
     if spec is None:
         return None
     from jwarp.world.io import parse_world_spec
@@ -77,6 +84,85 @@ def _world(spec: str | None, model: Any) -> Any:
         for prefix in ("world: ", "path: "):
             msg = msg.removeprefix(prefix)
         raise CLIError(f"--world: {msg}") from None
+
+
+
+def _load_scene(args: argparse.Namespace, model: Any) -> Any:
+    """The :class:`~jwarp.world.scene_file.Scene` of ``--scene`` (None without), its
+    frame ids: ``world``, ``base`` and the robot's fixed frames (all the robot's base)."""
+    if getattr(args, "scene", None) is None:
+        return None
+    from jwarp.world.scene_file import load_scene, robot_frames
+
+    try:
+        return load_scene(args.scene, frames=robot_frames(model))
+    except (ValueError, TypeError, OSError) as e:
+        raise CLIError(f"--scene: {' '.join(str(e).split()).removeprefix('scene: ')}") from None
+
+
+def _scene_world(scene: Any, model: Any, args: argparse.Namespace) -> Any:
+    """The World of ``--scene`` at ``--voxel`` over ``--extent`` (default: the obstacles'
+    bounding box padded by at least DEFAULT_PAD and by the largest robot sphere radius
+    + ``--margin`` + one voxel, so nothing outside the grid can touch the robot)."""
+    from jwarp.world.collision import check_world
+    from jwarp.world.scene_file import DEFAULT_PAD, DEFAULT_VOXEL, SceneOptions, scene_world
+
+    h = args.voxel if args.voxel is not None else scene.grid.get("voxel", DEFAULT_VOXEL)
+    r = max((s.radius for s in model.spheres), default=0.0)
+    pad = max(scene.grid.get("pad", DEFAULT_PAD), r + args.margin + float(h))
+    limits = None
+    if args.extent is not None:
+        limits = np.array(args.extent).reshape(3, 2)
+    try:
+        world = scene_world(scene, SceneOptions(voxel_size=args.voxel, limits=limits, pad=pad))
+        check_world(model, world)
+    except (ValueError, TypeError, MemoryError) as e:
+        raise CLIError(f"--scene: {' '.join(str(e).split()).removeprefix('scene: ')}") from None
+    return world
+
+
+def _extent(text: str) -> list[float]:
+    """``--extent x0,x1,y0,y1,z0,z1`` [m]."""
+    try:
+        v = [float(p) for p in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) != 6 or not all(math.isfinite(x) for x in v) or not all(
+            v[2 * d] < v[2 * d + 1] for d in range(3)):
+        raise CLIError(f"--extent: expected x0,x1,y0,y1,z0,z1 [m] with x0 < x1 etc., got {text!r}")
+    return v
+
+
+def _joint_option(text: str, option: str, model: Any, args: argparse.Namespace, scene: Any,
+                  fallback: np.ndarray | None = None) -> np.ndarray:
+    """``--start``/``--goal``: joint values v1,v2,... (or zeros), or ``moveit`` (the
+    ``--scene`` file's robot state / goal joint constraints) or ``moveit:FILE`` (a
+    planning scene or MotionPlanRequest YAML). MoveIt values are in rad/m, matched to the
+    robot's joints by name; a goal's unconstrained joints keep the start's values."""
+    head, colon, path = text.strip().partition(":")
+    if head.lower() != "moveit":
+        return parse_q(text, model, args.deg, option=option)
+    from jwarp.world.moveit import joint_vector
+    from jwarp.world.scene_file import load_scene, robot_frames
+
+    if colon and path.strip():
+        try:
+            src = load_scene(path.strip(), frames=robot_frames(model))
+        except (ValueError, TypeError, OSError) as e:
+            raise CLIError(f"{option}: {' '.join(str(e).split()).removeprefix('scene: ')}") from None
+    elif scene is not None:
+        src = scene
+    else:
+        raise CLIError(f"{option}: 'moveit' reads the --scene file; give --scene or moveit:FILE")
+    what = "robot state (robot_state or start_state)" if option == "--start" else \
+        "goal joint constraints"
+    values = src.start if option == "--start" else src.goal
+    if values is None:
+        raise CLIError(f"{option}: {src.source} has no {what}")
+    try:
+        return joint_vector(model, values, f"{src.source} {what}", fallback)
+    except ValueError as e:
+        raise CLIError(f"{option}: {' '.join(str(e).split())}") from None
 
 
 #: names in the solvers' errors -> the CLI options they come from
@@ -212,8 +298,9 @@ class _Recorder(RerunRecording):
 # ------------------------------------------------------------------ commands
 def cmd_plan(args: argparse.Namespace) -> int:
     model = robot_option(args.robot)
-    q0 = parse_q(args.start, model, args.deg, option="--start")
-    q1 = parse_q(args.goal, model, args.deg, option="--goal")
+    scene = _load_scene(args, model)
+    q0 = _joint_option(args.start, "--start", model, args, scene)
+    q1 = _joint_option(args.goal, "--goal", model, args, scene, fallback=q0)
     kappa = _kappa(args, model)
     net = _plan_warm_start(args.warm_start, model)
     if net is not None:
@@ -233,9 +320,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     check_device(args.device)
     if args.rerun is not None:  # before the world and the plan: no work lost on a bad path
         check_output(args.rerun, "--rerun", rerun=True,
-                     inputs={"--world": args.world, "--robot": args.robot,
-                             "--warm-start": args.warm_start})
-    world = _world(args.world, model)
+                     inputs={"--world": args.world, "--scene": args.scene,
+                             "--robot": args.robot, "--warm-start": args.warm_start})
+    world = _world(args.world, model, args, scene)
     from jwarp.solvers.planner import PlanOptions, Planner, plan
 
     rec = _Recorder(args.rerun, model, world) if args.rerun is not None else None
@@ -270,7 +357,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
         if rec is not None:
             rec.abort()
         raise
-    out = {"robot": model.name, "world": args.world, "start": q0.tolist(), "goal": q1.tolist(),
+    out = {"robot": model.name, "world": args.world if args.scene is None else args.scene,
+           "start": q0.tolist(), "goal": q1.tolist(),
            "elastic": kappa is not None, **res.to_dict(0)}
     if args.json:
         print(dumps(out))
@@ -410,10 +498,20 @@ def add_subcommands(sub: Any) -> None:
 
     s = sub.add_parser("plan", help="plan a collision-free path (gradient descent on U_path)")
     common(s)
-    s.add_argument("--world", required=True, metavar="SPEC",
-                   help="simplex:seed=S[,threshold=T,...], shelf[:voxel=V] or a world .npz file")
-    s.add_argument("--start", required=True, metavar="Q", help="start joint values v1,v2,...")
-    s.add_argument("--goal", required=True, metavar="Q", help="goal joint values v1,v2,...")
+    where = s.add_mutually_exclusive_group(required=True)
+    where.add_argument("--world", default=None, metavar="SPEC",
+                       help="simplex:seed=S[,threshold=T,...], shelf[:voxel=V] or a world .npz file")
+    where.add_argument("--scene", default=None, metavar="FILE.yaml",
+                       help="a scene file: jwarp scene or MoveIt planning scene (docs/scenes.md)")
+    s.add_argument("--voxel", type=real_arg("--voxel", 0.0, lo_open=True, unit=" [m]"),
+                   default=None, metavar="V",
+                   help="voxel size [m] of the --scene SDF (default: the file's, else 0.02)")
+    s.add_argument("--extent", type=_extent, default=None, metavar="X0,X1,Y0,Y1,Z0,Z1",
+                   help="grid extent [m] of the --scene SDF (default: the obstacles, padded)")
+    s.add_argument("--start", required=True, metavar="Q",
+                   help="start joint values v1,v2,..., or moveit[:FILE] (a MoveIt robot state)")
+    s.add_argument("--goal", required=True, metavar="Q",
+                   help="goal joint values v1,v2,..., or moveit[:FILE] (goal joint constraints)")
     s.add_argument("--starts", type=int_arg("--starts", 1), default=None, metavar="N",
                    help="multi-starts: the straight line + N-1 random via-point paths (default "
                         "8); with --warm-start the network's paths count (default: only them)")

@@ -1,0 +1,341 @@
+"""MoveIt planning scenes and motion-plan requests in YAML (as MoveIt, robowflex and
+MotionBenchMaker write them): collision objects -> :class:`~jwarp.world.primitives.Shape`,
+the robot state's joint values -> a start, goal joint constraints -> a goal.
+
+Read (everything else is ignored: octomaps, attached objects, object colours,
+``multi_dof_joint_state``, constraint tolerances and weights)::
+
+    fixed_frame_transforms:            # optional: more frame ids (child in frame_id)
+      - header: {frame_id: world}
+        child_frame_id: panda_link0
+        transform: {translation: [0, 0, 0], rotation: [0, 0, 0, 1]}
+    robot_state:                       # or start_state (a MotionPlanRequest)
+      joint_state:
+        name: [panda_joint1, ...]
+        position: [0.0, ...]
+    world:                             # or collision_objects at the top level
+      collision_objects:
+        - id: table
+          header: {frame_id: world}
+          pose: {position: [0.5, 0, 0.2], orientation: [0, 0, 0, 1]}    # optional
+          primitives:
+            - type: box                # box|sphere|cylinder|cone or 1|2|3|4 (SolidPrimitive)
+              dimensions: [0.6, 1.0, 0.4]
+          primitive_poses:             # one per primitive, relative to pose
+            - position: {x: 0, y: 0, z: 0}
+              orientation: {x: 0, y: 0, z: 0, w: 1}
+          meshes:                      # optional: inline shape_msgs/Mesh or a file
+            - vertices: [[x, y, z], ...]      # or {x:, y:, z:}
+              triangles: [[0, 1, 2], ...]     # or {vertex_indices: [...]}
+            - resource: meshes/mug.stl        # relative to the YAML file (or file://)
+          mesh_poses: [...]
+    goal_constraints:                  # a MotionPlanRequest's goal (the first set)
+      - joint_constraints:
+          - {joint_name: panda_joint1, position: 0.3}
+    joint_constraints: [...]           # or directly at the top level
+
+Positions are lists ``[x, y, z]`` or mappings ``{x, y, z}``; orientations quaternions
+``[x, y, z, w]`` (ROS order) or ``{x, y, z, w}``. Dimensions follow
+``shape_msgs/SolidPrimitive``: BOX ``[x, y, z]``, SPHERE ``[radius]``, CYLINDER and CONE
+``[height, radius]``. An object's ``operation`` may be absent, ``add`` (0) or ``append``
+(2). Every error is a ValueError naming the object id (or the joint names) and the problem.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from jwarp.world.primitives import Shape, finite_vector, pose_matrix, quaternion_matrix
+
+__all__ = ["PRIMITIVE_TYPES", "collision_objects", "goal_joint_values", "joint_vector",
+           "moveit_frames", "moveit_shapes", "parse_pose", "start_joint_values"]
+
+#: shape_msgs/SolidPrimitive type codes -> shape kinds
+PRIMITIVE_TYPES = {1: "box", 2: "sphere", 3: "cylinder", 4: "cone"}
+_OPERATIONS = {None: True, 0: True, 2: True, "add": True, "append": True}
+
+
+def parse_pose(value: Any, where: str) -> np.ndarray:
+    """A (4, 4) transform from a geometry_msgs/Pose mapping (``position`` and optional
+    ``orientation``, each a list or an x/y/z(/w) mapping; also ``translation``/``rotation``
+    of a Transform)."""
+    if not isinstance(value, dict):
+        raise ValueError(f"{where}: expected a pose mapping with position and orientation, "
+                         f"got {value!r}")
+    pos = value.get("position", value.get("translation"))
+    if pos is None:
+        raise ValueError(f"{where}: missing position")
+    rot = value.get("orientation", value.get("rotation"))
+    p = finite_vector(_xyz(pos, "xyz"), 3, f"{where} position")
+    if rot is None:
+        return pose_matrix(p)
+    q = finite_vector(_xyz(rot, "xyzw"), 4, f"{where} orientation")
+    try:
+        return pose_matrix(p, quaternion_matrix(q))
+    except ValueError as e:
+        raise ValueError(f"{where} orientation: {e}") from None
+
+
+def _xyz(value: Any, keys: str) -> Any:
+    if isinstance(value, dict):
+        missing = [k for k in keys if k not in value]
+        if missing:
+            return [value.get(k) for k in keys]  # finite_vector names the None
+        return [value[k] for k in keys]
+    return value
+
+
+def collision_objects(data: Any) -> list:
+    """The collision object list of a planning scene mapping (``world.collision_objects``
+    or top-level ``collision_objects``); [] when there is none."""
+    if not isinstance(data, dict):
+        raise ValueError(f"scene: expected a mapping at the top level, got {type(data).__name__}")
+    world = data.get("world") or {}
+    if not isinstance(world, dict):
+        raise ValueError("scene: 'world' must be a mapping")
+    objs = world.get("collision_objects", data.get("collision_objects")) or []
+    if not isinstance(objs, list):
+        raise ValueError("scene: 'collision_objects' must be a list")
+    return objs
+
+
+def moveit_frames(data: dict, frames: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``frames`` (name -> 4x4 in the world) plus the scene's ``fixed_frame_transforms``
+    (each relative to its header's frame, which must be known or defined before)."""
+    out = dict(frames)
+    for k, t in enumerate(data.get("fixed_frame_transforms") or []):
+        where = f"fixed_frame_transforms[{k}]"
+        if not isinstance(t, dict) or "child_frame_id" not in t:
+            raise ValueError(f"{where}: expected a mapping with child_frame_id and transform")
+        parent = _frame_id(t, where)
+        if parent not in out:
+            raise ValueError(f"{where}: unknown frame_id '{parent}'; known: {', '.join(sorted(out))}")
+        child = str(t["child_frame_id"])
+        T = out[parent] @ parse_pose(t.get("transform"), f"{where} transform")
+        if child in out and not np.allclose(out[child], T, atol=1e-9):
+            raise ValueError(f"{where}: frame '{child}' is already defined with another transform")
+        out[child] = T
+    return out
+
+
+def _frame_id(obj: dict, where: str) -> str:
+    header = obj.get("header") or {}
+    if not isinstance(header, dict):
+        raise ValueError(f"{where}: header must be a mapping")
+    return str(header.get("frame_id", "") or "").lstrip("/")
+
+
+def moveit_shapes(data: Any, frames: dict[str, np.ndarray], base_dir: Path | None = None,
+                  world_frame: str = "world") -> list[Shape]:
+    """Shapes of every collision object of a planning scene mapping, in the frame
+    ``world_frame`` of ``frames`` (name -> 4x4 world transform; an empty ``frame_id``
+    means ``world_frame``). ``base_dir``: folder of relative mesh files."""
+    shapes: list[Shape] = []
+    seen: set[str] = set()
+    for k, obj in enumerate(collision_objects(data)):
+        if not isinstance(obj, dict):
+            raise ValueError(f"collision_objects[{k}]: expected a mapping, got {obj!r}")
+        if "id" not in obj or not str(obj["id"]).strip():
+            raise ValueError(f"collision_objects[{k}]: missing 'id'")
+        oid = str(obj["id"])
+        where = f"object '{oid}'"
+        if oid in seen:
+            raise ValueError(f"{where}: id given twice")
+        seen.add(oid)
+        op = obj.get("operation")
+        if isinstance(op, str):
+            op = op.lower()
+        if op not in _OPERATIONS:
+            raise ValueError(f"{where}: operation {op!r} is not add (0) or append (2)")
+        frame = _frame_id(obj, where) or world_frame
+        if frame not in frames:
+            raise ValueError(f"{where}: unknown frame_id '{frame}'; known frames: "
+                             f"{', '.join(sorted(frames))}")
+        T = frames[frame]
+        if obj.get("pose") is not None:
+            T = T @ parse_pose(obj["pose"], f"{where}: pose")
+        if obj.get("planes"):
+            raise ValueError(f"{where}: planes (infinite half spaces) are not supported; "
+                             f"use a large box")
+        shapes += _primitives(obj, T, where, oid)
+        shapes += _meshes(obj, T, where, oid, base_dir)
+    return shapes
+
+
+def _poses(obj: dict, key: str, n: int, where: str) -> list:
+    poses = obj.get(key) or []
+    if not isinstance(poses, list):
+        raise ValueError(f"{where}: '{key}' must be a list")
+    if len(poses) != n:
+        raise ValueError(f"{where}: {n} {key.split('_')[0]}s but {len(poses)} {key} "
+                         f"(missing pose)" if len(poses) < n else
+                         f"{where}: {n} {key.split('_')[0]}s but {len(poses)} {key}")
+    return poses
+
+
+def _primitives(obj: dict, T: np.ndarray, where: str, oid: str) -> list[Shape]:
+    prims = obj.get("primitives") or []
+    if not isinstance(prims, list):
+        raise ValueError(f"{where}: 'primitives' must be a list")
+    poses = _poses(obj, "primitive_poses", len(prims), where)
+    out = []
+    for i, (prim, pose) in enumerate(zip(prims, poses)):
+        w = f"{where}: primitive {i}"
+        if not isinstance(prim, dict) or "type" not in prim:
+            raise ValueError(f"{w}: expected a mapping with type and dimensions")
+        t = prim["type"]
+        kind = PRIMITIVE_TYPES.get(t) if isinstance(t, int) and not isinstance(t, bool) else (
+            str(t).lower() if str(t).lower() in PRIMITIVE_TYPES.values() else None)
+        if kind is None:
+            raise ValueError(f"{w}: unknown primitive type {t!r}; known: BOX, SPHERE, "
+                             f"CYLINDER, CONE (or 1-4)")
+        dims = finite_vector(prim.get("dimensions", []), None, f"{w} ({kind}) dimensions")
+        Tp = T @ parse_pose(pose, f"{w} pose")
+        out.append(Shape(kind, dims, Tp, object_id=oid))
+    return out
+
+
+def _meshes(obj: dict, T: np.ndarray, where: str, oid: str, base_dir: Path | None) -> list[Shape]:
+    meshes = obj.get("meshes") or []
+    if not isinstance(meshes, list):
+        raise ValueError(f"{where}: 'meshes' must be a list")
+    poses = _poses(obj, "mesh_poses", len(meshes), where)
+    out = []
+    for i, (mesh, pose) in enumerate(zip(meshes, poses)):
+        w = f"{where}: mesh {i}"
+        out.append(Shape("mesh", [], T @ parse_pose(pose, f"{w} pose"), object_id=oid,
+                         mesh=load_mesh(mesh, w, base_dir)))
+    return out
+
+
+def load_mesh(spec: Any, where: str, base_dir: Path | None = None) -> Any:
+    """A trimesh.Trimesh from an inline shape_msgs/Mesh mapping (``vertices``,
+    ``triangles``) or a file (``resource``/``file``: a path, relative to ``base_dir``, or
+    ``file://``; optional ``scale``: a number or 3)."""
+    import trimesh
+
+    if not isinstance(spec, dict):
+        raise ValueError(f"{where}: expected a mapping (vertices/triangles or resource)")
+    src = spec.get("resource", spec.get("file"))
+    if src is not None:
+        src = str(src)
+        if src.startswith("package://"):
+            raise ValueError(f"{where}: cannot resolve '{src}' (package:// needs ROS); give "
+                             f"a file path")
+        path = Path(src.removeprefix("file://"))
+        if not path.is_absolute() and base_dir is not None:
+            path = base_dir / path
+        if not path.is_file():
+            raise ValueError(f"{where}: mesh file '{path}' does not exist")
+        try:
+            mesh = trimesh.load(path, force="mesh")
+        except Exception as e:  # trimesh raises many types on bad files
+            raise ValueError(f"{where}: cannot read mesh file '{path}': {e}") from None
+        if "scale" in spec:
+            s = spec["scale"]
+            s = finite_vector([s] * 3 if isinstance(s, (int, float)) else s, 3, f"{where} scale")
+            mesh.apply_scale(s) if np.allclose(s, s[0]) else mesh.apply_transform(np.diag([*s, 1.0]))
+        return mesh
+    verts = spec.get("vertices")
+    tris = spec.get("triangles")
+    if verts is None or tris is None:
+        raise ValueError(f"{where}: needs 'vertices' and 'triangles', or a 'resource' file")
+    v = np.array([finite_vector(_xyz(p, "xyz"), 3, f"{where} vertex {j}")
+                  for j, p in enumerate(verts)]).reshape(-1, 3)
+    f = []
+    for j, t in enumerate(tris):
+        idx = t.get("vertex_indices") if isinstance(t, dict) else t
+        try:
+            ids = [int(x) for x in idx]
+        except (TypeError, ValueError):
+            raise ValueError(f"{where}: triangle {j}: expected 3 vertex indices, got {t!r}") from None
+        if len(ids) != 3 or min(ids) < 0 or max(ids) >= len(v):
+            raise ValueError(f"{where}: triangle {j}: expected 3 vertex indices in "
+                             f"[0, {len(v)}), got {ids}")
+        f.append(ids)
+    if len(v) < 4 or not f:
+        raise ValueError(f"{where}: a closed mesh needs >= 4 vertices and some triangles")
+    return trimesh.Trimesh(v, np.array(f), process=True)
+
+
+# ------------------------------------------------------------------ joint values
+def start_joint_values(data: Any) -> dict[str, float] | None:
+    """``{joint name: value}`` of ``robot_state.joint_state`` (a planning scene) or
+    ``start_state.joint_state`` (a MotionPlanRequest); None if there is none."""
+    if not isinstance(data, dict):
+        return None
+    state = data.get("robot_state") or data.get("start_state")
+    if not state:
+        return None
+    js = state.get("joint_state") if isinstance(state, dict) else None
+    if not js:
+        return None
+    if not isinstance(js, dict):
+        raise ValueError("robot_state: joint_state must be a mapping with name and position")
+    names = js.get("name") or []
+    pos = js.get("position") or []
+    if not isinstance(names, list) or len(names) != len(pos):
+        raise ValueError(f"robot_state: joint_state has {len(names) if isinstance(names, list) else '?'} "
+                         f"names but {len(pos) if hasattr(pos, '__len__') else '?'} positions")
+    vals = finite_vector(pos, len(names), "robot_state: joint_state position")
+    return _unique(names, vals, "robot_state: joint_state")
+
+
+def goal_joint_values(data: Any) -> dict[str, float] | None:
+    """``{joint name: value}`` of the goal joint constraints: the first entry of
+    ``goal_constraints`` with ``joint_constraints`` (a MotionPlanRequest), or top-level
+    ``joint_constraints``; None if there are none."""
+    if not isinstance(data, dict):
+        return None
+    cons = data.get("joint_constraints")
+    if cons is None:
+        for g in data.get("goal_constraints") or []:
+            if isinstance(g, dict) and g.get("joint_constraints"):
+                cons = g["joint_constraints"]
+                break
+    if not cons:
+        return None
+    if not isinstance(cons, list):
+        raise ValueError("joint_constraints: expected a list of {joint_name, position}")
+    names, vals = [], []
+    for k, c in enumerate(cons):
+        if not isinstance(c, dict) or "joint_name" not in c or "position" not in c:
+            raise ValueError(f"joint_constraints[{k}]: expected joint_name and position, got {c!r}")
+        names.append(str(c["joint_name"]))
+        vals.append(finite_vector([c["position"]], 1, f"joint_constraints[{k}] "
+                                                       f"('{c['joint_name']}') position")[0])
+    return _unique(names, np.array(vals), "joint_constraints")
+
+
+def _unique(names: list, vals: np.ndarray, where: str) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for n, v in zip(names, vals):
+        n = str(n)
+        if n in out:
+            raise ValueError(f"{where}: joint '{n}' given twice")
+        out[n] = float(v)
+    return out
+
+
+def joint_vector(model: Any, values: dict[str, float], what: str,
+                 fallback: np.ndarray | None = None) -> np.ndarray:
+    """(n_dof,) joint values of ``model`` from ``{name: value}``: ValueError naming every
+    unknown joint name (names of coupled (mimic) frames of the model are accepted and
+    ignored: their values follow from the joints they mimic), and every joint of the model that is missing unless ``fallback``
+    (n_dof,) supplies it. ``what`` names the source in errors (e.g. ``"start"``)."""
+    names = model.joint_names
+    mimic = {f.name for f in model.frames if f.coupling and f.name not in names}
+    unknown = [n for n in values if n not in names and n not in mimic]
+    if unknown:
+        raise ValueError(f"{what}: unknown joint(s) {', '.join(repr(n) for n in unknown)} for "
+                         f"robot '{model.name}'; its joints: {', '.join(names)}")
+    missing = [n for n in names if n not in values]
+    if missing and fallback is None:
+        raise ValueError(f"{what}: no value for joint(s) {', '.join(repr(n) for n in missing)} "
+                         f"of robot '{model.name}'")
+    q = np.array([values[n] if n in values else float(fallback[i])
+                  for i, n in enumerate(names)], np.float64)
+    return q
