@@ -5,6 +5,8 @@ Examples::
     jwarp plan --robot planar4 --world simplex:seed=3 --start 1.2,0,0,0 --goal -1.2,0,0,0
     jwarp plan --robot justin19 --world world.npz --start ... --goal ... --starts 16 \\
         --rerun plan.rrd --json
+    jwarp plan --robot panda.urdf --scene examples/scenes/table_shelf.yaml --voxel 0.02 \\
+        --start moveit --goal moveit
     jwarp ik --robot justin19 --frame right_tcp --target 0.6,-0.25,0.8,0,1.5708,0 --json
     jwarp ik --robot justin19 --frame right_tcp --target ... --world shelf.npz \
         --warm-start model.pt [--starts 4]
@@ -17,8 +19,17 @@ followed by ``--starts`` random seeds (default 0 with a warm start, 16 without).
 network's paths (a ``jwarp train plan`` checkpoint for this robot; its waypoints) followed
 by multi-starts up to ``--starts`` (default: the network's paths only).
 
+``--scene FILE.yaml`` (``plan``, instead of ``--world``): a jwarp scene file or a MoveIt
+planning scene (docs/scenes.md), its SDF sampled at ``--voxel V`` [m] (default: the file's
+``grid.voxel``, else 0.02) over ``--extent x0,x1,y0,y1,z0,z1`` [m] (default: the obstacles'
+bounding box padded by max(0.2 m, largest robot sphere radius + ``--margin`` + a voxel)).
+Frame ids: ``world``, ``base`` and the robot's fixed frames, all the robot's base frame.
+
 ``--start``/``--goal`` are joint values v1,v2,... [rad, m for prismatic] (``--deg``: revolute
-ones in degrees); ``--target`` is x,y,z [m] and a rotation vector rx,ry,rz [rad] of the
+ones in degrees), or ``moveit`` (the ``--scene`` file's ``robot_state.joint_state`` /
+goal ``joint_constraints``) or ``moveit:FILE`` (another planning scene or MotionPlanRequest
+YAML): joints matched by name (unknown names are an error; a goal's unconstrained joints
+keep the start's values); ``--target`` is x,y,z [m] and a rotation vector rx,ry,rz [rad] of the
 frame in the robot's base frame. JSON output holds the path (or q), feasibility, costs,
 iterations and wall time. ``--rerun FILE.rrd`` writes a recording: the world's occupied
 voxels, the robot's spheres and the path (end-effector traces) at every logged iteration.
