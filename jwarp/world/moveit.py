@@ -170,9 +170,9 @@ def _poses(obj: dict, key: str, n: int, where: str) -> list:
     if not isinstance(poses, list):
         raise ValueError(f"{where}: '{key}' must be a list")
     if len(poses) != n:
-        raise ValueError(f"{where}: {n} {key.split('_')[0]}s but {len(poses)} {key} "
-                         f"(missing pose)" if len(poses) < n else
-                         f"{where}: {n} {key.split('_')[0]}s but {len(poses)} {key}")
+        what = "primitives" if key == "primitive_poses" else "meshes"
+        hint = " (missing pose)" if len(poses) < n else ""
+        raise ValueError(f"{where}: {n} {what} but {len(poses)} {key}{hint}")
     return poses
 
 
