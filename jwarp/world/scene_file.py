@@ -360,9 +360,11 @@ def scene_world(scene: Scene, options: SceneOptions | None = None) -> World:
 
 # ------------------------------------------------------------------ a scene for a Panda
 _PANDA_JOINTS = [f"panda_joint{i}" for i in range(1, 8)]
-#: the start (Panda's "ready" pose) and goal (the hand in front of the shelf's middle
-#: compartment) of examples/scenes/table_shelf.yaml [rad]
-TABLE_SHELF_START = dict(zip(_PANDA_JOINTS, [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]))
+#: the start (Panda's "ready" pose, fingers open 3.5 cm each, as MoveIt writes a full robot
+#: state) and goal (the arm's 7 joints: the hand in front of the shelf's lower
+#: compartment) of examples/scenes/table_shelf.yaml [rad, m]
+TABLE_SHELF_START = {**dict(zip(_PANDA_JOINTS, [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])),
+                     "panda_finger_joint1": 0.035, "panda_finger_joint2": 0.035}
 TABLE_SHELF_GOAL = dict(zip(_PANDA_JOINTS, [-1.0, 0.3, 0.0, -1.9, 0.0, 2.2, 0.785]))
 
 

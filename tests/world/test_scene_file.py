@@ -403,3 +403,15 @@ def test_bad_files(tmp_path):
         primitives=[{"type": "cone", "dimensions": [0.1]}])))
     with pytest.raises(ValueError, match=r"s.yaml: object 'Can1': a cone needs 2 dimensions"):
         load_scene(tmp_path / "s.yaml")
+
+
+def test_mimic_joint_names_are_accepted_and_ignored():
+    """justin19's torso_4 frame follows -(torso_tilt_1 + torso_tilt_2) (a coupled, mimic
+    joint): a MoveIt state listing it maps to the 19 joints; a fixed frame's name is not a
+    joint."""
+    m = jwarp.robot("justin19")
+    vals = {n: 0.01 * i for i, n in enumerate(m.joint_names)}
+    q = joint_vector(m, {**vals, "torso_4": 0.3}, "start")
+    np.testing.assert_allclose(q, 0.01 * np.arange(19))
+    with pytest.raises(ValueError, match=r"unknown joint\(s\) 'torso_base'"):
+        joint_vector(m, {**vals, "torso_base": 0.0}, "start")
