@@ -4,7 +4,8 @@ modules, and no ``_private`` name is used outside its module.
 Layers (low to high); a module may import its own layer or any lower one:
 
     0 host:      jwarp.atomic, jwarp.memory, jwarp.model, jwarp.registry, jwarp.measurement,
-                 jwarp.importers (URDF; model and atomic only, plus third-party libs)
+                 jwarp.importers (URDF in/out, sphere fitting: model and atomic only,
+                 plus third-party libs)
     1 kernels:   jwarp.kernels (Warp only)
     2 core:      jwarp.core (arrays, device model, rows, limits)
     3 kinematics jwarp.kinematics

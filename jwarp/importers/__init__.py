@@ -6,6 +6,7 @@
   (:func:`~jwarp.importers.robot.load_urdf`, :class:`~jwarp.importers.robot.UrdfRobot`).
 * :mod:`jwarp.importers.urdf_export`: a jwarp robot -> URDF (+ a side file for what URDF
   cannot hold).
+* :mod:`jwarp.importers.spheres`: collision spheres fitted to meshes and primitives.
 
 See docs/urdf.md and docs/urdf_export.md.
 """

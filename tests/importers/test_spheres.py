@@ -1,0 +1,215 @@
+"""Collision spheres fitted to meshes and primitives (jwarp.importers.spheres).
+
+Coverage is checked on fresh surface samples (another seed than the fit's), the excess
+volume against an independent Monte Carlo estimate with analytic inside tests, and the
+Panda collision meshes of example-robot-data (when installed) are the acceptance case."""
+
+from __future__ import annotations
+
+import importlib.metadata
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from jwarp.importers.spheres import (SphereFit, fit_geometry, fit_spheres, load_mesh,
+                                     one_sided_error, primitive_mesh)
+
+
+def fresh_error(mesh: trimesh.Trimesh, fit: SphereFit, n: int = 20000, seed: int = 987) -> float:
+    pts, _ = trimesh.sample.sample_surface(mesh, n, seed=seed)
+    return float(one_sided_error(pts, fit.centres, fit.radii).max())
+
+
+def l_prism(a: float = 0.2, b: float = 0.04, h: float = 0.05) -> trimesh.Trimesh:
+    """An L-shaped prism: the union of boxes [0,a]x[0,b]x[0,h] and [0,b]x[0,a]x[0,h]."""
+    poly = np.array([[0, 0], [a, 0], [a, b], [b, b], [b, a], [0, a]], float)
+    v = np.concatenate([np.c_[poly, np.zeros(6)], np.c_[poly, np.full(6, h)]])
+    bottom = [[0, 2, 1], [0, 3, 2], [0, 5, 3], [5, 4, 3]]
+    top = [[6 + i, 6 + k, 6 + j] for i, j, k in bottom]
+    sides = []
+    for i in range(6):
+        j = (i + 1) % 6
+        sides += [[i, j, 6 + j], [i, 6 + j, 6 + i]]
+    m = trimesh.Trimesh(v, bottom + top + sides, process=True)
+    assert m.is_watertight and m.volume > 0
+    return m
+
+
+def inside_l(x: np.ndarray, a: float = 0.2, b: float = 0.04, h: float = 0.05) -> np.ndarray:
+    z = (x[:, 2] >= 0) & (x[:, 2] <= h)
+    box1 = (x[:, 0] >= 0) & (x[:, 0] <= a) & (x[:, 1] >= 0) & (x[:, 1] <= b)
+    box2 = (x[:, 0] >= 0) & (x[:, 0] <= b) & (x[:, 1] >= 0) & (x[:, 1] <= a)
+    return z & (box1 | box2)
+
+
+def independent_excess(fit: SphereFit, inside, n: int = 400_000, seed: int = 31):
+    """Excess volume by sampling each sphere's bounding cube with its own points (a
+    different estimator from the fitter's one box), union counted once per point by
+    attributing it to the first sphere holding it."""
+    rng = np.random.default_rng(seed)
+    c, r = fit.centres, fit.radii
+    total, var = 0.0, 0.0
+    per = max(n // len(r), 2000)
+    for i in range(len(r)):
+        x = c[i] + (rng.random((per, 3)) * 2 - 1) * r[i]
+        d = np.linalg.norm(x[:, None, :] - c[None], axis=-1) <= r[None]
+        first = d[:, i] & ~d[:, :i].any(axis=1)  # points of the union owned by sphere i
+        hit = first & ~inside(x)
+        vol = (2 * r[i]) ** 3
+        p = hit.mean()
+        total += vol * p
+        var += vol ** 2 * p * (1 - p) / per
+    return total, np.sqrt(var)
+
+
+@pytest.mark.parametrize("kind,size", [("box", (0.08, 0.12, 0.2)), ("cylinder", (0.04, 0.2)),
+                                       ("capsule", (0.04, 0.15))])
+def test_primitives_covered_within_tolerance(kind, size):
+    tol = 0.01
+    mesh = primitive_mesh(kind, size)
+    fit = fit_spheres(mesh, tolerance=tol)
+    assert fit.meets_tolerance and fit.one_sided_error <= tol
+    assert fresh_error(mesh, fit) <= tol
+    # each sphere reaches at most tolerance past the surface point nearest its centre
+    _, d, _ = trimesh.proximity.closest_point(mesh, fit.centres)
+    assert np.all(fit.radii <= d + tol + 1e-9)
+
+
+def test_thin_plate_and_l_shape_covered():
+    plate = trimesh.creation.box((0.15, 0.1, 0.003))
+    for mesh in (plate, l_prism()):
+        fit = fit_spheres(mesh, tolerance=0.008)
+        assert fresh_error(mesh, fit) <= 0.008
+    # thin: the spheres follow the plate (no sphere centre off its mid-plane by more than
+    # the half thickness, radii ~ half thickness + tolerance)
+    fit = fit_spheres(plate, tolerance=0.008)
+    assert np.all(np.abs(fit.centres[:, 2]) <= 0.0015 + 1e-9)
+    assert fit.radii.max() <= 0.0015 + 0.008 + 1e-9
+
+
+def test_count_decreases_as_tolerance_grows():
+    mesh = l_prism()
+    ks = [fit_spheres(mesh, tolerance=t).k for t in (0.004, 0.008, 0.016, 0.032)]
+    assert all(a > b for a, b in zip(ks, ks[1:])), ks
+
+
+@pytest.mark.parametrize("shape", ["box", "l"])
+def test_excess_volume_matches_independent_estimate(shape):
+    if shape == "box":
+        half = np.array([0.05, 0.03, 0.02])
+        mesh = primitive_mesh("box", 2 * half)
+        inside = lambda x: np.all(np.abs(x) <= half, axis=1)  # noqa: E731
+    else:
+        mesh, inside = l_prism(), inside_l
+    fit = fit_spheres(mesh, tolerance=0.01, n_volume=300_000)
+    assert fit.n_volume == 300_000 and fit.volume_method.startswith("mesh.contains")
+    ref, ref_se = independent_excess(fit, inside)
+    assert fit.excess_volume > 0
+    assert abs(fit.excess_volume - ref) <= 4 * np.hypot(ref_se, fit.excess_volume_stderr) + 1e-7
+    assert fit.excess_fraction == pytest.approx(fit.excess_volume / mesh.volume)
+
+
+def test_sphere_primitive_is_exactly_one_sphere():
+    T = np.eye(4)
+    T[:3, 3] = [0.1, -0.2, 0.3]
+    fit = fit_geometry("sphere", [0.05], T, tolerance=0.01)
+    assert fit.k == 1 and fit.radii[0] == 0.05
+    np.testing.assert_array_equal(fit.centres[0], [0.1, -0.2, 0.3])
+    assert fit.one_sided_error == 0.0 and fit.excess_volume == 0.0
+
+
+def test_fit_geometry_origin_and_mesh_file(tmp_path):
+    R = trimesh.transformations.rotation_matrix(0.7, [1, 2, 3])
+    R[:3, 3] = [0.3, 0.1, -0.2]
+    fit = fit_geometry("cylinder", (0.03, 0.15), R, tolerance=0.01)
+    posed = primitive_mesh("cylinder", (0.03, 0.15))
+    posed.apply_transform(R)
+    assert fresh_error(posed, fit) <= 0.01
+    # a mesh file with a scale
+    path = tmp_path / "box.stl"
+    primitive_mesh("box", (1.0, 2.0, 3.0)).export(path)
+    fit2 = fit_geometry("mesh", origin=None, mesh=str(path), scale=0.05, tolerance=0.01)
+    assert fresh_error(load_mesh(path, 0.05), fit2) <= 0.01
+    assert np.all(np.abs(fit2.centres) <= [0.025, 0.05, 0.075])
+
+
+def test_max_spheres_trade_off():
+    mesh = primitive_mesh("box", (0.1, 0.2, 0.3))
+    free = fit_spheres(mesh, tolerance=0.01)
+    few = fit_spheres(mesh, tolerance=0.01, max_spheres=3)
+    more = fit_spheres(mesh, tolerance=0.01, max_spheres=12)
+    assert few.k <= 3 and more.k <= 12
+    # too few spheres: the error exceeds the tolerance and the report says so
+    assert not few.meets_tolerance and few.one_sided_error > 0.01
+    assert few.one_sided_error >= more.one_sided_error
+    # the reported error is the real one (fresh samples agree within sampling noise)
+    assert fresh_error(mesh, few) == pytest.approx(few.one_sided_error, abs=0.005)
+    # a generous count: the tolerance answer
+    enough = fit_spheres(mesh, tolerance=0.01, max_spheres=free.k + 50)
+    assert enough.meets_tolerance and enough.k <= free.k + 50
+
+
+def test_not_watertight_mesh():
+    mesh = primitive_mesh("box", (0.1, 0.06, 0.04))
+    mesh.update_faces(np.arange(len(mesh.faces)) >= 2)  # drop one face: an open box
+    assert not mesh.is_watertight
+    fit = fit_spheres(mesh, tolerance=0.01)
+    assert fresh_error(mesh, fit) <= 0.01
+    assert "convex hull" in fit.volume_method and fit.excess_volume >= 0
+
+
+@pytest.mark.parametrize("kwargs,name", [
+    ({"tolerance": 0.0}, "tolerance"), ({"tolerance": -1.0}, "tolerance"),
+    ({"tolerance": float("nan")}, "tolerance"), ({"tolerance": 0.01, "max_spheres": 0}, "max_spheres"),
+    ({"tolerance": 0.01, "n_surface": 1}, "n_surface")])
+def test_bad_arguments_name_themselves(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        fit_spheres(primitive_mesh("box", (0.1, 0.1, 0.1)), **kwargs)
+
+
+def test_bad_meshes_and_primitives():
+    with pytest.raises(ValueError, match="mesh"):
+        fit_spheres(trimesh.Trimesh(), tolerance=0.01)
+    with pytest.raises(TypeError, match="mesh"):
+        fit_spheres(np.zeros((3, 3)), tolerance=0.01)
+    with pytest.raises(ValueError, match="kind"):
+        primitive_mesh("cone", (1, 1))
+    with pytest.raises(ValueError, match="size"):
+        primitive_mesh("box", (1, 1))
+    with pytest.raises(ValueError, match="size"):
+        fit_geometry("sphere", [-0.1], tolerance=0.01)
+    with pytest.raises(ValueError, match="origin"):
+        fit_geometry("box", (1, 1, 1), np.eye(3), tolerance=0.01)
+    with pytest.raises(ValueError, match="mesh"):
+        fit_geometry("mesh", tolerance=0.01, mesh="/nonexistent/link.stl")
+    with pytest.raises(ValueError, match="tolerance"):
+        fit_geometry("sphere", [0.1], tolerance=0.0)
+
+
+def panda_collision_meshes() -> list[Path]:
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        pytest.skip("example-robot-data is not installed")
+    root = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots/panda_description"))
+    files = sorted((root / "meshes" / "collision").glob("*.stl"))
+    if not files:
+        pytest.skip(f"no Panda collision meshes under {root}")
+    return files
+
+
+def test_panda_collision_meshes_covered():
+    """Acceptance: every sampled surface point of each Panda collision mesh lies inside a
+    sphere within the tolerance (fresh samples)."""
+    tol = 0.01
+    rows = []
+    for path in panda_collision_meshes():
+        mesh = load_mesh(path)
+        fit = fit_spheres(mesh, tolerance=tol)
+        err = fresh_error(mesh, fit, n=20000)
+        assert fit.meets_tolerance and err <= tol, (path.name, err)
+        rows.append((path.stem, fit.k, err, fit.excess_fraction))
+    assert len(rows) >= 8
+    print("\n".join(f"{n:8s} k={k:3d} err={e * 1e3:.2f} mm excess={x:.2f}" for n, k, e, x in rows))
