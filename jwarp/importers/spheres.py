@@ -3,21 +3,30 @@ one-sided error.
 
 Method (see ``docs/spheres.md``):
 
-1. **Surface samples** ``S``: ``n_surface`` area-uniform points of the mesh plus its vertices
-   (the corners, where an uncovered point is most likely).
+1. **Surface samples** ``S``: ``n_surface`` area-uniform points of the mesh (default
+   ``clip(2 area / tolerance^2, 2000, 20000)``, a spacing of about ``tolerance / 1.4``) plus
+   its vertices (the corners, where an uncovered point is most likely).
 2. **Candidate spheres**, medial-axis-like: for each sample ``p`` with inward normal ``n`` the
    largest ball touching the surface at ``p`` (shrinking-ball iteration against ``S``: it
    stops at the opposite wall, so a thin plate gives thin balls), and centres at 1/2 and
-   1/4 of the way from ``p`` to that ball's centre (smaller balls for small details).
-   Each candidate centre ``c`` gets the radius ``d(c) + tolerance``, ``d(c)`` its exact
-   distance to the mesh (``trimesh.proximity``): a sphere reaches at most ``tolerance``
+   1/4 of the way from ``p`` to that ball's centre (smaller balls for small details), for
+   2500 of the samples (and later for any sample no candidate holds); centres outside a
+   watertight mesh are dropped. Each candidate centre ``c`` gets the radius
+   ``d(c) + tolerance``, ``d(c)`` its distance to the mesh (while choosing, an upper bound:
+   the distance to its own surface point and to the nearest sample; the chosen spheres get
+   the exact distance from ``trimesh.proximity``): a sphere reaches at most ``tolerance``
    past the surface point nearest its centre, so the excess volume stays small.
 3. **Greedy set cover** of ``S``: repeatedly take the candidate containing the most
    uncovered samples (a sample is covered by a sphere when it lies inside, or within the
    allowed error ``eps`` of it), then drop spheres whose samples all lie in others.
    Tolerance mode: ``eps = 0`` (every sample inside a sphere), fewest spheres found.
-   ``max_spheres`` mode: the smallest ``eps`` (bisection) for which the cover needs at
-   most ``max_spheres`` spheres; ``eps = 0`` if that is already possible.
+   ``max_spheres`` mode: the smallest ``eps`` (doubling from ``tolerance``, then
+   bisection to 2 %) for which the greedy cover of 3000 of the samples needs at most
+   ``max_spheres`` spheres; ``eps = 0`` if that is already possible. The spheres keep their
+   reach ``d + tolerance``: too few of them leave parts of the surface outside, and the
+   report says by how much (``one_sided_error``, ``meets_tolerance``). (For fewer spheres
+   that still hold the whole surface, raise ``tolerance`` instead.) Greedy cover is an
+   approximation: "smallest" is the smallest the greedy cover finds.
 4. **Check** on ``n_surface`` fresh samples (another random stream): the one-sided error is
    the largest distance of a fresh sample outside every sphere. In tolerance mode a fresh
    sample further out than ``tolerance / 2`` (a margin for the gaps between samples) is
@@ -42,8 +51,8 @@ import trimesh
 from scipy import sparse
 from scipy.spatial import cKDTree
 
-__all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "primitive_mesh", "load_mesh",
-           "one_sided_error", "excess_volume", "PRIMITIVES"]
+__all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "fit_link",
+           "primitive_mesh", "load_mesh", "one_sided_error", "excess_volume", "PRIMITIVES"]
 
 #: primitive kinds and the number of size values each takes (URDF order)
 PRIMITIVES = {"box": 3, "cylinder": 2, "capsule": 2, "sphere": 1}
@@ -462,12 +471,18 @@ def load_mesh(path: str | Path, scale: Any = None) -> trimesh.Trimesh:
         raise ValueError(f"mesh: cannot load '{p}': {e}") from e
     if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
         raise ValueError(f"mesh: '{p}' holds no triangles")
-    if scale is not None:
-        sc = np.broadcast_to(np.asarray(scale, np.float64).reshape(-1), (3,))
-        if not np.all(np.isfinite(sc)) or np.any(sc == 0):
-            raise ValueError(f"scale: must be finite and non-zero, got {np.asarray(scale).tolist()}")
-        m = m.copy()
-        m.apply_transform(np.diag([*sc, 1.0]))
+    return _scaled(m, scale)
+
+
+def _scaled(m: trimesh.Trimesh, scale: Any) -> trimesh.Trimesh:
+    """A copy of ``m`` scaled per axis (``scale``: None, a number or (3,))."""
+    if scale is None:
+        return m
+    sc = np.asarray(scale, np.float64).reshape(-1)
+    if sc.size not in (1, 3) or not np.all(np.isfinite(sc)) or np.any(sc == 0):
+        raise ValueError(f"scale: expected 1 or 3 finite non-zero numbers, got {sc.tolist()}")
+    m = m.copy()
+    m.apply_transform(np.diag([*np.broadcast_to(sc, (3,)), 1.0]))
     return m
 
 
@@ -497,13 +512,45 @@ def fit_geometry(kind: str, size: Any = None, origin: Any = None, mesh: Any = No
     if kind == "mesh":
         if mesh is None:
             raise ValueError("mesh: required for kind 'mesh'")
-        m = load_mesh(mesh, scale) if isinstance(mesh, (str, Path)) else _check_mesh(mesh)
-        if scale is not None and not isinstance(mesh, (str, Path)):
-            m = m.copy()
-            m.apply_transform(np.diag([*np.broadcast_to(np.asarray(scale, float).reshape(-1), (3,)), 1.0]))
+        m = load_mesh(mesh, scale) if isinstance(mesh, (str, Path)) else \
+            _scaled(_check_mesh(mesh), scale)
     elif kind in PRIMITIVES:
         m = primitive_mesh(kind, size)
     else:
         raise ValueError(f"kind: unknown geometry '{kind}', expected mesh or one of "
                          f"{sorted(PRIMITIVES)}")
     return fit_spheres(m, tolerance=tolerance, **options).transformed(T)
+
+
+def fit_link(geometries: Any, *, tolerance: float, **options: Any) -> SphereFit:
+    """Spheres of all collision geometries of one link, in the link frame: one
+    :func:`fit_geometry` per geometry, concatenated. Each geometry is a mapping or an
+    object with ``kind``, ``size``, ``origin`` and, for meshes, ``mesh`` (or
+    ``filename``/``path``) and ``scale``. The report: total count, the largest one-sided
+    error, summed excess volume (an overestimate of the union's where geometries overlap)
+    and mesh volume."""
+    fits = []
+    for i, g in enumerate(geometries):
+        get = (g.get if isinstance(g, dict) else lambda k, d=None, g=g: getattr(g, k, d))
+        mesh = get("mesh") if get("mesh") is not None else (get("filename") or get("path"))
+        try:
+            fits.append(fit_geometry(get("kind"), get("size"), get("origin"), mesh,
+                                     scale=get("scale"), tolerance=tolerance, **options))
+        except (ValueError, TypeError) as e:
+            raise type(e)(f"geometries[{i}]: {e}") from e
+    if not fits:
+        raise ValueError("geometries: empty")
+    err = max(f.one_sided_error for f in fits)
+    return SphereFit(
+        centres=np.concatenate([f.centres for f in fits]),
+        radii=np.concatenate([f.radii for f in fits]), tolerance=float(tolerance),
+        one_sided_error=err, meets_tolerance=all(f.meets_tolerance for f in fits),
+        fit_error=max(f.fit_error for f in fits),
+        excess_volume=sum(f.excess_volume for f in fits),
+        excess_volume_stderr=float(np.sqrt(sum(f.excess_volume_stderr ** 2 for f in fits))),
+        excess_fraction=(sum(f.excess_volume for f in fits)
+                         / max(sum(f.mesh_volume for f in fits), 1e-300)),
+        mesh_volume=sum(f.mesh_volume for f in fits), n_volume=max(f.n_volume for f in fits),
+        n_surface=max(f.n_surface for f in fits),
+        volume_method="; ".join(sorted({f.volume_method for f in fits})),
+        rounds=max(f.rounds for f in fits), notes=[n for f in fits for n in f.notes])

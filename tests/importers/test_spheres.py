@@ -213,3 +213,27 @@ def test_panda_collision_meshes_covered():
         rows.append((path.stem, fit.k, err, fit.excess_fraction))
     assert len(rows) >= 8
     print("\n".join(f"{n:8s} k={k:3d} err={e * 1e3:.2f} mm excess={x:.2f}" for n, k, e, x in rows))
+
+
+def test_fit_link_concatenates_geometries(tmp_path):
+    from types import SimpleNamespace
+
+    from jwarp.importers.spheres import fit_link
+
+    T = np.eye(4)
+    T[:3, 3] = [0.0, 0.0, 0.2]
+    path = tmp_path / "part.stl"
+    primitive_mesh("box", (0.06, 0.04, 0.02)).export(path)
+    geoms = [{"kind": "sphere", "size": [0.03], "origin": T},
+             SimpleNamespace(kind="box", size=(0.05, 0.05, 0.1), origin=np.eye(4), mesh=None,
+                             scale=None),
+             {"kind": "mesh", "filename": str(path), "scale": [1.0, 1.0, 2.0], "origin": None}]
+    fit = fit_link(geoms, tolerance=0.01)
+    box = fit_geometry("box", (0.05, 0.05, 0.1), tolerance=0.01)
+    part = fit_geometry("mesh", mesh=str(path), scale=[1.0, 1.0, 2.0], tolerance=0.01)
+    assert fit.k == 1 + box.k + part.k and fit.meets_tolerance
+    np.testing.assert_array_equal(fit.centres[0], [0.0, 0.0, 0.2])
+    for mesh in (primitive_mesh("box", (0.05, 0.05, 0.1)), primitive_mesh("box", (0.06, 0.04, 0.04))):
+        assert fresh_error(mesh, fit) <= 0.01
+    with pytest.raises(ValueError, match=r"geometries\[1\]: kind"):
+        fit_link([geoms[0], {"kind": "cone", "size": [1, 1]}], tolerance=0.01)
