@@ -107,8 +107,9 @@ class SphereFit:
     check samples outside every sphere; ``meets_tolerance``: ``one_sided_error <=
     tolerance``; ``fit_error``: the allowed error ``eps`` of the cover (0 in tolerance mode);
     ``excess_volume`` (+- ``excess_volume_stderr``, one standard error of the Monte Carlo
-    estimate from ``n_volume`` points) and ``excess_fraction`` = excess / ``mesh_volume``;
-    ``volume_method`` says how inside/outside was decided.
+    estimate from ``n_volume`` points) and ``excess_fraction`` = excess / ``mesh_volume``
+    (the convex hull's volume for a mesh that is not watertight); ``volume_method`` says how
+    inside/outside was decided; ``rounds``: fit-check rounds used.
     """
 
     centres: np.ndarray
@@ -135,7 +136,8 @@ class SphereFit:
     def transformed(self, origin: np.ndarray) -> "SphereFit":
         """The same fit with centres mapped by the rigid 4x4 ``origin`` (radii unchanged)."""
         T = _origin(origin)
-        out = SphereFit(**{**self.__dict__, "notes": list(self.notes)})
+        out = SphereFit(**{**self.__dict__, "notes": list(self.notes),
+                           "radii": self.radii.copy()})
         out.centres = self.centres @ T[:3, :3].T + T[:3, 3]
         return out
 
