@@ -168,8 +168,15 @@ class RerunRecording:
 
 # ------------------------------------------------------------------ parsing helpers
 def load_robot(name: str):
+    """A registered robot, a robot JSON, or a URDF file with its collision model (spheres
+    fitted to the links' collision geometry and sampled self-collision pairs, cached:
+    :func:`jwarp.world.spherize.spherized_robot`)."""
     from jwarp.registry import robot
 
+    if isinstance(name, str) and name.lower().endswith(".urdf"):
+        from jwarp.world.spherize import spherized_robot
+
+        return spherized_robot(name)[0]
     return robot(name)
 
 

@@ -15,7 +15,7 @@ import math
 import os
 from typing import Any
 
-from jwarp.cli.common import CLIError, check_output, real_arg
+from jwarp.cli.common import CLIError, check_output, int_arg, real_arg
 
 
 def _end_effectors(items: list[str] | None) -> dict[str, str] | None:
@@ -42,16 +42,26 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
         if not os.path.isdir(d):
             raise CLIError(f"--package-dir: not a folder: '{d}'")
     eff = _end_effectors(args.end_effector)
+    urdf_options = dict(end_effectors=eff, package_dirs=args.package_dir or [],
+                        continuous_limit=args.continuous_limit, name=args.name,
+                        require_meshes=args.require_meshes)
     try:
-        imported = load_urdf(args.urdf, end_effectors=eff, package_dirs=args.package_dir or [],
-                             continuous_limit=args.continuous_limit, name=args.name,
-                             require_meshes=args.require_meshes)
+        imported = load_urdf(args.urdf, **urdf_options)
+        model, fit = imported.model, None
+        if args.spheres == "fit" and any(g.kind != "sphere" for g in imported.geometries):
+            from jwarp.world.spherize import SpherizeOptions, spherized_robot
+
+            opts = SpherizeOptions(tolerance=args.tolerance, max_spheres=args.max_spheres,
+                                   pair_samples=args.pair_samples)
+            model, fit = spherized_robot(args.urdf, opts, cache=not args.no_cache,
+                                         **urdf_options)
+        elif args.spheres == "none":
+            model = model.copy(spheres=[])
     except ValueError as e:
         msg = " ".join(str(e).split())
         if msg.startswith("end_effectors."):
             raise CLIError(f"--end-effector: {msg.partition(': ')[2]}") from None
         raise CLIError(f"URDF: {msg}") from None
-    model = imported.model
     model.save(args.out)
     kinds: dict[str, int] = {}
     for g in imported.geometries:
@@ -62,6 +72,8 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
         "masses": len(model.masses), "mass_kg": sum(m.mass for m in model.masses),
         "spheres": len(model.spheres), "collision_geometry": kinds,
         "missing_meshes": missing, "end_effectors": sorted(model.end_effectors), "out": args.out}
+    if fit is not None:
+        summary["sphere_fit"] = fit.to_dict()
     if args.json:
         print(json.dumps(summary, indent=1))
     else:
@@ -70,6 +82,11 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
               f"{len(model.spheres)} spheres; collision geometry "
               f"{', '.join(f'{k} {v}' for k, v in sorted(kinds.items())) or 'none'}"
               + (f" ({len(missing)} mesh files not found)" if missing else ""))
+        if fit is not None:
+            worst = max((r["one_sided_error"] for r in fit.links), default=0.0)
+            print(f"spheres fitted to {len(fit.links)} links (tolerance {args.tolerance} m, "
+                  f"largest one-sided error {worst:.4f} m{', from the cache' if fit.cached else ''}); "
+                  f"{int(model.allowed_collision_pairs.sum()) // 2} self-collision frame pairs checked")
         print(f"end-effectors: {', '.join(sorted(model.end_effectors))}")
         print(f"robot: {args.out}")
     return 0
@@ -91,5 +108,21 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--name", default=None, help="robot name (default: the URDF's)")
     s.add_argument("--require-meshes", action="store_true",
                    help="fail if a collision mesh file is not found")
+    s.add_argument("--spheres", choices=("fit", "urdf", "none"), default="fit",
+                   help="collision model: fit spheres to every link's collision geometry and "
+                        "sample the self-collision pairs (fit, default), only the URDF's own "
+                        "sphere geometry (urdf), or no spheres (none)")
+    s.add_argument("--tolerance", type=real_arg("--tolerance", 0.0, lo_open=True, unit=" m"),
+                   default=0.01, metavar="M",
+                   help="one-sided error of the fitted spheres [m] (0.01)")
+    s.add_argument("--max-spheres", type=int_arg("--max-spheres", 1), default=None,
+                   metavar="K", help="most spheres per collision geometry (default: as many "
+                                     "as the tolerance needs)")
+    s.add_argument("--pair-samples", type=int_arg("--pair-samples", 1), default=10000,
+                   metavar="N", help="random configurations of the self-collision pair "
+                                     "sampling (10000)")
+    s.add_argument("--no-cache", action="store_true",
+                   help="fit again instead of reading the fit cache ($JWARP_CACHE or "
+                        "~/.cache/jwarp)")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
     s.set_defaults(func=cmd_import_urdf)

@@ -47,3 +47,23 @@ def load_urdf(path: str | os.PathLike, *, end_effectors: Mapping[str, str] | Non
     except RobotModelError as e:
         raise RobotModelError(f"{os.fspath(path)}: imported robot is invalid: {e}") from None
     return UrdfRobot(model=model, geometries=imp.geometries, source=imp)
+
+
+def example_robot_urdf(relative: str) -> str:
+    """The path of a URDF shipped by the ``example-robot-data`` package (a test extra of
+    jwarp; its wheel ships the robots folder, no Python module), e.g.
+    ``"panda_description/urdf/panda.urdf"``. ValueError naming the package or the file
+    when it is not installed or has no such file."""
+    from importlib import metadata
+    from pathlib import Path
+
+    try:
+        dist = metadata.distribution("example-robot-data")
+    except metadata.PackageNotFoundError:
+        raise ValueError("example-robot-data: not installed (pip install example-robot-data, "
+                         "or jwarp's test extra)") from None
+    folder = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
+    path = folder / relative
+    if not path.is_file():
+        raise ValueError(f"example-robot-data: no file '{relative}' under {folder}")
+    return str(path)
