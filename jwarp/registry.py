@@ -336,13 +336,14 @@ def robots() -> list[str]:
 
 def _looks_like_path(name: str) -> bool:
     seps = {"/", os.sep} | ({os.altsep} if os.altsep else set())
-    return name.lower().endswith((".json", ".urdf")) or any(s in name for s in seps)
+    return name.lower().endswith((".json", ".urdf", ".xml")) or any(s in name for s in seps)
 
 
 def robot(name: str | os.PathLike | RobotModel) -> RobotModel:
     """The robot registered under ``name`` (a RobotModel passes through; a path to a robot
     file, a name ending in ``.json`` or ``.urdf`` or containing a ``/``, is loaded; a
-    ``.urdf`` file is imported by :meth:`RobotModel.from_urdf`)."""
+    ``.urdf`` file is imported by :meth:`RobotModel.from_urdf`, a ``.xml`` file whose root is
+    ``<mujoco>`` by :func:`jwarp.importers.robot.load_mjcf`)."""
     if isinstance(name, RobotModel):
         return name
     if not isinstance(name, (str, os.PathLike)):
@@ -363,6 +364,12 @@ def robot(name: str | os.PathLike | RobotModel) -> RobotModel:
             if os.path.exists(name):
                 if name.lower().endswith(".urdf"):
                     return RobotModel.from_urdf(name)
+                from jwarp.importers.mjcf import is_mjcf
+
+                if is_mjcf(name):   # .xml with a <mujoco> root (needs jwarp[mjcf])
+                    from jwarp.importers.robot import load_mjcf
+
+                    return load_mjcf(name).model
                 return RobotModel.load(name)
             raise ValueError(f"robot: file not found: '{name}' (read as a path to a robot "
                              f"file; no robot is registered under that name either)")

@@ -4,7 +4,7 @@ registered by explicit import: :mod:`jwarp.cli.kinematics` (``robots | info | fk
 (``plan | ik``), :mod:`jwarp.cli.learning` (``train ik | eval ik``), :mod:`jwarp.cli.data`
 (``data generate | info | export``), :mod:`jwarp.cli.poses` (``sample-poses``),
 :mod:`jwarp.cli.design` (``sensitivity | design``), :mod:`jwarp.cli.urdf` (``import-urdf``),
-:mod:`jwarp.cli.urdf_export` (``export-urdf``).
+:mod:`jwarp.cli.urdf_export` (``export-urdf``), :mod:`jwarp.cli.mjcf` (``import-mjcf``).
 
 Examples and the joint-value syntax: :mod:`jwarp.cli.kinematics`. A value starting with a
 minus sign may follow any option directly (``--q -0.5,0,...``, ``-inf``, ``-nan``).
@@ -40,8 +40,8 @@ import sys
 import zipfile
 from typing import Sequence
 
-from jwarp.cli import (calibration, data, design, kinematics, learning, planning, poses, urdf,
-                       urdf_export)
+from jwarp.cli import (calibration, data, design, kinematics, learning, mjcf, planning, poses,
+                       urdf, urdf_export)
 from jwarp.cli.common import (CLIError, Parser, fix_negative_values, plugin_warnings_one_line,
                                value_options)
 
@@ -56,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
 
     for group in (kinematics, calibration, planning, learning, data, poses, design, urdf,
-                  urdf_export):
+                  urdf_export, mjcf):
         group.add_subcommands(sub)
     return p
 

@@ -1,7 +1,8 @@
 """URDF -> :class:`~jwarp.model.RobotModel` with the links' collision geometry.
 
 :func:`load_urdf` is what ``RobotModel.from_urdf``, ``jwarp.robot("x.urdf")`` and
-``jwarp import-urdf`` use (docs/urdf.md).
+``jwarp import-urdf`` use (docs/urdf.md); :func:`load_mjcf` the same for MuJoCo's MJCF
+(``jwarp.robot("x.xml")``, ``jwarp import-mjcf``).
 """
 
 from __future__ import annotations
@@ -42,6 +43,27 @@ def load_urdf(path: str | os.PathLike, *, end_effectors: Mapping[str, str] | Non
     except TypeError as e:
         raise TypeError(f"load_urdf: {e}") from None
     imp = read_urdf(path, opt)
+    try:
+        model = RobotModel.from_dict(imp.document)
+    except RobotModelError as e:
+        raise RobotModelError(f"{os.fspath(path)}: imported robot is invalid: {e}") from None
+    return UrdfRobot(model=model, geometries=imp.geometries, source=imp)
+
+
+def load_mjcf(path: str | os.PathLike, *, end_effectors: Mapping[str, str] | None = None,
+              **options: Any) -> UrdfRobot:
+    """Import a MuJoCo MJCF file (needs the ``mujoco`` package: ``pip install jwarp[mjcf]``).
+    ``end_effectors`` and ``options`` are the fields of
+    :class:`~jwarp.importers.mjcf.MjcfOptions`; the result's ``geometries`` are the bodies'
+    collision geoms (mesh geoms carry MuJoCo's compiled mesh in ``mesh``). ValueError naming
+    the file and the element for a malformed or unsupported file (docs/urdf.md, MJCF)."""
+    from jwarp.importers.mjcf import MjcfOptions, read_mjcf
+
+    try:
+        opt = MjcfOptions(end_effectors=end_effectors, **options)
+    except TypeError as e:
+        raise TypeError(f"load_mjcf: {e}") from None
+    imp = read_mjcf(path, opt)
     try:
         model = RobotModel.from_dict(imp.document)
     except RobotModelError as e:

@@ -112,6 +112,10 @@ class CollisionGeometry:
     mesh_uri: the ``filename`` as written in the URDF (mesh only).
     mesh_path: the resolved file (None if not found or not a mesh).
     scale: (3,) mesh scale (ones for primitives).
+    mesh: an in-memory mesh (``trimesh.Trimesh``, vertices in the geometry frame, scale
+        applied) when the geometry has no file: the MJCF importer stores MuJoCo's compiled
+        mesh here (``mesh_uri`` then names the MuJoCo mesh, ``mesh_path`` is None). The
+        sphere fitting uses it before :meth:`mesh_file`.
     """
 
     link: str
@@ -122,6 +126,7 @@ class CollisionGeometry:
     mesh_path: str | None = None
     scale: np.ndarray = field(default_factory=lambda: np.ones(3))
     name: str | None = None
+    mesh: Any = None
 
     def mesh_file(self) -> str:
         """The resolved mesh file; ValueError naming the link and the file if missing."""

@@ -105,7 +105,8 @@ class SpherizeReport:
 def _geometry(g: Any) -> dict:
     mesh = None
     if g.kind == "mesh":
-        mesh = g.mesh_file()  # ValueError naming the link and the file when missing
+        # an in-memory mesh (MJCF import) or the file (ValueError naming the link when missing)
+        mesh = g.mesh if getattr(g, "mesh", None) is not None else g.mesh_file()
     return {"kind": g.kind, "size": g.size, "origin": g.origin, "mesh": mesh,
             "scale": g.scale if g.kind == "mesh" else None}
 
