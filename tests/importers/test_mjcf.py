@@ -274,3 +274,16 @@ def test_saved_json_round_trip_and_cli(tmp_path):
     r = subprocess.run([sys.executable, "-m", "jwarp", "import-mjcf", path, "--out",
                         str(tmp_path / "nofolder" / "x.json")], capture_output=True, text=True)
     assert r.returncode == 2 and "--out" in r.stderr
+
+
+def test_missing_mujoco_says_how_to_install(tmp_path, monkeypatch):
+    path = write(tmp_path, ARM)
+    monkeypatch.setitem(sys.modules, "mujoco", None)   # import mujoco -> ImportError
+    with pytest.raises(ImportError, match=r"pip install jwarp\[mjcf\]"):
+        load_mjcf(path)
+    r = subprocess.run([sys.executable, "-c", "import sys; sys.modules['mujoco'] = None; "
+                        "from jwarp.cli import main; sys.exit(main(['import-mjcf', "
+                        f"{path!r}, '--out', {str(tmp_path / 'o.json')!r}]))"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "jwarp[mjcf]" in r.stderr
+    assert not (tmp_path / "o.json").exists()
