@@ -320,7 +320,7 @@ def build(m: Any, path: str, opt: MjcfOptions) -> UrdfImport:
     geometries = _geoms(mujoco, m, path, bodies, OG, OM)
     spheres = [{"frame": g.link, "position": g.origin[:3, 3].tolist(), "radius": float(g.size[0])}
                for g in geometries if g.kind == "sphere"]
-    has_child = set(int(p) for p in m.body_parentid[1:])
+    has_child = {int(p) for p in m.body_parentid[1:]}
     names = [f["name"] for f in frames]
     if opt.end_effectors is None:
         eff = {bodies[b]: bodies[b] for b in range(1, m.nbody) if b not in has_child}

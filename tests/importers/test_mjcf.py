@@ -12,8 +12,8 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco")
 
-import jwarp  # noqa: E402
-from jwarp.importers.robot import load_mjcf  # noqa: E402
+import jwarp
+from jwarp.importers.robot import load_mjcf
 
 
 def fk(model, Q):
@@ -265,14 +265,14 @@ def test_saved_json_round_trip_and_cli(tmp_path):
     Q = random_q(model, np.random.default_rng(1), 20)
     out = tmp_path / "arm.json"
     r = subprocess.run([sys.executable, "-m", "jwarp", "import-mjcf", path, "--out", str(out),
-                        "--json"], capture_output=True, text=True)
+                        "--json"], capture_output=True, text=True, check=False)
     assert r.returncode == 0, r.stderr
     summary = json.loads(r.stdout)
     assert summary["dof"] == 4 and summary["collision_geometry"]["mesh"] == 1
     again = jwarp.RobotModel.load(str(out))
     assert np.array_equal(fk(model, Q), fk(again, Q))
     r = subprocess.run([sys.executable, "-m", "jwarp", "import-mjcf", path, "--out",
-                        str(tmp_path / "nofolder" / "x.json")], capture_output=True, text=True)
+                        str(tmp_path / "nofolder" / "x.json")], capture_output=True, text=True, check=False)
     assert r.returncode == 2 and "--out" in r.stderr
 
 
@@ -281,9 +281,9 @@ def test_missing_mujoco_says_how_to_install(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "mujoco", None)   # import mujoco -> ImportError
     with pytest.raises(ImportError, match=r"pip install jwarp\[mjcf\]"):
         load_mjcf(path)
-    r = subprocess.run([sys.executable, "-c", "import sys; sys.modules['mujoco'] = None; "
-                        "from jwarp.cli import main; sys.exit(main(['import-mjcf', "
-                        f"{path!r}, '--out', {str(tmp_path / 'o.json')!r}]))"],
-                       capture_output=True, text=True)
+    code = ("import sys; sys.modules['mujoco'] = None; from jwarp.cli import main; "
+            f"sys.exit(main(['import-mjcf', {path!r}, '--out', {str(tmp_path / 'o.json')!r}]))")
+    r = subprocess.run([sys.executable, "-c", code],
+                       capture_output=True, text=True, check=False)
     assert r.returncode == 2 and "jwarp[mjcf]" in r.stderr
     assert not (tmp_path / "o.json").exists()
