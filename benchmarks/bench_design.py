@@ -93,9 +93,9 @@ def bench_jacobians(args: argparse.Namespace) -> dict:
     j = justin_problem(args)
     cases = {
         "hand4_contact": lambda: candidate_jacobians(h["robot"], h["meas"], h["q"], HAND_FREE,
-                                                     meta=h["meta"]),
+                                                     meta=h["meta"], device=args.device),
         "justin19_tracker": lambda: candidate_jacobians(j["robot"], j["meas"], j["q"],
-                                                        JUSTIN_FREE),
+                                                        JUSTIN_FREE, device=args.device),
     }
     sizes = {"hand4_contact": len(h["q"]), "justin19_tracker": len(j["q"])}
     for name, fn in cases.items():
@@ -153,6 +153,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="justin19 tracker candidates (default 1e4)")
     p.add_argument("--n", type=int, default=100, help="configurations to select (default 100)")
     p.add_argument("--repeats", type=int, default=3, help="timed runs per figure")
+    p.add_argument("--device", default="cpu",
+                   help="Warp device of the candidate Jacobians (section jacobians): cpu or "
+                        "cuda[:N]")
     timing.section_options(p, "jacobians,greedy,detmax,detmax_justin")
     args = p.parse_args(argv)
     args.device = "cpu"

@@ -298,3 +298,30 @@ def test_pool_roundtrip_and_errors(hand):
     bad = text.rsplit(",", 1)[0] + ",7\n"
     with pytest.raises(ValueError, match="line 5, column 'pair'"):
         parse_configurations(bad, hand, meas)
+
+
+def test_candidate_jacobians_on_every_device(device):
+    """The candidates' Jacobians on ``device`` (rigid hand4 contacts, and the elastic
+    justin19 tracker through the torque equilibrium) equal finite differences of the
+    predictions on the CPU; CPU and CUDA agree to round-off."""
+    from jwarp.solvers.calibration.campaign import justin_tracker_setup
+    from jwarp.solvers.calibration.map import CalibrationProblem
+
+    robot = get_robot("justin19")
+    meas = make_measurement(robot, justin_tracker_setup())
+    q = uniform_configurations(robot, np.random.default_rng(4), 16)
+    free = "theta,kappa_theta,tracker,markers"
+    U, space = candidate_jacobians(robot, meas, q, free, device=device, elastic=True)
+    prob = CalibrationProblem(robot, meas, q, np.zeros((len(q), len(meas.obs_names))),
+                              free=free, elastic=True, device=device)
+    x0 = prob.initial_x(guess=False)
+    J = prob.jacobian(x0)[:prob.n_data].reshape(U.shape)
+    np.testing.assert_allclose(U, J, rtol=1e-12, atol=1e-12)
+    # central differences of the whitened predictions for a few columns
+    for k in (0, space.size // 2, space.size - 1):
+        h = 1e-6 * max(1.0, abs(x0[k]))
+        xp, xm = x0.copy(), x0.copy()
+        xp[k] += h
+        xm[k] -= h
+        d = (prob.predict(xp) - prob.predict(xm)) / (2 * h) / prob.noise
+        np.testing.assert_allclose(U[:, :, k], d, rtol=1e-5, atol=1e-6 * np.abs(d).max())

@@ -35,7 +35,7 @@ import warp as wp
 from scipy.optimize import OptimizeResult, least_squares
 
 from jwarp import kinematics as K
-from jwarp.core.arrays import finite_as, init_warp, to_output
+from jwarp.core.arrays import finite_as, init_warp, resolve_device, to_output
 from jwarp.core.device import with_frame_masses, with_kappa_nonlinear
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
@@ -82,7 +82,7 @@ class Progress(NamedTuple):
 def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: np.ndarray,
                        lam: float, max_iter: int, tol: float,
                        masses: tuple[np.ndarray, np.ndarray] | None = None,
-                       kappa_nl: np.ndarray | None = None
+                       kappa_nl: np.ndarray | None = None, device: Any = "cpu"
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elastic FK (float64, CPU) as :func:`jwarp.fk_elastic`, but accepting compliances of
     either sign: the optimizer may cross kappa = 0 on its way (the fixed point is just as
@@ -92,8 +92,9 @@ def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: 
     :func:`.elastic.frame_masses`) replacing the robot's, optional nonlinear joint
     compliances ``kappa_nl`` (n,) [rad/(N m)^3] replacing the robot's -> numpy frames
     (S, n, 4, 4), rho* (S, n, 5), converged (S,). ``q`` are the joint values the links
-    see (transmission errors already applied)."""
-    model, batch, t = K.setup(robot, q, "cpu", np.float64, False)
+    see (transmission errors already applied). ``device``: where the kernels run (a Warp
+    ``q`` must be on it)."""
+    model, batch, t = K.setup(robot, q, device, np.float64, False)
     if masses is not None:
         t = with_frame_masses(t, *masses)
     if kappa_nl is not None:
@@ -181,6 +182,9 @@ class CalibrationProblem:
             noise (:mod:`.tow`, :mod:`.virtual_noise`); the data residuals and their
             Jacobian are whitened by ``L_s^-1`` (``Lambda_s = L_s L_s^T``, Cholesky) instead
             of ``1 / noise_sigma``, which it replaces. None: the diagonal ``noise_sigma``.
+        device: Warp device of the FK, equilibrium and DH-Jacobian kernels (float64;
+            "cpu" default, "cuda:0" for large batches such as the candidate Jacobians of
+            :func:`.design.candidate_jacobians`); the rest of the problem is numpy.
     """
 
     def __init__(self, robot: Any, measurement: Any, q: Any, y: Any, *,
@@ -189,7 +193,7 @@ class CalibrationProblem:
                  frames: Iterable[int | str] | None = None, p_nominal: Any = None,
                  elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
                  tol: float = 1e-12, bound_kappa: bool = False,
-                 covariance: Any = None) -> None:
+                 covariance: Any = None, device: Any = "cpu") -> None:
         self.robot = get_robot(robot)
         self.measurement = measurement
         if not hasattr(measurement, "jacobians") or not hasattr(measurement, "obs_names"):
@@ -201,10 +205,13 @@ class CalibrationProblem:
                 raise ValueError(f"measurement: built for robot '{mr.name}', not '{self.robot.name}'")
         self.q, self.y, self.meta = check_samples(self.robot, measurement, q, y, meta)
         init_warp()
-        #: the joint values on the CPU device (float64), uploaded once: every evaluation of
+        #: the Warp device of the model and Jacobian kernels ("cpu" default; "cuda:0" for
+        #: large batches, e.g. the candidate Jacobians of an experimental design)
+        self.device = resolve_device(device)
+        #: the joint values on ``device`` (float64), uploaded once: every evaluation of
         #: the model and its Jacobian launches on this array (the data do not change)
         self.q_device = wp.array(np.ascontiguousarray(self.q, np.float64), dtype=wp.float64,
-                                 device="cpu")
+                                 device=self.device)
         if elastic is False and MASS_GROUP in parse_groups(free):
             raise ValueError(f"free: the '{MASS_GROUP}' group acts only through the elastic "
                              f"model, but elastic=False was given")
@@ -289,15 +296,15 @@ class CalibrationProblem:
         S = self.n_samples
         if self.transmission:   # the links see q + dq(q): every launch below uses it
             q_eff = self.robot.joint_transmission(self.q, self.space.harmonic_at(x))
-            self.q_device = wp.array(q_eff, dtype=wp.float64, device="cpu")
+            self.q_device = wp.array(q_eff, dtype=wp.float64, device=self.device)
         if self.elastic:
             fm = frame_masses(self.robot, mass) if self._mass_idx.size else None
             knl = self.space.kappa_nonlinear_at(x) if self._knl_idx.size else None
             frames, rho, conv = signed_equilibrium(self.robot, self.q_device, dh, kap,
                                                    self.lam, self.max_iter, self.tol, masses=fm,
-                                                   kappa_nl=knl)
+                                                   kappa_nl=knl, device=self.device)
         else:
-            frames = K.fk(self.kin_robot_at(x), self.q_device, dh=dh, device="cpu",
+            frames = K.fk(self.kin_robot_at(x), self.q_device, dh=dh, device=self.device,
                           dtype=np.float64, validate=False).numpy()
             rho = np.broadcast_to(dh, (S,) + dh.shape)
             conv = np.ones(S, bool)
@@ -364,9 +371,9 @@ class CalibrationProblem:
         _, jf, jp = meas.jacobians(frames, p, self.meta)
         S, m = jf.shape[:2]
         jy = np.zeros((S, m, self.robot.n_frames, 5))
-        rows = wp.array(finite_as(rho, np.float64, "dh"), dtype=wp.float64, device="cpu")
+        rows = wp.array(finite_as(rho, np.float64, "dh"), dtype=wp.float64, device=self.device)
         for k, f in enumerate(meas.frames):
-            jdh = K.jacobian_dh(robot, self.q_device, int(f), dh=rows, device="cpu",
+            jdh = K.jacobian_dh(robot, self.q_device, int(f), dh=rows, device=self.device,
                                 dtype=np.float64, validate=False).numpy()  # (S, 6, n, 5)
             jy += (jf[:, :, k, :] @ jdh.reshape(S, 6, -1)).reshape(jy.shape)
         return jy, np.asarray(jp, np.float64)
