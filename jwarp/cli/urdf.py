@@ -18,18 +18,55 @@ from typing import Any
 from jwarp.cli.common import CLIError, check_output, int_arg, real_arg
 
 
-def _end_effectors(items: list[str] | None) -> dict[str, str] | None:
+def end_effectors_arg(items: list[str] | None, element: str = "LINK") -> dict[str, str] | None:
+    """``--end-effector NAME=<element>`` values -> ``{NAME: element}`` (None when none)."""
     if not items:
         return None
     out = {}
     for item in items:
-        alias, sep, link = item.partition("=")
-        if not sep or not alias.strip() or not link.strip():
-            raise CLIError(f"--end-effector: expected NAME=LINK, got '{item}'")
+        alias, sep, target = item.partition("=")
+        if not sep or not alias.strip() or not target.strip():
+            raise CLIError(f"--end-effector: expected NAME={element}, got '{item}'")
         if alias.strip() in out:
             raise CLIError(f"--end-effector: '{alias.strip()}' given twice")
-        out[alias.strip()] = link.strip()
+        out[alias.strip()] = target.strip()
     return out
+
+
+def import_error(e: ValueError, what: str) -> CLIError:
+    """An importer's ValueError as the CLI's one-line error: ``--end-effector`` for the
+    end-effector table, else the file (``what``: URDF, MJCF)."""
+    msg = " ".join(str(e).split())
+    if msg.startswith("end_effectors."):
+        return CLIError(f"--end-effector: {msg.partition(': ')[2]}")
+    return CLIError(f"{what}: {msg}")
+
+
+def import_summary(model: Any, geometries: list, out: str, as_json: bool,
+                   extra: dict[str, Any] | None = None, lines: list[str] | None = None,
+                   note: str = "") -> None:
+    """Print what an import wrote: joints, frames, masses, spheres, collision geometry by
+    kind, end-effectors (``--json``: as JSON with ``extra``; else text with ``note`` after
+    the geometry and ``lines`` before the end-effectors)."""
+    kinds: dict[str, int] = {}
+    for g in geometries:
+        kinds[g.kind] = kinds.get(g.kind, 0) + 1
+    summary: dict[str, Any] = {
+        "robot": model.name, "dof": model.n_dof, "frames": model.n_frames,
+        "masses": len(model.masses), "mass_kg": sum(m.mass for m in model.masses),
+        "spheres": len(model.spheres), "collision_geometry": kinds,
+        "end_effectors": sorted(model.end_effectors), "out": out, **(extra or {})}
+    if as_json:
+        print(json.dumps(summary, indent=1))
+        return
+    print(f"{model.name}: {model.n_dof} joints, {model.n_frames} frames, "
+          f"{len(model.masses)} masses ({summary['mass_kg']:.3f} kg), "
+          f"{len(model.spheres)} spheres; collision geometry "
+          f"{', '.join(f'{k} {v}' for k, v in sorted(kinds.items())) or 'none'}{note}")
+    for line in lines or []:
+        print(line)
+    print(f"end-effectors: {', '.join(sorted(model.end_effectors))}")
+    print(f"robot: {out}")
 
 
 def cmd_import_urdf(args: argparse.Namespace) -> int:
@@ -41,7 +78,7 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
     for d in args.package_dir or []:
         if not os.path.isdir(d):
             raise CLIError(f"--package-dir: not a folder: '{d}'")
-    eff = _end_effectors(args.end_effector)
+    eff = end_effectors_arg(args.end_effector)
     urdf_options = dict(end_effectors=eff, package_dirs=args.package_dir or [],
                         continuous_limit=args.continuous_limit, name=args.name,
                         require_meshes=args.require_meshes)
@@ -58,37 +95,21 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
         elif args.spheres == "none":
             model = model.copy(spheres=[])
     except ValueError as e:
-        msg = " ".join(str(e).split())
-        if msg.startswith("end_effectors."):
-            raise CLIError(f"--end-effector: {msg.partition(': ')[2]}") from None
-        raise CLIError(f"URDF: {msg}") from None
+        raise import_error(e, "URDF") from None
     model.save(args.out)
-    kinds: dict[str, int] = {}
-    for g in imported.geometries:
-        kinds[g.kind] = kinds.get(g.kind, 0) + 1
     missing = [g.mesh_uri for g in imported.geometries if g.kind == "mesh" and g.mesh_path is None]
-    summary: dict[str, Any] = {
-        "robot": model.name, "dof": model.n_dof, "frames": model.n_frames,
-        "masses": len(model.masses), "mass_kg": sum(m.mass for m in model.masses),
-        "spheres": len(model.spheres), "collision_geometry": kinds,
-        "missing_meshes": missing, "end_effectors": sorted(model.end_effectors), "out": args.out}
+    extra: dict[str, Any] = {"missing_meshes": missing}
+    lines = []
     if fit is not None:
-        summary["sphere_fit"] = fit.to_dict()
-    if args.json:
-        print(json.dumps(summary, indent=1))
-    else:
-        print(f"{model.name}: {model.n_dof} joints, {model.n_frames} frames, "
-              f"{len(model.masses)} masses ({summary['mass_kg']:.3f} kg), "
-              f"{len(model.spheres)} spheres; collision geometry "
-              f"{', '.join(f'{k} {v}' for k, v in sorted(kinds.items())) or 'none'}"
-              + (f" ({len(missing)} mesh files not found)" if missing else ""))
-        if fit is not None:
-            worst = max((r["one_sided_error"] for r in fit.links), default=0.0)
-            print(f"spheres fitted to {len(fit.links)} links (tolerance {args.tolerance} m, "
-                  f"largest one-sided error {worst:.4f} m{', from the cache' if fit.cached else ''}); "
-                  f"{int(model.allowed_collision_pairs.sum()) // 2} self-collision frame pairs checked")
-        print(f"end-effectors: {', '.join(sorted(model.end_effectors))}")
-        print(f"robot: {args.out}")
+        extra["sphere_fit"] = fit.to_dict()
+        worst = max((r["one_sided_error"] for r in fit.links), default=0.0)
+        lines.append(f"spheres fitted to {len(fit.links)} links (tolerance {args.tolerance} m, "
+                     f"largest one-sided error {worst:.4f} m"
+                     f"{', from the cache' if fit.cached else ''}); "
+                     f"{int(model.allowed_collision_pairs.sum()) // 2} self-collision frame "
+                     f"pairs checked")
+    import_summary(model, imported.geometries, args.out, args.json, extra, lines,
+                   f" ({len(missing)} mesh files not found)" if missing else "")
     return 0
 
 

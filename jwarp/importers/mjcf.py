@@ -44,7 +44,8 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.importers.urdf import EXACT, CollisionGeometry, UrdfImport, align_z, dh_of
+from jwarp.importers.urdf import (EXACT, CollisionGeometry, UrdfImport, align_z,
+                                 check_import_options, dh_of)
 
 #: MuJoCo's joint and geom type numbers (mjtJoint, mjtGeom)
 JOINT_TYPES = {0: "free", 1: "ball", 2: "slide", 3: "hinge"}
@@ -77,17 +78,7 @@ class MjcfOptions:
     name: str | None = None
 
     def validate(self) -> None:
-        if self.end_effectors is not None:
-            if not isinstance(self.end_effectors, Mapping):
-                raise TypeError("end_effectors: expected a mapping {alias: body name}")
-            for k, v in self.end_effectors.items():
-                if not isinstance(k, str) or not k or not isinstance(v, str) or not v:
-                    raise TypeError(f"end_effectors: expected non-empty names, got {k!r}: {v!r}")
-        c = self.continuous_limit
-        if isinstance(c, bool) or not isinstance(c, (int, float)) or not (0 < c < math.inf):
-            raise ValueError(f"continuous_limit: expected a finite number > 0 [rad], got {c!r}")
-        if self.name is not None and (not isinstance(self.name, str) or not self.name):
-            raise TypeError("name: expected a non-empty string")
+        check_import_options(self, "body")
 
 
 def import_mujoco() -> Any:

@@ -33,6 +33,15 @@ class UrdfRobot:
         return [g for g in self.geometries if g.link == link]
 
 
+def _imported(path: str | os.PathLike, imp: Any) -> UrdfRobot:
+    """The validated model of an import's document, with its geometry and source."""
+    try:
+        model = RobotModel.from_dict(imp.document)
+    except RobotModelError as e:
+        raise RobotModelError(f"{os.fspath(path)}: imported robot is invalid: {e}") from None
+    return UrdfRobot(model=model, geometries=imp.geometries, source=imp)
+
+
 def load_urdf(path: str | os.PathLike, *, end_effectors: Mapping[str, str] | None = None,
               package_dirs: Sequence[str | os.PathLike] = (), **options: Any) -> UrdfRobot:
     """Import a URDF file. ``end_effectors``, ``package_dirs`` and ``options`` are the fields
@@ -43,11 +52,7 @@ def load_urdf(path: str | os.PathLike, *, end_effectors: Mapping[str, str] | Non
     except TypeError as e:
         raise TypeError(f"load_urdf: {e}") from None
     imp = read_urdf(path, opt)
-    try:
-        model = RobotModel.from_dict(imp.document)
-    except RobotModelError as e:
-        raise RobotModelError(f"{os.fspath(path)}: imported robot is invalid: {e}") from None
-    return UrdfRobot(model=model, geometries=imp.geometries, source=imp)
+    return _imported(path, imp)
 
 
 def load_mjcf(path: str | os.PathLike, *, end_effectors: Mapping[str, str] | None = None,
@@ -64,11 +69,7 @@ def load_mjcf(path: str | os.PathLike, *, end_effectors: Mapping[str, str] | Non
     except TypeError as e:
         raise TypeError(f"load_mjcf: {e}") from None
     imp = read_mjcf(path, opt)
-    try:
-        model = RobotModel.from_dict(imp.document)
-    except RobotModelError as e:
-        raise RobotModelError(f"{os.fspath(path)}: imported robot is invalid: {e}") from None
-    return UrdfRobot(model=model, geometries=imp.geometries, source=imp)
+    return _imported(path, imp)
 
 
 def example_robot_urdf(relative: str) -> str:

@@ -80,12 +80,7 @@ class UrdfOptions:
     name: str | None = None
 
     def validate(self) -> None:
-        if self.end_effectors is not None:
-            if not isinstance(self.end_effectors, Mapping):
-                raise TypeError("end_effectors: expected a mapping {alias: link name}")
-            for k, v in self.end_effectors.items():
-                if not isinstance(k, str) or not k or not isinstance(v, str) or not v:
-                    raise TypeError(f"end_effectors: expected non-empty names, got {k!r}: {v!r}")
+        check_import_options(self, "link")
         if isinstance(self.package_dirs, (str, os.PathLike)):
             self.package_dirs = [self.package_dirs]
         for d in self.package_dirs:
@@ -93,11 +88,24 @@ class UrdfOptions:
                 raise TypeError(f"package_dirs: expected folder paths, got {type(d).__name__}")
             if not os.path.isdir(d):
                 raise ValueError(f"package_dirs: not a folder: '{os.fspath(d)}'")
-        c = self.continuous_limit
-        if isinstance(c, bool) or not isinstance(c, (int, float)) or not (0 < c < math.inf):
-            raise ValueError(f"continuous_limit: expected a finite number > 0 [rad], got {c!r}")
-        if self.name is not None and (not isinstance(self.name, str) or not self.name):
-            raise TypeError("name: expected a non-empty string")
+
+
+def check_import_options(options: Any, element: str) -> None:
+    """Check the fields every importer's options share: ``end_effectors`` ({alias:
+    ``element`` name} or None), ``continuous_limit`` (> 0 [rad]) and ``name`` (None or a
+    non-empty string); TypeError/ValueError naming the field."""
+    eff = options.end_effectors
+    if eff is not None:
+        if not isinstance(eff, Mapping):
+            raise TypeError(f"end_effectors: expected a mapping {{alias: {element} name}}")
+        for k, v in eff.items():
+            if not isinstance(k, str) or not k or not isinstance(v, str) or not v:
+                raise TypeError(f"end_effectors: expected non-empty names, got {k!r}: {v!r}")
+    c = options.continuous_limit
+    if isinstance(c, bool) or not isinstance(c, (int, float)) or not (0 < c < math.inf):
+        raise ValueError(f"continuous_limit: expected a finite number > 0 [rad], got {c!r}")
+    if options.name is not None and (not isinstance(options.name, str) or not options.name):
+        raise TypeError("name: expected a non-empty string")
 
 
 @dataclass
