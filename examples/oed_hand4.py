@@ -44,6 +44,8 @@ import warnings
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from calib_common import Check, report_checks
+
 import jwarp
 from jwarp.solvers.calibration import calibrate, perturb_robot
 from jwarp.solvers.calibration.campaign import uniform_configurations
@@ -210,14 +212,7 @@ def main(argv: list[str] | None = None) -> int:
             checks.append((f"N = {n}: {m} mean task error {v:.3f} mm < random {r:.3f} mm", v < r))
         checks.append((f"N = {n}: detmax criterion {crit['detmax', n]:.2f} >= greedy "
                        f"{crit['greedy', n]:.2f}", crit["detmax", n] >= crit["greedy", n] - 1e-9))
-    print("\nacceptance")
-    for text, ok in checks:
-        print(f"check: {text}  {'PASS' if ok else 'FAIL'}")
-    failed = sum(not ok for _, ok in checks)
-    print(f"checks: {len(checks) - failed} of {len(checks)} passed"
-          + (f"; {failed} FAILED, exit status 1" if failed else ""))
-    print(f"\ntotal {time.perf_counter() - t0:.1f} s")
-    return 1 if failed else 0
+    return report_checks([Check(text, ok) for text, ok in checks], t0)
 
 
 if __name__ == "__main__":

@@ -45,6 +45,8 @@ import time
 
 import numpy as np
 
+from calib_common import Check, report_checks
+
 import jwarp
 from jwarp.model import RobotModel
 from jwarp.solvers.calibration.campaign import uniform_configurations
@@ -233,14 +235,7 @@ def main(argv: list[str] | None = None) -> int:
                    "contact = task - 1 and eq. 2.24 fails by one direction",
                    cf["res"].actual.n_identifiable == cf["res"].task.n_identifiable - 1
                    and len(cf["res"].breaking) == 1))
-    print("\nacceptance")
-    for text, ok in checks:
-        print(f"check: {text}  {'PASS' if ok else 'FAIL'}")
-    failed = sum(not ok for _, ok in checks)
-    print(f"checks: {len(checks) - failed} of {len(checks)} passed"
-          + (f"; {failed} FAILED, exit status 1" if failed else ""))
-    print(f"\ntotal {time.perf_counter() - t0:.1f} s")
-    return 1 if failed else 0
+    return report_checks([Check(text, ok) for text, ok in checks], t0)
 
 
 if __name__ == "__main__":
