@@ -217,6 +217,8 @@ def load_mesh(spec: Any, where: str, base_dir: Path | None = None) -> Any:
     ``file://``; optional ``scale``: a number or 3)."""
     import trimesh
 
+    from jwarp.importers.spheres import load_mesh as load_mesh_file
+
     if not isinstance(spec, dict):
         raise ValueError(f"{where}: expected a mapping (vertices/triangles or resource)")
     src = spec.get("resource", spec.get("file"))
@@ -230,15 +232,15 @@ def load_mesh(spec: Any, where: str, base_dir: Path | None = None) -> Any:
             path = base_dir / path
         if not path.is_file():
             raise ValueError(f"{where}: mesh file '{path}' does not exist")
-        try:
-            mesh = trimesh.load(path, force="mesh")
-        except Exception as e:  # trimesh raises many types on bad files
-            raise ValueError(f"{where}: cannot read mesh file '{path}': {e}") from None
+        scale = None
         if "scale" in spec:
             s = spec["scale"]
-            s = finite_vector([s] * 3 if isinstance(s, (int, float)) else s, 3, f"{where} scale")
-            mesh.apply_scale(s) if np.allclose(s, s[0]) else mesh.apply_transform(np.diag([*s, 1.0]))
-        return mesh
+            scale = finite_vector([s] * 3 if isinstance(s, (int, float)) else s, 3,
+                                  f"{where} scale")
+        try:
+            return load_mesh_file(path, scale)
+        except ValueError as e:
+            raise ValueError(f"{where}: {e}") from None
     verts = spec.get("vertices")
     tris = spec.get("triangles")
     if verts is None or tris is None:
