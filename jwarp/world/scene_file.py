@@ -49,7 +49,7 @@ from jwarp.world.moveit import (goal_joint_values, load_mesh, moveit_frames, mov
                                 parse_pose, start_joint_values)
 from jwarp.world.primitives import (N_DIMS, Shape, finite_vector, pose_matrix,
                                     quaternion_matrix, rpy_matrix, signed_distance)
-from jwarp.world.sdf import World, world_from_mesh
+from jwarp.world.sdf import World, check_grid_cells, world_from_mesh
 
 __all__ = ["DEFAULT_PAD", "DEFAULT_VOXEL", "FORMAT", "TABLE_SHELF_GOAL", "TABLE_SHELF_START",
            "Scene", "SceneOptions", "load_scene",
@@ -299,12 +299,32 @@ def robot_frames(model: Any) -> dict[str, np.ndarray]:
 
 
 # ------------------------------------------------------------------ the grid
+def _grid_cells(span: np.ndarray, h: float, source: str) -> np.ndarray:
+    """(3,) int64 cells per axis covering ``span`` (3,) [m] at voxel ``h`` [m] (>= 2);
+    ValueError naming voxel_size and the cell count if there are more than 2**31 cells
+    or they need more than the available memory (:data:`BYTES_PER_CELL` each)."""
+    from jwarp.memory import available_memory, format_bytes
+
+    with np.errstate(over="ignore", invalid="ignore"):
+        nf = np.maximum(np.ceil(span / h - 1e-9) + 1, 2)
+    what = f"voxel_size: {h:g} m over the {' x '.join(f'{v:.4g}' for v in span)} m extent of " \
+           f"scene {source}"
+    hint = "raise voxel_size (--voxel) or shrink the extent"
+    check_grid_cells(nf, what, hint)
+    need = float(np.prod(nf)) * BYTES_PER_CELL
+    have = available_memory()
+    if have is not None and need > have:
+        raise ValueError(f"{what} needs a grid of {' x '.join(f'{v:.0f}' for v in nf)} = "
+                         f"{np.prod(nf):.4g} cells, about {format_bytes(need)} of memory, more "
+                         f"than the {format_bytes(have)} available; {hint}")
+    return nf.astype(np.int64)
+
+
 def scene_world(scene: Scene, options: SceneOptions | None = None) -> World:
     """The 3D :class:`World` of ``scene``: at every cell centre the minimum over the shapes
     of their exact signed distances (module docstring). ``meta`` records the source, the
-    object ids and the grid. MemoryError (before any allocation) if the grid cannot fit."""
-    from jwarp.memory import check_memory
-
+    object ids and the grid. ValueError naming ``voxel_size`` (before any allocation) if
+    the grid would have more than 2**31 cells or not fit in the available memory."""
     opts = options or SceneOptions()
     opts.validate()
     if not isinstance(scene, Scene):
@@ -326,11 +346,7 @@ def scene_world(scene: Scene, options: SceneOptions | None = None) -> World:
     else:
         lim = np.asarray(limits, dtype=np.float64)
         lo, span = lim[:, 0], lim[:, 1] - lim[:, 0]
-    n = np.ceil(span / h - 1e-9).astype(np.int64) + 1
-    n = np.maximum(n, 2)
-    check_memory(float(np.prod(n.astype(float))) * BYTES_PER_CELL,
-                 f"scene: a {' x '.join(map(str, n))} grid of voxel {h:g} m",
-                 "raise the voxel size or shrink the extent")
+    n = _grid_cells(span, h, scene.source)
     lim = np.stack([lo, lo + (n - 1) * h], axis=1)
     shape = tuple(int(v) for v in n)
     sdf = np.full(shape, np.inf)

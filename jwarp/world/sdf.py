@@ -52,7 +52,7 @@ from jwarp.core.arrays import finite_as, init_warp, real_array, resolve_device
 from jwarp.core.device import scalar_type
 from jwarp.kernels import collision as ck
 
-__all__ = ["FORMAT", "VERSION", "World", "grid_geometry", "load_world", "save_world", "sdf_query",
+__all__ = ["FORMAT", "MAX_GRID_CELLS", "VERSION", "World", "check_grid_cells", "grid_geometry", "load_world", "save_world", "sdf_query",
            "world_from_occupancy", "world_from_mesh",
            "world_from_points"]
 
@@ -72,13 +72,40 @@ class World:
         meta: free-form description (generator, seed, ...), saved with the world.
     """
 
-    sdf: np.ndarray
-    limits: np.ndarray
-    voxel_size: float
+    sdf: np.ndarray | None
+    limits: np.ndarray | None = None
+    voxel_size: float | None = None
     occupancy: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    shapes: Any = None
+    grid_error: float = 0.0
 
     def __post_init__(self) -> None:
+        if self.shapes is not None:
+            from jwarp.world.shapes import ShapeSet
+
+            if not isinstance(self.shapes, ShapeSet):
+                raise TypeError(f"shapes: expected a jwarp.world.shapes.ShapeSet, got "
+                                f"{type(self.shapes).__name__}")
+        try:
+            ge = float(self.grid_error)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"grid_error: expected a number [m], got {self.grid_error!r}") from e
+        if not (np.isfinite(ge) and ge >= 0):
+            raise ValueError(f"grid_error: expected a finite number >= 0 [m], got {ge!r}")
+        self.grid_error = ge
+        if self.sdf is None:  # exact objects only
+            from jwarp.world.shapes import ShapeSet
+
+            if self.shapes is None:
+                self.shapes = ShapeSet()
+            if self.limits is not None or self.voxel_size is not None or \
+                    self.occupancy is not None:
+                raise ValueError("sdf: a world without a grid takes no limits, voxel_size or "
+                                 "occupancy")
+            if not isinstance(self.meta, dict):
+                raise TypeError(f"meta: expected a dict, got {type(self.meta).__name__}")
+            return
         sdf = np.asarray(self.sdf)
         if sdf.dtype not in (np.float32, np.float64):
             if not np.issubdtype(sdf.dtype, np.number) or np.issubdtype(sdf.dtype, np.complexfloating):
@@ -130,13 +157,74 @@ class World:
             raise TypeError(f"meta: expected a dict, got {type(self.meta).__name__}")
 
     # ------------------------------------------------------------------ sizes
+    @classmethod
+    def of_shapes(cls, shapes: Any = None, meta: dict | None = None) -> "World":
+        """A 3D world of exact objects only (a :class:`jwarp.world.shapes.ShapeSet`; None:
+        empty, fill it with :meth:`add`)."""
+        return cls(None, shapes=shapes, meta=dict(meta or {}))
+
+    @property
+    def has_grid(self) -> bool:
+        """Whether the world holds a signed distance grid."""
+        return self.sdf is not None
+
+    @property
+    def resolution(self) -> float:
+        """The length [m] below which the world's distances are not resolved: the voxel
+        size of a grid, 0.02 m for exact objects only (the planner's default smoothing
+        width and its initial substep sizing use it)."""
+        return float(self.voxel_size) if self.sdf is not None else 0.02
+
+    def add(self, id: str, kind: str, dims: Any = (), pose: Any = None, *,
+            mesh: Any = None) -> int:
+        """Add an exact object (:meth:`jwarp.world.shapes.ShapeSet.add`)."""
+        self._require_3d("add")
+        if self.shapes is None:
+            from jwarp.world.shapes import ShapeSet
+
+            self.shapes = ShapeSet()
+        return self.shapes.add(id, kind, dims, pose, mesh=mesh)
+
+    def remove(self, id: str) -> None:
+        """Remove exact object ``id``."""
+        if self.shapes is None:
+            raise KeyError(f"object '{id}': this world has no objects")
+        self.shapes.remove(id)
+
+    def move(self, ids: Any, poses: Any) -> None:
+        """Move exact objects in place (:meth:`jwarp.world.shapes.ShapeSet.move`)."""
+        if self.shapes is None:
+            raise KeyError(f"objects {ids!r}: this world has no objects")
+        self.shapes.move(ids, poses)
+
+    @property
+    def object_ids(self) -> list[str]:
+        """Ids of the exact objects (index order of the kernels' object numbers)."""
+        return [] if self.shapes is None else self.shapes.ids
+
+    def object_name(self, k: int) -> str:
+        """The name of what a kernel reported as object ``k`` (-2: the grid)."""
+        if k == -2:
+            return "grid"
+        ids = self.object_ids
+        return ids[k] if 0 <= k < len(ids) else "none"
+
+    def _require_3d(self, what: str) -> None:
+        if self.sdf is not None and self.sdf.ndim != 3:
+            raise ValueError(f"{what}: exact objects need a 3D world, this grid is 2D")
+
+    def _require_grid(self, what: str) -> None:
+        if self.sdf is None:
+            raise ValueError(f"{what}: this world has no grid (exact objects only)")
+
     @property
     def dim(self) -> int:
         """2 or 3."""
-        return self.sdf.ndim
+        return 3 if self.sdf is None else self.sdf.ndim
 
     @property
     def shape(self) -> tuple[int, ...]:
+        self._require_grid("shape")
         return tuple(self.sdf.shape)
 
     @property
@@ -155,9 +243,13 @@ class World:
         return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
 
     def astype(self, dtype: Any) -> "World":
-        """The same world with the SDF stored as ``dtype`` (float32 or float64)."""
+        """The same world with the SDF stored as ``dtype`` (float32 or float64); exact
+        objects are shared."""
+        if self.sdf is None:
+            return World(None, meta=dict(self.meta), shapes=self.shapes)
         return World(self.sdf.astype(dtype), self.limits.copy(), self.voxel_size,
-                     None if self.occupancy is None else self.occupancy.copy(), dict(self.meta))
+                     None if self.occupancy is None else self.occupancy.copy(), dict(self.meta),
+                     self.shapes, self.grid_error)
 
     # ----------------------------------------------------------------- queries
     def distance(self, points: Any, *, grad: bool = False, device: Any = "cpu") -> Any:
@@ -168,6 +260,10 @@ class World:
     # --------------------------------------------------------------------- I/O
     def save(self, path: Any) -> None:
         """Write the world as ``.npz`` atomically (format: module docstring)."""
+        self._require_grid("save")
+        if self.shapes is not None and len(self.shapes):
+            raise ValueError("save: a world file holds a grid only; save the exact objects "
+                             "as a scene file")
         save_world(self, path)
 
     @classmethod
@@ -176,11 +272,32 @@ class World:
         return load_world(path)
 
     def __repr__(self) -> str:
+        if self.sdf is None:
+            return f"World(objects={self.object_ids}, meta={self.meta})"
         return (f"World(dim={self.dim}, shape={self.shape}, voxel_size={self.voxel_size:g} m, "
                 f"limits={np.round(self.limits, 4).tolist()}, meta={self.meta})")
 
 
 # ====================================================================== geometry
+#: the most cells a grid may have (index arithmetic of the kernels is 32-bit)
+MAX_GRID_CELLS = 2 ** 31
+
+
+def check_grid_cells(counts: Any, argument: str, hint: str = "") -> None:
+    """ValueError naming ``argument`` (e.g. ``"voxel_size: 1e-12 m"``) if a grid of
+    ``counts`` cells per axis (floats: may be huge or inf) has more than
+    :data:`MAX_GRID_CELLS` cells."""
+    n = np.asarray(counts, dtype=np.float64)
+    with np.errstate(over="ignore"):
+        total = float(np.prod(n))
+    if np.all(np.isfinite(n)) and total <= MAX_GRID_CELLS:
+        return
+    sizes = " x ".join(f"{v:.6g}" for v in n)
+    raise ValueError(f"{argument} needs a grid of {sizes} = {total:.4g} cells, more than "
+                     f"the 2**31 = {MAX_GRID_CELLS} cells a grid may have"
+                     + (f"; {hint}" if hint else ""))
+
+
 def grid_geometry(dim: int, *, shape: Sequence[int] | None = None, limits: Any = None,
                   voxel_size: float | None = None) -> tuple[tuple[int, ...], np.ndarray, float]:
     """Complete a grid from any of ``shape``, ``limits`` (dim, 2) [m] (first/last cell
@@ -204,6 +321,7 @@ def grid_geometry(dim: int, *, shape: Sequence[int] | None = None, limits: Any =
             raise ValueError(f"shape: expected {dim} grid sizes, got {s}")
         if min(s) < 2:
             raise ValueError(f"shape: every grid size must be >= 2, got {s}")
+        check_grid_cells(s, "shape")
     else:
         s = None
     h = None
@@ -235,7 +353,11 @@ def grid_geometry(dim: int, *, shape: Sequence[int] | None = None, limits: Any =
             return s, lim, float(hs[0])
         if h is None:
             h = float(span.max()) / (DEFAULT_CELLS - 1)
-        n = np.floor(span / h + 1e-6).astype(int) + 1
+        with np.errstate(over="ignore"):
+            nf = np.floor(span / h + 1e-6) + 1
+        check_grid_cells(nf, f"voxel_size: {h:g} m over limits {lim.tolist()}",
+                         "raise voxel_size or shrink the limits")
+        n = nf.astype(np.int64)
         if np.any(n < 2):
             raise ValueError(f"voxel_size: {h} m leaves fewer than 2 cells on an axis of "
                              f"limits {lim.tolist()}")
