@@ -389,6 +389,13 @@ class PathVerifier:
         pin.framesForwardKinematics(self.model, self.data, self.pin_q(q))
         return np.array([f(self.data) for f in fns])
 
+    def sphere_centres(self, q: Any) -> np.ndarray:
+        """(n_spheres, 3) world centres of the robot spheres at one configuration."""
+        pin.framesForwardKinematics(self.model, self.data, self.pin_q(q))
+        out = [fn(self.data) for fn, *_ in self._spheres]
+        return np.array([T[:3, :3] @ c + T[:3, 3] for T, (_, c, *_) in zip(out, self._spheres)]
+                        ).reshape(-1, 3)
+
     # -------------------------------------------------------------- sampling
     def samples(self, path: Any, max_step_deg: float = 0.5, max_step_m: float = 0.002
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
