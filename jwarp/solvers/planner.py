@@ -92,6 +92,19 @@ class PlanResult:
     (B, n_starts); all_paths (B, n_starts, W, n_dof) final paths of every start, read from
     the device on first use (the best paths are chosen on the device, so a caller that
     needs only ``path`` never copies the others to the host).
+
+    Budgets and fallback (:attr:`PlanOptions.time_limit`, ``stop_when_solved``,
+    ``fallback``): ``stop_reason`` why the call ended, one of :data:`STOP_REASONS`:
+    "solved" (every problem has a feasible path: ``stop_when_solved``, or the fallback
+    solved the rest), "all_done" (every start finished on its own: feasible with
+    ``early_stop``, converged with ``converge``), "time_limit" (the time ran out first)
+    or "iterations" (the iterations, and the fallback's samples, ran out first);
+    ``stage`` (B,) which stage gave the path: "optimizer" (the multi-starts),
+    "fallback" (the gradient optimisation seeded with the RRT-Connect path,
+    :mod:`jwarp.solvers.rrt`) or "none" (no feasible path). A fallback path is none of
+    the multi-starts: its ``start_index`` is -1, its ``iterations`` those of the seeded
+    optimisation; ``n_feasible``, ``all_*`` stay the multi-starts'. ``timings`` [s]:
+    "optimizer" (the multi-starts) and, where it ran, "rrt" and "fallback_optimizer".
     """
 
     path: np.ndarray
@@ -109,6 +122,12 @@ class PlanResult:
     #: every start's final path: a numpy (B, n_starts, W, n_dof) array, or a Warp array
     #: (B * n_starts, W, n_dof) on the planner's device (its own copy) until first read
     paths_source: Any = field(default=None, repr=False)
+    #: why the call ended (:data:`STOP_REASONS`)
+    stop_reason: str = "iterations"
+    #: (B,) "optimizer", "fallback" or "none" (None: filled by the planner)
+    stage: Any = None
+    #: seconds per stage: "optimizer", "rrt", "fallback_optimizer"
+    timings: dict = field(default_factory=dict, repr=False)
 
     @property
     def all_paths(self) -> np.ndarray:
@@ -130,7 +149,9 @@ class PlanResult:
                 "start_index": int(self.start_index[index]),
                 "n_feasible_starts": int(self.n_feasible[index]),
                 "n_substeps": int(self.n_substeps),
-                "wall_time_s": float(self.wall_time)}
+                "wall_time_s": float(self.wall_time),
+                "stop_reason": str(self.stop_reason),
+                "stage": None if self.stage is None else str(self.stage[index])}
 
 
 # ====================================================================== helpers
@@ -538,6 +559,12 @@ class PathObjective:
 # ====================================================================== options
 #: the kinds of multi-starts drawn when no seeds are given (:attr:`PlanOptions.initial`)
 INITIAL_KINDS = ("straight", "random", "mixed")
+#: why a plan call ended (:attr:`PlanResult.stop_reason`)
+STOP_REASONS = ("solved", "time_limit", "iterations", "all_done")
+#: the fallbacks of :attr:`PlanOptions.fallback` (besides None)
+FALLBACKS = ("rrt",)
+#: the stages of :attr:`PlanResult.stage`
+STAGES = ("optimizer", "fallback", "none")
 
 
 def _check_int(v: Any, name: str, lo: int) -> None:
@@ -571,7 +598,20 @@ class PlanOptions:
             (a path of zero collision cost is then feasible); None: max(voxel, 1 cm, margin).
         margin: required clearance [m] (>= 0) of every sphere at every substep.
         early_stop: freeze each path once it is feasible.
-        stop_when_solved: end as soon as every problem has one feasible path.
+        stop_when_solved: end as soon as every problem has one feasible path (default);
+            False optimises every start until it is feasible (or converged, or out of
+            iterations): for labels (``converge``), per-start statistics.
+        time_limit: seconds for the whole call (None: no limit), > 0: checked before
+            every iteration (wall clock since the call started); when it is reached the
+            current paths get their exact check and the call ends (the endpoint checks,
+            one evaluation and that check always run, so a call can overrun a tiny limit).
+        fallback: "rrt" (default): problems the multi-starts have not solved after
+            their iterations, or after ``fallback_after`` of ``time_limit``, get an
+            RRT-Connect path in joint space (:mod:`jwarp.solvers.rrt`) as the seed of
+            one more gradient optimisation (exact check as always); None: no fallback.
+        fallback_after: the share of ``time_limit`` the multi-starts may use before the
+            fallback, in (0, 1) (without a time limit: after the iterations).
+        rrt: :class:`jwarp.solvers.rrt.RRTOptions` of the fallback (None: its defaults).
         check_all_every: exact feasibility check of every unfinished path every this many
             iterations (>= 1; paths whose largest substep cost is below ``w c(margin)`` are
             checked every iteration) and after the last one.
@@ -604,7 +644,7 @@ class PlanOptions:
     eps: float | None = None
     margin: float = 0.0
     early_stop: bool = True
-    stop_when_solved: bool = False
+    stop_when_solved: bool = True
     check_all_every: int = 10
     free_via: bool = True
     kappa: Any = None
@@ -613,6 +653,10 @@ class PlanOptions:
     callback: Callable[[int, np.ndarray], None] | None = None
     converge: bool = False
     converge_tol: float = 1e-3
+    time_limit: float | None = None
+    fallback: str | None = "rrt"
+    fallback_after: float = 0.5
+    rrt: Any = None
 
     def validate(self, dtype: Any = np.float32) -> None:
         """ValueError/TypeError naming the first bad field; numbers must be finite in the
@@ -661,6 +705,34 @@ class PlanOptions:
         if self.callback is not None and not callable(self.callback):
             raise TypeError(f"callback: expected a callable (iteration, paths), got "
                             f"{type(self.callback).__name__}")
+        _check_budget(self)
+
+
+def _check_budget(o: "PlanOptions") -> None:
+    """:meth:`PlanOptions.validate` of ``time_limit``, ``fallback``, ``fallback_after``
+    and ``rrt``."""
+    if o.time_limit is not None:
+        if isinstance(o.time_limit, (bool, np.bool_)):
+            raise TypeError(f"time_limit: expected a number of seconds > 0 or None, got "
+                            f"{o.time_limit!r}")
+        t = real_number(o.time_limit, "time_limit")
+        if not (math.isfinite(t) and t > 0):
+            raise ValueError(f"time_limit: expected a number > 0 [s] or None, got "
+                             f"{o.time_limit!r}")
+    if o.fallback is not None and (not isinstance(o.fallback, str)
+                                   or o.fallback not in FALLBACKS):
+        raise ValueError(f"fallback: expected 'rrt' or None, got {o.fallback!r}")
+    f = real_number(o.fallback_after, "fallback_after")
+    if not 0.0 < f < 1.0:
+        raise ValueError(f"fallback_after: expected a number in (0, 1), got "
+                         f"{o.fallback_after!r}")
+    if o.rrt is not None:
+        from jwarp.solvers.rrt import RRTOptions
+
+        if not isinstance(o.rrt, RRTOptions):
+            raise TypeError(f"rrt: expected a jwarp.solvers.rrt.RRTOptions, got "
+                            f"{type(o.rrt).__name__}")
+        o.rrt.validate()
 
 
 @dataclass(frozen=True)
@@ -835,9 +907,17 @@ class Planner:
         return None if self._buffers is None else self._buffers.objective
 
     # ------------------------------------------------------------------ steps
-    def _plan(self, start: Any, goal: Any, seeds: Any, seeds_name: str) -> PlanResult:
-        t0 = time.perf_counter()
+    def _plan(self, start: Any, goal: Any, seeds: Any, seeds_name: str,
+              t_start: float | None = None) -> PlanResult:
+        """The multi-start optimisation, then (``options.fallback``) the fallback for the
+        problems it has not solved; ``t_start``: the ``time.perf_counter()`` at which the
+        call started (the clock of ``time_limit``; None: now)."""
+        t0 = time.perf_counter() if t_start is None else t_start
         model, o, dev = self.robot, self.options, self.device
+        deadline = None if o.time_limit is None else t0 + float(o.time_limit)
+        opt_deadline = deadline
+        if deadline is not None and o.fallback is not None:
+            opt_deadline = t0 + float(o.fallback_after) * float(o.time_limit)
         q0 = self._problems(start, "start")
         q1 = self._problems(goal, "goal")
         finite_as(q0, self.npdt, "start")  # also finite in the optimisation's dtype
@@ -873,12 +953,16 @@ class Planner:
         feasible = np.zeros(P, bool)
         iters = np.full(P, o.iterations, np.int64)
         kept_len = np.full(P, np.inf)  # converge: U_l of the last kept feasible iterate
+        reason = "iterations"
         for it in range(o.iterations + 1):
-            obj.evaluate(grad=it < o.iterations)
+            # the time limit: checked before the evaluation; the current paths still get
+            # their exact check below
+            out_of_time = opt_deadline is not None and time.perf_counter() >= opt_deadline
+            obj.evaluate(grad=it < o.iterations and not out_of_time)
             if o.callback is not None:
                 o.callback(it, obj.paths.numpy())
             smax = obj.sub_max.numpy()
-            last = it == o.iterations or (it + 1) % o.check_all_every == 0
+            last = it == o.iterations or out_of_time or (it + 1) % o.check_all_every == 0
             if o.converge:
                 self._converge_check(buf, it, last, smax < screen, done, feasible, iters,
                                      kept_len)
@@ -894,9 +978,17 @@ class Planner:
                             self._keep(buf, newly)
                             done[newly] = True
                 solved = feasible
-            if done.all() or (o.stop_when_solved and solved.reshape(B, n_starts).any(1).all()):
+            if o.stop_when_solved and solved.reshape(B, n_starts).any(1).all():
+                reason = "solved"
+                break
+            if done.all():
+                reason = "all_done"
                 break
             if it == o.iterations:
+                break
+            if out_of_time:
+                reason = "time_limit"
+                iters[~feasible] = it
                 break
             if o.early_stop:
                 obj.set_active(~done)
@@ -905,7 +997,14 @@ class Planner:
         rest = np.nonzero(~done & ~feasible)[0] if o.converge else np.nonzero(~done)[0]
         if len(rest):
             self._keep(buf, rest)
-        return self._result(buf, feasible, iters, B, n_starts, time.perf_counter() - t0)
+        res = self._result(buf, feasible, iters, B, n_starts, time.perf_counter() - t0)
+        res.stop_reason = reason
+        res.stage = np.where(res.feasible, "optimizer", "none")
+        res.timings = {"optimizer": time.perf_counter() - t0}
+        if o.fallback is not None and not res.feasible.all():
+            _fallback(self, res, q0, q1, t0, deadline)
+        res.wall_time = time.perf_counter() - t0
+        return res
 
     def _converge_check(self, buf: _Buffers, it: int, last: bool, screened: np.ndarray,
                         done: np.ndarray, feasible: np.ndarray, iters: np.ndarray,
@@ -1030,15 +1129,78 @@ class Planner:
                           all_iterations=it, paths_source=wp.clone(buf.final))
 
 
+def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarray, t0: float,
+              deadline: float | None) -> None:
+    """:attr:`PlanOptions.fallback` for the problems of ``res`` without a feasible path:
+    RRT-Connect (:func:`jwarp.solvers.rrt.rrt_connect`, with the planner's margin, kappa
+    and device) for each in turn, each path found resampled to the W waypoints
+    (:func:`jwarp.solvers.rrt.resample_path`) as the one seed of a gradient optimisation
+    of the same options (no fallback, ``stop_when_solved``) of all of them at once, its
+    exact check as always. Its feasible paths replace those problems' results in ``res``
+    (stage "fallback", ``start_index`` -1); ``stop_reason`` and ``timings`` updated. With a
+    ``deadline`` the trees get 80 % of the time left, the optimisation the rest."""
+    from jwarp.solvers.rrt import RRTOptions, resample_path, rrt_connect
+
+    o = planner.options
+    t_rrt = time.perf_counter()
+    ro = o.rrt if o.rrt is not None else RRTOptions()
+    rng = ro.seed if isinstance(ro.seed, np.random.Generator) else np.random.default_rng(ro.seed)
+    ropt = replace(ro, seed=rng)
+    rrt_stop = None if deadline is None else t_rrt + 0.8 * max(0.0, deadline - t_rrt)
+    W = res.path.shape[1]
+    found, seeds = [], []
+    timed_out = False
+    for b in np.nonzero(~res.feasible)[0]:
+        if rrt_stop is not None and time.perf_counter() >= rrt_stop:
+            timed_out = True
+            break
+        r = rrt_connect(planner.robot, planner.world, q0[b], q1[b], ropt, margin=o.margin,
+                        kappa=o.kappa, device=planner.device, deadline=rrt_stop)
+        if r.success:
+            found.append(int(b))
+            seeds.append(resample_path(r.path, W))
+        timed_out |= r.stop_reason == "time_limit"
+    res.timings["rrt"] = time.perf_counter() - t_rrt
+    if found:
+        t_opt = time.perf_counter()
+        left = None if deadline is None else max(deadline - t_opt, 1e-6)
+        sub_o = replace(o, n_starts=1, fallback=None, time_limit=left, stop_when_solved=True,
+                        callback=None)
+        sub = Planner(planner.robot, planner.world, len(found), sub_o, device=planner.device,
+                      dtype=planner.npdt)
+        idx = np.array(found)
+        r2 = sub._plan(q0[idx], q1[idx], np.stack(seeds)[:, None], "seeds")
+        timed_out |= r2.stop_reason == "time_limit"
+        ok = r2.feasible
+        b = idx[ok]
+        res.path[b] = r2.path[ok]
+        res.feasible[b] = True
+        res.cost[b] = r2.cost[ok]
+        res.length_cost[b] = r2.length_cost[ok]
+        res.collision_cost[b] = r2.collision_cost[ok]
+        res.iterations[b] = r2.iterations[ok]
+        res.start_index[b] = -1
+        res.stage[b] = "fallback"
+        res.timings["fallback_optimizer"] = time.perf_counter() - t_opt
+    if res.feasible.all():
+        res.stop_reason = "solved"
+    elif deadline is not None and (timed_out or time.perf_counter() >= deadline):
+        res.stop_reason = "time_limit"
+    else:
+        res.stop_reason = "iterations"
+
+
 def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed",
          n_starts: int = 8, n_waypoints: int = 20, n_substeps: int | None = None,
          iterations: int = 100, step: float = 0.01, max_step: float = 0.1,
          weights: PathWeights | None = None, eps: float | None = None, margin: float = 0.0,
-         early_stop: bool = True, stop_when_solved: bool = False, check_all_every: int = 10,
+         early_stop: bool = True, stop_when_solved: bool = True, check_all_every: int = 10,
          free_via: bool = True, kappa: Any = None, lam: float = 0.7, seed: int | None = 0,
          device: Any = "cpu", dtype: Any = np.float32,
          callback: Callable[[int, np.ndarray], None] | None = None,
-         converge: bool = False, converge_tol: float = 1e-3) -> PlanResult:
+         converge: bool = False, converge_tol: float = 1e-3, time_limit: float | None = None,
+         fallback: str | None = "rrt", fallback_after: float = 0.5,
+         rrt: Any = None) -> PlanResult:
     """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path:
     one call of a :class:`Planner` made for it.
 
@@ -1054,7 +1216,11 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
             type (default: CPU, float32).
         n_starts, n_waypoints, n_substeps, iterations, step, max_step, weights, eps,
             margin, early_stop, stop_when_solved, check_all_every, free_via, kappa, lam,
-            seed, callback, converge, converge_tol: the fields of :class:`PlanOptions`.
+            seed, callback, converge, converge_tol, time_limit, fallback, fallback_after,
+            rrt: the fields of :class:`PlanOptions` (``stop_when_solved`` True and
+            ``fallback`` "rrt" by default: pass False / None to optimise every start
+            until it is feasible without a fallback, as before). ``time_limit`` counts
+            from the start of this call.
 
     Returns:
         :class:`PlanResult` (``wall_time``: the whole call).
@@ -1083,9 +1249,11 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
                           early_stop=early_stop, stop_when_solved=stop_when_solved,
                           check_all_every=check_all_every, free_via=free_via, kappa=kappa,
                           lam=lam, seed=seed, callback=callback, converge=converge,
-                          converge_tol=converge_tol)
+                          converge_tol=converge_tol, time_limit=time_limit, fallback=fallback,
+                          fallback_after=fallback_after, rrt=rrt)
     planner = Planner(model, world, len(q0), options, device=device, dtype=dtype)
-    res = planner._plan(q0, q1, None if isinstance(initial, str) else initial, "initial")
+    res = planner._plan(q0, q1, None if isinstance(initial, str) else initial, "initial",
+                        t_start=t0)
     res.wall_time = time.perf_counter() - t0
     return res
 
