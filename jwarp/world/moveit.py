@@ -6,7 +6,7 @@ Read (everything else is ignored: octomaps, attached objects, object colours,
 ``multi_dof_joint_state``, constraint tolerances and weights)::
 
     fixed_frame_transforms:            # optional: more frame ids (child in frame_id)
-      - header: {frame_id: world}
+      - header: {frame_id: world}      # optional (no header or '': world)
         child_frame_id: panda_link0
         transform: {translation: [0, 0, 0], rotation: [0, 0, 0, 1]}
     robot_state:                       # or start_state (a MotionPlanRequest)
@@ -39,10 +39,15 @@ Positions are lists ``[x, y, z]`` or mappings ``{x, y, z}``; orientations quater
 ``shape_msgs/SolidPrimitive``: BOX ``[x, y, z]``, SPHERE ``[radius]``, CYLINDER and CONE
 ``[height, radius]``. An object's ``operation`` may be absent, ``add`` (0) or ``append``
 (2). Every error is a ValueError naming the object id (or the joint names) and the problem.
+Joint values are matched to a robot by :func:`joint_vector`: joints the robot model lacks
+or fixes (a gripper's fingers in a full MoveIt state) are ignored with one warning.
 """
 
 from __future__ import annotations
 
+import math
+import re
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -50,8 +55,8 @@ import numpy as np
 
 from jwarp.world.primitives import Shape, finite_vector, pose_matrix, quaternion_matrix
 
-__all__ = ["PRIMITIVE_TYPES", "collision_objects", "goal_joint_values", "joint_vector",
-           "moveit_frames", "moveit_shapes", "parse_pose", "start_joint_values"]
+__all__ = ["PRIMITIVE_TYPES", "collision_objects", "goal_joint_values", "ignored_joint_names",
+           "joint_vector", "moveit_frames", "moveit_shapes", "parse_pose", "start_joint_values"]
 
 #: shape_msgs/SolidPrimitive type codes -> shape kinds
 PRIMITIVE_TYPES = {1: "box", 2: "sphere", 3: "cylinder", 4: "cone"}
@@ -102,19 +107,29 @@ def collision_objects(data: Any) -> list:
     return objs
 
 
-def moveit_frames(data: dict, frames: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """``frames`` (name -> 4x4 in the world) plus the scene's ``fixed_frame_transforms``
-    (each relative to its header's frame, which must be known or defined before)."""
+def moveit_frames(data: dict, frames: dict[str, np.ndarray],
+                  world_frame: str = "world") -> dict[str, np.ndarray]:
+    """``frames`` (name -> 4x4 in the world) plus the scene's ``fixed_frame_transforms``:
+    each the pose of ``child_frame_id`` in its header's frame (no header or an empty
+    ``frame_id``: ``world_frame``), which must be known or defined before; where only the
+    child is known, the entry defines its header's frame instead."""
     out = dict(frames)
-    for k, t in enumerate(data.get("fixed_frame_transforms") or []):
+    entries = data.get("fixed_frame_transforms") or []
+    if not isinstance(entries, list):
+        raise ValueError("fixed_frame_transforms: expected a list")
+    for k, t in enumerate(entries):
         where = f"fixed_frame_transforms[{k}]"
-        if not isinstance(t, dict) or "child_frame_id" not in t:
+        if not isinstance(t, dict) or not str(t.get("child_frame_id") or "").strip("/ "):
             raise ValueError(f"{where}: expected a mapping with child_frame_id and transform")
-        parent = _frame_id(t, where)
+        parent = _frame_id(t, where) or world_frame
+        child = str(t["child_frame_id"]).strip().lstrip("/")
+        T = parse_pose(t.get("transform"), f"{where} transform")
+        if parent not in out and child in out:
+            out[parent] = out[child] @ np.linalg.inv(T)
+            continue
         if parent not in out:
             raise ValueError(f"{where}: unknown frame_id '{parent}'; known: {', '.join(sorted(out))}")
-        child = str(t["child_frame_id"])
-        T = out[parent] @ parse_pose(t.get("transform"), f"{where} transform")
+        T = out[parent] @ T
         if child in out and not np.allclose(out[child], T, atol=1e-9):
             raise ValueError(f"{where}: frame '{child}' is already defined with another transform")
         out[child] = T
@@ -125,7 +140,7 @@ def _frame_id(obj: dict, where: str) -> str:
     header = obj.get("header") or {}
     if not isinstance(header, dict):
         raise ValueError(f"{where}: header must be a mapping")
-    return str(header.get("frame_id", "") or "").lstrip("/")
+    return str(header.get("frame_id", "") or "").strip().lstrip("/")
 
 
 def moveit_shapes(data: Any, frames: dict[str, np.ndarray], base_dir: Path | None = None,
@@ -282,8 +297,10 @@ def start_joint_values(data: Any) -> dict[str, float] | None:
     if not isinstance(names, list) or len(names) != len(pos):
         raise ValueError(f"robot_state: joint_state has {len(names) if isinstance(names, list) else '?'} "
                          f"names but {len(pos) if hasattr(pos, '__len__') else '?'} positions")
-    vals = finite_vector(pos, len(names), "robot_state: joint_state position")
-    return _unique(names, vals, "robot_state: joint_state")
+    if not names:
+        return None
+    vals = [_number(v, f"robot_state: joint_state position of '{n}'") for n, v in zip(names, pos)]
+    return _unique(names, np.array(vals), "robot_state: joint_state")
 
 
 def goal_joint_values(data: Any) -> dict[str, float] | None:
@@ -307,9 +324,20 @@ def goal_joint_values(data: Any) -> dict[str, float] | None:
         if not isinstance(c, dict) or "joint_name" not in c or "position" not in c:
             raise ValueError(f"joint_constraints[{k}]: expected joint_name and position, got {c!r}")
         names.append(str(c["joint_name"]))
-        vals.append(finite_vector([c["position"]], 1, f"joint_constraints[{k}] "
-                                                       f"('{c['joint_name']}') position")[0])
+        vals.append(_number(c["position"], f"joint_constraints[{k}] ('{c['joint_name']}') "
+                                           f"position"))
     return _unique(names, np.array(vals), "joint_constraints")
+
+
+def _number(value: Any, where: str) -> float:
+    """``value`` as a float (NaN and inf pass: :func:`joint_vector` refuses them only for
+    the joints it uses, so a bad value of an ignored joint does not refuse the file)."""
+    if isinstance(value, (bool, str, bytes)) or value is None:
+        raise ValueError(f"{where}: expected a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: expected a number, got {value!r}") from None
 
 
 def _unique(names: list, vals: np.ndarray, where: str) -> dict[str, float]:
@@ -322,22 +350,71 @@ def _unique(names: list, vals: np.ndarray, where: str) -> dict[str, float]:
     return out
 
 
+#: words of gripper joint names (a MoveIt state of an arm lists its gripper's joints)
+_GRIPPER_WORDS = re.compile(r"finger|gripper|knuckle|jaw|claw|(^|_)hand(_|$)", re.IGNORECASE)
+
+
+def ignored_joint_names(model: Any, names: Any) -> list[str]:
+    """Those of ``names`` that are joints of the robot which ``model`` lacks or fixes, so a
+    MoveIt state or goal may list them and :func:`joint_vector` ignores them (with a
+    warning): names of fixed (uncoupled) DH frames of the model, and names of no frame of
+    the model that share the first ``_``-separated word of one of its joint or frame
+    names or of its name (``panda_finger_joint1`` for a Panda arm without fingers) or name
+    a gripper part (finger, gripper, knuckle, jaw, claw, hand). A static frame's (a
+    link's) name is not a joint name, so it is not ignored."""
+    frames = {f.name: f for f in model.frames}
+    words = {_first_word(n) for n in [*model.joint_names, *frames, model.name]}
+    out = []
+    for n in names:
+        if n in model.joint_names:
+            continue
+        f = frames.get(n)
+        if f is not None:
+            if f.kind == "dh" and not f.coupling:
+                out.append(n)
+        elif _first_word(n) in words or _GRIPPER_WORDS.search(n):
+            out.append(n)
+    return out
+
+
+def _first_word(name: str) -> str:
+    return str(name).lower().split("_", 1)[0]
+
+
 def joint_vector(model: Any, values: dict[str, float], what: str,
                  fallback: np.ndarray | None = None) -> np.ndarray:
-    """(n_dof,) joint values of ``model`` from ``{name: value}``: ValueError naming every
-    unknown joint name (names of coupled (mimic) frames of the model are accepted and
-    ignored: their values follow from the joints they mimic), and every joint of the model that is missing unless ``fallback``
-    (n_dof,) supplies it. ``what`` names the source in errors (e.g. ``"start"``)."""
+    """(n_dof,) joint values of ``model`` from ``{name: value}`` (a MoveIt state or goal).
+
+    * names of coupled (mimic) frames of the model are accepted and ignored (their values
+      follow from the joints they mimic);
+    * names of joints the model lacks or fixes (:func:`ignored_joint_names`, e.g. gripper
+      fingers) are ignored with one warning naming them and their values (whatever the
+      values: NaN or out of any range);
+    * any other unknown name is a ValueError naming it;
+    * every movable joint of the model needs a finite value unless ``fallback`` (n_dof,)
+      supplies it (ValueError naming the missing or non-finite ones).
+
+    ``what`` names the source in errors (e.g. ``"start"``)."""
     names = model.joint_names
     mimic = {f.name for f in model.frames if f.coupling and f.name not in names}
-    unknown = [n for n in values if n not in names and n not in mimic]
+    extra = [n for n in values if n not in names and n not in mimic]
+    ignored = ignored_joint_names(model, extra)
+    unknown = [n for n in extra if n not in ignored]
     if unknown:
         raise ValueError(f"{what}: unknown joint(s) {', '.join(repr(n) for n in unknown)} for "
                          f"robot '{model.name}'; its joints: {', '.join(names)}")
+    if ignored:
+        listed = ", ".join(f"'{n}' = {values[n]:g}" for n in ignored)
+        warnings.warn(f"{what}: ignoring joint(s) {listed}: not movable joints of robot "
+                      f"'{model.name}' (fixed or not in the model)", stacklevel=2)
     missing = [n for n in names if n not in values]
     if missing and fallback is None:
         raise ValueError(f"{what}: no value for joint(s) {', '.join(repr(n) for n in missing)} "
                          f"of robot '{model.name}'")
+    bad = [n for n in names if n in values and not math.isfinite(values[n])]
+    if bad:
+        raise ValueError(f"{what}: joint(s) {', '.join(f'{n!r} = {values[n]}' for n in bad)} "
+                         f"of robot '{model.name}' not finite (NaN or inf)")
     q = np.array([values[n] if n in values else float(fallback[i])
                   for i, n in enumerate(names)], np.float64)
     return q

@@ -64,3 +64,176 @@ def test_scene_world_refuses_grids_beyond_memory(table_shelf, monkeypatch):
                                          r"than the 1.0 MB available"):
         scene_world(table_shelf, SceneOptions(voxel_size=0.02))
     assert 51 * 95 * 66 < MAX_GRID_CELLS
+
+
+# ------------------------------------------------------------------ MoveIt input as tools write it
+def panda_urdf(fingers: str) -> str:
+    """A two-joint 'panda' whose finger joints are prismatic (finger 2 mimics finger 1;
+    axes +-y as in the Panda's URDF), fixed, or absent."""
+    def joint(name, parent, child, jtype="revolute", extra="", axis="0 0 1"):
+        lim = '<limit lower="-2" upper="2" effort="1" velocity="1"/>' if jtype == "revolute" \
+            else extra
+        return (f'<joint name="{name}" type="{jtype}"><parent link="{parent}"/>'
+                f'<child link="{child}"/><origin xyz="0 0 0.1" rpy="0 0 0"/>'
+                f'<axis xyz="{axis}"/>{lim}</joint>')
+
+    links = ["panda_link0", "panda_link1", "panda_link2", "panda_hand"]
+    parts = [joint("panda_joint1", "panda_link0", "panda_link1"),
+             joint("panda_joint2", "panda_link1", "panda_link2"),
+             joint("panda_hand_joint", "panda_link2", "panda_hand", "fixed")]
+    if fingers != "absent":
+        links += ["panda_leftfinger", "panda_rightfinger"]
+        lim = '<limit lower="0" upper="0.04" effort="1" velocity="1"/>'
+        kind = "prismatic" if fingers == "prismatic" else "fixed"
+        parts += [joint("panda_finger_joint1", "panda_hand", "panda_leftfinger", kind, lim,
+                        "0 1 0"),
+                  joint("panda_finger_joint2", "panda_hand", "panda_rightfinger", kind,
+                        lim + ('<mimic joint="panda_finger_joint1"/>'
+                               if kind == "prismatic" else ""), "0 -1 0")]
+    body = "".join(f'<link name="{n}"/>' for n in links) + "".join(parts)
+    return f'<?xml version="1.0"?><robot name="panda">{body}</robot>'
+
+
+@pytest.fixture(scope="module")
+def pandas(tmp_path_factory) -> dict:
+    import jwarp
+
+    folder = tmp_path_factory.mktemp("urdf")
+    out = {}
+    for fingers in ("prismatic", "fixed", "absent"):
+        path = folder / f"panda_{fingers}.urdf"
+        path.write_text(panda_urdf(fingers))
+        out[fingers] = jwarp.RobotModel.from_urdf(path)
+    return out
+
+
+FULL_STATE = {"panda_joint1": 0.1, "panda_joint2": -0.2, "panda_finger_joint1": 0.035,
+              "panda_finger_joint2": 0.035}
+
+
+def write_yaml(path, data) -> str:
+    import yaml
+
+    path.write_text(yaml.safe_dump(data))
+    return str(path)
+
+
+def moveit_state(start: dict | None = None, goal: dict | None = None, **more) -> dict:
+    data = {"world": {"collision_objects": []}, **more}
+    if start is not None:
+        data["robot_state"] = {"joint_state": {"name": list(start),
+                                               "position": list(start.values())}}
+    if goal is not None:
+        data["goal_constraints"] = [{"joint_constraints": [
+            {"joint_name": k, "position": v, "weight": 1.0} for k, v in goal.items()]}]
+    return data
+
+
+@pytest.mark.parametrize("fingers", ["fixed", "absent"])
+def test_finger_joints_the_model_fixes_or_lacks_warn_once(pandas, fingers, tmp_path):
+    from jwarp.world.moveit import joint_vector
+
+    m = pandas[fingers]
+    assert m.joint_names == ["panda_joint1", "panda_joint2"]
+    scene = load_scene(write_yaml(tmp_path / "s.yaml", moveit_state(FULL_STATE)))
+    with pytest.warns(UserWarning) as rec:
+        q = joint_vector(m, scene.start, "start")
+    assert len(rec) == 1
+    msg = str(rec[0].message)
+    assert "start: ignoring joint(s) 'panda_finger_joint1' = 0.035, 'panda_finger_joint2' = " \
+           "0.035" in msg and "robot 'panda'" in msg
+    np.testing.assert_allclose(q, [0.1, -0.2])
+
+
+def test_finger_values_out_of_range_or_nan_only_warn(pandas, tmp_path):
+    from jwarp.world.moveit import joint_vector
+
+    state = {**FULL_STATE, "panda_finger_joint1": 0.3, "panda_finger_joint2": float("nan")}
+    scene = load_scene(write_yaml(tmp_path / "s.yaml", moveit_state(state, goal=state)))
+    for what, values in (("start", scene.start), ("goal", scene.goal)):
+        with pytest.warns(UserWarning, match=rf"{what}: ignoring joint\(s\) 'panda_finger_joint1'"
+                                             r" = 0.3, 'panda_finger_joint2' = nan"):
+            q = joint_vector(pandas["fixed"], values, what, fallback=np.zeros(2))
+        np.testing.assert_allclose(q, [0.1, -0.2])
+
+
+def test_goal_constraints_on_missing_fingers_warn(pandas, tmp_path):
+    from jwarp.world.moveit import joint_vector
+
+    goal = {"panda_joint2": 0.5, "panda_finger_joint1": 0.04}
+    scene = load_scene(write_yaml(tmp_path / "g.yaml", moveit_state(goal=goal)))
+    with pytest.warns(UserWarning, match=r"goal: ignoring joint\(s\) 'panda_finger_joint1'"):
+        q = joint_vector(pandas["absent"], scene.goal, "goal", fallback=np.array([1.0, 1.0]))
+    np.testing.assert_allclose(q, [1.0, 0.5])
+
+
+def test_movable_fingers_and_mimics_are_used_without_warning(pandas, recwarn):
+    from jwarp.world.moveit import joint_vector
+
+    m = pandas["prismatic"]
+    assert m.joint_names == ["panda_joint1", "panda_joint2", "panda_finger_joint1"]
+    np.testing.assert_allclose(joint_vector(m, FULL_STATE, "start"), [0.1, -0.2, 0.035])
+    assert not [w for w in recwarn if issubclass(w.category, UserWarning)]
+
+
+def test_missing_movable_joints_and_foreign_names_stay_errors(pandas):
+    from jwarp.world.moveit import joint_vector
+
+    m = pandas["fixed"]
+    with pytest.raises(ValueError, match=r"start: no value for joint\(s\) 'panda_joint2' of "
+                                         r"robot 'panda'"), pytest.warns(UserWarning):
+        joint_vector(m, {"panda_joint1": 0.0, "panda_finger_joint1": 0.0}, "start")
+    with pytest.raises(ValueError, match=r"unknown joint\(s\) 'right_1', 'x'"):
+        joint_vector(m, {"panda_joint1": 0.0, "panda_joint2": 0.0, "right_1": 0.0, "x": 1.0},
+                     "start")
+    with pytest.raises(ValueError, match=r"unknown joint\(s\) 'panda_hand'"):  # a link
+        joint_vector(m, {"panda_joint1": 0.0, "panda_joint2": 0.0, "panda_hand": 0.0}, "start")
+    with pytest.raises(ValueError, match=r"start: joint\(s\) 'panda_joint2' = nan of robot "
+                                         r"'panda' not finite"):
+        joint_vector(m, {"panda_joint1": 0.0, "panda_joint2": float("nan")}, "start")
+
+
+def test_gripper_joints_of_another_naming_warn():
+    """A UR arm's MoveIt state lists its Robotiq gripper's joints (other first words)."""
+    import jwarp
+    from jwarp.world.moveit import ignored_joint_names
+
+    m = jwarp.robot("arm7")
+    assert ignored_joint_names(m, ["finger_joint", "left_inner_knuckle_joint", "right_9",
+                                   "panda_joint1", "right_base", "x"]) == \
+        ["finger_joint", "left_inner_knuckle_joint", "right_9"]
+
+
+def box_in(frame: str) -> dict:
+    return {"id": "box", "header": {"frame_id": frame},
+            "primitives": [{"type": "box", "dimensions": [0.1, 0.1, 0.1]}],
+            "primitive_poses": [{"position": [0, 0, 0], "orientation": [0, 0, 0, 1]}]}
+
+
+@pytest.mark.parametrize("header", [None, {}, {"frame_id": ""}, {"frame_id": "world"},
+                                    {"frame_id": "/world"}])
+def test_fixed_frame_transforms_without_header_are_in_the_world(header, tmp_path):
+    t = {"child_frame_id": "table", "transform": {"translation": [1, 2, 3],
+                                                   "rotation": [0, 0, 0, 1]}}
+    if header is not None:
+        t["header"] = header
+    data = {"fixed_frame_transforms": [t], "world": {"collision_objects": [box_in("table")]}}
+    scene = load_scene(write_yaml(tmp_path / "s.yaml", data))
+    np.testing.assert_allclose(scene.shapes[0].pose[:3, 3], [1, 2, 3])
+
+
+def test_fixed_frame_transforms_with_robot_frames(pandas, tmp_path):
+    from jwarp.world.scene_file import robot_frames
+
+    frames = robot_frames(pandas["fixed"])
+    assert "panda_link0" in frames and "panda_hand" not in frames
+    ident = {"translation": [0, 0, 0], "rotation": [0, 0, 0, 1]}
+    data = {"fixed_frame_transforms": [
+        {"header": {"frame_id": "world"}, "child_frame_id": "panda_link0", "transform": ident},
+        {"header": {"frame_id": "panda_link0"}, "child_frame_id": "panda_link0", "transform": ident},
+        # only the child known: the entry defines its header's frame
+        {"header": {"frame_id": "odom"}, "child_frame_id": "base",
+         "transform": {"translation": [0.5, 0, 0], "rotation": [0, 0, 0, 1]}}],
+        "world": {"collision_objects": [box_in("odom")]}}
+    scene = load_scene(write_yaml(tmp_path / "s.yaml", data), frames=frames)
+    np.testing.assert_allclose(scene.shapes[0].pose[:3, 3], [-0.5, 0, 0])
