@@ -126,13 +126,14 @@ def bench_feasibility(args: argparse.Namespace) -> dict:
                     break
                 tried += 1
                 line = PL.plan(robot, world, a, b, initial="straight", iterations=50,
-                               step=args.step, seed=None)
+                               step=args.step, seed=None, fallback=None)
                 if line.feasible[0]:
                     continue  # easy task
                 hard += 1
                 res = PL.plan(robot, world, a, b, initial="random", n_starts=args.starts,
                               iterations=50, step=args.step, seed=hard,
-                              n_substeps=line.n_substeps)
+                              n_substeps=line.n_substeps, stop_when_solved=False,
+                              fallback=None)
                 solved += bool(res.feasible[0])
                 single.append(res.all_feasible[0].mean())
         on_solved = [r for r in single if r > 0]

@@ -41,7 +41,8 @@ def plan_on_the_elastic_robot(robot: jwarp.RobotModel, rng: np.random.Generator)
     q = q[planner.collision_free(robot, world, q, 0.0, kappa=KAPPA)][:2]  # elastic robot
     t0 = time.perf_counter()
     res = compensation.compensated_plan(robot, world, q[0], q[1], kappa=KAPPA, n_starts=8,
-                                        iterations=100, step=0.2)
+                                        iterations=100, step=0.2, stop_when_solved=False,
+                                        fallback=None)
     dt = time.perf_counter() - t0
     ok = planner.path_feasible(robot, world, res.path[0], 4 * res.n_substeps, kappa=KAPPA)
     print(f"\nelastic plan in simplex:seed=1 (voxel {100 * world.voxel_size:.1f} cm): "

@@ -129,7 +129,7 @@ class PlanDataOptions:
                            step=self.step, max_step=self.max_step, weights=w,
                            margin=float(self.margin), check_all_every=self.check_all_every,
                            converge=bool(refine), converge_tol=float(self.converge_tol),
-                           seed=int(seed))
+                           seed=int(seed), stop_when_solved=False, fallback=None)
 
 
 @dataclass

@@ -166,7 +166,7 @@ def hard_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator, *,
     for _ in range(rounds):
         q0, q1 = sample_tasks(model, world, 3 * (n - got), rng)
         opts = PlanOptions(n_starts=1, initial="straight", n_waypoints=n_waypoints,
-                           n_substeps=n_substeps, iterations=iterations)
+                           n_substeps=n_substeps, iterations=iterations, fallback=None)
         easy = Planner(model, world, len(q0), opts, device="cpu").plan(q0, q1).feasible
         S.append(q0[~easy][:n - got])
         G.append(q1[~easy][:n - got])
@@ -184,7 +184,8 @@ def label_tasks(robot: Any, world: Any, starts: np.ndarray, goals: np.ndarray, *
     ``n_starts - 1`` random ones, thesis 3.5.1), best feasible path per task. Returns
     paths (N, W, n_dof), feasible (N,), cost (N,)."""
     opts = PlanOptions(n_starts=n_starts, initial="mixed", n_waypoints=n_waypoints,
-                       n_substeps=n_substeps, iterations=iterations, seed=seed)
+                       n_substeps=n_substeps, iterations=iterations, seed=seed,
+                       stop_when_solved=False, fallback=None)
     res = Planner(robot, world, len(starts), opts, device="cpu").plan(starts, goals)
     return res.path, res.feasible, res.cost
 
@@ -593,7 +594,8 @@ def clean(net: PlanNet, data: PlanSamples, *, iterations: int = 100, n_substeps:
         world = data.worlds[wi]
         seeds = net.paths(data.starts[idx], data.goals[idx], world)
         opts = PlanOptions(n_starts=seeds.shape[1], n_waypoints=seeds.shape[2],
-                           n_substeps=n_substeps, iterations=iterations, seed=seed)
+                           n_substeps=n_substeps, iterations=iterations, seed=seed,
+                           stop_when_solved=False, fallback=None)
         res = Planner(net.robot, world, len(idx), opts, device="cpu").plan(
             data.starts[idx], data.goals[idx], seeds=seeds)
         c = path_costs(net.robot, world, res.path, n_substeps)
