@@ -56,6 +56,7 @@ from types import SimpleNamespace
 
 import warp as wp
 
+from jwarp.kernels import geometry as geometry_kernels
 from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import ROWS_NOMINAL
 from jwarp.kernels.fk import kernels as fk_kernels
@@ -120,6 +121,19 @@ def kernels(scalar: type) -> SimpleNamespace:
         origin: vec3
         inv_h: scalar
         dim: int
+
+    gk = geometry_kernels.kernels(scalar)
+
+    @wp.struct
+    class WorldModel:
+        """The whole world of the fused kernels, one kernel argument: a grid (``use_grid``;
+        its values are lowered by the declared ``grid_error`` [m], so a grid's distance is
+        a lower bound of the true one) and exact objects (:mod:`jwarp.kernels.geometry`)."""
+
+        grid: WorldGrid
+        use_grid: int
+        grid_error: scalar
+        shapes: gk.WorldShapes
 
     @wp.func
     def smooth_clip(d: scalar, eps: scalar):
@@ -236,6 +250,30 @@ def kernels(scalar: type) -> SimpleNamespace:
         return sdf_lower_bound(world.cellmin, world.origin, world.inv_h, world.dim, x)
 
     @wp.func
+    def world_distance(world: WorldModel, x: vec3, cutoff: scalar):
+        """(d, g, k): the smallest signed distance [m] of the point x to the world where it
+        is below ``cutoff``, its gradient and what gave it (object index k >= 0, -2 the
+        grid); (cutoff, +z, -1) where nothing is closer than the cutoff. Grid cells whose
+        corners keep the cutoff and objects whose boxes keep it are skipped."""
+        best = cutoff
+        bg = vec3(zero, zero, one)
+        bk = int(-1)
+        if world.use_grid != 0:
+            if world_lower_bound(world.grid, x) - world.grid_error < cutoff:
+                d, g = world_sample(world.grid, x)
+                d = d - world.grid_error
+                if d < best:
+                    best = d
+                    bg = g
+                    bk = -2
+        d2, g2, k2 = gk.shapes_distance(world.shapes, x, best)
+        if k2 >= 0:
+            best = d2
+            bg = g2
+            bk = k2
+        return best, bg, bk
+
+    @wp.func
     def sphere_centre(frames: wp.array2d(dtype=mat44), b: int, f: int, p: vec3) -> vec3:
         T = frames[b, f]
         return unpack_rot(T) * p + unpack_pos(T)
@@ -248,7 +286,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         rho_stride: int,
         rho_layout: wp.vec4i,
         rows_kind: int,
-        world: WorldGrid,
+        world: WorldModel,
         w_world: scalar,
         w_self: scalar,
         eps: scalar,
@@ -296,10 +334,11 @@ def kernels(scalar: type) -> SimpleNamespace:
             x = sphere_centre(frames, t, fr, spheres.sph_pos[s])
             xs[t, s] = x
             if w_world != zero:
-                # cells whose corners all keep eps from the sphere cost nothing: skip them
-                if world_lower_bound(world, x) - spheres.sph_rad[s] < eps:
-                    d, g = world_sample(world, x)
-                    c, dc = smooth_clip(d - spheres.sph_rad[s], eps)
+                # what keeps eps from the sphere costs nothing: cells and objects skipped
+                rs = spheres.sph_rad[s]
+                d, g, obj = world_distance(world, x, rs + eps)
+                if obj != -1 and d - rs < eps:
+                    c, dc = smooth_clip(d - rs, eps)
                     u_world += c
                     if want_grad != 0 and dc != zero:
                         f = (w_world * dc) * g
@@ -378,7 +417,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
         rows_kind: int,
-        world: WorldGrid,
+        world: WorldModel,
         use_world: int,
         use_self: int,
         write_spheres: int,
@@ -407,16 +446,15 @@ def kernels(scalar: type) -> SimpleNamespace:
             x = sphere_centre(frames, b, spheres.sph_frame[s], spheres.sph_pos[s])
             xs[b, s] = x
             if use_world != 0:
-                look = write_spheres
-                if look == 0:  # only the minimum: skip cells that cannot lower it
-                    if world_lower_bound(world, x) - spheres.sph_rad[s] < dmin_w:
-                        look = 1
-                if look != 0:
-                    d, g = world_sample(world, x)
-                    d = d - spheres.sph_rad[s]
-                    dmin_w = wp.min(dmin_w, d)
-                    if write_spheres != 0:
-                        sphere_dist[b, s] = d
+                rs = spheres.sph_rad[s]
+                cut = dmin_w + rs  # only the minimum: skip what cannot lower it
+                if write_spheres != 0:
+                    cut = far
+                d, g, obj = world_distance(world, x, cut)
+                d = d - rs
+                dmin_w = wp.min(dmin_w, d)
+                if write_spheres != 0:
+                    sphere_dist[b, s] = d
         dmin_s = far
         if use_self != 0:
             for fp in range(spheres.fpair_a.shape[0]):
@@ -520,8 +558,29 @@ def kernels(scalar: type) -> SimpleNamespace:
         dist[p] = d
         grad[p] = g
 
+    @wp.kernel(module="unique", enable_backward=False)
+    def world_query_kernel(
+        # Data in:
+        points: wp.array(dtype=vec3),
+        cutoff: scalar,
+        # Model:
+        world: WorldModel,
+        # Data out:
+        dist: wp.array(dtype=scalar),
+        grad: wp.array(dtype=vec3),
+        obj: wp.array(dtype=wp.int32),
+    ):
+        """dist[p], grad[p], obj[p] of :func:`world_distance` at points[p]."""
+        p = wp.tid()
+        d, g, k = world_distance(world, points[p], cutoff)
+        dist[p] = d
+        grad[p] = g
+        obj[p] = k
+
     return SimpleNamespace(
-        scalar=scalar, SphereTables=SphereTables, WorldGrid=WorldGrid, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
+        world_query=world_query_kernel,
+        scalar=scalar, SphereTables=SphereTables, WorldGrid=WorldGrid, WorldModel=WorldModel,
+        world_distance=world_distance, geometry=gk, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
         sdf_lower_bound=sdf_lower_bound, world_sample=world_sample,
         world_lower_bound=world_lower_bound, sphere_centre=sphere_centre, cost=cost_kernel,
         distance=distance_kernel,

@@ -297,7 +297,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
     @wp.func
     def collision_free_row(q: wp.array2d(dtype=f64), b: int, rho: wp.array3d(dtype=f64),
                            use_rho: int, model: fk64.FrameTables, spheres: ck64.SphereTables,
-                           world: ck64.WorldGrid, use_world: int, use_self: int, margin: f64,
+                           world: ck64.WorldModel, use_world: int, use_self: int, margin: f64,
                            frames: wp.array2d(dtype=fk64.mat44),
                            xs: wp.array2d(dtype=fk64.vec3)) -> int:
         """1 if every sphere of q[b] keeps more than ``margin`` [m] from the world and from
@@ -313,10 +313,9 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
             xs[b, s] = x
             if use_world != 0:
                 r = spheres.sph_rad[s]
-                if ck64.world_lower_bound(world, x) - r <= margin:
-                    d, g = ck64.world_sample(world, x)
-                    if d - r <= margin:
-                        return 0
+                d, g, obj = ck64.world_distance(world, x, r + margin + f64(1e-9))
+                if obj != -1 and d - r <= margin:
+                    return 0
         if use_self != 0:
             for fp in range(spheres.fpair_a.shape[0]):
                 fa = spheres.fpair_a[fp]
@@ -342,7 +341,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
         model: fk64.FrameTables
         spheres: ck64.SphereTables
-        world: ck64.WorldGrid
+        world: ck64.WorldModel
         use_world: int
         use_self: int
         limits: wp.array2d(dtype=f64)

@@ -50,6 +50,7 @@ from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.kinematics.compensation import CompensationRows
+from jwarp.world.device_world import DeviceWorld, cell_minimum
 from jwarp.world.sdf import World, sdf_query
 
 __all__ = ["DEFAULT_EPS", "CollisionModel", "CollisionData", "collision_model", "collision_cost",
@@ -87,20 +88,6 @@ def rigid_pairs(robot: Any) -> tuple[np.ndarray, np.ndarray]:
     always collides, which says the model or its allowed pairs are wrong.)"""
     rt = collision_tables(get_robot(robot))
     return rt["rigid_pairs"].copy(), rt["rigid_distance"].copy()
-
-
-def cell_minimum(grid: np.ndarray) -> np.ndarray:
-    """``out[i, j, k]`` = min of ``grid`` over the corners ``(i..i+1, j..j+1, k..k+1)``
-    (last index clamped; size-1 axes use their single layer): a lower bound of the
-    interpolated field in the cell spanned from (i, j, k)."""
-    g = np.asarray(grid)
-    out = g.copy()
-    for axis in range(g.ndim):
-        if g.shape[axis] > 1:
-            nxt = np.concatenate([np.take(out, np.arange(1, g.shape[axis]), axis=axis),
-                                  np.take(out, [g.shape[axis] - 1], axis=axis)], axis=axis)
-            out = np.minimum(out, nxt)
-    return np.ascontiguousarray(out)
 
 
 class CollisionData:
@@ -200,31 +187,25 @@ class CollisionModel:
         for name in ("sph_frame", "sph_pos", "sph_rad", "bound_pos", "bound_rad", "fpair_a",
                      "fpair_b", "fpair_start", "ent_sphere", "ent_start", "pair_a", "pair_b"):
             setattr(self, name, getattr(sp, name))
-        if world is None:
-            grid = np.zeros((2, 2, 1), self.dtype)
-            self.origin = vec3(0.0, 0.0, 0.0)
-            self.inv_h = 1.0
-            self.dim = 3
-        else:
-            g = world.sdf.astype(self.dtype)
-            grid = g if world.dim == 3 else g[:, :, None]
-            o = np.zeros(3)
-            o[:world.dim] = world.limits[:, 0]
-            self.origin = vec3(*o)
-            self.inv_h = 1.0 / world.voxel_size
-            self.dim = world.dim
-        self.grid = wp.array(np.ascontiguousarray(grid), dtype=self.scalar, device=dev)
-        self.cellmin = wp.array(cell_minimum(grid), dtype=self.scalar, device=dev)
-        ws = self.k.WorldGrid()  # the world as one argument of the fused kernels
-        ws.grid, ws.cellmin, ws.origin = self.grid, self.cellmin, self.origin
-        ws.inv_h, ws.dim = self.scalar(self.inv_h), int(self.dim)
-        self.world_struct = ws
+        #: the world on the device (grid + exact objects), one struct argument
+        self.device_world = DeviceWorld(world, dev, self.scalar)
+        dw = self.device_world
+        self.grid, self.cellmin = dw.grid, dw.cellmin
+        self.origin, self.inv_h, self.dim = dw.origin, dw.inv_h, dw.dim
         self._work: CollisionData | None = None  # scratch of calls without a data
         self._launches: dict = {}
         self._dummy = wp.empty((1, 1), dtype=self.scalar, device=dev)
         self._no_update = elastic_kernels(self.scalar).CompensationArgs()  # enabled = 0
 
     # ------------------------------------------------------------ plumbing
+    @property
+    def world_struct(self) -> Any:
+        """The world as the fused kernels' argument (exact objects brought up to date:
+        moved objects in place, added/removed ones in a new struct)."""
+        if self.device_world.sync():
+            self._launches.clear()  # recorded launches hold the old struct
+        return self.device_world.struct
+
     @property
     def model_args(self) -> list:
         """Frame and sphere tables in kernel argument order."""
@@ -387,9 +368,10 @@ class CollisionModel:
         gout = g if g is not None else self._dummy
 
         def inputs() -> list:
-            return [q, rows.array, rows.stride, rows.layout_vec, int(rows.kind), self.world_struct,
+            return [q, rows.array, rows.stride, rows.layout_vec, int(rows.kind), world_struct,
                     ww, ws, float(eps), int(grad), *self.model_args, frames, xs, force, moment, bc]
 
+        world_struct = self.world_struct  # syncs moved/added objects first
         # caller-owned buffers (a planner's loop): replay a recorded launch (cheaper on the host)
         reuse = out_cost is not None and (rho is None or isinstance(rho, (wp.array, DHRows,
                                                                            CompensationRows)))

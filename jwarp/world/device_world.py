@@ -1,0 +1,137 @@
+"""A :class:`jwarp.world.sdf.World` on a Warp device: the ``WorldModel`` struct of the
+collision kernels (:mod:`jwarp.kernels.collision`), built in one place.
+
+The grid part (its values, the per-cell minimum of the corners, origin, 1/voxel,
+dimension and declared ``grid_error``) is copied once; the exact objects come from their
+:class:`jwarp.world.shapes.ShapeSet`, whose device copy follows moves in place and is
+rebuilt after adds/removes (:meth:`DeviceWorld.sync` returns whether the struct changed).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from jwarp.core.device import numpy_dtype
+from jwarp.kernels import collision as ck
+from jwarp.world.sdf import World
+
+__all__ = ["DeviceWorld", "cell_minimum", "empty_shapes", "world_query"]
+
+
+def cell_minimum(grid: np.ndarray) -> np.ndarray:
+    """``out[i, j, k]`` = min of ``grid`` over the corners ``(i..i+1, j..j+1, k..k+1)``
+    (last index clamped; size-1 axes use their single layer): a lower bound of the
+    interpolated field in the cell spanned from (i, j, k)."""
+    g = np.asarray(grid)
+    out = g.copy()
+    for axis in range(g.ndim):
+        if g.shape[axis] > 1:
+            nxt = np.concatenate([np.take(out, np.arange(1, g.shape[axis]), axis=axis),
+                                  np.take(out, [g.shape[axis] - 1], axis=axis)], axis=axis)
+            out = np.minimum(out, nxt)
+    return np.ascontiguousarray(out)
+
+
+_EMPTY: dict = {}
+
+
+def empty_shapes(device: Any, scalar: type) -> Any:
+    """A ``WorldShapes`` struct with no objects (cached per device and type)."""
+    key = (str(device), scalar.__name__)
+    s = _EMPTY.get(key)
+    if s is None:
+        gk = ck.kernels(scalar).geometry
+        s = gk.WorldShapes()
+        s.kind = wp.zeros(0, dtype=wp.int32, device=device)
+        s.rot = wp.zeros(0, dtype=gk.mat33, device=device)
+        s.pos = wp.zeros(0, dtype=gk.vec3, device=device)
+        s.size = wp.zeros(0, dtype=gk.vec3, device=device)
+        s.centre = wp.zeros(0, dtype=gk.vec3, device=device)
+        s.mesh = wp.zeros(0, dtype=wp.uint64, device=device)
+        s.planes = wp.zeros(0, dtype=wp.int32, device=device)
+        s.bvh = 0
+        s.use_bvh = 0
+        _EMPTY[key] = s
+    return s
+
+
+class DeviceWorld:
+    """``world`` (or None) on ``device`` in float type ``scalar``: :attr:`struct` is the
+    ``WorldModel`` argument of the fused collision kernels."""
+
+    def __init__(self, world: World | None, device: Any, scalar: type) -> None:
+        self.world, self.device, self.scalar = world, device, scalar
+        self.k = ck.kernels(scalar)
+        vec3 = self.k.vec3
+        dt = numpy_dtype(scalar)
+        use_grid = world is not None and world.sdf is not None
+        if not use_grid:
+            grid = np.zeros((2, 2, 1), dt)
+            origin, inv_h, dim = vec3(0.0, 0.0, 0.0), 1.0, 3
+        else:
+            g = world.sdf.astype(dt)
+            grid = g if world.dim == 3 else g[:, :, None]
+            o = np.zeros(3)
+            o[:world.dim] = world.limits[:, 0]
+            origin, inv_h, dim = vec3(*o), 1.0 / world.voxel_size, world.dim
+        self.origin, self.inv_h, self.dim = origin, inv_h, dim
+        self.grid = wp.array(np.ascontiguousarray(grid), dtype=scalar, device=device)
+        self.cellmin = wp.array(cell_minimum(grid), dtype=scalar, device=device)
+        gs = self.k.WorldGrid()
+        gs.grid, gs.cellmin, gs.origin = self.grid, self.cellmin, origin
+        gs.inv_h, gs.dim = scalar(inv_h), int(dim)
+        self.grid_struct = gs
+        ws = self.k.WorldModel()
+        ws.grid = gs
+        ws.use_grid = int(use_grid)
+        ws.grid_error = scalar(world.grid_error if world is not None else 0.0)
+        self.struct = ws
+        self._shapes_key = None
+        self.sync()
+
+    @property
+    def has_objects(self) -> bool:
+        w = self.world
+        return w is not None and w.shapes is not None and len(w.shapes) > 0
+
+    def sync(self) -> bool:
+        """Bring the exact objects up to date; True if the struct was replaced (objects
+        added or removed since the last call), False if unchanged or moved in place."""
+        w = self.world
+        ds = None
+        if w is not None and w.shapes is not None and len(w.shapes) > 0:
+            ds = w.shapes.device_shapes(self.device, self.scalar)
+        if self._shapes_key is not None and ds is self._shapes_key[0]:
+            return False
+        self._shapes_key = (ds,)  # also keeps the device copy alive
+        self.struct.shapes = ds.struct if ds is not None else empty_shapes(self.device,
+                                                                          self.scalar)
+        return True
+
+
+def world_query(world: World, points: Any, *, cutoff: float = 1e30, device: Any = "cpu",
+                dtype: Any = np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Signed distance [m] of the whole world (grid lowered by its ``grid_error``, and
+    exact objects) at ``points`` (N, 3): ``(dist (N,), grad (N, 3), obj (N,) int: object
+    index, -2 grid, -1 nothing within cutoff)``."""
+    from jwarp.core.arrays import init_warp, resolve_device
+    from jwarp.core.device import scalar_type
+
+    init_warp()
+    dev = resolve_device(device)
+    scalar = scalar_type(dtype)
+    dw = DeviceWorld(world, dev, scalar)
+    k = dw.k
+    p = np.ascontiguousarray(np.asarray(points, numpy_dtype(scalar)).reshape(-1, 3))
+    n = max(len(p), 1)
+    d = wp.empty(n, dtype=scalar, device=dev)
+    g = wp.empty(n, dtype=k.vec3, device=dev)
+    o = wp.empty(n, dtype=wp.int32, device=dev)
+    if len(p):
+        wp.launch(k.world_query, dim=len(p), inputs=[wp.array(p, dtype=k.vec3, device=dev),
+                                                     float(cutoff), dw.struct],
+                  outputs=[d, g, o], device=dev)
+    return d.numpy()[:len(p)], g.numpy()[:len(p)], o.numpy()[:len(p)]
