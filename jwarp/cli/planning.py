@@ -34,6 +34,15 @@ frame in the robot's base frame. JSON output holds the path (or q), feasibility,
 iterations and wall time. ``--rerun FILE.rrd`` writes a recording: the world's occupied
 voxels, the robot's spheres and the path (end-effector traces) at every logged iteration.
 
+Budgets (``plan``, docs/scenes.md "Budgets and fallback"): the planner stops as soon as a
+start is feasible (``--stop-when-solved``, the default; ``--no-stop-when-solved`` optimises
+every start until it is feasible or out of iterations), after ``--iterations`` or after
+``--time-limit S`` seconds (default: none). ``--fallback rrt`` (default) gives an unsolved
+problem an RRT-Connect path as the seed of one more optimisation (after the iterations or
+half the time limit); ``--fallback none`` does not. The output says why the planner
+stopped (``stop_reason``: solved, time_limit, iterations, all_done) and which stage solved
+the problem (``stage``: optimizer, fallback, none).
+
 Before any work (world generation included) every option is checked: finite numbers in
 range, integer counts (``--starts`` >= 1, ``--waypoints`` >= 2, ``--substeps`` >= 1,
 ``--iterations`` in [0, 1e9], ``--seed`` >= 0), ``--device``, ``--frame``, the batch size
@@ -182,7 +191,8 @@ _OPTION_OF = {"start": "--start", "goal": "--goal", "target": "--target", "frame
               "iterations": "--iterations", "max_iterations": "--iterations", "step": "--step",
               "margin": "--margin", "seed": "--seed", "kappa": "--kappa", "device": "--device",
               "world": "--world", "warm_start": "--warm-start",
-              "n_random_with_warm_start": "--starts"}
+              "n_random_with_warm_start": "--starts", "time_limit": "--time-limit",
+              "fallback": "--fallback"}
 
 
 def _solver_error(command: str, e: Exception) -> CLIError:
@@ -220,6 +230,20 @@ def _check_plan_size(args: argparse.Namespace, model: Any) -> None:
     option = max(ratios, key=ratios.get)
     subs = f"{args.substeps} substeps" if args.substeps is not None else "sized substeps"
     _check_memory(need, f"{P} starts x {W} waypoints x {subs} of '{model.name}'", option)
+
+
+def _fallback(text: str) -> str | None:
+    """``--fallback rrt|none``."""
+    v = text.strip().lower()
+    if v not in ("rrt", "none"):
+        raise CLIError(f"--fallback: expected 'rrt' or 'none', got {text!r}")
+    return None if v == "none" else v
+
+
+#: what each stage of PlanResult.stage means, for the text output
+_STAGE_TEXT = {"optimizer": "solved by the multi-start optimisation",
+               "fallback": "solved by the fallback: an RRT-Connect path, then optimised",
+               "none": "not solved"}
 
 
 def _check_frame(model: Any, frame: str) -> None:
@@ -344,18 +368,20 @@ def cmd_plan(args: argparse.Namespace) -> int:
                 rec.log_traces(it, paths)
                 rec.log_configs("iteration", it, paths[0], name="start0")
     try:
+        budget = dict(stop_when_solved=args.stop_when_solved, time_limit=args.time_limit,
+                      fallback=args.fallback)
         if net is not None:
             opts = PlanOptions(n_starts=args.starts, iterations=args.iterations,
                                n_waypoints=args.waypoints, n_substeps=args.substeps,
                                step=args.step, margin=args.margin, seed=args.seed, kappa=kappa,
-                               callback=callback)
+                               callback=callback, **budget)
             res = Planner(model, world, 1, opts, device=args.device, dtype=dtype_of(args.dtype),
                           warm_start=net).plan(q0, q1)
         else:
             res = plan(model, world, q0, q1, n_starts=args.starts, iterations=args.iterations,
                        n_waypoints=args.waypoints, n_substeps=args.substeps, step=args.step,
                        margin=args.margin, seed=args.seed, kappa=kappa, device=args.device,
-                       dtype=dtype_of(args.dtype), callback=callback)
+                       dtype=dtype_of(args.dtype), callback=callback, **budget)
         if rec is not None:
             for k, q in enumerate(res.path[0]):
                 rec.log_configs("waypoint", k, q[None], name="result")
@@ -380,6 +406,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
         print(f"costs: total {res.cost[0]:.6g}, length {res.length_cost[0]:.6g}, "
               f"collision {res.collision_cost[0]:.6g}; iterations {res.iterations[0]}; "
               f"{res.n_substeps} substeps per segment; wall time {res.wall_time:.3f} s")
+        stage = str(res.stage[0])
+        print(f"stopped: {res.stop_reason}; stage: {stage} ({_STAGE_TEXT.get(stage, stage)})")
         for k, q in enumerate(res.path[0]):
             print(f"  {k:3d}  [{', '.join(f'{v:+.5f}' for v in q)}]")
     if rec is not None and not args.json:
@@ -537,6 +565,15 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--step", type=real_arg("--step", 0.0, lo_open=True), default=0.01,
                    help="gradient step size, > 0 (default 0.01)")
     s.add_argument("--dtype", default="float32", choices=("float64", "float32"))
+    s.add_argument("--time-limit", type=real_arg("--time-limit", 0.0, lo_open=True, unit=" [s]"),
+                   default=None, metavar="S",
+                   help="stop after S seconds (> 0; default: no limit, only --iterations)")
+    s.add_argument("--stop-when-solved", action=argparse.BooleanOptionalAction, default=True,
+                   help="stop as soon as a start is feasible (default); --no-stop-when-solved "
+                        "optimises every start until it is feasible or out of iterations")
+    s.add_argument("--fallback", type=_fallback, default="rrt", metavar="rrt|none",
+                   help="fallback for an unsolved problem: rrt (default: an RRT-Connect path "
+                        "seeds one more optimisation) or none")
     s.set_defaults(func=cmd_plan)
 
     s = sub.add_parser("ik", help="collision-free inverse kinematics (two-stage, multi-start)")
