@@ -202,8 +202,7 @@ def _primitives(obj: dict, T: np.ndarray, where: str, oid: str) -> list[Shape]:
         if not isinstance(prim, dict) or "type" not in prim:
             raise ValueError(f"{w}: expected a mapping with type and dimensions")
         t = prim["type"]
-        kind = PRIMITIVE_TYPES.get(t) if isinstance(t, int) and not isinstance(t, bool) else (
-            str(t).lower() if str(t).lower() in PRIMITIVE_TYPES.values() else None)
+        kind = _primitive_kind(t)
         if kind is None:
             raise ValueError(f"{w}: unknown primitive type {t!r}; known: BOX, SPHERE, "
                              f"CYLINDER, CONE (or 1-4)")
@@ -211,6 +210,17 @@ def _primitives(obj: dict, T: np.ndarray, where: str, oid: str) -> list[Shape]:
         Tp = T @ parse_pose(pose, f"{w} pose")
         out.append(Shape(kind, dims, Tp, object_id=oid))
     return out
+
+
+def _primitive_kind(t: Any) -> str | None:
+    """The shape kind of a SolidPrimitive type (a code 1-4, also as a string, or a name in
+    any case); None if unknown."""
+    if isinstance(t, bool):
+        return None
+    text = str(t).strip().lower()
+    if isinstance(t, int) or text.isdigit():
+        return PRIMITIVE_TYPES.get(int(text))
+    return text if text in PRIMITIVE_TYPES.values() else None
 
 
 def _meshes(obj: dict, T: np.ndarray, where: str, oid: str, base_dir: Path | None) -> list[Shape]:
@@ -252,6 +262,8 @@ def load_mesh(spec: Any, where: str, base_dir: Path | None = None) -> Any:
             s = spec["scale"]
             scale = finite_vector([s] * 3 if isinstance(s, (int, float)) else s, 3,
                                   f"{where} scale")
+            if np.any(scale <= 0):
+                raise ValueError(f"{where} scale: expected numbers > 0, got {scale.tolist()}")
         try:
             return load_mesh_file(path, scale)
         except ValueError as e:

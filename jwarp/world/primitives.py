@@ -28,12 +28,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["KINDS", "N_DIMS", "Shape", "finite_vector", "pose_matrix", "quaternion_matrix", "rpy_matrix",
+__all__ = ["KINDS", "MAX_EXTENT", "N_DIMS", "Shape", "finite_vector", "pose_matrix", "quaternion_matrix", "rpy_matrix",
            "signed_distance", "union_distance"]
 
 #: the shape kinds and their number of dimensions (None: a mesh, no dimensions)
 N_DIMS = {"box": 3, "sphere": 1, "cylinder": 2, "capsule": 2, "cone": 2, "mesh": 0}
 KINDS = tuple(N_DIMS)
+#: [m] the largest dimension, position coordinate or mesh vertex coordinate of a shape (a
+#: bigger one is a unit mistake or garbage, and its grid could not be sampled)
+MAX_EXTENT = 1e4
 
 
 @dataclass(eq=False)
@@ -66,10 +69,12 @@ class Shape:
         if not np.all(np.isfinite(d)) or np.any(d <= 0):
             raise ValueError(f"{where}: {self.kind} dimensions must be finite and > 0 [m], "
                              f"got {d.tolist()}")
+        _check_extent(d, f"{where}: {self.kind} dimensions")
         self.dims = d
         T = np.asarray(self.pose, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ValueError(f"{where}: pose must be a finite 4x4 transform")
+        _check_extent(T[:3, 3], f"{where}: position")
         R = T[:3, :3]
         if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
             raise ValueError(f"{where}: pose rotation is not a rotation matrix")
@@ -81,6 +86,7 @@ class Shape:
         if self.kind == "mesh":
             if self.mesh is None:
                 raise ValueError(f"{where}: a mesh shape needs its mesh")
+            _check_mesh(self.mesh, where)
             if not self.mesh.is_watertight:
                 raise ValueError(f"{where}: mesh is not watertight (closed), so its inside is "
                                  f"undefined; close it or use its convex hull")
@@ -112,6 +118,29 @@ class Shape:
         m = self.mesh.copy()
         m.apply_transform(self.pose)
         return m
+
+
+def _check_extent(values: np.ndarray, where: str) -> None:
+    """ValueError naming ``where`` if any of ``values`` [m] exceeds :data:`MAX_EXTENT`."""
+    big = np.abs(values).max(initial=0.0)
+    if big > MAX_EXTENT:
+        raise ValueError(f"{where}: {np.asarray(values).tolist()} [m] exceed {MAX_EXTENT:g} m "
+                         f"(a unit mistake? lengths are in m)")
+
+
+def _check_mesh(mesh: Any, where: str) -> None:
+    """ValueError naming ``where`` for an empty mesh (no vertices or no faces), non-finite
+    or enormous vertices."""
+    v = np.asarray(mesh.vertices, np.float64).reshape(-1, 3)
+    nf = len(np.asarray(mesh.faces).reshape(-1, 3))
+    if len(v) == 0 or nf == 0:
+        raise ValueError(f"{where}: mesh is empty ({len(v)} vertices, {nf} faces)")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{where}: mesh vertices contain NaN or inf")
+    big = float(np.abs(v).max())
+    if big > MAX_EXTENT:
+        raise ValueError(f"{where}: mesh vertices reach {big:g} m, beyond {MAX_EXTENT:g} m (a "
+                         f"unit mistake? lengths are in m; give a scale)")
 
 
 # ------------------------------------------------------------------ distances

@@ -162,7 +162,7 @@ def load_scene(path: str | os.PathLike, frames: dict[str, np.ndarray] | None = N
     if not p.is_file():
         raise ValueError(f"scene: file '{p}' does not exist" if not p.exists()
                          else f"scene: '{p}' is not a file")
-    text = p.read_text()
+    text = _scene_text(p)
     try:
         if p.suffix.lower() == ".json":
             data = json.loads(text)
@@ -174,7 +174,30 @@ def load_scene(path: str | os.PathLike, frames: dict[str, np.ndarray] | None = N
         raise ValueError(f"scene {p}: not valid JSON: {e}") from None
     except Exception as e:  # yaml.YAMLError
         raise ValueError(f"scene {p}: not valid YAML: {' '.join(str(e).split())}") from None
+    if data is None:
+        raise ValueError(f"scene {p}: the file is empty")
     return scene_from_dict(data, frames=frames, base_dir=p.parent, source=str(p))
+
+
+def _scene_text(path: Path) -> str:
+    """The text of a scene file: UTF-8 (with or without a byte order mark) or UTF-16 with
+    a byte order mark; ValueError naming the file and the first bad byte otherwise."""
+    import codecs
+
+    raw = path.read_bytes()
+    if raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        try:
+            return raw.decode("utf-16")
+        except UnicodeDecodeError as e:
+            raise ValueError(f"scene {path}: not valid UTF-16 text ({e.reason} at byte "
+                             f"{e.start}); save the file as UTF-8") from None
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = raw.count(b"\n", 0, e.start) + 1
+        col = e.start - (raw.rfind(b"\n", 0, e.start) + 1) + 1
+        raise ValueError(f"scene {path}: not UTF-8 text (byte 0x{raw[e.start]:02x} at line "
+                         f"{line}, column {col}); save the file as UTF-8") from None
 
 
 def scene_from_dict(data: Any, frames: dict[str, np.ndarray] | None = None,

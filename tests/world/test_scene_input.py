@@ -237,3 +237,125 @@ def test_fixed_frame_transforms_with_robot_frames(pandas, tmp_path):
         "world": {"collision_objects": [box_in("odom")]}}
     scene = load_scene(write_yaml(tmp_path / "s.yaml", data), frames=frames)
     np.testing.assert_allclose(scene.shapes[0].pose[:3, 3], [-0.5, 0, 0])
+
+
+# ------------------------------------------------------------------ bad scenes
+def moveit_object(**over) -> dict:
+    obj = {"id": "Can1", "header": {"frame_id": "world"},
+           "primitives": [{"type": "cylinder", "dimensions": [0.12, 0.03]}],
+           "primitive_poses": [{"position": [0.6, 0.1, 0.4], "orientation": [0, 0, 0, 1]}]}
+    obj.update(over)
+    return {"world": {"collision_objects": [obj]}}
+
+
+def prim(kind, dims, position=(0, 0, 0)) -> dict:
+    return {"primitives": [{"type": kind, "dimensions": dims}],
+            "primitive_poses": [{"position": list(position), "orientation": [0, 0, 0, 1]}]}
+
+
+INF, NAN = float("inf"), float("nan")
+
+
+@pytest.mark.parametrize("over, match", [
+    ({"pose": {"position": [NAN, 0, 0]}}, r"object 'Can1': pose position: contains NaN"),
+    ({"pose": {"position": [0, 0, 0], "orientation": [0, INF, 0, 1]}},
+     r"object 'Can1': pose orientation: contains NaN or inf"),
+    (prim("box", [0.1, 0.1, 0.1], (0, INF, 0)), r"object 'Can1': primitive 0 pose position"),
+    (prim("box", [0.1, 0.0, 0.1]), r"object 'Can1': box dimensions must be finite and > 0"),
+    (prim("sphere", [-0.1]), r"object 'Can1': sphere dimensions must be finite and > 0"),
+    (prim("cylinder", [NAN, 0.1]), r"object 'Can1': primitive 0 \(cylinder\) dimensions: "
+                                   r"contains NaN"),
+    (prim("box", [2e4, 1, 1]), r"object 'Can1': box dimensions: \[20000.0, 1.0, 1.0\] \[m\] "
+                               r"exceed 10000 m"),
+    (prim("sphere", [1e300]), r"object 'Can1': sphere dimensions: .* exceed 10000 m"),
+    (prim("sphere", [0.1], (0, 0, -1.5e4)), r"object 'Can1': position: .* exceed 10000 m"),
+    ({"pose": {"position": [1e6, 0, 0]}}, r"object 'Can1': position: .* exceed 10000 m"),
+    (prim("torus", [1, 2]), r"object 'Can1': primitive 0: unknown primitive type 'torus'"),
+    (prim(None, [1]), r"object 'Can1': primitive 0: unknown primitive type None"),
+    (prim("5", [1]), r"object 'Can1': primitive 0: unknown primitive type '5'"),
+    ({"meshes": [{"vertices": [], "triangles": []}], "mesh_poses": [{"position": [0, 0, 0]}]},
+     r"object 'Can1': mesh 0: a closed mesh needs >= 4 vertices and some triangles"),
+])
+def test_bad_moveit_objects_name_the_object(over, match):
+    from jwarp.world.scene_file import scene_from_dict
+
+    with pytest.raises(ValueError, match=match):
+        scene_from_dict(moveit_object(**over))
+
+
+def test_primitive_type_codes_as_strings():
+    from jwarp.world.scene_file import scene_from_dict
+
+    scene = scene_from_dict(moveit_object(**prim("2", [0.1])))
+    assert [s.kind for s in scene.shapes] == ["sphere"]
+
+
+def jwarp_object(**over) -> dict:
+    obj = {"id": "ball", "type": "sphere", "radius": 0.1, "pose": {"position": [0, 0, 0.5]}}
+    obj.update(over)
+    return {"objects": [{k: v for k, v in obj.items() if v is not None}]}
+
+
+@pytest.mark.parametrize("data, match", [
+    (jwarp_object(radius=0), r"object 'ball': sphere dimensions must be finite and > 0"),
+    (jwarp_object(radius=-1), r"object 'ball': sphere dimensions must be finite and > 0"),
+    (jwarp_object(radius=INF), r"object 'ball': radius: contains NaN or inf"),
+    (jwarp_object(radius=5e4), r"object 'ball': sphere dimensions: \[50000.0\] \[m\] exceed"),
+    (jwarp_object(type="box", radius=None, size=[1, 1, 1e5]), r"object 'ball': box dimensions"),
+    (jwarp_object(pose={"position": [0, 0, 2e4]}), r"object 'ball': position: .* exceed"),
+    ({**jwarp_object(frame="far"), "frames": {"far": {"position": [9e3, 0, 0]}},
+      "objects": [{"id": "ball", "type": "sphere", "radius": 0.1, "frame": "far",
+                   "pose": {"position": [2e3, 0, 0]}}]}, r"object 'ball': position: .* exceed"),
+    (jwarp_object(pose={"position": [0, 0, 0], "quaternion": [NAN, 0, 0, 1]}),
+     r"object 'ball': pose quaternion .*: contains NaN"),
+    (jwarp_object(type="torus"), r"object 'ball': unknown type 'torus'"),
+])
+def test_bad_jwarp_objects_name_the_object(data, match):
+    from jwarp.world.scene_file import scene_from_dict
+
+    with pytest.raises(ValueError, match=match):
+        scene_from_dict(data)
+
+
+def mesh_object(path, **spec) -> dict:
+    return moveit_object(primitives=[], primitive_poses=[], meshes=[{"resource": str(path), **spec}],
+                         mesh_poses=[{"position": [0, 0, 0], "orientation": [0, 0, 0, 1]}])
+
+
+def test_empty_and_enormous_meshes(tmp_path):
+    import trimesh
+
+    from jwarp.world.primitives import Shape
+    from jwarp.world.scene_file import scene_from_dict
+
+    (tmp_path / "empty.stl").write_bytes(b"")
+    (tmp_path / "points.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n")
+    for name in ("empty.stl", "points.obj"):
+        with pytest.raises(ValueError, match=rf"object 'Can1': mesh 0: .*{name}"):
+            scene_from_dict(mesh_object(tmp_path / name))
+    trimesh.creation.box().export(tmp_path / "box.stl")
+    assert len(scene_from_dict(mesh_object(tmp_path / "box.stl")).shapes) == 1
+    with pytest.raises(ValueError, match=r"object 'Can1': mesh vertices reach 50000 m, beyond "
+                                         r"10000 m"):
+        scene_from_dict(mesh_object(tmp_path / "box.stl", scale=1e5))
+    with pytest.raises(ValueError, match=r"object 'Can1': mesh 0 scale: expected numbers > 0"):
+        scene_from_dict(mesh_object(tmp_path / "box.stl", scale=[1, -1, 1]))
+    with pytest.raises(ValueError, match=r"object 'lid': mesh is empty \(0 vertices, 0 faces\)"):
+        Shape("mesh", [], np.eye(4), "lid", trimesh.Trimesh())
+
+
+def test_file_encodings(tmp_path):
+    text = "objects:\n  - {id: tisch\u00e9, type: sphere, radius: 1, pose: {position: [0, 0, 0]}}\n"
+    (tmp_path / "latin1.yaml").write_bytes(text.encode("latin-1"))
+    with pytest.raises(ValueError, match=r"scene .*latin1.yaml: not UTF-8 text \(byte 0xe9 at "
+                                         r"line 2, column 15\)"):
+        load_scene(tmp_path / "latin1.yaml")
+    for enc in ("utf-8", "utf-8-sig", "utf-16"):
+        (tmp_path / f"{enc}.yaml").write_bytes(text.encode(enc))
+        assert load_scene(tmp_path / f"{enc}.yaml").object_ids == ["tisch\u00e9"]
+    (tmp_path / "empty.yaml").write_text("")
+    with pytest.raises(ValueError, match=r"scene .*empty.yaml: the file is empty"):
+        load_scene(tmp_path / "empty.yaml")
+    (tmp_path / "bad.json").write_bytes(b'{"objects": [\xff]}')
+    with pytest.raises(ValueError, match=r"scene .*bad.json: not UTF-8 text \(byte 0xff"):
+        load_scene(tmp_path / "bad.json")
