@@ -1,0 +1,143 @@
+"""Budgets and fallback of the planner (PlanOptions.time_limit, stop_when_solved on by
+default, fallback "rrt"): PlanResult.stop_reason per call and stage per problem; the
+RRT-Connect fallback solves a planar4 problem the straight line and the multi-starts do
+not solve in a few iterations."""
+
+import inspect
+import time
+
+import numpy as np
+import pytest
+
+import jwarp
+from jwarp.solvers import planner as PL
+from jwarp.solvers.rrt import RRTOptions
+
+from worlds import block_world_2d
+
+S4 = np.array([1.2, 0.0, 0.0, 0.0])
+G4 = np.array([-1.2, 0.0, 0.0, 0.0])
+#: an easy problem: the straight line is feasible at once
+S_EASY = np.array([2.0, 1.0, 0.0, 0.0])
+G_EASY = np.array([2.0, -1.0, 0.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def world():
+    return block_world_2d()
+
+
+def independent_feasible(robot, world, path):
+    n_sub = PL.substeps_for_voxel(robot, path, world.voxel_size, safety=2.0, max_substeps=256)
+    return bool(PL.path_feasible(robot, world, path, n_sub)[()])
+
+
+def test_defaults():
+    o = PL.PlanOptions()
+    assert o.stop_when_solved is True and o.fallback == "rrt" and o.time_limit is None
+    assert o.fallback_after == 0.5 and o.rrt is None
+    sig = inspect.signature(PL.plan).parameters
+    assert sig["stop_when_solved"].default is True
+    assert sig["fallback"].default == "rrt" and sig["time_limit"].default is None
+
+
+def test_stop_when_solved_ends_at_the_first_feasible_start(world):
+    o = dict(n_starts=8, iterations=300, step=0.05, seed=0, n_substeps=8,
+             weights=PL.PathWeights(length=0.05), fallback=None)
+    first = PL.plan("planar4", world, S4, G4, **o)
+    every = PL.plan("planar4", world, S4, G4, stop_when_solved=False, **o)
+    assert first.feasible[0] and first.stop_reason == "solved"
+    assert list(first.stage) == ["optimizer"]
+    # without it every start runs on: more feasible starts, the iterations used up
+    assert every.feasible[0] and every.stop_reason == "iterations"
+    assert every.n_feasible[0] > first.n_feasible[0] == 1
+    # the start that solved it first is the same, at the same iteration
+    k = int(first.start_index[0])
+    assert every.all_feasible[0, k]
+    assert every.all_iterations[0, k] == first.all_iterations[0, k] == first.iterations[0]
+
+
+def test_all_done_when_every_start_finishes(world):
+    res = PL.plan("planar4", world, S_EASY, G_EASY, initial="straight", n_starts=1,
+                  stop_when_solved=False, fallback=None)
+    assert res.feasible[0] and res.stop_reason == "all_done"
+
+
+def test_time_limit_ends_the_optimisation(world):
+    # a step too small to move anything: the straight line stays in collision
+    t = time.perf_counter()
+    res = PL.plan("planar4", world, S4, G4, initial="straight", step=1e-9,
+                  iterations=10**7, time_limit=0.3, fallback=None)
+    wall = time.perf_counter() - t
+    assert res.stop_reason == "time_limit" and not res.feasible[0]
+    assert list(res.stage) == ["none"]
+    assert 0.3 <= res.wall_time <= wall
+    assert wall < 3.0  # one iteration and the exact check after the limit (shared CPU)
+    assert 0 < res.iterations[0] < 10**7  # the iteration it stopped at
+    # with the fallback: the multi-starts get half the time, then RRT-Connect solves it
+    res = PL.plan("planar4", world, S4, G4, initial="straight", step=1e-9,
+                  iterations=10**7, time_limit=5.0)
+    assert res.feasible[0] and list(res.stage) == ["fallback"]
+    assert res.stop_reason == "solved"
+    assert res.timings["optimizer"] >= 2.5 and res.wall_time < 10.0
+
+
+def test_fallback_solves_what_the_multi_starts_do_not(world):
+    robot = jwarp.robot("planar4")
+    o = dict(n_starts=2, iterations=3, seed=0)
+    plain = PL.plan(robot, world, S4, G4, fallback=None, **o)
+    assert not plain.feasible[0]  # the straight line and a random start, 3 iterations
+    assert plain.stop_reason == "iterations" and list(plain.stage) == ["none"]
+    res = PL.plan(robot, world, S4, G4, **o)
+    assert res.feasible[0] and list(res.stage) == ["fallback"]
+    assert res.stop_reason == "solved" and res.start_index[0] == -1
+    assert independent_feasible(robot, world, res.path[0])
+    np.testing.assert_allclose(res.path[0, 0], S4)
+    np.testing.assert_allclose(res.path[0, -1], G4)
+    assert res.path.shape == (1, 20, 4)
+    # the multi-starts' own results stay as they were
+    np.testing.assert_array_equal(res.all_feasible, plain.all_feasible)
+    assert res.n_feasible[0] == 0
+    assert set(res.timings) == {"optimizer", "rrt", "fallback_optimizer"}
+    d = res.to_dict(0)
+    assert d["stop_reason"] == "solved" and d["stage"] == "fallback" and d["feasible"]
+
+
+def test_fallback_only_for_the_unsolved_problems(world):
+    starts, goals = np.array([S4, S_EASY]), np.array([G4, G_EASY])
+    for fb, stages in ((None, ["none", "optimizer"]), ("rrt", ["fallback", "optimizer"])):
+        opts = PL.PlanOptions(n_starts=4, iterations=3, seed=0, fallback=fb)
+        res = PL.Planner("planar4", world, 2, opts, device="cpu").plan(starts, goals)
+        assert list(res.stage) == stages
+        assert res.feasible[1] and res.start_index[1] >= 0
+        assert res.feasible[0] == (fb == "rrt")
+        assert res.stop_reason == ("solved" if fb else "iterations")
+
+
+def test_fallback_with_its_options(world):
+    # too few samples to connect the trees: the fallback fails, the result is the
+    # optimiser's
+    rrt = RRTOptions(max_samples=1, batch=1, goal_bias=0.0)
+    res = PL.plan("planar4", world, S4, G4, n_starts=2, iterations=3, seed=0, rrt=rrt)
+    assert not res.feasible[0] and list(res.stage) == ["none"]
+    assert res.stop_reason == "iterations" and "rrt" in res.timings
+
+
+@pytest.mark.parametrize("field, value, error, match", [
+    ("time_limit", -1.0, ValueError, "^time_limit: expected a number > 0"),
+    ("time_limit", 0, ValueError, "^time_limit: expected a number > 0"),
+    ("time_limit", float("nan"), ValueError, "^time_limit"),
+    ("time_limit", float("inf"), ValueError, "^time_limit"),
+    ("time_limit", True, TypeError, "^time_limit"),
+    ("time_limit", "1", TypeError, "^time_limit"),
+    ("fallback", "rrt*", ValueError, "^fallback: expected 'rrt' or None"),
+    ("fallback", "none", ValueError, "^fallback"),
+    ("fallback_after", 0.0, ValueError, "^fallback_after"),
+    ("fallback_after", 1.0, ValueError, "^fallback_after"),
+    ("stop_when_solved", "yes", TypeError, "^stop_when_solved"),
+])
+def test_budget_options_are_validated(world, field, value, error, match):
+    with pytest.raises(error, match=match):
+        PL.PlanOptions(**{field: value}).validate()
+    with pytest.raises(error, match=match):
+        PL.plan("planar4", world, S4, G4, **{field: value})
