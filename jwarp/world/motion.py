@@ -1,0 +1,325 @@
+"""Continuous feasibility of paths, checked on the device (host side of
+:mod:`jwarp.kernels.motion`).
+
+"Feasible" means: every waypoint within the joint limits, and along the whole continuous
+motion between the waypoints (linear in joint space) every collision sphere keeps
+``margin`` [m] from the world and from every sphere it may collide with; on the first and
+the last segment the clearance required is ``min(margin, endpoint_margin)`` (so a grasp
+pose closer to an object than the path margin can be reached). Distances are exact for
+the world's objects; a grid counts with its declared ``grid_error`` subtracted.
+
+One launch checks a batch of paths (one thread per segment) and a second reduces them:
+per path a flag, and for an infeasible one the first offending place (in waypoint units),
+the sphere (its link) and the object or the other sphere. Only these few numbers per path
+are read back.
+
+Example::
+
+    chk = MotionCheck("panda.urdf", world, device="cpu")
+    res = chk.check(paths)                 # paths (P, W, n_dof)
+    res.ok                                 # (P,) bool
+    print(res.reason(0))                   # "sphere 12 of link 'panda_hand' vs object ..."
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from jwarp.core.arrays import init_warp, real_array, real_number, resolve_device
+from jwarp.core.device import put_model, scalar_type
+from jwarp.core.limits import LIMIT_TOL
+from jwarp.kernels import motion as mk
+from jwarp.model import RobotModel
+from jwarp.registry import robot as get_robot
+from jwarp.world.collision import check_world
+from jwarp.world.device_world import DeviceWorld
+from jwarp.world.sdf import World
+
+__all__ = ["MotionCheck", "MotionOptions", "PathCheck", "check_paths", "sphere_reach"]
+
+
+@dataclass
+class MotionOptions:
+    """Options of the continuous check.
+
+    Attributes:
+        delta: largest travel [m] of any sphere centre between two substeps of the first
+            level (the substeps of a segment follow from it), > 0.
+        levels: refinements (x4 substeps each) of a segment whose clearance is uncertain
+            (between ``m`` and ``m + travel / 2``), >= 1.
+        max_substeps: most substeps of a segment at the first level, >= 1.
+    """
+
+    delta: float = 0.02
+    levels: int = 4
+    max_substeps: int = 256
+
+    def validate(self) -> None:
+        d = real_number(self.delta, "delta")
+        if not (np.isfinite(d) and d > 0):
+            raise ValueError(f"delta: expected a length > 0 [m], got {self.delta!r}")
+        for name in ("levels", "max_substeps"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
+
+
+def sphere_reach(robot: Any) -> np.ndarray:
+    """(n_spheres, n_frames) float64: for each sphere s and frame i, a bound [m] of the
+    distance of the sphere's centre from frame i's joint axis over every configuration
+    (0 where frame i is not an ancestor of the sphere's frame; 1 for a prismatic frame,
+    whose joint moves the centre by exactly its change). The bound is the sum of the
+    frames' translation lengths along the chain below i (|d| + |r| of a DH frame, plus the
+    largest joint offset of a prismatic one) plus the centre's offset in its frame."""
+    model = get_robot(robot)
+    from jwarp.core.device import fixed_parts
+
+    nf = model.n_frames
+    sf, sp, _ = model.sphere_arrays()
+    _, fixed_pos = fixed_parts(model)
+    dh = model.dh_table
+    prism = model.frame_is_prismatic
+    lim = np.asarray(model.joint_limits, np.float64).reshape(-1, 2)
+    step = np.zeros(nf)  # translation bound from the parent's origin to frame i's
+    for i, f in enumerate(model.frames):
+        if model.is_dh[i]:
+            step[i] = abs(dh[i, 0]) + abs(dh[i, 2])
+            if prism[i]:
+                step[i] += sum(abs(c) * np.abs(lim[j]).max() for j, c in f.coupling)
+        else:
+            step[i] = float(np.linalg.norm(fixed_pos[i]))
+    parents = model.parents
+    out = np.zeros((len(sf), nf))
+    for s, (f, p) in enumerate(zip(sf, sp)):
+        acc = float(np.linalg.norm(p))
+        i = int(f)
+        while i >= 0:
+            out[s, i] = 1.0 if prism[i] else acc
+            acc += step[i]
+            i = int(parents[i])
+    return out * (1.0 + 1e-9) + 1e-12
+
+
+@dataclass
+class PathCheck:
+    """Results of :meth:`MotionCheck.check` for P paths (numpy).
+
+    Attributes:
+        ok: (P,) bool, feasible.
+        code: (P,) int, :data:`jwarp.kernels.motion.CODE_NAMES` index of the first failure.
+        where: (P,) float, its place in waypoint units (segment t + fraction).
+        what: (P, 2) int: sphere a and object b (world; -2 = the grid), or spheres a, b
+            (self), -1 where not applicable.
+        clearance: (P,) float [m] at that place.
+    """
+
+    ok: np.ndarray
+    code: np.ndarray
+    where: np.ndarray
+    what: np.ndarray
+    clearance: np.ndarray
+    robot: Any = None
+    world: Any = None
+
+    def reason(self, i: int) -> str:
+        """Why path ``i`` is infeasible, in words ("feasible" if it is not)."""
+        c = int(self.code[i])
+        if c == 0:
+            return "feasible"
+        at = f"at waypoint {self.where[i]:.3f}"
+        a, b = (int(v) for v in self.what[i])
+        if c == 4:
+            return f"waypoint {int(round(self.where[i]))} outside the joint limits"
+        link = _link(self.robot, a)
+        mm = f"clearance {self.clearance[i] * 1e3:.2f} mm"
+        if c == 2:
+            return f"self collision: {link} vs {_link(self.robot, b)} {at} ({mm})"
+        other = self.world.object_name(b) if self.world is not None else str(b)
+        if c == 1:
+            return f"collision: {link} vs object '{other}' {at} ({mm})"
+        return (f"uncertified: {link} near '{other}' {at} ({mm}): the motion between checked "
+                f"substeps may come closer than the margin; lower the margin or add waypoints")
+
+    def reasons(self) -> list[str]:
+        return [self.reason(i) for i in range(len(self.ok))]
+
+
+def _link(robot: RobotModel | None, s: int) -> str:
+    if robot is None or s < 0:
+        return f"sphere {s}"
+    f = robot.spheres[s].frame
+    return f"sphere {s} of link '{robot.frames[f].name}'"
+
+
+class MotionCheck:
+    """A persistent continuous path check of one robot in one world on one device (the
+    Model: robot tables, world struct, sphere travel bounds; the Data: scratch and
+    outputs, grown on demand and reused).
+
+    Args:
+        robot: name or RobotModel (rigid; transmission errors are handled by the caller).
+        world: :class:`World` of the robot's workspace dimension, or None (self only).
+        device: Warp device (None: the preferred one).
+        options: :class:`MotionOptions`.
+    """
+
+    def __init__(self, robot: Any, world: World | None, *, device: Any = None,
+                 options: MotionOptions | None = None) -> None:
+        init_warp()
+        self.robot = get_robot(robot)
+        check_world(self.robot, world)
+        self.world = world
+        self.device = resolve_device(device)
+        self.options = options or MotionOptions()
+        if not isinstance(self.options, MotionOptions):
+            raise TypeError(f"options: expected a MotionOptions, got "
+                            f"{type(self.options).__name__}")
+        self.options.validate()
+        dev = self.device
+        self.model = put_model(self.robot, dev, wp.float64)
+        sp = self.model.spheres
+        self.n_spheres = sp.n_spheres
+        self.device_world = DeviceWorld(world, dev, wp.float64)
+        self.k = mk.kernels(wp.float64)
+        cm = self.k.CheckModel()
+        cm.model = self.model.frame_struct
+        cm.rho = self.model.dh0_3d
+        cm.spheres = sp.struct
+        cm.use_world = int(world is not None and sp.n_spheres > 0)
+        cm.use_self = int(sp.n_pairs > 0)
+        reach = sphere_reach(self.robot) if sp.n_spheres else np.zeros((0, self.robot.n_frames))
+        self._reach = wp.array(reach, dtype=wp.float64, device=dev)
+        cm.reach = self._reach
+        lt = self.model.limits
+        cm.limits, cm.lin_start, cm.lin_joint = lt.limits, lt.lin_start, lt.lin_joint
+        cm.lin_coef, cm.lin_bounds = lt.lin_coef, lt.lin_bounds
+        cm.limit_tol = wp.float64(LIMIT_TOL)
+        self._cm = cm
+        self._scratch: tuple | None = None
+        self._cap = 0
+        self._out: dict = {}
+
+    # ------------------------------------------------------------------ data
+    def _rows(self, n: int, m: int, dt: Any) -> wp.array:
+        if self.device.is_cuda:
+            return wp.empty((n, max(m, 1)), dtype=dt, device=self.device)
+        row = wp.empty((1, max(m, 1)), dtype=dt, device=self.device)
+        self._keep.append(row)
+        return wp.array(ptr=row.ptr, shape=(n, max(m, 1)), strides=(0, row.strides[1]),
+                        dtype=dt, device=self.device)
+
+    def _scratch_for(self, n: int) -> Any:
+        if self._scratch is None or n > self._cap:
+            cap = max(n, int(self._cap * 1.5))
+            self._keep: list = []
+            nd, nf, S = self.robot.n_dof, self.robot.n_frames, self.n_spheres
+            k = self.k
+            sc = k.CheckScratch()
+            sc.q = self._rows(cap, nd, wp.float64)
+            sc.dq = self._rows(cap, nd, wp.float64)
+            sc.dth = self._rows(cap, nf, wp.float64)
+            sc.travel = self._rows(cap, S, wp.float64)
+            sc.frames = self._rows(cap, nf, k.fk.mat44)
+            sc.xs = self._rows(cap, S, k.fk.vec3)
+            self._scratch, self._cap = sc, cap
+        return self._scratch
+
+    def _outputs(self, K: int, W: int) -> dict:
+        o = self._out
+        if o.get("shape") != (K, W):
+            dev = self.device
+            seg = (K, W - 1)
+            o = self._out = dict(
+                shape=(K, W),
+                seg_code=wp.empty(seg, dtype=wp.int32, device=dev),
+                seg_u=wp.empty(seg, dtype=wp.float64, device=dev),
+                seg_a=wp.empty(seg, dtype=wp.int32, device=dev),
+                seg_b=wp.empty(seg, dtype=wp.int32, device=dev),
+                seg_d=wp.empty(seg, dtype=wp.float64, device=dev),
+                seg_n=wp.empty(seg, dtype=wp.int32, device=dev),
+                ok=wp.empty(K, dtype=wp.int32, device=dev),
+                code=wp.empty(K, dtype=wp.int32, device=dev),
+                where=wp.empty(K, dtype=wp.float64, device=dev),
+                what=wp.empty((K, 2), dtype=wp.int32, device=dev),
+                dist=wp.empty(K, dtype=wp.float64, device=dev))
+        return o
+
+    # ------------------------------------------------------------------ check
+    def launch(self, paths: wp.array, idx: wp.array, K: int, *, margin: float = 0.0,
+               endpoint_margin: float | None = None) -> dict:
+        """Check the paths ``idx[:K]`` of the device array ``paths`` (P, W, n_dof) (float32
+        or float64) without host copies; returns the output arrays (``ok``, ``code``,
+        ``where``, ``what``, ``dist`` of length >= K, and the per-segment ones)."""
+        W = paths.shape[1]
+        if self.device_world.sync():
+            pass
+        self._cm.world = self.device_world.struct
+        out = self._outputs(K, W)
+        sc = self._scratch_for(K * (W - 1))
+        em = margin if endpoint_margin is None else endpoint_margin
+        o = self.options
+        kern = mk.kernels(paths.dtype)
+        wp.launch(kern.segment, dim=(K, W - 1),
+                  inputs=[paths, idx, float(margin), float(em), float(o.delta),
+                          int(o.max_substeps), int(o.levels), self._cm, sc],
+                  outputs=[out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"],
+                           out["seg_d"], out["seg_n"]], device=self.device)
+        wp.launch(kern.reduce, dim=K,
+                  inputs=[out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"],
+                          out["seg_d"]],
+                  outputs=[out["ok"], out["code"], out["where"], out["what"], out["dist"]],
+                  device=self.device)
+        return out
+
+    def check(self, paths: Any, *, margin: float = 0.0,
+              endpoint_margin: float | None = None) -> PathCheck:
+        """Check ``paths`` (W, n_dof) or (P, W, n_dof) (numpy or Warp; rad or m) with
+        ``margin`` [m] (>= 0) and ``endpoint_margin`` (None: = margin). Returns a
+        :class:`PathCheck` (P results; one for a single path)."""
+        margin = _check_margin(margin, "margin")
+        if endpoint_margin is not None:
+            endpoint_margin = _check_margin(endpoint_margin, "endpoint_margin")
+        n = self.robot.n_dof
+        if isinstance(paths, wp.array):
+            if paths.ndim != 3 or paths.shape[2] != n or paths.shape[1] < 2:
+                raise ValueError(f"paths: expected shape (P, W >= 2, {n}), got {paths.shape}")
+            p = paths
+        else:
+            a = real_array(paths, "paths")
+            if a.ndim == 2:
+                a = a[None]
+            if a.ndim != 3 or a.shape[2] != n or a.shape[1] < 2:
+                raise ValueError(f"paths: expected shape (W >= 2, {n}) or (P, W, {n}) for "
+                                 f"robot '{self.robot.name}', got {np.shape(paths)}")
+            if not np.all(np.isfinite(a)):
+                raise ValueError("paths: contains NaN or inf")
+            p = wp.array(np.ascontiguousarray(a, np.float64), dtype=wp.float64,
+                         device=self.device)
+        K = p.shape[0]
+        idx = wp.array(np.arange(K, dtype=np.int32), dtype=wp.int32, device=self.device)
+        out = self.launch(p, idx, K, margin=margin, endpoint_margin=endpoint_margin)
+        return PathCheck(ok=out["ok"].numpy()[:K].astype(bool), code=out["code"].numpy()[:K],
+                         where=out["where"].numpy()[:K], what=out["what"].numpy()[:K],
+                         clearance=out["dist"].numpy()[:K], robot=self.robot, world=self.world)
+
+
+def _check_margin(v: Any, name: str) -> float:
+    m = real_number(v, name)
+    if not (np.isfinite(m) and m >= 0):
+        raise ValueError(f"{name}: expected a finite clearance >= 0 [m], got {v!r}")
+    if m > 1e3:
+        raise ValueError(f"{name}: {m:g} m is not a clearance a robot can keep")
+    return m
+
+
+def check_paths(robot: Any, world: World | None, paths: Any, *, margin: float = 0.0,
+                endpoint_margin: float | None = None, device: Any = None,
+                options: MotionOptions | None = None) -> PathCheck:
+    """Continuous feasibility of ``paths`` (W, n_dof) or (P, W, n_dof): a
+    :class:`MotionCheck` made for this call (keep one for repeated checks)."""
+    return MotionCheck(robot, world, device=device, options=options).check(
+        paths, margin=margin, endpoint_margin=endpoint_margin)
