@@ -25,7 +25,8 @@ random distance and bearing in front of the robot, turned to face it):
 Starts: the hand pointing down at a random point in front of the robot (0.30-0.45 m
 forward, 0.45-0.65 m high). Targets are for the frame ``panda_hand_tcp``; the fingers are
 set to 3.5 cm open in both states. IK: :class:`jwarp.solvers.ik.IKSolver` on the CPU, all
-goal and start candidates of one problem in one batch, on the scene's 2 cm SDF with the
+goal and start candidates of one problem in one batch (8 seeds each: the ready pose, then
+uniform ones), on the scene's 2 cm SDF with the
 fitted sphere model (``SpherizeOptions(tolerance=0.02)``, cached). A candidate is accepted
 only if, with the fingers set, jwarp finds it collision-free (world and self, sphere model,
 ``--margin``) **and** the independent checker ``tests/verifier.py`` (pinocchio + coal)
@@ -371,7 +372,9 @@ class Generator:
               ) -> tuple[np.ndarray, Any, int] | None:
         from jwarp.solvers.planner import collision_free
 
-        for i in np.nonzero(ok)[0]:
+        cand = np.nonzero(ok)[0]
+        # the candidate nearest the ready pose first (natural problems)
+        for i in cand[np.argsort(np.abs(q[cand, :self.finger] - READY[:self.finger]).sum(1))]:
             c = q[i].copy()
             c[self.finger] = FINGER
             if not collision_free(self.robot, world, c[None], self.margin, device="cpu")[0]:
@@ -406,11 +409,15 @@ class Generator:
             world = scene_world(scene, SceneOptions(voxel_size=self.voxel, pad=0.3))
             self.stats["sdf_s"] += time.perf_counter() - t
             targets = np.stack([g for _, g in goals] + starts)
+            # seeds: the ready pose first (natural solutions near it), then uniform ones
+            lim = self.robot.joint_limits
+            seeds = rng.uniform(lim[:, 0], lim[:, 1], (len(targets), self.n_seeds, len(lim)))
+            seeds[:, 0] = READY
             t = time.perf_counter()
             ik = IKSolver(self.robot, TCP, len(targets),
                           IKOptions(n_starts=self.n_seeds, seed=int(rng.integers(2**31)),
                                     margin=self.margin, q_default=READY),
-                          world=world, device="cpu", dtype=np.float64).solve(targets)
+                          world=world, device="cpu", dtype=np.float64).solve(targets, seeds)
             self.stats["ik_s"] += time.perf_counter() - t
             self.stats["ik_feasible"] += int(ik.feasible.sum())
             verifier = PathVerifier(self.urdf, None, scene.shapes, spheres=self.spheres,
