@@ -52,8 +52,8 @@ def clearance(q: np.ndarray, scene_path) -> float:
 def test_plan_with_scene_goes_around_the_obstacle(capsys, scene_file):
     base = ["plan", "--robot", "arm7", "--scene", scene_file, "--voxel", VOXEL, "--start",
             q_text(START), "--goal", q_text(GOAL), "--waypoints", 12, "--json"]
-    # the straight line (no iterations) collides with the ball ...
-    code, out, _ = run(capsys, base + ["--starts", 1, "--iterations", 0])
+    # the straight line (no iterations, no fallback) collides with the ball ...
+    code, out, _ = run(capsys, base + ["--starts", 1, "--iterations", 0, "--fallback", "none"])
     line = np.array(json.loads(out)["path"])
     assert code == 1 and not json.loads(out)["feasible"]
     dense = START + np.linspace(0, 1, 200)[:, None] * (np.array(GOAL) - START)
