@@ -257,16 +257,26 @@ def substeps(paths: Any, n_substeps: int, *, device: Any = "cpu", dtype: Any = N
 
 
 def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin: float = 0.0,
-                  kappa: Any = None, device: Any = None) -> np.ndarray:
-    """Feasibility of paths (..., W, n_dof): every one of the ``n_substeps`` linear substeps
-    per segment collision-free with ``margin`` [m] (world and self; elastic model with
-    ``kappa``) and every waypoint within the joint limits. Returns (...,) bool. Runs on
-    ``device`` (None: the preferred device)."""
+                  kappa: Any = None, device: Any = None,
+                  endpoint_margin: float | None = None) -> np.ndarray:
+    """Feasibility of paths (..., W, n_dof): every waypoint within the joint limits and,
+    on the rigid model, every sphere at clearance >= ``margin`` [m] along the whole
+    continuous motion (:mod:`jwarp.world.motion`; ``min(margin, endpoint_margin)`` on the
+    first and last segment; ``n_substeps`` is not used). On the elastic model (``kappa``)
+    the ``n_substeps`` linear substeps per segment are checked at their torque equilibria.
+    Returns (...,) bool. Runs on ``device`` (None: the preferred device)."""
     model = get_robot(robot)
     check_world(model, world)
     a = real_array(paths, "paths")
     if a.ndim < 2 or a.shape[-1] != model.n_dof or a.shape[-2] < 2:
         raise ValueError(f"paths: expected shape (..., W >= 2, {model.n_dof}), got {a.shape}")
+    if kappa is None:
+        from jwarp.world.motion import MotionCheck
+
+        flat = a.reshape(-1, a.shape[-2], a.shape[-1])
+        res = MotionCheck(model, world, device=device).check(
+            flat, margin=margin, endpoint_margin=endpoint_margin)
+        return res.ok.reshape(a.shape[:-2])
     q = substeps(a, n_substeps, device=device)
     free = collision_free(model, world, q.reshape(-1, model.n_dof), margin, kappa=kappa,
                           device=device)
@@ -436,7 +446,7 @@ class PathObjective:
         self.S = (self.W - 1) * self.n_sub + 1
         self.N = self.P * self.S
         self.eps = real_number(eps, "eps", self.npdt) if eps is not None else float(
-            max(world.voxel_size, 0.01))
+            max(world.resolution, 0.01))
         if not self.eps > 0:
             raise ValueError(f"eps: expected > 0 [m], got {eps!r}")
         self.limits = limit_tables(self.robot, self.device, self.scalar)
@@ -596,7 +606,11 @@ class PlanOptions:
         weights: :class:`PathWeights` (lam_w, lam_s, lam_l); None: the defaults.
         eps: smoothing width of the clipped cost c (eq. 3.10) [m], > 0 and >= ``margin``
             (a path of zero collision cost is then feasible); None: max(voxel, 1 cm, margin).
-        margin: required clearance [m] (>= 0) of every sphere at every substep.
+        margin: required clearance [m] (>= 0) of every sphere along the whole continuous
+            motion (:mod:`jwarp.world.motion`).
+        endpoint_margin: clearance [m] required of the start and goal and on the first
+            and last segment, where it is below ``margin`` (None: ``margin``), so grasp
+            poses closer to an object than the path margin can be planned.
         early_stop: freeze each path once it is feasible.
         stop_when_solved: end as soon as every problem has one feasible path (default);
             False optimises every start until it is feasible (or converged, or out of
@@ -643,6 +657,7 @@ class PlanOptions:
     weights: PathWeights | None = None
     eps: float | None = None
     margin: float = 0.0
+    endpoint_margin: float | None = None
     early_stop: bool = True
     stop_when_solved: bool = True
     check_all_every: int = 10
@@ -672,6 +687,11 @@ class PlanOptions:
         margin = real_number(self.margin, "margin")
         if not (math.isfinite(margin) and margin >= 0):
             raise ValueError(f"margin: expected a number >= 0 [m], got {self.margin!r}")
+        if self.endpoint_margin is not None:
+            em = real_number(self.endpoint_margin, "endpoint_margin")
+            if not (math.isfinite(em) and em >= 0):
+                raise ValueError(f"endpoint_margin: expected a number >= 0 [m] or None, got "
+                                 f"{self.endpoint_margin!r}")
         if self.eps is not None:
             eps = real_number(self.eps, "eps")
             if not (math.isfinite(eps) and eps > 0):
@@ -837,11 +857,12 @@ class Planner:
         self._kernel_copies = not self.device.is_cpu
         #: smoothing width of the collision cost [m] (options.eps or its default)
         self.eps = (real_number(o.eps, "eps") if o.eps is not None
-                    else max(float(world.voxel_size), 0.01, o.margin))
+                    else max(float(world.resolution), 0.01, o.margin))
         real_number(self.eps, "eps", self.npdt)
         if o.kappa is not None:
             kappa_array(self.robot, o.kappa)  # validates, naming kappa
         self._buffers: _Buffers | None = None
+        self._motion = None  # the continuous path check (motion_check())
 
     # ------------------------------------------------------------------ public
     def plan(self, start: Any, goal: Any, seeds: Any = None) -> PlanResult:
@@ -922,8 +943,9 @@ class Planner:
         q1 = self._problems(goal, "goal")
         finite_as(q0, self.npdt, "start")  # also finite in the optimisation's dtype
         finite_as(q1, self.npdt, "goal")
-        check_endpoints(model, self.world, q0, "start", o.margin, o.kappa, device=dev)
-        check_endpoints(model, self.world, q1, "goal", o.margin, o.kappa, device=dev)
+        em = o.margin if o.endpoint_margin is None else min(o.margin, o.endpoint_margin)
+        check_endpoints(model, self.world, q0, "start", em, o.kappa, device=dev)
+        check_endpoints(model, self.world, q1, "goal", em, o.kappa, device=dev)
         if isinstance(seeds, ViaPoints):
             Q = _via_seeds(model, q0, q1, seeds.points, o.n_waypoints)
         else:
@@ -935,7 +957,7 @@ class Planner:
         Qf = Q.reshape(P, W, model.n_dof)
         n_sub = o.n_substeps
         if n_sub is None:
-            n_sub = substeps_for_voxel(model, Qf, float(self.world.voxel_size), device=dev)
+            n_sub = substeps_for_voxel(model, Qf, float(self.world.resolution), device=dev)
         buf = self._prepare(P, W, n_sub)
         obj = buf.objective
         obj.set_paths(Qf)
@@ -1058,7 +1080,29 @@ class Planner:
         host = wp.array(np.ascontiguousarray(idx, np.int32), dtype=wp.int32, device="cpu")
         wp.copy(buf.idx, host, count=len(idx))
 
+    def motion_check(self) -> Any:
+        """The planner's :class:`jwarp.world.motion.MotionCheck` (made on first use)."""
+        if self._motion is None:
+            from jwarp.world.motion import MotionCheck
+
+            self._motion = MotionCheck(self.robot, self.world, device=self.device)
+        return self._motion
+
     def _confirm(self, buf: _Buffers, cand: np.ndarray) -> np.ndarray:
+        """Exact feasibility of the candidate paths: rigid model: the continuous check on
+        the device (:mod:`jwarp.world.motion`), one launch over the candidates' segments,
+        one flag per candidate read back; elastic model: every substep at its converged
+        torque equilibrium (host loop)."""
+        o = self.options
+        if o.kappa is None:
+            obj = buf.objective
+            self._upload_idx(buf, cand)
+            out = self.motion_check().launch(obj.paths, buf.idx, len(cand), margin=o.margin,
+                                             endpoint_margin=o.endpoint_margin)
+            return out["ok"].numpy()[:len(cand)].astype(bool)
+        return self._confirm_elastic(buf, cand)
+
+    def _confirm_elastic(self, buf: _Buffers, cand: np.ndarray) -> np.ndarray:
         """Exact feasibility of the candidate paths (zero collision cost): every substep
         collision-free with ``margin`` and every waypoint within the limits. Only the
         candidates' paths and substeps are read (gathered on the device)."""
@@ -1082,7 +1126,7 @@ class Planner:
         # substep)
         surv = np.nonzero(ok)[0]
         if len(surv):  # every survivor's own count, checked in one call per count
-            need = substeps_per_path(self.robot, paths[surv], float(self.world.voxel_size),
+            need = substeps_per_path(self.robot, paths[surv], float(self.world.resolution),
                                      safety=SWEEP_SAFETY, max_substeps=MAX_CHECK_SUBSTEPS,
                                      device=dev)
             for k in np.unique(need[need > obj.n_sub]):

@@ -68,10 +68,15 @@ def test_substeps_catch_a_thin_wall_that_waypoints_miss(device, wall_world):
     robot = jwarp.robot("sphere2d")
     path = np.array([[-0.5, 0.0], [0.5, 0.0]])
     assert collision.is_collision_free(robot, path, wall_world, device=device).all()  # both free
-    assert PL.path_feasible(robot, wall_world, path, 1, device=device)  # waypoints miss the wall
+    # the check is continuous: it sees the wall between the waypoints whatever n_substeps
+    assert not PL.path_feasible(robot, wall_world, path, 1, device=device)
     n_sub = PL.substeps_for_voxel(robot, path, wall_world.voxel_size, device=device)
     assert n_sub >= 31  # 1 m of motion / 0.032 m voxels
     assert not PL.path_feasible(robot, wall_world, path, n_sub, device=device)
+    # ... and says where: the wall at x = 0 is half way
+    from jwarp.world.motion import check_paths
+    res = check_paths(robot, wall_world, path, device=device)
+    assert res.code[0] == 1 and 0.3 < res.where[0] < 0.7 and "grid" in res.reason(0)
     # the planner's own check sees it too: the straight line is never reported feasible
     res = PL.plan(robot, wall_world, path[0], path[1], initial="straight", iterations=0,
                   n_waypoints=2, device=device)
