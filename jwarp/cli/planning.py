@@ -125,8 +125,17 @@ def _scene_world(scene: Any, model: Any, args: argparse.Namespace) -> Any:
     bounding box padded by at least DEFAULT_PAD and by the largest robot sphere radius
     + ``--margin`` + one voxel, so nothing outside the grid can touch the robot)."""
     from jwarp.world.collision import check_world
-    from jwarp.world.scene_file import DEFAULT_PAD, DEFAULT_VOXEL, SceneOptions, scene_world
+    from jwarp.world.scene_file import (DEFAULT_PAD, DEFAULT_VOXEL, SceneOptions, exact_world,
+                                        scene_world)
 
+    if args.voxel is None and args.extent is None:  # no grid asked for: the exact objects
+        try:
+            world = exact_world(scene)
+            check_world(model, world)
+        except (ValueError, TypeError) as e:
+            raise CLIError(f"--scene: {' '.join(str(e).split()).removeprefix('scene: ')}") \
+                from None
+        return world
     h = args.voxel if args.voxel is not None else scene.grid.get("voxel", DEFAULT_VOXEL)
     r = max((s.radius for s in model.spheres), default=0.0)
     pad = max(scene.grid.get("pad", DEFAULT_PAD), r + args.margin + float(h))
@@ -544,7 +553,9 @@ def add_subcommands(sub: Any) -> None:
                        help="a scene file: jwarp scene or MoveIt planning scene (docs/scenes.md)")
     s.add_argument("--voxel", type=real_arg("--voxel", 0.0, lo_open=True, unit=" [m]"),
                    default=None, metavar="V",
-                   help="voxel size [m] of the --scene SDF (default: the file's, else 0.02)")
+                   help="build a signed distance grid of the --scene with this voxel size [m] "
+                        "(its interpolation error sqrt(3)/2 V is subtracted); default: no "
+                        "grid, the exact objects")
     s.add_argument("--extent", type=_extent, default=None, metavar="X0,X1,Y0,Y1,Z0,Z1",
                    help="grid extent [m] of the --scene SDF (default: the obstacles, padded)")
     s.add_argument("--start", required=True, metavar="Q",

@@ -7,7 +7,7 @@ negative inside obstacles) shared by every world constructor and by the collisio
 from jwarp.world.feasibility import (feasible_fraction, feasible_simplex_world, fixed_spheres,
                                      random_configurations, robot_reach, robot_world_grid)
 from jwarp.world.io import load_world, parse_world_spec, save_world
-from jwarp.world.scene_file import (Scene, SceneOptions, load_scene, scene_world,
+from jwarp.world.scene_file import (Scene, SceneOptions, exact_world, load_scene, scene_world,
                                     table_shelf_scene)
 from jwarp.world.scenes import shelf_grasp_poses, shelf_world
 from jwarp.world.self_pairs import never_colliding_pairs, with_self_pairs, write_self_pairs
@@ -15,7 +15,7 @@ from jwarp.world.sdf import (World, grid_geometry, world_from_mesh, world_from_o
                              world_from_points)
 from jwarp.world.simplex import noise_grid, simplex_noise, simplex_occupancy, simplex_world
 
-__all__ = ["Scene", "SceneOptions", "World", "feasible_fraction", "feasible_simplex_world",
+__all__ = ["Scene", "SceneOptions", "World", "exact_world", "feasible_fraction", "feasible_simplex_world",
            "fixed_spheres", "grid_geometry", "load_scene", "load_world",
            "never_colliding_pairs", "noise_grid", "parse_world_spec", "random_configurations",
            "robot_reach", "robot_world_grid", "save_world", "scene_world",

@@ -12,7 +12,8 @@ pose (4x4, local -> world). Local frames (the conventions of MoveIt's ``SolidPri
 * ``cone``: ``dims = [length, radius]``, axis z, base disc of ``radius`` at
   z = -length/2, tip at z = +length/2 (the centre of its bounding box at the origin, as
   MoveIt and FCL place it);
-* ``mesh``: a closed (watertight) triangle mesh, vertices in the local frame.
+* ``mesh``: a triangle mesh, vertices in the local frame (open meshes: inside by the
+  generalised winding number in the exact world; a grid needs a closed mesh).
 
 :func:`signed_distance` gives the exact Euclidean signed distance [m] (negative inside) to
 one shape by closed forms (the cone through the distance to its triangular cross-section
@@ -87,9 +88,8 @@ class Shape:
             if self.mesh is None:
                 raise ValueError(f"{where}: a mesh shape needs its mesh")
             _check_mesh(self.mesh, where)
-            if not self.mesh.is_watertight:
-                raise ValueError(f"{where}: mesh is not watertight (closed), so its inside is "
-                                 f"undefined; close it or use its convex hull")
+            # open meshes are accepted: the exact world decides inside by the winding
+            # number (jwarp.kernels.geometry); a grid of them (scene_world) needs them closed
 
     def to_local(self, points: np.ndarray) -> np.ndarray:
         """(..., 3) world points [m] -> (..., 3) in the shape's frame."""

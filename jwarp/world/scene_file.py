@@ -343,9 +343,25 @@ def _grid_cells(span: np.ndarray, h: float, source: str) -> np.ndarray:
     return nf.astype(np.int64)
 
 
+def exact_world(scene: Scene) -> World:
+    """The exact 3D :class:`World` of ``scene``: its shapes as exact objects
+    (:class:`jwarp.world.shapes.ShapeSet`; no grid), one object per shape (ids of objects
+    with several shapes get ``#k`` suffixes). Objects can then be added, moved and
+    removed in place (:meth:`World.add`, :meth:`World.move`, :meth:`World.remove`)."""
+    from jwarp.world.shapes import ShapeSet
+
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected a Scene, got {type(scene).__name__}")
+    meta = {"source": "scene", "scene": scene.source, "format": scene.format,
+            "objects": scene.object_ids, "exact": True}
+    return World.of_shapes(ShapeSet.from_shapes(scene.shapes), meta)
+
+
 def scene_world(scene: Scene, options: SceneOptions | None = None) -> World:
-    """The 3D :class:`World` of ``scene``: at every cell centre the minimum over the shapes
-    of their exact signed distances (module docstring). ``meta`` records the source, the
+    """The 3D grid :class:`World` of ``scene``: at every cell centre the minimum over the
+    shapes of their exact signed distances (module docstring); it declares
+    ``grid_error = sqrt(3)/2 voxel_size``, the most the interpolation can overestimate, and
+    the collision checks subtract it. Prefer :func:`exact_world` (no grid, exact). ``meta`` records the source, the
     object ids and the grid. ValueError naming ``voxel_size`` (before any allocation) if
     the grid would have more than 2**31 cells or not fit in the available memory."""
     opts = options or SceneOptions()
@@ -394,7 +410,10 @@ def scene_world(scene: Scene, options: SceneOptions | None = None) -> World:
         sdf[:] = float(np.linalg.norm(lim[:, 1] - lim[:, 0])) + h
     meta = {"source": "scene", "scene": scene.source, "format": scene.format,
             "objects": scene.object_ids, "pad": pad if limits is None else None}
-    return World(sdf.astype(opts.dtype), lim, h, sdf < 0, meta)
+    # trilinear interpolation of exact (1-Lipschitz) distances at cell centres is off by at
+    # most the distance to the cell's corners weighted: sqrt(3) / 2 voxels
+    return World(sdf.astype(opts.dtype), lim, h, sdf < 0, meta,
+                 grid_error=float(np.sqrt(3.0) / 2.0 * h))
 
 
 # ------------------------------------------------------------------ a scene for a Panda
