@@ -207,7 +207,7 @@ class IKObjective:
         self.pk = path_kernels.kernels(self.scalar)
         self.limits = limit_tables(self.robot, self.device, self.scalar)
         self.eps = real_number(eps, "eps", self.npdt) if eps is not None else (
-            float(max(world.voxel_size, 0.01)) if world is not None else 0.01)
+            float(max(world.resolution, 0.01)) if world is not None else 0.01)
         dev, sc, B, n = self.device, self.scalar, self.B, self.n
         #: per-configuration arrays with the configuration index fastest in memory (CUDA:
         #: a warp's loads and stores coalesce); the kernels index them [b, ...] either way
@@ -467,7 +467,7 @@ class IKOptions:
         """The smoothing width in use: ``eps`` or the default for ``world``."""
         if self.eps is not None:
             return self.eps
-        return max(float(world.voxel_size) if world is not None else 0.0, 0.01, self.margin)
+        return max(float(world.resolution) if world is not None else 0.0, 0.01, self.margin)
 
 
 class IKSolver:

@@ -1,0 +1,310 @@
+"""Exact world objects (jwarp.kernels.geometry, jwarp.world.shapes) and the continuous path
+check (jwarp.world.motion), on every device, against independent references: the numpy
+closed forms of jwarp.world.primitives, coal's distances, trimesh's closest points and
+winding-free inside tests, finite differences, and densely sampled paths."""
+
+import numpy as np
+import pytest
+import trimesh
+
+import jwarp
+from jwarp.world import World, exact_world
+from jwarp.world.device_world import world_query
+from jwarp.world.motion import MotionCheck, check_paths, sphere_reach
+from jwarp.world.primitives import Shape, pose_matrix, rpy_matrix, signed_distance
+from jwarp.world.scene_file import Scene
+from jwarp.world.shapes import ShapeSet
+
+PRIMS = [("box", [0.3, 0.2, 0.1]), ("sphere", [0.1]), ("cylinder", [0.3, 0.1]),
+         ("capsule", [0.2, 0.05]), ("cone", [0.3, 0.15])]
+
+
+def _shape(kind, dims, rng, oid="o"):
+    return Shape(kind, np.array(dims, float), pose_matrix(rng.normal(size=3) * 0.2,
+                                                          rpy_matrix(rng.normal(size=3))), oid)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("kind,dims", PRIMS)
+def test_primitive_distance_matches_closed_form(device, dtype, kind, dims):
+    rng = np.random.default_rng(1)
+    s = _shape(kind, dims, rng)
+    w = World.of_shapes(ShapeSet.from_shapes([s]))
+    pts = s.pose[:3, 3] + rng.normal(size=(2000, 3)) * 0.2
+    d, g, obj = world_query(w, pts, device=device, dtype=dtype)
+    ref = signed_distance(s, pts)
+    tol = 1e-12 if dtype == np.float64 else 2e-6
+    np.testing.assert_allclose(d, ref, atol=tol)
+    assert (ref < 0).sum() > 20 and (ref > 0).sum() > 50  # both sides sampled
+    assert (obj == 0).all()
+
+
+@pytest.mark.parametrize("kind,dims", PRIMS)
+def test_primitive_distance_matches_coal_outside(kind, dims):
+    coal = pytest.importorskip("coal")
+    rng = np.random.default_rng(2)
+    s = _shape(kind, dims, rng)
+    length_radius = {"cylinder": lambda: coal.Cylinder(dims[1], dims[0]),
+                     "capsule": lambda: coal.Capsule(dims[1], dims[0]),
+                     "cone": lambda: coal.Cone(dims[1], dims[0])}
+    geom = {"box": lambda: coal.Box(*dims), "sphere": lambda: coal.Sphere(dims[0]),
+            **length_radius}[kind]()
+    w = World.of_shapes(ShapeSet.from_shapes([s]))
+    pts = s.pose[:3, 3] + rng.normal(size=(300, 3)) * 0.3
+    d, _, _ = world_query(w, pts)
+    pts, d = pts[d > 1e-3], d[d > 1e-3]
+    tf = coal.Transform3s(s.pose[:3, :3], s.pose[:3, 3])
+    point = coal.Sphere(1e-9)
+    ref = []
+    for p in pts:
+        req, res = coal.DistanceRequest(), coal.DistanceResult()
+        coal.distance(geom, tf, point, coal.Transform3s(np.eye(3), p), req, res)
+        ref.append(res.min_distance + 1e-9)
+    np.testing.assert_allclose(d, ref, atol=2e-6)
+
+
+def test_mesh_distance_closed_and_open(device):
+    rng = np.random.default_rng(3)
+    closed = trimesh.creation.icosphere(subdivisions=3, radius=0.2)
+    cup = trimesh.creation.box().slice_plane([0, 0, 0], [0, 0, 1])  # a box without lid
+    for mesh, inside_ref in ((closed, lambda p: closed.contains(p)),
+                             (cup, lambda p: (np.abs(p[:, :2]) < 0.5).all(1) & (p[:, 2] > 0)
+                              & (p[:, 2] < 0.5))):
+        s = Shape("mesh", np.zeros(0), np.eye(4), "m", mesh=mesh)
+        w = World.of_shapes(ShapeSet.from_shapes([s]))
+        pts = rng.uniform(-0.8, 0.8, size=(1500, 3))
+        d, g, _ = world_query(w, pts, device=device)
+        _, dist, _ = trimesh.proximity.closest_point(mesh, pts)
+        np.testing.assert_allclose(np.abs(d), dist, atol=1e-5)
+        # the sign: inside for the closed sphere's contains; for the open cup, points
+        # well inside its walls count as inside (winding number ~5/6)
+        far = dist > 0.02
+        assert ((d < 0) == inside_ref(pts))[far].all()
+
+
+@pytest.mark.parametrize("dtype", [np.float64])
+def test_gradients_match_finite_differences(device, dtype):
+    rng = np.random.default_rng(4)
+    shapes = [_shape(k, d, rng, f"o{i}") for i, (k, d) in enumerate(PRIMS)]
+    shapes.append(Shape("mesh", np.zeros(0), pose_matrix([0.3, 0, 0]), "m",
+                        mesh=trimesh.creation.icosphere(subdivisions=2, radius=0.1)))
+    w = World.of_shapes(ShapeSet.from_shapes(shapes))
+    pts = rng.normal(size=(400, 3)) * 0.4
+    pts = np.concatenate([pts] + [s.pose[:3, 3] + rng.normal(size=(40, 3)) * 0.03
+                                  for s in shapes])  # and points inside
+    d, g, obj = world_query(w, pts, device=device, dtype=dtype)
+
+    def fd(h):
+        return np.stack([(world_query(w, pts + h * e, device=device)[0]
+                          - world_query(w, pts - h * e, device=device)[0]) / (2 * h)
+                         for e in np.eye(3)], axis=1)
+
+    mesh = obj == len(shapes) - 1   # float32 vertices: a wider step, looser tolerance
+    agree = np.where(mesh, np.linalg.norm(fd(1e-4) - g, axis=1) < 1e-3,
+                     np.linalg.norm(fd(1e-6) - g, axis=1) < 1e-5)
+    assert (d < 0).sum() > 100
+    # the distance is not differentiable on the medial axes and where two objects tie:
+    # those are a few points at most, and everywhere the gradient has unit length
+    assert agree.mean() > 0.97, agree.mean()
+    np.testing.assert_allclose(np.linalg.norm(g, axis=1), 1.0, atol=1e-6)
+    outside = d > 0.01
+    assert agree[outside].mean() > 0.99  # outside a convex shape the distance is C1
+
+
+def test_union_of_many_objects_matches_brute_force(device):
+    rng = np.random.default_rng(5)
+    shapes = [Shape(PRIMS[i % 5][0], np.array(PRIMS[i % 5][1]) * 0.3,
+                    pose_matrix(rng.uniform(-1, 1, 3), rpy_matrix(rng.normal(size=3))), f"o{i}")
+              for i in range(60)]
+    w = World.of_shapes(ShapeSet.from_shapes(shapes))
+    w.add("floor", "plane", pose=pose_matrix([0, 0, -1.2]))
+    pts = rng.uniform(-1.2, 1.2, size=(3000, 3))
+    ref = np.min([signed_distance(s, pts) for s in shapes], axis=0)
+    ref = np.minimum(ref, pts[:, 2] + 1.2)
+    d, _, obj = world_query(w, pts, device=device)
+    np.testing.assert_allclose(d, ref, atol=1e-9)
+    # with a cutoff only objects within it count; beyond, the cutoff is returned
+    dc, _, oc = world_query(w, pts, cutoff=0.05, device=device)
+    near = ref < 0.05
+    np.testing.assert_allclose(dc[near], ref[near], atol=1e-9)
+    assert (dc[~near] == 0.05).all() and (oc[~near] == -1).all()
+
+
+def test_add_move_remove_in_place(device):
+    robot = jwarp.robot("arm7")
+    w = World.of_shapes()
+    w.add("box", "box", [0.1, 0.1, 0.1], [5.0, 0.0, 0.0])
+    q = np.zeros((1, robot.n_dof))
+    from jwarp.world.collision import collision_model, min_distances
+    far = min_distances(robot, q, w, device=device, dtype=np.float64)[0, 0]
+    # move the box onto the arm: the cached collision model sees it
+    x = jwarp.fk(robot, q)[0, robot.frame_index(list(robot.end_effectors)[0]), :3, 3]
+    w.move("box", x)
+    near = min_distances(robot, q, w, device=device, dtype=np.float64)[0, 0]
+    assert far > 3.0 and near < 0
+    cm = collision_model(robot, w, device=device, dtype=np.float64)
+    import warp as wp
+    c1, _ = cm.cost(wp.array(q, dtype=wp.float64, device=cm.device), grad=False)
+    assert c1.numpy()[0] > 0
+    w.add("ball", "sphere", [0.05], [0.0, 0.0, 5.0])
+    w.remove("box")
+    assert w.object_ids == ["ball"]
+    assert min_distances(robot, q, w, device=device, dtype=np.float64)[0, 0] > 3.0
+    with pytest.raises(KeyError, match="object 'box'"):
+        w.move("box", [0, 0, 0])
+
+
+@pytest.mark.parametrize("bad,match", [
+    (dict(kind="box", dims=[0.1, -0.1, 0.1]), "object 'x': box dimensions must be finite and > 0"),
+    (dict(kind="box", dims=[0.1, np.nan, 0.1]), "object 'x': box dimensions"),
+    (dict(kind="box", dims=[1e6, 1, 1]), "object 'x': box dimensions .* exceed"),
+    (dict(kind="torus", dims=[0.1]), "object 'x': unknown shape type"),
+    (dict(kind="sphere", dims=[0.1], pose=[np.nan, 0, 0]), "object 'x': pose contains NaN"),
+    (dict(kind="sphere", dims=[0.1], pose=[1e9, 0, 0]), "object 'x': position .* beyond"),
+    (dict(kind="mesh", mesh=trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), int))),
+     "object 'x': empty mesh"),
+])
+def test_bad_objects_name_the_object(bad, match):
+    s = ShapeSet()
+    with pytest.raises(ValueError, match=match):
+        s.add("x", bad["kind"], bad.get("dims", ()), bad.get("pose"), mesh=bad.get("mesh"))
+    s.add("x", "sphere", [0.1])
+    with pytest.raises(ValueError, match="object 'x': an object of that id exists"):
+        s.add("x", "sphere", [0.1])
+    with pytest.raises(ValueError, match="object 'x': pose contains NaN"):
+        s.move(["x"], [[np.nan, 0, 0]])
+
+
+# ---------------------------------------------------------------- continuous check
+@pytest.fixture(scope="module")
+def arm_scene():
+    robot = jwarp.robot("arm7")
+    w = World.of_shapes()
+    w.add("box", "box", [0.2, 0.2, 0.2], [0.45, 0.0, 0.5])
+    w.add("pole", "cylinder", [0.6, 0.03], pose_matrix([0.0, 0.45, 0.5]))
+    w.add("floor", "plane", pose=pose_matrix([0, 0, -0.05]))
+    return robot, w
+
+
+def _dense_clearance(robot, world, paths, n=1500):
+    from jwarp.world.collision import min_distances
+    P, W, nd = paths.shape
+    u = np.linspace(0, 1, n)
+    seg = paths[:, :-1, None] + u[None, None, :, None] * np.diff(paths, axis=1)[:, :, None]
+    md = min_distances(robot, seg.reshape(-1, nd), world, dtype=np.float64)
+    return md.reshape(P, -1, 2).min(axis=(1, 2))
+
+
+def test_motion_check_agrees_with_dense_sampling(device, arm_scene):
+    robot, w = arm_scene
+    rng = np.random.default_rng(6)
+    lim = np.array(robot.joint_limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], size=(120, 2, robot.n_dof)) * 0.6
+    paths = q[:, :1] + np.linspace(0, 1, 6)[None, :, None] * (q[:, 1:] - q[:, :1])
+    res = MotionCheck(robot, w, device=device).check(paths)
+    dense = _dense_clearance(robot, w, paths)
+    assert not (res.ok & (dense < 0)).any()          # never feasible through an object
+    clear = dense > 2e-3                               # clearly free: certified
+    assert res.ok[clear].all()
+    assert 10 < (~res.ok).sum() < 110                  # both kinds present
+    bad = np.nonzero(~res.ok)[0]
+    assert set(res.code[bad]) <= {1, 2, 3}
+    assert all(("box" in r or "pole" in r or "floor" in r or "self" in r)
+               for r in res.reasons() if r != "feasible")
+
+
+def test_motion_check_margin_and_endpoint_margin(device, arm_scene):
+    robot, w = arm_scene
+    rng = np.random.default_rng(7)
+    lim = np.array(robot.joint_limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], size=(150, 2, robot.n_dof)) * 0.6
+    paths = q[:, :1] + np.linspace(0, 1, 5)[None, :, None] * (q[:, 1:] - q[:, :1])
+    chk = MotionCheck(robot, w, device=device)
+    dense = _dense_clearance(robot, w, paths)
+    for m in (0.0, 0.01, 0.03):
+        ok = chk.check(paths, margin=m).ok
+        assert not (ok & (dense < m)).any()
+        assert ok[dense > m + 3e-3].all()
+    # a grasp-like goal 4 mm from a ball: refused at margin 1 cm, planned with
+    # endpoint_margin 0 (the last segment may come closer than the margin, never below 0)
+    from jwarp.solvers.planner import sphere_centres
+    goal = np.array([0.0, 0.8, 0.0, -1.0, 0.0, 0.5, 0.0])
+    c = sphere_centres(robot, goal[None])[0]
+    _, _, rad = robot.sphere_arrays()
+    k = int(np.argmax(np.linalg.norm(c[:, :2], axis=1)))   # the farthest out
+    u = np.r_[c[k, :2], 0.0] / np.linalg.norm(c[k, :2])
+    ball = World.of_shapes()
+    ball.add("ball", "sphere", [0.05], c[k] + u * (rad[k] + 0.004 + 0.05))
+    start = goal + np.r_[1.2, 0, 0, 0, 0, 0, 0]
+    path = np.linspace(start, goal, 8)
+    chk = MotionCheck(robot, ball, device=device)
+    r0 = chk.check(path, margin=0.01)
+    assert not r0.ok[0] and "ball" in r0.reason(0) and r0.where[0] > 6.0
+    r1 = chk.check(path, margin=0.01, endpoint_margin=0.0)
+    assert r1.ok[0], r1.reason(0)
+    dense = _dense_clearance(robot, ball, path[None])
+    assert 0.0 < dense[0] <= 0.004 + 1e-6
+    assert _dense_clearance(robot, ball, path[None, :7])[0] >= 0.01
+
+
+def test_motion_check_reports_limits_and_uses_grid_error(device):
+    robot = jwarp.robot("sphere2d")
+    occ = np.zeros((64, 64), bool)
+    occ[31:33, :] = True
+    from jwarp.world import world_from_occupancy
+    grid = world_from_occupancy(occ, [[-1, 1], [-1, 1]])
+    path = np.array([[-0.5, 0.0], [-0.2, 0.0]])
+    base = check_paths(robot, grid, path, device=device)
+    assert base.ok[0]
+    from dataclasses import replace
+    g2 = replace(grid, grid_error=0.5)   # a grid that declares 0.5 m of error
+    bad = check_paths(robot, g2, path, device=device)
+    assert not bad.ok[0] and "grid" in bad.reason(0)
+    over = np.array([[-0.5, 0.0], [-1.5, 0.0]])
+    r = check_paths(robot, grid, over, device=device)
+    assert r.code[0] == 4 and "joint limits" in r.reason(0)
+
+
+def test_sphere_reach_bounds_the_motion():
+    """Finite differences of the sphere centres never exceed the reach bound."""
+    robot = jwarp.robot("justin19")
+    R = sphere_reach(robot)
+    rng = np.random.default_rng(8)
+    lim = np.array(robot.joint_limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], size=(200, robot.n_dof))
+    from jwarp.solvers.planner import sphere_centres
+    x0 = sphere_centres(robot, q)
+    h = 1e-6
+    for j in range(robot.n_dof):
+        dq = np.zeros(robot.n_dof)
+        dq[j] = h
+        speed = np.linalg.norm(sphere_centres(robot, q + dq) - x0, axis=-1) / h  # (200, S)
+        # frame angles that joint j drives (couplings)
+        coef = np.zeros(robot.n_frames)
+        for i, f in enumerate(robot.frames):
+            for jj, c in f.coupling:
+                if jj == j:
+                    coef[i] += abs(c)
+        bound = R @ coef
+        assert (speed <= bound[None] * (1 + 1e-4) + 1e-6).all(), j
+
+
+def test_exact_world_of_a_scene_and_planner_feasible_means_feasible(device, arm_scene):
+    robot, w = arm_scene
+    from jwarp.world.collision import min_distances
+    rng = np.random.default_rng(9)
+    lim = np.array(robot.joint_limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], size=(400, 2, robot.n_dof)) * 0.6
+    free = (min_distances(robot, q.reshape(-1, robot.n_dof), w, dtype=np.float64)
+            .reshape(400, 2, 2).min(axis=(1, 2)) > 0.02)
+    lines = q[:, :1] + np.linspace(0, 1, 20)[None, :, None] * (q[:, 1:] - q[:, :1])
+    through = _dense_clearance(robot, w, lines, n=50) < 0
+    k = np.nonzero(free & through)[0][:3]       # straight lines through an object
+    assert len(k) == 3
+    res = jwarp.solvers.planner.plan(robot, w, q[k, 0], q[k, 1], n_starts=4, iterations=80,
+                                      device=device)
+    assert res.feasible.all()
+    assert (_dense_clearance(robot, w, res.path, n=400) >= 0).all()
+    scene = Scene([Shape("box", np.array([0.2, 0.2, 0.2]), pose_matrix([0.45, 0, 0.5]), "b")])
+    ew = exact_world(scene)
+    assert ew.object_ids == ["b"] and not ew.has_grid and ew.dim == 3
