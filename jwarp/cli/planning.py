@@ -412,6 +412,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
         state = "feasible" if res.feasible[0] else "NOT feasible"
         print(f"robot {model.name}: path of {args.waypoints} waypoints is {state} "
               f"({res.n_feasible[0]} of {res.all_feasible.shape[1]} starts feasible)")
+        if not res.feasible[0] and res.reasons is not None:
+            print(f"why: {res.reasons[0]}")
         print(f"costs: total {res.cost[0]:.6g}, length {res.length_cost[0]:.6g}, "
               f"collision {res.collision_cost[0]:.6g}; iterations {res.iterations[0]}; "
               f"{res.n_substeps} substeps per segment; wall time {res.wall_time:.3f} s")

@@ -128,6 +128,8 @@ class PlanResult:
     stage: Any = None
     #: seconds per stage: "optimizer", "rrt", "fallback_optimizer"
     timings: dict = field(default_factory=dict, repr=False)
+    #: (B,) "feasible" or why the problem's path is not (:meth:`Planner.explain`)
+    reasons: Any = None
 
     @property
     def all_paths(self) -> np.ndarray:
@@ -151,6 +153,8 @@ class PlanResult:
                 "n_substeps": int(self.n_substeps),
                 "wall_time_s": float(self.wall_time),
                 "stop_reason": str(self.stop_reason),
+                "reason": (str(self.reasons[index]) if self.reasons is not None
+                           else None),
                 "stage": None if self.stage is None else str(self.stage[index])}
 
 
@@ -1025,8 +1029,29 @@ class Planner:
         res.timings = {"optimizer": time.perf_counter() - t0}
         if o.fallback is not None and not res.feasible.all():
             _fallback(self, res, q0, q1, t0, deadline)
+        res.reasons = self.explain(res)
         res.wall_time = time.perf_counter() - t0
         return res
+
+    def explain(self, res: PlanResult) -> list[str]:
+        """Per problem of ``res``: "feasible", or why its best path is not: the first
+        colliding link and object (or link pair), an uncertified approach, or the joint
+        limits (one check of the infeasible problems' paths on the device)."""
+        out = ["feasible"] * len(res.feasible)
+        bad = np.nonzero(~np.asarray(res.feasible, bool))[0]
+        if not len(bad):
+            return out
+        o = self.options
+        if o.kappa is not None:
+            for i in bad:
+                out[i] = "not feasible on the elastic model (collision or limits at a substep)"
+            return out
+        chk = self.motion_check().check(np.asarray(res.path)[bad], margin=o.margin,
+                                        endpoint_margin=o.endpoint_margin)
+        for k, i in enumerate(bad):
+            out[i] = chk.reason(k) if not chk.ok[k] else \
+                "not feasible: the optimisation ran out of iterations or time"
+        return out
 
     def _converge_check(self, buf: _Buffers, it: int, last: bool, screened: np.ndarray,
                         done: np.ndarray, feasible: np.ndarray, iters: np.ndarray,

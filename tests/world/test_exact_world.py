@@ -13,6 +13,7 @@ from jwarp.world.device_world import world_query
 from jwarp.world.motion import MotionCheck, check_paths, sphere_reach
 from jwarp.world.primitives import Shape, pose_matrix, rpy_matrix, signed_distance
 from jwarp.world.scene_file import Scene
+from jwarp.solvers.planner import plan
 from jwarp.world.shapes import ShapeSet
 
 PRIMS = [("box", [0.3, 0.2, 0.1]), ("sphere", [0.1]), ("cylinder", [0.3, 0.1]),
@@ -301,10 +302,29 @@ def test_exact_world_of_a_scene_and_planner_feasible_means_feasible(device, arm_
     through = _dense_clearance(robot, w, lines, n=50) < 0
     k = np.nonzero(free & through)[0][:3]       # straight lines through an object
     assert len(k) == 3
-    res = jwarp.solvers.planner.plan(robot, w, q[k, 0], q[k, 1], n_starts=4, iterations=80,
+    res = plan(robot, w, q[k, 0], q[k, 1], n_starts=4, iterations=80,
                                       device=device)
     assert res.feasible.all()
     assert (_dense_clearance(robot, w, res.path, n=400) >= 0).all()
     scene = Scene([Shape("box", np.array([0.2, 0.2, 0.2]), pose_matrix([0.45, 0, 0.5]), "b")])
     ew = exact_world(scene)
     assert ew.object_ids == ["b"] and not ew.has_grid and ew.dim == 3
+
+
+def test_infeasible_plan_says_why(device, arm_scene, tmp_path, capsys):
+    robot, w = arm_scene
+    from jwarp.world.collision import min_distances
+    # a free goal whose straight line hits the box, no iterations and no fallback
+    rng = np.random.default_rng(10)
+    lim = np.array(robot.joint_limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], size=(300, 2, robot.n_dof)) * 0.6
+    free = (min_distances(robot, q.reshape(-1, robot.n_dof), w, dtype=np.float64)
+            .reshape(300, 2, 2).min(axis=(1, 2)) > 0.02)
+    lines = q[:, :1] + np.linspace(0, 1, 20)[None, :, None] * (q[:, 1:] - q[:, :1])
+    i = int(np.nonzero(free & (_dense_clearance(robot, w, lines, n=50) < 0))[0][0])
+    start, goal = q[i, 0], q[i, 1]
+    res = plan(robot, w, start, goal, initial="straight", iterations=0,
+                                      device=device, fallback=None)
+    assert not res.feasible[0]
+    assert res.reasons[0].startswith("collision: sphere") and "vs object '" in res.reasons[0]
+    assert res.to_dict(0)["reason"] == res.reasons[0]
