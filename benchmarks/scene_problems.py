@@ -30,8 +30,11 @@ uniform ones), on the scene's 2 cm SDF with the
 fitted sphere model (``SpherizeOptions(tolerance=0.02)``, cached). A candidate is accepted
 only if, with the fingers set, jwarp finds it collision-free (world and self, sphere model,
 ``--margin``) **and** the independent checker ``tests/verifier.py`` (pinocchio + coal)
-finds both the URDF collision meshes and the robot spheres clear of the exact scene
-geometry by ``--margin``. A scene whose start or goal cannot be found is redrawn.
+finds the URDF collision meshes clear of the exact scene geometry by ``--margin`` and the
+robot spheres by ``max(--clearance, --margin)`` (default 0). jwarp's own check runs on the
+generator's 2 cm grid world; its grid worlds lower the SDF by a declared error (about 0.87
+voxel), so a coarser world may refuse a start or goal: ``--clearance 0.02`` avoids that
+for grids of up to 2 cm (about a quarter of the drawn scenes then fail). A scene whose start or goal cannot be found is redrawn.
 
 Files: ``DIR/<family>_<k>.yaml`` (MoveIt planning scene: ``robot_state.joint_state`` with
 the 7 arm joints and both finger joints, ``world.collision_objects`` of boxes and
@@ -359,8 +362,9 @@ class Generator:
     """Makes problems for one robot model (spheres + self pairs) and URDF."""
 
     def __init__(self, robot: Any, urdf: str, margin: float = 0.0, n_seeds: int = 8,
-                 voxel: float = 0.02):
+                 voxel: float = 0.02, clearance: float = 0.0):
         self.robot, self.urdf, self.margin = robot, urdf, margin
+        self.clearance = max(clearance, margin)
         self.n_seeds, self.voxel = n_seeds, voxel
         self.spheres = robot_spheres(robot)
         self.names = robot.joint_names
@@ -383,7 +387,7 @@ class Generator:
             t = time.perf_counter()
             v = verifier.check_path(c[None], margin=self.margin)
             self.stats["verify_s"] += time.perf_counter() - t
-            if not v.ok:
+            if not v.ok or (v.sphere is not None and v.sphere.distance < self.clearance):
                 self.stats["verifier_rejected"] += 1
                 continue
             return c, v, int(i)
@@ -468,7 +472,8 @@ def load_robot(path: str | None = None) -> tuple[Any, str]:
 
 def generate(out: str | os.PathLike, per_family: int, seed: int = 0,
              families: list[str] | None = None, margin: float = 0.0,
-             robot: str | None = None, log: Callable[[str], None] = print) -> dict:
+             robot: str | None = None, log: Callable[[str], None] = print,
+             clearance: float = 0.0) -> dict:
     """Write ``per_family`` problems of each family into ``out``; returns the index."""
     import yaml
 
@@ -481,12 +486,12 @@ def generate(out: str | os.PathLike, per_family: int, seed: int = 0,
         raise ValueError(f"families: unknown {unknown}; known: {', '.join(FAMILIES)}")
     t0 = time.perf_counter()
     model, urdf = load_robot(robot)
-    gen = Generator(model, urdf, margin)
+    gen = Generator(model, urdf, margin, clearance=clearance)
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     index = {"format": "jwarp.scene_problems", "version": 1, "robot": "panda",
              "urdf": URDF, "tcp": TCP, "seed": seed, "per_family": per_family,
-             "margin": margin, "spheres": len(model.spheres), "problems": [], "failed": []}
+             "margin": margin, "sphere_clearance": max(clearance, margin), "spheres": len(model.spheres), "problems": [], "failed": []}
     for fi, fam in enumerate(fams):
         for k in range(per_family):
             s = seed * 1_000_003 + fi * 10_007 + k
@@ -521,6 +526,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--families", default=None, help=f"comma-separated ({','.join(FAMILIES)})")
     ap.add_argument("--margin", type=float, default=0.0,
                     help="clearance [m] of start and goal (jwarp spheres and the checker)")
+    ap.add_argument("--clearance", type=float, default=0.0,
+                    help="least exact clearance [m] of the robot spheres at start and goal "
+                         "(0; e.g. 0.02 keeps them clear of a 2 cm grid's declared error, "
+                         "for worlds coarser than the generator's; fewer problems succeed)")
     ap.add_argument("--robot", default=None, metavar="JSON",
                     help="a saved Panda sphere model instead of fitting example-robot-data's URDF")
     a = ap.parse_args(argv)
@@ -528,7 +537,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--per-family: expected >= 1")
     fams = a.families.split(",") if a.families else None
     try:
-        index = generate(a.out, a.per_family, a.seed, fams, a.margin, a.robot)
+        index = generate(a.out, a.per_family, a.seed, fams, a.margin, a.robot, clearance=a.clearance)
     except ValueError as e:
         print(f"scene_problems: error: {e}", file=sys.stderr)
         return 2
