@@ -112,11 +112,12 @@ class DeviceWorld:
         return True
 
 
-def world_query(world: World, points: Any, *, cutoff: float = 1e30, device: Any = "cpu",
+def world_query(world: World, points: Any, *, cutoff: float = 1e30, device: Any = None,
                 dtype: Any = np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Signed distance [m] of the whole world (grid lowered by its ``grid_error``, and
     exact objects) at ``points`` (N, 3): ``(dist (N,), grad (N, 3), obj (N,) int: object
-    index, -2 grid, -1 nothing within cutoff)``."""
+    index, -2 grid, -1 nothing within cutoff)``, computed on ``device`` (None: the
+    preferred one)."""
     from jwarp.core.arrays import init_warp, resolve_device
     from jwarp.core.device import scalar_type
 

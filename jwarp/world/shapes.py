@@ -243,14 +243,16 @@ class ShapeSet:
 
     def distance(self, points: Any) -> np.ndarray:
         """Exact signed distance [m] of ``points`` (..., 3) to the union (numpy, float64,
-        through the float64 kernel on the CPU); +inf without objects."""
+        through the float64 kernel on the preferred device); +inf without objects."""
         init_warp()
         p = np.asarray(points, dtype=np.float64)
         flat = np.ascontiguousarray(p.reshape(-1, 3))
         if len(self) == 0:
             return np.full(p.shape[:-1], np.inf)
+        from jwarp.core.arrays import resolve_device
+
         k = gk.kernels(wp.float64)
-        dev = wp.get_device("cpu")
+        dev = resolve_device(None)
         ds = self.device_shapes(dev, wp.float64)
         n = len(flat)
         d = wp.empty(n, dtype=wp.float64, device=dev)
