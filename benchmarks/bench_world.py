@@ -64,7 +64,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--points", type=int, default=100_000)
     ap.add_argument("--paths", type=int, default=200)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--json", default=None, help="write the figures here")
     a = ap.parse_args(argv)
+    rows: list[dict] = []
+
+    def row(what: str, times: list[float], **extra) -> None:
+        rows.append(dict(what=what, min_ms=float(np.min(times) * 1e3),
+                         median_ms=float(np.median(times) * 1e3), **extra))
     if a.quick:
         a.repeats, a.points, a.paths = 3, 5000, 10
     init_warp()
@@ -84,6 +90,7 @@ def main(argv: list[str] | None = None) -> int:
         wp.synchronize_device(dev)
         times.append(time.perf_counter() - t0)
     print(f"{'build 20 objects + device copy (BVH)':<52}{stats(times)}")
+    row("build", times)
     # move
     w = _scene(rng, 60)
     dw = DeviceWorld(w, dev, f32)
@@ -98,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
         wp.synchronize_device(dev)
         times.append(time.perf_counter() - t0)
     print(f"{'move 50 objects (pose arrays + BVH refit)':<52}{stats(times)}")
+    row("move", times)
     # query: exact vs grid of the table-and-shelf scene
     from jwarp.world import exact_world, scene_world, SceneOptions
     from jwarp.world.scene_file import scene_from_dict, table_shelf_scene
@@ -129,6 +137,7 @@ def main(argv: list[str] | None = None) -> int:
         ns = np.median(t) / a.points * 1e9
         label = f"query {a.points} points, {name} ({len(scene.shapes)} shapes)"
         print(f"{label:<52}{stats(t)}   {ns:7.1f} ns/point, {np.median(t) / base:5.2f} x grid")
+        row(f"query {name}", t, ns_per_point=ns)
     # continuous check
     import jwarp
     from jwarp.world.motion import MotionCheck
@@ -150,6 +159,11 @@ def main(argv: list[str] | None = None) -> int:
     rate = a.paths / np.median(times)
     print(f"{f'check {a.paths} arm7 paths (20 waypoints), {ok[:a.paths].mean():.0%} ok':<52}"
           f"{stats(times)}   {rate:9.0f} paths/s")
+    row("check", times, paths_per_s=rate, ok=float(ok[:a.paths].mean()))
+    if a.json:
+        import json
+        with open(a.json, "w") as f:
+            json.dump({"device": str(dev), "rows": rows}, f, indent=1)
     return 0
 
 
