@@ -119,14 +119,14 @@ def main(argv: list[str] | None = None) -> int:
     p_wp = wp.array(pts, dtype=k.vec3, device=dev)
     out = [wp.empty(a.points, dtype=f32, device=dev), wp.empty(a.points, dtype=k.vec3, device=dev),
            wp.empty(a.points, dtype=wp.int32, device=dev)]
-    rows = {}
+    qw = {}
     for name, world, cut in (("exact", ex, 1e30), ("exact, cutoff 5 cm", ex, 0.05),
                              ("grid 2 cm", grid, 1e30)):
         dwq = DeviceWorld(world, dev, f32)
-        rows[name] = (dwq, cut)
-    res = {n: [] for n in rows}
+        qw[name] = (dwq, cut)
+    res = {n: [] for n in qw}
     for r in range(a.repeats):
-        for name, (dwq, cut) in rows.items():
+        for name, (dwq, cut) in qw.items():
             t0 = time.perf_counter()
             wp.launch(k.world_query, dim=a.points, inputs=[p_wp, cut, dwq.struct], outputs=out,
                       device=dev)
