@@ -32,7 +32,8 @@ import jwarp  # noqa: E402
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.importers.robot import example_robot_urdf  # noqa: E402
 from jwarp.solvers.planner import PlanOptions, Planner, collision_free, path_feasible  # noqa: E402
-from jwarp.world.scene_file import SceneOptions, load_scene, robot_frames, scene_world  # noqa: E402
+from jwarp.world.scene_file import (SceneOptions, exact_world, load_scene, robot_frames,  # noqa: E402
+                                    scene_world)
 from jwarp.world.spherize import SpherizeOptions, SpherizeReport, spherized_robot  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -108,7 +109,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--pairs", type=int, default=100, help="random start/goal pairs (100)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--voxel", type=float, default=0.02, help="SDF voxel [m] (0.02)")
+    ap.add_argument("--voxel", type=float, default=None,
+                    help="plan against a grid of this voxel [m] instead of the exact objects")
     ap.add_argument("--tolerance", type=float, default=0.02,
                     help="one-sided error of the fitted spheres [m] (0.02)")
     ap.add_argument("--starts", type=int, default=4, help="multi-starts per problem (4)")
@@ -134,12 +136,13 @@ def main(argv: list[str] | None = None) -> int:
     t_fit = time.perf_counter() - t0
     dev = "cuda:0" if a.no_cpu else "cpu"
     scene = load_scene(SCENE, robot_frames(robot))
-    world = scene_world(scene, SceneOptions(voxel_size=a.voxel))
+    world = exact_world(scene) if a.voxel is None else \
+        scene_world(scene, SceneOptions(voxel_size=a.voxel))
     starts, goals = task_pairs(robot, world, a.pairs, a.seed, a.margin, dev)
     print(f"Panda: {robot.n_dof} joints, {len(robot.spheres)} spheres (tolerance {a.tolerance} m, "
           f"{'cached' if fit.cached else f'fitted in {t_fit:.1f} s'}), "
           f"{int(robot.allowed_collision_pairs.sum()) // 2} self pairs; scene "
-          f"{len(scene.shapes)} shapes, voxel {a.voxel} m; {a.pairs} random start/goal pairs",
+          f"{len(scene.shapes)} shapes, {'exact' if a.voxel is None else f'voxel {a.voxel} m'}; {a.pairs} random start/goal pairs",
           flush=True)
     opts = PlanOptions(n_starts=a.starts, iterations=a.iterations, n_waypoints=a.waypoints,
                        margin=a.margin, stop_when_solved=True, seed=a.seed, fallback=None)
