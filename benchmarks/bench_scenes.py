@@ -132,7 +132,10 @@ def plan_one(robot: Any, prob: Problem, margin: float, args: argparse.Namespace,
                     time_limit=args.time_limit, stop_when_solved=True, fallback="rrt")
     wp.synchronize_device(device)
     t0 = time.perf_counter()
-    res = Planner(robot, prob.world, 1, o, device=device).plan(prob.start, prob.goal)
+    try:
+        res = Planner(robot, prob.world, 1, o, device=device).plan(prob.start, prob.goal)
+    except ValueError as e:   # a planner error is a failed problem, its message kept
+        res = e
     wp.synchronize_device(device)
     return time.perf_counter() - t0, res
 
@@ -186,11 +189,18 @@ def run_jwarp(robot: Any, urdf: str, spheres: list, probs: list[Problem], margin
     total = timing.stopwatch()
     for k, p in enumerate(probs):
         t, res = plan_one(robot, p, margin, args, device)
-        ok = bool(res.feasible[0])
-        row = {"planner": "jwarp", "device": device, "margin": margin, "problem": p.name,
-               "family": p.family, "solved": ok, "time_s": t, "stage": str(res.stage[0]),
-               "stop_reason": str(res.stop_reason), "reason": str(res.reasons[0]),
-               "timings": {k2: float(v) for k2, v in res.timings.items()}}
+        if isinstance(res, Exception):
+            ok = False
+            row = {"planner": "jwarp", "device": device, "margin": margin, "problem": p.name,
+                   "family": p.family, "solved": False, "time_s": t, "stage": "error",
+                   "stop_reason": "error", "reason": f"{type(res).__name__}: {res}"}
+            print(f"  {p.name} margin {margin:g}: planner error: {row['reason']}", flush=True)
+        else:
+            ok = bool(res.feasible[0])
+            row = {"planner": "jwarp", "device": device, "margin": margin, "problem": p.name,
+                   "family": p.family, "solved": ok, "time_s": t, "stage": str(res.stage[0]),
+                   "stop_reason": str(res.stop_reason), "reason": str(res.reasons[0]),
+                   "timings": {k2: float(v) for k2, v in res.timings.items()}}
         if ok and not args.no_verify:
             path = np.asarray(res.path[0], np.float64)
             row.update(verify(p.verifier(urdf, spheres, robot.joint_names), path, margin,
@@ -316,6 +326,7 @@ def stats(rows: list[dict]) -> dict:
         "solved_pct": 100.0 * len(solved) / len(rows) if rows else math.nan,
         "optimizer": sum(r.get("stage") == "optimizer" for r in rows),
         "fallback": sum(r.get("stage") == "fallback" for r in rows),
+        "errors": sum(r.get("stage") == "error" for r in rows),
         "verified": len(checked),
         "verified_free": sum(not r["collision"] for r in checked),
         "collisions": sum(r["collision"] for r in checked),
@@ -330,14 +341,14 @@ def stats(rows: list[dict]) -> dict:
 
 
 HEAD = (f"{'family':<17} {'n':>4} {'solved':>7} {'optim':>5} {'fallb':>5} {'verif.free':>10} "
-        f"{'coll':>4} {'m-viol':>6} {'mesh<m':>6} {'median_s':>8} {'p95_s':>6} {'max_s':>6}")
+        f"{'coll':>4} {'m-viol':>6} {'mesh<m':>6} {'error':>5} {'median_s':>8} {'p95_s':>6} {'max_s':>6}")
 
 
 def line(name: str, s: dict) -> str:
     vf = (f"{s['verified_free']}/{s['verified']}" if s["verified"] else "-")
     return (f"{name:<17} {s['problems']:>4} {pct(s['solved'], s['problems']):>7} "
             f"{s['optimizer']:>5} {s['fallback']:>5} {vf:>10} {s['collisions']:>4} "
-            f"{s['sphere_margin_violations']:>6} {s['mesh_below_margin']:>6} "
+            f"{s['sphere_margin_violations']:>6} {s['mesh_below_margin']:>6} {s['errors']:>5} "
             f"{s['median_s']:>8.3f} {s['p95_s']:>6.3f} {s['max_s']:>6.3f}")
 
 
