@@ -1,0 +1,35 @@
+"""Smoke test of benchmarks/bench_scenes.py: ``--quick`` on one problem of two families
+(generated, planned at both margins on the CPU, verified, and the OMPL baseline where it
+is installed) exits 0 and the independent verifier finds no collision on any path jwarp
+called feasible (the timings are not checked)."""
+
+from __future__ import annotations
+
+import pytest
+
+
+def test_bench_scenes_quick(run_bench):
+    from jwarp.importers.robot import example_robot_urdf
+
+    try:
+        example_robot_urdf("panda_description/urdf/panda.urdf")
+    except ValueError as e:
+        pytest.skip(str(e))
+    stdout, doc = run_bench("bench_scenes.py", "--quick", "--per-family", "1",
+                            "--families", "table_pick,bookshelf_small", "--device", "cpu",
+                            timeout=300)
+    assert stdout.startswith("machine: "), stdout
+    assert doc["n_problems"] == 2 and doc["margins"] == [0.0, 0.01]
+    assert doc["endpoint_margin"] == 0.0
+    jw = [r for r in doc["rows"] if r["planner"] == "jwarp"]
+    assert len(jw) == 4
+    solved = [r for r in jw if r["solved"]]
+    assert solved, stdout
+    for r in solved:   # every feasible path was re-checked: no collision, no margin broken
+        assert "collision" in r, r
+        assert not r["collision"], r
+        assert not r["sphere_margin_violation"], r
+    assert doc["jwarp_collisions"] == 0
+    for s in doc["summary"]:
+        assert s["problems"] == 2 and 0 <= s["solved"] <= 2
+        assert s["median_s"] <= s["p95_s"] <= s["max_s"]
