@@ -32,9 +32,8 @@ only if, with the fingers set, jwarp finds it collision-free (world and self, sp
 ``--margin``) **and** the independent checker ``tests/verifier.py`` (pinocchio + coal)
 finds the URDF collision meshes clear of the exact scene geometry by ``--margin`` and the
 robot spheres by ``max(--clearance, --margin)`` (default 0). jwarp's own check runs on the
-generator's 2 cm grid world; its grid worlds lower the SDF by a declared error (about 0.87
-voxel), so a coarser world may refuse a start or goal: ``--clearance 0.02`` avoids that
-for grids of up to 2 cm (about a quarter of the drawn scenes then fail). A scene whose start or goal cannot be found is redrawn.
+exact objects (``exact_world``; a ``Generator(voxel=...)`` grid world lowers the SDF by its
+declared error, about 0.87 voxel, and may then refuse a start or goal). A scene whose start or goal cannot be found is redrawn.
 
 Files: ``DIR/<family>_<k>.yaml`` (MoveIt planning scene: ``robot_state.joint_state`` with
 the 7 arm joints and both finger joints, ``world.collision_objects`` of boxes and
@@ -362,7 +361,7 @@ class Generator:
     """Makes problems for one robot model (spheres + self pairs) and URDF."""
 
     def __init__(self, robot: Any, urdf: str, margin: float = 0.0, n_seeds: int = 8,
-                 voxel: float = 0.02, clearance: float = 0.0):
+                 voxel: float | None = None, clearance: float = 0.0):
         self.robot, self.urdf, self.margin = robot, urdf, margin
         self.clearance = max(clearance, margin)
         self.n_seeds, self.voxel = n_seeds, voxel
@@ -396,7 +395,8 @@ class Generator:
     def problem(self, family: str, seed: int, max_tries: int = 20) -> dict | None:
         """One problem of ``family`` (a dict: scene data, start, goal, meta) or None."""
         from jwarp.solvers.ik import IKOptions, IKSolver
-        from jwarp.world.scene_file import SceneOptions, scene_from_dict, scene_world
+        from jwarp.world.scene_file import (SceneOptions, exact_world, scene_from_dict,
+                                            scene_world)
 
         rng = np.random.default_rng(seed)
         for attempt in range(max_tries):
@@ -410,7 +410,8 @@ class Generator:
             scene = scene_from_dict(data, source=f"{family}/{seed}")
             self.stats["scenes"] += 1
             t = time.perf_counter()
-            world = scene_world(scene, SceneOptions(voxel_size=self.voxel, pad=0.3))
+            world = exact_world(scene) if self.voxel is None else \
+                scene_world(scene, SceneOptions(voxel_size=self.voxel, pad=0.3))
             self.stats["sdf_s"] += time.perf_counter() - t
             targets = np.stack([g for _, g in goals] + starts)
             # seeds: the ready pose first (natural solutions near it), then uniform ones
