@@ -51,6 +51,8 @@ class RRTOptions:
         shortcut_iterations: random shortcut pairs tried on the found path, >= 0 (in
             rounds of ``batch`` pairs).
         batch: samples per round (and shortcut pairs per round), >= 1.
+        n_connect: the new nodes of a round (those nearest to the other tree) that the
+            other tree tries to connect to, >= 1.
         n_substeps: substeps per edge of the checks, >= 1; None sizes them to the world's
             voxel size per batch of edges (no sphere centre moves more than half a voxel).
     """
@@ -62,13 +64,15 @@ class RRTOptions:
     seed: Any = 0
     shortcut_iterations: int = 64
     batch: int = 32
+    n_connect: int = 4
     n_substeps: int | None = None
 
     def validate(self) -> None:
         step = real_number(self.step, "rrt.step")
         if not (math.isfinite(step) and step > 0):
             raise ValueError(f"rrt.step: expected a number > 0, got {self.step!r}")
-        for name, lo in (("max_samples", 1), ("shortcut_iterations", 0), ("batch", 1)):
+        for name, lo in (("max_samples", 1), ("shortcut_iterations", 0), ("batch", 1),
+                         ("n_connect", 1)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
                 raise ValueError(f"rrt.{name}: expected an integer >= {lo}, got {v!r}")
@@ -277,7 +281,7 @@ def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
             sel = sel[chk.edges(qn[sel], new[sel])]
         if len(sel):
             ids = A.add(new[sel], near[sel])
-            found = _connect(B, A.q[ids], ids, chk, step)
+            found = _connect(B, A.q[ids], ids, chk, step, o.n_connect)
             if found is not None:
                 ia, ib = found
                 pa, pb = A.branch(ia), B.branch(ib)
@@ -333,14 +337,18 @@ def _split(a: np.ndarray, b: np.ndarray, step: float, m: int | None = None) -> n
 
 
 def _connect(B: _Tree, targets: np.ndarray, target_ids: np.ndarray, chk: _Checks,
-             step: float) -> tuple[int, int] | None:
-    """Grow B greedily towards every target (K, n): the segment from its nearest node cut
-    into edges of at most ``step``, all checked in one batch; the longest feasible prefix
-    of each is added to B. Returns (target id, B node) of a complete connection (the
-    shortest one), else None."""
+             step: float, limit: int) -> tuple[int, int] | None:
+    """Grow B greedily towards the ``limit`` targets (K, n) nearest to it: the segment from
+    its nearest node cut into edges of at most ``step``, all checked in one batch; the
+    longest feasible prefix of each is added to B. Returns (target id, B node) of a
+    complete connection (the shortest one), else None."""
     near = B.nearest(targets)
     qb = B.q[near]
     dist = np.linalg.norm(targets - qb, axis=1)
+    if len(targets) > limit:
+        keep = np.argsort(dist, kind="stable")[:limit]
+        targets, target_ids, near, qb, dist = (targets[keep], target_ids[keep], near[keep],
+                                               qb[keep], dist[keep])
     m = np.maximum(1, np.ceil(dist / step).astype(np.int64))
     # every target's edges, each cut into its own m pieces
     rows = np.repeat(np.arange(len(targets)), m)

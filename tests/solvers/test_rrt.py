@@ -120,7 +120,7 @@ def test_resample_path_keeps_the_polyline():
     ("shortcut_iterations", -1, "^rrt.shortcut_iterations"),
     ("goal_bias", 1.5, "^rrt.goal_bias"), ("time_limit", 0.0, "^rrt.time_limit"),
     ("time_limit", float("inf"), "^rrt.time_limit"), ("seed", -1, "^rrt.seed"),
-    ("n_substeps", 0, "^rrt.n_substeps"),
+    ("n_substeps", 0, "^rrt.n_substeps"), ("n_connect", 0, "^rrt.n_connect"),
 ])
 def test_options_are_validated(field, value, match):
     with pytest.raises(ValueError, match=match):
