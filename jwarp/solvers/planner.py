@@ -1224,7 +1224,8 @@ def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarra
             timed_out = True
             break
         r = rrt_connect(planner.robot, planner.world, q0[b], q1[b], ropt, margin=o.margin,
-                        kappa=o.kappa, device=planner.device, deadline=rrt_stop)
+                        kappa=o.kappa, device=planner.device, deadline=rrt_stop,
+                        endpoint_margin=getattr(o, "endpoint_margin", None))
         if r.success:
             found.append(int(b))
             seeds.append(resample_path(r.path, W))

@@ -16,9 +16,11 @@ the planner's waypoints (:func:`resample_path`).
 
 The checks are called through the module :mod:`jwarp.solvers.planner` (its
 ``collision_free`` and ``path_feasible``), so whatever check the planner uses is the one
-the trees use. Every edge is checked at substeps sized so that no sphere centre moves
-more than half a voxel between two substeps (:func:`jwarp.solvers.planner.substeps_for_voxel`,
-``safety`` 2), or at ``RRTOptions.n_substeps``.
+the trees use: on the rigid model ``path_feasible`` checks the continuous motion of every
+edge; on the elastic model (``kappa``) its substeps are sized so that no sphere centre
+moves more than half the world's resolution between two substeps
+(:func:`jwarp.solvers.planner.substeps_for_voxel`, ``safety`` 2), or
+``RRTOptions.n_substeps``.
 """
 
 from __future__ import annotations
@@ -53,8 +55,9 @@ class RRTOptions:
         batch: samples per round (and shortcut pairs per round), >= 1.
         n_connect: the new nodes of a round (those nearest to the other tree) that the
             other tree tries to connect to, >= 1.
-        n_substeps: substeps per edge of the checks, >= 1; None sizes them to the world's
-            voxel size per batch of edges (no sphere centre moves more than half a voxel).
+        n_substeps: substeps per edge of the elastic model's checks, >= 1; None sizes them
+            to the world's resolution per batch of edges (no sphere centre moves more than
+            half of it); the rigid model's edge check is continuous (no substeps).
     """
 
     step: float = 0.25
@@ -155,41 +158,73 @@ class _Tree:
 
 
 class _Checks:
-    """Batched state and edge checks through :mod:`jwarp.solvers.planner`."""
+    """Batched state and edge checks through :mod:`jwarp.solvers.planner`. With an
+    ``endpoint_margin`` below ``margin`` the segments that start or end at one of the
+    ``roots`` (start, goal) are checked at that clearance, every other at ``margin``."""
 
     def __init__(self, model: Any, world: Any, margin: float, kappa: Any, device: Any,
-                 n_substeps: int | None) -> None:
+                 n_substeps: int | None, endpoint_margin: float | None = None,
+                 roots: np.ndarray | None = None) -> None:
         self.model, self.world, self.margin = model, world, margin
         self.kappa, self.device, self.n_sub = kappa, device, n_substeps
+        self.em = None
+        if endpoint_margin is not None and float(endpoint_margin) < margin:
+            self.em = float(endpoint_margin)
+        self.roots = roots
         self.last_n_sub = n_substeps or 1
         self.time = {"states": 0.0, "edges": 0.0}
 
-    def states(self, q: np.ndarray) -> np.ndarray:
+    def states(self, q: np.ndarray, margin: float | None = None) -> np.ndarray:
         t = time.perf_counter()
         ok = within_limits(self.model, q)
         if ok.any():
-            ok[ok] = _pl.collision_free(self.model, self.world, q[ok], self.margin,
+            ok[ok] = _pl.collision_free(self.model, self.world, q[ok],
+                                        self.margin if margin is None else margin,
                                         kappa=self.kappa, device=self.device)
         self.time["states"] += time.perf_counter() - t
         return ok
 
+    def _is_root(self, q: np.ndarray) -> np.ndarray:
+        return np.any(np.all(q[:, None] == self.roots[None], axis=-1), axis=1)
+
     def paths(self, paths: np.ndarray) -> np.ndarray:
-        """(E,) bool: the paths (E, W, n) feasible (every segment at the substeps)."""
+        """(E,) bool: the paths (E, W, n) feasible."""
         if not len(paths):
             return np.zeros(0, bool)
         t = time.perf_counter()
         n_sub = self.n_sub
-        if n_sub is None:
-            n_sub = _pl.substeps_for_voxel(self.model, paths, float(self.world.voxel_size),
+        if n_sub is None and self.kappa is None:
+            n_sub = 1  # the rigid model's path_feasible checks the continuous motion
+        elif n_sub is None:  # elastic: substeps at their equilibria, sized to the world
+            n_sub = _pl.substeps_for_voxel(self.model, paths, float(self.world.resolution),
                                            safety=_pl.SWEEP_SAFETY,
                                            max_substeps=_pl.MAX_CHECK_SUBSTEPS,
                                            device=self.device)
-        self.last_n_sub = int(n_sub)
-        ok = np.asarray(_pl.path_feasible(self.model, self.world, paths, int(n_sub),
-                                          margin=self.margin, kappa=self.kappa,
-                                          device=self.device), bool).reshape(len(paths))
+        self.last_n_sub = n_sub = int(n_sub)
+        ok = np.zeros(len(paths), bool)
+        if self.em is None or self.roots is None:
+            ok[:] = self._feasible(paths, n_sub)
+        else:
+            head, tail = self._is_root(paths[:, 0]), self._is_root(paths[:, -1])
+            end = head | tail
+            # the first and last segment at endpoint_margin where a root is at either end
+            ok[~end] = self._feasible(paths[~end], n_sub)
+            ok[end] = self._feasible(paths[end], n_sub, self.em)
+            if paths.shape[1] > 2:  # ... but the end away from the root at margin
+                for sel, seg in ((end & ~tail, slice(-2, None)), (end & ~head, slice(0, 2))):
+                    idx = np.nonzero(sel & ok)[0]
+                    if len(idx):
+                        ok[idx] = self._feasible(paths[idx, seg], n_sub)
         self.time["edges"] += time.perf_counter() - t
         return ok
+
+    def _feasible(self, paths: np.ndarray, n_sub: int, em: float | None = None) -> np.ndarray:
+        if not len(paths):
+            return np.zeros(0, bool)
+        kw = {} if em is None else {"endpoint_margin": em}
+        return np.asarray(_pl.path_feasible(self.model, self.world, paths, n_sub,
+                                            margin=self.margin, kappa=self.kappa,
+                                            device=self.device, **kw), bool).reshape(len(paths))
 
     def edges(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return self.paths(np.stack([a, b], axis=1))
@@ -204,13 +239,16 @@ def _vector(x: Any, n: int, name: str) -> np.ndarray:
 
 def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
                 options: RRTOptions | None = None, *, margin: float = 0.0, kappa: Any = None,
-                device: Any = None, deadline: float | None = None) -> RRTResult:
+                device: Any = None, deadline: float | None = None,
+                endpoint_margin: float | None = None) -> RRTResult:
     """A feasible path from ``start`` to ``goal`` (n_dof,) by RRT-Connect (module doc).
 
     Args:
         robot: robot name or RobotModel; world: a :class:`jwarp.world.World`.
         options: :class:`RRTOptions` (None: the defaults).
         margin: clearance [m] of every check; kappa: the elastic model's compliances.
+        endpoint_margin: clearance [m] of start and goal and of the edges at them, where
+            it is below ``margin`` (None: ``margin``; :attr:`PlanOptions.endpoint_margin`).
         device: Warp device of the checks (None: the preferred device).
         deadline: ``time.perf_counter()`` value after which the search stops (besides
             ``options.time_limit``).
@@ -235,12 +273,14 @@ def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
     if o.time_limit is not None:
         stop_at = min(stop_at, t0 + float(o.time_limit))
     rng = o.seed if isinstance(o.seed, np.random.Generator) else np.random.default_rng(o.seed)
-    chk = _Checks(model, world, float(margin), kappa, device, o.n_substeps)
-    ok = chk.states(np.stack([q0, q1]))
+    chk = _Checks(model, world, float(margin), kappa, device, o.n_substeps, endpoint_margin,
+                  np.stack([q0, q1]))
+    ok = chk.states(np.stack([q0, q1]), margin=chk.em)
     for name, good in zip(("start", "goal"), ok):
         if not good:
+            m = float(margin) if chk.em is None else chk.em
             raise ValueError(f"{name}: outside the joint limits or in collision (margin "
-                             f"{float(margin):g} m)")
+                             f"{m:g} m)")
     step = float(o.step)
 
     def result(path, reason, samples, nodes, raw) -> RRTResult:
@@ -333,7 +373,9 @@ def _split(a: np.ndarray, b: np.ndarray, step: float, m: int | None = None) -> n
     if m is None:
         m = max(1, int(np.ceil(np.linalg.norm(b - a, axis=1).max(initial=0.0) / step)))
     u = np.linspace(0.0, 1.0, m + 1)[None, :, None]
-    return a[:, None] + u * (b - a)[:, None]
+    out = a[:, None] + u * (b - a)[:, None]
+    out[:, -1] = b  # the ends exact (the checks recognise start and goal)
+    return out
 
 
 def _connect(B: _Tree, targets: np.ndarray, target_ids: np.ndarray, chk: _Checks,

@@ -28,7 +28,7 @@ def world():
 
 
 def independent_feasible(robot, world, path):
-    n_sub = PL.substeps_for_voxel(robot, path, world.voxel_size, safety=2.0, max_substeps=256)
+    n_sub = PL.substeps_for_voxel(robot, path, world.resolution, safety=2.0, max_substeps=256)
     return bool(PL.path_feasible(robot, world, path, n_sub)[()])
 
 

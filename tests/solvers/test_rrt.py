@@ -24,10 +24,10 @@ def world():
 
 
 def edges_feasible(robot, world, path):
-    """Every edge (E, 2, n) of ``path`` on its own, at substeps sized so that no sphere
-    moves more than half a voxel (the planner's final-check rule)."""
+    """Every edge (E, 2, n) of ``path`` on its own by the planner's path_feasible (the
+    continuous check on the rigid model; substeps sized to half a voxel otherwise)."""
     edges = np.stack([path[:-1], path[1:]], axis=1)
-    n_sub = PL.substeps_for_voxel(robot, edges, world.voxel_size, safety=2.0, max_substeps=256)
+    n_sub = PL.substeps_for_voxel(robot, edges, world.resolution, safety=2.0, max_substeps=256)
     return PL.path_feasible(robot, world, edges, n_sub)
 
 
@@ -129,3 +129,28 @@ def test_options_are_validated(field, value, match):
         PL.PlanOptions(rrt=R.RRTOptions(**{field: value})).validate()
     with pytest.raises(TypeError, match="^rrt: expected a jwarp.solvers.rrt.RRTOptions"):
         PL.PlanOptions(rrt={"step": 0.1}).validate()
+
+
+def test_endpoint_margin(world):
+    """A start closer to the block than the path margin: accepted with endpoint_margin,
+    whose clearance holds on the edges at start and goal only (PlanOptions.endpoint_margin)."""
+    robot = jwarp.robot("planar4")
+    near = np.array([0.128, 0.459, 0.0, 0.0])  # about 28 mm from the block
+    with pytest.raises(ValueError, match=r"^start: .* in collision \(margin 0.05 m\)"):
+        R.rrt_connect(robot, world, near, G4, margin=0.05, device="cpu")
+    res = R.rrt_connect(robot, world, near, G4, margin=0.05, endpoint_margin=0.0,
+                        device="cpu")
+    assert res.success
+    p = res.path
+    edges = np.stack([p[:-1], p[1:]], axis=1)
+    at_margin = PL.path_feasible(robot, world, edges, 1, margin=0.05)
+    assert not at_margin[0] and at_margin[1:-1].all()  # only the first edge needs it
+    assert PL.path_feasible(robot, world, edges[[0, -1]], 1, margin=0.05,
+                            endpoint_margin=0.0).all()
+    # the planner's fallback passes it on
+    for fb, ok in ((None, False), ("rrt", True)):
+        opts = PL.PlanOptions(margin=0.05, endpoint_margin=0.0, iterations=3, n_starts=2,
+                              fallback=fb)
+        out = PL.Planner(robot, world, 1, opts, device="cpu").plan(near, G4)
+        assert out.feasible[0] == ok
+        assert list(out.stage) == (["fallback"] if ok else ["none"])
