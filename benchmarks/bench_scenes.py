@@ -134,7 +134,7 @@ def plan_one(robot: Any, prob: Problem, margin: float, args: argparse.Namespace,
     t0 = time.perf_counter()
     try:
         res = Planner(robot, prob.world, 1, o, device=device).plan(prob.start, prob.goal)
-    except ValueError as e:   # a planner error is a failed problem, its message kept
+    except Exception as e:  # noqa: BLE001 - a planner error is a failed problem, kept
         res = e
     wp.synchronize_device(device)
     return time.perf_counter() - t0, res
@@ -366,6 +366,20 @@ def print_table(rows: list[dict], families: list[str]) -> dict:
 
 
 # ------------------------------------------------------------------ main
+def git_head() -> str:
+    """The checkout's commit (and '+changes' where jwarp/ has uncommitted edits)."""
+    import subprocess
+
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                              capture_output=True, text=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "jwarp"], cwd=ROOT,
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return (head or "unknown") + ("+changes" if dirty else "")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--problems", default=None, metavar="DIR",
@@ -428,7 +442,7 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"machine: {timing.machine('cpu')}; warp {wp.config.version}; "
           f"BLAS threads {os.environ.get('OPENBLAS_NUM_THREADS')}; load average "
-          f"{os.getloadavg()[0]:.2f}")
+          f"{os.getloadavg()[0]:.2f}; jwarp at git {git_head()}")
     print(f"problems: {len(probs)} ({', '.join(families)}) from {folder}; robot panda, "
           f"{len(robot.spheres)} spheres; world: exact primitives (no grid)")
     print(f"jwarp PlanOptions: margins {margins} m, endpoint_margin {args.endpoint_margin:g} m, "
@@ -443,6 +457,7 @@ def main(argv: list[str] | None = None) -> int:
     print(flush=True)
 
     result: dict = {"machine": timing.machine("cpu"), "warp": wp.config.version,
+                    "git": git_head(),
                     "problems_dir": str(folder), "n_problems": len(probs),
                     "families": families, "margins": margins,
                     "endpoint_margin": args.endpoint_margin, "time_limit_s": args.time_limit,
