@@ -197,6 +197,61 @@ class World:
             raise KeyError(f"objects {ids!r}: this world has no objects")
         self.shapes.move(ids, poses)
 
+    def attach(self, id: str, robot: Any, frame: Any, q: Any, *,
+               max_spheres: int = 32) -> Any:
+        """Attach exact object ``id`` to ``frame`` of ``robot`` at its configuration ``q``
+        (n_dof,): the object leaves the world and the returned robot (a copy) carries
+        spheres covering it (:mod:`jwarp.world.attach`), so planning and IK with that
+        robot move it with the frame. :meth:`detach` puts it back."""
+        from jwarp.kinematics.fk import fk
+        from jwarp.registry import robot as get_robot
+        from jwarp.world.attach import Attachment, attach_object
+
+        model = get_robot(robot)
+        fi = model.frame_index(frame)
+        if self.shapes is None or id not in self.shapes.ids:
+            raise KeyError(f"object '{id}': not in this world (objects: "
+                           f"{', '.join(self.object_ids) or 'none'})")
+        kind, dims, mesh = self.shapes.spec(id)
+        if kind == "plane":
+            raise ValueError(f"object '{id}': a plane cannot be attached")
+        T = np.asarray(fk(model, np.asarray(q, np.float64).reshape(1, -1),
+                          dtype=np.float64))[0, fi]
+        rel = np.linalg.inv(T) @ self.shapes.pose(id)
+        carried, rng = attach_object(model, fi, rel, kind, dims, mesh, max_spheres)
+        self.shapes.remove(id)
+        self.attached[id] = Attachment(id, kind, dims, mesh, fi, rel, rng)
+        return carried
+
+    def detach(self, id: str, robot: Any, q: Any) -> Any:
+        """Put attached object ``id`` back into the world where ``robot`` (the one
+        :meth:`attach` returned) holds it at ``q``; returns the robot without its spheres."""
+        from jwarp.kinematics.fk import fk
+        from jwarp.registry import robot as get_robot
+
+        a = self.attached.get(id)
+        if a is None:
+            raise KeyError(f"object '{id}': not attached (attached: "
+                           f"{', '.join(self.attached) or 'none'})")
+        model = get_robot(robot)
+        T = np.asarray(fk(model, np.asarray(q, np.float64).reshape(1, -1),
+                          dtype=np.float64))[0, a.frame]
+        self.add(id, a.kind, [] if a.dims is None else a.dims, T @ a.frame_T_object,
+                 mesh=a.mesh)
+        del self.attached[id]
+        s0, s1 = a.spheres
+        for b in self.attached.values():  # later attachments' spheres move down
+            if b.spheres[0] >= s1:
+                b.spheres = (b.spheres[0] - (s1 - s0), b.spheres[1] - (s1 - s0))
+        spheres = list(model.spheres[:s0]) + list(model.spheres[s1:])
+        name = model.name.removesuffix("+attached") if not self.attached else model.name
+        return model.copy(spheres=spheres, name=name)
+
+    @property
+    def attached(self) -> dict:
+        """Objects attached to a robot (:meth:`attach`), by id."""
+        return self.__dict__.setdefault("_attached", {})
+
     @property
     def object_ids(self) -> list[str]:
         """Ids of the exact objects (index order of the kernels' object numbers)."""

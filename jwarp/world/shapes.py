@@ -66,7 +66,9 @@ class _Object:
     size: np.ndarray      # kernel size (module docstring of jwarp.kernels.geometry)
     centre: np.ndarray    # local bounding-box centre
     half: np.ndarray      # local bounding-box half extents (planes: unused)
-    mesh: Any = None      # trimesh (mesh kind)
+    mesh: Any = None      # (vertices, faces) (mesh kind)
+    dims: Any = None      # the dimensions as given (add)
+    source: Any = None    # the mesh as given (add)
 
 
 class ShapeSet:
@@ -119,6 +121,8 @@ class ShapeSet:
             raise ValueError(f"{where}: unknown shape type {kind!r}; known: {', '.join(KINDS)}")
         T = np.eye(4) if pose is None else _pose(pose, where)
         obj = self._make(id, kind, dims, mesh, where)
+        obj.dims = None if kind in ("mesh", "plane") else np.asarray(dims, np.float64).reshape(-1)
+        obj.source = mesh
         self._objects.append(obj)
         self._index[id] = len(self._objects) - 1
         self._poses = np.concatenate([self._poses, T[None]])
@@ -221,6 +225,11 @@ class ShapeSet:
 
     def kind(self, id: str) -> str:
         return self._objects[self._find(id)].kind
+
+    def spec(self, id: str) -> tuple[str, Any, Any]:
+        """(kind, dims as given, mesh as given) of object ``id``."""
+        o = self._objects[self._find(id)]
+        return o.kind, o.dims, o.source
 
     def pose(self, id: str) -> np.ndarray:
         return self._poses[self._find(id)].copy()

@@ -328,3 +328,46 @@ def test_infeasible_plan_says_why(device, arm_scene, tmp_path, capsys):
     assert not res.feasible[0]
     assert res.reasons[0].startswith("collision: sphere") and "vs object '" in res.reasons[0]
     assert res.to_dict(0)["reason"] == res.reasons[0]
+
+
+@pytest.mark.parametrize("kind,dims", PRIMS + [("mesh", None)])
+def test_covering_spheres_contain_the_object(kind, dims):
+    from jwarp.world.attach import covering_spheres
+    rng = np.random.default_rng(11)
+    mesh = trimesh.creation.icosphere(radius=0.07) if kind == "mesh" else None
+    c, r = covering_spheres(kind, dims if dims else (), mesh=mesh, max_spheres=16)
+    assert 1 <= len(c) <= 18
+    s = Shape(kind, np.zeros(0) if kind == "mesh" else np.array(dims), np.eye(4), "o",
+              mesh=mesh)
+    pts = rng.uniform(-0.3, 0.3, (20000, 3))
+    inside = signed_distance(s, pts) < 0
+    covered = (np.linalg.norm(pts[:, None] - c[None], axis=-1) <= r[None]).any(1)
+    assert inside.sum() > 100 and covered[inside].all()
+
+
+def test_attach_moves_the_object_with_the_hand_and_detach_puts_it_back(device):
+    robot = jwarp.robot("arm7")
+    tcp = list(robot.end_effectors)[0]
+    q0 = np.array([0.0, 0.8, 0.0, -1.0, 0.0, 0.5, 0.0])
+    T = jwarp.fk(robot, q0[None], dtype=np.float64)[0, robot.frame_index(tcp)]
+    w = World.of_shapes()
+    part = T.copy()                          # a bar along the hand's x axis
+    part[:3, 3] = T[:3, 3] + T[:3, 0] * 0.15
+    w.add("part", "box", [0.2, 0.04, 0.04], part)
+    w.add("ball", "sphere", [0.02], T[:3, 3] + T[:3, 0] * 0.30)   # 3 cm beyond its tip
+    carried = w.attach("part", robot, tcp, q0)
+    assert w.object_ids == ["ball"] and len(carried.spheres) > len(robot.spheres)
+    from jwarp.world.collision import min_distances
+    q = np.repeat(q0[None], 60, 0)
+    q[:, 0] += np.linspace(0, 0.5, 60)
+    bare = min_distances(robot, q, w, device=device, dtype=np.float64)[:, 0]
+    held = min_distances(carried, q, w, device=device, dtype=np.float64)[:, 0]
+    assert (held <= bare + 1e-12).all()
+    # at q0 the bar's tip is 3 cm from the ball; the covering spheres bulge < 2.5 cm
+    assert 0.03 - 0.025 <= held[0] <= 0.03 + 1e-9 and bare[0] > held[0] + 0.05
+    # the part goes back where the hand left it
+    back = w.detach("part", carried, q[30])
+    assert len(back.spheres) == len(robot.spheres) and "part" in w.object_ids
+    T30 = jwarp.fk(robot, q[30:31], dtype=np.float64)[0, robot.frame_index(tcp)]
+    np.testing.assert_allclose(w.shapes.pose("part")[:3, 3], T30[:3, 3] + T30[:3, 0] * 0.15,
+                               atol=1e-12)
