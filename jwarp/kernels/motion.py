@@ -11,13 +11,14 @@ Travel bound: while the joints move by ``dq`` the centre of sphere s moves along
 length at most ``L_s = sum_i |dtheta_i| R[s, i]`` (``dtheta_i``: the change of the angle
 (or offset) of frame i, through the couplings; ``R[s, i]`` a bound of the distance of the
 sphere centre from frame i's joint axis over all configurations, 1 for prismatic frames;
-host: :func:`jwarp.world.motion.sphere_reach`). A segment is split into ``n`` equal substeps
-so that every point of the motion lies within ``l_s / 2 = L_s / (2 n)`` of a substep along
-the sphere's path. Hence a sphere whose clearance at every substep is ``>= m + l_s / 2``
-keeps ``m`` in between; a pair of spheres needs ``m + (l_a + l_b) / 2``. A clearance
-``< m`` at a substep is a proven violation; one between the two is *uncertain*, and the
-segment is checked again with 4 times the substeps, up to ``levels`` times; a segment still
-uncertain then is reported as such (not feasible).
+host: :func:`jwarp.world.motion.sphere_reach`). Along a segment q(u) = q_t + u dq, a sphere
+with clearance ``d_s`` at u therefore keeps ``>= m`` for every u' with
+``|u' - u| L_s <= d_s - m``; a pair of spheres likewise with ``L_a + L_b``. The check is
+*conservative advancement*: from u = 0, each evaluation (FK, exact world distances,
+self pairs) proves the motion up to ``u + min_s (d_s - m) / L_s`` and the next evaluation
+starts there, until u = 1. A clearance ``< m`` is a proven violation; a step below
+``min_step`` (the motion grazes the margin) or too many evaluations is *uncertified* (not
+feasible). Far from obstacles a few evaluations prove a whole segment.
 
 Result codes per segment and per path: :data:`OK` 0, :data:`WORLD` 1 (sphere ``a`` vs
 object ``b``; -2 the grid), :data:`SELF` 2 (spheres ``a`` and ``b``), :data:`UNCERTIFIED` 3
@@ -87,39 +88,43 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         xs: wp.array2d(dtype=vec3)
 
     @wp.func
-    def clearances(cm: CheckModel, sc: CheckScratch, r: int, m_req: f64, inv_n: f64):
-        """FK of sc.q[r] and the clearances of its spheres: (code, a, b, d) of the first
-        violation (code WORLD/SELF), else (UNCERTIFIED, a, b, d) of the first uncertain
-        sphere/pair, else (OK, -1, -1, 0)."""
+    def advance(cm: CheckModel, sc: CheckScratch, r: int, m_req: f64, reach: f64):
+        """FK of sc.q[r] and how far the motion is proven from there: returns (code, a, b,
+        d, step) with code WORLD/SELF (and the sphere(s)/object, clearance d) if a
+        clearance is below ``m_req`` here, else OK and ``step`` = min over spheres of
+        (clearance - m_req) / travel (pairs: / the sum of both travels), in units of the
+        segment's parameter u, capped at ``reach`` (objects farther than the whole
+        remaining motion are not visited); (a, b, d) then name the limiting pair."""
         model = cm.model
         spheres = cm.spheres
         nf = model.order.shape[0]
         for kk in range(nf):
             fk.write_frame(model, r, model.order[kk], sc.q, cm.rho, 0, fk_kernels.ROWS_NOMINAL,
                            sc.frames, r)
-        unc = int(0)
-        ua = int(-1)
-        ub = int(-1)
-        ud = zero
+        step = reach
+        la = int(-1)
+        lb = int(-1)
+        ld = f64(1e30)
         lmax = zero
         for s in range(spheres.sph_frame.shape[0]):
             x = ck.sphere_centre(sc.frames, r, spheres.sph_frame[s], spheres.sph_pos[s])
             sc.xs[r, s] = x
-            l = sc.travel[r, s] * inv_n
-            lmax = wp.max(lmax, l)
+            L = sc.travel[r, s]
+            lmax = wp.max(lmax, L)
             if cm.use_world != 0:
                 rs = spheres.sph_rad[s]
-                band = m_req + half * l
-                d, g, obj = ck.world_distance(cm.world, x, rs + band + f64(1e-9))
+                d, g, obj = ck.world_distance(cm.world, x, rs + m_req + L * reach + f64(1e-9))
                 if obj != -1:
                     dd = d - rs
                     if dd < m_req:
-                        return WORLD, s, obj, dd
-                    if dd < band and unc == 0:
-                        unc = 1
-                        ua = s
-                        ub = obj
-                        ud = dd
+                        return WORLD, s, obj, dd, zero
+                    if L > zero:
+                        h = (dd - m_req) / L
+                        if h < step:
+                            step = h
+                            la = s
+                            lb = obj
+                            ld = dd
         if cm.use_self != 0:
             for fp in range(spheres.fpair_a.shape[0]):
                 fa = spheres.fpair_a[fp]
@@ -127,25 +132,26 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 ca = ck.sphere_centre(sc.frames, r, fa, spheres.bound_pos[fa])
                 cb = ck.sphere_centre(sc.frames, r, fb, spheres.bound_pos[fb])
                 if wp.length(ca - cb) - spheres.bound_rad[fa] - spheres.bound_rad[fb] \
-                        < m_req + lmax + f64(1e-9):
+                        < m_req + f64(2.0) * lmax * step + f64(1e-9):
                     for e in range(spheres.fpair_start[fp], spheres.fpair_start[fp + 1]):
                         sa = spheres.ent_sphere[e]
                         xa = sc.xs[r, sa]
                         ra = spheres.sph_rad[sa]
-                        la = sc.travel[r, sa] * inv_n
+                        La = sc.travel[r, sa]
                         for p in range(spheres.ent_start[e], spheres.ent_start[e + 1]):
                             sb = spheres.pair_b[p]
                             dd = wp.length(xa - sc.xs[r, sb]) - ra - spheres.sph_rad[sb]
                             if dd < m_req:
-                                return SELF, sa, sb, dd
-                            if dd < m_req + half * (la + sc.travel[r, sb] * inv_n) and unc == 0:
-                                unc = 1
-                                ua = sa
-                                ub = sb
-                                ud = dd
-        if unc != 0:
-            return UNCERTIFIED, ua, ub, ud
-        return OK, -1, -1, zero
+                                return SELF, sa, sb, dd, zero
+                            Lab = La + sc.travel[r, sb]
+                            if Lab > zero:
+                                h = (dd - m_req) / Lab
+                                if h < step:
+                                    step = h
+                                    la = sa
+                                    lb = sb
+                                    ld = dd
+        return OK, la, lb, ld, step
 
     @wp.kernel(module="unique", enable_backward=False)
     def segment_kernel(
@@ -154,9 +160,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         idx: wp.array(dtype=wp.int32),
         margin: f64,
         end_margin: f64,
-        delta: f64,
-        max_sub: int,
-        levels: int,
+        min_step: f64,
+        max_evals: int,
         # Model:
         cm: CheckModel,
         # Scratch:
@@ -169,9 +174,13 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         seg_d: wp.array2d(dtype=f64),
         seg_n: wp.array2d(dtype=wp.int32),
     ):
-        """Segment t of path idx[k] (launch dim (K, W - 1)): its result code, where
-        (fraction u of the segment), what (a, b), the clearance d [m] and the substeps n
-        of the last level."""
+        """Segment t of path idx[k] (launch dim (K, W - 1)) by conservative advancement:
+        from u = 0, each evaluation proves the motion up to u + step (module docstring:
+        every sphere moves at most ``travel * step``); the evaluations continue from
+        there until u = 1 (OK), a clearance below the margin (WORLD/SELF), or a step
+        below ``min_step`` or more than ``max_evals`` evaluations (UNCERTIFIED: the motion
+        grazes the margin). Out: the code, where (u), what (a, b), the clearance d [m] and
+        the number of evaluations."""
         k, t = wp.tid()
         W = paths.shape[1]
         n_dof = paths.shape[2]
@@ -202,56 +211,62 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
                 v += model.cpl_coef[c] * sc.dq[r, model.cpl_joint[c]]
             sc.dth[r, i] = wp.abs(v)
-        lmax = zero
-        for s in range(cm.reach.shape[0]):
+        for s in range(cm.reach.shape[0]):  # travel of each centre over the whole segment
             l = zero
             for i in range(nf):
                 l += sc.dth[r, i] * cm.reach[s, i]
             sc.travel[r, s] = l
-            lmax = wp.max(lmax, l)
         m_req = margin
         if t == 0 or t == W - 2:
             m_req = wp.min(margin, end_margin)
-        n = wp.clamp(int(wp.ceil(lmax / delta)), 1, max_sub)
         code = int(OK)
-        cu = zero
+        u = zero
         ca = int(-1)
         cb = int(-1)
         cd = zero
-        for lev in range(levels):
-            inv_n = one / f64(n)
-            code = OK
-            unc = int(0)
-            for kk in range(n + 1):
-                u = f64(kk) * inv_n
-                for j in range(n_dof):
-                    if kk == n:
-                        sc.q[r, j] = f64(paths[p, t + 1, j])
-                    else:
-                        sc.q[r, j] = f64(paths[p, t, j]) + u * sc.dq[r, j]
-                c, a, b, d = clearances(cm, sc, r, m_req, inv_n)
-                if c == WORLD or c == SELF:
-                    code = c
-                    cu = u
-                    ca = a
-                    cb = b
-                    cd = d
-                    break
-                if c == UNCERTIFIED and unc == 0:
-                    unc = 1
-                    cu = u
-                    ca = a
-                    cb = b
-                    cd = d
-            if code != OK:
+        n = int(0)
+        while u < one:
+            for j in range(n_dof):
+                sc.q[r, j] = f64(paths[p, t, j]) + u * sc.dq[r, j]
+            c, a, b, d, step = advance(cm, sc, r, m_req, one - u)
+            n += 1
+            if c != OK:
+                code = c
+                ca = a
+                cb = b
+                cd = d
                 break
-            if unc == 0:
+            if step >= one - u:
+                u = one
+            elif step < min_step or n >= max_evals:
+                # stalled against the margin: a probe a little ahead that is below it
+                # proves a violation, else the segment stays unproven
+                code = UNCERTIFIED
+                ca = a
+                cb = b
+                cd = d
+                probe = f64(1e-4)
+                for _pr in range(3):
+                    up = wp.min(u + probe, one)
+                    for j in range(n_dof):
+                        sc.q[r, j] = f64(paths[p, t, j]) + up * sc.dq[r, j]
+                    c2, a2, b2, d2, s2 = advance(cm, sc, r, m_req, one - up)
+                    n += 1
+                    if c2 != OK:
+                        code = c2
+                        u = up
+                        ca = a2
+                        cb = b2
+                        cd = d2
+                        break
+                    probe = probe * f64(10.0)
                 break
-            code = UNCERTIFIED
-            if lev < levels - 1:
-                n = n * 4
+            else:
+                u = u + step
+        if code == OK:  # the goal of the segment itself (the advancement proved up to it)
+            u = one
         seg_code[k, t] = code
-        seg_u[k, t] = cu
+        seg_u[k, t] = u
         seg_a[k, t] = ca
         seg_b[k, t] = cb
         seg_d[k, t] = cd
@@ -293,5 +308,5 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 return
 
     return SimpleNamespace(CheckModel=CheckModel, CheckScratch=CheckScratch,
-                           clearances=clearances, segment=segment_kernel, reduce=reduce_kernel,
+                           advance=advance, segment=segment_kernel, reduce=reduce_kernel,
                            fk=fk, ck=ck)

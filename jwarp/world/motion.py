@@ -44,28 +44,25 @@ __all__ = ["MotionCheck", "MotionOptions", "PathCheck", "check_paths", "sphere_r
 
 @dataclass
 class MotionOptions:
-    """Options of the continuous check.
+    """Options of the continuous check (conservative advancement, :mod:`jwarp.kernels.motion`).
 
     Attributes:
-        delta: largest travel [m] of any sphere centre between two substeps of the first
-            level (the substeps of a segment follow from it), > 0.
-        levels: refinements (x4 substeps each) of a segment whose clearance is uncertain
-            (between ``m`` and ``m + travel / 2``), >= 1.
-        max_substeps: most substeps of a segment at the first level, >= 1.
+        min_step: the smallest proven step, as a fraction of a segment, in (0, 1): a
+            segment whose motion can only be proven in smaller steps (it grazes the
+            margin) is reported uncertified.
+        max_evals: most evaluations per segment (then uncertified), >= 1.
     """
 
-    delta: float = 0.02
-    levels: int = 4
-    max_substeps: int = 256
+    min_step: float = 1e-5
+    max_evals: int = 4000
 
     def validate(self) -> None:
-        d = real_number(self.delta, "delta")
-        if not (np.isfinite(d) and d > 0):
-            raise ValueError(f"delta: expected a length > 0 [m], got {self.delta!r}")
-        for name in ("levels", "max_substeps"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
+        d = real_number(self.min_step, "min_step")
+        if not (np.isfinite(d) and 0 < d < 1):
+            raise ValueError(f"min_step: expected a fraction in (0, 1), got {self.min_step!r}")
+        v = self.max_evals
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"max_evals: expected an integer >= 1, got {v!r}")
 
 
 def sphere_reach(robot: Any) -> np.ndarray:
@@ -141,8 +138,8 @@ class PathCheck:
         other = self.world.object_name(b) if self.world is not None else str(b)
         if c == 1:
             return f"collision: {link} vs object '{other}' {at} ({mm})"
-        return (f"uncertified: {link} near '{other}' {at} ({mm}): the motion between checked "
-                f"substeps may come closer than the margin; lower the margin or add waypoints")
+        return (f"uncertified: {link} grazes '{other}' {at} ({mm}): the motion cannot be "
+                f"proven to keep the margin there; lower the margin or move the path away")
 
     def reasons(self) -> list[str]:
         return [self.reason(i) for i in range(len(self.ok))]
@@ -264,8 +261,8 @@ class MotionCheck:
         o = self.options
         kern = mk.kernels(paths.dtype)
         wp.launch(kern.segment, dim=(K, W - 1),
-                  inputs=[paths, idx, float(margin), float(em), float(o.delta),
-                          int(o.max_substeps), int(o.levels), self._cm, sc],
+                  inputs=[paths, idx, float(margin), float(em), float(o.min_step),
+                          int(o.max_evals), self._cm, sc],
                   outputs=[out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"],
                            out["seg_d"], out["seg_n"]], device=self.device)
         wp.launch(kern.reduce, dim=K,
