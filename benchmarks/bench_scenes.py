@@ -425,6 +425,9 @@ def main(argv: list[str] | None = None) -> int:
         else:
             cuda_note = "CUDA not available: the GPU part is skipped"
     elapsed = timing.stopwatch()
+    print(f"machine: {timing.machine('cpu')}; warp {wp.config.version}; "
+          f"BLAS threads {os.environ.get('OPENBLAS_NUM_THREADS')}; load average "
+          f"{os.getloadavg()[0]:.2f}; jwarp at git {git_head()}")
     robot, urdf = SP.load_robot()
     spheres = robot_spheres(robot)
     folder, index = load_problems(args)
@@ -440,9 +443,6 @@ def main(argv: list[str] | None = None) -> int:
         except Exception:  # noqa: BLE001 - quieter logs only
             pass
 
-    print(f"machine: {timing.machine('cpu')}; warp {wp.config.version}; "
-          f"BLAS threads {os.environ.get('OPENBLAS_NUM_THREADS')}; load average "
-          f"{os.getloadavg()[0]:.2f}; jwarp at git {git_head()}")
     print(f"problems: {len(probs)} ({', '.join(families)}) from {folder}; robot panda, "
           f"{len(robot.spheres)} spheres; world: exact primitives (no grid)")
     print(f"jwarp PlanOptions: margins {margins} m, endpoint_margin {args.endpoint_margin:g} m, "
