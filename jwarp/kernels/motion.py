@@ -13,7 +13,9 @@ length at most ``L_s = sum_i |dtheta_i| R[s, i]`` (``dtheta_i``: the change of t
 sphere centre from frame i's joint axis over all configurations, 1 for prismatic frames;
 host: :func:`jwarp.world.motion.sphere_reach`). Along a segment q(u) = q_t + u dq, a sphere
 with clearance ``d_s`` at u therefore keeps ``>= m`` for every u' with
-``|u' - u| L_s <= d_s - m``; a pair of spheres likewise with ``L_a + L_b``. The check is
+``|u' - u| L_s <= d_s - m``; a pair of spheres likewise with their relative travel, which
+only the joints below their frames' common ancestor cause
+(:func:`jwarp.world.motion.pair_travel_tables`). The check is
 *conservative advancement*: from u = 0, each evaluation (FK, exact world distances,
 self pairs) proves the motion up to ``u + min_s (d_s - m) / L_s`` and the next evaluation
 starts there, until u = 1. A clearance ``< m`` is a proven violation; a step below
@@ -39,9 +41,12 @@ WORLD = wp.constant(1)
 SELF = wp.constant(2)
 UNCERTIFIED = wp.constant(3)
 LIMITS = wp.constant(4)
+#: a segment not finished because another segment of its path failed first
+SKIPPED = wp.constant(5)
 
 #: names of the result codes
-CODE_NAMES = ("ok", "world collision", "self collision", "uncertified", "joint limits")
+CODE_NAMES = ("ok", "world collision", "self collision", "uncertified", "joint limits",
+              "skipped")
 
 
 @functools.cache
@@ -68,6 +73,9 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         use_world: int
         use_self: int
         reach: wp.array2d(dtype=f64)
+        fp_start: wp.array(dtype=wp.int32)
+        fp_frame: wp.array(dtype=wp.int32)
+        fp_weight: wp.array(dtype=f64)
         limits: wp.array2d(dtype=f64)
         lin_start: wp.array(dtype=wp.int32)
         lin_joint: wp.array(dtype=wp.int32)
@@ -84,6 +92,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         dq: wp.array2d(dtype=f64)
         dth: wp.array2d(dtype=f64)
         travel: wp.array2d(dtype=f64)
+        fptravel: wp.array2d(dtype=f64)
         frames: wp.array2d(dtype=mat44)
         xs: wp.array2d(dtype=vec3)
 
@@ -105,12 +114,10 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         la = int(-1)
         lb = int(-1)
         ld = f64(1e30)
-        lmax = zero
         for s in range(spheres.sph_frame.shape[0]):
             x = ck.sphere_centre(sc.frames, r, spheres.sph_frame[s], spheres.sph_pos[s])
             sc.xs[r, s] = x
             L = sc.travel[r, s]
-            lmax = wp.max(lmax, L)
             if cm.use_world != 0:
                 rs = spheres.sph_rad[s]
                 d, g, obj = ck.world_distance(cm.world, x, rs + m_req + L * reach + f64(1e-9))
@@ -131,19 +138,18 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 fb = spheres.fpair_b[fp]
                 ca = ck.sphere_centre(sc.frames, r, fa, spheres.bound_pos[fa])
                 cb = ck.sphere_centre(sc.frames, r, fb, spheres.bound_pos[fb])
+                Lab = sc.fptravel[r, fp]  # the pair's relative travel (module docstring)
                 if wp.length(ca - cb) - spheres.bound_rad[fa] - spheres.bound_rad[fb] \
-                        < m_req + f64(2.0) * lmax * step + f64(1e-9):
+                        < m_req + Lab * step + f64(1e-9):
                     for e in range(spheres.fpair_start[fp], spheres.fpair_start[fp + 1]):
                         sa = spheres.ent_sphere[e]
                         xa = sc.xs[r, sa]
                         ra = spheres.sph_rad[sa]
-                        La = sc.travel[r, sa]
                         for p in range(spheres.ent_start[e], spheres.ent_start[e + 1]):
                             sb = spheres.pair_b[p]
                             dd = wp.length(xa - sc.xs[r, sb]) - ra - spheres.sph_rad[sb]
                             if dd < m_req:
                                 return SELF, sa, sb, dd, zero
-                            Lab = La + sc.travel[r, sb]
                             if Lab > zero:
                                 h = (dd - m_req) / Lab
                                 if h < step:
@@ -162,10 +168,15 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         end_margin: f64,
         min_step: f64,
         max_evals: int,
+        probe_len: f64,
+        group: int,
         # Model:
         cm: CheckModel,
         # Scratch:
         sc: CheckScratch,
+        bad: wp.array(dtype=wp.int32),
+        ok_segments: wp.array(dtype=wp.int32),
+        solved: wp.array(dtype=wp.int32),
         # Data out:
         seg_code: wp.array2d(dtype=wp.int32),
         seg_u: wp.array2d(dtype=f64),
@@ -187,6 +198,13 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         r = k * (W - 1) + t
         p = idx[k]
         model = cm.model
+        g = int(-1)  # ``group`` > 0: paths p of one problem p // group need one feasible
+        if group > 0:
+            g = p // group
+            if solved[g] != 0:
+                seg_code[k, t] = SKIPPED
+                seg_n[k, t] = 0
+                return
         # waypoints within the limits (the last segment also checks the goal)
         last = t + 1
         if t < W - 2:
@@ -202,6 +220,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 seg_b[k, t] = -1
                 seg_d[k, t] = zero
                 seg_n[k, t] = 0
+                bad[k] = 1
                 return
         for j in range(n_dof):
             sc.dq[r, j] = f64(paths[p, t + 1, j]) - f64(paths[p, t, j])
@@ -216,6 +235,11 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             for i in range(nf):
                 l += sc.dth[r, i] * cm.reach[s, i]
             sc.travel[r, s] = l
+        for fp in range(cm.fp_start.shape[0] - 1):  # relative travel of each frame pair
+            l = zero
+            for e in range(cm.fp_start[fp], cm.fp_start[fp + 1]):
+                l += sc.dth[r, cm.fp_frame[e]] * cm.fp_weight[e]
+            sc.fptravel[r, fp] = l
         m_req = margin
         if t == 0 or t == W - 2:
             m_req = wp.min(margin, end_margin)
@@ -225,7 +249,35 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         cb = int(-1)
         cd = zero
         n = int(0)
-        while u < one:
+        lmax = zero
+        for s in range(cm.reach.shape[0]):
+            lmax = wp.max(lmax, sc.travel[r, s])
+        # a coarse pass first (one probe per ``probe_len`` of travel, at most 16): most
+        # colliding segments show a clearance below the margin at one of them
+        n_probe = wp.min(int(wp.ceil(lmax / probe_len)), 16)
+        for kp in range(1, n_probe):
+            if bad[k] != 0:  # another segment of this path failed: nothing to prove
+                break
+            up = f64(kp) / f64(n_probe)
+            for j in range(n_dof):
+                sc.q[r, j] = f64(paths[p, t, j]) + up * sc.dq[r, j]
+            c, a, b, d, step = advance(cm, sc, r, m_req, zero)
+            n += 1
+            if c != OK:
+                code = c
+                u = up
+                ca = a
+                cb = b
+                cd = d
+                break
+        while u < one and code == OK:
+            if bad[k] != 0:
+                code = SKIPPED
+                break
+            if g >= 0:
+                if solved[g] != 0:
+                    code = SKIPPED
+                    break
             for j in range(n_dof):
                 sc.q[r, j] = f64(paths[p, t, j]) + u * sc.dq[r, j]
             c, a, b, d, step = advance(cm, sc, r, m_req, one - u)
@@ -265,6 +317,10 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 u = u + step
         if code == OK:  # the goal of the segment itself (the advancement proved up to it)
             u = one
+            if wp.atomic_add(ok_segments, k, 1) == W - 2 and g >= 0:
+                solved[g] = 1  # the path's last segment proven: its problem is solved
+        elif code != SKIPPED:
+            bad[k] = 1
         seg_code[k, t] = code
         seg_u[k, t] = u
         seg_a[k, t] = ca
@@ -296,9 +352,12 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         what[k, 0] = -1
         what[k, 1] = -1
         dist[k] = zero
+        skipped = int(0)
         for t in range(seg_code.shape[1]):
             c = seg_code[k, t]
-            if c != OK:
+            if c == SKIPPED:
+                skipped = 1
+            if c != OK and c != SKIPPED:
                 ok[k] = 0
                 code[k] = c
                 where[k] = f64(t) + seg_u[k, t]
@@ -306,6 +365,9 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 what[k, 1] = seg_b[k, t]
                 dist[k] = seg_d[k, t]
                 return
+        if skipped != 0:  # not failed, not proven either (its problem was solved)
+            ok[k] = 0
+            code[k] = SKIPPED
 
     return SimpleNamespace(CheckModel=CheckModel, CheckScratch=CheckScratch,
                            advance=advance, segment=segment_kernel, reduce=reduce_kernel,

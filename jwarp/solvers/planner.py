@@ -573,6 +573,9 @@ class PathObjective:
 # ====================================================================== options
 #: the kinds of multi-starts drawn when no seeds are given (:attr:`PlanOptions.initial`)
 INITIAL_KINDS = ("straight", "random", "mixed")
+#: substep length [m] of the cost in a world of exact objects only (sphere travel per
+#: substep): the continuous check proves feasibility, the cost only guides the descent
+EXACT_SUBSTEP = 0.25
 #: why a plan call ended (:attr:`PlanResult.stop_reason`)
 STOP_REASONS = ("solved", "time_limit", "iterations", "all_done")
 #: the fallbacks of :attr:`PlanOptions.fallback` (besides None)
@@ -632,7 +635,8 @@ class PlanOptions:
         rrt: :class:`jwarp.solvers.rrt.RRTOptions` of the fallback (None: its defaults).
         check_all_every: exact feasibility check of every unfinished path every this many
             iterations (>= 1; paths whose largest substep cost is below ``w c(margin)`` are
-            checked every iteration) and after the last one.
+            checked every iteration) and after the last one; None: 1 in a world of exact
+            objects only (its check costs about one evaluation), 10 with a grid.
         free_via: draw the random via points from collision-free configurations.
         kappa: elastic compensation with these compliances [rad/(N m)] (any form of
             :func:`jwarp.kinematics.kappa_array`); None plans on the rigid model.
@@ -664,7 +668,7 @@ class PlanOptions:
     endpoint_margin: float | None = None
     early_stop: bool = True
     stop_when_solved: bool = True
-    check_all_every: int = 10
+    check_all_every: int | None = None
     free_via: bool = True
     kappa: Any = None
     lam: float = 0.7
@@ -681,9 +685,10 @@ class PlanOptions:
         """ValueError/TypeError naming the first bad field; numbers must be finite in the
         computing ``dtype``."""
         npdt = numpy_dtype(scalar_type(dtype))
-        for name, lo in (("iterations", 0), ("n_waypoints", 2), ("n_starts", 1),
-                         ("check_all_every", 1)):
+        for name, lo in (("iterations", 0), ("n_waypoints", 2), ("n_starts", 1)):
             _check_int(getattr(self, name), name, lo)
+        if self.check_all_every is not None:
+            _check_int(self.check_all_every, "check_all_every", 1)
         for name in ("step", "max_step"):
             v = getattr(self, name)
             if not (math.isfinite(real_number(v, name, npdt)) and v > 0):
@@ -867,6 +872,7 @@ class Planner:
             kappa_array(self.robot, o.kappa)  # validates, naming kappa
         self._buffers: _Buffers | None = None
         self._motion = None  # the continuous path check (motion_check())
+        self._reach = None   # sphere_reach of the robot (substeps in exact worlds)
 
     # ------------------------------------------------------------------ public
     def plan(self, start: Any, goal: Any, seeds: Any = None) -> PlanResult:
@@ -960,8 +966,16 @@ class Planner:
         P = B * n_starts
         Qf = Q.reshape(P, W, model.n_dof)
         n_sub = o.n_substeps
-        if n_sub is None:
+        if n_sub is None and self.world.has_grid:
             n_sub = substeps_for_voxel(model, Qf, float(self.world.resolution), device=dev)
+        elif n_sub is None:  # exact objects only: the check is continuous, the cost a guide
+            from jwarp.world.motion import travel_bound
+
+            if self._reach is None:
+                from jwarp.world.motion import sphere_reach
+                self._reach = sphere_reach(model)
+            n_sub = int(np.clip(np.ceil(travel_bound(model, Qf, self._reach).max(initial=0.0)
+                                        / EXACT_SUBSTEP), 1, 16))
         buf = self._prepare(P, W, n_sub)
         obj = buf.objective
         obj.set_paths(Qf)
@@ -972,6 +986,8 @@ class Planner:
         # screen: a substep whose (weighted, clipped) cost is below w_min c(margin) has no
         # sphere within margin; such paths get the exact check every iteration, all others
         # every check_all_every iterations and after the last one
+        check_every = o.check_all_every if o.check_all_every is not None else (
+            10 if self.world.has_grid else 1)
         w = obj.weights
         w_min = min([v for v in (w.world, w.self) if v > 0] or [0.0])
         screen = w_min * (self.eps - o.margin) ** 2 / (2.0 * self.eps)
@@ -988,7 +1004,7 @@ class Planner:
             if o.callback is not None:
                 o.callback(it, obj.paths.numpy())
             smax = obj.sub_max.numpy()
-            last = it == o.iterations or out_of_time or (it + 1) % o.check_all_every == 0
+            last = it == o.iterations or out_of_time or (it + 1) % check_every == 0
             if o.converge:
                 self._converge_check(buf, it, last, smax < screen, done, feasible, iters,
                                      kept_len)
@@ -1122,8 +1138,11 @@ class Planner:
         if o.kappa is None:
             obj = buf.objective
             self._upload_idx(buf, cand)
+            # stop when solved: one proven path per problem is enough (the others of
+            # that problem are skipped inside the launch)
+            group = obj.P // self.n_problems if (o.stop_when_solved and not o.converge) else 0
             out = self.motion_check().launch(obj.paths, buf.idx, len(cand), margin=o.margin,
-                                             endpoint_margin=o.endpoint_margin)
+                                             endpoint_margin=o.endpoint_margin, group=group)
             return out["ok"].numpy()[:len(cand)].astype(bool)
         return self._confirm_elastic(buf, cand)
 
@@ -1264,7 +1283,8 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
          n_starts: int = 8, n_waypoints: int = 20, n_substeps: int | None = None,
          iterations: int = 100, step: float = 0.01, max_step: float = 0.1,
          weights: PathWeights | None = None, eps: float | None = None, margin: float = 0.0,
-         early_stop: bool = True, stop_when_solved: bool = True, check_all_every: int = 10,
+         early_stop: bool = True, stop_when_solved: bool = True,
+         check_all_every: int | None = None,
          free_via: bool = True, kappa: Any = None, lam: float = 0.7, seed: int | None = 0,
          device: Any = "cpu", dtype: Any = np.float32,
          callback: Callable[[int, np.ndarray], None] | None = None,

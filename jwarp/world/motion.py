@@ -39,7 +39,8 @@ from jwarp.world.collision import check_world
 from jwarp.world.device_world import DeviceWorld
 from jwarp.world.sdf import World
 
-__all__ = ["MotionCheck", "MotionOptions", "PathCheck", "check_paths", "sphere_reach"]
+__all__ = ["MotionCheck", "MotionOptions", "PathCheck", "check_paths", "pair_travel_tables",
+           "sphere_reach", "travel_bound"]
 
 
 @dataclass
@@ -51,15 +52,22 @@ class MotionOptions:
             segment whose motion can only be proven in smaller steps (it grazes the
             margin) is reported uncertified.
         max_evals: most evaluations per segment (then uncertified), >= 1.
+        probe_len: a coarse pass probes each segment every ``probe_len`` [m] of sphere
+            travel (at most 16 probes) for a clearance below the margin before the
+            advancement, > 0 (colliding paths are found in a few evaluations).
     """
 
     min_step: float = 1e-5
     max_evals: int = 4000
+    probe_len: float = 0.1
 
     def validate(self) -> None:
         d = real_number(self.min_step, "min_step")
         if not (np.isfinite(d) and 0 < d < 1):
             raise ValueError(f"min_step: expected a fraction in (0, 1), got {self.min_step!r}")
+        pl = real_number(self.probe_len, "probe_len")
+        if not (np.isfinite(pl) and pl > 0):
+            raise ValueError(f"probe_len: expected a length > 0 [m], got {self.probe_len!r}")
         v = self.max_evals
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"max_evals: expected an integer >= 1, got {v!r}")
@@ -101,6 +109,65 @@ def sphere_reach(robot: Any) -> np.ndarray:
     return out * (1.0 + 1e-9) + 1e-12
 
 
+def pair_travel_tables(robot: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per self-collision frame pair (the order of the collision tables) the joints that
+    change the distance between its spheres, as CSR ``(start (P_f + 1,), frame (E,),
+    weight (E,))``: the frames on both branches below the pair's common ancestor (the
+    ancestor's own joint and those above it move both frames rigidly) with the largest
+    reach (:func:`sphere_reach`) of the pair's spheres on that branch. A segment moving the
+    frame angles by ``dtheta`` changes a pair's distance by at most
+    ``sum weight |dtheta[frame]|``."""
+    from jwarp.core.device import collision_tables
+
+    model = get_robot(robot)
+    rt = collision_tables(model)
+    R = sphere_reach(model) if len(model.spheres) else np.zeros((0, model.n_frames))
+    sf = np.asarray(model.sphere_arrays()[0], int)
+    nf = model.n_frames
+    Rf = np.zeros((nf, nf))
+    for s, f in enumerate(sf):
+        Rf[f] = np.maximum(Rf[f], R[s])
+    parents = model.parents
+
+    def chain(f: int) -> list[int]:
+        out = []
+        while f >= 0:
+            out.append(f)
+            f = int(parents[f])
+        return out
+
+    start, frames, weights = [0], [], []
+    for fa, fb in zip(rt["fpair_a"], rt["fpair_b"]):
+        ca, cb = chain(int(fa)), chain(int(fb))
+        common = set(ca) & set(cb)
+        for f, c in ((int(fa), ca), (int(fb), cb)):
+            for i in c:
+                if i in common:
+                    break
+                frames.append(i)
+                weights.append(Rf[f, i])
+        start.append(len(frames))
+    return (np.array(start, np.int32), np.array(frames or [0], np.int32),
+            np.array(weights or [0.0], np.float64))
+
+
+def travel_bound(robot: Any, paths: np.ndarray, reach: np.ndarray | None = None
+                 ) -> np.ndarray:
+    """(P, W - 1) [m]: a bound of the largest travel of any sphere centre along each
+    segment of ``paths`` (P, W, n_dof) (numpy; :func:`sphere_reach` ``reach`` may be
+    passed to reuse it)."""
+    model = get_robot(robot)
+    R = sphere_reach(model) if reach is None else reach
+    if R.size == 0:
+        return np.zeros(paths.shape[:-2] + (paths.shape[-2] - 1,))
+    C = np.zeros((model.n_frames, model.n_dof))
+    for i, f in enumerate(model.frames):
+        for j, c in f.coupling:
+            C[i, j] += c
+    dth = np.abs(np.diff(np.asarray(paths, np.float64), axis=-2) @ C.T)   # (..., W-1, nf)
+    return (dth @ R.T).max(axis=-1)
+
+
 @dataclass
 class PathCheck:
     """Results of :meth:`MotionCheck.check` for P paths (numpy).
@@ -127,6 +194,8 @@ class PathCheck:
         c = int(self.code[i])
         if c == 0:
             return "feasible"
+        if c == 5:
+            return "not checked: another path of its problem was proven first"
         at = f"at waypoint {self.where[i]:.3f}"
         a, b = (int(v) for v in self.what[i])
         if c == 4:
@@ -191,6 +260,12 @@ class MotionCheck:
         reach = sphere_reach(self.robot) if sp.n_spheres else np.zeros((0, self.robot.n_frames))
         self._reach = wp.array(reach, dtype=wp.float64, device=dev)
         cm.reach = self._reach
+        fs, ff, fw = pair_travel_tables(self.robot)
+        self._fp = (wp.array(fs, dtype=wp.int32, device=dev),
+                    wp.array(ff, dtype=wp.int32, device=dev),
+                    wp.array(fw, dtype=wp.float64, device=dev))
+        cm.fp_start, cm.fp_frame, cm.fp_weight = self._fp
+        self.n_fpairs = len(fs) - 1
         lt = self.model.limits
         cm.limits, cm.lin_start, cm.lin_joint = lt.limits, lt.lin_start, lt.lin_joint
         cm.lin_coef, cm.lin_bounds = lt.lin_coef, lt.lin_bounds
@@ -220,6 +295,7 @@ class MotionCheck:
             sc.dq = self._rows(cap, nd, wp.float64)
             sc.dth = self._rows(cap, nf, wp.float64)
             sc.travel = self._rows(cap, S, wp.float64)
+            sc.fptravel = self._rows(cap, self.n_fpairs, wp.float64)
             sc.frames = self._rows(cap, nf, k.fk.mat44)
             sc.xs = self._rows(cap, S, k.fk.vec3)
             self._scratch, self._cap = sc, cap
@@ -238,6 +314,9 @@ class MotionCheck:
                 seg_b=wp.empty(seg, dtype=wp.int32, device=dev),
                 seg_d=wp.empty(seg, dtype=wp.float64, device=dev),
                 seg_n=wp.empty(seg, dtype=wp.int32, device=dev),
+                bad=wp.zeros(K, dtype=wp.int32, device=dev),
+                ok_segments=wp.zeros(K, dtype=wp.int32, device=dev),
+                solved=wp.zeros(1, dtype=wp.int32, device=dev),
                 ok=wp.empty(K, dtype=wp.int32, device=dev),
                 code=wp.empty(K, dtype=wp.int32, device=dev),
                 where=wp.empty(K, dtype=wp.float64, device=dev),
@@ -247,10 +326,13 @@ class MotionCheck:
 
     # ------------------------------------------------------------------ check
     def launch(self, paths: wp.array, idx: wp.array, K: int, *, margin: float = 0.0,
-               endpoint_margin: float | None = None) -> dict:
+               endpoint_margin: float | None = None, group: int = 0) -> dict:
         """Check the paths ``idx[:K]`` of the device array ``paths`` (P, W, n_dof) (float32
         or float64) without host copies; returns the output arrays (``ok``, ``code``,
-        ``where``, ``what``, ``dist`` of length >= K, and the per-segment ones)."""
+        ``where``, ``what``, ``dist`` of length >= K, and the per-segment ones).
+        ``group`` > 0: path p belongs to problem ``p // group`` and a problem needs one
+        feasible path: once one is proven, the others of its problem are skipped (code
+        "skipped", not ok)."""
         W = paths.shape[1]
         if self.device_world.sync():
             pass
@@ -260,9 +342,16 @@ class MotionCheck:
         em = margin if endpoint_margin is None else endpoint_margin
         o = self.options
         kern = mk.kernels(paths.dtype)
+        out["bad"].zero_()
+        out["ok_segments"].zero_()
+        n_groups = paths.shape[0] // group + 1 if group > 0 else 1
+        if out["solved"].shape[0] < n_groups:
+            out["solved"] = wp.zeros(n_groups, dtype=wp.int32, device=self.device)
+        out["solved"].zero_()
         wp.launch(kern.segment, dim=(K, W - 1),
                   inputs=[paths, idx, float(margin), float(em), float(o.min_step),
-                          int(o.max_evals), self._cm, sc],
+                          int(o.max_evals), float(o.probe_len), int(group), self._cm, sc,
+                          out["bad"], out["ok_segments"], out["solved"]],
                   outputs=[out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"],
                            out["seg_d"], out["seg_n"]], device=self.device)
         wp.launch(kern.reduce, dim=K,
