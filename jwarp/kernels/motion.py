@@ -43,10 +43,14 @@ UNCERTIFIED = wp.constant(3)
 LIMITS = wp.constant(4)
 #: a segment not finished because another segment of its path failed first
 SKIPPED = wp.constant(5)
+#: uncertified where the motion grazes the self-collision margin (spheres a, b)
+UNCERTIFIED_SELF = wp.constant(6)
+#: internal: proven step limited by a self pair
+OK_SELF_LIMITED = wp.constant(7)
 
 #: names of the result codes
 CODE_NAMES = ("ok", "world collision", "self collision", "uncertified", "joint limits",
-              "skipped")
+              "skipped", "uncertified (self)")
 
 
 @functools.cache
@@ -97,11 +101,13 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         xs: wp.array2d(dtype=vec3)
 
     @wp.func
-    def advance(cm: CheckModel, sc: CheckScratch, r: int, m_req: f64, reach: f64):
+    def advance(cm: CheckModel, sc: CheckScratch, r: int, m_req: f64, m_self: f64,
+                reach: f64):
         """FK of sc.q[r] and how far the motion is proven from there: returns (code, a, b,
         d, step) with code WORLD/SELF (and the sphere(s)/object, clearance d) if a
-        clearance is below ``m_req`` here, else OK and ``step`` = min over spheres of
-        (clearance - m_req) / travel (pairs: / the sum of both travels), in units of the
+        clearance is below ``m_req`` (world; ``m_self`` between the robot's own spheres)
+        here, else OK and ``step`` = min over spheres of (clearance - required) / travel
+        (pairs: / their relative travel), in units of the
         segment's parameter u, capped at ``reach`` (objects farther than the whole
         remaining motion are not visited); (a, b, d) then name the limiting pair."""
         model = cm.model
@@ -114,6 +120,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         la = int(-1)
         lb = int(-1)
         ld = f64(1e30)
+        lself = int(0)
         for s in range(spheres.sph_frame.shape[0]):
             x = ck.sphere_centre(sc.frames, r, spheres.sph_frame[s], spheres.sph_pos[s])
             sc.xs[r, s] = x
@@ -140,7 +147,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 cb = ck.sphere_centre(sc.frames, r, fb, spheres.bound_pos[fb])
                 Lab = sc.fptravel[r, fp]  # the pair's relative travel (module docstring)
                 if wp.length(ca - cb) - spheres.bound_rad[fa] - spheres.bound_rad[fb] \
-                        < m_req + Lab * step + f64(1e-9):
+                        < m_self + Lab * step + f64(1e-9):
                     for e in range(spheres.fpair_start[fp], spheres.fpair_start[fp + 1]):
                         sa = spheres.ent_sphere[e]
                         xa = sc.xs[r, sa]
@@ -148,15 +155,18 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                         for p in range(spheres.ent_start[e], spheres.ent_start[e + 1]):
                             sb = spheres.pair_b[p]
                             dd = wp.length(xa - sc.xs[r, sb]) - ra - spheres.sph_rad[sb]
-                            if dd < m_req:
+                            if dd < m_self:
                                 return SELF, sa, sb, dd, zero
                             if Lab > zero:
-                                h = (dd - m_req) / Lab
+                                h = (dd - m_self) / Lab
                                 if h < step:
                                     step = h
                                     la = sa
                                     lb = sb
                                     ld = dd
+                                    lself = 1
+        if lself != 0:  # the limiting constraint is a self pair (for the report)
+            return OK_SELF_LIMITED, la, lb, ld, step
         return OK, la, lb, ld, step
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -166,6 +176,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         idx: wp.array(dtype=wp.int32),
         margin: f64,
         end_margin: f64,
+        self_margin: f64,
         min_step: f64,
         max_evals: int,
         probe_len: f64,
@@ -241,8 +252,10 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 l += sc.dth[r, cm.fp_frame[e]] * cm.fp_weight[e]
             sc.fptravel[r, fp] = l
         m_req = margin
+        m_self = self_margin
         if t == 0 or t == W - 2:
             m_req = wp.min(margin, end_margin)
+            m_self = wp.min(self_margin, end_margin)
         code = int(OK)
         u = zero
         ca = int(-1)
@@ -261,9 +274,9 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             up = f64(kp) / f64(n_probe)
             for j in range(n_dof):
                 sc.q[r, j] = f64(paths[p, t, j]) + up * sc.dq[r, j]
-            c, a, b, d, step = advance(cm, sc, r, m_req, zero)
+            c, a, b, d, step = advance(cm, sc, r, m_req, m_self, zero)
             n += 1
-            if c != OK:
+            if c != OK and c != OK_SELF_LIMITED:
                 code = c
                 u = up
                 ca = a
@@ -280,9 +293,9 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                     break
             for j in range(n_dof):
                 sc.q[r, j] = f64(paths[p, t, j]) + u * sc.dq[r, j]
-            c, a, b, d, step = advance(cm, sc, r, m_req, one - u)
+            c, a, b, d, step = advance(cm, sc, r, m_req, m_self, one - u)
             n += 1
-            if c != OK:
+            if c != OK and c != OK_SELF_LIMITED:
                 code = c
                 ca = a
                 cb = b
@@ -294,6 +307,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 # stalled against the margin: a probe a little ahead that is below it
                 # proves a violation, else the segment stays unproven
                 code = UNCERTIFIED
+                if c == OK_SELF_LIMITED:
+                    code = UNCERTIFIED_SELF
                 ca = a
                 cb = b
                 cd = d
@@ -302,9 +317,9 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                     up = wp.min(u + probe, one)
                     for j in range(n_dof):
                         sc.q[r, j] = f64(paths[p, t, j]) + up * sc.dq[r, j]
-                    c2, a2, b2, d2, s2 = advance(cm, sc, r, m_req, one - up)
+                    c2, a2, b2, d2, s2 = advance(cm, sc, r, m_req, m_self, one - up)
                     n += 1
-                    if c2 != OK:
+                    if c2 != OK and c2 != OK_SELF_LIMITED:
                         code = c2
                         u = up
                         ca = a2

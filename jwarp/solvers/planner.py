@@ -178,7 +178,8 @@ def _configs(x: Any, robot: RobotModel, name: str) -> np.ndarray:
 
 
 def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, margin: float,
-                    rho_kappa: Any = None, device: Any = None) -> None:
+                    rho_kappa: Any = None, device: Any = None,
+                    self_margin: float = 0.0) -> None:
     """ValueError naming ``name`` (and the row) if a configuration is outside the limits or
     in collision (closer than ``margin`` to an obstacle or to itself), or, on the elastic
     model (``rho_kappa``: compliances), if its torque equilibrium does not converge
@@ -199,17 +200,25 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
             raise ValueError(f"{where}: the elastic equilibrium (kappa) does not converge in "
                              f"{c['max_iter']} torque updates (lam {c['lam']:g}) to {c['tol']:g} "
                              f"rad, so its collisions cannot be checked; lower kappa")
-    free = collision_free(robot, world, q, margin, rho=rho, device=device)
+    free = collision_free(robot, world, q, margin, rho=rho, device=device,
+                          self_margin=self_margin)
     if not free.all():
         i = int(np.nonzero(~free)[0][0])
         where = f"{name}[{i}]" if len(q) > 1 else name
-        raise ValueError(f"{where}: configuration is in collision (world or self, margin "
-                         f"{margin:g} m)")
+        from jwarp.world.collision import min_distances
+        md = np.asarray(min_distances(robot, q[i:i + 1], world, rho=None if rho is None
+                                      else rho[i:i + 1], device=device, dtype=np.float64))[0]
+        what = (f"{md[0] * 1e3:.2f} mm from the world (margin {margin:g} m)"
+                if md[0] <= margin else
+                f"{md[1] * 1e3:.2f} mm between its own links (self margin {self_margin:g} m)")
+        raise ValueError(f"{where}: configuration is in collision: {what}")
 
 
 def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
-                   kappa: Any = None, rho: Any = None, device: Any = None) -> np.ndarray:
-    """(N,) bool: q (N, n_dof) collision-free (world and self) with ``margin`` [m].
+                   kappa: Any = None, rho: Any = None, device: Any = None,
+                   self_margin: float = 0.0) -> np.ndarray:
+    """(N,) bool: q (N, n_dof) collision-free: more than ``margin`` [m] from the world and
+    more than ``self_margin`` [m] between the robot's own spheres.
 
     With ``rho`` (N, n_frames, 5) the frames are those DH rows; with ``kappa`` (and no
     rho) the elastic model in its torque equilibrium (:func:`elastic_equilibrium`, to
@@ -221,7 +230,8 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
     if rho is None and kappa is not None:
         rho, converged = elastic_equilibrium(robot, q, kappa, device=device)
     free = np.asarray(col.is_collision_free(robot, q, world, margin=margin, rho=rho,
-                                            device=device, dtype=np.float64), bool).reshape(-1)
+                                            device=device, dtype=np.float64,
+                                            self_margin=self_margin), bool).reshape(-1)
     return free if converged is None else free & converged.reshape(-1)
 
 
@@ -262,7 +272,7 @@ def substeps(paths: Any, n_substeps: int, *, device: Any = "cpu", dtype: Any = N
 
 def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin: float = 0.0,
                   kappa: Any = None, device: Any = None,
-                  endpoint_margin: float | None = None) -> np.ndarray:
+                  endpoint_margin: float | None = None, self_margin: float = 0.0) -> np.ndarray:
     """Feasibility of paths (..., W, n_dof): every waypoint within the joint limits and,
     on the rigid model, every sphere at clearance >= ``margin`` [m] along the whole
     continuous motion (:mod:`jwarp.world.motion`; ``min(margin, endpoint_margin)`` on the
@@ -275,15 +285,15 @@ def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin
     if a.ndim < 2 or a.shape[-1] != model.n_dof or a.shape[-2] < 2:
         raise ValueError(f"paths: expected shape (..., W >= 2, {model.n_dof}), got {a.shape}")
     if kappa is None:
-        from jwarp.world.motion import MotionCheck
+        from jwarp.world.motion import motion_check
 
         flat = a.reshape(-1, a.shape[-2], a.shape[-1])
-        res = MotionCheck(model, world, device=device).check(
-            flat, margin=margin, endpoint_margin=endpoint_margin)
+        res = motion_check(model, world, device=device).check(
+            flat, margin=margin, endpoint_margin=endpoint_margin, self_margin=self_margin)
         return res.ok.reshape(a.shape[:-2])
     q = substeps(a, n_substeps, device=device)
     free = collision_free(model, world, q.reshape(-1, model.n_dof), margin, kappa=kappa,
-                          device=device)
+                          device=device, self_margin=self_margin)
     free = free.reshape(q.shape[:-1]).all(axis=-1)
     return free & within_limits(model, a).all(axis=-1)
 
@@ -615,6 +625,8 @@ class PlanOptions:
             (a path of zero collision cost is then feasible); None: max(voxel, 1 cm, margin).
         margin: required clearance [m] (>= 0) of every sphere along the whole continuous
             motion (:mod:`jwarp.world.motion`).
+        self_margin: clearance [m] (>= 0) required between the robot's own spheres
+            (self collision; MoveIt's default padding is 0 too).
         endpoint_margin: clearance [m] required of the start and goal and on the first
             and last segment, where it is below ``margin`` (None: ``margin``), so grasp
             poses closer to an object than the path margin can be planned.
@@ -666,6 +678,7 @@ class PlanOptions:
     eps: float | None = None
     margin: float = 0.0
     endpoint_margin: float | None = None
+    self_margin: float = 0.0
     early_stop: bool = True
     stop_when_solved: bool = True
     check_all_every: int | None = None
@@ -696,6 +709,9 @@ class PlanOptions:
         margin = real_number(self.margin, "margin")
         if not (math.isfinite(margin) and margin >= 0):
             raise ValueError(f"margin: expected a number >= 0 [m], got {self.margin!r}")
+        sm = real_number(self.self_margin, "self_margin")
+        if not (math.isfinite(sm) and sm >= 0):
+            raise ValueError(f"self_margin: expected a number >= 0 [m], got {self.self_margin!r}")
         if self.endpoint_margin is not None:
             em = real_number(self.endpoint_margin, "endpoint_margin")
             if not (math.isfinite(em) and em >= 0):
@@ -954,8 +970,11 @@ class Planner:
         finite_as(q0, self.npdt, "start")  # also finite in the optimisation's dtype
         finite_as(q1, self.npdt, "goal")
         em = o.margin if o.endpoint_margin is None else min(o.margin, o.endpoint_margin)
-        check_endpoints(model, self.world, q0, "start", em, o.kappa, device=dev)
-        check_endpoints(model, self.world, q1, "goal", em, o.kappa, device=dev)
+        sem = min(o.self_margin, em)
+        check_endpoints(model, self.world, q0, "start", em, o.kappa, device=dev,
+                        self_margin=sem)
+        check_endpoints(model, self.world, q1, "goal", em, o.kappa, device=dev,
+                        self_margin=sem)
         if isinstance(seeds, ViaPoints):
             Q = _via_seeds(model, q0, q1, seeds.points, o.n_waypoints)
         else:
@@ -1063,7 +1082,8 @@ class Planner:
                 out[i] = "not feasible on the elastic model (collision or limits at a substep)"
             return out
         chk = self.motion_check().check(np.asarray(res.path)[bad], margin=o.margin,
-                                        endpoint_margin=o.endpoint_margin)
+                                        endpoint_margin=o.endpoint_margin,
+                                        self_margin=o.self_margin)
         for k, i in enumerate(bad):
             out[i] = chk.reason(k) if not chk.ok[k] else \
                 "not feasible: the optimisation ran out of iterations or time"
@@ -1142,7 +1162,8 @@ class Planner:
             # that problem are skipped inside the launch)
             group = obj.P // self.n_problems if (o.stop_when_solved and not o.converge) else 0
             out = self.motion_check().launch(obj.paths, buf.idx, len(cand), margin=o.margin,
-                                             endpoint_margin=o.endpoint_margin, group=group)
+                                             endpoint_margin=o.endpoint_margin, group=group,
+                                             self_margin=o.self_margin)
             return out["ok"].numpy()[:len(cand)].astype(bool)
         return self._confirm_elastic(buf, cand)
 
@@ -1244,7 +1265,7 @@ def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarra
             break
         r = rrt_connect(planner.robot, planner.world, q0[b], q1[b], ropt, margin=o.margin,
                         kappa=o.kappa, device=planner.device, deadline=rrt_stop,
-                        endpoint_margin=getattr(o, "endpoint_margin", None))
+                        endpoint_margin=o.endpoint_margin, self_margin=o.self_margin)
         if r.success:
             found.append(int(b))
             seeds.append(resample_path(r.path, W))
@@ -1290,7 +1311,8 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
          callback: Callable[[int, np.ndarray], None] | None = None,
          converge: bool = False, converge_tol: float = 1e-3, time_limit: float | None = None,
          fallback: str | None = "rrt", fallback_after: float = 0.5,
-         rrt: Any = None) -> PlanResult:
+         rrt: Any = None, endpoint_margin: float | None = None,
+         self_margin: float = 0.0) -> PlanResult:
     """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path:
     one call of a :class:`Planner` made for it.
 
@@ -1307,7 +1329,7 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
         n_starts, n_waypoints, n_substeps, iterations, step, max_step, weights, eps,
             margin, early_stop, stop_when_solved, check_all_every, free_via, kappa, lam,
             seed, callback, converge, converge_tol, time_limit, fallback, fallback_after,
-            rrt: the fields of :class:`PlanOptions` (``stop_when_solved`` True and
+            rrt, endpoint_margin, self_margin: the fields of :class:`PlanOptions` (``stop_when_solved`` True and
             ``fallback`` "rrt" by default: pass False / None to optimise every start
             until it is feasible without a fallback, as before). ``time_limit`` counts
             from the start of this call.
@@ -1340,7 +1362,8 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
                           check_all_every=check_all_every, free_via=free_via, kappa=kappa,
                           lam=lam, seed=seed, callback=callback, converge=converge,
                           converge_tol=converge_tol, time_limit=time_limit, fallback=fallback,
-                          fallback_after=fallback_after, rrt=rrt)
+                          fallback_after=fallback_after, rrt=rrt,
+                          endpoint_margin=endpoint_margin, self_margin=self_margin)
     planner = Planner(model, world, len(q0), options, device=device, dtype=dtype)
     res = planner._plan(q0, q1, None if isinstance(initial, str) else initial, "initial",
                         t_start=t0)

@@ -164,8 +164,9 @@ class _Checks:
 
     def __init__(self, model: Any, world: Any, margin: float, kappa: Any, device: Any,
                  n_substeps: int | None, endpoint_margin: float | None = None,
-                 roots: np.ndarray | None = None) -> None:
+                 roots: np.ndarray | None = None, self_margin: float = 0.0) -> None:
         self.model, self.world, self.margin = model, world, margin
+        self.self_margin = float(self_margin)
         self.kappa, self.device, self.n_sub = kappa, device, n_substeps
         self.em = None
         if endpoint_margin is not None and float(endpoint_margin) < margin:
@@ -178,9 +179,10 @@ class _Checks:
         t = time.perf_counter()
         ok = within_limits(self.model, q)
         if ok.any():
-            ok[ok] = _pl.collision_free(self.model, self.world, q[ok],
-                                        self.margin if margin is None else margin,
-                                        kappa=self.kappa, device=self.device)
+            m = self.margin if margin is None else margin
+            ok[ok] = _pl.collision_free(self.model, self.world, q[ok], m,
+                                        kappa=self.kappa, device=self.device,
+                                        self_margin=min(self.self_margin, m))
         self.time["states"] += time.perf_counter() - t
         return ok
 
@@ -224,7 +226,8 @@ class _Checks:
         kw = {} if em is None else {"endpoint_margin": em}
         return np.asarray(_pl.path_feasible(self.model, self.world, paths, n_sub,
                                             margin=self.margin, kappa=self.kappa,
-                                            device=self.device, **kw), bool).reshape(len(paths))
+                                            device=self.device, self_margin=self.self_margin,
+                                            **kw), bool).reshape(len(paths))
 
     def edges(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return self.paths(np.stack([a, b], axis=1))
@@ -240,7 +243,7 @@ def _vector(x: Any, n: int, name: str) -> np.ndarray:
 def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
                 options: RRTOptions | None = None, *, margin: float = 0.0, kappa: Any = None,
                 device: Any = None, deadline: float | None = None,
-                endpoint_margin: float | None = None) -> RRTResult:
+                endpoint_margin: float | None = None, self_margin: float = 0.0) -> RRTResult:
     """A feasible path from ``start`` to ``goal`` (n_dof,) by RRT-Connect (module doc).
 
     Args:
@@ -249,6 +252,7 @@ def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
         margin: clearance [m] of every check; kappa: the elastic model's compliances.
         endpoint_margin: clearance [m] of start and goal and of the edges at them, where
             it is below ``margin`` (None: ``margin``; :attr:`PlanOptions.endpoint_margin`).
+        self_margin: clearance [m] between the robot's own spheres (default 0).
         device: Warp device of the checks (None: the preferred device).
         deadline: ``time.perf_counter()`` value after which the search stops (besides
             ``options.time_limit``).
@@ -274,7 +278,7 @@ def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
         stop_at = min(stop_at, t0 + float(o.time_limit))
     rng = o.seed if isinstance(o.seed, np.random.Generator) else np.random.default_rng(o.seed)
     chk = _Checks(model, world, float(margin), kappa, device, o.n_substeps, endpoint_margin,
-                  np.stack([q0, q1]))
+                  np.stack([q0, q1]), self_margin=self_margin)
     ok = chk.states(np.stack([q0, q1]), margin=chk.em)
     for name, good in zip(("start", "goal"), ok):
         if not good:

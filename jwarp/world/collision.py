@@ -599,15 +599,20 @@ def min_distances(robot: Any, q: Any, world: World | None = None, *, rho: Any = 
 
 def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: float = 0.0, *,
                       rho: Any = None, device: Any = None, dtype: Any = None,
-                      validate: bool = True) -> np.ndarray:
+                      validate: bool = True, self_margin: float | None = None) -> np.ndarray:
     """(...,) bool numpy: every sphere keeps more than ``margin`` [m] from the world and
-    from every sphere it may collide with (joint limits are not checked here)."""
+    more than ``self_margin`` (None: ``margin``) from every sphere it may collide with
+    (joint limits are not checked here)."""
     margin = real_number(margin, "margin")
     if not np.isfinite(margin):
         raise ValueError(f"margin: expected a finite distance [m], got {margin}")
+    sm = margin if self_margin is None else real_number(self_margin, "self_margin")
+    if not np.isfinite(sm):
+        raise ValueError(f"self_margin: expected a finite distance [m], got {self_margin}")
     md = min_distances(robot, q, world, rho=rho, device=device, dtype=dtype, validate=validate)
     if isinstance(md, wp.array):
         md = md.numpy()
     elif hasattr(md, "detach"):
         md = md.detach().cpu().numpy()
-    return np.all(np.asarray(md) > margin, axis=-1)
+    md = np.asarray(md)
+    return (md[..., 0] > margin) & (md[..., 1] > sm)

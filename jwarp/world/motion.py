@@ -23,6 +23,7 @@ Example::
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,7 +40,8 @@ from jwarp.world.collision import check_world
 from jwarp.world.device_world import DeviceWorld
 from jwarp.world.sdf import World
 
-__all__ = ["MotionCheck", "MotionOptions", "PathCheck", "check_paths", "pair_travel_tables",
+__all__ = ["MotionCheck", "MotionOptions", "PathCheck", "check_paths", "motion_check",
+           "pair_travel_tables",
            "sphere_reach", "travel_bound"]
 
 
@@ -207,6 +209,9 @@ class PathCheck:
         other = self.world.object_name(b) if self.world is not None else str(b)
         if c == 1:
             return f"collision: {link} vs object '{other}' {at} ({mm})"
+        if c == 6:
+            return (f"uncertified: {link} grazes {_link(self.robot, b)} {at} ({mm}): the motion "
+                    f"cannot be proven to keep the self-collision margin there")
         return (f"uncertified: {link} grazes '{other}' {at} ({mm}): the motion cannot be "
                 f"proven to keep the margin there; lower the margin or move the path away")
 
@@ -326,13 +331,15 @@ class MotionCheck:
 
     # ------------------------------------------------------------------ check
     def launch(self, paths: wp.array, idx: wp.array, K: int, *, margin: float = 0.0,
-               endpoint_margin: float | None = None, group: int = 0) -> dict:
+               endpoint_margin: float | None = None, group: int = 0,
+               self_margin: float = 0.0) -> dict:
         """Check the paths ``idx[:K]`` of the device array ``paths`` (P, W, n_dof) (float32
         or float64) without host copies; returns the output arrays (``ok``, ``code``,
         ``where``, ``what``, ``dist`` of length >= K, and the per-segment ones).
         ``group`` > 0: path p belongs to problem ``p // group`` and a problem needs one
         feasible path: once one is proven, the others of its problem are skipped (code
-        "skipped", not ok)."""
+        "skipped", not ok). ``self_margin`` [m]: the clearance required between the
+        robot's own spheres (default 0)."""
         W = paths.shape[1]
         if self.device_world.sync():
             pass
@@ -349,7 +356,8 @@ class MotionCheck:
             out["solved"] = wp.zeros(n_groups, dtype=wp.int32, device=self.device)
         out["solved"].zero_()
         wp.launch(kern.segment, dim=(K, W - 1),
-                  inputs=[paths, idx, float(margin), float(em), float(o.min_step),
+                  inputs=[paths, idx, float(margin), float(em), float(self_margin),
+                          float(o.min_step),
                           int(o.max_evals), float(o.probe_len), int(group), self._cm, sc,
                           out["bad"], out["ok_segments"], out["solved"]],
                   outputs=[out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"],
@@ -362,11 +370,13 @@ class MotionCheck:
         return out
 
     def check(self, paths: Any, *, margin: float = 0.0,
-              endpoint_margin: float | None = None) -> PathCheck:
+              endpoint_margin: float | None = None, self_margin: float = 0.0) -> PathCheck:
         """Check ``paths`` (W, n_dof) or (P, W, n_dof) (numpy or Warp; rad or m) with
-        ``margin`` [m] (>= 0) and ``endpoint_margin`` (None: = margin). Returns a
-        :class:`PathCheck` (P results; one for a single path)."""
+        ``margin`` [m] (>= 0) from the world, ``self_margin`` [m] between the robot's own
+        spheres and ``endpoint_margin`` (None: = margin) on the first and last segment.
+        Returns a :class:`PathCheck` (P results; one for a single path)."""
         margin = _check_margin(margin, "margin")
+        self_margin = _check_margin(self_margin, "self_margin")
         if endpoint_margin is not None:
             endpoint_margin = _check_margin(endpoint_margin, "endpoint_margin")
         n = self.robot.n_dof
@@ -387,10 +397,35 @@ class MotionCheck:
                          device=self.device)
         K = p.shape[0]
         idx = wp.array(np.arange(K, dtype=np.int32), dtype=wp.int32, device=self.device)
-        out = self.launch(p, idx, K, margin=margin, endpoint_margin=endpoint_margin)
+        out = self.launch(p, idx, K, margin=margin, endpoint_margin=endpoint_margin,
+                          self_margin=self_margin)
         return PathCheck(ok=out["ok"].numpy()[:K].astype(bool), code=out["code"].numpy()[:K],
                          where=out["where"].numpy()[:K], what=out["what"].numpy()[:K],
                          clearance=out["dist"].numpy()[:K], robot=self.robot, world=self.world)
+
+
+_CHECKS: "OrderedDict[tuple, tuple]" = OrderedDict()
+
+
+def motion_check(robot: Any, world: World | None, *, device: Any = None) -> MotionCheck:
+    """A cached :class:`MotionCheck` for (robot content, world identity, device): repeated
+    checks (an RRT's edges) pay its set-up once. Worlds are held weakly."""
+    import weakref
+
+    from jwarp.core.device import content_key
+
+    model = get_robot(robot)
+    dev = resolve_device(device)
+    key = (content_key(model), id(world), str(dev))
+    hit = _CHECKS.get(key)
+    if hit is not None and hit[0]() is world:
+        _CHECKS.move_to_end(key)
+        return hit[1]
+    chk = MotionCheck(model, world, device=dev)
+    _CHECKS[key] = (weakref.ref(world) if world is not None else (lambda: None), chk)
+    while len(_CHECKS) > 8:
+        _CHECKS.popitem(last=False)
+    return chk
 
 
 def _check_margin(v: Any, name: str) -> float:
@@ -403,9 +438,9 @@ def _check_margin(v: Any, name: str) -> float:
 
 
 def check_paths(robot: Any, world: World | None, paths: Any, *, margin: float = 0.0,
-                endpoint_margin: float | None = None, device: Any = None,
-                options: MotionOptions | None = None) -> PathCheck:
+                endpoint_margin: float | None = None, self_margin: float = 0.0,
+                device: Any = None, options: MotionOptions | None = None) -> PathCheck:
     """Continuous feasibility of ``paths`` (W, n_dof) or (P, W, n_dof): a
     :class:`MotionCheck` made for this call (keep one for repeated checks)."""
     return MotionCheck(robot, world, device=device, options=options).check(
-        paths, margin=margin, endpoint_margin=endpoint_margin)
+        paths, margin=margin, endpoint_margin=endpoint_margin, self_margin=self_margin)

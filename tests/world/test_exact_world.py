@@ -67,7 +67,11 @@ def test_primitive_distance_matches_coal_outside(kind, dims):
 def test_mesh_distance_closed_and_open(device):
     rng = np.random.default_rng(3)
     closed = trimesh.creation.icosphere(subdivisions=3, radius=0.2)
-    cup = trimesh.creation.box().slice_plane([0, 0, 0], [0, 0, 1])  # a box without lid
+    box = trimesh.creation.box(extents=[1.0, 1.0, 0.5])
+    box.apply_translation([0, 0, 0.25])
+    top = box.triangles_center[:, 2] > 0.49                          # drop the lid: open
+    cup = trimesh.Trimesh(box.vertices, box.faces[~top], process=False)
+    assert not cup.is_watertight
     for mesh, inside_ref in ((closed, lambda p: closed.contains(p)),
                              (cup, lambda p: (np.abs(p[:, :2]) < 0.5).all(1) & (p[:, 2] > 0)
                               & (p[:, 2] < 0.5))):
@@ -371,3 +375,21 @@ def test_attach_moves_the_object_with_the_hand_and_detach_puts_it_back(device):
     T30 = jwarp.fk(robot, q[30:31], dtype=np.float64)[0, robot.frame_index(tcp)]
     np.testing.assert_allclose(w.shapes.pose("part")[:3, 3], T30[:3, 3] + T30[:3, 0] * 0.15,
                                atol=1e-12)
+
+
+def test_self_margin_is_separate_from_the_world_margin(device):
+    """The world margin does not apply between the robot's own links (MoveIt's default):
+    a path whose links pass 5 mm apart is feasible at margin 1 cm, not at self_margin 1 cm."""
+    robot = jwarp.robot("arm7")
+    from jwarp.world.collision import min_distances
+    rng = np.random.default_rng(12)
+    lim = np.array(robot.joint_limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], (4000, robot.n_dof))
+    md = min_distances(robot, q, None, dtype=np.float64)[:, 1]
+    i = int(np.nonzero((md > 0.004) & (md < 0.008))[0][0])    # links 4-8 mm apart
+    path = np.stack([q[i], q[i]])                                  # stand still there
+    empty = World.of_shapes()
+    chk = MotionCheck(robot, empty, device=device)
+    assert chk.check(path, margin=0.01).ok[0]
+    r = chk.check(path, margin=0.0, self_margin=0.01, endpoint_margin=0.01)
+    assert not r.ok[0] and r.reason(0).startswith("self collision")
