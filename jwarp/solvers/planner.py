@@ -586,6 +586,8 @@ INITIAL_KINDS = ("straight", "random", "mixed")
 #: substep length [m] of the cost in a world of exact objects only (sphere travel per
 #: substep): the continuous check proves feasibility, the cost only guides the descent
 EXACT_SUBSTEP = 0.25
+#: evaluations per segment of the planner's continuous check (MotionOptions.max_evals)
+PLANNER_CHECK_EVALS = 256
 #: why a plan call ended (:attr:`PlanResult.stop_reason`)
 STOP_REASONS = ("solved", "time_limit", "iterations", "all_done")
 #: the fallbacks of :attr:`PlanOptions.fallback` (besides None)
@@ -1144,9 +1146,12 @@ class Planner:
     def motion_check(self) -> Any:
         """The planner's :class:`jwarp.world.motion.MotionCheck` (made on first use)."""
         if self._motion is None:
-            from jwarp.world.motion import MotionCheck
+            from jwarp.world.motion import MotionCheck, MotionOptions
 
-            self._motion = MotionCheck(self.robot, self.world, device=self.device)
+            # a bounded proof per segment: a path grazing the margin for longer than the
+            # budget stays "not yet feasible" and the descent goes on moving it
+            self._motion = MotionCheck(self.robot, self.world, device=self.device,
+                                       options=MotionOptions(max_evals=PLANNER_CHECK_EVALS))
         return self._motion
 
     def _confirm(self, buf: _Buffers, cand: np.ndarray) -> np.ndarray:
