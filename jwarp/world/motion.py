@@ -75,6 +75,22 @@ class MotionOptions:
             raise ValueError(f"max_evals: expected an integer >= 1, got {v!r}")
 
 
+_TABLES: "OrderedDict[tuple, Any]" = OrderedDict()
+
+
+def _cached(kind: str, model: RobotModel, build: Any) -> Any:
+    """Robot tables cached by the robot's content (a few robots at a time)."""
+    from jwarp.core.device import content_key
+
+    key = (kind, content_key(model))
+    hit = _TABLES.get(key)
+    if hit is None:
+        hit = _TABLES[key] = build(model)
+        while len(_TABLES) > 16:
+            _TABLES.popitem(last=False)
+    return hit
+
+
 def sphere_reach(robot: Any) -> np.ndarray:
     """(n_spheres, n_frames) float64: for each sphere s and frame i, a bound [m] of the
     distance of the sphere's centre from frame i's joint axis over every configuration
@@ -82,7 +98,10 @@ def sphere_reach(robot: Any) -> np.ndarray:
     whose joint moves the centre by exactly its change). The bound is the sum of the
     frames' translation lengths along the chain below i (|d| + |r| of a DH frame, plus the
     largest joint offset of a prismatic one) plus the centre's offset in its frame."""
-    model = get_robot(robot)
+    return _cached("reach", get_robot(robot), _sphere_reach).copy()
+
+
+def _sphere_reach(model: RobotModel) -> np.ndarray:
     from jwarp.core.device import fixed_parts
 
     nf = model.n_frames
@@ -119,9 +138,12 @@ def pair_travel_tables(robot: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     reach (:func:`sphere_reach`) of the pair's spheres on that branch. A segment moving the
     frame angles by ``dtheta`` changes a pair's distance by at most
     ``sum weight |dtheta[frame]|``."""
+    return _cached("pairs", get_robot(robot), _pair_travel_tables)
+
+
+def _pair_travel_tables(model: RobotModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from jwarp.core.device import collision_tables
 
-    model = get_robot(robot)
     rt = collision_tables(model)
     R = sphere_reach(model) if len(model.spheres) else np.zeros((0, model.n_frames))
     sf = np.asarray(model.sphere_arrays()[0], int)
