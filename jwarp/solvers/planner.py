@@ -693,7 +693,7 @@ class PlanOptions:
     converge_tol: float = 1e-3
     time_limit: float | None = None
     fallback: str | None = "rrt"
-    fallback_after: float = 0.5
+    fallback_after: float = 0.15
     rrt: Any = None
 
     def validate(self, dtype: Any = np.float32) -> None:
@@ -1315,7 +1315,7 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
          device: Any = "cpu", dtype: Any = np.float32,
          callback: Callable[[int, np.ndarray], None] | None = None,
          converge: bool = False, converge_tol: float = 1e-3, time_limit: float | None = None,
-         fallback: str | None = "rrt", fallback_after: float = 0.5,
+         fallback: str | None = "rrt", fallback_after: float = 0.15,
          rrt: Any = None, endpoint_margin: float | None = None,
          self_margin: float = 0.0) -> PlanResult:
     """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path:

@@ -60,7 +60,7 @@ class RRTOptions:
             half of it); the rigid model's edge check is continuous (no substeps).
     """
 
-    step: float = 0.25
+    step: float = 0.5
     max_samples: int = 4000
     time_limit: float | None = None
     goal_bias: float = 0.1

@@ -329,26 +329,29 @@ class MotionCheck:
         return self._scratch
 
     def _outputs(self, K: int, W: int) -> dict:
+        """The outputs for K paths of W waypoints: views of buffers kept for the largest
+        K seen with this W (an RRT's varying edge batches reuse them)."""
         o = self._out
-        if o.get("shape") != (K, W):
+        if o.get("W") != W or o.get("cap", 0) < K:
             dev = self.device
-            seg = (K, W - 1)
+            cap = max(K, int(o.get("cap", 0) * 1.5) if o.get("W") == W else K)
+            seg = (cap, W - 1)
             o = self._out = dict(
-                shape=(K, W),
+                W=W, cap=cap,
                 seg_code=wp.empty(seg, dtype=wp.int32, device=dev),
                 seg_u=wp.empty(seg, dtype=wp.float64, device=dev),
                 seg_a=wp.empty(seg, dtype=wp.int32, device=dev),
                 seg_b=wp.empty(seg, dtype=wp.int32, device=dev),
                 seg_d=wp.empty(seg, dtype=wp.float64, device=dev),
                 seg_n=wp.empty(seg, dtype=wp.int32, device=dev),
-                bad=wp.zeros(K, dtype=wp.int32, device=dev),
-                ok_segments=wp.zeros(K, dtype=wp.int32, device=dev),
+                bad=wp.zeros(cap, dtype=wp.int32, device=dev),
+                ok_segments=wp.zeros(cap, dtype=wp.int32, device=dev),
                 solved=wp.zeros(1, dtype=wp.int32, device=dev),
-                ok=wp.empty(K, dtype=wp.int32, device=dev),
-                code=wp.empty(K, dtype=wp.int32, device=dev),
-                where=wp.empty(K, dtype=wp.float64, device=dev),
-                what=wp.empty((K, 2), dtype=wp.int32, device=dev),
-                dist=wp.empty(K, dtype=wp.float64, device=dev))
+                ok=wp.empty(cap, dtype=wp.int32, device=dev),
+                code=wp.empty(cap, dtype=wp.int32, device=dev),
+                where=wp.empty(cap, dtype=wp.float64, device=dev),
+                what=wp.empty((cap, 2), dtype=wp.int32, device=dev),
+                dist=wp.empty(cap, dtype=wp.float64, device=dev))
         return o
 
     # ------------------------------------------------------------------ check

@@ -35,7 +35,7 @@ def independent_feasible(robot, world, path):
 def test_defaults():
     o = PL.PlanOptions()
     assert o.stop_when_solved is True and o.fallback == "rrt" and o.time_limit is None
-    assert o.fallback_after == 0.5 and o.rrt is None
+    assert o.fallback_after == 0.15 and o.rrt is None
     sig = inspect.signature(PL.plan).parameters
     assert sig["stop_when_solved"].default is True
     assert sig["fallback"].default == "rrt" and sig["time_limit"].default is None
