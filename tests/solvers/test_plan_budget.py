@@ -65,6 +65,7 @@ def test_all_done_when_every_start_finishes(world):
 
 def test_time_limit_ends_the_optimisation(world):
     # a step too small to move anything: the straight line stays in collision
+    PL.plan("planar4", world, S4, G4, initial="straight", iterations=1, fallback=None)  # load
     t = time.perf_counter()
     res = PL.plan("planar4", world, S4, G4, initial="straight", step=1e-9,
                   iterations=10**7, time_limit=0.3, fallback=None)
@@ -74,12 +75,12 @@ def test_time_limit_ends_the_optimisation(world):
     assert 0.3 <= res.wall_time <= wall
     assert wall < 3.0  # one iteration and the exact check after the limit (shared CPU)
     assert 0 < res.iterations[0] < 10**7  # the iteration it stopped at
-    # with the fallback: the multi-starts get half the time, then RRT-Connect solves it
+    # with the fallback: the multi-starts get fallback_after (0.15) of the time, then RRT
     res = PL.plan("planar4", world, S4, G4, initial="straight", step=1e-9,
                   iterations=10**7, time_limit=5.0)
     assert res.feasible[0] and list(res.stage) == ["fallback"]
     assert res.stop_reason == "solved"
-    assert res.timings["optimizer"] >= 2.5 and res.wall_time < 10.0
+    assert res.timings["optimizer"] >= 0.15 * 5.0 - 0.01 and res.wall_time < 10.0
 
 
 def test_fallback_solves_what_the_multi_starts_do_not(world):
