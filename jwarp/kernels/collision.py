@@ -250,11 +250,12 @@ def kernels(scalar: type) -> SimpleNamespace:
         return sdf_lower_bound(world.cellmin, world.origin, world.inv_h, world.dim, x)
 
     @wp.func
-    def world_distance(world: WorldModel, x: vec3, cutoff: scalar):
+    def world_distance(world: WorldModel, x: vec3, cutoff: scalar, grp: int):
         """(d, g, k): the smallest signed distance [m] of the point x to the world where it
         is below ``cutoff``, its gradient and what gave it (object index k >= 0, -2 the
         grid); (cutoff, +z, -1) where nothing is closer than the cutoff. Grid cells whose
-        corners keep the cutoff and objects whose boxes keep it are skipped."""
+        corners keep the cutoff and objects whose boxes keep it are skipped. ``grp``: the
+        world of a batch of worlds (-1: all objects; :mod:`jwarp.kernels.geometry`)."""
         best = cutoff
         bg = vec3(zero, zero, one)
         bk = int(-1)
@@ -266,7 +267,7 @@ def kernels(scalar: type) -> SimpleNamespace:
                     best = d
                     bg = g
                     bk = -2
-        d2, g2, k2 = gk.shapes_distance(world.shapes, x, best)
+        d2, g2, k2 = gk.shapes_distance(world.shapes, x, best, grp)
         if k2 >= 0:
             best = d2
             bg = g2
@@ -291,6 +292,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         w_self: scalar,
         eps: scalar,
         want_grad: int,
+        group_div: int,
         # Model:
         model: fk.FrameTables,
         spheres: SphereTables,
@@ -320,6 +322,9 @@ def kernels(scalar: type) -> SimpleNamespace:
         if rows_kind != ROWS_NOMINAL:
             b, row, on_waypoint = fk.waypoint_thread(t, rho_layout)
             rb = rho_stride * row
+        grp = int(-1)  # a batch of worlds: configuration b plans in world b // group_div
+        if group_div > 0:
+            grp = b // group_div
         nf = model.order.shape[0]
         for k in range(nf):
             i = model.order[k]
@@ -336,7 +341,7 @@ def kernels(scalar: type) -> SimpleNamespace:
             if w_world != zero:
                 # what keeps eps from the sphere costs nothing: cells and objects skipped
                 rs = spheres.sph_rad[s]
-                d, g, obj = world_distance(world, x, rs + eps)
+                d, g, obj = world_distance(world, x, rs + eps, grp)
                 if obj != -1 and d - rs < eps:
                     c, dc = smooth_clip(d - rs, eps)
                     u_world += c
@@ -422,6 +427,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         use_self: int,
         write_spheres: int,
         write_pairs: int,
+        group_div: int,
         # Model:
         model: fk.FrameTables,
         spheres: SphereTables,
@@ -438,6 +444,9 @@ def kernels(scalar: type) -> SimpleNamespace:
         ``write_spheres``), pair_dist[b, p] = |x_a - x_b| - r_a - r_b (if ``write_pairs``),
         min_dist[b] = [min over spheres, min over pairs] (``far`` where none)."""
         b = wp.tid()
+        grp = int(-1)
+        if group_div > 0:
+            grp = b // group_div
         nf = model.order.shape[0]
         for k in range(nf):
             fk.write_frame(model, b, model.order[k], q, rho, b * rho_stride, rows_kind, frames, b)
@@ -450,7 +459,7 @@ def kernels(scalar: type) -> SimpleNamespace:
                 cut = dmin_w + rs  # only the minimum: skip what cannot lower it
                 if write_spheres != 0:
                     cut = far
-                d, g, obj = world_distance(world, x, cut)
+                d, g, obj = world_distance(world, x, cut, grp)
                 d = d - rs
                 dmin_w = wp.min(dmin_w, d)
                 if write_spheres != 0:
@@ -572,7 +581,7 @@ def kernels(scalar: type) -> SimpleNamespace:
     ):
         """dist[p], grad[p], obj[p] of :func:`world_distance` at points[p]."""
         p = wp.tid()
-        d, g, k = world_distance(world, points[p], cutoff)
+        d, g, k = world_distance(world, points[p], cutoff, -1)
         dist[p] = d
         grad[p] = g
         obj[p] = k

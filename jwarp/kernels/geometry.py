@@ -67,6 +67,9 @@ def kernels(scalar: type) -> SimpleNamespace:
         bvh: wp.uint64
         use_bvh: int
         planes: wp.array(dtype=wp.int32)
+        group: wp.array(dtype=wp.int32)
+        group_root: wp.array(dtype=wp.int32)
+        use_groups: int
 
     @wp.func
     def sgn(v: scalar) -> scalar:
@@ -211,26 +214,33 @@ def kernels(scalar: type) -> SimpleNamespace:
         return d, R * g
 
     @wp.func
-    def shapes_distance(ws: WorldShapes, x: vec3, cutoff: scalar):
+    def shapes_distance(ws: WorldShapes, x: vec3, cutoff: scalar, grp: int):
         """(d, g, k): the smallest signed distance [m] of x over the objects whose bounding
         box lies within ``cutoff`` of x, its gradient and the object; (cutoff, +z, -1) if
-        there is none. Objects farther than the cutoff are never visited."""
+        there is none. Objects farther than the cutoff are never visited. In a batch of
+        worlds (``use_groups``) only the objects of world ``grp`` count (``grp`` < 0: all)."""
         best = cutoff
         bg = vec3(zero, zero, one)
         bk = int(-1)
+        by_group = ws.use_groups != 0 and grp >= 0
         for i in range(ws.planes.shape[0]):
             k = ws.planes[i]
+            if by_group and ws.group[k] != grp:
+                continue
             d, g = shape_sdf(ws, k, x, cutoff)
             if d < best:
                 best = d
                 bg = g
                 bk = k
-        if ws.use_bvh != 0:
+        root = int(-1)
+        if by_group:
+            root = ws.group_root[grp]  # -2: this world has no objects in the BVH
+        if ws.use_bvh != 0 and root != -2:
             # the query box in float32, padded against rounding
             pad = cutoff + scalar(1e-5) * (one + wp.abs(x[0]) + wp.abs(x[1]) + wp.abs(x[2]))
             lo = wp.vec3f(wp.float32(x[0] - pad), wp.float32(x[1] - pad), wp.float32(x[2] - pad))
             hi = wp.vec3f(wp.float32(x[0] + pad), wp.float32(x[1] + pad), wp.float32(x[2] + pad))
-            query = wp.bvh_query_aabb(ws.bvh, lo, hi)
+            query = wp.bvh_query_aabb(ws.bvh, lo, hi, root)
             k = int(0)
             while wp.bvh_query_next(query, k):
                 d, g = shape_sdf(ws, k, x, best)
@@ -254,12 +264,18 @@ def kernels(scalar: type) -> SimpleNamespace:
     ):
         """dist[p], grad[p], obj[p] of :func:`shapes_distance` at points[p]."""
         i = wp.tid()
-        d, g, k = shapes_distance(ws, points[i], cutoff)
+        d, g, k = shapes_distance(ws, points[i], cutoff, -1)
         dist[i] = d
         grad[i] = g
         obj[i] = k
 
-    return SimpleNamespace(scalar=scalar, vec3=vec3, mat33=mat33, WorldShapes=WorldShapes,
+    @wp.kernel(module="unique", enable_backward=False)
+    def group_root_kernel(bvh: wp.uint64, roots: wp.array(dtype=wp.int32)):
+        """roots[g] = the BVH node of group g (launch dim: groups; host marks empty ones)."""
+        g = wp.tid()
+        roots[g] = wp.bvh_get_group_root(bvh, g)
+
+    return SimpleNamespace(group_roots=group_root_kernel, scalar=scalar, vec3=vec3, mat33=mat33, WorldShapes=WorldShapes,
                            sphere_sdf=sphere_sdf, box_sdf=box_sdf, cylinder_sdf=cylinder_sdf,
                            capsule_sdf=capsule_sdf, cone_sdf=cone_sdf, mesh_sdf=mesh_sdf,
                            shape_sdf=shape_sdf, shapes_distance=shapes_distance,

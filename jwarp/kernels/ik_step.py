@@ -313,7 +313,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
             xs[b, s] = x
             if use_world != 0:
                 r = spheres.sph_rad[s]
-                d, g, obj = ck64.world_distance(world, x, r + margin + f64(1e-9))
+                d, g, obj = ck64.world_distance(world, x, r + margin + f64(1e-9), -1)
                 if obj != -1 and d - r <= margin:
                     return 0
         if use_self != 0:

@@ -102,7 +102,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
 
     @wp.func
     def advance(cm: CheckModel, sc: CheckScratch, r: int, m_req: f64, m_self: f64,
-                reach: f64):
+                reach: f64, grp: int):
         """FK of sc.q[r] and how far the motion is proven from there: returns (code, a, b,
         d, step) with code WORLD/SELF (and the sphere(s)/object, clearance d) if a
         clearance is below ``m_req`` (world; ``m_self`` between the robot's own spheres)
@@ -127,7 +127,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             L = sc.travel[r, s]
             if cm.use_world != 0:
                 rs = spheres.sph_rad[s]
-                d, g, obj = ck.world_distance(cm.world, x, rs + m_req + L * reach + f64(1e-9))
+                d, g, obj = ck.world_distance(cm.world, x, rs + m_req + L * reach + f64(1e-9),
+                                              grp)
                 if obj != -1:
                     dd = d - rs
                     if dd < m_req:
@@ -181,6 +182,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         max_evals: int,
         probe_len: f64,
         group: int,
+        world_group: int,
         # Model:
         cm: CheckModel,
         # Scratch:
@@ -209,6 +211,9 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         r = k * (W - 1) + t
         p = idx[k]
         model = cm.model
+        wg = int(-1)  # a batch of worlds: path p plans in world p // world_group
+        if world_group > 0:
+            wg = p // world_group
         g = int(-1)  # ``group`` > 0: paths p of one problem p // group need one feasible
         if group > 0:
             g = p // group
@@ -274,7 +279,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             up = f64(kp) / f64(n_probe)
             for j in range(n_dof):
                 sc.q[r, j] = f64(paths[p, t, j]) + up * sc.dq[r, j]
-            c, a, b, d, step = advance(cm, sc, r, m_req, m_self, zero)
+            c, a, b, d, step = advance(cm, sc, r, m_req, m_self, zero, wg)
             n += 1
             if c != OK and c != OK_SELF_LIMITED:
                 code = c
@@ -293,7 +298,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                     break
             for j in range(n_dof):
                 sc.q[r, j] = f64(paths[p, t, j]) + u * sc.dq[r, j]
-            c, a, b, d, step = advance(cm, sc, r, m_req, m_self, one - u)
+            c, a, b, d, step = advance(cm, sc, r, m_req, m_self, one - u, wg)
             n += 1
             if c != OK and c != OK_SELF_LIMITED:
                 code = c
@@ -317,7 +322,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                     up = wp.min(u + probe, one)
                     for j in range(n_dof):
                         sc.q[r, j] = f64(paths[p, t, j]) + up * sc.dq[r, j]
-                    c2, a2, b2, d2, s2 = advance(cm, sc, r, m_req, m_self, one - up)
+                    c2, a2, b2, d2, s2 = advance(cm, sc, r, m_req, m_self, one - up, wg)
                     n += 1
                     if c2 != OK and c2 != OK_SELF_LIMITED:
                         code = c2

@@ -179,7 +179,7 @@ def _configs(x: Any, robot: RobotModel, name: str) -> np.ndarray:
 
 def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, margin: float,
                     rho_kappa: Any = None, device: Any = None,
-                    self_margin: float = 0.0) -> None:
+                    self_margin: float = 0.0, per_world: int = 0) -> None:
     """ValueError naming ``name`` (and the row) if a configuration is outside the limits or
     in collision (closer than ``margin`` to an obstacle or to itself), or, on the elastic
     model (``rho_kappa``: compliances), if its torque equilibrium does not converge
@@ -201,12 +201,13 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
                              f"{c['max_iter']} torque updates (lam {c['lam']:g}) to {c['tol']:g} "
                              f"rad, so its collisions cannot be checked; lower kappa")
     free = collision_free(robot, world, q, margin, rho=rho, device=device,
-                          self_margin=self_margin)
+                          self_margin=self_margin, per_world=per_world)
     if not free.all():
         i = int(np.nonzero(~free)[0][0])
         where = f"{name}[{i}]" if len(q) > 1 else name
         from jwarp.world.collision import min_distances
-        md = np.asarray(min_distances(robot, q[i:i + 1], world, rho=None if rho is None
+        w_i = world.select(i) if per_world and world.n_worlds > 1 else world
+        md = np.asarray(min_distances(robot, q[i:i + 1], w_i, rho=None if rho is None
                                       else rho[i:i + 1], device=device, dtype=np.float64))[0]
         what = (f"{md[0] * 1e3:.2f} mm from the world (margin {margin:g} m)"
                 if md[0] <= margin else
@@ -216,7 +217,7 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
 
 def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
                    kappa: Any = None, rho: Any = None, device: Any = None,
-                   self_margin: float = 0.0) -> np.ndarray:
+                   self_margin: float = 0.0, per_world: int = 0) -> np.ndarray:
     """(N,) bool: q (N, n_dof) collision-free: more than ``margin`` [m] from the world and
     more than ``self_margin`` [m] between the robot's own spheres.
 
@@ -231,7 +232,8 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
         rho, converged = elastic_equilibrium(robot, q, kappa, device=device)
     free = np.asarray(col.is_collision_free(robot, q, world, margin=margin, rho=rho,
                                             device=device, dtype=np.float64,
-                                            self_margin=self_margin), bool).reshape(-1)
+                                            self_margin=self_margin, per_world=per_world),
+                      bool).reshape(-1)
     return free if converged is None else free & converged.reshape(-1)
 
 
@@ -459,6 +461,8 @@ class PathObjective:
         self.P, self.W, self.n = int(n_paths), int(n_waypoints), self.robot.n_dof
         self.S = (self.W - 1) * self.n_sub + 1
         self.N = self.P * self.S
+        #: a batch of worlds: substep row b is in world b // group_div (0: one world)
+        self.group_div = 0
         self.eps = real_number(eps, "eps", self.npdt) if eps is not None else float(
             max(world.resolution, 0.01))
         if not self.eps > 0:
@@ -528,7 +532,7 @@ class PathObjective:
         # elastic: frames at the kept rows, and from them one torque update for next time
         self.cm.cost(self.q_sub, rho=comp, w_world=w.world, w_self=w.self, eps=self.eps,
                      grad=grad, out_cost=self.sub_cost, out_grad=self.sub_grad,
-                     update_rows=comp is not None)
+                     update_rows=comp is not None, group_div=self.group_div)
         wp.launch(k.path_cost, dim=self.P,
                   inputs=[self.paths, self.sub_cost, self.n_sub, self.scalar(w.length),
                           self.scalar(NORM_FLOOR)],
@@ -890,6 +894,13 @@ class Planner:
             kappa_array(self.robot, o.kappa)  # validates, naming kappa
         self._buffers: _Buffers | None = None
         self._motion = None  # the continuous path check (motion_check())
+        #: a batch of worlds (World.batch): problem b plans in world b
+        self.batched = world.n_worlds > 1
+        if self.batched and world.n_worlds != self.n_problems:
+            raise ValueError(f"world: a batch of {world.n_worlds} worlds needs as many "
+                             f"problems, got n_problems={self.n_problems}")
+        if self.batched and o.kappa is not None:
+            raise ValueError("kappa: a batch of worlds plans on the rigid model only")
         self._reach = None   # sphere_reach of the robot (substeps in exact worlds)
 
     # ------------------------------------------------------------------ public
@@ -973,10 +984,11 @@ class Planner:
         finite_as(q1, self.npdt, "goal")
         em = o.margin if o.endpoint_margin is None else min(o.margin, o.endpoint_margin)
         sem = min(o.self_margin, em)
+        pw = 1 if self.batched else 0
         check_endpoints(model, self.world, q0, "start", em, o.kappa, device=dev,
-                        self_margin=sem)
+                        self_margin=sem, per_world=pw)
         check_endpoints(model, self.world, q1, "goal", em, o.kappa, device=dev,
-                        self_margin=sem)
+                        self_margin=sem, per_world=pw)
         if isinstance(seeds, ViaPoints):
             Q = _via_seeds(model, q0, q1, seeds.points, o.n_waypoints)
         else:
@@ -1083,7 +1095,16 @@ class Planner:
             for i in bad:
                 out[i] = "not feasible on the elastic model (collision or limits at a substep)"
             return out
-        chk = self.motion_check().check(np.asarray(res.path)[bad], margin=o.margin,
+        paths = np.asarray(res.path)
+        if self.batched:  # the paths of every problem, so path b is in world b
+            chk = self.motion_check().check(paths, margin=o.margin,
+                                            endpoint_margin=o.endpoint_margin,
+                                            self_margin=o.self_margin, world_group=1)
+            for i in bad:
+                out[i] = chk.reason(i) if not chk.ok[i] else \
+                    "not feasible: the optimisation ran out of iterations or time"
+            return out
+        chk = self.motion_check().check(paths[bad], margin=o.margin,
                                         endpoint_margin=o.endpoint_margin,
                                         self_margin=o.self_margin)
         for k, i in enumerate(bad):
@@ -1136,6 +1157,8 @@ class Planner:
         obj = PathObjective(self.robot, self.world, P, W, n_sub, weights=o.weights,
                             eps=self.eps, kappa=o.kappa, lam=o.lam, device=self.device,
                             dtype=self.npdt)
+        if self.batched:  # substep rows of problem b's paths are in world b
+            obj.group_div = obj.S * (P // self.n_problems)
         self._buffers = _Buffers(obj, self.n_problems, self._kernel_copies)
         return self._buffers
 
@@ -1168,7 +1191,9 @@ class Planner:
             group = obj.P // self.n_problems if (o.stop_when_solved and not o.converge) else 0
             out = self.motion_check().launch(obj.paths, buf.idx, len(cand), margin=o.margin,
                                              endpoint_margin=o.endpoint_margin, group=group,
-                                             self_margin=o.self_margin)
+                                             self_margin=o.self_margin,
+                                             world_group=obj.P // self.n_problems
+                                             if self.batched else 0)
             return out["ok"].numpy()[:len(cand)].astype(bool)
         return self._confirm_elastic(buf, cand)
 
@@ -1268,7 +1293,8 @@ def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarra
         if rrt_stop is not None and time.perf_counter() >= rrt_stop:
             timed_out = True
             break
-        r = rrt_connect(planner.robot, planner.world, q0[b], q1[b], ropt, margin=o.margin,
+        r = rrt_connect(planner.robot, planner.world.select(int(b)), q0[b], q1[b], ropt,
+                        margin=o.margin,
                         kappa=o.kappa, device=planner.device, deadline=rrt_stop,
                         endpoint_margin=o.endpoint_margin, self_margin=o.self_margin)
         if r.success:
@@ -1281,7 +1307,11 @@ def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarra
         left = None if deadline is None else max(deadline - t_opt, 1e-6)
         sub_o = replace(o, n_starts=1, fallback=None, time_limit=left, stop_when_solved=True,
                         callback=None)
-        sub = Planner(planner.robot, planner.world, len(found), sub_o, device=planner.device,
+        sub_world = planner.world
+        if planner.batched:  # the found problems' own worlds, as a batch of their own
+            from jwarp.world.sdf import World
+            sub_world = World.batch([planner.world.select(int(b)) for b in found])
+        sub = Planner(planner.robot, sub_world, len(found), sub_o, device=planner.device,
                       dtype=planner.npdt)
         idx = np.array(found)
         r2 = sub._plan(q0[idx], q1[idx], np.stack(seeds)[:, None], "seeds")

@@ -324,7 +324,8 @@ class CollisionModel:
     def cost(self, q: wp.array, *, rho: Any = None, w_world: float = 1.0, w_self: float = 1.0,
              eps: float = DEFAULT_EPS, grad: bool = True, out_cost: wp.array | None = None,
              out_grad: wp.array | None = None, update_rows: bool = False,
-             data: CollisionData | None = None) -> tuple[wp.array, wp.array | None]:
+             data: CollisionData | None = None,
+             group_div: int = 0) -> tuple[wp.array, wp.array | None]:
         """Collision cost and its hand-written gradient in one launch.
 
         Args:
@@ -344,6 +345,8 @@ class CollisionModel:
             data: a :class:`CollisionData` for N configurations (:meth:`make_data`): its
                 scratch, and its ``cost``/``grad`` as outputs unless ``out_cost``/``out_grad``
                 are given. Without it the model's own scratch and new outputs are used.
+            group_div: a batch of worlds (:meth:`jwarp.world.sdf.World.batch`): row b of
+                q is in world ``b // group_div``; 0: every object counts.
 
         Returns:
             ``(cost (N,), grad (N, n_dof) or None)`` as Warp arrays (no host copies).
@@ -369,7 +372,8 @@ class CollisionModel:
 
         def inputs() -> list:
             return [q, rows.array, rows.stride, rows.layout_vec, int(rows.kind), world_struct,
-                    ww, ws, float(eps), int(grad), *self.model_args, frames, xs, force, moment, bc]
+                    ww, ws, float(eps), int(grad), int(group_div), *self.model_args, frames, xs,
+                    force, moment, bc]
 
         world_struct = self.world_struct  # syncs moved/added objects first
         # caller-owned buffers (a planner's loop): replay a recorded launch (cheaper on the host)
@@ -380,7 +384,7 @@ class CollisionModel:
                       device=self.device)
         else:
             key = (id(q), id(rows.array), rows.stride, int(rows.kind), rows.layout, id(cost),
-                   id(g), ww, ws, float(eps), n, id(comp), id(frames))
+                   id(g), ww, ws, float(eps), n, id(comp), id(frames), int(group_div))
             hit = self._launches.get(key)
             if hit is None:
                 if len(self._launches) > 32:
@@ -402,6 +406,9 @@ class CollisionModel:
         hand-written gradient and the route for derivatives w.r.t. other inputs.
         Returns ``(cost (N,), grad (N, n_dof))`` Warp arrays."""
         n, eps, w_world, w_self = self._cost_args(q, eps, w_world, w_self)
+        if self.device_world.has_objects and w_world != 0:
+            raise ValueError("tape: the Tape route takes grids only; this world has exact "
+                             "objects (use the hand-written gradient, tape=False)")
         rows = self.dh_rows(rho, n, expand=True)
         qg = wp.clone(q)
         qg.requires_grad = True
@@ -431,7 +438,7 @@ class CollisionModel:
     # ----------------------------------------------------------- distances
     def distances(self, q: wp.array, *, rho: Any = None, spheres: bool = False,
                   pairs: bool = False, use_world: bool = True, use_self: bool = True,
-                  data: CollisionData | None = None
+                  data: CollisionData | None = None, group_div: int = 0
                   ) -> tuple[wp.array | None, wp.array | None, wp.array]:
         """Signed surface distances [m] (Warp arrays).
 
@@ -459,7 +466,7 @@ class CollisionModel:
         dummy = self._dummy
         wp.launch(self.k.distance, dim=n,
                   inputs=[q, *rows.args, self.world_struct, uw, us,
-                          int(sd is not None), int(pd is not None),
+                          int(sd is not None), int(pd is not None), int(group_div),
                           *self.model_args, _FAR, d.frames, d.xs],
                   outputs=[sd if sd is not None else dummy, pd if pd is not None else dummy, md],
                   device=self.device)
@@ -586,11 +593,15 @@ def self_distances(robot: Any, q: Any, *, rho: Any = None, device: Any = None,
 
 
 def min_distances(robot: Any, q: Any, world: World | None = None, *, rho: Any = None,
-                  device: Any = None, dtype: Any = None, validate: bool = True) -> Any:
+                  device: Any = None, dtype: Any = None, validate: bool = True,
+                  per_world: int = 0) -> Any:
     """(..., 2) [smallest sphere-to-world, smallest sphere-to-sphere] surface distance [m]
-    per configuration (``inf`` where there is nothing to measure)."""
+    per configuration (``inf`` where there is nothing to measure). ``per_world`` > 0 with a
+    batch of worlds (:meth:`World.batch`): configuration b is in world ``b // per_world``
+    (0: all objects count)."""
     model, batch, cm = _prepare(robot, q, world, device, dtype, validate)
-    _, _, md = cm.distances(batch.array, rho=_rho_arg(rho, batch, model.n_frames))
+    _, _, md = cm.distances(batch.array, rho=_rho_arg(rho, batch, model.n_frames),
+                            group_div=per_world)
     out = to_output(md, batch, (2,))
     if isinstance(out, np.ndarray):
         out = np.where(out >= 0.5 * _FAR, np.inf, out)
@@ -599,7 +610,8 @@ def min_distances(robot: Any, q: Any, world: World | None = None, *, rho: Any = 
 
 def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: float = 0.0, *,
                       rho: Any = None, device: Any = None, dtype: Any = None,
-                      validate: bool = True, self_margin: float | None = None) -> np.ndarray:
+                      validate: bool = True, self_margin: float | None = None,
+                      per_world: int = 0) -> np.ndarray:
     """(...,) bool numpy: every sphere keeps more than ``margin`` [m] from the world and
     more than ``self_margin`` (None: ``margin``) from every sphere it may collide with
     (joint limits are not checked here)."""
@@ -609,7 +621,8 @@ def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: fl
     sm = margin if self_margin is None else real_number(self_margin, "self_margin")
     if not np.isfinite(sm):
         raise ValueError(f"self_margin: expected a finite distance [m], got {self_margin}")
-    md = min_distances(robot, q, world, rho=rho, device=device, dtype=dtype, validate=validate)
+    md = min_distances(robot, q, world, rho=rho, device=device, dtype=dtype, validate=validate,
+                       per_world=per_world)
     if isinstance(md, wp.array):
         md = md.numpy()
     elif hasattr(md, "detach"):

@@ -52,6 +52,9 @@ def empty_shapes(device: Any, scalar: type) -> Any:
         s.centre = wp.zeros(0, dtype=gk.vec3, device=device)
         s.mesh = wp.zeros(0, dtype=wp.uint64, device=device)
         s.planes = wp.zeros(0, dtype=wp.int32, device=device)
+        s.group = wp.zeros(0, dtype=wp.int32, device=device)
+        s.group_root = wp.zeros(1, dtype=wp.int32, device=device)
+        s.use_groups = 0
         s.bvh = 0
         s.use_bvh = 0
         _EMPTY[key] = s

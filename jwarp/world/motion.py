@@ -357,14 +357,15 @@ class MotionCheck:
     # ------------------------------------------------------------------ check
     def launch(self, paths: wp.array, idx: wp.array, K: int, *, margin: float = 0.0,
                endpoint_margin: float | None = None, group: int = 0,
-               self_margin: float = 0.0) -> dict:
+               self_margin: float = 0.0, world_group: int = 0) -> dict:
         """Check the paths ``idx[:K]`` of the device array ``paths`` (P, W, n_dof) (float32
         or float64) without host copies; returns the output arrays (``ok``, ``code``,
         ``where``, ``what``, ``dist`` of length >= K, and the per-segment ones).
         ``group`` > 0: path p belongs to problem ``p // group`` and a problem needs one
         feasible path: once one is proven, the others of its problem are skipped (code
         "skipped", not ok). ``self_margin`` [m]: the clearance required between the
-        robot's own spheres (default 0)."""
+        robot's own spheres (default 0). ``world_group`` > 0 with a batch of worlds
+        (:meth:`jwarp.world.sdf.World.batch`): path p is in world ``p // world_group``."""
         W = paths.shape[1]
         if self.device_world.sync():
             pass
@@ -383,7 +384,8 @@ class MotionCheck:
         wp.launch(kern.segment, dim=(K, W - 1),
                   inputs=[paths, idx, float(margin), float(em), float(self_margin),
                           float(o.min_step),
-                          int(o.max_evals), float(o.probe_len), int(group), self._cm, sc,
+                          int(o.max_evals), float(o.probe_len), int(group),
+                          int(world_group), self._cm, sc,
                           out["bad"], out["ok_segments"], out["solved"]],
                   outputs=[out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"],
                            out["seg_d"], out["seg_n"]], device=self.device)
@@ -395,7 +397,8 @@ class MotionCheck:
         return out
 
     def check(self, paths: Any, *, margin: float = 0.0,
-              endpoint_margin: float | None = None, self_margin: float = 0.0) -> PathCheck:
+              endpoint_margin: float | None = None, self_margin: float = 0.0,
+              world_group: int = 0) -> PathCheck:
         """Check ``paths`` (W, n_dof) or (P, W, n_dof) (numpy or Warp; rad or m) with
         ``margin`` [m] (>= 0) from the world, ``self_margin`` [m] between the robot's own
         spheres and ``endpoint_margin`` (None: = margin) on the first and last segment.
@@ -423,7 +426,7 @@ class MotionCheck:
         K = p.shape[0]
         idx = wp.array(np.arange(K, dtype=np.int32), dtype=wp.int32, device=self.device)
         out = self.launch(p, idx, K, margin=margin, endpoint_margin=endpoint_margin,
-                          self_margin=self_margin)
+                          self_margin=self_margin, world_group=world_group)
         return PathCheck(ok=out["ok"].numpy()[:K].astype(bool), code=out["code"].numpy()[:K],
                          where=out["where"].numpy()[:K], what=out["what"].numpy()[:K],
                          clearance=out["dist"].numpy()[:K], robot=self.robot, world=self.world)

@@ -163,6 +163,54 @@ class World:
         empty, fill it with :meth:`add`)."""
         return cls(None, shapes=shapes, meta=dict(meta or {}))
 
+    @classmethod
+    def batch(cls, worlds: Sequence["World"]) -> "World":
+        """One world holding a batch of worlds of exact objects, world i's objects as group
+        i (ids ``"<i>/<id>"``): a :class:`jwarp.solvers.planner.Planner` with one problem
+        per world plans each problem in its own world in one batch."""
+        from jwarp.world.shapes import ShapeSet
+
+        ws = list(worlds)
+        if not ws:
+            raise ValueError("worlds: expected at least one world")
+        out = ShapeSet()
+        for i, w in enumerate(ws):
+            if not isinstance(w, World):
+                raise TypeError(f"worlds[{i}]: expected a World, got {type(w).__name__}")
+            if w.sdf is not None:
+                raise ValueError(f"worlds[{i}]: a batch takes worlds of exact objects only "
+                                 f"(this one has a grid)")
+            if w.shapes is None:
+                continue
+            for oid in w.shapes.ids:
+                kind, dims, mesh = w.shapes.spec(oid)
+                out.add(f"{i}/{oid}", kind, [] if dims is None else dims, w.shapes.pose(oid),
+                        mesh=mesh, group=i)
+        out.n_worlds = len(ws)
+        return cls.of_shapes(out, {"n_worlds": len(ws)})
+
+    @property
+    def n_worlds(self) -> int:
+        """Worlds of a batch (:meth:`batch`); 1 for a single world."""
+        return int(self.meta.get("n_worlds", 1)) if self.sdf is None else 1
+
+    def select(self, i: int) -> "World":
+        """World ``i`` of a batch as a world of its own (a copy of its objects)."""
+        from jwarp.world.shapes import ShapeSet
+
+        if self.n_worlds == 1:
+            return self
+        if not 0 <= int(i) < self.n_worlds:
+            raise ValueError(f"i: expected a world of the batch in [0, {self.n_worlds}), got {i}")
+        out = ShapeSet()
+        groups = self.shapes.groups()
+        for oid, g in zip(self.shapes.ids, groups):
+            if g == i:
+                kind, dims, mesh = self.shapes.spec(oid)
+                out.add(oid.split("/", 1)[1], kind, [] if dims is None else dims,
+                        self.shapes.pose(oid), mesh=mesh)
+        return World.of_shapes(out, {"batch_of": self.n_worlds, "index": int(i)})
+
     @property
     def has_grid(self) -> bool:
         """Whether the world holds a signed distance grid."""

@@ -69,6 +69,7 @@ class _Object:
     mesh: Any = None      # (vertices, faces) (mesh kind)
     dims: Any = None      # the dimensions as given (add)
     source: Any = None    # the mesh as given (add)
+    group: int = 0        # its world in a batch of worlds
 
 
 class ShapeSet:
@@ -90,6 +91,8 @@ class ShapeSet:
         #: bumped by add/remove (device tables rebuilt) and by move (poses refreshed)
         self.structure_version = 0
         self.pose_version = 0
+        #: worlds of a batch (World.batch), also those without objects
+        self.n_worlds = 1
         self._device: dict = {}
 
     # ------------------------------------------------------------------ build
@@ -109,9 +112,12 @@ class ShapeSet:
         return s
 
     def add(self, id: str, kind: str, dims: Any = (), pose: Any = None, *,
-            mesh: Any = None) -> int:
+            mesh: Any = None, group: int = 0) -> int:
         """Add object ``id`` (a new name) of ``kind`` (:data:`KINDS`) with ``dims`` [m]
-        and ``pose`` (4x4 or a position; None: identity). Returns its index."""
+        and ``pose`` (4x4 or a position; None: identity); ``group``: its world in a batch
+        of worlds (>= 0). Returns its index."""
+        if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or group < 0:
+            raise ValueError(f"group: expected an integer >= 0, got {group!r}")
         if not isinstance(id, str) or not id:
             raise TypeError(f"id: expected a non-empty string, got {id!r}")
         where = f"object '{id}'"
@@ -123,6 +129,7 @@ class ShapeSet:
         obj = self._make(id, kind, dims, mesh, where)
         obj.dims = None if kind in ("mesh", "plane") else np.asarray(dims, np.float64).reshape(-1)
         obj.source = mesh
+        obj.group = int(group)
         self._objects.append(obj)
         self._index[id] = len(self._objects) - 1
         self._poses = np.concatenate([self._poses, T[None]])
@@ -219,6 +226,16 @@ class ShapeSet:
     @property
     def ids(self) -> list[str]:
         return [o.id for o in self._objects]
+
+    @property
+    def n_groups(self) -> int:
+        """Worlds of the batch: 1 + the largest group (1 without objects), at least
+        :attr:`n_worlds` when a batch set it."""
+        return max(1 + max((o.group for o in self._objects), default=0), self.n_worlds)
+
+    def groups(self) -> np.ndarray:
+        """(K,) int: each object's world in the batch."""
+        return np.array([o.group for o in self._objects], np.int64)
 
     def __len__(self) -> int:
         return len(self._objects)
@@ -322,17 +339,34 @@ class DeviceShapes:
         self.bvh = None
         self.struct = s
         self.structure_version = shapes.structure_version
+        groups = shapes.groups().astype(np.int32)
+        n_groups = shapes.n_groups
+        s.group = wp.array(groups, dtype=wp.int32, device=device)
+        s.use_groups = int(n_groups > 1)
         self._write_poses(shapes)
+        roots = np.full(n_groups, -2, np.int32)  # -2: no object of that world in the BVH
         if self._in_bvh.any():
             lo, hi = self._boxes(shapes)
             self._lo = wp.array(lo, dtype=wp.vec3, device=device)
             self._hi = wp.array(hi, dtype=wp.vec3, device=device)
-            self.bvh = wp.Bvh(self._lo, self._hi)
+            if n_groups > 1:
+                self._groups = wp.array(groups, dtype=wp.int32, device=device)
+                self.bvh = wp.Bvh(self._lo, self._hi, groups=self._groups)
+            else:
+                self.bvh = wp.Bvh(self._lo, self._hi)
             s.bvh = self.bvh.id
             s.use_bvh = 1
+            if n_groups > 1:
+                r = wp.empty(n_groups, dtype=wp.int32, device=device)
+                wp.launch(k.group_roots, dim=n_groups, inputs=[self.bvh.id], outputs=[r],
+                          device=device)
+                has = np.zeros(n_groups, bool)
+                has[groups[self._in_bvh]] = True
+                roots = np.where(has, r.numpy(), -2).astype(np.int32)
         else:
             s.bvh = 0
             s.use_bvh = 0
+        s.group_root = wp.array(roots, dtype=wp.int32, device=device)
         self.pose_version = shapes.pose_version
 
     def _write_poses(self, shapes: ShapeSet) -> None:

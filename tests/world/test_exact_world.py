@@ -393,3 +393,44 @@ def test_self_margin_is_separate_from_the_world_margin(device):
     assert chk.check(path, margin=0.01).ok[0]
     r = chk.check(path, margin=0.0, self_margin=0.01, endpoint_margin=0.01)
     assert not r.ok[0] and r.reason(0).startswith("self collision")
+
+
+def test_a_batch_of_worlds_plans_each_problem_in_its_own_world(device):
+    """World.batch: problem b sees only world b's objects (cost, checks, reasons), the same
+    verdicts as planning each world alone; distances per world equal those of select(b)."""
+    robot = jwarp.robot("arm7")
+    from jwarp.world.collision import min_distances
+    rng = np.random.default_rng(13)
+    worlds = []
+    for i in range(4):
+        w = World.of_shapes()
+        for j in range(3):
+            w.add(f"b{j}", "box", rng.uniform(0.05, 0.2, 3),
+                  rng.uniform([-0.7, -0.7, 0.0], [0.7, 0.7, 1.0]))
+        worlds.append(w)
+    worlds.append(World.of_shapes())                       # a world without objects
+    batch = World.batch(worlds)
+    assert batch.n_worlds == 5 and batch.select(4).object_ids == []
+    lim = np.array(robot.joint_limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], (5, robot.n_dof)) * 0.6
+    per = min_distances(robot, q, batch, device=device, dtype=np.float64, per_world=1)
+    alone = np.stack([min_distances(robot, q[i:i + 1], worlds[i], device=device,
+                                    dtype=np.float64)[0] for i in range(5)])
+    np.testing.assert_allclose(per[:4], alone[:4], atol=1e-12)
+    assert np.isinf(per[4, 0]) and per[4, 1] == alone[4, 1]
+    # plan: every problem in its own world; feasible paths verified densely in their world
+    free = []
+    while len(free) < 10:
+        c = rng.uniform(lim[:, 0], lim[:, 1], (64, robot.n_dof)) * 0.6
+        ok = np.ones(64, bool)
+        for w in worlds:
+            ok &= min_distances(robot, c, w, dtype=np.float64).min(axis=1) > 0.02
+        free.extend(c[ok])
+    starts, goals = np.array(free[:5]), np.array(free[5:10])
+    res = plan(robot, batch, starts, goals, n_starts=4, iterations=60, device=device)
+    for b in range(5):
+        if res.feasible[b]:
+            assert _dense_clearance(robot, worlds[b], res.path[b:b + 1], n=300)[0] >= 0
+    assert res.feasible.sum() >= 4
+    with pytest.raises(ValueError, match="a batch of 5 worlds needs as many problems"):
+        plan(robot, batch, starts[:2], goals[:2], device=device)
