@@ -461,7 +461,8 @@ def kernels(scalar: type) -> SimpleNamespace:
                     cut = far
                 d, g, obj = world_distance(world, x, cut, grp)
                 d = d - rs
-                dmin_w = wp.min(dmin_w, d)
+                if obj != -1:  # nothing within the cutoff: the minimum stays as it is
+                    dmin_w = wp.min(dmin_w, d)
                 if write_spheres != 0:
                     sphere_dist[b, s] = d
         dmin_s = far

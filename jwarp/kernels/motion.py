@@ -89,8 +89,9 @@ def kernels(path_scalar: type) -> SimpleNamespace:
 
     @wp.struct
     class CheckScratch:
-        """Per-thread rows (threads, m): q, dq (n_dof), dtheta (n_frames), travel (S),
-        frames (n_frames), xs (S). On the CPU stride-0 views of one row."""
+        """Rows: per segment (K (W - 1), m) dq (n_dof), dtheta (n_frames), travel (S),
+        fptravel (frame pairs); per evaluating thread q (n_dof), frames (n_frames), xs (S)
+        (on the CPU stride-0 views of one row)."""
 
         q: wp.array2d(dtype=f64)
         dq: wp.array2d(dtype=f64)
@@ -101,7 +102,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         xs: wp.array2d(dtype=vec3)
 
     @wp.func
-    def advance(cm: CheckModel, sc: CheckScratch, r: int, m_req: f64, m_self: f64,
+    def advance(cm: CheckModel, sc: CheckScratch, r: int, rt: int, m_req: f64, m_self: f64,
                 reach: f64, grp: int):
         """FK of sc.q[r] and how far the motion is proven from there: returns (code, a, b,
         d, step) with code WORLD/SELF (and the sphere(s)/object, clearance d) if a
@@ -109,7 +110,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         here, else OK and ``step`` = min over spheres of (clearance - required) / travel
         (pairs: / their relative travel), in units of the
         segment's parameter u, capped at ``reach`` (objects farther than the whole
-        remaining motion are not visited); (a, b, d) then name the limiting pair."""
+        remaining motion are not visited); (a, b, d) then name the limiting pair. Rows:
+        ``r`` of the evaluation scratch (q, frames, xs), ``rt`` of the segment's travel."""
         model = cm.model
         spheres = cm.spheres
         nf = model.order.shape[0]
@@ -124,7 +126,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         for s in range(spheres.sph_frame.shape[0]):
             x = ck.sphere_centre(sc.frames, r, spheres.sph_frame[s], spheres.sph_pos[s])
             sc.xs[r, s] = x
-            L = sc.travel[r, s]
+            L = sc.travel[rt, s]
             if cm.use_world != 0:
                 rs = spheres.sph_rad[s]
                 d, g, obj = ck.world_distance(cm.world, x, rs + m_req + L * reach + f64(1e-9),
@@ -146,7 +148,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 fb = spheres.fpair_b[fp]
                 ca = ck.sphere_centre(sc.frames, r, fa, spheres.bound_pos[fa])
                 cb = ck.sphere_centre(sc.frames, r, fb, spheres.bound_pos[fb])
-                Lab = sc.fptravel[r, fp]  # the pair's relative travel (module docstring)
+                Lab = sc.fptravel[rt, fp]  # the pair's relative travel (module docstring)
                 if wp.length(ca - cb) - spheres.bound_rad[fa] - spheres.bound_rad[fb] \
                         < m_self + Lab * step + f64(1e-9):
                     for e in range(spheres.fpair_start[fp], spheres.fpair_start[fp + 1]):
@@ -170,6 +172,124 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             return OK_SELF_LIMITED, la, lb, ld, step
         return OK, la, lb, ld, step
 
+    @wp.func
+    def required(margin: f64, end_margin: f64, self_margin: f64, t: int, W: int):
+        """(world, self) clearance required on segment t of W - 1."""
+        if t == 0 or t == W - 2:
+            return wp.min(margin, end_margin), wp.min(self_margin, end_margin)
+        return margin, self_margin
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def prep_kernel(
+        # Data in:
+        paths: wp.array3d(dtype=path_scalar),
+        idx: wp.array(dtype=wp.int32),
+        # Model:
+        cm: CheckModel,
+        # Scratch:
+        sc: CheckScratch,
+        bad: wp.array(dtype=wp.int32),
+        # Data out:
+        seg_code: wp.array2d(dtype=wp.int32),
+        seg_u: wp.array2d(dtype=f64),
+        seg_a: wp.array2d(dtype=wp.int32),
+        seg_b: wp.array2d(dtype=wp.int32),
+        seg_d: wp.array2d(dtype=f64),
+        seg_n: wp.array2d(dtype=wp.int32),
+    ):
+        """Segment t of path idx[k] (launch dim (K, W - 1)): its waypoints within the limits
+        (else code LIMITS), else code OK and the travel of every sphere and frame pair over
+        the segment (segment row k (W - 1) + t)."""
+        k, t = wp.tid()
+        W = paths.shape[1]
+        n_dof = paths.shape[2]
+        r = k * (W - 1) + t
+        p = idx[k]
+        model = cm.model
+        seg_code[k, t] = OK
+        seg_u[k, t] = zero
+        seg_a[k, t] = -1
+        seg_b[k, t] = -1
+        seg_d[k, t] = zero
+        seg_n[k, t] = 0
+        # waypoints within the limits (the last segment also checks the goal)
+        last = t + 1
+        if t < W - 2:
+            last = t
+        for wi in range(t, last + 1):
+            for j in range(n_dof):
+                sc.dq[r, j] = f64(paths[p, wi, j])
+            if pk.within_limits_row(sc.dq, r, cm.limits, cm.lin_start, cm.lin_joint,
+                                    cm.lin_coef, cm.lin_bounds, cm.limit_tol) == 0:
+                seg_code[k, t] = LIMITS
+                seg_u[k, t] = f64(wi - t)
+                bad[k] = 1
+                return
+        for j in range(n_dof):
+            sc.dq[r, j] = f64(paths[p, t + 1, j]) - f64(paths[p, t, j])
+        nf = model.order.shape[0]
+        for i in range(nf):
+            v = zero
+            for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
+                v += model.cpl_coef[c] * sc.dq[r, model.cpl_joint[c]]
+            sc.dth[r, i] = wp.abs(v)
+        for s in range(cm.reach.shape[0]):  # travel of each centre over the whole segment
+            l = zero
+            for i in range(nf):
+                l += sc.dth[r, i] * cm.reach[s, i]
+            sc.travel[r, s] = l
+        for fp in range(cm.fp_start.shape[0] - 1):  # relative travel of each frame pair
+            l = zero
+            for e in range(cm.fp_start[fp], cm.fp_start[fp + 1]):
+                l += sc.dth[r, cm.fp_frame[e]] * cm.fp_weight[e]
+            sc.fptravel[r, fp] = l
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def point_kernel(
+        # Data in:
+        paths: wp.array3d(dtype=path_scalar),
+        idx: wp.array(dtype=wp.int32),
+        margin: f64,
+        end_margin: f64,
+        self_margin: f64,
+        world_group: int,
+        seg_code: wp.array2d(dtype=wp.int32),
+        # Model:
+        cm: CheckModel,
+        # Scratch:
+        sc: CheckScratch,
+        # Data out:
+        pt_code: wp.array3d(dtype=wp.int32),
+        pt_h: wp.array3d(dtype=f64),
+        pt_a: wp.array3d(dtype=wp.int32),
+        pt_b: wp.array3d(dtype=wp.int32),
+        pt_d: wp.array3d(dtype=f64),
+    ):
+        """The evaluations of a segment in parallel (GPU; launch dim (K, W - 1, M)): point j
+        at u = (j + 1/2) / M, its code and proven radius h (in u) of :func:`advance`."""
+        k, t, j = wp.tid()
+        W = paths.shape[1]
+        M = pt_code.shape[2]
+        if seg_code[k, t] != OK:
+            pt_code[k, t, j] = SKIPPED
+            return
+        rt = k * (W - 1) + t
+        r = rt * M + j
+        p = idx[k]
+        wg = int(-1)
+        if world_group > 0:
+            wg = p // world_group
+        m_req, m_self = required(margin, end_margin, self_margin, t, W)
+        u = (f64(j) + half) / f64(M)
+        for jj in range(paths.shape[2]):
+            sc.q[r, jj] = f64(paths[p, t, jj]) + u * sc.dq[rt, jj]
+        c, a, b, d, h = advance(cm, sc, r, rt, m_req, m_self, one, wg)
+        pt_code[k, t, j] = c
+        pt_h[k, t, j] = h
+        pt_a[k, t, j] = a
+        pt_b[k, t, j] = b
+        pt_d[k, t, j] = d
+
     @wp.kernel(module="unique", enable_backward=False)
     def segment_kernel(
         # Data in:
@@ -183,6 +303,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         probe_len: f64,
         group: int,
         world_group: int,
+        use_points: int,
         # Model:
         cm: CheckModel,
         # Scratch:
@@ -190,6 +311,11 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         bad: wp.array(dtype=wp.int32),
         ok_segments: wp.array(dtype=wp.int32),
         solved: wp.array(dtype=wp.int32),
+        pt_code: wp.array3d(dtype=wp.int32),
+        pt_h: wp.array3d(dtype=f64),
+        pt_a: wp.array3d(dtype=wp.int32),
+        pt_b: wp.array3d(dtype=wp.int32),
+        pt_d: wp.array3d(dtype=f64),
         # Data out:
         seg_code: wp.array2d(dtype=wp.int32),
         seg_u: wp.array2d(dtype=f64),
@@ -221,46 +347,10 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 seg_code[k, t] = SKIPPED
                 seg_n[k, t] = 0
                 return
-        # waypoints within the limits (the last segment also checks the goal)
-        last = t + 1
-        if t < W - 2:
-            last = t
-        for wi in range(t, last + 1):
-            for j in range(n_dof):
-                sc.q[r, j] = f64(paths[p, wi, j])
-            if pk.within_limits_row(sc.q, r, cm.limits, cm.lin_start, cm.lin_joint,
-                                    cm.lin_coef, cm.lin_bounds, cm.limit_tol) == 0:
-                seg_code[k, t] = LIMITS
-                seg_u[k, t] = f64(wi - t)
-                seg_a[k, t] = -1
-                seg_b[k, t] = -1
-                seg_d[k, t] = zero
-                seg_n[k, t] = 0
-                bad[k] = 1
-                return
-        for j in range(n_dof):
-            sc.dq[r, j] = f64(paths[p, t + 1, j]) - f64(paths[p, t, j])
-        nf = model.order.shape[0]
-        for i in range(nf):
-            v = zero
-            for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
-                v += model.cpl_coef[c] * sc.dq[r, model.cpl_joint[c]]
-            sc.dth[r, i] = wp.abs(v)
-        for s in range(cm.reach.shape[0]):  # travel of each centre over the whole segment
-            l = zero
-            for i in range(nf):
-                l += sc.dth[r, i] * cm.reach[s, i]
-            sc.travel[r, s] = l
-        for fp in range(cm.fp_start.shape[0] - 1):  # relative travel of each frame pair
-            l = zero
-            for e in range(cm.fp_start[fp], cm.fp_start[fp + 1]):
-                l += sc.dth[r, cm.fp_frame[e]] * cm.fp_weight[e]
-            sc.fptravel[r, fp] = l
-        m_req = margin
-        m_self = self_margin
-        if t == 0 or t == W - 2:
-            m_req = wp.min(margin, end_margin)
-            m_self = wp.min(self_margin, end_margin)
+        if seg_code[k, t] != OK:  # outside the limits (prep_kernel)
+            return
+        rt = r  # the segment's travel row (prep_kernel); evaluations use row r too
+        m_req, m_self = required(margin, end_margin, self_margin, t, W)
         code = int(OK)
         u = zero
         ca = int(-1)
@@ -269,17 +359,43 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         n = int(0)
         lmax = zero
         for s in range(cm.reach.shape[0]):
-            lmax = wp.max(lmax, sc.travel[r, s])
+            lmax = wp.max(lmax, sc.travel[rt, s])
+        if use_points != 0:
+            # the parallel evaluations (point_kernel): the first violation is proven; else
+            # the proven radii cover [0, covered] and the advancement goes on from there
+            M = pt_code.shape[2]
+            covered = zero
+            gap = int(0)
+            for j in range(M):
+                c = pt_code[k, t, j]
+                uj = (f64(j) + half) / f64(M)
+                n += 1
+                if c == WORLD or c == SELF:
+                    code = c
+                    u = uj
+                    ca = pt_a[k, t, j]
+                    cb = pt_b[k, t, j]
+                    cd = pt_d[k, t, j]
+                    break
+                if gap == 0:
+                    if uj - pt_h[k, t, j] <= covered:
+                        covered = wp.max(covered, uj + pt_h[k, t, j])
+                    else:
+                        gap = 1
+            if code == OK:
+                u = wp.min(covered, one)
         # a coarse pass first (one probe per ``probe_len`` of travel, at most 16): most
         # colliding segments show a clearance below the margin at one of them
         n_probe = wp.min(int(wp.ceil(lmax / probe_len)), 16)
+        if use_points != 0:
+            n_probe = 0
         for kp in range(1, n_probe):
             if bad[k] != 0:  # another segment of this path failed: nothing to prove
                 break
             up = f64(kp) / f64(n_probe)
             for j in range(n_dof):
                 sc.q[r, j] = f64(paths[p, t, j]) + up * sc.dq[r, j]
-            c, a, b, d, step = advance(cm, sc, r, m_req, m_self, zero, wg)
+            c, a, b, d, step = advance(cm, sc, r, rt, m_req, m_self, zero, wg)
             n += 1
             if c != OK and c != OK_SELF_LIMITED:
                 code = c
@@ -298,7 +414,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                     break
             for j in range(n_dof):
                 sc.q[r, j] = f64(paths[p, t, j]) + u * sc.dq[r, j]
-            c, a, b, d, step = advance(cm, sc, r, m_req, m_self, one - u, wg)
+            c, a, b, d, step = advance(cm, sc, r, rt, m_req, m_self, one - u, wg)
             n += 1
             if c != OK and c != OK_SELF_LIMITED:
                 code = c
@@ -322,7 +438,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                     up = wp.min(u + probe, one)
                     for j in range(n_dof):
                         sc.q[r, j] = f64(paths[p, t, j]) + up * sc.dq[r, j]
-                    c2, a2, b2, d2, s2 = advance(cm, sc, r, m_req, m_self, one - up, wg)
+                    c2, a2, b2, d2, s2 = advance(cm, sc, r, rt, m_req, m_self, one - up, wg)
                     n += 1
                     if c2 != OK and c2 != OK_SELF_LIMITED:
                         code = c2
@@ -389,6 +505,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             ok[k] = 0
             code[k] = SKIPPED
 
-    return SimpleNamespace(CheckModel=CheckModel, CheckScratch=CheckScratch,
+    return SimpleNamespace(prep=prep_kernel, points=point_kernel, required=required,
+                           CheckModel=CheckModel, CheckScratch=CheckScratch,
                            advance=advance, segment=segment_kernel, reduce=reduce_kernel,
                            fk=fk, ck=ck)

@@ -35,7 +35,7 @@ import numpy as np
 from jwarp.core.arrays import real_array, real_number
 from jwarp.core.limits import sample_within_limits, within_limits
 from jwarp.registry import robot as get_robot
-from jwarp.solvers import planner as _pl
+from jwarp.solvers import feasibility as _fz
 
 
 @dataclass
@@ -180,7 +180,7 @@ class _Checks:
         ok = within_limits(self.model, q)
         if ok.any():
             m = self.margin if margin is None else margin
-            ok[ok] = _pl.collision_free(self.model, self.world, q[ok], m,
+            ok[ok] = _fz.collision_free(self.model, self.world, q[ok], m,
                                         kappa=self.kappa, device=self.device,
                                         self_margin=min(self.self_margin, m))
         self.time["states"] += time.perf_counter() - t
@@ -198,9 +198,9 @@ class _Checks:
         if n_sub is None and self.kappa is None:
             n_sub = 1  # the rigid model's path_feasible checks the continuous motion
         elif n_sub is None:  # elastic: substeps at their equilibria, sized to the world
-            n_sub = _pl.substeps_for_voxel(self.model, paths, float(self.world.resolution),
-                                           safety=_pl.SWEEP_SAFETY,
-                                           max_substeps=_pl.MAX_CHECK_SUBSTEPS,
+            n_sub = _fz.substeps_for_voxel(self.model, paths, float(self.world.resolution),
+                                           safety=_fz.SWEEP_SAFETY,
+                                           max_substeps=_fz.MAX_CHECK_SUBSTEPS,
                                            device=self.device)
         self.last_n_sub = n_sub = int(n_sub)
         ok = np.zeros(len(paths), bool)
@@ -224,7 +224,7 @@ class _Checks:
         if not len(paths):
             return np.zeros(0, bool)
         kw = {} if em is None else {"endpoint_margin": em}
-        return np.asarray(_pl.path_feasible(self.model, self.world, paths, n_sub,
+        return np.asarray(_fz.path_feasible(self.model, self.world, paths, n_sub,
                                             margin=self.margin, kappa=self.kappa,
                                             device=self.device, self_margin=self.self_margin,
                                             **kw), bool).reshape(len(paths))
@@ -270,7 +270,7 @@ def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
         raise TypeError(f"options: expected an RRTOptions, got {type(o).__name__}")
     o.validate()
     model = get_robot(robot)
-    _pl.check_world(model, world)
+    _fz.check_world(model, world)
     n = model.n_dof
     q0, q1 = _vector(start, n, "start"), _vector(goal, n, "goal")
     stop_at = math.inf if deadline is None else float(deadline)
@@ -475,7 +475,7 @@ def resample_path(path: np.ndarray, n_waypoints: int) -> np.ndarray:
     if W < 2:
         raise ValueError(f"n_waypoints: expected >= 2, got {n_waypoints!r}")
     if k > W:
-        return _pl.polyline_path(path[0], path[1:-1], path[-1], W)
+        return _fz.polyline_path(path[0], path[1:-1], path[-1], W)
     seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
     extra = W - k  # waypoints beyond the nodes, shared by the k - 1 segments
     if seg.sum() > 0 and extra > 0:

@@ -57,16 +57,23 @@ class MotionOptions:
         probe_len: a coarse pass probes each segment every ``probe_len`` [m] of sphere
             travel (at most 16 probes) for a clearance below the margin before the
             advancement, > 0 (colliding paths are found in a few evaluations).
+        points: evaluations of every segment in parallel before the advancement (each
+            proves an interval around it; the advancement goes on from the first gap),
+            >= 1, or 0 for none; None: 8 on a GPU (a thread per evaluation), 0 on the CPU.
     """
 
     min_step: float = 1e-5
     max_evals: int = 4000
     probe_len: float = 0.1
+    points: int | None = None
 
     def validate(self) -> None:
         d = real_number(self.min_step, "min_step")
         if not (np.isfinite(d) and 0 < d < 1):
             raise ValueError(f"min_step: expected a fraction in (0, 1), got {self.min_step!r}")
+        if self.points is not None and (isinstance(self.points, bool) or not isinstance(
+                self.points, (int, np.integer)) or self.points < 0):
+            raise ValueError(f"points: expected an integer >= 0 or None, got {self.points!r}")
         pl = real_number(self.probe_len, "probe_len")
         if not (np.isfinite(pl) and pl > 0):
             raise ValueError(f"probe_len: expected a length > 0 [m], got {self.probe_len!r}")
@@ -300,6 +307,7 @@ class MotionCheck:
         self._cm = cm
         self._scratch: tuple | None = None
         self._cap = 0
+        self._cap_eval = 0
         self._out: dict = {}
 
     # ------------------------------------------------------------------ data
@@ -311,22 +319,44 @@ class MotionCheck:
         return wp.array(ptr=row.ptr, shape=(n, max(m, 1)), strides=(0, row.strides[1]),
                         dtype=dt, device=self.device)
 
-    def _scratch_for(self, n: int) -> Any:
-        if self._scratch is None or n > self._cap:
+    def _scratch_for(self, n: int, n_eval: int) -> Any:
+        """Scratch for ``n`` segments (their travel rows, real rows on every device) and
+        ``n_eval`` evaluating threads (q, frames, xs; stride-0 rows on the CPU)."""
+        if self._scratch is None or n > self._cap or n_eval > self._cap_eval:
             cap = max(n, int(self._cap * 1.5))
+            cap_e = max(n_eval, int(self._cap_eval * 1.5))
             self._keep: list = []
             nd, nf, S = self.robot.n_dof, self.robot.n_frames, self.n_spheres
             k = self.k
+            dev = self.device
+
+            def full(m: int, dt: Any) -> wp.array:
+                return wp.empty((cap, max(m, 1)), dtype=dt, device=dev)
+
             sc = k.CheckScratch()
-            sc.q = self._rows(cap, nd, wp.float64)
-            sc.dq = self._rows(cap, nd, wp.float64)
-            sc.dth = self._rows(cap, nf, wp.float64)
-            sc.travel = self._rows(cap, S, wp.float64)
-            sc.fptravel = self._rows(cap, self.n_fpairs, wp.float64)
-            sc.frames = self._rows(cap, nf, k.fk.mat44)
-            sc.xs = self._rows(cap, S, k.fk.vec3)
-            self._scratch, self._cap = sc, cap
+            sc.dq = full(nd, wp.float64)
+            sc.dth = full(nf, wp.float64)
+            sc.travel = full(S, wp.float64)
+            sc.fptravel = full(self.n_fpairs, wp.float64)
+            sc.q = self._rows(cap_e, nd, wp.float64)
+            sc.frames = self._rows(cap_e, nf, k.fk.mat44)
+            sc.xs = self._rows(cap_e, S, k.fk.vec3)
+            self._scratch, self._cap, self._cap_eval = sc, cap, cap_e
         return self._scratch
+
+    def _points(self, K: int, W: int, M: int) -> list:
+        """The point outputs (K, W - 1, M) (code, h, a, b, d); one dummy set when M = 0."""
+        shape = (K, W - 1, M) if M > 0 else (1, 1, 1)
+        pts = self.__dict__.get("_pts")
+        if pts is None or pts[0].shape != shape:
+            dev = self.device
+            pts = [wp.empty(shape, dtype=wp.int32, device=dev),
+                   wp.empty(shape, dtype=wp.float64, device=dev),
+                   wp.empty(shape, dtype=wp.int32, device=dev),
+                   wp.empty(shape, dtype=wp.int32, device=dev),
+                   wp.empty(shape, dtype=wp.float64, device=dev)]
+            self.__dict__["_pts"] = pts
+        return pts
 
     def _outputs(self, K: int, W: int) -> dict:
         """The outputs for K paths of W waypoints: views of buffers kept for the largest
@@ -371,10 +401,21 @@ class MotionCheck:
             pass
         self._cm.world = self.device_world.struct
         out = self._outputs(K, W)
-        sc = self._scratch_for(K * (W - 1))
-        em = margin if endpoint_margin is None else endpoint_margin
         o = self.options
+        M = o.points if o.points is not None else (8 if self.device.is_cuda else 0)
+        sc = self._scratch_for(K * (W - 1), K * (W - 1) * max(M, 1))
+        em = margin if endpoint_margin is None else endpoint_margin
         kern = mk.kernels(paths.dtype)
+        seg_out = [out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"], out["seg_d"],
+                   out["seg_n"]]
+        pts = self._points(K, W, M)
+        wp.launch(kern.prep, dim=(K, W - 1), inputs=[paths, idx, self._cm, sc, out["bad"]],
+                  outputs=seg_out, device=self.device)
+        if M > 0:
+            wp.launch(kern.points, dim=(K, W - 1, M),
+                      inputs=[paths, idx, float(margin), float(em), float(self_margin),
+                              int(world_group), out["seg_code"], self._cm, sc],
+                      outputs=pts, device=self.device)
         out["bad"].zero_()
         out["ok_segments"].zero_()
         n_groups = paths.shape[0] // group + 1 if group > 0 else 1
@@ -385,8 +426,8 @@ class MotionCheck:
                   inputs=[paths, idx, float(margin), float(em), float(self_margin),
                           float(o.min_step),
                           int(o.max_evals), float(o.probe_len), int(group),
-                          int(world_group), self._cm, sc,
-                          out["bad"], out["ok_segments"], out["solved"]],
+                          int(world_group), int(M > 0), self._cm, sc,
+                          out["bad"], out["ok_segments"], out["solved"], *pts],
                   outputs=[out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"],
                            out["seg_d"], out["seg_n"]], device=self.device)
         wp.launch(kern.reduce, dim=K,

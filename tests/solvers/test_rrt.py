@@ -52,16 +52,18 @@ def test_rrt_connect_finds_a_path_every_edge_feasible(world):
 
 
 def test_rrt_uses_the_planners_checks(world, monkeypatch):
-    """The trees check states and edges through jwarp.solvers.planner's collision_free and
-    path_feasible (so a replaced check is the one the fallback uses)."""
+    """The trees check states and edges through the shared checks of
+    jwarp.solvers.feasibility (the planner's, re-exported there), so a replaced check is the
+    one the fallback uses."""
+    from jwarp.solvers import feasibility as FZ
     calls = {"collision_free": 0, "path_feasible": 0}
     for name in calls:
-        orig = getattr(PL, name)
+        orig = getattr(FZ, name)
 
         def wrapped(*a, _orig=orig, _name=name, **k):
             calls[_name] += 1
             return _orig(*a, **k)
-        monkeypatch.setattr(PL, name, wrapped)
+        monkeypatch.setattr(FZ, name, wrapped)
     res = R.rrt_connect("planar4", world, S4, G4, R.RRTOptions(seed=0), device="cpu")
     assert res.success
     assert calls["collision_free"] > 0 and calls["path_feasible"] > 0
