@@ -293,6 +293,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         eps: scalar,
         want_grad: int,
         group_div: int,
+        active: wp.array(dtype=wp.int32),
+        active_div: int,
         # Model:
         model: fk.FrameTables,
         spheres: SphereTables,
@@ -325,6 +327,13 @@ def kernels(scalar: type) -> SimpleNamespace:
         grp = int(-1)  # a batch of worlds: configuration b plans in world b // group_div
         if group_div > 0:
             grp = b // group_div
+        if active_div > 0:  # rows of frozen paths (active[b // active_div] == 0) cost nothing
+            if active[b // active_div] == 0:
+                cost[b] = zero
+                if want_grad != 0:
+                    for j in range(grad.shape[1]):
+                        grad[b, j] = zero
+                return
         nf = model.order.shape[0]
         for k in range(nf):
             i = model.order[k]

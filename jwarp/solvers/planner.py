@@ -196,6 +196,9 @@ class PathObjective:
         self.N = self.P * self.S
         #: a batch of worlds: substep row b is in world b // group_div (0: one world)
         self.group_div = 0
+        #: skip the collision cost of frozen paths (``active`` 0; the planner with
+        #: ``early_stop``): their costs are kept, nothing reads them again
+        self.skip_inactive = False
         self.eps = real_number(eps, "eps", self.npdt) if eps is not None else float(
             max(world.resolution, 0.01))
         if not self.eps > 0:
@@ -265,7 +268,8 @@ class PathObjective:
         # elastic: frames at the kept rows, and from them one torque update for next time
         self.cm.cost(self.q_sub, rho=comp, w_world=w.world, w_self=w.self, eps=self.eps,
                      grad=grad, out_cost=self.sub_cost, out_grad=self.sub_grad,
-                     update_rows=comp is not None, group_div=self.group_div)
+                     update_rows=comp is not None, group_div=self.group_div,
+                     active=self.active, active_div=self.S if self.skip_inactive else 0)
         wp.launch(k.path_cost, dim=self.P,
                   inputs=[self.paths, self.sub_cost, self.n_sub, self.scalar(w.length),
                           self.scalar(NORM_FLOOR)],
@@ -892,6 +896,7 @@ class Planner:
                             dtype=self.npdt)
         if self.batched:  # substep rows of problem b's paths are in world b
             obj.group_div = obj.S * (P // self.n_problems)
+        obj.skip_inactive = bool(o.early_stop)  # frozen paths cost no collision queries
         self._buffers = _Buffers(obj, self.n_problems, self._kernel_copies)
         return self._buffers
 

@@ -195,6 +195,7 @@ class CollisionModel:
         self._work: CollisionData | None = None  # scratch of calls without a data
         self._launches: dict = {}
         self._dummy = wp.empty((1, 1), dtype=self.scalar, device=dev)
+        self._no_active = wp.ones(1, dtype=wp.int32, device=dev)
         self._no_update = elastic_kernels(self.scalar).CompensationArgs()  # enabled = 0
 
     # ------------------------------------------------------------ plumbing
@@ -324,8 +325,9 @@ class CollisionModel:
     def cost(self, q: wp.array, *, rho: Any = None, w_world: float = 1.0, w_self: float = 1.0,
              eps: float = DEFAULT_EPS, grad: bool = True, out_cost: wp.array | None = None,
              out_grad: wp.array | None = None, update_rows: bool = False,
-             data: CollisionData | None = None,
-             group_div: int = 0) -> tuple[wp.array, wp.array | None]:
+             data: CollisionData | None = None, group_div: int = 0,
+             active: wp.array | None = None,
+             active_div: int = 0) -> tuple[wp.array, wp.array | None]:
         """Collision cost and its hand-written gradient in one launch.
 
         Args:
@@ -347,6 +349,8 @@ class CollisionModel:
                 are given. Without it the model's own scratch and new outputs are used.
             group_div: a batch of worlds (:meth:`jwarp.world.sdf.World.batch`): row b of
                 q is in world ``b // group_div``; 0: every object counts.
+            active, active_div: rows b with ``active[b // active_div] == 0`` are skipped
+                (cost and gradient 0; a planner's frozen paths); ``active_div`` 0: none.
 
         Returns:
             ``(cost (N,), grad (N, n_dof) or None)`` as Warp arrays (no host copies).
@@ -372,8 +376,9 @@ class CollisionModel:
 
         def inputs() -> list:
             return [q, rows.array, rows.stride, rows.layout_vec, int(rows.kind), world_struct,
-                    ww, ws, float(eps), int(grad), int(group_div), *self.model_args, frames, xs,
-                    force, moment, bc]
+                    ww, ws, float(eps), int(grad), int(group_div),
+                    active if active is not None else self._no_active, int(active_div),
+                    *self.model_args, frames, xs, force, moment, bc]
 
         world_struct = self.world_struct  # syncs moved/added objects first
         # caller-owned buffers (a planner's loop): replay a recorded launch (cheaper on the host)
@@ -384,7 +389,8 @@ class CollisionModel:
                       device=self.device)
         else:
             key = (id(q), id(rows.array), rows.stride, int(rows.kind), rows.layout, id(cost),
-                   id(g), ww, ws, float(eps), n, id(comp), id(frames), int(group_div))
+                   id(g), ww, ws, float(eps), n, id(comp), id(frames), int(group_div),
+                   id(active), int(active_div))
             hit = self._launches.get(key)
             if hit is None:
                 if len(self._launches) > 32:
@@ -392,7 +398,7 @@ class CollisionModel:
                 launch = wp.launch(self.k.cost, dim=n, inputs=inputs(),
                                    outputs=[cost, gout, comp], device=self.device,
                                    record_cmd=True)
-                hit = (launch, q, rows, cost, g, comp, frames)
+                hit = (launch, q, rows, cost, g, comp, frames, active)
                 self._launches[key] = hit
             hit[0].launch()
         if update_rows:
