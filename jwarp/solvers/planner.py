@@ -790,6 +790,13 @@ class Planner:
                             self._keep(buf, newly)
                             done[newly] = True
                 solved = feasible
+                if o.stop_when_solved and o.early_stop and B > 1:
+                    # a solved problem needs nothing more: its other starts stop here
+                    # (kept as they are), so they cost no evaluation or check from now on
+                    fin = np.repeat(solved.reshape(B, n_starts).any(1), n_starts) & ~done
+                    if fin.any():
+                        self._keep(buf, np.nonzero(fin)[0])
+                        done[fin] = True
             if o.stop_when_solved and solved.reshape(B, n_starts).any(1).all():
                 reason = "solved"
                 break
