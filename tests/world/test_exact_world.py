@@ -348,7 +348,8 @@ def test_covering_spheres_contain_the_object(kind, dims):
     assert 1 <= len(c) <= 18
     s = Shape(kind, np.zeros(0) if kind == "mesh" else np.array(dims), np.eye(4), "o",
               mesh=mesh)
-    pts = rng.uniform(-0.3, 0.3, (4000 if kind == "mesh" else 20000, 3))
+    half = 0.1 if kind == "mesh" else 0.3      # the mesh: 4000 points around its 7 cm ball
+    pts = rng.uniform(-half, half, (4000 if kind == "mesh" else 20000, 3))
     inside = signed_distance(s, pts) < 0
     covered = (np.linalg.norm(pts[:, None] - c[None], axis=-1) <= r[None]).any(1)
     assert inside.sum() > 100 and covered[inside].all()
