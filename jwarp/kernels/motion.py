@@ -196,6 +196,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         seg_b: wp.array2d(dtype=wp.int32),
         seg_d: wp.array2d(dtype=f64),
         seg_n: wp.array2d(dtype=wp.int32),
+        seg_cov: wp.array2d(dtype=f64),
     ):
         """Segment t of path idx[k] (launch dim (K, W - 1)): its waypoints within the limits
         (else code LIMITS), else code OK and the travel of every sphere and frame pair over
@@ -207,6 +208,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         p = idx[k]
         model = cm.model
         seg_code[k, t] = OK
+        seg_cov[k, t] = zero
         seg_u[k, t] = zero
         seg_a[k, t] = -1
         seg_b[k, t] = -1
@@ -254,6 +256,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         self_margin: f64,
         world_group: int,
         seg_code: wp.array2d(dtype=wp.int32),
+        seg_cov: wp.array2d(dtype=f64),
+        dense_start: int,
         # Model:
         cm: CheckModel,
         # Scratch:
@@ -266,11 +270,14 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         pt_d: wp.array3d(dtype=f64),
     ):
         """The evaluations of a segment in parallel (GPU; launch dim (K, W - 1, M)): point j
-        at u = (j + 1/2) / M, its code and proven radius h (in u) of :func:`advance`."""
+        of the part not proven yet, [c, 1] with c = seg_cov (uniform, or with
+        ``dense_start`` denser near c: u = c + (1 - c) ((j + 1/2) / M)^2), its code and
+        proven radius h (in u) of :func:`advance`."""
         k, t, j = wp.tid()
         W = paths.shape[1]
         M = pt_code.shape[2]
-        if seg_code[k, t] != OK:
+        c0 = seg_cov[k, t]
+        if seg_code[k, t] != OK or c0 >= one:
             pt_code[k, t, j] = SKIPPED
             return
         rt = k * (W - 1) + t
@@ -280,7 +287,10 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         if world_group > 0:
             wg = p // world_group
         m_req, m_self = required(margin, end_margin, self_margin, t, W)
-        u = (f64(j) + half) / f64(M)
+        f = (f64(j) + half) / f64(M)
+        if dense_start != 0:
+            f = f * f
+        u = c0 + (one - c0) * f
         for jj in range(paths.shape[2]):
             sc.q[r, jj] = f64(paths[p, t, jj]) + u * sc.dq[rt, jj]
         c, a, b, d, h = advance(cm, sc, r, rt, m_req, m_self, one, wg)
@@ -289,6 +299,57 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         pt_a[k, t, j] = a
         pt_b[k, t, j] = b
         pt_d[k, t, j] = d
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def cover_kernel(
+        # Data in:
+        pt_code: wp.array3d(dtype=wp.int32),
+        pt_h: wp.array3d(dtype=f64),
+        pt_a: wp.array3d(dtype=wp.int32),
+        pt_b: wp.array3d(dtype=wp.int32),
+        pt_d: wp.array3d(dtype=f64),
+        dense_start: int,
+        # Data in/out:
+        bad: wp.array(dtype=wp.int32),
+        seg_code: wp.array2d(dtype=wp.int32),
+        seg_u: wp.array2d(dtype=f64),
+        seg_a: wp.array2d(dtype=wp.int32),
+        seg_b: wp.array2d(dtype=wp.int32),
+        seg_d: wp.array2d(dtype=f64),
+        seg_n: wp.array2d(dtype=wp.int32),
+        seg_cov: wp.array2d(dtype=f64),
+    ):
+        """After a :func:`point_kernel` round (launch dim (K, W - 1)): a point below the
+        margin fails the segment there (proven); else the proven prefix [0, c] grows over
+        the points whose intervals join it."""
+        k, t = wp.tid()
+        M = pt_code.shape[2]
+        c0 = seg_cov[k, t]
+        if seg_code[k, t] != OK or c0 >= one:
+            return
+        cov = c0
+        gap = int(0)
+        for j in range(M):
+            f = (f64(j) + half) / f64(M)
+            if dense_start != 0:
+                f = f * f
+            uj = c0 + (one - c0) * f
+            c = pt_code[k, t, j]
+            seg_n[k, t] = seg_n[k, t] + 1
+            if c == WORLD or c == SELF:
+                seg_code[k, t] = c
+                seg_u[k, t] = uj
+                seg_a[k, t] = pt_a[k, t, j]
+                seg_b[k, t] = pt_b[k, t, j]
+                seg_d[k, t] = pt_d[k, t, j]
+                bad[k] = 1
+                return
+            if gap == 0:
+                if uj - pt_h[k, t, j] <= cov:
+                    cov = wp.max(cov, uj + pt_h[k, t, j])
+                else:
+                    gap = 1
+        seg_cov[k, t] = wp.min(cov, one)
 
     @wp.kernel(module="unique", enable_backward=False)
     def segment_kernel(
@@ -311,11 +372,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         bad: wp.array(dtype=wp.int32),
         ok_segments: wp.array(dtype=wp.int32),
         solved: wp.array(dtype=wp.int32),
-        pt_code: wp.array3d(dtype=wp.int32),
-        pt_h: wp.array3d(dtype=f64),
-        pt_a: wp.array3d(dtype=wp.int32),
-        pt_b: wp.array3d(dtype=wp.int32),
-        pt_d: wp.array3d(dtype=f64),
+        seg_cov: wp.array2d(dtype=f64),
         # Data out:
         seg_code: wp.array2d(dtype=wp.int32),
         seg_u: wp.array2d(dtype=f64),
@@ -360,30 +417,9 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         lmax = zero
         for s in range(cm.reach.shape[0]):
             lmax = wp.max(lmax, sc.travel[rt, s])
-        if use_points != 0:
-            # the parallel evaluations (point_kernel): the first violation is proven; else
-            # the proven radii cover [0, covered] and the advancement goes on from there
-            M = pt_code.shape[2]
-            covered = zero
-            gap = int(0)
-            for j in range(M):
-                c = pt_code[k, t, j]
-                uj = (f64(j) + half) / f64(M)
-                n += 1
-                if c == WORLD or c == SELF:
-                    code = c
-                    u = uj
-                    ca = pt_a[k, t, j]
-                    cb = pt_b[k, t, j]
-                    cd = pt_d[k, t, j]
-                    break
-                if gap == 0:
-                    if uj - pt_h[k, t, j] <= covered:
-                        covered = wp.max(covered, uj + pt_h[k, t, j])
-                    else:
-                        gap = 1
-            if code == OK:
-                u = wp.min(covered, one)
+        if use_points != 0:  # the parallel rounds (point/cover kernels) proved [0, cov]
+            u = seg_cov[k, t]
+            n = seg_n[k, t]
         # a coarse pass first (one probe per ``probe_len`` of travel, at most 16): most
         # colliding segments show a clearance below the margin at one of them
         n_probe = wp.min(int(wp.ceil(lmax / probe_len)), 16)
@@ -505,7 +541,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             ok[k] = 0
             code[k] = SKIPPED
 
-    return SimpleNamespace(prep=prep_kernel, points=point_kernel, required=required,
+    return SimpleNamespace(prep=prep_kernel, points=point_kernel, cover=cover_kernel,
+                           required=required,
                            CheckModel=CheckModel, CheckScratch=CheckScratch,
                            advance=advance, segment=segment_kernel, reduce=reduce_kernel,
                            fk=fk, ck=ck)

@@ -59,18 +59,25 @@ class MotionOptions:
             advancement, > 0 (colliding paths are found in a few evaluations).
         points: evaluations of every segment in parallel before the advancement (each
             proves an interval around it; the advancement goes on from the first gap),
-            >= 1, or 0 for none; None: 8 on a GPU (a thread per evaluation), 0 on the CPU.
+            >= 1, or 0 for none; None: 16 on a GPU (a thread per evaluation), 0 on the CPU.
+        rounds: rounds of parallel evaluations (>= 1): each evaluates ``points`` points of
+            every segment's part not proven yet (denser near its start after the first),
+            so a segment that grazes an obstacle is proven in parallel steps.
     """
 
     min_step: float = 1e-5
     max_evals: int = 4000
     probe_len: float = 0.1
     points: int | None = None
+    rounds: int = 4
 
     def validate(self) -> None:
         d = real_number(self.min_step, "min_step")
         if not (np.isfinite(d) and 0 < d < 1):
             raise ValueError(f"min_step: expected a fraction in (0, 1), got {self.min_step!r}")
+        if isinstance(self.rounds, bool) or not isinstance(self.rounds, (int, np.integer)) \
+                or self.rounds < 1:
+            raise ValueError(f"rounds: expected an integer >= 1, got {self.rounds!r}")
         if self.points is not None and (isinstance(self.points, bool) or not isinstance(
                 self.points, (int, np.integer)) or self.points < 0):
             raise ValueError(f"points: expected an integer >= 0 or None, got {self.points!r}")
@@ -374,6 +381,7 @@ class MotionCheck:
                 seg_b=wp.empty(seg, dtype=wp.int32, device=dev),
                 seg_d=wp.empty(seg, dtype=wp.float64, device=dev),
                 seg_n=wp.empty(seg, dtype=wp.int32, device=dev),
+                seg_cov=wp.empty(seg, dtype=wp.float64, device=dev),
                 bad=wp.zeros(cap, dtype=wp.int32, device=dev),
                 ok_segments=wp.zeros(cap, dtype=wp.int32, device=dev),
                 solved=wp.zeros(1, dtype=wp.int32, device=dev),
@@ -402,7 +410,7 @@ class MotionCheck:
         self._cm.world = self.device_world.struct
         out = self._outputs(K, W)
         o = self.options
-        M = o.points if o.points is not None else (8 if self.device.is_cuda else 0)
+        M = o.points if o.points is not None else (16 if self.device.is_cuda else 0)
         sc = self._scratch_for(K * (W - 1), K * (W - 1) * max(M, 1))
         em = margin if endpoint_margin is None else endpoint_margin
         kern = mk.kernels(paths.dtype)
@@ -410,12 +418,15 @@ class MotionCheck:
                    out["seg_n"]]
         pts = self._points(K, W, M)
         wp.launch(kern.prep, dim=(K, W - 1), inputs=[paths, idx, self._cm, sc, out["bad"]],
-                  outputs=seg_out, device=self.device)
-        if M > 0:
+                  outputs=seg_out + [out["seg_cov"]], device=self.device)
+        for rnd in range(o.rounds if M > 0 else 0):
             wp.launch(kern.points, dim=(K, W - 1, M),
                       inputs=[paths, idx, float(margin), float(em), float(self_margin),
-                              int(world_group), out["seg_code"], self._cm, sc],
+                              int(world_group), out["seg_code"], out["seg_cov"], int(rnd > 0),
+                              self._cm, sc],
                       outputs=pts, device=self.device)
+            wp.launch(kern.cover, dim=(K, W - 1), inputs=[*pts, int(rnd > 0)],
+                      outputs=[out["bad"], *seg_out, out["seg_cov"]], device=self.device)
         out["bad"].zero_()
         out["ok_segments"].zero_()
         n_groups = paths.shape[0] // group + 1 if group > 0 else 1
@@ -427,7 +438,7 @@ class MotionCheck:
                           float(o.min_step),
                           int(o.max_evals), float(o.probe_len), int(group),
                           int(world_group), int(M > 0), self._cm, sc,
-                          out["bad"], out["ok_segments"], out["solved"], *pts],
+                          out["bad"], out["ok_segments"], out["solved"], out["seg_cov"]],
                   outputs=[out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"],
                            out["seg_d"], out["seg_n"]], device=self.device)
         wp.launch(kern.reduce, dim=K,
