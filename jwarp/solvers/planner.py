@@ -329,6 +329,9 @@ INITIAL_KINDS = ("straight", "random", "mixed")
 EXACT_SUBSTEP = 0.25
 #: evaluations per segment of the planner's continuous check (MotionOptions.max_evals)
 PLANNER_CHECK_EVALS = 256
+#: the same on a GPU, after 8 rounds of parallel evaluations (H200, 700 Panda problems in one
+#: batch: 64 gave 667 solved in 4.0 s, 256 gave 691 in 15 s)
+PLANNER_CHECK_EVALS_GPU = 64
 #: why a plan call ended (:attr:`PlanResult.stop_reason`)
 STOP_REASONS = ("solved", "time_limit", "iterations", "all_done")
 #: the fallbacks of :attr:`PlanOptions.fallback` (besides None)
@@ -918,8 +921,12 @@ class Planner:
 
             # a bounded proof per segment: a path grazing the margin for longer than the
             # budget stays "not yet feasible" and the descent goes on moving it
+            # on a GPU one thread would advance a grazing segment alone (the launch waits
+            # for it): more parallel rounds, fewer sequential evaluations
+            opts = (MotionOptions(max_evals=PLANNER_CHECK_EVALS_GPU, rounds=8)
+                    if self.device.is_cuda else MotionOptions(max_evals=PLANNER_CHECK_EVALS))
             self._motion = MotionCheck(self.robot, self.world, device=self.device,
-                                       options=MotionOptions(max_evals=PLANNER_CHECK_EVALS))
+                                       options=opts)
         return self._motion
 
     def _confirm(self, buf: _Buffers, cand: np.ndarray) -> np.ndarray:
