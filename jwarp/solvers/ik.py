@@ -622,6 +622,15 @@ class IKSolver:
         return wp.array(ptr=row.ptr, shape=(B, m), strides=(0, row.strides[1]), dtype=dtype,
                         device=self.device)
 
+    def _sync_world(self) -> None:
+        """Objects added to or removed from the world since the last solve: the new world
+        struct in the check tables and the cost (recorded launches re-recorded); moved
+        objects need nothing (updated in place)."""
+        ws = self.cm64.world_struct
+        if self._check_tables.world is not ws:
+            self._check_tables.world = ws
+            self._launches.clear()
+
     def _launch(self, key: Any, kernel: Any, dim: int, inputs: list) -> None:
         launch = self._launches.get(key)
         if launch is None:
@@ -723,6 +732,7 @@ class IKSolver:
             ``n_problems == 1``: no leading dim).
         """
         t0 = time.perf_counter()
+        self._sync_world()
         T, lead = _targets(targets)
         P, model = self.n_problems, self.robot
         if len(T) != P:

@@ -440,3 +440,22 @@ def test_a_batch_of_worlds_plans_each_problem_in_its_own_world(device):
     assert res.feasible.sum() >= 4
     with pytest.raises(ValueError, match="a batch of 5 worlds needs as many problems"):
         plan(robot, batch, starts[:2], goals[:2], device=device)
+
+
+def test_ik_solver_sees_objects_added_after_it_was_built(device):
+    """An IKSolver keeps its world: an object added (or moved) later is in its next solve
+    (its check refuses a pose inside the new object)."""
+    from jwarp.solvers.ik import IKOptions, IKSolver
+    robot = jwarp.robot("arm7")
+    tcp = list(robot.end_effectors)[0]
+    q = np.array([0.0, 0.8, 0.0, -1.0, 0.0, 0.5, 0.0])
+    T = jwarp.fk(robot, q[None], dtype=np.float64)[0, robot.frame_index(tcp)]
+    w = World.of_shapes()
+    w.add("far", "sphere", [0.05], [3.0, 0.0, 0.0])
+    solver = IKSolver(robot, tcp, 1, IKOptions(n_starts=8), world=w, device=device)
+    assert solver.solve(T).feasible
+    w.add("block", "sphere", [0.08], T[:3, 3])           # the target is now inside it
+    res = solver.solve(T)
+    assert not res.feasible
+    w.move("block", T[:3, 3] + np.array([2.0, 0.0, 0.0]))  # and out of the way again
+    assert solver.solve(T).feasible
