@@ -201,7 +201,8 @@ _OPTION_OF = {"start": "--start", "goal": "--goal", "target": "--target", "frame
               "margin": "--margin", "seed": "--seed", "kappa": "--kappa", "device": "--device",
               "world": "--world", "warm_start": "--warm-start",
               "n_random_with_warm_start": "--starts", "time_limit": "--time-limit",
-              "fallback": "--fallback"}
+              "fallback": "--fallback", "endpoint_margin": "--endpoint-margin",
+              "self_margin": "--self-margin"}
 
 
 def _solver_error(command: str, e: Exception) -> CLIError:
@@ -378,7 +379,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
                 rec.log_configs("iteration", it, paths[0], name="start0")
     try:
         budget = dict(stop_when_solved=args.stop_when_solved, time_limit=args.time_limit,
-                      fallback=args.fallback)
+                      fallback=args.fallback, endpoint_margin=args.endpoint_margin,
+                      self_margin=args.self_margin)
         if net is not None:
             opts = PlanOptions(n_starts=args.starts, iterations=args.iterations,
                                n_waypoints=args.waypoints, n_substeps=args.substeps,
@@ -534,8 +536,8 @@ def add_subcommands(sub: Any) -> None:
         s.add_argument("--robot", required=True, help="robot name or path to a robot .json")
         s.add_argument("--deg", action="store_true", help="revolute joint values in degrees")
         s.add_argument("--margin", type=real_arg("--margin", 0.0, unit=" [m]"), default=0.0,
-                       metavar="M", help="required clearance [m] to obstacles and between "
-                                         "body parts (>= 0)")
+                       metavar="M", help="required clearance [m] to obstacles (>= 0; plan: "
+                                         "--self-margin between body parts; ik: both)")
         s.add_argument("--seed", type=int_arg("--seed", 0), default=0,
                        help="random seed of the multi-starts (>= 0)")
         s.add_argument("--elastic", action="store_true",
@@ -584,6 +586,13 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--stop-when-solved", action=argparse.BooleanOptionalAction, default=True,
                    help="stop as soon as a start is feasible (default); --no-stop-when-solved "
                         "optimises every start until it is feasible or out of iterations")
+    s.add_argument("--endpoint-margin", type=real_arg("--endpoint-margin", 0.0, unit=" [m]"),
+                   default=None, metavar="M",
+                   help="clearance [m] of start, goal and the first and last segment where it is "
+                        "below --margin (grasp poses close to an object); default: --margin")
+    s.add_argument("--self-margin", type=real_arg("--self-margin", 0.0, unit=" [m]"),
+                   default=0.0, metavar="M",
+                   help="clearance [m] between the robot's own links (default 0)")
     s.add_argument("--fallback", type=_fallback, default="rrt", metavar="rrt|none",
                    help="fallback for an unsolved problem: rrt (default: an RRT-Connect path "
                         "seeds one more optimisation) or none")
