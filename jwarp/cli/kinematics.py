@@ -104,6 +104,7 @@ def cmd_fk(args: argparse.Namespace) -> int:
             "kappa": kappa, "kappa_source": source, "lam": args.lam, "max_iter": args.max_iter,
             "iterations": int(np.asarray(res.iterations)),
             "converged": bool(np.asarray(res.converged)),
+            "diverged": bool(np.asarray(res.diverged).any()),
         })
     out["frames"] = _positions(model, frames)
     out["end_effectors"] = {ee: frames[fi, :3, 3].tolist() for ee, fi in model.end_effectors.items()}
@@ -137,7 +138,10 @@ def cmd_fk(args: argparse.Namespace) -> int:
                 "--kappa": f"{out['kappa']} rad/(N m)"}[out["kappa_source"]]
         print(f"elastic: kappa = {ksrc}, lambda = {args.lam:g}, iterations = "
               f"{out['iterations']}, converged = {'yes' if out['converged'] else 'NO'}")
-        if not out["converged"]:
+        if not out["converged"] and out.get("diverged"):
+            print("jwarp: warning: the elastic iteration diverged (non-finite frames); lower "
+                  "--kappa or --lam", file=sys.stderr)
+        elif not out["converged"]:
             print(f"jwarp: warning: the elastic iteration did not converge in {args.max_iter} "
                   f"updates; raise --max-iter or lower --lam", file=sys.stderr)
         print(f"{'end-effector':<16} {'dx [mm]':>9} {'dy [mm]':>9} {'dz [mm]':>9} {'|sag| [mm]':>11}")

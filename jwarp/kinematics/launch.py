@@ -281,13 +281,26 @@ class ElasticFK(NamedTuple):
 
     frames (..., n_frames, 4, 4); rho (..., n_frames, 5) equilibrium DH rows
     [d, theta, r, alpha, beta]; iterations (...,) int torque updates used per configuration;
-    converged (...,) bool: last update changed rho by less than ``tol`` [rad].
+    converged (...,) bool: last update changed rho by less than ``tol`` [rad] and every
+    frame and row is finite (a diverged iteration, e.g. an enormous kappa, is never
+    converged; :attr:`diverged` says so).
     """
 
     frames: Any
     rho: Any
     iterations: Any
     converged: Any
+
+    @property
+    def diverged(self) -> np.ndarray:
+        """(...,) bool numpy: the iteration left finite numbers (NaN or inf frames)."""
+        f = self.frames
+        if isinstance(f, wp.array):
+            f = f.numpy()
+        elif hasattr(f, "detach"):
+            f = f.detach().cpu().numpy()
+        f = np.asarray(f)
+        return ~np.isfinite(f).all(axis=(-1, -2, -3))
 
 
 class ElasticStep(NamedTuple):
@@ -450,6 +463,12 @@ def equilibrium(run: ElasticLaunch, max_iter: int, tol: float, frames: wp.array 
     if max_iter == 0:
         converged |= run.step(None)[2].numpy() <= tol
     frames = run.frames_at(rho, frames)
+    # a non-finite iterate has not converged, however small its last change looked (the
+    # iteration diverged: NaN comparisons pass silently in the kernels' max)
+    finite = np.isfinite(frames.numpy()).reshape(run.B, -1).all(axis=1)
+    if rho is not None:
+        finite &= np.isfinite(rho[0].numpy()).reshape(run.B, -1).all(axis=1)
+    converged &= finite
     return rho, frames, iterations, converged
 
 

@@ -1,0 +1,26 @@
+"""Reliability round 3, item 2: a diverged elastic iteration (non-finite frames) is never
+called converged, in the API and on the CLI (it failed before: kappa 1e10 in float32 gave
+NaN frames with converged=[True], iterations=[2])."""
+
+import numpy as np
+import pytest
+
+import jwarp
+from cli_helpers import run
+
+
+@pytest.mark.parametrize("dtype,kappa", [("float32", 1e10), ("float64", 1e308)])
+def test_nan_frames_are_not_converged(dtype, kappa):
+    r = jwarp.fk_elastic("justin19", np.zeros((2, 19)), kappa=kappa, dtype=dtype)
+    assert not np.isfinite(np.asarray(r.frames)).all()
+    assert not np.asarray(r.converged).any()
+    assert np.asarray(r.diverged).all()
+    ok = jwarp.fk_elastic("justin19", np.zeros((1, 19)), kappa=1e-4, dtype=dtype)
+    assert np.asarray(ok.converged).all() and not np.asarray(ok.diverged).any()
+
+
+def test_cli_says_it_diverged(capsys):
+    code, out, err = run(capsys, ["fk", "justin19", "--elastic", "--kappa", "1e10",
+                                  "--dtype", "float32", "--q", "0"])
+    assert "converged = NO" in out
+    assert "diverged" in err
