@@ -107,17 +107,39 @@ def check_device(name: str, option: str = "--device") -> None:
         raise CLIError(f"{option}: {msg.removeprefix('device: ')}") from None
 
 
+#: every existing file named on the command line being run ({option or argument: path}),
+#: set by :func:`set_command_files`: no output may be one of them
+_COMMAND_FILES: dict[str, str] = {}
+
+
+def set_command_files(args: Any) -> None:
+    """Record the existing files among the parsed arguments (string values that name a
+    file, and string items of list values) as the command's inputs: :func:`check_output`
+    refuses any of them as an output (whatever option names it), so no command overwrites
+    a file it reads."""
+    _COMMAND_FILES.clear()
+    for key, value in vars(args).items():
+        if key == "func":
+            continue
+        values = value if isinstance(value, (list, tuple)) else [value]
+        for v in values:
+            if isinstance(v, (str, os.PathLike)) and str(v) and os.path.isfile(v):
+                _COMMAND_FILES[f"--{key.replace('_', '-')}"] = os.fspath(v)
+
+
 def check_output(path: str, option: str, rerun: bool = False,
                  inputs: dict[str, str | None] | None = None) -> None:
     """Check an output path before any work: CLIError naming ``option`` if it is empty, a
     folder, in a missing or unwritable folder (a temporary file is made there and removed:
     :class:`jwarp.atomic.AtomicFile`), one of the existing input files ``inputs``
-    ({option: path}), or, with ``rerun``, if rerun-sdk is missing."""
+    ({option: path}) or of the command's other files (:func:`set_command_files`), or, with
+    ``rerun``, if rerun-sdk is missing."""
     from jwarp.atomic import AtomicFile
 
     if not path or not path.strip():
         raise CLIError(f"{option}: empty file name")
-    for opt, src in (inputs or {}).items():
+    others = {k: v for k, v in _COMMAND_FILES.items() if k != option}
+    for opt, src in [*(inputs or {}).items(), *others.items()]:  # the caller's names first
         if src and os.path.isfile(src) and os.path.realpath(src) == os.path.realpath(path):
             raise CLIError(f"{option}: {path} is also {opt}; give another file")
     if rerun:

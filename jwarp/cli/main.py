@@ -43,6 +43,7 @@ from typing import Sequence
 from jwarp.cli import (calibration, data, design, kinematics, learning, mjcf, planning, poses,
                        urdf, urdf_export)
 from jwarp.cli.common import (CLIError, Parser, fix_negative_values, plugin_warnings_one_line,
+                               set_command_files,
                                value_options)
 
 
@@ -82,6 +83,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(fix_negative_values(argv, value_options(parser)))
+        set_command_files(args)  # no output may overwrite a file the command reads
         return args.func(args)
     except CLIError as e:
         if e.usage:
