@@ -415,10 +415,23 @@ def cmd_simulate_campaign(args: argparse.Namespace) -> int:
     # joint compliance U(0.5, 1.5) K, lateral (alpha) a third of it (as DEFAULT_KAPPA)
     kappa = None if k == 0 else {"kappa_theta": (0.5 * k, 1.5 * k),
                                  "kappa_alpha": (k / 6, k / 2)}
-    camp = simulate_campaign(model, setup, args.samples, seed=args.seed, noise=args.noise,
-                             length_error=args.length_error * 1e-3,
-                             angle_error=math.radians(args.angle_error), kappa=kappa,
-                             sampler=sampler, accept=accept, unmodeled=unmodeled)
+    try:
+        camp = simulate_campaign(model, setup, args.samples, seed=args.seed, noise=args.noise,
+                                 length_error=args.length_error * 1e-3,
+                                 angle_error=math.radians(args.angle_error), kappa=kappa,
+                                 sampler=sampler, accept=accept, unmodeled=unmodeled)
+    except ValueError as e:
+        if "NaN or inf" in str(e) and args.kappa is not None:  # the robot sagged to infinity
+            raise _cli_error(f"--kappa: {args.kappa:g} rad/(N m) makes the true robot's "
+                             f"equilibrium non-finite; give a compliance a robot can have "
+                             f"(e.g. <= 1e-2)") from None
+        raise
+    # refuse what calibrate would refuse, before anything is written
+    bad = [o for o, v in (("--noise", camp.samples.y), ("--kappa", camp.samples.q))
+           if not np.all(np.isfinite(v))]
+    if bad:
+        raise _cli_error(f"{bad[0]}: {getattr(args, bad[0][2:])} gives non-finite samples; "
+                         f"nothing was written")
     paths = camp.write(args.out, option="--out")
     if args.json:
         print(json.dumps({"robot": model.name, "plugin": setup.plugin, "samples": args.samples,

@@ -455,6 +455,9 @@ class PlanOptions:
         margin = real_number(self.margin, "margin")
         if not (math.isfinite(margin) and margin >= 0):
             raise ValueError(f"margin: expected a number >= 0 [m], got {self.margin!r}")
+        real_number(self.margin, "margin", npdt)  # finite in the computing dtype too
+        if margin > 1e3:
+            raise ValueError(f"margin: {margin:g} m is not a clearance a robot can keep")
         sm = real_number(self.self_margin, "self_margin")
         if not (math.isfinite(sm) and sm >= 0):
             raise ValueError(f"self_margin: expected a number >= 0 [m], got {self.self_margin!r}")
