@@ -321,6 +321,10 @@ def kappa_array(model: RobotModel, kappa: Any) -> np.ndarray:
     """
     if kappa is None:
         return model.kappa
+    if getattr(kappa, "requires_grad", False):
+        raise TypeError("kappa: a torch tensor that requires grad: jwarp differentiates the "
+                        "elastic kinematics w.r.t. q only, so its gradient would silently stay "
+                        "None; pass kappa.detach() (d/dkappa: jwarp.kinematics.autodiff)")
     k = real_array(kappa, "kappa")
     if not np.all(np.isfinite(k)):
         raise ValueError("kappa: contains NaN or inf")

@@ -24,3 +24,16 @@ def test_cli_says_it_diverged(capsys):
                                   "--dtype", "float32", "--q", "0"])
     assert "converged = NO" in out
     assert "diverged" in err
+
+
+def test_kappa_that_requires_grad_is_refused_not_dropped():
+    """Reliability round 3, item 7: a kappa tensor with requires_grad was accepted and its
+    grad stayed None (finite differences give a real derivative): refused, naming kappa."""
+    torch = pytest.importorskip("torch")
+    kappa = torch.tensor(1e-4, dtype=torch.float64, requires_grad=True)
+    q = torch.zeros((1, 19), dtype=torch.float64, requires_grad=True)
+    with pytest.raises(TypeError, match="kappa: a torch tensor that requires grad"):
+        jwarp.fk_elastic("justin19", q, kappa=kappa)
+    r = jwarp.fk_elastic("justin19", q, kappa=kappa.detach())   # detached: fine
+    r.frames[..., 2, 3].sum().backward()
+    assert q.grad is not None and kappa.grad is None
