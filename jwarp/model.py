@@ -545,6 +545,20 @@ def _has_bool(x: Any) -> bool:
     return False
 
 
+#: the largest length [m] a frame may be from its parent: beyond it float32 kernels lose all
+#: precision (and overflow in products); no robot is that large
+MAX_LENGTH = 1e5
+
+
+def _within_reach(lengths: np.ndarray, where: str) -> None:
+    """RobotModelError naming ``where`` if a length exceeds :data:`MAX_LENGTH` [m] (the
+    kernels run in float32 by default: a value that imports may still give NaN frames)."""
+    big = np.abs(np.asarray(lengths, np.float64)).max(initial=0.0)
+    if big > MAX_LENGTH:
+        raise RobotModelError(f"{where}: {big:g} m exceeds {MAX_LENGTH:g} m; the kinematics "
+                              f"would overflow or lose all precision in float32")
+
+
 def _finite(x: Any, where: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
     """``x`` as a float64 array of finite numbers (numpy scalars welcome, bools refused)."""
     if _has_bool(x):
@@ -646,6 +660,7 @@ def validate(model: RobotModel) -> None:
             if f.dh is None:
                 raise RobotModelError(f"{w}.dh: missing DH row for a 'dh' frame")
             f.dh = _finite(f.dh, f"{w}.dh", (5,))
+            _within_reach(f.dh[[0, 2]], f"{w}.dh (d, r)")
             types = set()
             coupling = []
             for j, c in f.coupling:
@@ -664,6 +679,7 @@ def validate(model: RobotModel) -> None:
             if f.transform is None:
                 raise RobotModelError(f"{w}.transform: missing 4x4 transform for a 'static' frame")
             t = _finite(f.transform, f"{w}.transform", (4, 4))
+            _within_reach(t[:3, 3], f"{w}.transform (translation)")
             if not np.allclose(t[3], [0, 0, 0, 1]):
                 raise RobotModelError(f"{w}.transform: last row must be [0, 0, 0, 1]")
             if not np.allclose(t[:3, :3] @ t[:3, :3].T, np.eye(3), atol=1e-6):
