@@ -316,7 +316,8 @@ def export_urdf(robot: RobotModel, path: str | os.PathLike, *, name: str | None 
     (:func:`jwarp.atomic.commit_all`): an error leaves neither. The side file's
     ``notes.urdf_sha256`` is the SHA-256 of the URDF text written with it. A side file left
     from an earlier export of ``path`` is removed when no side file is written now (it would
-    describe another robot).
+    describe another robot); a file of that name that no export wrote (its notes do not
+    name this URDF) is left alone, with a warning.
     """
     if not isinstance(robot, RobotModel):
         raise TypeError(f"robot: expected a jwarp RobotModel (load a name or file with "
@@ -359,10 +360,26 @@ def export_urdf(robot: RobotModel, path: str | os.PathLike, *, name: str | None 
         raise
     commit_all(files)
     if side_file is None and side.is_file():
-        side.unlink()
-        warnings.append(f"removed the side file {side} of an earlier export (this robot "
-                        f"needs none)")
+        if _written_by_export(side, path):
+            side.unlink()
+            warnings.append(f"removed the side file {side} of an earlier export (this robot "
+                            f"needs none)")
+        else:  # a file of that name jwarp did not write: not ours to delete
+            warnings.append(f"left {side} alone: it is not a side file jwarp's export wrote "
+                            f"for {Path(path).name} (it no longer belongs to this URDF)")
     return warnings
+
+
+def _written_by_export(side: Path, urdf_path: Any) -> bool:
+    """Whether ``side`` is a side file an export of ``urdf_path`` wrote: JSON whose notes
+    name that URDF file and carry the SHA-256 of its text."""
+    try:
+        doc = json.loads(side.read_text(encoding="utf-8"))
+    except (OSError, ValueError, UnicodeDecodeError):
+        return False
+    notes = doc.get("notes") if isinstance(doc, dict) else None
+    return (isinstance(notes, dict) and notes.get("urdf_file") == Path(urdf_path).name
+            and isinstance(notes.get("urdf_sha256"), str))
 
 
 def _write(tmp: Path, text: str) -> None:

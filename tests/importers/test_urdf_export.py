@@ -186,6 +186,13 @@ def test_side_file_for_elastic_robot(tmp_path):
     assert len(warnings) == 1 and "removed the side file" in warnings[0]
     assert export_urdf(robot, tmp_path / "rigid.urdf") == []
     assert not side_file_path(tmp_path / "rigid.urdf").exists()
+    # a file of the side file's name that no export wrote is left alone (reliability 3,
+    # item 3: it was deleted)
+    foreign = side_file_path(tmp_path / "mine.urdf")
+    foreign.write_text('{"my": "notes"}')
+    w = export_urdf(robot, tmp_path / "mine.urdf")
+    assert foreign.read_text() == '{"my": "notes"}'
+    assert len(w) == 1 and "left" in w[0] and "alone" in w[0]
     # side_file=False: dropped, and said so
     w = export_urdf(elastic, tmp_path / "x.urdf", options=UrdfExportOptions(side_file=False))
     assert "dropped" in w[0] and not side_file_path(tmp_path / "x.urdf").exists()
