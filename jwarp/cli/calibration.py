@@ -22,7 +22,7 @@ Safety: option values are checked first (finite, in range; ``--samples`` against
 estimate of the memory it needs), then every output path (``--out``, ``--params-out``,
 ``--rerun``; the ``simulate-campaign`` folder), all before any computation. ``calibrate``
 writes ``--out`` and ``--params-out`` to temporary files (made before the computation) and
-renames them back to back at the end, after the ``--rerun`` recording; the
+renames them back to back at the end (the robot first), after the ``--rerun`` recording; the
 ``--params-out`` JSON records the SHA-256 of the ``--out`` robot file (``robot_sha256``), so
 a pair cut apart by a kill between the renames is recognisable. ``simulate-campaign``
 replaces its folder as one set (:class:`jwarp.atomic.AtomicFolder`). Test rows that are
@@ -315,7 +315,9 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
 
         save_calibration_rrd(args.rerun, res.robot, meas, res.params, data.q, data.y,
                              data.meta or None, p_before=p_start, robot_before=model)
-    commit_all(outputs[k] for k in ("--params-out", "--out") if k in outputs)
+    # the robot first: a kill between the renames leaves the new robot beside the old
+    # params, whose robot_sha256 then names the old robot (the new one is never lost)
+    commit_all(outputs[k] for k in ("--out", "--params-out") if k in outputs)
     fit_warnings = list(res.warnings) + [str(w.message) for w in caught
                                          if str(w.message) not in res.warnings]
     if both:

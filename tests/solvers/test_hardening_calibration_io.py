@@ -343,6 +343,36 @@ def test_calibrate_pair_and_killed_run_leaves_nothing_behind(camp_dir, tmp_path,
     assert json.loads(params.read_text())["robot_sha256"] == sha256_hex(out.read_bytes())
 
 
+def test_calibrate_renames_the_robot_before_its_params(camp_dir, tmp_path, capsys,
+                                                      monkeypatch):
+    """Reliability round 3, item 11: --params-out was renamed first, so a kill between the
+    renames left new params beside the old robot. The robot now goes first: a kill there
+    (simulated: the second rename fails) leaves the new robot and the old params, whose
+    robot_sha256 names the old robot."""
+    from jwarp.atomic import AtomicFile
+    out, params = tmp_path / "cal.json", tmp_path / "res.json"
+    args = ["calibrate", "--setup", str(camp_dir / "setup.json"), "--data",
+            str(camp_dir / "samples.csv"), "--calibrate-rows", "0:20", "--test-rows", "20:30",
+            "--out", str(out), "--params-out", str(params), "--quiet"]
+    assert main(args) == 0
+    old_robot, old_params = out.read_bytes(), params.read_bytes()
+    order = []
+    commit = AtomicFile.commit
+
+    def killed_after_first(self):
+        order.append(Path(self.target).name)
+        if len(order) == 2:
+            raise KeyboardInterrupt  # the kill between the two renames
+        return commit(self)
+
+    monkeypatch.setattr(AtomicFile, "commit", killed_after_first)
+    other = [a if a != "0:20" else "4:20" for a in args]   # another result
+    assert main(other) == 130   # interrupted
+    assert order == ["cal.json", "res.json"]
+    assert params.read_bytes() == old_params and out.read_bytes() != old_robot
+    assert json.loads(old_params)["robot_sha256"] == sha256_hex(old_robot)
+
+
 # ---------------------------------------------------------------- 5. calibration inputs
 def test_overlapping_rows_are_an_error_unless_allowed(camp_dir, capsys):
     base = ["calibrate", "--setup", str(camp_dir / "setup.json"), "--data",
