@@ -112,6 +112,10 @@ def _check_int(option: str, value: int, minimum: int) -> None:
         raise _cli_error(f"{option}: expected an integer >= {minimum}, got {value}")
 
 
+#: most multi-starts of ``calibrate`` (each a whole fit)
+MAX_STARTS = 10_000
+
+
 def _check_float(option: str, value: float | None, minimum: float = 0.0,
                  maximum: float = math.inf, unit: str = "") -> None:
     """A finite ``value`` in [minimum, maximum] (None: not given, fine)."""
@@ -221,6 +225,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from jwarp.cli.common import quiet_warp
 
     _check_int("--starts", args.starts, 1)
+    if args.starts > MAX_STARTS:  # each start is a whole fit: bound the work up front
+        raise _cli_error(f"--starts: {args.starts} starts of up to --max-nfev {args.max_nfev} "
+                         f"evaluations each (about {args.starts:.3g} x one calibration); at "
+                         f"most {MAX_STARTS}")
     _check_int("--max-nfev", args.max_nfev, 1)
     _check_int("--seed", args.seed, 0)
     quiet_warp()

@@ -28,3 +28,14 @@ def test_simulate_campaign_noise_writes_nothing_non_finite(capsys, tmp_path):
     one_line_error(capsys, ["simulate-campaign", "--robot", "justin19", "--noise", "1e308",
                             "--out", str(out)], "--noise")
     assert not out.exists()
+
+
+def test_calibrate_starts_without_end_is_refused_up_front(capsys, tmp_path):
+    """Reliability round 3, item 4: ``calibrate --starts 1000000000`` ran for minutes with
+    no bound or estimate: refused before any work, naming --starts and the figure."""
+    setup, data = tmp_path / "s.json", tmp_path / "d.csv"
+    setup.write_text("{}")
+    data.write_text("")
+    line = one_line_error(capsys, ["calibrate", "--setup", str(setup), "--data", str(data),
+                                   "--starts", "1000000000"], "--starts")
+    assert "1000000000" in line and "at most" in line
