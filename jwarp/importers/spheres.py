@@ -373,6 +373,11 @@ def excess_volume(mesh: trimesh.Trimesh, centres: np.ndarray, radii: np.ndarray,
     return box * p, box * np.sqrt(p * (1 - p) / n), method
 
 
+#: the largest surface a tolerance-mode fit takes, in cells of tolerance^2 (a Panda link at
+#: 1 cm is about 1e3; a 10 m box at 1 cm is 6e6)
+MAX_SURFACE_CELLS = 1e6
+
+
 # ----------------------------------------------------------------- public API
 def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | None = None,
                 n_surface: int | None = None, n_volume: int = 200_000, seed: int = 0,
@@ -386,6 +391,15 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
     opt = SphereFitOptions(tolerance, max_spheres, n_surface, n_volume, seed, max_rounds).validate()
     mesh = _check_mesh(mesh)
     tol = opt.tolerance
+    # the work before it starts: a cover within ``tolerance`` needs about one sphere per
+    # tolerance^2 of surface in the worst case, and the fit's matrices grow with its square
+    need = mesh.area / tol ** 2
+    if opt.max_spheres is None and need > MAX_SURFACE_CELLS:
+        raise ValueError(f"tolerance: a surface of {mesh.area:.4g} (unit^2) at tolerance {tol:g} "
+                         f"is about {need:.3g} cells of tolerance^2 (at most "
+                         f"{MAX_SURFACE_CELLS:.0e}): the fit would not end in reasonable time "
+                         f"or memory; raise the tolerance, give max_spheres, or check the "
+                         f"mesh's unit (a URDF in cm or mm needs a scale)")
     n_s = opt.n_surface or int(np.clip(2.0 * mesh.area / tol ** 2, 2000, 20000))
     watertight = bool(mesh.is_watertight)
     pts, nrm = _sample(mesh, n_s, opt.seed)

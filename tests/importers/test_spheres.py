@@ -237,3 +237,19 @@ def test_fit_link_concatenates_geometries(tmp_path):
         assert fresh_error(mesh, fit) <= 0.01
     with pytest.raises(ValueError, match=r"geometries\[1\]: kind"):
         fit_link([geoms[0], {"kind": "cone", "size": [1, 1]}], tolerance=0.01)
+
+
+def test_a_fit_that_would_not_end_is_refused_before_it_starts():
+    """Reliability round 3, items 4 and 9: a 10 m box (a URDF in cm) at the default 1 cm
+    tolerance ran 147 s, then asked for 838 GiB: refused at once, naming the tolerance and
+    the figure; a tolerance fit for the size works."""
+    import time
+    import trimesh
+    from jwarp.importers.spheres import fit_spheres
+    box = trimesh.creation.box(extents=[10.0, 10.0, 10.0])
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=r"tolerance: a surface of 600 .* 6e\+06 cells"):
+        fit_spheres(box, tolerance=0.01)
+    assert time.perf_counter() - t < 5.0
+    fit = fit_spheres(box, tolerance=1.0)
+    assert fit.meets_tolerance and len(fit.radii) >= 1
