@@ -385,12 +385,18 @@ class RobotModel:
         """Read a robot JSON file; errors name the file and the offending field."""
         path = Path(path)
         try:
-            text = path.read_text()
+            text = path.read_text(encoding="utf-8")
         except OSError as e:
             raise ValueError(f"path: cannot read robot file '{path}': {e}") from e
+        except UnicodeDecodeError as e:
+            raise RobotModelError(f"{path}: not a UTF-8 text file (byte {e.start}: "
+                                  f"{e.reason}); a robot file is JSON in UTF-8") from None
         try:
             doc = json.loads(text)
         except json.JSONDecodeError as e:
+            if path.suffix.lower() == ".xml":
+                raise RobotModelError(f"{path}: an .xml robot must be MJCF (a <mujoco> root) "
+                                      f"or be named .urdf; this one is neither") from None
             raise RobotModelError(f"{path}: not valid JSON: {e}") from e
         try:
             return _from_dict(doc)

@@ -184,6 +184,9 @@ class PathDB:
             raise PathDBError(f"database: '{self.path}' is a folder")
         exists = self.path.is_file() and self.path.stat().st_size > 0
         if not exists and not create:
+            if self.path.is_file():
+                raise PathDBError(f"database: '{self.path}' is empty (0 bytes): not a path "
+                                  f"database (jwarp data generate makes one)")
             raise PathDBError(f"database: '{self.path}' does not exist")
         if not exists and robot is None:
             raise PathDBError(f"database: a robot is needed to create '{self.path}'")
