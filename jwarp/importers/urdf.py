@@ -472,26 +472,36 @@ def _build(path: str, robot: Any, geometries: list[CollisionGeometry], opt: Urdf
         jdocs.append({"name": j.name, "type": jtype[j.name], "limits": lim})
     drive = {j.name: (j.name, 1.0, 0.0) for j in actuated}   # joint -> (actuated, mult, offset)
 
-    def resolve(j: Any, seen: tuple[str, ...] = ()) -> tuple[str, float, float]:
-        if j.name in drive:
-            return drive[j.name]
-        if j.name in seen:
-            raise UrdfError(f"{path}: joint '{j.name}': mimic joints form a cycle: "
-                            f"{' -> '.join(seen + (j.name,))}")
-        target = joints.get(j.mimic.joint)
-        if target is None:
-            raise UrdfError(f"{path}: joint '{j.name}': <mimic joint=\"{j.mimic.joint}\"> "
-                            f"names an unknown joint")
-        if target.type == "fixed":
-            raise UrdfError(f"{path}: joint '{j.name}': <mimic> of the fixed joint "
-                            f"'{target.name}'")
-        if jtype[target.name] != jtype[j.name]:
-            raise UrdfError(f"{path}: joint '{j.name}': a {jtype[j.name]} joint cannot mimic "
-                            f"the {jtype[target.name]} joint '{target.name}'")
-        src, m0, o0 = resolve(target, seen + (j.name,))
-        m = 1.0 if j.mimic.multiplier is None else float(j.mimic.multiplier)
-        o = 0.0 if j.mimic.offset is None else float(j.mimic.offset)
-        drive[j.name] = (src, m * m0, m * o0 + o)
+    def resolve(j: Any) -> tuple[str, float, float]:
+        """(actuated joint, multiplier, offset) of joint j, following mimics of mimics
+        iteratively (a chain of any length, in any document order)."""
+        chain: list[Any] = []
+        cur = j
+        while cur.name not in drive:
+            if cur in chain:
+                names = [c.name for c in chain[chain.index(cur):]] + [cur.name]
+                raise UrdfError(f"{path}: joint '{cur.name}': mimic joints form a cycle: "
+                                f"{' -> '.join(names)}")
+            target = joints.get(cur.mimic.joint)
+            if target is None:
+                raise UrdfError(f"{path}: joint '{cur.name}': <mimic joint=\"{cur.mimic.joint}\"> "
+                                f"names an unknown joint")
+            if target.type == "fixed":
+                raise UrdfError(f"{path}: joint '{cur.name}': <mimic> of the fixed joint "
+                                f"'{target.name}'")
+            if jtype[target.name] != jtype[cur.name]:
+                raise UrdfError(f"{path}: joint '{cur.name}': a {jtype[cur.name]} joint cannot "
+                                f"mimic the {jtype[target.name]} joint '{target.name}'")
+            chain.append(cur)
+            cur = target
+        for c in reversed(chain):  # from the one nearest the actuated joint outwards
+            src, m0, o0 = drive[c.mimic.joint]
+            m = 1.0 if c.mimic.multiplier is None else float(c.mimic.multiplier)
+            o = 0.0 if c.mimic.offset is None else float(c.mimic.offset)
+            if not (np.isfinite(m) and np.isfinite(o)):
+                raise UrdfError(f"{path}: joint '{c.name}': <mimic multiplier=\"{m:g}\" "
+                                f"offset=\"{o:g}\">: expected finite numbers")
+            drive[c.name] = (src, m * m0, m * o0 + o)
         return drive[j.name]
 
     for j in moving:
