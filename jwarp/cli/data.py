@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import os
 from typing import Any
 
@@ -114,6 +115,11 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(json.dumps(info))
     else:
         print(dumps(info))
+    short = info["worlds_missing_paths"]
+    if short:
+        w = short[0]
+        print(f"jwarp: warning: {len(short)} world(s) miss paths (e.g. world {w['world_id']}: "
+              f"{w['stored']} of {w['expected']} stored)", file=sys.stderr)
     return 0
 
 

@@ -427,11 +427,17 @@ class PathDB:
         f, h = self._query("SELECT COALESCE(SUM(feasible), 0), COALESCE(SUM(hard), 0) "
                            "FROM paths")[0]
         ids = self.world_ids()
+        # worlds whose stored paths are fewer than the world row says it has
+        short = self._query("SELECT w.world_id, w.n_paths, COUNT(p.world_id) FROM worlds w "
+                            "LEFT JOIN paths p ON p.world_id = w.world_id "
+                            "GROUP BY w.world_id HAVING COUNT(p.world_id) < w.n_paths")
         return {"path": str(self.path), **{k: v for k, v in self.meta.items() if k != "bps"},
                 "bps": self.bps is not None, "worlds": len(ids),
                 "world_ids": [ids[0], ids[-1]] if ids else [], "paths": n,
                 "n_dof": self.n_dof(), "feasible": (f / n) if n else None,
-                "hard": (h / n) if n else None, "settings": self.settings()}
+                "hard": (h / n) if n else None, "settings": self.settings(),
+                "worlds_missing_paths": [{"world_id": int(w), "expected": int(e),
+                                          "stored": int(c)} for w, e, c in short]}
 
 
 def rows_to_arrays(rows: list) -> dict[str, np.ndarray]:

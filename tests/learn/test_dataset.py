@@ -220,3 +220,21 @@ def test_writer_killed_mid_transaction(tmp_path):
         assert db.complete_worlds() == {0, 1, 2} and db.n_paths() == 15
         assert db.add_world(record(9))
         assert db.complete_worlds() == {0, 1, 2, 9}
+
+
+def test_info_reports_worlds_whose_paths_are_missing(tmp_path, capsys):
+    """Reliability round 3, item 10: a world whose paths were removed from the database was
+    never reported; ``info()`` lists it and ``jwarp data info`` warns."""
+    import sqlite3
+    from cli_helpers import run
+    p = filled(tmp_path / "d.sqlite")
+    with PathDB(p) as db:
+        assert db.info()["worlds_missing_paths"] == []
+    con = sqlite3.connect(str(p))
+    con.execute("DELETE FROM paths WHERE world_id = 1 AND task >= 2")
+    con.commit()
+    con.close()
+    with PathDB(p) as db:
+        assert db.info()["worlds_missing_paths"] == [{"world_id": 1, "expected": 5, "stored": 2}]
+    code, out, err = run(capsys, ["data", "info", str(p)])
+    assert code == 0 and "1 world(s) miss paths (e.g. world 1: 2 of 5 stored)" in err
