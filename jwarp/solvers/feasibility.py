@@ -60,7 +60,7 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
             i = int(np.nonzero(~conv)[0][0])
             where = f"{name}[{i}]" if len(q) > 1 else name
             c = ELASTIC_CHECK
-            raise ValueError(f"{where}: the elastic equilibrium (kappa) does not converge in "
+            raise ValueError(f"kappa: the elastic equilibrium at {where} does not converge in "
                              f"{c['max_iter']} torque updates (lam {c['lam']:g}) to {c['tol']:g} "
                              f"rad, so its collisions cannot be checked; lower kappa")
     free = collision_free(robot, world, q, margin, rho=rho, device=device,

@@ -39,3 +39,9 @@ def test_calibrate_starts_without_end_is_refused_up_front(capsys, tmp_path):
     line = one_line_error(capsys, ["calibrate", "--setup", str(setup), "--data", str(data),
                                    "--starts", "1000000000"], "--starts")
     assert "1000000000" in line and "at most" in line
+
+
+def test_plan_elastic_kappa_names_kappa(capsys):
+    """``plan --elastic --kappa 1e308`` said "rho: contains NaN or inf"."""
+    line = one_line_error(capsys, PLAN + ["--elastic", "--kappa", "1e308"], "--kappa")
+    assert "rho" not in line and "does not converge" in line
