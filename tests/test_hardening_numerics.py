@@ -154,12 +154,12 @@ def test_collision_checks_use_only_converged_equilibria(block_world):
     assert not PL.collision_free(model, block_world, q, 0.0, kappa=0.1).any()
     # the same rows handed in as rho are free: only convergence makes the difference
     assert PL.collision_free(model, block_world, q, 0.0, rho=rho).all()
-    with pytest.raises(ValueError, match=r"^start: the elastic equilibrium .*does not converge"):
+    with pytest.raises(ValueError, match=r"^kappa: the elastic equilibrium at start .*does not converge"):
         PL.plan(model, block_world, q[0], q[1], kappa=0.1, iterations=2, n_starts=1)
     # per-configuration compliances: the error names the row that does not converge
     mask = model.is_dh.astype(float)[:, None]
     kap = np.stack([np.full((model.n_frames, 3), 1e-3), np.full((model.n_frames, 3), 0.1)])
-    with pytest.raises(ValueError, match=r"^goal\[1\]: the elastic equilibrium"):
+    with pytest.raises(ValueError, match=r"^kappa: the elastic equilibrium at goal\[1\]"):
         PL.check_endpoints(model, block_world, q, "goal", 0.0, kap * mask)
     PL.check_endpoints(model, block_world, q, "goal", 0.0, kap[0] * mask)  # both converge
     path = PL.initial_paths(q[:1], np.array([[1.0, 0.0, 0.0, 0.0]]), 4)[0]

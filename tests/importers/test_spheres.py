@@ -253,3 +253,6 @@ def test_a_fit_that_would_not_end_is_refused_before_it_starts():
     assert time.perf_counter() - t < 5.0
     fit = fit_spheres(box, tolerance=1.0)
     assert fit.meets_tolerance and len(fit.radii) >= 1
+    small = trimesh.creation.box(extents=[0.1, 0.1, 0.1])   # --tolerance 1e-7 on a 10 cm box
+    with pytest.raises(ValueError, match=r"tolerance: .* at tolerance 1e-07"):
+        fit_spheres(small, tolerance=1e-7)
