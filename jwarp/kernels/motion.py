@@ -101,6 +101,39 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         frames: wp.array2d(dtype=mat44)
         xs: wp.array2d(dtype=vec3)
 
+    @wp.struct
+    class Segments:
+        """Per segment (K, W - 1) of a launch: result ``code``, where (``u``, a fraction of
+        the segment), what (``a``, ``b``), the clearance ``d`` [m], the evaluations ``n``,
+        and the proven prefix ``cov`` of the parallel rounds."""
+
+        code: wp.array2d(dtype=wp.int32)
+        u: wp.array2d(dtype=f64)
+        a: wp.array2d(dtype=wp.int32)
+        b: wp.array2d(dtype=wp.int32)
+        d: wp.array2d(dtype=f64)
+        n: wp.array2d(dtype=wp.int32)
+        cov: wp.array2d(dtype=f64)
+
+    @wp.struct
+    class Points:
+        """Per parallel evaluation (K, W - 1, M): code, proven radius ``h`` (in u), what
+        (``a``, ``b``) and clearance ``d``."""
+
+        code: wp.array3d(dtype=wp.int32)
+        h: wp.array3d(dtype=f64)
+        a: wp.array3d(dtype=wp.int32)
+        b: wp.array3d(dtype=wp.int32)
+        d: wp.array3d(dtype=f64)
+
+    @wp.func
+    def point_u(c0: f64, j: int, M: int, dense: int) -> f64:
+        """Point j of M over [c0, 1] (``dense``: denser near c0)."""
+        f = (f64(j) + half) / f64(M)
+        if dense != 0:
+            f = f * f
+        return c0 + (one - c0) * f
+
     @wp.func
     def advance(cm: CheckModel, sc: CheckScratch, r: int, rt: int, m_req: f64, m_self: f64,
                 reach: f64, grp: int):
@@ -190,13 +223,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         sc: CheckScratch,
         bad: wp.array(dtype=wp.int32),
         # Data out:
-        seg_code: wp.array2d(dtype=wp.int32),
-        seg_u: wp.array2d(dtype=f64),
-        seg_a: wp.array2d(dtype=wp.int32),
-        seg_b: wp.array2d(dtype=wp.int32),
-        seg_d: wp.array2d(dtype=f64),
-        seg_n: wp.array2d(dtype=wp.int32),
-        seg_cov: wp.array2d(dtype=f64),
+        seg: Segments,
     ):
         """Segment t of path idx[k] (launch dim (K, W - 1)): its waypoints within the limits
         (else code LIMITS), else code OK and the travel of every sphere and frame pair over
@@ -207,13 +234,13 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         r = k * (W - 1) + t
         p = idx[k]
         model = cm.model
-        seg_code[k, t] = OK
-        seg_cov[k, t] = zero
-        seg_u[k, t] = zero
-        seg_a[k, t] = -1
-        seg_b[k, t] = -1
-        seg_d[k, t] = zero
-        seg_n[k, t] = 0
+        seg.code[k, t] = OK
+        seg.cov[k, t] = zero
+        seg.u[k, t] = zero
+        seg.a[k, t] = -1
+        seg.b[k, t] = -1
+        seg.d[k, t] = zero
+        seg.n[k, t] = 0
         # waypoints within the limits (the last segment also checks the goal)
         last = t + 1
         if t < W - 2:
@@ -223,8 +250,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 sc.dq[r, j] = f64(paths[p, wi, j])
             if pk.within_limits_row(sc.dq, r, cm.limits, cm.lin_start, cm.lin_joint,
                                     cm.lin_coef, cm.lin_bounds, cm.limit_tol) == 0:
-                seg_code[k, t] = LIMITS
-                seg_u[k, t] = f64(wi - t)
+                seg.code[k, t] = LIMITS
+                seg.u[k, t] = f64(wi - t)
                 bad[k] = 1
                 return
         for j in range(n_dof):
@@ -255,30 +282,25 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         end_margin: f64,
         self_margin: f64,
         world_group: int,
-        seg_code: wp.array2d(dtype=wp.int32),
-        seg_cov: wp.array2d(dtype=f64),
+        seg: Segments,
         dense_start: int,
         # Model:
         cm: CheckModel,
         # Scratch:
         sc: CheckScratch,
         # Data out:
-        pt_code: wp.array3d(dtype=wp.int32),
-        pt_h: wp.array3d(dtype=f64),
-        pt_a: wp.array3d(dtype=wp.int32),
-        pt_b: wp.array3d(dtype=wp.int32),
-        pt_d: wp.array3d(dtype=f64),
+        pts: Points,
     ):
         """The evaluations of a segment in parallel (GPU; launch dim (K, W - 1, M)): point j
-        of the part not proven yet, [c, 1] with c = seg_cov (uniform, or with
+        of the part not proven yet, [c, 1] with c = ``seg.cov`` (uniform, or with
         ``dense_start`` denser near c: u = c + (1 - c) ((j + 1/2) / M)^2), its code and
         proven radius h (in u) of :func:`advance`."""
         k, t, j = wp.tid()
         W = paths.shape[1]
-        M = pt_code.shape[2]
-        c0 = seg_cov[k, t]
-        if seg_code[k, t] != OK or c0 >= one:
-            pt_code[k, t, j] = SKIPPED
+        M = pts.code.shape[2]
+        c0 = seg.cov[k, t]
+        if seg.code[k, t] != OK or c0 >= one:
+            pts.code[k, t, j] = SKIPPED
             return
         rt = k * (W - 1) + t
         r = rt * M + j
@@ -287,69 +309,53 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         if world_group > 0:
             wg = p // world_group
         m_req, m_self = required(margin, end_margin, self_margin, t, W)
-        f = (f64(j) + half) / f64(M)
-        if dense_start != 0:
-            f = f * f
-        u = c0 + (one - c0) * f
+        u = point_u(c0, j, M, dense_start)
         for jj in range(paths.shape[2]):
             sc.q[r, jj] = f64(paths[p, t, jj]) + u * sc.dq[rt, jj]
         c, a, b, d, h = advance(cm, sc, r, rt, m_req, m_self, one, wg)
-        pt_code[k, t, j] = c
-        pt_h[k, t, j] = h
-        pt_a[k, t, j] = a
-        pt_b[k, t, j] = b
-        pt_d[k, t, j] = d
+        pts.code[k, t, j] = c
+        pts.h[k, t, j] = h
+        pts.a[k, t, j] = a
+        pts.b[k, t, j] = b
+        pts.d[k, t, j] = d
 
     @wp.kernel(module="unique", enable_backward=False)
     def cover_kernel(
         # Data in:
-        pt_code: wp.array3d(dtype=wp.int32),
-        pt_h: wp.array3d(dtype=f64),
-        pt_a: wp.array3d(dtype=wp.int32),
-        pt_b: wp.array3d(dtype=wp.int32),
-        pt_d: wp.array3d(dtype=f64),
+        pts: Points,
         dense_start: int,
         # Data in/out:
         bad: wp.array(dtype=wp.int32),
-        seg_code: wp.array2d(dtype=wp.int32),
-        seg_u: wp.array2d(dtype=f64),
-        seg_a: wp.array2d(dtype=wp.int32),
-        seg_b: wp.array2d(dtype=wp.int32),
-        seg_d: wp.array2d(dtype=f64),
-        seg_n: wp.array2d(dtype=wp.int32),
-        seg_cov: wp.array2d(dtype=f64),
+        seg: Segments,
     ):
         """After a :func:`point_kernel` round (launch dim (K, W - 1)): a point below the
         margin fails the segment there (proven); else the proven prefix [0, c] grows over
         the points whose intervals join it."""
         k, t = wp.tid()
-        M = pt_code.shape[2]
-        c0 = seg_cov[k, t]
-        if seg_code[k, t] != OK or c0 >= one:
+        M = pts.code.shape[2]
+        c0 = seg.cov[k, t]
+        if seg.code[k, t] != OK or c0 >= one:
             return
         cov = c0
         gap = int(0)
         for j in range(M):
-            f = (f64(j) + half) / f64(M)
-            if dense_start != 0:
-                f = f * f
-            uj = c0 + (one - c0) * f
-            c = pt_code[k, t, j]
-            seg_n[k, t] = seg_n[k, t] + 1
+            uj = point_u(c0, j, M, dense_start)
+            c = pts.code[k, t, j]
+            seg.n[k, t] = seg.n[k, t] + 1
             if c == WORLD or c == SELF:
-                seg_code[k, t] = c
-                seg_u[k, t] = uj
-                seg_a[k, t] = pt_a[k, t, j]
-                seg_b[k, t] = pt_b[k, t, j]
-                seg_d[k, t] = pt_d[k, t, j]
+                seg.code[k, t] = c
+                seg.u[k, t] = uj
+                seg.a[k, t] = pts.a[k, t, j]
+                seg.b[k, t] = pts.b[k, t, j]
+                seg.d[k, t] = pts.d[k, t, j]
                 bad[k] = 1
                 return
             if gap == 0:
-                if uj - pt_h[k, t, j] <= cov:
-                    cov = wp.max(cov, uj + pt_h[k, t, j])
+                if uj - pts.h[k, t, j] <= cov:
+                    cov = wp.max(cov, uj + pts.h[k, t, j])
                 else:
                     gap = 1
-        seg_cov[k, t] = wp.min(cov, one)
+        seg.cov[k, t] = wp.min(cov, one)
 
     @wp.kernel(module="unique", enable_backward=False)
     def segment_kernel(
@@ -372,14 +378,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         bad: wp.array(dtype=wp.int32),
         ok_segments: wp.array(dtype=wp.int32),
         solved: wp.array(dtype=wp.int32),
-        seg_cov: wp.array2d(dtype=f64),
-        # Data out:
-        seg_code: wp.array2d(dtype=wp.int32),
-        seg_u: wp.array2d(dtype=f64),
-        seg_a: wp.array2d(dtype=wp.int32),
-        seg_b: wp.array2d(dtype=wp.int32),
-        seg_d: wp.array2d(dtype=f64),
-        seg_n: wp.array2d(dtype=wp.int32),
+        # Data in/out:
+        seg: Segments,
     ):
         """Segment t of path idx[k] (launch dim (K, W - 1)) by conservative advancement:
         from u = 0, each evaluation proves the motion up to u + step (module docstring:
@@ -393,7 +393,6 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         n_dof = paths.shape[2]
         r = k * (W - 1) + t
         p = idx[k]
-        model = cm.model
         wg = int(-1)  # a batch of worlds: path p plans in world p // world_group
         if world_group > 0:
             wg = p // world_group
@@ -401,10 +400,10 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         if group > 0:
             g = p // group
             if solved[g] != 0:
-                seg_code[k, t] = SKIPPED
-                seg_n[k, t] = 0
+                seg.code[k, t] = SKIPPED
+                seg.n[k, t] = 0
                 return
-        if seg_code[k, t] != OK:  # outside the limits (prep_kernel)
+        if seg.code[k, t] != OK:  # outside the limits (prep_kernel)
             return
         rt = r  # the segment's travel row (prep_kernel); evaluations use row r too
         m_req, m_self = required(margin, end_margin, self_margin, t, W)
@@ -418,8 +417,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         for s in range(cm.reach.shape[0]):
             lmax = wp.max(lmax, sc.travel[rt, s])
         if use_points != 0:  # the parallel rounds (point/cover kernels) proved [0, cov]
-            u = seg_cov[k, t]
-            n = seg_n[k, t]
+            u = seg.cov[k, t]
+            n = seg.n[k, t]
         # a coarse pass first (one probe per ``probe_len`` of travel, at most 16): most
         # colliding segments show a clearance below the margin at one of them
         n_probe = wp.min(int(wp.ceil(lmax / probe_len)), 16)
@@ -493,21 +492,17 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 solved[g] = 1  # the path's last segment proven: its problem is solved
         elif code != SKIPPED:
             bad[k] = 1
-        seg_code[k, t] = code
-        seg_u[k, t] = u
-        seg_a[k, t] = ca
-        seg_b[k, t] = cb
-        seg_d[k, t] = cd
-        seg_n[k, t] = n
+        seg.code[k, t] = code
+        seg.u[k, t] = u
+        seg.a[k, t] = ca
+        seg.b[k, t] = cb
+        seg.d[k, t] = cd
+        seg.n[k, t] = n
 
     @wp.kernel(module="unique", enable_backward=False)
     def reduce_kernel(
         # Data in:
-        seg_code: wp.array2d(dtype=wp.int32),
-        seg_u: wp.array2d(dtype=f64),
-        seg_a: wp.array2d(dtype=wp.int32),
-        seg_b: wp.array2d(dtype=wp.int32),
-        seg_d: wp.array2d(dtype=f64),
+        seg: Segments,
         # Data out:
         ok: wp.array(dtype=wp.int32),
         code: wp.array(dtype=wp.int32),
@@ -525,23 +520,24 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         what[k, 1] = -1
         dist[k] = zero
         skipped = int(0)
-        for t in range(seg_code.shape[1]):
-            c = seg_code[k, t]
+        for t in range(seg.code.shape[1]):
+            c = seg.code[k, t]
             if c == SKIPPED:
                 skipped = 1
             if c != OK and c != SKIPPED:
                 ok[k] = 0
                 code[k] = c
-                where[k] = f64(t) + seg_u[k, t]
-                what[k, 0] = seg_a[k, t]
-                what[k, 1] = seg_b[k, t]
-                dist[k] = seg_d[k, t]
+                where[k] = f64(t) + seg.u[k, t]
+                what[k, 0] = seg.a[k, t]
+                what[k, 1] = seg.b[k, t]
+                dist[k] = seg.d[k, t]
                 return
         if skipped != 0:  # not failed, not proven either (its problem was solved)
             ok[k] = 0
             code[k] = SKIPPED
 
-    return SimpleNamespace(prep=prep_kernel, points=point_kernel, cover=cover_kernel,
+    return SimpleNamespace(Segments=Segments, Points=Points, prep=prep_kernel,
+                           points=point_kernel, cover=cover_kernel,
                            required=required,
                            CheckModel=CheckModel, CheckScratch=CheckScratch,
                            advance=advance, segment=segment_kernel, reduce=reduce_kernel,

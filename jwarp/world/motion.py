@@ -31,7 +31,7 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import init_warp, real_array, real_number, resolve_device
-from jwarp.core.device import put_model, scalar_type
+from jwarp.core.device import put_model
 from jwarp.core.limits import LIMIT_TOL
 from jwarp.kernels import motion as mk
 from jwarp.model import RobotModel
@@ -351,17 +351,18 @@ class MotionCheck:
             self._scratch, self._cap, self._cap_eval = sc, cap, cap_e
         return self._scratch
 
-    def _points(self, K: int, W: int, M: int) -> list:
-        """The point outputs (K, W - 1, M) (code, h, a, b, d); one dummy set when M = 0."""
+    def _points(self, K: int, W: int, M: int) -> Any:
+        """The ``Points`` of the parallel rounds (K, W - 1, M); a dummy set when M = 0."""
         shape = (K, W - 1, M) if M > 0 else (1, 1, 1)
         pts = self.__dict__.get("_pts")
-        if pts is None or pts[0].shape != shape:
+        if pts is None or pts.code.shape != shape:
             dev = self.device
-            pts = [wp.empty(shape, dtype=wp.int32, device=dev),
-                   wp.empty(shape, dtype=wp.float64, device=dev),
-                   wp.empty(shape, dtype=wp.int32, device=dev),
-                   wp.empty(shape, dtype=wp.int32, device=dev),
-                   wp.empty(shape, dtype=wp.float64, device=dev)]
+            pts = self.k.Points()
+            pts.code = wp.empty(shape, dtype=wp.int32, device=dev)
+            pts.h = wp.empty(shape, dtype=wp.float64, device=dev)
+            pts.a = wp.empty(shape, dtype=wp.int32, device=dev)
+            pts.b = wp.empty(shape, dtype=wp.int32, device=dev)
+            pts.d = wp.empty(shape, dtype=wp.float64, device=dev)
             self.__dict__["_pts"] = pts
         return pts
 
@@ -372,16 +373,17 @@ class MotionCheck:
         if o.get("W") != W or o.get("cap", 0) < K:
             dev = self.device
             cap = max(K, int(o.get("cap", 0) * 1.5) if o.get("W") == W else K)
-            seg = (cap, W - 1)
+            shape = (cap, W - 1)
+            seg = self.k.Segments()
+            seg.code = wp.empty(shape, dtype=wp.int32, device=dev)
+            seg.u = wp.empty(shape, dtype=wp.float64, device=dev)
+            seg.a = wp.empty(shape, dtype=wp.int32, device=dev)
+            seg.b = wp.empty(shape, dtype=wp.int32, device=dev)
+            seg.d = wp.empty(shape, dtype=wp.float64, device=dev)
+            seg.n = wp.empty(shape, dtype=wp.int32, device=dev)
+            seg.cov = wp.empty(shape, dtype=wp.float64, device=dev)
             o = self._out = dict(
-                W=W, cap=cap,
-                seg_code=wp.empty(seg, dtype=wp.int32, device=dev),
-                seg_u=wp.empty(seg, dtype=wp.float64, device=dev),
-                seg_a=wp.empty(seg, dtype=wp.int32, device=dev),
-                seg_b=wp.empty(seg, dtype=wp.int32, device=dev),
-                seg_d=wp.empty(seg, dtype=wp.float64, device=dev),
-                seg_n=wp.empty(seg, dtype=wp.int32, device=dev),
-                seg_cov=wp.empty(seg, dtype=wp.float64, device=dev),
+                W=W, cap=cap, seg=seg,
                 bad=wp.zeros(cap, dtype=wp.int32, device=dev),
                 ok_segments=wp.zeros(cap, dtype=wp.int32, device=dev),
                 solved=wp.zeros(1, dtype=wp.int32, device=dev),
@@ -414,36 +416,30 @@ class MotionCheck:
         sc = self._scratch_for(K * (W - 1), K * (W - 1) * max(M, 1))
         em = margin if endpoint_margin is None else endpoint_margin
         kern = mk.kernels(paths.dtype)
-        seg_out = [out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"], out["seg_d"],
-                   out["seg_n"]]
+        seg = out["seg"]
         pts = self._points(K, W, M)
-        wp.launch(kern.prep, dim=(K, W - 1), inputs=[paths, idx, self._cm, sc, out["bad"]],
-                  outputs=seg_out + [out["seg_cov"]], device=self.device)
-        for rnd in range(o.rounds if M > 0 else 0):
-            wp.launch(kern.points, dim=(K, W - 1, M),
-                      inputs=[paths, idx, float(margin), float(em), float(self_margin),
-                              int(world_group), out["seg_code"], out["seg_cov"], int(rnd > 0),
-                              self._cm, sc],
-                      outputs=pts, device=self.device)
-            wp.launch(kern.cover, dim=(K, W - 1), inputs=[*pts, int(rnd > 0)],
-                      outputs=[out["bad"], *seg_out, out["seg_cov"]], device=self.device)
         out["bad"].zero_()
         out["ok_segments"].zero_()
         n_groups = paths.shape[0] // group + 1 if group > 0 else 1
         if out["solved"].shape[0] < n_groups:
             out["solved"] = wp.zeros(n_groups, dtype=wp.int32, device=self.device)
         out["solved"].zero_()
+        wp.launch(kern.prep, dim=(K, W - 1), inputs=[paths, idx, self._cm, sc, out["bad"]],
+                  outputs=[seg], device=self.device)
+        for rnd in range(o.rounds if M > 0 else 0):
+            wp.launch(kern.points, dim=(K, W - 1, M),
+                      inputs=[paths, idx, float(margin), float(em), float(self_margin),
+                              int(world_group), seg, int(rnd > 0), self._cm, sc],
+                      outputs=[pts], device=self.device)
+            wp.launch(kern.cover, dim=(K, W - 1), inputs=[pts, int(rnd > 0)],
+                      outputs=[out["bad"], seg], device=self.device)
         wp.launch(kern.segment, dim=(K, W - 1),
                   inputs=[paths, idx, float(margin), float(em), float(self_margin),
-                          float(o.min_step),
-                          int(o.max_evals), float(o.probe_len), int(group),
+                          float(o.min_step), int(o.max_evals), float(o.probe_len), int(group),
                           int(world_group), int(M > 0), self._cm, sc,
-                          out["bad"], out["ok_segments"], out["solved"], out["seg_cov"]],
-                  outputs=[out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"],
-                           out["seg_d"], out["seg_n"]], device=self.device)
-        wp.launch(kern.reduce, dim=K,
-                  inputs=[out["seg_code"], out["seg_u"], out["seg_a"], out["seg_b"],
-                          out["seg_d"]],
+                          out["bad"], out["ok_segments"], out["solved"]],
+                  outputs=[seg], device=self.device)
+        wp.launch(kern.reduce, dim=K, inputs=[seg],
                   outputs=[out["ok"], out["code"], out["where"], out["what"], out["dist"]],
                   device=self.device)
         return out
