@@ -459,3 +459,16 @@ def test_ik_solver_sees_objects_added_after_it_was_built(device):
     assert not res.feasible
     w.move("block", T[:3, 3] + np.array([2.0, 0.0, 0.0]))  # and out of the way again
     assert solver.solve(T).feasible
+
+
+def test_exact_world_example_runs_and_passes_its_checks():
+    """examples/exact_world.py: a user's first exact world (add, plan, why, move, attach)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[2]
+    proc = subprocess.run([sys.executable, str(root / "examples" / "exact_world.py")],
+                          cwd=root, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "checks: 4 of 4 passed" in proc.stdout
+    assert "vs object 'box'" in proc.stdout
