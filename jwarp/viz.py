@@ -59,6 +59,38 @@ def _frames_array(robot: RobotModel, frames: Any) -> np.ndarray:
     return f
 
 
+def object_meshes(world: Any) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """The exact objects of ``world`` as triangle meshes in the world frame, for display:
+    ``[(id, vertices (V, 3), faces (F, 3))]`` (a plane as a 4 x 4 m tile)."""
+    import trimesh
+
+    shapes = getattr(world, "shapes", None)
+    out = []
+    if shapes is None:
+        return out
+    for oid in shapes.ids:
+        kind, dims, mesh = shapes.spec(oid)
+        if kind == "box":
+            m = trimesh.creation.box(extents=dims)
+        elif kind == "sphere":
+            m = trimesh.creation.icosphere(subdivisions=2, radius=dims[0])
+        elif kind == "cylinder":
+            m = trimesh.creation.cylinder(radius=dims[1], height=dims[0])
+        elif kind == "capsule":
+            m = trimesh.creation.capsule(height=dims[0], radius=dims[1])
+        elif kind == "cone":
+            m = trimesh.creation.cone(radius=dims[1], height=dims[0])
+            m.apply_translation([0.0, 0.0, -0.5 * dims[0]])   # base at -length/2
+        elif kind == "plane":
+            m = trimesh.creation.box(extents=[4.0, 4.0, 1e-3])
+            m.apply_translation([0.0, 0.0, -5e-4])
+        else:
+            m = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=False)
+        m.apply_transform(shapes.pose(oid))
+        out.append((oid, np.asarray(m.vertices, np.float32), np.asarray(m.faces, np.int32)))
+    return out
+
+
 def world_spheres(robot: RobotModel, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Collision spheres in world coordinates: centres (n, 3) [m] and radii (n,) [m]."""
     f = _frames_array(robot, frames)

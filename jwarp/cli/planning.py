@@ -305,6 +305,14 @@ class _Recorder(RerunRecording):
                 raise
 
     def _log_world(self, world: Any) -> None:
+        from jwarp.viz import object_meshes
+
+        for oid, v, f in object_meshes(world):   # exact objects as meshes
+            self.rec.log(f"world/objects/{oid}", self.rr.Mesh3D(
+                vertex_positions=v, triangle_indices=f,
+                vertex_colors=[(90, 90, 90, 160)] * len(v)), static=True)
+        if not world.has_grid:
+            return
         occ = world.occupancy if world.occupancy is not None else world.sdf < 0
         idx = np.argwhere(occ)
         pts = np.zeros((len(idx), 3))

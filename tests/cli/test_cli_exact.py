@@ -54,3 +54,11 @@ def test_plan_goes_around_on_the_exact_world(capsys, scene_file):
 def test_bad_margins_name_the_option(capsys, scene_file, opt, value, msg):
     one_line_error(capsys, ["plan", "--robot", "arm7", "--scene", scene_file, "--start",
                             q_text(START), "--goal", q_text(GOAL), opt, value], msg)
+
+
+def test_plan_rerun_records_the_exact_objects(capsys, scene_file, tmp_path):
+    pytest.importorskip("rerun")
+    rrd = tmp_path / "p.rrd"
+    code, out, _ = run(capsys, ["plan", "--robot", "arm7", "--scene", scene_file, "--start",
+                                q_text(START), "--goal", q_text(GOAL), "--rerun", str(rrd)])
+    assert code == 0 and rrd.is_file() and rrd.stat().st_size > 0

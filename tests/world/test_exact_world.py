@@ -472,3 +472,22 @@ def test_exact_world_example_runs_and_passes_its_checks():
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "checks: 4 of 4 passed" in proc.stdout
     assert "vs object 'box'" in proc.stdout
+
+
+def test_object_meshes_for_display_lie_on_the_objects():
+    """jwarp.viz.object_meshes (rerun display of exact worlds): every vertex on its object's
+    surface (the exact distance), for every kind."""
+    from jwarp.viz import object_meshes
+    rng = np.random.default_rng(15)
+    w = World.of_shapes()
+    for i, (kind, dims) in enumerate(PRIMS):
+        w.add(f"o{i}", kind, dims, pose_matrix(rng.uniform(-1, 1, 3), rpy_matrix(rng.normal(size=3))))
+    w.add("ball", "mesh", mesh=trimesh.creation.icosphere(radius=0.1), pose=[2.0, 0, 0])
+    meshes = object_meshes(w)
+    assert [m[0] for m in meshes] == w.object_ids
+    for oid, v, f in meshes:
+        one = World.of_shapes()
+        kind, dims, mesh = w.shapes.spec(oid)
+        one.add(oid, kind, [] if dims is None else dims, w.shapes.pose(oid), mesh=mesh)
+        d = one.shapes.distance(v.astype(np.float64))
+        assert np.abs(d).max() < 0.02 * max(1.0, np.abs(v).max()), (oid, np.abs(d).max())
