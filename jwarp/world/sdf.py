@@ -356,8 +356,19 @@ class World:
 
     # ----------------------------------------------------------------- queries
     def distance(self, points: Any, *, grad: bool = False, device: Any = "cpu") -> Any:
-        """Interpolated signed distance [m] at ``points`` (..., dim) [m] (and its spatial
-        gradient (..., dim) if ``grad``), with the kernel the cost functions use."""
+        """Signed distance [m] at ``points`` (..., dim) [m]: the grid's interpolated value
+        (with the kernel the cost functions use; its spatial gradient (..., dim) if
+        ``grad``), and with exact objects the minimum with their exact distances (float64;
+        their gradient: :func:`jwarp.world.device_world.world_query`)."""
+        has_objects = self.shapes is not None and len(self.shapes) > 0
+        if self.sdf is None or has_objects:
+            if grad:
+                raise ValueError("grad: a world with exact objects gives its gradient through "
+                                 "jwarp.world.device_world.world_query(world, points)")
+            exact = self.shapes.distance(points)
+            if self.sdf is None:
+                return exact
+            return np.minimum(sdf_query(self, points, device=device), exact)
         return sdf_query(self, points, grad=grad, device=device)
 
     # --------------------------------------------------------------------- I/O

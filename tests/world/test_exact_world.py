@@ -491,3 +491,12 @@ def test_object_meshes_for_display_lie_on_the_objects():
         one.add(oid, kind, [] if dims is None else dims, w.shapes.pose(oid), mesh=mesh)
         d = one.shapes.distance(v.astype(np.float64))
         assert np.abs(d).max() < 0.02 * max(1.0, np.abs(v).max()), (oid, np.abs(d).max())
+
+
+def test_world_distance_of_exact_objects():
+    w = World.of_shapes()
+    w.add("ball", "sphere", [0.1], [0.0, 0.0, 0.0])
+    np.testing.assert_allclose(w.distance([[0.3, 0.0, 0.0], [0.0, 0.0, 0.0]]), [0.2, -0.1],
+                               atol=1e-12)
+    with pytest.raises(ValueError, match="grad: a world with exact objects"):
+        w.distance([[0.3, 0.0, 0.0]], grad=True)
