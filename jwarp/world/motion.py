@@ -407,8 +407,7 @@ class MotionCheck:
         robot's own spheres (default 0). ``world_group`` > 0 with a batch of worlds
         (:meth:`jwarp.world.sdf.World.batch`): path p is in world ``p // world_group``."""
         W = paths.shape[1]
-        if self.device_world.sync():
-            pass
+        self.device_world.sync()  # moved / added objects
         self._cm.world = self.device_world.struct
         out = self._outputs(K, W)
         o = self.options

@@ -45,3 +45,23 @@ def test_plan_elastic_kappa_names_kappa(capsys):
     """``plan --elastic --kappa 1e308`` said "rho: contains NaN or inf"."""
     line = one_line_error(capsys, PLAN + ["--elastic", "--kappa", "1e308"], "--kappa")
     assert "rho" not in line and "does not converge" in line
+
+
+def test_import_urdf_of_a_huge_link_ends_at_once(capsys, tmp_path):
+    """Reliability round 3, items 4 and 9, shown by the command that failed: ``jwarp
+    import-urdf --spheres fit`` of a link with a 10 m box (a URDF in cm), and of a normal
+    link at --tolerance 1e-7, ran for minutes; now one line naming the tolerance at once."""
+    import time
+    template = (
+        '<robot name="big"><link name="base"><collision><geometry><box size="{s} {s} {s}"/>'
+        '</geometry></collision></link><link name="l1"/><joint name="j1" type="revolute">'
+        '<parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>'
+        '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>')
+    for size, extra in (("10", []), ("1000", []), ("0.1", ["--tolerance", "1e-7"])):
+        path = tmp_path / f"b{size}.urdf"
+        path.write_text(template.format(s=size))
+        t = time.perf_counter()
+        line = one_line_error(capsys, ["import-urdf", str(path), "--out",
+                                       str(tmp_path / "o.json"), "--spheres", "fit", *extra],
+                              "URDF")
+        assert "tolerance" in line and "cells" in line and time.perf_counter() - t < 30

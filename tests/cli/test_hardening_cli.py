@@ -99,6 +99,13 @@ def test_fk_max_iter_zero_allowed_and_not_converged(capsys):
     (["--seed", "-1"], "--seed"),
     (["--device", "cuda:99"], "--device"),
     (["--elastic", "--kappa", "-inf"], "--kappa"),
+    # reliability round 3 (items 5): the option the user gave, never an internal name
+    (["--margin", "1e308"], "--margin"),
+    (["--margin", "1e30"], "--margin"),
+    (["--elastic", "--kappa", "1e308"], "--kappa"),
+    (["--endpoint-margin", "-1"], "--endpoint-margin"),
+    (["--self-margin", "nan"], "--self-margin"),
+    (["--time-limit", "-1"], "--time-limit"),
 ])
 def test_plan_bad_values(capsys, block, extra, option):
     one_line_error(capsys, plan_args(block, *extra), option)

@@ -500,3 +500,76 @@ def test_world_distance_of_exact_objects():
                                atol=1e-12)
     with pytest.raises(ValueError, match="grad: a world with exact objects"):
         w.distance([[0.3, 0.0, 0.0]], grad=True)
+
+
+@pytest.mark.parametrize("dtype", [np.float64])
+def test_collision_cost_gradient_in_an_exact_world_matches_finite_differences(device, dtype,
+                                                                               arm_scene):
+    """The fused cost kernel's hand-written gradient, now through exact objects (box,
+    cylinder, plane) and the BVH broad phase: central differences of the cost."""
+    from jwarp.world.collision import collision_cost
+    robot, w = arm_scene
+    rng = np.random.default_rng(16)
+    lim = np.array(robot.joint_limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], (300, robot.n_dof)) * 0.6
+    c, g = collision_cost(robot, q, w, eps=0.05, device=device, dtype=dtype)
+    q = q[c > 1e-4][:20]                       # configurations that touch something
+    assert len(q) >= 5
+    c, g = collision_cost(robot, q, w, eps=0.05, device=device, dtype=dtype)
+    h = 1e-6
+    fd = np.stack([(collision_cost(robot, q + h * e, w, eps=0.05, grad=False, device=device,
+                                   dtype=dtype)[0]
+                    - collision_cost(robot, q - h * e, w, eps=0.05, grad=False, device=device,
+                                     dtype=dtype)[0]) / (2 * h) for e in np.eye(robot.n_dof)],
+                   axis=1)
+    err = np.abs(fd - g).max(axis=1) / (1e-3 + np.abs(g).max(axis=1))
+    assert (err < 1e-4).mean() >= 0.9, err   # non-smooth only on medial axes / ties
+
+
+def test_bad_input_to_the_new_world_functions_names_the_argument():
+    from jwarp.world.attach import covering_spheres
+    from jwarp.world.motion import MotionOptions
+    robot = jwarp.robot("arm7")
+    w = World.of_shapes()
+    w.add("ball", "sphere", [0.1], [2.0, 0.0, 0.0])
+    w.add("floor", "plane")
+    grid = World(np.ones((4, 4, 4)), [[0, 1]] * 3, 1 / 3)
+    with pytest.raises(ValueError, match="worlds: expected at least one"):
+        World.batch([])
+    with pytest.raises(TypeError, match=r"worlds\[1\]: expected a World"):
+        World.batch([w, "x"])
+    with pytest.raises(ValueError, match=r"worlds\[0\]: a batch takes worlds of exact objects"):
+        World.batch([grid])
+    with pytest.raises(ValueError, match="i: expected a world of the batch"):
+        World.batch([w, w]).select(5)
+    with pytest.raises(KeyError, match="object 'nope'"):
+        w.attach("nope", robot, list(robot.end_effectors)[0], np.zeros(robot.n_dof))
+    with pytest.raises(ValueError, match="object 'floor': a plane cannot be attached"):
+        w.attach("floor", robot, list(robot.end_effectors)[0], np.zeros(robot.n_dof))
+    with pytest.raises(KeyError, match="object 'ball': not attached"):
+        w.detach("ball", robot, np.zeros(robot.n_dof))
+    with pytest.raises(ValueError, match="kind: an attached object must be"):
+        covering_spheres("plane")
+    with pytest.raises(ValueError, match="save: a world file holds a grid only|save: this world"):
+        w.save("/tmp/never.npz")
+    chk = MotionCheck(robot, w)
+    with pytest.raises(ValueError, match=r"paths: expected shape"):
+        chk.check(np.zeros((3, 5)))
+    with pytest.raises(ValueError, match="paths: contains NaN"):
+        chk.check(np.full((2, robot.n_dof), np.nan))
+    for bad, name in ((-1.0, "margin"), (np.inf, "margin")):
+        with pytest.raises(ValueError, match=name):
+            chk.check(np.zeros((2, robot.n_dof)), margin=bad)
+    with pytest.raises(ValueError, match="self_margin"):
+        chk.check(np.zeros((2, robot.n_dof)), self_margin=-1)
+    for kw, name in ((dict(min_step=0), "min_step"), (dict(max_evals=0), "max_evals"),
+                     (dict(probe_len=-1), "probe_len"), (dict(points=-1), "points"),
+                     (dict(rounds=0), "rounds")):
+        with pytest.raises(ValueError, match=name):
+            MotionCheck(robot, w, options=MotionOptions(**kw))
+    with pytest.raises(TypeError, match="options: expected a MotionOptions"):
+        MotionCheck(robot, w, options={"rounds": 2})
+    with pytest.raises(ValueError, match="group: expected an integer >= 0"):
+        w.shapes.add("g", "sphere", [0.1], group=-1)
+    with pytest.raises(ValueError, match=r"poses: expected \(1, 4, 4\)"):
+        w.move(["ball"], np.zeros((1, 2)))
