@@ -260,18 +260,21 @@ def kernels(scalar: type) -> SimpleNamespace:
         bg = vec3(zero, zero, one)
         bk = int(-1)
         if world.use_grid != 0:
-            if world_lower_bound(world.grid, x) - world.grid_error < cutoff:
-                d, g = world_sample(world.grid, x)
+            gr = world.grid
+            if sdf_lower_bound(gr.cellmin, gr.origin, gr.inv_h, gr.dim, x) - world.grid_error \
+                    < cutoff:
+                d, g = sdf_sample(gr.grid, gr.origin, gr.inv_h, gr.dim, x)
                 d = d - world.grid_error
                 if d < best:
                     best = d
                     bg = g
                     bk = -2
-        d2, g2, k2 = gk.shapes_distance(world.shapes, x, best, grp)
-        if k2 >= 0:
-            best = d2
-            bg = g2
-            bk = k2
+        if world.shapes.kind.shape[0] > 0:  # a grid-only world never enters the objects
+            d2, g2, k2 = gk.shapes_distance(world.shapes, x, best, grp)
+            if k2 >= 0:
+                best = d2
+                bg = g2
+                bk = k2
         return best, bg, bk
 
     @wp.func
