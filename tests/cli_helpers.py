@@ -22,3 +22,8 @@ def one_line_error(capsys, argv, option):
         assert lines[0].startswith("usage:"), err
     assert lines[-1].startswith(f"jwarp: error: {option}: "), lines[-1]
     return lines[-1]
+
+
+def q_text(q) -> str:
+    """Joint values as the CLI's comma-separated ``--start``/``--goal`` text."""
+    return ",".join(str(v) for v in q)

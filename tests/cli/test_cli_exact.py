@@ -10,16 +10,12 @@ import json
 import pytest
 import yaml
 
-from cli_helpers import one_line_error, run
+from cli_helpers import one_line_error, q_text, run
 
 START = [-1.2, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0]
 GOAL = [1.2, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0]
 SCENE = {"format": "jwarp.scene", "objects": [
     {"id": "ball", "type": "sphere", "radius": 0.1, "pose": {"position": [-0.57, 0.43, 0.86]}}]}
-
-
-def q_text(q):
-    return ",".join(str(v) for v in q)
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from cli_helpers import one_line_error, run
+from cli_helpers import one_line_error, q_text, run
 
 import jwarp
 from jwarp.core.device import host_frames
@@ -25,10 +25,6 @@ SCENE = {"format": "jwarp.scene", "objects": [
     {"id": "ball", "type": "sphere", "radius": 0.1, "pose": {"position": [-0.57, 0.43, 0.86]}},
     {"id": "floor", "type": "box", "size": [2, 2, 0.05],
      "pose": {"position": [0, 0, -0.025], "rpy": [0, 0, 0.3]}}]}
-
-
-def q_text(q):
-    return ",".join(str(v) for v in q)
 
 
 @pytest.fixture(scope="module")
