@@ -18,6 +18,7 @@ positive ``margin`` keeps pairs that come close.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,10 +27,12 @@ from typing import Any
 import numpy as np
 
 from jwarp.kinematics.fk import fk
+from jwarp.memory import check_memory, format_bytes
 from jwarp.model import RobotModel, SelfCollision
 from jwarp.registry import robot as get_robot
 
-__all__ = ["SelfPairs", "never_colliding_pairs", "adjacent_pairs", "rigid_groups",
+__all__ = ["SelfPairs", "PairSamplingCost", "never_colliding_pairs", "pair_sampling_cost",
+           "adjacent_pairs", "rigid_groups",
            "with_self_pairs", "write_self_pairs"]
 
 
@@ -95,6 +98,15 @@ def adjacent_pairs(robot: RobotModel) -> list[tuple[int, int]]:
     return sorted(out)
 
 
+#: default working-set target of the pair sampling [bytes] (:func:`never_colliding_pairs`)
+MAX_MEMORY = 256_000_000
+#: bytes per sphere-pair distance and configuration while a block is computed: the squared
+#: distance (then the surface distance) and one coordinate's difference (float64), with room
+_PAIR_BYTES = 8 * 4
+#: bytes per sphere and configuration of a batch: its world centre and the FK of its frame
+_SPHERE_BYTES = 8 * (3 + 3)
+
+
 def _int(x: Any, name: str, low: int) -> int:
     if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
         raise TypeError(f"{name}: expected an integer, got {type(x).__name__}")
@@ -103,42 +115,149 @@ def _int(x: Any, name: str, low: int) -> int:
     return int(x)
 
 
+@dataclass
+class PairSamplingCost:
+    """What :func:`never_colliding_pairs` will do (:func:`pair_sampling_cost`).
+
+    spheres: collision spheres; frames: frames with spheres; frame_pairs: frame pairs
+    computed (both frames with spheres: the tested ones and the adjacent ones, whose distances
+    are reported too); sphere_pairs: sphere pairs of those frame pairs; evaluations:
+    ``sphere_pairs * n_samples`` distances at most (frame pairs whose bounding spheres are
+    farther apart than the current minimum and ``margin`` are skipped, so usually fewer);
+    batch: configurations per FK batch; memory: working set [bytes] (at most about
+    ``max_memory``, plus the samples and the result matrices).
+    """
+
+    spheres: int
+    frames: int
+    frame_pairs: int
+    sphere_pairs: int
+    evaluations: int
+    batch: int
+    memory: int
+
+    def __str__(self) -> str:
+        return (f"self-pair sampling: {self.spheres} spheres on {self.frames} frames, "
+                f"{self.frame_pairs} frame pairs ({self.sphere_pairs} sphere pairs), at most "
+                f"{self.evaluations:.3g} distances, about {format_bytes(self.memory)} of memory")
+
+
+def _memory_arg(max_memory: Any) -> int:
+    max_memory = _int(max_memory, "max_memory", 1)
+    if max_memory < 1_000_000:
+        raise ValueError(f"max_memory: expected at least 1000000 bytes, got {max_memory}")
+    return max_memory
+
+
+def _plan(model: RobotModel, n_samples: int, batch: int, max_memory: int
+          ) -> tuple[PairSamplingCost, int]:
+    """The cost of the sampling and the tile size [spheres] of a frame-pair block."""
+    sf = model.sphere_arrays()[0]
+    frames, counts = np.unique(sf, return_counts=True)
+    S, nf = int(len(sf)), int(model.n_frames)
+    # a batch's centres and frame transforms take at most a quarter of the budget
+    per_cfg = S * _SPHERE_BYTES + nf * 8 * 16 * 4
+    batch = max(1, min(batch, n_samples, (max_memory // 4) // max(per_cfg, 1)))
+    # a block of tile x tile sphere pairs for one configuration fits in half the budget
+    tile = max(1, int(math.isqrt(max(1, (max_memory // 2) // _PAIR_BYTES))))
+    c = counts.astype(np.int64)
+    sphere_pairs = int((c.sum() ** 2 - (c ** 2).sum()) // 2)
+    nb = len(frames)
+    cost = PairSamplingCost(
+        spheres=S, frames=nb, frame_pairs=nb * (nb - 1) // 2, sphere_pairs=sphere_pairs,
+        evaluations=sphere_pairs * n_samples, batch=batch,
+        memory=int(batch * per_cfg + min(max_memory // 2,
+                                         _PAIR_BYTES * batch * int(np.max(c, initial=1)) ** 2)
+                   + nf * nf * 16))
+    return cost, tile
+
+
+def pair_sampling_cost(robot: Any, n_samples: int = 10000, *, batch: int = 1024,
+                       max_memory: int = MAX_MEMORY) -> PairSamplingCost:
+    """The work and memory of :func:`never_colliding_pairs` with these arguments, without
+    doing it (sizes only)."""
+    model = get_robot(robot)
+    n_samples = _int(n_samples, "n_samples", 1)
+    batch = _int(batch, "batch", 1)
+    return _plan(model, n_samples, batch, _memory_arg(max_memory))[0]
+
+
 def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
-                          margin: float = 0.0, *, batch: int = 1024) -> SelfPairs:
+                          margin: float = 0.0, *, batch: int = 1024,
+                          max_memory: int = MAX_MEMORY, verbose: bool = False) -> SelfPairs:
     """Adjacent and never-colliding frame pairs of ``robot`` (name or RobotModel) over
     ``n_samples`` configurations drawn uniformly within the joint limits with
-    ``numpy.random.default_rng(seed)`` (FK on the CPU in float64, ``batch`` at a time).
-    ``margin`` [m]: a pair counts as colliding when its spheres come closer than this."""
+    ``numpy.random.default_rng(seed)`` (FK on the CPU in float64, at most ``batch`` at a
+    time). ``margin`` [m]: a pair counts as colliding when its spheres come closer than this.
+
+    Memory is bounded by ``max_memory`` [bytes] (default 256 MB) at any sphere count: the
+    FK batch shrinks with the number of spheres, and every frame pair's sphere-pair distances
+    are computed in blocks of configurations and tiles of spheres. A frame pair is computed in
+    a configuration only where the distance of the two frames' bounding spheres is below
+    ``margin`` and below the pair's smallest distance so far (otherwise neither the collision
+    count nor the minimum can change), so the results are exact. ``verbose`` prints
+    :func:`pair_sampling_cost` before the work. A MemoryError is raised before the work when
+    the estimate exceeds the available memory."""
     model = get_robot(robot)
     n_samples = _int(n_samples, "n_samples", 1)
     seed = _int(seed, "seed", 0)
     batch = _int(batch, "batch", 1)
+    max_memory = _memory_arg(max_memory)
     if isinstance(margin, bool) or not isinstance(margin, (int, float, np.floating, np.integer)) \
             or not np.isfinite(margin):
         raise ValueError(f"margin: expected a finite distance [m], got {margin!r}")
+    margin = float(margin)
     sf, sp, sr = model.sphere_arrays()
     if len(sr) == 0:
         raise ValueError(f"robot: '{model.name}' has no collision spheres")
     lim = model.joint_limits
     if not np.all(np.isfinite(lim)):
         raise ValueError(f"robot: '{model.name}' has infinite joint limits; cannot sample")
+    cost, tile = _plan(model, n_samples, batch, max_memory)
+    if verbose:
+        print(cost, flush=True)
+    check_memory(cost.memory + n_samples * model.n_dof * 8, "self-pair sampling",
+                 "pass a smaller max_memory")
+    batch = cost.batch
     rng = np.random.default_rng(seed)
     q = lim[:, 0] + rng.random((n_samples, model.n_dof)) * (lim[:, 1] - lim[:, 0])
 
     order = np.argsort(sf, kind="stable")
     sf, sp, sr = sf[order], sp[order], sr[order]
     frames, starts = np.unique(sf, return_index=True)
+    ends = np.append(starts[1:], len(sf))
     nb = len(frames)
+    # bounding sphere of each frame's spheres (frame coordinates), a little inflated so that
+    # rounding never makes the bound larger than a true distance
+    centre = np.array([sp[s:e].mean(axis=0) for s, e in zip(starts, ends)])
+    reach = np.array([np.max(np.linalg.norm(sp[s:e] - centre[i], axis=1) + sr[s:e])
+                      for i, (s, e) in enumerate(zip(starts, ends))])
+    reach = reach + 1e-9 * (1.0 + reach)
     dmin = np.full((nb, nb), np.inf)
     hits = np.zeros((nb, nb), np.int64)
+    pairs = [(i, j) for i in range(nb) for j in range(i + 1, nb)]
     for s in range(0, n_samples, batch):
         T = fk(model, q[s:s + batch], device="cpu", dtype=np.float64)  # (B, nf, 4, 4)
-        Tf = T[:, sf]
-        x = np.einsum("bsij,sj->bsi", Tf[..., :3, :3], sp) + Tf[..., :3, 3]
-        d = np.linalg.norm(x[:, :, None] - x[:, None], axis=-1) - sr[:, None] - sr[None]
-        fd = np.minimum.reduceat(np.minimum.reduceat(d, starts, axis=1), starts, axis=2)
-        dmin = np.minimum(dmin, fd.min(axis=0))
-        hits += (fd < margin).sum(axis=0)
+        B = T.shape[0]
+        x = np.empty((B, len(sf), 3))
+        for i, f in enumerate(frames):
+            Tf = T[:, f]
+            x[:, starts[i]:ends[i]] = (np.einsum("bij,sj->bsi", Tf[:, :3, :3],
+                                                 sp[starts[i]:ends[i]]) + Tf[:, None, :3, 3])
+        Tb = T[:, frames]
+        C = np.einsum("bfij,fj->bfi", Tb[..., :3, :3], centre) + Tb[..., :3, 3]
+        del T, Tb
+        for i, j in pairs:
+            bound = np.linalg.norm(C[:, i] - C[:, j], axis=-1) - reach[i] - reach[j]
+            todo = np.flatnonzero(bound < max(margin, dmin[i, j]))
+            if not len(todo):
+                continue
+            fd = _frame_pair_min(x, sr, todo, starts[i], ends[i], starts[j], ends[j], tile)
+            dmin[i, j] = min(dmin[i, j], float(fd.min()))
+            hits[i, j] += int(np.count_nonzero(fd < margin))
+        del x, C
+    dmin = np.minimum(dmin, dmin.T)
+    hits = hits + hits.T
 
     nf = model.n_frames
     min_distance = np.full((nf, nf), np.inf)
@@ -156,7 +275,34 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
     always = [p for p in tested if rate[p] == 1.0]
     return SelfPairs(adjacent=adjacent, never_colliding=never, always_colliding=always,
                      min_distance=min_distance, collision_rate=rate, samples=q, seed=seed,
-                     margin=float(margin))
+                     margin=margin)
+
+
+def _frame_pair_min(x: np.ndarray, r: np.ndarray, todo: np.ndarray, a0: int, a1: int,
+                    b0: int, b1: int, tile: int) -> np.ndarray:
+    """(len(todo),) smallest surface distance [m] between spheres ``a0:a1`` and ``b0:b1`` in
+    the configurations ``todo`` of the batch's centres ``x`` (B, S, 3), computed in tiles of
+    at most ``tile`` x ``tile`` spheres and as many configurations as fit in
+    ``tile**2`` sphere pairs."""
+    out = np.full(len(todo), np.inf)
+    for ta in range(a0, a1, tile):
+        ea = min(ta + tile, a1)
+        for tb in range(b0, b1, tile):
+            eb = min(tb + tile, b1)
+            step = max(1, (tile * tile) // ((ea - ta) * (eb - tb)))
+            for k in range(0, len(todo), step):
+                sel = todo[k:k + step]
+                d2 = None
+                for c in range(3):   # |xa - xb|^2 summed as numpy's norm does: x, +y, +z
+                    e = x[sel, ta:ea, c][:, :, None] - x[sel, tb:eb, c][:, None]
+                    e *= e
+                    d2 = e if d2 is None else np.add(d2, e, out=d2)
+                d = np.sqrt(d2, out=d2)
+                d -= r[ta:ea, None]
+                d -= r[None, tb:eb]
+                out[k:k + step] = np.minimum(out[k:k + step], d.min(axis=(1, 2)))
+    return out
+
 
 
 def with_self_pairs(robot: Any, pairs: SelfPairs, *, replace: bool = True) -> RobotModel:
