@@ -60,8 +60,9 @@ class UrdfError(ValueError):
 class UrdfOptions:
     """Options of the URDF import.
 
-    end_effectors: ``{alias: link or frame name}``; None: every tip link (a link without
-        child joints) under its own name.
+    end_effectors: ``{alias: link or frame name}``; None: one per arm, at its tool
+        (:func:`jwarp.importers.tips.default_tips`: the tool frame after the last moving
+        joint of each branch, gripper fingers not counted), under its own name.
     package_dirs: folders searched for ``package://NAME/...`` mesh files: a folder that is
         the package ``NAME`` or that contains a folder ``NAME``; the URDF's own ancestors
         are searched last.
@@ -149,17 +150,32 @@ class CollisionGeometry:
 
 
 @dataclass
+class UrdfJoint:
+    """One URDF joint as written: ``type`` (``revolute``, ``continuous``, ``prismatic``,
+    ``fixed``), ``parent`` and ``child`` links, and ``actuated``: the jwarp joint that
+    drives it (itself, or the joint it mimics, through mimics of mimics; None if fixed)."""
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    actuated: str | None
+
+
+@dataclass
 class UrdfImport:
     """What :func:`read_urdf` found: the robot ``document`` (schema ``jwarp.robot``; frames
-    and joints referenced by name), the collision ``geometries`` of every link, and the
-    ``link_frames`` ``{link: frame name}`` (the same names) and ``joint_frames``
-    ``{URDF joint: dh frame name}`` of the moving joints."""
+    and joints referenced by name), the collision ``geometries`` of every link, the
+    ``link_frames`` ``{link: frame name}`` (the same names), ``joint_frames``
+    ``{URDF joint: dh frame name}`` of the moving joints and ``urdf_joints`` ``{name:
+    UrdfJoint}`` of every joint, fixed ones included (what an SRDF may name)."""
 
     document: dict[str, Any]
     geometries: list[CollisionGeometry]
     link_frames: dict[str, str]
     joint_frames: dict[str, str]
     path: str
+    urdf_joints: dict[str, UrdfJoint] = field(default_factory=dict)
 
 
 # ------------------------------------------------------------------ small geometry
@@ -592,7 +608,7 @@ def _build(path: str, robot: Any, geometries: list[CollisionGeometry], opt: Urdf
                for g in geometries if g.kind == "sphere"]
     names = [f["name"] for f in frames]
     if opt.end_effectors is None:
-        eff = {n: n for n in links if not children[n]}
+        eff = {names[i]: names[i] for i in document_tips(frames, jdocs)}
     else:
         eff = {}
         for alias, target in opt.end_effectors.items():
@@ -611,8 +627,38 @@ def _build(path: str, robot: Any, geometries: list[CollisionGeometry], opt: Urdf
         "notes": {"source": os.path.abspath(path),
                   "importer": "jwarp.importers.urdf (docs/urdf.md)"},
     }
+    urdf_joints = {j.name: UrdfJoint(name=j.name, type=j.type, parent=j.parent, child=j.child,
+                                     actuated=None if j.type == "fixed" else drive[j.name][0])
+                   for j in robot.joints}
     return UrdfImport(document=doc, geometries=geometries, link_frames=link_frames,
-                      joint_frames=joint_frames, path=path)
+                      joint_frames=joint_frames, path=path, urdf_joints=urdf_joints)
+
+
+def document_tips(frames: list[dict[str, Any]], joints: list[dict[str, Any]]) -> list[int]:
+    """:func:`jwarp.importers.tips.default_tips` of a robot document's ``frames`` and
+    ``joints`` (parents, joints referenced by name or index)."""
+    from jwarp.importers.tips import default_tips
+
+    fnames = [f["name"] for f in frames]
+    jnames = [j["name"] for j in joints]
+
+    def idx(v: Any, names: list[str]) -> int:
+        return names.index(v) if isinstance(v, str) else int(v)
+
+    parents = [-1 if f.get("parent") is None else idx(f["parent"], fnames) for f in frames]
+    couplings = []
+    for f in frames:
+        if f.get("kind") != "dh":
+            couplings.append([])
+        elif f.get("joint") is not None:
+            couplings.append([(idx(f["joint"], jnames), 1.0)])
+        elif f.get("coupled") is not None:
+            couplings.append([(idx(j, jnames), float(c)) for j, c in
+                              zip(f["coupled"]["joints"], f["coupled"]["coefficients"])])
+        else:
+            couplings.append([])
+    return default_tips(fnames, parents, couplings, jnames,
+                        [j.get("type", "revolute") for j in joints])
 
 
 def _reachable(root: str, children: dict[str, list[Any]]) -> set[str]:

@@ -1,0 +1,295 @@
+"""Planning groups, frozen joints and SRDF collision pairs of an imported URDF robot.
+
+:func:`plan_group` turns an imported robot (:class:`~jwarp.importers.robot.UrdfRobot`) into
+the robot jwarp plans with (docs/urdf.md, "Planning groups, grippers, SRDF"):
+
+* ``srdf``: MoveIt's SRDF; its ``disable_collisions`` are added to the robot's
+  self-collision exclude pairs (``srdf_collisions="add"``: the pairs found so far, e.g.
+  the sampled ones, plus the SRDF's) or replace them (``"replace"``: the SRDF's only);
+* ``group`` (an SRDF group) or ``joints`` (joint names): the joints to plan with; every
+  other joint is frozen (:func:`jwarp.model.freeze_joints`) at its ``lock`` value, else
+  its value in the SRDF ``state`` (a ``<group_state>``), else 0 clipped into its limits;
+* ``freeze``: joints frozen at a value (``None``: the same default), e.g. gripper
+  fingers; the mimic joints of a frozen joint follow it;
+* end-effectors: ``end_effectors`` when given; else the group's SRDF
+  ``<end_effector>`` parent links, else the tip links of the group's chains; without a
+  group the SRDF's end-effectors; else the default rule of :mod:`jwarp.importers.tips`
+  applied to the reduced robot.
+
+Errors are ValueError/TypeError naming the option (``group:``, ``joints:``, ``lock:``,
+``state:``, ``freeze:``, ``srdf:``, ``end_effectors.NAME:``); the CLI shows them as
+``--group:`` etc.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from jwarp.importers.robot import UrdfRobot
+from jwarp.importers.srdf import (Srdf, SrdfError, check_srdf, group_chain_tips,
+                                  group_end_effectors, group_joints, read_srdf)
+from jwarp.importers.tips import default_tips
+from jwarp.model import RobotModel, SelfCollision, freeze_joints, frozen_joint_values
+
+#: values of ``GroupOptions.srdf_collisions``
+SRDF_COLLISIONS = ("add", "replace")
+
+
+@dataclass
+class GroupOptions:
+    """Options of :func:`plan_group` (module docstring).
+
+    Attributes:
+        srdf: SRDF file or parsed :class:`~jwarp.importers.srdf.Srdf` (None: none).
+        group: SRDF group to plan with (needs ``srdf``).
+        joints: joint names to plan with (instead of ``group``).
+        lock: ``{joint: value}`` [rad or m] of joints outside the group or ``joints``.
+        state: SRDF ``<group_state>`` giving the default values of frozen joints.
+        freeze: ``{joint: value or None}`` joints frozen (None: the default value).
+        srdf_collisions: ``"add"`` (exclude pairs so far + SRDF pairs) or ``"replace"``.
+        end_effectors: ``{alias: link or frame}``; None: the defaults (module docstring).
+    """
+
+    srdf: str | os.PathLike | Srdf | None = None
+    group: str | None = None
+    joints: Sequence[str] | None = None
+    lock: Mapping[str, float] | None = None
+    state: str | None = None
+    freeze: Mapping[str, float | None] | None = None
+    srdf_collisions: str = "add"
+    end_effectors: Mapping[str, str] | None = None
+
+    def validate(self) -> None:
+        if self.srdf is not None and not isinstance(self.srdf, (str, os.PathLike, Srdf)):
+            raise TypeError(f"srdf: expected a file name or Srdf, got {type(self.srdf).__name__}")
+        for key in ("group", "state"):
+            v = getattr(self, key)
+            if v is not None and (not isinstance(v, str) or not v.strip()):
+                raise TypeError(f"{key}: expected a non-empty name, got {v!r}")
+        if self.group is not None and self.joints is not None:
+            raise ValueError("group: give either a group or joints, not both")
+        if (self.group is not None or self.state is not None) and self.srdf is None:
+            key = "group" if self.group is not None else "state"
+            raise ValueError(f"{key}: needs an SRDF (srdf / --srdf)"
+                             + ("; or give the joints (joints / --joints)" if key == "group"
+                                else ""))
+        if self.joints is not None:
+            if isinstance(self.joints, str) or not all(
+                    isinstance(j, str) and j for j in self.joints):
+                raise TypeError("joints: expected a list of joint names")
+            if not self.joints:
+                raise ValueError("joints: empty list of joints")
+        for key in ("lock", "freeze"):
+            v = getattr(self, key)
+            if v is None:
+                continue
+            if not isinstance(v, Mapping):
+                raise TypeError(f"{key}: expected a mapping {{joint: value}}")
+            for name, x in v.items():
+                if x is None and key == "freeze":
+                    continue
+                if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                    raise ValueError(f"{key}: {name}: expected a finite number, got {x!r}")
+        if self.lock and self.group is None and self.joints is None:
+            raise ValueError("lock: only with a group or joints (the joints outside them are "
+                             "locked); to fix a joint without a group use freeze")
+        if self.srdf_collisions not in SRDF_COLLISIONS:
+            raise ValueError(f"srdf_collisions: expected one of {', '.join(SRDF_COLLISIONS)}, "
+                             f"got {self.srdf_collisions!r}")
+
+
+@dataclass
+class GroupResult:
+    """What :func:`plan_group` made: the reduced ``model``; the ``planned`` joints; the
+    ``frozen`` joints and values [rad or m] with where each value came from (``source``:
+    lock, freeze, state, default); ``end_effectors_from`` (``given``, ``srdf
+    end_effector``, ``group chain tips``, ``default rule``); ``srdf_pairs`` (the SRDF's
+    disable_collisions) and ``pairs_added`` (exclude pairs the SRDF added)."""
+
+    model: RobotModel
+    planned: list[str]
+    frozen: dict[str, float] = field(default_factory=dict)
+    source: dict[str, str] = field(default_factory=dict)
+    end_effectors_from: str = "default rule"
+    srdf: Srdf | None = None
+    srdf_pairs: int = 0
+    pairs_added: int = 0
+    srdf_collisions: str = "add"
+
+
+def default_end_effectors(model: RobotModel) -> dict[str, int]:
+    """``{frame name: frame index}`` of the default end-effectors of ``model``
+    (:func:`jwarp.importers.tips.default_tips`: one per arm, at its tool)."""
+    tips = default_tips(model.frame_names, model.parents.tolist(),
+                        [f.coupling for f in model.frames], model.joint_names,
+                        [j.type for j in model.joints])
+    return {model.frame_names[i]: i for i in tips}
+
+
+def load_srdf(srdf: str | os.PathLike | Srdf, robot: UrdfRobot) -> Srdf:
+    """The SRDF (read if a path), checked against the URDF of ``robot`` (every link,
+    joint and group it names exists): SrdfError naming the file and the element."""
+    s = srdf if isinstance(srdf, Srdf) else read_srdf(srdf)
+    check_srdf(s, set(robot.source.link_frames), set(robot.source.urdf_joints))
+    return s
+
+
+def plan_group(robot: UrdfRobot, options: GroupOptions | None = None, *,
+               model: RobotModel | None = None) -> GroupResult:
+    """The robot to plan with: ``model`` (default ``robot.model``; e.g. the sphere-fitted
+    one, same frames) reduced to the group's joints, with SRDF pairs and end-effectors
+    (module docstring). ValueError/TypeError naming the option."""
+    o = GroupOptions() if options is None else options
+    if not isinstance(o, GroupOptions):
+        raise TypeError(f"options: expected GroupOptions, got {type(o).__name__}")
+    o.validate()
+    if not isinstance(robot, UrdfRobot):
+        raise TypeError(f"robot: expected an imported URDF robot (load_urdf), got "
+                        f"{type(robot).__name__}")
+    model = robot.model if model is None else model
+    if not isinstance(model, RobotModel):
+        raise TypeError(f"model: expected a RobotModel, got {type(model).__name__}")
+    if model.frame_names[:len(robot.model.frame_names)] != robot.model.frame_names:
+        raise ValueError("model: its frames are not those of the imported robot")
+    urdf_joints = robot.source.urdf_joints
+    names = model.joint_names
+    srdf = None if o.srdf is None else load_srdf(o.srdf, robot)
+
+    def actuated(name: str, key: str) -> str:
+        """The model joint a URDF joint name stands for (ValueError naming ``key``)."""
+        if name in names:
+            return name
+        j = urdf_joints.get(name)
+        if j is None:
+            raise ValueError(f"{key}: unknown joint '{name}' for robot '{model.name}'; its "
+                             f"joints: {', '.join(names)}")
+        if j.actuated is None:
+            raise ValueError(f"{key}: '{name}' is a fixed joint")
+        if j.actuated not in names:
+            raise ValueError(f"{key}: joint '{name}' is already frozen")
+        if key in ("freeze", "lock"):
+            raise ValueError(f"{key}: '{name}' mimics '{j.actuated}'; give '{j.actuated}' "
+                             f"(its mimic joints follow it)")
+        return j.actuated
+
+    # ---- the planned joints
+    if o.group is not None:
+        group = [urdf_joints[j] for j in group_joints(srdf, o.group, urdf_joints)]
+        planned = list(dict.fromkeys(j.actuated for j in group if j.actuated is not None))
+        planned = [j for j in planned if j in names]
+        if not planned:
+            raise ValueError(f"group: SRDF group '{o.group}' has no moving joint of robot "
+                             f"'{model.name}'")
+    elif o.joints is not None:
+        planned = list(dict.fromkeys(actuated(j, "joints") for j in o.joints))
+    else:
+        planned = list(names)
+
+    # ---- default values of frozen joints
+    def default(name: str) -> tuple[float, str]:
+        j = model.joints[model.joint_index(name)]
+        if o.state is not None:
+            st = srdf.state(o.state)
+            if name in st.values:
+                return st.values[name], "state"
+        return min(max(0.0, j.lower), j.upper), "default"
+
+    frozen: dict[str, float] = {}
+    source: dict[str, str] = {}
+    if o.group is not None or o.joints is not None:
+        for n in names:
+            if n not in planned:
+                frozen[n], source[n] = default(n)
+    for key, table in (("lock", o.lock or {}), ("freeze", o.freeze or {})):
+        for name, v in table.items():
+            a = actuated(name, key)
+            if key == "lock" and a in planned:
+                raise ValueError(f"lock: joint '{a}' is one of the planned joints (lock only "
+                                 f"the others; to remove it from planning use freeze)")
+            if v is None:
+                v, src = default(a)
+            else:
+                src = key
+            frozen[a], source[a] = float(v), src
+    for name, v in frozen.items():
+        j = model.joints[model.joint_index(name)]
+        tol = 1e-12 * max(1.0, abs(j.lower), abs(j.upper))
+        if not j.lower - tol <= v <= j.upper + tol:
+            unit = "m" if j.type == "prismatic" else "rad"
+            where = {"state": f"state: <group_state name=\"{o.state}\">",
+                     "default": "freeze"}.get(source[name], source[name])
+            raise ValueError(f"{where}: {name}={v:g} {unit} is outside the joint's limits "
+                             f"[{j.lower:g}, {j.upper:g}]")
+    planned = [n for n in planned if n not in frozen]
+    if not planned:
+        raise ValueError(f"freeze: freezes every joint to plan with of robot '{model.name}'")
+
+    # ---- SRDF collision pairs (frame indices are kept by freezing)
+    res = GroupResult(model=model, planned=planned, frozen=frozen, source=source, srdf=srdf,
+                      srdf_collisions=o.srdf_collisions)
+    if srdf is not None:
+        pairs = {tuple(sorted((model.frame_index(d.link1), model.frame_index(d.link2))))
+                 for d in srdf.disable_collisions if d.link1 != d.link2}
+        res.srdf_pairs = len(srdf.disable_collisions)
+        sc = model.self_collision
+        if o.srdf_collisions == "replace":
+            new = SelfCollision(exclude_pairs=sorted(pairs))
+            res.pairs_added = len(pairs)
+        else:
+            have = {tuple(sorted(p)) for p in sc.exclude_pairs}
+            added = sorted(pairs - have)
+            res.pairs_added = len(added)
+            new = SelfCollision(groups={k: list(v) for k, v in sc.groups.items()},
+                                include_pairs=list(sc.include_pairs),
+                                exclude_pairs=list(sc.exclude_pairs) + added)
+        notes = dict(model.notes)
+        notes["srdf"] = srdf.path
+        model = model.copy(self_collision=new, notes=notes)
+    if frozen:
+        model = freeze_joints(model, frozen)
+    if o.group is not None or o.joints is not None:
+        notes = dict(model.notes)
+        notes["planning_group"] = o.group if o.group is not None else ",".join(planned)
+        model = model.copy(notes=notes)
+
+    # ---- end-effectors
+    eff: dict[str, str]
+    if o.end_effectors is not None:
+        eff, res.end_effectors_from = dict(o.end_effectors), "given"
+    else:
+        eff = {}
+        if srdf is not None:
+            ees = (group_end_effectors(srdf, o.group) if o.group is not None
+                   else srdf.end_effectors)
+            eff = {e.name: e.parent_link for e in ees}
+            res.end_effectors_from = "srdf end_effector"
+            if not eff and o.group is not None:
+                eff = {t: t for t in group_chain_tips(srdf, o.group)}
+                res.end_effectors_from = "group chain tips"
+        if not eff:
+            eff = {n: n for n in default_end_effectors(model)}
+            res.end_effectors_from = "default rule"
+    fnames = model.frame_names
+    table = {}
+    for alias, target in eff.items():
+        if target not in fnames:
+            raise ValueError(f"end_effectors.{alias}: unknown link or frame '{target}'")
+        if alias in fnames and alias != target:
+            raise ValueError(f"end_effectors.{alias}: the name of another frame (than "
+                             f"'{target}'); choose another name")
+        table[alias] = fnames.index(target)
+    res.model = model.copy(end_effectors=table)
+    return res
+
+
+def frozen_summary(model: RobotModel) -> str:
+    """``name=value, ...`` of the frozen joints of ``model`` ('' when none)."""
+    return ", ".join(f"{k}={v:g}" for k, v in frozen_joint_values(model).items())
+
+
+__all__ = ["GroupOptions", "GroupResult", "SrdfError", "default_end_effectors", "load_srdf",
+           "plan_group", "frozen_summary"]

@@ -1,0 +1,351 @@
+"""MoveIt's SRDF (semantic robot description) in and out of jwarp (docs/urdf.md, SRDF).
+
+Read (:func:`read_srdf`): ``<group>`` (``<joint>``, ``<link>``, ``<chain base_link
+tip_link>``, ``<group>`` subgroups), ``<group_state>``, ``<end_effector>`` and
+``<disable_collisions link1 link2 reason>``. Other elements (``virtual_joint``,
+``passive_joint``, ``link_sphere_approximation``, ...) are skipped. :func:`check_srdf`
+checks every name against the URDF; :func:`group_joints` resolves a group to the URDF's
+joints as MoveIt does (a ``<link>`` adds the joint whose child it is; a chain the joints
+from ``base_link`` down to ``tip_link``; subgroups recursively).
+
+Write (:func:`srdf_text`, :func:`write_srdf`): the robot's frame pairs that are never
+checked for self-collision as ``<disable_collisions>`` (reason ``Adjacent`` for a frame
+and its parent, else ``Never``); :func:`jwarp.importers.urdf_export.export_urdf` writes
+it beside the URDF.
+
+Errors are :class:`SrdfError` (a ValueError) naming the file, the element and its line.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import quoteattr
+
+#: reasons :func:`srdf_text` writes
+REASON_ADJACENT = "Adjacent"
+REASON_NEVER = "Never"
+
+
+class SrdfError(ValueError):
+    """A malformed SRDF or one naming links/joints the URDF lacks; the message names the
+    file and the element."""
+
+
+@dataclass
+class SrdfGroup:
+    """One ``<group>``: its ``joints``, ``links``, ``chains`` ``[(base_link, tip_link)]``
+    and ``subgroups`` (names of other groups), in document order; ``line`` in the file."""
+
+    name: str
+    joints: list[str] = field(default_factory=list)
+    links: list[str] = field(default_factory=list)
+    chains: list[tuple[str, str]] = field(default_factory=list)
+    subgroups: list[str] = field(default_factory=list)
+    line: int = 0
+
+
+@dataclass
+class SrdfEndEffector:
+    """One ``<end_effector>``: ``parent_link`` is where the tool attaches (jwarp's
+    end-effector frame); ``group`` the gripper's group, ``parent_group`` the arm's."""
+
+    name: str
+    parent_link: str
+    group: str | None = None
+    parent_group: str | None = None
+    line: int = 0
+
+
+@dataclass
+class SrdfGroupState:
+    """One ``<group_state name group>``: ``values`` ``{joint: value}`` [rad or m]."""
+
+    name: str
+    group: str
+    values: dict[str, float] = field(default_factory=dict)
+    line: int = 0
+
+
+@dataclass
+class SrdfDisabled:
+    """One ``<disable_collisions link1 link2 reason>``."""
+
+    link1: str
+    link2: str
+    reason: str = ""
+    line: int = 0
+
+
+@dataclass
+class Srdf:
+    """The parts of an SRDF jwarp reads (module docstring); ``path`` names the source."""
+
+    name: str
+    groups: dict[str, SrdfGroup] = field(default_factory=dict)
+    group_states: dict[str, SrdfGroupState] = field(default_factory=dict)
+    end_effectors: list[SrdfEndEffector] = field(default_factory=list)
+    disable_collisions: list[SrdfDisabled] = field(default_factory=list)
+    path: str = "<srdf>"
+
+    def state(self, name: str) -> SrdfGroupState:
+        """The ``<group_state>`` called ``name``; SrdfError listing the known ones."""
+        if name not in self.group_states:
+            raise SrdfError(f"state: {self.path} has no <group_state name=\"{name}\"> (its "
+                            f"states: {', '.join(self.group_states) or 'none'})")
+        return self.group_states[name]
+
+
+# ------------------------------------------------------------------ reading
+def read_srdf(path: str | os.PathLike) -> Srdf:
+    """Parse the SRDF file ``path`` (no check against a URDF: :func:`check_srdf`).
+    SrdfError naming the file and element for bad XML, a root other than ``<robot>``, a
+    missing attribute, a value that is not a finite number, a name defined twice."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise SrdfError(f"{path}: SRDF file not found")
+    from lxml import etree
+
+    try:
+        root = etree.parse(path, etree.XMLParser(remove_comments=True)).getroot()
+    except etree.XMLSyntaxError as e:
+        raise SrdfError(f"{path}: not valid XML: {e}") from None
+    except OSError as e:
+        raise SrdfError(f"{path}: cannot read: {e}") from None
+    return _parse(root, path)
+
+
+def parse_srdf(text: str | bytes, source: str = "<srdf>") -> Srdf:
+    """:func:`read_srdf` of a document given as text; ``source`` names it in errors."""
+    from lxml import etree
+
+    try:
+        root = etree.fromstring(text.encode() if isinstance(text, str) else text,
+                                etree.XMLParser(remove_comments=True))
+    except etree.XMLSyntaxError as e:
+        raise SrdfError(f"{source}: not valid XML: {e}") from None
+    return _parse(root, source)
+
+
+def _attr(el: Any, key: str, path: str) -> str:
+    v = el.get(key)
+    if v is None or not v.strip():
+        name = el.get("name")
+        what = f"<{el.tag}{f' name={quoteattr(name)}' if name and key != 'name' else ''}>"
+        raise SrdfError(f"{path}: {what} (line {el.sourceline}) has no '{key}' attribute")
+    return v.strip()
+
+
+def _parse(root: Any, path: str) -> Srdf:
+    if root.tag != "robot":
+        raise SrdfError(f"{path}: the root element is <{root.tag}>, expected <robot>")
+    out = Srdf(name=root.get("name") or "", path=path)
+    for el in root:
+        if not isinstance(el.tag, str):
+            continue
+        if el.tag == "group":
+            name = _attr(el, "name", path)
+            if name in out.groups:
+                raise SrdfError(f"{path}: <group name=\"{name}\"> (line {el.sourceline}) is "
+                                f"defined twice (also line {out.groups[name].line})")
+            g = SrdfGroup(name=name, line=el.sourceline)
+            for sub in el:
+                if not isinstance(sub.tag, str):
+                    continue
+                if sub.tag == "joint":
+                    g.joints.append(_attr(sub, "name", path))
+                elif sub.tag == "link":
+                    g.links.append(_attr(sub, "name", path))
+                elif sub.tag == "chain":
+                    g.chains.append((_attr(sub, "base_link", path), _attr(sub, "tip_link", path)))
+                elif sub.tag == "group":
+                    g.subgroups.append(_attr(sub, "name", path))
+                else:
+                    raise SrdfError(f"{path}: <group name=\"{name}\">: unknown element "
+                                    f"<{sub.tag}> (line {sub.sourceline}; expected joint, "
+                                    f"link, chain or group)")
+            out.groups[name] = g
+        elif el.tag == "group_state":
+            name = _attr(el, "name", path)
+            st = SrdfGroupState(name=name, group=_attr(el, "group", path), line=el.sourceline)
+            for sub in el:
+                if not isinstance(sub.tag, str) or sub.tag != "joint":
+                    continue
+                jn = _attr(sub, "name", path)
+                text = _attr(sub, "value", path)
+                try:
+                    vals = [float(x) for x in text.split()]
+                except ValueError:
+                    vals = []
+                if len(vals) != 1 or not math.isfinite(vals[0]):
+                    raise SrdfError(f"{path}: <group_state name=\"{name}\"> joint '{jn}' "
+                                    f"(line {sub.sourceline}): value '{text}' is not one "
+                                    f"finite number")
+                st.values[jn] = vals[0]
+            if name in out.group_states:   # MoveIt keys states by (group, name); jwarp by name
+                raise SrdfError(f"{path}: <group_state name=\"{name}\"> (line {el.sourceline}) "
+                                f"is defined twice (also line {out.group_states[name].line})")
+            out.group_states[name] = st
+        elif el.tag == "end_effector":
+            out.end_effectors.append(SrdfEndEffector(
+                name=_attr(el, "name", path), parent_link=_attr(el, "parent_link", path),
+                group=el.get("group"), parent_group=el.get("parent_group"), line=el.sourceline))
+        elif el.tag == "disable_collisions":
+            out.disable_collisions.append(SrdfDisabled(
+                link1=_attr(el, "link1", path), link2=_attr(el, "link2", path),
+                reason=el.get("reason") or "", line=el.sourceline))
+    names = [e.name for e in out.end_effectors]
+    for k, n in enumerate(names):
+        if n in names[:k]:
+            raise SrdfError(f"{path}: <end_effector name=\"{n}\"> (line "
+                            f"{out.end_effectors[k].line}) is defined twice")
+    return out
+
+
+def check_srdf(srdf: Srdf, links: set[str] | list[str], joints: set[str] | list[str]) -> None:
+    """SrdfError naming the file, the element and its line for every name of ``srdf`` that
+    is not a URDF link (``links``) or joint (``joints``, fixed ones included) or group, and
+    for a group whose subgroups form a cycle."""
+    links, joints = set(links), set(joints)
+    p = srdf.path
+
+    def need(name: str, known: set[str], what: str, where: str) -> None:
+        if name not in known:
+            raise SrdfError(f"{p}: {where}: unknown {what} '{name}' (not in the URDF)")
+
+    for g in srdf.groups.values():
+        where = f"<group name=\"{g.name}\"> (line {g.line})"
+        for j in g.joints:
+            need(j, joints, "joint", where)
+        for link in g.links:
+            need(link, links, "link", where)
+        for base, tip in g.chains:
+            need(base, links, "link", f"{where} <chain base_link>")
+            need(tip, links, "link", f"{where} <chain tip_link>")
+        for s in g.subgroups:
+            if s not in srdf.groups:
+                raise SrdfError(f"{p}: {where}: unknown subgroup '{s}' (groups: "
+                                f"{', '.join(srdf.groups)})")
+        _subgroups(srdf, g.name, ())
+    for st in srdf.group_states.values():
+        where = f"<group_state name=\"{st.name}\"> (line {st.line})"
+        if st.group not in srdf.groups:
+            raise SrdfError(f"{p}: {where}: unknown group '{st.group}' (groups: "
+                            f"{', '.join(srdf.groups) or 'none'})")
+        for j in st.values:
+            need(j, joints, "joint", where)
+    for e in srdf.end_effectors:
+        where = f"<end_effector name=\"{e.name}\"> (line {e.line})"
+        need(e.parent_link, links, "link", f"{where} parent_link")
+        for key in ("group", "parent_group"):
+            g = getattr(e, key)
+            if g is not None and g not in srdf.groups:
+                raise SrdfError(f"{p}: {where}: unknown {key} '{g}' (groups: "
+                                f"{', '.join(srdf.groups) or 'none'})")
+    for d in srdf.disable_collisions:
+        where = f"<disable_collisions> (line {d.line})"
+        need(d.link1, links, "link", f"{where} link1")
+        need(d.link2, links, "link", f"{where} link2")
+
+
+def _subgroups(srdf: Srdf, name: str, seen: tuple[str, ...]) -> list[str]:
+    """``name`` and its subgroups, recursively (SrdfError on a cycle)."""
+    if name in seen:
+        cyc = " -> ".join(seen[seen.index(name):] + (name,))
+        raise SrdfError(f"{srdf.path}: <group name=\"{name}\">: subgroups form a cycle: {cyc}")
+    out = [name]
+    for s in srdf.groups[name].subgroups:
+        out += _subgroups(srdf, s, seen + (name,))
+    return out
+
+
+def group_joints(srdf: Srdf, name: str, urdf_joints: dict[str, Any]) -> list[str]:
+    """The URDF joints of group ``name`` (MoveIt's meaning; module docstring), in document
+    order without repeats, fixed ones included. ``urdf_joints``: ``{name: joint}`` with
+    attributes ``parent`` and ``child`` (links), e.g.
+    :attr:`jwarp.importers.urdf.UrdfImport.urdf_joints`. SrdfError naming the group for an
+    unknown group or a chain whose tip_link is not below its base_link."""
+    if name not in srdf.groups:
+        raise SrdfError(f"group: {srdf.path} has no <group name=\"{name}\"> (its groups: "
+                        f"{', '.join(srdf.groups) or 'none'})")
+    by_child = {j.child: j for j in urdf_joints.values()}
+    out: list[str] = []
+    for gname in _subgroups(srdf, name, ()):
+        g = srdf.groups[gname]
+        out += g.joints
+        out += [by_child[link].name for link in g.links if link in by_child]
+        for base, tip in g.chains:
+            chain, link = [], tip
+            while link != base:
+                j = by_child.get(link)
+                if j is None:
+                    raise SrdfError(f"{srdf.path}: <group name=\"{gname}\"> (line {g.line}) "
+                                    f"<chain>: tip_link '{tip}' is not below base_link "
+                                    f"'{base}'")
+                chain.append(j.name)
+                link = j.parent
+            out += chain[::-1]
+    return list(dict.fromkeys(out))
+
+
+def group_chain_tips(srdf: Srdf, name: str) -> list[str]:
+    """The ``tip_link`` of every chain of group ``name`` and its subgroups."""
+    return list(dict.fromkeys(tip for g in _subgroups(srdf, name, ())
+                              for _, tip in srdf.groups[g].chains))
+
+
+def group_end_effectors(srdf: Srdf, name: str) -> list[SrdfEndEffector]:
+    """The ``<end_effector>`` elements of group ``name``: those whose ``parent_group`` or
+    ``group`` is ``name`` or one of its subgroups."""
+    members = set(_subgroups(srdf, name, ()))
+    return [e for e in srdf.end_effectors
+            if e.parent_group in members or (e.parent_group is None and e.group in members)]
+
+
+# ------------------------------------------------------------------ writing
+def srdf_path(urdf_path: str | os.PathLike) -> Path:
+    """The SRDF written beside a URDF: ``robot.urdf`` -> ``robot.srdf`` (another suffix
+    is kept and ``.srdf`` appended)."""
+    p = Path(urdf_path)
+    return p.with_suffix(".srdf") if p.suffix.lower() == ".urdf" else p.with_name(p.name + ".srdf")
+
+
+def disabled_pairs(robot: Any) -> list[tuple[str, str, str]]:
+    """``(frame a, frame b, reason)`` for every frame pair of ``robot`` (a
+    :class:`~jwarp.model.RobotModel`) that is never checked for self-collision (its
+    ``self_collision`` groups and exclude pairs, less include pairs), ``a < b`` by index;
+    reason ``Adjacent`` when one is the other's parent, else ``Never``."""
+    allowed = robot.allowed_collision_pairs
+    parents = robot.parents
+    names = robot.frame_names
+    out = []
+    for a in range(robot.n_frames):
+        for b in range(a + 1, robot.n_frames):
+            if not allowed[a, b]:
+                adj = parents[a] == b or parents[b] == a
+                out.append((names[a], names[b], REASON_ADJACENT if adj else REASON_NEVER))
+    return out
+
+
+def srdf_text(robot: Any, *, name: str | None = None) -> str:
+    """The SRDF document of ``robot``: its :func:`disabled_pairs` as ``<disable_collisions>``
+    (link names = jwarp frame names = the exported URDF's links)."""
+    lines = ["<?xml version=\"1.0\"?>",
+             f"<!-- written by jwarp export_urdf from robot {robot.name!r}: the frame pairs "
+             f"jwarp never checks for self-collision; see docs/urdf.md -->",
+             f"<robot name={quoteattr(name or robot.name)}>"]
+    for a, b, reason in disabled_pairs(robot):
+        lines.append(f"  <disable_collisions link1={quoteattr(a)} link2={quoteattr(b)} "
+                     f"reason=\"{reason}\"/>")
+    lines.append("</robot>")
+    return "\n".join(lines) + "\n"
+
+
+def write_srdf(robot: Any, path: str | os.PathLike, *, name: str | None = None) -> None:
+    """Write :func:`srdf_text` to ``path`` atomically."""
+    from jwarp.atomic import atomic_write_text
+
+    atomic_write_text(path, srdf_text(robot, name=name))
