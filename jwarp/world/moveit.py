@@ -45,6 +45,7 @@ or fixes (a gripper's fingers in a full MoveIt state) are ignored with one warni
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import warnings
@@ -369,16 +370,22 @@ _GRIPPER_WORDS = re.compile(r"finger|gripper|knuckle|jaw|claw|(^|_)hand(_|$)", r
 def ignored_joint_names(model: Any, names: Any) -> list[str]:
     """Those of ``names`` that are joints of the robot which ``model`` lacks or fixes, so a
     MoveIt state or goal may list them and :func:`joint_vector` ignores them (with a
-    warning): names of fixed (uncoupled) DH frames of the model, and names of no frame of
+    warning): joints frozen by :func:`jwarp.model.freeze_joints` (``notes['frozen_joints']``),
+    names of fixed (uncoupled) DH frames of the model, and names of no frame of
     the model that share the first ``_``-separated word of one of its joint or frame
     names or of its name (``panda_finger_joint1`` for a Panda arm without fingers) or name
     a gripper part (finger, gripper, knuckle, jaw, claw, hand). A static frame's (a
     link's) name is not a joint name, so it is not ignored."""
     frames = {f.name: f for f in model.frames}
     words = {_first_word(n) for n in [*model.joint_names, *frames, model.name]}
+    notes = getattr(model, "notes", None) or {}
+    frozen = set(json.loads(notes["frozen_joints"])) if notes.get("frozen_joints") else set()
     out = []
     for n in names:
         if n in model.joint_names:
+            continue
+        if n in frozen:             # jwarp.model.freeze_joints: fixed at a value
+            out.append(n)
             continue
         f = frames.get(n)
         if f is not None:
