@@ -42,6 +42,89 @@ def import_error(e: ValueError, what: str) -> CLIError:
     return CLIError(f"{what}: {msg}")
 
 
+def joint_values_arg(items: list[str] | None, option: str, value_required: bool = True
+                     ) -> dict[str, float | None] | None:
+    """``--lock``/``--freeze`` values ``NAME=VALUE`` (``NAME`` alone when not
+    ``value_required``: None, the default value) -> ``{NAME: value}`` (None when none)."""
+    if not items:
+        return None
+    out: dict[str, float | None] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not name or (sep and not text.strip()) or (value_required and not sep):
+            form = "NAME=VALUE" if value_required else "NAME[=VALUE]"
+            raise CLIError(f"{option}: expected {form}, got '{item}'")
+        if name in out:
+            raise CLIError(f"{option}: joint '{name}' given twice")
+        if not sep:
+            out[name] = None
+            continue
+        try:
+            v = float(text)
+        except ValueError:
+            raise CLIError(f"{option}: {name}: expected a number [rad or m], got '{text}'") from None
+        if not math.isfinite(v):
+            raise CLIError(f"{option}: {name}: expected a finite number, got '{text}'")
+        out[name] = v
+    return out
+
+
+#: GroupOptions fields -> the import-urdf options that set them (error messages)
+GROUP_OPTIONS = {"group": "--group", "joints": "--joints", "lock": "--lock", "state": "--state",
+                 "freeze": "--freeze", "srdf": "--srdf", "srdf_collisions": "--srdf-collisions"}
+
+
+def group_options(args: argparse.Namespace, eff: dict[str, str] | None) -> Any:
+    """The :class:`~jwarp.importers.groups.GroupOptions` of ``import-urdf``'s options."""
+    from jwarp.importers.groups import GroupOptions
+
+    if args.srdf is not None and not os.path.isfile(args.srdf):
+        raise CLIError(f"--srdf: file not found: '{args.srdf}'")
+    joints = None
+    if args.joints is not None:
+        joints = [j.strip() for j in args.joints.split(",") if j.strip()]
+        if not joints:
+            raise CLIError("--joints: expected joint names j1,j2,...")
+    return GroupOptions(srdf=args.srdf, group=args.group, joints=joints,
+                        lock=joint_values_arg(args.lock, "--lock"), state=args.state,
+                        freeze=joint_values_arg(args.freeze, "--freeze", value_required=False),
+                        srdf_collisions=args.srdf_collisions, end_effectors=eff)
+
+
+def group_error(e: ValueError, srdf: str | None) -> CLIError:
+    """An error of :func:`~jwarp.importers.groups.plan_group` naming its CLI option."""
+    msg = " ".join(str(e).split())
+    key, sep, rest = msg.partition(": ")
+    if sep and key in GROUP_OPTIONS:
+        return CLIError(f"{GROUP_OPTIONS[key]}: {rest}")
+    if srdf is not None and msg.startswith(srdf):
+        return CLIError(f"--srdf: {msg}")
+    return import_error(e, "URDF")
+
+
+def group_lines(res: Any, sampled: bool) -> tuple[list[str], dict[str, Any]]:
+    """Summary lines and JSON fields of a :class:`~jwarp.importers.groups.GroupResult`
+    (``sampled``: the self-collision pairs were sampled, ``--spheres fit``)."""
+    lines, extra = [], {"planned_joints": res.planned, "frozen_joints": res.frozen,
+                        "end_effectors_from": res.end_effectors_from}
+    if res.srdf is not None:
+        how = ("the SRDF's only (--srdf-collisions replace)" if res.srdf_collisions == "replace"
+               else "the sampled pairs plus the SRDF's" if sampled
+               else "the SRDF's (no pairs sampled without --spheres fit)")
+        lines.append(f"SRDF {res.srdf.path}: {res.srdf_pairs} disable_collisions; "
+                     f"self-collision exclude pairs: {how} ({res.pairs_added} from the SRDF)")
+        extra["srdf"] = {"path": res.srdf.path, "disable_collisions": res.srdf_pairs,
+                         "pairs_added": res.pairs_added, "collisions": res.srdf_collisions,
+                         "groups": list(res.srdf.groups)}
+    if res.frozen:
+        lines.append(f"planning with {len(res.planned)} joints ({', '.join(res.planned)}); "
+                     f"frozen: " + ", ".join(f"{k}={v:g} ({res.source[k]})"
+                                             for k, v in res.frozen.items()))
+    lines.append(f"end-effectors from: {res.end_effectors_from}")
+    return lines, extra
+
+
 def import_summary(model: Any, geometries: list, out: str, as_json: bool,
                    extra: dict[str, Any] | None = None, lines: list[str] | None = None,
                    note: str = "") -> None:
@@ -96,6 +179,13 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
             model = model.copy(spheres=[])
     except ValueError as e:
         raise import_error(e, "URDF") from None
+    from jwarp.importers.groups import plan_group
+
+    try:
+        grouped = plan_group(imported, group_options(args, eff), model=model)
+    except ValueError as e:
+        raise group_error(e, args.srdf) from None
+    model = grouped.model
     model.save(args.out)
     missing = [g.mesh_uri for g in imported.geometries if g.kind == "mesh" and g.mesh_path is None]
     extra: dict[str, Any] = {"missing_meshes": missing}
@@ -108,6 +198,9 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
                      f"{', from the cache' if fit.cached else ''}); "
                      f"{int(model.allowed_collision_pairs.sum()) // 2} self-collision frame "
                      f"pairs checked")
+    more_lines, more = group_lines(grouped, fit is not None)
+    lines += more_lines
+    extra.update(more)
     import_summary(model, imported.geometries, args.out, args.json, extra, lines,
                    f" ({len(missing)} mesh files not found)" if missing else "")
     return 0
@@ -120,7 +213,8 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("urdf", metavar="URDF", help="the URDF file")
     s.add_argument("--out", required=True, metavar="ROBOT.json", help="robot file to write")
     s.add_argument("--end-effector", action="append", metavar="NAME=LINK",
-                   help="named end-effector (repeatable; default: every tip link)")
+                   help="named end-effector (repeatable; default: the group's SRDF "
+                        "end-effector or chain tip, else one per arm at its tool: docs/urdf.md)")
     s.add_argument("--package-dir", action="append", metavar="DIR",
                    help="folder searched for package:// mesh paths (repeatable)")
     s.add_argument("--continuous-limit", type=real_arg("--continuous-limit", 0.0, lo_open=True,
@@ -145,5 +239,23 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--no-cache", action="store_true",
                    help="fit again instead of reading the fit cache ($JWARP_CACHE or "
                         "~/.cache/jwarp)")
+    s.add_argument("--srdf", default=None, metavar="ROBOT.srdf",
+                   help="MoveIt SRDF: its disable_collisions are excluded from self-collision, "
+                        "its groups, group states and end-effectors can be used")
+    s.add_argument("--srdf-collisions", choices=("add", "replace"), default="add",
+                   help="SRDF disable_collisions: added to the sampled exclude pairs (add, "
+                        "default) or the only ones (replace)")
+    s.add_argument("--group", default=None, metavar="NAME",
+                   help="plan with the joints of this SRDF group only (others locked)")
+    s.add_argument("--joints", default=None, metavar="J1,J2,...",
+                   help="plan with these joints only (others locked)")
+    s.add_argument("--lock", action="append", metavar="NAME=VALUE",
+                   help="value [rad or m] of a joint outside --group/--joints (repeatable; "
+                        "default: --state's value, else 0 clipped into the limits)")
+    s.add_argument("--state", default=None, metavar="NAME",
+                   help="SRDF group_state giving the values of locked and frozen joints")
+    s.add_argument("--freeze", action="append", metavar="NAME[=VALUE]",
+                   help="freeze a joint at a value, e.g. a gripper finger (repeatable; mimic "
+                        "joints follow; no value: --state's, else 0 clipped into the limits)")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
     s.set_defaults(func=cmd_import_urdf)

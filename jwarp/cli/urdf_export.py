@@ -6,7 +6,8 @@ Example::
 
 Writes ``calibrated.urdf`` and, when the robot has fields URDF cannot hold (``kappa``,
 ``kappa_nonlinear``, ``harmonic``, ``linear_limits``), the side file
-``calibrated.urdf.jwarp.json`` (the full jwarp robot). Each warning is one line
+``calibrated.urdf.jwarp.json`` (the full jwarp robot), and the SRDF ``calibrated.srdf``
+with the frame pairs never checked for self-collision (``--no-srdf``: none). Each warning is one line
 ``jwarp: warning: ...`` on stderr. See ``docs/urdf_export.md``.
 """
 
@@ -25,11 +26,16 @@ def cmd_export_urdf(args: argparse.Namespace) -> int:
     check_output(args.out, "--out", inputs={"ROBOT": args.robot})
     side = str(side_file_path(args.out))
     check_output(side, "--out", inputs={"ROBOT": args.robot})
+    if not args.no_srdf:
+        from jwarp.importers.srdf import srdf_path
+
+        check_output(str(srdf_path(args.out)), "--out", inputs={"ROBOT": args.robot})
     robot = robot_option(args.robot, "ROBOT")
     if args.name is not None and not args.name.strip():
         raise CLIError("--name: empty robot name")
     opts = UrdfExportOptions(effort=args.effort, velocity=args.velocity,
-                             side_file={"auto": None, "always": True, "never": False}[args.side_file])
+                             side_file={"auto": None, "always": True, "never": False}[args.side_file],
+                             srdf=not args.no_srdf)
     for line in export_urdf(robot, args.out, name=args.name, options=opts):
         print(f"jwarp: warning: {' '.join(line.split())}", file=sys.stderr)
     print(args.out)
@@ -51,4 +57,7 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--side-file", choices=("auto", "always", "never"), default="auto",
                    help="write <out>.jwarp.json: when URDF cannot hold a field (auto), "
                         "always, never")
+    s.add_argument("--no-srdf", action="store_true",
+                   help="do not write <out stem>.srdf (the self-collision exclusions as "
+                        "MoveIt disable_collisions)")
     s.set_defaults(func=cmd_export_urdf)

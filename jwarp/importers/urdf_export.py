@@ -30,9 +30,12 @@ Mapping (see ``docs/urdf_export.md``):
 URDF cannot hold the elastic and non-geometric fields (``kappa``, ``kappa_nonlinear``,
 ``harmonic``) nor ``linear_limits``: when any is present the whole jwarp robot is written
 to the side file ``<out>.jwarp.json`` (readable with ``jwarp.robot(path)``) and a warning
-names the fields. Self-collision groups, end-effector names and gravity are not written
-into URDF either (MoveIt keeps them in the SRDF); they are in the side file when it is
-written.
+names the fields. End-effector names and gravity are not written into URDF either; they
+are in the side file when it is written. The frame pairs the robot never checks for
+self-collision (its ``self_collision`` groups and exclude pairs) are written as MoveIt's
+``<disable_collisions>`` to the SRDF ``<out stem>.srdf`` beside the URDF
+(:mod:`jwarp.importers.srdf`; ``options.srdf=False``: none), so that ``jwarp import-urdf
+OUT.urdf --srdf OUT.srdf`` gets them back.
 """
 
 from __future__ import annotations
@@ -68,12 +71,15 @@ class UrdfExportOptions:
             cannot hold, ``True`` always, ``False`` never (the warning then says the
             fields are dropped).
         root_link: name of the added root link (made unique against the frame names).
+        srdf: write the SRDF :func:`jwarp.importers.srdf.srdf_path` (``robot.urdf`` ->
+            ``robot.srdf``) with the robot's self-collision exclusions (default True).
     """
 
     effort: float = 0.0
     velocity: float = 0.0
     side_file: bool | None = None
     root_link: str = "jwarp_base"
+    srdf: bool = True
 
     def validate(self) -> None:
         for key in ("effort", "velocity"):
@@ -81,6 +87,8 @@ class UrdfExportOptions:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v < 0:
                 raise ValueError(f"options.{key}: must be a finite number >= 0, got {v!r}")
+        if not isinstance(self.srdf, bool):
+            raise TypeError(f"options.srdf: expected True or False, got {self.srdf!r}")
         if self.side_file not in (None, True, False):
             raise TypeError(f"options.side_file: expected None, True or False, "
                             f"got {self.side_file!r}")
@@ -296,7 +304,8 @@ def urdf_text(robot: RobotModel, *, name: str | None = None,
 def export_urdf(robot: RobotModel, path: str | os.PathLike, *, name: str | None = None,
                 options: UrdfExportOptions | None = None) -> list[str]:
     """Write ``robot`` as a URDF file ``path`` (and, if needed, the side file
-    ``<path>.jwarp.json``); returns the warnings (one line each).
+    ``<path>.jwarp.json``; and the SRDF ``<stem>.srdf`` unless ``options.srdf`` is False);
+    returns the warnings (one line each).
 
     Args:
         robot: the jwarp robot (e.g. a calibrated one, ``result.robot``).
@@ -312,8 +321,8 @@ def export_urdf(robot: RobotModel, path: str | os.PathLike, *, name: str | None 
         TypeError: ``robot`` is not a :class:`~jwarp.model.RobotModel`, ``name`` not a str.
         ValueError: ``path`` is a folder or its folder does not exist (checked before work).
 
-    Both files are written to temporary files first and renamed at the end
-    (:func:`jwarp.atomic.commit_all`): an error leaves neither. The side file's
+    All files are written to temporary files first and renamed at the end
+    (:func:`jwarp.atomic.commit_all`): an error leaves none. The side file's
     ``notes.urdf_sha256`` is the SHA-256 of the URDF text written with it. A side file left
     from an earlier export of ``path`` is removed when no side file is written now (it would
     describe another robot); a file of that name that no export wrote (its notes do not
@@ -334,6 +343,12 @@ def export_urdf(robot: RobotModel, path: str | os.PathLike, *, name: str | None 
     urdf_file = AtomicFile(path, option="path")       # checks the path before any work
     files = [urdf_file]
     try:
+        if options.srdf:
+            from jwarp.importers.srdf import srdf_path, srdf_text
+
+            srdf_file = AtomicFile(srdf_path(path), option="path")
+            files.insert(0, srdf_file)
+            _write(srdf_file.tmp, srdf_text(robot, name=name))
         missing = _unsupported(robot)
         write_side = bool(missing) if options.side_file is None else options.side_file
         side_file = AtomicFile(side, option="path") if write_side else None
