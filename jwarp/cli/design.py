@@ -5,7 +5,7 @@ Examples::
     # eigenvalue spectra of hand4 contacts vs the relative task (thesis Fig. 2.8)
     jwarp sensitivity --setup contact.json --task-setup relative.json --n 300 --seed 0 \\
         --png spectra.png --rerun spectra.rrd
-    # a pool of 10000 contact configurations, then the 100 task D-optimal ones
+    # a pool of 10000 collision-free contact configurations, then the 100 task D-optimal ones
     jwarp design --setup contact.json --write-candidates 10000 --seed 0 --out pool.csv
     jwarp design --setup contact.json --task-setup relative.json --candidates pool.csv \\
         --n 100 --method detmax --out plan.csv
@@ -23,6 +23,13 @@ eigenvalues) under ``sensitivity/<actual|task>``.
 ``--task-setup``, else plain D-optimality; :mod:`jwarp.solvers.calibration.design`) and
 writes them, in the order chosen, to ``--out`` in the pool format. With
 ``--write-candidates N`` it instead writes a pool of N drawn configurations to ``--out``.
+Pools are feasible (:func:`jwarp.solvers.calibration.pool.draw_pool`): draws outside the
+joint limits, in self-collision (sphere surfaces closer than ``--margin``, as
+``jwarp sample-poses`` checks them) or, with ``--world`` / ``--scene``, in collision with
+the world are dropped and replaced by more draws; a summary line says how many were
+dropped and why. Rows of ``--candidates`` are checked the same way and the failing ones
+left out of the selection (their line numbers are printed). A robot without collision
+spheres gets a ``warning:`` line on stderr: its pool is not checked.
 Option values and ``--out`` are checked before any work; files are written atomically.
 """
 
@@ -223,10 +230,41 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------ design
+def _design_world(args: argparse.Namespace, model: Any) -> Any:
+    """The World of ``--world`` SPEC or ``--scene`` FILE (its exact objects), or None."""
+    if args.world is not None:
+        from jwarp.world.io import parse_world_spec
+
+        try:
+            return parse_world_spec(args.world, robot=model)
+        except (ValueError, TypeError, OSError, MemoryError, OverflowError) as e:
+            msg = " ".join(str(e).split())
+            for prefix in ("world: ", "path: "):
+                msg = msg.removeprefix(prefix)
+            raise CLIError(f"--world: {msg}") from None
+    if args.scene is not None:
+        from jwarp.world.collision import check_world
+        from jwarp.world.scene_file import exact_world, load_scene, robot_frames
+
+        try:
+            world = exact_world(load_scene(args.scene, frames=robot_frames(model)))
+            check_world(model, world)
+        except (ValueError, TypeError, OSError) as e:
+            raise CLIError(f"--scene: {' '.join(str(e).split()).removeprefix('scene: ')}") \
+                from None
+        return world
+    return None
+
+
+def _warn(lines: list[str]) -> None:
+    for w in lines:
+        print(f"warning: {w}", file=sys.stderr)
+
+
 def cmd_design(args: argparse.Namespace) -> int:
     from jwarp.solvers.calibration.design import DesignOptions, design
-    from jwarp.solvers.calibration.pool import (configurations_text, draw_configurations,
-                                                read_configurations)
+    from jwarp.solvers.calibration.pool import (PoolChecker, configurations_text,
+                                                draw_pool, read_configurations)
     from jwarp.atomic import AtomicFile
 
     quiet_warp()
@@ -235,21 +273,46 @@ def cmd_design(args: argparse.Namespace) -> int:
     if args.write_candidates is None and not args.candidates:
         raise CLIError("--candidates: required (or --write-candidates N to make a pool)")
     inputs = {"--setup": args.setup, "--task-setup": args.task_setup,
-              "--candidates": args.candidates, "--task-samples": args.task_samples}
+              "--candidates": args.candidates, "--task-samples": args.task_samples,
+              "--scene": args.scene}
     check_output(args.out, "--out", inputs=inputs)
     setup, model, meas = _setup_and_measurement(args.setup, "--setup", args.robot)
+    world = _design_world(args, model)
     if args.write_candidates is not None:
-        q, meta = draw_configurations(model, setup, args.write_candidates, args.seed)
-        text = configurations_text(model, meas, q, meta)
+        try:
+            drawn = draw_pool(model, setup, args.write_candidates, args.seed, world=world,
+                              margin=args.margin)
+        except ValueError as e:
+            raise CLIError(f"--setup: {' '.join(str(e).split()).removeprefix('setup: ')}") \
+                from None
+        if len(drawn) == 0:
+            _warn(drawn.warnings)
+            raise CLIError(f"--write-candidates: no configuration of {drawn.drawn} draws passed "
+                           f"the collision check (margin {args.margin:g} m); lower --margin or "
+                           f"check the world")
+        text = configurations_text(model, meas, drawn.q, drawn.meta)
         with AtomicFile(args.out, option="--out") as f, open(f.tmp, "w", encoding="utf-8") as fh:
             fh.write(text)
-        print(f"wrote {len(q)} candidate configurations of '{meas.name}' on '{model.name}' "
-              f"to {args.out}")
+        _warn(drawn.warnings)
+        if args.json:
+            print(dumps(dict(drawn.to_dict(), robot=model.name, plugin=meas.name,
+                             out=args.out), indent=1))
+            return 0
+        print(f"wrote {len(drawn)} candidate configurations of '{meas.name}' on "
+              f"'{model.name}' to {args.out}"
+              f"{'' if drawn.complete else f' (SHORT of the {drawn.requested} asked for)'}")
+        print(drawn.summary())
         return 0
     pool = read_configurations(args.candidates, model, meas, "--candidates")
-    if args.n > len(pool):
-        raise CLIError(f"--n: {args.n} configurations asked from the {len(pool)} rows of "
-                       f"--candidates")
+    checker = PoolChecker(model, setup, world=world, margin=args.margin)
+    _warn(checker.warnings)
+    chk = checker(pool.q)
+    feasible = np.flatnonzero(chk.keep)
+    excluded = np.flatnonzero(~chk.keep)
+    if args.n > len(feasible):
+        raise CLIError(f"--n: {args.n} configurations asked from the {len(feasible)} rows of "
+                       f"--candidates that pass the collision check (of {len(pool)}; margin "
+                       f"{args.margin:g} m)")
     task = qt = mt = None
     if args.task_setup:
         tsetup, tmodel, task = _setup_and_measurement(args.task_setup, "--task-setup",
@@ -272,16 +335,20 @@ def cmd_design(args: argparse.Namespace) -> int:
         what = f"step {done}/{total}" if total else f"excursion {done}"
         print(f"design: {what}", file=sys.stderr)
 
+    meta_ok = {k: np.asarray(v)[feasible] for k, v in pool.meta.items()}
     try:
-        res = design(model, meas, pool.q, options, free=args.free, meta_pool=pool.meta or None,
-                     task=task, q_task=qt, meta_task=mt, progress=progress)
+        res = design(model, meas, pool.q[feasible], options, free=args.free,
+                     meta_pool=meta_ok or None, task=task, q_task=qt, meta_task=mt,
+                     progress=progress)
     except ValueError as e:
         msg = " ".join(str(e).split())
         for prefix, opt in (("free: ", "--free"), ("sigma: ", "--free")):
             if msg.startswith(prefix):
                 raise CLIError(f"{opt}: {msg.removeprefix(prefix)}") from None
         raise
-    idx = res.indices
+    idx = feasible[res.indices]            # rows of --candidates
+    res.indices = idx
+    res.n_candidates = len(pool)
     meta = {k: np.asarray(v)[idx] for k, v in pool.meta.items()}
     text = configurations_text(model, meas, pool.q[idx], meta)
     with AtomicFile(args.out, option="--out") as f, open(f.tmp, "w", encoding="utf-8") as fh:
@@ -290,10 +357,26 @@ def cmd_design(args: argparse.Namespace) -> int:
         doc = dict(res.to_dict(), robot=model.name, plugin=meas.name,
                    task=None if task is None else task.name, free=args.free,
                    candidates=args.candidates, out=args.out,
-                   lines=[int(v) for v in pool.lines[idx]])
+                   lines=[int(v) for v in pool.lines[idx]],
+                   collision_check={"self_checked": chk.self_checked,
+                                    "world_checked": chk.world_checked, "margin": args.margin,
+                                    "excluded": dict(chk.dropped),
+                                    "excluded_lines": [int(v) for v in pool.lines[excluded]],
+                                    "warnings": chk.warnings})
         print(dumps(doc, indent=1))
         return 0
     crit = "task D-optimality" if task is not None else "D-optimality"
+    if excluded.size:
+        why = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in chk.dropped.items() if v)
+        shown = ", ".join(str(int(v)) for v in pool.lines[excluded[:10]])
+        print(f"excluded {excluded.size} of {len(pool)} rows of --candidates that fail the "
+              f"collision check (margin {args.margin:g} m; {why}): lines {shown}"
+              f"{', ...' if excluded.size > 10 else ''}")
+    elif chk.self_checked or chk.world_checked:
+        what = " + ".join(w for w, on in (("self", chk.self_checked),
+                                          ("world", chk.world_checked)) if on)
+        print(f"all {len(pool)} rows of --candidates pass the collision check ({what}, "
+              f"margin {args.margin:g} m)")
     print(f"selected {len(idx)} of {len(pool)} candidates ({args.method}, {crit}, task rank "
           f"{res.rank}) in {res.time_s:.2f} s; criterion -log det(L^T Cov L): prior "
           f"{res.prior_criterion:.3f} -> {res.criterion:.3f}"
@@ -343,7 +426,18 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--candidates", default=None, metavar="POOL.csv",
                    help="candidate pool: the robot's joint columns + per-sample columns")
     s.add_argument("--write-candidates", type=int_arg("--write-candidates", 1), default=None,
-                   metavar="N", help="instead: draw N candidates (--seed) and write them to --out")
+                   metavar="N", help="instead: draw N collision-free candidates (--seed) and "
+                                     "write them to --out")
+    s.add_argument("--margin", type=real_arg("--margin", 0.0, 1.0, unit=" m"), default=0.0,
+                   help="least distance [m] between collision-sphere surfaces (self and "
+                        "world) of a kept candidate (default 0; sample-poses uses 0.02)")
+    where = s.add_mutually_exclusive_group()
+    where.add_argument("--world", default=None, metavar="SPEC",
+                       help="drop candidates in collision with this world: simplex:seed=S[,...], "
+                            "shelf or a world .npz file")
+    where.add_argument("--scene", default=None, metavar="FILE.yaml",
+                       help="drop candidates in collision with this scene's objects (jwarp or "
+                            "MoveIt scene file, docs/scenes.md)")
     s.add_argument("--n", type=int_arg("--n", 1), default=100,
                    help="configurations to select (default 100)")
     s.add_argument("--method", choices=("greedy", "detmax"), default="detmax")
