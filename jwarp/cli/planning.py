@@ -202,13 +202,13 @@ _OPTION_OF = {"start": "--start", "goal": "--goal", "target": "--target", "frame
               "world": "--world", "warm_start": "--warm-start",
               "n_random_with_warm_start": "--starts", "time_limit": "--time-limit",
               "fallback": "--fallback", "endpoint_margin": "--endpoint-margin",
-              "self_margin": "--self-margin"}
+              "self_margin": "--self-margin", "robot": "--robot"}
 
 
 def _solver_error(command: str, e: Exception) -> CLIError:
     """One line naming the option the solver's error is about (``start[0]: ...`` ->
     ``--start: ...``), else the command (``plan: ...``)."""
-    msg = " ".join(str(e).split())
+    msg = " ".join(str(e).split()).replace("allow_no_collision=True", "--no-collision")
     m = re.match(r"^([a-z_]+)(\[\d+\])?: ", msg)
     if m and m.group(1) in _OPTION_OF:
         return CLIError(f"{_OPTION_OF[m.group(1)]}: {msg[m.end():]}")
@@ -388,7 +388,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     try:
         budget = dict(stop_when_solved=args.stop_when_solved, time_limit=args.time_limit,
                       fallback=args.fallback, endpoint_margin=args.endpoint_margin,
-                      self_margin=args.self_margin)
+                      self_margin=args.self_margin, allow_no_collision=args.no_collision)
         if net is not None:
             opts = PlanOptions(n_starts=args.starts, iterations=args.iterations,
                                n_waypoints=args.waypoints, n_substeps=args.substeps,
@@ -500,11 +500,12 @@ def cmd_ik(args: argparse.Namespace) -> int:
             res = ik(model, args.frame, T, world=world, margin=args.margin,
                      max_iterations=args.iterations, seed=args.seed, kappa=kappa,
                      device=args.device, dtype=dtype_of(args.dtype), warm_start=net,
-                     n_random_with_warm_start=args.starts)
+                     n_random_with_warm_start=args.starts, allow_no_collision=args.no_collision)
         else:
             res = ik(model, args.frame, T, world=world, n_starts=args.starts,
                      margin=args.margin, max_iterations=args.iterations, seed=args.seed,
-                     kappa=kappa, device=args.device, dtype=dtype_of(args.dtype))
+                     kappa=kappa, device=args.device, dtype=dtype_of(args.dtype),
+                     allow_no_collision=args.no_collision)
         written = None
         if args.rerun is not None:
             rec = _Recorder(args.rerun, model, world)
@@ -555,6 +556,11 @@ def add_subcommands(sub: Any) -> None:
         s.add_argument("--rerun", default=None, metavar="FILE.rrd", help="write a rerun recording")
         s.add_argument("--json", action="store_true", help="print JSON")
         s.add_argument("--device", default="cpu", help="Warp device (default cpu; e.g. cuda:0)")
+        s.add_argument("--no-collision", action="store_true",
+                       help="accept a robot without collision spheres (nothing is then checked "
+                            "for collision: get spheres with import-urdf/import-mjcf --spheres "
+                            "fit) or in self-collision at its home configurations; without it "
+                            "either is an error")
 
     s = sub.add_parser("plan", help="plan a collision-free path (gradient descent on U_path)")
     common(s)

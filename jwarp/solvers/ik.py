@@ -52,6 +52,7 @@ from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.world import collision
+from jwarp.world.model_check import check_collision_model
 
 
 @dataclass
@@ -397,6 +398,12 @@ class IKOptions:
         n_random_with_warm_start: random seeds per target (uniform inside the limits, from
             the solver's :attr:`IKSolver.rng`) added after a warm start's seeds, >= 0
             (:class:`IKSolver` ``warm_start``; unused without one).
+        allow_no_collision: solve without a collision model: a robot without collision
+            spheres in a world (every solution is then world-collision-free) or in
+            self-collision at its home configurations is accepted; False (default): either
+            is a ValueError naming the robot and the link pairs
+            (:func:`jwarp.world.model_check.check_collision_model`; CLI ``--no-collision``).
+            Without a world a robot without spheres is plain kinematic IK, no error.
 
     ``validate()`` (also run on construction) raises ValueError/TypeError naming the field.
     """
@@ -421,6 +428,7 @@ class IKOptions:
     q_default: Any = None
     freeze_solved: bool = False
     n_random_with_warm_start: int = 0
+    allow_no_collision: bool = False
 
     def __post_init__(self) -> None:
         self.validate()
@@ -450,7 +458,7 @@ class IKOptions:
         if not 0.0 < lam <= 1.0:
             raise ValueError(f"lam: expected a damping factor in (0, 1], got {self.lam!r}")
         self.lam = lam
-        for name in ("stop_when_solved", "freeze_solved"):
+        for name in ("stop_when_solved", "freeze_solved", "allow_no_collision"):
             v = getattr(self, name)
             if not isinstance(v, (bool, np.bool_)):
                 raise TypeError(f"{name}: expected a bool, got {v!r}")
@@ -525,6 +533,9 @@ class IKSolver:
         elif not isinstance(options, IKOptions):
             raise TypeError(f"options: expected IKOptions, got {type(options).__name__}")
         options = dataclasses.replace(options)  # a copy (validated): later edits do not leak
+        if not options.allow_no_collision:
+            check_collision_model(self.robot, need_spheres=world is not None,
+                                  what="IK in a world")
         self.options = options
         self.device = resolve_device(device)
         self.scalar = scalar_type(np.float64 if dtype is None else dtype)
@@ -849,7 +860,8 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
        seed: int | None = 0,
        device: Any = "cpu", dtype: Any = np.float64,
        callback: Callable[[int, np.ndarray], None] | None = None,
-       warm_start: Any = None, n_random_with_warm_start: int = 0) -> IKResult:
+       warm_start: Any = None, n_random_with_warm_start: int = 0,
+       allow_no_collision: bool = False) -> IKResult:
     """Collision-free IK of ``frame`` onto ``target`` with random multi-starts: one
     :class:`IKSolver` solve.
 
@@ -884,7 +896,8 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
                      damping=damping, kappa=kappa, lam=lam, tol_rho=tol_rho,
                      stop_when_solved=stop_when_solved, check_every=check_every, seed=seed,
                      weights=weights, q_default=q_default,
-                     n_random_with_warm_start=n_random_with_warm_start)
+                     n_random_with_warm_start=n_random_with_warm_start,
+                     allow_no_collision=allow_no_collision)
     finite_as(T, numpy_dtype(scalar_type(dtype)), "target")  # before the seeds' check
     n_seeds = opts.n_starts
     if initial is not None:

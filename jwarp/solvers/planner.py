@@ -40,6 +40,7 @@ import warp as wp
 from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
 from jwarp.core.device import numpy_dtype, scalar_type, tables
 from jwarp.world import collision
+from jwarp.world.model_check import check_collision_model
 from jwarp.kernels import path as path_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
@@ -411,6 +412,11 @@ class PlanOptions:
         converge_tol: relative change of U_l that counts as converged, > 0.
         callback: called as ``callback(iteration, paths (P, W, n_dof))`` after every
             evaluation (e.g. rerun streaming; it reads every path to the host).
+        allow_no_collision: plan without a collision model: a robot without collision
+            spheres (every path is then collision-free) or in self-collision at its home
+            configurations is accepted; False (default): either is a ValueError naming the
+            robot and the link pairs (:func:`jwarp.world.model_check.check_collision_model`;
+            CLI ``--no-collision``).
     """
 
     n_starts: int = 8
@@ -439,6 +445,7 @@ class PlanOptions:
     fallback: str | None = "rrt"
     fallback_after: float = 0.15
     rrt: Any = None
+    allow_no_collision: bool = False
 
     def validate(self, dtype: Any = np.float32) -> None:
         """ValueError/TypeError naming the first bad field; numbers must be finite in the
@@ -489,7 +496,8 @@ class PlanOptions:
         tol = real_number(self.converge_tol, "converge_tol")
         if not (math.isfinite(tol) and tol > 0):
             raise ValueError(f"converge_tol: expected a number > 0, got {self.converge_tol!r}")
-        for name in ("early_stop", "stop_when_solved", "free_via", "converge"):
+        for name in ("early_stop", "stop_when_solved", "free_via", "converge",
+                     "allow_no_collision"):
             _check_flag(getattr(self, name), name)
         seed = self.seed
         if not (seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence))):
@@ -624,6 +632,8 @@ class Planner:
         options.validate(self.npdt)
         o = replace(options, step=float(options.step), max_step=float(options.max_step),
                     margin=real_number(options.margin, "margin"))
+        if not o.allow_no_collision:
+            check_collision_model(self.robot, need_spheres=True, what="planning")
         self.options = o
         self.device = resolve_device(device)
         #: gather the candidates and keep the final paths with kernels (on a GPU); on the
@@ -1102,7 +1112,7 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
          converge: bool = False, converge_tol: float = 1e-3, time_limit: float | None = None,
          fallback: str | None = "rrt", fallback_after: float = 0.15,
          rrt: Any = None, endpoint_margin: float | None = None,
-         self_margin: float = 0.0) -> PlanResult:
+         self_margin: float = 0.0, allow_no_collision: bool = False) -> PlanResult:
     """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path:
     one call of a :class:`Planner` made for it.
 
@@ -1119,7 +1129,8 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
         n_starts, n_waypoints, n_substeps, iterations, step, max_step, weights, eps,
             margin, early_stop, stop_when_solved, check_all_every, free_via, kappa, lam,
             seed, callback, converge, converge_tol, time_limit, fallback, fallback_after,
-            rrt, endpoint_margin, self_margin: the fields of :class:`PlanOptions` (``stop_when_solved`` True and
+            rrt, endpoint_margin, self_margin, allow_no_collision: the fields of
+            :class:`PlanOptions` (``stop_when_solved`` True and
             ``fallback`` "rrt" by default: pass False / None to optimise every start
             until it is feasible without a fallback, as before). ``time_limit`` counts
             from the start of this call.
@@ -1153,7 +1164,8 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
                           lam=lam, seed=seed, callback=callback, converge=converge,
                           converge_tol=converge_tol, time_limit=time_limit, fallback=fallback,
                           fallback_after=fallback_after, rrt=rrt,
-                          endpoint_margin=endpoint_margin, self_margin=self_margin)
+                          endpoint_margin=endpoint_margin, self_margin=self_margin,
+                          allow_no_collision=allow_no_collision)
     planner = Planner(model, world, len(q0), options, device=device, dtype=dtype)
     res = planner._plan(q0, q1, None if isinstance(initial, str) else initial, "initial",
                         t_start=t0)

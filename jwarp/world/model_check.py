@@ -1,0 +1,102 @@
+"""Checks of a robot's collision model before planning or IK: no silent empty models.
+
+A planner or IK solver that checks collisions with a robot that has no collision spheres
+would call every path or solution collision-free; a robot whose spheres overlap at its home
+configuration (a collision model that is wrong: spheres fitted to open meshes, a missing
+exclusion) would make every configuration near it infeasible with no reason given. Both are
+errors at construction (:func:`check_collision_model`, used by
+:class:`jwarp.solvers.planner.Planner` and :class:`jwarp.solvers.ik.IKSolver`), unless the
+caller opts out (``allow_no_collision=True``; CLI ``--no-collision``).
+
+jwarp's robot models carry no home or default configuration, so two stand in for it
+(:func:`home_configurations`): the zero configuration projected into the joint limits, and
+the middle of the limits. The self-collision check fails when the robot collides with itself
+at both (the Panda's zero configuration projected into its limits is folded, hand against
+link 5, while the middle of its limits is free, as for every robot shipped with jwarp).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from jwarp.core.limits import project_numpy
+from jwarp.kinematics.fk import fk
+from jwarp.registry import robot as get_robot
+from jwarp.world.collision import collision_pairs
+
+__all__ = ["NO_SPHERES_HINT", "home_configuration", "home_configurations",
+           "home_self_collisions", "check_collision_model"]
+
+#: how to get a collision model (the end of the error messages)
+NO_SPHERES_HINT = ("fit spheres to the robot's collision geometry with `jwarp import-urdf "
+                   "ROBOT.urdf --spheres fit` or `jwarp import-mjcf ROBOT.xml --spheres fit` "
+                   "(API: jwarp.world.spherize)")
+
+
+def home_configuration(robot: Any) -> np.ndarray:
+    """(n_dof,) the robot's home configuration [rad or m]: zero projected into the joint
+    limits (and linear limits, where the robot has them)."""
+    model = get_robot(robot)
+    return project_numpy(model, np.zeros(model.n_dof))
+
+
+def home_configurations(robot: Any) -> list[tuple[str, np.ndarray]]:
+    """``[(label, q (n_dof,))]``: :func:`home_configuration` and the middle of the joint
+    limits (projected into linear limits), the configurations of the self-collision check."""
+    model = get_robot(robot)
+    mid = project_numpy(model, model.joint_limits.mean(axis=1))
+    return [("the zero configuration projected into the limits", home_configuration(model)),
+            ("the middle of the joint limits", mid)]
+
+
+def home_self_collisions(robot: Any, q: Any = None) -> list[tuple[str, str, float]]:
+    """Frame pairs whose spheres overlap at ``q`` (None: :func:`home_configuration`) among
+    the self-collision pairs the robot checks (``RobotModel.allowed_collision_pairs``):
+    ``[(frame_a, frame_b, distance [m] < 0)]``, deepest first (one FK in float64 on the
+    CPU)."""
+    model = get_robot(robot)
+    q = home_configuration(model) if q is None else np.asarray(q, np.float64)
+    pairs = collision_pairs(model)
+    if len(pairs) == 0:
+        return []
+    sf, sp, sr = model.sphere_arrays()
+    T = fk(model, q[None], device="cpu", dtype=np.float64)[0]
+    x = np.einsum("sij,sj->si", T[sf, :3, :3], sp) + T[sf, :3, 3]
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = np.linalg.norm(x[i] - x[j], axis=1) - sr[i] - sr[j]
+    worst: dict[tuple[int, int], float] = {}
+    for k in np.flatnonzero(d < 0.0):
+        key = (int(min(sf[i[k]], sf[j[k]])), int(max(sf[i[k]], sf[j[k]])))
+        worst[key] = min(worst.get(key, 0.0), float(d[k]))
+    names = [f.name for f in model.frames]
+    return [(names[a], names[b], v) for (a, b), v in sorted(worst.items(), key=lambda t: t[1])]
+
+
+def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
+                          option: str = "allow_no_collision=True") -> None:
+    """ValueError naming the robot when ``need_spheres`` and it has no collision spheres,
+    or when it is in self-collision at both :func:`home_configurations` (naming the frame
+    pairs and how deep they overlap).
+    ``what``: the work refused (e.g. "planning"); ``option``: the opt-out to name."""
+    model = get_robot(robot)
+    if need_spheres and len(model.spheres) == 0:
+        raise ValueError(f"robot: '{model.name}' has no collision spheres, so {what} would "
+                         f"call everything collision-free; {NO_SPHERES_HINT}, or pass "
+                         f"{option} to work without a collision model")
+    if len(model.spheres) == 0:
+        return
+    found = []
+    for label, q in home_configurations(model):
+        hits = home_self_collisions(model, q)
+        if not hits:
+            return
+        listed = ", ".join(f"'{a}'-'{b}' ({-d * 1e3:.1f} mm deep)" for a, b, d in hits[:4])
+        more = f" and {len(hits) - 4} more pairs" if len(hits) > 4 else ""
+        found.append(f"at {label} {np.round(q, 4).tolist()}: {listed}{more}")
+    raise ValueError(
+        f"robot: '{model.name}' is in self-collision at both of its home configurations, "
+        f"{'; '.join(found)}; its collision model is wrong (spheres reaching outside the "
+        f"links: fit again with a smaller tolerance, or exclude the pairs in "
+        f"self_collision.exclude_pairs), or pass {option} to skip this check")
