@@ -21,6 +21,11 @@ Conventions (see ``docs/robot_schema.md``):
   ``[..., 1]`` = b) [rad, or m for a prismatic joint]; ``kappa_nonlinear`` ``(n_frames,)``
   [rad/(N m)^3] torque-dependent joint compliance: the theta axis of a DH frame bends by
   ``(kappa_theta + kappa_nonlinear tau^2) tau`` (negative = stiffening, as harmonic drives).
+  ``coupling_harmonic`` ``(n_frames, K, 2)`` angle-dependent errors of coupled frames: a
+  DH frame driven by ``u = sum_j c_j q_j`` (raw joint values) moves by
+  ``sum_k a_ik sin(k u) + b_ik cos(k u)`` more (the calibration's ``coupling`` group,
+  ``docs/calibration.md``; applied by the calibration's model evaluation, not yet by the
+  kinematics kernels).
 * SI units: m, rad, kg, N m.
 """
 
@@ -150,6 +155,7 @@ class RobotModel:
     notes: dict[str, str] = field(default_factory=dict)
     harmonic: np.ndarray | None = None  # (n_dof, K, 2) [rad or m]; None: K = 0
     kappa_nonlinear: np.ndarray | None = None  # (n_frames,) rad/(N m)^3
+    coupling_harmonic: np.ndarray | None = None  # (n_frames, K, 2) [rad or m]; None: K = 0
 
     def __post_init__(self) -> None:
         self.gravity = _finite(self.gravity, "gravity")
@@ -162,6 +168,9 @@ class RobotModel:
         if self.kappa_nonlinear is None:
             self.kappa_nonlinear = np.zeros(len(self.frames))
         self.kappa_nonlinear = _finite(self.kappa_nonlinear, "kappa_nonlinear")
+        if self.coupling_harmonic is None:
+            self.coupling_harmonic = np.zeros((len(self.frames), 0, 2))
+        self.coupling_harmonic = _finite(self.coupling_harmonic, "coupling_harmonic")
         validate(self)
 
     # ----------------------------------------------------------------- sizes
@@ -312,6 +321,28 @@ class RobotModel:
         """Whether any joint transmission error (``harmonic``) is nonzero."""
         h = self.harmonic
         return h.shape[1] != 0 and bool(np.any(h))   # shape first: the common K = 0 is cheap
+
+    @property
+    def has_coupling_harmonic(self) -> bool:
+        """Whether any angle-dependent coupled-frame error (``coupling_harmonic``) is nonzero."""
+        h = self.coupling_harmonic
+        return h.shape[1] != 0 and bool(np.any(h))
+
+    def coupled_frame_delta(self, q: np.ndarray, coupling_harmonic: np.ndarray | None = None
+                            ) -> np.ndarray:
+        """(..., n_frames) the extra joint value of every frame from ``coupling_harmonic``
+        (or the given (n_frames, K, 2)): ``sum_k a_ik sin(k u_i) + b_ik cos(k u_i)`` with
+        ``u = coupling_matrix @ q`` of the raw joint values q (..., n_dof) [rad or m]; it is
+        added to theta (d for a prismatic frame)."""
+        h = self.coupling_harmonic if coupling_harmonic is None else np.asarray(
+            coupling_harmonic, np.float64)
+        q = np.asarray(q, np.float64)
+        if h.shape[1] == 0:
+            return np.zeros(q.shape[:-1] + (self.n_frames,))
+        u = q @ self.coupling_matrix.T                      # (..., n_frames)
+        k = np.arange(1, h.shape[1] + 1)
+        ku = u[..., :, None] * k
+        return np.sum(h[:, :, 0] * np.sin(ku) + h[:, :, 1] * np.cos(ku), axis=-1)
 
     def joint_transmission(self, q: np.ndarray, harmonic: np.ndarray | None = None
                            ) -> np.ndarray:
@@ -763,6 +794,15 @@ def validate(model: RobotModel) -> None:
     if np.any(knl[~model.is_dh]):
         raise RobotModelError("kappa_nonlinear: must be 0 on static frames")
     model.kappa_nonlinear = knl
+    ch = _finite(model.coupling_harmonic, "coupling_harmonic")
+    if ch.ndim != 3 or ch.shape[0] != nf or ch.shape[2] != 2:
+        raise RobotModelError(f"coupling_harmonic: expected shape (n_frames={nf}, K, 2), "
+                              f"got {ch.shape}")
+    for i in np.nonzero(np.any(ch != 0, axis=(1, 2)))[0]:
+        if not model.frames[i].coupling:
+            raise RobotModelError(f"coupling_harmonic.{model.frames[i].name}: the frame is "
+                                  f"driven by no joint")
+    model.coupling_harmonic = ch
 
 
 def _check_frame(idx: Any, nf: int, where: str) -> int:
@@ -899,26 +939,32 @@ def _from_dict(doc: Any) -> RobotModel:
     knl = doc.get("kappa_nonlinear")
     if knl is not None:
         knl = _finite(knl, "kappa_nonlinear", (len(frames),))
+    coupled_h = doc.get("coupling_harmonic")
+    if coupled_h is not None:
+        coupled_h = _harmonic_from_doc(coupled_h, [f.name for f in frames],
+                                       "coupling_harmonic", "frame")
     return RobotModel(
         name=name, description=doc.get("description", ""), joints=joints, frames=frames,
         gravity=_finite(doc.get("gravity", [0.0, 0.0, -9.81]), "gravity", (3,)),
         workspace_dim=doc.get("workspace_dim", 3),
         masses=masses, spheres=spheres, capsules=capsules, self_collision=sc,
         end_effectors=eff, linear_limits=lin, kappa=kappa, harmonic=harmonic,
-        kappa_nonlinear=knl, notes={str(k): str(v) for k, v in (doc.get("notes") or {}).items()})
+        kappa_nonlinear=knl, coupling_harmonic=coupled_h, notes={str(k): str(v) for k, v in (doc.get("notes") or {}).items()})
 
 
-def _harmonic_from_doc(value: Any, jnames: list[str]) -> np.ndarray:
+def _harmonic_from_doc(value: Any, jnames: list[str], key: str = "harmonic",
+                       what: str = "joint") -> np.ndarray:
     """``harmonic``: {joint name: [[a_1, b_1], ..., [a_K, b_K]]} (joints left out: zero;
-    lists may differ in length, shorter ones are padded with zeros) -> (n_dof, K, 2)."""
+    lists may differ in length, shorter ones are padded with zeros) -> (n_dof, K, 2);
+    ``coupling_harmonic`` the same keyed by frame name (``key``/``what``)."""
     if not isinstance(value, dict):
-        raise RobotModelError("harmonic: expected an object {joint name: [[a_1, b_1], ...]}")
+        raise RobotModelError(f"{key}: expected an object {{{what} name: [[a_1, b_1], ...]}}")
     rows = {}
     for name, v in value.items():
-        j = _resolve(name, jnames, "harmonic", "joint")
-        a = _finite(v, f"harmonic.{name}")
+        j = _resolve(name, jnames, key, what)
+        a = _finite(v, f"{key}.{name}")
         if a.ndim != 2 or a.shape[1] != 2:
-            raise RobotModelError(f"harmonic.{name}: expected [[a_1, b_1], ..., [a_K, b_K]], "
+            raise RobotModelError(f"{key}.{name}: expected [[a_1, b_1], ..., [a_K, b_K]], "
                                   f"got shape {a.shape}")
         rows[j] = a
     K = max([a.shape[0] for a in rows.values()], default=0)
@@ -970,6 +1016,9 @@ def _to_dict(m: RobotModel) -> dict[str, Any]:
                            for j in range(m.n_dof) if np.any(m.harmonic[j])}
     if np.any(m.kappa_nonlinear):
         doc["kappa_nonlinear"] = lst(m.kappa_nonlinear)
+    if m.has_coupling_harmonic:
+        doc["coupling_harmonic"] = {m.frames[i].name: lst(m.coupling_harmonic[i])
+                                    for i in range(m.n_frames) if np.any(m.coupling_harmonic[i])}
     if m.notes:
         doc["notes"] = dict(m.notes)
     return doc
