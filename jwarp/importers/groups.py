@@ -121,12 +121,15 @@ class GroupResult:
     srdf_collisions: str = "add"
 
 
-def default_end_effectors(model: RobotModel) -> dict[str, int]:
+def default_end_effectors(model: RobotModel, links: Any = None) -> dict[str, int]:
     """``{frame name: frame index}`` of the default end-effectors of ``model``
-    (:func:`jwarp.importers.tips.default_tips`: one per arm, at its tool)."""
+    (:func:`jwarp.importers.tips.default_tips`: one per arm, at its tool); ``links``: the
+    frame names that may be tools (an imported URDF's links; None: every frame)."""
     tips = default_tips(model.frame_names, model.parents.tolist(),
                         [f.coupling for f in model.frames], model.joint_names,
-                        [j.type for j in model.joints])
+                        [j.type for j in model.joints],
+                        [f.kind == "dh" and not f.coupling for f in model.frames],
+                        None if links is None else [n in links for n in model.frame_names])
     return {model.frame_names[i]: i for i in tips}
 
 
@@ -271,7 +274,7 @@ def plan_group(robot: UrdfRobot, options: GroupOptions | None = None, *,
                 eff = {t: t for t in group_chain_tips(srdf, o.group)}
                 res.end_effectors_from = "group chain tips"
         if not eff:
-            eff = {n: n for n in default_end_effectors(model)}
+            eff = {n: n for n in default_end_effectors(model, robot.source.link_frames)}
             res.end_effectors_from = "default rule"
     fnames = model.frame_names
     table = {}

@@ -9,7 +9,8 @@ tips). The rule (:func:`default_tips`), on the frame tree:
    ``jaw``, ``claw`` or the word ``hand`` (``hand_index_joint``), when it is driven only
    by joints that drive a gripper frame (the mimic joints of a finger), or when it is one of two or more prismatic frames without
    moving frames below them that hang from one rigid body (a parallel-jaw gripper).
-   Frozen joints (:func:`jwarp.model.freeze_joints`) are not moving.
+   Frozen joints (:func:`jwarp.model.freeze_joints`) are not moving; a frozen joint
+   named like a gripper joint still ends the tool's body (rule 3).
 2. **Branches.** The *tip* of a branch is a moving, non-gripper frame with no such frame
    below it (the last arm joint). Branches driven by fewer than half the joints of the
    longest one (counted from the root, distinct joints) are dropped: a pan/tilt head or
@@ -19,7 +20,8 @@ tips). The rule (:func:`default_tips`), on the frame tree:
    whose name has the best of the words ``tcp``, ``grasp*``, ``tool<N>``,
    ``ee``/``eef``/``effector``, ``flange``, ``gripper``, ``hand`` (ties: a leaf of the
    body first, then the deepest, then by name); with none of them, the frame reached by
-   following the body from the tip while it does not branch.
+   following the body from the tip while it does not branch. Only links are tools
+   (not the ``<joint>_origin`` helper frames of the URDF import).
 
 Panda: ``panda_hand_tcp`` (the fingers are gripper joints, fixed or not). Baxter:
 ``left_gripper`` and ``right_gripper`` (the 1-joint head is dropped). UR10: ``tool0``.
@@ -51,7 +53,9 @@ def tool_rank(name: str) -> int | None:
 
 def default_tips(names: Sequence[str], parents: Sequence[int],
                  couplings: Sequence[Sequence[tuple[int, float]]],
-                 joint_names: Sequence[str], joint_types: Sequence[str]) -> list[int]:
+                 joint_names: Sequence[str], joint_types: Sequence[str],
+                 frozen: Sequence[bool] | None = None,
+                 tools: Sequence[bool] | None = None) -> list[int]:
     """Frame indices of the default end-effectors (module docstring), in frame order.
 
     Args:
@@ -59,6 +63,11 @@ def default_tips(names: Sequence[str], parents: Sequence[int],
         parents: (n_frames,) parent frame index, -1 for a root.
         couplings: per frame ``[(joint index, coefficient), ...]``; empty: not moving.
         joint_names, joint_types: per joint (``revolute`` / ``prismatic``).
+        frozen: per frame, whether it is a DH frame driven by no joint (a frozen joint);
+            a frozen frame named like a gripper joint and the frames below it are not
+            part of the tool's body (the fingers of a frozen gripper).
+        tools: per frame, whether it may be a tool (an importer passes its links, not
+            the helper frames it adds); None: every frame.
     """
     n = len(names)
     children: list[list[int]] = [[] for _ in range(n)]
@@ -132,19 +141,23 @@ def default_tips(names: Sequence[str], parents: Sequence[int],
         while stack:
             i = stack.pop()
             body.append(i)
-            stack.extend(c for c in children[i] if not moving[c])
+            stack.extend(c for c in children[i] if not moving[c] and not (
+                frozen is not None and frozen[c] and GRIPPER_WORDS.search(names[c])))
         inside = set(body)
-        ranked = [i for i in body if tool_rank(names[i]) is not None]
+        ok = [tools is None or bool(tools[i]) for i in range(n)]
+        ranked = [i for i in body if ok[i] and tool_rank(names[i]) is not None]
         if ranked:
             best = min(ranked, key=lambda i: (tool_rank(names[i]),
                                               any(c in inside for c in children[i]),
                                               -depth[i], names[i]))
         else:
-            best = t
+            best = cur = t
             while True:
-                nxt = [c for c in children[best] if c in inside]
+                nxt = [c for c in children[cur] if c in inside]
                 if len(nxt) != 1:
                     break
-                best = nxt[0]
+                cur = nxt[0]
+                if ok[cur] or not ok[best]:
+                    best = cur
         out.append(best)
     return sorted(set(out))

@@ -608,7 +608,7 @@ def _build(path: str, robot: Any, geometries: list[CollisionGeometry], opt: Urdf
                for g in geometries if g.kind == "sphere"]
     names = [f["name"] for f in frames]
     if opt.end_effectors is None:
-        eff = {names[i]: names[i] for i in document_tips(frames, jdocs)}
+        eff = {names[i]: names[i] for i in document_tips(frames, jdocs, set(links))}
     else:
         eff = {}
         for alias, target in opt.end_effectors.items():
@@ -634,9 +634,11 @@ def _build(path: str, robot: Any, geometries: list[CollisionGeometry], opt: Urdf
                       joint_frames=joint_frames, path=path, urdf_joints=urdf_joints)
 
 
-def document_tips(frames: list[dict[str, Any]], joints: list[dict[str, Any]]) -> list[int]:
+def document_tips(frames: list[dict[str, Any]], joints: list[dict[str, Any]],
+                  links: set[str] | None = None) -> list[int]:
     """:func:`jwarp.importers.tips.default_tips` of a robot document's ``frames`` and
-    ``joints`` (parents, joints referenced by name or index)."""
+    ``joints`` (parents, joints referenced by name or index); ``links``: the frame names
+    that may be tools (None: all)."""
     from jwarp.importers.tips import default_tips
 
     fnames = [f["name"] for f in frames]
@@ -657,8 +659,10 @@ def document_tips(frames: list[dict[str, Any]], joints: list[dict[str, Any]]) ->
                               zip(f["coupled"]["joints"], f["coupled"]["coefficients"])])
         else:
             couplings.append([])
+    frozen = [f.get("kind") == "dh" and not c for f, c in zip(frames, couplings)]
     return default_tips(fnames, parents, couplings, jnames,
-                        [j.get("type", "revolute") for j in joints])
+                        [j.get("type", "revolute") for j in joints], frozen,
+                        None if links is None else [n in links for n in fnames])
 
 
 def _reachable(root: str, children: dict[str, list[Any]]) -> set[str]:

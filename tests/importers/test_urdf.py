@@ -122,7 +122,8 @@ def test_every_link_is_a_frame_and_panda_finger_mimics():
     assert "panda_finger_joint2" not in m.joint_names       # mimic: not actuated
     f2 = m.frames[m.frame_index(imp.source.joint_frames["panda_finger_joint2"])]
     assert f2.coupling == [(m.joint_index("panda_finger_joint1"), 1.0)]
-    assert set(m.end_effectors) == {"panda_hand_tcp", "panda_leftfinger", "panda_rightfinger"}
+    # default end-effector: the tool of the arm, not every leaf link (docs/urdf.md)
+    assert set(m.end_effectors) == {"panda_hand_tcp"}
     # the fingers slide apart by q each: prismatic limits from the URDF
     assert m.joints[m.joint_index("panda_finger_joint1")].type == "prismatic"
 

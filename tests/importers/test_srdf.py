@@ -1,0 +1,180 @@
+"""MoveIt SRDF (jwarp.importers.srdf): the Panda SRDF of example-robot-data read and checked
+against counts taken with xml.etree, disable_collisions into the robot's exclude pairs
+(``import-urdf --srdf``), export -> import round trip of the pairs (``export-urdf`` writes
+the SRDF with the URDF as one set), and malformed SRDFs named by file and element."""
+
+from __future__ import annotations
+
+import json
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+import jwarp
+from jwarp.importers.groups import GroupOptions, plan_group
+from jwarp.importers.robot import example_robot_urdf, load_urdf
+from jwarp.importers.srdf import (SrdfError, group_joints, parse_srdf, read_srdf, srdf_path)
+from jwarp.importers.urdf_export import export_urdf
+
+
+def _panda() -> tuple[str, str]:
+    try:
+        urdf = example_robot_urdf("panda_description/urdf/panda.urdf")
+        srdf = example_robot_urdf("panda_description/srdf/panda.srdf")
+    except ValueError as e:
+        pytest.skip(str(e))
+    return urdf, srdf
+
+
+def _pairs(model) -> set[frozenset[str]]:
+    """Exclude pairs of ``model`` by frame name."""
+    n = model.frame_names
+    return {frozenset((n[a], n[b])) for a, b in model.self_collision.exclude_pairs}
+
+
+def test_read_panda_srdf_matches_etree():
+    _, path = _panda()
+    root = ET.parse(path).getroot()
+    s = read_srdf(path)
+    dc = root.findall("disable_collisions")
+    assert len(s.disable_collisions) == len(dc) > 0
+    assert [(d.link1, d.link2, d.reason) for d in s.disable_collisions] == \
+        [(e.get("link1"), e.get("link2"), e.get("reason")) for e in dc]
+    assert set(s.groups) == {g.get("name") for g in root.findall("group")}
+    arm = root.find("group[@name='arm']")
+    assert s.groups["arm"].joints == [j.get("name") for j in arm.findall("joint")]
+    st = root.find("group_state")
+    assert s.group_states[st.get("name")].values == {
+        j.get("name"): float(j.get("value")) for j in st.findall("joint")}
+    ee = root.find("end_effector")
+    assert [(e.name, e.parent_link) for e in s.end_effectors] == \
+        [(ee.get("name"), ee.get("parent_link"))]
+    # subgroups resolve to the joints of both groups
+    imp = load_urdf(_panda()[0])
+    both = group_joints(s, "arm_and_hand", imp.source.urdf_joints)
+    assert both == s.groups["arm"].joints + s.groups["hand"].joints
+
+
+def test_import_adds_srdf_pairs(tmp_path, capsys):
+    urdf, srdf = _panda()
+    root = ET.parse(srdf).getroot()
+    want = {frozenset((e.get("link1"), e.get("link2"))) for e in root.findall("disable_collisions")}
+    robot = load_urdf(urdf)
+    before = jwarp.robot("arm7")     # any model: the API checks that frames match
+    with pytest.raises(ValueError, match="model: its frames"):
+        plan_group(robot, GroupOptions(srdf=srdf), model=before)
+    # a robot with exclude pairs of its own (as sampled ones): SRDF pairs are added to them
+    own = robot.model.copy()
+    own.self_collision.exclude_pairs = [(0, 14)]      # panda_link0 - panda_rightfinger
+    res = plan_group(robot, GroupOptions(srdf=srdf), model=own)
+    names = robot.model.frame_names
+    assert _pairs(res.model) == want | {frozenset((names[0], names[14]))}
+    assert res.srdf_pairs == len(want) and res.pairs_added == len(want)
+    res = plan_group(robot, GroupOptions(srdf=srdf, srdf_collisions="replace"), model=own)
+    assert _pairs(res.model) == want
+    # end-effectors: the SRDF's <end_effector> parent link
+    ee = root.find("end_effector")
+    assert res.model.end_effectors == {ee.get("name"): names.index(ee.get("parent_link"))}
+    # the CLI says where the pairs came from
+    from jwarp.cli.main import main
+
+    out = tmp_path / "panda.json"
+    assert main(["import-urdf", urdf, "--out", str(out), "--spheres", "none", "--srdf", srdf,
+                 "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["srdf"]["disable_collisions"] == len(want)
+    assert _pairs(jwarp.robot(str(out))) == want
+
+
+def test_export_import_round_trip(tmp_path):
+    urdf, srdf = _panda()
+    model = plan_group(load_urdf(urdf), GroupOptions(srdf=srdf)).model
+    out = tmp_path / "exported.urdf"
+    export_urdf(model, out)
+    written = srdf_path(out)
+    assert written == tmp_path / "exported.srdf" and written.is_file()
+    # reasons: Adjacent exactly where a URDF joint of the exported file joins the links
+    joints = {frozenset((j.find("parent").get("link"), j.find("child").get("link")))
+              for j in ET.parse(out).getroot().findall("joint")}
+    for e in ET.parse(written).getroot().findall("disable_collisions"):
+        pair = frozenset((e.get("link1"), e.get("link2")))
+        assert e.get("reason") == ("Adjacent" if pair in joints else "Never")
+    back = plan_group(load_urdf(out), GroupOptions(srdf=written, srdf_collisions="replace"))
+    assert _pairs(back.model) == _pairs(model) and len(_pairs(model)) > 0
+    # the CLI: export-urdf writes the SRDF beside the URDF; --no-srdf does not
+    from jwarp.cli.main import main
+
+    src = tmp_path / "m.json"
+    model.save(src)
+    assert main(["export-urdf", str(src), "--out", str(tmp_path / "cli.urdf")]) == 0
+    assert (tmp_path / "cli.srdf").read_text() == written.read_text().replace(
+        "exported", "cli")  # same robot, same pairs
+    assert main(["export-urdf", str(src), "--out", str(tmp_path / "none.urdf"),
+                 "--no-srdf"]) == 0
+    assert not (tmp_path / "none.srdf").exists()
+
+
+def test_export_failure_leaves_no_srdf(tmp_path, monkeypatch):
+    import jwarp.importers.urdf_export as ue
+
+    def boom(*a, **k):
+        raise RuntimeError("boom")
+    monkeypatch.setattr(ue, "urdf_text", boom)
+    with pytest.raises(RuntimeError):
+        export_urdf(jwarp.robot("arm7"), tmp_path / "r.urdf")
+    assert os.listdir(tmp_path) == []
+
+
+BAD = [
+    ("<robot name='p'><disable_collisions link1='panda_link0' link2='nope' reason='Never'/>"
+     "</robot>", r"<disable_collisions> \(line 1\) link2: unknown link 'nope'"),
+    ("<robot name='p'><group name='g'><joint name='j9'/></group></robot>",
+     r"<group name=\"g\"> \(line 1\): unknown joint 'j9'"),
+    ("<robot name='p'><group name='a'><group name='b'/></group><group name='b'>"
+     "<group name='a'/></group></robot>", "subgroups form a cycle"),
+    ("<robot name='p'><group_state name='s' group='arm'/></robot>", "unknown group 'arm'"),
+    ("<robot name='p'><group name='g'><joint name='panda_joint1'/></group>"
+     "<group_state name='s' group='g'><joint name='panda_joint1' value='x'/></group_state>"
+     "</robot>", "value 'x' is not one finite number"),
+    ("<robot name='p'><end_effector name='e' parent_link='nope' group='g'/></robot>",
+     "unknown group 'g'|unknown link 'nope'"),
+    ("<robot name='p'><disable_collisions link1='panda_link0'/></robot>",
+     "has no 'link2' attribute"),
+    ("<robot name='p'><group name='g'><joint name='panda_joint1'/><chain/></group></robot>",
+     "<chain> .* has no 'base_link'"),
+    ("<robot name='p'><group name='g'", "not valid XML"),
+    ("<srdf/>", "root element is <srdf>, expected <robot>"),
+]
+
+
+@pytest.mark.parametrize("text,match", BAD, ids=[str(k) for k in range(len(BAD))])
+def test_bad_srdf_names_file_and_element(tmp_path, text, match):
+    urdf, _ = _panda()
+    path = tmp_path / "bad.srdf"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=match) as e:
+        plan_group(load_urdf(urdf), GroupOptions(srdf=path))
+    assert str(path) in str(e.value)
+    assert isinstance(e.value, SrdfError)
+
+
+def test_bad_chain_and_missing_group():
+    urdf, _ = _panda()
+    s = parse_srdf("<robot name='p'><group name='g'><chain base_link='panda_link5' "
+                   "tip_link='panda_link2'/></group></robot>", "x.srdf")
+    imp = load_urdf(urdf)
+    with pytest.raises(ValueError, match=r"x.srdf: <group name=\"g\"> \(line 1\) <chain>: "
+                                         r"tip_link 'panda_link2' is not below base_link"):
+        plan_group(imp, GroupOptions(srdf=s, group="g"))
+    with pytest.raises(ValueError, match=r"group: x.srdf has no <group name=\"h\"> \(its groups: g\)"):
+        plan_group(imp, GroupOptions(srdf=s, group="h"))
+    with pytest.raises(ValueError, match="state: x.srdf has no <group_state name=\"s\">"):
+        plan_group(imp, GroupOptions(srdf=s, joints=["panda_joint1"], state="s"))
+
+
+def test_srdf_path():
+    assert srdf_path("a/b.urdf") == Path("a/b.srdf")
+    assert srdf_path("a/b.URDF") == Path("a/b.srdf")
+    assert srdf_path("a/b.xml") == Path("a/b.xml.srdf")
