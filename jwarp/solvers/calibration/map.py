@@ -44,11 +44,12 @@ from jwarp.solvers.calibration.elastic import (ElasticComponents, effective_kapp
                                                mass_torque_jacobian, nonlinear_b,
                                                torque_jacobian, torque_state)
 from jwarp.solvers.calibration.options import CalibrationOptions
-from jwarp.solvers.calibration.origin import ORIGIN_GROUP, origin_twists, with_static_transforms
-from jwarp.solvers.calibration.params import (KIND_DH, KIND_HARMONIC, KIND_KAPPA,
-                                              KIND_KAPPA_NL, KIND_MASS, KIND_MEAS, KIND_ORIGIN,
-                                              MASS_GROUP, ParameterSpace, parse_groups,
-                                              with_pose_groups)
+from jwarp.solvers.calibration.origin import origin_twists, with_static_transforms
+from jwarp.solvers.calibration.params import (COUPLING_HARM, KIND_COUPLING, KIND_DH,
+                                              KIND_HARMONIC, KIND_KAPPA, KIND_KAPPA_NL,
+                                              KIND_MASS, KIND_MEAS, KIND_ORIGIN, MASS_GROUP,
+                                              ParameterSpace, parse_groups, with_pose_groups)
+from jwarp.solvers.calibration.robust import LOSSES, robust_weights
 from jwarp.solvers.calibration.result import CalibrationResult, build_result
 from jwarp.solvers.calibration.samples import check_samples
 
@@ -185,6 +186,12 @@ class CalibrationProblem:
         device: Warp device of the FK, equilibrium and DH-Jacobian kernels (float64;
             "cpu" default, "cuda:0" for large batches such as the candidate Jacobians of
             :func:`.design.candidate_jacobians`); the rest of the problem is numpy.
+        orders: harmonic orders of the ``harmonic`` and ``coupling`` groups, per group or
+            per joint/frame pattern (see :meth:`ParameterSpace.build`).
+        loss: "linear" (least squares, default), "soft_l1" or "huber": a robust loss on
+            each sample's whitened residual norm (:mod:`.robust`); the prior rows stay
+            Gaussian. loss_scale: where it turns robust [unit of the measurement]
+            (divided by the mean noise sigma into whitened units).
     """
 
     def __init__(self, robot: Any, measurement: Any, q: Any, y: Any, *,
@@ -193,7 +200,9 @@ class CalibrationProblem:
                  frames: Iterable[int | str] | None = None, p_nominal: Any = None,
                  elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
                  tol: float = 1e-12, bound_kappa: bool = False,
-                 covariance: Any = None, device: Any = "cpu") -> None:
+                 covariance: Any = None, device: Any = "cpu",
+                 orders: Mapping[str, int] | None = None, loss: str = "linear",
+                 loss_scale: float | None = None) -> None:
         self.robot = get_robot(robot)
         self.measurement = measurement
         if not hasattr(measurement, "jacobians") or not hasattr(measurement, "obs_names"):
@@ -217,8 +226,20 @@ class CalibrationProblem:
                              f"model, but elastic=False was given")
         self.space = ParameterSpace.build(self.robot, measurement, free, sigma=sigma,
                                           frames=frames, p_nominal=p_nominal,
-                                          bound_kappa=bound_kappa)
+                                          bound_kappa=bound_kappa, orders=orders)
         self.noise = _noise(measurement, noise_sigma)
+        if loss not in LOSSES:
+            raise ValueError(f"loss: expected one of {', '.join(LOSSES)}, got {loss!r}")
+        self.loss = loss
+        #: the robust loss's scale in whitened units (None for the linear loss)
+        self.loss_f: float | None = None
+        if loss != "linear":
+            if loss_scale is None or isinstance(loss_scale, bool) or not (
+                    isinstance(loss_scale, (int, float, np.floating)) and
+                    np.isfinite(loss_scale) and loss_scale > 0):
+                raise ValueError(f"loss_scale: expected a finite number > 0 [unit of the "
+                                 f"measurement] with loss={loss!r}, got {loss_scale!r}")
+            self.loss_f = float(loss_scale) / float(np.mean(self.noise))
         S, m = self.y.shape
         #: (S, m, m) inverse Cholesky factors of ``covariance`` (None: diagonal noise)
         self.whitener = _whitener(covariance, S, m)
@@ -239,12 +260,10 @@ class CalibrationProblem:
                            or np.any(self.robot.kappa_nonlinear))
         self.elastic = bool(elastic)
         self._org_idx = np.nonzero(sp.kind == KIND_ORIGIN)[0]
-        if self._org_idx.size and self.elastic:
-            raise ValueError(f"free: the '{ORIGIN_GROUP}' group needs a rigid problem (the "
-                             f"elastic equilibrium takes the robot's own static transforms): "
-                             f"robot '{self.robot.name}' has nonzero compliances or a "
-                             f"compliance group is free; give elastic=False or calibrate "
-                             f"the origins of a rigid robot")
+        self._cpl_idx = np.nonzero(sp.kind == KIND_COUPLING)[0]
+        #: whether the coupled frames get per-sample rows (``coupling`` group free, or
+        #: the robot has ``coupling_harmonic``)
+        self.coupled = bool(self._cpl_idx.size or self.robot.has_coupling_harmonic)
         self._kin_cache: tuple[bytes, RobotModel] | None = None
         #: the raw joint values and whether the links see other ones (transmission errors)
         self.q_device_raw = self.q_device
@@ -270,11 +289,24 @@ class CalibrationProblem:
         :func:`~jwarp.solvers.calibration.params.with_pose_groups` -, noise_sigma, sigma,
         frames, p_nominal, elastic, lam, max_iter, tol, bound_kappa, covariance)."""
         o = options
-        free = with_pose_groups(measurement, o.free, o.fix) if o.free_poses else o.free
+        p_nominal = o.p_nominal
+        fix = o.fix
+        if o.fix_at:
+            from jwarp.solvers.calibration.result import fixed_params
+
+            p_nominal = fixed_params(measurement, o.fix_at, p_nominal)
+            named = [] if fix is None or (isinstance(fix, str) and not fix.strip()) \
+                else parse_groups(fix)
+            fix = named + [g for g in o.fix_at if g not in named]
+        if o.free_poses:
+            free = with_pose_groups(measurement, o.free, fix)
+        else:
+            free = [g for g in parse_groups(o.free) if g not in (o.fix_at or {})]
         return cls(robot, measurement, q, y, free=free, meta=meta, noise_sigma=o.noise_sigma,
-                   sigma=o.sigma, frames=o.frames, p_nominal=o.p_nominal, elastic=o.elastic,
+                   sigma=o.sigma, frames=o.frames, p_nominal=p_nominal, elastic=o.elastic,
                    lam=o.lam, max_iter=o.max_iter, tol=o.tol, bound_kappa=o.bound_kappa,
-                   covariance=o.covariance)
+                   covariance=o.covariance, orders=o.orders, loss=o.loss,
+                   loss_scale=o.loss_scale)
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -297,21 +329,55 @@ class CalibrationProblem:
         if self.transmission:   # the links see q + dq(q): every launch below uses it
             q_eff = self.robot.joint_transmission(self.q, self.space.harmonic_at(x))
             self.q_device = wp.array(q_eff, dtype=wp.float64, device=self.device)
+        rows = self.coupled_rows(x, dh) if self.coupled else dh
         if self.elastic:
             fm = frame_masses(self.robot, mass) if self._mass_idx.size else None
             knl = self.space.kappa_nonlinear_at(x) if self._knl_idx.size else None
-            frames, rho, conv = signed_equilibrium(self.robot, self.q_device, dh, kap,
+            eq_robot = self.kin_robot_at(x) if self._org_idx.size else self.robot
+            frames, rho, conv = signed_equilibrium(eq_robot, self.q_device, rows, kap,
                                                    self.lam, self.max_iter, self.tol, masses=fm,
                                                    kappa_nl=knl, device=self.device)
         else:
-            frames = K.fk(self.kin_robot_at(x), self.q_device, dh=dh, device=self.device,
+            frames = K.fk(self.kin_robot_at(x), self.q_device, dh=rows, device=self.device,
                           dtype=np.float64, validate=False).numpy()
-            rho = np.broadcast_to(dh, (S,) + dh.shape)
+            rho = np.broadcast_to(rows, (S,) + dh.shape)
             conv = np.ones(S, bool)
         out = ModelState(frames, rho, dh, kap, p, conv, mass)
         self._cache = (key, out)
         self.n_evaluations += 1
         return out
+
+    def q_links(self, x: Any) -> np.ndarray:
+        """(S, n_dof) the joint values the links see at x (transmission errors applied)."""
+        if not self.transmission:
+            return self.q
+        return self.robot.joint_transmission(self.q, self.space.harmonic_at(x))
+
+    def coupling_terms(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(coupling matrix C (n, n_dof), offsets (n,), harmonics h (n, K, 2), coupled
+        angles u = q C^T (S, n)) at x (the robot's where the ``coupling`` group is not free)."""
+        if self._cpl_idx.size:
+            C, off, h = self.space.coupling_at(x)
+        else:
+            C, off, h = (self.robot.coupling_matrix, np.zeros(self.robot.n_frames),
+                         self.robot.coupling_harmonic)
+        return C, off, h, self.q @ C.T
+
+    def coupled_rows(self, x: Any, dh: np.ndarray) -> np.ndarray:
+        """(S, n, 5) per-sample DH rows: ``dh`` with the coupled frames' extra joint value
+        ``(C - C0) q' + offset + sum_k a_k sin(k u) + b_k cos(k u)`` on theta (d for a
+        prismatic frame); the kinematics add ``C0 q'`` themselves."""
+        C, off, h, u = self.coupling_terms(x)
+        delta = self.q_links(x) @ (C - self.robot.coupling_matrix).T + off
+        if h.shape[1]:
+            k = np.arange(1, h.shape[1] + 1)
+            ku = u[..., None] * k
+            delta = delta + np.sum(h[:, :, 0] * np.sin(ku) + h[:, :, 1] * np.cos(ku), axis=-1)
+        rows = np.broadcast_to(dh, (self.n_samples,) + dh.shape).copy()
+        pris = self.robot.frame_is_prismatic
+        rows[:, :, 1] += delta * ~pris
+        rows[:, :, 0] += delta * pris
+        return rows
 
     def kin_robot_at(self, x: Any) -> RobotModel:
         """The robot the kinematics launches see at x: :attr:`kin_robot` with the static
@@ -342,6 +408,8 @@ class CalibrationProblem:
         if not (np.all(st.converged) and np.all(np.isfinite(st.frames))):
             return np.full(self.n_residuals, np.inf)
         r = self.whiten(self.predict(x) - self.y)
+        if self.loss_f is not None:
+            r = r * robust_weights(r, self.loss, self.loss_f)[0][:, None]
         return np.concatenate([r.reshape(-1), self.space.prior_residuals(x)])
 
     def whiten(self, d: np.ndarray) -> np.ndarray:
@@ -389,8 +457,12 @@ class CalibrationProblem:
         kp_f, kp_c = sp.frame[self._kap_idx], sp.column[self._kap_idx]
         # transmission errors act as offsets of the driven frames' joint columns
         n_dh = dh_f.size
-        hq_f, hq_c, hq_w = self._joint_columns()
-        dh_f, dh_c = np.concatenate([dh_f, hq_f]), np.concatenate([dh_c, hq_c])
+        C_x = self.coupling_terms(x)[0] if self._cpl_idx.size else None
+        hq_f, hq_c, hq_w = self._joint_columns(C_x)
+        cf_f = np.unique(sp.frame[self._cpl_idx])
+        cf_c = np.where(self.robot.frame_is_prismatic[cf_f], 0, 1).astype(np.int64)
+        dh_f = np.concatenate([dh_f, hq_f, cf_f])
+        dh_c = np.concatenate([dh_c, hq_c, cf_c])
         knl_f = sp.frame[self._knl_idx]
         if self.elastic:
             st = torque_state(self.robot, frames, rho_full, frame_masses(self.robot, mass))
@@ -404,16 +476,24 @@ class CalibrationProblem:
             kap_eff = effective_kappa(kap, knl, st.tau) if np.any(knl) \
                 else kap
             b_nl = nonlinear_b(comps, st.tau, knl_f) if knl_f.size else None
-            d_dh, d_kap, d_mass = equilibrium_jacobian(jy, dtau, st.tau, kap_eff, comps, dh_f,
-                                                       dh_c, kp_f, kp_c, dtau_m, b_nl)
-            n_m = self._mass_idx.size
-            d_mass, d_knl = d_mass[:, :, :n_m], d_mass[:, :, n_m:]
+            b_org = (self._origin_b(x, frames, st, comps, kap_eff) if self._org_idx.size
+                     else None)
+            extra = [b for b in (b_nl, b_org) if b is not None]
+            d_dh, d_kap, d_mass = equilibrium_jacobian(
+                jy, dtau, st.tau, kap_eff, comps, dh_f, dh_c, kp_f, kp_c, dtau_m,
+                np.concatenate(extra, axis=2) if extra else None)
+            n_m, n_k = self._mass_idx.size, self._knl_idx.size
+            d_org_eq = d_mass[:, :, n_m + n_k:]
+            d_mass, d_knl = d_mass[:, :, :n_m], d_mass[:, :, n_m:n_m + n_k]
         else:
             d_dh = jy[:, :, dh_f, dh_c]
             d_kap = np.zeros((S, m, kp_f.size))
             d_mass = np.zeros((S, m, self._mass_idx.size))
             d_knl = np.zeros((S, m, 0))
-        d_dh, d_joint = d_dh[:, :, :n_dh], d_dh[:, :, n_dh:] @ hq_w   # (S, m, n_dof_h)
+            d_org_eq = None
+        n_hq = hq_f.size
+        d_cf = d_dh[:, :, n_dh + n_hq:]                                # (S, m, F_c)
+        d_dh, d_joint = d_dh[:, :, :n_dh], d_dh[:, :, n_dh:n_dh + n_hq] @ hq_w
         d_harm = self._harmonic_columns(d_joint)
         J = np.zeros((self.n_residuals, sp.size))
         wh = self.whiten
@@ -424,10 +504,94 @@ class CalibrationProblem:
         J[:self.n_data, self._harm_idx] = wh(d_harm).reshape(S * m, -1)
         J[:self.n_data, self._meas_idx] = wh(jp[:, :, sp.column[self._meas_idx]]).reshape(S * m, -1)
         if self._org_idx.size:
-            J[:self.n_data, self._org_idx] = wh(self._origin_columns(x, frames, p)).reshape(
+            d_org = self._origin_columns(x, frames, p)
+            if d_org_eq is not None:
+                d_org = d_org + d_org_eq
+            J[:self.n_data, self._org_idx] = wh(d_org).reshape(S * m, -1)
+        if self._cpl_idx.size:
+            J[:self.n_data, self._cpl_idx] = wh(self._coupling_columns(x, d_cf, cf_f)).reshape(
                 S * m, -1)
+        if self.loss_f is not None:
+            e = self.whiten(self.predict(x) - self.y)                  # (S, m)
+            w, dw = robust_weights(e, self.loss, self.loss_f)
+            Jd = J[:self.n_data].reshape(S, m, -1)
+            eJ = np.einsum("sm,smp->sp", e, Jd)                         # e^T J per sample
+            Jd = w[:, None, None] * Jd + (dw * 2.0 / self.loss_f ** 2)[:, None, None] \
+                * e[:, :, None] * eJ[:, None, :]
+            J[:self.n_data] = Jd.reshape(S * m, -1)
         J[self.n_data + np.arange(self._prior_idx.size), self._prior_idx] = 1.0 / sp.sigma[self._prior_idx]
         return J
+
+    def _coupling_columns(self, x: np.ndarray, d_cf: np.ndarray, cf_f: np.ndarray
+                          ) -> np.ndarray:
+        """(S, m, P_c) dy/d(coupling parameters) from dy/d(joint value) of the coupled
+        frames ``d_cf`` (S, m, F_c) (frames ``cf_f``): the offset 1, a coefficient
+        ``q'_j + h'(u) q_j``, a harmonic ``sin(k u)`` / ``cos(k u)``."""
+        sp = self.space
+        idx = self._cpl_idx
+        C, _, h, u = self.coupling_terms(x)
+        ql = self.q_links(x)
+        S = self.n_samples
+        K = h.shape[1]
+        kk = np.arange(1, K + 1)
+        basis = np.zeros((S, idx.size))
+        for n, pidx in enumerate(idx):
+            i, c = int(sp.frame[pidx]), int(sp.column[pidx])
+            ui = u[:, i]
+            if c == 0:
+                basis[:, n] = 1.0
+            elif c < COUPLING_HARM:
+                j = self.robot.frames[i].coupling[c - 1][0]
+                hp = (np.sum(kk * (h[i, :, 0] * np.cos(np.outer(ui, kk))
+                                   - h[i, :, 1] * np.sin(np.outer(ui, kk))), axis=1)
+                      if K else 0.0)
+                basis[:, n] = ql[:, j] + hp * self.q[:, j]
+            else:
+                k = (c - COUPLING_HARM) // 2 + 1
+                basis[:, n] = np.sin(k * ui) if (c - COUPLING_HARM) % 2 == 0 else np.cos(k * ui)
+        pos = np.searchsorted(cf_f, sp.frame[idx])
+        return d_cf[:, :, pos] * basis[:, None, :]
+
+    def _origin_b(self, x: np.ndarray, frames: np.ndarray, st: Any, comps: Any,
+                  kap_eff: np.ndarray) -> np.ndarray:
+        """(S, K, P_o) ``d w / d origin`` right-hand sides of the elastic equilibrium:
+        an origin parameter of a static frame moves its subtree rigidly by a twist
+        (:func:`.origin.origin_twists`), which changes the torques like a DH entry's
+        twist does (:func:`.elastic.torque_jacobian` with those twists), times the local
+        compliance."""
+        sp = self.space
+        idx = self._org_idx
+        S, n = frames.shape[:2]
+        out = np.zeros((S, comps.size, idx.size))
+        if comps.size == 0:
+            return out
+        kc = np.broadcast_to(np.asarray(kap_eff)[..., comps.frame, comps.axis], (S, comps.size))
+        tw = {}
+        for s in np.unique(sp.frame[idx]):
+            cols = np.nonzero(sp.frame[idx] == s)[0]
+            delta = np.zeros(6)
+            delta[sp.column[idx[cols]]] = x[idx[cols]]
+            par = self.robot.frames[int(s)].parent
+            pf = np.broadcast_to(np.eye(4), (S, 4, 4)) if par is None else frames[:, par]
+            p_s = frames[:, s, :3, 3]
+            t6 = origin_twists(frames[:, s], pf, self.robot.frames[int(s)].transform, delta,
+                               p_s[:, None, :])[:, 0]                 # (S, 6 (v, w), 6 c)
+            v, w = t6[:, :3, :], t6[:, 3:, :]                          # (S, 3, 6)
+            a = v - np.cross(w, p_s[:, :, None], axis=1)               # a = v - w x p_s
+            tw[int(s)] = (a, w)
+        for lo, hi in ((0, 5), (5, 6)):
+            a_all = np.zeros((S, n, 5, 3))
+            w_all = np.zeros((S, n, 5, 3))
+            for s_, (a, w) in tw.items():
+                a_all[:, s_, :hi - lo] = np.swapaxes(a[:, :, lo:hi], 1, 2)
+                w_all[:, s_, :hi - lo] = np.swapaxes(w[:, :, lo:hi], 1, 2)
+            dt = torque_jacobian(self.robot, st, twists=(a_all, w_all),
+                                 rows=(comps.frame, comps.axis))       # (S, K, n, 5)
+            for n_, pidx in enumerate(idx):
+                c = int(sp.column[pidx])
+                if lo <= c < hi:
+                    out[:, :, n_] = kc * dt[:, :, int(sp.frame[pidx]), c - lo]
+        return out
 
     def _origin_columns(self, x: np.ndarray, frames: np.ndarray, p: np.ndarray) -> np.ndarray:
         """(S, m, P_o) dy/d(origin parameters): the twists of the measured frames below
@@ -457,10 +621,13 @@ class CalibrationProblem:
             out[:, :, cols] = dy[:, :, sp.column[idx[cols]]]
         return out
 
-    def _joint_columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _joint_columns(self, coupling: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The DH entries a joint of the ``harmonic`` group drives: frames (E,), columns
         (E,) (theta, or d for a prismatic frame) and the coupling weights (E, J_h) that sum
-        their derivatives into d/dq of the J_h joints (``self._harm_joints``)."""
+        their derivatives into d/dq of the J_h joints (``self._harm_joints``);
+        ``coupling`` (n_frames, n_dof) replaces the robot's coefficients (the ``coupling``
+        group at x)."""
         sp = self.space
         joints = np.unique(sp.frame[self._harm_idx])
         self._harm_joints = joints
@@ -473,7 +640,7 @@ class CalibrationProblem:
                     fr.append(i)
                     co.append(0 if pris[i] else 1)
                     row = np.zeros(joints.size)
-                    row[hit[0]] = c
+                    row[hit[0]] = c if coupling is None else coupling[i, j]
                     wt.append(row)
         return (np.array(fr, np.int64), np.array(co, np.int64),
                 np.array(wt, np.float64).reshape(len(fr), joints.size))
@@ -654,7 +821,9 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
               fix: str | Iterable[str] | None = None, stall_tol: float | None = 1.0,
               callback: Callable[[Progress], Any] | None = None,
               identifiability_tol: float = 1e-2, moved_sigmas: float = 3.0,
-              warn: bool = True) -> CalibrationResult:
+              warn: bool = True, orders: Mapping[str, int] | None = None,
+              loss: str = "linear", loss_scale: float | None = None,
+              fix_at: Mapping[str, Any] | None = None) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples:
     :func:`calibrate_with` with these :class:`CalibrationOptions`.
 
@@ -666,7 +835,7 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
         free, noise_sigma, sigma, frames, p_nominal, x0, initial_guess, n_starts, seed,
             max_nfev, ftol, xtol, gtol, method, elastic, lam, max_iter, tol, bound_kappa,
             covariance, free_poses, fix, stall_tol, callback, identifiability_tol,
-            moved_sigmas, warn: the fields of :class:`CalibrationOptions`. By default the
+            moved_sigmas, warn, orders, loss, loss_scale, fix_at: the fields of :class:`CalibrationOptions`. By default the
             measurement's pose and marker groups (tracker, camera, markers, fixtures) are
             freed as well (``free_poses=False`` or ``fix`` to keep them), and compliances
             stay >= 0 (``bound_kappa``).
@@ -681,7 +850,8 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
         ftol=ftol, xtol=xtol, gtol=gtol, method=method, elastic=elastic, lam=lam,
         max_iter=max_iter, tol=tol, bound_kappa=bound_kappa, covariance=covariance,
         free_poses=free_poses, fix=fix, stall_tol=stall_tol, callback=callback,
-        identifiability_tol=identifiability_tol, moved_sigmas=moved_sigmas, warn=warn)
+        identifiability_tol=identifiability_tol, moved_sigmas=moved_sigmas, warn=warn,
+        orders=orders, loss=loss, loss_scale=loss_scale, fix_at=fix_at)
     return calibrate_with(robot, measurement, q, y, options, meta=meta, t0=t0)
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from jwarp.core.arrays import real_number
 from jwarp.solvers.calibration.params import parse_groups
+from jwarp.solvers.calibration.robust import LOSSES
 
 #: least-squares methods (scipy.optimize.least_squares) the calibration accepts
 METHODS = ("dogbox", "trf")
@@ -60,7 +61,23 @@ class CalibrationOptions:
         noise_sigma: measurement noise std, scalar or one per observation [unit]; None:
             ``measurement.noise``.
         sigma: prior sigma overrides {group: value} (``inf``: no prior; ``mass``: relative
-            to each nominal mass, 0.1 = 10 %).
+            to each nominal mass, 0.1 = 10 %); keys ``"group:pattern"`` set the sigma of
+            the group's parameters whose joint/frame name matches the fnmatch pattern
+            (``{"harmonic:torso_*": 5e-3}``), after the group's own.
+        orders: harmonic orders {group: K} of ``harmonic`` and ``coupling``, or per
+            joint/frame pattern (``{"harmonic:torso_*": 4, "coupling": 3}``); None: the
+            defaults (2 each).
+        loss: "linear" (least squares), "soft_l1" or "huber": a robust loss on each
+            sample's whitened residual norm (:mod:`~jwarp.solvers.calibration.robust`;
+            the prior rows stay Gaussian).
+        loss_scale: the robust loss's scale [unit of the measurement] (required with a
+            robust loss; e.g. 3 noise sigmas).
+        fix_at: {measurement group: value source}: keep these groups fixed at values
+            calibrated before: a :class:`~jwarp.solvers.calibration.result.CalibrationResult`,
+            its ``to_dict()`` (a ``--params-out`` JSON document) or the path of such a
+            file (:func:`~jwarp.solvers.calibration.result.fixed_params`); they replace
+            the groups' ``p_nominal`` and are left out of the free groups (with
+            ``free_poses`` as with ``fix``).
         frames: the calibratable DH frames (names or indices); None: the measured chains.
         p_nominal: measurement parameter prior means; None: the measurement's nominal.
         x0: (P,) first start (None: the prior mean).
@@ -127,6 +144,10 @@ class CalibrationOptions:
     identifiability_tol: float = 1e-2
     moved_sigmas: float = 3.0
     warn: bool = True
+    orders: Mapping[str, int] | None = None
+    loss: str = "linear"
+    loss_scale: float | None = None
+    fix_at: Mapping[str, Any] | None = None
 
     def validate(self) -> None:
         """ValueError/TypeError naming the first bad field."""
@@ -166,3 +187,15 @@ class CalibrationOptions:
             _flag(getattr(self, name), name)
         _number(self.identifiability_tol, "identifiability_tol", 0.0)
         _number(self.moved_sigmas, "moved_sigmas", 0.0, open_lo=True)
+        if self.orders is not None and not isinstance(self.orders, Mapping):
+            raise TypeError(f"orders: expected a mapping {{group: order}}, got "
+                            f"{type(self.orders).__name__}")
+        if self.loss not in LOSSES:
+            raise ValueError(f"loss: expected one of {', '.join(LOSSES)}, got {self.loss!r}")
+        _number(self.loss_scale, "loss_scale", 0.0, open_lo=True, none=True)
+        if self.loss != "linear" and self.loss_scale is None:
+            raise ValueError(f"loss_scale: required with loss={self.loss!r} (the residual "
+                             f"norm where the loss turns robust, unit of the measurement)")
+        if self.fix_at is not None and not isinstance(self.fix_at, Mapping):
+            raise TypeError(f"fix_at: expected a mapping {{group: result or file}}, got "
+                            f"{type(self.fix_at).__name__}")

@@ -21,6 +21,16 @@ non-geometric extras (``docs/nongeometric.md``):
 * ``kappa_nonlinear``: torque-dependent joint compliance [rad/(N m)^3] per DH frame (the
   theta axis bends by ``kappa_theta tau + kappa_nonlinear tau^3``), unbounded (negative =
   stiffening);
+* ``coupling``: per coupled DH frame i on those chains (a frame driven by several joints
+  or by one with a coefficient other than 1, e.g. justin19's passive ``torso_4`` =
+  -(q1 + q2)): its coupling coefficients c_ij (``"<frame>.coupling_<joint>"``, prior
+  mean the robot's), an offset (``"<frame>.coupling_offset"`` [rad, m], left out when
+  the ``theta`` (``d`` for a prismatic frame) group is free: the same entry) and K
+  harmonics of the coupled angle ``u_i = sum_j c_ij q_j`` (raw q):
+  ``dtheta_i = sum_k a_ik sin(k u_i) + b_ik cos(k u_i)`` (``"<frame>.coupling_a<k>"``,
+  ``"<frame>.coupling_b<k>"``, K = :data:`COUPLING_ORDER` or ``orders``; prior mean the
+  robot's ``coupling_harmonic``); one sigma for all of them (rad, or 1 for the
+  dimensionless coefficients);
 
 and per point mass of the robot's mass model (``robot.masses``):
 
@@ -63,9 +73,17 @@ HARMONIC_GROUP = "harmonic"                                # = robot.harmonic en
 KAPPA_NL_GROUP = "kappa_nonlinear"                         # = robot.kappa_nonlinear
 #: the number of harmonics the ``harmonic`` group frees (at least; more if the robot has)
 HARMONIC_ORDER = 2
+COUPLING_GROUP = "coupling"                                # = coupled frames
+#: the number of harmonics of the coupled angle the ``coupling`` group frees
+COUPLING_ORDER = 2
 #: robot parameter groups
 ROBOT_GROUPS = ("theta", "d", "r", "alpha", "beta", "kappa_theta", "kappa_alpha", "kappa_beta",
-                MASS_GROUP, HARMONIC_GROUP, KAPPA_NL_GROUP, ORIGIN_GROUP)
+                MASS_GROUP, HARMONIC_GROUP, KAPPA_NL_GROUP, ORIGIN_GROUP, COUPLING_GROUP)
+#: groups whose harmonic order ``orders`` may set (per group or per joint/frame pattern)
+ORDER_GROUPS = (HARMONIC_GROUP, COUPLING_GROUP)
+#: ``column`` of the ``coupling`` group: 0 the offset, COUPLING_COEF + t the t-th entry of
+#: the frame's coupling list, COUPLING_HARM + 2 (k - 1) + (0 a, 1 b) the k-th harmonic
+COUPLING_COEF, COUPLING_HARM = 1, 1000
 
 #: default prior standard deviations of the robot groups [m, rad, rad/(N m)]; ``mass`` is
 #: relative to each entry's nominal mass [1] (0.1 = 10 %)
@@ -81,10 +99,72 @@ DEFAULT_SIGMA: dict[str, float] = {
     KAPPA_NL_GROUP: 1e-9,
     # joint origin errors: 1 mm and 1 mrad (one sigma for the six entries of a frame)
     ORIGIN_GROUP: 1e-3,
+    # coupled frames: 1e-3 of each coefficient, 1 mrad of offset and harmonic terms
+    COUPLING_GROUP: 1e-3,
 }
 
 KIND_DH, KIND_KAPPA, KIND_MEAS, KIND_MASS, KIND_HARMONIC, KIND_KAPPA_NL = 0, 1, 2, 3, 4, 5
 KIND_ORIGIN = 6
+KIND_COUPLING = 7
+
+
+def coupled_frames(robot: RobotModel, dh_frames: Iterable[int]) -> list[int]:
+    """The DH frames of ``dh_frames`` that are coupled: driven by several joints, or by one
+    joint with a coefficient other than 1 (sorted indices)."""
+    out = []
+    for i in sorted(set(int(i) for i in dh_frames)):
+        c = robot.frames[i].coupling
+        if len(c) > 1 or (len(c) == 1 and c[0][1] != 1.0):
+            out.append(i)
+    return out
+
+
+def split_keyed(mapping: Mapping[str, Any] | None, name: str, valid: Iterable[str]
+                ) -> tuple[dict[str, Any], list[tuple[str, str, Any]]]:
+    """Split {key: value} into per-group entries {group: value} and per-parameter entries
+    [(group, pattern, value)] from keys ``"group:pattern"`` (pattern: fnmatch on the
+    joint/frame part of a parameter name, or on the whole name), in the order given.
+    ValueError naming ``name`` for an unknown group."""
+    whole: dict[str, Any] = {}
+    keyed: list[tuple[str, str, Any]] = []
+    valid = list(valid)
+    for key, v in (mapping or {}).items():
+        g, colon, pat = str(key).partition(":")
+        g, pat = g.strip(), pat.strip()
+        if g not in valid:
+            raise ValueError(f"{name}: unknown parameter group '{g}' (in '{key}'); valid "
+                             f"groups: {', '.join(valid)}")
+        if colon:
+            if not pat:
+                raise ValueError(f"{name}: empty pattern in '{key}' (expected "
+                                 f"'group:joint_or_frame_pattern', e.g. 'harmonic:torso_*')")
+            keyed.append((g, pat, v))
+        else:
+            whole[g] = v
+    return whole, keyed
+
+
+def _matches(param_name: str, pattern: str) -> bool:
+    import fnmatch
+
+    return (fnmatch.fnmatchcase(param_name.split(".", 1)[0], pattern)
+            or fnmatch.fnmatchcase(param_name, pattern))
+
+
+def _check_sigma(v: Any, where: str) -> float:
+    try:
+        fv = float(v)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: expected a number, got {v!r}") from None
+    if not (fv > 0) or math.isnan(fv):
+        raise ValueError(f"{where}: must be > 0 (inf = no prior), got {v!r}")
+    return fv
+
+
+def _check_order(v: Any, where: str) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= v <= 20:
+        raise ValueError(f"{where}: expected an integer harmonic order in [0, 20], got {v!r}")
+    return int(v)
 
 #: measurement groups that hold the poses of the sensors and markers (the calibration
 #: frames ``c`` of the paper): freed by default (:func:`with_pose_groups`), as the
@@ -295,6 +375,9 @@ class ParameterSpace:
         lower, upper: bounds (masses >= 0; compliances >= 0 with ``bound_kappa``; else
             unbounded).
         free_groups: the groups that were freed, in the order given.
+        typical: (P,) the solver's scale of each parameter: its prior sigma, or without a
+            prior the group's default sigma (None: 1), so that switching priors off does
+            not make the solver's first steps absurd (a 1 rad/(N m) compliance step).
     """
 
     robot: RobotModel
@@ -309,12 +392,14 @@ class ParameterSpace:
     lower: np.ndarray
     upper: np.ndarray
     free_groups: list[str]
+    typical: np.ndarray | None = None
 
     # ----------------------------------------------------------------- build
     @classmethod
     def build(cls, robot: RobotModel, measurement: Any, free: str | Iterable[str], *,
               sigma: Mapping[str, float] | None = None, frames: Iterable[int | str] | None = None,
-              p_nominal: np.ndarray | None = None, bound_kappa: bool = False) -> "ParameterSpace":
+              p_nominal: np.ndarray | None = None, bound_kappa: bool = False,
+              orders: Mapping[str, int] | None = None) -> "ParameterSpace":
         """Parameter space of the free groups.
 
         Args:
@@ -326,7 +411,15 @@ class ParameterSpace:
                 ``params.groups``), as a list or comma-separated string.
             sigma: per-group prior sigma overrides {group: sigma}; a measurement group given
                 here replaces its ParamBlock sigmas; ``mass`` is relative to each nominal
-                mass (0.1 = 10 %); ``inf`` removes the prior.
+                mass (0.1 = 10 %); ``inf`` removes the prior. Keys ``"group:pattern"``
+                set the sigma of the group's parameters whose joint/frame part (before
+                the ``.``) or whole name matches the fnmatch ``pattern``
+                (``{"harmonic:torso_*": 5e-3}``); applied after the group's own, in the
+                order given; a pattern that matches nothing is a ValueError.
+            orders: harmonic orders {group: K} of ``harmonic`` and ``coupling`` (defaults
+                :data:`HARMONIC_ORDER` (at least the robot's own K) and
+                :data:`COUPLING_ORDER`), or per joint/frame ``{"harmonic:torso_*": 4}``
+                (0: none for those).
             frames: DH frames whose rows may be calibrated, and static frames whose pose
                 the ``origin`` group frees (default for ``origin``: the static frames
                 preceding a joint frame on the measured chains; default for the DH groups
@@ -357,21 +450,27 @@ class ParameterSpace:
             raise ValueError(f"free: unknown parameter group(s) {bad}; valid groups: "
                              f"{', '.join(valid)}")
         sig = dict(DEFAULT_SIGMA)
-        if sigma is not None:
-            if not isinstance(sigma, Mapping):
-                raise TypeError(f"sigma: expected a mapping {{group: sigma}}, got "
-                                f"{type(sigma).__name__}")
-            for g, v in sigma.items():
-                if g not in valid:
-                    raise ValueError(f"sigma: unknown parameter group '{g}'; valid groups: "
-                                     f"{', '.join(valid)}")
-                try:
-                    fv = float(v)
-                except (TypeError, ValueError):
-                    raise ValueError(f"sigma['{g}']: expected a number, got {v!r}") from None
-                if not (fv > 0) or math.isnan(fv):
-                    raise ValueError(f"sigma['{g}']: must be > 0 (inf = no prior), got {v!r}")
-                sig[g] = fv
+        if sigma is not None and not isinstance(sigma, Mapping):
+            raise TypeError(f"sigma: expected a mapping {{group: sigma}}, got "
+                            f"{type(sigma).__name__}")
+        sig_whole, sig_keyed = split_keyed(sigma, "sigma", valid)
+        for g, v in sig_whole.items():
+            sig[g] = _check_sigma(v, f"sigma['{g}']")
+        sig_keyed = [(g, pat, _check_sigma(v, f"sigma['{g}:{pat}']")) for g, pat, v in sig_keyed]
+        if orders is not None and not isinstance(orders, Mapping):
+            raise TypeError(f"orders: expected a mapping {{group: order}}, got "
+                            f"{type(orders).__name__}")
+        ord_whole, ord_keyed = split_keyed(orders, "orders", ORDER_GROUPS)
+        ord_whole = {g: _check_order(v, f"orders['{g}']") for g, v in ord_whole.items()}
+        ord_keyed = [(g, pat, _check_order(v, f"orders['{g}:{pat}']")) for g, pat, v in ord_keyed]
+        ord_used = [False] * len(ord_keyed)
+
+        def order_of(g: str, owner: str, default: int) -> int:
+            k = ord_whole.get(g, default)
+            for n, (gg, pat, v) in enumerate(ord_keyed):
+                if gg == g and _matches(owner, pat):
+                    k, ord_used[n] = v, True
+            return k
         # which DH frames (and static frames of the origin group)
         static_frames: list[int] | None = None
         if frames is None:
@@ -434,8 +533,9 @@ class ParameterSpace:
                     frm.append(int(robot.masses[e].frame))
                     col.append(int(e))
             elif g == HARMONIC_GROUP:
-                K = max(HARMONIC_ORDER, robot.harmonic.shape[1])
+                K0 = max(ord_whole.get(g, HARMONIC_ORDER), robot.harmonic.shape[1])
                 for j in harmonic_joints(robot, dh_frames):
+                    K = order_of(g, robot.joints[j].name, K0)
                     for k in range(K):
                         for ab in range(2):
                             names.append(f"{robot.joints[j].name}.harmonic_{'ab'[ab]}{k + 1}")
@@ -465,6 +565,37 @@ class ParameterSpace:
                         kind.append(KIND_ORIGIN)
                         frm.append(i)
                         col.append(c)
+            elif g == COUPLING_GROUP:
+                cfr = coupled_frames(robot, dh_frames)
+                if not cfr:
+                    raise ValueError(f"free: group '{COUPLING_GROUP}' selects no frames: no DH "
+                                     f"frame on the measured chains of robot '{robot.name}' is "
+                                     f"coupled (driven by several joints or by a coefficient "
+                                     f"other than 1)")
+                ch = robot.coupling_harmonic
+                for i in cfr:
+                    fname = robot.frames[i].name
+                    offset_group = "d" if robot.frame_is_prismatic[i] else "theta"
+                    entries: list[tuple[str, int, float]] = []
+                    if offset_group not in groups:
+                        entries.append((f"{fname}.{g}_offset", 0, 0.0))
+                    for t, (j, c) in enumerate(robot.frames[i].coupling):
+                        entries.append((f"{fname}.{g}_{robot.joints[j].name}",
+                                        COUPLING_COEF + t, float(c)))
+                    K = order_of(g, fname, ord_whole.get(g, COUPLING_ORDER))
+                    for k in range(K):
+                        for ab in range(2):
+                            entries.append((f"{fname}.{g}_{'ab'[ab]}{k + 1}",
+                                            COUPLING_HARM + 2 * k + ab,
+                                            float(ch[i, k, ab]) if k < ch.shape[1] else 0.0))
+                    for nm, c, v in entries:
+                        names.append(nm)
+                        grp.append(g)
+                        nom.append(v)
+                        sg.append(sig[g])
+                        kind.append(KIND_COUPLING)
+                        frm.append(i)
+                        col.append(c)
             elif g == KAPPA_NL_GROUP:
                 for i in dh_frames:
                     names.append(f"{robot.frames[i].name}.{g}")
@@ -486,13 +617,40 @@ class ParameterSpace:
         if not names:
             raise ValueError(f"free: the groups {groups} select no parameters (no DH frames "
                              f"on the measured chains?)")
+        for n, (g, pat, _) in enumerate(ord_keyed):
+            if not ord_used[n] and g in groups:
+                raise ValueError(f"orders['{g}:{pat}']: the pattern matches no "
+                                 f"{'joint' if g == HARMONIC_GROUP else 'coupled frame'} of "
+                                 f"the '{g}' group")
+        # the typical scale of a parameter without prior: the group's default sigma
+        typical = [s_ if math.isfinite(s_) else math.inf for s_ in sg]
+        for k, g in enumerate(grp):
+            if not math.isfinite(typical[k]):
+                if g == MASS_GROUP:
+                    typical[k] = DEFAULT_SIGMA[MASS_GROUP] * max(nom[k], 1.0)
+                elif g in DEFAULT_SIGMA:
+                    typical[k] = DEFAULT_SIGMA[g]
+                elif kind[k] == KIND_MEAS and math.isfinite(float(block.sigma[col[k]])):
+                    typical[k] = float(block.sigma[col[k]])
+                else:
+                    typical[k] = 1.0
+        for g, pat, v in sig_keyed:
+            hit = [k for k, (gg, nm) in enumerate(zip(grp, names)) if gg == g and _matches(nm, pat)]
+            if not hit:
+                raise ValueError(f"sigma['{g}:{pat}']: the pattern matches no parameter of the "
+                                 f"'{g}' group (is the group free?)")
+            for k in hit:
+                sg[k] = v * nom[k] if (g == MASS_GROUP and math.isfinite(v)) else v
+                if math.isfinite(sg[k]):
+                    typical[k] = sg[k]
         kind_a = np.array(kind, np.int64)
         lower = np.where((kind_a == KIND_KAPPA) & bool(bound_kappa), 0.0, -np.inf)
         lower[kind_a == KIND_MASS] = 0.0
         return cls(robot=robot, p_nominal=pn, names=names, groups=grp,
                    nominal=np.array(nom), sigma=np.array(sg), kind=kind_a,
                    frame=np.array(frm, np.int64), column=np.array(col, np.int64),
-                   lower=lower, upper=np.full(len(names), np.inf), free_groups=groups)
+                   lower=lower, upper=np.full(len(names), np.inf), free_groups=groups,
+                   typical=np.array(typical, np.float64))
 
     # ------------------------------------------------------------- queries
     @property
@@ -509,8 +667,10 @@ class ParameterSpace:
 
     @property
     def scale(self) -> np.ndarray:
-        """(P,) typical scale per parameter: its prior sigma, 1 where there is none."""
-        return np.where(self.has_prior, self.sigma, 1.0)
+        """(P,) typical scale per parameter: its prior sigma; where there is none the
+        group's default sigma (:attr:`typical`), else 1."""
+        fallback = 1.0 if self.typical is None else self.typical
+        return np.where(self.has_prior, self.sigma, fallback)
 
     def index(self, name: str) -> int:
         try:
@@ -580,7 +740,59 @@ class ParameterSpace:
                            kappa_nonlinear=self.kappa_nonlinear_at(x))
         if np.any(self.kind == KIND_ORIGIN):
             out = with_static_transforms(out, self.static_transforms_at(x))
+        if np.any(self.kind == KIND_COUPLING):
+            out = self.with_coupling(out, x)
         return out
+
+    def coupling_at(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The coupled frames at ``x``: (coupling matrix (n_frames, n_dof) with the
+        calibrated coefficients, offsets (n_frames,) [rad or m] added to theta (d for a
+        prismatic frame), coupling harmonics (n_frames, K, 2); the robot's where not
+        free)."""
+        x = self.check(x)
+        rb = self.robot
+        C = rb.coupling_matrix.copy()
+        off = np.zeros(rb.n_frames)
+        m = self.kind == KIND_COUPLING
+        h0 = rb.coupling_harmonic
+        hm = m & (self.column >= COUPLING_HARM)
+        K = max(h0.shape[1], int((self.column[hm] - COUPLING_HARM).max()) // 2 + 1
+                if hm.any() else 0)
+        h = np.zeros((rb.n_frames, K, 2))
+        h[:, :h0.shape[1]] = h0
+        for p in np.nonzero(m)[0]:
+            i, c = int(self.frame[p]), int(self.column[p])
+            if c == 0:
+                off[i] = x[p]
+            elif c < COUPLING_HARM:
+                j = rb.frames[i].coupling[c - COUPLING_COEF][0]
+                C[i, j] = x[p]
+            else:
+                h[i, (c - COUPLING_HARM) // 2, (c - COUPLING_HARM) % 2] = x[p]
+        return C, off, h
+
+    def with_coupling(self, robot: RobotModel, x: Any) -> RobotModel:
+        """``robot`` (a copy of :attr:`robot` with other groups applied) with the
+        ``coupling`` group at ``x``: coefficients in the frames' couplings, offsets in
+        their DH rows, harmonics in ``coupling_harmonic``."""
+        C, off, h = self.coupling_at(x)
+        doc = robot.to_dict()
+        for i in np.unique(self.frame[self.kind == KIND_COUPLING]):
+            fd = doc["frames"][int(i)]
+            joints = [j for j, _ in self.robot.frames[int(i)].coupling]
+            coef = [float(C[i, j]) for j in joints]
+            fd.pop("joint", None)
+            if len(joints) == 1 and coef[0] == 1.0:
+                fd["joint"] = joints[0]
+                fd.pop("coupled", None)
+            else:
+                fd["coupled"] = {"joints": joints, "coefficients": coef}
+            fd["dh"][0 if self.robot.frame_is_prismatic[i] else 1] += float(off[i])
+        doc.pop("coupling_harmonic", None)
+        if h.shape[1] and np.any(h):
+            doc["coupling_harmonic"] = {self.robot.frames[i].name: h[i].tolist()
+                                        for i in range(self.robot.n_frames) if np.any(h[i])}
+        return RobotModel.from_dict(doc)
 
     def static_transforms_at(self, x: Any) -> dict[int, np.ndarray]:
         """{static frame: (4, 4) transform ``T0 @ Trans(v) @ Rot(w)``} of the frames of

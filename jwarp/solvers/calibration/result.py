@@ -59,14 +59,80 @@ def model_frames(robot: RobotModel, q: np.ndarray, *, kappa: Any = None,
     """World frames (S, n_frames, 4, 4) float64 on CPU: elastic equilibrium with ``kappa``
     (default the robot's) when elastic (default: iff kappa or the robot's
     ``kappa_nonlinear`` is nonzero), else rigid FK (both with the robot's joint
-    transmission errors, if any)."""
+    transmission errors, if any, and the angle-dependent errors of coupled frames,
+    ``coupling_harmonic``, as per-sample DH rows)."""
     kap = K.kappa_array(robot, kappa)
+    model = get_robot(robot)
+    dh = None
+    if model.has_coupling_harmonic:
+        qa = np.asarray(q, np.float64)
+        delta = model.coupled_frame_delta(qa)                        # (..., n)
+        dh = np.broadcast_to(model.dh_table, qa.shape[:-1] + model.dh_table.shape).copy()
+        pris = model.frame_is_prismatic
+        dh[..., 1] += delta * ~pris
+        dh[..., 0] += delta * pris
     if elastic is None:
-        elastic = bool(np.any(kap != 0) or np.any(get_robot(robot).kappa_nonlinear))
+        elastic = bool(np.any(kap != 0) or np.any(model.kappa_nonlinear))
     if elastic:
-        return K.fk_elastic(robot, q, kap, lam=lam, max_iter=max_iter, tol=tol, device="cpu",
-                            dtype=np.float64).frames
-    return K.fk(robot, q, device="cpu", dtype=np.float64)
+        return K.fk_elastic(model, q, kap, lam=lam, max_iter=max_iter, tol=tol, dh=dh,
+                            device="cpu", dtype=np.float64).frames
+    return K.fk(model, q, dh=dh, device="cpu", dtype=np.float64)
+
+
+def fixed_params(measurement: Any, fix_at: Mapping[str, Any], p_nominal: Any = None
+                 ) -> np.ndarray:
+    """Measurement parameters (P_meas,) with the groups of ``fix_at`` at values calibrated
+    before (``--fix tracker=cal.json``).
+
+    Args:
+        measurement: the measurement plugin (its ``params``).
+        fix_at: {group: source}; a source is a :class:`CalibrationResult`, its
+            ``to_dict()`` (the ``--params-out`` JSON: its ``measurement_params``), or the
+            path of such a JSON file.
+        p_nominal: (P_meas,) the other values (default: the ParamBlock's nominal).
+
+    Raises:
+        ValueError naming ``fix_at`` (unknown group, unreadable file, a parameter of the
+        group missing from the source).
+    """
+    import json
+    import os
+
+    block = getattr(measurement, "params", None)
+    if block is None:
+        raise ValueError("fix_at: the measurement has no parameters")
+    p = block.nominal.copy() if p_nominal is None else np.array(p_nominal, np.float64)
+    if p.shape != (block.size,):
+        raise ValueError(f"p_nominal: expected shape ({block.size},), got {p.shape}")
+    for g, src in fix_at.items():
+        if g not in block.group_names():
+            raise ValueError(f"fix_at: '{g}' is not a group of the measurement (its groups: "
+                             f"{', '.join(block.group_names())})")
+        where = f"fix_at['{g}']"
+        if isinstance(src, CalibrationResult):
+            values = dict(zip(src.param_names, map(float, src.params)))
+        else:
+            doc = src
+            if isinstance(src, (str, os.PathLike)):
+                try:
+                    with open(src, encoding="utf-8") as fh:
+                        doc = json.load(fh)
+                except (OSError, ValueError) as e:
+                    raise ValueError(f"{where}: cannot read {src}: {e}") from None
+            if not isinstance(doc, Mapping) or not isinstance(
+                    doc.get("measurement_params"), Mapping):
+                raise ValueError(f"{where}: expected a calibration result (its "
+                                 f"'measurement_params'), got {type(doc).__name__}")
+            values = doc["measurement_params"]
+        for k in block.indices(g):
+            name = block.names[k]
+            if name not in values:
+                raise ValueError(f"{where}: the source has no value of '{name}'")
+            v = float(values[name])
+            if not math.isfinite(v):
+                raise ValueError(f"{where}: '{name}' is not finite")
+            p[k] = v
+    return p
 
 
 def predict(robot: Any, measurement: Any, p: Any, q: Any, meta: Mapping[str, Any] | None = None,
