@@ -163,6 +163,25 @@ def test_freeze_rigid_pairs_and_coupled_joints():
             assert any(math.isclose(n.lower, old.lower - c * v) for n in small.linear_limits)
 
 
+def test_freeze_folds_transmission_errors():
+    """A frozen joint with a harmonic transmission error: its frames see value + dq(value);
+    reference: the full robot's FK (with its transmission error) at that value."""
+    robot = jwarp.robot("arm7")
+    h = np.zeros((robot.n_dof, 2, 2))
+    h[2] = [[0.01, -0.02], [0.005, 0.003]]
+    rh = robot.copy(harmonic=h)
+    v = 0.4
+    small = freeze_joints(rh, {robot.joint_names[2]: v})
+    assert small.harmonic.shape == (robot.n_dof - 1, 2, 2) and not small.has_harmonic
+    Q = np.random.default_rng(0).uniform(-1, 1, (10, small.n_dof))
+    Qf = np.insert(Q, 2, v, axis=1)
+    a = np.asarray(jwarp.fk(small, Q, device="cpu"), np.float64)
+    b = np.asarray(jwarp.fk(rh, Qf, device="cpu"), np.float64)
+    c = np.asarray(jwarp.fk(robot, Qf, device="cpu"), np.float64)
+    assert np.abs(b - c).max() > 1e-3            # the error matters ...
+    assert np.abs(a - b).max() < 1e-6            # ... and is kept
+
+
 def test_freeze_errors():
     m = jwarp.robot("arm7")
     with pytest.raises(ValueError, match="values: unknown joint 'nope'"):
