@@ -287,9 +287,10 @@ def cmd_design(args: argparse.Namespace) -> int:
                 from None
         if len(drawn) == 0:
             _warn(drawn.warnings)
+            why = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in drawn.dropped.items() if v)
             raise CLIError(f"--write-candidates: no configuration of {drawn.drawn} draws passed "
-                           f"the collision check (margin {args.margin:g} m); lower --margin or "
-                           f"check the world")
+                           f"the collision check (margin {args.margin:g} m; {why}); lower "
+                           f"--margin or check the world")
         text = configurations_text(model, meas, drawn.q, drawn.meta)
         with AtomicFile(args.out, option="--out") as f, open(f.tmp, "w", encoding="utf-8") as fh:
             fh.write(text)

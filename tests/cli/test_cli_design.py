@@ -14,7 +14,8 @@ from jwarp.solvers.calibration.files import Setup, make_measurement, write_setup
 from jwarp.solvers.calibration.pool import (draw_pool, parse_configurations,
                                             write_configurations)
 from jwarp.solvers.calibration.scenarios import hand_contact_setup
-from pool_helpers import self_colliding
+from jwarp.world import World
+from pool_helpers import ball_colliding, self_colliding
 
 
 @pytest.fixture(scope="module")
@@ -156,6 +157,33 @@ def test_design_pool_world_and_bare_robot(capsys, files, tmp_path):
     assert code == 0, err
     assert "warning: robot 'arm7_bare' has no collision spheres: the pool is NOT checked" in err
     assert "collision check: NONE" in out
+
+
+def test_design_pool_scene_counts(capsys, files, tmp_path):
+    d = files
+    centre, radius = [0.55, 0.0, 1.0], 0.3
+    (tmp_path / "ball.yaml").write_text(
+        f"objects:\n  - {{id: ball, type: sphere, radius: {radius}, "
+        f"pose: {{position: {centre}}}}}\n")
+    code, out, err = run(capsys, ["design", "--setup", d / "justin.json", "--write-candidates",
+                                  60, "--seed", 2, "--scene", tmp_path / "ball.yaml", "--out",
+                                  tmp_path / "s.csv", "--json"])
+    assert code == 0, err
+    doc = json.loads(out)
+    robot = get_robot("justin19")
+    world = World.of_shapes()
+    world.add("ball", "sphere", [radius], centre)
+    ref = draw_pool(robot, justin_tracker_setup(), 60, seed=2, world=world)   # same draws
+    raw = np.concatenate([ref.q, ref.rejected_q])
+    s_bad = self_colliding(robot, raw)
+    w_bad = ball_colliding(robot, raw, centre, radius) & ~s_bad
+    assert doc["world_checked"] and doc["drawn"] == len(raw)
+    assert doc["dropped"]["self_collision"] == int(s_bad.sum())
+    assert doc["dropped"]["world_collision"] == int(w_bad.sum()) > 0
+    q = parse_configurations((tmp_path / "s.csv").read_text(), robot,
+                             make_measurement(robot, justin_tracker_setup())).q
+    assert len(q) == 60 and not (self_colliding(robot, q)
+                                 | ball_colliding(robot, q, centre, radius)).any()
 
 
 def test_design_collision_option_errors(capsys, files, tmp_path):
