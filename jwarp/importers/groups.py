@@ -94,6 +94,10 @@ class GroupOptions:
                     continue
                 if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
                     raise ValueError(f"{key}: {name}: expected a finite number, got {x!r}")
+        if self.state is not None and self.group is None and self.joints is None \
+                and not self.freeze:
+            raise ValueError("state: only with a group, joints or freeze (it gives the values "
+                             "of the locked and frozen joints)")
         if self.lock and self.group is None and self.joints is None:
             raise ValueError("lock: only with a group or joints (the joints outside them are "
                              "locked); to fix a joint without a group use freeze")

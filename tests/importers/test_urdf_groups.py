@@ -276,6 +276,7 @@ def test_cli_group_and_errors(tmp_path, capsys):
         (["--joints", "panda_joint1", "--lock", "panda_joint1=0"], "--lock: joint 'panda_joint1' "
                                                                    "is one of the planned"),
         (["--lock", "panda_joint1=0"], "--lock: only with a group or joints"),
+        (["--srdf", srdf, "--state", "default"], "--state: only with a group, joints or freeze"),
         (["--joints", "panda_joint1", "--lock", "panda_joint2"], "--lock: expected NAME=VALUE"),
         (["--joints", "panda_joint1", "--lock", "panda_joint2=x"], "--lock: panda_joint2: expected"),
         (["--freeze", "panda_finger_joint1=0.5"], "--freeze: panda_finger_joint1=0.5 m is outside"),
