@@ -45,7 +45,6 @@ or fixes (a gripper's fingers in a full MoveIt state) are ignored with one warni
 
 from __future__ import annotations
 
-import json
 import math
 import re
 import warnings
@@ -54,6 +53,7 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.model import RobotModel, frozen_joint_values
 from jwarp.world.primitives import Shape, finite_vector, pose_matrix, quaternion_matrix
 
 __all__ = ["PRIMITIVE_TYPES", "collision_objects", "goal_joint_values", "ignored_joint_names",
@@ -378,8 +378,7 @@ def ignored_joint_names(model: Any, names: Any) -> list[str]:
     link's) name is not a joint name, so it is not ignored."""
     frames = {f.name: f for f in model.frames}
     words = {_first_word(n) for n in [*model.joint_names, *frames, model.name]}
-    notes = getattr(model, "notes", None) or {}
-    frozen = set(json.loads(notes["frozen_joints"])) if notes.get("frozen_joints") else set()
+    frozen = set(frozen_joint_values(model)) if isinstance(model, RobotModel) else set()
     out = []
     for n in names:
         if n in model.joint_names:
