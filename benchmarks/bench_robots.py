@@ -19,8 +19,10 @@ Per robot (a failing step is that row's error, never the end of the benchmark):
 2. **FK**: largest frame position [m] and rotation [rad] difference over ``--fk-configs``
    random configurations against pinocchio (URDF, every body frame of the same name) or
    MuJoCo's ``mj_kinematics`` (MJCF, bodies and sites of the same name).
-3. **home**: the declared home (robot JSON ``home``, if any) else zeros clipped into the
-   limits: free of self-collision (``is_collision_free`` with no world)?
+3. **home**: the declared home (the SRDF group_state of example-robot-data: Panda
+   ``default``, TALOS ``half_sitting``, Baxter ``neutral``) else zeros, clipped into the
+   limits: free of self-collision (``is_collision_free`` with no world)? (The Panda's
+   zeros are no home: its URDF meshes touch there, link5 against the hand, coal: 0 mm.)
 4. **IK**: ``--ik-poses`` targets = FK of the end-effector at random configurations free of
    self-collision; ``jwarp.ik`` (16 starts, self-collision on): solved % and wall time.
    Also the fraction of random configurations free of self-collision (``self-free``).
@@ -74,10 +76,12 @@ class Entry:
     keep: tuple = ()
     note: str = ""
     args: list = field(default_factory=list)
+    home: tuple = ()    # (SRDF path under the robots folder, group_state name)
 
 
 ZOO = [
-    Entry("panda", "erd", "panda_description/urdf/panda.urdf", "panda_hand_tcp"),
+    Entry("panda", "erd", "panda_description/urdf/panda.urdf", "panda_hand_tcp",
+          home=("panda_description/srdf/panda.srdf", "default")),
     Entry("ur3", "erd", "ur_description/urdf/ur3_robot.urdf", "tool0"),
     Entry("ur5", "erd", "ur_description/urdf/ur5_robot.urdf", "tool0"),
     Entry("ur10", "erd", "ur_description/urdf/ur10_robot.urdf", "tool0"),
@@ -86,11 +90,13 @@ ZOO = [
     Entry("z1", "erd", "z1_description/urdf/z1.urdf", "gripperStator"),
     Entry("so100", "erd", "so_arm_description/urdf/so100.urdf", "gripper_origin"),
     Entry("talos_arm", "erd", "talos_data/robots/talos_left_arm.urdf", "wrist_left_ft_tool_link",
-          note="TALOS left arm (the URDF of the sub-chain)"),
+          note="TALOS left arm (the URDF of the sub-chain)",
+          home=("talos_data/srdf/talos.srdf", "half_sitting")),
     Entry("tiago_arm", "erd", "tiago_description/robots/tiago.urdf", "arm_tool_link",
           keep=("arm_",), note="TIAGo: the 7 arm joints (--joints), the rest locked"),
     Entry("baxter", "erd", "baxter_description/urdf/baxter.urdf", "left_gripper",
-          note="whole robot, IK/plan with the left gripper"),
+          note="whole robot, IK/plan with the left gripper",
+          home=("baxter_description/srdf/baxter_manipulation.srdf", "neutral")),
     Entry("ur5e_mjcf", "mjcf", "ur5e_xml", "attachment_site", note="MuJoCo Menagerie UR5e"),
     Entry("robotiq_2f85_mjcf", "mjcf", "robotiq_2f85_xml", "pinch",
           note="MuJoCo Menagerie Robotiq 2F-85 (a gripper)"),
@@ -256,6 +262,46 @@ def sub_chain(path: str, keep: tuple) -> tuple[list[str], dict[str, float]]:
     return kept, locked
 
 
+def home_configuration(e: Entry, m: Any) -> tuple[np.ndarray, str]:
+    """The robot's declared home (its SRDF group_state, joints of the model only; the
+    others at zero) or zeros, clipped into the limits; and where it came from."""
+    import xml.etree.ElementTree as ET
+
+    lim = m.joint_limits
+    q = np.zeros(m.n_dof)
+    where = "zeros"
+    if e.home:
+        srdf, state = e.home
+        root = ET.parse(erd_root() / srdf).getroot()
+        gs = [g for g in root.iter("group_state") if g.get("name") == state]
+        if not gs:
+            raise ValueError(f"{srdf}: no group_state '{state}'")
+        for j in gs[0].iter("joint"):
+            if j.get("name") in m.joint_names:
+                q[m.joint_index(j.get("name"))] = float(j.get("value"))
+        where = f"SRDF '{state}'"
+    return np.clip(q, lim[:, 0], lim[:, 1]), where
+
+
+def colliding_pairs(m: Any, q: np.ndarray, most: int = 4) -> list[str]:
+    """The frame pairs whose spheres overlap at ``q`` (n_dof,) among those the robot
+    checks (``allowed_collision_pairs``), deepest first: "a/b -d mm" (numpy, from FK)."""
+    import jwarp
+
+    f, pos, rad = m.sphere_arrays()
+    T = np.asarray(jwarp.fk(m, q[None], device="cpu", dtype=np.float64))[0][f]
+    x = np.einsum("sij,sj->si", T[:, :3, :3], pos) + T[:, :3, 3]
+    d = np.linalg.norm(x[:, None] - x[None], axis=-1) - rad[:, None] - rad[None]
+    A = np.asarray(m.allowed_collision_pairs)
+    worst: dict[tuple, float] = {}
+    for i, j in zip(*np.nonzero(d < 0)):
+        if i < j and A[f[i], f[j]]:
+            k = tuple(sorted((m.frame_names[f[i]], m.frame_names[f[j]])))
+            worst[k] = min(worst.get(k, 0.0), float(d[i, j]))
+    return [f"{a}/{b} {1e3 * v:.1f} mm" for (a, b), v in sorted(worst.items(),
+                                                                 key=lambda t: t[1])][:most]
+
+
 # ---------------------------------------------------------------------------- FK
 def rot_angle(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
     """Angles [rad] of Ra^T Rb (..., 3, 3) (robust near 0: from the skew part)."""
@@ -417,12 +463,11 @@ def check_robot(e: Entry, args: Any, helps: tuple[str, str], work: str) -> dict:
         else:
             row.update(fk_vs_mujoco(path, m, Q))
         step = "home"
-        lim = m.joint_limits
-        home = getattr(m, "home", None)
-        q_home = (np.asarray(home, np.float64) if home is not None
-                  else np.clip(np.zeros(m.n_dof), lim[:, 0], lim[:, 1]))
+        q_home, row["home"] = home_configuration(e, m)
         row["home_free"] = bool(is_collision_free(m, q_home[None], None, 0.0,
                                                   dtype=np.float64)[0])
+        if not row["home_free"]:
+            row["home_collisions"] = colliding_pairs(m, q_home)
         step = "self-free"
         Qs = random_configurations(m, args.free_samples, rng_seed + 1)
         free = is_collision_free(m, Qs, None, 0.0, dtype=np.float64)
@@ -511,7 +556,8 @@ def table(rows: list[dict]) -> str:
         bits = []
         if r.get("error"):
             bits.append(f"ERROR {r['error']}")
-        for k in ("fit_note", "warning", "sub_chain", "plan_pair", "plan_reason", "fk_ref"):
+        for k in ("fit_note", "warning", "sub_chain", "home", "home_collisions", "plan_pair",
+                  "plan_reason", "fk_ref"):
             if r.get(k) and not (k == "fk_ref" and r[k] == "pinocchio"):
                 bits.append(f"{k}: {r[k]}")
         if r.get("import_warnings"):
