@@ -137,11 +137,12 @@ def default_end_effectors(model: RobotModel, links: Any = None) -> dict[str, int
     return {model.frame_names[i]: i for i in tips}
 
 
-def load_srdf(srdf: str | os.PathLike | Srdf, robot: UrdfRobot) -> Srdf:
+def load_srdf(srdf: str | os.PathLike | Srdf, robot: UrdfRobot, states: Any = None) -> Srdf:
     """The SRDF (read if a path), checked against the URDF of ``robot`` (every link,
-    joint and group it names exists): SrdfError naming the file and the element."""
+    joint and group it names exists; of the group states, those named in ``states``, None:
+    all): SrdfError naming the file and the element."""
     s = srdf if isinstance(srdf, Srdf) else read_srdf(srdf)
-    check_srdf(s, set(robot.source.link_frames), set(robot.source.urdf_joints))
+    check_srdf(s, set(robot.source.link_frames), set(robot.source.urdf_joints), states)
     return s
 
 
@@ -164,7 +165,8 @@ def plan_group(robot: UrdfRobot, options: GroupOptions | None = None, *,
         raise ValueError("model: its frames are not those of the imported robot")
     urdf_joints = robot.source.urdf_joints
     names = model.joint_names
-    srdf = None if o.srdf is None else load_srdf(o.srdf, robot)
+    srdf = None if o.srdf is None else load_srdf(o.srdf, robot,
+                                                  [] if o.state is None else [o.state])
 
     def actuated(name: str, key: str) -> str:
         """The model joint a URDF joint name stands for (ValueError naming ``key``)."""
@@ -185,7 +187,8 @@ def plan_group(robot: UrdfRobot, options: GroupOptions | None = None, *,
 
     # ---- the planned joints
     if o.group is not None:
-        group = [urdf_joints[j] for j in group_joints(srdf, o.group, urdf_joints)]
+        group = [urdf_joints[j] for j in group_joints(srdf, o.group, urdf_joints)
+                 if j in urdf_joints]          # not the SRDF's virtual joints
         planned = list(dict.fromkeys(j.actuated for j in group if j.actuated is not None))
         planned = [j for j in planned if j in names]
         if not planned:
@@ -201,8 +204,8 @@ def plan_group(robot: UrdfRobot, options: GroupOptions | None = None, *,
         j = model.joints[model.joint_index(name)]
         if o.state is not None:
             st = srdf.state(o.state)
-            if name in st.values:
-                return st.values[name], "state"
+            if name in st:
+                return st[name], "state"
         return min(max(0.0, j.lower), j.upper), "default"
 
     frozen: dict[str, float] = {}

@@ -2,8 +2,9 @@
 
 Read (:func:`read_srdf`): ``<group>`` (``<joint>``, ``<link>``, ``<chain base_link
 tip_link>``, ``<group>`` subgroups), ``<group_state>``, ``<end_effector>`` and
-``<disable_collisions link1 link2 reason>``. Other elements (``virtual_joint``,
-``passive_joint``, ``link_sphere_approximation``, ...) are skipped. :func:`check_srdf`
+``<disable_collisions link1 link2 reason>``; ``<virtual_joint>`` names (a floating base)
+are accepted where a joint is named (and are no joint of the robot). Other elements
+(``passive_joint``, ``link_sphere_approximation``, ...) are skipped. :func:`check_srdf`
 checks every name against the URDF; :func:`group_joints` resolves a group to the URDF's
 joints as MoveIt does (a ``<link>`` adds the joint whose child it is; a chain the joints
 from ``base_link`` down to ``tip_link``; subgroups recursively).
@@ -62,11 +63,13 @@ class SrdfEndEffector:
 
 @dataclass
 class SrdfGroupState:
-    """One ``<group_state name group>``: ``values`` ``{joint: value}`` [rad or m]."""
+    """One ``<group_state name group>``: ``values`` ``{joint: value}`` [rad or m]; a
+    multi-DOF joint (a floating ``virtual_joint``) has a tuple of numbers. ``group`` may be
+    None (pinocchio's SRDFs leave it out)."""
 
     name: str
-    group: str
-    values: dict[str, float] = field(default_factory=dict)
+    group: str | None
+    values: dict[str, float | tuple[float, ...]] = field(default_factory=dict)
     line: int = 0
 
 
@@ -86,17 +89,37 @@ class Srdf:
 
     name: str
     groups: dict[str, SrdfGroup] = field(default_factory=dict)
-    group_states: dict[str, SrdfGroupState] = field(default_factory=dict)
+    group_states: list[SrdfGroupState] = field(default_factory=list)
     end_effectors: list[SrdfEndEffector] = field(default_factory=list)
     disable_collisions: list[SrdfDisabled] = field(default_factory=list)
+    virtual_joints: list[str] = field(default_factory=list)
     path: str = "<srdf>"
 
-    def state(self, name: str) -> SrdfGroupState:
-        """The ``<group_state>`` called ``name``; SrdfError listing the known ones."""
-        if name not in self.group_states:
+    @property
+    def state_names(self) -> list[str]:
+        """The names of the ``<group_state>`` elements, without repeats."""
+        return list(dict.fromkeys(st.name for st in self.group_states))
+
+    def state(self, name: str) -> dict[str, float]:
+        """``{joint: value}`` of every ``<group_state>`` called ``name`` (MoveIt names states
+        per group: ``home`` of the arm and ``home`` of the hand are merged); joints of
+        several values (a floating base) are left out. SrdfError listing the known states,
+        or naming a joint two states of that name give different values."""
+        found = [st for st in self.group_states if st.name == name]
+        if not found:
             raise SrdfError(f"state: {self.path} has no <group_state name=\"{name}\"> (its "
-                            f"states: {', '.join(self.group_states) or 'none'})")
-        return self.group_states[name]
+                            f"states: {', '.join(self.state_names) or 'none'})")
+        out: dict[str, float] = {}
+        line: dict[str, int] = {}
+        for st in found:
+            for j, v in st.values.items():
+                if isinstance(v, tuple):
+                    continue
+                if j in out and out[j] != v:
+                    raise SrdfError(f"state: {self.path}: <group_state name=\"{name}\"> lines "
+                                    f"{line[j]} and {st.line} give joint '{j}' different values")
+                out[j], line[j] = v, st.line
+        return out
 
 
 # ------------------------------------------------------------------ reading
@@ -170,7 +193,7 @@ def _parse(root: Any, path: str) -> Srdf:
             out.groups[name] = g
         elif el.tag == "group_state":
             name = _attr(el, "name", path)
-            st = SrdfGroupState(name=name, group=_attr(el, "group", path), line=el.sourceline)
+            st = SrdfGroupState(name=name, group=el.get("group"), line=el.sourceline)
             for sub in el:
                 if not isinstance(sub.tag, str) or sub.tag != "joint":
                     continue
@@ -180,19 +203,18 @@ def _parse(root: Any, path: str) -> Srdf:
                     vals = [float(x) for x in text.split()]
                 except ValueError:
                     vals = []
-                if len(vals) != 1 or not math.isfinite(vals[0]):
+                if not vals or not all(math.isfinite(v) for v in vals):
                     raise SrdfError(f"{path}: <group_state name=\"{name}\"> joint '{jn}' "
-                                    f"(line {sub.sourceline}): value '{text}' is not one "
-                                    f"finite number")
-                st.values[jn] = vals[0]
-            if name in out.group_states:   # MoveIt keys states by (group, name); jwarp by name
-                raise SrdfError(f"{path}: <group_state name=\"{name}\"> (line {el.sourceline}) "
-                                f"is defined twice (also line {out.group_states[name].line})")
-            out.group_states[name] = st
+                                    f"(line {sub.sourceline}): value '{text}' is not finite "
+                                    f"numbers")
+                st.values[jn] = vals[0] if len(vals) == 1 else tuple(vals)
+            out.group_states.append(st)
         elif el.tag == "end_effector":
             out.end_effectors.append(SrdfEndEffector(
                 name=_attr(el, "name", path), parent_link=_attr(el, "parent_link", path),
                 group=el.get("group"), parent_group=el.get("parent_group"), line=el.sourceline))
+        elif el.tag == "virtual_joint":
+            out.virtual_joints.append(_attr(el, "name", path))
         elif el.tag == "disable_collisions":
             out.disable_collisions.append(SrdfDisabled(
                 link1=_attr(el, "link1", path), link2=_attr(el, "link2", path),
@@ -205,11 +227,15 @@ def _parse(root: Any, path: str) -> Srdf:
     return out
 
 
-def check_srdf(srdf: Srdf, links: set[str] | list[str], joints: set[str] | list[str]) -> None:
+def check_srdf(srdf: Srdf, links: set[str] | list[str], joints: set[str] | list[str],
+               states: Any = None) -> None:
     """SrdfError naming the file, the element and its line for every name of ``srdf`` that
-    is not a URDF link (``links``) or joint (``joints``, fixed ones included) or group, and
-    for a group whose subgroups form a cycle."""
-    links, joints = set(links), set(joints)
+    is not a URDF link (``links``), joint (``joints``, fixed ones included; or a
+    ``<virtual_joint>`` of the SRDF) or group, and
+    for a group whose subgroups form a cycle. ``states``: the names of the group states
+    to check (None: all); a state's joints of several values (a floating base) are not
+    checked."""
+    links, joints = set(links), set(joints) | set(srdf.virtual_joints)
     p = srdf.path
 
     def need(name: str, known: set[str], what: str, where: str) -> None:
@@ -230,13 +256,16 @@ def check_srdf(srdf: Srdf, links: set[str] | list[str], joints: set[str] | list[
                 raise SrdfError(f"{p}: {where}: unknown subgroup '{s}' (groups: "
                                 f"{', '.join(srdf.groups)})")
         _subgroups(srdf, g.name, ())
-    for st in srdf.group_states.values():
+    for st in srdf.group_states:
+        if states is not None and st.name not in states:
+            continue
         where = f"<group_state name=\"{st.name}\"> (line {st.line})"
-        if st.group not in srdf.groups:
+        if st.group is not None and st.group not in srdf.groups:
             raise SrdfError(f"{p}: {where}: unknown group '{st.group}' (groups: "
                             f"{', '.join(srdf.groups) or 'none'})")
-        for j in st.values:
-            need(j, joints, "joint", where)
+        for j, v in st.values.items():
+            if not isinstance(v, tuple):
+                need(j, joints, "joint", where)
     for e in srdf.end_effectors:
         where = f"<end_effector name=\"{e.name}\"> (line {e.line})"
         need(e.parent_link, links, "link", f"{where} parent_link")

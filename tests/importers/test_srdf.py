@@ -46,7 +46,7 @@ def test_read_panda_srdf_matches_etree():
     arm = root.find("group[@name='arm']")
     assert s.groups["arm"].joints == [j.get("name") for j in arm.findall("joint")]
     st = root.find("group_state")
-    assert s.group_states[st.get("name")].values == {
+    assert s.state(st.get("name")) == {
         j.get("name"): float(j.get("value")) for j in st.findall("joint")}
     ee = root.find("end_effector")
     assert [(e.name, e.parent_link) for e in s.end_effectors] == \
@@ -137,7 +137,7 @@ BAD = [
     ("<robot name='p'><group_state name='s' group='arm'/></robot>", "unknown group 'arm'"),
     ("<robot name='p'><group name='g'><joint name='panda_joint1'/></group>"
      "<group_state name='s' group='g'><joint name='panda_joint1' value='x'/></group_state>"
-     "</robot>", "value 'x' is not one finite number"),
+     "</robot>", "value 'x' is not finite numbers"),
     ("<robot name='p'><end_effector name='e' parent_link='nope' group='g'/></robot>",
      "unknown group 'g'|unknown link 'nope'"),
     ("<robot name='p'><disable_collisions link1='panda_link0'/></robot>",
@@ -155,7 +155,7 @@ def test_bad_srdf_names_file_and_element(tmp_path, text, match):
     path = tmp_path / "bad.srdf"
     path.write_text(text)
     with pytest.raises(ValueError, match=match) as e:
-        plan_group(load_urdf(urdf), GroupOptions(srdf=path))
+        plan_group(load_urdf(urdf), GroupOptions(srdf=path, joints=["panda_joint1"], state="s"))
     assert str(path) in str(e.value)
     assert isinstance(e.value, SrdfError)
 
@@ -178,3 +178,33 @@ def test_srdf_path():
     assert srdf_path("a/b.urdf") == Path("a/b.srdf")
     assert srdf_path("a/b.URDF") == Path("a/b.srdf")
     assert srdf_path("a/b.xml") == Path("a/b.xml.srdf")
+
+
+def test_group_states_as_moveit_and_pinocchio_write_them(tmp_path):
+    """States of one name in several groups are merged (MoveIt names states per group);
+    pinocchio's SRDFs leave out ``group`` and give the floating base 7 numbers; a state
+    is checked when it is used."""
+    urdf, _ = _panda()
+    path = tmp_path / "s.srdf"
+    path.write_text("""<robot name="panda">
+      <group name="arm"><joint name="panda_joint1"/><joint name="panda_joint2"/></group>
+      <group name="hand"><joint name="panda_finger_joint1"/></group>
+      <group_state name="home" group="arm"><joint name="panda_joint2" value="-0.5"/></group_state>
+      <group_state name="home" group="hand"><joint name="panda_finger_joint1" value="0.02"/>
+      </group_state>
+      <group_state name="pin"><joint name="root_joint" value="0 0 1 0 0 0 1"/>
+        <joint name="panda_joint2" value="0.25"/></group_state>
+      <group_state name="other" group="arm"><joint name="nope" value="1"/></group_state>
+    </robot>""")
+    s = read_srdf(path)
+    assert s.state("home") == {"panda_joint2": -0.5, "panda_finger_joint1": 0.02}
+    assert s.state("pin") == {"panda_joint2": 0.25}
+    imp = load_urdf(urdf)
+    res = plan_group(imp, GroupOptions(srdf=path, joints=["panda_joint1"], state="home"))
+    assert res.frozen["panda_joint2"] == -0.5 and res.frozen["panda_finger_joint1"] == 0.02
+    assert res.source["panda_joint3"] == "default" and res.frozen["panda_joint3"] == 0.0
+    res = plan_group(imp, GroupOptions(srdf=path, joints=["panda_joint1"], state="pin"))
+    assert res.frozen["panda_joint2"] == 0.25
+    with pytest.raises(ValueError, match=r"<group_state name=\"other\"> \(line 9\): unknown "
+                                         r"joint 'nope'"):
+        plan_group(imp, GroupOptions(srdf=path, joints=["panda_joint1"], state="other"))

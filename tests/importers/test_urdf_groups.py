@@ -35,8 +35,18 @@ BAXTER = "baxter_description/urdf/baxter.urdf"
 
 def fk_error(path: str, model, values: dict[str, float], n: int = 30, seed: int = 0) -> float:
     """Largest |FK - pinocchio FK| over every link frame of ``model`` at ``n`` random
-    configurations of its joints, pinocchio's other joints at ``values`` (by name)."""
-    pm = pin.buildModelFromUrdf(path, mimic=True)
+    configurations of its joints, pinocchio's other joints at ``values`` (by name); mimic
+    joints as the URDF says (``multiplier * value + offset``, read here with xml.etree;
+    pinocchio loads them as free joints: its ``mimic=True`` refuses TALOS)."""
+    import xml.etree.ElementTree as ET
+
+    mimic = {}
+    for j in ET.parse(path).getroot().findall("joint"):
+        el = j.find("mimic")
+        if el is not None:
+            mimic[j.get("name")] = (el.get("joint"), float(el.get("multiplier", 1.0)),
+                                    float(el.get("offset", 0.0)))
+    pm = pin.buildModelFromUrdf(path)
     pd = pm.createData()
     rng = np.random.default_rng(seed)
     lim = model.joint_limits
@@ -47,12 +57,17 @@ def fk_error(path: str, model, values: dict[str, float], n: int = 30, seed: int 
     assert len(links) > 10
     err = 0.0
     for k in range(n):
+        def value(name: str) -> float:
+            if name in model.joint_names:
+                return Q[k, model.joint_index(name)]
+            if name in mimic:
+                src, mult, off = mimic[name]
+                return mult * value(src) + off
+            return values[name]
         q = pin.neutral(pm)
         for i in range(1, pm.njoints):
             j, name = pm.joints[i], pm.names[i]
-            if j.nq == 0:
-                continue
-            v = Q[k, model.joint_index(name)] if name in model.joint_names else values[name]
+            v = value(name)
             if j.nq == 1:
                 q[j.idx_q] = v
             else:
@@ -84,6 +99,32 @@ def test_group_from_srdf_equals_pinocchio():
     assert m.notes["planning_group"] == "arm"
 
 
+def test_talos_arm_chain_group_with_half_sitting_state():
+    """A real SRDF chain group (TALOS ``l_arm``: torso_2_link -> wrist_left_ft_tool_link) with
+    the ``half_sitting`` state (which also holds the 7 values of the floating
+    ``root_joint``, left out): FK of the 7-joint arm equals pinocchio's FK of the full URDF
+    with every other joint at its state value."""
+    urdf = _erd("talos_data/robots/talos_full_v2.urdf")
+    srdf = _erd("talos_data/srdf/talos.srdf")
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(srdf).getroot()
+    state = {j.get("name"): [float(x) for x in j.get("value").split()]
+             for j in root.find("group_state[@name='half_sitting']").findall("joint")}
+    res = plan_group(load_urdf(urdf), GroupOptions(srdf=srdf, group="l_arm",
+                                                   state="half_sitting"))
+    m = res.model
+    assert m.joint_names == [f"arm_left_{k}_joint" for k in range(1, 8)]
+    for name, v in res.frozen.items():       # the state's value where it has one, else 0
+        if res.source[name] == "state":
+            assert state[name] == [v]
+        else:
+            assert name not in state and v == 0.0
+    assert sum(s == "state" for s in res.source.values()) >= 20
+    assert m.end_effectors == {"wrist_left_ft_tool_link": m.frame_index("wrist_left_ft_tool_link")}
+    assert fk_error(urdf, m, res.frozen, n=10) < 1e-12
+
+
 def test_chain_group_tip_is_the_end_effector(tmp_path):
     urdf = _erd(PANDA)
     srdf = tmp_path / "chain.srdf"
@@ -109,9 +150,7 @@ def test_joint_subset_of_baxter_equals_pinocchio():
     # the others: the lock values, else 0 clipped into the limits
     values = {n: lock.get(n, min(max(0.0, lo), hi))
               for n, (lo, hi) in zip(full.joint_names, full.joint_limits) if n not in left}
-    values["r_gripper_r_finger_joint"] = -values["r_gripper_l_finger_joint"]  # mimics (-1)
-    values["l_gripper_r_finger_joint"] = -values["l_gripper_l_finger_joint"]
-    assert res.frozen == {n: v for n, v in values.items() if n in full.joint_names}
+    assert res.frozen == values
     assert fk_error(urdf, m, values) < 1e-12
     # default end-effector of the left arm only: the right arm is now fixed
     assert list(m.end_effectors) == ["left_gripper"]
@@ -124,7 +163,7 @@ def test_frozen_fingers_panda():
     assert m.n_dof == 7 and "panda_finger_joint1" not in m.joint_names
     assert m.frame_names == full.frame_names              # frames and indices kept
     # finger 2 mimics finger 1: both at 0.03
-    assert fk_error(urdf, m, {"panda_finger_joint1": 0.03, "panda_finger_joint2": 0.03}) < 1e-12
+    assert fk_error(urdf, m, {"panda_finger_joint1": 0.03}) < 1e-12
     assert frozen_joint_values(m) == {"panda_finger_joint1": 0.03}
     # on import: --freeze NAME (no value: 0 clipped into [0, 0.04])
     res = plan_group(load_urdf(urdf), GroupOptions(freeze={"panda_finger_joint1": None}))
