@@ -21,7 +21,11 @@ extra ``jwarp[mjcf]``), so includes, defaults, ``<compiler angle>``, ``<frame>``
 * active ``<equality><joint>`` constraints ``q1 - ref1 = c0 + c1 (q2 - ref2)`` (polycoef
   with ``c2 = c3 = c4 = 0``) make ``joint1`` a coupled joint driven by ``joint2`` (chains
   resolved); a nonlinear polynomial or a joint fixed to a constant (no ``joint2``) is
-  unsupported;
+  unsupported (an error naming it);
+* the other active equality constraints (``<connect>``, ``<weld>``, ``<tendon>``, ``<flex>``,
+  ...: the loop closures of linkages such as the Robotiq 2F-85's) cannot be imported: they
+  are dropped with an :class:`MjcfWarning` naming each of them (and listed in the robot's
+  ``notes["dropped_equalities"]``); the joints they would tie move independently;
 * sites become static frames (named after the site) on their body;
 * body mass and ``ipos`` become point masses;
 * geoms with ``contype | conaffinity != 0`` on bodies other than the world body are the
@@ -38,6 +42,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -57,6 +62,11 @@ INSTALL = "pip install jwarp[mjcf] (or pip install mujoco)"
 
 class MjcfError(ValueError):
     """A malformed or unsupported MJCF file; the message names the file and the element."""
+
+
+class MjcfWarning(UserWarning):
+    """Something of an MJCF file the import leaves out (equality constraints other than
+    linear joint couplings); the message names the file and the elements."""
 
 
 @dataclass
@@ -177,6 +187,15 @@ def build(m: Any, path: str, opt: MjcfOptions) -> UrdfImport:
 
     # ---- joint equalities -> couplings: drive[j] = (source joint, coefficient, offset)
     coupled: dict[int, tuple[int, float, float]] = {}
+    dropped = [_equality_text(mujoco, m, e) for e in range(m.neq)
+               if int(m.eq_type[e]) != EQ_JOINT and bool(m.eq_active0[e])]
+    if dropped:
+        warnings.warn(f"{path}: {len(dropped)} equality constraint"
+                      f"{'s' if len(dropped) > 1 else ''} cannot be imported and "
+                      f"{'are' if len(dropped) > 1 else 'is'} dropped: {'; '.join(dropped)} "
+                      f"(jwarp imports only linear <joint> couplings; the loops these close "
+                      f"are not enforced, their joints move independently)", MjcfWarning,
+                      stacklevel=4)
     for e in range(m.neq):
         if int(m.eq_type[e]) != EQ_JOINT or not bool(m.eq_active0[e]):
             continue
@@ -334,10 +353,31 @@ def build(m: Any, path: str, opt: MjcfOptions) -> UrdfImport:
         "joints": jdocs, "frames": frames, "masses": masses, "spheres": spheres,
         "end_effectors": eff,
         "notes": {"source": os.path.abspath(path),
-                  "importer": "jwarp.importers.mjcf (docs/urdf.md, MJCF)"},
+                  "importer": "jwarp.importers.mjcf (docs/urdf.md, MJCF)",
+                  **({"dropped_equalities": "; ".join(dropped)} if dropped else {})},
     }
     return UrdfImport(document=doc, geometries=geometries, link_frames=link_frames,
                       joint_frames=joint_frames, path=path)
+
+
+def _equality_text(mujoco: Any, m: Any, e: int) -> str:
+    """``<connect> 'name' (body1 'a', body2 'b')`` of equality constraint ``e``."""
+    t = int(m.eq_type[e])
+    try:
+        kind = mujoco.mjtEq(t).name.removeprefix("mjEQ_").lower()
+    except ValueError:
+        kind = f"type {t}"
+    name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_EQUALITY, e)
+    objtype = int(m.eq_objtype[e]) if hasattr(m, "eq_objtype") else int(mujoco.mjtObj.mjOBJ_BODY)
+    what = {int(mujoco.mjtObj.mjOBJ_BODY): "body", int(mujoco.mjtObj.mjOBJ_XBODY): "body",
+            int(mujoco.mjtObj.mjOBJ_SITE): "site", int(mujoco.mjtObj.mjOBJ_TENDON): "tendon",
+            int(mujoco.mjtObj.mjOBJ_JOINT): "joint"}.get(objtype)
+    objs = []
+    for k, obj in enumerate((int(m.eq_obj1id[e]), int(m.eq_obj2id[e])), 1):
+        if what is not None and obj >= 0:
+            objs.append(f"{what}{k} '{mujoco.mj_id2name(m, objtype, obj) or obj}'")
+    label = f"'{name}'" if name else f"#{e}"
+    return f"<{kind}> {label}" + (f" ({', '.join(objs)})" if objs else "")
 
 
 def _geoms(mujoco: Any, m: Any, path: str, bodies: list[str], OG: Any, OM: Any

