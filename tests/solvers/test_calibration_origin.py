@@ -116,17 +116,44 @@ def test_space_selects_joint_origins():
         ParameterSpace.build(bare, cartesian(bare), "origin")
 
 
-def test_origin_group_requires_rigid_problem():
+def test_origin_group_with_the_elastic_model_matches_central_differences():
+    """The origin group on a compliant robot (issue 29): the columns include the shift of
+    the torque equilibrium (leaving it out is visibly wrong), against central differences."""
     robot = origin_arm()
     kappa = np.zeros((robot.n_frames, 3))
-    kappa[robot.is_dh, 2] = 1e-4
-    soft = robot.copy(kappa=kappa)
+    kappa[robot.is_dh, 2] = 3e-4
+    doc = robot.to_dict()
+    doc["masses"] = [{"frame": i, "mass": 2.0, "com": [0.01, 0.0, 0.05]}
+                     for i in np.nonzero(robot.is_dh)[0].tolist()]
+    doc["kappa"] = kappa.tolist()
+    soft = jwarp.RobotModel.from_dict(doc)
+    meas = cartesian(soft)
     q = random_q(soft, 20, 2)
-    with pytest.raises(ValueError, match="'origin' group needs a rigid problem"):
-        CalibrationProblem(soft, cartesian(soft), q, np.zeros((20, 3)), free="origin")
-    # the rigid problem of the same robot is fine
-    CalibrationProblem(soft, cartesian(soft), q, np.zeros((20, 3)), free="origin",
-                       elastic=False)
+    y = np.random.default_rng(5).normal(0.0, 0.3, (20, 3))
+    prob = CalibrationProblem(soft, meas, q, y, free="origin,kappa_theta", tol=1e-15,
+                              max_iter=300)
+    assert prob.elastic
+    sp = prob.space
+    rng = np.random.default_rng(6)
+    x = sp.nominal + 5 * sp.scale * rng.standard_normal(sp.size)
+    x[sp.kind != KIND_ORIGIN] = 3e-4 * rng.uniform(0.5, 1.5, int((sp.kind != KIND_ORIGIN).sum()))
+    J = prob.jacobian(x)
+    org = np.nonzero(sp.kind == KIND_ORIGIN)[0]
+    Jfd = np.empty((J.shape[0], org.size))
+    for n, i in enumerate(org):
+        h = 1e-5
+        xp, xm = x.copy(), x.copy()
+        xp[i] += h
+        xm[i] -= h
+        Jfd[:, n] = (prob.residuals(xp) - prob.residuals(xm)) / (2 * h)
+    norms = np.linalg.norm(Jfd[:prob.n_data], axis=0)
+    rel = np.linalg.norm(J[:, org] - Jfd, axis=0) / np.maximum(norms, 1e-6 * np.median(norms))
+    assert rel.max() < 1e-6, (rel.max(), sp.names[org[int(rel.argmax())]])
+    # the equilibrium's share is not negligible: the rigid columns alone are far off
+    rigid = prob._origin_columns(x, prob.state(x).frames, prob.state(x).p)
+    rigid = prob.whiten(rigid).reshape(prob.n_data, -1)
+    off = np.linalg.norm(rigid - Jfd[:prob.n_data], axis=0) / norms
+    assert off.max() > 1e-3
 
 
 @pytest.mark.parametrize("extra", ["", ",theta,d,tracker,markers"])

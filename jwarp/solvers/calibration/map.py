@@ -787,6 +787,18 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
         x[neg] = 0.0                        # hold the negative ones at the bound
         held |= neg
         c = prob.cost(x)                    # x is feasible now
+        if not np.isfinite(c):
+            # the projected point has no equilibrium (e.g. without priors the unbounded
+            # run went far, and zeroing compliances leaves the rest unstable): go on from
+            # the best point with the held ones at 0, or stop; scipy refuses a start with
+            # non-finite residuals ("Residuals are not finite in the initial point")
+            x = best_x.copy()
+            x[held] = 0.0
+            c = prob.cost(x)
+            if not np.isfinite(c):
+                message += " (the active set stopped: no equilibrium with the compliances " \
+                           "that ended negative held at 0)"
+                break
         if np.isfinite(c) and c <= best_cost:
             best_x, best_cost = x.copy(), c
         if neg.any():
