@@ -510,8 +510,9 @@ def check_robot(e: Entry, args: Any, helps: tuple[str, str], work: str) -> dict:
         row["plan_s"] = time.perf_counter() - t0
         row["plan_found"] = bool(pr.feasible[0])
         row["plan_stage"] = None if pr.stage is None else str(pr.stage[0])
+        row["plan_stop"] = str(pr.stop_reason)
         if not row["plan_found"] and pr.reasons is not None:
-            row["plan_reason"] = str(pr.reasons[0])
+            row["plan_reason"] = f"{pr.reasons[0]} (stopped: {pr.stop_reason})"
     except Exception as err:  # noqa: BLE001 - a row's error, not the benchmark's end
         row["error"] = f"{step}: {type(err).__name__}: {' '.join(str(err).split())[:300]}"
         if args.verbose:
