@@ -21,8 +21,10 @@ Per robot (a failing step is that row's error, never the end of the benchmark):
    MuJoCo's ``mj_kinematics`` (MJCF, bodies and sites of the same name).
 3. **home**: the declared home (the SRDF group_state of example-robot-data: Panda
    ``default``, TALOS ``half_sitting``, Baxter ``neutral``) else zeros, clipped into the
-   limits: free of self-collision (``is_collision_free`` with no world)? (The Panda's
-   zeros are no home: its URDF meshes touch there, link5 against the hand, coal: 0 mm.)
+   limits: free of self-collision (``is_collision_free`` with no world)? And, as an
+   independent reference, the smallest distance between the URDF's own collision meshes
+   (pinocchio + coal) over the link pairs jwarp checks (``home mesh mm``; 0: contact).
+   (Zeros are no home for the Panda or the Kinova: their meshes touch there.)
 4. **IK**: ``--ik-poses`` targets = FK of the end-effector at random configurations free of
    self-collision; ``jwarp.ik`` (16 starts, self-collision on): solved % and wall time.
    Also the fraction of random configurations free of self-collision (``self-free``).
@@ -85,9 +87,12 @@ ZOO = [
     Entry("ur3", "erd", "ur_description/urdf/ur3_robot.urdf", "tool0"),
     Entry("ur5", "erd", "ur_description/urdf/ur5_robot.urdf", "tool0"),
     Entry("ur10", "erd", "ur_description/urdf/ur10_robot.urdf", "tool0"),
-    Entry("kinova", "erd", "kinova_description/robots/kinova.urdf", "j2s6s200_end_effector"),
-    Entry("xarm7", "erd", "xarm_description/urdf/xarm7.urdf", "link_eef"),
-    Entry("z1", "erd", "z1_description/urdf/z1.urdf", "gripperStator"),
+    Entry("kinova", "erd", "kinova_description/robots/kinova.urdf", "j2s6s200_end_effector",
+          home=("kinova_description/srdf/kinova.srdf", "arm_up")),
+    Entry("xarm7", "erd", "xarm_description/urdf/xarm7.urdf", "link_eef",
+          home=("xarm_description/srdf/xarm7.srdf", "home")),
+    Entry("z1", "erd", "z1_description/urdf/z1.urdf", "gripperStator",
+          home=("z1_description/srdf/z1.srdf", "home")),
     Entry("so100", "erd", "so_arm_description/urdf/so100.urdf", "gripper_origin"),
     Entry("talos_arm", "erd", "talos_data/robots/talos_left_arm.urdf", "wrist_left_ft_tool_link",
           note="TALOS left arm (the URDF of the sub-chain)",
@@ -302,6 +307,40 @@ def colliding_pairs(m: Any, q: np.ndarray, most: int = 4) -> list[str]:
                                                                  key=lambda t: t[1])][:most]
 
 
+def mesh_clearance(path: str, m: Any, q: np.ndarray, locked: dict) -> tuple[float, str]:
+    """The smallest distance [mm] between the URDF's own collision geometry (pinocchio +
+    coal, an independent reference) over the link pairs jwarp checks, at ``q``; its pair.
+    Negative or 0: the meshes touch or overlap (0 is coal's answer for any contact)."""
+    import pinocchio as pin
+
+    share = str(erd_root().parents[1])    # package://example-robot-data/... resolves here
+    pm = pin.buildModelFromUrdf(path, mimic=True)
+    gm = pin.buildGeomFromUrdf(pm, path, pin.GeometryType.COLLISION, package_dirs=[share])
+    A = np.asarray(m.allowed_collision_pairs)
+    link = [pm.frames[g.parentFrame].name for g in gm.geometryObjects]
+    for a in range(len(link)):
+        for b in range(a + 1, len(link)):
+            if link[a] in m.frame_names and link[b] in m.frame_names and \
+                    A[m.frame_index(link[a]), m.frame_index(link[b])]:
+                gm.addCollisionPair(pin.CollisionPair(a, b))
+    if not gm.collisionPairs:
+        return float("nan"), "no pair"
+    qp = pin.neutral(pm)
+    for i in range(1, pm.njoints):
+        j, name = pm.joints[i], pm.names[i]
+        v = q[m.joint_index(name)] if name in m.joint_names else locked.get(name, 0.0)
+        if j.nq == 1:
+            qp[j.idx_q] = v
+        elif j.nq == 2:
+            qp[j.idx_q], qp[j.idx_q + 1] = np.cos(v), np.sin(v)
+    pd, gd = pm.createData(), pin.GeometryData(gm)
+    pin.computeDistances(pm, pd, gm, gd, qp)
+    d = [r.min_distance for r in gd.distanceResults]
+    k = int(np.argmin(d))
+    cp = gm.collisionPairs[k]
+    return 1e3 * float(d[k]), f"{link[cp.first]}/{link[cp.second]}"
+
+
 # ---------------------------------------------------------------------------- FK
 def rot_angle(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
     """Angles [rad] of Ra^T Rb (..., 3, 3) (robust near 0: from the skew part)."""
@@ -468,6 +507,9 @@ def check_robot(e: Entry, args: Any, helps: tuple[str, str], work: str) -> dict:
                                                   dtype=np.float64)[0])
         if not row["home_free"]:
             row["home_collisions"] = colliding_pairs(m, q_home)
+        if e.source == "erd" and args.mesh_home:
+            row["home_mesh_mm"], row["home_mesh_pair"] = mesh_clearance(
+                path, m, q_home, row.get("frozen", {}))
         step = "self-free"
         Qs = random_configurations(m, args.free_samples, rng_seed + 1)
         free = is_collision_free(m, Qs, None, 0.0, dtype=np.float64)
@@ -536,6 +578,7 @@ COLUMNS = [("robot", "robot", ""), ("dof", "dof", ""), ("spheres", "spheres", ""
            ("protrusion_m", "protr mm", ""), ("import_s", "import s", ".1f"),
            ("peak_gb", "peak GB", ".2f"), ("fk_pos_err_m", "FK pos", ".1e"),
            ("fk_rot_err_rad", "FK rot", ".1e"), ("home_free", "home free", ""),
+           ("home_mesh_mm", "home mesh mm", ".1f"),
            ("self_free_pct", "self-free %", ".0f"), ("ik_solved_pct", "IK %", ".0f"),
            ("ik_s", "IK s", ".1f"), ("plan_found", "plan", ""), ("plan_s", "plan s", ".1f")]
 
@@ -557,7 +600,8 @@ def table(rows: list[dict]) -> str:
         bits = []
         if r.get("error"):
             bits.append(f"ERROR {r['error']}")
-        for k in ("fit_note", "warning", "sub_chain", "home", "home_collisions", "plan_pair",
+        for k in ("fit_note", "warning", "sub_chain", "home", "home_collisions",
+                  "home_mesh_pair", "plan_pair",
                   "plan_reason", "fk_ref"):
             if r.get(k) and not (k == "fk_ref" and r[k] == "pinocchio"):
                 bits.append(f"{k}: {r[k]}")
@@ -592,6 +636,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--import-arg", action="append", default=None, metavar="ARG",
                     help="extra argument of every import command (repeatable, e.g. "
                          "--import-arg=--tolerance --import-arg=0.02)")
+    ap.add_argument("--no-mesh-home", dest="mesh_home", action="store_false",
+                    help="skip the URDF meshes' clearance at home (pinocchio + coal)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--verbose", action="store_true", help="print tracebacks of failures")
     args = ap.parse_args(argv)
