@@ -7,6 +7,19 @@ Examples::
     jwarp calibrate --robot justin19 --setup run/setup.json --data run/samples.csv \\
         --free theta,d,r,alpha,kappa_theta,kappa_alpha \\
         --calibrate-rows 0:300 --test-rows 300:500 --out run/calibrated.json --json
+    jwarp calibrate --setup run/setup.json --data run/samples.csv \\
+        --free theta,d,r,alpha,kappa_theta,kappa_alpha,harmonic,coupling \\
+        --prior harmonic=1e-3,harmonic:torso_*=5e-3 --order harmonic:torso_*=3 \\
+        --loss soft_l1 --loss-scale 3 --fix tracker=run/first.json --diagnostics
+
+``--prior`` sets prior sigmas (SI units: m, rad, rad/(N m); ``inf``: no prior) per group or
+per joint/frame pattern (``group:pattern``), or reads them from a JSON file
+``{"harmonic:torso_*": 5e-3, ...}``; ``--order`` the harmonic orders of ``harmonic`` and
+``coupling``; ``--loss`` a robust loss on each sample's residual norm, ``--loss-scale``
+in mm (in the measurement's unit when it is not metres); ``--fix GROUP=RESULT.json``
+keeps a measurement group at the values of an earlier ``--params-out``;
+``--diagnostics`` prints the residual diagnostics of docs/calibration.md (correlation
+between end-effectors, residual against joint angles and torques) on the calibration rows.
 
 ``calibrate`` frees the robot groups named by ``--free`` (DH entries, compliances, ``mass``:
 the point masses of the robot's mass model that load its compliant joints; ``--out`` then
@@ -91,6 +104,61 @@ def _stats(err: np.ndarray, scale: float) -> dict[str, float]:
     from jwarp.solvers.calibration import error_stats
 
     return {k: v * scale for k, v in error_stats(err).items()}
+
+
+def _parse_keyed(values: list[str] | None, option: str, kind: type) -> dict[str, Any]:
+    """``--prior``/``--order`` values: ``KEY=VALUE[,KEY=VALUE...]`` items or (``--prior``)
+    JSON files {key: value}; later ones win."""
+    out: dict[str, Any] = {}
+    for v in values or []:
+        if "=" not in v:
+            if kind is int:
+                raise _cli_error(f"{option}: expected GROUP[:PATTERN]=K, got '{v}'")
+            try:
+                with open(v, encoding="utf-8") as fh:
+                    doc = json.load(fh)
+            except (OSError, ValueError) as e:
+                raise _cli_error(f"{option}: '{v}' is neither KEY=SIGMA nor a readable JSON "
+                                 f"file ({e})") from None
+            if not isinstance(doc, dict):
+                raise _cli_error(f"{option}: {v}: expected a JSON object {{key: sigma}}")
+            items = list(doc.items())
+        else:
+            items = []
+            for item in v.split(","):
+                key, eq, val = item.partition("=")
+                if not eq or not key.strip():
+                    raise _cli_error(f"{option}: expected KEY=VALUE items, got '{item}'")
+                items.append((key.strip(), val.strip()))
+        for key, val in items:
+            try:
+                num = kind(val) if not isinstance(val, (int, float)) or kind is float \
+                    else val
+                if kind is int and (isinstance(val, float) or str(val).strip() != str(num)):
+                    raise ValueError
+            except (TypeError, ValueError):
+                raise _cli_error(f"{option}: {key}: expected "
+                                 f"{'an integer' if kind is int else 'a number'}, "
+                                 f"got {val!r}") from None
+            out[str(key)] = num
+    return out
+
+
+def _parse_fix(fix: str | None) -> tuple[str | None, dict[str, str]]:
+    """``--fix`` items ``GROUP`` or ``GROUP=RESULT.json`` -> (the groups, comma-separated,
+    {group: result file})."""
+    if fix is None or not fix.strip():
+        return fix, {}
+    groups, at = [], {}
+    for item in fix.split(","):
+        g, eq, path = item.partition("=")
+        g = g.strip()
+        if eq:
+            if not path.strip():
+                raise _cli_error(f"--fix: expected GROUP=RESULT.json, got '{item}'")
+            at[g] = path.strip()
+        groups.append(g)
+    return ",".join(groups), at
 
 
 def _free_groups(free: str, meas: Any, fix: str | None) -> list[str]:
@@ -271,8 +339,25 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     train_rows, test_rows, both = _rows(args, S)
     train = data.select(train_rows)
     test = data.select(test_rows) if test_rows is not None else None
-    free = _free_groups(args.free, meas, args.fix)
+    fix_groups, fix_at = _parse_fix(args.fix)
+    free = _free_groups(args.free, meas, fix_groups)
     scale, unit = (1000.0, "mm") if meas.unit == "m" else (1.0, meas.unit)
+    priors = _parse_keyed(args.prior, "--prior", float)
+    orders = _parse_keyed(args.order, "--order", int)
+    if fix_at:
+        from jwarp.solvers.calibration.result import fixed_params
+
+        try:
+            fixed_params(meas, fix_at)
+        except ValueError as e:
+            raise _cli_error("--fix: " + str(e).split(": ", 1)[1]) from None
+    if args.loss != "linear":
+        if args.loss_scale is None:
+            raise _cli_error(f"--loss-scale: required with --loss {args.loss} (the residual "
+                             f"norm where the loss turns robust, {unit})")
+        _check_float("--loss-scale", args.loss_scale, unit=f" {unit}")
+        if not args.loss_scale > 0:
+            raise _cli_error(f"--loss-scale: expected a number > 0 {unit}, got {args.loss_scale}")
 
     def table_rows(robot: Any, p: np.ndarray) -> dict[str, dict[str, float]]:
         out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None), scale)}
@@ -297,15 +382,21 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            options = CalibrationOptions(free=free, free_poses=False, n_starts=args.starts,
-                                         seed=args.seed, max_nfev=args.max_nfev, callback=bar,
-                                         covariance=covariance)
+            options = CalibrationOptions(
+                free=free, free_poses=False, n_starts=args.starts, seed=args.seed,
+                max_nfev=args.max_nfev, callback=bar, covariance=covariance,
+                sigma=priors or None, orders=orders or None, loss=args.loss,
+                loss_scale=None if args.loss == "linear" else args.loss_scale / scale,
+                fix_at=fix_at or None)
             res = calibrate_with(model, meas, train.q, train.y, options,
                                  meta=train.meta or None)
         except ValueError as e:
             if str(e).startswith("q, y: "):  # too few rows for the free parameters
                 raise _cli_error("--calibrate-rows: " + str(e).removeprefix("q, y: ").replace(
                     "give more samples", "give more rows")) from None
+            for field, opt in (("sigma", "--prior"), ("orders", "--order")):
+                if str(e).startswith(field):
+                    raise _cli_error(f"{opt}: {e}") from None
             raise
         finally:
             bar.close()
@@ -340,9 +431,20 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         "warnings": input_warnings + fit_warnings,
         "out": args.out, "params_out": args.params_out, "rerun": args.rerun,
     }
+    diag = None
+    if args.diagnostics:
+        from jwarp.solvers.calibration.diagnostics import (format_diagnostics,
+                                                           residual_diagnostics)
+
+        diag = residual_diagnostics(res.robot, meas, res.params, train.q, train.y,
+                                    train.meta or None)
+        summary["diagnostics"] = diag.to_dict(scale)
     if args.json:
         print(dumps(summary, indent=1))
         return 0
+    if diag is not None:
+        print(format_diagnostics(diag, scale, unit))
+        print()
     print(f"calibrated '{model.name}' with '{meas.name}': {len(train)} calibration rows, "
           f"{0 if test is None else len(test)} test rows"
           f"{f' ({both} of them fitted too)' if both else ''}; free: {', '.join(free)}")
@@ -465,9 +567,28 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--free", default="theta", metavar="GROUPS",
                    help="parameter groups to calibrate: theta,d,r,alpha,beta,kappa_theta,"
                         "kappa_alpha,kappa_beta,mass (point masses loading compliant joints; "
-                        "prior 10%% of each mass) (+ measurement groups such as intrinsics)")
+                        "prior 10%% of each mass), harmonic, kappa_nonlinear, origin, "
+                        "coupling (coupled frames: coefficients, offset, harmonics of the "
+                        "coupled angle) (+ measurement groups such as intrinsics)")
     s.add_argument("--fix", default=None, metavar="GROUPS",
-                   help="measurement groups to keep at their setup values (e.g. markers)")
+                   help="measurement groups to keep at their setup values (e.g. markers), "
+                        "or GROUP=RESULT.json at the values of an earlier --params-out "
+                        "(e.g. tracker=cal.json)")
+    s.add_argument("--prior", action="append", default=None, metavar="KEY=SIGMA|FILE.json",
+                   help="prior sigmas [m, rad, rad/(N m); inf: none] per group or per "
+                        "joint/frame pattern (harmonic=1e-3,harmonic:torso_*=5e-3), or a "
+                        "JSON file of them; repeatable")
+    s.add_argument("--order", action="append", default=None, metavar="KEY=K",
+                   help="harmonic orders of the harmonic and coupling groups, per group or "
+                        "pattern (harmonic:torso_*=3,coupling=2); repeatable")
+    s.add_argument("--loss", default="linear", choices=("linear", "soft_l1", "huber"),
+                   help="robust loss on each sample's residual norm (default linear)")
+    s.add_argument("--loss-scale", type=float, default=None, metavar="MM",
+                   help="where the robust loss turns robust [mm; the measurement's unit "
+                        "when not metres], e.g. 3 noise sigmas")
+    s.add_argument("--diagnostics", action="store_true",
+                   help="print residual diagnostics of the calibrated model (correlation "
+                        "between end-effectors, residual vs joint angle and torque)")
     s.add_argument("--calibrate-rows", default=None, metavar="A:B",
                    help="rows used for calibration (default: all rows not in --test-rows)")
     s.add_argument("--test-rows", default=None, metavar="A:B",
@@ -522,8 +643,10 @@ def add_subcommands(sub: Any) -> None:
                    help="effects in the truth outside the calibration model: "
                         "harmonic[:amp=RAD,k=K] (joint transmission errors), "
                         "kappa_nonlinear[:rel=R] (torque-dependent stiffness), "
-                        "kappa_beta[:min=K,max=K] (lateral compliance), comma-separated, or "
-                        "'all' (defaults: docs/nongeometric.md); truth.json carries them")
+                        "kappa_beta[:min=K,max=K] (lateral compliance), "
+                        "coupling[:amp=RAD,k=K] (error of coupled frames), comma-separated, "
+                        "or 'all' (the first three; defaults: docs/nongeometric.md); "
+                        "truth.json carries them")
     s.add_argument("--out", required=True, metavar="FOLDER",
                    help="folder for samples.csv, setup.json and truth.json, replaced as one "
                         "set (its parent folder must exist; its other files are kept)")

@@ -21,6 +21,7 @@ import numpy as np
 import jwarp
 from jwarp.solvers.calibration import calibrate, errors
 from jwarp.solvers.calibration.campaign import justin_tracker_setup, simulate_campaign
+from jwarp.solvers.calibration.diagnostics import residual_diagnostics
 from jwarp.solvers.calibration.files import make_measurement
 
 from devices import requires_cpu
@@ -39,7 +40,7 @@ def _fit(robot, camp, free):
         warnings.simplefilter("ignore")
         res = calibrate(robot, meas, s.q[:N_TRAIN], s.y[:N_TRAIN], free=free, warn=False)
     test = errors(res.robot, meas, res.params, s.q[N_TRAIN:], s.y[N_TRAIN:])
-    return float(test.mean()), res
+    return float(test.mean()), res, meas
 
 
 def test_coupling_group_brings_the_test_error_to_the_reference():
@@ -52,9 +53,9 @@ def test_coupling_group_brings_the_test_error_to_the_reference():
     true_h = camp.true_robot.coupling_harmonic[robot.frame_index("torso_4")]
     amp = np.hypot(true_h[:, 0], true_h[:, 1])
     assert np.all((amp >= 5e-3) & (amp <= 1e-2))
-    e_ref, _ = _fit(robot, ref_camp, GROUPS)
-    e_without, _ = _fit(robot, camp, GROUPS)
-    e_with, res = _fit(robot, camp, GROUPS + ",coupling")
+    e_ref, _, _ = _fit(robot, ref_camp, GROUPS)
+    e_without, res0, meas = _fit(robot, camp, GROUPS)
+    e_with, res, _ = _fit(robot, camp, GROUPS + ",coupling")
     figures = (f"test error [mm]: reference {1e3 * e_ref:.3f}, without the coupling group "
                f"{1e3 * e_without:.3f}, with it {1e3 * e_with:.3f}")
     assert e_with <= 1.10 * e_ref, figures
@@ -62,3 +63,10 @@ def test_coupling_group_brings_the_test_error_to_the_reference():
     v = dict(zip(res.names, res.x))
     fit2 = np.array([v["torso_4.coupling_a2"], v["torso_4.coupling_b2"]])
     assert np.linalg.norm(fit2 - true_h[1]) < 0.3 * np.linalg.norm(true_h[1]), (fit2, true_h[1])
+    # the diagnostics point at the coupled frame before, not after
+    s = camp.samples
+    before = residual_diagnostics(res0.robot, meas, res0.params, s.q[:N_TRAIN], s.y[:N_TRAIN])
+    after = residual_diagnostics(res.robot, meas, res.params, s.q[:N_TRAIN], s.y[:N_TRAIN])
+    assert before.joints[0].frame == "torso_4" and before.joints[0].share > 2 * before.chance
+    share_after = {j.frame: j.share for j in after.joints}["torso_4"]
+    assert share_after < 0.5 * before.joints[0].share, (share_after, before.joints[0].share)
