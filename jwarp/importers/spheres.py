@@ -1,94 +1,107 @@
-"""Collision spheres fitted to a link's geometry (meshes and primitives), with a bounded
-one-sided error.
+"""Collision spheres fitted to a link's geometry (meshes and primitives): spheres centred
+inside the part's solid, each reaching at most ``protrusion`` past its surface, that cover
+the surface within a one-sided error ``tolerance``, with an optional count budget.
 
 Method (see ``docs/spheres.md``):
 
-1. **Surface samples** ``S``: ``n_surface`` area-uniform points of the mesh (default
-   ``clip(2 area / tolerance^2, 2000, 20000)``, a spacing of about ``tolerance / 1.4``) plus
-   its vertices (the corners, where an uncovered point is most likely).
-2. **Candidate spheres**, medial-axis-like: for each sample ``p`` with inward normal ``n`` the
-   largest ball touching the surface at ``p`` (shrinking-ball iteration against ``S``: it
-   stops at the opposite wall, so a thin plate gives thin balls), and centres at 1/2 and
-   1/4 of the way from ``p`` to that ball's centre (smaller balls for small details), for
-   2500 of the samples (and later for any sample no candidate holds); centres outside a
-   watertight mesh are dropped. Each candidate centre ``c`` gets the radius
-   ``d(c) + tolerance``, ``d(c)`` its distance to the mesh (while choosing, an upper bound:
-   the distance to its own surface point and to the nearest sample; the chosen spheres get
-   the exact distance from ``trimesh.proximity``): a sphere reaches at most ``tolerance``
-   past the surface point nearest its centre, so the excess volume stays small.
-3. **Greedy set cover** of ``S``: repeatedly take the candidate containing the most
-   uncovered samples (a sample is covered by a sphere when it lies inside, or within the
-   allowed error ``eps`` of it), then drop spheres whose samples all lie in others.
-   Tolerance mode: ``eps = 0`` (every sample inside a sphere), fewest spheres found.
-   ``max_spheres`` mode: the smallest ``eps`` (doubling from ``tolerance``, then
-   bisection to 2 %) for which the greedy cover of 3000 of the samples needs at most
-   ``max_spheres`` spheres; ``eps = 0`` if that is already possible. The spheres keep their
-   reach ``d + tolerance``: too few of them leave parts of the surface outside, and the
-   report says by how much (``one_sided_error``, ``meets_tolerance``). (For fewer spheres
-   that still hold the whole surface, raise ``tolerance`` instead.) Greedy cover is an
-   approximation: "smallest" is the smallest the greedy cover finds.
-4. **Check** on ``n_surface`` fresh samples (another random stream): the one-sided error is
-   the largest distance of a fresh sample outside every sphere. In tolerance mode a fresh
-   sample further out than ``tolerance / 2`` (a margin for the gaps between samples) is
-   added to ``S`` and the cover repeated (up to ``max_rounds`` times); the report states
-   the final value either way.
-5. **Excess volume**: the volume of the union of spheres outside the mesh, Monte Carlo
-   with ``n_volume`` uniform points in the spheres' bounding box (``mesh.contains`` for a
-   watertight mesh; for a mesh that is not watertight the inside is approximated by the
-   mesh's convex hull, which underestimates the excess of a non-convex part).
+0. **The solid**: inside/outside is the generalised winding number of the triangles (> 1/2
+   inside; Warp's BVH query ``mesh_query_point_sign_winding_number``), so open meshes
+   (holes, cracks, missing faces) and meshes of several overlapping bodies have a solid as a
+   closed mesh does. A mesh whose triangles face inwards (negative signed volume) is
+   flipped first. Signed distances to the surface come from the same query.
+1. **Surface samples** ``S``: ``n_surface`` area-uniform points (default
+   ``clip(4 area / tolerance^2, 1500, 4000)``) plus the mesh's vertices (corners).
+2. **Candidate centres on the medial axis**, only inside the solid: for 1500 samples ``p``
+   (normal ``n``, both sides) the largest ball touching the surface at ``p`` that holds no
+   other sample (shrinking-ball iteration: it stops at the opposite wall), and centres at
+   1/2 and 1/4 of the way to that ball's centre. Centres whose winding number says outside
+   are dropped (**no sphere is centred outside the solid**). A candidate centred at ``c``
+   has radius ``clearance(c) + protrusion``, ``clearance`` its exact distance to the
+   surface: **a sphere reaches at most ``protrusion`` past the surface** (the ball of
+   radius ``clearance`` lies in the solid, so every point of the sphere is within
+   ``radius - clearance`` of the solid).
+3. **Greedy set cover** of ``S``: a sample counts as covered by a sphere when it lies
+   within ``eps`` outside it; repeatedly take the candidate covering the most uncovered
+   samples, then drop spheres whose samples all lie in others. Without ``max_spheres``:
+   ``eps = 0.8 tolerance`` (the rest is a margin for the gaps between samples). With
+   ``max_spheres = K``: that ``eps`` if K spheres suffice, else the smallest ``eps`` (by
+   bisection, to 2 %) for which the greedy cover needs at most K spheres: the one-sided
+   error then exceeds the tolerance and the report says by how much.
+4. **Check** on ``n_surface`` fresh samples (another random stream): ``one_sided_error``
+   is the largest distance of a fresh sample outside every sphere. Without a budget, fresh
+   samples further out than ``tolerance`` are added to ``S`` and the cover repeated (up to
+   ``max_rounds`` times).
+5. **Report**: ``max_protrusion``, the largest distance by which a sphere reaches outside
+   the solid (``radius - clearance(centre)``, and at least the largest distance to the
+   surface of 64 points on each sphere that lie outside the solid: for an open mesh a
+   sphere may reach out through a hole), and the **excess volume** (the union of spheres
+   outside the solid, Monte Carlo with ``n_volume`` points in the spheres' bounding box,
+   inside test by winding number) as a volume and a fraction of the solid's volume
+   (``|mesh.volume|`` for a closed single-body mesh, else Monte Carlo by winding number).
 
-Units: metres (whatever unit the mesh is in; tolerance in the same unit).
+Units: metres (whatever unit the mesh is in; tolerance and protrusion in the same unit).
+Memory: the cover's matrix is at most ``_MAX_PAIRS`` float32 entries (about 100 MB); the
+fit of a Panda link takes about a second on one core.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import trimesh
+import warp as wp
 from scipy import sparse
 from scipy.spatial import cKDTree
 
 __all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "fit_link",
-           "primitive_mesh", "load_mesh", "one_sided_error", "excess_volume", "PRIMITIVES"]
+           "primitive_mesh", "load_mesh", "one_sided_error", "excess_volume",
+           "signed_distance", "inside_solid", "sphere_protrusion", "PRIMITIVES"]
 
 #: primitive kinds and the number of size values each takes (URDF order)
 PRIMITIVES = {"box": 3, "cylinder": 2, "capsule": 2, "sphere": 1}
 _DEPTHS = (1.0, 0.5, 0.25)  # candidate centres at these fractions of the medial radius
-_CANDIDATE_POINTS = 2500  # samples whose medial balls give candidates (plus unheld ones)
-_MAX_MODE_SAMPLES = 3000  # samples of the error search with max_spheres
+_CANDIDATE_POINTS = 1500  # samples whose medial balls give candidates (plus unheld ones)
+_FIT_SAMPLES = (1500, 4000)  # clip of the automatic surface sample count
+_MAX_PAIRS = 12_000_000  # candidates x samples of the cover's dense slack matrix
+_EPS_FIT = 0.85  # the cover's allowed error, as a fraction of the tolerance
+_SPHERE_POINTS = 64  # points per sphere of the protrusion check
+_CHECK_SAMPLES = 20_000  # fresh surface samples of the check (at least)
+_REFIT = 0.9  # refit when a fresh sample lies further out than this x tolerance
 
 
 @dataclass
 class SphereFitOptions:
     """Options of :func:`fit_spheres` (lengths in the mesh's unit, usually m).
 
-    tolerance: > 0, the allowed one-sided error and each sphere's reach past the surface.
-    max_spheres: None (fewest spheres meeting ``tolerance``) or >= 1 (smallest error with at
-        most this many spheres).
+    tolerance: > 0, the allowed one-sided error (every surface point within this distance
+        of a sphere).
+    max_spheres: None (the fewest spheres meeting ``tolerance``) or >= 1 (at most this many
+        spheres; the error reached is reported).
     n_surface: surface samples for the fit, and again (fresh) for the check; None:
-        ``clip(2 area / tolerance^2, 2000, 20000)`` (spacing about tolerance / 1.4).
+        ``clip(4 area / tolerance^2, 1500, 4000)``.
     n_volume: Monte Carlo points of the excess-volume estimate.
     seed: random seed (the fit is deterministic for a given seed).
-    max_rounds: fit-check rounds in tolerance mode (>= 1).
+    max_rounds: fit-check rounds without a budget (>= 1).
+    protrusion: > 0, how far a sphere may reach past the surface (each radius is the
+        centre's clearance + protrusion); None: ``tolerance / 2``.
     """
 
     tolerance: float
     max_spheres: int | None = None
     n_surface: int | None = None
-    n_volume: int = 200_000
+    n_volume: int = 100_000
     seed: int = 0
     max_rounds: int = 4
+    protrusion: float | None = None
 
     def validate(self) -> "SphereFitOptions":
-        tol = self.tolerance
-        if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating, np.integer)):
-            raise TypeError(f"tolerance: expected a number, got {type(tol).__name__}")
-        if not np.isfinite(tol) or tol <= 0:
-            raise ValueError(f"tolerance: must be finite and > 0, got {tol}")
-        self.tolerance = float(tol)
+        self.tolerance = _length(self.tolerance, "tolerance")
+        if self.protrusion is not None:
+            self.protrusion = _length(self.protrusion, "protrusion")
         if self.max_spheres is not None:
             self.max_spheres = _int(self.max_spheres, "max_spheres", 1)
         if self.n_surface is not None:
@@ -105,11 +118,13 @@ class SphereFit:
 
     centres (k, 3), radii (k,) [mesh unit]; ``one_sided_error``: max distance of the fresh
     check samples outside every sphere; ``meets_tolerance``: ``one_sided_error <=
-    tolerance``; ``fit_error``: the allowed error ``eps`` of the cover (0 in tolerance mode);
-    ``excess_volume`` (+- ``excess_volume_stderr``, one standard error of the Monte Carlo
-    estimate from ``n_volume`` points) and ``excess_fraction`` = excess / ``mesh_volume``
-    (the convex hull's volume for a mesh that is not watertight); ``volume_method`` says how
-    inside/outside was decided; ``rounds``: fit-check rounds used.
+    tolerance``; ``fit_error``: the allowed error ``eps`` of the cover; ``protrusion``: the
+    allowed reach past the surface; ``max_protrusion``: the largest reach of a sphere
+    outside the solid (module docstring, step 5); ``excess_volume`` (+-
+    ``excess_volume_stderr``, one standard error of the Monte Carlo estimate from
+    ``n_volume`` points) and ``excess_fraction`` = excess / ``mesh_volume`` (the solid's
+    volume); ``volume_method`` says how inside/outside was decided; ``rounds``: fit-check
+    rounds used; ``watertight``: whether the mesh was closed.
     """
 
     centres: np.ndarray
@@ -127,6 +142,9 @@ class SphereFit:
     volume_method: str
     rounds: int = 1
     notes: list[str] = field(default_factory=list)
+    protrusion: float = 0.0
+    max_protrusion: float = 0.0
+    watertight: bool = True
 
     @property
     def k(self) -> int:
@@ -149,6 +167,14 @@ def _int(x: Any, name: str, low: int) -> int:
     if x < low:
         raise ValueError(f"{name}: must be >= {low}, got {x}")
     return int(x)
+
+
+def _length(x: Any, name: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.floating, np.integer)):
+        raise TypeError(f"{name}: expected a number, got {type(x).__name__}")
+    if not np.isfinite(x) or x <= 0:
+        raise ValueError(f"{name}: must be finite and > 0, got {x}")
+    return float(x)
 
 
 def _origin(origin: Any) -> np.ndarray:
@@ -177,11 +203,112 @@ def one_sided_error(points: np.ndarray, centres: np.ndarray, radii: np.ndarray) 
     """(n,) distance [m] of each point outside every sphere: ``max(0, min_i |p - c_i| - r_i)``
     (0 inside some sphere). ``points`` (n, 3), ``centres`` (k, 3), ``radii`` (k,)."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
+    c = np.asarray(centres, np.float64).reshape(-1, 3)
+    r = np.asarray(radii, np.float64).reshape(-1)
     out = np.full(len(p), np.inf)
-    for s in range(0, len(p), 4096):
-        d = np.linalg.norm(p[s:s + 4096, None, :] - centres[None], axis=-1) - radii[None]
-        out[s:s + 4096] = d.min(axis=1) if len(radii) else np.inf
+    if len(r) == 0:
+        return out
+    step = max(1, 4_000_000 // max(len(r), 1))  # bounded memory at any sphere count
+    for s in range(0, len(p), step):
+        d = np.linalg.norm(p[s:s + step, None, :] - c[None], axis=-1) - r[None]
+        out[s:s + step] = d.min(axis=1)
     return np.maximum(out, 0.0)
+
+
+# ----------------------------------------------------------------- the solid (Warp)
+@wp.kernel(enable_backward=False)
+def _signed_distance_kernel(mesh: wp.uint64, points: wp.array(dtype=wp.vec3),
+                            max_dist: float, out: wp.array(dtype=float)):
+    i = wp.tid()
+    p = points[i]
+    q = wp.mesh_query_point_sign_winding_number(mesh, p, max_dist)
+    if q.result:
+        c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+        out[i] = q.sign * wp.length(p - c)
+    else:
+        out[i] = max_dist
+
+
+class _Solid:
+    """A mesh's solid for point queries: generalised winding number > 1/2 inside (Warp's
+    BVH query on the CPU), signed distance to the surface (negative inside). Coordinates are
+    taken relative to the bounding-box centre (float32 in Warp)."""
+
+    def __init__(self, mesh: trimesh.Trimesh) -> None:
+        from jwarp.core.arrays import init_warp
+
+        init_warp()
+        V = np.asarray(mesh.vertices, np.float64)
+        F = np.asarray(mesh.faces, np.int64)
+        a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+        self.centre = 0.5 * (V.min(0) + V.max(0))
+        signed = float(np.einsum("ij,ij->i", a - self.centre,
+                                 np.cross(b - self.centre, c - self.centre)).sum() / 6.0)
+        self.flipped = signed < 0  # triangles facing inwards: flip them
+        if self.flipped:
+            F = F[:, ::-1]
+        self.faces = F
+        self.simple = False  # a closed single-body mesh (set by the fit): nothing buried
+        self.extent = float(np.linalg.norm(V.max(0) - V.min(0)))
+        self._pts = wp.array((V - self.centre).astype(np.float32), dtype=wp.vec3, device="cpu")
+        self._idx = wp.array(F.astype(np.int32).ravel(), dtype=wp.int32, device="cpu")
+        self.mesh = wp.Mesh(points=self._pts, indices=self._idx, support_winding_number=True)
+
+    def signed_distance(self, x: np.ndarray) -> np.ndarray:
+        """(n,) signed distance of the points ``x`` (n, 3) to the surface, < 0 inside."""
+        x = np.asarray(x, np.float64).reshape(-1, 3)
+        if len(x) == 0:
+            return np.zeros(0)
+        maxd = 2.0 * self.extent + float(np.linalg.norm(x - self.centre, axis=1).max()) + 1.0
+        out = wp.zeros(len(x), dtype=float, device="cpu")
+        pts = wp.array((x - self.centre).astype(np.float32), dtype=wp.vec3, device="cpu")
+        wp.launch(_signed_distance_kernel, len(x), inputs=[self.mesh.id, pts, maxd, out],
+                  device="cpu")
+        return out.numpy().astype(np.float64)
+
+
+def signed_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
+    """(n,) signed distance [mesh unit] of ``points`` (n, 3) to the surface of ``mesh``,
+    negative inside its solid (generalised winding number > 1/2: defined for open and
+    multi-body meshes too). Float32 precision relative to the mesh's bounding-box centre."""
+    return _Solid(_check_mesh(mesh)).signed_distance(points)
+
+
+def inside_solid(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
+    """(n,) bool: ``points`` (n, 3) inside the solid of ``mesh`` (generalised winding
+    number > 1/2; for a closed mesh the same as ``mesh.contains``)."""
+    return signed_distance(mesh, points) < 0.0
+
+
+def _fibonacci(n: int) -> np.ndarray:
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    t = np.pi * (1.0 + 5 ** 0.5) * i
+    s = np.sqrt(1.0 - z * z)
+    return np.stack([s * np.cos(t), s * np.sin(t), z], axis=1)
+
+
+def _protrusion(solid: _Solid, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """(k,) how far each sphere reaches outside the solid: ``max(radius - clearance(centre),
+    largest surface distance of its outside points among 64 on the sphere)``."""
+    c = np.asarray(centres, np.float64).reshape(-1, 3)
+    r = np.asarray(radii, np.float64).reshape(-1)
+    if len(r) == 0:
+        return np.zeros(0)
+    by_centre = r + solid.signed_distance(c)
+    u = _fibonacci(_SPHERE_POINTS)
+    x = (c[:, None, :] + r[:, None, None] * u[None]).reshape(-1, 3)
+    d = solid.signed_distance(x).reshape(len(r), -1)
+    return np.maximum(by_centre, np.maximum(d, 0.0).max(axis=1))
+
+
+def sphere_protrusion(mesh: trimesh.Trimesh, centres: np.ndarray,
+                      radii: np.ndarray) -> np.ndarray:
+    """(k,) how far [mesh unit] each sphere (``centres`` (k, 3), ``radii`` (k,)) reaches
+    outside the solid of ``mesh``: ``radius + signed_distance(centre)`` (exact for a closed
+    mesh: the ball of radius ``-signed_distance`` lies inside), at least the largest
+    surface distance of 64 points on the sphere outside the solid (an open mesh's hole)."""
+    return _protrusion(_Solid(_check_mesh(mesh)), centres, radii)
 
 
 def _sample(mesh: trimesh.Trimesh, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -214,67 +341,25 @@ def _shrinking_ball(points: np.ndarray, inward: np.ndarray, tree: cKDTree, r0: f
     return r
 
 
-def _candidates(mesh: trimesh.Trimesh, pts: np.ndarray, normals: np.ndarray,
-                samples: np.ndarray, tolerance: float,
-                watertight: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Candidate centres (M, 3) and radii (M,) = ``d + tolerance``, from the medial balls of
-    ``pts`` (normals ``normals``) among all ``samples``. ``d`` is an upper bound of the
-    centre's distance to the mesh (to its own surface point and to the nearest sample);
-    :func:`_exact_radii` replaces it by the exact distance for the spheres chosen."""
+def _candidates(solid: _Solid, pts: np.ndarray, normals: np.ndarray, samples: np.ndarray,
+                grid: float) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate centres (M, 3) inside the solid and their clearance (M,): the medial balls
+    of ``pts`` (normals ``normals``, both sides) among ``samples``, and centres at 1/2 and
+    1/4 of the way to them; duplicates within ``grid`` merged."""
     tree = cKDTree(samples)
-    r0 = 0.5 * float(np.linalg.norm(mesh.extents))
-    sides = (-1.0,) if watertight else (-1.0, 1.0)  # outward face normals: inward = -n
-    centres, dists = [], []
-    for side in sides:
+    r0 = 0.5 * solid.extent
+    centres = []
+    for side in (-1.0, 1.0):  # inward is -normal for a well-oriented mesh; try both
         inward = side * normals
         r = _shrinking_ball(pts, inward, tree, r0)
         for f in _DEPTHS:
             centres.append(pts + (f * r)[:, None] * inward)
-            dists.append(f * r)
-    c, d = np.concatenate(centres), np.concatenate(dists)
-    _, keep = np.unique(np.round(c / (0.05 * tolerance)).astype(np.int64), axis=0,
-                        return_index=True)
-    keep = np.sort(keep)
-    c, d = c[keep], np.minimum(d[keep], tree.query(c[keep])[0])
-    if watertight:  # keep centres inside (a medial centre of a closed mesh is inside)
-        inside = mesh.contains(c)
-        c, d = c[inside], d[inside]
-    return c, d + tolerance
-
-
-def _exact_radii(mesh: trimesh.Trimesh, c: np.ndarray, tolerance: float) -> np.ndarray:
-    """(k,) exact distance of each centre to the mesh + tolerance."""
-    _, d, _ = trimesh.proximity.closest_point(mesh, c)
-    return np.asarray(d, np.float64) + tolerance
-
-
-class _Coverage:
-    """Which candidate holds which sample, with the slack ``|p - c| - r`` of every pair
-    whose slack is <= ``eps_max`` (computed once; a cover at any ``eps <= eps_max`` filters
-    it)."""
-
-    def __init__(self, samples: np.ndarray, centres: np.ndarray, radii: np.ndarray,
-                 eps_max: float) -> None:
-        self.shape = (len(centres), len(samples))
-        tree = cKDTree(samples)
-        lists = tree.query_ball_point(centres, radii + eps_max, return_sorted=False)
-        self.rows = np.repeat(np.arange(len(centres)), [len(x) for x in lists])
-        self.cols = (np.concatenate([np.asarray(x, np.int64) for x in lists]) if len(self.rows)
-                     else np.zeros(0, np.int64))
-        self.slack = (np.linalg.norm(samples[self.cols] - centres[self.rows], axis=1)
-                      - radii[self.rows])
-
-    def matrix(self, eps: float) -> sparse.csr_matrix:
-        """(M, N) int32 0/1: sample j lies within radius + eps of candidate i."""
-        k = self.slack <= eps
-        return sparse.csr_matrix((np.ones(int(k.sum()), np.int32), (self.rows[k], self.cols[k])),
-                                 shape=self.shape)
-
-    def unheld(self, eps: float) -> np.ndarray:
-        """Indices of the samples no candidate holds at ``eps``."""
-        held = np.zeros(self.shape[1], bool)
-        held[self.cols[self.slack <= eps]] = True
-        return np.flatnonzero(~held)
+    c = np.concatenate(centres)
+    _, keep = np.unique(np.round(c / grid).astype(np.int64), axis=0, return_index=True)
+    c = c[np.sort(keep)]
+    sd = solid.signed_distance(c)
+    inside = sd < -1e-9 * max(solid.extent, 1e-300)
+    return c[inside], -sd[inside]
 
 
 def _greedy_cover(A: sparse.csr_matrix, limit: int | None) -> list[int] | None:
@@ -307,70 +392,118 @@ def _greedy_cover(A: sparse.csr_matrix, limit: int | None) -> list[int] | None:
     return chosen
 
 
-def _cover(samples: np.ndarray, cand_c: np.ndarray, cand_r: np.ndarray,
-           max_spheres: int | None, tol: float, eps_max: float) -> tuple[list[int], float]:
-    """Chosen candidate indices and the allowed error eps of the cover: 0 when possible,
-    else (too many spheres, or samples held by no candidate) the smallest eps found by
-    doubling from ``tol`` and then bisection, to ~2 % or 0.05 tolerance."""
-    cov = _Coverage(samples, cand_c, cand_r, 0.0)
-    chosen = _greedy_cover(cov.matrix(0.0), max_spheres)
+class _Slack:
+    """Dense (M, N) float32 ``|p_j - c_i| - r_i`` of candidates and samples (at most
+    ``_MAX_PAIRS`` entries: the caller subsamples candidates)."""
+
+    def __init__(self, samples: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> None:
+        self.s = np.empty((len(centres), len(samples)), np.float32)
+        step = max(1, 4_000_000 // max(len(samples), 1))
+        o = samples.mean(axis=0) if len(samples) else np.zeros(3)
+        p = samples - o
+        pp = np.einsum("ij,ij->i", p, p)
+        for a in range(0, len(centres), step):
+            c = centres[a:a + step] - o
+            d2 = np.einsum("ij,ij->i", c, c)[:, None] + pp[None] - 2.0 * (c @ p.T)
+            self.s[a:a + step] = np.sqrt(np.maximum(d2, 0.0)) - radii[a:a + step, None]
+
+    def matrix(self, eps: float) -> sparse.csr_matrix:
+        """(M, N) int32 0/1: sample j lies within radius + eps of candidate i."""
+        return sparse.csr_matrix(self.s <= eps, dtype=np.int32)
+
+    def unheld(self, eps: float) -> np.ndarray:
+        """Indices of the samples no candidate holds at ``eps``."""
+        return np.flatnonzero(~(self.s <= eps).any(axis=0)) if len(self.s) else \
+            np.arange(self.s.shape[1])
+
+
+def _two_for_one(B: np.ndarray, chosen: list[int]) -> list[int]:
+    """Local search after the greedy cover (``B`` (M, N) bool: candidate i holds sample j):
+    replace two chosen spheres by one candidate that holds every sample only they held,
+    while such a pair exists."""
+    chosen = list(chosen)
+    improved = True
+    while improved and len(chosen) > 1:
+        improved = False
+        cnt = B[chosen].sum(axis=0, dtype=np.int32)
+        for a in range(len(chosen)):
+            for b in range(a + 1, len(chosen)):
+                i, j = chosen[a], chosen[b]
+                only = np.flatnonzero((B[i] | B[j]) & (cnt - B[i] - B[j] <= 0))
+                ok = np.flatnonzero(B[:, only].all(axis=1)) if len(only) else np.arange(len(B))
+                if len(ok):
+                    m = int(ok[np.argmax(B[ok].sum(axis=1))])
+                    chosen = [x for x in chosen if x not in (i, j)] + [m]
+                    improved = True
+                    break
+            if improved:
+                break
+    return chosen
+
+
+def _cover(slack: _Slack, max_spheres: int | None, eps0: float,
+           eps_max: float) -> tuple[list[int], float]:
+    """Chosen candidate indices and the allowed error eps of the cover: ``eps0`` when
+    possible, else (too many spheres, or samples held by no candidate) the smallest eps
+    found by doubling from ``eps0`` and then bisection, to ~2 %."""
+    chosen = _greedy_cover(slack.matrix(eps0), max_spheres)
     if chosen is not None:
-        return chosen, 0.0
-    lo, hi = 0.0, tol
+        return _two_for_one(slack.s <= eps0, chosen), eps0
+    lo, hi = eps0, 2.0 * eps0
     while True:
-        cov = _Coverage(samples, cand_c, cand_r, hi)
-        best = _greedy_cover(cov.matrix(hi), max_spheres)
+        best = _greedy_cover(slack.matrix(hi), max_spheres)
         if best is not None:
             break
         if hi >= eps_max:
             raise RuntimeError("sphere cover failed at the largest error (a bug)")
         lo, hi = hi, min(2.0 * hi, eps_max)
-    while hi - lo > max(0.02 * hi, 0.05 * tol, 1e-12):
+    while hi - lo > max(0.02 * hi, 0.02 * eps0, 1e-12):
         mid = 0.5 * (lo + hi)
-        got = _greedy_cover(cov.matrix(mid), max_spheres)
+        got = _greedy_cover(slack.matrix(mid), max_spheres)
         if got is None:
             lo = mid
         else:
             hi, best = mid, got
-    return best, hi
+    return _two_for_one(slack.s <= hi, best), hi
 
 
-def _tighten(samples: np.ndarray, c: np.ndarray, r: np.ndarray, tol: float) -> np.ndarray:
-    """Radii shrunk to what their samples need: each sample goes to the sphere it is deepest
-    in, and a sphere keeps ``max |p - c| + tol / 2`` over its samples (a margin for the gaps
-    between samples), never more than before."""
-    need = np.zeros(len(r))
-    for s in range(0, len(samples), 2048):
-        d = np.linalg.norm(samples[s:s + 2048, None, :] - c[None], axis=-1)
-        owner = np.argmin(d - r[None], axis=1)
-        np.maximum.at(need, owner, d[np.arange(len(d)), owner])
-    return np.minimum(r, need + 0.5 * tol)
+def _solid_volume(mesh: trimesh.Trimesh, solid: _Solid, n: int, seed: int
+                  ) -> tuple[float, str]:
+    """The solid's volume: ``|mesh.volume|`` of a closed single-body mesh, else Monte Carlo
+    by winding number with ``n`` points in the bounding box."""
+    if mesh.is_watertight and mesh.body_count == 1:
+        return abs(float(mesh.volume)), "closed mesh"
+    lo, hi = mesh.bounds
+    x = lo + np.random.default_rng(seed).random((n, 3)) * (hi - lo)
+    return float(np.prod(hi - lo)) * float((solid.signed_distance(x) < 0).mean()), \
+        "Monte Carlo by winding number"
+
+
+def _excess(solid: _Solid, centres: np.ndarray, radii: np.ndarray, n: int,
+            seed: int) -> tuple[float, float]:
+    c = np.asarray(centres, np.float64).reshape(-1, 3)
+    r = np.asarray(radii, np.float64).reshape(-1)
+    if len(r) == 0:
+        return 0.0, 0.0
+    lo, hi = (c - r[:, None]).min(0), (c + r[:, None]).max(0)
+    box = float(np.prod(hi - lo))
+    x = lo + np.random.default_rng(seed).random((n, 3)) * (hi - lo)
+    in_union = one_sided_error(x, c, r) <= 0.0
+    outside = np.zeros(n, bool)
+    idx = np.flatnonzero(in_union)
+    if len(idx):
+        outside[idx] = solid.signed_distance(x[idx]) >= 0.0
+    p = outside.mean()
+    return box * p, box * np.sqrt(p * (1 - p) / n)
 
 
 def excess_volume(mesh: trimesh.Trimesh, centres: np.ndarray, radii: np.ndarray, *,
                   n: int = 200_000, seed: int = 0) -> tuple[float, float, str]:
-    """Monte Carlo volume of the union of spheres outside ``mesh``: ``(volume, one standard
-    error, method)`` from ``n`` uniform points in the spheres' bounding box. Inside test:
-    ``mesh.contains`` for a watertight mesh, else the convex hull (documented
-    approximation)."""
-    c = np.asarray(centres, np.float64).reshape(-1, 3)
-    r = np.asarray(radii, np.float64).reshape(-1)
-    if len(r) == 0:
-        return 0.0, 0.0, "none"
-    lo, hi = (c - r[:, None]).min(0), (c + r[:, None]).max(0)
-    box = float(np.prod(hi - lo))
-    rng = np.random.default_rng(seed)
-    x = lo + rng.random((n, 3)) * (hi - lo)
-    in_union = one_sided_error(x, c, r) <= 0.0
-    body = mesh if mesh.is_watertight else mesh.convex_hull
-    method = "mesh.contains (watertight)" if mesh.is_watertight else \
-        "convex hull of the mesh (not watertight: lower bound where the part is non-convex)"
-    outside = np.zeros(n, bool)
-    idx = np.flatnonzero(in_union)
-    if len(idx):
-        outside[idx] = ~body.contains(x[idx])
-    p = outside.mean()
-    return box * p, box * np.sqrt(p * (1 - p) / n), method
+    """Monte Carlo volume of the union of spheres outside the solid of ``mesh``: ``(volume,
+    one standard error, method)`` from ``n`` uniform points in the spheres' bounding box.
+    Inside test: generalised winding number > 1/2 (open and multi-body meshes too)."""
+    vol, se = _excess(_Solid(_check_mesh(mesh)), centres, radii, n, seed)
+    return vol, se, "winding number"
 
 
 #: the largest surface a tolerance-mode fit takes, in cells of tolerance^2 (a Panda link at
@@ -379,20 +512,38 @@ MAX_SURFACE_CELLS = 1e6
 
 
 # ----------------------------------------------------------------- public API
+#: the automatic protrusion: ``PROTRUSION_MIN * tolerance`` for spheres of clearance up to
+#: ``PROTRUSION_KNEE[0] * tolerance``, rising linearly to ``PROTRUSION_MAX * tolerance`` at
+#: ``PROTRUSION_KNEE[1] * tolerance`` and beyond
+PROTRUSION_MIN, PROTRUSION_MAX, PROTRUSION_KNEE = 0.5, 2.0, (3.0, 5.0)
+
+
+def _reach(clearance: np.ndarray, *, tol: float, fixed: float | None,
+           part: float | None) -> np.ndarray:
+    """(M,) allowed protrusion of spheres of the given clearance (module docstring)."""
+    if fixed is not None:
+        return np.full(np.shape(clearance), fixed)
+    a, b = PROTRUSION_KNEE
+    x = np.asarray(clearance) if part is None else np.full(np.shape(clearance), part)
+    t = np.clip((x / tol - a) / (b - a), 0.0, 1.0)
+    return tol * (PROTRUSION_MIN + (PROTRUSION_MAX - PROTRUSION_MIN) * t)
+
+
 def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | None = None,
-                n_surface: int | None = None, n_volume: int = 200_000, seed: int = 0,
-                max_rounds: int = 4) -> SphereFit:
-    """Fit spheres to ``mesh`` so that every surface point lies inside a sphere (one-sided
-    error <= ``tolerance``), with as few spheres as the greedy cover finds; or, with
-    ``max_spheres``, the smallest error reachable with at most that many (reported, with
-    ``meets_tolerance`` False when it exceeds ``tolerance``). See the module docstring for
-    the method and :class:`SphereFitOptions` for the arguments. Returns a :class:`SphereFit`
-    (centres (k, 3), radii (k,), in the mesh's frame and unit)."""
-    opt = SphereFitOptions(tolerance, max_spheres, n_surface, n_volume, seed, max_rounds).validate()
+                n_surface: int | None = None, n_volume: int = 100_000, seed: int = 0,
+                max_rounds: int = 4, protrusion: float | None = None) -> SphereFit:
+    """Fit spheres to ``mesh``: centres inside its solid, radii = clearance + ``protrusion``
+    (default ``tolerance / 2``), every surface point within ``tolerance`` of a sphere with as
+    few spheres as the greedy cover finds; or, with ``max_spheres``, at most that many and
+    the smallest error the cover finds (reported, ``meets_tolerance`` False when it exceeds
+    ``tolerance``). See the module docstring for the method and :class:`SphereFitOptions`
+    for the arguments. Returns a :class:`SphereFit` (centres (k, 3), radii (k,), in the
+    mesh's frame and unit)."""
+    opt = SphereFitOptions(tolerance, max_spheres, n_surface, n_volume, seed, max_rounds,
+                           protrusion).validate()
     mesh = _check_mesh(mesh)
     tol = opt.tolerance
-    # the work before it starts: a cover within ``tolerance`` needs about one sphere per
-    # tolerance^2 of surface in the worst case, and the fit's matrices grow with its square
+    part = None  # the automatic protrusion follows the part's largest clearance
     need = mesh.area / tol ** 2
     if opt.max_spheres is None and need > MAX_SURFACE_CELLS:
         raise ValueError(f"tolerance: a surface of {mesh.area:.4g} (unit^2) at tolerance {tol:g} "
@@ -400,57 +551,119 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
                          f"{MAX_SURFACE_CELLS:.0e}): the fit would not end in reasonable time "
                          f"or memory; raise the tolerance, give max_spheres, or check the "
                          f"mesh's unit (a URDF in cm or mm needs a scale)")
-    n_s = opt.n_surface or int(np.clip(2.0 * mesh.area / tol ** 2, 2000, 20000))
+    solid = _Solid(mesh)
     watertight = bool(mesh.is_watertight)
+    n_s = opt.n_surface or int(np.clip(4.0 * mesh.area / tol ** 2, *_FIT_SAMPLES))
     pts, nrm = _sample(mesh, n_s, opt.seed)
     used = np.unique(mesh.faces)
-    samples = np.concatenate([pts, np.asarray(mesh.vertices)[used]])
-    normals = np.concatenate([nrm, np.asarray(mesh.vertex_normals)[used]])
+    verts = np.asarray(mesh.vertices)[used]
+    if len(verts) > n_s // 2:  # a fine mesh: its vertices add nothing over the samples
+        verts = verts[np.random.default_rng(opt.seed + 1).permutation(len(verts))[:n_s // 2]]
+    samples = np.concatenate([pts, verts])
+    normals = np.concatenate([nrm, np.asarray(mesh.vertex_normals)[used][:len(verts)]
+                              if len(verts) == len(used) else
+                              _closest_normals(mesh, verts)])
+    solid.simple = watertight and mesh.body_count == 1  # then no face is buried
+    on = _on_boundary(solid, samples, normals)
+    samples, normals = samples[on], normals[on]
     rng = np.random.default_rng(opt.seed)
-    n_cand = _CANDIDATE_POINTS if opt.max_spheres is None else _CANDIDATE_POINTS // 2
-    sub = rng.permutation(len(samples))[:n_cand]
-    cand_c, cand_r = _candidates(mesh, samples[sub], normals[sub], samples, tol, watertight)
-    scale = float(np.linalg.norm(mesh.extents))
-    eps_max = 2.0 * scale  # one sphere of any candidate then holds every sample
-    check, _ = _sample(mesh, n_s, opt.seed + 7919)  # fresh stream
+    grid = 0.2 * min(tol, opt.protrusion or tol)
+    sub = rng.permutation(len(samples))[:_CANDIDATE_POINTS]
+    cand_c, cand_d = _candidates(solid, samples[sub], normals[sub], samples, grid)
+    if opt.protrusion is None and len(cand_d):
+        part = float(cand_d.max())
+    reach = functools.partial(_reach, tol=tol, fixed=opt.protrusion, part=part)
     notes: list[str] = []
-    if opt.max_spheres is not None:  # the error search works on a subset (documented)
-        keep = rng.permutation(len(samples))[:_MAX_MODE_SAMPLES]
-        samples, normals = samples[keep], normals[keep]
-    rounds = 0
+    if solid.flipped:
+        notes.append("the mesh's triangles face inwards: flipped")
+    if len(cand_c) == 0:  # no solid (a sheet, a single open surface): spheres on the surface
+        notes.append("the mesh encloses no solid (winding number <= 1/2 everywhere): "
+                      "spheres centred on the surface")
+        cand_c, cand_d = samples[sub].copy(), np.zeros(len(sub))
+    eps_max = 2.0 * solid.extent + tol  # one sphere of any candidate then holds every sample
+    eps0 = _EPS_FIT * tol
+    n_check = max(n_s, _CHECK_SAMPLES)
+    check = _boundary_sample(mesh, solid, n_check, opt.seed + 7919)  # fresh stream
+    rounds, best = 0, None
     while True:
         rounds += 1
-        lost = _Coverage(samples, cand_c, cand_r, 0.0).unheld(0.0)
+        cap = max(1, _MAX_PAIRS // len(samples))
+        cand_c, cand_d = _thin(cand_c, cand_d, cap, grid)
+        slack = _Slack(samples, cand_c, cand_d + reach(cand_d))
+        lost = slack.unheld(eps0) if rounds == 1 else np.zeros(0, np.int64)
         if len(lost):  # samples no candidate holds: add their own medial candidates
-            c2, r2 = _candidates(mesh, samples[lost], normals[lost], samples, tol, watertight)
-            cand_c, cand_r = np.concatenate([cand_c, c2]), np.concatenate([cand_r, r2])
-        chosen, eps = _cover(samples, cand_c, cand_r, opt.max_spheres, tol, eps_max)
-        c = cand_c[chosen]
-        r = np.minimum(cand_r[chosen], _exact_radii(mesh, c, tol))
-        if eps == 0.0:
-            r = _tighten(samples, c, r, tol)
+            c2, d2 = _candidates(solid, samples[lost], normals[lost], samples, grid)
+            cand_c, cand_d = np.concatenate([cand_c, c2]), np.concatenate([cand_d, d2])
+            cand_c, cand_d = _thin(cand_c, cand_d, cap, grid)
+            slack = _Slack(samples, cand_c, cand_d + reach(cand_d))
+        chosen, eps = _cover(slack, opt.max_spheres, eps0, eps_max)
+        c, r = cand_c[chosen], cand_d[chosen] + reach(cand_d[chosen])
         err_all = one_sided_error(check, c, r)
         err = float(err_all.max())
-        bad = err_all > (0.5 * tol if opt.max_spheres is None else max(eps, tol))
-        if not bad.any() or rounds >= opt.max_rounds:
+        key = (err > tol, len(c) if err <= tol else err, err)
+        if best is None or key < best[0]:
+            best = (key, c, r, err, eps, float(reach(cand_d[chosen]).max()), eps > eps0)
+        bad = err_all > _REFIT * tol
+        if opt.max_spheres is not None or not bad.any() or rounds >= opt.max_rounds:
             break
+        eps0 *= 0.95  # the next round's cover a little tighter
         # fresh samples outside: fit them too, with their own candidates
         new_p = check[bad]
-        _, _, tri = trimesh.proximity.closest_point(mesh, new_p)
-        new_n = np.asarray(mesh.face_normals[tri])
+        new_n = _closest_normals(mesh, new_p)
         samples, normals = np.concatenate([samples, new_p]), np.concatenate([normals, new_n])
-        c2, r2 = _candidates(mesh, new_p, new_n, samples, tol, watertight)
-        cand_c, cand_r = np.concatenate([cand_c, c2]), np.concatenate([cand_r, r2])
-        check, _ = _sample(mesh, n_s, opt.seed + 7919 * (rounds + 1))
-    if eps > 0 and opt.max_spheres is None:
+        c2, d2 = _candidates(solid, new_p, new_n, samples, grid)
+        cand_c, cand_d = np.concatenate([cand_c, c2]), np.concatenate([cand_d, d2])
+        check = _boundary_sample(mesh, solid, n_check, opt.seed + 7919 * (rounds + 1))
+    _, c, r, err, eps, allowed, widened = best  # of the rounds: covered, then fewest
+    if widened and opt.max_spheres is None:
         notes.append(f"some samples are held by no candidate sphere; cover error {eps:.3g}")
-    vol, se, method = excess_volume(mesh, c, r, n=opt.n_volume, seed=opt.seed + 104729)
-    mvol = float(mesh.volume) if watertight else float(mesh.convex_hull.volume)
+    prot = _protrusion(solid, c, r)
+    vol, se = _excess(solid, c, r, opt.n_volume, opt.seed + 104729)
+    mvol, how = _solid_volume(mesh, solid, opt.n_volume, opt.seed + 15485863)
     return SphereFit(centres=c, radii=r, tolerance=tol, one_sided_error=err,
                      meets_tolerance=err <= tol, fit_error=float(eps), excess_volume=vol,
                      excess_volume_stderr=se, excess_fraction=vol / mvol if mvol > 0 else np.inf,
                      mesh_volume=mvol, n_volume=opt.n_volume, n_surface=n_s,
-                     volume_method=method, rounds=rounds, notes=notes)
+                     volume_method=f"winding number (solid volume: {how})", rounds=rounds,
+                     notes=notes, protrusion=allowed,
+                     max_protrusion=float(prot.max()) if len(prot) else 0.0,
+                     watertight=watertight)
+
+
+def _thin(c: np.ndarray, d: np.ndarray, cap: int, grid: float
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """At most ``cap`` candidates (bounded memory): one per cell of a grid coarsened by
+    1.25 until they fit (the deepest of each cell, so the spread and the big balls stay)."""
+    order = np.argsort(-d, kind="stable")
+    c, d = c[order], d[order]
+    while len(c) > cap:
+        grid *= 1.25
+        _, keep = np.unique(np.floor(c / grid).astype(np.int64), axis=0, return_index=True)
+        keep = np.sort(keep)
+        c, d = c[keep], d[keep]
+    return c, d
+
+
+def _on_boundary(solid: _Solid, p: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """(n,) bool: surface points ``p`` (normals ``n``) on the solid's boundary, i.e. not
+    buried inside it (a face of one body inside another: inside on both sides)."""
+    if solid.simple:
+        return np.ones(len(p), bool)
+    h = 1e-3 * solid.extent
+    both = (solid.signed_distance(p + h * n) < 0) & (solid.signed_distance(p - h * n) < 0)
+    return ~both
+
+
+def _boundary_sample(mesh: trimesh.Trimesh, solid: _Solid, n: int, seed: int) -> np.ndarray:
+    """About ``n`` area-uniform samples of the solid's boundary (buried ones dropped)."""
+    p, nrm = _sample(mesh, n, seed)
+    return p[_on_boundary(solid, p, nrm)]
+
+
+def _closest_normals(mesh: trimesh.Trimesh, p: np.ndarray) -> np.ndarray:
+    """(n, 3) face normal of the triangle nearest each point."""
+    _, _, tri = trimesh.proximity.closest_point(mesh, p)
+    return np.asarray(mesh.face_normals[tri])
 
 
 def primitive_mesh(kind: str, size: Any, *, sections: int = 64) -> trimesh.Trimesh:
@@ -502,6 +715,33 @@ def _scaled(m: trimesh.Trimesh, scale: Any) -> trimesh.Trimesh:
     return m
 
 
+def _geometry_mesh(kind: str, size: Any, mesh: Any, scale: Any) -> trimesh.Trimesh:
+    """The mesh of one URDF-style geometry in its own frame (``sphere`` as an icosphere)."""
+    if kind == "mesh":
+        if mesh is None:
+            raise ValueError("mesh: required for kind 'mesh'")
+        return load_mesh(mesh, scale) if isinstance(mesh, (str, Path)) else \
+            _scaled(_check_mesh(mesh), scale)
+    if kind in PRIMITIVES:
+        return primitive_mesh(kind, size)
+    raise ValueError(f"kind: unknown geometry '{kind}', expected mesh or one of "
+                     f"{sorted(PRIMITIVES)}")
+
+
+def _exact_sphere(size: Any, tolerance: float, T: np.ndarray) -> SphereFit:
+    r = float(np.asarray(size, np.float64).reshape(-1)[0])
+    vol = 4.0 / 3.0 * np.pi * r ** 3
+    fit = SphereFit(centres=np.zeros((1, 3)), radii=np.array([r]), tolerance=float(tolerance),
+                    one_sided_error=0.0, meets_tolerance=True, fit_error=0.0,
+                    excess_volume=0.0, excess_volume_stderr=0.0, excess_fraction=0.0,
+                    mesh_volume=vol, n_volume=0, n_surface=0, volume_method="exact sphere",
+                    notes=["exact: the geometry is a sphere"])
+    return fit.transformed(T)
+
+
+_FIT_KEYS = ("max_spheres", "n_surface", "n_volume", "seed", "max_rounds", "protrusion")
+
+
 def fit_geometry(kind: str, size: Any = None, origin: Any = None, mesh: Any = None, *,
                  scale: Any = None, tolerance: float, **options: Any) -> SphereFit:
     """Spheres for one collision geometry of a link, in the link frame.
@@ -513,54 +753,57 @@ def fit_geometry(kind: str, size: Any = None, origin: Any = None, mesh: Any = No
     :func:`fit_spheres`."""
     T = _origin(origin)
     if kind == "sphere":
-        m = primitive_mesh(kind, size)  # validates size
+        primitive_mesh(kind, size)  # validates size
         SphereFitOptions(tolerance, **{k: v for k, v in options.items()
-                                       if k in ("max_spheres", "n_surface", "n_volume", "seed",
-                                                "max_rounds")}).validate()
-        r = float(np.asarray(size, np.float64).reshape(-1)[0])
-        vol = 4.0 / 3.0 * np.pi * r ** 3
-        fit = SphereFit(centres=np.zeros((1, 3)), radii=np.array([r]), tolerance=float(tolerance),
-                        one_sided_error=0.0, meets_tolerance=True, fit_error=0.0,
-                        excess_volume=0.0, excess_volume_stderr=0.0, excess_fraction=0.0,
-                        mesh_volume=vol, n_volume=0, n_surface=0, volume_method="exact sphere",
-                        notes=[f"exact: the geometry is a sphere ({len(m.faces)}-face mesh unused)"])
-        return fit.transformed(T)
-    if kind == "mesh":
-        if mesh is None:
-            raise ValueError("mesh: required for kind 'mesh'")
-        m = load_mesh(mesh, scale) if isinstance(mesh, (str, Path)) else \
-            _scaled(_check_mesh(mesh), scale)
-    elif kind in PRIMITIVES:
-        m = primitive_mesh(kind, size)
-    else:
-        raise ValueError(f"kind: unknown geometry '{kind}', expected mesh or one of "
-                         f"{sorted(PRIMITIVES)}")
+                                       if k in _FIT_KEYS}).validate()
+        return _exact_sphere(size, tolerance, T)
+    m = _geometry_mesh(kind, size, mesh, scale)
     return fit_spheres(m, tolerance=tolerance, **options).transformed(T)
 
 
 def fit_link(geometries: Any, *, tolerance: float, **options: Any) -> SphereFit:
-    """Spheres of all collision geometries of one link, in the link frame: one
-    :func:`fit_geometry` per geometry, concatenated. Each geometry is a mapping or an
-    object with ``kind``, ``size``, ``origin`` and, for meshes, ``mesh`` (or
-    ``filename``/``path``) and ``scale``. The report: total count, the largest one-sided
-    error, summed excess volume (an overestimate of the union's where geometries overlap)
-    and mesh volume."""
-    fits = []
+    """Spheres of all collision geometries of one link, in the link frame. Each geometry is
+    a mapping or an object with ``kind``, ``size``, ``origin`` and, for meshes, ``mesh`` (or
+    ``filename``/``path``) and ``scale``. Spheres are taken as they are; every other
+    geometry is posed in the link frame and the union fitted as **one** part
+    (:func:`fit_spheres`: the solid of overlapping bodies by winding number, so
+    ``max_spheres`` is the budget of the whole link). The report: total count, the fit's
+    one-sided error, excess and protrusion (URDF spheres add none)."""
+    exact, parts = [], []
     for i, g in enumerate(geometries):
         get = (g.get if isinstance(g, dict) else lambda k, d=None, g=g: getattr(g, k, d))
         mesh = get("mesh") if get("mesh") is not None else (get("filename") or get("path"))
         try:
-            fits.append(fit_geometry(get("kind"), get("size"), get("origin"), mesh,
-                                     scale=get("scale"), tolerance=tolerance, **options))
+            kind = get("kind")
+            T = _origin(get("origin"))
+            if kind == "sphere":
+                primitive_mesh(kind, get("size"))
+                exact.append(_exact_sphere(get("size"), tolerance, T))
+            else:
+                m = _geometry_mesh(kind, get("size"), mesh, get("scale")).copy()
+                m.apply_transform(T)
+                parts.append(m)
         except (ValueError, TypeError) as e:
             raise type(e)(f"geometries[{i}]: {e}") from e
-    if not fits:
+    if not exact and not parts:
         raise ValueError("geometries: empty")
-    err = max(f.one_sided_error for f in fits)
+    SphereFitOptions(tolerance, **{k: v for k, v in options.items() if k in _FIT_KEYS}
+                     ).validate()
+    budget = options.get("max_spheres")
+    fits = list(exact)
+    if parts:
+        if budget is not None:
+            if budget <= len(exact):
+                raise ValueError(f"max_spheres: {budget} is no more than the link's "
+                                 f"{len(exact)} sphere geometries")
+            options = {**options, "max_spheres": budget - len(exact)}
+        whole = parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
+        fits.append(fit_spheres(whole, tolerance=tolerance, **options))
     return SphereFit(
         centres=np.concatenate([f.centres for f in fits]),
         radii=np.concatenate([f.radii for f in fits]), tolerance=float(tolerance),
-        one_sided_error=err, meets_tolerance=all(f.meets_tolerance for f in fits),
+        one_sided_error=max(f.one_sided_error for f in fits),
+        meets_tolerance=all(f.meets_tolerance for f in fits),
         fit_error=max(f.fit_error for f in fits),
         excess_volume=sum(f.excess_volume for f in fits),
         excess_volume_stderr=float(np.sqrt(sum(f.excess_volume_stderr ** 2 for f in fits))),
@@ -569,4 +812,7 @@ def fit_link(geometries: Any, *, tolerance: float, **options: Any) -> SphereFit:
         mesh_volume=sum(f.mesh_volume for f in fits), n_volume=max(f.n_volume for f in fits),
         n_surface=max(f.n_surface for f in fits),
         volume_method="; ".join(sorted({f.volume_method for f in fits})),
-        rounds=max(f.rounds for f in fits), notes=[n for f in fits for n in f.notes])
+        rounds=max(f.rounds for f in fits), notes=[n for f in fits for n in f.notes],
+        protrusion=max(f.protrusion for f in fits),
+        max_protrusion=max(f.max_protrusion for f in fits),
+        watertight=all(f.watertight for f in fits))

@@ -5,10 +5,15 @@ geometry and the self-collision pairs sampled as MoveIt's setup assistant does
 :func:`spherize` takes a :class:`~jwarp.importers.robot.UrdfRobot` (the kinematic import:
 links as frames, URDF sphere geometry already as spheres) and
 
-1. fits spheres (:func:`jwarp.importers.spheres.fit_link`, one-sided error <= ``tolerance``
-   on fresh surface samples) to every link's other collision geometry (boxes, cylinders,
-   capsules, meshes); links whose geometry is all spheres ("spherized" URDFs) keep them
-   as they are;
+1. fits spheres (:func:`jwarp.importers.spheres.fit_link`: centres inside the solid by
+   winding number, so open and multi-body meshes work; one-sided error <= ``tolerance``
+   on fresh surface samples; each sphere reaching at most ``protrusion`` past the surface;
+   at most ``max_spheres`` per link when given) to every link's other collision geometry
+   (boxes, cylinders, capsules, meshes, fitted together as one part); links whose geometry
+   is all spheres ("spherized" URDFs) keep them as they are. A link whose fit passes a
+   bound (one-sided error > ``tolerance``, largest protrusion > ``warn_protrusion``,
+   excess volume > ``warn_excess`` x the part's volume) is named in
+   ``SpherizeReport.warnings`` and a :class:`SphereFitWarning` is issued;
 2. excludes the self-collision pairs that are adjacent (through fixed joints too) or never /
    always in collision over ``pair_samples`` random configurations
    (:func:`jwarp.world.self_pairs.never_colliding_pairs`).
@@ -25,6 +30,7 @@ import hashlib
 import json
 import math
 import os
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,10 +41,16 @@ from jwarp.atomic import atomic_write_text
 from jwarp.model import RobotModel, Sphere
 from jwarp.world.self_pairs import SelfPairs, never_colliding_pairs, with_self_pairs
 
-__all__ = ["SpherizeOptions", "SpherizeReport", "spherize", "spherized_robot"]
+__all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize",
+           "spherized_robot"]
 
 #: bump when the fitted result of the same inputs changes
-CACHE_VERSION = 1
+CACHE_VERSION = 2
+
+
+class SphereFitWarning(UserWarning):
+    """A link's fitted spheres pass a bound (error, protrusion or excess): the collision
+    model may miss collisions or refuse free configurations."""
 
 
 @dataclass
@@ -47,9 +59,16 @@ class SpherizeOptions:
     field.
 
     tolerance: one-sided error [m] of the fitted spheres (every surface point within this
-        distance of a sphere) and each sphere's reach past the surface, > 0.
+        distance of a sphere), > 0.
+    protrusion: None (automatic: ``tolerance / 2`` for thin parts such as fingers and
+        hands, up to ``2 tolerance`` for thick links; docs/spheres.md) or how far [m] a
+        sphere may reach past the surface, > 0.
     max_spheres: None (the fewest spheres meeting ``tolerance``) or the most spheres per
-        collision geometry (the fit then reports the error it reached).
+        link (the fit then reports the error it reached).
+    warn_protrusion: bound [m] on a link's largest protrusion; None: ``2.5 tolerance`` (or
+        ``1.25 protrusion`` when larger).
+    warn_excess: bound on a link's excess volume as a fraction of its volume, > 0 (a link
+        whose excess is below ``(2 tolerance)^3`` is not named: a tiny part's shell).
     pair_samples: random configurations of the self-collision pair sampling, >= 1.
     pair_margin: distance [m] below which a sampled pair counts as colliding, >= 0.
     seed: seed of the fit and of the pair sampling.
@@ -60,10 +79,16 @@ class SpherizeOptions:
     pair_samples: int = 10000
     pair_margin: float = 0.0
     seed: int = 0
+    protrusion: float | None = None
+    warn_protrusion: float | None = None
+    warn_excess: float = 1.0
 
     def validate(self) -> None:
-        for name, strict in (("tolerance", True), ("pair_margin", False)):
+        for name, strict in (("tolerance", True), ("pair_margin", False), ("protrusion", True),
+                             ("warn_protrusion", True), ("warn_excess", True)):
             v = getattr(self, name)
+            if v is None and name in ("protrusion", "warn_protrusion"):
+                continue
             if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)):
                 raise TypeError(f"{name}: expected a number [m], got {type(v).__name__}")
             if not math.isfinite(v) or v < 0 or (strict and v == 0):
@@ -82,13 +107,16 @@ class SpherizeOptions:
 @dataclass
 class SpherizeReport:
     """What :func:`spherize` did. ``links``: one row per link with collision geometry:
-    ``{link, geometries, spheres, one_sided_error [m], meets_tolerance, excess_fraction,
-    kept (URDF spheres taken as they are)}``; ``pairs``: the sampled self pairs (None when
+    ``{link, geometries, spheres, one_sided_error [m], meets_tolerance, protrusion (the
+    allowed reach [m]), max_protrusion [m], excess_volume [m^3], excess_fraction,
+    watertight, kept (URDF spheres taken as they are)}``; ``warnings``: one line per link
+    that passes a bound (module docstring); ``pairs``: the sampled self pairs (None when
     read from the cache); ``cached``: the model came from the disk cache."""
 
     links: list[dict] = field(default_factory=list)
     pairs: SelfPairs | None = None
     cached: bool = False
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def n_spheres(self) -> int:
@@ -96,7 +124,7 @@ class SpherizeReport:
 
     def to_dict(self) -> dict:
         out: dict[str, Any] = {"links": self.links, "spheres": self.n_spheres,
-                               "cached": self.cached}
+                               "cached": self.cached, "warnings": list(self.warnings)}
         if self.pairs is not None:
             out["excluded_pairs"] = len(self.pairs.exclude_pairs)
         return out
@@ -128,29 +156,43 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None
         by_link.setdefault(g.link, []).append(g)
     spheres = list(model.spheres)
     report = SpherizeReport()
-    fit_opts = {"seed": int(o.seed)}
+    fit_opts: dict[str, Any] = {"seed": int(o.seed)}
     if o.max_spheres is not None:
         fit_opts["max_spheres"] = int(o.max_spheres)
+    if o.protrusion is not None:
+        fit_opts["protrusion"] = float(o.protrusion)
     for link, geoms in by_link.items():
         frame = model.frame_index(link)
         todo = [g for g in geoms if g.kind != "sphere"]
         if not todo:  # a spherized link: its spheres are already the model's
             report.links.append({"link": link, "geometries": len(geoms), "spheres": len(geoms),
                                  "one_sided_error": 0.0, "meets_tolerance": True,
-                                 "excess_fraction": 0.0, "kept": True})
+                                 "protrusion": 0.0, "max_protrusion": 0.0,
+                                 "excess_volume": 0.0, "excess_fraction": 0.0,
+                                 "watertight": True, "kept": True})
             continue
+        link_opts = dict(fit_opts)
+        if o.max_spheres is not None:  # the link's URDF spheres count against its budget
+            link_opts["max_spheres"] = max(int(o.max_spheres) - (len(geoms) - len(todo)), 1)
         try:
             fit = fit_link([_geometry(g) for g in todo], tolerance=float(o.tolerance),
-                           **fit_opts)
+                           **link_opts)
         except (ValueError, TypeError) as e:
             raise type(e)(f"link '{link}': {e}") from e
         spheres += [Sphere(frame=frame, position=np.asarray(c, np.float64), radius=float(r))
                     for c, r in zip(fit.centres, fit.radii)]
-        report.links.append({"link": link, "geometries": len(geoms),
-                             "spheres": int(len(fit.radii)) + len(geoms) - len(todo),
-                             "one_sided_error": float(fit.one_sided_error),
-                             "meets_tolerance": bool(fit.meets_tolerance),
-                             "excess_fraction": float(fit.excess_fraction), "kept": False})
+        row = {"link": link, "geometries": len(geoms),
+               "spheres": int(len(fit.radii)) + len(geoms) - len(todo),
+               "one_sided_error": float(fit.one_sided_error),
+               "meets_tolerance": bool(fit.meets_tolerance),
+               "protrusion": float(fit.protrusion), "max_protrusion": float(fit.max_protrusion),
+               "excess_volume": float(fit.excess_volume),
+               "excess_fraction": float(fit.excess_fraction),
+               "watertight": bool(fit.watertight), "kept": False}
+        report.links.append(row)
+        report.warnings += link_warnings(row, o)
+    for w in report.warnings:
+        warnings.warn(w, SphereFitWarning, stacklevel=2)
     fitted = model.copy(spheres=spheres)
     if len(spheres):
         pairs = never_colliding_pairs(fitted, n_samples=int(o.pair_samples), seed=int(o.seed),
@@ -158,6 +200,29 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None
         fitted = with_self_pairs(fitted, pairs)
         report.pairs = pairs
     return fitted, report
+
+
+def link_warnings(row: dict, options: SpherizeOptions) -> list[str]:
+    """The bounds a link's fit row (:class:`SpherizeReport` ``links``) passes, as lines
+    naming the link and the figures (empty when none)."""
+    tol = float(options.tolerance)
+    bound = options.warn_protrusion
+    if bound is None:
+        bound = max(2.5 * tol, 1.25 * float(options.protrusion or 0.0))
+    out = []
+    name = row["link"]
+    if row.get("one_sided_error", 0.0) > tol:
+        out.append(f"link '{name}': one-sided error {row['one_sided_error']:.4f} m > tolerance "
+                   f"{tol:g} m (surface outside the spheres: collisions may be missed)")
+    if row.get("max_protrusion", 0.0) > bound:
+        out.append(f"link '{name}': a sphere reaches {row['max_protrusion']:.4f} m outside the "
+                   f"part (bound {bound:g} m): free configurations may be refused")
+    if row.get("excess_fraction", 0.0) > options.warn_excess and \
+            row.get("excess_volume", 0.0) > (2.0 * tol) ** 3:  # not for a 1 cm^3 part
+        out.append(f"link '{name}': spheres' volume outside the part is "
+                   f"{row['excess_fraction']:.2f} x the part's volume (bound "
+                   f"{options.warn_excess:g})")
+    return out
 
 
 def _cache_dir() -> Path:
@@ -197,14 +262,19 @@ def spherized_robot(path: str | os.PathLike, options: SpherizeOptions | None = N
             try:
                 doc = json.loads(file.read_text())
                 model = RobotModel.from_dict(doc["robot"])
-                return model, SpherizeReport(links=doc["links"], cached=True)
+                report = SpherizeReport(links=doc["links"], cached=True,
+                                        warnings=list(doc.get("warnings", [])))
+                for w in report.warnings:
+                    warnings.warn(w, SphereFitWarning, stacklevel=2)
+                return model, report
             except (OSError, ValueError, KeyError, TypeError):
                 pass  # a damaged cache entry: recompute
     model, report = spherize(imported, o)
     if file is not None:
         try:
             file.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(file, json.dumps({"robot": model.to_dict(), "links": report.links}))
+            atomic_write_text(file, json.dumps({"robot": model.to_dict(), "links": report.links,
+                                                "warnings": report.warnings}))
         except OSError:
             pass  # a read-only home: no cache, same result
     return model, report
