@@ -100,6 +100,8 @@ def adjacent_pairs(robot: RobotModel) -> list[tuple[int, int]]:
 
 #: default working-set target of the pair sampling [bytes] (:func:`never_colliding_pairs`)
 MAX_MEMORY = 256_000_000
+#: most spheres of one bounding-sphere cluster of a frame (the culling of sphere blocks)
+CLUSTER = 48
 #: bytes per sphere-pair distance and configuration while a block is computed: the squared
 #: distance (then the surface distance) and one coordinate's difference (float64), with room
 _PAIR_BYTES = 8 * 4
@@ -195,7 +197,8 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
     are computed in blocks of configurations and tiles of spheres. A frame pair is computed in
     a configuration only where the distance of the two frames' bounding spheres is below
     ``margin`` and below the pair's smallest distance so far (otherwise neither the collision
-    count nor the minimum can change), so the results are exact. ``verbose`` prints
+    count nor the minimum can change), so the results are exact; frames of more than
+    :data:`CLUSTER` spheres are culled per cluster of spheres. ``verbose`` prints
     :func:`pair_sampling_cost` before the work. A MemoryError is raised before the work when
     the estimate exceeds the available memory."""
     model = get_robot(robot)
@@ -227,12 +230,29 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
     frames, starts = np.unique(sf, return_index=True)
     ends = np.append(starts[1:], len(sf))
     nb = len(frames)
-    # bounding sphere of each frame's spheres (frame coordinates), a little inflated so that
-    # rounding never makes the bound larger than a true distance
-    centre = np.array([sp[s:e].mean(axis=0) for s, e in zip(starts, ends)])
-    reach = np.array([np.max(np.linalg.norm(sp[s:e] - centre[i], axis=1) + sr[s:e])
-                      for i, (s, e) in enumerate(zip(starts, ends))])
-    reach = reach + 1e-9 * (1.0 + reach)
+    # each frame's spheres in clusters of at most CLUSTER (sorted along the frame's principal
+    # axis; the order within a frame changes no minimum), each with a bounding sphere (frame
+    # coordinates, a little inflated so that rounding never makes a bound exceed a distance)
+    groups: list[list[int]] = []        # per frame: its cluster indices
+    g0, g1, gc, gr = [], [], [], []
+    for i, (a, e) in enumerate(zip(starts, ends)):
+        p = sp[a:e]
+        if e - a > CLUSTER:
+            u = np.linalg.svd(p - p.mean(axis=0), full_matrices=False)[2][0]
+            o = a + np.argsort(p @ u, kind="stable")
+            sp[a:e], sr[a:e] = sp[o], sr[o]
+        groups.append([])
+        for c in range(a, e, CLUSTER):
+            ce = min(c + CLUSTER, e)
+            mid = sp[c:ce].mean(axis=0)
+            reach = float(np.max(np.linalg.norm(sp[c:ce] - mid, axis=1) + sr[c:ce]))
+            groups[i].append(len(g0))
+            g0.append(c)
+            g1.append(ce)
+            gc.append(mid)
+            gr.append(reach + 1e-9 * (1.0 + reach))
+    gframe = np.repeat(frames, [len(g) for g in groups])
+    gc_arr, gr_arr = np.array(gc), np.array(gr)
     dmin = np.full((nb, nb), np.inf)
     hits = np.zeros((nb, nb), np.int64)
     pairs = [(i, j) for i in range(nb) for j in range(i + 1, nb)]
@@ -244,17 +264,24 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
             Tf = T[:, f]
             x[:, starts[i]:ends[i]] = (np.einsum("bij,sj->bsi", Tf[:, :3, :3],
                                                  sp[starts[i]:ends[i]]) + Tf[:, None, :3, 3])
-        Tb = T[:, frames]
-        C = np.einsum("bfij,fj->bfi", Tb[..., :3, :3], centre) + Tb[..., :3, 3]
-        del T, Tb
+        Tg = T[:, gframe]
+        C = np.einsum("bgij,gj->bgi", Tg[..., :3, :3], gc_arr) + Tg[..., :3, 3]
+        del T, Tg
         for i, j in pairs:
-            bound = np.linalg.norm(C[:, i] - C[:, j], axis=-1) - reach[i] - reach[j]
-            todo = np.flatnonzero(bound < max(margin, dmin[i, j]))
-            if not len(todo):
-                continue
-            fd = _frame_pair_min(x, sr, todo, starts[i], ends[i], starts[j], ends[j], tile)
-            dmin[i, j] = min(dmin[i, j], float(fd.min()))
-            hits[i, j] += int(np.count_nonzero(fd < margin))
+            fd = None           # (B,) the pair's smallest distance per sample (inf: > bound)
+            for ga in groups[i]:
+                for gb in groups[j]:
+                    bound = np.linalg.norm(C[:, ga] - C[:, gb], axis=-1) - gr_arr[ga] - gr_arr[gb]
+                    todo = np.flatnonzero(bound < max(margin, dmin[i, j]))
+                    if not len(todo):
+                        continue
+                    d = _frame_pair_min(x, sr, todo, g0[ga], g1[ga], g0[gb], g1[gb], tile)
+                    if fd is None:
+                        fd = np.full(B, np.inf)
+                    fd[todo] = np.minimum(fd[todo], d)
+                    dmin[i, j] = min(dmin[i, j], float(d.min()))
+            if fd is not None:
+                hits[i, j] += int(np.count_nonzero(fd < margin))
         del x, C
     dmin = np.minimum(dmin, dmin.T)
     hits = hits + hits.T
