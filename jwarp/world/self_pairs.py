@@ -168,9 +168,8 @@ def _plan(model: RobotModel, n_samples: int, batch: int, max_memory: int
     cost = PairSamplingCost(
         spheres=S, frames=nb, frame_pairs=nb * (nb - 1) // 2, sphere_pairs=sphere_pairs,
         evaluations=sphere_pairs * n_samples, batch=batch,
-        memory=int(batch * per_cfg + min(max_memory // 2,
-                                         _PAIR_BYTES * batch * int(np.max(c, initial=1)) ** 2)
-                   + nf * nf * 16))
+        memory=int(batch * per_cfg + nf * nf * 16 + min(
+            max_memory // 2, _PAIR_BYTES * batch * min(CLUSTER, int(np.max(c, initial=1))) ** 2)))
     return cost, tile
 
 
