@@ -288,9 +288,9 @@ def home_configuration(e: Entry, m: Any) -> tuple[np.ndarray, str]:
     return np.clip(q, lim[:, 0], lim[:, 1]), where
 
 
-def colliding_pairs(m: Any, q: np.ndarray, most: int = 4) -> list[str]:
-    """The frame pairs whose spheres overlap at ``q`` (n_dof,) among those the robot
-    checks (``allowed_collision_pairs``), deepest first: "a/b -d mm" (numpy, from FK)."""
+def overlaps(m: Any, q: np.ndarray) -> dict[tuple, float]:
+    """{(frame a, frame b): deepest overlap [m] < 0} of the sphere pairs the robot checks
+    (``allowed_collision_pairs``) at ``q`` (n_dof,) (numpy, from FK)."""
     import jwarp
 
     f, pos, rad = m.sphere_arrays()
@@ -303,8 +303,24 @@ def colliding_pairs(m: Any, q: np.ndarray, most: int = 4) -> list[str]:
         if i < j and A[f[i], f[j]]:
             k = tuple(sorted((m.frame_names[f[i]], m.frame_names[f[j]])))
             worst[k] = min(worst.get(k, 0.0), float(d[i, j]))
+    return worst
+
+
+def colliding_pairs(m: Any, q: np.ndarray, most: int = 4) -> list[str]:
+    """The frame pairs whose spheres overlap at ``q``, deepest first: "a/b -d mm"."""
+    worst = overlaps(m, q)
     return [f"{a}/{b} {1e3 * v:.1f} mm" for (a, b), v in sorted(worst.items(),
                                                                  key=lambda t: t[1])][:most]
+
+
+def frequent_pairs(m: Any, Q: np.ndarray, most: int = 3) -> list[str]:
+    """The frame pairs colliding most often over the configurations ``Q``: "a/b k%"."""
+    count: dict[tuple, int] = {}
+    for q in Q:
+        for k in overlaps(m, q):
+            count[k] = count.get(k, 0) + 1
+    return [f"{a}/{b} {100 * c / len(Q):.0f}%" for (a, b), c in
+            sorted(count.items(), key=lambda t: -t[1])][:most]
 
 
 def mesh_clearance(path: str, m: Any, q: np.ndarray, locked: dict) -> tuple[float, str]:
@@ -514,6 +530,8 @@ def check_robot(e: Entry, args: Any, helps: tuple[str, str], work: str) -> dict:
         Qs = random_configurations(m, args.free_samples, rng_seed + 1)
         free = is_collision_free(m, Qs, None, 0.0, dtype=np.float64)
         row["self_free_pct"] = 100.0 * float(free.mean())
+        if free.mean() < 0.5:   # why: the pairs that collide most often
+            row["frequent_collisions"] = frequent_pairs(m, Qs[~free][:100])
         Qf = Qs[free]
         if len(Qf) < 2:
             raise ValueError(f"{int(free.sum())} of {len(Qs)} random configurations are free "
@@ -592,6 +610,8 @@ def table(rows: list[dict]) -> str:
             v = r.get(k)
             if k in ("one_sided_error_m", "protrusion_m") and isinstance(v, (int, float)):
                 cells.append(f"{1e3 * v:.1f}")
+            elif k == "plan_found" and v and r.get("plan_stage"):
+                cells.append(f"yes ({r['plan_stage']})")
             else:
                 cells.append(fmt(v, spec))
         out.append("| " + " | ".join(cells) + " |")
@@ -601,7 +621,7 @@ def table(rows: list[dict]) -> str:
         if r.get("error"):
             bits.append(f"ERROR {r['error']}")
         for k in ("fit_note", "warning", "sub_chain", "home", "home_collisions",
-                  "home_mesh_pair", "plan_pair",
+                  "home_mesh_pair", "frequent_collisions", "plan_pair",
                   "plan_reason", "fk_ref"):
             if r.get(k) and not (k == "fk_ref" and r[k] == "pinocchio"):
                 bits.append(f"{k}: {r[k]}")
