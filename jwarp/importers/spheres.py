@@ -68,7 +68,8 @@ _CANDIDATE_POINTS = 1500  # samples whose medial balls give candidates (plus unh
 _FIT_SAMPLES = (1500, 4000)  # clip of the automatic surface sample count
 _MAX_PAIRS = 12_000_000  # candidates x samples of the cover's dense slack matrix
 _EPS_FIT = 0.85  # the cover's allowed error, as a fraction of the tolerance
-_SPHERE_POINTS = 64  # points per sphere of the protrusion check
+_BUDGET_SAMPLES = 2000  # samples of the error search with max_spheres
+_HOLE_DIRECTIONS = 64  # directions of the open-mesh clearance test
 _CHECK_SAMPLES = 20_000  # fresh surface samples of the check (at least)
 _REFIT = 0.9  # refit when a fresh sample lies further out than this x tolerance
 
@@ -95,7 +96,7 @@ class SphereFitOptions:
     n_surface: int | None = None
     n_volume: int = 100_000
     seed: int = 0
-    max_rounds: int = 4
+    max_rounds: int = 6
     protrusion: float | None = None
 
     def validate(self) -> "SphereFitOptions":
@@ -249,6 +250,7 @@ class _Solid:
             F = F[:, ::-1]
         self.faces = F
         self.simple = False  # a closed single-body mesh (set by the fit): nothing buried
+        self.closed = bool(mesh.is_watertight)  # no holes: the triangles bound the solid
         self.extent = float(np.linalg.norm(V.max(0) - V.min(0)))
         self._pts = wp.array((V - self.centre).astype(np.float32), dtype=wp.vec3, device="cpu")
         self._idx = wp.array(F.astype(np.int32).ravel(), dtype=wp.int32, device="cpu")
@@ -288,26 +290,53 @@ def _fibonacci(n: int) -> np.ndarray:
     return np.stack([s * np.cos(t), s * np.sin(t), z], axis=1)
 
 
+def _clearance(solid: _Solid, c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(M,) clearance of centres ``c`` inside the solid: their distance ``d`` to the
+    triangles, and for an open mesh at most the radius of a ball around ``c`` whose 64
+    sampled points at 0.99 x that radius all lie inside the solid (a hole is no triangle:
+    a ball reaching through it is shrunk by bisection, 6 steps)."""
+    d = np.asarray(d, np.float64).copy()
+    if solid.closed or len(d) == 0:
+        return d
+    u = _fibonacci(_HOLE_DIRECTIONS)
+
+    def all_inside(idx: np.ndarray, rad: np.ndarray) -> np.ndarray:
+        x = (c[idx, None, :] + 0.99 * rad[:, None, None] * u[None]).reshape(-1, 3)
+        return (solid.signed_distance(x).reshape(len(idx), -1) < 0).all(axis=1)
+
+    idx = np.flatnonzero(~all_inside(np.arange(len(d)), d))
+    if len(idx):
+        lo, hi = np.zeros(len(idx)), d[idx].copy()
+        for _ in range(6):
+            mid = 0.5 * (lo + hi)
+            ok = all_inside(idx, mid)
+            lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+        d[idx] = 0.99 * lo
+    return d
+
+
 def _protrusion(solid: _Solid, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """(k,) how far each sphere reaches outside the solid: ``max(radius - clearance(centre),
-    largest surface distance of its outside points among 64 on the sphere)``."""
+    """(k,) how far each sphere reaches outside the solid: ``radius - clearance(centre)``
+    (the ball of radius ``clearance`` lies inside, so every point of the sphere is within
+    that distance of the solid; a centre outside has a negative clearance)."""
     c = np.asarray(centres, np.float64).reshape(-1, 3)
     r = np.asarray(radii, np.float64).reshape(-1)
     if len(r) == 0:
         return np.zeros(0)
-    by_centre = r + solid.signed_distance(c)
-    u = _fibonacci(_SPHERE_POINTS)
-    x = (c[:, None, :] + r[:, None, None] * u[None]).reshape(-1, 3)
-    d = solid.signed_distance(x).reshape(len(r), -1)
-    return np.maximum(by_centre, np.maximum(d, 0.0).max(axis=1))
+    sd = solid.signed_distance(c)
+    inside = sd < 0
+    clear = sd * -1.0
+    clear[inside] = _clearance(solid, c[inside], -sd[inside])
+    return r - clear
 
 
 def sphere_protrusion(mesh: trimesh.Trimesh, centres: np.ndarray,
                       radii: np.ndarray) -> np.ndarray:
     """(k,) how far [mesh unit] each sphere (``centres`` (k, 3), ``radii`` (k,)) reaches
-    outside the solid of ``mesh``: ``radius + signed_distance(centre)`` (exact for a closed
-    mesh: the ball of radius ``-signed_distance`` lies inside), at least the largest
-    surface distance of 64 points on the sphere outside the solid (an open mesh's hole)."""
+    outside the solid of ``mesh``: ``radius + signed_distance(centre)`` (an upper bound,
+    exact for a convex part: the ball of radius ``-signed_distance`` lies inside); for an
+    open mesh the clearance is also bounded by the solid's holes (sampled, see the module
+    docstring)."""
     return _protrusion(_Solid(_check_mesh(mesh)), centres, radii)
 
 
@@ -359,7 +388,8 @@ def _candidates(solid: _Solid, pts: np.ndarray, normals: np.ndarray, samples: np
     c = c[np.sort(keep)]
     sd = solid.signed_distance(c)
     inside = sd < -1e-9 * max(solid.extent, 1e-300)
-    return c[inside], -sd[inside]
+    c = c[inside]
+    return c, _clearance(solid, c, -sd[inside])
 
 
 def _greedy_cover(A: sparse.csr_matrix, limit: int | None) -> list[int] | None:
@@ -397,6 +427,7 @@ class _Slack:
     ``_MAX_PAIRS`` entries: the caller subsamples candidates)."""
 
     def __init__(self, samples: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> None:
+        self.c, self.r = centres, radii
         self.s = np.empty((len(centres), len(samples)), np.float32)
         step = max(1, 4_000_000 // max(len(samples), 1))
         o = samples.mean(axis=0) if len(samples) else np.zeros(3)
@@ -417,26 +448,32 @@ class _Slack:
             np.arange(self.s.shape[1])
 
 
-def _two_for_one(B: np.ndarray, chosen: list[int]) -> list[int]:
-    """Local search after the greedy cover (``B`` (M, N) bool: candidate i holds sample j):
-    replace two chosen spheres by one candidate that holds every sample only they held,
-    while such a pair exists."""
+def _two_for_one(B: np.ndarray, chosen: list[int], centres: np.ndarray,
+                 reach: np.ndarray) -> list[int]:
+    """Local search after the greedy cover (``B`` (M, N) bool: candidate i holds sample j;
+    ``reach`` (M,): radius + eps): replace two chosen spheres that hold a common region
+    (centres closer than their summed reach) by one candidate that holds every sample only
+    they held, while such a pair exists."""
     chosen = list(chosen)
+    tried: set = set()
     improved = True
     while improved and len(chosen) > 1:
         improved = False
         cnt = B[chosen].sum(axis=0, dtype=np.int32)
-        for a in range(len(chosen)):
-            for b in range(a + 1, len(chosen)):
-                i, j = chosen[a], chosen[b]
-                only = np.flatnonzero((B[i] | B[j]) & (cnt - B[i] - B[j] <= 0))
-                ok = np.flatnonzero(B[:, only].all(axis=1)) if len(only) else np.arange(len(B))
-                if len(ok):
-                    m = int(ok[np.argmax(B[ok].sum(axis=1))])
-                    chosen = [x for x in chosen if x not in (i, j)] + [m]
-                    improved = True
-                    break
-            if improved:
+        ch = np.asarray(chosen)
+        dist = np.linalg.norm(centres[ch, None] - centres[None, ch], axis=-1)
+        near = dist <= reach[ch, None] + reach[None, ch]
+        for a, b in zip(*np.nonzero(np.triu(near, 1))):
+            i, j = int(ch[a]), int(ch[b])
+            if (i, j) in tried:
+                continue
+            tried.add((i, j))
+            only = np.flatnonzero((B[i] | B[j]) & (cnt - B[i] - B[j] <= 0))
+            ok = np.flatnonzero(B[:, only].all(axis=1)) if len(only) else np.arange(len(B))
+            if len(ok):
+                m = int(ok[np.argmax(B[ok].sum(axis=1))])
+                chosen = [x for x in chosen if x not in (i, j)] + [m]
+                improved = True
                 break
     return chosen
 
@@ -448,7 +485,7 @@ def _cover(slack: _Slack, max_spheres: int | None, eps0: float,
     found by doubling from ``eps0`` and then bisection, to ~2 %."""
     chosen = _greedy_cover(slack.matrix(eps0), max_spheres)
     if chosen is not None:
-        return _two_for_one(slack.s <= eps0, chosen), eps0
+        return _two_for_one(slack.s <= eps0, chosen, slack.c, slack.r + eps0), eps0
     lo, hi = eps0, 2.0 * eps0
     while True:
         best = _greedy_cover(slack.matrix(hi), max_spheres)
@@ -464,7 +501,7 @@ def _cover(slack: _Slack, max_spheres: int | None, eps0: float,
             lo = mid
         else:
             hi, best = mid, got
-    return _two_for_one(slack.s <= hi, best), hi
+    return _two_for_one(slack.s <= hi, best, slack.c, slack.r + hi), hi
 
 
 def _solid_volume(mesh: trimesh.Trimesh, solid: _Solid, n: int, seed: int
@@ -531,7 +568,7 @@ def _reach(clearance: np.ndarray, *, tol: float, fixed: float | None,
 
 def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | None = None,
                 n_surface: int | None = None, n_volume: int = 100_000, seed: int = 0,
-                max_rounds: int = 4, protrusion: float | None = None) -> SphereFit:
+                max_rounds: int = 6, protrusion: float | None = None) -> SphereFit:
     """Fit spheres to ``mesh``: centres inside its solid, radii = clearance + ``protrusion``
     (default ``tolerance / 2``), every surface point within ``tolerance`` of a sphere with as
     few spheres as the greedy cover finds; or, with ``max_spheres``, at most that many and
@@ -553,7 +590,7 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
                          f"mesh's unit (a URDF in cm or mm needs a scale)")
     solid = _Solid(mesh)
     watertight = bool(mesh.is_watertight)
-    n_s = opt.n_surface or int(np.clip(4.0 * mesh.area / tol ** 2, *_FIT_SAMPLES))
+    n_s = opt.n_surface or int(np.clip(8.0 * mesh.area / tol ** 2, *_FIT_SAMPLES))
     pts, nrm = _sample(mesh, n_s, opt.seed)
     used = np.unique(mesh.faces)
     verts = np.asarray(mesh.vertices)[used]
@@ -570,6 +607,10 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
     grid = 0.2 * min(tol, opt.protrusion or tol)
     sub = rng.permutation(len(samples))[:_CANDIDATE_POINTS]
     cand_c, cand_d = _candidates(solid, samples[sub], normals[sub], samples, grid)
+    if opt.max_spheres is not None and len(samples) > _BUDGET_SAMPLES:
+        # the error search repeats the cover: on a subset of the samples (documented)
+        keep = np.sort(rng.permutation(len(samples))[:_BUDGET_SAMPLES])
+        samples, normals = samples[keep], normals[keep]
     if opt.protrusion is None and len(cand_d):
         part = float(cand_d.max())
     reach = functools.partial(_reach, tol=tol, fixed=opt.protrusion, part=part)
@@ -590,7 +631,7 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
         cap = max(1, _MAX_PAIRS // len(samples))
         cand_c, cand_d = _thin(cand_c, cand_d, cap, grid)
         slack = _Slack(samples, cand_c, cand_d + reach(cand_d))
-        lost = slack.unheld(eps0) if rounds == 1 else np.zeros(0, np.int64)
+        lost = slack.unheld(eps0)
         if len(lost):  # samples no candidate holds: add their own medial candidates
             c2, d2 = _candidates(solid, samples[lost], normals[lost], samples, grid)
             cand_c, cand_d = np.concatenate([cand_c, c2]), np.concatenate([cand_d, d2])
@@ -600,11 +641,12 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
         c, r = cand_c[chosen], cand_d[chosen] + reach(cand_d[chosen])
         err_all = one_sided_error(check, c, r)
         err = float(err_all.max())
-        key = (err > tol, len(c) if err <= tol else err, err)
+        key = (err > tol, err > _REFIT * tol, len(c) if err <= tol else err, err)
         if best is None or key < best[0]:
             best = (key, c, r, err, eps, float(reach(cand_d[chosen]).max()), eps > eps0)
         bad = err_all > _REFIT * tol
-        if opt.max_spheres is not None or not bad.any() or rounds >= opt.max_rounds:
+        if (opt.max_spheres is not None and eps > eps0) or not bad.any() \
+                or rounds >= opt.max_rounds:  # (eps > eps0 with a budget: it binds)
             break
         eps0 *= 0.95  # the next round's cover a little tighter
         # fresh samples outside: fit them too, with their own candidates
@@ -614,7 +656,7 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
         c2, d2 = _candidates(solid, new_p, new_n, samples, grid)
         cand_c, cand_d = np.concatenate([cand_c, c2]), np.concatenate([cand_d, d2])
         check = _boundary_sample(mesh, solid, n_check, opt.seed + 7919 * (rounds + 1))
-    _, c, r, err, eps, allowed, widened = best  # of the rounds: covered, then fewest
+    _, c, r, err, eps, allowed, widened = best  # of the rounds: covered with margin, fewest
     if widened and opt.max_spheres is None:
         notes.append(f"some samples are held by no candidate sphere; cover error {eps:.3g}")
     prot = _protrusion(solid, c, r)

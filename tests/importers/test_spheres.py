@@ -90,7 +90,7 @@ def test_thin_plate_and_l_shape_covered():
         assert fresh_error(mesh, fit) <= 0.008
     # thin: the spheres follow the plate (no sphere centre off its mid-plane by more than
     # the half thickness, radii ~ half thickness + the thin part's protrusion tolerance / 2)
-    fit = fit_spheres(plate, tolerance=0.008)
+    fit = fit_spheres(plate, tolerance=0.008)  # (the same seed: the same fit)
     assert np.all(np.abs(fit.centres[:, 2]) <= 0.0015 + 1e-9)
     assert fit.protrusion == pytest.approx(0.004)
     assert fit.radii.max() <= 0.0015 + 0.004 + 1e-6
