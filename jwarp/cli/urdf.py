@@ -169,12 +169,16 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
         imported = load_urdf(args.urdf, **urdf_options)
         model, fit = imported.model, None
         if args.spheres == "fit" and any(g.kind != "sphere" for g in imported.geometries):
-            from jwarp.world.spherize import SpherizeOptions, spherized_robot
+            import warnings
+
+            from jwarp.world.spherize import SphereFitWarning, SpherizeOptions, spherized_robot
 
             opts = SpherizeOptions(tolerance=args.tolerance, max_spheres=args.max_spheres,
-                                   pair_samples=args.pair_samples)
-            model, fit = spherized_robot(args.urdf, opts, cache=not args.no_cache,
-                                         **urdf_options)
+                                   pair_samples=args.pair_samples, protrusion=args.protrusion)
+            with warnings.catch_warnings():  # printed below from the report, each once
+                warnings.simplefilter("ignore", SphereFitWarning)
+                model, fit = spherized_robot(args.urdf, opts, cache=not args.no_cache,
+                                             **urdf_options)
         elif args.spheres == "none":
             model = model.copy(spheres=[])
     except ValueError as e:
@@ -198,6 +202,7 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
                      f"{', from the cache' if fit.cached else ''}); "
                      f"{int(model.allowed_collision_pairs.sum()) // 2} self-collision frame "
                      f"pairs checked")
+        lines += [f"warning: {w}" for w in fit.warnings]
     more_lines, more = group_lines(grouped, fit is not None)
     lines += more_lines
     extra.update(more)
@@ -231,8 +236,13 @@ def add_subcommands(sub: Any) -> None:
                    default=0.01, metavar="M",
                    help="one-sided error of the fitted spheres [m] (0.01)")
     s.add_argument("--max-spheres", type=int_arg("--max-spheres", 1), default=None,
-                   metavar="K", help="most spheres per collision geometry (default: as many "
-                                     "as the tolerance needs)")
+                   metavar="K", help="most spheres per link (default: as many as the "
+                                     "tolerance needs)")
+    s.add_argument("--protrusion", type=real_arg("--protrusion", 0.0, lo_open=True, unit=" m"),
+                   default=None, metavar="M",
+                   help="how far a fitted sphere may reach past the link's surface [m] "
+                        "(default: tolerance/2 for thin parts such as fingers, up to "
+                        "2 x tolerance for thick links)")
     s.add_argument("--pair-samples", type=int_arg("--pair-samples", 1), default=10000,
                    metavar="N", help="random configurations of the self-collision pair "
                                      "sampling (10000)")
