@@ -258,3 +258,22 @@ def test_active_set_does_not_start_from_a_point_without_equilibrium():
     assert np.isfinite(sol.cost) and sol.cost <= prob.cost(xs)
     assert sol.x[0] >= 0.0
     assert isinstance(sol, OptimizeResult)
+
+
+class _FiniteOnlyAtStart(_NoEquilibriumAtZero):
+    """Every point but the start has no equilibrium: scipy 1.17's dogbox then ends its
+    first iteration without a finite trial, and its callback read an unset cost
+    (UnboundLocalError 'cost_new')."""
+
+    def residuals(self, x):
+        if not np.array_equal(x, [1e-4, 1.0]):
+            return np.full(2, np.inf)
+        return np.array([3.0, -2.0])
+
+
+def test_a_run_without_any_finite_trial_ends_at_its_start():
+    prob = _FiniteOnlyAtStart()
+    xs = np.array([1e-4, 1.0])
+    sol = solve_start(prob, xs, CalibrationOptions(free="x", max_nfev=3, stall_tol=None))
+    np.testing.assert_array_equal(sol.x, xs)
+    assert sol.cost == prob.cost(xs)

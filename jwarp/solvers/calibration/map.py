@@ -522,6 +522,24 @@ class CalibrationProblem:
         J[self.n_data + np.arange(self._prior_idx.size), self._prior_idx] = 1.0 / sp.sigma[self._prior_idx]
         return J
 
+    def scale_unpriored(self, x: Any) -> None:
+        """Set the solver's scale (``space.typical``) of the parameters without a prior to
+        ``1 / |dr/dx_i|`` of the data rows at ``x`` (scipy's ``x_scale="jac"``, fixed at the
+        start); a parameter without effect there keeps its group's default sigma. Without
+        this the trust region of a prior-less run is measured in SI units (1 rad/(N m) of
+        compliance next to 1 m of length) and the run crawls or keeps its start."""
+        sp = self.space
+        free = ~sp.has_prior
+        if not free.any():
+            return
+        J = self.jacobian(x)[:self.n_data]
+        norms = np.linalg.norm(J[:, free], axis=0)
+        ok = np.isfinite(norms) & (norms > 0)
+        typ = np.array(sp.scale, np.float64) if sp.typical is None else sp.typical.copy()
+        idx = np.nonzero(free)[0]
+        typ[idx[ok]] = 1.0 / norms[ok]
+        sp.typical = typ
+
     def _coupling_columns(self, x: np.ndarray, d_cf: np.ndarray, cf_f: np.ndarray
                           ) -> np.ndarray:
         """(S, m, P_c) dy/d(coupling parameters) from dy/d(joint value) of the coupled
@@ -732,9 +750,19 @@ def _least_squares(prob: CalibrationProblem, x: np.ndarray, moving: np.ndarray,
                 - costs[-1] < max(o.stall_tol, STALL_RTOL * costs[-1])):
             raise StopIteration
 
-    sol = least_squares(fun, x[idx], jac=jac, bounds=(lower[idx], sp.upper[idx]),
-                        method=o.method, x_scale=sp.scale[idx], ftol=o.ftol, xtol=o.xtol,
-                        gtol=o.gtol, max_nfev=max_nfev, callback=callback)
+    try:
+        sol = least_squares(fun, x[idx], jac=jac, bounds=(lower[idx], sp.upper[idx]),
+                            method=o.method, x_scale=sp.scale[idx], ftol=o.ftol, xtol=o.xtol,
+                            gtol=o.gtol, max_nfev=max_nfev, callback=callback)
+    except UnboundLocalError as e:
+        if "cost_new" not in str(e):
+            raise
+        # scipy 1.17 dogbox with a callback: max_nfev reached while every trial step so
+        # far had non-finite residuals (no equilibrium) -> its callback reads an unset
+        # cost. No step was accepted: the run ends at its start.
+        return OptimizeResult(x=x[idx].copy(), cost=0.5 * float(fun(x[idx]) @ fun(x[idx])),
+                              nfev=int(max_nfev or 1), status=0, success=False,
+                              message="no trial step had finite residuals before max_nfev")
     if sol.status == -2:  # our StopIteration: converged for all practical purposes
         sol.status, sol.success = 2, True
         sol.message = (f"the cost fell by less than stall_tol={o.stall_tol:g} (or "
@@ -772,6 +800,7 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
     best_x, best_cost = xs.copy(), prob.cost(xs)
     x = xs.copy()
     held = np.zeros(sp.size, bool)
+    rejected = False     # a run's end point had no equilibrium and was not kept
     nfev, rounds, status, message = 0, 0, 0, "no solver run"
     for rounds in range(1, (MAX_ACTIVE_SET_ROUNDS if bounded else 1) + 1):
         left = None if o.max_nfev is None else o.max_nfev - nfev
@@ -788,6 +817,7 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
         held |= neg
         c = prob.cost(x)                    # x is feasible now
         if not np.isfinite(c):
+            rejected = True
             # the projected point has no equilibrium (e.g. without priors the unbounded
             # run went far, and zeroing compliances leaves the rest unstable): go on from
             # the best point with the held ones at 0, or stop; scipy refuses a start with
@@ -815,7 +845,7 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
         c_end = prob.cost(x)
         if np.isfinite(c_end) and c_end <= best_cost:
             best_x, best_cost = x.copy(), c_end
-    if best_cost < prob.cost(x):
+    if rejected or best_cost < prob.cost(x):
         message += " (the guard kept the best feasible point seen)"
     return OptimizeResult(x=best_x, cost=float(best_cost), nfev=nfev, status=status,
                           message=message, rounds=rounds, held=held & (best_x == 0.0))
@@ -900,6 +930,7 @@ def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
         raise ValueError(f"x0: the elastic equilibrium does not converge at the start for "
                          f"{int((~prob.state(start0).converged).sum())} sample(s) "
                          f"(max_iter={o.max_iter}, tol={o.tol}); lower lam or raise max_iter")
+    prob.scale_unpriored(start0)
     robot_kinds = ((sp.kind == KIND_DH) | (sp.kind == KIND_KAPPA) | (sp.kind == KIND_MASS)
                    | (sp.kind == KIND_ORIGIN))
     n_starts = int(o.n_starts)

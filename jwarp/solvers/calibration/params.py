@@ -377,8 +377,10 @@ class ParameterSpace:
             unbounded).
         free_groups: the groups that were freed, in the order given.
         typical: (P,) the solver's scale of each parameter: its prior sigma, or without a
-            prior the group's default sigma (None: 1), so that switching priors off does
-            not make the solver's first steps absurd (a 1 rad/(N m) compliance step).
+            prior the group's default sigma (None: 1); the MAP solver replaces the latter
+            by the data Jacobian's column scale at the start
+            (:meth:`~.map.CalibrationProblem.scale_unpriored`), so that switching priors
+            off does not make the solver's steps absurd (a 1 rad/(N m) compliance step).
     """
 
     robot: RobotModel
