@@ -5,43 +5,48 @@ the surface within a one-sided error ``tolerance``, with an optional count budge
 Method (see ``docs/spheres.md``):
 
 0. **The solid**: inside/outside is the generalised winding number of the triangles (> 1/2
-   inside; Warp's BVH query ``mesh_query_point_sign_winding_number``), so open meshes
-   (holes, cracks, missing faces) and meshes of several overlapping bodies have a solid as a
-   closed mesh does. A mesh whose triangles face inwards (negative signed volume) is
-   flipped first. Signed distances to the surface come from the same query.
+   inside; Warp's BVH query ``mesh_query_point_sign_winding_number`` on the CPU), so open
+   meshes (holes, cracks, missing faces) and meshes of several overlapping bodies have a
+   solid as a closed mesh does. A mesh whose triangles face inwards (negative signed
+   volume) is flipped first. Signed distances to the surface come from the same query.
+   Surface samples buried inside the solid (a face of one body inside another) are dropped.
 1. **Surface samples** ``S``: ``n_surface`` area-uniform points (default
-   ``clip(4 area / tolerance^2, 1500, 4000)``) plus the mesh's vertices (corners).
+   ``clip(8 area / tolerance^2, 1500, 4000)``) plus the mesh's vertices (corners).
 2. **Candidate centres on the medial axis**, only inside the solid: for 1500 samples ``p``
    (normal ``n``, both sides) the largest ball touching the surface at ``p`` that holds no
    other sample (shrinking-ball iteration: it stops at the opposite wall), and centres at
-   1/2 and 1/4 of the way to that ball's centre. Centres whose winding number says outside
+   1/2 and 1/4 of the way to that ball's centre. Centres the winding number puts outside
    are dropped (**no sphere is centred outside the solid**). A candidate centred at ``c``
    has radius ``clearance(c) + protrusion``, ``clearance`` its exact distance to the
-   surface: **a sphere reaches at most ``protrusion`` past the surface** (the ball of
-   radius ``clearance`` lies in the solid, so every point of the sphere is within
-   ``radius - clearance`` of the solid).
+   surface (an open mesh: also bounded by its holes, sampled): **a sphere reaches at most
+   ``protrusion`` past the surface** (the ball of radius ``clearance`` lies in the solid,
+   so every point of the sphere is within ``radius - clearance`` of it). The default
+   protrusion follows the part's thickness ``R`` (its largest clearance):
+   ``PROTRUSION_MIN tolerance`` (1/2) up to ``R = 3 tolerance`` (fingers, hands), rising
+   linearly to ``PROTRUSION_MAX tolerance`` (2) at ``R = 5 tolerance`` (thick arm links).
 3. **Greedy set cover** of ``S``: a sample counts as covered by a sphere when it lies
    within ``eps`` outside it; repeatedly take the candidate covering the most uncovered
-   samples, then drop spheres whose samples all lie in others. Without ``max_spheres``:
-   ``eps = 0.8 tolerance`` (the rest is a margin for the gaps between samples). With
-   ``max_spheres = K``: that ``eps`` if K spheres suffice, else the smallest ``eps`` (by
-   bisection, to 2 %) for which the greedy cover needs at most K spheres: the one-sided
-   error then exceeds the tolerance and the report says by how much.
-4. **Check** on ``n_surface`` fresh samples (another random stream): ``one_sided_error``
-   is the largest distance of a fresh sample outside every sphere. Without a budget, fresh
-   samples further out than ``tolerance`` are added to ``S`` and the cover repeated (up to
-   ``max_rounds`` times).
-5. **Report**: ``max_protrusion``, the largest distance by which a sphere reaches outside
-   the solid (``radius - clearance(centre)``, and at least the largest distance to the
-   surface of 64 points on each sphere that lie outside the solid: for an open mesh a
-   sphere may reach out through a hole), and the **excess volume** (the union of spheres
+   samples, drop spheres whose samples all lie in others, then replace two neighbouring
+   spheres by one candidate holding every sample only they held, while possible. Without
+   ``max_spheres``: ``eps = 0.85 tolerance`` (the rest is a margin for the gaps between
+   samples). With ``max_spheres = K``: that ``eps`` if K spheres suffice, else the smallest
+   ``eps`` (doubling, then bisection to 2 %) for which the greedy cover of 2000 of the
+   samples needs at most K spheres: the one-sided error then exceeds the tolerance and the
+   report says by how much.
+4. **Check** on at least 20 000 fresh boundary samples (another random stream):
+   ``one_sided_error`` is the largest distance of a fresh sample outside every sphere.
+   Fresh samples further out than 0.9 tolerance are added to ``S`` and the cover repeated
+   with a 5 % smaller ``eps`` (up to ``max_rounds`` times); the round kept is the one
+   within 0.9 tolerance (else within tolerance) with the fewest spheres.
+5. **Report**: ``max_protrusion``, the largest ``radius - clearance(centre)`` (how far a
+   sphere reaches outside the solid), and the **excess volume** (the union of spheres
    outside the solid, Monte Carlo with ``n_volume`` points in the spheres' bounding box,
    inside test by winding number) as a volume and a fraction of the solid's volume
    (``|mesh.volume|`` for a closed single-body mesh, else Monte Carlo by winding number).
 
 Units: metres (whatever unit the mesh is in; tolerance and protrusion in the same unit).
-Memory: the cover's matrix is at most ``_MAX_PAIRS`` float32 entries (about 100 MB); the
-fit of a Panda link takes about a second on one core.
+Memory: the cover's dense matrix is at most ``_MAX_PAIRS`` float32 entries (about 50 MB);
+the fit of a Panda link takes about a second on one core.
 """
 
 from __future__ import annotations
@@ -82,13 +87,14 @@ class SphereFitOptions:
         of a sphere).
     max_spheres: None (the fewest spheres meeting ``tolerance``) or >= 1 (at most this many
         spheres; the error reached is reported).
-    n_surface: surface samples for the fit, and again (fresh) for the check; None:
-        ``clip(4 area / tolerance^2, 1500, 4000)``.
+    n_surface: surface samples for the fit (the check takes at least 20 000 fresh ones);
+        None: ``clip(8 area / tolerance^2, 1500, 4000)``.
     n_volume: Monte Carlo points of the excess-volume estimate.
     seed: random seed (the fit is deterministic for a given seed).
-    max_rounds: fit-check rounds without a budget (>= 1).
+    max_rounds: fit-check rounds (>= 1; with a binding budget one).
     protrusion: > 0, how far a sphere may reach past the surface (each radius is the
-        centre's clearance + protrusion); None: ``tolerance / 2``.
+        centre's clearance + protrusion); None: by the part's thickness, ``tolerance / 2``
+        for thin parts up to ``2 tolerance`` for thick ones (module docstring).
     """
 
     tolerance: float
@@ -623,7 +629,7 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
         cand_c, cand_d = samples[sub].copy(), np.zeros(len(sub))
     eps_max = 2.0 * solid.extent + tol  # one sphere of any candidate then holds every sample
     eps0 = _EPS_FIT * tol
-    n_check = max(n_s, _CHECK_SAMPLES)
+    n_check = int(np.clip(20.0 * mesh.area / tol ** 2, _CHECK_SAMPLES, 2.5 * _CHECK_SAMPLES))
     check = _boundary_sample(mesh, solid, n_check, opt.seed + 7919)  # fresh stream
     rounds, best = 0, None
     while True:
