@@ -522,16 +522,24 @@ class CalibrationProblem:
         J[self.n_data + np.arange(self._prior_idx.size), self._prior_idx] = 1.0 / sp.sigma[self._prior_idx]
         return J
 
-    def scale_unpriored(self, x: Any) -> None:
+    def scale_unpriored(self, x: Any) -> np.ndarray:
         """Set the solver's scale (``space.typical``) of the parameters without a prior to
         ``1 / |dr/dx_i|`` of the data rows at ``x`` (scipy's ``x_scale="jac"``, fixed at the
-        start); a parameter without effect there keeps its group's default sigma. Without
-        this the trust region of a prior-less run is measured in SI units (1 rad/(N m) of
-        compliance next to 1 m of length) and the run crawls or keeps its start."""
+        start). Without this the trust region of a prior-less run is measured in SI units
+        (1 rad/(N m) of compliance next to 1 m of length) and the run crawls or keeps its
+        start.
+
+        Returns:
+            (P,) bool: the parameters without a prior that have no effect on the data at
+            ``x`` (e.g. the pose of a head that loads the torso only once compliances are
+            nonzero); :func:`calibrate_with` holds them at the start (free, they make
+            prior-less runs wander off; measured in docs/calibration.md).
+        """
         sp = self.space
         free = ~sp.has_prior
+        none = np.zeros(sp.size, bool)
         if not free.any():
-            return
+            return none
         J = self.jacobian(x)[:self.n_data]
         norms = np.linalg.norm(J[:, free], axis=0)
         ok = np.isfinite(norms) & (norms > 0)
@@ -539,6 +547,8 @@ class CalibrationProblem:
         idx = np.nonzero(free)[0]
         typ[idx[ok]] = 1.0 / norms[ok]
         sp.typical = typ
+        none[idx[~ok]] = True
+        return none
 
     def _coupling_columns(self, x: np.ndarray, d_cf: np.ndarray, cf_f: np.ndarray
                           ) -> np.ndarray:
@@ -771,7 +781,8 @@ def _least_squares(prob: CalibrationProblem, x: np.ndarray, moving: np.ndarray,
 
 
 def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
-                cb: Callable[[Any], None] | None = None) -> OptimizeResult:
+                cb: Callable[[Any], None] | None = None,
+                hold: np.ndarray | None = None) -> OptimizeResult:
     """Minimize ``prob.cost`` from the start ``xs`` (P,) with the solver options of ``o``.
 
     Without ``o.bound_kappa`` (or no free compliance): one
@@ -782,6 +793,9 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
     compliances that ended negative are set to 0 and held, and the others solved again
     from there; a held one whose cost gradient points inside (d cost / d kappa < 0) is
     released. At most :data:`MAX_ACTIVE_SET_ROUNDS` runs share ``o.max_nfev``.
+
+    ``hold`` (bool (P,)): parameters kept at their start values throughout (the
+    prior-less ones without effect at the start, :meth:`CalibrationProblem.scale_unpriored`).
 
     Guard: the returned x is the lowest-cost feasible point seen, the start included, so
     the cost never ends above the start's (``xs`` must be feasible: compliances >= 0 with
@@ -800,16 +814,17 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
     best_x, best_cost = xs.copy(), prob.cost(xs)
     x = xs.copy()
     held = np.zeros(sp.size, bool)
+    pinned = np.zeros(sp.size, bool) if hold is None else np.asarray(hold, bool)
     rejected = False     # a run's end point had no equilibrium and was not kept
     nfev, rounds, status, message = 0, 0, 0, "no solver run"
     for rounds in range(1, (MAX_ACTIVE_SET_ROUNDS if bounded else 1) + 1):
         left = None if o.max_nfev is None else o.max_nfev - nfev
         if left is not None and left < 1:
             break
-        sol = _least_squares(prob, x, ~held, lower, o, left, cb)
+        sol = _least_squares(prob, x, ~(held | pinned), lower, o, left, cb)
         nfev += int(sol.nfev)
         status, message = int(sol.status), str(sol.message)
-        x[~held] = sol.x
+        x[~(held | pinned)] = sol.x
         if not bounded:
             break
         neg = kap & (x < 0)
@@ -837,7 +852,7 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
             break
         r = prob.residuals(x)
         g = prob.jacobian(x).T @ r          # d cost / dx
-        release = held & (g * sp.scale < -max(o.gtol or 0.0, 1e-10) * max(float(r @ r), 1.0))
+        release = held & kap & (g * sp.scale < -max(o.gtol or 0.0, 1e-10) * max(float(r @ r), 1.0))
         if not release.any():
             break
         held &= ~release
@@ -847,6 +862,9 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
             best_x, best_cost = x.copy(), c_end
     if rejected or best_cost < prob.cost(x):
         message += " (the guard kept the best feasible point seen)"
+    if pinned.any():
+        message += (f" ({int(pinned.sum())} parameter(s) without prior and without effect at "
+                    f"the start held there)")
     return OptimizeResult(x=best_x, cost=float(best_cost), nfev=nfev, status=status,
                           message=message, rounds=rounds, held=held & (best_x == 0.0))
 
@@ -930,7 +948,7 @@ def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
         raise ValueError(f"x0: the elastic equilibrium does not converge at the start for "
                          f"{int((~prob.state(start0).converged).sum())} sample(s) "
                          f"(max_iter={o.max_iter}, tol={o.tol}); lower lam or raise max_iter")
-    prob.scale_unpriored(start0)
+    hold = prob.scale_unpriored(start0)
     robot_kinds = ((sp.kind == KIND_DH) | (sp.kind == KIND_KAPPA) | (sp.kind == KIND_MASS)
                    | (sp.kind == KIND_ORIGIN))
     n_starts = int(o.n_starts)
@@ -949,7 +967,7 @@ def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
                 continue
         it = [0]
         cb = _iteration_callback(k, n_starts, it, callback)
-        sol = solve_start(prob, xs, o, cb)
+        sol = solve_start(prob, xs, o, cb, hold=hold)
         runs.append({"start": k, "cost": float(sol.cost), "nfev": int(sol.nfev),
                      "iterations": it[0], "status": int(sol.status), "message": str(sol.message),
                      "held_at_bound": int(sol.held.sum())})
