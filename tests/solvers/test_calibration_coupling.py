@@ -277,3 +277,34 @@ def test_a_run_without_any_finite_trial_ends_at_its_start():
     sol = solve_start(prob, xs, CalibrationOptions(free="x", max_nfev=3, stall_tol=None))
     np.testing.assert_array_equal(sol.x, xs)
     assert sol.cost == prob.cost(xs)
+
+
+def test_all_priors_off_starts_scales_by_the_data_and_holds_what_has_no_effect():
+    """Issue 29 item 5 on a small elastic campaign: every prior off. The prior-less
+    parameters get the scale 1 / |column| of the data Jacobian at the start; those without
+    effect there (the head's rows, which load the torso only through compliances that are
+    still 0) are held; the fit ends far below the start."""
+    from jwarp.solvers.calibration.campaign import justin_tracker_setup, simulate_campaign
+    from jwarp.solvers.calibration.files import make_measurement
+
+    robot = jwarp.robot("justin19")
+    camp = simulate_campaign(robot, justin_tracker_setup(), 40, seed=1)
+    meas = make_measurement(robot, camp.setup)
+    groups = "theta,kappa_theta,harmonic"
+    sigma = {g: np.inf for g in groups.split(",") + ["tracker", "markers"]}
+    q, y = camp.samples.q, camp.samples.y
+    prob = CalibrationProblem(robot, meas, q, y, free=groups + ",tracker,markers", sigma=sigma)
+    x0 = prob.initial_x()
+    hold = prob.scale_unpriored(x0)
+    J = prob.jacobian(x0)[:prob.n_data]
+    norms = np.linalg.norm(J, axis=0)
+    held = {prob.space.names[i] for i in np.nonzero(hold)[0]}
+    assert held == {prob.space.names[i] for i in np.nonzero(norms == 0)[0]}
+    assert "head_1.theta" in held and "right_3.theta" not in held
+    ok = ~hold
+    np.testing.assert_allclose(prob.space.scale[ok], 1.0 / norms[ok], rtol=1e-12)
+    res = calibrate(robot, meas, q, y, free=groups, sigma=sigma, warn=False)
+    assert np.isfinite(res.cost) and "without effect at the start held" in res.message
+    assert res.errors.mean() < 0.25 * res.errors_start.mean()
+    v = dict(zip(res.names, res.x))
+    assert v["head_1.theta"] == dict(zip(res.names, res.nominal))["head_1.theta"]
