@@ -20,9 +20,14 @@ allow? (a script printing figures, never a timed test)
    ``jwarp.world.collision.is_collision_free`` at margin 0 against the exact scene:
    *refused* = the spheres touch an object where the meshes do not.
 
-Printed: the machine, per model its sphere count, and per family the free configurations
-and the refused % (acceptance of issue "Any arm a user brings": <= 2 % with the default
-fit), with the smallest mesh clearance of the refused ones.
+4. The same grasp targets once more through jwarp's IK **with** the sphere model and the
+   scene (margin 0, 8 starts, the ready pose first): a target is *unreachable* for the
+   model when no collision-free solution is found, although the meshes admit one.
+
+Printed: the machine, per model its sphere count, and per family the free configurations,
+the refused % of those fixed configurations, and the unreachable % of their targets
+(acceptance of issue "Any arm a user brings": refused endpoints <= 2 % with the default
+fit), with the mesh clearance of the refused configurations.
 """
 
 from __future__ import annotations
@@ -61,9 +66,10 @@ def sphere_model(spec: str, urdf: str) -> tuple[str, Any]:
     return f"fit {tol:g} m", spherized_robot(urdf, SpherizeOptions(tolerance=tol))[0]
 
 
-def grasp_configs(model: Any, urdf: str, family: str, seed: int) -> tuple[Any, np.ndarray,
-                                                                          list]:
-    """(scene, configurations (n, n_dof) whose URDF meshes are free, their mesh clearance)."""
+def grasp_configs(model: Any, urdf: str, family: str, seed: int
+                  ) -> tuple[Any, np.ndarray, list, np.ndarray]:
+    """(scene, configurations (n, n_dof) whose URDF meshes are free, their mesh clearance,
+    their grasp targets (n, 4, 4))."""
     from verifier import PathVerifier
 
     from jwarp.solvers.ik import IKOptions, IKSolver
@@ -73,7 +79,7 @@ def grasp_configs(model: Any, urdf: str, family: str, seed: int) -> tuple[Any, n
     objects, goals, _ = SP.FAMILIES[family](rng)
     scene = scene_from_dict({"world": {"collision_objects": objects}}, source=f"{family}/{seed}")
     if not goals:
-        return scene, np.zeros((0, model.n_dof)), []
+        return scene, np.zeros((0, model.n_dof)), [], np.zeros((0, 4, 4))
     targets = np.stack([g for _, g in goals])
     lim = model.joint_limits
     seeds = rng.uniform(lim[:, 0], lim[:, 1], (len(targets), 8, len(lim)))
@@ -83,7 +89,7 @@ def grasp_configs(model: Any, urdf: str, family: str, seed: int) -> tuple[Any, n
                   device="cpu", dtype=np.float64).solve(targets, seeds)
     finger = model.joint_names.index("panda_finger_joint1")
     ver = PathVerifier(urdf, None, scene.shapes, spheres=None, joint_names=model.joint_names)
-    out, clear = [], []
+    out, clear, tg = [], [], []
     for i in np.nonzero(ik.feasible)[0]:
         q = ik.q[i].copy()
         q[finger] = SP.FINGER
@@ -91,7 +97,26 @@ def grasp_configs(model: Any, urdf: str, family: str, seed: int) -> tuple[Any, n
         if v.mesh is not None and v.mesh.distance >= 0.0:
             out.append(q)
             clear.append(float(v.mesh.distance))
-    return scene, np.array(out).reshape(-1, model.n_dof), clear
+            tg.append(targets[i])
+    return scene, np.array(out).reshape(-1, model.n_dof), clear, np.array(tg).reshape(-1, 4, 4)
+
+
+def target_refused(model: Any, world: Any, targets: np.ndarray, seed: int) -> np.ndarray:
+    """(n,) bool: jwarp's IK with the sphere model in ``world`` (margin 0, 8 starts, the
+    ready pose first, fingers at the generator's opening) finds no collision-free solution
+    of the grasp target."""
+    from jwarp.solvers.ik import IKOptions, IKSolver
+
+    rng = np.random.default_rng(seed)
+    lim = model.joint_limits
+    seeds = rng.uniform(lim[:, 0], lim[:, 1], (len(targets), 8, len(lim)))
+    seeds[:, 0] = SP.READY
+    finger = model.joint_names.index("panda_finger_joint1")
+    seeds[..., finger] = SP.FINGER
+    ik = IKSolver(model, SP.TCP, len(targets),
+                  IKOptions(n_starts=8, seed=seed, margin=0.0, q_default=SP.READY),
+                  world=world, device="cpu", dtype=np.float64).solve(targets, seeds)
+    return ~np.asarray(ik.feasible, bool)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -130,16 +155,17 @@ def main(argv: list[str] | None = None) -> int:
     rows: dict[str, dict] = {}
     for fam in fams:
         for k in range(args.per_family):
-            scene, Q, clear = grasp_configs(ref, urdf, fam, 1000 * args.seed + k)
+            scene, Q, clear, tg = grasp_configs(ref, urdf, fam, 1000 * args.seed + k)
             if not len(Q):
                 continue
             world = exact_world(scene)
-            r = rows.setdefault(fam, {"free": 0, **{lab: [0, []] for lab, _ in models}})
+            r = rows.setdefault(fam, {"free": 0, **{lab: [0, [], 0] for lab, _ in models}})
             r["free"] += len(Q)
             for lab, m in models:
                 ok = is_collision_free(m, Q, world, 0.0, device="cpu")
                 r[lab][0] += int((~ok).sum())
                 r[lab][1] += [c for c, o in zip(clear, ok) if not o]
+                r[lab][2] += int(target_refused(m, world, tg, 7 + k).sum())
     labs = [lab for lab, _ in models]
     print(f"\ngrasp configurations whose URDF meshes are free, refused by each sphere model "
           f"(margin 0, exact scene; {args.per_family} scenes per family)")
@@ -155,6 +181,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{fam:18s} {r['free']:5d} " + " ".join(cells))
     print(f"{'all':18s} {n:5d} " + " ".join(
         f"{tot[lab]:4d} ({100.0 * tot[lab] / max(n, 1):5.1f}%)".rjust(22) for lab in labs))
+    print("\nthe same grasp targets, refused by jwarp's IK with each sphere model in the scene "
+          "(no collision-free solution from 8 starts: the grasp is unreachable for the model)")
+    print(f"{'family':18s} {'free':>5s} " + " ".join(f"{lab:>22s}" for lab in labs))
+    tot2 = {lab: 0 for lab in labs}
+    for fam, r in rows.items():
+        cells = []
+        for lab in labs:
+            tot2[lab] += r[lab][2]
+            cells.append(f"{r[lab][2]:4d} ({100.0 * r[lab][2] / r['free']:5.1f}%)".rjust(22))
+        print(f"{fam:18s} {r['free']:5d} " + " ".join(cells))
+    print(f"{'all':18s} {n:5d} " + " ".join(
+        f"{tot2[lab]:4d} ({100.0 * tot2[lab] / max(n, 1):5.1f}%)".rjust(22) for lab in labs))
     for lab in labs:
         cl = [c for r in rows.values() for c in r[lab][1]]
         if cl:
