@@ -57,7 +57,8 @@ __all__ = ["DeviceModel", "KinematicsTables", "LimitTables", "SphereModel", "Pat
 
 #: the fields of ``kernels.fk.FrameTables`` (attributes of :class:`DeviceModel`)
 _FRAME_FIELDS = ("order", "parent", "is_dh", "prismatic", "fixed_rot", "fixed_pos", "dh0",
-                 "trig", "cpl_start", "cpl_joint", "cpl_coef")
+                 "trig", "cpl_start", "cpl_joint", "cpl_coef", "ch_start", "ch_ab",
+                 "jh_start", "jh_ab")
 #: the fields of ``kernels.collision.SphereTables`` (attributes of :class:`SphereModel`)
 _SPHERE_FIELDS = ("sph_frame", "sph_pos", "sph_rad", "bound_pos", "bound_rad", "fpair_a",
                   "fpair_b", "fpair_start", "ent_sphere", "ent_start", "pair_b")
@@ -147,7 +148,9 @@ class DeviceModel:
 
     Frame tables (``kernels.fk.FrameTables``): ``order``, ``parent``, ``is_dh``,
     ``prismatic``, ``fixed_rot``, ``fixed_pos``, ``dh0`` (n_frames, 5), ``trig``,
-    ``cpl_start``/``cpl_joint``/``cpl_coef``; ``dh0_3d`` the nominal rows as (1, n_frames, 5).
+    ``cpl_start``/``cpl_joint``/``cpl_coef``; ``ch_start``/``ch_ab`` the CSR table of the
+    ``coupling_harmonic`` terms and ``jh_start``/``jh_ab`` that of the transmission errors
+    of the joints driving them (empty ranges without them); ``dh0_3d`` the nominal rows as (1, n_frames, 5).
     Mass model: ``mass`` (n_frames,) [kg], ``mass_com`` (n_frames,) vec3 [m], ``dh_info``
     (n_dh,) vec4i, ``static_idx``. ``gravity`` vec3 [m/s^2]; ``kappa`` (1, n_frames, 3) the
     robot's compliances [rad/(N m)]; ``kappa_nl`` (n_frames,) its ``kappa_nonlinear``
@@ -170,6 +173,10 @@ class DeviceModel:
     cpl_start: wp.array
     cpl_joint: wp.array
     cpl_coef: wp.array
+    ch_start: wp.array  # (n_frames + 1,) int32 CSR into ch_ab
+    ch_ab: wp.array  # (max(n_terms, 1), 2) [a_k, b_k] of the coupled frames' harmonic terms
+    jh_start: wp.array  # (n_dof + 1,) int32 CSR into jh_ab
+    jh_ab: wp.array  # (max(n_terms, 1), 2) transmission errors of the joints driving them
     mass: wp.array
     mass_com: wp.array
     dh_info: wp.array  # (n_dh,) vec4i [position in order, frame, subtree end, parent] of DH frames
@@ -395,6 +402,7 @@ def _build(robot: RobotModel, dev: wp.Device, scalar: type, key: str) -> DeviceM
             cpl_joint.append(j)
             cpl_coef.append(c)
         cpl_start[i + 1] = len(cpl_joint)
+    ch_start, ch_ab, jh_start, jh_ab = _coupling_harmonic_table(robot)
     mass, com = frame_mass_model(robot)
     rot, pos = fixed_parts(robot)
     dh0 = robot.dh_table.astype(npdt)
@@ -415,6 +423,10 @@ def _build(robot: RobotModel, dev: wp.Device, scalar: type, key: str) -> DeviceM
         cpl_start=arr(cpl_start, wp.int32),
         cpl_joint=arr(np.array(cpl_joint or [0], np.int32), wp.int32),
         cpl_coef=arr(np.array(cpl_coef or [0.0], npdt), scalar),
+        ch_start=arr(ch_start, wp.int32),
+        ch_ab=arr(ch_ab.astype(npdt), scalar),
+        jh_start=arr(jh_start, wp.int32),
+        jh_ab=arr(jh_ab.astype(npdt), scalar),
         mass=arr(mass.astype(npdt), scalar),
         mass_com=arr(com.astype(npdt), k.vec3),
         dh_info=arr(_dh_info(robot), wp.vec4i),
@@ -424,6 +436,36 @@ def _build(robot: RobotModel, dev: wp.Device, scalar: type, key: str) -> DeviceM
         limits=_limit_tables(robot, dev, scalar),
         kappa_nl=arr(np.asarray(robot.kappa_nonlinear, np.float64).astype(npdt), scalar),
     )
+
+
+def _csr_terms(h: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(start (len(h) + 1,) int32, ab (max(n_terms, 1), 2)): CSR of the harmonic terms
+    ``h`` (n, K, 2) of the selected ``rows`` (bool (n,)), trailing zero terms dropped (a row
+    without terms, or not selected, has an empty range)."""
+    start = np.zeros(len(h) + 1, np.int32)
+    parts: list[np.ndarray] = []
+    for i in range(len(h)):
+        nz = np.nonzero(np.any(h[i] != 0.0, axis=1))[0] if rows[i] and h.shape[1] else ()
+        if len(nz):
+            parts.append(h[i, :nz[-1] + 1])
+        start[i + 1] = start[i] + (nz[-1] + 1 if len(nz) else 0)
+    return start, (np.concatenate(parts) if parts else np.zeros((1, 2)))
+
+
+def _coupling_harmonic_table(robot: RobotModel
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(ch_start, ch_ab, jh_start, jh_ab) (``kernels.fk`` FrameTables): the CSR tables of
+    ``robot.coupling_harmonic`` per frame and of the transmission errors (``harmonic``) of
+    the joints that drive a frame with such terms (the kernels recover those joints'
+    commanded values from the link values); all ranges empty for a robot without them."""
+    ch = np.asarray(robot.coupling_harmonic, np.float64)
+    ch_start, ch_ab = _csr_terms(ch, np.ones(robot.n_frames, bool))
+    drive = np.zeros(robot.n_dof, bool)
+    for i in np.nonzero(np.diff(ch_start))[0]:
+        for j, _ in robot.frames[i].coupling:
+            drive[j] = True
+    jh_start, jh_ab = _csr_terms(np.asarray(robot.harmonic, np.float64), drive)
+    return ch_start, ch_ab, jh_start, jh_ab
 
 
 def _limit_tables(robot: RobotModel, dev: wp.Device, scalar: type) -> LimitTables:

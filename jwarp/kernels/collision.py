@@ -421,9 +421,10 @@ def kernels(scalar: type) -> SimpleNamespace:
                         gi = wp.dot(z, F)
                         if model.prismatic[i] == 0:
                             gi = wp.dot(z, moment[t, i] - wp.cross(unpack_pos(T), F))
+                        hp = fk.coupling_harmonic_slope(model, i, b, q)
                         for m in range(m0, m1):
                             jm = model.cpl_joint[m]
-                            grad[b, jm] = grad[b, jm] + model.cpl_coef[m] * gi
+                            grad[b, jm] = grad[b, jm] + fk.coupling_weight(model, m, b, q, hp) * gi
         if comp.enabled != 0 and on_waypoint != 0:
             el.compensation_update_at(model, frames, t, rho, rb, comp)
 

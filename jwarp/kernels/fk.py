@@ -15,6 +15,20 @@ Frame tables (part of the *Model*, :class:`jwarp.core.device.DeviceModel`):
 * ``dh0``          (n_frames, 5)      nominal rows [d, theta, r, alpha, beta]
 * ``trig``         (n_frames,) vec4   nominal [cos alpha, sin alpha, cos beta, sin beta]
 * ``cpl_start``    (n_frames + 1,) int32, ``cpl_joint``/``cpl_coef``: CSR coupling q -> frame
+* ``ch_start``     (n_frames + 1,) int32, ``ch_ab`` (n_terms, 2): CSR angle-dependent errors
+  of coupled frames (the robot's ``coupling_harmonic``): frame i's terms k = 1 .. K_i are
+  rows ``ch_start[i] .. ch_start[i + 1] - 1`` ``[a_k, b_k]``; empty for every frame of a
+  robot without them (one comparison per frame)
+* ``jh_start``     (n_dof + 1,) int32, ``jh_ab`` (n_terms, 2): CSR transmission errors (the
+  robot's ``harmonic``) of the joints that drive a frame with harmonic terms, only to
+  recover their commanded values (:func:`commanded`); empty otherwise
+
+The kernels see the links' joint values q' (the host applies transmission errors:
+:mod:`jwarp.kinematics.transmission`). A frame's joint value (:func:`joint_value`) is
+``sum_j c_j q'_j + sum_k a_k sin(k u) + b_k cos(k u)`` with ``u = sum_j c_j q_j`` of the
+commanded values (:func:`harmonic_angle`; ``RobotModel.coupled_frame_delta``); its
+derivative w.r.t. q'_j is ``c_j (1 + h'(u) / s_j)`` (:func:`coupling_weight`), the weight
+of every analytic Jacobian column and projected gradient of a coupled frame.
 
 DH rows ``rho`` (B_rho, n_frames, 5 or 9) and ``rows_kind`` (the host's typed value is
 :class:`jwarp.core.rows.DHRows`); ``rho_stride`` is 1 to use row ``b`` for configuration
@@ -72,13 +86,10 @@ def kernels(scalar: type) -> SimpleNamespace:
         cpl_start: wp.array(dtype=wp.int32)
         cpl_joint: wp.array(dtype=wp.int32)
         cpl_coef: wp.array(dtype=scalar)
-
-    @wp.func
-    def joint_value(model: FrameTables, i: int, b: int, q: wp.array2d(dtype=scalar)) -> scalar:
-        v = zero
-        for k in range(model.cpl_start[i], model.cpl_start[i + 1]):
-            v += model.cpl_coef[k] * q[b, model.cpl_joint[k]]
-        return v
+        ch_start: wp.array(dtype=wp.int32)
+        ch_ab: wp.array2d(dtype=scalar)
+        jh_start: wp.array(dtype=wp.int32)
+        jh_ab: wp.array2d(dtype=scalar)
 
     @wp.func
     def dh_fixed_rot(alpha: scalar, beta: scalar) -> mat33:
@@ -177,6 +188,114 @@ def kernels(scalar: type) -> SimpleNamespace:
                 sd = dx - i3 * h * dx
                 return c0 * cd - s0 * sd, s0 * cd + c0 * sd
             return cos_sin_near(x, x0, cn, sn)
+
+    @wp.func
+    def coupled_angle(model: FrameTables, i: int, b: int, q: wp.array2d(dtype=scalar)) -> scalar:
+        """``sum_j c_j q[b, j]`` of frame i (its coupling, without harmonic terms)."""
+        v = zero
+        for k in range(model.cpl_start[i], model.cpl_start[i + 1]):
+            v += model.cpl_coef[k] * q[b, model.cpl_joint[k]]
+        return v
+
+    @wp.func
+    def commanded(model: FrameTables, j: int, x: scalar):
+        """(q_j, dq'_j/dq_j): the commanded value of joint j whose links see x (the inverse
+        of its transmission error ``x = q + sum_k a_k sin(k q) + b_k cos(k q)``, by Newton's
+        method, and the error's slope there); (x, 1) where ``jh`` holds no terms."""
+        y = x
+        s = one
+        h0 = model.jh_start[j]
+        h1 = model.jh_start[j + 1]
+        if h1 > h0:
+            for it in range(6):
+                f = y - x
+                s = one
+                for k in range(h0, h1):
+                    kk = scalar(k - h0 + 1)
+                    ck, sk = cos_sin(kk * y)
+                    f += model.jh_ab[k, 0] * sk + model.jh_ab[k, 1] * ck
+                    s += kk * (model.jh_ab[k, 0] * ck - model.jh_ab[k, 1] * sk)
+                y = y - f / s
+        return y, s
+
+    @wp.func
+    def harmonic_angle(model: FrameTables, i: int, b: int, q: wp.array2d(dtype=scalar)) -> scalar:
+        """The angle of frame i's harmonic terms, ``u = sum_j c_j q_j`` of the commanded
+        joint values (:func:`commanded` of the values q the kernels see)."""
+        v = zero
+        for k in range(model.cpl_start[i], model.cpl_start[i + 1]):
+            j = model.cpl_joint[k]
+            y, s = commanded(model, j, q[b, j])
+            v += model.cpl_coef[k] * y
+        return v
+
+    @wp.func
+    def joint_value(model: FrameTables, i: int, b: int, q: wp.array2d(dtype=scalar)) -> scalar:
+        """Joint value of frame i at configuration b: ``sum_j c_j q[b, j] + sum_k a_k sin(k u)
+        + b_k cos(k u)`` (``u`` :func:`harmonic_angle`; no terms without ``coupling_harmonic``)."""
+        v = coupled_angle(model, i, b, q)
+        h0 = model.ch_start[i]
+        h1 = model.ch_start[i + 1]
+        if h1 > h0:
+            u = harmonic_angle(model, i, b, q)
+            e = zero
+            for k in range(h0, h1):
+                ck, sk = cos_sin(scalar(k - h0 + 1) * u)
+                e += model.ch_ab[k, 0] * sk + model.ch_ab[k, 1] * ck
+            v += e
+        return v
+
+    @wp.func
+    def coupling_harmonic_slope(model: FrameTables, i: int, b: int,
+                                q: wp.array2d(dtype=scalar)) -> scalar:
+        """``h'(u) = sum_k k (a_k cos(k u) - b_k sin(k u))`` of frame i's harmonic terms (zero
+        without them): pass it to :func:`coupling_weight`."""
+        g = zero
+        h0 = model.ch_start[i]
+        h1 = model.ch_start[i + 1]
+        if h1 > h0:
+            u = harmonic_angle(model, i, b, q)
+            for k in range(h0, h1):
+                kk = scalar(k - h0 + 1)
+                ck, sk = cos_sin(kk * u)
+                g += kk * (model.ch_ab[k, 0] * ck - model.ch_ab[k, 1] * sk)
+        return g
+
+    @wp.func
+    def coupling_weight(model: FrameTables, c: int, b: int, q: wp.array2d(dtype=scalar),
+                        hp: scalar) -> scalar:
+        """d joint_value / dq_j of coupling entry c (joint j = ``cpl_joint[c]``) at
+        configuration b: ``c_j (1 + h'(u) / s_j)``, ``hp`` = h'(u) of the frame
+        (:func:`coupling_harmonic_slope`), s_j the slope of joint j's transmission error
+        (1 without); exactly ``cpl_coef[c]`` where hp is zero."""
+        w = model.cpl_coef[c]
+        if hp != zero:
+            j = model.cpl_joint[c]
+            y, s = commanded(model, j, q[b, j])
+            w = w * (one + hp / s)
+        return w
+
+    @wp.func
+    def harmonic_travel(model: FrameTables, i: int, r: int, dq: wp.array2d(dtype=scalar)) -> scalar:
+        """A bound of how much frame i's harmonic terms can change over the joint motion
+        dq[r] (zero without them): ``L sum_j |c_j dq_j| / s_min_j`` with L = sum_k k (|a_k| +
+        |b_k|) and s_min_j the least slope of joint j's transmission (1 without)."""
+        t = zero
+        h0 = model.ch_start[i]
+        h1 = model.ch_start[i + 1]
+        if h1 > h0:
+            lip = zero
+            for k in range(h0, h1):
+                lip += scalar(k - h0 + 1) * (wp.abs(model.ch_ab[k, 0]) + wp.abs(model.ch_ab[k, 1]))
+            for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
+                j = model.cpl_joint[c]
+                smin = one
+                for k in range(model.jh_start[j], model.jh_start[j + 1]):
+                    smin -= scalar(k - model.jh_start[j] + 1) * (wp.abs(model.jh_ab[k, 0])
+                                                                 + wp.abs(model.jh_ab[k, 1]))
+                t += wp.abs(model.cpl_coef[c] * dq[r, j]) / smin
+            t = t * lip
+        return t
 
     @wp.func
     def child_frame(model: FrameTables, Rp: mat33, pp: vec3, i: int, rb: int, qi: scalar,
@@ -401,19 +520,20 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.func
     def add_axis_columns(model: FrameTables, i: int, z: vec3, p: vec3, target: vec3, b: int,
-                         jac: wp.array3d(dtype=scalar)):
+                         q: wp.array2d(dtype=scalar), jac: wp.array3d(dtype=scalar)):
         """Adds the velocity of ``target`` due to the joint(s) driving frame i (axis z
         through p) to the columns of jac[b] (rows [linear; angular]; coupled joints add
-        ``coef *`` the column)."""
+        :func:`coupling_weight` ``*`` the column, q[b] the configuration)."""
         if model.cpl_start[i + 1] > model.cpl_start[i]:
             lin = wp.cross(z, target - p)
             ang = z
             if model.prismatic[i] != 0:
                 lin = z
                 ang = vec3(zero, zero, zero)
+            hp = coupling_harmonic_slope(model, i, b, q)
             for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
                 j = model.cpl_joint[c]
-                w = model.cpl_coef[c]
+                w = coupling_weight(model, c, b, q, hp)
                 for r in range(3):
                     jac[b, r, j] = jac[b, r, j] + w * lin[r]
                     jac[b, r + 3, j] = jac[b, r + 3, j] + w * ang[r]
@@ -438,20 +558,20 @@ def kernels(scalar: type) -> SimpleNamespace:
         p = vec3(zero, zero, zero)
         for k in range(chain.shape[0]):
             i, R, p = chain_link(model, chain, k, b, q, rows_kind, rho, rb, R, p)
-            add_axis_columns(model, i, vec3(R[0, 2], R[1, 2], R[2, 2]), p, target, b, jac)
+            add_axis_columns(model, i, vec3(R[0, 2], R[1, 2], R[2, 2]), p, target, b, q, jac)
 
     @wp.func
     def frames_jacobian(model: FrameTables, chain: wp.array(dtype=wp.int32),
-                        frames: wp.array2d(dtype=mat44), b: int, target: vec3,
-                        jac: wp.array3d(dtype=scalar)):
+                        frames: wp.array2d(dtype=mat44), b: int, q: wp.array2d(dtype=scalar),
+                        target: vec3, jac: wp.array3d(dtype=scalar)):
         """Geometric Jacobian jac[b] (6, n_dof) of the world point ``target`` moving with
-        the last frame of ``chain``, from frames an FK pass has already computed (no
-        kinematics of its own)."""
+        the last frame of ``chain``, from frames an FK pass has already computed at q[b]
+        (no kinematics of its own; q only for :func:`coupling_weight`)."""
         clear_jacobian(jac, b)
         for k in range(chain.shape[0]):
             T = frames[b, chain[k]]
             add_axis_columns(model, chain[k], vec3(T[0, 2], T[1, 2], T[2, 2]),
-                             vec3(T[0, 3], T[1, 3], T[2, 3]), target, b, jac)
+                             vec3(T[0, 3], T[1, 3], T[2, 3]), target, b, q, jac)
 
     @wp.kernel(module="unique")
     def jacobian_kernel(
@@ -528,7 +648,9 @@ def kernels(scalar: type) -> SimpleNamespace:
     return SimpleNamespace(
         scalar=scalar, FrameTables=FrameTables, vec3=vec3, mat33=mat33, mat44=mat44,
         vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, cos_sin_step=cos_sin_step,
-        joint_value=joint_value, waypoint_thread=waypoint_thread, write_frame=write_frame,
+        joint_value=joint_value, coupled_angle=coupled_angle, commanded=commanded,
+        harmonic_angle=harmonic_angle, coupling_harmonic_slope=coupling_harmonic_slope,
+        coupling_weight=coupling_weight, harmonic_travel=harmonic_travel, waypoint_thread=waypoint_thread, write_frame=write_frame,
         child_frame=child_frame, child_rot_pos=child_rot_pos, chain_link=chain_link,
         chain_pose=chain_pose, chain_point=chain_point, add_axis_columns=add_axis_columns,
         clear_jacobian=clear_jacobian, chain_jacobian=chain_jacobian,

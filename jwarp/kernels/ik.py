@@ -66,6 +66,7 @@ def kernels(scalar: type) -> SimpleNamespace:
     def pose_error_kernel(
         # Data in:
         frames: wp.array2d(dtype=mat44),
+        q: wp.array2d(dtype=scalar),
         target: wp.array(dtype=mat44),
         lam_p: scalar,
         lam_r: scalar,
@@ -81,11 +82,11 @@ def kernels(scalar: type) -> SimpleNamespace:
         grad: wp.array2d(dtype=scalar),
     ):
         """Jacobian (B, 6, n_dof) of the frame ``chain[-1]`` (from ``frames``, no FK of
-        its own), 6D error (B, 6), its norms (B,), U_f (B,) and dU_f/dq (B, n_dof).
+        its own; ``frames`` were computed at ``q`` (B, n_dof)), 6D error (B, 6), its norms (B,), U_f (B,) and dU_f/dq (B, n_dof).
         Launch dim B."""
         b = wp.tid()
         F = frames[b, chain[chain.shape[0] - 1]]
-        fk.frames_jacobian(model, chain, frames, b, fk.unpack_pos(F), jac)
+        fk.frames_jacobian(model, chain, frames, b, q, fk.unpack_pos(F), jac)
         T = target[b]
         dp = fk.unpack_pos(F) - fk.unpack_pos(T)
         M, ev, ew = pose_error_row(fk.unpack_rot(F), fk.unpack_pos(F), T, b, err)

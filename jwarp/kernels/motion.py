@@ -261,7 +261,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             v = zero
             for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
                 v += model.cpl_coef[c] * sc.dq[r, model.cpl_joint[c]]
-            sc.dth[r, i] = wp.abs(v)
+            sc.dth[r, i] = wp.abs(v) + fk.harmonic_travel(model, i, r, sc.dq)
         for s in range(cm.reach.shape[0]):  # travel of each centre over the whole segment
             l = zero
             for i in range(nf):

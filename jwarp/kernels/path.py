@@ -441,6 +441,7 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
     @wp.kernel(module="unique")
     def grad_kernel(
         frames: wp.array2d(dtype=mat44),
+        q: wp.array2d(dtype=scalar),
         xs: wp.array2d(dtype=vec3),
         W: int,
         n_sub: int,
@@ -454,7 +455,8 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
     ):
         """Adds lam_c dU_c/dq_t to the substep gradient row ``p * S + t * n_sub`` of every
         interior waypoint t (that row enters waypoint t's gradient with weight 1 and no
-        other waypoint's). Launch dim (P, W); scratch force, moment (P * W, n_frames)."""
+        other waypoint's). Launch dim (P, W); scratch force, moment (P * W, n_frames);
+        ``frames`` were computed at the waypoints ``q`` (P * W, n_dof)."""
         p, t = wp.tid()
         if t == 0 or t == W - 1:
             return
@@ -488,9 +490,10 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
                 gi = wp.dot(z, F)
                 if model.prismatic[i] == 0:
                     gi = wp.dot(z, moment[r, i] - wp.cross(vec3(T[0, 3], T[1, 3], T[2, 3]), F))
+                hp = fk.coupling_harmonic_slope(model, i, r, q)
                 for m in range(m0, m1):
                     jm = model.cpl_joint[m]
-                    sub_grad[row, jm] = sub_grad[row, jm] + model.cpl_coef[m] * gi
+                    sub_grad[row, jm] = sub_grad[row, jm] + fk.coupling_weight(model, m, r, q, hp) * gi
 
     @wp.kernel(module="unique")
     def arcs_kernel(

@@ -16,7 +16,8 @@ from jwarp.kinematics.data import KinematicsData, forward_kinematics, frame_jaco
 from jwarp.kinematics.equilibrium import elastic_step, fk_elastic, gravity_torques
 from jwarp.kinematics.fk import fk
 from jwarp.kinematics.jacobians import jacobian, jacobian_dh
-from jwarp.kinematics.transmission import transmitted, without_transmission
+from jwarp.kinematics.transmission import (transmitted, without_coupling_harmonic,
+                                           without_transmission)
 from jwarp.kinematics.launch import (ELASTIC_TOL, ElasticFK, ElasticLaunch, ElasticStep,
                                      default_tol, elastic_args, equilibrium, frame_rows, host_out,
                                      kappa_array, launch_fk, rho0_full, setup)
@@ -25,4 +26,4 @@ __all__ = ["ELASTIC_TOL", "ElasticFK", "ElasticLaunch", "ElasticStep", "Kinemati
            "default_tol", "elastic_args", "elastic_step", "equilibrium", "fk", "fk_elastic",
            "forward_kinematics", "frame_jacobian", "frame_rows", "gravity_torques", "host_out",
            "jacobian", "jacobian_dh", "kappa_array", "launch_fk", "rho0_full", "setup",
-           "transmitted", "without_transmission"]
+           "transmitted", "without_coupling_harmonic", "without_transmission"]

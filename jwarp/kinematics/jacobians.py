@@ -12,8 +12,7 @@ from jwarp.core.arrays import is_torch, Batch, empty, finite_as, first_touch, ou
 from jwarp.core.device import KinematicsTables
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import frame_rows, jacobian_inputs, point_vec, setup, small_call
-from jwarp.kinematics.transmission import (transmission_slope, transmitted,
-                                         without_transmission)
+from jwarp.kinematics.transmission import transmission_slope, transmitted
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 
@@ -77,11 +76,21 @@ def jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any
     scaled by ``dq'/dq`` (:mod:`jwarp.kinematics.transmission`).
     """
     model = get_robot(robot)
-    if model.has_harmonic:
-        return _scaled(jacobian(without_transmission(model), transmitted(model, q), frame,
-                                point=point, dh=dh, device=device, dtype=dtype,
-                                validate=validate, out=out),
+    if model.has_harmonic:   # the kernels at the links' values, with the robot's own tables
+        return _scaled(link_jacobian(model, transmitted(model, q), frame, point=point, dh=dh,
+                                     device=device, dtype=dtype, validate=validate, out=out),
                        transmission_slope(model, q))
+    return link_jacobian(robot, q, frame, point=point, dh=dh, device=device, dtype=dtype,
+                         validate=validate, out=out)
+
+
+def link_jacobian(robot: Any, q_link: Any, frame: int | str, *, point: Any = None,
+                  dh: Any = None, device: Any = None, dtype: Any = None,
+                  validate: bool = True, out: Any = None) -> Any:
+    """:func:`jacobian` w.r.t. the joint values the links see, ``q_link`` (transmission
+    errors already applied; no ``dq'/dq`` factor): the same as :func:`jacobian` for a
+    robot without transmission errors."""
+    q = q_link
     if dh is None:
         res = small_call("jacobian", robot, q, device, dtype, validate, out, frame, point)
         if res is not None:

@@ -83,6 +83,19 @@ def without_transmission(model: RobotModel) -> RobotModel:
     return out
 
 
+def without_coupling_harmonic(model: RobotModel) -> RobotModel:
+    """The robot without the angle-dependent errors of its coupled frames
+    (``coupling_harmonic``; a copy, cached on ``model``), for callers that add them to
+    per-configuration DH rows themselves (the calibration). The kinematics kernels
+    otherwise apply them (:mod:`jwarp.kernels.fk` ``joint_value``)."""
+    if not model.has_coupling_harmonic:
+        return model
+    out = model.__dict__.get("_without_coupling_harmonic")
+    if out is None:
+        out = model.__dict__["_without_coupling_harmonic"] = model.copy(coupling_harmonic=None)
+    return out
+
+
 def untransmitted(model: RobotModel, q_link: np.ndarray, *, tol: float = 1e-13,
                   max_iter: int = 30) -> np.ndarray:
     """The joint values ``q`` whose links see ``q_link`` (..., n_dof): the inverse of

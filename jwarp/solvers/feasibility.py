@@ -19,7 +19,7 @@ from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, res
 from jwarp.core.device import numpy_dtype, scalar_type, tables
 from jwarp.core.limits import describe_violation, sample_within_limits, within_limits
 from jwarp.kernels import path as path_kernels
-from jwarp.kinematics.transmission import without_transmission
+from jwarp.kinematics.transmission import untransmitted, without_transmission
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.world import collision
@@ -107,8 +107,14 @@ def elastic_equilibrium(robot: Any, q: np.ndarray, kappa: Any, device: Any = Non
     from jwarp.kinematics.equilibrium import fk_elastic
 
     # the checks see the links' joint values (transmission errors already applied)
-    res = fk_elastic(without_transmission(get_robot(robot)), np.asarray(q, np.float64), kappa,
-                     device=device, dtype=np.float64, **ELASTIC_CHECK)
+    model = get_robot(robot)
+    q = np.asarray(q, np.float64)
+    if model.has_harmonic and model.has_coupling_harmonic:
+        # the coupled frames' harmonic terms need the commanded values: the robot's own tables
+        q = untransmitted(model, q)
+    else:
+        model = without_transmission(model)
+    res = fk_elastic(model, q, kappa, device=device, dtype=np.float64, **ELASTIC_CHECK)
     return np.asarray(res.rho), np.asarray(res.converged, bool)
 
 

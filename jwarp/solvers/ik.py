@@ -294,7 +294,7 @@ class IKObjective:
                      [self.frames])
         w = self.weights
         self._launch(("pose", w.position, w.rotation), self.kk.pose_error,
-                     [self.frames, self.target, self.scalar(w.position),
+                     [self.frames, self.q, self.target, self.scalar(w.position),
                       self.scalar(w.rotation), t.frame_struct, t.chain(self.frame)],
                      [self.jac, self.err, self.pos_err, self.rot_err, self.cost_f, self.grad_f])
 

@@ -294,7 +294,8 @@ class PathObjective:
                   outputs=[self.cartesian, self.total], device=dev)
         if grad:
             wp.launch(c.k.grad, dim=(self.P, self.W),
-                      inputs=[c.frames, c.xs, self.W, self.n_sub, lam, floor,
+                      inputs=[c.frames, self.paths.reshape((PW, self.n)), c.xs, self.W,
+                              self.n_sub, lam, floor,
                               self.cm.model.frame_struct, self.cm.sph_frame, c.force, c.moment],
                       outputs=[self.sub_grad], device=dev)
 

@@ -269,8 +269,9 @@ class CalibrationProblem:
         self.q_device_raw = self.q_device
         self.transmission = bool(self._harm_idx.size or self.robot.has_harmonic)
         #: the robot the kinematics launches see: transmission errors are applied here
-        #: (``q_device``), not again by the public kinematics functions
-        self.kin_robot = K.without_transmission(self.robot)
+        #: (``q_device``), not again by the public kinematics functions; the coupled frames'
+        #: harmonic terms go into the per-sample rows (:meth:`coupled_rows`), not the kernels
+        self.kin_robot = K.without_coupling_harmonic(K.without_transmission(self.robot))
         self._dh_idx = np.nonzero(sp.kind == KIND_DH)[0]
         self._kap_idx = np.nonzero(sp.kind == KIND_KAPPA)[0]
         self._meas_idx = np.nonzero(sp.kind == KIND_MEAS)[0]
@@ -333,7 +334,7 @@ class CalibrationProblem:
         if self.elastic:
             fm = frame_masses(self.robot, mass) if self._mass_idx.size else None
             knl = self.space.kappa_nonlinear_at(x) if self._knl_idx.size else None
-            eq_robot = self.kin_robot_at(x) if self._org_idx.size else self.robot
+            eq_robot = self.kin_robot_at(x)   # without coupling_harmonic: in the rows
             frames, rho, conv = signed_equilibrium(eq_robot, self.q_device, rows, kap,
                                                    self.lam, self.max_iter, self.tol, masses=fm,
                                                    kappa_nl=knl, device=self.device)

@@ -71,6 +71,7 @@ def model_frames(robot: RobotModel, q: np.ndarray, *, kappa: Any = None,
         pris = model.frame_is_prismatic
         dh[..., 1] += delta * ~pris
         dh[..., 0] += delta * pris
+        model = K.without_coupling_harmonic(model)   # the rows carry them (not the kernels)
     if elastic is None:
         elastic = bool(np.any(kap != 0) or np.any(model.kappa_nonlinear))
     if elastic:
