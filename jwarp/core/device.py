@@ -58,7 +58,7 @@ __all__ = ["DeviceModel", "KinematicsTables", "LimitTables", "SphereModel", "Pat
 #: the fields of ``kernels.fk.FrameTables`` (attributes of :class:`DeviceModel`)
 _FRAME_FIELDS = ("order", "parent", "is_dh", "prismatic", "fixed_rot", "fixed_pos", "dh0",
                  "trig", "cpl_start", "cpl_joint", "cpl_coef", "ch_start", "ch_ab",
-                 "jh_start", "jh_ab")
+                 "jh_start", "jh_ab", "n_ch")
 #: the fields of ``kernels.collision.SphereTables`` (attributes of :class:`SphereModel`)
 _SPHERE_FIELDS = ("sph_frame", "sph_pos", "sph_rad", "bound_pos", "bound_rad", "fpair_a",
                   "fpair_b", "fpair_start", "ent_sphere", "ent_start", "pair_b")
@@ -177,6 +177,7 @@ class DeviceModel:
     ch_ab: wp.array  # (max(n_terms, 1), 2) [a_k, b_k] of the coupled frames' harmonic terms
     jh_start: wp.array  # (n_dof + 1,) int32 CSR into jh_ab
     jh_ab: wp.array  # (max(n_terms, 1), 2) transmission errors of the joints driving them
+    n_ch: int  # frames with coupling_harmonic terms (0: the kernels skip the tables)
     mass: wp.array
     mass_com: wp.array
     dh_info: wp.array  # (n_dh,) vec4i [position in order, frame, subtree end, parent] of DH frames
@@ -427,6 +428,7 @@ def _build(robot: RobotModel, dev: wp.Device, scalar: type, key: str) -> DeviceM
         ch_ab=arr(ch_ab.astype(npdt), scalar),
         jh_start=arr(jh_start, wp.int32),
         jh_ab=arr(jh_ab.astype(npdt), scalar),
+        n_ch=int(np.count_nonzero(np.diff(ch_start))),
         mass=arr(mass.astype(npdt), scalar),
         mass_com=arr(com.astype(npdt), k.vec3),
         dh_info=arr(_dh_info(robot), wp.vec4i),

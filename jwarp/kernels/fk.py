@@ -18,7 +18,8 @@ Frame tables (part of the *Model*, :class:`jwarp.core.device.DeviceModel`):
 * ``ch_start``     (n_frames + 1,) int32, ``ch_ab`` (n_terms, 2): CSR angle-dependent errors
   of coupled frames (the robot's ``coupling_harmonic``): frame i's terms k = 1 .. K_i are
   rows ``ch_start[i] .. ch_start[i + 1] - 1`` ``[a_k, b_k]``; empty for every frame of a
-  robot without them (one comparison per frame)
+  robot without them; ``n_ch`` the number of frames with terms (0: the kernels skip them
+  on a uniform branch, reading no table)
 * ``jh_start``     (n_dof + 1,) int32, ``jh_ab`` (n_terms, 2): CSR transmission errors (the
   robot's ``harmonic``) of the joints that drive a frame with harmonic terms, only to
   recover their commanded values (:func:`commanded`); empty otherwise
@@ -90,6 +91,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         ch_ab: wp.array2d(dtype=scalar)
         jh_start: wp.array(dtype=wp.int32)
         jh_ab: wp.array2d(dtype=scalar)
+        n_ch: wp.int32
 
     @wp.func
     def dh_fixed_rot(alpha: scalar, beta: scalar) -> mat33:
@@ -234,15 +236,16 @@ def kernels(scalar: type) -> SimpleNamespace:
         """Joint value of frame i at configuration b: ``sum_j c_j q[b, j] + sum_k a_k sin(k u)
         + b_k cos(k u)`` (``u`` :func:`harmonic_angle`; no terms without ``coupling_harmonic``)."""
         v = coupled_angle(model, i, b, q)
-        h0 = model.ch_start[i]
-        h1 = model.ch_start[i + 1]
-        if h1 > h0:
-            u = harmonic_angle(model, i, b, q)
-            e = zero
-            for k in range(h0, h1):
-                ck, sk = cos_sin(scalar(k - h0 + 1) * u)
-                e += model.ch_ab[k, 0] * sk + model.ch_ab[k, 1] * ck
-            v += e
+        if model.n_ch != 0:  # a uniform branch on a kernel argument: free without terms
+            h0 = model.ch_start[i]
+            h1 = model.ch_start[i + 1]
+            if h1 > h0:
+                u = harmonic_angle(model, i, b, q)
+                e = zero
+                for k in range(h0, h1):
+                    ck, sk = cos_sin(scalar(k - h0 + 1) * u)
+                    e += model.ch_ab[k, 0] * sk + model.ch_ab[k, 1] * ck
+                v += e
         return v
 
     @wp.func
@@ -251,14 +254,15 @@ def kernels(scalar: type) -> SimpleNamespace:
         """``h'(u) = sum_k k (a_k cos(k u) - b_k sin(k u))`` of frame i's harmonic terms (zero
         without them): pass it to :func:`coupling_weight`."""
         g = zero
-        h0 = model.ch_start[i]
-        h1 = model.ch_start[i + 1]
-        if h1 > h0:
-            u = harmonic_angle(model, i, b, q)
-            for k in range(h0, h1):
-                kk = scalar(k - h0 + 1)
-                ck, sk = cos_sin(kk * u)
-                g += kk * (model.ch_ab[k, 0] * ck - model.ch_ab[k, 1] * sk)
+        if model.n_ch != 0:
+            h0 = model.ch_start[i]
+            h1 = model.ch_start[i + 1]
+            if h1 > h0:
+                u = harmonic_angle(model, i, b, q)
+                for k in range(h0, h1):
+                    kk = scalar(k - h0 + 1)
+                    ck, sk = cos_sin(kk * u)
+                    g += kk * (model.ch_ab[k, 0] * ck - model.ch_ab[k, 1] * sk)
         return g
 
     @wp.func
@@ -281,8 +285,11 @@ def kernels(scalar: type) -> SimpleNamespace:
         dq[r] (zero without them): ``L sum_j |c_j dq_j| / s_min_j`` with L = sum_k k (|a_k| +
         |b_k|) and s_min_j the least slope of joint j's transmission (1 without)."""
         t = zero
-        h0 = model.ch_start[i]
-        h1 = model.ch_start[i + 1]
+        h0 = int(0)
+        h1 = int(0)
+        if model.n_ch != 0:
+            h0 = model.ch_start[i]
+            h1 = model.ch_start[i + 1]
         if h1 > h0:
             lip = zero
             for k in range(h0, h1):
@@ -530,13 +537,21 @@ def kernels(scalar: type) -> SimpleNamespace:
             if model.prismatic[i] != 0:
                 lin = z
                 ang = vec3(zero, zero, zero)
-            hp = coupling_harmonic_slope(model, i, b, q)
-            for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
-                j = model.cpl_joint[c]
-                w = coupling_weight(model, c, b, q, hp)
-                for r in range(3):
-                    jac[b, r, j] = jac[b, r, j] + w * lin[r]
-                    jac[b, r + 3, j] = jac[b, r + 3, j] + w * ang[r]
+            if model.n_ch == 0:  # no harmonic terms anywhere (uniform branch): plain weights
+                for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
+                    j = model.cpl_joint[c]
+                    w = model.cpl_coef[c]
+                    for r in range(3):
+                        jac[b, r, j] = jac[b, r, j] + w * lin[r]
+                        jac[b, r + 3, j] = jac[b, r + 3, j] + w * ang[r]
+            else:
+                hp = coupling_harmonic_slope(model, i, b, q)
+                for c in range(model.cpl_start[i], model.cpl_start[i + 1]):
+                    j = model.cpl_joint[c]
+                    w = coupling_weight(model, c, b, q, hp)
+                    for r in range(3):
+                        jac[b, r, j] = jac[b, r, j] + w * lin[r]
+                        jac[b, r + 3, j] = jac[b, r + 3, j] + w * ang[r]
 
     @wp.func
     def clear_jacobian(jac: wp.array3d(dtype=scalar), b: int):
