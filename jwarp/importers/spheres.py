@@ -242,9 +242,11 @@ class _Solid:
     taken relative to the bounding-box centre (float32 in Warp)."""
 
     def __init__(self, mesh: trimesh.Trimesh) -> None:
-        from jwarp.core.arrays import init_warp
-
-        init_warp()
+        # importers sit below jwarp.core: Warp directly (init is a no-op once done)
+        wp.config.quiet = True
+        if hasattr(wp, "LOG_WARNING"):
+            wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+        wp.init()
         V = np.asarray(mesh.vertices, np.float64)
         F = np.asarray(mesh.faces, np.int64)
         a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
