@@ -342,6 +342,7 @@ def build(m: Any, path: str, opt: MjcfOptions) -> UrdfImport:
                 raise MjcfError(f"end_effectors.{alias}: unknown body, site or frame "
                                 f"'{target}' (bodies: {', '.join(bodies)})")
             eff[alias] = target
+    excluded = _contact_excludes(m, bodies, set(names))
     model_name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_MODEL, 0) if hasattr(
         mujoco.mjtObj, "mjOBJ_MODEL") else None
     name = opt.name or model_name or os.path.splitext(os.path.basename(path))[0] or "mjcf"
@@ -352,12 +353,27 @@ def build(m: Any, path: str, opt: MjcfOptions) -> UrdfImport:
                         f"Units: m, rad, kg."),
         "joints": jdocs, "frames": frames, "masses": masses, "spheres": spheres,
         "end_effectors": eff,
+        **({"self_collision": {"exclude_pairs": excluded}} if excluded else {}),
         "notes": {"source": os.path.abspath(path),
                   "importer": "jwarp.importers.mjcf (docs/urdf.md, MJCF)",
                   **({"dropped_equalities": "; ".join(dropped)} if dropped else {})},
     }
     return UrdfImport(document=doc, geometries=geometries, link_frames=link_frames,
                       joint_frames=joint_frames, path=path)
+
+
+def _contact_excludes(m: Any, bodies: list[str], frames: set[str]) -> list[list[str]]:
+    """The body pairs of the model's ``<contact><exclude body1 body2>`` elements (MuJoCo's
+    ``exclude_signature`` = body1 << 16 | body2) as frame-name pairs for
+    ``self_collision.exclude_pairs`` (pairs naming the world body or a body that is not a
+    frame are left out)."""
+    out: set[tuple[str, str]] = set()
+    for sig in np.asarray(getattr(m, "exclude_signature", []), np.int64).reshape(-1):
+        a, b = int(sig) >> 16, int(sig) & 0xFFFF
+        if 0 < a < len(bodies) and 0 < b < len(bodies) and a != b \
+                and bodies[a] in frames and bodies[b] in frames:
+            out.add((min(bodies[a], bodies[b]), max(bodies[a], bodies[b])))
+    return [list(p) for p in sorted(out)]
 
 
 def _equality_text(mujoco: Any, m: Any, e: int) -> str:

@@ -197,7 +197,11 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None
     if len(spheres):
         pairs = never_colliding_pairs(fitted, n_samples=int(o.pair_samples), seed=int(o.seed),
                                       margin=float(o.pair_margin))
-        fitted = with_self_pairs(fitted, pairs)
+        # the model's own exclusions (e.g. MJCF <contact><exclude>) are kept and the
+        # sampled ones added; a model without any (an imported URDF) gets exactly these
+        sc = model.self_collision
+        own = bool(sc.exclude_pairs or sc.include_pairs or sc.groups)
+        fitted = with_self_pairs(fitted, pairs, replace=not own)
         report.pairs = pairs
     return fitted, report
 

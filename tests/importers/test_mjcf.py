@@ -352,6 +352,39 @@ def test_robotiq_2f85_connects_are_named_and_fk_matches_mujoco():
                                                   if k not in drive}
 
 
+def test_contact_excludes_become_exclude_pairs():
+    """<contact><exclude body1 body2> of the 2F-85 (read from the XML with ElementTree,
+    independently of MuJoCo's compiled signatures) are the model's exclude pairs, and a
+    sphere fit keeps them besides the sampled ones."""
+    import warnings
+    import xml.etree.ElementTree as ET
+
+    path = _menagerie("robotiq_2f85_xml")
+    want = {tuple(sorted((e.get("body1"), e.get("body2"))))
+            for e in ET.parse(path).getroot().iter("exclude")}
+    assert len(want) >= 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        imp = load_mjcf(path)
+    model = imp.model
+    got = {tuple(sorted((model.frames[a].name, model.frames[b].name)))
+           for a, b in model.self_collision.exclude_pairs}
+    assert got == want
+    allowed = model.allowed_collision_pairs
+    for a, b in want:
+        assert not allowed[model.frame_index(a), model.frame_index(b)]
+
+    from jwarp.world.spherize import SpherizeOptions, spherize
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted, _ = spherize(imp, SpherizeOptions(tolerance=0.02, max_spheres=2,
+                                                  pair_samples=50))
+    kept = {tuple(sorted((fitted.frames[a].name, fitted.frames[b].name)))
+            for a, b in fitted.self_collision.exclude_pairs}
+    assert want <= kept and len(kept) > len(want)
+
+
 def test_ur5e_fk_matches_mujoco():
     imp, err = compare(_menagerie("ur5e_xml"), n=100)
     assert err < 1e-9 and imp.model.n_dof == 6
