@@ -189,7 +189,14 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
         grouped = plan_group(imported, group_options(args, eff), model=model)
     except ValueError as e:
         raise group_error(e, args.srdf) from None
+    fitted_pairs = model.self_collision.exclude_pairs  # sampled over every joint
     model = grouped.model
+    resampled = None
+    if fit is not None and model.n_dof < imported.model.n_dof \
+            and grouped.srdf_collisions != "replace":
+        from jwarp.world.spherize import resample_pairs
+
+        model, resampled = resample_pairs(model, fitted_pairs, opts)
     model.save(args.out)
     missing = [g.mesh_uri for g in imported.geometries if g.kind == "mesh" and g.mesh_path is None]
     extra: dict[str, Any] = {"missing_meshes": missing}
@@ -203,6 +210,12 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
                      f"{int(model.allowed_collision_pairs.sum()) // 2} self-collision frame "
                      f"pairs checked")
         lines += [f"warning: {w}" for w in fit.warnings]
+        if resampled is not None:
+            lines.append(f"self-collision pairs sampled again over the {model.n_dof} planned "
+                         f"joints (the others locked): {len(resampled.never_colliding)} never, "
+                         f"{len(resampled.always_colliding)} always colliding excluded")
+            extra["pairs_resampled"] = {"never": len(resampled.never_colliding),
+                                        "always": len(resampled.always_colliding)}
     more_lines, more = group_lines(grouped, fit is not None)
     lines += more_lines
     extra.update(more)

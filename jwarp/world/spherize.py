@@ -42,7 +42,7 @@ from jwarp.model import RobotModel, Sphere
 from jwarp.world.self_pairs import SelfPairs, never_colliding_pairs, with_self_pairs
 
 __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize",
-           "spherized_robot"]
+           "spherized_robot", "resample_pairs"]
 
 #: bump when the fitted result of the same inputs changes
 CACHE_VERSION = 2
@@ -282,3 +282,31 @@ def spherized_robot(path: str | os.PathLike, options: SpherizeOptions | None = N
         except OSError:
             pass  # a read-only home: no cache, same result
     return model, report
+
+
+def resample_pairs(model: RobotModel, sampled: Any, options: SpherizeOptions
+                   ) -> tuple[RobotModel, SelfPairs]:
+    """The self-collision exclusions of ``model`` sampled again over its own joints: for a
+    model whose joints were locked or frozen after the fit (a planning group), whose
+    ``sampled`` pairs came from the whole robot's joint ranges (a pair that collides only
+    where a locked joint goes no more is excluded now; one that collides at every value of
+    the planned joints, e.g. an arm link resting on a locked torso, is excluded as MoveIt
+    does). Exclusions of ``model`` that are not among the ``sampled`` ones (SRDF pairs,
+    links that freezing joined rigidly) are kept. Returns (model, the new pairs)."""
+    o = options
+    o.validate()
+    pairs = never_colliding_pairs(model, n_samples=int(o.pair_samples), seed=int(o.seed),
+                                  margin=float(o.pair_margin))
+    sc = model.self_collision
+    old = {tuple(sorted(int(i) for i in p)) for p in sampled}
+    keep = [tuple(sorted(p)) for p in sc.exclude_pairs if tuple(sorted(p)) not in old]
+    out = with_self_pairs(model, pairs, replace=True)
+    merged = sorted(set(out.self_collision.exclude_pairs) | set(keep))
+    notes = dict(out.notes)
+    notes["self_collision"] += (f"; sampled over the {model.n_dof} planned joints (others "
+                                f"locked), {len(keep)} earlier exclusions kept")
+    from jwarp.model import SelfCollision
+
+    new_sc = SelfCollision(groups={k: list(v) for k, v in sc.groups.items()},
+                           include_pairs=list(sc.include_pairs), exclude_pairs=merged)
+    return out.copy(self_collision=new_sc, notes=notes), pairs
