@@ -119,6 +119,21 @@ def target_refused(model: Any, world: Any, targets: np.ndarray, seed: int) -> np
     return ~np.asarray(ik.feasible, bool)
 
 
+def count_table(rows: dict, labs: list[str], col: int, n: int) -> None:
+    """Prints per family and in all the count ``rows[family][label][col]`` of each model
+    and its share of the family's free configurations (``n`` in all)."""
+    print(f"{'family':18s} {'free':>5s} " + " ".join(f"{lab:>22s}" for lab in labs))
+    tot = {lab: 0 for lab in labs}
+    for fam, r in rows.items():
+        cells = []
+        for lab in labs:
+            tot[lab] += r[lab][col]
+            cells.append(f"{r[lab][col]:4d} ({100.0 * r[lab][col] / r['free']:5.1f}%)".rjust(22))
+        print(f"{fam:18s} {r['free']:5d} " + " ".join(cells))
+    print(f"{'all':18s} {n:5d} " + " ".join(
+        f"{tot[lab]:4d} ({100.0 * tot[lab] / max(n, 1):5.1f}%)".rjust(22) for lab in labs))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--per-family", type=int, default=10, help="scenes per family (10)")
@@ -169,30 +184,11 @@ def main(argv: list[str] | None = None) -> int:
     labs = [lab for lab, _ in models]
     print(f"\ngrasp configurations whose URDF meshes are free, refused by each sphere model "
           f"(margin 0, exact scene; {args.per_family} scenes per family)")
-    print(f"{'family':18s} {'free':>5s} " + " ".join(f"{lab:>22s}" for lab in labs))
-    tot = {lab: 0 for lab in labs}
-    n = 0
-    for fam, r in rows.items():
-        n += r["free"]
-        cells = []
-        for lab in labs:
-            tot[lab] += r[lab][0]
-            cells.append(f"{r[lab][0]:4d} ({100.0 * r[lab][0] / r['free']:5.1f}%)".rjust(22))
-        print(f"{fam:18s} {r['free']:5d} " + " ".join(cells))
-    print(f"{'all':18s} {n:5d} " + " ".join(
-        f"{tot[lab]:4d} ({100.0 * tot[lab] / max(n, 1):5.1f}%)".rjust(22) for lab in labs))
+    n = sum(r["free"] for r in rows.values())
+    count_table(rows, labs, 0, n)
     print("\nthe same grasp targets, refused by jwarp's IK with each sphere model in the scene "
           "(no collision-free solution from 8 starts: the grasp is unreachable for the model)")
-    print(f"{'family':18s} {'free':>5s} " + " ".join(f"{lab:>22s}" for lab in labs))
-    tot2 = {lab: 0 for lab in labs}
-    for fam, r in rows.items():
-        cells = []
-        for lab in labs:
-            tot2[lab] += r[lab][2]
-            cells.append(f"{r[lab][2]:4d} ({100.0 * r[lab][2] / r['free']:5.1f}%)".rjust(22))
-        print(f"{fam:18s} {r['free']:5d} " + " ".join(cells))
-    print(f"{'all':18s} {n:5d} " + " ".join(
-        f"{tot2[lab]:4d} ({100.0 * tot2[lab] / max(n, 1):5.1f}%)".rjust(22) for lab in labs))
+    count_table(rows, labs, 2, n)
     for lab in labs:
         cl = [c for r in rows.values() for c in r[lab][1]]
         if cl:

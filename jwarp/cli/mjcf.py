@@ -23,7 +23,8 @@ import warnings
 from typing import Any
 
 from jwarp.cli.common import CLIError, check_output, int_arg, real_arg
-from jwarp.cli.urdf import end_effectors_arg, import_error, import_summary
+from jwarp.cli.urdf import (end_effectors_arg, import_error, import_summary,
+                            sphere_fit_line)
 
 
 def _spheres_choice(args: argparse.Namespace) -> str:
@@ -80,11 +81,7 @@ def cmd_import_mjcf(args: argparse.Namespace) -> int:
     lines = []
     if fit is not None:
         extra["sphere_fit"] = fit.to_dict()
-        worst = max((r["one_sided_error"] for r in fit.links), default=0.0)
-        lines.append(f"spheres fitted to {len(fit.links)} bodies (tolerance {args.tolerance} m, "
-                     f"largest one-sided error {worst:.4f} m); "
-                     f"{int(model.allowed_collision_pairs.sum()) // 2} self-collision frame "
-                     f"pairs checked")
+        lines.append(sphere_fit_line(fit, model, args.tolerance, "bodies"))
     if not model.spheres:
         lines.append("no collision spheres: plan and ik in a world refuse this robot unless "
                      "--no-collision is given")

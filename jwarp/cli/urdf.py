@@ -125,6 +125,18 @@ def group_lines(res: Any, sampled: bool) -> tuple[list[str], dict[str, Any]]:
     return lines, extra
 
 
+def sphere_fit_line(fit: Any, model: Any, tolerance: float, parts: str) -> str:
+    """The summary line of a sphere fit (``fit``: a SpherizeReport) of an import: parts
+    fitted (``parts``: "links", "bodies"), tolerance, largest one-sided error, checked
+    frame pairs of the written ``model``."""
+    worst = max((r["one_sided_error"] for r in fit.links), default=0.0)
+    return (f"spheres fitted to {len(fit.links)} {parts} (tolerance {tolerance} m, "
+            f"largest one-sided error {worst:.4f} m"
+            f"{', from the cache' if fit.cached else ''}); "
+            f"{int(model.allowed_collision_pairs.sum()) // 2} self-collision frame "
+            f"pairs checked")
+
+
 def import_summary(model: Any, geometries: list, out: str, as_json: bool,
                    extra: dict[str, Any] | None = None, lines: list[str] | None = None,
                    note: str = "") -> None:
@@ -203,12 +215,7 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
     lines = []
     if fit is not None:
         extra["sphere_fit"] = fit.to_dict()
-        worst = max((r["one_sided_error"] for r in fit.links), default=0.0)
-        lines.append(f"spheres fitted to {len(fit.links)} links (tolerance {args.tolerance} m, "
-                     f"largest one-sided error {worst:.4f} m"
-                     f"{', from the cache' if fit.cached else ''}); "
-                     f"{int(model.allowed_collision_pairs.sum()) // 2} self-collision frame "
-                     f"pairs checked")
+        lines.append(sphere_fit_line(fit, model, args.tolerance, "links"))
         lines += [f"warning: {w}" for w in fit.warnings]
         if resampled is not None:
             lines.append(f"self-collision pairs sampled again over the {model.n_dof} planned "
