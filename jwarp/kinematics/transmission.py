@@ -75,11 +75,17 @@ def transmission_slope(model: RobotModel, q: Any) -> np.ndarray | None:
 def without_transmission(model: RobotModel) -> RobotModel:
     """The robot without its transmission errors (a copy, cached on ``model``; models are
     treated as immutable once used)."""
-    if not model.has_harmonic:
+    return _cached_copy(model, model.has_harmonic, "_without_transmission", harmonic=None)
+
+
+def _cached_copy(model: RobotModel, needed: bool, key: str, **changes: object) -> RobotModel:
+    """``model`` itself when not ``needed``, else ``model.copy(**changes)``, cached on the
+    model under ``key``."""
+    if not needed:
         return model
-    out = model.__dict__.get("_without_transmission")
+    out = model.__dict__.get(key)
     if out is None:
-        out = model.__dict__["_without_transmission"] = model.copy(harmonic=None)
+        out = model.__dict__[key] = model.copy(**changes)
     return out
 
 
@@ -88,12 +94,8 @@ def without_coupling_harmonic(model: RobotModel) -> RobotModel:
     (``coupling_harmonic``; a copy, cached on ``model``), for callers that add them to
     per-configuration DH rows themselves (the calibration). The kinematics kernels
     otherwise apply them (:mod:`jwarp.kernels.fk` ``joint_value``)."""
-    if not model.has_coupling_harmonic:
-        return model
-    out = model.__dict__.get("_without_coupling_harmonic")
-    if out is None:
-        out = model.__dict__["_without_coupling_harmonic"] = model.copy(coupling_harmonic=None)
-    return out
+    return _cached_copy(model, model.has_coupling_harmonic, "_without_coupling_harmonic",
+                        coupling_harmonic=None)
 
 
 def untransmitted(model: RobotModel, q_link: np.ndarray, *, tol: float = 1e-13,
