@@ -533,11 +533,11 @@ class IKSolver:
         elif not isinstance(options, IKOptions):
             raise TypeError(f"options: expected IKOptions, got {type(options).__name__}")
         options = dataclasses.replace(options)  # a copy (validated): later edits do not leak
+        self.device = resolve_device(device)
         if not options.allow_no_collision:
             check_collision_model(self.robot, need_spheres=world is not None,
-                                  what="IK in a world")
+                                  what="IK in a world", device=self.device)
         self.options = options
-        self.device = resolve_device(device)
         self.scalar = scalar_type(np.float64 if dtype is None else dtype)
         self.npdt = numpy_dtype(self.scalar)
         self.eps = options.eps_for(world)

@@ -633,10 +633,11 @@ class Planner:
         options.validate(self.npdt)
         o = replace(options, step=float(options.step), max_step=float(options.max_step),
                     margin=real_number(options.margin, "margin"))
-        if not o.allow_no_collision:
-            check_collision_model(self.robot, need_spheres=True, what="planning")
-        self.options = o
         self.device = resolve_device(device)
+        if not o.allow_no_collision:
+            check_collision_model(self.robot, need_spheres=True, what="planning",
+                                  device=self.device)
+        self.options = o
         #: gather the candidates and keep the final paths with kernels (on a GPU); on the
         #: CPU the host indexes the device arrays in place (the same numbers, no launches)
         self._kernel_copies = not self.device.is_cpu

@@ -51,18 +51,19 @@ def home_configurations(robot: Any) -> list[tuple[str, np.ndarray]]:
             ("the middle of the joint limits", mid)]
 
 
-def home_self_collisions(robot: Any, q: Any = None) -> list[tuple[str, str, float]]:
+def home_self_collisions(robot: Any, q: Any = None, *, device: Any = "cpu"
+                         ) -> list[tuple[str, str, float]]:
     """Frame pairs whose spheres overlap at ``q`` (None: :func:`home_configuration`) among
     the self-collision pairs the robot checks (``RobotModel.allowed_collision_pairs``):
-    ``[(frame_a, frame_b, distance [m] < 0)]``, deepest first (one FK in float64 on the
-    CPU)."""
+    ``[(frame_a, frame_b, distance [m] < 0)]``, deepest first (one FK in float64 on
+    ``device``: the caller's, so a solver on a GPU runs no CPU kernel)."""
     model = get_robot(robot)
     q = home_configuration(model) if q is None else np.asarray(q, np.float64)
     pairs = collision_pairs(model)
     if len(pairs) == 0:
         return []
     sf, sp, sr = model.sphere_arrays()
-    T = fk(model, q[None], device="cpu", dtype=np.float64)[0]
+    T = fk(model, q[None], device=device, dtype=np.float64)[0]
     x = np.einsum("sij,sj->si", T[sf, :3, :3], sp) + T[sf, :3, 3]
     i, j = pairs[:, 0], pairs[:, 1]
     d = np.linalg.norm(x[i] - x[j], axis=1) - sr[i] - sr[j]
@@ -75,11 +76,13 @@ def home_self_collisions(robot: Any, q: Any = None) -> list[tuple[str, str, floa
 
 
 def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
-                          option: str = "allow_no_collision=True") -> None:
+                          option: str = "allow_no_collision=True",
+                          device: Any = "cpu") -> None:
     """ValueError naming the robot when ``need_spheres`` and it has no collision spheres,
     or when it is in self-collision at both :func:`home_configurations` (naming the frame
     pairs and how deep they overlap).
-    ``what``: the work refused (e.g. "planning"); ``option``: the opt-out to name."""
+    ``what``: the work refused (e.g. "planning"); ``option``: the opt-out to name;
+    ``device``: where the FK of the check runs."""
     model = get_robot(robot)
     if need_spheres and len(model.spheres) == 0:
         raise ValueError(f"robot: '{model.name}' has no collision spheres, so {what} would "
@@ -89,7 +92,7 @@ def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
         return
     found = []
     for label, q in home_configurations(model):
-        hits = home_self_collisions(model, q)
+        hits = home_self_collisions(model, q, device=device)
         if not hits:
             return
         listed = ", ".join(f"'{a}'-'{b}' ({-d * 1e3:.1f} mm deep)" for a, b, d in hits[:4])
