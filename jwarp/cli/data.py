@@ -9,7 +9,7 @@ Examples::
         --ray --num-gpus 0.25 --device cuda        # local Ray, 4 tasks per GPU
     jwarp data generate ... --ray-address auto     # an existing Ray cluster (ray start --head)
     jwarp data info out.sqlite
-    jwarp data export out.sqlite --npz out.npz
+    jwarp data export out.sqlite --out out.npz [--skip-damaged]
 
 ``generate`` labels the worlds of seeds ``--first-seed`` .. ``--first-seed + --worlds - 1``
 (one world per seed, deterministic) with ``--paths-per-world`` paths each, ``--chunk``
@@ -22,8 +22,16 @@ stderr shows paths, paths/s and the ETA (``--quiet``: none); the summary goes to
 Every option is checked before any work: counts in range, ``--device``, ``--db`` (a
 writable file in an existing folder; an existing database must be one of ``--robot``),
 Ray installed for ``--ray`` (the optional extra ``distributed``), ``--num-gpus`` only with
-Ray, the default labeller available; ``export --npz`` writable and not the database.
-Errors are one line naming the option.
+Ray, the default labeller available, the memory the labeller needs for one world
+(``--paths-per-world`` x ``--n-waypoints`` x the multi-starts, :mod:`jwarp.memory`);
+``export --out`` writable and not the database. Errors are one line naming the option.
+An existing database must be writable and so must its folder (SQLite writes its journal
+beside it): a read-only one is refused before the first world is labelled.
+
+``--db`` keeps its name (it is not ``--out``): the database is read as well as written
+(``generate`` resumes into it). A damaged stored world (a blob that does not decompress,
+or a path row of the wrong size) is an error naming the file, the world and the row;
+``data export --skip-damaged`` leaves such worlds and rows out and says how many.
 """
 
 from __future__ import annotations
@@ -34,17 +42,27 @@ import sys
 import os
 from typing import Any
 
+from jwarp.cli.vocabulary import add_out, require_out
 from jwarp.cli.common import (CLIError, check_device, check_output, dumps, int_arg, quiet_warp,
                               real_arg, robot_option)
 
 
 def _check_db(path: str, robot: Any, timeout: float) -> None:
-    """``--db``: an existing database of ``robot``, or a new file in a writable folder."""
+    """``--db``: an existing, writable database of ``robot`` in a writable folder (SQLite
+    writes its journal beside the file), or a new file in a writable folder."""
     from jwarp.learn.dataset import PathDB, PathDBError
 
     if os.path.isdir(path):
         raise CLIError(f"--db: {path} is a folder")
     if os.path.isfile(path) and os.path.getsize(path) > 0:
+        folder = os.path.dirname(os.path.abspath(path))
+        if not os.access(path, os.W_OK):
+            raise CLIError(f"--db: {path} is read-only; nothing can be added to it (make it "
+                           f"writable or give another --db)")
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise CLIError(f"--db: the folder {folder} is read-only; SQLite writes its "
+                           f"journal beside {os.path.basename(path)} (make the folder "
+                           f"writable or give another --db)")
         try:
             PathDB(path, robot, timeout=timeout).close()
         except PathDBError as e:
@@ -52,6 +70,43 @@ def _check_db(path: str, robot: Any, timeout: float) -> None:
                 from None
     else:
         check_output(path, "--db")
+
+
+#: the planner's substeps per segment when the labeller sizes them (an estimate)
+_SIZED_SUBSTEPS = 16
+
+
+def labeller_memory(model: Any, options: Any, paths_per_world: int, chunk: int) -> float:
+    """Estimated peak memory [bytes] of labelling one world with ``paths_per_world`` paths
+    (:func:`jwarp.learn.plan_data.label_world`: every task's multi-starts in one planner
+    batch, all of them kept as ``all_paths``) plus the finished records of a chunk."""
+    n, F, S = model.n_dof, model.n_frames, len(model.spheres)
+    W = int(getattr(options, "n_waypoints", 20))
+    starts = int(getattr(options, "max_starts", 100))
+    sub = getattr(options, "n_substeps", None) or _SIZED_SUBSTEPS
+    item = 8 if str(getattr(options, "dtype", "float32")) == "float64" else 4
+    per_sub = item * (3 * n + 52 * F + 3 * S + 4) + 24 * n     # as jwarp plan's estimate
+    batch = float(paths_per_world) * starts
+    need = batch * ((W - 1) * sub + 1) * per_sub + batch * W * n * (item + 8)
+    need += float(chunk) * paths_per_world * W * n * 4 * 3     # records waiting for the DB
+    return need
+
+
+def _check_generate_memory(model: Any, options: Any, args: argparse.Namespace) -> None:
+    from jwarp.learn.generate import DEFAULT_CHUNK
+    from jwarp.memory import check_memory
+
+    need = labeller_memory(model, options, args.paths_per_world,
+                           1 if not (args.ray or args.ray_address) else
+                           (args.chunk or DEFAULT_CHUNK))
+    W = getattr(options, "n_waypoints", 20)
+    option = "--n-waypoints" if args.n_waypoints is not None and W > 200 else "--paths-per-world"
+    try:
+        check_memory(need, f"labelling one world ({args.paths_per_world} paths x {W} "
+                           f"waypoints x {getattr(options, 'max_starts', '?')} multi-starts of "
+                           f"'{model.name}')", f"lower {option}")
+    except MemoryError as e:
+        raise CLIError(f"{option}: {e}") from None
 
 
 def cmd_generate(args: argparse.Namespace) -> int:
@@ -81,6 +136,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
         options = gen.default_options(**kw)
     except ImportError as e:
         raise CLIError(f"data generate: {e}") from None
+    _check_generate_memory(model, options, args)
     if os.path.isfile(args.db) and os.path.getsize(args.db) > 0:
         from jwarp.learn.dataset import PathDB
 
@@ -126,11 +182,21 @@ def cmd_info(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     from jwarp.learn.dataset import PathDB, export_npz
 
-    check_output(args.npz, "--npz", inputs={"DB": args.db})
+    require_out(args)
+    check_output(args.out, "--out", inputs={"DB": args.db})
+    skipped: list = []
     with PathDB(args.db, timeout=args.timeout) as db:
-        out = export_npz(db, args.npz)
-        n = db.n_paths()
-    print(f"{out}: {n} paths")
+        try:
+            out = export_npz(db, args.out, skip_damaged=args.skip_damaged, skipped=skipped)
+        except ValueError as e:
+            msg = " ".join(str(e).split()).removeprefix("database: ")
+            if "damaged" in msg:
+                msg += " (--skip-damaged leaves damaged worlds and rows out)"
+            raise CLIError(f"DB: {msg}") from None
+        n = db.n_paths() - sum(d.get("paths", 0) for d in skipped)
+    for d in skipped:
+        print(f"jwarp: warning: skipped {d['what']}", file=sys.stderr)
+    print(f"{out}: {n} paths" + (f" ({len(skipped)} damaged item(s) skipped)" if skipped else ""))
     return 0
 
 
@@ -185,6 +251,9 @@ def add_subcommands(sub: Any) -> None:
 
     e = dsub.add_parser("export", help="export a path database to .npz")
     e.add_argument("db", metavar="DB", help="the SQLite database")
-    e.add_argument("--npz", required=True, metavar="FILE", help="the .npz file to write")
+    add_out(e, "--npz", required=True, metavar="FILE.npz", help="the .npz file to write")
+    e.add_argument("--skip-damaged", action="store_true",
+                   help="leave out worlds and path rows whose stored data is damaged (each "
+                        "named on stderr) instead of stopping at the first")
     timeout(e)
     e.set_defaults(func=cmd_export)

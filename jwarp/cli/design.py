@@ -4,7 +4,7 @@ Examples::
 
     # eigenvalue spectra of hand4 contacts vs the relative task (thesis Fig. 2.8)
     jwarp sensitivity --setup contact.json --task-setup relative.json --n 300 --seed 0 \\
-        --png spectra.png --rerun spectra.rrd
+        --out spectra.png --rerun spectra.rrd
     # a pool of 10000 collision-free contact configurations, then the 100 task D-optimal ones
     jwarp design --setup contact.json --write-candidates 10000 --seed 0 --out pool.csv
     jwarp design --setup contact.json --task-setup relative.json --candidates pool.csv \\
@@ -15,8 +15,8 @@ plan CSV: joint + per-sample columns, observed columns ignored) or at ``--n`` co
 drawn with ``--seed`` (contact setups: in contact on the nominal robot; others: uniform),
 and the task measurement (``--task-setup``) at ``--task-samples`` or ``--n`` uniform
 configurations. Prints the identifiable counts, the kernel-inclusion verdict of eq. 2.24
-and the directions that break it (:mod:`jwarp.solvers.calibration.sensitivity`); ``--png``
-draws both spectra on a log scale, ``--rerun`` logs them as bar charts (log10 of the
+and the directions that break it (:mod:`jwarp.solvers.calibration.sensitivity`); ``--out``
+(old spelling ``--png``, deprecated) draws both spectra on a log scale, ``--rerun`` logs them as bar charts (log10 of the
 eigenvalues) under ``sensitivity/<actual|task>``.
 
 ``design``: selects ``--n`` rows of ``--candidates`` (task D-optimality with
@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.cli.vocabulary import add_out
 from jwarp.cli.common import (CLIError, RerunRecording, check_output, dumps, int_arg, quiet_warp,
                               real_arg)
 
@@ -87,7 +88,7 @@ _COLORS = {"actual": (40, 40, 220), "task": (200, 90, 30)}   # BGR: red, blue (F
 
 
 def spectra_png(path: str, spectra: list[tuple[str, np.ndarray]], threshold: float | None,
-                title: str, option: str = "--png") -> None:
+                title: str, option: str = "--out") -> None:
     """A log-scale plot of eigenvalue spectra (descending, one polyline + markers each)
     written atomically as PNG (OpenCV; matplotlib is not a dependency)."""
     import cv2
@@ -167,11 +168,11 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     quiet_warp()
     inputs = {"--setup": args.setup, "--task-setup": args.task_setup,
               "--samples": args.samples, "--task-samples": args.task_samples}
-    for opt, p in (("--png", args.png), ("--rerun", args.rerun)):
+    for opt, p in (("--out", args.out), ("--rerun", args.rerun)):
         if p:
             check_output(p, opt, rerun=opt == "--rerun", inputs=inputs)
-    if args.png and args.rerun and args.png == args.rerun:
-        raise CLIError(f"--rerun: {args.rerun} is also --png; give another file")
+    if args.out and args.rerun and args.out == args.rerun:
+        raise CLIError(f"--rerun: {args.rerun} is also --out; give another file")
     setup, model, meas = _setup_and_measurement(args.setup, "--setup", args.robot)
     tsetup, tmodel, task = _setup_and_measurement(args.task_setup, "--task-setup",
                                                   args.robot or setup.robot)
@@ -195,8 +196,8 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - t0
     labels = (f"actual ({meas.name})", f"task ({task.name})")
     spectra = [("actual", res.actual.eigenvalues), ("task", res.task.eigenvalues)]
-    if args.png:
-        spectra_png(args.png, spectra, res.actual.threshold,
+    if args.out:
+        spectra_png(args.out, spectra, res.actual.threshold,
                     f"{model.name}: eigenvalues of J^T J, {meas.name} (red) vs {task.name} "
                     f"(blue)")
     if args.rerun:
@@ -204,7 +205,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     if args.json:
         doc = dict(res.to_dict(), robot=model.name, free=args.free,
                    configurations={"actual": int(len(qa)), "task": int(len(qt))},
-                   time_s=wall, png=args.png, rerun=args.rerun)
+                   time_s=wall, out=args.out, png=args.out, rerun=args.rerun)
         print(dumps(doc, indent=1))
         return 0
     unit = "whitened" if args.whiten else f"{meas.unit} / parameter unit"
@@ -223,7 +224,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
     for k, d in enumerate(res.breaking):
         top = ", ".join(f"{n} {w:+.2f}" for n, w in d.top)
         print(f"  direction {k + 1} (task gain {d.task_gain:.2e}): {top}")
-    for path in (args.png, args.rerun):
+    for path in (args.out, args.rerun):
         if path:
             print(f"wrote {path}")
     return 0
@@ -412,7 +413,8 @@ def add_subcommands(sub: Any) -> None:
                    help="... and > atol (the thesis uses 1e-6; default 0)")
     s.add_argument("--whiten", action="store_true",
                    help="divide the Jacobian rows by the measurement noise")
-    s.add_argument("--png", default=None, metavar="OUT.png", help="plot both spectra (log)")
+    add_out(s, "--png", metavar="OUT.png",
+            help="plot both spectra (log scale) to this PNG (--png: deprecated spelling)")
     s.add_argument("--rerun", default=None, metavar="OUT.rrd",
                    help="log both spectra as rerun bar charts")
     s.add_argument("--json", action="store_true", help="print the result as JSON")

@@ -6,7 +6,7 @@ Examples::
     jwarp info justin19 --json
     jwarp fk justin19 --q zeros --elastic
     jwarp fk arm7 --q 0,30,0,-60,0,45,0 --deg --json
-    jwarp show justin19 --q zeros --q 0,0,45,... --elastic --save justin.rrd
+    jwarp show justin19 --q zeros --q 0,0,45,... --elastic --out justin.rrd
 
 Joint values ``--q`` are comma-separated, in rad (m for prismatic joints), or ``zeros``;
 ``--deg`` reads revolute joints in degrees. A value starting with a minus sign may follow
@@ -22,10 +22,15 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.cli.vocabulary import add_out, require_out
 from jwarp.cli.common import (DEFAULT_KAPPA, DEFAULT_MAX_ITER, CLIError, check_device,
                                check_dtype_range, check_output, dumps, elastic_options,
                                int_arg, load_robot, parse_kappa, parse_q, quiet_warp,
                                real_arg, warn_limits, dtype_of)
+
+
+#: fk_elastic's own default of max_iter (jwarp.kinematics.equilibrium; the CLI's differs)
+API_MAX_ITER = 10
 
 
 def cmd_robots(args: argparse.Namespace) -> int:
@@ -161,17 +166,18 @@ def cmd_show(args: argparse.Namespace) -> int:
         if kappa is None:
             kappa = model.kappa
     # the output path before any work
-    check_output(args.save, "--save", rerun=True, inputs={"robot": args.robot})
+    require_out(args)
+    check_output(args.out, "--out", rerun=True, inputs={"robot": args.robot})
     for q in qs:
         warn_limits(model, q)
     quiet_warp()
     from jwarp.viz import save_robot_rrd
 
     try:
-        path = save_robot_rrd(model, np.stack(qs), args.save, elastic_kappa=kappa, lam=args.lam,
-                              max_iter=args.max_iter, option="--save")
+        path = save_robot_rrd(model, np.stack(qs), args.out, elastic_kappa=kappa, lam=args.lam,
+                              max_iter=args.max_iter, option="--out")
     except ImportError as e:
-        raise CLIError(f"--save: {e}") from None
+        raise CLIError(f"--out: {e}") from None
     print(f"wrote {path} ({len(qs)} configuration{'s' if len(qs) != 1 else ''} of "
           f"'{model.name}'{', rigid and elastic' if args.elastic else ''}); "
           f"view with: rerun {path}")
@@ -201,9 +207,11 @@ def add_subcommands(sub: Any) -> None:
                        metavar="L", help="damping of the fixed-point iteration, in (0, 1] "
                                          "(default 1)")
         s.add_argument("--max-iter", type=int_arg("--max-iter", 0), default=None, metavar="N",
-                       help=f"most torque updates, >= 0 (default {DEFAULT_MAX_ITER}; the "
-                            "iteration stops once no DH angle changes by more than 1e-9 rad; "
-                            "0: the rigid frames, converged only if they are the equilibrium)")
+                       help=f"most torque updates, >= 0 (default {DEFAULT_MAX_ITER}, the Python "
+                            f"API's fk_elastic(max_iter=...) default is {API_MAX_ITER}: the CLI "
+                            "allows more because it stops once no DH angle changes by more "
+                            "than 1e-9 rad; 0: the rigid frames, converged only if they are "
+                            "the equilibrium)")
 
     s = sub.add_parser("fk", help="forward kinematics: every frame's position")
     s.add_argument("robot", help="robot name or path to a robot .json")
@@ -220,5 +228,6 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--q", action="append", metavar="Q",
                    help="a configuration (v1,v2,... or 'zeros'); repeat for several time steps")
     elastic_opts(s)
-    s.add_argument("--save", required=True, metavar="FILE.rrd", help="the recording to write")
+    add_out(s, "--save", required=True, metavar="FILE.rrd",
+            help="the rerun recording to write (--save: deprecated spelling)")
     s.set_defaults(func=cmd_show)

@@ -1,4 +1,5 @@
-"""CLI subcommands ``jwarp plan`` and ``jwarp ik`` (hooked into :mod:`jwarp.cli`).
+"""CLI subcommands ``jwarp plan``, ``jwarp ik`` and ``jwarp free-config`` (hooked into
+:mod:`jwarp.cli`).
 
 Examples::
 
@@ -10,6 +11,13 @@ Examples::
     jwarp ik --robot justin19 --frame right_tcp --target 0.6,-0.25,0.8,0,1.5708,0 --json
     jwarp ik --robot justin19 --frame right_tcp --target ... --world shelf.npz \
         --warm-start model.pt [--starts 4]
+    jwarp free-config --robot planar4 --world simplex:seed=3 --n 2 --seed 0
+
+``free-config`` prints collision-free configurations (within the joint limits, clear of
+the world and of the robot itself by ``--margin``) with the joint names, and each as a
+``--start`` value to copy. ``ik`` and ``plan`` print the joint names beside every
+configuration (``--json``: ``joint_names``); ``plan --json``'s ``costs.explained`` says how
+``total`` is made of ``collision`` and ``length``.
 
 ``--warm-start MODEL.pt`` (``ik``) starts the solver from a trained IK network's
 prediction (a ``jwarp train ik`` checkpoint for this robot and frame; twin heads: 2 seeds)
@@ -250,6 +258,52 @@ def _fallback(text: str) -> str | None:
     return None if v == "none" else v
 
 
+def _weights() -> Any:
+    """The weights of U_path the CLI plans with (the planner's default PathWeights)."""
+    from jwarp.solvers.planner import PathWeights
+
+    return PathWeights()
+
+
+def _costs_explained() -> dict:
+    """The ``costs`` entries of ``plan --json`` that say how ``total`` is made: why it is
+    below ``length`` (the length enters with its weight 0.01)."""
+    w = _weights()
+    return {"weights": {"world": w.world, "self": w.self, "length": w.length},
+            "explained": (f"total is U_path (thesis eq. 3.16) = collision + {w.length:g} x "
+                          f"length. collision: the world ({w.world:g} x) and self-collision "
+                          f"({w.self:g} x) costs summed over the path's substeps (positive "
+                          f"within the cost's smoothing distance eps of an obstacle, so a "
+                          f"feasible path can have collision > 0); length: U_l (eq. 3.5), the joint-space "
+                          f"length cost, unweighted, 1 for the straight line and > 1 for "
+                          f"any detour. So total < length whenever collision < "
+                          f"{1 - w.length:g} x length")}
+
+
+def _exact_endpoints(path: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """``path`` (W, n_dof) float64 with its first and last waypoints replaced by the
+    float64 start and goal the planner held fixed (a float32 plan rounds them)."""
+    path = np.array(path, np.float64)
+    if len(path) >= 2 and np.allclose(path[0], q0, atol=1e-5) and \
+            np.allclose(path[-1], q1, atol=1e-5):
+        path[0], path[-1] = q0, q1
+    return path
+
+
+def _name_width(model: Any) -> int:
+    return max((len(n) for n in model.joint_names), default=5)
+
+
+def _config_table(model: Any, qs: np.ndarray) -> str:
+    """Configurations (K, n_dof) as a table: one row per joint (its name), one column per
+    configuration (waypoint k)."""
+    w = _name_width(model)
+    lines = [f"  {'joint':<{w}} " + " ".join(f"{'#' + str(k):>9}" for k in range(len(qs)))]
+    for j, name in enumerate(model.joint_names):
+        lines.append(f"  {name:<{w}} " + " ".join(f"{q[j]:+9.5f}" for q in qs))
+    return "\n".join(lines)
+
+
 #: what each stage of PlanResult.stage means, for the text output
 _STAGE_TEXT = {"optimizer": "solved by the multi-start optimisation",
                "fallback": "solved by the fallback: an RRT-Connect path, then optimised",
@@ -414,8 +468,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
             rec.abort()
         raise
     out = {"robot": model.name, "world": args.world if args.scene is None else args.scene,
-           "start": q0.tolist(), "goal": q1.tolist(),
-           "elastic": kappa is not None, **res.to_dict(0)}
+           "joint_names": list(model.joint_names), "start": q0.tolist(), "goal": q1.tolist(),
+           "dtype": args.dtype, "elastic": kappa is not None, **res.to_dict(0)}
+    path = _exact_endpoints(np.asarray(res.path[0], np.float64), q0, q1)
+    out["path"] = path.tolist()
+    out["costs"] = dict(out["costs"], **_costs_explained())
     if args.json:
         print(dumps(out))
     else:
@@ -424,13 +481,14 @@ def cmd_plan(args: argparse.Namespace) -> int:
               f"({res.n_feasible[0]} of {res.all_feasible.shape[1]} starts feasible)")
         if not res.feasible[0] and res.reasons is not None:
             print(f"why: {res.reasons[0]}")
-        print(f"costs: total {res.cost[0]:.6g}, length {res.length_cost[0]:.6g}, "
-              f"collision {res.collision_cost[0]:.6g}; iterations {res.iterations[0]}; "
-              f"{res.n_substeps} substeps per segment; wall time {res.wall_time:.3f} s")
+        print(f"costs: total {res.cost[0]:.6g} = collision {res.collision_cost[0]:.6g} + "
+              f"{_weights().length:g} x length {res.length_cost[0]:.6g}; iterations "
+              f"{res.iterations[0]}; {res.n_substeps} substeps per segment; wall time "
+              f"{res.wall_time:.3f} s")
         stage = str(res.stage[0])
         print(f"stopped: {res.stop_reason}; stage: {stage} ({_STAGE_TEXT.get(stage, stage)})")
-        for k, q in enumerate(res.path[0]):
-            print(f"  {k:3d}  [{', '.join(f'{v:+.5f}' for v in q)}]")
+        print(f"path [rad/m] ({args.dtype}; start and goal as given):")
+        print(_config_table(model, path))
     if rec is not None and not args.json:
         print(f"wrote {written}; view with: rerun {written}")
     return 0 if res.feasible[0] else 1
@@ -521,7 +579,8 @@ def cmd_ik(args: argparse.Namespace) -> int:
     except (ValueError, TypeError) as e:
         raise _solver_error("ik", e) from None
     out = {"robot": model.name, "frame": args.frame, "target": T.tolist(), "world": args.world,
-           "elastic": kappa is not None, **res.to_dict(0)}
+           "joint_names": list(model.joint_names), "elastic": kappa is not None,
+           **res.to_dict(0)}
     if net is not None:
         out["warm_start"] = args.warm_start
     if args.json:
@@ -532,10 +591,71 @@ def cmd_ik(args: argparse.Namespace) -> int:
               f"{res.all_q.shape[0]} starts); position error {float(res.pos_err):.3g} m, "
               f"rotation error {float(res.rot_err):.3g} rad; iterations {int(res.iterations)}; "
               f"wall time {res.wall_time:.4f} s")
-        print(f"q = [{', '.join(f'{v:+.6f}' for v in res.q)}]")
+        print("q [rad/m]:")
+        for name, v in zip(model.joint_names, np.asarray(res.q, np.float64)):
+            print(f"  {name:<{_name_width(model)}} {v:+.6f}")
         if written:
             print(f"wrote {written}; view with: rerun {written}")
     return 0 if res.feasible else 1
+
+
+#: configurations drawn per batch by ``free-config``
+FREE_CONFIG_BATCH = 256
+
+
+def cmd_free_config(args: argparse.Namespace) -> int:
+    """``jwarp free-config``: collision-free configurations (joint limits, the world, self
+    collision; :func:`jwarp.world.collision.is_collision_free`) drawn uniformly within the
+    joint limits (:func:`jwarp.world.feasibility.random_configurations`), for a ``--start``
+    or ``--goal`` that is not in collision."""
+    model = robot_option(args.robot)
+    quiet_warp()
+    check_device(args.device)
+    _check_memory(float(FREE_CONFIG_BATCH) * _config_bytes(model),
+                  f"{FREE_CONFIG_BATCH} configurations of '{model.name}'", "--robot")
+    world = _world(args.world, model)
+    from jwarp.world.collision import is_collision_free
+    from jwarp.world.feasibility import random_configurations
+
+    if not model.spheres and not args.no_collision:
+        raise CLIError(f"--robot: '{model.name}' has no collision spheres, so nothing can be "
+                       f"checked (give --no-collision for configurations within the joint "
+                       f"limits only)")
+    found: list[np.ndarray] = []
+    tried = 0
+    batch = 0
+    while len(found) < args.n and tried < args.tries:
+        k = min(FREE_CONFIG_BATCH, args.tries - tried)
+        q = random_configurations(model, k, seed=[args.seed, batch])
+        batch += 1
+        tried += k
+        if model.spheres:
+            try:
+                ok = is_collision_free(model, q, world, args.margin, device=args.device,
+                                       dtype=np.float64)
+            except (ValueError, TypeError) as e:
+                raise _solver_error("free-config", e) from None
+        else:
+            ok = np.ones(len(q), bool)
+        found += list(q[ok][:args.n - len(found)])
+    if not found:
+        raise CLIError(f"--tries: none of {tried} random configurations of '{model.name}' is "
+                       f"collision-free in --world {args.world} (margin {args.margin:g} m); "
+                       f"raise --tries, lower --margin or try another world")
+    qs = np.stack(found)
+    if args.json:
+        print(dumps({"robot": model.name, "world": args.world, "margin": args.margin,
+                     "seed": args.seed, "tried": tried, "joint_names": list(model.joint_names),
+                     "configurations": qs.tolist()}))
+    else:
+        where = f"in --world {args.world}" if args.world else "(self-collision only)"
+        print(f"robot {model.name}: {len(qs)} collision-free configuration"
+              f"{'s' if len(qs) != 1 else ''} {where}, margin {args.margin:g} m, from {tried} "
+              f"draws (seed {args.seed})")
+        print(_config_table(model, qs))
+        for q in qs:
+            print("--start " + ",".join(f"{v:.6g}" for v in q))
+    return 0 if len(qs) >= args.n else 1
 
 
 # ------------------------------------------------------------------ parser
@@ -584,7 +704,8 @@ def add_subcommands(sub: Any) -> None:
                    help="multi-starts: the straight line + N-1 random via-point paths (default "
                         "8); with --warm-start the network's paths count (default: only them)")
     s.add_argument("--iterations", type=int_arg("--iterations", 0, MAX_ITERATIONS), default=200,
-                   metavar="N", help="most iterations (default 200)")
+                   metavar="N", help="most iterations (default 200; the Python API's "
+                                     "plan(iterations=...) default is 100)")
     s.add_argument("--waypoints", type=int_arg("--waypoints", 2), default=None, metavar="W",
                    help="waypoints, >= 2 (default 20; with --warm-start the network's)")
     s.add_argument("--warm-start", default=None, metavar="MODEL.pt",
@@ -593,7 +714,9 @@ def add_subcommands(sub: Any) -> None:
                    help="substeps per segment (default: sized to the voxel size)")
     s.add_argument("--step", type=real_arg("--step", 0.0, lo_open=True), default=0.01,
                    help="gradient step size, > 0 (default 0.01)")
-    s.add_argument("--dtype", default="float32", choices=("float64", "float32"))
+    s.add_argument("--dtype", default="float32", choices=("float64", "float32"),
+                   help="float type of the optimisation (default float32, as jwarp.plan; "
+                        "the JSON's start, goal and path endpoints are the float64 inputs)")
     s.add_argument("--time-limit", type=real_arg("--time-limit", 0.0, lo_open=True, unit=" [s]"),
                    default=None, metavar="S",
                    help="stop after S seconds (> 0; default: no limit, only --iterations)")
@@ -628,3 +751,24 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--warm-start", default=None, metavar="MODEL.pt",
                    help="start from a trained IK network's prediction (jwarp train ik)")
     s.set_defaults(func=cmd_ik)
+
+    s = sub.add_parser("free-config", help="print collision-free configurations of a robot "
+                                           "in a world (a --start or --goal for plan)")
+    s.add_argument("--robot", required=True, help="robot name or path to a robot .json")
+    s.add_argument("--world", default=None, metavar="SPEC",
+                   help="simplex:seed=S[,...], shelf or a world .npz file (default: none, "
+                        "self-collision only)")
+    s.add_argument("--n", type=int_arg("--n", 1, 10**6), default=1, metavar="N",
+                   help="configurations to print (default 1)")
+    s.add_argument("--margin", type=real_arg("--margin", 0.0, unit=" [m]"), default=0.0,
+                   metavar="M", help="required clearance [m] to the world and between links "
+                                     "(default 0)")
+    s.add_argument("--seed", type=int_arg("--seed", 0), default=0,
+                   help="random seed of the draws (>= 0)")
+    s.add_argument("--tries", type=int_arg("--tries", 1, 10**9), default=100_000,
+                   metavar="N", help="most configurations drawn (default 100000)")
+    s.add_argument("--no-collision", action="store_true",
+                   help="accept a robot without collision spheres (joint limits only)")
+    s.add_argument("--device", default="cpu", help="Warp device (default cpu; e.g. cuda:0)")
+    s.add_argument("--json", action="store_true", help="print JSON")
+    s.set_defaults(func=cmd_free_config)

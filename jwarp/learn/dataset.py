@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 from torch.utils.data import IterableDataset
 
-__all__ = ["FORMAT", "SCHEMA_VERSION", "PathDB", "PathDBError", "PathDataset", "WorldRecord",
+__all__ = ["DamagedRowError", "FORMAT", "SCHEMA_VERSION", "PathDB", "PathDBError", "PathDataset", "WorldRecord",
            "export_npz", "world_from_record", "world_record"]
 
 FORMAT = "jwarp-path-db"
@@ -160,6 +160,16 @@ def _pack_occ(occ: np.ndarray) -> bytes:
 def _unpack_occ(blob: bytes, shape: tuple[int, ...]) -> np.ndarray:
     bits = np.frombuffer(zlib.decompress(blob), np.uint8)
     return np.unpackbits(bits, count=int(np.prod(shape))).astype(bool).reshape(shape)
+
+
+class DamagedRowError(PathDBError):
+    """A stored world or path row whose data cannot be decoded (a blob that does not
+    decompress, or of the wrong size); the message names the file, the world and the row.
+    ``world_id`` and ``task`` (None for a world row) say which."""
+
+    def __init__(self, message: str, world_id: int, task: int | None = None):
+        super().__init__(message)
+        self.world_id, self.task = int(world_id), task
 
 
 # ====================================================================== database
@@ -388,14 +398,26 @@ class PathDB:
         if not r:
             raise KeyError(f"database: '{self.path}' has no world {world_id}")
         shape, lim, h, occ, sdf, dt, meta, n = r[0]
-        shape = tuple(json.loads(shape))
-        return {"world_id": int(world_id), "shape": shape,
-                "limits": np.frombuffer(lim, np.float64).reshape(len(shape), 2).copy(),
-                "voxel_size": float(h),
-                "occupancy": None if occ is None else _unpack_occ(occ, shape),
-                "sdf": None if sdf is None else np.frombuffer(
-                    zlib.decompress(sdf), np.float32).reshape(shape).copy(),
-                "sdf_dtype": dt, "meta": json.loads(meta), "n_paths": int(n)}
+        field = "shape"
+        try:
+            shape = tuple(json.loads(shape))
+            field = "limits"
+            limits = np.frombuffer(lim, np.float64).reshape(len(shape), 2).copy()
+            field = "occupancy"
+            occupancy = None if occ is None else _unpack_occ(occ, shape)
+            field = "sdf"
+            grid = None if sdf is None else np.frombuffer(
+                zlib.decompress(sdf), np.float32).reshape(shape).copy()
+            field = "meta"
+            meta = json.loads(meta)
+        except (zlib.error, ValueError, TypeError) as e:
+            raise DamagedRowError(
+                f"database: '{self.path}': world {int(world_id)} is damaged (table worlds, "
+                f"row world_id={int(world_id)}, column {field}: "
+                f"{type(e).__name__}: {' '.join(str(e).split())})", world_id) from None
+        return {"world_id": int(world_id), "shape": shape, "limits": limits,
+                "voxel_size": float(h), "occupancy": occupancy, "sdf": grid,
+                "sdf_dtype": dt, "meta": meta, "n_paths": int(n)}
 
     def world(self, world_id: int) -> Any:
         """The :class:`jwarp.world.sdf.World` of ``world_id``."""
@@ -405,14 +427,34 @@ class PathDB:
         return [json.loads(r[0]) for r in self._query(
             "SELECT json FROM settings ORDER BY settings_id")]
 
-    def paths_of(self, world_ids: Iterable[int]) -> dict[str, np.ndarray]:
+    def paths_of(self, world_ids: Iterable[int], *, skip_damaged: bool = False,
+                 skipped: list | None = None) -> dict[str, np.ndarray]:
         """All paths of the worlds ``world_ids`` (in that order, tasks in order) as arrays
-        world_id, task, start, goal, path (N, W, n_dof) float32, cost, feasible, hard."""
+        world_id, task, start, goal, path (N, W, n_dof) float32, cost, feasible, hard.
+
+        A row whose blobs have the wrong size (start/goal not n_dof float32 values,
+        waypoints not n_waypoints x n_dof) is a :class:`DamagedRowError` naming the file,
+        the world and the task; ``skip_damaged``: left out instead, and described in
+        ``skipped`` (a list; dicts with ``what``, ``world_id``, ``task``, ``paths``)."""
         rows: list = []
+        n_dof = self.n_dof()
         for wid in world_ids:
-            rows += self._query("SELECT world_id, task, start, goal, waypoints, n_waypoints, "
-                                "cost, feasible, hard FROM paths WHERE world_id = ? "
-                                "ORDER BY task", (int(wid),))
+            for r in self._query("SELECT world_id, task, start, goal, waypoints, n_waypoints, "
+                                 "cost, feasible, hard FROM paths WHERE world_id = ? "
+                                 "ORDER BY task", (int(wid),)):
+                bad = _bad_path_row(r, n_dof)
+                if bad is None:
+                    rows.append(r)
+                    continue
+                what = (f"path row (world_id={r[0]}, task={r[1]}) of world {r[0]} in "
+                        f"'{self.path}': {bad}")
+                if not skip_damaged:
+                    raise DamagedRowError(f"database: '{self.path}': world {r[0]} is damaged "
+                                          f"(table paths, row world_id={r[0]}, task={r[1]}: "
+                                          f"{bad})", r[0], r[1])
+                if skipped is not None:
+                    skipped.append({"what": what, "world_id": int(r[0]), "task": int(r[1]),
+                                    "paths": 1})
         return rows_to_arrays(rows)
 
     def rows(self) -> list[tuple]:
@@ -440,6 +482,23 @@ class PathDB:
                                           "stored": int(c)} for w, e, c in short]}
 
 
+def _bad_path_row(r: tuple, n_dof: int | None) -> str | None:
+    """Why the path row r (world_id, task, start, goal, waypoints, n_waypoints, ...) cannot
+    be decoded, or None."""
+    try:
+        W = int(r[5])
+    except (TypeError, ValueError):
+        return f"n_waypoints is {r[5]!r}"
+    for k, name in ((2, "start"), (3, "goal"), (4, "waypoints")):
+        if not isinstance(r[k], (bytes, bytearray, memoryview)):
+            return f"{name} is not a blob"
+    n = len(r[2]) // 4 if n_dof is None else n_dof
+    for k, name, size in ((2, "start", 4 * n), (3, "goal", 4 * n), (4, "waypoints", 4 * n * W)):
+        if len(r[k]) != size:
+            return f"{name} has {len(r[k])} bytes, expected {size} ({n} joints, {W} waypoints)"
+    return None
+
+
 def rows_to_arrays(rows: list) -> dict[str, np.ndarray]:
     if not rows:
         return {"world_id": np.zeros(0, np.int64), "task": np.zeros(0, np.int64),
@@ -464,21 +523,40 @@ def rows_to_arrays(rows: list) -> dict[str, np.ndarray]:
 
 # ====================================================================== export
 def export_npz(db: str | os.PathLike | PathDB, out: str | os.PathLike, *,
-               world_ids: Iterable[int] | None = None) -> Path:
+               world_ids: Iterable[int] | None = None, skip_damaged: bool = False,
+               skipped: list | None = None) -> Path:
     """Write the database (or the worlds ``world_ids``) to one ``.npz`` file, atomically
     (a temporary file renamed at the end). Arrays: ``world_id``, ``task``, ``start``,
     ``goal``, ``path`` (N, W, n_dof) float32, ``cost``, ``feasible``, ``hard``;
     ``worlds`` (M,) ids, ``world_limits`` (M, dim, 2), ``world_voxel_size`` (M,),
     ``world_occupancy`` (M, *shape) bool when every world has one of the same shape;
-    ``meta`` (JSON string of the database's meta and settings)."""
+    ``meta`` (JSON string of the database's meta and settings).
+
+    A damaged world or path row is a :class:`DamagedRowError` (file, world, row) before
+    anything is written; ``skip_damaged``: damaged worlds (with their paths) and rows are
+    left out and described in the list ``skipped`` (``what``, ``world_id``, ``task``,
+    ``paths``)."""
     from jwarp.atomic import AtomicFile
 
     own = not isinstance(db, PathDB)
     d = PathDB(db) if own else db
     try:
         ids = d.world_ids() if world_ids is None else [int(i) for i in world_ids]
-        arrays = d.paths_of(ids)
-        rows = [d.world_row(i) for i in ids]
+        rows, good = [], []
+        for i in ids:
+            try:
+                rows.append(d.world_row(i))
+                good.append(i)
+            except DamagedRowError as e:
+                if not skip_damaged:
+                    raise
+                if skipped is not None:
+                    n = int(d._query("SELECT COUNT(*) FROM paths WHERE world_id = ?",
+                                     (i,))[0][0])
+                    skipped.append({"what": f"world {i} and its {n} paths: {e}",
+                                    "world_id": i, "task": None, "paths": n})
+        ids = good
+        arrays = d.paths_of(ids, skip_damaged=skip_damaged, skipped=skipped)
         arrays["worlds"] = np.array(ids, np.int64)
         if rows:
             arrays["world_limits"] = np.stack([r["limits"] for r in rows])
