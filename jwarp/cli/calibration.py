@@ -68,36 +68,71 @@ def _cli_error(msg: str) -> Exception:
 
 
 class ProgressBar:
-    """One self-overwriting status line on stderr (plain lines when stderr is no TTY)."""
+    """The calibration's progress on stderr: a tqdm bar per start whose count is the
+    solver iterations (its total the ``--max-nfev`` budget: every iteration costs at
+    least one evaluation), with the cost (0.5 |r|^2 of the whitened problem) and the
+    step (the relative cost decrease of the last iteration).
 
-    def __init__(self, label: str, stream: Any = None, enabled: bool = True):
+    The cost of one least-squares run never rises (only cost-reducing steps are
+    accepted); where it does, the solver has begun a new run: an active-set round (the
+    compliances that went negative are held at 0 and the rest solved again from there, so
+    the cost restarts higher) or the next multi-start. Each is written as its own line,
+    so a rising cost is explained. ``restarts`` counts the active-set rounds seen."""
+
+    def __init__(self, label: str, stream: Any = None, enabled: bool = True,
+                 total: int | None = None):
         self.label, self.stream, self.enabled = label, stream or sys.stderr, enabled
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.t0 = time.perf_counter()
-        self.last = 0.0
+        self.total = total
+        self.bar: Any = None
+        self.start = -1
+        self.cost = math.nan
+        self.round = 1
+        self.restarts = 0
+
+    def _new_bar(self, p: Any) -> None:
+        from tqdm.auto import tqdm
+
+        if self.bar is not None:
+            self.bar.close()
+        desc = self.label if p.n_starts == 1 else f"{self.label} start {p.start + 1}/{p.n_starts}"
+        self.bar = tqdm(total=self.total, desc=desc, unit="it", file=self.stream,
+                        dynamic_ncols=True, leave=True, mininterval=0.2,
+                        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} "
+                                   "iterations (of the --max-nfev budget) [{elapsed}{postfix}]")
 
     def __call__(self, p: Any) -> None:
+        cost = float(p.cost)
+        if p.start != self.start:
+            self.start, self.round = p.start, 1
+            if self.enabled:
+                self._new_bar(p)
+            step = math.nan
+        elif math.isfinite(self.cost) and cost > self.cost * (1 + 1e-12):
+            self.round += 1
+            self.restarts += 1
+            if self.enabled:
+                self.bar.write(f"{self.label}: active-set round {self.round} of start "
+                               f"{p.start + 1}: compliances that went negative are held at 0 "
+                               f"and the fit restarts from there (cost {self.cost:.6g} -> "
+                               f"{cost:.6g}; not a divergence)", file=self.stream)
+            step = math.nan
+        else:
+            step = (self.cost - cost) / self.cost if self.cost > 0 else 0.0
+        self.cost = cost
         if not self.enabled:
             return
-        now = time.perf_counter()
-        if not self.tty and now - self.last < 1.0 and p.iteration > 1:
-            return  # a line per second in logs
-        self.last = now
-        width = 20
-        done = int(width * (p.start + 1) / max(p.n_starts, 1))
-        bar = "#" * done + "-" * (width - done)
-        line = (f"{self.label} [{bar}] start {p.start + 1}/{p.n_starts} iteration "
-                f"{p.iteration:4d} cost {p.cost:11.5g}  {now - self.t0:6.1f} s")
-        if self.tty:
-            self.stream.write("\r" + line)
-        else:
-            self.stream.write(line + "\n")
-        self.stream.flush()
+        self.bar.update(1)
+        post = f"cost {cost:.6g}"
+        if math.isfinite(step):
+            post += f", step {step:.2e}"
+        if self.round > 1:
+            post += f", round {self.round}"
+        self.bar.set_postfix_str(post, refresh=False)
 
     def close(self) -> None:
-        if self.enabled and self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
 
 
 def _stats(err: np.ndarray, scale: float) -> dict[str, float]:
@@ -299,6 +334,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                          f"most {MAX_STARTS}")
     _check_int("--max-nfev", args.max_nfev, 1)
     _check_int("--seed", args.seed, 0)
+    if args.name is not None and not args.name.strip():
+        raise _cli_error("--name: empty robot name")
     quiet_warp()
     inputs = {"--setup": args.setup, "--data": args.data, "--robot": args.robot}
     outputs = _reserve_outputs(args, inputs)
@@ -377,7 +414,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                          f"({why}); give more (or more varied) rows") from None
     before = table_rows(model, p_start)
     covariance = _tow_covariance(args, setup, model, meas, train, free)
-    bar = ProgressBar("calibrate", enabled=not args.quiet)
+    bar = ProgressBar("calibrate", enabled=not args.quiet, total=args.max_nfev)
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -387,7 +424,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                 max_nfev=args.max_nfev, callback=bar, covariance=covariance,
                 sigma=priors or None, orders=orders or None, loss=args.loss,
                 loss_scale=None if args.loss == "linear" else args.loss_scale / scale,
-                fix_at=fix_at or None)
+                fix_at=fix_at or None, warn=False)  # the findings: res.warnings, once
             res = calibrate_with(model, meas, train.q, train.y, options,
                                  meta=train.meta or None)
         except ValueError as e:
@@ -402,8 +439,10 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
             bar.close()
     wall = time.perf_counter() - t0
     after = table_rows(res.robot, res.params)
+    calibrated = _with_provenance(res.robot, args, setup, raw, free, before, after, unit,
+                                  len(train), 0 if test is None else len(test))
     # --out and --params-out into their temporary files, renamed back to back at the end
-    robot_text = json.dumps(res.robot.to_dict(), indent=1) + "\n"
+    robot_text = json.dumps(calibrated.to_dict(), indent=1) + "\n"
     if "--out" in outputs:
         _write_tmp(outputs["--out"], robot_text)
     if "--params-out" in outputs:
@@ -418,7 +457,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     # params, whose robot_sha256 then names the old robot (the new one is never lost)
     commit_all(outputs[k] for k in ("--out", "--params-out") if k in outputs)
     fit_warnings = list(res.warnings) + [str(w.message) for w in caught
-                                         if str(w.message) not in res.warnings]
+                                         if str(w.message) not in res.warnings
+                                         and w.category.__name__ != "CalibrationWarning"]
     if both:
         fit_warnings.append(f"{both} of the {len(test)} test rows were also calibration rows "
                             f"(--allow-overlap): their errors are not independent of the fit")
@@ -430,6 +470,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         "nfev": res.nfev, "success": bool(res.success), "elastic": bool(res.elastic),
         "warnings": input_warnings + fit_warnings,
         "out": args.out, "params_out": args.params_out, "rerun": args.rerun,
+        "calibrated_name": calibrated.name, "active_set_rounds": bar.restarts,
     }
     diag = None
     if args.diagnostics:
@@ -449,7 +490,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
           f"{0 if test is None else len(test)} test rows"
           f"{f' ({both} of them fitted too)' if both else ''}; free: {', '.join(free)}")
     print(f"{res.iterations} iterations, {res.nfev} evaluations, {wall:.1f} s"
-          f"{', elastic model' if res.elastic else ''}")
+          f"{', elastic model' if res.elastic else ''}"
+          f"{f'; {bar.restarts} active-set restart(s) (compliances held at 0)' if bar.restarts else ''}")
     print(f"\n{'rows':<8}{'':8}{'mean':>10}{'std':>10}{'max':>10}   [{unit}]")
     for rows in ("train", "test"):
         if rows not in before:
@@ -461,8 +503,43 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         print(f"warning: {w}")
     for path in (args.out, args.params_out, args.rerun):
         if path:
-            print(f"wrote {path}")
+            print(f"wrote {path}" + (f" (robot '{calibrated.name}', provenance in its notes."
+                                     f"calibration)" if path == args.out else ""))
     return 0
+
+
+#: the ``notes`` key of a calibrated robot's provenance (a JSON object)
+PROVENANCE_NOTE = "calibration"
+
+
+def _with_provenance(robot: Any, args: argparse.Namespace, setup: Any, raw: bytes,
+                     free: list[str], before: dict, after: dict, unit: str, n_train: int,
+                     n_test: int) -> Any:
+    """The calibrated robot renamed (``--name``, default ``<name>-calibrated``) with its
+    provenance in ``notes['calibration']`` (JSON: campaign id, input files and the
+    SHA-256 of the samples, rows, free groups, errors before/after, date, jwarp version)."""
+    import dataclasses
+    from datetime import datetime, timezone
+
+    from jwarp import __version__
+    from jwarp.solvers.calibration.files import sha256_hex
+
+    base = robot.name.removesuffix("-calibrated")
+    name = args.name if args.name is not None else f"{base}-calibrated"
+    prov = {
+        "date": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "jwarp_version": str(__version__),
+        "nominal_robot": robot.name if args.robot is None else args.robot,
+        "campaign_id": setup.campaign_id, "setup": os.path.abspath(args.setup),
+        "data": os.path.abspath(args.data), "data_sha256": sha256_hex(raw),
+        "calibrate_rows": args.calibrate_rows, "test_rows": args.test_rows,
+        "samples": {"train": n_train, "test": n_test}, "free": list(free),
+        "loss": args.loss, "starts": args.starts,
+        "errors": {"unit": unit, "before": before, "after": after},
+    }
+    notes = dict(robot.notes)
+    notes[PROVENANCE_NOTE] = json.dumps(prov, sort_keys=False)
+    return dataclasses.replace(robot, name=name, notes=notes)
 
 
 #: memory of simulate-campaign per sample and robot frame [bytes] (a few 4x4 float64
@@ -597,7 +674,11 @@ def add_subcommands(sub: Any) -> None:
                    help="allow test rows that are also calibration rows (the report counts "
                         "them; their errors are not independent of the fit)")
     s.add_argument("--out", default=None, metavar="CALIBRATED.json",
-                   help="write the calibrated robot (atomically)")
+                   help="write the calibrated robot (atomically), named --name, with its "
+                        "provenance (campaign, input files, free groups, errors, date) in "
+                        "its notes")
+    s.add_argument("--name", default=None, metavar="NAME",
+                   help="name of the calibrated robot (default: <robot>-calibrated)")
     s.add_argument("--params-out", default=None, metavar="RESULT.json",
                    help="write parameters, posterior std and findings as JSON (with the "
                         "SHA-256 of the --out robot file: robot_sha256)")

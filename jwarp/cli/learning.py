@@ -444,6 +444,7 @@ def cmd_train_plan(args: argparse.Namespace) -> int:
 def cmd_eval_plan(args: argparse.Namespace) -> int:
     model = robot_option(args.robot)
     quiet_warp()
+    check_device(args.device)
     try:
         ks = tuple(sorted({int(v) for v in args.ks.split(",")}))
         if not ks or ks[0] < 0:
@@ -472,7 +473,8 @@ def cmd_eval_plan(args: argparse.Namespace) -> int:
         raise CLIError("--hard: no hard task found in the test worlds")
     rows = evaluate_plan(model, worlds, starts, goals, index,
                          nets=[(Path(p).stem, n) for p, n in nets], ks=ks,
-                         n_random=args.random_starts, n_waypoints=W, seed=args.seed)
+                         n_random=args.random_starts, n_waypoints=W, seed=args.seed,
+                         device=args.device)
     if args.json:
         print(dumps(_plain({"robot": model.name, "n_worlds": len(worlds), "tasks": len(starts),
                             "hard": args.hard, "ks": list(ks), "models": [p for p, _ in nets],
@@ -515,7 +517,8 @@ def add_subcommands(sub: Any) -> None:
     """Add ``train ik|plan`` and ``eval ik|plan`` to the ``jwarp`` subparsers."""
     from jwarp.cli.common import Parser
 
-    train = sub.add_parser("train", help="train a learned model (train ik: IK warm starts)")
+    train = sub.add_parser("train", help="train a learned warm start: train ik (IK network) "
+                                         "| train plan (motion-planning network)")
     tsub = train.add_subparsers(dest="what", metavar="WHAT", parser_class=Parser)
     tsub.required = True
     s = tsub.add_parser("ik", help="train an IK network (learned warm starts of the IK solver)")
@@ -545,7 +548,9 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--no-boosting", action="store_true", help="no hard-sample boosting")
     s.add_argument("--supervised", action="store_true",
                    help="the supervised baseline (labels from the IK solver)")
-    s.add_argument("--device", default="cpu", help="torch/Warp device (default cpu; e.g. cuda)")
+    s.add_argument("--device", default="cpu",
+                   help="torch device of the network and Warp device of the IK solver that "
+                        "scores it (default cpu; e.g. cuda)")
     s.add_argument("--out", default="model.pt", metavar="MODEL.pt",
                    help="checkpoint, written after every epoch (default model.pt)")
     s.add_argument("--resume", action="store_true", help="continue from the checkpoint --out")
@@ -607,7 +612,9 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--extend", type=real_arg("--extend", 0.0, 10.0), default=0.0, metavar="F",
                    help="per round, add F x the set of new tasks the network does worst on "
                         "(default 0)")
-    s.add_argument("--device", default="cpu", help="torch device (default cpu)")
+    s.add_argument("--device", default="cpu",
+                   help="torch device of the network (default cpu; e.g. cuda); the planner "
+                        "that labels the tasks runs on the CPU")
     s.add_argument("--out", default="plan_model.pt", metavar="MODEL.pt",
                    help="checkpoint, written after every epoch (default plan_model.pt)")
     s.add_argument("--seed", type=int_arg("--seed", 0, 2**31 - 1), default=0,
@@ -615,7 +622,8 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--quiet", action="store_true", help="no epoch lines")
     s.set_defaults(func=cmd_train_plan)
 
-    ev = sub.add_parser("eval", help="evaluate a learned model (eval ik: Tables 3.4/3.5)")
+    ev = sub.add_parser("eval", help="evaluate learned warm starts: eval ik (Tables 3.4/3.5) "
+                                     "| eval plan (Fig. 3.24, Table 3.3)")
     esub = ev.add_subparsers(dest="what", metavar="WHAT", parser_class=Parser)
     esub.required = True
     s = esub.add_parser("ik", help="Table 3.5 analogue: random vs learned IK warm starts")
@@ -665,5 +673,7 @@ def add_subcommands(sub: Any) -> None:
                    metavar="N", help="the random multi-starts of the best-of row (default 10)")
     s.add_argument("--seed", type=int_arg("--seed", 0, 2**31 - 1), default=0,
                    help="seed of the test worlds and tasks")
+    s.add_argument("--device", default="cpu",
+                   help="Warp device of the planner (default cpu; e.g. cuda:0)")
     s.add_argument("--json", action="store_true", help="print JSON")
     s.set_defaults(func=cmd_eval_plan)

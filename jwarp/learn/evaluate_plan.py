@@ -25,12 +25,13 @@ __all__ = ["evaluate_plan", "format_plan_table"]
 
 def _run(model: Any, world: Any, q0: np.ndarray, q1: np.ndarray, K: int, *, seeds: Any = None,
          n_starts: int = 1, initial: str = "random", n_waypoints: int = 20,
-         n_substeps: int = 4, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+         n_substeps: int = 4, seed: int = 0, device: Any = "cpu"
+         ) -> tuple[np.ndarray, np.ndarray]:
     """(B, n_starts) first feasible iteration (K + 1: never) and (B,) best cost."""
     opts = PlanOptions(n_starts=n_starts, initial=initial, n_waypoints=n_waypoints,
                        n_substeps=n_substeps, iterations=K, check_all_every=1, seed=seed,
                        stop_when_solved=False, fallback=None)
-    res = Planner(model, world, len(q0), opts, device="cpu").plan(q0, q1, seeds=seeds)
+    res = Planner(model, world, len(q0), opts, device=device).plan(q0, q1, seeds=seeds)
     it = np.where(res.all_feasible, res.all_iterations, K + 1)
     return it, np.where(res.feasible, res.cost, np.nan)
 
@@ -38,13 +39,14 @@ def _run(model: Any, world: Any, q0: np.ndarray, q1: np.ndarray, K: int, *, seed
 def evaluate_plan(robot: Any, worlds: list, starts: np.ndarray, goals: np.ndarray,
                   world_index: np.ndarray, *, nets: list | tuple = (), ks: tuple = (0, 10, 50),
                   n_random: int = 10, n_waypoints: int = 20, n_substeps: int = 4,
-                  seed: int = 0, baselines: bool = True) -> list[dict]:
+                  seed: int = 0, baselines: bool = True, device: Any = "cpu") -> list[dict]:
     """Rows of the table: per ``(name, net)`` in ``nets`` (a network's heads as the
     starts; "network alone" is the k = 0 column), then "random (1)" (one random multi-start:
     1-3 random via points), "random (best of n_random)" and "straight line". Each row:
     ``name``, ``feasible`` {k: fraction of tasks feasible after k iterations}, ``cost``
     (mean U_path of the feasible ones after max(ks)), ``n_tasks``. ``baselines=False``:
-    the networks' rows only."""
+    the networks' rows only. ``device``: the planner's Warp device (the networks predict
+    on their own device)."""
     model = get_robot(robot)
     starts = np.asarray(starts, np.float64)
     goals = np.asarray(goals, np.float64)
@@ -66,11 +68,12 @@ def evaluate_plan(robot: Any, worlds: list, starts: np.ndarray, goals: np.ndarra
             if "net" in how:
                 seeds = how["net"].paths(q0, q1, world)
                 it, c = _run(model, world, q0, q1, K, seeds=seeds, n_starts=seeds.shape[1],
-                             n_waypoints=seeds.shape[2], n_substeps=n_substeps, seed=seed)
+                             n_waypoints=seeds.shape[2], n_substeps=n_substeps, seed=seed,
+                             device=device)
             else:
                 it, c = _run(model, world, q0, q1, K, n_starts=how["n_starts"],
                              initial=how["initial"], n_waypoints=n_waypoints,
-                             n_substeps=n_substeps, seed=seed + int(wi))
+                             n_substeps=n_substeps, seed=seed + int(wi), device=device)
             first[idx] = it.min(axis=1)
             cost[idx] = c
         feas = {k: float(np.mean(first <= k)) for k in ks}

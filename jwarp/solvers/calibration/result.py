@@ -402,7 +402,7 @@ def build_result(prob: Any, sol: Any, x_start: np.ndarray, iterations: int, star
         head = f"calibration: {len(msgs)} finding(s):\n  " + "\n  ".join(msgs[:20])
         if len(msgs) > 20:
             head += f"\n  ... and {len(msgs) - 20} more (see result.warnings)"
-        warnings.warn(head, CalibrationWarning, stacklevel=3)
+        warnings.warn(head, CalibrationWarning, stacklevel=_caller_stacklevel())
     meas = prob.measurement
     return CalibrationResult(
         robot=sp.robot_at(x), params=sp.measurement_params(x), x=x, x_start=np.asarray(x_start),
