@@ -414,3 +414,19 @@ def build_result(prob: Any, sol: Any, x_start: np.ndarray, iterations: int, star
         space=sp, elastic=prob.elastic, time_s=float(time_s),
         unit=str(getattr(meas, "unit", "m")),
         param_names=list(getattr(getattr(meas, "params", None), "names", []) or []))
+
+
+def _caller_stacklevel() -> int:
+    """The ``warnings.warn`` stacklevel, for the function calling this one, of the first
+    frame outside the jwarp package: a finding is attributed to the user's call
+    (``calibrate(...)`` in their script), whichever jwarp entry point it went through."""
+    import os
+    import sys
+
+    import jwarp
+
+    root = os.path.dirname(os.path.abspath(jwarp.__file__)) + os.sep
+    frame, level = sys._getframe(1), 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(root):
+        frame, level = frame.f_back, level + 1
+    return level
