@@ -378,6 +378,28 @@ def _plan_db_samples(args: argparse.Namespace, model: Any) -> tuple[Any, Any]:
         raise CLIError(f"--val-fraction: {clean(e).removeprefix('val_fraction: ')}") from None
 
 
+def _check_label_memory(model: Any, args: argparse.Namespace) -> None:
+    """Refuse ``--tasks-per-world`` x ``--label-starts`` x ``--waypoints`` whose labelling
+    (one planner batch per world) cannot fit in memory (estimate of
+    :func:`jwarp.cli.data.labeller_memory`)."""
+    from types import SimpleNamespace
+
+    from jwarp.cli.data import labeller_memory
+    from jwarp.memory import check_memory
+
+    W = args.waypoints or 20
+    n = max(args.tasks_per_world, args.val_tasks)
+    need = labeller_memory(model, SimpleNamespace(n_waypoints=W, max_starts=args.label_starts,
+                                                  n_substeps=None, dtype="float32"), n, 1)
+    option = max((("--tasks-per-world", n / 50), ("--label-starts", args.label_starts / 16),
+                  ("--waypoints", W / 20)), key=lambda t: t[1])[0]
+    try:
+        check_memory(need, f"labelling {n} tasks x {args.label_starts} multi-starts x {W} "
+                           f"waypoints of '{model.name}'", f"lower {option}")
+    except MemoryError as e:
+        raise CLIError(f"{option}: {e}") from None
+
+
 def cmd_train_plan(args: argparse.Namespace) -> int:
     model = robot_option(args.robot)
     if model.workspace_dim not in (2, 3):  # pragma: no cover - every robot is 2D or 3D
@@ -388,6 +410,8 @@ def cmd_train_plan(args: argparse.Namespace) -> int:
     from jwarp.core.arrays import init_warp
     from jwarp.learn.train_plan import TrainPlanOptions, improve, make_plan_data, train_plan
 
+    if args.data is None:  # the labelling's memory, before any world is made
+        _check_label_memory(model, args)
     db_data = _plan_db_samples(args, model) if args.data is not None else None
     if args.waypoints is None:
         args.waypoints = db_data[0].paths.shape[1] if db_data is not None else 20

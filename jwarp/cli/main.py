@@ -1,7 +1,8 @@
 """Command line interface: the parser and :func:`main`. Command groups, one module each,
 registered by explicit import: :mod:`jwarp.cli.kinematics` (``robots | info | fk | show``),
 :mod:`jwarp.cli.calibration` (``calibrate | simulate-campaign``), :mod:`jwarp.cli.planning`
-(``plan | ik``), :mod:`jwarp.cli.learning` (``train ik | eval ik``), :mod:`jwarp.cli.data`
+(``plan | ik | free-config``), :mod:`jwarp.cli.learning` (``train ik | train plan | eval ik |
+eval plan``), :mod:`jwarp.cli.data`
 (``data generate | info | export``), :mod:`jwarp.cli.poses` (``sample-poses``),
 :mod:`jwarp.cli.design` (``sensitivity | design``), :mod:`jwarp.cli.urdf` (``import-urdf``),
 :mod:`jwarp.cli.urdf_export` (``export-urdf``), :mod:`jwarp.cli.mjcf` (``import-mjcf``).
@@ -18,7 +19,7 @@ Errors and exit status (:func:`main`):
   Option values are checked before any work: numbers must be finite and in range
   (``--lam`` in (0, 1], counts >= 1, ``--max-iter`` >= 0, ...), sizes are checked against
   an estimate of the memory they need (:mod:`jwarp.memory`; the error gives the figure),
-  ``--device`` must exist, and every output path (``--save``, ``--rerun``) must be
+  ``--device`` must exist, and every output path (``--out``, ``--rerun``) must be
   writable (its folder exists, it is not a folder) before the computation starts. Files
   are written atomically (:class:`jwarp.atomic.AtomicFile`): an error or interrupt leaves
   no temporary file and the old file as it was.

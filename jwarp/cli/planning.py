@@ -16,8 +16,8 @@ Examples::
 ``free-config`` prints collision-free configurations (within the joint limits, clear of
 the world and of the robot itself by ``--margin``) with the joint names, and each as a
 ``--start`` value to copy. ``ik`` and ``plan`` print the joint names beside every
-configuration (``--json``: ``joint_names``); ``plan --json``'s ``costs.explained`` says how
-``total`` is made of ``collision`` and ``length``.
+configuration (``--json``: ``joint_names``); ``plan --json``'s ``costs_explained`` says how
+``costs.total`` is made of ``costs.collision`` and ``costs.length``.
 
 ``--warm-start MODEL.pt`` (``ik``) starts the solver from a trained IK network's
 prediction (a ``jwarp train ik`` checkpoint for this robot and frame; twin heads: 2 seeds)
@@ -266,8 +266,9 @@ def _weights() -> Any:
 
 
 def _costs_explained() -> dict:
-    """The ``costs`` entries of ``plan --json`` that say how ``total`` is made: why it is
-    below ``length`` (the length enters with its weight 0.01)."""
+    """``costs_explained`` of ``plan --json``: the weights and how ``costs.total`` is made
+    of ``costs.collision`` and ``costs.length`` (why total < length: the length enters
+    with its weight 0.01)."""
     w = _weights()
     return {"weights": {"world": w.world, "self": w.self, "length": w.length},
             "explained": (f"total is U_path (thesis eq. 3.16) = collision + {w.length:g} x "
@@ -472,7 +473,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
            "dtype": args.dtype, "elastic": kappa is not None, **res.to_dict(0)}
     path = _exact_endpoints(np.asarray(res.path[0], np.float64), q0, q1)
     out["path"] = path.tolist()
-    out["costs"] = dict(out["costs"], **_costs_explained())
+    out["costs_explained"] = _costs_explained()  # beside "costs", which stays numbers
     if args.json:
         print(dumps(out))
     else:

@@ -6,8 +6,9 @@ heuristic in joint space (docs/pose_sampling.md)::
         --k-of-n 4 --max-angle 60 --order tsp
 
 The plan CSV has the robot's joint columns (as a samples file, rad or m) in execution
-order, plus ``pair`` for contact setups. Every option is checked (and ``--out`` is probed)
-before any sampling; the file is written atomically.
+order, plus ``pair`` for contact setups. Every option is checked (and ``--out`` is probed,
+``--batch-size`` and ``--n`` against an estimate of their memory) before any sampling; the
+file is written atomically.
 """
 
 from __future__ import annotations
@@ -19,6 +20,21 @@ from typing import Any
 
 from jwarp.cli.common import (CLIError, check_device, check_output, int_arg, quiet_warp, real_arg,
                               robot_option)
+
+
+def _check_sampling_memory(robot: Any, args: argparse.Namespace) -> None:
+    """Refuse a ``--batch-size`` (candidates per kernel launch) or ``--n`` whose estimated
+    memory exceeds the available memory, before any sampling."""
+    from jwarp.cli.planning import _config_bytes
+    from jwarp.memory import check_memory
+
+    per = _config_bytes(robot)
+    for option, n, what in (("--batch-size", args.batch_size, "candidates per launch"),
+                            ("--n", args.n, "poses kept")):
+        try:
+            check_memory(float(n) * per, f"{n} {what} of '{robot.name}'", f"lower {option}")
+        except MemoryError as e:
+            raise CLIError(f"{option}: {e}") from None
 
 
 def cmd_sample_poses(args: argparse.Namespace) -> int:
@@ -38,6 +54,7 @@ def cmd_sample_poses(args: argparse.Namespace) -> int:
     if not name:
         raise CLIError("--robot: not given and the setup file names no robot")
     robot = robot_option(name)
+    _check_sampling_memory(robot, args)
     opt = PoseOptions(margin=args.margin, joint_margin=args.joint_margin, k_of_n=args.k_of_n,
                       max_angle=None if args.max_angle == 180.0 else args.max_angle,
                       single_marker=args.single_marker, require=args.require,

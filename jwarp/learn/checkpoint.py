@@ -43,7 +43,7 @@ from jwarp.learn.plan_net import PlanNet, PlanNetConfig
 from jwarp.registry import robot as get_robot
 
 __all__ = ["FORMAT", "PLAN_FORMAT", "VERSION", "save_checkpoint", "load_checkpoint",
-           "load_plan_checkpoint", "read_checkpoint"]
+           "load_plan_checkpoint", "read_checkpoint", "check_weights"]
 
 FORMAT = "jwarp-ik-net"
 #: the format of motion-planning network checkpoints
@@ -138,7 +138,8 @@ def load_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = "c
     """
     doc = read_checkpoint(path)
     model, bps = _robot_and_bps(doc, path, robot)
-    config = IKNetConfig.from_dict(doc["config"])
+    config = _config(IKNetConfig, doc, path)
+    check_weights(IKNet, config, bps, doc, path)   # before any weight is allocated
     net = IKNet(config, bps=bps)
     return _finish(net, model, doc, path, device)
 
@@ -149,8 +150,70 @@ def load_plan_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any
     (ValueError for another robot or kinematics hash, or a file of another format)."""
     doc = read_checkpoint(path, PLAN_FORMAT)
     model, bps = _robot_and_bps(doc, path, robot)
-    net = PlanNet(PlanNetConfig.from_dict(doc["config"]), bps=bps)
+    config = _config(PlanNetConfig, doc, path)
+    check_weights(PlanNet, config, bps, doc, path)  # before any weight is allocated
+    net = PlanNet(config, bps=bps)
     return _finish(net, model, doc, path, device)
+
+
+def _config(cls: Any, doc: dict, path: Any) -> Any:
+    """The network config of the checkpoint (ValueError naming the file when it is not
+    a valid config)."""
+    try:
+        return cls.from_dict(doc["config"])
+    except (ValueError, TypeError, KeyError, AttributeError) as e:
+        raise ValueError(f"checkpoint: '{path}' has an invalid config ({type(e).__name__}: "
+                         f"{' '.join(str(e).split())})") from None
+
+
+def _shape_text(shape: tuple) -> str:
+    return "(" + ", ".join(str(d) for d in shape) + ")"
+
+
+def check_weights(cls: Any, config: Any, bps: Any, doc: dict, path: Any) -> None:
+    """Check the stored weights against the network the config declares, before any
+    weight is allocated: the network is built on torch's ``meta`` device (shapes only, no
+    memory), its parameter shapes compared with the file's ``state_dict``, and its size
+    against the available memory (:mod:`jwarp.memory`). A mismatch (a damaged or edited
+    file: e.g. a 9 kB file whose config says hidden=40000) is a ValueError naming the
+    file, the config fields and the first differing tensors; too large a network a
+    MemoryError with the figure."""
+    from jwarp.memory import check_memory, format_bytes
+
+    stored = doc["state_dict"]
+    if not isinstance(stored, dict) or not all(isinstance(v, torch.Tensor)
+                                               for v in stored.values()):
+        raise ValueError(f"checkpoint: '{path}': its state_dict is not a dict of tensors")
+    try:
+        with torch.device("meta"):
+            ref = cls(config, bps=bps)
+    except (ValueError, TypeError, RuntimeError) as e:
+        raise ValueError(f"checkpoint: '{path}' has an invalid config ({type(e).__name__}: "
+                         f"{' '.join(str(e).split())})") from None
+    want = {k: tuple(v.shape) for k, v in ref.state_dict().items()}
+    have = {k: tuple(v.shape) for k, v in stored.items()}
+    fields = ", ".join(f"{k}={v}" for k, v in config.to_dict().items()
+                       if k in ("hidden", "n_blocks", "n_bps", "n_heads", "n_waypoints",
+                                "twin", "unit_vectors"))
+    missing = [k for k in want if k not in have]
+    extra = [k for k in have if k not in want]
+    other = [k for k in want if k in have and want[k] != have[k]]
+    if missing or extra or other:
+        parts = []
+        if other:
+            parts.append(f"{len(other)} tensor(s) of another shape (e.g. '{other[0]}': the "
+                         f"config makes {_shape_text(want[other[0]])}, the file holds "
+                         f"{_shape_text(have[other[0]])})")
+        if missing:
+            parts.append(f"{len(missing)} missing (e.g. '{missing[0]}')")
+        if extra:
+            parts.append(f"{len(extra)} unexpected (e.g. '{extra[0]}')")
+        raise ValueError(f"checkpoint: '{path}': its config ({fields}) does not match its "
+                         f"weights: {'; '.join(parts)}; the file is damaged or was edited "
+                         f"(nothing was allocated)")
+    need = 4.0 * sum(int(torch.Size(s).numel()) for s in want.values())
+    check_memory(need, f"the network of '{path}' ({fields}; {format_bytes(need)} of float32 "
+                       f"weights)", "this checkpoint cannot be loaded here")
 
 
 def _robot_and_bps(doc: dict, path: Any, robot: Any) -> tuple[Any, Any]:

@@ -48,7 +48,7 @@ import torch
 import warp as wp
 
 from jwarp.core.arrays import init_warp
-from jwarp.learn.checkpoint import read_checkpoint, save_checkpoint
+from jwarp.learn.checkpoint import check_weights, read_checkpoint, save_checkpoint
 from jwarp.learn.ik_data import DEFAULT_MIX, IKData, check_mix, make_ik_data
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.torch_costs import ik_objective, u_ik
@@ -383,6 +383,7 @@ class IKTrainer:
             raise ValueError(f"resume: checkpoint '{path}' holds another network "
                              f"({doc['robot']}, {doc['config']}) than these options "
                              f"({self.model.name}, {self.net.config.to_dict()})")
+        check_weights(IKNet, self.net.config, self.net.bps, doc, path)  # one line, no dump
         self.net.load_state_dict(doc["state_dict"])
         if doc.get("optimizer_state") is not None:
             self.opt.load_state_dict(doc["optimizer_state"])

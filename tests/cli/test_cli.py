@@ -146,7 +146,7 @@ def test_fk_elastic_text(capsys):
     (["fk"], "required"),
     ([], "required"),
     (["frobnicate"], "invalid choice"),
-    (["show", "justin19"], "--save"),
+    (["show", "justin19"], "--out"),
 ])
 def test_bad_input_exit_code_2(capsys, argv, message):
     code, out, err = run(capsys, *argv)
@@ -165,7 +165,7 @@ def test_show_writes_rrd(capsys, tmp_path):
     pytest.importorskip("rerun")
     target = tmp_path / "j.rrd"
     code, out, err = run(capsys, "show", "justin19", "--q", "zeros", "--q",
-                         ",".join(["0.1"] * 19), "--elastic", "--save", str(target))
+                         ",".join(["0.1"] * 19), "--elastic", "--out", str(target))
     assert code == 0, err
     assert target.stat().st_size > 0 and str(target) in out
     assert [p.name for p in tmp_path.iterdir()] == ["j.rrd"]
@@ -173,7 +173,7 @@ def test_show_writes_rrd(capsys, tmp_path):
 
 def test_show_missing_folder(capsys, tmp_path):
     pytest.importorskip("rerun")
-    code, _, err = run(capsys, "show", "justin19", "--save", str(tmp_path / "no" / "x.rrd"))
+    code, _, err = run(capsys, "show", "justin19", "--out", str(tmp_path / "no" / "x.rrd"))
     assert code == 2 and "does not exist" in err
 
 

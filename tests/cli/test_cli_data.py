@@ -56,7 +56,7 @@ def test_generate_info_export(capsys, tmp_path, fake):
     info = json.loads(out)
     assert code == 0 and info["worlds"] == 5 and info["paths"] == 15 and info["robot"] == "planar5"
     assert info["settings"][0]["options"]["n_waypoints"] == 4
-    code, out, _ = run(capsys, ["data", "export", db, "--npz", tmp_path / "d.npz"])
+    code, out, _ = run(capsys, ["data", "export", db, "--out", tmp_path / "d.npz"])
     assert code == 0 and "15 paths" in out
     with np.load(tmp_path / "d.npz") as z:
         assert z["path"].shape == (15, 4, 5)
@@ -105,8 +105,8 @@ def test_info_export_errors(capsys, tmp_path, fake):
     assert len(err.strip().splitlines()) == 1
     db = tmp_path / "d.sqlite"
     assert run(capsys, GEN + ["--worlds", 1, "--db", db])[0] == 0
-    one_line_error(capsys, ["data", "export", db, "--npz", db], "--npz")
-    one_line_error(capsys, ["data", "export", db, "--npz", tmp_path / "no" / "x.npz"], "--npz")
+    one_line_error(capsys, ["data", "export", db, "--out", db], "--out")
+    one_line_error(capsys, ["data", "export", db, "--out", tmp_path / "no" / "x.npz"], "--out")
     con = sqlite3.connect(db, isolation_level=None)
     con.execute("BEGIN EXCLUSIVE")  # a writer holding the file: readers wait, then fail
     try:

@@ -36,7 +36,7 @@ def files(tmp_path_factory):
 def test_sensitivity_text_json_png_rerun(capsys, files):
     d = files
     code, out, err = run(capsys, ["sensitivity", "--setup", d / "one.json", "--task-setup",
-                                  d / "rel2.json", "--n", 80, "--png", d / "s.png",
+                                  d / "rel2.json", "--n", 80, "--out", d / "s.png",
                                   "--rerun", d / "s.rrd"])
     assert code == 0, err
     assert "actual (contact)" in out and "FAILS by 1 direction" in out

@@ -225,7 +225,7 @@ def test_rerun_and_save_paths_checked_before_any_work(capsys, monkeypatch, tmp_p
     _forbid(monkeypatch, "jwarp.kinematics", "fk")
     one_line_error(capsys, plan_args(block, "--rerun", target), "--rerun")
     one_line_error(capsys, IK + ["--world", str(block), "--rerun", target], "--rerun")
-    one_line_error(capsys, ["show", "planar4", "--elastic", "--save", target], "--save")
+    one_line_error(capsys, ["show", "planar4", "--elastic", "--out", target], "--out")
     assert sorted(p.name for p in tmp_path.iterdir()) == []
 
 
@@ -241,7 +241,7 @@ def test_output_that_is_an_input_is_refused(capsys, tmp_path, block):
     robot = tmp_path / "r.json"
     jwarp.robot("planar4").save(robot)
     before = robot.read_bytes()
-    line = one_line_error(capsys, ["show", robot, "--save", robot], "--save")
+    line = one_line_error(capsys, ["show", robot, "--out", robot], "--out")
     assert "is also robot" in line and robot.read_bytes() == before
 
 
@@ -283,7 +283,7 @@ def test_show_interrupt_keeps_old_file(capsys, monkeypatch, tmp_path):
     monkeypatch.setattr(viz, "log_robot", log_then_interrupt)
     try:
         code, out, err = run(capsys, ["show", "planar4", "--q", "zeros", "--q", "0.1,0,0,0",
-                                      "--save", target])
+                                      "--out", target])
     except KeyboardInterrupt:
         pytest.fail("KeyboardInterrupt escaped main()")
     assert code == 130 and err.splitlines() == ["jwarp: interrupted"]
