@@ -414,7 +414,7 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--whiten", action="store_true",
                    help="divide the Jacobian rows by the measurement noise")
     add_out(s, "--png", metavar="OUT.png",
-            help="plot both spectra (log scale) to this PNG (--png: deprecated spelling)")
+            help="plot both spectra (log scale) to this PNG")
     s.add_argument("--rerun", default=None, metavar="OUT.rrd",
                    help="log both spectra as rerun bar charts")
     s.add_argument("--json", action="store_true", help="print the result as JSON")

@@ -229,5 +229,5 @@ def add_subcommands(sub: Any) -> None:
                    help="a configuration (v1,v2,... or 'zeros'); repeat for several time steps")
     elastic_opts(s)
     add_out(s, "--save", required=True, metavar="FILE.rrd",
-            help="the rerun recording to write (--save: deprecated spelling)")
+            help="the rerun recording to write")
     s.set_defaults(func=cmd_show)
