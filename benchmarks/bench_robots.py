@@ -81,6 +81,8 @@ class Entry:
     note: str = ""
     args: list = field(default_factory=list)
     home: tuple = ()    # (SRDF path under the robots folder, group_state name)
+    srdf: str = ""      # an SRDF passed without a home state (when ``home`` gives none)
+    home_arg: bool = True   # pass ``--home <state>`` (False: the state names no URDF joint)
     plan: bool = True   # False: no arm (a gripper): no table-and-shelf plan
     lock: dict = field(default_factory=dict)   # values of locked joints other than 0
 
@@ -89,7 +91,8 @@ ZOO = [
     Entry("panda", "erd", "panda_description/urdf/panda.urdf", "panda_hand_tcp",
           home=("panda_description/srdf/panda.srdf", "default")),
     Entry("ur3", "erd", "ur_description/urdf/ur3_robot.urdf", "tool0"),
-    Entry("ur5", "erd", "ur_description/urdf/ur5_robot.urdf", "tool0"),
+    Entry("ur5", "erd", "ur_description/urdf/ur5_robot.urdf", "tool0",
+          srdf="ur_description/srdf/ur5.srdf"),
     Entry("ur10", "erd", "ur_description/urdf/ur10_robot.urdf", "tool0"),
     Entry("kinova", "erd", "kinova_description/robots/kinova.urdf", "j2s6s200_end_effector",
           home=("kinova_description/srdf/kinova.srdf", "arm_up")),
@@ -107,8 +110,10 @@ ZOO = [
                "its lowest the URDF meshes of arm_1_link and the torso column overlap, "
                "coal: -5.8 mm)"),
     Entry("baxter", "erd", "baxter_description/urdf/baxter.urdf", "left_gripper",
-          note="whole robot, IK/plan with the left gripper",
-          home=("baxter_description/srdf/baxter_manipulation.srdf", "neutral")),
+          note="whole robot, IK/plan with the left gripper; its SRDF's joints are "
+               "'baxter/...' (skipped at import): home = zeros, as 'neutral' gives",
+          home=("baxter_description/srdf/baxter_manipulation.srdf", "neutral"),
+          home_arg=False),
     Entry("ur5e_mjcf", "mjcf", "ur5e_xml", "attachment_site", note="MuJoCo Menagerie UR5e"),
     Entry("robotiq_2f85_mjcf", "mjcf", "robotiq_2f85_xml", "pinch",
           note="MuJoCo Menagerie Robotiq 2F-85 (a gripper: no plan)", plan=False),
@@ -221,6 +226,11 @@ def import_robot(e: Entry, path: str, out: str, args: Any, help_urdf: str, help_
                "--spheres", "fit", "--no-cache", "--json", "--end-effector", f"ee={e.ee}"]
         if args.quick and "--pair-samples" not in extra:
             cmd += ["--pair-samples", "1000"]
+        srdf = e.home[0] if e.home else e.srdf
+        if srdf and "--srdf" in help_urdf and not args.no_srdf:   # as a MoveIt user would
+            cmd += ["--srdf", str(erd_root() / srdf)]
+            if e.home and e.home_arg and "--home" in help_urdf:
+                cmd += ["--home", e.home[1]]
         if e.keep:
             kept, locked = sub_chain(path, e.keep)
             locked.update(e.lock)
@@ -263,6 +273,17 @@ def import_robot(e: Entry, path: str, out: str, args: Any, help_urdf: str, help_
     row.update(fit_figures(summary))
     if summary.get("missing_meshes"):
         row["missing_meshes"] = len(summary["missing_meshes"])
+    hf = summary.get("home_fit")
+    if hf:   # what the import did to free its home
+        row["import_home"] = hf.get("home_from")
+        row["default_pairs"] = ["/".join(p["links"]) + f" (mesh {1e3 * p['mesh_distance_m']:.1f} mm)"
+                                for p in hf.get("default_pairs", [])]
+        row["tightened"] = [f"{t['link']} {t['spheres']} spheres -{1e3 * t['largest_cut_m']:.1f} mm"
+                            + (" (reverted)" if t.get("reverted") else "")
+                            for t in hf.get("tightened", [])]
+    sk = (summary.get("srdf") or {}).get("skipped")
+    if sk:
+        row["srdf_skipped"] = f"{len(sk)} SRDF entries skipped (first: {sk[0]})"
     return row, None
 
 
@@ -291,7 +312,7 @@ def home_configuration(e: Entry, m: Any) -> tuple[np.ndarray, str]:
     lim = m.joint_limits
     q = np.zeros(m.n_dof)
     where = "zeros"
-    if e.home:
+    if e.home and e.home_arg:
         srdf, state = e.home
         root = ET.parse(erd_root() / srdf).getroot()
         gs = [g for g in root.iter("group_state") if g.get("name") == state]
@@ -299,7 +320,14 @@ def home_configuration(e: Entry, m: Any) -> tuple[np.ndarray, str]:
             raise ValueError(f"{srdf}: no group_state '{state}'")
         for j in gs[0].iter("joint"):
             if j.get("name") in m.joint_names:
-                q[m.joint_index(j.get("name"))] = float(j.get("value"))
+                k = m.joint_index(j.get("name"))
+                v = float(j.get("value"))
+                if m.joints[k].type != "prismatic" and not lim[k, 0] <= v <= lim[k, 1]:
+                    # an angle written in (-pi, pi] for a joint whose range is elsewhere:
+                    # the same pose 2 pi k away, where it fits (as import-urdf --home does)
+                    w = v + 2 * np.pi * np.ceil((lim[k, 0] - v) / (2 * np.pi))
+                    v = w if w <= lim[k, 1] else v
+                q[k] = v
         where = f"SRDF '{state}'"
     return np.clip(q, lim[:, 0], lim[:, 1]), where
 
@@ -647,7 +675,8 @@ def table(rows: list[dict], max_ik: int = 100) -> str:
         bits = []
         if r.get("error"):
             bits.append(f"ERROR {r['error']}")
-        for k in ("fit_note", "warning", "sub_chain", "home", "home_collisions",
+        for k in ("fit_note", "warning", "sub_chain", "home", "import_home", "default_pairs",
+                  "tightened", "srdf_skipped", "home_collisions",
                   "home_mesh_pair", "frequent_collisions", "plan_pair",
                   "plan_reason", "fk_ref"):
             if r.get(k) and not (k == "fk_ref" and r[k] == "pinocchio"):
@@ -685,6 +714,8 @@ def main(argv: list[str] | None = None) -> int:
                          "--import-arg=--tolerance --import-arg=0.02)")
     ap.add_argument("--no-mesh-home", dest="mesh_home", action="store_false",
                     help="skip the URDF meshes' clearance at home (pinocchio + coal)")
+    ap.add_argument("--no-srdf", action="store_true",
+                    help="import without the SRDF example-robot-data ships (and its --home)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--verbose", action="store_true", help="print tracebacks of failures")
     args = ap.parse_args(argv)
@@ -711,7 +742,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{os.sysconf('SC_PAGE_SIZE') * os.sysconf('SC_PHYS_PAGES') / 1024 ** 3:.0f} GB")
     settings = {k: getattr(args, k) for k in ("quick", "fk_configs", "ik_poses", "ik_starts",
                                                "free_samples", "plan_time", "import_timeout",
-                                               "mem_limit_gb", "import_arg", "seed")}
+                                               "mem_limit_gb", "import_arg", "no_srdf",
+                                               "seed")}
     print("settings: " + ", ".join(f"{k}={v}" for k, v in settings.items()))
     for k, why in NOT_SHIPPED.items():
         print(f"not in the zoo: {k} ({why})")

@@ -116,7 +116,12 @@ def group_lines(res: Any, sampled: bool) -> tuple[list[str], dict[str, Any]]:
                      f"self-collision exclude pairs: {how} ({res.pairs_added} from the SRDF)")
         extra["srdf"] = {"path": res.srdf.path, "disable_collisions": res.srdf_pairs,
                          "pairs_added": res.pairs_added, "collisions": res.srdf_collisions,
-                         "groups": list(res.srdf.groups)}
+                         "groups": list(res.srdf.groups),
+                         "skipped": [str(k) for k in res.srdf.skipped]}
+        if res.srdf.skipped:
+            from jwarp.importers.srdf import skipped_summary
+
+            lines.append(f"warning: {skipped_summary(res.srdf)}")
     if res.frozen:
         lines.append(f"planning with {len(res.planned)} joints ({', '.join(res.planned)}); "
                      f"frozen: " + ", ".join(f"{k}={v:g} ({res.source[k]})"
@@ -164,6 +169,45 @@ def import_summary(model: Any, geometries: list, out: str, as_json: bool,
     print(f"robot: {out}")
 
 
+def home_arg(text: str | None) -> str | list[float] | None:
+    """``--home``: an SRDF group_state name, or joint values ``q1,q2,...`` [rad or m]."""
+    if text is None:
+        return None
+    text = text.strip()
+    if not text:
+        raise CLIError("--home: expected an SRDF state name or joint values q1,q2,...")
+    parts = [t.strip() for t in text.split(",")]
+    try:
+        values = [float(t) for t in parts]
+    except ValueError:
+        if len(parts) > 1:
+            raise CLIError(f"--home: expected numbers q1,q2,... [rad or m], got '{text}'") from None
+        return text
+    if not all(math.isfinite(v) for v in values):
+        raise CLIError(f"--home: expected finite numbers, got '{text}'")
+    return values
+
+
+def home_fit_step(imported: Any, model: Any, args: argparse.Namespace, srdf: Any
+                  ) -> tuple[Any, Any]:
+    """The import's home made free of self-collision (:func:`jwarp.importers.home_fit.
+    fit_home`: Default pairs, tightened spheres), its warnings printed from the report."""
+    import warnings
+
+    from jwarp.importers.home_fit import HomeFitOptions, HomeFitWarning, fit_home
+
+    home = home_arg(args.home)
+    try:
+        with warnings.catch_warnings():  # printed from the report
+            warnings.simplefilter("ignore", HomeFitWarning)
+            return fit_home(imported, model, home, HomeFitOptions(tolerance=args.tolerance),
+                            srdf=srdf)
+    except ValueError as e:
+        msg = " ".join(str(e).split())
+        raise CLIError(f"--home: {msg.removeprefix('home: ').removeprefix('state: ')}") \
+            from None
+
+
 def cmd_import_urdf(args: argparse.Namespace) -> int:
     from jwarp.importers.robot import load_urdf
 
@@ -174,6 +218,9 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
         if not os.path.isdir(d):
             raise CLIError(f"--package-dir: not a folder: '{d}'")
     eff = end_effectors_arg(args.end_effector)
+    home = home_arg(args.home)   # its form checked before the fit
+    if isinstance(home, str) and args.srdf is None:
+        raise CLIError(f"--home: state '{home}' needs --srdf (or give joint values q1,q2,...)")
     urdf_options = dict(end_effectors=eff, package_dirs=args.package_dir or [],
                         continuous_limit=args.continuous_limit, name=args.name,
                         require_meshes=args.require_meshes)
@@ -198,7 +245,13 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
     from jwarp.importers.groups import plan_group
 
     try:
-        grouped = plan_group(imported, group_options(args, eff), model=model)
+        import warnings
+
+        from jwarp.importers.srdf import SrdfWarning
+
+        with warnings.catch_warnings():  # printed from the summary (group_lines)
+            warnings.simplefilter("ignore", SrdfWarning)
+            grouped = plan_group(imported, group_options(args, eff), model=model)
     except ValueError as e:
         raise group_error(e, args.srdf) from None
     fitted_pairs = model.self_collision.exclude_pairs  # sampled over every joint
@@ -209,6 +262,12 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
         from jwarp.world.spherize import resample_pairs
 
         model, resampled = resample_pairs(model, fitted_pairs, opts)
+    home = None
+    if model.spheres and not args.no_home_fit:
+        model, home = home_fit_step(imported, model, args, grouped.srdf)
+    elif args.home is not None:
+        raise CLIError("--home: needs a collision model (--spheres fit or urdf) and no "
+                       "--no-home-fit")
     model.save(args.out)
     missing = [g.mesh_uri for g in imported.geometries if g.kind == "mesh" and g.mesh_path is None]
     extra: dict[str, Any] = {"missing_meshes": missing}
@@ -226,6 +285,10 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
     more_lines, more = group_lines(grouped, fit is not None)
     lines += more_lines
     extra.update(more)
+    if home is not None:
+        lines.append(home.summary())
+        lines += [f"warning: {w}" for w in home.warnings]
+        extra["home_fit"] = home.to_dict()
     import_summary(model, imported.geometries, args.out, args.json, extra, lines,
                    f" ({len(missing)} mesh files not found)" if missing else "")
     return 0
@@ -287,5 +350,13 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--freeze", action="append", metavar="NAME[=VALUE]",
                    help="freeze a joint at a value, e.g. a gripper finger (repeatable; mimic "
                         "joints follow; no value: --state's, else 0 clipped into the limits)")
+    s.add_argument("--home", default=None, metavar="STATE|Q1,Q2,...",
+                   help="home configuration made free of self-collision: an SRDF group_state "
+                        "(with --srdf) or joint values (default: zeros projected into the "
+                        "limits); pairs whose URDF geometry touches there are excluded "
+                        "(reason Default), spheres overlapping where it does not are "
+                        "tightened (docs/urdf.md)")
+    s.add_argument("--no-home-fit", action="store_true",
+                   help="leave the home as fitted (no Default pairs, no tightening)")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
     s.set_defaults(func=cmd_import_urdf)

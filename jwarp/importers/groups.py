@@ -137,13 +137,49 @@ def default_end_effectors(model: RobotModel, links: Any = None) -> dict[str, int
     return {model.frame_names[i]: i for i in tips}
 
 
-def load_srdf(srdf: str | os.PathLike | Srdf, robot: UrdfRobot, states: Any = None) -> Srdf:
-    """The SRDF (read if a path), checked against the URDF of ``robot`` (every link,
-    joint and group it names exists; of the group states, those named in ``states``, None:
-    all): SrdfError naming the file and the element."""
+def load_srdf(srdf: str | os.PathLike | Srdf, robot: UrdfRobot, states: Any = None,
+              groups: Any = None) -> Srdf:
+    """The SRDF (read if a path) for the URDF of ``robot``: entries naming links or joints
+    the URDF lacks are skipped as MoveIt does (:func:`~jwarp.importers.srdf.prune_srdf`,
+    one :class:`~jwarp.importers.srdf.SrdfWarning` naming how many and the first few;
+    the returned Srdf lists them in ``skipped``), the rest checked
+    (:func:`~jwarp.importers.srdf.check_srdf`; of the group states, those named in
+    ``states``, None: all). SrdfError naming the file and the element for a group of
+    ``groups`` (the ones the user asked for) that lost a member or was dropped: planning
+    with part of a group would be planning with other joints than asked."""
+    import warnings
+
+    from jwarp.importers.srdf import SrdfWarning, prune_srdf, skipped_summary
+
     s = srdf if isinstance(srdf, Srdf) else read_srdf(srdf)
-    check_srdf(s, set(robot.source.link_frames), set(robot.source.urdf_joints), states)
-    return s
+    links, joints = set(robot.source.link_frames), set(robot.source.urdf_joints)
+    pruned = prune_srdf(s, links, joints)
+    for name in groups or []:
+        if name not in s.groups:
+            continue   # group_joints names the known groups
+        members = set(_members(s, name))
+        bad = [k for k in pruned.skipped if k.element == "group" and k.owner in members]
+        if bad:
+            raise SrdfError(f"group: {s.path}: <group name=\"{name}\"> (line "
+                            f"{s.groups[name].line}) names what the URDF lacks: "
+                            + "; ".join(str(k) for k in bad[:4])
+                            + (f" and {len(bad) - 4} more" if len(bad) > 4 else ""))
+    check_srdf(pruned, links, joints, [st for st in (states or [])
+                                       if any(g.name == st for g in pruned.group_states)]
+               if states is not None else None)
+    if pruned.skipped:
+        warnings.warn(skipped_summary(pruned), SrdfWarning, stacklevel=2)
+    return pruned
+
+
+def _members(srdf: Srdf, name: str, seen: tuple = ()) -> list[str]:
+    """``name`` and its subgroups, recursively (no error on a cycle: check_srdf's)."""
+    if name in seen or name not in srdf.groups:
+        return []
+    out = [name]
+    for g in srdf.groups[name].subgroups:
+        out += _members(srdf, g, seen + (name,))
+    return out
 
 
 def plan_group(robot: UrdfRobot, options: GroupOptions | None = None, *,
@@ -166,7 +202,8 @@ def plan_group(robot: UrdfRobot, options: GroupOptions | None = None, *,
     urdf_joints = robot.source.urdf_joints
     names = model.joint_names
     srdf = None if o.srdf is None else load_srdf(o.srdf, robot,
-                                                  [] if o.state is None else [o.state])
+                                                  [] if o.state is None else [o.state],
+                                                  [] if o.group is None else [o.group])
 
     def actuated(name: str, key: str) -> str:
         """The model joint a URDF joint name stands for (ValueError naming ``key``)."""

@@ -5,13 +5,18 @@ tip_link>``, ``<group>`` subgroups), ``<group_state>``, ``<end_effector>`` and
 ``<disable_collisions link1 link2 reason>``; ``<virtual_joint>`` names (a floating base)
 are accepted where a joint is named (and are no joint of the robot). Other elements
 (``passive_joint``, ``link_sphere_approximation``, ...) are skipped. :func:`check_srdf`
-checks every name against the URDF; :func:`group_joints` resolves a group to the URDF's
+checks every name against the URDF (strict); :func:`prune_srdf` drops the entries naming
+links or joints the URDF lacks, as MoveIt's loader does (one SRDF often serves several
+URDFs: a whole robot and its arm, or joints renamed by a prefix), and lists them;
+:func:`group_joints` resolves a group to the URDF's
 joints as MoveIt does (a ``<link>`` adds the joint whose child it is; a chain the joints
 from ``base_link`` down to ``tip_link``; subgroups recursively).
 
 Write (:func:`srdf_text`, :func:`write_srdf`): the robot's frame pairs that are never
 checked for self-collision as ``<disable_collisions>`` (reason ``Adjacent`` for a frame
-and its parent, else ``Never``); :func:`jwarp.importers.urdf_export.export_urdf` writes
+and its parent, ``Default`` for the pairs in contact at the home configuration that the
+import excluded (``notes['self_collision_default']``, :mod:`jwarp.importers.home_fit`),
+else ``Never``); :func:`jwarp.importers.urdf_export.export_urdf` writes
 it beside the URDF.
 
 Errors are :class:`SrdfError` (a ValueError) naming the file, the element and its line.
@@ -29,11 +34,40 @@ from xml.sax.saxutils import quoteattr
 #: reasons :func:`srdf_text` writes
 REASON_ADJACENT = "Adjacent"
 REASON_NEVER = "Never"
+REASON_DEFAULT = "Default"
+#: ``RobotModel.notes`` key: JSON ``[[frame a, frame b], ...]`` of the pairs excluded by
+#: MoveIt's "Default" rule (in contact at the home configuration; written with that reason)
+DEFAULT_NOTE = "self_collision_default"
 
 
 class SrdfError(ValueError):
     """A malformed SRDF or one naming links/joints the URDF lacks; the message names the
     file and the element."""
+
+
+class SrdfWarning(UserWarning):
+    """SRDF entries skipped because they name links or joints the URDF lacks."""
+
+
+@dataclass
+class SrdfSkipped:
+    """One entry :func:`prune_srdf` dropped: ``element`` (``group``, ``group_state``,
+    ``end_effector``, ``disable_collisions``), ``owner`` (the group/state/end-effector
+    name; '' for disable_collisions), ``what`` (e.g. "joint 'baxter/head_pan'"),
+    ``line`` in the file; ``whole``: a consequence of other skips, no unknown name of its
+    own (a group left empty, a state with no joint left, a subgroup or group that is
+    gone)."""
+
+    element: str
+    owner: str
+    what: str
+    line: int = 0
+    whole: bool = False
+
+    def __str__(self) -> str:
+        where = (f"<{self.element} name=\"{self.owner}\">" if self.owner
+                 else f"<{self.element}>")
+        return f"{where} (line {self.line}): {self.what}"
 
 
 @dataclass
@@ -94,6 +128,8 @@ class Srdf:
     disable_collisions: list[SrdfDisabled] = field(default_factory=list)
     virtual_joints: list[str] = field(default_factory=list)
     path: str = "<srdf>"
+    #: entries :func:`prune_srdf` dropped (empty for a file read as it is)
+    skipped: list[SrdfSkipped] = field(default_factory=list)
 
     @property
     def state_names(self) -> list[str]:
@@ -106,6 +142,14 @@ class Srdf:
         several values (a floating base) are left out. SrdfError listing the known states,
         or naming a joint two states of that name give different values."""
         found = [st for st in self.group_states if st.name == name]
+        dropped = [k for k in self.skipped if k.element == "group_state" and k.owner == name]
+        if not found and dropped:
+            raise SrdfError(f"state: {self.path}: <group_state name=\"{name}\"> (line "
+                            f"{dropped[0].line}): "
+                            + "; ".join(f"unknown {k.what}" for k in dropped[:4]
+                                        if not k.whole)
+                            + (f" and {len(dropped) - 5} more" if len(dropped) > 5 else "")
+                            + " (nothing of the state is in the URDF)")
         if not found:
             raise SrdfError(f"state: {self.path} has no <group_state name=\"{name}\"> (its "
                             f"states: {', '.join(self.state_names) or 'none'})")
@@ -280,6 +324,127 @@ def check_srdf(srdf: Srdf, links: set[str] | list[str], joints: set[str] | list[
         need(d.link2, links, "link", f"{where} link2")
 
 
+def prune_srdf(srdf: Srdf, links: set[str] | list[str], joints: set[str] | list[str]
+               ) -> Srdf:
+    """A copy of ``srdf`` without the entries that name links or joints the URDF lacks
+    (``links``, ``joints``: its names, fixed joints included; the SRDF's
+    ``<virtual_joint>`` names count as joints), as MoveIt's SRDF loader skips them:
+    a group's unknown joints, links and chains (a chain with an unknown base or tip) and
+    subgroups that are gone; a group left empty; a group state's unknown joints (a state
+    left without joints is dropped); an end-effector whose parent link is unknown or whose
+    group is gone (an unknown ``parent_group`` is forgotten); a ``disable_collisions`` of
+    an unknown link. The dropped entries are listed in the copy's ``skipped``
+    (:class:`SrdfSkipped`); nothing is raised (a cycle of subgroups is left for
+    :func:`check_srdf`)."""
+    links, joints = set(links), set(joints) | set(srdf.virtual_joints)
+    out = Srdf(name=srdf.name, virtual_joints=list(srdf.virtual_joints), path=srdf.path,
+               skipped=list(srdf.skipped))
+    skip = out.skipped
+    groups: dict[str, SrdfGroup] = {}
+    for g in srdf.groups.values():
+        ng = SrdfGroup(name=g.name, line=g.line)
+        for j in g.joints:
+            if j in joints:
+                ng.joints.append(j)
+            else:
+                skip.append(SrdfSkipped("group", g.name, f"joint '{j}'", g.line))
+        for link in g.links:
+            if link in links:
+                ng.links.append(link)
+            else:
+                skip.append(SrdfSkipped("group", g.name, f"link '{link}'", g.line))
+        for base, tip in g.chains:
+            bad = [x for x in (base, tip) if x not in links]
+            if bad:
+                skip.append(SrdfSkipped("group", g.name, f"chain {base} -> {tip} (link "
+                                        f"'{bad[0]}')", g.line))
+            else:
+                ng.chains.append((base, tip))
+        ng.subgroups = list(g.subgroups)
+        groups[g.name] = ng
+    # groups left empty are dropped, then subgroups naming them, until nothing changes
+    while True:
+        gone = [n for n, g in groups.items()
+                if not (g.joints or g.links or g.chains or g.subgroups)]
+        for n in gone:
+            skip.append(SrdfSkipped("group", n, "every member (the group is dropped)",
+                                    groups.pop(n).line, whole=True))
+        changed = bool(gone)
+        for g in groups.values():
+            keep = [s for s in g.subgroups if s in groups]
+            for s in g.subgroups:
+                if s not in groups and s not in srdf.groups:
+                    keep.append(s)   # never defined: check_srdf names it
+                elif s not in groups:
+                    skip.append(SrdfSkipped("group", g.name, f"subgroup '{s}' (dropped)",
+                                            g.line, whole=True))
+            if len(keep) != len(g.subgroups):
+                changed = True
+            g.subgroups = keep
+        if not changed:
+            break
+    out.groups = groups
+    for st in srdf.group_states:
+        ns = SrdfGroupState(name=st.name, group=st.group, line=st.line)
+        for j, v in st.values.items():
+            if j in joints or isinstance(v, tuple):   # several values: a floating base
+                ns.values[j] = v
+            else:
+                skip.append(SrdfSkipped("group_state", st.name, f"joint '{j}'", st.line))
+        if st.group is not None and st.group in srdf.groups and st.group not in groups:
+            skip.append(SrdfSkipped("group_state", st.name, f"group '{st.group}' (dropped; "
+                                    f"the state is dropped)", st.line, whole=True))
+        elif st.values and not ns.values:
+            skip.append(SrdfSkipped("group_state", st.name, "every joint (the state is "
+                                    "dropped)", st.line, whole=True))
+        else:
+            out.group_states.append(ns)
+    for e in srdf.end_effectors:
+        if e.parent_link not in links:
+            skip.append(SrdfSkipped("end_effector", e.name, f"parent_link '{e.parent_link}' "
+                                    f"(the end-effector is dropped)", e.line))
+            continue
+        if e.group is not None and e.group in srdf.groups and e.group not in groups:
+            skip.append(SrdfSkipped("end_effector", e.name, f"group '{e.group}' (dropped; the "
+                                    f"end-effector is dropped)", e.line, whole=True))
+            continue
+        pg = e.parent_group
+        if pg is not None and pg in srdf.groups and pg not in groups:
+            skip.append(SrdfSkipped("end_effector", e.name, f"parent_group '{pg}' (dropped)",
+                                    e.line, whole=True))
+            pg = None
+        out.end_effectors.append(SrdfEndEffector(name=e.name, parent_link=e.parent_link,
+                                                 group=e.group, parent_group=pg, line=e.line))
+    for d in srdf.disable_collisions:
+        bad = [x for x in (d.link1, d.link2) if x not in links]
+        if bad:
+            skip.append(SrdfSkipped("disable_collisions", "", f"link '{bad[0]}'", d.line))
+        else:
+            out.disable_collisions.append(d)
+    return out
+
+
+def skipped_summary(srdf: Srdf, most: int = 4) -> str:
+    """One line: how many entries of ``srdf`` were skipped (:func:`prune_srdf`), per
+    element, and the first ``most`` ('' when none)."""
+    if not srdf.skipped:
+        return ""
+    named = [k for k in srdf.skipped if not k.whole]
+    count: dict[str, int] = {}
+    for k in named:
+        count[k.element] = count.get(k.element, 0) + 1
+    names = list(dict.fromkeys(k.what.split("'")[1] for k in named if "'" in k.what))
+    dropped = [k for k in srdf.skipped if k.whole]
+    first = "; ".join(str(k) for k in srdf.skipped[:most])
+    more = f"; and {len(srdf.skipped) - most} more" if len(srdf.skipped) > most else ""
+    return (f"{srdf.path}: {len(named)} entries name links or joints the URDF lacks and "
+            f"are skipped, as MoveIt does ("
+            + ", ".join(f"{v} in {k}" for k, v in count.items())
+            + (f"; {len(dropped)} elements left empty or dangling, dropped" if dropped else "")
+            + f"; {len(names)} unknown names, e.g. "
+            + ", ".join(f"'{n}'" for n in names[:most]) + f"): {first}{more}")
+
+
 def _subgroups(srdf: Srdf, name: str, seen: tuple[str, ...]) -> list[str]:
     """``name`` and its subgroups, recursively (SrdfError on a cycle)."""
     if name in seen:
@@ -346,17 +511,37 @@ def disabled_pairs(robot: Any) -> list[tuple[str, str, str]]:
     """``(frame a, frame b, reason)`` for every frame pair of ``robot`` (a
     :class:`~jwarp.model.RobotModel`) that is never checked for self-collision (its
     ``self_collision`` groups and exclude pairs, less include pairs), ``a < b`` by index;
-    reason ``Adjacent`` when one is the other's parent, else ``Never``."""
+    reason ``Adjacent`` when one is the other's parent, ``Default`` for the pairs listed in
+    ``notes['self_collision_default']`` (in contact at the home configuration), else
+    ``Never``."""
     allowed = robot.allowed_collision_pairs
     parents = robot.parents
     names = robot.frame_names
+    default = {frozenset(p) for p in default_pair_names(robot)}
     out = []
     for a in range(robot.n_frames):
         for b in range(a + 1, robot.n_frames):
             if not allowed[a, b]:
                 adj = parents[a] == b or parents[b] == a
-                out.append((names[a], names[b], REASON_ADJACENT if adj else REASON_NEVER))
+                reason = (REASON_ADJACENT if adj else REASON_DEFAULT
+                          if frozenset((names[a], names[b])) in default else REASON_NEVER)
+                out.append((names[a], names[b], reason))
     return out
+
+
+def default_pair_names(robot: Any) -> list[tuple[str, str]]:
+    """The frame-name pairs of ``robot``'s ``notes['self_collision_default']`` (excluded
+    by the "Default" rule at import; empty when none or unreadable)."""
+    import json
+
+    text = getattr(robot, "notes", {}).get(DEFAULT_NOTE)
+    if not text:
+        return []
+    try:
+        doc = json.loads(text)
+        return [(str(a), str(b)) for a, b in doc]
+    except (ValueError, TypeError):
+        return []
 
 
 def srdf_text(robot: Any, *, name: str | None = None) -> str:

@@ -14,6 +14,14 @@ positive ``margin`` keeps pairs that come close.
 :func:`with_self_pairs` writes the result into a robot's ``self_collision`` section
 (``exclude_pairs``), which the planner's self-collision check reads
 (``RobotModel.allowed_collision_pairs``); :func:`write_self_pairs` saves it as robot JSON.
+
+MoveIt's setup assistant also disables the pairs in collision at the robot's default
+configuration (reason "Default"). :func:`default_pairs` applies that rule only where the
+robot's own geometry is in contact there (a ``contact`` test the caller gives, e.g. the
+URDF's collision meshes: :mod:`jwarp.importers.home_fit`): spheres that overlap where
+the meshes do not are a fit to correct, not a pair to stop checking.
+:func:`with_default_pairs` adds them to ``exclude_pairs`` and lists them in
+``notes['self_collision_default']`` (an exported SRDF writes them with reason="Default").
 """
 
 from __future__ import annotations
@@ -32,8 +40,12 @@ from jwarp.model import RobotModel, SelfCollision
 from jwarp.registry import robot as get_robot
 
 __all__ = ["SelfPairs", "PairSamplingCost", "never_colliding_pairs", "pair_sampling_cost",
-           "adjacent_pairs", "rigid_groups",
-           "with_self_pairs", "write_self_pairs"]
+           "adjacent_pairs", "rigid_groups", "default_pairs", "with_default_pairs",
+           "DEFAULT_NOTE", "with_self_pairs", "write_self_pairs"]
+
+#: ``RobotModel.notes`` key listing the "Default" pairs (JSON ``[[frame a, frame b], ...]``;
+#: the same key as :data:`jwarp.importers.srdf.DEFAULT_NOTE`)
+DEFAULT_NOTE = "self_collision_default"
 
 
 @dataclass
@@ -329,6 +341,63 @@ def _frame_pair_min(x: np.ndarray, r: np.ndarray, todo: np.ndarray, a0: int, a1:
                 out[k:k + step] = np.minimum(out[k:k + step], d.min(axis=(1, 2)))
     return out
 
+
+
+def default_pairs(robot: Any, home: Any, contact: Any
+                  ) -> tuple[list[tuple[int, int, float]], list[tuple[int, int, float]]]:
+    """MoveIt's "Default" rule, checked against the robot's own geometry: the checked frame
+    pairs (``RobotModel.allowed_collision_pairs``) whose spheres overlap at ``home``
+    ((n_dof,) [rad or m]), split into ``(default, fit)``, each ``[(a, b, depth [m] < 0)]``
+    (frame indices ``a < b``, deepest first): ``default`` where ``contact(a, b)`` is true
+    (the pair's geometry touches at ``home``: excluded, as MoveIt does), ``fit`` where it
+    is false (the spheres reach too far: a fit to correct, never an exclusion). ``contact``:
+    a callable ``(frame a, frame b) -> bool``."""
+    from jwarp.world.model_check import home_self_collisions
+
+    model = get_robot(robot)
+    q = np.asarray(home, np.float64).reshape(-1)
+    if q.shape != (model.n_dof,) or not np.all(np.isfinite(q)):
+        raise ValueError(f"home: expected {model.n_dof} finite joint values, got shape "
+                         f"{q.shape}")
+    if not callable(contact):
+        raise TypeError(f"contact: expected a callable (frame a, frame b) -> bool, got "
+                        f"{type(contact).__name__}")
+    default, fit = [], []
+    for na, nb, depth in home_self_collisions(model, q):
+        a, b = sorted((model.frame_index(na), model.frame_index(nb)))
+        (default if contact(a, b) else fit).append((a, b, depth))
+    return default, fit
+
+
+def with_default_pairs(robot: Any, pairs: Any) -> RobotModel:
+    """A copy of ``robot`` whose ``exclude_pairs`` also hold ``pairs`` (frame index pairs,
+    e.g. the ``default`` of :func:`default_pairs`; extra items are ignored), listed by name
+    in ``notes['self_collision_default']`` (added to those listed already)."""
+    import json
+
+    model = get_robot(robot)
+    nf = model.n_frames
+    new = []
+    for p in pairs:
+        a, b = int(p[0]), int(p[1])
+        if not (0 <= a < nf and 0 <= b < nf) or a == b:
+            raise ValueError(f"pairs: frame pair ({a}, {b}) out of range for robot "
+                             f"'{model.name}' ({nf} frames)")
+        new.append((min(a, b), max(a, b)))
+    if not new:
+        return model
+    sc = model.self_collision
+    have = {tuple(sorted(p)) for p in sc.exclude_pairs}
+    names = model.frame_names
+    notes = dict(model.notes)
+    listed = json.loads(notes.get(DEFAULT_NOTE) or "[]")
+    listed += [[names[a], names[b]] for a, b in new if [names[a], names[b]] not in listed]
+    notes[DEFAULT_NOTE] = json.dumps(listed)
+    new_sc = SelfCollision(groups={k: list(v) for k, v in sc.groups.items()},
+                           include_pairs=list(sc.include_pairs),   # exclusion wins
+                           exclude_pairs=list(sc.exclude_pairs)
+                           + sorted(set(new) - have))
+    return model.copy(self_collision=new_sc, notes=notes)
 
 
 def with_self_pairs(robot: Any, pairs: SelfPairs, *, replace: bool = True) -> RobotModel:

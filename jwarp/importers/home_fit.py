@@ -1,0 +1,450 @@
+"""The home configuration of an imported robot made free of self-collision, as a MoveIt
+user's setup would, without hiding real collisions (docs/urdf.md, "Home configuration").
+
+:func:`fit_home` takes the robot being imported (:class:`~jwarp.importers.robot.UrdfRobot`,
+for its collision geometry) and its jwarp model (fitted spheres, sampled pairs, SRDF pairs,
+planning group) and looks at the frame pairs whose spheres overlap at the home:
+
+* **Default** (MoveIt's setup assistant disables the pairs in collision at the default
+  configuration, reason "Default"): only where the URDF's own collision geometry of the
+  two links is in contact there (closer than ``contact_margin``, overlapping included).
+  The contact test is jwarp's own: surface points of one link's geometry (its vertices and
+  ``n_surface`` area-uniform samples) against the other's solid (signed distance by
+  generalised winding number, :func:`jwarp.importers.spheres.signed_distance`), both ways,
+  at the home's FK; sampled points give an upper bound of the true distance, so a pair
+  whose meshes are apart is never called in contact. The pairs are excluded
+  (:func:`jwarp.world.self_pairs.with_default_pairs`), listed in the report and in
+  ``notes['self_collision_default']`` (an exported SRDF writes them with
+  reason="Default"), and warned about by name.
+* **Tightened**: where the meshes are apart but the spheres overlap (spheres reaching past
+  the surface, up to the fit's protrusion), the overlapping spheres of the two links are
+  shrunk, never below their clearance (the distance of the centre to the link's surface:
+  the sphere then still holds the ball inside the solid), each pair by what it lacks to
+  ``gap`` split in proportion to the two spheres' protrusion, until the home is free. A
+  link whose shrunk spheres would leave its surface further than ``tolerance`` outside
+  them (the one-sided error on ``n_surface`` samples; None: not bounded) is put back as
+  it was and, with ``refit``, fitted again (:func:`jwarp.importers.spheres.fit_link`,
+  same tolerance) with a protrusion of half the URDF geometry's distance to its partner
+  at the home, less ``gap`` (so the pair is free whatever the partner's spheres do within
+  their own protrusion), then tightened again where still needed. A pair still
+  overlapping stays checked and is in the report's ``remaining``: no collision is hidden.
+
+The home (:func:`resolve_home`): an SRDF ``<group_state>`` name, joint values, or None
+(:func:`jwarp.world.model_check.home_configuration`: zeros projected into the limits).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from jwarp.importers.spheres import load_mesh, one_sided_error, primitive_mesh, signed_distance
+from jwarp.model import RobotModel, Sphere
+
+__all__ = ["HomeFitOptions", "HomeFitReport", "HomeFitWarning", "fit_home", "resolve_home",
+           "link_mesh", "mesh_distance"]
+
+
+class HomeFitWarning(UserWarning):
+    """A pair excluded by the Default rule, spheres tightened, or a home left in collision."""
+
+
+@dataclass
+class HomeFitOptions:
+    """Options of :func:`fit_home` (module docstring).
+
+    Attributes:
+        contact_margin: URDF geometry closer than this at the home [m] is in contact (the
+            Default rule); overlapping geometry always is.
+        gap: surface distance [m] left between the tightened spheres of a pair.
+        tolerance: largest one-sided error [m] of a tightened link's surface (None: not
+            bounded); the import passes its fit tolerance.
+        n_surface: area-uniform surface samples per link (contact test and coverage).
+        seed: seed of the samples (and of a refit).
+        refit: a link whose shrunk spheres would exceed ``tolerance`` is fitted again
+            with a protrusion that fits the home (False: left as it was).
+    """
+
+    contact_margin: float = 0.001
+    gap: float = 1e-4
+    tolerance: float | None = None
+    n_surface: int = 4000
+    seed: int = 0
+    refit: bool = True
+
+    def validate(self) -> "HomeFitOptions":
+        for key in ("contact_margin", "gap", "tolerance"):
+            v = getattr(self, key)
+            if v is None and key == "tolerance":
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                    or v < 0:
+                raise ValueError(f"{key}: expected a finite distance >= 0 [m], got {v!r}")
+        if isinstance(self.n_surface, bool) or not isinstance(self.n_surface, int) \
+                or self.n_surface < 100:
+            raise ValueError(f"n_surface: expected an integer >= 100, got {self.n_surface!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
+            raise TypeError(f"seed: expected an integer, got {type(self.seed).__name__}")
+        return self
+
+
+@dataclass
+class HomeFitReport:
+    """What :func:`fit_home` did. ``home``: (n_dof,) values [rad or m] and ``home_from``
+    (where they came from); ``default_pairs``: ``{"links": [a, b], "sphere_depth_m",
+    "mesh_distance_m"}`` excluded (reason Default); ``tightened``: per link ``{"link",
+    "spheres" (count shrunk), "largest_cut_m", "one_sided_error_m": [before, after]}``;
+    ``remaining``: pairs still overlapping at the home ``{"links", "sphere_depth_m",
+    "mesh_distance_m", "why"}``; ``warnings``: the lines warned."""
+
+    home: list[float]
+    home_from: str
+    default_pairs: list[dict] = field(default_factory=list)
+    tightened: list[dict] = field(default_factory=list)
+    remaining: list[dict] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def home_free(self) -> bool:
+        """No checked pair overlaps at the home any more."""
+        return not self.remaining
+
+    def to_dict(self) -> dict:
+        return {**asdict(self), "home_free": self.home_free}
+
+    def summary(self) -> str:
+        """One line for the import's summary."""
+        d = ", ".join("/".join(p["links"]) for p in self.default_pairs) or "none"
+        t = ", ".join(
+            f"{r['link']} (fitted again: protrusion {1e3 * r['protrusion_m']:.1f} mm, "
+            f"{r['spheres']} spheres)" if r.get("refit") else
+            f"{r['link']} ({r['spheres']} spheres, up to {1e3 * r['largest_cut_m']:.1f} mm)"
+            for r in self.tightened if not r.get("reverted")) or "none"
+        state = "free" if self.home_free else (
+            "IN COLLISION: " + ", ".join("/".join(p["links"]) for p in self.remaining))
+        return (f"home ({self.home_from}): {state}; Default pairs excluded: {d}; spheres "
+                f"tightened: {t}")
+
+
+# ------------------------------------------------------------------ the home
+def resolve_home(model: RobotModel, home: Any = None, srdf: Any = None) -> tuple[np.ndarray, str]:
+    """(q (n_dof,) [rad or m], where it came from) of ``home``: None (zeros projected into
+    the limits), the name of an SRDF ``<group_state>`` of ``srdf`` (its joints of
+    ``model``; the others as for None), or ``n_dof`` numbers. A revolute joint's value
+    outside its limits is moved by a multiple of 2 pi into them where it fits (the same
+    pose: SRDFs write angles in (-pi, pi]). ValueError naming ``home`` for an unknown
+    state, a wrong count, a value outside the joint's limits."""
+    from jwarp.world.model_check import home_configuration
+
+    q = home_configuration(model)
+    lim = model.joint_limits
+    if home is None:
+        return q, "zeros projected into the limits"
+    if isinstance(home, str):
+        if srdf is None:
+            raise ValueError(f"home: state '{home}' needs an SRDF (srdf / --srdf); or give "
+                             f"{model.n_dof} joint values")
+        values = srdf.state(home)   # SrdfError naming the file and the states
+        used = [j for j in values if j in model.joint_names]
+        if not used:
+            raise ValueError(f"home: SRDF state '{home}' sets none of the joints of robot "
+                             f"'{model.name}' ({', '.join(model.joint_names)})")
+        for j in used:
+            q[model.joint_index(j)] = values[j]
+        what = f"SRDF group_state '{home}'"
+    else:
+        if isinstance(home, (bytes, dict)) or not isinstance(home, (Sequence, np.ndarray)):
+            raise TypeError(f"home: expected a state name or joint values, got "
+                            f"{type(home).__name__}")
+        v = np.asarray(home, np.float64).reshape(-1)
+        if v.shape != (model.n_dof,) or not np.all(np.isfinite(v)):
+            raise ValueError(f"home: expected {model.n_dof} finite joint values (joints "
+                             f"{', '.join(model.joint_names)}), got {len(v)}")
+        q = v.copy()
+        what = "given joint values"
+    tol = 1e-9 * np.maximum(1.0, np.abs(lim).max(axis=1))
+    for j, jt in enumerate(model.joints):   # a revolute joint's value + 2 pi k: same pose
+        if jt.type != "prismatic" and not lim[j, 0] - tol[j] <= q[j] <= lim[j, 1] + tol[j]:
+            k = math.ceil((lim[j, 0] - tol[j] - q[j]) / (2 * math.pi))
+            if q[j] + 2 * math.pi * k <= lim[j, 1] + tol[j]:
+                q[j] += 2 * math.pi * k
+    bad = np.flatnonzero((q < lim[:, 0] - tol) | (q > lim[:, 1] + tol))
+    if len(bad):
+        j = int(bad[0])
+        raise ValueError(f"home: {model.joint_names[j]}={q[j]:g} is outside the joint's "
+                         f"limits [{lim[j, 0]:g}, {lim[j, 1]:g}] ({what})")
+    return np.clip(q, lim[:, 0], lim[:, 1]), what
+
+
+# ------------------------------------------------------------------ geometry
+def link_mesh(robot: Any, link: str) -> Any:
+    """The collision geometry of ``link`` of an imported URDF (``robot``: a
+    :class:`~jwarp.importers.robot.UrdfRobot`) as one trimesh in the link frame [m]
+    (primitives tessellated), or None when it has none or a mesh file is missing."""
+    import trimesh
+
+    parts = []
+    for g in robot.geometries:
+        if g.link != link:
+            continue
+        if g.kind == "mesh":
+            if getattr(g, "mesh", None) is not None:
+                m = g.mesh.copy()
+            elif g.mesh_path is None:
+                return None
+            else:
+                m = load_mesh(g.mesh_path, g.scale)
+        else:
+            m = primitive_mesh(g.kind, g.size)
+        m = m.copy()
+        m.apply_transform(np.asarray(g.origin, np.float64))
+        parts.append(m)
+    if not parts:
+        return None
+    return parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
+
+
+def _surface_points(mesh: Any, n: int, seed: int) -> np.ndarray:
+    """(m, 3) the mesh's vertices (at most ``n``) and ``n`` area-uniform samples."""
+    import trimesh
+
+    v = np.asarray(mesh.vertices, np.float64)
+    if len(v) > n:
+        v = v[np.random.default_rng(seed).permutation(len(v))[:n]]
+    pts, _ = trimesh.sample.sample_surface(mesh, n, seed=seed)
+    return np.concatenate([v, np.asarray(pts, np.float64)])
+
+
+def _moved(T: np.ndarray, p: np.ndarray) -> np.ndarray:
+    return p @ T[:3, :3].T + T[:3, 3]
+
+
+def mesh_distance(mesh_a: Any, T_a: np.ndarray, mesh_b: Any, T_b: np.ndarray, *,
+                  n_surface: int = 4000, seed: int = 0) -> float:
+    """Smallest distance [m] between the solids of ``mesh_a`` posed at ``T_a`` (4, 4) and
+    ``mesh_b`` at ``T_b``, negative when they overlap (as deep as the deepest sampled point
+    of one inside the other): surface points of each (vertices and ``n_surface``
+    samples) against the other's signed distance (winding number). An upper bound of the
+    true distance (the sampled points of the nearest spot may miss it by their spacing)."""
+    Ta, Tb = np.asarray(T_a, np.float64), np.asarray(T_b, np.float64)
+    pa = _surface_points(mesh_a, n_surface, seed)
+    pb = _surface_points(mesh_b, n_surface, seed + 1)
+    inv_b, inv_a = np.linalg.inv(Tb), np.linalg.inv(Ta)
+    d_ab = signed_distance(mesh_b, _moved(inv_b @ Ta, pa))
+    d_ba = signed_distance(mesh_a, _moved(inv_a @ Tb, pb))
+    return float(min(d_ab.min(), d_ba.min()))
+
+
+# ------------------------------------------------------------------ the fit
+def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
+             options: HomeFitOptions | None = None, *, srdf: Any = None
+             ) -> tuple[RobotModel, HomeFitReport]:
+    """``model`` (default ``robot.model``; its frames those of the imported ``robot``, e.g.
+    fitted and reduced to a planning group) with its home made free of self-collision by
+    the Default rule and tightened spheres (module docstring); ``home`` as in
+    :func:`resolve_home` (``srdf``: a parsed :class:`~jwarp.importers.srdf.Srdf` for a
+    state name). Returns (model, report); warns (:class:`HomeFitWarning`) naming every
+    excluded pair, tightened link and pair left in collision."""
+    from jwarp.kinematics.fk import fk
+    from jwarp.world.model_check import home_self_collisions
+    from jwarp.world.self_pairs import default_pairs, with_default_pairs
+
+    o = (HomeFitOptions() if options is None else options)
+    if not isinstance(o, HomeFitOptions):
+        raise TypeError(f"options: expected HomeFitOptions, got {type(o).__name__}")
+    o.validate()
+    model = robot.model if model is None else model
+    if not isinstance(model, RobotModel):
+        raise TypeError(f"model: expected a RobotModel, got {type(model).__name__}")
+    if model.frame_names[:len(robot.model.frame_names)] != robot.model.frame_names:
+        raise ValueError("model: its frames are not those of the imported robot")
+    q, where = resolve_home(model, home, srdf)
+    report = HomeFitReport(home=q.tolist(), home_from=where)
+    if not model.spheres:
+        return model, report
+    names = model.frame_names
+    T = fk(model, q[None], device="cpu", dtype=np.float64)[0]
+    meshes: dict[int, Any] = {}
+
+    def mesh_of(f: int) -> Any:
+        if f not in meshes:
+            meshes[f] = link_mesh(robot, names[f])
+        return meshes[f]
+
+    dist: dict[tuple[int, int], float] = {}
+
+    def distance(a: int, b: int) -> float:
+        if (a, b) not in dist:
+            ma, mb = mesh_of(a), mesh_of(b)
+            dist[a, b] = (math.nan if ma is None or mb is None else
+                          mesh_distance(ma, T[a], mb, T[b], n_surface=o.n_surface, seed=o.seed))
+        return dist[a, b]
+
+    default, fit = default_pairs(model, q, lambda a, b: distance(a, b) <= o.contact_margin)
+    for a, b, depth in default:
+        report.default_pairs.append({"links": [names[a], names[b]], "sphere_depth_m": depth,
+                                     "mesh_distance_m": distance(a, b)})
+        report.warnings.append(
+            f"links '{names[a]}' and '{names[b]}' are in collision at the home ({where}): "
+            f"their URDF collision geometry is {_contact_words(distance(a, b))}; the pair "
+            f"is excluded from self-collision checks (reason Default, as MoveIt's setup "
+            f"assistant does)")
+    model = with_default_pairs(model, [(a, b) for a, b, _ in default])
+    if fit:
+        pairs = [(a, b) for a, b, _ in fit]
+        model = _tighten(robot, model, T, pairs, o, report, mesh_of)
+        back = [r["frame"] for r in report.tightened if r.get("reverted")]
+        if back and o.refit:
+            model = _refit(robot, model, back, pairs, o, report, distance)
+            left = {tuple(sorted((names.index(na), names.index(nb))))
+                    for na, nb, _ in home_self_collisions(model, q)}
+            again = [p for p in pairs if p in left]
+            if again:
+                model = _tighten(robot, model, T, again, o, report, mesh_of)
+    # what is left (pairs without geometry, or tightening that would uncover a surface)
+    for na, nb, depth in home_self_collisions(model, q):
+        a, b = sorted((names.index(na), names.index(nb)))
+        d = distance(a, b)
+        why = ("no URDF collision geometry to compare" if math.isnan(d) else
+               "tightening would uncover a surface beyond the tolerance"
+               if any(r["link"] in (na, nb) for r in report.tightened if r.get("reverted"))
+               else "spheres at their clearance still overlap")
+        report.remaining.append({"links": [names[a], names[b]], "sphere_depth_m": depth,
+                                 "mesh_distance_m": d, "why": why})
+        report.warnings.append(f"links '{names[a]}' and '{names[b]}' remain in collision at "
+                               f"the home ({where}): spheres {-1e3 * depth:.1f} mm deep, URDF "
+                               f"geometry {_contact_words(d)} ({why})")
+    for w in report.warnings:
+        warnings.warn(w, HomeFitWarning, stacklevel=2)
+    return model, report
+
+
+def _contact_words(d: float) -> str:
+    if math.isnan(d):
+        return "missing"
+    if d < 0:
+        return f"overlapping by {-1e3 * d:.1f} mm"
+    return f"{1e3 * d:.1f} mm apart"
+
+
+def _tighten(robot: Any, model: RobotModel, T: np.ndarray, pairs: list[tuple[int, int]],
+             o: HomeFitOptions, report: HomeFitReport, mesh_of: Any) -> RobotModel:
+    """Shrink the overlapping spheres of the frame ``pairs`` at the home's FK ``T``
+    (n_frames, 4, 4) towards their clearance (module docstring); the report's
+    ``tightened`` rows."""
+    sf, sp, sr = model.sphere_arrays()
+    x = np.einsum("sij,sj->si", T[sf, :3, :3], sp) + T[sf, :3, 3]
+    frames = sorted({f for p in pairs for f in p})
+    lo = sr.copy()            # no geometry: the sphere stays as it is
+    for f in frames:
+        m = mesh_of(f)
+        idx = np.flatnonzero(sf == f)
+        if m is None or not len(idx):
+            continue
+        clear = -signed_distance(m, sp[idx])
+        lo[idx] = np.clip(clear, 0.0, sr[idx])
+    r = sr.copy()
+    for _ in range(50):
+        cut = np.zeros_like(r)
+        for a, b in pairs:
+            ia, ib = np.flatnonzero(sf == a), np.flatnonzero(sf == b)
+            d = (np.linalg.norm(x[ia, None] - x[None, ib], axis=-1) - r[ia, None] - r[None, ib])
+            for i, j in zip(*np.nonzero(d < o.gap)):
+                need = o.gap - d[i, j]
+                si, sj = r[ia[i]] - lo[ia[i]], r[ib[j]] - lo[ib[j]]
+                tot = si + sj
+                if tot <= 0:
+                    continue
+                k = min(1.0, need / tot)
+                cut[ia[i]] = max(cut[ia[i]], k * si)
+                cut[ib[j]] = max(cut[ib[j]], k * sj)
+        if cut.max() <= 1e-12:
+            break
+        r = np.maximum(r - cut, lo)
+    changed = np.flatnonzero(r < sr)
+    if not len(changed):
+        return model
+    spheres = list(model.spheres)
+    for f in sorted({int(sf[i]) for i in changed}):
+        idx = np.flatnonzero(sf == f)
+        mine = [i for i in idx if r[i] < sr[i]]
+        pts = _surface_points(mesh_of(f), o.n_surface, o.seed + 2)
+        before = float(one_sided_error(pts, sp[idx], sr[idx]).max())
+        after = float(one_sided_error(pts, sp[idx], r[idx]).max())
+        row = {"link": model.frame_names[f], "frame": f, "spheres": len(mine),
+               "largest_cut_m": float(max(sr[i] - r[i] for i in mine)),
+               "one_sided_error_m": [before, after]}
+        if o.tolerance is not None and after > max(o.tolerance, before) + 1e-12:
+            row["reverted"] = True
+            if o.refit:
+                row["why"] = (f"shrinking would leave the surface {1e3 * after:.1f} mm "
+                              f"outside the spheres")
+                report.tightened.append(row)
+                continue
+            report.warnings.append(
+                f"link '{row['link']}': shrinking {len(mine)} spheres by up to "
+                f"{1e3 * row['largest_cut_m']:.1f} mm would leave its surface "
+                f"{1e3 * after:.1f} mm outside them (tolerance {1e3 * o.tolerance:.1f} mm): "
+                f"not tightened")
+        else:
+            for i in mine:
+                s = spheres[i]
+                spheres[i] = Sphere(frame=s.frame, position=np.asarray(s.position),
+                                    radius=float(r[i]))
+            report.warnings.append(
+                f"link '{row['link']}': {len(mine)} spheres shrunk by up to "
+                f"{1e3 * row['largest_cut_m']:.1f} mm towards their clearance (they overlapped "
+                f"at the home while the URDF geometry does not); one-sided error "
+                f"{1e3 * before:.1f} -> {1e3 * after:.1f} mm")
+        report.tightened.append(row)
+    return model.copy(spheres=spheres)
+
+
+def _refit(robot: Any, model: RobotModel, frames: list[int], pairs: list[tuple[int, int]],
+           o: HomeFitOptions, report: HomeFitReport, distance: Any) -> RobotModel:
+    """Fit the spheres of ``frames`` again (:func:`jwarp.importers.spheres.fit_link`, the
+    import's tolerance) with a protrusion small enough for their ``pairs`` at the home:
+    half of the URDF geometry's distance there, less ``gap``. The report's rows of these
+    links say so (``refit``); a fit that fails leaves the link as it was."""
+    from jwarp.importers.spheres import fit_link
+
+    names = model.frame_names
+    spheres = list(model.spheres)
+    for f in frames:
+        row = next(r for r in report.tightened if r.get("frame") == f and r.get("reverted"))
+        gaps = [distance(a, b) for a, b in pairs if f in (a, b)]
+        p = 0.5 * (min(gaps) - o.gap) if gaps else math.nan
+        geoms = [g for g in robot.geometries if g.link == names[f]]
+        if not geoms or not p > 1e-4 or any(g.kind == "mesh" and getattr(g, "mesh", None)
+                                            is None and g.mesh_path is None for g in geoms):
+            row["why"] += "; no refit (no room between the links' geometry)"
+            report.warnings.append(f"link '{names[f]}': {row['why']}: not tightened")
+            continue
+        items = [{"kind": g.kind, "size": g.size, "origin": g.origin, "scale": g.scale,
+                  "mesh": (g.mesh if getattr(g, "mesh", None) is not None else g.mesh_path)
+                  if g.kind == "mesh" else None} for g in geoms]
+        try:
+            fit = fit_link(items, tolerance=float(o.tolerance), protrusion=float(p),
+                           seed=o.seed)
+        except (ValueError, TypeError) as e:
+            row["why"] += f"; refit failed: {e}"
+            report.warnings.append(f"link '{names[f]}': {row['why']}: not tightened")
+            continue
+        old = sum(1 for s in spheres if s.frame == f)
+        spheres = [s for s in spheres if s.frame != f] + [
+            Sphere(frame=f, position=np.asarray(c, np.float64), radius=float(r))
+            for c, r in zip(fit.centres, fit.radii)]
+        row.update(reverted=False, refit=True, protrusion_m=float(p), spheres_before=old,
+                   spheres=int(len(fit.radii)),
+                   one_sided_error_m=[row["one_sided_error_m"][0], float(fit.one_sided_error)])
+        report.warnings.append(
+            f"link '{names[f]}': {row['why']}; fitted again with protrusion "
+            f"{1e3 * p:.1f} mm (half its URDF geometry's distance to its partner at the home): "
+            f"{old} -> {len(fit.radii)} spheres, one-sided error "
+            f"{1e3 * fit.one_sided_error:.1f} mm")
+    return model.copy(spheres=spheres)
