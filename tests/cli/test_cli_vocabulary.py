@@ -156,10 +156,59 @@ def test_defaults_that_differ_from_the_python_api_are_named_in_help(capsys):
     assert cli != api
     h = _help_of(["plan"], "--iterations", capsys)
     assert f"default {cli}" in h[:200] and f"default is {api}" in h[:200]
-    # equal ones need no note: plan --starts/--waypoints/--step, ik --iterations
+
+
+def _defaults(command: str) -> dict:
+    return {a.dest: a.default for a in dict(_subparsers())[command]._actions
+            if a.option_strings}
+
+
+@pytest.mark.parametrize("command, api, names", [
+    ("plan", "jwarp.solvers.planner:plan",
+     {"step": "step", "margin": "margin", "seed": "seed", "self_margin": "self_margin",
+      "fallback": "fallback", "stop_when_solved": "stop_when_solved"}),
+    ("ik", "jwarp.solvers.ik:ik",
+     {"iterations": "max_iterations", "margin": "margin", "seed": "seed"}),
+    ("train ik", "jwarp.learn.train_ik:TrainIKOptions",
+     {"targets_per_world": "n_targets", "val_targets": "n_val", "hidden": "hidden",
+      "n_bps": "n_bps", "batch": "batch_size", "steps_per_epoch": "steps_per_epoch",
+      "lr": "lr", "mix": "mix", "seed": "seed"}),
+    ("train plan", "jwarp.learn.train_plan:TrainPlanOptions",
+     {"n_bps": "n_bps", "hidden": "hidden", "blocks": "n_blocks", "heads": "n_heads",
+      "batch": "batch_size", "steps_per_epoch": "steps_per_epoch", "lr": "lr"}),
+    ("calibrate", "jwarp.solvers.calibration:calibrate",
+     {"max_nfev": "max_nfev", "starts": "n_starts", "seed": "seed"}),
+])
+def test_cli_defaults_equal_the_python_api(command, api, names):
+    """Every other default the CLI shares with the Python API is the API's own."""
+    import dataclasses
+    import importlib
+
+    mod, name = api.split(":")
+    obj = getattr(importlib.import_module(mod), name)
+    if dataclasses.is_dataclass(obj):
+        ref = {f.name: f.default for f in dataclasses.fields(obj)}
+    else:
+        ref = {k: p.default for k, p in inspect.signature(obj).parameters.items()}
+    cli = _defaults(command)
+    for opt, param in names.items():
+        assert cli[opt] == ref[param], (command, opt, cli[opt], ref[param])
+
+
+def test_implicit_defaults_of_plan_and_ik_equal_the_api(capsys):
+    """--starts/--waypoints of plan and --starts of ik are filled in at run time (a warm
+    start changes them): the help names the API's values."""
+    from jwarp.solvers.ik import ik
+    from jwarp.solvers.planner import plan
+
+    import re
+
     sig = inspect.signature(plan).parameters
-    assert (sig["n_starts"].default, sig["n_waypoints"].default, sig["step"].default) == \
-        (8, 20, 0.01)
+    n_ik = inspect.signature(ik).parameters["n_starts"].default
+    for cmd, opt, n in ((["plan"], "--starts", sig["n_starts"].default),
+                        (["plan"], "--waypoints", sig["n_waypoints"].default),
+                        (["ik"], "--starts", n_ik)):
+        assert re.search(rf"\(default {n}\b", _help_of(cmd, opt, capsys)[:250]), (cmd, opt)
 
 
 # ------------------------------------------------------------------ configurations
