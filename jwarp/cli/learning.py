@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import re
 from pathlib import Path
 from typing import Any
@@ -363,10 +364,16 @@ def _plan_db_samples(args: argparse.Namespace, model: Any) -> tuple[Any, Any]:
     except ValueError as e:  # PathDBError: missing, not a database, another robot, corrupt
         raise CLIError(f"--data: {clean(e)}") from None
     try:
+        skipped: list = []
         samples = samples_from_db(db, model, hard_only=not args.all_paths,
-                                  n_waypoints=args.waypoints)
+                                  n_waypoints=args.waypoints, skip_damaged=args.skip_damaged,
+                                  skipped=skipped)
+        for item in skipped:
+            print(f"jwarp: warning: skipped {item['what']}", file=sys.stderr)
     except ValueError as e:
         msg = clean(e)
+        if "is damaged" in msg:
+            msg += " (--skip-damaged leaves damaged worlds and rows out)"
         if msg.startswith("n_waypoints: "):
             raise CLIError(f"--waypoints: {msg.removeprefix('n_waypoints: ')}") from None
         raise CLIError(f"--data: {msg}") from None
@@ -410,6 +417,8 @@ def cmd_train_plan(args: argparse.Namespace) -> int:
     from jwarp.core.arrays import init_warp
     from jwarp.learn.train_plan import TrainPlanOptions, improve, make_plan_data, train_plan
 
+    if args.skip_damaged and args.data is None:
+        raise CLIError("--skip-damaged: only with --data (a path database)")
     if args.data is None:  # the labelling's memory, before any world is made
         _check_label_memory(model, args)
     db_data = _plan_db_samples(args, model) if args.data is not None else None
@@ -613,6 +622,9 @@ def add_subcommands(sub: Any) -> None:
                    default=0.1, metavar="F",
                    help="with --data: fraction of its worlds held out for validation, unseen "
                         "in training (default 0.1; 0: no validation)")
+    s.add_argument("--skip-damaged", action="store_true",
+                   help="with --data: leave out worlds and path rows whose stored data is "
+                        "damaged (each named on stderr) instead of stopping at the first")
     s.add_argument("--all-paths", action="store_true",
                    help="with --data: also the paths not flagged hard (default: hard only; "
                         "infeasible paths are always left out)")

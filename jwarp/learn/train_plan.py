@@ -234,7 +234,8 @@ def make_plan_data(robot: Any, worlds: list, n_per_world: int, *, seed: int = 0,
 
 
 def samples_from_db(db: Any, robot: Any, *, world_ids: Any = None, hard_only: bool = True,
-                    feasible_only: bool = True, n_waypoints: int | None = None) -> PlanSamples:
+                    feasible_only: bool = True, n_waypoints: int | None = None,
+                    skip_damaged: bool = False, skipped: list | None = None) -> PlanSamples:
     """The stored labels of a path database (a path or an open
     :class:`jwarp.learn.dataset.PathDB`) as :class:`PlanSamples`: starts, goals, paths (the
     stored float32 values) of the worlds ``world_ids`` (None: all; in that order, tasks in
@@ -246,9 +247,12 @@ def samples_from_db(db: Any, robot: Any, *, world_ids: Any = None, hard_only: bo
 
     Errors (ValueError): a database of another robot (:class:`PathDBError` naming the
     file), a world id not in it, stored paths whose waypoint count is not ``n_waypoints``
-    (None: not checked), no selected row (naming the database)."""
+    (None: not checked), no selected row (naming the database), a damaged world or path
+    row (:class:`jwarp.learn.dataset.DamagedRowError`, naming the file, the world and the
+    row). ``skip_damaged``: damaged worlds and rows are left out instead and described in
+    the list ``skipped`` (as :func:`jwarp.learn.dataset.export_npz`)."""
     from jwarp.core.device import content_key
-    from jwarp.learn.dataset import PathDB, PathDBError
+    from jwarp.learn.dataset import DamagedRowError, PathDB, PathDBError
 
     model = get_robot(robot)
     own = not isinstance(db, PathDB)
@@ -265,8 +269,21 @@ def samples_from_db(db: Any, robot: Any, *, world_ids: Any = None, hard_only: bo
             raise ValueError(f"world_ids: database '{d.path}' has no world "
                              f"{', '.join(map(str, missing[:5]))}"
                              f"{' ...' if len(missing) > 5 else ''}")
+        if skip_damaged:
+            good = []
+            for i in ids:
+                try:
+                    d.world_row(i)
+                    good.append(i)
+                except DamagedRowError as e:
+                    if skipped is not None:
+                        skipped.append({"what": f"world {i} and its paths: {e}",
+                                        "world_id": i, "task": None})
+            ids = good
         try:
-            a = d.paths_of(ids)
+            a = d.paths_of(ids, skip_damaged=skip_damaged, skipped=skipped)
+        except DamagedRowError:
+            raise
         except ValueError as e:
             if "waypoints" not in str(e):
                 raise

@@ -353,6 +353,32 @@ def test_damaged_world_blob_named_and_skipped(capsys, tmp_path):
     assert "5 paths" in out
 
 
+def test_train_plan_data_damaged_named_and_skipped(capsys, tmp_path):
+    from jwarp.learn.dataset import DamagedRowError
+    from jwarp.learn.train_plan import samples_from_db
+
+    db = _db(tmp_path / "d.sqlite")
+    con = sqlite3.connect(db)
+    con.execute("UPDATE worlds SET occupancy = x'0102' WHERE world_id = 1")
+    con.execute("UPDATE paths SET waypoints = x'00' WHERE world_id = 2 AND task = 0")
+    con.commit()
+    con.close()
+    line = one_line_error(capsys, ["train", "plan", "--robot", "planar5", "--data", db,
+                                   "--all-paths", "--epochs", 1, "--out",
+                                   tmp_path / "m.pt"], "--data")
+    assert "world 2" in line and "task=0" in line and str(db) in line
+    assert "--skip-damaged" in line and not (tmp_path / "m.pt").exists()
+    skipped: list = []
+    s = samples_from_db(db, "planar5", hard_only=False, skip_damaged=True, skipped=skipped)
+    assert s.world_ids == [0, 2] and len(s.starts) == 5
+    assert [(k["world_id"], k["task"]) for k in skipped] == [(1, None), (2, 0)]
+    with pytest.raises(DamagedRowError) as e:    # the row, not "mixed waypoint counts"
+        samples_from_db(db, "planar5", hard_only=False, world_ids=[2])
+    assert "task=0" in str(e.value) and "mixes" not in str(e.value)
+    one_line_error(capsys, ["train", "plan", "--robot", "planar5", "--skip-damaged",
+                            "--epochs", 1, "--out", tmp_path / "m.pt"], "--skip-damaged")
+
+
 def test_damaged_path_row_named_without_skip(tmp_path):
     from jwarp.learn.dataset import DamagedRowError, PathDB
 
