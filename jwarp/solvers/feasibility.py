@@ -156,10 +156,8 @@ def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin
     if a.ndim < 2 or a.shape[-1] != model.n_dof or a.shape[-2] < 2:
         raise ValueError(f"paths: expected shape (..., W >= 2, {model.n_dof}), got {a.shape}")
     if kappa is None:
-        from jwarp.world.motion import motion_check
-
         flat = a.reshape(-1, a.shape[-2], a.shape[-1])
-        res = motion_check(model, world, device=device).check(
+        res = certify_check(model, world, device=device).check(
             flat, margin=margin, endpoint_margin=endpoint_margin, self_margin=self_margin)
         return res.ok.reshape(a.shape[:-2])
     q = substeps(a, n_substeps, device=device)
@@ -167,6 +165,19 @@ def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin
                           device=device, self_margin=self_margin)
     free = free.reshape(q.shape[:-1]).all(axis=-1)
     return free & within_limits(model, a).all(axis=-1)
+
+
+def certify_check(robot: Any, world: Any, device: Any = None) -> Any:
+    """The continuous check (:class:`jwarp.world.motion.MotionCheck`, the default
+    :class:`jwarp.world.motion.MotionOptions`: up to 4000 evaluations per segment) that
+    :func:`path_feasible` (the rigid model), the RRT-Connect's edges and the planner's
+    certificate of an RRT fallback path share: one cached check per (robot, world, device),
+    so a path the trees accept is proven by the same pairs, margins and evaluation budget
+    when the planner certifies it (the planner's iterations use a smaller budget, which
+    leaves a path grazing a self pair for ~0.1 mm "not yet proven")."""
+    from jwarp.world.motion import motion_check
+
+    return motion_check(robot, world, device=device)
 
 
 def check_substeps(n_substeps: Any) -> int:

@@ -48,7 +48,8 @@ from jwarp.kinematics.compensation import CompensationRows
 from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.kinematics.launch import kappa_array
 from jwarp.solvers.feasibility import (ELASTIC_CHECK, MAX_CHECK_SUBSTEPS, SWEEP_SAFETY,  # noqa: F401
-                                       check_endpoints, check_substeps, check_world,
+                                       certify_check, check_endpoints, check_substeps,
+                                       check_world,
                                        collision_free, elastic_equilibrium, initial_paths,
                                        path_feasible, polyline_path, sphere_centres,
                                        substeps, substeps_for_voxel, substeps_per_path)
@@ -101,7 +102,8 @@ class PlanResult:
     "fallback" (the gradient optimisation seeded with the RRT-Connect path,
     :mod:`jwarp.solvers.rrt`) or "none" (no feasible path). A fallback path is none of
     the multi-starts: its ``start_index`` is -1, its ``iterations`` those of the seeded
-    optimisation; ``n_feasible``, ``all_*`` stay the multi-starts'. ``timings`` [s]:
+    optimisation (0: the RRT path itself, certified as it is); ``n_feasible``, ``all_*``
+    stay the multi-starts'. ``fallback_notes``: what the fallback did. ``timings`` [s]:
     "optimizer" (the multi-starts) and, where it ran, "rrt" and "fallback_optimizer".
     """
 
@@ -128,6 +130,10 @@ class PlanResult:
     timings: dict = field(default_factory=dict, repr=False)
     #: (B,) "feasible" or why the problem's path is not (:meth:`Planner.explain`)
     reasons: Any = None
+    #: (B,) str: what the RRT fallback did for each problem ("" where it did not run):
+    #: no tree connection (and why), or its path certified / not certified (and why);
+    #: appended to ``reasons`` of a problem without a plan
+    fallback_notes: Any = None
 
     @property
     def all_paths(self) -> np.ndarray:
@@ -847,7 +853,18 @@ class Planner:
     def explain(self, res: PlanResult) -> list[str]:
         """Per problem of ``res``: "feasible", or why its best path is not: the first
         colliding link and object (or link pair), an uncertified approach, or the joint
-        limits (one check of the infeasible problems' paths on the device)."""
+        limits (one check of the infeasible problems' paths on the device), then what the
+        RRT fallback did ("; fallback: ...", :attr:`PlanResult.fallback_notes`)."""
+        out = self._explain(res)
+        notes = res.fallback_notes
+        if notes is not None:
+            for i in np.nonzero(~np.asarray(res.feasible, bool))[0]:
+                if notes[i]:
+                    out[i] = f"{out[i]}; fallback: {notes[i]}"
+        return out
+
+    def _explain(self, res: PlanResult) -> list[str]:
+        """:meth:`explain` without the fallback's notes."""
         out = ["feasible"] * len(res.feasible)
         bad = np.nonzero(~np.asarray(res.feasible, bool))[0]
         if not len(bad):
@@ -1038,13 +1055,19 @@ class Planner:
 def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarray, t0: float,
               deadline: float | None) -> None:
     """:attr:`PlanOptions.fallback` for the problems of ``res`` without a feasible path:
-    RRT-Connect (:func:`jwarp.solvers.rrt.rrt_connect`, with the planner's margin, kappa
+    RRT-Connect (:func:`jwarp.solvers.rrt.rrt_connect`, with the planner's margins, kappa
     and device) for each in turn, each path found resampled to the W waypoints
-    (:func:`jwarp.solvers.rrt.resample_path`) as the one seed of a gradient optimisation
-    of the same options (no fallback, ``stop_when_solved``) of all of them at once, its
-    exact check as always. Its feasible paths replace those problems' results in ``res``
-    (stage "fallback", ``start_index`` -1); ``stop_reason`` and ``timings`` updated. With a
-    ``deadline`` the trees get 80 % of the time left, the optimisation the rest."""
+    (:func:`jwarp.solvers.rrt.resample_path`: its nodes kept where it has at most W) as
+    the one seed of a gradient optimisation of the same options (no fallback,
+    ``stop_when_solved``) of all of them at once. On the rigid model that optimisation's
+    exact check is the RRT's own (:func:`jwarp.solvers.feasibility.certify_check`: the
+    same pairs, margins and evaluation budget), so a seed the trees proved is certified as
+    it is at iteration 0 and returned (the trees' shortcuts were checked by it too); a
+    seed that is not (more than W nodes, so its corners were cut) is optimised and kept
+    only if that ends certified. Its feasible paths replace those problems' results in
+    ``res`` (stage "fallback", ``start_index`` -1); ``fallback_notes``, ``stop_reason``
+    and ``timings`` updated. With a ``deadline`` the trees get 80 % of the time left, the
+    optimisation the rest."""
     from jwarp.solvers.rrt import RRTOptions, resample_path, rrt_connect
 
     o = planner.options
@@ -1054,12 +1077,14 @@ def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarra
     ropt = replace(ro, seed=rng)
     rrt_stop = None if deadline is None else t_rrt + 0.8 * max(0.0, deadline - t_rrt)
     W = res.path.shape[1]
-    found, seeds = [], []
+    notes = res.fallback_notes = np.full(len(res.feasible), "", dtype=object)
+    found, seeds, nodes = [], [], []
     timed_out = False
     for b in np.nonzero(~res.feasible)[0]:
         if rrt_stop is not None and time.perf_counter() >= rrt_stop:
             timed_out = True
-            break
+            notes[b] = "RRT-Connect not run: no time left"
+            continue
         r = rrt_connect(planner.robot, planner.world.select(int(b)), q0[b], q1[b], ropt,
                         margin=o.margin,
                         kappa=o.kappa, device=planner.device, deadline=rrt_stop,
@@ -1067,19 +1092,30 @@ def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarra
         if r.success:
             found.append(int(b))
             seeds.append(resample_path(r.path, W))
+            nodes.append(len(r.path))
+        else:
+            why = {"max_samples": f"all {r.n_samples} samples drawn",
+                   "time_limit": "out of time",
+                   "check_mismatch": "its path failed the edge-by-edge re-check"}.get(
+                       r.stop_reason, r.stop_reason)
+            notes[b] = (f"RRT-Connect found no path ({why}; {r.n_samples} samples, "
+                        f"{r.n_nodes} nodes, {r.wall_time:.2f} s)")
         timed_out |= r.stop_reason == "time_limit"
     res.timings["rrt"] = time.perf_counter() - t_rrt
     if found:
         t_opt = time.perf_counter()
         left = None if deadline is None else max(deadline - t_opt, 1e-6)
+        # every iteration checked (the first before any step: the seed as it is)
         sub_o = replace(o, n_starts=1, fallback=None, time_limit=left, stop_when_solved=True,
-                        callback=None)
+                        callback=None, check_all_every=1)
         sub_world = planner.world
         if planner.batched:  # the found problems' own worlds, as a batch of their own
             from jwarp.world.sdf import World
             sub_world = World.batch([planner.world.select(int(b)) for b in found])
         sub = Planner(planner.robot, sub_world, len(found), sub_o, device=planner.device,
                       dtype=planner.npdt)
+        if o.kappa is None:  # certify with the check that proved the RRT's edges
+            sub._motion = certify_check(planner.robot, sub_world, device=planner.device)
         idx = np.array(found)
         r2 = sub._plan(q0[idx], q1[idx], np.stack(seeds)[:, None], "seeds")
         timed_out |= r2.stop_reason == "time_limit"
@@ -1094,12 +1130,39 @@ def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarra
         res.start_index[b] = -1
         res.stage[b] = "fallback"
         res.timings["fallback_optimizer"] = time.perf_counter() - t_opt
+        for k, bb in enumerate(found):
+            cut = (f", resampled to {W} waypoints (corners cut)" if nodes[k] > W
+                   else f" as {W} waypoints")
+            if ok[k]:
+                how = ("certified as it is" if r2.iterations[k] == 0 else
+                       f"certified after {int(r2.iterations[k])} optimisation steps")
+                notes[bb] = f"RRT-Connect path of {nodes[k]} nodes{cut}: {how}"
+            else:
+                notes[bb] = (f"RRT-Connect path of {nodes[k]} nodes{cut} not certified "
+                             f"({_seed_reason(planner, sub, seeds[k], bb)}) and its "
+                             f"optimisation ended infeasible")
     if res.feasible.all():
         res.stop_reason = "solved"
     elif deadline is not None and (timed_out or time.perf_counter() >= deadline):
         res.stop_reason = "time_limit"
     else:
         res.stop_reason = "iterations"
+
+
+def _seed_reason(planner: "Planner", sub: "Planner", seed: np.ndarray, b: int) -> str:
+    """Why the fallback seed (W, n_dof) of problem ``b`` is not certified, in words (the
+    fallback optimisation's check, in the problem's own world)."""
+    o = planner.options
+    if o.kappa is not None:
+        ok = path_feasible(planner.robot, planner.world.select(int(b)), seed[None],
+                           sub.objective.n_sub if sub.objective is not None else 1,
+                           margin=o.margin, kappa=o.kappa, device=planner.device,
+                           self_margin=o.self_margin)[0]
+        return "certified now" if ok else "not feasible on the elastic model"
+    chk = certify_check(planner.robot, planner.world.select(int(b)), device=planner.device)
+    c = chk.check(seed[None].astype(planner.npdt).astype(np.float64), margin=o.margin,
+                  endpoint_margin=o.endpoint_margin, self_margin=o.self_margin)
+    return c.reason(0)
 
 
 def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed",
