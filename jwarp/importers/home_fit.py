@@ -30,7 +30,9 @@ planning group) and looks at the frame pairs whose spheres overlap at the home:
   overlapping stays checked and is in the report's ``remaining``: no collision is hidden.
 
 The home (:func:`resolve_home`): an SRDF ``<group_state>`` name, joint values, or None
-(:func:`jwarp.world.model_check.home_configuration`: zeros projected into the limits).
+(:func:`jwarp.world.model_check.home_configuration`: zeros projected into the limits);
+:func:`fit_home` writes it to ``notes['home']``, the first configuration of the solvers'
+collision-model check (:func:`jwarp.world.model_check.home_configurations`).
 """
 
 from __future__ import annotations
@@ -321,7 +323,13 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
                                f"geometry {_contact_words(d)} ({why})")
     for w in report.warnings:
         warnings.warn(w, HomeFitWarning, stacklevel=2)
-    return model, report
+    import json
+
+    from jwarp.world.model_check import HOME_NOTE
+
+    notes = dict(model.notes)
+    notes[HOME_NOTE] = json.dumps([float(v) for v in q])   # the solvers' check starts here
+    return model.copy(notes=notes), report
 
 
 def _contact_words(d: float) -> str:

@@ -8,8 +8,10 @@ errors at construction (:func:`check_collision_model`, used by
 :class:`jwarp.solvers.planner.Planner` and :class:`jwarp.solvers.ik.IKSolver`), unless the
 caller opts out (``allow_no_collision=True``; CLI ``--no-collision``).
 
-jwarp's robot models carry no home or default configuration, so two stand in for it
-(:func:`home_configurations`): the zero configuration projected into the joint limits, and
+A robot imported with ``jwarp import-urdf`` carries its home (``notes['home']``, JSON joint
+values: the SRDF state or values of ``--home``, made free of self-collision at import,
+:mod:`jwarp.importers.home_fit`); it is the first of :func:`home_configurations`. Two
+more stand in for a home: the zero configuration projected into the joint limits, and
 the middle of the limits. The self-collision check fails when the robot collides with itself
 at both (the Panda's zero configuration projected into its limits is folded, hand against
 link 5, while the middle of its limits is free, as for every robot shipped with jwarp).
@@ -26,7 +28,8 @@ from jwarp.kinematics.fk import fk
 from jwarp.registry import robot as get_robot
 from jwarp.world.collision import collision_pairs
 
-__all__ = ["NO_SPHERES_HINT", "home_configuration", "home_configurations",
+__all__ = ["NO_SPHERES_HINT", "HOME_NOTE", "noted_home", "home_configuration",
+           "home_configurations",
            "home_self_collisions", "check_collision_model"]
 
 #: how to get a collision model (the end of the error messages)
@@ -42,13 +45,38 @@ def home_configuration(robot: Any) -> np.ndarray:
     return project_numpy(model, np.zeros(model.n_dof))
 
 
+#: ``RobotModel.notes`` key of the home an import chose (JSON list of joint values)
+HOME_NOTE = "home"
+
+
+def noted_home(robot: Any) -> np.ndarray | None:
+    """(n_dof,) the home in ``notes['home']`` [rad or m], projected into the limits; None
+    when there is none or it does not fit the robot (another joint count, not numbers)."""
+    import json
+
+    model = get_robot(robot)
+    text = model.notes.get(HOME_NOTE)
+    if not text:
+        return None
+    try:
+        q = np.asarray(json.loads(text), np.float64).reshape(-1)
+    except (ValueError, TypeError):
+        return None
+    if q.shape != (model.n_dof,) or not np.all(np.isfinite(q)):
+        return None
+    return project_numpy(model, q)
+
+
 def home_configurations(robot: Any) -> list[tuple[str, np.ndarray]]:
-    """``[(label, q (n_dof,))]``: :func:`home_configuration` and the middle of the joint
-    limits (projected into linear limits), the configurations of the self-collision check."""
+    """``[(label, q (n_dof,))]``: the imported home (:func:`noted_home`) where the robot
+    has one, :func:`home_configuration` and the middle of the joint limits (projected into
+    linear limits), the configurations of the self-collision check."""
     model = get_robot(robot)
     mid = project_numpy(model, model.joint_limits.mean(axis=1))
-    return [("the zero configuration projected into the limits", home_configuration(model)),
-            ("the middle of the joint limits", mid)]
+    noted = noted_home(model)
+    return ([("its home (notes.home)", noted)] if noted is not None else []) + [
+        ("the zero configuration projected into the limits", home_configuration(model)),
+        ("the middle of the joint limits", mid)]
 
 
 def home_self_collisions(robot: Any, q: Any = None, *, device: Any = "cpu"
@@ -79,8 +107,8 @@ def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
                           option: str = "allow_no_collision=True",
                           device: Any = "cpu") -> None:
     """ValueError naming the robot when ``need_spheres`` and it has no collision spheres,
-    or when it is in self-collision at both :func:`home_configurations` (naming the frame
-    pairs and how deep they overlap).
+    or when it is in self-collision at every one of :func:`home_configurations` (naming the
+    frame pairs and how deep they overlap).
     ``what``: the work refused (e.g. "planning"); ``option``: the opt-out to name;
     ``device``: where the FK of the check runs."""
     model = get_robot(robot)
@@ -99,7 +127,8 @@ def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
         more = f" and {len(hits) - 4} more pairs" if len(hits) > 4 else ""
         found.append(f"at {label} {np.round(q, 4).tolist()}: {listed}{more}")
     raise ValueError(
-        f"robot: '{model.name}' is in self-collision at both of its home configurations, "
+        f"robot: '{model.name}' is in self-collision at "
+        f"{'both' if len(found) == 2 else f'all {len(found)}'} of its home configurations, "
         f"{'; '.join(found)}; its collision model is wrong (spheres reaching outside the "
         f"links: fit again with a smaller tolerance, or exclude the pairs in "
         f"self_collision.exclude_pairs), or pass {option} to skip this check")

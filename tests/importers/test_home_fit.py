@@ -250,6 +250,10 @@ def test_cli_home(boxes, tmp_path, capsys, monkeypatch):
     assert ["base", "b"] not in [p["links"] for p in hf["default_pairs"]]
     m = jwarp.robot(str(out))
     assert _overlaps(m, np.zeros(4)) == {}
+    from jwarp.world.model_check import home_configurations, noted_home
+    assert json.loads(m.notes["home"]) == [0.0] * 4 and noted_home(m).tolist() == [0.0] * 4
+    assert home_configurations(m)[0][0] == "its home (notes.home)"
+    assert noted_home(m.copy(notes={"home": "[1, 2]"})) is None    # not this robot's
     assert m.allowed_collision_pairs[m.frame_index("base"), m.frame_index("b")]
     for extra, match in ((["--home", "0,0"], "--home: expected 4 finite joint values"),
                          (["--home", "arm_up"], "--home: state 'arm_up' needs --srdf"),

@@ -15,7 +15,8 @@ import pytest
 import jwarp
 from jwarp.importers.groups import GroupOptions, plan_group
 from jwarp.importers.robot import example_robot_urdf, load_urdf
-from jwarp.importers.srdf import (SrdfError, group_joints, parse_srdf, read_srdf, srdf_path)
+from jwarp.importers.srdf import (SrdfError, SrdfWarning, group_joints, parse_srdf, read_srdf,
+                                  srdf_path)
 from jwarp.importers.urdf_export import export_urdf
 
 
@@ -177,6 +178,7 @@ def test_srdf_path():
     assert srdf_path("a/b.xml") == Path("a/b.xml.srdf")
 
 
+@pytest.mark.filterwarnings("ignore::jwarp.importers.srdf.SrdfWarning")
 def test_group_states_as_moveit_and_pinocchio_write_them(tmp_path):
     """States of one name in several groups are merged (MoveIt names states per group);
     pinocchio's SRDFs leave out ``group`` and give the floating base 7 numbers; a state
@@ -197,7 +199,8 @@ def test_group_states_as_moveit_and_pinocchio_write_them(tmp_path):
     assert s.state("home") == {"panda_joint2": -0.5, "panda_finger_joint1": 0.02}
     assert s.state("pin") == {"panda_joint2": 0.25}
     imp = load_urdf(urdf)
-    res = plan_group(imp, GroupOptions(srdf=path, joints=["panda_joint1"], state="home"))
+    with pytest.warns(SrdfWarning, match="1 entries name links or joints the URDF lacks.*'nope'"):
+        res = plan_group(imp, GroupOptions(srdf=path, joints=["panda_joint1"], state="home"))
     assert res.frozen["panda_joint2"] == -0.5 and res.frozen["panda_finger_joint1"] == 0.02
     assert res.source["panda_joint3"] == "default" and res.frozen["panda_joint3"] == 0.0
     res = plan_group(imp, GroupOptions(srdf=path, joints=["panda_joint1"], state="pin"))
