@@ -20,9 +20,15 @@ Per robot (a failing step is that row's error, never the end of the benchmark):
 2. **FK**: largest frame position [m] and rotation [rad] difference over ``--fk-configs``
    random configurations against pinocchio (URDF, every body frame of the same name) or
    MuJoCo's ``mj_kinematics`` (MJCF, bodies and sites of the same name).
+   Where example-robot-data ships an SRDF for the robot it is passed as a MoveIt user
+   would (``--srdf``, and ``--home <state>`` where the state names the URDF's joints;
+   ``--no-srdf``: neither); the import's home fit (Default pairs excluded where the URDF
+   meshes touch at the home, spheres tightened where they do not) is in the row's notes.
 3. **home**: the declared home (the SRDF group_state of example-robot-data: Panda
-   ``default``, TALOS ``half_sitting``, Baxter ``neutral``) else zeros, clipped into the
-   limits: free of self-collision (``is_collision_free`` with no world)? And, as an
+   ``default``, Kinova ``arm_up``, xArm7/Z1 ``home``, TALOS ``half_sitting``; Baxter's
+   ``neutral`` names joints ``baxter/...``: zeros, as it gives) else zeros; a revolute
+   angle outside the limits moved by 2 pi into them where it fits (Kinova ``arm_up``'s
+   joint 3), else clipped: free of self-collision (``is_collision_free`` with no world)? And, as an
    independent reference, the smallest distance between the URDF's own collision meshes
    (pinocchio + coal) over the link pairs jwarp checks (``home mesh mm``; 0: contact).
    (Zeros are no home for the Panda or the Kinova: their meshes touch there.)

@@ -15,5 +15,9 @@ def test_bench_robots_failed_imports_are_rows(run_bench):
         assert r["error"].startswith("import failed (exit 2)") and "--tolerance" in r["error"], r
         assert r["import_s"] > 0 and r["peak_gb"] > 0
         assert "--tolerance -1" in r["import_cmd"]
+    # the Panda is imported with the SRDF example-robot-data ships, and its default state
+    # as the home, as a MoveIt user would; the MJCF arm has none
+    assert "panda.srdf --home default" in rows[0]["import_cmd"]
+    assert "--srdf" not in rows[1]["import_cmd"]
     assert "| robot | dof | spheres |" in stdout and "ERROR import failed" in stdout
     assert doc["meets_acceptance"] == []
