@@ -2,48 +2,64 @@
 
 The facade: kinematics (:func:`fk`, :func:`fk_elastic`, :func:`jacobian`,
 :func:`jacobian_dh`), robots (:func:`robot`, :func:`robots`, :class:`RobotModel`), worlds
-(:class:`World`), and the solvers (:func:`plan`, :func:`ik`, :func:`calibrate`,
-:class:`Planner`, :class:`IKSolver`). The solvers and worlds are imported on first use, so
-``import jwarp`` stays light. The layers beneath are listed in README.md ("Architecture").
+(:class:`World`), the solvers (:func:`plan`, :func:`ik`, :func:`calibrate`,
+:class:`Planner`, :class:`IKSolver`) and :func:`warmup` (compile every kernel ahead of
+time). Every name, and every subpackage (``jwarp.kinematics``, ``jwarp.solvers``, ...), is
+imported on first use, so ``import jwarp`` costs no Warp, torch or scipy import (``jwarp
+--help`` starts in a fraction of a second). The layers beneath are listed in README.md
+("Architecture").
 """
 
 from typing import Any
-
-from jwarp.kinematics.equilibrium import elastic_step, fk_elastic, gravity_torques
-from jwarp.kinematics.fk import fk
-from jwarp.kinematics.jacobians import jacobian, jacobian_dh
-from jwarp.kinematics.launch import ElasticFK, ElasticStep
-from jwarp.model import RobotModel, RobotModelError
-from jwarp.registry import hookimpl, measurements, register_plugin, robot, robots
 
 __version__ = "0.1.0"
 
 #: facade names imported on first use: name -> module
 LAZY = {
+    "ElasticFK": "jwarp.kinematics.launch",
+    "ElasticStep": "jwarp.kinematics.launch",
+    "RobotModel": "jwarp.model",
+    "RobotModelError": "jwarp.model",
+    "elastic_step": "jwarp.kinematics.equilibrium",
+    "fk": "jwarp.kinematics.fk",
+    "fk_elastic": "jwarp.kinematics.equilibrium",
+    "gravity_torques": "jwarp.kinematics.equilibrium",
+    "hookimpl": "jwarp.registry",
+    "jacobian": "jwarp.kinematics.jacobians",
+    "jacobian_dh": "jwarp.kinematics.jacobians",
+    "measurements": "jwarp.registry",
+    "register_plugin": "jwarp.registry",
+    "robot": "jwarp.registry",
+    "robots": "jwarp.registry",
     "World": "jwarp.world.sdf",
     "plan": "jwarp.solvers.planner",
     "Planner": "jwarp.solvers.planner",
     "ik": "jwarp.solvers.ik",
     "IKSolver": "jwarp.solvers.ik",
     "calibrate": "jwarp.solvers.calibration.map",
+    "warmup": "jwarp.cli.warmup",
 }
 
-__all__ = [
-    "ElasticFK", "ElasticStep", "RobotModel", "RobotModelError", "elastic_step", "fk",
-    "fk_elastic", "gravity_torques", "hookimpl", "jacobian", "jacobian_dh", "measurements",
-    "register_plugin", "robot", "robots", *LAZY,
-]
+#: subpackages and modules reachable as attributes (``import jwarp; jwarp.kinematics.fk``)
+SUBMODULES = frozenset({
+    "atomic", "cli", "core", "importers", "kernels", "kinematics", "learn", "measurement",
+    "memory", "model", "plugins", "registry", "solvers", "viz", "world",
+})
+
+__all__ = sorted(LAZY)
 
 
 def __getattr__(name: str) -> Any:
-    if name in LAZY:
-        import importlib
+    import importlib
 
+    if name in LAZY:
         value = getattr(importlib.import_module(LAZY[name]), name)
         globals()[name] = value
         return value
+    if name in SUBMODULES:
+        return importlib.import_module(f"{__name__}.{name}")  # sets the attribute itself
     raise AttributeError(f"module 'jwarp' has no attribute {name!r}")
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(LAZY))
+    return sorted(set(globals()) | set(LAZY) | SUBMODULES)

@@ -123,7 +123,7 @@ def cmd_fk(args: argparse.Namespace) -> int:
 
     kind = "elastic" if args.elastic else "rigid"
     print(f"robot {model.name}: {kind} FK, {args.dtype} on {args.device}")
-    print(f"q [rad/m] = [{', '.join(f'{v:.6g}' for v in q)}]")
+    print(f"q [rad/m]: {', '.join(f'{n}={v:.6g}' for n, v in zip(model.joint_names, q))}")
     eff_of: dict[int, list[str]] = {}
     for ee, fi in model.end_effectors.items():
         eff_of.setdefault(fi, []).append(ee)

@@ -5,7 +5,8 @@ registered by explicit import: :mod:`jwarp.cli.kinematics` (``robots | info | fk
 eval plan``), :mod:`jwarp.cli.data`
 (``data generate | info | export``), :mod:`jwarp.cli.poses` (``sample-poses``),
 :mod:`jwarp.cli.design` (``sensitivity | design``), :mod:`jwarp.cli.urdf` (``import-urdf``),
-:mod:`jwarp.cli.urdf_export` (``export-urdf``), :mod:`jwarp.cli.mjcf` (``import-mjcf``).
+:mod:`jwarp.cli.urdf_export` (``export-urdf``), :mod:`jwarp.cli.mjcf` (``import-mjcf``),
+:mod:`jwarp.cli.warmup` (``warmup``: compile every kernel ahead of time).
 
 Examples and the joint-value syntax: :mod:`jwarp.cli.kinematics`. A value starting with a
 minus sign may follow any option directly (``--q -0.5,0,...``, ``-inf``, ``-nan``).
@@ -42,7 +43,7 @@ import zipfile
 from typing import Sequence
 
 from jwarp.cli import (calibration, data, design, kinematics, learning, mjcf, planning, poses,
-                       urdf, urdf_export)
+                       urdf, urdf_export, warmup)
 from jwarp.cli.common import (CLIError, Parser, fix_negative_values, plugin_warnings_one_line,
                                set_command_files,
                                value_options)
@@ -58,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
 
     for group in (kinematics, calibration, planning, learning, data, poses, design, urdf,
-                  urdf_export, mjcf):
+                  urdf_export, mjcf, warmup):
         group.add_subcommands(sub)
     return p
 

@@ -295,6 +295,10 @@ def test_ik_and_plan_text_print_joint_names(capsys, free_pair):
     assert [r[0] for r in table] == list(names)
     assert all(len(r) == 21 for r in table)          # name + 20 waypoints
     assert "= collision" in out and "x length" in out
+    code, out, _ = run(capsys, ["fk", "planar4", "--q", "0.1,0.2,0.3,0.4"])
+    qline = next(ln for ln in out.splitlines() if ln.startswith("q [rad/m]"))
+    assert code == 0 and qline.endswith(
+        ", ".join(f"{n}={v:g}" for n, v in zip(names, (0.1, 0.2, 0.3, 0.4))))
 
 
 # ------------------------------------------------------------------ no lost work

@@ -12,7 +12,9 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+# scipy.spatial.transform is imported inside the functions: importing it costs 0.3 s, and
+# every plugin load (any `jwarp` command) imports this module (issue 27: CLI start-up).
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -30,6 +32,8 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 def rotvec_matrix(r: np.ndarray) -> np.ndarray:
     """Rotation matrix (3, 3) of a rotation vector r (3,) [rad]."""
+    from scipy.spatial.transform import Rotation
+
     return Rotation.from_rotvec(np.asarray(r, dtype=np.float64)).as_matrix()
 
 
@@ -53,6 +57,8 @@ def nearest_rotvec(R: np.ndarray, ref: np.ndarray) -> np.ndarray:
     representations ``(angle + 2 pi k) axis`` (a rotation near pi has two nearly opposite
     ones). Keeps a fitted pose next to its prior mean, so the Gaussian prior on the rotation
     vector measures the actual change."""
+    from scipy.spatial.transform import Rotation
+
     r = Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_rotvec()
     ref = np.asarray(ref, dtype=np.float64)
     th = float(np.linalg.norm(r))
@@ -101,6 +107,8 @@ def rigid_align(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarra
     sv = np.linalg.svd(a, compute_uv=False)
     if sv[1] <= 1e-9 * max(sv[0], 1e-300):
         raise ValueError("rigid_align: the points are collinear; the rotation is not determined")
+    from scipy.spatial.transform import Rotation
+
     rot, _ = Rotation.align_vectors(b, a)
     R = rot.as_matrix()
     return R, md - R @ ms

@@ -30,7 +30,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from jwarp.model import RobotModel
 from jwarp.plugins.measurements import geometry as g
@@ -245,6 +244,8 @@ class ImageMeasurement(Measurement):
         if not ok or not np.all(np.isfinite(rvec)) or not np.all(np.isfinite(tvec)):
             raise ValueError("initial_guess: PnP failed (degenerate marker positions)")
         rvec, tvec = cv2.solvePnPRefineLM(obj, undist, np.eye(3), None, rvec, tvec)
+        from scipy.spatial.transform import Rotation  # lazy: 0.3 s at import
+
         Rcf = Rotation.from_rotvec(rvec.ravel()).as_matrix()   # x_cam = Rcf x_F + t
         out = p.copy()
         out[3:6] = g.nearest_rotvec(Rcf.T, p[3:6])   # the representation next to the prior

@@ -50,6 +50,7 @@ from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
+from jwarp.core.threads import limit_blas
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.calibration.params import ParameterSpace, parse_groups
 
@@ -419,6 +420,7 @@ def prior_information(space: ParameterSpace) -> np.ndarray:
     return 1.0 / space.sigma ** 2
 
 
+@limit_blas  # small dense problems (JWARP_BLAS_THREADS)
 def design(robot: Any, actual: Any, q_pool: Any, options: DesignOptions, *,
            free: str | Iterable[str], meta_pool: Mapping[str, Any] | None = None,
            task: Any = None, q_task: Any = None, meta_task: Mapping[str, Any] | None = None,

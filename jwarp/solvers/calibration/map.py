@@ -37,6 +37,7 @@ from scipy.optimize import OptimizeResult, least_squares
 from jwarp import kinematics as K
 from jwarp.core.arrays import finite_as, init_warp, resolve_device, to_output
 from jwarp.core.device import with_frame_masses, with_kappa_nonlinear
+from jwarp.core.threads import limit_blas
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.calibration.elastic import (ElasticComponents, effective_kappa,
@@ -916,6 +917,7 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
     return calibrate_with(robot, measurement, q, y, options, meta=meta, t0=t0)
 
 
+@limit_blas  # small dense solves: a threaded BLAS only oversubscribes (JWARP_BLAS_THREADS)
 def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
                    *, meta: Mapping[str, Any] | None = None, t0: float | None = None
                    ) -> CalibrationResult:

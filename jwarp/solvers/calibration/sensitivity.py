@@ -42,6 +42,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from jwarp.core.threads import limit_blas
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.calibration.params import ROBOT_GROUPS, ParameterSpace, parse_groups
 
@@ -281,6 +282,7 @@ def align(J: np.ndarray, names: list[str], union: list[str]) -> np.ndarray:
     return out
 
 
+@limit_blas  # small dense problems (JWARP_BLAS_THREADS)
 def sensitivity(robot: Any, actual: Any, q_actual: Any, task: Any, q_task: Any,
                 free: str | Iterable[str], *, meta_actual: Mapping[str, Any] | None = None,
                 meta_task: Mapping[str, Any] | None = None, whiten: bool = False,

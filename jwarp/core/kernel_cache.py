@@ -1,0 +1,251 @@
+"""Warp's kernel cache as jwarp sees it: where it is, and a notice when jwarp's kernels
+have to be compiled.
+
+Warp compiles each kernel from source on its first launch (10-30 s a kernel family on a
+small CPU) and keeps the binary in its kernel cache: ``wp.config.kernel_cache_dir``, by
+default ``~/.cache/warp/<warp version>`` (Linux), or ``$WARP_CACHE_PATH/<warp version>``
+when the environment variable ``WARP_CACHE_PATH`` is set. A binary is found again by the
+hash of its kernel's source and options, so a cache stays valid until jwarp or Warp
+changes.
+
+:func:`install_compile_notice` (called by :func:`jwarp.core.arrays.init_warp`) makes the
+first compilation of a process print one line on stderr::
+
+    jwarp: compiling jwarp kernels for cpu (first run only, cached in /root/.cache/warp/1.19.0)
+
+and, on a terminal, a progress bar (tqdm) while a compilation takes more than 1 s.
+``JWARP_COMPILE_NOTICE=0`` silences both. Loads from the cache print nothing. The notice
+wraps Warp's ``Module._compile`` (which Warp calls for every module load not yet in
+memory, cached or not) and decides "compile" the way Warp does: the module's binary is
+not in the cache. Should a later Warp rename that method, the notice silently does
+nothing; the kernels work as before.
+
+:func:`compile_progress` shows one bar over a known number of module loads
+(``jwarp warmup``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import inspect
+import os
+import sys
+import threading
+import time
+from typing import Any, Callable, Iterator
+
+import warp as wp
+
+__all__ = ["CACHE_ENV", "NOTICE_ENV", "cache_dir", "compile_progress", "compiled_modules",
+           "install_compile_notice", "notice_enabled"]
+
+#: Warp's environment variable for the kernel cache's parent folder
+CACHE_ENV = "WARP_CACHE_PATH"
+#: ``JWARP_COMPILE_NOTICE=0`` silences the compile notice and its progress bar
+NOTICE_ENV = "JWARP_COMPILE_NOTICE"
+#: seconds a compilation runs before its progress bar appears
+BAR_DELAY = 1.0
+
+_NO_BAR = object()  # the bar could not be made (no tqdm): the line suffices
+
+_LOCK = threading.RLock()
+_STATE: dict[str, Any] = {"installed": False, "announced": False, "compiled": [],
+                          "active": 0, "bar": None, "progress": None, "ticker": None}
+
+
+def cache_dir() -> str:
+    """The folder of Warp's kernel cache (``wp.config.kernel_cache_dir``; Warp is
+    initialised if it was not)."""
+    if wp.config.kernel_cache_dir is None:  # as jwarp.core.arrays.init_warp: quietly
+        if hasattr(wp, "LOG_WARNING"):
+            wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+        wp.init()
+    return str(wp.config.kernel_cache_dir)
+
+
+def notice_enabled() -> bool:
+    """False when ``JWARP_COMPILE_NOTICE`` is ``0``/``false``/``no``/``off``."""
+    return os.environ.get(NOTICE_ENV, "1").strip().lower() not in ("0", "false", "no", "off")
+
+
+def compiled_modules() -> list[str]:
+    """Names of the jwarp kernel modules this process compiled (not loaded from the
+    cache), in order."""
+    with _LOCK:
+        return list(_STATE["compiled"])
+
+
+def _is_jwarp(module: Any) -> bool:
+    kernels = getattr(module, "kernels", None) or {}
+    try:
+        return any(str(getattr(getattr(k, "func", None), "__module__", "")).startswith("jwarp.")
+                   for k in list(kernels.values()))
+    except Exception:  # noqa: BLE001 - an unexpected Warp internals change: no notice
+        return False
+
+
+def _kernel_names(module: Any) -> str:
+    names = [str(getattr(k, "key", "?")).rsplit("__locals__", 1)[-1].strip("_")
+             for k in list((getattr(module, "kernels", None) or {}).values())]
+    return ", ".join(names[:2]) + (", ..." if len(names) > 2 else "")
+
+
+def _device_name(device: Any) -> str:
+    return str(getattr(device, "alias", None) or device or "the compile target")
+
+
+def _new_bar(total: int | None, desc: str) -> Any:
+    import shutil
+
+    from tqdm import tqdm
+
+    fmt = ("{desc}: {n_fmt}/{total_fmt} modules |{bar}| [{elapsed}<{remaining}]{postfix}"
+           if total else "{desc} [{elapsed}]{postfix}")
+    # a terminal that reports no size (e.g. a pty without one) gets 80 x 24, not no bar
+    size = shutil.get_terminal_size((80, 24))
+    return tqdm(total=total, desc=desc, file=sys.stderr, leave=total is not None,
+                ncols=min(size.columns or 80, 120), nrows=size.lines or 24, bar_format=fmt,
+                disable=None, mininterval=0.2)
+
+
+def _ticker() -> None:
+    """Shows (after :data:`BAR_DELAY` s) and refreshes the bar of a running compilation."""
+    while True:
+        time.sleep(0.25)
+        with _LOCK:
+            if _STATE["active"] == 0:
+                _STATE["ticker"] = None
+                return
+            if _STATE["progress"] is not None:
+                continue
+            bar = _STATE["bar"]
+            if bar is None and time.perf_counter() - _STATE["since"] >= BAR_DELAY:
+                try:
+                    bar = _STATE["bar"] = _new_bar(None, "jwarp: compiling")
+                    bar.start_t = time.time() - (time.perf_counter() - _STATE["since"])
+                except Exception:  # noqa: BLE001 - no tqdm or no terminal: the line suffices
+                    _STATE["bar"] = _NO_BAR
+                    continue
+            if bar is not None and bar is not _NO_BAR:
+                bar.set_description_str(f"jwarp: compiling {_STATE['what']}", refresh=False)
+                bar.refresh()
+
+
+def _begin(module: Any, device: Any) -> None:
+    with _LOCK:
+        if not _STATE["announced"] and _STATE["progress"] is None:  # warmup: its own header
+            _STATE["announced"] = True
+            print(f"jwarp: compiling jwarp kernels for {_device_name(device)} (first run only, "
+                  f"cached in {wp.config.kernel_cache_dir})", file=sys.stderr, flush=True)
+        _STATE["active"] += 1
+        _STATE["what"] = _kernel_names(module)
+        if _STATE["active"] == 1:
+            _STATE["since"] = time.perf_counter()
+        if _STATE["ticker"] is None and _STATE["progress"] is None:
+            t = threading.Thread(target=_ticker, name="jwarp-compile-bar", daemon=True)
+            _STATE["ticker"] = t
+            t.start()
+
+
+def _end(module: Any, compiled: bool) -> None:
+    with _LOCK:
+        _STATE["active"] -= 1
+        if compiled:
+            _STATE["compiled"].append(str(getattr(module, "name", "?")))
+        if _STATE["active"] == 0 and _STATE["bar"] is not None:
+            if _STATE["bar"] is not _NO_BAR:
+                _STATE["bar"].close()
+            _STATE["bar"] = None
+
+
+def _wrap(original: Callable[..., bool]) -> Callable[..., bool]:
+    signature = inspect.signature(original)
+
+    def _compile(self: Any, *args: Any, **kwargs: Any) -> bool:
+        progress = _STATE["progress"]
+        try:
+            if not (notice_enabled() or progress is not None) or not _is_jwarp(self):
+                return original(self, *args, **kwargs)
+            bound = signature.bind(self, *args, **kwargs).arguments
+            out_dir, out_name = bound.get("output_dir"), bound.get("output_name")
+            cached = (bool(wp.config.cache_kernels) and out_dir is not None
+                      and out_name is not None
+                      and os.path.exists(os.path.join(os.fspath(out_dir), out_name)))
+        except Exception:  # noqa: BLE001 - Warp internals changed: compile without notice
+            return original(self, *args, **kwargs)
+        if cached:
+            result = original(self, *args, **kwargs)
+            if progress is not None:
+                progress.update(1)
+            return result
+        if notice_enabled():
+            _begin(self, bound.get("device"))
+        else:
+            with _LOCK:
+                _STATE["active"] += 1
+        compiled = False
+        try:
+            compiled = bool(original(self, *args, **kwargs))
+            return compiled
+        finally:
+            _end(self, compiled)
+            if progress is not None:
+                progress.update(1)
+
+    _compile.__wrapped__ = original  # type: ignore[attr-defined]
+    _compile._jwarp_notice = True  # type: ignore[attr-defined]
+    return _compile
+
+
+def install_compile_notice() -> bool:
+    """Wrap Warp's module compilation once per process so that compiling jwarp's kernels
+    prints the notice (see the module docstring). Returns False where this Warp has no
+    ``Module._compile`` (no notice then)."""
+    with _LOCK:
+        if _STATE["installed"]:
+            return True
+        try:
+            from warp._src.context import Module
+        except ImportError:  # pragma: no cover - an older Warp layout
+            Module = getattr(getattr(wp, "context", None), "Module", None)
+        original = getattr(Module, "_compile", None) if Module is not None else None
+        if original is None or not callable(original):
+            return False
+        if not getattr(original, "_jwarp_notice", False):
+            Module._compile = _wrap(original)
+        _STATE["installed"] = True
+        return True
+
+
+class _Progress:
+    """A thread-safe counter over a known number of module loads, drawn as a tqdm bar."""
+
+    def __init__(self, total: int, desc: str, enabled: bool):
+        self.bar = _new_bar(total, desc) if enabled else None
+        self.n = 0
+        self.lock = threading.Lock()
+
+    def update(self, k: int) -> None:
+        with self.lock:
+            self.n += k
+            if self.bar is not None:
+                self.bar.update(k)
+
+
+@contextlib.contextmanager
+def compile_progress(total: int, desc: str = "jwarp warmup",
+                     bar: bool = True) -> Iterator[_Progress]:
+    """Inside the block, every jwarp module load (compiled or from the cache) advances one
+    progress bar of ``total`` steps (on a terminal; ``bar=False``: none); the per-compile
+    bar of the notice is off meanwhile. Yields the counter (``.n`` loads so far)."""
+    install_compile_notice()
+    p = _Progress(int(total), desc, bar)
+    with _LOCK:
+        _STATE["progress"] = p
+    try:
+        yield p
+    finally:
+        with _LOCK:
+            _STATE["progress"] = None
+        if p.bar is not None:
+            p.bar.close()

@@ -1,0 +1,99 @@
+"""The BLAS thread pool around jwarp's small dense solves.
+
+numpy's OpenBLAS starts one thread per core by default. The dense problems of calibration
+(a least-squares Jacobian of a few thousand rows by a few hundred columns), experiment
+design and sensitivity analysis are too small to gain from threads, and on a loaded machine
+the spinning pool threads steal the cores from each other: ``examples/calibrate_justin_tracker.py``
+took 325.7 s with the default pool and 28.3 s with one thread on a loaded 2-core machine
+(issue 27), with the same numbers. The solvers therefore run inside
+:func:`blas_threads` (or are decorated with :func:`limit_blas`), which caps the BLAS pool
+for the duration of the call and restores it afterwards (``threadpoolctl``).
+
+``JWARP_BLAS_THREADS`` (environment variable) overrides the cap: a positive integer is
+the number of BLAS threads inside the solvers; ``0`` (or ``none``) leaves the pool as the
+user configured it (``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``, ...). Anything else is a
+ValueError naming the variable. Unset: :data:`DEFAULT_BLAS_THREADS`.
+
+The pool is process-wide: two solves running in threads of one process share one cap.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+from typing import Any, Callable, Iterator, TypeVar
+
+__all__ = ["BLAS_THREADS_ENV", "DEFAULT_BLAS_THREADS", "blas_thread_limit", "blas_threads",
+           "limit_blas"]
+
+#: environment variable overriding the BLAS threads inside jwarp's solvers
+BLAS_THREADS_ENV = "JWARP_BLAS_THREADS"
+#: BLAS threads inside jwarp's solvers when ``JWARP_BLAS_THREADS`` is unset
+DEFAULT_BLAS_THREADS = 1
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def blas_thread_limit(value: str | None = None) -> int | None:
+    """The BLAS threads inside the solvers: ``value`` (default: ``$JWARP_BLAS_THREADS``)
+    parsed; None means "leave the pool alone" (``0`` or ``none``); unset or empty gives
+    :data:`DEFAULT_BLAS_THREADS`.
+
+    Raises:
+        ValueError: naming ``JWARP_BLAS_THREADS`` for anything but an integer >= 0 or
+            ``none``.
+    """
+    text = os.environ.get(BLAS_THREADS_ENV) if value is None else value
+    if text is None or not str(text).strip():
+        return DEFAULT_BLAS_THREADS
+    text = str(text).strip()
+    if text.lower() == "none":
+        return None
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise ValueError(f"{BLAS_THREADS_ENV}: expected an integer >= 0 (BLAS threads inside "
+                         f"jwarp's solvers; 0 or 'none': leave the pool as configured), "
+                         f"got {text!r}")
+    return None if n == 0 else n
+
+
+def _controller() -> Any:
+    """A fresh ``threadpoolctl.ThreadpoolController``: the BLAS libraries loaded *now*
+    (numpy's and scipy's are separate OpenBLAS builds, and scipy's may be loaded after a
+    first solve; a scan costs about 2 ms)."""
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
+
+
+@contextlib.contextmanager
+def blas_threads(n: int | None | str = "env") -> Iterator[int | None]:
+    """Context manager: at most ``n`` BLAS threads inside the block (default: from
+    ``JWARP_BLAS_THREADS``, see :func:`blas_thread_limit`; None: no limit). Yields the
+    limit applied (None: the pool was left alone). The previous pool sizes are restored
+    on exit, also after an exception."""
+    limit = blas_thread_limit() if n == "env" else n
+    if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
+        raise ValueError(f"n: expected a positive integer, None or 'env', got {limit!r}")
+    if limit is None:
+        yield None
+        return
+    ctl = _controller()
+    with ctl.limit(limits=limit, user_api="blas"):
+        yield limit
+
+
+def limit_blas(func: _F) -> _F:
+    """Decorator: run ``func`` inside :func:`blas_threads` (the limit read from
+    ``JWARP_BLAS_THREADS`` at each call)."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        with blas_threads():
+            return func(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
