@@ -77,12 +77,18 @@ class ProgressBar:
     accepted); where it does, the solver has begun a new run: an active-set round (the
     compliances that went negative are held at 0 and the rest solved again from there, so
     the cost restarts higher) or the next multi-start. Each is written as its own line,
-    so a rising cost is explained. ``restarts`` counts the active-set rounds seen."""
+    so a rising cost is explained. ``restarts`` counts the active-set rounds seen. With a
+    robust loss (``robust``) the bar shows 0.5 |r|^2, which is not what the solver
+    minimises and may rise within a run: no restart is inferred from it."""
 
     def __init__(self, label: str, stream: Any = None, enabled: bool = True,
-                 total: int | None = None):
+                 total: int | None = None, robust: bool = False):
         self.label, self.stream, self.enabled = label, stream or sys.stderr, enabled
         self.total = total
+        #: with a robust loss the solver minimises the robust cost while the callback
+        #: reports 0.5 |r|^2, which may rise within a run: no restart is inferred then
+        self.robust = robust
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
         self.bar: Any = None
         self.start = -1
         self.cost = math.nan
@@ -96,7 +102,7 @@ class ProgressBar:
             self.bar.close()
         desc = self.label if p.n_starts == 1 else f"{self.label} start {p.start + 1}/{p.n_starts}"
         self.bar = tqdm(total=self.total, desc=desc, unit="it", file=self.stream,
-                        dynamic_ncols=True, leave=True, mininterval=0.2,
+                        dynamic_ncols=True, leave=True, mininterval=0.2 if self.tty else 1.0,
                         bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} "
                                    "iterations (of the --max-nfev budget) [{elapsed}{postfix}]")
 
@@ -107,7 +113,7 @@ class ProgressBar:
             if self.enabled:
                 self._new_bar(p)
             step = math.nan
-        elif math.isfinite(self.cost) and cost > self.cost * (1 + 1e-12):
+        elif not self.robust and math.isfinite(self.cost) and cost > self.cost * (1 + 1e-12):
             self.round += 1
             self.restarts += 1
             if self.enabled:
@@ -122,7 +128,7 @@ class ProgressBar:
         if not self.enabled:
             return
         self.bar.update(1)
-        post = f"cost {cost:.6g}"
+        post = f"{'|r|^2/2' if self.robust else 'cost'} {cost:.6g}"
         if math.isfinite(step):
             post += f", step {step:.2e}"
         if self.round > 1:
@@ -414,7 +420,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                          f"({why}); give more (or more varied) rows") from None
     before = table_rows(model, p_start)
     covariance = _tow_covariance(args, setup, model, meas, train, free)
-    bar = ProgressBar("calibrate", enabled=not args.quiet, total=args.max_nfev)
+    bar = ProgressBar("calibrate", enabled=not args.quiet, total=args.max_nfev,
+                      robust=args.loss != "linear")
     t0 = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -53,6 +53,11 @@ def test_progress_bar_labels_restarts_and_counts_iterations():
     for s, c in ((0, 5.0), (0, 4.0), (1, 50.0), (1, 40.0)):
         bar(SimpleNamespace(start=s, n_starts=2, iteration=1, cost=c))
     assert bar.restarts == 0
+    # a robust loss: 0.5 |r|^2 may rise within a run, no restart is inferred
+    bar = ProgressBar("calibrate", stream=io.StringIO(), total=10, robust=True)
+    for k, c in enumerate(costs):
+        bar(SimpleNamespace(start=0, n_starts=1, iteration=k + 1, cost=c))
+    assert bar.restarts == 0
 
 
 def test_calibrated_robot_renamed_with_provenance_findings_once(campaign, capsys, tmp_path):
