@@ -1094,7 +1094,7 @@ def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarra
             seeds.append(resample_path(r.path, W))
             nodes.append(len(r.path))
         else:
-            why = {"max_samples": f"all {r.n_samples} samples drawn",
+            why = {"max_samples": "rrt.max_samples used up",
                    "time_limit": "out of time",
                    "check_mismatch": "its path failed the edge-by-edge re-check"}.get(
                        r.stop_reason, r.stop_reason)

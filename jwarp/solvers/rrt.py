@@ -5,8 +5,8 @@ start and the goal, in numpy on top of jwarp's batched checks. Each round draws 
 configurations within the joint limits (:func:`jwarp.core.limits.sample_within_limits`;
 with probability ``goal_bias`` the other tree's root instead), extends one tree from the
 nearest node of each sample by at most ``step`` (joint-space Euclidean norm), keeps the
-new nodes whose state is collision-free (:func:`jwarp.solvers.planner.collision_free`)
-and whose edge is feasible (:func:`jwarp.solvers.planner.path_feasible` on the batch of
+new nodes whose state is collision-free (:func:`jwarp.solvers.feasibility.collision_free`)
+and whose edge is feasible (:func:`jwarp.solvers.feasibility.path_feasible` on the batch of
 edges ``(E, 2, n_dof)``), then connects the other tree greedily towards every new node:
 the straight segment from its nearest node, cut into edges of at most ``step``, is
 checked in one batch and its longest feasible prefix added. A complete connection joins
@@ -14,13 +14,14 @@ the trees; the trees swap roles every round. The path is then shortcut (random p
 its nodes joined by straight segments where feasible, in batches) and can be resampled to
 the planner's waypoints (:func:`resample_path`).
 
-The checks are called through the module :mod:`jwarp.solvers.planner` (its
-``collision_free`` and ``path_feasible``), so whatever check the planner uses is the one
-the trees use: on the rigid model ``path_feasible`` checks the continuous motion of every
-edge; on the elastic model (``kappa``) its substeps are sized so that no sphere centre
-moves more than half the world's resolution between two substeps
-(:func:`jwarp.solvers.planner.substeps_for_voxel`, ``safety`` 2), or
-``RRTOptions.n_substeps``.
+The checks are those of :mod:`jwarp.solvers.feasibility` (``collision_free`` and
+``path_feasible``): on the rigid model ``path_feasible`` checks the continuous motion of
+every edge with :func:`jwarp.solvers.feasibility.certify_check`, the very check (pairs,
+margins, evaluation budget) with which the planner certifies an RRT fallback path, so a
+path the trees return is certified there as it is; on the elastic model (``kappa``) its
+substeps are sized so that no sphere centre moves more than half the world's resolution
+between two substeps (:func:`jwarp.solvers.feasibility.substeps_for_voxel`, ``safety``
+2), or ``RRTOptions.n_substeps``.
 """
 
 from __future__ import annotations

@@ -169,6 +169,6 @@ def test_no_plan_reason_names_the_fallback(ur5_problem):
         pytest.fail("the straight line is free here: no fallback to test")
     assert not res.feasible[0] and res.stage[0] == "none"
     note = res.fallback_notes[0]
-    assert note.startswith("RRT-Connect found no path (all 1 samples drawn")
+    assert note.startswith("RRT-Connect found no path (rrt.max_samples used up; 1 samples")
     assert res.reasons[0].endswith("; fallback: " + note)
     assert json.dumps(res.to_dict())  # still JSON-ready
