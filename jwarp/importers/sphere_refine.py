@@ -1,0 +1,221 @@
+"""Continuous refinement of a sphere fit: the same number of spheres (or a few more),
+centres moved and radii reset so that the spheres reach as little as possible past the
+part's surface while every surface point stays within the one-sided error bound.
+
+Method (lengths in the mesh's unit; ``e = error_fraction * tolerance``):
+
+1. **The problem.** For a centre ``c`` inside the solid with clearance ``s(c)`` (its
+   distance to the surface), a sphere of radius ``s(c) + p`` reaches at most ``p`` past
+   the surface (its protrusion). A surface point ``x`` lies within ``e`` of that sphere
+   when ``g(x, c) = |x - c| - s(c) <= p + e``. With ``k`` centres ``C``, the smallest
+   common protrusion that covers every surface sample within ``e`` is
+   ``P(C) = max_x min_i g(x, c_i) - e``.
+2. **Centres**: ``P`` is minimised over the centres from the given fit's (a smooth
+   max/min with temperatures of ``0.05 tolerance``, Adam steps, the exact gradient of the
+   clearance from the closest surface point, Warp's mesh query; centres kept inside the
+   solid).
+3. **Radii**: each sample goes to the sphere of smallest ``g``; a sphere's protrusion is
+   the largest ``g - e`` of its samples (it may be negative: a sphere smaller than its
+   inscribed ball), then each sphere in turn is shrunk as far as every sample stays
+   within ``e`` of some sphere. Spheres holding no sample are dropped.
+4. **Check** on fresh surface samples (``n_check``, another random stream): samples
+   further out than ``check_fraction * tolerance`` join the fit samples and step 3
+   repeats (up to 4 times). The report (``one_sided_error``, ``max_protrusion``,
+   excess) is recomputed with :mod:`jwarp.importers.spheres`.
+
+Optionally ``extra`` spheres are added one at a time at the worst-covered sample (its
+medial candidate), with step 2 repeated, and kept only when they lower ``P``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import trimesh
+import warp as wp
+
+from jwarp.importers.spheres import (SphereFit, _Solid, _boundary_sample, _candidates,
+                                     _check_mesh, _excess, _protrusion, _sample,
+                                     _on_boundary, one_sided_error)
+
+__all__ = ["refine_fit", "coverage_protrusion", "MAX_SPHERES"]
+
+#: fits of more spheres than this are returned unrefined (the steps are dense in N x k)
+MAX_SPHERES = 64
+_SAMPLES = (2000, 6000)  # clip of the automatic fit-sample count 8 area / tolerance^2
+
+
+@wp.kernel(enable_backward=False)
+def _closest_kernel(mesh: wp.uint64, points: wp.array(dtype=wp.vec3), max_dist: float,
+                    sd: wp.array(dtype=float), closest: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    p = points[i]
+    q = wp.mesh_query_point_sign_winding_number(mesh, p, max_dist)
+    if q.result:
+        c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+        sd[i] = q.sign * wp.length(p - c)
+        closest[i] = c
+    else:
+        sd[i] = max_dist
+        closest[i] = p
+
+
+def _clearance_grad(solid: _Solid, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(k,) clearance ``-signed_distance`` of centres ``c`` (k, 3) and (k, 3) its gradient
+    (the unit vector from the closest surface point, sign-corrected)."""
+    x = (c - solid.centre).astype(np.float32)
+    maxd = 2.0 * solid.extent + float(np.linalg.norm(x, axis=1).max()) + 1.0
+    sd = wp.zeros(len(c), dtype=float, device="cpu")
+    cl = wp.zeros(len(c), dtype=wp.vec3, device="cpu")
+    wp.launch(_closest_kernel, len(c), inputs=[solid.mesh.id, wp.array(x, dtype=wp.vec3,
+                                                                        device="cpu"),
+                                               maxd], outputs=[sd, cl], device="cpu")
+    s = -sd.numpy().astype(np.float64)
+    d = x.astype(np.float64) - cl.numpy().astype(np.float64)
+    n = np.linalg.norm(d, axis=1, keepdims=True)
+    u = np.where(n > 0, d / np.maximum(n, 1e-300), 0.0)
+    return s, np.where(s[:, None] >= 0, u, -u)
+
+
+def _g(x: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """(N, k) ``|x_j - c_i| - s_i``."""
+    return np.linalg.norm(x[:, None, :] - c[None], axis=-1) - s[None]
+
+
+def _optimise(solid: _Solid, x: np.ndarray, c: np.ndarray, tol: float, iters: int,
+              lr: float) -> np.ndarray:
+    """Centres (k, 3) minimising a smooth ``max_j min_i g(x_j, c_i)`` (Adam)."""
+    c = c.copy()
+    t1, t2 = 0.05 * tol, 0.05 * tol
+    m, v = np.zeros_like(c), np.zeros_like(c)
+    best, best_c = np.inf, c.copy()
+    b1, b2 = 0.9, 0.999
+    for it in range(1, iters + 1):
+        s, u = _clearance_grad(solid, c)
+        diff = x[:, None, :] - c[None]  # (N, k, 3)
+        dist = np.linalg.norm(diff, axis=-1)
+        g = dist - s[None]
+        hard = float(g.min(axis=1).max())
+        if hard < best and np.all(s > 0):
+            best, best_c = hard, c.copy()
+        a = -g / t1
+        amax = a.max(axis=1, keepdims=True)
+        w = np.exp(a - amax)
+        ws = w.sum(axis=1, keepdims=True)
+        mj = -t1 * (amax[:, 0] + np.log(ws[:, 0]))  # softmin over spheres
+        w /= ws
+        b = mj / t2
+        b -= b.max()
+        vj = np.exp(b)
+        vj /= vj.sum()  # softmax weights over samples
+        coef = vj[:, None] * w  # (N, k)
+        dg_dc = -diff / np.maximum(dist, 1e-12)[..., None] - u[None]  # d g / d c_i
+        grad = np.einsum("jk,jkd->kd", coef, dg_dc)
+        grad += 10.0 * np.where(s < 0.1 * tol, 1.0, 0.0)[:, None] * -u  # stay inside
+        m = b1 * m + (1 - b1) * grad
+        v = b2 * v + (1 - b2) * grad * grad
+        step = lr * (0.1 + 0.9 * (1 - it / iters))
+        c -= step * (m / (1 - b1 ** it)) / (np.sqrt(v / (1 - b2 ** it)) + 1e-12)
+    return best_c
+
+
+def _radii(x: np.ndarray, c: np.ndarray, s: np.ndarray, e: float) -> np.ndarray:
+    """(k,) radii: per-sphere protrusion from the assignment to the smallest ``g``, then
+    each sphere shrunk while every sample stays within ``e`` (NaN: sphere not needed)."""
+    g = _g(x, c, s)
+    own = g.argmin(axis=1)
+    k = len(c)
+    p = np.full(k, -np.inf)
+    np.maximum.at(p, own, g[np.arange(len(x)), own] - e)
+    for i in np.argsort(-p):  # the largest first
+        if not np.isfinite(p[i]):
+            continue
+        others = np.delete(np.arange(k), i)
+        held_else = (g[:, others] - e <= p[None, others]).any(axis=1) if len(others) \
+            else np.zeros(len(x), bool)
+        need = ~held_else
+        p[i] = float((g[need, i] - e).max()) if need.any() else -np.inf
+    r = s + p
+    r[~np.isfinite(p) | (r <= 0)] = np.nan
+    return r
+
+
+def coverage_protrusion(mesh: trimesh.Trimesh, centres: np.ndarray, tolerance: float,
+                        *, n: int = 20_000, seed: int = 0) -> float:
+    """The smallest common protrusion [mesh unit] with which spheres at ``centres`` (k, 3)
+    (radius = clearance + protrusion) hold ``n`` surface samples within ``tolerance``:
+    ``max_x min_i (|x - c_i| - clearance(c_i)) - tolerance``."""
+    solid = _Solid(_check_mesh(mesh))
+    x = _boundary_sample(mesh, solid, n, seed)
+    s, _ = _clearance_grad(solid, np.asarray(centres, np.float64).reshape(-1, 3))
+    return float(_g(x, np.asarray(centres, np.float64).reshape(-1, 3), s).min(1).max()
+                 - tolerance)
+
+
+def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float = 0.88,
+               check_fraction: float = 0.95, extra: int = 0, n_surface: int | None = None,
+               n_check: int = 50_000, iters: int = 300, seed: int = 0,
+               n_volume: int = 100_000) -> SphereFit:
+    """``fit`` (a :func:`~jwarp.importers.spheres.fit_spheres` result for ``mesh``, same
+    frame) with its centres moved and radii reset so that the spheres reach as little as
+    possible past the surface while the one-sided error stays within ``check_fraction x
+    tolerance`` on ``n_check`` fresh samples (module docstring). ``extra`` >= 0 spheres
+    may be added where they lower the protrusion. Returns a new :class:`SphereFit`
+    (the input's when the refinement does not lower the largest protrusion)."""
+    mesh = _check_mesh(mesh)
+    if not isinstance(fit, SphereFit):
+        raise TypeError(f"fit: expected a SphereFit, got {type(fit).__name__}")
+    if not 0 < error_fraction <= check_fraction <= 1:
+        raise ValueError(f"error_fraction, check_fraction: expected 0 < error_fraction <= "
+                         f"check_fraction <= 1, got {error_fraction}, {check_fraction}")
+    if isinstance(extra, bool) or not isinstance(extra, (int, np.integer)) or extra < 0:
+        raise ValueError(f"extra: expected an integer >= 0, got {extra!r}")
+    tol = float(fit.tolerance)
+    if fit.k == 0 or fit.k > MAX_SPHERES:
+        return fit  # nothing to move, or too many spheres for the dense (N, k) steps
+    n_surface = n_surface or int(np.clip(8.0 * mesh.area / tol ** 2, *_SAMPLES))
+    solid = _Solid(mesh)
+    solid.simple = bool(mesh.is_watertight and mesh.body_count == 1)
+    pts, nrm = _sample(mesh, n_surface, seed + 31)
+    on = _on_boundary(solid, pts, nrm)
+    x, xn = pts[on], nrm[on]
+    c0 = np.asarray(fit.centres, np.float64)
+    s0, _ = _clearance_grad(solid, c0)
+    c0 = c0[s0 > 0]  # the fit centres its spheres inside (guard)
+    lr = 0.05 * tol
+    c = _optimise(solid, x, c0, tol, iters, lr)
+    for _ in range(int(extra)):
+        s, _ = _clearance_grad(solid, c)
+        worst = int(_g(x, c, s).min(axis=1).argmax())
+        cc, _ = _candidates(solid, x[worst:worst + 1], xn[worst:worst + 1], x, 0.1 * tol)
+        if not len(cc):
+            break
+        c = _optimise(solid, x, np.concatenate([c, cc[:1]]), tol, iters, lr)
+    e = error_fraction * tol
+    s, _ = _clearance_grad(solid, c)
+    for rnd in range(5):
+        r = _radii(x, c, s, e)
+        keep = np.isfinite(r)
+        cc, rr = c[keep], r[keep]
+        check = _boundary_sample(mesh, solid, n_check, seed + 7919 * (rnd + 3))
+        err_all = one_sided_error(check, cc, rr)
+        bad = err_all > check_fraction * tol
+        if not bad.any():
+            break
+        x = np.concatenate([x, check[bad]])
+        e *= 0.97
+    err = float(err_all.max())
+    prot = _protrusion(solid, cc, rr)
+    if float(prot.max()) >= fit.max_protrusion or (err > check_fraction * tol
+                                                    and err > fit.one_sided_error):
+        return fit  # no better than the fit (a binding budget, a hard part)
+    vol, se = _excess(solid, cc, rr, n_volume, seed + 104729)
+    out = replace(fit, centres=cc, radii=rr, one_sided_error=err, meets_tolerance=err <= tol,
+                  fit_error=e, excess_volume=vol, excess_volume_stderr=se,
+                  excess_fraction=vol / fit.mesh_volume if fit.mesh_volume > 0 else np.inf,
+                  protrusion=float(prot.max()), max_protrusion=float(prot.max()),
+                  notes=list(fit.notes) + [f"refined: largest protrusion "
+                                           f"{fit.max_protrusion:.4g} -> {prot.max():.4g}"])
+    return out
