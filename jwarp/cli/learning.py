@@ -198,6 +198,7 @@ def cmd_train_ik(args: argparse.Namespace) -> int:
         options = TrainIKOptions(**fields)
     except (ValueError, TypeError) as e:
         raise _option_error(e, _TRAIN_OPTION_OF, "train ik") from None
+    _check_net_memory("ik", options, args)
     init_warp()
     curves = _Curves(args.rerun) if args.rerun is not None else None
 
@@ -385,6 +386,31 @@ def _plan_db_samples(args: argparse.Namespace, model: Any) -> tuple[Any, Any]:
         raise CLIError(f"--val-fraction: {clean(e).removeprefix('val_fraction: ')}") from None
 
 
+def _check_net_memory(kind: str, options: Any, args: argparse.Namespace) -> None:
+    """Refuse a network (``--hidden``, ``--blocks``, ``--n-bps``) whose training memory
+    (weights, gradients, Adam's moments; counted on torch's meta device) or whose batch
+    (``--batch`` x ``--hidden`` activations) exceeds the available memory, before any
+    data is made."""
+    from jwarp.learn.checkpoint import network_bytes
+    from jwarp.memory import check_memory
+
+    if kind == "ik":
+        from jwarp.learn.ik_net import IKNet as cls
+    else:
+        from jwarp.learn.plan_net import PlanNet as cls
+    config = options.net_config()
+    need = network_bytes(cls, config, training=True)
+    blocks = getattr(config, "n_blocks", 3)
+    need += 4.0 * 2 * args.batch * args.hidden * (2 * blocks + 2)   # activations + grads
+    option = "--hidden" if args.hidden * args.hidden > 64 * args.batch * 8 else "--batch"
+    try:
+        check_memory(need, f"training this network (hidden {args.hidden}, {blocks} blocks, "
+                           f"batch {args.batch}: weights, gradients, optimizer state and "
+                           f"activations)", f"lower {option}")
+    except MemoryError as e:
+        raise CLIError(f"{option}: {e}") from None
+
+
 def _check_label_memory(model: Any, args: argparse.Namespace) -> None:
     """Refuse ``--tasks-per-world`` x ``--label-starts`` x ``--waypoints`` whose labelling
     (one planner batch per world) cannot fit in memory (estimate of
@@ -438,6 +464,7 @@ def cmd_train_plan(args: argparse.Namespace) -> int:
         axis_symmetries(model)
     except (ValueError, TypeError) as e:
         raise _option_error(e, _TRAIN_PLAN_OPTION_OF, "train plan") from None
+    _check_net_memory("plan", options, args)
     init_warp()
     if db_data is not None:
         data, val = db_data

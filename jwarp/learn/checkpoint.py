@@ -43,7 +43,7 @@ from jwarp.learn.plan_net import PlanNet, PlanNetConfig
 from jwarp.registry import robot as get_robot
 
 __all__ = ["FORMAT", "PLAN_FORMAT", "VERSION", "save_checkpoint", "load_checkpoint",
-           "load_plan_checkpoint", "read_checkpoint", "check_weights"]
+           "load_plan_checkpoint", "read_checkpoint", "check_weights", "network_bytes"]
 
 FORMAT = "jwarp-ik-net"
 #: the format of motion-planning network checkpoints
@@ -238,3 +238,21 @@ def _finish(net: Any, model: Any, doc: dict, path: Any, device: Any) -> Any:
     net.meta = {k: v for k, v in doc.items() if k not in ("state_dict", "optimizer_state")}
     net.meta["path"] = str(path)
     return net
+
+
+#: bytes per float32 parameter while training with Adam: weights, gradients, 2 moments
+TRAIN_BYTES_PER_PARAM = 16
+
+
+def network_bytes(cls: Any, config: Any, *, training: bool = False) -> float:
+    """The memory [bytes] of the network ``cls(config)`` (float32 weights; ``training``:
+    with gradients and Adam's moments, :data:`TRAIN_BYTES_PER_PARAM`), counted on
+    torch's ``meta`` device: nothing is allocated. A world-aware network's basis point set
+    is left out (small)."""
+    with torch.device("meta"):
+        try:
+            net = cls(config)
+        except TypeError:
+            net = cls(config, bps=None)
+    n = sum(int(p.numel()) for p in net.parameters())
+    return float(n) * (TRAIN_BYTES_PER_PARAM if training else 4)

@@ -333,6 +333,48 @@ def test_memory_estimates_refuse_before_labelling(capsys, tmp_path, monkeypatch)
     assert not (tmp_path / "d.sqlite").exists()
 
 
+def test_network_memory_refused_before_any_data(capsys, tmp_path, monkeypatch):
+    """--hidden 65536: ~26e9 parameters (counted on torch's meta device), hundreds of GB
+    to train; refused before any world or target is made."""
+    import importlib
+
+    def forbidden(*a, **k):
+        raise AssertionError("data made before the memory check")
+
+    # (jwarp.learn re-exports functions named like these modules: import them by name)
+    tik = importlib.import_module("jwarp.learn.train_ik")
+    tp = importlib.import_module("jwarp.learn.train_plan")
+    monkeypatch.setattr(tik, "make_ik_data", forbidden)
+    monkeypatch.setattr(tp, "make_plan_data", forbidden)
+    for cmd in (["train", "ik"], ["train", "plan"]):
+        line = one_line_error(capsys, cmd + ["--robot", "planar4", "--epochs", 1, "--hidden",
+                                             65536, "--out", tmp_path / "m.pt"], "--hidden")
+        assert "needs about" in line and "GB" in line
+    line = one_line_error(capsys, ["train", "plan", "--robot", "planar4", "--epochs", 1,
+                                   "--tasks-per-world", 10**7, "--out", tmp_path / "m.pt"],
+                          "--tasks-per-world")
+    assert "needs about" in line
+    assert not (tmp_path / "m.pt").exists()
+
+
+def test_sampling_sizes_refused_before_sampling(capsys, tmp_path):
+    """sample-poses --batch-size and design --write-candidates: refused by the memory
+    estimate before any draw (a simulated campaign's setup)."""
+    from jwarp.solvers.calibration.scenarios import scenario
+
+    setup, _, _ = scenario("justin19", "cartesian")
+    path = tmp_path / "setup.json"
+    from jwarp.solvers.calibration.files import write_setup
+
+    write_setup(path, setup)
+    line = one_line_error(capsys, ["sample-poses", "--setup", path, "--n", 10, "--batch-size",
+                                   10**9, "--out", tmp_path / "p.csv"], "--batch-size")
+    assert "needs about" in line
+    line = one_line_error(capsys, ["design", "--setup", path, "--write-candidates", 10**9,
+                                   "--out", tmp_path / "p.csv"], "--write-candidates")
+    assert "needs about" in line and not (tmp_path / "p.csv").exists()
+
+
 def test_damaged_world_blob_named_and_skipped(capsys, tmp_path):
     db = _db(tmp_path / "d.sqlite")
     con = sqlite3.connect(db)
