@@ -172,6 +172,13 @@ def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float =
                          f"check_fraction <= 1, got {error_fraction}, {check_fraction}")
     if isinstance(extra, bool) or not isinstance(extra, (int, np.integer)) or extra < 0:
         raise ValueError(f"extra: expected an integer >= 0, got {extra!r}")
+    for name, v, lo in (("iters", iters, 1), ("n_check", n_check, 100), ("seed", seed, 0),
+                        ("n_volume", n_volume, 100)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+            raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+    if n_surface is not None and (isinstance(n_surface, bool) or
+                                  not isinstance(n_surface, (int, np.integer)) or n_surface < 10):
+        raise ValueError(f"n_surface: expected None or an integer >= 10, got {n_surface!r}")
     tol = float(fit.tolerance)
     if fit.k == 0 or fit.k > MAX_SPHERES:
         return fit  # nothing to move, or too many spheres for the dense (N, k) steps
