@@ -48,8 +48,12 @@ iterations) of the models.
 
 Every option is checked before any work (data generation, training): counts and numbers
 in range, ``--device``, the output paths (``--out``, ``--rerun``: writable folder, not a
-folder, not the same file) and, with ``--resume``, that ``--out`` exists; errors name the
-option (``jwarp: error: --batch: ...``).
+folder, not the same file), with ``--resume`` that ``--out`` exists, and the memory the
+network needs to train (``--hidden``, ``--batch``; counted on torch's meta device) and
+``train plan``'s labelling needs (``--tasks-per-world`` x ``--label-starts``); errors name
+the option (``jwarp: error: --batch: ...``). A checkpoint (``--model``, ``--resume``) is
+checked against its config before any weight is allocated. ``train plan --data DB
+--skip-damaged`` leaves out damaged worlds and rows of the database (each named).
 """
 
 from __future__ import annotations
