@@ -282,11 +282,17 @@ def import_robot(e: Entry, path: str, out: str, args: Any, help_urdf: str, help_
     hf = summary.get("home_fit")
     if hf:   # what the import did to free its home
         row["import_home"] = hf.get("home_from")
-        row["default_pairs"] = ["/".join(p["links"]) + f" (mesh {1e3 * p['mesh_distance_m']:.1f} mm)"
+        row["default_pairs"] = ["/".join(p["links"])
+                                + f" (mesh {1e3 * p['mesh_distance_m']:.1f} mm)"
                                 for p in hf.get("default_pairs", [])]
-        row["tightened"] = [f"{t['link']} {t['spheres']} spheres -{1e3 * t['largest_cut_m']:.1f} mm"
-                            + (" (reverted)" if t.get("reverted") else "")
-                            for t in hf.get("tightened", [])]
+        row["tightened"] = [
+            f"{t['link']} refit at protrusion {1e3 * t['protrusion_m']:.1f} mm "
+            f"({t['spheres_before']} -> {t['spheres']} spheres)" if t.get("refit") else
+            f"{t['link']} {t['spheres']} spheres -{1e3 * t['largest_cut_m']:.1f} mm"
+            + (" (left as fitted)" if t.get("reverted") else "")
+            for t in hf.get("tightened", [])]
+        if not hf.get("home_free", True):
+            row["import_home_left"] = ["/".join(p["links"]) for p in hf.get("remaining", [])]
     sk = (summary.get("srdf") or {}).get("skipped")
     if sk:
         row["srdf_skipped"] = f"{len(sk)} SRDF entries skipped (first: {sk[0]})"
@@ -682,7 +688,7 @@ def table(rows: list[dict], max_ik: int = 100) -> str:
         if r.get("error"):
             bits.append(f"ERROR {r['error']}")
         for k in ("fit_note", "warning", "sub_chain", "home", "import_home", "default_pairs",
-                  "tightened", "srdf_skipped", "home_collisions",
+                  "tightened", "import_home_left", "srdf_skipped", "home_collisions",
                   "home_mesh_pair", "frequent_collisions", "plan_pair",
                   "plan_reason", "fk_ref"):
             if r.get(k) and not (k == "fk_ref" and r[k] == "pinocchio"):

@@ -72,7 +72,7 @@ class HomeFitOptions:
             with a protrusion that fits the home (False: left as it was).
     """
 
-    contact_margin: float = 0.001
+    contact_margin: float = 0.0005
     gap: float = 1e-4
     tolerance: float | None = None
     n_surface: int = 4000
