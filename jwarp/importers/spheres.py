@@ -33,6 +33,14 @@ Method (see ``docs/spheres.md``):
    ``eps`` (doubling, then bisection to 2 %) for which the greedy cover of 2000 of the
    samples needs at most K spheres: the one-sided error then exceeds the tolerance and the
    report says by how much.
+   **Large parts** (``8 area / tolerance^2`` > 50 000 samples, e.g. a mobile base or a
+   pedestal at 1 cm, and no ``max_spheres``): the dense matrix cannot hold enough samples,
+   so the cover is sparse (the pairs within ``radius + eps`` from a k-d tree): up to 60 000
+   surface samples (``min(8 area / tolerance^2, 60 000)``), medial candidates from one in
+   six of them (on the inward side only when the mesh is closed and consistently wound),
+   at most 60 000 candidates (thinned as above), the same greedy cover and
+   pruning, no two-for-one step; samples no candidate holds even after their own
+   candidates are added stay uncovered (the check reports them).
 4. **Check** on at least 20 000 fresh boundary samples (another random stream):
    ``one_sided_error`` is the largest distance of a fresh sample outside every sphere.
    Fresh samples further out than 0.9 tolerance are added to ``S`` and the cover repeated
@@ -52,6 +60,7 @@ the fit of a Panda link takes about a second on one core.
 from __future__ import annotations
 
 import functools
+import itertools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -72,6 +81,11 @@ _DEPTHS = (1.0, 0.5, 0.25)  # candidate centres at these fractions of the medial
 _CANDIDATE_POINTS = 1500  # samples whose medial balls give candidates (plus unheld ones)
 _FIT_SAMPLES = (1500, 4000)  # clip of the automatic surface sample count
 _MAX_PAIRS = 12_000_000  # candidates x samples of the cover's dense slack matrix
+#: a part whose automatic sample count ``8 area / tolerance^2`` exceeds this (a mobile base,
+#: a pedestal: > 0.6 m^2 at 1 cm) is fitted by the sparse cover (module docstring, step 3)
+_SPARSE_FROM = 50_000
+_SPARSE_SAMPLES = 60_000  # at most this many fit samples of the sparse cover
+_SPARSE_CANDIDATES = 60_000  # at most this many candidates of the sparse cover
 _EPS_FIT = 0.85  # the cover's allowed error, as a fraction of the tolerance
 _BUDGET_SAMPLES = 2000  # samples of the error search with max_spheres
 _HOLE_DIRECTIONS = 64  # directions of the open-mesh clearance test
@@ -215,6 +229,13 @@ def one_sided_error(points: np.ndarray, centres: np.ndarray, radii: np.ndarray) 
     out = np.full(len(p), np.inf)
     if len(r) == 0:
         return out
+    if len(r) * len(p) > 1_000_000:  # many: Warp's CPU loop (float64, the same figures)
+        _init_warp()
+        res = wp.zeros(len(p), dtype=wp.float64, device="cpu")
+        wp.launch(_outside_kernel, len(p), device="cpu", inputs=[
+            wp.array(p, dtype=wp.vec3d, device="cpu"), wp.array(c, dtype=wp.vec3d, device="cpu"),
+            wp.array(r, dtype=wp.float64, device="cpu"), res])
+        return np.maximum(res.numpy(), 0.0)
     step = max(1, 4_000_000 // max(len(r), 1))  # bounded memory at any sphere count
     for s in range(0, len(p), step):
         d = np.linalg.norm(p[s:s + step, None, :] - c[None], axis=-1) - r[None]
@@ -223,6 +244,25 @@ def one_sided_error(points: np.ndarray, centres: np.ndarray, radii: np.ndarray) 
 
 
 # ----------------------------------------------------------------- the solid (Warp)
+def _init_warp() -> None:
+    # importers sit below jwarp.core: Warp directly (init is a no-op once done)
+    wp.config.quiet = True
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+    wp.init()
+
+
+@wp.kernel(enable_backward=False)
+def _outside_kernel(points: wp.array(dtype=wp.vec3d), centres: wp.array(dtype=wp.vec3d),
+                    radii: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
+    i = wp.tid()
+    p = points[i]
+    best = wp.float64(1.0e300)
+    for j in range(centres.shape[0]):
+        best = wp.min(best, wp.length(p - centres[j]) - radii[j])
+    out[i] = best
+
+
 @wp.kernel(enable_backward=False)
 def _signed_distance_kernel(mesh: wp.uint64, points: wp.array(dtype=wp.vec3),
                             max_dist: float, out: wp.array(dtype=float)):
@@ -242,11 +282,7 @@ class _Solid:
     taken relative to the bounding-box centre (float32 in Warp)."""
 
     def __init__(self, mesh: trimesh.Trimesh) -> None:
-        # importers sit below jwarp.core: Warp directly (init is a no-op once done)
-        wp.config.quiet = True
-        if hasattr(wp, "LOG_WARNING"):
-            wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
-        wp.init()
+        _init_warp()
         V = np.asarray(mesh.vertices, np.float64)
         F = np.asarray(mesh.faces, np.int64)
         a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
@@ -379,14 +415,15 @@ def _shrinking_ball(points: np.ndarray, inward: np.ndarray, tree: cKDTree, r0: f
 
 
 def _candidates(solid: _Solid, pts: np.ndarray, normals: np.ndarray, samples: np.ndarray,
-                grid: float) -> tuple[np.ndarray, np.ndarray]:
+                grid: float, sides: tuple = (-1.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
     """Candidate centres (M, 3) inside the solid and their clearance (M,): the medial balls
-    of ``pts`` (normals ``normals``, both sides) among ``samples``, and centres at 1/2 and
-    1/4 of the way to them; duplicates within ``grid`` merged."""
+    of ``pts`` (normals ``normals``, both ``sides``: inward is -normal for a well-oriented
+    mesh) among ``samples``, and centres at 1/2 and 1/4 of the way to them; duplicates
+    within ``grid`` merged."""
     tree = cKDTree(samples)
     r0 = 0.5 * solid.extent
     centres = []
-    for side in (-1.0, 1.0):  # inward is -normal for a well-oriented mesh; try both
+    for side in sides:
         inward = side * normals
         r = _shrinking_ball(pts, inward, tree, r0)
         for f in _DEPTHS:
@@ -420,7 +457,12 @@ def _greedy_cover(A: sparse.csr_matrix, limit: int | None) -> list[int] | None:
         new = cols[uncovered[cols]]
         uncovered[new] = False
         chosen.append(j)
-        gain -= np.asarray(At[new].sum(axis=0)).ravel().astype(np.int64)
+        if len(new):  # the rows of the newly covered samples, gathered (= At[new].sum(0))
+            lo, hi = At.indptr[new], At.indptr[new + 1]
+            ln = hi - lo
+            pos = np.repeat(lo - np.cumsum(ln) + ln, ln) + np.arange(int(ln.sum()))
+            gain -= np.bincount(At.indices[pos], weights=At.data[pos],
+                                minlength=len(gain)).astype(np.int64)
     counts = np.asarray(A[chosen].sum(axis=0)).ravel()
     for j in reversed(list(chosen)):  # prune spheres whose samples all lie in others
         cols = A.indices[A.indptr[j]:A.indptr[j + 1]]
@@ -434,7 +476,8 @@ class _Slack:
     """Dense (M, N) float32 ``|p_j - c_i| - r_i`` of candidates and samples (at most
     ``_MAX_PAIRS`` entries: the caller subsamples candidates)."""
 
-    def __init__(self, samples: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> None:
+    def __init__(self, samples: np.ndarray, centres: np.ndarray, radii: np.ndarray,
+                 eps: float = 0.0) -> None:
         self.c, self.r = centres, radii
         self.s = np.empty((len(centres), len(samples)), np.float32)
         step = max(1, 4_000_000 // max(len(samples), 1))
@@ -454,6 +497,35 @@ class _Slack:
         """Indices of the samples no candidate holds at ``eps``."""
         return np.flatnonzero(~(self.s <= eps).any(axis=0)) if len(self.s) else \
             np.arange(self.s.shape[1])
+
+
+class _Holds:
+    """Sparse (M, N) 0/1 "candidate i holds sample j at ``eps``" (``|p_j - c_i| - r_i <=
+    eps``) of a large part, from a k-d tree of the samples (module docstring, step 3)."""
+
+    def __init__(self, samples: np.ndarray, centres: np.ndarray, radii: np.ndarray,
+                 eps: float) -> None:
+        tree = cKDTree(samples)
+        rows = tree.query_ball_point(centres, radii + eps, return_sorted=False) \
+            if len(centres) else []
+        n = np.fromiter((len(x) for x in rows), np.int64, len(rows))
+        indptr = np.concatenate([[0], np.cumsum(n)])
+        indices = np.fromiter(itertools.chain.from_iterable(rows), np.int32, int(indptr[-1]))
+        self.A = sparse.csr_matrix((np.ones(len(indices), np.int32), indices, indptr),
+                                   shape=(len(centres), len(samples)))
+        self.A.sort_indices()
+
+    def unheld(self, eps: float) -> np.ndarray:
+        """Indices of the samples no candidate holds."""
+        return np.flatnonzero(np.diff(self.A.tocsc().indptr) == 0)
+
+    def cover(self) -> list[int]:
+        """Greedy cover of the samples some candidate holds (the others stay uncovered)."""
+        held = np.flatnonzero(np.diff(self.A.tocsc().indptr) > 0)
+        if len(held) == 0:
+            return [int(np.argmax(np.diff(self.A.indptr)))] if self.A.shape[0] else []
+        got = _greedy_cover(self.A[:, held].tocsr(), None)
+        return [] if got is None else got
 
 
 def _two_for_one(B: np.ndarray, chosen: list[int], centres: np.ndarray,
@@ -598,7 +670,10 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
                          f"mesh's unit (a URDF in cm or mm needs a scale)")
     solid = _Solid(mesh)
     watertight = bool(mesh.is_watertight)
-    n_s = opt.n_surface or int(np.clip(8.0 * mesh.area / tol ** 2, *_FIT_SAMPLES))
+    sparse = opt.max_spheres is None and opt.n_surface is None and \
+        8.0 * mesh.area / tol ** 2 > _SPARSE_FROM
+    n_s = opt.n_surface or (min(int(8.0 * mesh.area / tol ** 2), _SPARSE_SAMPLES) if sparse
+                            else int(np.clip(8.0 * mesh.area / tol ** 2, *_FIT_SAMPLES)))
     pts, nrm = _sample(mesh, n_s, opt.seed)
     used = np.unique(mesh.faces)
     verts = np.asarray(mesh.vertices)[used]
@@ -609,12 +684,18 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
                               if len(verts) == len(used) else
                               _closest_normals(mesh, verts)])
     solid.simple = watertight and mesh.body_count == 1  # then no face is buried
+    if sparse and watertight and mesh.is_winding_consistent:  # the inward side is known
+        grid_sides: tuple = (1.0,) if solid.flipped else (-1.0,)
+    else:
+        grid_sides = (-1.0, 1.0)
+    medial = functools.partial(_candidates, sides=grid_sides)
     on = _on_boundary(solid, samples, normals)
     samples, normals = samples[on], normals[on]
     rng = np.random.default_rng(opt.seed)
     grid = 0.2 * min(tol, opt.protrusion or tol)
-    sub = rng.permutation(len(samples))[:_CANDIDATE_POINTS]
-    cand_c, cand_d = _candidates(solid, samples[sub], normals[sub], samples, grid)
+    sub = rng.permutation(len(samples))[:max(_CANDIDATE_POINTS, len(samples) // 6)
+                                        if sparse else _CANDIDATE_POINTS]
+    cand_c, cand_d = medial(solid, samples[sub], normals[sub], samples, grid)
     if opt.max_spheres is not None and len(samples) > _BUDGET_SAMPLES:
         # the error search repeats the cover: on a subset of the samples (documented)
         keep = np.sort(rng.permutation(len(samples))[:_BUDGET_SAMPLES])
@@ -636,16 +717,20 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
     rounds, best = 0, None
     while True:
         rounds += 1
-        cap = max(1, _MAX_PAIRS // len(samples))
+        cap = _SPARSE_CANDIDATES if sparse else max(1, _MAX_PAIRS // len(samples))
+        kind = _Holds if sparse else _Slack
         cand_c, cand_d = _thin(cand_c, cand_d, cap, grid)
-        slack = _Slack(samples, cand_c, cand_d + reach(cand_d))
+        slack = kind(samples, cand_c, cand_d + reach(cand_d), eps0)
         lost = slack.unheld(eps0)
         if len(lost):  # samples no candidate holds: add their own medial candidates
-            c2, d2 = _candidates(solid, samples[lost], normals[lost], samples, grid)
+            c2, d2 = medial(solid, samples[lost], normals[lost], samples, grid)
             cand_c, cand_d = np.concatenate([cand_c, c2]), np.concatenate([cand_d, d2])
             cand_c, cand_d = _thin(cand_c, cand_d, cap, grid)
-            slack = _Slack(samples, cand_c, cand_d + reach(cand_d))
-        chosen, eps = _cover(slack, opt.max_spheres, eps0, eps_max)
+            slack = kind(samples, cand_c, cand_d + reach(cand_d), eps0)
+        if sparse:
+            chosen, eps = slack.cover(), eps0
+        else:
+            chosen, eps = _cover(slack, opt.max_spheres, eps0, eps_max)
         c, r = cand_c[chosen], cand_d[chosen] + reach(cand_d[chosen])
         err_all = one_sided_error(check, c, r)
         err = float(err_all.max())
@@ -661,7 +746,7 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
         new_p = check[bad]
         new_n = _closest_normals(mesh, new_p)
         samples, normals = np.concatenate([samples, new_p]), np.concatenate([normals, new_n])
-        c2, d2 = _candidates(solid, new_p, new_n, samples, grid)
+        c2, d2 = medial(solid, new_p, new_n, samples, grid)
         cand_c, cand_d = np.concatenate([cand_c, c2]), np.concatenate([cand_d, d2])
         check = _boundary_sample(mesh, solid, n_check, opt.seed + 7919 * (rounds + 1))
     _, c, r, err, eps, allowed, widened = best  # of the rounds: covered with margin, fewest
