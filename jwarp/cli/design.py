@@ -279,12 +279,12 @@ def cmd_design(args: argparse.Namespace) -> int:
     check_output(args.out, "--out", inputs=inputs)
     setup, model, meas = _setup_and_measurement(args.setup, "--setup", args.robot)
     if args.write_candidates is not None:   # the pool's memory, before any draw
-        from jwarp.cli.planning import _config_bytes
+        from jwarp.cli.planning import config_bytes
         from jwarp.memory import check_memory
 
         n = args.write_candidates
         try:
-            check_memory(2.0 * n * _config_bytes(model), f"a pool of {n} configurations of "
+            check_memory(2.0 * n * config_bytes(model), f"a pool of {n} configurations of "
                          f"'{model.name}' (with the draws its checks drop)",
                          "lower --write-candidates")
         except MemoryError as e:

@@ -88,7 +88,7 @@ _CONFIG_BYTES = (2 * 128, 2 * 40, 2 * 32)
 _SIZING_SAMPLES = 16
 
 
-def _config_bytes(model: Any) -> int:
+def config_bytes(model: Any) -> int:
     f, s, j = _CONFIG_BYTES
     return f * model.n_frames + s * len(model.spheres) + j * model.n_dof
 
@@ -242,7 +242,7 @@ def _check_plan_size(args: argparse.Namespace, model: Any) -> None:
     per_sub = item * (3 * n + 52 * F + 3 * Sph + 4) + 24 * n   # solver buffers + host checks
     need = float(P) * S * per_sub + 48.0 * P * W * n
     if args.substeps is None:  # the sizing of the substeps samples 16 points per segment
-        need += float(P) * ((W - 1) * _SIZING_SAMPLES + 1) * _config_bytes(model)
+        need += float(P) * ((W - 1) * _SIZING_SAMPLES + 1) * config_bytes(model)
     ratios = {"--starts": P / 8, "--waypoints": W / 20,
               "--substeps": (args.substeps or 0) / 8}
     option = max(ratios, key=ratios.get)
@@ -542,7 +542,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
     elif args.starts < 1 and args.warm_start is None:
         raise CLIError(f"--starts: expected an integer >= 1, got '{args.starts}'")
     heads = 2 if args.warm_start is not None else 0  # a twin network's seeds
-    _check_memory(float(args.starts + heads) * _config_bytes(model),
+    _check_memory(float(args.starts + heads) * config_bytes(model),
                   f"{args.starts} starts of '{model.name}'", "--starts")
     quiet_warp()
     check_device(args.device)
@@ -612,7 +612,7 @@ def cmd_free_config(args: argparse.Namespace) -> int:
     model = robot_option(args.robot)
     quiet_warp()
     check_device(args.device)
-    _check_memory(float(FREE_CONFIG_BATCH) * _config_bytes(model),
+    _check_memory(float(FREE_CONFIG_BATCH) * config_bytes(model),
                   f"{FREE_CONFIG_BATCH} configurations of '{model.name}'", "--robot")
     world = _world(args.world, model)
     from jwarp.world.collision import is_collision_free

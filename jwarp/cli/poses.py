@@ -25,10 +25,10 @@ from jwarp.cli.common import (CLIError, check_device, check_output, int_arg, qui
 def _check_sampling_memory(robot: Any, args: argparse.Namespace) -> None:
     """Refuse a ``--batch-size`` (candidates per kernel launch) or ``--n`` whose estimated
     memory exceeds the available memory, before any sampling."""
-    from jwarp.cli.planning import _config_bytes
+    from jwarp.cli.planning import config_bytes
     from jwarp.memory import check_memory
 
-    per = _config_bytes(robot)
+    per = config_bytes(robot)
     for option, n, what in (("--batch-size", args.batch_size, "candidates per launch"),
                             ("--n", args.n, "poses kept")):
         try:

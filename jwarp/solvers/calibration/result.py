@@ -423,9 +423,8 @@ def _caller_stacklevel() -> int:
     import os
     import sys
 
-    import jwarp
-
-    root = os.path.dirname(os.path.abspath(jwarp.__file__)) + os.sep
+    # this file is jwarp/solvers/calibration/result.py: the package root is 3 levels up
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))) + os.sep
     frame, level = sys._getframe(1), 1
     while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(root):
         frame, level = frame.f_back, level + 1
