@@ -281,7 +281,7 @@ def import_robot(e: Entry, path: str, out: str, args: Any, help_urdf: str, help_
         row["missing_meshes"] = len(summary["missing_meshes"])
     hf = summary.get("home_fit")
     if hf:   # what the import did to free its home
-        row["import_home"] = hf.get("home_from")
+        row["import_home"] = f"{hf.get('home_from')} ({hf.get('seconds', 0.0):.1f} s)"
         row["default_pairs"] = ["/".join(p["links"])
                                 + f" (mesh {1e3 * p['mesh_distance_m']:.1f} mm)"
                                 for p in hf.get("default_pairs", [])]

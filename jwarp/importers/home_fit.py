@@ -38,6 +38,7 @@ collision-model check (:func:`jwarp.world.model_check.home_configurations`).
 from __future__ import annotations
 
 import math
+import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
@@ -102,7 +103,7 @@ class HomeFitReport:
     "mesh_distance_m"}`` excluded (reason Default); ``tightened``: per link ``{"link",
     "spheres" (count shrunk), "largest_cut_m", "one_sided_error_m": [before, after]}``;
     ``remaining``: pairs still overlapping at the home ``{"links", "sphere_depth_m",
-    "mesh_distance_m", "why"}``; ``warnings``: the lines warned."""
+    "mesh_distance_m", "why"}``; ``warnings``: the lines warned; ``seconds``: wall time."""
 
     home: list[float]
     home_from: str
@@ -110,6 +111,7 @@ class HomeFitReport:
     tightened: list[dict] = field(default_factory=list)
     remaining: list[dict] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    seconds: float = 0.0
 
     @property
     def home_free(self) -> bool:
@@ -260,6 +262,7 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
     if not isinstance(o, HomeFitOptions):
         raise TypeError(f"options: expected HomeFitOptions, got {type(o).__name__}")
     o.validate()
+    t0 = time.perf_counter()
     model = robot.model if model is None else model
     if not isinstance(model, RobotModel):
         raise TypeError(f"model: expected a RobotModel, got {type(model).__name__}")
@@ -329,6 +332,7 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
 
     notes = dict(model.notes)
     notes[HOME_NOTE] = json.dumps([float(v) for v in q])   # the solvers' check starts here
+    report.seconds = time.perf_counter() - t0
     return model.copy(notes=notes), report
 
 
