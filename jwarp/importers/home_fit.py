@@ -413,7 +413,18 @@ def _tighten(robot: Any, model: RobotModel, T: np.ndarray, pairs: list[tuple[int
                 f"{1e3 * row['largest_cut_m']:.1f} mm towards their clearance (they overlapped "
                 f"at the home while the URDF geometry does not); one-sided error "
                 f"{1e3 * before:.1f} -> {1e3 * after:.1f} mm")
-        report.tightened.append(row)
+        prev = next((x for x in report.tightened if x.get("frame") == f
+                     and not x.get("reverted")), None)
+        if prev is not None and prev.get("refit") and not row.get("reverted"):
+            prev["then_shrunk"] = row["spheres"]   # a refitted link shrunk after all
+            prev["largest_cut_m"] = row["largest_cut_m"]
+            prev["one_sided_error_m"][1] = after
+        elif prev is not None and not row.get("reverted"):   # a second pass on a link
+            prev["spheres"] += row["spheres"]
+            prev["largest_cut_m"] = max(prev["largest_cut_m"], row["largest_cut_m"])
+            prev["one_sided_error_m"][1] = after
+        else:
+            report.tightened.append(row)
     return model.copy(spheres=spheres)
 
 
