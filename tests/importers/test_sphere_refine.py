@@ -137,3 +137,65 @@ def test_bad_arguments_name_themselves(kwargs, exc, name):
         refine_fit(box, {"centres": []})
     with pytest.raises(TypeError, match="mesh"):
         refine_fit("box.stl", fit)
+
+
+def test_fit_refined_is_no_worse_than_one_refinement():
+    """The multi-start fit: no more spheres than the plain fit, a largest protrusion no
+    higher than the refinement of the plain fit alone, the error within the tolerance on
+    fresh samples."""
+    from jwarp.importers.sphere_refine import fit_refined
+
+    cap = trimesh.creation.capsule(height=0.12, radius=0.025, count=[32, 32])
+    base = fit_spheres(cap, tolerance=TOL)
+    one = refine_fit(cap, base, iters=150)
+    got = fit_refined(cap, tolerance=TOL, refine={"iters": 150})
+    assert got.k <= base.k
+    assert got.max_protrusion <= one.max_protrusion + 1e-9
+    assert fresh_error(cap, got.centres, got.radii) <= TOL
+    with pytest.raises(ValueError, match="ladder"):
+        fit_refined(cap, tolerance=TOL, ladder=(1.5,), refine={"iters": 5})
+
+
+URDF = """<robot name="toy">
+  <link name="base"/>
+  {links}
+</robot>"""
+
+
+def toy_chain(tmp_path: Path) -> Path:
+    """base -(j1..j4 revolute)- l1..l4 -(fixed)- hand -(fixed)- tcp."""
+    parts, parent = [], "base"
+    for i in range(1, 5):
+        parts.append(f'<link name="l{i}"/><joint name="j{i}" type="revolute"><parent '
+                     f'link="{parent}"/><child link="l{i}"/><origin xyz="0 0 0.1"/><axis '
+                     f'xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>'
+                     f'</joint>')
+        parent = f"l{i}"
+    parts.append('<link name="hand"/><joint name="jh" type="fixed"><parent link="l4"/>'
+                 '<child link="hand"/><origin xyz="0 0 0.1"/></joint>')
+    parts.append('<link name="tcp"/><joint name="jt" type="fixed"><parent link="hand"/>'
+                 '<child link="tcp"/><origin xyz="0 0 0.1"/></joint>')
+    p = tmp_path / "toy.urdf"
+    p.write_text(URDF.format(links="\n".join(parts)))
+    return p
+
+
+def test_link_protrusions_wrist_and_base(tmp_path):
+    """The wrist: the links with at most 2 moving joints between them and the end
+    effector (l2: j3, j4; l1 has 3); the fixed root gets the base factor."""
+    from jwarp.importers.robot import load_urdf
+    from jwarp.importers.sphere_refine import link_protrusions
+
+    model = load_urdf(toy_chain(tmp_path), end_effectors={"tcp": "tcp"}).model
+    got = link_protrusions(model, 0.02)
+    assert got["base"] == pytest.approx(0.06)
+    for name in ("l2", "l3", "l4", "hand"):
+        assert got[name] == pytest.approx(0.015), name
+    assert "l1" not in got
+    got1 = link_protrusions(model, 0.02, wrist_joints=0, wrist=0.5, base=1.0)
+    assert got1["l4"] == pytest.approx(0.01) and "l3" not in got1
+    assert got1["base"] == pytest.approx(0.02)
+    with pytest.raises(ValueError, match="tolerance"):
+        link_protrusions(model, 0.0)
+    with pytest.raises(ValueError, match="wrist_joints"):
+        link_protrusions(model, 0.01, wrist_joints=-1)
