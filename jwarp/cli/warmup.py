@@ -163,8 +163,9 @@ def warmup(device: Any = None, robots: Iterable[Any] | None = None,
         raise ValueError(f"jobs: expected a positive integer, got {jobs!r}")
     mods = kernel_modules(families, dtypes, names)
     before = len(compiled_modules())
-    with compile_progress(len(mods), f"jwarp warmup ({dev.alias})", bar=progress):
+    with compile_progress(len(mods), f"jwarp warmup ({dev.alias})", bar=progress) as p:
         wp.force_load(device=dev, modules=mods, max_workers=jobs if jobs > 1 else 0)
+        p.update(max(len(mods) - p.n, 0))  # modules already loaded in this process
     done = compiled_modules()[before:]
     return WarmupReport(
         device=str(dev.alias), cache_dir=cache_dir(),

@@ -164,14 +164,15 @@ def _wrap(original: Callable[..., bool]) -> Callable[..., bool]:
     def _compile(self: Any, *args: Any, **kwargs: Any) -> bool:
         progress = _STATE["progress"]
         try:
-            if not (notice_enabled() or progress is not None) or not _is_jwarp(self):
-                return original(self, *args, **kwargs)
-            bound = signature.bind(self, *args, **kwargs).arguments
+            ours = _is_jwarp(self)
+            bound = signature.bind(self, *args, **kwargs).arguments if ours else {}
             out_dir, out_name = bound.get("output_dir"), bound.get("output_name")
             cached = (bool(wp.config.cache_kernels) and out_dir is not None
                       and out_name is not None
                       and os.path.exists(os.path.join(os.fspath(out_dir), out_name)))
         except Exception:  # noqa: BLE001 - Warp internals changed: compile without notice
+            ours = False
+        if not ours:
             return original(self, *args, **kwargs)
         if cached:
             result = original(self, *args, **kwargs)

@@ -64,8 +64,11 @@ print(",".join(n for _, n in out))
 '''
 
 
-def run_probe(kernels: list[tuple[str, str, float]], notice: str = "1") -> tuple[str, str]:
-    env = dict(os.environ, JWARP_COMPILE_NOTICE=notice)
+def run_probe(kernels: list[tuple[str, str, float]], cache: Path,
+              notice: str = "1") -> tuple[str, str]:
+    """Launch the probe kernels in a fresh process with the kernel cache in ``cache``
+    (WARP_CACHE_PATH: the probes stay out of the user's cache)."""
+    env = dict(os.environ, JWARP_COMPILE_NOTICE=notice, WARP_CACHE_PATH=str(cache))
     args = [f"{t}:{m}:{v!r}" for t, m, v in kernels]
     r = subprocess.run([sys.executable, "-c", PROBE, *args], env=env,
                        capture_output=True, text=True, timeout=300)
@@ -82,32 +85,33 @@ def notice_lines(stderr: str) -> list[str]:
     return [ln for ln in stderr.splitlines() if ln.startswith("jwarp: compiling")]
 
 
-def test_notice_once_only_when_jwarp_compiles():
+def test_notice_once_only_when_jwarp_compiles(tmp_path):
     v1, v2, v3 = (float(int(uuid.uuid4().int % 10**6)) + 0.25 * i for i in range(3))
     tag = uuid.uuid4().hex[:8]
     # two fresh jwarp kernels and a fresh kernel of another package: one line in all
     out, err = run_probe([(f"a{tag}", "jwarp.probe_a", v1), (f"b{tag}", "jwarp.probe_b", v2),
-                          (f"c{tag}", "userpkg.probe", v3)])
+                          (f"c{tag}", "userpkg.probe", v3)], tmp_path)
     cache, _, compiled, names = out.splitlines()
     lines = notice_lines(err)
     assert len(lines) == 1, err
     m = NOTICE.match(lines[0])
-    assert m and m.group("dir") == cache
+    assert m and m.group("dir") == cache == str(tmp_path / wp.config.version)
     for name in names.split(","):          # Warp did compile each: its folder is there now
         assert in_cache(cache, name)
     assert compiled.split(",") == names.split(",")[:2]   # jwarp's two, not the other one
     # the same kernels again: loaded from the cache, no line
-    out, err = run_probe([(f"a{tag}", "jwarp.probe_a", v1), (f"b{tag}", "jwarp.probe_b", v2)])
+    out, err = run_probe([(f"a{tag}", "jwarp.probe_a", v1), (f"b{tag}", "jwarp.probe_b", v2)],
+                         tmp_path)
     assert notice_lines(err) == [] and out.splitlines()[2] == ""
     # a fresh jwarp kernel with the notice turned off: no line, still compiled
-    out, err = run_probe([(f"d{tag}", "jwarp.probe_d", v3)], notice="0")
+    out, err = run_probe([(f"d{tag}", "jwarp.probe_d", v3)], tmp_path, notice="0")
     assert notice_lines(err) == []
     assert in_cache(out.splitlines()[0], out.splitlines()[3])
 
 
-def test_only_a_fresh_user_kernel_prints_nothing():
+def test_only_a_fresh_user_kernel_prints_nothing(tmp_path):
     v = float(int(uuid.uuid4().int % 10**6)) + 0.5
-    out, err = run_probe([(f"u{uuid.uuid4().hex[:8]}", "userpkg.other", v)])
+    out, err = run_probe([(f"u{uuid.uuid4().hex[:8]}", "userpkg.other", v)], tmp_path)
     assert notice_lines(err) == [] and out.splitlines()[2] == ""
 
 
