@@ -168,7 +168,7 @@ def load_srdf(srdf: str | os.PathLike | Srdf, robot: UrdfRobot, states: Any = No
                                        if any(g.name == st for g in pruned.group_states)]
                if states is not None else None)
     if pruned.skipped:
-        warnings.warn(skipped_summary(pruned), SrdfWarning, stacklevel=2)
+        warnings.warn(skipped_summary(pruned), SrdfWarning, stacklevel=3)  # plan_group's caller
     return pruned
 
 
