@@ -41,12 +41,16 @@ from jwarp.importers.spheres import (SphereFit, _Solid, _boundary_sample, _candi
                                      _sample, fit_spheres, one_sided_error)
 
 __all__ = ["refine_fit", "fit_refined", "coverage_protrusion", "link_protrusions",
-           "MAX_SPHERES", "LADDER", "WRIST_JOINTS", "WRIST_PROTRUSION", "BASE_PROTRUSION"]
+           "MAX_SPHERES", "LADDER", "WRIST_JOINTS", "WRIST_PROTRUSION", "BASE_PROTRUSION",
+           "HAND_PROTRUSION"]
 
 #: :func:`link_protrusions`: links with at most this many moving joints between them and an
 #: end effector form its wrist; their spheres may reach ``WRIST_PROTRUSION x tolerance``
 #: past the surface, the fixed root link's ``BASE_PROTRUSION x tolerance``
 WRIST_JOINTS, WRIST_PROTRUSION, BASE_PROTRUSION = 2, 0.75, 3.0
+#: :func:`link_protrusions`: the bound on the hand's spheres (links rigid with an end
+#: effector), x tolerance: the thin-part protrusion of the fit (spheres that hug a gripper)
+HAND_PROTRUSION = 0.5
 
 #: :func:`fit_refined` also refines fits at these fractions of the first fit's protrusion
 #: (kept when they need no more spheres): the refinement finds a local optimum, so several
@@ -240,65 +244,94 @@ def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float =
 
 
 def fit_refined(mesh: trimesh.Trimesh, *, tolerance: float, protrusion: float | None = None,
-                ladder: tuple = LADDER, refine: dict | None = None,
-                **fit_options: Any) -> SphereFit:
+                max_protrusion: float | None = None, ladder: tuple = LADDER,
+                refine: dict | None = None, **fit_options: Any) -> SphereFit:
     """:func:`~jwarp.importers.spheres.fit_spheres` of ``mesh`` followed by
     :func:`refine_fit`, from several starting points: the fit with ``protrusion`` (None:
-    automatic) and fits at ``ladder`` fractions of its protrusion that need no more
-    spheres; the refined fit with the lowest largest protrusion is returned (error within
-    ``check_fraction x tolerance`` on fresh samples, or the plain fit if none is).
-    ``refine``: keyword arguments of :func:`refine_fit`; ``fit_options``: of
-    ``fit_spheres`` (``max_spheres``, ``seed``, ...)."""
+    automatic) and fits at ``ladder`` fractions of its protrusion. The refinement finds a
+    local optimum, so several starts find lower protrusions more often.
+
+    Which refined fit is returned: with ``max_protrusion`` None, the one of the lowest
+    largest protrusion among those of no more spheres than the first fit; with
+    ``max_protrusion`` [m], the one of the fewest spheres among those reaching at most that
+    far past the surface (then the lowest protrusion; none: the lowest protrusion, with a
+    note). Every candidate's one-sided error is within ``check_fraction x tolerance`` on
+    fresh samples (else the plain fit is the candidate). ``refine``: keyword arguments of
+    :func:`refine_fit`; ``fit_options``: of ``fit_spheres`` (``max_spheres``, ``seed``,
+    ...)."""
     ropt = dict(refine or {})
-    base = fit_spheres(mesh, tolerance=tolerance, protrusion=protrusion, **fit_options)
-    best = refine_fit(mesh, base, **ropt)
+    if max_protrusion is not None and (isinstance(max_protrusion, bool) or not isinstance(
+            max_protrusion, (int, float, np.floating)) or not max_protrusion > 0):
+        raise ValueError(f"max_protrusion: expected None or a distance > 0, got "
+                         f"{max_protrusion!r}")
     for f in ladder:
-        if not 0 < float(f) < 1:
+        if isinstance(f, bool) or not isinstance(f, (int, float, np.floating)) \
+                or not 0 < float(f) < 1:
             raise ValueError(f"ladder: expected fractions in (0, 1), got {f!r}")
+    base = fit_spheres(mesh, tolerance=tolerance, protrusion=protrusion, **fit_options)
+    cands = [refine_fit(mesh, base, **ropt)]
+    for f in ladder:
         fit = fit_spheres(mesh, tolerance=tolerance, protrusion=float(f) * base.protrusion,
                           **fit_options)
-        if fit.k > base.k:
-            break  # lower protrusions need still more spheres
+        if max_protrusion is None and fit.k > base.k:
+            continue  # more spheres than the first fit: not a candidate
         got = refine_fit(mesh, fit, **ropt)
-        if got.one_sided_error <= tolerance and (got.max_protrusion, got.k) < \
-                (best.max_protrusion, best.k):
-            best = got
+        if got.one_sided_error <= tolerance:
+            cands.append(got)
+    if max_protrusion is None:
+        ok = [c for c in cands if c.k <= base.k]
+        return min(ok, key=lambda c: (c.max_protrusion, c.k))
+    ok = [c for c in cands if c.max_protrusion <= max_protrusion]
+    if ok:
+        return min(ok, key=lambda c: (c.k, c.max_protrusion))
+    best = min(cands, key=lambda c: (c.max_protrusion, c.k))
+    best.notes.append(f"no refined fit reaches at most {max_protrusion:.4g} past the surface "
+                      f"(lowest {best.max_protrusion:.4g})")
     return best
 
 
 def link_protrusions(model: Any, tolerance: float, *, wrist_joints: int = WRIST_JOINTS,
-                     wrist: float = WRIST_PROTRUSION, base: float = BASE_PROTRUSION
-                     ) -> dict[str, float]:
-    """Per-link protrusion [m] that spends a sphere budget where grasping brings a robot
-    near objects: ``{link: protrusion}`` for the links on the path from the root to each
-    end effector of ``model`` (a :class:`~jwarp.model.RobotModel`) with at most
-    ``wrist_joints`` moving joints between them and it (``wrist x tolerance``: a Panda's
-    link5, link6, link7, link8 and hand), and for the root link when it is fixed
-    (``base x tolerance``: it moves with nothing). Other links are not listed (the fit's
-    automatic protrusion). Measured on the Panda (docs/spheres.md): 68 spheres, one-sided
-    error <= 1 cm, 1.3 % of mesh-free grasp configurations refused instead of 5 %."""
+                     wrist: float = WRIST_PROTRUSION, base: float = BASE_PROTRUSION,
+                     hand: float = HAND_PROTRUSION) -> dict[str, dict[str, float]]:
+    """Per-link options of :func:`fit_refined` that spend a sphere budget where grasping
+    brings a robot near objects: ``{link: {"protrusion": start [m], "max_protrusion": bound
+    [m]}}`` for
+
+    * the **wrist**: links on the path from the root to an end effector of ``model`` (a
+      :class:`~jwarp.model.RobotModel`) with at most ``wrist_joints`` moving joints between
+      them and it: start and bound ``wrist x tolerance`` (a Panda's link5, link6, link7);
+    * the **hand**: the links rigidly attached to the end effector (no moving joint
+      between): start ``wrist x tolerance``, bound ``hand x tolerance`` (a Panda's link8,
+      hand and TCP frame: the gripper's spheres hug it);
+    * the **base**: the root link when it is fixed, start ``base x tolerance``, no bound
+      (it moves with nothing).
+
+    Other links are not listed (the automatic protrusion). Measured on the Panda at 1 cm
+    (module docstring of the caller, docs/spheres.md): 68-70 spheres, one-sided error
+    <= 1 cm, 1.3-1.7 % of mesh-free grasp configurations refused instead of 5 %."""
     tol = float(tolerance)
     if not np.isfinite(tol) or tol <= 0:
         raise ValueError(f"tolerance: expected a finite distance > 0 [m], got {tolerance!r}")
     if isinstance(wrist_joints, bool) or not isinstance(wrist_joints, (int, np.integer)) \
             or wrist_joints < 0:
         raise ValueError(f"wrist_joints: expected an integer >= 0, got {wrist_joints!r}")
-    for name, v in (("wrist", wrist), ("base", base)):
+    for name, v in (("wrist", wrist), ("base", base), ("hand", hand)):
         if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) \
                 or not np.isfinite(v) or v <= 0:
             raise ValueError(f"{name}: expected a finite factor > 0, got {v!r}")
     frames = model.frames
-    out: dict[str, float] = {}
+    out: dict[str, dict[str, float]] = {}
     if frames and frames[0].parent is None and frames[0].kind == "static":
-        out[frames[0].name] = base * tol
+        out[frames[0].name] = {"protrusion": base * tol}
     for ee in model.end_effectors:
         path = model.ancestors(ee)
         moving = 0
         for i in reversed(path):
             if moving > wrist_joints:
                 break
-            if i != path[0]:
-                out[frames[i].name] = wrist * tol
             if frames[i].kind != "static":
                 moving += 1
+            if i != path[0]:
+                cap = (hand if moving == 0 else wrist) * tol
+                out[frames[i].name] = {"protrusion": wrist * tol, "max_protrusion": cap}
     return out

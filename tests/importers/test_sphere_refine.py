@@ -188,13 +188,17 @@ def test_link_protrusions_wrist_and_base(tmp_path):
 
     model = load_urdf(toy_chain(tmp_path), end_effectors={"tcp": "tcp"}).model
     got = link_protrusions(model, 0.02)
-    assert got["base"] == pytest.approx(0.06)
-    for name in ("l2", "l3", "l4", "hand"):
-        assert got[name] == pytest.approx(0.015), name
+    assert got["base"] == {"protrusion": pytest.approx(0.06)}
+    for name in ("l2", "l3", "l4"):
+        assert got[name] == {"protrusion": pytest.approx(0.015),
+                             "max_protrusion": pytest.approx(0.015)}, name
+    for name in ("hand", "tcp"):  # rigid with the end effector: the spheres hug it
+        assert got[name] == {"protrusion": pytest.approx(0.015),
+                             "max_protrusion": pytest.approx(0.01)}, name
     assert "l1" not in got
     got1 = link_protrusions(model, 0.02, wrist_joints=0, wrist=0.5, base=1.0)
-    assert got1["l4"] == pytest.approx(0.01) and "l3" not in got1
-    assert got1["base"] == pytest.approx(0.02)
+    assert got1["l4"]["protrusion"] == pytest.approx(0.01) and "l3" not in got1
+    assert got1["base"]["protrusion"] == pytest.approx(0.02)
     with pytest.raises(ValueError, match="tolerance"):
         link_protrusions(model, 0.0)
     with pytest.raises(ValueError, match="wrist_joints"):
