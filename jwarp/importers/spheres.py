@@ -825,7 +825,8 @@ def primitive_mesh(kind: str, size: Any, *, sections: int = 64) -> trimesh.Trime
 
 def load_mesh(path: str | Path, scale: Any = None) -> trimesh.Trimesh:
     """A mesh file (stl, obj, dae with pycollada, ...) as one Trimesh, scaled by ``scale``
-    (a number or (3,) per axis)."""
+    (a number or (3,) per axis); vertices at the same position are merged (whatever their
+    normals or texture coordinates)."""
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"mesh: file not found '{p}'")
@@ -835,6 +836,10 @@ def load_mesh(path: str | Path, scale: Any = None) -> trimesh.Trimesh:
         raise ValueError(f"mesh: cannot load '{p}': {e}") from e
     if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
         raise ValueError(f"mesh: '{p}' holds no triangles")
+    # one vertex per position (COLLADA files often give each triangle its own corners, for
+    # their normals/UVs: a triangle soup, open and of one body per face, takes the slow
+    # open-mesh clearance test; merged it is the closed solid it draws)
+    m.merge_vertices(merge_tex=True, merge_norm=True)
     return _scaled(m, scale)
 
 

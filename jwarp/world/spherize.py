@@ -10,7 +10,8 @@ links as frames, URDF sphere geometry already as spheres) and
    on fresh surface samples; each sphere reaching at most ``protrusion`` past the surface;
    at most ``max_spheres`` per link when given) to every link's other collision geometry
    (boxes, cylinders, capsules, meshes, fitted together as one part); links whose geometry
-   is all spheres ("spherized" URDFs) keep them as they are. A link whose fit passes a
+   is all spheres ("spherized" URDFs) keep them as they are; links of the same geometry
+   (mesh file, scale, pose; a hand's fingers) are fitted once. A link whose fit passes a
    bound (one-sided error > ``tolerance``, largest protrusion > ``warn_protrusion``,
    excess volume > ``warn_excess`` x the part's volume) is named in
    ``SpherizeReport.warnings`` and a :class:`SphereFitWarning` is issued;
@@ -45,7 +46,7 @@ __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize",
            "spherized_robot", "resample_pairs"]
 
 #: bump when the fitted result of the same inputs changes
-CACHE_VERSION = 2
+CACHE_VERSION = 3  # 3: mesh vertices merged, sparse cover of large parts
 
 
 class SphereFitWarning(UserWarning):
@@ -161,6 +162,7 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None
         fit_opts["max_spheres"] = int(o.max_spheres)
     if o.protrusion is not None:
         fit_opts["protrusion"] = float(o.protrusion)
+    fitted_once: dict = {}  # links of the same geometry (a hand's fingers) are fitted once
     for link, geoms in by_link.items():
         frame = model.frame_index(link)
         todo = [g for g in geoms if g.kind != "sphere"]
@@ -174,9 +176,14 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None
         link_opts = dict(fit_opts)
         if o.max_spheres is not None:  # the link's URDF spheres count against its budget
             link_opts["max_spheres"] = max(int(o.max_spheres) - (len(geoms) - len(todo)), 1)
+        parts = [_geometry(g) for g in todo]
+        key = _fit_key(parts, link_opts)
         try:
-            fit = fit_link([_geometry(g) for g in todo], tolerance=float(o.tolerance),
-                           **link_opts)
+            fit = fitted_once.get(key) if key is not None else None
+            if fit is None:
+                fit = fit_link(parts, tolerance=float(o.tolerance), **link_opts)
+                if key is not None:
+                    fitted_once[key] = fit
         except (ValueError, TypeError) as e:
             raise type(e)(f"link '{link}': {e}") from e
         spheres += [Sphere(frame=frame, position=np.asarray(c, np.float64), radius=float(r))
@@ -204,6 +211,25 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None
         fitted = with_self_pairs(fitted, pairs, replace=not own)
         report.pairs = pairs
     return fitted, report
+
+
+def _fit_key(parts: list[dict], options: dict) -> tuple | None:
+    """A hashable key of a link's geometries (kind, size, pose, mesh file or object, scale)
+    and fit options: links with equal keys get the same fit (it is deterministic)."""
+    key: list = [tuple(sorted((k, repr(v)) for k, v in options.items()))]
+    for g in parts:
+        mesh = g["mesh"]
+        if mesh is not None and not isinstance(mesh, (str, os.PathLike)):
+            mesh = ("object", id(mesh))
+        key.append((g["kind"], None if g["size"] is None else
+                    tuple(np.asarray(g["size"], np.float64).ravel().tolist()),
+                    None if g["origin"] is None else
+                    tuple(np.asarray(g["origin"], np.float64).ravel().tolist()),
+                    None if mesh is None else str(mesh) if isinstance(mesh, (str, os.PathLike))
+                    else mesh,
+                    None if g["scale"] is None else
+                    tuple(np.asarray(g["scale"], np.float64).ravel().tolist())))
+    return tuple(key)
 
 
 def link_warnings(row: dict, options: SpherizeOptions) -> list[str]:
