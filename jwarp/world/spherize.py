@@ -140,11 +140,12 @@ def _geometry(g: Any) -> dict:
             "scale": g.scale if g.kind == "mesh" else None}
 
 
-def spherize(urdf_robot: Any, options: SpherizeOptions | None = None
-             ) -> tuple[RobotModel, SpherizeReport]:
+def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
+             sample_pairs: bool = True) -> tuple[RobotModel, SpherizeReport]:
     """The collision model of an imported URDF (module docstring): a copy of
     ``urdf_robot.model`` with fitted spheres and sampled self-collision exclusions, and the
-    report."""
+    report. ``sample_pairs`` False: no pair sampling (the caller samples the pairs of a
+    planning group with :func:`resample_pairs`; the model keeps its own exclusions)."""
     from jwarp.importers.spheres import fit_link
 
     o = SpherizeOptions() if options is None else options
@@ -201,7 +202,7 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None
     for w in report.warnings:
         warnings.warn(w, SphereFitWarning, stacklevel=2)
     fitted = model.copy(spheres=spheres)
-    if len(spheres):
+    if len(spheres) and sample_pairs:
         pairs = never_colliding_pairs(fitted, n_samples=int(o.pair_samples), seed=int(o.seed),
                                       margin=float(o.pair_margin))
         # the model's own exclusions (e.g. MJCF <contact><exclude>) are kept and the
@@ -273,9 +274,11 @@ def _cache_key(urdf_robot: Any, path: str, options: SpherizeOptions, urdf_option
 
 
 def spherized_robot(path: str | os.PathLike, options: SpherizeOptions | None = None, *,
-                    cache: bool = True, **urdf_options: Any) -> tuple[RobotModel, SpherizeReport]:
+                    cache: bool = True, sample_pairs: bool = True,
+                    **urdf_options: Any) -> tuple[RobotModel, SpherizeReport]:
     """:func:`spherize` of the URDF file ``path`` (``urdf_options``: the fields of
-    :class:`~jwarp.importers.urdf.UrdfOptions`, e.g. ``package_dirs``, ``end_effectors``).
+    :class:`~jwarp.importers.urdf.UrdfOptions`, e.g. ``package_dirs``, ``end_effectors``;
+    ``sample_pairs`` as in :func:`spherize`).
     With ``cache`` the result is read from / written to the disk cache (module docstring;
     a cache file that does not load is recomputed and replaced)."""
     from jwarp.importers.robot import load_urdf
@@ -287,7 +290,10 @@ def spherized_robot(path: str | os.PathLike, options: SpherizeOptions | None = N
     imported = load_urdf(path, **urdf_options)
     file = None
     if cache:
-        file = _cache_dir() / "urdf" / f"{_cache_key(imported, os.fspath(path), o, urdf_options)}.json"
+        key = _cache_key(imported, os.fspath(path), o, urdf_options)
+        if not sample_pairs:
+            key = hashlib.sha256(f"{key}-no-pairs".encode()).hexdigest()[:32]
+        file = _cache_dir() / "urdf" / f"{key}.json"
         if file.is_file():
             try:
                 doc = json.loads(file.read_text())
@@ -299,7 +305,7 @@ def spherized_robot(path: str | os.PathLike, options: SpherizeOptions | None = N
                 return model, report
             except (OSError, ValueError, KeyError, TypeError):
                 pass  # a damaged cache entry: recompute
-    model, report = spherize(imported, o)
+    model, report = spherize(imported, o, sample_pairs=sample_pairs)
     if file is not None:
         try:
             file.parent.mkdir(parents=True, exist_ok=True)
