@@ -208,6 +208,23 @@ def home_fit_step(imported: Any, model: Any, args: argparse.Namespace, srdf: Any
             from None
 
 
+def group_resamples(imported: Any, args: argparse.Namespace, eff: Any) -> bool:
+    """Whether the import's planning group has fewer joints than the robot and keeps
+    sampled pairs: then its self pairs are sampled over the group only (once, after the
+    fit) and not first over every joint (the group of the kinematic model, probed)."""
+    import warnings
+
+    from jwarp.importers.groups import plan_group
+
+    try:
+        with warnings.catch_warnings():  # the import's own call reports them
+            warnings.simplefilter("ignore")
+            g = plan_group(imported, group_options(args, eff), model=imported.model)
+    except (ValueError, CLIError):
+        return False  # the import's own call reports it
+    return g.model.n_dof < imported.model.n_dof and g.srdf_collisions != "replace"
+
+
 def cmd_import_urdf(args: argparse.Namespace) -> int:
     from jwarp.importers.robot import load_urdf
 
@@ -237,6 +254,8 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
             with warnings.catch_warnings():  # printed below from the report, each once
                 warnings.simplefilter("ignore", SphereFitWarning)
                 model, fit = spherized_robot(args.urdf, opts, cache=not args.no_cache,
+                                             sample_pairs=not group_resamples(imported, args,
+                                                                              eff),
                                              **urdf_options)
         elif args.spheres == "none":
             model = model.copy(spheres=[])
