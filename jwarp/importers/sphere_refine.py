@@ -266,8 +266,8 @@ def fit_refined(mesh: trimesh.Trimesh, *, tolerance: float, protrusion: float | 
                          f"{max_protrusion!r}")
     for f in ladder:
         if isinstance(f, bool) or not isinstance(f, (int, float, np.floating)) \
-                or not 0 < float(f) < 1:
-            raise ValueError(f"ladder: expected fractions in (0, 1), got {f!r}")
+                or not 0 < float(f) <= 2 or float(f) == 1:
+            raise ValueError(f"ladder: expected factors in (0, 2] other than 1, got {f!r}")
     base = fit_spheres(mesh, tolerance=tolerance, protrusion=protrusion, **fit_options)
     cands = [refine_fit(mesh, base, **ropt)]
     for f in ladder:

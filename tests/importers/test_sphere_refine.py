@@ -153,7 +153,7 @@ def test_fit_refined_is_no_worse_than_one_refinement():
     assert got.max_protrusion <= one.max_protrusion + 1e-9
     assert fresh_error(cap, got.centres, got.radii) <= TOL
     with pytest.raises(ValueError, match="ladder"):
-        fit_refined(cap, tolerance=TOL, ladder=(1.5,), refine={"iters": 5})
+        fit_refined(cap, tolerance=TOL, ladder=(2.5,), refine={"iters": 5})
 
 
 URDF = """<robot name="toy">
