@@ -190,11 +190,11 @@ def home_arg(text: str | None) -> str | list[float] | None:
 
 def home_fit_step(imported: Any, model: Any, args: argparse.Namespace, srdf: Any
                   ) -> tuple[Any, Any]:
-    """The import's home made free of self-collision (:func:`jwarp.importers.home_fit.
+    """The import's home made free of self-collision (:func:`jwarp.world.home_fit.
     fit_home`: Default pairs, tightened spheres), its warnings printed from the report."""
     import warnings
 
-    from jwarp.importers.home_fit import HomeFitOptions, HomeFitWarning, fit_home
+    from jwarp.world.home_fit import HomeFitOptions, HomeFitWarning, fit_home
 
     home = home_arg(args.home)
     try:

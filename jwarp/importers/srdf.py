@@ -15,7 +15,7 @@ from ``base_link`` down to ``tip_link``; subgroups recursively).
 Write (:func:`srdf_text`, :func:`write_srdf`): the robot's frame pairs that are never
 checked for self-collision as ``<disable_collisions>`` (reason ``Adjacent`` for a frame
 and its parent, ``Default`` for the pairs in contact at the home configuration that the
-import excluded (``notes['self_collision_default']``, :mod:`jwarp.importers.home_fit`),
+import excluded (``notes['self_collision_default']``, :mod:`jwarp.world.home_fit`),
 else ``Never``); :func:`jwarp.importers.urdf_export.export_urdf` writes
 it beside the URDF.
 

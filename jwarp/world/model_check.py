@@ -10,7 +10,7 @@ caller opts out (``allow_no_collision=True``; CLI ``--no-collision``).
 
 A robot imported with ``jwarp import-urdf`` carries its home (``notes['home']``, JSON joint
 values: the SRDF state or values of ``--home``, made free of self-collision at import,
-:mod:`jwarp.importers.home_fit`); it is the first of :func:`home_configurations`. Two
+:mod:`jwarp.world.home_fit`); it is the first of :func:`home_configurations`. Two
 more stand in for a home: the zero configuration projected into the joint limits, and
 the middle of the limits. The self-collision check fails when the robot collides with itself
 at both (the Panda's zero configuration projected into its limits is folded, hand against

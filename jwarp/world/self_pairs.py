@@ -18,7 +18,7 @@ positive ``margin`` keeps pairs that come close.
 MoveIt's setup assistant also disables the pairs in collision at the robot's default
 configuration (reason "Default"). :func:`default_pairs` applies that rule only where the
 robot's own geometry is in contact there (a ``contact`` test the caller gives, e.g. the
-URDF's collision meshes: :mod:`jwarp.importers.home_fit`): spheres that overlap where
+URDF's collision meshes: :mod:`jwarp.world.home_fit`): spheres that overlap where
 the meshes do not are a fit to correct, not a pair to stop checking.
 :func:`with_default_pairs` adds them to ``exclude_pairs`` and lists them in
 ``notes['self_collision_default']`` (an exported SRDF writes them with reason="Default").

@@ -1,4 +1,4 @@
-"""The home made free of self-collision at import (jwarp.importers.home_fit): the Default
+"""The home made free of self-collision at import (jwarp.world.home_fit): the Default
 rule only where the URDF geometry touches (boxes at known distances: analytic), spheres
 tightened where it does not (never below their clearance, analytic for a cube; a link
 whose surface would be uncovered beyond the tolerance is left as it was), the mesh
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.importers.home_fit import (HomeFitOptions, HomeFitWarning, fit_home, link_mesh,
+from jwarp.world.home_fit import (HomeFitOptions, HomeFitWarning, fit_home, link_mesh,
                                       mesh_distance, resolve_home)
 from jwarp.importers.robot import example_robot_urdf, load_urdf
 from jwarp.importers.srdf import read_srdf, srdf_text
