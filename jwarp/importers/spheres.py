@@ -474,7 +474,8 @@ def _greedy_cover(A: sparse.csr_matrix, limit: int | None) -> list[int] | None:
 
 class _Slack:
     """Dense (M, N) float32 ``|p_j - c_i| - r_i`` of candidates and samples (at most
-    ``_MAX_PAIRS`` entries: the caller subsamples candidates)."""
+    ``_MAX_PAIRS`` entries: the caller subsamples candidates; ``eps`` unused, the signature
+    of :class:`_Holds`)."""
 
     def __init__(self, samples: np.ndarray, centres: np.ndarray, radii: np.ndarray,
                  eps: float = 0.0) -> None:
@@ -516,7 +517,8 @@ class _Holds:
         self.A.sort_indices()
 
     def unheld(self, eps: float) -> np.ndarray:
-        """Indices of the samples no candidate holds."""
+        """Indices of the samples no candidate holds (at the ``eps`` of the construction;
+        the argument is the signature of :class:`_Slack`)."""
         return np.flatnonzero(np.diff(self.A.tocsc().indptr) == 0)
 
     def cover(self) -> list[int]:

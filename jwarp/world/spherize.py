@@ -180,11 +180,10 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
         parts = [_geometry(g) for g in todo]
         key = _fit_key(parts, link_opts)
         try:
-            fit = fitted_once.get(key) if key is not None else None
+            fit = fitted_once.get(key)
             if fit is None:
-                fit = fit_link(parts, tolerance=float(o.tolerance), **link_opts)
-                if key is not None:
-                    fitted_once[key] = fit
+                fit = fitted_once[key] = fit_link(parts, tolerance=float(o.tolerance),
+                                                  **link_opts)
         except (ValueError, TypeError) as e:
             raise type(e)(f"link '{link}': {e}") from e
         spheres += [Sphere(frame=frame, position=np.asarray(c, np.float64), radius=float(r))
@@ -214,7 +213,7 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
     return fitted, report
 
 
-def _fit_key(parts: list[dict], options: dict) -> tuple | None:
+def _fit_key(parts: list[dict], options: dict) -> tuple:
     """A hashable key of a link's geometries (kind, size, pose, mesh file or object, scale)
     and fit options: links with equal keys get the same fit (it is deterministic)."""
     key: list = [tuple(sorted((k, repr(v)) for k, v in options.items()))]
