@@ -24,7 +24,20 @@ Method (lengths in the mesh's unit; ``e = error_fraction * tolerance``):
    excess) is recomputed with :mod:`jwarp.importers.spheres`.
 
 Optionally ``extra`` spheres are added one at a time at the worst-covered sample (its
-medial candidate), with step 2 repeated, and kept only when they lower ``P``.
+medial candidate), with step 2 repeated (rarely useful: the min-max optimum is local).
+
+:func:`fit_refined` runs :func:`~jwarp.importers.spheres.fit_spheres` at a ladder of
+protrusions and refines each (several starting points); :func:`link_protrusions` gives
+per-link starts and bounds that spend a sphere budget on the wrist and the hand, where
+grasping brings an arm near objects, and save it on the fixed base.
+
+Measured (Panda of example-robot-data, 1 cm, shared 2-core VM; grasp configurations of
+``benchmarks/bench_grasp_endpoints.py``, 4 x 10 scenes per family, 1150 configurations
+whose URDF meshes are free): the default fit, 61 spheres, largest protrusion 20 mm,
+refuses 60 (5.2 %); :func:`refine_fit` of every link (same 61 spheres) 38 (3.3 %),
+fingers 4.1 mm; :func:`fit_refined` (same count) 32 (2.8 %), fingers 0.9 mm;
+:func:`fit_refined` with :func:`link_protrusions`, 68 spheres (seed 0), 15 (1.3 %), one-sided error <= 9.5 mm on 50 000 fresh samples per link, hand 3.7 mm,
+fingers 0.9 mm. The count varies with the seed (71 at seed 1).
 """
 
 from __future__ import annotations
