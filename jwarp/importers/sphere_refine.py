@@ -23,9 +23,6 @@ Method (lengths in the mesh's unit; ``e = error_fraction * tolerance``):
    repeats (up to 4 times). The report (``one_sided_error``, ``max_protrusion``,
    excess) is recomputed with :mod:`jwarp.importers.spheres`.
 
-Optionally ``extra`` spheres are added one at a time at the worst-covered sample (its
-medial candidate), with step 2 repeated (rarely useful: the min-max optimum is local).
-
 :func:`fit_refined` runs :func:`~jwarp.importers.spheres.fit_spheres` at a ladder of
 protrusions and refines each (several starting points); :func:`link_protrusions` gives
 per-link starts and bounds that spend a sphere budget on the wrist and the hand, where
@@ -36,8 +33,10 @@ Measured (Panda of example-robot-data, 1 cm, shared 2-core VM; grasp configurati
 whose URDF meshes are free): the default fit, 61 spheres, largest protrusion 20 mm,
 refuses 60 (5.2 %); :func:`refine_fit` of every link (same 61 spheres) 38 (3.3 %),
 fingers 4.1 mm; :func:`fit_refined` (same count) 32 (2.8 %), fingers 0.9 mm;
-:func:`fit_refined` with :func:`link_protrusions`, 68 spheres (seed 0), 15 (1.3 %), one-sided error <= 9.5 mm on 50 000 fresh samples per link, hand 3.7 mm,
-fingers 0.9 mm. The count varies with the seed (71 at seed 1).
+:func:`fit_refined` with :func:`link_protrusions`, 68 spheres (seed 0), 15 (1.3 %),
+one-sided error <= 9.5 mm on 50 000 fresh samples per link, hand 3.7 mm, fingers 0.9 mm;
+the count and the figures vary with the seed (seed 1: 71 spheres, 1.8 %; seed 2: 70,
+1.7 %).
 """
 
 from __future__ import annotations
@@ -49,9 +48,8 @@ import numpy as np
 import trimesh
 import warp as wp
 
-from jwarp.importers.spheres import (SphereFit, _Solid, _boundary_sample, _candidates,
-                                     _check_mesh, _excess, _on_boundary, _protrusion,
-                                     _sample, fit_spheres, one_sided_error)
+from jwarp.importers.spheres import (SphereFit, excess_volume, fit_spheres,
+                                     one_sided_error, sphere_protrusion)
 
 __all__ = ["refine_fit", "fit_refined", "coverage_protrusion", "link_protrusions",
            "MAX_SPHERES", "LADDER", "WRIST_JOINTS", "WRIST_PROTRUSION", "BASE_PROTRUSION",
@@ -90,18 +88,65 @@ def _closest_kernel(mesh: wp.uint64, points: wp.array(dtype=wp.vec3), max_dist: 
         closest[i] = p
 
 
-def _clearance_grad(solid: _Solid, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+class _MeshSolid:
+    """The solid of a mesh for point queries (generalised winding number > 1/2 inside, as
+    :func:`jwarp.importers.spheres.signed_distance`): signed distance and closest surface
+    point. Coordinates relative to the bounding-box centre (float32 in Warp)."""
+
+    def __init__(self, mesh: trimesh.Trimesh) -> None:
+        wp.config.quiet = True
+        wp.init()
+        V = np.asarray(mesh.vertices, np.float64)
+        F = np.asarray(mesh.faces, np.int64)
+        self.centre = 0.5 * (V.min(0) + V.max(0))
+        a, b, c = (V[F[:, i]] - self.centre for i in range(3))
+        if float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) < 0:
+            F = F[:, ::-1]  # triangles facing inwards
+        self.extent = float(np.linalg.norm(V.max(0) - V.min(0)))
+        self._pts = wp.array((V - self.centre).astype(np.float32), dtype=wp.vec3, device="cpu")
+        self._idx = wp.array(F.astype(np.int32).ravel(), dtype=wp.int32, device="cpu")
+        self.mesh = wp.Mesh(points=self._pts, indices=self._idx, support_winding_number=True)
+
+    def query(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n,) signed distance (< 0 inside) and (n, 3) closest surface point of ``p``."""
+        x = (np.asarray(p, np.float64).reshape(-1, 3) - self.centre).astype(np.float32)
+        if len(x) == 0:
+            return np.zeros(0), np.zeros((0, 3))
+        maxd = 2.0 * self.extent + float(np.linalg.norm(x, axis=1).max()) + 1.0
+        sd = wp.zeros(len(x), dtype=float, device="cpu")
+        cl = wp.zeros(len(x), dtype=wp.vec3, device="cpu")
+        wp.launch(_closest_kernel, len(x), inputs=[self.mesh.id, wp.array(
+            x, dtype=wp.vec3, device="cpu"), maxd], outputs=[sd, cl], device="cpu")
+        return sd.numpy().astype(np.float64), cl.numpy().astype(np.float64) + self.centre
+
+
+def _check_mesh(mesh: Any) -> trimesh.Trimesh:
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise TypeError(f"mesh: expected a trimesh.Trimesh, got {type(mesh).__name__}")
+    if len(mesh.faces) == 0 or not np.all(np.isfinite(mesh.vertices)) or not mesh.area > 0:
+        raise ValueError("mesh: empty, zero-area or not finite")
+    return mesh
+
+
+def _boundary_sample(mesh: trimesh.Trimesh, solid: _MeshSolid, n: int, seed: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """About ``n`` area-uniform surface samples and their normals on the solid's boundary
+    (a face of one body buried inside another, inside on both sides, dropped)."""
+    p, face = trimesh.sample.sample_surface(mesh, n, seed=seed)
+    p, nrm = np.asarray(p), np.asarray(mesh.face_normals[face])
+    if mesh.is_watertight and mesh.body_count == 1:
+        return p, nrm
+    h = 1e-3 * solid.extent
+    both = (solid.query(p + h * nrm)[0] < 0) & (solid.query(p - h * nrm)[0] < 0)
+    return p[~both], nrm[~both]
+
+
+def _clearance_grad(solid: _MeshSolid, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(k,) clearance ``-signed_distance`` of centres ``c`` (k, 3) and (k, 3) its gradient
     (the unit vector from the closest surface point, sign-corrected)."""
-    x = (c - solid.centre).astype(np.float32)
-    maxd = 2.0 * solid.extent + float(np.linalg.norm(x, axis=1).max()) + 1.0
-    sd = wp.zeros(len(c), dtype=float, device="cpu")
-    cl = wp.zeros(len(c), dtype=wp.vec3, device="cpu")
-    wp.launch(_closest_kernel, len(c), inputs=[solid.mesh.id, wp.array(x, dtype=wp.vec3,
-                                                                        device="cpu"),
-                                               maxd], outputs=[sd, cl], device="cpu")
-    s = -sd.numpy().astype(np.float64)
-    d = x.astype(np.float64) - cl.numpy().astype(np.float64)
+    sd, cl = solid.query(c)
+    s = -sd
+    d = np.asarray(c, np.float64) - cl
     n = np.linalg.norm(d, axis=1, keepdims=True)
     u = np.where(n > 0, d / np.maximum(n, 1e-300), 0.0)
     return s, np.where(s[:, None] >= 0, u, -u)
@@ -112,7 +157,7 @@ def _g(x: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
     return np.linalg.norm(x[:, None, :] - c[None], axis=-1) - s[None]
 
 
-def _optimise(solid: _Solid, x: np.ndarray, c: np.ndarray, tol: float, iters: int,
+def _optimise(solid: _MeshSolid, x: np.ndarray, c: np.ndarray, tol: float, iters: int,
               lr: float) -> np.ndarray:
     """Centres (k, 3) minimising a smooth ``max_j min_i g(x_j, c_i)`` (Adam)."""
     c = c.copy()
@@ -175,22 +220,22 @@ def coverage_protrusion(mesh: trimesh.Trimesh, centres: np.ndarray, tolerance: f
     """The smallest common protrusion [mesh unit] with which spheres at ``centres`` (k, 3)
     (radius = clearance + protrusion) hold ``n`` surface samples within ``tolerance``:
     ``max_x min_i (|x - c_i| - clearance(c_i)) - tolerance``."""
-    solid = _Solid(_check_mesh(mesh))
-    x = _boundary_sample(mesh, solid, n, seed)
+    solid = _MeshSolid(_check_mesh(mesh))
+    x, _ = _boundary_sample(mesh, solid, n, seed)
     s, _ = _clearance_grad(solid, np.asarray(centres, np.float64).reshape(-1, 3))
     return float(_g(x, np.asarray(centres, np.float64).reshape(-1, 3), s).min(1).max()
                  - tolerance)
 
 
 def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float = 0.88,
-               check_fraction: float = 0.95, extra: int = 0, n_surface: int | None = None,
+               check_fraction: float = 0.95, n_surface: int | None = None,
                n_check: int = 50_000, iters: int = 300, seed: int = 0,
                n_volume: int = 100_000) -> SphereFit:
     """``fit`` (a :func:`~jwarp.importers.spheres.fit_spheres` result for ``mesh``, same
     frame) with its centres moved and radii reset so that the spheres reach as little as
     possible past the surface while the one-sided error stays within ``check_fraction x
-    tolerance`` on ``n_check`` fresh samples (module docstring). ``extra`` >= 0 spheres
-    may be added where they lower the protrusion. Returns a new :class:`SphereFit`
+    tolerance`` on ``n_check`` fresh samples (module docstring). Returns a new
+    :class:`SphereFit`
     (the input's when the refinement does not lower the largest protrusion)."""
     mesh = _check_mesh(mesh)
     if not isinstance(fit, SphereFit):
@@ -198,8 +243,6 @@ def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float =
     if not 0 < error_fraction <= check_fraction <= 1:
         raise ValueError(f"error_fraction, check_fraction: expected 0 < error_fraction <= "
                          f"check_fraction <= 1, got {error_fraction}, {check_fraction}")
-    if isinstance(extra, bool) or not isinstance(extra, (int, np.integer)) or extra < 0:
-        raise ValueError(f"extra: expected an integer >= 0, got {extra!r}")
     for name, v, lo in (("iters", iters, 1), ("n_check", n_check, 100), ("seed", seed, 0),
                         ("n_volume", n_volume, 100)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
@@ -211,30 +254,21 @@ def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float =
     if fit.k == 0 or fit.k > MAX_SPHERES:
         return fit  # nothing to move, or too many spheres for the dense (N, k) steps
     n_surface = n_surface or int(np.clip(8.0 * mesh.area / tol ** 2, *_SAMPLES))
-    solid = _Solid(mesh)
-    solid.simple = bool(mesh.is_watertight and mesh.body_count == 1)
-    pts, nrm = _sample(mesh, n_surface, seed + 31)
-    on = _on_boundary(solid, pts, nrm)
-    x, xn = pts[on], nrm[on]
+    solid = _MeshSolid(mesh)
+    x, _ = _boundary_sample(mesh, solid, n_surface, seed + 31)
     c0 = np.asarray(fit.centres, np.float64)
     s0, _ = _clearance_grad(solid, c0)
     c0 = c0[s0 > 0]  # the fit centres its spheres inside (guard)
-    lr = 0.05 * tol
-    c = _optimise(solid, x, c0, tol, iters, lr)
-    for _ in range(int(extra)):
-        s, _ = _clearance_grad(solid, c)
-        worst = int(_g(x, c, s).min(axis=1).argmax())
-        cc, _ = _candidates(solid, x[worst:worst + 1], xn[worst:worst + 1], x, 0.1 * tol)
-        if not len(cc):
-            break
-        c = _optimise(solid, x, np.concatenate([c, cc[:1]]), tol, iters, lr)
+    if len(c0) == 0:
+        return fit
+    c = _optimise(solid, x, c0, tol, iters, 0.05 * tol)
     e = error_fraction * tol
     s, _ = _clearance_grad(solid, c)
     for rnd in range(5):
         r = _radii(x, c, s, e)
         keep = np.isfinite(r)
         cc, rr = c[keep], r[keep]
-        check = _boundary_sample(mesh, solid, n_check, seed + 7919 * (rnd + 3))
+        check, _ = _boundary_sample(mesh, solid, n_check, seed + 7919 * (rnd + 3))
         err_all = one_sided_error(check, cc, rr)
         bad = err_all > check_fraction * tol
         if not bad.any():
@@ -242,11 +276,11 @@ def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float =
         x = np.concatenate([x, check[bad]])
         e *= 0.97
     err = float(err_all.max())
-    prot = _protrusion(solid, cc, rr)
+    prot = sphere_protrusion(mesh, cc, rr)
     if float(prot.max()) >= fit.max_protrusion or (err > check_fraction * tol
                                                     and err > fit.one_sided_error):
         return fit  # no better than the fit (a binding budget, a hard part)
-    vol, se = _excess(solid, cc, rr, n_volume, seed + 104729)
+    vol, se, _ = excess_volume(mesh, cc, rr, n=n_volume, seed=seed + 104729)
     out = replace(fit, centres=cc, radii=rr, one_sided_error=err, meets_tolerance=err <= tol,
                   fit_error=e, excess_volume=vol, excess_volume_stderr=se,
                   excess_fraction=vol / fit.mesh_volume if fit.mesh_volume > 0 else np.inf,

@@ -125,7 +125,6 @@ def test_panda_link_refined():
 @pytest.mark.parametrize("kwargs,exc,name", [
     ({"error_fraction": 0.0}, ValueError, "error_fraction"),
     ({"error_fraction": 0.9, "check_fraction": 0.8}, ValueError, "check_fraction"),
-    ({"extra": -1}, ValueError, "extra"),
     ({"iters": 0}, ValueError, "iters"),
 ])
 def test_bad_arguments_name_themselves(kwargs, exc, name):
