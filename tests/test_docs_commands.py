@@ -1,0 +1,405 @@
+"""Every command quoted in README.md, docs/*.md and examples/README.md (issue 27 item 4).
+
+* Every ``jwarp ...`` command of a fenced block (tests/doc_commands.py extracts them) is
+  parsed by the real parser, as :func:`jwarp.cli.main.main` parses it, so a subcommand or
+  option that does not exist (or a value it refuses) fails naming ``file:line``. Synopsis
+  notation is expanded (:func:`doc_commands.expand`): ``[...]`` optional parts once with and
+  once without, ``a|b`` each alternative, ``PLACEHOLDER`` words and ``...`` through the
+  explicit tables below.
+* ``python X.py`` commands: the script exists and its ``--help`` names the options used.
+* A curated list of commands runs for real in a temporary folder, each with a check of its
+  output (README's calibration recipe, the planning and IK examples, design.md's recipe, ...).
+* Figures the docs quote are checked where that is cheap: defaults quoted in synopses
+  against the parser's defaults, quoted output lines against the run's output.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import doc_commands as dc  # tests/doc_commands.py
+from jwarp.cli.common import CLIError, fix_negative_values, value_options
+from jwarp.cli.main import build_parser, main
+
+ROOT = dc.ROOT
+COMMANDS = dc.all_commands()
+JWARP = [c for c in COMMANDS if c.program == "jwarp"]
+PYTHON = [c for c in COMMANDS if c.program == "python"]
+
+# ------------------------------------------------------------------ synopsis tables
+#: placeholder words of synopses -> a value of the option's type (parse only)
+PLACEHOLDERS = {
+    "N": "10", "K": "1", "S": "1", "M": "0.01", "R": "justin19", "RAD": "3.14",
+    "DIR": "pkgs", "NAME": "arm", "NAME=BODY": "tcp=panda_hand", "SPEC": "shelf",
+    "CSV": "samples.csv", "ADDR": "auto", "NAME=VALUE": "panda_finger_joint1=0.04",
+    "J1,J2,...": "panda_joint1,panda_joint2", "STATE": "default", "Q1,Q2,...": "0,0,0,0,0,0,0",
+}
+#: ``--start ...`` / ``--goal ...``: "some configuration"; README names `--start zeros`
+VALUE_ELLIPSIS = {"--start": "zeros", "--goal": "zeros"}
+#: ``jwarp CMD ... --more``: ``...`` stands for the options of a command nearby
+COMMAND_ELLIPSIS = {
+    "docs/calibration.md:86": ("--setup run/setup.json --data run/samples.csv",
+                               "the calibrate options of README's recipe"),
+    "docs/scenes.md:358": ("--robot planar4 --world block.npz --start 1.2,0,0,0 "
+                           "--goal -1.2,0,0,0", "the plan two lines above (scenes.md:356)"),
+    "docs/scenes.md:359": ("--robot planar4 --world block.npz --start 1.2,0,0,0 "
+                           "--goal -1.2,0,0,0", "the plan three lines above (scenes.md:356)"),
+}
+
+
+def variants(cmd: dc.DocCommand) -> list[list[str]]:
+    """The concrete argv lists (after ``jwarp``) of a doc command: synopsis expanded and
+    placeholders replaced through the tables above. AssertionError naming the line for a
+    ``...`` the tables do not explain."""
+    out = []
+    for v in dc.expand(dc.words(cmd.text)[1:]):
+        argv: list[str] = []
+        for k, (w, optional) in enumerate(v):
+            if w == "...":
+                prev = argv[-1] if argv else ""
+                if prev in VALUE_ELLIPSIS:
+                    argv.append(VALUE_ELLIPSIS[prev])
+                elif cmd.where in COMMAND_ELLIPSIS and not prev.startswith("-") and k <= 2:
+                    argv += COMMAND_ELLIPSIS[cmd.where][0].split()
+                elif optional:
+                    pass  # "[--opt X ...]": the option may repeat
+                else:
+                    raise AssertionError(f"{cmd.where}: '...' not explained by the tables: "
+                                         f"{cmd.text}")
+                continue
+            argv.append(PLACEHOLDERS.get(w, w))
+        out.append(argv)
+    return out
+
+
+@pytest.fixture(scope="module")
+def parser():
+    return build_parser()
+
+
+def parse(parser, argv: list[str]):
+    return parser.parse_args(fix_negative_values(argv, value_options(parser)))
+
+
+def test_every_command_is_classified():
+    """No silent skipping: every extracted command is a jwarp command (parsed below) or a
+    python command (checked below), and the extraction finds the commands it must."""
+    assert len(JWARP) + len(PYTHON) == len(COMMANDS)
+    assert len(COMMANDS) >= 50, len(COMMANDS)
+    files = {c.file for c in COMMANDS}
+    assert {"README.md", "docs/install.md", "docs/design.md", "docs/urdf.md"} <= files
+    # the README's source tree (``jwarp/__init__.py  facade ...``) and printed messages
+    # (``jwarp: warning: ...``) are not commands
+    assert not [c.where for c in COMMANDS if not re.match(r"(jwarp|python3?)\s", c.text)]
+    # every synopsis-table entry names an extracted command
+    assert set(COMMAND_ELLIPSIS) <= {c.where for c in COMMANDS}
+
+
+@pytest.mark.parametrize("cmd", JWARP, ids=[c.where for c in JWARP])
+def test_jwarp_command_parses(cmd, parser, capsys):
+    for argv in variants(cmd):
+        try:
+            parse(parser, argv)
+        except (CLIError, SystemExit) as e:
+            pytest.fail(f"{cmd.where}: `jwarp {' '.join(argv)}` does not parse: {e}")
+    capsys.readouterr()
+
+
+def _optional_defaults(cmd: dc.DocCommand) -> list[tuple[str, str]]:
+    """``[--opt VALUE]`` groups of a synopsis whose VALUE is a number literal."""
+    return re.findall(r"\[(--[a-z-]+) (-?[0-9][0-9.e+-]*)\]", cmd.text)
+
+
+SYNOPSES_WITH_DEFAULTS = [c for c in JWARP if _optional_defaults(c)]
+
+
+@pytest.mark.parametrize("cmd", SYNOPSES_WITH_DEFAULTS,
+                         ids=[c.where for c in SYNOPSES_WITH_DEFAULTS])
+def test_synopsis_values_are_the_defaults(cmd, parser):
+    """A ``[--opt 0.02]`` in a synopsis quotes the default: leaving it out gives the same."""
+    minimal = parse(parser, variants(cmd)[-1])
+    for opt, text in _optional_defaults(cmd):
+        given = parse(parser, variants(cmd)[-1] + [opt, text])
+        dest = opt.lstrip("-").replace("-", "_")
+        assert getattr(minimal, dest) == getattr(given, dest), \
+            f"{cmd.where}: {opt} {text} is not the default ({getattr(minimal, dest)!r})"
+
+
+def test_deprecated_spelling_prints_the_documented_warning(parser, capsys):
+    """docs/cli_vocabulary.md quotes the warning of an old spelling on the line after it."""
+    cmd = next(c for c in JWARP if c.where.startswith("docs/cli_vocabulary.md"))
+    lines = (ROOT / cmd.file).read_text().splitlines()
+    parse(parser, variants(cmd)[0])
+    assert lines[cmd.line].strip() in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ python commands
+def _python_steps() -> list[tuple[dc.DocCommand, list[str]]]:
+    """Every ``&&`` step of the python commands, as words."""
+    return [(c, dc.words(step)) for c in PYTHON for step in c.text.split("&&")]
+
+
+#: steps of the README's install one-liners that are not run (with the reason) -> check
+INSTALL_STEPS = {
+    "python3 -m venv .venv": "creates a virtual environment (the test runs inside one)",
+    ". .venv/bin/activate": "activates it",
+    "pip install torch==2.13.0": "the pinned torch (checked: pyproject accepts it)",
+    "pip install -e .": "installs jwarp (checked: pyproject's project)",
+    'pip install -e .[test]': "with the test extra (checked: the extra exists)",
+}
+
+
+def test_python_commands():
+    import tomllib
+
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    seen = 0
+    for cmd, w in _python_steps():
+        text = " ".join(w)
+        if text in INSTALL_STEPS:
+            seen += 1
+            continue
+        assert w[0] in ("python", "python3"), f"{cmd.where}: unclassified step {text!r}"
+        if w[1:3] == ["-m", "pytest"]:
+            assert all((ROOT / p).exists() for p in w[3:]), cmd.where
+        else:
+            assert w[1].endswith(".py") and (ROOT / w[1]).is_file(), \
+                f"{cmd.where}: {w[1]} does not exist"
+        seen += 1
+    assert seen == len(_python_steps())
+    # README: "`pyproject.toml` accepts `torch>=2.3`"; the pin 2.13.0 satisfies it
+    assert "torch>=2.3" in pyproject["project"]["dependencies"]
+    assert "test" in pyproject["project"]["optional-dependencies"]
+    readme = (ROOT / "README.md").read_text()
+    assert "`pyproject.toml` accepts\n`torch>=2.3`" in readme or \
+        "`pyproject.toml` accepts `torch>=2.3`" in readme
+
+
+SCRIPTS = sorted({w[1] for _, w in _python_steps() if w[0].startswith("python")
+                  and w[1].endswith(".py")})
+
+
+@pytest.mark.parametrize("script", SCRIPTS)
+def test_python_script_help_names_the_documented_options(script):
+    """``python X.py --help`` works and lists every option the docs pass to X.py."""
+    r = subprocess.run([sys.executable, str(ROOT / script), "--help"], capture_output=True,
+                       text=True, timeout=120, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    used = {o for _, w in _python_steps() if len(w) > 1 and w[1] == script
+            for o in w[2:] if o.startswith("--")}
+    missing = [o for o in used if o not in r.stdout]
+    assert not missing, f"{script} --help lacks {missing}"
+
+
+# ------------------------------------------------------------------ commands run for real
+def doc(where: str) -> dc.DocCommand:
+    return next(c for c in COMMANDS if c.where == where)
+
+
+def argv_of(where: str, variant: int = 0) -> list[str]:
+    """The doc command's argv; words naming a file of the repository (the shipped models,
+    example scenes) become absolute paths, the rest run in the temporary folder."""
+    out = []
+    for w in variants(doc(where))[variant]:
+        out.append(str(ROOT / w) if "/" in w and (ROOT / w).is_file() else w)
+    return out
+
+
+def run(capsys, argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory):
+    return tmp_path_factory.mktemp("docs")
+
+
+@pytest.fixture
+def in_work(work, monkeypatch):
+    monkeypatch.chdir(work)
+    return work
+
+
+def _readme_block_world(folder: Path) -> None:
+    """Run README's Python lines up to ``save_world(world, "block.npz")`` (its own recipe
+    for the world of the plan command) in ``folder``."""
+    text = (ROOT / "README.md").read_text()
+    block = next(b for b in re.findall(r"```python\n(.*?)```", text, re.S)
+                 if 'save_world(world, "block.npz")' in b)
+    head = block[:block.index('save_world(world, "block.npz")')] + \
+        'save_world(world, "block.npz")\n'
+    head = "\n".join(ln for ln in head.splitlines() if not ln.startswith("from jwarp.solvers"))
+    exec(compile(head, "README.md (block world)", "exec"), {})
+    assert (folder / "block.npz").is_file()
+
+
+def _tcp_sag(out: str) -> float:
+    """|sag| [mm] of right_tcp in the end-effector table of ``fk --elastic``."""
+    return float([ln for ln in out.splitlines() if ln.startswith("right_tcp")][-1].split()[-1])
+
+
+def test_readme_cli_examples(in_work, capsys):
+    import jwarp
+
+    # jwarp robots [--json]
+    code, out, _ = run(capsys, argv_of("README.md:120", 0))
+    assert code == 0 and sorted(r["name"] for r in json.loads(out)) == sorted(jwarp.robots())
+    code, out, _ = run(capsys, argv_of("README.md:120", 1))
+    assert code == 0 and all(name in out for name in jwarp.robots())
+    # jwarp info justin19 [--json]: joints, frames, bodies (or the robot's JSON)
+    code, out, _ = run(capsys, argv_of("README.md:121", 0))
+    info = json.loads(out)
+    assert code == 0 and info["name"] == "justin19" and len(info["joints"]) == 19
+    code, out, _ = run(capsys, argv_of("README.md:121", 1))
+    assert code == 0 and "right_tcp" in out
+    # jwarp fk justin19 --q 0,...,0 --json: the frames of jwarp.fk
+    code, out, _ = run(capsys, argv_of("README.md:122"))
+    robot = jwarp.robot("justin19")
+    T = jwarp.fk(robot, np.zeros(19))
+    frames = json.loads(out)["frames"]
+    i = robot.frame_index("right_tcp")
+    assert code == 0
+    np.testing.assert_allclose(np.ravel(frames["right_tcp"])[:3], T[i, :3, 3], atol=1e-9)
+    # --elastic: "+ iterations and TCP sag [mm]"
+    code, out, _ = run(capsys, argv_of("README.md:123"))
+    assert code == 0 and "iteration" in out
+    sag = _tcp_sag(out)
+    assert 0 < sag < 100, out
+    # --deg: the same frames as the radians
+    code, out_deg, _ = run(capsys, argv_of("README.md:124"))
+    q = ",".join(str(np.radians(v)) for v in (0, 30, 0, -60, 0, 45, 0))
+    code_rad, out_rad, _ = run(capsys, ["fk", "arm7", "--q", q])
+    assert code == code_rad == 0
+    assert [ln for ln in out_deg.splitlines() if "tcp" in ln] == \
+        [ln for ln in out_rad.splitlines() if "tcp" in ln]
+    # explicit compliances: a bigger sag than the default's
+    code, out, _ = run(capsys, argv_of("README.md:125"))
+    sag2 = _tcp_sag(out)
+    assert code == 0 and sag2 > 0
+    # jwarp show ... --out justin.rrd (rerun-sdk is a dependency)
+    code, out, _ = run(capsys, argv_of("README.md:126"))
+    assert code == 0 and (in_work / "justin.rrd").stat().st_size > 1000, out
+
+
+def test_readme_calibration_recipe(in_work, capsys):
+    """README's recipe as written: simulate 500 samples, calibrate on 300, test on 200,
+    the calibrated robot used by fk."""
+    code, out, _ = run(capsys, argv_of("README.md:159"))
+    assert code == 0
+    with open(in_work / "run" / "samples.csv") as f:
+        assert sum(1 for _ in csv.reader(f)) == 1 + 500
+    code, out, _ = run(capsys, argv_of("README.md:160", 0))  # with [--json] [--rerun ...]
+    assert code == 0, out
+    res = json.loads(out)
+    # the keys README quotes for --json
+    assert {"before", "after", "free", "time_s", "warnings"} <= set(res)
+    assert {"train", "test"} <= set(res["before"])
+    before, after = res["before"]["test"]["mean"], res["after"]["test"]["mean"]
+    assert after < 0.2 * before and after < 3.0, (before, after)  # mm, 1 mm noise
+    assert (in_work / "run" / "cal.rrd").is_file()
+    # "as a robot named <robot>-calibrated whose notes.calibration records the campaign id,
+    # the input files, the free groups, the errors before/after and the date"
+    saved = json.loads((in_work / "run" / "calibrated.json").read_text())
+    assert saved["name"] == "justin19-calibrated"
+    assert saved["notes"]["calibration"]
+    code, out, _ = run(capsys, argv_of("README.md:163"))
+    assert code == 0 and "right_tcp" in out
+
+
+def test_readme_simulate_campaign_defaults(parser):
+    """README: "DH errors (+-1 mm, +-0.3 deg by default: --length-error MM, --angle-error
+    DEG)"."""
+    assert "+-1 mm, +-0.3 deg by default" in (ROOT / "README.md").read_text()
+    args = parse(parser, argv_of("README.md:159"))
+    assert (args.length_error, args.angle_error) == (1.0, 0.3)
+
+
+def test_readme_planning_and_ik(in_work, capsys):
+    _readme_block_world(in_work)
+    code, out, _ = run(capsys, argv_of("README.md:307"))
+    res = json.loads(out)
+    assert code == 0 and res["feasible"] in (True, [True]), out[:400]
+    # "its JSON start, goal and path endpoints are the float64 inputs"
+    assert res["start"] == [1.2, 0, 0, 0] and res["goal"] == [-1.2, 0, 0, 0]
+    assert (in_work / "plan.rrd").is_file()
+    # docs/scenes.md:356 and its quoted status line (the command's comment)
+    cmd = doc("docs/scenes.md:356")
+    code, out, _ = run(capsys, argv_of(cmd.where))
+    assert code == 0 and cmd.comment and cmd.comment in out, (cmd.comment, out)
+    # IK: exit 0 = a feasible solution, joint names beside the values
+    code, out, _ = run(capsys, argv_of("README.md:310"))
+    assert code == 0 and "right_1" in out and "head_tilt" in out, out
+    code, out, _ = run(capsys, argv_of("README.md:352"))  # warm start from the shipped net
+    assert code == 0 and "head_tilt" in out, out
+    # README (prose): `jwarp free-config --robot planar4 --world simplex:seed=3 [--n 2]`
+    code, out, _ = run(capsys, ["free-config", "--robot", "planar4", "--world",
+                                "simplex:seed=3", "--n", "2", "--seed", "0"])
+    starts = [ln.split()[1] for ln in out.splitlines() if ln.startswith("--start ")]
+    assert code == 0 and len(starts) == 2
+    for s in starts:  # each is a start that plan accepts (not refused as in collision)
+        code, out, err = run(capsys, ["plan", "--robot", "planar4", "--world",
+                                      "simplex:seed=3", "--start", s, "--goal", starts[0],
+                                      "--starts", "2", "--iterations", "3"])
+        assert code in (0, 1), err  # 2 would be a refused (e.g. colliding) start
+
+
+def test_readme_eval_ik_shipped_model(in_work, capsys):
+    code, out, _ = run(capsys, argv_of("README.md:351"))
+    assert code == 0 and "justin19_shelf" in out and "100 targets" in out, out
+
+
+def test_design_recipe(in_work, capsys):
+    """docs/design.md's recipe: the campaigns and the pool exactly; the DETMAX selection
+    from the first 300 pool rows (over the 10000 it takes about a minute)."""
+    for where in ("docs/design.md:187", "docs/design.md:188"):
+        code, out, _ = run(capsys, argv_of(where))
+        assert code == 0, out
+    code, out, _ = run(capsys, argv_of("docs/design.md:189"))
+    assert code == 0
+    text = (ROOT / "docs" / "design.md").read_text()
+    quoted = re.search(r"(collision check \(self, margin 0 m\): dropped \d+ of \d+ draws)",
+                       text).group(1)
+    assert quoted in out, (quoted, out)
+    assert re.search(r"wrote 10000 candidate configurations of 'cartesian' on 'justin19'",
+                     out)
+    pool = (in_work / "pool.csv").read_text().splitlines()
+    header = [ln for ln in pool if not re.match(r"^-?[0-9.]", ln)]
+    rows = [ln for ln in pool if re.match(r"^-?[0-9.]", ln)]
+    assert len(rows) == 10000
+    (in_work / "pool.csv").write_text("\n".join(header + rows[:300]) + "\n")
+    code, out, _ = run(capsys, argv_of("docs/design.md:190"))
+    assert code == 0 and "selected 100 of 300 candidates (detmax" in out, out
+    assert (in_work / "plan.csv").is_file()
+
+
+def test_urdf_import_of_the_panda(in_work, capsys):
+    """docs/urdf.md:21 with example-robot-data's Panda as panda.urdf and a coarse fit
+    (--tolerance 0.05 --pair-samples 500: the fit at the default tolerance takes longer)."""
+    import jwarp
+    from jwarp.importers.robot import example_robot_urdf
+
+    urdf = example_robot_urdf("panda_description/urdf/panda.urdf")
+    argv = [urdf if w == "panda.urdf" else w for w in argv_of("docs/urdf.md:21", -1)]
+    code, out, err = run(capsys, argv + ["--tolerance", "0.05", "--pair-samples", "500",
+                                         "--no-cache"])
+    assert code == 0, err
+    saved = json.loads((in_work / "panda.json").read_text())
+    assert saved["frames"][saved["end_effectors"]["tcp"]]["name"] == "panda_hand_tcp"
+    robot = jwarp.robot(str(in_work / "panda.json"))  # loads as a robot of 7 arm joints+
+    assert robot.n_dof >= 7 and robot.frame_index("tcp") == saved["end_effectors"]["tcp"]
+
+
+def test_install_warmup(in_work, capsys):
+    code, out, _ = run(capsys, argv_of("docs/install.md:35"))
+    assert code == 0 and re.search(r"\d+ kernel modules on cpu: \d+ compiled", out), out
+    assert "kernel cache:" in out
