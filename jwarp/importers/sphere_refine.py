@@ -66,7 +66,7 @@ HAND_PROTRUSION = 0.5
 #: :func:`fit_refined` also refines fits at these fractions of the first fit's protrusion
 #: (kept when they need no more spheres): the refinement finds a local optimum, so several
 #: starting points give a lower protrusion more often
-LADDER = (0.8, 0.6, 0.4)
+LADDER = (0.8, 0.6)
 
 #: fits of more spheres than this are returned unrefined (the steps are dense in N x k)
 MAX_SPHERES = 64
@@ -229,7 +229,7 @@ def coverage_protrusion(mesh: trimesh.Trimesh, centres: np.ndarray, tolerance: f
 
 def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float = 0.88,
                check_fraction: float = 0.95, n_surface: int | None = None,
-               n_check: int = 50_000, iters: int = 300, seed: int = 0,
+               n_check: int = 50_000, iters: int = 150, seed: int = 0,
                n_volume: int = 100_000) -> SphereFit:
     """``fit`` (a :func:`~jwarp.importers.spheres.fit_spheres` result for ``mesh``, same
     frame) with its centres moved and radii reset so that the spheres reach as little as
