@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import json
 import threading
 import weakref
@@ -552,8 +553,8 @@ def _collision_tables(host: DeviceModel) -> dict:
     f, p, r = robot.sphere_arrays()
     allowed = np.asarray(robot.allowed_collision_pairs, bool)
     n = robot.n_frames
-    cand = np.array([(a, b) for a in range(len(f)) for b in range(len(f))
-                     if f[a] < f[b] and allowed[f[a], f[b]]], np.int32).reshape(-1, 2)
+    ia, ib = np.nonzero((f[:, None] < f[None, :]) & allowed[f[:, None], f[None, :]])
+    cand = np.stack([ia, ib], axis=1).astype(np.int32).reshape(-1, 2)  # row-major: a, then b
     rigid = np.zeros(len(cand), bool)
     dmin = np.zeros(len(cand))
     if len(cand):
@@ -568,8 +569,8 @@ def _collision_tables(host: DeviceModel) -> dict:
     ent_start = [0]      # entry -> its pairs
     pairs: list[tuple[int, int]] = []
     for key in fpairs:
-        for a in sorted({a for a, _ in groups[key]}):
-            pairs.extend(sorted(pr for pr in groups[key] if pr[0] == a))
+        for a, grp in itertools.groupby(sorted(groups[key]), key=lambda pr: pr[0]):
+            pairs.extend(grp)
             ent_sphere.append(a)
             ent_start.append(len(pairs))
         start.append(len(ent_sphere))
