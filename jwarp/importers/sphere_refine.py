@@ -295,8 +295,10 @@ def fit_refined(mesh: trimesh.Trimesh, *, tolerance: float, protrusion: float | 
                 refine: dict | None = None, **fit_options: Any) -> SphereFit:
     """:func:`~jwarp.importers.spheres.fit_spheres` of ``mesh`` followed by
     :func:`refine_fit`, from several starting points: the fit with ``protrusion`` (None:
-    automatic) and fits at ``ladder`` fractions of its protrusion. The refinement finds a
-    local optimum, so several starts find lower protrusions more often.
+    automatic) and fits at ``ladder`` fractions of its protrusion (only with
+    ``max_protrusion`` or when the first fit's protrusion is below ``tolerance``, a thin
+    part: for a thick one they need more spheres, and time). The refinement finds a local
+    optimum, so several starts find lower protrusions more often.
 
     Which refined fit is returned: with ``max_protrusion`` None, the one of the lowest
     largest protrusion among those of no more spheres than the first fit; with
@@ -317,6 +319,8 @@ def fit_refined(mesh: trimesh.Trimesh, *, tolerance: float, protrusion: float | 
             raise ValueError(f"ladder: expected factors in (0, 2] other than 1, got {f!r}")
     base = fit_spheres(mesh, tolerance=tolerance, protrusion=protrusion, **fit_options)
     cands = [refine_fit(mesh, base, **ropt)]
+    if max_protrusion is None and base.protrusion >= tolerance:
+        ladder = ()  # a thick part: lower protrusions need more spheres (and time)
     for f in ladder:
         fit = fit_spheres(mesh, tolerance=tolerance, protrusion=float(f) * base.protrusion,
                           **fit_options)
