@@ -31,12 +31,11 @@ grasping brings an arm near objects, and save it on the fixed base.
 Measured (Panda of example-robot-data, 1 cm, shared 2-core VM; grasp configurations of
 ``benchmarks/bench_grasp_endpoints.py``, 4 x 10 scenes per family, 1150 configurations
 whose URDF meshes are free): the default fit, 61 spheres, largest protrusion 20 mm,
-refuses 60 (5.2 %); :func:`refine_fit` of every link (same 61 spheres) 38 (3.3 %),
-fingers 4.1 mm; :func:`fit_refined` (same count) 32 (2.8 %), fingers 0.9 mm;
-:func:`fit_refined` with :func:`link_protrusions`, 68 spheres (seed 0), 15 (1.3 %),
-one-sided error <= 9.5 mm on 50 000 fresh samples per link, hand 3.7 mm, fingers 0.9 mm;
-the count and the figures vary with the seed (seed 1: 71 spheres, 1.8 %; seed 2: 70,
-1.7 %).
+refuses 60 (5.2 %); :func:`refine_fit` of every link (300 iterations, same 61 spheres)
+38 (3.3 %), fingers 4.1 mm; :func:`fit_refined` with :func:`link_protrusions` (seed 0),
+68 spheres, 16 (1.4 %), one-sided error <= 9.5 mm on 50 000 fresh samples per link, hand
+3.9 mm, fingers 0.9 mm, import 27 s instead of 6 s; the count and the figures vary with
+the seed (seed 1: 71 spheres, 2.0 %).
 """
 
 from __future__ import annotations
@@ -358,8 +357,8 @@ def link_protrusions(model: Any, tolerance: float, *, wrist_joints: int = WRIST_
       (it moves with nothing).
 
     Other links are not listed (the automatic protrusion). Measured on the Panda at 1 cm
-    (module docstring of the caller, docs/spheres.md): 68-70 spheres, one-sided error
-    <= 1 cm, 1.3-1.7 % of mesh-free grasp configurations refused instead of 5 %."""
+    (module docstring): 68 spheres, one-sided error <= 1 cm, 1.4 % of mesh-free grasp
+    configurations refused instead of 5.2 %."""
     tol = float(tolerance)
     if not np.isfinite(tol) or tol <= 0:
         raise ValueError(f"tolerance: expected a finite distance > 0 [m], got {tolerance!r}")
