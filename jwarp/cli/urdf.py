@@ -250,7 +250,8 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
             from jwarp.world.spherize import SphereFitWarning, SpherizeOptions, spherized_robot
 
             opts = SpherizeOptions(tolerance=args.tolerance, max_spheres=args.max_spheres,
-                                   pair_samples=args.pair_samples, protrusion=args.protrusion)
+                                   pair_samples=args.pair_samples, protrusion=args.protrusion,
+                                   refine=args.refine)
             with warnings.catch_warnings():  # printed below from the report, each once
                 warnings.simplefilter("ignore", SphereFitWarning)
                 model, fit = spherized_robot(args.urdf, opts, cache=not args.no_cache,
@@ -344,7 +345,12 @@ def add_subcommands(sub: Any) -> None:
                    default=None, metavar="M",
                    help="how far a fitted sphere may reach past the link's surface [m] "
                         "(default: tolerance/2 for thin parts such as fingers, up to "
-                        "2 x tolerance for thick links)")
+                        "2 x tolerance for thick links; the wrist, hand and fixed base "
+                        "refined to hug their parts, see --no-refine)")
+    s.add_argument("--no-refine", dest="refine", action="store_false",
+                   help="fit the wrist, hand and base like every other link (default: "
+                        "refined fits there: spheres that reach less past the surface, "
+                        "fewer free grasps refused; slower import; docs/spheres.md)")
     s.add_argument("--pair-samples", type=int_arg("--pair-samples", 1), default=10000,
                    metavar="N", help="random configurations of the self-collision pair "
                                      "sampling (10000)")

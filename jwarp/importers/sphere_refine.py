@@ -40,6 +40,7 @@ the seed (seed 1: 71 spheres, 2.0 %).
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import replace
 from typing import Any
 
@@ -127,10 +128,39 @@ def _check_mesh(mesh: Any) -> trimesh.Trimesh:
     return mesh
 
 
+#: per mesh object (one fit of a link runs several refinements of the same mesh): its solid
+#: and its boundary samples by (n, seed); weak keys, so nothing outlives the mesh
+_MESH_CACHE: "weakref.WeakKeyDictionary[trimesh.Trimesh, dict]" = weakref.WeakKeyDictionary()
+
+
+def _cached(mesh: trimesh.Trimesh) -> dict:
+    got = _MESH_CACHE.get(mesh)
+    if got is None or got["faces"] != len(mesh.faces):
+        got = _MESH_CACHE[mesh] = {"faces": len(mesh.faces), "solid": None, "samples": {}}
+    return got
+
+
+def _mesh_solid(mesh: trimesh.Trimesh) -> _MeshSolid:
+    c = _cached(mesh)
+    if c["solid"] is None:
+        c["solid"] = _MeshSolid(mesh)
+    return c["solid"]
+
+
 def _boundary_sample(mesh: trimesh.Trimesh, solid: _MeshSolid, n: int, seed: int
                      ) -> tuple[np.ndarray, np.ndarray]:
     """About ``n`` area-uniform surface samples and their normals on the solid's boundary
-    (a face of one body buried inside another, inside on both sides, dropped)."""
+    (a face of one body buried inside another, inside on both sides, dropped); the same
+    (n, seed) of the same mesh object is sampled once."""
+    store = _cached(mesh)["samples"]
+    if (n, seed) not in store:
+        store[(n, seed)] = _boundary_sample_new(mesh, solid, n, seed)
+    p, nrm = store[(n, seed)]
+    return p.copy(), nrm.copy()
+
+
+def _boundary_sample_new(mesh: trimesh.Trimesh, solid: _MeshSolid, n: int, seed: int
+                         ) -> tuple[np.ndarray, np.ndarray]:
     p, face = trimesh.sample.sample_surface(mesh, n, seed=seed)
     p, nrm = np.asarray(p), np.asarray(mesh.face_normals[face])
     if mesh.is_watertight and mesh.body_count == 1:
@@ -253,7 +283,7 @@ def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float =
     if fit.k == 0 or fit.k > MAX_SPHERES:
         return fit  # nothing to move, or too many spheres for the dense (N, k) steps
     n_surface = n_surface or int(np.clip(8.0 * mesh.area / tol ** 2, *_SAMPLES))
-    solid = _MeshSolid(mesh)
+    solid = _mesh_solid(mesh)
     x, _ = _boundary_sample(mesh, solid, n_surface, seed + 31)
     c0 = np.asarray(fit.centres, np.float64)
     s0, _ = _clearance_grad(solid, c0)

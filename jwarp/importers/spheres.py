@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -586,10 +587,38 @@ def _cover(slack: _Slack, max_spheres: int | None, eps0: float,
     return _two_for_one(slack.s <= hi, best, slack.c, slack.r + hi), hi
 
 
+#: per mesh object (the fits of one link at several protrusions share it): its solid and
+#: solid volumes by (n, seed); weak keys, so nothing outlives the mesh
+_MESH_CACHE: "weakref.WeakKeyDictionary[trimesh.Trimesh, dict]" = weakref.WeakKeyDictionary()
+
+
+def _mesh_cache(mesh: trimesh.Trimesh) -> dict:
+    got = _MESH_CACHE.get(mesh)
+    if got is None or got["faces"] != len(mesh.faces):
+        got = _MESH_CACHE[mesh] = {"faces": len(mesh.faces), "solid": None, "volume": {}}
+    return got
+
+
+def _solid_of(mesh: trimesh.Trimesh) -> _Solid:
+    c = _mesh_cache(mesh)
+    if c["solid"] is None:
+        c["solid"] = _Solid(mesh)
+    return c["solid"]
+
+
 def _solid_volume(mesh: trimesh.Trimesh, solid: _Solid, n: int, seed: int
                   ) -> tuple[float, str]:
     """The solid's volume: ``|mesh.volume|`` of a closed single-body mesh, else Monte Carlo
-    by winding number with ``n`` points in the bounding box."""
+    by winding number with ``n`` points in the bounding box (once per mesh object, n and
+    seed)."""
+    store = _mesh_cache(mesh)["volume"]
+    if (n, seed) not in store:
+        store[(n, seed)] = _solid_volume_new(mesh, solid, n, seed)
+    return store[(n, seed)]
+
+
+def _solid_volume_new(mesh: trimesh.Trimesh, solid: _Solid, n: int, seed: int
+                      ) -> tuple[float, str]:
     if mesh.is_watertight and mesh.body_count == 1:
         return abs(float(mesh.volume)), "closed mesh"
     lo, hi = mesh.bounds
@@ -670,7 +699,7 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
                          f"{MAX_SURFACE_CELLS:.0e}): the fit would not end in reasonable time "
                          f"or memory; raise the tolerance, give max_spheres, or check the "
                          f"mesh's unit (a URDF in cm or mm needs a scale)")
-    solid = _Solid(mesh)
+    solid = _solid_of(mesh)
     watertight = bool(mesh.is_watertight)
     sparse = opt.max_spheres is None and opt.n_surface is None and \
         8.0 * mesh.area / tol ** 2 > _SPARSE_FROM
@@ -903,14 +932,19 @@ def fit_geometry(kind: str, size: Any = None, origin: Any = None, mesh: Any = No
     return fit_spheres(m, tolerance=tolerance, **options).transformed(T)
 
 
-def fit_link(geometries: Any, *, tolerance: float, **options: Any) -> SphereFit:
+def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
+             **options: Any) -> SphereFit:
     """Spheres of all collision geometries of one link, in the link frame. Each geometry is
     a mapping or an object with ``kind``, ``size``, ``origin`` and, for meshes, ``mesh`` (or
     ``filename``/``path``) and ``scale``. Spheres are taken as they are; every other
     geometry is posed in the link frame and the union fitted as **one** part
     (:func:`fit_spheres`: the solid of overlapping bodies by winding number, so
-    ``max_spheres`` is the budget of the whole link). The report: total count, the fit's
-    one-sided error, excess and protrusion (URDF spheres add none)."""
+    ``max_spheres`` is the budget of the whole link). ``fit``: the function fitting that
+    part (default :func:`fit_spheres`; :func:`jwarp.world.spherize.spherize` passes
+    :func:`jwarp.importers.sphere_refine.fit_refined` for a robot's wrist, hand and base,
+    with its ``max_protrusion``; other options are passed on). The
+    report: total count, the fit's one-sided error, excess and protrusion (URDF spheres add
+    none)."""
     exact, parts = [], []
     for i, g in enumerate(geometries):
         get = (g.get if isinstance(g, dict) else lambda k, d=None, g=g: getattr(g, k, d))
@@ -940,7 +974,7 @@ def fit_link(geometries: Any, *, tolerance: float, **options: Any) -> SphereFit:
                                  f"{len(exact)} sphere geometries")
             options = {**options, "max_spheres": budget - len(exact)}
         whole = parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
-        fits.append(fit_spheres(whole, tolerance=tolerance, **options))
+        fits.append((fit or fit_spheres)(whole, tolerance=tolerance, **options))
     return SphereFit(
         centres=np.concatenate([f.centres for f in fits]),
         radii=np.concatenate([f.radii for f in fits]), tolerance=float(tolerance),

@@ -46,7 +46,7 @@ __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize",
            "spherized_robot", "resample_pairs"]
 
 #: bump when the fitted result of the same inputs changes
-CACHE_VERSION = 3  # 3: mesh vertices merged, sparse cover of large parts
+CACHE_VERSION = 4  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits
 
 
 class SphereFitWarning(UserWarning):
@@ -73,6 +73,10 @@ class SpherizeOptions:
     pair_samples: random configurations of the self-collision pair sampling, >= 1.
     pair_margin: distance [m] below which a sampled pair counts as colliding, >= 0.
     seed: seed of the fit and of the pair sampling.
+    refine: with the automatic protrusion, fit the wrist, hand and fixed base by
+        :func:`jwarp.importers.sphere_refine.fit_refined` with the per-link protrusions of
+        :func:`~jwarp.importers.sphere_refine.link_protrusions` (spheres that hug the parts
+        that come near grasped objects; docs/spheres.md); False: the plain fit everywhere.
     """
 
     tolerance: float = 0.01
@@ -83,6 +87,7 @@ class SpherizeOptions:
     protrusion: float | None = None
     warn_protrusion: float | None = None
     warn_excess: float = 1.0
+    refine: bool = True
 
     def validate(self) -> None:
         for name, strict in (("tolerance", True), ("pair_margin", False), ("protrusion", True),
@@ -103,6 +108,8 @@ class SpherizeOptions:
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
                 raise ValueError(f"{name}: expected an integer >= {lo}"
                                  f"{' or None' if none else ''}, got {v!r}")
+        if not isinstance(self.refine, (bool, np.bool_)):
+            raise TypeError(f"refine: expected True or False, got {type(self.refine).__name__}")
 
 
 @dataclass
@@ -146,6 +153,7 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
     ``urdf_robot.model`` with fitted spheres and sampled self-collision exclusions, and the
     report. ``sample_pairs`` False: no pair sampling (the caller samples the pairs of a
     planning group with :func:`resample_pairs`; the model keeps its own exclusions)."""
+    from jwarp.importers.sphere_refine import fit_refined, link_protrusions
     from jwarp.importers.spheres import fit_link
 
     o = SpherizeOptions() if options is None else options
@@ -164,6 +172,9 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
     if o.protrusion is not None:
         fit_opts["protrusion"] = float(o.protrusion)
     fitted_once: dict = {}  # links of the same geometry (a hand's fingers) are fitted once
+    # the wrist, hand and base: refined fits (jwarp.importers.sphere_refine)
+    per_link = link_protrusions(model, float(o.tolerance)) \
+        if o.protrusion is None and o.refine else {}
     for link, geoms in by_link.items():
         frame = model.frame_index(link)
         todo = [g for g in geoms if g.kind != "sphere"]
@@ -175,6 +186,8 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
                                  "watertight": True, "kept": True})
             continue
         link_opts = dict(fit_opts)
+        if link in per_link:
+            link_opts.update(per_link[link], fit=fit_refined)
         if o.max_spheres is not None:  # the link's URDF spheres count against its budget
             link_opts["max_spheres"] = max(int(o.max_spheres) - (len(geoms) - len(todo)), 1)
         parts = [_geometry(g) for g in todo]
@@ -195,7 +208,9 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
                "protrusion": float(fit.protrusion), "max_protrusion": float(fit.max_protrusion),
                "excess_volume": float(fit.excess_volume),
                "excess_fraction": float(fit.excess_fraction),
-               "watertight": bool(fit.watertight), "kept": False}
+               "watertight": bool(fit.watertight), "kept": False,
+               "requested_protrusion": float(link_opts.get("protrusion", 0.0)),
+               "refined": link in per_link}
         report.links.append(row)
         report.warnings += link_warnings(row, o)
     for w in report.warnings:
@@ -238,7 +253,8 @@ def link_warnings(row: dict, options: SpherizeOptions) -> list[str]:
     tol = float(options.tolerance)
     bound = options.warn_protrusion
     if bound is None:
-        bound = max(2.5 * tol, 1.25 * float(options.protrusion or 0.0))
+        bound = max(2.5 * tol, 1.25 * float(options.protrusion or 0.0),
+                    1.25 * float(row.get("requested_protrusion", 0.0)))
     out = []
     name = row["link"]
     if row.get("one_sided_error", 0.0) > tol:
