@@ -113,7 +113,8 @@ def extract(path: Path, root: Path = ROOT) -> list[DocCommand]:
                 and s[:1] in "[-"):
             # an indented synopsis line ("    [--opt X] --other Y") continues the command above
             prev = found.pop()
-            found.append(DocCommand(rel, prev.line, f"{prev.text} {' '.join(strip_comment(s).split())}"))
+            more = " ".join(strip_comment(s).split())
+            found.append(DocCommand(rel, prev.line, f"{prev.text} {more}"))
             last_end = i
             continue
         if buf is None:

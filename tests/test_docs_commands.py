@@ -46,13 +46,25 @@ PLACEHOLDERS = {
 VALUE_ELLIPSIS = {"--start": "zeros", "--goal": "zeros"}
 #: ``jwarp CMD ... --more``: ``...`` stands for the options of a command nearby
 COMMAND_ELLIPSIS = {
-    "docs/calibration.md:86": ("--setup run/setup.json --data run/samples.csv",
-                               "the calibrate options of README's recipe"),
-    "docs/scenes.md:358": ("--robot planar4 --world block.npz --start 1.2,0,0,0 "
-                           "--goal -1.2,0,0,0", "the plan two lines above (scenes.md:356)"),
-    "docs/scenes.md:359": ("--robot planar4 --world block.npz --start 1.2,0,0,0 "
-                           "--goal -1.2,0,0,0", "the plan three lines above (scenes.md:356)"),
+    "docs/calibration.md: jwarp calibrate ... --prior": (
+        "--setup run/setup.json --data run/samples.csv",
+        "the calibrate options of README's recipe"),
+    "docs/scenes.md: jwarp plan ... --time-limit": (
+        "--robot planar4 --world block.npz --start 1.2,0,0,0 --goal -1.2,0,0,0",
+        "the plan two lines above"),
+    "docs/scenes.md: jwarp plan ... --no-stop-when-solved": (
+        "--robot planar4 --world block.npz --start 1.2,0,0,0 --goal -1.2,0,0,0",
+        "the plan three lines above"),
 }
+
+
+def _ellipsis_of(cmd: dc.DocCommand) -> str:
+    """The :data:`COMMAND_ELLIPSIS` options of ``cmd`` ("" if none)."""
+    for key, (options, _reason) in COMMAND_ELLIPSIS.items():
+        file, prefix = key.split(": ", 1)
+        if cmd.file == file and cmd.text.startswith(prefix):
+            return options
+    return ""
 
 
 def variants(cmd: dc.DocCommand) -> list[list[str]]:
@@ -67,8 +79,8 @@ def variants(cmd: dc.DocCommand) -> list[list[str]]:
                 prev = argv[-1] if argv else ""
                 if prev in VALUE_ELLIPSIS:
                     argv.append(VALUE_ELLIPSIS[prev])
-                elif cmd.where in COMMAND_ELLIPSIS and not prev.startswith("-") and k <= 2:
-                    argv += COMMAND_ELLIPSIS[cmd.where][0].split()
+                elif _ellipsis_of(cmd) and not prev.startswith("-") and k <= 2:
+                    argv += _ellipsis_of(cmd).split()
                 elif optional:
                     pass  # "[--opt X ...]": the option may repeat
                 else:
@@ -99,8 +111,9 @@ def test_every_command_is_classified():
     # the README's source tree (``jwarp/__init__.py  facade ...``) and printed messages
     # (``jwarp: warning: ...``) are not commands
     assert not [c.where for c in COMMANDS if not re.match(r"(jwarp|python3?)\s", c.text)]
-    # every synopsis-table entry names an extracted command
-    assert set(COMMAND_ELLIPSIS) <= {c.where for c in COMMANDS}
+    # every synopsis-table entry names exactly one extracted command
+    for key in COMMAND_ELLIPSIS:
+        doc(key)
 
 
 @pytest.mark.parametrize("cmd", JWARP, ids=[c.where for c in JWARP])
@@ -200,15 +213,20 @@ def test_python_script_help_names_the_documented_options(script):
 
 
 # ------------------------------------------------------------------ commands run for real
-def doc(where: str) -> dc.DocCommand:
-    return next(c for c in COMMANDS if c.where == where)
+def doc(key: str) -> dc.DocCommand:
+    """The one command of ``key`` = ``"FILE: the start of its text"`` (keys by text, not by
+    line number, so that an edit above a command does not break the test)."""
+    file, prefix = key.split(": ", 1)
+    found = [c for c in COMMANDS if c.file == file and c.text.startswith(prefix)]
+    assert len(found) == 1, f"{key!r} names {len(found)} commands"
+    return found[0]
 
 
-def argv_of(where: str, variant: int = 0) -> list[str]:
+def argv_of(key: str, variant: int = 0) -> list[str]:
     """The doc command's argv; words naming a file of the repository (the shipped models,
     example scenes) become absolute paths, the rest run in the temporary folder."""
     out = []
-    for w in variants(doc(where))[variant]:
+    for w in variants(doc(key))[variant]:
         out.append(str(ROOT / w) if "/" in w and (ROOT / w).is_file() else w)
     return out
 
@@ -252,18 +270,18 @@ def test_readme_cli_examples(in_work, capsys):
     import jwarp
 
     # jwarp robots [--json]
-    code, out, _ = run(capsys, argv_of("README.md:120", 0))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp robots", 0))
     assert code == 0 and sorted(r["name"] for r in json.loads(out)) == sorted(jwarp.robots())
-    code, out, _ = run(capsys, argv_of("README.md:120", 1))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp robots", 1))
     assert code == 0 and all(name in out for name in jwarp.robots())
     # jwarp info justin19 [--json]: joints, frames, bodies (or the robot's JSON)
-    code, out, _ = run(capsys, argv_of("README.md:121", 0))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp info justin19", 0))
     info = json.loads(out)
     assert code == 0 and info["name"] == "justin19" and len(info["joints"]) == 19
-    code, out, _ = run(capsys, argv_of("README.md:121", 1))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp info justin19", 1))
     assert code == 0 and "right_tcp" in out
     # jwarp fk justin19 --q 0,...,0 --json: the frames of jwarp.fk
-    code, out, _ = run(capsys, argv_of("README.md:122"))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp fk justin19 --q 0,0"))
     robot = jwarp.robot("justin19")
     T = jwarp.fk(robot, np.zeros(19))
     frames = json.loads(out)["frames"]
@@ -271,34 +289,35 @@ def test_readme_cli_examples(in_work, capsys):
     assert code == 0
     np.testing.assert_allclose(np.ravel(frames["right_tcp"])[:3], T[i, :3, 3], atol=1e-9)
     # --elastic: "+ iterations and TCP sag [mm]"
-    code, out, _ = run(capsys, argv_of("README.md:123"))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp fk justin19 --q zeros --elastic"))
     assert code == 0 and "iteration" in out
     sag = _tcp_sag(out)
     assert 0 < sag < 100, out
     # --deg: the same frames as the radians
-    code, out_deg, _ = run(capsys, argv_of("README.md:124"))
+    code, out_deg, _ = run(capsys, argv_of("README.md: jwarp fk arm7 --q 0,30"))
     q = ",".join(str(np.radians(v)) for v in (0, 30, 0, -60, 0, 45, 0))
     code_rad, out_rad, _ = run(capsys, ["fk", "arm7", "--q", q])
     assert code == code_rad == 0
     assert [ln for ln in out_deg.splitlines() if "tcp" in ln] == \
         [ln for ln in out_rad.splitlines() if "tcp" in ln]
     # explicit compliances: a bigger sag than the default's
-    code, out, _ = run(capsys, argv_of("README.md:125"))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp fk justin19 --elastic --kappa"))
     sag2 = _tcp_sag(out)
     assert code == 0 and sag2 > 0
     # jwarp show ... --out justin.rrd (rerun-sdk is a dependency)
-    code, out, _ = run(capsys, argv_of("README.md:126"))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp show justin19"))
     assert code == 0 and (in_work / "justin.rrd").stat().st_size > 1000, out
 
 
 def test_readme_calibration_recipe(in_work, capsys):
     """README's recipe as written: simulate 500 samples, calibrate on 300, test on 200,
     the calibrated robot used by fk."""
-    code, out, _ = run(capsys, argv_of("README.md:159"))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp simulate-campaign --robot justin19"))
     assert code == 0
     with open(in_work / "run" / "samples.csv") as f:
         assert sum(1 for _ in csv.reader(f)) == 1 + 500
-    code, out, _ = run(capsys, argv_of("README.md:160", 0))  # with [--json] [--rerun ...]
+    # with [--json] [--rerun run/cal.rrd]
+    code, out, _ = run(capsys, argv_of("README.md: jwarp calibrate --setup run/setup.json", 0))
     assert code == 0, out
     res = json.loads(out)
     # the keys README quotes for --json
@@ -312,7 +331,7 @@ def test_readme_calibration_recipe(in_work, capsys):
     saved = json.loads((in_work / "run" / "calibrated.json").read_text())
     assert saved["name"] == "justin19-calibrated"
     assert saved["notes"]["calibration"]
-    code, out, _ = run(capsys, argv_of("README.md:163"))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp fk run/calibrated.json"))
     assert code == 0 and "right_tcp" in out
 
 
@@ -320,26 +339,30 @@ def test_readme_simulate_campaign_defaults(parser):
     """README: "DH errors (+-1 mm, +-0.3 deg by default: --length-error MM, --angle-error
     DEG)"."""
     assert "+-1 mm, +-0.3 deg by default" in (ROOT / "README.md").read_text()
-    args = parse(parser, argv_of("README.md:159"))
+    args = parse(parser, argv_of("README.md: jwarp simulate-campaign --robot justin19"))
     assert (args.length_error, args.angle_error) == (1.0, 0.3)
 
 
 def test_readme_planning_and_ik(in_work, capsys):
     _readme_block_world(in_work)
-    code, out, _ = run(capsys, argv_of("README.md:307"))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp plan --robot planar4 --world block.npz"))
     res = json.loads(out)
     assert code == 0 and res["feasible"] in (True, [True]), out[:400]
     # "its JSON start, goal and path endpoints are the float64 inputs"
     assert res["start"] == [1.2, 0, 0, 0] and res["goal"] == [-1.2, 0, 0, 0]
     assert (in_work / "plan.rrd").is_file()
     # docs/scenes.md:356 and its quoted status line (the command's comment)
-    cmd = doc("docs/scenes.md:356")
-    code, out, _ = run(capsys, argv_of(cmd.where))
+    key = "docs/scenes.md: jwarp plan --robot planar4 --world block.npz"
+    cmd = doc(key)
+    code, out, _ = run(capsys, argv_of(key))
     assert code == 0 and cmd.comment and cmd.comment in out, (cmd.comment, out)
     # IK: exit 0 = a feasible solution, joint names beside the values
-    code, out, _ = run(capsys, argv_of("README.md:310"))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp ik --robot justin19 --frame right_tcp "
+                                       "--target 0.6,"))
     assert code == 0 and "right_1" in out and "head_tilt" in out, out
-    code, out, _ = run(capsys, argv_of("README.md:352"))  # warm start from the shipped net
+    # warm start from the shipped network
+    code, out, _ = run(capsys, argv_of("README.md: jwarp ik --robot justin19 --frame right_tcp "
+                                       "--target 0.56,"))
     assert code == 0 and "head_tilt" in out, out
     # README (prose): `jwarp free-config --robot planar4 --world simplex:seed=3 [--n 2]`
     code, out, _ = run(capsys, ["free-config", "--robot", "planar4", "--world",
@@ -354,17 +377,19 @@ def test_readme_planning_and_ik(in_work, capsys):
 
 
 def test_readme_eval_ik_shipped_model(in_work, capsys):
-    code, out, _ = run(capsys, argv_of("README.md:351"))
+    code, out, _ = run(capsys, argv_of("README.md: jwarp eval ik --robot justin19"))
     assert code == 0 and "justin19_shelf" in out and "100 targets" in out, out
 
 
 def test_design_recipe(in_work, capsys):
     """docs/design.md's recipe: the campaigns and the pool exactly; the DETMAX selection
     from the first 300 pool rows (over the 10000 it takes about a minute)."""
-    for where in ("docs/design.md:187", "docs/design.md:188"):
-        code, out, _ = run(capsys, argv_of(where))
+    for key in ("docs/design.md: jwarp simulate-campaign --plugin cartesian",
+                "docs/design.md: jwarp simulate-campaign --plugin relative"):
+        code, out, _ = run(capsys, argv_of(key))
         assert code == 0, out
-    code, out, _ = run(capsys, argv_of("docs/design.md:189"))
+    code, out, _ = run(capsys, argv_of("docs/design.md: jwarp design --setup tracker/setup.json "
+                                       "--write-candidates"))
     assert code == 0
     text = (ROOT / "docs" / "design.md").read_text()
     quoted = re.search(r"(collision check \(self, margin 0 m\): dropped \d+ of \d+ draws)",
@@ -377,7 +402,8 @@ def test_design_recipe(in_work, capsys):
     rows = [ln for ln in pool if re.match(r"^-?[0-9.]", ln)]
     assert len(rows) == 10000
     (in_work / "pool.csv").write_text("\n".join(header + rows[:300]) + "\n")
-    code, out, _ = run(capsys, argv_of("docs/design.md:190"))
+    code, out, _ = run(capsys, argv_of("docs/design.md: jwarp design --setup tracker/setup.json "
+                                       "--task-setup"))
     assert code == 0 and "selected 100 of 300 candidates (detmax" in out, out
     assert (in_work / "plan.csv").is_file()
 
@@ -389,7 +415,8 @@ def test_urdf_import_of_the_panda(in_work, capsys):
     from jwarp.importers.robot import example_robot_urdf
 
     urdf = example_robot_urdf("panda_description/urdf/panda.urdf")
-    argv = [urdf if w == "panda.urdf" else w for w in argv_of("docs/urdf.md:21", -1)]
+    key = "docs/urdf.md: jwarp import-urdf panda.urdf --out panda.json --end-effector"
+    argv = [urdf if w == "panda.urdf" else w for w in argv_of(key, -1)]
     code, out, err = run(capsys, argv + ["--tolerance", "0.05", "--pair-samples", "500",
                                          "--no-cache"])
     assert code == 0, err
@@ -400,6 +427,185 @@ def test_urdf_import_of_the_panda(in_work, capsys):
 
 
 def test_install_warmup(in_work, capsys):
-    code, out, _ = run(capsys, argv_of("docs/install.md:35"))
+    code, out, _ = run(capsys, argv_of("docs/install.md: jwarp warmup --device cpu --robots"))
     assert code == 0 and re.search(r"\d+ kernel modules on cpu: \d+ compiled", out), out
     assert "kernel cache:" in out
+
+
+def test_install_md_module_count():
+    """docs/install.md quotes the module count of a full ``jwarp warmup`` (every family,
+    both dtypes, every registered robot's IK step)."""
+    import jwarp
+    from jwarp.cli.warmup import kernel_modules
+
+    text = (ROOT / "docs" / "install.md").read_text()
+    quoted = {int(n) for n in re.findall(r"(\d+) kernel modules on cpu", text)}
+    quoted |= {int(n) for n in re.findall(r"\((\d+) modules on the CPU", text)}
+    assert quoted == {len(kernel_modules(robots=jwarp.robots()))}, quoted
+
+
+# ------------------------------------------------------------------ inline commands
+def _subparsers(parser) -> dict:
+    import argparse
+
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            return a.choices
+    return {}
+
+
+def _inline_commands() -> list[tuple[str, str]]:
+    """``(file:line, text)`` of inline code spans of prose that start with ``jwarp <word>``."""
+    found = []
+    for f in dc.doc_files():
+        text = f.read_text(encoding="utf-8")
+        prose = re.sub(r"```.*?```", lambda m: "\n" * m.group(0).count("\n"), text, flags=re.S)
+        for m in re.finditer(r"`(jwarp\s+[a-z-][^`]*)`", prose):
+            line = prose.count("\n", 0, m.start()) + 1
+            found.append((f"{f.relative_to(ROOT).as_posix()}:{line}", " ".join(m.group(1).split())))
+    return found
+
+
+INLINE = _inline_commands()
+
+
+def test_inline_commands_name_real_options(parser):
+    """Every `jwarp SUB ... --opt` span in prose names an existing subcommand and only
+    options of it (a fragment need not be a complete command)."""
+    assert len(INLINE) >= 20, len(INLINE)
+    bad = []
+    for where, text in INLINE:
+        w = text.split()[1:]
+        opts = re.findall(r"(?<![\w-])--[a-z0-9][a-z0-9-]*", text)  # `--a/--b` names both
+        if w[0].startswith("-"):  # `jwarp --help`, `jwarp --version`
+            known = {o for a in parser._actions for o in a.option_strings}
+            bad += [f"{where}: {o}" for o in opts if o not in known]
+            continue
+        for name in w[0].split("|"):  # `jwarp import-urdf|import-mjcf --spheres fit`
+            p = _subparsers(parser).get(name)
+            if p is None:
+                bad.append(f"{where}: no subcommand {name!r} in `{text}`")
+                continue
+            if len(w) > 1 and w[1] in _subparsers(p):
+                p = _subparsers(p)[w[1]]
+            known = {o for a in p._actions for o in a.option_strings}
+            bad += [f"{where}: `{text}`: {o} is not an option of `jwarp {name}`"
+                    for o in opts if o not in known]
+    assert not bad, "\n".join(bad)
+
+
+# ------------------------------------------------------------------ README's Python
+#: README python blocks that need a CUDA device: on a machine without one they run with
+#: "cuda:0" replaced by "cpu" (the code path is the same; the device is the point)
+CUDA_SNIPPETS = {'kin.fk("justin19", q, device="cuda:0")'}
+
+
+def _expected(comment: str) -> re.Pattern | None:
+    """The output a ``print(...)  # comment`` quotes, as a pattern (``...`` matches
+    anything), or None for a prose comment (``# metres``)."""
+    if not re.match(r"^([\[\(\d-]|True\b|False\b|None\b)", comment):
+        return None
+    return re.compile(".*".join(re.escape(p) for p in comment.split("...")) + r"\Z")
+
+
+def test_readme_python_snippets(work, tmp_path, monkeypatch, capsys):
+    """Every ```python block of README.md runs, in order, in one namespace (later blocks
+    use earlier names, as a reader's session would), in a folder holding README's
+    simulated campaign (run/, the calibration block reads it); every ``print(...)  #
+    output`` line prints the output its comment quotes."""
+    import builtins
+    import warp as wp
+
+    monkeypatch.chdir(tmp_path)
+    assert main(argv_of("README.md: jwarp simulate-campaign --robot justin19")) == 0
+    capsys.readouterr()
+    text = (ROOT / "README.md").read_text()
+    blocks = [(text.count("\n", 0, m.start()) + 2, m.group(1))
+              for m in re.finditer(r"```python\n(.*?)```", text, re.S)]
+    assert len(blocks) >= 8
+    assert all(sum(key in code for _, code in blocks) == 1 for key in CUDA_SNIPPETS)
+    printed: dict[tuple[str, int], list[str]] = {}
+    real_print = builtins.print
+
+    def recording_print(*args, **kwargs):
+        frame = sys._getframe(1)
+        if frame.f_code.co_filename.startswith("README.md") and "file" not in kwargs:
+            key = (frame.f_code.co_filename, frame.f_lineno)
+            printed.setdefault(key, []).append(" ".join(str(a) for a in args))
+        real_print(*args, **kwargs)
+
+    monkeypatch.setattr(builtins, "print", recording_print)
+    ns: dict = {"__name__": "__readme__"}
+    checked = 0
+    for first, code in blocks:
+        where = f"README.md:{first - 1}"
+        if any(key in code for key in CUDA_SNIPPETS) and not wp.is_cuda_available():
+            code = code.replace('"cuda:0"', '"cpu"')
+        try:
+            exec(compile(code, where, "exec"), ns)
+        except Exception as e:
+            pytest.fail(f"{where}: the README's Python block fails: {type(e).__name__}: {e}")
+        for k, src in enumerate(code.splitlines(), 1):
+            m = re.match(r"\s*print\(.*\)\s+#\s*(.*)$", src)
+            pattern = m and _expected(m.group(1).strip())
+            if pattern:
+                out = printed.get((where, k), [])
+                assert out and pattern.match(out[-1]), \
+                    f"README.md:{first + k - 1}: prints {out!r}, the README says {m.group(1)!r}"
+                checked += 1
+    assert checked >= 5, checked
+
+
+# ------------------------------------------------------------------ docs' Python blocks
+def _python_blocks() -> list[tuple[str, str]]:
+    """``(file:line, code)`` of every ```python block of the docs."""
+    out = []
+    for f in dc.doc_files():
+        text = f.read_text(encoding="utf-8")
+        for m in re.finditer(r"```python\n(.*?)```", text, re.S):
+            out.append((f"{f.relative_to(ROOT).as_posix()}:{text.count(chr(10), 0, m.start()) + 1}",
+                        m.group(1)))
+    return out
+
+
+def _jwarp_names(code: str) -> list[tuple[str, str | None]]:
+    """``(module, name)`` of every ``from jwarp... import a, b`` / ``import jwarp.x`` of a
+    block (name None for a module import), and ``("jwarp", attr)`` of every ``jwarp.attr``."""
+    found: list[tuple[str, str | None]] = []
+    flat = re.sub(r"\(\s*([^)]*?)\s*\)", lambda m: " ".join(m.group(1).split()), code)
+    for mod, names in re.findall(r"^\s*from (jwarp(?:\.\w+)*) import ([^#\n]+)", flat, re.M):
+        for n in names.split(","):
+            n = n.strip().split(" as ")[0].strip()
+            if n:
+                found.append((mod, n))
+    for mod in re.findall(r"^\s*import (jwarp(?:\.\w+)*)", flat, re.M):
+        found.append((mod, None))
+    for attr in re.findall(r"(?<![\w.])jwarp\.([A-Za-z_]\w*)", code):
+        found.append(("jwarp", attr))
+    return found
+
+
+def test_docs_python_blocks_name_real_jwarp_api():
+    """The Python blocks of README.md and docs/*.md are fragments (``robot``, ``setup``,
+    ``panda.urdf`` come from the text around them; README's are run whole above): every
+    jwarp module, function and class they import or use exists."""
+    import importlib
+
+    blocks = _python_blocks()
+    assert len(blocks) >= 30, len(blocks)
+    bad, n = [], 0
+    for where, code in blocks:
+        for mod, name in _jwarp_names(code):
+            n += 1
+            try:
+                m = importlib.import_module(mod)
+            except ImportError as e:
+                bad.append(f"{where}: import {mod}: {e}")
+                continue
+            if name is not None and not hasattr(m, name):
+                try:
+                    importlib.import_module(f"{mod}.{name}")
+                except ImportError:
+                    bad.append(f"{where}: {mod} has no {name!r}")
+    assert n >= 100, n
+    assert not bad, "\n".join(bad)
