@@ -609,3 +609,24 @@ def test_docs_python_blocks_name_real_jwarp_api():
                     bad.append(f"{where}: {mod} has no {name!r}")
     assert n >= 100, n
     assert not bad, "\n".join(bad)
+
+
+# ------------------------------------------------------------------ files the docs name
+#: paths the docs name that are not meant to exist in the repository
+EXAMPLE_PATHS = {"jwarp/plugins/robots/my_arm.py": "the module a reader writes (robot_schema.md)"}
+
+
+def test_files_named_by_the_docs_exist():
+    """Every ``jwarp/...``, ``tests/...``, ``examples/...``, ``benchmarks/...``, ``docs/...``
+    path the docs name exists (relative to the repository or to the doc)."""
+    bad = []
+    for f in dc.doc_files():
+        text = f.read_text(encoding="utf-8")
+        for m in re.finditer(r"(?<![\w/.-])((?:jwarp|tests|examples|benchmarks|docs)/[\w./-]*\w)",
+                             text):
+            p = m.group(1)
+            if p in EXAMPLE_PATHS:
+                continue
+            if not ((ROOT / p).exists() or (f.parent / p).exists()):
+                bad.append(f"{f.relative_to(ROOT)}:{text.count(chr(10), 0, m.start()) + 1}: {p}")
+    assert not bad, "\n".join(bad)
