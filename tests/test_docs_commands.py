@@ -630,3 +630,67 @@ def test_files_named_by_the_docs_exist():
             if not ((ROOT / p).exists() or (f.parent / p).exists()):
                 bad.append(f"{f.relative_to(ROOT)}:{text.count(chr(10), 0, m.start()) + 1}: {p}")
     assert not bad, "\n".join(bad)
+
+
+# ------------------------------------------------------------------ option tables
+def _command_parser(parser, name: str):
+    """The subparser of ``name`` (``"data export"``: nested)."""
+    p = parser
+    for w in name.split():
+        p = _subparsers(p)[w]
+    return p
+
+
+def _options_of(p) -> dict[str, object]:
+    """option string -> its action."""
+    return {o: a for a in p._actions for o in a.option_strings}
+
+
+def test_cli_vocabulary_tables(parser, capsys):
+    """docs/cli_vocabulary.md: every command of an option's row has that option, and every
+    old spelling of the alias table still parses (with its one-line deprecation)."""
+    text = (ROOT / "docs" / "cli_vocabulary.md").read_text()
+    rows = re.findall(r"^\| `(--[a-z-]+)[^`]*` \| [^|]+ \| (.+) \|$", text, re.M)
+    assert len(rows) >= 4, rows
+    bad = []
+    for opt, commands in rows:
+        names = re.findall(r"`([a-z][a-z -]*[a-z])`", re.sub(r"\([^)]*\)", "", commands))
+        assert names, commands
+        for name in names:
+            if opt not in _options_of(_command_parser(parser, name)):
+                bad.append(f"`{name}` has no {opt}")
+    aliases = re.findall(r"^\| `([a-z][a-z -]*?) (--[a-z-]+) (\S+)` \| `[a-z -]*? (--[a-z-]+) "
+                         r"\S+` \|$", text, re.M)
+    assert len(aliases) >= 3, aliases
+    for name, old, _value, new in aliases:
+        opts = _options_of(_command_parser(parser, name))
+        if old not in opts or new not in opts:
+            bad.append(f"`{name}`: {old} or {new} missing")
+    assert not bad, "\n".join(bad)
+
+
+def test_datasets_option_table(parser):
+    """docs/datasets.md's table of ``data generate`` options: each exists, and the
+    defaults it quotes are the parser's."""
+    text = (ROOT / "docs" / "datasets.md").read_text()
+    table = text[text.index("| option | meaning |"):]
+    table = table[:table.index("\n\n")]
+    opts = _options_of(_command_parser(parser, "data generate"))
+    rows = [r for r in re.findall(r"^\| (.+?) \| (.+) \|$", table, re.M)
+            if r[0].startswith("`--")]
+    assert len(rows) >= 8
+    checked = 0
+    for names, meaning in rows:
+        for opt in re.findall(r"`(--[a-z-]+)", names):
+            assert opt in opts, f"datasets.md: `data generate` has no {opt}"
+        m = re.search(r"\(default (?:(\w) = )?([0-9.]+)\)", meaning)
+        if m:
+            given = re.findall(r"`(--[a-z-]+)", names)
+            opt = given[0] if not m.group(1) else next(
+                o for o in given if re.search(rf"`{o} {m.group(1)}`", names))
+            default = opts[opt].default
+            if default is None and opt == "--chunk":  # None: generate's DEFAULT_CHUNK
+                from jwarp.learn.generate import DEFAULT_CHUNK as default
+            assert float(default) == float(m.group(2)), (opt, default)
+            checked += 1
+    assert checked >= 3, checked
