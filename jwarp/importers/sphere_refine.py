@@ -297,6 +297,8 @@ def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float =
         r = _radii(x, c, s, e)
         keep = np.isfinite(r)
         cc, rr = c[keep], r[keep]
+        if len(rr) == 0:  # no sphere holds any sample (a part below the tolerance)
+            return fit
         check, _ = _boundary_sample(mesh, solid, n_check, seed + 7919 * (rnd + 3))
         err_all = one_sided_error(check, cc, rr)
         bad = err_all > check_fraction * tol

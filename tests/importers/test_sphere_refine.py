@@ -202,3 +202,16 @@ def test_link_protrusions_wrist_and_base(tmp_path):
         link_protrusions(model, 0.0)
     with pytest.raises(ValueError, match="wrist_joints"):
         link_protrusions(model, 0.01, wrist_joints=-1)
+
+
+def test_refine_fit_of_a_part_below_the_tolerance_returns_the_fit():
+    """A 5 mm cylinder (TIAGo's arm_tool_link) at a 1 cm tolerance: the refinement has no
+    sphere to keep and returns the plain fit (it raised on an empty reduction)."""
+    from jwarp.importers.sphere_refine import fit_refined
+    from jwarp.importers.spheres import fit_spheres, primitive_mesh
+
+    mesh = primitive_mesh("cylinder", [0.005, 0.005])
+    fit = fit_refined(mesh, tolerance=0.01, protrusion=0.0075, max_protrusion=0.005)
+    plain = fit_spheres(mesh, tolerance=0.01, protrusion=0.0075)
+    assert fit.k >= 1 and fit.one_sided_error <= 0.01
+    assert fit.k <= plain.k
