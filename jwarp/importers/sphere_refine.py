@@ -69,7 +69,7 @@ HAND_PROTRUSION = 0.5
 LADDER = (0.8, 0.6)
 
 #: fits of more spheres than this are returned unrefined (the steps are dense in N x k)
-MAX_SPHERES = 64
+MAX_SPHERES = 32
 _SAMPLES = (2000, 6000)  # clip of the automatic fit-sample count 8 area / tolerance^2
 
 
@@ -328,7 +328,8 @@ def fit_refined(mesh: trimesh.Trimesh, *, tolerance: float, protrusion: float | 
     :func:`refine_fit`, from several starting points: the fit with ``protrusion`` (None:
     automatic) and fits at ``ladder`` fractions of its protrusion (only with
     ``max_protrusion`` or when the first fit's protrusion is below ``tolerance``, a thin
-    part: for a thick one they need more spheres, and time). The refinement finds a local
+    part: for a thick one they need more spheres, and time; with ``max_protrusion`` the
+    ladder stops at the first start whose refined fit is within the bound). The refinement finds a local
     optimum, so several starts find lower protrusions more often.
 
     Which refined fit is returned: with ``max_protrusion`` None, the one of the lowest
@@ -349,10 +350,14 @@ def fit_refined(mesh: trimesh.Trimesh, *, tolerance: float, protrusion: float | 
                 or not 0 < float(f) <= 2 or float(f) == 1:
             raise ValueError(f"ladder: expected factors in (0, 2] other than 1, got {f!r}")
     base = fit_spheres(mesh, tolerance=tolerance, protrusion=protrusion, **fit_options)
+    if base.k > MAX_SPHERES:
+        return base  # too many spheres to refine (time): the plain fit
     cands = [refine_fit(mesh, base, **ropt)]
     if max_protrusion is None and base.protrusion >= tolerance:
         ladder = ()  # a thick part: lower protrusions need more spheres (and time)
     for f in ladder:
+        if max_protrusion is not None and cands[-1].max_protrusion <= max_protrusion:
+            break  # within the bound: lower starts only add spheres (and time)
         fit = fit_spheres(mesh, tolerance=tolerance, protrusion=float(f) * base.protrusion,
                           **fit_options)
         if max_protrusion is None and fit.k > base.k:
