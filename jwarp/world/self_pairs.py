@@ -267,6 +267,10 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
     dmin = np.full((nb, nb), np.inf)
     hits = np.zeros((nb, nb), np.int64)
     pairs = [(i, j) for i in range(nb) for j in range(i + 1, nb)]
+    # frames of one rigid group (fixed or locked joints between them) keep their distance in
+    # every configuration: computed in the first sample only, counted for all
+    gid = rigid_groups(model)
+    rigid = {(i, j) for i, j in pairs if gid[frames[i]] == gid[frames[j]]}
     for s in range(0, n_samples, batch):
         T = fk(model, q[s:s + batch], device="cpu", dtype=np.float64)  # (B, nf, 4, 4)
         B = T.shape[0]
@@ -279,10 +283,15 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
         C = np.einsum("bgij,gj->bgi", Tg[..., :3, :3], gc_arr) + Tg[..., :3, 3]
         del T, Tg
         for i, j in pairs:
+            one = (i, j) in rigid
+            if one and s > 0:
+                continue
             fd = None           # (B,) the pair's smallest distance per sample (inf: > bound)
             for ga in groups[i]:
                 for gb in groups[j]:
                     bound = np.linalg.norm(C[:, ga] - C[:, gb], axis=-1) - gr_arr[ga] - gr_arr[gb]
+                    if one:
+                        bound = bound[:1]
                     todo = np.flatnonzero(bound < max(margin, dmin[i, j]))
                     if not len(todo):
                         continue
@@ -292,7 +301,8 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
                     fd[todo] = np.minimum(fd[todo], d)
                     dmin[i, j] = min(dmin[i, j], float(d.min()))
             if fd is not None:
-                hits[i, j] += int(np.count_nonzero(fd < margin))
+                hits[i, j] += (n_samples * int(fd[0] < margin) if one
+                               else int(np.count_nonzero(fd < margin)))
         del x, C
     dmin = np.minimum(dmin, dmin.T)
     hits = hits + hits.T
