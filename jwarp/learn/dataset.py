@@ -49,8 +49,8 @@ from typing import Any
 import numpy as np
 from torch.utils.data import IterableDataset
 
-__all__ = ["DamagedRowError", "FORMAT", "SCHEMA_VERSION", "PathDB", "PathDBError", "PathDataset", "WorldRecord",
-           "export_npz", "world_from_record", "world_record"]
+__all__ = ["DamagedRowError", "DuplicateWorldError", "FORMAT", "SCHEMA_VERSION", "PathDB", "PathDBError", "PathDataset", "WorldRecord",
+           "export_npz", "record_hash", "world_from_record", "world_record"]
 
 FORMAT = "jwarp-path-db"
 SCHEMA_VERSION = 1
@@ -70,7 +70,13 @@ CREATE TABLE IF NOT EXISTS paths (
     hard INTEGER NOT NULL, settings_id INTEGER REFERENCES settings(settings_id),
     PRIMARY KEY (world_id, task));
 CREATE INDEX IF NOT EXISTS paths_by_world ON paths(world_id);
+CREATE TABLE IF NOT EXISTS world_hashes (
+    hash TEXT PRIMARY KEY, world_id INTEGER NOT NULL UNIQUE REFERENCES worlds(world_id));
 """
+
+#: the table of world content hashes (also added to databases written before it existed)
+HASH_TABLE = ("CREATE TABLE IF NOT EXISTS world_hashes (hash TEXT PRIMARY KEY, "
+              "world_id INTEGER NOT NULL UNIQUE REFERENCES worlds(world_id))")
 
 #: a record of one world as the generator's workers return it (plain, picklable)
 WorldRecord = dict
@@ -137,6 +143,28 @@ def world_record(world_id: int, world: Any, labels: Any) -> WorldRecord:
         "feasible": feasible, "hard": hard,
         "settings": dict(getattr(labels, "settings", {}) or {}),
     }
+
+
+def record_hash(rec: dict) -> str:
+    """The content hash of a world record or stored world row (``shape``, ``limits``,
+    ``voxel_size``, ``occupancy`` or ``sdf``): equal to
+    :meth:`jwarp.world.sdf.World.content_hash` of the world it holds."""
+    import hashlib
+
+    h = hashlib.sha256()
+    h.update(json.dumps([[int(x) for x in rec["shape"]], float(rec["voxel_size"])]).encode())
+    h.update(np.ascontiguousarray(np.asarray(rec["limits"], np.float64)).tobytes())
+    if rec.get("occupancy") is not None:
+        h.update(b"occ")
+        h.update(np.packbits(np.asarray(rec["occupancy"], bool).ravel()).tobytes())
+    else:
+        h.update(b"sdf")
+        h.update(np.ascontiguousarray(np.asarray(rec["sdf"]), np.float32).tobytes())
+    return h.hexdigest()
+
+
+class DuplicateWorldError(ValueError):
+    """A world whose content (grid) equals a world already in the database."""
 
 
 def world_from_record(row: dict) -> Any:
@@ -214,6 +242,10 @@ class PathDB:
             if exists:
                 self.meta = self._read_meta()
                 self._check(robot, bps)
+                try:  # a database of before the hash table: add it (read-only: later)
+                    self.con.execute(HASH_TABLE)
+                except sqlite3.Error:
+                    pass
             else:
                 self.meta = self._create(robot, bps)
         except BaseException:
@@ -341,6 +373,15 @@ class PathDB:
                                     (wid,)).fetchone():
                     self.con.execute("ROLLBACK")
                     return False
+                digest = record_hash(rec)
+                self._hash_old_worlds()
+                dup = self.con.execute("SELECT world_id FROM world_hashes WHERE hash = ?",
+                                       (digest,)).fetchone()
+                if dup:
+                    raise DuplicateWorldError(
+                        f"database: '{self.path}': world {wid} has the same grid as world "
+                        f"{int(dup[0])} (content hash {digest[:12]}): nothing written; "
+                        f"distinct world seeds must give distinct worlds")
                 sid = self._settings_id(rec["settings"])
                 self.con.execute(
                     "INSERT OR IGNORE INTO worlds(world_id, dim, shape, limits, voxel_size, "
@@ -352,6 +393,8 @@ class PathDB:
                      None if rec["sdf"] is None else zlib.compress(
                          np.asarray(rec["sdf"], np.float32).tobytes(), 6),
                      rec["sdf_dtype"], _json(rec["meta"]), n, sid))
+                self.con.execute("INSERT INTO world_hashes(hash, world_id) VALUES (?, ?)",
+                                 (digest, wid))
                 w = int(rec["paths"].shape[1])
                 self.con.executemany(
                     "INSERT OR IGNORE INTO paths(world_id, task, start, goal, waypoints, "
@@ -463,6 +506,21 @@ class PathDB:
         return self._query("SELECT world_id, task, start, goal, waypoints, cost, feasible, "
                            "hard FROM paths ORDER BY world_id, task")
 
+    def _hash_old_worlds(self) -> None:
+        """Hashes of stored worlds that have none (a database of before the hash table),
+        inside the caller's transaction; a duplicate among them keeps the first."""
+        rows = self.con.execute(
+            "SELECT world_id FROM worlds WHERE world_id NOT IN "
+            "(SELECT world_id FROM world_hashes)").fetchall()
+        for (wid,) in rows:
+            self.con.execute("INSERT OR IGNORE INTO world_hashes(hash, world_id) VALUES (?, ?)",
+                             (record_hash(self.world_row(int(wid))), int(wid)))
+
+    def world_hashes(self) -> dict[int, str]:
+        """``{world_id: content hash}`` of every stored world (:func:`record_hash`),
+        computed from the rows (also for a database without the hash table)."""
+        return {wid: record_hash(self.world_row(wid)) for wid in self.world_ids()}
+
     def info(self) -> dict:
         """A summary: meta, counts, feasible/hard fractions, the settings used."""
         n = self.n_paths()
@@ -473,8 +531,13 @@ class PathDB:
         short = self._query("SELECT w.world_id, w.n_paths, COUNT(p.world_id) FROM worlds w "
                             "LEFT JOIN paths p ON p.world_id = w.world_id "
                             "GROUP BY w.world_id HAVING COUNT(p.world_id) < w.n_paths")
+        by_hash: dict[str, list[int]] = {}
+        for wid, digest in self.world_hashes().items():
+            by_hash.setdefault(digest, []).append(wid)
+        dups = [sorted(v) for v in by_hash.values() if len(v) > 1]
         return {"path": str(self.path), **{k: v for k, v in self.meta.items() if k != "bps"},
                 "bps": self.bps is not None, "worlds": len(ids),
+                "distinct_worlds": len(by_hash), "duplicate_worlds": dups,
                 "world_ids": [ids[0], ids[-1]] if ids else [], "paths": n,
                 "n_dof": self.n_dof(), "feasible": (f / n) if n else None,
                 "hard": (h / n) if n else None, "settings": self.settings(),

@@ -319,11 +319,22 @@ def samples_from_db(db: Any, robot: Any, *, world_ids: Any = None, hard_only: bo
     return PlanSamples(a["start"], a["goal"], a["path"], index, worlds, None, first, source)
 
 
+def world_content_key(world: Any, index: int) -> str:
+    """The content hash of a world (:meth:`jwarp.world.sdf.World.content_hash`), or
+    ``"index:<i>"`` for an entry without a grid."""
+    try:
+        return world.content_hash()
+    except (AttributeError, ValueError):
+        return f"index:{index}"
+
+
 def split_by_world(samples: PlanSamples, val_fraction: float = 0.1, seed: int = 0
                    ) -> tuple[PlanSamples, PlanSamples]:
     """(train, val): a random ``val_fraction`` of the worlds (rounded, at least one when
     ``val_fraction`` > 0) and all their samples go to validation, so validation worlds are
-    unseen in training; each part keeps only its worlds (:meth:`PlanSamples.compact`).
+    unseen in training; worlds of equal content (:meth:`jwarp.world.sdf.World.content_hash`,
+    e.g. the same grid stored twice) are one world for the split, so none is on both sides;
+    each part keeps only its worlds (:meth:`PlanSamples.compact`).
     ``val_fraction`` 0: val is empty. ValueError for a fraction outside [0, 1) or fewer
     than two worlds to split."""
     if not (isinstance(val_fraction, (int, float)) and 0.0 <= val_fraction < 1.0):
@@ -334,9 +345,20 @@ def split_by_world(samples: PlanSamples, val_fraction: float = 0.1, seed: int = 
     if len(used) < 2:
         raise ValueError(f"val_fraction: the samples have {len(used)} world(s); a split by "
                          f"world needs at least 2 (or val_fraction 0)")
-    n_val = min(max(1, round(val_fraction * len(used))), len(used) - 1)
+    # split by content: worlds with equal grids (world_content_key) fall on one side
+    keys = [world_content_key(samples.worlds[int(i)], int(i)) for i in used]
+    groups: dict[str, list[int]] = {}
+    for i, k in zip(used, keys):
+        groups.setdefault(k, []).append(int(i))
+    if len(groups) < 2:
+        raise ValueError(f"val_fraction: the samples' {len(used)} world(s) have "
+                         f"{len(groups)} distinct grid(s); a split by world needs at least 2 "
+                         f"(or val_fraction 0)")
+    order = sorted(groups)
+    n_val = min(max(1, round(val_fraction * len(order))), len(order) - 1)
     rng = np.random.default_rng(seed)
-    val_worlds = rng.permutation(used)[:n_val]
+    val_keys = [order[j] for j in rng.permutation(len(order))[:n_val]]
+    val_worlds = [i for k in val_keys for i in groups[k]]
     is_val = np.isin(samples.world_index, val_worlds)
     return (samples.subset(np.flatnonzero(~is_val)).compact(),
             samples.subset(np.flatnonzero(is_val)).compact())

@@ -146,21 +146,41 @@ def robot_world_grid(robot: Any, cells: int = 64, voxel_size: float | None = Non
     return grid_geometry(len(n), shape=tuple(int(v) for v in n), limits=lower, voxel_size=h)
 
 
+#: candidate simplex seeds drawn from a requested seed's own stream lie at and above this
+#: offset, away from the small seeds users request
+STREAM_SEED_OFFSET = 2 ** 32
+
+
+def world_seed_candidates(seed: int, n: int) -> list[int]:
+    """The simplex seeds :func:`feasible_simplex_world` tries for the requested ``seed``:
+    ``seed`` itself, then ``n - 1`` seeds of its own stream
+    (``numpy.random.SeedSequence(seed)``, offset by :data:`STREAM_SEED_OFFSET`). Distinct
+    requested seeds therefore fall back onto distinct candidates: the old rule (``seed``,
+    ``seed + 1``, ...) made consecutive seeds collapse onto one world (seeds 1-7 of
+    justin19 all became world 11)."""
+    seed = int(seed)
+    extra = np.random.SeedSequence(seed).generate_state(max(int(n) - 1, 0), dtype=np.uint64)
+    return [seed] + [STREAM_SEED_OFFSET + int(x % (2 ** 62)) for x in extra]
+
+
 def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200,
                            n: int = 1000, max_tries: int = 50, cells: int = 64,
                            voxel_size: float | None = None, clear_base: bool = True,
                            margin: float = 0.0, dim: int | None = None, device: Any = None,
                            extent: float | None = None, **noise: Any) -> World:
-    """The first simplex world from ``seed`` on (seed, seed + 1, ...) in which at least
-    ``min_feasible`` of ``n`` random configurations are collision-free (thesis: 200 of 1000).
+    """The first simplex world of the candidates of ``seed`` (:func:`world_seed_candidates`:
+    ``seed`` itself, then seeds of its own stream, so distinct seeds give distinct worlds) in
+    which at least ``min_feasible`` of ``n`` random configurations are collision-free
+    (thesis: 200 of 1000).
 
     The grid covers the robot's reach (:func:`robot_world_grid`), or, with ``extent`` [m],
     a cube (square) of that side with ``cells`` cells per axis centred on the reach box
     (the worlds of thesis Table 3.2: e.g. 64 x 64 over 1 x 1 m); with ``clear_base`` the
     robot's fixed spheres (plus two voxels) are kept free of obstacles. ``noise``:
     threshold, frequency, octaves, persistence (see :func:`simplex_world`). The result's
-    ``meta`` records the seed used and the feasible fraction. Raises ValueError when
-    no seed of ``max_tries`` passes (lower the obstacle density: raise ``threshold``).
+    ``meta`` records the seed used, the requested seed, the candidate's index and the
+    feasible fraction. Raises ValueError when no candidate of ``max_tries`` passes (lower
+    the obstacle density: raise ``threshold``).
     """
     from jwarp.world.simplex import simplex_world
 
@@ -191,14 +211,18 @@ def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200
                                          voxel_size=h)
     keep = fixed_spheres(model, pad=2 * h, device=device) if clear_base else []
     fractions = []
-    for s in range(int(seed), int(seed) + int(max_tries)):
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) \
+            or seed < 0:
+        raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
+    for k, s in enumerate(world_seed_candidates(int(seed), int(max_tries))):
         world = simplex_world(dim, seed=s, shape=shape, limits=limits, keep_free=keep, **noise)
-        frac = feasible_fraction(model, world, n, seed=s, margin=margin, device=device)
+        frac = feasible_fraction(model, world, n, seed=s % 2 ** 32, margin=margin,
+                                 device=device)
         fractions.append(frac)
         if frac * n >= min_feasible:
-            world.meta.update(robot=model.name, requested_seed=int(seed),
+            world.meta.update(robot=model.name, requested_seed=int(seed), candidate=k,
                               feasible_fraction=frac, feasible_samples=int(n))
             return world
-    raise ValueError(f"no simplex world among seeds {seed}..{seed + max_tries - 1} has "
+    raise ValueError(f"no simplex world among {max_tries} candidates of seed {seed} has "
                      f"{min_feasible}/{n} collision-free configurations for '{model.name}' "
                      f"(best {max(fractions) * n:.0f}); raise 'threshold' for fewer obstacles")

@@ -189,6 +189,27 @@ class World:
         out.n_worlds = len(ws)
         return cls.of_shapes(out, {"n_worlds": len(ws)})
 
+    def content_hash(self) -> str:
+        """SHA-256 (hex) of the grid's content: shape, limits, voxel size and the occupancy
+        (or, without one, the SDF as float32). Equal grids give equal hashes whatever their
+        meta; datasets use it to refuse duplicate worlds and to split by world. The exact
+        objects (``shapes``) are not part of it; a world without a grid raises ValueError."""
+        import hashlib
+
+        if self.sdf is None:
+            raise ValueError("world: has no grid (exact objects only): no content hash")
+        sdf = np.asarray(self.sdf)
+        h = hashlib.sha256()
+        h.update(json.dumps([list(map(int, sdf.shape)), float(self.voxel_size)]).encode())
+        h.update(np.ascontiguousarray(np.asarray(self.limits, np.float64)).tobytes())
+        if self.occupancy is not None:
+            h.update(b"occ")
+            h.update(np.packbits(np.asarray(self.occupancy, bool).ravel()).tobytes())
+        else:
+            h.update(b"sdf")
+            h.update(np.ascontiguousarray(sdf, np.float32).tobytes())
+        return h.hexdigest()
+
     @property
     def n_worlds(self) -> int:
         """Worlds of a batch (:meth:`batch`); 1 for a single world."""
