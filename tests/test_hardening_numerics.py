@@ -275,11 +275,10 @@ def test_float32_default_tolerance_reports_converged_configurations(capsys):
     f64 = K.fk_elastic(model, q, 1e-4, device="cpu")
     f32 = K.fk_elastic(model, q.astype(np.float32), 1e-4, device="cpu")
     strict = K.fk_elastic(model, q.astype(np.float32), 1e-4, tol=1e-9, device="cpu")
-    with capsys.disabled():
-        print(f"\njustin19, 1000 random q, kappa 1e-4, max_iter 10: converged float32 "
-              f"default tol {f32.converged.mean():.1%} (tol 1e-9: {strict.converged.mean():.1%}),"
-              f" float64 {f64.converged.mean():.1%}; median updates float32 "
-              f"{np.median(f32.iterations):.0f}, float64 {np.median(f64.iterations):.0f}")
+    print(f"\njustin19, 1000 random q, kappa 1e-4, max_iter 10: converged float32 "
+          f"default tol {f32.converged.mean():.1%} (tol 1e-9: {strict.converged.mean():.1%}),"
+          f" float64 {f64.converged.mean():.1%}; median updates float32 "
+          f"{np.median(f32.iterations):.0f}, float64 {np.median(f64.iterations):.0f}")
     assert f64.converged.all()
     assert f32.converged.all()
     assert strict.converged.mean() < 0.99  # float32 rows cannot resolve 1e-9 rad

@@ -39,6 +39,7 @@ def test_kappa_that_requires_grad_is_refused_not_dropped():
     assert q.grad is not None and kappa.grad is None
 
 
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")  # the point
 def test_a_model_whose_lengths_overflow_float32_is_refused_at_load(tmp_path):
     """Reliability round 3, item 8: a URDF joint origin of 1e300 imported and float32 FK then
     returned NaN frames: refused at load, naming the file and the frame."""

@@ -199,21 +199,19 @@ def test_justin_elastic_sag_converges_in_three_iterations(device, capsys):
         it = K.fk_elastic(model, q, kappa, max_iter=n, tol=0.0, device=device)
         residual.append(np.linalg.norm(it.frames[:, tcp][..., :3, 3] - exact.frames[:, tcp][..., :3, 3],
                                        axis=-1).max() * 1e3)
-    with capsys.disabled():
-        print(f"\njustin19 kappa=0.1 rad/kNm: TCP sag at q=0 right {sag[0, 0]:.2f} mm, "
-              f"left {sag[0, 1]:.2f} mm; over 200 random q mean {sag[1:].mean():.1f} mm, "
-              f"min {sag[1:].min():.1f} mm, max {sag[1:].max():.1f} mm")
-        print("max TCP distance to the equilibrium after 0..4 updates [mm]: "
-              + ", ".join(f"{r:.4f}" for r in residual))
+    print(f"\njustin19 kappa=0.1 rad/kNm: TCP sag at q=0 right {sag[0, 0]:.2f} mm, "
+          f"left {sag[0, 1]:.2f} mm; over 200 random q mean {sag[1:].mean():.1f} mm, "
+          f"min {sag[1:].min():.1f} mm, max {sag[1:].max():.1f} mm")
+    print("max TCP distance to the equilibrium after 0..4 updates [mm]: "
+          + ", ".join(f"{r:.4f}" for r in residual))
     assert 2.0 < sag[0].min() and sag[0].max() < 60.0          # a few mm to cm at q = 0
     assert 1.0 < sag.min() and sag.max() < 300.0  # up to ~0.2 m with the torso tilted
     # contraction by > 5x per update; after 3 updates every TCP is within 0.5 mm
     assert all(residual[k + 1] < 0.2 * residual[k] for k in range(4))
     assert residual[3] < 0.5
     coarse = K.fk_elastic(model, q, kappa, tol=1e-4, device=device)  # 0.1 mm per metre
-    with capsys.disabled():
-        print(f"updates to tol 1e-4 rad: median {np.median(coarse.iterations):.0f}, "
-              f"max {coarse.iterations.max()}")
+    print(f"updates to tol 1e-4 rad: median {np.median(coarse.iterations):.0f}, "
+          f"max {coarse.iterations.max()}")
     assert coarse.converged.all() and np.median(coarse.iterations) <= 3
 
 
@@ -231,13 +229,12 @@ def test_twenty_times_softer_converges_with_damping(device, capsys):
                               tol=1e-6, device=device)
     rigid = K.fk(model, q, device=device)
     sag = np.linalg.norm(res.frames[:, [13, 22]][..., :3, 3] - rigid[:, [13, 22]][..., :3, 3], axis=-1)
-    with capsys.disabled():
-        print(f"\n20x softer limbs, lam=0.5: converged {res.converged.mean():.0%}, iterations median "
-              f"{np.median(res.iterations):.0f} max {res.iterations.max()}; lam=1: converged "
-              f"{undamped.converged.mean():.0%}; TCP sag mean {sag.mean() * 1e3:.1f} mm, max "
-              f"{sag.max() * 1e3:.1f} mm")
-        print(f"20x everything (torso too), lam=0.5, tol 1e-6: converged "
-              f"{everything.converged.mean():.0%}, iterations median {np.median(everything.iterations):.0f}")
+    print(f"\n20x softer limbs, lam=0.5: converged {res.converged.mean():.0%}, iterations median "
+          f"{np.median(res.iterations):.0f} max {res.iterations.max()}; lam=1: converged "
+          f"{undamped.converged.mean():.0%}; TCP sag mean {sag.mean() * 1e3:.1f} mm, max "
+          f"{sag.max() * 1e3:.1f} mm")
+    print(f"20x everything (torso too), lam=0.5, tol 1e-6: converged "
+          f"{everything.converged.mean():.0%}, iterations median {np.median(everything.iterations):.0f}")
     assert res.converged.all()
     tau = ref_torques(model, res.frames, dh=res.rho)
     rho_fixed = model.dh_table.copy()[None].repeat(100, 0)
