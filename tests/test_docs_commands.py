@@ -400,6 +400,34 @@ def test_readme_eval_ik_shipped_model(in_work, capsys):
     assert code == 0 and "justin19_shelf" in out and "100 targets" in out, out
 
 
+def test_readme_learning_recipes(in_work, capsys):
+    """The README's two learning blocks, run as written (smoke-sized): train ik; data
+    generate, info, export, train plan, eval plan, free-config, plan with the warm start."""
+    code, out, err = run(capsys, argv_of("README.md: jwarp train ik --robot planar5"))
+    assert code == 0 and Path("p5.pt").is_file(), err
+    code, out, err = run(capsys, argv_of("README.md: jwarp data generate --robot planar4"))
+    assert code == 0 and Path("planar4.sqlite").is_file(), err
+    code, out, err = run(capsys, argv_of("README.md: jwarp data info planar4.sqlite"))
+    info = json.loads(out)
+    assert code == 0 and info["worlds"] == info["distinct_worlds"] == 2 and info["paths"] == 2
+    code, out, err = run(capsys, argv_of("README.md: jwarp data export planar4.sqlite"))
+    assert code == 0 and len(np.load("planar4.npz")["start"]) == 2, err
+    code, out, err = run(capsys, argv_of("README.md: jwarp train plan --robot planar4 --hard"))
+    assert code == 0 and "trained planning network for planar4" in out and \
+        Path("plan4.pt").is_file(), err
+    code, out, err = run(capsys, argv_of("README.md: jwarp eval plan --robot planar4"))
+    assert code == 0 and "feasibility after k planner iterations" in out, out + err
+    code, out, err = run(capsys, argv_of("README.md: jwarp free-config --robot planar4"))
+    starts = [ln.split()[1] for ln in out.splitlines() if ln.startswith("--start ")]
+    assert code == 0 and len(starts) == 2, out + err
+    argv = argv_of("README.md: jwarp plan --robot planar4 --world simplex:seed=3")
+    argv[argv.index("--start") + 1] = starts[0]
+    argv[argv.index("--goal") + 1] = starts[1]
+    code, out, err = run(capsys, argv)
+    # the network's path is the only start (no random starts beside a warm start; 16 without)
+    assert code in (0, 1) and "of 1 starts" in out, out + err  # 1: not feasible
+
+
 def test_design_recipe(in_work, capsys):
     """docs/design.md's recipe: the campaigns and the pool exactly; the DETMAX selection
     from the first 300 pool rows (over the 10000 it takes about a minute)."""
