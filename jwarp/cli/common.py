@@ -95,6 +95,17 @@ def check_dtype_range(values: Any, dtype: Any, option: str) -> None:
                        f"{float(np.finfo(dtype).max):.3g}); use --dtype float64")
 
 
+def check_option_memory(need: float, what: str, option: str) -> None:
+    """:func:`jwarp.memory.check_memory` of ``need`` bytes for ``what``, before any work;
+    too much is a CLIError naming ``option`` (the one to lower)."""
+    from jwarp.memory import check_memory
+
+    try:
+        check_memory(need, what, f"lower {option}")
+    except MemoryError as e:
+        raise CLIError(f"{option}: {e}") from None
+
+
 def check_device(name: str, option: str = "--device") -> None:
     """CLIError naming ``option`` unless Warp has the device ``name`` (checked before any
     work; e.g. ``cuda:0`` on a machine without a GPU)."""

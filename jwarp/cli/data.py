@@ -43,7 +43,8 @@ import os
 from typing import Any
 
 from jwarp.cli.vocabulary import add_out, require_out
-from jwarp.cli.common import (CLIError, check_device, check_output, dumps, int_arg, quiet_warp,
+from jwarp.cli.common import (CLIError, check_option_memory,
+                              check_device, check_output, dumps, int_arg, quiet_warp,
                               real_arg, robot_option)
 
 
@@ -94,19 +95,15 @@ def labeller_memory(model: Any, options: Any, paths_per_world: int, chunk: int) 
 
 def _check_generate_memory(model: Any, options: Any, args: argparse.Namespace) -> None:
     from jwarp.learn.generate import DEFAULT_CHUNK
-    from jwarp.memory import check_memory
 
     need = labeller_memory(model, options, args.paths_per_world,
                            1 if not (args.ray or args.ray_address) else
                            (args.chunk or DEFAULT_CHUNK))
     W = getattr(options, "n_waypoints", 20)
     option = "--n-waypoints" if args.n_waypoints is not None and W > 200 else "--paths-per-world"
-    try:
-        check_memory(need, f"labelling one world ({args.paths_per_world} paths x {W} "
-                           f"waypoints x {getattr(options, 'max_starts', '?')} multi-starts of "
-                           f"'{model.name}')", f"lower {option}")
-    except MemoryError as e:
-        raise CLIError(f"{option}: {e}") from None
+    check_option_memory(need, f"labelling one world ({args.paths_per_world} paths x {W} "
+                        f"waypoints x {getattr(options, 'max_starts', '?')} multi-starts of "
+                        f"'{model.name}')", option)
 
 
 def cmd_generate(args: argparse.Namespace) -> int:

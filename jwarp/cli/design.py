@@ -280,15 +280,12 @@ def cmd_design(args: argparse.Namespace) -> int:
     setup, model, meas = _setup_and_measurement(args.setup, "--setup", args.robot)
     if args.write_candidates is not None:   # the pool's memory, before any draw
         from jwarp.cli.planning import config_bytes
-        from jwarp.memory import check_memory
+        from jwarp.cli.common import check_option_memory
 
         n = args.write_candidates
-        try:
-            check_memory(2.0 * n * config_bytes(model), f"a pool of {n} configurations of "
-                         f"'{model.name}' (with the draws its checks drop)",
-                         "lower --write-candidates")
-        except MemoryError as e:
-            raise CLIError(f"--write-candidates: {e}") from None
+        check_option_memory(2.0 * n * config_bytes(model), f"a pool of {n} configurations "
+                            f"of '{model.name}' (with the draws its checks drop)",
+                            "--write-candidates")
     world = _design_world(args, model)
     if args.write_candidates is not None:
         try:

@@ -67,7 +67,8 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.cli.common import (CLIError, RerunRecording, check_device, check_output, dumps, int_arg,
+from jwarp.cli.common import (CLIError, check_option_memory,
+                              RerunRecording, check_device, check_output, dumps, int_arg,
                               quiet_warp, real_arg, robot_option)
 
 #: the test targets of ``eval ik`` without ``--mix`` (as in training by default)
@@ -396,7 +397,6 @@ def _check_net_memory(kind: str, options: Any, args: argparse.Namespace) -> None
     (``--batch`` x ``--hidden`` activations) exceeds the available memory, before any
     data is made."""
     from jwarp.learn.checkpoint import network_bytes
-    from jwarp.memory import check_memory
 
     if kind == "ik":
         from jwarp.learn.ik_net import IKNet as cls
@@ -407,12 +407,9 @@ def _check_net_memory(kind: str, options: Any, args: argparse.Namespace) -> None
     blocks = getattr(config, "n_blocks", 3)
     need += 4.0 * 2 * args.batch * args.hidden * (2 * blocks + 2)   # activations + grads
     option = "--hidden" if args.hidden * args.hidden > 64 * args.batch * 8 else "--batch"
-    try:
-        check_memory(need, f"training this network (hidden {args.hidden}, {blocks} blocks, "
-                           f"batch {args.batch}: weights, gradients, optimizer state and "
-                           f"activations)", f"lower {option}")
-    except MemoryError as e:
-        raise CLIError(f"{option}: {e}") from None
+    check_option_memory(need, f"training this network (hidden {args.hidden}, {blocks} blocks, "
+                        f"batch {args.batch}: weights, gradients, optimizer state and "
+                        f"activations)", option)
 
 
 def _check_label_memory(model: Any, args: argparse.Namespace) -> None:
@@ -422,7 +419,6 @@ def _check_label_memory(model: Any, args: argparse.Namespace) -> None:
     from types import SimpleNamespace
 
     from jwarp.cli.data import labeller_memory
-    from jwarp.memory import check_memory
 
     W = args.waypoints or 20
     n = max(args.tasks_per_world, args.val_tasks)
@@ -430,11 +426,8 @@ def _check_label_memory(model: Any, args: argparse.Namespace) -> None:
                                                   n_substeps=None, dtype="float32"), n, 1)
     option = max((("--tasks-per-world", n / 50), ("--label-starts", args.label_starts / 16),
                   ("--waypoints", W / 20)), key=lambda t: t[1])[0]
-    try:
-        check_memory(need, f"labelling {n} tasks x {args.label_starts} multi-starts x {W} "
-                           f"waypoints of '{model.name}'", f"lower {option}")
-    except MemoryError as e:
-        raise CLIError(f"{option}: {e}") from None
+    check_option_memory(need, f"labelling {n} tasks x {args.label_starts} multi-starts x {W} "
+                        f"waypoints of '{model.name}'", option)
 
 
 def cmd_train_plan(args: argparse.Namespace) -> int:

@@ -69,7 +69,8 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.cli.common import (CLIError, RerunRecording, dtype_of, quiet_warp, check_device,
+from jwarp.cli.common import (CLIError, check_option_memory,
+                              RerunRecording, dtype_of, quiet_warp, check_device,
                               check_output, dumps, int_arg, parse_q, real_arg, robot_option)
 
 #: log every this many iterations to rerun
@@ -223,15 +224,6 @@ def _solver_error(command: str, e: Exception) -> CLIError:
     return CLIError(f"{command}: {msg}")
 
 
-def _check_memory(need: float, what: str, option: str) -> None:
-    from jwarp.memory import check_memory
-
-    try:
-        check_memory(need, what, f"lower {option}")
-    except MemoryError as e:
-        raise CLIError(f"{option}: {e}") from None
-
-
 def _check_plan_size(args: argparse.Namespace, model: Any) -> None:
     """Refuse --starts x --waypoints x --substeps that cannot fit in memory (estimate)."""
     P, W = args.starts, args.waypoints
@@ -247,7 +239,7 @@ def _check_plan_size(args: argparse.Namespace, model: Any) -> None:
               "--substeps": (args.substeps or 0) / 8}
     option = max(ratios, key=ratios.get)
     subs = f"{args.substeps} substeps" if args.substeps is not None else "sized substeps"
-    _check_memory(need, f"{P} starts x {W} waypoints x {subs} of '{model.name}'", option)
+    check_option_memory(need, f"{P} starts x {W} waypoints x {subs} of '{model.name}'", option)
 
 
 def _fallback(text: str) -> str | None:
@@ -542,8 +534,8 @@ def cmd_ik(args: argparse.Namespace) -> int:
     elif args.starts < 1 and args.warm_start is None:
         raise CLIError(f"--starts: expected an integer >= 1, got '{args.starts}'")
     heads = 2 if args.warm_start is not None else 0  # a twin network's seeds
-    _check_memory(float(args.starts + heads) * config_bytes(model),
-                  f"{args.starts} starts of '{model.name}'", "--starts")
+    check_option_memory(float(args.starts + heads) * config_bytes(model),
+                        f"{args.starts} starts of '{model.name}'", "--starts")
     quiet_warp()
     check_device(args.device)
     if args.rerun is not None:  # before the world and the solve: no work lost on a bad path
@@ -612,8 +604,8 @@ def cmd_free_config(args: argparse.Namespace) -> int:
     model = robot_option(args.robot)
     quiet_warp()
     check_device(args.device)
-    _check_memory(float(FREE_CONFIG_BATCH) * config_bytes(model),
-                  f"{FREE_CONFIG_BATCH} configurations of '{model.name}'", "--robot")
+    check_option_memory(float(FREE_CONFIG_BATCH) * config_bytes(model),
+                        f"{FREE_CONFIG_BATCH} configurations of '{model.name}'", "--robot")
     world = _world(args.world, model)
     from jwarp.world.collision import is_collision_free
     from jwarp.world.feasibility import random_configurations

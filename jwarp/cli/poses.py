@@ -18,7 +18,8 @@ import json
 import math
 from typing import Any
 
-from jwarp.cli.common import (CLIError, check_device, check_output, int_arg, quiet_warp, real_arg,
+from jwarp.cli.common import (CLIError, check_option_memory,
+                              check_device, check_output, int_arg, quiet_warp, real_arg,
                               robot_option)
 
 
@@ -26,15 +27,11 @@ def _check_sampling_memory(robot: Any, args: argparse.Namespace) -> None:
     """Refuse a ``--batch-size`` (candidates per kernel launch) or ``--n`` whose estimated
     memory exceeds the available memory, before any sampling."""
     from jwarp.cli.planning import config_bytes
-    from jwarp.memory import check_memory
 
     per = config_bytes(robot)
     for option, n, what in (("--batch-size", args.batch_size, "candidates per launch"),
                             ("--n", args.n, "poses kept")):
-        try:
-            check_memory(float(n) * per, f"{n} {what} of '{robot.name}'", f"lower {option}")
-        except MemoryError as e:
-            raise CLIError(f"{option}: {e}") from None
+        check_option_memory(float(n) * per, f"{n} {what} of '{robot.name}'", option)
 
 
 def cmd_sample_poses(args: argparse.Namespace) -> int:

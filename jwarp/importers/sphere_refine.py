@@ -40,7 +40,6 @@ the seed (seed 1: 71 spheres, 2.0 %).
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import replace
 from typing import Any
 
@@ -48,7 +47,7 @@ import numpy as np
 import trimesh
 import warp as wp
 
-from jwarp.importers.spheres import (SphereFit, excess_volume, fit_spheres,
+from jwarp.importers.spheres import (SphereFit, excess_volume, fit_spheres, mesh_memo,
                                      one_sided_error, sphere_protrusion)
 
 __all__ = ["refine_fit", "fit_refined", "coverage_protrusion", "link_protrusions",
@@ -128,23 +127,8 @@ def _check_mesh(mesh: Any) -> trimesh.Trimesh:
     return mesh
 
 
-#: per mesh object (one fit of a link runs several refinements of the same mesh): its solid
-#: and its boundary samples by (n, seed); weak keys, so nothing outlives the mesh
-_MESH_CACHE: "weakref.WeakKeyDictionary[trimesh.Trimesh, dict]" = weakref.WeakKeyDictionary()
-
-
-def _cached(mesh: trimesh.Trimesh) -> dict:
-    got = _MESH_CACHE.get(mesh)
-    if got is None or got["faces"] != len(mesh.faces):
-        got = _MESH_CACHE[mesh] = {"faces": len(mesh.faces), "solid": None, "samples": {}}
-    return got
-
-
 def _mesh_solid(mesh: trimesh.Trimesh) -> _MeshSolid:
-    c = _cached(mesh)
-    if c["solid"] is None:
-        c["solid"] = _MeshSolid(mesh)
-    return c["solid"]
+    return mesh_memo(mesh, "refine solid", lambda: _MeshSolid(mesh))
 
 
 def _boundary_sample(mesh: trimesh.Trimesh, solid: _MeshSolid, n: int, seed: int
@@ -152,10 +136,8 @@ def _boundary_sample(mesh: trimesh.Trimesh, solid: _MeshSolid, n: int, seed: int
     """About ``n`` area-uniform surface samples and their normals on the solid's boundary
     (a face of one body buried inside another, inside on both sides, dropped); the same
     (n, seed) of the same mesh object is sampled once."""
-    store = _cached(mesh)["samples"]
-    if (n, seed) not in store:
-        store[(n, seed)] = _boundary_sample_new(mesh, solid, n, seed)
-    p, nrm = store[(n, seed)]
+    p, nrm = mesh_memo(mesh, ("refine samples", n, seed),
+                       lambda: _boundary_sample_new(mesh, solid, n, seed))
     return p.copy(), nrm.copy()
 
 

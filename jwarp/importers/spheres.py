@@ -74,7 +74,7 @@ from scipy.spatial import cKDTree
 
 __all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "fit_link",
            "primitive_mesh", "load_mesh", "one_sided_error", "excess_volume",
-           "signed_distance", "inside_solid", "sphere_protrusion", "PRIMITIVES"]
+           "signed_distance", "inside_solid", "sphere_protrusion", "mesh_memo", "PRIMITIVES"]
 
 #: primitive kinds and the number of size values each takes (URDF order)
 PRIMITIVES = {"box": 3, "cylinder": 2, "capsule": 2, "sphere": 1}
@@ -587,23 +587,25 @@ def _cover(slack: _Slack, max_spheres: int | None, eps0: float,
     return _two_for_one(slack.s <= hi, best, slack.c, slack.r + hi), hi
 
 
-#: per mesh object (the fits of one link at several protrusions share it): its solid and
-#: solid volumes by (n, seed); weak keys, so nothing outlives the mesh
+#: per mesh object: what the fits of one link compute more than once (its solid, solid
+#: volumes, boundary samples); weak keys, so nothing outlives the mesh
 _MESH_CACHE: "weakref.WeakKeyDictionary[trimesh.Trimesh, dict]" = weakref.WeakKeyDictionary()
 
 
-def _mesh_cache(mesh: trimesh.Trimesh) -> dict:
+def mesh_memo(mesh: trimesh.Trimesh, key: Any, make: Any) -> Any:
+    """``make()`` computed once per mesh object and ``key`` (a hashable) and remembered
+    while the mesh lives (the fits of one link at several protrusions, its refinements);
+    a mesh whose face count changed starts afresh."""
     got = _MESH_CACHE.get(mesh)
-    if got is None or got["faces"] != len(mesh.faces):
-        got = _MESH_CACHE[mesh] = {"faces": len(mesh.faces), "solid": None, "volume": {}}
-    return got
+    if got is None or got[0] != len(mesh.faces):
+        got = _MESH_CACHE[mesh] = (len(mesh.faces), {})
+    if key not in got[1]:
+        got[1][key] = make()
+    return got[1][key]
 
 
 def _solid_of(mesh: trimesh.Trimesh) -> _Solid:
-    c = _mesh_cache(mesh)
-    if c["solid"] is None:
-        c["solid"] = _Solid(mesh)
-    return c["solid"]
+    return mesh_memo(mesh, "solid", lambda: _Solid(mesh))
 
 
 def _solid_volume(mesh: trimesh.Trimesh, solid: _Solid, n: int, seed: int
@@ -611,10 +613,8 @@ def _solid_volume(mesh: trimesh.Trimesh, solid: _Solid, n: int, seed: int
     """The solid's volume: ``|mesh.volume|`` of a closed single-body mesh, else Monte Carlo
     by winding number with ``n`` points in the bounding box (once per mesh object, n and
     seed)."""
-    store = _mesh_cache(mesh)["volume"]
-    if (n, seed) not in store:
-        store[(n, seed)] = _solid_volume_new(mesh, solid, n, seed)
-    return store[(n, seed)]
+    return mesh_memo(mesh, ("volume", n, seed),
+                     lambda: _solid_volume_new(mesh, solid, n, seed))
 
 
 def _solid_volume_new(mesh: trimesh.Trimesh, solid: _Solid, n: int, seed: int

@@ -10,14 +10,13 @@ poses (FK of random configurations free of self-collision) solved >= 95%."""
 from __future__ import annotations
 
 import json
-from importlib import metadata
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import jwarp
 from jwarp.cli import main as cli
+from robot_data import erd  # tests/robot_data.py
 from jwarp.world.collision import is_collision_free
 from jwarp.world.feasibility import random_configurations
 
@@ -32,18 +31,6 @@ URDFS = {"panda": ("panda_description/urdf/panda.urdf", "panda_hand_tcp",
                    ("panda_description/srdf/panda.srdf", "default",
                     {"panda_finger_joint1": 0.04})),
          "ur5": ("ur_description/urdf/ur5_robot.urdf", "tool0", None)}
-
-
-def erd(relative: str) -> str:
-    """A file of example-robot-data's robots folder (skip where not installed)."""
-    try:
-        dist = metadata.distribution("example-robot-data")
-    except metadata.PackageNotFoundError:
-        pytest.skip("example-robot-data is not installed")
-    path = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")) / relative
-    if not path.is_file():
-        pytest.skip(f"example-robot-data has no {relative}")
-    return str(path)
 
 
 def cli_help(command: str, capsys) -> str:

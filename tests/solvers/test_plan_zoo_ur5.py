@@ -13,14 +13,13 @@ frame pair the model lets collide, in numpy."""
 from __future__ import annotations
 
 import json
-from importlib import metadata
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import jwarp
 from jwarp.cli import main as cli
+from robot_data import erd  # tests/robot_data.py
 from jwarp.solvers import planner as planner_module
 from jwarp.solvers.feasibility import certify_check
 from jwarp.solvers.rrt import RRTOptions, resample_path, rrt_connect
@@ -30,18 +29,6 @@ from jwarp.world.sdf import World
 
 #: the coarse fit of tests/importers/test_zoo.py (a CI-sized import)
 FIT = ["--tolerance", "0.03", "--max-spheres", "8", "--pair-samples", "300"]
-
-
-def erd(relative: str) -> str:
-    """A file of example-robot-data's robots folder (skip where not installed)."""
-    try:
-        dist = metadata.distribution("example-robot-data")
-    except metadata.PackageNotFoundError:
-        pytest.skip("example-robot-data is not installed")
-    path = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")) / relative
-    if not path.is_file():
-        pytest.skip(f"example-robot-data has no {relative}")
-    return str(path)
 
 
 def boxes_world(ee_pos: np.ndarray) -> tuple[World, list, float, float]:
