@@ -316,6 +316,18 @@ def ref_jacobian_fd(model, q, frame_index, eps=1e-6, dh=None):
 
 
 # ------------------------------------------------------------- sampling
+def central_difference_grad(value, q, h=1e-6):
+    """(B, n) central differences of ``value(q)`` (B,) w.r.t. each column of ``q`` (B, n),
+    step ``h``: the reference for analytic gradients of batched objectives."""
+    q = np.asarray(q, np.float64)
+    fd = np.zeros_like(q)
+    for j in range(q.shape[1]):
+        e = np.zeros(q.shape[1])
+        e[j] = h
+        fd[:, j] = (value(q + e) - value(q - e)) / (2 * h)
+    return fd
+
+
 def sample_q(model, n, seed=0, margin=0.0):
     """(n, n_dof) configurations uniform within the joint limits (shrunk by ``margin``)."""
     rng = np.random.default_rng(seed)

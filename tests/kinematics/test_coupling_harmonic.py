@@ -17,7 +17,7 @@ from jwarp.solvers import ik as IK
 from jwarp.solvers.calibration.result import model_frames
 from jwarp.world import collision
 
-from reference import ref_fk
+from reference import central_difference_grad, ref_fk
 
 #: (K = 2, 2) [a_k, b_k] of torso_4 [rad]: a few mrad
 H = np.array([[4.0e-3, -3.0e-3], [2.5e-3, 5.0e-3]])
@@ -170,12 +170,7 @@ def test_ik_objective_gradient_and_ik_reach_targets(device):
                          device=device, dtype=np.float64)
     q = qt + rng.normal(0, 0.05, qt.shape)
     u, g = obj.value_and_grad(q, T)
-    fd = np.zeros_like(q)
-    h = 1e-6
-    for j in range(robot.n_dof):
-        e = np.zeros(robot.n_dof)
-        e[j] = h
-        fd[:, j] = (obj.value_and_grad(q + e, T)[0] - obj.value_and_grad(q - e, T)[0]) / (2 * h)
+    fd = central_difference_grad(lambda x: obj.value_and_grad(x, T)[0], q)
     np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-7)
     # IK converges on the robot with harmonics, to the targets of its numpy FK
     res = IK.ik(robot, "right_tcp", T, n_starts=8, seed=2, device=device)

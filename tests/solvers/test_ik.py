@@ -10,6 +10,7 @@ from jwarp.world import collision
 from jwarp.solvers import ik as IK
 from jwarp.core.limits import sample_within_limits, within_limits
 from jwarp.world import shelf_world
+from reference import central_difference_grad  # tests/reference.py
 
 
 def ref_costs(F, T, lam_p, lam_r):
@@ -40,12 +41,7 @@ def test_pose_error_and_uik_gradient_match_numpy_and_fd(device):
     ref = [ref_costs(F[b], T[b], 2.0, 0.5) for b in range(4)]
     ref = np.array(ref) + c + 0.05 * np.sum((q - qd) ** 2, axis=1)
     np.testing.assert_allclose(u, ref, rtol=1e-10)
-    fd = np.zeros_like(q)
-    h = 1e-6
-    for j in range(robot.n_dof):
-        e = np.zeros(robot.n_dof)
-        e[j] = h
-        fd[:, j] = (obj.value_and_grad(q + e, T)[0] - obj.value_and_grad(q - e, T)[0]) / (2 * h)
+    fd = central_difference_grad(lambda x: obj.value_and_grad(x, T)[0], q)
     np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-6)
 
 
