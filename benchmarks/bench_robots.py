@@ -317,31 +317,19 @@ def sub_chain(path: str, keep: tuple) -> tuple[list[str], dict[str, float]]:
 
 
 def home_configuration(e: Entry, m: Any) -> tuple[np.ndarray, str]:
-    """The robot's declared home (its SRDF group_state, joints of the model only; the
-    others at zero) or zeros, clipped into the limits; and where it came from."""
-    import xml.etree.ElementTree as ET
-
+    """The robot's declared home (its SRDF group_state as ``import-urdf --home`` reads it:
+    :func:`jwarp.world.home_fit.resolve_home`, joints of the model only, the others at
+    zero, angles moved by 2 pi into their limits) or zeros, clipped into the limits; and
+    where it came from."""
     lim = m.joint_limits
-    q = np.zeros(m.n_dof)
-    where = "zeros"
     if e.home and e.home_arg:
+        from jwarp.importers.srdf import read_srdf
+        from jwarp.world.home_fit import resolve_home
+
         srdf, state = e.home
-        root = ET.parse(erd_root() / srdf).getroot()
-        gs = [g for g in root.iter("group_state") if g.get("name") == state]
-        if not gs:
-            raise ValueError(f"{srdf}: no group_state '{state}'")
-        for j in gs[0].iter("joint"):
-            if j.get("name") in m.joint_names:
-                k = m.joint_index(j.get("name"))
-                v = float(j.get("value"))
-                if m.joints[k].type != "prismatic" and not lim[k, 0] <= v <= lim[k, 1]:
-                    # an angle written in (-pi, pi] for a joint whose range is elsewhere:
-                    # the same pose 2 pi k away, where it fits (as import-urdf --home does)
-                    w = v + 2 * np.pi * np.ceil((lim[k, 0] - v) / (2 * np.pi))
-                    v = w if w <= lim[k, 1] else v
-                q[k] = v
-        where = f"SRDF '{state}'"
-    return np.clip(q, lim[:, 0], lim[:, 1]), where
+        q, _ = resolve_home(m, state, read_srdf(erd_root() / srdf))
+        return q, f"SRDF '{state}'"
+    return np.clip(np.zeros(m.n_dof), lim[:, 0], lim[:, 1]), "zeros"
 
 
 def overlaps(m: Any, q: np.ndarray) -> dict[tuple, float]:
