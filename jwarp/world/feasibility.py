@@ -158,8 +158,11 @@ def world_seed_candidates(seed: int, n: int) -> list[int]:
     requested seeds therefore fall back onto distinct candidates: the old rule (``seed``,
     ``seed + 1``, ...) made consecutive seeds collapse onto one world (seeds 1-7 of
     justin19 all became world 11)."""
+    for name, v, lo in (("seed", seed, 0), ("n", n, 1)):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
+            raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
     seed = int(seed)
-    extra = np.random.SeedSequence(seed).generate_state(max(int(n) - 1, 0), dtype=np.uint64)
+    extra = np.random.SeedSequence(seed).generate_state(int(n) - 1, dtype=np.uint64)
     return [seed] + [STREAM_SEED_OFFSET + int(x % (2 ** 62)) for x in extra]
 
 

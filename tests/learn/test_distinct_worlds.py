@@ -41,6 +41,15 @@ def test_candidates_of_distinct_seeds_are_disjoint():
     assert not set(a) & set(b)
     assert len(set(a)) == 50
     assert world_seed_candidates(1, 50) == a  # deterministic
+    for bad, name in (((-1, 5), "seed"), ((1.5, 5), "seed"), ((True, 5), "seed"),
+                      ((1, 0), "n"), ((1, "5"), "n")):
+        with pytest.raises(ValueError, match=f"^{name}: expected an integer"):
+            world_seed_candidates(*bad)
+
+
+def test_content_hash_of_a_world_without_a_grid_is_refused():
+    with pytest.raises(ValueError, match="no grid"):
+        World.of_shapes().content_hash()
 
 
 def test_content_hash_ignores_meta_and_sees_the_grid():
