@@ -27,6 +27,8 @@ from jwarp.world.collision import is_collision_free
 from jwarp.world.feasibility import random_configurations
 from jwarp.world.sdf import World
 
+UR5 = "ur_description/urdf/ur5_robot.urdf"
+
 #: the coarse fit of tests/importers/test_zoo.py (a CI-sized import)
 FIT = ["--tolerance", "0.03", "--max-spheres", "8", "--pair-samples", "300"]
 
@@ -56,7 +58,7 @@ def ur5_problem(tmp_path_factory):
     """(robot, world, boxes, start above the table, goal at the shelf)."""
     pytest.importorskip("trimesh")
     tmp = tmp_path_factory.mktemp("ur5")
-    path = erd("ur_description/urdf/ur5_robot.urdf")
+    path = erd(UR5)
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("JWARP_CACHE", str(tmp / "cache"))
         assert cli(["import-urdf", path, "--out", str(tmp / "ur5.json"), "--spheres", "fit",
@@ -98,6 +100,25 @@ def reference_clearances(m, boxes, path: np.ndarray, per_segment: int = 200
     return world, d.min(0), d[0]
 
 
+def assert_verified(m, boxes, path: np.ndarray) -> None:
+    """The independent verifier (tests/verifier.py): pinocchio FK of the URDF + coal
+    distances of the model's spheres to the exact boxes, densely interpolated. (Not the
+    meshes: a 3 cm fit's one-sided error lets them reach 3 cm past the spheres.)"""
+    from verifier import PathVerifier, robot_spheres
+
+    from jwarp.world.primitives import Shape
+
+    shapes = []
+    for k, (c, h) in enumerate(boxes):
+        T = np.eye(4)
+        T[:3, 3] = c
+        shapes.append(Shape("box", 2.0 * h, T, object_id=f"box{k}"))
+    ver = PathVerifier(erd(UR5), None, shapes, spheres=robot_spheres(m),
+                       joint_names=m.joint_names, mesh_check=False)
+    verdict = ver.check_path(np.asarray(path, np.float64))
+    assert verdict.ok and verdict.n_samples > len(path), verdict.first_violation
+
+
 def test_ur5_table_to_shelf_plan_found_and_truly_free(ur5_problem):
     m, world, boxes, qa, qb = ur5_problem
     res = jwarp.plan(m, world, qa, qb, time_limit=20.0, seed=0)
@@ -105,6 +126,7 @@ def test_ur5_table_to_shelf_plan_found_and_truly_free(ur5_problem):
     assert res.reasons[0] == "feasible"
     w, self_min, self_start = reference_clearances(m, boxes, res.path[0])
     assert w > -1e-9
+    assert_verified(m, boxes, res.path[0])
     # every checked pair keeps its clearance (a pair already overlapping at the start -
     # a constant-distance pair the model leaves out - only must not get deeper)
     assert np.all(self_min >= np.minimum(self_start, 0.0) - 1e-9), self_min.min()
@@ -143,6 +165,7 @@ def test_ur5_rrt_path_is_the_fallback_plan(ur5_problem, evals, monkeypatch):
         assert "certified as it is" in res.fallback_notes[0]
         np.testing.assert_allclose(res.path[0], seed, atol=1e-6)
     w, self_min, self_start = reference_clearances(m, boxes, res.path[0])
+    assert_verified(m, boxes, res.path[0])
     assert w > -1e-9
     assert np.all(self_min >= np.minimum(self_start, 0.0) - 1e-9), self_min.min()
 
