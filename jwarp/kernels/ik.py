@@ -26,6 +26,11 @@ import warp as wp
 from jwarp.kernels.fk import kernels as fk_kernels
 
 
+#: orientation modes of a target: the full pose, position only, the rotation about one
+#: axis of the frame free (:func:`kernels` ``apply_orientation``)
+ORIENT_FULL, ORIENT_NONE, ORIENT_AXIS = 0, 1, 2
+
+
 @functools.cache
 def kernels(scalar: type) -> SimpleNamespace:
     """IK kernels for one scalar type (``wp.float32`` or ``wp.float64``)."""
@@ -62,6 +67,43 @@ def kernels(scalar: type) -> SimpleNamespace:
             err[b, r + 3] = ew[r]
         return M, ev, ew
 
+    @wp.func
+    def apply_orientation(mode: int, axis: vec3, R: mat33, T: mat44, b: int,
+                          err: wp.array2d(dtype=scalar), jac: wp.array3d(dtype=scalar)):
+        """Restrict the rotation rows of err[b] (6,) and jac[b] (6, n_dof) to the target's
+        orientation mode: ``ORIENT_FULL`` leaves them; ``ORIENT_NONE`` (position only)
+        zeroes them; ``ORIENT_AXIS`` (the rotation about the frame's ``axis`` (3,), in the
+        frame's coordinates, is free) makes the error the rotation taking the current axis
+        ``a = R axis`` onto the target's ``Rot(T) axis`` (angle in [0, pi] times the unit
+        normal of both) and removes the rotation about ``a`` from the angular rows
+        (``J_w <- (I - a a^T) J_w``)."""
+        if mode == ORIENT_NONE:
+            for r in range(3):
+                err[b, r + 3] = zero
+                for j in range(jac.shape[2]):
+                    jac[b, r + 3, j] = zero
+        elif mode == ORIENT_AXIS:
+            a = R * axis
+            at = fk.unpack_rot(T) * axis
+            c = wp.cross(a, at)
+            s = wp.length(c)
+            ang = wp.atan2(s, wp.dot(a, at))
+            e = c
+            if s > scalar(1e-12):
+                e = c * (ang / s)
+            elif wp.dot(a, at) < zero:  # opposite axes: any normal of a
+                n = wp.cross(a, vec3(scalar(1.0), zero, zero))
+                if wp.length(n) < scalar(0.5):
+                    n = wp.cross(a, vec3(zero, scalar(1.0), zero))
+                e = wp.normalize(n) * ang
+            for r in range(3):
+                err[b, r + 3] = e[r]
+            for j in range(jac.shape[2]):
+                jw = vec3(jac[b, 3, j], jac[b, 4, j], jac[b, 5, j])
+                jw = jw - a * wp.dot(a, jw)
+                for r in range(3):
+                    jac[b, r + 3, j] = jw[r]
+
     @wp.kernel(module="unique")
     def pose_error_kernel(
         # Data in:
@@ -70,6 +112,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         target: wp.array(dtype=mat44),
         lam_p: scalar,
         lam_r: scalar,
+        orient: int,
+        axis: vec3,
         # Model:
         model: fk.FrameTables,
         chain: wp.array(dtype=wp.int32),
@@ -82,7 +126,9 @@ def kernels(scalar: type) -> SimpleNamespace:
         grad: wp.array2d(dtype=scalar),
     ):
         """Jacobian (B, 6, n_dof) of the frame ``chain[-1]`` (from ``frames``, no FK of
-        its own; ``frames`` were computed at ``q`` (B, n_dof)), 6D error (B, 6), its norms (B,), U_f (B,) and dU_f/dq (B, n_dof).
+        its own; ``frames`` were computed at ``q`` (B, n_dof)), 6D error (B, 6) restricted
+        to the orientation mode ``orient`` (:func:`apply_orientation`; U_f and its
+        gradient stay the full eq. 3.15), its norms (B,), U_f (B,) and dU_f/dq (B, n_dof).
         Launch dim B."""
         b = wp.tid()
         F = frames[b, chain[chain.shape[0] - 1]]
@@ -90,8 +136,9 @@ def kernels(scalar: type) -> SimpleNamespace:
         T = target[b]
         dp = fk.unpack_pos(F) - fk.unpack_pos(T)
         M, ev, ew = pose_error_row(fk.unpack_rot(F), fk.unpack_pos(F), T, b, err)
+        apply_orientation(orient, axis, fk.unpack_rot(F), T, b, err, jac)
         pos_err[b] = wp.length(ev)
-        rot_err[b] = wp.length(ew)
+        rot_err[b] = wp.length(vec3(err[b, 3], err[b, 4], err[b, 5]))
         tr = M[0, 0] + M[1, 1] + M[2, 2]
         cost[b] = lam_p * half * wp.dot(dp, dp) + lam_r * half * (scalar(3.0) - tr)
         vee = vec3(M[1, 2] - M[2, 1], M[2, 0] - M[0, 2], M[0, 1] - M[1, 0])
@@ -144,5 +191,6 @@ def kernels(scalar: type) -> SimpleNamespace:
                           lam_l, grad)
 
     return SimpleNamespace(scalar=scalar, rotation_log=rotation_log,
-                           pose_error_row=pose_error_row, aux_row=aux_row,
+                           pose_error_row=pose_error_row, apply_orientation=apply_orientation,
+                           aux_row=aux_row,
                            pose_error=pose_error_kernel, aux_cost=aux_cost_kernel)

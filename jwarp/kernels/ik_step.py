@@ -58,6 +58,35 @@ N_EXTRA = 5
 
 f64 = wp.float64
 
+#: weight of the squared rotation error [m^2/rad^2] in the restart's progress measure
+#: ``|e_v|^2 + W_ROT |e_w|^2`` (the sqrt is applied to the rows)
+W_ROT = 0.1
+W_ROT_SQRT = W_ROT ** 0.5
+#: a joint within this distance [rad or m] of a box limit counts as at the limit
+LIMIT_HOLD = 1e-6
+
+
+@wp.struct
+class RestartArgs:
+    """Re-seeding of stalled configurations, one kernel argument of ``step``.
+
+    after: steps without progress before a re-seed (0: never); max_restarts: re-seeds per
+    configuration before it gives up; progress: the fraction of its best cost a step
+    must reach to count as progress; on_cost: the best cost set while on target (the
+    tolerances' cost); seed: Warp random seed of the solve; best (B,) float64, stall (B,)
+    and count (B,) int32 per configuration; gave (P,) int32 starts given up per problem.
+    """
+
+    after: int
+    max_restarts: int
+    progress: f64
+    on_cost: f64
+    seed: int
+    best: wp.array(dtype=f64)
+    stall: wp.array(dtype=wp.int32)
+    count: wp.array(dtype=wp.int32)
+    gave: wp.array(dtype=wp.int32)
+
 
 @functools.cache
 def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
@@ -124,6 +153,17 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         """The scaled step of configuration b (float64): ``J^T A^-1 e`` minus, if
         ``use_ns``, ``alpha (g - J^T A^-1 J g)``, with ``A = J J^T + mu2 I`` over the task
         rows, times ``min(1, max_step / max_j |dq_j|)``."""
+        free = vecn()
+        for j in range(N):
+            free[j] = one
+        return dls_step_masked(jac, err, grad, b, use_ns, mu2, alpha, max_step, free)
+
+    @wp.func
+    def dls_step_masked(jac: wp.array3d(dtype=scalar), err: wp.array2d(dtype=scalar),
+                        grad: wp.array2d(dtype=scalar), b: int, use_ns: int, mu2: f64,
+                        alpha: f64, max_step: f64, free: vecn) -> vecn:
+        """:func:`dls_step` over the joints with ``free[j] = 1`` only (the columns of J and
+        the entries of g of the others are zero, so they do not move)."""
         J = matmn()
         e = vecm()
         g = vecn()
@@ -131,9 +171,9 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
             rr = task_row(r)
             e[r] = f64(err[b, rr])
             for j in range(N):
-                J[r, j] = f64(jac[b, rr, j])
+                J[r, j] = f64(jac[b, rr, j]) * free[j]
         for j in range(N):
-            g[j] = f64(grad[b, j])
+            g[j] = f64(grad[b, j]) * free[j]
         A = J * wp.transpose(J)
         for i in range(M):
             A[i, i] = A[i, i] + mu2
@@ -166,6 +206,35 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         for j in range(N):
             dq[b, j] = d[j]
 
+    @wp.func
+    def task_cost(err: wp.array2d(dtype=scalar), b: int) -> f64:
+        """The progress measure of a configuration: ``|e_v|^2 + W_ROT |e_w|^2`` over the
+        task rows [m^2]."""
+        c = zero
+        for r in range(M):
+            rr = task_row(r)
+            v = f64(err[b, rr])
+            if rr >= 3:
+                v = v * f64(W_ROT_SQRT)
+            c += v * v
+        return c
+
+    @wp.func
+    def sample_row(q: wp.array2d(dtype=scalar), b: int, state: wp.uint32,
+                   limits: wp.array2d(dtype=scalar), lin_start: wp.array(dtype=wp.int32),
+                   lin_joint: wp.array(dtype=wp.int32), lin_coef: wp.array(dtype=scalar),
+                   lin_bounds: wp.array2d(dtype=scalar)):
+        """q[b] uniform in the box, redrawn (up to 20 times) until it meets the linear
+        limits, else projected onto them."""
+        for attempt in range(20):
+            for j in range(N):
+                lo = limits[j, 0]
+                q[b, j] = lo + scalar(wp.randf(state)) * (limits[j, 1] - lo)
+            if pk.within_linear_limits(q, b, lin_start, lin_joint, lin_coef, lin_bounds,
+                                       scalar(0.0)) != 0:
+                return
+        pk.project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
+
     @wp.kernel(module="unique", enable_backward=False)
     def step_kernel(
         # Data in:
@@ -181,6 +250,7 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         mu2: f64,
         alpha: f64,
         max_step: f64,
+        restart: RestartArgs,
         # Model:
         limits: wp.array2d(dtype=scalar),
         lin_start: wp.array(dtype=wp.int32),
@@ -197,23 +267,70 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         """One projected DLS step of every active configuration (module docstring);
         ``iterations[b]`` counts the steps. With ``freeze_solved`` an active configuration
         of a solved problem is frozen instead (``done[b] = 2``, counted in ``counts[0]``).
-        Launch dim B."""
+        Joints at a box limit that the step would push outward are held (their columns
+        removed, the step recomputed). A configuration off target whose
+        :func:`task_cost` has not fallen below ``restart.progress`` times its best for
+        ``restart.after`` steps is re-seeded (uniform in the limits, Warp's random stream
+        from ``restart.seed``); after ``restart.max_restarts`` re-seeds it gives up
+        (``done[b] = 3``, counted in ``counts[0]``; a problem all of whose starts gave up
+        is counted in ``counts[3]``). Launch dim B."""
         b = wp.tid()
         stop = int(0)
         if counts[0] >= q.shape[0]:
             stop = 1
-        if stop_solved != 0 and counts[1] >= n_problems:
+        if stop_solved != 0 and counts[1] + counts[3] >= n_problems:
             stop = 1
         if b == 0:
             halt[0] = stop
             counts[2] = 0  # the next iteration's near-target count
         if stop != 0 or done[b] != 0:
             return
-        if freeze_solved != 0 and solved[b // n_starts] != 0:
+        p = b // n_starts
+        if freeze_solved != 0 and solved[p] != 0:
             done[b] = 2
             wp.atomic_add(counts, 0, 1)
             return
-        d = dls_step(jac, err, grad, b, on[b], mu2, alpha, max_step)
+        if restart.after > 0:
+            c = task_cost(err, b)
+            if on[b] != 0:  # on target: progress is measured from the tolerance on
+                restart.best[b] = restart.on_cost
+                restart.stall[b] = 0
+            elif c < restart.progress * restart.best[b]:
+                restart.best[b] = c
+                restart.stall[b] = 0
+            else:
+                restart.stall[b] = restart.stall[b] + 1
+                if restart.stall[b] >= restart.after:
+                    k = restart.count[b]
+                    if k >= restart.max_restarts:
+                        done[b] = 3
+                        wp.atomic_add(counts, 0, 1)
+                        if wp.atomic_add(restart.gave, p, 1) == n_starts - 1:
+                            wp.atomic_add(counts, 3, 1)
+                        return
+                    restart.count[b] = k + 1
+                    restart.stall[b] = 0
+                    restart.best[b] = f64(1.0e300)
+                    state = wp.rand_init(restart.seed + 7919 * (k + 1), b)
+                    sample_row(q, b, state, limits, lin_start, lin_joint, lin_coef,
+                               lin_bounds)
+                    iterations[b] = iterations[b] + 1
+                    return
+        free = vecn()
+        for j in range(N):
+            free[j] = one
+        d = dls_step_masked(jac, err, grad, b, on[b], mu2, alpha, max_step, free)
+        held = int(0)
+        for j in range(N):
+            lo = f64(limits[j, 0])
+            hi = f64(limits[j, 1])
+            qj = f64(q[b, j])
+            tol = f64(LIMIT_HOLD)
+            if (d[j] < zero and qj <= lo + tol) or (d[j] > zero and qj >= hi - tol):
+                free[j] = zero
+                held = 1
+        if held != 0:
+            d = dls_step_masked(jac, err, grad, b, on[b], mu2, alpha, max_step, free)
         for j in range(N):
             q[b, j] = scalar(f64(q[b, j]) + d[j])
         pk.project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
@@ -235,19 +352,13 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         the linear limits, else projected onto them (the device twin of
         :func:`jwarp.core.limits.sample_within_limits`; Warp's random stream). Launch dim B."""
         b = wp.tid()
-        state = wp.rand_init(seed, b)
-        for attempt in range(20):
-            for j in range(N):
-                lo = limits[j, 0]
-                q[b, j] = lo + scalar(wp.randf(state)) * (limits[j, 1] - lo)
-            if pk.within_linear_limits(q, b, lin_start, lin_joint, lin_coef, lin_bounds,
-                                       scalar(0.0)) != 0:
-                return
-        pk.project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
+        sample_row(q, b, wp.rand_init(seed, b), limits, lin_start, lin_joint, lin_coef,
+                   lin_bounds)
 
     return SimpleNamespace(scalar=scalar, planar=planar, rows=M, n_dof=N, task_row=task_row,
-                           cholesky_solve=cholesky_solve, dls_step=dls_step, dls=dls_kernel,
-                           step=step_kernel, sample=sample_kernel)
+                           cholesky_solve=cholesky_solve, dls_step=dls_step,
+                           dls_step_masked=dls_step_masked, task_cost=task_cost,
+                           dls=dls_kernel, step=step_kernel, sample=sample_kernel)
 
 
 @functools.cache
@@ -528,6 +639,8 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         model: fk.FrameTables,
         chain: wp.array(dtype=wp.int32),
         nominal: wp.array3d(dtype=scalar),
+        orient: int,
+        axis: fk.vec3,
         # Data out:
         jac: wp.array3d(dtype=scalar),
         err: wp.array2d(dtype=scalar),
@@ -536,13 +649,15 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         ``chain[-1]``, walking only its chain (twice: the frame, then the joint axes,
         :mod:`jwarp.kernels.fk` ``chain_pose`` and ``chain_jacobian``) with no frames
         stored: the values of FK + :mod:`jwarp.kernels.ik` ``pose_error`` (the same
-        functions, ``pose_error_row`` included). Configurations that are done keep theirs. Launch dim B."""
+        functions, ``pose_error_row`` and ``apply_orientation`` included). Configurations
+        that are done keep theirs. Launch dim B."""
         b = wp.tid()
         if halt[0] != 0 or done[b] != 0:
             return
         R, p = fk.chain_pose(model, chain, b, q, ROWS_NOMINAL, nominal, 0)
         ikk.pose_error_row(R, p, target[b], b, err)
         fk.chain_jacobian(model, chain, b, q, ROWS_NOMINAL, nominal, 0, p, jac)
+        ikk.apply_orientation(orient, axis, R, target[b], b, err, jac)
 
     @wp.kernel(module="unique", enable_backward=False)
     def reset_kernel(
@@ -554,18 +669,24 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         solved: wp.array(dtype=wp.int32),
         counts: wp.array(dtype=wp.int32),
         halt: wp.array(dtype=wp.int32),
+        restart: RestartArgs,
     ):
         """Zero the solver state of a new solve. Launch dim B (>= n_problems)."""
         b = wp.tid()
         done[b] = 0
         on[b] = 0
         iterations[b] = 0
+        restart.best[b] = f64(1.0e300)
+        restart.stall[b] = 0
+        restart.count[b] = 0
         if b < n_problems:
             solved[b] = 0
+            restart.gave[b] = 0
         if b == 0:
             counts[0] = 0
             counts[1] = 0
             counts[2] = 0
+            counts[3] = 0
             halt[0] = 0
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -585,17 +706,22 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         err: wp.array2d(dtype=scalar),
         cost_a: wp.array(dtype=scalar),
         done: wp.array(dtype=wp.int32),
+        iterations: wp.array(dtype=wp.int32),
         max_iterations: int,
         # Data out:
         out: wp.array2d(dtype=f64),
     ):
         """Result rows of the configurations that are not done (feasible): their last q,
-        task error norms and U_A, infeasible, ``max_iterations``. Launch dim B."""
+        task error norms and U_A, infeasible, ``max_iterations`` (a start that gave up:
+        its own step count). Launch dim B."""
         b = wp.tid()
         if done[b] == 1:
             return
         pe, re = task_errors(err, b)
-        write_result(out, b, q, pe, re, f64(cost_a[b]), zero, f64(max_iterations))
+        its = f64(max_iterations)
+        if done[b] == 3:
+            its = f64(iterations[b])
+        write_result(out, b, q, pe, re, f64(cost_a[b]), zero, its)
 
     @wp.kernel(module="unique", enable_backward=False)
     def select_kernel(

@@ -10,6 +10,16 @@ closeness to a default pose, eq. 3.19) inside the Jacobian's nullspace,
 target manifold. Every step is scaled so that no joint moves more than ``max_step`` and
 projected onto the joint limits.
 
+Convergence (beyond the thesis): a joint at a box limit that the step would push further
+out is held (its Jacobian column removed, the step recomputed), and a start whose pose
+error stops falling while off target (``restart_after`` steps without a 10 % gain) is
+re-seeded uniformly inside the limits, up to ``max_restarts`` times; then it gives up. A
+problem is done when solved or when all its starts gave up; with ``stop_when_solved`` the
+batch ends when every problem is done. Panda, 4 starts, 50 iterations, 1 mm / 0.01 rad:
+85 % of reachable targets solved before, 99 % with both (benchmarks/README.md). Targets may
+constrain the full pose, the position only (``orientation="none"``) or one axis of the
+frame (``orientation="axis"``, ``free_axis``: a grasp symmetric about the tool axis).
+
 A configuration is *feasible* when it is on the target, collision-free with ``margin``
 (world and self) and within the limits; each multi-start stops when feasible. The batch
 holds ``P`` problems (targets) x ``S`` seeds; the solver returns per problem the feasible
@@ -78,7 +88,8 @@ class IKResult:
 
     q (T, n_dof) chosen solution; feasible (T,) bool; pos_err (T,) [m]; rot_err (T,) [rad];
     cost (T,) U_A at the solution; iterations (T,) iterations the chosen start needed
-    (projection + nullspace); start_index (T,); n_feasible (T,) feasible starts;
+    (projection + nullspace, re-seeds included; an infeasible start: ``max_iterations``, or
+    its own count if it gave up); start_index (T,); n_feasible (T,) feasible starts;
     wall_time [s]; all_q (T, n_starts, n_dof); all_feasible (T, n_starts).
     """
 
@@ -190,7 +201,8 @@ class IKObjective:
     def __init__(self, robot: Any, frame: int | str, n: int, *, world: Any = None,
                  weights: IKWeights | None = None, eps: float | None = None,
                  q_default: Any = None, kappa: Any = None, lam: float = 0.7,
-                 device: Any = None, dtype: Any = np.float64, batch_fastest: bool = False):
+                 device: Any = None, dtype: Any = np.float64, batch_fastest: bool = False,
+                 orientation: str = "full", free_axis: Any = (0.0, 0.0, 1.0)):
         init_warp()
         self.robot = get_robot(robot)
         self.frame = self.robot.frame_index(frame)
@@ -198,12 +210,18 @@ class IKObjective:
         self.world = world
         self.weights = weights or IKWeights()
         self.weights.validate()
+        if orientation not in ORIENTATIONS:
+            raise ValueError(f"orientation: expected one of {', '.join(map(repr, ORIENTATIONS))}, "
+                             f"got {orientation!r}")
+        #: the kernels' orientation mode and free axis (:attr:`IKOptions.orientation`)
+        self.orient = ORIENTATIONS[orientation]
         self.device = resolve_device(device)
         self.scalar = scalar_type(dtype)
         self.npdt = numpy_dtype(self.scalar)
         self.B, self.n = int(n), self.robot.n_dof
         self.t = tables(self.robot, self.device, self.npdt)
         self.fk = fk_kernels.kernels(self.scalar)
+        self.axis = self.fk.vec3(*(float(v) for v in free_axis))
         self.kk = ik_kernels.kernels(self.scalar)
         self.pk = path_kernels.kernels(self.scalar)
         self.limits = limit_tables(self.robot, self.device, self.scalar)
@@ -295,7 +313,8 @@ class IKObjective:
         w = self.weights
         self._launch(("pose", w.position, w.rotation), self.kk.pose_error,
                      [self.frames, self.q, self.target, self.scalar(w.position),
-                      self.scalar(w.rotation), t.frame_struct, t.chain(self.frame)],
+                      self.scalar(w.rotation), self.orient, self.axis, t.frame_struct,
+                      t.chain(self.frame)],
                      [self.jac, self.err, self.pos_err, self.rot_err, self.cost_f, self.grad_f])
 
     def evaluate_aux(self) -> None:
@@ -345,6 +364,11 @@ class IKObjective:
         u = self.cost_f.numpy() + self.cost_a.numpy()
         g = self.grad_f.numpy() + self.grad_a.numpy()
         return u.astype(np.float64), g.astype(np.float64)
+
+
+#: values of :attr:`IKOptions.orientation` -> the kernels' mode
+ORIENTATIONS = {"full": ik_kernels.ORIENT_FULL, "none": ik_kernels.ORIENT_NONE,
+                "axis": ik_kernels.ORIENT_AXIS}
 
 
 def _task_rows(robot: RobotModel) -> np.ndarray:
@@ -398,6 +422,19 @@ class IKOptions:
         n_random_with_warm_start: random seeds per target (uniform inside the limits, from
             the solver's :attr:`IKSolver.rng`) added after a warm start's seeds, >= 0
             (:class:`IKSolver` ``warm_start``; unused without one).
+        restart_after: re-seed a start whose pose error has not improved (by 10 %,
+            measured as ``|e_v|^2 + 0.1 |e_w|^2``) for this many steps while off target,
+            >= 1 (uniform inside the limits, Warp's random stream); None: never (a start
+            then runs until feasible or out of iterations, the thesis' multi-start).
+        max_restarts: re-seeds per start before it gives up, >= 0; a problem whose
+            starts all gave up is done (with ``stop_when_solved`` the batch ends once every
+            problem is solved or given up).
+        orientation: what of the target's orientation counts: "full" (the pose),
+            "none" (position only: ``rot_err`` is 0) or "axis" (the frame's
+            ``free_axis`` must point along the target's; the rotation about it is free:
+            ``rot_err`` is the angle between the axes).
+        free_axis: (3,) the free axis of ``orientation="axis"`` in the frame's coordinates
+            (normalised; default the tool axis z).
         allow_no_collision: solve without a collision model: a robot without collision
             spheres in a world (every solution is then world-collision-free) or in
             self-collision at its home configurations is accepted; False (default): either
@@ -428,6 +465,10 @@ class IKOptions:
     q_default: Any = None
     freeze_solved: bool = False
     n_random_with_warm_start: int = 0
+    restart_after: int | None = 5
+    max_restarts: int = 10
+    orientation: str = "full"
+    free_axis: Any = (0.0, 0.0, 1.0)
     allow_no_collision: bool = False
 
     def __post_init__(self) -> None:
@@ -440,6 +481,18 @@ class IKOptions:
             setattr(self, name, _positive_int(getattr(self, name), name, lo))
         if self.read_every is not None:
             self.read_every = _positive_int(self.read_every, "read_every", 1)
+        if self.restart_after is not None:
+            self.restart_after = _positive_int(self.restart_after, "restart_after", 1)
+        self.max_restarts = _positive_int(self.max_restarts, "max_restarts", 0)
+        if self.orientation not in ORIENTATIONS:
+            raise ValueError(f"orientation: expected one of {', '.join(map(repr, ORIENTATIONS))}, "
+                             f"got {self.orientation!r}")
+        axis = real_array(self.free_axis, "free_axis").astype(np.float64)
+        norm = float(np.linalg.norm(axis)) if axis.shape == (3,) else 0.0
+        if axis.shape != (3,) or not np.all(np.isfinite(axis)) or norm < 1e-9:
+            raise ValueError(f"free_axis: expected a finite nonzero vector (3,), got "
+                             f"{self.free_axis!r}")
+        self.free_axis = tuple(float(v) for v in axis / norm)
         for name in ("tol_pos", "tol_rot", "step", "max_step", "damping", "tol_rho"):
             v = getattr(self, name)
             if not (math.isfinite(real_number(v, name)) and v > 0):
@@ -562,10 +615,11 @@ class IKSolver:
         self.targets = wp.zeros(self.n_problems, dtype=mat44, device=dev)
         self.best = wp.zeros((self.n_problems, 2), dtype=wp.int32, device=dev)
         self.solved = wp.zeros(self.n_problems, dtype=wp.int32, device=dev)
-        #: [done or frozen seeds, solved problems, seeds on target this iteration]
-        self.counts = wp.zeros(3, dtype=wp.int32, device=dev)
+        #: [done, frozen or given-up seeds, solved problems, seeds on target this
+        #: iteration, problems whose seeds all gave up]
+        self.counts = wp.zeros(4, dtype=wp.int32, device=dev)
         self._counts_host = (self.counts if dev.is_cpu else
-                             wp.zeros(3, dtype=wp.int32, device="cpu", pinned=True))
+                             wp.zeros(4, dtype=wp.int32, device="cpu", pinned=True))
         self.halt = wp.zeros(1, dtype=wp.int32, device=dev)
         self.n_seeds = 0
         self.objective: IKObjective | None = None
@@ -581,13 +635,26 @@ class IKSolver:
         fast = dev.is_cuda  # configuration index fastest in memory (coalesced)
         obj = IKObjective(self.robot, self.frame, B, world=self.world, weights=o.weights,
                           eps=self.eps, q_default=o.q_default, kappa=o.kappa, lam=o.lam,
-                          device=dev, dtype=self.scalar, batch_fastest=fast)
+                          device=dev, dtype=self.scalar, batch_fastest=fast,
+                          orientation=o.orientation, free_axis=o.free_axis)
         self.objective = obj
         i32 = wp.int32
         self.on = wp.zeros(B, dtype=i32, device=dev)
         #: per seed: 0 active, 1 done (feasible), 2 frozen (``freeze_solved``)
         self.done = wp.zeros(B, dtype=i32, device=dev)
         self.iterations = wp.zeros(B, dtype=i32, device=dev)
+        rs = step_kernels.RestartArgs()
+        rs.after = int(o.restart_after or 0)
+        rs.max_restarts = int(o.max_restarts)
+        rs.progress = wp.float64(RESTART_PROGRESS)
+        rs.on_cost = wp.float64(o.tol_pos ** 2 + step_kernels.W_ROT * o.tol_rot ** 2)
+        rs.seed = 0
+        rs.best = wp.zeros(B, dtype=wp.float64, device=dev)
+        rs.stall = wp.zeros(B, dtype=i32, device=dev)
+        rs.count = wp.zeros(B, dtype=i32, device=dev)
+        rs.gave = wp.zeros(P, dtype=i32, device=dev)
+        #: the re-seeding state (:class:`jwarp.kernels.ik_step.RestartArgs`)
+        self.restart = rs
         self.out = batch_array(B, (n + step_kernels.N_EXTRA,), wp.float64, dev, fast)
         # the seeds whose pose is on target, gathered for their collision costs
         self.idx = wp.zeros(B, dtype=i32, device=dev)
@@ -665,7 +732,7 @@ class IKSolver:
         t = obj.t
         self._launch("pose", self.ck.pose, self.B, [
             obj.q, obj.target, self.halt, self.done, t.frame_struct, t.chain(self.frame),
-            t.dh0_3d, obj.jac, obj.err])
+            t.dh0_3d, obj.orient, obj.axis, obj.jac, obj.err])
 
     def _near(self, cap: int) -> None:
         """List the on-target seeds, at most ``cap`` of them (the others wait)."""
@@ -713,8 +780,8 @@ class IKSolver:
         self._launch("step", self.dk.step, self.B, [
             obj.jac, obj.err, obj.grad_a, self.on, self.solved, self.n_seeds,
             int(o.freeze_solved), int(o.stop_when_solved), self.n_problems, o.damping ** 2,
-            o.step, o.max_step, *self.limits.args, obj.q, self.done, self.counts,
-            self.iterations, self.halt])
+            o.step, o.max_step, self.restart, *self.limits.args, obj.q, self.done,
+            self.counts, self.iterations, self.halt])
 
     # ------------------------------------------------------------------ solve
     def reseed(self, seed: int | None) -> None:
@@ -781,8 +848,11 @@ class IKSolver:
         else:
             wp.copy(self.targets, wp.array(T, dtype=self.targets.dtype, device=dev))
         self._launch("repeat", self.ck.repeat_targets, B, [self.targets, S, obj.target])
+        self.restart.seed = int(self.rng.integers(1 << 31))  # the re-seeds of this solve
+        self._launches.pop("step", None)  # recorded with the last solve's seed
         self._launch("reset", self.ck.reset, B, [P, self.done, self.on, self.iterations,
-                                                self.solved, self.counts, self.halt])
+                                                self.solved, self.counts, self.halt,
+                                                self.restart])
         o = self.options
         rigid = obj.compensation is None
         # the counters are read every iteration on the CPU (a view: free) and on CUDA every
@@ -795,7 +865,7 @@ class IKSolver:
         cap = self.B if every else self._gather_size(2 * 32)
 
         def over(c: np.ndarray) -> bool:
-            return bool(c[0] >= B or (o.stop_when_solved and c[1] >= P))
+            return bool(c[0] >= B or (o.stop_when_solved and c[1] + c[3] >= P))
 
         for it in range(o.max_iterations + 1):
             last = it == o.max_iterations
@@ -840,7 +910,8 @@ class IKSolver:
                     break
             self._step()
         self._launch("finalize", self.ck.finalize, B, [obj.q, obj.err, obj.cost_a, self.done,
-                                                       o.max_iterations, self.out])
+                                                       self.iterations, o.max_iterations,
+                                                       self.out])
         self._launch("select", self.ck.select, P, [self.out, S, model.n_dof, self.best])
         out = self.out.numpy().copy() if dev.is_cpu else self.out.numpy()
         best = self.best.numpy().copy() if dev.is_cpu else self.best.numpy()
@@ -861,7 +932,9 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
        device: Any = "cpu", dtype: Any = np.float64,
        callback: Callable[[int, np.ndarray], None] | None = None,
        warm_start: Any = None, n_random_with_warm_start: int = 0,
-       allow_no_collision: bool = False) -> IKResult:
+       allow_no_collision: bool = False, restart_after: int | None = 5,
+       max_restarts: int = 10, orientation: str = "full",
+       free_axis: Any = (0.0, 0.0, 1.0)) -> IKResult:
     """Collision-free IK of ``frame`` onto ``target`` with random multi-starts: one
     :class:`IKSolver` solve.
 
@@ -897,7 +970,8 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
                      stop_when_solved=stop_when_solved, check_every=check_every, seed=seed,
                      weights=weights, q_default=q_default,
                      n_random_with_warm_start=n_random_with_warm_start,
-                     allow_no_collision=allow_no_collision)
+                     allow_no_collision=allow_no_collision, restart_after=restart_after,
+                     max_restarts=max_restarts, orientation=orientation, free_axis=free_axis)
     finite_as(T, numpy_dtype(scalar_type(dtype)), "target")  # before the seeds' check
     n_seeds = opts.n_starts
     if initial is not None:
@@ -917,6 +991,7 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
     solver = _SOLVERS.pop(key, None) if key is not None else None  # in use: not shared
     if solver is None:
         solver = IKSolver(model, fi, len(T), opts, world=world, device=device, dtype=dtype)
+    solver.reseed(seed)  # a cached solver: the same re-seeds as a new one
     res = solver.solve(T, q0, callback=callback)
     if key is not None:
         _SOLVERS[key] = solver
@@ -924,6 +999,10 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
             _SOLVERS.pop(next(iter(_SOLVERS)))
     return res.reshaped(lead, time.perf_counter() - t0)
 
+
+#: a step counts as progress (resets a start's stall count) when it brings the pose cost
+#: below this fraction of the start's best (:attr:`IKOptions.restart_after`)
+RESTART_PROGRESS = 0.9
 
 #: :func:`ik` keeps this many small solvers (<= :data:`SOLVER_CACHE_MAX_BATCH` seeds) for
 #: calls with the same robot, frame, sizes, world, device, dtype and options (a solver's
