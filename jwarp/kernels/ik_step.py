@@ -28,6 +28,9 @@ iteration, after the cost kernels of :mod:`jwarp.kernels.ik` and the collision k
   ``dq = J^T A^-1 e`` and, on target, minus ``alpha (g - J^T A^-1 J g)`` (the U_A gradient
   ``g`` projected onto the nullspace), the whole step scaled so that no joint moves more
   than ``max_step``, then projected onto the joint limits (:mod:`jwarp.kernels.path`).
+  Joints at a box limit that the step pushes outward are held (columns removed, the step
+  recomputed); a start that stalls off target is re-seeded or gives up (``RestartArgs``,
+  ``done[b] = 3``).
   Done configurations do not move; once ``counts`` say the solve is over
   (every configuration done, or every problem solved with ``stop_solved``) nothing moves
   and ``halt[0]`` becomes 1, which the next ``check`` obeys.
