@@ -51,6 +51,9 @@ import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
 
 URDF = "panda_description/urdf/panda.urdf"
 TCP = "panda_hand_tcp"
+#: the Warp device of every kernel here (FK included: a GPU machine may have no CPU
+#: compiler for Warp)
+DEVICE = "cpu"
 
 
 def panda() -> object:
@@ -64,7 +67,7 @@ def common_check(model: object, q: np.ndarray, T: np.ndarray, tol_pos: float,
                  tol_rot: float) -> np.ndarray:
     """(P,) bool: q (P, n_dof) puts ``tcp`` on T (P, 4, 4) within the tolerances (float64
     FK) and lies within the box limits."""
-    F = jwarp.fk(model, np.asarray(q, np.float64))[:, model.frame_index("tcp")]
+    F = jwarp.fk(model, np.asarray(q, np.float64), device=DEVICE)[:, model.frame_index("tcp")]
     pos = np.linalg.norm(F[:, :3, 3] - T[:, :3, 3], axis=1)
     c = (np.einsum("bij,bij->b", F[:, :3, :3], T[:, :3, :3]) - 1.0) / 2.0
     rot = np.arccos(np.clip(c, -1.0, 1.0))
@@ -78,7 +81,8 @@ def section_reach(args: argparse.Namespace) -> dict:
     out = {}
     for P in args.targets:
         rng = np.random.default_rng(P)
-        T = jwarp.fk(model, sample_within_limits(model, P, rng))[:, model.frame_index("tcp")]
+        T = jwarp.fk(model, sample_within_limits(model, P, rng),
+                     device=DEVICE)[:, model.frame_index("tcp")]
         S = args.seeds
         seeds = sample_within_limits(model, P * S, rng).reshape(P, S, -1)
         base = dict(n_starts=S, max_iterations=args.iterations, tol_pos=1e-3, tol_rot=1e-2)
@@ -141,8 +145,8 @@ def scene_setup(n_targets: int, device: str) -> tuple:
     found = []
     while sum(len(f) for f in found) < n_targets:
         q = sample_within_limits(robot, 2000, rng)
-        ok = collision_free(robot, world, q, 0.0, device="cpu")
-        F = jwarp.fk(robot, q[ok])[:, fi]
+        ok = collision_free(robot, world, q, 0.0, device=device)
+        F = jwarp.fk(robot, q[ok], device=device)[:, fi]
         reach = (F[:, 0, 3] > 0.2) & (F[:, 2, 3] > 0.1)  # in front, above the floor
         found.append(F[reach])
     return robot, world, np.concatenate(found)[:n_targets]
@@ -187,6 +191,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=5)
     timing.section_options(p, "reach,scene")
     args = p.parse_args(argv)
+    global DEVICE
+    DEVICE = args.device
     init_warp()
     args.targets = [int(x) for x in str(args.targets).split(",") if x.strip()]
     if args.quick:

@@ -416,9 +416,11 @@ class IKOptions:
         q_default: default pose of the closeness term, (n_dof,) or per seed
             (n_problems * n_seeds, n_dof) (None: the middle of the limits).
         freeze_solved: once a problem has a feasible seed, stop its other seeds (they keep
-            their last state, infeasible). Large batches run much less work, but a problem
-            gets the first feasible seeds found instead of the lowest U_A among those found
-            by the time every problem is solved (off: the thesis' multi-start, :func:`ik`).
+            their last state, infeasible): a problem is done when solved, and solved
+            problems cost nothing more (default). A problem gets the first feasible seeds
+            found instead of the lowest U_A among those found by the time every problem
+            is solved (False: the thesis' multi-start; about half the solved targets per
+            second on the Panda, benchmarks/bench_ik_converge.py).
         n_random_with_warm_start: random seeds per target (uniform inside the limits, from
             the solver's :attr:`IKSolver.rng`) added after a warm start's seeds, >= 0
             (:class:`IKSolver` ``warm_start``; unused without one).
@@ -463,7 +465,7 @@ class IKOptions:
     seed: int | None = 0
     weights: IKWeights | None = None
     q_default: Any = None
-    freeze_solved: bool = False
+    freeze_solved: bool = True
     n_random_with_warm_start: int = 0
     restart_after: int | None = 5
     max_restarts: int = 10
@@ -934,7 +936,7 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
        warm_start: Any = None, n_random_with_warm_start: int = 0,
        allow_no_collision: bool = False, restart_after: int | None = 5,
        max_restarts: int = 10, orientation: str = "full",
-       free_axis: Any = (0.0, 0.0, 1.0)) -> IKResult:
+       free_axis: Any = (0.0, 0.0, 1.0), freeze_solved: bool = True) -> IKResult:
     """Collision-free IK of ``frame`` onto ``target`` with random multi-starts: one
     :class:`IKSolver` solve.
 
@@ -971,7 +973,8 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
                      weights=weights, q_default=q_default,
                      n_random_with_warm_start=n_random_with_warm_start,
                      allow_no_collision=allow_no_collision, restart_after=restart_after,
-                     max_restarts=max_restarts, orientation=orientation, free_axis=free_axis)
+                     max_restarts=max_restarts, orientation=orientation, free_axis=free_axis,
+                     freeze_solved=freeze_solved)
     finite_as(T, numpy_dtype(scalar_type(dtype)), "target")  # before the seeds' check
     n_seeds = opts.n_starts
     if initial is not None:

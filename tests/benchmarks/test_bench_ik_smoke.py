@@ -19,8 +19,9 @@ def test_bench_ik_quick_cpu(run_bench):
     for k in ("solver", "ik", "baseline"):
         t = c[k]["time_per_target_ms_median_over_targets"]
         assert 0 < t["min"] <= t["median"]
-    # the same seeds: the same solutions, so the same iterations
-    assert c["solver"]["iterations_median"] == c["baseline"]["iterations_median"]
+    # the same seeds and re-seeds: the same solutions, so the same iterations (the
+    # baseline, the solver before held limits and re-seeding, differs)
+    assert c["solver"]["iterations_median"] == c["ik"]["iterations_median"]
     for k in ("solver", "ik"):  # timing.speedup: per run, of the medians, of the bests
         sp = c[f"speedup_{k}_vs_baseline"]
         assert len(sp["per_run"]) == 2 and sp["of_medians"] > 0 and sp["of_bests"] > 0

@@ -19,8 +19,6 @@ from jwarp.solvers import ik as IK
 
 from robot_data import erd
 
-pin = pytest.importorskip("pinocchio")
-
 PANDA = "panda_description/urdf/panda.urdf"
 TCP = "panda_hand_tcp"
 
@@ -28,6 +26,7 @@ TCP = "panda_hand_tcp"
 @pytest.fixture(scope="module")
 def panda():
     """(jwarp model, pinocchio reference FK of the tcp: q (B, n_dof) -> (B, 4, 4))."""
+    pytest.importorskip("pinocchio")
     from verifier import PathVerifier
     from jwarp.importers.robot import load_urdf
 

@@ -97,7 +97,8 @@ def test_solver_matches_the_host_loop_float64(name, frame, kw):
     legacy = _bench().legacy_ik
     robot = jwarp.robot(name)
     _, T = _free_targets(robot, frame, 3, seed=1)
-    new = IK.ik(robot, frame, T, n_starts=6, seed=2, restart_after=None, **kw)
+    new = IK.ik(robot, frame, T, n_starts=6, seed=2, restart_after=None, freeze_solved=False,
+                **kw)
     old = legacy(robot, frame, T, n_starts=6, seed=2, hold_limits=True, **kw)
     np.testing.assert_array_equal(new.all_feasible, old.all_feasible)
     np.testing.assert_array_equal(new.all_iterations, old.all_iterations)
@@ -119,7 +120,7 @@ def test_solver_matches_the_host_loop_in_the_shelf():
 
     T = IK.pose_matrix([0.6, -0.25, 0.8], Rotation.from_euler("y", 90, degrees=True).as_rotvec())
     kw = dict(world=world, n_starts=16, margin=0.01, seed=0)
-    new = IK.ik(robot, "right_tcp", T, restart_after=None, **kw)
+    new = IK.ik(robot, "right_tcp", T, restart_after=None, freeze_solved=False, **kw)
     old = legacy(robot, "right_tcp", T, hold_limits=True, **kw)
     assert new.feasible and old.feasible
     np.testing.assert_array_equal(new.all_feasible, old.all_feasible)
@@ -299,7 +300,8 @@ def test_freeze_solved_stops_the_other_seeds(device):
     _, T = _free_targets(robot, "tcp", 6, seed=13, device=device)
     seeds = sample_within_limits(robot, 6 * 5, np.random.default_rng(2)).reshape(6, 5, -1)
     opts = dict(n_starts=5, stop_when_solved=False, max_iterations=60)
-    full = IK.IKSolver(robot, "tcp", 6, IK.IKOptions(**opts), device=device).solve(T, seeds)
+    full = IK.IKSolver(robot, "tcp", 6, IK.IKOptions(freeze_solved=False, **opts),
+                       device=device).solve(T, seeds)
     frozen = IK.IKSolver(robot, "tcp", 6, IK.IKOptions(freeze_solved=True, **opts),
                          device=device).solve(T, seeds)
     assert frozen.feasible.all() and full.feasible.all()
