@@ -13,6 +13,17 @@ Examples::
         --warm-start model.pt [--starts 4]
     jwarp free-config --robot planar4 --world simplex:seed=3 --n 2 --seed 0
 
+``ik`` targets (:mod:`jwarp.cli.targets`): ``--target X,Y,Z[,RX,RY,RZ]`` (rotation vector),
+``--target X,Y,Z`` with ``--quat QX,QY,QZ,QW`` (ROS order, normalised) or ``--rpy R,P,Y``
+[rad, also with ``--deg``] (R = Rz(Y) Ry(P) Rx(R)), or ``--target-matrix`` (a 4x4 rigid
+transform: 16 numbers or a file); ``--position-only`` or ``--free-axis X,Y,Z`` (the rotation
+about that end-effector axis is free; ``jwarp.ik(orientation=..., free_axis=...)``);
+``--tol-pos M``/``--tol-rot RAD``; ``--initial Q`` (joint values, ``--deg`` honoured, within
+the limits) is the first of the ``--starts`` seeds; ``--scene`` as for ``plan`` (exact
+objects, or a grid with ``--voxel``/``--extent``). An infeasible answer prints ``why:``
+(JSON ``reason``): :func:`jwarp.solvers.ik_explain.explain_ik` (limits, pose error against
+the tolerances, colliding pairs).
+
 ``free-config`` prints collision-free configurations (within the joint limits, clear of
 the world and of the robot itself by ``--margin``) with the joint names, and each as a
 ``--start`` value to copy. ``ik`` and ``plan`` print the joint names beside every
@@ -72,19 +83,23 @@ import numpy as np
 from jwarp.cli.common import (CLIError, check_option_memory,
                               RerunRecording, dtype_of, quiet_warp, check_device,
                               check_output, dumps, int_arg, parse_q, real_arg, robot_option)
+from jwarp.cli.targets import MAX_TARGET  # noqa: F401  (the largest --target value, here before)
 
 #: log every this many iterations to rerun
 RERUN_EVERY = 5
 #: the most --iterations (a bound that keeps every counter in range)
 MAX_ITERATIONS = 10**9
-#: the largest --target coordinate [m] or rotation vector component [rad] (squares of
-#: larger ones overflow; no robot reaches 1000 km)
-MAX_TARGET = 1e6
 #: host memory per configuration whose frames are computed in one batch, per frame,
 #: collision sphere and joint [bytes]: float64 4x4 frames, sphere centres and their
 #: temporaries (measured: about 1.5 to 2 times 128 / 40 / 32 B; IK per start, the planner
 #: per sampled point of its substep sizing)
 _CONFIG_BYTES = (2 * 128, 2 * 40, 2 * 32)
+#: ``--elastic`` of each command
+ELASTIC_HELP = {
+    "plan": "plan on the elastic model (one torque update per iteration)",
+    "ik": "solve on the elastic model (one torque update per iteration; a solution counts "
+          "once the torque equilibrium has converged, its pose and collisions are those of "
+          "the deflected robot)"}
 #: the planner samples each segment this many times to size --substeps (when not given)
 _SIZING_SAMPLES = 16
 
@@ -211,7 +226,9 @@ _OPTION_OF = {"start": "--start", "goal": "--goal", "target": "--target", "frame
               "world": "--world", "warm_start": "--warm-start",
               "n_random_with_warm_start": "--starts", "time_limit": "--time-limit",
               "fallback": "--fallback", "endpoint_margin": "--endpoint-margin",
-              "self_margin": "--self-margin", "robot": "--robot"}
+              "self_margin": "--self-margin", "robot": "--robot", "initial": "--initial",
+              "tol_pos": "--tol-pos", "tol_rot": "--tol-rot", "free_axis": "--free-axis",
+              "orientation": "--position-only"}
 
 
 def _solver_error(command: str, e: Exception) -> CLIError:
@@ -309,21 +326,6 @@ def _check_frame(model: Any, frame: str) -> None:
     except (ValueError, TypeError, KeyError) as e:
         msg = " ".join(str(e).split()).removeprefix("frame: ")
         raise CLIError(f"--frame: {msg}") from None
-
-
-def _target(text: str) -> np.ndarray:
-    parts = [p.strip() for p in text.split(",") if p.strip()]
-    try:
-        vals = [float(p) for p in parts]
-    except ValueError:
-        raise CLIError(f"--target: expected x,y,z,rx,ry,rz (numbers), got {text!r}") from None
-    if len(vals) not in (3, 6) or not all(math.isfinite(v) for v in vals):
-        raise CLIError(f"--target: expected 3 or 6 finite numbers x,y,z[,rx,ry,rz], got {text!r}")
-    if not all(abs(v) <= MAX_TARGET for v in vals):
-        raise CLIError(f"--target: expected values within +-{MAX_TARGET:g} (m, rad), got {text!r}")
-    from jwarp.solvers.ik import pose_matrix
-
-    return pose_matrix(vals[:3], vals[3:] if len(vals) == 6 else (0.0, 0.0, 0.0))
 
 
 def _kappa(args: argparse.Namespace, model: Any) -> Any:
@@ -524,39 +526,102 @@ def _warm_start(path: str | None, model: Any, frame: str, device: str) -> Any:
     return net
 
 
+def _orientation(args: argparse.Namespace, has_rotation: bool) -> tuple[str, np.ndarray | None]:
+    """``--position-only`` / ``--free-axis`` -> (orientation mode, free axis (3,) or None)."""
+    from jwarp.cli.targets import unit_axis
+
+    if args.position_only:
+        if has_rotation:
+            given = ("--target-matrix" if args.target_matrix is not None else
+                     "--quat" if args.quat is not None else "--rpy" if args.rpy is not None
+                     else "a 6-number --target")
+            raise CLIError(f"--position-only: not allowed with {given} (an orientation that "
+                           f"would be ignored); give --target X,Y,Z")
+        return "none", None
+    if args.free_axis is not None:
+        return "axis", unit_axis(args.free_axis, "--free-axis")
+    return "full", None
+
+
+def _initial(args: argparse.Namespace, model: Any) -> np.ndarray | None:
+    """``--initial Q`` (n_dof,) [rad/m] within the joint limits (errors name --initial)."""
+    if args.initial is None:
+        return None
+    from jwarp.core.limits import describe_violation, within_limits
+
+    q = parse_q(args.initial, model, args.deg, option="--initial")
+    if not bool(within_limits(model, q)):
+        raise CLIError(f"--initial: outside the joint limits of '{model.name}': "
+                       f"{describe_violation(model, q)}")
+    return q
+
+
+def _ik_seeds(args: argparse.Namespace, model: Any, q_init: np.ndarray, T: np.ndarray,
+              world: Any, net: Any) -> np.ndarray:
+    """The seeds (S, n_dof) of ``--initial``: q_init first, then the warm start's and
+    ``--starts`` random ones (with --warm-start), else ``--starts`` - 1 random ones, drawn
+    as :func:`jwarp.solvers.ik.ik` draws its own (``--seed``)."""
+    from jwarp.core.limits import sample_within_limits
+
+    rng = np.random.default_rng(args.seed)
+    if net is not None:
+        from jwarp.solvers.ik import warm_start_seeds
+
+        rest = warm_start_seeds(model, net, T[None], world, args.starts, rng,
+                                name="--warm-start")[0]
+    else:
+        rest = sample_within_limits(model, args.starts - 1, rng)
+    return np.concatenate([q_init[None], rest])
+
+
 def cmd_ik(args: argparse.Namespace) -> int:
+    from jwarp.cli.targets import target_pose
+
     model = robot_option(args.robot)
     _check_frame(model, args.frame)
-    T = _target(args.target)
+    T, has_rotation = target_pose(args.target, args.quat, args.rpy, args.target_matrix)
+    orientation, free_axis = _orientation(args, has_rotation)
+    scene = _load_scene(args, model)
+    q_init = _initial(args, model)
     kappa = _kappa(args, model)
     if args.starts is None:  # random seeds: 16, or none beside a warm start
         args.starts = 0 if args.warm_start is not None else 16
     elif args.starts < 1 and args.warm_start is None:
         raise CLIError(f"--starts: expected an integer >= 1, got '{args.starts}'")
     heads = 2 if args.warm_start is not None else 0  # a twin network's seeds
-    check_option_memory(float(args.starts + heads) * config_bytes(model),
+    check_option_memory(float(args.starts + heads + 1) * config_bytes(model),
                         f"{args.starts} starts of '{model.name}'", "--starts")
     quiet_warp()
     check_device(args.device)
     if args.rerun is not None:  # before the world and the solve: no work lost on a bad path
         check_output(args.rerun, "--rerun", rerun=True,
-                     inputs={"--world": args.world, "--robot": args.robot,
-                             "--warm-start": args.warm_start})
+                     inputs={"--world": args.world, "--scene": args.scene, "--robot": args.robot,
+                             "--warm-start": args.warm_start,
+                             "--target-matrix": args.target_matrix})
     net = _warm_start(args.warm_start, model, args.frame, args.device)
-    world = _world(args.world, model)
+    world = _world(args.world, model, args, scene)
     from jwarp.solvers.ik import ik
 
+    tol = {k: v for k, v in (("tol_pos", args.tol_pos), ("tol_rot", args.tol_rot))
+           if v is not None}
+    extra: dict = dict(tol)
+    if orientation != "full":
+        extra["orientation"] = orientation
+        if free_axis is not None:
+            extra["free_axis"] = free_axis
     try:
-        if net is not None:
-            res = ik(model, args.frame, T, world=world, margin=args.margin,
-                     max_iterations=args.iterations, seed=args.seed, kappa=kappa,
-                     device=args.device, dtype=dtype_of(args.dtype), warm_start=net,
-                     n_random_with_warm_start=args.starts, allow_no_collision=args.no_collision)
+        common = dict(world=world, margin=args.margin, max_iterations=args.iterations,
+                      seed=args.seed, kappa=kappa, device=args.device,
+                      dtype=dtype_of(args.dtype), allow_no_collision=args.no_collision,
+                      **extra)
+        if q_init is not None:
+            seeds = _ik_seeds(args, model, q_init, T, world, net)
+            res = ik(model, args.frame, T, initial=seeds, **common)
+        elif net is not None:
+            res = ik(model, args.frame, T, warm_start=net,
+                     n_random_with_warm_start=args.starts, **common)
         else:
-            res = ik(model, args.frame, T, world=world, n_starts=args.starts,
-                     margin=args.margin, max_iterations=args.iterations, seed=args.seed,
-                     kappa=kappa, device=args.device, dtype=dtype_of(args.dtype),
-                     allow_no_collision=args.no_collision)
+            res = ik(model, args.frame, T, n_starts=args.starts, **common)
         written = None
         if args.rerun is not None:
             rec = _Recorder(args.rerun, model, world)
@@ -571,25 +636,65 @@ def cmd_ik(args: argparse.Namespace) -> int:
                 raise
     except (ValueError, TypeError) as e:
         raise _solver_error("ik", e) from None
-    out = {"robot": model.name, "frame": args.frame, "target": T.tolist(), "world": args.world,
+    tol_pos = args.tol_pos if args.tol_pos is not None else _ik_default("tol_pos")
+    tol_rot = args.tol_rot if args.tol_rot is not None else _ik_default("tol_rot")
+    reason = None
+    if not res.feasible:
+        from jwarp.solvers.ik_explain import explain_ik
+
+        reason = explain_ik(model, args.frame, np.asarray(res.q, np.float64), T, world=world,
+                            margin=args.margin, tol_pos=tol_pos, tol_rot=tol_rot,
+                            orientation=orientation,
+                            free_axis=free_axis if free_axis is not None else (0.0, 0.0, 1.0),
+                            kappa=kappa)
+        if reason == "feasible":  # the float64 re-check passes: a solver-side rounding
+            reason = (f"the solver's check failed, but a float64 re-check of the answer "
+                      f"passes (limits, pose within tol_pos {tol_pos:g} m / tol_rot "
+                      f"{tol_rot:g} rad, collisions with margin {args.margin:g} m)"
+                      + ("; --dtype float32 rounds: try --dtype float64"
+                         if args.dtype == "float32" else ""))
+    out = {"robot": model.name, "frame": args.frame, "target": T.tolist(),
+           "world": args.world if args.scene is None else args.scene,
            "joint_names": list(model.joint_names), "elastic": kappa is not None,
+           "orientation": orientation,
+           "free_axis": None if free_axis is None else free_axis.tolist(),
+           "tol_pos_m": tol_pos, "tol_rot_rad": tol_rot,
+           "initial": None if q_init is None else q_init.tolist(),
            **res.to_dict(0)}
+    out["reason"] = reason if reason is not None else "feasible"
     if net is not None:
         out["warm_start"] = args.warm_start
     if args.json:
         print(dumps(out))
     else:
         state = "feasible" if res.feasible else "NOT feasible"
-        print(f"robot {model.name}: IK of {args.frame} is {state} ({int(res.n_feasible)} of "
-              f"{res.all_q.shape[0]} starts); position error {float(res.pos_err):.3g} m, "
-              f"rotation error {float(res.rot_err):.3g} rad; iterations {int(res.iterations)}; "
-              f"wall time {res.wall_time:.4f} s")
+        mode = ""
+        if orientation == "none":
+            mode = " (position only)"
+        elif orientation == "axis":
+            mode = f" (free rotation about {','.join(f'{v:.4g}' for v in free_axis)})"
+        print(f"robot {model.name}: IK of {args.frame}{mode} is {state} "
+              f"({int(res.n_feasible)} of {res.all_q.shape[0]} starts); position error "
+              f"{float(res.pos_err):.3g} m, rotation error {float(res.rot_err):.3g} rad "
+              f"(tolerances {tol_pos:g} m, {tol_rot:g} rad); iterations "
+              f"{int(res.iterations)}; wall time {res.wall_time:.4f} s")
+        if reason is not None:
+            print(f"why: {reason}")
         print("q [rad/m]:")
         for name, v in zip(model.joint_names, np.asarray(res.q, np.float64)):
             print(f"  {name:<{_name_width(model)}} {v:+.6f}")
         if written:
             print(f"wrote {written}; view with: rerun {written}")
     return 0 if res.feasible else 1
+
+
+def _ik_default(name: str) -> float:
+    """The default of :func:`jwarp.solvers.ik.ik`'s keyword ``name`` (its tolerances)."""
+    import inspect
+
+    from jwarp.solvers.ik import ik
+
+    return float(inspect.signature(ik).parameters[name].default)
 
 
 #: configurations drawn per batch by ``free-config``
@@ -654,7 +759,7 @@ def cmd_free_config(args: argparse.Namespace) -> int:
 # ------------------------------------------------------------------ parser
 def add_subcommands(sub: Any) -> None:
     """Add ``plan`` and ``ik`` to the ``jwarp`` subparsers."""
-    def common(s: argparse.ArgumentParser) -> None:
+    def common(s: argparse.ArgumentParser, command: str) -> None:
         s.add_argument("--robot", required=True, help="robot name or path to a robot .json")
         s.add_argument("--deg", action="store_true", help="revolute joint values in degrees")
         s.add_argument("--margin", type=real_arg("--margin", 0.0, unit=" [m]"), default=0.0,
@@ -662,8 +767,7 @@ def add_subcommands(sub: Any) -> None:
                                          "--self-margin between body parts; ik: both)")
         s.add_argument("--seed", type=int_arg("--seed", 0), default=0,
                        help="random seed of the multi-starts (>= 0)")
-        s.add_argument("--elastic", action="store_true",
-                       help="plan on the elastic model (one torque update per iteration)")
+        s.add_argument("--elastic", action="store_true", help=ELASTIC_HELP[command])
         s.add_argument("--kappa", default=None, metavar="K",
                        help="compliance [rad/(N m)] with --elastic (default: the robot's, else 1e-4)")
         s.add_argument("--rerun", default=None, metavar="FILE.rrd", help="write a rerun recording")
@@ -675,20 +779,24 @@ def add_subcommands(sub: Any) -> None:
                             "fit) or in self-collision at its home configurations; without it "
                             "either is an error")
 
+    def scene_options(s: argparse.ArgumentParser) -> None:
+        s.add_argument("--voxel", type=real_arg("--voxel", 0.0, lo_open=True, unit=" [m]"),
+                       default=None, metavar="V",
+                       help="build a signed distance grid of the --scene with this voxel size "
+                            "[m] (its interpolation error sqrt(3)/2 V is subtracted); default: "
+                            "no grid, the exact objects")
+        s.add_argument("--extent", type=_extent, default=None, metavar="X0,X1,Y0,Y1,Z0,Z1",
+                       help="grid extent [m] of the --scene SDF (default: the obstacles, "
+                            "padded)")
+
     s = sub.add_parser("plan", help="plan a collision-free path (gradient descent on U_path)")
-    common(s)
+    common(s, "plan")
     where = s.add_mutually_exclusive_group(required=True)
     where.add_argument("--world", default=None, metavar="SPEC",
                        help="simplex:seed=S[,threshold=T,...], shelf[:voxel=V] or a world .npz file")
     where.add_argument("--scene", default=None, metavar="FILE.yaml",
                        help="a scene file: jwarp scene or MoveIt planning scene (docs/scenes.md)")
-    s.add_argument("--voxel", type=real_arg("--voxel", 0.0, lo_open=True, unit=" [m]"),
-                   default=None, metavar="V",
-                   help="build a signed distance grid of the --scene with this voxel size [m] "
-                        "(its interpolation error sqrt(3)/2 V is subtracted); default: no "
-                        "grid, the exact objects")
-    s.add_argument("--extent", type=_extent, default=None, metavar="X0,X1,Y0,Y1,Z0,Z1",
-                   help="grid extent [m] of the --scene SDF (default: the obstacles, padded)")
+    scene_options(s)
     s.add_argument("--start", required=True, metavar="Q",
                    help="start joint values v1,v2,..., or moveit[:FILE] (a MoveIt robot state)")
     s.add_argument("--goal", required=True, metavar="Q",
@@ -729,17 +837,51 @@ def add_subcommands(sub: Any) -> None:
     s.set_defaults(func=cmd_plan)
 
     s = sub.add_parser("ik", help="collision-free inverse kinematics (two-stage, multi-start)")
-    common(s)
+    common(s, "ik")
     s.add_argument("--frame", required=True, help="end-effector frame, e.g. right_tcp")
-    s.add_argument("--target", required=True, metavar="X,Y,Z[,RX,RY,RZ]",
-                   help="target position [m] and rotation vector [rad] in the base frame")
-    s.add_argument("--world", default=None, metavar="SPEC",
-                   help="optional world: simplex:seed=S[,...], shelf or a world .npz file")
+    s.add_argument("--target", default=None, metavar="X,Y,Z[,RX,RY,RZ]",
+                   help="target position [m] and rotation vector [rad] in the base frame "
+                        "(3 numbers: the orientation from --quat/--rpy, else identity); or "
+                        "give --target-matrix")
+    s.add_argument("--quat", default=None, metavar="QX,QY,QZ,QW",
+                   help="target orientation as a quaternion, scalar last (ROS/MoveIt order; "
+                        "normalised), with a 3-number --target")
+    s.add_argument("--rpy", default=None, metavar="R,P,Y",
+                   help="target orientation as roll, pitch, yaw [rad, also with --deg] about "
+                        "the fixed x, y, z axes (ROS/URDF: Rz(Y) Ry(P) Rx(R)), with a 3-number "
+                        "--target")
+    s.add_argument("--target-matrix", default=None, metavar="FILE_OR_16_NUMBERS",
+                   help="the target as a 4x4 rigid transform, row by row: 16 numbers or a "
+                        "text file of them (instead of --target)")
+    orient = s.add_mutually_exclusive_group()
+    orient.add_argument("--position-only", action="store_true",
+                        help="reach the target position only, any orientation (with a "
+                             "3-number --target)")
+    orient.add_argument("--free-axis", default=None, metavar="X,Y,Z",
+                        help="the rotation about this axis of the end-effector frame is free "
+                             "(e.g. 0,0,1: a grasp symmetric about the tool's z axis); the "
+                             "target's orientation fixes the axis' direction")
+    s.add_argument("--tol-pos", type=real_arg("--tol-pos", 0.0, lo_open=True, unit=" [m]"),
+                   default=None, metavar="M",
+                   help="position tolerance [m], > 0 (default 1e-4, as jwarp.ik)")
+    s.add_argument("--tol-rot", type=real_arg("--tol-rot", 0.0, lo_open=True, unit=" [rad]"),
+                   default=None, metavar="RAD",
+                   help="rotation tolerance [rad], > 0 (default 1e-3, as jwarp.ik)")
+    where = s.add_mutually_exclusive_group()
+    where.add_argument("--world", default=None, metavar="SPEC",
+                       help="optional world: simplex:seed=S[,...], shelf or a world .npz file")
+    where.add_argument("--scene", default=None, metavar="FILE.yaml",
+                       help="a scene file: jwarp scene or MoveIt planning scene (docs/scenes.md)")
+    scene_options(s)
     s.add_argument("--starts", type=int_arg("--starts", 0), default=None, metavar="N",
-                   help="random seeds, >= 1 (default 16); with --warm-start the random seeds "
-                        "after the network's, >= 0 (default 0)")
+                   help="seeds, >= 1 (default 16; with --initial it is the first of them); "
+                        "with --warm-start the random seeds after the network's, >= 0 "
+                        "(default 0)")
     s.add_argument("--iterations", type=int_arg("--iterations", 0, MAX_ITERATIONS), default=200,
                    metavar="N", help="most iterations (default 200)")
+    s.add_argument("--initial", default=None, metavar="Q",
+                   help="an initial guess v1,v2,... [rad, m; --deg: revolute ones in degrees]: "
+                        "the first seed, followed by random ones up to --starts")
     s.add_argument("--dtype", default="float64", choices=("float64", "float32"))
     s.add_argument("--warm-start", default=None, metavar="MODEL.pt",
                    help="start from a trained IK network's prediction (jwarp train ik)")
