@@ -7,7 +7,8 @@ n_dof)`` (:func:`jwarp.solvers.ik.check_warm_start`; a loaded
 ``jwarp.learn.ik_net.IKNet``, H = 2 for twin heads); ``None`` is the random baseline.
 
 :func:`evaluate_ik` runs the two-stage solver (:class:`jwarp.solvers.ik.IKSolver`, every
-seed on its own until it is feasible or out of iterations: ``stop_when_solved`` off) from
+seed on its own until it is feasible or out of iterations: ``stop_when_solved``,
+``freeze_solved`` and re-seeding (``restart_after``) off, the thesis' multi-start) from
 the seeds *in order*: a network's H heads first, then ``n_random`` random seeds (uniform
 inside the limits, numpy stream of ``seed``: the same random seeds for every warm start
 evaluated with the same ``seed``); the random baseline uses the random seeds only. Seeds
@@ -134,7 +135,8 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
     n_random = _count(n_random, "n_random", 0 if warm_start is not None else 1)
     max_iterations = _count(max_iterations, "max_iterations", 0)
     opts = IKOptions(n_starts=1, max_iterations=max_iterations, margin=margin, tol_pos=tol_pos,
-                     tol_rot=tol_rot, stop_when_solved=False, q_default=q_default, seed=seed)
+                     tol_rot=tol_rot, stop_when_solved=False, q_default=q_default, seed=seed,
+                     restart_after=None, freeze_solved=False)  # every seed on its own
     qd = (project_numpy(model, model.joint_limits.mean(axis=1)) if q_default is None
           else np.asarray(q_default, np.float64).reshape(model.n_dof))
     rng = np.random.default_rng(seed)
