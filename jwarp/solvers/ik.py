@@ -375,6 +375,17 @@ def _task_rows(robot: RobotModel) -> np.ndarray:
     return np.array([0, 1, 5]) if robot.workspace_dim == 2 else np.arange(6)
 
 
+def check_single_world(world: Any) -> None:
+    """ValueError naming ``world`` for a batch of worlds (:meth:`World.batch`): IK checks
+    every target against one world (a batch would be checked as the union of its worlds);
+    solve each world's targets with that world (``world.select(i)``)."""
+    n = getattr(world, "n_worlds", 1) if world is not None else 1
+    if n > 1:
+        raise ValueError(f"world: a batch of {n} worlds; IK solves in one world (its "
+                         f"targets would be checked against all {n}): solve per world, "
+                         f"world.select(i)")
+
+
 def _positive_int(v: Any, name: str, lo: int) -> int:
     if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
         raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
@@ -581,6 +592,7 @@ class IKSolver:
         self.robot = get_robot(robot)
         self.frame = self.robot.frame_index(frame)
         collision.check_world(self.robot, world)
+        check_single_world(world)
         self.world = world
         self.n_problems = _positive_int(n_problems, "n_problems", 1)
         if options is None:
@@ -965,6 +977,7 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
     model = get_robot(robot)
     fi = model.frame_index(frame)
     collision.check_world(model, world)
+    check_single_world(world)
     T, lead = _targets(target)
     opts = IKOptions(n_starts=n_starts, tol_pos=tol_pos, tol_rot=tol_rot, margin=margin,
                      eps=eps, max_iterations=max_iterations, step=step, max_step=max_step,

@@ -220,3 +220,17 @@ def test_orientation_rows_of_the_jacobian_match_finite_differences(mode):
 def test_orientation_modes_are_named_in_the_kernels():
     assert IK.ORIENTATIONS == {"full": ik_kernels.ORIENT_FULL, "none": ik_kernels.ORIENT_NONE,
                                "axis": ik_kernels.ORIENT_AXIS}
+
+
+def test_a_batch_of_worlds_is_refused_by_name():
+    """IK checks every target against one world: a batch (the planner's one world per
+    problem) would be their union, so it is refused, naming ``world``."""
+    from jwarp.world import World
+
+    a = World.of_shapes()
+    a.add("b0", "box", [0.1, 0.1, 0.1], [0.6, 0.0, 0.3])
+    both = World.batch([a, a])
+    with pytest.raises(ValueError, match="^world: a batch of 2 worlds"):
+        IK.ik("arm7", "tcp", np.eye(4), world=both)
+    with pytest.raises(ValueError, match="^world: a batch of 2 worlds"):
+        IK.IKSolver("arm7", "tcp", 2, world=both)
