@@ -5,6 +5,7 @@ loop it replaced (kept here as :func:`legacy_ik`, the baseline), timed side by s
     python benchmarks/bench_ik.py                      # CPU: section c (+ a, b at CPU sizes)
     python benchmarks/bench_ik.py --device cuda        # CUDA: sections a, b (+ c on the CPU)
     python benchmarks/bench_ik.py --quick              # smoke-test sizes
+    PYTHONPATH=/tmp/peers python benchmarks/bench_ik.py --peers   # vs Newton, pytorch_kinematics
 
 Sections (``--only`` picks some):
 
@@ -23,6 +24,16 @@ Sections (``--only`` picks some):
   :func:`jwarp.solvers.ik.ik` beside the baseline, all three from the same numpy seeds (so
   with the same solutions; drawing them is timed).
 
+* ``peers`` (``--peers``, or ``--only peers``): jwarp's IKSolver beside Newton's ``newton.ik``
+  IKSolver (Levenberg-Marquardt; at each of ``--newton-iterations``) and pytorch_kinematics'
+  PseudoInverseIK on the Panda of example-robot-data (TCP ``panda_hand_tcp``): the same
+  reachable targets (FK of random configurations), the same ``--peer-seeds`` numpy seeds per
+  target, 1 mm / 0.01 rad, and one float64 check of every returned configuration (pinocchio,
+  else jwarp's float64 FK: pose errors and joint limits; ``benchmarks/ik_peers.py``); printed
+  as a table ``| targets | library | solved targets/s | solved |``. A peer that is not
+  installed is printed as "not installed". Newton runs on the Warp device, pytorch_kinematics
+  on the torch device of ``--device``.
+
 In a and b the persistent solver draws its seeds on the device (Warp's random stream),
 :func:`ik` and the baseline on the host (numpy's); the solved rates are printed beside
 the rates.
@@ -38,7 +49,9 @@ thread (set before numpy loads; an exported value wins).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import io
 import math
 import os
 import sys
@@ -316,6 +329,191 @@ def section_c(args: argparse.Namespace) -> dict:
     return shelf_ik(args.targets_c, args.repeats, variants=variants)
 
 
+# ====================================================================== peers
+def _ints(p: argparse.ArgumentParser, option: str, text: str) -> list[int]:
+    """Comma-separated positive integers of ``option`` (a parser error naming it otherwise)."""
+    try:
+        vals = [int(v) for v in str(text).split(",") if v.strip()]
+    except ValueError:
+        vals = []
+    if not vals or min(vals) < 1:
+        p.error(f"{option}: expected comma-separated positive integers, got {text!r}")
+    return vals
+
+
+def _count(n: int) -> str:
+    """A target count as the issue's tables print it (1e3, or the number)."""
+    e = int(round(math.log10(n)))
+    return f"1e{e}" if 10 ** e == n and e >= 2 else str(n)
+
+
+def _k(v: float) -> str:
+    """A rate as the issue's tables print it (121 k)."""
+    return f"{v / 1e3:.3g} k"
+
+
+def section_peers(args: argparse.Namespace) -> dict:
+    """jwarp vs Newton's ik and pytorch_kinematics (module docstring, ``benchmarks/ik_peers.py``):
+    per ``--peer-targets`` size and library, solved targets per second (min and median over
+    ``--repeats`` runs, one solve each, interleaved after an untimed warm-up,
+    :func:`timing.each_run`) and the solved share of the common check; a library whose
+    warm-up solve predicts more than ``--peer-budget`` seconds for the runs at a size is
+    skipped there. Prints the table, returns the figures."""
+    import importlib.metadata as md
+
+    import ik_peers as K
+
+    dev, dt = args.device, args.dtype
+    tol_p, tol_r = args.peer_tol_pos, args.peer_tol_rot
+    S, it = args.peer_seeds, args.peer_iterations
+    try:
+        urdf, model = K.panda(args.peer_urdf, args.peer_model)
+    except ValueError as e:
+        raise SystemExit(f"bench_ik.py: {e}") from None
+    check = K.PoseCheck(urdf, model, tol_p, tol_r, device=dev)
+    libs = args.peer_libraries
+    newton = K.import_newton() if "newton" in libs else None
+    pk = K.import_pytorch_kinematics() if "pytorch_kinematics" in libs else None
+
+    def version(dist: str) -> str | None:
+        try:
+            return md.version(dist)
+        except md.PackageNotFoundError:
+            return None
+
+    out: dict = {"robot": model.name, "urdf": urdf, "frame": K.TCP, "seeds": S,
+                 "iterations": it, "newton_iterations": args.newton_iterations,
+                 "tol_pos_m": tol_p, "tol_rot_rad": tol_r, "check": check.reference,
+                 "limit_slack_rad": K.LIMIT_SLACK, "dtype_jwarp_pytorch_kinematics":
+                 np.dtype(dt).name, "dtype_newton": "float32",
+                 "jwarp_commit": _git_commit(),
+                 "newton": (newton.__version__ if newton is not None else "not installed")
+                 if "newton" in libs else "not run",
+                 "pytorch_kinematics": (version("pytorch-kinematics") or "installed")
+                 if pk is not None else ("not installed" if "pytorch_kinematics" in libs
+                                         else "not run"),
+                 "stand_ins": list(K.STAND_INS), "rows": []}
+    try:
+        import torch
+        out["torch"] = torch.__version__
+    except ImportError:
+        out["torch"] = "not installed"
+
+    # the frames agree: each library's own FK of the TCP against the reference (float64)
+    rng = np.random.default_rng(123)
+    q5 = sample_within_limits(model, 5, rng)[:, K.arm_columns(model)]
+    ref = check.fk(q5)
+    frame_check: dict = {}
+
+    def frame_diff(name: str, T: np.ndarray) -> None:
+        d = float(np.abs(np.asarray(T) - ref).max())
+        frame_check[name] = d
+        if d > 1e-5:  # float32 FK agrees to ~1e-6; more is another frame or offset
+            raise RuntimeError(f"peers: {name}'s TCP frame differs from the reference by {d:g}")
+
+    q_full = np.tile(np.mean(model.joint_limits, axis=1), (5, 1))
+    q_full[:, K.arm_columns(model)] = q5
+    frame_diff("jwarp", np.asarray(jwarp.fk(model, q_full, device=dev, dtype=np.float64)
+                                   )[:, model.frame_index(K.TCP)])
+    out["frame_check_max_abs_diff"] = frame_check
+
+    for P in args.peer_targets:
+        T, _, seeds = K.problem(model, P, S, seed=0, device=dev)
+        runners: dict = {}
+        if "jwarp" in libs:
+            jw = K.Jwarp(model, P, S, it, tol_p, tol_r, dev, dt)
+            runners[f"jwarp IKSolver, max {it} it"] = (jw, lambda jw=jw: jw.solve(T, seeds))
+        if newton is not None:
+            nw = K.Newton(newton, urdf, P, S, max(args.newton_iterations), dev)
+            if "newton" not in frame_check:
+                frame_diff("newton", nw.fk(q5))
+            for n_it in args.newton_iterations:
+                runners[f"Newton {newton.__version__} ik LM, {n_it} it"] = (
+                    nw, lambda nw=nw, n_it=n_it: nw.solve(T, seeds, n_it))
+        if pk is not None:
+            with contextlib.redirect_stderr(io.StringIO()):  # its URDF parser's warnings
+                pr = K.PytorchKinematics(pk, urdf, P, S, it, tol_p, tol_r, dev, dt)
+            if "pytorch_kinematics" not in frame_check:
+                frame_diff("pytorch_kinematics", pr.fk(q5))
+            runners[f"pytorch_kinematics, {it} it"] = (pr, lambda pr=pr: pr.solve(T, seeds))
+        # untimed first call of each (compiles); skip what would exceed the budget
+        kept: dict = {}
+        for name, (runner, call) in runners.items():
+            t0 = time.perf_counter()
+            call()
+            wp.synchronize_device(dev)
+            first = time.perf_counter() - t0
+            if first * args.repeats > args.peer_budget:
+                out["rows"].append({"targets": P, "library": name, "skipped":
+                                    f"first solve {first:.1f} s x {args.repeats} runs > "
+                                    f"--peer-budget {args.peer_budget:g} s"})
+            else:
+                kept[name] = (runner, call)
+        runs = timing.each_run([lambda r, c=c: c for _, c in kept.values()], args.repeats, dev)
+        for (name, (runner, _)), r in zip(kept.items(), runs):
+            solved, rates, pose_ok, over = [], [], [], 0.0
+            for q, t in zip(r.results, r.seconds):
+                q_best = K.pick_best(check, q, T) if runner.returns_all_seeds else q
+                n = int(check(q_best, T).solved.sum())
+                solved.append(n / P)
+                rates.append(n / t)
+                c = check(q, T)  # every seed returned: on target ignoring the limits
+                ok = (c.pos_err <= tol_p) & (c.rot_err <= tol_r)
+                pose_ok.append(float(np.mean(ok.reshape(P, -1).any(1))))
+                over = max(over, float(np.max(np.maximum(q - check.hi, check.lo - q))))
+            row = {"targets": P, "library": name, "solved_targets_per_s": stats(rates),
+                   "solved_rate": stats(solved), "pose_only_rate": stats(pose_ok),
+                   "max_limit_violation_rad": max(over, 0.0), "seconds": r.timing.figures()}
+            if isinstance(runner, K.Jwarp):
+                row["jwarp_own_feasible_rate"] = float(np.mean(runner.last.feasible))
+                row["iterations_run_max"] = int(np.max(runner.last.all_iterations))
+            out["rows"].append(row)
+    print(peers_table(out))
+    return out
+
+
+def peers_table(out: dict) -> str:
+    """The peers section's figures as the issue's table (solved targets/s: median over the
+    runs, min in brackets; solved: the common check), then: pose only (a returned seed on
+    target when the limits are ignored), the largest joint-limit violation of any returned
+    seed [rad] (0: none) and the seconds per solve."""
+    lines = ["| targets | library | solved targets/s | solved | pose only | largest limit "
+             "violation [rad] | s per solve (min / median) |", "|---|---|---|---|---|---|---|"]
+    for r in out["rows"]:
+        if "skipped" in r:
+            lines.append(f"| {_count(r['targets'])} | {r['library']} | skipped: {r['skipped']} "
+                         "| | | | |")
+            continue
+        rate, sec = r["solved_targets_per_s"], r["seconds"]
+        lines.append(f"| {_count(r['targets'])} | {r['library']} | {_k(rate['median'])} "
+                     f"(min {_k(rate['min'])}) | {100 * r['solved_rate']['median']:.1f}% | "
+                     f"{100 * r['pose_only_rate']['median']:.1f}% | "
+                     f"{r['max_limit_violation_rad']:.2g} | "
+                     f"{sec['min']:.3g} / {sec['median']:.3g} |")
+    for lib in ("newton", "pytorch_kinematics"):
+        if out[lib] == "not installed":
+            lines.append(f"| | {lib} | not installed | | | | |")
+    return "\n".join(lines)
+
+
+def _git_commit() -> str:
+    """The commit of the jwarp that runs (the git checkout holding the imported package),
+    with ``+uncommitted jwarp/ changes`` where its jwarp/ differs from that commit."""
+    import subprocess
+
+    pkg = os.path.dirname(os.path.abspath(jwarp.__file__))
+    try:
+        c = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=pkg,
+                           capture_output=True, text=True, timeout=10).stdout.strip()
+        d = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", "."],
+                           cwd=pkg, capture_output=True, text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        c = d = ""
+    if not c:
+        return f"unknown (jwarp from {pkg}, not a git checkout)"
+    return c + (" +uncommitted jwarp/ changes" if d else "")
+
+
 # ====================================================================== main
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -334,8 +532,45 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--targets-c", type=int, default=40, help="targets of section c")
     p.add_argument("--repeats", type=int, default=5, help="timed runs (min/median)")
     p.add_argument("--no-baseline", action="store_true", help="skip the baseline (legacy_ik)")
+    p.add_argument("--peers", action="store_true",
+                   help="run the peers section (jwarp vs Newton's ik and pytorch_kinematics); "
+                   "alone unless --only names other sections too")
+    p.add_argument("--peer-targets", default=None,
+                   help="comma-separated target counts of the peers section (default 1000 on "
+                   "the CPU, 1000,10000 on CUDA; --quick 8)")
+    p.add_argument("--peer-seeds", type=int, default=4, help="seeds per target, peers")
+    p.add_argument("--peer-iterations", type=int, default=50,
+                   help="iterations of jwarp (its maximum) and pytorch_kinematics, peers")
+    p.add_argument("--newton-iterations", default="10,20,50",
+                   help="comma-separated iteration counts of Newton's LM, peers")
+    p.add_argument("--peer-libraries", default="jwarp,newton,pytorch_kinematics",
+                   help="comma-separated libraries of the peers section")
+    p.add_argument("--peer-tol-pos", type=float, default=1e-3, help="peers: tolerance [m]")
+    p.add_argument("--peer-tol-rot", type=float, default=1e-2, help="peers: tolerance [rad]")
+    p.add_argument("--peer-urdf", default=None,
+                   help="peers: the Panda URDF (default: example-robot-data's)")
+    p.add_argument("--peer-model", default=None,
+                   help="peers: jwarp's robot JSON of that URDF (default: imported from it; "
+                   "write both with: python benchmarks/ik_peers.py DIR)")
+    p.add_argument("--peer-budget", type=float, default=120.0,
+                   help="peers: skip a library at a size where its first solve times "
+                   "--repeats exceeds this [s]")
     timing.section_options(p, "a,b,c")
     args = p.parse_args(argv)
+    if args.peers and "peers" not in args.only.split(","):
+        args.only = "peers" if args.only == "a,b,c" else args.only + ",peers"
+    args.newton_iterations = _ints(p, "--newton-iterations", args.newton_iterations)
+    for opt in ("peer_seeds", "peer_iterations"):
+        if getattr(args, opt) < 1:
+            p.error(f"--{opt.replace('_', '-')}: expected >= 1, got {getattr(args, opt)}")
+    for opt in ("peer_tol_pos", "peer_tol_rot", "peer_budget"):
+        if not getattr(args, opt) > 0:
+            p.error(f"--{opt.replace('_', '-')}: expected > 0, got {getattr(args, opt)}")
+    known = ("jwarp", "newton", "pytorch_kinematics")
+    args.peer_libraries = [v.strip() for v in args.peer_libraries.split(",") if v.strip()]
+    if not args.peer_libraries or set(args.peer_libraries) - set(known):
+        p.error(f"--peer-libraries: expected some of {', '.join(known)}, got "
+                f"{','.join(args.peer_libraries)!r}")
     init_warp()
     cuda = str(args.device).startswith("cuda")
     args.dtype = np.dtype(args.dtype or ("float32" if cuda else "float64")).type
@@ -343,10 +578,13 @@ def main(argv: list[str] | None = None) -> int:
         args.batch = 10000 if cuda else 200
     if args.batch_b is None:
         args.batch_b = 10000 if cuda else 100
+    if args.peer_targets is None:
+        args.peer_targets = "8" if args.quick else ("1000,10000" if cuda else "1000")
+    args.peer_targets = _ints(p, "--peer-targets", args.peer_targets)
     if args.quick:
         args.batch, args.batch_b, args.targets_c, args.repeats = 8, 4, 3, 2
         args.max_iterations = min(args.max_iterations, 30)
-    sections = {"a": section_a, "b": section_b, "c": section_c}
+    sections = {"a": section_a, "b": section_b, "c": section_c, "peers": section_peers}
     timing.run_sections(p, sections, args, f"repeats {args.repeats} (min/median)",
                         repeats=args.repeats)
     return 0
