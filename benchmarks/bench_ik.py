@@ -69,6 +69,7 @@ wp.config.quiet = True
 import jwarp  # noqa: E402
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.core.limits import sample_within_limits, within_limits  # noqa: E402
+from jwarp.kernels.ik_step import LIMIT_HOLD  # noqa: E402
 from jwarp.solvers import ik as IK  # noqa: E402
 from jwarp.solvers.planner import collision_free  # noqa: E402
 from jwarp.world import collision  # noqa: E402
@@ -85,11 +86,15 @@ def legacy_ik(robot: Any, frame: Any, target: Any, *, world: Any = None, n_start
               max_step: float = 0.5, damping: float = 1e-3, kappa: Any = None,
               lam: float = 0.7, tol_rho: float = 1e-6, stop_when_solved: bool = True,
               check_every: int = 5, seed: int | None = 0, device: Any = "cpu",
-              dtype: Any = np.float64, callback: Callable | None = None) -> IK.IKResult:
+              dtype: Any = np.float64, callback: Callable | None = None,
+              hold_limits: bool = False) -> IK.IKResult:
     """The IK solver before :class:`IKSolver` (jwarp 634a275): kernels for the costs, then
     per iteration a host read of q, the errors, J and dU_A/dq, the damped least-squares
     step in numpy (float64) and the feasibility check of the candidates on the host
-    (``collision_free``, float64). Inputs are not validated (the benchmark's own)."""
+    (``collision_free``, float64). Inputs are not validated (the benchmark's own).
+    ``hold_limits``: the solver's rule since: joints at a box limit (within
+    ``ik_step.LIMIT_HOLD``) that the step pushes outward are held (their Jacobian columns
+    and gradient entries zeroed, the step recomputed); the tests' reference of it."""
     t0 = time.perf_counter()
     init_warp()
     model = jwarp.robot(robot)
@@ -155,13 +160,26 @@ def legacy_ik(robot: Any, frame: Any, target: Any, *, world: Any = None, n_start
         if stop_when_solved and feasible.reshape(nT, n_starts).any(1).all():
             break
         J = obj.jac.numpy().astype(np.float64)[:, rows]         # (B, m, n)
-        JJt = J @ np.swapaxes(J, 1, 2) + mu2 * np.eye(len(rows))
-        dq = np.einsum("bmn,bm->bn", J, np.linalg.solve(JJt, err[..., None])[..., 0])
         ga = obj.grad_a.numpy().astype(np.float64)
-        ns = ga - np.einsum("bmn,bm->bn", J, np.linalg.solve(JJt, (J @ ga[..., None]))[..., 0])
-        dq = np.where(on[:, None], dq - step * ns, dq)
-        big = np.abs(dq).max(axis=1, keepdims=True)
-        dq *= np.minimum(1.0, max_step / np.maximum(big, 1e-300))
+
+        def dls(J: np.ndarray, ga: np.ndarray) -> np.ndarray:
+            JJt = J @ np.swapaxes(J, 1, 2) + mu2 * np.eye(len(rows))
+            dq = np.einsum("bmn,bm->bn", J, np.linalg.solve(JJt, err[..., None])[..., 0])
+            ns = ga - np.einsum("bmn,bm->bn", J,
+                                np.linalg.solve(JJt, (J @ ga[..., None]))[..., 0])
+            dq = np.where(on[:, None], dq - step * ns, dq)
+            big = np.abs(dq).max(axis=1, keepdims=True)
+            return dq * np.minimum(1.0, max_step / np.maximum(big, 1e-300))
+
+        dq = dls(J, ga)
+        if hold_limits:
+            lim = obj.limits.limits.numpy().astype(np.float64)
+            held = (((dq < 0) & (q <= lim[:, 0] + LIMIT_HOLD))
+                    | ((dq > 0) & (q >= lim[:, 1] - LIMIT_HOLD)))
+            rows_h = held.any(1)
+            if rows_h.any():
+                free = (~held).astype(np.float64)
+                dq[rows_h] = dls(J * free[:, None, :], ga * free)[rows_h]
         dq[done] = 0.0
         obj.set_q(q + dq, keep_rho=True)
         obj.project_limits()
@@ -207,7 +225,8 @@ def batched(args: argparse.Namespace, name: str, robot_name: str, frame: str, wo
     T = np.asarray(jwarp.fk(robot, q, device=args.device, dtype=np.float64)
                    )[:, robot.frame_index(frame)]
     dev, dt = args.device, args.dtype
-    opts = IK.IKOptions(n_starts=starts, margin=margin, max_iterations=args.max_iterations)
+    opts = IK.IKOptions(n_starts=starts, margin=margin, max_iterations=args.max_iterations,
+                        freeze_solved=False)  # ik()'s semantics before freezing was default
     kw = dict(world=world, n_starts=starts, margin=margin, max_iterations=args.max_iterations,
               device=dev, dtype=dt)
 
@@ -293,6 +312,7 @@ def shelf_ik(n_targets: int, repeats: int, starts: int = 16,
                          world=world, device="cpu", dtype=np.float64)
 
     def solve_new(T: np.ndarray, seed: int) -> Any:  # ik()'s seeds (numpy), drawn in the timing
+        solver.reseed(seed)  # and ik()'s re-seeds
         return solver.solve(T, sample_within_limits(robot, starts, np.random.default_rng(seed)))
 
     solves = {"solver": solve_new,
