@@ -15,7 +15,7 @@ Sections (``--only`` picks some):
   1 mm / 0.01 rad; for each of ``--targets``: ``restart_after=None`` (no re-seeding, the
   solver before this issue apart from the held limits), the default re-seeding, and the
   same with ``freeze_solved``; then :class:`IKOptions`' defaults (16 seeds, 200
-  iterations, 1e-4 m / 1e-3 rad). "solved" is one float64 check of every returned
+  iterations, 1e-4 m / 1e-3 rad); ``--dtype`` the iteration's float type. "solved" is one float64 check of every returned
   configuration (jwarp's float64 FK: position and rotation error, box limits), not the
   solver's own flag. Solved targets per second = solved / (min or median seconds of one
   ``solve`` of a persistent solver, ``--repeats`` runs interleaved, each reseeded).
@@ -89,7 +89,7 @@ def section_reach(args: argparse.Namespace) -> dict:
         variants = {"no re-seeding": IKOptions(restart_after=None, **base),
                     "re-seeding (default)": IKOptions(**base),
                     "re-seeding + freeze_solved": IKOptions(freeze_solved=True, **base)}
-        solvers = {k: IKSolver(model, "tcp", P, o, device=args.device)
+        solvers = {k: IKSolver(model, "tcp", P, o, device=args.device, dtype=args.dtype)
                    for k, o in variants.items()}
 
         def make(s: IKSolver, seeds_: np.ndarray) -> object:
@@ -113,7 +113,7 @@ def section_reach(args: argparse.Namespace) -> dict:
                   f"{ok.sum() / t.best:10.0f} solved/s (min time {t.best * 1e3:.2f} ms, "
                   f"median {t.median * 1e3:.2f} ms)", flush=True)
         # the defaults: 16 random seeds (drawn by the solver), 200 iterations, 1e-4 / 1e-3
-        d = IKSolver(model, "tcp", P, IKOptions(), device=args.device)
+        d = IKSolver(model, "tcp", P, IKOptions(), device=args.device, dtype=args.dtype)
         run = timing.each_run([lambda r: (d.reseed(r), lambda: d.solve(T))[1]], args.repeats,
                               device=args.device)[0]
         res = run.results[-1]
@@ -125,6 +125,7 @@ def section_reach(args: argparse.Namespace) -> dict:
               f"{ok.sum() / run.timing.best:10.0f} solved/s", flush=True)
         out[str(P)] = rows
     return {"seeds": args.seeds, "iterations": args.iterations, "tol": "1 mm / 0.01 rad",
+            "dtype": args.dtype,
             "by_targets": out}
 
 
@@ -189,6 +190,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--iterations", type=int, default=50, help="iterations (reach)")
     p.add_argument("--scene-targets", type=int, default=100)
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--dtype", choices=("float64", "float32"), default="float64",
+                   help="the solver's float type (reach; its feasibility check is float64)")
     timing.section_options(p, "reach,scene")
     args = p.parse_args(argv)
     global DEVICE

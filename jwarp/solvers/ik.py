@@ -249,6 +249,11 @@ class IKObjective:
         self.coll_cost = wp.zeros(B, dtype=sc, device=dev)
         self.coll_grad = batch((n,), sc)
         self.cm = collision.collision_model(self.robot, world, device=dev, dtype=self.npdt)
+        w = self.weights
+        #: whether U_A has a collision term: spheres, and a world (weighted) or self pairs
+        #: (weighted); without one the collision kernels are not launched (their cost is 0)
+        self.collides = bool(self.cm.n_spheres > 0 and (
+            (world is not None and w.world > 0) or (self.cm.n_pairs > 0 and w.self > 0)))
         self._launches: dict = {}
         self.set_default(q_default)
         #: elastic compensation rows (None: the rigid robot)
@@ -322,7 +327,7 @@ class IKObjective:
         the frames of the last :meth:`evaluate_pose` (elastic: the same DH rows, followed
         by the iteration's one torque update of the rows)."""
         w = self.weights
-        use = int(w.world > 0 or w.self > 0)
+        use = int(self.collides)
         comp = self.compensation
         # elastic: at the rows of evaluate_pose, then one torque update from them: inside
         # the collision launch on the CPU; on CUDA from evaluate_pose's frames, one thread
@@ -771,7 +776,7 @@ class IKSolver:
             views = self._near_views[K] = (self.q_near[:K], self.near_cost[:K],
                                            self.near_grad[:K])
         qk, ck, gk = views
-        use = int(w.world > 0 or w.self > 0)
+        use = int(obj.collides)
         if use:
             self._launch(("gather", K), self.ck.gather, K, [obj.q, self.idx, self.counts, qk])
             obj.cm.cost(qk, w_world=w.world, w_self=w.self, eps=obj.eps, grad=True,
