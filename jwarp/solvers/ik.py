@@ -933,6 +933,9 @@ class IKSolver:
                                                        self.out])
         self._launch("select", self.ck.select, P, [self.out, S, model.n_dof, self.best])
         out = self.out.numpy().copy() if dev.is_cpu else self.out.numpy()
+        if self.npdt != np.float64:  # a float32 value clamped to a limit may lie outside
+            lo, hi = model.joint_limits[:, 0], model.joint_limits[:, 1]  # the float64 one
+            np.clip(out[:, :model.n_dof], lo, hi, out=out[:, :model.n_dof])
         best = self.best.numpy().copy() if dev.is_cpu else self.best.numpy()
         res = IKResult.from_rows(out, best, model.n_dof, P, S, time.perf_counter() - t0)
         if model.has_harmonic:  # back to the commanded joint values

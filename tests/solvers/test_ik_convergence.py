@@ -234,3 +234,18 @@ def test_a_batch_of_worlds_is_refused_by_name():
         IK.ik("arm7", "tcp", np.eye(4), world=both)
     with pytest.raises(ValueError, match="^world: a batch of 2 worlds"):
         IK.IKSolver("arm7", "tcp", 2, world=both)
+
+
+def test_float32_answers_lie_within_the_float64_limits(device):
+    """A float32 iteration clamps to float32(limit), up to ~1e-7 outside the float64 limit:
+    the returned joint values are within the limits exactly."""
+    robot = jwarp.robot("arm7")
+    rng = np.random.default_rng(8)
+    q = sample_within_limits(robot, 30, rng)
+    lo, hi = robot.joint_limits.T
+    q[:, 1] = lo[1]  # targets at a joint limit: solutions clamp there
+    T = jwarp.fk(robot, q)[:, robot.frame_index("tcp")]
+    res = IK.IKSolver(robot, "tcp", 30, IK.IKOptions(n_starts=4, tol_pos=1e-3, tol_rot=1e-2),
+                      device=device, dtype=np.float32).solve(T)
+    assert res.feasible.mean() > 0.8
+    assert ((res.all_q >= lo) & (res.all_q <= hi)).all()
