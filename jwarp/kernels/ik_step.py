@@ -253,7 +253,6 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         mu2: f64,
         alpha: f64,
         max_step: f64,
-        restart: RestartArgs,
         # Model:
         limits: wp.array2d(dtype=scalar),
         lin_start: wp.array(dtype=wp.int32),
@@ -266,6 +265,7 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         counts: wp.array(dtype=wp.int32),
         iterations: wp.array(dtype=wp.int32),
         halt: wp.array(dtype=wp.int32),
+        restart: RestartArgs,
     ):
         """One projected DLS step of every active configuration (module docstring);
         ``iterations[b]`` counts the steps. With ``freeze_solved`` an active configuration

@@ -799,8 +799,8 @@ class IKSolver:
         self._launch("step", self.dk.step, self.B, [
             obj.jac, obj.err, obj.grad_a, self.on, self.solved, self.n_seeds,
             int(o.freeze_solved), int(o.stop_when_solved), self.n_problems, o.damping ** 2,
-            o.step, o.max_step, self.restart, *self.limits.args, obj.q, self.done,
-            self.counts, self.iterations, self.halt])
+            o.step, o.max_step, *self.limits.args, obj.q, self.done, self.counts,
+            self.iterations, self.halt, self.restart])
 
     # ------------------------------------------------------------------ solve
     def reseed(self, seed: int | None) -> None:
