@@ -502,7 +502,7 @@ def host_frames(robot: RobotModel, q: np.ndarray) -> np.ndarray:
     th = dh[:, 1] + np.where(pris, 0.0, qi)
     ca, sa, cb, sb = np.cos(dh[:, 3]), np.sin(dh[:, 3]), np.cos(dh[:, 4]), np.sin(dh[:, 4])
     ct, st = np.cos(th), np.sin(th)
-    one, zero = np.ones_like(ca), np.zeros_like(ca)
+    zero = np.zeros_like(ca)
     fixed = np.stack([np.stack([cb, sb * sa, sb * ca], -1),       # Rot_y(beta) Rot_x(alpha)
                       np.stack([zero, ca, -sa], -1),
                       np.stack([-sb, cb * sa, cb * ca], -1)], -2)

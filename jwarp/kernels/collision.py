@@ -89,7 +89,7 @@ def kernels(scalar: type) -> SimpleNamespace:
     """Collision kernels and functions for one scalar type (``wp.float32``/``wp.float64``)."""
     fk = fk_kernels(scalar)
     el = elastic_kernels(scalar)
-    vec3, vec4, mat33, mat44 = fk.vec3, fk.vec4, fk.mat33, fk.mat44
+    vec3, mat44 = fk.vec3, fk.mat44
     zero = scalar(0.0)
     one = scalar(1.0)
     half = scalar(0.5)

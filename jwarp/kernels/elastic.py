@@ -49,9 +49,8 @@ from jwarp.kernels.fk import kernels as fk_kernels
 def kernels(scalar: type) -> SimpleNamespace:
     """Elastic kernels for one scalar type."""
     fk = fk_kernels(scalar)
-    vec3, vec4, mat33, mat44 = fk.vec3, fk.vec4, fk.mat33, fk.mat44
+    vec3, vec4, mat44 = fk.vec3, fk.vec4, fk.mat44
     zero = scalar(0.0)
-    one = scalar(1.0)
     unpack_rot, unpack_pos = fk.unpack_rot, fk.unpack_pos
 
     @wp.func

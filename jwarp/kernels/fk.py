@@ -450,7 +450,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         return unpack_rot(Tp), unpack_pos(Tp)
 
     @wp.func
-    def parent_pose(frames: wp.array4d(dtype=scalar), b: int, pi: int):
+    def parent_pose(frames: wp.array4d(dtype=scalar), b: int, pi: int):  # noqa: F811 (overload)
         """World rotation and position of frame pi from scalar frames (any strides)."""
         return (mat33(frames[b, pi, 0, 0], frames[b, pi, 0, 1], frames[b, pi, 0, 2],
                       frames[b, pi, 1, 0], frames[b, pi, 1, 1], frames[b, pi, 1, 2],
@@ -462,7 +462,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         frames[b, i] = pack(R, p)
 
     @wp.func
-    def store_pose(frames: wp.array4d(dtype=scalar), b: int, i: int, R: mat33, p: vec3):
+    def store_pose(frames: wp.array4d(dtype=scalar), b: int, i: int, R: mat33,  # noqa: F811
+                   p: vec3):  # (a Warp overload)
         for r in range(3):
             for c in range(3):
                 frames[b, i, r, c] = R[r, c]

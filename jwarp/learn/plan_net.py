@@ -28,7 +28,6 @@ mapped world is built.
 
 from __future__ import annotations
 
-import dataclasses
 import weakref
 from dataclasses import dataclass
 from typing import Any

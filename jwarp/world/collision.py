@@ -50,7 +50,7 @@ from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 from jwarp.kinematics.compensation import CompensationRows
-from jwarp.world.device_world import DeviceWorld, cell_minimum
+from jwarp.world.device_world import DeviceWorld
 from jwarp.world.sdf import World, sdf_query
 
 __all__ = ["DEFAULT_EPS", "CollisionModel", "CollisionData", "collision_model", "collision_cost",
@@ -181,7 +181,6 @@ class CollisionModel:
         self.tables = self.model  # older name
         self.k = ck.kernels(self.scalar)
         sp = self.model.spheres
-        vec3 = self.k.vec3
         dev = self.device
         self.n_spheres, self.n_pairs, self.pairs = sp.n_spheres, sp.n_pairs, sp.pairs
         for name in ("sph_frame", "sph_pos", "sph_rad", "bound_pos", "bound_rad", "fpair_a",

@@ -23,9 +23,12 @@ times ``persistence``), normalised so the sum stays in about [-1, 1].
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 __all__ = ["simplex_noise", "noise_grid", "simplex_occupancy", "simplex_world"]
 
