@@ -210,3 +210,28 @@ def test_tests_mirror_the_packages():
     assert folders <= packages, f"test folders without a package: {sorted(folders - packages)}"
     names = [p.name for p in tests.rglob("test_*.py")]
     assert len(names) == len(set(names)), sorted(n for n in names if names.count(n) > 1)
+
+
+@pytest.mark.parametrize("func, options", [("ik", "jwarp.solvers.ik:IKOptions"),
+                                           ("plan", "jwarp.solvers.planner:PlanOptions"),
+                                           ("calibrate",
+                                            "jwarp.solvers.calibration:CalibrationOptions")])
+def test_options_are_spelled_once(func, options):
+    """``jwarp.ik``/``plan``/``calibrate`` take ``options=None, **overrides``: no keyword
+    re-lists a field of their options dataclass (issue 28: options spelled once)."""
+    import dataclasses
+    import importlib
+    import inspect
+
+    import jwarp
+
+    mod, name = options.split(":")
+    cls = getattr(importlib.import_module(mod), name)
+    params = inspect.signature(getattr(jwarp, func)).parameters
+    fields = {f.name for f in dataclasses.fields(cls)}
+    relisted = sorted(fields & set(params))
+    assert not relisted, f"jwarp.{func} re-lists fields of {name}: {relisted}"
+    assert "options" in params and params["options"].default is None
+    assert params["options"].kind is inspect.Parameter.KEYWORD_ONLY
+    var_kw = [p.name for p in params.values() if p.kind is inspect.Parameter.VAR_KEYWORD]
+    assert var_kw == ["overrides"], f"jwarp.{func}: expected **overrides, got {var_kw}"

@@ -689,12 +689,13 @@ def cmd_ik(args: argparse.Namespace) -> int:
 
 
 def _ik_default(name: str) -> float:
-    """The default of :func:`jwarp.solvers.ik.ik`'s keyword ``name`` (its tolerances)."""
-    import inspect
+    """The default of :func:`jwarp.solvers.ik.ik`'s option ``name`` (its tolerances): the
+    :class:`~jwarp.solvers.ik.IKOptions` field's."""
+    import dataclasses
 
-    from jwarp.solvers.ik import ik
+    from jwarp.solvers.ik import IKOptions
 
-    return float(inspect.signature(ik).parameters[name].default)
+    return float({f.name: f.default for f in dataclasses.fields(IKOptions)}[name])
 
 
 #: configurations drawn per batch by ``free-config``

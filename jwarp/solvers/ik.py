@@ -944,19 +944,10 @@ class IKSolver:
         return res.reshaped(lead)
 
 
-def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts: int = 16,
-       initial: Any = None, q_default: Any = None, weights: IKWeights | None = None,
-       tol_pos: float = 1e-4, tol_rot: float = 1e-3, margin: float = 0.0,
-       eps: float | None = None, max_iterations: int = 200, step: float = 1.0,
-       max_step: float = 0.5, damping: float = 1e-3, kappa: Any = None, lam: float = 0.7,
-       tol_rho: float = 1e-6, stop_when_solved: bool = True, check_every: int = 5,
-       seed: int | None = 0,
+def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, initial: Any = None,
        device: Any = "cpu", dtype: Any = np.float64,
-       callback: Callable[[int, np.ndarray], None] | None = None,
-       warm_start: Any = None, n_random_with_warm_start: int = 0,
-       allow_no_collision: bool = False, restart_after: int | None = 5,
-       max_restarts: int = 10, orientation: str = "full",
-       free_axis: Any = (0.0, 0.0, 1.0), freeze_solved: bool = True) -> IKResult:
+       callback: Callable[[int, np.ndarray], None] | None = None, warm_start: Any = None,
+       options: IKOptions | None = None, **overrides: Any) -> IKResult:
     """Collision-free IK of ``frame`` onto ``target`` with random multi-starts: one
     :class:`IKSolver` solve.
 
@@ -966,19 +957,29 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
         target: pose(s) (4, 4) or (..., 4, 4) in the base frame [m].
         world: optional :class:`jwarp.world.World` (None: self-collision only).
         initial: seeds (n_dof,), (n_starts, n_dof) or (T, n_starts, n_dof) instead of random.
-        device, dtype: Warp device and float type.
+        device, dtype: Warp device (default "cpu", unlike :class:`IKSolver`'s preferred
+            device) and float type.
         callback: ``callback(iteration, q (B, n_dof))`` after every evaluation.
         warm_start: optional learned warm start (:class:`IKSolver`'s ``warm_start``: an
             object with ``seeds(targets (T, 4, 4), world) -> (T, H, n_dof)``): the seeds
             are its H per target followed by ``n_random_with_warm_start`` random ones
             (numpy, from ``seed``) instead of ``n_starts`` random ones; ``initial`` wins.
-        The other options are the fields of :class:`IKOptions`.
+        options: :class:`IKOptions` (None: its defaults); not modified.
+        **overrides: any field of :class:`IKOptions` as a keyword (``n_starts=32``,
+            ``tol_pos=1e-5``, ``seed=1``, ...): the options are
+            ``dataclasses.replace(options, **overrides)``, so an override wins over the same
+            field of ``options``; ``ik(r, f, T, n_starts=8)`` equals
+            ``ik(r, f, T, options=IKOptions(n_starts=8))``.
 
     Raises:
         ValueError: unknown frame, bad target/seed shapes, world dimension mismatch, bad
             options, a warm start's output that is not (T, H, n_dof) finite values.
-        TypeError: a ``warm_start`` without a callable ``seeds``.
+        TypeError: an override that is not a field of :class:`IKOptions` (named, with the
+            list of fields), ``options`` not an :class:`IKOptions`, a ``warm_start``
+            without a callable ``seeds``.
     """
+    from jwarp.solvers.overrides import with_overrides
+
     t0 = time.perf_counter()
     init_warp()
     check_warm_start(warm_start)
@@ -987,15 +988,8 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, n_starts
     collision.check_world(model, world)
     check_single_world(world)
     T, lead = _targets(target)
-    opts = IKOptions(n_starts=n_starts, tol_pos=tol_pos, tol_rot=tol_rot, margin=margin,
-                     eps=eps, max_iterations=max_iterations, step=step, max_step=max_step,
-                     damping=damping, kappa=kappa, lam=lam, tol_rho=tol_rho,
-                     stop_when_solved=stop_when_solved, check_every=check_every, seed=seed,
-                     weights=weights, q_default=q_default,
-                     n_random_with_warm_start=n_random_with_warm_start,
-                     allow_no_collision=allow_no_collision, restart_after=restart_after,
-                     max_restarts=max_restarts, orientation=orientation, free_axis=free_axis,
-                     freeze_solved=freeze_solved)
+    opts = with_overrides("ik", IKOptions, options, overrides)
+    seed = opts.seed
     finite_as(T, numpy_dtype(scalar_type(dtype)), "target")  # before the seeds' check
     n_seeds = opts.n_starts
     if initial is not None:

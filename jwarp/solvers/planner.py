@@ -1165,19 +1165,9 @@ def _seed_reason(planner: "Planner", sub: "Planner", seed: np.ndarray, b: int) -
     return c.reason(0)
 
 
-def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed",
-         n_starts: int = 8, n_waypoints: int = 20, n_substeps: int | None = None,
-         iterations: int = 100, step: float = 0.01, max_step: float = 0.1,
-         weights: PathWeights | None = None, eps: float | None = None, margin: float = 0.0,
-         early_stop: bool = True, stop_when_solved: bool = True,
-         check_all_every: int | None = None,
-         free_via: bool = True, kappa: Any = None, lam: float = 0.7, seed: int | None = 0,
-         device: Any = "cpu", dtype: Any = np.float32,
-         callback: Callable[[int, np.ndarray], None] | None = None,
-         converge: bool = False, converge_tol: float = 1e-3, time_limit: float | None = None,
-         fallback: str | None = "rrt", fallback_after: float = 0.15,
-         rrt: Any = None, endpoint_margin: float | None = None,
-         self_margin: float = 0.0, allow_no_collision: bool = False) -> PlanResult:
+def plan(robot: Any, world: Any, start: Any, goal: Any, *, device: Any = "cpu",
+         dtype: Any = np.float32, options: PlanOptions | None = None,
+         **overrides: Any) -> PlanResult:
     """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path:
     one call of a :class:`Planner` made for it.
 
@@ -1185,20 +1175,19 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
         robot: robot name or RobotModel.
         world: a :class:`jwarp.world.World` of the robot's workspace dimension.
         start, goal: (n_dof,) or (B, n_dof) joint values [rad or m] (B problems).
-        initial: a kind of multi-starts (:attr:`PlanOptions.initial`) or an array of user
-            guesses (W, n_dof), (n_starts, W, n_dof) or (B, n_starts, W, n_dof) (the
-            ``seeds`` of :meth:`Planner.plan`; ``n_starts`` and ``n_waypoints`` are then
-            theirs).
         device, dtype: Warp device of the optimisation and of every check, and its float
             type (default: CPU, float32).
-        n_starts, n_waypoints, n_substeps, iterations, step, max_step, weights, eps,
-            margin, early_stop, stop_when_solved, check_all_every, free_via, kappa, lam,
-            seed, callback, converge, converge_tol, time_limit, fallback, fallback_after,
-            rrt, endpoint_margin, self_margin, allow_no_collision: the fields of
-            :class:`PlanOptions` (``stop_when_solved`` True and
-            ``fallback`` "rrt" by default: pass False / None to optimise every start
-            until it is feasible without a fallback, as before). ``time_limit`` counts
-            from the start of this call.
+        options: :class:`PlanOptions` (None: its defaults); not modified.
+        **overrides: any field of :class:`PlanOptions` as a keyword (``n_starts=16``,
+            ``iterations=300``, ``callback=f``, ...): the options are
+            ``dataclasses.replace(options, **overrides)``, so an override wins over the same
+            field of ``options`` (``stop_when_solved`` True and ``fallback`` "rrt" by
+            default: pass False / None to optimise every start until it is feasible
+            without a fallback). ``time_limit`` counts from the start of this call.
+            ``initial`` is a kind of multi-starts (:attr:`PlanOptions.initial`) or, not a
+            string, an array of user guesses (W, n_dof), (n_starts, W, n_dof) or
+            (B, n_starts, W, n_dof) (the ``seeds`` of :meth:`Planner.plan`; ``n_starts``
+            and ``n_waypoints`` are then theirs, and the options' kind is unused).
 
     Returns:
         :class:`PlanResult` (``wall_time``: the whole call).
@@ -1206,8 +1195,15 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
     Raises:
         ValueError: bad shapes, NaN, start/goal outside the limits or in collision, world
             and robot dimensions differ, bad options.
+        TypeError: an override that is not a field of :class:`PlanOptions` (named, with
+            the list of fields), ``options`` not a :class:`PlanOptions`.
     """
+    from jwarp.solvers.overrides import with_overrides
+
     t0 = time.perf_counter()
+    seeds = None
+    if not isinstance(overrides.get("initial", ""), str):  # guesses (seeds), not a kind
+        seeds = overrides.pop("initial")  # (None: the options' kind, as before)
     init_warp()
     model = get_robot(robot)
     check_world(model, world)
@@ -1220,20 +1216,9 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, initial: Any = "mixed
             q1 = np.repeat(q1, len(q0), 0)
         else:
             raise ValueError(f"start, goal: batch sizes differ ({len(q0)} vs {len(q1)})")
-    kind = initial if isinstance(initial, str) else "mixed"
-    options = PlanOptions(n_starts=n_starts, initial=kind, n_waypoints=n_waypoints,
-                          n_substeps=n_substeps, iterations=iterations, step=step,
-                          max_step=max_step, weights=weights, eps=eps, margin=margin,
-                          early_stop=early_stop, stop_when_solved=stop_when_solved,
-                          check_all_every=check_all_every, free_via=free_via, kappa=kappa,
-                          lam=lam, seed=seed, callback=callback, converge=converge,
-                          converge_tol=converge_tol, time_limit=time_limit, fallback=fallback,
-                          fallback_after=fallback_after, rrt=rrt,
-                          endpoint_margin=endpoint_margin, self_margin=self_margin,
-                          allow_no_collision=allow_no_collision)
+    options = with_overrides("plan", PlanOptions, options, overrides)
     planner = Planner(model, world, len(q0), options, device=device, dtype=dtype)
-    res = planner._plan(q0, q1, None if isinstance(initial, str) else initial, "initial",
-                        t_start=t0)
+    res = planner._plan(q0, q1, seeds, "initial", t_start=t0)
     res.wall_time = time.perf_counter() - t0
     return res
 

@@ -144,13 +144,13 @@ def _help_of(command: list[str], option: str, capsys) -> str:
 def test_defaults_that_differ_from_the_python_api_are_named_in_help(capsys):
     from jwarp.cli.common import DEFAULT_MAX_ITER
     from jwarp.kinematics.equilibrium import fk_elastic
-    from jwarp.solvers.planner import plan
+    from jwarp.solvers.planner import PlanOptions
 
     api = inspect.signature(fk_elastic).parameters["max_iter"].default
     assert api != DEFAULT_MAX_ITER  # the difference the help must name
     h = _help_of(["fk"], "--max-iter", capsys)
     assert f"default {DEFAULT_MAX_ITER}" in h and f"default is {api}" in h[:300]
-    api = inspect.signature(plan).parameters["iterations"].default
+    api = PlanOptions.iterations  # plan()'s options are PlanOptions' fields
     parser = dict(_subparsers())["plan"]
     cli = next(a.default for a in parser._actions if "--iterations" in a.option_strings)
     assert cli != api
@@ -164,10 +164,10 @@ def _defaults(command: str) -> dict:
 
 
 @pytest.mark.parametrize("command, api, names", [
-    ("plan", "jwarp.solvers.planner:plan",
+    ("plan", "jwarp.solvers.planner:PlanOptions",
      {"step": "step", "margin": "margin", "seed": "seed", "self_margin": "self_margin",
       "fallback": "fallback", "stop_when_solved": "stop_when_solved"}),
-    ("ik", "jwarp.solvers.ik:ik",
+    ("ik", "jwarp.solvers.ik:IKOptions",
      {"iterations": "max_iterations", "margin": "margin", "seed": "seed"}),
     ("train ik", "jwarp.learn.train_ik:TrainIKOptions",
      {"targets_per_world": "n_targets", "val_targets": "n_val", "hidden": "hidden",
@@ -176,7 +176,7 @@ def _defaults(command: str) -> dict:
     ("train plan", "jwarp.learn.train_plan:TrainPlanOptions",
      {"n_bps": "n_bps", "hidden": "hidden", "blocks": "n_blocks", "heads": "n_heads",
       "batch": "batch_size", "steps_per_epoch": "steps_per_epoch", "lr": "lr"}),
-    ("calibrate", "jwarp.solvers.calibration:calibrate",
+    ("calibrate", "jwarp.solvers.calibration:CalibrationOptions",
      {"max_nfev": "max_nfev", "starts": "n_starts", "seed": "seed"}),
 ])
 def test_cli_defaults_equal_the_python_api(command, api, names):
@@ -198,16 +198,14 @@ def test_cli_defaults_equal_the_python_api(command, api, names):
 def test_implicit_defaults_of_plan_and_ik_equal_the_api(capsys):
     """--starts/--waypoints of plan and --starts of ik are filled in at run time (a warm
     start changes them): the help names the API's values."""
-    from jwarp.solvers.ik import ik
-    from jwarp.solvers.planner import plan
+    from jwarp.solvers.ik import IKOptions
+    from jwarp.solvers.planner import PlanOptions
 
     import re
 
-    sig = inspect.signature(plan).parameters
-    n_ik = inspect.signature(ik).parameters["n_starts"].default
-    for cmd, opt, n in ((["plan"], "--starts", sig["n_starts"].default),
-                        (["plan"], "--waypoints", sig["n_waypoints"].default),
-                        (["ik"], "--starts", n_ik)):
+    for cmd, opt, n in ((["plan"], "--starts", PlanOptions.n_starts),
+                        (["plan"], "--waypoints", PlanOptions.n_waypoints),
+                        (["ik"], "--starts", IKOptions.n_starts)):
         assert re.search(rf"\(default {n}\b", _help_of(cmd, opt, capsys)[:250]), (cmd, opt)
 
 

@@ -122,3 +122,50 @@ def test_options_are_validated_naming_the_field():
         calibrate_with(robot, None, np.zeros((3, 7)), np.zeros((3, 3)), {"free": "theta"})
     with pytest.raises(ValueError, match="^max_nfev"):
         calibrate(robot, None, np.zeros((3, 7)), np.zeros((3, 3)), free="theta", max_nfev=0)
+
+
+def test_calibrate_takes_options_and_overrides():
+    """calibrate(options=..., **overrides): the options are
+    dataclasses.replace(options, **overrides); an override wins over the options' field and
+    the result equals the keyword call bit for bit; the options object is not modified."""
+    robot = jwarp.robot("arm7")
+    meas = _tcp_measurement(robot)
+    q, rng = _data(robot, 30, 2)
+    y = meas.predict(jwarp.fk(robot, q, device="cpu", dtype=np.float64),
+                     meas.params.nominal) + rng.normal(0, 1e-4, (30, 3))
+    opts = CalibrationOptions(free="theta", n_starts=2, seed=7, max_nfev=10, warn=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", CalibrationWarning)
+        kw = calibrate(robot, meas, q, y, free="theta,d,tracker", n_starts=2, seed=3,
+                       max_nfev=15, warn=False)
+        a = calibrate(robot, meas, q, y, options=opts, free="theta,d,tracker", seed=3,
+                      max_nfev=15)
+        b = calibrate(robot, meas, q, y, options=replace(opts, free="theta,d,tracker",
+                                                         seed=3, max_nfev=15))
+    for r in (a, b):
+        np.testing.assert_array_equal(r.x, kw.x)
+        assert r.cost == kw.cost and r.nfev == kw.nfev and r.iterations == kw.iterations
+    assert len(kw.starts) == 2
+    assert (opts.free, opts.seed, opts.max_nfev) == ("theta", 7, 10)  # not modified
+
+
+def test_calibrate_rejects_unknown_options_naming_them():
+    robot = jwarp.robot("arm7")
+    q, y = np.zeros((3, 7)), np.zeros((3, 3))
+    with pytest.raises(TypeError, match=r"calibrate\(\) got an unexpected option 'n_seeds'"
+                                        r".*CalibrationOptions: free, noise_sigma"):
+        calibrate(robot, None, q, y, free="theta", n_seeds=2)
+    with pytest.raises(TypeError, match="missing the option 'free'"):
+        calibrate(robot, None, q, y, n_starts=2)
+    with pytest.raises(TypeError, match="^options: expected CalibrationOptions or None"):
+        calibrate(robot, None, q, y, options={"free": "theta"})
+    with pytest.raises(ValueError, match="^n_starts"):  # values: validated as before
+        calibrate(robot, None, q, y, options=CalibrationOptions(free="theta"), n_starts=0)
+
+
+def _tcp_measurement(robot):
+    from jwarp.plugins.measurements.cartesian import CartesianMeasurement
+
+    return CartesianMeasurement(robot, {"plugin": "cartesian", "tracker": {
+        "position": [2.0, 0.0, 1.0], "rotvec": [0.0, 0.0, 2.6]}, "markers": [
+        {"name": "tcp", "frame": "tcp", "position": [0.0, 0.0, 0.05]}], "noise": 1e-4})

@@ -190,3 +190,44 @@ def test_ik_jacobian_from_fk_frames_matches_the_jacobian_kernel(device, kappa):
     want = jacobian(robot, q, "right_tcp", dh=dh, device=device, dtype=np.float64)
     np.testing.assert_allclose(obj.jac.numpy(), want, atol=1e-12)
     assert np.abs(want[:, :, :3]).max() > 0.1  # the torso columns are there
+
+
+def _same_result(a, b):
+    for name in ("q", "pos_err", "rot_err", "feasible", "iterations"):
+        np.testing.assert_array_equal(np.asarray(getattr(a, name)), np.asarray(getattr(b, name)),
+                                      err_msg=name)
+
+
+def test_ik_takes_options_and_overrides():
+    """ik(options=..., **overrides): the options are dataclasses.replace(options,
+    **overrides); an override wins over the options' field; the results equal the keyword
+    call bit for bit; the options object is not modified."""
+    robot = jwarp.robot("arm7")
+    q = sample_within_limits(robot, 4, np.random.default_rng(11))
+    T = np.asarray(jwarp.fk(robot, q, device="cpu"))[:, robot.frame_index("right_tcp")]
+    kw = IK.ik(robot, "right_tcp", T, n_starts=3, seed=5, max_iterations=120, tol_pos=2e-4,
+               freeze_solved=False, orientation="axis", free_axis=(0.0, 1.0, 1.0))
+    opts = IK.IKOptions(n_starts=7, seed=1, max_iterations=120, orientation="axis",
+                        free_axis=(0.0, 1.0, 1.0))
+    a = IK.ik(robot, "right_tcp", T, options=opts, n_starts=3, seed=5, tol_pos=2e-4,
+              freeze_solved=False)
+    b = IK.ik(robot, "right_tcp", T, options=IK.IKOptions(
+        n_starts=3, seed=5, max_iterations=120, tol_pos=2e-4, freeze_solved=False,
+        orientation="axis", free_axis=(0.0, 1.0, 1.0)))
+    _same_result(a, kw)
+    _same_result(b, kw)
+    assert np.asarray(kw.feasible).any()
+    assert (opts.n_starts, opts.seed, opts.tol_pos) == (7, 1, 1e-4)  # not modified
+    other = IK.ik(robot, "right_tcp", T, options=opts)  # the options' own seed and starts
+    assert not np.array_equal(np.asarray(other.q), np.asarray(kw.q))
+
+
+def test_ik_rejects_unknown_options_naming_them():
+    robot = jwarp.robot("arm7")
+    with pytest.raises(TypeError, match=r"ik\(\) got an unexpected option 'n_seeds'; "
+                                        r"options are the fields of IKOptions: n_starts"):
+        IK.ik(robot, "tcp", np.eye(4), n_seeds=4)
+    with pytest.raises(TypeError, match="^options: expected IKOptions or None"):
+        IK.ik(robot, "tcp", np.eye(4), options={"n_starts": 4})
+    with pytest.raises(ValueError, match="^n_starts"):  # values: validated as before
+        IK.ik(robot, "tcp", np.eye(4), options=IK.IKOptions(), n_starts=0)

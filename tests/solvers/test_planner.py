@@ -239,3 +239,46 @@ def test_substeps_per_path_equals_a_numpy_sweep(device, name):
     got = PL.substeps_per_path(robot, Q, 0.01, safety=2.0, max_substeps=512, device=device)
     np.testing.assert_array_equal(got, want)
     assert len(np.unique(got)) > 3   # a real spread of counts, not one clamped value
+
+
+def _same_plan(a, b):
+    for name in ("path", "feasible", "iterations", "length_cost", "collision_cost"):
+        np.testing.assert_array_equal(np.asarray(getattr(a, name)), np.asarray(getattr(b, name)),
+                                      err_msg=name)
+
+
+def test_plan_takes_options_and_overrides(block_world):
+    """plan(options=..., **overrides): the options are dataclasses.replace(options,
+    **overrides); an override wins over the options' field; the results equal the keyword
+    call bit for bit; the options object is not modified; ``initial`` is a kind or seeds."""
+    robot = jwarp.robot("planar4")
+    s, g = np.array([1.2, 0.0, 0.0, 0.0]), np.array([-1.2, 0.0, 0.0, 0.0])
+    o = dict(n_starts=6, n_substeps=8, iterations=120, step=0.05, seed=2, fallback=None,
+             stop_when_solved=False)
+    kw = PL.plan(robot, block_world, s, g, initial="random", **o)
+    opts = PL.PlanOptions(initial="straight", n_starts=6, n_substeps=8, iterations=120,
+                          step=0.05, seed=9, fallback=None)
+    a = PL.plan(robot, block_world, s, g, options=opts, initial="random", seed=2,
+                stop_when_solved=False)
+    b = PL.plan(robot, block_world, s, g, options=PL.PlanOptions(initial="random", **o))
+    _same_plan(a, kw)
+    _same_plan(b, kw)
+    assert (opts.initial, opts.seed, opts.stop_when_solved) == ("straight", 9, True)
+    # user guesses (not a kind) are seeds, with or without options
+    guess = PL.initial_paths(s[None], g[None], 12, "straight")[0]
+    kw = PL.plan(robot, block_world, s, g, initial=guess, iterations=30, fallback=None,
+                 n_substeps=8, step=0.05, seed=9)
+    a = PL.plan(robot, block_world, s, g, options=opts, initial=guess, iterations=30)
+    _same_plan(a, kw)
+    assert a.path.shape == (1, 12, 4)
+
+
+def test_plan_rejects_unknown_options_naming_them(block_world):
+    s, g = np.array([1.2, 0.0, 0.0, 0.0]), np.array([-1.2, 0.0, 0.0, 0.0])
+    with pytest.raises(TypeError, match=r"plan\(\) got an unexpected option 'max_iterations'; "
+                                        r"options are the fields of PlanOptions: n_starts"):
+        PL.plan("planar4", block_world, s, g, max_iterations=10)
+    with pytest.raises(TypeError, match="^options: expected PlanOptions or None"):
+        PL.plan("planar4", block_world, s, g, options={"n_starts": 2})
+    with pytest.raises(ValueError, match="^n_starts"):  # values: validated as before
+        PL.plan("planar4", block_world, s, g, options=PL.PlanOptions(), n_starts=0)

@@ -871,21 +871,9 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
                           message=message, rounds=rounds, held=held & (best_x == 0.0))
 
 
-def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Iterable[str],
-              meta: Mapping[str, Any] | None = None, noise_sigma: Any = None,
-              sigma: Mapping[str, float] | None = None, frames: Iterable[int | str] | None = None,
-              p_nominal: Any = None, x0: Any = None, initial_guess: bool = True,
-              n_starts: int = 1, seed: int | None = 0, max_nfev: int | None = 200,
-              ftol: float = 1e-8, xtol: float = 1e-8, gtol: float = 1e-8,
-              method: str = "dogbox", elastic: bool | None = None, lam: float = 1.0,
-              max_iter: int = 100, tol: float = 1e-12, bound_kappa: bool = True,
-              covariance: Any = None, free_poses: bool = True,
-              fix: str | Iterable[str] | None = None, stall_tol: float | None = 1.0,
-              callback: Callable[[Progress], Any] | None = None,
-              identifiability_tol: float = 1e-2, moved_sigmas: float = 3.0,
-              warn: bool = True, orders: Mapping[str, int] | None = None,
-              loss: str = "linear", loss_scale: float | None = None,
-              fix_at: Mapping[str, Any] | None = None) -> CalibrationResult:
+def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *,
+              meta: Mapping[str, Any] | None = None, options: CalibrationOptions | None = None,
+              **overrides: Any) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples:
     :func:`calibrate_with` with these :class:`CalibrationOptions`.
 
@@ -894,26 +882,28 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *, free: str | Itera
         measurement: a measurement plugin instance (see jwarp.measurement).
         q: (S, n_dof) joint values [rad, m]; y: (S, m) observations [measurement.unit].
         meta: per-sample inputs {name: (S,)} the measurement needs (``meta_names``).
-        free, noise_sigma, sigma, frames, p_nominal, x0, initial_guess, n_starts, seed,
-            max_nfev, ftol, xtol, gtol, method, elastic, lam, max_iter, tol, bound_kappa,
-            covariance, free_poses, fix, stall_tol, callback, identifiability_tol,
-            moved_sigmas, warn, orders, loss, loss_scale, fix_at: the fields of :class:`CalibrationOptions`. By default the
-            measurement's pose and marker groups (tracker, camera, markers, fixtures) are
-            freed as well (``free_poses=False`` or ``fix`` to keep them), and compliances
-            stay >= 0 (``bound_kappa``).
+        options: :class:`CalibrationOptions` (None: built from the overrides, which must
+            then name ``free``); not modified.
+        **overrides: any field of :class:`CalibrationOptions` as a keyword (``free=``,
+            ``noise_sigma=``, ``n_starts=``, ``max_nfev=``, ...): the options are
+            ``dataclasses.replace(options, **overrides)``, so an override wins over the same
+            field of ``options``. By default the measurement's pose and marker groups
+            (tracker, camera, markers, fixtures) are freed as well (``free_poses=False`` or
+            ``fix`` to keep them), and compliances stay >= 0 (``bound_kappa``).
 
     Returns:
         :class:`~jwarp.solvers.calibration.result.CalibrationResult`.
+
+    Raises:
+        TypeError: an override that is not a field of :class:`CalibrationOptions` (named,
+            with the list of fields), ``options`` not a :class:`CalibrationOptions`, no
+            ``free`` (neither in ``options`` nor as an override).
+        ValueError: bad options or data (:func:`calibrate_with`).
     """
+    from jwarp.solvers.overrides import with_overrides
+
     t0 = time.perf_counter()
-    options = CalibrationOptions(
-        free=free, noise_sigma=noise_sigma, sigma=sigma, frames=frames, p_nominal=p_nominal,
-        x0=x0, initial_guess=initial_guess, n_starts=n_starts, seed=seed, max_nfev=max_nfev,
-        ftol=ftol, xtol=xtol, gtol=gtol, method=method, elastic=elastic, lam=lam,
-        max_iter=max_iter, tol=tol, bound_kappa=bound_kappa, covariance=covariance,
-        free_poses=free_poses, fix=fix, stall_tol=stall_tol, callback=callback,
-        identifiability_tol=identifiability_tol, moved_sigmas=moved_sigmas, warn=warn,
-        orders=orders, loss=loss, loss_scale=loss_scale, fix_at=fix_at)
+    options = with_overrides("calibrate", CalibrationOptions, options, overrides)
     return calibrate_with(robot, measurement, q, y, options, meta=meta, t0=t0)
 
 
