@@ -834,18 +834,20 @@ SCALED = {
         {"--worlds": "3", "--paths-per-world": "1"},
         "10000 worlds x 100 paths take hours; 3 worlds x 1 path (~2 min on the 2-core VM: "
         "worlds 0 and 2 give a hard path each, which the split by world of train plan needs)"),
+    "docs/datasets.md: jwarp data generate --robot justin19 --worlds 10000 --paths-per-world "
+    "100 --db /data/justin19.sqlite --ray-address": (
+        {"--worlds": "1", "--paths-per-world": "1", "--db": "justin19.sqlite",
+         "--device": "cpu", "--num-gpus": "0"},
+        "CI has no GPU and no cluster: one world of one path on the CPU, in a local Ray "
+        "instance started by the test (the running cluster --ray-address auto finds), the "
+        "database in the test's folder"),
     "docs/datasets.md: jwarp train plan --robot justin19 --data out.sqlite": (
         {"--epochs": "1", "--steps-per-epoch": "2"},
         "10 epochs of 100 steps take ~2.5 min on the CPU; 1 epoch of 2 steps trains the same "
         "network on the same split"),
 }
 #: doc commands that are parsed but not run, with the reason
-NOT_RUN = {
-    "docs/datasets.md: jwarp data generate --robot justin19 --worlds 10000 --paths-per-world "
-    "100 --db /data/justin19.sqlite --ray-address": (
-        "needs a running Ray cluster (--ray-address auto) and CUDA (--device cuda); ray is "
-        "not installed in CI"),
-}
+NOT_RUN: dict = {}
 
 
 def scaled_argv(key: str) -> list[str]:
@@ -891,6 +893,29 @@ def test_datasets_md_recipe(in_work, capsys):
     assert code == 0 and quoted[0].strip() in err, (quoted, err)
     n = len(np.load(in_work / "p.npz")["start"])
     assert n == 3 and re.sub(r"\d+", str(n), quoted[1].strip()) in out, (quoted, out)
+
+
+def test_datasets_md_ray_command(in_work, capsys):
+    """docs/datasets.md's cluster command (scaled: :data:`SCALED`) against a local Ray
+    instance: the chunk runs as a Ray task and its world lands in the driver's database."""
+    ray = pytest.importorskip("ray", reason="the test extra's ray is not installed")
+    if ray.is_initialized():
+        ray.shutdown()
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False,
+             runtime_env={"env_vars": {"PYTHONPATH": str(ROOT)}})
+    try:
+        key = ("docs/datasets.md: jwarp data generate --robot justin19 --worlds 10000 "
+               "--paths-per-world 100 --db /data/justin19.sqlite --ray-address")
+        argv = scaled_argv(key)
+        assert argv[argv.index("--ray-address") + 1] == "auto"
+        code, out, err = run(capsys, argv)
+    finally:
+        ray.shutdown()
+    assert code == 0 and "justin19.sqlite: 1 worlds (1 paths) written" in out, out + err
+    assert out.rstrip().endswith("(ray)"), out  # the chunk ran as a Ray task
+    code, out, err = run(capsys, ["data", "info", "justin19.sqlite"])
+    info = json.loads(out)
+    assert info["robot"] == "justin19" and info["worlds"] == 1 and info["paths"] == 1
 
 
 def _campaigns(folder: Path, capsys) -> None:
