@@ -52,7 +52,7 @@ import warp as wp
 
 from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
 from jwarp.core.device import numpy_dtype, scalar_type, tables
-from jwarp.core.limits import LIMIT_TOL, limit_tables, project_numpy, sample_within_limits
+from jwarp.core.limits import LIMIT_TOL, limit_tables, sample_within_limits
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik as ik_kernels
 from jwarp.kernels import ik_step as step_kernels
