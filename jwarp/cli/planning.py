@@ -713,6 +713,7 @@ def cmd_free_config(args: argparse.Namespace) -> int:
     check_option_memory(float(FREE_CONFIG_BATCH) * config_bytes(model),
                         f"{FREE_CONFIG_BATCH} configurations of '{model.name}'", "--robot")
     world = _world(args.world, model)
+    kappa = _kappa(args, model)
     from jwarp.world.collision import is_collision_free
     from jwarp.world.feasibility import random_configurations
 
@@ -730,8 +731,13 @@ def cmd_free_config(args: argparse.Namespace) -> int:
         tried += k
         if model.spheres:
             try:
-                ok = is_collision_free(model, q, world, args.margin, device=args.device,
-                                       dtype=np.float64)
+                if kappa is None:
+                    ok = is_collision_free(model, q, world, args.margin, device=args.device,
+                                           dtype=np.float64)
+                else:  # the deflected robot, as plan/ik --elastic check their endpoints
+                    from jwarp.solvers.feasibility import collision_free
+                    ok = collision_free(model, world, q, args.margin, kappa=kappa,
+                                        device=args.device, self_margin=args.margin)
             except (ValueError, TypeError) as e:
                 raise _solver_error("free-config", e) from None
         else:
@@ -744,10 +750,13 @@ def cmd_free_config(args: argparse.Namespace) -> int:
     qs = np.stack(found)
     if args.json:
         print(dumps({"robot": model.name, "world": args.world, "margin": args.margin,
+                     "elastic": kappa is not None,
                      "seed": args.seed, "tried": tried, "joint_names": list(model.joint_names),
                      "configurations": qs.tolist()}))
     else:
         where = f"in --world {args.world}" if args.world else "(self-collision only)"
+        if kappa is not None:
+            where += ", elastic (deflected by gravity)"
         print(f"robot {model.name}: {len(qs)} collision-free configuration"
               f"{'s' if len(qs) != 1 else ''} {where}, margin {args.margin:g} m, from {tried} "
               f"draws (seed {args.seed})")
@@ -905,6 +914,11 @@ def add_subcommands(sub: Any) -> None:
                    metavar="N", help="most configurations drawn (default 100000)")
     s.add_argument("--no-collision", action="store_true",
                    help="accept a robot without collision spheres (joint limits only)")
+    s.add_argument("--elastic", action="store_true",
+                   help="check the elastic model (the robot deflected by gravity at its "
+                        "torque equilibrium), as plan/ik --elastic check their start and goal")
+    s.add_argument("--kappa", default=None, metavar="K",
+                   help="compliance [rad/(N m)] with --elastic (default: the robot's, else 1e-4)")
     s.add_argument("--device", default="cpu", help="Warp device (default cpu; e.g. cuda:0)")
     s.add_argument("--json", action="store_true", help="print JSON")
     s.set_defaults(func=cmd_free_config)
