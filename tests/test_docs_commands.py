@@ -832,15 +832,18 @@ SCALED = {
     "docs/datasets.md: jwarp data generate --robot justin19 --worlds 10000 --paths-per-world "
     "100 --db out.sqlite": (
         {"--worlds": "3", "--paths-per-world": "1"},
-        "10000 worlds x 100 paths take hours; 3 worlds x 1 path (~2 min on the 2-core VM: "
-        "worlds 0 and 2 give a hard path each, which the split by world of train plan needs)"),
+        "10000 worlds x 100 paths take hours; 3 worlds x 1 path (worlds 0 and 2 give a hard "
+        "path each, which the split by world of train plan needs); run after the cluster "
+        "command below has labelled the same 3 worlds into out.sqlite, so it resumes: the "
+        "complete worlds are skipped (the documented rerun), saving ~1.5 min of CI"),
     "docs/datasets.md: jwarp data generate --robot justin19 --worlds 10000 --paths-per-world "
     "100 --db /data/justin19.sqlite --ray-address": (
-        {"--worlds": "1", "--paths-per-world": "1", "--db": "justin19.sqlite",
-         "--device": "cpu", "--num-gpus": "0"},
-        "CI has no GPU and no cluster: one world of one path on the CPU, in a local Ray "
-        "instance started by the test (the running cluster --ray-address auto finds), the "
-        "database in the test's folder"),
+        {"--worlds": "3", "--paths-per-world": "1", "--db": "out.sqlite",
+         "--device": "cpu", "--num-gpus": "0", "--chunk": "1"},
+        "CI has no GPU and no cluster: 3 worlds of one path on the CPU, in a local Ray "
+        "instance of 2 CPUs started by the test (the running cluster --ray-address auto "
+        "finds), into the database of the recipe above (out.sqlite in the test's folder); "
+        "--chunk 1: 3 worlds are 3 tasks, both CPUs busy (16 would be one task)"),
     "docs/datasets.md: jwarp train plan --robot justin19 --data out.sqlite": (
         {"--epochs": "1", "--steps-per-epoch": "2"},
         "10 epochs of 100 steps take ~2.5 min on the CPU; 1 epoch of 2 steps trains the same "
@@ -863,13 +866,31 @@ def scaled_argv(key: str) -> list[str]:
 
 
 def test_datasets_md_recipe(in_work, capsys):
-    """docs/datasets.md's generate / info / export / train plan (scaled: :data:`SCALED`),
-    and docs/cli_vocabulary.md's ``data export p.sqlite --npz p.npz`` on the same database
-    (its deprecation line and its "p.npz: N paths" line)."""
+    """docs/datasets.md's cluster command, then its generate / info / export / train plan
+    (scaled: :data:`SCALED`), and docs/cli_vocabulary.md's ``data export p.sqlite --npz
+    p.npz`` on the same database (its deprecation line and its "p.npz: N paths" line). The
+    cluster command runs against a local Ray instance: its chunks run as Ray tasks and their
+    worlds land in the driver's database; the plain generate then resumes it."""
+    ray = pytest.importorskip("ray", reason="the test extra's ray is not installed")
+    if ray.is_initialized():
+        ray.shutdown()
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
+             runtime_env={"env_vars": {"PYTHONPATH": str(ROOT)}})
+    try:
+        key = ("docs/datasets.md: jwarp data generate --robot justin19 --worlds 10000 "
+               "--paths-per-world 100 --db /data/justin19.sqlite --ray-address")
+        argv = scaled_argv(key)
+        assert argv[argv.index("--ray-address") + 1] == "auto"
+        code, out, err = run(capsys, argv)
+    finally:
+        ray.shutdown()
+    assert code == 0 and "out.sqlite: 3 worlds (3 paths) written" in out, out + err
+    assert out.rstrip().endswith("(ray)"), out  # the chunks ran as Ray tasks
     key = ("docs/datasets.md: jwarp data generate --robot justin19 --worlds 10000 "
            "--paths-per-world 100 --db out.sqlite")
     code, out, err = run(capsys, scaled_argv(key))
-    assert code == 0 and "out.sqlite: 3 worlds (3 paths) written" in out, out + err
+    assert code == 0 and "out.sqlite: 0 worlds (0 paths) written, 3 already there" in out, \
+        out + err
     code, out, err = run(capsys, argv_of("docs/datasets.md: jwarp data info out.sqlite"))
     info = json.loads(out)
     assert code == 0 and info["robot"] == "justin19" and info["worlds"] == 3
@@ -893,29 +914,6 @@ def test_datasets_md_recipe(in_work, capsys):
     assert code == 0 and quoted[0].strip() in err, (quoted, err)
     n = len(np.load(in_work / "p.npz")["start"])
     assert n == 3 and re.sub(r"\d+", str(n), quoted[1].strip()) in out, (quoted, out)
-
-
-def test_datasets_md_ray_command(in_work, capsys):
-    """docs/datasets.md's cluster command (scaled: :data:`SCALED`) against a local Ray
-    instance: the chunk runs as a Ray task and its world lands in the driver's database."""
-    ray = pytest.importorskip("ray", reason="the test extra's ray is not installed")
-    if ray.is_initialized():
-        ray.shutdown()
-    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False,
-             runtime_env={"env_vars": {"PYTHONPATH": str(ROOT)}})
-    try:
-        key = ("docs/datasets.md: jwarp data generate --robot justin19 --worlds 10000 "
-               "--paths-per-world 100 --db /data/justin19.sqlite --ray-address")
-        argv = scaled_argv(key)
-        assert argv[argv.index("--ray-address") + 1] == "auto"
-        code, out, err = run(capsys, argv)
-    finally:
-        ray.shutdown()
-    assert code == 0 and "justin19.sqlite: 1 worlds (1 paths) written" in out, out + err
-    assert out.rstrip().endswith("(ray)"), out  # the chunk ran as a Ray task
-    code, out, err = run(capsys, ["data", "info", "justin19.sqlite"])
-    info = json.loads(out)
-    assert info["robot"] == "justin19" and info["worlds"] == 1 and info["paths"] == 1
 
 
 def _campaigns(folder: Path, capsys) -> None:
