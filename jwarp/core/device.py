@@ -17,7 +17,7 @@ Model vs Data (as in MuJoCo Warp):
   edit a copy, not the model in place.
 * **Data** -- workspaces that hold every intermediate and output of a computation on one
   batch shape and are reused across calls (no allocation on a second call of equal
-  shape): :class:`PathData` (the buffers of a batch of paths),
+  shape): the planner's path buffers (:class:`jwarp.solvers.planner.PathObjective`),
   :class:`jwarp.world.collision.CollisionData` (collision scratch and outputs),
   :class:`jwarp.kinematics.data.KinematicsData` ``(model, batch)`` (joint values, frames,
   frame Jacobians and their recorded launches; filled by
@@ -52,7 +52,7 @@ from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 
-__all__ = ["DeviceModel", "KinematicsTables", "LimitTables", "SphereModel", "PathData",
+__all__ = ["DeviceModel", "KinematicsTables", "LimitTables", "SphereModel",
            "put_model", "tables", "content_key", "scalar_type", "numpy_dtype",
            "frame_mass_model", "with_frame_masses", "with_kappa_nonlinear", "fixed_parts", "collision_tables"]
 
@@ -625,60 +625,3 @@ def _sphere_model(m: DeviceModel) -> SphereModel:
         pair_a=arr(rt["pairs"][:, 0], wp.int32),
         pair_b=arr(rt["pairs"][:, 1], wp.int32),
     )
-
-
-# ====================================================================== Data
-@dataclass(eq=False)
-class PathData:
-    """The device buffers of a batch of P paths of W waypoints with ``n_sub`` substeps per
-    segment (S = (W - 1) n_sub + 1 configurations per path, N = P S in all), reused from
-    one optimisation to the next (:meth:`fits` says whether a batch shape can reuse it).
-
-    ``paths``/``paths_next`` (P, W, n_dof) (a projected step ping-pongs between them),
-    ``q_sub`` (N, n_dof) the substep configurations, ``sub_cost`` (N,) and ``sub_grad``
-    (N, n_dof) their collision cost and gradient, ``length``/``collision``/``total``/
-    ``sub_max`` (P,) per-path costs, ``grad`` (P, W, n_dof) dU/dQ, ``active`` (P,) int32."""
-
-    n_paths: int
-    n_waypoints: int
-    n_substeps: int
-    paths: wp.array
-    paths_next: wp.array
-    q_sub: wp.array
-    sub_cost: wp.array
-    sub_grad: wp.array
-    length: wp.array
-    collision: wp.array
-    total: wp.array
-    sub_max: wp.array
-    grad: wp.array
-    active: wp.array
-
-    @property
-    def n_configs(self) -> int:
-        """N = P * S substep configurations."""
-        return self.n_paths * ((self.n_waypoints - 1) * self.n_substeps + 1)
-
-    @classmethod
-    def make(cls, model: DeviceModel, n_paths: int, n_waypoints: int,
-             n_substeps: int) -> "PathData":
-        """Zeroed buffers (``active`` all ones) for the model's device and dtype."""
-        P, W, n_sub = int(n_paths), int(n_waypoints), int(n_substeps)
-        if P < 1 or W < 2 or n_sub < 1:
-            raise ValueError(f"PathData: expected n_paths >= 1, n_waypoints >= 2 and "
-                             f"n_substeps >= 1, got {n_paths}, {n_waypoints}, {n_substeps}")
-        n, sc, dev = model.n_dof, model.scalar, model.device
-        N = P * ((W - 1) * n_sub + 1)
-
-        def z(shape: Any) -> wp.array:
-            return wp.zeros(shape, dtype=sc, device=dev)
-
-        return cls(P, W, n_sub, paths=z((P, W, n)), paths_next=z((P, W, n)), q_sub=z((N, n)),
-                   sub_cost=z(N), sub_grad=z((N, n)), length=z(P), collision=z(P), total=z(P),
-                   sub_max=z(P), grad=z((P, W, n)),
-                   active=wp.ones(P, dtype=wp.int32, device=dev))
-
-    def fits(self, n_paths: int, n_waypoints: int, n_substeps: int) -> bool:
-        """True where a batch of this shape can reuse these buffers."""
-        return (self.n_paths, self.n_waypoints, self.n_substeps) == (
-            int(n_paths), int(n_waypoints), int(n_substeps))

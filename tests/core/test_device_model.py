@@ -1,5 +1,5 @@
 """The device Model (jwarp/core/device.py put_model), the typed DH rows (jwarp/core/rows.py)
-and the Data workspaces (CollisionData, PathData): one cache keyed by robot content, every
+and the Data workspaces (CollisionData): one cache keyed by robot content, every
 table against the RobotModel (numpy), workspaces reused by identity, rows validated."""
 
 import dataclasses
@@ -10,7 +10,7 @@ import warp as wp
 
 import jwarp
 from jwarp.core import device as D
-from jwarp.core.device import PathData, collision_tables, content_key, put_model, tables
+from jwarp.core.device import collision_tables, content_key, put_model, tables
 from jwarp.core.limits import limit_tables, sample_within_limits
 from jwarp.core.rows import PER_CONFIG_LAYOUT, DHRows, RowsKind
 from jwarp.kernels import fk as fk_kernels
@@ -281,22 +281,6 @@ def test_collision_data_is_reused_and_gives_the_same_numbers():
     other = collision.collision_model(r, None, device="cpu", dtype=np.float32)
     with pytest.raises(ValueError, match="data"):
         other.cost(wp.array(q, dtype=wp.float32, device="cpu"), data=d)
-
-
-def test_path_data_buffers():
-    m = put_model("arm7", "cpu", np.float32)
-    pd = PathData.make(m, 3, 5, 4)
-    S = 4 * 4 + 1
-    assert pd.n_configs == 3 * S
-    assert pd.paths.shape == (3, 5, 7) and pd.paths_next.shape == (3, 5, 7)
-    assert pd.q_sub.shape == (3 * S, 7) and pd.sub_grad.shape == (3 * S, 7)
-    assert pd.sub_cost.shape == (3 * S,) and pd.grad.shape == (3, 5, 7)
-    for name in ("length", "collision", "total", "sub_max"):
-        assert getattr(pd, name).shape == (3,) and getattr(pd, name).dtype == wp.float32
-    assert pd.active.numpy().tolist() == [1, 1, 1]
-    assert pd.fits(3, 5, 4) and not pd.fits(3, 5, 3) and not pd.fits(2, 5, 4)
-    with pytest.raises(ValueError, match="n_waypoints"):
-        PathData.make(m, 3, 1, 4)
 
 
 def test_compensation_rows_as_typed_rows():
