@@ -235,3 +235,18 @@ def test_options_are_spelled_once(func, options):
     assert params["options"].kind is inspect.Parameter.KEYWORD_ONLY
     var_kw = [p.name for p in params.values() if p.kind is inspect.Parameter.VAR_KEYWORD]
     assert var_kw == ["overrides"], f"jwarp.{func}: expected **overrides, got {var_kw}"
+
+
+def test_feasibility_helpers_come_from_their_module():
+    """The planner re-exports the feasibility helpers it uses (``collision_free``,
+    ``check_world``, ...) for old callers; jwarp's own modules import them from
+    ``jwarp.solvers.feasibility``, where they live."""
+    import jwarp.solvers.feasibility as feas
+
+    helpers = {n for n in dir(feas) if not n.startswith("_") and callable(getattr(feas, n))
+               and getattr(getattr(feas, n), "__module__", "") == feas.__name__}
+    bad = [f"{m}:{line} imports {sorted(set(names) & helpers)} from jwarp.solvers.planner"
+           for m in MODULES if m not in FACADE and m != "jwarp.solvers.planner"
+           for line, target, names, _ in imports(m)
+           if target == "jwarp.solvers.planner" and names and set(names) & helpers]
+    assert not bad, "\n".join(bad)

@@ -38,7 +38,8 @@ from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.limits import sample_within_limits
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
-from jwarp.solvers.planner import PathWeights, PlanOptions, Planner, check_world, collision_free
+from jwarp.solvers.feasibility import check_world, collision_free
+from jwarp.solvers.planner import PathWeights, PlanOptions, Planner
 from jwarp.world.feasibility import feasible_simplex_world
 
 __all__ = ["PlanDataOptions", "WorldLabels", "world_for", "label_world", "world_extent"]
