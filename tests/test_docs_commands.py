@@ -1411,8 +1411,9 @@ def _jwarp_names(code: str) -> list[tuple[str, str | None]]:
 
 def test_docs_python_blocks_name_real_jwarp_api():
     """The Python blocks of README.md and docs/*.md are fragments (``robot``, ``setup``,
-    ``panda.urdf`` come from the text around them; README's are run whole above): every
-    jwarp module, function and class they import or use exists."""
+    ``panda.urdf`` come from the text around them; README's are run whole above, those of
+    docs/*.md and examples/README.md after curated preludes in tests/test_docs_snippets.py):
+    every jwarp module, function and class they import or use exists."""
     import importlib
 
     blocks = _python_blocks()
