@@ -176,16 +176,10 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "from jwarp.importers.spheres import load_mesh\n"
         "mesh = load_mesh('link3.stl')\norigin_4x4 = np.eye(4)\n"
         "from jwarp.importers.robot import load_urdf\n"
-        "urdf_link_geometries = [{'kind': g.kind, 'size': g.size, 'origin': g.origin,\n"
-        "                         'mesh': g.mesh_path, 'scale': g.scale}\n"
-        "                        for g in load_urdf(erd('panda_description/urdf/panda.urdf'))"
-        ".geometries_of('panda_link3')]\n",
-        "`link3.stl`, `mesh` and `urdf_link_geometries`: example-robot-data's Panda link 3; "
-        "the link's geometries as the mappings fit_link's docstring names (kind, size, "
-        "origin, mesh, scale): fit_link refuses the importer's own CollisionGeometry "
-        "objects of load_urdf(...).geometries_of(link) (it reads `mesh`/`filename`/`path`, "
-        "they carry `mesh_path`: 'mesh: required for kind mesh'), a jwarp bug reported in "
-        "issue 27's notes"),
+        "urdf_link_geometries = load_urdf(erd('panda_description/urdf/panda.urdf'))"
+        ".geometries_of('panda_link3')\n",
+        "`link3.stl`, `mesh` and `urdf_link_geometries`: example-robot-data's Panda link 3 "
+        "and the importer's own CollisionGeometry objects of that link"),
     "docs/spheres.md:204": (
         _JUSTIN, "`robot` is justin19 (the text's robot with spheres)"),
     "docs/urdf.md:6": (

@@ -936,7 +936,7 @@ def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
              **options: Any) -> SphereFit:
     """Spheres of all collision geometries of one link, in the link frame. Each geometry is
     a mapping or an object with ``kind``, ``size``, ``origin`` and, for meshes, ``mesh`` (or
-    ``filename``/``path``) and ``scale``. Spheres are taken as they are; every other
+    ``filename``/``path``/``mesh_path``: the importer's ``CollisionGeometry``) and ``scale``. Spheres are taken as they are; every other
     geometry is posed in the link frame and the union fitted as **one** part
     (:func:`fit_spheres`: the solid of overlapping bodies by winding number, so
     ``max_spheres`` is the budget of the whole link). ``fit``: the function fitting that
@@ -948,7 +948,8 @@ def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
     exact, parts = [], []
     for i, g in enumerate(geometries):
         get = (g.get if isinstance(g, dict) else lambda k, d=None, g=g: getattr(g, k, d))
-        mesh = get("mesh") if get("mesh") is not None else (get("filename") or get("path"))
+        mesh = get("mesh") if get("mesh") is not None else (
+            get("filename") or get("path") or get("mesh_path"))  # the importer's geometries
         try:
             kind = get("kind")
             T = _origin(get("origin"))

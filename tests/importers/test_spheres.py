@@ -264,3 +264,21 @@ def test_a_fit_that_would_not_end_is_refused_before_it_starts():
     small = trimesh.creation.box(extents=[0.1, 0.1, 0.1])   # --tolerance 1e-7 on a 10 cm box
     with pytest.raises(ValueError, match=r"tolerance: .* at tolerance 1e-07"):
         fit_spheres(small, tolerance=1e-7)
+
+
+def test_fit_link_takes_the_importers_geometries():
+    """fit_link accepts load_urdf(...).geometries_of(link) as they are (a mesh file in
+    ``mesh_path``), with the same spheres as the mappings its docstring names."""
+    from jwarp.importers.robot import load_urdf
+    from jwarp.importers.spheres import fit_link
+
+    from robot_data import erd
+
+    geoms = load_urdf(erd("panda_description/urdf/panda.urdf")).geometries_of("panda_link3")
+    as_maps = [{"kind": g.kind, "size": g.size, "origin": g.origin, "mesh": g.mesh_path,
+                "scale": g.scale} for g in geoms]
+    a = fit_link(geoms, tolerance=0.02)
+    b = fit_link(as_maps, tolerance=0.02)
+    np.testing.assert_array_equal(a.centres, b.centres)
+    np.testing.assert_array_equal(a.radii, b.radii)
+    assert len(a.radii) >= 1
