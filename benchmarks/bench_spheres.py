@@ -4,7 +4,8 @@ and self-collision pairs: spheres, one-sided error, excess, largest protrusion, 
 and peak memory per robot.
 
     python benchmarks/bench_spheres.py                 # panda, ur10, talos arm; pairs
-    python benchmarks/bench_spheres.py --quick         # the Panda only, few pair samples
+    python benchmarks/bench_spheres.py --quick         # the Panda only, few pair samples,
+                                                       # 10 000 / 50 000 check samples
 
 Sections (``--only`` picks some):
 
@@ -74,8 +75,16 @@ def link_mesh(geoms) -> trimesh.Trimesh:
     return parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
 
 
-def measure_links(name: str, path: str, model, fit_rows: dict) -> list[dict]:
-    """Independent per-link figures of a fitted model (module docstring)."""
+#: fresh surface samples of the one-sided error and points of the volumes per link (the
+#: module docstring's 50 000 and 200 000); ``--quick``: QUICK_SAMPLES
+SAMPLES = (50_000, 200_000)
+QUICK_SAMPLES = (10_000, 50_000)
+
+
+def measure_links(name: str, path: str, model, fit_rows: dict,
+                  samples: tuple = SAMPLES) -> list[dict]:
+    """Independent per-link figures of a fitted model (module docstring); ``samples``:
+    (surface samples, volume points) per link."""
     from jwarp.importers.robot import load_urdf
     from jwarp.importers.spheres import (excess_volume, one_sided_error, signed_distance,
                                          sphere_protrusion)
@@ -90,15 +99,15 @@ def measure_links(name: str, path: str, model, fit_rows: dict) -> list[dict]:
         f = model.frame_index(link)
         c = np.array([s.position for s in model.spheres if s.frame == f]).reshape(-1, 3)
         r = np.array([s.radius for s in model.spheres if s.frame == f])
-        pts, face = trimesh.sample.sample_surface(mesh, 50_000, seed=424242)
+        pts, face = trimesh.sample.sample_surface(mesh, samples[0], seed=424242)
         nrm = mesh.face_normals[face]
         h = 1e-3 * float(np.linalg.norm(mesh.extents))
         buried = (signed_distance(mesh, pts + h * nrm) < 0) & (signed_distance(mesh, pts - h * nrm) < 0)
         err = float(one_sided_error(pts[~buried], c, r).max()) if len(r) else float("inf")
         prot = float(sphere_protrusion(mesh, c, r).max()) if len(r) else 0.0
-        exc, _, _ = excess_volume(mesh, c, r, n=200_000, seed=7)
+        exc, _, _ = excess_volume(mesh, c, r, n=samples[1], seed=7)
         lo, hi = mesh.bounds
-        x = lo + np.random.default_rng(8).random((200_000, 3)) * (hi - lo)
+        x = lo + np.random.default_rng(8).random((samples[1], 3)) * (hi - lo)
         vol = float(np.prod(hi - lo)) * float((signed_distance(mesh, x) < 0).mean())
         rows.append({"robot": name, "link": link, "group": group(name, link), "spheres": len(r),
                      "one_sided_error_mm": err * 1e3, "max_protrusion_mm": prot * 1e3,
@@ -109,7 +118,7 @@ def measure_links(name: str, path: str, model, fit_rows: dict) -> list[dict]:
     return rows
 
 
-def _one_robot(name: str, options: dict, queue) -> None:
+def _one_robot(name: str, options: dict, queue, samples: tuple = SAMPLES) -> None:
     """Fit one robot in this (fresh) process: time, peak memory, per-link figures."""
     init_warp()
     from jwarp.importers.robot import example_robot_urdf, load_urdf
@@ -124,7 +133,7 @@ def _one_robot(name: str, options: dict, queue) -> None:
         model, rep = spherize(imported, SpherizeOptions(**options))
     seconds = time.perf_counter() - t
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    rows = measure_links(name, str(path), model, {r["link"]: r for r in rep.links})
+    rows = measure_links(name, str(path), model, {r["link"]: r for r in rep.links}, samples)
     queue.put({"robot": name, "spheres": len(model.spheres), "seconds": seconds,
                "peak_rss_mb": peak / 1024, "rss_before_fit_mb": base / 1024,
                "warnings": rep.warnings, "links": rows,
@@ -146,7 +155,8 @@ def robots(args) -> dict:
     ctx = mp.get_context("spawn")
     for name in names:
         q = ctx.Queue()
-        p = ctx.Process(target=_one_robot, args=(name, options, q))
+        p = ctx.Process(target=_one_robot, args=(name, options, q,
+                                                 QUICK_SAMPLES if args.quick else SAMPLES))
         p.start()
         res = q.get()
         p.join()
