@@ -15,9 +15,9 @@ Sections (``--only`` picks some):
   1 mm / 0.01 rad; for each of ``--targets``: ``restart_after=None`` (no re-seeding, the
   solver before this issue apart from the held limits), the default re-seeding, and the
   same with ``freeze_solved``; then :class:`IKOptions`' defaults (16 seeds, 200
-  iterations, 1e-4 m / 1e-3 rad); ``--dtype`` the iteration's float type. "solved" is one float64 check of every returned
-  configuration (jwarp's float64 FK: position and rotation error, box limits), not the
-  solver's own flag. Solved targets per second = solved / (min or median seconds of one
+  iterations, 1e-4 m / 1e-3 rad); ``--dtype`` the iteration's float type. "solved" is
+  one float64 check of every returned configuration (jwarp's float64 FK: position and
+  rotation error, box limits), not the solver's own flag. Solved targets per second = solved / (min or median seconds of one
   ``solve`` of a persistent solver, ``--repeats`` runs interleaved, each reseeded).
 * ``scene``: collision-free IK of the fitted Panda sphere model
   (``benchmarks/scene_problems.py``'s, ``SpherizeOptions(tolerance=0.02)``) in a table

@@ -935,8 +935,9 @@ def fit_geometry(kind: str, size: Any = None, origin: Any = None, mesh: Any = No
 def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
              **options: Any) -> SphereFit:
     """Spheres of all collision geometries of one link, in the link frame. Each geometry is
-    a mapping or an object with ``kind``, ``size``, ``origin`` and, for meshes, ``mesh`` (or
-    ``filename``/``path``/``mesh_path``: the importer's ``CollisionGeometry``) and ``scale``. Spheres are taken as they are; every other
+    a mapping or an object with ``kind``, ``size``, ``origin`` and, for meshes, ``mesh``
+    (or ``filename``/``path``/``mesh_path``: the importer's ``CollisionGeometry``) and
+    ``scale``. Spheres are taken as they are; every other
     geometry is posed in the link frame and the union fitted as **one** part
     (:func:`fit_spheres`: the solid of overlapping bodies by winding number, so
     ``max_spheres`` is the budget of the whole link). ``fit``: the function fitting that
