@@ -76,7 +76,8 @@ class RestartArgs:
     after: steps without progress before a re-seed (0: never); max_restarts: re-seeds per
     configuration before it gives up; progress: the fraction of its best cost a step
     must reach to count as progress; on_cost: the best cost set while on target (the
-    tolerances' cost); seed: Warp random seed of the solve; best (B,) float64, stall (B,)
+    tolerances' cost); seed (1,) int32: Warp random seed of the solve (an array, so a
+    recorded launch reads each solve's); best (B,) float64, stall (B,)
     and count (B,) int32 per configuration; gave (P,) int32 starts given up per problem.
     """
 
@@ -84,7 +85,7 @@ class RestartArgs:
     max_restarts: int
     progress: f64
     on_cost: f64
-    seed: int
+    seed: wp.array(dtype=wp.int32)
     best: wp.array(dtype=f64)
     stall: wp.array(dtype=wp.int32)
     count: wp.array(dtype=wp.int32)
@@ -314,7 +315,7 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
                     restart.count[b] = k + 1
                     restart.stall[b] = 0
                     restart.best[b] = f64(1.0e300)
-                    state = wp.rand_init(restart.seed + 7919 * (k + 1), b)
+                    state = wp.rand_init(restart.seed[0] + 7919 * (k + 1), b)
                     sample_row(q, b, state, limits, lin_start, lin_joint, lin_coef,
                                lin_bounds)
                     iterations[b] = iterations[b] + 1

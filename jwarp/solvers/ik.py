@@ -210,11 +210,8 @@ class IKObjective:
         self.world = world
         self.weights = weights or IKWeights()
         self.weights.validate()
-        if orientation not in ORIENTATIONS:
-            raise ValueError(f"orientation: expected one of {', '.join(map(repr, ORIENTATIONS))}, "
-                             f"got {orientation!r}")
         #: the kernels' orientation mode and free axis (:attr:`IKOptions.orientation`)
-        self.orient = ORIENTATIONS[orientation]
+        self.orient, free_axis = orientation_args(orientation, free_axis)
         self.device = resolve_device(device)
         self.scalar = scalar_type(dtype)
         self.npdt = numpy_dtype(self.scalar)
@@ -380,6 +377,20 @@ def _task_rows(robot: RobotModel) -> np.ndarray:
     return np.array([0, 1, 5]) if robot.workspace_dim == 2 else np.arange(6)
 
 
+def orientation_args(orientation: str, free_axis: Any) -> tuple[int, tuple]:
+    """(the kernels' mode of ``orientation``, ``free_axis`` normalised (3,)); ValueError
+    naming ``orientation`` (not a key of :data:`ORIENTATIONS`) or ``free_axis`` (not a
+    finite nonzero 3-vector)."""
+    if orientation not in ORIENTATIONS:
+        raise ValueError(f"orientation: expected one of {', '.join(map(repr, ORIENTATIONS))}, "
+                         f"got {orientation!r}")
+    axis = real_array(free_axis, "free_axis").astype(np.float64)
+    norm = float(np.linalg.norm(axis)) if axis.shape == (3,) else 0.0
+    if axis.shape != (3,) or not np.all(np.isfinite(axis)) or norm < 1e-9:
+        raise ValueError(f"free_axis: expected a finite nonzero vector (3,), got {free_axis!r}")
+    return ORIENTATIONS[orientation], tuple(float(v) for v in axis / norm)
+
+
 def check_single_world(world: Any) -> None:
     """ValueError naming ``world`` for a batch of worlds (:meth:`World.batch`): IK checks
     every target against one world (a batch would be checked as the union of its worlds);
@@ -502,15 +513,7 @@ class IKOptions:
         if self.restart_after is not None:
             self.restart_after = _positive_int(self.restart_after, "restart_after", 1)
         self.max_restarts = _positive_int(self.max_restarts, "max_restarts", 0)
-        if self.orientation not in ORIENTATIONS:
-            raise ValueError(f"orientation: expected one of {', '.join(map(repr, ORIENTATIONS))}, "
-                             f"got {self.orientation!r}")
-        axis = real_array(self.free_axis, "free_axis").astype(np.float64)
-        norm = float(np.linalg.norm(axis)) if axis.shape == (3,) else 0.0
-        if axis.shape != (3,) or not np.all(np.isfinite(axis)) or norm < 1e-9:
-            raise ValueError(f"free_axis: expected a finite nonzero vector (3,), got "
-                             f"{self.free_axis!r}")
-        self.free_axis = tuple(float(v) for v in axis / norm)
+        _, self.free_axis = orientation_args(self.orientation, self.free_axis)
         for name in ("tol_pos", "tol_rot", "step", "max_step", "damping", "tol_rho"):
             v = getattr(self, name)
             if not (math.isfinite(real_number(v, name)) and v > 0):
@@ -667,7 +670,10 @@ class IKSolver:
         rs.max_restarts = int(o.max_restarts)
         rs.progress = wp.float64(RESTART_PROGRESS)
         rs.on_cost = wp.float64(o.tol_pos ** 2 + step_kernels.W_ROT * o.tol_rot ** 2)
-        rs.seed = 0
+        rs.seed = wp.zeros(1, dtype=i32, device=dev)
+        # the solve's seed is staged here (CUDA: pinned, copied without a sync)
+        self._seed_host = (rs.seed if dev.is_cpu else
+                           wp.zeros(1, dtype=i32, device="cpu", pinned=True))
         rs.best = wp.zeros(B, dtype=wp.float64, device=dev)
         rs.stall = wp.zeros(B, dtype=i32, device=dev)
         rs.count = wp.zeros(B, dtype=i32, device=dev)
@@ -867,8 +873,9 @@ class IKSolver:
         else:
             wp.copy(self.targets, wp.array(T, dtype=self.targets.dtype, device=dev))
         self._launch("repeat", self.ck.repeat_targets, B, [self.targets, S, obj.target])
-        self.restart.seed = int(self.rng.integers(1 << 31))  # the re-seeds of this solve
-        self._launches.pop("step", None)  # recorded with the last solve's seed
+        self._seed_host.numpy()[0] = int(self.rng.integers(1 << 31))  # this solve's re-seeds
+        if not dev.is_cpu:
+            wp.copy(self.restart.seed, self._seed_host)
         self._launch("reset", self.ck.reset, B, [P, self.done, self.on, self.iterations,
                                                 self.solved, self.counts, self.halt,
                                                 self.restart])
