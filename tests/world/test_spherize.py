@@ -161,3 +161,16 @@ def test_fitted_panda_plans_and_solves_ik_in_the_scene(panda, table_shelf):
     F = np.asarray(jwarp.fk(model, ik.q[ik.feasible], device="cpu", dtype="float64"))[:, frame]
     assert np.abs(F[:, :3, 3] - T[ik.feasible, :3, 3]).max() < 1e-3
     assert collision_free(model, table_shelf, ik.q[ik.feasible], 0.0, device="cpu").all()
+    # and the independent verifier (pinocchio FK, coal: the URDF's collision meshes and the
+    # fitted spheres against the scene's exact primitives) finds every IK answer clear
+    from pathlib import Path
+
+    from verifier import PathVerifier, robot_spheres
+
+    scene = load_scene(Path(__file__).parents[2] / "examples" / "scenes" / "table_shelf.yaml",
+                       robot_frames(model))
+    v = PathVerifier(example_robot_urdf("panda_description/urdf/panda.urdf"), None,
+                     scene.shapes, spheres=robot_spheres(model), joint_names=model.joint_names)
+    for qs in ik.q[ik.feasible]:
+        verdict = v.check_path(qs[None], margin=0.0)
+        assert verdict.ok, verdict
