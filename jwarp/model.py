@@ -150,6 +150,9 @@ class RobotModel:
     capsules: list[Capsule] = field(default_factory=list)
     self_collision: SelfCollision = field(default_factory=SelfCollision)
     end_effectors: dict[str, int] = field(default_factory=dict)
+    #: ``{name: frame index}``: other names of frames (an imported URDF's joint names, each
+    #: naming its child link's frame, as pinocchio's joint frames; docs/urdf.md)
+    frame_aliases: dict[str, int] = field(default_factory=dict)
     linear_limits: list[LinearLimit] = field(default_factory=list)
     kappa: np.ndarray | None = None  # (n_frames, 3) rad/(N m)
     notes: dict[str, str] = field(default_factory=dict)
@@ -192,7 +195,8 @@ class RobotModel:
 
     # ------------------------------------------------------------- look-ups
     def frame_index(self, frame: int | str, argname: str = "frame") -> int:
-        """Index of a frame given by index, frame name or end-effector name."""
+        """Index of a frame given by index, end-effector name, frame name or frame alias
+        (:attr:`frame_aliases`), looked up in that order."""
         if isinstance(frame, (bool, np.bool_)):
             raise TypeError(f"{argname}: expected a frame name or index, got {frame!r}")
         if isinstance(frame, (int, np.integer)):
@@ -207,6 +211,8 @@ class RobotModel:
             names = self.frame_names
             if frame in names:
                 return names.index(frame)
+            if frame in self.frame_aliases:
+                return self.frame_aliases[frame]
             raise ValueError(
                 f"{argname}: unknown frame '{frame}' for robot '{self.name}'; "
                 f"known: {', '.join(names)}")
@@ -768,6 +774,14 @@ def validate(model: RobotModel) -> None:
             raise RobotModelError(f"end_effectors.{name}: the name of frame {i} '{name}', but "
                                   f"points at frame {idx} '{frame_names[idx]}' (frame "
                                   f"'{name}' would be ambiguous)")
+    for name, idx in model.frame_aliases.items():
+        _name(name, "frame_aliases")
+        idx = model.frame_aliases[name] = _check_frame(idx, nf, f"frame_aliases.{name}")
+        if name in frame_names and frame_names.index(name) != idx:
+            i = frame_names.index(name)
+            raise RobotModelError(f"frame_aliases.{name}: the name of frame {i} '{name}', but "
+                                  f"points at frame {idx} '{frame_names[idx]}' (frame "
+                                  f"'{name}' would be ambiguous)")
     for k, lim in enumerate(model.linear_limits):
         w = f"linear_limits[{k}]"
         if len(lim.joints) != len(lim.coefficients) or not lim.joints:
@@ -921,6 +935,10 @@ def _from_dict(doc: Any) -> RobotModel:
         exclude_pairs=[tuple(fidx(m, f"self_collision.exclude_pairs[{k}]") for m in p)
                        for k, p in enumerate(scd.get("exclude_pairs", []))])
     eff = {str(k): fidx(v, f"end_effectors.{k}") for k, v in (doc.get("end_effectors") or {}).items()}
+    aliases = doc.get("frame_aliases") or {}
+    if not isinstance(aliases, dict):
+        raise RobotModelError("frame_aliases: expected an object {name: frame}")
+    aliases = {str(k): fidx(v, f"frame_aliases.{k}") for k, v in aliases.items()}
     lin = []
     for k, ld in enumerate(doc.get("linear_limits", [])):
         lim = _finite(_req(ld, "limits", f"linear_limits[{k}]"), f"linear_limits[{k}].limits", (2,))
@@ -948,7 +966,7 @@ def _from_dict(doc: Any) -> RobotModel:
         gravity=_finite(doc.get("gravity", [0.0, 0.0, -9.81]), "gravity", (3,)),
         workspace_dim=doc.get("workspace_dim", 3),
         masses=masses, spheres=spheres, capsules=capsules, self_collision=sc,
-        end_effectors=eff, linear_limits=lin, kappa=kappa, harmonic=harmonic,
+        end_effectors=eff, frame_aliases=aliases, linear_limits=lin, kappa=kappa, harmonic=harmonic,
         kappa_nonlinear=knl, coupling_harmonic=coupled_h, notes={str(k): str(v) for k, v in (doc.get("notes") or {}).items()})
 
 
@@ -1009,6 +1027,8 @@ def _to_dict(m: RobotModel) -> dict[str, Any]:
         "linear_limits": [{"joints": l.joints, "coefficients": l.coefficients,
                            "limits": [l.lower, l.upper]} for l in m.linear_limits],
     }
+    if m.frame_aliases:
+        doc["frame_aliases"] = dict(m.frame_aliases)
     if np.any(m.kappa):
         doc["kappa"] = lst(m.kappa)
     if m.has_harmonic:

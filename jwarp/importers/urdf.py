@@ -15,7 +15,9 @@ stop the import). Mapping (docs/urdf.md):
   link frame. ``T @ R_align`` is folded into the DH row when it is one exactly
   (``Rot_y(beta) Rot_x(alpha) Trans_x(r) Rot_z(theta) Trans_z(d)``, to 4e-15), else it is
   a static frame ``<joint>_origin``. The dh frame is the child link's frame (named after
-  the link) when ``R_align = I``, else it is named after the joint;
+  the link) when ``R_align = I``, else it is jwarp's axis frame ``<joint>_axis``;
+* every URDF joint name (fixed ones too) is a frame alias (``frame_aliases``) of its child
+  link's frame: the URDF joint frame after the joint's motion, pinocchio's ``oMf[joint]``;
 * ``mimic`` joints are coupled frames: ``q_frame = multiplier * q[joint]``, the offset
   added to theta (or d); mimics of mimics are resolved;
 * ``continuous`` joints become revolute joints with limits ``[-continuous_limit,
@@ -167,8 +169,10 @@ class UrdfImport:
     """What :func:`read_urdf` found: the robot ``document`` (schema ``jwarp.robot``; frames
     and joints referenced by name), the collision ``geometries`` of every link, the
     ``link_frames`` ``{link: frame name}`` (the same names), ``joint_frames``
-    ``{URDF joint: dh frame name}`` of the moving joints and ``urdf_joints`` ``{name:
-    UrdfJoint}`` of every joint, fixed ones included (what an SRDF may name)."""
+    ``{URDF joint: dh frame name}`` of the moving joints (the child link's frame, or the axis
+    frame ``<joint>_axis``; the joint's name itself is an alias of the child link's frame)
+    and ``urdf_joints`` ``{name: UrdfJoint}`` of every joint, fixed ones included (what an
+    SRDF may name)."""
 
     document: dict[str, Any]
     geometries: list[CollisionGeometry]
@@ -538,6 +542,7 @@ def _build(path: str, robot: Any, geometries: list[CollisionGeometry], opt: Urdf
         return name
 
     used.update(links)   # link names are kept as they are
+    used.update(joints)  # joint names are aliases of their child links' frames (below)
     frames.append({"name": roots[0], "parent": None, "kind": "static",
                    "transform": np.eye(4).tolist()})
     link_frames[roots[0]] = roots[0]
@@ -577,7 +582,7 @@ def _build(path: str, robot: Any, geometries: list[CollisionGeometry], opt: Urdf
                     parent = oname
             col = 0 if jtype[j.name] == "prismatic" else 1
             row[col] += sign * offset
-            name = j.child if R is None else unique(j.name)
+            name = j.child if R is None else unique(f"{j.name}_axis")
             fd: dict[str, Any] = {"name": name, "parent": parent, "kind": "dh",
                                   "dh": row.tolist()}
             if sign * mult == 1.0:
@@ -607,15 +612,18 @@ def _build(path: str, robot: Any, geometries: list[CollisionGeometry], opt: Urdf
     spheres = [{"frame": g.link, "position": g.origin[:3, 3].tolist(), "radius": float(g.size[0])}
                for g in geometries if g.kind == "sphere"]
     names = [f["name"] for f in frames]
+    # a joint's name is its child link's frame (pinocchio's joint frame: the URDF joint
+    # frame after the motion); a name that is also a frame's stays that frame's
+    aliases = {j.name: j.child for j in robot.joints if j.name not in names}
     if opt.end_effectors is None:
         eff = {names[i]: names[i] for i in document_tips(frames, jdocs, set(links))}
     else:
         eff = {}
         for alias, target in opt.end_effectors.items():
-            if target not in names:
+            if target not in names and target not in aliases:
                 raise UrdfError(f"end_effectors.{alias}: unknown link or frame '{target}' "
                                 f"(links: {', '.join(links)})")
-            eff[alias] = target
+            eff[alias] = target if target in names else aliases[target]
     n_mimic = len(moving) - len(actuated)
     doc = {
         "schema": "jwarp.robot", "version": 1, "name": opt.name or robot.name,
@@ -623,7 +631,7 @@ def _build(path: str, robot: Any, geometries: list[CollisionGeometry], opt: Urdf
                         f"{len(actuated)} actuated joints, {n_mimic} mimic joints. "
                         f"Units: m, rad, kg."),
         "joints": jdocs, "frames": frames, "masses": masses, "spheres": spheres,
-        "end_effectors": eff,
+        "end_effectors": eff, "frame_aliases": aliases,
         "notes": {"source": os.path.abspath(path),
                   "importer": "jwarp.importers.urdf (docs/urdf.md)"},
     }

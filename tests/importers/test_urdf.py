@@ -128,6 +128,70 @@ def test_every_link_is_a_frame_and_panda_finger_mimics():
     assert m.joints[m.joint_index("panda_finger_joint1")].type == "prismatic"
 
 
+#: a robot with axes along z (UR5: also +-y), one with axes along x (SO-100, with a joint named
+#: after a link), continuous joints and non-foldable origins (Kinova), a mimic finger (Panda)
+JOINT_FRAME_ARMS = ("panda", "ur5", "so100", "kinova")
+
+
+@pytest.mark.parametrize("arm", JOINT_FRAME_ARMS)
+def test_every_link_and_joint_frame_equals_pinocchio(arm):
+    """FK of every URDF link AND joint name equals pinocchio's ``oMf`` of that name (a joint
+    name is the URDF joint frame after the motion, the child link's frame; jwarp's axis frame
+    is ``<joint>_axis``; docs/urdf.md). A joint named like a link is that link (SO-100's
+    ``gripper``): pinocchio's frame of the same name and type BODY is compared."""
+    path = _robots_dir() / ARMS[arm]
+    m = jwarp.robot(str(path))
+    pm = pin.buildModelFromUrdf(str(path), mimic=True)
+    pd = pm.createData()
+    from lxml import etree
+
+    root = etree.parse(str(path)).getroot()
+    links = {el.get("name") for el in root.findall("link")}
+    joints = {el.get("name") for el in root.findall("joint")}
+    kinds = (pin.FrameType.BODY, pin.FrameType.JOINT, pin.FrameType.FIXED_JOINT)
+    pairs = [(f, m.frame_index(fr.name)) for f, fr in enumerate(pm.frames)
+             if fr.type in kinds and fr.name != "universe"
+             and not (fr.name in links and fr.type != pin.FrameType.BODY)]
+    compared = {pm.frames[f].name for f, _ in pairs}
+    assert compared == links | joints, "every link and joint compared"
+    rng = np.random.default_rng(7)
+    Q = rng.uniform(m.joint_limits[:, 0], m.joint_limits[:, 1], (200, m.n_dof))
+    F = np.asarray(jwarp.fk(m, Q, device="cpu", dtype=np.float64))
+    ours = F[:, [i for _, i in pairs]]
+    err = 0.0
+    for k, qp in enumerate(pin_config(pm, m, Q)):
+        pin.framesForwardKinematics(pm, pd, qp)
+        theirs = np.array([pd.oMf[f].homogeneous for f, _ in pairs])
+        err = max(err, float(np.abs(ours[k] - theirs).max()))
+    assert err < 1e-9, f"{arm}: a link or joint frame differs from pinocchio by {err:.2e}"
+
+
+def test_joint_names_are_frame_aliases(tmp_path):
+    """The joint names are ``frame_aliases`` of the child links' frames, kept by JSON; the
+    axis-aligned dh frame of a joint whose axis is not +-z is ``<joint>_axis``; a document
+    without ``frame_aliases`` (saved before) loads; an alias may not shadow another frame."""
+    path = _robots_dir() / ARMS["ur5"]
+    imp = load_urdf(path, end_effectors={"elbow": "elbow_joint"})
+    m = imp.model
+    assert m.frame_index("elbow_joint") == m.frame_index("forearm_link")
+    assert m.frame_index("elbow") == m.frame_index("forearm_link")   # end_effectors may name a joint
+    assert imp.source.joint_frames["elbow_joint"] == "elbow_joint_axis"
+    assert "elbow_joint" not in m.frame_names
+    assert m.frame_index("world_joint") == m.frame_index("base_link")  # fixed joints too
+    doc = m.to_dict()
+    assert doc["frame_aliases"]["elbow_joint"] == m.frame_index("forearm_link")
+    m2 = jwarp.RobotModel.from_dict(json.loads(json.dumps(doc)))
+    assert m2.frame_aliases == m.frame_aliases
+    old = dict(doc)
+    del old["frame_aliases"]
+    assert jwarp.RobotModel.from_dict(old).frame_aliases == {}
+    bad = dict(doc, frame_aliases={"tool0": "forearm_link"})
+    with pytest.raises(ValueError, match="frame_aliases.tool0"):
+        jwarp.RobotModel.from_dict(bad)
+    with pytest.raises(ValueError, match="frame_aliases.x"):
+        jwarp.RobotModel.from_dict(dict(doc, frame_aliases={"x": 99}))
+
+
 # ------------------------------------------------------------------ small URDFs
 def write(tmp_path, text: str, name: str = "robot.urdf") -> Path:
     p = tmp_path / name
