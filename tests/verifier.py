@@ -26,9 +26,10 @@ Two checks, at samples so dense that no revolute joint moves more than ``max_ste
     exact primitive).
 
 Sphere frame names follow jwarp's URDF importer (jwarp/importers/urdf.py, docs/urdf.md):
-a URDF link name is that link's frame; a joint name is the frame of a moving joint whose
-axis is neither +z nor -z: the joint frame turned so that its z is the joint axis
-(``R_align``, reimplemented here); ``<joint>_origin`` the same frame at joint value 0.
+a URDF link name is that link's frame; a joint name is the URDF joint frame (pinocchio's
+frame of that name: the child link's frame); ``<joint>_axis`` is the frame of a moving
+joint whose axis is neither +z nor -z: the joint frame turned so that its z is the joint
+axis (``R_align``, reimplemented here); ``<joint>_origin`` the same frame at joint value 0.
 Mimic joints follow their joint (``multiplier * q + offset``). Self-collision is not
 checked. A sample at the first or last waypoint is held to ``endpoint_margin`` (default
 ``margin``), every other sample to ``margin``.
@@ -350,20 +351,25 @@ class PathVerifier:
     # -------------------------------------------------------------- frames
     def _frame_fn(self, name: str, ujoints: dict) -> Any:
         """A function of the pinocchio data -> (4, 4) world placement of jwarp frame
-        ``name`` (module docstring: links, joint-named frames, ``<joint>_origin``)."""
+        ``name`` (module docstring: links, joints, ``<joint>_axis``, ``<joint>_origin``)."""
         m = self.model
-        if m.existFrame(name, pin.BODY):
-            fid = m.getFrameId(name, pin.BODY)
-            return lambda d: d.oMf[fid].homogeneous
-        base = name[:-len("_origin")] if name.endswith("_origin") else name
-        if base in ujoints and ujoints[base].type != "fixed" and m.existJointName(base):
+        for kind in (pin.BODY, pin.JOINT, pin.FIXED_JOINT):
+            if m.existFrame(name, kind):
+                fid = m.getFrameId(name, kind)
+                return lambda d: d.oMf[fid].homogeneous
+        base = name
+        for suffix in ("_origin", "_axis"):
+            if name.endswith(suffix):
+                base = name[:-len(suffix)]
+        if base != name and base in ujoints and ujoints[base].type != "fixed" \
+                and m.existJointName(base):
             j = ujoints[base]
             R = np.eye(4)
             if not (np.all(np.abs(j.axis - [0, 0, 1]) <= 1e-12)
                     or np.all(np.abs(j.axis + [0, 0, 1]) <= 1e-12)):
                 R[:3, :3] = _align_z(j.axis)
             jid = m.getJointId(base)
-            if name == base:
+            if name.endswith("_axis"):
                 return lambda d: d.oMi[jid].homogeneous @ R
             parent, place = m.parents[jid], m.jointPlacements[jid].homogeneous.copy()
             return lambda d: d.oMi[parent].homogeneous @ place @ R

@@ -48,7 +48,8 @@ __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize",
 #: bump when the fitted result of the same inputs changes
 #: Monte Carlo points of a link's excess volume at import (:func:`spherize`)
 EXCESS_SAMPLES = 50_000
-CACHE_VERSION = 4  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits
+CACHE_VERSION = 5  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits;
+#                   5: URDF axis frames named <joint>_axis, joint names frame aliases
 
 
 class SphereFitWarning(UserWarning):
