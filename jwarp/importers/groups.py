@@ -323,12 +323,14 @@ def plan_group(robot: UrdfRobot, options: GroupOptions | None = None, *,
     fnames = model.frame_names
     table = {}
     for alias, target in eff.items():
-        if target not in fnames:
+        if target not in fnames and target not in model.frame_aliases:
             raise ValueError(f"end_effectors.{alias}: unknown link or frame '{target}'")
-        if alias in fnames and alias != target:
+        # a URDF joint's name is its child link's frame (a frame alias, docs/urdf.md)
+        idx = fnames.index(target) if target in fnames else model.frame_aliases[target]
+        if alias in fnames and fnames.index(alias) != idx:
             raise ValueError(f"end_effectors.{alias}: the name of another frame (than "
                              f"'{target}'); choose another name")
-        table[alias] = fnames.index(target)
+        table[alias] = idx
     res.model = model.copy(end_effectors=table)
     return res
 

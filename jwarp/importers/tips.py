@@ -21,7 +21,7 @@ tips). The rule (:func:`default_tips`), on the frame tree:
    ``ee``/``eef``/``effector``, ``flange``, ``gripper``, ``hand`` (ties: a leaf of the
    body first, then the deepest, then by name); with none of them, the frame reached by
    following the body from the tip while it does not branch. Only links are tools
-   (not the ``<joint>_origin`` helper frames of the URDF import).
+   (not the ``<joint>_origin`` and ``<joint>_axis`` helper frames of the URDF import).
 
 Panda: ``panda_hand_tcp`` (the fingers are gripper joints, fixed or not). Baxter:
 ``left_gripper`` and ``right_gripper`` (the 1-joint head is dropped). UR10: ``tool0``.

@@ -178,6 +178,10 @@ def test_joint_names_are_frame_aliases(tmp_path):
     assert imp.source.joint_frames["elbow_joint"] == "elbow_joint_axis"
     assert "elbow_joint" not in m.frame_names
     assert m.frame_index("world_joint") == m.frame_index("base_link")  # fixed joints too
+    from jwarp.importers.groups import GroupOptions, plan_group
+
+    grouped = plan_group(imp, GroupOptions(end_effectors={"wrist": "wrist_2_joint"})).model
+    assert grouped.end_effectors == {"wrist": m.frame_index("wrist_2_link")}
     doc = m.to_dict()
     assert doc["frame_aliases"]["elbow_joint"] == m.frame_index("forearm_link")
     m2 = jwarp.RobotModel.from_dict(json.loads(json.dumps(doc)))
