@@ -154,12 +154,12 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "from jwarp.measurement import Measurement\n"
         "class LaserMeasurement(Measurement):\n    pass\n",
         "`LaserMeasurement` is the plugin class the text writes"),
-    "docs/robot_schema.md:303": (
+    "docs/robot_schema.md:313": (
         "import jwarp\nfactory = lambda: jwarp.robot('planar4')\n",
         "`factory` is any callable returning a RobotModel"),
-    "docs/robot_schema.md:323": ("", "self-contained (the factory is not called: my_arm.json "
+    "docs/robot_schema.md:333": ("", "self-contained (the factory is not called: my_arm.json "
                                      "is the reader's file)"),
-    "docs/robot_schema.md:344": (
+    "docs/robot_schema.md:354": (
         "import jwarp\nfrom pathlib import Path as _P\n"
         "_P('my_package').mkdir()\n"
         "jwarp.robot('planar4').save('my_package/my_arm.json')\n"
@@ -188,14 +188,14 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "__import__('os').mkdir('ros_share')\n",
         "panda.urdf: example-robot-data's Panda; `q` 3 configurations of it; ros_share: "
         "the folder of the package_dirs substitution"),
-    "docs/urdf.md:150": (_panda("panda.urdf", "panda.srdf"),
+    "docs/urdf.md:163": (_panda("panda.urdf", "panda.srdf"),
                          "panda.urdf/panda.srdf: example-robot-data's Panda and its SRDF"),
-    "docs/urdf.md:213": (_panda("panda.urdf"), "panda.urdf: example-robot-data's Panda"),
-    "docs/urdf.md:297": (
+    "docs/urdf.md:226": (_panda("panda.urdf"), "panda.urdf: example-robot-data's Panda"),
+    "docs/urdf.md:310": (
         f"import jwarp\nopen('panda.xml', 'w').write({MJCF_ARM!r})\n",
         "panda.xml: tests/test_docs_commands.py's small MJCF arm (a Panda MJCF such as "
         "MuJoCo Menagerie's is not installed here), which has the attachment_site"),
-    "docs/urdf_export.md:66": (
+    "docs/urdf_export.md:67": (
         _panda("panda.urdf") + "import jwarp\n"
         "from jwarp.importers.urdf_export import export_urdf\n"
         "from jwarp.solvers.calibration.campaign import simulate_campaign\n"
@@ -247,7 +247,7 @@ SUBSTITUTIONS: dict[str, list[tuple[str, str, str]]] = {
         ('"/opt/ros/humble/share"', '"ros_share"',
          "CI has no ROS install; package_dirs must name existing folders (an empty one "
          "here: example-robot-data's package:// meshes resolve without it)")],
-    "docs/robot_schema.md:303": [
+    "docs/robot_schema.md:313": [
         (", ...}", "}", "`...` stands for more entries (not Python in a dict display)")],
     "docs/design.md:40": [
         ("DesignOptions(n=100,", "DesignOptions(n=20,",
@@ -435,18 +435,18 @@ CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
     "docs/ik.md:112": _check_explain_ik,
     "docs/measurements.md:8": _check_measurement,
     "docs/measurements.md:192": _check_hook,
-    "docs/robot_schema.md:303": _check_robot_hook,
-    "docs/robot_schema.md:323": _check_builtin_hook,
-    "docs/robot_schema.md:344": _check_package_hook,
+    "docs/robot_schema.md:313": _check_robot_hook,
+    "docs/robot_schema.md:333": _check_builtin_hook,
+    "docs/robot_schema.md:354": _check_package_hook,
     "docs/scenes.md:13": _check_scene,
     "docs/scenes.md:224": _check_world_edits,
     "docs/spheres.md:10": _check_sphere_fit,
     "docs/spheres.md:204": _check_self_pairs,
     "docs/urdf.md:6": _check_urdf,
-    "docs/urdf.md:150": _check_group,
-    "docs/urdf.md:213": _check_spherized,
-    "docs/urdf.md:297": _check_mjcf,
-    "docs/urdf_export.md:66": _check_export,
+    "docs/urdf.md:163": _check_group,
+    "docs/urdf.md:226": _check_spherized,
+    "docs/urdf.md:310": _check_mjcf,
+    "docs/urdf_export.md:67": _check_export,
     "examples/README.md:90": _check_campaign,
 }
 
