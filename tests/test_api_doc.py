@@ -52,7 +52,8 @@ def test_signatures_hold_no_addresses():
         Second paragraph."""
 
     sig = gen.format_signature("f", gen.signature(f))
-    assert "0x" not in sig and sig.startswith("f(a, b=<") and sig.endswith("*, c: int = 1) -> Thing")
+    assert "0x" not in sig and sig.startswith("f(a, b=<")
+    assert sig.endswith("*, c: int = 1) -> Thing")
     assert gen.first_paragraph(f) == "First paragraph\non two lines."
     long = gen.format_signature("f" * 90, gen.signature(f), width=96)
     assert all(len(line) <= 96 for line in long.splitlines()[1:])

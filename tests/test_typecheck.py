@@ -23,7 +23,8 @@ def test_mypy_passes_on_jwarp():
         import mypy  # noqa: F401
     except ImportError:
         pytest.skip("mypy is not installed (pip install -e '.[test]')")
-    cache = Path(tempfile.gettempdir()) / f"jwarp-mypy-cache-{os.getuid() if hasattr(os, 'getuid') else 0}"
+    user = os.getuid() if hasattr(os, "getuid") else 0
+    cache = Path(tempfile.gettempdir()) / f"jwarp-mypy-cache-{user}"
     r = subprocess.run([sys.executable, "-m", "mypy", "--cache-dir", str(cache)], cwd=ROOT,
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr

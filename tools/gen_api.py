@@ -155,7 +155,8 @@ def first_line(obj: Any) -> str:
 def _own_doc(cls: type) -> str:
     """A class's docstring unless it is the one dataclasses write (``Name(field: type, ...)``)."""
     doc = cls.__dict__.get("__doc__")
-    if not isinstance(doc, str) or re.match(rf"{re.escape(cls.__name__)}\(.*\)$", doc.strip(), re.S):
+    generated = rf"{re.escape(cls.__name__)}\(.*\)$"
+    if not isinstance(doc, str) or re.match(generated, doc.strip(), re.S):
         return ""
     return first_paragraph(cls)
 
@@ -180,6 +181,13 @@ def document(qualname: str, obj: Any, seen: dict[int, str]) -> list[str]:
         return out + [f"The same object as `{seen[id(obj)]}`.", ""]
     if inspect.isclass(obj) or inspect.isfunction(obj) or inspect.ismodule(obj) or callable(obj):
         seen[id(obj)] = qualname
+    foreign = getattr(obj, "__module__", None)
+    if isinstance(foreign, str) and foreign.split(".")[0] != "jwarp" and not inspect.ismodule(obj):
+        # another package's object (pluggy's marker, ...): named only, so that the page does not
+        # change with that package's version
+        what = obj if inspect.isclass(obj) or inspect.isroutine(obj) else type(obj)
+        return out + [f"`{foreign.split('.')[0]}`'s `{what.__qualname__}`"
+                      + ("" if what is obj else " instance") + ".", ""]
     if inspect.ismodule(obj):
         para = first_paragraph(obj)
         return out + [f"Module `{obj.__name__}`." + (f" {para}" if para else ""), ""]
