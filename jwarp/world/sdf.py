@@ -245,7 +245,7 @@ class World:
         width and its initial substep sizing use it)."""
         return float(self.voxel_size) if self.sdf is not None else 0.02
 
-    def add(self, id: str, kind: str, dims: Any = (), pose: Any = None, *,
+    def add(self, id: str, kind: str, dims: ArrayLike = (), pose: ArrayLike | None = None, *,
             mesh: Any = None) -> int:
         """Add an exact object (:meth:`jwarp.world.shapes.ShapeSet.add`)."""
         self._require_3d("add")
@@ -261,7 +261,7 @@ class World:
             raise KeyError(f"object '{id}': this world has no objects")
         self.shapes.remove(id)
 
-    def move(self, ids: Any, poses: Any) -> None:
+    def move(self, ids: str | Sequence[str], poses: ArrayLike) -> None:
         """Move exact objects in place (:meth:`jwarp.world.shapes.ShapeSet.move`)."""
         if self.shapes is None:
             raise KeyError(f"objects {ids!r}: this world has no objects")
