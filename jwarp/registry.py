@@ -28,6 +28,7 @@ environment variable ``JWARP_NO_ENTRY_POINTS=1`` to skip the entry points (built
 from __future__ import annotations
 
 import os
+import types
 import warnings
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -116,7 +117,8 @@ def _warn(message: str) -> None:
     import sys
 
     package = os.path.dirname(os.path.abspath(__file__)) + os.sep
-    level, frame = 1, sys._getframe(0)
+    level = 1
+    frame: types.FrameType | None = sys._getframe(0)
     while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(package):
         level, frame = level + 1, frame.f_back
     warnings.warn(message, PluginWarning, stacklevel=level)

@@ -65,7 +65,7 @@ def object_meshes(world: Any) -> list[tuple[str, np.ndarray, np.ndarray]]:
     import trimesh
 
     shapes = getattr(world, "shapes", None)
-    out = []
+    out: list[tuple[str, np.ndarray, np.ndarray]] = []
     if shapes is None:
         return out
     for oid in shapes.ids:

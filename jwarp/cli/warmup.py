@@ -28,9 +28,13 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any, Iterable
+from typing import TYPE_CHECKING, Any, Iterable
 
 from jwarp.cli.common import CLIError, check_device, int_arg
+
+if TYPE_CHECKING:
+    from jwarp.core.types import DeviceLike
+    from jwarp.model import RobotModel
 
 __all__ = ["DTYPES", "FAMILIES", "WarmupReport", "add_subcommands", "kernel_modules", "warmup"]
 
@@ -135,7 +139,7 @@ def kernel_modules(families: Iterable[str] = FAMILIES, dtypes: Iterable[str] = D
     return list(modules.values())
 
 
-def warmup(device: Any = None, robots: Iterable[Any] | None = None,
+def warmup(device: DeviceLike = None, robots: Iterable[str | RobotModel] | None = None,
            dtypes: Iterable[str] = DTYPES, families: Iterable[str] = FAMILIES, *,
            jobs: int | None = None, progress: bool = True) -> WarmupReport:
     """Compile (or load from the kernel cache) every kernel of ``families`` in ``dtypes``

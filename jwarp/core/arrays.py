@@ -418,8 +418,8 @@ def host_copy(arr: wp.array, out: np.ndarray | None = None) -> np.ndarray:
         if scalar not in _HOST_DTYPES:
             return arr.numpy()
         out = np.empty(tuple(arr.shape) + inner, _HOST_DTYPES[scalar])
-    dst = wp.array(out.reshape(tuple(arr.shape) + inner), dtype=arr.dtype, device="cpu",
-                   copy=False)
+    dst: wp.array = wp.array(out.reshape(tuple(arr.shape) + inner), dtype=arr.dtype,
+                             device="cpu", copy=False)
     done = first_touch(dst) if fresh else None
     stream = arr.device.null_stream  # as Warp's .numpy(): in order with every stream
     wp.copy(dst, arr, stream=stream)

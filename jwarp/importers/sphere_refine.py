@@ -102,8 +102,9 @@ class _MeshSolid:
         if float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) < 0:
             F = F[:, ::-1]  # triangles facing inwards
         self.extent = float(np.linalg.norm(V.max(0) - V.min(0)))
-        self._pts = wp.array((V - self.centre).astype(np.float32), dtype=wp.vec3, device="cpu")
-        self._idx = wp.array(F.astype(np.int32).ravel(), dtype=wp.int32, device="cpu")
+        self._pts: wp.array = wp.array((V - self.centre).astype(np.float32), dtype=wp.vec3,
+                                       device="cpu")
+        self._idx: wp.array = wp.array(F.astype(np.int32).ravel(), dtype=wp.int32, device="cpu")
         self.mesh = wp.Mesh(points=self._pts, indices=self._idx, support_winding_number=True)
 
     def query(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

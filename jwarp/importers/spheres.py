@@ -297,8 +297,9 @@ class _Solid:
         self.simple = False  # a closed single-body mesh (set by the fit): nothing buried
         self.closed = bool(mesh.is_watertight)  # no holes: the triangles bound the solid
         self.extent = float(np.linalg.norm(V.max(0) - V.min(0)))
-        self._pts = wp.array((V - self.centre).astype(np.float32), dtype=wp.vec3, device="cpu")
-        self._idx = wp.array(F.astype(np.int32).ravel(), dtype=wp.int32, device="cpu")
+        self._pts: wp.array = wp.array((V - self.centre).astype(np.float32), dtype=wp.vec3,
+                                       device="cpu")
+        self._idx: wp.array = wp.array(F.astype(np.int32).ravel(), dtype=wp.int32, device="cpu")
         self.mesh = wp.Mesh(points=self._pts, indices=self._idx, support_winding_number=True)
 
     def signed_distance(self, x: np.ndarray) -> np.ndarray:
@@ -308,7 +309,7 @@ class _Solid:
             return np.zeros(0)
         maxd = 2.0 * self.extent + float(np.linalg.norm(x - self.centre, axis=1).max()) + 1.0
         out = wp.zeros(len(x), dtype=float, device="cpu")
-        pts = wp.array((x - self.centre).astype(np.float32), dtype=wp.vec3, device="cpu")
+        pts: wp.array = wp.array((x - self.centre).astype(np.float32), dtype=wp.vec3, device="cpu")
         wp.launch(_signed_distance_kernel, len(x), inputs=[self.mesh.id, pts, maxd, out],
                   device="cpu")
         return out.numpy().astype(np.float64)

@@ -656,7 +656,7 @@ def document_tips(frames: list[dict[str, Any]], joints: list[dict[str, Any]],
         return names.index(v) if isinstance(v, str) else int(v)
 
     parents = [-1 if f.get("parent") is None else idx(f["parent"], fnames) for f in frames]
-    couplings = []
+    couplings: list[list[tuple[int, float]]] = []
     for f in frames:
         if f.get("kind") != "dh":
             couplings.append([])

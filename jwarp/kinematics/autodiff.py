@@ -84,13 +84,14 @@ def tape_jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None,
     if pt.shape != (3,) or not np.all(np.isfinite(pt)):
         raise ValueError(f"point: expected 3 finite numbers [m], got {point!r}")
     pt = finite_as(pt, npdt, "point").astype(np.float64)
-    q_w = wp.array(batch.array.numpy(), dtype=t.scalar, device=t.device, requires_grad=True)
+    q_w: wp.array = wp.array(batch.array.numpy(), dtype=t.scalar, device=t.device,
+                             requires_grad=True)
     dh_np = _rows_batched(model.dh_table if dh is None else dh, B, n, 5, "dh")
-    dh_w = wp.array(finite_as(dh_np, npdt, "dh"), dtype=t.scalar, device=t.device,
-                    requires_grad=True)
+    dh_w: wp.array = wp.array(finite_as(dh_np, npdt, "dh"), dtype=t.scalar, device=t.device,
+                              requires_grad=True)
     kap_np = _rows_batched(kappa_array(model, kappa), B, n, 3, "kappa")
-    kap_w = wp.array(finite_as(kap_np, npdt, "kappa"), dtype=t.scalar, device=t.device,
-                     requires_grad=True)
+    kap_w: wp.array = wp.array(finite_as(kap_np, npdt, "kappa"), dtype=t.scalar,
+                               device=t.device, requires_grad=True)
     tape = wp.Tape()
     with tape:
         frames = record_frames(t, q_w, dh_w, kap_w, float(lam), int(iterations))
@@ -98,7 +99,7 @@ def tape_jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None,
     mat44 = fk_kernels.kernels(t.scalar).mat44
     params = {"q": q_w, "dh": dh_w, "kappa": kap_w}
     # d(entry)/d(param) for the 3 point coordinates and the 9 rotation entries
-    grads = {k: [] for k in wrt}
+    grads: dict[str, list] = {k: [] for k in wrt}
     seeds = []
     for r in range(3):
         s = np.zeros((B, n, 4, 4))

@@ -101,12 +101,12 @@ class KinematicsData:
             raise ValueError(f"batch: expected >= 1 configurations, got {batch}")
         B = int(batch)
         dev, sc = model.device, model.scalar
-        self.model = model
-        self.batch = B
+        self.model: DeviceModel = model
+        self.batch: int = B
         self.device: wp.Device = dev
-        self.q = wp.zeros((B, model.n_dof), dtype=sc, device=dev)
-        self.frames = wp.zeros((B, model.n_frames), dtype=fk_kernels.kernels(sc).mat44,
-                               device=dev)
+        self.q: wp.array = wp.zeros((B, model.n_dof), dtype=sc, device=dev)
+        self.frames: wp.array = wp.zeros((B, model.n_frames),
+                                         dtype=fk_kernels.kernels(sc).mat44, device=dev)
         self._jacobian: wp.array | None = None
         self._fk_cmd: Any = None
         self._jac_cmds: dict[int, list] = {}   # frame -> [recorded launch, its point tuple]

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from jwarp.core.arrays import out_view, real_number, to_output
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.transmission import transmitted
 from jwarp.registry import robot as get_robot
@@ -16,9 +17,10 @@ from jwarp.kinematics.launch import (ElasticFK, ElasticLaunch, ElasticStep, elas
                                      equilibrium, frame_rows, host_out, rho0_full, setup)
 
 
-def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_iter: int = 10,
-               tol: float | None = None, dh: Any = None, device: Any = None, dtype: Any = None,
-               validate: bool = True, out: Any = None) -> ElasticFK:
+def fk_elastic(robot: RobotLike, q: ArrayLike, kappa: ArrayLike | None = None, *,
+               lam: float = 1.0, max_iter: int = 10, tol: float | None = None,
+               dh: ArrayLike | None = None, device: DeviceLike = None, dtype: DTypeLike = None,
+               validate: bool = True, out: ArrayLike | None = None) -> ElasticFK:
     """Elastic forward kinematics: frames in the static torque equilibrium.
 
     Solves ``rho = rho0 + kappa * tau(F(q, rho))`` (thesis eq. 2.33) by the damped
@@ -66,8 +68,9 @@ def fk_elastic(robot: Any, q: Any, kappa: Any = None, *, lam: float = 1.0, max_i
                      host_out(iterations, batch), host_out(converged, batch))
 
 
-def elastic_step(robot: Any, q: Any, rho: Any = None, kappa: Any = None, *, lam: float = 1.0,
-                 dh: Any = None, device: Any = None, dtype: Any = None,
+def elastic_step(robot: RobotLike, q: ArrayLike, rho: ArrayLike | None = None,
+                 kappa: ArrayLike | None = None, *, lam: float = 1.0, dh: ArrayLike | None = None,
+                 device: DeviceLike = None, dtype: DTypeLike = None,
                  validate: bool = True) -> ElasticStep:
     """One torque update, as used for compensation inside an optimizer (Fig. 2.11).
 
@@ -90,8 +93,8 @@ def elastic_step(robot: Any, q: Any, rho: Any = None, kappa: Any = None, *, lam:
                        to_output(delta, batch, ()))
 
 
-def gravity_torques(robot: Any, q: Any, *, dh: Any = None, device: Any = None,
-                    dtype: Any = None) -> Any:
+def gravity_torques(robot: RobotLike, q: ArrayLike, *, dh: ArrayLike | None = None,
+                    device: DeviceLike = None, dtype: DTypeLike = None) -> Any:
     """Gravity torques (..., n_frames, 3) [N m] about the [alpha, beta, theta] axes of
     every DH frame at the frames F(q, dh) (rigid; zero rows for static frames)."""
     robot = get_robot(robot)

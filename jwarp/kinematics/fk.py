@@ -11,14 +11,16 @@ from __future__ import annotations
 from typing import Any
 
 from jwarp.core.arrays import out_view, to_output
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import frame_rows, launch_fk, setup, small_call
 from jwarp.kinematics.transmission import transmitted
 from jwarp.registry import robot as get_robot
 
 
-def fk(robot: Any, q: Any, *, dh: Any = None, device: Any = None, dtype: Any = None,
-       validate: bool = True, out: Any = None) -> Any:
+def fk(robot: RobotLike, q: ArrayLike, *, dh: ArrayLike | None = None,
+       device: DeviceLike = None, dtype: DTypeLike = None, validate: bool = True,
+       out: ArrayLike | None = None) -> Any:
     """Forward kinematics of all frames.
 
     Args:

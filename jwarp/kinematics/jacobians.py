@@ -10,6 +10,7 @@ import warp as wp
 
 from jwarp.core.arrays import is_torch, Batch, empty, finite_as, first_touch, out_view, to_output, zeros
 from jwarp.core.device import KinematicsTables
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import frame_rows, jacobian_inputs, point_vec, setup, small_call
 from jwarp.kinematics.transmission import transmission_slope, transmitted
@@ -58,9 +59,10 @@ def _scaled(jac: Any, slope: np.ndarray) -> Any:
     return jac
 
 
-def jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any = None,
-             device: Any = None, dtype: Any = None, validate: bool = True,
-             out: Any = None) -> Any:
+def jacobian(robot: RobotLike, q: ArrayLike, frame: int | str, *,
+             point: ArrayLike | None = None, dh: ArrayLike | None = None,
+             device: DeviceLike = None, dtype: DTypeLike = None, validate: bool = True,
+             out: ArrayLike | None = None) -> Any:
     """Geometric Jacobian of a frame (or of a point fixed in it) w.r.t. the joints.
 
     Returns (..., 6, n_dof): rows [linear velocity; angular velocity] in the base frame.
@@ -113,8 +115,9 @@ def link_jacobian(robot: Any, q_link: Any, frame: int | str, *, point: Any = Non
     return to_output(jac, batch, tail, out=out)
 
 
-def jacobian_dh(robot: Any, q: Any, frame: int | str, *, point: Any = None, dh: Any = None,
-                device: Any = None, dtype: Any = None, validate: bool = True) -> Any:
+def jacobian_dh(robot: RobotLike, q: ArrayLike, frame: int | str, *,
+                point: ArrayLike | None = None, dh: ArrayLike | None = None,
+                device: DeviceLike = None, dtype: DTypeLike = None, validate: bool = True) -> Any:
     """Jacobian of a frame's pose (or a point in it) w.r.t. every DH parameter.
 
     Returns (..., 6, n_frames, 5): rows [linear; angular] in the base frame, columns the

@@ -343,11 +343,13 @@ def _world_structs(ws: list[World], dev: wp.Device, kn: SimpleNamespace) -> tupl
     alive until the launch is done."""
     grids = [_grid32(w) for w in ws]
     if dev.is_cpu:  # zero-copy views of the host grids
-        arrays = [wp.array(g, dtype=wp.float32, device=dev, copy=False) for g in grids]
+        arrays: list[wp.array] = [wp.array(g, dtype=wp.float32, device=dev, copy=False)
+                                  for g in grids]
         keep: list = [grids, arrays]
     else:  # one upload of all grids, then views into it
         sizes = [g.size for g in grids]
-        flat = wp.array(np.concatenate([g.ravel() for g in grids]), dtype=wp.float32, device=dev)
+        flat: wp.array = wp.array(np.concatenate([g.ravel() for g in grids]), dtype=wp.float32,
+                                  device=dev)
         arrays, off = [], 0
         for g, n in zip(grids, sizes):
             arrays.append(wp.array(ptr=flat.ptr + 4 * off, shape=g.shape, dtype=wp.float32,

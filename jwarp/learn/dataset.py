@@ -602,7 +602,7 @@ def export_npz(db: str | os.PathLike | PathDB, out: str | os.PathLike, *,
     from jwarp.atomic import AtomicFile
 
     own = not isinstance(db, PathDB)
-    d = PathDB(db) if own else db
+    d = db if isinstance(db, PathDB) else PathDB(db)  # own: made here, closed here
     try:
         ids = d.world_ids() if world_ids is None else [int(i) for i in world_ids]
         rows, good = [], []

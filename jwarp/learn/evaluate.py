@@ -78,7 +78,7 @@ def _groups(world: Any, targets: Any) -> list[tuple[Any, np.ndarray]]:
     return [(world, poses(targets, "targets"))]
 
 
-def _mean_std(x: Sequence[float]) -> dict:
+def _mean_std(x: Sequence[float] | np.ndarray) -> dict:
     a = np.asarray(x, np.float64)
     if a.size == 0:
         return {"mean": math.nan, "std": math.nan, "n": 0}

@@ -204,7 +204,8 @@ def generate(robot: Any, n_worlds: int, paths_per_world: int, db: str | os.PathL
     rmod = ray_module() if (ray or ray_address) else None  # fail before any work
     t0 = time.perf_counter()
     own = not isinstance(db, PathDB)
-    pdb = PathDB(db, robot, bps=bps, create=True, timeout=timeout) if own else db
+    pdb = (db if isinstance(db, PathDB)
+           else PathDB(db, robot, bps=bps, create=True, timeout=timeout))
     report = GenerateReport(db=str(pdb.path), backend="ray" if rmod else "in-process")
     try:
         check_settings(pdb, options, paths_per_world)

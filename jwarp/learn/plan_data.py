@@ -154,9 +154,9 @@ class WorldLabels:
     feasible: np.ndarray
     hard: np.ndarray
     settings: dict
-    length_cost: np.ndarray = field(default=None, repr=False)
-    n_feasible_starts: np.ndarray = field(default=None, repr=False)
-    n_starts: np.ndarray = field(default=None, repr=False)
+    length_cost: np.ndarray | None = field(default=None, repr=False)
+    n_feasible_starts: np.ndarray | None = field(default=None, repr=False)
+    n_starts: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.starts)

@@ -168,7 +168,7 @@ def ik_iteration_overhead(robot: Any, frame: Any, kappa: Any, *, world: Any = No
                 dt = np.diff(stamps)
                 per_it[name].append(float(np.median(dt[min(5, len(dt) // 2):])))
                 setup[name].append(res.wall_time - float(np.sum(dt)))
-    out = {f"{name}_s": float(np.median(v)) for name, v in per_it.items()}
+    out: dict[str, Any] = {f"{name}_s": float(np.median(v)) for name, v in per_it.items()}
     out["overhead"] = out["elastic_s"] / out["rigid_s"] - 1.0
     out["overhead_per_round"] = [e / g - 1.0 for g, e in zip(per_it["rigid"], per_it["elastic"])]
     out.update({f"{name}_setup_s": float(np.median(v)) for name, v in setup.items()})

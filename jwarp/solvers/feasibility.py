@@ -30,7 +30,7 @@ SWEEP_SAFETY = 2.0
 MAX_CHECK_SUBSTEPS = 256
 #: the elastic equilibrium of the feasibility checks (:func:`elastic_equilibrium`):
 #: damped updates (lam), most updates, tolerance [rad] (0.1 um at 1 m)
-ELASTIC_CHECK = {"lam": 0.7, "max_iter": 30, "tol": 1e-7}
+ELASTIC_CHECK: dict[str, Any] = {"lam": 0.7, "max_iter": 30, "tol": 1e-7}
 
 
 def check_world(robot: RobotModel, world: Any) -> None:
@@ -134,7 +134,7 @@ def substeps(paths: Any, n_substeps: int, *, device: Any = "cpu", dtype: Any = N
     flat = a.reshape(-1, W, n)
     S = (W - 1) * n_sub + 1
     dev = resolve_device(device)
-    p = wp.array(flat, dtype=scalar, device=dev)
+    p: wp.array = wp.array(flat, dtype=scalar, device=dev)
     out = wp.empty((flat.shape[0] * S, n), dtype=scalar, device=dev)
     wp.launch(path_kernels.kernels(scalar).substeps, dim=(flat.shape[0], S),
               inputs=[p, n_sub], outputs=[out], device=dev)

@@ -285,7 +285,7 @@ class IKObjective:
                              f"({self.B}, {self.n}), got {a.shape}")
         a = finite_as(a.reshape(-1, self.n), self.npdt, "q_default")
         self.default_stride = int(len(a) > 1)
-        self.q_default = wp.array(a, dtype=self.scalar, device=self.device)
+        self.q_default: wp.array = wp.array(a, dtype=self.scalar, device=self.device)
 
     def set_q(self, q: np.ndarray, keep_rho: bool = False) -> None:
         """Copy q (B, n_dof) into the batch; ``keep_rho`` keeps the elastic DH rows of the

@@ -943,7 +943,7 @@ class Planner:
         return self._buffers
 
     def _upload_idx(self, buf: _Buffers, idx: np.ndarray) -> None:
-        host = wp.array(np.ascontiguousarray(idx, np.int32), dtype=wp.int32, device="cpu")
+        host: wp.array = wp.array(np.ascontiguousarray(idx, np.int32), dtype=wp.int32, device="cpu")
         wp.copy(buf.idx, host, count=len(idx))
 
     def motion_check(self) -> Any:
@@ -1033,7 +1033,7 @@ class Planner:
         """Per problem the best start (feasible first, then the lowest U_path), chosen on
         the device; reads the chosen paths and costs only."""
         obj = buf.objective
-        host = wp.array(feasible.astype(np.int32), dtype=wp.int32, device="cpu")
+        host: wp.array = wp.array(feasible.astype(np.int32), dtype=wp.int32, device="cpu")
         wp.copy(buf.feasible, host)
         wp.launch(obj.k.select, dim=B, inputs=[buf.final, buf.final_cost, buf.feasible,
                                                n_starts],

@@ -284,8 +284,8 @@ class CollisionModel:
                              f"[d, theta, r, alpha, beta] per frame), got {a.shape}")
         if not np.all(np.isfinite(a)):
             raise ValueError("rho: contains NaN or inf")
-        arr = wp.array(finite_as(a.reshape(-1, nf, 5), self.dtype, "rho"), dtype=self.scalar,
-                       device=self.device)
+        arr: wp.array = wp.array(finite_as(a.reshape(-1, nf, 5), self.dtype, "rho"),
+                                 dtype=self.scalar, device=self.device)
         return DHRows.per_config(arr) if a.ndim == 3 else DHRows.shared(arr)
 
     def _cost_args(self, q: Any, eps: Any, w_world: Any, w_self: Any

@@ -81,8 +81,8 @@ class DeviceWorld:
             o[:world.dim] = world.limits[:, 0]
             origin, inv_h, dim = vec3(*o), 1.0 / world.voxel_size, world.dim
         self.origin, self.inv_h, self.dim = origin, inv_h, dim
-        self.grid = wp.array(np.ascontiguousarray(grid), dtype=scalar, device=device)
-        self.cellmin = wp.array(cell_minimum(grid), dtype=scalar, device=device)
+        self.grid: wp.array = wp.array(np.ascontiguousarray(grid), dtype=scalar, device=device)
+        self.cellmin: wp.array = wp.array(cell_minimum(grid), dtype=scalar, device=device)
         gs = self.k.WorldGrid()
         gs.grid, gs.cellmin, gs.origin = self.grid, self.cellmin, origin
         gs.inv_h, gs.dim = scalar(inv_h), int(dim)

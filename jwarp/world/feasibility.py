@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -24,7 +24,7 @@ __all__ = ["random_configurations", "feasible_fraction", "feasible_simplex_world
            "fixed_spheres", "robot_reach", "robot_world_grid"]
 
 
-def random_configurations(robot: Any, n: int, seed: int = 0) -> np.ndarray:
+def random_configurations(robot: Any, n: int, seed: int | Sequence[int] = 0) -> np.ndarray:
     """(n, n_dof) configurations drawn uniformly within the joint limits and the linear
     joint limits (rejection sampling), reproducible by ``seed``."""
     model = get_robot(robot)

@@ -299,12 +299,12 @@ class MotionCheck:
         cm.use_world = int(world is not None and sp.n_spheres > 0)
         cm.use_self = int(sp.n_pairs > 0)
         reach = sphere_reach(self.robot) if sp.n_spheres else np.zeros((0, self.robot.n_frames))
-        self._reach = wp.array(reach, dtype=wp.float64, device=dev)
+        self._reach: wp.array = wp.array(reach, dtype=wp.float64, device=dev)
         cm.reach = self._reach
         fs, ff, fw = pair_travel_tables(self.robot)
-        self._fp = (wp.array(fs, dtype=wp.int32, device=dev),
-                    wp.array(ff, dtype=wp.int32, device=dev),
-                    wp.array(fw, dtype=wp.float64, device=dev))
+        self._fp: tuple[wp.array, wp.array, wp.array] = (
+            wp.array(fs, dtype=wp.int32, device=dev), wp.array(ff, dtype=wp.int32, device=dev),
+            wp.array(fw, dtype=wp.float64, device=dev))
         cm.fp_start, cm.fp_frame, cm.fp_weight = self._fp
         self.n_fpairs = len(fs) - 1
         lt = self.model.limits
@@ -471,7 +471,7 @@ class MotionCheck:
             p = wp.array(np.ascontiguousarray(a, np.float64), dtype=wp.float64,
                          device=self.device)
         K = p.shape[0]
-        idx = wp.array(np.arange(K, dtype=np.int32), dtype=wp.int32, device=self.device)
+        idx: wp.array = wp.array(np.arange(K, dtype=np.int32), dtype=wp.int32, device=self.device)
         out = self.launch(p, idx, K, margin=margin, endpoint_margin=endpoint_margin,
                           self_margin=self_margin, world_group=world_group)
         return PathCheck(ok=out["ok"].numpy()[:K].astype(bool), code=out["code"].numpy()[:K],

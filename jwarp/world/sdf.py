@@ -50,6 +50,7 @@ from scipy import ndimage
 from jwarp.atomic import AtomicFile
 from jwarp.core.arrays import finite_as, init_warp, real_array, resolve_device
 from jwarp.core.device import scalar_type
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import collision as ck
 
 __all__ = ["FORMAT", "MAX_GRID_CELLS", "VERSION", "World", "check_grid_cells", "grid_geometry", "load_world", "save_world", "sdf_query",
@@ -244,7 +245,7 @@ class World:
         width and its initial substep sizing use it)."""
         return float(self.voxel_size) if self.sdf is not None else 0.02
 
-    def add(self, id: str, kind: str, dims: Any = (), pose: Any = None, *,
+    def add(self, id: str, kind: str, dims: ArrayLike = (), pose: ArrayLike | None = None, *,
             mesh: Any = None) -> int:
         """Add an exact object (:meth:`jwarp.world.shapes.ShapeSet.add`)."""
         self._require_3d("add")
@@ -260,13 +261,13 @@ class World:
             raise KeyError(f"object '{id}': this world has no objects")
         self.shapes.remove(id)
 
-    def move(self, ids: Any, poses: Any) -> None:
+    def move(self, ids: str | Sequence[str], poses: ArrayLike) -> None:
         """Move exact objects in place (:meth:`jwarp.world.shapes.ShapeSet.move`)."""
         if self.shapes is None:
             raise KeyError(f"objects {ids!r}: this world has no objects")
         self.shapes.move(ids, poses)
 
-    def attach(self, id: str, robot: Any, frame: Any, q: Any, *,
+    def attach(self, id: str, robot: RobotLike, frame: int | str, q: ArrayLike, *,
                max_spheres: int = 32) -> Any:
         """Attach exact object ``id`` to ``frame`` of ``robot`` at its configuration ``q``
         (n_dof,): the object leaves the world and the returned robot (a copy) carries
@@ -292,7 +293,7 @@ class World:
         self.attached[id] = Attachment(id, kind, dims, mesh, fi, rel, rng)
         return carried
 
-    def detach(self, id: str, robot: Any, q: Any) -> Any:
+    def detach(self, id: str, robot: RobotLike, q: ArrayLike) -> Any:
         """Put attached object ``id`` back into the world where ``robot`` (the one
         :meth:`attach` returned) holds it at ``q``; returns the robot without its spheres."""
         from jwarp.kinematics.fk import fk
@@ -366,7 +367,7 @@ class World:
         axes = [self.limits[d, 0] + self.voxel_size * np.arange(n) for d, n in enumerate(self.shape)]
         return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
 
-    def astype(self, dtype: Any) -> "World":
+    def astype(self, dtype: DTypeLike) -> "World":
         """The same world with the SDF stored as ``dtype`` (float32 or float64); exact
         objects are shared."""
         if self.sdf is None:
@@ -376,7 +377,8 @@ class World:
                      self.shapes, self.grid_error)
 
     # ----------------------------------------------------------------- queries
-    def distance(self, points: Any, *, grad: bool = False, device: Any = "cpu") -> Any:
+    def distance(self, points: ArrayLike, *, grad: bool = False,
+                 device: DeviceLike = "cpu") -> Any:
         """Signed distance [m] at ``points`` (..., dim) [m]: the grid's interpolated value
         (with the kernel the cost functions use; its spatial gradient (..., dim) if
         ``grad``), and with exact objects the minimum with their exact distances (float64;
@@ -393,7 +395,7 @@ class World:
         return sdf_query(self, points, grad=grad, device=device)
 
     # --------------------------------------------------------------------- I/O
-    def save(self, path: Any) -> None:
+    def save(self, path: str | os.PathLike) -> None:
         """Write the world as ``.npz`` atomically (format: module docstring)."""
         self._require_grid("save")
         if self.shapes is not None and len(self.shapes):
@@ -402,7 +404,7 @@ class World:
         save_world(self, path)
 
     @classmethod
-    def load(cls, path: Any) -> "World":
+    def load(cls, path: str | os.PathLike) -> "World":
         """Read a world written by :meth:`save`; a malformed file raises ValueError."""
         return load_world(path)
 

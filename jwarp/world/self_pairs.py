@@ -245,7 +245,10 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
     # axis; the order within a frame changes no minimum), each with a bounding sphere (frame
     # coordinates, a little inflated so that rounding never makes a bound exceed a distance)
     groups: list[list[int]] = []        # per frame: its cluster indices
-    g0, g1, gc, gr = [], [], [], []
+    g0: list[int] = []
+    g1: list[int] = []
+    gc: list[np.ndarray] = []
+    gr: list[float] = []
     for i, (a, e) in enumerate(zip(starts, ends)):
         p = sp[a:e]
         if e - a > CLUSTER:
@@ -372,7 +375,8 @@ def default_pairs(robot: Any, home: Any, contact: Any
     if not callable(contact):
         raise TypeError(f"contact: expected a callable (frame a, frame b) -> bool, got "
                         f"{type(contact).__name__}")
-    default, fit = [], []
+    default: list[tuple[int, int, float]] = []
+    fit: list[tuple[int, int, float]] = []
     for na, nb, depth in home_self_collisions(model, q):
         a, b = sorted((model.frame_index(na), model.frame_index(nb)))
         (default if contact(a, b) else fit).append((a, b, depth))

@@ -347,10 +347,10 @@ class DeviceShapes:
         roots = np.full(n_groups, -2, np.int32)  # -2: no object of that world in the BVH
         if self._in_bvh.any():
             lo, hi = self._boxes(shapes)
-            self._lo = wp.array(lo, dtype=wp.vec3, device=device)
-            self._hi = wp.array(hi, dtype=wp.vec3, device=device)
+            self._lo: wp.array = wp.array(lo, dtype=wp.vec3, device=device)
+            self._hi: wp.array = wp.array(hi, dtype=wp.vec3, device=device)
             if n_groups > 1:
-                self._groups = wp.array(groups, dtype=wp.int32, device=device)
+                self._groups: wp.array = wp.array(groups, dtype=wp.int32, device=device)
                 self.bvh = wp.Bvh(self._lo, self._hi, groups=self._groups)
             else:
                 self.bvh = wp.Bvh(self._lo, self._hi)

@@ -192,7 +192,8 @@ def simplex_world(dim: int = 3, *, seed: int, shape: Sequence[int] | None = None
                   limits: np.ndarray | None = None, voxel_size: float | None = None,
                   threshold: float = 0.6, frequency: float = 2.0, octaves: int = 1,
                   persistence: float = 0.5,
-                  keep_free: Sequence[tuple[Sequence[float], float]] = ()) -> "World":
+                  keep_free: Sequence[tuple[Sequence[float] | np.ndarray, float]] = ()
+                  ) -> "World":
     """A random occupancy world from simplex noise, with its signed distance field.
 
     Args:

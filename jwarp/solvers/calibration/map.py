@@ -220,8 +220,8 @@ class CalibrationProblem:
         self.device = resolve_device(device)
         #: the joint values on ``device`` (float64), uploaded once: every evaluation of
         #: the model and its Jacobian launches on this array (the data do not change)
-        self.q_device = wp.array(np.ascontiguousarray(self.q, np.float64), dtype=wp.float64,
-                                 device=self.device)
+        self.q_device: wp.array = wp.array(np.ascontiguousarray(self.q, np.float64),
+                                           dtype=wp.float64, device=self.device)
         if elastic is False and MASS_GROUP in parse_groups(free):
             raise ValueError(f"free: the '{MASS_GROUP}' group acts only through the elastic "
                              f"model, but elastic=False was given")
@@ -441,7 +441,8 @@ class CalibrationProblem:
         _, jf, jp = meas.jacobians(frames, p, self.meta)
         S, m = jf.shape[:2]
         jy = np.zeros((S, m, self.robot.n_frames, 5))
-        rows = wp.array(finite_as(rho, np.float64, "dh"), dtype=wp.float64, device=self.device)
+        rows: wp.array = wp.array(finite_as(rho, np.float64, "dh"), dtype=wp.float64,
+                                  device=self.device)
         for k, f in enumerate(meas.frames):
             jdh = K.jacobian_dh(robot, self.q_device, int(f), dh=rows, device=self.device,
                                 dtype=np.float64, validate=False).numpy()  # (S, 6, n, 5)

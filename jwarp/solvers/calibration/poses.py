@@ -336,7 +336,7 @@ class PoseSampler:
         c.contain_tol = sc(CONTAIN_TOL)
         self.checks = c
         skip = self._skip_frame_pairs()
-        self.skip_fpair = wp.array(skip, dtype=wp.int32, device=dev)
+        self.skip_fpair: wp.array = wp.array(skip, dtype=wp.int32, device=dev)
         lim = np.asarray(robot.joint_limits, np.float64)
         jm = opt.joint_margin
         lo, hi = lim[:, 0] + jm, lim[:, 1] - jm
@@ -348,8 +348,8 @@ class PoseSampler:
         lt = self.model.limits
         self.limit_args = [wp.array(box.astype(dt), dtype=sc, device=dev), lt.lin_start,
                            lt.lin_joint, lt.lin_coef, lt.lin_bounds]
-        self.lower_w = wp.array(lo.astype(dt), dtype=sc, device=dev)
-        self.upper_w = wp.array(hi.astype(dt), dtype=sc, device=dev)
+        self.lower_w: wp.array = wp.array(lo.astype(dt), dtype=sc, device=dev)
+        self.upper_w: wp.array = wp.array(hi.astype(dt), dtype=sc, device=dev)
 
     def _skip_frame_pairs(self) -> np.ndarray:
         """(P_f,) int32 flags of the frame pairs left out of the self-collision check:
@@ -395,7 +395,7 @@ class PoseSampler:
         if n == 0:
             return np.zeros(0, np.int32), np.zeros((0, m - (0 if self.cameras else 1)), np.int32)
         dev = self.device
-        qw = wp.array(q.astype(self.np_dtype), dtype=self.scalar, device=dev)
+        qw: wp.array = wp.array(q.astype(self.np_dtype), dtype=self.scalar, device=dev)
         frames, _r1 = _scratch(dev, n, self.robot.n_frames, self.k.mat44)
         xs, _r2 = _scratch(dev, n, max(self.model.spheres.n_spheres, 1), self.k.vec3)
         code = wp.empty(n, dtype=wp.int32, device=dev)

@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import math
+import types
 import warnings
 from dataclasses import dataclass, field
 from typing import Any, Mapping
@@ -425,7 +426,8 @@ def _caller_stacklevel() -> int:
 
     # this file is jwarp/solvers/calibration/result.py: the package root is 3 levels up
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))) + os.sep
-    frame, level = sys._getframe(1), 1
+    level = 1
+    frame: types.FrameType | None = sys._getframe(1)
     while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(root):
         frame, level = frame.f_back, level + 1
     return level

@@ -201,7 +201,7 @@ class MeasurementGraph:
     def index(self, names: str | Sequence[str]) -> np.ndarray:
         """Joint indices of the nodes ``names`` (one name or several, in that order)."""
         names = [names] if isinstance(names, str) else list(names)
-        out = []
+        out: list[int] = []
         for n in names:
             if n not in self.slices:
                 raise ValueError(f"node '{n}': not in the graph (nodes: {', '.join(self.order)})")
