@@ -250,3 +250,76 @@ def test_feasibility_helpers_come_from_their_module():
            for line, target, names, _ in imports(m)
            if target == "jwarp.solvers.planner" and names and set(names) & helpers]
     assert not bad, "\n".join(bad)
+
+
+def _device_defaults() -> list[str]:
+    """``module:line name=default`` for every public function, method (``__init__``
+    included) and dataclass field named ``device`` whose default is not None."""
+    bad = []
+    for m, (path, tree, _) in MODULES.items():
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                if node.name.startswith("_") and node.name != "__init__":
+                    continue
+                a = node.args
+                pos = a.posonlyargs + a.args
+                pairs = list(zip(pos[len(pos) - len(a.defaults):], a.defaults))
+                pairs += [(k, d) for k, d in zip(a.kwonlyargs, a.kw_defaults) if d is not None]
+                for arg, default in pairs:
+                    if arg.arg == "device" and not (isinstance(default, ast.Constant)
+                                                    and default.value is None):
+                        bad.append(f"{m}:{node.lineno} {node.name}(device={ast.unparse(default)})")
+            elif isinstance(node, ast.ClassDef) and not node.name.startswith("_"):
+                for st in node.body:
+                    if (isinstance(st, ast.AnnAssign) and isinstance(st.target, ast.Name)
+                            and st.target.id == "device" and st.value is not None
+                            and not (isinstance(st.value, ast.Constant) and st.value.value is None)):
+                        bad.append(f"{m}:{st.lineno} {node.name}.device = {ast.unparse(st.value)}")
+    return bad
+
+
+def test_one_device_default_rule():
+    """Every public function, method and options dataclass of jwarp that takes a ``device``
+    defaults it to None (issue 28: one device rule, docs/api.md "Devices"), and the
+    facades' functions and classes say so in their signatures."""
+    import importlib
+    import inspect
+
+    bad = _device_defaults()
+    assert not bad, "device defaults other than None:\n" + "\n".join(bad)
+    facades = ["jwarp", "jwarp.kinematics", "jwarp.world", "jwarp.learn",
+               "jwarp.solvers.calibration", "jwarp.solvers.ik", "jwarp.solvers.planner"]
+    seen = 0
+    for name in facades:
+        mod = importlib.import_module(name)
+        for attr in getattr(mod, "__all__", ()):
+            obj = getattr(mod, attr)
+            fn = obj.__init__ if inspect.isclass(obj) else obj
+            if not callable(fn):
+                continue
+            try:
+                params = inspect.signature(fn).parameters
+            except (TypeError, ValueError):
+                continue
+            p = params.get("device")
+            if p is not None:
+                seen += 1
+                assert p.default in (None, inspect.Parameter.empty), f"{name}.{attr}: {p}"
+    assert seen >= 10
+
+
+def test_devices_resolve_through_the_one_helper():
+    """Only ``jwarp.core.arrays.resolve_device`` turns ``device=None`` into a device: no
+    other module asks Warp for its preferred or default device (``put_model``, the Model's
+    builder, resolves ``device=None`` to Warp's default device, the same rule)."""
+    allowed = {"jwarp.core.arrays", "jwarp.core.device"}
+    bad = []
+    for m, (path, tree, _) in MODULES.items():
+        if m in allowed:
+            continue
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and node.attr in ("get_preferred_device",
+                                                                   "get_device")
+                    and isinstance(node.value, ast.Name) and node.value.id == "wp"):
+                bad.append(f"{m}:{node.lineno} wp.{node.attr}")
+    assert not bad, "device resolved outside resolve_device:\n" + "\n".join(bad)

@@ -100,6 +100,12 @@ def resolve_device(device: Any, *inputs: Any, like: Any = None) -> wp.Device:
     return dev
 
 
+def device_name(device: Any, *inputs: Any) -> str:
+    """The device of :func:`resolve_device` by name ("cpu", "cuda:0"): for torch
+    (``torch.device(name)``, ``module.to(name)``) and for cache keys."""
+    return resolve_device(device, *inputs).alias
+
+
 #: devices resolved from their names (see :func:`resolve_device`)
 _DEVICES: dict = {}
 

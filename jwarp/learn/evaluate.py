@@ -104,7 +104,7 @@ def _solve_block(model: Any, frame: Any, world: Any, T: np.ndarray, seeds: np.nd
 def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start: Any = None,
                 n_random: int = N_RANDOM, max_iterations: int = 200, margin: float = 0.0,
                 tol_pos: float = 1e-4, tol_rot: float = 1e-3, q_default: Any = None,
-                seed: int = 0, device: Any = "cpu", dtype: Any = np.float64,
+                seed: int = 0, device: Any = None, dtype: Any = np.float64,
                 name: str | None = None) -> dict:
     """The Table 3.5 columns of one initial guess (module docstring).
 
@@ -229,7 +229,7 @@ def _config_value(net: Any, key: str) -> Any:
 
 def ablation_table(robot: Any, frame: Any, world: Any, targets: Any,
                    nets: Mapping[str, Any] | Sequence[tuple[str, Any]], *,
-                   iterations: int = 10, device: Any = "cpu", **options: Any) -> list[dict]:
+                   iterations: int = 10, device: Any = None, **options: Any) -> list[dict]:
     """Table 3.4: per network (``{name: net}`` or ``[(name, net)]``) the feasibility after
     ``iterations`` solver iterations from its heads alone (head 1: ``feasibility``; any
     head: ``feasibility_heads``), with its ``boosting``, ``twin`` and ``unit_vectors``

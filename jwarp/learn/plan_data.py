@@ -74,7 +74,8 @@ class PlanDataOptions:
             the length cost settles; False: the labels are the early-stopped paths.
         refine: feasible multi-starts per hard task converged for its label, >= 1.
         converge_tol: relative change of U_l between checks that counts as converged.
-        device: Warp device of the optimisation ("cpu", "cuda", "cuda:0", ...).
+        device: Warp device of the optimisation ("cpu", "cuda", "cuda:0", ...; None:
+            Warp's default device, docs/api.md "Devices").
         dtype: "float32" or "float64", the optimisation's float type.
     """
 
@@ -90,7 +91,7 @@ class PlanDataOptions:
     converge: bool = True
     refine: int = 4
     converge_tol: float = 1e-4
-    device: str = "cpu"
+    device: str | None = None
     dtype: str = "float32"
 
     def validate(self) -> None:
@@ -112,7 +113,7 @@ class PlanDataOptions:
                                  f"got {v!r}")
         if not isinstance(self.converge, (bool, np.bool_)):
             raise TypeError(f"converge: expected True or False, got {self.converge!r}")
-        if not isinstance(self.device, str):
+        if self.device is not None and not isinstance(self.device, str):
             raise TypeError(f"device: expected a device name (str), got "
                             f"{type(self.device).__name__}")
         if self.dtype not in ("float32", "float64"):

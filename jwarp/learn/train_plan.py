@@ -42,6 +42,7 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
+from jwarp.core.arrays import device_name
 from jwarp.learn.plan_net import (PlanNet, PlanNetConfig, axis_symmetries, encode_paths,
                                   symmetric_bps)
 from jwarp.registry import robot as get_robot
@@ -462,7 +463,7 @@ class TrainPlanOptions:
     """Options of :func:`train_plan` (the network: robot, n_bps, n_waypoints, hidden,
     n_blocks, n_heads; training: epochs x steps_per_epoch Adam steps of batch_size samples,
     lr; the switches time_reversal, axis_symmetry, boosting (boost_percentile,
-    boost_ratio); n_substeps of the costs; device; seed; checkpoint (written after every
+    boost_ratio); n_substeps of the costs; device (None: Warp's default device); seed; checkpoint (written after every
     epoch when given))."""
 
     robot: str = "planar4"
@@ -481,7 +482,7 @@ class TrainPlanOptions:
     boost_percentile: float = 0.8
     boost_ratio: float = 0.9
     n_substeps: int = 4
-    device: str = "cpu"
+    device: str | None = None
     seed: int = 0
     checkpoint: str | None = None
 
@@ -550,7 +551,7 @@ def train_plan(options: TrainPlanOptions, data: PlanSamples, val: PlanSamples | 
     rng = np.random.default_rng(options.seed)
     if net is None:
         net = PlanNet(options.net_config())
-    net.to(options.device)
+    net.to(device_name(options.device))
     arr = augment(net, data, time_reversal=options.time_reversal,
                   axis_symmetry=options.axis_symmetry)
     M = len(arr["source"])

@@ -578,8 +578,8 @@ class IKSolver:
         n_problems: targets per :meth:`solve` (>= 1).
         options: :class:`IKOptions` (None: the defaults).
         world: optional :class:`jwarp.world.World` (None: self-collision only).
-        device: Warp device (None: CUDA if present, else the CPU); every kernel and check
-            of the solve runs there.
+        device: Warp device (None: Warp's default device, docs/api.md "Devices"); every
+            kernel and check of the solve runs there.
         dtype: float type of the iteration (None: float64); the step's linear algebra and
             the feasibility check are float64 either way.
         warm_start: optional learned warm start (thesis 3.4): any object with a callable
@@ -952,7 +952,7 @@ class IKSolver:
 
 
 def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, initial: Any = None,
-       device: Any = "cpu", dtype: Any = np.float64,
+       device: Any = None, dtype: Any = np.float64,
        callback: Callable[[int, np.ndarray], None] | None = None, warm_start: Any = None,
        options: IKOptions | None = None, **overrides: Any) -> IKResult:
     """Collision-free IK of ``frame`` onto ``target`` with random multi-starts: one
@@ -964,8 +964,8 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, initial:
         target: pose(s) (4, 4) or (..., 4, 4) in the base frame [m].
         world: optional :class:`jwarp.world.World` (None: self-collision only).
         initial: seeds (n_dof,), (n_starts, n_dof) or (T, n_starts, n_dof) instead of random.
-        device, dtype: Warp device (default "cpu", unlike :class:`IKSolver`'s preferred
-            device) and float type.
+        device, dtype: Warp device (None: Warp's default device, as :class:`IKSolver`;
+            docs/api.md "Devices") and float type.
         callback: ``callback(iteration, q (B, n_dof))`` after every evaluation.
         warm_start: optional learned warm start (:class:`IKSolver`'s ``warm_start``: an
             object with ``seeds(targets (T, 4, 4), world) -> (T, H, n_dof)``): the seeds

@@ -590,8 +590,8 @@ class Planner:
         n_problems: B, the start/goal pairs of every :meth:`plan` call.
         options: :class:`PlanOptions` (None: the defaults); validated here, and copied.
         device: Warp device of the optimisation and of every check (collision, limits,
-            elastic equilibrium, substep sizing); None: the preferred device (CUDA if
-            present, else CPU).
+            elastic equilibrium, substep sizing); None: Warp's default device (docs/api.md
+            "Devices").
         dtype: float type of the optimisation (None: float32); the exact feasibility
             checks run in float64.
         warm_start: optional learned warm start (thesis 3.4.3): any object with a callable
@@ -1165,7 +1165,7 @@ def _seed_reason(planner: "Planner", sub: "Planner", seed: np.ndarray, b: int) -
     return c.reason(0)
 
 
-def plan(robot: Any, world: Any, start: Any, goal: Any, *, device: Any = "cpu",
+def plan(robot: Any, world: Any, start: Any, goal: Any, *, device: Any = None,
          dtype: Any = np.float32, options: PlanOptions | None = None,
          **overrides: Any) -> PlanResult:
     """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path:
@@ -1176,7 +1176,7 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, device: Any = "cpu",
         world: a :class:`jwarp.world.World` of the robot's workspace dimension.
         start, goal: (n_dof,) or (B, n_dof) joint values [rad or m] (B problems).
         device, dtype: Warp device of the optimisation and of every check, and its float
-            type (default: CPU, float32).
+            type (default: Warp's default device, as :class:`Planner`; float32).
         options: :class:`PlanOptions` (None: its defaults); not modified.
         **overrides: any field of :class:`PlanOptions` as a keyword (``n_starts=16``,
             ``iterations=300``, ``callback=f``, ...): the options are
