@@ -273,7 +273,8 @@ def _device_defaults() -> list[str]:
                 for st in node.body:
                     if (isinstance(st, ast.AnnAssign) and isinstance(st.target, ast.Name)
                             and st.target.id == "device" and st.value is not None
-                            and not (isinstance(st.value, ast.Constant) and st.value.value is None)):
+                            and not (isinstance(st.value, ast.Constant)
+                                     and st.value.value is None)):
                         bad.append(f"{m}:{st.lineno} {node.name}.device = {ast.unparse(st.value)}")
     return bad
 

@@ -130,9 +130,9 @@ def read_checkpoint(path: str | os.PathLike, fmt: str = FORMAT) -> dict:
 
 
 def load_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = None) -> IKNet:
-    """The :class:`IKNet` of a checkpoint, on ``device`` (None: Warp's default device, docs/api.md
-    "Devices") in eval mode, with ``.meta`` (every
-    field but the weights and the optimizer state).
+    """The :class:`IKNet` of a checkpoint, on ``device`` (None: Warp's default device,
+    docs/api.md "Devices") in eval mode, with ``.meta`` (every field but the weights and
+    the optimizer state).
 
     ``robot`` (name or RobotModel; None: the checkpoint's robot from the registry): the
     robot the network is meant for; a different name or kinematics hash raises ValueError

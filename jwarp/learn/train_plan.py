@@ -463,8 +463,8 @@ class TrainPlanOptions:
     """Options of :func:`train_plan` (the network: robot, n_bps, n_waypoints, hidden,
     n_blocks, n_heads; training: epochs x steps_per_epoch Adam steps of batch_size samples,
     lr; the switches time_reversal, axis_symmetry, boosting (boost_percentile,
-    boost_ratio); n_substeps of the costs; device (None: Warp's default device); seed; checkpoint (written after every
-    epoch when given))."""
+    boost_ratio); n_substeps of the costs; device (None: Warp's default device); seed;
+    checkpoint (written after every epoch when given))."""
 
     robot: str = "planar4"
     n_bps: int = 128
