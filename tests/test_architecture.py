@@ -324,3 +324,72 @@ def test_devices_resolve_through_the_one_helper():
                     and isinstance(node.value, ast.Name) and node.value.id == "wp"):
                 bad.append(f"{m}:{node.lineno} wp.{node.attr}")
     assert not bad, "device resolved outside resolve_device:\n" + "\n".join(bad)
+
+
+#: option dataclasses and the names the vocabulary replaced (issue 28; docs/api.md "Solvers")
+OPTION_CLASSES = ["jwarp.solvers.ik:IKOptions", "jwarp.solvers.planner:PlanOptions",
+                  "jwarp.solvers.calibration:CalibrationOptions",
+                  "jwarp.solvers.calibration.design:DesignOptions",
+                  "jwarp.solvers.calibration.poses:PoseOptions", "jwarp.solvers.rrt:RRTOptions",
+                  "jwarp.learn.plan_data:PlanDataOptions", "jwarp.learn.train_ik:TrainIKOptions",
+                  "jwarp.learn.train_plan:TrainPlanOptions"]
+OLD_OPTION_NAMES = {"max_iter", "max_iterations", "n_iter", "n_iterations", "n_seeds",
+                    "initial", "early_stop"}
+
+
+@pytest.mark.parametrize("path", OPTION_CLASSES)
+def test_options_use_one_vocabulary(path):
+    """No options dataclass has a field named as the vocabulary's replaced names
+    (``iterations``, ``n_starts``, ``seeds``, ``start_kind``, ``freeze_solved`` /
+    ``freeze_feasible`` / ``stop_when_solved``)."""
+    import dataclasses
+    import importlib
+
+    mod, name = path.split(":")
+    cls = getattr(importlib.import_module(mod), name)
+    fields = {f.name for f in dataclasses.fields(cls)}
+    assert not fields & OLD_OPTION_NAMES, f"{name}: {sorted(fields & OLD_OPTION_NAMES)}"
+    from jwarp.solvers.overrides import renamed
+
+    assert set(renamed(cls).values()) <= fields
+
+
+def test_old_option_names_warn_and_give_the_same_options():
+    """The replaced names work for one release: constructor, attribute and ``**overrides``
+    warn (DeprecationWarning) and give the same options and the same result."""
+    import numpy as np
+
+    import jwarp
+    from jwarp.solvers.calibration import CalibrationOptions
+    from jwarp.solvers.calibration.design import DesignOptions
+    from jwarp.solvers.ik import IKOptions
+    from jwarp.solvers.planner import PlanOptions
+
+    with pytest.warns(DeprecationWarning, match="'max_iterations' is renamed 'iterations'"):
+        old = IKOptions(max_iterations=7)
+    assert old == IKOptions(iterations=7)
+    with pytest.warns(DeprecationWarning):
+        assert old.max_iterations == 7
+    with pytest.warns(DeprecationWarning):
+        assert PlanOptions(initial="straight", early_stop=False) == PlanOptions(
+            start_kind="straight", freeze_feasible=False)
+    with pytest.warns(DeprecationWarning):
+        assert CalibrationOptions(free="theta", max_iter=5) == CalibrationOptions(
+            free="theta", equilibrium_iterations=5)
+    with pytest.warns(DeprecationWarning):
+        assert DesignOptions(n=3, max_iter=4) == DesignOptions(n=3, iterations=4)
+    with pytest.raises(TypeError, match="both"):
+        IKOptions(max_iterations=3, iterations=4)
+    T = jwarp.fk("arm7", np.full(7, 0.3), device="cpu")[jwarp.robot("arm7").frame_index("tcp")]
+    new = jwarp.ik("arm7", "tcp", T, iterations=20, n_starts=2, seed=1, device="cpu",
+                   allow_no_collision=True)
+    with pytest.warns(DeprecationWarning, match=r"ik\(\): 'max_iterations'"):
+        again = jwarp.ik("arm7", "tcp", T, max_iterations=20, n_starts=2, seed=1, device="cpu",
+                         allow_no_collision=True)
+    np.testing.assert_array_equal(new.q, again.q)
+    q0 = np.zeros((2, 7))
+    with pytest.warns(DeprecationWarning, match="'initial' is renamed 'seeds'"):
+        a = jwarp.ik("arm7", "tcp", T, initial=q0, iterations=5, device="cpu",
+                     allow_no_collision=True)
+    b = jwarp.ik("arm7", "tcp", T, seeds=q0, iterations=5, device="cpu", allow_no_collision=True)
+    np.testing.assert_array_equal(a.q, b.q)

@@ -134,7 +134,7 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
     fi = model.frame_index(frame)
     n_random = _count(n_random, "n_random", 0 if warm_start is not None else 1)
     max_iterations = _count(max_iterations, "max_iterations", 0)
-    opts = IKOptions(n_starts=1, max_iterations=max_iterations, margin=margin, tol_pos=tol_pos,
+    opts = IKOptions(n_starts=1, iterations=max_iterations, margin=margin, tol_pos=tol_pos,
                      tol_rot=tol_rot, stop_when_solved=False, q_default=q_default, seed=seed,
                      restart_after=None, freeze_solved=False)  # every seed on its own
     qd = (project_numpy(model, model.joint_limits.mean(axis=1)) if q_default is None

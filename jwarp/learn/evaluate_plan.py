@@ -28,7 +28,7 @@ def _run(model: Any, world: Any, q0: np.ndarray, q1: np.ndarray, K: int, *, seed
          n_substeps: int = 4, seed: int = 0, device: Any = None
          ) -> tuple[np.ndarray, np.ndarray]:
     """(B, n_starts) first feasible iteration (K + 1: never) and (B,) best cost."""
-    opts = PlanOptions(n_starts=n_starts, initial=initial, n_waypoints=n_waypoints,
+    opts = PlanOptions(n_starts=n_starts, start_kind=initial, n_waypoints=n_waypoints,
                        n_substeps=n_substeps, iterations=K, check_all_every=1, seed=seed,
                        stop_when_solved=False, fallback=None)
     res = Planner(model, world, len(q0), opts, device=device).plan(q0, q1, seeds=seeds)

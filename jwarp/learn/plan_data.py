@@ -126,7 +126,7 @@ class PlanDataOptions:
         with ``refine``, the convergence of feasible seeds (``length_weight``,
         ``converge``)."""
         w = PathWeights(length=float(self.length_weight)) if refine else PathWeights()
-        return PlanOptions(n_starts=n_starts, initial=initial, n_waypoints=self.n_waypoints,
+        return PlanOptions(n_starts=n_starts, start_kind=initial, n_waypoints=self.n_waypoints,
                            n_substeps=self.n_substeps, iterations=self.iterations,
                            step=self.step, max_step=self.max_step, weights=w,
                            margin=float(self.margin), check_all_every=self.check_all_every,

@@ -230,7 +230,7 @@ class IKTrainer:
                                          device=self.wdev, dtype=sc) for w in d.worlds]
         self._objectives += [ik_objective(self.model, o.frame, o.n_val * self.H, world=w,
                                           device=self.wdev, dtype=sc) for w in d.val_worlds]
-        vopt = IKOptions(n_starts=self.H, max_iterations=o.val_iterations, seed=o.seed)
+        vopt = IKOptions(n_starts=self.H, iterations=o.val_iterations, seed=o.seed)
         self.solvers = [IKSolver(self.model, o.frame, o.n_val, vopt, world=w, device=self.wdev)
                         for w in d.val_worlds]
         # hard set: a ring per training world
@@ -252,7 +252,7 @@ class IKTrainer:
         o, out, feas = self.options, [], []
         for w, T, q0 in zip(self.data.worlds, self.data.targets, self.data.q):
             s = IKSolver(self.model, o.frame, len(T), IKOptions(
-                n_starts=n_starts, max_iterations=max_iterations, seed=o.seed),
+                n_starts=n_starts, iterations=max_iterations, seed=o.seed),
                 world=w, device=self.wdev)
             r = s.solve(T)
             # unsolved: the configuration the target came from (scene tasks have none:

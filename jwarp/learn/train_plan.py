@@ -167,7 +167,7 @@ def hard_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator, *,
     S, G, got = [], [], 0
     for _ in range(rounds):
         q0, q1 = sample_tasks(model, world, 3 * (n - got), rng)
-        opts = PlanOptions(n_starts=1, initial="straight", n_waypoints=n_waypoints,
+        opts = PlanOptions(n_starts=1, start_kind="straight", n_waypoints=n_waypoints,
                            n_substeps=n_substeps, iterations=iterations, fallback=None)
         easy = Planner(model, world, len(q0), opts, device="cpu").plan(q0, q1).feasible
         S.append(q0[~easy][:n - got])
@@ -185,7 +185,7 @@ def label_tasks(robot: Any, world: Any, starts: np.ndarray, goals: np.ndarray, *
     """The default labeler: the planner's multi-starts (the straight line and
     ``n_starts - 1`` random ones, thesis 3.5.1), best feasible path per task. Returns
     paths (N, W, n_dof), feasible (N,), cost (N,)."""
-    opts = PlanOptions(n_starts=n_starts, initial="mixed", n_waypoints=n_waypoints,
+    opts = PlanOptions(n_starts=n_starts, start_kind="mixed", n_waypoints=n_waypoints,
                        n_substeps=n_substeps, iterations=iterations, seed=seed,
                        stop_when_solved=False, fallback=None)
     res = Planner(robot, world, len(starts), opts, device="cpu").plan(starts, goals)
