@@ -677,7 +677,8 @@ class Planner:
                 collision-free with ``options.margin`` (and a converged equilibrium on the
                 elastic model).
             seeds: the initial paths: None draws ``options.n_starts`` multi-starts of kind
-                ``options.start_kind`` (with a ``warm_start``: its paths first); an array of paths (W, n_dof), (n_seeds, W, n_dof) or
+                ``options.start_kind`` (with a ``warm_start``: its paths first); an array
+                of paths (W, n_dof), (n_seeds, W, n_dof) or
                 (n_problems, n_seeds, W, n_dof) (their first/last rows are replaced by
                 start/goal, they are projected onto the limits, and W is theirs), e.g.
                 learned warm starts; or :class:`ViaPoints`.

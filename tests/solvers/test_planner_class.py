@@ -157,7 +157,8 @@ def test_options_are_validated_naming_the_field(device, block_world):
            (P(start_kind=np.zeros((2, 4))), TypeError, "start_kind"),
            (P(weights={"world": 1.0}), TypeError, "weights"),
            (P(weights=PL.PathWeights(length=-1.0)), ValueError, "weights.length"),
-           (P(freeze_feasible="yes"), TypeError, "freeze_feasible"), (P(seed=-1), ValueError, "seed"),
+           (P(freeze_feasible="yes"), TypeError, "freeze_feasible"),
+           (P(seed=-1), ValueError, "seed"),
            (P(kappa=1e-4, lam=1.5), ValueError, "lam"), (P(callback=3), TypeError, "callback"),
            (P(step=1e39), ValueError, "step")]
     for opts, err, name in bad:

@@ -307,8 +307,8 @@ class CalibrationProblem:
             free = [g for g in parse_groups(o.free) if g not in (o.fix_at or {})]
         return cls(robot, measurement, q, y, free=free, meta=meta, noise_sigma=o.noise_sigma,
                    sigma=o.sigma, frames=o.frames, p_nominal=p_nominal, elastic=o.elastic,
-                   lam=o.lam, max_iter=o.equilibrium_iterations, tol=o.tol, bound_kappa=o.bound_kappa,
-                   covariance=o.covariance, orders=o.orders, loss=o.loss,
+                   lam=o.lam, max_iter=o.equilibrium_iterations, tol=o.tol,
+                   bound_kappa=o.bound_kappa, covariance=o.covariance, orders=o.orders, loss=o.loss,
                    loss_scale=o.loss_scale)
 
     # ------------------------------------------------------------------ sizes
@@ -941,8 +941,8 @@ def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
     if not np.all(np.isfinite(prob.residuals(start0))):
         raise ValueError(f"x0: the elastic equilibrium does not converge at the start for "
                          f"{int((~prob.state(start0).converged).sum())} sample(s) "
-                         f"(equilibrium_iterations={o.equilibrium_iterations}, tol={o.tol}); lower lam "
-                         f"or raise equilibrium_iterations")
+                         f"(equilibrium_iterations={o.equilibrium_iterations}, tol={o.tol}); "
+                         f"lower lam or raise equilibrium_iterations")
     hold = prob.scale_unpriored(start0)
     robot_kinds = ((sp.kind == KIND_DH) | (sp.kind == KIND_KAPPA) | (sp.kind == KIND_MASS)
                    | (sp.kind == KIND_ORIGIN))
