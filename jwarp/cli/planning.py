@@ -227,7 +227,7 @@ _OPTION_OF = {"start": "--start", "goal": "--goal", "target": "--target", "frame
               "n_random_with_warm_start": "--starts", "time_limit": "--time-limit",
               "fallback": "--fallback", "endpoint_margin": "--endpoint-margin",
               "self_margin": "--self-margin", "robot": "--robot", "initial": "--initial",
-              "seeds": "--initial", "start_kind": "--initial",
+              "seeds": "--initial",
               "tol_pos": "--tol-pos", "tol_rot": "--tol-rot", "free_axis": "--free-axis",
               "orientation": "--position-only"}
 
