@@ -98,7 +98,7 @@ def test_planner_and_ik_check_their_inputs_in_the_solver_dtype(block_world):
     far[0, 3] = BIG
     with pytest.raises(ValueError, match="^target: values overflow float32"):
         ik("arm7", "tcp", far, n_starts=2, iterations=2, dtype=np.float32)
-    with pytest.raises(ValueError, match="^initial: values overflow float32"):
+    with pytest.raises(ValueError, match="^seeds: values overflow float32"):
         ik("arm7", "tcp", T, seeds=_big(7), iterations=2, dtype=np.float32)
     obj = PL.PathObjective("planar4", block_world, 1, 3, 2, device="cpu", dtype=np.float32)
     paths = np.zeros((1, 3, 4))
