@@ -282,12 +282,12 @@ def small_call(op: str, robot: Any, q: Any, device: Any, dtype: Any, validate: b
             return None
         warp_in = True
     elif is_torch(q):
-        if q.requires_grad or q.device.type != "cpu":
-            return None
-        try:
+        try:   # raises for a tensor that requires grad or is not on the CPU
             qa = q.numpy()
         except (RuntimeError, TypeError):
             return None
+        if device is None:   # q's device (resolve_device), here the CPU: no torch lookup
+            device = "cpu"
     else:
         return None
     model = robot if type(robot) is RobotModel else get_robot(robot)
