@@ -119,14 +119,14 @@ class PlanDataOptions:
         if self.dtype not in ("float32", "float64"):
             raise ValueError(f"dtype: expected 'float32' or 'float64', got {self.dtype!r}")
 
-    def plan_options(self, initial: str, n_starts: int, seed: int,
+    def plan_options(self, start_kind: str, n_starts: int, seed: int,
                      refine: bool = False) -> PlanOptions:
         """The :class:`PlanOptions` of one stage: the search (straight line or
         multi-starts: the planner's length weight, each path stopping once feasible) or,
         with ``refine``, the convergence of feasible seeds (``length_weight``,
         ``converge``)."""
         w = PathWeights(length=float(self.length_weight)) if refine else PathWeights()
-        return PlanOptions(n_starts=n_starts, start_kind=initial, n_waypoints=self.n_waypoints,
+        return PlanOptions(n_starts=n_starts, start_kind=start_kind, n_waypoints=self.n_waypoints,
                            n_substeps=self.n_substeps, iterations=self.iterations,
                            step=self.step, max_step=self.max_step, weights=w,
                            margin=float(self.margin), check_all_every=self.check_all_every,
