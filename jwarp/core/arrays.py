@@ -509,6 +509,7 @@ class HostWrap:
         self.pool: np.ndarray | None = None
         self.base = 0
         self.next = self.slots
+        self.lock = threading.Lock()
         first = wp.array(np.zeros(self.shape, self.npdt), dtype=dtype, device="cpu", copy=False)
         state = dict(first.__dict__)
         fast = (type(first) is wp.array and {"ptr", "_ref", "ctype", "_array_interface",
@@ -521,13 +522,14 @@ class HostWrap:
     def take(self) -> tuple[np.ndarray, int]:
         """A fresh slot (of the template's shape and dtype) to write a result to, and its
         address; :meth:`wrap` makes it a Warp array."""
-        k = self.next
-        if k == self.slots:
-            self.pool = np.empty((self.slots,) + self.shape, self.npdt)
-            self.base = self.pool.ctypes.data
-            k = 0
-        self.next = k + 1
-        return self.pool[k], self.base + k * self.nbytes
+        with self.lock:   # threads never share a slot
+            k = self.next
+            if k == self.slots:
+                self.pool = np.empty((self.slots,) + self.shape, self.npdt)
+                self.base = self.pool.ctypes.data
+                k = 0
+            self.next = k + 1
+            return self.pool[k], self.base + k * self.nbytes
 
     def wrap(self, slot: np.ndarray, ptr: int) -> wp.array:
         """The slot of :meth:`take` (at address ``ptr``) as a new Warp array."""

@@ -308,9 +308,10 @@ def small_call(op: str, robot: Any, q: Any, device: Any, dtype: Any, validate: b
             if call is None:
                 return None
             if key is not None:
-                _CALLS[key] = call   # holds the model: its id is not reused meanwhile
-                if len(_CALLS) > 4 * SMALL_CALL_WORKSPACES:
-                    del _CALLS[next(iter(_CALLS))]
+                with _WORKSPACES_LOCK:
+                    _CALLS[key] = call   # holds the model: its id is not reused meanwhile
+                    while len(_CALLS) > 4 * SMALL_CALL_WORKSPACES:
+                        del _CALLS[next(iter(_CALLS))]
         if out is not None and not (type(out) is np.ndarray and out.shape == call.want
                                     and out.dtype == call.npdt and out.flags.c_contiguous
                                     and out.flags.writeable):
