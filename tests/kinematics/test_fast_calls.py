@@ -310,3 +310,22 @@ def test_warp_small_calls_equal_the_general_path(justin, qs, dtype):
         np.testing.assert_array_equal(k.numpy(), K.fk(justin, qs[i:i + 1].astype(dtype)))
     np.testing.assert_array_equal(wp.clone(keep[3]).numpy(), keep[3].numpy())  # a kernel reads it
     assert launch.clear_workspaces() >= 1
+
+
+def test_warp_small_calls_from_threads(justin, qs):
+    """Threads on the Warp small path never share a result slot: every array keeps its own
+    configuration's frames."""
+    ref = K.fk(justin, qs[:200], device="cpu")
+    bad = []
+
+    def work(first):
+        kept = [(i, K.fk(justin, wp.array(qs[i:i + 1], device="cpu"))) for i in
+                range(first, 200, 4)]
+        bad.extend(i for i, a in kept if not np.array_equal(a.numpy()[0], ref[i]))
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not bad
