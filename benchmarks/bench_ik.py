@@ -225,9 +225,9 @@ def batched(args: argparse.Namespace, name: str, robot_name: str, frame: str, wo
     T = np.asarray(jwarp.fk(robot, q, device=args.device, dtype=np.float64)
                    )[:, robot.frame_index(frame)]
     dev, dt = args.device, args.dtype
-    opts = IK.IKOptions(n_starts=starts, margin=margin, max_iterations=args.max_iterations,
+    opts = IK.IKOptions(n_starts=starts, margin=margin, iterations=args.max_iterations,
                         freeze_solved=False)  # ik()'s semantics before freezing was default
-    kw = dict(world=world, n_starts=starts, margin=margin, max_iterations=args.max_iterations,
+    kw = dict(world=world, n_starts=starts, margin=margin, iterations=args.max_iterations,
               device=dev, dtype=dt)
 
     def persistent(s: IK.IKSolver) -> Callable[[int], Callable[[], Any]]:

@@ -85,7 +85,7 @@ def section_reach(args: argparse.Namespace) -> dict:
                      device=DEVICE)[:, model.frame_index("tcp")]
         S = args.seeds
         seeds = sample_within_limits(model, P * S, rng).reshape(P, S, -1)
-        base = dict(n_starts=S, max_iterations=args.iterations, tol_pos=1e-3, tol_rot=1e-2)
+        base = dict(n_starts=S, iterations=args.iterations, tol_pos=1e-3, tol_rot=1e-2)
         variants = {"no re-seeding": IKOptions(restart_after=None, **base),
                     "re-seeding (default)": IKOptions(**base),
                     "re-seeding + freeze_solved": IKOptions(freeze_solved=True, **base)}

@@ -125,12 +125,12 @@ def bench_feasibility(args: argparse.Namespace) -> dict:
                 if hard >= args.tasks:
                     break
                 tried += 1
-                line = PL.plan(robot, world, a, b, initial="straight", iterations=50,
+                line = PL.plan(robot, world, a, b, start_kind="straight", iterations=50,
                                step=args.step, seed=None, fallback=None)
                 if line.feasible[0]:
                     continue  # easy task
                 hard += 1
-                res = PL.plan(robot, world, a, b, initial="random", n_starts=args.starts,
+                res = PL.plan(robot, world, a, b, start_kind="random", n_starts=args.starts,
                               iterations=50, step=args.step, seed=hard,
                               n_substeps=line.n_substeps, stop_when_solved=False,
                               fallback=None)
@@ -207,7 +207,7 @@ def bench_compensation(args: argparse.Namespace) -> dict:
                               ("soft20x_2e-3_theta_only", [0.0, 0.0, 20 * comp.JUSTIN_KAPPA], 0.7)):
         out[f"ik_convergence_{label}"] = comp.compare_ik(robot, "right_tcp", T, kappa, lam=lam,
                                                          n_starts=8, check_every=1,
-                                                         max_iterations=400, device=args.device)
+                                                         iterations=400, device=args.device)
     return out
 
 

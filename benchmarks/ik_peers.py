@@ -207,7 +207,7 @@ class Jwarp:
 
         self.cols = arm_columns(model)
         self.solver = IKSolver(model, TCP, n_targets, IKOptions(
-            n_starts=n_seeds, max_iterations=iterations, tol_pos=tol_pos, tol_rot=tol_rot,
+            n_starts=n_seeds, iterations=iterations, tol_pos=tol_pos, tol_rot=tol_rot,
             seed=0), device=device, dtype=dtype)
         self.last = None
 

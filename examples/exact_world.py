@@ -66,13 +66,13 @@ def main() -> int:
     print(f"1-2. plan around the box: {text}")
     checks.append(("the plan keeps the 1 cm margin (dense re-check)", ok))
 
-    line = plan(robot, world, start, goal, initial="straight", iterations=0, fallback=None)
+    line = plan(robot, world, start, goal, start_kind="straight", iterations=0, fallback=None)
     print(f"3. the straight line: {line.reasons[0]}")
     checks.append(("the straight line is refused, naming the box",
                    not line.feasible[0] and "'box'" in line.reasons[0]))
 
     world.move("box", [-0.57, -0.42, 2.5])       # lifted far above: the line is free now
-    moved = plan(robot, world, start, goal, initial="straight", iterations=0, fallback=None)
+    moved = plan(robot, world, start, goal, start_kind="straight", iterations=0, fallback=None)
     print(f"4. box moved away: the straight line is "
           f"{'feasible' if moved.feasible[0] else 'NOT feasible: ' + moved.reasons[0]}")
     checks.append(("the moved box is seen at once", bool(moved.feasible[0])))

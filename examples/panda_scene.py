@@ -146,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
           flush=True)
     opts = PlanOptions(n_starts=a.starts, iterations=a.iterations, n_waypoints=a.waypoints,
                        margin=a.margin, stop_when_solved=True, seed=a.seed, fallback=None)
-    line = PlanOptions(n_starts=1, initial="straight", iterations=a.iterations,
+    line = PlanOptions(n_starts=1, start_kind="straight", iterations=a.iterations,
                        n_waypoints=a.waypoints, margin=a.margin, seed=a.seed, fallback=None)
     rows = []
     for name, stages in () if a.no_cpu else (("straight line, then multi-starts, 1 CPU core", [line, opts]),

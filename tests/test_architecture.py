@@ -250,3 +250,146 @@ def test_feasibility_helpers_come_from_their_module():
            for line, target, names, _ in imports(m)
            if target == "jwarp.solvers.planner" and names and set(names) & helpers]
     assert not bad, "\n".join(bad)
+
+
+def _device_defaults() -> list[str]:
+    """``module:line name=default`` for every public function, method (``__init__``
+    included) and dataclass field named ``device`` whose default is not None."""
+    bad = []
+    for m, (path, tree, _) in MODULES.items():
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                if node.name.startswith("_") and node.name != "__init__":
+                    continue
+                a = node.args
+                pos = a.posonlyargs + a.args
+                pairs = list(zip(pos[len(pos) - len(a.defaults):], a.defaults))
+                pairs += [(k, d) for k, d in zip(a.kwonlyargs, a.kw_defaults) if d is not None]
+                for arg, default in pairs:
+                    if arg.arg == "device" and not (isinstance(default, ast.Constant)
+                                                    and default.value is None):
+                        bad.append(f"{m}:{node.lineno} {node.name}(device={ast.unparse(default)})")
+            elif isinstance(node, ast.ClassDef) and not node.name.startswith("_"):
+                for st in node.body:
+                    if (isinstance(st, ast.AnnAssign) and isinstance(st.target, ast.Name)
+                            and st.target.id == "device" and st.value is not None
+                            and not (isinstance(st.value, ast.Constant)
+                                     and st.value.value is None)):
+                        bad.append(f"{m}:{st.lineno} {node.name}.device = {ast.unparse(st.value)}")
+    return bad
+
+
+def test_one_device_default_rule():
+    """Every public function, method and options dataclass of jwarp that takes a ``device``
+    defaults it to None (issue 28: one device rule, docs/api.md "Devices"), and the
+    facades' functions and classes say so in their signatures."""
+    import importlib
+    import inspect
+
+    bad = _device_defaults()
+    assert not bad, "device defaults other than None:\n" + "\n".join(bad)
+    facades = ["jwarp", "jwarp.kinematics", "jwarp.world", "jwarp.learn",
+               "jwarp.solvers.calibration", "jwarp.solvers.ik", "jwarp.solvers.planner"]
+    seen = 0
+    for name in facades:
+        mod = importlib.import_module(name)
+        for attr in getattr(mod, "__all__", ()):
+            obj = getattr(mod, attr)
+            fn = obj.__init__ if inspect.isclass(obj) else obj
+            if not callable(fn):
+                continue
+            try:
+                params = inspect.signature(fn).parameters
+            except (TypeError, ValueError):
+                continue
+            p = params.get("device")
+            if p is not None:
+                seen += 1
+                assert p.default in (None, inspect.Parameter.empty), f"{name}.{attr}: {p}"
+    assert seen >= 10
+
+
+def test_devices_resolve_through_the_one_helper():
+    """Only ``jwarp.core.arrays.resolve_device`` turns ``device=None`` into a device: no
+    other module asks Warp for its preferred or default device (``put_model``, the Model's
+    builder, resolves ``device=None`` to Warp's default device, the same rule)."""
+    allowed = {"jwarp.core.arrays", "jwarp.core.device"}
+    bad = []
+    for m, (path, tree, _) in MODULES.items():
+        if m in allowed:
+            continue
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and node.attr in ("get_preferred_device",
+                                                                   "get_device")
+                    and isinstance(node.value, ast.Name) and node.value.id == "wp"):
+                bad.append(f"{m}:{node.lineno} wp.{node.attr}")
+    assert not bad, "device resolved outside resolve_device:\n" + "\n".join(bad)
+
+
+#: option dataclasses and the names the vocabulary replaced (issue 28; docs/api.md "Solvers")
+OPTION_CLASSES = ["jwarp.solvers.ik:IKOptions", "jwarp.solvers.planner:PlanOptions",
+                  "jwarp.solvers.calibration:CalibrationOptions",
+                  "jwarp.solvers.calibration.design:DesignOptions",
+                  "jwarp.solvers.calibration.poses:PoseOptions", "jwarp.solvers.rrt:RRTOptions",
+                  "jwarp.learn.plan_data:PlanDataOptions", "jwarp.learn.train_ik:TrainIKOptions",
+                  "jwarp.learn.train_plan:TrainPlanOptions"]
+OLD_OPTION_NAMES = {"max_iter", "max_iterations", "n_iter", "n_iterations", "n_seeds",
+                    "initial", "early_stop"}
+
+
+@pytest.mark.parametrize("path", OPTION_CLASSES)
+def test_options_use_one_vocabulary(path):
+    """No options dataclass has a field named as the vocabulary's replaced names
+    (``iterations``, ``n_starts``, ``seeds``, ``start_kind``, ``freeze_solved`` /
+    ``freeze_feasible`` / ``stop_when_solved``)."""
+    import dataclasses
+    import importlib
+
+    mod, name = path.split(":")
+    cls = getattr(importlib.import_module(mod), name)
+    fields = {f.name for f in dataclasses.fields(cls)}
+    assert not fields & OLD_OPTION_NAMES, f"{name}: {sorted(fields & OLD_OPTION_NAMES)}"
+    from jwarp.solvers.overrides import renamed
+
+    assert set(renamed(cls).values()) <= fields
+
+
+def test_old_option_names_warn_and_give_the_same_options():
+    """The replaced names work for one release: constructor, attribute and ``**overrides``
+    warn (DeprecationWarning) and give the same options and the same result."""
+    import numpy as np
+
+    import jwarp
+    from jwarp.solvers.calibration import CalibrationOptions
+    from jwarp.solvers.calibration.design import DesignOptions
+    from jwarp.solvers.ik import IKOptions
+    from jwarp.solvers.planner import PlanOptions
+
+    with pytest.warns(DeprecationWarning, match="'max_iterations' is renamed 'iterations'"):
+        old = IKOptions(max_iterations=7)
+    assert old == IKOptions(iterations=7)
+    with pytest.warns(DeprecationWarning):
+        assert old.max_iterations == 7
+    with pytest.warns(DeprecationWarning):
+        assert PlanOptions(initial="straight", early_stop=False) == PlanOptions(
+            start_kind="straight", freeze_feasible=False)
+    with pytest.warns(DeprecationWarning):
+        assert CalibrationOptions(free="theta", max_iter=5) == CalibrationOptions(
+            free="theta", equilibrium_iterations=5)
+    with pytest.warns(DeprecationWarning):
+        assert DesignOptions(n=3, max_iter=4) == DesignOptions(n=3, iterations=4)
+    with pytest.raises(TypeError, match="both"):
+        IKOptions(max_iterations=3, iterations=4)
+    T = jwarp.fk("arm7", np.full(7, 0.3), device="cpu")[jwarp.robot("arm7").frame_index("tcp")]
+    new = jwarp.ik("arm7", "tcp", T, iterations=20, n_starts=2, seed=1, device="cpu",
+                   allow_no_collision=True)
+    with pytest.warns(DeprecationWarning, match=r"ik\(\): 'max_iterations'"):
+        again = jwarp.ik("arm7", "tcp", T, max_iterations=20, n_starts=2, seed=1, device="cpu",
+                         allow_no_collision=True)
+    np.testing.assert_array_equal(new.q, again.q)
+    q0 = np.zeros((2, 7))
+    with pytest.warns(DeprecationWarning, match="'initial' is renamed 'seeds'"):
+        a = jwarp.ik("arm7", "tcp", T, initial=q0, iterations=5, device="cpu",
+                     allow_no_collision=True)
+    b = jwarp.ik("arm7", "tcp", T, seeds=q0, iterations=5, device="cpu", allow_no_collision=True)
+    np.testing.assert_array_equal(a.q, b.q)

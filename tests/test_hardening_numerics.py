@@ -97,9 +97,9 @@ def test_planner_and_ik_check_their_inputs_in_the_solver_dtype(block_world):
     far = T.copy()
     far[0, 3] = BIG
     with pytest.raises(ValueError, match="^target: values overflow float32"):
-        ik("arm7", "tcp", far, n_starts=2, max_iterations=2, dtype=np.float32)
-    with pytest.raises(ValueError, match="^initial: values overflow float32"):
-        ik("arm7", "tcp", T, initial=_big(7), max_iterations=2, dtype=np.float32)
+        ik("arm7", "tcp", far, n_starts=2, iterations=2, dtype=np.float32)
+    with pytest.raises(ValueError, match="^seeds: values overflow float32"):
+        ik("arm7", "tcp", T, seeds=_big(7), iterations=2, dtype=np.float32)
     obj = PL.PathObjective("planar4", block_world, 1, 3, 2, device="cpu", dtype=np.float32)
     paths = np.zeros((1, 3, 4))
     paths[0, 1, 1] = BIG
@@ -173,9 +173,9 @@ def test_elastic_ik_is_infeasible_where_the_rows_do_not_converge():
     target with a converged equilibrium; with kappa = 1e-3 the same problem is solved."""
     model = jwarp.robot("arm7")
     T = jwarp.fk(model, np.full(7, 0.3))[model.frame_index("tcp")]
-    soft = ik(model, "tcp", T, n_starts=4, max_iterations=40, kappa=0.1, seed=1)
+    soft = ik(model, "tcp", T, n_starts=4, iterations=40, kappa=0.1, seed=1)
     assert not soft.feasible and soft.n_feasible == 0
-    ok = ik(model, "tcp", T, n_starts=4, max_iterations=40, kappa=1e-3, seed=1)
+    ok = ik(model, "tcp", T, n_starts=4, iterations=40, kappa=1e-3, seed=1)
     assert ok.feasible
 
 
@@ -206,7 +206,7 @@ def test_numpy_scalars_are_accepted_where_floats_are(block_world):
     assert res.path.shape == (1, 20, 4)
     arm = jwarp.robot("arm7")
     sol = ik(arm, "tcp", jwarp.fk(arm, np.full(7, 0.3))[arm.frame_index("tcp")], n_starts=2,
-             max_iterations=3, tol_pos=np.float32(1e-4), step=np.float64(1.0),
+             iterations=3, tol_pos=np.float32(1e-4), step=np.float64(1.0),
              damping=np.float32(1e-3))
     assert sol.q.shape == (7,)
 

@@ -227,6 +227,7 @@ _OPTION_OF = {"start": "--start", "goal": "--goal", "target": "--target", "frame
               "n_random_with_warm_start": "--starts", "time_limit": "--time-limit",
               "fallback": "--fallback", "endpoint_margin": "--endpoint-margin",
               "self_margin": "--self-margin", "robot": "--robot", "initial": "--initial",
+              "seeds": "--initial",
               "tol_pos": "--tol-pos", "tol_rot": "--tol-rot", "free_axis": "--free-axis",
               "orientation": "--position-only"}
 
@@ -610,13 +611,13 @@ def cmd_ik(args: argparse.Namespace) -> int:
         if free_axis is not None:
             extra["free_axis"] = free_axis
     try:
-        common = dict(world=world, margin=args.margin, max_iterations=args.iterations,
+        common = dict(world=world, margin=args.margin, iterations=args.iterations,
                       seed=args.seed, kappa=kappa, device=args.device,
                       dtype=dtype_of(args.dtype), allow_no_collision=args.no_collision,
                       **extra)
         if q_init is not None:
             seeds = _ik_seeds(args, model, q_init, T, world, net)
-            res = ik(model, args.frame, T, initial=seeds, **common)
+            res = ik(model, args.frame, T, seeds=seeds, **common)
         elif net is not None:
             res = ik(model, args.frame, T, warm_start=net,
                      n_random_with_warm_start=args.starts, **common)

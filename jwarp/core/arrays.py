@@ -46,20 +46,75 @@ def is_torch(x: Any) -> bool:
     return mod.startswith("torch") and hasattr(x, "detach")
 
 
-def resolve_device(device: Any, like: Any = None) -> wp.Device:
-    """The Warp device: ``device`` if given, else that of ``like`` (warp/torch), else the
-    preferred device (CUDA if present, else CPU)."""
-    init_warp()
+def resolve_device(device: Any, *inputs: Any, like: Any = None) -> wp.Device:
+    """THE device rule of every public jwarp function and solver (docs/api.md, "Devices").
+
+    ``device`` given ("cpu", "cuda:0", a ``wp.Device`` or a torch device): that device.
+    ``device=None``: the device of the first of ``like`` and ``inputs`` that has one, a
+    Warp array or a torch tensor (its memory's device), or a device object of jwarp (a
+    :class:`~jwarp.core.device.DeviceModel`, a data, a solver: anything whose ``device``
+    attribute is a ``wp.Device``); else Warp's default device (``wp.get_device()``: CUDA
+    when present, else the CPU, unless ``wp.set_device``/``wp.ScopedDevice`` chose
+    another), as in Newton, MuJoCo Warp and :func:`~jwarp.core.device.put_model`.
+
+    Why the default device and not always "cpu" for host inputs: a Warp or cuRobo user
+    expects the GPU when there is one, the CPU results are those of the CPU (a machine
+    without CUDA computes exactly what it computed before), and the same call of a solver
+    function and of its solver class (``ik``/``IKSolver``, ``plan``/``Planner``) runs on the
+    same device. Pass ``device="cpu"`` for small problems on a CUDA machine.
+
+    Resolved devices of a name are cached ("cpu", "cuda:0": no string parsing per call;
+    a bare "cuda" follows the current CUDA device and is looked up each time).
+
+    Raises:
+        ValueError: naming ``device`` for an unknown or unavailable device.
+    """
+    if not _INITIALISED:
+        init_warp()
     if device is None:
-        if isinstance(like, wp.array):
-            return like.device
-        if like is not None and is_torch(like):
-            return wp.device_from_torch(like.device)
-        return wp.get_preferred_device()
+        for x in (like, *inputs):
+            if x is None:
+                continue
+            d = getattr(x, "device", None)
+            if isinstance(d, wp.Device):
+                return d
+            if d is not None and is_torch(x):
+                if d.type == "cpu":
+                    return _cpu()
+                return wp.device_from_torch(d)
+        return wp.get_device()
+    if isinstance(device, wp.Device):
+        return device
     try:
-        return wp.get_device(str(device) if not isinstance(device, wp.Device) else device)
+        dev = _DEVICES.get(device)
+    except TypeError:   # unhashable: reported below
+        dev = None
+    if dev is not None:
+        return dev
+    try:
+        dev = wp.get_device(str(device))
     except Exception as e:  # warp raises RuntimeError/ValueError for unknown devices
         raise ValueError(f"device: unknown or unavailable device {device!r}: {e}") from e
+    if str(device) == dev.alias:   # "cpu", "cuda:0": always the same device
+        _DEVICES[device] = dev
+    return dev
+
+
+def device_name(device: Any, *inputs: Any) -> str:
+    """The device of :func:`resolve_device` by name ("cpu", "cuda:0"): for torch
+    (``torch.device(name)``, ``module.to(name)``) and for cache keys."""
+    return resolve_device(device, *inputs).alias
+
+
+#: devices resolved from their names (see :func:`resolve_device`)
+_DEVICES: dict = {}
+
+
+def _cpu() -> wp.Device:
+    dev = _DEVICES.get("cpu")
+    if dev is None:
+        dev = _DEVICES["cpu"] = wp.get_device("cpu")
+    return dev
 
 
 @dataclass
@@ -427,6 +482,66 @@ def host_copy(arr: wp.array, out: np.ndarray | None = None) -> np.ndarray:
     if done is not None:
         done()
     return out
+
+
+_new_object = object.__new__
+
+
+class HostWrap:
+    """New Warp CPU arrays of one shape and dtype holding copies of host results, at about
+    a third of the cost of ``wp.array(host.copy(), dtype=..., copy=False)`` (the small-call
+    path of fk/jacobian returns a new Warp array per call).
+
+    The copies are written to consecutive slots of a numpy pool of about 64 kB (a new pool
+    when it is used up; a pool lives while an array of it does), so the pointer of a slot
+    is known without asking numpy. The first array is made by ``wp.array``; its attributes
+    are kept as a template, and each later array gets a copy of them with its own pointer
+    (``ptr``), owner (``_ref``: the slot, which keeps the pool alive) and no cached
+    interfaces. Where Warp's array keeps other attributes (another Warp version), every
+    call takes ``wp.array``."""
+
+    POOL_BYTES = 1 << 16
+
+    def __init__(self, shape: tuple, npdt: Any, dtype: Any) -> None:
+        self.shape, self.npdt, self.dtype = tuple(shape), np.dtype(npdt), dtype
+        self.nbytes = math.prod(self.shape) * self.npdt.itemsize
+        self.slots = max(1, self.POOL_BYTES // max(self.nbytes, 1))
+        self.pool: np.ndarray | None = None
+        self.base = 0
+        self.next = self.slots
+        self.lock = threading.Lock()
+        first = wp.array(np.zeros(self.shape, self.npdt), dtype=dtype, device="cpu", copy=False)
+        state = dict(first.__dict__)
+        fast = (type(first) is wp.array and {"ptr", "_ref", "ctype", "_array_interface",
+                                              "deleter"} <= state.keys()
+                and state["deleter"] is None)
+        if fast:
+            state.update(ctype=None, _array_interface=None)
+        self.state = state if fast else None
+
+    def take(self) -> tuple[np.ndarray, int]:
+        """A fresh slot (of the template's shape and dtype) to write a result to, and its
+        address; :meth:`wrap` makes it a Warp array."""
+        with self.lock:   # threads never share a slot
+            k = self.next
+            if k == self.slots:
+                self.pool = np.empty((self.slots,) + self.shape, self.npdt)
+                self.base = self.pool.ctypes.data
+                k = 0
+            self.next = k + 1
+            return self.pool[k], self.base + k * self.nbytes
+
+    def wrap(self, slot: np.ndarray, ptr: int) -> wp.array:
+        """The slot of :meth:`take` (at address ``ptr``) as a new Warp array."""
+        state = self.state
+        if state is None:
+            return wp.array(slot, dtype=self.dtype, device="cpu", copy=False)
+        arr = _new_object(wp.array)   # every attribute comes from the template
+        d = arr.__dict__
+        d.update(state)
+        d["ptr"] = ptr
+        d["_ref"] = slot
+        return arr
 
 
 def to_output(arr: wp.array, batch: Batch, tail: tuple = (), out: Any = None) -> Any:

@@ -51,7 +51,7 @@ def record_frames(t: Any, q: wp.array, dh: wp.array, kappa: wp.array | None, lam
 
 def tape_jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None,
                   kappa: Any = None, iterations: int = 0, lam: float = 1.0, dh: Any = None,
-                  wrt: tuple[str, ...] = WRT, device: Any = "cpu",
+                  wrt: tuple[str, ...] = WRT, device: Any = None,
                   dtype: Any = np.float64) -> dict[str, np.ndarray]:
     """Jacobians of a frame's pose (or a point in it) by reverse-mode autodiff.
 

@@ -2,8 +2,9 @@
 
 Every public function takes a robot (name or :class:`~jwarp.model.RobotModel`) and joint values
 ``q`` of shape ``(..., n_dof)`` as numpy, Warp or torch arrays, and returns the same kind
-with the same leading batch dimensions. ``device`` defaults to CUDA when present, else
-CPU; ``dtype`` defaults to float64 for float64 input, else float32.
+with the same leading batch dimensions. ``device`` None is the device rule of docs/api.md
+("Devices": q's device for Warp/torch q, else Warp's default device); ``dtype`` defaults
+to float64 for float64 input, else float32.
 """
 
 from __future__ import annotations
@@ -28,7 +29,8 @@ def fk(robot: RobotLike, q: ArrayLike, *, dh: ArrayLike | None = None,
         q: joint values (..., n_dof) [rad or m].
         dh: optional DH rows (n_frames, 5) or per configuration (..., n_frames, 5)
             [d, theta, r, alpha, beta] replacing the nominal ones (calibration).
-        device: "cpu", "cuda:0", ... (default: CUDA if present, else CPU).
+        device: "cpu", "cuda:0", ... (None: q's device for Warp/torch q, else Warp's
+            default device: docs/api.md "Devices").
         dtype: float32 or float64 (default: float64 for float64 input, else float32).
         validate: check q for NaN/inf (costs a pass over q).
         out: optional array the frames are written to, and returned: a numpy array or

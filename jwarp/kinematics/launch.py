@@ -11,14 +11,16 @@ here."""
 from __future__ import annotations
 
 import math
+import sys
 import threading
 from typing import Any, NamedTuple
 
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import (Batch, as_batch, default_dtype, empty, finite_as, first_touch,
-                               init_warp, is_torch, real_array, real_number, resolve_device)
+from jwarp.core.arrays import (Batch, HostWrap, as_batch, default_dtype, empty, finite_as,
+                               first_touch, init_warp, is_torch, real_array, real_number,
+                               resolve_device)
 from jwarp.core.device import KinematicsTables, numpy_dtype, scalar_type, tables
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kernels import fk as fk_kernels
@@ -198,70 +200,139 @@ def clear_workspaces() -> int:
     with _WORKSPACES_LOCK:
         n = len(_WORKSPACES)
         _WORKSPACES.clear()
+        _CALLS.clear()
     return n
+
+
+class SmallCall(NamedTuple):
+    """What a small call of one signature resolved once (see :func:`small_call`): the
+    robot, the workspace, the batch, the result's shape and dtype, the frame and point of
+    a Jacobian, whether q is cast to a narrower dtype, and (Warp input) the wrapper of the
+    results as Warp arrays."""
+
+    model: RobotModel
+    ws: Workspace
+    B: int
+    want: tuple
+    npdt: np.dtype
+    frame: int
+    point: tuple | None
+    narrowing: bool
+    wrap: HostWrap | None
+
+
+#: (op, robot id, device alias, dtype argument, input kind, q dtype, q shape, frame, point)
+#: -> :class:`SmallCall`; cleared with the workspaces
+_CALLS: dict = {}
+
+
+def _resolve_small(op: str, model: RobotModel, q: Any, qa: np.ndarray, warp_in: bool,
+                   dev: wp.Device, dtype: Any, frame: Any, point: Any) -> SmallCall | None:
+    """The :class:`SmallCall` of a signature, or None where the general path must run."""
+    if qa.dtype not in _SMALL_DTYPES or qa.ndim == 0:
+        return None
+    n = model.n_dof
+    shape = qa.shape
+    if shape[-1] != n or qa.size == 0:
+        return None
+    B = qa.size // n
+    npdt = qa.dtype if dtype is None else numpy_dtype(scalar_type(dtype))
+    if warp_in and (npdt != qa.dtype or dev != q.device):
+        return None   # the general path raises / moves q
+    tail = (model.n_frames, 4, 4) if op == "fk" else (6, n)
+    if B * (tail[0] * 16 if op == "fk" else 6 * n) * npdt.itemsize > SMALL_CALL_BYTES:
+        return None
+    t = tables(model, dev, npdt)
+    if op == "fk":
+        fi, pt = -1, None
+    else:
+        fi = model.frame_index(frame)
+        pt = ORIGIN if point is None else tuple(point_vec(point, t))
+    ws = workspace(t, B)
+    want = shape[:-1] + tail
+    wrap = None
+    if warp_in:
+        wdt = fk_kernels.kernels(t.scalar).mat44 if op == "fk" else t.scalar
+        lead = shape[:-1] + ((model.n_frames,) if op == "fk" else (6, n))
+        wrap = HostWrap(lead + ((4, 4) if op == "fk" else ()), npdt, wdt)
+    return SmallCall(model, ws, B, want, npdt, fi, pt, npdt.itemsize < qa.itemsize, wrap)
 
 
 def small_call(op: str, robot: Any, q: Any, device: Any, dtype: Any, validate: bool,
                out: Any = None, frame: Any = None, point: Any = None) -> Any:
     """The fast path of :func:`~jwarp.kinematics.fk.fk` (``op`` "fk") and
     :func:`~jwarp.kinematics.jacobians.jacobian` ("jacobian") for a small batch of float32/
-    float64 numpy q (or a CPU torch tensor without grad), through a cached
-    :class:`Workspace`. Returns None wherever the general path must run instead: other
-    inputs, large results, a busy workspace, a non-finite q, an ``out`` that is not a
-    fitting numpy array (the general path then raises its usual errors)."""
-    if type(q) is np.ndarray:
-        qa, torch_in = q, False
-    elif is_torch(q):
-        if q.requires_grad or q.device.type != "cpu":
+    float64 q: a numpy array, a CPU torch tensor without grad or a contiguous Warp CPU array
+    without grad, through a cached :class:`Workspace`. What a call signature needs (robot
+    tables, workspace, shapes) is resolved once and kept (:class:`SmallCall`), so a repeated
+    call costs a copy of q, the recorded launch and a copy of the result. Returns None
+    wherever the general path must run instead: other inputs, large results, a busy
+    workspace, a non-finite q, an ``out`` that is not a fitting numpy array (the general
+    path then raises its usual errors)."""
+    tq = type(q)
+    warp_in = False
+    if tq is np.ndarray:
+        qa = q
+    elif tq is wp.array:
+        if out is not None or q.requires_grad or not q.is_contiguous or not q.device.is_cpu:
             return None
         try:
+            qa = np.asarray(q)
+        except (TypeError, ValueError, AttributeError):
+            return None
+        warp_in = True
+    elif is_torch(q):
+        try:   # raises for a tensor that requires grad or is not on the CPU
             qa = q.numpy()
         except (RuntimeError, TypeError):
             return None
-        torch_in = True
+        if device is None:   # q's device (resolve_device), here the CPU: no torch lookup
+            device = "cpu"
     else:
         return None
-    if qa.dtype not in _SMALL_DTYPES or qa.ndim == 0:
-        return None
-    model = get_robot(robot)
-    n = model.n_dof
-    shape = qa.shape
-    if shape[-1] != n or qa.size == 0:
-        return None
-    B = qa.size // n
+    model = robot if type(robot) is RobotModel else get_robot(robot)
     try:   # any error: the general path raises it, in its order
         dev = resolve_device(device, like=q)
-        npdt = qa.dtype if dtype is None else numpy_dtype(scalar_type(dtype))
-        tail = (model.n_frames, 4, 4) if op == "fk" else (6, n)
-        if B * (tail[0] * 16 if op == "fk" else 6 * n) * npdt.itemsize > SMALL_CALL_BYTES:
-            return None
-        want = shape[:-1] + tail
-        if out is not None and not (type(out) is np.ndarray and out.shape == want
-                                    and out.dtype == npdt and out.flags.c_contiguous
+        key = None
+        if point is None or type(point) is tuple:   # else: resolved per call
+            try:
+                key = (op, id(model), dev.alias, dtype, warp_in, qa.dtype, qa.shape, frame,
+                       point)
+                call = _CALLS.get(key)
+            except TypeError:   # an unhashable argument: resolved per call
+                key = call = None
+        else:
+            call = None
+        if call is None or call.model is not model:
+            call = _resolve_small(op, model, q, qa, warp_in, dev, dtype, frame, point)
+            if call is None:
+                return None
+            if key is not None:
+                with _WORKSPACES_LOCK:
+                    _CALLS[key] = call   # holds the model: its id is not reused meanwhile
+                    while len(_CALLS) > 4 * SMALL_CALL_WORKSPACES:
+                        del _CALLS[next(iter(_CALLS))]
+        if out is not None and not (type(out) is np.ndarray and out.shape == call.want
+                                    and out.dtype == call.npdt and out.flags.c_contiguous
                                     and out.flags.writeable):
             return None
-        t = tables(model, dev, npdt)
-        if op == "fk":
-            fi, pt = -1, None
-        else:
-            fi = model.frame_index(frame)
-            pt = ORIGIN if point is None else tuple(point_vec(point, t))
-        ws = workspace(t, B)
     except (ValueError, TypeError):
         return None
-    if npdt.itemsize < qa.itemsize:   # float64 q computed in float32: overflow -> inf
+    q2 = qa.reshape(call.B, model.n_dof)
+    if warp_in:   # the result is written to a new Warp array's memory
+        out, ptr = call.wrap.take()
+    if call.narrowing:   # float64 q computed in float32: overflow -> inf
         with np.errstate(over="ignore", invalid="ignore"):
-            res = ws.run(op, qa.reshape(B, model.n_dof), validate, out, fi, pt)
+            res = call.ws.run(op, q2, validate, out, call.frame, call.point)
     else:
-        res = ws.run(op, qa.reshape(B, model.n_dof), validate, out, fi, pt)
+        res = call.ws.run(op, q2, validate, out, call.frame, call.point)
+    if warp_in:
+        return None if res is None else call.wrap.wrap(res, ptr)
     if res is None or out is not None:
         return res
-    res = res.reshape(want)
-    if torch_in:
-        import torch
-
-        return torch.from_numpy(res)
-    return res
+    if tq is not np.ndarray:
+        return sys.modules["torch"].from_numpy(res.reshape(call.want))
+    return res.reshape(call.want)
 
 
 #: default tolerance of :func:`fk_elastic` [rad] per computing dtype: float64 stops at

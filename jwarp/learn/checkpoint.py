@@ -37,6 +37,7 @@ from typing import Any
 import torch
 
 from jwarp.atomic import AtomicFile
+from jwarp.core.arrays import device_name
 from jwarp.core.device import content_key
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.plan_net import PlanNet, PlanNetConfig
@@ -128,9 +129,10 @@ def read_checkpoint(path: str | os.PathLike, fmt: str = FORMAT) -> dict:
     return doc
 
 
-def load_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = "cpu") -> IKNet:
-    """The :class:`IKNet` of a checkpoint, on ``device`` in eval mode, with ``.meta`` (every
-    field but the weights and the optimizer state).
+def load_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = None) -> IKNet:
+    """The :class:`IKNet` of a checkpoint, on ``device`` (None: Warp's default device,
+    docs/api.md "Devices") in eval mode, with ``.meta`` (every field but the weights and
+    the optimizer state).
 
     ``robot`` (name or RobotModel; None: the checkpoint's robot from the registry): the
     robot the network is meant for; a different name or kinematics hash raises ValueError
@@ -144,7 +146,7 @@ def load_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = "c
     return _finish(net, model, doc, path, device)
 
 
-def load_plan_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = "cpu"
+def load_plan_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = None
                          ) -> PlanNet:
     """The :class:`PlanNet` of a ``"jwarp-plan-net"`` checkpoint, as :func:`load_checkpoint`
     (ValueError for another robot or kinematics hash, or a file of another format)."""
@@ -233,7 +235,7 @@ def _robot_and_bps(doc: dict, path: Any, robot: Any) -> tuple[Any, Any]:
 def _finish(net: Any, model: Any, doc: dict, path: Any, device: Any) -> Any:
     net.robot = model
     net.load_state_dict(doc["state_dict"])
-    net.to(device)
+    net.to(device_name(device))
     net.eval()
     net.meta = {k: v for k, v in doc.items() if k not in ("state_dict", "optimizer_state")}
     net.meta["path"] = str(path)

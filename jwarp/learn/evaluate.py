@@ -104,7 +104,7 @@ def _solve_block(model: Any, frame: Any, world: Any, T: np.ndarray, seeds: np.nd
 def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start: Any = None,
                 n_random: int = N_RANDOM, max_iterations: int = 200, margin: float = 0.0,
                 tol_pos: float = 1e-4, tol_rot: float = 1e-3, q_default: Any = None,
-                seed: int = 0, device: Any = "cpu", dtype: Any = np.float64,
+                seed: int = 0, device: Any = None, dtype: Any = np.float64,
                 name: str | None = None) -> dict:
     """The Table 3.5 columns of one initial guess (module docstring).
 
@@ -134,7 +134,7 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
     fi = model.frame_index(frame)
     n_random = _count(n_random, "n_random", 0 if warm_start is not None else 1)
     max_iterations = _count(max_iterations, "max_iterations", 0)
-    opts = IKOptions(n_starts=1, max_iterations=max_iterations, margin=margin, tol_pos=tol_pos,
+    opts = IKOptions(n_starts=1, iterations=max_iterations, margin=margin, tol_pos=tol_pos,
                      tol_rot=tol_rot, stop_when_solved=False, q_default=q_default, seed=seed,
                      restart_after=None, freeze_solved=False)  # every seed on its own
     qd = (project_numpy(model, model.joint_limits.mean(axis=1)) if q_default is None
@@ -229,7 +229,7 @@ def _config_value(net: Any, key: str) -> Any:
 
 def ablation_table(robot: Any, frame: Any, world: Any, targets: Any,
                    nets: Mapping[str, Any] | Sequence[tuple[str, Any]], *,
-                   iterations: int = 10, device: Any = "cpu", **options: Any) -> list[dict]:
+                   iterations: int = 10, device: Any = None, **options: Any) -> list[dict]:
     """Table 3.4: per network (``{name: net}`` or ``[(name, net)]``) the feasibility after
     ``iterations`` solver iterations from its heads alone (head 1: ``feasibility``; any
     head: ``feasibility_heads``), with its ``boosting``, ``twin`` and ``unit_vectors``

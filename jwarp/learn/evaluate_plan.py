@@ -24,11 +24,11 @@ __all__ = ["evaluate_plan", "format_plan_table"]
 
 
 def _run(model: Any, world: Any, q0: np.ndarray, q1: np.ndarray, K: int, *, seeds: Any = None,
-         n_starts: int = 1, initial: str = "random", n_waypoints: int = 20,
-         n_substeps: int = 4, seed: int = 0, device: Any = "cpu"
+         n_starts: int = 1, start_kind: str = "random", n_waypoints: int = 20,
+         n_substeps: int = 4, seed: int = 0, device: Any = None
          ) -> tuple[np.ndarray, np.ndarray]:
     """(B, n_starts) first feasible iteration (K + 1: never) and (B,) best cost."""
-    opts = PlanOptions(n_starts=n_starts, initial=initial, n_waypoints=n_waypoints,
+    opts = PlanOptions(n_starts=n_starts, start_kind=start_kind, n_waypoints=n_waypoints,
                        n_substeps=n_substeps, iterations=K, check_all_every=1, seed=seed,
                        stop_when_solved=False, fallback=None)
     res = Planner(model, world, len(q0), opts, device=device).plan(q0, q1, seeds=seeds)
@@ -39,7 +39,7 @@ def _run(model: Any, world: Any, q0: np.ndarray, q1: np.ndarray, K: int, *, seed
 def evaluate_plan(robot: Any, worlds: list, starts: np.ndarray, goals: np.ndarray,
                   world_index: np.ndarray, *, nets: list | tuple = (), ks: tuple = (0, 10, 50),
                   n_random: int = 10, n_waypoints: int = 20, n_substeps: int = 4,
-                  seed: int = 0, baselines: bool = True, device: Any = "cpu") -> list[dict]:
+                  seed: int = 0, baselines: bool = True, device: Any = None) -> list[dict]:
     """Rows of the table: per ``(name, net)`` in ``nets`` (a network's heads as the
     starts; "network alone" is the k = 0 column), then "random (1)" (one random multi-start:
     1-3 random via points), "random (best of n_random)" and "straight line". Each row:
@@ -54,9 +54,9 @@ def evaluate_plan(robot: Any, worlds: list, starts: np.ndarray, goals: np.ndarra
     ks = tuple(sorted(int(k) for k in ks))
     K = ks[-1]
     kinds: list[tuple[str, dict]] = [(name, {"net": net}) for name, net in nets]
-    kinds += [] if not baselines else [("random (1)", {"n_starts": 1, "initial": "random"}),
-              (f"random (best of {n_random})", {"n_starts": n_random, "initial": "random"}),
-              ("straight line", {"n_starts": 1, "initial": "straight"})]
+    kinds += [] if not baselines else [("random (1)", {"n_starts": 1, "start_kind": "random"}),
+              (f"random (best of {n_random})", {"n_starts": n_random, "start_kind": "random"}),
+              ("straight line", {"n_starts": 1, "start_kind": "straight"})]
     rows = []
     for name, how in kinds:
         first = np.empty(len(starts))
@@ -72,7 +72,7 @@ def evaluate_plan(robot: Any, worlds: list, starts: np.ndarray, goals: np.ndarra
                              device=device)
             else:
                 it, c = _run(model, world, q0, q1, K, n_starts=how["n_starts"],
-                             initial=how["initial"], n_waypoints=n_waypoints,
+                             start_kind=how["start_kind"], n_waypoints=n_waypoints,
                              n_substeps=n_substeps, seed=seed + int(wi), device=device)
             first[idx] = it.min(axis=1)
             cost[idx] = c

@@ -74,7 +74,8 @@ class PlanDataOptions:
             the length cost settles; False: the labels are the early-stopped paths.
         refine: feasible multi-starts per hard task converged for its label, >= 1.
         converge_tol: relative change of U_l between checks that counts as converged.
-        device: Warp device of the optimisation ("cpu", "cuda", "cuda:0", ...).
+        device: Warp device of the optimisation ("cpu", "cuda", "cuda:0", ...; None:
+            Warp's default device, docs/api.md "Devices").
         dtype: "float32" or "float64", the optimisation's float type.
     """
 
@@ -90,7 +91,7 @@ class PlanDataOptions:
     converge: bool = True
     refine: int = 4
     converge_tol: float = 1e-4
-    device: str = "cpu"
+    device: str | None = None
     dtype: str = "float32"
 
     def validate(self) -> None:
@@ -112,20 +113,20 @@ class PlanDataOptions:
                                  f"got {v!r}")
         if not isinstance(self.converge, (bool, np.bool_)):
             raise TypeError(f"converge: expected True or False, got {self.converge!r}")
-        if not isinstance(self.device, str):
+        if self.device is not None and not isinstance(self.device, str):
             raise TypeError(f"device: expected a device name (str), got "
                             f"{type(self.device).__name__}")
         if self.dtype not in ("float32", "float64"):
             raise ValueError(f"dtype: expected 'float32' or 'float64', got {self.dtype!r}")
 
-    def plan_options(self, initial: str, n_starts: int, seed: int,
+    def plan_options(self, start_kind: str, n_starts: int, seed: int,
                      refine: bool = False) -> PlanOptions:
         """The :class:`PlanOptions` of one stage: the search (straight line or
         multi-starts: the planner's length weight, each path stopping once feasible) or,
         with ``refine``, the convergence of feasible seeds (``length_weight``,
         ``converge``)."""
         w = PathWeights(length=float(self.length_weight)) if refine else PathWeights()
-        return PlanOptions(n_starts=n_starts, initial=initial, n_waypoints=self.n_waypoints,
+        return PlanOptions(n_starts=n_starts, start_kind=start_kind, n_waypoints=self.n_waypoints,
                            n_substeps=self.n_substeps, iterations=self.iterations,
                            step=self.step, max_step=self.max_step, weights=w,
                            margin=float(self.margin), check_all_every=self.check_all_every,

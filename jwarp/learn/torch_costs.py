@@ -16,6 +16,7 @@ import numpy as np
 import torch
 import warp as wp
 
+from jwarp.core.arrays import device_name
 from jwarp.core.device import content_key
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKWeights
@@ -56,13 +57,13 @@ def _check(t: Any, name: str, tail: tuple) -> None:
 
 def path_objective(robot: Any, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
                    *, weights: PathWeights | None = None, eps: float | None = None,
-                   device: Any = "cpu", dtype: Any = np.float32) -> PathObjective:
+                   device: Any = None, dtype: Any = np.float32) -> PathObjective:
     """A cached :class:`PathObjective` for these sizes (rebuilt when anything differs:
     robots count as equal by content)."""
     model = get_robot(robot)
     w = weights or PathWeights()
     key = ("path", content_key(model), id(world), n_paths, n_waypoints, n_substeps,
-           (w.world, w.self, w.length), eps, str(device), np.dtype(dtype).name)
+           (w.world, w.self, w.length), eps, device_name(device), np.dtype(dtype).name)
     obj = _OBJECTIVES.get(key)
     if obj is None:
         obj = _remember(key, PathObjective(model, world, n_paths, n_waypoints, n_substeps,
@@ -104,14 +105,14 @@ def u_path(paths: torch.Tensor, robot: Any, world: Any, n_substeps: int, *,
 
 def ik_objective(robot: Any, frame: Any, n: int, *, world: Any = None,
                  weights: IKWeights | None = None, eps: float | None = None,
-                 q_default: Any = None, device: Any = "cpu", dtype: Any = np.float32
+                 q_default: Any = None, device: Any = None, dtype: Any = np.float32
                  ) -> IKObjective:
     """A cached :class:`IKObjective` for this batch size (q_default is (re)set each call;
     robots count as equal by content)."""
     model = get_robot(robot)
     w = weights or IKWeights()
     key = ("ik", content_key(model), model.frame_index(frame), id(world), n,
-           (w.position, w.rotation, w.world, w.self, w.default), eps, str(device),
+           (w.position, w.rotation, w.world, w.self, w.default), eps, device_name(device),
            np.dtype(dtype).name)
     obj = _OBJECTIVES.get(key)
     if obj is None:

@@ -47,7 +47,7 @@ import numpy as np
 import torch
 import warp as wp
 
-from jwarp.core.arrays import init_warp
+from jwarp.core.arrays import device_name, init_warp
 from jwarp.learn.checkpoint import check_weights, read_checkpoint, save_checkpoint
 from jwarp.learn.ik_data import DEFAULT_MIX, IKData, check_mix, make_ik_data
 from jwarp.learn.ik_net import IKNet, IKNetConfig
@@ -71,7 +71,8 @@ class TrainIKOptions:
     epochs (total, counting resumed ones), steps_per_epoch, lr, lr_decay (per epoch).
     Loss: head_weight, head_scale, mean_weight, boosting, boost_factor, boost_fraction,
     hard_set_size. Validation: val_iterations (solver iterations). Run: device (torch
-    device string, "cpu", "cuda", "cuda:0"), dtype ("float32" | "float64"), seed,
+    device string, "cpu", "cuda", "cuda:0"; None: Warp's default device, docs/api.md
+    "Devices"), dtype ("float32" | "float64"), seed,
     checkpoint (path or None), resume.
     """
 
@@ -102,7 +103,7 @@ class TrainIKOptions:
     boost_fraction: float = 0.25
     hard_set_size: int = 4096
     val_iterations: int = 10
-    device: str = "cpu"
+    device: str | None = None
     dtype: str = "float32"
     seed: int = 0
     checkpoint: str | None = None
@@ -195,7 +196,7 @@ class IKTrainer:
         self.options = o
         self.supervised = supervised
         self.model = get_robot(o.robot)
-        self.tdev = torch.device(o.device)
+        self.tdev = torch.device(device_name(o.device))
         if self.tdev.type == "cuda" and self.tdev.index is None:
             self.tdev = torch.device("cuda", torch.cuda.current_device())
         init_warp()
@@ -229,7 +230,7 @@ class IKTrainer:
                                          device=self.wdev, dtype=sc) for w in d.worlds]
         self._objectives += [ik_objective(self.model, o.frame, o.n_val * self.H, world=w,
                                           device=self.wdev, dtype=sc) for w in d.val_worlds]
-        vopt = IKOptions(n_starts=self.H, max_iterations=o.val_iterations, seed=o.seed)
+        vopt = IKOptions(n_starts=self.H, iterations=o.val_iterations, seed=o.seed)
         self.solvers = [IKSolver(self.model, o.frame, o.n_val, vopt, world=w, device=self.wdev)
                         for w in d.val_worlds]
         # hard set: a ring per training world
@@ -251,7 +252,7 @@ class IKTrainer:
         o, out, feas = self.options, [], []
         for w, T, q0 in zip(self.data.worlds, self.data.targets, self.data.q):
             s = IKSolver(self.model, o.frame, len(T), IKOptions(
-                n_starts=n_starts, max_iterations=max_iterations, seed=o.seed),
+                n_starts=n_starts, iterations=max_iterations, seed=o.seed),
                 world=w, device=self.wdev)
             r = s.solve(T)
             # unsolved: the configuration the target came from (scene tasks have none:

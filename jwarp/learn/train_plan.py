@@ -42,6 +42,7 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
+from jwarp.core.arrays import device_name
 from jwarp.learn.plan_net import (PlanNet, PlanNetConfig, axis_symmetries, encode_paths,
                                   symmetric_bps)
 from jwarp.registry import robot as get_robot
@@ -166,7 +167,7 @@ def hard_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator, *,
     S, G, got = [], [], 0
     for _ in range(rounds):
         q0, q1 = sample_tasks(model, world, 3 * (n - got), rng)
-        opts = PlanOptions(n_starts=1, initial="straight", n_waypoints=n_waypoints,
+        opts = PlanOptions(n_starts=1, start_kind="straight", n_waypoints=n_waypoints,
                            n_substeps=n_substeps, iterations=iterations, fallback=None)
         easy = Planner(model, world, len(q0), opts, device="cpu").plan(q0, q1).feasible
         S.append(q0[~easy][:n - got])
@@ -184,7 +185,7 @@ def label_tasks(robot: Any, world: Any, starts: np.ndarray, goals: np.ndarray, *
     """The default labeler: the planner's multi-starts (the straight line and
     ``n_starts - 1`` random ones, thesis 3.5.1), best feasible path per task. Returns
     paths (N, W, n_dof), feasible (N,), cost (N,)."""
-    opts = PlanOptions(n_starts=n_starts, initial="mixed", n_waypoints=n_waypoints,
+    opts = PlanOptions(n_starts=n_starts, start_kind="mixed", n_waypoints=n_waypoints,
                        n_substeps=n_substeps, iterations=iterations, seed=seed,
                        stop_when_solved=False, fallback=None)
     res = Planner(robot, world, len(starts), opts, device="cpu").plan(starts, goals)
@@ -462,8 +463,8 @@ class TrainPlanOptions:
     """Options of :func:`train_plan` (the network: robot, n_bps, n_waypoints, hidden,
     n_blocks, n_heads; training: epochs x steps_per_epoch Adam steps of batch_size samples,
     lr; the switches time_reversal, axis_symmetry, boosting (boost_percentile,
-    boost_ratio); n_substeps of the costs; device; seed; checkpoint (written after every
-    epoch when given))."""
+    boost_ratio); n_substeps of the costs; device (None: Warp's default device); seed;
+    checkpoint (written after every epoch when given))."""
 
     robot: str = "planar4"
     n_bps: int = 128
@@ -481,7 +482,7 @@ class TrainPlanOptions:
     boost_percentile: float = 0.8
     boost_ratio: float = 0.9
     n_substeps: int = 4
-    device: str = "cpu"
+    device: str | None = None
     seed: int = 0
     checkpoint: str | None = None
 
@@ -550,7 +551,7 @@ def train_plan(options: TrainPlanOptions, data: PlanSamples, val: PlanSamples | 
     rng = np.random.default_rng(options.seed)
     if net is None:
         net = PlanNet(options.net_config())
-    net.to(options.device)
+    net.to(device_name(options.device))
     arr = augment(net, data, time_reversal=options.time_reversal,
                   axis_symmetry=options.axis_symmetry)
     M = len(arr["source"])

@@ -155,7 +155,7 @@ def ik_iteration_overhead(robot: Any, frame: Any, kappa: Any, *, world: Any = No
     fi = model.frame_index(frame)
     target = np.eye(4)
     target[:3, 3] = [10.0, 0.0, 0.0]  # 10 m away
-    common = dict(world=world, n_starts=n_starts, max_iterations=iterations,
+    common = dict(world=world, n_starts=n_starts, iterations=iterations,
                   stop_when_solved=False, seed=0, **kwargs)
     per_it: dict = {"rigid": [], "elastic": []}
     setup: dict = {"rigid": [], "elastic": []}

@@ -47,7 +47,7 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
     in collision (closer than ``margin`` to an obstacle or to itself), or, on the elastic
     model (``rho_kappa``: compliances), if its torque equilibrium does not converge
     (:data:`ELASTIC_CHECK`): then nothing can be said about its collisions. The checks run
-    on ``device`` (None: the preferred device)."""
+    on ``device`` (None: Warp's default device)."""
     ok = within_limits(robot, q)
     if not ok.all():
         i = int(np.nonzero(~ok)[0][0])
@@ -118,7 +118,7 @@ def elastic_equilibrium(robot: Any, q: np.ndarray, kappa: Any, device: Any = Non
     return np.asarray(res.rho), np.asarray(res.converged, bool)
 
 
-def substeps(paths: Any, n_substeps: int, *, device: Any = "cpu", dtype: Any = None) -> np.ndarray:
+def substeps(paths: Any, n_substeps: int, *, device: Any = None, dtype: Any = None) -> np.ndarray:
     """Linear substeps (eq. 3.3) of paths (..., W, n_dof) -> (..., S, n_dof) with
     S = (W - 1) n_substeps + 1 (every waypoint included, the goal last)."""
     init_warp()
@@ -149,7 +149,7 @@ def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin
     continuous motion (:mod:`jwarp.world.motion`; ``min(margin, endpoint_margin)`` on the
     first and last segment; ``n_substeps`` is not used). On the elastic model (``kappa``)
     the ``n_substeps`` linear substeps per segment are checked at their torque equilibria.
-    Returns (...,) bool. Runs on ``device`` (None: the preferred device)."""
+    Returns (...,) bool. Runs on ``device`` (None: Warp's default device)."""
     model = get_robot(robot)
     check_world(model, world)
     a = real_array(paths, "paths")
@@ -265,7 +265,7 @@ def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: s
     inside the robot's limits, connected linearly with start and goal; the W waypoints are
     spread evenly along the polyline's joint-space length) - thesis 3.5.1. With ``world``
     the via points are drawn from collision-free configurations (rejection sampling on
-    ``device``, None: the preferred device; plain random ones if none is found).
+    ``device``, None: Warp's default device; plain random ones if none is found).
     """
     start = np.asarray(start, np.float64)
     goal = np.asarray(goal, np.float64)

@@ -61,6 +61,7 @@ from jwarp.kinematics.compensation import CompensationRows
 from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
+from jwarp.solvers.overrides import renamed_options, translate, with_overrides
 from jwarp.world import collision
 from jwarp.world.model_check import check_collision_model
 
@@ -88,7 +89,7 @@ class IKResult:
 
     q (T, n_dof) chosen solution; feasible (T,) bool; pos_err (T,) [m]; rot_err (T,) [rad];
     cost (T,) U_A at the solution; iterations (T,) iterations the chosen start needed
-    (projection + nullspace, re-seeds included; an infeasible start: ``max_iterations``, or
+    (projection + nullspace, re-seeds included; an infeasible start: ``iterations``, or
     its own count if it gave up); start_index (T,); n_feasible (T,) feasible starts;
     wall_time [s]; all_q (T, n_starts, n_dof); all_feasible (T, n_starts).
     """
@@ -408,6 +409,7 @@ def _positive_int(v: Any, name: str, lo: int) -> int:
     return int(v)
 
 
+@renamed_options(max_iterations="iterations")
 @dataclass
 class IKOptions:
     """Options of :class:`IKSolver` and :func:`ik` (thesis 3.3.3).
@@ -419,7 +421,7 @@ class IKOptions:
         margin: required clearance [m] (world and self), >= 0.
         eps: smoothing width of the collision clip [m], > 0 and >= margin (None: the
             world's voxel size, at least 0.01 and ``margin``).
-        max_iterations: iterations per seed (projection + nullspace), >= 0.
+        iterations: iterations per seed (projection + nullspace), >= 0.
         step: nullspace step alpha.
         max_step: the largest change of one joint per iteration [rad or m]; the whole step
             is scaled down to it.
@@ -479,7 +481,7 @@ class IKOptions:
     tol_rot: float = 1e-3
     margin: float = 0.0
     eps: float | None = None
-    max_iterations: int = 200
+    iterations: int = 200
     step: float = 1.0
     max_step: float = 0.5
     damping: float = 1e-3
@@ -505,7 +507,7 @@ class IKOptions:
 
     def validate(self) -> None:
         """Check every field (ValueError/TypeError naming it); numbers become floats."""
-        for name, lo in (("n_starts", 1), ("max_iterations", 0), ("check_every", 1),
+        for name, lo in (("n_starts", 1), ("iterations", 0), ("check_every", 1),
                          ("n_random_with_warm_start", 0)):
             setattr(self, name, _positive_int(getattr(self, name), name, lo))
         if self.read_every is not None:
@@ -578,8 +580,8 @@ class IKSolver:
         n_problems: targets per :meth:`solve` (>= 1).
         options: :class:`IKOptions` (None: the defaults).
         world: optional :class:`jwarp.world.World` (None: self-collision only).
-        device: Warp device (None: CUDA if present, else the CPU); every kernel and check
-            of the solve runs there.
+        device: Warp device (None: Warp's default device, docs/api.md "Devices"); every
+            kernel and check of the solve runs there.
         dtype: float type of the iteration (None: float64); the step's linear algebra and
             the feasibility check are float64 either way.
         warm_start: optional learned warm start (thesis 3.4): any object with a callable
@@ -893,8 +895,8 @@ class IKSolver:
         def over(c: np.ndarray) -> bool:
             return bool(c[0] >= B or (o.stop_when_solved and c[1] + c[3] >= P))
 
-        for it in range(o.max_iterations + 1):
-            last = it == o.max_iterations
+        for it in range(o.iterations + 1):
+            last = it == o.iterations
             read = every or it % k_read == 0
             if rigid:
                 self._pose()
@@ -936,7 +938,7 @@ class IKSolver:
                     break
             self._step()
         self._launch("finalize", self.ck.finalize, B, [obj.q, obj.err, obj.cost_a, self.done,
-                                                       self.iterations, o.max_iterations,
+                                                       self.iterations, o.iterations,
                                                        self.out])
         self._launch("select", self.ck.select, P, [self.out, S, model.n_dof, self.best])
         out = self.out.numpy().copy() if dev.is_cpu else self.out.numpy()
@@ -951,8 +953,8 @@ class IKSolver:
         return res.reshaped(lead)
 
 
-def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, initial: Any = None,
-       device: Any = "cpu", dtype: Any = np.float64,
+def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, seeds: Any = None,
+       device: Any = None, dtype: Any = np.float64,
        callback: Callable[[int, np.ndarray], None] | None = None, warm_start: Any = None,
        options: IKOptions | None = None, **overrides: Any) -> IKResult:
     """Collision-free IK of ``frame`` onto ``target`` with random multi-starts: one
@@ -963,14 +965,15 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, initial:
         frame: end-effector frame (name, end-effector alias or index).
         target: pose(s) (4, 4) or (..., 4, 4) in the base frame [m].
         world: optional :class:`jwarp.world.World` (None: self-collision only).
-        initial: seeds (n_dof,), (n_starts, n_dof) or (T, n_starts, n_dof) instead of random.
-        device, dtype: Warp device (default "cpu", unlike :class:`IKSolver`'s preferred
-            device) and float type.
+        seeds: start configurations (n_dof,), (n_starts, n_dof) or (T, n_starts, n_dof)
+            instead of random ones (the old name ``initial`` warns, for one release).
+        device, dtype: Warp device (None: Warp's default device, as :class:`IKSolver`;
+            docs/api.md "Devices") and float type.
         callback: ``callback(iteration, q (B, n_dof))`` after every evaluation.
         warm_start: optional learned warm start (:class:`IKSolver`'s ``warm_start``: an
             object with ``seeds(targets (T, 4, 4), world) -> (T, H, n_dof)``): the seeds
             are its H per target followed by ``n_random_with_warm_start`` random ones
-            (numpy, from ``seed``) instead of ``n_starts`` random ones; ``initial`` wins.
+            (numpy, from ``seed``) instead of ``n_starts`` random ones; ``seeds`` win.
         options: :class:`IKOptions` (None: its defaults); not modified.
         **overrides: any field of :class:`IKOptions` as a keyword (``n_starts=32``,
             ``tol_pos=1e-5``, ``seed=1``, ...): the options are
@@ -985,9 +988,12 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, initial:
             list of fields), ``options`` not an :class:`IKOptions`, a ``warm_start``
             without a callable ``seeds``.
     """
-    from jwarp.solvers.overrides import with_overrides
-
     t0 = time.perf_counter()
+    if "initial" in overrides:   # the old name of seeds (one release)
+        given = {"initial": overrides.pop("initial")}
+        if seeds is not None:
+            given["seeds"] = seeds
+        seeds = translate("ik()", {"initial": "seeds"}, given)["seeds"]
     init_warp()
     check_warm_start(warm_start)
     model = get_robot(robot)
@@ -999,9 +1005,9 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, initial:
     seed = opts.seed
     finite_as(T, numpy_dtype(scalar_type(dtype)), "target")  # before the seeds' check
     n_seeds = opts.n_starts
-    if initial is not None:
-        q0 = _seeds(model, initial, len(T), "initial")
-        finite_as(q0, numpy_dtype(scalar_type(dtype)), "initial")
+    if seeds is not None:
+        q0 = _seeds(model, seeds, len(T), "seeds")
+        finite_as(q0, numpy_dtype(scalar_type(dtype)), "seeds")
         n_seeds = q0.shape[1]
     elif warm_start is not None:  # its seeds, then random ones from numpy's stream
         q0 = warm_start_seeds(model, warm_start, T, world, opts.n_random_with_warm_start,

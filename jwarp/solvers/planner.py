@@ -54,6 +54,7 @@ from jwarp.solvers.feasibility import (ELASTIC_CHECK, MAX_CHECK_SUBSTEPS, SWEEP_
                                        path_feasible, polyline_path, sphere_centres,
                                        substeps, substeps_for_voxel, substeps_per_path)
 from jwarp.core.limits import limit_tables, project_numpy, within_limits
+from jwarp.solvers.overrides import renamed_options, translate, with_overrides
 
 #: floor of the length-cost normaliser 1/2 |q_goal - q_start|^2 [rad^2]
 NORM_FLOOR = 1e-4
@@ -96,7 +97,7 @@ class PlanResult:
     ``fallback``): ``stop_reason`` why the call ended, one of :data:`STOP_REASONS`:
     "solved" (every problem has a feasible path: ``stop_when_solved``, or the fallback
     solved the rest), "all_done" (every start finished on its own: feasible with
-    ``early_stop``, converged with ``converge``), "time_limit" (the time ran out first)
+    ``freeze_feasible``, converged with ``converge``), "time_limit" (the time ran out first)
     or "iterations" (the iterations, and the fallback's samples, ran out first);
     ``stage`` (B,) which stage gave the path: "optimizer" (the multi-starts),
     "fallback" (the gradient optimisation seeded with the RRT-Connect path,
@@ -204,7 +205,7 @@ class PathObjective:
         #: a batch of worlds: substep row b is in world b // group_div (0: one world)
         self.group_div = 0
         #: skip the collision cost of frozen paths (``active`` 0; the planner with
-        #: ``early_stop``): their costs are kept, nothing reads them again
+        #: ``freeze_feasible``): their costs are kept, nothing reads them again
         self.skip_inactive = False
         self.eps = real_number(eps, "eps", self.npdt) if eps is not None else float(
             max(world.resolution, 0.01))
@@ -330,7 +331,7 @@ class PathObjective:
 
 
 # ====================================================================== options
-#: the kinds of multi-starts drawn when no seeds are given (:attr:`PlanOptions.initial`)
+#: the kinds of multi-starts drawn when no seeds are given (:attr:`PlanOptions.start_kind`)
 INITIAL_KINDS = ("straight", "random", "mixed")
 #: substep length [m] of the cost in a world of exact objects only (sphere travel per
 #: substep): the continuous check proves feasibility, the cost only guides the descent
@@ -358,6 +359,7 @@ def _check_flag(v: Any, name: str) -> None:
         raise TypeError(f"{name}: expected True or False, got {v!r}")
 
 
+@renamed_options(initial="start_kind", early_stop="freeze_feasible")
 @dataclass
 class PlanOptions:
     """Options of the planner: of :class:`Planner`, and the keyword options of :func:`plan`
@@ -365,7 +367,7 @@ class PlanOptions:
 
     Attributes:
         n_starts: multi-starts per problem when no seeds are given ("straight": one).
-        initial: the multi-starts without seeds: "straight" (the line in joint space),
+        start_kind: the multi-starts without seeds: "straight" (the line in joint space),
             "random" (1-3 random via points inside the limits, thesis 3.5.1) or "mixed"
             (the line plus ``n_starts - 1`` random ones).
         n_waypoints: W, >= 2 (20 in the thesis); seeds given as paths bring their own W.
@@ -384,7 +386,7 @@ class PlanOptions:
         endpoint_margin: clearance [m] required of the start and goal and on the first
             and last segment, where it is below ``margin`` (None: ``margin``), so grasp
             poses closer to an object than the path margin can be planned.
-        early_stop: freeze each path once it is feasible.
+        freeze_feasible: freeze each path once it is feasible.
         stop_when_solved: end as soon as every problem has one feasible path (default);
             False optimises every start until it is feasible (or converged, or out of
             iterations): for labels (``converge``), per-start statistics.
@@ -415,7 +417,7 @@ class PlanOptions:
             is the last feasible one), and the path stops when the relative change of
             U_l between two kept iterates is <= ``converge_tol`` (or the iterations run
             out). ``iterations`` of the result is then the iteration of the kept iterate.
-            False (default): ``early_stop`` decides.
+            False (default): ``freeze_feasible`` decides.
         converge_tol: relative change of U_l that counts as converged, > 0.
         callback: called as ``callback(iteration, paths (P, W, n_dof))`` after every
             evaluation (e.g. rerun streaming; it reads every path to the host).
@@ -427,7 +429,7 @@ class PlanOptions:
     """
 
     n_starts: int = 8
-    initial: str = "mixed"
+    start_kind: str = "mixed"
     n_waypoints: int = 20
     n_substeps: int | None = None
     iterations: int = 100
@@ -438,7 +440,7 @@ class PlanOptions:
     margin: float = 0.0
     endpoint_margin: float | None = None
     self_margin: float = 0.0
-    early_stop: bool = True
+    freeze_feasible: bool = True
     stop_when_solved: bool = True
     check_all_every: int | None = None
     free_via: bool = True
@@ -487,12 +489,13 @@ class PlanOptions:
             if eps < margin:
                 raise ValueError(f"eps: must be >= margin ({margin:g} m), got {eps:g}")
             real_number(self.eps, "eps", npdt)
-        if not isinstance(self.initial, str):
-            raise TypeError(f"initial: expected one of {', '.join(map(repr, INITIAL_KINDS))}, "
-                            f"got {type(self.initial).__name__} (give initial paths as seeds)")
-        if self.initial not in INITIAL_KINDS:
-            raise ValueError(f"initial: unknown kind '{self.initial}' (expected 'straight', "
-                             f"'random', 'mixed' or an array of paths)")
+        if not isinstance(self.start_kind, str):
+            raise TypeError(f"start_kind: expected one of "
+                            f"{', '.join(map(repr, INITIAL_KINDS))}, got "
+                            f"{type(self.start_kind).__name__} (give initial paths as seeds)")
+        if self.start_kind not in INITIAL_KINDS:
+            raise ValueError(f"start_kind: unknown kind '{self.start_kind}' (expected "
+                             f"'straight', 'random' or 'mixed'; paths are seeds)")
         if self.n_substeps is not None:
             check_substeps(self.n_substeps)
         if self.weights is not None:
@@ -503,7 +506,7 @@ class PlanOptions:
         tol = real_number(self.converge_tol, "converge_tol")
         if not (math.isfinite(tol) and tol > 0):
             raise ValueError(f"converge_tol: expected a number > 0, got {self.converge_tol!r}")
-        for name in ("early_stop", "stop_when_solved", "free_via", "converge",
+        for name in ("freeze_feasible", "stop_when_solved", "free_via", "converge",
                      "allow_no_collision"):
             _check_flag(getattr(self, name), name)
         seed = self.seed
@@ -590,15 +593,15 @@ class Planner:
         n_problems: B, the start/goal pairs of every :meth:`plan` call.
         options: :class:`PlanOptions` (None: the defaults); validated here, and copied.
         device: Warp device of the optimisation and of every check (collision, limits,
-            elastic equilibrium, substep sizing); None: the preferred device (CUDA if
-            present, else CPU).
+            elastic equilibrium, substep sizing); None: Warp's default device (docs/api.md
+            "Devices").
         dtype: float type of the optimisation (None: float32); the exact feasibility
             checks run in float64.
         warm_start: optional learned warm start (thesis 3.4.3): any object with a callable
             ``paths(starts (B, n_dof), goals (B, n_dof), world) -> (B, H, W, n_dof)``
             (e.g. ``jwarp.learn.plan_net.PlanNet``). A :meth:`plan` call without seeds then
             starts from its H paths per problem, followed by ``options.n_starts - H``
-            multi-starts of kind ``options.initial`` (none if ``n_starts <= H``) of the
+            multi-starts of kind ``options.start_kind`` (none if ``n_starts <= H``) of the
             network's W waypoints; explicit seeds win. TypeError naming ``warm_start`` if
             it has no callable ``paths``.
 
@@ -674,7 +677,8 @@ class Planner:
                 collision-free with ``options.margin`` (and a converged equilibrium on the
                 elastic model).
             seeds: the initial paths: None draws ``options.n_starts`` multi-starts of kind
-                ``options.initial`` (with a ``warm_start``: its paths first); an array of paths (W, n_dof), (n_seeds, W, n_dof) or
+                ``options.start_kind`` (with a ``warm_start``: its paths first); an array
+                of paths (W, n_dof), (n_seeds, W, n_dof) or
                 (n_problems, n_seeds, W, n_dof) (their first/last rows are replaced by
                 start/goal, they are projected onto the limits, and W is theirs), e.g.
                 learned warm starts; or :class:`ViaPoints`.
@@ -716,7 +720,7 @@ class Planner:
         o = self.options
         extra = o.n_starts - g.shape[1]
         if extra > 0:
-            r = _initial(self.robot, q0, q1, o.initial, extra, g.shape[2], o.seed, self.world,
+            r = _initial(self.robot, q0, q1, o.start_kind, extra, g.shape[2], o.seed, self.world,
                          o.free_via, device=self.device)
             g = np.concatenate([g, r], axis=1)
         return g
@@ -753,7 +757,7 @@ class Planner:
         if isinstance(seeds, ViaPoints):
             Q = _via_seeds(model, q0, q1, seeds.points, o.n_waypoints)
         else:
-            Q = _initial(model, q0, q1, o.initial if seeds is None else seeds, o.n_starts,
+            Q = _initial(model, q0, q1, o.start_kind if seeds is None else seeds, o.n_starts,
                          o.n_waypoints, o.seed, self.world, o.free_via, device=dev,
                          name=seeds_name)  # (B, n_starts, W, n)
         B, n_starts, W = Q.shape[:3]
@@ -810,11 +814,11 @@ class Planner:
                     if len(newly):
                         feasible[newly] = True
                         iters[newly] = it
-                        if o.early_stop:
+                        if o.freeze_feasible:
                             self._keep(buf, newly)
                             done[newly] = True
                 solved = feasible
-                if o.stop_when_solved and o.early_stop and B > 1:
+                if o.stop_when_solved and o.freeze_feasible and B > 1:
                     # a solved problem needs nothing more: its other starts stop here
                     # (kept as they are), so they cost no evaluation or check from now on
                     fin = np.repeat(solved.reshape(B, n_starts).any(1), n_starts) & ~done
@@ -833,7 +837,7 @@ class Planner:
                 reason = "time_limit"
                 iters[~feasible] = it
                 break
-            if o.early_stop:
+            if o.freeze_feasible:
                 obj.set_active(~done)
             obj.step(o.step, o.max_step)
         # converge: a feasible path's final is its last feasible iterate, already kept
@@ -938,7 +942,7 @@ class Planner:
                             dtype=self.npdt)
         if self.batched:  # substep rows of problem b's paths are in world b
             obj.group_div = obj.S * (P // self.n_problems)
-        obj.skip_inactive = bool(o.early_stop)  # frozen paths cost no collision queries
+        obj.skip_inactive = bool(o.freeze_feasible)  # frozen paths cost no collision queries
         self._buffers = _Buffers(obj, self.n_problems, self._kernel_copies)
         return self._buffers
 
@@ -1165,8 +1169,8 @@ def _seed_reason(planner: "Planner", sub: "Planner", seed: np.ndarray, b: int) -
     return c.reason(0)
 
 
-def plan(robot: Any, world: Any, start: Any, goal: Any, *, device: Any = "cpu",
-         dtype: Any = np.float32, options: PlanOptions | None = None,
+def plan(robot: Any, world: Any, start: Any, goal: Any, *, seeds: Any = None,
+         device: Any = None, dtype: Any = np.float32, options: PlanOptions | None = None,
          **overrides: Any) -> PlanResult:
     """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path:
     one call of a :class:`Planner` made for it.
@@ -1175,8 +1179,11 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, device: Any = "cpu",
         robot: robot name or RobotModel.
         world: a :class:`jwarp.world.World` of the robot's workspace dimension.
         start, goal: (n_dof,) or (B, n_dof) joint values [rad or m] (B problems).
+        seeds: optional user guesses (W, n_dof), (n_starts, W, n_dof) or
+            (B, n_starts, W, n_dof) (the ``seeds`` of :meth:`Planner.plan`; ``n_starts``
+            and ``n_waypoints`` are then theirs, and ``start_kind`` is unused).
         device, dtype: Warp device of the optimisation and of every check, and its float
-            type (default: CPU, float32).
+            type (default: Warp's default device, as :class:`Planner`; float32).
         options: :class:`PlanOptions` (None: its defaults); not modified.
         **overrides: any field of :class:`PlanOptions` as a keyword (``n_starts=16``,
             ``iterations=300``, ``callback=f``, ...): the options are
@@ -1184,10 +1191,8 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, device: Any = "cpu",
             field of ``options`` (``stop_when_solved`` True and ``fallback`` "rrt" by
             default: pass False / None to optimise every start until it is feasible
             without a fallback). ``time_limit`` counts from the start of this call.
-            ``initial`` is a kind of multi-starts (:attr:`PlanOptions.initial`) or, not a
-            string, an array of user guesses (W, n_dof), (n_starts, W, n_dof) or
-            (B, n_starts, W, n_dof) (the ``seeds`` of :meth:`Planner.plan`; ``n_starts``
-            and ``n_waypoints`` are then theirs, and the options' kind is unused).
+            The old ``initial`` (one release, with a DeprecationWarning) is
+            ``start_kind`` when a string, else ``seeds``.
 
     Returns:
         :class:`PlanResult` (``wall_time``: the whole call).
@@ -1198,12 +1203,12 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, device: Any = "cpu",
         TypeError: an override that is not a field of :class:`PlanOptions` (named, with
             the list of fields), ``options`` not a :class:`PlanOptions`.
     """
-    from jwarp.solvers.overrides import with_overrides
-
     t0 = time.perf_counter()
-    seeds = None
-    if not isinstance(overrides.get("initial", ""), str):  # guesses (seeds), not a kind
-        seeds = overrides.pop("initial")  # (None: the options' kind, as before)
+    if not isinstance(overrides.get("initial", ""), str):  # the old name of seeds
+        given = {"initial": overrides.pop("initial")}
+        if seeds is not None:
+            given["seeds"] = seeds
+        seeds = translate("plan()", {"initial": "seeds"}, given)["seeds"]
     init_warp()
     model = get_robot(robot)
     check_world(model, world)
@@ -1218,7 +1223,7 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, device: Any = "cpu",
             raise ValueError(f"start, goal: batch sizes differ ({len(q0)} vs {len(q1)})")
     options = with_overrides("plan", PlanOptions, options, overrides)
     planner = Planner(model, world, len(q0), options, device=device, dtype=dtype)
-    res = planner._plan(q0, q1, seeds, "initial", t_start=t0)
+    res = planner._plan(q0, q1, seeds, "seeds", t_start=t0)
     res.wall_time = time.perf_counter() - t0
     return res
 

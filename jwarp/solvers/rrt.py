@@ -254,7 +254,7 @@ def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
         endpoint_margin: clearance [m] of start and goal and of the edges at them, where
             it is below ``margin`` (None: ``margin``; :attr:`PlanOptions.endpoint_margin`).
         self_margin: clearance [m] between the robot's own spheres (default 0).
-        device: Warp device of the checks (None: the preferred device).
+        device: Warp device of the checks (None: Warp's default device).
         deadline: ``time.perf_counter()`` value after which the search stops (besides
             ``options.time_limit``).
 

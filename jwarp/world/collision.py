@@ -163,7 +163,7 @@ class CollisionModel:
         robot: name or RobotModel.
         world: :class:`World` of the robot's workspace dimension, or None (self-collision only).
             Its SDF is copied to the device once: treat the world as immutable afterwards.
-        device: Warp device (default: CUDA if present, else CPU).
+        device: Warp device (None: Warp's default device, docs/api.md "Devices").
         dtype: float32 (default) or float64.
     """
 

@@ -79,7 +79,7 @@ def home_configurations(robot: Any) -> list[tuple[str, np.ndarray]]:
         ("the middle of the joint limits", mid)]
 
 
-def home_self_collisions(robot: Any, q: Any = None, *, device: Any = "cpu"
+def home_self_collisions(robot: Any, q: Any = None, *, device: Any = None
                          ) -> list[tuple[str, str, float]]:
     """Frame pairs whose spheres overlap at ``q`` (None: :func:`home_configuration`) among
     the self-collision pairs the robot checks (``RobotModel.allowed_collision_pairs``):
@@ -105,7 +105,7 @@ def home_self_collisions(robot: Any, q: Any = None, *, device: Any = "cpu"
 
 def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
                           option: str = "allow_no_collision=True",
-                          device: Any = "cpu") -> None:
+                          device: Any = None) -> None:
     """ValueError naming the robot when ``need_spheres`` and it has no collision spheres,
     or when it is in self-collision at every one of :func:`home_configurations` (naming the
     frame pairs and how deep they overlap).

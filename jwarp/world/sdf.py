@@ -378,7 +378,7 @@ class World:
 
     # ----------------------------------------------------------------- queries
     def distance(self, points: ArrayLike, *, grad: bool = False,
-                 device: DeviceLike = "cpu") -> Any:
+                 device: DeviceLike = None) -> Any:
         """Signed distance [m] at ``points`` (..., dim) [m]: the grid's interpolated value
         (with the kernel the cost functions use; its spatial gradient (..., dim) if
         ``grad``), and with exact objects the minimum with their exact distances (float64;
@@ -577,7 +577,7 @@ def world_from_points(points: Any, limits: Any, voxel_size: float | None = None,
 
 
 def world_from_mesh(mesh: Any, limits: Any, voxel_size: float | None = None, *,
-                    shape: Sequence[int] | None = None, device: Any = "cpu",
+                    shape: Sequence[int] | None = None, device: Any = None,
                     dtype: Any = np.float64) -> World:
     """World from a closed triangle mesh: exact distance of every cell centre to the mesh
     surface, negative inside (ray-casting parity), via Warp's BVH mesh queries.
@@ -714,7 +714,7 @@ def load_world(path: str | os.PathLike) -> World:
         raise ValueError(f"{path}: {e}") from e
 
 
-def sdf_query(world: World, points: Any, *, grad: bool = False, device: Any = "cpu"
+def sdf_query(world: World, points: Any, *, grad: bool = False, device: Any = None
               ) -> Any:
     """Interpolated signed distance [m] of ``world`` at ``points`` (..., dim) [m] (numpy),
     with the lookup of the cost kernels. Returns (...,) or, with ``grad``, a tuple

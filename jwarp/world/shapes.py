@@ -26,7 +26,7 @@ from typing import Any, Iterable
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import init_warp
+from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.kernels import geometry as gk
 
 __all__ = ["KINDS", "ShapeSet", "DeviceShapes", "LIMIT_EXTENT"]
@@ -269,14 +269,12 @@ class ShapeSet:
 
     def distance(self, points: Any) -> np.ndarray:
         """Exact signed distance [m] of ``points`` (..., 3) to the union (numpy, float64,
-        through the float64 kernel on the preferred device); +inf without objects."""
+        through the float64 kernel on Warp's default device); +inf without objects."""
         init_warp()
         p = np.asarray(points, dtype=np.float64)
         flat = np.ascontiguousarray(p.reshape(-1, 3))
         if len(self) == 0:
             return np.full(p.shape[:-1], np.inf)
-        from jwarp.core.arrays import resolve_device
-
         k = gk.kernels(wp.float64)
         dev = resolve_device(None)
         ds = self.device_shapes(dev, wp.float64)
@@ -294,7 +292,7 @@ class ShapeSet:
         key = (str(device), scalar.__name__)
         ds = self._device.get(key)
         if ds is None or ds.structure_version != self.structure_version:
-            ds = self._device[key] = DeviceShapes(self, wp.get_device(device), scalar)
+            ds = self._device[key] = DeviceShapes(self, resolve_device(device), scalar)
         elif ds.pose_version != self.pose_version:
             ds.update_poses(self)
         return ds

@@ -168,7 +168,7 @@ def _defaults(command: str) -> dict:
      {"step": "step", "margin": "margin", "seed": "seed", "self_margin": "self_margin",
       "fallback": "fallback", "stop_when_solved": "stop_when_solved"}),
     ("ik", "jwarp.solvers.ik:IKOptions",
-     {"iterations": "max_iterations", "margin": "margin", "seed": "seed"}),
+     {"iterations": "iterations", "margin": "margin", "seed": "seed"}),
     ("train ik", "jwarp.learn.train_ik:TrainIKOptions",
      {"targets_per_world": "n_targets", "val_targets": "n_val", "hidden": "hidden",
       "n_bps": "n_bps", "batch": "batch_size", "steps_per_epoch": "steps_per_epoch",

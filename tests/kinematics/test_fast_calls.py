@@ -283,3 +283,49 @@ def test_first_touch_of_big_fresh_outputs_keeps_results(justin):
     if done is not None:      # Linux with more than one core
         done()
     assert arrays.first_touch(arrays.empty((10,), wp.float64, wp.get_device("cpu"))) is None
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_warp_small_calls_equal_the_general_path(justin, qs, dtype):
+    """A small Warp CPU q takes the small path (issue 28: fk overhead): a new Warp array per
+    call, of the general path's shape and dtype, bit-identical, never overwritten later."""
+    launch.clear_workspaces()
+    for shape in [(19,), (1, 19), (3, 19), (3, 1, 19)]:
+        n = int(np.prod(shape[:-1]))
+        x = qs[:n].astype(dtype).reshape(shape)
+        general = wp.array(x, device="cpu", requires_grad=True)   # grad: the general path
+        for device in (None, "cpu"):
+            a = K.fk(justin, wp.array(x, device="cpu"), device=device)
+            b = K.fk(justin, general, device=device)
+            assert type(a) is wp.array and a.shape == b.shape and a.dtype == b.dtype
+            np.testing.assert_array_equal(a.numpy(), b.numpy())
+            j = K.jacobian(justin, wp.array(x, device="cpu"), "right_tcp", device=device)
+            jg = K.jacobian(justin, general, "right_tcp", device=device)
+            assert j.shape == jg.shape and j.dtype == jg.dtype
+            np.testing.assert_array_equal(j.numpy(), jg.numpy())
+    keep = [K.fk(justin, wp.array(qs[i:i + 1].astype(dtype), device="cpu")) for i in range(80)]
+    assert len({k.ptr for k in keep}) == 80
+    gc.collect()
+    for i, k in enumerate(keep):
+        np.testing.assert_array_equal(k.numpy(), K.fk(justin, qs[i:i + 1].astype(dtype)))
+    np.testing.assert_array_equal(wp.clone(keep[3]).numpy(), keep[3].numpy())  # a kernel reads it
+    assert launch.clear_workspaces() >= 1
+
+
+def test_warp_small_calls_from_threads(justin, qs):
+    """Threads on the Warp small path never share a result slot: every array keeps its own
+    configuration's frames."""
+    ref = K.fk(justin, qs[:200], device="cpu")
+    bad = []
+
+    def work(first):
+        kept = [(i, K.fk(justin, wp.array(qs[i:i + 1], device="cpu"))) for i in
+                range(first, 200, 4)]
+        bad.extend(i for i, a in kept if not np.array_equal(a.numpy()[0], ref[i]))
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not bad

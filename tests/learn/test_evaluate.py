@@ -81,7 +81,7 @@ def _brute_force(model, worlds, Ts, seeds_of, max_iterations):
     counts, its, qsol = [], [], []
     for w, T in zip(worlds, Ts):
         seeds = seeds_of(w, T)
-        opts = IKOptions(max_iterations=max_iterations, stop_when_solved=False,
+        opts = IKOptions(iterations=max_iterations, stop_when_solved=False,
                          restart_after=None, freeze_solved=False)
         res = IKSolver(model, FRAME, len(T), opts, world=w, device="cpu").solve(T, seeds)
         for p in range(len(T)):

@@ -41,7 +41,7 @@ def test_shipped_justin19_network_beats_random_seeds_at_the_shelf():
     net = load_checkpoint(MODELS / "justin19_shelf.pt", robot="justin19")
     world = shelf_world()
     T = shelf_grasp_poses(60, seed=777)   # not a seed of the training data
-    opts = IKOptions(n_starts=2, max_iterations=10, margin=0.01, seed=5)
+    opts = IKOptions(n_starts=2, iterations=10, margin=0.01, seed=5)
     learned = IKSolver("justin19", "right_tcp", len(T), opts, world=world, device="cpu",
                        warm_start=net).solve(T)
     rand = IKSolver("justin19", "right_tcp", len(T), opts, world=world, device="cpu").solve(T)

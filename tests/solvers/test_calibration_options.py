@@ -108,7 +108,7 @@ def test_options_are_validated_naming_the_field():
            (C(free="theta", gtol="x"), TypeError, "gtol"),
            (C(free="theta", elastic="yes"), TypeError, "elastic"),
            (C(free="theta", lam=0.0), ValueError, "lam"),
-           (C(free="theta", max_iter=-1), ValueError, "max_iter"),
+           (C(free="theta", equilibrium_iterations=-1), ValueError, "equilibrium_iterations"),
            (C(free="theta", tol=np.nan), ValueError, "tol"),
            (C(free="theta", bound_kappa=2), TypeError, "bound_kappa"),
            (C(free="theta", identifiability_tol=-1.0), ValueError, "identifiability_tol"),

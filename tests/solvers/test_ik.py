@@ -107,8 +107,8 @@ def test_bad_inputs():
         IK.ik(robot, "tcp", bad)
     with pytest.raises(ValueError, match="world"):
         IK.ik("planar4", "tcp", T, world=shelf_world())
-    with pytest.raises(ValueError, match="initial"):
-        IK.ik(robot, "tcp", T, initial=np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="seeds"):
+        IK.ik(robot, "tcp", T, seeds=np.zeros((2, 3)))
     with pytest.raises(ValueError, match="n_starts"):
         IK.ik(robot, "tcp", T, n_starts=0)
 
@@ -205,14 +205,14 @@ def test_ik_takes_options_and_overrides():
     robot = jwarp.robot("arm7")
     q = sample_within_limits(robot, 4, np.random.default_rng(11))
     T = np.asarray(jwarp.fk(robot, q, device="cpu"))[:, robot.frame_index("right_tcp")]
-    kw = IK.ik(robot, "right_tcp", T, n_starts=3, seed=5, max_iterations=120, tol_pos=2e-4,
+    kw = IK.ik(robot, "right_tcp", T, n_starts=3, seed=5, iterations=120, tol_pos=2e-4,
                freeze_solved=False, orientation="axis", free_axis=(0.0, 1.0, 1.0))
-    opts = IK.IKOptions(n_starts=7, seed=1, max_iterations=120, orientation="axis",
+    opts = IK.IKOptions(n_starts=7, seed=1, iterations=120, orientation="axis",
                         free_axis=(0.0, 1.0, 1.0))
     a = IK.ik(robot, "right_tcp", T, options=opts, n_starts=3, seed=5, tol_pos=2e-4,
               freeze_solved=False)
     b = IK.ik(robot, "right_tcp", T, options=IK.IKOptions(
-        n_starts=3, seed=5, max_iterations=120, tol_pos=2e-4, freeze_solved=False,
+        n_starts=3, seed=5, iterations=120, tol_pos=2e-4, freeze_solved=False,
         orientation="axis", free_axis=(0.0, 1.0, 1.0)))
     _same_result(a, kw)
     _same_result(b, kw)

@@ -73,7 +73,7 @@ def test_restarts_solve_reachable_panda_targets(panda):
     seeds = sample_within_limits(model, P * 4, np.random.default_rng(12)).reshape(P, 4, -1)
     rates = {}
     for ra in (None, 5):
-        o = IK.IKOptions(n_starts=4, max_iterations=50, tol_pos=1e-3, tol_rot=1e-2, seed=3,
+        o = IK.IKOptions(n_starts=4, iterations=50, tol_pos=1e-3, tol_rot=1e-2, seed=3,
                          restart_after=ra)
         res = IK.IKSolver(model, "tcp", P, o, device="cpu").solve(T, seeds)
         ok = _independently_solved(model, ref_fk, res, T, 1e-3, 1e-2)
@@ -87,7 +87,7 @@ def test_restarted_solves_are_deterministic(device):
     robot = jwarp.robot("arm7")
     q = sample_within_limits(robot, 6, np.random.default_rng(2))
     T = jwarp.fk(robot, q)[:, robot.frame_index("tcp")]
-    solver = IK.IKSolver(robot, "tcp", 6, IK.IKOptions(n_starts=3, max_iterations=60,
+    solver = IK.IKSolver(robot, "tcp", 6, IK.IKOptions(n_starts=3, iterations=60,
                                                         restart_after=2, seed=9),
                          device=device)
     runs = []
@@ -100,12 +100,12 @@ def test_restarted_solves_are_deterministic(device):
 
 def test_unreachable_targets_give_up_and_end_the_batch(device):
     """A target 10 m away: its starts stall, re-seed ``max_restarts`` times and give up;
-    the solve ends long before ``max_iterations`` with the reachable target solved."""
+    the solve ends long before ``iterations`` with the reachable target solved."""
     robot = jwarp.robot("arm7")
     q = sample_within_limits(robot, 1, np.random.default_rng(5))
     T = np.repeat(jwarp.fk(robot, q)[:, robot.frame_index("tcp")], 2, axis=0)
     T[1, :3, 3] = 10.0
-    o = IK.IKOptions(n_starts=4, max_iterations=5000, restart_after=4, max_restarts=3, seed=1)
+    o = IK.IKOptions(n_starts=4, iterations=5000, restart_after=4, max_restarts=3, seed=1)
     evaluations = []
     res = IK.IKSolver(robot, "tcp", 2, o, device=device).solve(
         T, callback=lambda it, qq: evaluations.append(it))
@@ -120,7 +120,7 @@ def test_without_restarts_an_unreachable_target_runs_to_the_cap(device):
     robot = jwarp.robot("arm7")
     T = np.eye(4)
     T[:3, 3] = 10.0
-    o = IK.IKOptions(n_starts=2, max_iterations=40, restart_after=None, seed=1)
+    o = IK.IKOptions(n_starts=2, iterations=40, restart_after=None, seed=1)
     res = IK.IKSolver(robot, "tcp", 1, o, device=device).solve(T)
     assert not res.feasible and (res.all_iterations == 40).all()
 

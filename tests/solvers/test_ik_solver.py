@@ -157,7 +157,7 @@ def test_device_feasibility_check_matches_the_host_check(device, dtype):
     q = q.astype(dtype).astype(np.float64)  # exactly representable in the solver's dtype
     T = jwarp.fk(robot, q, device=device, dtype=np.float64)[:, robot.frame_index("right_tcp")]
     margin = 0.02
-    opts = IK.IKOptions(max_iterations=0, margin=margin, tol_pos=1e-3, tol_rot=1e-2)
+    opts = IK.IKOptions(iterations=0, margin=margin, tol_pos=1e-3, tol_rot=1e-2)
     res = IK.IKSolver(robot, "right_tcp", len(q), opts, world=world, device=device,
                       dtype=dtype).solve(T, q[:, None])
     want = within_limits(robot, q) & collision.is_collision_free(
@@ -230,8 +230,8 @@ def test_caller_seeds_are_used(device):
 def test_options_are_checked_by_name():
     with pytest.raises(ValueError, match="^n_starts"):
         IK.IKOptions(n_starts=0)
-    with pytest.raises(ValueError, match="^max_iterations"):
-        IK.IKOptions(max_iterations=-1)
+    with pytest.raises(ValueError, match="^iterations"):
+        IK.IKOptions(iterations=-1)
     with pytest.raises(ValueError, match="^check_every"):
         IK.IKOptions(check_every=True)
     with pytest.raises(ValueError, match="^tol_pos"):
@@ -283,7 +283,7 @@ def test_random_seeds_are_drawn_on_the_device_within_the_limits(device):
     robot = jwarp.robot("justin19")  # box and linear (torso) limits
     far = np.eye(4)
     far[:3, 3] = 10.0  # out of reach: the seeds are the result rows
-    solver = IK.IKSolver(robot, "right_tcp", 2, IK.IKOptions(n_starts=200, max_iterations=0,
+    solver = IK.IKSolver(robot, "right_tcp", 2, IK.IKOptions(n_starts=200, iterations=0,
                                                              seed=4), device=device)
     q = solver.solve(far).all_q.reshape(-1, robot.n_dof)
     assert within_limits(robot, q).all()
@@ -299,7 +299,7 @@ def test_freeze_solved_stops_the_other_seeds(device):
     robot = jwarp.robot("arm7")
     _, T = _free_targets(robot, "tcp", 6, seed=13, device=device)
     seeds = sample_within_limits(robot, 6 * 5, np.random.default_rng(2)).reshape(6, 5, -1)
-    opts = dict(n_starts=5, stop_when_solved=False, max_iterations=60)
+    opts = dict(n_starts=5, stop_when_solved=False, iterations=60)
     full = IK.IKSolver(robot, "tcp", 6, IK.IKOptions(freeze_solved=False, **opts),
                        device=device).solve(T, seeds)
     frozen = IK.IKSolver(robot, "tcp", 6, IK.IKOptions(freeze_solved=True, **opts),

@@ -89,7 +89,7 @@ def test_garbage_is_rescued_by_random_seeds():
     assert res.all_q.shape == (5, 13, model.n_dof)
     assert res.feasible.all()
     # without the random extra seeds the corner guess alone is (at best) worse
-    res1 = IK.IKSolver(ROBOT, FRAME, len(T), IK.IKOptions(max_iterations=3), device="cpu",
+    res1 = IK.IKSolver(ROBOT, FRAME, len(T), IK.IKOptions(iterations=3), device="cpu",
                        warm_start=Garbage(model.n_dof)).solve(T)
     assert res1.all_q.shape == (5, 1, model.n_dof)
     assert res1.feasible.sum() <= res.feasible.sum()
@@ -97,7 +97,7 @@ def test_garbage_is_rescued_by_random_seeds():
 
 def test_random_extra_seeds_come_from_the_solver_rng():
     model, q, T = _problems(3, seed=2)
-    opts = IK.IKOptions(n_random_with_warm_start=4, max_iterations=0, seed=7)
+    opts = IK.IKOptions(n_random_with_warm_start=4, iterations=0, seed=7)
     a = IK.IKSolver(ROBOT, FRAME, 3, opts, device="cpu", warm_start=Known(q))
     b = IK.IKSolver(ROBOT, FRAME, 3, opts, device="cpu", warm_start=Known(q))
     ra, rb = a.solve(T), b.solve(T)
@@ -177,9 +177,9 @@ def test_ik_with_warm_start():
                   seed=3, device="cpu")
     assert r1.all_q.shape == (4, 11, model.n_dof) and r1.feasible.all()
     np.testing.assert_array_equal(r1.q, r2.q)
-    # initial= wins
+    # seeds= win
     ws.calls.clear()
-    r3 = jwarp.ik(ROBOT, FRAME, T, warm_start=ws, initial=np.zeros(model.n_dof), device="cpu")
+    r3 = jwarp.ik(ROBOT, FRAME, T, warm_start=ws, seeds=np.zeros(model.n_dof), device="cpu")
     assert r3.all_q.shape == (4, 1, model.n_dof) and ws.calls == []
     with pytest.raises(ValueError, match="warm_start"):
         jwarp.ik(ROBOT, FRAME, T, warm_start=Returns(np.zeros((1, 1, 5))))

@@ -39,11 +39,11 @@ def test_planning_without_spheres_is_an_error(world, bare):
     with pytest.raises(ValueError, match="'bare4' has no collision spheres"):
         Planner(bare, world, 1, PlanOptions())
     # opted out: the straight line through the block is "feasible" (nothing is checked)
-    res = plan(bare, world, START, GOAL, iterations=5, n_starts=1, initial="straight",
+    res = plan(bare, world, START, GOAL, iterations=5, n_starts=1, start_kind="straight",
                allow_no_collision=True)
     assert res.feasible[0]
     with_spheres = plan("planar4", world, START, GOAL, iterations=0, n_starts=1,
-                        initial="straight", fallback=None)
+                        start_kind="straight", fallback=None)
     assert not with_spheres.feasible[0]   # the same line collides when spheres are checked
     with pytest.raises(TypeError, match="allow_no_collision"):
         PlanOptions(allow_no_collision="yes").validate()
@@ -91,7 +91,7 @@ def test_self_collision_at_home_names_the_link_pairs(world):
     T = jwarp.fk("arm7", np.full(7, 0.3))[robot.frame_index("right_7")]
     with pytest.raises(ValueError, match="self-collision at both"):
         ik(robot, "right_7", T)
-    ik(robot, "right_7", T, allow_no_collision=True, max_iterations=2)
+    ik(robot, "right_7", T, allow_no_collision=True, iterations=2)
     # a collision at one home configuration only (the middle of the limits is free) is fine
     panda_like = inflated("arm7", "right_7", 0.01)
     assert not home_self_collisions(panda_like, home_configurations(panda_like)[1][1])

@@ -56,16 +56,16 @@ def test_stop_when_solved_ends_at_the_first_feasible_start(world):
 
 
 def test_all_done_when_every_start_finishes(world):
-    res = PL.plan("planar4", world, S_EASY, G_EASY, initial="straight", n_starts=1,
+    res = PL.plan("planar4", world, S_EASY, G_EASY, start_kind="straight", n_starts=1,
                   stop_when_solved=False, fallback=None)
     assert res.feasible[0] and res.stop_reason == "all_done"
 
 
 def test_time_limit_ends_the_optimisation(world):
     # a step too small to move anything: the straight line stays in collision
-    PL.plan("planar4", world, S4, G4, initial="straight", iterations=1, fallback=None)  # load
+    PL.plan("planar4", world, S4, G4, start_kind="straight", iterations=1, fallback=None)  # load
     t = time.perf_counter()
-    res = PL.plan("planar4", world, S4, G4, initial="straight", step=1e-9,
+    res = PL.plan("planar4", world, S4, G4, start_kind="straight", step=1e-9,
                   iterations=10**7, time_limit=0.3, fallback=None)
     wall = time.perf_counter() - t
     assert res.stop_reason == "time_limit" and not res.feasible[0]
@@ -74,7 +74,7 @@ def test_time_limit_ends_the_optimisation(world):
     assert wall < 3.0  # one iteration and the exact check after the limit (shared CPU)
     assert 0 < res.iterations[0] < 10**7  # the iteration it stopped at
     # with the fallback: the multi-starts get fallback_after (0.15) of the time, then RRT
-    res = PL.plan("planar4", world, S4, G4, initial="straight", step=1e-9,
+    res = PL.plan("planar4", world, S4, G4, start_kind="straight", step=1e-9,
                   iterations=10**7, time_limit=5.0)
     assert res.feasible[0] and list(res.stage) == ["fallback"]
     assert res.stop_reason == "solved"

@@ -153,7 +153,7 @@ def test_ur5_rrt_path_is_the_fallback_plan(ur5_problem, evals, monkeypatch):
     seed = resample_path(rrt.path, W)
     # the RRT's edges and the certificate are one check: the path it returns is proven
     assert certify_check(m, world, device="cpu").check(rrt.path).ok[0]
-    res = jwarp.plan(m, world, qa, qb, n_starts=1, initial="straight", iterations=0,
+    res = jwarp.plan(m, world, qa, qb, n_starts=1, start_kind="straight", iterations=0,
                      n_waypoints=W, rrt=RRTOptions(seed=np.random.default_rng(7)),
                      time_limit=20.0)
     if res.stage[0] == "optimizer":
@@ -173,7 +173,7 @@ def test_ur5_rrt_path_is_the_fallback_plan(ur5_problem, evals, monkeypatch):
 def test_no_plan_reason_names_the_fallback(ur5_problem):
     """Without a plan the reason says what the RRT fallback did (here: too few samples)."""
     m, world, boxes, qa, qb = ur5_problem
-    res = jwarp.plan(m, world, qa, qb, n_starts=1, initial="straight", iterations=0,
+    res = jwarp.plan(m, world, qa, qb, n_starts=1, start_kind="straight", iterations=0,
                      rrt=RRTOptions(max_samples=1, batch=1, seed=0), time_limit=20.0)
     if res.stage[0] == "optimizer":
         pytest.fail("the straight line is free here: no fallback to test")

@@ -78,7 +78,7 @@ def test_substeps_catch_a_thin_wall_that_waypoints_miss(device, wall_world):
     res = check_paths(robot, wall_world, path, device=device)
     assert res.code[0] == 1 and 0.3 < res.where[0] < 0.7 and "grid" in res.reason(0)
     # the planner's own check sees it too: the straight line is never reported feasible
-    res = PL.plan(robot, wall_world, path[0], path[1], initial="straight", iterations=0,
+    res = PL.plan(robot, wall_world, path[0], path[1], start_kind="straight", iterations=0,
                   n_waypoints=2, device=device)
     assert not res.feasible[0] and res.collision_cost[0] > 0
 
@@ -88,7 +88,7 @@ def test_sphere2d_plans_through_the_opening(device):
     world = world_from_occupancy((np.abs(X) < 1.5 * H2) & (Y < 0.3), LIM2, H2)
     robot = jwarp.robot("sphere2d")
     s, g = np.array([-0.5, 0.0]), np.array([0.5, 0.0])
-    res = PL.plan(robot, world, s, g, initial="mixed", n_starts=8, iterations=200,
+    res = PL.plan(robot, world, s, g, start_kind="mixed", n_starts=8, iterations=200,
                   step=0.05, n_waypoints=10, seed=1, device=device)
     assert res.feasible[0] and not res.all_feasible[0, 0]  # the straight start failed
     p = res.path[0]
@@ -103,7 +103,7 @@ def test_planar4_plans_around_a_known_obstacle(device, block_world):
     s, g = np.array([1.2, 0.0, 0.0, 0.0]), np.array([-1.2, 0.0, 0.0, 0.0])
     straight = PL.initial_paths(s[None], g[None], 20, "straight")[0]
     assert not PL.path_feasible(robot, block_world, straight, 16, device=device)
-    res = PL.plan(robot, block_world, s, g, initial="mixed", n_starts=16, n_substeps=8,
+    res = PL.plan(robot, block_world, s, g, start_kind="mixed", n_starts=16, n_substeps=8,
                   iterations=300, step=0.05, seed=0, device=device)
     assert res.feasible[0] and res.n_feasible[0] >= 1
     p = res.path[0]
@@ -126,7 +126,7 @@ def test_batched_problems_and_user_guess(device, block_world):
     s = np.array([[2.0, 1.0, 0.0, 0.0], [2.0, 0.0, 0.5, 0.0]])
     g = np.array([[2.0, -1.0, 0.0, 0.0], [2.5, 0.3, 0.0, 0.0]])
     guess = PL.initial_paths(s, g, 8, "straight")[:, None]  # (B, 1, W, n)
-    res = PL.plan(robot, block_world, s, g, initial=guess, iterations=50, device=device)
+    res = PL.plan(robot, block_world, s, g, seeds=guess, iterations=50, device=device)
     assert res.path.shape == (2, 8, 4) and res.feasible.shape == (2,)
     assert res.feasible.all() and np.all(res.iterations == 0)  # both lines are free already
     np.testing.assert_allclose(res.path, guess[:, 0], atol=1e-6)
@@ -148,10 +148,10 @@ def test_bad_inputs_give_clear_errors(device, block_world, wall_world):
         PL.plan(robot, block_world, ok, np.full(4, np.nan), device=device)
     with pytest.raises(ValueError, match="world"):
         PL.plan("arm7", block_world, np.zeros(7), np.zeros(7), device=device)
-    with pytest.raises(ValueError, match="initial"):
-        PL.plan(robot, block_world, ok, -ok, initial=np.zeros((5, 3)), device=device)
-    with pytest.raises(ValueError, match="initial"):
-        PL.plan(robot, block_world, ok, -ok, initial="zigzag", device=device)
+    with pytest.raises(ValueError, match="seeds"):
+        PL.plan(robot, block_world, ok, -ok, seeds=np.zeros((5, 3)), device=device)
+    with pytest.raises(ValueError, match="start_kind"):
+        PL.plan(robot, block_world, ok, -ok, start_kind="zigzag", device=device)
     with pytest.raises(ValueError, match="eps"):
         PL.plan(robot, block_world, ok, -ok, eps=0.01, margin=0.02, device=device)
     with pytest.raises(ValueError, match="iterations"):
@@ -255,20 +255,20 @@ def test_plan_takes_options_and_overrides(block_world):
     s, g = np.array([1.2, 0.0, 0.0, 0.0]), np.array([-1.2, 0.0, 0.0, 0.0])
     o = dict(n_starts=6, n_substeps=8, iterations=120, step=0.05, seed=2, fallback=None,
              stop_when_solved=False)
-    kw = PL.plan(robot, block_world, s, g, initial="random", **o)
-    opts = PL.PlanOptions(initial="straight", n_starts=6, n_substeps=8, iterations=120,
+    kw = PL.plan(robot, block_world, s, g, start_kind="random", **o)
+    opts = PL.PlanOptions(start_kind="straight", n_starts=6, n_substeps=8, iterations=120,
                           step=0.05, seed=9, fallback=None)
-    a = PL.plan(robot, block_world, s, g, options=opts, initial="random", seed=2,
+    a = PL.plan(robot, block_world, s, g, options=opts, start_kind="random", seed=2,
                 stop_when_solved=False)
-    b = PL.plan(robot, block_world, s, g, options=PL.PlanOptions(initial="random", **o))
+    b = PL.plan(robot, block_world, s, g, options=PL.PlanOptions(start_kind="random", **o))
     _same_plan(a, kw)
     _same_plan(b, kw)
-    assert (opts.initial, opts.seed, opts.stop_when_solved) == ("straight", 9, True)
+    assert (opts.start_kind, opts.seed, opts.stop_when_solved) == ("straight", 9, True)
     # user guesses (not a kind) are seeds, with or without options
     guess = PL.initial_paths(s[None], g[None], 12, "straight")[0]
-    kw = PL.plan(robot, block_world, s, g, initial=guess, iterations=30, fallback=None,
+    kw = PL.plan(robot, block_world, s, g, seeds=guess, iterations=30, fallback=None,
                  n_substeps=8, step=0.05, seed=9)
-    a = PL.plan(robot, block_world, s, g, options=opts, initial=guess, iterations=30)
+    a = PL.plan(robot, block_world, s, g, options=opts, seeds=guess, iterations=30)
     _same_plan(a, kw)
     assert a.path.shape == (1, 12, 4)
 

@@ -153,11 +153,12 @@ def test_options_are_validated_naming_the_field(device, block_world):
            (P(step=0.0), ValueError, "step"), (P(max_step=np.inf), ValueError, "max_step"),
            (P(margin=-0.1), ValueError, "margin"), (P(eps=0.01, margin=0.02), ValueError, "eps"),
            (P(check_all_every=0), ValueError, "check_all_every"),
-           (P(initial="zigzag"), ValueError, "initial"),
-           (P(initial=np.zeros((2, 4))), TypeError, "initial"),
+           (P(start_kind="zigzag"), ValueError, "start_kind"),
+           (P(start_kind=np.zeros((2, 4))), TypeError, "start_kind"),
            (P(weights={"world": 1.0}), TypeError, "weights"),
            (P(weights=PL.PathWeights(length=-1.0)), ValueError, "weights.length"),
-           (P(early_stop="yes"), TypeError, "early_stop"), (P(seed=-1), ValueError, "seed"),
+           (P(freeze_feasible="yes"), TypeError, "freeze_feasible"),
+           (P(seed=-1), ValueError, "seed"),
            (P(kappa=1e-4, lam=1.5), ValueError, "lam"), (P(callback=3), TypeError, "callback"),
            (P(step=1e39), ValueError, "step")]
     for opts, err, name in bad:

@@ -30,7 +30,7 @@ def independent_feasible(robot, world, path):
 
 def run(world, converge, **kw):
     robot = jwarp.robot("planar4")
-    o = PL.PlanOptions(initial="mixed", n_starts=8, iterations=300, step=0.05, seed=0,
+    o = PL.PlanOptions(start_kind="mixed", n_starts=8, iterations=300, step=0.05, seed=0,
                        n_substeps=8, converge=converge, weights=PL.PathWeights(length=0.05), **kw)
     return PL.Planner(robot, world, 1, o, device="cpu").plan(START, GOAL)
 
@@ -67,7 +67,7 @@ def test_converge_tolerance_stops_earlier(block_world):
 def test_default_unchanged(block_world):
     """Without converge, plan() keeps its early stop: the same paths as before."""
     a = run(block_world, False)
-    b = PL.plan("planar4", block_world, START, GOAL, initial="mixed", n_starts=8,
+    b = PL.plan("planar4", block_world, START, GOAL, start_kind="mixed", n_starts=8,
                 iterations=300, step=0.05, seed=0, n_substeps=8,
                 weights=PL.PathWeights(length=0.05))
     np.testing.assert_array_equal(a.path, b.path)
@@ -134,7 +134,7 @@ def test_cartesian_length_shortens_workspace_motion(block_world):
     robot = jwarp.robot("planar4")
     plain = run(block_world, True)
     cart = PL.Planner(robot, block_world, 1, PL.PlanOptions(
-        initial="mixed", n_starts=8, iterations=300, step=0.05, seed=0, n_substeps=8,
+        start_kind="mixed", n_starts=8, iterations=300, step=0.05, seed=0, n_substeps=8,
         converge=True, weights=PL.PathWeights(length=0.05, cartesian=0.05)),
         device="cpu").plan(START, GOAL)
     assert cart.feasible[0]

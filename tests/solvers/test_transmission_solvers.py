@@ -53,7 +53,7 @@ def test_ik_solutions_reach_the_target_with_the_transmission(device):
     q_true = rng.uniform(-1.5, 1.5, (16, robot.n_dof))
     T = ref_fk(plain, ref_transmission(robot, q_true))[:, -1]
     frame = robot.n_frames - 1
-    opts = IKOptions(n_starts=8, max_iterations=200)
+    opts = IKOptions(n_starts=8, iterations=200)
     res = IKSolver(robot, frame, 16, opts, device=device, dtype=np.float64).solve(T)
     assert res.feasible.sum() >= 8  # (some random targets self-collide)
     ok = res.feasible

@@ -332,7 +332,7 @@ def test_infeasible_plan_says_why(device, arm_scene, tmp_path, capsys):
     lines = q[:, :1] + np.linspace(0, 1, 20)[None, :, None] * (q[:, 1:] - q[:, :1])
     i = int(np.nonzero(free & (_dense_clearance(robot, w, lines, n=50) < 0))[0][0])
     start, goal = q[i, 0], q[i, 1]
-    res = plan(robot, w, start, goal, initial="straight", iterations=0,
+    res = plan(robot, w, start, goal, start_kind="straight", iterations=0,
                                       device=device, fallback=None)
     assert not res.feasible[0]
     assert res.reasons[0].startswith("collision: sphere") and "vs object '" in res.reasons[0]

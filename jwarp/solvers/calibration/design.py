@@ -38,7 +38,7 @@ times. ``detmax`` (Mitchell 1974) starts from the greedy design (or a random one
 makes excursions: add the ``k`` best candidates one by one, then remove the ``k`` worst
 points one by one (k = 1, then up to ``max_excursion`` when k = 1 fails); an excursion is
 kept only when it raises ``c`` by more than ``tol``, so ``c`` never decreases; it stops
-when no excursion improves or after ``max_iter`` accepted ones. Candidates are chosen
+when no excursion improves or after ``iterations`` accepted ones. Candidates are chosen
 without repetition.
 """
 
@@ -53,16 +53,18 @@ import numpy as np
 from jwarp.core.threads import limit_blas
 from jwarp.registry import robot as get_robot
 from jwarp.solvers.calibration.params import ParameterSpace, parse_groups
+from jwarp.solvers.overrides import renamed_options
 
 METHODS = ("greedy", "detmax")
 
 
+@renamed_options(max_iter="iterations")
 @dataclass
 class DesignOptions:
     """Options of :func:`select`.
 
     n: configurations to select; method: ``greedy`` or ``detmax``; start (detmax):
-    ``greedy`` or ``random``; max_excursion: deepest detmax excursion; max_iter: most
+    ``greedy`` or ``random``; max_excursion: deepest detmax excursion; iterations: most
     accepted detmax excursions; tol: least improvement of c that counts; refresh: Woodbury
     updates between exact inverses; seed: of the random start; rank_rtol: relative
     eigenvalue tolerance of the task's rank.
@@ -72,14 +74,14 @@ class DesignOptions:
     method: str = "detmax"
     start: str = "greedy"
     max_excursion: int = 2
-    max_iter: int = 10000
+    iterations: int = 10000
     tol: float = 1e-9
     refresh: int = 32
     seed: int | None = 0
     rank_rtol: float = 1e-10
 
     def validate(self) -> None:
-        for name, lo in (("n", 1), ("max_excursion", 1), ("max_iter", 0), ("refresh", 1)):
+        for name, lo in (("n", 1), ("max_excursion", 1), ("iterations", 0), ("refresh", 1)):
             v = getattr(self, name)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
                 raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
@@ -327,7 +329,7 @@ def select(U: Any, prior: Any, L: Any | None, options: DesignOptions,
     if options.method == "detmax":
         k_max = min(options.max_excursion, n_c - options.n) if n_c > options.n else 0
         k = 1
-        while k <= k_max and iterations < options.max_iter:
+        while k <= k_max and iterations < options.iterations:
             trial = st.copy()
             for _ in range(k):
                 _add_best(trial)

@@ -84,7 +84,7 @@ class Progress(NamedTuple):
 def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: np.ndarray,
                        lam: float, max_iter: int, tol: float,
                        masses: tuple[np.ndarray, np.ndarray] | None = None,
-                       kappa_nl: np.ndarray | None = None, device: Any = "cpu"
+                       kappa_nl: np.ndarray | None = None, device: Any = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elastic FK (float64, CPU) as :func:`jwarp.fk_elastic`, but accepting compliances of
     either sign: the optimizer may cross kappa = 0 on its way (the fixed point is just as
@@ -185,7 +185,8 @@ class CalibrationProblem:
             Jacobian are whitened by ``L_s^-1`` (``Lambda_s = L_s L_s^T``, Cholesky) instead
             of ``1 / noise_sigma``, which it replaces. None: the diagonal ``noise_sigma``.
         device: Warp device of the FK, equilibrium and DH-Jacobian kernels (float64;
-            "cpu" default, "cuda:0" for large batches such as the candidate Jacobians of
+            None: Warp's default device, docs/api.md "Devices"; "cpu" for small problems on
+            a CUDA machine, "cuda:0" for large batches such as the candidate Jacobians of
             :func:`.design.candidate_jacobians`); the rest of the problem is numpy.
         orders: harmonic orders of the ``harmonic`` and ``coupling`` groups, per group or
             per joint/frame pattern (see :meth:`ParameterSpace.build`).
@@ -201,7 +202,7 @@ class CalibrationProblem:
                  frames: Iterable[int | str] | None = None, p_nominal: Any = None,
                  elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
                  tol: float = 1e-12, bound_kappa: bool = False,
-                 covariance: Any = None, device: Any = "cpu",
+                 covariance: Any = None, device: Any = None,
                  orders: Mapping[str, int] | None = None, loss: str = "linear",
                  loss_scale: float | None = None) -> None:
         self.robot = get_robot(robot)
@@ -215,8 +216,8 @@ class CalibrationProblem:
                 raise ValueError(f"measurement: built for robot '{mr.name}', not '{self.robot.name}'")
         self.q, self.y, self.meta = check_samples(self.robot, measurement, q, y, meta)
         init_warp()
-        #: the Warp device of the model and Jacobian kernels ("cpu" default; "cuda:0" for
-        #: large batches, e.g. the candidate Jacobians of an experimental design)
+        #: the Warp device of the model and Jacobian kernels (None: Warp's default device;
+        #: "cuda:0" for large batches, e.g. the candidate Jacobians of an experimental design)
         self.device = resolve_device(device)
         #: the joint values on ``device`` (float64), uploaded once: every evaluation of
         #: the model and its Jacobian launches on this array (the data do not change)
@@ -306,8 +307,8 @@ class CalibrationProblem:
             free = [g for g in parse_groups(o.free) if g not in (o.fix_at or {})]
         return cls(robot, measurement, q, y, free=free, meta=meta, noise_sigma=o.noise_sigma,
                    sigma=o.sigma, frames=o.frames, p_nominal=p_nominal, elastic=o.elastic,
-                   lam=o.lam, max_iter=o.max_iter, tol=o.tol, bound_kappa=o.bound_kappa,
-                   covariance=o.covariance, orders=o.orders, loss=o.loss,
+                   lam=o.lam, max_iter=o.equilibrium_iterations, tol=o.tol,
+                   bound_kappa=o.bound_kappa, covariance=o.covariance, orders=o.orders, loss=o.loss,
                    loss_scale=o.loss_scale)
 
     # ------------------------------------------------------------------ sizes
@@ -941,7 +942,8 @@ def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
     if not np.all(np.isfinite(prob.residuals(start0))):
         raise ValueError(f"x0: the elastic equilibrium does not converge at the start for "
                          f"{int((~prob.state(start0).converged).sum())} sample(s) "
-                         f"(max_iter={o.max_iter}, tol={o.tol}); lower lam or raise max_iter")
+                         f"(equilibrium_iterations={o.equilibrium_iterations}, tol={o.tol}); "
+                         f"lower lam or raise equilibrium_iterations")
     hold = prob.scale_unpriored(start0)
     robot_kinds = ((sp.kind == KIND_DH) | (sp.kind == KIND_KAPPA) | (sp.kind == KIND_MASS)
                    | (sp.kind == KIND_ORIGIN))

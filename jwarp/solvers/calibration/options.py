@@ -12,6 +12,7 @@ import numpy as np
 from jwarp.core.arrays import real_number
 from jwarp.solvers.calibration.params import parse_groups
 from jwarp.solvers.calibration.robust import LOSSES
+from jwarp.solvers.overrides import renamed_options
 
 #: least-squares methods (scipy.optimize.least_squares) the calibration accepts
 METHODS = ("dogbox", "trf")
@@ -41,6 +42,7 @@ def _flag(v: Any, name: str, none: bool = False) -> None:
         raise TypeError(f"{name}: expected True or False{' or None' if none else ''}, got {v!r}")
 
 
+@renamed_options(max_iter="equilibrium_iterations")
 @dataclass
 class CalibrationOptions:
     """Options of a MAP calibration; :meth:`validate` raises ValueError/TypeError naming
@@ -90,8 +92,8 @@ class CalibrationOptions:
         max_nfev, ftol, xtol, gtol, method: of :func:`scipy.optimize.least_squares`
             (``method`` "dogbox" or "trf"; ``x_scale`` is the prior sigma).
         elastic: True/False; None: elastic iff a compliance is free or nonzero.
-        lam, max_iter, tol: damping in (0, 1], most updates and tolerance [rad] of the
-            elastic equilibrium.
+        lam, equilibrium_iterations, tol: damping in (0, 1], most updates and tolerance
+            [rad] of the elastic equilibrium (``fk_elastic``'s ``lam``, ``max_iter``, ``tol``).
         bound_kappa: keep compliances >= 0 (default): every start runs the unbounded
             solver, then holds the compliances that ended negative at 0 and solves again
             (an active set; a held one whose gradient points inside is released), so the
@@ -133,7 +135,7 @@ class CalibrationOptions:
     method: str = "dogbox"
     elastic: bool | None = None
     lam: float = 1.0
-    max_iter: int = 100
+    equilibrium_iterations: int = 100
     tol: float = 1e-12
     bound_kappa: bool = True
     covariance: Any = None
@@ -181,7 +183,7 @@ class CalibrationOptions:
         _flag(self.elastic, "elastic", none=True)
         if not (isinstance(self.lam, (int, float)) and 0 < self.lam <= 1):
             raise ValueError(f"lam: damping must be in (0, 1], got {self.lam!r}")
-        _int(self.max_iter, "max_iter", 0)
+        _int(self.equilibrium_iterations, "equilibrium_iterations", 0)
         _number(self.tol, "tol", 0.0)
         for name in ("initial_guess", "bound_kappa", "warn", "free_poses"):
             _flag(getattr(self, name), name)

@@ -167,7 +167,8 @@ class PoseOptions:
     self_collision: check self-collision (False: only limits and visibility).
     batch_size: candidates per kernel launch (CPU ~1e5, CUDA ~1e7).
     max_tries: candidates drawn at most before giving up.
-    seed: random seed; device: Warp device ("cpu", "cuda", "cuda:0"); dtype: float32/float64.
+    seed: random seed; device: Warp device ("cpu", "cuda", "cuda:0"; None: Warp's default
+    device, docs/api.md "Devices"); dtype: float32/float64.
     """
 
     margin: float = 0.02
@@ -180,7 +181,7 @@ class PoseOptions:
     batch_size: int = 1 << 16
     max_tries: int = 50_000_000
     seed: int = 0
-    device: str | None = "cpu"
+    device: str | None = None
     dtype: str = "float32"
 
     def validate(self) -> "PoseOptions":
