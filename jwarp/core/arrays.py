@@ -18,7 +18,7 @@ import os
 import sys
 import threading
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, cast
 
 import numpy as np
 import warp as wp
@@ -510,7 +510,8 @@ class HostWrap:
         self.base = 0
         self.next = self.slots
         self.lock = threading.Lock()
-        first = wp.array(np.zeros(self.shape, self.npdt), dtype=dtype, device="cpu", copy=False)
+        first: Any = wp.array(np.zeros(self.shape, self.npdt), dtype=dtype, device="cpu",
+                              copy=False)
         state = dict(first.__dict__)
         fast = (type(first) is wp.array and {"ptr", "_ref", "ctype", "_array_interface",
                                               "deleter"} <= state.keys()
@@ -529,7 +530,8 @@ class HostWrap:
                 self.base = self.pool.ctypes.data
                 k = 0
             self.next = k + 1
-            return self.pool[k], self.base + k * self.nbytes
+            pool = cast(np.ndarray, self.pool)   # set at the first take
+            return pool[k], self.base + k * self.nbytes
 
     def wrap(self, slot: np.ndarray, ptr: int) -> wp.array:
         """The slot of :meth:`take` (at address ``ptr``) as a new Warp array."""

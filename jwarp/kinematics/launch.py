@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import sys
 import threading
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 import warp as wp
@@ -319,15 +319,16 @@ def small_call(op: str, robot: Any, q: Any, device: Any, dtype: Any, validate: b
     except (ValueError, TypeError):
         return None
     q2 = qa.reshape(call.B, model.n_dof)
+    wrap = cast(HostWrap, call.wrap)   # set for Warp input
     if warp_in:   # the result is written to a new Warp array's memory
-        out, ptr = call.wrap.take()
+        out, ptr = wrap.take()
     if call.narrowing:   # float64 q computed in float32: overflow -> inf
         with np.errstate(over="ignore", invalid="ignore"):
             res = call.ws.run(op, q2, validate, out, call.frame, call.point)
     else:
         res = call.ws.run(op, q2, validate, out, call.frame, call.point)
     if warp_in:
-        return None if res is None else call.wrap.wrap(res, ptr)
+        return None if res is None else wrap.wrap(res, ptr)
     if res is None or out is not None:
         return res
     if tq is not np.ndarray:

@@ -60,13 +60,13 @@ def renamed_options(**renames: str) -> Any:
     gives the new one, each with a ``DeprecationWarning`` (for one release).
     ``inspect.signature`` shows the new fields only."""
     def decorate(cls: type) -> type:
-        init = cls.__init__
+        init = cls.__init__  # type: ignore[misc]
 
         @functools.wraps(init)
         def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
             init(self, *args, **translate(cls.__name__, renames, kwargs))
 
-        cls.__init__ = __init__
+        cls.__init__ = __init__  # type: ignore[misc]
         setattr(cls, RENAMED, dict(renames))
         for old, new in renames.items():
             setattr(cls, old, property(functools.partial(_old_attribute, name=cls.__name__,
