@@ -7,7 +7,8 @@ Model vs Data (as in MuJoCo Warp):
   kernel. The frame tables of FK (``order``, ``parent``, ..., ``trig``, the coupling CSR;
   one kernel argument ``frame_struct``), the mass model (``mass``, ``mass_com``,
   ``dh_info``, ``static_idx``), gravity and the robot's default compliances ``kappa``, the
-  joint limits with the linear limits (``limits``: :class:`LimitTables`), the nominal DH
+  joint limits with the linear limits (``limits``: the ``kernels.path.LimitTables`` struct,
+  one kernel argument), the nominal DH
   rows (``nominal_rows``: :class:`jwarp.core.rows.DHRows`), and, built on first use, the
   collision spheres and self-collision pairs (``spheres``: :class:`SphereModel`).
   Models are cached by robot *content* (a hash of the robot's canonical JSON, with device
@@ -24,10 +25,6 @@ Model vs Data (as in MuJoCo Warp):
   :func:`jwarp.kinematics.forward_kinematics` ``(m, d, q)`` and
   :func:`jwarp.kinematics.frame_jacobian` ``(m, d, frame, q, point)``). Kernels
   group their parameters ``# Model:`` / ``# Data in:`` / ``# Data out:``.
-
-``tables(robot, device, dtype)`` and :func:`jwarp.core.limits.limit_tables` are the older
-names of :func:`put_model` and ``put_model(...).limits`` (``KinematicsTables`` is
-:class:`DeviceModel`).
 """
 
 from __future__ import annotations
@@ -49,20 +46,12 @@ import warp as wp
 from jwarp.core.rows import DHRows
 from jwarp.kernels.collision import kernels as collision_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kernels.path import kernels as path_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 
-__all__ = ["DeviceModel", "KinematicsTables", "LimitTables", "SphereModel",
-           "put_model", "tables", "content_key", "scalar_type", "numpy_dtype",
+__all__ = ["DeviceModel", "SphereModel", "put_model", "struct_fields", "make_struct", "content_key", "scalar_type", "numpy_dtype",
            "frame_mass_model", "with_frame_masses", "with_kappa_nonlinear", "fixed_parts", "collision_tables"]
-
-#: the fields of ``kernels.fk.FrameTables`` (attributes of :class:`DeviceModel`)
-_FRAME_FIELDS = ("order", "parent", "is_dh", "prismatic", "fixed_rot", "fixed_pos", "dh0",
-                 "trig", "cpl_start", "cpl_joint", "cpl_coef", "ch_start", "ch_ab",
-                 "jh_start", "jh_ab", "n_ch")
-#: the fields of ``kernels.collision.SphereTables`` (attributes of :class:`SphereModel`)
-_SPHERE_FIELDS = ("sph_frame", "sph_pos", "sph_rad", "bound_pos", "bound_rad", "fpair_a",
-                  "fpair_b", "fpair_start", "ent_sphere", "ent_start", "pair_b")
 
 _SCALARS = {np.dtype(np.float32): wp.float32, np.dtype(np.float64): wp.float64}
 
@@ -84,24 +73,30 @@ def numpy_dtype(scalar: type) -> np.dtype:
     return np.dtype(np.float32) if scalar == wp.float32 else np.dtype(np.float64)
 
 
+# ====================================================================== structs
+def struct_fields(struct_type: Any) -> tuple[str, ...]:
+    """The field names of the Warp struct type ``struct_type`` in declaration order: the
+    one list of a table's fields (the struct in :mod:`jwarp.kernels` declares them)."""
+    return tuple(struct_type.vars)
+
+
+def make_struct(struct_type: Any, source: Any = None, **values: Any) -> Any:
+    """An instance of the Warp struct type ``struct_type`` with every declared field taken
+    from ``values`` (by name) or else from the attribute of that name of ``source``.
+    Raises TypeError naming a field that neither gives."""
+    st = struct_type()
+    for name in struct_fields(struct_type):
+        if name in values:
+            value = values[name]
+        elif source is not None and hasattr(source, name):
+            value = getattr(source, name)
+        else:
+            raise TypeError(f"{name}: no value for this field of {struct_type.key}")
+        setattr(st, name, value)
+    return st
+
+
 # ====================================================================== Model
-@dataclass(eq=False)
-class LimitTables:
-    """Joint limits as the path kernels' projection reads them (see kernels/path.py): the
-    box ``limits`` (n_dof, 2) and the linear limits ``lower <= sum_k c_k q_{j_k} <= upper``
-    as CSR rows (``lin_start`` (L + 1,), ``lin_joint``/``lin_coef`` (max(nnz, 1),),
-    ``lin_bounds`` (L, 2))."""
-
-    limits: wp.array
-    lin_start: wp.array
-    lin_joint: wp.array
-    lin_coef: wp.array
-    lin_bounds: wp.array
-
-    @property
-    def args(self) -> list:
-        return [self.limits, self.lin_start, self.lin_joint, self.lin_coef, self.lin_bounds]
-
 
 @dataclass(eq=False)
 class SphereModel:
@@ -136,10 +131,7 @@ class SphereModel:
     @cached_property
     def struct(self) -> Any:
         """The tables as one kernel argument (``kernels.collision.SphereTables``)."""
-        st = collision_kernels(self.scalar).SphereTables()
-        for name in _SPHERE_FIELDS:
-            setattr(st, name, getattr(self, name))
-        return st
+        return make_struct(collision_kernels(self.scalar).SphereTables, self)
 
 
 @dataclass(eq=False)
@@ -155,7 +147,8 @@ class DeviceModel:
     Mass model: ``mass`` (n_frames,) [kg], ``mass_com`` (n_frames,) vec3 [m], ``dh_info``
     (n_dh,) vec4i, ``static_idx``. ``gravity`` vec3 [m/s^2]; ``kappa`` (1, n_frames, 3) the
     robot's compliances [rad/(N m)]; ``kappa_nl`` (n_frames,) its ``kappa_nonlinear``
-    [rad/(N m)^3] (the theta axis bends by ``kappa tau + kappa_nl tau^3``); ``limits`` :class:`LimitTables`; ``key`` the content
+    [rad/(N m)^3] (the theta axis bends by ``kappa tau + kappa_nl tau^3``); ``limits`` the
+    joint limits (``kernels.path.LimitTables``, one kernel argument); ``key`` the content
     key of the robot (:func:`content_key`)."""
 
     robot: RobotModel
@@ -185,7 +178,7 @@ class DeviceModel:
     static_idx: wp.array  # (n_static,) int32 static frame indices
     gravity: Any  # vec3 of the scalar type
     kappa: wp.array  # (1, n_frames, 3) default compliances
-    limits: LimitTables
+    limits: Any  # kernels.path.LimitTables struct
     kappa_nl: wp.array  # (n_frames,) torque-dependent joint compliance [rad/(N m)^3]
 
     @property
@@ -206,9 +199,7 @@ class DeviceModel:
         """The frame tables as one kernel argument (``kernels.fk.FrameTables``; cached)."""
         st = self.__dict__.get("_frame_struct")
         if st is None:
-            st = fk_kernels(self.scalar).FrameTables()
-            for name in _FRAME_FIELDS:
-                setattr(st, name, getattr(self, name))
+            st = make_struct(fk_kernels(self.scalar).FrameTables, self)
             self.__dict__["_frame_struct"] = st
         return st
 
@@ -234,9 +225,6 @@ class DeviceModel:
                                     dtype=wp.int32, device=self.device)
         return cache[frame]
 
-
-#: the older name of :class:`DeviceModel`
-KinematicsTables = DeviceModel
 
 def fixed_parts(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
     """Nominal ``Rot_y(beta) Rot_x(alpha)`` (n, 3, 3) and ``r Rot_y(beta) e_x`` (n, 3) of DH
@@ -382,11 +370,6 @@ def put_model(robot: Any, device: object = None, dtype: object = np.float32) -> 
     return m
 
 
-def tables(robot: RobotModel, device: object = None, dtype: object = np.float32) -> DeviceModel:
-    """The older name of :func:`put_model`."""
-    return put_model(robot, device, dtype)
-
-
 def _build(robot: RobotModel, dev: wp.Device, scalar: type, key: str) -> DeviceModel:
     """Upload every table of ``robot`` (the one place where the Model is built)."""
     npdt = numpy_dtype(scalar)
@@ -436,7 +419,7 @@ def _build(robot: RobotModel, dev: wp.Device, scalar: type, key: str) -> DeviceM
         static_idx=arr(np.nonzero(~robot.is_dh.astype(bool))[0].astype(np.int32), wp.int32),
         gravity=k.vec3(float(g[0]), float(g[1]), float(g[2])),
         kappa=arr(np.asarray(robot.kappa, np.float64).astype(npdt)[None], scalar),
-        limits=_limit_tables(robot, dev, scalar),
+        limits=_put_limits(robot, dev, scalar),
         kappa_nl=arr(np.asarray(robot.kappa_nonlinear, np.float64).astype(npdt), scalar),
     )
 
@@ -471,7 +454,8 @@ def _coupling_harmonic_table(robot: RobotModel
     return ch_start, ch_ab, jh_start, jh_ab
 
 
-def _limit_tables(robot: RobotModel, dev: wp.Device, scalar: type) -> LimitTables:
+def _put_limits(robot: RobotModel, dev: wp.Device, scalar: type) -> Any:
+    """The joint limits of ``robot`` as one ``kernels.path.LimitTables`` struct."""
     npdt = numpy_dtype(scalar)
     start, joint, coef, bounds = [0], [], [], []
     for lim in robot.linear_limits:
@@ -479,8 +463,9 @@ def _limit_tables(robot: RobotModel, dev: wp.Device, scalar: type) -> LimitTable
         coef += list(lim.coefficients)
         start.append(len(joint))
         bounds.append([lim.lower, lim.upper])
-    return LimitTables(
-        limits=wp.array(robot.joint_limits.astype(npdt), dtype=scalar, device=dev),
+    return make_struct(
+        path_kernels(scalar).LimitTables,
+        box=wp.array(robot.joint_limits.astype(npdt), dtype=scalar, device=dev),
         lin_start=wp.array(np.array(start, np.int32), dtype=wp.int32, device=dev),
         lin_joint=wp.array(np.array(joint or [0], np.int32), dtype=wp.int32, device=dev),
         lin_coef=wp.array(np.array(coef or [0.0], npdt), dtype=scalar, device=dev),

@@ -432,10 +432,10 @@ def test_float32_elastic_equilibrium_matches_float64(device):
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_component_major_fk_layout_matches_fk(device, dtype):
     """launch_fk(component_major=True): memory (n_frames, 4, 4, B), viewed (B, n_frames, 4, 4)."""
-    from jwarp.core.device import tables
+    from jwarp.core.device import put_model
     model = jwarp.robot("justin19")
     q = _sample(model, 64, seed=16)
-    t = tables(model, device, dtype)
+    t = put_model(model, device, dtype)
     qa = wp.array(q.astype(dtype), device=device)
     out = K.launch_fk(t, qa, component_major=True)
     assert out.shape == (64, 27, 4, 4) and out.strides[0] == np.dtype(dtype).itemsize
