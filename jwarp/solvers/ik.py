@@ -221,7 +221,7 @@ class IKObjective:
         self.axis = self.fk.vec3(*(float(v) for v in free_axis))
         self.kk = ik_kernels.kernels(self.scalar)
         self.pk = path_kernels.kernels(self.scalar)
-        self.limits = put_model(self.robot, self.device, self.scalar).limits
+        self.limits = self.t.limits
         self.eps = real_number(eps, "eps", self.npdt) if eps is not None else (
             float(max(world.resolution, 0.01)) if world is not None else 0.01)
         dev, sc, B, n = self.device, self.scalar, self.B, self.n
