@@ -173,7 +173,7 @@ def legacy_ik(robot: Any, frame: Any, target: Any, *, world: Any = None, n_start
 
         dq = dls(J, ga)
         if hold_limits:
-            lim = obj.limits.limits.numpy().astype(np.float64)
+            lim = obj.limits.box.numpy().astype(np.float64)
             held = (((dq < 0) & (q <= lim[:, 0] + LIMIT_HOLD))
                     | ((dq > 0) & (q >= lim[:, 1] - LIMIT_HOLD)))
             rows_h = held.any(1)

@@ -44,7 +44,7 @@ if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
     wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
 
 from jwarp.core.arrays import init_warp  # noqa: E402
-from jwarp.core.device import tables  # noqa: E402
+from jwarp.core.device import put_model  # noqa: E402
 from jwarp.kinematics import (  # noqa: E402
     ElasticLaunch, KinematicsData, elastic_args, fk, fk_elastic, forward_kinematics,
     frame_jacobian, jacobian, launch_fk)
@@ -408,7 +408,7 @@ class Bench:
     # ------------------------------------------------------------ jwarp ops
     def jwarp_launches(self, model: RobotModel, q: wp.array, dev: Any) -> dict[str, list[dict]]:
         """Record the launches of every timed op on batch ``q`` (runs each once)."""
-        t = tables(model, dev, self.ftype)
+        t = put_model(model, dev, self.ftype)
         ops: dict[str, list[dict]] = {}
         with record_launches() as rec:
             launch_fk(t, q)
@@ -476,7 +476,7 @@ class Bench:
             # KinematicsData path: Warp q copied into a reused data, its recorded launch
             # replayed, the data's own buffer returned (pinocchio-style Model/Data)
             tcp = self.args.tcp
-            m_dev = tables(model, dev, self.ftype)
+            m_dev = put_model(model, dev, self.ftype)
             kdata = KinematicsData(m_dev, B)
             fk_out = fk(model, q, device=dev, dtype=self.ftype, validate=False)
             q_np = np.array(q.numpy())

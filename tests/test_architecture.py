@@ -393,3 +393,93 @@ def test_old_option_names_warn_and_give_the_same_options():
                      allow_no_collision=True)
     b = jwarp.ik("arm7", "tcp", T, seeds=q0, iterations=5, device="cpu", allow_no_collision=True)
     np.testing.assert_array_equal(a.q, b.q)
+
+
+# ---------------------------------------------------------------- one Model, one name each
+#: the removed names of the device model's tables (one name each now: ``put_model``,
+#: ``DeviceModel``, ``DeviceModel.limits``, ``CollisionModel.model``)
+OLD_TABLE_NAMES = {"KinematicsTables", "limit_tables"}
+#: the loose joint-limit arrays that kernels took before ``kernels.path.LimitTables``
+LOOSE_LIMIT_NAMES = {"lin_start", "lin_joint", "lin_coef", "lin_bounds"}
+SOURCE_DIRS = ("jwarp", "tests", "benchmarks", "examples")
+
+
+def _sources() -> dict[Path, ast.Module]:
+    top = ROOT.parent
+    return {p: ast.parse(p.read_text(), str(p)) for d in SOURCE_DIRS
+            for p in sorted((top / d).rglob("*.py"))}
+
+
+SOURCES = _sources()
+
+
+def test_no_alias_names_of_the_old_tables():
+    """No module of jwarp/, tests/, benchmarks/ or examples/ defines, imports or uses the
+    old table names: ``KinematicsTables``, ``limit_tables``, a ``tables`` function of
+    ``jwarp.core.device`` or a ``.tables`` attribute (the collision model's ``model``)."""
+    bad = []
+    for path, tree in SOURCES.items():
+        where = path.relative_to(ROOT.parent)
+        for node in ast.walk(tree):
+            names: list[str] = []
+            if isinstance(node, ast.Name):
+                names = [node.id]
+            elif isinstance(node, ast.Attribute):
+                names = [node.attr]
+                if node.attr == "tables":
+                    bad.append(f"{where}:{node.lineno} uses the attribute .tables")
+            elif isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                names = [node.name]
+            elif isinstance(node, ast.ImportFrom):
+                names = [a.name for a in node.names] + [a.asname or "" for a in node.names]
+                if (node.module or "").endswith("core.device") and any(
+                        a.name == "tables" for a in node.names):
+                    bad.append(f"{where}:{node.lineno} imports tables from jwarp.core.device")
+            bad += [f"{where}:{node.lineno} names {n}" for n in names if n in OLD_TABLE_NAMES]
+    import jwarp.core.device as device
+    import jwarp.core.limits as limits
+
+    for mod, name in ((device, "tables"), (device, "KinematicsTables"),
+                      (limits, "limit_tables")):
+        if hasattr(mod, name):
+            bad.append(f"{mod.__name__} still has {name}")
+    assert not bad, "\n".join(bad)
+
+
+def _is_warp(decorator: ast.expr, kinds: set[str]) -> bool:
+    """``@wp.kernel``, ``@wp.func``, ``@wp.kernel(...)`` etc. with the attribute in
+    ``kinds``."""
+    d = decorator.func if isinstance(decorator, ast.Call) else decorator
+    return isinstance(d, ast.Attribute) and isinstance(d.value, ast.Name) \
+        and d.value.id == "wp" and d.attr in kinds
+
+
+def _is_array(annotation: ast.expr | None) -> bool:
+    """An annotation ``wp.array(...)``, ``wp.array2d(...)``, ..."""
+    return isinstance(annotation, ast.Call) and isinstance(annotation.func, ast.Attribute) \
+        and annotation.func.attr.startswith("array")
+
+
+def test_kernels_take_the_limits_as_one_struct():
+    """Joint limits travel as one ``kernels.path.LimitTables`` struct: no Warp kernel or
+    function takes the loose limit arrays (``lin_start``, ``lin_joint``, ``lin_coef``,
+    ``lin_bounds``, or a ``limits`` array), and no struct but LimitTables holds them."""
+    bad = []
+    for path, tree in SOURCES.items():
+        where = path.relative_to(ROOT.parent)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef) and any(
+                    _is_warp(d, {"kernel", "func"}) for d in node.decorator_list):
+                for a in node.args.args:
+                    if a.arg in LOOSE_LIMIT_NAMES or (a.arg == "limits"
+                                                      and _is_array(a.annotation)):
+                        bad.append(f"{where}:{node.lineno} {node.name}({a.arg}: a loose limit "
+                                   f"array)")
+            elif isinstance(node, ast.ClassDef) and node.name != "LimitTables" and any(
+                    _is_warp(d, {"struct"}) for d in node.decorator_list):
+                for item in node.body:
+                    if isinstance(item, ast.AnnAssign) and isinstance(item.target, ast.Name) \
+                            and item.target.id in LOOSE_LIMIT_NAMES:
+                        bad.append(f"{where}:{item.lineno} struct {node.name} holds "
+                                   f"{item.target.id}")
+    assert not bad, "\n".join(bad)

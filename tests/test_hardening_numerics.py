@@ -17,7 +17,7 @@ from jwarp import kinematics as K
 from jwarp.kinematics.autodiff import tape_jacobian
 from jwarp.cli import main
 from jwarp.world.collision import collision_cost, is_collision_free, min_distances
-from jwarp.core.device import tables
+from jwarp.core.device import put_model
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.solvers import planner as PL
 from jwarp.solvers.ik import ik
@@ -66,7 +66,7 @@ def _big(n=19):
     (lambda: collision_cost("planar4", _big(4)[None], None, **F32), "q"),
     (lambda: min_distances("planar4", np.zeros((1, 4)), rho=np.full((6, 5), BIG), **F32), "rho"),
     (lambda: collision_cost("planar4", np.zeros((1, 4)), None, eps=BIG, **F32), "eps"),
-    (lambda: CompensationRows(tables(jwarp.robot("arm7"), "cpu", np.float32), 1, 2, 1, BIG, 0.5),
+    (lambda: CompensationRows(put_model(jwarp.robot("arm7"), "cpu", np.float32), 1, 2, 1, BIG, 0.5),
      "kappa"),
 ])
 def test_overflow_in_the_computing_dtype_is_a_value_error(call, name):
@@ -189,7 +189,7 @@ def test_numpy_scalars_are_accepted_where_floats_are(block_world):
     np.testing.assert_array_equal(got.iterations, ref.iterations)
     step = K.elastic_step("justin19", q, None, 1e-4, lam=np.float64(0.5), device="cpu")
     assert np.isfinite(step.rho).all()
-    t = tables(jwarp.robot("arm7"), "cpu", np.float64)
+    t = put_model(jwarp.robot("arm7"), "cpu", np.float64)
     rows = CompensationRows(t, 1, 2, 1, np.float32(1e-4), np.float32(0.5))
     assert rows.kappa.numpy().max() == pytest.approx(1e-4)
     qp = np.zeros((2, 4))
@@ -225,7 +225,7 @@ def test_numpy_scalars_are_accepted_where_floats_are(block_world):
     (lambda: collision_cost("planar4", np.zeros(4), None, eps=True), "eps"),
     (lambda: ik("arm7", "tcp", np.eye(4), tol_pos=True), "tol_pos"),
     (lambda: ik("arm7", "tcp", np.eye(4), margin=True), "margin"),
-    (lambda: CompensationRows(tables(jwarp.robot("arm7"), "cpu", np.float64), 1, 2, 1, 1e-4,
+    (lambda: CompensationRows(put_model(jwarp.robot("arm7"), "cpu", np.float64), 1, 2, 1, 1e-4,
                               True), "lam"),
 ])
 def test_bool_is_refused_where_a_number_is_meant(call, name):

@@ -7,9 +7,13 @@ Model vs Data (as in MuJoCo Warp):
   kernel. The frame tables of FK (``order``, ``parent``, ..., ``trig``, the coupling CSR;
   one kernel argument ``frame_struct``), the mass model (``mass``, ``mass_com``,
   ``dh_info``, ``static_idx``), gravity and the robot's default compliances ``kappa``, the
-  joint limits with the linear limits (``limits``: :class:`LimitTables`), the nominal DH
+  joint limits with the linear limits (``limits``, one kernel argument), the nominal DH
   rows (``nominal_rows``: :class:`jwarp.core.rows.DHRows`), and, built on first use, the
   collision spheres and self-collision pairs (``spheres``: :class:`SphereModel`).
+  Each table's fields are declared once, by its Warp struct in :mod:`jwarp.kernels`
+  (``fk.FrameTables``, ``collision.SphereTables``, ``path.LimitTables``): the host
+  reads them from the struct (:func:`struct_fields`, :func:`make_struct`), and the
+  struct's fields are attributes of the DeviceModel (frame tables) and of the SphereModel.
   Models are cached by robot *content* (a hash of the robot's canonical JSON, with device
   and dtype): two equal :class:`~jwarp.model.RobotModel` objects share one DeviceModel and
   an edited copy (``copy``, ``with_dh``, ``with_masses``) gets its own. Like the robot's
@@ -24,10 +28,6 @@ Model vs Data (as in MuJoCo Warp):
   :func:`jwarp.kinematics.forward_kinematics` ``(m, d, q)`` and
   :func:`jwarp.kinematics.frame_jacobian` ``(m, d, frame, q, point)``). Kernels
   group their parameters ``# Model:`` / ``# Data in:`` / ``# Data out:``.
-
-``tables(robot, device, dtype)`` and :func:`jwarp.core.limits.limit_tables` are the older
-names of :func:`put_model` and ``put_model(...).limits`` (``KinematicsTables`` is
-:class:`DeviceModel`).
 """
 
 from __future__ import annotations
@@ -49,20 +49,12 @@ import warp as wp
 from jwarp.core.rows import DHRows
 from jwarp.kernels.collision import kernels as collision_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kernels.path import kernels as path_kernels
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 
-__all__ = ["DeviceModel", "KinematicsTables", "LimitTables", "SphereModel",
-           "put_model", "tables", "content_key", "scalar_type", "numpy_dtype",
+__all__ = ["DeviceModel", "SphereModel", "put_model", "struct_fields", "struct_field", "make_struct", "content_key", "scalar_type", "numpy_dtype",
            "frame_mass_model", "with_frame_masses", "with_kappa_nonlinear", "fixed_parts", "collision_tables"]
-
-#: the fields of ``kernels.fk.FrameTables`` (attributes of :class:`DeviceModel`)
-_FRAME_FIELDS = ("order", "parent", "is_dh", "prismatic", "fixed_rot", "fixed_pos", "dh0",
-                 "trig", "cpl_start", "cpl_joint", "cpl_coef", "ch_start", "ch_ab",
-                 "jh_start", "jh_ab", "n_ch")
-#: the fields of ``kernels.collision.SphereTables`` (attributes of :class:`SphereModel`)
-_SPHERE_FIELDS = ("sph_frame", "sph_pos", "sph_rad", "bound_pos", "bound_rad", "fpair_a",
-                  "fpair_b", "fpair_start", "ent_sphere", "ent_start", "pair_b")
 
 _SCALARS = {np.dtype(np.float32): wp.float32, np.dtype(np.float64): wp.float64}
 
@@ -84,24 +76,42 @@ def numpy_dtype(scalar: type) -> np.dtype:
     return np.dtype(np.float32) if scalar == wp.float32 else np.dtype(np.float64)
 
 
+# ====================================================================== structs
+def struct_fields(struct: Any) -> tuple[str, ...]:
+    """The field names of a Warp struct type (``@wp.struct``) or struct instance in
+    declaration order: the one list of a table's fields (the struct in
+    :mod:`jwarp.kernels` declares them)."""
+    if hasattr(struct, "vars"):
+        return tuple(struct.vars)
+    return tuple(struct.cls.__annotations__)
+
+
+def struct_field(owner: object, struct_name: str, name: str) -> Any:
+    """The field ``name`` of the struct instance ``owner.<struct_name>`` (the ``__getattr__``
+    of a host class whose struct holds its tables); AttributeError if it has none."""
+    st = owner.__dict__.get(struct_name)
+    if st is not None and not name.startswith("_") and name in struct_fields(st):
+        return getattr(st, name)
+    raise AttributeError(f"'{type(owner).__name__}' object has no attribute '{name}'")
+
+
+def make_struct(struct_type: Any, source: Any = None, **values: Any) -> Any:
+    """An instance of the Warp struct type ``struct_type`` with every declared field taken
+    from ``values`` (by name) or else from the attribute of that name of ``source``.
+    Raises TypeError naming a field that neither gives."""
+    st = struct_type()
+    for name in struct_fields(struct_type):
+        if name in values:
+            value = values[name]
+        elif source is not None and hasattr(source, name):
+            value = getattr(source, name)
+        else:
+            raise TypeError(f"{name}: no value for this field of {struct_type.key}")
+        setattr(st, name, value)
+    return st
+
+
 # ====================================================================== Model
-@dataclass(eq=False)
-class LimitTables:
-    """Joint limits as the path kernels' projection reads them (see kernels/path.py): the
-    box ``limits`` (n_dof, 2) and the linear limits ``lower <= sum_k c_k q_{j_k} <= upper``
-    as CSR rows (``lin_start`` (L + 1,), ``lin_joint``/``lin_coef`` (max(nnz, 1),),
-    ``lin_bounds`` (L, 2))."""
-
-    limits: wp.array
-    lin_start: wp.array
-    lin_joint: wp.array
-    lin_coef: wp.array
-    lin_bounds: wp.array
-
-    @property
-    def args(self) -> list:
-        return [self.limits, self.lin_start, self.lin_joint, self.lin_coef, self.lin_bounds]
-
 
 @dataclass(eq=False)
 class SphereModel:
@@ -112,7 +122,12 @@ class SphereModel:
     ``rigid_pairs`` (R, 2) and ``rigid_distance`` (R,) [m]: the allowed pairs left out
     because their distance is constant and positive. Empty tables are padded to one entry
     (Warp kernels need non-empty arrays); the kernels take their lengths from
-    ``sph_frame`` and ``fpair_a``, which keep their true length."""
+    ``sph_frame`` and ``fpair_a``, which keep their true length.
+
+    ``struct``: the device tables as one kernel argument (``kernels.collision.SphereTables``,
+    whose declaration is their field list: ``sph_frame``, ``sph_pos``, ... ``pair_b``, read
+    as attributes of the SphereModel too); ``pair_a`` (P,) the first sphere of every pair
+    (the second is the struct's ``pair_b``)."""
 
     scalar: type
     n_spheres: int
@@ -120,26 +135,11 @@ class SphereModel:
     pairs: np.ndarray
     rigid_pairs: np.ndarray
     rigid_distance: np.ndarray
-    sph_frame: wp.array
-    sph_pos: wp.array
-    sph_rad: wp.array
-    bound_pos: wp.array
-    bound_rad: wp.array
-    fpair_a: wp.array
-    fpair_b: wp.array
-    fpair_start: wp.array
-    ent_sphere: wp.array
-    ent_start: wp.array
+    struct: Any
     pair_a: wp.array
-    pair_b: wp.array
 
-    @cached_property
-    def struct(self) -> Any:
-        """The tables as one kernel argument (``kernels.collision.SphereTables``)."""
-        st = collision_kernels(self.scalar).SphereTables()
-        for name in _SPHERE_FIELDS:
-            setattr(st, name, getattr(self, name))
-        return st
+    def __getattr__(self, name: str) -> Any:
+        return struct_field(self, "struct", name)
 
 
 @dataclass(eq=False)
@@ -147,45 +147,35 @@ class DeviceModel:
     """Every table the kernels read about one robot, on one device in one dtype (see the
     module docstring). Build it with :func:`put_model`; never written by a kernel.
 
-    Frame tables (``kernels.fk.FrameTables``): ``order``, ``parent``, ``is_dh``,
+    Frame tables (``frame_struct``, one kernel argument: ``kernels.fk.FrameTables``, whose
+    declaration is their field list; read as attributes of the model too): ``order``,
+    ``parent``, ``is_dh``,
     ``prismatic``, ``fixed_rot``, ``fixed_pos``, ``dh0`` (n_frames, 5), ``trig``,
     ``cpl_start``/``cpl_joint``/``cpl_coef``; ``ch_start``/``ch_ab`` the CSR table of the
     ``coupling_harmonic`` terms and ``jh_start``/``jh_ab`` that of the transmission errors
-    of the joints driving them (empty ranges without them); ``dh0_3d`` the nominal rows as (1, n_frames, 5).
+    of the joints driving them (empty ranges without them), ``n_ch`` the frames with
+    ``coupling_harmonic`` terms (0: the kernels skip those tables); ``dh0_3d`` the nominal
+    rows as (1, n_frames, 5).
     Mass model: ``mass`` (n_frames,) [kg], ``mass_com`` (n_frames,) vec3 [m], ``dh_info``
     (n_dh,) vec4i, ``static_idx``. ``gravity`` vec3 [m/s^2]; ``kappa`` (1, n_frames, 3) the
     robot's compliances [rad/(N m)]; ``kappa_nl`` (n_frames,) its ``kappa_nonlinear``
-    [rad/(N m)^3] (the theta axis bends by ``kappa tau + kappa_nl tau^3``); ``limits`` :class:`LimitTables`; ``key`` the content
+    [rad/(N m)^3] (the theta axis bends by ``kappa tau + kappa_nl tau^3``); ``limits`` the
+    joint limits (``kernels.path.LimitTables``, one kernel argument); ``key`` the content
     key of the robot (:func:`content_key`)."""
 
     robot: RobotModel
     device: wp.Device
     scalar: type
     key: str
-    order: wp.array
-    parent: wp.array
-    is_dh: wp.array
-    prismatic: wp.array
-    fixed_rot: wp.array
-    fixed_pos: wp.array
-    dh0: wp.array
+    frame_struct: Any  # kernels.fk.FrameTables: the frame tables, one kernel argument
     dh0_3d: wp.array  # (1, n_frames, 5) view used as the shared rho0
-    trig: wp.array  # (n_frames,) vec4 [cos alpha, sin alpha, cos beta, sin beta]
-    cpl_start: wp.array
-    cpl_joint: wp.array
-    cpl_coef: wp.array
-    ch_start: wp.array  # (n_frames + 1,) int32 CSR into ch_ab
-    ch_ab: wp.array  # (max(n_terms, 1), 2) [a_k, b_k] of the coupled frames' harmonic terms
-    jh_start: wp.array  # (n_dof + 1,) int32 CSR into jh_ab
-    jh_ab: wp.array  # (max(n_terms, 1), 2) transmission errors of the joints driving them
-    n_ch: int  # frames with coupling_harmonic terms (0: the kernels skip the tables)
     mass: wp.array
     mass_com: wp.array
     dh_info: wp.array  # (n_dh,) vec4i [position in order, frame, subtree end, parent] of DH frames
     static_idx: wp.array  # (n_static,) int32 static frame indices
     gravity: Any  # vec3 of the scalar type
     kappa: wp.array  # (1, n_frames, 3) default compliances
-    limits: LimitTables
+    limits: Any  # kernels.path.LimitTables struct
     kappa_nl: wp.array  # (n_frames,) torque-dependent joint compliance [rad/(N m)^3]
 
     @property
@@ -201,16 +191,8 @@ class DeviceModel:
         """The numpy dtype of the tables."""
         return numpy_dtype(self.scalar)
 
-    @property
-    def frame_struct(self) -> Any:
-        """The frame tables as one kernel argument (``kernels.fk.FrameTables``; cached)."""
-        st = self.__dict__.get("_frame_struct")
-        if st is None:
-            st = fk_kernels(self.scalar).FrameTables()
-            for name in _FRAME_FIELDS:
-                setattr(st, name, getattr(self, name))
-            self.__dict__["_frame_struct"] = st
-        return st
+    def __getattr__(self, name: str) -> Any:
+        return struct_field(self, "frame_struct", name)
 
     @property
     def nominal_rows(self) -> DHRows:
@@ -234,9 +216,6 @@ class DeviceModel:
                                     dtype=wp.int32, device=self.device)
         return cache[frame]
 
-
-#: the older name of :class:`DeviceModel`
-KinematicsTables = DeviceModel
 
 def fixed_parts(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
     """Nominal ``Rot_y(beta) Rot_x(alpha)`` (n, 3, 3) and ``r Rot_y(beta) e_x`` (n, 3) of DH
@@ -295,7 +274,7 @@ def with_frame_masses(t: DeviceModel, mass: np.ndarray, com: np.ndarray) -> Devi
     out = dataclasses.replace(
         t, mass=wp.array(mass.astype(npdt), dtype=t.scalar, device=t.device),
         mass_com=wp.array(com.astype(npdt), dtype=t.mass_com.dtype, device=t.device))
-    for name in ("_frame_struct", "_nominal_rows", "_chains", "spheres"):  # mass-free caches
+    for name in ("_nominal_rows", "_chains", "spheres"):  # mass-free caches
         if name in t.__dict__:
             out.__dict__[name] = t.__dict__[name]
     return out
@@ -311,7 +290,7 @@ def with_kappa_nonlinear(t: DeviceModel, kappa_nl: np.ndarray) -> DeviceModel:
         raise ValueError(f"kappa_nl: expected shape ({n},), got {a.shape}")
     out = dataclasses.replace(t, kappa_nl=wp.array(a.astype(numpy_dtype(t.scalar)),
                                                    dtype=t.scalar, device=t.device))
-    for name in ("_frame_struct", "_nominal_rows", "_chains", "spheres"):
+    for name in ("_nominal_rows", "_chains", "spheres"):
         if name in t.__dict__:
             out.__dict__[name] = t.__dict__[name]
     return out
@@ -382,11 +361,6 @@ def put_model(robot: Any, device: object = None, dtype: object = np.float32) -> 
     return m
 
 
-def tables(robot: RobotModel, device: object = None, dtype: object = np.float32) -> DeviceModel:
-    """The older name of :func:`put_model`."""
-    return put_model(robot, device, dtype)
-
-
 def _build(robot: RobotModel, dev: wp.Device, scalar: type, key: str) -> DeviceModel:
     """Upload every table of ``robot`` (the one place where the Model is built)."""
     npdt = numpy_dtype(scalar)
@@ -411,32 +385,34 @@ def _build(robot: RobotModel, dev: wp.Device, scalar: type, key: str) -> DeviceM
     g = robot.gravity
     return DeviceModel(
         robot=robot, device=dev, scalar=scalar, key=key,
-        order=arr(robot.topological_order, wp.int32),
-        parent=arr(robot.parents, wp.int32),
-        is_dh=arr(robot.is_dh.astype(np.int32), wp.int32),
-        prismatic=arr(robot.frame_is_prismatic.astype(np.int32), wp.int32),
-        fixed_rot=arr(rot.astype(npdt), k.mat33),
-        fixed_pos=arr(pos.astype(npdt), k.vec3),
-        dh0=arr(dh0, scalar),
+        frame_struct=make_struct(
+            k.FrameTables,
+            order=arr(robot.topological_order, wp.int32),
+            parent=arr(robot.parents, wp.int32),
+            is_dh=arr(robot.is_dh.astype(np.int32), wp.int32),
+            prismatic=arr(robot.frame_is_prismatic.astype(np.int32), wp.int32),
+            fixed_rot=arr(rot.astype(npdt), k.mat33),
+            fixed_pos=arr(pos.astype(npdt), k.vec3),
+            dh0=arr(dh0, scalar),
+            trig=arr(np.stack([np.cos(robot.dh_table[:, 3]), np.sin(robot.dh_table[:, 3]),
+                               np.cos(robot.dh_table[:, 4]), np.sin(robot.dh_table[:, 4])],
+                              1).astype(npdt), k.vec4),
+            cpl_start=arr(cpl_start, wp.int32),
+            cpl_joint=arr(np.array(cpl_joint or [0], np.int32), wp.int32),
+            cpl_coef=arr(np.array(cpl_coef or [0.0], npdt), scalar),
+            ch_start=arr(ch_start, wp.int32),
+            ch_ab=arr(ch_ab.astype(npdt), scalar),
+            jh_start=arr(jh_start, wp.int32),
+            jh_ab=arr(jh_ab.astype(npdt), scalar),
+            n_ch=int(np.count_nonzero(np.diff(ch_start)))),
         dh0_3d=arr(dh0[None], scalar),
-        trig=arr(np.stack([np.cos(robot.dh_table[:, 3]), np.sin(robot.dh_table[:, 3]),
-                           np.cos(robot.dh_table[:, 4]), np.sin(robot.dh_table[:, 4])], 1).astype(npdt),
-                 k.vec4),
-        cpl_start=arr(cpl_start, wp.int32),
-        cpl_joint=arr(np.array(cpl_joint or [0], np.int32), wp.int32),
-        cpl_coef=arr(np.array(cpl_coef or [0.0], npdt), scalar),
-        ch_start=arr(ch_start, wp.int32),
-        ch_ab=arr(ch_ab.astype(npdt), scalar),
-        jh_start=arr(jh_start, wp.int32),
-        jh_ab=arr(jh_ab.astype(npdt), scalar),
-        n_ch=int(np.count_nonzero(np.diff(ch_start))),
         mass=arr(mass.astype(npdt), scalar),
         mass_com=arr(com.astype(npdt), k.vec3),
         dh_info=arr(_dh_info(robot), wp.vec4i),
         static_idx=arr(np.nonzero(~robot.is_dh.astype(bool))[0].astype(np.int32), wp.int32),
         gravity=k.vec3(float(g[0]), float(g[1]), float(g[2])),
         kappa=arr(np.asarray(robot.kappa, np.float64).astype(npdt)[None], scalar),
-        limits=_limit_tables(robot, dev, scalar),
+        limits=_put_limits(robot, dev, scalar),
         kappa_nl=arr(np.asarray(robot.kappa_nonlinear, np.float64).astype(npdt), scalar),
     )
 
@@ -471,7 +447,8 @@ def _coupling_harmonic_table(robot: RobotModel
     return ch_start, ch_ab, jh_start, jh_ab
 
 
-def _limit_tables(robot: RobotModel, dev: wp.Device, scalar: type) -> LimitTables:
+def _put_limits(robot: RobotModel, dev: wp.Device, scalar: type) -> Any:
+    """The joint limits of ``robot`` as one ``kernels.path.LimitTables`` struct."""
     npdt = numpy_dtype(scalar)
     start, joint, coef, bounds = [0], [], [], []
     for lim in robot.linear_limits:
@@ -479,8 +456,9 @@ def _limit_tables(robot: RobotModel, dev: wp.Device, scalar: type) -> LimitTable
         coef += list(lim.coefficients)
         start.append(len(joint))
         bounds.append([lim.lower, lim.upper])
-    return LimitTables(
-        limits=wp.array(robot.joint_limits.astype(npdt), dtype=scalar, device=dev),
+    return make_struct(
+        path_kernels(scalar).LimitTables,
+        box=wp.array(robot.joint_limits.astype(npdt), dtype=scalar, device=dev),
         lin_start=wp.array(np.array(start, np.int32), dtype=wp.int32, device=dev),
         lin_joint=wp.array(np.array(joint or [0], np.int32), dtype=wp.int32, device=dev),
         lin_coef=wp.array(np.array(coef or [0.0], npdt), dtype=scalar, device=dev),
@@ -612,16 +590,18 @@ def _sphere_model(m: DeviceModel) -> SphereModel:
     return SphereModel(
         scalar=m.scalar, n_spheres=len(rt["sph_frame"]), n_pairs=len(rt["pairs"]),
         pairs=rt["pairs"], rigid_pairs=rt["rigid_pairs"], rigid_distance=rt["rigid_distance"],
-        sph_frame=counted(rt["sph_frame"]),
-        sph_pos=arr(rt["sph_pos"].astype(npdt), vec3),
-        sph_rad=arr(rt["sph_rad"].astype(npdt), m.scalar),
-        bound_pos=arr(rt["bound_pos"].astype(npdt), vec3),
-        bound_rad=arr(rt["bound_rad"].astype(npdt), m.scalar),
-        fpair_a=counted(rt["fpair_a"]),
-        fpair_b=arr(rt["fpair_b"], wp.int32),
-        fpair_start=arr(rt["fpair_start"], wp.int32),
-        ent_sphere=arr(rt["ent_sphere"], wp.int32),
-        ent_start=arr(rt["ent_start"], wp.int32),
+        struct=make_struct(
+            collision_kernels(m.scalar).SphereTables,
+            sph_frame=counted(rt["sph_frame"]),
+            sph_pos=arr(rt["sph_pos"].astype(npdt), vec3),
+            sph_rad=arr(rt["sph_rad"].astype(npdt), m.scalar),
+            bound_pos=arr(rt["bound_pos"].astype(npdt), vec3),
+            bound_rad=arr(rt["bound_rad"].astype(npdt), m.scalar),
+            fpair_a=counted(rt["fpair_a"]),
+            fpair_b=arr(rt["fpair_b"], wp.int32),
+            fpair_start=arr(rt["fpair_start"], wp.int32),
+            ent_sphere=arr(rt["ent_sphere"], wp.int32),
+            ent_start=arr(rt["ent_start"], wp.int32),
+            pair_b=arr(rt["pairs"][:, 1], wp.int32)),
         pair_a=arr(rt["pairs"][:, 0], wp.int32),
-        pair_b=arr(rt["pairs"][:, 1], wp.int32),
     )

@@ -3,28 +3,21 @@
 The box is ``RobotModel.joint_limits (n_dof, 2)``; linear limits are
 ``RobotModel.linear_limits`` (``lower <= sum_k c_k q_{j_k} <= upper``, e.g. justin19's
 coupled torso ``0 <= q1 + q2 <= 2.356``). :mod:`jwarp.kernels.path` projects onto both; the
-device tables it reads (:class:`LimitTables`) are part of the robot's device model
-(:func:`jwarp.core.device.put_model`).
+device tables it reads (the ``kernels.path.LimitTables`` struct) are the ``limits`` of the
+robot's device model (:func:`jwarp.core.device.put_model`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from jwarp.core.device import LimitTables, put_model
 from jwarp.model import RobotModel
 
-__all__ = ["LIMIT_TOL", "LimitTables", "limit_tables", "limit_violation", "within_limits",
+__all__ = ["LIMIT_TOL", "limit_violation", "within_limits",
            "describe_violation", "sample_within_limits", "project_numpy"]
 
 #: slack when checking limits [rad or m] (float32 round-off of a projected value)
 LIMIT_TOL = 1e-6
-
-
-def limit_tables(robot: RobotModel, device: object, dtype: object) -> LimitTables:
-    """Limit tables of ``robot`` on ``device`` in ``dtype``: the ``limits`` of its
-    :func:`jwarp.core.device.put_model` (cached by robot content)."""
-    return put_model(robot, device, dtype).limits
 
 
 def limit_violation(robot: RobotModel, q: np.ndarray) -> np.ndarray:

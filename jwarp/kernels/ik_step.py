@@ -225,19 +225,16 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
 
     @wp.func
     def sample_row(q: wp.array2d(dtype=scalar), b: int, state: wp.uint32,
-                   limits: wp.array2d(dtype=scalar), lin_start: wp.array(dtype=wp.int32),
-                   lin_joint: wp.array(dtype=wp.int32), lin_coef: wp.array(dtype=scalar),
-                   lin_bounds: wp.array2d(dtype=scalar)):
+                   limits: pk.LimitTables):
         """q[b] uniform in the box, redrawn (up to 20 times) until it meets the linear
         limits, else projected onto them."""
         for attempt in range(20):
             for j in range(N):
-                lo = limits[j, 0]
-                q[b, j] = lo + scalar(wp.randf(state)) * (limits[j, 1] - lo)
-            if pk.within_linear_limits(q, b, lin_start, lin_joint, lin_coef, lin_bounds,
-                                       scalar(0.0)) != 0:
+                lo = limits.box[j, 0]
+                q[b, j] = lo + scalar(wp.randf(state)) * (limits.box[j, 1] - lo)
+            if pk.within_linear_limits(q, b, limits, scalar(0.0)) != 0:
                 return
-        pk.project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
+        pk.project_row(q, b, limits)
 
     @wp.kernel(module="unique", enable_backward=False)
     def step_kernel(
@@ -255,11 +252,7 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         alpha: f64,
         max_step: f64,
         # Model:
-        limits: wp.array2d(dtype=scalar),
-        lin_start: wp.array(dtype=wp.int32),
-        lin_joint: wp.array(dtype=wp.int32),
-        lin_coef: wp.array(dtype=scalar),
-        lin_bounds: wp.array2d(dtype=scalar),
+        limits: pk.LimitTables,
         # Data in/out:
         q: wp.array2d(dtype=scalar),
         done: wp.array(dtype=wp.int32),
@@ -316,8 +309,7 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
                     restart.stall[b] = 0
                     restart.best[b] = f64(1.0e300)
                     state = wp.rand_init(restart.seed[0] + 7919 * (k + 1), b)
-                    sample_row(q, b, state, limits, lin_start, lin_joint, lin_coef,
-                               lin_bounds)
+                    sample_row(q, b, state, limits)
                     iterations[b] = iterations[b] + 1
                     return
         free = vecn()
@@ -326,8 +318,8 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         d = dls_step_masked(jac, err, grad, b, on[b], mu2, alpha, max_step, free)
         held = int(0)
         for j in range(N):
-            lo = f64(limits[j, 0])
-            hi = f64(limits[j, 1])
+            lo = f64(limits.box[j, 0])
+            hi = f64(limits.box[j, 1])
             qj = f64(q[b, j])
             tol = f64(LIMIT_HOLD)
             if (d[j] < zero and qj <= lo + tol) or (d[j] > zero and qj >= hi - tol):
@@ -337,18 +329,14 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
             d = dls_step_masked(jac, err, grad, b, on[b], mu2, alpha, max_step, free)
         for j in range(N):
             q[b, j] = scalar(f64(q[b, j]) + d[j])
-        pk.project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
+        pk.project_row(q, b, limits)
         iterations[b] = iterations[b] + 1
 
     @wp.kernel(module="unique", enable_backward=False)
     def sample_kernel(
         seed: int,
         # Model:
-        limits: wp.array2d(dtype=scalar),
-        lin_start: wp.array(dtype=wp.int32),
-        lin_joint: wp.array(dtype=wp.int32),
-        lin_coef: wp.array(dtype=scalar),
-        lin_bounds: wp.array2d(dtype=scalar),
+        limits: pk.LimitTables,
         # Data out:
         q: wp.array2d(dtype=scalar),
     ):
@@ -356,8 +344,7 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         the linear limits, else projected onto them (the device twin of
         :func:`jwarp.core.limits.sample_within_limits`; Warp's random stream). Launch dim B."""
         b = wp.tid()
-        sample_row(q, b, wp.rand_init(seed, b), limits, lin_start, lin_joint, lin_coef,
-                   lin_bounds)
+        sample_row(q, b, wp.rand_init(seed, b), limits)
 
     return SimpleNamespace(scalar=scalar, planar=planar, rows=M, n_dof=N, task_row=task_row,
                            cholesky_solve=cholesky_solve, dls_step=dls_step,
@@ -459,11 +446,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         world: ck64.WorldModel
         use_world: int
         use_self: int
-        limits: wp.array2d(dtype=f64)
-        lin_start: wp.array(dtype=wp.int32)
-        lin_joint: wp.array(dtype=wp.int32)
-        lin_coef: wp.array(dtype=f64)
-        lin_bounds: wp.array2d(dtype=f64)
+        limits: pk64.LimitTables
         limit_tol: f64
 
     @wp.struct
@@ -528,8 +511,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         q64 = scratch.q64
         for j in range(n):
             q64[b, j] = f64(q[b, j])
-        if pk64.within_limits_row(q64, b, tables.limits, tables.lin_start, tables.lin_joint,
-                                  tables.lin_coef, tables.lin_bounds, tables.limit_tol) == 0:
+        if pk64.within_limits_row(q64, b, tables.limits, tables.limit_tol) == 0:
             return
         if use_rows != 0:
             for i in range(rows.shape[1]):

@@ -80,11 +80,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         fp_start: wp.array(dtype=wp.int32)
         fp_frame: wp.array(dtype=wp.int32)
         fp_weight: wp.array(dtype=f64)
-        limits: wp.array2d(dtype=f64)
-        lin_start: wp.array(dtype=wp.int32)
-        lin_joint: wp.array(dtype=wp.int32)
-        lin_coef: wp.array(dtype=f64)
-        lin_bounds: wp.array2d(dtype=f64)
+        limits: pk.LimitTables
         limit_tol: f64
 
     @wp.struct
@@ -248,8 +244,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         for wi in range(t, last + 1):
             for j in range(n_dof):
                 sc.dq[r, j] = f64(paths[p, wi, j])
-            if pk.within_limits_row(sc.dq, r, cm.limits, cm.lin_start, cm.lin_joint,
-                                    cm.lin_coef, cm.lin_bounds, cm.limit_tol) == 0:
+            if pk.within_limits_row(sc.dq, r, cm.limits, cm.limit_tol) == 0:
                 seg.code[k, t] = LIMITS
                 seg.u[k, t] = f64(wi - t)
                 bad[k] = 1

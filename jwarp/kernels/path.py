@@ -15,9 +15,10 @@ The first and last waypoints (start, goal) are fixed; only the interior ones mov
 * Gradient w.r.t. an interior waypoint ``t``: the length term
   ``lam_l K (2 q_t - q_{t-1} - q_{t+1})`` plus the substep gradients scattered with the hat
   weights ``1 - |s - t n_sub| / n_sub`` of the substeps ``s`` in the two adjacent segments.
-* Limits: a box ``limits (n_dof, 2)`` and linear limits ``lower <= sum_k c_k q_{j_k} <= upper``
-  (CSR tables ``lin_start (L + 1)``, ``lin_joint``, ``lin_coef``, ``lin_bounds (L, 2)``),
-  enforced by alternating projections (box, then each linear half-space pair) ending with
+* Limits (:class:`LimitTables`, one kernel argument ``limits``, part of the robot's
+  *Model*): a box ``box (n_dof, 2)`` and linear limits
+  ``lower <= sum_k c_k q_{j_k} <= upper`` (CSR tables ``lin_start (L + 1)``, ``lin_joint``,
+  ``lin_coef``, ``lin_bounds (L, 2)``), enforced by alternating projections (box, then each linear half-space pair) ending with
   the box (``project_row``); ``within_limits_row`` / ``within_linear_limits`` check them up
   to a tolerance (the IK solver's feasibility check and seed sampling use them).
 
@@ -41,6 +42,19 @@ def kernels(scalar: type) -> SimpleNamespace:
     one = scalar(1.0)
     half = scalar(0.5)
     n_rounds = PROJECTION_ROUNDS
+
+    @wp.struct
+    class LimitTables:
+        """The joint limits of one robot (see the module docstring), one kernel argument:
+        the box ``box`` (n_dof, 2) [rad or m] and the linear limits as CSR rows
+        ``lin_start`` (L + 1,), ``lin_joint``/``lin_coef`` (max(nnz, 1),), ``lin_bounds``
+        (L, 2)."""
+
+        box: wp.array2d(dtype=scalar)
+        lin_start: wp.array(dtype=wp.int32)
+        lin_joint: wp.array(dtype=wp.int32)
+        lin_coef: wp.array(dtype=scalar)
+        lin_bounds: wp.array2d(dtype=scalar)
 
     @wp.func
     def length_scale(paths: wp.array3d(dtype=scalar), p: int, norm_floor: scalar) -> scalar:
@@ -67,72 +81,63 @@ def kernels(scalar: type) -> SimpleNamespace:
         return g
 
     @wp.func
-    def linear_value(x: wp.array2d(dtype=scalar), row: int, l: int,
-                     lin_start: wp.array(dtype=wp.int32), lin_joint: wp.array(dtype=wp.int32),
-                     lin_coef: wp.array(dtype=scalar)):
+    def linear_value(x: wp.array2d(dtype=scalar), row: int, l: int, lim: LimitTables):
         """(v, c2): the value ``v = sum_k c_k x[row, j_k]`` of linear limit l and
         ``c2 = sum_k c_k^2`` (the squared norm of its row, for the projection)."""
         v = zero
         c2 = zero
-        for k in range(lin_start[l], lin_start[l + 1]):
-            c = lin_coef[k]
-            v += c * x[row, lin_joint[k]]
+        for k in range(lim.lin_start[l], lim.lin_start[l + 1]):
+            c = lim.lin_coef[k]
+            v += c * x[row, lim.lin_joint[k]]
             c2 += c * c
         return v, c2
 
     @wp.func
-    def within_linear_limits(x: wp.array2d(dtype=scalar), row: int,
-                             lin_start: wp.array(dtype=wp.int32),
-                             lin_joint: wp.array(dtype=wp.int32),
-                             lin_coef: wp.array(dtype=scalar),
-                             lin_bounds: wp.array2d(dtype=scalar), tol: scalar) -> int:
+    def within_linear_limits(x: wp.array2d(dtype=scalar), row: int, lim: LimitTables,
+                             tol: scalar) -> int:
         """1 if x[row] violates no linear limit by more than ``tol`` (``tol`` = 0: every
         ``lower <= v <= upper``), else 0."""
-        for l in range(lin_bounds.shape[0]):
-            v, c2 = linear_value(x, row, l, lin_start, lin_joint, lin_coef)
-            if lin_bounds[l, 0] - v > tol or v - lin_bounds[l, 1] > tol:
+        for l in range(lim.lin_bounds.shape[0]):
+            v, c2 = linear_value(x, row, l, lim)
+            if lim.lin_bounds[l, 0] - v > tol or v - lim.lin_bounds[l, 1] > tol:
                 return 0
         return 1
 
     @wp.func
-    def within_limits_row(x: wp.array2d(dtype=scalar), row: int,
-                          limits: wp.array2d(dtype=scalar), lin_start: wp.array(dtype=wp.int32),
-                          lin_joint: wp.array(dtype=wp.int32), lin_coef: wp.array(dtype=scalar),
-                          lin_bounds: wp.array2d(dtype=scalar), tol: scalar) -> int:
+    def within_limits_row(x: wp.array2d(dtype=scalar), row: int, lim: LimitTables,
+                          tol: scalar) -> int:
         """1 if x[row] violates no box or linear limit by more than ``tol``
         (:func:`jwarp.core.limits.within_limits`), else 0."""
         for j in range(x.shape[1]):
-            if limits[j, 0] - x[row, j] > tol or x[row, j] - limits[j, 1] > tol:
+            if lim.box[j, 0] - x[row, j] > tol or x[row, j] - lim.box[j, 1] > tol:
                 return 0
-        return within_linear_limits(x, row, lin_start, lin_joint, lin_coef, lin_bounds, tol)
+        return within_linear_limits(x, row, lim, tol)
 
     @wp.func
-    def project_row(x: wp.array2d(dtype=scalar), row: int, limits: wp.array2d(dtype=scalar),
-                    lin_start: wp.array(dtype=wp.int32), lin_joint: wp.array(dtype=wp.int32),
-                    lin_coef: wp.array(dtype=scalar), lin_bounds: wp.array2d(dtype=scalar)):
+    def project_row(x: wp.array2d(dtype=scalar), row: int, lim: LimitTables):
         """Project x[row, :] onto the box and the linear limits (alternating projections)."""
         n = x.shape[1]
-        n_lin = lin_bounds.shape[0]
+        n_lin = lim.lin_bounds.shape[0]
         rounds = 1
         if n_lin > 0:
             rounds = n_rounds
         for _r in range(rounds):
             for j in range(n):
-                x[row, j] = wp.clamp(x[row, j], limits[j, 0], limits[j, 1])
+                x[row, j] = wp.clamp(x[row, j], lim.box[j, 0], lim.box[j, 1])
             for l in range(n_lin):
-                v, c2 = linear_value(x, row, l, lin_start, lin_joint, lin_coef)
+                v, c2 = linear_value(x, row, l, lim)
                 excess = zero
-                if v < lin_bounds[l, 0]:
-                    excess = v - lin_bounds[l, 0]
-                if v > lin_bounds[l, 1]:
-                    excess = v - lin_bounds[l, 1]
+                if v < lim.lin_bounds[l, 0]:
+                    excess = v - lim.lin_bounds[l, 0]
+                if v > lim.lin_bounds[l, 1]:
+                    excess = v - lim.lin_bounds[l, 1]
                 if excess != zero and c2 > zero:
-                    for k in range(lin_start[l], lin_start[l + 1]):
-                        jj = lin_joint[k]
-                        x[row, jj] = x[row, jj] - lin_coef[k] * excess / c2
+                    for k in range(lim.lin_start[l], lim.lin_start[l + 1]):
+                        jj = lim.lin_joint[k]
+                        x[row, jj] = x[row, jj] - lim.lin_coef[k] * excess / c2
         if n_lin > 0:
             for j in range(n):
-                x[row, j] = wp.clamp(x[row, j], limits[j, 0], limits[j, 1])
+                x[row, j] = wp.clamp(x[row, j], lim.box[j, 0], lim.box[j, 1])
 
     @wp.kernel(module="unique")
     def substeps_kernel(
@@ -230,11 +235,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         max_step: scalar,
         active: wp.array(dtype=wp.int32),
         # Model:
-        limits: wp.array2d(dtype=scalar),
-        lin_start: wp.array(dtype=wp.int32),
-        lin_joint: wp.array(dtype=wp.int32),
-        lin_coef: wp.array(dtype=scalar),
-        lin_bounds: wp.array2d(dtype=scalar),
+        limits: LimitTables,
         # Data out:
         paths_out: wp.array2d(dtype=scalar),
     ):
@@ -254,22 +255,18 @@ def kernels(scalar: type) -> SimpleNamespace:
             g = waypoint_grad(paths, sub_grad, p, t, j, n_sub, lam_l, k_len)
             d = wp.clamp(step * g, -max_step, max_step)
             paths_out[row, j] = paths[p, t, j] - d
-        project_row(paths_out, row, limits, lin_start, lin_joint, lin_coef, lin_bounds)
+        project_row(paths_out, row, limits)
 
     @wp.kernel(module="unique")
     def project_kernel(
         # Model:
-        limits: wp.array2d(dtype=scalar),
-        lin_start: wp.array(dtype=wp.int32),
-        lin_joint: wp.array(dtype=wp.int32),
-        lin_coef: wp.array(dtype=scalar),
-        lin_bounds: wp.array2d(dtype=scalar),
+        limits: LimitTables,
         # Data in/out:
         q: wp.array2d(dtype=scalar),
     ):
         """Project every row of q (B, n_dof) onto the joint limits, in place. Launch dim B."""
         b = wp.tid()
-        project_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds)
+        project_row(q, b, limits)
 
     @wp.kernel(module="unique")
     def gather_kernel(
@@ -363,7 +360,8 @@ def kernels(scalar: type) -> SimpleNamespace:
             best_cost[b, c] = final_cost[p, c]
 
     return SimpleNamespace(
-        scalar=scalar, length_scale=length_scale, waypoint_grad=waypoint_grad,
+        scalar=scalar, LimitTables=LimitTables, length_scale=length_scale,
+        waypoint_grad=waypoint_grad,
         linear_value=linear_value, within_linear_limits=within_linear_limits,
         within_limits_row=within_limits_row, project_row=project_row, substeps=substeps_kernel,
         path_cost=path_cost_kernel, path_grad=path_grad_kernel, path_step=path_step_kernel,

@@ -190,10 +190,7 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.func
     def check_row(q: wp.array2d(dtype=scalar), b: int, model: fk.FrameTables,
-                  spheres: ck.SphereTables, limits: wp.array2d(dtype=scalar),
-                  lin_start: wp.array(dtype=wp.int32), lin_joint: wp.array(dtype=wp.int32),
-                  lin_coef: wp.array(dtype=scalar), lin_bounds: wp.array2d(dtype=scalar),
-                  sensors: Sensors, checks: Checks, skip_fpair: wp.array(dtype=wp.int32),
+                  spheres: ck.SphereTables, limits: pk.LimitTables, sensors: Sensors, checks: Checks, skip_fpair: wp.array(dtype=wp.int32),
                   rho: wp.array3d(dtype=scalar), frames: wp.array2d(dtype=mat44),
                   xs: wp.array2d(dtype=vec3), t: int, seen: wp.array2d(dtype=wp.int32),
                   write_seen: int) -> int:
@@ -203,8 +200,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         if write_seen != 0:
             for m in range(checks.n_markers):
                 seen[b, m] = 0
-        if pk.within_limits_row(q, b, limits, lin_start, lin_joint, lin_coef, lin_bounds,
-                                zero) == 0:
+        if pk.within_limits_row(q, b, limits, zero) == 0:
             return LIMITS
         nf = model.order.shape[0]
         for k in range(nf):
@@ -255,11 +251,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         # Model:
         model: fk.FrameTables,
         spheres: ck.SphereTables,
-        limits: wp.array2d(dtype=scalar),
-        lin_start: wp.array(dtype=wp.int32),
-        lin_joint: wp.array(dtype=wp.int32),
-        lin_coef: wp.array(dtype=scalar),
-        lin_bounds: wp.array2d(dtype=scalar),
+        limits: pk.LimitTables,
         sensors: Sensors,
         skip_fpair: wp.array(dtype=wp.int32),
         rho0: wp.array3d(dtype=scalar),
@@ -273,9 +265,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         """code[b] = verdict of q[b]; seen[b, m] = cameras seeing marker m (all markers
         evaluated, no early exit between markers)."""
         b = wp.tid()
-        code[b] = check_row(q, b, model, spheres, limits, lin_start, lin_joint, lin_coef,
-                            lin_bounds, sensors, checks, skip_fpair, rho0, frames, xs, b, seen,
-                            1)
+        code[b] = check_row(q, b, model, spheres, limits, sensors, checks, skip_fpair, rho0,
+                            frames, xs, b, seen, 1)
 
     @wp.kernel(module="unique", enable_backward=False)
     def sample_kernel(
@@ -287,11 +278,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         # Model:
         model: fk.FrameTables,
         spheres: ck.SphereTables,
-        limits: wp.array2d(dtype=scalar),
-        lin_start: wp.array(dtype=wp.int32),
-        lin_joint: wp.array(dtype=wp.int32),
-        lin_coef: wp.array(dtype=scalar),
-        lin_bounds: wp.array2d(dtype=scalar),
+        limits: pk.LimitTables,
         sensors: Sensors,
         skip_fpair: wp.array(dtype=wp.int32),
         rho0: wp.array3d(dtype=scalar),
@@ -314,9 +301,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         state = wp.rand_init(seed, b)
         for j in range(qbuf.shape[1]):
             qbuf[b, j] = lower[j] + scalar(wp.randf(state)) * (upper[j] - lower[j])
-        c = check_row(qbuf, b, model, spheres, limits, lin_start, lin_joint, lin_coef,
-                      lin_bounds, sensors, checks, skip_fpair, rho0, frames, xs, b, dummy_seen,
-                      0)
+        c = check_row(qbuf, b, model, spheres, limits, sensors, checks, skip_fpair, rho0, frames,
+                      xs, b, dummy_seen, 0)
         wp.atomic_add(counts, b % 64, c, 1)
         if c == OK:
             slot = wp.atomic_add(count, 0, 1)

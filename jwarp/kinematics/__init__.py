@@ -13,7 +13,8 @@ share), :mod:`~jwarp.kinematics.compensation` (DH rows kept across optimizer ite
 """
 
 from jwarp.kinematics.data import KinematicsData, forward_kinematics, frame_jacobian
-from jwarp.kinematics.equilibrium import elastic_step, fk_elastic, gravity_torques
+from jwarp.kinematics.equilibrium import (elastic_step, fk_elastic, gravity_torques,
+                                          solve_equilibrium)
 from jwarp.kinematics.fk import fk
 from jwarp.kinematics.jacobians import jacobian, jacobian_dh
 from jwarp.kinematics.transmission import (transmitted, without_coupling_harmonic,
@@ -26,4 +27,5 @@ __all__ = ["ELASTIC_TOL", "ElasticFK", "ElasticLaunch", "ElasticStep", "Kinemati
            "default_tol", "elastic_args", "elastic_step", "equilibrium", "fk", "fk_elastic",
            "forward_kinematics", "frame_jacobian", "frame_rows", "gravity_torques", "host_out",
            "jacobian", "jacobian_dh", "kappa_array", "launch_fk", "rho0_full", "setup",
-           "transmitted", "without_coupling_harmonic", "without_transmission"]
+           "solve_equilibrium", "transmitted", "without_coupling_harmonic",
+           "without_transmission"]

@@ -50,7 +50,7 @@ class CompensationRows:
 
     Args:
         t: the robot's :class:`~jwarp.core.device.DeviceModel` on the optimizer's device and
-            dtype (``put_model``; ``tables`` is its older name).
+            dtype (:func:`~jwarp.core.device.put_model`).
         n_paths, n_waypoints, n_substeps: layout of the configurations: P paths of
             W waypoints, S = (W - 1) * n_substeps + 1 configurations per path, configuration
             ``p * S + s``. For IK pass ``n_paths=B``, ``n_waypoints=1``, ``n_substeps=1``.

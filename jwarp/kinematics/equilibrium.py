@@ -1,14 +1,17 @@
 """Elastic kinematics: the frames in the static equilibrium of gravity torques and joint
 compliances (rho = rho0 + kappa tau, a damped fixed-point iteration), one torque update
-(:func:`elastic_step`) and the gravity torques."""
+(:func:`elastic_step`) and the gravity torques; :func:`solve_equilibrium` ``(m, q, dh,
+kappa)`` is the equilibrium on a given device model (its masses, nonlinear compliances)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from jwarp.core.arrays import out_view, real_number, to_output
+from jwarp.core.arrays import as_batch, out_view, real_number, to_output
+from jwarp.core.device import DeviceModel
 from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.transmission import transmitted
@@ -66,6 +69,47 @@ def fk_elastic(robot: RobotLike, q: ArrayLike, kappa: ArrayLike | None = None, *
     return ElasticFK(to_output(frames, batch, (model.n_frames,), out=out),
                      to_output(rho_arr, batch, (model.n_frames, 5)),
                      host_out(iterations, batch), host_out(converged, batch))
+
+
+def solve_equilibrium(m: DeviceModel, q: Any, dh: Any, kappa: Any, *, lam: float = 1.0,
+                      max_iter: int = 10, tol: float | None = None,
+                      validate: bool = True) -> ElasticFK:
+    """The elastic equilibrium (as :func:`fk_elastic`) on the device model ``m``
+    (:func:`~jwarp.core.device.put_model`, or a copy with other masses or nonlinear
+    compliances: :func:`~jwarp.core.device.with_frame_masses`,
+    :func:`~jwarp.core.device.with_kappa_nonlinear`), with compliances of either sign (an
+    optimizer may cross kappa = 0; the fixed point is just as well defined). No
+    transmission errors are applied: ``q`` are the joint values the links see.
+
+    Args:
+        m: the device model; the kernels run on its device in its dtype.
+        q: (..., n_dof) joint values [rad or m]: numpy, or a Warp array of the model's
+            dtype (used as is on the model's device: no copy).
+        dh: geometric DH rows rho0 (n_frames, 5) or (..., n_frames, 5).
+        kappa: compliances (n_frames, 3) or (..., n_frames, 3) [rad/(N m)], any sign.
+        lam, max_iter, tol: as for :func:`fk_elastic`.
+        validate: check ``q`` for NaN/inf.
+
+    Returns:
+        :class:`ElasticFK` of numpy arrays (for a Warp ``q`` too): frames
+        (..., n_frames, 4, 4), rho (..., n_frames, 5), iterations and converged (...,).
+    """
+    if not isinstance(m, DeviceModel):
+        raise TypeError(f"m: expected a DeviceModel (jwarp.core.device.put_model), got "
+                        f"{type(m).__name__}")
+    robot = m.robot
+    batch = as_batch(q, robot.n_dof, "q", device=m.device, dtype=m.scalar,
+                     what=f"robot '{robot.name}' has {robot.n_dof} joints", validate=validate)
+    lam, tol = lam_tol(lam, tol, m)
+    kap = frame_rows(np.asarray(kappa, np.float64), robot, batch, m, "kappa", 3)
+    rho0 = frame_rows(np.asarray(dh, np.float64), robot, batch, m, "dh", 5)
+    run = ElasticLaunch(m, batch.array, kap, rho0, float(lam))
+    rho, frames, iterations, converged = equilibrium(run, int(max_iter), float(tol))
+    rho_arr = rho[0] if rho is not None else rho0_full(run)
+    host = replace(batch, kind="numpy")  # numpy out for a Warp q too
+    n = robot.n_frames
+    return ElasticFK(to_output(frames, host, (n,)), to_output(rho_arr, host, (n, 5)),
+                     host_out(iterations, host), host_out(np.asarray(converged, bool), host))
 
 
 def elastic_step(robot: RobotLike, q: ArrayLike, rho: ArrayLike | None = None,

@@ -9,7 +9,7 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import is_torch, Batch, empty, finite_as, first_touch, out_view, to_output, zeros
-from jwarp.core.device import KinematicsTables
+from jwarp.core.device import DeviceModel
 from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import frame_rows, jacobian_inputs, point_vec, setup, small_call
@@ -18,7 +18,7 @@ from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
 
 
-def _dh_rows(dh: Any, model: RobotModel, batch: Batch, t: KinematicsTables,
+def _dh_rows(dh: Any, model: RobotModel, batch: Batch, t: DeviceModel,
              validate: bool) -> tuple[wp.array, int] | None:
     """The ``dh`` argument as (device rows (B or 1, n_frames, 5), batch stride): None for
     the nominal rows; a contiguous Warp array of the computing dtype on the computing device

@@ -21,7 +21,7 @@ import warp as wp
 from jwarp.core.arrays import (Batch, HostWrap, as_batch, default_dtype, empty, finite_as,
                                first_touch, init_warp, is_torch, real_array, real_number,
                                resolve_device)
-from jwarp.core.device import KinematicsTables, numpy_dtype, scalar_type, tables
+from jwarp.core.device import DeviceModel, numpy_dtype, put_model, scalar_type
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.data import (  # noqa: F401  (POINT_ARG, jacobian_inputs: re-exported)
@@ -31,17 +31,17 @@ from jwarp.registry import robot as get_robot
 
 
 def setup(robot: Any, q: Any, device: Any, dtype: Any, validate: bool = True
-           ) -> tuple[RobotModel, Batch, KinematicsTables]:
+           ) -> tuple[RobotModel, Batch, DeviceModel]:
     init_warp()
     model = get_robot(robot)
     dev = resolve_device(device, like=q)
     dt = default_dtype(q) if dtype is None else dtype
     batch = as_batch(q, model.n_dof, "q", device=dev, dtype=dt,
                      what=f"robot '{model.name}' has {model.n_dof} joints", validate=validate)
-    return model, batch, tables(model, dev, dt)
+    return model, batch, put_model(model, dev, dt)
 
 
-def frame_rows(x: Any, model: RobotModel, batch: Batch, t: KinematicsTables, name: str,
+def frame_rows(x: Any, model: RobotModel, batch: Batch, t: DeviceModel, name: str,
                width: int) -> tuple[wp.array, int]:
     """Per-frame rows (n_frames, width) shared, or (..., n_frames, width) per configuration,
     as a (B or 1, n_frames, width) device array and its batch stride (0: shared). Internal
@@ -60,7 +60,7 @@ def frame_rows(x: Any, model: RobotModel, batch: Batch, t: KinematicsTables, nam
     return wp.array(a, dtype=t.scalar, device=t.device), 1
 
 
-def launch_fk(t: KinematicsTables, q: wp.array, dh: tuple[wp.array, int] | None = None,
+def launch_fk(t: DeviceModel, q: wp.array, dh: tuple[wp.array, int] | None = None,
               frames: wp.array | None = None, frame_major: bool = False,
               component_major: bool = False) -> wp.array:
     """Launch the FK kernel on a (B, n_dof) device array; returns frames (B, n_frames) mat44.
@@ -121,7 +121,7 @@ class Workspace:
     One call at a time: a call that finds the workspace busy (another thread) returns None
     and the caller takes the general path, so concurrent calls stay correct."""
 
-    def __init__(self, t: KinematicsTables, B: int):
+    def __init__(self, t: DeviceModel, B: int):
         self.t = t
         self.data = KinematicsData(t, B)
         self.cuda = t.device.is_cuda
@@ -179,7 +179,7 @@ _WORKSPACES: dict = {}
 _WORKSPACES_LOCK = threading.Lock()
 
 
-def workspace(t: KinematicsTables, B: int) -> Workspace:
+def workspace(t: DeviceModel, B: int) -> Workspace:
     """The cached :class:`Workspace` for batch size ``B`` on the tables ``t`` (made on
     first use; per process)."""
     key = (id(t), B)
@@ -242,7 +242,7 @@ def _resolve_small(op: str, model: RobotModel, q: Any, qa: np.ndarray, warp_in: 
     tail = (model.n_frames, 4, 4) if op == "fk" else (6, n)
     if B * (tail[0] * 16 if op == "fk" else 6 * n) * npdt.itemsize > SMALL_CALL_BYTES:
         return None
-    t = tables(model, dev, npdt)
+    t = put_model(model, dev, npdt)
     if op == "fk":
         fi, pt = -1, None
     else:
@@ -418,7 +418,7 @@ class ElasticLaunch:
     building block of :func:`fk_elastic`, shared with torch_ops, autodiff and the
     calibration's signed equilibrium; optimizers use :mod:`jwarp.kinematics.compensation`)."""
 
-    def __init__(self, t: KinematicsTables, q: wp.array, kappa: tuple[wp.array, int],
+    def __init__(self, t: DeviceModel, q: wp.array, kappa: tuple[wp.array, int],
                  rho0: tuple[wp.array, int] | None, lam: float, write_tau: bool = False,
                  requires_grad: bool = False):
         self.t, self.q, self.kappa, self.lam = t, q, kappa, lam
@@ -493,7 +493,7 @@ class ElasticLaunch:
         return launch_fk(self.t, self.q, dh=rho, frames=out)
 
 
-def lam_tol(lam: Any, tol: Any, t: KinematicsTables) -> tuple[float, float]:
+def lam_tol(lam: Any, tol: Any, t: DeviceModel) -> tuple[float, float]:
     """Validated damping and tolerance as floats; ``tol`` None is :func:`default_tol` of
     the tables' dtype."""
     lam = real_number(lam, "lam")

@@ -49,10 +49,10 @@ def _prepare(q: torch.Tensor, model: RobotModel, device: Any, scalar: type) -> t
 
 def fk_torch(model: RobotModel, q: torch.Tensor, *, dh: Any, device: Any, dtype: type) -> torch.Tensor:
     """Differentiable FK of a torch tensor q (..., n_dof) -> (..., n_frames, 4, 4)."""
-    from jwarp.core.device import tables
+    from jwarp.core.device import put_model
     from jwarp.kinematics.launch import launch_fk
 
-    t = tables(model, device, np.float32 if dtype == wp.float32 else np.float64)
+    t = put_model(model, device, np.float32 if dtype == wp.float32 else np.float64)
     qc = _prepare(q, model, device, t.scalar)
     dh_pair = None
     if dh is not None:

@@ -16,7 +16,7 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
-from jwarp.core.device import numpy_dtype, scalar_type, tables
+from jwarp.core.device import numpy_dtype, put_model, scalar_type
 from jwarp.core.limits import describe_violation, sample_within_limits, within_limits
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.transmission import untransmitted, without_transmission
@@ -236,7 +236,7 @@ def _longest_arcs(robot: RobotModel, q: np.ndarray, fine: int, device: Any) -> n
     P, S, n = q.shape
     init_warp()
     dev = resolve_device(device)
-    m = tables(robot, dev, np.float64)
+    m = put_model(robot, dev, np.float64)
     sph = m.spheres
     if sph.n_spheres == 0 or S < 2:
         return np.zeros(P)

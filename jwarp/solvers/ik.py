@@ -51,8 +51,8 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
-from jwarp.core.device import numpy_dtype, scalar_type, tables
-from jwarp.core.limits import LIMIT_TOL, limit_tables, sample_within_limits
+from jwarp.core.device import numpy_dtype, put_model, scalar_type
+from jwarp.core.limits import LIMIT_TOL, sample_within_limits
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik as ik_kernels
 from jwarp.kernels import ik_step as step_kernels
@@ -217,12 +217,12 @@ class IKObjective:
         self.scalar = scalar_type(dtype)
         self.npdt = numpy_dtype(self.scalar)
         self.B, self.n = int(n), self.robot.n_dof
-        self.t = tables(self.robot, self.device, self.npdt)
+        self.t = put_model(self.robot, self.device, self.npdt)
         self.fk = fk_kernels.kernels(self.scalar)
         self.axis = self.fk.vec3(*(float(v) for v in free_axis))
         self.kk = ik_kernels.kernels(self.scalar)
         self.pk = path_kernels.kernels(self.scalar)
-        self.limits = limit_tables(self.robot, self.device, self.scalar)
+        self.limits = self.t.limits
         self.eps = real_number(eps, "eps", self.npdt) if eps is not None else (
             float(max(world.resolution, 0.01)) if world is not None else 0.01)
         dev, sc, B, n = self.device, self.scalar, self.B, self.n
@@ -356,7 +356,7 @@ class IKObjective:
             self.compensation.update(self.frames)
 
     def project_limits(self) -> None:
-        self._launch(("project",), self.pk.project, [*self.limits.args], [self.q])
+        self._launch(("project",), self.pk.project, [self.limits], [self.q])
 
     def value_and_grad(self, q: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Host convenience: U_ik = U_f + U_A (eq. 3.19) (B,) and its gradient (B, n_dof)."""
@@ -623,8 +623,8 @@ class IKSolver:
         self.planar = self.robot.workspace_dim == 2
         self.dk = step_kernels.dls_kernels(self.scalar, self.planar, self.robot.n_dof)
         self.ck = step_kernels.check_kernels(self.scalar, self.planar)
-        self.limits = limit_tables(self.robot, self.device, self.scalar)
-        self.limits64 = limit_tables(self.robot, self.device, np.float64)
+        self.limits = put_model(self.robot, self.device, self.scalar).limits
+        self.limits64 = put_model(self.robot, self.device, np.float64).limits
         self.cm64 = collision.collision_model(self.robot, world, device=self.device,
                                               dtype=np.float64)
         w = options.weights or IKWeights()
@@ -701,9 +701,7 @@ class IKSolver:
         tab.world = cm.world_struct
         tab.use_world = int(self.world is not None and cm.n_spheres > 0)
         tab.use_self = int(cm.n_pairs > 0)
-        lt = self.limits64
-        tab.limits, tab.lin_start, tab.lin_joint = lt.limits, lt.lin_start, lt.lin_joint
-        tab.lin_coef, tab.lin_bounds = lt.lin_coef, lt.lin_bounds
+        tab.limits = self.limits64
         tab.limit_tol = wp.float64(LIMIT_TOL)
         self._check_tables = tab
         sc = ck.CheckScratch()
@@ -807,7 +805,7 @@ class IKSolver:
         self._launch("step", self.dk.step, self.B, [
             obj.jac, obj.err, obj.grad_a, self.on, self.solved, self.n_seeds,
             int(o.freeze_solved), int(o.stop_when_solved), self.n_problems, o.damping ** 2,
-            o.step, o.max_step, *self.limits.args, obj.q, self.done, self.counts,
+            o.step, o.max_step, self.limits, obj.q, self.done, self.counts,
             self.iterations, self.halt, self.restart])
 
     # ------------------------------------------------------------------ solve
@@ -865,7 +863,7 @@ class IKSolver:
         if q0 is None:  # random seeds, drawn on the device
             obj.reset_rows()
             wp.launch(self.dk.sample, dim=B, inputs=[int(self.rng.integers(1 << 31)),
-                                                     *self.limits.args],
+                                                     self.limits],
                       outputs=[obj.q], device=dev)
         else:
             obj.set_q(q0.reshape(B, -1))

@@ -38,7 +38,7 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
-from jwarp.core.device import numpy_dtype, scalar_type, tables
+from jwarp.core.device import numpy_dtype, put_model, scalar_type
 from jwarp.world import collision
 from jwarp.world.model_check import check_collision_model
 from jwarp.kernels import path as path_kernels
@@ -53,7 +53,7 @@ from jwarp.solvers.feasibility import (ELASTIC_CHECK, MAX_CHECK_SUBSTEPS, SWEEP_
                                        collision_free, elastic_equilibrium, initial_paths,
                                        path_feasible, polyline_path, sphere_centres,
                                        substeps, substeps_for_voxel, substeps_per_path)
-from jwarp.core.limits import limit_tables, project_numpy, within_limits
+from jwarp.core.limits import project_numpy, within_limits
 from jwarp.solvers.overrides import renamed_options, translate, with_overrides
 
 #: floor of the length-cost normaliser 1/2 |q_goal - q_start|^2 [rad^2]
@@ -211,7 +211,7 @@ class PathObjective:
             max(world.resolution, 0.01))
         if not self.eps > 0:
             raise ValueError(f"eps: expected > 0 [m], got {eps!r}")
-        self.limits = limit_tables(self.robot, self.device, self.scalar)
+        self.limits = put_model(self.robot, self.device, self.scalar).limits
         dev, sc = self.device, self.scalar
         self.paths = wp.zeros((self.P, self.W, self.n), dtype=sc, device=dev)
         self._paths_next = wp.zeros((self.P, self.W, self.n), dtype=sc, device=dev)
@@ -228,7 +228,7 @@ class PathObjective:
         #: elastic compensation rows (None: the rigid robot)
         self.compensation: CompensationRows | None = None
         if kappa is not None:
-            self.compensation = CompensationRows(tables(self.robot, dev, self.npdt), self.P,
+            self.compensation = CompensationRows(put_model(self.robot, dev, self.npdt), self.P,
                                                  self.W, self.n_sub, kappa, lam)
         #: Cartesian length cost U_c (P,) (eq. 3.7, unweighted; zeros without it)
         self.cartesian = wp.zeros(self.P, dtype=sc, device=dev)
@@ -319,7 +319,7 @@ class PathObjective:
         wp.launch(self.k.path_step, dim=(self.P, self.W),
                   inputs=[self.paths, self.sub_grad, self.n_sub, self.scalar(self.weights.length),
                           self.scalar(NORM_FLOOR), self.scalar(step), self.scalar(max_step),
-                          self.active, *self.limits.args],
+                          self.active, self.limits],
                   outputs=[self._paths_next.reshape((self.P * self.W, self.n))], device=self.device)
         self.paths, self._paths_next = self._paths_next, self.paths
 

@@ -42,7 +42,8 @@ import warp as wp
 
 from jwarp.core.arrays import (Batch, as_batch, default_dtype, finite_as, init_warp, real_array,
                           real_number, resolve_device, to_output)
-from jwarp.core.device import DeviceModel, collision_tables, numpy_dtype, put_model, scalar_type
+from jwarp.core.device import (DeviceModel, collision_tables, numpy_dtype, put_model, scalar_type,
+                               struct_fields)
 from jwarp.core.rows import DHRows, RowsKind
 from jwarp.kernels import collision as ck
 from jwarp.kernels.elastic import kernels as elastic_kernels
@@ -178,13 +179,11 @@ class CollisionModel:
         self.dtype = numpy_dtype(self.scalar)
         #: the robot's device model (frame, mass and sphere tables; shared by content)
         self.model: DeviceModel = put_model(self.robot, self.device, self.scalar)
-        self.tables = self.model  # older name
         self.k = ck.kernels(self.scalar)
         sp = self.model.spheres
         dev = self.device
         self.n_spheres, self.n_pairs, self.pairs = sp.n_spheres, sp.n_pairs, sp.pairs
-        for name in ("sph_frame", "sph_pos", "sph_rad", "bound_pos", "bound_rad", "fpair_a",
-                     "fpair_b", "fpair_start", "ent_sphere", "ent_start", "pair_a", "pair_b"):
+        for name in (*struct_fields(self.k.SphereTables), "pair_a"):  # the sphere tables
             setattr(self, name, getattr(sp, name))
         #: the world on the device (grid + exact objects), one struct argument
         self.device_world = DeviceWorld(world, dev, self.scalar)

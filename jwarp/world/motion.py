@@ -307,9 +307,7 @@ class MotionCheck:
             wp.array(fw, dtype=wp.float64, device=dev))
         cm.fp_start, cm.fp_frame, cm.fp_weight = self._fp
         self.n_fpairs = len(fs) - 1
-        lt = self.model.limits
-        cm.limits, cm.lin_start, cm.lin_joint = lt.limits, lt.lin_start, lt.lin_joint
-        cm.lin_coef, cm.lin_bounds = lt.lin_coef, lt.lin_bounds
+        cm.limits = self.model.limits
         cm.limit_tol = wp.float64(LIMIT_TOL)
         self._cm = cm
         self._scratch: tuple | None = None

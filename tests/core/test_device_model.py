@@ -10,8 +10,8 @@ import warp as wp
 
 import jwarp
 from jwarp.core import device as D
-from jwarp.core.device import collision_tables, content_key, put_model, tables
-from jwarp.core.limits import limit_tables, sample_within_limits
+from jwarp.core.device import collision_tables, content_key, put_model
+from jwarp.core.limits import sample_within_limits
 from jwarp.core.rows import PER_CONFIG_LAYOUT, DHRows, RowsKind
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.compensation import CompensationRows
@@ -33,9 +33,7 @@ def test_equal_robots_share_one_model_and_edited_copies_do_not():
     assert twin is not r and content_key(twin) == content_key(r)
     assert put_model(twin, "cpu", np.float32) is m
     assert put_model("arm7", "cpu", "float32") is m
-    # the older entry points are the same model
-    assert tables(r, "cpu", np.float32) is m
-    assert limit_tables(twin, "cpu", wp.float32) is m.limits
+    assert put_model(twin, "cpu", wp.float32).limits is m.limits
     # another dtype: another model
     m64 = put_model(r, "cpu", np.float64)
     assert m64 is not m and m64.scalar == wp.float64 and m.scalar == wp.float32
@@ -148,9 +146,10 @@ def test_every_table_matches_the_robot(name):
     np.testing.assert_array_equal(np.array(m.gravity), r.gravity)
     np.testing.assert_array_equal(m.kappa.numpy(), r.kappa[None])
     # limits: box and linear CSR
-    np.testing.assert_array_equal(m.limits.limits.numpy(),
+    np.testing.assert_array_equal(m.limits.box.numpy(),
                                   [[j.lower, j.upper] for j in r.joints])
-    ls, lj, lc, lb = (a.numpy() for a in m.limits.args[1:])
+    ls, lj, lc, lb = (getattr(m.limits, k).numpy() for k in ("lin_start", "lin_joint", "lin_coef",
+                                                           "lin_bounds"))
     assert len(ls) == len(r.linear_limits) + 1
     for k, lim in enumerate(r.linear_limits):
         assert lj[ls[k]:ls[k + 1]].tolist() == list(lim.joints)

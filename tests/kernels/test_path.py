@@ -8,7 +8,8 @@ import jwarp
 from jwarp.core.arrays import init_warp
 from jwarp.kernels import path as PK
 from jwarp.solvers import planner
-from jwarp.core.limits import limit_tables, limit_violation, project_numpy, within_limits
+from jwarp.core.device import put_model
+from jwarp.core.limits import limit_violation, project_numpy, within_limits
 
 init_warp()
 F64 = wp.float64
@@ -131,12 +132,12 @@ def test_step_kernel_clamps_projects_and_freezes(device):
     sub_grad = rng.normal(scale=50.0, size=(P * S, n))
     sub_grad[:, 2] = -400.0  # pushes q2 up: the torso sum q1 + q2 must be projected
     step, max_step, lam_l = 0.01, 0.3, 0.2
-    lim = limit_tables(robot, device, np.float64)
+    lim = put_model(robot, device, np.float64).limits
     active = np.array([1, 0, 1], np.int32)
     out = wp.empty((P * W, n), dtype=F64, device=device)
     wp.launch(K64.path_step, dim=(P, W),
               inputs=[_w(Q, device=device), _w(sub_grad, device=device), n_sub, lam_l, FLOOR, step, max_step,
-                      wp.array(active, dtype=wp.int32, device=device), *lim.args], outputs=[out], device=device)
+                      wp.array(active, dtype=wp.int32, device=device), lim], outputs=[out], device=device)
     got = out.numpy().reshape(P, W, n)
     # numpy: gradient with hat weights + length term, clamp, projection
     g = np.zeros_like(Q)
@@ -159,16 +160,16 @@ def test_projection_justin_torso_polygon(device):
     robot = jwarp.robot("justin19")
     rng = np.random.default_rng(5)
     q = rng.uniform(-4, 4, size=(2000, robot.n_dof))
-    lim = limit_tables(robot, device, np.float64)
+    lim = put_model(robot, device, np.float64).limits
     arr = _w(q, device=device)
-    wp.launch(K64.project, dim=len(q), inputs=[*lim.args], outputs=[arr], device=device)
+    wp.launch(K64.project, dim=len(q), inputs=[lim], outputs=[arr], device=device)
     got = arr.numpy()
     assert limit_violation(robot, got).max() < 1e-12
     np.testing.assert_allclose(got, project_numpy(robot, q), atol=1e-12)
     # points inside the limits are left alone
     inside = project_numpy(robot, q)
     arr = _w(inside, device=device)
-    wp.launch(K64.project, dim=len(q), inputs=[*lim.args], outputs=[arr], device=device)
+    wp.launch(K64.project, dim=len(q), inputs=[lim], outputs=[arr], device=device)
     np.testing.assert_array_equal(arr.numpy(), inside)
 
 

@@ -19,7 +19,7 @@ import warp as wp
 
 import jwarp
 from jwarp.core.device import put_model
-from jwarp.core.limits import limit_tables, project_numpy
+from jwarp.core.limits import project_numpy
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik as ik_kernels
 from jwarp.kernels import path as path_kernels
@@ -44,15 +44,11 @@ def _probes(scalar):
         fk.chain_jacobian(model, chain, b, q, ROWS_NOMINAL, nominal, 0, p, jac)
 
     @wp.kernel(module="unique", enable_backward=False)
-    def limits_probe(q: wp.array2d(dtype=scalar), tol: scalar,
-                     limits: wp.array2d(dtype=scalar), lin_start: wp.array(dtype=wp.int32),
-                     lin_joint: wp.array(dtype=wp.int32), lin_coef: wp.array(dtype=scalar),
-                     lin_bounds: wp.array2d(dtype=scalar), out: wp.array2d(dtype=wp.int32)):
+    def limits_probe(q: wp.array2d(dtype=scalar), tol: scalar, limits: pk.LimitTables,
+                     out: wp.array2d(dtype=wp.int32)):
         b = wp.tid()
-        out[b, 0] = pk.within_limits_row(q, b, limits, lin_start, lin_joint, lin_coef,
-                                         lin_bounds, tol)
-        out[b, 1] = pk.within_linear_limits(q, b, lin_start, lin_joint, lin_coef, lin_bounds,
-                                            tol)
+        out[b, 0] = pk.within_limits_row(q, b, limits, tol)
+        out[b, 1] = pk.within_linear_limits(q, b, limits, tol)
 
     @wp.kernel(module="unique", enable_backward=False)
     def aux_probe(q: wp.array2d(dtype=scalar), q_default: wp.array2d(dtype=scalar),
@@ -116,12 +112,12 @@ def test_limit_checks_match_numpy(npdt, scalar):
     q[:100] = project_numpy(robot, q[:100])      # inside (on the boundary, some)
     q[100:200, 3:] = project_numpy(robot, q[100:200])[:, 3:]   # torso may break its polygon
     q = q.astype(npdt)
-    lt = limit_tables(robot, "cpu", npdt)
+    lt = put_model(robot, "cpu", npdt).limits
     out = wp.zeros((len(q), 2), dtype=wp.int32, device="cpu")
     limits_probe = _probes(scalar)[1]
     for tol in (0.0, 1e-3):
         wp.launch(limits_probe, dim=len(q), inputs=[wp.array(q, dtype=scalar, device="cpu"),
-                                                    scalar(tol), *lt.args],
+                                                    scalar(tol), lt],
                   outputs=[out], device="cpu")
         got = out.numpy().astype(bool)
         # numpy's verdict, where the kernel's round-off cannot flip it

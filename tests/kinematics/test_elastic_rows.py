@@ -9,7 +9,7 @@ import warp as wp
 
 import jwarp
 from jwarp.world import collision
-from jwarp.core.device import tables
+from jwarp.core.device import put_model
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.kernels import fk as fk_kernels
 from jwarp.solvers import planner as PL
@@ -54,7 +54,7 @@ def test_update_from_given_frames_matches_reference_and_maps_substeps(name, grav
     if per_waypoint:
         kappa = kappa * np.linspace(0.5, 2.0, P * W)[:, None, None]
     q = sample_within_limits(model, P * S, np.random.default_rng(1))
-    rows = CompensationRows(tables(model, "cpu", np.float64), P, W, n_sub, kappa, LAM)
+    rows = CompensationRows(put_model(model, "cpu", np.float64), P, W, n_sub, kappa, LAM)
     assert rows.rows.shape == (P * W, model.n_frames, 9)
     np.testing.assert_array_equal(rows.delta.numpy(), 1e30)  # nothing converged yet
     # substep s of a path reads waypoint round(s / n_sub), ties to the later one
@@ -114,7 +114,7 @@ def test_cost_at_compensation_rows_equals_cost_at_expanded_rows(device):
     P, W, n_sub = 3, 4, 5
     S = (W - 1) * n_sub + 1
     q = sample_within_limits(model, P * S, np.random.default_rng(3))
-    rows = CompensationRows(tables(model, device, np.float64), P, W, n_sub, 3e-3, LAM)
+    rows = CompensationRows(put_model(model, device, np.float64), P, W, n_sub, 3e-3, LAM)
     for _ in range(2):
         rows.update(_frames(model, ref_fk(model, q, rows.rho()), device))
     cm = collision.collision_model(model, world, device=device, dtype=np.float64)
@@ -140,7 +140,7 @@ def test_cost_at_compensation_rows_equals_cost_at_expanded_rows(device):
         np.testing.assert_allclose(g2[hit, j], ((cp - cmn) / (2 * h))[hit], rtol=1e-4,
                                    atol=1e-6)
     # the update fused into the cost launch equals the update from reference frames
-    twin = CompensationRows(tables(model, device, np.float64), P, W, n_sub, 3e-3, LAM)
+    twin = CompensationRows(put_model(model, device, np.float64), P, W, n_sub, 3e-3, LAM)
     for _ in range(2):
         twin.update(_frames(model, ref_fk(model, q, twin.rho()), device))
     F = ref_fk(model, q, rows.rho())
@@ -156,7 +156,7 @@ def test_cost_at_compensation_rows_equals_cost_at_expanded_rows(device):
 
 
 def test_bad_compensation_arguments():
-    t = tables(jwarp.robot("arm7"), "cpu", np.float64)
+    t = put_model(jwarp.robot("arm7"), "cpu", np.float64)
     with pytest.raises(ValueError, match="lam"):
         CompensationRows(t, 1, 3, 2, 1e-4, 0.0)
     with pytest.raises(ValueError, match="kappa"):
@@ -209,7 +209,7 @@ def test_waypoint_thread_maps_threads_to_configurations_and_rows(device, P, W, n
     """CPU layout: thread b is configuration b. CUDA layout (P given): a permutation with
     the waypoints first. Either way each configuration reads its nearest waypoint's row."""
     model = jwarp.robot("planar4")
-    rows = CompensationRows(tables(model, device, np.float32), P, W, n_sub, 1e-3, LAM)
+    rows = CompensationRows(put_model(model, device, np.float32), P, W, n_sub, 1e-3, LAM)
     layout = rows.layout
     assert layout[:3] == (rows.S, n_sub, W)
     layout = layout[:3] + (0,)  # the CPU's

@@ -8,7 +8,7 @@ import jwarp
 from jwarp import kinematics as K
 from jwarp.kinematics.autodiff import tape_jacobian
 
-from devices import requires_cuda
+from devices import requires_cpu, requires_cuda
 from reference import (kappa_uniform, ref_fk, ref_fk_elastic, ref_jacobian_fd, ref_torques,
                        sample_q)
 
@@ -432,10 +432,10 @@ def test_float32_elastic_equilibrium_matches_float64(device):
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_component_major_fk_layout_matches_fk(device, dtype):
     """launch_fk(component_major=True): memory (n_frames, 4, 4, B), viewed (B, n_frames, 4, 4)."""
-    from jwarp.core.device import tables
+    from jwarp.core.device import put_model
     model = jwarp.robot("justin19")
     q = _sample(model, 64, seed=16)
-    t = tables(model, device, dtype)
+    t = put_model(model, device, dtype)
     qa = wp.array(q.astype(dtype), device=device)
     out = K.launch_fk(t, qa, component_major=True)
     assert out.shape == (64, 27, 4, 4) and out.strides[0] == np.dtype(dtype).itemsize
@@ -447,3 +447,32 @@ def test_component_major_fk_layout_matches_fk(device, dtype):
     with pytest.raises(ValueError, match="frames: component_major"):
         K.launch_fk(t, qa, frames=wp.empty((64, 27, 4), dtype=t.scalar, device=device),
                     component_major=True)
+
+
+@requires_cpu
+def test_solve_equilibrium_on_a_device_model_is_fk_elastic():
+    """``solve_equilibrium(m, q, dh, kappa)`` on the robot's device model gives fk_elastic's
+    numbers exactly, takes a Warp q as is, and accepts compliances of either sign."""
+    from jwarp.core.device import frame_mass_model, put_model, with_frame_masses
+
+    r = jwarp.robot("justin19")
+    rng = np.random.default_rng(7)
+    q = rng.uniform(r.joint_limits[:, 0], r.joint_limits[:, 1], (5, r.n_dof))
+    kap = kappa_uniform(r, 2e-4)
+    m = put_model(r, "cpu", np.float64)
+    ref = jwarp.fk_elastic(r, q, kap, dh=r.dh_table, device="cpu", dtype=np.float64,
+                           max_iter=30)
+    eq = K.solve_equilibrium(m, q, r.dh_table, kap, max_iter=30)
+    for a, b in zip(eq, ref):
+        np.testing.assert_array_equal(a, b)
+    qw = wp.array(q, dtype=wp.float64, device="cpu")
+    np.testing.assert_array_equal(K.solve_equilibrium(m, qw, r.dh_table, kap, max_iter=30).frames,
+                                  ref.frames)
+    neg = K.solve_equilibrium(m, q, r.dh_table, -kap, max_iter=30)
+    assert neg.converged.all() and not np.array_equal(neg.frames, ref.frames)
+    mass, com = frame_mass_model(r)
+    heavy = K.solve_equilibrium(with_frame_masses(m, 2 * mass, com), q, r.dh_table, kap,
+                                max_iter=30)
+    assert not np.array_equal(heavy.rho, ref.rho)
+    with pytest.raises(TypeError, match="m: expected a DeviceModel"):
+        K.solve_equilibrium(r, q, r.dh_table, kap)

@@ -27,7 +27,6 @@ docs/calibration_robustness.md).
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from typing import Any, Callable, Iterable, Mapping, NamedTuple
 
 import numpy as np
@@ -35,8 +34,8 @@ import warp as wp
 from scipy.optimize import OptimizeResult, least_squares
 
 from jwarp import kinematics as K
-from jwarp.core.arrays import finite_as, init_warp, resolve_device, to_output
-from jwarp.core.device import with_frame_masses, with_kappa_nonlinear
+from jwarp.core.arrays import finite_as, init_warp, resolve_device
+from jwarp.core.device import put_model, with_frame_masses, with_kappa_nonlinear
 from jwarp.core.threads import limit_blas
 from jwarp.model import RobotModel
 from jwarp.registry import robot as get_robot
@@ -96,20 +95,14 @@ def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: 
     (S, n, 4, 4), rho* (S, n, 5), converged (S,). ``q`` are the joint values the links
     see (transmission errors already applied). ``device``: where the kernels run (a Warp
     ``q`` must be on it)."""
-    model, batch, t = K.setup(robot, q, device, np.float64, False)
+    m = put_model(robot, resolve_device(device, like=q), np.float64)
     if masses is not None:
-        t = with_frame_masses(t, *masses)
+        m = with_frame_masses(m, *masses)
     if kappa_nl is not None:
-        t = with_kappa_nonlinear(t, kappa_nl)
-    kap = K.frame_rows(np.asarray(kappa, np.float64), model, batch, t, "kappa", 3)
-    rho0 = K.frame_rows(np.asarray(dh, np.float64), model, batch, t, "dh", 5)
-    run = K.ElasticLaunch(t, batch.array, kap, rho0, float(lam))
-    rho, frames, _, conv = K.equilibrium(run, int(max_iter), float(tol))
-    n = model.n_frames
-    rho_arr = rho[0] if rho is not None else K.rho0_full(run)
-    host = replace(batch, kind="numpy")  # numpy out for Warp input too
-    return (to_output(frames, host, (n,)), to_output(rho_arr, host, (n, 5)),
-            np.asarray(conv, bool))
+        m = with_kappa_nonlinear(m, kappa_nl)
+    eq = K.solve_equilibrium(m, q, dh, kappa, lam=lam, max_iter=max_iter, tol=tol,
+                             validate=False)
+    return eq.frames, eq.rho, eq.converged
 
 
 def _whitener(covariance: Any, S: int, m: int) -> np.ndarray | None:

@@ -38,7 +38,8 @@ import warp as wp
 
 from jwarp.atomic import atomic_write_text
 from jwarp.core.arrays import init_warp, resolve_device
-from jwarp.core.device import put_model, scalar_type
+from jwarp.core.device import make_struct, put_model, scalar_type
+from jwarp.kernels import path as path_kernels
 from jwarp.kernels import visibility as vk
 from jwarp.model import RobotModel
 from jwarp.plugins.measurements.geometry import parse_markers, rotvec_matrix
@@ -346,9 +347,9 @@ class PoseSampler:
                              f"'{robot.joint_names[int(np.argmax(lo > hi))]}'")
         self.lower, self.upper = lo, hi
         box = np.stack([lo, hi], axis=1)
-        lt = self.model.limits
-        self.limit_args = [wp.array(box.astype(dt), dtype=sc, device=dev), lt.lin_start,
-                           lt.lin_joint, lt.lin_coef, lt.lin_bounds]
+        #: the robot's limits with the box narrowed by the joint margin (one struct)
+        self.limits = make_struct(path_kernels.kernels(sc).LimitTables, self.model.limits,
+                                  box=wp.array(box.astype(dt), dtype=sc, device=dev))
         self.lower_w: wp.array = wp.array(lo.astype(dt), dtype=sc, device=dev)
         self.upper_w: wp.array = wp.array(hi.astype(dt), dtype=sc, device=dev)
 
@@ -372,7 +373,7 @@ class PoseSampler:
         return [int(b.frame) for b in meas.bodies.values() if b.frame is not None]
 
     def _model_args(self) -> list:
-        return [self.model.frame_struct, self.model.spheres.struct, *self.limit_args,
+        return [self.model.frame_struct, self.model.spheres.struct, self.limits,
                 self.sensors, self.skip_fpair, self.model.dh0_3d]
 
     # ---------------------------------------------------------------- checks
