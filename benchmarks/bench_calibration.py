@@ -70,7 +70,7 @@ def systematic_truth(nominal, rng, *, length_error: float = 0.001,
     r, alpha and beta (uniform +-``length_error`` [m] / +-``angle_error`` [rad]), joint
     and lateral compliances kappa_theta, kappa_alpha *and kappa_beta* drawn from ``kappa``
     [rad/(N m)] (kappa_beta is left out of the default free groups: unmodeled)."""
-    from jwarp.solvers.calibration.params import perturb_robot
+    from jwarp.calibration.estimate.params import perturb_robot
 
     return perturb_robot(nominal, rng, groups=("theta", "d", "r", "alpha", "beta"),
                          length_error=length_error, angle_error=angle_error, kappa=kappa,
@@ -108,9 +108,9 @@ def main(argv: list[str] | None = None) -> int:
 
     import jwarp
     from jwarp.plugins.measurements.cartesian import CartesianMeasurement
-    from jwarp.solvers.calibration import CalibrationWarning, calibrate, error_stats, errors
-    from jwarp.solvers.calibration.params import perturb_robot
-    from jwarp.solvers.calibration.result import model_frames
+    from jwarp.calibration import CalibrationWarning, calibrate, error_stats, errors
+    from jwarp.calibration.estimate.params import perturb_robot
+    from jwarp.calibration.estimate.result import model_frames
 
     if args.device not in ("cpu",) and not args.device.startswith("cuda"):
         print(f"--device: expected cpu or cuda, got {args.device!r}", file=sys.stderr)

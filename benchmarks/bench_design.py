@@ -1,6 +1,6 @@
 #!/usr/bin/env python
 """Optimal experimental design (thesis 2.4.2): speed of the batched candidate Jacobians
-and of greedy / DETMAX selection (:mod:`jwarp.solvers.calibration.design`).
+and of greedy / DETMAX selection (:mod:`jwarp.calibration.design.optimal`).
 
     python benchmarks/bench_design.py                 # 1e4 candidates, N = 100
     python benchmarks/bench_design.py --pool 100000 --only jacobians
@@ -37,13 +37,13 @@ if hasattr(wp.config, "quiet"):
 
 import jwarp  # noqa: E402
 from jwarp.core.arrays import init_warp  # noqa: E402
-from jwarp.solvers.calibration.campaign import (justin_tracker_setup,  # noqa: E402
-                                                uniform_configurations)
-from jwarp.solvers.calibration.design import (DesignOptions, candidate_jacobians,  # noqa: E402
+from jwarp.calibration.simulate.campaign import (justin_tracker_setup,  # noqa: E402
+                                                 uniform_configurations)
+from jwarp.calibration.design.optimal import (DesignOptions, candidate_jacobians,  # noqa: E402
                                               prior_information, select, task_information)
-from jwarp.solvers.calibration.files import Setup, make_measurement  # noqa: E402
-from jwarp.solvers.calibration.pool import draw_configurations  # noqa: E402
-from jwarp.solvers.calibration.scenarios import HAND_FINGERS, hand_contact_setup  # noqa: E402
+from jwarp.calibration.files import Setup, make_measurement  # noqa: E402
+from jwarp.calibration.pool import draw_configurations  # noqa: E402
+from jwarp.calibration.simulate.scenarios import HAND_FINGERS, hand_contact_setup  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import timing  # noqa: E402  (benchmarks/timing.py, beside this script)

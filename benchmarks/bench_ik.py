@@ -71,7 +71,7 @@ from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.core.limits import sample_within_limits, within_limits  # noqa: E402
 from jwarp.kernels.ik_step import LIMIT_HOLD  # noqa: E402
 from jwarp.solvers import ik as IK  # noqa: E402
-from jwarp.solvers.planner import collision_free  # noqa: E402
+from jwarp.world.path_feasibility import collision_free
 from jwarp.world import collision  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # also when imported by path

@@ -44,7 +44,7 @@ wp.config.quiet = True
 import jwarp  # noqa: E402
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.core.limits import sample_within_limits  # noqa: E402
-from jwarp.solvers.ik import IKOptions, IKSolver  # noqa: E402
+from jwarp.solvers.ik import IKOptions, IKSolver
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
@@ -132,7 +132,7 @@ def section_reach(args: argparse.Namespace) -> dict:
 def scene_setup(n_targets: int, device: str) -> tuple:
     """(sphere model, exact world, targets (n, 4, 4)) of the table-and-bookshelf scene."""
     import scene_problems as sp
-    from jwarp.solvers.planner import collision_free
+    from jwarp.world.path_feasibility import collision_free
     from jwarp.world.scene_file import exact_world, scene_from_dict
 
     robot, _ = sp.load_robot()

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 import jwarp
-from jwarp.registry import measurement
+from jwarp.model.registry import measurement
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import timing  # noqa: E402
@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{1e3 * t:>11.3f}{S / t:>13.0f}")
             sys.stdout.flush()
     if args.json:
-        from jwarp.atomic import atomic_write_text
+        from jwarp.utils.atomic import atomic_write_text
         atomic_write_text(args.json, json.dumps({"rows": rows, "device": args.device,
                                                  "load": load}, indent=1))
     return 0

@@ -59,7 +59,8 @@ from jwarp.world import collision  # noqa: E402
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.solvers import compensation as comp  # noqa: E402
 from jwarp.solvers import ik as IK  # noqa: E402
-from jwarp.solvers import planner as PL  # noqa: E402
+from jwarp.solvers import planning as PL  # noqa: E402
+from jwarp.world import path_feasibility
 from jwarp.core.limits import sample_within_limits  # noqa: E402
 from jwarp.world.io import parse_world_spec  # noqa: E402
 
@@ -87,8 +88,8 @@ def bench_iteration(args: argparse.Namespace) -> dict:
     world = parse_world_spec(SIMPLEX.format(seed=1), robot)
     rng = np.random.default_rng(0)
     q = free_configs(robot, world, 2 * max(args.paths, 1), rng)
-    Q = PL.initial_paths(q[0::2], q[1::2], 20, "straight")
-    n_sub = PL.substeps_for_voxel(robot, Q[:1], world.voxel_size)
+    Q = path_feasibility.initial_paths(q[0::2], q[1::2], 20, "straight")
+    n_sub = path_feasibility.substeps_for_voxel(robot, Q[:1], world.voxel_size)
     out = {"world_voxel_m": world.voxel_size, "n_substeps": n_sub, "waypoints": 20}
     for P in (1, args.paths):
         obj = PL.PathObjective(robot, world, P, 20, n_sub, device=args.device, dtype=np.float32)
@@ -173,8 +174,8 @@ def bench_compensation(args: argparse.Namespace) -> dict:
     world = parse_world_spec(SIMPLEX.format(seed=1), robot)
     rng = np.random.default_rng(3)
     q = free_configs(robot, world, 2 * args.paths, rng)
-    Q = PL.initial_paths(q[0::2], q[1::2], 20, "straight")
-    n_sub = PL.substeps_for_voxel(robot, Q[:1], world.voxel_size)
+    Q = path_feasibility.initial_paths(q[0::2], q[1::2], 20, "straight")
+    n_sub = path_feasibility.substeps_for_voxel(robot, Q[:1], world.voxel_size)
     out: dict = {}
     for P in (1, args.paths):
         objs = [PL.PathObjective(robot, world, P, 20, n_sub, kappa=k, device=args.device)

@@ -786,7 +786,7 @@ def main(argv: list[str] | None = None) -> int:
 def write_json(path: str, rows: list[dict], settings: dict, total: float,
                acc: list[str] | None = None) -> None:
     """The rows, settings and machine as JSON (atomically)."""
-    from jwarp.atomic import atomic_write_text
+    from jwarp.utils.atomic import atomic_write_text
 
     doc = {"machine": timing.machine(), "settings": settings, "rows": rows,
            "not_shipped": NOT_SHIPPED, "meets_acceptance": acc, "total_s": total}

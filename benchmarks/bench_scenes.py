@@ -15,7 +15,7 @@ test).
    ``--families``) written to ``--out`` (default: a temporary folder), or read with
    ``--problems DIR`` (its ``index.json``).
 2. jwarp: for every margin of ``--margins`` (default ``0,0.01``) and every problem, one
-   :class:`jwarp.solvers.planner.Planner` on ``jwarp.world.exact_world(scene)`` (no grid)
+   :class:`jwarp.solvers.planning.Planner` on ``jwarp.world.exact_world(scene)`` (no grid)
    with ``PlanOptions(margin, endpoint_margin=0, time_limit=1 s, stop_when_solved=True,
    fallback="rrt")``, device ``cpu`` (one core: Warp runs CPU kernels serially, numpy's
    BLAS is held to one thread) and/or ``cuda``; one untimed warm-up call first (kernel
@@ -126,7 +126,7 @@ class Problem:
 # ------------------------------------------------------------------ jwarp
 def plan_one(robot: Any, prob: Problem, margin: float, args: argparse.Namespace,
              device: str) -> tuple[float, Any]:
-    from jwarp.solvers.planner import Planner, PlanOptions
+    from jwarp.solvers.planning import Planner, PlanOptions
 
     o = PlanOptions(margin=margin, endpoint_margin=args.endpoint_margin,
                     time_limit=args.time_limit, stop_when_solved=True, fallback="rrt")
@@ -506,7 +506,7 @@ def main(argv: list[str] | None = None) -> int:
     result["summary"] = summary
     result["jwarp_collisions"] = coll
     if args.json:
-        from jwarp.atomic import atomic_write_text
+        from jwarp.utils.atomic import atomic_write_text
 
         atomic_write_text(args.json, json.dumps(result, indent=1, default=str) + "\n")
     sys.stdout.flush()

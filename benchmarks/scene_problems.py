@@ -373,7 +373,7 @@ class Generator:
 
     def _pick(self, q: np.ndarray, ok: np.ndarray, world: Any, verifier: PathVerifier
               ) -> tuple[np.ndarray, Any, int] | None:
-        from jwarp.solvers.planner import collision_free
+        from jwarp.world.path_feasibility import collision_free
 
         cand = np.nonzero(ok)[0]
         # the candidate nearest the ready pose first (natural problems)

@@ -180,7 +180,7 @@ def run_sections(parser: Any, sections: dict, args: Any, note: str, **fields: An
         print(f"== {name} ({elapsed():.1f} s)")
         print(json.dumps(result[name], indent=1, default=float), flush=True)
     if args.json:
-        from jwarp.atomic import atomic_write_text
+        from jwarp.utils.atomic import atomic_write_text
 
         atomic_write_text(args.json, json.dumps(result, indent=1, default=float) + "\n")
     return result

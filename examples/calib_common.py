@@ -20,9 +20,9 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 import jwarp
-from jwarp.solvers.calibration import CalibrationWarning, calibrate, error_stats, errors
-from jwarp.solvers.calibration.files import Samples, make_measurement
-from jwarp.solvers.calibration.result import model_frames
+from jwarp.calibration import CalibrationWarning, calibrate, error_stats, errors
+from jwarp.calibration.files import Samples, make_measurement
+from jwarp.calibration.estimate.result import model_frames
 
 
 def example_parser(doc: str, *, noise: float, noise_help: str, quick_help: str

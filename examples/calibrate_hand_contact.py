@@ -37,11 +37,11 @@ import time
 import numpy as np
 
 import jwarp
-from jwarp.solvers.calibration.campaign import simulate_campaign, uniform_configurations
-from jwarp.solvers.calibration.files import make_measurement
-from jwarp.solvers.calibration.result import model_frames
-from jwarp.solvers.calibration.scenarios import (HAND_FINGERS, contact_sampler,
-                                                 hand_contact_setup)
+from jwarp.calibration.simulate.campaign import simulate_campaign, uniform_configurations
+from jwarp.calibration.files import make_measurement
+from jwarp.calibration.estimate.result import model_frames
+from jwarp.calibration.simulate.scenarios import (HAND_FINGERS, contact_sampler,
+                                                  hand_contact_setup)
 
 from calib_common import (accuracy_checks, distance_stats_mm, example_parser, falls_check,
                           floor_line, parse_example, print_table, report_checks, run_rows,

@@ -42,11 +42,11 @@ import time
 import numpy as np
 
 import jwarp
-from jwarp.plugins.measurements.geometry import pose_matrix
-from jwarp.solvers.calibration.campaign import simulate_campaign
-from jwarp.solvers.calibration.files import Setup, make_measurement
-from jwarp.solvers.calibration.result import model_frames
-from jwarp.solvers.calibration.scenarios import scenario
+from jwarp.model.geometry import pose_matrix
+from jwarp.calibration.simulate.campaign import simulate_campaign
+from jwarp.calibration.files import Setup, make_measurement
+from jwarp.calibration.estimate.result import model_frames
+from jwarp.calibration.simulate.scenarios import scenario
 
 from calib_common import (Check, accuracy_checks, distance_stats_mm, example_parser,
                           floor_line, parse_example, print_table, report_checks, run_rows,

@@ -35,8 +35,8 @@ import dataclasses
 import math
 import sys
 
-from jwarp.solvers.calibration.campaign import justin_tracker_setup, simulate_campaign
-from jwarp.solvers.calibration.files import make_measurement
+from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
+from jwarp.calibration.files import make_measurement
 
 from calib_common import (Check, accuracy_checks, example_parser, falls_check, floor_line,
                           parse_example, print_table, report_checks, run_rows, split_campaign,

@@ -33,18 +33,19 @@ KAPPA = 0.1e-3  # 0.1 rad/kNm = 1e-4 rad/(N m), for [alpha, beta, theta] of ever
 def plan_on_the_elastic_robot(robot: jwarp.RobotModel, rng: np.random.Generator) -> None:
     """A path and an IK solution on the elastic robot (one torque update per iteration),
     checked on the converged equilibrium."""
-    from jwarp.solvers import compensation, planner
+    from jwarp.solvers import compensation
+    from jwarp.world import path_feasibility
     from jwarp.world.io import parse_world_spec
 
     world = parse_world_spec("simplex:seed=1,feasible=200", robot)
     q = random_configurations(robot, 200, rng)
-    q = q[planner.collision_free(robot, world, q, 0.0, kappa=KAPPA)][:2]  # elastic robot
+    q = q[path_feasibility.collision_free(robot, world, q, 0.0, kappa=KAPPA)][:2]  # elastic robot
     t0 = time.perf_counter()
     res = compensation.compensated_plan(robot, world, q[0], q[1], kappa=KAPPA, n_starts=8,
                                         iterations=100, step=0.2, stop_when_solved=False,
                                         fallback=None)
     dt = time.perf_counter() - t0
-    ok = planner.path_feasible(robot, world, res.path[0], 4 * res.n_substeps, kappa=KAPPA)
+    ok = path_feasibility.path_feasible(robot, world, res.path[0], 4 * res.n_substeps, kappa=KAPPA)
     print(f"\nelastic plan in simplex:seed=1 (voxel {100 * world.voxel_size:.1f} cm): "
           f"feasible {bool(res.feasible[0])}, {int(res.n_feasible[0])} of 8 starts, "
           f"{int(res.iterations[0])} iterations, {dt:.2f} s; re-checked on the equilibrium "

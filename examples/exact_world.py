@@ -25,7 +25,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 import jwarp  # noqa: E402
-from jwarp.solvers.planner import plan  # noqa: E402
+from jwarp.solvers.planning import plan
 from jwarp.world import World  # noqa: E402
 from jwarp.world.collision import min_distances  # noqa: E402
 from jwarp.world.primitives import pose_matrix  # noqa: E402

@@ -42,16 +42,16 @@ import sys
 
 import numpy as np
 
-from jwarp.solvers.calibration.campaign import justin_tracker_setup, simulate_campaign
-from jwarp.solvers.calibration.files import make_measurement
-from jwarp.solvers.calibration.unmodeled import parse_unmodeled
+from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
+from jwarp.calibration.files import make_measurement
+from jwarp.calibration.simulate.unmodeled import parse_unmodeled
 
 import time
 import warnings
 
-from jwarp.solvers.calibration import (CalibrationProblem, CalibrationWarning, calibrate,
-                                       error_stats, errors)
-from jwarp.solvers.calibration.result import group_norms, observation_groups
+from jwarp.calibration import (CalibrationProblem, CalibrationWarning, calibrate,
+                               error_stats, errors)
+from jwarp.calibration.estimate.result import group_norms, observation_groups
 
 from calib_common import (Check, Data, Row, example_parser, floor_line, noise_floor,
                           parse_example, print_table, report_checks, scaled,

@@ -3,9 +3,9 @@ random vs greedy vs DETMAX selection of contact configurations, task error of th
 calibrated models over many random true robots.
 
 Pool: ``--pool`` configurations in contact on the NOMINAL model (all six finger pairs in
-turn; :func:`~jwarp.solvers.calibration.pool.draw_configurations`). Design (once, on the
+turn; :func:`~jwarp.calibration.pool.draw_configurations`). Design (once, on the
 nominal model: the truth is unknown when a campaign is planned): task D-optimality
-(:mod:`jwarp.solvers.calibration.design`) of the full-DH calibration (theta, d, r, alpha;
+(:mod:`jwarp.calibration.design.optimal`) of the full-DH calibration (theta, d, r, alpha;
 prior 5 mm / 5 deg) for the task "fingertip positions relative to the thumb tip" (eq. 2.46)
 at ``--task`` uniform configurations; greedy (its first N of the 300 are the greedy N)
 and DETMAX from the greedy start per N; random: a fresh uniform subset of the pool per
@@ -47,14 +47,14 @@ from scipy.spatial.transform import Rotation
 from calib_common import Check, report_checks
 
 import jwarp
-from jwarp.solvers.calibration import calibrate, perturb_robot
-from jwarp.solvers.calibration.campaign import uniform_configurations
-from jwarp.solvers.calibration.design import (DesignOptions, candidate_jacobians,
+from jwarp.calibration import calibrate, perturb_robot
+from jwarp.calibration.simulate.campaign import uniform_configurations
+from jwarp.calibration.design.optimal import (DesignOptions, candidate_jacobians,
                                               prior_information, select, task_information)
-from jwarp.solvers.calibration.files import Setup, make_measurement
-from jwarp.solvers.calibration.pool import draw_configurations
-from jwarp.solvers.calibration.result import model_frames
-from jwarp.solvers.calibration.scenarios import HAND_FINGERS, hand_contact_setup
+from jwarp.calibration.files import Setup, make_measurement
+from jwarp.calibration.pool import draw_configurations
+from jwarp.calibration.estimate.result import model_frames
+from jwarp.calibration.simulate.scenarios import HAND_FINGERS, hand_contact_setup
 
 FREE = "theta,d,r,alpha"
 ALL_PAIRS = tuple((a, b) for i, a in enumerate(HAND_FINGERS) for b in HAND_FINGERS[i + 1:])
@@ -124,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     sel: dict[tuple[str, int], np.ndarray] = {}
     crit: dict[tuple[str, int], float] = {}
     times = {"greedy": g.time_s}
-    from jwarp.solvers.calibration.design import criterion
+    from jwarp.calibration.design.optimal import criterion
 
     for n in args.sizes:
         sel["greedy", n] = g.indices[:n]

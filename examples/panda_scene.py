@@ -31,7 +31,8 @@ import warp as wp  # noqa: E402
 import jwarp  # noqa: E402
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.importers.robot import example_robot_urdf  # noqa: E402
-from jwarp.solvers.planner import PlanOptions, Planner, collision_free, path_feasible  # noqa: E402
+from jwarp.solvers.planning import PlanOptions, Planner
+from jwarp.world.path_feasibility import collision_free, path_feasible
 from jwarp.world.scene_file import (SceneOptions, exact_world, load_scene, robot_frames,  # noqa: E402
                                     scene_world)
 from jwarp.world.spherize import SpherizeOptions, SpherizeReport, spherized_robot  # noqa: E402

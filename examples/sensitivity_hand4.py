@@ -49,12 +49,12 @@ from calib_common import Check, report_checks
 
 import jwarp
 from jwarp.model import RobotModel
-from jwarp.solvers.calibration.campaign import uniform_configurations
-from jwarp.solvers.calibration.files import Setup, make_measurement
-from jwarp.solvers.calibration.pool import draw_configurations
-from jwarp.solvers.calibration.scenarios import HAND_FINGERS, hand_contact_setup
-from jwarp.solvers.calibration.sensitivity import (kernel_basis, sensitivity, spectrum,
-                                                   stacked_jacobian)
+from jwarp.calibration.simulate.campaign import uniform_configurations
+from jwarp.calibration.files import Setup, make_measurement
+from jwarp.calibration.pool import draw_configurations
+from jwarp.calibration.simulate.scenarios import HAND_FINGERS, hand_contact_setup
+from jwarp.calibration.design.sensitivity import (kernel_basis, sensitivity, spectrum,
+                                                  stacked_jacobian)
 
 FREE = "theta,d,r,alpha"
 THESIS_ATOL = 1e-6

@@ -42,13 +42,13 @@ import time
 import numpy as np
 
 import jwarp
-from jwarp.solvers.calibration import CalibrationOptions, CalibrationProblem, calibrate_with
-from jwarp.solvers.calibration.campaign import rough_setup
-from jwarp.solvers.calibration.files import Setup, make_measurement
-from jwarp.solvers.calibration.params import perturb_robot
-from jwarp.solvers.calibration.result import model_frames
-from jwarp.solvers.calibration.scenarios import scenario
-from jwarp.solvers.calibration.tow import TowSpec, tow_covariance, tow_from_dict
+from jwarp.calibration import CalibrationOptions, CalibrationProblem, calibrate_with
+from jwarp.calibration.simulate.campaign import rough_setup
+from jwarp.calibration.files import Setup, make_measurement
+from jwarp.calibration.estimate.params import perturb_robot
+from jwarp.calibration.estimate.result import model_frames
+from jwarp.calibration.simulate.scenarios import scenario
+from jwarp.calibration.design.tow import TowSpec, tow_covariance, tow_from_dict
 
 GEOMETRY = ["theta", "d", "r", "alpha"]
 PAPER = {"MAP": (1.05, 4.77), "MAP + TOW": (1.21, 4.11)}   # px mean, mm mean (Table 2.3)
@@ -182,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
                                                 covariance=cov))
     t_tow = time.perf_counter() - t0
 
-    from jwarp.solvers.calibration import errors
+    from jwarp.calibration import errors
 
     rows = {}
     for label, res, t in (("MAP", res_map, t_map), ("MAP + TOW", res_tow, t_tow)):

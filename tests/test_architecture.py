@@ -3,8 +3,9 @@ modules, and no ``_private`` name is used outside its module.
 
 Layers (low to high); a module may import its own layer or any lower one:
 
-    0 host:      jwarp.atomic, jwarp.memory, jwarp.model, jwarp.registry, jwarp.measurement,
-                 jwarp.importers (URDF in/out, sphere fitting: model and atomic only,
+    0 host:      jwarp.utils (atomic files, memory estimates, deprecated paths),
+                 jwarp.model (RobotModel, the plugin registry, the measurement interface),
+                 jwarp.importers (URDF in/out, sphere fitting: model and utils only,
                  plus third-party libs)
     1 kernels:   jwarp.kernels (Warp only)
     2 core:      jwarp.core (arrays, device model, rows, limits)
@@ -32,11 +33,33 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1] / "jwarp"
 
 LAYERS = {
-    "jwarp.atomic": 0, "jwarp.memory": 0, "jwarp.model": 0, "jwarp.registry": 0, "jwarp.measurement": 0,
-    "jwarp.importers": 0,
+    "jwarp.utils": 0, "jwarp.model": 0, "jwarp.importers": 0,
     "jwarp.kernels": 1, "jwarp.core": 2, "jwarp.kinematics": 3, "jwarp.world": 4,
-    "jwarp.plugins": 5, "jwarp.solvers": 6, "jwarp.learn": 7, "jwarp.viz": 8, "jwarp.cli": 9,
+    "jwarp.plugins": 5, "jwarp.solvers": 6, "jwarp.calibration": 6, "jwarp.learn": 7,
+    "jwarp.viz": 8, "jwarp.cli": 9,
 }
+#: old module paths kept for one release: each only forwards (with a DeprecationWarning)
+#: to the module it moved to (issue 28, packages by job)
+DEPRECATED = {
+    "jwarp.atomic": "jwarp.utils.atomic", "jwarp.memory": "jwarp.utils.memory",
+    "jwarp.registry": "jwarp.model.registry", "jwarp.measurement": "jwarp.model.measurement",
+    "jwarp.solvers.planner": "jwarp.solvers.planning",
+    "jwarp.solvers.rrt": "jwarp.solvers.planning.rrt",
+    "jwarp.solvers.ik_explain": "jwarp.solvers.ik.explain",
+    "jwarp.solvers.feasibility": "jwarp.world.path_feasibility",
+    "jwarp.solvers.calibration": "jwarp.calibration",
+    "jwarp.solvers.calibration.design": "jwarp.calibration.design.optimal",
+    "jwarp.plugins.measurements.geometry": "jwarp.model.geometry",
+    **{f"jwarp.solvers.calibration.{m}": f"jwarp.calibration.{p}{m}"
+       for p, ms in (("estimate.", ("map", "options", "params", "origin", "elastic", "robust",
+                                    "samples", "result", "diagnostics")),
+                     ("design.", ("sensitivity", "poses", "tour", "tow", "virtual_noise")),
+                     ("simulate.", ("campaign", "scenarios", "unmodeled")),
+                     ("", ("files", "pool")))
+       for m in ms},
+}
+for _old in DEPRECATED:
+    LAYERS[_old] = LAYERS[max((p for p in LAYERS if DEPRECATED[_old].startswith(p)), key=len)]
 FACADE = {"jwarp", "jwarp.__main__"}
 
 
@@ -213,9 +236,9 @@ def test_tests_mirror_the_packages():
 
 
 @pytest.mark.parametrize("func, options", [("ik", "jwarp.solvers.ik:IKOptions"),
-                                           ("plan", "jwarp.solvers.planner:PlanOptions"),
+                                           ("plan", "jwarp.solvers.planning:PlanOptions"),
                                            ("calibrate",
-                                            "jwarp.solvers.calibration:CalibrationOptions")])
+                                            "jwarp.calibration:CalibrationOptions")])
 def test_options_are_spelled_once(func, options):
     """``jwarp.ik``/``plan``/``calibrate`` take ``options=None, **overrides``: no keyword
     re-lists a field of their options dataclass (issue 28: options spelled once)."""
@@ -240,15 +263,15 @@ def test_options_are_spelled_once(func, options):
 def test_feasibility_helpers_come_from_their_module():
     """The planner re-exports the feasibility helpers it uses (``collision_free``,
     ``check_world``, ...) for old callers; jwarp's own modules import them from
-    ``jwarp.solvers.feasibility``, where they live."""
-    import jwarp.solvers.feasibility as feas
+    ``jwarp.world.path_feasibility``, where they live."""
+    import jwarp.world.path_feasibility as feas
 
     helpers = {n for n in dir(feas) if not n.startswith("_") and callable(getattr(feas, n))
                and getattr(getattr(feas, n), "__module__", "") == feas.__name__}
-    bad = [f"{m}:{line} imports {sorted(set(names) & helpers)} from jwarp.solvers.planner"
-           for m in MODULES if m not in FACADE and m != "jwarp.solvers.planner"
+    bad = [f"{m}:{line} imports {sorted(set(names) & helpers)} from jwarp.solvers.planning"
+           for m in MODULES if m not in FACADE and m != "jwarp.solvers.planning"
            for line, target, names, _ in imports(m)
-           if target == "jwarp.solvers.planner" and names and set(names) & helpers]
+           if target == "jwarp.solvers.planning" and names and set(names) & helpers]
     assert not bad, "\n".join(bad)
 
 
@@ -289,7 +312,7 @@ def test_one_device_default_rule():
     bad = _device_defaults()
     assert not bad, "device defaults other than None:\n" + "\n".join(bad)
     facades = ["jwarp", "jwarp.kinematics", "jwarp.world", "jwarp.learn",
-               "jwarp.solvers.calibration", "jwarp.solvers.ik", "jwarp.solvers.planner"]
+               "jwarp.calibration", "jwarp.solvers.ik", "jwarp.solvers.planning"]
     seen = 0
     for name in facades:
         mod = importlib.import_module(name)
@@ -327,10 +350,10 @@ def test_devices_resolve_through_the_one_helper():
 
 
 #: option dataclasses and the names the vocabulary replaced (issue 28; docs/api.md "Solvers")
-OPTION_CLASSES = ["jwarp.solvers.ik:IKOptions", "jwarp.solvers.planner:PlanOptions",
-                  "jwarp.solvers.calibration:CalibrationOptions",
-                  "jwarp.solvers.calibration.design:DesignOptions",
-                  "jwarp.solvers.calibration.poses:PoseOptions", "jwarp.solvers.rrt:RRTOptions",
+OPTION_CLASSES = ["jwarp.solvers.ik:IKOptions", "jwarp.solvers.planning:PlanOptions",
+                  "jwarp.calibration:CalibrationOptions",
+                  "jwarp.calibration.design.optimal:DesignOptions",
+                  "jwarp.calibration.design.poses:PoseOptions", "jwarp.solvers.planning.rrt:RRTOptions",
                   "jwarp.learn.plan_data:PlanDataOptions", "jwarp.learn.train_ik:TrainIKOptions",
                   "jwarp.learn.train_plan:TrainPlanOptions"]
 OLD_OPTION_NAMES = {"max_iter", "max_iterations", "n_iter", "n_iterations", "n_seeds",
@@ -360,10 +383,10 @@ def test_old_option_names_warn_and_give_the_same_options():
     import numpy as np
 
     import jwarp
-    from jwarp.solvers.calibration import CalibrationOptions
-    from jwarp.solvers.calibration.design import DesignOptions
+    from jwarp.calibration import CalibrationOptions
+    from jwarp.calibration.design.optimal import DesignOptions
     from jwarp.solvers.ik import IKOptions
-    from jwarp.solvers.planner import PlanOptions
+    from jwarp.solvers.planning import PlanOptions
 
     with pytest.warns(DeprecationWarning, match="'max_iterations' is renamed 'iterations'"):
         old = IKOptions(max_iterations=7)

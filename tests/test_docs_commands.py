@@ -1331,7 +1331,7 @@ def _expected(comment: str) -> re.Pattern | None:
 
 # README's calibration block warns about the directions its data cannot determine (its text
 # says so): expected
-@pytest.mark.filterwarnings("ignore::jwarp.solvers.calibration.result.CalibrationWarning")
+@pytest.mark.filterwarnings("ignore::jwarp.calibration.estimate.result.CalibrationWarning")
 def test_readme_python_snippets(work, tmp_path, monkeypatch, capsys):
     """Every ```python block of README.md runs, in order, in one namespace (later blocks
     use earlier names, as a reader's session would), in a folder holding README's

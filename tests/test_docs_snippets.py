@@ -37,9 +37,9 @@ _JUSTIN = "import jwarp\nrobot = jwarp.robot('justin19')\n"
 #: ``robot, meas, q, y`` (and ``meta``, ``setup``) of calibration.md and measurements.md
 _IMAGE_CAMPAIGN = _JUSTIN + """\
 from jwarp import calibrate
-from jwarp.solvers.calibration.campaign import simulate_campaign
-from jwarp.solvers.calibration.files import make_measurement
-from jwarp.solvers.calibration.scenarios import scenario
+from jwarp.calibration.simulate.campaign import simulate_campaign
+from jwarp.calibration.files import make_measurement
+from jwarp.calibration.simulate.scenarios import scenario
 _setup, _sampler, _accept = scenario("justin19", "image")
 _camp = simulate_campaign(robot, _setup, 40, seed=1, sampler=_sampler, accept=_accept)
 meas = make_measurement(robot, _camp.setup)
@@ -50,10 +50,10 @@ q, y, meta = _camp.samples.q, _camp.samples.y, _camp.samples.meta
 #: examples/sensitivity_hand4.py and examples/oed_hand4.py build them
 _HAND4 = """\
 import jwarp
-from jwarp.solvers.calibration.campaign import uniform_configurations
-from jwarp.solvers.calibration.files import Setup, make_measurement
-from jwarp.solvers.calibration.pool import draw_configurations
-from jwarp.solvers.calibration.scenarios import HAND_FINGERS, hand_contact_setup
+from jwarp.calibration.simulate.campaign import uniform_configurations
+from jwarp.calibration.files import Setup, make_measurement
+from jwarp.calibration.pool import draw_configurations
+from jwarp.calibration.simulate.scenarios import HAND_FINGERS, hand_contact_setup
 robot = jwarp.robot("hand4")
 _pairs = tuple((a, b) for i, a in enumerate(HAND_FINGERS) for b in HAND_FINGERS[i + 1:])
 setup = hand_contact_setup(pairs=_pairs)
@@ -72,7 +72,7 @@ from types import SimpleNamespace
 import jwarp
 from jwarp.learn.dataset import PathDB, world_record
 from jwarp.learn.plan_data import world_for
-from jwarp.solvers.calibration.campaign import uniform_configurations
+from jwarp.calibration.simulate.campaign import uniform_configurations
 _robot = jwarp.robot("justin19")
 with PathDB("out.sqlite", "justin19", create=True) as _db:
     for _s in range(4):
@@ -151,7 +151,7 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "`setup` the JSON section of the image scenario's setup, `q`/`meta` its 40 simulated "
         "samples, `p` the nominal parameters"),
     "docs/measurements.md:192": (
-        "from jwarp.measurement import Measurement\n"
+        "from jwarp.model.measurement import Measurement\n"
         "class LaserMeasurement(Measurement):\n    pass\n",
         "`LaserMeasurement` is the plugin class the text writes"),
     "docs/robot_schema.md:313": (
@@ -198,8 +198,8 @@ PRELUDES: dict[str, tuple[str, str]] = {
     "docs/urdf_export.md:67": (
         _panda("panda.urdf") + "import jwarp\n"
         "from jwarp.importers.urdf_export import export_urdf\n"
-        "from jwarp.solvers.calibration.campaign import simulate_campaign\n"
-        "from jwarp.solvers.calibration.files import Setup, make_measurement\n"
+        "from jwarp.calibration.simulate.campaign import simulate_campaign\n"
+        "from jwarp.calibration.files import Setup, make_measurement\n"
         "robot = jwarp.robot('panda.urdf')\n"
         "_setup = Setup(plugin='cartesian', robot='panda', section={\n"
         "    'tracker': {'position': [2.0, 0.3, 0.8], 'rotvec': [0.1, -0.2, 2.4]},\n"

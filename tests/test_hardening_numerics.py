@@ -19,7 +19,8 @@ from jwarp.cli import main
 from jwarp.world.collision import collision_cost, is_collision_free, min_distances
 from jwarp.core.device import put_model
 from jwarp.kinematics.compensation import CompensationRows
-from jwarp.solvers import planner as PL
+from jwarp.solvers import planning as PL
+from jwarp.world import path_feasibility
 from jwarp.solvers.ik import ik
 from jwarp.world import world_from_occupancy
 from jwarp.world.feasibility import random_configurations
@@ -106,7 +107,7 @@ def test_planner_and_ik_check_their_inputs_in_the_solver_dtype(block_world):
     with pytest.raises(ValueError, match="^paths: values overflow float32"):
         obj.set_paths(paths)
     with pytest.raises(ValueError, match="^paths: values overflow float32"):
-        PL.substeps(paths, 2, dtype=np.float32)
+        path_feasibility.substeps(paths, 2, dtype=np.float32)
 
 
 # ------------------------------------------------------- 4. honest elastic answers
@@ -149,23 +150,23 @@ def test_collision_checks_use_only_converged_equilibria(block_world):
                       dtype=np.float64)  # what the checks solve
     rho = np.asarray(eq.rho)
     assert not eq.converged.any() and np.isfinite(rho).all()
-    assert PL.collision_free(model, block_world, q, 0.0).all()  # rigid: free
-    assert PL.collision_free(model, block_world, q, 0.0, kappa=1e-3).all()  # converges: free
-    assert not PL.collision_free(model, block_world, q, 0.0, kappa=0.1).any()
+    assert path_feasibility.collision_free(model, block_world, q, 0.0).all()  # rigid: free
+    assert path_feasibility.collision_free(model, block_world, q, 0.0, kappa=1e-3).all()  # converges: free
+    assert not path_feasibility.collision_free(model, block_world, q, 0.0, kappa=0.1).any()
     # the same rows handed in as rho are free: only convergence makes the difference
-    assert PL.collision_free(model, block_world, q, 0.0, rho=rho).all()
+    assert path_feasibility.collision_free(model, block_world, q, 0.0, rho=rho).all()
     with pytest.raises(ValueError, match=r"^kappa: the elastic equilibrium at start .*does not converge"):
         PL.plan(model, block_world, q[0], q[1], kappa=0.1, iterations=2, n_starts=1)
     # per-configuration compliances: the error names the row that does not converge
     mask = model.is_dh.astype(float)[:, None]
     kap = np.stack([np.full((model.n_frames, 3), 1e-3), np.full((model.n_frames, 3), 0.1)])
     with pytest.raises(ValueError, match=r"^kappa: the elastic equilibrium at goal\[1\]"):
-        PL.check_endpoints(model, block_world, q, "goal", 0.0, kap * mask)
-    PL.check_endpoints(model, block_world, q, "goal", 0.0, kap[0] * mask)  # both converge
-    path = PL.initial_paths(q[:1], np.array([[1.0, 0.0, 0.0, 0.0]]), 4)[0]
-    assert PL.path_feasible(model, block_world, path, 4)
-    assert PL.path_feasible(model, block_world, path, 4, kappa=1e-3)
-    assert not PL.path_feasible(model, block_world, path, 4, kappa=0.1)
+        path_feasibility.check_endpoints(model, block_world, q, "goal", 0.0, kap * mask)
+    path_feasibility.check_endpoints(model, block_world, q, "goal", 0.0, kap[0] * mask)  # both converge
+    path = path_feasibility.initial_paths(q[:1], np.array([[1.0, 0.0, 0.0, 0.0]]), 4)[0]
+    assert path_feasibility.path_feasible(model, block_world, path, 4)
+    assert path_feasibility.path_feasible(model, block_world, path, 4, kappa=1e-3)
+    assert not path_feasibility.path_feasible(model, block_world, path, 4, kappa=0.1)
 
 
 def test_elastic_ik_is_infeasible_where_the_rows_do_not_converge():
@@ -252,7 +253,7 @@ def test_complex_q_is_a_type_error(q):
         with pytest.raises(TypeError, match="^q: expected real numbers, got complex"):
             K.fk("justin19", q)
         with pytest.raises(TypeError, match="^q: expected real numbers"):
-            PL.collision_free(jwarp.robot("justin19"), None, np.asarray(q)[None], 0.0)
+            path_feasibility.collision_free(jwarp.robot("justin19"), None, np.asarray(q)[None], 0.0)
 
 
 def test_complex_arguments_are_type_errors():

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import jwarp.model as model_mod
+import jwarp.model.robot as model_mod
 from jwarp.model import RobotModel, RobotModelError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -7,7 +7,7 @@ import pytest
 
 import jwarp
 from jwarp import kinematics
-from jwarp import viz
+from jwarp.viz import robot as viz
 
 
 def test_world_spheres_follow_their_frames():

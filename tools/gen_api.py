@@ -27,13 +27,13 @@ API_MD = ROOT / "docs" / "api.md"
 INTRO_MD = ROOT / "docs" / "api_intro.md"
 
 #: the public facades, in page order; each entry lists alternative module paths (the first
-#: importable wins), so that a facade can move (e.g. ``jwarp.solvers.calibration`` ->
+#: importable wins), so that a facade can move (e.g. ``jwarp.calibration`` ->
 #: ``jwarp.calibration``) without editing this script.
 FACADES: tuple[tuple[str, ...], ...] = (
     ("jwarp",),
     ("jwarp.kinematics",),
     ("jwarp.world",),
-    ("jwarp.calibration", "jwarp.solvers.calibration"),
+    ("jwarp.calibration", "jwarp.calibration"),
     ("jwarp.learn",),
 )
 

@@ -38,7 +38,7 @@ writes ``--out`` and ``--params-out`` to temporary files (made before the comput
 renames them back to back at the end (the robot first), after the ``--rerun`` recording; the
 ``--params-out`` JSON records the SHA-256 of the ``--out`` robot file (``robot_sha256``), so
 a pair cut apart by a kill between the renames is recognisable. ``simulate-campaign``
-replaces its folder as one set (:class:`jwarp.atomic.AtomicFolder`). Test rows that are
+replaces its folder as one set (:class:`jwarp.utils.atomic.AtomicFolder`). Test rows that are
 also calibration rows are an error unless ``--allow-overlap``; without
 ``--calibrate-rows`` the calibration rows are all rows not in ``--test-rows``.
 """
@@ -142,7 +142,7 @@ class ProgressBar:
 
 
 def _stats(err: np.ndarray, scale: float) -> dict[str, float]:
-    from jwarp.solvers.calibration import error_stats
+    from jwarp.calibration import error_stats
 
     return {k: v * scale for k, v in error_stats(err).items()}
 
@@ -204,9 +204,9 @@ def _parse_fix(fix: str | None) -> tuple[str | None, dict[str, str]]:
 
 def _free_groups(free: str, meas: Any, fix: str | None) -> list[str]:
     """``--free`` plus the measurement's pose and marker groups not in ``--fix``
-    (:func:`jwarp.solvers.calibration.params.with_pose_groups`, what ``calibrate()`` frees
+    (:func:`jwarp.calibration.estimate.params.with_pose_groups`, what ``calibrate()`` frees
     by default)."""
-    from jwarp.solvers.calibration.params import with_pose_groups
+    from jwarp.calibration.estimate.params import with_pose_groups
 
     try:
         return with_pose_groups(meas, free or "", fix)
@@ -238,11 +238,11 @@ def _check_float(option: str, value: float | None, minimum: float = 0.0,
 
 def _reserve_outputs(args: argparse.Namespace, inputs: dict[str, str | None]) -> dict[str, Any]:
     """Check every output path of ``calibrate`` before any work and hold a temporary file
-    beside ``--out`` and ``--params-out`` (:class:`~jwarp.atomic.AtomicFile`; ``--rerun``
+    beside ``--out`` and ``--params-out`` (:class:`~jwarp.utils.atomic.AtomicFile`; ``--rerun``
     is only probed, its recording writes its own): a missing or unwritable folder, a
     folder given for a file, an output that is an input or another output is an error
     naming the option."""
-    from jwarp.atomic import AtomicFile
+    from jwarp.utils.atomic import AtomicFile
 
     outs = [(opt, p) for opt, p in (("--out", args.out), ("--params-out", args.params_out),
                                      ("--rerun", args.rerun)) if p]
@@ -282,7 +282,7 @@ def _write_tmp(f: Any, text: str) -> None:
 
 def _rows(args: argparse.Namespace, S: int) -> tuple[np.ndarray, np.ndarray | None, int]:
     """(calibration row indices, test row indices or None, rows in both)."""
-    from jwarp.solvers.calibration.files import parse_rows
+    from jwarp.calibration.files import parse_rows
 
     every = np.arange(S)
     test = every[parse_rows(args.test_rows, S, "--test-rows")] if args.test_rows else None
@@ -308,9 +308,9 @@ def _tow_covariance(args: argparse.Namespace, setup: Any, model: Any, meas: Any,
     """Per-sample covariance of the calibration rows: the setup's ``tow`` section (eq. 2.11,
     linearized at the start: nominal robot, initial guess of the measurement) plus
     ``--virtual-noise`` (eq. 2.7); None when neither is given."""
-    from jwarp.solvers.calibration import CalibrationProblem
-    from jwarp.solvers.calibration.tow import tow_covariance, tow_from_dict
-    from jwarp.solvers.calibration.virtual_noise import add_virtual_noise
+    from jwarp.calibration import CalibrationProblem
+    from jwarp.calibration.design.tow import tow_covariance, tow_from_dict
+    from jwarp.calibration.design.virtual_noise import add_virtual_noise
 
     if setup.tow is None and args.virtual_noise is None:
         return None
@@ -353,12 +353,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
-    from jwarp.atomic import commit_all
+    from jwarp.utils.atomic import commit_all
     from jwarp.cli.common import dumps
-    from jwarp.registry import robot as get_robot
-    from jwarp.solvers.calibration import CalibrationOptions, calibrate_with, errors
-    from jwarp.solvers.calibration.files import (make_measurement, parse_samples, read_setup,
-                                                 read_text, sha256_hex)
+    from jwarp.model.registry import robot as get_robot
+    from jwarp.calibration import CalibrationOptions, calibrate_with, errors
+    from jwarp.calibration.files import (make_measurement, parse_samples, read_setup,
+                                         read_text, sha256_hex)
 
     setup = read_setup(args.setup)
     robot_name = args.robot or setup.robot
@@ -388,7 +388,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     priors = _parse_keyed(args.prior, "--prior", float)
     orders = _parse_keyed(args.order, "--order", int)
     if fix_at:
-        from jwarp.solvers.calibration.result import fixed_params
+        from jwarp.calibration.estimate.result import fixed_params
 
         try:
             fixed_params(meas, fix_at)
@@ -408,7 +408,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
             out["test"] = _stats(errors(robot, meas, p, test.q, test.y, test.meta or None), scale)
         return out
 
-    from jwarp.solvers.calibration.result import model_frames
+    from jwarp.calibration.estimate.result import model_frames
 
     try:
         p_start = meas.initial_guess(model_frames(model, train.q, elastic=False), train.y,
@@ -481,8 +481,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     }
     diag = None
     if args.diagnostics:
-        from jwarp.solvers.calibration.diagnostics import (format_diagnostics,
-                                                           residual_diagnostics)
+        from jwarp.calibration.estimate.diagnostics import (format_diagnostics,
+                                                            residual_diagnostics)
 
         diag = residual_diagnostics(res.robot, meas, res.params, train.q, train.y,
                                     train.meta or None)
@@ -529,7 +529,7 @@ def _with_provenance(robot: Any, args: argparse.Namespace, setup: Any, raw: byte
     from datetime import datetime, timezone
 
     from jwarp import __version__
-    from jwarp.solvers.calibration.files import sha256_hex
+    from jwarp.calibration.files import sha256_hex
 
     base = robot.name.removesuffix("-calibrated")
     name = args.name if args.name is not None else f"{base}-calibrated"
@@ -558,9 +558,9 @@ _BYTES_PER_SAMPLE_COLUMN = 64
 
 def _check_campaign_memory(model: Any, meas: Any, n: int) -> None:
     """Refuse ``--samples`` whose estimated memory exceeds the available memory."""
-    from jwarp.solvers.calibration.files import columns
+    from jwarp.calibration.files import columns
 
-    from jwarp.memory import check_memory, format_bytes
+    from jwarp.utils.memory import check_memory, format_bytes
 
     per = (_BYTES_PER_SAMPLE_FRAME * model.n_frames
            + _BYTES_PER_SAMPLE_COLUMN * len(columns(model, meas)))
@@ -573,11 +573,11 @@ def _check_campaign_memory(model: Any, meas: Any, n: int) -> None:
 
 
 def cmd_simulate_campaign(args: argparse.Namespace) -> int:
-    from jwarp.atomic import AtomicFolder
+    from jwarp.utils.atomic import AtomicFolder
     from jwarp.cli.common import quiet_warp
-    from jwarp.registry import robot as get_robot
-    from jwarp.solvers.calibration.campaign import simulate_campaign
-    from jwarp.solvers.calibration.files import make_measurement, read_setup
+    from jwarp.model.registry import robot as get_robot
+    from jwarp.calibration.simulate.campaign import simulate_campaign
+    from jwarp.calibration.files import make_measurement, read_setup
 
     _check_int("--samples", args.samples, 1)
     _check_int("--seed", args.seed, 0)
@@ -585,7 +585,7 @@ def cmd_simulate_campaign(args: argparse.Namespace) -> int:
     _check_float("--length-error", args.length_error, unit=" mm")
     _check_float("--angle-error", args.angle_error, maximum=180.0, unit=" deg")
     _check_float("--kappa", args.kappa, unit=" rad/(N m)")
-    from jwarp.solvers.calibration.unmodeled import parse_unmodeled
+    from jwarp.calibration.simulate.unmodeled import parse_unmodeled
 
     try:
         unmodeled = parse_unmodeled(args.unmodeled, option="--unmodeled")
@@ -598,7 +598,7 @@ def cmd_simulate_campaign(args: argparse.Namespace) -> int:
         robot_name = args.robot or setup.robot
         sampler = accept = None
     else:
-        from jwarp.solvers.calibration.scenarios import scenario
+        from jwarp.calibration.simulate.scenarios import scenario
 
         robot_name = args.robot or "justin19"
         setup, sampler, accept = scenario(robot_name, args.plugin)

@@ -96,9 +96,9 @@ def check_dtype_range(values: Any, dtype: Any, option: str) -> None:
 
 
 def check_option_memory(need: float, what: str, option: str) -> None:
-    """:func:`jwarp.memory.check_memory` of ``need`` bytes for ``what``, before any work;
+    """:func:`jwarp.utils.memory.check_memory` of ``need`` bytes for ``what``, before any work;
     too much is a CLIError naming ``option`` (the one to lower)."""
-    from jwarp.memory import check_memory
+    from jwarp.utils.memory import check_memory
 
     try:
         check_memory(need, what, f"lower {option}")
@@ -142,10 +142,10 @@ def check_output(path: str, option: str, rerun: bool = False,
                  inputs: dict[str, str | None] | None = None) -> None:
     """Check an output path before any work: CLIError naming ``option`` if it is empty, a
     folder, in a missing or unwritable folder (a temporary file is made there and removed:
-    :class:`jwarp.atomic.AtomicFile`), one of the existing input files ``inputs``
+    :class:`jwarp.utils.atomic.AtomicFile`), one of the existing input files ``inputs``
     ({option: path}) or of the command's other files (:func:`set_command_files`), or, with
     ``rerun``, if rerun-sdk is missing."""
-    from jwarp.atomic import AtomicFile
+    from jwarp.utils.atomic import AtomicFile
 
     if not path or not path.strip():
         raise CLIError(f"{option}: empty file name")
@@ -168,13 +168,13 @@ def check_output(path: str, option: str, rerun: bool = False,
 
 class RerunRecording:
     """A rerun recording of ``--rerun`` written to a temporary file
-    (:class:`jwarp.atomic.AtomicFile`): :meth:`close` renames it to the path, :meth:`abort`
+    (:class:`jwarp.utils.atomic.AtomicFile`): :meth:`close` renames it to the path, :meth:`abort`
     (or a failure to open it) removes it. ``rr`` is the rerun module, ``rec`` the
     recording (application id ``app``)."""
 
     def __init__(self, path: str, app: str):
         from jwarp import viz
-        from jwarp.atomic import AtomicFile
+        from jwarp.utils.atomic import AtomicFile
 
         self.rr = viz.rerun_module()
         try:
@@ -204,7 +204,7 @@ def load_robot(name: str):
     """A registered robot, a robot JSON, or a URDF file with its collision model (spheres
     fitted to the links' collision geometry and sampled self-collision pairs, cached:
     :func:`jwarp.world.spherize.spherized_robot`)."""
-    from jwarp.registry import robot
+    from jwarp.model.registry import robot
 
     if isinstance(name, str) and name.lower().endswith(".urdf"):
         from jwarp.world.spherize import spherized_robot
@@ -361,7 +361,7 @@ def dtype_of(name: str) -> Any:
 
 
 def plugin_warnings_one_line() -> None:
-    """Show :class:`~jwarp.registry.PluginWarning` as one ``jwarp: warning: ...`` line on
+    """Show :class:`~jwarp.model.registry.PluginWarning` as one ``jwarp: warning: ...`` line on
     stderr (a broken plugin is reported, never a traceback); other warnings as before."""
     import warnings
 
@@ -370,7 +370,7 @@ def plugin_warnings_one_line() -> None:
         return
 
     def showwarning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
-        from jwarp.registry import PluginWarning
+        from jwarp.model.registry import PluginWarning
 
         if isinstance(category, type) and issubclass(category, PluginWarning):
             print(f"jwarp: warning: {message}", file=sys.stderr if file is None else file)

@@ -23,7 +23,7 @@ Every option is checked before any work: counts in range, ``--device``, ``--db``
 writable file in an existing folder; an existing database must be one of ``--robot``),
 Ray installed for ``--ray`` (the optional extra ``distributed``), ``--num-gpus`` only with
 Ray, the default labeller available, the memory the labeller needs for one world
-(``--paths-per-world`` x ``--n-waypoints`` x the multi-starts, :mod:`jwarp.memory`);
+(``--paths-per-world`` x ``--n-waypoints`` x the multi-starts, :mod:`jwarp.utils.memory`);
 ``export --out`` writable and not the database. Errors are one line naming the option.
 An existing database must be writable and so must its folder (SQLite writes its journal
 beside it): a read-only one is refused before the first world is labelled.

@@ -15,15 +15,15 @@ plan CSV: joint + per-sample columns, observed columns ignored) or at ``--n`` co
 drawn with ``--seed`` (contact setups: in contact on the nominal robot; others: uniform),
 and the task measurement (``--task-setup``) at ``--task-samples`` or ``--n`` uniform
 configurations. Prints the identifiable counts, the kernel-inclusion verdict of eq. 2.24
-and the directions that break it (:mod:`jwarp.solvers.calibration.sensitivity`); ``--out``
+and the directions that break it (:mod:`jwarp.calibration.design.sensitivity`); ``--out``
 (old spelling ``--png``, deprecated) draws both spectra on a log scale, ``--rerun`` logs them as bar charts (log10 of the
 eigenvalues) under ``sensitivity/<actual|task>``.
 
 ``design``: selects ``--n`` rows of ``--candidates`` (task D-optimality with
-``--task-setup``, else plain D-optimality; :mod:`jwarp.solvers.calibration.design`) and
+``--task-setup``, else plain D-optimality; :mod:`jwarp.calibration.design.optimal`) and
 writes them, in the order chosen, to ``--out`` in the pool format. With
 ``--write-candidates N`` it instead writes a pool of N drawn configurations to ``--out``.
-Pools are feasible (:func:`jwarp.solvers.calibration.pool.draw_pool`): draws outside the
+Pools are feasible (:func:`jwarp.calibration.pool.draw_pool`): draws outside the
 joint limits, in self-collision (sphere surfaces closer than ``--margin``, as
 ``jwarp sample-poses`` checks them) or, with ``--world`` / ``--scene``, in collision with
 the world are dropped and replaced by more draws; a summary line says how many were
@@ -51,8 +51,8 @@ DEFAULT_FREE = "theta,d,r,alpha"
 
 
 def _setup_and_measurement(path: str, option: str, robot_name: str | None) -> tuple[Any, Any, Any]:
-    from jwarp.registry import robot as get_robot
-    from jwarp.solvers.calibration.files import make_measurement, read_setup
+    from jwarp.model.registry import robot as get_robot
+    from jwarp.calibration.files import make_measurement, read_setup
 
     try:
         setup = read_setup(path)
@@ -71,8 +71,8 @@ def _setup_and_measurement(path: str, option: str, robot_name: str | None) -> tu
 
 def _configurations(model: Any, setup: Any, meas: Any, path: str | None, option: str,
                     n: int, seed: int, uniform: bool) -> tuple[np.ndarray, dict | None]:
-    from jwarp.solvers.calibration.campaign import uniform_configurations
-    from jwarp.solvers.calibration.pool import draw_configurations, read_configurations
+    from jwarp.calibration.simulate.campaign import uniform_configurations
+    from jwarp.calibration.pool import draw_configurations, read_configurations
 
     if path:
         s = read_configurations(path, model, meas, option)
@@ -93,7 +93,7 @@ def spectra_png(path: str, spectra: list[tuple[str, np.ndarray]], threshold: flo
     written atomically as PNG (OpenCV; matplotlib is not a dependency)."""
     import cv2
 
-    from jwarp.atomic import AtomicFile
+    from jwarp.utils.atomic import AtomicFile
 
     W, H, left, right, top, bottom = 900, 560, 90, 30, 50, 60
     img = np.full((H, W, 3), 255, np.uint8)
@@ -163,7 +163,7 @@ def spectra_rrd(path: str, spectra: list[tuple[str, np.ndarray]]) -> None:
 
 # ------------------------------------------------------------- sensitivity
 def cmd_sensitivity(args: argparse.Namespace) -> int:
-    from jwarp.solvers.calibration.sensitivity import sensitivity
+    from jwarp.calibration.design.sensitivity import sensitivity
 
     quiet_warp()
     inputs = {"--setup": args.setup, "--task-setup": args.task_setup,
@@ -263,10 +263,10 @@ def _warn(lines: list[str]) -> None:
 
 
 def cmd_design(args: argparse.Namespace) -> int:
-    from jwarp.solvers.calibration.design import DesignOptions, design
-    from jwarp.solvers.calibration.pool import (PoolChecker, configurations_text,
-                                                draw_pool, read_configurations)
-    from jwarp.atomic import AtomicFile
+    from jwarp.calibration.design.optimal import DesignOptions, design
+    from jwarp.calibration.pool import (PoolChecker, configurations_text,
+                                        draw_pool, read_configurations)
+    from jwarp.utils.atomic import AtomicFile
 
     quiet_warp()
     if args.write_candidates is not None and args.candidates:

@@ -38,7 +38,7 @@ def cmd_robots(args: argparse.Namespace) -> int:
     ``jwarp: warning: ...`` lines on stderr (the list itself, also ``--json``, stays a list)."""
     import warnings
 
-    from jwarp.registry import PluginWarning, plugin_problems, robots
+    from jwarp.model.registry import PluginWarning, plugin_problems, robots
 
     rows = []
     with warnings.catch_warnings():

@@ -19,10 +19,10 @@ Errors and exit status (:func:`main`):
   own usage errors, e.g. a missing required option, print the usage lines before it).
   Option values are checked before any work: numbers must be finite and in range
   (``--lam`` in (0, 1], counts >= 1, ``--max-iter`` >= 0, ...), sizes are checked against
-  an estimate of the memory they need (:mod:`jwarp.memory`; the error gives the figure),
+  an estimate of the memory they need (:mod:`jwarp.utils.memory`; the error gives the figure),
   ``--device`` must exist, and every output path (``--out``, ``--rerun``) must be
   writable (its folder exists, it is not a folder) before the computation starts. Files
-  are written atomically (:class:`jwarp.atomic.AtomicFile`): an error or interrupt leaves
+  are written atomically (:class:`jwarp.utils.atomic.AtomicFile`): an error or interrupt leaves
   no temporary file and the old file as it was.
 * Exceptions reach :func:`main` as one line: :class:`CLIError`, ValueError, TypeError,
   OSError (files), ``zipfile.BadZipFile`` are input errors and print their message;

@@ -21,7 +21,7 @@ about that end-effector axis is free; ``jwarp.ik(orientation=..., free_axis=...)
 ``--tol-pos M``/``--tol-rot RAD``; ``--initial Q`` (joint values, ``--deg`` honoured, within
 the limits) is the first of the ``--starts`` seeds; ``--scene`` as for ``plan`` (exact
 objects, or a grid with ``--voxel``/``--extent``). An infeasible answer prints ``why:``
-(JSON ``reason``): :func:`jwarp.solvers.ik_explain.explain_ik` (limits, pose error against
+(JSON ``reason``): :func:`jwarp.solvers.ik.explain.explain_ik` (limits, pose error against
 the tolerances, colliding pairs).
 
 ``free-config`` prints collision-free configurations (within the joint limits, clear of
@@ -270,7 +270,7 @@ def _fallback(text: str) -> str | None:
 
 def _weights() -> Any:
     """The weights of U_path the CLI plans with (the planner's default PathWeights)."""
-    from jwarp.solvers.planner import PathWeights
+    from jwarp.solvers.planning import PathWeights
 
     return PathWeights()
 
@@ -426,7 +426,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
                      inputs={"--world": args.world, "--scene": args.scene,
                              "--robot": args.robot, "--warm-start": args.warm_start})
     world = _world(args.world, model, args, scene)
-    from jwarp.solvers.planner import PlanOptions, Planner, plan
+    from jwarp.solvers.planning import PlanOptions, Planner, plan
 
     rec = _Recorder(args.rerun, model, world) if args.rerun is not None else None
     callback = None
@@ -641,7 +641,7 @@ def cmd_ik(args: argparse.Namespace) -> int:
     tol_rot = args.tol_rot if args.tol_rot is not None else _ik_default("tol_rot")
     reason = None
     if not res.feasible:
-        from jwarp.solvers.ik_explain import explain_ik
+        from jwarp.solvers.ik.explain import explain_ik
 
         reason = explain_ik(model, args.frame, np.asarray(res.q, np.float64), T, world=world,
                             margin=args.margin, tol_pos=tol_pos, tol_rot=tol_rot,
@@ -736,7 +736,7 @@ def cmd_free_config(args: argparse.Namespace) -> int:
                     ok = is_collision_free(model, q, world, args.margin, device=args.device,
                                            dtype=np.float64)
                 else:  # the deflected robot, as plan/ik --elastic check their endpoints
-                    from jwarp.solvers.feasibility import collision_free
+                    from jwarp.world.path_feasibility import collision_free
                     ok = collision_free(model, world, q, args.margin, kappa=kappa,
                                         device=args.device, self_margin=args.margin)
             except (ValueError, TypeError) as e:

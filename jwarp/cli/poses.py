@@ -35,9 +35,9 @@ def _check_sampling_memory(robot: Any, args: argparse.Namespace) -> None:
 
 
 def cmd_sample_poses(args: argparse.Namespace) -> int:
-    from jwarp.solvers.calibration.files import read_setup
-    from jwarp.solvers.calibration.poses import PoseOptions, PoseSampler, write_plan
-    from jwarp.solvers.calibration.tour import order_poses
+    from jwarp.calibration.files import read_setup
+    from jwarp.calibration.design.poses import PoseOptions, PoseSampler, write_plan
+    from jwarp.calibration.design.tour import order_poses
 
     check_output(args.out, "--out", inputs={"--setup": args.setup})
     device = args.device or "cpu"
@@ -59,7 +59,7 @@ def cmd_sample_poses(args: argparse.Namespace) -> int:
                       device=device)
     draw = None
     if setup.plugin == "contact":   # configurations on the contact manifold (nominal model)
-        from jwarp.solvers.calibration.scenarios import contact_sampler
+        from jwarp.calibration.simulate.scenarios import contact_sampler
 
         draw = contact_sampler(robot, setup)
     try:

@@ -21,7 +21,7 @@ Model vs Data (as in MuJoCo Warp):
   edit a copy, not the model in place.
 * **Data** -- workspaces that hold every intermediate and output of a computation on one
   batch shape and are reused across calls (no allocation on a second call of equal
-  shape): the planner's path buffers (:class:`jwarp.solvers.planner.PathObjective`),
+  shape): the planner's path buffers (:class:`jwarp.solvers.planning.PathObjective`),
   :class:`jwarp.world.collision.CollisionData` (collision scratch and outputs),
   :class:`jwarp.kinematics.data.KinematicsData` ``(model, batch)`` (joint values, frames,
   frame Jacobians and their recorded launches; filled by
@@ -51,7 +51,7 @@ from jwarp.kernels.collision import kernels as collision_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.kernels.path import kernels as path_kernels
 from jwarp.model import RobotModel
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 
 __all__ = ["DeviceModel", "SphereModel", "put_model", "struct_fields", "struct_field", "make_struct", "content_key", "scalar_type", "numpy_dtype",
            "frame_mass_model", "with_frame_masses", "with_kappa_nonlinear", "fixed_parts", "collision_tables"]

@@ -560,6 +560,6 @@ def srdf_text(robot: Any, *, name: str | None = None) -> str:
 
 def write_srdf(robot: Any, path: str | os.PathLike, *, name: str | None = None) -> None:
     """Write :func:`srdf_text` to ``path`` atomically."""
-    from jwarp.atomic import atomic_write_text
+    from jwarp.utils.atomic import atomic_write_text
 
     atomic_write_text(path, srdf_text(robot, name=name))

@@ -51,7 +51,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from jwarp.atomic import AtomicFile, commit_all
+from jwarp.utils.atomic import AtomicFile, commit_all
 from jwarp.model import RobotModel
 
 #: diagonal inertia [kg m^2] added to every exported inertial (point masses have none)
@@ -322,7 +322,7 @@ def export_urdf(robot: RobotModel, path: str | os.PathLike, *, name: str | None 
         ValueError: ``path`` is a folder or its folder does not exist (checked before work).
 
     All files are written to temporary files first and renamed at the end
-    (:func:`jwarp.atomic.commit_all`): an error leaves none. The side file's
+    (:func:`jwarp.utils.atomic.commit_all`): an error leaves none. The side file's
     ``notes.urdf_sha256`` is the SHA-256 of the URDF text written with it. A side file left
     from an earlier export of ``path`` is removed when no side file is written now (it would
     describe another robot); a file of that name that no export wrote (its notes do not

@@ -1,7 +1,7 @@
 """Measurement-pose checks (thesis 2.4.3, elastic paper IV-C): limits, marker visibility
 from fixed cameras with occlusion by the robot's spheres, self-collision with a margin.
 
-Math only; the host side is :mod:`jwarp.solvers.calibration.poses`. Built per scalar type
+Math only; the host side is :mod:`jwarp.calibration.design.poses`. Built per scalar type
 by :func:`kernels` (float32 or float64); one thread per candidate configuration.
 
 Sensor tables (:class:`Sensors`, part of the *Model*):

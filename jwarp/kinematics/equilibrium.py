@@ -15,7 +15,7 @@ from jwarp.core.device import DeviceModel
 from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.transmission import transmitted
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 from jwarp.kinematics.launch import (ElasticFK, ElasticLaunch, ElasticStep, elastic_args, lam_tol,
                                      equilibrium, frame_rows, host_out, rho0_full, setup)
 

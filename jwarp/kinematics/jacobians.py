@@ -15,7 +15,7 @@ from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import frame_rows, jacobian_inputs, point_vec, setup, small_call
 from jwarp.kinematics.transmission import transmission_slope, transmitted
 from jwarp.model import RobotModel
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 
 
 def _dh_rows(dh: Any, model: RobotModel, batch: Batch, t: DeviceModel,

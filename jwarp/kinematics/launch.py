@@ -27,7 +27,7 @@ from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.data import (  # noqa: F401  (POINT_ARG, jacobian_inputs: re-exported)
     ORIGIN, POINT_ARG, KinematicsData, fk_inputs, jacobian_inputs, point_vec)
 from jwarp.model import RobotModel
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 
 
 def setup(robot: Any, q: Any, device: Any, dtype: Any, validate: bool = True

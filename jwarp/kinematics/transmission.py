@@ -10,7 +10,7 @@ Jacobian gains the diagonal chain-rule factor ``dq'_j/dq_j``
 :func:`~jwarp.kinematics.jacobians.jacobian`, ``jacobian_dh``) call :func:`transmitted`
 first; robots without transmission errors pass through untouched (one attribute check).
 The IK and planner kernels read joint values on the device directly; the solvers
-(:class:`~jwarp.solvers.ik.IKSolver`, :class:`~jwarp.solvers.planner.Planner`) therefore
+(:class:`~jwarp.solvers.ik.IKSolver`, :class:`~jwarp.solvers.planning.Planner`) therefore
 work in the links' joint space: their inputs (seeds, start, goal, warm starts) go through
 :func:`transmitted` and their results come back through :func:`untransmitted`, so a
 solution is exact for the commanded joint values (see ``docs/nongeometric.md``).

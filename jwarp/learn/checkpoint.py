@@ -20,7 +20,7 @@ tensors)::
     optimizer_state   optimizer.state_dict() or None (for resuming)
     training_state    dict or None (the trainer's state besides the optimizer: hard set)
 
-Files are written atomically (:class:`jwarp.atomic.AtomicFile`).
+Files are written atomically (:class:`jwarp.utils.atomic.AtomicFile`).
 
 Motion-planning networks (:class:`jwarp.learn.plan_net.PlanNet`) are written by the same
 :func:`save_checkpoint` with ``format`` ``"jwarp-plan-net"`` (``config``: PlanNetConfig)
@@ -36,12 +36,12 @@ from typing import Any
 
 import torch
 
-from jwarp.atomic import AtomicFile
+from jwarp.utils.atomic import AtomicFile
 from jwarp.core.arrays import device_name
 from jwarp.core.device import content_key
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.plan_net import PlanNet, PlanNetConfig
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 
 __all__ = ["FORMAT", "PLAN_FORMAT", "VERSION", "save_checkpoint", "load_checkpoint",
            "load_plan_checkpoint", "read_checkpoint", "check_weights", "network_bytes"]
@@ -176,11 +176,11 @@ def check_weights(cls: Any, config: Any, bps: Any, doc: dict, path: Any) -> None
     """Check the stored weights against the network the config declares, before any
     weight is allocated: the network is built on torch's ``meta`` device (shapes only, no
     memory), its parameter shapes compared with the file's ``state_dict``, and its size
-    against the available memory (:mod:`jwarp.memory`). A mismatch (a damaged or edited
+    against the available memory (:mod:`jwarp.utils.memory`). A mismatch (a damaged or edited
     file: e.g. a 9 kB file whose config says hidden=40000) is a ValueError naming the
     file, the config fields and the first differing tensors; too large a network a
     MemoryError with the figure."""
-    from jwarp.memory import check_memory, format_bytes
+    from jwarp.utils.memory import check_memory, format_bytes
 
     stored = doc["state_dict"]
     if not isinstance(stored, dict) or not all(isinstance(v, torch.Tensor)

@@ -98,7 +98,7 @@ def _json(obj: Any) -> str:
 
 def _robot_identity(robot: Any) -> tuple[str, str]:
     from jwarp.core.device import content_key
-    from jwarp.registry import robot as get_robot
+    from jwarp.model.registry import robot as get_robot
 
     model = get_robot(robot) if isinstance(robot, (str, os.PathLike)) else robot
     return model.name, content_key(model)
@@ -599,7 +599,7 @@ def export_npz(db: str | os.PathLike | PathDB, out: str | os.PathLike, *,
     anything is written; ``skip_damaged``: damaged worlds (with their paths) and rows are
     left out and described in the list ``skipped`` (``what``, ``world_id``, ``task``,
     ``paths``)."""
-    from jwarp.atomic import AtomicFile
+    from jwarp.utils.atomic import AtomicFile
 
     own = not isinstance(db, PathDB)
     d = db if isinstance(db, PathDB) else PathDB(db)  # own: made here, closed here

@@ -43,7 +43,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from jwarp.core.limits import project_numpy, sample_within_limits
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver, check_warm_start, warm_start_seeds
 
 #: seeds per target and block after the first (a target stops once one is feasible)

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.registry import robot as get_robot
-from jwarp.solvers.planner import PlanOptions, Planner
+from jwarp.model.registry import robot as get_robot
+from jwarp.solvers.planning import PlanOptions, Planner
 
 __all__ = ["evaluate_plan", "format_plan_table"]
 

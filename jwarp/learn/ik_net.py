@@ -26,7 +26,7 @@ import torch
 from torch import nn
 
 from jwarp.learn.encoding import JointCodec, feature_size, frame_features, frame_features_numpy
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 from jwarp.world.feasibility import robot_reach
 
 __all__ = ["IKNetConfig", "IKNet", "DenseBlock", "NetConfig", "network_bps", "world_key"]

@@ -1,7 +1,7 @@
 """Hard-task motion-planning labels (thesis 3.5.1, "Motion Planning Dataset", Table 3.2).
 
 Per world: random collision-free start/goal pairs. The straight line in joint space is
-optimized first (:class:`jwarp.solvers.planner.Planner`, gradient descent on U_path with a
+optimized first (:class:`jwarp.solvers.planning.Planner`, gradient descent on U_path with a
 fixed step); a task is *easy* when it converges to a feasible path and *hard* otherwise.
 A hard task gets up to ``max_starts`` multi-starts through 1-3 random via points, all
 optimized in one batch, and its label is the best (lowest U_path, so in practice the
@@ -37,9 +37,9 @@ from jwarp.core.arrays import real_number
 from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.limits import sample_within_limits
 from jwarp.model import RobotModel
-from jwarp.registry import robot as get_robot
-from jwarp.solvers.feasibility import check_world, collision_free
-from jwarp.solvers.planner import PathWeights, PlanOptions, Planner
+from jwarp.model.registry import robot as get_robot
+from jwarp.world.path_feasibility import check_world, collision_free
+from jwarp.solvers.planning import PathWeights, PlanOptions, Planner
 from jwarp.world.feasibility import feasible_simplex_world
 
 __all__ = ["PlanDataOptions", "WorldLabels", "world_for", "label_world", "world_extent"]

@@ -38,7 +38,7 @@ from torch import nn
 
 from jwarp.learn.encoding import JointCodec
 from jwarp.learn.ik_net import DenseBlock, NetConfig, network_bps, world_key
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 from jwarp.world.feasibility import robot_reach
 
 __all__ = ["PlanNetConfig", "PlanNet", "AxisSymmetry", "AXIS_SYMMETRIES", "axis_symmetries",

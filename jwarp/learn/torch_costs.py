@@ -18,9 +18,9 @@ import warp as wp
 
 from jwarp.core.arrays import device_name
 from jwarp.core.device import content_key
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKWeights
-from jwarp.solvers.planner import PathObjective, PathWeights
+from jwarp.solvers.planning import PathObjective, PathWeights
 
 #: objectives by (kind, robot content key (:func:`jwarp.core.device.content_key`: equal
 #: robots share one, an edited copy gets its own), id of the world (the objective holds

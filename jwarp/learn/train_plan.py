@@ -45,9 +45,9 @@ import torch
 from jwarp.core.arrays import device_name
 from jwarp.learn.plan_net import (PlanNet, PlanNetConfig, axis_symmetries, encode_paths,
                                   symmetric_bps)
-from jwarp.registry import robot as get_robot
-from jwarp.solvers.feasibility import collision_free
-from jwarp.solvers.planner import PlanOptions, Planner
+from jwarp.model.registry import robot as get_robot
+from jwarp.world.path_feasibility import collision_free
+from jwarp.solvers.planning import PlanOptions, Planner
 
 __all__ = ["PlanSamples", "TrainPlanOptions", "make_plan_data", "label_tasks", "sample_tasks",
            "hard_tasks",

@@ -5,7 +5,7 @@ The elastic robot's frames are ``F(q, rho*)`` at the torque equilibrium
 solved to convergence: every outer iteration makes **one** damped torque update from the
 DH rows ``rho`` kept from the previous iteration (the configurations move little between
 iterations), and gradients treat ``rho`` as constant (d rho / dq = 0). As the optimizer
-converges, so does ``rho``. :func:`jwarp.solvers.planner.plan` and
+converges, so does ``rho``. :func:`jwarp.solvers.planning.plan` and
 :func:`jwarp.solvers.ik.ik` implement this when given ``kappa``; this module wraps them
 and measures what it costs (:func:`compare_ik`, :func:`iteration_overhead`).
 """
@@ -19,9 +19,9 @@ import numpy as np
 
 from jwarp.kinematics.equilibrium import fk_elastic
 from jwarp.kinematics.launch import kappa_array
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKResult, ik
-from jwarp.solvers.planner import PathObjective, PlanResult, plan
+from jwarp.solvers.planning import PathObjective, PlanResult, plan
 
 #: compliance of Agile Justin's joints used by the studies [rad/(N m)] (0.1 rad/kNm)
 JUSTIN_KAPPA = 1e-4
@@ -46,7 +46,7 @@ def compensated_ik(robot: Any, frame: Any, target: Any, *, kappa: Any = None,
 
 def compensated_plan(robot: Any, world: Any, start: Any, goal: Any, *, kappa: Any = None,
                      lam: float = 0.7, **kwargs: Any) -> PlanResult:
-    """:func:`jwarp.solvers.planner.plan` on the elastic model (kappa default: the robot's)."""
+    """:func:`jwarp.solvers.planning.plan` on the elastic model (kappa default: the robot's)."""
     model = get_robot(robot)
     return plan(model, world, start, goal, kappa=_kappa(model, kappa), lam=lam, **kwargs)
 

@@ -17,7 +17,7 @@ import numpy as np
 from jwarp.core.arrays import real_number
 from jwarp.core.device import content_key
 from jwarp.model import RobotModel
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 from jwarp.world.sdf import World, grid_geometry
 
 __all__ = ["random_configurations", "feasible_fraction", "feasible_simplex_world",

@@ -5,7 +5,7 @@ would call every path or solution collision-free; a robot whose spheres overlap 
 configuration (a collision model that is wrong: spheres fitted to open meshes, a missing
 exclusion) would make every configuration near it infeasible with no reason given. Both are
 errors at construction (:func:`check_collision_model`, used by
-:class:`jwarp.solvers.planner.Planner` and :class:`jwarp.solvers.ik.IKSolver`), unless the
+:class:`jwarp.solvers.planning.Planner` and :class:`jwarp.solvers.ik.IKSolver`), unless the
 caller opts out (``allow_no_collision=True``; CLI ``--no-collision``).
 
 A robot imported with ``jwarp import-urdf`` carries its home (``notes['home']``, JSON joint
@@ -25,7 +25,7 @@ import numpy as np
 
 from jwarp.core.limits import project_numpy
 from jwarp.kinematics.fk import fk
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 from jwarp.world.collision import collision_pairs
 
 __all__ = ["NO_SPHERES_HINT", "HOME_NOTE", "noted_home", "home_configuration",

@@ -35,7 +35,7 @@ from jwarp.core.device import put_model
 from jwarp.core.limits import LIMIT_TOL
 from jwarp.kernels import motion as mk
 from jwarp.model import RobotModel
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 from jwarp.world.collision import check_world
 from jwarp.world.device_world import DeviceWorld
 from jwarp.world.sdf import World

@@ -326,7 +326,7 @@ def _grid_cells(span: np.ndarray, h: float, source: str) -> np.ndarray:
     """(3,) int64 cells per axis covering ``span`` (3,) [m] at voxel ``h`` [m] (>= 2);
     ValueError naming voxel_size and the cell count if there are more than 2**31 cells
     or they need more than the available memory (:data:`BYTES_PER_CELL` each)."""
-    from jwarp.memory import available_memory, format_bytes
+    from jwarp.utils.memory import available_memory, format_bytes
 
     with np.errstate(over="ignore", invalid="ignore"):
         nf = np.maximum(np.ceil(span / h - 1e-9) + 1, 2)

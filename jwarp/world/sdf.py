@@ -47,7 +47,7 @@ import numpy as np
 import warp as wp
 from scipy import ndimage
 
-from jwarp.atomic import AtomicFile
+from jwarp.utils.atomic import AtomicFile
 from jwarp.core.arrays import finite_as, init_warp, real_array, resolve_device
 from jwarp.core.device import scalar_type
 from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
@@ -167,7 +167,7 @@ class World:
     @classmethod
     def batch(cls, worlds: Sequence["World"]) -> "World":
         """One world holding a batch of worlds of exact objects, world i's objects as group
-        i (ids ``"<i>/<id>"``): a :class:`jwarp.solvers.planner.Planner` with one problem
+        i (ids ``"<i>/<id>"``): a :class:`jwarp.solvers.planning.Planner` with one problem
         per world plans each problem in its own world in one batch."""
         from jwarp.world.shapes import ShapeSet
 
@@ -274,7 +274,7 @@ class World:
         spheres covering it (:mod:`jwarp.world.attach`), so planning and IK with that
         robot move it with the frame. :meth:`detach` puts it back."""
         from jwarp.kinematics.fk import fk
-        from jwarp.registry import robot as get_robot
+        from jwarp.model.registry import robot as get_robot
         from jwarp.world.attach import Attachment, attach_object
 
         model = get_robot(robot)
@@ -297,7 +297,7 @@ class World:
         """Put attached object ``id`` back into the world where ``robot`` (the one
         :meth:`attach` returned) holds it at ``q``; returns the robot without its spheres."""
         from jwarp.kinematics.fk import fk
-        from jwarp.registry import robot as get_robot
+        from jwarp.model.registry import robot as get_robot
 
         a = self.attached.get(id)
         if a is None:

@@ -35,9 +35,9 @@ from typing import Any
 import numpy as np
 
 from jwarp.kinematics.fk import fk
-from jwarp.memory import check_memory, format_bytes
+from jwarp.utils.memory import check_memory, format_bytes
 from jwarp.model import RobotModel, SelfCollision
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 
 __all__ = ["SelfPairs", "PairSamplingCost", "never_colliding_pairs", "pair_sampling_cost",
            "adjacent_pairs", "rigid_groups", "default_pairs", "with_default_pairs",

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.atomic import atomic_write_text
+from jwarp.utils.atomic import atomic_write_text
 from jwarp.model import RobotModel, Sphere
 from jwarp.world.self_pairs import SelfPairs, never_colliding_pairs, with_self_pairs
 

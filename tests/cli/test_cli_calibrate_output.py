@@ -106,9 +106,9 @@ def test_name_option_and_empty_name(campaign, capsys, tmp_path):
 
 def test_python_findings_attributed_to_the_callers_line(campaign):
     import jwarp
-    from jwarp.solvers.calibration import CalibrationWarning, calibrate
-    from jwarp.solvers.calibration.files import (make_measurement, parse_samples, read_setup,
-                                                 read_text)
+    from jwarp.calibration import CalibrationWarning, calibrate
+    from jwarp.calibration.files import (make_measurement, parse_samples, read_setup,
+                                         read_text)
 
     model = jwarp.robot("justin19")
     meas = make_measurement(model, read_setup(str(campaign / "setup.json")))

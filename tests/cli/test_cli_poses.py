@@ -5,11 +5,11 @@ import math
 
 import numpy as np
 
-from jwarp.registry import robot as get_robot
-from jwarp.solvers.calibration.campaign import justin_tracker_setup
-from jwarp.solvers.calibration.files import write_setup
-from jwarp.solvers.calibration.poses import PoseOptions, PoseSampler
-from jwarp.solvers.calibration.tour import path_length
+from jwarp.model.registry import robot as get_robot
+from jwarp.calibration.simulate.campaign import justin_tracker_setup
+from jwarp.calibration.files import write_setup
+from jwarp.calibration.design.poses import PoseOptions, PoseSampler
+from jwarp.calibration.design.tour import path_length
 from tests.cli_helpers import one_line_error, run
 
 
@@ -73,7 +73,7 @@ def test_sample_poses_errors(tmp_path, capsys):
 
 
 def test_sample_poses_contact_plan_has_pairs(tmp_path, capsys):
-    from jwarp.solvers.calibration.scenarios import hand_contact_setup
+    from jwarp.calibration.simulate.scenarios import hand_contact_setup
 
     path = tmp_path / "hand.json"
     write_setup(path, hand_contact_setup())

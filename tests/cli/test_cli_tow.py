@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.solvers.calibration.campaign import simulate_campaign
-from jwarp.solvers.calibration.files import read_setup, write_setup
-from jwarp.solvers.calibration.scenarios import scenario
+from jwarp.calibration.simulate.campaign import simulate_campaign
+from jwarp.calibration.files import read_setup, write_setup
+from jwarp.calibration.simulate.scenarios import scenario
 
 from tests.cli_helpers import one_line_error, run
 

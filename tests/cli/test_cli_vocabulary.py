@@ -144,7 +144,7 @@ def _help_of(command: list[str], option: str, capsys) -> str:
 def test_defaults_that_differ_from_the_python_api_are_named_in_help(capsys):
     from jwarp.cli.common import DEFAULT_MAX_ITER
     from jwarp.kinematics.equilibrium import fk_elastic
-    from jwarp.solvers.planner import PlanOptions
+    from jwarp.solvers.planning import PlanOptions
 
     api = inspect.signature(fk_elastic).parameters["max_iter"].default
     assert api != DEFAULT_MAX_ITER  # the difference the help must name
@@ -164,7 +164,7 @@ def _defaults(command: str) -> dict:
 
 
 @pytest.mark.parametrize("command, api, names", [
-    ("plan", "jwarp.solvers.planner:PlanOptions",
+    ("plan", "jwarp.solvers.planning:PlanOptions",
      {"step": "step", "margin": "margin", "seed": "seed", "self_margin": "self_margin",
       "fallback": "fallback", "stop_when_solved": "stop_when_solved"}),
     ("ik", "jwarp.solvers.ik:IKOptions",
@@ -176,7 +176,7 @@ def _defaults(command: str) -> dict:
     ("train plan", "jwarp.learn.train_plan:TrainPlanOptions",
      {"n_bps": "n_bps", "hidden": "hidden", "blocks": "n_blocks", "heads": "n_heads",
       "batch": "batch_size", "steps_per_epoch": "steps_per_epoch", "lr": "lr"}),
-    ("calibrate", "jwarp.solvers.calibration:CalibrationOptions",
+    ("calibrate", "jwarp.calibration:CalibrationOptions",
      {"max_nfev": "max_nfev", "starts": "n_starts", "seed": "seed"}),
 ])
 def test_cli_defaults_equal_the_python_api(command, api, names):
@@ -199,7 +199,7 @@ def test_implicit_defaults_of_plan_and_ik_equal_the_api(capsys):
     """--starts/--waypoints of plan and --starts of ik are filled in at run time (a warm
     start changes them): the help names the API's values."""
     from jwarp.solvers.ik import IKOptions
-    from jwarp.solvers.planner import PlanOptions
+    from jwarp.solvers.planning import PlanOptions
 
     import re
 
@@ -358,11 +358,11 @@ def test_network_memory_refused_before_any_data(capsys, tmp_path, monkeypatch):
 def test_sampling_sizes_refused_before_sampling(capsys, tmp_path):
     """sample-poses --batch-size and design --write-candidates: refused by the memory
     estimate before any draw (a simulated campaign's setup)."""
-    from jwarp.solvers.calibration.scenarios import scenario
+    from jwarp.calibration.simulate.scenarios import scenario
 
     setup, _, _ = scenario("justin19", "cartesian")
     path = tmp_path / "setup.json"
-    from jwarp.solvers.calibration.files import write_setup
+    from jwarp.calibration.files import write_setup
 
     write_setup(path, setup)
     line = one_line_error(capsys, ["sample-poses", "--setup", path, "--n", 10, "--batch-size",

@@ -10,7 +10,7 @@ import numpy as np
 
 import jwarp
 from jwarp.cli.common import DEFAULT_KAPPA
-from jwarp.solvers.feasibility import collision_free
+from jwarp.world.path_feasibility import collision_free
 from jwarp.world import parse_world_spec
 
 from cli_helpers import run

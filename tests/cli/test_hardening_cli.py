@@ -247,7 +247,7 @@ def test_output_that_is_an_input_is_refused(capsys, tmp_path, block):
 
 def test_plan_error_mid_run_keeps_old_recording(capsys, monkeypatch, tmp_path, block):
     pytest.importorskip("rerun")
-    import jwarp.solvers.planner as PL
+    import jwarp.solvers.planning as PL
 
     target = tmp_path / "plan.rrd"
     target.write_bytes(b"old recording")
@@ -268,7 +268,7 @@ def test_plan_error_mid_run_keeps_old_recording(capsys, monkeypatch, tmp_path, b
 
 def test_show_interrupt_keeps_old_file(capsys, monkeypatch, tmp_path):
     pytest.importorskip("rerun")
-    import jwarp.viz as viz
+    import jwarp.viz.robot as viz
 
     target = tmp_path / "show.rrd"
     target.write_bytes(b"old")

@@ -81,7 +81,7 @@ def _arm7_campaign():
 def test_calibration_solve_runs_with_the_limit(monkeypatch, two_threads, env, inside):
     """The pool seen from the solver's iteration callback: 1 thread by default, the
     variable's value when set, untouched with 0; 2 again after the solve. Same result."""
-    from jwarp.solvers.calibration import CalibrationWarning, calibrate
+    from jwarp.calibration import CalibrationWarning, calibrate
 
     if env is None:
         monkeypatch.delenv(BLAS_THREADS_ENV, raising=False)
@@ -99,7 +99,7 @@ def test_calibration_solve_runs_with_the_limit(monkeypatch, two_threads, env, in
 
 
 def test_bad_variable_stops_the_solve(monkeypatch):
-    from jwarp.solvers.calibration import calibrate
+    from jwarp.calibration import calibrate
 
     monkeypatch.setenv(BLAS_THREADS_ENV, "many")
     robot, meas, q, y = _arm7_campaign()

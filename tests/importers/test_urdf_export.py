@@ -15,7 +15,7 @@ import pytest
 import jwarp
 from jwarp.importers.urdf_export import (UrdfExportOptions, dh_origin, export_urdf, rpy_of,
                                          side_file_path)
-from jwarp.solvers.calibration.params import perturb_robot
+from jwarp.calibration.estimate.params import perturb_robot
 
 pin = pytest.importorskip("pinocchio")
 

@@ -7,7 +7,8 @@ import warp as wp
 import jwarp
 from jwarp.core.arrays import init_warp
 from jwarp.kernels import path as PK
-from jwarp.solvers import planner
+from jwarp.solvers import planning as planner
+from jwarp.world import path_feasibility
 from jwarp.core.device import put_model
 from jwarp.core.limits import limit_violation, project_numpy, within_limits
 
@@ -73,7 +74,7 @@ def test_substeps_match_numpy(device, n_sub):
     # waypoints are exactly the substeps s = t n_sub
     np.testing.assert_array_equal(got[:, ::n_sub], Q)
     # the host wrapper agrees and keeps leading dims
-    np.testing.assert_allclose(planner.substeps(Q, n_sub, device=device), ref_substeps(Q, n_sub), atol=1e-14)
+    np.testing.assert_allclose(path_feasibility.substeps(Q, n_sub, device=device), ref_substeps(Q, n_sub), atol=1e-14)
 
 
 def test_path_cost_matches_numpy(device):
@@ -175,8 +176,8 @@ def test_projection_justin_torso_polygon(device):
 
 def test_substeps_bad_input():
     with pytest.raises(ValueError, match="paths"):
-        planner.substeps(np.zeros((1, 3)), 2)
+        path_feasibility.substeps(np.zeros((1, 3)), 2)
     with pytest.raises(ValueError, match="n_substeps"):
-        planner.substeps(np.zeros((2, 3)), 0)
+        path_feasibility.substeps(np.zeros((2, 3)), 0)
     with pytest.raises(ValueError, match="paths"):
-        planner.substeps(np.full((2, 3), np.nan), 2)
+        path_feasibility.substeps(np.full((2, 3), np.nan), 2)

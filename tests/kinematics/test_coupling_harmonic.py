@@ -14,7 +14,7 @@ import jwarp
 from jwarp import kinematics as K
 from jwarp.core.limits import sample_within_limits
 from jwarp.solvers import ik as IK
-from jwarp.solvers.calibration.result import model_frames
+from jwarp.calibration.estimate.result import model_frames
 from jwarp.world import collision
 
 from reference import central_difference_grad, ref_fk

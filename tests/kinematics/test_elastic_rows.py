@@ -12,7 +12,8 @@ from jwarp.world import collision
 from jwarp.core.device import put_model
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.kernels import fk as fk_kernels
-from jwarp.solvers import planner as PL
+from jwarp.solvers import planning as PL
+from jwarp.world import path_feasibility
 from jwarp.core.limits import sample_within_limits
 
 from devices import requires_cuda
@@ -83,7 +84,7 @@ def test_rows_converge_to_the_equilibrium_under_a_fixed_path(device):
     model = jwarp.robot("justin19")
     kappa = kappa_uniform(model, 1e-4)
     q = sample_within_limits(model, 4, np.random.default_rng(2))
-    Q = PL.initial_paths(q[:2], q[2:], 5, "straight")
+    Q = path_feasibility.initial_paths(q[:2], q[2:], 5, "straight")
     obj = PL.PathObjective(model, block_world(), 2, 5, 4, kappa=kappa, lam=LAM, dtype=np.float64,
                            device=device)
     obj.set_paths(Q)
@@ -173,7 +174,7 @@ def test_cuda_fused_update_matches_the_reference_iteration():
     model = jwarp.robot("justin19")
     kappa = kappa_uniform(model, 1e-3)
     q = sample_within_limits(model, 6, np.random.default_rng(4))
-    Q = PL.initial_paths(q[:3], q[3:], 6, "straight")
+    Q = path_feasibility.initial_paths(q[:3], q[3:], 6, "straight")
     _, rho_ref = ref_fk_elastic(model, Q.reshape(-1, model.n_dof), kappa, n_iter=3, lam=LAM)
     objs = []
     for first in (False, True):

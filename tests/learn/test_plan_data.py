@@ -5,7 +5,8 @@ import pytest
 
 import jwarp
 from jwarp.learn.plan_data import PlanDataOptions, WorldLabels, label_world, world_for
-from jwarp.solvers import planner as PL
+from jwarp.solvers import planning as PL
+from jwarp.world import path_feasibility
 from jwarp.world import world_from_occupancy
 
 N = 64
@@ -30,8 +31,8 @@ def labels(world):
 
 
 def independent_feasible(robot, world, path):
-    n_sub = PL.substeps_for_voxel(robot, path, world.voxel_size, safety=2.0, max_substeps=256)
-    return bool(PL.path_feasible(robot, world, path, n_sub)[()])
+    n_sub = path_feasibility.substeps_for_voxel(robot, path, world.voxel_size, safety=2.0, max_substeps=256)
+    return bool(path_feasibility.path_feasible(robot, world, path, n_sub)[()])
 
 
 def test_shapes_and_settings(labels):

@@ -18,7 +18,8 @@ from jwarp.learn.plan_net import (AXIS_SYMMETRIES, PlanNet, PlanNetConfig, axis_
 from jwarp.learn.train_plan import (TrainPlanOptions, augment, boost_weights,
                                     clean, extend, make_plan_data, path_costs, plan_loss,
                                     train_plan, validation_mse)
-from jwarp.solvers.planner import PlanOptions, Planner, path_feasible
+from jwarp.solvers.planning import PlanOptions, Planner
+from jwarp.world.path_feasibility import path_feasible
 from jwarp.world.feasibility import feasible_simplex_world, random_configurations
 from jwarp.world.sdf import World
 

@@ -11,7 +11,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import jwarp
-from jwarp.registry import measurement
+from jwarp.model.registry import measurement
 
 from devices import requires_cpu
 from reference import sample_q
@@ -461,7 +461,7 @@ def test_relative_same_frame_cancels(device, hand):
 
 # ------------------------------------------------------ registry, validation
 def test_registry_lists_and_looks_up_plugins(hand):
-    from jwarp.measurement import Measurement
+    from jwarp.model.measurement import Measurement
     assert {"cartesian", "image", "contact", "relative"} <= set(jwarp.measurements())
     for name in ("cartesian", "image", "contact", "relative"):
         cls = measurement(name)

@@ -1,4 +1,4 @@
-"""MAP calibration (jwarp.solvers.calibration): torque derivatives, the analytic residual
+"""MAP calibration (jwarp.calibration): torque derivatives, the analytic residual
 Jacobian through the elastic equilibrium, recovery of a simulated truth, identifiability
 warnings, result I/O and input validation. All float64, small sample counts. The solver
 evaluates its model on the CPU (it takes no device): those tests need Warp's CPU backend
@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.measurement import Measurement, ParamBlock
-from jwarp.solvers.calibration import (CalibrationProblem, CalibrationWarning, ParameterSpace,
-                                       calibrate, error_stats, errors, observation_groups,
-                                       predict)
-from jwarp.solvers.calibration import elastic as E
-from jwarp.solvers.calibration.params import perturb_robot
-from jwarp.solvers.calibration.result import model_frames
+from jwarp.model.measurement import Measurement, ParamBlock
+from jwarp.calibration import (CalibrationProblem, CalibrationWarning, ParameterSpace,
+                               calibrate, error_stats, errors, observation_groups,
+                               predict)
+from jwarp.calibration.estimate import elastic as E
+from jwarp.calibration.estimate.params import perturb_robot
+from jwarp.calibration.estimate.result import model_frames
 
 from devices import requires_cpu
 
@@ -299,7 +299,7 @@ def test_rough_tracker_near_half_turn_converges_without_biasing_the_robot():
 def test_nearest_rotvec_picks_the_representation_next_to_the_reference():
     from scipy.spatial.transform import Rotation
 
-    from jwarp.plugins.measurements.geometry import nearest_rotvec
+    from jwarp.model.geometry import nearest_rotvec
 
     for r_true, ref in (([0, 0, -math.pi + 0.05], [0, 0, math.pi - 0.1]),
                         ([0.1, 0.2, 0.3], [0.1, 0.2, 0.3]),

@@ -16,12 +16,12 @@ from scipy.optimize import OptimizeResult
 
 import jwarp
 from jwarp.model import RobotModel, RobotModelError
-from jwarp.solvers.calibration import CalibrationProblem, ParameterSpace, calibrate
-from jwarp.solvers.calibration.map import solve_start
-from jwarp.solvers.calibration.options import CalibrationOptions
-from jwarp.solvers.calibration.params import KIND_COUPLING, KIND_HARMONIC, KIND_KAPPA
-from jwarp.solvers.calibration.result import fixed_params, model_frames
-from jwarp.solvers.calibration.robust import robust_weights
+from jwarp.calibration import CalibrationProblem, ParameterSpace, calibrate
+from jwarp.calibration.estimate.map import solve_start
+from jwarp.calibration.estimate.options import CalibrationOptions
+from jwarp.calibration.estimate.params import KIND_COUPLING, KIND_HARMONIC, KIND_KAPPA
+from jwarp.calibration.estimate.result import fixed_params, model_frames
+from jwarp.calibration.estimate.robust import robust_weights
 
 from devices import requires_cpu
 from reference import THETA, nominal_dh, ref_fk
@@ -284,8 +284,8 @@ def test_all_priors_off_starts_scales_by_the_data_and_holds_what_has_no_effect()
     parameters get the scale 1 / |column| of the data Jacobian at the start; those without
     effect there (the head's rows, which load the torso only through compliances that are
     still 0) are held; the fit ends far below the start."""
-    from jwarp.solvers.calibration.campaign import justin_tracker_setup, simulate_campaign
-    from jwarp.solvers.calibration.files import make_measurement
+    from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
+    from jwarp.calibration.files import make_measurement
 
     robot = jwarp.robot("justin19")
     camp = simulate_campaign(robot, justin_tracker_setup(), 40, seed=1)

@@ -19,10 +19,10 @@ import warnings
 import numpy as np
 
 import jwarp
-from jwarp.solvers.calibration import calibrate, errors
-from jwarp.solvers.calibration.campaign import justin_tracker_setup, simulate_campaign
-from jwarp.solvers.calibration.diagnostics import residual_diagnostics
-from jwarp.solvers.calibration.files import make_measurement
+from jwarp.calibration import calibrate, errors
+from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
+from jwarp.calibration.estimate.diagnostics import residual_diagnostics
+from jwarp.calibration.files import make_measurement
 
 from devices import requires_cpu
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.solvers.calibration import CalibrationProblem, calibrate
-from jwarp.solvers.calibration.campaign import justin_tracker_setup, simulate_campaign
-from jwarp.solvers.calibration.files import make_measurement
+from jwarp.calibration import CalibrationProblem, calibrate
+from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
+from jwarp.calibration.files import make_measurement
 
 FREE = "theta,d,kappa_theta,tracker,markers"
 

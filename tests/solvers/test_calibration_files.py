@@ -9,11 +9,11 @@ import pytest
 
 import jwarp
 from jwarp.cli import main
-from jwarp.solvers.calibration.campaign import (justin_tracker_setup, rough_setup,
-                                                simulate_campaign, uniform_configurations)
-from jwarp.solvers.calibration.files import (Samples, make_measurement, parse_rows,
-                                             parse_samples, read_samples, read_setup,
-                                             setup_from_dict, write_samples, write_setup)
+from jwarp.calibration.simulate.campaign import (justin_tracker_setup, rough_setup,
+                                                 simulate_campaign, uniform_configurations)
+from jwarp.calibration.files import (Samples, make_measurement, parse_rows,
+                                     parse_samples, read_samples, read_setup,
+                                     setup_from_dict, write_samples, write_setup)
 
 
 @pytest.fixture(scope="module")
@@ -83,7 +83,7 @@ def test_samples_round_trip_exact(tmp_path, justin, meas):
     assert list(back.lines) == list(range(2, 9))
 
 
-@pytest.mark.filterwarnings("ignore::jwarp.solvers.calibration.files.DataWarning")  # values 0, 1, 2, ...: far outside the limits, on purpose
+@pytest.mark.filterwarnings("ignore::jwarp.calibration.files.DataWarning")  # values 0, 1, 2, ...: far outside the limits, on purpose
 def test_samples_column_order_is_free(justin, meas):
     cols = [j.name for j in justin.joints] + meas.obs_names
     vals = list(np.arange(len(cols), dtype=float))

@@ -11,9 +11,9 @@ import pytest
 import warp as wp
 
 import jwarp
-from jwarp.solvers.calibration import (CalibrationOptions, CalibrationProblem,
-                                       CalibrationWarning, calibrate, calibrate_with)
-from jwarp.solvers.calibration import map as M
+from jwarp.calibration import (CalibrationOptions, CalibrationProblem,
+                               CalibrationWarning, calibrate, calibrate_with)
+from jwarp.calibration.estimate import map as M
 
 
 def _cartesian(robot):

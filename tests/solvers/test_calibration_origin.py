@@ -12,10 +12,10 @@ import pytest
 import jwarp
 from jwarp.importers.urdf_export import dh_origin, export_urdf
 from jwarp.plugins.measurements.cartesian import CartesianMeasurement
-from jwarp.solvers.calibration import CalibrationProblem, ParameterSpace, calibrate
-from jwarp.solvers.calibration.origin import (delta_transform, left_jacobian, rotation,
-                                              with_static_transforms)
-from jwarp.solvers.calibration.params import KIND_ORIGIN
+from jwarp.calibration import CalibrationProblem, ParameterSpace, calibrate
+from jwarp.calibration.estimate.origin import (delta_transform, left_jacobian, rotation,
+                                               with_static_transforms)
+from jwarp.calibration.estimate.params import KIND_ORIGIN
 
 from devices import requires_cpu
 

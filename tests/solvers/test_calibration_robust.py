@@ -20,12 +20,12 @@ from scipy.optimize import OptimizeResult, least_squares
 import jwarp
 from jwarp.model import RobotModel
 from jwarp.plugins.measurements.cartesian import CartesianMeasurement
-from jwarp.solvers.calibration import (ROBOT_GROUPS, CalibrationOptions, CalibrationProblem,
-                                       CalibrationWarning, calibrate, errors)
-from jwarp.solvers.calibration import elastic as E
-from jwarp.solvers.calibration import map as M
-from jwarp.solvers.calibration.params import KIND_KAPPA, perturb_robot, with_pose_groups
-from jwarp.solvers.calibration.result import model_frames
+from jwarp.calibration import (ROBOT_GROUPS, CalibrationOptions, CalibrationProblem,
+                               CalibrationWarning, calibrate, errors)
+from jwarp.calibration.estimate import elastic as E
+from jwarp.calibration.estimate import map as M
+from jwarp.calibration.estimate.params import KIND_KAPPA, perturb_robot, with_pose_groups
+from jwarp.calibration.estimate.result import model_frames
 
 FULL = "theta,d,r,alpha,beta,kappa_theta,kappa_alpha"
 NOISE = 1e-4

@@ -8,9 +8,9 @@ import warp as wp
 
 import jwarp
 from jwarp.kinematics import jacobian, jacobian_dh
-from jwarp.solvers.calibration import CalibrationProblem
-from jwarp.solvers.calibration.campaign import justin_tracker_setup
-from jwarp.solvers.calibration.files import make_measurement
+from jwarp.calibration import CalibrationProblem
+from jwarp.calibration.simulate.campaign import justin_tracker_setup
+from jwarp.calibration.files import make_measurement
 
 
 def _uploads(monkeypatch, shape):

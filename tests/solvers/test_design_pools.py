@@ -1,4 +1,4 @@
-"""Feasible candidate pools of experimental design (jwarp.solvers.calibration.pool):
+"""Feasible candidate pools of experimental design (jwarp.calibration.pool):
 the kept configurations are free of self- and world collision, and the dropped counts
 equal an independent count (numpy sphere distances from jwarp's FK) on the raw draws."""
 
@@ -8,13 +8,13 @@ import warnings
 import numpy as np
 import pytest
 
-from jwarp.registry import robot as get_robot
-from jwarp.solvers.calibration.campaign import justin_tracker_setup
-from jwarp.solvers.calibration.design import DesignOptions, design
-from jwarp.solvers.calibration.files import Setup, make_measurement
-from jwarp.solvers.calibration.pool import (REASONS, check_configurations, draw_configurations,
-                                            draw_pool)
-from jwarp.solvers.calibration.scenarios import hand_contact_setup
+from jwarp.model.registry import robot as get_robot
+from jwarp.calibration.simulate.campaign import justin_tracker_setup
+from jwarp.calibration.design.optimal import DesignOptions, design
+from jwarp.calibration.files import Setup, make_measurement
+from jwarp.calibration.pool import (REASONS, check_configurations, draw_configurations,
+                                    draw_pool)
+from jwarp.calibration.simulate.scenarios import hand_contact_setup
 from jwarp.world import World
 from pool_helpers import ball_colliding, in_limits, self_colliding
 

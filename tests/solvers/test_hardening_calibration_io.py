@@ -20,13 +20,13 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp import atomic
-from jwarp.atomic import AtomicFolder, atomic_write_text, clean_stale
+from jwarp.utils import atomic
+from jwarp.utils.atomic import AtomicFolder, atomic_write_text, clean_stale
 from jwarp.cli import main
-from jwarp.solvers.calibration.campaign import (justin_tracker_setup, read_campaign,
-                                                simulate_campaign)
-from jwarp.solvers.calibration.files import (DataWarning, make_measurement, parse_samples,
-                                             read_samples, read_setup, sha256_hex)
+from jwarp.calibration.simulate.campaign import (justin_tracker_setup, read_campaign,
+                                                 simulate_campaign)
+from jwarp.calibration.files import (DataWarning, make_measurement, parse_samples,
+                                     read_samples, read_setup, sha256_hex)
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -349,7 +349,7 @@ def test_calibrate_renames_the_robot_before_its_params(camp_dir, tmp_path, capsy
     renames left new params beside the old robot. The robot now goes first: a kill there
     (simulated: the second rename fails) leaves the new robot and the old params, whose
     robot_sha256 names the old robot."""
-    from jwarp.atomic import AtomicFile
+    from jwarp.utils.atomic import AtomicFile
     out, params = tmp_path / "cal.json", tmp_path / "res.json"
     args = ["calibrate", "--setup", str(camp_dir / "setup.json"), "--data",
             str(camp_dir / "samples.csv"), "--calibrate-rows", "0:20", "--test-rows", "20:30",

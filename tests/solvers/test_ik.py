@@ -1,4 +1,4 @@
-"""Two-stage IK (jwarp/solvers/ik.py, jwarp/kernels/ik.py): costs vs numpy and finite
+"""Two-stage IK (jwarp/solvers/ik/solver.py, jwarp/kernels/ik.py): costs vs numpy and finite
 differences, targets reached to tolerance, collision-free solutions, clear errors."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Why an IK answer is not feasible (:func:`jwarp.solvers.ik_explain.explain_ik`), on
+"""Why an IK answer is not feasible (:func:`jwarp.solvers.ik.explain.explain_ik`), on
 closed-form cases: a joint outside its limit by a known amount, a pose off by a known
 translation and rotation, a collision sphere at the centre of a box (distance known in
 closed form), a self-collision whose pair is found independently with numpy, and the
@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 
 import jwarp
 from jwarp.core.device import host_frames
-from jwarp.solvers.ik_explain import explain_ik, limit_reasons, pose_errors
+from jwarp.solvers.ik.explain import explain_ik, limit_reasons, pose_errors
 from jwarp.viz import world_spheres
 from jwarp.world import World
 

@@ -1,4 +1,4 @@
-"""The device-resident IK solver (jwarp/solvers/ik.py IKSolver, jwarp/kernels/ik_step.py):
+"""The device-resident IK solver (jwarp/solvers/ik/solver.py IKSolver, jwarp/kernels/ik_step.py):
 the damped least-squares kernel against numpy, the solver against the host loop it
 replaced (benchmarks/bench_ik.py legacy_ik), the device's feasibility check and best-seed
 choice against the host's, reuse across calls, caller seeds and option checks. CPU always;

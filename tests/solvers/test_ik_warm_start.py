@@ -1,4 +1,4 @@
-"""Warm starts in the IK solver (jwarp/solvers/ik.py: IKSolver(warm_start=), ik(warm_start=),
+"""Warm starts in the IK solver (jwarp/solvers/ik/solver.py: IKSolver(warm_start=), ik(warm_start=),
 IKOptions.n_random_with_warm_start): a duck-typed object with ``seeds(targets, world)``.
 Fakes stand in for a learned network: one returning known solutions (solved in a couple of
 iterations), one returning garbage (solved by the random extra seeds), bad ones (clear

@@ -11,7 +11,7 @@ import pytest
 import jwarp
 from jwarp.model import Sphere
 from jwarp.solvers.ik import IKOptions, IKSolver, ik, pose_matrix
-from jwarp.solvers.planner import PlanOptions, Planner, plan
+from jwarp.solvers.planning import PlanOptions, Planner, plan
 from jwarp.world.model_check import (check_collision_model, home_configurations,
                                      home_self_collisions)
 

@@ -10,7 +10,7 @@ import pytest
 
 import jwarp
 from jwarp.model import RobotModel, RobotModelError
-from jwarp.solvers.calibration import CalibrationProblem, ParameterSpace
+from jwarp.calibration import CalibrationProblem, ParameterSpace
 
 from devices import requires_cpu
 from reference import ref_fk, ref_torques, nominal_dh, THETA

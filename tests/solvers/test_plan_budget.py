@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.solvers import planner as PL
-from jwarp.solvers.rrt import RRTOptions
+from jwarp.solvers import planning as PL
+from jwarp.world import path_feasibility
+from jwarp.solvers.planning.rrt import RRTOptions
 
 from worlds import block_world_2d
 
@@ -28,8 +29,8 @@ def world():
 
 
 def independent_feasible(robot, world, path):
-    n_sub = PL.substeps_for_voxel(robot, path, world.resolution, safety=2.0, max_substeps=256)
-    return bool(PL.path_feasible(robot, world, path, n_sub)[()])
+    n_sub = path_feasibility.substeps_for_voxel(robot, path, world.resolution, safety=2.0, max_substeps=256)
+    return bool(path_feasibility.path_feasible(robot, world, path, n_sub)[()])
 
 
 def test_defaults():

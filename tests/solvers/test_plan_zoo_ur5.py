@@ -20,9 +20,9 @@ import pytest
 import jwarp
 from jwarp.cli import main as cli
 from robot_data import erd  # tests/robot_data.py
-from jwarp.solvers import planner as planner_module
-from jwarp.solvers.feasibility import certify_check
-from jwarp.solvers.rrt import RRTOptions, resample_path, rrt_connect
+from jwarp.solvers.planning import planner as planner_module
+from jwarp.world.path_feasibility import certify_check
+from jwarp.solvers.planning.rrt import RRTOptions, resample_path, rrt_connect
 from jwarp.world.collision import is_collision_free
 from jwarp.world.feasibility import random_configurations
 from jwarp.world.sdf import World

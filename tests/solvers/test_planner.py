@@ -1,11 +1,12 @@
-"""Planner (jwarp/solvers/planner.py): U_path gradient, substep detection, planning, errors."""
+"""Planner (jwarp/solvers/planning/planner.py): U_path gradient, substep detection, planning, errors."""
 
 import numpy as np
 import pytest
 
 import jwarp
 from jwarp.world import collision
-from jwarp.solvers import planner as PL
+from jwarp.solvers import planning as PL
+from jwarp.world import path_feasibility
 from jwarp.core.limits import within_limits
 from jwarp.world import world_from_occupancy
 
@@ -39,7 +40,7 @@ def test_upath_gradient_matches_central_fd(device, block_world):
     robot = jwarp.robot("planar4")
     rng = np.random.default_rng(0)
     s, g = np.array([1.2, 0.3, 0.0, 0.0]), np.array([-1.2, -0.2, 0.1, 0.0])
-    Q = PL.initial_paths(s[None], g[None], 6, "straight")
+    Q = path_feasibility.initial_paths(s[None], g[None], 6, "straight")
     Q = np.repeat(Q, 2, 0)
     Q[:, 1:-1] += rng.normal(scale=0.3, size=Q[:, 1:-1].shape)
     obj = PL.PathObjective(robot, block_world, 2, 6, 3, weights=PL.PathWeights(1.0, 0.7, 0.05),
@@ -57,7 +58,7 @@ def test_upath_gradient_matches_central_fd(device, block_world):
             fd[:, t, j] = (obj.value_and_grad(Qp)[0] - obj.value_and_grad(Qm)[0]) / (2 * h)
     np.testing.assert_allclose(grad, fd, atol=1e-5 * np.abs(fd).max(), rtol=1e-4)
     # U_path = collision (independent call on the substeps) + lam_l * length
-    qs = PL.substeps(Q, 3, device=device).reshape(-1, 4)
+    qs = path_feasibility.substeps(Q, 3, device=device).reshape(-1, 4)
     c, _ = collision.collision_cost(robot, qs, block_world, w_world=1.0, w_self=0.7, eps=0.04,
                                     grad=False, device=device, dtype=np.float64)
     np.testing.assert_allclose(coll0, c.reshape(2, -1).sum(1), rtol=1e-10)
@@ -69,10 +70,10 @@ def test_substeps_catch_a_thin_wall_that_waypoints_miss(device, wall_world):
     path = np.array([[-0.5, 0.0], [0.5, 0.0]])
     assert collision.is_collision_free(robot, path, wall_world, device=device).all()  # both free
     # the check is continuous: it sees the wall between the waypoints whatever n_substeps
-    assert not PL.path_feasible(robot, wall_world, path, 1, device=device)
-    n_sub = PL.substeps_for_voxel(robot, path, wall_world.voxel_size, device=device)
+    assert not path_feasibility.path_feasible(robot, wall_world, path, 1, device=device)
+    n_sub = path_feasibility.substeps_for_voxel(robot, path, wall_world.voxel_size, device=device)
     assert n_sub >= 31  # 1 m of motion / 0.032 m voxels
-    assert not PL.path_feasible(robot, wall_world, path, n_sub, device=device)
+    assert not path_feasibility.path_feasible(robot, wall_world, path, n_sub, device=device)
     # ... and says where: the wall at x = 0 is half way
     from jwarp.world.motion import check_paths
     res = check_paths(robot, wall_world, path, device=device)
@@ -95,14 +96,14 @@ def test_sphere2d_plans_through_the_opening(device):
     np.testing.assert_array_equal(p[0], s)
     np.testing.assert_array_equal(p[-1], g)
     assert p[:, 1].max() > 0.3  # it went over the top of the wall
-    assert PL.path_feasible(robot, world, p, 64, device=device)  # independent fine check
+    assert path_feasibility.path_feasible(robot, world, p, 64, device=device)  # independent fine check
 
 
 def test_planar4_plans_around_a_known_obstacle(device, block_world):
     robot = jwarp.robot("planar4")
     s, g = np.array([1.2, 0.0, 0.0, 0.0]), np.array([-1.2, 0.0, 0.0, 0.0])
-    straight = PL.initial_paths(s[None], g[None], 20, "straight")[0]
-    assert not PL.path_feasible(robot, block_world, straight, 16, device=device)
+    straight = path_feasibility.initial_paths(s[None], g[None], 20, "straight")[0]
+    assert not path_feasibility.path_feasible(robot, block_world, straight, 16, device=device)
     res = PL.plan(robot, block_world, s, g, start_kind="mixed", n_starts=16, n_substeps=8,
                   iterations=300, step=0.05, seed=0, device=device)
     assert res.feasible[0] and res.n_feasible[0] >= 1
@@ -112,9 +113,9 @@ def test_planar4_plans_around_a_known_obstacle(device, block_world):
     assert within_limits(robot, p).all()
     # checked at substeps sized to the final path (sphere motion <= voxel / 2), not only at
     # the 8 substeps the optimisation used
-    n_chk = PL.substeps_for_voxel(robot, p, block_world.voxel_size, safety=PL.SWEEP_SAFETY,
+    n_chk = path_feasibility.substeps_for_voxel(robot, p, block_world.voxel_size, safety=path_feasibility.SWEEP_SAFETY,
                                   device=device)
-    assert n_chk > 8 and PL.path_feasible(robot, block_world, p, n_chk, device=device)
+    assert n_chk > 8 and path_feasibility.path_feasible(robot, block_world, p, n_chk, device=device)
     assert res.length_cost[0] > 1.0 and res.collision_cost[0] >= 0
     assert 0 < res.iterations[0] <= 300 and res.wall_time > 0
     d = res.to_dict()
@@ -125,7 +126,7 @@ def test_batched_problems_and_user_guess(device, block_world):
     robot = jwarp.robot("planar4")
     s = np.array([[2.0, 1.0, 0.0, 0.0], [2.0, 0.0, 0.5, 0.0]])
     g = np.array([[2.0, -1.0, 0.0, 0.0], [2.5, 0.3, 0.0, 0.0]])
-    guess = PL.initial_paths(s, g, 8, "straight")[:, None]  # (B, 1, W, n)
+    guess = path_feasibility.initial_paths(s, g, 8, "straight")[:, None]  # (B, 1, W, n)
     res = PL.plan(robot, block_world, s, g, seeds=guess, iterations=50, device=device)
     assert res.path.shape == (2, 8, 4) and res.feasible.shape == (2,)
     assert res.feasible.all() and np.all(res.iterations == 0)  # both lines are free already
@@ -167,7 +168,7 @@ def test_torch_upath_matches_numpy_gradient(device, block_world):
     robot = jwarp.robot("planar4")
     rng = np.random.default_rng(3)
     s, g = np.array([1.2, 0.3, 0.0, 0.0]), np.array([-1.2, -0.2, 0.1, 0.0])
-    Q = np.repeat(PL.initial_paths(s[None], g[None], 6, "straight"), 3, 0)
+    Q = np.repeat(path_feasibility.initial_paths(s[None], g[None], 6, "straight"), 3, 0)
     Q[:, 1:-1] += rng.normal(scale=0.3, size=Q[:, 1:-1].shape)
     w = PL.PathWeights(1.0, 0.5, 0.1)
     obj = PL.PathObjective(robot, block_world, 3, 6, 3, weights=w, eps=0.04, device=device,
@@ -204,7 +205,7 @@ def test_cli_plan_and_ik_json(block_world, tmp_path, capsys):
     assert set(out["costs"]) == {"total", "length", "collision"}
     assert out["iterations"] > 0 and out["wall_time_s"] > 0
     assert rrd.stat().st_size > 1000
-    assert PL.path_feasible("planar4", block_world, np.array(out["path"]), 32)
+    assert path_feasibility.path_feasible("planar4", block_world, np.array(out["path"]), 32)
     from scipy.spatial.transform import Rotation
 
     F = jwarp.fk("arm7", np.array([0.3, 0.6, 0.0, -1.0, 0.2, 0.5, 0.0]), device="cpu")[8]
@@ -233,10 +234,10 @@ def test_substeps_per_path_equals_a_numpy_sweep(device, name):
     u = np.arange(fine)[:, None] / fine
     q = (Q[:, :-1, None] + u * np.diff(Q, axis=1)[:, :, None]).reshape(P, -1, n)
     q = np.concatenate([q, Q[:, -1:]], axis=1)
-    x = PL.sphere_centres(robot, q.reshape(-1, n), device=device).reshape(P, q.shape[1], -1, 3)
+    x = path_feasibility.sphere_centres(robot, q.reshape(-1, n), device=device).reshape(P, q.shape[1], -1, 3)
     arc = np.linalg.norm(np.diff(x, axis=1), axis=-1).reshape(P, W - 1, fine, -1).sum(2)
     want = np.clip(np.ceil(arc.max(axis=(1, 2)) * 2.0 / 0.01), 1, 512).astype(np.int64)
-    got = PL.substeps_per_path(robot, Q, 0.01, safety=2.0, max_substeps=512, device=device)
+    got = path_feasibility.substeps_per_path(robot, Q, 0.01, safety=2.0, max_substeps=512, device=device)
     np.testing.assert_array_equal(got, want)
     assert len(np.unique(got)) > 3   # a real spread of counts, not one clamped value
 
@@ -265,7 +266,7 @@ def test_plan_takes_options_and_overrides(block_world):
     _same_plan(b, kw)
     assert (opts.start_kind, opts.seed, opts.stop_when_solved) == ("straight", 9, True)
     # user guesses (not a kind) are seeds, with or without options
-    guess = PL.initial_paths(s[None], g[None], 12, "straight")[0]
+    guess = path_feasibility.initial_paths(s[None], g[None], 12, "straight")[0]
     kw = PL.plan(robot, block_world, s, g, seeds=guess, iterations=30, fallback=None,
                  n_substeps=8, step=0.05, seed=9)
     a = PL.plan(robot, block_world, s, g, options=opts, seeds=guess, iterations=30)

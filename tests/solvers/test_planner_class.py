@@ -1,13 +1,16 @@
-"""The persistent planner (jwarp.solvers.planner.Planner, PlanOptions): buffers reused across
+"""The persistent planner (jwarp.solvers.planning.Planner, PlanOptions): buffers reused across
 calls, seeds from the caller, the best start chosen on the device, options validated, and the
 planner's device passed to every check."""
+
+import sys
 
 import numpy as np
 import pytest
 import warp as wp
 
 import jwarp
-from jwarp.solvers import planner as PL
+from jwarp.solvers import planning as PL
+from jwarp.world import path_feasibility
 from jwarp.world import world_from_occupancy
 
 from devices import requires_cpu
@@ -49,7 +52,7 @@ def test_planner_reuses_its_buffers_and_matches_plan(device, block_world):
     # another problem in between (paths frozen by early stop, other seeds), then the first
     # again: the same buffers, and the same numbers as a fresh planner and as plan()
     planner.plan(np.array([[2.0, 0.0, 0.5, 0.0]] * 2), np.array([[2.5, 0.3, 0.0, 0.0]] * 2),
-                 seeds=PL.initial_paths(np.array([[2.0, 0.0, 0.5, 0.0]] * 2),
+                 seeds=path_feasibility.initial_paths(np.array([[2.0, 0.0, 0.5, 0.0]] * 2),
                                         np.array([[2.5, 0.3, 0.0, 0.0]] * 2), 20,
                                         "straight")[:, None].repeat(6, axis=1))
     again = planner.plan(starts, goals)
@@ -97,7 +100,7 @@ def test_caller_seeds_paths_and_via_points(device, block_world):
     robot = jwarp.robot("planar4")
     s = np.array([[2.0, 1.0, 0.0, 0.0], [2.0, 0.0, 0.5, 0.0]])
     g = np.array([[2.0, -1.0, 0.0, 0.0], [2.5, 0.3, 0.0, 0.0]])
-    line = PL.initial_paths(s, g, 8, "straight")
+    line = path_feasibility.initial_paths(s, g, 8, "straight")
     seeds = np.stack([line, line + 0.05, line - 0.05], axis=1)  # (B, 3 seeds, W, n)
     planner = PL.Planner(robot, block_world, 2, PL.PlanOptions(iterations=30), device=device)
     res = planner.plan(s, g, seeds=seeds)
@@ -110,7 +113,7 @@ def test_caller_seeds_paths_and_via_points(device, block_world):
     assert res.path.shape == (2, 20, 4) and res.all_feasible.shape == (2, 1)
     as_is = PL.Planner(robot, block_world, 2, PL.PlanOptions(iterations=0, n_waypoints=9),
                        device=device).plan(s, g, seeds=via)
-    expect = PL.polyline_path(s[0], np.array([[1.6, 0.0, 0.0, 0.0]]), g[0], 9)
+    expect = path_feasibility.polyline_path(s[0], np.array([[1.6, 0.0, 0.0, 0.0]]), g[0], 9)
     np.testing.assert_allclose(as_is.path[0], expect, atol=1e-6)
     assert np.abs(np.diff(np.linalg.norm(np.diff(expect, axis=0), axis=1))).max() < 1e-9
     with pytest.raises(ValueError, match="seeds: expected paths"):
@@ -196,11 +199,13 @@ def test_plan_on_cpu_runs_every_check_on_the_cpu(block_world, monkeypatch):
             return fn(*a, **k)
         return wrapped
 
-    from jwarp.solvers import feasibility as FZ
+    from jwarp.world import path_feasibility as FZ
     for name in ("collision_free", "elastic_equilibrium", "path_feasible", "substeps_for_voxel",
                  "sphere_centres"):
-        fn = spy(getattr(PL, name))
-        monkeypatch.setattr(PL, name, fn)
+        fn = spy(getattr(FZ, name))
+        for mod in [m for k, m in list(sys.modules.items())  # every planning module using it
+                    if k.startswith("jwarp.solvers.planning") and hasattr(m, name)]:
+            monkeypatch.setattr(mod, name, fn)
         monkeypatch.setattr(FZ, name, fn)   # the checks live there (the planner re-exports)
     monkeypatch.setattr(wp, "get_preferred_device", no_default)
     launches = []

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.solvers import planner as PL
+from jwarp.solvers import planning as PL
+from jwarp.world import path_feasibility
 from jwarp.world import world_from_occupancy
 
 N = 64
@@ -24,8 +25,8 @@ def block_world():
 
 def independent_feasible(robot, world, path):
     """path_feasible at substeps sized so no sphere moves more than half a voxel."""
-    n_sub = PL.substeps_for_voxel(robot, path, world.voxel_size, safety=2.0, max_substeps=256)
-    return bool(PL.path_feasible(robot, world, path, n_sub)[()])
+    n_sub = path_feasibility.substeps_for_voxel(robot, path, world.voxel_size, safety=2.0, max_substeps=256)
+    return bool(path_feasibility.path_feasible(robot, world, path, n_sub)[()])
 
 
 def run(world, converge, **kw):
@@ -86,7 +87,7 @@ def test_option_errors_name_the_field(field, value, exc):
 def cartesian_reference(robot, Q):
     """Eq. 3.7 summed over every collision sphere, in numpy (host FK)."""
     P, W, n = Q.shape
-    x = PL.sphere_centres(robot, Q.reshape(-1, n)).reshape(P, W, -1, 3)
+    x = path_feasibility.sphere_centres(robot, Q.reshape(-1, n)).reshape(P, W, -1, 3)
     step = 0.5 * (np.diff(x, axis=1) ** 2).sum((-1, -2, -3))
     direct = 0.5 * ((x[:, -1] - x[:, 0]) ** 2).sum((-1, -2))
     return (W - 1) * step / direct
@@ -99,7 +100,7 @@ def test_cartesian_length_value_and_gradient(name):
     lim = robot.joint_limits
     s = rng.uniform(lim[:, 0], lim[:, 1]) * 0.5
     g = rng.uniform(lim[:, 0], lim[:, 1]) * 0.5
-    Q = np.repeat(PL.initial_paths(s[None], g[None], 5, "straight"), 2, 0)
+    Q = np.repeat(path_feasibility.initial_paths(s[None], g[None], 5, "straight"), 2, 0)
     Q[:, 1:-1] += rng.normal(scale=0.1, size=Q[:, 1:-1].shape)
     d = robot.workspace_dim
     occ = np.zeros((8,) * d, bool)  # an empty world: only the length terms

@@ -1,4 +1,4 @@
-"""Measurement-pose sampling (jwarp.solvers.calibration.poses) and TSP ordering (tour.py)
+"""Measurement-pose sampling (jwarp.calibration.design.poses) and TSP ordering (tour.py)
 against an independent numpy reference: FK frames (float64), sphere centres, the view cone,
 the facing angle, segment-sphere occlusion and sphere-pair distances written out here."""
 
@@ -10,12 +10,12 @@ import pytest
 
 from jwarp.core.limits import within_limits
 from jwarp.kinematics.fk import fk
-from jwarp.registry import robot as get_robot
-from jwarp.solvers.calibration.campaign import justin_tracker_setup, simulate_campaign
-from jwarp.solvers.calibration.files import read_setup, write_setup
-from jwarp.solvers.calibration.poses import (CONTAIN_TOL, PoseOptions, PoseSampler,
-                                             parse_cameras, plan_text, write_plan)
-from jwarp.solvers.calibration.tour import order_poses, path_length
+from jwarp.model.registry import robot as get_robot
+from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
+from jwarp.calibration.files import read_setup, write_setup
+from jwarp.calibration.design.poses import (CONTAIN_TOL, PoseOptions, PoseSampler,
+                                            parse_cameras, plan_text, write_plan)
+from jwarp.calibration.design.tour import order_poses, path_length
 from jwarp.world.collision import collision_pairs
 from reference import ref_fk
 
@@ -208,9 +208,9 @@ def test_too_strict_reports_counts(justin):
 
 
 def test_contact_poses_on_the_manifold():
-    from jwarp.solvers.calibration.scenarios import (contact_distance, contact_sampler,
-                                                     hand_contact_setup)
-    from jwarp.solvers.calibration.files import make_measurement
+    from jwarp.calibration.simulate.scenarios import (contact_distance, contact_sampler,
+                                                      hand_contact_setup)
+    from jwarp.calibration.files import make_measurement
 
     hand = get_robot("hand4")
     s = hand_contact_setup()

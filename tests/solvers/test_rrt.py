@@ -1,5 +1,5 @@
-"""RRT-Connect in joint space (jwarp.solvers.rrt): the planner's fallback. Paths whose every
-edge passes the planner's path_feasible, the checks used through jwarp.solvers.planner, the
+"""RRT-Connect in joint space (jwarp.solvers.planning.rrt): the planner's fallback. Paths whose every
+edge passes the planner's path_feasible, the checks used through jwarp.solvers.planning, the
 budgets (samples, time), resampling to waypoints and the options' validation."""
 
 import time
@@ -9,8 +9,9 @@ import pytest
 
 import jwarp
 from jwarp.core.limits import within_limits
-from jwarp.solvers import planner as PL
-from jwarp.solvers import rrt as R
+from jwarp.solvers import planning as PL
+from jwarp.world import path_feasibility
+from jwarp.solvers.planning import rrt as R
 
 from worlds import block_world_2d
 
@@ -27,14 +28,14 @@ def edges_feasible(robot, world, path):
     """Every edge (E, 2, n) of ``path`` on its own by the planner's path_feasible (the
     continuous check on the rigid model; substeps sized to half a voxel otherwise)."""
     edges = np.stack([path[:-1], path[1:]], axis=1)
-    n_sub = PL.substeps_for_voxel(robot, edges, world.resolution, safety=2.0, max_substeps=256)
-    return PL.path_feasible(robot, world, edges, n_sub)
+    n_sub = path_feasibility.substeps_for_voxel(robot, edges, world.resolution, safety=2.0, max_substeps=256)
+    return path_feasibility.path_feasible(robot, world, edges, n_sub)
 
 
 def test_rrt_connect_finds_a_path_every_edge_feasible(world):
     robot = jwarp.robot("planar4")
     # the straight line is blocked
-    assert not PL.path_feasible(robot, world, PL.initial_paths(S4[None], G4[None], 20)[0], 32)
+    assert not path_feasibility.path_feasible(robot, world, path_feasibility.initial_paths(S4[None], G4[None], 20)[0], 32)
     res = R.rrt_connect(robot, world, S4, G4, R.RRTOptions(seed=1), device="cpu")
     assert res.success and res.stop_reason == "connected"
     p = res.path
@@ -53,9 +54,9 @@ def test_rrt_connect_finds_a_path_every_edge_feasible(world):
 
 def test_rrt_uses_the_planners_checks(world, monkeypatch):
     """The trees check states and edges through the shared checks of
-    jwarp.solvers.feasibility (the planner's, re-exported there), so a replaced check is the
+    jwarp.world.path_feasibility (the planner's, re-exported there), so a replaced check is the
     one the fallback uses."""
-    from jwarp.solvers import feasibility as FZ
+    from jwarp.world import path_feasibility as FZ
     calls = {"collision_free": 0, "path_feasible": 0}
     for name in calls:
         orig = getattr(FZ, name)
@@ -129,7 +130,7 @@ def test_options_are_validated(field, value, match):
         R.RRTOptions(**{field: value}).validate()
     with pytest.raises(ValueError, match=match):
         PL.PlanOptions(rrt=R.RRTOptions(**{field: value})).validate()
-    with pytest.raises(TypeError, match="^rrt: expected a jwarp.solvers.rrt.RRTOptions"):
+    with pytest.raises(TypeError, match="^rrt: expected a jwarp.solvers.planning.rrt.RRTOptions"):
         PL.PlanOptions(rrt={"step": 0.1}).validate()
 
 
@@ -145,9 +146,9 @@ def test_endpoint_margin(world):
     assert res.success
     p = res.path
     edges = np.stack([p[:-1], p[1:]], axis=1)
-    at_margin = PL.path_feasible(robot, world, edges, 1, margin=0.05)
+    at_margin = path_feasibility.path_feasible(robot, world, edges, 1, margin=0.05)
     assert not at_margin[0] and at_margin[1:-1].all()  # only the first edge needs it
-    assert PL.path_feasible(robot, world, edges[[0, -1]], 1, margin=0.05,
+    assert path_feasibility.path_feasible(robot, world, edges[[0, -1]], 1, margin=0.05,
                             endpoint_margin=0.0).all()
     # the planner's fallback passes it on
     for fb, ok in ((None, False), ("rrt", True)):

@@ -1,4 +1,4 @@
-"""Built-in calibration campaigns (jwarp.solvers.calibration.scenarios) and the examples'
+"""Built-in calibration campaigns (jwarp.calibration.simulate.scenarios) and the examples'
 --quick runs. Observations are checked against plain-numpy re-computations (pinhole
 projection, brute-force capsule distance, end-effector differences) on the true robot."""
 
@@ -14,11 +14,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import jwarp
-from jwarp.solvers.calibration.campaign import simulate_campaign
-from jwarp.solvers.calibration.files import make_measurement, read_samples, read_setup
-from jwarp.solvers.calibration.result import model_frames
-from jwarp.solvers.calibration.scenarios import (available, contact_sampler, hand_contact_setup,
-                                                 look_at_head_joints, scenario)
+from jwarp.calibration.simulate.campaign import simulate_campaign
+from jwarp.calibration.files import make_measurement, read_samples, read_setup
+from jwarp.calibration.estimate.result import model_frames
+from jwarp.calibration.simulate.scenarios import (available, contact_sampler, hand_contact_setup,
+                                                  look_at_head_joints, scenario)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -51,7 +51,7 @@ def test_relative_scenario_is_tcp_difference_on_the_truth():
 def test_look_at_points_the_head_x_axis_at_the_target():
     robot = jwarp.robot("justin19")
     rng = np.random.default_rng(3)
-    from jwarp.solvers.calibration.campaign import uniform_configurations
+    from jwarp.calibration.simulate.campaign import uniform_configurations
 
     q = uniform_configurations(robot, rng, 200)
     target = np.array([1.1, 0.0, 1.0]) + rng.uniform(-0.3, 0.3, (200, 3))

@@ -6,19 +6,19 @@ import itertools
 import numpy as np
 import pytest
 
-from jwarp.registry import robot as get_robot
-from jwarp.solvers.calibration.campaign import uniform_configurations
-from jwarp.solvers.calibration.design import (DesignOptions, _State, candidate_jacobians,
+from jwarp.model.registry import robot as get_robot
+from jwarp.calibration.simulate.campaign import uniform_configurations
+from jwarp.calibration.design.optimal import (DesignOptions, _State, candidate_jacobians,
                                               criterion, design, detmax, greedy, select,
                                               task_factor)
-from jwarp.solvers.calibration.files import Setup, make_measurement
-from jwarp.solvers.calibration.params import ParameterSpace
-from jwarp.solvers.calibration.pool import (configurations_text, draw_configurations,
-                                            parse_configurations)
-from jwarp.solvers.calibration.result import model_frames
-from jwarp.solvers.calibration.scenarios import hand_contact_setup
-from jwarp.solvers.calibration.sensitivity import (kernel_basis, kernel_inclusion, sensitivity,
-                                                   spectrum, stacked_jacobian)
+from jwarp.calibration.files import Setup, make_measurement
+from jwarp.calibration.estimate.params import ParameterSpace
+from jwarp.calibration.pool import (configurations_text, draw_configurations,
+                                    parse_configurations)
+from jwarp.calibration.estimate.result import model_frames
+from jwarp.calibration.simulate.scenarios import hand_contact_setup
+from jwarp.calibration.design.sensitivity import (kernel_basis, kernel_inclusion, sensitivity,
+                                                  spectrum, stacked_jacobian)
 
 
 @pytest.fixture(scope="module")
@@ -269,7 +269,7 @@ def test_design_on_hand_contacts(hand):
     res = design(hand, meas, q, DesignOptions(n=30), free="theta,d,r,alpha", meta_pool=meta,
                  task=task, q_task=qt)
     U, space = candidate_jacobians(hand, meas, q, "theta,d,r,alpha", meta=meta)
-    from jwarp.solvers.calibration.design import prior_information, task_information
+    from jwarp.calibration.design.optimal import prior_information, task_information
 
     L, _ = task_information(hand, task, qt, space.names, "theta,d,r,alpha")
     prior = prior_information(space)
@@ -304,8 +304,8 @@ def test_candidate_jacobians_on_every_device(device):
     """The candidates' Jacobians on ``device`` (rigid hand4 contacts, and the elastic
     justin19 tracker through the torque equilibrium) equal finite differences of the
     predictions on the CPU; CPU and CUDA agree to round-off."""
-    from jwarp.solvers.calibration.campaign import justin_tracker_setup
-    from jwarp.solvers.calibration.map import CalibrationProblem
+    from jwarp.calibration.simulate.campaign import justin_tracker_setup
+    from jwarp.calibration.estimate.map import CalibrationProblem
 
     robot = get_robot("justin19")
     meas = make_measurement(robot, justin_tracker_setup())

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.plugins.measurements.geometry import pose_matrix
-from jwarp.solvers.calibration.files import make_measurement
-from jwarp.solvers.calibration.result import model_frames
-from jwarp.solvers.calibration.scenarios import HEAD_CAMERA_INTRINSICS, justin_camera_setup
-from jwarp.solvers.calibration.tow import (GaussianNode, MeasurementGraph, adjusted_covariance,
-                                           reverse_covariance, sequential_covariance,
-                                           task_space_covariance, tow_covariance,
-                                           tow_from_dict)
+from jwarp.model.geometry import pose_matrix
+from jwarp.calibration.files import make_measurement
+from jwarp.calibration.estimate.result import model_frames
+from jwarp.calibration.simulate.scenarios import HEAD_CAMERA_INTRINSICS, justin_camera_setup
+from jwarp.calibration.design.tow import (GaussianNode, MeasurementGraph, adjusted_covariance,
+                                          reverse_covariance, sequential_covariance,
+                                          task_space_covariance, tow_covariance,
+                                          tow_from_dict)
 
 
 def spd(rng, d, batch=()):

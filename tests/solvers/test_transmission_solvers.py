@@ -7,7 +7,8 @@ import pytest
 
 import jwarp
 from jwarp.kinematics.transmission import transmitted, untransmitted
-from jwarp.solvers import planner as PL
+from jwarp.solvers import planning as PL
+from jwarp.world import path_feasibility
 from jwarp.solvers.ik import IKOptions, IKSolver
 
 from reference import ref_fk
@@ -79,5 +80,5 @@ def test_planner_paths_are_commanded_values(device):
     np.testing.assert_allclose(res.path[0, -1], goal, atol=1e-6)
     # the links' path is collision-free (checked on the plain robot at the links' values)
     link = ref_transmission(robot, res.path[0])
-    assert PL.path_feasible(plain, world, link[None], 8, device=device)[0]
+    assert path_feasibility.path_feasible(plain, world, link[None], 8, device=device)[0]
     np.testing.assert_allclose(res.all_paths[0, res.start_index[0]], res.path[0])

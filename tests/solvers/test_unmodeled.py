@@ -12,12 +12,12 @@ import pytest
 
 import jwarp
 from jwarp.model import RobotModel
-from jwarp.solvers.calibration import calibrate, error_stats, errors
-from jwarp.solvers.calibration.campaign import (justin_tracker_setup, read_campaign,
-                                                simulate_campaign)
-from jwarp.solvers.calibration.files import make_measurement
-from jwarp.solvers.calibration.result import model_frames, predict
-from jwarp.solvers.calibration.unmodeled import EFFECTS, parse_unmodeled
+from jwarp.calibration import calibrate, error_stats, errors
+from jwarp.calibration.simulate.campaign import (justin_tracker_setup, read_campaign,
+                                                 simulate_campaign)
+from jwarp.calibration.files import make_measurement
+from jwarp.calibration.estimate.result import model_frames, predict
+from jwarp.calibration.simulate.unmodeled import EFFECTS, parse_unmodeled
 
 from cli_helpers import one_line_error, run
 from devices import requires_cpu

@@ -13,7 +13,7 @@ from jwarp.world.device_world import world_query
 from jwarp.world.motion import MotionCheck, check_paths, sphere_reach
 from jwarp.world.primitives import Shape, pose_matrix, rpy_matrix, signed_distance
 from jwarp.world.scene_file import Scene
-from jwarp.solvers.planner import plan
+from jwarp.solvers.planning import plan
 from jwarp.world.shapes import ShapeSet
 
 PRIMS = [("box", [0.3, 0.2, 0.1]), ("sphere", [0.1]), ("cylinder", [0.3, 0.1]),
@@ -237,7 +237,7 @@ def test_motion_check_margin_and_endpoint_margin(device, arm_scene):
         assert ok[dense > m + 3e-3].all()
     # a grasp-like goal 4 mm from a ball: refused at margin 1 cm, planned with
     # endpoint_margin 0 (the last segment may come closer than the margin, never below 0)
-    from jwarp.solvers.planner import sphere_centres
+    from jwarp.world.path_feasibility import sphere_centres
     goal = np.array([0.0, 0.8, 0.0, -1.0, 0.0, 0.5, 0.0])
     c = sphere_centres(robot, goal[None])[0]
     _, _, rad = robot.sphere_arrays()
@@ -282,7 +282,7 @@ def test_sphere_reach_bounds_the_motion():
     rng = np.random.default_rng(8)
     lim = np.array(robot.joint_limits)
     q = rng.uniform(lim[:, 0], lim[:, 1], size=(200, robot.n_dof))
-    from jwarp.solvers.planner import sphere_centres
+    from jwarp.world.path_feasibility import sphere_centres
     x0 = sphere_centres(robot, q)
     h = 1e-6
     for j in range(robot.n_dof):

@@ -56,9 +56,9 @@ def test_scene_world_refuses_bad_voxels(table_shelf, voxel):
 
 
 def test_scene_world_refuses_grids_beyond_memory(table_shelf, monkeypatch):
-    import jwarp.memory
+    import jwarp.utils.memory
 
-    monkeypatch.setattr(jwarp.memory, "available_memory", lambda: 10 ** 6)
+    monkeypatch.setattr(jwarp.utils.memory, "available_memory", lambda: 10 ** 6)
     with pytest.raises(ValueError, match=r"voxel_size: 0.02 m .* needs a grid of 51 x 95 x 66 "
                                          r"= 3.198e\+05 cells, about 10.2 MB of memory, more "
                                          r"than the 1.0 MB available"):

@@ -11,7 +11,8 @@ import pytest
 import jwarp
 from jwarp.importers.robot import example_robot_urdf, load_urdf
 from jwarp.solvers.ik import IKOptions, IKSolver
-from jwarp.solvers.planner import PlanOptions, Planner, collision_free, path_feasible
+from jwarp.solvers.planning import PlanOptions, Planner
+from jwarp.world.path_feasibility import collision_free, path_feasible
 from jwarp.world.scene_file import SceneOptions, load_scene, robot_frames, scene_world
 from jwarp.world.spherize import SpherizeOptions, spherize, spherized_robot
 

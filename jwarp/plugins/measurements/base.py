@@ -1,6 +1,6 @@
 """Compatibility name for plugin authors: the measurement plugin contract lives in
-:mod:`jwarp.measurement` (``Measurement``, ``ParamBlock``)."""
+:mod:`jwarp.model.measurement` (``Measurement``, ``ParamBlock``)."""
 
-from jwarp.measurement import Measurement, ParamBlock
+from jwarp.model.measurement import Measurement, ParamBlock
 
 __all__ = ["Measurement", "ParamBlock"]

@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 
 from jwarp.model import RobotModel
-from jwarp.plugins.measurements import geometry as g
-from jwarp.measurement import Measurement, ParamBlock
-from jwarp.registry import hookimpl
+from jwarp.model import geometry as g
+from jwarp.model.measurement import Measurement, ParamBlock
+from jwarp.model.registry import hookimpl
 
 
 class RelativeMeasurement(Measurement):

@@ -7,7 +7,7 @@ The numbers are justin19's (frames ``right_base`` .. ``right_tcp``, joints ``rig
 """
 
 from jwarp.plugins.robots import load_builtin
-from jwarp.registry import hookimpl
+from jwarp.model.registry import hookimpl
 
 
 @hookimpl

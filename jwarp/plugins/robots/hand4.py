@@ -7,7 +7,7 @@ in ``hand4.json`` (description and notes).
 """
 
 from jwarp.plugins.robots import load_builtin
-from jwarp.registry import hookimpl
+from jwarp.model.registry import hookimpl
 
 
 @hookimpl

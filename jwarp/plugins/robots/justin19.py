@@ -5,7 +5,7 @@ Numbers: the published ones (``shared/robots/justin19.json``) in jwarp's schema,
 """
 
 from jwarp.plugins.robots import load_builtin
-from jwarp.registry import hookimpl
+from jwarp.model.registry import hookimpl
 
 
 @hookimpl

@@ -6,7 +6,7 @@ in z = 0 and a point mass per link. Descriptions: ``planar4.json``, ``planar5.js
 """
 
 from jwarp.plugins.robots import load_builtin
-from jwarp.registry import hookimpl
+from jwarp.model.registry import hookimpl
 
 
 @hookimpl

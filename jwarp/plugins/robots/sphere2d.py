@@ -5,7 +5,7 @@ the world's orientation. Description: ``sphere2d.json``.
 """
 
 from jwarp.plugins.robots import load_builtin
-from jwarp.registry import hookimpl
+from jwarp.model.registry import hookimpl
 
 
 @hookimpl

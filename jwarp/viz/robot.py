@@ -24,9 +24,9 @@ from typing import Any, Iterable, Iterator, Mapping
 
 import numpy as np
 
-from jwarp.atomic import AtomicFile
+from jwarp.utils.atomic import AtomicFile
 from jwarp.model import RobotModel
-from jwarp.registry import robot as get_robot
+from jwarp.model.registry import robot as get_robot
 
 #: timeline on which :func:`save_robot_rrd` logs the configurations
 TIMELINE = "config"
@@ -296,8 +296,8 @@ def save_calibration_rrd(path: str | os.PathLike, robot: Any, measurement: Any, 
     calibrated tracker pose), image points in an ``image`` 2D view, relative positions from
     the first end-effector; every plugin gets ``error/after/<group>`` scalars [mm or px].
     """
-    from jwarp.solvers.calibration.result import (group_norms, model_frames,
-                                                  observation_groups)
+    from jwarp.calibration.estimate.result import (group_norms, model_frames,
+                                                   observation_groups)
 
     rr = rerun_module()
     model = get_robot(robot)

@@ -42,7 +42,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from jwarp.atomic import atomic_write_text
+from jwarp.utils.atomic import atomic_write_text
 
 SCHEMA_NAME = "jwarp.robot"
 SCHEMA_VERSION = 1

@@ -1,0 +1,259 @@
+"""The options of a motion plan: :class:`PlanOptions`, :class:`PathWeights`, :class:`ViaPoints`
+and their checks."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from jwarp.core.arrays import real_number
+from jwarp.core.device import numpy_dtype, scalar_type
+from jwarp.world.path_feasibility import check_substeps
+from jwarp.solvers.overrides import renamed_options
+
+
+@dataclass
+class PathWeights:
+    """Weights of eq. 3.16: world collision, self-collision and length (joint space, eq.
+    3.5); ``cartesian``: the Cartesian length cost (eqs. 3.6-3.7, the motion of every
+    collision sphere between waypoints, normalised by the direct start-goal motion; rigid
+    kinematics), 0 (default) leaves it out."""
+
+    world: float = 1.0
+    self: float = 1.0
+    length: float = 0.01
+    cartesian: float = 0.0
+
+    def validate(self) -> None:
+        for k in ("world", "self", "length", "cartesian"):
+            v = getattr(self, k)
+            if not (math.isfinite(real_number(v, f"weights.{k}")) and v >= 0):
+                raise ValueError(f"weights.{k}: expected a finite number >= 0, got {v!r}")
+
+
+# ====================================================================== options
+#: the kinds of multi-starts drawn when no seeds are given (:attr:`PlanOptions.start_kind`)
+INITIAL_KINDS = ("straight", "random", "mixed")
+
+
+#: why a plan call ended (:attr:`PlanResult.stop_reason`)
+STOP_REASONS = ("solved", "time_limit", "iterations", "all_done")
+
+
+#: the fallbacks of :attr:`PlanOptions.fallback` (besides None)
+FALLBACKS = ("rrt",)
+
+
+#: the stages of :attr:`PlanResult.stage`
+STAGES = ("optimizer", "fallback", "none")
+
+
+def check_int(v: Any, name: str, lo: int) -> None:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+        raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+
+
+def _check_flag(v: Any, name: str) -> None:
+    if not (isinstance(v, (bool, np.bool_)) or (isinstance(v, (int, np.integer)) and v in (0, 1))):
+        raise TypeError(f"{name}: expected True or False, got {v!r}")
+
+
+@renamed_options(initial="start_kind", early_stop="freeze_feasible")
+@dataclass
+class PlanOptions:
+    """Options of the planner: of :class:`Planner`, and the keyword options of :func:`plan`
+    (documented here once). :meth:`validate` raises ValueError/TypeError naming the field.
+
+    Attributes:
+        n_starts: multi-starts per problem when no seeds are given ("straight": one).
+        start_kind: the multi-starts without seeds: "straight" (the line in joint space),
+            "random" (1-3 random via points inside the limits, thesis 3.5.1) or "mixed"
+            (the line plus ``n_starts - 1`` random ones).
+        n_waypoints: W, >= 2 (20 in the thesis); seeds given as paths bring their own W.
+        n_substeps: substeps per segment, >= 1; None sizes them to the world's voxel size
+            on the initial paths of each call (:func:`substeps_for_voxel`).
+        iterations: most gradient steps per path, >= 0.
+        step, max_step: step size alpha (eq. 3.18) and the largest change of one joint of
+            one waypoint per step [rad], both > 0.
+        weights: :class:`PathWeights` (lam_w, lam_s, lam_l); None: the defaults.
+        eps: smoothing width of the clipped cost c (eq. 3.10) [m], > 0 and >= ``margin``
+            (a path of zero collision cost is then feasible); None: max(voxel, 1 cm, margin).
+        margin: required clearance [m] (>= 0) of every sphere along the whole continuous
+            motion (:mod:`jwarp.world.motion`).
+        self_margin: clearance [m] (>= 0) required between the robot's own spheres
+            (self collision; MoveIt's default padding is 0 too).
+        endpoint_margin: clearance [m] required of the start and goal and on the first
+            and last segment, where it is below ``margin`` (None: ``margin``), so grasp
+            poses closer to an object than the path margin can be planned.
+        freeze_feasible: freeze each path once it is feasible.
+        stop_when_solved: end as soon as every problem has one feasible path (default);
+            False optimises every start until it is feasible (or converged, or out of
+            iterations): for labels (``converge``), per-start statistics.
+        time_limit: seconds for the whole call (None: no limit), > 0: checked before
+            every iteration (wall clock since the call started); when it is reached the
+            current paths get their exact check and the call ends (the endpoint checks,
+            one evaluation and that check always run, so a call can overrun a tiny limit).
+        fallback: "rrt" (default): problems the multi-starts have not solved after
+            their iterations, or after ``fallback_after`` of ``time_limit``, get an
+            RRT-Connect path in joint space (:mod:`jwarp.solvers.planning.rrt`) as the seed of
+            one more gradient optimisation (exact check as always); None: no fallback.
+        fallback_after: the share of ``time_limit`` the multi-starts may use before the
+            fallback, in (0, 1) (without a time limit: after the iterations).
+        rrt: :class:`jwarp.solvers.planning.rrt.RRTOptions` of the fallback (None: its defaults).
+        check_all_every: exact feasibility check of every unfinished path every this many
+            iterations (>= 1; paths whose largest substep cost is below ``w c(margin)`` are
+            checked every iteration) and after the last one; None: 1 in a world of exact
+            objects only (its check costs about one evaluation), 10 with a grid.
+        free_via: draw the random via points from collision-free configurations.
+        kappa: elastic compensation with these compliances [rad/(N m)] (any form of
+            :func:`jwarp.kinematics.kappa_array`); None plans on the rigid model.
+        lam: damping of the torque update in (0, 1] (elastic only).
+        seed: random seed of the random multi-starts (an integer >= 0, a numpy Generator
+            or None for fresh entropy); every call draws from ``default_rng(seed)``.
+        converge: keep optimizing feasible paths until their length cost converges
+            (labels of thesis 3.5.1): a feasible path is re-checked every
+            ``check_all_every`` iterations; each feasible iterate is kept (so the result
+            is the last feasible one), and the path stops when the relative change of
+            U_l between two kept iterates is <= ``converge_tol`` (or the iterations run
+            out). ``iterations`` of the result is then the iteration of the kept iterate.
+            False (default): ``freeze_feasible`` decides.
+        converge_tol: relative change of U_l that counts as converged, > 0.
+        callback: called as ``callback(iteration, paths (P, W, n_dof))`` after every
+            evaluation (e.g. rerun streaming; it reads every path to the host).
+        allow_no_collision: plan without a collision model: a robot without collision
+            spheres (every path is then collision-free) or in self-collision at its home
+            configurations is accepted; False (default): either is a ValueError naming the
+            robot and the link pairs (:func:`jwarp.world.model_check.check_collision_model`;
+            CLI ``--no-collision``).
+    """
+
+    n_starts: int = 8
+    start_kind: str = "mixed"
+    n_waypoints: int = 20
+    n_substeps: int | None = None
+    iterations: int = 100
+    step: float = 0.01
+    max_step: float = 0.1
+    weights: PathWeights | None = None
+    eps: float | None = None
+    margin: float = 0.0
+    endpoint_margin: float | None = None
+    self_margin: float = 0.0
+    freeze_feasible: bool = True
+    stop_when_solved: bool = True
+    check_all_every: int | None = None
+    free_via: bool = True
+    kappa: Any = None
+    lam: float = 0.7
+    seed: Any = 0
+    callback: Callable[[int, np.ndarray], None] | None = None
+    converge: bool = False
+    converge_tol: float = 1e-3
+    time_limit: float | None = None
+    fallback: str | None = "rrt"
+    fallback_after: float = 0.15
+    rrt: Any = None
+    allow_no_collision: bool = False
+
+    def validate(self, dtype: Any = np.float32) -> None:
+        """ValueError/TypeError naming the first bad field; numbers must be finite in the
+        computing ``dtype``."""
+        npdt = numpy_dtype(scalar_type(dtype))
+        for name, lo in (("iterations", 0), ("n_waypoints", 2), ("n_starts", 1)):
+            check_int(getattr(self, name), name, lo)
+        if self.check_all_every is not None:
+            check_int(self.check_all_every, "check_all_every", 1)
+        for name in ("step", "max_step"):
+            v = getattr(self, name)
+            if not (math.isfinite(real_number(v, name, npdt)) and v > 0):
+                raise ValueError(f"{name}: expected a number > 0, got {v!r}")
+        margin = real_number(self.margin, "margin")
+        if not (math.isfinite(margin) and margin >= 0):
+            raise ValueError(f"margin: expected a number >= 0 [m], got {self.margin!r}")
+        real_number(self.margin, "margin", npdt)  # finite in the computing dtype too
+        if margin > 1e3:
+            raise ValueError(f"margin: {margin:g} m is not a clearance a robot can keep")
+        sm = real_number(self.self_margin, "self_margin")
+        if not (math.isfinite(sm) and sm >= 0):
+            raise ValueError(f"self_margin: expected a number >= 0 [m], got {self.self_margin!r}")
+        if self.endpoint_margin is not None:
+            em = real_number(self.endpoint_margin, "endpoint_margin")
+            if not (math.isfinite(em) and em >= 0):
+                raise ValueError(f"endpoint_margin: expected a number >= 0 [m] or None, got "
+                                 f"{self.endpoint_margin!r}")
+        if self.eps is not None:
+            eps = real_number(self.eps, "eps")
+            if not (math.isfinite(eps) and eps > 0):
+                raise ValueError(f"eps: expected a number > 0 [m], got {self.eps!r}")
+            if eps < margin:
+                raise ValueError(f"eps: must be >= margin ({margin:g} m), got {eps:g}")
+            real_number(self.eps, "eps", npdt)
+        if not isinstance(self.start_kind, str):
+            raise TypeError(f"start_kind: expected one of "
+                            f"{', '.join(map(repr, INITIAL_KINDS))}, got "
+                            f"{type(self.start_kind).__name__} (give initial paths as seeds)")
+        if self.start_kind not in INITIAL_KINDS:
+            raise ValueError(f"start_kind: unknown kind '{self.start_kind}' (expected "
+                             f"'straight', 'random' or 'mixed'; paths are seeds)")
+        if self.n_substeps is not None:
+            check_substeps(self.n_substeps)
+        if self.weights is not None:
+            if not isinstance(self.weights, PathWeights):
+                raise TypeError(f"weights: expected a PathWeights, got "
+                                f"{type(self.weights).__name__}")
+            self.weights.validate()
+        tol = real_number(self.converge_tol, "converge_tol")
+        if not (math.isfinite(tol) and tol > 0):
+            raise ValueError(f"converge_tol: expected a number > 0, got {self.converge_tol!r}")
+        for name in ("freeze_feasible", "stop_when_solved", "free_via", "converge",
+                     "allow_no_collision"):
+            _check_flag(getattr(self, name), name)
+        seed = self.seed
+        if not (seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence))):
+            check_int(seed, "seed", 0)
+        if self.kappa is not None and not 0.0 < real_number(self.lam, "lam") <= 1.0:
+            raise ValueError(f"lam: expected a damping factor in (0, 1], got {self.lam!r}")
+        if self.callback is not None and not callable(self.callback):
+            raise TypeError(f"callback: expected a callable (iteration, paths), got "
+                            f"{type(self.callback).__name__}")
+        _check_budget(self)
+
+
+def _check_budget(o: "PlanOptions") -> None:
+    """:meth:`PlanOptions.validate` of ``time_limit``, ``fallback``, ``fallback_after``
+    and ``rrt``."""
+    if o.time_limit is not None:
+        if isinstance(o.time_limit, (bool, np.bool_)):
+            raise TypeError(f"time_limit: expected a number of seconds > 0 or None, got "
+                            f"{o.time_limit!r}")
+        t = real_number(o.time_limit, "time_limit")
+        if not (math.isfinite(t) and t > 0):
+            raise ValueError(f"time_limit: expected a number > 0 [s] or None, got "
+                             f"{o.time_limit!r}")
+    if o.fallback is not None and (not isinstance(o.fallback, str)
+                                   or o.fallback not in FALLBACKS):
+        raise ValueError(f"fallback: expected 'rrt' or None, got {o.fallback!r}")
+    f = real_number(o.fallback_after, "fallback_after")
+    if not 0.0 < f < 1.0:
+        raise ValueError(f"fallback_after: expected a number in (0, 1), got "
+                         f"{o.fallback_after!r}")
+    if o.rrt is not None:
+        from jwarp.solvers.planning.rrt import RRTOptions
+
+        if not isinstance(o.rrt, RRTOptions):
+            raise TypeError(f"rrt: expected a jwarp.solvers.planning.rrt.RRTOptions, got "
+                            f"{type(o.rrt).__name__}")
+        o.rrt.validate()
+
+
+@dataclass(frozen=True)
+class ViaPoints:
+    """Seeds of :meth:`Planner.plan` given as via points: ``points`` (k, n_dof),
+    (n_seeds, k, n_dof) or (n_problems, n_seeds, k, n_dof) (k >= 0). Each seed is the
+    path start -> via points -> goal of ``n_waypoints`` waypoints spread evenly along its
+    joint-space length (as the random multi-starts), projected onto the limits."""
+
+    points: Any

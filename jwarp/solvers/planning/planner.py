@@ -1,0 +1,774 @@
+"""The planner: a persistent :class:`Planner` holding its device buffers, the one-call
+:func:`plan`, initial paths and the RRT fallback."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
+from jwarp.core.device import numpy_dtype, scalar_type
+from jwarp.world.model_check import check_collision_model
+from jwarp.model import RobotModel
+from jwarp.model.registry import robot as get_robot
+from jwarp.kinematics.transmission import transmitted, untransmitted
+from jwarp.kinematics.launch import kappa_array
+from jwarp.world.path_feasibility import (MAX_CHECK_SUBSTEPS, SWEEP_SAFETY, certify_check,
+                                          check_endpoints, check_world, collision_free,
+                                          initial_paths, path_feasible, polyline_path,
+                                          substeps_for_voxel, substeps_per_path)
+from jwarp.core.limits import project_numpy, within_limits
+from jwarp.solvers.overrides import translate, with_overrides
+from jwarp.solvers.planning.objective import PathObjective, path_configs
+from jwarp.solvers.planning.options import PlanOptions, ViaPoints, check_int
+from jwarp.solvers.planning.result import PlanResult
+
+
+#: substep length [m] of the cost in a world of exact objects only (sphere travel per
+#: substep): the continuous check proves feasibility, the cost only guides the descent
+EXACT_SUBSTEP = 0.25
+
+
+#: evaluations per segment of the planner's continuous check (MotionOptions.max_evals)
+PLANNER_CHECK_EVALS = 256
+
+
+#: the same on a GPU, after 8 rounds of parallel evaluations (H200, 700 Panda problems in one
+#: batch: 64 gave 667 solved in 4.0 s, 256 gave 691 in 15 s)
+PLANNER_CHECK_EVALS_GPU = 64
+
+
+# ====================================================================== planner
+class _Buffers:
+    """The device buffers of one shape (P paths of W waypoints, n_sub substeps)."""
+
+    def __init__(self, obj: PathObjective, B: int, gather: bool) -> None:
+        P, W, n, S = obj.P, obj.W, obj.n, obj.S
+        dev, sc = obj.device, obj.scalar
+        self.key = (P, W, obj.n_sub)
+        self.objective = obj
+        self.used = False
+        # every buffer is written before it is read
+        self.idx = wp.empty(P, dtype=wp.int32, device=dev)             # path indices
+        self.final = wp.empty((P, W, n), dtype=sc, device=dev)          # kept paths
+        self.final_cost = wp.empty((P, 3), dtype=sc, device=dev)        # U_path, U_l, coll.
+        self.feasible = wp.empty(P, dtype=wp.int32, device=dev)
+        self.best = wp.empty(B, dtype=wp.int32, device=dev)
+        self.best_path = wp.empty((B, W, n), dtype=sc, device=dev)
+        self.best_cost = wp.empty((B, 3), dtype=sc, device=dev)
+        #: candidates of the exact checks gathered on the device (``gather``; else None:
+        #: on the CPU the host reads the arrays in place)
+        self.cand_paths = self.cand_sub = None
+        if gather:
+            self.cand_paths = wp.empty((P, W, n), dtype=sc, device=dev)
+            self.cand_sub = wp.empty((P * S, n), dtype=sc, device=dev)
+
+
+class Planner:
+    """A persistent batched planner (thesis 3.3, gradient descent on U_path eq. 3.16) for
+    ``n_problems`` start/goal pairs at a time on one device.
+
+    Args:
+        robot: robot name or RobotModel.
+        world: a :class:`jwarp.world.World` of the robot's workspace dimension.
+        n_problems: B, the start/goal pairs of every :meth:`plan` call.
+        options: :class:`PlanOptions` (None: the defaults); validated here, and copied.
+        device: Warp device of the optimisation and of every check (collision, limits,
+            elastic equilibrium, substep sizing); None: Warp's default device (docs/api.md
+            "Devices").
+        dtype: float type of the optimisation (None: float32); the exact feasibility
+            checks run in float64.
+        warm_start: optional learned warm start (thesis 3.4.3): any object with a callable
+            ``paths(starts (B, n_dof), goals (B, n_dof), world) -> (B, H, W, n_dof)``
+            (e.g. ``jwarp.learn.plan_net.PlanNet``). A :meth:`plan` call without seeds then
+            starts from its H paths per problem, followed by ``options.n_starts - H``
+            multi-starts of kind ``options.start_kind`` (none if ``n_starts <= H``) of the
+            network's W waypoints; explicit seeds win. TypeError naming ``warm_start`` if
+            it has no callable ``paths``.
+
+    The device buffers (paths, substeps, costs, gradients, the kept paths and the
+    per-problem selection) are allocated by the first :meth:`plan` call and reused by
+    every later call of the same shapes (seeds per problem, waypoints, substeps: give
+    ``options.n_substeps`` to keep the shapes fixed; sized substeps follow each call's
+    initial paths). The best start of every problem is chosen on the device; only the
+    per-path screen, the candidates of the exact checks and the chosen paths are read.
+
+    Example::
+
+        planner = Planner("planar4", world, 64, PlanOptions(n_starts=8, n_substeps=8))
+        res = planner.plan(starts, goals)                 # random multi-starts
+        res = planner.plan(starts, goals, seeds=guesses)  # e.g. learned warm starts
+    """
+
+    def __init__(self, robot: Any, world: Any, n_problems: int,
+                 options: PlanOptions | None = None, device: Any = None,
+                 dtype: Any = None, warm_start: Any = None) -> None:
+        init_warp()
+        if warm_start is not None and not callable(getattr(warm_start, "paths", None)):
+            raise TypeError(f"warm_start: expected an object with a callable paths(starts, "
+                            f"goals, world) (e.g. a loaded planning network), got "
+                            f"{type(warm_start).__name__}")
+        self.warm_start = warm_start
+        self.robot = get_robot(robot)
+        check_world(self.robot, world)
+        self.world = world
+        check_int(n_problems, "n_problems", 1)
+        self.n_problems = int(n_problems)
+        if options is None:
+            options = PlanOptions()
+        if not isinstance(options, PlanOptions):
+            raise TypeError(f"options: expected a PlanOptions, got {type(options).__name__}")
+        self.scalar = scalar_type(np.float32 if dtype is None else dtype)
+        self.npdt = numpy_dtype(self.scalar)
+        options.validate(self.npdt)
+        o = replace(options, step=float(options.step), max_step=float(options.max_step),
+                    margin=real_number(options.margin, "margin"))
+        self.device = resolve_device(device)
+        if not o.allow_no_collision:
+            check_collision_model(self.robot, need_spheres=True, what="planning",
+                                  device=self.device)
+        self.options = o
+        #: gather the candidates and keep the final paths with kernels (on a GPU); on the
+        #: CPU the host indexes the device arrays in place (the same numbers, no launches)
+        self._kernel_copies = not self.device.is_cpu
+        #: smoothing width of the collision cost [m] (options.eps or its default)
+        self.eps = (real_number(o.eps, "eps") if o.eps is not None
+                    else max(float(world.resolution), 0.01, o.margin))
+        real_number(self.eps, "eps", self.npdt)
+        if o.kappa is not None:
+            kappa_array(self.robot, o.kappa)  # validates, naming kappa
+        self._buffers: _Buffers | None = None
+        self._motion = None  # the continuous path check (motion_check())
+        #: a batch of worlds (World.batch): problem b plans in world b
+        self.batched = world.n_worlds > 1
+        if self.batched and world.n_worlds != self.n_problems:
+            raise ValueError(f"world: a batch of {world.n_worlds} worlds needs as many "
+                             f"problems, got n_problems={self.n_problems}")
+        if self.batched and o.kappa is not None:
+            raise ValueError("kappa: a batch of worlds plans on the rigid model only")
+        self._reach = None   # sphere_reach of the robot (substeps in exact worlds)
+
+    # ------------------------------------------------------------------ public
+    def plan(self, start: Any, goal: Any, seeds: Any = None) -> PlanResult:
+        """Plan the ``n_problems`` paths from ``start`` to ``goal``.
+
+        Args:
+            start, goal: (n_problems, n_dof) or (n_dof,) joint values [rad or m] (a single
+                configuration is used for every problem). Checked: within the limits,
+                collision-free with ``options.margin`` (and a converged equilibrium on the
+                elastic model).
+            seeds: the initial paths: None draws ``options.n_starts`` multi-starts of kind
+                ``options.start_kind`` (with a ``warm_start``: its paths first); an array
+                of paths (W, n_dof), (n_seeds, W, n_dof) or
+                (n_problems, n_seeds, W, n_dof) (their first/last rows are replaced by
+                start/goal, they are projected onto the limits, and W is theirs), e.g.
+                learned warm starts; or :class:`ViaPoints`.
+
+        Returns:
+            :class:`PlanResult` (``wall_time``: this call).
+        """
+        if seeds is None and self.warm_start is not None:
+            seeds = self._warm_seeds(start, goal)
+        model = self.robot
+        if not model.has_harmonic:
+            return self._plan(start, goal, seeds, "seeds")
+        # transmission errors: the kernels and checks work in the links' joint space; the
+        # endpoints and seeds go in through q' = q + dq(q), the paths come back through its
+        # inverse (waypoints exact; between them the links follow the straight segment in
+        # q', which differs from the one in q by the change of dq along it)
+        q0 = transmitted(model, self._problems(start, "start"))
+        q1 = transmitted(model, self._problems(goal, "goal"))
+        if seeds is not None and not isinstance(seeds, (str, ViaPoints)):
+            seeds = transmitted(model, real_array(seeds, "seeds"))
+        elif isinstance(seeds, ViaPoints):
+            seeds = ViaPoints(transmitted(model, real_array(seeds.points, "seeds")))
+        res = self._plan(q0, q1, seeds, "seeds")
+        res.path = untransmitted(model, res.path)
+        res.paths_source = untransmitted(model, res.all_paths)
+        return res
+
+    def _warm_seeds(self, start: Any, goal: Any) -> np.ndarray:
+        """The warm start's paths (B, H, W, n_dof), then ``n_starts - H`` multi-starts."""
+        q0, q1 = self._problems(start, "start"), self._problems(goal, "goal")
+        raw = self.warm_start.paths(q0.copy(), q1.copy(), self.world)
+        if hasattr(raw, "detach") and hasattr(raw, "cpu"):  # a torch tensor
+            raw = raw.detach().cpu().numpy()
+        g = np.asarray(raw, dtype=np.float64)
+        if g.ndim != 4 or g.shape[0] != len(q0) or g.shape[3] != self.robot.n_dof \
+                or g.shape[1] == 0 or g.shape[2] < 2 or not np.all(np.isfinite(g)):
+            raise ValueError(f"warm_start: paths() returned shape {g.shape}, expected "
+                             f"({len(q0)}, H, W, {self.robot.n_dof}) finite values")
+        o = self.options
+        extra = o.n_starts - g.shape[1]
+        if extra > 0:
+            r = _initial(self.robot, q0, q1, o.start_kind, extra, g.shape[2], o.seed, self.world,
+                         o.free_via, device=self.device)
+            g = np.concatenate([g, r], axis=1)
+        return g
+
+    @property
+    def objective(self) -> PathObjective | None:
+        """The :class:`PathObjective` (device buffers) of the last call's shapes; None
+        before the first call."""
+        return None if self._buffers is None else self._buffers.objective
+
+    # ------------------------------------------------------------------ steps
+    def _plan(self, start: Any, goal: Any, seeds: Any, seeds_name: str,
+              t_start: float | None = None) -> PlanResult:
+        """The multi-start optimisation, then (``options.fallback``) the fallback for the
+        problems it has not solved; ``t_start``: the ``time.perf_counter()`` at which the
+        call started (the clock of ``time_limit``; None: now)."""
+        t0 = time.perf_counter() if t_start is None else t_start
+        model, o, dev = self.robot, self.options, self.device
+        deadline = None if o.time_limit is None else t0 + float(o.time_limit)
+        opt_deadline = deadline
+        if deadline is not None and o.fallback is not None:
+            opt_deadline = t0 + float(o.fallback_after) * float(o.time_limit)
+        q0 = self._problems(start, "start")
+        q1 = self._problems(goal, "goal")
+        finite_as(q0, self.npdt, "start")  # also finite in the optimisation's dtype
+        finite_as(q1, self.npdt, "goal")
+        em = o.margin if o.endpoint_margin is None else min(o.margin, o.endpoint_margin)
+        sem = min(o.self_margin, em)
+        pw = 1 if self.batched else 0
+        check_endpoints(model, self.world, q0, "start", em, o.kappa, device=dev,
+                        self_margin=sem, per_world=pw)
+        check_endpoints(model, self.world, q1, "goal", em, o.kappa, device=dev,
+                        self_margin=sem, per_world=pw)
+        if isinstance(seeds, ViaPoints):
+            Q = _via_seeds(model, q0, q1, seeds.points, o.n_waypoints)
+        else:
+            Q = _initial(model, q0, q1, o.start_kind if seeds is None else seeds, o.n_starts,
+                         o.n_waypoints, o.seed, self.world, o.free_via, device=dev,
+                         name=seeds_name)  # (B, n_starts, W, n)
+        B, n_starts, W = Q.shape[:3]
+        P = B * n_starts
+        Qf = Q.reshape(P, W, model.n_dof)
+        n_sub = o.n_substeps
+        if n_sub is None and self.world.has_grid:
+            n_sub = substeps_for_voxel(model, Qf, float(self.world.resolution), device=dev)
+        elif n_sub is None:  # exact objects only: the check is continuous, the cost a guide
+            from jwarp.world.motion import travel_bound
+
+            if self._reach is None:
+                from jwarp.world.motion import sphere_reach
+                self._reach = sphere_reach(model)
+            n_sub = int(np.clip(np.ceil(travel_bound(model, Qf, self._reach).max(initial=0.0)
+                                        / EXACT_SUBSTEP), 1, 16))
+        buf = self._prepare(P, W, n_sub)
+        obj = buf.objective
+        obj.set_paths(Qf)
+        if buf.used:  # the last call left paths inactive
+            obj.set_active(np.ones(P, bool))
+        buf.used = True
+
+        # screen: a substep whose (weighted, clipped) cost is below w_min c(margin) has no
+        # sphere within margin; such paths get the exact check every iteration, all others
+        # every check_all_every iterations and after the last one
+        check_every = o.check_all_every if o.check_all_every is not None else (
+            10 if self.world.has_grid else 1)
+        w = obj.weights
+        w_min = min([v for v in (w.world, w.self) if v > 0] or [0.0])
+        screen = w_min * (self.eps - o.margin) ** 2 / (2.0 * self.eps)
+        done = np.zeros(P, bool)
+        feasible = np.zeros(P, bool)
+        iters = np.full(P, o.iterations, np.int64)
+        kept_len = np.full(P, np.inf)  # converge: U_l of the last kept feasible iterate
+        reason = "iterations"
+        for it in range(o.iterations + 1):
+            # the time limit: checked before the evaluation; the current paths still get
+            # their exact check below
+            out_of_time = opt_deadline is not None and time.perf_counter() >= opt_deadline
+            obj.evaluate(grad=it < o.iterations and not out_of_time)
+            if o.callback is not None:
+                o.callback(it, obj.paths.numpy())
+            smax = obj.sub_max.numpy()
+            last = it == o.iterations or out_of_time or (it + 1) % check_every == 0
+            if o.converge:
+                self._converge_check(buf, it, last, smax < screen, done, feasible, iters,
+                                     kept_len)
+                solved = done & feasible
+            else:
+                cand = np.nonzero(~done & ((smax < screen) | last))[0]
+                if len(cand):
+                    newly = cand[self._confirm(buf, cand)]
+                    if len(newly):
+                        feasible[newly] = True
+                        iters[newly] = it
+                        if o.freeze_feasible:
+                            self._keep(buf, newly)
+                            done[newly] = True
+                solved = feasible
+                if o.stop_when_solved and o.freeze_feasible and B > 1:
+                    # a solved problem needs nothing more: its other starts stop here
+                    # (kept as they are), so they cost no evaluation or check from now on
+                    fin = np.repeat(solved.reshape(B, n_starts).any(1), n_starts) & ~done
+                    if fin.any():
+                        self._keep(buf, np.nonzero(fin)[0])
+                        done[fin] = True
+            if o.stop_when_solved and solved.reshape(B, n_starts).any(1).all():
+                reason = "solved"
+                break
+            if done.all():
+                reason = "all_done"
+                break
+            if it == o.iterations:
+                break
+            if out_of_time:
+                reason = "time_limit"
+                iters[~feasible] = it
+                break
+            if o.freeze_feasible:
+                obj.set_active(~done)
+            obj.step(o.step, o.max_step)
+        # converge: a feasible path's final is its last feasible iterate, already kept
+        rest = np.nonzero(~done & ~feasible)[0] if o.converge else np.nonzero(~done)[0]
+        if len(rest):
+            self._keep(buf, rest)
+        res = self._result(buf, feasible, iters, B, n_starts, time.perf_counter() - t0)
+        res.stop_reason = reason
+        res.stage = np.where(res.feasible, "optimizer", "none")
+        res.timings = {"optimizer": time.perf_counter() - t0}
+        if o.fallback is not None and not res.feasible.all():
+            _fallback(self, res, q0, q1, t0, deadline)
+        res.reasons = self.explain(res)
+        res.wall_time = time.perf_counter() - t0
+        return res
+
+    def explain(self, res: PlanResult) -> list[str]:
+        """Per problem of ``res``: "feasible", or why its best path is not: the first
+        colliding link and object (or link pair), an uncertified approach, or the joint
+        limits (one check of the infeasible problems' paths on the device), then what the
+        RRT fallback did ("; fallback: ...", :attr:`PlanResult.fallback_notes`)."""
+        out = self._explain(res)
+        notes = res.fallback_notes
+        if notes is not None:
+            for i in np.nonzero(~np.asarray(res.feasible, bool))[0]:
+                if notes[i]:
+                    out[i] = f"{out[i]}; fallback: {notes[i]}"
+        return out
+
+    def _explain(self, res: PlanResult) -> list[str]:
+        """:meth:`explain` without the fallback's notes."""
+        out = ["feasible"] * len(res.feasible)
+        bad = np.nonzero(~np.asarray(res.feasible, bool))[0]
+        if not len(bad):
+            return out
+        o = self.options
+        if o.kappa is not None:
+            for i in bad:
+                out[i] = "not feasible on the elastic model (collision or limits at a substep)"
+            return out
+        paths = np.asarray(res.path)
+        if self.batched:  # the paths of every problem, so path b is in world b
+            chk = self.motion_check().check(paths, margin=o.margin,
+                                            endpoint_margin=o.endpoint_margin,
+                                            self_margin=o.self_margin, world_group=1)
+            for i in bad:
+                out[i] = chk.reason(i) if not chk.ok[i] else \
+                    "not feasible: the optimisation ran out of iterations or time"
+            return out
+        chk = self.motion_check().check(paths[bad], margin=o.margin,
+                                        endpoint_margin=o.endpoint_margin,
+                                        self_margin=o.self_margin)
+        for k, i in enumerate(bad):
+            out[i] = chk.reason(k) if not chk.ok[k] else \
+                "not feasible: the optimisation ran out of iterations or time"
+        return out
+
+    def _converge_check(self, buf: _Buffers, it: int, last: bool, screened: np.ndarray,
+                        done: np.ndarray, feasible: np.ndarray, iters: np.ndarray,
+                        kept_len: np.ndarray) -> None:
+        """One iteration's checks of :attr:`PlanOptions.converge` (arrays (P,) updated in
+        place): paths not yet feasible are checked as without ``converge``; feasible ones
+        every ``check_all_every`` iterations. Every confirmed iterate is kept; a feasible
+        path whose U_l changed by <= ``converge_tol`` (relative) since its last kept
+        iterate is done. A feasible path that left feasibility goes on; its last feasible
+        iterate stays kept."""
+        last = last or it == 0  # converge: every path is checked once at the start
+        cand = np.nonzero(~done & np.where(feasible, last, screened | last))[0]
+        if not len(cand):
+            return
+        good = cand[self._confirm(buf, cand)]
+        if not len(good):
+            return
+        length = buf.objective.length.numpy().astype(np.float64)[good]
+        again = feasible[good]
+        change = np.abs(length - kept_len[good])
+        stop = good[again & (change <= self.options.converge_tol * np.abs(kept_len[good]))]
+        feasible[good] = True
+        iters[good] = it
+        kept_len[good] = length
+        self._keep(buf, good)
+        done[stop] = True
+
+    def _problems(self, x: Any, name: str) -> np.ndarray:
+        q = path_configs(x, self.robot, name)
+        if len(q) == 1 and self.n_problems > 1:
+            q = np.repeat(q, self.n_problems, 0)
+        if len(q) != self.n_problems:
+            raise ValueError(f"{name}: expected {self.n_problems} configurations (n_problems) "
+                             f"or one, got {len(q)}")
+        return q
+
+    def _prepare(self, P: int, W: int, n_sub: int) -> _Buffers:
+        """The buffers of this shape: the last call's, else new ones."""
+        buf = self._buffers
+        if buf is not None and buf.key == (P, W, n_sub):
+            return buf
+        self._buffers = None  # free the old ones first
+        o = self.options
+        obj = PathObjective(self.robot, self.world, P, W, n_sub, weights=o.weights,
+                            eps=self.eps, kappa=o.kappa, lam=o.lam, device=self.device,
+                            dtype=self.npdt)
+        if self.batched:  # substep rows of problem b's paths are in world b
+            obj.group_div = obj.S * (P // self.n_problems)
+        obj.skip_inactive = bool(o.freeze_feasible)  # frozen paths cost no collision queries
+        self._buffers = _Buffers(obj, self.n_problems, self._kernel_copies)
+        return self._buffers
+
+    def _upload_idx(self, buf: _Buffers, idx: np.ndarray) -> None:
+        host: wp.array = wp.array(np.ascontiguousarray(idx, np.int32), dtype=wp.int32, device="cpu")
+        wp.copy(buf.idx, host, count=len(idx))
+
+    def motion_check(self) -> Any:
+        """The planner's :class:`jwarp.world.motion.MotionCheck` (made on first use)."""
+        if self._motion is None:
+            from jwarp.world.motion import MotionCheck, MotionOptions
+
+            # a bounded proof per segment: a path grazing the margin for longer than the
+            # budget stays "not yet feasible" and the descent goes on moving it
+            # on a GPU one thread would advance a grazing segment alone (the launch waits
+            # for it): more parallel rounds, fewer sequential evaluations
+            opts = (MotionOptions(max_evals=PLANNER_CHECK_EVALS_GPU, rounds=8)
+                    if self.device.is_cuda else MotionOptions(max_evals=PLANNER_CHECK_EVALS))
+            self._motion = MotionCheck(self.robot, self.world, device=self.device,
+                                       options=opts)
+        return self._motion
+
+    def _confirm(self, buf: _Buffers, cand: np.ndarray) -> np.ndarray:
+        """Exact feasibility of the candidate paths: rigid model: the continuous check on
+        the device (:mod:`jwarp.world.motion`), one launch over the candidates' segments,
+        one flag per candidate read back; elastic model: every substep at its converged
+        torque equilibrium (host loop)."""
+        o = self.options
+        if o.kappa is None:
+            obj = buf.objective
+            self._upload_idx(buf, cand)
+            # stop when solved: one proven path per problem is enough (the others of
+            # that problem are skipped inside the launch)
+            group = obj.P // self.n_problems if (o.stop_when_solved and not o.converge) else 0
+            out = self.motion_check().launch(obj.paths, buf.idx, len(cand), margin=o.margin,
+                                             endpoint_margin=o.endpoint_margin, group=group,
+                                             self_margin=o.self_margin,
+                                             world_group=obj.P // self.n_problems
+                                             if self.batched else 0)
+            return out["ok"].numpy()[:len(cand)].astype(bool)
+        return self._confirm_elastic(buf, cand)
+
+    def _confirm_elastic(self, buf: _Buffers, cand: np.ndarray) -> np.ndarray:
+        """Exact feasibility of the candidate paths (zero collision cost): every substep
+        collision-free with ``margin`` and every waypoint within the limits. Only the
+        candidates' paths and substeps are read (gathered on the device)."""
+        obj, o, dev = buf.objective, self.options, self.device
+        S, n, K = obj.S, obj.n, len(cand)
+        if self._kernel_copies:
+            self._upload_idx(buf, cand)
+            wp.launch(obj.k.gather, dim=(K, S),
+                      inputs=[obj.paths, obj.q_sub, buf.idx, obj.n_sub],
+                      outputs=[buf.cand_paths, buf.cand_sub], device=dev)
+            q = buf.cand_sub[:K * S].numpy().astype(np.float64)
+            paths = buf.cand_paths[:K].numpy().astype(np.float64)
+        else:  # CPU: the arrays are host memory
+            q = obj.q_sub.numpy().reshape(obj.P, S, n)[cand].reshape(K * S, n).astype(np.float64)
+            paths = obj.paths.numpy()[cand].astype(np.float64)
+        # elastic: the converged torque equilibrium at every substep, not the kept rows
+        free = collision_free(self.robot, self.world, q, o.margin, kappa=o.kappa, device=dev)
+        ok = free.reshape(K, S).all(axis=1) & within_limits(self.robot, paths).all(axis=1)
+        # the paths moved since n_substeps was chosen: re-check the survivors at substeps
+        # sized to their own segments (no sphere centre moves more than half a voxel per
+        # substep)
+        surv = np.nonzero(ok)[0]
+        if len(surv):  # every survivor's own count, checked in one call per count
+            need = substeps_per_path(self.robot, paths[surv], float(self.world.resolution),
+                                     safety=SWEEP_SAFETY, max_substeps=MAX_CHECK_SUBSTEPS,
+                                     device=dev)
+            for k in np.unique(need[need > obj.n_sub]):
+                sel = surv[need == k]
+                ok[sel] = path_feasible(self.robot, self.world, paths[sel], int(k),
+                                        margin=o.margin, kappa=o.kappa, device=dev)
+        return ok
+
+    def _keep(self, buf: _Buffers, idx: np.ndarray) -> None:
+        """Keep the current paths ``idx`` and their costs as final (on the device)."""
+        obj = buf.objective
+        if not self._kernel_copies:  # CPU: the arrays are host memory
+            buf.final.numpy()[idx] = obj.paths.numpy()[idx]
+            cost = buf.final_cost.numpy()
+            for c, a in enumerate((obj.total, obj.length, obj.collision)):
+                cost[idx, c] = a.numpy()[idx]
+            return
+        self._upload_idx(buf, idx)
+        wp.launch(obj.k.keep, dim=(len(idx), obj.W),
+                  inputs=[obj.paths, obj.total, obj.length, obj.collision, buf.idx],
+                  outputs=[buf.final, buf.final_cost], device=self.device)
+
+    def _result(self, buf: _Buffers, feasible: np.ndarray, iters: np.ndarray, B: int,
+                n_starts: int, wall: float) -> PlanResult:
+        """Per problem the best start (feasible first, then the lowest U_path), chosen on
+        the device; reads the chosen paths and costs only."""
+        obj = buf.objective
+        host: wp.array = wp.array(feasible.astype(np.int32), dtype=wp.int32, device="cpu")
+        wp.copy(buf.feasible, host)
+        wp.launch(obj.k.select, dim=B, inputs=[buf.final, buf.final_cost, buf.feasible,
+                                               n_starts],
+                  outputs=[buf.best, buf.best_path, buf.best_cost], device=self.device)
+        best = buf.best.numpy().astype(np.int64)
+        cost = buf.best_cost.numpy().astype(np.float64)
+        rows = np.arange(B)
+        fz = feasible.reshape(B, n_starts)
+        it = iters.reshape(B, n_starts)
+        return PlanResult(path=buf.best_path.numpy().astype(np.float64), feasible=fz[rows, best],
+                          cost=np.ascontiguousarray(cost[:, 0]),
+                          length_cost=np.ascontiguousarray(cost[:, 1]),
+                          collision_cost=np.ascontiguousarray(cost[:, 2]),
+                          iterations=it[rows, best], start_index=best, n_feasible=fz.sum(1),
+                          wall_time=wall, n_substeps=obj.n_sub, all_feasible=fz,
+                          all_iterations=it, paths_source=wp.clone(buf.final))
+
+
+def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarray, t0: float,
+              deadline: float | None) -> None:
+    """:attr:`PlanOptions.fallback` for the problems of ``res`` without a feasible path:
+    RRT-Connect (:func:`jwarp.solvers.planning.rrt.rrt_connect`, with the planner's margins, kappa
+    and device) for each in turn, each path found resampled to the W waypoints
+    (:func:`jwarp.solvers.planning.rrt.resample_path`: its nodes kept where it has at most W) as
+    the one seed of a gradient optimisation of the same options (no fallback,
+    ``stop_when_solved``) of all of them at once. On the rigid model that optimisation's
+    exact check is the RRT's own (:func:`jwarp.world.path_feasibility.certify_check`: the
+    same pairs, margins and evaluation budget), so a seed the trees proved is certified as
+    it is at iteration 0 and returned (the trees' shortcuts were checked by it too); a
+    seed that is not (more than W nodes, so its corners were cut) is optimised and kept
+    only if that ends certified. Its feasible paths replace those problems' results in
+    ``res`` (stage "fallback", ``start_index`` -1); ``fallback_notes``, ``stop_reason``
+    and ``timings`` updated. With a ``deadline`` the trees get 80 % of the time left, the
+    optimisation the rest."""
+    from jwarp.solvers.planning.rrt import RRTOptions, resample_path, rrt_connect
+
+    o = planner.options
+    t_rrt = time.perf_counter()
+    ro = o.rrt if o.rrt is not None else RRTOptions()
+    rng = ro.seed if isinstance(ro.seed, np.random.Generator) else np.random.default_rng(ro.seed)
+    ropt = replace(ro, seed=rng)
+    rrt_stop = None if deadline is None else t_rrt + 0.8 * max(0.0, deadline - t_rrt)
+    W = res.path.shape[1]
+    notes = res.fallback_notes = np.full(len(res.feasible), "", dtype=object)
+    found, seeds, nodes = [], [], []
+    timed_out = False
+    for b in np.nonzero(~res.feasible)[0]:
+        if rrt_stop is not None and time.perf_counter() >= rrt_stop:
+            timed_out = True
+            notes[b] = "RRT-Connect not run: no time left"
+            continue
+        r = rrt_connect(planner.robot, planner.world.select(int(b)), q0[b], q1[b], ropt,
+                        margin=o.margin,
+                        kappa=o.kappa, device=planner.device, deadline=rrt_stop,
+                        endpoint_margin=o.endpoint_margin, self_margin=o.self_margin)
+        if r.success:
+            found.append(int(b))
+            seeds.append(resample_path(r.path, W))
+            nodes.append(len(r.path))
+        else:
+            why = {"max_samples": "rrt.max_samples used up",
+                   "time_limit": "out of time",
+                   "check_mismatch": "its path failed the edge-by-edge re-check"}.get(
+                       r.stop_reason, r.stop_reason)
+            notes[b] = (f"RRT-Connect found no path ({why}; {r.n_samples} samples, "
+                        f"{r.n_nodes} nodes, {r.wall_time:.2f} s)")
+        timed_out |= r.stop_reason == "time_limit"
+    res.timings["rrt"] = time.perf_counter() - t_rrt
+    if found:
+        t_opt = time.perf_counter()
+        left = None if deadline is None else max(deadline - t_opt, 1e-6)
+        # every iteration checked (the first before any step: the seed as it is)
+        sub_o = replace(o, n_starts=1, fallback=None, time_limit=left, stop_when_solved=True,
+                        callback=None, check_all_every=1)
+        sub_world = planner.world
+        if planner.batched:  # the found problems' own worlds, as a batch of their own
+            from jwarp.world.sdf import World
+            sub_world = World.batch([planner.world.select(int(b)) for b in found])
+        sub = Planner(planner.robot, sub_world, len(found), sub_o, device=planner.device,
+                      dtype=planner.npdt)
+        if o.kappa is None:  # certify with the check that proved the RRT's edges
+            sub._motion = certify_check(planner.robot, sub_world, device=planner.device)
+        idx = np.array(found)
+        r2 = sub._plan(q0[idx], q1[idx], np.stack(seeds)[:, None], "seeds")
+        timed_out |= r2.stop_reason == "time_limit"
+        ok = r2.feasible
+        b = idx[ok]
+        res.path[b] = r2.path[ok]
+        res.feasible[b] = True
+        res.cost[b] = r2.cost[ok]
+        res.length_cost[b] = r2.length_cost[ok]
+        res.collision_cost[b] = r2.collision_cost[ok]
+        res.iterations[b] = r2.iterations[ok]
+        res.start_index[b] = -1
+        res.stage[b] = "fallback"
+        res.timings["fallback_optimizer"] = time.perf_counter() - t_opt
+        for k, bb in enumerate(found):
+            cut = (f", resampled to {W} waypoints (corners cut)" if nodes[k] > W
+                   else f" as {W} waypoints")
+            if ok[k]:
+                how = ("certified as it is" if r2.iterations[k] == 0 else
+                       f"certified after {int(r2.iterations[k])} optimisation steps")
+                notes[bb] = f"RRT-Connect path of {nodes[k]} nodes{cut}: {how}"
+            else:
+                notes[bb] = (f"RRT-Connect path of {nodes[k]} nodes{cut} not certified "
+                             f"({_seed_reason(planner, sub, seeds[k], bb)}) and its "
+                             f"optimisation ended infeasible")
+    if res.feasible.all():
+        res.stop_reason = "solved"
+    elif deadline is not None and (timed_out or time.perf_counter() >= deadline):
+        res.stop_reason = "time_limit"
+    else:
+        res.stop_reason = "iterations"
+
+
+def _seed_reason(planner: "Planner", sub: "Planner", seed: np.ndarray, b: int) -> str:
+    """Why the fallback seed (W, n_dof) of problem ``b`` is not certified, in words (the
+    fallback optimisation's check, in the problem's own world)."""
+    o = planner.options
+    if o.kappa is not None:
+        ok = path_feasible(planner.robot, planner.world.select(int(b)), seed[None],
+                           sub.objective.n_sub if sub.objective is not None else 1,
+                           margin=o.margin, kappa=o.kappa, device=planner.device,
+                           self_margin=o.self_margin)[0]
+        return "certified now" if ok else "not feasible on the elastic model"
+    chk = certify_check(planner.robot, planner.world.select(int(b)), device=planner.device)
+    c = chk.check(seed[None].astype(planner.npdt).astype(np.float64), margin=o.margin,
+                  endpoint_margin=o.endpoint_margin, self_margin=o.self_margin)
+    return c.reason(0)
+
+
+def plan(robot: Any, world: Any, start: Any, goal: Any, *, seeds: Any = None,
+         device: Any = None, dtype: Any = np.float32, options: PlanOptions | None = None,
+         **overrides: Any) -> PlanResult:
+    """Plan collision-free paths from ``start`` to ``goal`` by gradient descent on U_path:
+    one call of a :class:`Planner` made for it.
+
+    Args:
+        robot: robot name or RobotModel.
+        world: a :class:`jwarp.world.World` of the robot's workspace dimension.
+        start, goal: (n_dof,) or (B, n_dof) joint values [rad or m] (B problems).
+        seeds: optional user guesses (W, n_dof), (n_starts, W, n_dof) or
+            (B, n_starts, W, n_dof) (the ``seeds`` of :meth:`Planner.plan`; ``n_starts``
+            and ``n_waypoints`` are then theirs, and ``start_kind`` is unused).
+        device, dtype: Warp device of the optimisation and of every check, and its float
+            type (default: Warp's default device, as :class:`Planner`; float32).
+        options: :class:`PlanOptions` (None: its defaults); not modified.
+        **overrides: any field of :class:`PlanOptions` as a keyword (``n_starts=16``,
+            ``iterations=300``, ``callback=f``, ...): the options are
+            ``dataclasses.replace(options, **overrides)``, so an override wins over the same
+            field of ``options`` (``stop_when_solved`` True and ``fallback`` "rrt" by
+            default: pass False / None to optimise every start until it is feasible
+            without a fallback). ``time_limit`` counts from the start of this call.
+            The old ``initial`` (one release, with a DeprecationWarning) is
+            ``start_kind`` when a string, else ``seeds``.
+
+    Returns:
+        :class:`PlanResult` (``wall_time``: the whole call).
+
+    Raises:
+        ValueError: bad shapes, NaN, start/goal outside the limits or in collision, world
+            and robot dimensions differ, bad options.
+        TypeError: an override that is not a field of :class:`PlanOptions` (named, with
+            the list of fields), ``options`` not a :class:`PlanOptions`.
+    """
+    t0 = time.perf_counter()
+    if not isinstance(overrides.get("initial", ""), str):  # the old name of seeds
+        given = {"initial": overrides.pop("initial")}
+        if seeds is not None:
+            given["seeds"] = seeds
+        seeds = translate("plan()", {"initial": "seeds"}, given)["seeds"]
+    init_warp()
+    model = get_robot(robot)
+    check_world(model, world)
+    q0 = path_configs(start, model, "start")
+    q1 = path_configs(goal, model, "goal")
+    if len(q0) != len(q1):
+        if len(q0) == 1:
+            q0 = np.repeat(q0, len(q1), 0)
+        elif len(q1) == 1:
+            q1 = np.repeat(q1, len(q0), 0)
+        else:
+            raise ValueError(f"start, goal: batch sizes differ ({len(q0)} vs {len(q1)})")
+    options = with_overrides("plan", PlanOptions, options, overrides)
+    planner = Planner(model, world, len(q0), options, device=device, dtype=dtype)
+    res = planner._plan(q0, q1, seeds, "seeds", t_start=t0)
+    res.wall_time = time.perf_counter() - t0
+    return res
+
+
+def _initial(model: RobotModel, q0: np.ndarray, q1: np.ndarray, initial: Any, n_starts: int,
+             W: int, seed: Any, world: Any = None, free_via: bool = True, device: Any = None,
+             name: str = "initial") -> np.ndarray:
+    """Initial paths (B, n_starts, W, n_dof): of a kind (:data:`INITIAL_KINDS`) or from
+    the caller's guesses ``initial`` (errors name ``name``)."""
+    B, n = q0.shape
+    if isinstance(initial, str):
+        rng = np.random.default_rng(seed)
+        if initial == "straight":
+            return initial_paths(q0, q1, W, "straight")[:, None]
+        if initial in ("random", "mixed"):
+            k = n_starts if initial == "random" else n_starts - 1
+            parts = []
+            if initial == "mixed":
+                parts.append(initial_paths(q0, q1, W, "straight")[:, None])
+            if k > 0:
+                r = initial_paths(np.repeat(q0, k, 0), np.repeat(q1, k, 0), W, "random",
+                                  robot=model, rng=rng, world=world if free_via else None,
+                                  device=device)
+                parts.append(r.reshape(B, k, W, n))
+            return np.concatenate(parts, axis=1)
+        raise ValueError(f"{name}: unknown kind '{initial}' (expected 'straight', 'random', "
+                         f"'mixed' or an array of paths)")
+    g = _seed_array(initial, name, q0.shape, "W", 2)
+    g[:, :, 0] = q0[:, None]
+    g[:, :, -1] = q1[:, None]
+    return project_numpy(model, g)
+
+
+def _seed_array(x: Any, name: str, shape: tuple[int, int], rows: str, min_rows: int
+                ) -> np.ndarray:
+    """Seeds (rows, n), (n_seeds, rows, n) or (B, n_seeds, rows, n) with rows >= min_rows
+    -> (B, n_seeds, rows, n) float64, a copy; errors name ``name``."""
+    B, n = shape
+    g = real_array(x, name)
+    if g.ndim == 2:
+        g = g[None, None]
+    elif g.ndim == 3:
+        g = g[None]
+    if (g.ndim != 4 or g.shape[-1] != n or g.shape[-2] < min_rows
+            or g.shape[0] not in (1, B)):
+        what = "paths" if rows == "W" else "via points"
+        raise ValueError(f"{name}: expected {what} ({rows}, {n}), (n_starts, {rows}, {n}) or "
+                         f"({B}, n_starts, {rows}, {n}), got {np.shape(x)}")
+    if not np.all(np.isfinite(g)):
+        raise ValueError(f"{name}: contains NaN or inf")
+    return np.array(np.broadcast_to(g, (B,) + g.shape[1:]), np.float64)
+
+
+def _via_seeds(model: RobotModel, q0: np.ndarray, q1: np.ndarray, points: Any, W: int
+               ) -> np.ndarray:
+    """Seed paths (B, n_seeds, W, n_dof) through the via points of :class:`ViaPoints`."""
+    v = _seed_array(points, "seeds", q0.shape, "k", 0)
+    B, K = v.shape[:2]
+    out = np.empty((B, K, W, q0.shape[1]))
+    for b in range(B):
+        for i in range(K):
+            out[b, i] = polyline_path(q0[b], v[b, i], q1[b], W)
+    return project_numpy(model, out)

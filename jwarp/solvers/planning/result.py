@@ -1,0 +1,93 @@
+"""What a motion plan returns: :class:`PlanResult`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+
+@dataclass
+class PlanResult:
+    """Result of :func:`plan` / :meth:`Planner.plan` for B problems.
+
+    path (B, W, n_dof) best path per problem; feasible (B,) bool; cost (B,) U_path;
+    length_cost (B,) U_l (eq. 3.5, 1 for the straight line); collision_cost (B,) weighted
+    world + self cost summed over substeps; iterations (B,) gradient steps until the chosen
+    path was feasible (or the iteration budget); start_index (B,) which multi-start (seed)
+    won; n_feasible (B,) feasible multi-starts; wall_time [s] of the whole call;
+    n_substeps substeps per segment; all_feasible (B, n_starts); all_iterations
+    (B, n_starts); all_paths (B, n_starts, W, n_dof) final paths of every start, read from
+    the device on first use (the best paths are chosen on the device, so a caller that
+    needs only ``path`` never copies the others to the host).
+
+    Budgets and fallback (:attr:`PlanOptions.time_limit`, ``stop_when_solved``,
+    ``fallback``): ``stop_reason`` why the call ended, one of :data:`STOP_REASONS`:
+    "solved" (every problem has a feasible path: ``stop_when_solved``, or the fallback
+    solved the rest), "all_done" (every start finished on its own: feasible with
+    ``freeze_feasible``, converged with ``converge``), "time_limit" (the time ran out first)
+    or "iterations" (the iterations, and the fallback's samples, ran out first);
+    ``stage`` (B,) which stage gave the path: "optimizer" (the multi-starts),
+    "fallback" (the gradient optimisation seeded with the RRT-Connect path,
+    :mod:`jwarp.solvers.planning.rrt`) or "none" (no feasible path). A fallback path is none of
+    the multi-starts: its ``start_index`` is -1, its ``iterations`` those of the seeded
+    optimisation (0: the RRT path itself, certified as it is); ``n_feasible``, ``all_*``
+    stay the multi-starts'. ``fallback_notes``: what the fallback did. ``timings`` [s]:
+    "optimizer" (the multi-starts) and, where it ran, "rrt" and "fallback_optimizer".
+    """
+
+    path: np.ndarray
+    feasible: np.ndarray
+    cost: np.ndarray
+    length_cost: np.ndarray
+    collision_cost: np.ndarray
+    iterations: np.ndarray
+    start_index: np.ndarray
+    n_feasible: np.ndarray
+    wall_time: float
+    n_substeps: int
+    all_feasible: np.ndarray = field(repr=False)
+    all_iterations: np.ndarray = field(repr=False)
+    #: every start's final path: a numpy (B, n_starts, W, n_dof) array, or a Warp array
+    #: (B * n_starts, W, n_dof) on the planner's device (its own copy) until first read
+    paths_source: Any = field(default=None, repr=False)
+    #: why the call ended (:data:`STOP_REASONS`)
+    stop_reason: str = "iterations"
+    #: (B,) "optimizer", "fallback" or "none" (None: filled by the planner)
+    stage: Any = None
+    #: seconds per stage: "optimizer", "rrt", "fallback_optimizer"
+    timings: dict = field(default_factory=dict, repr=False)
+    #: (B,) "feasible" or why the problem's path is not (:meth:`Planner.explain`)
+    reasons: Any = None
+    #: (B,) str: what the RRT fallback did for each problem ("" where it did not run):
+    #: no tree connection (and why), or its path certified / not certified (and why);
+    #: appended to ``reasons`` of a problem without a plan
+    fallback_notes: Any = None
+
+    @property
+    def all_paths(self) -> np.ndarray:
+        """(B, n_starts, W, n_dof) float64: the final path of every start."""
+        src = self.paths_source
+        if isinstance(src, wp.array):
+            B, n_starts = self.all_feasible.shape
+            src = src.numpy().astype(np.float64).reshape((B, n_starts) + self.path.shape[1:])
+            self.paths_source = src
+        return src
+
+    def to_dict(self, index: int = 0) -> dict:
+        """JSON-ready summary of problem ``index``."""
+        return {"path": self.path[index].tolist(), "feasible": bool(self.feasible[index]),
+                "costs": {"total": float(self.cost[index]),
+                          "length": float(self.length_cost[index]),
+                          "collision": float(self.collision_cost[index])},
+                "iterations": int(self.iterations[index]),
+                "start_index": int(self.start_index[index]),
+                "n_feasible_starts": int(self.n_feasible[index]),
+                "n_substeps": int(self.n_substeps),
+                "wall_time_s": float(self.wall_time),
+                "stop_reason": str(self.stop_reason),
+                "reason": (str(self.reasons[index]) if self.reasons is not None
+                           else None),
+                "stage": None if self.stage is None else str(self.stage[index])}

@@ -1,0 +1,496 @@
+"""RRT-Connect in joint space: the planner's fallback (:attr:`PlanOptions.fallback`).
+
+Bidirectional rapidly-exploring random trees (Kuffner and LaValle, ICRA 2000) from the
+start and the goal, in numpy on top of jwarp's batched checks. Each round draws ``batch``
+configurations within the joint limits (:func:`jwarp.core.limits.sample_within_limits`;
+with probability ``goal_bias`` the other tree's root instead), extends one tree from the
+nearest node of each sample by at most ``step`` (joint-space Euclidean norm), keeps the
+new nodes whose state is collision-free (:func:`jwarp.world.path_feasibility.collision_free`)
+and whose edge is feasible (:func:`jwarp.world.path_feasibility.path_feasible` on the batch of
+edges ``(E, 2, n_dof)``), then connects the other tree greedily towards every new node:
+the straight segment from its nearest node, cut into edges of at most ``step``, is
+checked in one batch and its longest feasible prefix added. A complete connection joins
+the trees; the trees swap roles every round. The path is then shortcut (random pairs of
+its nodes joined by straight segments where feasible, in batches) and can be resampled to
+the planner's waypoints (:func:`resample_path`).
+
+The checks are those of :mod:`jwarp.world.path_feasibility` (``collision_free`` and
+``path_feasible``): on the rigid model ``path_feasible`` checks the continuous motion of
+every edge with :func:`jwarp.world.path_feasibility.certify_check`, the very check (pairs,
+margins, evaluation budget) with which the planner certifies an RRT fallback path, so a
+path the trees return is certified there as it is; on the elastic model (``kappa``) its
+substeps are sized so that no sphere centre moves more than half the world's resolution
+between two substeps (:func:`jwarp.world.path_feasibility.substeps_for_voxel`, ``safety``
+2), or ``RRTOptions.n_substeps``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from jwarp.core.arrays import real_array, real_number
+from jwarp.core.limits import sample_within_limits, within_limits
+from jwarp.model.registry import robot as get_robot
+from jwarp.world import path_feasibility as _fz
+
+
+@dataclass
+class RRTOptions:
+    """Options of :func:`rrt_connect` (ValueError/TypeError naming the field from
+    :meth:`validate`).
+
+    Attributes:
+        step: the longest extension of a tree in one step and the longest edge checked
+            in one piece [rad, m for prismatic joints], joint-space Euclidean norm, > 0.
+        max_samples: most random samples per problem, >= 1.
+        time_limit: seconds per problem (None: no limit but the caller's deadline), > 0.
+        goal_bias: probability that a sample is the other tree's root, in [0, 1].
+        seed: random seed (an integer >= 0, a numpy Generator or None: fresh entropy).
+        shortcut_iterations: random shortcut pairs tried on the found path, >= 0 (in
+            rounds of ``batch`` pairs).
+        batch: samples per round (and shortcut pairs per round), >= 1.
+        n_connect: the new nodes of a round (those nearest to the other tree) that the
+            other tree tries to connect to, >= 1.
+        n_substeps: substeps per edge of the elastic model's checks, >= 1; None sizes them
+            to the world's resolution per batch of edges (no sphere centre moves more than
+            half of it); the rigid model's edge check is continuous (no substeps).
+    """
+
+    step: float = 0.5
+    max_samples: int = 4000
+    time_limit: float | None = None
+    goal_bias: float = 0.1
+    seed: Any = 0
+    shortcut_iterations: int = 64
+    batch: int = 32
+    n_connect: int = 4
+    n_substeps: int | None = None
+
+    def validate(self) -> None:
+        step = real_number(self.step, "rrt.step")
+        if not (math.isfinite(step) and step > 0):
+            raise ValueError(f"rrt.step: expected a number > 0, got {self.step!r}")
+        for name, lo in (("max_samples", 1), ("shortcut_iterations", 0), ("batch", 1),
+                         ("n_connect", 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+                raise ValueError(f"rrt.{name}: expected an integer >= {lo}, got {v!r}")
+        if self.n_substeps is not None:
+            v = self.n_substeps
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"rrt.n_substeps: expected an integer >= 1, got {v!r}")
+        if self.time_limit is not None:
+            t = real_number(self.time_limit, "rrt.time_limit")
+            if not (math.isfinite(t) and t > 0):
+                raise ValueError(f"rrt.time_limit: expected a number > 0 [s] or None, got "
+                                 f"{self.time_limit!r}")
+        b = real_number(self.goal_bias, "rrt.goal_bias")
+        if not (0.0 <= b <= 1.0):
+            raise ValueError(f"rrt.goal_bias: expected a number in [0, 1], got "
+                             f"{self.goal_bias!r}")
+        seed = self.seed
+        if not (seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence))):
+            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+                raise ValueError(f"rrt.seed: expected an integer >= 0, a Generator or None, "
+                                 f"got {seed!r}")
+
+
+@dataclass
+class RRTResult:
+    """Result of :func:`rrt_connect`.
+
+    path (k, n_dof) start ... goal (every edge checked feasible; shortcut), or None when
+    the trees did not connect; success; stop_reason "connected", "max_samples" or
+    "time_limit"; n_samples random samples drawn; n_nodes nodes of both trees; raw_nodes
+    nodes of the path before shortcutting; n_substeps the substeps per edge of the last
+    check; wall_time [s]."""
+
+    path: np.ndarray | None
+    success: bool
+    stop_reason: str
+    n_samples: int
+    n_nodes: int
+    raw_nodes: int
+    n_substeps: int
+    wall_time: float
+    timings: dict = field(default_factory=dict)
+
+
+class _Tree:
+    """Nodes (N, n) and parents (N,) in growing arrays."""
+
+    def __init__(self, root: np.ndarray) -> None:
+        self.q = np.empty((256, len(root)))
+        self.parent = np.empty(256, np.int64)
+        self.q[0], self.parent[0], self.n = root, -1, 1
+
+    @property
+    def nodes(self) -> np.ndarray:
+        return self.q[:self.n]
+
+    def add(self, q: np.ndarray, parent: np.ndarray) -> np.ndarray:
+        k = len(q)
+        while self.n + k > len(self.q):
+            self.q = np.concatenate([self.q, np.empty_like(self.q)])
+            self.parent = np.concatenate([self.parent, np.empty_like(self.parent)])
+        idx = np.arange(self.n, self.n + k)
+        self.q[idx], self.parent[idx] = q, parent
+        self.n += k
+        return idx
+
+    def nearest(self, x: np.ndarray) -> np.ndarray:
+        """Index of the nearest node of each row of x (K, n)."""
+        nodes = self.nodes
+        d = (x * x).sum(1)[:, None] - 2.0 * x @ nodes.T + (nodes * nodes).sum(1)[None]
+        return np.argmin(d, axis=1)
+
+    def branch(self, i: int) -> np.ndarray:
+        """Nodes from the root to node i, (k, n)."""
+        out = []
+        while i >= 0:
+            out.append(self.q[i])
+            i = int(self.parent[i])
+        return np.array(out[::-1])
+
+
+class _Checks:
+    """Batched state and edge checks through :mod:`jwarp.solvers.planning`. With an
+    ``endpoint_margin`` below ``margin`` the segments that start or end at one of the
+    ``roots`` (start, goal) are checked at that clearance, every other at ``margin``."""
+
+    def __init__(self, model: Any, world: Any, margin: float, kappa: Any, device: Any,
+                 n_substeps: int | None, endpoint_margin: float | None = None,
+                 roots: np.ndarray | None = None, self_margin: float = 0.0) -> None:
+        self.model, self.world, self.margin = model, world, margin
+        self.self_margin = float(self_margin)
+        self.kappa, self.device, self.n_sub = kappa, device, n_substeps
+        self.em = None
+        if endpoint_margin is not None and float(endpoint_margin) < margin:
+            self.em = float(endpoint_margin)
+        self.roots = roots
+        self.last_n_sub = n_substeps or 1
+        self.time = {"states": 0.0, "edges": 0.0}
+
+    def states(self, q: np.ndarray, margin: float | None = None) -> np.ndarray:
+        t = time.perf_counter()
+        ok = within_limits(self.model, q)
+        if ok.any():
+            m = self.margin if margin is None else margin
+            ok[ok] = _fz.collision_free(self.model, self.world, q[ok], m,
+                                        kappa=self.kappa, device=self.device,
+                                        self_margin=min(self.self_margin, m))
+        self.time["states"] += time.perf_counter() - t
+        return ok
+
+    def _is_root(self, q: np.ndarray) -> np.ndarray:
+        return np.any(np.all(q[:, None] == self.roots[None], axis=-1), axis=1)
+
+    def paths(self, paths: np.ndarray) -> np.ndarray:
+        """(E,) bool: the paths (E, W, n) feasible."""
+        if not len(paths):
+            return np.zeros(0, bool)
+        t = time.perf_counter()
+        n_sub = self.n_sub
+        if n_sub is None and self.kappa is None:
+            n_sub = 1  # the rigid model's path_feasible checks the continuous motion
+        elif n_sub is None:  # elastic: substeps at their equilibria, sized to the world
+            n_sub = _fz.substeps_for_voxel(self.model, paths, float(self.world.resolution),
+                                           safety=_fz.SWEEP_SAFETY,
+                                           max_substeps=_fz.MAX_CHECK_SUBSTEPS,
+                                           device=self.device)
+        self.last_n_sub = n_sub = int(n_sub)
+        ok = np.zeros(len(paths), bool)
+        if self.em is None or self.roots is None:
+            ok[:] = self._feasible(paths, n_sub)
+        else:
+            head, tail = self._is_root(paths[:, 0]), self._is_root(paths[:, -1])
+            end = head | tail
+            # the first and last segment at endpoint_margin where a root is at either end
+            ok[~end] = self._feasible(paths[~end], n_sub)
+            ok[end] = self._feasible(paths[end], n_sub, self.em)
+            if paths.shape[1] > 2:  # ... but the end away from the root at margin
+                for sel, seg in ((end & ~tail, slice(-2, None)), (end & ~head, slice(0, 2))):
+                    idx = np.nonzero(sel & ok)[0]
+                    if len(idx):
+                        ok[idx] = self._feasible(paths[idx, seg], n_sub)
+        self.time["edges"] += time.perf_counter() - t
+        return ok
+
+    def _feasible(self, paths: np.ndarray, n_sub: int, em: float | None = None) -> np.ndarray:
+        if not len(paths):
+            return np.zeros(0, bool)
+        kw = {} if em is None else {"endpoint_margin": em}
+        return np.asarray(_fz.path_feasible(self.model, self.world, paths, n_sub,
+                                            margin=self.margin, kappa=self.kappa,
+                                            device=self.device, self_margin=self.self_margin,
+                                            **kw), bool).reshape(len(paths))
+
+    def edges(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return self.paths(np.stack([a, b], axis=1))
+
+
+def _vector(x: Any, n: int, name: str) -> np.ndarray:
+    a = real_array(x, name)
+    if a.shape != (n,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: expected {n} finite joint values, got shape {a.shape}")
+    return np.array(a, np.float64)
+
+
+def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
+                options: RRTOptions | None = None, *, margin: float = 0.0, kappa: Any = None,
+                device: Any = None, deadline: float | None = None,
+                endpoint_margin: float | None = None, self_margin: float = 0.0) -> RRTResult:
+    """A feasible path from ``start`` to ``goal`` (n_dof,) by RRT-Connect (module doc).
+
+    Args:
+        robot: robot name or RobotModel; world: a :class:`jwarp.world.World`.
+        options: :class:`RRTOptions` (None: the defaults).
+        margin: clearance [m] of every check; kappa: the elastic model's compliances.
+        endpoint_margin: clearance [m] of start and goal and of the edges at them, where
+            it is below ``margin`` (None: ``margin``; :attr:`PlanOptions.endpoint_margin`).
+        self_margin: clearance [m] between the robot's own spheres (default 0).
+        device: Warp device of the checks (None: Warp's default device).
+        deadline: ``time.perf_counter()`` value after which the search stops (besides
+            ``options.time_limit``).
+
+    Returns:
+        :class:`RRTResult`; ``path`` None when the trees did not connect within
+        ``max_samples`` or the time.
+
+    Raises:
+        ValueError: start or goal outside the limits or in collision, bad options.
+    """
+    t0 = time.perf_counter()
+    o = options or RRTOptions()
+    if not isinstance(o, RRTOptions):
+        raise TypeError(f"options: expected an RRTOptions, got {type(o).__name__}")
+    o.validate()
+    model = get_robot(robot)
+    _fz.check_world(model, world)
+    n = model.n_dof
+    q0, q1 = _vector(start, n, "start"), _vector(goal, n, "goal")
+    stop_at = math.inf if deadline is None else float(deadline)
+    if o.time_limit is not None:
+        stop_at = min(stop_at, t0 + float(o.time_limit))
+    rng = o.seed if isinstance(o.seed, np.random.Generator) else np.random.default_rng(o.seed)
+    chk = _Checks(model, world, float(margin), kappa, device, o.n_substeps, endpoint_margin,
+                  np.stack([q0, q1]), self_margin=self_margin)
+    ok = chk.states(np.stack([q0, q1]), margin=chk.em)
+    for name, good in zip(("start", "goal"), ok):
+        if not good:
+            m = float(margin) if chk.em is None else chk.em
+            raise ValueError(f"{name}: outside the joint limits or in collision (margin "
+                             f"{m:g} m)")
+    step = float(o.step)
+
+    def result(path, reason, samples, nodes, raw) -> RRTResult:
+        return RRTResult(path=path, success=path is not None, stop_reason=reason,
+                         n_samples=samples, n_nodes=nodes, raw_nodes=raw,
+                         n_substeps=chk.last_n_sub, wall_time=time.perf_counter() - t0,
+                         timings=dict(chk.time))
+
+    # the straight line first
+    line = _split(q0[None], q1[None], step)[0]
+    if chk.edges(line[:-1], line[1:]).all():
+        direct = _verify(np.stack([q0, q1]), chk, step)
+        if direct is not None:
+            return result(direct, "connected", 0, 2, 2)
+    trees = [_Tree(q0), _Tree(q1)]  # trees[0] grows from the start
+    a = 0                           # the tree extended towards the samples this round
+    samples = 0
+    found = None
+    reason = "max_samples"
+    while samples < o.max_samples:
+        if time.perf_counter() >= stop_at:
+            reason = "time_limit"
+            break
+        A, B = trees[a], trees[1 - a]
+        K = min(o.batch, o.max_samples - samples)
+        x = sample_within_limits(model, K, rng)
+        x[rng.random(K) < o.goal_bias] = B.q[0]
+        samples += K
+        near = A.nearest(x)
+        qn = A.q[near]
+        d = x - qn
+        dist = np.linalg.norm(d, axis=1)
+        keep = dist > 1e-12
+        new = qn + d * np.minimum(1.0, step / np.maximum(dist, 1e-300))[:, None]
+        keep[keep] = chk.states(new[keep])
+        sel = np.nonzero(keep)[0]
+        if len(sel):
+            sel = sel[chk.edges(qn[sel], new[sel])]
+        if len(sel):
+            ids = A.add(new[sel], near[sel])
+            found = _connect(B, A.q[ids], ids, chk, step, o.n_connect)
+            if found is not None:
+                ia, ib = found
+                pa, pb = A.branch(ia), B.branch(ib)
+                path = np.concatenate([pa, pb[::-1]])
+                if a == 1:
+                    path = path[::-1]
+                path[0], path[-1] = q0, q1
+                found = path
+                reason = "connected"
+                break
+        a = 1 - a
+    nodes = trees[0].n + trees[1].n
+    if found is None:
+        return result(None, reason, samples, nodes, 0)
+    raw = len(found)
+    t = time.perf_counter()
+    path = shortcut(found, chk, step, o.shortcut_iterations, o.batch, rng, stop_at)
+    chk.time["shortcut"] = time.perf_counter() - t
+    path = _verify(path, chk, step)
+    if path is None:
+        return result(None, "check_mismatch", samples, nodes, raw)
+    return result(path, "connected", samples, nodes, raw)
+
+
+def _verify(path: np.ndarray, chk: _Checks, step: float, rounds: int = 3) -> np.ndarray | None:
+    """Every edge of ``path`` checked on its own (one batch, substeps sized to the
+    batch); an edge that fails is replaced by its pieces at ``step`` (halved every round).
+    None if edges still fail after ``rounds`` rounds (the checks disagree at the edges'
+    different substeps: a configuration within a hair of an obstacle)."""
+    for r in range(rounds + 1):
+        ok = chk.edges(path[:-1], path[1:])
+        if ok.all():
+            return path
+        if r == rounds:
+            return None
+        out = [path[:1]]
+        for e in range(len(ok)):
+            if ok[e]:
+                out.append(path[e + 1:e + 2])
+            else:
+                out.append(_split(path[e:e + 1], path[e + 1:e + 2], step / 2 ** r)[0, 1:])
+        path = np.concatenate(out)
+    return None
+
+
+def _split(a: np.ndarray, b: np.ndarray, step: float, m: int | None = None) -> np.ndarray:
+    """Each segment a -> b (K, n) cut into m pieces (default: the longest's count at
+    ``step``): points (K, m + 1, n)."""
+    if m is None:
+        m = max(1, int(np.ceil(np.linalg.norm(b - a, axis=1).max(initial=0.0) / step)))
+    u = np.linspace(0.0, 1.0, m + 1)[None, :, None]
+    out = a[:, None] + u * (b - a)[:, None]
+    out[:, -1] = b  # the ends exact (the checks recognise start and goal)
+    return out
+
+
+def _connect(B: _Tree, targets: np.ndarray, target_ids: np.ndarray, chk: _Checks,
+             step: float, limit: int) -> tuple[int, int] | None:
+    """Grow B greedily towards the ``limit`` targets (K, n) nearest to it: the segment from
+    its nearest node cut into edges of at most ``step``, all checked in one batch; the
+    longest feasible prefix of each is added to B. Returns (target id, B node) of a
+    complete connection (the shortest one), else None."""
+    near = B.nearest(targets)
+    qb = B.q[near]
+    dist = np.linalg.norm(targets - qb, axis=1)
+    if len(targets) > limit:
+        keep = np.argsort(dist, kind="stable")[:limit]
+        targets, target_ids, near, qb, dist = (targets[keep], target_ids[keep], near[keep],
+                                               qb[keep], dist[keep])
+    m = np.maximum(1, np.ceil(dist / step).astype(np.int64))
+    # every target's edges, each cut into its own m pieces
+    rows = np.repeat(np.arange(len(targets)), m)
+    k = np.arange(len(rows)) - np.repeat(np.cumsum(m) - m, m)
+    frac0, frac1 = (k / m[rows])[:, None], ((k + 1) / m[rows])[:, None]
+    d = (targets - qb)[rows]
+    ea, eb = qb[rows] + frac0 * d, qb[rows] + frac1 * d
+    eb[k + 1 == m[rows]] = targets[rows[k + 1 == m[rows]]]
+    ok = chk.edges(ea, eb)
+    best = None
+    start = 0
+    for i, mi in enumerate(m):
+        seg = ok[start:start + mi]
+        p = mi if seg.all() else int(np.argmin(seg))  # feasible prefix length
+        if p == mi:
+            if best is None or dist[i] < best[0]:
+                best = (dist[i], int(target_ids[i]), int(near[i]))
+        elif p > 0:
+            pts = eb[start:start + p]
+            parents = np.empty(p, np.int64)
+            ids = B.add(pts, parents)  # chained: the first from near[i]
+            B.parent[ids[0]] = near[i]
+            B.parent[ids[1:]] = ids[:-1]
+        start += mi
+    return None if best is None else (best[1], best[2])
+
+
+def path_length(path: np.ndarray) -> float:
+    """Joint-space length of a polyline (k, n)."""
+    return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+
+
+def shortcut(path: np.ndarray, chk: Any, step: float, iterations: int, batch: int,
+             rng: np.random.Generator, stop_at: float = math.inf) -> np.ndarray:
+    """Random shortcuts of ``path`` (k, n): in rounds of ``batch`` random node pairs
+    (i, j > i + 1), each straight segment i -> j (cut at ``step``) checked in one batch;
+    the feasible ones that do not overlap are applied, the longest saving first."""
+    path = np.array(path, np.float64)
+    tried = 0
+    while tried < iterations and len(path) > 2 and time.perf_counter() < stop_at:
+        k = len(path)
+        K = min(batch, iterations - tried)
+        tried += K
+        i = rng.integers(0, k - 2, size=K)
+        j = i + 2 + np.floor(rng.random(K) * (k - i - 2)).astype(np.int64)
+        pairs = np.unique(np.stack([i, j], 1), axis=0)
+        pairs = pairs[pairs[:, 1] > pairs[:, 0] + 1]
+        if not len(pairs):
+            continue
+        seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        direct = np.linalg.norm(path[pairs[:, 1]] - path[pairs[:, 0]], axis=1)
+        gain = cum[pairs[:, 1]] - cum[pairs[:, 0]] - direct
+        pairs, gain = pairs[gain > 1e-9], gain[gain > 1e-9]
+        if not len(pairs):
+            continue
+        ok = chk.paths(_split(path[pairs[:, 0]], path[pairs[:, 1]], step))
+        pairs, gain = pairs[ok], gain[ok]
+        drop = np.zeros(k, bool)
+        used = np.zeros(k - 1, bool)  # segments replaced by an applied shortcut
+        for p in np.argsort(-gain):
+            a, b = pairs[p]
+            if used[a:b].any():
+                continue
+            used[a:b] = True
+            drop[a + 1:b] = True
+        path = path[~drop]
+    return path
+
+
+def resample_path(path: np.ndarray, n_waypoints: int) -> np.ndarray:
+    """A polyline (k, n) as ``n_waypoints`` waypoints on it: with k <= n_waypoints every
+    node is a waypoint (the path between the waypoints is the polyline itself), the rest
+    spread over its segments in proportion to their lengths; else the waypoints spread
+    evenly along its length (:func:`jwarp.solvers.planning.polyline_path`)."""
+    path = np.asarray(path, np.float64)
+    k, W = len(path), int(n_waypoints)
+    if W < 2:
+        raise ValueError(f"n_waypoints: expected >= 2, got {n_waypoints!r}")
+    if k > W:
+        return _fz.polyline_path(path[0], path[1:-1], path[-1], W)
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    extra = W - k  # waypoints beyond the nodes, shared by the k - 1 segments
+    if seg.sum() > 0 and extra > 0:
+        share = extra * seg / seg.sum()
+        cnt = np.floor(share).astype(np.int64)
+        rest = extra - int(cnt.sum())
+        cnt[np.argsort(-(share - cnt))[:rest]] += 1
+    else:
+        cnt = np.zeros(k - 1, np.int64)
+        cnt[0] += extra
+    out = [path[:1]]
+    for s in range(k - 1):
+        u = np.linspace(0.0, 1.0, cnt[s] + 2)[1:, None]
+        out.append(path[s] + u * (path[s + 1] - path[s]))
+    res = np.concatenate(out)
+    assert len(res) == W
+    return res
