@@ -10,7 +10,6 @@ import math
 import os
 import re
 import sys
-from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -166,37 +165,13 @@ def check_output(path: str, option: str, rerun: bool = False,
         raise CLIError(str(e)) from None
 
 
-class RerunRecording:
-    """A rerun recording of ``--rerun`` written to a temporary file
-    (:class:`jwarp.utils.atomic.AtomicFile`): :meth:`close` renames it to the path, :meth:`abort`
-    (or a failure to open it) removes it. ``rr`` is the rerun module, ``rec`` the
-    recording (application id ``app``)."""
-
-    def __init__(self, path: str, app: str):
-        from jwarp import viz
-        from jwarp.utils.atomic import AtomicFile
-
-        self.rr = viz.rerun_module()
-        try:
-            self.file = AtomicFile(path, option="--rerun")
-        except ValueError as e:
-            raise CLIError(str(e)) from None
-        try:
-            self.rec = viz.open_recording(self.file.tmp, app)
-        except BaseException:
-            self.file.discard()
-            raise
-
-    def close(self) -> Path:
-        self.rec.flush()
-        self.rec.disconnect()
-        return self.file.commit()
-
-    def abort(self) -> None:
-        try:
-            self.rec.disconnect()  # no writer left on the temporary file
-        finally:
-            self.file.discard()
+def rerun_recording(cls: type, path: str, *args: Any) -> Any:
+    """``cls(path, *args, option="--rerun")`` (a :class:`jwarp.viz.recording.Recording`
+    or a subclass): an unwritable path is a :class:`CLIError` naming ``--rerun``."""
+    try:
+        return cls(path, *args, option="--rerun")
+    except ValueError as e:
+        raise CLIError(str(e)) from None
 
 
 # ------------------------------------------------------------------ parsing helpers

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from jwarp.cli.vocabulary import add_out
-from jwarp.cli.common import (CLIError, RerunRecording, check_output, dumps, int_arg, quiet_warp,
+from jwarp.cli.common import (CLIError, rerun_recording, check_output, dumps, int_arg, quiet_warp,
                               real_arg)
 
 DEFAULT_FREE = "theta,d,r,alpha"
@@ -146,21 +146,6 @@ def spectra_png(path: str, spectra: list[tuple[str, np.ndarray]], threshold: flo
         raise
 
 
-def spectra_rrd(path: str, spectra: list[tuple[str, np.ndarray]]) -> None:
-    """Log the spectra as rerun bar charts (log10 eigenvalues, zeros at -30) under
-    ``sensitivity/<name>``."""
-    rec = RerunRecording(path, "jwarp-sensitivity")
-    try:
-        rr = rec.rr
-        for name, v in spectra:
-            lv = np.log10(np.maximum(np.asarray(v, np.float64), 1e-30))
-            rec.rec.log(f"sensitivity/{name}", rr.BarChart(lv), static=True)
-    except BaseException:
-        rec.abort()
-        raise
-    rec.close()
-
-
 # ------------------------------------------------------------- sensitivity
 def cmd_sensitivity(args: argparse.Namespace) -> int:
     from jwarp.calibration.design.sensitivity import sensitivity
@@ -201,7 +186,10 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
                     f"{model.name}: eigenvalues of J^T J, {meas.name} (red) vs {task.name} "
                     f"(blue)")
     if args.rerun:
-        spectra_rrd(args.rerun, spectra)
+        from jwarp.viz.spectra import SpectraRecording
+
+        rec = rerun_recording(SpectraRecording, args.rerun)
+        rec.save(spectra)
     if args.json:
         doc = dict(res.to_dict(), robot=model.name, free=args.free,
                    configurations={"actual": int(len(qa)), "task": int(len(qt))},

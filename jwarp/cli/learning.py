@@ -68,7 +68,7 @@ from typing import Any
 import numpy as np
 
 from jwarp.cli.common import (CLIError, check_option_memory,
-                              RerunRecording, check_device, check_output, dumps, int_arg,
+                              rerun_recording, check_device, check_output, dumps, int_arg,
                               quiet_warp, real_arg, robot_option)
 
 #: the test targets of ``eval ik`` without ``--mix`` (as in training by default)
@@ -149,22 +149,6 @@ def _worlds_per_batch(batch: int, n_worlds: int, kind: str) -> int:
     return 1
 
 
-# ------------------------------------------------------------------ rerun curves
-class _Curves(RerunRecording):
-    """Training curves in a rerun recording (temporary file renamed at the end)."""
-
-    def __init__(self, path: str):
-        super().__init__(path, "jwarp-train-ik")
-
-    def log(self, rec: dict) -> None:
-        self.rec.set_time("epoch", sequence=int(rec.get("epoch", 0)))
-        for k, v in rec.items():
-            if k == "epoch" or isinstance(v, bool) or not isinstance(v, (int, float)):
-                continue
-            if math.isfinite(float(v)):
-                self.rec.log(f"train/{k}", self.rr.Scalars(float(v)))
-
-
 # ------------------------------------------------------------------ commands
 def cmd_train_ik(args: argparse.Namespace) -> int:
     model = robot_option(args.robot)
@@ -205,7 +189,11 @@ def cmd_train_ik(args: argparse.Namespace) -> int:
         raise _option_error(e, _TRAIN_OPTION_OF, "train ik") from None
     _check_net_memory("ik", options, args)
     init_warp()
-    curves = _Curves(args.rerun) if args.rerun is not None else None
+    curves = None
+    if args.rerun is not None:
+        from jwarp.viz.curves import TrainingCurves
+
+        curves = rerun_recording(TrainingCurves, args.rerun)
 
     def callback(rec: Any, net: Any = None) -> None:
         if curves is not None and isinstance(rec, dict):

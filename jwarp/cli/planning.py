@@ -81,7 +81,7 @@ from typing import Any
 import numpy as np
 
 from jwarp.cli.common import (CLIError, check_option_memory,
-                              RerunRecording, dtype_of, quiet_warp, check_device,
+                              rerun_recording, dtype_of, quiet_warp, check_device,
                               check_output, dumps, int_arg, parse_q, real_arg, robot_option)
 from jwarp.cli.targets import MAX_TARGET  # noqa: F401  (the largest --target value, here before)
 
@@ -340,64 +340,6 @@ def _kappa(args: argparse.Namespace, model: Any) -> Any:
     return model.kappa if kappa is None else kappa
 
 
-# ------------------------------------------------------------------ rerun
-class _Recorder(RerunRecording):
-    """A rerun recording written to a temporary file, renamed on success."""
-
-    def __init__(self, path: str, model: Any, world: Any):
-        super().__init__(path, "jwarp-planning")
-        self.model = model
-        if world is not None:
-            try:
-                self._log_world(world)
-            except BaseException:
-                self.abort()
-                raise
-
-    def _log_world(self, world: Any) -> None:
-        from jwarp.viz import object_meshes
-
-        for oid, v, f in object_meshes(world):   # exact objects as meshes
-            self.rec.log(f"world/objects/{oid}", self.rr.Mesh3D(
-                vertex_positions=v, triangle_indices=f,
-                vertex_colors=[(90, 90, 90, 160)] * len(v)), static=True)
-        if not world.has_grid:
-            return
-        occ = world.occupancy if world.occupancy is not None else world.sdf < 0
-        idx = np.argwhere(occ)
-        pts = np.zeros((len(idx), 3))
-        pts[:, :world.dim] = world.limits[:, 0] + world.voxel_size * idx
-        half = np.full((len(idx), 3), 0.5 * world.voxel_size)
-        if world.dim == 2:
-            half[:, 2] = 0.005
-        self.rec.log("world/occupied", self.rr.Boxes3D(centers=pts, half_sizes=half,
-                                                       colors=[(90, 90, 90, 160)] * len(pts)),
-                     static=True)
-
-    def log_configs(self, timeline: str, step: int, q: np.ndarray, name: str = "robot") -> None:
-        """Spheres (and skeleton of the first configuration) of q (K, n_dof) at one step."""
-        from jwarp.core.device import host_frames
-        from jwarp.viz import log_robot, world_spheres
-
-        self.rec.set_time(timeline, sequence=step)
-        frames = host_frames(self.model, q)  # host FK: any --device, no Warp CPU backend needed
-        log_robot(self.rec, self.model, frames[0], path=name, spheres=False)
-        cs, rs = zip(*(world_spheres(self.model, f) for f in frames))
-        self.rec.log(f"{name}/spheres", self.rr.Points3D(np.concatenate(cs), radii=np.concatenate(rs),
-                                                         colors=[(80, 140, 220, 60)]))
-
-    def log_traces(self, step: int, paths: np.ndarray) -> None:
-        """End-effector (last frame) trace of every path (P, W, n_dof) at one iteration."""
-        from jwarp.core.device import host_frames
-
-        P, W, n = paths.shape
-        fi = next(iter(self.model.end_effectors.values()), self.model.n_frames - 1)
-        frames = host_frames(self.model, paths.reshape(-1, n))
-        tcp = frames[:, fi, :3, 3].reshape(P, W, 3)
-        self.rec.set_time("iteration", sequence=step)
-        self.rec.log("paths/end_effector", self.rr.LineStrips3D(list(tcp), radii=0.004))
-
-
 # ------------------------------------------------------------------ commands
 def cmd_plan(args: argparse.Namespace) -> int:
     model = robot_option(args.robot)
@@ -427,8 +369,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
                              "--robot": args.robot, "--warm-start": args.warm_start})
     world = _world(args.world, model, args, scene)
     from jwarp.solvers.planning import PlanOptions, Planner, plan
+    from jwarp.viz.planning import PlanRecording
 
-    rec = _Recorder(args.rerun, model, world) if args.rerun is not None else None
+    rec = (rerun_recording(PlanRecording, args.rerun, model, world)
+           if args.rerun is not None else None)
     callback = None
     if rec is not None:
         def callback(it: int, paths: np.ndarray) -> None:
@@ -625,7 +569,9 @@ def cmd_ik(args: argparse.Namespace) -> int:
             res = ik(model, args.frame, T, n_starts=args.starts, **common)
         written = None
         if args.rerun is not None:
-            rec = _Recorder(args.rerun, model, world)
+            from jwarp.viz.planning import PlanRecording
+
+            rec = rerun_recording(PlanRecording, args.rerun, model, world)
             try:
                 for k, q in enumerate(res.all_q):
                     rec.log_configs("start", k, q[None], name="solution")

@@ -1,13 +1,22 @@
-"""Streaming robots to rerun (https://rerun.io): frames, skeleton, collision bodies.
+"""rerun (https://rerun.io) recordings: robots (frames, skeleton, collision bodies),
+calibration samples, planning runs, training curves and spectra.
 
-The package: :mod:`jwarp.viz.robot`."""
+``rerun`` is imported on first use, so these modules import on machines without
+rerun-sdk. Modules: :mod:`~jwarp.viz.robot` (robots, worlds, calibration samples),
+:mod:`~jwarp.viz.recording` (a recording renamed into place at the end),
+:mod:`~jwarp.viz.planning`, :mod:`~jwarp.viz.curves`, :mod:`~jwarp.viz.spectra`."""
 
+from jwarp.viz.curves import TrainingCurves
+from jwarp.viz.planning import PlanRecording
+from jwarp.viz.recording import Recording
 from jwarp.viz.robot import (SAMPLE_TIMELINE, TIMELINE, atomic_recording, log_robot,
                              object_meshes, open_recording, rerun_module, save_calibration_rrd,
                              save_robot_rrd, world_capsules, world_spheres)
+from jwarp.viz.spectra import SpectraRecording
 
 __all__ = [
-    "SAMPLE_TIMELINE", "TIMELINE", "atomic_recording", "log_robot", "object_meshes",
-    "open_recording", "rerun_module", "save_calibration_rrd", "save_robot_rrd",
-    "world_capsules", "world_spheres",
+    "PlanRecording", "Recording", "SAMPLE_TIMELINE", "SpectraRecording", "TIMELINE",
+    "TrainingCurves", "atomic_recording", "log_robot", "object_meshes", "open_recording",
+    "rerun_module", "save_calibration_rrd", "save_robot_rrd", "world_capsules",
+    "world_spheres",
 ]
