@@ -505,4 +505,80 @@ def test_kernels_take_the_limits_as_one_struct():
                             and item.target.id in LOOSE_LIMIT_NAMES:
                         bad.append(f"{where}:{item.lineno} struct {node.name} holds "
                                    f"{item.target.id}")
+
+
+# ------------------------------------------------------------------ packages by job
+#: the packages each job lives in (issue 28)
+PACKAGES = ("jwarp.model", "jwarp.utils", "jwarp.solvers.planning", "jwarp.solvers.ik",
+            "jwarp.calibration", "jwarp.calibration.estimate", "jwarp.calibration.design",
+            "jwarp.calibration.simulate", "jwarp.viz")
+#: the public facades: each has ``__all__``, and every name in it resolves
+FACADES = ("jwarp", "jwarp.kinematics", "jwarp.world", "jwarp.calibration", "jwarp.learn",
+           "jwarp.solvers.planning", "jwarp.solvers.ik", "jwarp.model", "jwarp.viz")
+
+
+def test_packages_by_job():
+    """Each job in its package; no loose top-level module but the facade, ``__main__`` and
+    the deprecated paths; jwarp.solvers holds no calibration code (only forwarding
+    modules)."""
+    for pkg in PACKAGES:
+        assert pkg in MODULES and MODULES[pkg][2], f"{pkg} is not a package"
+    loose = {m for m, (_p, _t, is_pkg) in MODULES.items()
+             if m.count(".") == 1 and not is_pkg} - FACADE - set(DEPRECATED)
+    assert not loose, f"loose top-level modules: {sorted(loose)}"
+    stale = [m for m in MODULES if m.startswith("jwarp.solvers.calibration") and m not in DEPRECATED]
+    assert not stale, stale
+
+
+@pytest.mark.parametrize("facade", FACADES)
+def test_facades_have_all(facade):
+    import importlib
+
+    mod = importlib.import_module(facade)
+    names = getattr(mod, "__all__", None)
+    assert names, f"{facade} has no __all__"
+    assert len(names) == len(set(names)), f"{facade}.__all__ repeats a name"
+    missing = [n for n in names if not hasattr(mod, n)]
+    assert not missing, f"{facade}.__all__ names what it lacks: {missing}"
+
+
+@pytest.mark.parametrize("old", sorted(DEPRECATED))
+def test_deprecated_path_forwards_with_a_warning(old):
+    """An old module path still imports for one release: it warns (DeprecationWarning
+    naming the new path) and its public names are the new module's objects."""
+    import importlib
+    import sys
+    import warnings
+
+    new = importlib.import_module(DEPRECATED[old])
+    sys.modules.pop(old, None)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        mod = importlib.import_module(old)
+    msgs = [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning)]
+    assert any(DEPRECATED[old] in m for m in msgs), msgs
+    public = getattr(new, "__all__", None) or [n for n in vars(new) if not n.startswith("_")]
+    for name in public:
+        assert getattr(mod, name) is getattr(new, name), f"{old}.{name}"
+    with pytest.raises(AttributeError, match="moved to"):
+        mod.no_such_name  # noqa: B018
+
+
+def test_nothing_imports_a_deprecated_path():
+    """jwarp's own modules, the tests, benchmarks and examples import the new paths."""
+    bad = [f"{m}:{line} imports {target}" for m in MODULES if m not in DEPRECATED
+           for line, target, _names, _top in imports(m) if target in DEPRECATED]
+    repo = ROOT.parent
+    for folder in ("tests", "benchmarks", "examples"):
+        for path in sorted((repo / folder).rglob("*.py")):
+            tree = ast.parse(path.read_text(), str(path))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and node.level == 0:
+                    targets = [node.module or ""] + [f"{node.module}.{a.name}" for a in node.names]
+                elif isinstance(node, ast.Import):
+                    targets = [a.name for a in node.names]
+                else:
+                    continue
+                bad += [f"{path.relative_to(repo)}:{node.lineno} imports {t}" for t in targets
+                        if t in DEPRECATED and path.name != "test_architecture.py"]
     assert not bad, "\n".join(bad)

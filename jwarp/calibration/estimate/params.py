@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import IntEnum
 from typing import Any, Iterable, Mapping
 
 import numpy as np
@@ -104,9 +105,27 @@ DEFAULT_SIGMA: dict[str, float] = {
     COUPLING_GROUP: 1e-2,
 }
 
-KIND_DH, KIND_KAPPA, KIND_MEAS, KIND_MASS, KIND_HARMONIC, KIND_KAPPA_NL = 0, 1, 2, 3, 4, 5
-KIND_ORIGIN = 6
-KIND_COUPLING = 7
+class ParamKind(IntEnum):
+    """What a parameter of :class:`ParameterSpace` is (``ParameterSpace.kind``, stored as
+    int64 codes): a DH entry, a compliance, a measurement parameter, a mass, a harmonic
+    (non-geometric) term, a nonlinear compliance, a joint-origin error or a coupling
+    term."""
+
+    DH = 0
+    KAPPA = 1
+    MEAS = 2
+    MASS = 3
+    HARMONIC = 4
+    KAPPA_NL = 5
+    ORIGIN = 6
+    COUPLING = 7
+
+
+#: the kinds by their module-level names (``np.int64`` codes compare equal to them)
+KIND_DH, KIND_KAPPA, KIND_MEAS, KIND_MASS = (ParamKind.DH, ParamKind.KAPPA, ParamKind.MEAS,
+                                             ParamKind.MASS)
+KIND_HARMONIC, KIND_KAPPA_NL = ParamKind.HARMONIC, ParamKind.KAPPA_NL
+KIND_ORIGIN, KIND_COUPLING = ParamKind.ORIGIN, ParamKind.COUPLING
 
 
 def coupled_frames(robot: RobotModel, dh_frames: Iterable[int]) -> list[int]:
@@ -389,7 +408,7 @@ class ParameterSpace:
     groups: list[str]
     nominal: np.ndarray
     sigma: np.ndarray
-    kind: np.ndarray
+    kind: np.ndarray  # (P,) int64 ParamKind codes
     frame: np.ndarray
     column: np.ndarray
     lower: np.ndarray
