@@ -33,8 +33,14 @@ FACADES: tuple[tuple[str, ...], ...] = (
     ("jwarp",),
     ("jwarp.kinematics",),
     ("jwarp.world",),
-    ("jwarp.calibration", "jwarp.calibration"),
+    ("jwarp.calibration",),
+    ("jwarp.calibration.design",),
+    ("jwarp.calibration.simulate",),
+    ("jwarp.solvers.planning",),
+    ("jwarp.solvers.ik",),
+    ("jwarp.model",),
     ("jwarp.learn",),
+    ("jwarp.viz",),
 )
 
 #: width of a wrapped signature line
