@@ -82,7 +82,7 @@ import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
 def legacy_ik(robot: Any, frame: Any, target: Any, *, world: Any = None, n_starts: int = 16,
               initial: Any = None, q_default: Any = None, weights: Any = None,
               tol_pos: float = 1e-4, tol_rot: float = 1e-3, margin: float = 0.0,
-              eps: float | None = None, max_iterations: int = 200, step: float = 1.0,
+              eps: float | None = None, iterations: int = 200, step: float = 1.0,
               max_step: float = 0.5, damping: float = 1e-3, kappa: Any = None,
               lam: float = 0.7, tol_rho: float = 1e-6, stop_when_solved: bool = True,
               check_every: int = 5, seed: int | None = 0, device: Any = "cpu",
@@ -125,6 +125,7 @@ def legacy_ik(robot: Any, frame: Any, target: Any, *, world: Any = None, n_start
     npos = 2 if model.workspace_dim == 2 else 3
     done = np.zeros(B, bool)
     feasible = np.zeros(B, bool)
+    max_iterations = iterations
     iters = np.full(B, max_iterations, np.int64)
     q_out = np.zeros((B, model.n_dof))
     errs = np.zeros((B, 3))  # pos, rot, U_A

@@ -52,7 +52,7 @@ def test_problem_uploads_the_joint_values_once(monkeypatch, free):
             return fn(robot_, q_, *a, **k)
         return wrapped
 
-    for name in ("setup", "fk", "jacobian_dh"):  # the kinematics entry points of the problem
+    for name in ("solve_equilibrium", "fk", "jacobian_dh"):  # the problem's kinematics calls
         monkeypatch.setattr(M.K, name, spy(getattr(M.K, name)))
     sp = prob.space
     for k in range(3):
