@@ -286,7 +286,7 @@ def cmd_eval_ik(args: argparse.Namespace) -> int:
     mix = args.mix if args.mix is not None else DEFAULT_EVAL_MIX
     _check_mix_world(mix, kind)
     worlds, targets = _eval_data(model, frame, kind, n_worlds, args.targets, args.seed, mix)
-    common = dict(max_iterations=args.iterations, seed=args.seed, device=args.device)
+    common = dict(iterations=args.iterations, seed=args.seed, device=args.device)
     rows = [evaluate_ik(model, frame, worlds, targets, n_random=args.random_starts,
                         name="Random", **common)]
     for p, n in nets:

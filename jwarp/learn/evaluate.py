@@ -45,6 +45,7 @@ import numpy as np
 from jwarp.core.limits import project_numpy, sample_within_limits
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver, check_warm_start, warm_start_seeds
+from jwarp.solvers.overrides import translate
 
 #: seeds per target and block after the first (a target stops once one is feasible)
 BLOCK = 8
@@ -102,10 +103,10 @@ def _solve_block(model: Any, frame: Any, world: Any, T: np.ndarray, seeds: np.nd
 
 
 def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start: Any = None,
-                n_random: int = N_RANDOM, max_iterations: int = 200, margin: float = 0.0,
+                n_random: int = N_RANDOM, iterations: int = 200, margin: float = 0.0,
                 tol_pos: float = 1e-4, tol_rot: float = 1e-3, q_default: Any = None,
                 seed: int = 0, device: Any = None, dtype: Any = np.float64,
-                name: str | None = None) -> dict:
+                name: str | None = None, **old_names: Any) -> dict:
     """The Table 3.5 columns of one initial guess (module docstring).
 
     Args:
@@ -116,7 +117,8 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
         warm_start: None (random initial guesses) or an object with a callable ``seeds``.
         n_random: random seeds tried one after the other (after a network's heads), >= 0
             (>= 1 without a warm start); the cap of the multi-starts is H + n_random.
-        max_iterations: solver iterations per seed; margin, tol_pos, tol_rot, q_default:
+        iterations: solver iterations per seed (``max_iterations``: the name before issue
+            28, deprecated); margin, tol_pos, tol_rot, q_default:
             the solver's options (:class:`jwarp.solvers.ik.IKOptions`).
         seed: numpy seed of the random seeds; device, dtype: where the solver runs.
         name: the row's name (default "Random" or the warm start's class name).
@@ -133,7 +135,16 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
     model = get_robot(robot)
     fi = model.frame_index(frame)
     n_random = _count(n_random, "n_random", 0 if warm_start is not None else 1)
-    max_iterations = _count(max_iterations, "max_iterations", 0)
+    if old_names:   # the name before issue 28's one vocabulary, for one release
+        unknown = sorted(set(old_names) - {"max_iterations"})
+        if unknown:
+            raise TypeError(f"evaluate_ik() got an unexpected keyword argument {unknown[0]!r}")
+        if iterations != 200:
+            raise TypeError("evaluate_ik(): got both 'max_iterations' and its new name "
+                            "'iterations'")
+        iterations = translate("evaluate_ik()", {"max_iterations": "iterations"},
+                               old_names)["iterations"]
+    max_iterations = _count(iterations, "iterations", 0)
     opts = IKOptions(n_starts=1, iterations=max_iterations, margin=margin, tol_pos=tol_pos,
                      tol_rot=tol_rot, stop_when_solved=False, q_default=q_default, seed=seed,
                      restart_after=None, freeze_solved=False)  # every seed on its own
@@ -245,7 +256,7 @@ def ablation_table(robot: Any, frame: Any, world: Any, targets: Any,
             raise TypeError(f"nets[{label!r}]: expected a warm start, got None")
         check_warm_start(net, f"nets[{label!r}]")
         r = evaluate_ik(robot, frame, world, targets, warm_start=net, n_random=0,
-                        max_iterations=iterations, device=device, name=str(label), **options)
+                        iterations=iterations, device=device, name=str(label), **options)
         rows.append({"name": str(label), "boosting": _config_value(net, "boosting"),
                      "twin": _config_value(net, "twin"),
                      "unit_vectors": _config_value(net, "unit_vectors"),

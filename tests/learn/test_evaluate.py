@@ -99,7 +99,7 @@ def test_columns_equal_a_brute_force_run(problems):
     model, worlds, qs, Ts = problems
     net = Corner(model.n_dof)
     r = evaluate_ik(ROBOT, FRAME, worlds, Ts, warm_start=net, n_random=19, seed=4,
-                    max_iterations=40)
+                    iterations=40)
     rng = np.random.default_rng(4)
 
     def seeds_of(w, T):
@@ -118,12 +118,12 @@ def test_columns_equal_a_brute_force_run(problems):
 
 def test_one_world_and_no_world(problems):
     model, worlds, qs, Ts = problems
-    r = evaluate_ik(model, FRAME, worlds[0], Ts[0], n_random=4, max_iterations=30)
+    r = evaluate_ik(model, FRAME, worlds[0], Ts[0], n_random=4, iterations=30)
     assert r["n_targets"] == 10 and r["n_worlds"] == 1
     r = evaluate_ik(model, FRAME, None, np.concatenate(Ts), n_random=4)
     assert r["n_targets"] == 20 and r["solved_rate"] > 0.5
     # (W, P, 4, 4) for W worlds
-    r = evaluate_ik(model, FRAME, worlds, np.stack(Ts), n_random=2, max_iterations=5)
+    r = evaluate_ik(model, FRAME, worlds, np.stack(Ts), n_random=2, iterations=5)
     assert r["n_targets"] == 20
 
 
@@ -140,7 +140,7 @@ def test_ablation_table_and_printing(problems):
     for c in TABLE_34_COLUMNS:
         assert c in t34
     assert "Yes" in t34 and "No" in t34 and "after 10 solver iterations" in t34
-    r0 = evaluate_ik(ROBOT, FRAME, worlds, Ts, n_random=3, max_iterations=5)
+    r0 = evaluate_ik(ROBOT, FRAME, worlds, Ts, n_random=3, iterations=5)
     r1 = evaluate_ik(ROBOT, FRAME, worlds, Ts, warm_start=Twin(worlds, qs), n_random=3,
                      name="Unsupervised")
     t35 = format_table_35([r0, r1], "Table 3.5")
@@ -158,8 +158,8 @@ def test_input_errors(problems):
     model, worlds, qs, Ts = problems
     with pytest.raises(ValueError, match="n_random"):
         evaluate_ik(ROBOT, FRAME, worlds, Ts, n_random=0)
-    with pytest.raises(ValueError, match="max_iterations"):
-        evaluate_ik(ROBOT, FRAME, worlds, Ts, max_iterations=-1)
+    with pytest.raises(ValueError, match="iterations"):
+        evaluate_ik(ROBOT, FRAME, worlds, Ts, iterations=-1)
     with pytest.raises(ValueError, match="targets"):
         evaluate_ik(ROBOT, FRAME, worlds, Ts[:1])
     with pytest.raises(ValueError, match="targets"):
@@ -172,3 +172,18 @@ def test_input_errors(problems):
         ablation_table(ROBOT, FRAME, None, Ts[0], {})
     with pytest.raises(TypeError, match="nets"):
         ablation_table(ROBOT, FRAME, None, Ts[0], [("x", object())])
+
+
+def test_evaluate_ik_old_iterations_name_warns(problems):
+    """``max_iterations`` (the name before issue 28's one vocabulary) still works for one
+    release, with a DeprecationWarning, and gives the row of ``iterations``."""
+    model, worlds, qs, Ts = problems
+    new = evaluate_ik(model, FRAME, worlds[0], Ts[0], n_random=2, iterations=5)
+    with pytest.warns(DeprecationWarning, match="'max_iterations' is renamed 'iterations'"):
+        old = evaluate_ik(model, FRAME, worlds[0], Ts[0], n_random=2, max_iterations=5)
+    for k in ("multi_starts", "solved_rate", "iterations", "length_cost", "max_iterations"):
+        assert old[k] == new[k], k
+    with pytest.raises(TypeError, match="both"):
+        evaluate_ik(model, FRAME, worlds[0], Ts[0], iterations=7, max_iterations=5)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'max_iter'"):
+        evaluate_ik(model, FRAME, worlds[0], Ts[0], max_iter=5)
