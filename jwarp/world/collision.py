@@ -42,8 +42,7 @@ import warp as wp
 
 from jwarp.core.arrays import (Batch, as_batch, default_dtype, finite_as, init_warp, real_array,
                           real_number, resolve_device, to_output)
-from jwarp.core.device import (DeviceModel, collision_tables, numpy_dtype, put_model, scalar_type,
-                               struct_fields)
+from jwarp.core.device import DeviceModel, collision_tables, numpy_dtype, put_model, scalar_type
 from jwarp.core.rows import DHRows, RowsKind
 from jwarp.kernels import collision as ck
 from jwarp.kernels.elastic import kernels as elastic_kernels
@@ -183,8 +182,6 @@ class CollisionModel:
         sp = self.model.spheres
         dev = self.device
         self.n_spheres, self.n_pairs, self.pairs = sp.n_spheres, sp.n_pairs, sp.pairs
-        for name in (*struct_fields(self.k.SphereTables), "pair_a"):  # the sphere tables
-            setattr(self, name, getattr(sp, name))
         #: the world on the device (grid + exact objects), one struct argument
         self.device_world = DeviceWorld(world, dev, self.scalar)
         dw = self.device_world
@@ -420,6 +417,7 @@ class CollisionModel:
         frames = wp.zeros((n, self.robot.n_frames), dtype=k.mat44, device=self.device,
                           requires_grad=True)
         cost = wp.zeros(n, dtype=self.scalar, device=self.device, requires_grad=True)
+        sp = self.model.spheres
         tape = wp.Tape()
         with tape:
             wp.launch(k.fk, dim=n, inputs=[qg, *rows.args, self.model.frame_struct],
@@ -427,12 +425,12 @@ class CollisionModel:
             if self.world is not None and self.n_spheres and w_world != 0:
                 wp.launch(self.k.world_cost_spheres, dim=(n, self.n_spheres),
                           inputs=[frames, self.grid, self.origin, self.inv_h, self.dim,
-                                  float(w_world), float(eps), self.sph_frame, self.sph_pos,
-                                  self.sph_rad], outputs=[cost], device=self.device)
+                                  float(w_world), float(eps), sp.sph_frame, sp.sph_pos,
+                                  sp.sph_rad], outputs=[cost], device=self.device)
             if self.n_pairs and w_self != 0:
                 wp.launch(self.k.self_cost_pairs, dim=(n, self.n_pairs),
-                          inputs=[frames, float(w_self), float(eps), self.sph_frame,
-                                  self.sph_pos, self.sph_rad, self.pair_a, self.pair_b],
+                          inputs=[frames, float(w_self), float(eps), sp.sph_frame,
+                                  sp.sph_pos, sp.sph_rad, sp.pair_a, sp.pair_b],
                           outputs=[cost], device=self.device)
         tape.backward(grads={cost: wp.ones(n, dtype=self.scalar, device=self.device)})
         grad = wp.clone(qg.grad)

@@ -155,16 +155,16 @@ class PathObjective:
         wp.launch(c.k.fk.fk, dim=PW, inputs=[self.paths.reshape((PW, self.n)), *c.rows.args,
                                              self.cm.model.frame_struct],
                   outputs=[c.frames], device=dev)
+        sp = self.cm.model.spheres
         wp.launch(c.k.centres, dim=(PW, self.cm.n_spheres),
-                  inputs=[c.frames, self.cm.sph_frame, self.cm.sph_pos], outputs=[c.xs],
-                  device=dev)
+                  inputs=[c.frames, sp.sph_frame, sp.sph_pos], outputs=[c.xs], device=dev)
         wp.launch(c.k.cost, dim=self.P, inputs=[c.xs, self.W, lam, floor],
                   outputs=[self.cartesian, self.total], device=dev)
         if grad:
             wp.launch(c.k.grad, dim=(self.P, self.W),
                       inputs=[c.frames, self.paths.reshape((PW, self.n)), c.xs, self.W,
                               self.n_sub, lam, floor,
-                              self.cm.model.frame_struct, self.cm.sph_frame, c.force, c.moment],
+                              self.cm.model.frame_struct, sp.sph_frame, c.force, c.moment],
                       outputs=[self.sub_grad], device=dev)
 
     def gradient(self) -> wp.array:
