@@ -42,8 +42,10 @@ LAZY = {
 
 #: subpackages and modules reachable as attributes (``import jwarp; jwarp.kinematics.fk``)
 SUBMODULES = frozenset({
-    "atomic", "cli", "core", "importers", "kernels", "kinematics", "learn", "measurement",
-    "memory", "model", "plugins", "registry", "solvers", "viz", "world",
+    "calibration", "cli", "core", "importers", "kernels", "kinematics", "learn", "model",
+    "plugins", "solvers", "utils", "viz", "world",
+    # deprecated paths (issue 28), forwarding with a DeprecationWarning for one release
+    "atomic", "measurement", "memory", "registry",
 })
 
 __all__ = sorted(LAZY)
