@@ -5,14 +5,15 @@ Modules (each with one job): :mod:`~jwarp.kinematics.fk` (forward kinematics),
 :mod:`~jwarp.kinematics.jacobians` (joint and DH Jacobians),
 :mod:`~jwarp.kinematics.equilibrium` (elastic FK, one torque update, gravity torques),
 :mod:`~jwarp.kinematics.data` (:class:`KinematicsData`, the reusable workspace of one batch
-size, with :func:`forward_kinematics` and :func:`frame_jacobian`),
+size, with :func:`forward_kinematics`, :func:`frame_jacobian` and :func:`frame_dh_jacobian`),
 :mod:`~jwarp.kinematics.launch` (the validated batch, device tables and kernel launches they
 share), :mod:`~jwarp.kinematics.compensation` (DH rows kept across optimizer iterations),
 :mod:`~jwarp.kinematics.torch_ops` (torch autograd), :mod:`~jwarp.kinematics.autodiff`
 (Warp tape Jacobians).
 """
 
-from jwarp.kinematics.data import KinematicsData, forward_kinematics, frame_jacobian
+from jwarp.kinematics.data import (KinematicsData, forward_kinematics, frame_dh_jacobian,
+                                  frame_jacobian)
 from jwarp.kinematics.equilibrium import (elastic_step, fk_elastic, gravity_torques,
                                           solve_equilibrium)
 from jwarp.kinematics.fk import fk
@@ -25,7 +26,8 @@ from jwarp.kinematics.launch import (ELASTIC_TOL, ElasticFK, ElasticLaunch, Elas
 
 __all__ = ["ELASTIC_TOL", "ElasticFK", "ElasticLaunch", "ElasticStep", "KinematicsData",
            "default_tol", "elastic_args", "elastic_step", "equilibrium", "fk", "fk_elastic",
-           "forward_kinematics", "frame_jacobian", "frame_rows", "gravity_torques", "host_out",
+           "forward_kinematics", "frame_dh_jacobian", "frame_jacobian", "frame_rows",
+           "gravity_torques", "host_out",
            "jacobian", "jacobian_dh", "kappa_array", "launch_fk", "rho0_full", "setup",
            "solve_equilibrium", "transmitted", "without_coupling_harmonic",
            "without_transmission"]

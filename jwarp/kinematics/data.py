@@ -29,8 +29,8 @@ from jwarp.core.arrays import finite_as, real_array
 from jwarp.core.device import DeviceModel, numpy_dtype
 from jwarp.kernels import fk as fk_kernels
 
-__all__ = ["KinematicsData", "forward_kinematics", "frame_jacobian", "fk_inputs",
-           "jacobian_inputs", "point_vec", "POINT_ARG", "ORIGIN"]
+__all__ = ["KinematicsData", "forward_kinematics", "frame_jacobian", "frame_dh_jacobian",
+           "fk_inputs", "jacobian_inputs", "point_vec", "POINT_ARG", "ORIGIN"]
 
 #: the point of a Jacobian when none is given: the frame's origin [m]
 ORIGIN = (0.0, 0.0, 0.0)
@@ -79,7 +79,9 @@ class KinematicsData:
     * ``q`` (batch, n_dof) scalar: joint values [rad or m], the input of every launch;
     * ``frames`` (batch, n_frames) mat44: base_T_frame of every frame [m];
     * ``jacobian`` (batch, 6, n_dof) scalar: rows [linear [m/rad]; angular [rad/rad]] in the
-      base frame (made on first use).
+      base frame (made on first use);
+    * ``jacobian_dh`` (batch, 6, n_frames, 5) scalar: the same rows w.r.t. every DH
+      parameter [d, theta, r, alpha, beta] (made on first use).
 
     Launches are recorded once (``wp.launch(..., record_cmd=True)``) and replayed: the FK
     launch, and one Jacobian launch per frame whose point is set in place when it changes.
@@ -108,6 +110,7 @@ class KinematicsData:
         self.frames: wp.array = wp.zeros((B, model.n_frames),
                                          dtype=fk_kernels.kernels(sc).mat44, device=dev)
         self._jacobian: wp.array | None = None
+        self._jacobian_dh: wp.array | None = None
         self._fk_cmd: Any = None
         self._jac_cmds: dict[int, list] = {}   # frame -> [recorded launch, its point tuple]
         self._stage: np.ndarray | None = None  # host side of q (CPU: q's own memory)
@@ -126,6 +129,16 @@ class KinematicsData:
             self._jacobian = wp.zeros((self.batch, 6, self.model.n_dof), dtype=self.model.scalar,
                                       device=self.device)
         return self._jacobian
+
+    @property
+    def jacobian_dh(self) -> wp.array:
+        """(batch, 6, n_frames, 5) scalar: the last DH Jacobian of
+        :func:`frame_dh_jacobian` (made on first use)."""
+        if self._jacobian_dh is None:
+            m = self.model
+            self._jacobian_dh = wp.zeros((self.batch, 6, m.n_frames, 5), dtype=m.scalar,
+                                         device=self.device)
+        return self._jacobian_dh
 
     # -------------------------------------------------------- recorded launches
     def fk_launch(self) -> Any:
@@ -262,7 +275,39 @@ def _load_q(m: DeviceModel, d: KinematicsData, q: Any, validate: bool) -> None:
     d.upload_q()
 
 
-def forward_kinematics(m: DeviceModel, d: KinematicsData, q: Any = None, *,
+def _load_dh(m: DeviceModel, d: KinematicsData, dh: Any,
+             validate: bool) -> tuple[wp.array, int] | None:
+    """The ``dh`` argument as (device rows (1 or batch, n_frames, 5), batch stride); None
+    for the nominal rows. A contiguous Warp array of the model's dtype on its device is used
+    as is (no copy); anything else is checked and uploaded."""
+    if dh is None:
+        return None
+    n = m.n_frames
+    shapes = ((n, 5), (d.batch, n, 5))
+    if isinstance(dh, wp.array):
+        shape = tuple(dh.shape)
+        if shape not in shapes:
+            raise ValueError(f"dh: expected shape ({n}, 5) or ({d.batch}, {n}, 5) (n_frames, "
+                             f"batch {d.batch}), got {shape}")
+        if dh.dtype != m.scalar:
+            raise TypeError(f"dh: Warp array of {getattr(dh.dtype, '__name__', dh.dtype)}, "
+                            f"expected {m.dtype.name} (the model's dtype)")
+        if dh.device != d.device or not dh.is_contiguous:
+            raise ValueError(f"dh: expected a contiguous Warp array on {d.device}, got one on "
+                             f"{dh.device}" + ("" if dh.is_contiguous else " (not contiguous)"))
+        if validate:
+            finite_as(dh.numpy(), m.dtype, "dh")
+        rows = dh
+    else:
+        a = real_array(dh, "dh")
+        if a.shape not in shapes:
+            raise ValueError(f"dh: expected shape ({n}, 5) or ({d.batch}, {n}, 5) (n_frames, "
+                             f"batch {d.batch}), got {a.shape}")
+        rows = wp.array(finite_as(a, m.dtype, "dh"), dtype=m.scalar, device=d.device)
+    return (rows.reshape((1, n, 5)), 0) if rows.ndim == 2 else (rows, 1)
+
+
+def forward_kinematics(m: DeviceModel, d: KinematicsData, q: Any = None, *, dh: Any = None,
                        validate: bool = True) -> wp.array:
     """Forward kinematics of all frames of the ``batch`` configurations of ``d``.
 
@@ -272,23 +317,32 @@ def forward_kinematics(m: DeviceModel, d: KinematicsData, q: Any = None, *,
         q: joint values (batch, n_dof) [rad or m]: a numpy array (or anything numpy turns
             into real numbers; cast to the model's dtype), or a Warp array of the model's
             dtype on its device (copied on the device); None: ``d.q`` as already filled.
-        validate: check q for NaN/inf (after the cast; a Warp q or ``d.q`` is read back
-            to the host for it).
+        dh: DH rows [d, theta, r, alpha, beta] [m, rad] instead of the nominal ones:
+            (n_frames, 5) for every configuration or (batch, n_frames, 5) per
+            configuration; a contiguous Warp array of the model's dtype on its device is
+            used without a copy (the launch is then not the recorded one).
+        validate: check q (and dh) for NaN/inf (after the cast; a Warp q or ``d.q`` is
+            read back to the host for it).
 
     Returns:
         ``d.frames``: (batch, n_frames) mat44 base_T_frame [m] of every frame, on the
         model's device. The same array every call, overwritten by the next call.
 
     Raises:
-        ValueError: q of another shape or (``validate``) with NaN/inf, naming ``q`` (a
-            rejected host q may be left in ``d.q``; ``d.frames`` is not written); a Warp q
-            on another device; ``d`` made for another model.
-        TypeError: a Warp q of another dtype; q not real numbers; ``d`` not a
+        ValueError: q or dh of another shape or (``validate``) with NaN/inf, naming the
+            argument (a rejected host q may be left in ``d.q``; ``d.frames`` is not
+            written); a Warp q or dh on another device; ``d`` made for another model.
+        TypeError: a Warp q or dh of another dtype; q or dh not real numbers; ``d`` not a
             :class:`KinematicsData`.
     """
     _check_args(m, d)
+    rows = _load_dh(m, d, dh, validate)
     _load_q(m, d, q, validate)
-    d.fk_launch().launch()
+    if rows is None:
+        d.fk_launch().launch()
+    else:
+        wp.launch(fk_kernels.kernels(m.scalar).fk, dim=d.batch, inputs=fk_inputs(m, d.q, rows),
+                  outputs=[d.frames], device=d.device)
     return d.frames
 
 
@@ -319,3 +373,37 @@ def frame_jacobian(m: DeviceModel, d: KinematicsData, frame: int | str, q: Any =
     _load_q(m, d, q, validate)
     cmd.launch()
     return d.jacobian
+
+
+def frame_dh_jacobian(m: DeviceModel, d: KinematicsData, frame: int | str, q: Any = None,
+                      point: Any = None, *, dh: Any = None, validate: bool = True) -> wp.array:
+    """Jacobian of ``frame``'s pose (or of a point fixed in it) w.r.t. every DH parameter,
+    for the ``batch`` configurations of ``d`` (the calibration's model Jacobian).
+
+    Args:
+        m, d: as for :func:`forward_kinematics`.
+        frame: frame name or index (``m.robot.frame_index``).
+        q: joint values (batch, n_dof) [rad or m] as for :func:`forward_kinematics`.
+        point: (3,) [m] in the frame's coordinates (default: its origin).
+        dh: DH rows as for :func:`forward_kinematics` (None: the nominal rows).
+        validate: check q and dh for NaN/inf.
+
+    Returns:
+        ``d.jacobian_dh``: (batch, 6, n_frames, 5) rows [linear; angular] in the base frame,
+        columns the DH rows [d, theta, r, alpha, beta] of each frame (zero for frames off
+        the chain and for static frames). The same array every call, overwritten by the
+        next.
+
+    Raises:
+        ValueError / TypeError: as for :func:`forward_kinematics` and :func:`frame_jacobian`.
+    """
+    _check_args(m, d)
+    fi = m.robot.frame_index(frame)
+    vec = point_vec(point, m)
+    rows = _load_dh(m, d, dh, validate)
+    _load_q(m, d, q, validate)
+    out = d.jacobian_dh
+    out.zero_()
+    wp.launch(fk_kernels.kernels(m.scalar).jacobian_dh, dim=d.batch,
+              inputs=jacobian_inputs(m, d.q, rows, vec, fi), outputs=[out], device=d.device)
+    return out

@@ -10,7 +10,8 @@ import warp as wp
 
 import jwarp
 from jwarp.core.device import put_model
-from jwarp.kinematics import KinematicsData, forward_kinematics, frame_jacobian
+from jwarp.kinematics import (KinematicsData, forward_kinematics, frame_dh_jacobian,
+                              frame_jacobian)
 from jwarp.kinematics import launch
 
 from devices import cuda_available
@@ -95,6 +96,80 @@ def test_frame_jacobian_equals_reference_and_jacobian(device, name, dtype):
     np.testing.assert_array_equal(frame_jacobian(m, d, other, q).numpy(),
                                   jwarp.jacobian(robot, q, other, device=device))
     np.testing.assert_array_equal(frame_jacobian(m, d, tcp, q).numpy(), got)
+
+
+def _perturbed_rows(robot, seed):
+    """(B, n_frames, 5) DH rows: the nominal ones plus up to 1 cm / 0.02 rad per entry."""
+    rng = np.random.default_rng(seed)
+    return robot.dh_table[None] + rng.uniform(-0.01, 0.01, (B, robot.n_frames, 5)) \
+        * robot.is_dh[None, :, None]
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("name", ["arm7", "justin19"])
+def test_dh_rows_equal_fk_and_jacobian_dh(device, name, dtype):
+    """forward_kinematics(dh=) and frame_dh_jacobian equal jwarp.fk(dh=) and
+    jwarp.jacobian_dh bit for bit (rows shared or per configuration, numpy or Warp), and the
+    DH Jacobian equals central differences of the FK."""
+    robot = jwarp.robot(name)
+    m = put_model(robot, device, dtype)
+    d = KinematicsData(m, B)
+    q = sample_q(robot, B, seed=4).astype(dtype)
+    rows = _perturbed_rows(robot, 5)
+    got = frames_np(forward_kinematics(m, d, q, dh=rows))
+    np.testing.assert_array_equal(got, jwarp.fk(robot, q, dh=rows, device=device))
+    assert np.abs(got - frames_np(forward_kinematics(m, d, q))).max() > 1e-4  # rows matter
+    shared = robot.dh_table + 0.003
+    wrows = wp.array(shared.astype(dtype), dtype=m.scalar, device=device)
+    np.testing.assert_array_equal(frames_np(forward_kinematics(m, d, q, dh=wrows)),
+                                  jwarp.fk(robot, q, dh=shared, device=device))
+    tcp = TCP[name]
+    jd = frame_dh_jacobian(m, d, tcp, q, dh=rows)
+    assert jd is d.jacobian_dh and jd.shape == (B, 6, robot.n_frames, 5)
+    got_j = host(jd)
+    np.testing.assert_array_equal(got_j, jwarp.jacobian_dh(robot, q, tcp, dh=rows,
+                                                           device=device))
+    point = [0.02, 0.0, -0.05]
+    np.testing.assert_array_equal(
+        host(frame_dh_jacobian(m, d, tcp, q, point=point, dh=rows)),
+        jwarp.jacobian_dh(robot, q, tcp, point=point, dh=rows, device=device))
+    if dtype == np.float64:   # position rows against central differences of the rows
+        fi, h = robot.frame_index(tcp), 1e-6
+        for f, c in ((int(np.nonzero(robot.is_dh)[0][1]), 0), (fi - 1, 1), (fi - 2, 3)):
+            if not robot.is_dh[f]:
+                continue
+            up, dn = rows.copy(), rows.copy()
+            up[:, f, c] += h
+            dn[:, f, c] -= h
+            fd = (frames_np(forward_kinematics(m, d, q, dh=up))[:, fi, :3, 3]
+                  - frames_np(forward_kinematics(m, d, q, dh=dn))[:, fi, :3, 3]) / (2 * h)
+            np.testing.assert_allclose(got_j[:, :3, f, c], fd, atol=1e-7)
+
+
+def test_bad_dh_names_dh(device):
+    robot = jwarp.robot("arm7")
+    m = put_model(robot, device, np.float64)
+    d = KinematicsData(m, 3)
+    q = sample_q(robot, 3, seed=1)
+    n = robot.n_frames
+    with pytest.raises(ValueError, match=r"dh: expected shape"):
+        forward_kinematics(m, d, q, dh=np.zeros((n, 4)))
+    with pytest.raises(ValueError, match=r"dh: expected shape"):
+        frame_dh_jacobian(m, d, "right_tcp", q, dh=np.zeros((2, n, 5)))
+    bad = robot.dh_table.copy()
+    bad[1, 0] = np.nan
+    with pytest.raises(ValueError, match="dh"):
+        forward_kinematics(m, d, q, dh=bad)
+    with pytest.raises(TypeError, match=r"dh: Warp array of float32"):
+        forward_kinematics(m, d, q, dh=wp.zeros((n, 5), dtype=wp.float32, device=device))
+    with pytest.raises(TypeError, match="dh"):
+        forward_kinematics(m, d, q, dh="rows")
+    with pytest.raises(ValueError, match="right_hand"):
+        frame_dh_jacobian(m, d, "right_hand", q)
+    nan_w = wp.array(bad, dtype=wp.float64, device=device)
+    with pytest.raises(ValueError, match="dh"):
+        frame_dh_jacobian(m, d, "right_tcp", q, dh=nan_w)
+    frame_dh_jacobian(m, d, "right_tcp", q, dh=nan_w, validate=False)  # not checked: runs
 
 
 def test_second_call_returns_the_same_buffer_with_new_values(device):

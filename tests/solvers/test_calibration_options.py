@@ -46,14 +46,16 @@ def test_problem_uploads_the_joint_values_once(monkeypatch, free):
     assert prob.elastic == ("kappa" in free)
     seen = []
 
-    def spy(fn):
-        def wrapped(robot_, q_, *a, **k):
-            seen.append(q_)
-            return fn(robot_, q_, *a, **k)
+    def spy(fn, at):   # records the joint values, positional argument ``at``
+        def wrapped(*a, **k):
+            seen.append(a[at])
+            return fn(*a, **k)
         return wrapped
 
-    for name in ("solve_equilibrium", "fk", "jacobian_dh"):  # the problem's kinematics calls
-        monkeypatch.setattr(M.K, name, spy(getattr(M.K, name)))
+    # the problem's kinematics calls: (m, q, ...), (m, d, q, ...), (m, d, frame, q, ...)
+    for name, at in (("solve_equilibrium", 1), ("forward_kinematics", 2),
+                     ("frame_dh_jacobian", 3)):
+        monkeypatch.setattr(M.K, name, spy(getattr(M.K, name), at))
     sp = prob.space
     for k in range(3):
         x = sp.nominal + 0.1 * k * sp.scale

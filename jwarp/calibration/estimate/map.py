@@ -260,6 +260,7 @@ class CalibrationProblem:
         #: the robot has ``coupling_harmonic``)
         self.coupled = bool(self._cpl_idx.size or self.robot.has_coupling_harmonic)
         self._kin_cache: tuple[bytes, RobotModel] | None = None
+        self._kin_data: Any = None   # KinematicsData of the samples (:meth:`kinematics`)
         #: the raw joint values and whether the links see other ones (transmission errors)
         self.q_device_raw = self.q_device
         self.transmission = bool(self._harm_idx.size or self.robot.has_harmonic)
@@ -334,8 +335,9 @@ class CalibrationProblem:
                                                    self.lam, self.max_iter, self.tol, masses=fm,
                                                    kappa_nl=knl, device=self.device)
         else:
-            frames = K.fk(self.kin_robot_at(x), self.q_device, dh=rows, device=self.device,
-                          dtype=np.float64, validate=False).numpy()
+            m, d = self.kinematics(self.kin_robot_at(x))
+            frames = K.forward_kinematics(m, d, self.q_device, dh=rows,
+                                          validate=False).numpy().copy()
             rho = np.broadcast_to(rows, (S,) + dh.shape)
             conv = np.ones(S, bool)
         out = ModelState(frames, rho, dh, kap, p, conv, mass)
@@ -374,6 +376,15 @@ class CalibrationProblem:
         rows[:, :, 1] += delta * ~pris
         rows[:, :, 0] += delta * pris
         return rows
+
+    def kinematics(self, robot: RobotModel) -> tuple[Any, Any]:
+        """The float64 device model of ``robot`` (the kinematics robot, or
+        :meth:`kin_robot_at` with free origins) and the :class:`~jwarp.kinematics.KinematicsData`
+        of the samples on it (kept while the model stays the same)."""
+        m = put_model(robot, self.device, np.float64)
+        if self._kin_data is None or self._kin_data.model is not m:
+            self._kin_data = K.KinematicsData(m, self.n_samples)
+        return m, self._kin_data
 
     def kin_robot_at(self, x: Any) -> RobotModel:
         """The robot the kinematics launches see at x: :attr:`kin_robot` with the static
@@ -437,9 +448,10 @@ class CalibrationProblem:
         jy = np.zeros((S, m, self.robot.n_frames, 5))
         rows: wp.array = wp.array(finite_as(rho, np.float64, "dh"), dtype=wp.float64,
                                   device=self.device)
+        m, d = self.kinematics(robot)
         for k, f in enumerate(meas.frames):
-            jdh = K.jacobian_dh(robot, self.q_device, int(f), dh=rows, device=self.device,
-                                dtype=np.float64, validate=False).numpy()  # (S, 6, n, 5)
+            jdh = K.frame_dh_jacobian(m, d, int(f), self.q_device, dh=rows,
+                                      validate=False).numpy()  # (S, 6, n, 5), d's buffer
             jy += (jf[:, :, k, :] @ jdh.reshape(S, 6, -1)).reshape(jy.shape)
         return jy, np.asarray(jp, np.float64)
 
