@@ -505,6 +505,7 @@ def test_kernels_take_the_limits_as_one_struct():
                             and item.target.id in LOOSE_LIMIT_NAMES:
                         bad.append(f"{where}:{item.lineno} struct {node.name} holds "
                                    f"{item.target.id}")
+    assert not bad, "\n".join(bad)
 
 
 # ------------------------------------------------------------------ packages by job
