@@ -414,11 +414,15 @@ def joint_vector(model: Any, values: dict[str, float], what: str,
 
     ``what`` names the source in errors (e.g. ``"start"``)."""
     names = model.joint_names
-    mimic = {f.name for f in model.frames if f.coupling and f.name not in names}
-    # an imported URDF names a mimic joint's frame "<joint>_axis" ("<joint>" is an alias)
-    aliases = getattr(model, "frame_aliases", None) or {}
-    mimic |= {n[:-len("_axis")] for n in mimic if n.endswith("_axis")
-              and n[:-len("_axis")] in aliases}
+    frames = model.frames
+    mimic = {f.name for f in frames if f.coupling and f.name not in names}
+    # an imported URDF's joint names are aliases of their child links' frames: a mimic
+    # joint's is its coupled frame, or the fixed frame after its coupled "<joint>_axis"
+    for a, i in model.frame_aliases.items():
+        p = frames[i].parent
+        if a not in names and (frames[i].coupling or (
+                p is not None and frames[p].coupling and frames[p].name == a + "_axis")):
+            mimic.add(a)
     extra = [n for n in values if n not in names and n not in mimic]
     ignored = ignored_joint_names(model, extra)
     unknown = [n for n in extra if n not in ignored]

@@ -359,3 +359,29 @@ def test_file_encodings(tmp_path):
     (tmp_path / "bad.json").write_bytes(b'{"objects": [\xff]}')
     with pytest.raises(ValueError, match=r"scene .*bad.json: not UTF-8 text \(byte 0xff"):
         load_scene(tmp_path / "bad.json")
+
+
+@pytest.mark.parametrize("axis", ["0 0 1", "1 0 0"])
+def test_mimic_joint_names_are_accepted_whatever_their_axis(tmp_path, axis, recwarn):
+    """A MoveIt state naming a URDF mimic joint: accepted silently whether the importer
+    named its coupled frame after the child link (z axis) or "<joint>_axis" (other axes);
+    a fixed joint after it still warns."""
+    from jwarp.model import RobotModel
+    from jwarp.world.moveit import joint_vector
+
+    lim = '<limit lower="-1" upper="1" effort="1" velocity="1"/>'
+    (tmp_path / "m.urdf").write_text(
+        '<robot name="rr"><link name="base"/><link name="l1"/><link name="l2"/>'
+        '<link name="tip"/>'
+        '<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>'
+        f'<origin xyz="0 0 0.1"/><axis xyz="0 0 1"/>{lim}</joint>'
+        '<joint name="jm" type="revolute"><parent link="l1"/><child link="l2"/>'
+        f'<origin xyz="0 0 0.1"/><axis xyz="{axis}"/>{lim}<mimic joint="j1"/></joint>'
+        '<joint name="tip_joint" type="fixed"><parent link="l2"/><child link="tip"/>'
+        '<origin xyz="0 0 0.05"/></joint></robot>')
+    m = RobotModel.from_urdf(tmp_path / "m.urdf")
+    assert m.joint_names == ["j1"] and "jm" in m.frame_aliases
+    np.testing.assert_allclose(joint_vector(m, {"j1": 0.2, "jm": 0.2}, "start"), [0.2])
+    assert not [w for w in recwarn if issubclass(w.category, UserWarning)]
+    with pytest.warns(UserWarning, match="ignoring joint.*'tip_joint'"):
+        joint_vector(m, {"j1": 0.2, "tip_joint": 0.0}, "start")
