@@ -45,7 +45,7 @@ import numpy as np
 from jwarp.core.limits import project_numpy, sample_within_limits
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver, check_warm_start, warm_start_seeds
-from jwarp.solvers.overrides import translate
+from jwarp.solvers.overrides import renamed_argument
 
 #: seeds per target and block after the first (a target stops once one is feasible)
 BLOCK = 8
@@ -103,7 +103,7 @@ def _solve_block(model: Any, frame: Any, world: Any, T: np.ndarray, seeds: np.nd
 
 
 def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start: Any = None,
-                n_random: int = N_RANDOM, iterations: int = 200, margin: float = 0.0,
+                n_random: int = N_RANDOM, iterations: int | None = None, margin: float = 0.0,
                 tol_pos: float = 1e-4, tol_rot: float = 1e-3, q_default: Any = None,
                 seed: int = 0, device: Any = None, dtype: Any = np.float64,
                 name: str | None = None, **old_names: Any) -> dict:
@@ -117,8 +117,8 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
         warm_start: None (random initial guesses) or an object with a callable ``seeds``.
         n_random: random seeds tried one after the other (after a network's heads), >= 0
             (>= 1 without a warm start); the cap of the multi-starts is H + n_random.
-        iterations: solver iterations per seed (``max_iterations``: the name before issue
-            28, deprecated); margin, tol_pos, tol_rot, q_default:
+        iterations: solver iterations per seed (None: 200; ``max_iterations``: the name
+            before issue 28, deprecated); margin, tol_pos, tol_rot, q_default:
             the solver's options (:class:`jwarp.solvers.ik.IKOptions`).
         seed: numpy seed of the random seeds; device, dtype: where the solver runs.
         name: the row's name (default "Random" or the warm start's class name).
@@ -135,16 +135,12 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
     model = get_robot(robot)
     fi = model.frame_index(frame)
     n_random = _count(n_random, "n_random", 0 if warm_start is not None else 1)
-    if old_names:   # the name before issue 28's one vocabulary, for one release
-        unknown = sorted(set(old_names) - {"max_iterations"})
-        if unknown:
-            raise TypeError(f"evaluate_ik() got an unexpected keyword argument {unknown[0]!r}")
-        if iterations != 200:
-            raise TypeError("evaluate_ik(): got both 'max_iterations' and its new name "
-                            "'iterations'")
-        iterations = translate("evaluate_ik()", {"max_iterations": "iterations"},
-                               old_names)["iterations"]
-    max_iterations = _count(iterations, "iterations", 0)
+    unknown = sorted(set(old_names) - {"max_iterations"})
+    if unknown:
+        raise TypeError(f"evaluate_ik() got an unexpected keyword argument {unknown[0]!r}")
+    iterations = renamed_argument("evaluate_ik()", "max_iterations", "iterations", old_names,
+                                  iterations)   # the name before issue 28, for one release
+    max_iterations = _count(200 if iterations is None else iterations, "iterations", 0)
     opts = IKOptions(n_starts=1, iterations=max_iterations, margin=margin, tol_pos=tol_pos,
                      tol_rot=tol_rot, stop_when_solved=False, q_default=q_default, seed=seed,
                      restart_after=None, freeze_solved=False)  # every seed on its own

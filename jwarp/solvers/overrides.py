@@ -54,6 +54,20 @@ def translate(owner: str, renames: Mapping[str, str], kwargs: dict[str, Any],
     return out
 
 
+def renamed_argument(func: str, old: str, new: str, kwargs: dict[str, Any], value: Any,
+                     default: Any = None) -> Any:
+    """The value of keyword ``new`` of a call of ``func`` whose ``**kwargs`` may still hold
+    its old name ``old``: popped from ``kwargs`` and taken with a ``DeprecationWarning``
+    (pointing at ``func``'s caller). TypeError when both are given (``value`` is not
+    ``default``)."""
+    if old not in kwargs:
+        return value
+    given = {old: kwargs.pop(old)}
+    if value is not default:
+        given[new] = value
+    return translate(func, {old: new}, given, stacklevel=4)[new]
+
+
 def renamed_options(**renames: str) -> Any:
     """Class decorator of an options dataclass whose fields ``renames`` (old=new) were
     renamed: the constructor still takes the old names, and reading an old attribute

@@ -183,7 +183,8 @@ def test_evaluate_ik_old_iterations_name_warns(problems):
         old = evaluate_ik(model, FRAME, worlds[0], Ts[0], n_random=2, max_iterations=5)
     for k in ("multi_starts", "solved_rate", "iterations", "length_cost", "max_iterations"):
         assert old[k] == new[k], k
-    with pytest.raises(TypeError, match="both"):
-        evaluate_ik(model, FRAME, worlds[0], Ts[0], iterations=7, max_iterations=5)
+    for it in (7, 200):   # the default value given explicitly counts too
+        with pytest.raises(TypeError, match="both"):
+            evaluate_ik(model, FRAME, worlds[0], Ts[0], iterations=it, max_iterations=5)
     with pytest.raises(TypeError, match="unexpected keyword argument 'max_iter'"):
         evaluate_ik(model, FRAME, worlds[0], Ts[0], max_iter=5)

@@ -18,7 +18,7 @@ from jwarp.kernels import ik_step as step_kernels
 from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.solvers.overrides import translate, with_overrides
+from jwarp.solvers.overrides import renamed_argument, with_overrides
 from jwarp.world import collision
 from jwarp.world.model_check import check_collision_model
 from jwarp.solvers.ik.objective import IKObjective, batch_array, check_single_world, target_poses
@@ -459,11 +459,7 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, seeds: A
             without a callable ``seeds``.
     """
     t0 = time.perf_counter()
-    if "initial" in overrides:   # the old name of seeds (one release)
-        given = {"initial": overrides.pop("initial")}
-        if seeds is not None:
-            given["seeds"] = seeds
-        seeds = translate("ik()", {"initial": "seeds"}, given)["seeds"]
+    seeds = renamed_argument("ik()", "initial", "seeds", overrides, seeds)  # one release
     init_warp()
     check_warm_start(warm_start)
     model = get_robot(robot)

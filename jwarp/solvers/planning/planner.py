@@ -22,7 +22,7 @@ from jwarp.world.path_feasibility import (MAX_CHECK_SUBSTEPS, SWEEP_SAFETY, cert
                                           initial_paths, path_feasible, polyline_path,
                                           substeps_for_voxel, substeps_per_path)
 from jwarp.core.limits import project_numpy, within_limits
-from jwarp.solvers.overrides import translate, with_overrides
+from jwarp.solvers.overrides import renamed_argument, with_overrides
 from jwarp.solvers.planning.objective import PathObjective, path_configs
 from jwarp.solvers.planning.options import PlanOptions, ViaPoints, check_int
 from jwarp.solvers.planning.result import PlanResult
@@ -690,10 +690,7 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, seeds: Any = None,
     """
     t0 = time.perf_counter()
     if not isinstance(overrides.get("initial", ""), str):  # the old name of seeds
-        given = {"initial": overrides.pop("initial")}
-        if seeds is not None:
-            given["seeds"] = seeds
-        seeds = translate("plan()", {"initial": "seeds"}, given)["seeds"]
+        seeds = renamed_argument("plan()", "initial", "seeds", overrides, seeds)
     init_warp()
     model = get_robot(robot)
     check_world(model, world)
