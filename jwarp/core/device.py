@@ -86,21 +86,34 @@ def struct_fields(struct: Any) -> tuple[str, ...]:
     return tuple(struct.cls.__annotations__)
 
 
+#: the field names of each struct instance type (Warp makes one type per struct)
+_FIELD_SETS: dict[type, frozenset[str]] = {}
+
+
 def struct_field(owner: object, struct_name: str, name: str) -> Any:
     """The field ``name`` of the struct instance ``owner.<struct_name>`` (the ``__getattr__``
     of a host class whose struct holds its tables); AttributeError if it has none."""
     st = owner.__dict__.get(struct_name)
-    if st is not None and not name.startswith("_") and name in struct_fields(st):
-        return getattr(st, name)
+    if st is not None and not name.startswith("_"):
+        fields = _FIELD_SETS.get(type(st))
+        if fields is None:
+            fields = _FIELD_SETS[type(st)] = frozenset(struct_fields(st))
+        if name in fields:
+            return getattr(st, name)
     raise AttributeError(f"'{type(owner).__name__}' object has no attribute '{name}'")
 
 
 def make_struct(struct_type: Any, source: Any = None, **values: Any) -> Any:
     """An instance of the Warp struct type ``struct_type`` with every declared field taken
     from ``values`` (by name) or else from the attribute of that name of ``source``.
-    Raises TypeError naming a field that neither gives."""
+    Raises TypeError naming a field that neither gives, or a value that is no field."""
     st = struct_type()
-    for name in struct_fields(struct_type):
+    fields = struct_fields(struct_type)
+    unknown = sorted(set(values) - set(fields))
+    if unknown:
+        raise TypeError(f"{unknown[0]}: not a field of {struct_type.key} (its fields: "
+                        f"{', '.join(fields)})")
+    for name in fields:
         if name in values:
             value = values[name]
         elif source is not None and hasattr(source, name):

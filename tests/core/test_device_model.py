@@ -383,3 +383,21 @@ def test_collision_model_takes_every_kind_of_rows():
         np.testing.assert_allclose(cm.cost(qw, rho=rho)[0].numpy(), c_per, rtol=1e-12, atol=1e-14)
     assert cm.dh_rows(None, 12) is cm.model.nominal_rows
     assert not np.allclose(cm.cost(qw)[0].numpy(), c_per)
+
+
+def test_make_struct_names_unknown_and_missing_fields():
+    """make_struct: a value that is no field of the struct (a typo) and a field neither the
+    values nor the source give are TypeErrors naming them; a given value wins over the
+    source's."""
+    from jwarp.kernels import path as path_kernels
+
+    m = put_model("justin19", "cpu", np.float64)
+    LT = path_kernels.kernels(m.scalar).LimitTables
+    with pytest.raises(TypeError, match=r"bx: not a field .*box, lin_start"):
+        D.make_struct(LT, m.limits, bx=None)
+    with pytest.raises(TypeError, match="box: no value"):
+        D.make_struct(LT)
+    box = wp.zeros_like(m.limits.box)
+    st = D.make_struct(LT, m.limits, box=box)
+    assert st.box.ptr == box.ptr and st.lin_coef.ptr == m.limits.lin_coef.ptr
+    assert D.struct_fields(LT) == ("box", "lin_start", "lin_joint", "lin_coef", "lin_bounds")
