@@ -16,8 +16,9 @@ from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.transmission import transmitted
 from jwarp.model.registry import robot as get_robot
-from jwarp.kinematics.launch import (ElasticFK, ElasticLaunch, ElasticStep, elastic_args, lam_tol,
-                                     equilibrium, frame_rows, host_out, rho0_full, setup)
+from jwarp.kinematics.launch import (ElasticFK, ElasticLaunch, ElasticStep, check_max_iter,
+                                     elastic_args, equilibrium, frame_rows, host_out, lam_tol,
+                                     rho0_full, setup)
 
 
 def fk_elastic(robot: RobotLike, q: ArrayLike, kappa: ArrayLike | None = None, *,
@@ -101,10 +102,11 @@ def solve_equilibrium(m: DeviceModel, q: Any, dh: Any, kappa: Any, *, lam: float
     batch = as_batch(q, robot.n_dof, "q", device=m.device, dtype=m.scalar,
                      what=f"robot '{robot.name}' has {robot.n_dof} joints", validate=validate)
     lam, tol = lam_tol(lam, tol, m)
-    kap = frame_rows(np.asarray(kappa, np.float64), robot, batch, m, "kappa", 3)
-    rho0 = frame_rows(np.asarray(dh, np.float64), robot, batch, m, "dh", 5)
+    max_iter = check_max_iter(max_iter)
+    kap = frame_rows(kappa, robot, batch, m, "kappa", 3)
+    rho0 = frame_rows(dh, robot, batch, m, "dh", 5)
     run = ElasticLaunch(m, batch.array, kap, rho0, float(lam))
-    rho, frames, iterations, converged = equilibrium(run, int(max_iter), float(tol))
+    rho, frames, iterations, converged = equilibrium(run, max_iter, float(tol))
     rho_arr = rho[0] if rho is not None else rho0_full(run)
     host = replace(batch, kind="numpy")  # numpy out for a Warp q too
     n = robot.n_frames

@@ -505,15 +505,21 @@ def lam_tol(lam: Any, tol: Any, t: DeviceModel) -> tuple[float, float]:
     return lam, tol
 
 
+def check_max_iter(max_iter: Any) -> int:
+    """``max_iter`` of the elastic iteration as an int; ValueError unless an integer >= 0."""
+    if isinstance(max_iter, (bool, np.bool_)) or not isinstance(max_iter, (int, np.integer)) \
+            or max_iter < 0:
+        raise ValueError(f"max_iter: expected an integer >= 0, got {max_iter!r}")
+    return int(max_iter)
+
+
 def elastic_args(robot: Any, q: Any, kappa: Any, lam: float, max_iter: int, tol: float | None,
                   dh: Any, device: Any, dtype: Any, validate: bool):
     """Validated arguments of the elastic functions: (model, batch, tables, kappa rows,
     rho0 rows or None); lam and tol as :func:`lam_tol` checks them."""
     model, batch, t = setup(robot, q, device, dtype, validate)
     lam_tol(lam, tol, t)
-    if isinstance(max_iter, (bool, np.bool_)) or not isinstance(max_iter, (int, np.integer)) \
-            or max_iter < 0:
-        raise ValueError(f"max_iter: expected an integer >= 0, got {max_iter!r}")
+    check_max_iter(max_iter)
     kap = frame_rows(kappa_array(model, kappa), model, batch, t, "kappa", 3)
     rho0 = None if dh is None else frame_rows(dh, model, batch, t, "dh", 5)
     return model, batch, t, kap, rho0

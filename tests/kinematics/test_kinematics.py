@@ -476,3 +476,12 @@ def test_solve_equilibrium_on_a_device_model_is_fk_elastic():
     assert not np.array_equal(heavy.rho, ref.rho)
     with pytest.raises(TypeError, match="m: expected a DeviceModel"):
         K.solve_equilibrium(r, q, r.dh_table, kap)
+    for bad in (-1, 2.5, True):   # as fk_elastic: an integer >= 0
+        with pytest.raises(ValueError, match="max_iter"):
+            K.solve_equilibrium(m, q, r.dh_table, kap, max_iter=bad)
+    with pytest.raises(TypeError, match="kappa"):
+        K.solve_equilibrium(m, q, r.dh_table, "x")
+    with pytest.raises(ValueError, match="kappa: expected shape"):
+        K.solve_equilibrium(m, q, r.dh_table, kap[:, :2])
+    with pytest.raises(ValueError, match="dh"):
+        K.solve_equilibrium(m, q, np.full_like(r.dh_table, np.nan), kap)
