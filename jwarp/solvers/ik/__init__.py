@@ -37,18 +37,16 @@ per iteration from the DH rows kept from the previous iteration; frames and Jaco
 those rows, gradients with the rows fixed; "on target" also requires the torque update to
 have converged (largest DH change < ``tol_rho``)."""
 
-from jwarp.solvers.ik.objective import (pose_matrix, target_poses, batch_array, IKObjective,
-                                        check_single_world)
-from jwarp.solvers.ik.options import (IKWeights, ORIENTATIONS, orientation_args, positive_int,
-                                      IKOptions)
+from jwarp.solvers.ik.objective import IKObjective, pose_matrix
+from jwarp.solvers.ik.options import ORIENTATIONS, IKOptions, IKWeights, orientation_args
 from jwarp.solvers.ik.result import IKResult
 from jwarp.solvers.ik.solver import (IKSolver, ik, RESTART_PROGRESS, SOLVER_CACHE_SIZE,
                                      SOLVER_CACHE_MAX_BATCH, check_warm_start, warm_start_seeds,
                                      select_best)
 
 __all__ = [
-    "pose_matrix", "target_poses", "batch_array", "IKObjective", "check_single_world",
-    "IKWeights", "ORIENTATIONS", "orientation_args", "positive_int", "IKOptions", "IKResult",
+    "pose_matrix", "IKObjective", "IKWeights", "ORIENTATIONS", "orientation_args",
+    "IKOptions", "IKResult",
     "IKSolver", "ik", "RESTART_PROGRESS", "SOLVER_CACHE_SIZE", "SOLVER_CACHE_MAX_BATCH",
     "check_warm_start", "warm_start_seeds", "select_best",
 ]

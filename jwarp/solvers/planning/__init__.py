@@ -25,16 +25,16 @@ at the DH rows kept from the previous iteration, one torque update at every wayp
 those frames gives the rows of the next iteration (substeps take their nearest
 waypoint's), and the collision gradient is taken with the rows fixed."""
 
-from jwarp.solvers.planning.objective import NORM_FLOOR, path_configs, PathObjective
+from jwarp.solvers.planning.objective import NORM_FLOOR, PathObjective
 from jwarp.solvers.planning.options import (PathWeights, INITIAL_KINDS, STOP_REASONS, FALLBACKS,
-                                            STAGES, check_int, PlanOptions, ViaPoints)
+                                            STAGES, PlanOptions, ViaPoints)
 from jwarp.solvers.planning.planner import (EXACT_SUBSTEP, PLANNER_CHECK_EVALS,
                                             PLANNER_CHECK_EVALS_GPU, Planner, plan)
 from jwarp.solvers.planning.result import PlanResult
 
 __all__ = [
-    "NORM_FLOOR", "path_configs", "PathObjective", "PathWeights", "INITIAL_KINDS",
-    "STOP_REASONS", "FALLBACKS", "STAGES", "check_int", "PlanOptions", "ViaPoints",
+    "NORM_FLOOR", "PathObjective", "PathWeights", "INITIAL_KINDS", "STOP_REASONS",
+    "FALLBACKS", "STAGES", "PlanOptions", "ViaPoints",
     "EXACT_SUBSTEP", "PLANNER_CHECK_EVALS", "PLANNER_CHECK_EVALS_GPU", "Planner", "plan",
     "PlanResult",
 ]
