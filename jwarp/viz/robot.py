@@ -17,16 +17,16 @@ end-effector (``elastic/sag_mm/<end_effector>``, scalar in mm).
 
 from __future__ import annotations
 
-import contextlib
 import os
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Mapping
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from jwarp.utils.atomic import AtomicFile
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.atomic import AtomicFile
+from jwarp.viz.recording import atomic_recording, rerun_module
 
 #: timeline on which :func:`save_robot_rrd` logs the configurations
 TIMELINE = "config"
@@ -35,14 +35,6 @@ _RIGID_COLOR = (150, 160, 175)
 _ELASTIC_COLOR = (240, 140, 40)
 _SPHERE_COLOR = (80, 140, 220, 110)
 _CAPSULE_COLOR = (90, 190, 120, 140)
-
-
-def rerun_module() -> Any:
-    try:
-        import rerun as rr
-    except ImportError as e:  # pragma: no cover - depends on the machine
-        raise ImportError("jwarp.viz needs rerun-sdk: pip install rerun-sdk") from e
-    return rr
 
 
 def _frames_array(robot: RobotModel, frames: Any) -> np.ndarray:
@@ -183,33 +175,6 @@ def _q_batch(model: RobotModel, q_list: Any) -> np.ndarray:
     if not np.all(np.isfinite(q)):
         raise ValueError("q_list: contains NaN or inf")
     return q
-
-
-def open_recording(path: str | os.PathLike, application_id: str = "jwarp") -> Any:
-    """A rerun RecordingStream saving to ``path`` (z up, right-handed); flush and
-    disconnect it when done."""
-    rr = rerun_module()
-    rec = rr.RecordingStream(application_id)
-    rec.save(str(path))
-    rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    return rec
-
-
-@contextlib.contextmanager
-def atomic_recording(path: str | os.PathLike, application_id: str = "jwarp",
-                     option: str = "path") -> Iterator[Any]:
-    """A rerun RecordingStream saving to a temporary file beside ``path``, renamed to
-    ``path`` when the block ends without error (readers never see a partial file). On an
-    error or interrupt the stream is closed and the temporary file removed; ``path``
-    stays as it was. ``option`` names the path in errors (e.g. ``--save``)."""
-    rerun_module()  # a clear error before any file is made
-    with AtomicFile(path, option=option) as f:
-        rec = open_recording(f.tmp, application_id)
-        try:
-            yield rec
-            rec.flush()
-        finally:
-            rec.disconnect()  # no writer left on the temporary file before the rename/removal
 
 
 def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,

@@ -17,11 +17,7 @@ class SpectraRecording(Recording):
     def save(self, spectra: list[tuple[str, np.ndarray]]) -> None:
         """Log the spectra as bar charts (log10 eigenvalues, zeros at -30) under
         ``sensitivity/<name>`` and close the recording (removed on any error)."""
-        try:
+        with self:
             for name, v in spectra:
                 lv = np.log10(np.maximum(np.asarray(v, np.float64), 1e-30))
                 self.rec.log(f"sensitivity/{name}", self.rr.BarChart(lv), static=True)
-        except BaseException:
-            self.abort()
-            raise
-        self.close()
