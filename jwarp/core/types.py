@@ -24,9 +24,10 @@ RobotLike = Union["RobotModel", str, "os.PathLike[str]"]
 ArrayLike = Union[np.ndarray, "torch.Tensor", "wp.array", float, Sequence[float],
                   Sequence[Sequence[float]]]
 
-#: a device: a Warp device, its name (``"cpu"``, ``"cuda:0"``) or None (the rule of each
-#: function: from the input array, else the preferred device)
-DeviceLike = Union["wp.Device", str, None]
+#: a device: a Warp device, its name (``"cpu"``, ``"cuda:0"``), a torch device, or None (the
+#: one rule, :func:`jwarp.core.arrays.resolve_device`: the inputs' device, else Warp's
+#: default device)
+DeviceLike = Union["wp.Device", str, "torch.device", None]
 
 #: a computing dtype: float32 or float64 as numpy, Warp or a name (``"float32"``); None: that
 #: of the input

@@ -85,16 +85,16 @@ def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: 
                        masses: tuple[np.ndarray, np.ndarray] | None = None,
                        kappa_nl: np.ndarray | None = None, device: Any = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Elastic FK (float64, CPU) as :func:`jwarp.fk_elastic`, but accepting compliances of
+    """Elastic FK (float64) as :func:`jwarp.fk_elastic`, but accepting compliances of
     either sign: the optimizer may cross kappa = 0 on its way (the fixed point is just as
     well defined; only the final model must be physical). q (S, n_dof) (numpy, or a
-    float64 CPU Warp array used as is: no upload), dh (n, 5), kappa (n, 3), optional mass
-    model ``masses`` = (per-frame mass (n,) [kg], centre of mass (n, 3) [m], see
-    :func:`.elastic.frame_masses`) replacing the robot's, optional nonlinear joint
+    float64 Warp array on ``device``, used as is: no upload), dh (n, 5), kappa (n, 3),
+    optional mass model ``masses`` = (per-frame mass (n,) [kg], centre of mass (n, 3) [m],
+    see :func:`.elastic.frame_masses`) replacing the robot's, optional nonlinear joint
     compliances ``kappa_nl`` (n,) [rad/(N m)^3] replacing the robot's -> numpy frames
     (S, n, 4, 4), rho* (S, n, 5), converged (S,). ``q`` are the joint values the links
-    see (transmission errors already applied). ``device``: where the kernels run (a Warp
-    ``q`` must be on it)."""
+    see (transmission errors already applied). ``device``: where the kernels run (None: the
+    one device rule, :func:`~jwarp.core.arrays.resolve_device`)."""
     m = put_model(robot, resolve_device(device, like=q), np.float64)
     if masses is not None:
         m = with_frame_masses(m, *masses)

@@ -376,7 +376,7 @@ def build_result(prob: Any, sol: Any, x_start: np.ndarray, iterations: int, star
         msgs.append(f"solver stopped before convergence: {sol.message}")
     if not np.all(conv):
         msgs.append(f"elastic equilibrium not converged for {int((~conv).sum())} of "
-                    f"{conv.size} samples at the optimum (raise max_iter or lower lam)")
+                    f"{conv.size} samples at the optimum (raise equilibrium_iterations or lower lam)")
     neg_mask = (sp.kind == KIND_KAPPA) & (x < 0)
     neg = [sp.names[i] for i in np.nonzero(neg_mask)[0]]
     if neg:

@@ -159,7 +159,7 @@ class _Tree:
 
 
 class _Checks:
-    """Batched state and edge checks through :mod:`jwarp.solvers.planning`. With an
+    """Batched state and edge checks through :mod:`jwarp.world.path_feasibility`. With an
     ``endpoint_margin`` below ``margin`` the segments that start or end at one of the
     ``roots`` (start, goal) are checked at that clearance, every other at ``margin``."""
 
@@ -470,7 +470,7 @@ def resample_path(path: np.ndarray, n_waypoints: int) -> np.ndarray:
     """A polyline (k, n) as ``n_waypoints`` waypoints on it: with k <= n_waypoints every
     node is a waypoint (the path between the waypoints is the polyline itself), the rest
     spread over its segments in proportion to their lengths; else the waypoints spread
-    evenly along its length (:func:`jwarp.solvers.planning.polyline_path`)."""
+    evenly along its length (:func:`jwarp.world.path_feasibility.polyline_path`)."""
     path = np.asarray(path, np.float64)
     k, W = len(path), int(n_waypoints)
     if W < 2:
