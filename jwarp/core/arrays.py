@@ -502,6 +502,13 @@ class HostWrap:
 
     POOL_BYTES = 1 << 16
 
+    #: the instance attributes of a ``wp.array`` (Warp 1.19) that :meth:`wrap` copies or sets
+    KNOWN_ATTRIBUTES = frozenset({
+        "_array_interface", "_grad", "_is_read", "_memory_kind", "_ref", "_requires_grad",
+        "_retain_grad", "_storage_base_ptr", "_storage_nbytes", "capacity", "ctype",
+        "deleter", "device", "dtype", "is_contiguous", "is_transposed", "ndim", "pinned",
+        "ptr", "shape", "size", "strides"})
+
     def __init__(self, shape: tuple, npdt: Any, dtype: Any) -> None:
         self.shape, self.npdt, self.dtype = tuple(shape), np.dtype(npdt), dtype
         self.nbytes = math.prod(self.shape) * self.npdt.itemsize
@@ -513,9 +520,10 @@ class HostWrap:
         first: Any = wp.array(np.zeros(self.shape, self.npdt), dtype=dtype, device="cpu",
                               copy=False)
         state = dict(first.__dict__)
-        fast = (type(first) is wp.array and {"ptr", "_ref", "ctype", "_array_interface",
-                                              "deleter"} <= state.keys()
-                and state["deleter"] is None)
+        # only where the array's attributes are exactly those known (Warp 1.19): an
+        # attribute a later Warp adds is not copied from the template unseen
+        fast = (type(first) is wp.array and state.keys() == self.KNOWN_ATTRIBUTES
+                and state["deleter"] is None and state["_storage_base_ptr"] is None)
         if fast:
             state.update(ctype=None, _array_interface=None)
         self.state = state if fast else None

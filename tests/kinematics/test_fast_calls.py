@@ -329,3 +329,21 @@ def test_warp_small_calls_from_threads(justin, qs):
     for t in threads:
         t.join()
     assert not bad
+
+
+def test_host_wrap_copies_only_known_array_attributes(monkeypatch):
+    """HostWrap makes result arrays from a template only while a wp.array's attributes are
+    exactly the known ones (else it builds each with wp.array): both give the same array."""
+    from jwarp.core.arrays import HostWrap
+
+    fast = HostWrap((3, 4), np.float32, wp.float32)
+    assert fast.state is not None   # this Warp: the fast path
+    monkeypatch.setattr(HostWrap, "KNOWN_ATTRIBUTES", HostWrap.KNOWN_ATTRIBUTES - {"_is_read"})
+    slow = HostWrap((3, 4), np.float32, wp.float32)
+    assert slow.state is None       # an unknown attribute: every array built by Warp
+    for h in (fast, slow):
+        slot, ptr = h.take()
+        slot[:] = np.arange(12, dtype=np.float32).reshape(3, 4)
+        a = h.wrap(slot, ptr)
+        assert type(a) is wp.array and a.ptr == ptr and a.shape == (3, 4)
+        np.testing.assert_array_equal(a.numpy(), slot)
