@@ -5,7 +5,7 @@ parameters are typed Any").
 
 Counts the parameters (``self``/``cls`` excluded) of every ``def`` in jwarp/*.py: annotated,
 annotated exactly ``Any`` (or ``typing.Any``), unannotated. ``--facade``: only the functions and
-classes' ``__init__`` that ``jwarp.__all__`` names (resolved through ``jwarp.LAZY``) and their
+classes' ``__init__`` that ``jwarp.__all__`` names (found where they are defined) and their
 public methods. ``--list``: print each ``Any`` parameter.
 """
 
@@ -56,11 +56,16 @@ def count(facade: bool = False) -> tuple[int, int, int, list[str]]:
         sys.path.insert(0, str(ROOT))
         import jwarp
 
+        import inspect
+
         for name in jwarp.__all__:
-            path = ROOT / (jwarp.LAZY[name].replace(".", "/") + ".py")
-            if not path.exists():
-                path = path.with_suffix("") / "__init__.py"
-            files.setdefault(path, set()).add(name)  # type: ignore[union-attr]
+            obj = getattr(jwarp, name)
+            try:   # the file that defines it (a package may only re-export it)
+                path = Path(inspect.getsourcefile(obj) or "")
+            except TypeError:   # not defined in Python source (e.g. an instance)
+                continue
+            if ROOT / "jwarp" in path.parents:
+                files.setdefault(path, set()).add(getattr(obj, "__name__", name))  # type: ignore[union-attr]
     else:
         files = {p: None for p in sorted((ROOT / "jwarp").rglob("*.py"))}
     n = annotated = anys = 0
