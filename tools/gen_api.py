@@ -19,28 +19,18 @@ import inspect
 import re
 import sys
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 API_MD = ROOT / "docs" / "api.md"
 INTRO_MD = ROOT / "docs" / "api_intro.md"
 
-#: the public facades, in page order; each entry lists alternative module paths (the first
-#: importable wins), so that a facade can move (e.g. ``jwarp.calibration`` ->
-#: ``jwarp.calibration``) without editing this script.
-FACADES: tuple[tuple[str, ...], ...] = (
-    ("jwarp",),
-    ("jwarp.kinematics",),
-    ("jwarp.world",),
-    ("jwarp.calibration",),
-    ("jwarp.calibration.design",),
-    ("jwarp.calibration.simulate",),
-    ("jwarp.solvers.planning",),
-    ("jwarp.solvers.ik",),
-    ("jwarp.model",),
-    ("jwarp.learn",),
-    ("jwarp.viz",),
+#: the public facades, in page order (tests/test_architecture.py checks each one's
+#: ``__all__`` and device defaults from this list)
+FACADES: tuple[str, ...] = (
+    "jwarp", "jwarp.kinematics", "jwarp.world", "jwarp.calibration", "jwarp.calibration.design",
+    "jwarp.calibration.simulate", "jwarp.solvers.planning", "jwarp.solvers.ik", "jwarp.model",
+    "jwarp.learn", "jwarp.viz",
 )
 
 #: width of a wrapped signature line
@@ -66,19 +56,6 @@ def _clean(text: str) -> str:
     text = _FORWARD.sub(r"\1", _ADDRESS.sub("", text))
     text = _CLASS.sub(r"\1", text)
     return text.replace(str(ROOT), "<repo>")
-
-
-def import_facade(alternatives: tuple[str, ...]) -> ModuleType:
-    """The first importable module of ``alternatives`` (ImportError naming them all)."""
-    errors = []
-    for name in alternatives:
-        try:
-            return importlib.import_module(name)
-        except ModuleNotFoundError as e:
-            if e.name is None or not name.startswith(e.name):
-                raise
-            errors.append(f"{name}: {e}")
-    raise ImportError("no facade of " + ", ".join(alternatives) + ": " + "; ".join(errors))
 
 
 def signature(obj: Any) -> inspect.Signature | None:
@@ -232,8 +209,8 @@ def generate() -> str:
     """The text of docs/api.md."""
     lines = [INTRO_MD.read_text(encoding="utf-8").rstrip("\n"), "", GENERATED, ""]
     seen: dict[int, str] = {}
-    for alternatives in FACADES:
-        mod = import_facade(alternatives)
+    for facade in FACADES:
+        mod = importlib.import_module(facade)
         names = getattr(mod, "__all__", None)
         if names is None:
             raise ValueError(f"facade {mod.__name__} has no __all__")
