@@ -1,6 +1,7 @@
 """Static checks of jwarp/ (issue "Finish the house", item 5): pyflakes' rules and syntax
-errors through ruff (``ruff check jwarp --select F,E9``: undefined names, unused imports and
-variables, redefinitions). ruff is in the test extra; without it the test is skipped, said
+errors through ruff (``ruff check jwarp`` with pyproject.toml's ``[tool.ruff.lint]``, ``F``
+and ``E9``: undefined names, unused imports and variables, redefinitions), the same command
+as ``.ci/run``. ruff is in the test extra; without it the test is skipped, said
 so."""
 
 from __future__ import annotations
@@ -27,7 +28,6 @@ def _ruff() -> list[str]:
 
 
 def test_ruff_pyflakes_rules_pass_on_jwarp():
-    r = subprocess.run([*_ruff(), "check", "jwarp", "--isolated", "--select", "F,E9",
-                        "--output-format", "concise"], cwd=ROOT, capture_output=True,
-                       text=True, timeout=120)
+    r = subprocess.run([*_ruff(), "check", "jwarp", "--output-format", "concise"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stdout + r.stderr
