@@ -767,21 +767,18 @@ def validate(model: RobotModel) -> None:
             pairs.append(tuple(_check_frame(m, nf, f"self_collision.{key}[{k}]") for m in pair))
         setattr(sc, key, pairs)
     frame_names = [f.name for f in model.frames]
-    for name, idx in model.end_effectors.items():
-        idx = model.end_effectors[name] = _check_frame(idx, nf, f"end_effectors.{name}")
-        if name in frame_names and frame_names.index(name) != idx:
-            i = frame_names.index(name)
-            raise RobotModelError(f"end_effectors.{name}: the name of frame {i} '{name}', but "
-                                  f"points at frame {idx} '{frame_names[idx]}' (frame "
-                                  f"'{name}' would be ambiguous)")
-    for name, idx in model.frame_aliases.items():
-        _name(name, "frame_aliases")
-        idx = model.frame_aliases[name] = _check_frame(idx, nf, f"frame_aliases.{name}")
-        if name in frame_names and frame_names.index(name) != idx:
-            i = frame_names.index(name)
-            raise RobotModelError(f"frame_aliases.{name}: the name of frame {i} '{name}', but "
-                                  f"points at frame {idx} '{frame_names[idx]}' (frame "
-                                  f"'{name}' would be ambiguous)")
+    # other names of frames: each a frame index, none the name of another frame
+    for table, named in (("end_effectors", model.end_effectors),
+                         ("frame_aliases", model.frame_aliases)):
+        for name, idx in named.items():
+            if table == "frame_aliases":
+                _name(name, table)
+            idx = named[name] = _check_frame(idx, nf, f"{table}.{name}")
+            if name in frame_names and frame_names.index(name) != idx:
+                i = frame_names.index(name)
+                raise RobotModelError(f"{table}.{name}: the name of frame {i} '{name}', but "
+                                      f"points at frame {idx} '{frame_names[idx]}' (frame "
+                                      f"'{name}' would be ambiguous)")
     for k, lim in enumerate(model.linear_limits):
         w = f"linear_limits[{k}]"
         if len(lim.joints) != len(lim.coefficients) or not lim.joints:
