@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -41,12 +40,12 @@ UR5 = "ur_description/urdf/ur5_robot.urdf"
 
 def ur5_path() -> str | None:
     """The UR5 URDF of example-robot-data, or None where it is not installed."""
+    from jwarp.importers.robot import example_robot_urdf
+
     try:
-        dist = metadata.distribution("example-robot-data")
-    except metadata.PackageNotFoundError:
+        return example_robot_urdf(UR5)
+    except ValueError:
         return None
-    path = Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")) / UR5
-    return str(path) if path.is_file() else None
 
 
 def inputs(q: np.ndarray) -> dict:
