@@ -32,12 +32,11 @@ import numpy as np
 from jwarp.core.arrays import real_array
 from jwarp.core.limits import LIMIT_TOL
 from jwarp.model.registry import robot as get_robot
+from jwarp.solvers.ik.options import ORIENTATIONS, orientation_args
 
 __all__ = ["explain_ik", "pose_errors", "limit_reasons", "collision_reasons",
            "ORIENTATIONS"]
 
-#: the orientation modes of the solver (``IKOptions.orientation``)
-ORIENTATIONS = ("full", "none", "axis")
 #: colliding pairs listed per kind (world, self); the rest are counted
 MAX_PAIRS = 3
 
@@ -226,14 +225,8 @@ def _inputs(model: Any, frame: Any, q: Any, target: Any, orientation: str,
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         raise ValueError(f"target: expected one finite pose (4, 4), got shape {T.shape}")
     fi = model.frame_index(frame)
-    if orientation not in ORIENTATIONS:
-        raise ValueError(f"orientation: expected one of {', '.join(ORIENTATIONS)}, got "
-                         f"{orientation!r}")
-    axis = real_array(free_axis, "free_axis").astype(np.float64)
-    n = float(np.linalg.norm(axis)) if axis.shape == (3,) else 0.0
-    if axis.shape != (3,) or not (math.isfinite(n) and n > 1e-12):
-        raise ValueError(f"free_axis: expected a nonzero vector (3,), got {free_axis!r}")
-    return np.asarray(qv, np.float64), np.asarray(T, np.float64), fi, axis / n
+    _, axis = orientation_args(orientation, free_axis)   # the solver's own check
+    return np.asarray(qv, np.float64), np.asarray(T, np.float64), fi, np.asarray(axis)
 
 
 def explain_ik(robot: Any, frame: Any, q: Any, target: Any, *, world: Any = None,
