@@ -33,6 +33,7 @@ of one batch size, reused from call to call. DH rows are :class:`jwarp.core.rows
 
 from __future__ import annotations
 
+import os
 import weakref
 from collections import OrderedDict
 from typing import Any
@@ -45,6 +46,7 @@ from jwarp.core.arrays import (Batch, as_batch, default_dtype, finite_as, init_w
 from jwarp.core.device import DeviceModel, collision_tables, numpy_dtype, put_model, scalar_type
 from jwarp.core.rows import DHRows, RowsKind
 from jwarp.kernels import collision as ck
+from jwarp.kernels import collision_wide as cwide
 from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.model import RobotModel
@@ -60,6 +62,20 @@ __all__ = ["DEFAULT_EPS", "CollisionModel", "CollisionData", "collision_model", 
 #: default smoothing distance eps of the clip c (eq. 3.10) [m]
 DEFAULT_EPS = 0.05
 _FAR = 1e30
+#: the cost's launch plan where a CollisionModel is not told (``wide=None``): the
+#: environment variable ``JWARP_COST_KERNEL`` = ``fused`` (one thread per configuration),
+#: ``wide`` (:mod:`jwarp.kernels.collision_wide`) or ``auto`` (wide on CUDA, fused on the CPU)
+COST_KERNELS = ("auto", "fused", "wide")
+
+
+def default_wide(device: Any) -> bool:
+    """Whether :meth:`CollisionModel.cost` runs the wide launches on ``device`` by default:
+    ``JWARP_COST_KERNEL`` (``auto``: on CUDA only; see :data:`COST_KERNELS`)."""
+    v = os.environ.get("JWARP_COST_KERNEL", "auto").strip().lower() or "auto"
+    if v not in COST_KERNELS:
+        raise ValueError(f"JWARP_COST_KERNEL: expected one of {', '.join(COST_KERNELS)}, "
+                         f"got {v!r}")
+    return v == "wide" or (v == "auto" and bool(wp.get_device(device).is_cuda))
 
 
 def check_world(robot: RobotModel, world: World | None) -> None:
@@ -123,6 +139,7 @@ class CollisionData:
         self.moment = self._scratch(nf, vec3)
         self.bc = self._scratch(nf, vec3)
         self._out: dict = {}
+        self._wide: tuple | None = None
 
     def _scratch(self, m: int, dt: Any) -> wp.array:
         if self.device.is_cuda:
@@ -136,6 +153,22 @@ class CollisionData:
     def scratch(self) -> tuple[wp.array, ...]:
         """(frames, xs, force, moment, bc)."""
         return self.frames, self.xs, self.force, self.moment, self.bc
+
+    @property
+    def wide_scratch(self) -> tuple[wp.array, ...]:
+        """(frames, xs, force, moment, bc) with a real row per configuration, as the wide
+        launches need (they hand rows to each other): the scratch itself on CUDA, full
+        arrays made on first use on the CPU."""
+        if self.device.is_cuda:
+            return self.scratch
+        if self._wide is None:
+            k = fk_kernels(self.scalar)
+            vec3 = ck.kernels(self.scalar).vec3
+            nf, ns = self.frames.shape[1], self.xs.shape[1]
+            self._wide = tuple(wp.empty((self.n, m), dtype=dt, device=self.device)
+                               for m, dt in ((nf, k.mat44), (ns, vec3), (nf, vec3), (nf, vec3),
+                                             (nf, vec3)))
+        return self._wide
 
     def output(self, name: str) -> wp.array:
         """The output ``name`` (cost, grad, sphere_dist, pair_dist, min_dist), made once."""
@@ -165,10 +198,14 @@ class CollisionModel:
             Its SDF is copied to the device once: treat the world as immutable afterwards.
         device: Warp device (None: Warp's default device, docs/api.md "Devices").
         dtype: float32 (default) or float64.
+        wide: run :meth:`cost` as the wide launches of :mod:`jwarp.kernels.collision_wide`
+            (parallel over configuration x sphere and configuration x frame pair) instead
+            of the fused one-thread-per-configuration kernel; None: :func:`default_wide`
+            (wide on CUDA). The two agree to float rounding.
     """
 
     def __init__(self, robot: Any, world: World | None = None, *, device: Any = None,
-                 dtype: Any = np.float32) -> None:
+                 dtype: Any = np.float32, wide: bool | None = None) -> None:
         init_warp()
         self.robot = get_robot(robot)
         check_world(self.robot, world)
@@ -179,6 +216,10 @@ class CollisionModel:
         #: the robot's device model (frame, mass and sphere tables; shared by content)
         self.model: DeviceModel = put_model(self.robot, self.device, self.scalar)
         self.k = ck.kernels(self.scalar)
+        if wide is not None and not isinstance(wide, (bool, np.bool_)):
+            raise TypeError(f"wide: expected True, False or None, got {wide!r}")
+        #: whether :meth:`cost` runs the wide launches (else the fused kernel)
+        self.wide = default_wide(self.device) if wide is None else bool(wide)
         sp = self.model.spheres
         dev = self.device
         self.n_spheres, self.n_pairs, self.pairs = sp.n_spheres, sp.n_pairs, sp.pairs
@@ -366,8 +407,14 @@ class CollisionModel:
         comp = rho.args() if update_rows else self._no_update
         ww = float(w_world) if self.world is not None and self.n_spheres else 0.0
         ws = float(w_self) if self.n_pairs else 0.0
-        frames, xs, force, moment, bc = d.frames, d.xs, d.force, d.moment, d.bc
         gout = g if g is not None else self._dummy
+        if self.wide:
+            self._cost_wide(q, rows, ww, ws, float(eps), grad, group_div, active, active_div,
+                            d, cost, gout, comp, record=out_cost is not None)
+            if update_rows:
+                rho.commit()
+            return cost, g
+        frames, xs, force, moment, bc = d.frames, d.xs, d.force, d.moment, d.bc
 
         def inputs() -> list:
             return [q, rows.array, rows.stride, rows.layout_vec, int(rows.kind), world_struct,
@@ -399,6 +446,55 @@ class CollisionModel:
         if update_rows:
             rho.commit()
         return cost, g
+
+    def _cost_wide(self, q: wp.array, rows: DHRows, ww: float, ws: float, eps: float,
+                   grad: bool, group_div: int, active: wp.array | None, active_div: int,
+                   d: CollisionData, cost: wp.array, gout: wp.array, comp: Any,
+                   record: bool) -> None:
+        """:meth:`cost` as the four launches of :mod:`jwarp.kernels.collision_wide`
+        (``record``: replay launches recorded for the same buffers, a planner's loop)."""
+        n = q.shape[0]
+        kw = cwide.kernels(self.scalar)
+        frames, xs, force, moment, bc = d.wide_scratch
+        act = active if active is not None else self._no_active
+        world_struct = self.world_struct  # syncs moved/added objects first
+        sp = self.model.spheres.struct
+        layout, kind = rows.layout_vec, int(rows.kind)
+        want_grad = int(grad)
+        plan = [(kw.frames, n, [self.model.frame_struct, sp, q, rows.array, rows.stride, layout,
+                                kind, want_grad, int(ws != 0.0), act, int(active_div),
+                                frames, force, moment, bc], [cost, gout, comp])]
+        if self.n_spheres:
+            plan.append((kw.world, (self.n_spheres, n),
+                         [sp, world_struct, kind, layout, ww, eps, want_grad, int(group_div), act,
+                          int(active_div), frames, xs, force, moment], [cost]))
+        n_fp = int(self.model.spheres.struct.fpair_a.shape[0])
+        if ws != 0.0 and n_fp:
+            plan.append((kw.self_pairs, (n_fp, n),
+                         [sp, kind, layout, ws, eps, want_grad, act, int(active_div), xs, bc,
+                          force, moment], [cost]))
+        if grad:
+            plan.append((kw.gradient, n, [self.model.frame_struct, q, kind, layout, act,
+                                          int(active_div), frames, force, moment], [gout]))
+        if not record:
+            for kern, dim, inputs, outputs in plan:
+                wp.launch(kern, dim=dim, inputs=inputs, outputs=outputs, device=self.device)
+            return
+        key = ("wide", id(q), id(rows.array), rows.stride, kind, rows.layout, id(cost),
+               id(gout), ww, ws, eps, n, id(comp), id(frames), int(group_div), id(active),
+               int(active_div), want_grad)
+        hit = self._launches.get(key)
+        if hit is None:
+            if len(self._launches) > 32:
+                self._launches.clear()
+            launches = [wp.launch(kern, dim=dim, inputs=inputs, outputs=outputs,
+                                  device=self.device, record_cmd=True)
+                        for kern, dim, inputs, outputs in plan]
+            # the recorded launches hold these arrays: keep them alive with the record
+            hit = (launches, q, rows, cost, gout, comp, frames, active)
+            self._launches[key] = hit
+        for launch in hit[0]:
+            launch.launch()
 
     def cost_tape(self, q: wp.array, *, rho: Any = None, w_world: float = 1.0,
                   w_self: float = 1.0, eps: float = DEFAULT_EPS) -> tuple[wp.array, wp.array]:
