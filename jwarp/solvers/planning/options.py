@@ -92,6 +92,10 @@ class PlanOptions:
         stop_when_solved: end as soon as every problem has one feasible path (default);
             False optimises every start until it is feasible (or converged, or out of
             iterations): for labels (``converge``), per-start statistics.
+        enough_feasible: with ``stop_when_solved`` False (and ``freeze_feasible``, not
+            ``converge``): a problem's other starts stop once this many of its starts are
+            feasible (>= 1; labels need only the few they converge); None: every start runs
+            until it is feasible or out of iterations.
         time_limit: seconds for the whole call (None: no limit), > 0: checked before
             every iteration (wall clock since the call started); when it is reached the
             current paths get their exact check and the call ends (the endpoint checks,
@@ -144,6 +148,7 @@ class PlanOptions:
     self_margin: float = 0.0
     freeze_feasible: bool = True
     stop_when_solved: bool = True
+    enough_feasible: int | None = None
     check_all_every: int | None = None
     free_via: bool = True
     kappa: Any = None
@@ -166,6 +171,8 @@ class PlanOptions:
             check_int(getattr(self, name), name, lo)
         if self.check_all_every is not None:
             check_int(self.check_all_every, "check_all_every", 1)
+        if self.enough_feasible is not None:
+            check_int(self.enough_feasible, "enough_feasible", 1)
         for name in ("step", "max_step"):
             v = getattr(self, name)
             if not (math.isfinite(real_number(v, name, npdt)) and v > 0):

@@ -303,13 +303,18 @@ class Planner:
                             self._keep(buf, newly)
                             done[newly] = True
                 solved = feasible
-                if o.stop_when_solved and o.freeze_feasible and B > 1:
-                    # a solved problem needs nothing more: its other starts stop here
-                    # (kept as they are), so they cost no evaluation or check from now on
-                    fin = np.repeat(solved.reshape(B, n_starts).any(1), n_starts) & ~done
+                enough = 1 if o.stop_when_solved else o.enough_feasible
+                if enough is not None and o.freeze_feasible and (B > 1 or enough > 1):
+                    # a solved problem needs nothing more (``enough_feasible``: enough of
+                    # its starts are feasible): its other starts stop here (kept as they
+                    # are), so they cost no evaluation or check from now on
+                    fin = np.repeat(solved.reshape(B, n_starts).sum(1) >= enough,
+                                    n_starts) & ~done
                     if fin.any():
                         self._keep(buf, np.nonzero(fin)[0])
                         done[fin] = True
+                        if not o.stop_when_solved:  # enough_feasible: where they stopped
+                            iters[fin] = it
             if o.stop_when_solved and solved.reshape(B, n_starts).any(1).all():
                 reason = "solved"
                 break
