@@ -47,12 +47,13 @@ from jwarp.world import random_configurations  # noqa: E402
 from jwarp.world.collision import CollisionModel, is_collision_free  # noqa: E402
 
 
-def configurations(robot: Any, world: Any, n: int, kind: str, seed: int) -> np.ndarray:
+def configurations(robot: Any, world: Any, n: int, kind: str, seed: int,
+                   device: Any) -> np.ndarray:
     q = random_configurations(robot, n, seed)
     if kind == "random":
         return q
     pool = random_configurations(robot, 4000, seed + 1)
-    free = pool[is_collision_free(robot, pool, world, device="cpu")]
+    free = pool[is_collision_free(robot, pool, world, device=device)]
     if not len(free):
         return q
     pick = free[np.random.default_rng(seed).integers(0, len(free), n)]
@@ -75,7 +76,7 @@ def panda_case(path: str | None) -> tuple[Any, Any]:
 def row(robot: Any, world: Any, n: int, kind: str, args: argparse.Namespace) -> dict:
     dt = np.float32 if args.dtype == "float32" else np.float64
     scalar = wp.float32 if dt == np.float32 else wp.float64
-    q = configurations(robot, world, n, kind, seed=n)
+    q = configurations(robot, world, n, kind, seed=n, device=args.device)
     qa = wp.array(q.astype(dt), dtype=scalar, device=args.device)
     out = {}
     calls = []
@@ -114,7 +115,7 @@ def bench(args: argparse.Namespace) -> dict:
             robot, world = panda_case(args.panda)
             sizes = args.panda_batches
         else:
-            robot, world = get_robot(case), world_for(case, 0)
+            robot, world = get_robot(case), world_for(case, 0, device=args.device)
             sizes = args.justin_batches if case == "justin19" else args.arm_batches
         for n in sizes:
             for kind in ("random", "near"):

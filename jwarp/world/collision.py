@@ -420,6 +420,7 @@ class CollisionModel:
             return [q, rows.array, rows.stride, rows.layout_vec, int(rows.kind), world_struct,
                     ww, ws, float(eps), int(grad), int(group_div),
                     active if active is not None else self._no_active, int(active_div),
+                    int(ww != 0.0 and self.device_world.bound_skip),
                     *self.model_args, frames, xs, force, moment, bc]
 
         world_struct = self.world_struct  # syncs moved/added objects first

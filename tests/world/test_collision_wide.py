@@ -139,3 +139,56 @@ def test_wide_choice_and_bad_values(monkeypatch):
     assert not default_wide("cpu")
     monkeypatch.delenv("JWARP_COST_KERNEL")
     assert not default_wide("cpu")  # auto: the fused kernel on the CPU
+
+
+def primitive_scene(rng, n_objects=8, extent=1.0, clear=0.7, top=1.2):
+    """Exact objects of every primitive kind (no mesh) within ``extent`` [m] of the base,
+    ``clear`` [m] from its vertical axis, up to ``top`` [m], and a floor far below."""
+    w = World.of_shapes()
+    kinds = [("sphere", (0.12,)), ("box", (0.2, 0.1, 0.3)), ("cylinder", (0.08, 0.3)),
+             ("capsule", (0.06, 0.2)), ("cone", (0.15, 0.25))]
+    for j in range(n_objects):
+        kind, dims = kinds[j % len(kinds)]
+        T = np.eye(4)
+        a = rng.normal(size=3)
+        a *= rng.uniform(0, np.pi) / np.linalg.norm(a)
+        from scipy.spatial.transform import Rotation
+        T[:3, :3] = Rotation.from_rotvec(a).as_matrix()
+        lo, hi = [-extent, -extent, 0.0], [extent, extent, top]
+        T[:3, 3] = rng.uniform(lo, hi)
+        while np.linalg.norm(T[:2, 3]) < clear:  # clear of the base column
+            T[:3, 3] = rng.uniform(lo, hi)
+        w.add(f"o{j}", kind, dims, T)
+    T = np.eye(4)
+    T[2, 3] = -1.0
+    w.add("floor", "plane", (), T)
+    return w
+
+
+@pytest.mark.parametrize("name", ["arm7", "justin19"])
+def test_bounding_sphere_skip_changes_no_bit(device, name, monkeypatch):
+    """The fused kernel skips the object queries of a frame whose bounding sphere keeps eps
+    from every object (worlds of primitives): cost and gradient are bit for bit those of
+    the kernel that queries every sphere."""
+    from jwarp.world.device_world import DeviceWorld
+
+    robot = jwarp.robot(name)
+    rng = np.random.default_rng(5)
+    world = primitive_scene(rng) if name == "arm7" else primitive_scene(rng, 16, 1.4, 0.9, 1.8)
+    q = sample(robot, 200, seed=6)
+    for dtype, scalar in ((np.float64, wp.float64), (np.float32, wp.float32)):
+        qa = wp.array(q.astype(dtype), dtype=scalar, device=device)
+        cm = CollisionModel(robot, world, device=device, dtype=dtype, wide=False)
+        assert cm.device_world.bound_skip
+        c1, g1 = (a.numpy().copy() for a in cm.cost(qa, w_self=0.0))
+        with monkeypatch.context() as m:
+            m.setattr(DeviceWorld, "bound_skip", property(lambda self: False))
+            cm2 = CollisionModel(robot, world, device=device, dtype=dtype, wide=False)
+            c0, g0 = (a.numpy().copy() for a in cm2.cost(qa, w_self=0.0))
+        assert (c0 > 0).sum() >= 20 and (c0 == 0).sum() >= 5  # touching and free ones
+        np.testing.assert_array_equal(c1, c0)
+        np.testing.assert_array_equal(g1, g0)
+    # a mesh in the world: no skip (a winding-number sign need not be 1-Lipschitz)
+    import trimesh
+    world.add("m", "mesh", mesh=trimesh.creation.box((0.1, 0.1, 0.1)))
+    assert not CollisionModel(robot, world, device=device, wide=False).device_world.bound_skip
