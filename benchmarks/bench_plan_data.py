@@ -50,7 +50,8 @@ THESIS = {"planar4": (32.6, 1.7136), "arm7": (54.5, 1.551), "justin19": (44.1, 1
 def options(args: argparse.Namespace) -> PlanDataOptions:
     return PlanDataOptions(max_starts=args.starts, iterations=args.iterations, step=args.step,
                            device=args.device,
-                           stats_tasks=None if args.stats_tasks < 0 else args.stats_tasks)
+                           stats_tasks=None if args.stats_tasks < 0 else args.stats_tasks,
+                           substep_voxels=args.substep_voxels)
 
 
 def make_world(robot: str, seed: int, args: argparse.Namespace):
@@ -140,6 +141,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="hard tasks per call that run every start (the single-start "
                         "statistics); the others stop once `refine` starts are feasible; "
                         "-1: all (every start of every task runs)")
+    p.add_argument("--substep-voxels", type=float, default=1.0,
+                   help="the most a sphere travels between cost substeps, in voxels")
     p.add_argument("--speed-robot", default="justin19")
     p.add_argument("--repeats", type=int, default=3, help="timed runs of the speed section")
     timing.section_options(p, "fidelity,speed")

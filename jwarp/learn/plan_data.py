@@ -63,6 +63,8 @@ class PlanDataOptions:
         step, max_step: step size (eq. 3.18) and the largest change of one joint of one
             waypoint per step [rad], > 0.
         n_substeps: substeps per segment (None: sized to the world's voxel per call).
+        substep_voxels: with ``n_substeps`` None: the most a sphere centre travels between
+            two cost substeps, in voxels (:attr:`PlanOptions.substep_voxels`), > 0.
         check_all_every: exact feasibility checks every this many iterations, >= 1.
         length_weight: lam_l of eq. 3.16 while converging the feasible paths (world and
             self-collision weights are 1), >= 0; the search uses the planner's 0.01. 0.1:
@@ -90,6 +92,7 @@ class PlanDataOptions:
     step: float = 0.01
     max_step: float = 0.1
     n_substeps: int | None = None
+    substep_voxels: float = 1.0
     check_all_every: int = 10
     length_weight: float = 0.1
     margin: float = 0.0
@@ -115,6 +118,7 @@ class PlanDataOptions:
             if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"n_substeps: expected None or an integer >= 1, got {v!r}")
         for name, strict in (("step", True), ("max_step", True), ("converge_tol", True),
+                             ("substep_voxels", True),
                              ("length_weight", False), ("margin", False)):
             v = getattr(self, name)
             x = real_number(v, name)
@@ -138,6 +142,7 @@ class PlanDataOptions:
         w = PathWeights(length=float(self.length_weight)) if refine else PathWeights()
         return PlanOptions(n_starts=n_starts, start_kind=start_kind, n_waypoints=self.n_waypoints,
                            n_substeps=self.n_substeps, iterations=self.iterations,
+                           substep_voxels=float(self.substep_voxels),
                            step=self.step, max_step=self.max_step, weights=w,
                            margin=float(self.margin), check_all_every=self.check_all_every,
                            converge=bool(refine), converge_tol=float(self.converge_tol),

@@ -64,18 +64,26 @@ DEFAULT_EPS = 0.05
 _FAR = 1e30
 #: the cost's launch plan where a CollisionModel is not told (``wide=None``): the
 #: environment variable ``JWARP_COST_KERNEL`` = ``fused`` (one thread per configuration),
-#: ``wide`` (:mod:`jwarp.kernels.collision_wide`) or ``auto`` (wide on CUDA, fused on the CPU)
+#: ``wide`` (:mod:`jwarp.kernels.collision_wide`) or ``auto`` (the default)
 COST_KERNELS = ("auto", "fused", "wide")
+#: ``auto``: the wide launches on CUDA up to this many configurations per call. Measured on
+#: an H200 (benchmarks/bench_cost_kernel.py, float32): at 400-20 000 configurations the
+#: wide launches fill the GPU (1.3-3.3x faster per call); at 1e6 random configurations
+#: they gain 1.04-1.2x, and a labelling run, whose ~1.2e6 configurations per call follow
+#: smooth paths (coherent warps), ran 15 % slower with them.
+WIDE_MAX_CONFIGS = 65536
 
 
-def default_wide(device: Any) -> bool:
-    """Whether :meth:`CollisionModel.cost` runs the wide launches on ``device`` by default:
-    ``JWARP_COST_KERNEL`` (``auto``: on CUDA only; see :data:`COST_KERNELS`)."""
+def default_wide(device: Any, n: int) -> bool:
+    """Whether :meth:`CollisionModel.cost` of ``n`` configurations runs the wide launches on
+    ``device`` when the model is not told: ``JWARP_COST_KERNEL`` (``auto``: on CUDA up to
+    :data:`WIDE_MAX_CONFIGS`; see :data:`COST_KERNELS`)."""
     v = os.environ.get("JWARP_COST_KERNEL", "auto").strip().lower() or "auto"
     if v not in COST_KERNELS:
         raise ValueError(f"JWARP_COST_KERNEL: expected one of {', '.join(COST_KERNELS)}, "
                          f"got {v!r}")
-    return v == "wide" or (v == "auto" and bool(wp.get_device(device).is_cuda))
+    return v == "wide" or (v == "auto" and bool(resolve_device(device).is_cuda)
+                           and n <= WIDE_MAX_CONFIGS)
 
 
 def check_world(robot: RobotModel, world: World | None) -> None:
@@ -200,8 +208,9 @@ class CollisionModel:
         dtype: float32 (default) or float64.
         wide: run :meth:`cost` as the wide launches of :mod:`jwarp.kernels.collision_wide`
             (parallel over configuration x sphere and configuration x frame pair) instead
-            of the fused one-thread-per-configuration kernel; None: :func:`default_wide`
-            (wide on CUDA). The two agree to float rounding.
+            of the fused one-thread-per-configuration kernel; None: per call,
+            :func:`default_wide` (on CUDA for batches up to :data:`WIDE_MAX_CONFIGS`). The
+            two agree to float rounding.
     """
 
     def __init__(self, robot: Any, world: World | None = None, *, device: Any = None,
@@ -218,8 +227,9 @@ class CollisionModel:
         self.k = ck.kernels(self.scalar)
         if wide is not None and not isinstance(wide, (bool, np.bool_)):
             raise TypeError(f"wide: expected True, False or None, got {wide!r}")
-        #: whether :meth:`cost` runs the wide launches (else the fused kernel)
-        self.wide = default_wide(self.device) if wide is None else bool(wide)
+        #: whether :meth:`cost` runs the wide launches (else the fused kernel); None: by
+        #: the batch size (:func:`default_wide`)
+        self.wide: bool | None = None if wide is None else bool(wide)
         sp = self.model.spheres
         dev = self.device
         self.n_spheres, self.n_pairs, self.pairs = sp.n_spheres, sp.n_pairs, sp.pairs
@@ -408,7 +418,7 @@ class CollisionModel:
         ww = float(w_world) if self.world is not None and self.n_spheres else 0.0
         ws = float(w_self) if self.n_pairs else 0.0
         gout = g if g is not None else self._dummy
-        if self.wide:
+        if self.wide if self.wide is not None else default_wide(self.device, n):
             self._cost_wide(q, rows, ww, ws, float(eps), grad, group_div, active, active_div,
                             d, cost, gout, comp, record=out_cost is not None)
             if update_rows:

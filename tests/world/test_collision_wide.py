@@ -128,17 +128,23 @@ def test_wide_with_compensation_rows_and_their_update(device):
 
 
 def test_wide_choice_and_bad_values(monkeypatch):
+    from jwarp.world.collision import WIDE_MAX_CONFIGS
+
     with pytest.raises(TypeError, match="wide"):
         CollisionModel("arm7", None, device="cpu", wide="yes")
+    assert CollisionModel("arm7", None, device="cpu").wide is None  # by the batch size
     monkeypatch.setenv("JWARP_COST_KERNEL", "fast")
     with pytest.raises(ValueError, match="JWARP_COST_KERNEL"):
-        default_wide("cpu")
+        default_wide("cpu", 10)
     monkeypatch.setenv("JWARP_COST_KERNEL", "wide")
-    assert default_wide("cpu") and CollisionModel("arm7", None, device="cpu").wide
+    assert default_wide("cpu", 10) and default_wide("cpu", 10 * WIDE_MAX_CONFIGS)
     monkeypatch.setenv("JWARP_COST_KERNEL", "fused")
-    assert not default_wide("cpu")
+    assert not default_wide("cpu", 10)
     monkeypatch.delenv("JWARP_COST_KERNEL")
-    assert not default_wide("cpu")  # auto: the fused kernel on the CPU
+    assert not default_wide("cpu", 10)  # auto: the fused kernel on the CPU
+    if wp.is_cuda_available():
+        assert default_wide("cuda:0", WIDE_MAX_CONFIGS)
+        assert not default_wide("cuda:0", WIDE_MAX_CONFIGS + 1)
 
 
 def primitive_scene(rng, n_objects=8, extent=1.0, clear=0.7, top=1.2):
@@ -189,6 +195,10 @@ def test_bounding_sphere_skip_changes_no_bit(device, name, monkeypatch):
         np.testing.assert_array_equal(c1, c0)
         np.testing.assert_array_equal(g1, g0)
     # a mesh in the world: no skip (a winding-number sign need not be 1-Lipschitz)
-    import trimesh
-    world.add("m", "mesh", mesh=trimesh.creation.box((0.1, 0.1, 0.1)))
+    from types import SimpleNamespace
+
+    v = 0.05 * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    f = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                  [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
+    world.add("m", "mesh", mesh=SimpleNamespace(vertices=v, faces=f))  # a closed cube
     assert not CollisionModel(robot, world, device=device, wide=False).device_world.bound_skip

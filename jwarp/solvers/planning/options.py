@@ -75,6 +75,10 @@ class PlanOptions:
         n_waypoints: W, >= 2 (20 in the thesis); seeds given as paths bring their own W.
         n_substeps: substeps per segment, >= 1; None sizes them to the world's voxel size
             on the initial paths of each call (:func:`substeps_for_voxel`).
+        substep_voxels: with ``n_substeps`` None in a grid world: the most a sphere centre
+            may travel between two substeps of the cost, in voxels (> 0; 1: the thesis'
+            rule). The cost only guides the paths (the exact continuous check certifies
+            them), so a coarser cost (2-3) trades some guidance for fewer configurations.
         iterations: most gradient steps per path, >= 0.
         step, max_step: step size alpha (eq. 3.18) and the largest change of one joint of
             one waypoint per step [rad], both > 0.
@@ -138,6 +142,7 @@ class PlanOptions:
     start_kind: str = "mixed"
     n_waypoints: int = 20
     n_substeps: int | None = None
+    substep_voxels: float = 1.0
     iterations: int = 100
     step: float = 0.01
     max_step: float = 0.1
@@ -173,7 +178,7 @@ class PlanOptions:
             check_int(self.check_all_every, "check_all_every", 1)
         if self.enough_feasible is not None:
             check_int(self.enough_feasible, "enough_feasible", 1)
-        for name in ("step", "max_step"):
+        for name in ("step", "max_step", "substep_voxels"):
             v = getattr(self, name)
             if not (math.isfinite(real_number(v, name, npdt)) and v > 0):
                 raise ValueError(f"{name}: expected a number > 0, got {v!r}")

@@ -250,7 +250,8 @@ class Planner:
         Qf = Q.reshape(P, W, model.n_dof)
         n_sub = o.n_substeps
         if n_sub is None and self.world.has_grid:
-            n_sub = substeps_for_voxel(model, Qf, float(self.world.resolution), device=dev)
+            n_sub = substeps_for_voxel(model, Qf, float(self.world.resolution),
+                                       safety=1.0 / float(o.substep_voxels), device=dev)
         elif n_sub is None:  # exact objects only: the check is continuous, the cost a guide
             from jwarp.world.motion import travel_bound
 
