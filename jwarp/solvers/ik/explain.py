@@ -32,6 +32,7 @@ import numpy as np
 from jwarp.core.arrays import real_array
 from jwarp.core.limits import LIMIT_TOL
 from jwarp.model.registry import robot as get_robot
+from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.ik.options import ORIENTATIONS, orientation_args
 
 __all__ = ["explain_ik", "pose_errors", "limit_reasons", "collision_reasons",
@@ -221,7 +222,7 @@ def _inputs(model: Any, frame: Any, q: Any, target: Any, orientation: str,
                          f"shape {qv.shape}")
     if not np.all(np.isfinite(qv)):
         raise ValueError("q: contains NaN or inf")
-    T = real_array(target, "target")
+    T = real_array(as_poses(target), "target")
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         raise ValueError(f"target: expected one finite pose (4, 4), got shape {T.shape}")
     fi = model.frame_index(frame)
