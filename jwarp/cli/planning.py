@@ -19,8 +19,9 @@ Examples::
 transform: 16 numbers or a file); ``--position-only`` or ``--free-axis X,Y,Z`` (the rotation
 about that end-effector axis is free; ``jwarp.ik(orientation=..., free_axis=...)``);
 ``--tol-pos M``/``--tol-rot RAD``; ``--initial Q`` (joint values, ``--deg`` honoured, within
-the limits) is the first of the ``--starts`` seeds; ``--scene`` as for ``plan`` (exact
-objects, or a grid with ``--voxel``/``--extent``). An infeasible answer prints ``why:``
+the limits) is the first of the ``--starts`` seeds; ``--targets FILE --out RESULTS``
+solves a file of targets in one batch (:func:`cmd_ik_batch`, docs/ik.md "Many targets");
+``--scene`` as for ``plan`` (exact objects, or a grid with ``--voxel``/``--extent``). An infeasible answer prints ``why:``
 (JSON ``reason``): :func:`jwarp.solvers.ik.explain.explain_ik` (limits, pose error against
 the tolerances, colliding pairs).
 
