@@ -130,7 +130,9 @@ def _at_limits(model: Any, q: np.ndarray, tol: float = 1e-6) -> list[str]:
 
 
 def _link(model: Any, s: int) -> str:
-    return model.frames[model.spheres[s].frame].name
+    from jwarp.world.collision import sphere_link
+
+    return sphere_link(model, s)
 
 
 def collision_reasons(robot: Any, q: Any, world: Any = None, margin: float = 0.0, *,
@@ -183,30 +185,20 @@ def _pairs(model: Any) -> np.ndarray:
 def _objects(model: Any, q: np.ndarray, world: Any, spheres: np.ndarray,
              rho: Any) -> list[str]:
     """The name of the object nearest to each sphere's centre (``world.object_name``)."""
-    if world.dim != 3:
-        return ["the world grid"] * len(spheres)
-    from jwarp.kinematics.fk import fk
-    from jwarp.world.device_world import world_query
+    from jwarp.world.collision import nearest_objects
 
-    F = np.asarray(fk(model, q[None], dh=None if rho is None else rho[None],
-                      dtype=np.float64, device="cpu"))[0]
-    idx, pos, _ = model.sphere_arrays()            # sphere frames and centres in them
-    c = np.einsum("nij,nj->ni", F[idx, :3, :3], pos) + F[idx, :3, 3]
-    _, _, obj = world_query(world, c[spheres], device="cpu")
-    out = []
-    for o in obj:
-        name = world.object_name(int(o))
-        out.append("the world grid" if int(o) == -2 else f"object '{name}'")
-    return out
+    return nearest_objects(model, q, world, spheres, rho)
 
 
 def _pair_lines(worst: dict, margin: float, kind: str) -> list[str]:
+    from jwarp.world.collision import mm_text
+
     items = sorted(worst.items(), key=lambda kv: kv[1])
     lines = []
     for (a, b), d in items[:MAX_PAIRS]:
         other = b if kind == "object" else f"link '{b}'"
         what = "collision" if kind == "object" else "self-collision"
-        lines.append(f"{what}: link '{a}' vs {other}, distance {d * 1e3:.2f} mm "
+        lines.append(f"{what}: link '{a}' vs {other}, distance {mm_text(d)} mm "
                      f"(margin {margin * 1e3:g} mm)")
     if len(items) > MAX_PAIRS:
         lines.append(f"and {len(items) - MAX_PAIRS} more {'link-object' if kind == 'object' else 'link-link'} "
