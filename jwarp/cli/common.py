@@ -189,7 +189,7 @@ def load_robot(name: str):
     if isinstance(name, str) and name.lower().endswith(".urdf"):
         from jwarp.world.spherize import spherized_robot
 
-        return spherized_robot(name)[0]
+        return spherized_robot(name, progress=None)[0]  # a bar on a terminal
     return robot(name)
 
 

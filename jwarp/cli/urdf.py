@@ -263,7 +263,7 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
                 model, fit = spherized_robot(args.urdf, opts, cache=not args.no_cache,
                                              sample_pairs=not group_resamples(imported, args,
                                                                               eff),
-                                             **urdf_options)
+                                             progress=None, **urdf_options)
         elif args.spheres == "none":
             model = model.copy(spheres=[])
     except ValueError as e:
