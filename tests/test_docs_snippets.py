@@ -192,7 +192,7 @@ PRELUDES: dict[str, tuple[str, str]] = {
     "docs/urdf.md:198": (_panda("panda.urdf", "panda.srdf"),
                          "panda.urdf/panda.srdf: example-robot-data's Panda and its SRDF"),
     "docs/urdf.md:261": (_panda("panda.urdf"), "panda.urdf: example-robot-data's Panda"),
-    "docs/urdf.md:345": (
+    "docs/urdf.md:349": (
         f"import jwarp\nopen('panda.xml', 'w').write({MJCF_ARM!r})\n",
         "panda.xml: tests/test_docs_commands.py's small MJCF arm (a Panda MJCF such as "
         "MuJoCo Menagerie's is not installed here), which has the attachment_site"),
@@ -462,7 +462,7 @@ CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
     "docs/urdf.md:43": _check_robot_names,
     "docs/urdf.md:198": _check_group,
     "docs/urdf.md:261": _check_spherized,
-    "docs/urdf.md:345": _check_mjcf,
+    "docs/urdf.md:349": _check_mjcf,
     "docs/urdf_export.md:67": _check_export,
     "examples/README.md:90": _check_campaign,
 }
