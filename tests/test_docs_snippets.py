@@ -136,7 +136,7 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "q = uniform_configurations(robot, np.random.default_rng(2), 20)\n",
         "`setup` the hand4 contact setup, `world` an empty exact world, `q` 20 uniform "
         "configurations to check"),
-    "docs/ik.md:165": (
+    "docs/ik.md:167": (
         "import jwarp\nimport numpy as np\n"
         "from jwarp.world import load_scene, exact_world\n"
         "robot = jwarp.robot('justin19')\n"
@@ -448,7 +448,7 @@ CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
     "docs/design.md:9": _check_sensitivity,
     "docs/design.md:40": _check_design,
     "docs/design.md:100": _check_pool,
-    "docs/ik.md:165": _check_explain_ik,
+    "docs/ik.md:167": _check_explain_ik,
     "docs/measurements.md:8": _check_measurement,
     "docs/measurements.md:192": _check_hook,
     "docs/robot_schema.md:313": _check_robot_hook,
