@@ -381,16 +381,17 @@ def robot(name: str | os.PathLike | RobotModel) -> RobotModel:
         raise PluginError(f"robot: {_conflict_text('robot', name, plugins)}; remove one of "
                           f"them{_hint(plugins)}")
     if name not in table.found:
-        from jwarp.importers.robot import package_robot_path
+        if ":" in name:   # "example-robot-data:panda", "robot_descriptions:panda"
+            from jwarp.importers.robot import package_robot_path
 
-        try:   # "example-robot-data:panda", "robot_descriptions:panda"
-            path = package_robot_path(name)
-        except ValueError as e:
-            raise ValueError(f"robot: {e}") from None
-        if path is not None:
-            model = _load_file(path)
-            _ROBOT_CACHE[name] = model
-            return model
+            try:
+                path = package_robot_path(name)
+            except ValueError as e:
+                raise ValueError(f"robot: {e}") from None
+            if path is not None:
+                model = _load_file(path)
+                _ROBOT_CACHE[name] = model
+                return model
         if _looks_like_path(name):
             if os.path.exists(name):
                 return _load_file(name)
