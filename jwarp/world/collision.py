@@ -717,6 +717,69 @@ def min_distances(robot: Any, q: Any, world: World | None = None, *, rho: Any = 
     return out
 
 
+def mm_text(metres: float) -> str:
+    """A distance [m] as millimetres with 2 decimals, never ``-0.00``: a value that rounds
+    to zero but is not zero keeps two significant digits (``-0.0031``), an exact zero is
+    ``0.00``."""
+    v = float(metres) * 1e3
+    text = f"{v:.2f}"
+    if float(text) == 0.0:
+        return "0.00" if v == 0.0 or not np.isfinite(v) else f"{v:.2g}"
+    return text
+
+
+def sphere_link(robot: Any, s: int) -> str:
+    """The name of the frame (link) collision sphere ``s`` of ``robot`` is fixed to."""
+    model = get_robot(robot)
+    return model.frames[model.spheres[int(s)].frame].name
+
+
+def nearest_objects(robot: Any, q: Any, world: World, spheres: Any, rho: Any = None
+                    ) -> list[str]:
+    """What each of the collision ``spheres`` (indices) of one configuration q (n_dof,) is
+    nearest to, in words: ``"object 'NAME'"`` (the world's exact objects) or ``"the world
+    grid"`` (a grid, and every 2D world). ``rho`` (n_frames, 5): the frames' DH rows (an
+    elastic equilibrium) instead of q's rigid ones. Computed on the CPU in float64."""
+    from jwarp.kinematics.fk import fk
+    from jwarp.world.device_world import world_query
+
+    model = get_robot(robot)
+    spheres = np.asarray(spheres, np.int64).reshape(-1)
+    if world.dim != 3:
+        return ["the world grid"] * len(spheres)
+    q1 = np.asarray(q, np.float64).reshape(1, model.n_dof)
+    F = np.asarray(fk(model, q1, dh=None if rho is None else np.asarray(rho)[None],
+                      dtype=np.float64, device="cpu"))[0]
+    idx, pos, _ = model.sphere_arrays()            # sphere frames and centres in them
+    c = np.einsum("nij,nj->ni", F[idx, :3, :3], pos) + F[idx, :3, 3]
+    _, _, obj = world_query(world, c[spheres], device="cpu")
+    return ["the world grid" if int(o) == -2 else f"object '{world.object_name(int(o))}'"
+            for o in obj]
+
+
+def closest_pair_text(robot: Any, q: Any, world: World | None, *, self_collision: bool,
+                      rho: Any = None, device: Any = None) -> str:
+    """The closest pair of one configuration q (n_dof,) in words, for a message about a
+    configuration in collision: ``link 'L' vs object 'O', -93.27 mm`` (``self_collision``
+    False: the sphere nearest to the world and the object nearest to it) or ``link 'A' vs
+    link 'B', -1.50 mm`` (True: the closest sphere pair of :func:`collision_pairs`); the
+    signed surface distance (negative = penetration). ``rho`` (n_frames, 5): the frames'
+    DH rows (an elastic equilibrium)."""
+    model = get_robot(robot)
+    q1 = np.asarray(q, np.float64).reshape(1, model.n_dof)
+    r1 = None if rho is None else np.asarray(rho, np.float64)[None]
+    if not self_collision:
+        d = np.asarray(sphere_distances(model, q1, world, rho=r1, device=device,
+                                        dtype=np.float64))[0]
+        s = int(np.argmin(d))
+        obj = nearest_objects(model, q1[0], world, [s], None if r1 is None else r1[0])[0]
+        return f"link '{sphere_link(model, s)}' vs {obj}, {mm_text(d[s])} mm"
+    d = np.asarray(self_distances(model, q1, rho=r1, device=device, dtype=np.float64))[0]
+    p = int(np.argmin(d))
+    a, b = (sphere_link(model, int(i)) for i in collision_pairs(model)[p])
+    return f"link '{a}' vs link '{b}', {mm_text(d[p])} mm"
+
+
 def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: float = 0.0, *,
                       rho: Any = None, device: Any = None, dtype: Any = None,
                       validate: bool = True, self_margin: float | None = None,

@@ -107,7 +107,8 @@ class PlanOptions:
         fallback: "rrt" (default): problems the multi-starts have not solved after
             their iterations, or after ``fallback_after`` of ``time_limit``, get an
             RRT-Connect path in joint space (:mod:`jwarp.solvers.planning.rrt`) as the seed of
-            one more gradient optimisation (exact check as always); None: no fallback.
+            one more gradient optimisation (exact check as always); None or "none" (the
+            CLI's ``--fallback none``; stored as None): no fallback.
         fallback_after: the share of ``time_limit`` the multi-starts may use before the
             fallback, in (0, 1) (without a time limit: after the iterations).
         rrt: :class:`jwarp.solvers.planning.rrt.RRTOptions` of the fallback (None: its defaults).
@@ -167,6 +168,9 @@ class PlanOptions:
     fallback_after: float = 0.15
     rrt: Any = None
     allow_no_collision: bool = False
+
+    def __post_init__(self) -> None:
+        self.fallback = fallback_word(self.fallback)
 
     def validate(self, dtype: Any = np.float32) -> None:
         """ValueError/TypeError naming the first bad field; numbers must be finite in the
@@ -234,6 +238,16 @@ class PlanOptions:
         _check_budget(self)
 
 
+def fallback_word(value: Any) -> Any:
+    """:attr:`PlanOptions.fallback` in one vocabulary with the CLI's ``--fallback rrt|none``:
+    ``"none"`` (any case, spaces around) is None, ``"RRT"`` is ``"rrt"``; anything else is
+    returned as it is (checked by :meth:`PlanOptions.validate`)."""
+    if isinstance(value, str) and value.strip().lower() in (*FALLBACKS, "none"):
+        v = value.strip().lower()
+        return None if v == "none" else v
+    return value
+
+
 def _check_budget(o: "PlanOptions") -> None:
     """:meth:`PlanOptions.validate` of ``time_limit``, ``fallback``, ``fallback_after``
     and ``rrt``."""
@@ -245,9 +259,10 @@ def _check_budget(o: "PlanOptions") -> None:
         if not (math.isfinite(t) and t > 0):
             raise ValueError(f"time_limit: expected a number > 0 [s] or None, got "
                              f"{o.time_limit!r}")
+    o.fallback = fallback_word(o.fallback)
     if o.fallback is not None and (not isinstance(o.fallback, str)
                                    or o.fallback not in FALLBACKS):
-        raise ValueError(f"fallback: expected 'rrt' or None, got {o.fallback!r}")
+        raise ValueError(f"fallback: expected 'rrt', 'none' or None, got {o.fallback!r}")
     f = real_number(o.fallback_after, "fallback_after")
     if not 0.0 < f < 1.0:
         raise ValueError(f"fallback_after: expected a number in (0, 1), got "
