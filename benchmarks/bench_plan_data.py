@@ -141,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="hard tasks per call that run every start (the single-start "
                         "statistics); the others stop once `refine` starts are feasible; "
                         "-1: all (every start of every task runs)")
-    p.add_argument("--substep-voxels", type=float, default=1.0,
+    p.add_argument("--substep-voxels", type=float, default=3.0,
                    help="the most a sphere travels between cost substeps, in voxels")
     p.add_argument("--speed-robot", default="justin19")
     p.add_argument("--repeats", type=int, default=3, help="timed runs of the speed section")
