@@ -458,6 +458,14 @@ class CollisionModel:
             rho.commit()
         return cost, g
 
+    def cost_kernels(self, n: int) -> list:
+        """The kernels :meth:`cost` launches for ``n`` configurations (the fused one, or the
+        wide launches), e.g. to load their modules before a CUDA graph capture."""
+        if self.wide if self.wide is not None else default_wide(self.device, n):
+            kw = cwide.kernels(self.scalar)
+            return [kw.frames, kw.world, kw.self_pairs, kw.gradient]
+        return [self.k.cost]
+
     def _cost_wide(self, q: wp.array, rows: DHRows, ww: float, ws: float, eps: float,
                    grad: bool, group_div: int, active: wp.array | None, active_div: int,
                    d: CollisionData, cost: wp.array, gout: wp.array, comp: Any,

@@ -186,6 +186,7 @@ class IKSolver:
         sc.xs = self._scratch(B, max(cm.n_spheres, 1), k64.vec3)
         self._check_scratch = sc
         self._launches: dict = {}
+        self._cost_data: dict = {}  # CollisionData per gathered U_A batch size
 
     def _scratch(self, B: int, m: int, dtype: Any) -> wp.array:
         """(B, m) scratch of the check: on CUDA frame-major (coalesced); on the CPU, whose
@@ -257,8 +258,11 @@ class IKSolver:
         use = int(obj.collides)
         if use:
             self._launch(("gather", K), self.ck.gather, K, [obj.q, self.idx, self.counts, qk])
+            data = self._cost_data.get(K)  # the solver's own scratch (graphs hold it)
+            if data is None:
+                data = self._cost_data[K] = obj.cm.make_data(K)
             obj.cm.cost(qk, w_world=w.world, w_self=w.self, eps=obj.eps, grad=True,
-                        out_cost=ck, out_grad=gk)
+                        out_cost=ck, out_grad=gk, data=data)
         self._launch(("scatter", K), self.ck.scatter_aux, K, [
             obj.q, obj.q_default, obj.default_stride, self.idx, self.counts, ck, gk, use,
             self.scalar(w.default), obj.coll_cost, obj.cost_a, obj.grad_a])
@@ -271,6 +275,35 @@ class IKSolver:
             int(full), o.margin, self.n_seeds, self.halt, self.iterations,
             self._check_tables, self._check_scratch,
             self.on, self.done, self.solved, self.counts, self.out])
+
+    def _iteration_graph(self, cap: int, full: bool) -> None:
+        """One rigid iteration between two host reads (error and Jacobian, the on-target
+        list of at most ``cap`` seeds, their U_A, the check, the step) as a CUDA graph,
+        captured on first use for (``cap``, ``full``) and replayed after (the recorded
+        launches hold fixed buffers; a world that gains or loses objects drops the
+        graphs with the launches)."""
+        key = ("graph", cap, bool(full))
+        graph = self._launches.get(key)
+        if graph is None:
+            # what the capture may not do itself: load the kernels' modules, size the
+            # cost's scratch (only these modules load, not every one Warp knows)
+            obj = self.objective
+            K = self._gather_size(cap)
+            kernels = [self.ck.pose, self.ck.near, self.ck.gather, self.ck.scatter_aux,
+                       self.ck.check, self.dk.step]
+            if obj.collides:
+                kernels += obj.cm.cost_kernels(K)
+                if K not in self._cost_data:
+                    self._cost_data[K] = obj.cm.make_data(K)
+            wp.force_load(device=self.device, modules=list({k.module: None for k in kernels}))
+            with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:
+                self._pose()
+                self._near(cap)
+                self._near_aux(cap)
+                self._check(full)
+                self._step()
+            graph = self._launches[key] = capture.graph
+        wp.capture_launch(graph)
 
     def _step(self) -> None:
         o, obj = self.options, self.objective
@@ -367,9 +400,15 @@ class IKSolver:
         def over(c: np.ndarray) -> bool:
             return bool(c[0] >= B or (o.stop_when_solved and c[1] + c[3] >= P))
 
+        graphs = rigid and not every and callback is None and bool(dev.is_cuda)
         for it in range(o.iterations + 1):
             last = it == o.iterations
             read = every or it % k_read == 0
+            if graphs and not read and not last:
+                # an iteration between two reads: its launches depend on nothing the host
+                # learns in between, so they replay as one CUDA graph
+                self._iteration_graph(cap, it % o.check_every == 0)
+                continue
             if rigid:
                 self._pose()
             else:
