@@ -157,7 +157,7 @@ def scene_setup(n_targets: int, device: str, robot_file: str | None = None) -> t
 def section_scene(args: argparse.Namespace) -> dict:
     robot, world, T = scene_setup(args.scene_targets, args.device, args.panda)
     P = len(T)
-    o = IKOptions(n_starts=4, seed=0)
+    o = IKOptions(n_starts=4, seed=0, cuda_graphs=not args.no_cuda_graphs)
     batch = IKSolver(robot, TCP, P, o, world=world, device=args.device)
     one = IKSolver(robot, TCP, 1, o, world=world, device=args.device)
     run = timing.each_run([lambda r: (batch.reseed(r), lambda: batch.solve(T))[1]],
@@ -190,6 +190,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", type=int, default=4, help="seeds per target (reach)")
     p.add_argument("--iterations", type=int, default=50, help="iterations (reach)")
     p.add_argument("--scene-targets", type=int, default=100)
+    p.add_argument("--no-cuda-graphs", action="store_true",
+                   help="scene: launch every kernel from Python (IKOptions.cuda_graphs=False)")
     p.add_argument("--panda", default=None, metavar="JSON",
                    help="scene: the fitted Panda robot file (default: fit it here)")
     p.add_argument("--repeats", type=int, default=5)

@@ -145,6 +145,33 @@ def test_cuda_solver_matches_the_cpu_solver_float64():
     np.testing.assert_allclose(res[0].q, res[1].q, rtol=0, atol=1e-8)
 
 
+@requires_cuda
+def test_cuda_graphs_replay_the_launches():
+    """IKOptions.cuda_graphs: the iterations between counter reads replayed as CUDA graphs
+    give the results of launching every kernel (fused cost: no atomics, bit for bit), also
+    on a second solve that replays the captured graphs."""
+    robot = jwarp.robot("justin19")
+    world = shelf_world()
+    _, T = _free_targets(robot, "right_tcp", 6, seed=7, world=world, margin=0.01)
+    seeds = sample_within_limits(robot, 48, np.random.default_rng(4)).reshape(6, 8, -1)
+    res = {}
+    for graphs in (False, True):
+        opts = IK.IKOptions(n_starts=8, margin=0.01, cuda_graphs=graphs)
+        solver = IK.IKSolver(robot, "right_tcp", len(T), opts, world=world, device="cuda:0",
+                             dtype=np.float64)
+        solver.objective.cm.wide = False  # the fused cost: the same sums in every run
+        res[graphs] = [solver.solve(T, seeds) for _ in range(2)]
+        if graphs:
+            assert any(k[0] == "graph" for k in solver._launches if isinstance(k, tuple))
+    for a, b in zip(res[False], res[True]):
+        np.testing.assert_array_equal(a.all_feasible, b.all_feasible)
+        np.testing.assert_array_equal(a.all_iterations, b.all_iterations)
+        np.testing.assert_allclose(a.q, b.q, rtol=0, atol=1e-12)
+    assert res[True][0].feasible.all()
+    with pytest.raises(TypeError, match="cuda_graphs"):
+        IK.IKOptions(cuda_graphs=1)
+
+
 # ------------------------------------------------------------ the device's checks
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_device_feasibility_check_matches_the_host_check(device, dtype):

@@ -93,6 +93,9 @@ class IKOptions:
             the rigid robot's gathered launch keeps the last size with headroom (seeds
             beyond it take pose-only steps for an iteration), the elastic robot evaluates U_A
             of every seed; results may differ slightly, every returned solution is checked.
+        cuda_graphs: on CUDA, replay the rigid robot's iterations between two counter
+            reads as one CUDA graph each (captured on first use; fewer launches from the
+            host). False launches every kernel from Python (the same arithmetic).
         seed: random seed of the starts (None: fresh entropy).
         weights: :class:`IKWeights` of U_f and U_A (None: the defaults).
         q_default: default pose of the closeness term, (n_dof,) or per seed
@@ -144,6 +147,7 @@ class IKOptions:
     stop_when_solved: bool = True
     check_every: int = 5
     read_every: int | None = None
+    cuda_graphs: bool = True
     seed: int | None = 0
     weights: IKWeights | None = None
     q_default: Any = None
@@ -187,7 +191,7 @@ class IKOptions:
         if not 0.0 < lam <= 1.0:
             raise ValueError(f"lam: expected a damping factor in (0, 1], got {self.lam!r}")
         self.lam = lam
-        for name in ("stop_when_solved", "freeze_solved", "allow_no_collision"):
+        for name in ("stop_when_solved", "freeze_solved", "allow_no_collision", "cuda_graphs"):
             v = getattr(self, name)
             if not isinstance(v, (bool, np.bool_)):
                 raise TypeError(f"{name}: expected a bool, got {v!r}")

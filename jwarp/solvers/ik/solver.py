@@ -400,7 +400,7 @@ class IKSolver:
         def over(c: np.ndarray) -> bool:
             return bool(c[0] >= B or (o.stop_when_solved and c[1] + c[3] >= P))
 
-        graphs = rigid and not every and callback is None and bool(dev.is_cuda)
+        graphs = o.cuda_graphs and rigid and not every and callback is None and dev.is_cuda
         for it in range(o.iterations + 1):
             last = it == o.iterations
             read = every or it % k_read == 0
