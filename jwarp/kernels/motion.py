@@ -596,8 +596,9 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         * step >= w: the interval is proven (every sphere moves at most ``travel * w``
           from u_m); the segment's last one proves the segment (``ok_segments``,
           ``solved`` as :func:`segment_kernel`);
-        * else, where w / 2 < ``min_step``: the segment is UNCERTIFIED there (the motion
-          grazes the margin); where ``last``: the interval is left to the sequential
+        * else, where step < ``min_step``: the segment is UNCERTIFIED there (the motion
+          grazes the margin; an interval narrower than ``min_step`` is never split: it is
+          proven or this); where ``last``: the interval is left to the sequential
           advancement (``seg.cov`` = min of its start); else its two halves are appended
           to the next level's list (``next_seg``, ``next_i``, counter ``count[level + 1]``;
           a half beyond the capacity is left like ``last``).
@@ -641,7 +642,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 if wp.atomic_add(ok_segments, k, 1) == W - 2 and g >= 0:
                     solved[g] = 1
             return
-        if half * w < min_step:  # halves narrower than the smallest step: stalled
+        if step < min_step:  # stalled against the margin (as segment_kernel)
             code = int(UNCERTIFIED)
             if c == OK_SELF_LIMITED:
                 code = UNCERTIFIED_SELF

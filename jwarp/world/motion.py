@@ -71,8 +71,9 @@ class MotionOptions:
             "advance" on the CPU. Both use the same travel bound and evaluation.
         intervals: ``"levels"``: intervals per segment at level 0, in [1, 4096].
         levels: ``"levels"``: the most levels (>= 1; level l has ``intervals * 2**l``
-            per segment), or None: down to ``min_step`` (an interval whose halves would be
-            narrower than ``min_step`` and is not proven makes its segment uncertified).
+            per segment), or None: down to ``min_step`` (an interval not proven whose step
+            is below ``min_step`` makes its segment uncertified, as in the advancement;
+            one narrower than ``min_step`` is proven or that).
             A segment still unresolved after the last level goes to ``fallback``.
         capacity: ``"levels"``: intervals the work list holds (>= 1), or None: twice the
             level-0 intervals of the launch (at least 1024). On a GPU each holds a row of
@@ -125,11 +126,11 @@ class MotionOptions:
             raise ValueError(f"fallback: expected True or False, got {self.fallback!r}")
 
     def n_levels(self) -> int:
-        """The levels of ``"levels"``: :attr:`levels`, at most down to the first level
-        whose unproven intervals are uncertified (halves narrower than ``min_step``), and
+        """The levels of ``"levels"``: :attr:`levels`, at most down to the first level of
+        intervals narrower than ``min_step`` (each is proven or uncertified there), and
         at most ``intervals * 2**(levels - 1) <= 2**29`` intervals per segment."""
         n = 1
-        while (1.0 / (4.0 * self.intervals * 2 ** (n - 1)) >= self.min_step
+        while (1.0 / (2.0 * self.intervals * 2 ** (n - 1)) >= self.min_step
                and self.intervals * 2 ** n <= 2 ** 29):
             n += 1
         return n if self.levels is None else min(n, int(self.levels))
