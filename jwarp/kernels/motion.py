@@ -22,6 +22,18 @@ starts there, until u = 1. A clearance ``< m`` is a proven violation; a step bel
 ``min_step`` (the motion grazes the margin) or too many evaluations is *uncertified* (not
 feasible). Far from obstacles a few evaluations prove a whole segment.
 
+The same bound proves an interval from its midpoint: an evaluation at u_m with every
+clearance ``d_s >= m + w L_s`` (pairs likewise) proves [u_m - w, u_m + w]. The *levels*
+(:func:`level_kernel`, the GPU's default; the host: :class:`jwarp.world.motion.MotionCheck`)
+split every segment into n0 intervals (level 0) and evaluate every interval of a level in
+parallel, at its midpoint with ``reach`` = its half width: a clearance below the margin is
+a proven violation, a step >= the half width proves the interval, a step below
+``min_step`` leaves the segment uncertified (as the advancement does), any other interval
+is halved and both halves are appended to the next level's work list (compacted with an
+atomic counter; a fixed capacity). A segment is proven when all its intervals are. What
+the levels leave (the capacity, the level cap) goes on with the advancement from its
+proven prefix, or is uncertified: nothing is proven that the bound does not prove.
+
 Result codes per segment and per path: :data:`OK` 0, :data:`WORLD` 1 (sphere ``a`` vs
 object ``b``; -2 the grid), :data:`SELF` 2 (spheres ``a`` and ``b``), :data:`UNCERTIFIED` 3
 (sphere ``a``, object/sphere ``b``), :data:`LIMITS` 4 (waypoint outside the limits).

@@ -8,10 +8,14 @@ the last segment the clearance required is ``min(margin, endpoint_margin)`` (so 
 pose closer to an object than the path margin can be reached). Distances are exact for
 the world's objects; a grid counts with its declared ``grid_error`` subtracted.
 
-One launch checks a batch of paths (one thread per segment) and a second reduces them:
-per path a flag, and for an infeasible one the first offending place (in waypoint units),
-the sphere (its link) and the object or the other sphere. Only these few numbers per path
-are read back.
+One call checks a batch of paths on the device, in a few launches: on the CPU by
+conservative advancement (one thread per segment, :attr:`MotionOptions.method`
+"advance"), on a GPU by interval refinement (every segment split into intervals, each
+proven from its midpoint or halved, level by level, every interval of a level a thread:
+"levels"; a fixed number of launches, no host read), both with the same travel bound;
+a last launch reduces them: per path a flag, and for an infeasible one the first
+offending place (in waypoint units), the sphere (its link) and the object or the other
+sphere. Only these few numbers per path are read back.
 
 Example::
 

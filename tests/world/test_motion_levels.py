@@ -15,8 +15,8 @@ import jwarp
 from jwarp.world import World
 from jwarp.world.collision import min_distances
 from jwarp.world.motion import MotionCheck, MotionOptions
-from jwarp.world.path_feasibility import sphere_centres
 from jwarp.world.primitives import pose_matrix
+from worlds import ball_worlds, grazing_paths
 
 LEVELS = MotionOptions(method="levels")
 ADVANCE = MotionOptions(method="advance")
@@ -52,52 +52,6 @@ def _dense(robot, world, paths, n=1500):
     seg = paths[:, :-1, None] + u[None, None, :, None] * np.diff(paths, axis=1)[:, :, None]
     md = min_distances(robot, seg.reshape(-1, nd), world, dtype=np.float64)
     return md.reshape(P, -1, 2).min(axis=1)
-
-
-def graze_paths(robot, n, delta, margin=0.0, W=3, seed=0, N=3000):
-    """``n`` paths of W waypoints (self-free) and per path a ball that they pass at
-    ``margin + delta`` [m] (the smallest clearance of any sphere over N samples a segment;
-    the ball's radius is set to it): grazing for 0 < delta <~ 1 mm, a collision for
-    delta < 0. Returns (paths (n, W, n_dof), the smallest clearance (n,) of a denser
-    sampling, balls [(centre, radius)])."""
-    rng = np.random.default_rng(seed)
-    lim = np.array(robot.joint_limits)
-    mid = lim.mean(1)
-    _, _, rad = robot.sphere_arrays()
-    paths, balls, dense = [], [], []
-    while len(paths) < n:
-        q = mid + 0.7 * (rng.uniform(lim[:, 0], lim[:, 1], size=(2, robot.n_dof)) - mid)
-        path = q[:1] + np.linspace(0, 1, W)[:, None] * (q[1:] - q[:1])
-        u = np.linspace(0, 1, N * (W - 1) + 1)
-        qs = path[0] + u[:, None] * (path[-1] - path[0])
-        if min_distances(robot, qs[::25], None, dtype=np.float64)[:, 1].min() < 0.01:
-            continue
-        x = sphere_centres(robot, qs)                      # (samples, S, 3)
-        i = int(rng.integers(len(u) // 4, 3 * len(u) // 4))
-        s = int(rng.integers(len(rad)))
-        v = x[i + 1, s] - x[i - 1, s]
-        if np.linalg.norm(v) < 1e-6:
-            continue
-        nrm = np.cross(v, rng.normal(size=3))              # across the sphere's motion
-        c = x[i, s] + nrm / np.linalg.norm(nrm) * (rad[s] + 0.15)
-        R = (np.linalg.norm(x - c, axis=-1) - rad).min() - margin - delta
-        if R < 0.03 or c[2] - R < 0.0:
-            continue
-        fine = np.linspace(0, 1, 8 * N * (W - 1) + 1)
-        xf = sphere_centres(robot, path[0] + fine[:, None] * (path[-1] - path[0]))
-        paths.append(path)
-        balls.append((c, R))
-        dense.append((np.linalg.norm(xf - c, axis=-1) - rad).min() - R)
-    return np.array(paths), np.array(dense), balls
-
-
-def _ball_worlds(balls):
-    ws = []
-    for c, R in balls:
-        w = World.of_shapes()
-        w.add("ball", "sphere", [R], c)
-        ws.append(w)
-    return World.batch(ws)
 
 
 def _compare(name, old, new, dense_ok):
@@ -145,9 +99,9 @@ def test_levels_prove_grazing_paths_in_a_batch_of_worlds(device, arm, margin):
     """Paths passing a ball (each in its own world of a batch, ``world_group`` 1) at
     margin + 1 mm, + 0.2 mm (feasible), and 0.2 mm into the margin (infeasible)."""
     for delta in (1e-3, 2e-4, -2e-4):
-        paths, dense, balls = graze_paths(arm, 12, delta, margin=margin,
+        paths, dense, balls = grazing_paths(arm, 12, delta, margin=margin,
                                           seed=int(1e4 * delta) + 7)
-        wb = _ball_worlds(balls)
+        wb = ball_worlds(balls)
         old = MotionCheck(arm, wb, device=device, options=ADVANCE).check(
             paths, margin=margin, world_group=1)
         new = MotionCheck(arm, wb, device=device, options=LEVELS).check(
@@ -164,8 +118,8 @@ def test_levels_prove_grazing_paths_in_a_batch_of_worlds(device, arm, margin):
 def test_levels_uncertify_below_min_step(arm):
     """A graze the smallest step cannot resolve is uncertified (not feasible), as by the
     advancement; a coarser ``min_step`` uncertifies earlier."""
-    paths, dense, balls = graze_paths(arm, 6, 2e-5, seed=3)
-    wb = _ball_worlds(balls)
+    paths, dense, balls = grazing_paths(arm, 6, 2e-5, seed=3)
+    wb = ball_worlds(balls)
     for ms in (1e-5, 1e-3):
         old = MotionCheck(arm, wb, options=MotionOptions(method="advance", min_step=ms)).check(
             paths, world_group=1)
@@ -225,8 +179,8 @@ def test_levels_overflow_never_certifies(arm, scene):
     """A work list too small for the segments: without the fallback what does not fit is
     uncertified; with it (the advancement from the proven prefix) the verdicts are the
     full check's. The level cap likewise."""
-    paths, dense, balls = graze_paths(arm, 8, 2e-4, W=4, seed=41)
-    wb = _ball_worlds(balls)
+    paths, dense, balls = grazing_paths(arm, 8, 2e-4, W=4, seed=41)
+    wb = ball_worlds(balls)
     full = MotionCheck(arm, wb, options=LEVELS).check(paths, world_group=1)
     assert full.ok.all()
     for cap in (1, 7, 40, 200):
