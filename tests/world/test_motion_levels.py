@@ -222,3 +222,28 @@ def test_levels_is_the_gpu_default_and_options_are_validated(arm, scene):
                      (dict(fallback="yes"), "fallback")):
         with pytest.raises(ValueError, match=name):
             MotionCheck(arm, scene, options=MotionOptions(**kw))
+
+
+def test_planner_with_the_levels_plans_feasible_paths(arm, scene, monkeypatch):
+    """The planner's checks (its confirmation launch with ``group``, float32 paths) on the
+    levels (the GPU's default) on the CPU: straight lines through an object are planned
+    around it, and every path called feasible keeps clear of the world densely sampled."""
+    from jwarp.solvers.planning import plan
+    monkeypatch.setattr(MotionOptions, "resolved_method", lambda self, device: "levels")
+    calls = []
+    orig = MotionCheck._launch_levels
+    monkeypatch.setattr(MotionCheck, "_launch_levels",
+                        lambda self, *a, **kw: calls.append(a[4]) or orig(self, *a, **kw))
+    rng = np.random.default_rng(9)
+    lim = np.array(arm.joint_limits)
+    q = rng.uniform(lim[:, 0], lim[:, 1], size=(400, 2, arm.n_dof)) * 0.6
+    free = (min_distances(arm, q.reshape(-1, arm.n_dof), scene, dtype=np.float64)
+            .reshape(400, 2, 2).min(axis=(1, 2)) > 0.02)
+    lines = q[:, :1] + np.linspace(0, 1, 20)[None, :, None] * (q[:, 1:] - q[:, :1])
+    through = _dense(arm, scene, lines, n=50)[:, 0] < 0
+    k = np.nonzero(free & through)[0][:3]
+    assert len(k) == 3
+    res = plan(arm, scene, q[k, 0], q[k, 1], n_starts=4, iterations=80, device="cpu")
+    assert res.feasible.all()
+    assert (_dense(arm, scene, np.asarray(res.path), n=400) >= 0).all()
+    assert calls                                      # the planner's check ran the levels
