@@ -9,6 +9,8 @@ level in parallel), on the same paths in the same process.
     python benchmarks/bench_motion_check.py                    # CPU
     python benchmarks/bench_motion_check.py --device cuda      # a GPU
     python benchmarks/bench_motion_check.py --quick            # smoke-test sizes
+    python benchmarks/bench_motion_check.py --device cuda --advance-evals 64 \
+        --advance-rounds 8                                     # the planner's GPU settings
 
 Cases per robot (arm7, justin19, and the fitted-sphere Panda of benchmarks/scene_problems.py
 when its URDF is installed):
@@ -94,8 +96,10 @@ def load(name: str) -> Any:
 
 def run_case(robot: Any, world: World, paths: np.ndarray, world_group: int, device: Any,
              args: argparse.Namespace) -> dict:
-    checks = [MotionCheck(robot, world, device=device, options=MotionOptions(method=m))
-              for m in ("advance", "levels")]
+    adv = MotionOptions(method="advance", max_evals=args.advance_evals,
+                        rounds=args.advance_rounds)
+    checks = [MotionCheck(robot, world, device=device, options=o)
+              for o in (adv, MotionOptions(method="levels"))]
     P = wp.array(np.ascontiguousarray(paths, np.float64), dtype=wp.float64, device=device)
     idx = wp.array(np.arange(len(paths), dtype=np.int32), device=device)
     res = []
@@ -124,6 +128,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--robots", default="arm7,justin19,panda")
     ap.add_argument("--paths", type=int, default=None, help="ordinary paths per robot")
     ap.add_argument("--graze", type=int, default=None, help="grazing paths per case")
+    ap.add_argument("--advance-evals", type=int, default=MotionOptions.max_evals,
+                    help="the advancement's max_evals (the planner's on a GPU: "
+                         "PLANNER_CHECK_EVALS_GPU = 64)")
+    ap.add_argument("--advance-rounds", type=int, default=MotionOptions.rounds,
+                    help="the advancement's parallel rounds on a GPU (the planner's: 8)")
     ap.add_argument("--min-time", type=float, default=0.2)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--quick", action="store_true")

@@ -479,7 +479,7 @@ class MotionCheck:
         M = 0 if levels else (o.points if o.points is not None
                               else (16 if self.device.is_cuda else 0))
         n_seg = K * (W - 1)
-        cap = self._capacity(n_seg) if levels else 0
+        cap = self._work_lists(n_seg) if levels else 0
         sc = self._scratch_for(n_seg, cap if levels else n_seg * max(M, 1))
         em = margin if endpoint_margin is None else endpoint_margin
         kern = mk.kernels(paths.dtype)
@@ -528,11 +528,26 @@ class MotionCheck:
         self.last_launches = n_launch + 1
         return out
 
-    def _capacity(self, n_seg: int) -> int:
+    def _work_lists(self, n_seg: int) -> int:
+        """The levels' two work lists (segment row, interval) for ``n_seg`` segments:
+        :attr:`MotionOptions.capacity` entries, or (None) at least twice the level-0
+        intervals, kept and grown by half (varying batches reuse them); returns their
+        length (the capacity of this launch)."""
         o = self.options
         if o.capacity is not None:
-            return int(o.capacity)
-        return max(2 * n_seg * int(o.intervals), 1024)
+            cap = int(o.capacity)
+            if not self._lists or self._lists[0].shape[0] != cap:
+                self._lists = tuple(wp.empty(cap, dtype=wp.int32, device=self.device)
+                                    for _ in range(4))
+            return cap
+        need = max(2 * n_seg * int(o.intervals), 1024)
+        have = self._lists[0].shape[0] if self._lists else 0
+        if have < need:
+            cap = max(need, int(have * 1.5))
+            self._lists = ()  # free the old ones first
+            self._lists = tuple(wp.empty(cap, dtype=wp.int32, device=self.device)
+                                for _ in range(4))
+        return self._lists[0].shape[0]
 
     def _launch_levels(self, kern: Any, paths: wp.array, idx: wp.array, K: int, W: int,
                        cap: int, sc: Any, out: dict, margin: float, em: float,
@@ -545,9 +560,7 @@ class MotionCheck:
         dev = self.device
         n0 = int(o.intervals)
         L = o.n_levels()
-        if not self._lists or self._lists[0].shape[0] != cap:
-            self._lists = tuple(wp.empty(cap, dtype=wp.int32, device=dev) for _ in range(4))
-        lists = self._lists
+        lists = self._lists  # (_work_lists: cap entries each)
         count = self._levels_count
         if count is None or count.shape[0] != L + 2:
             count = self._levels_count = wp.zeros(L + 2, dtype=wp.int32, device=dev)
@@ -558,8 +571,7 @@ class MotionCheck:
         n = 1
         host = None if dev.is_cuda else count.numpy()  # the CPU: a view, no copy
         for lv in range(L):
-            src, dst = lists[2 * (lv % 2): 2 * (lv % 2) + 2], lists[2 - 2 * (lv % 2):
-                                                                     4 - 2 * (lv % 2)]
+            src, dst = (lists[:2], lists[2:]) if lv % 2 == 0 else (lists[2:], lists[:2])
             dim = cap
             if host is not None:
                 dim = min(int(host[lv]), cap)
