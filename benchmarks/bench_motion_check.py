@@ -3,8 +3,9 @@
 (``MotionOptions(method="advance")``: on a GPU 4 rounds of 16 parallel points per segment
 first, then one thread per segment advancing from the proven prefix; on the CPU the
 advancement alone) against the interval refinement (``method="levels"``: 16 intervals per
-segment, each proven from its midpoint or halved, level by level, every interval of a
-level in parallel), on the same paths in the same process.
+segment, each proven from its midpoint or cut to the parts it leaves unproven, at most
+half of it each, level by level, every interval of a level in parallel), on the same
+paths in the same process.
 
     python benchmarks/bench_motion_check.py                    # CPU
     python benchmarks/bench_motion_check.py --device cuda      # a GPU

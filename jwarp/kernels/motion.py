@@ -28,9 +28,11 @@ clearance ``d_s >= m + w L_s`` (pairs likewise) proves [u_m - w, u_m + w]. The *
 split every segment into n0 intervals (level 0) and evaluate every interval of a level in
 parallel, at its midpoint with ``reach`` = its half width: a clearance below the margin is
 a proven violation, a step >= the half width proves the interval, a step below
-``min_step`` leaves the segment uncertified (as the advancement does), any other interval
-is halved and both halves are appended to the next level's work list (compacted with an
-atomic counter; a fixed capacity). A segment is proven when all its intervals are. What
+``min_step`` leaves the segment uncertified (as the advancement does); of any other
+interval the two parts the step does not prove, [u0, u_m - step] and [u_m + step, u1]
+(each at most half of it: the widths at least halve per level), are appended to the next
+level's work list (compacted with an atomic counter; a fixed capacity). A segment is
+proven when all its intervals are. What
 the levels leave (the capacity, the level cap) goes on with the advancement from its
 proven prefix, or is uncertified: nothing is proven that the bound does not prove.
 
@@ -539,12 +541,14 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         seg: Segments,
         # Data out:
         list_seg: wp.array(dtype=wp.int32),
-        list_i: wp.array(dtype=wp.int32),
+        list_u0: wp.array(dtype=f64),
+        list_u1: wp.array(dtype=f64),
     ):
         """Level 0 of the interval refinement (launch dim (K, W - 1), after
         :func:`prep_kernel`): segment t of path k, within the limits, is split into ``n0``
         equal intervals [j / n0, (j + 1) / n0], appended to the work list (``list_seg``:
-        the segment row k (W - 1) + t, ``list_i``: j; ``count[0]`` their number). An
+        the segment row k (W - 1) + t, ``list_u0``, ``list_u1``: the interval's ends in
+        the segment's parameter u; ``count[0]`` their number). An
         interval beyond the list's capacity is left to the sequential advancement
         (``seg.cov`` = its start). A segment of a path outside the limits is skipped."""
         k, t = wp.tid()
@@ -563,7 +567,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             pos = base + j
             if pos < cap:
                 list_seg[pos] = k * W1 + t
-                list_i[pos] = j
+                list_u0[pos] = f64(j) / f64(n0)
+                list_u1[pos] = f64(j + 1) / f64(n0)
             else:
                 wp.atomic_min(seg.cov, k, t, f64(j) / f64(n0))
 
@@ -581,10 +586,10 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         group: int,
         world_group: int,
         level: int,
-        n_level: int,
         last: int,
         list_seg: wp.array(dtype=wp.int32),
-        list_i: wp.array(dtype=wp.int32),
+        list_u0: wp.array(dtype=f64),
+        list_u1: wp.array(dtype=f64),
         # Scratch:
         sc: CheckScratch,
         # Data in/out:
@@ -595,14 +600,14 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         seg: Segments,
         # Data out:
         next_seg: wp.array(dtype=wp.int32),
-        next_i: wp.array(dtype=wp.int32),
+        next_u0: wp.array(dtype=f64),
+        next_u1: wp.array(dtype=f64),
     ):
         """One level of the interval refinement (launch dim: the list's capacity on a GPU,
         threads past ``count[level]`` return; its size on the CPU). Interval i of the list
-        is [j, j + 1] / ``n_level`` of segment row r = ``list_seg[i]`` (j = ``list_i[i]``;
-        ``n_level`` = n0 2^level intervals per segment at this level). One :func:`advance`
-        at its midpoint u_m with ``reach`` = its half width w (objects farther than the
-        interval's whole motion are not visited; scratch row i):
+        is [u0, u1] = [``list_u0[i]``, ``list_u1[i]``] of segment row r = ``list_seg[i]``.
+        One :func:`advance` at its midpoint u_m with ``reach`` = its half width w (objects
+        farther than the interval's whole motion are not visited; scratch row i):
 
         * a clearance below the margin: the segment fails there (WORLD/SELF, proven);
         * step >= w: the interval is proven (every sphere moves at most ``travel * w``
@@ -611,9 +616,11 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         * else, where step < ``min_step``: the segment is UNCERTIFIED there (the motion
           grazes the margin; an interval narrower than ``min_step`` is never split: it is
           proven or this); where ``last``: the interval is left to the sequential
-          advancement (``seg.cov`` = min of its start); else its two halves are appended
-          to the next level's list (``next_seg``, ``next_i``, counter ``count[level + 1]``;
-          a half beyond the capacity is left like ``last``).
+          advancement (``seg.cov`` = min of its start); else the parts the evaluation does
+          not prove, [u0, u_m - step] and [u_m + step, u1] (each at most half of it), are
+          appended to the next level's list (``next_*``, counter ``count[level + 1]``; a
+          part beyond the capacity is left like ``last``). The ends are rounded outwards
+          (by 1e-15: what an interval leaves out is proven).
 
         A segment already decided, of a failed path (``bad``) or of a solved problem
         (``group``) is not evaluated further."""
@@ -622,7 +629,6 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             return
         W = paths.shape[1]
         r = list_seg[i]
-        j = list_i[i]
         k = r // (W - 1)
         t = r - k * (W - 1)
         if seg.code[k, t] != OK or bad[k] != 0:
@@ -637,10 +643,10 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         if world_group > 0:
             wg = p // world_group
         m_req, m_self = required(margin, end_margin, self_margin, t, W)
-        u0 = f64(j) / f64(n_level)
-        u1 = f64(j + 1) / f64(n_level)
+        u0 = list_u0[i]
+        u1 = list_u1[i]
         um = half * (u0 + u1)
-        w = half * (u1 - u0)
+        w = wp.max(um - u0, u1 - um) + f64(1e-15)  # covers [u0, u1] despite rounding
         for jj in range(paths.shape[2]):
             sc.q[i, jj] = f64(paths[p, t, jj]) + um * sc.dq[r, jj]
         c, a, b, d, step = advance(cm, sc, i, r, m_req, m_self, w, wg)
@@ -664,17 +670,35 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         if last != 0:
             wp.atomic_min(seg.cov, k, t, u0)
             return
-        if seg.code[k, t] != OK or bad[k] != 0:  # decided meanwhile: no halves
+        if seg.code[k, t] != OK or bad[k] != 0:  # decided meanwhile: no parts
             return
-        wp.atomic_add(seg.left, k, t, 1)  # one interval out, two in
+        # the parts not proven: [u0, um - s], [um + s, u1] with s = step less a guard, so
+        # that the rounded ends lie within the proven [um - step, um + step]; an empty
+        # part (its end before its start) lies within it whole
+        sg = wp.max(step - f64(1e-15), zero)
+        a_end = um - sg
+        b_start = um + sg
+        n_parts = int(0)
+        if a_end > u0:
+            n_parts += 1
+        if u1 > b_start:
+            n_parts += 1
+        wp.atomic_add(seg.left, k, t, n_parts - 1)  # one interval out, its parts in
         cap = next_seg.shape[0]
         for h in range(2):
-            pos = wp.atomic_add(count, level + 1, 1)
-            if pos < cap:
-                next_seg[pos] = r
-                next_i[pos] = 2 * j + h
-            else:
-                wp.atomic_min(seg.cov, k, t, f64(2 * j + h) / f64(2 * n_level))
+            lo = u0
+            hi = a_end
+            if h == 1:
+                lo = b_start
+                hi = u1
+            if hi > lo:
+                pos = wp.atomic_add(count, level + 1, 1)
+                if pos < cap:
+                    next_seg[pos] = r
+                    next_u0[pos] = lo
+                    next_u1[pos] = hi
+                else:
+                    wp.atomic_min(seg.cov, k, t, lo)
 
     @wp.kernel(module="unique", enable_backward=False)
     def level_end_kernel(

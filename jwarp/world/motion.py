@@ -11,9 +11,9 @@ the world's objects; a grid counts with its declared ``grid_error`` subtracted.
 One call checks a batch of paths on the device, in a few launches: on the CPU by
 conservative advancement (one thread per segment, :attr:`MotionOptions.method`
 "advance"), on a GPU by interval refinement (every segment split into intervals, each
-proven from its midpoint or halved, level by level, every interval of a level a thread:
-"levels"; a fixed number of launches, no host read), both with the same travel bound;
-a last launch reduces them: per path a flag, and for an infeasible one the first
+proven from its midpoint or cut to what it leaves unproven, level by level, every
+interval of a level a thread: "levels"; a fixed number of launches, no host read), both
+with the same travel bound; a last launch reduces them: per path a flag, and for an infeasible one the first
 offending place (in waypoint units), the sphere (its link) and the object or the other
 sphere. Only these few numbers per path are read back.
 
@@ -68,8 +68,9 @@ class MotionOptions:
             every segment's part not proven yet (denser near its start after the first),
             so a segment that grazes an obstacle is proven in parallel steps.
         method: ``"levels"`` (interval refinement: every segment split into
-            ``intervals`` intervals, each proven from its midpoint or halved, level by
-            level, all intervals of a level in parallel), ``"advance"`` (conservative
+            ``intervals`` intervals, each proven from its midpoint or cut to the two parts
+            that evaluation leaves unproven (each at most half of it), level by level, all
+            intervals of a level in parallel), ``"advance"`` (conservative
             advancement from the start of each segment, one thread per segment, after
             ``points`` x ``rounds`` parallel evaluations), or None: "levels" on a GPU,
             "advance" on the CPU. Both use the same travel bound and evaluation.
@@ -371,7 +372,7 @@ class MotionCheck:
         cm.limit_tol = wp.float64(LIMIT_TOL)
         self._cm = cm
         self._scratch: tuple | None = None
-        self._lists: tuple = ()  # the levels' work lists (two of (segment row, interval))
+        self._lists: tuple = ()  # the levels' work lists (two of (segment row, u0, u1))
         self._levels_count: wp.array | None = None  # per level its list's size
         #: kernel launches of the last check (memsets not counted)
         self.last_launches = 0
@@ -537,17 +538,21 @@ class MotionCheck:
         if o.capacity is not None:
             cap = int(o.capacity)
             if not self._lists or self._lists[0].shape[0] != cap:
-                self._lists = tuple(wp.empty(cap, dtype=wp.int32, device=self.device)
-                                    for _ in range(4))
+                self._lists = self._new_lists(cap)
             return cap
         need = max(2 * n_seg * int(o.intervals), 1024)
         have = self._lists[0].shape[0] if self._lists else 0
         if have < need:
             cap = max(need, int(have * 1.5))
             self._lists = ()  # free the old ones first
-            self._lists = tuple(wp.empty(cap, dtype=wp.int32, device=self.device)
-                                for _ in range(4))
+            self._lists = self._new_lists(cap)
         return self._lists[0].shape[0]
+
+    def _new_lists(self, cap: int) -> tuple:
+        """Two work lists of ``cap`` intervals: (segment row, u0, u1) each."""
+        dev = self.device
+        return tuple(wp.empty(cap, dtype=dt, device=dev)
+                     for _ in range(2) for dt in (wp.int32, wp.float64, wp.float64))
 
     def _launch_levels(self, kern: Any, paths: wp.array, idx: wp.array, K: int, W: int,
                        cap: int, sc: Any, out: dict, margin: float, em: float,
@@ -567,11 +572,11 @@ class MotionCheck:
         count.zero_()
         seg = out["seg"]
         wp.launch(kern.level_init, dim=(K, W - 1), inputs=[n0, out["bad"]],
-                  outputs=[count, seg, lists[0], lists[1]], device=dev)
+                  outputs=[count, seg, *lists[:3]], device=dev)
         n = 1
         host = None if dev.is_cuda else count.numpy()  # the CPU: a view, no copy
         for lv in range(L):
-            src, dst = (lists[:2], lists[2:]) if lv % 2 == 0 else (lists[2:], lists[:2])
+            src, dst = (lists[:3], lists[3:]) if lv % 2 == 0 else (lists[3:], lists[:3])
             dim = cap
             if host is not None:
                 dim = min(int(host[lv]), cap)
@@ -580,10 +585,9 @@ class MotionCheck:
             wp.launch(kern.level, dim=dim,
                       inputs=[self._cm, paths, idx, float(margin), float(em),
                               float(self_margin), float(o.min_step), int(group),
-                              int(world_group), lv, n0 << lv, int(lv == L - 1), src[0], src[1],
-                              sc],
+                              int(world_group), lv, int(lv == L - 1), *src, sc],
                       outputs=[count, out["bad"], out["ok_segments"], out["solved"], seg,
-                               dst[0], dst[1]], device=dev)
+                               *dst], device=dev)
             n += 1
         wp.launch(kern.level_end, dim=(K, W - 1),
                   inputs=[int(group), int(o.fallback), idx, out["solved"]],

@@ -133,6 +133,20 @@ def test_levels_uncertify_below_min_step(arm):
             assert 1 / (2 * 16 * 2 ** (chk.options.n_levels() - 1)) < ms
 
 
+def test_levels_never_prove_a_shallow_collision(arm):
+    """Spheres that dip 20 um and 1 um into a ball for a moment (a small part of one
+    interval): never feasible (an interval left out of the proof would show here)."""
+    for delta, seed in ((-2e-5, 51), (-1e-6, 52)):
+        paths, dense, balls = grazing_paths(arm, 16, delta, seed=seed)
+        assert (dense < 0).all()
+        wb = ball_worlds(balls)
+        new = MotionCheck(arm, wb, options=LEVELS).check(paths, world_group=1)
+        old = MotionCheck(arm, wb, options=ADVANCE).check(paths, world_group=1)
+        _compare(f"graze {delta * 1e3:+.3f} mm", old, new, dense >= 0)
+        assert not new.ok.any()
+        assert set(new.code) <= {WORLD, UNCERTIFIED}
+
+
 def test_levels_self_collision(device, arm):
     """Self-collision only (no world), with a self margin: verdicts of the advancement."""
     paths = _random_paths(arm, 200, 4, seed=21, scale=1.0)
