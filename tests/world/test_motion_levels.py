@@ -83,7 +83,8 @@ def test_levels_agree_on_free_and_colliding_paths(device, arm, scene):
     np.testing.assert_array_equal(new.ok, old.ok)
     bad = ~new.ok
     assert set(new.code[bad]) <= {WORLD, SELF}
-    np.testing.assert_array_equal(new.code[bad], old.code[bad])
+    if device == "cpu":  # (on a GPU the first segment to fail stops the others: any)
+        np.testing.assert_array_equal(new.code[bad], old.code[bad])
     # the place reported is a place of the violation: a configuration there collides
     for i in np.nonzero(new.code == WORLD)[0][:10]:
         t = int(new.where[i])
@@ -91,7 +92,8 @@ def test_levels_agree_on_free_and_colliding_paths(device, arm, scene):
         q = paths[i, t] + u * (paths[i, t + 1] - paths[i, t])
         assert min_distances(arm, q[None], scene, dtype=np.float64)[0, 0] < 1e-9
         assert "vs object" in new.reason(i)
-    assert chk.last_launches <= 4 + chk.options.n_levels()
+    # prep, level 0, the levels, their end, (the advancement of what is left,) reduce
+    assert chk.last_launches <= 5 + chk.options.n_levels()
 
 
 @pytest.mark.parametrize("margin", [0.0, 0.01])
@@ -185,7 +187,8 @@ def test_levels_group_stops_a_solved_problem(device, arm, scene, dtype):
     has = solo.ok.reshape(-1, G).any(1)
     assert 0 < has.sum() < len(has)                # solved and unsolved problems
     np.testing.assert_array_equal(ok.reshape(-1, G).any(1), has)
-    assert (code == 5).sum() > 0                    # some skipped
+    if device == "cpu":  # (a GPU may prove every path of a problem in one level)
+        assert (code == 5).sum() > 0                # some skipped
     assert not (ok & ~solo.ok).any()
 
 
