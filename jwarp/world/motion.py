@@ -51,22 +51,26 @@ __all__ = ["MotionCheck", "MotionOptions", "PathCheck", "check_paths", "motion_c
 
 @dataclass
 class MotionOptions:
-    """Options of the continuous check (conservative advancement, :mod:`jwarp.kernels.motion`).
+    """Options of the continuous check (conservative advancement or interval refinement,
+    :mod:`jwarp.kernels.motion`).
 
     Attributes:
         min_step: the smallest proven step, as a fraction of a segment, in (0, 1): a
             segment whose motion can only be proven in smaller steps (it grazes the
             margin) is reported uncertified.
-        max_evals: most evaluations per segment (then uncertified), >= 1.
-        probe_len: a coarse pass probes each segment every ``probe_len`` [m] of sphere
-            travel (at most 16 probes) for a clearance below the margin before the
-            advancement, > 0 (colliding paths are found in a few evaluations).
-        points: evaluations of every segment in parallel before the advancement (each
-            proves an interval around it; the advancement goes on from the first gap),
-            >= 1, or 0 for none; None: 16 on a GPU (a thread per evaluation), 0 on the CPU.
-        rounds: rounds of parallel evaluations (>= 1): each evaluates ``points`` points of
-            every segment's part not proven yet (denser near its start after the first),
-            so a segment that grazes an obstacle is proven in parallel steps.
+        max_evals: most evaluations per segment of the advancement (then uncertified),
+            >= 1 (the levels have none: ``levels`` and ``capacity`` bound them).
+        probe_len: ``"advance"``: a coarse pass probes each segment every ``probe_len``
+            [m] of sphere travel (at most 16 probes) for a clearance below the margin
+            before the advancement, > 0 (colliding paths are found in a few evaluations).
+        points: ``"advance"``: evaluations of every segment in parallel before the
+            advancement (each proves an interval around it; the advancement goes on from
+            the first gap), >= 1, or 0 for none; None: 16 on a GPU (a thread per
+            evaluation), 0 on the CPU.
+        rounds: ``"advance"``: rounds of parallel evaluations (>= 1): each evaluates
+            ``points`` points of every segment's part not proven yet (denser near its
+            start after the first), so a segment that grazes an obstacle is proven in
+            parallel steps.
         method: ``"levels"`` (interval refinement: every segment split into
             ``intervals`` intervals, each proven from its midpoint or cut to the two parts
             that evaluation leaves unproven (each at most half of it), level by level, all
