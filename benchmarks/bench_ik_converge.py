@@ -129,13 +129,14 @@ def section_reach(args: argparse.Namespace) -> dict:
             "by_targets": out}
 
 
-def scene_setup(n_targets: int, device: str) -> tuple:
-    """(sphere model, exact world, targets (n, 4, 4)) of the table-and-bookshelf scene."""
+def scene_setup(n_targets: int, device: str, robot_file: str | None = None) -> tuple:
+    """(sphere model, exact world, targets (n, 4, 4)) of the table-and-bookshelf scene
+    (``robot_file``: the fitted Panda as a robot JSON, else fitted here)."""
     import scene_problems as sp
     from jwarp.world.path_feasibility import collision_free
     from jwarp.world.scene_file import exact_world, scene_from_dict
 
-    robot, _ = sp.load_robot()
+    robot, _ = sp.load_robot(robot_file)
     rng = np.random.default_rng(7)
     objects, _, _ = sp.FAMILIES["bookshelf_small"](rng)
     table, _, _ = sp.FAMILIES["table_pick"](np.random.default_rng(8))
@@ -154,7 +155,7 @@ def scene_setup(n_targets: int, device: str) -> tuple:
 
 
 def section_scene(args: argparse.Namespace) -> dict:
-    robot, world, T = scene_setup(args.scene_targets, args.device)
+    robot, world, T = scene_setup(args.scene_targets, args.device, args.panda)
     P = len(T)
     o = IKOptions(n_starts=4, seed=0)
     batch = IKSolver(robot, TCP, P, o, world=world, device=args.device)
@@ -189,6 +190,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", type=int, default=4, help="seeds per target (reach)")
     p.add_argument("--iterations", type=int, default=50, help="iterations (reach)")
     p.add_argument("--scene-targets", type=int, default=100)
+    p.add_argument("--panda", default=None, metavar="JSON",
+                   help="scene: the fitted Panda robot file (default: fit it here)")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--dtype", choices=("float64", "float32"), default="float64",
                    help="the solver's float type (reach; its feasibility check is float64)")

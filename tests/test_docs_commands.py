@@ -683,6 +683,34 @@ def test_ik_md_why_lines(in_work, capsys):
     assert ans["pos_err"] >= gap - 1e-6, (ans["pos_err"], gap)
 
 
+def test_ik_md_targets_file(in_work, capsys):
+    """docs/ik.md "Many targets": the quoted targets.csv solved in one batch by the quoted
+    command; results.csv holds a row per target (joint names, status, errors) whose FK is
+    its target, and the printed line starts as quoted."""
+    import jwarp
+    from jwarp.solvers.ik.objective import pose_from_quaternions
+
+    text = (ROOT / "docs" / "ik.md").read_text()
+    block = re.search(r"`targets.csv`.*?```text\n(x,y,z,qx,qy,qz,qw\n.*?)```", text, re.S)
+    assert block, "docs/ik.md: the quoted targets.csv"
+    (in_work / "targets.csv").write_text(block.group(1))
+    code, out, err = run(capsys, argv_of("docs/ik.md: jwarp ik --robot arm7 --frame right_tcp "
+                                         "--targets targets.csv --out results.csv"))
+    quoted = re.search(r"prints `(robot arm7: IK .*?) \.\.\.`", text, re.S)
+    assert quoted and code == 0, out + err
+    assert out.startswith(" ".join(quoted.group(1).split())), out
+    robot = jwarp.robot("arm7")
+    rows = list(csv.reader(open(in_work / "results.csv")))
+    assert rows[0] == [*robot.joint_names, "status", "pos_err_m", "rot_err_rad"]
+    vals = np.array([[float(v) for v in r[:7]] for r in rows[1:]])
+    assert [r[7] for r in rows[1:]] == ["solved"] * 3
+    tgt = np.loadtxt(in_work / "targets.csv", delimiter=",", skiprows=1)
+    T = pose_from_quaternions(tgt[:, :3], tgt[:, 3:])
+    F = jwarp.fk(robot, vals)[:, robot.frame_index("right_tcp")]
+    assert np.all(np.linalg.norm(F[:, :3, 3] - T[:, :3, 3], axis=1) <= 1e-4 + 1e-9)
+    assert all(_rot_angle(F[k, :3, :3], T[k, :3, :3]) <= 1e-3 + 1e-7 for k in range(3))
+
+
 # ------------------------------------------------------------------ every command, run
 def _path_columns(out: str, joint_names: list[str]) -> np.ndarray:
     """The path table ``jwarp plan`` prints (one row per joint, one column per waypoint,

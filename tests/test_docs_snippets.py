@@ -136,7 +136,7 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "q = uniform_configurations(robot, np.random.default_rng(2), 20)\n",
         "`setup` the hand4 contact setup, `world` an empty exact world, `q` 20 uniform "
         "configurations to check"),
-    "docs/ik.md:112": (
+    "docs/ik.md:167": (
         "import jwarp\nimport numpy as np\n"
         "from jwarp.world import load_scene, exact_world\n"
         "robot = jwarp.robot('justin19')\n"
@@ -188,10 +188,11 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "__import__('os').mkdir('ros_share')\n",
         "panda.urdf: example-robot-data's Panda; `q` 3 configurations of it; ros_share: "
         "the folder of the package_dirs substitution"),
-    "docs/urdf.md:163": (_panda("panda.urdf", "panda.srdf"),
+    "docs/urdf.md:43": ("", "self-contained (example-robot-data of the test extra)"),
+    "docs/urdf.md:198": (_panda("panda.urdf", "panda.srdf"),
                          "panda.urdf/panda.srdf: example-robot-data's Panda and its SRDF"),
-    "docs/urdf.md:226": (_panda("panda.urdf"), "panda.urdf: example-robot-data's Panda"),
-    "docs/urdf.md:310": (
+    "docs/urdf.md:261": (_panda("panda.urdf"), "panda.urdf: example-robot-data's Panda"),
+    "docs/urdf.md:349": (
         f"import jwarp\nopen('panda.xml', 'w').write({MJCF_ARM!r})\n",
         "panda.xml: tests/test_docs_commands.py's small MJCF arm (a Panda MJCF such as "
         "MuJoCo Menagerie's is not installed here), which has the attachment_site"),
@@ -392,6 +393,21 @@ def _check_urdf(ns: dict, folder: Path, out: str) -> None:
     assert ns["tcp"].shape == (len(q), 4, 4) and ns["imported"].geometries_of("panda_link3")
 
 
+def _check_robot_names(ns: dict, folder: Path, out: str) -> None:
+    """The Panda by name is the Panda of its URDF; ur5_urdf is UR5's file; the names list
+    the ones the text names."""
+    import jwarp
+    from jwarp.model import RobotModel
+
+    panda = ns["panda"]
+    assert panda.n_dof == 8 and list(panda.end_effectors) == ["panda_hand_tcp"]
+    ref = RobotModel.from_urdf(__import__("jwarp.importers.robot", fromlist=["x"])
+                               .example_robot_urdf("panda_description/urdf/panda.urdf"))
+    assert panda.frame_names == ref.frame_names
+    assert ns["ur5_urdf"].endswith("ur5_robot.urdf") and jwarp.robot(ns["ur5_urdf"]).n_dof == 6
+    assert {"panda", "ur3", "ur5", "ur10", "xarm7", "z1", "baxter"} <= set(ns["names"])
+
+
 def _check_group(ns: dict, folder: Path, out: str) -> None:
     assert len(ns["res"].model.joint_names) == 7 and ns["arm"].n_dof == 7
 
@@ -432,7 +448,7 @@ CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
     "docs/design.md:9": _check_sensitivity,
     "docs/design.md:40": _check_design,
     "docs/design.md:100": _check_pool,
-    "docs/ik.md:112": _check_explain_ik,
+    "docs/ik.md:167": _check_explain_ik,
     "docs/measurements.md:8": _check_measurement,
     "docs/measurements.md:192": _check_hook,
     "docs/robot_schema.md:313": _check_robot_hook,
@@ -443,9 +459,10 @@ CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
     "docs/spheres.md:10": _check_sphere_fit,
     "docs/spheres.md:204": _check_self_pairs,
     "docs/urdf.md:6": _check_urdf,
-    "docs/urdf.md:163": _check_group,
-    "docs/urdf.md:226": _check_spherized,
-    "docs/urdf.md:310": _check_mjcf,
+    "docs/urdf.md:43": _check_robot_names,
+    "docs/urdf.md:198": _check_group,
+    "docs/urdf.md:261": _check_spherized,
+    "docs/urdf.md:349": _check_mjcf,
     "docs/urdf_export.md:67": _check_export,
     "examples/README.md:90": _check_campaign,
 }

@@ -46,6 +46,7 @@ also calibration rows are an error unless ``--allow-overlap``; without
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -95,11 +96,27 @@ class ProgressBar:
         self.round = 1
         self.restarts = 0
 
+    def _finish(self) -> None:
+        """Close the current bar; a run that ended before its budget (converged, or an
+        active-set round/start that stopped early) is drawn complete: 100 %, its count of
+        iterations and the budget it did not need."""
+        bar = self.bar
+        if bar is None:
+            return
+        if bar.total and bar.n < bar.total:
+            budget = bar.total
+            bar.total = bar.n
+            bar.bar_format = ("{desc}: {percentage:3.0f}%|{bar}| {n_fmt} iterations, done "
+                              f"within the --max-nfev budget of {budget}"
+                              " [{elapsed}{postfix}]")
+            bar.refresh()
+        bar.close()
+        self.bar = None
+
     def _new_bar(self, p: Any) -> None:
         from tqdm.auto import tqdm
 
-        if self.bar is not None:
-            self.bar.close()
+        self._finish()
         desc = self.label if p.n_starts == 1 else f"{self.label} start {p.start + 1}/{p.n_starts}"
         self.bar = tqdm(total=self.total, desc=desc, unit="it", file=self.stream,
                         dynamic_ncols=True, leave=True, mininterval=0.2 if self.tty else 1.0,
@@ -136,9 +153,8 @@ class ProgressBar:
         self.bar.set_postfix_str(post, refresh=False)
 
     def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
+        """Close the bar (complete when the fit ended before its budget)."""
+        self._finish()
 
 
 def _stats(err: np.ndarray, scale: float) -> dict[str, float]:
@@ -525,7 +541,6 @@ def _with_provenance(robot: Any, args: argparse.Namespace, setup: Any, raw: byte
     """The calibrated robot renamed (``--name``, default ``<name>-calibrated``) with its
     provenance in ``notes['calibration']`` (JSON: campaign id, input files and the
     SHA-256 of the samples, rows, free groups, errors before/after, date, jwarp version)."""
-    import dataclasses
     from datetime import datetime, timezone
 
     from jwarp import __version__
@@ -605,6 +620,10 @@ def cmd_simulate_campaign(args: argparse.Namespace) -> int:
     if not robot_name:
         raise _cli_error("--robot: not given and the setup file names no robot")
     model = get_robot(robot_name)
+    # the written setup.json names the robot, so calibrate needs no --robot again (a file
+    # by its absolute path: calibrate may run from another folder)
+    recorded = os.path.abspath(robot_name) if os.path.isfile(robot_name) else robot_name
+    setup = dataclasses.replace(setup, robot=recorded)
     _check_campaign_memory(model, make_measurement(model, setup), args.samples)
     k = args.kappa if args.kappa is not None else (
         DEFAULT_TRUE_KAPPA if model.name in ELASTIC_ROBOTS else 0.0)

@@ -176,15 +176,20 @@ def rerun_recording(cls: type, path: str, *args: Any) -> Any:
 
 # ------------------------------------------------------------------ parsing helpers
 def load_robot(name: str):
-    """A registered robot, a robot JSON, or a URDF file with its collision model (spheres
-    fitted to the links' collision geometry and sampled self-collision pairs, cached:
-    :func:`jwarp.world.spherize.spherized_robot`)."""
+    """A registered robot, a robot JSON, or a URDF file (also one of a description
+    package: ``example-robot-data:NAME``, ``robot_descriptions:NAME``) with its collision
+    model (spheres fitted to the links' collision geometry and sampled self-collision
+    pairs, cached: :func:`jwarp.world.spherize.spherized_robot`)."""
+    from jwarp.importers.robot import package_robot_path
     from jwarp.model.registry import robot
 
+    path = package_robot_path(name)  # example-robot-data:NAME, robot_descriptions:NAME
+    if path is not None and path.lower().endswith(".urdf"):
+        name = path
     if isinstance(name, str) and name.lower().endswith(".urdf"):
         from jwarp.world.spherize import spherized_robot
 
-        return spherized_robot(name)[0]
+        return spherized_robot(name, progress=None)[0]  # a bar on a terminal
     return robot(name)
 
 

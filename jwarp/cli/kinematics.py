@@ -66,12 +66,32 @@ def cmd_robots(args: argparse.Namespace) -> int:
     return 0
 
 
+def device_line() -> str:
+    """One line on the devices Warp computes on: ``devices: cpu, cuda:0 (NAME)``, or, on a
+    machine without CUDA, that there is none and why (no NVIDIA driver, or a driver that
+    found no GPU): Warp's own "CUDA driver not found" line is not printed
+    (:mod:`jwarp.utils.warp_init`)."""
+    import warp as wp
+
+    from jwarp.core.arrays import init_warp
+    from jwarp.utils.warp_init import cuda_driver_found
+
+    init_warp()
+    cuda = list(wp.get_cuda_devices())
+    if cuda:
+        return "devices: cpu, " + ", ".join(f"{d} ({d.name})" for d in cuda)
+    why = "the NVIDIA driver found no GPU" if cuda_driver_found() else \
+        "no NVIDIA CUDA driver found"
+    return f"devices: cpu only (no CUDA: {why}; jwarp computes on the CPU)"
+
+
 def cmd_info(args: argparse.Namespace) -> int:
     m = load_robot(args.robot)
     if args.json:
         print(dumps(m.to_dict()))
     else:
         print(m.summary())
+        print(device_line())
     return 0
 
 

@@ -71,7 +71,7 @@ def cmd_import_mjcf(args: argparse.Namespace) -> int:
         opts = SpherizeOptions(tolerance=args.tolerance, max_spheres=args.max_spheres,
                                pair_samples=args.pair_samples)
         try:
-            model, fit = spherize(imported, opts)
+            model, fit = spherize(imported, opts, progress=None)
         except ValueError as e:
             raise import_error(e, "MJCF") from None
     elif spheres == "none":

@@ -19,8 +19,9 @@ Examples::
 transform: 16 numbers or a file); ``--position-only`` or ``--free-axis X,Y,Z`` (the rotation
 about that end-effector axis is free; ``jwarp.ik(orientation=..., free_axis=...)``);
 ``--tol-pos M``/``--tol-rot RAD``; ``--initial Q`` (joint values, ``--deg`` honoured, within
-the limits) is the first of the ``--starts`` seeds; ``--scene`` as for ``plan`` (exact
-objects, or a grid with ``--voxel``/``--extent``). An infeasible answer prints ``why:``
+the limits) is the first of the ``--starts`` seeds; ``--targets FILE --out RESULTS``
+solves a file of targets in one batch (:func:`cmd_ik_batch`, docs/ik.md "Many targets");
+``--scene`` as for ``plan`` (exact objects, or a grid with ``--voxel``/``--extent``). An infeasible answer prints ``why:``
 (JSON ``reason``): :func:`jwarp.solvers.ik.explain.explain_ik` (limits, pose error against
 the tolerances, colliding pairs).
 
@@ -83,6 +84,7 @@ import numpy as np
 from jwarp.cli.common import (CLIError, check_option_memory,
                               rerun_recording, dtype_of, quiet_warp, check_device,
                               check_output, dumps, int_arg, parse_q, real_arg, robot_option)
+from jwarp.cli.vocabulary import add_out
 from jwarp.cli.targets import MAX_TARGET  # noqa: F401  (the largest --target value, here before)
 
 #: log every this many iterations to rerun
@@ -477,7 +479,8 @@ def _orientation(args: argparse.Namespace, has_rotation: bool) -> tuple[str, np.
 
     if args.position_only:
         if has_rotation:
-            given = ("--target-matrix" if args.target_matrix is not None else
+            given = ("--targets" if getattr(args, "targets", None) is not None else
+                     "--target-matrix" if args.target_matrix is not None else
                      "--quat" if args.quat is not None else "--rpy" if args.rpy is not None
                      else "a 6-number --target")
             raise CLIError(f"--position-only: not allowed with {given} (an orientation that "
@@ -522,6 +525,10 @@ def _ik_seeds(args: argparse.Namespace, model: Any, q_init: np.ndarray, T: np.nd
 def cmd_ik(args: argparse.Namespace) -> int:
     from jwarp.cli.targets import target_pose
 
+    if args.targets is not None:
+        return cmd_ik_batch(args)
+    if args.out is not None:
+        raise CLIError("--out: only with --targets (the results of a batch of targets)")
     model = robot_option(args.robot)
     _check_frame(model, args.frame)
     T, has_rotation = target_pose(args.target, args.quat, args.rpy, args.target_matrix)
@@ -633,6 +640,127 @@ def cmd_ik(args: argparse.Namespace) -> int:
         if written:
             print(f"wrote {written}; view with: rerun {written}")
     return 0 if res.feasible else 1
+
+
+#: the file types of ``ik --targets ... --out FILE``
+IK_OUT_TYPES = (".csv", ".npy")
+
+
+def cmd_ik_batch(args: argparse.Namespace) -> int:
+    """``jwarp ik --targets FILE --out RESULTS``: every target of the file in one batch
+    (:func:`jwarp.solvers.ik.ik`); the results (q, status, errors per row) written
+    atomically, the solve rate printed (docs/ik.md "Many targets")."""
+    import time
+
+    from jwarp.cli.targets import TARGET_LAYOUTS, read_targets
+
+    t0 = time.perf_counter()
+    for opt, val in (("--target", args.target), ("--quat", args.quat), ("--rpy", args.rpy),
+                     ("--target-matrix", args.target_matrix), ("--initial", args.initial),
+                     ("--rerun", args.rerun)):
+        if val is not None:
+            raise CLIError(f"--targets: not allowed with {opt} (the file holds the targets)")
+    if args.out is None:
+        raise CLIError("--out: required with --targets (the results file, .csv or .npy)")
+    if not args.out.lower().endswith(IK_OUT_TYPES):
+        raise CLIError(f"--out: expected a .csv or .npy file for the results, got {args.out!r}")
+    model = robot_option(args.robot)
+    _check_frame(model, args.frame)
+    check_output(args.out, "--out", inputs={"--targets": args.targets, "--robot": args.robot,
+                                            "--scene": args.scene, "--world": args.world,
+                                            "--warm-start": args.warm_start})
+    T, layout = read_targets(args.targets)
+    if args.position_only and layout != "position":
+        raise CLIError(f"--position-only: not allowed with --targets holding orientations "
+                       f"({','.join(TARGET_LAYOUTS[layout][3:6])}...); give x,y,z columns")
+    orientation, free_axis = _orientation(args, layout != "position")
+    scene = _load_scene(args, model)
+    kappa = _kappa(args, model)
+    if args.starts is None:
+        args.starts = 0 if args.warm_start is not None else 16
+    elif args.starts < 1 and args.warm_start is None:
+        raise CLIError(f"--starts: expected an integer >= 1, got '{args.starts}'")
+    heads = 2 if args.warm_start is not None else 0
+    check_option_memory(float(len(T)) * (args.starts + heads + 1) * config_bytes(model),
+                        f"{len(T)} targets x {args.starts} starts of '{model.name}'",
+                        "--targets")
+    quiet_warp()
+    check_device(args.device)
+    net = _warm_start(args.warm_start, model, args.frame, args.device)
+    world = _world(args.world, model, args, scene)
+    from jwarp.solvers.ik import ik
+
+    extra: dict = {k: v for k, v in (("tol_pos", args.tol_pos), ("tol_rot", args.tol_rot))
+                   if v is not None}
+    if orientation != "full":
+        extra["orientation"] = orientation
+        if free_axis is not None:
+            extra["free_axis"] = free_axis
+    try:
+        common = dict(world=world, margin=args.margin, iterations=args.iterations,
+                      seed=args.seed, kappa=kappa, device=args.device,
+                      dtype=dtype_of(args.dtype), allow_no_collision=args.no_collision,
+                      **extra)
+        if net is not None:
+            res = ik(model, args.frame, T, warm_start=net,
+                     n_random_with_warm_start=args.starts, **common)
+        else:
+            res = ik(model, args.frame, T, n_starts=args.starts, **common)
+    except (ValueError, TypeError) as e:
+        raise _solver_error("ik", e) from None
+    written = write_ik_results(args.out, model, res)
+    n, solved = len(T), int(np.sum(res.feasible))
+    tol_pos = args.tol_pos if args.tol_pos is not None else _ik_default("tol_pos")
+    tol_rot = args.tol_rot if args.tol_rot is not None else _ik_default("tol_rot")
+    total = time.perf_counter() - t0
+    if args.json:
+        print(dumps({"robot": model.name, "frame": args.frame, "targets": args.targets,
+                     "layout": layout, "n_targets": n, "solved": solved,
+                     "solve_rate": solved / n, "orientation": orientation,
+                     "tol_pos_m": tol_pos, "tol_rot_rad": tol_rot,
+                     "solve_time_s": float(res.wall_time), "wall_time_s": total,
+                     "out": str(written), "joint_names": list(model.joint_names)}))
+    else:
+        print(f"robot {model.name}: IK of {args.frame} for {n} target{'s' if n != 1 else ''} "
+              f"of {args.targets} ({layout}): solved {solved} of {n} ({100.0 * solved / n:.1f} "
+              f"%) within {tol_pos:g} m, {tol_rot:g} rad; solve {res.wall_time:.2f} s, total "
+              f"{total:.2f} s")
+        print(f"wrote {written} (one row per target: q, status, pos_err_m, rot_err_rad)")
+    return 0 if solved == n else 1
+
+
+def ik_result_columns(model: Any) -> list[str]:
+    """The columns of ``ik --targets``'s results: the joint names [rad/m], ``status``
+    (CSV: solved|failed; .npy: 1|0), ``pos_err_m``, ``rot_err_rad``."""
+    return [*model.joint_names, "status", "pos_err_m", "rot_err_rad"]
+
+
+def write_ik_results(path: str, model: Any, res: Any) -> str:
+    """Write the batch IK results ``res`` (an :class:`~jwarp.solvers.ik.IKResult` of N
+    targets) to ``path`` atomically (:class:`jwarp.utils.atomic.AtomicFile`): ``.npy`` a
+    float64 array (N, n_dof + 3) [q, status 1|0, pos_err_m, rot_err_rad], else CSV with a
+    header line of :func:`ik_result_columns`. Returns the path."""
+    from jwarp.utils.atomic import AtomicFile
+
+    q = np.asarray(res.q, np.float64).reshape(-1, model.n_dof)
+    ok = np.asarray(res.feasible, bool).reshape(-1)
+    pos = np.asarray(res.pos_err, np.float64).reshape(-1)
+    rot = np.asarray(res.rot_err, np.float64).reshape(-1)
+    try:
+        with AtomicFile(path, option="--out") as f:
+            if path.lower().endswith(".npy"):
+                with open(f.tmp, "wb") as fh:
+                    np.save(fh, np.column_stack([q, ok.astype(np.float64), pos, rot]))
+            else:
+                lines = [",".join(ik_result_columns(model))]
+                lines += [",".join([*(repr(float(v)) for v in q[i]),
+                                    "solved" if ok[i] else "failed", repr(float(pos[i])),
+                                    repr(float(rot[i]))]) for i in range(len(q))]
+                with open(f.tmp, "w", encoding="utf-8") as fh:
+                    fh.write("\n".join(lines) + "\n")
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    return path
 
 
 def _ik_default(name: str) -> float:
@@ -810,6 +938,13 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--target-matrix", default=None, metavar="FILE_OR_16_NUMBERS",
                    help="the target as a 4x4 rigid transform, row by row: 16 numbers or a "
                         "text file of them (instead of --target)")
+    s.add_argument("--targets", default=None, metavar="FILE",
+                   help="many targets in one batch: a CSV (x,y,z[,qx,qy,qz,qw | roll,pitch,"
+                        "yaw | rx,ry,rz] or 16 matrix columns; a header line names them) or "
+                        ".npy file (N x 3, 7, 16 or N x 4 x 4); needs --out (docs/ik.md)")
+    add_out(s, metavar="FILE.csv|FILE.npy",
+            help="with --targets: the results, one row per target: q, status, pos_err_m, "
+                 "rot_err_rad (written atomically)")
     orient = s.add_mutually_exclusive_group()
     orient.add_argument("--position-only", action="store_true",
                         help="reach the target position only, any orientation (with a "

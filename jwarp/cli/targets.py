@@ -146,23 +146,30 @@ def matrix_target(text: str, option: str = "--target-matrix") -> np.ndarray:
         if len(vals) != 16:
             raise CLIError(f"{option}: expected 16 numbers (a 4x4 matrix row by row), got "
                            f"{len(vals)} in {source if source != 'the value' else repr(raw)}")
-    T = np.array(vals, np.float64).reshape(4, 4)
+    return rigid_pose(np.array(vals, np.float64).reshape(4, 4), option)
+
+
+def rigid_pose(T: np.ndarray, where: str) -> np.ndarray:
+    """The pose (4, 4) ``T`` with its rotation replaced by the nearest rotation, after the
+    checks of ``--target-matrix`` (finite, within :data:`MAX_TARGET`, last row ``0 0 0 1``,
+    rotation block orthonormal within :data:`RIGID_TOL` with determinant +1); a CLIError
+    starting with ``where`` otherwise."""
     if not np.all(np.isfinite(T)):
-        raise CLIError(f"{option}: the matrix holds NaN or inf")
+        raise CLIError(f"{where}: the matrix holds NaN or inf")
     if np.abs(T).max() > MAX_TARGET:
-        raise CLIError(f"{option}: expected values within +-{MAX_TARGET:g}")
+        raise CLIError(f"{where}: expected values within +-{MAX_TARGET:g}")
     last = np.abs(T[3] - [0.0, 0.0, 0.0, 1.0]).max()
     if last > RIGID_TOL:
-        raise CLIError(f"{option}: not a rigid transform: the last row is "
+        raise CLIError(f"{where}: not a rigid transform: the last row is "
                        f"{' '.join(f'{v:g}' for v in T[3])}, expected 0 0 0 1")
     R = T[:3, :3]
     ortho = float(np.abs(R @ R.T - np.eye(3)).max())
     if ortho > RIGID_TOL:
-        raise CLIError(f"{option}: not a rigid transform: the rotation block is not "
+        raise CLIError(f"{where}: not a rigid transform: the rotation block is not "
                        f"orthonormal (largest |R R^T - I| entry {ortho:.3g} > {RIGID_TOL:g})")
     det = float(np.linalg.det(R))
     if det < 0:
-        raise CLIError(f"{option}: not a rigid transform: the rotation block is a reflection "
+        raise CLIError(f"{where}: not a rigid transform: the rotation block is a reflection "
                        f"(determinant {det:.6g})")
     out = np.eye(4)
     out[:3, :3] = nearest_rotation(R)
@@ -212,3 +219,177 @@ def target_pose(target: str | None = None, quat: str | None = None, rpy: str | N
         T[:3, :3] = rotvec_matrix(rv)
         return T, True
     return T, False
+
+
+# ------------------------------------------------------------------ --targets FILE
+#: the column layouts of ``--targets`` (CSV header names; docs/ik.md "Many targets")
+TARGET_LAYOUTS: dict[str, tuple[str, ...]] = {
+    "position": ("x", "y", "z"),
+    "quaternion": ("x", "y", "z", "qx", "qy", "qz", "qw"),
+    "rpy": ("x", "y", "z", "roll", "pitch", "yaw"),
+    "rotvec": ("x", "y", "z", "rx", "ry", "rz"),
+    "matrix": tuple(f"m{i}{j}" for i in range(4) for j in range(4)),
+}
+#: the layout of a file without names, by its number of columns (6 is ambiguous: rpy or
+#: a rotation vector, so it needs a header)
+_BY_COUNT = {3: "position", 7: "quaternion", 16: "matrix"}
+
+
+def _layout_of(header: list[str], where: str) -> str:
+    names = tuple(h.strip().lower() for h in header)
+    for layout, cols in TARGET_LAYOUTS.items():
+        if names == cols:
+            return layout
+    known = "; ".join(",".join(c) if k != "matrix" else "m00,m01,...,m33"
+                      for k, c in TARGET_LAYOUTS.items())
+    raise CLIError(f"{where}: unknown column names {','.join(header)!r}; expected one of: "
+                   f"{known}")
+
+
+def _count_layout(n: int, where: str) -> str:
+    if n in _BY_COUNT:
+        return _BY_COUNT[n]
+    if n == 6:
+        raise CLIError(f"{where}: 6 columns are either x,y,z,roll,pitch,yaw or x,y,z,rx,ry,rz "
+                       f"(a rotation vector); name them in a CSV header line")
+    raise CLIError(f"{where}: expected 3 (x,y,z), 7 (x,y,z,qx,qy,qz,qw) or 16 (a 4x4 matrix "
+                   f"row by row) columns, or a CSV header naming 6, got {n}")
+
+
+def _split(line: str) -> list[str]:
+    return [p.strip() for p in (line.split(",") if "," in line else line.split())]
+
+
+def _read_csv(path: str, option: str) -> tuple[np.ndarray, str, list[int]]:
+    """(values (N, C), layout, file line of each row) of a CSV/text targets file."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            lines = fh.read().splitlines()
+    except (OSError, UnicodeDecodeError) as e:
+        raise CLIError(f"{option}: cannot read {path}: {e}") from None
+    rows: list[list[float]] = []
+    where_line: list[int] = []
+    layout = None
+    for k, raw in enumerate(lines, start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        parts = _split(line)
+        try:
+            vals = [float(p) for p in parts]
+        except ValueError:
+            vals = None
+        if vals is None:
+            if layout is None and not rows:   # the header
+                layout = _layout_of(parts, f"{option}: {path} line {k}")
+                continue
+            bad = next(p for p in parts if not _is_number(p))
+            raise CLIError(f"{option}: {path} row {len(rows) + 1} (line {k}): {bad!r} is not a "
+                           f"number")
+        if rows and len(vals) != len(rows[0]):
+            raise CLIError(f"{option}: {path} row {len(rows) + 1} (line {k}): {len(vals)} "
+                           f"columns, the rows before have {len(rows[0])}")
+        rows.append(vals)
+        where_line.append(k)
+    if not rows:
+        raise CLIError(f"{option}: {path} holds no targets")
+    if layout is None:
+        layout = _count_layout(len(rows[0]), f"{option}: {path}")
+    elif len(rows[0]) != len(TARGET_LAYOUTS[layout]):
+        raise CLIError(f"{option}: {path} row 1 (line {where_line[0]}): {len(rows[0])} columns, "
+                       f"the header names {len(TARGET_LAYOUTS[layout])}")
+    return np.array(rows, np.float64), layout, where_line
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _read_npy(path: str, option: str) -> tuple[np.ndarray, str]:
+    """(values (N, C), layout) of a .npy targets file: (N, 3), (N, 7), (N, 16) or
+    (N, 4, 4) (one target: (3,), (7,), (16,) or (4, 4))."""
+    try:
+        a = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as e:
+        raise CLIError(f"{option}: cannot read {path} as a .npy array: "
+                       f"{' '.join(str(e).split())}") from None
+    if a.dtype.kind not in "fiu" or a.dtype == np.bool_:
+        raise CLIError(f"{option}: {path} holds {a.dtype} values, not real numbers")
+    if a.shape[-2:] == (4, 4) and a.ndim in (2, 3):
+        a = a.reshape(-1, 16)
+    elif a.ndim == 1:
+        a = a[None]
+    if a.ndim != 2 or a.shape[0] == 0:
+        raise CLIError(f"{option}: {path} has shape {a.shape}; expected (N, 3), (N, 7), "
+                       f"(N, 16) or (N, 4, 4)")
+    if a.shape[1] == 6:
+        raise CLIError(f"{option}: {path} has 6 columns, either x,y,z,roll,pitch,yaw or "
+                       f"x,y,z,rx,ry,rz; write a CSV file with a header line naming them")
+    return np.asarray(a, np.float64), _count_layout(a.shape[1], f"{option}: {path}")
+
+
+def read_targets(path: str, option: str = "--targets") -> tuple[np.ndarray, str]:
+    """The target poses (N, 4, 4) of a targets file and its layout (a key of
+    :data:`TARGET_LAYOUTS`; ``"position"``: identity orientations).
+
+    ``.npy``: (N, 3), (N, 7), (N, 16) or (N, 4, 4) float values. Any other file is CSV
+    (commas, or whitespace) with an optional header line naming the columns as in
+    :data:`TARGET_LAYOUTS`; without one 3, 7 or 16 columns decide (6 need the header);
+    ``#`` starts a comment, blank lines are skipped. Quaternions (x, y, z, w) are
+    normalised, matrices checked as ``--target-matrix``'s. Every error is a CLIError
+    naming ``option``, the file and the row (1-based; CSV: and the line)."""
+    import os
+
+    if not os.path.exists(path):
+        raise CLIError(f"{option}: file not found: '{path}'")
+    if os.path.isdir(path):
+        raise CLIError(f"{option}: {path} is a folder, not a file of targets")
+    if path.lower().endswith(".npy"):
+        vals, layout = _read_npy(path, option)
+        lines: list[int] | None = None
+    else:
+        vals, layout, lines = _read_csv(path, option)
+
+    def where(i: int) -> str:
+        line = f" (line {lines[i]})" if lines is not None else ""
+        return f"{option}: {path} row {i + 1}{line}"
+
+    bad = ~np.isfinite(vals).all(axis=1)
+    if bad.any():
+        raise CLIError(f"{where(int(np.flatnonzero(bad)[0]))}: NaN or inf")
+    big = (np.abs(vals) > MAX_TARGET).any(axis=1)
+    if big.any():
+        raise CLIError(f"{where(int(np.flatnonzero(big)[0]))}: expected values within "
+                       f"+-{MAX_TARGET:g}")
+    N = len(vals)
+    T = np.broadcast_to(np.eye(4), (N, 4, 4)).copy()
+    if layout == "matrix":
+        for i in range(N):
+            T[i] = rigid_pose(vals[i].reshape(4, 4), where(i))
+        return T, layout
+    T[:, :3, 3] = vals[:, :3]
+    rot = vals[:, 3:]
+    if layout == "quaternion":
+        norm = np.linalg.norm(rot, axis=1)
+        zero = ~(norm > 1e-12)
+        if zero.any():
+            raise CLIError(f"{where(int(np.flatnonzero(zero)[0]))}: the quaternion "
+                           f"qx,qy,qz,qw has zero norm")
+        from jwarp.solvers.ik.objective import quaternion_matrices
+
+        T[:, :3, :3] = quaternion_matrices(rot)
+    elif layout == "rpy":
+        r, p, y = rot.T
+        cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+        T[:, :3, :3] = np.stack([
+            np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+            np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+            np.stack([-sp, cp * sr, cp * cr], -1)], -2)
+    elif layout == "rotvec":
+        for i in range(N):
+            T[i, :3, :3] = rotvec_matrix(rot[i])
+    return T, layout

@@ -228,6 +228,12 @@ def group_resamples(imported: Any, args: argparse.Namespace, eff: Any) -> bool:
 def cmd_import_urdf(args: argparse.Namespace) -> int:
     from jwarp.importers.robot import load_urdf
 
+    from jwarp.importers.robot import package_robot_path
+
+    try:  # example-robot-data:NAME, robot_descriptions:NAME
+        args.urdf = package_robot_path(args.urdf) or args.urdf
+    except ValueError as e:
+        raise CLIError(f"URDF: {' '.join(str(e).split())}") from None
     check_output(args.out, "--out", inputs={"URDF": args.urdf})
     if not os.path.isfile(args.urdf):
         raise CLIError(f"URDF: file not found: '{args.urdf}'")
@@ -257,7 +263,7 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
                 model, fit = spherized_robot(args.urdf, opts, cache=not args.no_cache,
                                              sample_pairs=not group_resamples(imported, args,
                                                                               eff),
-                                             **urdf_options)
+                                             progress=None, **urdf_options)
         elif args.spheres == "none":
             model = model.copy(spheres=[])
     except ValueError as e:
@@ -318,7 +324,9 @@ def add_subcommands(sub: Any) -> None:
     """Register ``import-urdf`` on the CLI's subparsers."""
     s = sub.add_parser("import-urdf", help="import a URDF robot into a jwarp robot JSON "
                                            "(links as frames, mimic joints coupled, masses)")
-    s.add_argument("urdf", metavar="URDF", help="the URDF file")
+    s.add_argument("urdf", metavar="URDF",
+                   help="the URDF file, or example-robot-data:NAME / robot_descriptions:NAME "
+                        "(a robot of that package, docs/urdf.md)")
     s.add_argument("--out", required=True, metavar="ROBOT.json", help="robot file to write")
     s.add_argument("--end-effector", action="append", metavar="NAME=LINK",
                    help="named end-effector (repeatable; default: the group's SRDF "

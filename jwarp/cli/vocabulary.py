@@ -3,8 +3,8 @@
 * ``--out FILE`` is the file (or folder) a command writes as its result, on every command
   that writes one (``show``, ``data export``, ``sensitivity``, ``design``, ``calibrate``,
   ``simulate-campaign``, ``sample-poses``, ``train ik|plan``, ``import-urdf``,
-  ``import-mjcf``, ``export-urdf``). Old spellings (``--save``, ``--npz``, ``--png``) are
-  hidden aliases: they still work and print one line
+  ``import-mjcf``, ``export-urdf``, ``ik --targets``). Old spellings (``--save``,
+  ``--npz``, ``--png``) are hidden aliases: they still work and print one line
   ``jwarp: warning: --save is deprecated; use --out`` on stderr.
 * Secondary outputs are named by what they hold: ``--rerun FILE.rrd`` (a rerun recording,
   on every command that can write one), ``--params-out`` (``calibrate``'s parameters).

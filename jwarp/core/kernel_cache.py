@@ -36,6 +36,8 @@ from typing import Any, Callable, Iterator
 
 import warp as wp
 
+from jwarp.utils.warp_init import init_quietly
+
 __all__ = ["CACHE_ENV", "NOTICE_ENV", "cache_dir", "compile_progress", "compiled_modules",
            "install_compile_notice", "notice_enabled"]
 
@@ -59,7 +61,7 @@ def cache_dir() -> str:
     if wp.config.kernel_cache_dir is None:  # as jwarp.core.arrays.init_warp: quietly
         if hasattr(wp, "LOG_WARNING"):
             wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
-        wp.init()
+        init_quietly()
     return str(wp.config.kernel_cache_dir)
 
 

@@ -47,6 +47,8 @@ import numpy as np
 import trimesh
 import warp as wp
 
+from jwarp.utils.warp_init import init_quietly
+
 from jwarp.importers.spheres import (SphereFit, excess_volume, fit_spheres, mesh_memo,
                                      one_sided_error, sphere_protrusion)
 
@@ -94,7 +96,7 @@ class _MeshSolid:
 
     def __init__(self, mesh: trimesh.Trimesh) -> None:
         wp.config.quiet = True
-        wp.init()
+        init_quietly()
         V = np.asarray(mesh.vertices, np.float64)
         F = np.asarray(mesh.faces, np.int64)
         self.centre = 0.5 * (V.min(0) + V.max(0))

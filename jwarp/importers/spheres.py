@@ -72,6 +72,8 @@ import warp as wp
 from scipy import sparse
 from scipy.spatial import cKDTree
 
+from jwarp.utils.warp_init import init_quietly
+
 __all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "fit_link",
            "primitive_mesh", "load_mesh", "one_sided_error", "excess_volume",
            "signed_distance", "inside_solid", "sphere_protrusion", "mesh_memo", "PRIMITIVES"]
@@ -250,7 +252,7 @@ def _init_warp() -> None:
     wp.config.quiet = True
     if hasattr(wp, "LOG_WARNING"):
         wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
-    wp.init()
+    init_quietly()  # without Warp's "CUDA driver not found" line on a CPU machine
 
 
 @wp.kernel(enable_backward=False)

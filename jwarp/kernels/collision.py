@@ -256,6 +256,26 @@ def kernels(scalar: type) -> SimpleNamespace:
         grid); (cutoff, +z, -1) where nothing is closer than the cutoff. Grid cells whose
         corners keep the cutoff and objects whose boxes keep it are skipped. ``grp``: the
         world of a batch of worlds (-1: all objects; :mod:`jwarp.kernels.geometry`)."""
+        return world_distance_skip(world, x, cutoff, grp, 0)
+
+    @wp.func
+    def objects_far(world: WorldModel, c: vec3, r: scalar, eps: scalar, grp: int) -> int:
+        """1 where every exact object keeps more than ``r + eps`` (plus a rounding slack)
+        from the point c: then no sphere inside the ball (c, r) comes within eps of an
+        object (signed distances of convex primitives are 1-Lipschitz; callers pass this
+        only for worlds without meshes, see ``bound_skip``), so their object queries can
+        be skipped."""
+        slack = scalar(1e-4) * (one + wp.abs(c[0]) + wp.abs(c[1]) + wp.abs(c[2]))
+        d, g, k = gk.shapes_distance(world.shapes, c, r + eps + slack, grp)
+        if k == -1:
+            return 1
+        return 0
+
+    @wp.func
+    def world_distance_skip(world: WorldModel, x: vec3, cutoff: scalar, grp: int,
+                            skip_objects: int):
+        """:func:`world_distance`; ``skip_objects`` = 1 leaves the exact objects out (the
+        caller proved them farther than the cutoff, :func:`objects_far`)."""
         best = cutoff
         bg = vec3(zero, zero, one)
         bk = int(-1)
@@ -269,8 +289,8 @@ def kernels(scalar: type) -> SimpleNamespace:
                     best = d
                     bg = g
                     bk = -2
-        if world.shapes.kind.shape[0] > 0:  # a grid-only world never enters the objects
-            d2, g2, k2 = gk.shapes_distance(world.shapes, x, best, grp)
+        if world.shapes.kind.shape[0] > 0 and skip_objects == 0:  # a grid-only world never
+            d2, g2, k2 = gk.shapes_distance(world.shapes, x, best, grp)  # enters the objects
             if k2 >= 0:
                 best = d2
                 bg = g2
@@ -298,6 +318,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         group_div: int,
         active: wp.array(dtype=wp.int32),
         active_div: int,
+        bound_skip: int,
         # Model:
         model: fk.FrameTables,
         spheres: SphereTables,
@@ -319,7 +340,10 @@ def kernels(scalar: type) -> SimpleNamespace:
         (N, n_frames), xs (N, S), force, moment and bounding-sphere centres bc
         (N, n_frames). With ``comp.enabled`` (and compensation rows, ``ROWS_COMPENSATION``) the
         waypoint threads end with one torque update of their row from the frames just
-        computed (:func:`jwarp.kernels.elastic` ``compensation_update_at``)."""
+        computed (:func:`jwarp.kernels.elastic` ``compensation_update_at``).
+        ``bound_skip`` (exact objects, no meshes): where a frame's bounding sphere keeps
+        eps from every object (:func:`objects_far`), its spheres skip the object queries
+        (the same cost: those spheres' terms are 0)."""
         t = wp.tid()
         b = t
         rb = int(0)
@@ -346,14 +370,23 @@ def kernels(scalar: type) -> SimpleNamespace:
                 moment[t, i] = vec3(zero, zero, zero)
         hit = int(0)
         u_world = zero
+        cur = int(-1)  # the frame whose bounding sphere was tested last (bound_skip)
+        far = int(0)
         for s in range(spheres.sph_frame.shape[0]):
             fr = spheres.sph_frame[s]
             x = sphere_centre(frames, t, fr, spheres.sph_pos[s])
             xs[t, s] = x
             if w_world != zero:
+                if bound_skip != 0 and fr != cur:
+                    cur = fr
+                    far = 0
+                    if spheres.bound_rad[fr] >= zero:
+                        far = objects_far(world, sphere_centre(frames, t, fr,
+                                                               spheres.bound_pos[fr]),
+                                          spheres.bound_rad[fr], eps, grp)
                 # what keeps eps from the sphere costs nothing: cells and objects skipped
                 rs = spheres.sph_rad[s]
-                d, g, obj = world_distance(world, x, rs + eps, grp)
+                d, g, obj = world_distance_skip(world, x, rs + eps, grp, far)
                 if obj != -1 and d - rs < eps:
                     c, dc = smooth_clip(d - rs, eps)
                     u_world += c
@@ -603,7 +636,8 @@ def kernels(scalar: type) -> SimpleNamespace:
     return SimpleNamespace(
         world_query=world_query_kernel,
         scalar=scalar, SphereTables=SphereTables, WorldGrid=WorldGrid, WorldModel=WorldModel,
-        world_distance=world_distance, geometry=gk, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
+        world_distance=world_distance, world_distance_skip=world_distance_skip,
+        objects_far=objects_far, geometry=gk, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
         sdf_lower_bound=sdf_lower_bound, world_sample=world_sample,
         world_lower_bound=world_lower_bound, sphere_centre=sphere_centre, cost=cost_kernel,
         distance=distance_kernel,

@@ -57,7 +57,9 @@ def _groups(world: Any, targets: Any) -> list[tuple[Any, np.ndarray]]:
     """[(world, targets (P, 4, 4))] from one world (or None) and (N, 4, 4) targets, or a
     sequence of W worlds with (W, P, 4, 4) targets or a sequence of W (P_w, 4, 4)."""
     def poses(t: Any, what: str) -> np.ndarray:
-        a = np.asarray(t, np.float64)
+        from jwarp.solvers.ik.objective import as_poses
+
+        a = np.asarray(as_poses(t), np.float64)  # also (positions, quaternions)
         if a.ndim == 2:
             a = a[None]
         if a.ndim != 3 or a.shape[1:] != (4, 4) or len(a) == 0:
@@ -113,7 +115,8 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
         robot: robot name or RobotModel; frame: the end-effector frame.
         world: a :class:`jwarp.world.World`, None (self-collision only) or a sequence of
             worlds; targets: poses (N, 4, 4) (one world), or per world (W, P, 4, 4) or a
-            sequence of W arrays (P_w, 4, 4).
+            sequence of W arrays (P_w, 4, 4); a pose array may also be a tuple
+            ``(positions (N, 3), quaternions (N, 4) xyzw)`` (as :func:`jwarp.ik`).
         warm_start: None (random initial guesses) or an object with a callable ``seeds``.
         n_random: random seeds tried one after the other (after a network's heads), >= 0
             (>= 1 without a warm start); the cap of the multi-starts is H + n_random.

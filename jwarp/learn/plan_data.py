@@ -63,6 +63,8 @@ class PlanDataOptions:
         step, max_step: step size (eq. 3.18) and the largest change of one joint of one
             waypoint per step [rad], > 0.
         n_substeps: substeps per segment (None: sized to the world's voxel per call).
+        substep_voxels: with ``n_substeps`` None: the most a sphere centre travels between
+            two cost substeps, in voxels (:attr:`PlanOptions.substep_voxels`), > 0.
         check_all_every: exact feasibility checks every this many iterations, >= 1.
         length_weight: lam_l of eq. 3.16 while converging the feasible paths (world and
             self-collision weights are 1), >= 0; the search uses the planner's 0.01. 0.1:
@@ -73,6 +75,11 @@ class PlanDataOptions:
         converge: converge the feasible paths (the best ``refine`` of each task) until
             the length cost settles; False: the labels are the early-stopped paths.
         refine: feasible multi-starts per hard task converged for its label, >= 1.
+        stats_tasks: the first this many hard tasks of a call run every multi-start (the
+            single-start statistics of Table 3.2 are measured on them); every other hard
+            task stops its starts once ``refine`` of them are feasible (one without
+            ``converge``), so starts that would never be needed cost nothing. None: every
+            hard task runs every start (the statistics over all of them).
         converge_tol: relative change of U_l between checks that counts as converged.
         device: Warp device of the optimisation ("cpu", "cuda", "cuda:0", ...; None:
             Warp's default device, docs/api.md "Devices").
@@ -85,11 +92,13 @@ class PlanDataOptions:
     step: float = 0.01
     max_step: float = 0.1
     n_substeps: int | None = None
+    substep_voxels: float = 1.0
     check_all_every: int = 10
     length_weight: float = 0.1
     margin: float = 0.0
     converge: bool = True
     refine: int = 4
+    stats_tasks: int | None = 32
     converge_tol: float = 1e-4
     device: str | None = None
     dtype: str = "float32"
@@ -100,11 +109,16 @@ class PlanDataOptions:
             v = getattr(self, name)
             if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
                 raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+        if self.stats_tasks is not None:
+            v = self.stats_tasks
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 0:
+                raise ValueError(f"stats_tasks: expected None or an integer >= 0, got {v!r}")
         if self.n_substeps is not None:
             v = self.n_substeps
             if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"n_substeps: expected None or an integer >= 1, got {v!r}")
         for name, strict in (("step", True), ("max_step", True), ("converge_tol", True),
+                             ("substep_voxels", True),
                              ("length_weight", False), ("margin", False)):
             v = getattr(self, name)
             x = real_number(v, name)
@@ -120,18 +134,20 @@ class PlanDataOptions:
             raise ValueError(f"dtype: expected 'float32' or 'float64', got {self.dtype!r}")
 
     def plan_options(self, start_kind: str, n_starts: int, seed: int,
-                     refine: bool = False) -> PlanOptions:
+                     refine: bool = False, enough: int | None = None) -> PlanOptions:
         """The :class:`PlanOptions` of one stage: the search (straight line or
-        multi-starts: the planner's length weight, each path stopping once feasible) or,
-        with ``refine``, the convergence of feasible seeds (``length_weight``,
-        ``converge``)."""
+        multi-starts: the planner's length weight, each path stopping once feasible, a
+        problem's starts once ``enough`` of them are) or, with ``refine``, the convergence
+        of feasible seeds (``length_weight``, ``converge``)."""
         w = PathWeights(length=float(self.length_weight)) if refine else PathWeights()
         return PlanOptions(n_starts=n_starts, start_kind=start_kind, n_waypoints=self.n_waypoints,
                            n_substeps=self.n_substeps, iterations=self.iterations,
+                           substep_voxels=float(self.substep_voxels),
                            step=self.step, max_step=self.max_step, weights=w,
                            margin=float(self.margin), check_all_every=self.check_all_every,
                            converge=bool(refine), converge_tol=float(self.converge_tol),
-                           seed=int(seed), stop_when_solved=False, fallback=None)
+                           seed=int(seed), stop_when_solved=False, fallback=None,
+                           enough_feasible=None if refine else enough)
 
 
 @dataclass
@@ -145,7 +161,10 @@ class WorldLabels:
     an easy task, kept separately); settings: the options that made them (JSON-able);
     length_cost (N,) U_l (eq. 3.5, 1 for the straight line) of the label; n_feasible_starts
     (N,) feasible multi-starts of a hard task (0 for easy ones); n_starts (N,) multi-starts
-    run (0 for easy tasks).
+    run to the end (0 for easy tasks); stats (N,) bool: the hard tasks whose multi-starts
+    all ran (``PlanDataOptions.stats_tasks``), the subset the single-start statistics are
+    measured on (elsewhere a task's starts stopped once enough were feasible, and
+    ``n_feasible_starts`` counts those).
     """
 
     starts: np.ndarray
@@ -158,6 +177,7 @@ class WorldLabels:
     length_cost: np.ndarray | None = field(default=None, repr=False)
     n_feasible_starts: np.ndarray | None = field(default=None, repr=False)
     n_starts: np.ndarray | None = field(default=None, repr=False)
+    stats: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.starts)
@@ -165,9 +185,11 @@ class WorldLabels:
     @property
     def single_start_rate(self) -> float:
         """Fraction of feasible multi-starts over the hard tasks some start solved (the
-        thesis' "Avg. Feas." of Table 3.2: its dataset holds only solved tasks); NaN if
-        none."""
+        thesis' "Avg. Feas." of Table 3.2: its dataset holds only solved tasks), on the
+        tasks whose starts all ran (:attr:`stats`); NaN if none."""
         m = self.hard & self.feasible
+        if self.stats is not None:
+            m = m & self.stats
         if not m.any():
             return float("nan")
         return float(self.n_feasible_starts[m].sum() / self.n_starts[m].sum())
@@ -265,16 +287,26 @@ def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
     n_feasible = np.zeros(n_tasks, np.int64)
     n_starts = np.zeros(n_tasks, np.int64)
     seeds = [paths[i:i + 1] for i in range(n_tasks)]  # feasible paths to converge
-    h = np.nonzero(hard)[0]
-    if len(h):
-        res = Planner(model, world, len(h), o.plan_options("random", o.max_starts, start_seed),
+    stats = np.zeros(n_tasks, bool)
+    hard_idx = np.nonzero(hard)[0]
+    n_stats = len(hard_idx) if o.stats_tasks is None else min(int(o.stats_tasks), len(hard_idx))
+    enough = o.refine if o.converge else 1
+    # the statistics' subset runs every start; the others stop once enough are feasible
+    for h, stop, sd in ((hard_idx[:n_stats], None, start_seed),
+                        (hard_idx[n_stats:], enough, start_seed + 1)):
+        if not len(h):
+            continue
+        res = Planner(model, world, len(h),
+                      o.plan_options("random", o.max_starts, sd, enough=stop),
                       device=o.device, dtype=dtype).plan(q0[h], q1[h])
         paths[h] = res.path
         cost[h] = res.cost
         length[h] = res.length_cost
         feasible[h] = res.feasible
         n_feasible[h] = res.n_feasible
-        n_starts[h] = o.max_starts
+        if stop is None:
+            n_starts[h] = o.max_starts
+            stats[h] = True
         if o.converge and res.feasible.any():
             allp, fz = res.all_paths, res.all_feasible
             for k, i in enumerate(h):
@@ -293,7 +325,7 @@ def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
                        cost=cost.astype(np.float64), feasible=feasible.astype(bool),
                        hard=hard.astype(bool), settings=settings,
                        length_cost=length.astype(np.float64), n_feasible_starts=n_feasible,
-                       n_starts=n_starts)
+                       n_starts=n_starts, stats=stats)
 
 
 def _refine(model: RobotModel, world: Any, o: PlanDataOptions, dtype: Any, q0: np.ndarray,

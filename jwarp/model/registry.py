@@ -341,11 +341,30 @@ def _looks_like_path(name: str) -> bool:
     return name.lower().endswith((".json", ".urdf", ".xml")) or any(s in name for s in seps)
 
 
+def _load_file(path: str) -> RobotModel:
+    """The robot of a file: a ``.urdf`` by :meth:`RobotModel.from_urdf`, a ``.xml`` whose
+    root is ``<mujoco>`` by :func:`jwarp.importers.robot.load_mjcf`, else a robot JSON."""
+    if path.lower().endswith(".urdf"):
+        return RobotModel.from_urdf(path)
+    from jwarp.importers.mjcf import is_mjcf
+
+    if is_mjcf(path):   # .xml with a <mujoco> root (needs jwarp[mjcf])
+        from jwarp.importers.robot import load_mjcf
+
+        return load_mjcf(path).model
+    return RobotModel.load(path)
+
+
 def robot(name: str | os.PathLike | RobotModel) -> RobotModel:
     """The robot registered under ``name`` (a RobotModel passes through; a path to a robot
     file, a name ending in ``.json`` or ``.urdf`` or containing a ``/``, is loaded; a
     ``.urdf`` file is imported by :meth:`RobotModel.from_urdf`, a ``.xml`` file whose root is
-    ``<mujoco>`` by :func:`jwarp.importers.robot.load_mjcf`)."""
+    ``<mujoco>`` by :func:`jwarp.importers.robot.load_mjcf`). A name
+    ``"example-robot-data:NAME"`` is a URDF of the example-robot-data package
+    (:func:`jwarp.importers.robot.example_robot_urdf`: ``panda``, ``ur5``, ``xarm7``, ...),
+    ``"robot_descriptions:NAME"`` one of the robot_descriptions package
+    (:func:`~jwarp.importers.robot.robot_descriptions_path`); ValueError naming the package
+    to install when it is missing (docs/urdf.md "Robots one name away")."""
     if isinstance(name, RobotModel):
         return name
     if not isinstance(name, (str, os.PathLike)):
@@ -362,17 +381,20 @@ def robot(name: str | os.PathLike | RobotModel) -> RobotModel:
         raise PluginError(f"robot: {_conflict_text('robot', name, plugins)}; remove one of "
                           f"them{_hint(plugins)}")
     if name not in table.found:
+        if ":" in name:   # "example-robot-data:panda", "robot_descriptions:panda"
+            from jwarp.importers.robot import package_robot_path
+
+            try:
+                path = package_robot_path(name)
+            except ValueError as e:
+                raise ValueError(f"robot: {e}") from None
+            if path is not None:
+                model = _load_file(path)
+                _ROBOT_CACHE[name] = model
+                return model
         if _looks_like_path(name):
             if os.path.exists(name):
-                if name.lower().endswith(".urdf"):
-                    return RobotModel.from_urdf(name)
-                from jwarp.importers.mjcf import is_mjcf
-
-                if is_mjcf(name):   # .xml with a <mujoco> root (needs jwarp[mjcf])
-                    from jwarp.importers.robot import load_mjcf
-
-                    return load_mjcf(name).model
-                return RobotModel.load(name)
+                return _load_file(name)
             raise ValueError(f"robot: file not found: '{name}' (read as a path to a robot "
                              f"file; no robot is registered under that name either)")
         raise ValueError(f"robot: unknown robot '{name}'; registered: "

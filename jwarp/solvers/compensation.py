@@ -21,6 +21,7 @@ from jwarp.kinematics.equilibrium import fk_elastic
 from jwarp.kinematics.launch import kappa_array
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKResult, ik
+from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.planning import PathObjective, PlanResult, plan
 
 #: compliance of Agile Justin's joints used by the studies [rad/(N m)] (0.1 rad/kNm)
@@ -84,6 +85,7 @@ def compare_ik(robot: Any, frame: Any, targets: Any, kappa: Any, *, n_starts: in
     runs until it is on the target): mean iterations of the starts that succeed in both,
     success counts, and the equilibrium error of the compensated solutions."""
     model = get_robot(robot)
+    targets = as_poses(targets)
     common = dict(n_starts=n_starts, seed=seed, stop_when_solved=False, **kwargs)
     rigid = ik(model, frame, targets, **common)
     soft = ik(model, frame, targets, kappa=kappa, lam=lam, **common)

@@ -33,6 +33,7 @@ of one batch size, reused from call to call. DH rows are :class:`jwarp.core.rows
 
 from __future__ import annotations
 
+import os
 import weakref
 from collections import OrderedDict
 from typing import Any
@@ -45,6 +46,7 @@ from jwarp.core.arrays import (Batch, as_batch, default_dtype, finite_as, init_w
 from jwarp.core.device import DeviceModel, collision_tables, numpy_dtype, put_model, scalar_type
 from jwarp.core.rows import DHRows, RowsKind
 from jwarp.kernels import collision as ck
+from jwarp.kernels import collision_wide as cwide
 from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.model import RobotModel
@@ -60,6 +62,28 @@ __all__ = ["DEFAULT_EPS", "CollisionModel", "CollisionData", "collision_model", 
 #: default smoothing distance eps of the clip c (eq. 3.10) [m]
 DEFAULT_EPS = 0.05
 _FAR = 1e30
+#: the cost's launch plan where a CollisionModel is not told (``wide=None``): the
+#: environment variable ``JWARP_COST_KERNEL`` = ``fused`` (one thread per configuration),
+#: ``wide`` (:mod:`jwarp.kernels.collision_wide`) or ``auto`` (the default)
+COST_KERNELS = ("auto", "fused", "wide")
+#: ``auto``: the wide launches on CUDA up to this many configurations per call. Measured on
+#: an H200 (benchmarks/bench_cost_kernel.py, float32): at 400-20 000 configurations the
+#: wide launches fill the GPU (1.3-3.3x faster per call); at 1e6 random configurations
+#: they gain 1.04-1.2x, and a labelling run, whose ~1.2e6 configurations per call follow
+#: smooth paths (coherent warps), ran 15 % slower with them.
+WIDE_MAX_CONFIGS = 65536
+
+
+def default_wide(device: Any, n: int) -> bool:
+    """Whether :meth:`CollisionModel.cost` of ``n`` configurations runs the wide launches on
+    ``device`` when the model is not told: ``JWARP_COST_KERNEL`` (``auto``: on CUDA up to
+    :data:`WIDE_MAX_CONFIGS`; see :data:`COST_KERNELS`)."""
+    v = os.environ.get("JWARP_COST_KERNEL", "auto").strip().lower() or "auto"
+    if v not in COST_KERNELS:
+        raise ValueError(f"JWARP_COST_KERNEL: expected one of {', '.join(COST_KERNELS)}, "
+                         f"got {v!r}")
+    return v == "wide" or (v == "auto" and bool(resolve_device(device).is_cuda)
+                           and n <= WIDE_MAX_CONFIGS)
 
 
 def check_world(robot: RobotModel, world: World | None) -> None:
@@ -123,6 +147,7 @@ class CollisionData:
         self.moment = self._scratch(nf, vec3)
         self.bc = self._scratch(nf, vec3)
         self._out: dict = {}
+        self._wide: tuple | None = None
 
     def _scratch(self, m: int, dt: Any) -> wp.array:
         if self.device.is_cuda:
@@ -136,6 +161,22 @@ class CollisionData:
     def scratch(self) -> tuple[wp.array, ...]:
         """(frames, xs, force, moment, bc)."""
         return self.frames, self.xs, self.force, self.moment, self.bc
+
+    @property
+    def wide_scratch(self) -> tuple[wp.array, ...]:
+        """(frames, xs, force, moment, bc) with a real row per configuration, as the wide
+        launches need (they hand rows to each other): the scratch itself on CUDA, full
+        arrays made on first use on the CPU."""
+        if self.device.is_cuda:
+            return self.scratch
+        if self._wide is None:
+            k = fk_kernels(self.scalar)
+            vec3 = ck.kernels(self.scalar).vec3
+            nf, ns = self.frames.shape[1], self.xs.shape[1]
+            self._wide = tuple(wp.empty((self.n, m), dtype=dt, device=self.device)
+                               for m, dt in ((nf, k.mat44), (ns, vec3), (nf, vec3), (nf, vec3),
+                                             (nf, vec3)))
+        return self._wide
 
     def output(self, name: str) -> wp.array:
         """The output ``name`` (cost, grad, sphere_dist, pair_dist, min_dist), made once."""
@@ -165,10 +206,15 @@ class CollisionModel:
             Its SDF is copied to the device once: treat the world as immutable afterwards.
         device: Warp device (None: Warp's default device, docs/api.md "Devices").
         dtype: float32 (default) or float64.
+        wide: run :meth:`cost` as the wide launches of :mod:`jwarp.kernels.collision_wide`
+            (parallel over configuration x sphere and configuration x frame pair) instead
+            of the fused one-thread-per-configuration kernel; None: per call,
+            :func:`default_wide` (on CUDA for batches up to :data:`WIDE_MAX_CONFIGS`). The
+            two agree to float rounding.
     """
 
     def __init__(self, robot: Any, world: World | None = None, *, device: Any = None,
-                 dtype: Any = np.float32) -> None:
+                 dtype: Any = np.float32, wide: bool | None = None) -> None:
         init_warp()
         self.robot = get_robot(robot)
         check_world(self.robot, world)
@@ -179,6 +225,11 @@ class CollisionModel:
         #: the robot's device model (frame, mass and sphere tables; shared by content)
         self.model: DeviceModel = put_model(self.robot, self.device, self.scalar)
         self.k = ck.kernels(self.scalar)
+        if wide is not None and not isinstance(wide, (bool, np.bool_)):
+            raise TypeError(f"wide: expected True, False or None, got {wide!r}")
+        #: whether :meth:`cost` runs the wide launches (else the fused kernel); None: by
+        #: the batch size (:func:`default_wide`)
+        self.wide: bool | None = None if wide is None else bool(wide)
         sp = self.model.spheres
         dev = self.device
         self.n_spheres, self.n_pairs, self.pairs = sp.n_spheres, sp.n_pairs, sp.pairs
@@ -366,13 +417,20 @@ class CollisionModel:
         comp = rho.args() if update_rows else self._no_update
         ww = float(w_world) if self.world is not None and self.n_spheres else 0.0
         ws = float(w_self) if self.n_pairs else 0.0
-        frames, xs, force, moment, bc = d.frames, d.xs, d.force, d.moment, d.bc
         gout = g if g is not None else self._dummy
+        if self.wide if self.wide is not None else default_wide(self.device, n):
+            self._cost_wide(q, rows, ww, ws, float(eps), grad, group_div, active, active_div,
+                            d, cost, gout, comp, record=out_cost is not None)
+            if update_rows:
+                rho.commit()
+            return cost, g
+        frames, xs, force, moment, bc = d.frames, d.xs, d.force, d.moment, d.bc
 
         def inputs() -> list:
             return [q, rows.array, rows.stride, rows.layout_vec, int(rows.kind), world_struct,
                     ww, ws, float(eps), int(grad), int(group_div),
                     active if active is not None else self._no_active, int(active_div),
+                    int(ww != 0.0 and self.device_world.bound_skip),
                     *self.model_args, frames, xs, force, moment, bc]
 
         world_struct = self.world_struct  # syncs moved/added objects first
@@ -399,6 +457,55 @@ class CollisionModel:
         if update_rows:
             rho.commit()
         return cost, g
+
+    def _cost_wide(self, q: wp.array, rows: DHRows, ww: float, ws: float, eps: float,
+                   grad: bool, group_div: int, active: wp.array | None, active_div: int,
+                   d: CollisionData, cost: wp.array, gout: wp.array, comp: Any,
+                   record: bool) -> None:
+        """:meth:`cost` as the four launches of :mod:`jwarp.kernels.collision_wide`
+        (``record``: replay launches recorded for the same buffers, a planner's loop)."""
+        n = q.shape[0]
+        kw = cwide.kernels(self.scalar)
+        frames, xs, force, moment, bc = d.wide_scratch
+        act = active if active is not None else self._no_active
+        world_struct = self.world_struct  # syncs moved/added objects first
+        sp = self.model.spheres.struct
+        layout, kind = rows.layout_vec, int(rows.kind)
+        want_grad = int(grad)
+        plan = [(kw.frames, n, [self.model.frame_struct, sp, q, rows.array, rows.stride, layout,
+                                kind, want_grad, int(ws != 0.0), act, int(active_div),
+                                frames, force, moment, bc], [cost, gout, comp])]
+        if self.n_spheres:
+            plan.append((kw.world, (self.n_spheres, n),
+                         [sp, world_struct, kind, layout, ww, eps, want_grad, int(group_div), act,
+                          int(active_div), frames, xs, force, moment], [cost]))
+        n_fp = int(self.model.spheres.struct.fpair_a.shape[0])
+        if ws != 0.0 and n_fp:
+            plan.append((kw.self_pairs, (n_fp, n),
+                         [sp, kind, layout, ws, eps, want_grad, act, int(active_div), xs, bc,
+                          force, moment], [cost]))
+        if grad:
+            plan.append((kw.gradient, n, [self.model.frame_struct, q, kind, layout, act,
+                                          int(active_div), frames, force, moment], [gout]))
+        if not record:
+            for kern, dim, inputs, outputs in plan:
+                wp.launch(kern, dim=dim, inputs=inputs, outputs=outputs, device=self.device)
+            return
+        key = ("wide", id(q), id(rows.array), rows.stride, kind, rows.layout, id(cost),
+               id(gout), ww, ws, eps, n, id(comp), id(frames), int(group_div), id(active),
+               int(active_div), want_grad)
+        hit = self._launches.get(key)
+        if hit is None:
+            if len(self._launches) > 32:
+                self._launches.clear()
+            launches = [wp.launch(kern, dim=dim, inputs=inputs, outputs=outputs,
+                                  device=self.device, record_cmd=True)
+                        for kern, dim, inputs, outputs in plan]
+            # the recorded launches hold these arrays: keep them alive with the record
+            hit = (launches, q, rows, cost, gout, comp, frames, active)
+            self._launches[key] = hit
+        for launch in hit[0]:
+            launch.launch()
 
     def cost_tape(self, q: wp.array, *, rho: Any = None, w_world: float = 1.0,
                   w_self: float = 1.0, eps: float = DEFAULT_EPS) -> tuple[wp.array, wp.array]:
@@ -608,6 +715,69 @@ def min_distances(robot: Any, q: Any, world: World | None = None, *, rho: Any = 
     if isinstance(out, np.ndarray):
         out = np.where(out >= 0.5 * _FAR, np.inf, out)
     return out
+
+
+def mm_text(metres: float) -> str:
+    """A distance [m] as millimetres with 2 decimals, never ``-0.00``: a value that rounds
+    to zero but is not zero keeps two significant digits (``-0.0031``), an exact zero is
+    ``0.00``."""
+    v = float(metres) * 1e3
+    text = f"{v:.2f}"
+    if float(text) == 0.0:
+        return "0.00" if v == 0.0 or not np.isfinite(v) else f"{v:.2g}"
+    return text
+
+
+def sphere_link(robot: Any, s: int) -> str:
+    """The name of the frame (link) collision sphere ``s`` of ``robot`` is fixed to."""
+    model = get_robot(robot)
+    return model.frames[model.spheres[int(s)].frame].name
+
+
+def nearest_objects(robot: Any, q: Any, world: World, spheres: Any, rho: Any = None
+                    ) -> list[str]:
+    """What each of the collision ``spheres`` (indices) of one configuration q (n_dof,) is
+    nearest to, in words: ``"object 'NAME'"`` (the world's exact objects) or ``"the world
+    grid"`` (a grid, and every 2D world). ``rho`` (n_frames, 5): the frames' DH rows (an
+    elastic equilibrium) instead of q's rigid ones. Computed on the CPU in float64."""
+    from jwarp.kinematics.fk import fk
+    from jwarp.world.device_world import world_query
+
+    model = get_robot(robot)
+    spheres = np.asarray(spheres, np.int64).reshape(-1)
+    if world.dim != 3:
+        return ["the world grid"] * len(spheres)
+    q1 = np.asarray(q, np.float64).reshape(1, model.n_dof)
+    F = np.asarray(fk(model, q1, dh=None if rho is None else np.asarray(rho)[None],
+                      dtype=np.float64, device="cpu"))[0]
+    idx, pos, _ = model.sphere_arrays()            # sphere frames and centres in them
+    c = np.einsum("nij,nj->ni", F[idx, :3, :3], pos) + F[idx, :3, 3]
+    _, _, obj = world_query(world, c[spheres], device="cpu")
+    return ["the world grid" if int(o) == -2 else f"object '{world.object_name(int(o))}'"
+            for o in obj]
+
+
+def closest_pair_text(robot: Any, q: Any, world: World | None, *, self_collision: bool,
+                      rho: Any = None, device: Any = None) -> str:
+    """The closest pair of one configuration q (n_dof,) in words, for a message about a
+    configuration in collision: ``link 'L' vs object 'O', -93.27 mm`` (``self_collision``
+    False: the sphere nearest to the world and the object nearest to it) or ``link 'A' vs
+    link 'B', -1.50 mm`` (True: the closest sphere pair of :func:`collision_pairs`); the
+    signed surface distance (negative = penetration). ``rho`` (n_frames, 5): the frames'
+    DH rows (an elastic equilibrium)."""
+    model = get_robot(robot)
+    q1 = np.asarray(q, np.float64).reshape(1, model.n_dof)
+    r1 = None if rho is None else np.asarray(rho, np.float64)[None]
+    if not self_collision:
+        d = np.asarray(sphere_distances(model, q1, world, rho=r1, device=device,
+                                        dtype=np.float64))[0]
+        s = int(np.argmin(d))
+        obj = nearest_objects(model, q1[0], world, [s], None if r1 is None else r1[0])[0]
+        return f"link '{sphere_link(model, s)}' vs {obj}, {mm_text(d[s])} mm"
+    d = np.asarray(self_distances(model, q1, rho=r1, device=device, dtype=np.float64))[0]
+    p = int(np.argmin(d))
+    a, b = (sphere_link(model, int(i)) for i in collision_pairs(model)[p])
+    return f"link '{a}' vs link '{b}', {mm_text(d[p])} mm"
 
 
 def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: float = 0.0, *,

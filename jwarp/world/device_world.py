@@ -93,7 +93,15 @@ class DeviceWorld:
         ws.grid_error = scalar(world.grid_error if world is not None else 0.0)
         self.struct = ws
         self._shapes_key = None
+        self._bound_skip = False
         self.sync()
+
+    @property
+    def bound_skip(self) -> bool:
+        """Whether the fused cost may skip the object queries of a frame whose bounding
+        sphere keeps eps from every object: exact objects, none a mesh (a mesh's
+        winding-number sign need not be 1-Lipschitz, the primitives' distances are)."""
+        return self._bound_skip
 
     @property
     def has_objects(self) -> bool:
@@ -110,6 +118,8 @@ class DeviceWorld:
         if self._shapes_key is not None and ds is self._shapes_key[0]:
             return False
         self._shapes_key = (ds,)  # also keeps the device copy alive
+        self._bound_skip = ds is not None and all(w.shapes.kind(i) != "mesh"
+                                                   for i in w.shapes.ids)
         self.struct.shapes = ds.struct if ds is not None else empty_shapes(self.device,
                                                                           self.scalar)
         return True

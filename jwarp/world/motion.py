@@ -40,7 +40,7 @@ from jwarp.core.limits import LIMIT_TOL
 from jwarp.kernels import motion as mk
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.world.collision import check_world
+from jwarp.world.collision import check_world, mm_text
 from jwarp.world.device_world import DeviceWorld
 from jwarp.world.sdf import World
 
@@ -301,7 +301,7 @@ class PathCheck:
         if c == 4:
             return f"waypoint {int(round(self.where[i]))} outside the joint limits"
         link = _link(self.robot, a)
-        mm = f"clearance {self.clearance[i] * 1e3:.2f} mm"
+        mm = f"clearance {mm_text(self.clearance[i])} mm"
         if c == 2:
             return f"self collision: {link} vs {_link(self.robot, b)} {at} ({mm})"
         other = self.world.object_name(b) if self.world is not None else str(b)

@@ -44,7 +44,8 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
                     rho_kappa: Any = None, device: Any = None,
                     self_margin: float = 0.0, per_world: int = 0) -> None:
     """ValueError naming ``name`` (and the row) if a configuration is outside the limits or
-    in collision (closer than ``margin`` to an obstacle or to itself), or, on the elastic
+    in collision (closer than ``margin`` to an obstacle or to itself: the message names the
+    link and the object, or the two links, and their distance), or, on the elastic
     model (``rho_kappa``: compliances), if its torque equilibrium does not converge
     (:data:`ELASTIC_CHECK`): then nothing can be said about its collisions. The checks run
     on ``device`` (None: Warp's default device)."""
@@ -68,13 +69,16 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
     if not free.all():
         i = int(np.nonzero(~free)[0][0])
         where = f"{name}[{i}]" if len(q) > 1 else name
-        from jwarp.world.collision import min_distances
+        from jwarp.world.collision import closest_pair_text, min_distances
         w_i = world.select(i) if per_world and world.n_worlds > 1 else world
-        md = np.asarray(min_distances(robot, q[i:i + 1], w_i, rho=None if rho is None
-                                      else rho[i:i + 1], device=device, dtype=np.float64))[0]
-        what = (f"{md[0] * 1e3:.2f} mm from the world (margin {margin:g} m)"
-                if md[0] <= margin else
-                f"{md[1] * 1e3:.2f} mm between its own links (self margin {self_margin:g} m)")
+        rho_i = None if rho is None else rho[i:i + 1]
+        md = np.asarray(min_distances(robot, q[i:i + 1], w_i, rho=rho_i, device=device,
+                                      dtype=np.float64))[0]
+        hit_world = bool(md[0] <= margin)
+        pair = closest_pair_text(robot, q[i], w_i, self_collision=not hit_world,
+                                 rho=None if rho_i is None else rho_i[0], device=device)
+        what = (f"{pair} (margin {margin:g} m)" if hit_world else
+                f"{pair} (self margin {self_margin:g} m)")
         raise ValueError(f"{where}: configuration is in collision: {what}")
 
 

@@ -31,6 +31,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -150,14 +151,31 @@ def _geometry(g: Any) -> dict:
             "scale": g.scale if g.kind == "mesh" else None}
 
 
+def fit_progress(total: int, enabled: bool | None) -> Any:
+    """The sphere fit's progress bar on stderr (tqdm; one step per link to fit, and one for
+    the self-collision pair sampling): ``enabled`` None shows it when stderr is a terminal,
+    False never (a disabled bar: its calls do nothing)."""
+    from tqdm.auto import tqdm
+
+    if enabled is None:
+        enabled = bool(getattr(sys.stderr, "isatty", lambda: False)())
+    return tqdm(total=total, desc="sphere fit", unit="link", file=sys.stderr,
+                disable=not enabled, leave=True, dynamic_ncols=True,
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} steps "
+                           "[{elapsed}<{remaining}{postfix}]")
+
+
 def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
-             sample_pairs: bool = True) -> tuple[RobotModel, SpherizeReport]:
+             sample_pairs: bool = True, progress: bool | None = False
+             ) -> tuple[RobotModel, SpherizeReport]:
     """The collision model of an imported URDF (module docstring): a copy of
     ``urdf_robot.model`` with fitted spheres and sampled self-collision exclusions, and the
     report. ``sample_pairs`` False: no pair sampling (the caller samples the pairs of a
-    planning group with :func:`resample_pairs`; the model keeps its own exclusions)."""
-    from jwarp.importers.sphere_refine import fit_refined, link_protrusions
-    from jwarp.importers.spheres import fit_link
+    planning group with :func:`resample_pairs`; the model keeps its own exclusions).
+    ``progress``: a progress bar on stderr (:func:`fit_progress`: a step per link, the
+    link's name beside it, then the pair sampling); None: when stderr is a terminal.
+    The fit's results do not depend on it."""
+    from jwarp.importers.sphere_refine import link_protrusions
 
     o = SpherizeOptions() if options is None else options
     if not isinstance(o, SpherizeOptions):
@@ -176,10 +194,41 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
         fit_opts["max_spheres"] = int(o.max_spheres)
     if o.protrusion is not None:
         fit_opts["protrusion"] = float(o.protrusion)
-    fitted_once: dict = {}  # links of the same geometry (a hand's fingers) are fitted once
     # the wrist, hand and base: refined fits (jwarp.importers.sphere_refine)
     per_link = link_protrusions(model, float(o.tolerance)) \
         if o.protrusion is None and o.refine else {}
+    n_fit = sum(any(g.kind != "sphere" for g in geoms) for geoms in by_link.values())
+    bar = fit_progress(n_fit + int(bool(sample_pairs)), progress)
+    try:
+        fitted = _fit_links(model, by_link, o, fit_opts, per_link, spheres, report, bar)
+        for w in report.warnings:
+            warnings.warn(w, SphereFitWarning, stacklevel=2)
+        if len(spheres) and sample_pairs:
+            bar.set_postfix_str("self-collision pairs", refresh=True)
+            pairs = never_colliding_pairs(fitted, n_samples=int(o.pair_samples),
+                                          seed=int(o.seed), margin=float(o.pair_margin))
+            # the model's own exclusions (e.g. MJCF <contact><exclude>) are kept and the
+            # sampled ones added; a model without any (an imported URDF) gets exactly these
+            sc = model.self_collision
+            own = bool(sc.exclude_pairs or sc.include_pairs or sc.groups)
+            fitted = with_self_pairs(fitted, pairs, replace=not own)
+            report.pairs = pairs
+        if sample_pairs:
+            bar.update(1)
+    finally:
+        bar.close()
+    return fitted, report
+
+
+def _fit_links(model: RobotModel, by_link: dict[str, list], o: SpherizeOptions,
+               fit_opts: dict[str, Any], per_link: dict, spheres: list, report: Any,
+               bar: Any) -> RobotModel:
+    """The links' fits of :func:`spherize` (spheres and report rows appended to
+    ``spheres`` and ``report``; one ``bar`` step per fitted link); the model with them."""
+    from jwarp.importers.spheres import fit_link
+    from jwarp.importers.sphere_refine import fit_refined
+
+    fitted_once: dict = {}  # links of the same geometry (a hand's fingers) are fitted once
     for link, geoms in by_link.items():
         frame = model.frame_index(link)
         todo = [g for g in geoms if g.kind != "sphere"]
@@ -195,6 +244,7 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
             link_opts.update(per_link[link], fit=fit_refined)
         if o.max_spheres is not None:  # the link's URDF spheres count against its budget
             link_opts["max_spheres"] = max(int(o.max_spheres) - (len(geoms) - len(todo)), 1)
+        bar.set_postfix_str(link, refresh=False)
         parts = [_geometry(g) for g in todo]
         key = _fit_key(parts, link_opts)
         try:
@@ -218,19 +268,8 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
                "refined": link in per_link}
         report.links.append(row)
         report.warnings += link_warnings(row, o)
-    for w in report.warnings:
-        warnings.warn(w, SphereFitWarning, stacklevel=2)
-    fitted = model.copy(spheres=spheres)
-    if len(spheres) and sample_pairs:
-        pairs = never_colliding_pairs(fitted, n_samples=int(o.pair_samples), seed=int(o.seed),
-                                      margin=float(o.pair_margin))
-        # the model's own exclusions (e.g. MJCF <contact><exclude>) are kept and the
-        # sampled ones added; a model without any (an imported URDF) gets exactly these
-        sc = model.self_collision
-        own = bool(sc.exclude_pairs or sc.include_pairs or sc.groups)
-        fitted = with_self_pairs(fitted, pairs, replace=not own)
-        report.pairs = pairs
-    return fitted, report
+        bar.update(1)
+    return model.copy(spheres=spheres)
 
 
 def _fit_key(parts: list[dict], options: dict) -> tuple:
@@ -295,10 +334,12 @@ def _cache_key(urdf_robot: Any, path: str, options: SpherizeOptions, urdf_option
 
 def spherized_robot(path: str | os.PathLike, options: SpherizeOptions | None = None, *,
                     cache: bool = True, sample_pairs: bool = True,
+                    progress: bool | None = False,
                     **urdf_options: Any) -> tuple[RobotModel, SpherizeReport]:
     """:func:`spherize` of the URDF file ``path`` (``urdf_options``: the fields of
     :class:`~jwarp.importers.urdf.UrdfOptions`, e.g. ``package_dirs``, ``end_effectors``;
-    ``sample_pairs`` as in :func:`spherize`).
+    ``sample_pairs`` and ``progress`` (a bar on stderr while fitting; None: on a terminal)
+    as in :func:`spherize`).
     With ``cache`` the result is read from / written to the disk cache (module docstring;
     a cache file that does not load is recomputed and replaced)."""
     from jwarp.importers.robot import load_urdf
@@ -325,7 +366,7 @@ def spherized_robot(path: str | os.PathLike, options: SpherizeOptions | None = N
                 return model, report
             except (OSError, ValueError, KeyError, TypeError):
                 pass  # a damaged cache entry: recompute
-    model, report = spherize(imported, o, sample_pairs=sample_pairs)
+    model, report = spherize(imported, o, sample_pairs=sample_pairs, progress=progress)
     if file is not None:
         try:
             file.parent.mkdir(parents=True, exist_ok=True)

@@ -47,7 +47,8 @@ def test_progress_bar_labels_restarts_and_counts_iterations():
     text = stream.getvalue()
     assert bar.restarts == 1
     assert text.count("active-set round 2") == 1 and "cost 8 -> 9" in text
-    assert "5/10" in text and "cost 6.5" in text and "step" in text
+    assert "5 iterations, done within the --max-nfev budget of 10" in text  # complete
+    assert "cost 6.5" in text and "step" in text
     # a new start is not a restart, even at a higher cost
     bar = ProgressBar("calibrate", stream=io.StringIO(), total=10)
     for s, c in ((0, 5.0), (0, 4.0), (1, 50.0), (1, 40.0)):
@@ -121,3 +122,71 @@ def test_python_findings_attributed_to_the_callers_line(campaign):
     found = [w for w in caught if issubclass(w.category, CalibrationWarning)]
     assert found, "the fit reported no finding (a free compliance without excitation is one)"
     assert all(w.filename == __file__ and w.lineno == line for w in found)
+
+
+def test_progress_bar_completes_when_the_fit_ends_early():
+    """Issue 39 item 5: a fit that converges within 3 of its 100-evaluation budget ends at
+    100 % (not 3 %), saying how many iterations it took and the budget; a run that used
+    its whole budget is unchanged."""
+    stream = io.StringIO()
+    bar = ProgressBar("calibrate", stream=stream, total=100)
+    for k, c in enumerate([10.0, 5.0, 2.0]):
+        bar(SimpleNamespace(start=0, n_starts=1, iteration=k + 1, cost=c))
+    bar.close()
+    last = stream.getvalue().replace("\r", "\n").strip().splitlines()[-1]
+    assert last.startswith("calibrate: 100%"), last
+    assert "3 iterations, done within the --max-nfev budget of 100" in last
+    # two starts: the first one's bar is completed when the second begins
+    stream = io.StringIO()
+    bar = ProgressBar("calibrate", stream=stream, total=50)
+    for s, c in ((0, 5.0), (0, 4.0), (1, 50.0)):
+        bar(SimpleNamespace(start=s, n_starts=2, iteration=1, cost=c))
+    bar.close()
+    text = stream.getvalue()
+    assert "start 1/2: 100%" in text and "2 iterations, done within" in text
+    assert "start 2/2: 100%" in text
+    # the whole budget used: the usual bar, at 100 %
+    stream = io.StringIO()
+    bar = ProgressBar("calibrate", stream=stream, total=2)
+    for k in range(2):
+        bar(SimpleNamespace(start=0, n_starts=1, iteration=k + 1, cost=1.0 / (k + 1)))
+    bar.close()
+    assert "2/2 iterations (of the --max-nfev budget)" in stream.getvalue()
+
+
+def test_calibrate_bar_on_the_cli_ends_complete(campaign, capsys):
+    code, out, err = run(capsys, _cal(campaign))
+    assert code == 0, err
+    last = [ln for ln in err.replace("\r", "\n").splitlines() if ln.startswith("calibrate")][-1]
+    assert last.startswith("calibrate: 100%"), last
+
+
+def test_simulated_setup_records_the_robot(campaign, capsys, tmp_path, monkeypatch):
+    """Issue 39 item 5: simulate-campaign --robot R --setup S (S naming no robot) writes a
+    setup.json naming R, so calibrate needs no --robot."""
+    doc = json.loads((campaign / "setup.json").read_text())
+    doc.pop("robot", None)
+    for key in ("campaign_id", "samples_sha256"):
+        doc.pop(key, None)
+    rough = tmp_path / "rough.json"
+    rough.write_text(json.dumps(doc))
+    run2 = tmp_path / "run2"
+    code, out, err = run(capsys, ["simulate-campaign", "--robot", "justin19", "--setup", rough,
+                                  "--samples", "120", "--seed", "2", "--out", run2])
+    assert code == 0, err
+    assert json.loads((run2 / "setup.json").read_text())["robot"] == "justin19"
+    code, out, err = run(capsys, ["calibrate", "--setup", run2 / "setup.json", "--data",
+                                  run2 / "samples.csv", "--free", "theta,d", "--max-nfev", "20",
+                                  "--quiet", "--json"])
+    assert code == 0, err
+    # a robot file is recorded by its absolute path (calibrate may run elsewhere)
+    import jwarp
+
+    robot_file = tmp_path / "j19.json"
+    jwarp.robot("justin19").save(robot_file)
+    run3 = tmp_path / "run3"
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run(capsys, ["simulate-campaign", "--robot", "j19.json", "--setup",
+                                  rough, "--samples", "60", "--out", run3])
+    assert code == 0, err
+    assert json.loads((run3 / "setup.json").read_text())["robot"] == str(robot_file)

@@ -127,6 +127,22 @@ def test_one_world_and_no_world(problems):
     assert r["n_targets"] == 20
 
 
+def test_positions_and_quaternions_as_targets(problems):
+    """Issue 39 item 3: targets as (positions, quaternions xyzw), as jwarp.ik takes them:
+    the same row as their poses."""
+    from scipy.spatial.transform import Rotation
+
+    from jwarp.solvers.ik.objective import pose_from_quaternions
+
+    model, worlds, qs, Ts = problems
+    p, quat = Ts[0][:, :3, 3], Rotation.from_matrix(Ts[0][:, :3, :3]).as_quat()
+    a = evaluate_ik(model, FRAME, worlds[0], (p, quat), n_random=4, iterations=30)
+    b = evaluate_ik(model, FRAME, worlds[0], pose_from_quaternions(p, quat), n_random=4,
+                    iterations=30)
+    a.pop("wall_s"), b.pop("wall_s")
+    assert a == b and a["n_targets"] == 10
+
+
 def test_ablation_table_and_printing(problems):
     model, worlds, qs, Ts = problems
     rows = ablation_table(ROBOT, FRAME, worlds, Ts,

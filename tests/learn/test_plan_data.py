@@ -99,7 +99,45 @@ def test_world_for_table_3_2():
     np.testing.assert_array_equal(w.occupancy, w2.occupancy)
 
 
+def test_early_stopped_starts_and_the_statistics_subset(world, labels):
+    """stats_tasks: the first hard tasks run every start (``stats``), the others stop
+    their starts once ``refine`` are feasible: their non-feasible starts end before the
+    iteration budget, and the labels stay feasible by the independent check."""
+    from dataclasses import replace
+
+    robot = jwarp.robot("planar4")
+    h = np.nonzero(labels.hard)[0]
+    assert len(h) >= 3
+    np.testing.assert_array_equal(labels.stats, labels.hard)  # FAST: every hard task (< 32)
+    part = label_world("planar4", world, 12, 5, replace(FAST, stats_tasks=1, refine=1))
+    assert part.stats.sum() == 1 and part.stats[h[0]] and not part.stats[h[1:]].any()
+    assert np.all(part.n_starts[h[1:]] == 0) and part.n_starts[h[0]] == 6
+    np.testing.assert_array_equal(part.hard, labels.hard)
+    assert part.feasible[h].sum() >= labels.feasible[h].sum() - 1
+    for i in np.nonzero(part.feasible)[0]:
+        assert independent_feasible(robot, world, part.paths[i].astype(np.float64)), i
+    assert np.isfinite(part.single_start_rate) or not part.feasible[h[0]]
+    # the planner option behind it: a problem's starts stop once enough are feasible
+    o = replace(FAST.plan_options("random", 6, 3), enough_feasible=1)
+    full = PL.Planner("planar4", world, len(h), FAST.plan_options("random", 6, 3),
+                      device="cpu").plan(labels.starts[h].astype(np.float64),
+                                         labels.goals[h].astype(np.float64))
+    stop = PL.Planner("planar4", world, len(h), o, device="cpu").plan(
+        labels.starts[h].astype(np.float64), labels.goals[h].astype(np.float64))
+    np.testing.assert_array_equal(stop.feasible, full.feasible)
+    solved = stop.feasible
+    assert solved.any()
+    # the unsolved starts of a solved problem stopped at its first feasible iteration
+    for b in np.nonzero(solved)[0]:
+        first = stop.all_iterations[b][stop.all_feasible[b]].min()
+        assert np.all(stop.all_iterations[b][~stop.all_feasible[b]] <= first)
+    assert stop.n_feasible.sum() <= full.n_feasible.sum()
+    with pytest.raises(ValueError, match="enough_feasible"):
+        replace(o, enough_feasible=0).validate()
+
+
 @pytest.mark.parametrize("field,value,exc", [
+    ("stats_tasks", -1, ValueError), ("stats_tasks", 1.0, ValueError),
     ("n_waypoints", 2, ValueError), ("max_starts", 0, ValueError), ("iterations", 1.5, ValueError),
     ("step", 0.0, ValueError), ("max_step", -1.0, ValueError), ("margin", float("nan"), ValueError),
     ("converge_tol", 0.0, ValueError), ("converge", 1, TypeError), ("dtype", "int8", ValueError),

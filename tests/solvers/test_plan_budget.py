@@ -114,6 +114,20 @@ def test_fallback_only_for_the_unsolved_problems(world):
         assert res.stop_reason == ("solved" if fb else "iterations")
 
 
+def test_fallback_none_is_the_clis_word(world):
+    """Issue 39 item 5: ``fallback="none"`` (the CLI's ``--fallback none``) is None in
+    Python too: stored as None, and the same plan."""
+    for word in ("none", "None", " NONE "):
+        assert PL.PlanOptions(fallback=word).fallback is None
+    assert PL.PlanOptions(fallback="RRT").fallback == "rrt"
+    o = dict(n_starts=2, iterations=3, seed=0)
+    plain = PL.plan("planar4", world, S4, G4, fallback=None, **o)
+    word = PL.plan("planar4", world, S4, G4, fallback="none", **o)
+    assert list(word.stage) == list(plain.stage) == ["none"]
+    np.testing.assert_array_equal(word.path, plain.path)
+    assert "rrt" not in word.timings
+
+
 def test_fallback_with_its_options(world):
     # too few samples to connect the trees: the fallback fails, the result is the
     # optimiser's
@@ -130,8 +144,9 @@ def test_fallback_with_its_options(world):
     ("time_limit", float("inf"), ValueError, "^time_limit"),
     ("time_limit", True, TypeError, "^time_limit"),
     ("time_limit", "1", TypeError, "^time_limit"),
-    ("fallback", "rrt*", ValueError, "^fallback: expected 'rrt' or None"),
-    ("fallback", "none", ValueError, "^fallback"),
+    ("fallback", "rrt*", ValueError, "^fallback: expected 'rrt', 'none' or None"),
+    ("fallback", "", ValueError, "^fallback"),
+    ("fallback", 0, ValueError, "^fallback"),
     ("fallback_after", 0.0, ValueError, "^fallback_after"),
     ("fallback_after", 1.0, ValueError, "^fallback_after"),
     ("stop_when_solved", "yes", TypeError, "^stop_when_solved"),

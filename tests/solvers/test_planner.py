@@ -122,6 +122,27 @@ def test_planar4_plans_around_a_known_obstacle(device, block_world):
     assert d["feasible"] and len(d["path"]) == 20 and "length" in d["costs"]
 
 
+def test_substep_voxels_coarsens_the_cost_not_the_check(device, block_world):
+    """``substep_voxels``: fewer cost substeps in a grid world (the cost guides, the
+    continuous check certifies): the paths still go around the block, verified densely."""
+    robot = jwarp.robot("planar4")
+    s, g = np.array([1.2, 0.0, 0.0, 0.0]), np.array([-1.2, 0.0, 0.0, 0.0])
+    kw = dict(start_kind="mixed", n_starts=16, iterations=300, step=0.05, seed=0,
+              fallback=None, device=device)
+    fine = PL.plan(robot, block_world, s, g, **kw)
+    coarse = PL.plan(robot, block_world, s, g, substep_voxels=3.0, **kw)
+    assert coarse.n_substeps < fine.n_substeps
+    assert coarse.n_substeps <= np.ceil(fine.n_substeps / 3) + 1
+    assert coarse.feasible[0] and fine.feasible[0]
+    p = coarse.path[0]
+    n_chk = path_feasibility.substeps_for_voxel(robot, p, block_world.voxel_size,
+                                                safety=path_feasibility.SWEEP_SAFETY,
+                                                device=device)
+    assert path_feasibility.path_feasible(robot, block_world, p, n_chk, device=device)
+    with pytest.raises(ValueError, match="substep_voxels"):
+        PL.plan(robot, block_world, s, g, substep_voxels=0.0, device=device)
+
+
 def test_batched_problems_and_user_guess(device, block_world):
     robot = jwarp.robot("planar4")
     s = np.array([[2.0, 1.0, 0.0, 0.0], [2.0, 0.0, 0.5, 0.0]])

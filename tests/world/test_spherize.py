@@ -175,3 +175,25 @@ def test_fitted_panda_plans_and_solves_ik_in_the_scene(panda, table_shelf):
     for qs in ik.q[ik.feasible]:
         verdict = v.check_path(qs[None], margin=0.0)
         assert verdict.ok, verdict
+
+
+def test_sphere_fit_shows_a_progress_bar(urdf, capsys):
+    """Issue 39 item 5: the fit draws a bar on stderr (a step per fitted link, named, and
+    one for the pair sampling; the result does not depend on it); off by default in
+    Python, on a terminal only with ``progress=None`` (the CLI's import)."""
+    imported = load_urdf(urdf)
+    opts = SpherizeOptions(tolerance=TOL, pair_samples=200)
+    quiet, _ = spherize(imported, opts)
+    assert capsys.readouterr().err == ""
+    loud, _ = spherize(imported, opts, progress=True)
+    err = capsys.readouterr().err
+    last = err.replace("\r", "\n").strip().splitlines()[-1]
+    assert last.startswith("sphere fit: 100%") and "3/3 steps" in last, err  # arm, tip, pairs
+    assert "self-collision pairs" in last
+    assert loud.to_dict() == quiet.to_dict()
+    spherize(imported, opts, progress=None)   # stderr is not a terminal here: no bar
+    assert capsys.readouterr().err == ""
+    model, rep = spherized_robot(urdf, opts, progress=True)
+    assert "sphere fit: 100%" in capsys.readouterr().err and not rep.cached
+    model, rep = spherized_robot(urdf, opts, progress=True)   # from the cache: nothing to show
+    assert capsys.readouterr().err == "" and rep.cached

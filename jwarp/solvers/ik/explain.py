@@ -32,6 +32,7 @@ import numpy as np
 from jwarp.core.arrays import real_array
 from jwarp.core.limits import LIMIT_TOL
 from jwarp.model.registry import robot as get_robot
+from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.ik.options import ORIENTATIONS, orientation_args
 
 __all__ = ["explain_ik", "pose_errors", "limit_reasons", "collision_reasons",
@@ -129,7 +130,9 @@ def _at_limits(model: Any, q: np.ndarray, tol: float = 1e-6) -> list[str]:
 
 
 def _link(model: Any, s: int) -> str:
-    return model.frames[model.spheres[s].frame].name
+    from jwarp.world.collision import sphere_link
+
+    return sphere_link(model, s)
 
 
 def collision_reasons(robot: Any, q: Any, world: Any = None, margin: float = 0.0, *,
@@ -182,30 +185,20 @@ def _pairs(model: Any) -> np.ndarray:
 def _objects(model: Any, q: np.ndarray, world: Any, spheres: np.ndarray,
              rho: Any) -> list[str]:
     """The name of the object nearest to each sphere's centre (``world.object_name``)."""
-    if world.dim != 3:
-        return ["the world grid"] * len(spheres)
-    from jwarp.kinematics.fk import fk
-    from jwarp.world.device_world import world_query
+    from jwarp.world.collision import nearest_objects
 
-    F = np.asarray(fk(model, q[None], dh=None if rho is None else rho[None],
-                      dtype=np.float64, device="cpu"))[0]
-    idx, pos, _ = model.sphere_arrays()            # sphere frames and centres in them
-    c = np.einsum("nij,nj->ni", F[idx, :3, :3], pos) + F[idx, :3, 3]
-    _, _, obj = world_query(world, c[spheres], device="cpu")
-    out = []
-    for o in obj:
-        name = world.object_name(int(o))
-        out.append("the world grid" if int(o) == -2 else f"object '{name}'")
-    return out
+    return nearest_objects(model, q, world, spheres, rho)
 
 
 def _pair_lines(worst: dict, margin: float, kind: str) -> list[str]:
+    from jwarp.world.collision import mm_text
+
     items = sorted(worst.items(), key=lambda kv: kv[1])
     lines = []
     for (a, b), d in items[:MAX_PAIRS]:
         other = b if kind == "object" else f"link '{b}'"
         what = "collision" if kind == "object" else "self-collision"
-        lines.append(f"{what}: link '{a}' vs {other}, distance {d * 1e3:.2f} mm "
+        lines.append(f"{what}: link '{a}' vs {other}, distance {mm_text(d)} mm "
                      f"(margin {margin * 1e3:g} mm)")
     if len(items) > MAX_PAIRS:
         lines.append(f"and {len(items) - MAX_PAIRS} more {'link-object' if kind == 'object' else 'link-link'} "
@@ -221,7 +214,7 @@ def _inputs(model: Any, frame: Any, q: Any, target: Any, orientation: str,
                          f"shape {qv.shape}")
     if not np.all(np.isfinite(qv)):
         raise ValueError("q: contains NaN or inf")
-    T = real_array(target, "target")
+    T = real_array(as_poses(target), "target")
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         raise ValueError(f"target: expected one finite pose (4, 4), got shape {T.shape}")
     fi = model.frame_index(frame)

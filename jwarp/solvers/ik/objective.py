@@ -31,8 +31,77 @@ def pose_matrix(xyz: Any, rotvec: Any = (0.0, 0.0, 0.0)) -> np.ndarray:
     return T
 
 
+def quaternion_matrices(q: Any, name: str = "quaternions") -> np.ndarray:
+    """Rotations (..., 3, 3) of quaternions (..., 4) in ROS/MoveIt/scipy order
+    ``(x, y, z, w)`` (scalar last), each normalised; ValueError naming ``name`` (and the
+    flat index) for NaN/inf or a zero quaternion."""
+    a = real_array(q, name)
+    if a.ndim == 0 or a.shape[-1] != 4:
+        raise ValueError(f"{name}: expected shape (..., 4) (x, y, z, w), got {a.shape}")
+    flat = a.reshape(-1, 4)
+    if not np.all(np.isfinite(flat)):
+        bad = int(np.flatnonzero(~np.isfinite(flat).all(axis=1))[0])
+        raise ValueError(f"{name}: quaternion {bad} contains NaN or inf")
+    norm = np.linalg.norm(flat, axis=1)
+    if np.any(~(norm > 1e-12)):
+        bad = int(np.flatnonzero(~(norm > 1e-12))[0])
+        raise ValueError(f"{name}: quaternion {bad} has zero norm")
+    x, y, z, w = (flat / norm[:, None]).T
+    R = np.empty((len(flat), 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), \
+        2 * (x * z + y * w)
+    R[:, 1, 0], R[:, 1, 1], R[:, 1, 2] = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), \
+        2 * (y * z - x * w)
+    R[:, 2, 0], R[:, 2, 1], R[:, 2, 2] = 2 * (x * z - y * w), 2 * (y * z + x * w), \
+        1 - 2 * (x * x + y * y)
+    return R.reshape(a.shape[:-1] + (3, 3))
+
+
+def _is_position_quaternion_pair(target: Any) -> bool:
+    """Whether ``target`` is a ``(positions (..., 3), quaternions (..., 4))`` tuple (a tuple
+    of two 4x4 poses is not: its first item ends in 4)."""
+    if not isinstance(target, tuple) or len(target) != 2:
+        return False
+    try:
+        return np.shape(target[0])[-1:] == (3,) and np.shape(target[1])[-1:] == (4,)
+    except (TypeError, ValueError):  # ragged: not this form
+        return False
+
+
+def pose_from_quaternions(positions: Any, quaternions: Any) -> np.ndarray:
+    """Poses (..., 4, 4) of positions (..., 3) [m] and quaternions (..., 4) ``(x, y, z,
+    w)`` (normalised; equal leading dims). ValueError naming ``target`` otherwise."""
+    p = real_array(positions, "target")
+    q = real_array(quaternions, "target")
+    if p.shape[:-1] != q.shape[:-1]:
+        raise ValueError(f"target: positions {p.shape} and quaternions {q.shape} must have "
+                         f"the same leading dims ((..., 3) and (..., 4))")
+    if not np.all(np.isfinite(p)):
+        raise ValueError("target: positions contain NaN or inf")
+    R = quaternion_matrices(q, "target")
+    T = np.zeros(p.shape[:-1] + (4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = p
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def as_poses(target: Any) -> Any:
+    """``target`` itself, or the poses (..., 4, 4) of a ``(positions (..., 3), quaternions
+    (..., 4))`` tuple (:func:`pose_from_quaternions`): the one place where the IK's target
+    forms are read."""
+    if _is_position_quaternion_pair(target):
+        return pose_from_quaternions(*target)
+    return target
+
+
 def target_poses(target: Any) -> tuple[np.ndarray, tuple]:
-    T = real_array(target, "target")
+    """The targets as flat poses (P, 4, 4) and their leading dims: ``target`` is poses
+    (..., 4, 4) or a tuple ``(positions (..., 3) [m], quaternions (..., 4))`` with the
+    quaternions in ROS/MoveIt/scipy order ``(x, y, z, w)`` (normalised here). ValueError
+    naming ``target`` for any other shape, NaN/inf, a zero quaternion or a matrix that is
+    not a rigid transform."""
+    T = real_array(as_poses(target), "target")
     if T.ndim < 2 or T.shape[-2:] != (4, 4) or T.size == 0:
         raise ValueError(f"target: expected shape (..., 4, 4), got {T.shape}")
     if not np.all(np.isfinite(T)):

@@ -291,7 +291,9 @@ class IKSolver:
 
         Args:
             targets: poses (n_problems, 4, 4) in the base frame [m], or one pose (4, 4)
-                for every problem; planar robots use x, y and the rotation about z.
+                for every problem, or a tuple ``(positions (n_problems, 3), quaternions
+                (n_problems, 4))`` with quaternions ``(x, y, z, w)`` (ROS/scipy order,
+                normalised); planar robots use x, y and the rotation about z.
             seeds: initial configurations (n_problems, n_seeds, n_dof) or the same for every
                 problem (n_seeds, n_dof) or (n_dof,); None: with a ``warm_start``, its H
                 seeds per problem and ``options.n_random_with_warm_start`` random ones
@@ -433,7 +435,9 @@ def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, seeds: A
     Args:
         robot: robot name or RobotModel.
         frame: end-effector frame (name, end-effector alias or index).
-        target: pose(s) (4, 4) or (..., 4, 4) in the base frame [m].
+        target: pose(s) (4, 4) or (..., 4, 4) in the base frame [m], or a tuple
+            ``(positions (..., 3) [m], quaternions (..., 4))``, the quaternions in
+            ROS/MoveIt/scipy order ``(x, y, z, w)`` (normalised; no scipy needed).
         world: optional :class:`jwarp.world.World` (None: self-collision only).
         seeds: start configurations (n_dof,), (n_starts, n_dof) or (T, n_starts, n_dof)
             instead of random ones (the old name ``initial`` warns, for one release).

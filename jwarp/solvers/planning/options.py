@@ -75,6 +75,10 @@ class PlanOptions:
         n_waypoints: W, >= 2 (20 in the thesis); seeds given as paths bring their own W.
         n_substeps: substeps per segment, >= 1; None sizes them to the world's voxel size
             on the initial paths of each call (:func:`substeps_for_voxel`).
+        substep_voxels: with ``n_substeps`` None in a grid world: the most a sphere centre
+            may travel between two substeps of the cost, in voxels (> 0; 1: the thesis'
+            rule). The cost only guides the paths (the exact continuous check certifies
+            them), so a coarser cost (2-3) trades some guidance for fewer configurations.
         iterations: most gradient steps per path, >= 0.
         step, max_step: step size alpha (eq. 3.18) and the largest change of one joint of
             one waypoint per step [rad], both > 0.
@@ -92,6 +96,10 @@ class PlanOptions:
         stop_when_solved: end as soon as every problem has one feasible path (default);
             False optimises every start until it is feasible (or converged, or out of
             iterations): for labels (``converge``), per-start statistics.
+        enough_feasible: with ``stop_when_solved`` False (and ``freeze_feasible``, not
+            ``converge``): a problem's other starts stop once this many of its starts are
+            feasible (>= 1; labels need only the few they converge); None: every start runs
+            until it is feasible or out of iterations.
         time_limit: seconds for the whole call (None: no limit), > 0: checked before
             every iteration (wall clock since the call started); when it is reached the
             current paths get their exact check and the call ends (the endpoint checks,
@@ -99,7 +107,8 @@ class PlanOptions:
         fallback: "rrt" (default): problems the multi-starts have not solved after
             their iterations, or after ``fallback_after`` of ``time_limit``, get an
             RRT-Connect path in joint space (:mod:`jwarp.solvers.planning.rrt`) as the seed of
-            one more gradient optimisation (exact check as always); None: no fallback.
+            one more gradient optimisation (exact check as always); None or "none" (the
+            CLI's ``--fallback none``; stored as None): no fallback.
         fallback_after: the share of ``time_limit`` the multi-starts may use before the
             fallback, in (0, 1) (without a time limit: after the iterations).
         rrt: :class:`jwarp.solvers.planning.rrt.RRTOptions` of the fallback (None: its defaults).
@@ -134,6 +143,7 @@ class PlanOptions:
     start_kind: str = "mixed"
     n_waypoints: int = 20
     n_substeps: int | None = None
+    substep_voxels: float = 1.0
     iterations: int = 100
     step: float = 0.01
     max_step: float = 0.1
@@ -144,6 +154,7 @@ class PlanOptions:
     self_margin: float = 0.0
     freeze_feasible: bool = True
     stop_when_solved: bool = True
+    enough_feasible: int | None = None
     check_all_every: int | None = None
     free_via: bool = True
     kappa: Any = None
@@ -158,6 +169,9 @@ class PlanOptions:
     rrt: Any = None
     allow_no_collision: bool = False
 
+    def __post_init__(self) -> None:
+        self.fallback = fallback_word(self.fallback)
+
     def validate(self, dtype: Any = np.float32) -> None:
         """ValueError/TypeError naming the first bad field; numbers must be finite in the
         computing ``dtype``."""
@@ -166,7 +180,9 @@ class PlanOptions:
             check_int(getattr(self, name), name, lo)
         if self.check_all_every is not None:
             check_int(self.check_all_every, "check_all_every", 1)
-        for name in ("step", "max_step"):
+        if self.enough_feasible is not None:
+            check_int(self.enough_feasible, "enough_feasible", 1)
+        for name in ("step", "max_step", "substep_voxels"):
             v = getattr(self, name)
             if not (math.isfinite(real_number(v, name, npdt)) and v > 0):
                 raise ValueError(f"{name}: expected a number > 0, got {v!r}")
@@ -222,6 +238,16 @@ class PlanOptions:
         _check_budget(self)
 
 
+def fallback_word(value: Any) -> Any:
+    """:attr:`PlanOptions.fallback` in one vocabulary with the CLI's ``--fallback rrt|none``:
+    ``"none"`` (any case, spaces around) is None, ``"RRT"`` is ``"rrt"``; anything else is
+    returned as it is (checked by :meth:`PlanOptions.validate`)."""
+    if isinstance(value, str) and value.strip().lower() in (*FALLBACKS, "none"):
+        v = value.strip().lower()
+        return None if v == "none" else v
+    return value
+
+
 def _check_budget(o: "PlanOptions") -> None:
     """:meth:`PlanOptions.validate` of ``time_limit``, ``fallback``, ``fallback_after``
     and ``rrt``."""
@@ -233,9 +259,10 @@ def _check_budget(o: "PlanOptions") -> None:
         if not (math.isfinite(t) and t > 0):
             raise ValueError(f"time_limit: expected a number > 0 [s] or None, got "
                              f"{o.time_limit!r}")
+    o.fallback = fallback_word(o.fallback)
     if o.fallback is not None and (not isinstance(o.fallback, str)
                                    or o.fallback not in FALLBACKS):
-        raise ValueError(f"fallback: expected 'rrt' or None, got {o.fallback!r}")
+        raise ValueError(f"fallback: expected 'rrt', 'none' or None, got {o.fallback!r}")
     f = real_number(o.fallback_after, "fallback_after")
     if not 0.0 < f < 1.0:
         raise ValueError(f"fallback_after: expected a number in (0, 1), got "

@@ -253,7 +253,8 @@ class Planner:
         Qf = Q.reshape(P, W, model.n_dof)
         n_sub = o.n_substeps
         if n_sub is None and self.world.has_grid:
-            n_sub = substeps_for_voxel(model, Qf, float(self.world.resolution), device=dev)
+            n_sub = substeps_for_voxel(model, Qf, float(self.world.resolution),
+                                       safety=1.0 / float(o.substep_voxels), device=dev)
         elif n_sub is None:  # exact objects only: the check is continuous, the cost a guide
             from jwarp.world.motion import travel_bound
 
@@ -306,13 +307,18 @@ class Planner:
                             self._keep(buf, newly)
                             done[newly] = True
                 solved = feasible
-                if o.stop_when_solved and o.freeze_feasible and B > 1:
-                    # a solved problem needs nothing more: its other starts stop here
-                    # (kept as they are), so they cost no evaluation or check from now on
-                    fin = np.repeat(solved.reshape(B, n_starts).any(1), n_starts) & ~done
+                enough = 1 if o.stop_when_solved else o.enough_feasible
+                if enough is not None and o.freeze_feasible and (B > 1 or enough > 1):
+                    # a solved problem needs nothing more (``enough_feasible``: enough of
+                    # its starts are feasible): its other starts stop here (kept as they
+                    # are), so they cost no evaluation or check from now on
+                    fin = np.repeat(solved.reshape(B, n_starts).sum(1) >= enough,
+                                    n_starts) & ~done
                     if fin.any():
                         self._keep(buf, np.nonzero(fin)[0])
                         done[fin] = True
+                        if not o.stop_when_solved:  # enough_feasible: where they stopped
+                            iters[fin] = it
             if o.stop_when_solved and solved.reshape(B, n_starts).any(1).all():
                 reason = "solved"
                 break
