@@ -23,3 +23,58 @@ def block_world_2d():
     h = 2.0 / 63
     X, Y = np.meshgrid(*[lim[d, 0] + h * np.arange(64) for d in range(2)], indexing="ij")
     return world_from_occupancy((X > 0.5) & (X < 0.75) & (np.abs(Y) < 0.12), lim, h)
+
+
+def grazing_paths(robot, n, delta, margin=0.0, W=3, seed=0, N=3000):
+    """``n`` paths of W waypoints (self-free) and per path a ball that they pass at
+    ``margin + delta`` [m] (the smallest clearance of any sphere over N samples a segment;
+    the ball's radius is set to it): grazing for 0 < delta <~ 1 mm, a collision for
+    delta < 0. Returns (paths (n, W, n_dof), the smallest clearance (n,) of a denser
+    sampling, balls [(centre, radius)])."""
+    from jwarp.core.limits import within_limits
+    from jwarp.world.collision import min_distances
+    from jwarp.world.path_feasibility import sphere_centres
+
+    rng = np.random.default_rng(seed)
+    lim = np.array(robot.joint_limits)
+    mid = lim.mean(1)
+    _, _, rad = robot.sphere_arrays()
+    paths, balls, dense = [], [], []
+    while len(paths) < n:
+        q = mid + 0.7 * (rng.uniform(lim[:, 0], lim[:, 1], size=(2, robot.n_dof)) - mid)
+        path = q[:1] + np.linspace(0, 1, W)[:, None] * (q[1:] - q[:1])
+        if not within_limits(robot, q).all():  # (linear limits: convex, the ends suffice)
+            continue
+        u = np.linspace(0, 1, N * (W - 1) + 1)
+        qs = path[0] + u[:, None] * (path[-1] - path[0])
+        if min_distances(robot, qs[::25], None, dtype=np.float64)[:, 1].min() < 0.01:
+            continue
+        x = sphere_centres(robot, qs)                      # (samples, S, 3)
+        i = int(rng.integers(len(u) // 4, 3 * len(u) // 4))
+        s = int(rng.integers(len(rad)))
+        v = x[i + 1, s] - x[i - 1, s]
+        if np.linalg.norm(v) < 1e-6:
+            continue
+        nrm = np.cross(v, rng.normal(size=3))              # across the sphere's motion
+        c = x[i, s] + nrm / np.linalg.norm(nrm) * (rad[s] + 0.15)
+        R = (np.linalg.norm(x - c, axis=-1) - rad).min() - margin - delta
+        if R < 0.03 or c[2] - R < 0.0:
+            continue
+        fine = np.linspace(0, 1, 8 * N * (W - 1) + 1)
+        xf = sphere_centres(robot, path[0] + fine[:, None] * (path[-1] - path[0]))
+        paths.append(path)
+        balls.append((c, R))
+        dense.append((np.linalg.norm(xf - c, axis=-1) - rad).min() - R)
+    return np.array(paths), np.array(dense), balls
+
+
+def ball_worlds(balls):
+    """A batch of worlds (:meth:`World.batch`), world i the ball ``balls[i]`` alone."""
+    from jwarp.world import World
+
+    ws = []
+    for c, R in balls:
+        w = World.of_shapes()
+        w.add("ball", "sphere", [R], c)
+        ws.append(w)
+    return World.batch(ws)

@@ -22,6 +22,20 @@ starts there, until u = 1. A clearance ``< m`` is a proven violation; a step bel
 ``min_step`` (the motion grazes the margin) or too many evaluations is *uncertified* (not
 feasible). Far from obstacles a few evaluations prove a whole segment.
 
+The same bound proves an interval from its midpoint: an evaluation at u_m with every
+clearance ``d_s >= m + w L_s`` (pairs likewise) proves [u_m - w, u_m + w]. The *levels*
+(:func:`level_kernel`, the GPU's default; the host: :class:`jwarp.world.motion.MotionCheck`)
+split every segment into n0 intervals (level 0) and evaluate every interval of a level in
+parallel, at its midpoint with ``reach`` = its half width: a clearance below the margin is
+a proven violation, a step >= the half width proves the interval, a step below
+``min_step`` leaves the segment uncertified (as the advancement does); of any other
+interval the two parts the step does not prove, [u0, u_m - step] and [u_m + step, u1]
+(each at most half of it: the widths at least halve per level), are appended to the next
+level's work list (compacted with an atomic counter; a fixed capacity). A segment is
+proven when all its intervals are. What
+the levels leave (the capacity, the level cap) goes on with the advancement from its
+proven prefix, or is uncertified: nothing is proven that the bound does not prove.
+
 Result codes per segment and per path: :data:`OK` 0, :data:`WORLD` 1 (sphere ``a`` vs
 object ``b``; -2 the grid), :data:`SELF` 2 (spheres ``a`` and ``b``), :data:`UNCERTIFIED` 3
 (sphere ``a``, object/sphere ``b``), :data:`LIMITS` 4 (waypoint outside the limits).
@@ -101,7 +115,9 @@ def kernels(path_scalar: type) -> SimpleNamespace:
     class Segments:
         """Per segment (K, W - 1) of a launch: result ``code``, where (``u``, a fraction of
         the segment), what (``a``, ``b``), the clearance ``d`` [m], the evaluations ``n``,
-        and the proven prefix ``cov`` of the parallel rounds."""
+        and the proven prefix ``cov`` of the parallel rounds (of the levels: the start of
+        the first interval they left unresolved, 1 if none); the levels' intervals not
+        resolved yet ``left`` and the first result written (``claim``, 0: none)."""
 
         code: wp.array2d(dtype=wp.int32)
         u: wp.array2d(dtype=f64)
@@ -110,6 +126,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         d: wp.array2d(dtype=f64)
         n: wp.array2d(dtype=wp.int32)
         cov: wp.array2d(dtype=f64)
+        left: wp.array2d(dtype=wp.int32)
+        claim: wp.array2d(dtype=wp.int32)
 
     @wp.struct
     class Points:
@@ -382,7 +400,10 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         there until u = 1 (OK), a clearance below the margin (WORLD/SELF), or a step
         below ``min_step`` or more than ``max_evals`` evaluations (UNCERTIFIED: the motion
         grazes the margin). Out: the code, where (u), what (a, b), the clearance d [m] and
-        the number of evaluations."""
+        the number of evaluations. ``use_points``: 0 from u = 0 (a coarse probe pass
+        first), 1 from ``seg.cov`` (the point rounds), 2 from ``seg.cov`` where the levels
+        left the segment unresolved (a segment they decided, ``cov`` = 1, is left as it
+        is)."""
         k, t = wp.tid()
         W = paths.shape[1]
         n_dof = paths.shape[2]
@@ -392,6 +413,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         if world_group > 0:
             wg = p // world_group
         g = int(-1)  # ``group`` > 0: paths p of one problem p // group need one feasible
+        if use_points == 2 and seg.cov[k, t] >= one:
+            return  # proven (and counted) by the levels (or failed there)
         if group > 0:
             g = p // group
             if solved[g] != 0:
@@ -411,7 +434,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         lmax = zero
         for s in range(cm.reach.shape[0]):
             lmax = wp.max(lmax, sc.travel[rt, s])
-        if use_points != 0:  # the parallel rounds (point/cover kernels) proved [0, cov]
+        if use_points != 0:  # the parallel rounds or the levels proved [0, cov]
             u = seg.cov[k, t]
             n = seg.n[k, t]
         # a coarse pass first (one probe per ``probe_len`` of travel, at most 16): most
@@ -494,6 +517,233 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         seg.d[k, t] = cd
         seg.n[k, t] = n
 
+    @wp.func
+    def claim_result(seg: Segments, k: int, t: int, code: int, u: f64, a: int, b: int,
+                     d: f64):
+        """Write the segment's result once: the first interval that decides it (a
+        violation, or an unproven interval at the finest width) writes code, where and
+        what; later ones leave it."""
+        if wp.atomic_add(seg.claim, k, t, 1) == 0:
+            seg.u[k, t] = u
+            seg.a[k, t] = a
+            seg.b[k, t] = b
+            seg.d[k, t] = d
+            seg.code[k, t] = code
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def level_init_kernel(
+        # Model:
+        n0: int,
+        # Data in:
+        bad: wp.array(dtype=wp.int32),
+        # Data in/out:
+        count: wp.array(dtype=wp.int32),
+        seg: Segments,
+        # Data out:
+        list_seg: wp.array(dtype=wp.int32),
+        list_u0: wp.array(dtype=f64),
+        list_u1: wp.array(dtype=f64),
+    ):
+        """Level 0 of the interval refinement (launch dim (K, W - 1), after
+        :func:`prep_kernel`): segment t of path k, within the limits, is split into ``n0``
+        equal intervals [j / n0, (j + 1) / n0], appended to the work list (``list_seg``:
+        the segment row k (W - 1) + t, ``list_u0``, ``list_u1``: the interval's ends in
+        the segment's parameter u; ``count[0]`` their number). An
+        interval beyond the list's capacity is left to the sequential advancement
+        (``seg.cov`` = its start). A segment of a path outside the limits is skipped."""
+        k, t = wp.tid()
+        W1 = seg.code.shape[1]
+        if seg.code[k, t] != OK:
+            return
+        if bad[k] != 0:
+            seg.code[k, t] = SKIPPED
+            return
+        seg.cov[k, t] = one
+        seg.left[k, t] = n0
+        seg.claim[k, t] = 0
+        cap = list_seg.shape[0]
+        base = wp.atomic_add(count, 0, n0)
+        for j in range(n0):
+            pos = base + j
+            if pos < cap:
+                list_seg[pos] = k * W1 + t
+                list_u0[pos] = f64(j) / f64(n0)
+                list_u1[pos] = f64(j + 1) / f64(n0)
+            else:
+                wp.atomic_min(seg.cov, k, t, f64(j) / f64(n0))
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def level_kernel(
+        # Model:
+        cm: CheckModel,
+        # Data in:
+        paths: wp.array3d(dtype=path_scalar),
+        idx: wp.array(dtype=wp.int32),
+        margin: f64,
+        end_margin: f64,
+        self_margin: f64,
+        min_step: f64,
+        group: int,
+        world_group: int,
+        level: int,
+        last: int,
+        list_seg: wp.array(dtype=wp.int32),
+        list_u0: wp.array(dtype=f64),
+        list_u1: wp.array(dtype=f64),
+        # Scratch:
+        sc: CheckScratch,
+        # Data in/out:
+        count: wp.array(dtype=wp.int32),
+        bad: wp.array(dtype=wp.int32),
+        ok_segments: wp.array(dtype=wp.int32),
+        solved: wp.array(dtype=wp.int32),
+        seg: Segments,
+        # Data out:
+        next_seg: wp.array(dtype=wp.int32),
+        next_u0: wp.array(dtype=f64),
+        next_u1: wp.array(dtype=f64),
+    ):
+        """One level of the interval refinement (launch dim: the list's capacity on a GPU,
+        threads past ``count[level]`` return; its size on the CPU). Interval i of the list
+        is [u0, u1] = [``list_u0[i]``, ``list_u1[i]``] of segment row r = ``list_seg[i]``.
+        One :func:`advance` at its midpoint u_m with ``reach`` = its half width w (objects
+        farther than the interval's whole motion are not visited; scratch row i):
+
+        * a clearance below the margin: the segment fails there (WORLD/SELF, proven);
+        * step >= w: the interval is proven (every sphere moves at most ``travel * w``
+          from u_m); the segment's last one proves the segment (``ok_segments``,
+          ``solved`` as :func:`segment_kernel`);
+        * else, where step < ``min_step``: the segment is UNCERTIFIED there (the motion
+          grazes the margin; an interval narrower than ``min_step`` is never split: it is
+          proven or this); where ``last``: the interval is left to the sequential
+          advancement (``seg.cov`` = min of its start); else the parts the evaluation does
+          not prove, [u0, u_m - step] and [u_m + step, u1] (each at most half of it), are
+          appended to the next level's list (``next_*``, counter ``count[level + 1]``; a
+          part beyond the capacity is left like ``last``). The ends are rounded outwards
+          (by 1e-15: what an interval leaves out is proven).
+
+        A segment already decided, of a failed path (``bad``) or of a solved problem
+        (``group``) is not evaluated further."""
+        i = wp.tid()
+        if i >= count[level] or i >= list_seg.shape[0]:
+            return
+        W = paths.shape[1]
+        r = list_seg[i]
+        k = r // (W - 1)
+        t = r - k * (W - 1)
+        if seg.code[k, t] != OK or bad[k] != 0:
+            return
+        p = idx[k]
+        g = int(-1)
+        if group > 0:
+            g = p // group
+            if solved[g] != 0:
+                return
+        wg = int(-1)
+        if world_group > 0:
+            wg = p // world_group
+        m_req, m_self = required(margin, end_margin, self_margin, t, W)
+        u0 = list_u0[i]
+        u1 = list_u1[i]
+        um = half * (u0 + u1)
+        w = wp.max(um - u0, u1 - um) + f64(1e-15)  # covers [u0, u1] despite rounding
+        for jj in range(paths.shape[2]):
+            sc.q[i, jj] = f64(paths[p, t, jj]) + um * sc.dq[r, jj]
+        c, a, b, d, step = advance(cm, sc, i, r, m_req, m_self, w, wg)
+        wp.atomic_add(seg.n, k, t, 1)
+        if c != OK and c != OK_SELF_LIMITED:  # below the margin here: proven
+            claim_result(seg, k, t, c, um, a, b, d)
+            bad[k] = 1
+            return
+        if step >= w:  # the interval is proven
+            if wp.atomic_add(seg.left, k, t, -1) == 1:  # its segment's last one
+                if wp.atomic_add(ok_segments, k, 1) == W - 2 and g >= 0:
+                    solved[g] = 1
+            return
+        if step < min_step:  # stalled against the margin (as segment_kernel)
+            code = int(UNCERTIFIED)
+            if c == OK_SELF_LIMITED:
+                code = UNCERTIFIED_SELF
+            claim_result(seg, k, t, code, um, a, b, d)
+            bad[k] = 1
+            return
+        if last != 0:
+            wp.atomic_min(seg.cov, k, t, u0)
+            return
+        if seg.code[k, t] != OK or bad[k] != 0:  # decided meanwhile: no parts
+            return
+        # the parts not proven: [u0, um - s], [um + s, u1] with s = step less a guard, so
+        # that the rounded ends lie within the proven [um - step, um + step]; an empty
+        # part (its end before its start) lies within it whole
+        sg = wp.max(step - f64(1e-15), zero)
+        a_end = um - sg
+        b_start = um + sg
+        n_parts = int(0)
+        if a_end > u0:
+            n_parts += 1
+        if u1 > b_start:
+            n_parts += 1
+        wp.atomic_add(seg.left, k, t, n_parts - 1)  # one interval out, its parts in
+        cap = next_seg.shape[0]
+        for h in range(2):
+            lo = u0
+            hi = a_end
+            if h == 1:
+                lo = b_start
+                hi = u1
+            if hi > lo:
+                pos = wp.atomic_add(count, level + 1, 1)
+                if pos < cap:
+                    next_seg[pos] = r
+                    next_u0[pos] = lo
+                    next_u1[pos] = hi
+                else:
+                    wp.atomic_min(seg.cov, k, t, lo)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def level_end_kernel(
+        # Model:
+        group: int,
+        fallback: int,
+        # Data in:
+        idx: wp.array(dtype=wp.int32),
+        solved: wp.array(dtype=wp.int32),
+        # Data in/out:
+        bad: wp.array(dtype=wp.int32),
+        count: wp.array(dtype=wp.int32),
+        seg: Segments,
+    ):
+        """After the last level (launch dim (K, W - 1)): a segment whose intervals were all
+        proven is OK (``cov`` = 1); one of a failed path or a solved problem is SKIPPED;
+        one with intervals left unresolved (the capacity or the level cap) keeps code OK
+        and its proven prefix [0, cov] for :func:`segment_kernel` (``fallback``; counted in
+        the last entry of ``count``), or is UNCERTIFIED at ``cov`` (no fallback)."""
+        k, t = wp.tid()
+        if seg.code[k, t] != OK:
+            return
+        if seg.left[k, t] == 0:
+            seg.u[k, t] = one
+            seg.cov[k, t] = one
+            return
+        skip = bad[k]
+        if group > 0:
+            if solved[idx[k] // group] != 0:
+                skip = 1
+        if skip != 0:
+            seg.code[k, t] = SKIPPED
+            return
+        if seg.cov[k, t] >= one:  # (unreachable: an unresolved interval lowers it)
+            seg.cov[k, t] = zero
+        if fallback != 0:
+            wp.atomic_add(count, count.shape[0] - 1, 1)
+            return
+        seg.code[k, t] = UNCERTIFIED
+        seg.u[k, t] = seg.cov[k, t]
+        seg.a[k, t] = -1
+        seg.b[k, t] = -1
+        seg.d[k, t] = zero
+        bad[k] = 1
+
     @wp.kernel(module="unique", enable_backward=False)
     def reduce_kernel(
         # Data in:
@@ -536,4 +786,6 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                            required=required,
                            CheckModel=CheckModel, CheckScratch=CheckScratch,
                            advance=advance, segment=segment_kernel, reduce=reduce_kernel,
+                           level_init=level_init_kernel, level=level_kernel,
+                           level_end=level_end_kernel,
                            fk=fk, ck=ck)

@@ -8,10 +8,14 @@ the last segment the clearance required is ``min(margin, endpoint_margin)`` (so 
 pose closer to an object than the path margin can be reached). Distances are exact for
 the world's objects; a grid counts with its declared ``grid_error`` subtracted.
 
-One launch checks a batch of paths (one thread per segment) and a second reduces them:
-per path a flag, and for an infeasible one the first offending place (in waypoint units),
-the sphere (its link) and the object or the other sphere. Only these few numbers per path
-are read back.
+One call checks a batch of paths on the device, in a few launches: on the CPU by
+conservative advancement (one thread per segment, :attr:`MotionOptions.method`
+"advance"), on a GPU by interval refinement (every segment split into intervals, each
+proven from its midpoint or cut to what it leaves unproven, level by level, every
+interval of a level a thread: "levels"; a fixed number of launches, no host read), both
+with the same travel bound; a last launch reduces them: per path a flag, and for an infeasible one the first
+offending place (in waypoint units), the sphere (its link) and the object or the other
+sphere. Only these few numbers per path are read back.
 
 Example::
 
@@ -47,22 +51,46 @@ __all__ = ["MotionCheck", "MotionOptions", "PathCheck", "check_paths", "motion_c
 
 @dataclass
 class MotionOptions:
-    """Options of the continuous check (conservative advancement, :mod:`jwarp.kernels.motion`).
+    """Options of the continuous check (conservative advancement or interval refinement,
+    :mod:`jwarp.kernels.motion`).
 
     Attributes:
         min_step: the smallest proven step, as a fraction of a segment, in (0, 1): a
             segment whose motion can only be proven in smaller steps (it grazes the
             margin) is reported uncertified.
-        max_evals: most evaluations per segment (then uncertified), >= 1.
-        probe_len: a coarse pass probes each segment every ``probe_len`` [m] of sphere
-            travel (at most 16 probes) for a clearance below the margin before the
-            advancement, > 0 (colliding paths are found in a few evaluations).
-        points: evaluations of every segment in parallel before the advancement (each
-            proves an interval around it; the advancement goes on from the first gap),
-            >= 1, or 0 for none; None: 16 on a GPU (a thread per evaluation), 0 on the CPU.
-        rounds: rounds of parallel evaluations (>= 1): each evaluates ``points`` points of
-            every segment's part not proven yet (denser near its start after the first),
-            so a segment that grazes an obstacle is proven in parallel steps.
+        max_evals: most evaluations per segment of the advancement (then uncertified),
+            >= 1 (the levels have none: ``levels`` and ``capacity`` bound them).
+        probe_len: ``"advance"``: a coarse pass probes each segment every ``probe_len``
+            [m] of sphere travel (at most 16 probes) for a clearance below the margin
+            before the advancement, > 0 (colliding paths are found in a few evaluations).
+        points: ``"advance"``: evaluations of every segment in parallel before the
+            advancement (each proves an interval around it; the advancement goes on from
+            the first gap), >= 1, or 0 for none; None: 16 on a GPU (a thread per
+            evaluation), 0 on the CPU.
+        rounds: ``"advance"``: rounds of parallel evaluations (>= 1): each evaluates
+            ``points`` points of every segment's part not proven yet (denser near its
+            start after the first), so a segment that grazes an obstacle is proven in
+            parallel steps.
+        method: ``"levels"`` (interval refinement: every segment split into
+            ``intervals`` intervals, each proven from its midpoint or cut to the two parts
+            that evaluation leaves unproven (each at most half of it), level by level, all
+            intervals of a level in parallel), ``"advance"`` (conservative
+            advancement from the start of each segment, one thread per segment, after
+            ``points`` x ``rounds`` parallel evaluations), or None: "levels" on a GPU,
+            "advance" on the CPU. Both use the same travel bound and evaluation.
+        intervals: ``"levels"``: intervals per segment at level 0, in [1, 4096].
+        levels: ``"levels"``: the most levels (>= 1; level l has ``intervals * 2**l``
+            per segment), or None: down to ``min_step`` (an interval not proven whose step
+            is below ``min_step`` makes its segment uncertified, as in the advancement;
+            one narrower than ``min_step`` is proven or that).
+            A segment still unresolved after the last level goes to ``fallback``.
+        capacity: ``"levels"``: intervals the work list holds (>= 1), or None: twice the
+            level-0 intervals of the launch (at least 1024). On a GPU each holds a row of
+            evaluation scratch (configuration, frames, sphere centres). An interval that
+            does not fit is left unresolved (``fallback``).
+        fallback: ``"levels"``: a segment left unresolved by the levels (capacity, level
+            cap) goes on with the conservative advancement from its proven prefix (True,
+            bounded by ``max_evals`` and ``min_step``), or is reported uncertified (False).
     """
 
     min_step: float = 1e-5
@@ -70,6 +98,11 @@ class MotionOptions:
     probe_len: float = 0.1
     points: int | None = None
     rounds: int = 4
+    method: str | None = None
+    intervals: int = 16
+    levels: int | None = None
+    capacity: int | None = None
+    fallback: bool = True
 
     def validate(self) -> None:
         d = real_number(self.min_step, "min_step")
@@ -87,6 +120,35 @@ class MotionOptions:
         v = self.max_evals
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"max_evals: expected an integer >= 1, got {v!r}")
+        if self.method not in (None, "levels", "advance"):
+            raise ValueError(f"method: expected 'levels', 'advance' or None, got "
+                             f"{self.method!r}")
+        v = self.intervals
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 4096:
+            raise ValueError(f"intervals: expected an integer in [1, 4096], got {v!r}")
+        for name, lo in (("levels", 1), ("capacity", 1)):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer))
+                                  or v < lo):
+                raise ValueError(f"{name}: expected an integer >= {lo} or None, got {v!r}")
+        if not isinstance(self.fallback, (bool, np.bool_)):
+            raise ValueError(f"fallback: expected True or False, got {self.fallback!r}")
+
+    def n_levels(self) -> int:
+        """The levels of ``"levels"``: :attr:`levels`, at most down to the first level of
+        intervals narrower than ``min_step`` (each is proven or uncertified there), and
+        at most ``intervals * 2**(levels - 1) <= 2**29`` intervals per segment."""
+        n = 1
+        while (1.0 / (2.0 * self.intervals * 2 ** (n - 1)) >= self.min_step
+               and self.intervals * 2 ** n <= 2 ** 29):
+            n += 1
+        return n if self.levels is None else min(n, int(self.levels))
+
+    def resolved_method(self, device: Any) -> str:
+        """:attr:`method` on ``device`` (None: "levels" on a GPU, "advance" on the CPU)."""
+        if self.method is not None:
+            return self.method
+        return "levels" if device.is_cuda else "advance"
 
 
 _TABLES: "OrderedDict[tuple, Any]" = OrderedDict()
@@ -248,6 +310,9 @@ class PathCheck:
         if c == 6:
             return (f"uncertified: {link} grazes {_link(self.robot, b)} {at} ({mm}): the motion "
                     f"cannot be proven to keep the self-collision margin there")
+        if a < 0:
+            return (f"uncertified {at}: the motion was not proven within the check's work "
+                    f"budget (MotionOptions capacity, levels)")
         return (f"uncertified: {link} grazes '{other}' {at} ({mm}): the motion cannot be "
                 f"proven to keep the margin there; lower the margin or move the path away")
 
@@ -311,6 +376,10 @@ class MotionCheck:
         cm.limit_tol = wp.float64(LIMIT_TOL)
         self._cm = cm
         self._scratch: tuple | None = None
+        self._lists: tuple = ()  # the levels' work lists (two of (segment row, u0, u1))
+        self._levels_count: wp.array | None = None  # per level its list's size
+        #: kernel launches of the last check (memsets not counted)
+        self.last_launches = 0
         self._cap = 0
         self._cap_eval = 0
         self._out: dict = {}
@@ -380,6 +449,8 @@ class MotionCheck:
             seg.d = wp.empty(shape, dtype=wp.float64, device=dev)
             seg.n = wp.empty(shape, dtype=wp.int32, device=dev)
             seg.cov = wp.empty(shape, dtype=wp.float64, device=dev)
+            seg.left = wp.empty(shape, dtype=wp.int32, device=dev)
+            seg.claim = wp.empty(shape, dtype=wp.int32, device=dev)
             o = self._out = dict(
                 W=W, cap=cap, seg=seg,
                 bad=wp.zeros(cap, dtype=wp.int32, device=dev),
@@ -409,8 +480,12 @@ class MotionCheck:
         self._cm.world = self.device_world.struct
         out = self._outputs(K, W)
         o = self.options
-        M = o.points if o.points is not None else (16 if self.device.is_cuda else 0)
-        sc = self._scratch_for(K * (W - 1), K * (W - 1) * max(M, 1))
+        levels = o.resolved_method(self.device) == "levels"
+        M = 0 if levels else (o.points if o.points is not None
+                              else (16 if self.device.is_cuda else 0))
+        n_seg = K * (W - 1)
+        cap = self._work_lists(n_seg) if levels else 0
+        sc = self._scratch_for(n_seg, cap if levels else n_seg * max(M, 1))
         em = margin if endpoint_margin is None else endpoint_margin
         kern = mk.kernels(paths.dtype)
         seg = out["seg"]
@@ -421,25 +496,107 @@ class MotionCheck:
         if out["solved"].shape[0] < n_groups:
             out["solved"] = wp.zeros(n_groups, dtype=wp.int32, device=self.device)
         out["solved"].zero_()
+        dev = self.device
         wp.launch(kern.prep, dim=(K, W - 1), inputs=[paths, idx, self._cm, sc, out["bad"]],
-                  outputs=[seg], device=self.device)
+                  outputs=[seg], device=dev)
+        n_launch = 1
+        use_points = int(M > 0)
+        run_segments = True
+        if levels:
+            n_launch += self._launch_levels(kern, paths, idx, K, W, cap, sc, out, margin, em,
+                                            self_margin, group, world_group)
+            use_points = 2
+            # the CPU reads how many segments the levels left (free there); a GPU launches
+            # the advancement anyway (its threads return at once where none is left)
+            left = self._levels_count
+            run_segments = bool(o.fallback) and (dev.is_cuda or left is None
+                                                 or int(left.numpy()[-1]) > 0)
         for rnd in range(o.rounds if M > 0 else 0):
             wp.launch(kern.points, dim=(K, W - 1, M),
                       inputs=[paths, idx, float(margin), float(em), float(self_margin),
                               int(world_group), seg, int(rnd > 0), self._cm, sc],
-                      outputs=[pts], device=self.device)
+                      outputs=[pts], device=dev)
             wp.launch(kern.cover, dim=(K, W - 1), inputs=[pts, int(rnd > 0)],
-                      outputs=[out["bad"], seg], device=self.device)
-        wp.launch(kern.segment, dim=(K, W - 1),
-                  inputs=[paths, idx, float(margin), float(em), float(self_margin),
-                          float(o.min_step), int(o.max_evals), float(o.probe_len), int(group),
-                          int(world_group), int(M > 0), self._cm, sc,
-                          out["bad"], out["ok_segments"], out["solved"]],
-                  outputs=[seg], device=self.device)
+                      outputs=[out["bad"], seg], device=dev)
+            n_launch += 2
+        if run_segments:
+            wp.launch(kern.segment, dim=(K, W - 1),
+                      inputs=[paths, idx, float(margin), float(em), float(self_margin),
+                              float(o.min_step), int(o.max_evals), float(o.probe_len),
+                              int(group), int(world_group), use_points, self._cm, sc,
+                              out["bad"], out["ok_segments"], out["solved"]],
+                      outputs=[seg], device=dev)
+            n_launch += 1
         wp.launch(kern.reduce, dim=K, inputs=[seg],
                   outputs=[out["ok"], out["code"], out["where"], out["what"], out["dist"]],
-                  device=self.device)
+                  device=dev)
+        self.last_launches = n_launch + 1
         return out
+
+    def _work_lists(self, n_seg: int) -> int:
+        """The levels' two work lists (segment row, interval) for ``n_seg`` segments:
+        :attr:`MotionOptions.capacity` entries, or (None) at least twice the level-0
+        intervals, kept and grown by half (varying batches reuse them); returns their
+        length (the capacity of this launch)."""
+        o = self.options
+        if o.capacity is not None:
+            cap = int(o.capacity)
+            if not self._lists or self._lists[0].shape[0] != cap:
+                self._lists = self._new_lists(cap)
+            return cap
+        need = max(2 * n_seg * int(o.intervals), 1024)
+        have = self._lists[0].shape[0] if self._lists else 0
+        if have < need:
+            cap = max(need, int(have * 1.5))
+            self._lists = ()  # free the old ones first
+            self._lists = self._new_lists(cap)
+        return self._lists[0].shape[0]
+
+    def _new_lists(self, cap: int) -> tuple:
+        """Two work lists of ``cap`` intervals: (segment row, u0, u1) each."""
+        dev = self.device
+        return tuple(wp.empty(cap, dtype=dt, device=dev)
+                     for _ in range(2) for dt in (wp.int32, wp.float64, wp.float64))
+
+    def _launch_levels(self, kern: Any, paths: wp.array, idx: wp.array, K: int, W: int,
+                       cap: int, sc: Any, out: dict, margin: float, em: float,
+                       self_margin: float, group: int, world_group: int) -> int:
+        """The interval refinement (:attr:`MotionOptions.method` "levels"): level 0, the
+        levels, their end; returns the number of launches. A GPU launches every level at
+        the list's capacity (sizes stay on the device: no host read); the CPU reads each
+        level's size (no copy there) and stops at an empty level."""
+        o = self.options
+        dev = self.device
+        n0 = int(o.intervals)
+        L = o.n_levels()
+        lists = self._lists  # (_work_lists: cap entries each)
+        count = self._levels_count
+        if count is None or count.shape[0] != L + 2:
+            count = self._levels_count = wp.zeros(L + 2, dtype=wp.int32, device=dev)
+        count.zero_()
+        seg = out["seg"]
+        wp.launch(kern.level_init, dim=(K, W - 1), inputs=[n0, out["bad"]],
+                  outputs=[count, seg, *lists[:3]], device=dev)
+        n = 1
+        host = None if dev.is_cuda else count.numpy()  # the CPU: a view, no copy
+        for lv in range(L):
+            src, dst = (lists[:3], lists[3:]) if lv % 2 == 0 else (lists[3:], lists[:3])
+            dim = cap
+            if host is not None:
+                dim = min(int(host[lv]), cap)
+                if dim == 0:
+                    break
+            wp.launch(kern.level, dim=dim,
+                      inputs=[self._cm, paths, idx, float(margin), float(em),
+                              float(self_margin), float(o.min_step), int(group),
+                              int(world_group), lv, int(lv == L - 1), *src, sc],
+                      outputs=[count, out["bad"], out["ok_segments"], out["solved"], seg,
+                               *dst], device=dev)
+            n += 1
+        wp.launch(kern.level_end, dim=(K, W - 1),
+                  inputs=[int(group), int(o.fallback), idx, out["solved"]],
+                  outputs=[out["bad"], count, seg], device=dev)
+        return n + 1
 
     def check(self, paths: Any, *, margin: float = 0.0,
               endpoint_margin: float | None = None, self_margin: float = 0.0,

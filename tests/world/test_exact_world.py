@@ -201,17 +201,18 @@ def _dense_clearance(robot, world, paths, n=1500):
     return md.reshape(P, -1, 2).min(axis=(1, 2))
 
 
-@pytest.mark.parametrize("points", [0, 8])
-def test_motion_check_agrees_with_dense_sampling(device, arm_scene, points):
-    """Both schemes: the advancement alone (the CPU's default) and parallel evaluations
-    first (the GPU's default, 8 points per segment)."""
+@pytest.mark.parametrize("points,method", [(0, "advance"), (8, "advance"), (None, "levels")])
+def test_motion_check_agrees_with_dense_sampling(device, arm_scene, points, method):
+    """Every scheme: the advancement alone (the CPU's default), parallel evaluations
+    first (8 points per segment), and the interval refinement (the GPU's default)."""
     from jwarp.world.motion import MotionOptions
     robot, w = arm_scene
     rng = np.random.default_rng(6)
     lim = np.array(robot.joint_limits)
     q = rng.uniform(lim[:, 0], lim[:, 1], size=(120, 2, robot.n_dof)) * 0.6
     paths = q[:, :1] + np.linspace(0, 1, 6)[None, :, None] * (q[:, 1:] - q[:, :1])
-    res = MotionCheck(robot, w, device=device, options=MotionOptions(points=points)).check(paths)
+    res = MotionCheck(robot, w, device=device,
+                      options=MotionOptions(points=points, method=method)).check(paths)
     dense = _dense_clearance(robot, w, paths)
     assert not (res.ok & (dense < 0)).any()          # never feasible through an object
     clear = dense > 2e-3                               # clearly free: certified
