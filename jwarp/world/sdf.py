@@ -595,24 +595,11 @@ def world_from_mesh(mesh: Any, limits: Any, voxel_size: float | None = None, *,
 
     from jwarp.core.arrays import init_warp, resolve_device
     from jwarp.kernels.collision import mesh_sdf_kernel
+    from jwarp.world.shapes import mesh_arrays
 
-    if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
-        verts, faces = mesh.vertices, mesh.faces
-    else:
-        try:
-            verts, faces = mesh
-        except (TypeError, ValueError) as e:
-            raise TypeError("mesh: expected a trimesh.Trimesh or a (vertices, faces) pair") from e
-    v = np.asarray(verts, dtype=np.float64)
-    f = np.asarray(faces)
-    if v.ndim != 2 or v.shape[1] != 3 or len(v) < 3:
+    v, f = mesh_arrays(mesh, "mesh")
+    if len(v) < 3:
         raise ValueError(f"mesh: vertices must have shape (V >= 3, 3), got {v.shape}")
-    if not np.all(np.isfinite(v)):
-        raise ValueError("mesh: vertices contain NaN or inf")
-    if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or not np.issubdtype(f.dtype, np.integer):
-        raise ValueError(f"mesh: faces must be an integer array of shape (F >= 1, 3), got {f.shape}")
-    if f.min() < 0 or f.max() >= len(v):
-        raise ValueError(f"mesh: face indices out of range [0, {len(v)})")
     import trimesh
 
     if not trimesh.Trimesh(v, f, process=True).is_watertight:

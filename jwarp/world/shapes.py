@@ -29,7 +29,7 @@ import warp as wp
 from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.kernels import geometry as gk
 
-__all__ = ["KINDS", "ShapeSet", "DeviceShapes", "LIMIT_EXTENT"]
+__all__ = ["KINDS", "ShapeSet", "DeviceShapes", "LIMIT_EXTENT", "mesh_arrays"]
 
 #: kinds a ShapeSet holds
 KINDS = ("sphere", "box", "cylinder", "capsule", "cone", "plane", "mesh")
@@ -57,6 +57,44 @@ def _pose(pose: Any, where: str) -> np.ndarray:
         raise ValueError(f"{where}: position {T[:3, 3].tolist()} is beyond "
                          f"{LIMIT_EXTENT:g} m")
     return T
+
+
+def mesh_arrays(mesh: Any, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices (V, 3) float64, faces (F, 3) int32)`` of a mesh-like object (anything
+    with ``vertices`` and ``faces``, e.g. a ``trimesh.Trimesh``, or a ``(vertices, faces)``
+    pair), checked before any kernel sees it: finite vertices, integer face indices in
+    ``[0, V)`` (an index past the vertices would make Warp's mesh queries read outside
+    the vertex array). Raises TypeError/ValueError starting with ``where``."""
+    if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+        verts, faces = mesh.vertices, mesh.faces
+    elif isinstance(mesh, (tuple, list)) and len(mesh) == 2:
+        verts, faces = mesh
+    else:
+        raise TypeError(f"{where}: a mesh needs a trimesh.Trimesh (vertices, faces), got "
+                        f"{type(mesh).__name__}")
+    try:
+        v = np.asarray(verts, dtype=np.float64)
+        f = np.asarray(faces)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"{where}: mesh vertices and faces must be arrays of numbers: "
+                        f"{e}") from None
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0 or f.ndim != 2 or len(f) == 0:
+        raise ValueError(f"{where}: empty mesh ({len(v)} vertices, {len(f)} faces)"
+                         if v.size == 0 or f.size == 0 else
+                         f"{where}: mesh vertices must have shape (V, 3) and faces (F, 3), "
+                         f"got {v.shape} and {f.shape}")
+    if f.shape[1] != 3:
+        raise ValueError(f"{where}: mesh faces must be triangles (F, 3), got shape {f.shape}")
+    if f.dtype == bool or not np.issubdtype(f.dtype, np.integer):
+        raise TypeError(f"{where}: mesh face indices must be integers, got dtype {f.dtype}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{where}: mesh vertices contain NaN or inf")
+    bad = np.nonzero((f < 0).any(axis=1) | (f >= len(v)).any(axis=1))[0]
+    if len(bad):
+        j = int(bad[0])
+        raise ValueError(f"{where}: mesh face {j} has vertex indices {f[j].tolist()} outside "
+                         f"[0, {len(v)}) ({len(bad)} such faces)")
+    return v, f.astype(np.int32)
 
 
 @dataclass
@@ -163,21 +201,12 @@ class ShapeSet:
         return _Object(id, kind, size, z.copy(), half)
 
     def _make_mesh(self, id: str, mesh: Any, where: str) -> _Object:
-        try:
-            v = np.asarray(mesh.vertices, dtype=np.float64)
-            f = np.asarray(mesh.faces, dtype=np.int64)
-        except AttributeError:
-            raise TypeError(f"{where}: a mesh needs a trimesh.Trimesh (vertices, faces), got "
-                            f"{type(mesh).__name__}") from None
-        if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0 or f.ndim != 2 or len(f) == 0:
-            raise ValueError(f"{where}: empty mesh ({len(v)} vertices, {len(f)} faces)")
-        if not np.all(np.isfinite(v)):
-            raise ValueError(f"{where}: mesh vertices contain NaN or inf")
+        v, f = mesh_arrays(mesh, where)
         if np.abs(v).max() > LIMIT_EXTENT:
             raise ValueError(f"{where}: mesh vertices beyond {LIMIT_EXTENT:g} m")
         lo, hi = v.min(0), v.max(0)
         return _Object(id, "mesh", 0.5 * (hi - lo), 0.5 * (hi + lo), 0.5 * (hi - lo),
-                       mesh=(v, f.astype(np.int32)))
+                       mesh=(v, f))
 
     def remove(self, id: str) -> None:
         """Remove object ``id`` (KeyError naming it if absent)."""

@@ -169,11 +169,22 @@ def test_add_move_remove_in_place(device):
     (dict(kind="sphere", dims=[0.1], pose=[1e9, 0, 0]), "object 'x': position .* beyond"),
     (dict(kind="mesh", mesh=trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), int))),
      "object 'x': empty mesh"),
+    # face indices past the vertices (or negative) made the first query read outside Warp's
+    # vertex array (a segfault); any mesh-like object is checked, not only a Trimesh
+    (dict(kind="mesh", mesh=trimesh.Trimesh(np.eye(3), [[0, 1, 100000000]], process=False)),
+     r"object 'x': mesh face 0 has vertex indices \[0, 1, 100000000\] outside \[0, 3\)"),
+    (dict(kind="mesh", mesh=trimesh.Trimesh(np.eye(3), [[0, 1, 2], [0, -1, 2]], process=False)),
+     r"object 'x': mesh face 1 has vertex indices \[0, -1, 2\]"),
+    (dict(kind="mesh", mesh=(np.eye(3), np.array([[0, 1, 7]]))), "object 'x': mesh face 0"),
+    (dict(kind="mesh", mesh=(np.eye(3), np.array([[0, 1, 2, 0]]))), "object 'x': mesh faces must be triangles"),
+    (dict(kind="mesh", mesh=(np.array([[0, 0, 0], [1, 0, 0], [0, 1, np.nan]]), [[0, 1, 2]])),
+     "object 'x': mesh vertices contain NaN"),
 ])
 def test_bad_objects_name_the_object(bad, match):
     s = ShapeSet()
     with pytest.raises(ValueError, match=match):
         s.add("x", bad["kind"], bad.get("dims", ()), bad.get("pose"), mesh=bad.get("mesh"))
+    assert len(s) == 0
     s.add("x", "sphere", [0.1])
     with pytest.raises(ValueError, match="object 'x': an object of that id exists"):
         s.add("x", "sphere", [0.1])
@@ -491,6 +502,20 @@ def test_object_meshes_for_display_lie_on_the_objects():
         one.add(oid, kind, [] if dims is None else dims, w.shapes.pose(oid), mesh=mesh)
         d = one.shapes.distance(v.astype(np.float64))
         assert np.abs(d).max() < 0.02 * max(1.0, np.abs(v).max()), (oid, np.abs(d).max())
+
+
+def test_a_mesh_with_faces_past_its_vertices_is_refused_before_any_query():
+    """World.add and world_from_mesh check face indices and dtype: nothing reaches Warp."""
+    from jwarp.world import world_from_mesh
+    w = World.of_shapes()
+    with pytest.raises(ValueError, match=r"object 'm': mesh face 0 has vertex indices"):
+        w.add("m", "mesh", mesh=trimesh.Trimesh(np.eye(3), [[0, 1, 100000000]], process=False))
+    with pytest.raises(TypeError, match="object 'm': mesh face indices must be integers"):
+        w.add("m", "mesh", mesh=(np.eye(3), np.array([[0.0, 1.5, 2.0]])))
+    assert w.object_ids == []
+    assert np.isinf(w.distance([[0.0, 0.0, 0.0]])).all()
+    with pytest.raises(ValueError, match=r"mesh: mesh face 0 has vertex indices \[0, 1, -4\]"):
+        world_from_mesh((np.eye(4)[:, :3], np.array([[0, 1, -4]])), [[-1, 1]] * 3, 0.5)
 
 
 def test_world_distance_of_exact_objects():
