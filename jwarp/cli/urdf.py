@@ -13,6 +13,7 @@ import argparse
 import json
 import math
 import os
+import sys
 from typing import Any
 
 from jwarp.cli.common import CLIError, check_output, int_arg, real_arg
@@ -243,6 +244,10 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
                         require_meshes=args.require_meshes)
     try:
         imported = load_urdf(args.urdf, **urdf_options)
+        from jwarp.importers.urdf_export import export_set_problems
+
+        for problem in export_set_problems(args.urdf):  # files of an export that differ
+            print(f"jwarp: warning: {problem}", file=sys.stderr)
         model, fit = imported.model, None
         if args.spheres == "fit" and any(g.kind != "sphere" for g in imported.geometries):
             import warnings
