@@ -242,6 +242,7 @@ def _reserve_outputs(args: argparse.Namespace, inputs: dict[str, str | None]) ->
     is only probed, its recording writes its own): a missing or unwritable folder, a
     folder given for a file, an output that is an input or another output is an error
     naming the option."""
+    from jwarp.cli.common import input_named
     from jwarp.utils.atomic import AtomicFile
 
     outs = [(opt, p) for opt, p in (("--out", args.out), ("--params-out", args.params_out),
@@ -251,6 +252,9 @@ def _reserve_outputs(args: argparse.Namespace, inputs: dict[str, str | None]) ->
         key = os.path.realpath(p)
         if key in seen:
             raise _cli_error(f"{opt}: {p} is also {seen[key]}; give another file")
+        other = input_named(p, opt)   # --prior FILE, --fix GROUP=FILE, ...: inputs too
+        if other is not None and other not in ("--out", "--params-out", "--rerun"):
+            raise _cli_error(f"{opt}: {p} is also {other}; give another file")
         seen[key] = opt
     if args.rerun:
         from jwarp.viz import rerun_module

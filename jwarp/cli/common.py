@@ -117,24 +117,49 @@ def check_device(name: str, option: str = "--device") -> None:
         raise CLIError(f"{option}: {msg.removeprefix('device: ')}") from None
 
 
-#: every existing file named on the command line being run ({option or argument: path}),
-#: set by :func:`set_command_files`: no output may be one of them
-_COMMAND_FILES: dict[str, str] = {}
+#: every existing file named on the command line being run ((option or argument, path),
+#: several per option where a list or KEY=FILE items name several), set by
+#: :func:`set_command_files`: no output may be one of them
+_COMMAND_FILES: list[tuple[str, str]] = []
+
+
+def _files_in(value: Any) -> list[str]:
+    """The existing files a parsed value names: itself, or the ``FILE`` of its
+    comma-separated ``KEY=FILE`` items (``--fix tracker=first.json``)."""
+    if not isinstance(value, (str, os.PathLike)) or not str(value):
+        return []
+    text = os.fspath(value)
+    names = [text]
+    if isinstance(text, str) and "=" in text:
+        names += [item.partition("=")[2].strip() for item in text.split(",") if "=" in item]
+    return [n for n in names if n and os.path.isfile(n)]
 
 
 def set_command_files(args: Any) -> None:
     """Record the existing files among the parsed arguments (string values that name a
-    file, and string items of list values) as the command's inputs: :func:`check_output`
-    refuses any of them as an output (whatever option names it), so no command overwrites
-    a file it reads."""
+    file, string items of list values, and the ``FILE`` of ``KEY=FILE`` items) as the
+    command's inputs: :func:`check_output` and :func:`input_named` refuse any of them as an
+    output (whatever option names it), so no command overwrites a file it reads."""
     _COMMAND_FILES.clear()
     for key, value in vars(args).items():
         if key == "func":
             continue
         values = value if isinstance(value, (list, tuple)) else [value]
         for v in values:
-            if isinstance(v, (str, os.PathLike)) and str(v) and os.path.isfile(v):
-                _COMMAND_FILES[f"--{key.replace('_', '-')}"] = os.fspath(v)
+            for f in _files_in(v):
+                _COMMAND_FILES.append((f"--{key.replace('_', '-')}", f))
+
+
+def input_named(path: str, option: str, inputs: dict[str, str | None] | None = None
+                ) -> str | None:
+    """The option (or argument) of an existing input file that ``path`` (the output of
+    ``option``) is: one of ``inputs`` ({option: path}) first, else one of the command's
+    other files (:func:`set_command_files`); None if it is none of them."""
+    others = [(k, v) for k, v in _COMMAND_FILES if k != option]
+    for opt, src in [*(inputs or {}).items(), *others]:  # the caller's names first
+        if src and os.path.isfile(src) and os.path.realpath(src) == os.path.realpath(path):
+            return opt
+    return None
 
 
 def check_output(path: str, option: str, rerun: bool = False,
@@ -148,10 +173,9 @@ def check_output(path: str, option: str, rerun: bool = False,
 
     if not path or not path.strip():
         raise CLIError(f"{option}: empty file name")
-    others = {k: v for k, v in _COMMAND_FILES.items() if k != option}
-    for opt, src in [*(inputs or {}).items(), *others.items()]:  # the caller's names first
-        if src and os.path.isfile(src) and os.path.realpath(src) == os.path.realpath(path):
-            raise CLIError(f"{option}: {path} is also {opt}; give another file")
+    opt = input_named(path, option, inputs)
+    if opt is not None:
+        raise CLIError(f"{option}: {path} is also {opt}; give another file")
     if rerun:
         from jwarp.viz import rerun_module
 
