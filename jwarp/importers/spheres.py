@@ -862,12 +862,17 @@ def load_mesh(path: str | Path, scale: Any = None) -> trimesh.Trimesh:
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"mesh: file not found '{p}'")
-    try:
-        m = trimesh.load(p, force="mesh")
+    try:  # unprocessed first: processing drops the faces of a NaN vertex without a word
+        m = trimesh.load(p, force="mesh", process=False)
     except Exception as e:  # trimesh raises many types for unreadable files
         raise ValueError(f"mesh: cannot load '{p}': {e}") from e
     if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
         raise ValueError(f"mesh: '{p}' holds no triangles")
+    bad = ~np.isfinite(np.asarray(m.vertices, np.float64)).all(axis=1)
+    if bad.any():
+        raise ValueError(f"mesh: '{p}' has {int(bad.sum())} vertices that are NaN or inf "
+                         f"(the first: vertex {int(np.argmax(bad))})")
+    m.process()  # what trimesh.load(p) does by default
     # one vertex per position (COLLADA files often give each triangle its own corners, for
     # their normals/UVs: a triangle soup, open and of one body per face, takes the slow
     # open-mesh clearance test; merged it is the closed solid it draws)

@@ -52,7 +52,7 @@ from jwarp.world.primitives import (N_DIMS, Shape, finite_vector, pose_matrix,
 from jwarp.world.sdf import World, check_grid_cells, world_from_mesh
 
 __all__ = ["DEFAULT_PAD", "DEFAULT_VOXEL", "FORMAT", "TABLE_SHELF_GOAL", "TABLE_SHELF_START",
-           "Scene", "SceneOptions", "load_scene",
+           "DuplicateKeyError", "Scene", "SceneOptions", "load_scene", "load_yaml",
            "robot_frames", "scene_from_dict", "scene_world", "table_shelf_scene"]
 
 FORMAT = "jwarp.scene"
@@ -165,11 +165,11 @@ def load_scene(path: str | os.PathLike, frames: dict[str, np.ndarray] | None = N
     text = _scene_text(p)
     try:
         if p.suffix.lower() == ".json":
-            data = json.loads(text)
+            data = json.loads(text, object_pairs_hook=_unique_json_keys)
         else:
-            import yaml
-
-            data = yaml.safe_load(text)
+            data = load_yaml(text)
+    except DuplicateKeyError as e:
+        raise ValueError(f"scene {p}: {e}") from None
     except (json.JSONDecodeError, ValueError) as e:
         raise ValueError(f"scene {p}: not valid JSON: {e}") from None
     except Exception as e:  # yaml.YAMLError
@@ -177,6 +177,48 @@ def load_scene(path: str | os.PathLike, frames: dict[str, np.ndarray] | None = N
     if data is None:
         raise ValueError(f"scene {p}: the file is empty")
     return scene_from_dict(data, frames=frames, base_dir=p.parent, source=str(p))
+
+
+class DuplicateKeyError(ValueError):
+    """A key given twice in one mapping of a YAML or JSON document (the later value would
+    silently replace the earlier one: a second ``objects:`` list drops the first)."""
+
+
+def _unique_json_keys(pairs: list[tuple[str, Any]]) -> dict:
+    out: dict = {}
+    for k, v in pairs:
+        if k in out:
+            raise DuplicateKeyError(f"key {k!r} is given twice in one JSON object; keep one")
+        out[k] = v
+    return out
+
+
+def load_yaml(text: str) -> Any:
+    """``yaml.safe_load(text)``, but a key given twice in one mapping is a
+    :class:`DuplicateKeyError` naming the key and both lines (PyYAML keeps the last value
+    without a word). Every YAML jwarp reads goes through it."""
+    import yaml
+
+    class UniqueKeyLoader(yaml.SafeLoader):
+        def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+            if isinstance(node, yaml.MappingNode):
+                seen: dict = {}
+                for key_node, _ in node.value:
+                    if key_node.tag == "tag:yaml.org,2002:merge":
+                        continue
+                    key = self.construct_object(key_node, deep=True)
+                    try:
+                        first = seen.get(key)
+                    except TypeError:  # an unhashable key: PyYAML reports it
+                        continue
+                    line = key_node.start_mark.line + 1
+                    if first is not None:
+                        raise DuplicateKeyError(f"key {key!r} is given twice in one mapping "
+                                                f"(lines {first} and {line}); keep one")
+                    seen[key] = line
+            return super().construct_mapping(node, deep=deep)
+
+    return yaml.load(text, Loader=UniqueKeyLoader)  # noqa: S506 - a SafeLoader
 
 
 def _scene_text(path: Path) -> str:

@@ -411,6 +411,43 @@ def test_bad_files(tmp_path):
         load_scene(tmp_path / "s.yaml")
 
 
+def test_keys_given_twice_and_nan_mesh_vertices_are_errors(tmp_path):
+    """Reliability round 4, item 4: a second top-level ``objects:`` dropped the first list
+    (a plan through the lost wall was "feasible"), a key given twice in an object took the
+    last value, and an STL with a NaN vertex loaded with its faces dropped."""
+    wall = ("objects:\n  - id: wall\n    type: box\n    size: [0.1, 1, 1]\n"
+            "    pose: {position: [0.5, 0, 0.5]}\n")
+    ball = ("objects:\n  - id: ball\n    type: sphere\n    radius: 0.1\n"
+            "    pose: {position: [0, 0, 2]}\n")
+    (tmp_path / "two.yaml").write_text(wall + ball)
+    with pytest.raises(ValueError, match=r"two.yaml: key 'objects' is given twice in one "
+                                         r"mapping \(lines 1 and 6\)"):
+        load_scene(tmp_path / "two.yaml")
+    (tmp_path / "twice.yaml").write_text(wall.replace("size: [0.1, 1, 1]\n",
+                                                      "size: [0.1, 1, 1]\n    size: [0.01, 0.01, 0.01]\n"))
+    with pytest.raises(ValueError, match=r"twice.yaml: key 'size' is given twice .*lines 4 and 5"):
+        load_scene(tmp_path / "twice.yaml")
+    (tmp_path / "twice.json").write_text('{"objects": [], "objects": []}')
+    with pytest.raises(ValueError, match=r"twice.json: key 'objects' is given twice"):
+        load_scene(tmp_path / "twice.json")
+    # MoveIt scenes go through the same reader
+    (tmp_path / "m.yaml").write_text("name: a\nname: b\nworld: {collision_objects: []}\n")
+    with pytest.raises(ValueError, match=r"m.yaml: key 'name' is given twice"):
+        load_scene(tmp_path / "m.yaml")
+    (tmp_path / "one.yaml").write_text(wall)
+    assert [s.object_id for s in load_scene(tmp_path / "one.yaml").shapes] == ["wall"]
+    # a NaN vertex in an STL file: an error naming the file, no face dropped
+    box = trimesh.creation.box()
+    v = box.vertices.copy()
+    v[0, 0] = np.nan
+    trimesh.Trimesh(v, box.faces, process=False).export(tmp_path / "nan.stl")
+    (tmp_path / "mesh.yaml").write_text("objects:\n  - id: m\n    type: mesh\n"
+                                        "    file: nan.stl\n    pose: {position: [0, 0, 0]}\n")
+    with pytest.raises(ValueError, match=r"object 'm': .*nan.stl' has \d+ vertices that are "
+                                         r"NaN or inf"):
+        load_scene(tmp_path / "mesh.yaml")
+
+
 def test_mimic_joint_names_are_accepted_and_ignored():
     """justin19's torso_4 frame follows -(torso_tilt_1 + torso_tilt_2) (a coupled, mimic
     joint): a MoveIt state listing it maps to the 19 joints; a fixed frame's name is not a
