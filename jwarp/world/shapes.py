@@ -50,6 +50,9 @@ def _pose(pose: Any, where: str) -> np.ndarray:
                          f"got shape {T.shape}")
     if not np.all(np.isfinite(T)):
         raise ValueError(f"{where}: pose contains NaN or inf")
+    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=1e-9):
+        raise ValueError(f"{where}: pose's last row is {T[3].tolist()}, not [0, 0, 0, 1] "
+                         f"(a transposed transform?)")
     R = T[:3, :3]
     if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
         raise ValueError(f"{where}: pose rotation is not a rotation matrix")
@@ -234,11 +237,8 @@ class ShapeSet:
         if not np.all(np.isfinite(T)):
             bad = int(np.nonzero(~np.isfinite(T).reshape(len(idx), -1).all(1))[0][0])
             raise ValueError(f"object '{ids[bad]}': pose contains NaN or inf")
-        R = T[:, :3, :3]
-        err = np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max(axis=(1, 2))
-        if err.max(initial=0.0) > 1e-6:
-            bad = int(np.argmax(err))
-            raise ValueError(f"object '{ids[bad]}': pose rotation is not a rotation matrix")
+        for k in range(len(idx)):  # the checks of add, object by object
+            _pose(T[k], f"object '{ids[k]}'")
         if np.abs(T[:, :3, 3]).max(initial=0.0) > LIMIT_EXTENT:
             raise ValueError(f"poses: a position is beyond {LIMIT_EXTENT:g} m")
         self._poses[idx] = T
@@ -299,8 +299,17 @@ class ShapeSet:
     def distance(self, points: Any) -> np.ndarray:
         """Exact signed distance [m] of ``points`` (..., 3) to the union (numpy, float64,
         through the float64 kernel on Warp's default device); +inf without objects."""
+        from jwarp.core.arrays import real_array
+
+        p = real_array(points, "points")
+        if p.ndim < 1 or p.shape[-1] != 3:
+            raise ValueError(f"points: expected shape (..., 3), got {p.shape}")
+        if not np.all(np.isfinite(p)):
+            bad = np.argwhere(~np.isfinite(p.reshape(-1, 3)).all(axis=-1))[0, 0]
+            at = np.unravel_index(int(bad), p.shape[:-1]) if p.ndim > 1 else ()
+            raise ValueError(f"points: point {list(map(int, at))} contains NaN or inf (a "
+                             f"distance of an unknown point is no answer)")
         init_warp()
-        p = np.asarray(points, dtype=np.float64)
         flat = np.ascontiguousarray(p.reshape(-1, 3))
         if len(self) == 0:
             return np.full(p.shape[:-1], np.inf)

@@ -598,3 +598,57 @@ def test_bad_input_to_the_new_world_functions_names_the_argument():
         w.shapes.add("g", "sphere", [0.1], group=-1)
     with pytest.raises(ValueError, match=r"poses: expected \(1, 4, 4\)"):
         w.move(["ball"], np.zeros((1, 2)))
+
+
+def test_world_poses_indices_and_points_that_are_not_what_the_user_meant(device):
+    """Reliability round 4, item 5: a transposed 4x4 pose (last row not [0, 0, 0, 1]) put
+    the object at the origin (add and move); move accepted a reflection that add refuses;
+    select(1.7) / select('1') returned an empty world; the distance of a NaN point was 1e30
+    ("free"); detach took any robot and stripped another object's spheres."""
+    T = pose_matrix([0.5, 0.2, 0.3], rpy_matrix([0.3, 0.2, 0.1]))
+    w = World.of_shapes()
+    with pytest.raises(ValueError, match=r"object 'b': pose's last row is .* not \[0, 0, 0, 1\]"):
+        w.add("b", "box", [0.1, 0.1, 0.1], T.T)
+    w.add("b", "box", [0.1, 0.1, 0.1], T)
+    with pytest.raises(ValueError, match=r"object 'b': pose's last row"):
+        w.move("b", T.T)
+    flip = T.copy()
+    flip[:3, 0] *= -1                                   # det -1: a reflection
+    with pytest.raises(ValueError, match="object 'b': pose rotation is not a rotation matrix"):
+        w.move("b", flip)
+    with pytest.raises(ValueError, match="object 'c': pose rotation is not a rotation matrix"):
+        w.add("c", "box", [0.1, 0.1, 0.1], flip)
+    np.testing.assert_array_equal(w.shapes.pose("b"), T)   # refused moves changed nothing
+    # the distance of a NaN point is an error, not 1e30
+    with pytest.raises(ValueError, match=r"points: point \[1\] contains NaN"):
+        w.distance([[0.0, 0.0, 0.0], [np.nan, 0.0, 0.0]])
+    with pytest.raises(ValueError, match=r"points: expected shape \(\.\.\., 3\)"):
+        w.distance([[0.0, 0.0]])
+    # select takes an integer index only
+    batch = World.batch([w, World.of_shapes()])
+    for bad in (1.7, "1", True, None):
+        with pytest.raises(TypeError, match="i: expected an integer index"):
+            batch.select(bad)
+    assert batch.select(np.int64(0)).object_ids == ["b"] and batch.select(1).object_ids == []
+    with pytest.raises(TypeError, match="i: expected an integer index"):
+        w.select(0.0)
+    # detach only with a robot that carries the object
+    robot = jwarp.robot("arm7")
+    tcp = list(robot.end_effectors)[0]
+    q0 = np.array([0.0, 0.8, 0.0, -1.0, 0.0, 0.5, 0.0])
+    Th = jwarp.fk(robot, q0[None], dtype=np.float64)[0, robot.frame_index(tcp)]
+    w2 = World.of_shapes()
+    w2.add("part", "sphere", [0.03], Th[:3, 3])
+    w2.add("tool", "box", [0.02, 0.02, 0.1], Th)
+    carried = w2.attach("part", robot, tcp, q0)
+    both = w2.attach("tool", carried, tcp, q0)
+    for wrong in (robot, "arm7"):
+        with pytest.raises(ValueError, match="robot: not a robot that carries object 'part'"):
+            w2.detach("part", wrong, q0)
+    with pytest.raises(ValueError, match="robot: not a robot that carries object 'tool'"):
+        w2.detach("tool", carried, q0)    # carries 'part' only: detach would strip its spheres
+    assert sorted(w2.attached) == ["part", "tool"] and w2.object_ids == []
+    back = w2.detach("part", both, q0)
+    assert len(back.spheres) == len(both.spheres) - (len(carried.spheres) - len(robot.spheres))
+    back = w2.detach("tool", back, q0)
+    assert len(back.spheres) == len(robot.spheres) and sorted(w2.object_ids) == ["part", "tool"]
