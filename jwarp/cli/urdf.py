@@ -40,6 +40,8 @@ def import_error(e: ValueError, what: str) -> CLIError:
     msg = " ".join(str(e).split())
     if msg.startswith("end_effectors."):
         return CLIError(f"--end-effector: {msg.partition(': ')[2]}")
+    if msg.startswith("protrusion: "):  # the sphere fit's bound on the option
+        return CLIError(f"--{msg}")
     return CLIError(f"{what}: {msg}")
 
 

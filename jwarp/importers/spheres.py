@@ -938,6 +938,30 @@ def fit_geometry(kind: str, size: Any = None, origin: Any = None, mesh: Any = No
     return fit_spheres(m, tolerance=tolerance, **options).transformed(T)
 
 
+def geometry_bounds(geometries: Any) -> np.ndarray:
+    """(2, 3) [m] lower and upper corner of the box holding a link's collision
+    ``geometries`` (as :func:`fit_link` takes them) in the link frame."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for i, g in enumerate(geometries):
+        get = (g.get if isinstance(g, dict) else lambda k, d=None, g=g: getattr(g, k, d))
+        mesh = get("mesh") if get("mesh") is not None else (
+            get("filename") or get("path") or get("mesh_path"))
+        try:
+            T = _origin(get("origin"))
+            if get("kind") == "sphere":
+                r = float(np.asarray(get("size"), np.float64).reshape(-1)[0])
+                b = T[:3, 3] + np.array([[-r], [r]])
+            else:
+                b = _geometry_mesh(get("kind"), get("size"), mesh, get("scale")).bounds
+                corners = np.array(np.meshgrid(*b.T, indexing="ij")).reshape(3, -1).T
+                c = corners @ T[:3, :3].T + T[:3, 3]
+                b = np.stack([c.min(0), c.max(0)])
+        except (ValueError, TypeError) as e:
+            raise type(e)(f"geometries[{i}]: {e}") from e
+        lo, hi = np.minimum(lo, b[0]), np.maximum(hi, b[1])
+    return np.stack([lo, hi])
+
+
 def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
              **options: Any) -> SphereFit:
     """Spheres of all collision geometries of one link, in the link frame. Each geometry is

@@ -175,3 +175,28 @@ def test_fitted_panda_plans_and_solves_ik_in_the_scene(panda, table_shelf):
     for qs in ik.q[ik.feasible]:
         verdict = v.check_path(qs[None], margin=0.0)
         assert verdict.ok, verdict
+
+
+def test_absurd_protrusion_is_bounded_by_the_robot_and_all_in_contact_refused(urdf, tmp_path,
+                                                                              capsys):
+    """Reliability round 4, item 6: ``--protrusion 1e308`` wrote spheres of radius 1e308 m,
+    every self pair was dropped as always colliding and free-config called configurations
+    free. The option is bounded by the robot's size (the box of its collision geometry),
+    and a fit whose spheres are in contact in every tested pair is refused."""
+    imported = load_urdf(urdf)
+    with pytest.raises(ValueError, match=r"protrusion: 1e\+308 m is more than the robot's "
+                                         r"size \(its collision geometry spans 0\.4"):
+        spherize(imported, SpherizeOptions(tolerance=TOL, protrusion=1e308, pair_samples=50))
+    # within the robot's size, but the tip's spheres reach the base in every sample: the
+    # only tested pair (base-tip) would be excluded as always colliding
+    with pytest.raises(ValueError, match=r"protrusion: the fitted spheres of all 1 link pairs "
+                                         r"that are not adjacent are in contact in every one"):
+        spherize(imported, SpherizeOptions(tolerance=TOL, protrusion=0.4, pair_samples=50))
+    _, rep = spherize(imported, SpherizeOptions(tolerance=TOL, protrusion=0.005,
+                                                pair_samples=50))
+    assert rep.pairs.always_colliding == []          # a sane protrusion fits as before
+    code, out, err = run(capsys, ["import-urdf", urdf, "--out", tmp_path / "r.json",
+                                  "--protrusion", "1e308", "--pair-samples", "50"])
+    assert code == 2 and err.strip().splitlines()[-1].startswith(
+        "jwarp: error: --protrusion: 1e+308 m is more than the robot's size")
+    assert not (tmp_path / "r.json").exists()
