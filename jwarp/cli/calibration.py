@@ -155,10 +155,15 @@ def _parse_keyed(values: list[str] | None, option: str, kind: type) -> dict[str,
         if "=" not in v:
             if kind is int:
                 raise _cli_error(f"{option}: expected GROUP[:PATTERN]=K, got '{v}'")
+            from jwarp.cli.common import read_small_text
+
+            if not os.path.exists(v):
+                raise _cli_error(f"{option}: '{v}' is neither KEY=SIGMA nor a file (no such "
+                                 f"file)")
+            text = read_small_text(v, option)
             try:
-                with open(v, encoding="utf-8") as fh:
-                    doc = json.load(fh)
-            except (OSError, ValueError) as e:
+                doc = json.loads(text)
+            except ValueError as e:
                 raise _cli_error(f"{option}: '{v}' is neither KEY=SIGMA nor a readable JSON "
                                  f"file ({e})") from None
             if not isinstance(doc, dict):

@@ -162,6 +162,45 @@ def input_named(path: str, option: str, inputs: dict[str, str | None] | None = N
     return None
 
 
+#: the most bytes read from a text file that holds a few numbers (``--target-matrix FILE``,
+#: ``--prior FILE.json``)
+MAX_SMALL_TEXT = 1 << 20
+
+
+def read_small_text(path: str, option: str, max_bytes: int = MAX_SMALL_TEXT) -> str:
+    """The UTF-8 text of a small input file (a few numbers) named by ``option``: CLIError
+    naming the option for anything but a regular file (a folder, ``/dev/zero``, a pipe),
+    a file larger than ``max_bytes`` (never read past that), an unreadable or non-UTF-8
+    file."""
+    import stat
+
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        raise CLIError(f"{option}: cannot read {path}: {e.strerror or e}") from None
+    if not stat.S_ISREG(st.st_mode):
+        what = ("a folder" if stat.S_ISDIR(st.st_mode) else "a device" if
+                stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "a pipe or socket"
+                if stat.S_ISFIFO(st.st_mode) or stat.S_ISSOCK(st.st_mode) else "not a file")
+        raise CLIError(f"{option}: {path} is {what}, not a regular file")
+    too_big = (f"{option}: {path} is larger than {max_bytes} bytes; expected a small text "
+               f"file of a few numbers")
+    if st.st_size > max_bytes:
+        raise CLIError(too_big)
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(max_bytes + 1)
+    except OSError as e:
+        raise CLIError(f"{option}: cannot read {path}: {e.strerror or e}") from None
+    if len(raw) > max_bytes:  # it grew since the stat
+        raise CLIError(too_big)
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise CLIError(f"{option}: {path} is not UTF-8 text (byte 0x{raw[e.start]:02x} at "
+                       f"offset {e.start})") from None
+
+
 def check_output(path: str, option: str, rerun: bool = False,
                  inputs: dict[str, str | None] | None = None) -> None:
     """Check an output path before any work: CLIError naming ``option`` if it is empty, a

@@ -6,6 +6,7 @@ option."""
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 
@@ -75,6 +76,12 @@ def test_errors_name_the_option(campaign, capsys, tmp_path):
     one_line_error(capsys, base + ["--prior", "theta:nope*=1e-3"], "--prior")
     one_line_error(capsys, base + ["--prior", "theta=abc"], "--prior")
     one_line_error(capsys, base + ["--prior", str(tmp_path / "missing.json")], "--prior")
+    # a file read for a few numbers: a regular file of bounded size (round 4, item 7)
+    line = one_line_error(capsys, base + ["--prior", str(tmp_path)], "--prior")
+    assert "is a folder, not a regular file" in line
+    if os.path.exists("/dev/zero"):
+        line = one_line_error(capsys, base + ["--prior", "/dev/zero"], "--prior")
+        assert "/dev/zero is a device, not a regular file" in line
     one_line_error(capsys, base + ["--order", "harmonic=1.5"], "--order")
     one_line_error(capsys, base + ["--order", "theta=2"], "--order")
     line = one_line_error(capsys, base + ["--fix", f"tracker={tmp_path / 'missing.json'}"],
