@@ -410,6 +410,9 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         _check_float("--loss-scale", args.loss_scale, unit=f" {unit}")
         if not args.loss_scale > 0:
             raise _cli_error(f"--loss-scale: expected a number > 0 {unit}, got {args.loss_scale}")
+    elif args.loss_scale is not None:
+        raise _cli_error("--loss-scale: only with a robust --loss (soft_l1 or huber); with "
+                         "the default linear loss it would be ignored")
 
     def table_rows(robot: Any, p: np.ndarray) -> dict[str, dict[str, float]]:
         out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None), scale)}

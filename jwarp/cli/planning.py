@@ -783,8 +783,8 @@ def add_subcommands(sub: Any) -> None:
                         "optimises every start until it is feasible or out of iterations")
     s.add_argument("--endpoint-margin", type=real_arg("--endpoint-margin", 0.0, unit=" [m]"),
                    default=None, metavar="M",
-                   help="clearance [m] of start, goal and the first and last segment where it is "
-                        "below --margin (grasp poses close to an object); default: --margin")
+                   help="clearance [m] of start, goal and the first and last segment, at most "
+                        "--margin (grasp poses close to an object); default: --margin")
     s.add_argument("--self-margin", type=real_arg("--self-margin", 0.0, unit=" [m]"),
                    default=0.0, metavar="M",
                    help="clearance [m] between the robot's own links (default 0)")

@@ -84,6 +84,9 @@ def group_options(args: argparse.Namespace, eff: dict[str, str] | None) -> Any:
 
     if args.srdf is not None and not os.path.isfile(args.srdf):
         raise CLIError(f"--srdf: file not found: '{args.srdf}'")
+    if args.srdf_collisions is not None and args.srdf is None:
+        raise CLIError("--srdf-collisions: only with --srdf (it says what becomes of the SRDF's "
+                       "disable_collisions); without one it would be ignored")
     joints = None
     if args.joints is not None:
         joints = [j.strip() for j in args.joints.split(",") if j.strip()]
@@ -92,7 +95,7 @@ def group_options(args: argparse.Namespace, eff: dict[str, str] | None) -> Any:
     return GroupOptions(srdf=args.srdf, group=args.group, joints=joints,
                         lock=joint_values_arg(args.lock, "--lock"), state=args.state,
                         freeze=joint_values_arg(args.freeze, "--freeze", value_required=False),
-                        srdf_collisions=args.srdf_collisions, end_effectors=eff)
+                        srdf_collisions=args.srdf_collisions or "add", end_effectors=eff)
 
 
 def group_error(e: ValueError, srdf: str | None) -> CLIError:
@@ -367,7 +370,7 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--srdf", default=None, metavar="ROBOT.srdf",
                    help="MoveIt SRDF: its disable_collisions are excluded from self-collision, "
                         "its groups, group states and end-effectors can be used")
-    s.add_argument("--srdf-collisions", choices=("add", "replace"), default="add",
+    s.add_argument("--srdf-collisions", choices=("add", "replace"), default=None,
                    help="SRDF disable_collisions: added to the sampled exclude pairs (add, "
                         "default) or the only ones (replace)")
     s.add_argument("--group", default=None, metavar="NAME",

@@ -73,6 +73,9 @@ def test_errors_name_the_option(campaign, capsys, tmp_path):
             "--free", BASE, "--quiet"]
     one_line_error(capsys, base + ["--loss", "huber"], "--loss-scale")
     one_line_error(capsys, base + ["--loss", "huber", "--loss-scale", "0"], "--loss-scale")
+    # round 4, item 8: a scale without a robust loss was accepted and ignored
+    line = one_line_error(capsys, base + ["--loss-scale", "3"], "--loss-scale")
+    assert "only with a robust --loss" in line
     one_line_error(capsys, base + ["--prior", "theta:nope*=1e-3"], "--prior")
     one_line_error(capsys, base + ["--prior", "theta=abc"], "--prior")
     one_line_error(capsys, base + ["--prior", str(tmp_path / "missing.json")], "--prior")

@@ -355,3 +355,22 @@ def test_export_killed_before_removing_a_stale_side_file_or_on_a_first_export(tm
     assert side_file_path(out).is_file()
     p = export_set_problems(out)
     assert len(p) == 1 and p[0].startswith(f"side file {side_file_path(out)}")
+
+
+def test_srdf_collisions_without_an_srdf_is_refused(tmp_path, capsys):
+    """Reliability round 4, item 8: ``--srdf-collisions`` without ``--srdf`` was accepted
+    and ignored."""
+    from jwarp.cli.main import main
+
+    with pytest.raises(ValueError, match="srdf_collisions: 'replace' only with an SRDF"):
+        GroupOptions(srdf_collisions="replace").validate()
+    GroupOptions().validate()                 # the default "add" says nothing
+    urdf = tmp_path / "r.urdf"
+    export_urdf(jwarp.robot("planar4"), urdf, options=jwarp.importers.urdf_export.UrdfExportOptions(
+        srdf=False))
+    for how in ("add", "replace"):
+        assert main(["import-urdf", str(urdf), "--out", str(tmp_path / "r.json"), "--spheres",
+                     "none", "--srdf-collisions", how]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[-1].startswith("jwarp: error: --srdf-collisions: only with --srdf")
+    assert not (tmp_path / "r.json").exists()
