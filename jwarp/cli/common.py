@@ -399,8 +399,10 @@ def dtype_of(name: str) -> Any:
 
 
 def plugin_warnings_one_line() -> None:
-    """Show :class:`~jwarp.model.registry.PluginWarning` as one ``jwarp: warning: ...`` line on
-    stderr (a broken plugin is reported, never a traceback); other warnings as before."""
+    """Show :class:`~jwarp.model.registry.PluginWarning` and
+    :class:`~jwarp.core.kernel_cache.KernelCacheWarning` as one ``jwarp: warning: ...`` line
+    on stderr (a broken plugin or an unusable kernel cache is reported, never a traceback);
+    other warnings as before."""
     import warnings
 
     show = warnings.showwarning
@@ -408,9 +410,11 @@ def plugin_warnings_one_line() -> None:
         return
 
     def showwarning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        from jwarp.core.kernel_cache import KernelCacheWarning
         from jwarp.model.registry import PluginWarning
 
-        if isinstance(category, type) and issubclass(category, PluginWarning):
+        if isinstance(category, type) and issubclass(category, (PluginWarning,
+                                                                KernelCacheWarning)):
             print(f"jwarp: warning: {message}", file=sys.stderr if file is None else file)
         else:
             show(message, category, filename, lineno, file, line)
