@@ -335,7 +335,10 @@ def _tow_covariance(args: argparse.Namespace, setup: Any, model: Any, meas: Any,
         st = prob.state(prob.initial_x())
         cov = tow_covariance(meas, spec, st.frames, st.p, meta=train.meta or None)
     if args.virtual_noise is not None:
-        cov = add_virtual_noise(cov, args.virtual_noise)
+        try:
+            cov = add_virtual_noise(cov, args.virtual_noise)
+        except ValueError as e:
+            raise _cli_error(f"--virtual-noise: {str(e).removeprefix('virtual: ')}") from None
     return cov
 
 
@@ -453,6 +456,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
             for field, opt in (("sigma", "--prior"), ("orders", "--order")):
                 if str(e).startswith(field):
                     raise _cli_error(f"{opt}: {e}") from None
+            if str(e).startswith("loss_scale: "):
+                raise _cli_error(f"--loss-scale: {str(e).removeprefix('loss_scale: ')}") from None
             raise
         finally:
             bar.close()

@@ -76,6 +76,12 @@ def test_errors_name_the_option(campaign, capsys, tmp_path):
     # round 4, item 8: a scale without a robust loss was accepted and ignored
     line = one_line_error(capsys, base + ["--loss-scale", "3"], "--loss-scale")
     assert "only with a robust --loss" in line
+    # round 4, item 9: 1e308 gave "numeric overflow" naming no option
+    line = one_line_error(capsys, base + ["--loss", "huber", "--loss-scale", "1e308"],
+                          "--loss-scale")
+    assert "times the mean noise sigma" in line
+    line = one_line_error(capsys, base + ["--virtual-noise", "1e308"], "--virtual-noise")
+    assert "a standard deviation of at most" in line
     one_line_error(capsys, base + ["--prior", "theta:nope*=1e-3"], "--prior")
     one_line_error(capsys, base + ["--prior", "theta=abc"], "--prior")
     one_line_error(capsys, base + ["--prior", str(tmp_path / "missing.json")], "--prior")

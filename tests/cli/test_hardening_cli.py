@@ -133,6 +133,11 @@ def test_plan_solver_errors_name_the_option(capsys, block, start, option, messag
     (["--elastic", "--kappa", "-inf"], "--kappa"),
     (["--device", "nodevice"], "--device"),
     (["--robot", "nobot"], "--robot"),
+    # reliability round 4, item 9: "numeric overflow" named no option
+    (["--tol-pos", "1e308"], "--tol-pos"),
+    (["--tol-rot", "1e308"], "--tol-rot"),
+    (["--tol-rot", "4"], "--tol-rot"),
+    (["--seed", "-1"], "--seed"),
 ])
 def test_ik_bad_values(capsys, extra, option):
     one_line_error(capsys, IK + extra, option)
