@@ -652,3 +652,30 @@ def test_world_poses_indices_and_points_that_are_not_what_the_user_meant(device)
     assert len(back.spheres) == len(both.spheres) - (len(carried.spheres) - len(robot.spheres))
     back = w2.detach("tool", back, q0)
     assert len(back.spheres) == len(robot.spheres) and sorted(w2.object_ids) == ["part", "tool"]
+
+
+def test_a_clearance_below_the_margin_names_the_margin(device):
+    """Reliability round 4, item 9: a positive clearance below the margin was reported as
+    "collision ... (clearance 5.00 mm)" without the margin it is below."""
+    from jwarp.world.collision import min_distances
+    robot = jwarp.robot("arm7")
+    q0 = np.array([0.0, 0.8, 0.0, -1.0, 0.0, 0.5, 0.0])
+    T = jwarp.fk(robot, q0[None], dtype=np.float64)[0, robot.frame_index(
+        list(robot.end_effectors)[0])]
+    w = World.of_shapes()
+    w.add("ball", "sphere", [0.02], T[:3, 3] + [0.0, 0.0, 0.25])
+    d = float(min_distances(robot, q0[None], w, dtype=np.float64)[0, 0])
+    assert d > 0.01
+    path = np.stack([q0, q0])
+    chk = MotionCheck(robot, w, device=device)
+    r = chk.check(path, margin=d + 0.02)
+    assert not r.ok[0]
+    reason = r.reason(0)
+    assert reason.startswith("collision: ") and "vs object 'ball'" in reason
+    assert f"below the margin {(d + 0.02) * 1e3:.2f} mm" in reason, reason
+    r = chk.check(path, margin=d + 0.02, endpoint_margin=d + 0.01)
+    assert "endpoint margin" in r.reason(0)
+    # a real collision (clearance <= 0) keeps its words
+    w.move("ball", T[:3, 3])
+    r = chk.check(path, margin=0.0)
+    assert not r.ok[0] and "below the margin" not in r.reason(0)
