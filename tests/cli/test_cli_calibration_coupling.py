@@ -82,6 +82,12 @@ def test_errors_name_the_option(campaign, capsys, tmp_path):
     assert "times the mean noise sigma" in line
     line = one_line_error(capsys, base + ["--virtual-noise", "1e308"], "--virtual-noise")
     assert "a standard deviation of at most" in line
+    # a --fix file with a bad value: the file, the parameter and the value
+    for value, shown in (("x", "'x'"), (None, "None"), ([1, 2], "[1, 2]")):
+        fx = tmp_path / "fx.json"
+        fx.write_text(json.dumps({"measurement_params": {"tracker_px": value}}))
+        line = one_line_error(capsys, base + ["--fix", f"tracker={fx}"], "--fix")
+        assert f"{fx}: 'tracker_px' is {shown}, not a number" in line, line
     one_line_error(capsys, base + ["--prior", "theta:nope*=1e-3"], "--prior")
     one_line_error(capsys, base + ["--prior", "theta=abc"], "--prior")
     one_line_error(capsys, base + ["--prior", str(tmp_path / "missing.json")], "--prior")
