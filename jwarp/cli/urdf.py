@@ -231,6 +231,25 @@ def group_resamples(imported: Any, args: argparse.Namespace, eff: Any) -> bool:
     return g.model.n_dof < imported.model.n_dof and g.srdf_collisions != "replace"
 
 
+def home_needs_model(args: argparse.Namespace, imported: Any) -> None:
+    """``--home`` fits the collision model at a home configuration: CLIError naming it,
+    before any work, when the options or the URDF leave no collision model to fit."""
+    if args.home is None:
+        return
+    if args.no_home_fit:
+        raise CLIError("--home: needs a collision model fitted at the home, not "
+                       "--no-home-fit (--home is the configuration of the home fit)")
+    if args.spheres == "none":
+        raise CLIError("--home: needs a collision model, and --spheres none gives none to "
+                       "fit at the home")
+    if args.spheres == "urdf" and not imported.model.spheres:
+        raise CLIError(f"--home: needs a collision model, and {args.urdf} has no sphere "
+                       f"geometry, so --spheres urdf gives none (use --spheres fit)")
+    if args.spheres == "fit" and not imported.model.spheres and not imported.geometries:
+        raise CLIError(f"--home: needs a collision model, and {args.urdf} has no collision "
+                       f"geometry to fit one to")
+
+
 def cmd_import_urdf(args: argparse.Namespace) -> int:
     from jwarp.importers.robot import load_urdf
 
@@ -253,6 +272,7 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
 
         for problem in export_set_problems(args.urdf):  # files of an export that differ
             print(f"jwarp: warning: {problem}", file=sys.stderr)
+        home_needs_model(args, imported)  # before the sphere fit
         model, fit = imported.model, None
         if args.spheres == "fit" and any(g.kind != "sphere" for g in imported.geometries):
             import warnings

@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import os
 import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -855,13 +856,35 @@ def primitive_mesh(kind: str, size: Any, *, sections: int = 64) -> trimesh.Trime
     return trimesh.creation.icosphere(subdivisions=3, radius=s[0])
 
 
+def file_problem(path: str | os.PathLike) -> str | None:
+    """Why ``path`` cannot be read as a file (``"does not exist"``, ``"is a folder, not a
+    file"``, ``"is a device, not a regular file"``, ...), or None for a regular file."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return ("is a symbolic link to a file that does not exist"
+                if os.path.islink(path) else "does not exist")
+    except OSError as e:
+        return f"cannot be read ({e.strerror or e})"
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "is a folder, not a file"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "is a device, not a regular file"
+    return "is not a regular file (a pipe or socket)"
+
+
 def load_mesh(path: str | Path, scale: Any = None) -> trimesh.Trimesh:
     """A mesh file (stl, obj, dae with pycollada, ...) as one Trimesh, scaled by ``scale``
     (a number or (3,) per axis); vertices at the same position are merged (whatever their
     normals or texture coordinates)."""
     p = Path(path)
-    if not p.is_file():
-        raise ValueError(f"mesh: file not found '{p}'")
+    why = file_problem(p)
+    if why is not None:
+        raise ValueError(f"mesh: '{p}' {why}")
     try:  # unprocessed first: processing drops the faces of a NaN vertex without a word
         m = trimesh.load(p, force="mesh", process=False)
     except Exception as e:  # trimesh raises many types for unreadable files

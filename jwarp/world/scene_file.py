@@ -45,8 +45,8 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.world.moveit import (goal_joint_values, load_mesh, moveit_frames, moveit_shapes,
-                                parse_pose, start_joint_values)
+from jwarp.world.moveit import (RobotFrames, goal_joint_values, load_mesh, moveit_frames,
+                                moveit_shapes, parse_pose, start_joint_values, unknown_frame)
 from jwarp.world.primitives import (N_DIMS, Shape, finite_vector, pose_matrix,
                                     quaternion_matrix, rpy_matrix, signed_distance)
 from jwarp.world.sdf import World, check_grid_cells, world_from_mesh
@@ -248,7 +248,7 @@ def scene_from_dict(data: Any, frames: dict[str, np.ndarray] | None = None,
     if not isinstance(data, dict):
         raise ValueError(f"scene {source}: expected a mapping at the top level, got "
                          f"{type(data).__name__}")
-    known = {"world": np.eye(4)}
+    known = RobotFrames({"world": np.eye(4)}, getattr(frames, "moving", ()))
     for name, T in (frames or {}).items():
         known[str(name)] = np.asarray(T, dtype=np.float64)
     base = Path(base_dir) if base_dir is not None else None
@@ -303,8 +303,7 @@ def _jwarp_scene(data: dict, frames: dict, base: Path | None, source: str) -> Sc
                              f"expected {', '.join(_OBJECT_KEYS[kind])}")
         frame = str(obj.get("frame", scene_frame))
         if frame not in frames:
-            raise ValueError(f"{where}: unknown frame '{frame}'; known frames: "
-                             f"{', '.join(sorted(frames))}")
+            raise unknown_frame(frames, frame, where, "frame")
         if "pose" not in obj:
             raise ValueError(f"{where}: missing pose")
         T = frames[frame] @ _jwarp_pose(obj["pose"], f"{where}: pose")
@@ -353,13 +352,17 @@ def robot_frames(model: Any) -> dict[str, np.ndarray]:
     from jwarp.core.device import host_frames
 
     T = host_frames(model, np.zeros(model.n_dof))[0]
-    out = {"base": np.eye(4)}
+    out = RobotFrames({"base": np.eye(4)})
     fixed: list[bool] = []
+    moving = []
     for i, f in enumerate(model.frames):
         ok = not f.coupling and (f.parent is None or fixed[f.parent])
         fixed.append(ok)
         if ok:
             out[f.name] = T[i]
+        else:
+            moving.append(f.name)
+    out.moving = tuple(moving)
     return out
 
 

@@ -180,7 +180,17 @@ class ShapeSet:
     def _make(self, id: str, kind: str, dims: Any, mesh: Any, where: str) -> _Object:
         if kind == "mesh":
             return self._make_mesh(id, mesh, where)
-        d = np.asarray(dims, dtype=np.float64).reshape(-1)
+        from jwarp.core.arrays import real_array
+
+        # numbers only: numpy would take True as 1.0 and the text "0.1" as 0.1
+        items = dims if isinstance(dims, (list, tuple)) else [dims]
+        if any(isinstance(x, (bool, np.bool_, str, bytes)) for x in items):
+            raise ValueError(f"{where}: {kind} dimensions must be numbers [m], got {dims!r}")
+        try:
+            d = real_array(dims, f"{where}: dims").reshape(-1)
+        except TypeError:
+            raise ValueError(f"{where}: {kind} dimensions must be numbers [m], "
+                             f"got {dims!r}") from None
         if len(d) != _N_DIMS[kind]:
             raise ValueError(f"{where}: a {kind} needs {_N_DIMS[kind]} dimensions, got {len(d)}")
         if not np.all(np.isfinite(d)) or np.any(d <= 0):

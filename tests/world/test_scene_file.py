@@ -458,3 +458,44 @@ def test_mimic_joint_names_are_accepted_and_ignored():
     np.testing.assert_allclose(q, 0.01 * np.arange(19))
     with pytest.raises(ValueError, match=r"unknown joint\(s\) 'torso_base'"):
         joint_vector(m, {**vals, "torso_base": 0.0}, "start")
+
+
+def test_messages_name_the_culprit(tmp_path):
+    """Reliability round 4, item 9: a folder or /dev/zero as a mesh was "does not exist";
+    ``scale: 1.0e6`` (text to YAML) and box dims of text or booleans were taken or refused
+    without the reason; a frame_id of a moving link was only "unknown"."""
+    import os
+
+    from jwarp.world import World
+    mesh = {"resource": str(tmp_path)}
+    with pytest.raises(ValueError, match=r"mesh file '.*' is a folder, not a file"):
+        scene_from_dict(moveit_object(meshes=[mesh], mesh_poses=[{"position": [0, 0, 0]}]),
+                        base_dir=tmp_path)
+    if os.path.exists("/dev/zero"):
+        with pytest.raises(ValueError, match=r"mesh file '/dev/zero' is a device, not a "
+                                             r"regular file"):
+            scene_from_dict(jwarp_object(type="mesh", radius=None, file="/dev/zero"),
+                            base_dir=tmp_path)
+    trimesh.creation.box().export(tmp_path / "box.stl")
+    (tmp_path / "s.yaml").write_text(
+        "world:\n  collision_objects:\n    - id: m\n      header: {frame_id: world}\n"
+        "      meshes: [{resource: box.stl, scale: 1.0e6}]\n"
+        "      mesh_poses: [{position: [0, 0, 0], orientation: [0, 0, 0, 1]}]\n")
+    with pytest.raises(ValueError, match=r"scale: '1.0e6' is text, not a number .*1.0e\+6"):
+        load_scene(tmp_path / "s.yaml")
+    for size, match in ((["0.1", 0.1, 0.1], r"size: '0.1' is text, not a number"),
+                        ([True, 0.1, 0.1], r"size: expected numbers, got True")):
+        with pytest.raises(ValueError, match=match):
+            scene_from_dict(jwarp_object(type="box", radius=None, size=size), base_dir=tmp_path)
+        with pytest.raises(ValueError, match="object 'b': box dimensions must be numbers"):
+            World.of_shapes().add("b", "box", size)
+    robot = jwarp.robot("arm7")
+    frames = robot_frames(robot)
+    moving = frames.moving[2]
+    with pytest.raises(ValueError, match=f"frame_id '{moving}' is a link of the robot that "
+                                         f"moves with its joints"):
+        scene_from_dict(moveit_object(header={"frame_id": moving}), frames=frames)
+    with pytest.raises(ValueError, match=f"frame '{moving}' is a link of the robot that moves"):
+        scene_from_dict(jwarp_object(frame=moving), frames=frames)
+    with pytest.raises(ValueError, match="unknown frame_id 'nowhere'; known frames"):
+        scene_from_dict(moveit_object(header={"frame_id": "nowhere"}), frames=frames)

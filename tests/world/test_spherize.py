@@ -200,3 +200,22 @@ def test_absurd_protrusion_is_bounded_by_the_robot_and_all_in_contact_refused(ur
     assert code == 2 and err.strip().splitlines()[-1].startswith(
         "jwarp: error: --protrusion: 1e+308 m is more than the robot's size")
     assert not (tmp_path / "r.json").exists()
+
+
+def test_home_without_a_collision_model_names_the_reason(urdf, tmp_path, capsys):
+    """Reliability round 4, item 9: ``--home`` with ``--spheres urdf`` of a URDF without
+    sphere geometry said "needs a collision model (--spheres fit or urdf)", after the work;
+    now the reason, before any work."""
+    boxes = tmp_path / "boxes.urdf"
+    boxes.write_text(URDF.replace('<sphere radius="0.05"/>', '<box size="0.1 0.1 0.1"/>'))
+    out = tmp_path / "r.json"
+    for extra, words in ((["--spheres", "urdf"], "has no sphere geometry, so --spheres urdf "
+                                                  "gives none"),
+                         (["--spheres", "none"], "--spheres none gives none"),
+                         (["--no-home-fit"], "not --no-home-fit")):
+        code, _, err = run(capsys, ["import-urdf", boxes, "--out", out, "--home", "0,0",
+                                    *extra])
+        assert code == 2, err
+        last = err.strip().splitlines()[-1]
+        assert last.startswith("jwarp: error: --home: ") and words in last, last
+    assert not out.exists()
