@@ -399,10 +399,11 @@ def dtype_of(name: str) -> Any:
 
 
 def plugin_warnings_one_line() -> None:
-    """Show :class:`~jwarp.model.registry.PluginWarning` and
-    :class:`~jwarp.core.kernel_cache.KernelCacheWarning` as one ``jwarp: warning: ...`` line
-    on stderr (a broken plugin or an unusable kernel cache is reported, never a traceback);
-    other warnings as before."""
+    """Show :class:`~jwarp.model.registry.PluginWarning`,
+    :class:`~jwarp.core.kernel_cache.KernelCacheWarning` and
+    :class:`~jwarp.utils.roots.OutsideFolderWarning` as one ``jwarp: warning: ...`` line on
+    stderr (a broken plugin, an unusable kernel cache, a file outside its document's folder
+    is reported, never a traceback); other warnings as before."""
     import warnings
 
     show = warnings.showwarning
@@ -412,9 +413,10 @@ def plugin_warnings_one_line() -> None:
     def showwarning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
         from jwarp.core.kernel_cache import KernelCacheWarning
         from jwarp.model.registry import PluginWarning
+        from jwarp.utils.roots import OutsideFolderWarning
 
-        if isinstance(category, type) and issubclass(category, (PluginWarning,
-                                                                KernelCacheWarning)):
+        if isinstance(category, type) and issubclass(category, (
+                PluginWarning, KernelCacheWarning, OutsideFolderWarning)):
             print(f"jwarp: warning: {message}", file=sys.stderr if file is None else file)
         else:
             show(message, category, filename, lineno, file, line)

@@ -261,7 +261,9 @@ def _meshes(obj: dict, T: np.ndarray, where: str, oid: str, base_dir: Path | Non
 def load_mesh(spec: Any, where: str, base_dir: Path | None = None) -> Any:
     """A trimesh.Trimesh from an inline shape_msgs/Mesh mapping (``vertices``,
     ``triangles``) or a file (``resource``/``file``: a path, relative to ``base_dir``, or
-    ``file://``; optional ``scale``: a number or 3)."""
+    ``file://``; optional ``scale``: a number or 3). A file outside ``base_dir`` (and the
+    folders of ``JWARP_ALLOWED_ROOTS``) is read with an
+    :class:`~jwarp.utils.roots.OutsideFolderWarning`."""
     import trimesh
 
     from jwarp.importers.spheres import file_problem, load_mesh as load_mesh_file
@@ -280,6 +282,10 @@ def load_mesh(spec: Any, where: str, base_dir: Path | None = None) -> Any:
         why = file_problem(path)
         if why is not None:
             raise ValueError(f"{where}: mesh file '{path}' {why}")
+        if base_dir is not None:  # ../, absolute, file://: said once (jwarp.utils.roots)
+            from jwarp.utils.roots import warn_if_outside
+
+            warn_if_outside(path, base_dir, f"{where}: mesh file", stacklevel=2)
         scale = None
         if "scale" in spec:
             s = spec["scale"]

@@ -47,6 +47,7 @@ import numpy as np
 
 from jwarp.world.moveit import (RobotFrames, goal_joint_values, load_mesh, moveit_frames,
                                 moveit_shapes, parse_pose, start_joint_values, unknown_frame)
+from jwarp.utils.roots import one_warning_per_file
 from jwarp.world.primitives import (N_DIMS, Shape, finite_vector, pose_matrix,
                                     quaternion_matrix, rpy_matrix, signed_distance)
 from jwarp.world.sdf import World, check_grid_cells, world_from_mesh
@@ -253,17 +254,22 @@ def scene_from_dict(data: Any, frames: dict[str, np.ndarray] | None = None,
         known[str(name)] = np.asarray(T, dtype=np.float64)
     base = Path(base_dir) if base_dir is not None else None
     try:
-        if "objects" in data or data.get("format") == FORMAT:
-            return _jwarp_scene(data, known, base, source)
-        if any(k in data for k in ("world", "collision_objects", "robot_state", "start_state",
-                                   "goal_constraints", "joint_constraints")):
-            known = moveit_frames(data, known)
-            return Scene(moveit_shapes(data, known, base), "moveit", {},
-                         start_joint_values(data), goal_joint_values(data), source)
+        with one_warning_per_file():  # a mesh outside the scene's folder: said once
+            return _scene_of(data, known, base, source)
     except ValueError as e:
         raise ValueError(f"scene {source}: {e}") from None
-    raise ValueError(f"scene {source}: neither a jwarp scene ('objects') nor a MoveIt "
-                     f"planning scene ('world: collision_objects')")
+
+
+def _scene_of(data: dict, known: dict, base: Path | None, source: str) -> Scene:
+    if "objects" in data or data.get("format") == FORMAT:
+        return _jwarp_scene(data, known, base, source)
+    if any(k in data for k in ("world", "collision_objects", "robot_state", "start_state",
+                               "goal_constraints", "joint_constraints")):
+        known = moveit_frames(data, known)
+        return Scene(moveit_shapes(data, known, base), "moveit", {},
+                     start_joint_values(data), goal_joint_values(data), source)
+    raise ValueError("neither a jwarp scene ('objects') nor a MoveIt planning scene "
+                     "('world: collision_objects')")
 
 
 def _jwarp_scene(data: dict, frames: dict, base: Path | None, source: str) -> Scene:

@@ -499,3 +499,47 @@ def test_messages_name_the_culprit(tmp_path):
         scene_from_dict(jwarp_object(frame=moving), frames=frames)
     with pytest.raises(ValueError, match="unknown frame_id 'nowhere'; known frames"):
         scene_from_dict(moveit_object(header={"frame_id": "nowhere"}), frames=frames)
+
+
+def test_meshes_outside_the_scene_folder_warn_once_per_file(tmp_path, monkeypatch, capsys):
+    """Reliability round 4, item 10: a mesh named with ``../``, an absolute path or
+    ``file://`` was read without a word. One warning per file outside the scene's folder;
+    JWARP_ALLOWED_ROOTS lists folders whose files need none."""
+    import warnings
+
+    from jwarp.utils.roots import ROOTS_ENV, OutsideFolderWarning
+
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    trimesh.creation.box().export(lib / "box.stl")
+    trimesh.creation.box().export(lib / "other.stl")
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    trimesh.creation.box().export(scenes / "own.stl")
+    objs = [{"id": f"m{k}", "type": "mesh", "file": f, "pose": {"position": [k, 0, 0]}}
+            for k, f in enumerate(["../lib/box.stl", str(lib / "box.stl"),
+                                   f"file://{lib / 'box.stl'}", "own.stl", "../lib/other.stl"])]
+    (scenes / "s.yaml").write_text(yaml.safe_dump({"objects": objs}))
+    monkeypatch.delenv(ROOTS_ENV, raising=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = load_scene(scenes / "s.yaml")
+    assert len(scene.shapes) == 5                # read anyway
+    out = [str(w.message) for w in caught if issubclass(w.category, OutsideFolderWarning)]
+    # box.stl named three ways: one warning; other.stl: one
+    assert len(out) == 2 and all(f"is outside {scenes.resolve()}" in m for m in out), out
+    assert "object 'm0'" in out[0] and "other.stl" in out[1]
+    monkeypatch.setenv(ROOTS_ENV, str(lib))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_scene(scenes / "s.yaml")
+    assert not [w for w in caught if issubclass(w.category, OutsideFolderWarning)]
+    # the CLI prints it as one line
+    from jwarp.cli.common import plugin_warnings_one_line
+    monkeypatch.delenv(ROOTS_ENV)
+    plugin_warnings_one_line()
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        load_scene(scenes / "s.yaml")
+    err = capsys.readouterr().err
+    assert err.count("jwarp: warning: object 'm0': mesh file") == 1
