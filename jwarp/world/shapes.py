@@ -38,23 +38,37 @@ _N_DIMS = {"sphere": 1, "box": 3, "cylinder": 2, "capsule": 2, "cone": 2, "plane
 LIMIT_EXTENT = 1e4
 
 
+_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+_EYE3 = np.eye(3)
+_ORTHO_TOL = 1e-6 + 1e-5 * _EYE3
+
+
+def _det3(R: np.ndarray) -> float:
+    return float(R[0, 0] * (R[1, 1] * R[2, 2] - R[1, 2] * R[2, 1])
+                 - R[0, 1] * (R[1, 0] * R[2, 2] - R[1, 2] * R[2, 0])
+                 + R[0, 2] * (R[1, 0] * R[2, 1] - R[1, 1] * R[2, 0]))
+
+
 def _pose(pose: Any, where: str) -> np.ndarray:
     try:
         T = np.asarray(pose, dtype=np.float64)
     except (TypeError, ValueError) as e:
         raise TypeError(f"{where}: pose must be a 4x4 transform of numbers: {e}") from None
     if T.shape == (3,):
-        T = np.concatenate([np.eye(4)[:, :3], np.append(T, 1.0)[:, None]], axis=1)
+        p = T
+        T = np.eye(4)
+        T[:3, 3] = p
     if T.shape != (4, 4):
         raise ValueError(f"{where}: pose must be a 4x4 transform (or a position (3,)), "
                          f"got shape {T.shape}")
-    if not np.all(np.isfinite(T)):
+    if not np.isfinite(T).all():
         raise ValueError(f"{where}: pose contains NaN or inf")
-    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=1e-9):
+    if np.abs(T[3] - _LAST_ROW).max() > 1e-9:
         raise ValueError(f"{where}: pose's last row is {T[3].tolist()}, not [0, 0, 0, 1] "
                          f"(a transposed transform?)")
     R = T[:3, :3]
-    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+    # np.allclose(R^T R, I, atol=1e-6) (its rtol 1e-5 on the diagonal), and det(R) > 0
+    if (np.abs(R.T @ R - _EYE3) > _ORTHO_TOL).any() or _det3(R) < 0:
         raise ValueError(f"{where}: pose rotation is not a rotation matrix")
     if np.abs(T[:3, 3]).max() > LIMIT_EXTENT:
         raise ValueError(f"{where}: position {T[:3, 3].tolist()} is beyond "
@@ -128,7 +142,9 @@ class ShapeSet:
     def __init__(self) -> None:
         self._objects: list[_Object] = []
         self._index: dict[str, int] = {}
-        self._poses = np.zeros((0, 4, 4))
+        #: the poses (K, 4, 4) are the first K rows of a buffer grown by doubling, so that
+        #: adding objects one by one is amortised O(1) (a copy per add made n adds O(n^2))
+        self._pose_buf = np.zeros((0, 4, 4))
         #: bumped by add/remove (device tables rebuilt) and by move (poses refreshed)
         self.structure_version = 0
         self.pose_version = 0
@@ -171,11 +187,25 @@ class ShapeSet:
         obj.dims = None if kind in ("mesh", "plane") else np.asarray(dims, np.float64).reshape(-1)
         obj.source = mesh
         obj.group = int(group)
+        k = len(self._objects)
+        if k == len(self._pose_buf):
+            grown = np.zeros((max(8, 2 * k), 4, 4))
+            grown[:k] = self._pose_buf[:k]
+            self._pose_buf = grown
+        self._pose_buf[k] = T
         self._objects.append(obj)
-        self._index[id] = len(self._objects) - 1
-        self._poses = np.concatenate([self._poses, T[None]])
+        self._index[id] = k
         self.structure_version += 1
-        return len(self._objects) - 1
+        return k
+
+    @property
+    def _poses(self) -> np.ndarray:
+        """(K, 4, 4) the objects' poses (a view of the buffer)."""
+        return self._pose_buf[:len(self._objects)]
+
+    @_poses.setter
+    def _poses(self, value: np.ndarray) -> None:
+        self._pose_buf = np.array(value, np.float64).reshape(-1, 4, 4)
 
     def _make(self, id: str, kind: str, dims: Any, mesh: Any, where: str) -> _Object:
         if kind == "mesh":
@@ -224,8 +254,9 @@ class ShapeSet:
     def remove(self, id: str) -> None:
         """Remove object ``id`` (KeyError naming it if absent)."""
         k = self._find(id)
+        poses = np.delete(self._poses, k, axis=0)
         del self._objects[k]
-        self._poses = np.delete(self._poses, k, axis=0)
+        self._poses = poses
         self._index = {o.id: i for i, o in enumerate(self._objects)}
         self.structure_version += 1
 
