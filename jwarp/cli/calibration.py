@@ -413,9 +413,12 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         _check_float("--loss-scale", args.loss_scale, unit=f" {unit}")
         if not args.loss_scale > 0:
             raise _cli_error(f"--loss-scale: expected a number > 0 {unit}, got {args.loss_scale}")
+        loss_scale: float | None = float(args.loss_scale) / scale   # in the measurement's unit
     elif args.loss_scale is not None:
         raise _cli_error("--loss-scale: only with a robust --loss (soft_l1 or huber); with "
                          "the default linear loss it would be ignored")
+    else:
+        loss_scale = None
 
     def table_rows(robot: Any, p: np.ndarray) -> dict[str, dict[str, float]]:
         out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None), scale)}
@@ -445,7 +448,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                 free=free, free_poses=False, n_starts=args.starts, seed=args.seed,
                 max_nfev=args.max_nfev, callback=bar, covariance=covariance,
                 sigma=priors or None, orders=orders or None, loss=args.loss,
-                loss_scale=None if args.loss == "linear" else args.loss_scale / scale,
+                loss_scale=loss_scale,
                 fix_at=fix_at or None, warn=False)  # the findings: res.warnings, once
             res = calibrate_with(model, meas, train.q, train.y, options,
                                  meta=train.meta or None)

@@ -282,9 +282,9 @@ class ShapeSet:
         last = np.abs(T[:, 3] - _LAST_ROW).max(axis=1, initial=0.0)
         R = T[:, :3, :3]
         ortho = (np.abs(np.einsum("nji,njk->nik", R, R) - _EYE3) > _ORTHO_TOL).any(axis=(1, 2))
-        bad = np.nonzero((last > 1e-9) | ortho | (np.linalg.det(R) < 0))[0] if len(idx) else []
-        if len(bad):
-            _pose(T[int(bad[0])], f"object '{ids[int(bad[0])]}'")
+        rows = np.nonzero((last > 1e-9) | ortho | (np.linalg.det(R) < 0))[0]
+        if len(rows):
+            _pose(T[int(rows[0])], f"object '{ids[int(rows[0])]}'")
         if np.abs(T[:, :3, 3]).max(initial=0.0) > LIMIT_EXTENT:
             raise ValueError(f"poses: a position is beyond {LIMIT_EXTENT:g} m")
         self._poses[idx] = T
