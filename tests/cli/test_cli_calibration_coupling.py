@@ -97,6 +97,11 @@ def test_errors_name_the_option(campaign, capsys, tmp_path):
     if os.path.exists("/dev/zero"):
         line = one_line_error(capsys, base + ["--prior", "/dev/zero"], "--prior")
         assert "/dev/zero is a device, not a regular file" in line
+        # the data and setup files: never read without end either
+        _, c = campaign
+        line = one_line_error(capsys, ["calibrate", "--setup", c / "setup.json", "--data",
+                                       "/dev/zero", "--free", BASE], "data")
+        assert "/dev/zero is a device, pipe or socket, not a regular file" in line
     one_line_error(capsys, base + ["--order", "harmonic=1.5"], "--order")
     one_line_error(capsys, base + ["--order", "theta=2"], "--order")
     line = one_line_error(capsys, base + ["--fix", f"tracker={tmp_path / 'missing.json'}"],
