@@ -113,7 +113,7 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "the text's `calibrate(robot, meas, q, y)`: justin19 and a 40-sample simulated image "
         "campaign (the free harmonic/coupling groups need justin19's coupled torso); "
         "`calibrate` keeps its result for the check (the block drops it)"),
-    "docs/calibration.md:146": (
+    "docs/calibration.md:147": (
         _IMAGE_CAMPAIGN + "res = calibrate(robot, meas, q, y, free='theta,d,r,alpha')\n",
         "`res` is a calibration result of the text (the image campaign above, DH free)"),
     "docs/design.md:9": (
@@ -167,7 +167,7 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "the block is my_package/robots.py: `__file__` names it, my_arm.json (planar4) "
         "lies beside it"),
     "docs/scenes.md:13": ("", "self-contained (examples/ is linked into the folder)"),
-    "docs/scenes.md:224": (
+    "docs/scenes.md:238": (
         "import numpy as np\npose = np.eye(4); pose[:3, 3] = (0.6, 0.0, 0.8)\n"
         "new_pose = pose.copy(); new_pose[0, 3] = 0.5\n",
         "`pose`/`new_pose`: 4x4 poses of the cup [m]"),
@@ -191,12 +191,12 @@ PRELUDES: dict[str, tuple[str, str]] = {
     "docs/urdf.md:43": ("", "self-contained (example-robot-data of the test extra)"),
     "docs/urdf.md:198": (_panda("panda.urdf", "panda.srdf"),
                          "panda.urdf/panda.srdf: example-robot-data's Panda and its SRDF"),
-    "docs/urdf.md:261": (_panda("panda.urdf"), "panda.urdf: example-robot-data's Panda"),
-    "docs/urdf.md:349": (
+    "docs/urdf.md:268": (_panda("panda.urdf"), "panda.urdf: example-robot-data's Panda"),
+    "docs/urdf.md:362": (
         f"import jwarp\nopen('panda.xml', 'w').write({MJCF_ARM!r})\n",
         "panda.xml: tests/test_docs_commands.py's small MJCF arm (a Panda MJCF such as "
         "MuJoCo Menagerie's is not installed here), which has the attachment_site"),
-    "docs/urdf_export.md:67": (
+    "docs/urdf_export.md:75": (
         _panda("panda.urdf") + "import jwarp\n"
         "from jwarp.importers.urdf_export import export_urdf\n"
         "from jwarp.calibration.simulate.campaign import simulate_campaign\n"
@@ -441,7 +441,7 @@ def _check_campaign(ns: dict, folder: Path, out: str) -> None:
 #: "file:line" -> check(namespace, folder, stdout) after the block ran
 CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
     "docs/calibration.md:79": _check_priors_and_orders,
-    "docs/calibration.md:146": _check_diagnostics,
+    "docs/calibration.md:147": _check_diagnostics,
     "docs/datasets.md:45": _check_generate,
     "docs/datasets.md:135": _check_loader,
     "docs/datasets.md:175": _check_train_plan,
@@ -455,15 +455,15 @@ CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
     "docs/robot_schema.md:333": _check_builtin_hook,
     "docs/robot_schema.md:354": _check_package_hook,
     "docs/scenes.md:13": _check_scene,
-    "docs/scenes.md:224": _check_world_edits,
+    "docs/scenes.md:238": _check_world_edits,
     "docs/spheres.md:10": _check_sphere_fit,
     "docs/spheres.md:204": _check_self_pairs,
     "docs/urdf.md:6": _check_urdf,
     "docs/urdf.md:43": _check_robot_names,
     "docs/urdf.md:198": _check_group,
-    "docs/urdf.md:261": _check_spherized,
-    "docs/urdf.md:349": _check_mjcf,
-    "docs/urdf_export.md:67": _check_export,
+    "docs/urdf.md:268": _check_spherized,
+    "docs/urdf.md:362": _check_mjcf,
+    "docs/urdf_export.md:75": _check_export,
     "examples/README.md:90": _check_campaign,
 }
 

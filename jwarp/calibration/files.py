@@ -139,11 +139,18 @@ def read_text(path: str | os.PathLike, what: str) -> tuple[str, bytes]:
     """The text of a UTF-8 file (a leading byte order mark dropped) and its bytes.
 
     Raises:
-        ValueError: the file is missing or unreadable (named as ``what``: e.g. ``data``),
-            or not UTF-8 (naming the file, line and column of the first bad byte).
+        ValueError: the file is missing, unreadable or not a regular file (named as
+            ``what``: e.g. ``data``), or not UTF-8 (naming the file, line and column of the
+            first bad byte).
     """
+    import stat
+
     path = os.fspath(path)
     try:
+        mode = os.stat(path).st_mode
+        if not stat.S_ISREG(mode):  # a folder, /dev/zero, a pipe: never read without end
+            kind = "a folder" if stat.S_ISDIR(mode) else "a device, pipe or socket"
+            raise ValueError(f"{what}: {path} is {kind}, not a regular file")
         with open(path, "rb") as f:
             raw = f.read()
     except FileNotFoundError:

@@ -171,10 +171,15 @@ def _parse_keyed(values: list[str] | None, option: str, kind: type) -> dict[str,
         if "=" not in v:
             if kind is int:
                 raise _cli_error(f"{option}: expected GROUP[:PATTERN]=K, got '{v}'")
+            from jwarp.cli.common import read_small_text
+
+            if not os.path.exists(v):
+                raise _cli_error(f"{option}: '{v}' is neither KEY=SIGMA nor a file (no such "
+                                 f"file)")
+            text = read_small_text(v, option)
             try:
-                with open(v, encoding="utf-8") as fh:
-                    doc = json.load(fh)
-            except (OSError, ValueError) as e:
+                doc = json.loads(text)
+            except ValueError as e:
                 raise _cli_error(f"{option}: '{v}' is neither KEY=SIGMA nor a readable JSON "
                                  f"file ({e})") from None
             if not isinstance(doc, dict):
@@ -258,6 +263,7 @@ def _reserve_outputs(args: argparse.Namespace, inputs: dict[str, str | None]) ->
     is only probed, its recording writes its own): a missing or unwritable folder, a
     folder given for a file, an output that is an input or another output is an error
     naming the option."""
+    from jwarp.cli.common import input_named
     from jwarp.utils.atomic import AtomicFile
 
     outs = [(opt, p) for opt, p in (("--out", args.out), ("--params-out", args.params_out),
@@ -267,6 +273,9 @@ def _reserve_outputs(args: argparse.Namespace, inputs: dict[str, str | None]) ->
         key = os.path.realpath(p)
         if key in seen:
             raise _cli_error(f"{opt}: {p} is also {seen[key]}; give another file")
+        other = input_named(p, opt)   # --prior FILE, --fix GROUP=FILE, ...: inputs too
+        if other is not None and other not in ("--out", "--params-out", "--rerun"):
+            raise _cli_error(f"{opt}: {p} is also {other}; give another file")
         seen[key] = opt
     if args.rerun:
         from jwarp.viz import rerun_module
@@ -342,7 +351,10 @@ def _tow_covariance(args: argparse.Namespace, setup: Any, model: Any, meas: Any,
         st = prob.state(prob.initial_x())
         cov = tow_covariance(meas, spec, st.frames, st.p, meta=train.meta or None)
     if args.virtual_noise is not None:
-        cov = add_virtual_noise(cov, args.virtual_noise)
+        try:
+            cov = add_virtual_noise(cov, args.virtual_noise)
+        except ValueError as e:
+            raise _cli_error(f"--virtual-noise: {str(e).removeprefix('virtual: ')}") from None
     return cov
 
 
@@ -417,6 +429,12 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         _check_float("--loss-scale", args.loss_scale, unit=f" {unit}")
         if not args.loss_scale > 0:
             raise _cli_error(f"--loss-scale: expected a number > 0 {unit}, got {args.loss_scale}")
+        loss_scale: float | None = float(args.loss_scale) / scale   # in the measurement's unit
+    elif args.loss_scale is not None:
+        raise _cli_error("--loss-scale: only with a robust --loss (soft_l1 or huber); with "
+                         "the default linear loss it would be ignored")
+    else:
+        loss_scale = None
 
     def table_rows(robot: Any, p: np.ndarray) -> dict[str, dict[str, float]]:
         out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None), scale)}
@@ -446,7 +464,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                 free=free, free_poses=False, n_starts=args.starts, seed=args.seed,
                 max_nfev=args.max_nfev, callback=bar, covariance=covariance,
                 sigma=priors or None, orders=orders or None, loss=args.loss,
-                loss_scale=None if args.loss == "linear" else args.loss_scale / scale,
+                loss_scale=loss_scale,
                 fix_at=fix_at or None, warn=False)  # the findings: res.warnings, once
             res = calibrate_with(model, meas, train.q, train.y, options,
                                  meta=train.meta or None)
@@ -457,6 +475,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
             for field, opt in (("sigma", "--prior"), ("orders", "--order")):
                 if str(e).startswith(field):
                     raise _cli_error(f"{opt}: {e}") from None
+            if str(e).startswith("loss_scale: "):
+                raise _cli_error(f"--loss-scale: {str(e).removeprefix('loss_scale: ')}") from None
             raise
         finally:
             bar.close()

@@ -117,24 +117,88 @@ def check_device(name: str, option: str = "--device") -> None:
         raise CLIError(f"{option}: {msg.removeprefix('device: ')}") from None
 
 
-#: every existing file named on the command line being run ({option or argument: path}),
-#: set by :func:`set_command_files`: no output may be one of them
-_COMMAND_FILES: dict[str, str] = {}
+#: every existing file named on the command line being run ((option or argument, path),
+#: several per option where a list or KEY=FILE items name several), set by
+#: :func:`set_command_files`: no output may be one of them
+_COMMAND_FILES: list[tuple[str, str]] = []
+
+
+def _files_in(value: Any) -> list[str]:
+    """The existing files a parsed value names: itself, or the ``FILE`` of its
+    comma-separated ``KEY=FILE`` items (``--fix tracker=first.json``)."""
+    if not isinstance(value, (str, os.PathLike)) or not str(value):
+        return []
+    text = os.fspath(value)
+    names = [text]
+    if isinstance(text, str) and "=" in text:
+        names += [item.partition("=")[2].strip() for item in text.split(",") if "=" in item]
+    return [n for n in names if n and os.path.isfile(n)]
 
 
 def set_command_files(args: Any) -> None:
     """Record the existing files among the parsed arguments (string values that name a
-    file, and string items of list values) as the command's inputs: :func:`check_output`
-    refuses any of them as an output (whatever option names it), so no command overwrites
-    a file it reads."""
+    file, string items of list values, and the ``FILE`` of ``KEY=FILE`` items) as the
+    command's inputs: :func:`check_output` and :func:`input_named` refuse any of them as an
+    output (whatever option names it), so no command overwrites a file it reads."""
     _COMMAND_FILES.clear()
     for key, value in vars(args).items():
         if key == "func":
             continue
         values = value if isinstance(value, (list, tuple)) else [value]
         for v in values:
-            if isinstance(v, (str, os.PathLike)) and str(v) and os.path.isfile(v):
-                _COMMAND_FILES[f"--{key.replace('_', '-')}"] = os.fspath(v)
+            for f in _files_in(v):
+                _COMMAND_FILES.append((f"--{key.replace('_', '-')}", f))
+
+
+def input_named(path: str, option: str, inputs: dict[str, str | None] | None = None
+                ) -> str | None:
+    """The option (or argument) of an existing input file that ``path`` (the output of
+    ``option``) is: one of ``inputs`` ({option: path}) first, else one of the command's
+    other files (:func:`set_command_files`); None if it is none of them."""
+    others = [(k, v) for k, v in _COMMAND_FILES if k != option]
+    for opt, src in [*(inputs or {}).items(), *others]:  # the caller's names first
+        if src and os.path.isfile(src) and os.path.realpath(src) == os.path.realpath(path):
+            return opt
+    return None
+
+
+#: the most bytes read from a text file that holds a few numbers (``--target-matrix FILE``,
+#: ``--prior FILE.json``)
+MAX_SMALL_TEXT = 1 << 20
+
+
+def read_small_text(path: str, option: str, max_bytes: int = MAX_SMALL_TEXT) -> str:
+    """The UTF-8 text of a small input file (a few numbers) named by ``option``: CLIError
+    naming the option for anything but a regular file (a folder, ``/dev/zero``, a pipe),
+    a file larger than ``max_bytes`` (never read past that), an unreadable or non-UTF-8
+    file."""
+    import stat
+
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        raise CLIError(f"{option}: cannot read {path}: {e.strerror or e}") from None
+    if not stat.S_ISREG(st.st_mode):
+        what = ("a folder" if stat.S_ISDIR(st.st_mode) else "a device" if
+                stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "a pipe or socket"
+                if stat.S_ISFIFO(st.st_mode) or stat.S_ISSOCK(st.st_mode) else "not a file")
+        raise CLIError(f"{option}: {path} is {what}, not a regular file")
+    too_big = (f"{option}: {path} is larger than {max_bytes} bytes; expected a small text "
+               f"file of a few numbers")
+    if st.st_size > max_bytes:
+        raise CLIError(too_big)
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(max_bytes + 1)
+    except OSError as e:
+        raise CLIError(f"{option}: cannot read {path}: {e.strerror or e}") from None
+    if len(raw) > max_bytes:  # it grew since the stat
+        raise CLIError(too_big)
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise CLIError(f"{option}: {path} is not UTF-8 text (byte 0x{raw[e.start]:02x} at "
+                       f"offset {e.start})") from None
 
 
 def check_output(path: str, option: str, rerun: bool = False,
@@ -148,10 +212,9 @@ def check_output(path: str, option: str, rerun: bool = False,
 
     if not path or not path.strip():
         raise CLIError(f"{option}: empty file name")
-    others = {k: v for k, v in _COMMAND_FILES.items() if k != option}
-    for opt, src in [*(inputs or {}).items(), *others.items()]:  # the caller's names first
-        if src and os.path.isfile(src) and os.path.realpath(src) == os.path.realpath(path):
-            raise CLIError(f"{option}: {path} is also {opt}; give another file")
+    opt = input_named(path, option, inputs)
+    if opt is not None:
+        raise CLIError(f"{option}: {path} is also {opt}; give another file")
     if rerun:
         from jwarp.viz import rerun_module
 
@@ -341,8 +404,11 @@ def dtype_of(name: str) -> Any:
 
 
 def plugin_warnings_one_line() -> None:
-    """Show :class:`~jwarp.model.registry.PluginWarning` as one ``jwarp: warning: ...`` line on
-    stderr (a broken plugin is reported, never a traceback); other warnings as before."""
+    """Show :class:`~jwarp.model.registry.PluginWarning`,
+    :class:`~jwarp.core.kernel_cache.KernelCacheWarning` and
+    :class:`~jwarp.utils.roots.OutsideFolderWarning` as one ``jwarp: warning: ...`` line on
+    stderr (a broken plugin, an unusable kernel cache, a file outside its document's folder
+    is reported, never a traceback); other warnings as before."""
     import warnings
 
     show = warnings.showwarning
@@ -350,9 +416,12 @@ def plugin_warnings_one_line() -> None:
         return
 
     def showwarning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        from jwarp.core.kernel_cache import KernelCacheWarning
         from jwarp.model.registry import PluginWarning
+        from jwarp.utils.roots import OutsideFolderWarning
 
-        if isinstance(category, type) and issubclass(category, PluginWarning):
+        if isinstance(category, type) and issubclass(category, (
+                PluginWarning, KernelCacheWarning, OutsideFolderWarning)):
             print(f"jwarp: warning: {message}", file=sys.stderr if file is None else file)
         else:
             show(message, category, filename, lineno, file, line)

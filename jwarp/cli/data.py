@@ -55,6 +55,9 @@ def _check_db(path: str, robot: Any, timeout: float) -> None:
 
     if os.path.isdir(path):
         raise CLIError(f"--db: {path} is a folder")
+    if os.path.islink(path) and not os.path.exists(path):  # SQLite would open the target
+        raise CLIError(f"--db: {path} is a symbolic link to {os.readlink(path)}, which does "
+                       f"not exist (a dangling link); give the database file itself")
     if os.path.isfile(path) and os.path.getsize(path) > 0:
         folder = os.path.dirname(os.path.abspath(path))
         if not os.access(path, os.W_OK):

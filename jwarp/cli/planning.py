@@ -810,9 +810,18 @@ def cmd_free_config(args: argparse.Namespace) -> int:
                     ok = is_collision_free(model, q, world, args.margin, device=args.device,
                                            dtype=np.float64)
                 else:  # the deflected robot, as plan/ik --elastic check their endpoints
-                    from jwarp.world.path_feasibility import collision_free
-                    ok = collision_free(model, world, q, args.margin, kappa=kappa,
-                                        device=args.device, self_margin=args.margin)
+                    from jwarp.world.path_feasibility import (ELASTIC_CHECK, collision_free,
+                                                              elastic_equilibrium)
+                    rho, conv = elastic_equilibrium(model, q, kappa, device=args.device)
+                    if not conv.any():
+                        c = ELASTIC_CHECK
+                        raise CLIError(f"--kappa: the elastic equilibrium converges at none of "
+                                       f"{len(q)} random configurations ({c['max_iter']} torque "
+                                       f"updates, lam {c['lam']:g}, to {c['tol']:g} rad), so "
+                                       f"no collision can be checked; lower --kappa")
+                    rho = np.where(conv[:, None, None], rho, 0.0)
+                    ok = collision_free(model, world, q, args.margin, rho=rho,
+                                        device=args.device, self_margin=args.margin) & conv
             except (ValueError, TypeError) as e:
                 raise _solver_error("free-config", e) from None
         else:
@@ -911,8 +920,8 @@ def add_subcommands(sub: Any) -> None:
                         "optimises every start until it is feasible or out of iterations")
     s.add_argument("--endpoint-margin", type=real_arg("--endpoint-margin", 0.0, unit=" [m]"),
                    default=None, metavar="M",
-                   help="clearance [m] of start, goal and the first and last segment where it is "
-                        "below --margin (grasp poses close to an object); default: --margin")
+                   help="clearance [m] of start, goal and the first and last segment, at most "
+                        "--margin (grasp poses close to an object); default: --margin")
     s.add_argument("--self-margin", type=real_arg("--self-margin", 0.0, unit=" [m]"),
                    default=0.0, metavar="M",
                    help="clearance [m] between the robot's own links (default 0)")

@@ -29,7 +29,7 @@ from typing import Sequence
 
 import numpy as np
 
-from jwarp.cli.common import CLIError
+from jwarp.cli.common import CLIError, read_small_text
 
 #: the largest target coordinate [m] or rotation component [rad] (squares of larger ones
 #: overflow; no robot reaches 1000 km)
@@ -129,11 +129,8 @@ def matrix_target(text: str, option: str = "--target-matrix") -> np.ndarray:
         if not looks_numeric and os.path.exists(raw):
             if os.path.isdir(raw):
                 raise CLIError(f"{option}: {raw} is a folder, not a file of 16 numbers")
-            try:
-                with open(raw, encoding="utf-8") as fh:
-                    body = "\n".join(line.split("#", 1)[0] for line in fh)
-            except (OSError, UnicodeDecodeError) as e:
-                raise CLIError(f"{option}: cannot read {raw}: {e}") from None
+            body = "\n".join(line.split("#", 1)[0]
+                             for line in read_small_text(raw, option).splitlines())
             try:
                 vals = [float(p) for p in _SEP.split(
                     body.replace("[", " ").replace("]", " ").strip()) if p]

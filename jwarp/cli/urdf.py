@@ -13,6 +13,7 @@ import argparse
 import json
 import math
 import os
+import sys
 from typing import Any
 
 from jwarp.cli.common import CLIError, check_output, int_arg, real_arg
@@ -39,6 +40,8 @@ def import_error(e: ValueError, what: str) -> CLIError:
     msg = " ".join(str(e).split())
     if msg.startswith("end_effectors."):
         return CLIError(f"--end-effector: {msg.partition(': ')[2]}")
+    if msg.startswith("protrusion: "):  # the sphere fit's bound on the option
+        return CLIError(f"--{msg}")
     return CLIError(f"{what}: {msg}")
 
 
@@ -81,6 +84,9 @@ def group_options(args: argparse.Namespace, eff: dict[str, str] | None) -> Any:
 
     if args.srdf is not None and not os.path.isfile(args.srdf):
         raise CLIError(f"--srdf: file not found: '{args.srdf}'")
+    if args.srdf_collisions is not None and args.srdf is None:
+        raise CLIError("--srdf-collisions: only with --srdf (it says what becomes of the SRDF's "
+                       "disable_collisions); without one it would be ignored")
     joints = None
     if args.joints is not None:
         joints = [j.strip() for j in args.joints.split(",") if j.strip()]
@@ -89,7 +95,7 @@ def group_options(args: argparse.Namespace, eff: dict[str, str] | None) -> Any:
     return GroupOptions(srdf=args.srdf, group=args.group, joints=joints,
                         lock=joint_values_arg(args.lock, "--lock"), state=args.state,
                         freeze=joint_values_arg(args.freeze, "--freeze", value_required=False),
-                        srdf_collisions=args.srdf_collisions, end_effectors=eff)
+                        srdf_collisions=args.srdf_collisions or "add", end_effectors=eff)
 
 
 def group_error(e: ValueError, srdf: str | None) -> CLIError:
@@ -225,6 +231,25 @@ def group_resamples(imported: Any, args: argparse.Namespace, eff: Any) -> bool:
     return g.model.n_dof < imported.model.n_dof and g.srdf_collisions != "replace"
 
 
+def home_needs_model(args: argparse.Namespace, imported: Any) -> None:
+    """``--home`` fits the collision model at a home configuration: CLIError naming it,
+    before any work, when the options or the URDF leave no collision model to fit."""
+    if args.home is None:
+        return
+    if args.no_home_fit:
+        raise CLIError("--home: needs a collision model fitted at the home, not "
+                       "--no-home-fit (--home is the configuration of the home fit)")
+    if args.spheres == "none":
+        raise CLIError("--home: needs a collision model, and --spheres none gives none to "
+                       "fit at the home")
+    if args.spheres == "urdf" and not imported.model.spheres:
+        raise CLIError(f"--home: needs a collision model, and {args.urdf} has no sphere "
+                       f"geometry, so --spheres urdf gives none (use --spheres fit)")
+    if args.spheres == "fit" and not imported.model.spheres and not imported.geometries:
+        raise CLIError(f"--home: needs a collision model, and {args.urdf} has no collision "
+                       f"geometry to fit one to")
+
+
 def cmd_import_urdf(args: argparse.Namespace) -> int:
     from jwarp.importers.robot import load_urdf
 
@@ -249,6 +274,11 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
                         require_meshes=args.require_meshes)
     try:
         imported = load_urdf(args.urdf, **urdf_options)
+        from jwarp.importers.urdf_export import export_set_problems
+
+        for problem in export_set_problems(args.urdf):  # files of an export that differ
+            print(f"jwarp: warning: {problem}", file=sys.stderr)
+        home_needs_model(args, imported)  # before the sphere fit
         model, fit = imported.model, None
         if args.spheres == "fit" and any(g.kind != "sphere" for g in imported.geometries):
             import warnings
@@ -368,7 +398,7 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--srdf", default=None, metavar="ROBOT.srdf",
                    help="MoveIt SRDF: its disable_collisions are excluded from self-collision, "
                         "its groups, group states and end-effectors can be used")
-    s.add_argument("--srdf-collisions", choices=("add", "replace"), default="add",
+    s.add_argument("--srdf-collisions", choices=("add", "replace"), default=None,
                    help="SRDF disable_collisions: added to the sampled exclude pairs (add, "
                         "default) or the only ones (replace)")
     s.add_argument("--group", default=None, metavar="NAME",

@@ -7,7 +7,8 @@ Example::
 Writes ``calibrated.urdf`` and, when the robot has fields URDF cannot hold (``kappa``,
 ``kappa_nonlinear``, ``harmonic``, ``linear_limits``), the side file
 ``calibrated.urdf.jwarp.json`` (the full jwarp robot), and the SRDF ``calibrated.srdf``
-with the frame pairs never checked for self-collision (``--no-srdf``: none). Each warning is one line
+with the frame pairs never checked for self-collision (``--no-srdf``: none; an SRDF there
+that no export of ``--out`` wrote is never overwritten). Each warning is one line
 ``jwarp: warning: ...`` on stderr. See ``docs/urdf_export.md``.
 """
 
@@ -21,7 +22,8 @@ from jwarp.cli.common import CLIError, check_output, real_arg, robot_option
 
 
 def cmd_export_urdf(args: argparse.Namespace) -> int:
-    from jwarp.importers.urdf_export import UrdfExportOptions, export_urdf, side_file_path
+    from jwarp.importers.urdf_export import (UrdfExportOptions, check_srdf_target, export_urdf,
+                                             side_file_path)
 
     check_output(args.out, "--out", inputs={"ROBOT": args.robot})
     side = str(side_file_path(args.out))
@@ -30,6 +32,10 @@ def cmd_export_urdf(args: argparse.Namespace) -> int:
         from jwarp.importers.srdf import srdf_path
 
         check_output(str(srdf_path(args.out)), "--out", inputs={"ROBOT": args.robot})
+        try:  # a user's SRDF beside --out is not overwritten
+            check_srdf_target(args.out, option="--out")
+        except ValueError as e:
+            raise CLIError(str(e)) from None
     robot = robot_option(args.robot, "ROBOT")
     if args.name is not None and not args.name.strip():
         raise CLIError("--name: empty robot name")

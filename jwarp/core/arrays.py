@@ -24,7 +24,7 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.device import numpy_dtype, scalar_type
-from jwarp.core.kernel_cache import install_compile_notice
+from jwarp.core.kernel_cache import ensure_cache_dir, install_compile_notice
 from jwarp.utils.warp_init import init_quietly
 
 _INITIALISED = False
@@ -37,6 +37,7 @@ def init_warp() -> None:
         wp.config.quiet = True
         if hasattr(wp, "LOG_WARNING"):  # Warp >= 1.1x logs through log_level
             wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+        ensure_cache_dir()  # an unusable WARP_CACHE_PATH: a warning and a temporary cache
         init_quietly()  # wp.init() without the "CUDA driver not found" line (no CUDA)
         install_compile_notice()  # one stderr line when jwarp's kernels compile (issue 27)
         _INITIALISED = True

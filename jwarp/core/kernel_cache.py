@@ -38,8 +38,8 @@ import warp as wp
 
 from jwarp.utils.warp_init import init_quietly
 
-__all__ = ["CACHE_ENV", "NOTICE_ENV", "cache_dir", "compile_progress", "compiled_modules",
-           "install_compile_notice", "notice_enabled"]
+__all__ = ["CACHE_ENV", "NOTICE_ENV", "KernelCacheWarning", "cache_dir", "compile_progress",
+           "compiled_modules", "ensure_cache_dir", "install_compile_notice", "notice_enabled"]
 
 #: Warp's environment variable for the kernel cache's parent folder
 CACHE_ENV = "WARP_CACHE_PATH"
@@ -53,6 +53,54 @@ _NO_BAR = object()  # the bar could not be made (no tqdm): the line suffices
 _LOCK = threading.RLock()
 _STATE: dict[str, Any] = {"installed": False, "announced": False, "compiled": [],
                           "active": 0, "bar": None, "progress": None, "ticker": None}
+
+
+class KernelCacheWarning(UserWarning):
+    """Warp's kernel cache folder cannot be used; a temporary one is used instead
+    (:func:`ensure_cache_dir`)."""
+
+
+def _unusable(folder: str) -> str | None:
+    """Why ``folder`` cannot hold the kernel cache (it is made if missing and a file is
+    written and removed there), or None if it can."""
+    import tempfile
+
+    try:
+        os.makedirs(folder, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".jwarp-probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        return e.strerror or str(e)
+    return None
+
+
+def ensure_cache_dir() -> str | None:
+    """Before ``wp.init()``: check the kernel cache folder chosen by ``WARP_CACHE_PATH`` (or
+    ``wp.config.kernel_cache_dir``). When it cannot be used (not a folder, not writable:
+    Warp would fail every command with a bare OS error), warn (:class:`KernelCacheWarning`,
+    naming the folder and the variable) and point Warp at a new temporary folder (kernels
+    then compile again in every process); returns that folder, else None."""
+    import tempfile
+    import warnings
+
+    if wp.config.kernel_cache_dir is not None:
+        base, where = str(wp.config.kernel_cache_dir), "wp.config.kernel_cache_dir"
+    elif os.environ.get(CACHE_ENV):
+        base, where = os.environ[CACHE_ENV], CACHE_ENV
+    else:
+        return None
+    folder = os.path.join(os.path.realpath(base), wp.config.version)
+    why = _unusable(folder)
+    if why is None:
+        return None
+    tmp = tempfile.mkdtemp(prefix="jwarp-warp-cache-")
+    warnings.warn(f"{where}={base}: Warp's kernel cache {folder} cannot be used ({why}); "
+                  f"using the temporary cache {tmp} instead (kernels compile again in every "
+                  f"process): set {CACHE_ENV} to a writable folder", KernelCacheWarning,
+                  stacklevel=3)
+    wp.config.kernel_cache_dir = tmp
+    return tmp
 
 
 def cache_dir() -> str:

@@ -104,6 +104,10 @@ class GroupOptions:
         if self.srdf_collisions not in SRDF_COLLISIONS:
             raise ValueError(f"srdf_collisions: expected one of {', '.join(SRDF_COLLISIONS)}, "
                              f"got {self.srdf_collisions!r}")
+        if self.srdf_collisions != "add" and self.srdf is None:
+            raise ValueError(f"srdf_collisions: '{self.srdf_collisions}' only with an SRDF "
+                             f"(srdf), whose disable_collisions it is about; without one it "
+                             f"would be ignored")
 
 
 @dataclass

@@ -45,6 +45,7 @@ import os
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -161,12 +162,50 @@ def read_mjcf(path: str | os.PathLike, options: MjcfOptions | None = None) -> Ur
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise MjcfError(f"path: MJCF file not found: '{path}'")
+    warn_outside_includes(path)
     mujoco = import_mujoco()
     try:
         m = mujoco.MjModel.from_xml_path(path)
     except ValueError as e:
         raise MjcfError(f"{path}: MuJoCo could not load it: {' '.join(str(e).split())}") from None
     return build(m, path, opt)
+
+
+def warn_outside_includes(path: str) -> None:
+    """An :class:`~jwarp.utils.roots.OutsideFolderWarning` for each ``<include file>`` of
+    the MJCF ``path`` (and of the files it includes) outside the model's folder (MuJoCo
+    resolves them against it), once per file. A file that does not parse is left to
+    MuJoCo's error."""
+    from jwarp.utils.roots import one_warning_per_file
+
+    with one_warning_per_file():
+        _warn_includes([Path(path)], set(), Path(path).resolve().parent, path)
+
+
+def _warn_includes(todo: list, seen: set, folder: Path, path: str) -> None:
+    from lxml import etree
+
+    from jwarp.utils.roots import warn_if_outside
+
+    while todo:
+        f = todo.pop()
+        key = f.resolve()
+        if key in seen:
+            continue
+        seen.add(key)
+        try:
+            root = etree.parse(str(f), etree.XMLParser(remove_comments=True)).getroot()
+        except (etree.XMLSyntaxError, OSError):
+            continue
+        for el in root.iter("include"):
+            name = el.get("file")
+            if not name:
+                continue
+            inc = Path(name) if Path(name).is_absolute() else folder / name
+            warn_if_outside(inc, folder, f"{path}: <include> (line {el.sourceline}) file",
+                            stacklevel=5)
+            if inc.is_file():
+                todo.append(inc)
 
 
 def build(m: Any, path: str, opt: MjcfOptions) -> UrdfImport:

@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import os
 import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -857,19 +858,46 @@ def primitive_mesh(kind: str, size: Any, *, sections: int = 64) -> trimesh.Trime
     return trimesh.creation.icosphere(subdivisions=3, radius=s[0])
 
 
+def file_problem(path: str | os.PathLike) -> str | None:
+    """Why ``path`` cannot be read as a file (``"does not exist"``, ``"is a folder, not a
+    file"``, ``"is a device, not a regular file"``, ...), or None for a regular file."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return ("is a symbolic link to a file that does not exist"
+                if os.path.islink(path) else "does not exist")
+    except OSError as e:
+        return f"cannot be read ({e.strerror or e})"
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "is a folder, not a file"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "is a device, not a regular file"
+    return "is not a regular file (a pipe or socket)"
+
+
 def load_mesh(path: str | Path, scale: Any = None) -> trimesh.Trimesh:
     """A mesh file (stl, obj, dae with pycollada, ...) as one Trimesh, scaled by ``scale``
     (a number or (3,) per axis); vertices at the same position are merged (whatever their
     normals or texture coordinates)."""
     p = Path(path)
-    if not p.is_file():
-        raise ValueError(f"mesh: file not found '{p}'")
-    try:
-        m = trimesh.load(p, force="mesh")
+    why = file_problem(p)
+    if why is not None:
+        raise ValueError(f"mesh: '{p}' {why}")
+    try:  # unprocessed first: processing drops the faces of a NaN vertex without a word
+        m = trimesh.load(p, force="mesh", process=False)
     except Exception as e:  # trimesh raises many types for unreadable files
         raise ValueError(f"mesh: cannot load '{p}': {e}") from e
     if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
         raise ValueError(f"mesh: '{p}' holds no triangles")
+    bad = ~np.isfinite(np.asarray(m.vertices, np.float64)).all(axis=1)
+    if bad.any():
+        raise ValueError(f"mesh: '{p}' has {int(bad.sum())} vertices that are NaN or inf "
+                         f"(the first: vertex {int(np.argmax(bad))})")
+    m.process()  # what trimesh.load(p) does by default
     # one vertex per position (COLLADA files often give each triangle its own corners, for
     # their normals/UVs: a triangle soup, open and of one body per face, takes the slow
     # open-mesh clearance test; merged it is the closed solid it draws)
@@ -933,6 +961,30 @@ def fit_geometry(kind: str, size: Any = None, origin: Any = None, mesh: Any = No
         return _exact_sphere(size, tolerance, T)
     m = _geometry_mesh(kind, size, mesh, scale)
     return fit_spheres(m, tolerance=tolerance, **options).transformed(T)
+
+
+def geometry_bounds(geometries: Any) -> np.ndarray:
+    """(2, 3) [m] lower and upper corner of the box holding a link's collision
+    ``geometries`` (as :func:`fit_link` takes them) in the link frame."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for i, g in enumerate(geometries):
+        get = (g.get if isinstance(g, dict) else lambda k, d=None, g=g: getattr(g, k, d))
+        mesh = get("mesh") if get("mesh") is not None else (
+            get("filename") or get("path") or get("mesh_path"))
+        try:
+            T = _origin(get("origin"))
+            if get("kind") == "sphere":
+                r = float(np.asarray(get("size"), np.float64).reshape(-1)[0])
+                b = T[:3, 3] + np.array([[-r], [r]])
+            else:
+                b = _geometry_mesh(get("kind"), get("size"), mesh, get("scale")).bounds
+                corners = np.array(np.meshgrid(*b.T, indexing="ij")).reshape(3, -1).T
+                c = corners @ T[:3, :3].T + T[:3, 3]
+                b = np.stack([c.min(0), c.max(0)])
+        except (ValueError, TypeError) as e:
+            raise type(e)(f"geometries[{i}]: {e}") from e
+        lo, hi = np.minimum(lo, b[0]), np.maximum(hi, b[1])
+    return np.stack([lo, hi])
 
 
 def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,

@@ -26,11 +26,15 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote, unquote
 from xml.sax.saxutils import quoteattr
 
+#: the word that starts the comment of an exported SRDF naming its URDF (:func:`export_mark`)
+EXPORT_MARK = "jwarp-export"
 #: reasons :func:`srdf_text` writes
 REASON_ADJACENT = "Adjacent"
 REASON_NEVER = "Never"
@@ -544,11 +548,20 @@ def default_pair_names(robot: Any) -> list[tuple[str, str]]:
         return []
 
 
-def srdf_text(robot: Any, *, name: str | None = None) -> str:
+def srdf_text(robot: Any, *, name: str | None = None, urdf_file: str | None = None,
+              urdf_sha256: str | None = None) -> str:
     """The SRDF document of ``robot``: its :func:`disabled_pairs` as ``<disable_collisions>``
-    (link names = jwarp frame names = the exported URDF's links)."""
-    lines = ["<?xml version=\"1.0\"?>",
-             f"<!-- written by jwarp export_urdf from robot {robot.name!r}: the frame pairs "
+    (link names = jwarp frame names = the exported URDF's links). With ``urdf_file`` and
+    ``urdf_sha256`` (what :func:`jwarp.importers.urdf_export.export_urdf` passes) a first
+    comment records the URDF it belongs to (:func:`export_mark`)."""
+    lines = ["<?xml version=\"1.0\"?>"]
+    if urdf_file is not None and urdf_sha256 is not None:
+        if not re.fullmatch(r"[0-9a-f]{64}", urdf_sha256):
+            raise ValueError(f"urdf_sha256: expected 64 hex digits, got {urdf_sha256!r}")
+        # percent-encoded (and '-' too): a comment may not hold "--"
+        enc = quote(urdf_file, safe="").replace("-", "%2D")
+        lines.append(f"<!-- {EXPORT_MARK} urdf_file={enc} urdf_sha256={urdf_sha256} -->")
+    lines += [f"<!-- written by jwarp export_urdf from robot {robot.name!r}: the frame pairs "
              f"jwarp never checks for self-collision; see docs/urdf.md -->",
              f"<robot name={quoteattr(name or robot.name)}>"]
     for a, b, reason in disabled_pairs(robot):
@@ -556,6 +569,24 @@ def srdf_text(robot: Any, *, name: str | None = None) -> str:
                      f"reason=\"{reason}\"/>")
     lines.append("</robot>")
     return "\n".join(lines) + "\n"
+
+
+def export_mark(path: str | os.PathLike) -> tuple[str, str] | None:
+    """``(URDF file name, its SHA-256)`` recorded by :func:`srdf_text` in an SRDF that
+    ``export_urdf`` wrote (read from the first 4 KiB of ``path``); ``("", "")`` for an SRDF
+    of an older export (its comment says so, but names no URDF); None for any other file
+    (a user's SRDF), or one that cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096).decode("utf-8", "replace")
+    except OSError:
+        return None
+    m = re.search(EXPORT_MARK + r" urdf_file=(\S+) urdf_sha256=([0-9a-f]{64}) -->", head)
+    if m:
+        return unquote(m.group(1)), m.group(2)
+    if "<!-- written by jwarp export_urdf from robot" in head:
+        return "", ""
+    return None
 
 
 def write_srdf(robot: Any, path: str | os.PathLike, *, name: str | None = None) -> None:

@@ -326,7 +326,12 @@ def export_urdf(robot: RobotModel, path: str | os.PathLike, *, name: str | None 
     ``notes.urdf_sha256`` is the SHA-256 of the URDF text written with it. A side file left
     from an earlier export of ``path`` is removed when no side file is written now (it would
     describe another robot); a file of that name that no export wrote (its notes do not
-    name this URDF) is left alone, with a warning.
+    name this URDF) is left alone, with a warning. The same for the SRDF: one an earlier
+    export of ``path`` wrote is replaced (or, with ``options.srdf`` False, removed); any
+    other file of that name is never overwritten (ValueError before any work,
+    :func:`check_srdf_target`). The renames go side file, SRDF, URDF; the SRDF records the
+    URDF's name and SHA-256 like the side file, so a kill between renames leaves a set that
+    :func:`export_set_problems` reports.
     """
     if not isinstance(robot, RobotModel):
         raise TypeError(f"robot: expected a jwarp RobotModel (load a name or file with "
@@ -340,27 +345,29 @@ def export_urdf(robot: RobotModel, path: str | os.PathLike, *, name: str | None 
     if not isinstance(path, (str, os.PathLike)) or not str(path).strip():
         raise TypeError(f"path: expected a file name, got {path!r}")
     side = side_file_path(path)
+    check_srdf_target(path, options)
     urdf_file = AtomicFile(path, option="path")       # checks the path before any work
     files = [urdf_file]
     try:
+        text = urdf_text(robot, name=name, options=options)
+        digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
         if options.srdf:
             from jwarp.importers.srdf import srdf_path, srdf_text
 
             srdf_file = AtomicFile(srdf_path(path), option="path")
             files.insert(0, srdf_file)
-            _write(srdf_file.tmp, srdf_text(robot, name=name))
+            _write(srdf_file.tmp, srdf_text(robot, name=name, urdf_file=Path(path).name,
+                                            urdf_sha256=digest))
         missing = _unsupported(robot)
         write_side = bool(missing) if options.side_file is None else options.side_file
         side_file = AtomicFile(side, option="path") if write_side else None
         if side_file is not None:
             files.insert(0, side_file)
-        text = urdf_text(robot, name=name, options=options)
         _write(urdf_file.tmp, text)
         warnings = []
         if side_file is not None:
             doc = robot.to_dict()
-            doc.setdefault("notes", {})["urdf_sha256"] = hashlib.sha256(
-                text.encode("utf-8")).hexdigest()
+            doc.setdefault("notes", {})["urdf_sha256"] = digest
             doc["notes"]["urdf_file"] = Path(path).name
             _write(side_file.tmp, json.dumps(doc, indent=1) + "\n")
             if missing:
@@ -373,6 +380,8 @@ def export_urdf(robot: RobotModel, path: str | os.PathLike, *, name: str | None 
         for f in files:
             f.discard()
         raise
+    # the URDF last: a kill between two renames leaves a side file or SRDF whose recorded
+    # urdf_sha256 is not the URDF's (export_set_problems reports it)
     commit_all(files)
     if side_file is None and side.is_file():
         if _written_by_export(side, path):
@@ -382,7 +391,77 @@ def export_urdf(robot: RobotModel, path: str | os.PathLike, *, name: str | None 
         else:  # a file of that name jwarp did not write: not ours to delete
             warnings.append(f"left {side} alone: it is not a side file jwarp's export wrote "
                             f"for {Path(path).name} (it no longer belongs to this URDF)")
+    if not options.srdf:
+        from jwarp.importers.srdf import export_mark, srdf_path
+
+        old = srdf_path(path)
+        if old.is_file():
+            mark = export_mark(old)
+            if mark is not None and mark[0] in ("", Path(path).name):
+                old.unlink()
+                warnings.append(f"removed the SRDF {old} of an earlier export (no SRDF "
+                                f"written now; it described another robot)")
+            else:
+                warnings.append(f"left {old} alone: no SRDF written now, and it is not one "
+                                f"jwarp's export wrote for {Path(path).name}, so it may not "
+                                f"describe this URDF's links")
     return warnings
+
+
+def check_srdf_target(path: str | os.PathLike, options: UrdfExportOptions | None = None,
+                      option: str = "path") -> None:
+    """ValueError naming ``option`` if :func:`export_urdf` would overwrite an SRDF it did not
+    write: the file :func:`jwarp.importers.srdf.srdf_path` of ``path`` exists and is not an
+    SRDF of an export of ``path`` (e.g. the user's MoveIt SRDF of the robot, the natural
+    ``import-urdf robot.urdf --srdf robot.srdf`` -> ``export-urdf --out robot.urdf`` round
+    trip). Nothing to check with ``options.srdf`` False."""
+    from jwarp.importers.srdf import export_mark, srdf_path
+
+    if options is not None and not options.srdf:
+        return
+    target = srdf_path(path)
+    if not target.exists():
+        return
+    mark = export_mark(target) if target.is_file() else None
+    if mark is None or mark[0] not in ("", Path(path).name):
+        raise ValueError(f"{option}: {target} exists and is not an SRDF that export-urdf wrote "
+                         f"for {Path(path).name} (your own SRDF?); it is not overwritten: "
+                         f"give another {option}, or write no SRDF (--no-srdf, "
+                         f"UrdfExportOptions(srdf=False))")
+
+
+def export_set_problems(path: str | os.PathLike) -> list[str]:
+    """What does not belong together in the files an export of the URDF ``path`` wrote:
+    the side file (``notes``) and the SRDF (:func:`jwarp.importers.srdf.export_mark`) record
+    the URDF file name and the SHA-256 of its text; one that names ``path`` but records
+    another hash (an export killed between its renames, or a URDF changed since), or whose
+    URDF is missing, is one line each. Empty when the set is whole (or holds no record)."""
+    from jwarp.importers.srdf import export_mark, srdf_path
+
+    p = Path(path)
+    try:
+        digest = hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else None
+    except OSError:
+        digest = None
+    out = []
+    records = []
+    side = side_file_path(p)
+    if side.is_file() and _written_by_export(side, p):
+        notes = json.loads(side.read_text(encoding="utf-8"))["notes"]
+        records.append(("side file", side, notes["urdf_sha256"]))
+    srdf = srdf_path(p)
+    mark = export_mark(srdf) if srdf.is_file() else None
+    if mark is not None and mark[0] == p.name:
+        records.append(("SRDF", srdf, mark[1]))
+    for what, f, sha in records:
+        if digest is None:
+            out.append(f"{what} {f} was written by export-urdf with {p}, which does not "
+                       f"exist (an interrupted export?)")
+        elif sha != digest:
+            out.append(f"{what} {f} was written by export-urdf with another version of {p} "
+                       f"(URDF sha256 {sha[:12]}..., the file's is {digest[:12]}...): an "
+                       f"interrupted export, or the URDF changed since; export again")
+    return out
 
 
 def _written_by_export(side: Path, urdf_path: Any) -> bool:

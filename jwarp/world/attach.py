@@ -18,7 +18,7 @@ import numpy as np
 
 from jwarp.model import RobotModel, Sphere
 
-__all__ = ["Attachment", "attach_object", "covering_spheres"]
+__all__ = ["Attachment", "attach_object", "covering_spheres", "sphere_table"]
 
 
 def _grid_cells(half: np.ndarray, n_max: int) -> np.ndarray:
@@ -86,6 +86,25 @@ class Attachment:
     frame: int
     frame_T_object: np.ndarray
     spheres: tuple[int, int]
+    #: the covering spheres as added: (n, 5) frame, centre (3,), radius (None: unchecked)
+    added: np.ndarray | None = None
+
+    def carried_by(self, robot: RobotModel) -> bool:
+        """Whether ``robot`` carries this object: its spheres :attr:`spheres` are the
+        covering spheres attach added (a robot of another attach, or the bare robot, is
+        not; detach would strip other spheres)."""
+        s0, s1 = self.spheres
+        if len(robot.spheres) < s1 or self.frame >= robot.n_frames:
+            return False
+        if self.added is None:
+            return True
+        return bool(np.array_equal(sphere_table(robot.spheres[s0:s1]), self.added))
+
+
+def sphere_table(spheres: Any) -> np.ndarray:
+    """(n, 5) float64 rows ``frame, x, y, z, radius`` of ``spheres``."""
+    return np.array([[s.frame, *np.asarray(s.position, np.float64), s.radius]
+                     for s in spheres], np.float64).reshape(-1, 5)
 
 
 def attach_object(robot: RobotModel, frame: int, frame_T_object: np.ndarray, kind: str,

@@ -288,6 +288,23 @@ class PathCheck:
     clearance: np.ndarray
     robot: Any = None
     world: Any = None
+    #: the margins [m] the paths were checked with (None: not known)
+    margin: float | None = None
+    endpoint_margin: float | None = None
+    self_margin: float | None = None
+
+    def _clearance_text(self, i: int, self_pair: bool) -> str:
+        """``clearance 3.00 mm`` and, when positive, the margin it is below."""
+        d = float(self.clearance[i])
+        mm = f"clearance {d * 1e3:.2f} mm"
+        if d <= 0 or self.margin is None:
+            return mm
+        if self_pair:
+            return f"{mm}, below the self margin {float(self.self_margin or 0.0) * 1e3:.2f} mm"
+        em = self.endpoint_margin
+        both = "" if em is None or em == self.margin else \
+            f" (endpoint margin {em * 1e3:.2f} mm on the first and last segment)"
+        return f"{mm}, below the margin {self.margin * 1e3:.2f} mm{both}"
 
     def reason(self, i: int) -> str:
         """Why path ``i`` is infeasible, in words ("feasible" if it is not)."""
@@ -303,10 +320,12 @@ class PathCheck:
         link = _link(self.robot, a)
         mm = f"clearance {mm_text(self.clearance[i])} mm"
         if c == 2:
-            return f"self collision: {link} vs {_link(self.robot, b)} {at} ({mm})"
+            return (f"self collision: {link} vs {_link(self.robot, b)} {at} "
+                    f"({self._clearance_text(i, True)})")
         other = self.world.object_name(b) if self.world is not None else str(b)
         if c == 1:
-            return f"collision: {link} vs object '{other}' {at} ({mm})"
+            return (f"collision: {link} vs object '{other}' {at} "
+                    f"({self._clearance_text(i, False)})")
         if c == 6:
             return (f"uncertified: {link} grazes {_link(self.robot, b)} {at} ({mm}): the motion "
                     f"cannot be proven to keep the self-collision margin there")
@@ -631,7 +650,9 @@ class MotionCheck:
                           self_margin=self_margin, world_group=world_group)
         return PathCheck(ok=out["ok"].numpy()[:K].astype(bool), code=out["code"].numpy()[:K],
                          where=out["where"].numpy()[:K], what=out["what"].numpy()[:K],
-                         clearance=out["dist"].numpy()[:K], robot=self.robot, world=self.world)
+                         clearance=out["dist"].numpy()[:K], robot=self.robot, world=self.world,
+                         margin=margin, endpoint_margin=endpoint_margin,
+                         self_margin=self_margin)
 
 
 _CHECKS: "OrderedDict[tuple, tuple]" = OrderedDict()

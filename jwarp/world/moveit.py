@@ -108,13 +108,35 @@ def collision_objects(data: Any) -> list:
     return objs
 
 
+class RobotFrames(dict):
+    """Frame name -> 4x4 transform in the world of the frames a scene may use, and
+    ``moving``: the robot's frames that move with its joints (named in errors: a scene
+    object cannot be fixed to one)."""
+
+    def __init__(self, frames: Any = (), moving: Any = ()) -> None:
+        super().__init__(frames)
+        self.moving = tuple(moving) if moving else tuple(getattr(frames, "moving", ()))
+
+
+def unknown_frame(frames: dict, frame: str, where: str, key: str = "frame_id") -> ValueError:
+    """The error for a ``key`` naming ``frame``, which ``frames`` lacks: a robot link that
+    moves with its joints is said to be one; else the known frames are listed."""
+    if frame in getattr(frames, "moving", ()):
+        return ValueError(f"{where}: {key} '{frame}' is a link of the robot that moves with "
+                          f"its joints; a scene object must be given in a fixed frame (world, "
+                          f"base, or a frame fixed to the base: {', '.join(sorted(frames))}); "
+                          f"an object held by the robot: World.attach")
+    return ValueError(f"{where}: unknown {key} '{frame}'; known frames: "
+                      f"{', '.join(sorted(frames))}")
+
+
 def moveit_frames(data: dict, frames: dict[str, np.ndarray],
                   world_frame: str = "world") -> dict[str, np.ndarray]:
     """``frames`` (name -> 4x4 in the world) plus the scene's ``fixed_frame_transforms``:
     each the pose of ``child_frame_id`` in its header's frame (no header or an empty
     ``frame_id``: ``world_frame``), which must be known or defined before; where only the
     child is known, the entry defines its header's frame instead."""
-    out = dict(frames)
+    out = RobotFrames(frames)
     entries = data.get("fixed_frame_transforms") or []
     if not isinstance(entries, list):
         raise ValueError("fixed_frame_transforms: expected a list")
@@ -129,7 +151,7 @@ def moveit_frames(data: dict, frames: dict[str, np.ndarray],
             out[parent] = out[child] @ np.linalg.inv(T)
             continue
         if parent not in out:
-            raise ValueError(f"{where}: unknown frame_id '{parent}'; known: {', '.join(sorted(out))}")
+            raise unknown_frame(out, parent, where)
         T = out[parent] @ T
         if child in out and not np.allclose(out[child], T, atol=1e-9):
             raise ValueError(f"{where}: frame '{child}' is already defined with another transform")
@@ -168,8 +190,7 @@ def moveit_shapes(data: Any, frames: dict[str, np.ndarray], base_dir: Path | Non
             raise ValueError(f"{where}: operation {op!r} is not add (0) or append (2)")
         frame = _frame_id(obj, where) or world_frame
         if frame not in frames:
-            raise ValueError(f"{where}: unknown frame_id '{frame}'; known frames: "
-                             f"{', '.join(sorted(frames))}")
+            raise unknown_frame(frames, frame, where)
         T = frames[frame]
         if obj.get("pose") is not None:
             T = T @ parse_pose(obj["pose"], f"{where}: pose")
@@ -240,10 +261,12 @@ def _meshes(obj: dict, T: np.ndarray, where: str, oid: str, base_dir: Path | Non
 def load_mesh(spec: Any, where: str, base_dir: Path | None = None) -> Any:
     """A trimesh.Trimesh from an inline shape_msgs/Mesh mapping (``vertices``,
     ``triangles``) or a file (``resource``/``file``: a path, relative to ``base_dir``, or
-    ``file://``; optional ``scale``: a number or 3)."""
+    ``file://``; optional ``scale``: a number or 3). A file outside ``base_dir`` (and the
+    folders of ``JWARP_ALLOWED_ROOTS``) is read with an
+    :class:`~jwarp.utils.roots.OutsideFolderWarning`."""
     import trimesh
 
-    from jwarp.importers.spheres import load_mesh as load_mesh_file
+    from jwarp.importers.spheres import file_problem, load_mesh as load_mesh_file
 
     if not isinstance(spec, dict):
         raise ValueError(f"{where}: expected a mapping (vertices/triangles or resource)")
@@ -256,8 +279,13 @@ def load_mesh(spec: Any, where: str, base_dir: Path | None = None) -> Any:
         path = Path(src.removeprefix("file://"))
         if not path.is_absolute() and base_dir is not None:
             path = base_dir / path
-        if not path.is_file():
-            raise ValueError(f"{where}: mesh file '{path}' does not exist")
+        why = file_problem(path)
+        if why is not None:
+            raise ValueError(f"{where}: mesh file '{path}' {why}")
+        if base_dir is not None:  # ../, absolute, file://: said once (jwarp.utils.roots)
+            from jwarp.utils.roots import warn_if_outside
+
+            warn_if_outside(path, base_dir, f"{where}: mesh file", stacklevel=2)
         scale = None
         if "scale" in spec:
             s = spec["scale"]

@@ -97,6 +97,9 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
     converged = None
     if rho is None and kappa is not None:
         rho, converged = elastic_equilibrium(robot, q, kappa, device=device)
+        conv = converged.reshape(-1)
+        if not conv.all():  # unknown frames (NaN rows): checked as zeros, reported not free
+            rho = np.where(conv[:, None, None], rho, 0.0)
     free = np.asarray(col.is_collision_free(robot, q, world, margin=margin, rho=rho,
                                             device=device, dtype=np.float64,
                                             self_margin=self_margin, per_world=per_world),

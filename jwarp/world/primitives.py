@@ -255,11 +255,29 @@ def pose_matrix(position: Any, rotation: np.ndarray | None = None) -> np.ndarray
     return T
 
 
+def _not_text(text: str, where: str) -> None:
+    """ValueError for a number given as text, with YAML's reason when it reads as one."""
+    try:
+        float(text)
+    except ValueError:
+        raise ValueError(f"{where}: expected numbers, got the text {text!r}") from None
+    raise ValueError(f"{where}: {text!r} is text, not a number (YAML reads a number such as "
+                     f"1.0e6, without a sign in its exponent, or a quoted one as text: write "
+                     f"1.0e+6, or drop the quotes)")
+
+
 def finite_vector(value: Any, n: int | None, where: str) -> np.ndarray:
     """``value`` as a (n,) float64 vector of finite numbers (any length if ``n`` is None);
     ValueError naming ``where`` (e.g. ``"object 'table': pose position"``) otherwise."""
+    if isinstance(value, str):
+        _not_text(value, where)
     if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__len__"):
         raise ValueError(f"{where}: expected a list of {n or 'some'} numbers, got {value!r}")
+    for x in value:  # float() would take True as 1.0 and the text "0.5" as 0.5
+        if isinstance(x, str):
+            _not_text(x, where)
+        if isinstance(x, (bool, np.bool_, bytes)):
+            raise ValueError(f"{where}: expected numbers, got {x!r} in {value!r}")
     try:
         v = np.array([float(x) for x in value], dtype=np.float64)
     except (TypeError, ValueError):

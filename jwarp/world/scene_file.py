@@ -45,14 +45,15 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.world.moveit import (goal_joint_values, load_mesh, moveit_frames, moveit_shapes,
-                                parse_pose, start_joint_values)
+from jwarp.world.moveit import (RobotFrames, goal_joint_values, load_mesh, moveit_frames,
+                                moveit_shapes, parse_pose, start_joint_values, unknown_frame)
+from jwarp.utils.roots import one_warning_per_file
 from jwarp.world.primitives import (N_DIMS, Shape, finite_vector, pose_matrix,
                                     quaternion_matrix, rpy_matrix, signed_distance)
 from jwarp.world.sdf import World, check_grid_cells, world_from_mesh
 
 __all__ = ["DEFAULT_PAD", "DEFAULT_VOXEL", "FORMAT", "TABLE_SHELF_GOAL", "TABLE_SHELF_START",
-           "Scene", "SceneOptions", "load_scene",
+           "DuplicateKeyError", "Scene", "SceneOptions", "load_scene", "load_yaml",
            "robot_frames", "scene_from_dict", "scene_world", "table_shelf_scene"]
 
 FORMAT = "jwarp.scene"
@@ -165,11 +166,11 @@ def load_scene(path: str | os.PathLike, frames: dict[str, np.ndarray] | None = N
     text = _scene_text(p)
     try:
         if p.suffix.lower() == ".json":
-            data = json.loads(text)
+            data = json.loads(text, object_pairs_hook=_unique_json_keys)
         else:
-            import yaml
-
-            data = yaml.safe_load(text)
+            data = load_yaml(text)
+    except DuplicateKeyError as e:
+        raise ValueError(f"scene {p}: {e}") from None
     except (json.JSONDecodeError, ValueError) as e:
         raise ValueError(f"scene {p}: not valid JSON: {e}") from None
     except Exception as e:  # yaml.YAMLError
@@ -177,6 +178,48 @@ def load_scene(path: str | os.PathLike, frames: dict[str, np.ndarray] | None = N
     if data is None:
         raise ValueError(f"scene {p}: the file is empty")
     return scene_from_dict(data, frames=frames, base_dir=p.parent, source=str(p))
+
+
+class DuplicateKeyError(ValueError):
+    """A key given twice in one mapping of a YAML or JSON document (the later value would
+    silently replace the earlier one: a second ``objects:`` list drops the first)."""
+
+
+def _unique_json_keys(pairs: list[tuple[str, Any]]) -> dict:
+    out: dict = {}
+    for k, v in pairs:
+        if k in out:
+            raise DuplicateKeyError(f"key {k!r} is given twice in one JSON object; keep one")
+        out[k] = v
+    return out
+
+
+def load_yaml(text: str) -> Any:
+    """``yaml.safe_load(text)``, but a key given twice in one mapping is a
+    :class:`DuplicateKeyError` naming the key and both lines (PyYAML keeps the last value
+    without a word). Every YAML jwarp reads goes through it."""
+    import yaml
+
+    class UniqueKeyLoader(yaml.SafeLoader):
+        def construct_mapping(self, node: Any, deep: bool = False) -> Any:
+            if isinstance(node, yaml.MappingNode):
+                seen: dict = {}
+                for key_node, _ in node.value:
+                    if key_node.tag == "tag:yaml.org,2002:merge":
+                        continue
+                    key = self.construct_object(key_node, deep=True)
+                    try:
+                        first = seen.get(key)
+                    except TypeError:  # an unhashable key: PyYAML reports it
+                        continue
+                    line = key_node.start_mark.line + 1
+                    if first is not None:
+                        raise DuplicateKeyError(f"key {key!r} is given twice in one mapping "
+                                                f"(lines {first} and {line}); keep one")
+                    seen[key] = line
+            return super().construct_mapping(node, deep=deep)
+
+    return yaml.load(text, Loader=UniqueKeyLoader)  # noqa: S506 - a SafeLoader
 
 
 def _scene_text(path: Path) -> str:
@@ -206,22 +249,27 @@ def scene_from_dict(data: Any, frames: dict[str, np.ndarray] | None = None,
     if not isinstance(data, dict):
         raise ValueError(f"scene {source}: expected a mapping at the top level, got "
                          f"{type(data).__name__}")
-    known = {"world": np.eye(4)}
+    known = RobotFrames({"world": np.eye(4)}, getattr(frames, "moving", ()))
     for name, T in (frames or {}).items():
         known[str(name)] = np.asarray(T, dtype=np.float64)
     base = Path(base_dir) if base_dir is not None else None
     try:
-        if "objects" in data or data.get("format") == FORMAT:
-            return _jwarp_scene(data, known, base, source)
-        if any(k in data for k in ("world", "collision_objects", "robot_state", "start_state",
-                                   "goal_constraints", "joint_constraints")):
-            known = moveit_frames(data, known)
-            return Scene(moveit_shapes(data, known, base), "moveit", {},
-                         start_joint_values(data), goal_joint_values(data), source)
+        with one_warning_per_file():  # a mesh outside the scene's folder: said once
+            return _scene_of(data, known, base, source)
     except ValueError as e:
         raise ValueError(f"scene {source}: {e}") from None
-    raise ValueError(f"scene {source}: neither a jwarp scene ('objects') nor a MoveIt "
-                     f"planning scene ('world: collision_objects')")
+
+
+def _scene_of(data: dict, known: dict, base: Path | None, source: str) -> Scene:
+    if "objects" in data or data.get("format") == FORMAT:
+        return _jwarp_scene(data, known, base, source)
+    if any(k in data for k in ("world", "collision_objects", "robot_state", "start_state",
+                               "goal_constraints", "joint_constraints")):
+        known = moveit_frames(data, known)
+        return Scene(moveit_shapes(data, known, base), "moveit", {},
+                     start_joint_values(data), goal_joint_values(data), source)
+    raise ValueError("neither a jwarp scene ('objects') nor a MoveIt planning scene "
+                     "('world: collision_objects')")
 
 
 def _jwarp_scene(data: dict, frames: dict, base: Path | None, source: str) -> Scene:
@@ -261,8 +309,7 @@ def _jwarp_scene(data: dict, frames: dict, base: Path | None, source: str) -> Sc
                              f"expected {', '.join(_OBJECT_KEYS[kind])}")
         frame = str(obj.get("frame", scene_frame))
         if frame not in frames:
-            raise ValueError(f"{where}: unknown frame '{frame}'; known frames: "
-                             f"{', '.join(sorted(frames))}")
+            raise unknown_frame(frames, frame, where, "frame")
         if "pose" not in obj:
             raise ValueError(f"{where}: missing pose")
         T = frames[frame] @ _jwarp_pose(obj["pose"], f"{where}: pose")
@@ -311,13 +358,17 @@ def robot_frames(model: Any) -> dict[str, np.ndarray]:
     from jwarp.core.device import host_frames
 
     T = host_frames(model, np.zeros(model.n_dof))[0]
-    out = {"base": np.eye(4)}
+    out = RobotFrames({"base": np.eye(4)})
     fixed: list[bool] = []
+    moving = []
     for i, f in enumerate(model.frames):
         ok = not f.coupling and (f.parent is None or fixed[f.parent])
         fixed.append(ok)
         if ok:
             out[f.name] = T[i]
+        else:
+            moving.append(f.name)
+    out.moving = tuple(moving)
     return out
 
 

@@ -217,10 +217,13 @@ class World:
         return int(self.meta.get("n_worlds", 1)) if self.sdf is None else 1
 
     def select(self, i: int) -> "World":
-        """World ``i`` of a batch as a world of its own (a copy of its objects)."""
+        """World ``i`` (an integer) of a batch as a world of its own (a copy of its
+        objects); a single world is its own world ``i`` for any ``i``."""
         from jwarp.world.shapes import ShapeSet
 
-        if self.n_worlds == 1:
+        if isinstance(i, (bool, np.bool_)) or not isinstance(i, (int, np.integer)):
+            raise TypeError(f"i: expected an integer index of a world of the batch, got {i!r}")
+        if self.n_worlds == 1:  # one world serves every problem
             return self
         if not 0 <= int(i) < self.n_worlds:
             raise ValueError(f"i: expected a world of the batch in [0, {self.n_worlds}), got {i}")
@@ -275,7 +278,7 @@ class World:
         robot move it with the frame. :meth:`detach` puts it back."""
         from jwarp.kinematics.fk import fk
         from jwarp.model.registry import robot as get_robot
-        from jwarp.world.attach import Attachment, attach_object
+        from jwarp.world.attach import Attachment, attach_object, sphere_table
 
         model = get_robot(robot)
         fi = model.frame_index(frame)
@@ -290,7 +293,8 @@ class World:
         rel = np.linalg.inv(T) @ self.shapes.pose(id)
         carried, rng = attach_object(model, fi, rel, kind, dims, mesh, max_spheres)
         self.shapes.remove(id)
-        self.attached[id] = Attachment(id, kind, dims, mesh, fi, rel, rng)
+        self.attached[id] = Attachment(id, kind, dims, mesh, fi, rel, rng,
+                                       sphere_table(carried.spheres[rng[0]:rng[1]]))
         return carried
 
     def detach(self, id: str, robot: RobotLike, q: ArrayLike) -> Any:
@@ -304,6 +308,11 @@ class World:
             raise KeyError(f"object '{id}': not attached (attached: "
                            f"{', '.join(self.attached) or 'none'})")
         model = get_robot(robot)
+        if not a.carried_by(model):
+            raise ValueError(f"robot: not a robot that carries object '{id}' (its spheres "
+                             f"{a.spheres[0]}..{a.spheres[1] - 1} are not the ones attach "
+                             f"added); pass the robot attach returned (or one a later attach "
+                             f"returned)")
         T = np.asarray(fk(model, np.asarray(q, np.float64).reshape(1, -1),
                           dtype=np.float64))[0, a.frame]
         self.add(id, a.kind, [] if a.dims is None else a.dims, T @ a.frame_T_object,
@@ -595,24 +604,11 @@ def world_from_mesh(mesh: Any, limits: Any, voxel_size: float | None = None, *,
 
     from jwarp.core.arrays import init_warp, resolve_device
     from jwarp.kernels.collision import mesh_sdf_kernel
+    from jwarp.world.shapes import mesh_arrays
 
-    if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
-        verts, faces = mesh.vertices, mesh.faces
-    else:
-        try:
-            verts, faces = mesh
-        except (TypeError, ValueError) as e:
-            raise TypeError("mesh: expected a trimesh.Trimesh or a (vertices, faces) pair") from e
-    v = np.asarray(verts, dtype=np.float64)
-    f = np.asarray(faces)
-    if v.ndim != 2 or v.shape[1] != 3 or len(v) < 3:
+    v, f = mesh_arrays(mesh, "mesh")
+    if len(v) < 3:
         raise ValueError(f"mesh: vertices must have shape (V >= 3, 3), got {v.shape}")
-    if not np.all(np.isfinite(v)):
-        raise ValueError("mesh: vertices contain NaN or inf")
-    if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or not np.issubdtype(f.dtype, np.integer):
-        raise ValueError(f"mesh: faces must be an integer array of shape (F >= 1, 3), got {f.shape}")
-    if f.min() < 0 or f.max() >= len(v):
-        raise ValueError(f"mesh: face indices out of range [0, {len(v)})")
     import trimesh
 
     if not trimesh.Trimesh(v, f, process=True).is_watertight:

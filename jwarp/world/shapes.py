@@ -29,7 +29,7 @@ import warp as wp
 from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.kernels import geometry as gk
 
-__all__ = ["KINDS", "ShapeSet", "DeviceShapes", "LIMIT_EXTENT"]
+__all__ = ["KINDS", "ShapeSet", "DeviceShapes", "LIMIT_EXTENT", "mesh_arrays"]
 
 #: kinds a ShapeSet holds
 KINDS = ("sphere", "box", "cylinder", "capsule", "cone", "plane", "mesh")
@@ -38,25 +38,80 @@ _N_DIMS = {"sphere": 1, "box": 3, "cylinder": 2, "capsule": 2, "cone": 2, "plane
 LIMIT_EXTENT = 1e4
 
 
+_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+_EYE3 = np.eye(3)
+_ORTHO_TOL = 1e-6 + 1e-5 * _EYE3
+
+
+def _det3(R: np.ndarray) -> float:
+    return float(R[0, 0] * (R[1, 1] * R[2, 2] - R[1, 2] * R[2, 1])
+                 - R[0, 1] * (R[1, 0] * R[2, 2] - R[1, 2] * R[2, 0])
+                 + R[0, 2] * (R[1, 0] * R[2, 1] - R[1, 1] * R[2, 0]))
+
+
 def _pose(pose: Any, where: str) -> np.ndarray:
     try:
         T = np.asarray(pose, dtype=np.float64)
     except (TypeError, ValueError) as e:
         raise TypeError(f"{where}: pose must be a 4x4 transform of numbers: {e}") from None
     if T.shape == (3,):
-        T = np.concatenate([np.eye(4)[:, :3], np.append(T, 1.0)[:, None]], axis=1)
+        p = T
+        T = np.eye(4)
+        T[:3, 3] = p
     if T.shape != (4, 4):
         raise ValueError(f"{where}: pose must be a 4x4 transform (or a position (3,)), "
                          f"got shape {T.shape}")
-    if not np.all(np.isfinite(T)):
+    if not np.isfinite(T).all():
         raise ValueError(f"{where}: pose contains NaN or inf")
+    if np.abs(T[3] - _LAST_ROW).max() > 1e-9:
+        raise ValueError(f"{where}: pose's last row is {T[3].tolist()}, not [0, 0, 0, 1] "
+                         f"(a transposed transform?)")
     R = T[:3, :3]
-    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+    # np.allclose(R^T R, I, atol=1e-6) (its rtol 1e-5 on the diagonal), and det(R) > 0
+    if (np.abs(R.T @ R - _EYE3) > _ORTHO_TOL).any() or _det3(R) < 0:
         raise ValueError(f"{where}: pose rotation is not a rotation matrix")
     if np.abs(T[:3, 3]).max() > LIMIT_EXTENT:
         raise ValueError(f"{where}: position {T[:3, 3].tolist()} is beyond "
                          f"{LIMIT_EXTENT:g} m")
     return T
+
+
+def mesh_arrays(mesh: Any, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices (V, 3) float64, faces (F, 3) int32)`` of a mesh-like object (anything
+    with ``vertices`` and ``faces``, e.g. a ``trimesh.Trimesh``, or a ``(vertices, faces)``
+    pair), checked before any kernel sees it: finite vertices, integer face indices in
+    ``[0, V)`` (an index past the vertices would make Warp's mesh queries read outside
+    the vertex array). Raises TypeError/ValueError starting with ``where``."""
+    if hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+        verts, faces = mesh.vertices, mesh.faces
+    elif isinstance(mesh, (tuple, list)) and len(mesh) == 2:
+        verts, faces = mesh
+    else:
+        raise TypeError(f"{where}: a mesh needs a trimesh.Trimesh (vertices, faces), got "
+                        f"{type(mesh).__name__}")
+    try:
+        v = np.asarray(verts, dtype=np.float64)
+        f = np.asarray(faces)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"{where}: mesh vertices and faces must be arrays of numbers: "
+                        f"{e}") from None
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0 or f.ndim != 2 or len(f) == 0:
+        raise ValueError(f"{where}: empty mesh ({len(v)} vertices, {len(f)} faces)"
+                         if v.size == 0 or f.size == 0 else
+                         f"{where}: mesh vertices must have shape (V, 3) and faces (F, 3), "
+                         f"got {v.shape} and {f.shape}")
+    if f.shape[1] != 3:
+        raise ValueError(f"{where}: mesh faces must be triangles (F, 3), got shape {f.shape}")
+    if f.dtype == bool or not np.issubdtype(f.dtype, np.integer):
+        raise TypeError(f"{where}: mesh face indices must be integers, got dtype {f.dtype}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{where}: mesh vertices contain NaN or inf")
+    bad = np.nonzero((f < 0).any(axis=1) | (f >= len(v)).any(axis=1))[0]
+    if len(bad):
+        j = int(bad[0])
+        raise ValueError(f"{where}: mesh face {j} has vertex indices {f[j].tolist()} outside "
+                         f"[0, {len(v)}) ({len(bad)} such faces)")
+    return v, f.astype(np.int32)
 
 
 @dataclass
@@ -87,7 +142,9 @@ class ShapeSet:
     def __init__(self) -> None:
         self._objects: list[_Object] = []
         self._index: dict[str, int] = {}
-        self._poses = np.zeros((0, 4, 4))
+        #: the poses (K, 4, 4) are the first K rows of a buffer grown by doubling, so that
+        #: adding objects one by one is amortised O(1) (a copy per add made n adds O(n^2))
+        self._pose_buf = np.zeros((0, 4, 4))
         #: bumped by add/remove (device tables rebuilt) and by move (poses refreshed)
         self.structure_version = 0
         self.pose_version = 0
@@ -130,16 +187,40 @@ class ShapeSet:
         obj.dims = None if kind in ("mesh", "plane") else np.asarray(dims, np.float64).reshape(-1)
         obj.source = mesh
         obj.group = int(group)
+        k = len(self._objects)
+        if k == len(self._pose_buf):
+            grown = np.zeros((max(8, 2 * k), 4, 4))
+            grown[:k] = self._pose_buf[:k]
+            self._pose_buf = grown
+        self._pose_buf[k] = T
         self._objects.append(obj)
-        self._index[id] = len(self._objects) - 1
-        self._poses = np.concatenate([self._poses, T[None]])
+        self._index[id] = k
         self.structure_version += 1
-        return len(self._objects) - 1
+        return k
+
+    @property
+    def _poses(self) -> np.ndarray:
+        """(K, 4, 4) the objects' poses (a view of the buffer)."""
+        return self._pose_buf[:len(self._objects)]
+
+    @_poses.setter
+    def _poses(self, value: np.ndarray) -> None:
+        self._pose_buf = np.array(value, np.float64).reshape(-1, 4, 4)
 
     def _make(self, id: str, kind: str, dims: Any, mesh: Any, where: str) -> _Object:
         if kind == "mesh":
             return self._make_mesh(id, mesh, where)
-        d = np.asarray(dims, dtype=np.float64).reshape(-1)
+        from jwarp.core.arrays import real_array
+
+        # numbers only: numpy would take True as 1.0 and the text "0.1" as 0.1
+        items = dims if isinstance(dims, (list, tuple)) else [dims]
+        if any(isinstance(x, (bool, np.bool_, str, bytes)) for x in items):
+            raise ValueError(f"{where}: {kind} dimensions must be numbers [m], got {dims!r}")
+        try:
+            d = real_array(dims, f"{where}: dims").reshape(-1)
+        except TypeError:
+            raise ValueError(f"{where}: {kind} dimensions must be numbers [m], "
+                             f"got {dims!r}") from None
         if len(d) != _N_DIMS[kind]:
             raise ValueError(f"{where}: a {kind} needs {_N_DIMS[kind]} dimensions, got {len(d)}")
         if not np.all(np.isfinite(d)) or np.any(d <= 0):
@@ -163,27 +244,19 @@ class ShapeSet:
         return _Object(id, kind, size, z.copy(), half)
 
     def _make_mesh(self, id: str, mesh: Any, where: str) -> _Object:
-        try:
-            v = np.asarray(mesh.vertices, dtype=np.float64)
-            f = np.asarray(mesh.faces, dtype=np.int64)
-        except AttributeError:
-            raise TypeError(f"{where}: a mesh needs a trimesh.Trimesh (vertices, faces), got "
-                            f"{type(mesh).__name__}") from None
-        if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0 or f.ndim != 2 or len(f) == 0:
-            raise ValueError(f"{where}: empty mesh ({len(v)} vertices, {len(f)} faces)")
-        if not np.all(np.isfinite(v)):
-            raise ValueError(f"{where}: mesh vertices contain NaN or inf")
+        v, f = mesh_arrays(mesh, where)
         if np.abs(v).max() > LIMIT_EXTENT:
             raise ValueError(f"{where}: mesh vertices beyond {LIMIT_EXTENT:g} m")
         lo, hi = v.min(0), v.max(0)
         return _Object(id, "mesh", 0.5 * (hi - lo), 0.5 * (hi + lo), 0.5 * (hi - lo),
-                       mesh=(v, f.astype(np.int32)))
+                       mesh=(v, f))
 
     def remove(self, id: str) -> None:
         """Remove object ``id`` (KeyError naming it if absent)."""
         k = self._find(id)
+        poses = np.delete(self._poses, k, axis=0)
         del self._objects[k]
-        self._poses = np.delete(self._poses, k, axis=0)
+        self._poses = poses
         self._index = {o.id: i for i, o in enumerate(self._objects)}
         self.structure_version += 1
 
@@ -205,11 +278,13 @@ class ShapeSet:
         if not np.all(np.isfinite(T)):
             bad = int(np.nonzero(~np.isfinite(T).reshape(len(idx), -1).all(1))[0][0])
             raise ValueError(f"object '{ids[bad]}': pose contains NaN or inf")
+        # the checks of add (_pose), vectorised; the first bad object is named
+        last = np.abs(T[:, 3] - _LAST_ROW).max(axis=1, initial=0.0)
         R = T[:, :3, :3]
-        err = np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max(axis=(1, 2))
-        if err.max(initial=0.0) > 1e-6:
-            bad = int(np.argmax(err))
-            raise ValueError(f"object '{ids[bad]}': pose rotation is not a rotation matrix")
+        ortho = (np.abs(np.einsum("nji,njk->nik", R, R) - _EYE3) > _ORTHO_TOL).any(axis=(1, 2))
+        rows = np.nonzero((last > 1e-9) | ortho | (np.linalg.det(R) < 0))[0]
+        if len(rows):
+            _pose(T[int(rows[0])], f"object '{ids[int(rows[0])]}'")
         if np.abs(T[:, :3, 3]).max(initial=0.0) > LIMIT_EXTENT:
             raise ValueError(f"poses: a position is beyond {LIMIT_EXTENT:g} m")
         self._poses[idx] = T
@@ -270,8 +345,17 @@ class ShapeSet:
     def distance(self, points: Any) -> np.ndarray:
         """Exact signed distance [m] of ``points`` (..., 3) to the union (numpy, float64,
         through the float64 kernel on Warp's default device); +inf without objects."""
+        from jwarp.core.arrays import real_array
+
+        p = real_array(points, "points")
+        if p.ndim < 1 or p.shape[-1] != 3:
+            raise ValueError(f"points: expected shape (..., 3), got {p.shape}")
+        if not np.all(np.isfinite(p)):
+            bad = np.argwhere(~np.isfinite(p.reshape(-1, 3)).all(axis=-1))[0, 0]
+            at = np.unravel_index(int(bad), p.shape[:-1]) if p.ndim > 1 else ()
+            raise ValueError(f"points: point {list(map(int, at))} contains NaN or inf (a "
+                             f"distance of an unknown point is no answer)")
         init_warp()
-        p = np.asarray(points, dtype=np.float64)
         flat = np.ascontiguousarray(p.reshape(-1, 3))
         if len(self) == 0:
             return np.full(p.shape[:-1], np.inf)

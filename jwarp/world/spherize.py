@@ -185,6 +185,12 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
     by_link: dict[str, list] = {}
     for g in urdf_robot.geometries:
         by_link.setdefault(g.link, []).append(g)
+    if o.protrusion is not None and by_link:
+        size = robot_size(model, by_link)
+        if o.protrusion > size:
+            raise ValueError(f"protrusion: {o.protrusion:g} m is more than the robot's size "
+                             f"(its collision geometry spans {size:.4g} m): spheres reaching "
+                             f"that far past the surface would touch every other link")
     spheres = list(model.spheres)
     report = SpherizeReport()
     # the excess volume (a reported figure, not the spheres) by 50 000 Monte Carlo points a
@@ -213,6 +219,7 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
             own = bool(sc.exclude_pairs or sc.include_pairs or sc.groups)
             fitted = with_self_pairs(fitted, pairs, replace=not own)
             report.pairs = pairs
+            check_not_all_in_contact(pairs, o)
         if sample_pairs:
             bar.update(1)
     finally:
@@ -270,6 +277,43 @@ def _fit_links(model: RobotModel, by_link: dict[str, list], o: SpherizeOptions,
         report.warnings += link_warnings(row, o)
         bar.update(1)
     return model.copy(spheres=spheres)
+
+
+def robot_size(model: RobotModel, by_link: dict[str, list]) -> float:
+    """Diagonal [m] of the box holding every link's collision geometry (``by_link``: link
+    name -> its geometries) at the configuration of zeros clipped to the joint limits."""
+    from jwarp.importers.spheres import geometry_bounds
+    from jwarp.kinematics.fk import fk
+
+    lim = np.asarray(model.joint_limits, np.float64)
+    q = np.clip(np.zeros(model.n_dof), lim[:, 0], lim[:, 1])
+    T = np.asarray(fk(model, q[None], device="cpu", dtype=np.float64))[0]
+    pts = []
+    for link, geoms in by_link.items():
+        b = geometry_bounds([_geometry(g) for g in geoms])
+        corners = np.array(np.meshgrid(*b.T, indexing="ij")).reshape(3, -1).T
+        Tf = T[model.frame_index(link)]
+        pts.append(corners @ Tf[:3, :3].T + Tf[:3, 3])
+    p = np.concatenate(pts)
+    return float(np.linalg.norm(p.max(0) - p.min(0)))
+
+
+def check_not_all_in_contact(pairs: SelfPairs, options: SpherizeOptions) -> None:
+    """ValueError when every tested self pair (frames with spheres, not adjacent) of the
+    sampled ``pairs`` collided in every sample: all of them are excluded as "always
+    colliding", so the model would check no self pair at all and call every
+    configuration free (spheres far too large: ``protrusion``, ``tolerance``)."""
+    always = set(pairs.always_colliding)
+    tested = (always | set(pairs.never_colliding) | {
+        (int(a), int(b)) for a, b in zip(*np.nonzero(np.triu(pairs.collision_rate > 0, 1)))}
+              ) - set(pairs.adjacent)
+    if always and tested == always:
+        raise ValueError(f"protrusion: the fitted spheres of all {len(always)} link pairs "
+                         f"that are not adjacent are in contact in every one of "
+                         f"{len(pairs.samples)} samples, so every pair would be excluded as "
+                         f"always colliding and no self-collision checked; the spheres are "
+                         f"far too large (protrusion {options.protrusion} m, tolerance "
+                         f"{options.tolerance:g} m)")
 
 
 def _fit_key(parts: list[dict], options: dict) -> tuple:

@@ -6,6 +6,7 @@ option."""
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 
@@ -72,9 +73,35 @@ def test_errors_name_the_option(campaign, capsys, tmp_path):
             "--free", BASE, "--quiet"]
     one_line_error(capsys, base + ["--loss", "huber"], "--loss-scale")
     one_line_error(capsys, base + ["--loss", "huber", "--loss-scale", "0"], "--loss-scale")
+    # round 4, item 8: a scale without a robust loss was accepted and ignored
+    line = one_line_error(capsys, base + ["--loss-scale", "3"], "--loss-scale")
+    assert "only with a robust --loss" in line
+    # round 4, item 9: 1e308 gave "numeric overflow" naming no option
+    line = one_line_error(capsys, base + ["--loss", "huber", "--loss-scale", "1e308"],
+                          "--loss-scale")
+    assert "times the mean noise sigma" in line
+    line = one_line_error(capsys, base + ["--virtual-noise", "1e308"], "--virtual-noise")
+    assert "a standard deviation of at most" in line
+    # a --fix file with a bad value: the file, the parameter and the value
+    for value, shown in (("x", "'x'"), (None, "None"), ([1, 2], "[1, 2]")):
+        fx = tmp_path / "fx.json"
+        fx.write_text(json.dumps({"measurement_params": {"tracker_px": value}}))
+        line = one_line_error(capsys, base + ["--fix", f"tracker={fx}"], "--fix")
+        assert f"{fx}: 'tracker_px' is {shown}, not a number" in line, line
     one_line_error(capsys, base + ["--prior", "theta:nope*=1e-3"], "--prior")
     one_line_error(capsys, base + ["--prior", "theta=abc"], "--prior")
     one_line_error(capsys, base + ["--prior", str(tmp_path / "missing.json")], "--prior")
+    # a file read for a few numbers: a regular file of bounded size (round 4, item 7)
+    line = one_line_error(capsys, base + ["--prior", str(tmp_path)], "--prior")
+    assert "is a folder, not a regular file" in line
+    if os.path.exists("/dev/zero"):
+        line = one_line_error(capsys, base + ["--prior", "/dev/zero"], "--prior")
+        assert "/dev/zero is a device, not a regular file" in line
+        # the data and setup files: never read without end either
+        _, c = campaign
+        line = one_line_error(capsys, ["calibrate", "--setup", c / "setup.json", "--data",
+                                       "/dev/zero", "--free", BASE], "data")
+        assert "/dev/zero is a device, pipe or socket, not a regular file" in line
     one_line_error(capsys, base + ["--order", "harmonic=1.5"], "--order")
     one_line_error(capsys, base + ["--order", "theta=2"], "--order")
     line = one_line_error(capsys, base + ["--fix", f"tracker={tmp_path / 'missing.json'}"],

@@ -71,6 +71,11 @@ def test_generate_option_errors(capsys, tmp_path, fake, monkeypatch):
     one_line_error(capsys, base + ["--db", db, "--device", "cuda:9"], "--device")
     one_line_error(capsys, base + ["--db", tmp_path], "--db")
     one_line_error(capsys, base + ["--db", tmp_path / "no" / "d.sqlite"], "--db")
+    # round 4, item 9: a dangling symbolic link gave SQLite's "unable to open database file"
+    dangling = tmp_path / "link.sqlite"
+    dangling.symlink_to(tmp_path / "gone" / "d.sqlite")
+    line = one_line_error(capsys, base + ["--db", dangling], "--db")
+    assert "is a symbolic link to" in line and "dangling" in line
     one_line_error(capsys, base + ["--db", db, "--num-gpus", 1], "--num-gpus")
     one_line_error(capsys, base + ["--db", db, "--timeout", "nan"], "--timeout")
     monkeypatch.setitem(sys.modules, "ray", None)

@@ -42,3 +42,19 @@ def test_elastic_configurations_are_free_on_the_deflected_robot(capsys):
 def test_kappa_without_elastic_is_refused(capsys):
     code, out, err = run(capsys, ["free-config", "--robot", "justin19", "--kappa", "1e-4"])
     assert code != 0 and "--kappa" in err
+
+
+def test_absurd_kappa_names_the_option_and_collision_free_reports_not_free(capsys):
+    """Reliability round 4, item 9: ``--elastic --kappa 1e308`` failed with "free-config:
+    rho: contains NaN or inf"; collision_free of configurations whose equilibrium does not
+    converge raised instead of calling them not free (its docstring)."""
+    code, out, err = run(capsys, ["free-config", "--robot", "planar4", "--world",
+                                  "simplex:seed=3", "--n", "2", "--seed", "0", "--elastic",
+                                  "--kappa", "1e308"])
+    assert code == 2 and out == ""
+    assert err.strip().splitlines()[-1].startswith(
+        "jwarp: error: --kappa: the elastic equilibrium converges at none of")
+    robot = jwarp.robot("planar4")
+    world = parse_world_spec("simplex:seed=3", robot)
+    q = np.zeros((3, robot.n_dof))
+    assert not collision_free(robot, world, q, 0.0, kappa=1e308, device="cpu").any()

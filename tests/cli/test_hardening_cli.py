@@ -106,6 +106,9 @@ def test_fk_max_iter_zero_allowed_and_not_converged(capsys):
     (["--endpoint-margin", "-1"], "--endpoint-margin"),
     (["--self-margin", "nan"], "--self-margin"),
     (["--time-limit", "-1"], "--time-limit"),
+    # reliability round 4, item 8: accepted and ignored (it only relaxes the margin)
+    (["--margin", "0.01", "--endpoint-margin", "0.05"], "--endpoint-margin"),
+    (["--endpoint-margin", "0.001"], "--endpoint-margin"),       # default --margin 0
 ])
 def test_plan_bad_values(capsys, block, extra, option):
     one_line_error(capsys, plan_args(block, *extra), option)
@@ -130,6 +133,11 @@ def test_plan_solver_errors_name_the_option(capsys, block, start, option, messag
     (["--elastic", "--kappa", "-inf"], "--kappa"),
     (["--device", "nodevice"], "--device"),
     (["--robot", "nobot"], "--robot"),
+    # reliability round 4, item 9: "numeric overflow" named no option
+    (["--tol-pos", "1e308"], "--tol-pos"),
+    (["--tol-rot", "1e308"], "--tol-rot"),
+    (["--tol-rot", "4"], "--tol-rot"),
+    (["--seed", "-1"], "--seed"),
 ])
 def test_ik_bad_values(capsys, extra, option):
     one_line_error(capsys, IK + extra, option)

@@ -158,3 +158,30 @@ def test_errors_name_the_option(tmp_path):
           match="--quat")
     error(target_pose, None, option="--target", match="--target-matrix")
     assert "--target" in msg
+
+
+def test_matrix_and_prior_files_are_small_regular_files(tmp_path, capsys):
+    """Reliability round 4, item 7: ``--target-matrix /dev/zero`` read without a size limit
+    (3 GB in 8 s). A file read for a few numbers must be a regular file of at most
+    MAX_SMALL_TEXT bytes; nothing past that is read."""
+    import os
+    import time
+
+    from jwarp.cli.common import MAX_SMALL_TEXT, read_small_text
+
+    t0 = time.perf_counter()
+    if os.path.exists("/dev/zero"):
+        error(matrix_target, "/dev/zero", option="--target-matrix",
+              match="/dev/zero is a device, not a regular file")
+    assert time.perf_counter() - t0 < 5.0
+    big = tmp_path / "big.txt"
+    big.write_text("0 " * (MAX_SMALL_TEXT // 2 + 1))
+    error(matrix_target, str(big), option="--target-matrix", match="larger than")
+    fifo = tmp_path / "fifo"
+    if hasattr(os, "mkfifo"):
+        os.mkfifo(fifo)      # opening it would block forever
+        error(matrix_target, str(fifo), option="--target-matrix", match="pipe")
+    with pytest.raises(CLIError, match="--prior: .* is a folder, not a regular file"):
+        read_small_text(str(tmp_path), "--prior")
+    (tmp_path / "ok.json").write_text('{"theta": 1e-3}')
+    assert read_small_text(str(tmp_path / "ok.json"), "--prior") == '{"theta": 1e-3}'

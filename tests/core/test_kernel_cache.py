@@ -177,3 +177,41 @@ def test_help_imports_no_heavy_packages():
     loaded, names = r.stdout.splitlines()
     assert loaded == ""
     assert names == "jwarp.kinematics.fk jwarp.kinematics Planner"
+
+
+CACHE_PROBE = '''
+from jwarp.cli.common import plugin_warnings_one_line
+plugin_warnings_one_line()
+from jwarp.core.arrays import init_warp
+init_warp()
+import warp as wp
+print(wp.config.kernel_cache_dir)
+'''
+
+
+@pytest.mark.parametrize("bad", ["file", "unwritable"])
+def test_unusable_cache_path_warns_naming_it_and_falls_back(tmp_path, bad):
+    """Reliability round 4, item 9: a WARP_CACHE_PATH that is a file or an unwritable
+    folder made every command fail with a bare OS error. Now: one warning naming the cache
+    and the variable, and a temporary cache."""
+    if bad == "file":
+        path = tmp_path / "a_file"
+        path.write_text("x")
+    else:
+        if hasattr(os, "geteuid") and os.geteuid() == 0:
+            pytest.skip("root writes into any folder")
+        path = tmp_path / "ro"
+        path.mkdir()
+        path.chmod(0o500)
+    env = dict(os.environ, WARP_CACHE_PATH=str(path), PYTHONPATH=str(Path(jwarp.__file__).parents[1]))
+    r = subprocess.run([sys.executable, "-c", CACHE_PROBE], env=env, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("jwarp: warning:")]
+    assert len(lines) == 1, r.stderr
+    assert lines[0].startswith(f"jwarp: warning: WARP_CACHE_PATH={path}: Warp's kernel cache ")
+    assert "cannot be used" in lines[0] and "temporary cache" in lines[0]
+    used = r.stdout.strip().splitlines()[-1]
+    assert not used.startswith(str(path)) and Path(used).is_dir()
+    import shutil
+    shutil.rmtree(Path(used).parent, ignore_errors=True)

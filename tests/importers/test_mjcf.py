@@ -435,3 +435,32 @@ def test_cli_warns_about_dropped_equalities(tmp_path, capsys):
     (line,) = [ln for ln in err.splitlines() if ln.startswith("jwarp: warning:")]
     assert "<weld> 'glue'" in line and "<connect> #2" in line
     assert json.loads(stdout)["warnings"] == [line.removeprefix("jwarp: warning: ")]
+
+
+def test_include_outside_the_model_folder_warns_once_per_file(tmp_path, monkeypatch):
+    """Reliability round 4, item 10: an MJCF ``<include>`` reaching out of the model's
+    folder was read without a word; JWARP_ALLOWED_ROOTS lists folders that need none."""
+    import warnings
+
+    from jwarp.utils.roots import ROOTS_ENV, OutsideFolderWarning
+
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    (shared / "arm.xml").write_text(
+        "<mujoco><worldbody><body name='b'><joint name='j' type='hinge' range='-1 1'/>"
+        "<geom type='sphere' size='0.05'/></body></worldbody></mujoco>")
+    model = tmp_path / "model"
+    model.mkdir()
+    main = write(model, "<mujoco model='m'><include file='../shared/arm.xml'/></mujoco>")
+    monkeypatch.delenv(ROOTS_ENV, raising=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_mjcf(main)
+    out = [w for w in caught if issubclass(w.category, OutsideFolderWarning)]
+    assert len(out) == 1 and "arm.xml" in str(out[0].message)
+    assert f"is outside {model.resolve()}" in str(out[0].message)
+    monkeypatch.setenv(ROOTS_ENV, str(shared))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_mjcf(main)
+    assert not [w for w in caught if issubclass(w.category, OutsideFolderWarning)]

@@ -10,6 +10,7 @@ import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import jwarp
@@ -208,3 +209,168 @@ def test_group_states_as_moveit_and_pinocchio_write_them(tmp_path):
     with pytest.raises(ValueError, match=r"<group_state name=\"other\"> \(line 9\): unknown "
                                          r"joint 'nope'"):
         plan_group(imp, GroupOptions(srdf=path, joints=["panda_joint1"], state="other"))
+
+
+# ------------------------------------------------ reliability 4, item 2: the export's set
+USER_SRDF = ("<?xml version='1.0'?>\n<robot name='mine'><group name='arm'>"
+             "<chain base_link='a' tip_link='b'/></group></robot>\n")
+
+
+def test_export_never_overwrites_a_users_srdf(tmp_path, capsys):
+    """``import-urdf robot.urdf --srdf robot.srdf`` then ``export-urdf --out robot.urdf``:
+    the user's SRDF beside --out is refused before any work, not overwritten; --no-srdf
+    writes the URDF and says the SRDF there is not this export's; an SRDF an earlier export
+    of the same URDF wrote is replaced (and removed, with a warning, under --no-srdf)."""
+    from jwarp.cli.main import main
+
+    robot = jwarp.robot("arm7")
+    out = tmp_path / "robot.urdf"
+    mine = tmp_path / "robot.srdf"
+    mine.write_text(USER_SRDF)
+    with pytest.raises(ValueError, match=r"path: .*robot.srdf exists and is not an SRDF "
+                                         r"that export-urdf wrote for robot.urdf"):
+        export_urdf(robot, out)
+    assert sorted(os.listdir(tmp_path)) == ["robot.srdf"] and mine.read_text() == USER_SRDF
+    assert main(["export-urdf", "arm7", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--out: " in err and "robot.srdf" in err and "--no-srdf" in err
+    assert sorted(os.listdir(tmp_path)) == ["robot.srdf"] and mine.read_text() == USER_SRDF
+    assert main(["export-urdf", "arm7", "--out", str(out), "--no-srdf"]) == 0
+    err = capsys.readouterr().err
+    assert f"left {mine} alone" in err and "may not describe this URDF" in err
+    assert out.is_file() and mine.read_text() == USER_SRDF
+    # an SRDF written by an export of this URDF is the export's to replace or remove
+    mine.unlink()
+    export_urdf(robot, out)
+    first = mine.read_text()
+    assert export_urdf(robot.copy(name="other"), out) == [] and mine.read_text() != first
+    w = export_urdf(robot, out, options=jwarp.importers.urdf_export.UrdfExportOptions(
+        srdf=False))
+    assert not mine.exists() and len(w) == 1 and "removed the SRDF" in w[0]
+    # an export SRDF of another URDF of the same stem ("robot.urdf" vs "robot.xml" -> no
+    # clash; a renamed copy) is not this export's either
+    other = tmp_path / "robot.srdf"
+    export_urdf(robot, tmp_path / "copy.urdf")
+    (tmp_path / "copy.srdf").rename(other)
+    with pytest.raises(ValueError, match="not an SRDF that export-urdf wrote for robot.urdf"):
+        export_urdf(robot, out)
+
+
+class _Killed(BaseException):
+    """A kill between two renames: no clean-up runs."""
+
+
+def _kill_after(monkeypatch, k):
+    """export_urdf's commit: the first ``k`` renames happen, then the process "dies" (the
+    others' temporary files are dropped here: after a real SIGKILL the next write of the
+    target removes those of the dead process, jwarp.utils.atomic.clean_stale)."""
+    import jwarp.importers.urdf_export as ue
+
+    def commit_all(files):
+        files = list(files)
+        for f in files[:k]:
+            f.commit()
+        for f in files[k:]:
+            f.discard()
+        raise _Killed()
+    monkeypatch.setattr(ue, "commit_all", commit_all)
+
+
+@pytest.mark.parametrize("k", [0, 1, 2, 3])
+def test_export_killed_between_renames_leaves_a_detected_set(tmp_path, monkeypatch, capsys, k):
+    """export-urdf writes the side file, the SRDF and the URDF (in that order, the URDF
+    last). Killed after ``k`` renames over an earlier export: every mixed set (a new side
+    file or SRDF beside the old URDF) is reported by export_set_problems and by
+    import-urdf; the whole old (k=0) and whole new (k=3) sets report nothing."""
+    from jwarp.importers.urdf_export import export_set_problems, side_file_path
+
+    base = jwarp.robot("arm7")
+    kappa = np.zeros((base.n_frames, 3))
+    kappa[base.is_dh, 2] = 1e-4
+    old, new = base.copy(kappa=kappa), base.copy(kappa=2 * kappa, name="new")
+    out = tmp_path / "robot.urdf"
+    export_urdf(old, out)
+    assert export_set_problems(out) == []
+    _kill_after(monkeypatch, k)
+    with pytest.raises(_Killed):
+        export_urdf(new, out)
+    monkeypatch.undo()
+    new_side = "'new'" in side_file_path(out).read_text() or '"new"' in side_file_path(
+        out).read_text()
+    new_srdf = "robot 'new'" in srdf_path(out).read_text()
+    new_urdf = "robot 'new'" in out.read_text()
+    assert (new_side, new_srdf, new_urdf) == (k >= 1, k >= 2, k >= 3)
+    problems = export_set_problems(out)
+    assert len(problems) == {0: 0, 1: 1, 2: 2, 3: 0}[k], problems
+    if k == 1:
+        assert problems[0].startswith(f"side file {side_file_path(out)} was written by "
+                                      f"export-urdf with another version of {out}")
+    if k == 2:
+        assert problems[1].startswith(f"SRDF {srdf_path(out)} was written")
+    # import-urdf of that URDF says so
+    from jwarp.cli.main import main
+
+    assert main(["import-urdf", str(out), "--out", str(tmp_path / "back.json"), "--spheres",
+                 "none", "--no-home-fit"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("jwarp: warning: ") == len(problems)
+    for p in problems:
+        assert p in " ".join(err.split())
+    # the next export makes the set whole again (and removes the killed one's files)
+    export_urdf(new, out)
+    assert export_set_problems(out) == []
+    assert sorted(os.listdir(tmp_path)) == ["back.json", "robot.srdf", "robot.urdf",
+                                            "robot.urdf.jwarp.json"]
+
+
+def test_export_killed_before_removing_a_stale_side_file_or_on_a_first_export(tmp_path,
+                                                                              monkeypatch):
+    from jwarp.importers.urdf_export import export_set_problems, side_file_path
+
+    base = jwarp.robot("arm7")
+    kappa = np.zeros((base.n_frames, 3))
+    kappa[base.is_dh, 2] = 1e-4
+    out = tmp_path / "robot.urdf"
+    # a first export killed after the side file: no URDF, the side file says whose it is
+    _kill_after(monkeypatch, 1)
+    with pytest.raises(_Killed):
+        export_urdf(base.copy(kappa=kappa), out)
+    monkeypatch.undo()
+    p = export_set_problems(out)
+    assert len(p) == 1 and "which does not exist" in p[0]
+    export_urdf(base.copy(kappa=kappa), out)
+    assert export_set_problems(out) == []
+    # the rigid robot needs no side file: killed after its renames, before the old side
+    # file is removed -> the old side file records another URDF
+    import jwarp.importers.urdf_export as ue
+    real = ue.commit_all
+
+    def commit_then_die(files):
+        real(files)
+        raise _Killed()
+    monkeypatch.setattr(ue, "commit_all", commit_then_die)
+    with pytest.raises(_Killed):
+        export_urdf(base.copy(name="rigid"), out)
+    monkeypatch.undo()
+    assert side_file_path(out).is_file()
+    p = export_set_problems(out)
+    assert len(p) == 1 and p[0].startswith(f"side file {side_file_path(out)}")
+
+
+def test_srdf_collisions_without_an_srdf_is_refused(tmp_path, capsys):
+    """Reliability round 4, item 8: ``--srdf-collisions`` without ``--srdf`` was accepted
+    and ignored."""
+    from jwarp.cli.main import main
+
+    with pytest.raises(ValueError, match="srdf_collisions: 'replace' only with an SRDF"):
+        GroupOptions(srdf_collisions="replace").validate()
+    GroupOptions().validate()                 # the default "add" says nothing
+    urdf = tmp_path / "r.urdf"
+    export_urdf(jwarp.robot("planar4"), urdf, options=jwarp.importers.urdf_export.UrdfExportOptions(
+        srdf=False))
+    for how in ("add", "replace"):
+        assert main(["import-urdf", str(urdf), "--out", str(tmp_path / "r.json"), "--spheres",
+                     "none", "--srdf-collisions", how]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[-1].startswith("jwarp: error: --srdf-collisions: only with --srdf")
+    assert not (tmp_path / "r.json").exists()

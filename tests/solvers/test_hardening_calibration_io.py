@@ -487,6 +487,10 @@ def test_simulate_campaign_refuses_samples_beyond_memory(tmp_path, capsys):
     (["--max-nfev", "0"], "--max-nfev"), (["--seed=-2"], "--seed"),
     (["--calibrate-rows", "0:99"], "--calibrate-rows"), (["--test-rows", "a:b"], "--test-rows"),
     (["--test-rows", "0:30"], "--test-rows"),
+    # reliability round 4 (items 7-9): ignored options, overflows, unbounded reads
+    (["--loss-scale", "3"], "--loss-scale"),
+    (["--loss", "huber", "--loss-scale", "1e308"], "--loss-scale"),
+    (["--virtual-noise", "1e308"], "--virtual-noise"),
 ])
 def test_calibrate_bad_values_one_line(camp_dir, capsys, extra, option):
     rc = main(["calibrate", "--setup", str(camp_dir / "setup.json"), "--data",

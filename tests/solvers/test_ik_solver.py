@@ -432,3 +432,20 @@ def test_sparse_counter_reads_still_solve_and_check_everything(device, read_ever
                                        dtype=np.float64).all()
     with pytest.raises(ValueError, match="^read_every"):
         IK.IKOptions(read_every=0)
+
+
+def test_seed_and_tolerances_out_of_range_name_the_option():
+    """Reliability round 4, item 9: ik(seed=-1) failed inside numpy without naming seed;
+    tol_pos/tol_rot of 1e308 overflowed ("numeric overflow") in the solver's setup."""
+    from jwarp.solvers.ik import IKOptions, IKSolver, ik
+
+    T = np.eye(4)
+    T[:3, 3] = [0.5, 0.5, 0.0]
+    for kw, match in ((dict(seed=-1), r"seed: expected an integer in \[0, 2\*\*63\)"),
+                      (dict(tol_pos=1e308), "tol_pos: 1e\\+308 m is not a position tolerance"),
+                      (dict(tol_rot=1e308), "tol_rot: 1e\\+308 rad is more than pi")):
+        with pytest.raises(ValueError, match=match):
+            ik("planar4", "tcp", T, n_starts=2, iterations=2, **kw)
+    solver = IKSolver(jwarp.robot("planar4"), "tcp", 1, IKOptions(n_starts=2, iterations=2))
+    with pytest.raises(ValueError, match="seed: expected an integer >= 0"):
+        solver.reseed(-1)

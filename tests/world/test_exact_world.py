@@ -169,11 +169,22 @@ def test_add_move_remove_in_place(device):
     (dict(kind="sphere", dims=[0.1], pose=[1e9, 0, 0]), "object 'x': position .* beyond"),
     (dict(kind="mesh", mesh=trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), int))),
      "object 'x': empty mesh"),
+    # face indices past the vertices (or negative) made the first query read outside Warp's
+    # vertex array (a segfault); any mesh-like object is checked, not only a Trimesh
+    (dict(kind="mesh", mesh=trimesh.Trimesh(np.eye(3), [[0, 1, 100000000]], process=False)),
+     r"object 'x': mesh face 0 has vertex indices \[0, 1, 100000000\] outside \[0, 3\)"),
+    (dict(kind="mesh", mesh=trimesh.Trimesh(np.eye(3), [[0, 1, 2], [0, -1, 2]], process=False)),
+     r"object 'x': mesh face 1 has vertex indices \[0, -1, 2\]"),
+    (dict(kind="mesh", mesh=(np.eye(3), np.array([[0, 1, 7]]))), "object 'x': mesh face 0"),
+    (dict(kind="mesh", mesh=(np.eye(3), np.array([[0, 1, 2, 0]]))), "object 'x': mesh faces must be triangles"),
+    (dict(kind="mesh", mesh=(np.array([[0, 0, 0], [1, 0, 0], [0, 1, np.nan]]), [[0, 1, 2]])),
+     "object 'x': mesh vertices contain NaN"),
 ])
 def test_bad_objects_name_the_object(bad, match):
     s = ShapeSet()
     with pytest.raises(ValueError, match=match):
         s.add("x", bad["kind"], bad.get("dims", ()), bad.get("pose"), mesh=bad.get("mesh"))
+    assert len(s) == 0
     s.add("x", "sphere", [0.1])
     with pytest.raises(ValueError, match="object 'x': an object of that id exists"):
         s.add("x", "sphere", [0.1])
@@ -494,6 +505,20 @@ def test_object_meshes_for_display_lie_on_the_objects():
         assert np.abs(d).max() < 0.02 * max(1.0, np.abs(v).max()), (oid, np.abs(d).max())
 
 
+def test_a_mesh_with_faces_past_its_vertices_is_refused_before_any_query():
+    """World.add and world_from_mesh check face indices and dtype: nothing reaches Warp."""
+    from jwarp.world import world_from_mesh
+    w = World.of_shapes()
+    with pytest.raises(ValueError, match=r"object 'm': mesh face 0 has vertex indices"):
+        w.add("m", "mesh", mesh=trimesh.Trimesh(np.eye(3), [[0, 1, 100000000]], process=False))
+    with pytest.raises(TypeError, match="object 'm': mesh face indices must be integers"):
+        w.add("m", "mesh", mesh=(np.eye(3), np.array([[0.0, 1.5, 2.0]])))
+    assert w.object_ids == []
+    assert np.isinf(w.distance([[0.0, 0.0, 0.0]])).all()
+    with pytest.raises(ValueError, match=r"mesh: mesh face 0 has vertex indices \[0, 1, -4\]"):
+        world_from_mesh((np.eye(4)[:, :3], np.array([[0, 1, -4]])), [[-1, 1]] * 3, 0.5)
+
+
 def test_world_distance_of_exact_objects():
     w = World.of_shapes()
     w.add("ball", "sphere", [0.1], [0.0, 0.0, 0.0])
@@ -574,3 +599,109 @@ def test_bad_input_to_the_new_world_functions_names_the_argument():
         w.shapes.add("g", "sphere", [0.1], group=-1)
     with pytest.raises(ValueError, match=r"poses: expected \(1, 4, 4\)"):
         w.move(["ball"], np.zeros((1, 2)))
+
+
+def test_world_poses_indices_and_points_that_are_not_what_the_user_meant(device):
+    """Reliability round 4, item 5: a transposed 4x4 pose (last row not [0, 0, 0, 1]) put
+    the object at the origin (add and move); move accepted a reflection that add refuses;
+    select(1.7) / select('1') returned an empty world; the distance of a NaN point was 1e30
+    ("free"); detach took any robot and stripped another object's spheres."""
+    T = pose_matrix([0.5, 0.2, 0.3], rpy_matrix([0.3, 0.2, 0.1]))
+    w = World.of_shapes()
+    with pytest.raises(ValueError, match=r"object 'b': pose's last row is .* not \[0, 0, 0, 1\]"):
+        w.add("b", "box", [0.1, 0.1, 0.1], T.T)
+    w.add("b", "box", [0.1, 0.1, 0.1], T)
+    with pytest.raises(ValueError, match=r"object 'b': pose's last row"):
+        w.move("b", T.T)
+    flip = T.copy()
+    flip[:3, 0] *= -1                                   # det -1: a reflection
+    with pytest.raises(ValueError, match="object 'b': pose rotation is not a rotation matrix"):
+        w.move("b", flip)
+    with pytest.raises(ValueError, match="object 'c': pose rotation is not a rotation matrix"):
+        w.add("c", "box", [0.1, 0.1, 0.1], flip)
+    np.testing.assert_array_equal(w.shapes.pose("b"), T)   # refused moves changed nothing
+    # the distance of a NaN point is an error, not 1e30
+    with pytest.raises(ValueError, match=r"points: point \[1\] contains NaN"):
+        w.distance([[0.0, 0.0, 0.0], [np.nan, 0.0, 0.0]])
+    with pytest.raises(ValueError, match=r"points: expected shape \(\.\.\., 3\)"):
+        w.distance([[0.0, 0.0]])
+    # select takes an integer index only
+    batch = World.batch([w, World.of_shapes()])
+    for bad in (1.7, "1", True, None):
+        with pytest.raises(TypeError, match="i: expected an integer index"):
+            batch.select(bad)
+    assert batch.select(np.int64(0)).object_ids == ["b"] and batch.select(1).object_ids == []
+    with pytest.raises(TypeError, match="i: expected an integer index"):
+        w.select(0.0)
+    # detach only with a robot that carries the object
+    robot = jwarp.robot("arm7")
+    tcp = list(robot.end_effectors)[0]
+    q0 = np.array([0.0, 0.8, 0.0, -1.0, 0.0, 0.5, 0.0])
+    Th = jwarp.fk(robot, q0[None], dtype=np.float64)[0, robot.frame_index(tcp)]
+    w2 = World.of_shapes()
+    w2.add("part", "sphere", [0.03], Th[:3, 3])
+    w2.add("tool", "box", [0.02, 0.02, 0.1], Th)
+    carried = w2.attach("part", robot, tcp, q0)
+    both = w2.attach("tool", carried, tcp, q0)
+    for wrong in (robot, "arm7"):
+        with pytest.raises(ValueError, match="robot: not a robot that carries object 'part'"):
+            w2.detach("part", wrong, q0)
+    with pytest.raises(ValueError, match="robot: not a robot that carries object 'tool'"):
+        w2.detach("tool", carried, q0)    # carries 'part' only: detach would strip its spheres
+    assert sorted(w2.attached) == ["part", "tool"] and w2.object_ids == []
+    back = w2.detach("part", both, q0)
+    assert len(back.spheres) == len(both.spheres) - (len(carried.spheres) - len(robot.spheres))
+    back = w2.detach("tool", back, q0)
+    assert len(back.spheres) == len(robot.spheres) and sorted(w2.object_ids) == ["part", "tool"]
+
+
+def test_a_clearance_below_the_margin_names_the_margin(device):
+    """Reliability round 4, item 9: a positive clearance below the margin was reported as
+    "collision ... (clearance 5.00 mm)" without the margin it is below."""
+    from jwarp.world.collision import min_distances
+    robot = jwarp.robot("arm7")
+    q0 = np.array([0.0, 0.8, 0.0, -1.0, 0.0, 0.5, 0.0])
+    T = jwarp.fk(robot, q0[None], dtype=np.float64)[0, robot.frame_index(
+        list(robot.end_effectors)[0])]
+    w = World.of_shapes()
+    w.add("ball", "sphere", [0.02], T[:3, 3] + [0.0, 0.0, 0.25])
+    d = float(min_distances(robot, q0[None], w, dtype=np.float64)[0, 0])
+    assert d > 0.01
+    path = np.stack([q0, q0])
+    chk = MotionCheck(robot, w, device=device)
+    r = chk.check(path, margin=d + 0.02)
+    assert not r.ok[0]
+    reason = r.reason(0)
+    assert reason.startswith("collision: ") and "vs object 'ball'" in reason
+    assert f"below the margin {(d + 0.02) * 1e3:.2f} mm" in reason, reason
+    r = chk.check(path, margin=d + 0.02, endpoint_margin=d + 0.01)
+    assert "endpoint margin" in r.reason(0)
+    # a real collision (clearance <= 0) keeps its words
+    w.move("ball", T[:3, 3])
+    r = chk.check(path, margin=0.0)
+    assert not r.ok[0] and "below the margin" not in r.reason(0)
+
+
+def test_adding_objects_one_by_one_is_amortised_constant_time():
+    """Reliability round 4, item 11: every add copied every pose (10,000 objects took 7 s,
+    50,000 took 187 s). The last quarter of 20,000 adds costs about what the first quarter
+    does (a copy per add made it several times more), and the poses are all kept."""
+    import time
+    n = 20000
+    w = World.of_shapes()
+    marks = []
+    t0 = time.perf_counter()
+    for i in range(n):
+        if i % (n // 4) == 0:
+            marks.append(time.perf_counter())
+        w.add(f"b{i}", "box", [0.01, 0.01, 0.01], [i * 1e-3, 0.0, 0.0])
+    marks.append(time.perf_counter())
+    first, last = marks[1] - marks[0], marks[4] - marks[3]
+    assert last < 3.0 * first + 0.05, (first, last)
+    assert marks[-1] - t0 < 30.0
+    assert len(w.shapes) == n and w.shapes.pose(f"b{n - 1}")[0, 3] == pytest.approx(19.999)
+    w.remove("b0")
+    assert w.shapes.pose("b1")[0, 3] == pytest.approx(1e-3) and len(w.shapes) == n - 1
+    w.add("again", "sphere", [0.1], [1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(w.shapes.pose("again")[:3, 3], [1.0, 2.0, 3.0])
+    assert w.shapes.bounds().shape == (n, 3, 2)

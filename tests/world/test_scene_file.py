@@ -411,6 +411,43 @@ def test_bad_files(tmp_path):
         load_scene(tmp_path / "s.yaml")
 
 
+def test_keys_given_twice_and_nan_mesh_vertices_are_errors(tmp_path):
+    """Reliability round 4, item 4: a second top-level ``objects:`` dropped the first list
+    (a plan through the lost wall was "feasible"), a key given twice in an object took the
+    last value, and an STL with a NaN vertex loaded with its faces dropped."""
+    wall = ("objects:\n  - id: wall\n    type: box\n    size: [0.1, 1, 1]\n"
+            "    pose: {position: [0.5, 0, 0.5]}\n")
+    ball = ("objects:\n  - id: ball\n    type: sphere\n    radius: 0.1\n"
+            "    pose: {position: [0, 0, 2]}\n")
+    (tmp_path / "two.yaml").write_text(wall + ball)
+    with pytest.raises(ValueError, match=r"two.yaml: key 'objects' is given twice in one "
+                                         r"mapping \(lines 1 and 6\)"):
+        load_scene(tmp_path / "two.yaml")
+    (tmp_path / "twice.yaml").write_text(wall.replace("size: [0.1, 1, 1]\n",
+                                                      "size: [0.1, 1, 1]\n    size: [0.01, 0.01, 0.01]\n"))
+    with pytest.raises(ValueError, match=r"twice.yaml: key 'size' is given twice .*lines 4 and 5"):
+        load_scene(tmp_path / "twice.yaml")
+    (tmp_path / "twice.json").write_text('{"objects": [], "objects": []}')
+    with pytest.raises(ValueError, match=r"twice.json: key 'objects' is given twice"):
+        load_scene(tmp_path / "twice.json")
+    # MoveIt scenes go through the same reader
+    (tmp_path / "m.yaml").write_text("name: a\nname: b\nworld: {collision_objects: []}\n")
+    with pytest.raises(ValueError, match=r"m.yaml: key 'name' is given twice"):
+        load_scene(tmp_path / "m.yaml")
+    (tmp_path / "one.yaml").write_text(wall)
+    assert [s.object_id for s in load_scene(tmp_path / "one.yaml").shapes] == ["wall"]
+    # a NaN vertex in an STL file: an error naming the file, no face dropped
+    box = trimesh.creation.box()
+    v = box.vertices.copy()
+    v[0, 0] = np.nan
+    trimesh.Trimesh(v, box.faces, process=False).export(tmp_path / "nan.stl")
+    (tmp_path / "mesh.yaml").write_text("objects:\n  - id: m\n    type: mesh\n"
+                                        "    file: nan.stl\n    pose: {position: [0, 0, 0]}\n")
+    with pytest.raises(ValueError, match=r"object 'm': .*nan.stl' has \d+ vertices that are "
+                                         r"NaN or inf"):
+        load_scene(tmp_path / "mesh.yaml")
+
+
 def test_mimic_joint_names_are_accepted_and_ignored():
     """justin19's torso_4 frame follows -(torso_tilt_1 + torso_tilt_2) (a coupled, mimic
     joint): a MoveIt state listing it maps to the 19 joints; a fixed frame's name is not a
@@ -421,3 +458,88 @@ def test_mimic_joint_names_are_accepted_and_ignored():
     np.testing.assert_allclose(q, 0.01 * np.arange(19))
     with pytest.raises(ValueError, match=r"unknown joint\(s\) 'torso_base'"):
         joint_vector(m, {**vals, "torso_base": 0.0}, "start")
+
+
+def test_messages_name_the_culprit(tmp_path):
+    """Reliability round 4, item 9: a folder or /dev/zero as a mesh was "does not exist";
+    ``scale: 1.0e6`` (text to YAML) and box dims of text or booleans were taken or refused
+    without the reason; a frame_id of a moving link was only "unknown"."""
+    import os
+
+    from jwarp.world import World
+    mesh = {"resource": str(tmp_path)}
+    with pytest.raises(ValueError, match=r"mesh file '.*' is a folder, not a file"):
+        scene_from_dict(moveit_object(meshes=[mesh], mesh_poses=[{"position": [0, 0, 0]}]),
+                        base_dir=tmp_path)
+    if os.path.exists("/dev/zero"):
+        with pytest.raises(ValueError, match=r"mesh file '/dev/zero' is a device, not a "
+                                             r"regular file"):
+            scene_from_dict(jwarp_object(type="mesh", radius=None, file="/dev/zero"),
+                            base_dir=tmp_path)
+    trimesh.creation.box().export(tmp_path / "box.stl")
+    (tmp_path / "s.yaml").write_text(
+        "world:\n  collision_objects:\n    - id: m\n      header: {frame_id: world}\n"
+        "      meshes: [{resource: box.stl, scale: 1.0e6}]\n"
+        "      mesh_poses: [{position: [0, 0, 0], orientation: [0, 0, 0, 1]}]\n")
+    with pytest.raises(ValueError, match=r"scale: '1.0e6' is text, not a number .*1.0e\+6"):
+        load_scene(tmp_path / "s.yaml")
+    for size, match in ((["0.1", 0.1, 0.1], r"size: '0.1' is text, not a number"),
+                        ([True, 0.1, 0.1], r"size: expected numbers, got True")):
+        with pytest.raises(ValueError, match=match):
+            scene_from_dict(jwarp_object(type="box", radius=None, size=size), base_dir=tmp_path)
+        with pytest.raises(ValueError, match="object 'b': box dimensions must be numbers"):
+            World.of_shapes().add("b", "box", size)
+    robot = jwarp.robot("arm7")
+    frames = robot_frames(robot)
+    moving = frames.moving[2]
+    with pytest.raises(ValueError, match=f"frame_id '{moving}' is a link of the robot that "
+                                         f"moves with its joints"):
+        scene_from_dict(moveit_object(header={"frame_id": moving}), frames=frames)
+    with pytest.raises(ValueError, match=f"frame '{moving}' is a link of the robot that moves"):
+        scene_from_dict(jwarp_object(frame=moving), frames=frames)
+    with pytest.raises(ValueError, match="unknown frame_id 'nowhere'; known frames"):
+        scene_from_dict(moveit_object(header={"frame_id": "nowhere"}), frames=frames)
+
+
+def test_meshes_outside_the_scene_folder_warn_once_per_file(tmp_path, monkeypatch, capsys):
+    """Reliability round 4, item 10: a mesh named with ``../``, an absolute path or
+    ``file://`` was read without a word. One warning per file outside the scene's folder;
+    JWARP_ALLOWED_ROOTS lists folders whose files need none."""
+    import warnings
+
+    from jwarp.utils.roots import ROOTS_ENV, OutsideFolderWarning
+
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    trimesh.creation.box().export(lib / "box.stl")
+    trimesh.creation.box().export(lib / "other.stl")
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    trimesh.creation.box().export(scenes / "own.stl")
+    objs = [{"id": f"m{k}", "type": "mesh", "file": f, "pose": {"position": [k, 0, 0]}}
+            for k, f in enumerate(["../lib/box.stl", str(lib / "box.stl"),
+                                   f"file://{lib / 'box.stl'}", "own.stl", "../lib/other.stl"])]
+    (scenes / "s.yaml").write_text(yaml.safe_dump({"objects": objs}))
+    monkeypatch.delenv(ROOTS_ENV, raising=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = load_scene(scenes / "s.yaml")
+    assert len(scene.shapes) == 5                # read anyway
+    out = [str(w.message) for w in caught if issubclass(w.category, OutsideFolderWarning)]
+    # box.stl named three ways: one warning; other.stl: one
+    assert len(out) == 2 and all(f"is outside {scenes.resolve()}" in m for m in out), out
+    assert "object 'm0'" in out[0] and "other.stl" in out[1]
+    monkeypatch.setenv(ROOTS_ENV, str(lib))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_scene(scenes / "s.yaml")
+    assert not [w for w in caught if issubclass(w.category, OutsideFolderWarning)]
+    # the CLI prints it as one line
+    from jwarp.cli.common import plugin_warnings_one_line
+    monkeypatch.delenv(ROOTS_ENV)
+    plugin_warnings_one_line()
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        load_scene(scenes / "s.yaml")
+    err = capsys.readouterr().err
+    assert err.count("jwarp: warning: object 'm0': mesh file") == 1

@@ -197,3 +197,47 @@ def test_sphere_fit_shows_a_progress_bar(urdf, capsys):
     assert "sphere fit: 100%" in capsys.readouterr().err and not rep.cached
     model, rep = spherized_robot(urdf, opts, progress=True)   # from the cache: nothing to show
     assert capsys.readouterr().err == "" and rep.cached
+
+
+def test_absurd_protrusion_is_bounded_by_the_robot_and_all_in_contact_refused(urdf, tmp_path,
+                                                                              capsys):
+    """Reliability round 4, item 6: ``--protrusion 1e308`` wrote spheres of radius 1e308 m,
+    every self pair was dropped as always colliding and free-config called configurations
+    free. The option is bounded by the robot's size (the box of its collision geometry),
+    and a fit whose spheres are in contact in every tested pair is refused."""
+    imported = load_urdf(urdf)
+    with pytest.raises(ValueError, match=r"protrusion: 1e\+308 m is more than the robot's "
+                                         r"size \(its collision geometry spans 0\.4"):
+        spherize(imported, SpherizeOptions(tolerance=TOL, protrusion=1e308, pair_samples=50))
+    # within the robot's size, but the tip's spheres reach the base in every sample: the
+    # only tested pair (base-tip) would be excluded as always colliding
+    with pytest.raises(ValueError, match=r"protrusion: the fitted spheres of all 1 link pairs "
+                                         r"that are not adjacent are in contact in every one"):
+        spherize(imported, SpherizeOptions(tolerance=TOL, protrusion=0.4, pair_samples=50))
+    _, rep = spherize(imported, SpherizeOptions(tolerance=TOL, protrusion=0.005,
+                                                pair_samples=50))
+    assert rep.pairs.always_colliding == []          # a sane protrusion fits as before
+    code, out, err = run(capsys, ["import-urdf", urdf, "--out", tmp_path / "r.json",
+                                  "--protrusion", "1e308", "--pair-samples", "50"])
+    assert code == 2 and err.strip().splitlines()[-1].startswith(
+        "jwarp: error: --protrusion: 1e+308 m is more than the robot's size")
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_home_without_a_collision_model_names_the_reason(urdf, tmp_path, capsys):
+    """Reliability round 4, item 9: ``--home`` with ``--spheres urdf`` of a URDF without
+    sphere geometry said "needs a collision model (--spheres fit or urdf)", after the work;
+    now the reason, before any work."""
+    boxes = tmp_path / "boxes.urdf"
+    boxes.write_text(URDF.replace('<sphere radius="0.05"/>', '<box size="0.1 0.1 0.1"/>'))
+    out = tmp_path / "r.json"
+    for extra, words in ((["--spheres", "urdf"], "has no sphere geometry, so --spheres urdf "
+                                                  "gives none"),
+                         (["--spheres", "none"], "--spheres none gives none"),
+                         (["--no-home-fit"], "not --no-home-fit")):
+        code, _, err = run(capsys, ["import-urdf", boxes, "--out", out, "--home", "0,0",
+                                    *extra])
+        assert code == 2, err
+        last = err.strip().splitlines()[-1]
+        assert last.startswith("jwarp: error: --home: ") and words in last, last
+    assert not out.exists()

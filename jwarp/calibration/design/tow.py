@@ -231,6 +231,10 @@ class MeasurementGraph:
         return mu, cov
 
 
+#: the largest virtual noise standard deviation (its square must stay a finite covariance)
+MAX_STD = 1e150
+
+
 def virtual_covariance(virtual: Any, dim: int, name: str = "virtual") -> np.ndarray:
     """(dim, dim) virtual noise covariance from a std (scalar or (dim,)) or a (dim, dim)
     (or (..., dim, dim)) covariance."""
@@ -240,6 +244,9 @@ def virtual_covariance(virtual: Any, dim: int, name: str = "virtual") -> np.ndar
     if v.ndim == 0 or v.shape == (dim,):
         if np.any(v < 0):
             raise ValueError(f"{name}: a standard deviation must be >= 0, got {virtual!r}")
+        if np.any(v > MAX_STD):  # its square (a covariance) would overflow
+            raise ValueError(f"{name}: a standard deviation of at most {MAX_STD:g}, got "
+                             f"{float(v.max()):g}")
         return np.diag(np.broadcast_to(v, (dim,)) ** 2)
     if v.ndim >= 2 and v.shape[-2:] == (dim, dim):
         return v

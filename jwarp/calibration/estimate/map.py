@@ -53,6 +53,10 @@ from jwarp.calibration.estimate.robust import LOSSES, robust_weights
 from jwarp.calibration.estimate.result import CalibrationResult, build_result
 from jwarp.calibration.estimate.samples import check_samples
 
+#: the largest robust-loss scale in noise sigmas (beyond it the loss is linear on any data,
+#: and its square overflows near 1e154)
+MAX_LOSS_SIGMAS = 1e6
+
 
 class ModelState(NamedTuple):
     """The model at one x (:meth:`CalibrationProblem.state`).
@@ -235,6 +239,10 @@ class CalibrationProblem:
                 raise ValueError(f"loss_scale: expected a finite number > 0 [unit of the "
                                  f"measurement] with loss={loss!r}, got {loss_scale!r}")
             self.loss_f = float(loss_scale) / float(np.mean(self.noise))
+            if not self.loss_f <= MAX_LOSS_SIGMAS:  # its square overflows long before inf
+                raise ValueError(f"loss_scale: {self.loss_f:.3g} times the mean noise sigma; at "
+                                 f"most {MAX_LOSS_SIGMAS:g} times (the loss would be linear "
+                                 f"wherever data are: use the linear loss)")
         S, m = self.y.shape
         #: (S, m, m) inverse Cholesky factors of ``covariance`` (None: diagonal noise)
         self.whitener = _whitener(covariance, S, m)

@@ -9,8 +9,9 @@ Robot groups (per DH frame on the chains the measurement observes):
 * ``origin``: a 6-parameter pose error ``(x, y, z [m], rx, ry, rz [rad])`` per static frame
   that precedes a joint frame on those chains (the joint origins of an imported URDF; any
   static frame with ``frames=``), applied as ``T <- T @ Trans(v) @ Rot(w)``
-  (:mod:`.origin`); names ``"<frame>.origin_x"`` ... ``"<frame>.origin_rz"``; rigid
-  problems only.
+  (:mod:`.origin`); names ``"<frame>.origin_x"`` ... ``"<frame>.origin_rz"``; also on a
+  compliant robot and with free compliance groups (the elastic equilibrium follows the
+  moved origins, issue 29).
 
 non-geometric extras (``docs/nongeometric.md``):
 

@@ -126,13 +126,18 @@ def fixed_params(measurement: Any, fix_at: Mapping[str, Any], p_nominal: Any = N
                 raise ValueError(f"{where}: expected a calibration result (its "
                                  f"'measurement_params'), got {type(doc).__name__}")
             values = doc["measurement_params"]
+        origin = f"{os.fspath(src)}: " if isinstance(src, (str, os.PathLike)) else ""
         for k in block.indices(g):
             name = block.names[k]
             if name not in values:
-                raise ValueError(f"{where}: the source has no value of '{name}'")
-            v = float(values[name])
+                raise ValueError(f"{where}: {origin}the source has no value of '{name}'")
+            raw = values[name]
+            if isinstance(raw, (bool, np.bool_)) or not isinstance(
+                    raw, (int, float, np.integer, np.floating)):
+                raise ValueError(f"{where}: {origin}'{name}' is {raw!r}, not a number")
+            v = float(raw)
             if not math.isfinite(v):
-                raise ValueError(f"{where}: '{name}' is not finite")
+                raise ValueError(f"{where}: {origin}'{name}' is not finite")
             p[k] = v
     return p
 

@@ -15,6 +15,9 @@ from jwarp.kernels import ik as ik_kernels
 from jwarp.model import RobotModel
 from jwarp.solvers.overrides import renamed_options
 
+#: the largest accepted position tolerance [m] (IKOptions.tol_pos): larger means nothing
+MAX_TOL_POS = 1e3
+
 
 @dataclass
 class IKWeights:
@@ -178,6 +181,13 @@ class IKOptions:
             if not (math.isfinite(real_number(v, name)) and v > 0):
                 raise ValueError(f"{name}: expected a number > 0, got {v!r}")
             setattr(self, name, float(v))
+        # beyond these a tolerance means nothing (and its square overflows the solver's)
+        if self.tol_pos > MAX_TOL_POS:
+            raise ValueError(f"tol_pos: {self.tol_pos:g} m is not a position tolerance (at "
+                             f"most {MAX_TOL_POS:g} m)")
+        if self.tol_rot > math.pi:
+            raise ValueError(f"tol_rot: {self.tol_rot:g} rad is more than pi, the largest "
+                             f"rotation error there is")
         margin = real_number(self.margin, "margin")
         if not (math.isfinite(margin) and margin >= 0):
             raise ValueError(f"margin: expected a number >= 0 [m], got {margin!r}")
@@ -199,6 +209,8 @@ class IKOptions:
         if self.seed is not None and (isinstance(self.seed, (bool, np.bool_))
                                       or not isinstance(self.seed, numbers.Integral)):
             raise TypeError(f"seed: expected an integer or None, got {self.seed!r}")
+        if self.seed is not None and not 0 <= int(self.seed) < 2 ** 63:
+            raise ValueError(f"seed: expected an integer in [0, 2**63) or None, got {self.seed!r}")
         if self.weights is not None:
             if not isinstance(self.weights, IKWeights):
                 raise TypeError(f"weights: expected IKWeights, got {type(self.weights).__name__}")

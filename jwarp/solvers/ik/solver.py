@@ -315,7 +315,10 @@ class IKSolver:
 
     # ------------------------------------------------------------------ solve
     def reseed(self, seed: int | None) -> None:
-        """Restart the random seeds' generator from ``seed``."""
+        """Restart the random seeds' generator from ``seed`` (an integer >= 0 or None)."""
+        if seed is not None and (isinstance(seed, (bool, np.bool_))
+                                 or not isinstance(seed, (int, np.integer)) or seed < 0):
+            raise ValueError(f"seed: expected an integer >= 0 or None, got {seed!r}")
         self.rng = np.random.default_rng(seed)
 
     def solve(self, targets: Any, seeds: Any = None, *,

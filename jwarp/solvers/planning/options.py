@@ -91,7 +91,8 @@ class PlanOptions:
             (self collision; MoveIt's default padding is 0 too).
         endpoint_margin: clearance [m] required of the start and goal and on the first
             and last segment, where it is below ``margin`` (None: ``margin``), so grasp
-            poses closer to an object than the path margin can be planned.
+            poses closer to an object than the path margin can be planned; at most
+            ``margin`` (a larger one would be ignored: ValueError).
         freeze_feasible: freeze each path once it is feasible.
         stop_when_solved: end as soon as every problem has one feasible path (default);
             False optimises every start until it is feasible (or converged, or out of
@@ -200,6 +201,11 @@ class PlanOptions:
             if not (math.isfinite(em) and em >= 0):
                 raise ValueError(f"endpoint_margin: expected a number >= 0 [m] or None, got "
                                  f"{self.endpoint_margin!r}")
+            if em > margin:
+                raise ValueError(f"endpoint_margin: {em:g} m is larger than the margin "
+                                 f"({margin:g} m): it only relaxes the margin near the start "
+                                 f"and goal, so it would be ignored; give a margin of at least "
+                                 f"{em:g} m, or an endpoint margin <= {margin:g} m")
         if self.eps is not None:
             eps = real_number(self.eps, "eps")
             if not (math.isfinite(eps) and eps > 0):
