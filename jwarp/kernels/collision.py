@@ -302,6 +302,39 @@ def kernels(scalar: type) -> SimpleNamespace:
         T = frames[b, f]
         return unpack_rot(T) * p + unpack_pos(T)
 
+    @wp.func
+    def forces_to_gradient(model: fk.FrameTables, frames: wp.array2d(dtype=mat44),
+                           force: wp.array2d(dtype=vec3), moment: wp.array2d(dtype=vec3),
+                           t: int, b: int, q: wp.array2d(dtype=scalar),
+                           grad: wp.array2d(dtype=scalar)):
+        """``grad[b] += d cost / d q_b`` from the per-frame force and moment sums of row t
+        (world coordinates, module docstring): subtrees summed into their roots (leaves
+        first; ``force``/``moment`` are overwritten with the sums), then each driven
+        frame's ``z . (M - o x F)`` (revolute) or ``z . F`` (prismatic) spread onto its
+        joints through the couplings."""
+        nf = model.order.shape[0]
+        # subtree sums, leaves to root (children follow parents in ``order``)
+        for kk in range(nf):
+            i = model.order[nf - 1 - kk]
+            pi = model.parent[i]
+            if pi >= 0:
+                force[t, pi] = force[t, pi] + force[t, i]
+                moment[t, pi] = moment[t, pi] + moment[t, i]
+        for i in range(nf):
+            m0 = model.cpl_start[i]
+            m1 = model.cpl_start[i + 1]
+            if m1 > m0:
+                T = frames[t, i]
+                z = vec3(T[0, 2], T[1, 2], T[2, 2])
+                F = force[t, i]
+                gi = wp.dot(z, F)
+                if model.prismatic[i] == 0:
+                    gi = wp.dot(z, moment[t, i] - wp.cross(unpack_pos(T), F))
+                hp = fk.coupling_harmonic_slope(model, i, b, q)
+                for m in range(m0, m1):
+                    jm = model.cpl_joint[m]
+                    grad[b, jm] = grad[b, jm] + fk.coupling_weight(model, m, b, q, hp) * gi
+
     @wp.kernel(module="unique", enable_backward=False)
     def cost_kernel(
         # Data in:
@@ -437,27 +470,7 @@ def kernels(scalar: type) -> SimpleNamespace:
             for j in range(grad.shape[1]):
                 grad[b, j] = zero
             if hit != 0:
-                # subtree sums, leaves to root (children follow parents in ``order``)
-                for kk in range(nf):
-                    i = model.order[nf - 1 - kk]
-                    pi = model.parent[i]
-                    if pi >= 0:
-                        force[t, pi] = force[t, pi] + force[t, i]
-                        moment[t, pi] = moment[t, pi] + moment[t, i]
-                for i in range(nf):
-                    m0 = model.cpl_start[i]
-                    m1 = model.cpl_start[i + 1]
-                    if m1 > m0:
-                        T = frames[t, i]
-                        z = vec3(T[0, 2], T[1, 2], T[2, 2])
-                        F = force[t, i]
-                        gi = wp.dot(z, F)
-                        if model.prismatic[i] == 0:
-                            gi = wp.dot(z, moment[t, i] - wp.cross(unpack_pos(T), F))
-                        hp = fk.coupling_harmonic_slope(model, i, b, q)
-                        for m in range(m0, m1):
-                            jm = model.cpl_joint[m]
-                            grad[b, jm] = grad[b, jm] + fk.coupling_weight(model, m, b, q, hp) * gi
+                forces_to_gradient(model, frames, force, moment, t, b, q, grad)
         if comp.enabled != 0 and on_waypoint != 0:
             el.compensation_update_at(model, frames, t, rho, rb, comp)
 
@@ -637,6 +650,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         world_query=world_query_kernel,
         scalar=scalar, SphereTables=SphereTables, WorldGrid=WorldGrid, WorldModel=WorldModel,
         world_distance=world_distance, world_distance_skip=world_distance_skip,
+        forces_to_gradient=forces_to_gradient,
         objects_far=objects_far, geometry=gk, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
         sdf_lower_bound=sdf_lower_bound, world_sample=world_sample,
         world_lower_bound=world_lower_bound, sphere_centre=sphere_centre, cost=cost_kernel,

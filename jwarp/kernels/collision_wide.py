@@ -43,7 +43,6 @@ def kernels(scalar: type) -> SimpleNamespace:
     ck = collision_kernels.kernels(scalar)
     vec3, mat44 = fk.vec3, fk.mat44
     zero = scalar(0.0)
-    unpack_pos = fk.unpack_pos
 
     @wp.func
     def thread_rows(t: int, rows_kind: int, rho_layout: wp.vec4i, rho_stride: int):
@@ -257,28 +256,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         b, rb, on_waypoint = thread_rows(t, rows_kind, rho_layout, 0)
         if frozen(b, active, active_div) != 0:
             return
-        nf = model.order.shape[0]
-        for kk in range(nf):
-            i = model.order[nf - 1 - kk]
-            pi = model.parent[i]
-            if pi >= 0:
-                force[t, pi] = force[t, pi] + force[t, i]
-                moment[t, pi] = moment[t, pi] + moment[t, i]
-        for i in range(nf):
-            m0 = model.cpl_start[i]
-            m1 = model.cpl_start[i + 1]
-            if m1 > m0:
-                T = frames[t, i]
-                z = vec3(T[0, 2], T[1, 2], T[2, 2])
-                F = force[t, i]
-                gi = wp.dot(z, F)
-                if model.prismatic[i] == 0:
-                    gi = wp.dot(z, moment[t, i] - wp.cross(unpack_pos(T), F))
-                if gi != zero:
-                    hp = fk.coupling_harmonic_slope(model, i, b, q)
-                    for m in range(m0, m1):
-                        jm = model.cpl_joint[m]
-                        grad[b, jm] = grad[b, jm] + fk.coupling_weight(model, m, b, q, hp) * gi
+        ck.forces_to_gradient(model, frames, force, moment, t, b, q, grad)
 
     return SimpleNamespace(frames=frames_kernel, world=world_kernel, self_pairs=self_kernel,
                            gradient=gradient_kernel, scalar=scalar)
