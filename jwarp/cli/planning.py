@@ -522,6 +522,21 @@ def _ik_seeds(args: argparse.Namespace, model: Any, q_init: np.ndarray, T: np.nd
     return np.concatenate([q_init[None], rest])
 
 
+def _ik_keywords(args: argparse.Namespace, world: Any, kappa: Any, orientation: str,
+                 free_axis: Any) -> dict:
+    """The keywords of ``jwarp.ik`` that ``ik`` and ``ik --targets`` take from the
+    command line (tolerances only where given, the orientation only where not full)."""
+    extra: dict = {k: v for k, v in (("tol_pos", args.tol_pos), ("tol_rot", args.tol_rot))
+                   if v is not None}
+    if orientation != "full":
+        extra["orientation"] = orientation
+        if free_axis is not None:
+            extra["free_axis"] = free_axis
+    return dict(world=world, margin=args.margin, iterations=args.iterations, seed=args.seed,
+                kappa=kappa, device=args.device, dtype=dtype_of(args.dtype),
+                allow_no_collision=args.no_collision, **extra)
+
+
 def cmd_ik(args: argparse.Namespace) -> int:
     from jwarp.cli.targets import target_pose
 
@@ -554,18 +569,8 @@ def cmd_ik(args: argparse.Namespace) -> int:
     world = _world(args.world, model, args, scene)
     from jwarp.solvers.ik import ik
 
-    tol = {k: v for k, v in (("tol_pos", args.tol_pos), ("tol_rot", args.tol_rot))
-           if v is not None}
-    extra: dict = dict(tol)
-    if orientation != "full":
-        extra["orientation"] = orientation
-        if free_axis is not None:
-            extra["free_axis"] = free_axis
     try:
-        common = dict(world=world, margin=args.margin, iterations=args.iterations,
-                      seed=args.seed, kappa=kappa, device=args.device,
-                      dtype=dtype_of(args.dtype), allow_no_collision=args.no_collision,
-                      **extra)
+        common = _ik_keywords(args, world, kappa, orientation, free_axis)
         if q_init is not None:
             seeds = _ik_seeds(args, model, q_init, T, world, net)
             res = ik(model, args.frame, T, seeds=seeds, **common)
@@ -690,17 +695,8 @@ def cmd_ik_batch(args: argparse.Namespace) -> int:
     world = _world(args.world, model, args, scene)
     from jwarp.solvers.ik import ik
 
-    extra: dict = {k: v for k, v in (("tol_pos", args.tol_pos), ("tol_rot", args.tol_rot))
-                   if v is not None}
-    if orientation != "full":
-        extra["orientation"] = orientation
-        if free_axis is not None:
-            extra["free_axis"] = free_axis
     try:
-        common = dict(world=world, margin=args.margin, iterations=args.iterations,
-                      seed=args.seed, kappa=kappa, device=args.device,
-                      dtype=dtype_of(args.dtype), allow_no_collision=args.no_collision,
-                      **extra)
+        common = _ik_keywords(args, world, kappa, orientation, free_axis)
         if net is not None:
             res = ik(model, args.frame, T, warm_start=net,
                      n_random_with_warm_start=args.starts, **common)
