@@ -505,6 +505,11 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     if both:
         fit_warnings.append(f"{both} of the {len(test)} test rows were also calibration rows "
                             f"(--allow-overlap): their errors are not independent of the fit")
+    test_range = None
+    if test is not None:
+        test_range, rng_msg = _test_range(res, meas, test, scale)
+        if rng_msg is not None:
+            fit_warnings.append(rng_msg)
     summary = {
         "robot": model.name, "plugin": meas.name, "unit": unit, "free": free,
         "samples": {"train": len(train), "test": 0 if test is None else len(test),
@@ -515,6 +520,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         "out": args.out, "params_out": args.params_out, "rerun": args.rerun,
         "calibrated_name": calibrated.name, "active_set_rounds": bar.restarts,
     }
+    if test_range is not None:
+        summary["test_range"] = test_range
     diag = None
     if args.diagnostics:
         from jwarp.calibration.estimate.diagnostics import (format_diagnostics,
@@ -542,6 +549,13 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         for label, d in (("before", before), ("after", after)):
             s = d[rows]
             print(f"{rows:<8}{label:<8}{s['mean']:>10.3f}{s['std']:>10.3f}{s['max']:>10.3f}")
+    if test_range is not None and test_range["outside"] is not None:
+        for label in ("inside", "outside"):
+            part = test_range[label]
+            if part is not None:
+                print(f"{'test':<8}{label:<8}{part['mean']:>10.3f}{part['std']:>10.3f}"
+                      f"{part['max']:>10.3f}   ({part['rows']} rows {label} the calibration "
+                      f"poses' range)")
     for w in fit_warnings:
         print(f"warning: {w}")
     for path in (args.out, args.params_out, args.rerun):
@@ -549,6 +563,25 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
             print(f"wrote {path}" + (f" (robot '{calibrated.name}', provenance in its notes."
                                      f"calibration)" if path == args.out else ""))
     return 0
+
+
+def _test_range(res: Any, meas: Any, test: Any, scale: float
+                ) -> tuple[dict[str, Any], str | None]:
+    """The test rows' errors of the calibrated robot inside and outside the range of the
+    calibration poses (``{"inside": stats | None, "outside": stats | None}``, stats with
+    ``rows``; in the report's unit) and the warning naming how far outside (None: all
+    inside)."""
+    from jwarp.calibration import errors
+    from jwarp.model.valid_range import outside_message
+
+    err = errors(res.robot, meas, res.params, test.q, test.y, test.meta or None)
+    out = res.valid_range.outside(test.q)
+    doc: dict[str, Any] = {}
+    for label, mask in (("inside", ~out), ("outside", out)):
+        doc[label] = ({**_stats(err[mask], scale), "rows": int(mask.sum())}
+                      if mask.any() else None)
+    msg = outside_message(res.robot, test.q, "--test-rows")
+    return doc, msg
 
 
 #: the ``notes`` key of a calibrated robot's provenance (a JSON object)

@@ -19,6 +19,7 @@ import numpy as np
 from jwarp import kinematics as K
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
+from jwarp.model.valid_range import ValidRange, record_valid_range, valid_range_of
 from jwarp.calibration.estimate.params import KIND_KAPPA, KIND_MASS, ParameterSpace
 
 
@@ -220,6 +221,10 @@ class CalibrationResult:
     warnings: the findings as text (also emitted as CalibrationWarning when warn=True).
     space: the ParameterSpace (to map x again); elastic: whether the equilibrium was used.
     time_s: wall time [s].
+    valid_range: the range of the calibration poses, per joint and coupled angle
+        (:class:`~jwarp.model.valid_range.ValidRange`), also recorded in
+        ``robot.notes['valid_range']``: IK, the planner and ``jwarp fk`` warn outside it.
+    provenance: how settings were chosen (e.g. ``{"cv": ...}`` of a cross-validation).
     """
 
     robot: RobotModel
@@ -249,6 +254,8 @@ class CalibrationResult:
     time_s: float
     unit: str = "m"
     param_names: list[str] = field(default_factory=list)
+    valid_range: ValidRange | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
 
     def value(self, name: str) -> float:
         """Calibrated value of the free parameter ``name``."""
@@ -285,6 +292,9 @@ class CalibrationResult:
                                for d in self.unidentifiable],
             "moved": [[n, v] for n, v in self.moved],
             "warnings": list(self.warnings),
+            **({"valid_range": self.valid_range.to_dict()} if self.valid_range is not None
+               else {}),
+            **({"provenance": self.provenance} if self.provenance else {}),
         }
 
 
@@ -410,8 +420,11 @@ def build_result(prob: Any, sol: Any, x_start: np.ndarray, iterations: int, star
             head += f"\n  ... and {len(msgs) - 20} more (see result.warnings)"
         warnings.warn(head, CalibrationWarning, stacklevel=_caller_stacklevel())
     meas = prob.measurement
+    robot = sp.robot_at(x)
+    vr = valid_range_of(robot, prob.q)
     return CalibrationResult(
-        robot=sp.robot_at(x), params=sp.measurement_params(x), x=x, x_start=np.asarray(x_start),
+        robot=record_valid_range(robot, prob.q), params=sp.measurement_params(x), x=x,
+        x_start=np.asarray(x_start),
         names=list(sp.names), groups=list(sp.groups), nominal=sp.nominal.copy(),
         sigma=sp.sigma.copy(), std=std, cost=float(sol.cost), success=bool(sol.status > 0),
         status=int(sol.status), message=str(sol.message), nfev=int(sol.nfev),
@@ -419,7 +432,8 @@ def build_result(prob: Any, sol: Any, x_start: np.ndarray, iterations: int, star
         error_names=[n for n, _ in groups], unidentifiable=weak, moved=moved, warnings=msgs,
         space=sp, elastic=prob.elastic, time_s=float(time_s),
         unit=str(getattr(meas, "unit", "m")),
-        param_names=list(getattr(getattr(meas, "params", None), "names", []) or []))
+        param_names=list(getattr(getattr(meas, "params", None), "names", []) or []),
+        valid_range=vr)
 
 
 def _caller_stacklevel() -> int:
