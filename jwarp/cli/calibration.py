@@ -328,6 +328,27 @@ def _rows(args: argparse.Namespace, S: int) -> tuple[np.ndarray, np.ndarray | No
     return train, test, both
 
 
+def _cv_settings(args: argparse.Namespace, n_train: int) -> list | None:
+    """The grid of ``--cv`` (None without ``--cv``); errors name ``--cv``, ``--cv-grid``,
+    ``--cv-workers``."""
+    if args.cv is None:
+        if args.cv_grid or args.cv_workers is not None:
+            raise _cli_error(f"{'--cv-grid' if args.cv_grid else '--cv-workers'}: only with "
+                             f"--cv K (cross-validation)")
+        return None
+    if not 2 <= args.cv <= n_train:
+        raise _cli_error(f"--cv: expected an integer in [2, {n_train}] (folds of the "
+                         f"{n_train} calibration rows), got {args.cv}")
+    if args.cv_workers is not None:
+        _check_int("--cv-workers", args.cv_workers, 1)
+    from jwarp.calibration.estimate.cv import parse_cv_grid
+
+    try:
+        return parse_cv_grid(args.cv_grid)
+    except ValueError as e:
+        raise _cli_error(str(e)) from None
+
+
 def _tow_covariance(args: argparse.Namespace, setup: Any, model: Any, meas: Any, train: Any,
                     free: list[str]) -> np.ndarray | None:
     """Per-sample covariance of the calibration rows: the setup's ``tow`` section (eq. 2.11,
@@ -436,6 +457,9 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     else:
         loss_scale = None
 
+    cv_settings = _cv_settings(args, len(train))
+    cv_result = None
+
     def table_rows(robot: Any, p: np.ndarray) -> dict[str, dict[str, float]]:
         out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None), scale)}
         if test is not None:
@@ -466,12 +490,22 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                 sigma=priors or None, orders=orders or None, loss=args.loss,
                 loss_scale=loss_scale,
                 fix_at=fix_at or None, warn=False)  # the findings: res.warnings, once
-            res = calibrate_with(model, meas, train.q, train.y, options,
-                                 meta=train.meta or None)
+            if cv_settings is None:
+                res = calibrate_with(model, meas, train.q, train.y, options,
+                                     meta=train.meta or None)
+            else:
+                from jwarp.calibration.estimate.cv import calibrate_cv
+
+                res, cv_result = calibrate_cv(model, meas, train.q, train.y, options,
+                                              cv_settings, folds=args.cv, seed=args.seed,
+                                              workers=args.cv_workers,
+                                              meta=train.meta or None)
         except ValueError as e:
             if str(e).startswith("q, y: "):  # too few rows for the free parameters
                 raise _cli_error("--calibrate-rows: " + str(e).removeprefix("q, y: ").replace(
                     "give more samples", "give more rows")) from None
+            if cv_settings is not None and str(e).startswith(("free:", "sigma", "orders")):
+                raise _cli_error(f"--cv-grid: a setting fails: {e}") from None
             for field, opt in (("sigma", "--prior"), ("orders", "--order")):
                 if str(e).startswith(field):
                     raise _cli_error(f"{opt}: {e}") from None
@@ -483,7 +517,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     wall = time.perf_counter() - t0
     after = table_rows(res.robot, res.params)
     calibrated = _with_provenance(res.robot, args, setup, raw, free, before, after, unit,
-                                  len(train), 0 if test is None else len(test))
+                                  len(train), 0 if test is None else len(test),
+                                  cv=None if cv_result is None else cv_result.to_dict(scale, unit))
     # --out and --params-out into their temporary files, renamed back to back at the end
     robot_text = json.dumps(calibrated.to_dict(), indent=1) + "\n"
     if "--out" in outputs:
@@ -522,6 +557,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     }
     if test_range is not None:
         summary["test_range"] = test_range
+    if cv_result is not None:
+        summary["cv"] = cv_result.to_dict(scale, unit)
     diag = None
     if args.diagnostics:
         from jwarp.calibration.estimate.diagnostics import (format_diagnostics,
@@ -533,6 +570,9 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     if args.json:
         print(dumps(summary, indent=1))
         return 0
+    if cv_result is not None:
+        print(cv_result.table(scale, unit))
+        print()
     if diag is not None:
         print(format_diagnostics(diag, scale, unit))
         print()
@@ -590,7 +630,7 @@ PROVENANCE_NOTE = "calibration"
 
 def _with_provenance(robot: Any, args: argparse.Namespace, setup: Any, raw: bytes,
                      free: list[str], before: dict, after: dict, unit: str, n_train: int,
-                     n_test: int) -> Any:
+                     n_test: int, cv: dict | None = None) -> Any:
     """The calibrated robot renamed (``--name``, default ``<name>-calibrated``) with its
     provenance in ``notes['calibration']`` (JSON: campaign id, input files and the
     SHA-256 of the samples, rows, free groups, errors before/after, date, jwarp version)."""
@@ -612,6 +652,8 @@ def _with_provenance(robot: Any, args: argparse.Namespace, setup: Any, raw: byte
         "loss": args.loss, "starts": args.starts,
         "errors": {"unit": unit, "before": before, "after": after},
     }
+    if cv is not None:   # --cv: the settings chosen, their CV error and the table
+        prov["cv"] = cv
     notes = dict(robot.notes)
     notes[PROVENANCE_NOTE] = json.dumps(prov, sort_keys=False)
     return dataclasses.replace(robot, name=name, notes=notes)
@@ -745,6 +787,18 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--diagnostics", action="store_true",
                    help="print residual diagnostics of the calibrated model (correlation "
                         "between end-effectors, residual vs joint angle and torque)")
+    s.add_argument("--cv", type=int, default=None, metavar="K",
+                   help="choose prior strengths, harmonic orders or groups by K-fold "
+                        "cross-validation on the calibration rows (the grid: --cv-grid), "
+                        "then fit the best on all of them; the table is printed and the "
+                        "choice recorded in the provenance")
+    s.add_argument("--cv-grid", action="append", default=None, metavar="AXIS=V1|V2|...",
+                   help="settings of --cv, the product of the items: scale=0.1|1 (factor "
+                        "on every free robot group's prior), prior:KEY=S1|S2, order:KEY=K1|K2, "
+                        "free=G1|G2 (group lists), or a JSON file listing settings; default "
+                        "scale=0.01|0.02|0.05|0.1|0.2|0.5|1|2|5|10; repeatable")
+    s.add_argument("--cv-workers", type=int, default=None, metavar="N",
+                   help="processes for the --cv fits (default: one per core)")
     s.add_argument("--calibrate-rows", default=None, metavar="A:B",
                    help="rows used for calibration (default: all rows not in --test-rows)")
     s.add_argument("--test-rows", default=None, metavar="A:B",
