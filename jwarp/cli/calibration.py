@@ -494,11 +494,11 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                 res = calibrate_with(model, meas, train.q, train.y, options,
                                      meta=train.meta or None)
             else:
-                from jwarp.calibration.estimate.cv import calibrate_cv
+                from jwarp.calibration.estimate.cv import CVOptions, calibrate_cv
 
-                res, cv_result = calibrate_cv(model, meas, train.q, train.y, options,
-                                              cv_settings, folds=args.cv, seed=args.seed,
-                                              workers=args.cv_workers,
+                cvo = CVOptions(folds=args.cv, settings=cv_settings, seed=args.seed,
+                                workers=args.cv_workers)
+                res, cv_result = calibrate_cv(model, meas, train.q, train.y, options, cvo,
                                               meta=train.meta or None)
         except ValueError as e:
             if str(e).startswith("q, y: "):  # too few rows for the free parameters

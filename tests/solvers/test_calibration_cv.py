@@ -15,7 +15,7 @@ import pytest
 import jwarp
 from cli_helpers import one_line_error, run  # tests/cli_helpers.py
 from jwarp.calibration import CalibrationOptions, calibrate_with, errors
-from jwarp.calibration.estimate.cv import (CVSetting, calibrate_cv, cross_validate,
+from jwarp.calibration.estimate.cv import (CVOptions, CVSetting, calibrate_cv, cross_validate,
                                            default_grid, fold_indices, parse_cv_grid)
 from jwarp.calibration.estimate.params import DEFAULT_SIGMA
 from jwarp.calibration.files import make_measurement, parse_samples, read_setup
@@ -45,7 +45,7 @@ def test_cv_choice_recovers_the_known_prior_scale_better_than_the_default(small_
     q, y = data.q[:40], data.y[:40]
     base = CalibrationOptions(free="theta,d,r,alpha", warn=False)
     grid = [CVSetting(prior_scale=s) for s in (0.01, 0.1, 1.0)]
-    res, cv = calibrate_cv(model, meas, q, y, base, grid, folds=4, workers=1)
+    res, cv = calibrate_cv(model, meas, q, y, base, CVOptions(4, grid, workers=1))
     # the truth's scale is ~0.01 of the default priors: CV picks it, the default is 1
     assert cv.chosen.prior_scale == 0.01
     assert cv.errors[0] < cv.errors[2]
@@ -69,8 +69,8 @@ def test_folds_in_processes_give_the_same_numbers(small_errors):
     _, model, meas, data = small_errors
     base = CalibrationOptions(free="theta", warn=False)
     grid = [CVSetting(prior_scale=0.1), CVSetting()]
-    one = cross_validate(model, meas, data.q[:24], data.y[:24], base, grid, folds=3, workers=1)
-    two = cross_validate(model, meas, data.q[:24], data.y[:24], base, grid, folds=3, workers=2)
+    one = cross_validate(model, meas, data.q[:24], data.y[:24], base, CVOptions(3, grid, 0, 1))
+    two = cross_validate(model, meas, data.q[:24], data.y[:24], base, CVOptions(3, grid, 0, 2))
     assert two.workers == 2
     np.testing.assert_array_equal(one.fold_errors, two.fold_errors)
     # every row held out exactly once, folds of near-equal size
@@ -78,8 +78,14 @@ def test_folds_in_processes_give_the_same_numbers(small_errors):
     assert sorted(np.bincount(f)) == [8, 8, 8]
     with pytest.raises(ValueError, match="folds"):
         fold_indices(24, 1)
-    with pytest.raises(ValueError, match="workers"):
-        cross_validate(model, meas, data.q[:24], data.y[:24], base, grid, folds=3, workers=0)
+    for bad, name in ((CVOptions(workers=0), "workers"), (CVOptions(folds=1), "folds"),
+                      (CVOptions(seed=-1), "seed")):
+        with pytest.raises(ValueError, match=name):
+            cross_validate(model, meas, data.q[:24], data.y[:24], base, bad)
+    with pytest.raises(TypeError, match="settings"):
+        CVOptions(settings=[{"prior_scale": 1}]).validate()
+    with pytest.raises(ValueError, match="folds"):   # more folds than rows
+        cross_validate(model, meas, data.q[:4], data.y[:4], base, CVOptions(folds=5))
 
 
 def test_setting_scales_free_robot_groups_and_their_patterns_only():

@@ -206,6 +206,43 @@ def _grid_file(path: str, option: str) -> list[CVSetting]:
 
 
 @dataclass
+class CVOptions:
+    """Options of a cross-validation (:func:`cross_validate`, :func:`calibrate_cv`);
+    :meth:`validate` raises ValueError/TypeError naming the field.
+
+    Attributes:
+        folds: K, the number of folds (2 <= K <= the calibration rows).
+        settings: the grid (:class:`CVSetting`); None: :func:`default_grid`.
+        seed: the seed of the fold permutation (an integer >= 0).
+        workers: processes running the fits (None: :func:`default_workers`, one per
+            core; 1: in this process).
+    """
+
+    folds: int = 5
+    settings: Sequence[CVSetting] | None = None
+    seed: int = 0
+    workers: int | None = None
+
+    def validate(self) -> None:
+        """ValueError/TypeError naming the first bad field (``folds`` against the rows:
+        :func:`fold_indices`)."""
+        if isinstance(self.folds, bool) or not isinstance(self.folds, (int, np.integer)) \
+                or self.folds < 2:
+            raise ValueError(f"folds: expected an integer >= 2, got {self.folds!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) \
+                or self.seed < 0:
+            raise ValueError(f"seed: expected an integer >= 0, got {self.seed!r}")
+        if self.workers is not None and (isinstance(self.workers, bool) or not isinstance(
+                self.workers, (int, np.integer)) or self.workers < 1):
+            raise ValueError(f"workers: expected an integer >= 1 or None, got "
+                             f"{self.workers!r}")
+        if self.settings is not None and (
+                isinstance(self.settings, (str, bytes)) or not len(self.settings)
+                or not all(isinstance(x, CVSetting) for x in self.settings)):
+            raise TypeError("settings: expected a non-empty sequence of CVSetting or None")
+
+
+@dataclass
 class CVResult:
     """The cross-validation table.
 
@@ -319,17 +356,16 @@ def default_workers(tasks: int) -> int:
 
 
 def cross_validate(robot: Any, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
-                   settings: Sequence[CVSetting] | None = None, *, folds: int = 5,
-                   seed: int = 0, workers: int | None = None,
+                   cv: CVOptions | None = None, *,
                    meta: Mapping[str, Any] | None = None) -> CVResult:
-    """Score ``settings`` (default :func:`default_grid`) by ``folds``-fold
-    cross-validation on the rows q (S, n_dof), y (S, m) (module docstring).
+    """Score the settings of ``cv`` (:class:`CVOptions`; default 5 folds of
+    :func:`default_grid`) by K-fold cross-validation on the rows q (S, n_dof), y (S, m)
+    (module docstring).
 
     Args:
         robot, measurement, meta: as :func:`~jwarp.calibration.calibrate`.
         options: the base :class:`CalibrationOptions` each setting changes.
-        folds: K (2 <= K <= S); seed: the fold permutation's seed (an integer >= 0).
-        workers: processes (None: :func:`default_workers`; 1: in this process).
+        cv: folds, grid, seed of the fold permutation, worker processes.
 
     Returns:
         :class:`CVResult` (the best setting: lowest CV error; ties: the first).
@@ -343,20 +379,18 @@ def cross_validate(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
     if not isinstance(options, CalibrationOptions):
         raise TypeError(f"options: expected a CalibrationOptions, got {type(options).__name__}")
     options.validate()
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
-    grid = list(default_grid() if settings is None else settings)
-    if not grid or not all(isinstance(s, CVSetting) for s in grid):
-        raise TypeError("settings: expected a non-empty sequence of CVSetting")
+    cv = CVOptions() if cv is None else cv
+    if not isinstance(cv, CVOptions):
+        raise TypeError(f"cv: expected a CVOptions, got {type(cv).__name__}")
+    cv.validate()
+    folds, seed, workers = int(cv.folds), int(cv.seed), cv.workers
+    grid = list(default_grid() if cv.settings is None else cv.settings)
     model = get_robot(robot)
     qa, ya, md = check_samples(model, measurement, q, y, meta)
     fold = fold_indices(len(qa), folds, seed)
-    opts = [s.apply(options) for s in grid]
+    opts = [x.apply(options) for x in grid]
     for o in opts:
         o.validate()
-    if workers is not None and (isinstance(workers, bool) or not isinstance(
-            workers, (int, np.integer)) or workers < 1):
-        raise ValueError(f"workers: expected an integer >= 1 or None, got {workers!r}")
     tasks = [(g, k, model, measurement, qa, ya, md or None, opts[g],
               np.flatnonzero(fold != k), np.flatnonzero(fold == k))
              for g in range(len(grid)) for k in range(folds)]
@@ -388,9 +422,8 @@ def cross_validate(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
 
 
 def calibrate_cv(robot: Any, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
-                 settings: Sequence[CVSetting] | None = None, *, folds: int = 5,
-                 seed: int = 0, workers: int | None = None,
-                 meta: Mapping[str, Any] | None = None) -> tuple[Any, CVResult]:
+                 cv: CVOptions | None = None, *, meta: Mapping[str, Any] | None = None
+                 ) -> tuple[Any, CVResult]:
     """:func:`cross_validate`, then the calibration with the chosen setting on all rows
     (with ``options``' callback and warnings). Returns (the
     :class:`~jwarp.calibration.estimate.result.CalibrationResult`, whose
@@ -398,10 +431,9 @@ def calibrate_cv(robot: Any, measurement: Any, q: Any, y: Any, options: Calibrat
     :class:`CVResult`)."""
     from jwarp.calibration.estimate.map import calibrate_with
 
-    cv = cross_validate(robot, measurement, q, y, options, settings, folds=folds, seed=seed,
-                        workers=workers, meta=meta)
-    final = dataclasses.replace(cv.chosen.apply(options), callback=options.callback,
+    table = cross_validate(robot, measurement, q, y, options, cv, meta=meta)
+    final = dataclasses.replace(table.chosen.apply(options), callback=options.callback,
                                 warn=options.warn)
     res = calibrate_with(robot, measurement, q, y, final, meta=meta)
-    res.provenance = dict(res.provenance, cv=cv.to_dict())
-    return res, cv
+    res.provenance = dict(res.provenance, cv=table.to_dict())
+    return res, table
