@@ -412,10 +412,11 @@ def cross_validate(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
         held[g * folds + k] = err
     fold_err = np.array([[float(np.mean(held[g * folds + k])) for k in range(folds)]
                          for g in range(G)])
-    cv = np.array([float(np.mean(np.concatenate([held[g * folds + k].reshape(-1)
-                                                 for k in range(folds)])))
-                   for g in range(G)])
-    return CVResult(settings=grid, errors=cv, fold_errors=fold_err, best=int(np.argmin(cv)),
+    cv_err = np.array([float(np.mean(np.concatenate([held[g * folds + k].reshape(-1)
+                                                     for k in range(folds)])))
+                       for g in range(G)])
+    return CVResult(settings=grid, errors=cv_err, fold_errors=fold_err,
+                    best=int(np.argmin(cv_err)),
                     folds=int(folds), seed=int(seed), rows=len(qa),
                     time_s=time.perf_counter() - t0, workers=n_workers,
                     unit=str(getattr(measurement, "unit", "m")), fold_of=fold)
