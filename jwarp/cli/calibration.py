@@ -431,6 +431,13 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     train_rows, test_rows, both = _rows(args, S)
     train = data.select(train_rows)
     test = data.select(test_rows) if test_rows is not None else None
+    from jwarp.calibration.estimate.backlash import motion_directions
+
+    # the direction each joint last moved in, from the previous row of the file (the
+    # measurement order): the backlash group's, and that of a robot recording backlash
+    directions = motion_directions(data.q)
+    dir_train = directions[train_rows]
+    dir_test = directions[test_rows] if test_rows is not None else None
     fix_groups, fix_at = _parse_fix(args.fix)
     free = _free_groups(args.free, meas, fix_groups)
     scale, unit = (1000.0, "mm") if meas.unit == "m" else (1.0, meas.unit)
@@ -461,9 +468,11 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     cv_result = None
 
     def table_rows(robot: Any, p: np.ndarray) -> dict[str, dict[str, float]]:
-        out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None), scale)}
+        out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None,
+                                      directions=dir_train), scale)}
         if test is not None:
-            out["test"] = _stats(errors(robot, meas, p, test.q, test.y, test.meta or None), scale)
+            out["test"] = _stats(errors(robot, meas, p, test.q, test.y, test.meta or None,
+                                        directions=dir_test), scale)
         return out
 
     from jwarp.calibration.estimate.result import model_frames
@@ -489,7 +498,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                 max_nfev=args.max_nfev, callback=bar, covariance=covariance,
                 sigma=priors or None, orders=orders or None, loss=args.loss,
                 loss_scale=loss_scale,
-                fix_at=fix_at or None, warn=False)  # the findings: res.warnings, once
+                fix_at=fix_at or None, warn=False,  # the findings: res.warnings, once
+                directions=dir_train)
             if cv_settings is None:
                 res = calibrate_with(model, meas, train.q, train.y, options,
                                      meta=train.meta or None)
@@ -542,7 +552,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                             f"(--allow-overlap): their errors are not independent of the fit")
     test_range = None
     if test is not None:
-        test_range, rng_msg = _test_range(res, meas, test, scale)
+        test_range, rng_msg = _test_range(res, meas, test, scale, dir_test)
         if rng_msg is not None:
             fit_warnings.append(rng_msg)
     summary = {
@@ -565,7 +575,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                                                             residual_diagnostics)
 
         diag = residual_diagnostics(res.robot, meas, res.params, train.q, train.y,
-                                    train.meta or None)
+                                    train.meta or None, directions=dir_train)
         summary["diagnostics"] = diag.to_dict(scale)
     if args.json:
         print(dumps(summary, indent=1))
@@ -605,7 +615,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     return 0
 
 
-def _test_range(res: Any, meas: Any, test: Any, scale: float
+def _test_range(res: Any, meas: Any, test: Any, scale: float, directions: Any = None
                 ) -> tuple[dict[str, Any], str | None]:
     """The test rows' errors of the calibrated robot inside and outside the range of the
     calibration poses (``{"inside": stats | None, "outside": stats | None}``, stats with
@@ -614,7 +624,8 @@ def _test_range(res: Any, meas: Any, test: Any, scale: float
     from jwarp.calibration import errors
     from jwarp.model.valid_range import outside_message
 
-    err = errors(res.robot, meas, res.params, test.q, test.y, test.meta or None)
+    err = errors(res.robot, meas, res.params, test.q, test.y, test.meta or None,
+                 directions=directions)
     out = res.valid_range.outside(test.q)
     doc: dict[str, Any] = {}
     for label, mask in (("inside", ~out), ("outside", out)):
@@ -767,7 +778,9 @@ def add_subcommands(sub: Any) -> None:
                         "kappa_alpha,kappa_beta,mass (point masses loading compliant joints; "
                         "prior 10%% of each mass), harmonic, kappa_nonlinear, origin, "
                         "coupling (coupled frames: coefficients, offset, harmonics of the "
-                        "coupled angle) (+ measurement groups such as intrinsics)")
+                        "coupled angle), backlash (direction-dependent joint errors; the "
+                        "direction from the previous row) (+ measurement groups such as "
+                        "intrinsics)")
     s.add_argument("--fix", default=None, metavar="GROUPS",
                    help="measurement groups to keep at their setup values (e.g. markers), "
                         "or GROUP=RESULT.json at the values of an earlier --params-out "
@@ -858,7 +871,9 @@ def add_subcommands(sub: Any) -> None:
                         "harmonic[:amp=RAD,k=K] (joint transmission errors), "
                         "kappa_nonlinear[:rel=R] (torque-dependent stiffness), "
                         "kappa_beta[:min=K,max=K] (lateral compliance), "
-                        "coupling[:amp=RAD,k=K] (error of coupled frames), comma-separated, "
+                        "coupling[:amp=RAD,k=K] (error of coupled frames), "
+                        "backlash[:min=RAD,max=RAD] (direction-dependent joint errors), "
+                        "comma-separated, "
                         "or 'all' (the first three; defaults: docs/nongeometric.md); "
                         "truth.json carries them")
     s.add_argument("--out", required=True, metavar="FOLDER",

@@ -318,10 +318,13 @@ def _slice_meta(meta: Mapping[str, Any] | None, rows: np.ndarray) -> dict[str, A
 
 
 def _fold_options(options: CalibrationOptions, rows: np.ndarray) -> CalibrationOptions:
-    """``options`` for the fit on ``rows``: a per-sample covariance (S, m, m) sliced."""
+    """``options`` for the fit on ``rows``: a per-sample covariance (S, m, m) and the
+    directions of motion (S, n_dof) sliced."""
     cov = options.covariance
     if cov is not None and np.ndim(cov) == 3:
-        return dataclasses.replace(options, covariance=np.asarray(cov)[rows])
+        options = dataclasses.replace(options, covariance=np.asarray(cov)[rows])
+    if options.directions is not None:
+        options = dataclasses.replace(options, directions=np.asarray(options.directions)[rows])
     return options
 
 
@@ -334,7 +337,9 @@ def _fit_fold(task: tuple) -> tuple[int, int, np.ndarray]:
     g, k, robot, meas, q, y, meta, options, train, test = task
     res = calibrate_with(robot, meas, q[train], y[train], _fold_options(options, train),
                          meta=_slice_meta(meta, train))
-    err = errors(res.robot, meas, res.params, q[test], y[test], _slice_meta(meta, test))
+    dirs = None if options.directions is None else np.asarray(options.directions)[test]
+    err = errors(res.robot, meas, res.params, q[test], y[test], _slice_meta(meta, test),
+                 directions=dirs)
     return g, k, err
 
 
@@ -388,6 +393,10 @@ def cross_validate(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
     model = get_robot(robot)
     qa, ya, md = check_samples(model, measurement, q, y, meta)
     fold = fold_indices(len(qa), folds, seed)
+    if options.directions is None:   # the direction of motion: from all rows' order
+        from jwarp.calibration.estimate.backlash import motion_directions
+
+        options = dataclasses.replace(options, directions=motion_directions(qa))
     opts = [x.apply(options) for x in grid]
     for o in opts:
         o.validate()

@@ -20,7 +20,9 @@ from jwarp import kinematics as K
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import ValidRange, record_valid_range, valid_range_of
-from jwarp.calibration.estimate.params import KIND_KAPPA, KIND_MASS, ParameterSpace
+from jwarp.calibration.estimate.backlash import check_directions
+from jwarp.calibration.estimate.params import (KIND_KAPPA, KIND_MASS, ParameterSpace,
+                                               robot_backlash)
 
 
 class CalibrationWarning(UserWarning):
@@ -57,15 +59,26 @@ def group_norms(diff: np.ndarray, groups: list[tuple[str, np.ndarray]]) -> np.nd
 
 def model_frames(robot: RobotModel, q: np.ndarray, *, kappa: Any = None,
                  elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
-                 tol: float = 1e-12) -> np.ndarray:
+                 tol: float = 1e-12, directions: Any = None) -> np.ndarray:
     """World frames (S, n_frames, 4, 4) float64 on CPU: elastic equilibrium with ``kappa``
     (default the robot's) when elastic (default: iff kappa or the robot's
     ``kappa_nonlinear`` is nonzero), else rigid FK (both with the robot's joint
     transmission errors, if any, and the angle-dependent errors of coupled frames,
-    ``coupling_harmonic``, as per-sample DH rows)."""
+    ``coupling_harmonic``, as per-sample DH rows). ``directions`` (S, n_dof): the
+    direction each joint last moved in (:mod:`~jwarp.calibration.estimate.backlash`),
+    with which the robot's recorded backlash (``notes['backlash']``) is applied; None: no
+    backlash."""
     kap = K.kappa_array(robot, kappa)
     model = get_robot(robot)
     dh = None
+    q_kin = q
+    if directions is not None:
+        b = robot_backlash(model)
+        if np.any(b):
+            qa = np.asarray(q, np.float64)
+            if qa.ndim != 2:
+                raise ValueError(f"q: expected (S, n_dof) with directions, got {qa.shape}")
+            q_kin = model.joint_transmission(qa) + check_directions(directions, *qa.shape) * b
     if model.has_coupling_harmonic:
         qa = np.asarray(q, np.float64)
         delta = model.coupled_frame_delta(qa)                        # (..., n)
@@ -74,6 +87,9 @@ def model_frames(robot: RobotModel, q: np.ndarray, *, kappa: Any = None,
         dh[..., 1] += delta * ~pris
         dh[..., 0] += delta * pris
         model = K.without_coupling_harmonic(model)   # the rows carry them (not the kernels)
+    if q_kin is not q:   # the links' values carry the transmission errors and the backlash
+        model = K.without_transmission(model)
+    q = q_kin
     if elastic is None:
         elastic = bool(np.any(kap != 0) or np.any(model.kappa_nonlinear))
     if elastic:
@@ -145,7 +161,7 @@ def fixed_params(measurement: Any, fix_at: Mapping[str, Any], p_nominal: Any = N
 
 def predict(robot: Any, measurement: Any, p: Any, q: Any, meta: Mapping[str, Any] | None = None,
             *, kappa: Any = None, elastic: bool | None = None, lam: float = 1.0,
-            max_iter: int = 100, tol: float = 1e-12) -> np.ndarray:
+            max_iter: int = 100, tol: float = 1e-12, directions: Any = None) -> np.ndarray:
     """Predicted observations (S, m) of ``measurement`` with parameters ``p`` (P_meas,) for
     joint values ``q`` (S, n_dof) on ``robot`` (elastic as in :func:`model_frames`)."""
     from jwarp.calibration.estimate.samples import check_samples
@@ -155,25 +171,28 @@ def predict(robot: Any, measurement: Any, p: Any, q: Any, meta: Mapping[str, Any
     qa = np.asarray(q, np.float64)
     S = qa.shape[0] if qa.ndim == 2 else 0
     qa, _, md = check_samples(model, measurement, q, np.zeros((S, m)), meta)
-    fr = model_frames(model, qa, kappa=kappa, elastic=elastic, lam=lam, max_iter=max_iter, tol=tol)
+    fr = model_frames(model, qa, kappa=kappa, elastic=elastic, lam=lam, max_iter=max_iter,
+                      tol=tol, directions=directions)
     return np.asarray(measurement.predict(fr, np.asarray(p, np.float64), md), np.float64)
 
 
 def errors(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
            meta: Mapping[str, Any] | None = None, *, kappa: Any = None,
            elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
-           tol: float = 1e-12) -> np.ndarray:
+           tol: float = 1e-12, directions: Any = None) -> np.ndarray:
     """Per-sample errors (S, G) = norm of (prediction - y) per observation group (marker,
     image point, distance) in the measurement's unit, for rows q (S, n_dof), y (S, m).
 
     ``robot`` is e.g. the nominal or the calibrated model (``result.robot``); ``p`` the
-    measurement parameters (``result.params``); elastic as in :func:`model_frames`.
+    measurement parameters (``result.params``); elastic and ``directions`` (backlash) as
+    in :func:`model_frames`.
     """
     from jwarp.calibration.estimate.samples import check_samples
 
     model = get_robot(robot)
     qa, ya, md = check_samples(model, measurement, q, y, meta)
-    fr = model_frames(model, qa, kappa=kappa, elastic=elastic, lam=lam, max_iter=max_iter, tol=tol)
+    fr = model_frames(model, qa, kappa=kappa, elastic=elastic, lam=lam, max_iter=max_iter,
+                      tol=tol, directions=directions)
     yp = np.asarray(measurement.predict(fr, np.asarray(p, np.float64), md), np.float64)
     return group_norms(yp - ya, observation_groups(measurement))
 
