@@ -105,7 +105,7 @@ def _link(relative: str, name: str) -> None:
 
 #: "file:line" of a block -> (prelude code, reason)
 PRELUDES: dict[str, tuple[str, str]] = {
-    "docs/calibration.md:79": (
+    "docs/calibration.md:80": (
         _IMAGE_CAMPAIGN + "_calibrate, _results = calibrate, []\n"
         "def calibrate(*args, **kwargs):\n"
         "    _results.append(_calibrate(*args, **kwargs))\n"
@@ -113,10 +113,10 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "the text's `calibrate(robot, meas, q, y)`: justin19 and a 40-sample simulated image "
         "campaign (the free harmonic/coupling groups need justin19's coupled torso); "
         "`calibrate` keeps its result for the check (the block drops it)"),
-    "docs/calibration.md:147": (
+    "docs/calibration.md:148": (
         _IMAGE_CAMPAIGN + "res = calibrate(robot, meas, q, y, free='theta,d,r,alpha')\n",
         "`res` is a calibration result of the text (the image campaign above, DH free)"),
-    "docs/calibration.md:286": (
+    "docs/calibration.md:287": (
         _IMAGE_CAMPAIGN,
         "`robot, meas, q, y` of the text: justin19's 40-sample simulated image campaign"),
     "docs/design.md:9": (
@@ -269,7 +269,7 @@ NOT_RUN_SNIPPETS: dict[str, str] = {}
 
 
 def _check_priors_and_orders(ns: dict, folder: Path, out: str) -> None:
-    """calibration.md:79: each joint's harmonic order and prior sigma are the ones asked."""
+    """calibration.md:80: each joint's harmonic order and prior sigma are the ones asked."""
     import re
 
     (res,) = ns["_results"]
@@ -453,9 +453,9 @@ def _check_campaign(ns: dict, folder: Path, out: str) -> None:
 
 #: "file:line" -> check(namespace, folder, stdout) after the block ran
 CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
-    "docs/calibration.md:79": _check_priors_and_orders,
-    "docs/calibration.md:147": _check_diagnostics,
-    "docs/calibration.md:286": _check_cross_validation,
+    "docs/calibration.md:80": _check_priors_and_orders,
+    "docs/calibration.md:148": _check_diagnostics,
+    "docs/calibration.md:287": _check_cross_validation,
     "docs/datasets.md:45": _check_generate,
     "docs/datasets.md:135": _check_loader,
     "docs/datasets.md:175": _check_train_plan,

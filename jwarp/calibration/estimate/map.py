@@ -370,7 +370,7 @@ class CalibrationProblem:
         if not self.transmission:
             return self.q
         out = self.robot.joint_transmission(self.q, self.space.harmonic_at(x))
-        if self.backlash:   # direction-dependent: q'_j += b_j s_j
+        if self.directions is not None:   # backlash, direction-dependent: q'_j += b_j s_j
             out = out + self.directions * self.space.backlash_at(x)
         return out
 
@@ -728,6 +728,7 @@ class CalibrationProblem:
             return np.zeros(d_joint.shape[:2] + (0,))
         j = self.space.frame[idx]
         pos = np.searchsorted(self._harm_joints, j)
+        assert self.directions is not None   # set whenever the group is free
         return d_joint[:, :, pos] * self.directions[:, j][:, None, :]
 
     # ------------------------------------------------------------- starts
