@@ -434,8 +434,11 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     from jwarp.calibration.estimate.backlash import motion_directions
 
     # the direction each joint last moved in, from the previous row of the file (the
-    # measurement order): the backlash group's, and that of a robot recording backlash
+    # measurement order) or its dir_<joint> columns: the backlash group's, and that of a
+    # robot recording backlash
     directions = motion_directions(data.q)
+    if data.directions is not None:   # the file's dir_<joint> columns, where given
+        directions = np.where(np.isnan(data.directions), directions, data.directions)
     dir_train = directions[train_rows]
     dir_test = directions[test_rows] if test_rows is not None else None
     fix_groups, fix_at = _parse_fix(args.fix)

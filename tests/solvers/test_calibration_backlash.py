@@ -160,3 +160,45 @@ def test_cli_simulates_and_calibrates_backlash(tmp_path, capsys):
     assert sum(p["group"] == "backlash" for p in params) == 17
     corr = [j["direction_corr"] for j in without["diagnostics"]["joints"]]
     assert max(abs(c) for c in corr if c is not None) > 0.3
+
+
+def test_direction_columns_of_the_samples_file(tmp_path, capsys):
+    """``dir_<joint>`` columns give the directions (here the reverse of the row order's):
+    the fitted backlash changes sign; a bad value names line and column."""
+    import csv
+
+    from cli_helpers import run  # tests/cli_helpers.py
+    from jwarp.calibration.files import parse_samples, read_setup
+
+    out = tmp_path / "run"
+    code, _, err = run(capsys, ["simulate-campaign", "--samples", "80", "--seed", "1",
+                                "--kappa", "0", "--unmodeled", "backlash:min=2e-3,max=3e-3",
+                                "--out", out])
+    assert code == 0, err
+    rows = list(csv.reader((out / "samples.csv").read_text().splitlines()))
+    robot = jwarp.robot("justin19")
+    setup = read_setup(str(out / "setup.json"))
+    meas = make_measurement(robot, setup)
+    data = parse_samples((out / "samples.csv").read_text(), robot, meas)
+    assert data.directions is None
+    rev = -motion_directions(data.q)
+    names = [f"dir_{j}" for j in robot.joint_names]
+    text = "\n".join([",".join(rows[0] + names)] + [
+        ",".join(r + [f"{v:g}" for v in rev[k]]) for k, r in enumerate(rows[1:])]) + "\n"
+    (tmp_path / "rev.csv").write_text(text)
+    back = parse_samples(text, robot, meas)
+    np.testing.assert_array_equal(back.directions, rev)
+    np.testing.assert_array_equal(back.y, data.y)
+    code, _, err = run(capsys, ["calibrate", "--setup", out / "setup.json", "--data",
+                                tmp_path / "rev.csv", "--free", "theta,d,r,alpha,backlash",
+                                "--quiet", "--json", "--params-out", tmp_path / "p.json"])
+    assert code == 0, err
+    params = json.loads((tmp_path / "p.json").read_text())["parameters"]
+    b = {p["name"].split(".")[0]: p["value"] for p in params if p["group"] == "backlash"}
+    bt = robot_backlash(jwarp.robot(str(out / "truth.json")))
+    for j in ("torso_pan", "right_1", "left_1"):
+        assert b[j] == pytest.approx(-bt[robot.joint_names.index(j)], abs=1e-3), (j, b[j])
+    lines = text.splitlines()
+    lines[2] = lines[2].rsplit(",", 1)[0] + ",2"          # the last joint's column
+    with pytest.raises(ValueError, match=f"line 3, column '{names[-1]}': expected"):
+        parse_samples("\n".join(lines) + "\n", robot, meas)
