@@ -854,6 +854,29 @@ def test_calibration_md_priors_and_orders(tmp_path, monkeypatch, capsys):
                                 else 2) for j, k in orders.items()), orders
 
 
+def test_calibration_md_cross_validation(tmp_path, monkeypatch, capsys):
+    """docs/calibration.md "Choosing settings": the worked example's campaign and its
+    ``calibrate --cv 4``: the prior scale of the truth (0.01) chosen, and every quoted
+    line of the table and of the inside / outside report printed as quoted (the timing
+    in the first line aside)."""
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run(capsys, argv_of("docs/calibration.md: jwarp simulate-campaign "
+                                         "--samples 140"))
+    assert code == 0, out + err
+    code, out, err = run(capsys, argv_of("docs/calibration.md: jwarp calibrate --setup "
+                                         "cv/setup.json"))
+    assert code == 0, out + err
+    chosen = [ln for ln in out.splitlines() if ln.endswith("<- chosen")]
+    assert len(chosen) == 1 and chosen[0].split()[0] == "scale=0.01", out
+    text = (ROOT / "docs" / "calibration.md").read_text()
+    quoted = re.search(r"prints \(abridged\)\n\n```\n(.*?)```", text, re.S).group(1)
+    lines = quoted.splitlines()
+    assert lines[0].startswith("cross-validation: 4 folds of 40 calibration rows, 10 settings")
+    for ln in lines[1:]:
+        ln = ln.removesuffix(" ...")
+        assert any(o.startswith(ln) for o in out.splitlines()), (ln, out)
+
+
 #: doc commands run with fewer worlds/paths/epochs than written (the replacements are
 #: applied to the doc's argv word by word), with the reason
 SCALED = {

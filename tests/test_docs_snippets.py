@@ -105,7 +105,7 @@ def _link(relative: str, name: str) -> None:
 
 #: "file:line" of a block -> (prelude code, reason)
 PRELUDES: dict[str, tuple[str, str]] = {
-    "docs/calibration.md:79": (
+    "docs/calibration.md:80": (
         _IMAGE_CAMPAIGN + "_calibrate, _results = calibrate, []\n"
         "def calibrate(*args, **kwargs):\n"
         "    _results.append(_calibrate(*args, **kwargs))\n"
@@ -113,9 +113,12 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "the text's `calibrate(robot, meas, q, y)`: justin19 and a 40-sample simulated image "
         "campaign (the free harmonic/coupling groups need justin19's coupled torso); "
         "`calibrate` keeps its result for the check (the block drops it)"),
-    "docs/calibration.md:147": (
+    "docs/calibration.md:148": (
         _IMAGE_CAMPAIGN + "res = calibrate(robot, meas, q, y, free='theta,d,r,alpha')\n",
         "`res` is a calibration result of the text (the image campaign above, DH free)"),
+    "docs/calibration.md:287": (
+        _IMAGE_CAMPAIGN,
+        "`robot, meas, q, y` of the text: justin19's 40-sample simulated image campaign"),
     "docs/design.md:9": (
         _HAND4 + "q_actual, _meta = draw_configurations(robot, setup, 30, 0)\n"
         "pairs = _meta['pair']\n"
@@ -266,7 +269,7 @@ NOT_RUN_SNIPPETS: dict[str, str] = {}
 
 
 def _check_priors_and_orders(ns: dict, folder: Path, out: str) -> None:
-    """calibration.md:79: each joint's harmonic order and prior sigma are the ones asked."""
+    """calibration.md:80: each joint's harmonic order and prior sigma are the ones asked."""
     import re
 
     (res,) = ns["_results"]
@@ -283,6 +286,16 @@ def _check_priors_and_orders(ns: dict, folder: Path, out: str) -> None:
 
 def _check_diagnostics(ns: dict, folder: Path, out: str) -> None:
     assert "mm" in out and len(out.splitlines()) >= 2, out
+
+
+def _check_cross_validation(ns: dict, folder: Path, out: str) -> None:
+    """calibration.md "Choosing settings": the table printed, the choice recorded in the
+    provenance, the valid range of the 40 rows in the result."""
+    res, cv = ns["res"], ns["cv"]
+    assert "cross-validation: 4 folds of 40 calibration rows, 3 settings" in out, out
+    prov = res.provenance["cv"]
+    assert prov["chosen"] == cv.chosen.to_dict() and len(prov["table"]) == 3
+    np.testing.assert_array_equal(res.valid_range.upper, ns["q"][:40].max(axis=0))
 
 
 def _check_generate(ns: dict, folder: Path, out: str) -> None:
@@ -440,8 +453,9 @@ def _check_campaign(ns: dict, folder: Path, out: str) -> None:
 
 #: "file:line" -> check(namespace, folder, stdout) after the block ran
 CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
-    "docs/calibration.md:79": _check_priors_and_orders,
-    "docs/calibration.md:147": _check_diagnostics,
+    "docs/calibration.md:80": _check_priors_and_orders,
+    "docs/calibration.md:148": _check_diagnostics,
+    "docs/calibration.md:287": _check_cross_validation,
     "docs/datasets.md:45": _check_generate,
     "docs/datasets.md:135": _check_loader,
     "docs/datasets.md:175": _check_train_plan,

@@ -15,6 +15,8 @@ Typical use::
 from jwarp.calibration.estimate.map import (CalibrationProblem, ModelState, Progress, calibrate,
                                             calibrate_with)
 from jwarp.calibration.estimate.options import CalibrationOptions
+from jwarp.calibration.estimate.cv import (CVOptions, CVResult, CVSetting, calibrate_cv,
+                                           cross_validate)
 from jwarp.calibration.estimate.params import (DEFAULT_SIGMA, ROBOT_GROUPS, ParameterSpace,
                                                influencing_frames, influencing_masses,
                                                parse_groups, perturb_robot)
@@ -30,7 +32,8 @@ from jwarp.calibration.simulate.campaign import Campaign, simulate_campaign
 from jwarp.calibration.simulate.scenarios import scenario
 
 __all__ = [
-    "calibrate", "calibrate_with", "CalibrationOptions", "CalibrationProblem",
+    "calibrate", "calibrate_cv", "calibrate_with", "CalibrationOptions", "cross_validate",
+    "CVOptions", "CVResult", "CVSetting", "CalibrationProblem",
     "CalibrationResult", "CalibrationWarning", "Campaign", "check_samples", "DEFAULT_SIGMA",
     "DesignOptions", "DesignResult", "Direction", "error_stats", "errors",
     "influencing_frames", "influencing_masses", "model_frames", "ModelState",

@@ -90,6 +90,9 @@ class Samples:
     y: np.ndarray
     meta: dict[str, np.ndarray] = field(default_factory=dict)
     lines: np.ndarray | None = None  # (S,) line number of each row in the file
+    #: (S, n_dof) the direction (+1, -1, 0) each joint last moved in, from the optional
+    #: ``dir_<joint>`` columns (NaN for joints without one); None: no such column
+    directions: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
@@ -97,7 +100,8 @@ class Samples:
     def select(self, rows: slice | np.ndarray) -> "Samples":
         """The samples of ``rows`` (a slice or index array)."""
         return Samples(self.q[rows], self.y[rows], {k: v[rows] for k, v in self.meta.items()},
-                       None if self.lines is None else self.lines[rows])
+                       None if self.lines is None else self.lines[rows],
+                       None if self.directions is None else self.directions[rows])
 
 
 def setup_from_dict(doc: Any, where: str = "setup") -> Setup:
@@ -266,6 +270,11 @@ def numeric_rows(reader: Any, header: list[str], col: list[int], where: str,
         lines.append(line)
     return values, lines
 
+#: prefix of the optional samples-CSV columns of the direction each joint last moved in
+#: (``dir_<joint>``: -1, 0, 1), read by the ``backlash`` calibration group
+DIRECTION_PREFIX = "dir_"
+
+
 def parse_samples(text: str, robot: RobotModel, meas: Measurement, where: str = "data"
                   ) -> Samples:
     """Parse CSV text (the content of a samples file)."""
@@ -280,10 +289,13 @@ def parse_samples(text: str, robot: RobotModel, meas: Measurement, where: str = 
     missing = [c for c in expected if c not in header]
     if missing:
         raise ValueError(f"{where}: missing column(s) {missing}; expected {expected}")
-    extra = [c for c in header if c not in expected]
+    dir_cols = [f"{DIRECTION_PREFIX}{j}" for j in robot.joint_names]
+    extra = [c for c in header if c not in expected and c not in dir_cols]
     if extra:
-        raise ValueError(f"{where}: unknown column(s) {extra}; expected {expected}")
-    col = [header.index(c) for c in expected]
+        raise ValueError(f"{where}: unknown column(s) {extra}; expected {expected} (and "
+                         f"optionally direction columns {DIRECTION_PREFIX}<joint>)")
+    dirs_given = [c for c in dir_cols if c in header]
+    col = [header.index(c) for c in expected + dirs_given]
     values, lines = numeric_rows(reader, header, col, where, header_line)
     if not values:
         raise ValueError(f"{where}: no sample rows after the header")
@@ -301,7 +313,20 @@ def parse_samples(text: str, robot: RobotModel, meas: Measurement, where: str = 
         meta[name] = v
     lines_a = np.asarray(lines, dtype=np.int64)
     _warn_far_outside(robot, a[:, :n], lines_a, where)
-    return Samples(q=a[:, :n].copy(), y=a[:, n + nm:].copy(), meta=meta, lines=lines_a)
+    ne = len(expected)
+    directions = None
+    if dirs_given:
+        directions = np.full((a.shape[0], n), np.nan)
+        for k, c in enumerate(dirs_given):
+            v = a[:, ne + k]
+            wrong = np.flatnonzero((v != 1) & (v != -1) & (v != 0))
+            if wrong.size:
+                raise ValueError(f"{where}: line {lines_a[wrong[0]]}, column '{c}': expected "
+                                 f"the direction the joint last moved in, -1, 0 or 1, got "
+                                 f"{v[wrong[0]]:g}")
+            directions[:, dir_cols.index(c)] = v
+    return Samples(q=a[:, :n].copy(), y=a[:, n + nm:ne].copy(), meta=meta, lines=lines_a,
+                   directions=directions)
 
 
 def _warn_far_outside(robot: RobotModel, q: np.ndarray, lines: np.ndarray, where: str) -> None:

@@ -328,6 +328,27 @@ def _rows(args: argparse.Namespace, S: int) -> tuple[np.ndarray, np.ndarray | No
     return train, test, both
 
 
+def _cv_settings(args: argparse.Namespace, n_train: int) -> list | None:
+    """The grid of ``--cv`` (None without ``--cv``); errors name ``--cv``, ``--cv-grid``,
+    ``--cv-workers``."""
+    if args.cv is None:
+        if args.cv_grid or args.cv_workers is not None:
+            raise _cli_error(f"{'--cv-grid' if args.cv_grid else '--cv-workers'}: only with "
+                             f"--cv K (cross-validation)")
+        return None
+    if not 2 <= args.cv <= n_train:
+        raise _cli_error(f"--cv: expected an integer in [2, {n_train}] (folds of the "
+                         f"{n_train} calibration rows), got {args.cv}")
+    if args.cv_workers is not None:
+        _check_int("--cv-workers", args.cv_workers, 1)
+    from jwarp.calibration.estimate.cv import parse_cv_grid
+
+    try:
+        return parse_cv_grid(args.cv_grid)
+    except ValueError as e:
+        raise _cli_error(str(e)) from None
+
+
 def _tow_covariance(args: argparse.Namespace, setup: Any, model: Any, meas: Any, train: Any,
                     free: list[str]) -> np.ndarray | None:
     """Per-sample covariance of the calibration rows: the setup's ``tow`` section (eq. 2.11,
@@ -410,6 +431,16 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     train_rows, test_rows, both = _rows(args, S)
     train = data.select(train_rows)
     test = data.select(test_rows) if test_rows is not None else None
+    from jwarp.calibration.estimate.backlash import motion_directions
+
+    # the direction each joint last moved in, from the previous row of the file (the
+    # measurement order) or its dir_<joint> columns: the backlash group's, and that of a
+    # robot recording backlash
+    directions = motion_directions(data.q)
+    if data.directions is not None:   # the file's dir_<joint> columns, where given
+        directions = np.where(np.isnan(data.directions), directions, data.directions)
+    dir_train = directions[train_rows]
+    dir_test = directions[test_rows] if test_rows is not None else None
     fix_groups, fix_at = _parse_fix(args.fix)
     free = _free_groups(args.free, meas, fix_groups)
     scale, unit = (1000.0, "mm") if meas.unit == "m" else (1.0, meas.unit)
@@ -436,10 +467,15 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     else:
         loss_scale = None
 
+    cv_settings = _cv_settings(args, len(train))
+    cv_result = None
+
     def table_rows(robot: Any, p: np.ndarray) -> dict[str, dict[str, float]]:
-        out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None), scale)}
+        out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None,
+                                      directions=dir_train), scale)}
         if test is not None:
-            out["test"] = _stats(errors(robot, meas, p, test.q, test.y, test.meta or None), scale)
+            out["test"] = _stats(errors(robot, meas, p, test.q, test.y, test.meta or None,
+                                        directions=dir_test), scale)
         return out
 
     from jwarp.calibration.estimate.result import model_frames
@@ -465,13 +501,24 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                 max_nfev=args.max_nfev, callback=bar, covariance=covariance,
                 sigma=priors or None, orders=orders or None, loss=args.loss,
                 loss_scale=loss_scale,
-                fix_at=fix_at or None, warn=False)  # the findings: res.warnings, once
-            res = calibrate_with(model, meas, train.q, train.y, options,
-                                 meta=train.meta or None)
+                fix_at=fix_at or None, warn=False,  # the findings: res.warnings, once
+                directions=dir_train)
+            if cv_settings is None:
+                res = calibrate_with(model, meas, train.q, train.y, options,
+                                     meta=train.meta or None)
+            else:
+                from jwarp.calibration.estimate.cv import CVOptions, calibrate_cv
+
+                cvo = CVOptions(folds=args.cv, settings=cv_settings, seed=args.seed,
+                                workers=args.cv_workers)
+                res, cv_result = calibrate_cv(model, meas, train.q, train.y, options, cvo,
+                                              meta=train.meta or None)
         except ValueError as e:
             if str(e).startswith("q, y: "):  # too few rows for the free parameters
                 raise _cli_error("--calibrate-rows: " + str(e).removeprefix("q, y: ").replace(
                     "give more samples", "give more rows")) from None
+            if cv_settings is not None and str(e).startswith(("free:", "sigma", "orders")):
+                raise _cli_error(f"--cv-grid: a setting fails: {e}") from None
             for field, opt in (("sigma", "--prior"), ("orders", "--order")):
                 if str(e).startswith(field):
                     raise _cli_error(f"{opt}: {e}") from None
@@ -483,7 +530,8 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     wall = time.perf_counter() - t0
     after = table_rows(res.robot, res.params)
     calibrated = _with_provenance(res.robot, args, setup, raw, free, before, after, unit,
-                                  len(train), 0 if test is None else len(test))
+                                  len(train), 0 if test is None else len(test),
+                                  cv=None if cv_result is None else cv_result.to_dict(scale, unit))
     # --out and --params-out into their temporary files, renamed back to back at the end
     robot_text = json.dumps(calibrated.to_dict(), indent=1) + "\n"
     if "--out" in outputs:
@@ -505,6 +553,11 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     if both:
         fit_warnings.append(f"{both} of the {len(test)} test rows were also calibration rows "
                             f"(--allow-overlap): their errors are not independent of the fit")
+    test_range = None
+    if test is not None:
+        test_range, rng_msg = _test_range(res, meas, test, scale, dir_test)
+        if rng_msg is not None:
+            fit_warnings.append(rng_msg)
     summary = {
         "robot": model.name, "plugin": meas.name, "unit": unit, "free": free,
         "samples": {"train": len(train), "test": 0 if test is None else len(test),
@@ -515,17 +568,24 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         "out": args.out, "params_out": args.params_out, "rerun": args.rerun,
         "calibrated_name": calibrated.name, "active_set_rounds": bar.restarts,
     }
+    if test_range is not None:
+        summary["test_range"] = test_range
+    if cv_result is not None:
+        summary["cv"] = cv_result.to_dict(scale, unit)
     diag = None
     if args.diagnostics:
         from jwarp.calibration.estimate.diagnostics import (format_diagnostics,
                                                             residual_diagnostics)
 
         diag = residual_diagnostics(res.robot, meas, res.params, train.q, train.y,
-                                    train.meta or None)
+                                    train.meta or None, directions=dir_train)
         summary["diagnostics"] = diag.to_dict(scale)
     if args.json:
         print(dumps(summary, indent=1))
         return 0
+    if cv_result is not None:
+        print(cv_result.table(scale, unit))
+        print()
     if diag is not None:
         print(format_diagnostics(diag, scale, unit))
         print()
@@ -542,6 +602,13 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         for label, d in (("before", before), ("after", after)):
             s = d[rows]
             print(f"{rows:<8}{label:<8}{s['mean']:>10.3f}{s['std']:>10.3f}{s['max']:>10.3f}")
+    if test_range is not None and test_range["outside"] is not None:
+        for label in ("inside", "outside"):
+            part = test_range[label]
+            if part is not None:
+                print(f"{'test':<8}{label:<8}{part['mean']:>10.3f}{part['std']:>10.3f}"
+                      f"{part['max']:>10.3f}   ({part['rows']} rows {label} the calibration "
+                      f"poses' range)")
     for w in fit_warnings:
         print(f"warning: {w}")
     for path in (args.out, args.params_out, args.rerun):
@@ -551,13 +618,33 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     return 0
 
 
+def _test_range(res: Any, meas: Any, test: Any, scale: float, directions: Any = None
+                ) -> tuple[dict[str, Any], str | None]:
+    """The test rows' errors of the calibrated robot inside and outside the range of the
+    calibration poses (``{"inside": stats | None, "outside": stats | None}``, stats with
+    ``rows``; in the report's unit) and the warning naming how far outside (None: all
+    inside)."""
+    from jwarp.calibration import errors
+    from jwarp.model.valid_range import outside_message
+
+    err = errors(res.robot, meas, res.params, test.q, test.y, test.meta or None,
+                 directions=directions)
+    out = res.valid_range.outside(test.q)
+    doc: dict[str, Any] = {}
+    for label, mask in (("inside", ~out), ("outside", out)):
+        doc[label] = ({**_stats(err[mask], scale), "rows": int(mask.sum())}
+                      if mask.any() else None)
+    msg = outside_message(res.robot, test.q, "--test-rows")
+    return doc, msg
+
+
 #: the ``notes`` key of a calibrated robot's provenance (a JSON object)
 PROVENANCE_NOTE = "calibration"
 
 
 def _with_provenance(robot: Any, args: argparse.Namespace, setup: Any, raw: bytes,
                      free: list[str], before: dict, after: dict, unit: str, n_train: int,
-                     n_test: int) -> Any:
+                     n_test: int, cv: dict | None = None) -> Any:
     """The calibrated robot renamed (``--name``, default ``<name>-calibrated``) with its
     provenance in ``notes['calibration']`` (JSON: campaign id, input files and the
     SHA-256 of the samples, rows, free groups, errors before/after, date, jwarp version)."""
@@ -579,6 +666,8 @@ def _with_provenance(robot: Any, args: argparse.Namespace, setup: Any, raw: byte
         "loss": args.loss, "starts": args.starts,
         "errors": {"unit": unit, "before": before, "after": after},
     }
+    if cv is not None:   # --cv: the settings chosen, their CV error and the table
+        prov["cv"] = cv
     notes = dict(robot.notes)
     notes[PROVENANCE_NOTE] = json.dumps(prov, sort_keys=False)
     return dataclasses.replace(robot, name=name, notes=notes)
@@ -692,7 +781,9 @@ def add_subcommands(sub: Any) -> None:
                         "kappa_alpha,kappa_beta,mass (point masses loading compliant joints; "
                         "prior 10%% of each mass), harmonic, kappa_nonlinear, origin, "
                         "coupling (coupled frames: coefficients, offset, harmonics of the "
-                        "coupled angle) (+ measurement groups such as intrinsics)")
+                        "coupled angle), backlash (direction-dependent joint errors; the "
+                        "direction from the previous row) (+ measurement groups such as "
+                        "intrinsics)")
     s.add_argument("--fix", default=None, metavar="GROUPS",
                    help="measurement groups to keep at their setup values (e.g. markers), "
                         "or GROUP=RESULT.json at the values of an earlier --params-out "
@@ -712,6 +803,18 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--diagnostics", action="store_true",
                    help="print residual diagnostics of the calibrated model (correlation "
                         "between end-effectors, residual vs joint angle and torque)")
+    s.add_argument("--cv", type=int, default=None, metavar="K",
+                   help="choose prior strengths, harmonic orders or groups by K-fold "
+                        "cross-validation on the calibration rows (the grid: --cv-grid), "
+                        "then fit the best on all of them; the table is printed and the "
+                        "choice recorded in the provenance")
+    s.add_argument("--cv-grid", action="append", default=None, metavar="AXIS=V1|V2|...",
+                   help="settings of --cv, the product of the items: scale=0.1|1 (factor "
+                        "on every free robot group's prior), prior:KEY=S1|S2, order:KEY=K1|K2, "
+                        "free=G1|G2 (group lists), or a JSON file listing settings; default "
+                        "scale=0.01|0.02|0.05|0.1|0.2|0.5|1|2|5|10; repeatable")
+    s.add_argument("--cv-workers", type=int, default=None, metavar="N",
+                   help="processes for the --cv fits (default: one per core)")
     s.add_argument("--calibrate-rows", default=None, metavar="A:B",
                    help="rows used for calibration (default: all rows not in --test-rows)")
     s.add_argument("--test-rows", default=None, metavar="A:B",
@@ -771,7 +874,9 @@ def add_subcommands(sub: Any) -> None:
                         "harmonic[:amp=RAD,k=K] (joint transmission errors), "
                         "kappa_nonlinear[:rel=R] (torque-dependent stiffness), "
                         "kappa_beta[:min=K,max=K] (lateral compliance), "
-                        "coupling[:amp=RAD,k=K] (error of coupled frames), comma-separated, "
+                        "coupling[:amp=RAD,k=K] (error of coupled frames), "
+                        "backlash[:min=RAD,max=RAD] (direction-dependent joint errors), "
+                        "comma-separated, "
                         "or 'all' (the first three; defaults: docs/nongeometric.md); "
                         "truth.json carries them")
     s.add_argument("--out", required=True, metavar="FOLDER",

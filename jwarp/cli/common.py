@@ -372,6 +372,11 @@ def warn_limits(model: Any, q: np.ndarray) -> None:
                                for j, c in zip(lim.joints, lim.coefficients))
             print(f"jwarp: warning: {terms} = {v:+.6g} outside [{lim.lower:+.6g}, "
                   f"{lim.upper:+.6g}]", file=sys.stderr)
+    from jwarp.model.valid_range import outside_message
+
+    rng = outside_message(model, q, "q")   # a calibrated robot used outside its poses' range
+    if rng is not None:
+        print(f"jwarp: warning: {rng}", file=sys.stderr)
 
 
 def dumps(obj: Any, indent: int = 0) -> str:

@@ -28,9 +28,9 @@ def test_spec_parsing_forms_and_defaults():
     assert u.effects == {"harmonic": {"amp": 1e-3, "k": 3.0}, "kappa_nonlinear": {},
                          "kappa_beta": {"max": 5e-5, "min": 0.0}}
     assert u.get("kappa_nonlinear", "rel") == EFFECTS["kappa_nonlinear"]["rel"]
-    # 'all' is the effects of issue 16; 'coupling' (issue 29) only by name, so that
-    # campaigns with 'all' keep their data
-    assert set(parse_unmodeled("all").effects) == set(EFFECTS) - {"coupling"}
+    # 'all' is the effects of issue 16; 'coupling' (issue 29) and 'backlash' (issue 38)
+    # only by name, so that campaigns with 'all' keep their data
+    assert set(parse_unmodeled("all").effects) == set(EFFECTS) - {"coupling", "backlash"}
     assert parse_unmodeled("coupling:amp=5e-3").get("coupling", "amp") == 5e-3
     assert not parse_unmodeled("none") and not parse_unmodeled(None) and not parse_unmodeled("")
     assert parse_unmodeled(["harmonic", "kappa_beta"]).effects == {"harmonic": {}, "kappa_beta": {}}

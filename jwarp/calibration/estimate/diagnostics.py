@@ -44,7 +44,10 @@ class JointDiagnostics:
     frame: its name; share: the share of the squared residual that per-sample rotations
     about it remove; bin_means (bins,): means of ``dq_s`` per bin of its joint value [rad
     or m]; bin_centres (bins,): the bins' median joint values; torque_corr: correlation of
-    ``dq_s`` with the gravity torque about its axis (nan without a mass model or torque).
+    ``dq_s`` with the gravity torque about its axis (nan without a mass model or torque);
+    direction_corr: correlation of ``dq_s`` with the direction its joint last moved in
+    (``s @ C_i``, +-1; nan without ``directions`` or motion): large for backlash, the
+    ``backlash`` group's effect.
     """
 
     frame: str
@@ -52,6 +55,7 @@ class JointDiagnostics:
     bin_means: np.ndarray
     bin_centres: np.ndarray
     torque_corr: float
+    direction_corr: float = float("nan")
 
 
 @dataclass
@@ -84,13 +88,14 @@ class Diagnostics:
             "joints": [{"frame": j.frame, "share": j.share,
                         "bin_means": j.bin_means.tolist(),
                         "bin_centres": j.bin_centres.tolist(),
-                        "torque_corr": num(j.torque_corr)} for j in self.joints],
+                        "torque_corr": num(j.torque_corr),
+                        "direction_corr": num(j.direction_corr)} for j in self.joints],
         }
 
 
 def residual_diagnostics(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
-                         meta: Mapping[str, Any] | None = None, *, bins: int = 5
-                         ) -> Diagnostics:
+                         meta: Mapping[str, Any] | None = None, *, bins: int = 5,
+                         directions: Any = None) -> Diagnostics:
     """Diagnostics of the residuals ``y - predict(robot, q)`` (module docstring).
 
     Args:
@@ -98,6 +103,10 @@ def residual_diagnostics(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
         measurement: the measurement plugin; p: (P_meas,) its parameters.
         q: (S, n_dof) joint values; y: (S, m) observations; meta: per-sample inputs.
         bins: equal-count bins of each joint value (>= 2, at most S).
+        directions: (S, n_dof) the direction (+1, -1, 0) each joint last moved in before
+            each sample (:func:`~jwarp.calibration.estimate.backlash.motion_directions` of
+            the samples in measurement order): adds the direction correlation, and applies
+            a backlash the robot records; None: neither.
 
     Returns:
         :class:`Diagnostics`.
@@ -114,7 +123,13 @@ def residual_diagnostics(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
     pa = np.asarray(p, np.float64)
     frames = [i for i in np.nonzero(model.is_dh)[0] if model.frames[i].coupling]
     prob = CalibrationProblem(model, measurement, qa, y, meta=meta, free="theta",
-                              frames=frames, p_nominal=pa, noise_sigma=1.0)
+                              frames=frames, p_nominal=pa, noise_sigma=1.0,
+                              directions=directions)
+    sdir = None
+    if directions is not None:
+        from jwarp.calibration.estimate.backlash import check_directions
+
+        sdir = check_directions(directions, S, model.n_dof)
     sp = prob.space
     x0 = sp.nominal
     r = prob.y - prob.predict(x0)                                      # (S, m)
@@ -157,7 +172,17 @@ def residual_diagnostics(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
             den = float(np.sqrt((t @ t) * (d @ d)))
             if den > 0 and float(np.abs(tau[:, i]).max()) > 1e-9:
                 corr = float(t @ d) / den
-        out.joints.append(JointDiagnostics(model.frames[i].name, share, means, centres, corr))
+        dcorr = float("nan")
+        if sdir is not None:
+            sv = np.sign(sdir @ C[i])
+            mv = sv != 0
+            if mv.sum() > 2:
+                a_, b_ = sv[mv] - sv[mv].mean(), dq[mv] - dq[mv].mean()
+                den = float(np.sqrt((a_ @ a_) * (b_ @ b_)))
+                if den > 0:
+                    dcorr = float(a_ @ b_) / den
+        out.joints.append(JointDiagnostics(model.frames[i].name, share, means, centres, corr,
+                                           dcorr))
     out.joints.sort(key=lambda j: -j.share)
     return out
 
@@ -174,9 +199,12 @@ def format_diagnostics(diag: Diagnostics, scale: float = 1.0, unit: str = "",
             lines.append(f"    {a} ~ {b}: " + " ".join(f"{v:+.2f}" for v in rr))
     lines.append(f"  per-sample joint errors: share of the squared residual removed (chance "
                  f"{diag.chance:.3f}), mean error per bin of the joint value [mrad], "
-                 f"correlation with the gravity torque")
+                 f"correlation with the gravity torque"
+                 + (" and with the direction of motion" if any(
+                     np.isfinite(j.direction_corr) for j in diag.joints) else ""))
     for j in diag.joints[:top]:
         tc = "  n/a" if not np.isfinite(j.torque_corr) else f"{j.torque_corr:+.2f}"
+        dc = "" if not np.isfinite(j.direction_corr) else f"   {j.direction_corr:+.2f}"
         lines.append(f"    {j.frame:<14}{j.share:7.3f}   "
-                     + " ".join(f"{1e3 * b:+6.2f}" for b in j.bin_means) + f"   {tc}")
+                     + " ".join(f"{1e3 * b:+6.2f}" for b in j.bin_means) + f"   {tc}{dc}")
     return "\n".join(lines)

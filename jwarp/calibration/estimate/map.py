@@ -45,6 +45,8 @@ from jwarp.calibration.estimate.elastic import (ElasticComponents, effective_kap
                                                 torque_jacobian, torque_state)
 from jwarp.calibration.estimate.options import CalibrationOptions
 from jwarp.calibration.estimate.origin import origin_twists, with_static_transforms
+from jwarp.calibration.estimate.backlash import check_directions, motion_directions
+from jwarp.calibration.estimate.params import (KIND_BACKLASH, robot_backlash)
 from jwarp.calibration.estimate.params import (COUPLING_HARM, KIND_COUPLING, KIND_DH,
                                                KIND_HARMONIC, KIND_KAPPA, KIND_KAPPA_NL,
                                                KIND_MASS, KIND_MEAS, KIND_ORIGIN, MASS_GROUP,
@@ -191,6 +193,9 @@ class CalibrationProblem:
             each sample's whitened residual norm (:mod:`.robust`); the prior rows stay
             Gaussian. loss_scale: where it turns robust [unit of the measurement]
             (divided by the mean noise sigma into whitened units).
+        directions: (S, n_dof) the direction (+1, -1, 0 unknown) each joint last moved in
+            before each sample, for the ``backlash`` group and a robot with recorded
+            backlash; None: from the order of q (:func:`.backlash.motion_directions`).
     """
 
     def __init__(self, robot: Any, measurement: Any, q: Any, y: Any, *,
@@ -201,7 +206,7 @@ class CalibrationProblem:
                  tol: float = 1e-12, bound_kappa: bool = False,
                  covariance: Any = None, device: Any = None,
                  orders: Mapping[str, int] | None = None, loss: str = "linear",
-                 loss_scale: float | None = None) -> None:
+                 loss_scale: float | None = None, directions: Any = None) -> None:
         self.robot = get_robot(robot)
         self.measurement = measurement
         if not hasattr(measurement, "jacobians") or not hasattr(measurement, "obs_names"):
@@ -257,6 +262,12 @@ class CalibrationProblem:
         kf = self.space.kappa_free
         sp = self.space
         self._harm_idx = np.nonzero(sp.kind == KIND_HARMONIC)[0]
+        self._bl_idx = np.nonzero(sp.kind == KIND_BACKLASH)[0]
+        #: backlash in play (the group free or recorded in the robot) and the directions
+        self.backlash = bool(self._bl_idx.size or np.any(robot_backlash(self.robot)))
+        self.directions = (None if not self.backlash else motion_directions(self.q)
+                           if directions is None else
+                           check_directions(directions, *self.q.shape))
         self._knl_idx = np.nonzero(sp.kind == KIND_KAPPA_NL)[0]
         if elastic is None:
             elastic = bool(kf.any() or np.any(self.robot.kappa != 0) or self._knl_idx.size
@@ -271,7 +282,8 @@ class CalibrationProblem:
         self._kin_data: Any = None   # KinematicsData of the samples (:meth:`kinematics`)
         #: the raw joint values and whether the links see other ones (transmission errors)
         self.q_device_raw = self.q_device
-        self.transmission = bool(self._harm_idx.size or self.robot.has_harmonic)
+        self.transmission = bool(self._harm_idx.size or self.robot.has_harmonic
+                                 or self.backlash)
         #: the robot the kinematics launches see: transmission errors are applied here
         #: (``q_device``), not again by the public kinematics functions; the coupled frames'
         #: harmonic terms go into the per-sample rows (:meth:`coupled_rows`), not the kernels
@@ -311,7 +323,7 @@ class CalibrationProblem:
                    sigma=o.sigma, frames=o.frames, p_nominal=p_nominal, elastic=o.elastic,
                    lam=o.lam, max_iter=o.equilibrium_iterations, tol=o.tol,
                    bound_kappa=o.bound_kappa, covariance=o.covariance, orders=o.orders, loss=o.loss,
-                   loss_scale=o.loss_scale)
+                   loss_scale=o.loss_scale, directions=o.directions)
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -332,7 +344,7 @@ class CalibrationProblem:
         dh, kap, p, mass = self.space.unpack(x)
         S = self.n_samples
         if self.transmission:   # the links see q + dq(q): every launch below uses it
-            q_eff = self.robot.joint_transmission(self.q, self.space.harmonic_at(x))
+            q_eff = self.q_links(x)
             self.q_device = wp.array(q_eff, dtype=wp.float64, device=self.device)
         rows = self.coupled_rows(x, dh) if self.coupled else dh
         if self.elastic:
@@ -357,7 +369,10 @@ class CalibrationProblem:
         """(S, n_dof) the joint values the links see at x (transmission errors applied)."""
         if not self.transmission:
             return self.q
-        return self.robot.joint_transmission(self.q, self.space.harmonic_at(x))
+        out = self.robot.joint_transmission(self.q, self.space.harmonic_at(x))
+        if self.directions is not None:   # backlash, direction-dependent: q'_j += b_j s_j
+            out = out + self.directions * self.space.backlash_at(x)
+        return out
 
     def coupling_terms(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(coupling matrix C (n, n_dof), offsets (n,), harmonics h (n, K, 2), coupled
@@ -512,6 +527,7 @@ class CalibrationProblem:
         d_cf = d_dh[:, :, n_dh + n_hq:]                                # (S, m, F_c)
         d_dh, d_joint = d_dh[:, :, :n_dh], d_dh[:, :, n_dh:n_dh + n_hq] @ hq_w
         d_harm = self._harmonic_columns(d_joint)
+        d_bl = self._backlash_columns(d_joint)
         J = np.zeros((self.n_residuals, sp.size))
         wh = self.whiten
         J[:self.n_data, self._dh_idx] = wh(d_dh).reshape(S * m, -1)
@@ -519,6 +535,7 @@ class CalibrationProblem:
         J[:self.n_data, self._mass_idx] = wh(d_mass).reshape(S * m, -1)
         J[:self.n_data, self._knl_idx] = wh(d_knl).reshape(S * m, -1)
         J[:self.n_data, self._harm_idx] = wh(d_harm).reshape(S * m, -1)
+        J[:self.n_data, self._bl_idx] = wh(d_bl).reshape(S * m, -1)
         J[:self.n_data, self._meas_idx] = wh(jp[:, :, sp.column[self._meas_idx]]).reshape(S * m, -1)
         if self._org_idx.size:
             d_org = self._origin_columns(x, frames, p)
@@ -674,7 +691,7 @@ class CalibrationProblem:
         ``coupling`` (n_frames, n_dof) replaces the robot's coefficients (the ``coupling``
         group at x)."""
         sp = self.space
-        joints = np.unique(sp.frame[self._harm_idx])
+        joints = np.unique(np.concatenate([sp.frame[self._harm_idx], sp.frame[self._bl_idx]]))
         self._harm_joints = joints
         fr, co, wt = [], [], []
         pris = self.robot.frame_is_prismatic
@@ -702,6 +719,17 @@ class CalibrationProblem:
         kq = self.q[:, sp.frame[idx]] * k                       # (S, P_h)
         basis = np.where(sp.column[idx] % 2 == 0, np.sin(kq), np.cos(kq))
         return d_joint[:, :, pos] * basis[:, None, :]
+
+    def _backlash_columns(self, d_joint: np.ndarray) -> np.ndarray:
+        """(S, m, P_b) dy/db_j = dy/dq'_j s_j (the direction of the sample) from dy/dq'_j
+        ``d_joint`` (S, m, J_h)."""
+        idx = self._bl_idx
+        if idx.size == 0:
+            return np.zeros(d_joint.shape[:2] + (0,))
+        j = self.space.frame[idx]
+        pos = np.searchsorted(self._harm_joints, j)
+        assert self.directions is not None   # set whenever the group is free
+        return d_joint[:, :, pos] * self.directions[:, j][:, None, :]
 
     # ------------------------------------------------------------- starts
     def initial_x(self, x: np.ndarray | None = None, guess: bool = True) -> np.ndarray:

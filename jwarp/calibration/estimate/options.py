@@ -117,6 +117,10 @@ class CalibrationOptions:
             eigenvalue below this is reported as not identifiable.
         moved_sigmas: report parameters that moved more than this many prior sigmas.
         warn: emit the findings with ``warnings.warn`` (they are always in the result).
+        directions: (S, n_dof) the direction (+1, -1; 0 unknown) each joint last moved in
+            before each sample, for the ``backlash`` group (direction-dependent joint
+            errors, :mod:`~jwarp.calibration.estimate.backlash`); None: from the order of
+            the rows (the previous sample in measurement order).
     """
 
     free: str | Iterable[str]
@@ -150,6 +154,7 @@ class CalibrationOptions:
     loss: str = "linear"
     loss_scale: float | None = None
     fix_at: Mapping[str, Any] | None = None
+    directions: Any = None
 
     def validate(self) -> None:
         """ValueError/TypeError naming the first bad field."""

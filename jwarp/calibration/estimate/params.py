@@ -76,11 +76,15 @@ KAPPA_NL_GROUP = "kappa_nonlinear"                         # = robot.kappa_nonli
 #: the number of harmonics the ``harmonic`` group frees (at least; more if the robot has)
 HARMONIC_ORDER = 2
 COUPLING_GROUP = "coupling"                                # = coupled frames
+#: direction-dependent joint errors (backlash): ``q'_j += b_j s_j``, s_j = +-1 the
+#: direction joint j last moved in (:mod:`jwarp.calibration.estimate.backlash`)
+BACKLASH_GROUP = "backlash"
 #: the number of harmonics of the coupled angle the ``coupling`` group frees
 COUPLING_ORDER = 2
 #: robot parameter groups
 ROBOT_GROUPS = ("theta", "d", "r", "alpha", "beta", "kappa_theta", "kappa_alpha", "kappa_beta",
-                MASS_GROUP, HARMONIC_GROUP, KAPPA_NL_GROUP, ORIGIN_GROUP, COUPLING_GROUP)
+                MASS_GROUP, HARMONIC_GROUP, KAPPA_NL_GROUP, ORIGIN_GROUP, COUPLING_GROUP,
+                BACKLASH_GROUP)
 #: groups whose harmonic order ``orders`` may set (per group or per joint/frame pattern)
 ORDER_GROUPS = (HARMONIC_GROUP, COUPLING_GROUP)
 #: ``column`` of the ``coupling`` group: 0 the offset, COUPLING_COEF + t the t-th entry of
@@ -104,6 +108,8 @@ DEFAULT_SIGMA: dict[str, float] = {
     # coupled frames: 1 % of each coefficient, 10 mrad of offset and harmonic terms (a
     # passive coupling is looser than a drive: Agile Justin's torso shows ~10 mrad)
     COUPLING_GROUP: 1e-2,
+    # backlash / hysteresis of a joint: half the dead band, a few arcmin (1e-3 rad)
+    BACKLASH_GROUP: 1e-3,
 }
 
 class ParamKind(IntEnum):
@@ -120,6 +126,7 @@ class ParamKind(IntEnum):
     KAPPA_NL = 5
     ORIGIN = 6
     COUPLING = 7
+    BACKLASH = 8
 
 
 #: the kinds by their module-level names (``np.int64`` codes compare equal to them)
@@ -127,6 +134,7 @@ KIND_DH, KIND_KAPPA, KIND_MEAS, KIND_MASS = (ParamKind.DH, ParamKind.KAPPA, Para
                                              ParamKind.MASS)
 KIND_HARMONIC, KIND_KAPPA_NL = ParamKind.HARMONIC, ParamKind.KAPPA_NL
 KIND_ORIGIN, KIND_COUPLING = ParamKind.ORIGIN, ParamKind.COUPLING
+KIND_BACKLASH = ParamKind.BACKLASH
 
 
 def coupled_frames(robot: RobotModel, dh_frames: Iterable[int]) -> list[int]:
@@ -336,6 +344,50 @@ def influencing_frames(robot: RobotModel, measured: Iterable[int] | None, elasti
             if not use[i] and loaded[i] and any(a in chain for a in robot.ancestors(i)):
                 use[i] = True
     return [int(i) for i in np.nonzero(use & dh)[0]]
+
+
+#: the ``RobotModel.notes`` key of a robot's backlash: JSON ``{joint: b}`` [rad or m]
+BACKLASH_NOTE = "backlash"
+
+
+def robot_backlash(robot: RobotModel) -> np.ndarray:
+    """(n_dof,) the backlash b_j recorded in ``robot.notes['backlash']`` (0 where none;
+    ValueError naming the note when it is not a JSON object of numbers)."""
+    import json
+
+    out = np.zeros(robot.n_dof)
+    text = robot.notes.get(BACKLASH_NOTE)
+    if not text:
+        return out
+    try:
+        doc = json.loads(text)
+        names = robot.joint_names
+        for k, v in doc.items():
+            if k in names:
+                out[names.index(k)] = float(v)
+    except (ValueError, TypeError, AttributeError):
+        raise ValueError(f"notes.{BACKLASH_NOTE}: expected a JSON object {{joint: backlash}}"
+                         ) from None
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f"notes.{BACKLASH_NOTE}: not finite")
+    return out
+
+
+def with_backlash(robot: RobotModel, b: np.ndarray) -> RobotModel:
+    """A copy of ``robot`` recording the backlash b (n_dof,) [rad or m] in
+    ``notes['backlash']`` (its nonzero entries; none: the note removed). The kinematics
+    kernels do not apply it (it needs the direction of motion):
+    :func:`~jwarp.calibration.estimate.result.model_frames` does, given ``directions``."""
+    import json
+
+    notes = dict(robot.notes)
+    nz = {robot.joints[j].name: float(v) for j, v in enumerate(np.asarray(b, np.float64))
+          if v != 0.0}
+    if nz:
+        notes[BACKLASH_NOTE] = json.dumps(nz)
+    else:
+        notes.pop(BACKLASH_NOTE, None)
+    return robot.copy(notes=notes)
 
 
 def harmonic_joints(robot: RobotModel, dh_frames: Iterable[int]) -> list[int]:
@@ -569,6 +621,16 @@ class ParameterSpace:
                             kind.append(KIND_HARMONIC)
                             frm.append(j)
                             col.append(2 * k + ab)
+            elif g == BACKLASH_GROUP:
+                bl0 = robot_backlash(robot)
+                for j in harmonic_joints(robot, dh_frames):
+                    names.append(f"{robot.joints[j].name}.backlash")
+                    grp.append(g)
+                    nom.append(float(bl0[j]))
+                    sg.append(sig[g])
+                    kind.append(KIND_BACKLASH)
+                    frm.append(j)
+                    col.append(0)
             elif g == ORIGIN_GROUP:
                 if static_frames is None:
                     measured = (getattr(measurement, "frames", None)
@@ -765,6 +827,8 @@ class ParameterSpace:
             out = with_static_transforms(out, self.static_transforms_at(x))
         if np.any(self.kind == KIND_COUPLING):
             out = self.with_coupling(out, x)
+        if np.any(self.kind == KIND_BACKLASH):
+            out = with_backlash(out, self.backlash_at(x))
         return out
 
     def coupling_at(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -841,6 +905,15 @@ class ParameterSpace:
         h[:, :h0.shape[1]] = h0
         h[self.frame[m], self.column[m] // 2, self.column[m] % 2] = x[m]
         return h
+
+    def backlash_at(self, x: Any) -> np.ndarray:
+        """(n_dof,) backlash b_j [rad or m] at ``x`` (the robot's recorded one,
+        :func:`robot_backlash`, where not free)."""
+        x = self.check(x)
+        out = robot_backlash(self.robot)
+        m = self.kind == KIND_BACKLASH
+        out[self.frame[m]] = x[m]
+        return out
 
     def kappa_nonlinear_at(self, x: Any) -> np.ndarray:
         """(n_frames,) nonlinear joint compliances [rad/(N m)^3] at ``x``."""

@@ -19,7 +19,10 @@ import numpy as np
 from jwarp import kinematics as K
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.calibration.estimate.params import KIND_KAPPA, KIND_MASS, ParameterSpace
+from jwarp.model.valid_range import ValidRange, record_valid_range, valid_range_of
+from jwarp.calibration.estimate.backlash import check_directions
+from jwarp.calibration.estimate.params import (KIND_KAPPA, KIND_MASS, ParameterSpace,
+                                               robot_backlash)
 
 
 class CalibrationWarning(UserWarning):
@@ -56,15 +59,26 @@ def group_norms(diff: np.ndarray, groups: list[tuple[str, np.ndarray]]) -> np.nd
 
 def model_frames(robot: RobotModel, q: np.ndarray, *, kappa: Any = None,
                  elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
-                 tol: float = 1e-12) -> np.ndarray:
+                 tol: float = 1e-12, directions: Any = None) -> np.ndarray:
     """World frames (S, n_frames, 4, 4) float64 on CPU: elastic equilibrium with ``kappa``
     (default the robot's) when elastic (default: iff kappa or the robot's
     ``kappa_nonlinear`` is nonzero), else rigid FK (both with the robot's joint
     transmission errors, if any, and the angle-dependent errors of coupled frames,
-    ``coupling_harmonic``, as per-sample DH rows)."""
+    ``coupling_harmonic``, as per-sample DH rows). ``directions`` (S, n_dof): the
+    direction each joint last moved in (:mod:`~jwarp.calibration.estimate.backlash`),
+    with which the robot's recorded backlash (``notes['backlash']``) is applied; None: no
+    backlash."""
     kap = K.kappa_array(robot, kappa)
     model = get_robot(robot)
     dh = None
+    q_kin = q
+    if directions is not None:
+        b = robot_backlash(model)
+        if np.any(b):
+            qa = np.asarray(q, np.float64)
+            if qa.ndim != 2:
+                raise ValueError(f"q: expected (S, n_dof) with directions, got {qa.shape}")
+            q_kin = model.joint_transmission(qa) + check_directions(directions, *qa.shape) * b
     if model.has_coupling_harmonic:
         qa = np.asarray(q, np.float64)
         delta = model.coupled_frame_delta(qa)                        # (..., n)
@@ -73,6 +87,9 @@ def model_frames(robot: RobotModel, q: np.ndarray, *, kappa: Any = None,
         dh[..., 1] += delta * ~pris
         dh[..., 0] += delta * pris
         model = K.without_coupling_harmonic(model)   # the rows carry them (not the kernels)
+    if q_kin is not q:   # the links' values carry the transmission errors and the backlash
+        model = K.without_transmission(model)
+    q = q_kin
     if elastic is None:
         elastic = bool(np.any(kap != 0) or np.any(model.kappa_nonlinear))
     if elastic:
@@ -144,7 +161,7 @@ def fixed_params(measurement: Any, fix_at: Mapping[str, Any], p_nominal: Any = N
 
 def predict(robot: Any, measurement: Any, p: Any, q: Any, meta: Mapping[str, Any] | None = None,
             *, kappa: Any = None, elastic: bool | None = None, lam: float = 1.0,
-            max_iter: int = 100, tol: float = 1e-12) -> np.ndarray:
+            max_iter: int = 100, tol: float = 1e-12, directions: Any = None) -> np.ndarray:
     """Predicted observations (S, m) of ``measurement`` with parameters ``p`` (P_meas,) for
     joint values ``q`` (S, n_dof) on ``robot`` (elastic as in :func:`model_frames`)."""
     from jwarp.calibration.estimate.samples import check_samples
@@ -154,25 +171,28 @@ def predict(robot: Any, measurement: Any, p: Any, q: Any, meta: Mapping[str, Any
     qa = np.asarray(q, np.float64)
     S = qa.shape[0] if qa.ndim == 2 else 0
     qa, _, md = check_samples(model, measurement, q, np.zeros((S, m)), meta)
-    fr = model_frames(model, qa, kappa=kappa, elastic=elastic, lam=lam, max_iter=max_iter, tol=tol)
+    fr = model_frames(model, qa, kappa=kappa, elastic=elastic, lam=lam, max_iter=max_iter,
+                      tol=tol, directions=directions)
     return np.asarray(measurement.predict(fr, np.asarray(p, np.float64), md), np.float64)
 
 
 def errors(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
            meta: Mapping[str, Any] | None = None, *, kappa: Any = None,
            elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
-           tol: float = 1e-12) -> np.ndarray:
+           tol: float = 1e-12, directions: Any = None) -> np.ndarray:
     """Per-sample errors (S, G) = norm of (prediction - y) per observation group (marker,
     image point, distance) in the measurement's unit, for rows q (S, n_dof), y (S, m).
 
     ``robot`` is e.g. the nominal or the calibrated model (``result.robot``); ``p`` the
-    measurement parameters (``result.params``); elastic as in :func:`model_frames`.
+    measurement parameters (``result.params``); elastic and ``directions`` (backlash) as
+    in :func:`model_frames`.
     """
     from jwarp.calibration.estimate.samples import check_samples
 
     model = get_robot(robot)
     qa, ya, md = check_samples(model, measurement, q, y, meta)
-    fr = model_frames(model, qa, kappa=kappa, elastic=elastic, lam=lam, max_iter=max_iter, tol=tol)
+    fr = model_frames(model, qa, kappa=kappa, elastic=elastic, lam=lam, max_iter=max_iter,
+                      tol=tol, directions=directions)
     yp = np.asarray(measurement.predict(fr, np.asarray(p, np.float64), md), np.float64)
     return group_norms(yp - ya, observation_groups(measurement))
 
@@ -220,6 +240,10 @@ class CalibrationResult:
     warnings: the findings as text (also emitted as CalibrationWarning when warn=True).
     space: the ParameterSpace (to map x again); elastic: whether the equilibrium was used.
     time_s: wall time [s].
+    valid_range: the range of the calibration poses, per joint and coupled angle
+        (:class:`~jwarp.model.valid_range.ValidRange`), also recorded in
+        ``robot.notes['valid_range']``: IK, the planner and ``jwarp fk`` warn outside it.
+    provenance: how settings were chosen (e.g. ``{"cv": ...}`` of a cross-validation).
     """
 
     robot: RobotModel
@@ -249,6 +273,8 @@ class CalibrationResult:
     time_s: float
     unit: str = "m"
     param_names: list[str] = field(default_factory=list)
+    valid_range: ValidRange | None = None
+    provenance: dict[str, Any] = field(default_factory=dict)
 
     def value(self, name: str) -> float:
         """Calibrated value of the free parameter ``name``."""
@@ -285,6 +311,9 @@ class CalibrationResult:
                                for d in self.unidentifiable],
             "moved": [[n, v] for n, v in self.moved],
             "warnings": list(self.warnings),
+            **({"valid_range": self.valid_range.to_dict()} if self.valid_range is not None
+               else {}),
+            **({"provenance": self.provenance} if self.provenance else {}),
         }
 
 
@@ -410,8 +439,11 @@ def build_result(prob: Any, sol: Any, x_start: np.ndarray, iterations: int, star
             head += f"\n  ... and {len(msgs) - 20} more (see result.warnings)"
         warnings.warn(head, CalibrationWarning, stacklevel=_caller_stacklevel())
     meas = prob.measurement
+    robot = sp.robot_at(x)
+    vr = valid_range_of(robot, prob.q)
     return CalibrationResult(
-        robot=sp.robot_at(x), params=sp.measurement_params(x), x=x, x_start=np.asarray(x_start),
+        robot=record_valid_range(robot, prob.q), params=sp.measurement_params(x), x=x,
+        x_start=np.asarray(x_start),
         names=list(sp.names), groups=list(sp.groups), nominal=sp.nominal.copy(),
         sigma=sp.sigma.copy(), std=std, cost=float(sol.cost), success=bool(sol.status > 0),
         status=int(sol.status), message=str(sol.message), nfev=int(sol.nfev),
@@ -419,7 +451,8 @@ def build_result(prob: Any, sol: Any, x_start: np.ndarray, iterations: int, star
         error_names=[n for n, _ in groups], unidentifiable=weak, moved=moved, warnings=msgs,
         space=sp, elastic=prob.elastic, time_s=float(time_s),
         unit=str(getattr(meas, "unit", "m")),
-        param_names=list(getattr(getattr(meas, "params", None), "names", []) or []))
+        param_names=list(getattr(getattr(meas, "params", None), "names", []) or []),
+        valid_range=vr)
 
 
 def _caller_stacklevel() -> int:

@@ -36,7 +36,7 @@ from jwarp.model import RobotModel
 from jwarp.model.measurement import Measurement
 from jwarp.calibration.files import Samples, Setup, make_measurement, parse_samples, \
     read_setup, read_text, samples_text, sha256_hex, write_setup
-from jwarp.calibration.estimate.params import perturb_robot
+from jwarp.calibration.estimate.params import perturb_robot, robot_backlash
 from jwarp.calibration.estimate.result import model_frames
 from jwarp.calibration.simulate.unmodeled import Unmodeled, add_unmodeled, parse_unmodeled
 
@@ -314,6 +314,10 @@ def simulate_campaign(robot: RobotModel, setup: Setup, n: int, *, seed: int = 0,
     q = np.concatenate(qs)[:n]
     meta = {k: np.concatenate([m[k] for m in metas])[:n] for k in metas[0]}
     fr = np.concatenate(frames_kept)[:n]
+    if np.any(robot_backlash(true_robot)):   # the direction of motion: the samples' order
+        from jwarp.calibration.estimate.backlash import motion_directions
+
+        fr = model_frames(true_robot, q, directions=motion_directions(q))
     y = meas.simulate(fr, p_true, sigma, rng, meta or None)
     rough = rough_setup(setup, rng, rough_position=rough_position,
                         rough_rotation=rough_rotation, rough_marker=rough_marker)

@@ -27,6 +27,12 @@ effects, each drawn once per true robot (seeded) and written into the true robot
   phi_k)`` (default ``amp`` 1e-2 rad, ``k`` 2: 5-10 mrad per harmonic, the size that
   Agile Justin's data suggests); stored in the true robot's ``coupling_harmonic``. The
   calibration's ``coupling`` group models it.
+* ``backlash`` -- direction-dependent joint errors (backlash, hysteresis; issue 38): every
+  joint driving a DH frame gets ``b_j ~ U(min, max)`` (default 1e-3 .. 3e-3 rad), and
+  the links see ``q_j + b_j s_j`` with ``s_j`` the direction joint j last moved in, from
+  the previous sample in measurement order
+  (:func:`~jwarp.calibration.estimate.backlash.motion_directions`); stored in the true
+  robot's ``notes['backlash']``. The calibration's ``backlash`` group models it.
 
 Spec strings (``--unmodeled``): comma-separated effects, each optionally followed by
 ``:key=value`` options; further ``key=value`` items after a comma belong to the effect
@@ -51,6 +57,7 @@ EFFECTS: dict[str, dict[str, float]] = {
     "kappa_nonlinear": {"rel": 0.5},
     "kappa_beta": {"min": 1e-5, "max": 3e-5},
     "coupling": {"amp": 1e-2, "k": 2},
+    "backlash": {"min": 1e-3, "max": 3e-3},
 }
 #: what ``all`` selects: the effects of issue 16 (``coupling`` is named on its own, so
 #: that campaigns with ``all`` keep their data)
@@ -82,6 +89,9 @@ class Unmodeled:
                                                      or not 1 <= opts.get("k", 2) <= 20):
                 raise ValueError(f"{option}: {name}:k must be an integer in [1, 20], "
                                  f"got {opts.get('k')!r}")
+            if name == "backlash" and opts.get("min", 1e-3) > opts.get("max", 3e-3):
+                raise ValueError(f"{option}: backlash: min > max "
+                                 f"({opts.get('min', 1e-3)!r} > {opts.get('max', 3e-3)!r})")
             if name == "kappa_beta" and opts.get("min", 1e-5) > opts.get("max", 3e-5):
                 raise ValueError(f"{option}: kappa_beta: min > max "
                                  f"({opts.get('min', 1e-5)!r} > {opts.get('max', 3e-5)!r})")
@@ -170,7 +180,7 @@ def reference_torques(robot: RobotModel, q: np.ndarray, percentile: float = 95.0
 def add_unmodeled(truth: RobotModel, unmodeled: Unmodeled, rng: np.random.Generator,
                   q_ref: np.ndarray) -> RobotModel:
     """A copy of ``truth`` with the effects of ``unmodeled`` drawn from ``rng`` (in the
-    fixed order harmonic, kappa_nonlinear, kappa_beta, coupling); ``q_ref`` (N, n_dof)
+    fixed order harmonic, kappa_nonlinear, kappa_beta, coupling, backlash); ``q_ref`` (N, n_dof)
     configurations defining the reference torques of ``kappa_nonlinear``."""
     if not unmodeled:
         return truth
@@ -205,4 +215,13 @@ def add_unmodeled(truth: RobotModel, unmodeled: Unmodeled, rng: np.random.Genera
             phi = rng.uniform(-np.pi, np.pi, K)
             ch[i, :K, 0] += A * np.cos(phi)          # A sin(k u + phi) = A cos(phi) sin(k u)
             ch[i, :K, 1] += A * np.sin(phi)          #                  + A sin(phi) cos(k u)
-    return truth.copy(harmonic=harm, kappa_nonlinear=knl, kappa=kap, coupling_harmonic=ch)
+    out = truth.copy(harmonic=harm, kappa_nonlinear=knl, kappa=kap, coupling_harmonic=ch)
+    if "backlash" in unmodeled.effects:   # drawn last: the other effects keep their draws
+        from jwarp.calibration.estimate.params import harmonic_joints, with_backlash
+
+        lo, hi = unmodeled.get("backlash", "min"), unmodeled.get("backlash", "max")
+        b = np.zeros(truth.n_dof)
+        joints = harmonic_joints(truth, np.nonzero(dh)[0])
+        b[joints] = rng.uniform(lo, hi, len(joints))
+        out = with_backlash(out, b)
+    return out

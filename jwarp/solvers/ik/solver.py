@@ -18,6 +18,7 @@ from jwarp.kernels import ik_step as step_kernels
 from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
+from jwarp.model.valid_range import check_valid_range
 from jwarp.solvers.overrides import renamed_argument, with_overrides
 from jwarp.world import collision
 from jwarp.world.model_check import check_collision_model
@@ -464,6 +465,8 @@ class IKSolver:
         if model.has_harmonic:  # back to the commanded joint values
             res = dataclasses.replace(res, q=untransmitted(model, res.q),
                                       all_q=untransmitted(model, res.all_q))
+        # a calibrated robot: warn once when the solutions leave its calibration's range
+        check_valid_range(model, res.q, "ik")
         return res.reshaped(lead)
 
 

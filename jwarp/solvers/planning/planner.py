@@ -15,6 +15,7 @@ from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.world.model_check import check_collision_model
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
+from jwarp.model.valid_range import check_valid_range
 from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.kinematics.launch import kappa_array
 from jwarp.world.path_feasibility import (MAX_CHECK_SUBSTEPS, SWEEP_SAFETY, certify_check,
@@ -178,7 +179,10 @@ class Planner:
             seeds = self._warm_seeds(start, goal)
         model = self.robot
         if not model.has_harmonic:
-            return self._plan(start, goal, seeds, "seeds")
+            out = self._plan(start, goal, seeds, "seeds")
+            # a calibrated robot: warn once when the paths leave its calibration's range
+            check_valid_range(model, out.path, "plan")
+            return out
         # transmission errors: the kernels and checks work in the links' joint space; the
         # endpoints and seeds go in through q' = q + dq(q), the paths come back through its
         # inverse (waypoints exact; between them the links follow the straight segment in
@@ -192,6 +196,7 @@ class Planner:
         res = self._plan(q0, q1, seeds, "seeds")
         res.path = untransmitted(model, res.path)
         res.paths_source = untransmitted(model, res.all_paths)
+        check_valid_range(model, res.path, "plan")
         return res
 
     def _warm_seeds(self, start: Any, goal: Any) -> np.ndarray:
@@ -716,6 +721,7 @@ def plan(robot: Any, world: Any, start: Any, goal: Any, *, seeds: Any = None,
     planner = Planner(model, world, len(q0), options, device=device, dtype=dtype)
     res = planner._plan(q0, q1, seeds, "seeds", t_start=t0)
     res.wall_time = time.perf_counter() - t0
+    check_valid_range(model, res.path, "plan")   # a calibrated robot: warn once outside
     return res
 
 
