@@ -296,15 +296,15 @@ class PathCheck:
     def _clearance_text(self, i: int, self_pair: bool) -> str:
         """``clearance 3.00 mm`` and, when positive, the margin it is below."""
         d = float(self.clearance[i])
-        mm = f"clearance {d * 1e3:.2f} mm"
+        mm = f"clearance {mm_text(d)} mm"
         if d <= 0 or self.margin is None:
             return mm
         if self_pair:
-            return f"{mm}, below the self margin {float(self.self_margin or 0.0) * 1e3:.2f} mm"
+            return f"{mm}, below the self margin {mm_text(float(self.self_margin or 0.0))} mm"
         em = self.endpoint_margin
         both = "" if em is None or em == self.margin else \
-            f" (endpoint margin {em * 1e3:.2f} mm on the first and last segment)"
-        return f"{mm}, below the margin {self.margin * 1e3:.2f} mm{both}"
+            f" (endpoint margin {mm_text(em)} mm on the first and last segment)"
+        return f"{mm}, below the margin {mm_text(self.margin)} mm{both}"
 
     def reason(self, i: int) -> str:
         """Why path ``i`` is infeasible, in words ("feasible" if it is not)."""
