@@ -24,7 +24,6 @@ Python: :func:`warmup` (also ``jwarp.warmup``).
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -145,7 +144,8 @@ def warmup(device: DeviceLike = None, robots: Iterable[str | RobotModel] | None 
     """Compile (or load from the kernel cache) every kernel of ``families`` in ``dtypes``
     on ``device`` (default: CUDA if present, else the CPU), the IK step for each of
     ``robots`` (default: every registered robot), ``jobs`` modules at a time (default
-    ``min(cpu count, 4)``). ``progress``: a tqdm bar on stderr (terminal only).
+    ``min(jwarp.core.threads.cpu_threads(), 4)``). ``progress``: a tqdm bar on stderr
+    (terminal only).
 
     Returns:
         :class:`WarmupReport` (the cache folder, modules loaded and compiled, seconds).
@@ -162,7 +162,9 @@ def warmup(device: DeviceLike = None, robots: Iterable[str | RobotModel] | None 
     dev = resolve_device(device)
     names = list(robot_names()) if robots is None else list(robots)
     if jobs is None:
-        jobs = min(os.cpu_count() or 1, 4)
+        from jwarp.core.threads import cpu_threads
+
+        jobs = min(cpu_threads(), 4)
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ValueError(f"jobs: expected a positive integer, got {jobs!r}")
     mods = kernel_modules(families, dtypes, names)
@@ -231,6 +233,8 @@ def add_subcommands(sub: Any) -> None:
                    metavar="T,...", help="float32, float64 or both (default both)")
     s.add_argument("--families", type=_list_arg("--families"), default=list(FAMILIES),
                    metavar="F,...", help=f"kernel families (default all: {', '.join(FAMILIES)})")
-    s.add_argument("--jobs", type=int_arg("--jobs", 1, 64), default=min(os.cpu_count() or 1, 4),
-                   metavar="N", help="modules compiled at a time (default min(cores, 4))")
+    s.add_argument("--jobs", type=int_arg("--jobs", 1, 64), default=None,
+                   metavar="N", help="modules compiled at a time (default min(free cores, 4): "
+                                     "$JWARP_THREADS, else the cores this process may use "
+                                     "less the load of others)")
     s.set_defaults(func=cmd_warmup)

@@ -13,7 +13,9 @@ import warp as wp
 class PlanResult:
     """Result of :func:`plan` / :meth:`Planner.plan` for B problems.
 
-    path (B, W, n_dof) best path per problem; feasible (B,) bool; cost (B,) U_path;
+    path (B, W, n_dof) the chosen path per problem (shortened by
+    :attr:`PlanOptions.shorten` where that was shorter and certified: then it differs from
+    ``all_paths[b, start_index[b]]``, see ``length_before``); feasible (B,) bool; cost (B,) U_path;
     length_cost (B,) U_l (eq. 3.5, 1 for the straight line); collision_cost (B,) weighted
     world + self cost summed over substeps; iterations (B,) gradient steps until the chosen
     path was feasible (or the iteration budget); start_index (B,) which multi-start (seed)
