@@ -38,9 +38,13 @@ test).
    the same time limit. Skipped (said so) where ``ompl`` cannot be imported, or with
    ``--no-ompl``. Its paths are not re-verified (``--verify-ompl`` does).
 
+``--no-stop-when-solved`` plans with ``stop_when_solved=False``; ``--option NAME=JSON``
+sets another PlanOptions field (repeatable, e.g. ``--option shorten=0``).
+
 Printed: the machine, the settings, then per device and margin a table per family
 (problems, solved, solved by the optimizer / by the fallback, verified collision-free of
-the solved, collisions, margin violations, median / p95 / max seconds) and the baseline's
+the solved, collisions, margin violations, median / p95 / max seconds, median / p95 length
+ratio: U_l of the solved paths, 1 for the straight line) and the baseline's
 line, and at the end a summary table. A path jwarp called feasible that the verifier finds
 colliding is saved (scene file, ``path.npy``, the verdict) under ``--save-failures``.
 """
