@@ -24,6 +24,7 @@ Python: :func:`warmup` (also ``jwarp.warmup``).
 from __future__ import annotations
 
 import argparse
+from types import SimpleNamespace
 import sys
 import time
 from dataclasses import dataclass, field
@@ -38,7 +39,8 @@ if TYPE_CHECKING:
 __all__ = ["DTYPES", "FAMILIES", "WarmupReport", "add_subcommands", "kernel_modules", "warmup"]
 
 #: the kernel families, in the order they are compiled
-FAMILIES = ("fk", "elastic", "geometry", "collision", "path", "motion", "ik", "calibration")
+FAMILIES = ("fk", "elastic", "geometry", "collision", "path", "motion", "ik", "calibration",
+            "learn", "spherize")
 #: the float types every family is built in (the public API follows its input's dtype)
 DTYPES = ("float32", "float64")
 
@@ -99,7 +101,8 @@ def kernel_modules(families: Iterable[str] = FAMILIES, dtypes: Iterable[str] = D
     nothing. Raises ValueError naming ``families``/``dtypes`` for an unknown entry."""
     import warp as wp
 
-    from jwarp.kernels import collision, elastic, fk, geometry, ik, ik_step, motion, path
+    from jwarp.kernels import (collision, collision_wide, elastic, fk, geometry, ik, ik_step,
+                               motion, path)
     from jwarp.kernels import visibility
     from jwarp.model.registry import robot as get_robot
 
@@ -117,7 +120,7 @@ def kernel_modules(families: Iterable[str] = FAMILIES, dtypes: Iterable[str] = D
             elif fam == "geometry":
                 spaces.append(geometry.kernels(sc))
             elif fam == "collision":
-                spaces.append(collision.kernels(sc))
+                spaces += [collision.kernels(sc), collision_wide.kernels(sc)]
             elif fam == "path":
                 spaces += [path.kernels(sc), path.cartesian_kernels(sc)]
             elif fam == "motion":
@@ -131,6 +134,15 @@ def kernel_modules(families: Iterable[str] = FAMILIES, dtypes: Iterable[str] = D
                     spaces.append(ik_step.dls_kernels(sc, planar, n_dof))
             elif fam == "calibration":
                 spaces.append(visibility.kernels(sc))
+            elif fam == "learn":  # the basis point set encoding of jwarp train (float32)
+                from jwarp.learn import bps
+
+                spaces.append(bps.kernels())
+            elif fam == "spherize":  # the sphere fit of URDF imports (fixed types)
+                from jwarp.importers import sphere_refine, spheres
+
+                spaces.append(SimpleNamespace(
+                    fit=list(spheres.fit_kernels()) + list(sphere_refine.fit_kernels())))
     modules: dict[int, Any] = {}
     for space in spaces:
         for k in _kernels_of(space):
