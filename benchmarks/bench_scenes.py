@@ -38,9 +38,13 @@ test).
    the same time limit. Skipped (said so) where ``ompl`` cannot be imported, or with
    ``--no-ompl``. Its paths are not re-verified (``--verify-ompl`` does).
 
+``--no-stop-when-solved`` plans with ``stop_when_solved=False``; ``--option NAME=JSON``
+sets another PlanOptions field (repeatable, e.g. ``--option shorten=0``).
+
 Printed: the machine, the settings, then per device and margin a table per family
 (problems, solved, solved by the optimizer / by the fallback, verified collision-free of
-the solved, collisions, margin violations, median / p95 / max seconds) and the baseline's
+the solved, collisions, margin violations, median / p95 / max seconds, median / p95 length
+ratio: U_l of the solved paths, 1 for the straight line) and the baseline's
 line, and at the end a summary table. A path jwarp called feasible that the verifier finds
 colliding is saved (scene file, ``path.npy``, the verdict) under ``--save-failures``.
 """
@@ -129,7 +133,8 @@ def plan_one(robot: Any, prob: Problem, margin: float, args: argparse.Namespace,
     from jwarp.solvers.planning import Planner, PlanOptions
 
     o = PlanOptions(margin=margin, endpoint_margin=args.endpoint_margin,
-                    time_limit=args.time_limit, stop_when_solved=True, fallback="rrt")
+                    time_limit=args.time_limit, stop_when_solved=not args.no_stop_when_solved,
+                    fallback="rrt", **extra_options(args))
     wp.synchronize_device(device)
     t0 = time.perf_counter()
     try:
@@ -138,6 +143,24 @@ def plan_one(robot: Any, prob: Problem, margin: float, args: argparse.Namespace,
         res = e
     wp.synchronize_device(device)
     return time.perf_counter() - t0, res
+
+
+def extra_options(args: argparse.Namespace) -> dict:
+    """PlanOptions fields given on the command line (``--option NAME=VALUE``)."""
+    out = {}
+    for text in args.option or []:
+        k, _, v = text.partition("=")
+        out[k.strip()] = json.loads(v)
+    return out
+
+
+def length_ratio(path: np.ndarray) -> float:
+    """The length cost U_l of a path (W, n) (thesis eq. 3.5, as ``PlanResult.length_cost``):
+    1 for the straight line at evenly spaced waypoints, > 1 for any detour."""
+    path = np.asarray(path, np.float64)
+    d2 = float(np.sum((path[-1] - path[0]) ** 2))
+    seg = float(np.sum(np.diff(path, axis=0) ** 2))
+    return (len(path) - 1) * seg / max(d2, 1e-12)
 
 
 def verify(v: PathVerifier, path: np.ndarray, margin: float, end_margin: float) -> dict:
@@ -201,6 +224,8 @@ def run_jwarp(robot: Any, urdf: str, spheres: list, probs: list[Problem], margin
                    "family": p.family, "solved": ok, "time_s": t, "stage": str(res.stage[0]),
                    "stop_reason": str(res.stop_reason), "reason": str(res.reasons[0]),
                    "timings": {k2: float(v) for k2, v in res.timings.items()}}
+            if ok:
+                row["length_ratio"] = length_ratio(res.path[0])
         if ok and not args.no_verify:
             path = np.asarray(res.path[0], np.float64)
             row.update(verify(p.verifier(urdf, spheres, robot.joint_names), path, margin,
@@ -321,6 +346,7 @@ def stats(rows: list[dict]) -> dict:
     t = np.array([r["time_s"] for r in rows]) if rows else np.zeros(0)
     solved = [r for r in rows if r["solved"]]
     checked = [r for r in solved if "collision" in r]
+    lr = np.array([r["length_ratio"] for r in solved if "length_ratio" in r])
     return {
         "problems": len(rows), "solved": len(solved),
         "solved_pct": 100.0 * len(solved) / len(rows) if rows else math.nan,
@@ -337,11 +363,14 @@ def stats(rows: list[dict]) -> dict:
         "max_s": float(t.max()) if len(t) else math.nan,
         "median_solved_s": (float(np.median([r["time_s"] for r in solved]))
                             if solved else math.nan),
+        "median_length_ratio": (float(np.median(lr)) if len(lr) else math.nan),
+        "p95_length_ratio": (float(np.percentile(lr, 95)) if len(lr) else math.nan),
     }
 
 
 HEAD = (f"{'family':<17} {'n':>4} {'solved':>7} {'optim':>5} {'fallb':>5} {'verif.free':>10} "
-        f"{'coll':>4} {'m-viol':>6} {'mesh<m':>6} {'error':>5} {'median_s':>8} {'p95_s':>6} {'max_s':>6}")
+        f"{'coll':>4} {'m-viol':>6} {'mesh<m':>6} {'error':>5} {'median_s':>8} {'p95_s':>6} {'max_s':>6} "
+        f"{'len_med':>7} {'len_p95':>7}")
 
 
 def line(name: str, s: dict) -> str:
@@ -349,7 +378,8 @@ def line(name: str, s: dict) -> str:
     return (f"{name:<17} {s['problems']:>4} {pct(s['solved'], s['problems']):>7} "
             f"{s['optimizer']:>5} {s['fallback']:>5} {vf:>10} {s['collisions']:>4} "
             f"{s['sphere_margin_violations']:>6} {s['mesh_below_margin']:>6} {s['errors']:>5} "
-            f"{s['median_s']:>8.3f} {s['p95_s']:>6.3f} {s['max_s']:>6.3f}")
+            f"{s['median_s']:>8.3f} {s['p95_s']:>6.3f} {s['max_s']:>6.3f} "
+            f"{s['median_length_ratio']:>7.2f} {s['p95_length_ratio']:>7.2f}")
 
 
 def print_table(rows: list[dict], families: list[str]) -> dict:
@@ -398,6 +428,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--endpoint-margin", type=float, default=0.0,
                     help="clearance [m] of the first/last segment (0: grasp poses stay plannable)")
     ap.add_argument("--time-limit", type=float, default=1.0, help="seconds per problem (1)")
+    ap.add_argument("--no-stop-when-solved", action="store_true",
+                    help="PlanOptions(stop_when_solved=False): every start optimised")
+    ap.add_argument("--option", action="append", metavar="NAME=JSON",
+                    help="another PlanOptions field, e.g. --option shorten=0 (repeatable)")
     ap.add_argument("--no-ompl", action="store_true", help="skip the OMPL baseline")
     ap.add_argument("--verify-ompl", action="store_true",
                     help="also re-check OMPL's paths with the verifier")
@@ -446,7 +480,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"problems: {len(probs)} ({', '.join(families)}) from {folder}; robot panda, "
           f"{len(robot.spheres)} spheres; world: exact primitives (no grid)")
     print(f"jwarp PlanOptions: margins {margins} m, endpoint_margin {args.endpoint_margin:g} m, "
-          f"time_limit {args.time_limit:g} s, stop_when_solved, fallback rrt; time = "
+          f"time_limit {args.time_limit:g} s, stop_when_solved={not args.no_stop_when_solved}, "
+          f"fallback rrt, {extra_options(args)}; time = "
           f"Planner construction + plan(), after one untimed warm-up call")
     print("verifier: URDF meshes + robot spheres vs exact primitives (coal), <= 0.5 deg "
           "steps; first/last segment at endpoint_margin, inner at margin")
@@ -494,12 +529,15 @@ def main(argv: list[str] | None = None) -> int:
         print()
     print("summary")
     print(f"{'planner':<16} {'device':<7} {'margin':>6} {'problems':>8} {'solved':>7} "
-          f"{'verif.free':>10} {'coll':>4} {'median_s':>8} {'p95_s':>6} {'max_s':>6}")
+          f"{'verif.free':>10} {'coll':>4} {'median_s':>8} {'p95_s':>6} {'max_s':>6} "
+          f"{'len_med':>7} {'len_p95':>7}")
     for s in summary:
         vf = f"{s['verified_free']}/{s['verified']}" if s["verified"] else "-"
         print(f"{s['planner']:<16} {s['device']:<7} {s['margin']:>6g} {s['problems']:>8} "
               f"{pct(s['solved'], s['problems']):>7} {vf:>10} {s['collisions']:>4} "
-              f"{s['median_s']:>8.3f} {s['p95_s']:>6.3f} {s['max_s']:>6.3f}")
+              f"{s['median_s']:>8.3f} {s['p95_s']:>6.3f} {s['max_s']:>6.3f} "
+              f"{s.get('median_length_ratio', math.nan):>7.2f} "
+              f"{s.get('p95_length_ratio', math.nan):>7.2f}")
     coll = sum(s["collisions"] for s in summary if s["planner"] == "jwarp")
     print(f"verifier collisions among jwarp's feasible paths: {coll} (must be 0); "
           f"wall time {elapsed():.0f} s; load average {os.getloadavg()[0]:.2f}", flush=True)

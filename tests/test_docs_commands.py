@@ -61,6 +61,9 @@ COMMAND_ELLIPSIS = {
     "docs/scenes.md: jwarp plan ... --no-stop-when-solved": (
         "--robot planar4 --world block.npz --start 1.2,0,0,0 --goal -1.2,0,0,0",
         "the plan three lines above"),
+    "docs/scenes.md: jwarp plan ... --shorten 0": (
+        "--robot planar4 --world block.npz --start 1.2,0,0,0 --goal -1.2,0,0,0",
+        "the plan four lines above"),
 }
 
 
@@ -816,7 +819,8 @@ def test_scenes_md_commands(in_work, capsys):
 
 def test_scenes_md_time_limit_and_no_stop(in_work, capsys):
     """docs/scenes.md: ``plan ... --time-limit 0.5 --fallback none`` ("at most about 0.5 s,
-    no fallback") and ``plan ... --no-stop-when-solved`` ("every start optimised"), with
+    no fallback"), ``plan ... --no-stop-when-solved`` ("every start optimised") and
+    ``plan ... --shorten 0`` (the first feasible path, not shortened), with
     the plan two and three lines above them (README's block world)."""
     _readme_block_world(in_work)
     code, out, err = run(capsys, argv_of("docs/scenes.md: jwarp plan ... --time-limit"))
@@ -830,6 +834,12 @@ def test_scenes_md_time_limit_and_no_stop(in_work, capsys):
     stop = re.search(r"stopped: (\w+); stage: (\w+)", out)
     assert code in (0, 1) and stop, out + err
     assert stop.group(1) in ("all_done", "iterations"), out  # not "solved": no early stop
+    # --shorten 0: the first feasible path as it is (its length line says nothing shortened)
+    code, out, err = run(capsys, argv_of("docs/scenes.md: jwarp plan ... --shorten 0"))
+    assert code in (0, 1), out + err
+    if code == 0:
+        assert re.search(r"length: \S+ x the straight line's length cost\n", out), out
+        assert "shortened" not in out, out
 
 
 def test_calibration_md_priors_and_orders(tmp_path, monkeypatch, capsys):

@@ -59,7 +59,10 @@ start is feasible (``--stop-when-solved``, the default; ``--no-stop-when-solved`
 every start until it is feasible or out of iterations), after ``--iterations`` or after
 ``--time-limit S`` seconds (default: none). ``--fallback rrt`` (default) gives an unsolved
 problem an RRT-Connect path as the seed of one more optimisation (after the iterations or
-half the time limit); ``--fallback none`` does not. The output says why the planner
+half the time limit); ``--fallback none`` does not. ``--shorten N`` (default 4; 0: off) pulls the solved path
+straight in N rounds of shortcuts proven by the exact check (with ``--stop-when-solved``).
+The output prints the path's length cost against the straight line's (and before the
+shortening). The output says why the planner
 stopped (``stop_reason``: solved, time_limit, iterations, all_done) and which stage solved
 the problem (``stage``: optimizer, fallback, none).
 
@@ -303,6 +306,17 @@ def _exact_endpoints(path: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.nda
     return path
 
 
+def _length_line(res: Any) -> str:
+    """The text output's line of the length ratio: U_l (1 for the straight line) and,
+    where :attr:`PlanOptions.shorten` shortened the path, what it was before."""
+    line = f"length: {res.length_cost[0]:.3g} x the straight line's length cost"
+    before = res.length_before
+    if before is not None and np.isfinite(before[0]) and before[0] > res.length_cost[0]:
+        line += (f" (shortened from {before[0]:.3g} x in {res.timings.get('shorten', 0.0):.3f} "
+                 f"s)")
+    return line
+
+
 def _name_width(model: Any) -> int:
     return max((len(n) for n in model.joint_names), default=5)
 
@@ -384,7 +398,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     try:
         budget = dict(stop_when_solved=args.stop_when_solved, time_limit=args.time_limit,
                       fallback=args.fallback, endpoint_margin=args.endpoint_margin,
-                      self_margin=args.self_margin, allow_no_collision=args.no_collision)
+                      self_margin=args.self_margin, allow_no_collision=args.no_collision,
+                      shorten=args.shorten)
         if net is not None:
             opts = PlanOptions(n_starts=args.starts, iterations=args.iterations,
                                n_waypoints=args.waypoints, n_substeps=args.substeps,
@@ -427,6 +442,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
               f"{_weights().length:g} x length {res.length_cost[0]:.6g}; iterations "
               f"{res.iterations[0]}; {res.n_substeps} substeps per segment; wall time "
               f"{res.wall_time:.3f} s")
+        if res.feasible[0]:
+            print(_length_line(res))
         stage = str(res.stage[0])
         print(f"stopped: {res.stop_reason}; stage: {stage} ({_STAGE_TEXT.get(stage, stage)})")
         print(f"path [rad/m] ({args.dtype}; start and goal as given):")
@@ -914,6 +931,10 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--stop-when-solved", action=argparse.BooleanOptionalAction, default=True,
                    help="stop as soon as a start is feasible (default); --no-stop-when-solved "
                         "optimises every start until it is feasible or out of iterations")
+    s.add_argument("--shorten", type=int_arg("--shorten", 0), default=4, metavar="N",
+                   help="rounds of shortcuts of the solved path, proven by the exact check "
+                        "(default 4; 0: the first feasible path as it is; with "
+                        "--stop-when-solved only)")
     s.add_argument("--endpoint-margin", type=real_arg("--endpoint-margin", 0.0, unit=" [m]"),
                    default=None, metavar="M",
                    help="clearance [m] of start, goal and the first and last segment, at most "

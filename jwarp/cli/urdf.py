@@ -393,8 +393,8 @@ def add_subcommands(sub: Any) -> None:
                    metavar="N", help="random configurations of the self-collision pair "
                                      "sampling (10000)")
     s.add_argument("--no-cache", action="store_true",
-                   help="fit again instead of reading the fit cache ($JWARP_CACHE or "
-                        "~/.cache/jwarp)")
+                   help="fit again instead of reading the fit cache ($JWARP_CACHE/urdf, default "
+                        "~/.cache/jwarp/urdf)")
     s.add_argument("--srdf", default=None, metavar="ROBOT.srdf",
                    help="MoveIt SRDF: its disable_collisions are excluded from self-collision, "
                         "its groups, group states and end-effectors can be used")

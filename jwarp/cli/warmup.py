@@ -24,7 +24,7 @@ Python: :func:`warmup` (also ``jwarp.warmup``).
 from __future__ import annotations
 
 import argparse
-import os
+from types import SimpleNamespace
 import sys
 import time
 from dataclasses import dataclass, field
@@ -39,7 +39,8 @@ if TYPE_CHECKING:
 __all__ = ["DTYPES", "FAMILIES", "WarmupReport", "add_subcommands", "kernel_modules", "warmup"]
 
 #: the kernel families, in the order they are compiled
-FAMILIES = ("fk", "elastic", "geometry", "collision", "path", "motion", "ik", "calibration")
+FAMILIES = ("fk", "elastic", "geometry", "collision", "path", "motion", "ik", "calibration",
+            "learn", "spherize")
 #: the float types every family is built in (the public API follows its input's dtype)
 DTYPES = ("float32", "float64")
 
@@ -100,7 +101,8 @@ def kernel_modules(families: Iterable[str] = FAMILIES, dtypes: Iterable[str] = D
     nothing. Raises ValueError naming ``families``/``dtypes`` for an unknown entry."""
     import warp as wp
 
-    from jwarp.kernels import collision, elastic, fk, geometry, ik, ik_step, motion, path
+    from jwarp.kernels import (collision, collision_wide, elastic, fk, geometry, ik, ik_step,
+                               motion, path)
     from jwarp.kernels import visibility
     from jwarp.model.registry import robot as get_robot
 
@@ -118,7 +120,7 @@ def kernel_modules(families: Iterable[str] = FAMILIES, dtypes: Iterable[str] = D
             elif fam == "geometry":
                 spaces.append(geometry.kernels(sc))
             elif fam == "collision":
-                spaces.append(collision.kernels(sc))
+                spaces += [collision.kernels(sc), collision_wide.kernels(sc)]
             elif fam == "path":
                 spaces += [path.kernels(sc), path.cartesian_kernels(sc)]
             elif fam == "motion":
@@ -132,6 +134,15 @@ def kernel_modules(families: Iterable[str] = FAMILIES, dtypes: Iterable[str] = D
                     spaces.append(ik_step.dls_kernels(sc, planar, n_dof))
             elif fam == "calibration":
                 spaces.append(visibility.kernels(sc))
+            elif fam == "learn":  # the basis point set encoding of jwarp train (float32)
+                from jwarp.learn import bps
+
+                spaces.append(bps.kernels())
+            elif fam == "spherize":  # the sphere fit of URDF imports (fixed types)
+                from jwarp.importers import sphere_refine, spheres
+
+                spaces.append(SimpleNamespace(
+                    fit=list(spheres.fit_kernels()) + list(sphere_refine.fit_kernels())))
     modules: dict[int, Any] = {}
     for space in spaces:
         for k in _kernels_of(space):
@@ -145,7 +156,8 @@ def warmup(device: DeviceLike = None, robots: Iterable[str | RobotModel] | None 
     """Compile (or load from the kernel cache) every kernel of ``families`` in ``dtypes``
     on ``device`` (default: CUDA if present, else the CPU), the IK step for each of
     ``robots`` (default: every registered robot), ``jobs`` modules at a time (default
-    ``min(cpu count, 4)``). ``progress``: a tqdm bar on stderr (terminal only).
+    ``min(jwarp.core.threads.cpu_threads(), 4)``). ``progress``: a tqdm bar on stderr
+    (terminal only).
 
     Returns:
         :class:`WarmupReport` (the cache folder, modules loaded and compiled, seconds).
@@ -162,7 +174,9 @@ def warmup(device: DeviceLike = None, robots: Iterable[str | RobotModel] | None 
     dev = resolve_device(device)
     names = list(robot_names()) if robots is None else list(robots)
     if jobs is None:
-        jobs = min(os.cpu_count() or 1, 4)
+        from jwarp.core.threads import cpu_threads
+
+        jobs = min(cpu_threads(), 4)
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ValueError(f"jobs: expected a positive integer, got {jobs!r}")
     mods = kernel_modules(families, dtypes, names)
@@ -231,6 +245,8 @@ def add_subcommands(sub: Any) -> None:
                    metavar="T,...", help="float32, float64 or both (default both)")
     s.add_argument("--families", type=_list_arg("--families"), default=list(FAMILIES),
                    metavar="F,...", help=f"kernel families (default all: {', '.join(FAMILIES)})")
-    s.add_argument("--jobs", type=int_arg("--jobs", 1, 64), default=min(os.cpu_count() or 1, 4),
-                   metavar="N", help="modules compiled at a time (default min(cores, 4))")
+    s.add_argument("--jobs", type=int_arg("--jobs", 1, 64), default=None,
+                   metavar="N", help="modules compiled at a time (default min(free cores, 4): "
+                                     "$JWARP_THREADS, else the cores this process may use "
+                                     "less the load of others)")
     s.set_defaults(func=cmd_warmup)

@@ -14,7 +14,6 @@ import errno
 import math
 import mmap
 import numbers
-import os
 import sys
 import threading
 from dataclasses import dataclass
@@ -328,7 +327,9 @@ _MADVISE: list = []         # [libc.madvise] once found to work, [None] where un
 def _madvise() -> Any:
     if not _MADVISE:
         fn = None
-        if sys.platform.startswith("linux") and (os.cpu_count() or 1) > 1:
+        from jwarp.core.threads import available_cpus
+
+        if sys.platform.startswith("linux") and available_cpus() > 1:
             try:
                 fn = ctypes.CDLL(None, use_errno=True).madvise
                 fn.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]

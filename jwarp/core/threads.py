@@ -15,20 +15,32 @@ user configured it (``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``, ...). Anythin
 ValueError naming the variable. Unset: :data:`DEFAULT_BLAS_THREADS`.
 
 The pool is process-wide: two solves running in threads of one process share one cap.
+
+CPU threads of jwarp's other parallel CPU work (torch's intra-op pool while training,
+``jwarp warmup``'s compile jobs): :func:`cpu_threads`. On a loaded machine a pool of one
+thread per core oversubscribes the cores (issue 39: a torch training epoch took 70-81 s
+beside another job against 0.7 s quiet, 3-4x the CPU time). ``JWARP_THREADS`` (a positive
+integer) fixes the count; unset, it is the CPUs this process may run on
+(:func:`available_cpus`: the affinity mask, a cgroup CPU quota) less those other processes
+keep busy (the 1-minute load average beyond this process's own thread), at least 1.
+:func:`torch_threads` holds torch's pool at that count inside a block.
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
+import math
 import os
 from typing import Any, Callable, Iterator, TypeVar
 
-__all__ = ["BLAS_THREADS_ENV", "DEFAULT_BLAS_THREADS", "blas_thread_limit", "blas_threads",
-           "limit_blas"]
+__all__ = ["BLAS_THREADS_ENV", "DEFAULT_BLAS_THREADS", "THREADS_ENV", "available_cpus",
+           "blas_thread_limit", "blas_threads", "cpu_threads", "limit_blas", "torch_threads"]
 
 #: environment variable overriding the BLAS threads inside jwarp's solvers
 BLAS_THREADS_ENV = "JWARP_BLAS_THREADS"
+#: environment variable fixing the threads of jwarp's CPU-parallel work (:func:`cpu_threads`)
+THREADS_ENV = "JWARP_THREADS"
 #: BLAS threads inside jwarp's solvers when ``JWARP_BLAS_THREADS`` is unset
 DEFAULT_BLAS_THREADS = 1
 
@@ -97,3 +109,68 @@ def limit_blas(func: _F) -> _F:
             return func(*args, **kwargs)
 
     return wrapper  # type: ignore[return-value]
+
+
+def available_cpus() -> int:
+    """The CPUs this process may run on: its affinity mask (``os.sched_getaffinity``;
+    ``os.cpu_count()`` where the platform has none), capped by a cgroup v2 CPU quota
+    (``/sys/fs/cgroup/cpu.max``, rounded up) where one is set; at least 1."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # macOS, Windows
+        n = os.cpu_count() or 1
+    try:
+        with open("/sys/fs/cgroup/cpu.max") as f:
+            quota, period = f.read().split()[:2]
+        if quota != "max" and float(period) > 0:
+            n = min(n, max(1, -(-int(quota) // int(period))))
+    except (OSError, ValueError):
+        pass
+    return max(1, n)
+
+
+def cpu_threads(value: str | None = None, load: float | None = None) -> int:
+    """Threads of jwarp's CPU-parallel work: ``value`` (default ``$JWARP_THREADS``), a
+    positive integer, wins; unset or empty: :func:`available_cpus` less the CPUs other
+    processes keep busy, ``load`` (default: the 1-minute load average) beyond this
+    process's own thread (1), rounded; at least 1, at most :func:`available_cpus`.
+
+    Raises:
+        ValueError: naming ``JWARP_THREADS`` for anything but a positive integer.
+    """
+    text = os.environ.get(THREADS_ENV) if value is None else value
+    if text is not None and str(text).strip():
+        try:
+            n = int(str(text).strip())
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise ValueError(f"{THREADS_ENV}: expected a positive integer (threads of "
+                             f"jwarp's CPU-parallel work), got {text!r}")
+        return n
+    cpus = available_cpus()
+    if load is None:
+        try:
+            load = os.getloadavg()[0]
+        except (AttributeError, OSError):  # Windows
+            load = 0.0
+    others = max(0.0, float(load) - 1.0)
+    return int(min(cpus, max(1, math.floor(cpus - others + 0.5))))
+
+
+@contextlib.contextmanager
+def torch_threads(n: int | None = None) -> Iterator[int]:
+    """Context manager: torch's intra-op thread pool at ``n`` threads (None:
+    :func:`cpu_threads`) inside the block, the previous count restored after (also after
+    an exception). Yields the count. Training loops of :mod:`jwarp.learn` run inside it."""
+    import torch
+
+    count = cpu_threads() if n is None else n
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise ValueError(f"n: expected a positive integer or None, got {n!r}")
+    before = torch.get_num_threads()
+    torch.set_num_threads(count)
+    try:
+        yield count
+    finally:
+        torch.set_num_threads(before)

@@ -52,7 +52,7 @@ from jwarp.utils.warp_init import init_quietly
 from jwarp.importers.spheres import (SphereFit, excess_volume, fit_spheres, mesh_memo,
                                      one_sided_error, sphere_protrusion)
 
-__all__ = ["refine_fit", "fit_refined", "coverage_protrusion", "link_protrusions",
+__all__ = ["refine_fit", "fit_refined", "coverage_protrusion", "link_protrusions", "fit_kernels",
            "MAX_SPHERES", "LADDER", "WRIST_JOINTS", "WRIST_PROTRUSION", "BASE_PROTRUSION",
            "HAND_PROTRUSION"]
 
@@ -87,6 +87,11 @@ def _closest_kernel(mesh: wp.uint64, points: wp.array(dtype=wp.vec3), max_dist: 
     else:
         sd[i] = max_dist
         closest[i] = p
+
+
+def fit_kernels() -> tuple:
+    """The Warp kernels of the refined sphere fit (``jwarp warmup --families spherize``)."""
+    return (_closest_kernel,)
 
 
 class _MeshSolid:

@@ -75,7 +75,7 @@ from scipy.spatial import cKDTree
 
 from jwarp.utils.warp_init import init_quietly
 
-__all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "fit_link",
+__all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "fit_link", "fit_kernels",
            "primitive_mesh", "load_mesh", "one_sided_error", "excess_volume",
            "signed_distance", "inside_solid", "sphere_protrusion", "mesh_memo", "PRIMITIVES"]
 
@@ -278,6 +278,11 @@ def _signed_distance_kernel(mesh: wp.uint64, points: wp.array(dtype=wp.vec3),
         out[i] = q.sign * wp.length(p - c)
     else:
         out[i] = max_dist
+
+
+def fit_kernels() -> tuple:
+    """The Warp kernels of the sphere fit (``jwarp warmup --families spherize``)."""
+    return (_outside_kernel, _signed_distance_kernel)
 
 
 class _Solid:

@@ -43,7 +43,7 @@ from jwarp.model.registry import robot as get_robot
 from jwarp.world.feasibility import random_configurations
 from jwarp.world.sdf import World
 
-__all__ = ["BasisPointSet", "basis_points", "bps_encode", "hcp_density", "hcp_points",
+__all__ = ["BasisPointSet", "basis_points", "bps_encode", "hcp_density", "hcp_points", "kernels",
            "robot_reach_ball"]
 
 #: relative tolerance of the ball test: points on the sphere count as inside
@@ -51,8 +51,8 @@ _EDGE = 1e-12
 
 
 @functools.cache
-def _kernels() -> SimpleNamespace:
-    """The encoding kernel (float32), built once."""
+def kernels() -> SimpleNamespace:
+    """The encoding kernel (float32), built once (``jwarp warmup --families learn``)."""
     k = ck.kernels(wp.float32)
     WorldGrid = k.WorldGrid
     vec3 = k.vec3
@@ -410,7 +410,7 @@ def bps_encode(worlds: Any, points: Any, *, device: Any = None, out: Any = None)
     else:
         dev = resolve_device(device)
         dest = wp.empty(shape, dtype=wp.float32, device=dev)
-    kn = _kernels()
+    kn = kernels()
     structs, keep = _world_structs(ws, dev, kn)
     wp.launch(kn.encode, dim=shape,
               inputs=[structs, wp.array(p3, dtype=kn.vec3, device=dev)],

@@ -52,6 +52,7 @@ from jwarp.learn.checkpoint import check_weights, read_checkpoint, save_checkpoi
 from jwarp.learn.ik_data import DEFAULT_MIX, IKData, check_mix, make_ik_data
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.torch_costs import ik_objective, u_ik
+from jwarp.core.threads import torch_threads
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver
 
@@ -413,6 +414,14 @@ def _line(rec: dict, epochs: int, supervised: bool) -> str:
 
 
 def _run(trainer: IKTrainer, progress: bool, callback: Callable | None) -> tuple[IKNet, list]:
+    """The training loop, inside :func:`jwarp.core.threads.torch_threads` (a thread count
+    that does not oversubscribe the CPUs)."""
+    with torch_threads():
+        return _epochs(trainer, progress, callback)
+
+
+def _epochs(trainer: IKTrainer, progress: bool, callback: Callable | None
+            ) -> tuple[IKNet, list]:
     o = trainer.options
     path = o.checkpoint
     if o.resume and path is not None and Path(path).is_file():

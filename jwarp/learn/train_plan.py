@@ -43,6 +43,7 @@ import numpy as np
 import torch
 
 from jwarp.core.arrays import device_name
+from jwarp.core.threads import torch_threads
 from jwarp.learn.plan_net import (PlanNet, PlanNetConfig, axis_symmetries, encode_paths,
                                   symmetric_bps)
 from jwarp.model.registry import robot as get_robot
@@ -544,6 +545,13 @@ def train_plan(options: TrainPlanOptions, data: PlanSamples, val: PlanSamples | 
     """Train (or continue training ``net``) on ``data``; validation MSE on ``val`` (None:
     none). Returns the network (eval mode) and the history: one record per epoch, epoch 0
     the untrained (or given) network's validation MSE."""
+    with torch_threads():  # a thread count that does not oversubscribe the CPUs
+        return _train_plan(options, data, val, net, progress, callback)
+
+
+def _train_plan(options: TrainPlanOptions, data: PlanSamples, val: PlanSamples | None,
+                net: PlanNet | None, progress: bool, callback: Callable | None
+                ) -> tuple[PlanNet, list]:
     options.validate()
     if not len(data):
         raise ValueError("data: no samples")

@@ -26,6 +26,7 @@ def test_bench_scenes_quick(run_bench):
     solved = [r for r in jw if r["solved"]]
     assert solved, stdout
     for r in solved:   # every feasible path was re-checked: no collision, no margin broken
+        assert r["length_ratio"] >= 1.0 - 1e-6, r  # U_l: 1 for the straight line
         assert "collision" in r, r
         assert not r["collision"], r
         assert not r["sphere_margin_violation"], r
@@ -33,3 +34,5 @@ def test_bench_scenes_quick(run_bench):
     for s in doc["summary"]:
         assert s["problems"] == 2 and 0 <= s["solved"] <= 2
         assert s["median_s"] <= s["p95_s"] <= s["max_s"]
+        if s["solved"] and s["planner"] == "jwarp":
+            assert 1.0 - 1e-6 <= s["median_length_ratio"] <= s["p95_length_ratio"]

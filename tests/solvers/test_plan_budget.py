@@ -98,7 +98,7 @@ def test_fallback_solves_what_the_multi_starts_do_not(world):
     # the multi-starts' own results stay as they were
     np.testing.assert_array_equal(res.all_feasible, plain.all_feasible)
     assert res.n_feasible[0] == 0
-    assert set(res.timings) == {"optimizer", "rrt", "fallback_optimizer"}
+    assert set(res.timings) == {"optimizer", "rrt", "fallback_optimizer", "shorten"}
     d = res.to_dict(0)
     assert d["stop_reason"] == "solved" and d["stage"] == "fallback" and d["feasible"]
 

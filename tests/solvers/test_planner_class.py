@@ -111,7 +111,9 @@ def test_caller_seeds_paths_and_via_points(device, block_world):
     via = PL.ViaPoints(np.array([[[[1.6, 0.0, 0.0, 0.0]]], [[[2.2, 0.2, 0.2, 0.0]]]]))
     res = planner.plan(s, g, seeds=via)  # (B, 1 seed, 1 via point, n)
     assert res.path.shape == (2, 20, 4) and res.all_feasible.shape == (2, 1)
-    as_is = PL.Planner(robot, block_world, 2, PL.PlanOptions(iterations=0, n_waypoints=9),
+    # (shorten=0: the seed's path as it is, not pulled straight)
+    as_is = PL.Planner(robot, block_world, 2,
+                       PL.PlanOptions(iterations=0, n_waypoints=9, shorten=0),
                        device=device).plan(s, g, seeds=via)
     expect = path_feasibility.polyline_path(s[0], np.array([[1.6, 0.0, 0.0, 0.0]]), g[0], 9)
     np.testing.assert_allclose(as_is.path[0], expect, atol=1e-6)
@@ -125,8 +127,10 @@ def test_caller_seeds_paths_and_via_points(device, block_world):
 
 
 def test_best_start_is_chosen_on_the_device_and_all_paths_read_on_demand(device, block_world):
+    # (shorten=0: the chosen start's path as it ended, not pulled straight)
     planner = PL.Planner("planar4", block_world, 1,
-                         PL.PlanOptions(n_starts=8, n_substeps=8, iterations=200, step=0.05),
+                         PL.PlanOptions(n_starts=8, n_substeps=8, iterations=200, step=0.05,
+                                        shorten=0),
                          device=device)
     res = planner.plan(S4, G4)
     assert isinstance(res.paths_source, wp.array)  # not read yet

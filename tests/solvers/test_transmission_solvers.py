@@ -2,6 +2,8 @@
 both work in the links' joint space and return commanded joint values, checked here with
 the numpy reference FK of the links' joint values (an independent numpy transmission)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -81,4 +83,7 @@ def test_planner_paths_are_commanded_values(device):
     # the links' path is collision-free (checked on the plain robot at the links' values)
     link = ref_transmission(robot, res.path[0])
     assert path_feasibility.path_feasible(plain, world, link[None], 8, device=device)[0]
-    np.testing.assert_allclose(res.all_paths[0, res.start_index[0]], res.path[0])
+    # the chosen start's path as it ended (shorten=0: not pulled straight afterwards)
+    raw = PL.Planner(robot, world, 1, dataclasses.replace(opts, shorten=0),
+                     device=device).plan(start, goal)
+    np.testing.assert_allclose(raw.all_paths[0, raw.start_index[0]], raw.path[0])

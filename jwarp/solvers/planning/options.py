@@ -133,6 +133,20 @@ class PlanOptions:
         converge_tol: relative change of U_l that counts as converged, > 0.
         callback: called as ``callback(iteration, paths (P, W, n_dof))`` after every
             evaluation (e.g. rerun streaming; it reads every path to the host).
+        shorten: rounds of shortcuts of every solved problem's path once the call has
+            its paths (>= 0; 0: off, the first feasible path as it is): with
+            ``stop_when_solved`` (the default) on the rigid model, without ``converge``
+            (:mod:`jwarp.solvers.planning.shorten`). Each round pulls the path straight:
+            from the start, the straight segments to the later corners (and midpoints
+            between them) are proven by the exact continuous check, with the clearance
+            ``eps`` from the world (the cost's smoothing width, >= ``margin``: a shortcut
+            keeps as far from objects as the descent's cost asks), and the path jumps
+            to the farthest proven one; the waypoints
+            are then respaced along the shortened polyline and the whole path is checked
+            again with the planner's rule; it replaces the path only if certified and of
+            a lower length cost U_l. ``time_limit`` bounds it too. The multi-starts stop
+            at the first feasible one, which may be a long detour (a random via point):
+            this makes the default path short at little extra time.
         allow_no_collision: plan without a collision model: a robot without collision
             spheres (every path is then collision-free) or in self-collision at its home
             configurations is accepted; False (default): either is a ValueError naming the
@@ -169,6 +183,7 @@ class PlanOptions:
     fallback_after: float = 0.15
     rrt: Any = None
     allow_no_collision: bool = False
+    shorten: int = 4
 
     def __post_init__(self) -> None:
         self.fallback = fallback_word(self.fallback)
@@ -177,7 +192,8 @@ class PlanOptions:
         """ValueError/TypeError naming the first bad field; numbers must be finite in the
         computing ``dtype``."""
         npdt = numpy_dtype(scalar_type(dtype))
-        for name, lo in (("iterations", 0), ("n_waypoints", 2), ("n_starts", 1)):
+        for name, lo in (("iterations", 0), ("n_waypoints", 2), ("n_starts", 1),
+                         ("shorten", 0)):
             check_int(getattr(self, name), name, lo)
         if self.check_all_every is not None:
             check_int(self.check_all_every, "check_all_every", 1)

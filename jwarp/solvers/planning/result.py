@@ -13,7 +13,9 @@ import warp as wp
 class PlanResult:
     """Result of :func:`plan` / :meth:`Planner.plan` for B problems.
 
-    path (B, W, n_dof) best path per problem; feasible (B,) bool; cost (B,) U_path;
+    path (B, W, n_dof) the chosen path per problem (shortened by
+    :attr:`PlanOptions.shorten` where that was shorter and certified: then it differs from
+    ``all_paths[b, start_index[b]]``, see ``length_before``); feasible (B,) bool; cost (B,) U_path;
     length_cost (B,) U_l (eq. 3.5, 1 for the straight line); collision_cost (B,) weighted
     world + self cost summed over substeps; iterations (B,) gradient steps until the chosen
     path was feasible (or the iteration budget); start_index (B,) which multi-start (seed)
@@ -35,7 +37,9 @@ class PlanResult:
     the multi-starts: its ``start_index`` is -1, its ``iterations`` those of the seeded
     optimisation (0: the RRT path itself, certified as it is); ``n_feasible``, ``all_*``
     stay the multi-starts'. ``fallback_notes``: what the fallback did. ``timings`` [s]:
-    "optimizer" (the multi-starts) and, where it ran, "rrt" and "fallback_optimizer".
+    "optimizer" (the multi-starts) and, where it ran, "rrt", "fallback_optimizer" and
+    "shorten". ``length_before``: the length cost before the shortening
+    (:attr:`PlanOptions.shorten`).
     """
 
     path: np.ndarray
@@ -65,6 +69,10 @@ class PlanResult:
     #: no tree connection (and why), or its path certified / not certified (and why);
     #: appended to ``reasons`` of a problem without a plan
     fallback_notes: Any = None
+    #: (B,) float: U_l of each problem's feasible path before :attr:`PlanOptions.shorten`
+    #: shortened it (equal to ``length_cost`` where nothing was shorter; NaN where the
+    #: problem has no feasible path or nothing was tried); None: shortening off
+    length_before: Any = None
 
     @property
     def all_paths(self) -> np.ndarray:
@@ -90,4 +98,8 @@ class PlanResult:
                 "stop_reason": str(self.stop_reason),
                 "reason": (str(self.reasons[index]) if self.reasons is not None
                            else None),
-                "stage": None if self.stage is None else str(self.stage[index])}
+                "stage": None if self.stage is None else str(self.stage[index]),
+                "length_before_shortening": (
+                    None if self.length_before is None
+                    or not np.isfinite(self.length_before[index])
+                    else float(self.length_before[index]))}

@@ -1,0 +1,104 @@
+"""Threads of jwarp's CPU-parallel work (issue 39, item 6; jwarp.core.threads): the count
+follows JWARP_THREADS, else the CPUs this process may run on (its affinity mask) less the
+load of other processes; torch training runs inside that count and the previous pool size
+comes back after it; a bad JWARP_THREADS is a ValueError naming it."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from jwarp.core import threads as T
+
+
+def test_env_wins_and_bad_values_name_it(monkeypatch):
+    monkeypatch.setenv(T.THREADS_ENV, "3")
+    assert T.cpu_threads(load=50.0) == 3  # the user's count, whatever the load
+    assert T.cpu_threads(" 5 ") == 5
+    for bad in ["0", "-2", "two", "1.5"]:
+        monkeypatch.setenv(T.THREADS_ENV, bad)
+        with pytest.raises(ValueError, match=f"^{T.THREADS_ENV}: expected a positive integer"):
+            T.cpu_threads()
+    monkeypatch.setenv(T.THREADS_ENV, "")  # empty: as unset
+    assert 1 <= T.cpu_threads() <= T.available_cpus()
+
+
+def test_affinity_and_load(monkeypatch):
+    monkeypatch.delenv(T.THREADS_ENV, raising=False)
+    monkeypatch.setattr(T.os, "sched_getaffinity", lambda pid: {0, 1, 2, 3}, raising=False)
+    monkeypatch.setattr(T.os, "cpu_count", lambda: 64)  # the machine's: not ours to use
+    cpus = T.available_cpus()
+    assert cpus <= 4
+    # quiet (this process's own thread only): every CPU it may use
+    assert T.cpu_threads(load=0.0) == cpus
+    assert T.cpu_threads(load=1.0) == cpus
+    # another process keeps one CPU busy: one fewer; a loaded machine: one
+    assert T.cpu_threads(load=2.0) == max(1, cpus - 1)
+    assert T.cpu_threads(load=40.0) == 1
+    # the load average is read when not given
+    monkeypatch.setattr(T.os, "getloadavg", lambda: (30.0, 30.0, 30.0))
+    assert T.cpu_threads() == 1
+    monkeypatch.setattr(T.os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    assert T.cpu_threads() == cpus
+
+
+def test_available_cpus_is_the_affinity_mask():
+    if not hasattr(os, "sched_getaffinity"):
+        pytest.skip("no affinity mask on this platform")
+    assert 1 <= T.available_cpus() <= len(os.sched_getaffinity(0))
+
+
+def test_torch_threads_sets_and_restores():
+    torch = pytest.importorskip("torch")
+    before = torch.get_num_threads()
+    with T.torch_threads(1) as n:
+        assert n == 1 and torch.get_num_threads() == 1
+    assert torch.get_num_threads() == before
+    with pytest.raises(RuntimeError):
+        with T.torch_threads(1):
+            raise RuntimeError("boom")
+    assert torch.get_num_threads() == before
+    with pytest.raises(ValueError, match="^n: expected a positive integer"):
+        with T.torch_threads(0):
+            pass
+
+
+def test_training_runs_at_jwarp_threads(monkeypatch):
+    """train_ik's epochs and train_plan run with torch at JWARP_THREADS threads (read back
+    from torch inside the training), and the caller's pool size comes back after."""
+    torch = pytest.importorskip("torch")
+    import importlib
+
+    TI = importlib.import_module("jwarp.learn.train_ik")  # the modules (the package
+    TP = importlib.import_module("jwarp.learn.train_plan")  # exports functions of the names)
+
+    before = torch.get_num_threads()
+    want = 1 if before != 1 else 2
+    monkeypatch.setenv(T.THREADS_ENV, str(want))
+    seen = []
+    monkeypatch.setattr(TI, "_epochs", lambda *a: seen.append(torch.get_num_threads()) or
+                        ("net", []))
+    assert TI._run(object(), False, None) == ("net", [])
+    monkeypatch.setattr(TP, "_train_plan", lambda *a: seen.append(torch.get_num_threads()) or
+                        ("net", []))
+    assert TP.train_plan(object(), object()) == ("net", [])
+    assert seen == [want, want]
+    assert torch.get_num_threads() == before
+
+
+def test_warmup_jobs_follow_jwarp_threads(monkeypatch):
+    import warp
+
+    from jwarp.cli import warmup as W
+
+    monkeypatch.setenv(T.THREADS_ENV, "1")
+    seen = {}
+
+    def force_load(device=None, modules=None, max_workers=None):
+        seen["workers"] = max_workers
+
+    monkeypatch.setattr(warp, "force_load", force_load)
+    monkeypatch.setattr(W, "kernel_modules", lambda *a: [])
+    W.warmup("cpu", robots=[], families=["fk"], progress=False)
+    assert seen["workers"] == 0  # one job: no pool

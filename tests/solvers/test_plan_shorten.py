@@ -1,0 +1,251 @@
+"""Short paths by default (issue 39, item 1): PlanOptions.shorten shortens the path of
+every solved problem (stop_when_solved, rigid model) with shortcuts proven by the exact
+continuous check, then respaces its waypoints; the shortened path is certified again and
+kept only when its length cost U_l is lower. Non-default modes (stop_when_solved False,
+converge, shorten=0) return what they returned before. Panda scene problems: every
+shortened path is re-checked by the independent verifier (tests/verifier.py)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from jwarp.solvers import planning as PL
+from jwarp.solvers.planning.shorten import corners, length_cost, respace, shortcut_paths
+from jwarp.world import path_feasibility
+
+from worlds import block_world_2d
+
+S4 = np.array([1.2, 0.0, 0.0, 0.0])
+G4 = np.array([-1.2, 0.0, 0.0, 0.0])
+#: the multi-starts of test_plan_budget: the first feasible one is a detour
+OPTS = dict(n_starts=8, iterations=300, step=0.05, seed=0, n_substeps=8,
+            weights=PL.PathWeights(length=0.05), fallback=None)
+
+
+@pytest.fixture(scope="module")
+def world():
+    return block_world_2d()
+
+
+def independent_feasible(robot, world, path):
+    n_sub = path_feasibility.substeps_for_voxel(robot, path, world.resolution, safety=2.0,
+                                                max_substeps=256)
+    return bool(path_feasibility.path_feasible(robot, world, path, n_sub)[()])
+
+
+# ------------------------------------------------------------------ the pieces
+def test_length_cost_is_the_planners(world):
+    res = PL.plan("planar4", world, S4, G4, shorten=0, **OPTS)
+    assert length_cost(res.path[0]) == pytest.approx(res.length_cost[0], rel=1e-4)
+    line = np.linspace(S4, G4, 20)
+    assert length_cost(line) == pytest.approx(1.0)
+
+
+def test_corners_and_respace_keep_the_polyline():
+    a, b, c = np.zeros(2), np.array([1.0, 0.0]), np.array([1.0, 2.0])
+    path = np.concatenate([np.linspace(a, b, 5), np.linspace(b, c, 9)[1:], [c]])  # c twice
+    k = corners(path)
+    np.testing.assert_allclose(k, [a, b, c])
+    r = respace(k, 12)
+    assert r.shape == (12, 2)
+    np.testing.assert_allclose(r[[0, -1]], [a, c])
+    assert any(np.allclose(q, b) for q in r)  # the corner stays a waypoint
+    on_first = np.isclose(r[:, 1], 0.0) & (r[:, 0] <= 1.0 + 1e-12)
+    on_second = np.isclose(r[:, 0], 1.0)
+    assert np.all(on_first | on_second)  # every waypoint on the polyline
+    seg = np.linalg.norm(np.diff(r, axis=0), axis=1)
+    assert seg.max() <= 1.5 * seg.min()  # spread in proportion to the lengths
+    assert length_cost(r) < length_cost(path)
+
+
+def test_shortcut_paths_uses_only_proven_segments():
+    path = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 0.0], [3.0, 1.0], [4.0, 0.0]])
+    calls = []
+
+    def accept_all(segs, per):
+        calls.append((segs.shape, per))
+        return np.ones(len(segs), bool)
+
+    out = shortcut_paths(path[None], accept_all, rounds=3)
+    np.testing.assert_allclose(out[0], path[[0, -1]])
+    assert calls and all(s[1:] == (2, 2) and s[0] % per == 0 for s, per in calls)
+    # nothing proven: the path stays as it is
+    out = shortcut_paths(path[None], lambda s, p: np.zeros(len(s), bool), rounds=3)
+    np.testing.assert_allclose(out[0], path)
+    # no rounds, or not active: unchanged
+    np.testing.assert_allclose(shortcut_paths(path[None], accept_all, rounds=0)[0], path)
+    np.testing.assert_allclose(
+        shortcut_paths(path[None], accept_all, 3, active=np.array([False]))[0], path)
+
+    # only the segments that avoid x in (1.5, 2.5) above y 0.25 are proven
+    def wall(segs, per):
+        u = np.linspace(0, 1, 201)[None, :, None]
+        q = segs[:, :1] + u * (segs[:, 1:] - segs[:, :1])
+        hit = (np.abs(q[..., 0] - 2.0) < 0.5) & (q[..., 1] < 0.25)
+        return ~hit.any(axis=1)
+
+    out = shortcut_paths(path[None], wall, rounds=4)[0]
+    assert np.linalg.norm(np.diff(out, axis=0), axis=1).sum() < \
+        np.linalg.norm(np.diff(path, axis=0), axis=1).sum() - 0.5
+    assert wall(np.stack([out[:-1], out[1:]], 1), 1).all()
+
+
+# ------------------------------------------------------------------ the planner
+def test_default_path_is_shortened_and_feasible(world):
+    first = PL.plan("planar4", world, S4, G4, shorten=0, **OPTS)
+    short = PL.plan("planar4", world, S4, G4, **OPTS)
+    assert PL.PlanOptions().shorten == 4
+    assert first.feasible[0] and short.feasible[0]
+    assert first.length_before is None  # shortening off
+    assert short.length_before[0] == pytest.approx(first.length_cost[0])
+    # the detour of the first feasible start is cut: much shorter
+    assert short.length_cost[0] < 0.8 * first.length_cost[0]
+    assert length_cost(short.path[0]) == pytest.approx(short.length_cost[0], rel=1e-4)
+    assert "shorten" in short.timings
+    # same start, goal, waypoints; the same start won at the same iteration
+    np.testing.assert_allclose(short.path[0, [0, -1]], first.path[0, [0, -1]])
+    assert short.path.shape == first.path.shape
+    assert short.start_index[0] == first.start_index[0]
+    assert short.iterations[0] == first.iterations[0]
+    # certified again by the planner's check and by an independent one
+    robot = PL.Planner("planar4", world, 1).robot
+    assert independent_feasible(robot, world, short.path[0])
+    # its costs are the objective's at the new path (U_path = collision + w U_l)
+    assert short.cost[0] == pytest.approx(short.collision_cost[0]
+                                          + 0.05 * short.length_cost[0], rel=1e-4)
+    d = short.to_dict(0)
+    assert d["length_before_shortening"] == pytest.approx(first.length_cost[0])
+
+
+def test_non_default_modes_unchanged(world):
+    for extra in (dict(stop_when_solved=False), dict(converge=True, stop_when_solved=False,
+                                                      iterations=60)):
+        a = PL.plan("planar4", world, S4, G4, shorten=0, **{**OPTS, **extra})
+        b = PL.plan("planar4", world, S4, G4, **{**OPTS, **extra})
+        np.testing.assert_array_equal(a.path, b.path)
+        np.testing.assert_array_equal(a.length_cost, b.length_cost)
+        assert b.length_before is None
+
+
+def test_a_batch_is_shortened_per_problem(world):
+    starts = np.stack([S4, np.array([2.0, 1.0, 0.0, 0.0])])
+    goals = np.stack([G4, np.array([2.0, -1.0, 0.0, 0.0])])
+    o = {**OPTS, "fallback": "rrt"}
+    first = PL.plan("planar4", world, starts, goals, shorten=0, **o)
+    short = PL.plan("planar4", world, starts, goals, **o)
+    assert short.feasible.all() and first.feasible.all()
+    assert np.all(short.length_cost <= first.length_cost * (1 + 1e-6))
+    np.testing.assert_allclose(short.length_before, first.length_cost)
+    robot = PL.Planner("planar4", world, 1).robot
+    for p in short.path:
+        assert independent_feasible(robot, world, p)
+
+
+def test_batch_of_worlds():
+    """World.batch: each problem's shortcuts are proven in its own world (re-checked in
+    that world alone)."""
+    import jwarp
+    from jwarp.world import World
+    from jwarp.world.collision import min_distances
+    from jwarp.world.path_feasibility import certify_check
+
+    robot = jwarp.robot("arm7")
+    rng = np.random.default_rng(13)
+    worlds = []
+    for i in range(3):
+        w = World.of_shapes()
+        for j in range(3):
+            w.add(f"b{j}", "box", rng.uniform(0.05, 0.2, 3),
+                  rng.uniform([-0.7, -0.7, 0.0], [0.7, 0.7, 1.0]))
+        worlds.append(w)
+    batch = World.batch(worlds)
+    lim = np.array(robot.joint_limits)
+    free = []
+    while len(free) < 6:
+        c = rng.uniform(lim[:, 0], lim[:, 1], (64, robot.n_dof)) * 0.6
+        ok = np.ones(64, bool)
+        for w in worlds:
+            ok &= min_distances(robot, c, w, dtype=np.float64).min(axis=1) > 0.02
+        free.extend(c[ok])
+    starts, goals = np.array(free[:3]), np.array(free[3:6])
+    o = dict(n_starts=4, iterations=60, start_kind="random", seed=1, device="cpu")
+    first = PL.plan(robot, batch, starts, goals, shorten=0, **o)
+    short = PL.plan(robot, batch, starts, goals, **o)
+    np.testing.assert_array_equal(short.feasible, first.feasible)
+    assert short.feasible.sum() >= 2
+    for b in np.nonzero(short.feasible)[0]:
+        assert short.length_cost[b] <= first.length_cost[b] * (1 + 1e-6)
+        assert certify_check(robot, worlds[b], device="cpu").check(short.path[b]).ok[0]
+    assert np.sum(short.length_cost[short.feasible]) < np.sum(first.length_cost[first.feasible])
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, True, "4"])
+def test_bad_shorten(bad):
+    with pytest.raises((ValueError, TypeError), match="shorten"):
+        PL.PlanOptions(shorten=bad).validate()
+
+
+def test_time_limit_bounds_it(world):
+    # the time is up before the shortening: the path stays the first feasible one
+    import time
+
+    pl = PL.Planner("planar4", world, 1, PL.PlanOptions(shorten=0, **OPTS))
+    res = pl.plan(S4, G4)
+    path = res.path.copy()
+    pl.options.shorten = 4
+    pl._shorten(pl._buffers, res, deadline=time.perf_counter() - 1.0)
+    np.testing.assert_array_equal(res.path, path)
+    assert "shorten" not in res.timings
+    # with time left it shortens
+    pl._shorten(pl._buffers, res, deadline=time.perf_counter() + 100.0)
+    assert res.length_cost[0] < 0.8 * res.length_before[0]
+
+
+# ------------------------------------------------------------------ panda scenes
+def test_panda_scene_paths_short_and_verified(tmp_path):
+    """Three table_under_pick problems of benchmarks/scene_problems.py: the default paths
+    are no longer than the first feasible ones (much shorter together), and every one is
+    collision-free by the independent verifier (URDF meshes and spheres, coal)."""
+    from jwarp.importers.robot import example_robot_urdf
+
+    try:
+        example_robot_urdf("panda_description/urdf/panda.urdf")
+    except ValueError as e:
+        pytest.skip(str(e))
+    pytest.importorskip("coal")
+    root = Path(__file__).resolve().parents[2]
+    sys.path.insert(0, str(root / "benchmarks"))
+    import scene_problems as SP
+    from verifier import PathVerifier, robot_spheres
+
+    from jwarp.world import exact_world, load_scene
+    from jwarp.world.moveit import joint_vector
+    from jwarp.world.scene_file import robot_frames
+
+    robot, urdf = SP.load_robot()
+    index = SP.generate(tmp_path, 3, 1, ["table_under_pick"], log=lambda s: None)
+    before, after = [], []
+    for e in index["problems"]:
+        scene = load_scene(tmp_path / e["file"], robot_frames(robot))
+        world = exact_world(scene)
+        q0 = joint_vector(robot, scene.start, "start")
+        q1 = joint_vector(robot, scene.goal, "goal", q0)
+        o = dict(margin=0.0, endpoint_margin=0.0, fallback=None, device="cpu")
+        first = PL.plan(robot, world, q0, q1, shorten=0, **o)
+        res = PL.plan(robot, world, q0, q1, **o)
+        assert res.feasible[0] == first.feasible[0]
+        if not res.feasible[0]:
+            continue
+        assert res.length_cost[0] <= first.length_cost[0] * (1 + 1e-6)
+        before.append(first.length_cost[0])
+        after.append(res.length_cost[0])
+        v = PathVerifier(urdf, None, scene.shapes, spheres=robot_spheres(robot),
+                         joint_names=robot.joint_names)
+        got = v.check_path(res.path[0], margin=0.0, endpoint_margin=0.0)
+        assert got.min_distance >= 0, str(got)
+    assert len(after) >= 2
+    assert sum(after) < 0.7 * sum(before)
