@@ -61,8 +61,13 @@ def test_bps_encoding_loads_only_warmed_modules(loads):
     occ = np.zeros((16, 16), bool)
     occ[6:9, 6:9] = True
     world = world_from_occupancy(occ, lim, 2.0 / 15)
+    from jwarp.learn import bps
+
+    # an earlier test of the session may have loaded it already (then nothing loads now;
+    # unloading it could free code that recorded launches still hold)
+    loaded_before = bool(bps.kernels().encode.module.execs)
     d = bps_encode([world], np.array([[0.0, 0.0], [0.9, 0.9]]), device="cpu")
     assert d.shape == (1, 2) and d[0, 0] < 0 < d[0, 1]
-    assert loads, "the encoding loaded no module"
+    assert loads or loaded_before, "the encoding loaded no module"
     warm = {m.name for m in kernel_modules(["learn"], ["float32"])}
     assert set(loads) <= warm, set(loads) - warm
