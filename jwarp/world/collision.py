@@ -19,8 +19,10 @@ x-y plane and use the x, y of their spheres; a world of the other dimension is a
 
 Fast path for loops (a planner): build a :class:`CollisionModel` once and call
 :meth:`CollisionModel.cost` with Warp arrays and a :class:`CollisionData` workspace (or
-preallocated outputs); it launches one kernel, computes the gradient by hand in the same
-launch and copies nothing to the host. :func:`collision_cost` wraps it for numpy / Warp /
+preallocated outputs); it launches one fused kernel (one thread per configuration, the
+gradient by hand in the same launch) or, on CUDA for batches up to
+:data:`WIDE_MAX_CONFIGS`, the four wide launches of :mod:`jwarp.kernels.collision_wide`,
+and copies nothing to the host. :func:`collision_cost` wraps it for numpy / Warp /
 torch input (same kind out).
 
 Model vs Data: the robot's frame and sphere tables are its
