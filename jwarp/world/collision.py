@@ -475,13 +475,21 @@ class CollisionModel:
         """:meth:`cost` as the four launches of :mod:`jwarp.kernels.collision_wide`
         (``record``: replay launches recorded for the same buffers, a planner's loop)."""
         n = q.shape[0]
-        kw = cwide.kernels(self.scalar)
         frames, xs, force, moment, bc = d.wide_scratch
+        world_struct = self.world_struct  # syncs moved/added objects (drops the records)
+        kind, want_grad = int(rows.kind), int(grad)
+        key = ("wide", id(q), id(rows.array), rows.stride, kind, rows.layout, id(cost),
+               id(gout), ww, ws, eps, n, id(comp), id(frames), int(group_div), id(active),
+               int(active_div), want_grad)
+        hit = self._launches.get(key) if record else None
+        if hit is not None:  # a planner's loop: the recorded launches, no argument packing
+            for launch in hit[0]:
+                launch.launch()
+            return
+        kw = cwide.kernels(self.scalar)
         act = active if active is not None else self._no_active
-        world_struct = self.world_struct  # syncs moved/added objects first
         sp = self.model.spheres.struct
-        layout, kind = rows.layout_vec, int(rows.kind)
-        want_grad = int(grad)
+        layout = rows.layout_vec
         plan = [(kw.frames, n, [self.model.frame_struct, sp, q, rows.array, rows.stride, layout,
                                 kind, want_grad, int(ws != 0.0), act, int(active_div),
                                 frames, force, moment, bc], [cost, gout, comp])]
@@ -501,20 +509,14 @@ class CollisionModel:
             for kern, dim, inputs, outputs in plan:
                 wp.launch(kern, dim=dim, inputs=inputs, outputs=outputs, device=self.device)
             return
-        key = ("wide", id(q), id(rows.array), rows.stride, kind, rows.layout, id(cost),
-               id(gout), ww, ws, eps, n, id(comp), id(frames), int(group_div), id(active),
-               int(active_div), want_grad)
-        hit = self._launches.get(key)
-        if hit is None:
-            if len(self._launches) > 32:
-                self._launches.clear()
-            launches = [wp.launch(kern, dim=dim, inputs=inputs, outputs=outputs,
-                                  device=self.device, record_cmd=True)
-                        for kern, dim, inputs, outputs in plan]
-            # the recorded launches hold these arrays: keep them alive with the record
-            hit = (launches, q, rows, cost, gout, comp, frames, active)
-            self._launches[key] = hit
-        for launch in hit[0]:
+        if len(self._launches) > 32:
+            self._launches.clear()
+        launches = [wp.launch(kern, dim=dim, inputs=inputs, outputs=outputs,
+                              device=self.device, record_cmd=True)
+                    for kern, dim, inputs, outputs in plan]
+        # the recorded launches hold these arrays: keep them alive with the record
+        self._launches[key] = (launches, q, rows, cost, gout, comp, frames, active)
+        for launch in launches:
             launch.launch()
 
     def cost_tape(self, q: wp.array, *, rho: Any = None, w_world: float = 1.0,
