@@ -204,6 +204,45 @@ def save_failure(args: argparse.Namespace, prob: Problem, path: np.ndarray, tag:
     return str(d)
 
 
+def save_path(folder: str, prob: Problem, path: np.ndarray, tag: str) -> None:
+    """One feasible path as ``folder/tag/problem.npy`` (for ``--verify-saved`` elsewhere)."""
+    d = Path(folder) / tag
+    d.mkdir(parents=True, exist_ok=True)
+    np.save(d / f"{prob.name}.npy", path)
+
+
+def verify_saved(args: argparse.Namespace, robot: Any, urdf: str | None, spheres: list,
+                 probs: list[Problem], margins: list[float]) -> int:
+    """``--verify-saved DIR``: the verifier on paths another machine planned and saved with
+    ``--save-paths`` (a GPU machine without pinocchio/coal). Prints per folder the paths
+    checked and the collisions; returns the number of collisions."""
+    if urdf is None:
+        raise SystemExit("--verify-saved: needs example-robot-data (the Panda URDF)")
+    by_name = {p.name: p for p in probs}
+    total = 0
+    for d in sorted(Path(args.verify_saved).iterdir()):
+        if not d.is_dir():
+            continue
+        m = float(d.name.rsplit("_m", 1)[1])
+        files = sorted(d.glob("*.npy"))
+        coll = viol = 0
+        for f in files:
+            p = by_name.get(f.stem)
+            if p is None:
+                raise SystemExit(f"--verify-saved: {f} names no problem of the set")
+            row = verify(p.verifier(urdf, spheres, robot.joint_names), np.load(f), m,
+                         args.endpoint_margin)
+            coll += row["collision"]
+            viol += row["sphere_margin_violation"]
+            if row["collision"]:
+                print(f"  !! {d.name}/{f.stem}: {row['first_violation']}", flush=True)
+        print(f"{d.name}: {len(files)} feasible paths verified, {coll} collisions, "
+              f"{viol} sphere margin violations", flush=True)
+        total += coll
+    print(f"verifier collisions among the saved feasible paths: {total} (must be 0)")
+    return total
+
+
 def run_jwarp(robot: Any, urdf: str, spheres: list, probs: list[Problem], margin: float,
               args: argparse.Namespace, device: str) -> tuple[list[dict], float]:
     """Every problem planned on ``device`` at ``margin``; (rows, wall time of all)."""
@@ -226,6 +265,9 @@ def run_jwarp(robot: Any, urdf: str, spheres: list, probs: list[Problem], margin
                    "timings": {k2: float(v) for k2, v in res.timings.items()}}
             if ok:
                 row["length_ratio"] = length_ratio(res.path[0])
+                if args.save_paths:
+                    save_path(args.save_paths, p, np.asarray(res.path[0], np.float64),
+                              f"{device.split(':')[0]}_m{margin:g}")
         if ok and not args.no_verify:
             path = np.asarray(res.path[0], np.float64)
             row.update(verify(p.verifier(urdf, spheres, robot.joint_names), path, margin,
@@ -360,6 +402,8 @@ def stats(rows: list[dict]) -> dict:
         "mesh_below_margin": sum(r["mesh_below_margin"] for r in checked),
         "median_s": float(np.median(t)) if len(t) else math.nan,
         "p95_s": float(np.percentile(t, 95)) if len(t) else math.nan,
+        "p98_s": float(np.percentile(t, 98)) if len(t) else math.nan,
+        "mean_s": float(np.mean(t)) if len(t) else math.nan,
         "max_s": float(t.max()) if len(t) else math.nan,
         "median_solved_s": (float(np.median([r["time_s"] for r in solved]))
                             if solved else math.nan),
@@ -369,7 +413,8 @@ def stats(rows: list[dict]) -> dict:
 
 
 HEAD = (f"{'family':<17} {'n':>4} {'solved':>7} {'optim':>5} {'fallb':>5} {'verif.free':>10} "
-        f"{'coll':>4} {'m-viol':>6} {'mesh<m':>6} {'error':>5} {'median_s':>8} {'p95_s':>6} {'max_s':>6} "
+        f"{'coll':>4} {'m-viol':>6} {'mesh<m':>6} {'error':>5} {'mean_s':>6} {'median_s':>8} {'p95_s':>6} "
+        f"{'p98_s':>6} {'max_s':>6} "
         f"{'len_med':>7} {'len_p95':>7}")
 
 
@@ -378,8 +423,8 @@ def line(name: str, s: dict) -> str:
     return (f"{name:<17} {s['problems']:>4} {pct(s['solved'], s['problems']):>7} "
             f"{s['optimizer']:>5} {s['fallback']:>5} {vf:>10} {s['collisions']:>4} "
             f"{s['sphere_margin_violations']:>6} {s['mesh_below_margin']:>6} {s['errors']:>5} "
-            f"{s['median_s']:>8.3f} {s['p95_s']:>6.3f} {s['max_s']:>6.3f} "
-            f"{s['median_length_ratio']:>7.2f} {s['p95_length_ratio']:>7.2f}")
+            f"{s['mean_s']:>6.3f} {s['median_s']:>8.3f} {s['p95_s']:>6.3f} {s['p98_s']:>6.3f} "
+            f"{s['max_s']:>6.3f} {s['median_length_ratio']:>7.2f} {s['p95_length_ratio']:>7.2f}")
 
 
 def print_table(rows: list[dict], families: list[str]) -> dict:
@@ -441,6 +486,12 @@ def main(argv: list[str] | None = None) -> int:
                     metavar="DIR", help="where verifier-refuted paths are saved")
     ap.add_argument("--progress", action="store_true", help="a line per problem on stderr")
     ap.add_argument("--json", default=None, metavar="FILE", help="also write every row as JSON")
+    ap.add_argument("--robot", default=None, metavar="JSON",
+                    help="the fitted Panda as a robot file (default: fitted from the URDF)")
+    ap.add_argument("--save-paths", default=None, metavar="DIR",
+                    help="save every feasible path (DIR/<device>_m<margin>/<problem>.npy)")
+    ap.add_argument("--verify-saved", default=None, metavar="DIR",
+                    help="only verify the paths saved by --save-paths (needs --problems)")
     args = ap.parse_args(argv)
     if args.per_family is None:
         args.per_family = 3 if args.quick else 100
@@ -462,7 +513,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"machine: {timing.machine('cpu')}; warp {wp.config.version}; "
           f"BLAS threads {os.environ.get('OPENBLAS_NUM_THREADS')}; load average "
           f"{os.getloadavg()[0]:.2f}; jwarp at git {git_head()}")
-    robot, urdf = SP.load_robot()
+    robot, urdf = SP.load_robot(args.robot)
+    if urdf is None and not (args.no_verify and args.no_ompl):
+        raise SystemExit("--robot without example-robot-data: add --no-verify --no-ompl "
+                         "(and verify elsewhere with --save-paths / --verify-saved)")
     spheres = robot_spheres(robot)
     folder, index = load_problems(args)
     probs = [Problem(folder, e, robot) for e in index["problems"]]
@@ -470,6 +524,8 @@ def main(argv: list[str] | None = None) -> int:
         print("no problems", file=sys.stderr)
         return 1
     families = [f for f in SP.FAMILIES if any(p.family == f for p in probs)]
+    if args.verify_saved:
+        return 1 if verify_saved(args, robot, urdf, spheres, probs, margins) else 0
     mods = None if args.no_ompl else ompl_modules()
     if isinstance(mods, tuple):
         try:
