@@ -79,7 +79,11 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import scene_problems as SP  # noqa: E402
 import timing  # noqa: E402
-from verifier import PathVerifier, robot_spheres  # noqa: E402
+try:  # pinocchio + coal: the verifier (a GPU machine may lack them: --no-verify there)
+    from verifier import PathVerifier, robot_spheres  # noqa: E402
+except ImportError as _e:
+    PathVerifier = None  # type: ignore[assignment,misc]
+    _VERIFIER_MISSING = f"{type(_e).__name__}: {_e}"
 
 from jwarp.core.arrays import init_warp  # noqa: E402
 
@@ -120,7 +124,7 @@ class Problem:
         self.goal = joint_vector(robot, self.scene.goal, "goal", self.start)
         self._verifier = None
 
-    def verifier(self, urdf: str, spheres: list, names: list) -> PathVerifier:
+    def verifier(self, urdf: str, spheres: list, names: list) -> Any:
         if self._verifier is None:
             self._verifier = PathVerifier(urdf, None, self.scene.shapes, spheres=spheres,
                                           joint_names=names)
@@ -163,7 +167,7 @@ def length_ratio(path: np.ndarray) -> float:
     return (len(path) - 1) * seg / max(d2, 1e-12)
 
 
-def verify(v: PathVerifier, path: np.ndarray, margin: float, end_margin: float) -> dict:
+def verify(v: Any, path: np.ndarray, margin: float, end_margin: float) -> dict:
     """jwarp's rule (module docstring): first/last segments at min(margin, end_margin),
     the inner ones at margin. Returns the figures of the row."""
     em = min(margin, end_margin)
@@ -514,10 +518,10 @@ def main(argv: list[str] | None = None) -> int:
           f"BLAS threads {os.environ.get('OPENBLAS_NUM_THREADS')}; load average "
           f"{os.getloadavg()[0]:.2f}; jwarp at git {git_head()}")
     robot, urdf = SP.load_robot(args.robot)
-    if urdf is None and not (args.no_verify and args.no_ompl):
+    if (urdf is None or PathVerifier is None) and not (args.no_verify and args.no_ompl):
         raise SystemExit("--robot without example-robot-data: add --no-verify --no-ompl "
                          "(and verify elsewhere with --save-paths / --verify-saved)")
-    spheres = robot_spheres(robot)
+    spheres = robot_spheres(robot) if PathVerifier is not None else []
     folder, index = load_problems(args)
     probs = [Problem(folder, e, robot) for e in index["problems"]]
     if not probs:
