@@ -36,7 +36,10 @@ def independent_feasible(robot, world, path):
 def test_defaults():
     o = PL.PlanOptions()
     assert o.stop_when_solved is True and o.fallback == "rrt" and o.time_limit is None
-    assert o.fallback_after == 0.15 and o.rrt is None
+    assert o.fallback_after is None and o.rrt is None
+    assert PL.options.fallback_share(o, "cpu") == 0.15
+    assert PL.options.fallback_share(o, "cuda:0") == 0.08
+    assert PL.options.fallback_share(PL.PlanOptions(fallback_after=0.3), "cuda:0") == 0.3
     assert "options" in inspect.signature(PL.plan).parameters  # plan()'s options: PlanOptions
 
 

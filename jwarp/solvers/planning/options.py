@@ -45,6 +45,16 @@ STOP_REASONS = ("solved", "time_limit", "iterations", "all_done")
 
 #: the fallbacks of :attr:`PlanOptions.fallback` (besides None)
 FALLBACKS = ("rrt",)
+#: ``PlanOptions.fallback_after=None`` per device kind: the share of ``time_limit`` the
+#: multi-starts use before the fallback (measured on the scene benchmark's 700 problems).
+FALLBACK_AFTER = {"cpu": 0.15, "cuda": 0.08}
+
+
+def fallback_share(o: "PlanOptions", device: str) -> float:
+    """``o.fallback_after``, or its default on ``device`` (``FALLBACK_AFTER``)."""
+    if o.fallback_after is not None:
+        return float(o.fallback_after)
+    return FALLBACK_AFTER["cuda" if str(device).startswith("cuda") else "cpu"]
 
 
 #: the stages of :attr:`PlanResult.stage`
@@ -111,7 +121,10 @@ class PlanOptions:
             one more gradient optimisation (exact check as always); None or "none" (the
             CLI's ``--fallback none``; stored as None): no fallback.
         fallback_after: the share of ``time_limit`` the multi-starts may use before the
-            fallback, in (0, 1) (without a time limit: after the iterations).
+            fallback, in (0, 1) (without a time limit: after the iterations); None
+            (default): :data:`FALLBACK_AFTER` of the planner's device kind (0.15 on the
+            CPU, 0.08 on CUDA, where the fallback's share of the tail is largest:
+            benchmarks/README.md, ``bench_scenes.py``).
         rrt: :class:`jwarp.solvers.planning.rrt.RRTOptions` of the fallback (None: its defaults).
         check_all_every: exact feasibility check of every unfinished path every this many
             iterations (>= 1; paths whose largest substep cost is below ``w c(margin)`` are
@@ -180,7 +193,7 @@ class PlanOptions:
     converge_tol: float = 1e-3
     time_limit: float | None = None
     fallback: str | None = "rrt"
-    fallback_after: float = 0.15
+    fallback_after: float | None = None
     rrt: Any = None
     allow_no_collision: bool = False
     shorten: int = 4
@@ -285,7 +298,7 @@ def _check_budget(o: "PlanOptions") -> None:
     if o.fallback is not None and (not isinstance(o.fallback, str)
                                    or o.fallback not in FALLBACKS):
         raise ValueError(f"fallback: expected 'rrt', 'none' or None, got {o.fallback!r}")
-    f = real_number(o.fallback_after, "fallback_after")
+    f = 0.5 if o.fallback_after is None else real_number(o.fallback_after, "fallback_after")
     if not 0.0 < f < 1.0:
         raise ValueError(f"fallback_after: expected a number in (0, 1), got "
                          f"{o.fallback_after!r}")

@@ -25,7 +25,7 @@ from jwarp.world.path_feasibility import (MAX_CHECK_SUBSTEPS, SWEEP_SAFETY, cert
 from jwarp.core.limits import project_numpy, within_limits
 from jwarp.solvers.overrides import renamed_argument, with_overrides
 from jwarp.solvers.planning.objective import PathObjective, path_configs
-from jwarp.solvers.planning.options import PlanOptions, ViaPoints, check_int
+from jwarp.solvers.planning.options import PlanOptions, ViaPoints, check_int, fallback_share
 from jwarp.solvers.planning.result import PlanResult
 
 
@@ -243,7 +243,7 @@ class Planner:
         deadline = None if o.time_limit is None else t0 + float(o.time_limit)
         opt_deadline = deadline
         if deadline is not None and o.fallback is not None:
-            opt_deadline = t0 + float(o.fallback_after) * float(o.time_limit)
+            opt_deadline = t0 + fallback_share(o, str(dev)) * float(o.time_limit)
         q0 = self._problems(start, "start")
         q1 = self._problems(goal, "goal")
         finite_as(q0, self.npdt, "start")  # also finite in the optimisation's dtype
