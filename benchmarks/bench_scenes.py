@@ -229,7 +229,7 @@ def verify_saved(args: argparse.Namespace, robot: Any, urdf: str | None, spheres
             continue
         m = float(d.name.rsplit("_m", 1)[1])
         files = sorted(d.glob("*.npy"))
-        coll = viol = 0
+        coll = viol = mesh = sphere = 0
         for f in files:
             p = by_name.get(f.stem)
             if p is None:
@@ -238,10 +238,13 @@ def verify_saved(args: argparse.Namespace, robot: Any, urdf: str | None, spheres
                          args.endpoint_margin)
             coll += row["collision"]
             viol += row["sphere_margin_violation"]
+            mesh += row["mesh_min_m"] is not None and row["mesh_min_m"] < 0
+            sphere += row["sphere_min_m"] is not None and row["sphere_min_m"] < 0
             if row["collision"]:
                 print(f"  !! {d.name}/{f.stem}: {row['first_violation']}", flush=True)
-        print(f"{d.name}: {len(files)} feasible paths verified, {coll} collisions, "
-              f"{viol} sphere margin violations", flush=True)
+        print(f"{d.name}: {len(files)} feasible paths verified, {coll} collisions ({mesh} of "
+              f"the URDF meshes, {sphere} of the spheres), {viol} sphere margin violations",
+              flush=True)
         total += coll
     print(f"verifier collisions among the saved feasible paths: {total} (must be 0)")
     return total
