@@ -48,7 +48,13 @@ SUBMODULES = frozenset({
     "atomic", "measurement", "memory", "registry",
 })
 
-__all__ = sorted(LAZY)
+#: the entry points (``__all__``, docs/api.md's first section); the other names of
+#: :data:`LAZY` stay reachable here and are documented under their facade
+#: (``jwarp.kinematics``, ``jwarp.model``): no name is listed by two facades
+ENTRY_POINTS = ("IKSolver", "Planner", "RobotModel", "World", "calibrate", "fk", "hookimpl", "ik",
+                "jacobian", "measurements", "plan", "register_plugin", "robot", "robots",
+                "warmup")
+__all__ = sorted(ENTRY_POINTS)
 
 
 def __getattr__(name: str) -> Any:

@@ -32,12 +32,9 @@ from jwarp.calibration.simulate.campaign import Campaign, simulate_campaign
 from jwarp.calibration.simulate.scenarios import scenario
 
 __all__ = [
-    "calibrate", "calibrate_cv", "calibrate_with", "CalibrationOptions", "cross_validate",
-    "CVOptions", "CVResult", "CVSetting", "CalibrationProblem",
-    "CalibrationResult", "CalibrationWarning", "Campaign", "check_samples", "DEFAULT_SIGMA",
-    "DesignOptions", "DesignResult", "Direction", "error_stats", "errors",
-    "influencing_frames", "influencing_masses", "model_frames", "ModelState",
-    "observation_groups", "order_poses", "ParameterSpace", "parse_groups", "perturb_robot",
-    "PoseOptions", "predict", "Progress", "ROBOT_GROUPS", "sample_poses", "scenario",
-    "sensitivity", "SensitivityResult", "simulate_campaign",
+    "calibrate_cv", "calibrate_with", "CalibrationOptions", "cross_validate", "CVOptions",
+    "CVResult", "CVSetting", "CalibrationProblem", "CalibrationResult",
+    "CalibrationWarning", "Direction", "error_stats", "errors", "influencing_frames",
+    "influencing_masses", "model_frames", "ModelState", "observation_groups",
+    "ParameterSpace", "perturb_robot", "predict", "Progress",
 ]

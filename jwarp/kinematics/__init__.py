@@ -24,10 +24,9 @@ from jwarp.kinematics.launch import (ELASTIC_TOL, ElasticFK, ElasticLaunch, Elas
                                      default_tol, elastic_args, equilibrium, frame_rows, host_out,
                                      kappa_array, launch_fk, rho0_full, setup)
 
-__all__ = ["ELASTIC_TOL", "ElasticFK", "ElasticLaunch", "ElasticStep", "KinematicsData",
-           "default_tol", "elastic_args", "elastic_step", "equilibrium", "fk", "fk_elastic",
-           "forward_kinematics", "frame_dh_jacobian", "frame_jacobian", "frame_rows",
-           "gravity_torques", "host_out",
-           "jacobian", "jacobian_dh", "kappa_array", "launch_fk", "rho0_full", "setup",
-           "solve_equilibrium", "transmitted", "without_coupling_harmonic",
-           "without_transmission"]
+__all__ = [
+    "ElasticFK", "ElasticStep", "KinematicsData", "elastic_step", "fk_elastic",
+    "forward_kinematics", "frame_dh_jacobian", "frame_jacobian", "gravity_torques",
+    "jacobian_dh", "kappa_array", "solve_equilibrium", "transmitted",
+    "without_coupling_harmonic", "without_transmission",
+]

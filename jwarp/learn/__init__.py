@@ -24,10 +24,12 @@ from jwarp.learn.train_ik import IKTrainer, TrainIKOptions, ik_loss, train_ik, t
 from jwarp.learn.train_plan import (PlanSamples, TrainPlanOptions, clean, extend, improve,
                                     make_plan_data, train_plan)
 
-__all__ = ["BasisPointSet", "basis_points", "bps_encode", "load_checkpoint", "read_checkpoint",
-           "save_checkpoint", "JointCodec", "frame_features", "IKData", "make_ik_data",
-           "make_worlds", "sample_targets", "IKNet", "IKNetConfig", "ik_objective", "u_ik",
-           "u_path", "IKTrainer", "TrainIKOptions", "ik_loss", "train_ik", "train_ik_supervised",
-           "load_plan_checkpoint", "evaluate_plan", "format_plan_table", "AXIS_SYMMETRIES",
-           "AxisSymmetry", "PlanNet", "PlanNetConfig", "axis_symmetries", "PlanSamples",
-           "TrainPlanOptions", "clean", "extend", "improve", "make_plan_data", "train_plan"]
+__all__ = [
+    "BasisPointSet", "basis_points", "bps_encode", "load_checkpoint", "read_checkpoint",
+    "save_checkpoint", "JointCodec", "frame_features", "IKData", "make_ik_data",
+    "make_worlds", "sample_targets", "IKNet", "IKNetConfig", "u_ik", "u_path", "IKTrainer",
+    "TrainIKOptions", "ik_loss", "train_ik", "train_ik_supervised", "load_plan_checkpoint",
+    "evaluate_plan", "format_plan_table", "AxisSymmetry", "PlanNet", "PlanNetConfig",
+    "axis_symmetries", "PlanSamples", "TrainPlanOptions", "clean", "extend", "improve",
+    "make_plan_data", "train_plan",
+]

@@ -8,8 +8,6 @@ from jwarp.model.robot import (Capsule, DH_PARAMS, FRAME_KINDS, FROZEN_NOTE, Fra
                                Sphere, freeze_joints, frozen_joint_values, validate)
 
 __all__ = [
-    "Capsule", "DH_PARAMS", "FRAME_KINDS", "FROZEN_NOTE", "Frame", "JOINT_TYPES", "Joint",
-    "KAPPA_AXES", "LinearLimit", "MAX_LENGTH", "Mass", "RobotModel", "RobotModelError",
-    "SCHEMA_NAME", "SCHEMA_VERSION", "SelfCollision", "Sphere", "freeze_joints",
-    "frozen_joint_values", "validate",
+    "Capsule", "Frame", "Joint", "LinearLimit", "Mass", "RobotModelError", "SelfCollision",
+    "Sphere", "freeze_joints", "frozen_joint_values", "validate",
 ]

@@ -14,8 +14,7 @@ from jwarp.viz.robot import (SAMPLE_TIMELINE, TIMELINE, log_robot, object_meshes
 from jwarp.viz.spectra import SpectraRecording
 
 __all__ = [
-    "PlanRecording", "Recording", "SAMPLE_TIMELINE", "SpectraRecording", "TIMELINE",
-    "TrainingCurves", "atomic_recording", "log_robot", "object_meshes", "open_recording",
-    "rerun_module", "save_calibration_rrd", "save_robot_rrd", "world_capsules",
-    "world_spheres",
+    "PlanRecording", "Recording", "SpectraRecording", "TrainingCurves", "log_robot",
+    "object_meshes", "open_recording", "save_calibration_rrd", "save_robot_rrd",
+    "world_capsules", "world_spheres",
 ]

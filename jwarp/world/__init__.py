@@ -15,10 +15,11 @@ from jwarp.world.sdf import (World, grid_geometry, world_from_mesh, world_from_o
                              world_from_points)
 from jwarp.world.simplex import noise_grid, simplex_noise, simplex_occupancy, simplex_world
 
-__all__ = ["Scene", "SceneOptions", "World", "exact_world", "feasible_fraction", "feasible_simplex_world",
-           "fixed_spheres", "grid_geometry", "load_scene", "load_world",
-           "never_colliding_pairs", "noise_grid", "parse_world_spec", "random_configurations",
-           "robot_reach", "robot_world_grid", "save_world", "scene_world",
-           "shelf_grasp_poses", "shelf_world", "simplex_noise", "simplex_occupancy",
-           "simplex_world", "table_shelf_scene", "with_self_pairs", "world_from_mesh",
-           "world_from_occupancy", "world_from_points", "write_self_pairs"]
+__all__ = [
+    "Scene", "SceneOptions", "exact_world", "feasible_fraction", "feasible_simplex_world",
+    "fixed_spheres", "load_scene", "load_world", "never_colliding_pairs",
+    "random_configurations", "robot_reach", "robot_world_grid", "save_world",
+    "scene_world", "shelf_grasp_poses", "shelf_world", "simplex_world",
+    "table_shelf_scene", "with_self_pairs", "world_from_mesh", "world_from_occupancy",
+    "world_from_points", "write_self_pairs",
+]

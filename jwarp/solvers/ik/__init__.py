@@ -45,8 +45,5 @@ from jwarp.solvers.ik.solver import (IKSolver, ik, RESTART_PROGRESS, SOLVER_CACH
                                      select_best)
 
 __all__ = [
-    "pose_matrix", "IKObjective", "IKWeights", "ORIENTATIONS", "orientation_args",
-    "IKOptions", "IKResult",
-    "IKSolver", "ik", "RESTART_PROGRESS", "SOLVER_CACHE_SIZE", "SOLVER_CACHE_MAX_BATCH",
-    "check_warm_start", "warm_start_seeds", "select_best",
+    "pose_matrix", "IKObjective", "IKWeights", "IKOptions", "IKResult", "warm_start_seeds",
 ]

@@ -33,8 +33,5 @@ from jwarp.solvers.planning.planner import (EXACT_SUBSTEP, PLANNER_CHECK_EVALS,
 from jwarp.solvers.planning.result import PlanResult
 
 __all__ = [
-    "NORM_FLOOR", "PathObjective", "PathWeights", "INITIAL_KINDS", "STOP_REASONS",
-    "FALLBACKS", "STAGES", "PlanOptions", "ViaPoints",
-    "EXACT_SUBSTEP", "PLANNER_CHECK_EVALS", "PLANNER_CHECK_EVALS_GPU", "Planner", "plan",
-    "PlanResult",
+    "PathObjective", "PathWeights", "PlanOptions", "ViaPoints", "PlanResult",
 ]
