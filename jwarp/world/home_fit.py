@@ -71,6 +71,8 @@ class HomeFitOptions:
         seed: seed of the samples (and of a refit).
         refit: a link whose shrunk spheres would exceed ``tolerance`` is fitted again
             with a protrusion that fits the home (False: left as it was).
+        n_random: random configurations tried for a default home when none of
+            :func:`home_candidates` is free.
     """
 
     contact_margin: float = 0.0005
@@ -79,6 +81,7 @@ class HomeFitOptions:
     n_surface: int = 4000
     seed: int = 0
     refit: bool = True
+    n_random: int = 2000
 
     def validate(self) -> "HomeFitOptions":
         for key in ("contact_margin", "gap", "tolerance"):
@@ -93,6 +96,9 @@ class HomeFitOptions:
             raise ValueError(f"n_surface: expected an integer >= 100, got {self.n_surface!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int):
             raise TypeError(f"seed: expected an integer, got {type(self.seed).__name__}")
+        if isinstance(self.n_random, bool) or not isinstance(self.n_random, int) \
+                or self.n_random < 0:
+            raise ValueError(f"n_random: expected an integer >= 0, got {self.n_random!r}")
         return self
 
 
@@ -107,7 +113,11 @@ class HomeFitReport:
 
     home: list[float]
     home_from: str
+    #: always empty since issue 42 (no pair is unchecked to free a home); kept for readers
     default_pairs: list[dict] = field(default_factory=list)
+    #: default homes tried and found in self-collision: ``{"home_from", "pairs": [{"links",
+    #: "sphere_depth_m", "mesh_distance_m"}]}``
+    rejected: list[dict] = field(default_factory=list)
     tightened: list[dict] = field(default_factory=list)
     remaining: list[dict] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -123,7 +133,6 @@ class HomeFitReport:
 
     def summary(self) -> str:
         """One line for the import's summary."""
-        d = ", ".join("/".join(p["links"]) for p in self.default_pairs) or "none"
         t = ", ".join(
             f"{r['link']} (fitted again: protrusion {1e3 * r['protrusion_m']:.1f} mm, "
             f"{r['spheres']} spheres)" if r.get("refit") else
@@ -131,8 +140,11 @@ class HomeFitReport:
             for r in self.tightened if not r.get("reverted")) or "none"
         state = "free" if self.home_free else (
             "IN COLLISION: " + ", ".join("/".join(p["links"]) for p in self.remaining))
-        return (f"home ({self.home_from}): {state}; Default pairs excluded: {d}; spheres "
-                f"tightened: {t}")
+        why = ("; replaced " + ", ".join(
+            f"{r['home_from']} (self-collision: "
+            + ", ".join("/".join(p["links"]) for p in r["pairs"]) + ")"
+            for r in self.rejected)) if self.rejected else ""
+        return f"home ({self.home_from}): {state}{why}; spheres tightened: {t}"
 
 
 # ------------------------------------------------------------------ the home
@@ -245,19 +257,48 @@ def mesh_distance(mesh_a: Any, T_a: np.ndarray, mesh_b: Any, T_b: np.ndarray, *,
 
 
 # ------------------------------------------------------------------ the fit
+#: group_state names tried first for a default home (MoveIt configs' usual names)
+HOME_STATE_NAMES = ("ready", "home", "default")
+
+
+def home_candidates(model: RobotModel, srdf: Any = None) -> list[tuple[Any, str]]:
+    """``[(home, what)]`` tried in order for the default home (``fit_home(home=None)``):
+    zeros projected into the limits; the SRDF's ``<group_state>`` names (``ready``,
+    ``home``, ``default`` first, then the others in document order) that set a joint of
+    ``model``; the middle of the limits. (The sampled free configuration is the last
+    resort: :func:`fit_home`.)"""
+    out: list[tuple[Any, str]] = [(None, "zeros projected into the limits")]
+    if srdf is not None:
+        names = srdf.state_names
+        names = [n for n in HOME_STATE_NAMES if n in names] + \
+            [n for n in names if n not in HOME_STATE_NAMES]
+        for n in names:
+            try:
+                values = srdf.state(n)
+            except ValueError:
+                continue
+            if any(j in model.joint_names for j in values):
+                out.append((n, f"SRDF group_state '{n}'"))
+    lim = np.asarray(model.joint_limits, np.float64)
+    out.append((list(0.5 * (lim[:, 0] + lim[:, 1])), "the middle of the joint limits"))
+    return out
+
+
 def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
              options: HomeFitOptions | None = None, *, srdf: Any = None
              ) -> tuple[RobotModel, HomeFitReport]:
     """``model`` (default ``robot.model``; its frames those of the imported ``robot``, e.g.
-    fitted and reduced to a planning group) with its home made free of self-collision by
-    the Default rule and tightened spheres (module docstring); ``home`` as in
-    :func:`resolve_home` (``srdf``: a parsed :class:`~jwarp.importers.srdf.Srdf` for a
-    state name). Returns (model, report); warns (:class:`HomeFitWarning`) naming every
-    excluded pair, tightened link and pair left in collision."""
-    from jwarp.kinematics.fk import fk
-    from jwarp.world.model_check import home_self_collisions
-    from jwarp.world.self_pairs import default_pairs, with_default_pairs
-
+    fitted and reduced to a planning group) with a home free of self-collision (module
+    docstring); ``home`` as in :func:`resolve_home` (``srdf``: a parsed
+    :class:`~jwarp.importers.srdf.Srdf` for a state name, and the default home's
+    candidates). A checked pair whose URDF collision geometry is in contact at the home
+    (closer than ``contact_margin``) is a self-collision: a given ``home`` is refused
+    (ValueError naming it, the pairs and their distances); the default home (None) is
+    replaced by the first free one of :func:`home_candidates`, else by a free random
+    configuration (``n_random`` tries, seeded), else refused. No pair is ever unchecked to
+    free a home. Spheres overlapping where the geometry is apart are tightened or fitted
+    again. Returns (model, report); warns (:class:`HomeFitWarning`) naming a replaced home,
+    every tightened link and pair left overlapping."""
     o = (HomeFitOptions() if options is None else options)
     if not isinstance(o, HomeFitOptions):
         raise TypeError(f"options: expected HomeFitOptions, got {type(o).__name__}")
@@ -268,12 +309,11 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
         raise TypeError(f"model: expected a RobotModel, got {type(model).__name__}")
     if model.frame_names[:len(robot.model.frame_names)] != robot.model.frame_names:
         raise ValueError("model: its frames are not those of the imported robot")
-    q, where = resolve_home(model, home, srdf)
+    q, where = resolve_home(model, home, srdf)   # a given home's errors first
     report = HomeFitReport(home=q.tolist(), home_from=where)
     if not model.spheres:
         return model, report
     names = model.frame_names
-    T = fk(model, q[None], device="cpu", dtype=np.float64)[0]
     meshes: dict[int, Any] = {}
 
     def mesh_of(f: int) -> Any:
@@ -281,25 +321,72 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
             meshes[f] = link_mesh(robot, names[f])
         return meshes[f]
 
-    dist: dict[tuple[int, int], float] = {}
+    def contacts(qc: np.ndarray) -> tuple[list, list, Any]:
+        """(pairs in contact [(a, b, sphere depth, mesh distance)], pairs to tighten
+        [(a, b, depth)], the distance function) at ``qc``."""
+        from jwarp.kinematics.fk import fk
+        from jwarp.world.self_pairs import default_pairs
 
-    def distance(a: int, b: int) -> float:
-        if (a, b) not in dist:
-            ma, mb = mesh_of(a), mesh_of(b)
-            dist[a, b] = (math.nan if ma is None or mb is None else
-                          mesh_distance(ma, T[a], mb, T[b], n_surface=o.n_surface, seed=o.seed))
-        return dist[a, b]
+        T = fk(model, qc[None], device="cpu", dtype=np.float64)[0]
+        dist: dict[tuple[int, int], float] = {}
 
-    default, fit = default_pairs(model, q, lambda a, b: distance(a, b) <= o.contact_margin)
-    for a, b, depth in default:
-        report.default_pairs.append({"links": [names[a], names[b]], "sphere_depth_m": depth,
-                                     "mesh_distance_m": distance(a, b)})
+        def distance(a: int, b: int) -> float:
+            if (a, b) not in dist:
+                ma, mb = mesh_of(a), mesh_of(b)
+                dist[a, b] = (math.nan if ma is None or mb is None else
+                              mesh_distance(ma, T[a], mb, T[b], n_surface=o.n_surface,
+                                            seed=o.seed))
+            return dist[a, b]
+
+        hit, fit = default_pairs(model, qc, lambda a, b: distance(a, b) <= o.contact_margin)
+        return [(a, b, d, distance(a, b)) for a, b, d in hit], fit, (T, distance)
+
+    def words(rows: list) -> str:
+        return ", ".join(f"{names[a]}/{names[b]} (URDF collision geometry "
+                         f"{_contact_words(dm)}, spheres {-1e3 * d:.1f} mm deep)"
+                         for a, b, d, dm in rows)
+
+    hit, fit, (T, distance) = contacts(q)
+    if hit and home is not None:
+        raise ValueError(
+            f"home: {where} is a self-collision of robot '{model.name}': {words(hit)}; "
+            f"give a home where these links are apart, or, if they may touch, disable the "
+            f"pair in the SRDF (<disable_collisions>); jwarp does not uncheck a pair to "
+            f"free a home")
+    if hit:   # the default home: replaced by a free one
+        rejected = [(where, hit)]
+        found = None
+        for cand, what in home_candidates(model, srdf)[1:]:
+            try:
+                qc, _ = resolve_home(model, cand, srdf)
+            except ValueError:
+                continue      # a state outside the limits
+            h, f2, td = contacts(qc)
+            if not h:
+                found = (qc, what, f2, td)
+                break
+            rejected.append((what, h))
+        if found is None:
+            found = _random_free_home(model, o, contacts)
+            if found is not None:
+                rejected.append(("", []))
+        if found is None:
+            raise ValueError(
+                f"home: no home free of self-collision found for robot '{model.name}': "
+                + "; ".join(f"{w}: {words(h)}" for w, h in rejected if w)
+                + f"; nor among {o.n_random} random configurations; give one (--home)")
+        q, where, fit, (T, distance) = found
+        rejected = [r for r in rejected if r[0]]
+        report.home, report.home_from = q.tolist(), where
+        report.rejected = [{"home_from": w, "pairs": [
+            {"links": [names[a], names[b]], "sphere_depth_m": d, "mesh_distance_m": dm}
+            for a, b, d, dm in h]} for w, h in rejected]
         report.warnings.append(
-            f"links '{names[a]}' and '{names[b]}' are in collision at the home ({where}): "
-            f"their URDF collision geometry is {_contact_words(distance(a, b))}; the pair "
-            f"is excluded from self-collision checks (reason Default, as MoveIt's setup "
-            f"assistant does)")
-    model = with_default_pairs(model, [(a, b) for a, b, _ in default])
+            f"the default home ({rejected[0][0]}) is a self-collision: {words(rejected[0][1])}"
+            + "".join(f"; so is {w}: {words(h)}" for w, h in rejected[1:])
+            + f"; the home is {where} instead (no pair is unchecked to free a home)")
+    from jwarp.world.model_check import home_self_collisions
+
     if fit:
         pairs = [(a, b) for a, b, _ in fit]
         model = _tighten(robot, model, T, pairs, o, report, mesh_of)
@@ -307,12 +394,12 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
         if back and o.refit:
             model = _refit(robot, model, back, pairs, o, report, distance)
             left = {tuple(sorted((names.index(na), names.index(nb))))
-                    for na, nb, _ in home_self_collisions(model, q)}
+                    for na, nb, _ in home_self_collisions(model, q, device="cpu")}
             again = [p for p in pairs if p in left]
             if again:
                 model = _tighten(robot, model, T, again, o, report, mesh_of)
     # what is left (pairs without geometry, or tightening that would uncover a surface)
-    for na, nb, depth in home_self_collisions(model, q):
+    for na, nb, depth in home_self_collisions(model, q, device="cpu"):
         a, b = sorted((names.index(na), names.index(nb)))
         d = distance(a, b)
         why = ("no URDF collision geometry to compare" if math.isnan(d) else
@@ -334,6 +421,27 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
     notes[HOME_NOTE] = json.dumps([float(v) for v in q])   # the solvers' check starts here
     report.seconds = time.perf_counter() - t0
     return model.copy(notes=notes), report
+
+
+def _random_free_home(model: RobotModel, o: HomeFitOptions, contacts: Any) -> Any:
+    """The first of ``o.n_random`` random configurations (seed ``o.seed``) whose checked
+    spheres overlap nowhere (then no URDF geometry is tested) or whose overlapping pairs'
+    geometry is apart: ``(q, what, pairs to tighten, (T, distance))``, or None."""
+    from jwarp.world.model_check import home_self_collisions
+
+    lim = np.asarray(model.joint_limits, np.float64)
+    rng = np.random.default_rng(o.seed)
+    tried_mesh = 0
+    for k in range(o.n_random):
+        qc = lim[:, 0] + rng.random(model.n_dof) * (lim[:, 1] - lim[:, 0])
+        if home_self_collisions(model, qc, device="cpu") and tried_mesh >= 10:
+            continue      # geometry tests for the first few overlapping ones only
+        h, fit, td = contacts(qc)
+        tried_mesh += bool(fit or h)
+        if not h:
+            return qc, f"a random configuration free of self-collision (try {k + 1}, seed " \
+                       f"{o.seed})", fit, td
+    return None
 
 
 def _contact_words(d: float) -> str:
