@@ -321,11 +321,15 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
             meshes[f] = link_mesh(robot, names[f])
         return meshes[f]
 
+    # spheres farther apart than this have geometry apart (each link's surface is within
+    # the fit's one-sided error, at most ``tolerance``, of its spheres)
+    reach = o.contact_margin + 2.0 * (o.tolerance or 0.0)
+
     def contacts(qc: np.ndarray) -> tuple[list, list, Any]:
-        """(pairs in contact [(a, b, sphere depth, mesh distance)], pairs to tighten
-        [(a, b, depth)], the distance function) at ``qc``."""
+        """(pairs in contact [(a, b, sphere distance, mesh distance)], pairs to tighten
+        [(a, b, depth)], (FK, the distance function)) at ``qc``: the URDF geometry of every
+        checked pair whose spheres are closer than ``reach`` is tested."""
         from jwarp.kinematics.fk import fk
-        from jwarp.world.self_pairs import default_pairs
 
         T = fk(model, qc[None], device="cpu", dtype=np.float64)[0]
         dist: dict[tuple[int, int], float] = {}
@@ -338,12 +342,18 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
                                             seed=o.seed))
             return dist[a, b]
 
-        hit, fit = default_pairs(model, qc, lambda a, b: distance(a, b) <= o.contact_margin)
-        return [(a, b, d, distance(a, b)) for a, b, d in hit], fit, (T, distance)
+        hit, fit = [], []
+        for (a, b), d in _near_pairs(model, T, reach):
+            if distance(a, b) <= o.contact_margin:
+                hit.append((a, b, d, distance(a, b)))
+            elif d < 0:
+                fit.append((a, b, d))
+        return hit, fit, (T, distance)
 
     def words(rows: list) -> str:
         return ", ".join(f"{names[a]}/{names[b]} (URDF collision geometry "
-                         f"{_contact_words(dm)}, spheres {-1e3 * d:.1f} mm deep)"
+                         f"{_contact_words(dm)}, spheres "
+                         + (f"{-1e3 * d:.1f} mm deep)" if d < 0 else f"{1e3 * d:.1f} mm apart)")
                          for a, b, d, dm in rows)
 
     hit, fit, (T, distance) = contacts(q)
@@ -367,7 +377,7 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
                 break
             rejected.append((what, h))
         if found is None:
-            found = _random_free_home(model, o, contacts)
+            found = _random_free_home(model, o, contacts, reach)
             if found is not None:
                 rejected.append(("", []))
         if found is None:
@@ -423,24 +433,47 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
     return model.copy(notes=notes), report
 
 
-def _random_free_home(model: RobotModel, o: HomeFitOptions, contacts: Any) -> Any:
+def _near_pairs(model: RobotModel, T: np.ndarray, reach: float
+                ) -> list[tuple[tuple[int, int], float]]:
+    """``[((a, b), smallest sphere surface distance [m])]`` of the checked frame pairs
+    (``allowed_collision_pairs``) closer than ``reach`` at the FK ``T``, closest first."""
+    from jwarp.world.collision import collision_pairs
+
+    pairs = collision_pairs(model)
+    if len(pairs) == 0:
+        return []
+    sf, sp, sr = model.sphere_arrays()
+    x = np.einsum("sij,sj->si", T[sf, :3, :3], sp) + T[sf, :3, 3]
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = np.linalg.norm(x[i] - x[j], axis=1) - sr[i] - sr[j]
+    best: dict[tuple[int, int], float] = {}
+    for k in np.flatnonzero(d < reach):
+        key = (int(min(sf[i[k]], sf[j[k]])), int(max(sf[i[k]], sf[j[k]])))
+        best[key] = min(best.get(key, math.inf), float(d[k]))
+    return sorted(best.items(), key=lambda t: t[1])
+
+
+def _random_free_home(model: RobotModel, o: HomeFitOptions, contacts: Any, reach: float
+                      ) -> Any:
     """The first of ``o.n_random`` random configurations (seed ``o.seed``) whose checked
-    spheres overlap nowhere (then no URDF geometry is tested) or whose overlapping pairs'
-    geometry is apart: ``(q, what, pairs to tighten, (T, distance))``, or None."""
-    from jwarp.world.model_check import home_self_collisions
+    spheres are all farther apart than ``reach`` (then no URDF geometry needs a test), or,
+    among the first ten that are not, one whose geometry is apart: ``(q, what, pairs to
+    tighten, (FK, distance))``, or None."""
+    from jwarp.kinematics.fk import fk
 
     lim = np.asarray(model.joint_limits, np.float64)
     rng = np.random.default_rng(o.seed)
-    tried_mesh = 0
+    tested = 0
     for k in range(o.n_random):
         qc = lim[:, 0] + rng.random(model.n_dof) * (lim[:, 1] - lim[:, 0])
-        if home_self_collisions(model, qc, device="cpu") and tried_mesh >= 10:
-            continue      # geometry tests for the first few overlapping ones only
+        if _near_pairs(model, fk(model, qc[None], device="cpu", dtype=np.float64)[0], reach):
+            if tested >= 10:
+                continue      # URDF geometry tests for the first few only (their cost)
+            tested += 1
         h, fit, td = contacts(qc)
-        tried_mesh += bool(fit or h)
         if not h:
-            return qc, f"a random configuration free of self-collision (try {k + 1}, seed " \
-                       f"{o.seed})", fit, td
+            return qc, (f"a random configuration free of self-collision (try {k + 1}, seed "
+                        f"{o.seed})"), fit, td
     return None
 
 
