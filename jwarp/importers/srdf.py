@@ -598,13 +598,19 @@ def disabled_pairs(robot: Any) -> list[tuple[str, str, str]]:
     """``(frame a, frame b, reason)`` for every frame pair of ``robot`` (a
     :class:`~jwarp.model.RobotModel`) that is never checked for self-collision (its
     ``self_collision`` groups and exclude pairs, less include pairs), ``a < b`` by index;
-    reason ``Adjacent`` when one is the other's parent, ``Default`` for the pairs listed in
-    ``notes['self_collision_default']`` (in contact at the home configuration), else
+    reason: the one recorded at import (``notes['self_collision_pairs']``,
+    :mod:`jwarp.model.pair_reasons`) in MoveIt's words (``Adjacent``, ``Always``,
+    ``Never``; an SRDF pair its own reason, else ``User``; frames joined by frozen joints
+    ``Never``), else ``Adjacent`` when one is the other's parent, ``Default`` for the pairs
+    listed in ``notes['self_collision_default']`` (an older import's home rule), else
     ``Never``."""
+    from jwarp.model.pair_reasons import pair_reasons
+
     allowed = robot.allowed_collision_pairs
     parents = robot.parents
     names = robot.frame_names
     default = {frozenset(p) for p in default_pair_names(robot)}
+    recorded = pair_reasons(robot)
     out = []
     for a in range(robot.n_frames):
         for b in range(a + 1, robot.n_frames):
@@ -612,6 +618,12 @@ def disabled_pairs(robot: Any) -> list[tuple[str, str, str]]:
                 adj = parents[a] == b or parents[b] == a
                 reason = (REASON_ADJACENT if adj else REASON_DEFAULT
                           if frozenset((names[a], names[b])) in default else REASON_NEVER)
+                if (a, b) in recorded:
+                    kind, why = recorded[(a, b)]
+                    m = re.search(r"reason (\S+)$", why)
+                    reason = ((m.group(1) if m else "User") if kind == "SRDF" else
+                              kind if kind in ("Adjacent", "Always", "Never", "Default")
+                              else REASON_NEVER if kind == "Frozen" else "User")
                 out.append((names[a], names[b], reason))
     return out
 
