@@ -295,13 +295,13 @@ def plan_group(robot: UrdfRobot, options: GroupOptions | None = None, *,
         from jwarp.importers.srdf import disabled_link_pairs
         from jwarp.model.pair_reasons import pair_reasons, with_pair_reasons
 
-        def key(a: str, b: str) -> tuple[int, int]:
+        def pair_key(a: str, b: str) -> tuple[int, int]:
             i, j = model.frame_index(a), model.frame_index(b)
             return (min(i, j), max(i, j))
 
         dis = disabled_link_pairs(srdf, robot.source.link_frames)
-        pairs = {key(*sorted(p)): ("SRDF", why) for p, why in dis.items()}
-        enabled = {key(d.link1, d.link2) for d in srdf.enable_collisions
+        pairs = {pair_key(*sorted(p)): ("SRDF", why) for p, why in dis.items()}
+        enabled = {pair_key(d.link1, d.link2) for d in srdf.enable_collisions
                    if d.link1 != d.link2}
         res.srdf_pairs = len(srdf.disable_collisions)
         sc = model.self_collision
