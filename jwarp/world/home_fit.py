@@ -1,38 +1,44 @@
-"""The home configuration of an imported robot made free of self-collision, as a MoveIt
-user's setup would, without hiding real collisions (docs/urdf.md, "Home configuration").
+"""The home configuration of an imported robot free of self-collision, without hiding
+real collisions (docs/urdf.md, "Home configuration").
 
 :func:`fit_home` takes the robot being imported (:class:`~jwarp.importers.robot.UrdfRobot`,
 for its collision geometry) and its jwarp model (fitted spheres, sampled pairs, SRDF pairs,
-planning group) and looks at the frame pairs whose spheres overlap at the home:
+planning group) and looks, at the home, at every checked frame pair whose spheres are
+closer than ``contact_margin + 2 tolerance`` (farther, the geometry is apart: each link's
+surface is within the fit's one-sided error of its spheres). The contact test is jwarp's
+own: surface points of one link's geometry (its vertices and ``n_surface`` area-uniform
+samples) against the other's solid (signed distance by generalised winding number,
+:func:`jwarp.importers.spheres.signed_distance`), both ways, at the home's FK; sampled
+points give an upper bound of the true distance, so a pair whose meshes are apart is never
+called in contact.
 
-* **Default** (MoveIt's setup assistant disables the pairs in collision at the default
-  configuration, reason "Default"): only where the URDF's own collision geometry of the
-  two links is in contact there (closer than ``contact_margin``, overlapping included).
-  The contact test is jwarp's own: surface points of one link's geometry (its vertices and
-  ``n_surface`` area-uniform samples) against the other's solid (signed distance by
-  generalised winding number, :func:`jwarp.importers.spheres.signed_distance`), both ways,
-  at the home's FK; sampled points give an upper bound of the true distance, so a pair
-  whose meshes are apart is never called in contact. The pairs are excluded
-  (:func:`jwarp.world.self_pairs.with_default_pairs`), listed in the report and in
-  ``notes['self_collision_default']`` (an exported SRDF writes them with
-  reason="Default"), and warned about by name.
-* **Tightened**: where the meshes are apart but the spheres overlap (spheres reaching past
-  the surface, up to the fit's protrusion), the overlapping spheres of the two links are
-  shrunk, never below their clearance (the distance of the centre to the link's surface:
-  the sphere then still holds the ball inside the solid), each pair by what it lacks to
-  ``gap`` split in proportion to the two spheres' protrusion, until the home is free. A
-  link whose shrunk spheres would leave its surface further than ``tolerance`` outside
-  them (the one-sided error on ``n_surface`` samples; None: not bounded) is put back as
-  it was and, with ``refit``, fitted again (:func:`jwarp.importers.spheres.fit_link`,
-  same tolerance) with a protrusion of half the URDF geometry's distance to its partner
-  at the home, less ``gap`` (so the pair is free whatever the partner's spheres do within
-  their own protrusion), then tightened again where still needed. A pair still
+* **Geometry in contact** (closer than ``contact_margin``, overlapping included): the home
+  is a self-collision. A home the caller gave is refused (ValueError naming it, the pairs,
+  the geometry's overlap and the spheres' depth). The default home (zeros projected into
+  the limits) is replaced by the first free one of :func:`home_candidates` (the SRDF's
+  group states, ``ready``/``home``/``default`` first; the middle of the limits), else by a
+  free random configuration (``n_random`` tries), else refused; the report's ``rejected``
+  and a warning say which homes were in collision and which was chosen. MoveIt's setup
+  assistant would instead uncheck such pairs (its "Default" rule); jwarp never unchecks a
+  pair to free a home: a pair free almost everywhere else would go unchecked on every
+  motion (issue 42: the Panda's link5 against its hand).
+* **Tightened**: where the geometry is apart but the spheres overlap (spheres reaching
+  past the surface, up to the fit's protrusion), the overlapping spheres of the two links
+  are shrunk, never below their clearance (the distance of the centre to the link's
+  surface: the sphere then still holds the ball inside the solid), each pair by what it
+  lacks to ``gap`` split in proportion to the two spheres' protrusion, until the home is
+  free. A link whose shrunk spheres would leave its surface further than ``tolerance``
+  outside them (the one-sided error on ``n_surface`` samples; None: not bounded) is put
+  back as it was and, with ``refit``, fitted again (:func:`jwarp.importers.spheres.
+  fit_link`, same tolerance) with a protrusion of half the URDF geometry's distance to its
+  partner at the home, less ``gap`` (so the pair is free whatever the partner's spheres do
+  within their own protrusion), then tightened again where still needed. A pair still
   overlapping stays checked and is in the report's ``remaining``: no collision is hidden.
 
 The home (:func:`resolve_home`): an SRDF ``<group_state>`` name, joint values, or None
 (:func:`jwarp.world.model_check.home_configuration`: zeros projected into the limits);
-:func:`fit_home` writes it to ``notes['home']``, the first configuration of the solvers'
-collision-model check (:func:`jwarp.world.model_check.home_configurations`).
+:func:`fit_home` writes the chosen one to ``notes['home']``, the first configuration of the
+solvers' collision-model check (:func:`jwarp.world.model_check.home_configurations`).
 """
 
 from __future__ import annotations
@@ -54,7 +60,8 @@ __all__ = ["HomeFitOptions", "HomeFitReport", "HomeFitWarning", "fit_home", "res
 
 
 class HomeFitWarning(UserWarning):
-    """A pair excluded by the Default rule, spheres tightened, or a home left in collision."""
+    """A default home replaced (it was a self-collision), spheres tightened, or a pair
+    left overlapping at the home."""
 
 
 @dataclass
@@ -62,8 +69,8 @@ class HomeFitOptions:
     """Options of :func:`fit_home` (module docstring).
 
     Attributes:
-        contact_margin: URDF geometry closer than this at the home [m] is in contact (the
-            Default rule); overlapping geometry always is.
+        contact_margin: URDF geometry closer than this at the home [m] is in contact (a
+            self-collision); overlapping geometry always is.
         gap: surface distance [m] left between the tightened spheres of a pair.
         tolerance: largest one-sided error [m] of a tightened link's surface (None: not
             bounded); the import passes its fit tolerance.

@@ -29,12 +29,11 @@ MoveIt's fourth rule, **Default** (pairs in collision at the default configurati
 not applied by the import: a home in self-collision is refused or replaced
 (:mod:`jwarp.world.home_fit`), never freed by unchecking a pair.
 
-MoveIt's setup assistant also disables the pairs in collision at the robot's default
-configuration (reason "Default"). :func:`default_pairs` applies that rule only where the
-robot's own geometry is in contact there (a ``contact`` test the caller gives, e.g. the
-URDF's collision meshes: :mod:`jwarp.world.home_fit`): spheres that overlap where
-the meshes do not are a fit to correct, not a pair to stop checking.
-:func:`with_default_pairs` adds them to ``exclude_pairs`` and lists them in
+:func:`default_pairs` splits the pairs whose spheres overlap at a configuration by
+whether the robot's own geometry is in contact there (a ``contact`` test the caller gives,
+e.g. the URDF's collision meshes): spheres that overlap where the meshes do not are a fit
+to correct. :func:`with_default_pairs` (MoveIt's "Default" rule, which the import no longer
+applies) adds pairs to ``exclude_pairs`` and lists them in
 ``notes['self_collision_default']`` (an exported SRDF writes them with reason="Default").
 """
 
