@@ -203,6 +203,36 @@ def test_acceptance_moveit_srdf_pairs_equal_skipped_plus_adjacent(cheap_panda):
     assert set(got) == srdf | {frozenset(r["links"]) for r in own}
 
 
+def test_group_resampled_keeps_the_srdf_decision(cheap_panda):
+    """A planning group (``--group panda_arm``: the fingers frozen): the pairs sampled again
+    over the 7 arm joints add no never-colliding pair (``never=False``, the SRDF decides
+    those); the skipped pairs are the SRDF's plus adjacent, always-colliding and frozen
+    ones, and the link5 pairs stay checked."""
+    from jwarp.world.spherize import SpherizeOptions, resample_pairs
+
+    imp, model, rep = cheap_panda
+    s, _ = _read(MOVEIT_SRDF)
+    g = plan_group(imp, GroupOptions(srdf=s, group="panda_arm"), model=model)
+    out, pairs = resample_pairs(g.model, model.self_collision.exclude_pairs,
+                                SpherizeOptions(**CHEAP), never=False)
+    assert out.n_dof == 7 and pairs.never_colliding == []
+    rows = skipped_pairs(out)
+    srdf = {frozenset((d.link1, d.link2)) for d in s.disable_collisions}
+    other = {frozenset(r["links"]) for r in rows if r["reason"] != "SRDF"}
+    assert {frozenset(r["links"]) for r in rows} == srdf | other
+    assert {r["reason"] for r in rows if frozenset(r["links"]) in other} <= {
+        "Adjacent", "Always", "Frozen"}
+    A = out.allowed_collision_pairs
+    for a, b in LINK5_PAIRS:
+        assert A[out.frame_index(a), out.frame_index(b)], (a, b)
+    # with never=True (--srdf-collisions add) the sampled never pairs are unchecked too
+    # (here all of them are the SRDF's as well: the SRDF's reason is the one recorded)
+    out2, pairs2 = resample_pairs(g.model, model.self_collision.exclude_pairs,
+                                  SpherizeOptions(**CHEAP))
+    A2 = out2.allowed_collision_pairs
+    assert pairs2.never_colliding and not any(A2[a, b] for a, b in pairs2.never_colliding)
+
+
 def test_cli_srdf_parsed_before_the_fit(tmp_path, capsys, monkeypatch):
     """A bad --srdf (or a --home state it lacks) fails before any sphere fit (the fit is
     replaced by one that fails the test), in well under a second of the import's work."""
