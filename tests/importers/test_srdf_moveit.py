@@ -300,3 +300,39 @@ def test_cli_moveit_srdf_import(tmp_path, capsys, monkeypatch):
     assert [home[m.joint_index(j)] for j in ready] == pytest.approx(list(ready.values()))
     for a, b in LINK5_PAIRS:
         assert m.allowed_collision_pairs[m.frame_index(a), m.frame_index(b)]
+    # coal on the URDF meshes (pinocchio, not jwarp): the chosen home keeps every checked
+    # pair apart; at the default home link5 touches the hand
+    pytest.importorskip("pinocchio")
+    at_home = _coal_distances(m, home)
+    assert min(at_home.values()) > 0.005, min(at_home.items(), key=lambda t: t[1])
+    zeros = _coal_distances(m, [min(max(0.0, lo), hi) for lo, hi in m.joint_limits])
+    assert zeros[frozenset(("panda_link5", "panda_hand"))] <= 0.0
+
+
+def _coal_distances(m, q) -> dict:
+    """{frozenset(links): coal's smallest distance [m]} of the URDF collision geometry
+    (pinocchio) of every pair ``m`` checks, at ``q`` (the finger mimic follows)."""
+    import numpy as np
+    import pinocchio as pin
+
+    urdf = _urdf()
+    pm = pin.buildModelFromUrdf(urdf)
+    gm = pin.buildGeomFromUrdf(pm, urdf, pin.GeometryType.COLLISION,
+                               package_dirs=[str(Path(urdf).parents[4])])
+    names = [pm.frames[g.parentFrame].name for g in gm.geometryObjects]
+    qp = pin.neutral(pm)
+    for i in range(1, pm.njoints):
+        n = "panda_finger_joint1" if pm.names[i] == "panda_finger_joint2" else pm.names[i]
+        qp[pm.joints[i].idx_q] = q[m.joint_index(n)]
+    A = m.allowed_collision_pairs
+    pairs = [(a, b) for a in range(len(names)) for b in range(a + 1, len(names))
+             if names[a] != names[b] and A[m.frame_index(names[a]), m.frame_index(names[b])]]
+    for a, b in pairs:
+        gm.addCollisionPair(pin.CollisionPair(a, b))
+    pd, gd = pm.createData(), pin.GeometryData(gm)
+    pin.computeDistances(pm, pd, gm, gd, np.asarray(qp))
+    out: dict = {}
+    for (a, b), r in zip(pairs, gd.distanceResults):
+        key = frozenset((names[a], names[b]))
+        out[key] = min(out.get(key, np.inf), r.min_distance)
+    return out
