@@ -1,6 +1,7 @@
 """Why a robot's self-collision pairs are not checked: the reasons recorded per excluded
 frame pair (``notes['self_collision_pairs']``), MoveIt's adjacency rule, and the list of
-every unchecked pair with its reason (docs/urdf.md, "Self-collision pairs").
+every unchecked pair with its reason (docs/urdf.md, "Which self-collision pairs are not
+checked").
 
 Reasons: ``SRDF`` (the SRDF's allowed-collision matrix; ``why`` names the element, line and
 MoveIt's reason), ``Adjacent`` (:func:`moveit_adjacent_pairs`), ``Always`` / ``Never``
@@ -38,7 +39,7 @@ def moveit_adjacent_pairs(robot: Any) -> list[tuple[int, int]]:
     tree joins them by a path whose frames in between carry none (a parent and its child
     link; or two links joined through links without geometry, e.g. the Panda's link7 and
     hand through the flange panda_link8, or a joint's own ``_axis``/``_origin`` frames).
-    Unlike :func:`adjacent_pairs`, two links that are only rigidly attached (a link and its
+    Unlike :func:`jwarp.world.self_pairs.adjacent_pairs`, two links that are only rigidly attached (a link and its
     parent's fixed child) are not adjacent: whether they collide is sampled."""
     model = get_robot(robot)
     solid = np.zeros(model.n_frames, bool)
