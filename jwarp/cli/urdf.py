@@ -254,6 +254,10 @@ def home_fit_step(imported: Any, model: Any, args: argparse.Namespace, srdf: Any
             from None
 
 
+#: unchecked pairs named per reason in the text summary (``--json`` lists them all)
+PAIRS_SHOWN = 40
+
+
 def pair_lines(model: Any) -> tuple[list[str], list[dict]]:
     """Summary lines naming every unchecked self-collision pair by reason, and the JSON rows
     (:func:`jwarp.model.pair_reasons.skipped_pairs`)."""
@@ -264,7 +268,9 @@ def pair_lines(model: Any) -> tuple[list[str], list[dict]]:
     for r in rows:
         by.setdefault(r["reason"], []).append("/".join(r["links"]))
     lines = [skipped_summary(model)]
-    lines += [f"  {k}: {', '.join(v)}" for k, v in by.items()]
+    lines += [f"  {k}: {', '.join(v[:PAIRS_SHOWN])}"
+              + (f" and {len(v) - PAIRS_SHOWN} more (--json lists every pair)"
+                 if len(v) > PAIRS_SHOWN else "") for k, v in by.items()]
     return lines, rows
 
 
