@@ -464,7 +464,10 @@ def add_subcommands(sub: Any) -> None:
                         "~/.cache/jwarp/urdf)")
     s.add_argument("--srdf", default=None, metavar="ROBOT.srdf",
                    help="MoveIt SRDF: its disable_collisions are excluded from self-collision, "
-                        "its groups, group states and end-effectors can be used")
+                        "its groups, group states and end-effectors can be used; read and "
+                        "checked before the sphere fit; elements jwarp does not use "
+                        "(passive_joint, link_sphere_approximation, ...) are named in one "
+                        "warning")
     s.add_argument("--srdf-collisions", choices=("srdf", "add", "replace"), default=None,
                    help="SRDF disable_collisions: with the adjacent and always colliding "
                         "pairs (srdf, default: every pair the SRDF keeps checked is checked), "
