@@ -123,7 +123,7 @@ class HomeFitReport:
     #: always empty since issue 42 (no pair is unchecked to free a home); kept for readers
     default_pairs: list[dict] = field(default_factory=list)
     #: default homes tried and found in self-collision: ``{"home_from", "pairs": [{"links",
-    #: "sphere_depth_m", "mesh_distance_m"}]}``
+    #: "sphere_distance_m" (negative: overlapping), "mesh_distance_m"}]}``
     rejected: list[dict] = field(default_factory=list)
     tightened: list[dict] = field(default_factory=list)
     remaining: list[dict] = field(default_factory=list)
@@ -385,18 +385,15 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
             rejected.append((what, h))
         if found is None:
             found = _random_free_home(model, o, contacts, reach)
-            if found is not None:
-                rejected.append(("", []))
         if found is None:
             raise ValueError(
                 f"home: no home free of self-collision found for robot '{model.name}': "
                 + "; ".join(f"{w}: {words(h)}" for w, h in rejected if w)
                 + f"; nor among {o.n_random} random configurations; give one (--home)")
         q, where, fit, (T, distance) = found
-        rejected = [r for r in rejected if r[0]]
         report.home, report.home_from = q.tolist(), where
         report.rejected = [{"home_from": w, "pairs": [
-            {"links": [names[a], names[b]], "sphere_depth_m": d, "mesh_distance_m": dm}
+            {"links": [names[a], names[b]], "sphere_distance_m": d, "mesh_distance_m": dm}
             for a, b, d, dm in h]} for w, h in rejected]
         report.warnings.append(
             f"the default home ({rejected[0][0]}) is a self-collision: {words(rejected[0][1])}"
