@@ -282,9 +282,15 @@ def import_robot(e: Entry, path: str, out: str, args: Any, help_urdf: str, help_
     hf = summary.get("home_fit")
     if hf:   # what the import did to free its home
         row["import_home"] = f"{hf.get('home_from')} ({hf.get('seconds', 0.0):.1f} s)"
-        row["default_pairs"] = ["/".join(p["links"])
-                                + f" (mesh {1e3 * p['mesh_distance_m']:.1f} mm)"
-                                for p in hf.get("default_pairs", [])]
+        # default homes in self-collision, replaced (issue 42: no pair is unchecked)
+        row["home_replaced"] = [
+            r["home_from"] + ": " + ", ".join("/".join(p["links"])
+                                             + f" (mesh {1e3 * p['mesh_distance_m']:.1f} mm)"
+                                             for p in r["pairs"])
+            for r in hf.get("rejected", [])]
+        row["skipped_pairs"] = summary.get("skipped_pairs") and {
+            k: sum(1 for x in summary["skipped_pairs"] if x["reason"] == k)
+            for k in dict.fromkeys(x["reason"] for x in summary["skipped_pairs"])}
         row["tightened"] = [
             f"{t['link']} refit at protrusion {1e3 * t['protrusion_m']:.1f} mm "
             f"({t['spheres_before']} -> {t['spheres']} spheres)" if t.get("refit") else
@@ -675,8 +681,8 @@ def table(rows: list[dict], max_ik: int = 100) -> str:
         bits = []
         if r.get("error"):
             bits.append(f"ERROR {r['error']}")
-        for k in ("fit_note", "warning", "sub_chain", "home", "import_home", "default_pairs",
-                  "tightened", "import_home_left", "srdf_skipped", "home_collisions",
+        for k in ("fit_note", "warning", "sub_chain", "home", "import_home", "home_replaced",
+                  "skipped_pairs", "tightened", "import_home_left", "srdf_skipped", "home_collisions",
                   "home_mesh_pair", "frequent_collisions", "plan_pair",
                   "plan_reason", "fk_ref"):
             if r.get(k) and not (k == "fk_ref" and r[k] == "pinocchio"):

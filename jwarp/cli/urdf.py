@@ -78,8 +78,43 @@ GROUP_OPTIONS = {"group": "--group", "joints": "--joints", "lock": "--lock", "st
                  "freeze": "--freeze", "srdf": "--srdf", "srdf_collisions": "--srdf-collisions"}
 
 
-def group_options(args: argparse.Namespace, eff: dict[str, str] | None) -> Any:
-    """The :class:`~jwarp.importers.groups.GroupOptions` of ``import-urdf``'s options."""
+def early_srdf(args: argparse.Namespace, imported: Any) -> tuple[Any, list[str]]:
+    """``--srdf`` read and checked against the URDF before any sphere fit (a bad file
+    fails in well under a second, naming ``--srdf``, ``--group``, ``--state`` or
+    ``--home``): (the pruned :class:`~jwarp.importers.srdf.Srdf` or None, the warning lines:
+    elements jwarp does not use, names the URDF lacks)."""
+    import warnings
+
+    from jwarp.importers.groups import load_srdf
+    from jwarp.importers.srdf import SrdfIgnoredWarning, SrdfWarning
+
+    if args.srdf is None:
+        return None, []
+    if not os.path.isfile(args.srdf):
+        raise CLIError(f"--srdf: file not found: '{args.srdf}'")
+    home = home_arg(args.home)
+    states = [x for x in (args.state, home if isinstance(home, str) else None) if x]
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            srdf = load_srdf(args.srdf, imported, states,
+                             [args.group] if args.group else [])
+            for name in states:
+                srdf.state(name)     # an unknown state: SrdfError naming the states
+    except ValueError as e:
+        msg = " ".join(str(e).split())
+        if isinstance(home, str) and args.state != home and f'"{home}"' in msg:
+            raise CLIError(f"--home: {msg.removeprefix('state: ')}") from None
+        raise group_error(e, args.srdf) from None
+    lines = [" ".join(str(w.message).split()) for w in caught
+             if issubclass(w.category, (SrdfWarning, SrdfIgnoredWarning))]
+    return srdf, lines
+
+
+def group_options(args: argparse.Namespace, eff: dict[str, str] | None,
+                  srdf: Any = None) -> Any:
+    """The :class:`~jwarp.importers.groups.GroupOptions` of ``import-urdf``'s options
+    (``srdf``: the SRDF already read by :func:`early_srdf`, else ``--srdf``'s file)."""
     from jwarp.importers.groups import GroupOptions
 
     if args.srdf is not None and not os.path.isfile(args.srdf):
@@ -92,10 +127,11 @@ def group_options(args: argparse.Namespace, eff: dict[str, str] | None) -> Any:
         joints = [j.strip() for j in args.joints.split(",") if j.strip()]
         if not joints:
             raise CLIError("--joints: expected joint names j1,j2,...")
-    return GroupOptions(srdf=args.srdf, group=args.group, joints=joints,
-                        lock=joint_values_arg(args.lock, "--lock"), state=args.state,
+    return GroupOptions(srdf=args.srdf if srdf is None else srdf, group=args.group,
+                        joints=joints, lock=joint_values_arg(args.lock, "--lock"),
+                        state=args.state,
                         freeze=joint_values_arg(args.freeze, "--freeze", value_required=False),
-                        srdf_collisions=args.srdf_collisions or "add", end_effectors=eff)
+                        srdf_collisions=args.srdf_collisions or "srdf", end_effectors=eff)
 
 
 def group_error(e: ValueError, srdf: str | None) -> CLIError:
@@ -116,18 +152,21 @@ def group_lines(res: Any, sampled: bool) -> tuple[list[str], dict[str, Any]]:
                         "end_effectors_from": res.end_effectors_from}
     if res.srdf is not None:
         how = ("the SRDF's only (--srdf-collisions replace)" if res.srdf_collisions == "replace"
-               else "the sampled pairs plus the SRDF's" if sampled
-               else "the SRDF's (no pairs sampled without --spheres fit)")
+               else "the sampled pairs plus the SRDF's (--srdf-collisions add)"
+               if res.srdf_collisions == "add" and sampled
+               else "the SRDF's, the adjacent and the always colliding ones (sampled "
+                    "never-colliding pairs the SRDF keeps checked are checked)"
+               if sampled else "the SRDF's (no pairs sampled without --spheres fit)")
         lines.append(f"SRDF {res.srdf.path}: {res.srdf_pairs} disable_collisions; "
-                     f"self-collision exclude pairs: {how} ({res.pairs_added} from the SRDF)")
+                     f"self-collision exclude pairs: {how} ({res.pairs_added} from the SRDF"
+                     + (f", {res.pairs_dropped} sampled never-colliding pairs checked again"
+                        if res.pairs_dropped else "") + ")")
         extra["srdf"] = {"path": res.srdf.path, "disable_collisions": res.srdf_pairs,
-                         "pairs_added": res.pairs_added, "collisions": res.srdf_collisions,
+                         "pairs_added": res.pairs_added, "pairs_dropped": res.pairs_dropped,
+                         "collisions": res.srdf_collisions,
                          "groups": list(res.srdf.groups),
-                         "skipped": [str(k) for k in res.srdf.skipped]}
-        if res.srdf.skipped:
-            from jwarp.importers.srdf import skipped_summary
-
-            lines.append(f"warning: {skipped_summary(res.srdf)}")
+                         "skipped": [str(k) for k in res.srdf.skipped],
+                         "ignored": [f"{t} (line {n})" for t, n in res.srdf.ignored]}
     if res.frozen:
         lines.append(f"planning with {len(res.planned)} joints ({', '.join(res.planned)}); "
                      f"frozen: " + ", ".join(f"{k}={v:g} ({res.source[k]})"
@@ -196,8 +235,9 @@ def home_arg(text: str | None) -> str | list[float] | None:
 
 def home_fit_step(imported: Any, model: Any, args: argparse.Namespace, srdf: Any
                   ) -> tuple[Any, Any]:
-    """The import's home made free of self-collision (:func:`jwarp.world.home_fit.
-    fit_home`: Default pairs, tightened spheres), its warnings printed from the report."""
+    """The import's home free of self-collision (:func:`jwarp.world.home_fit.fit_home`: a
+    given home in collision refused, the default one replaced; spheres tightened), its
+    warnings printed from the report."""
     import warnings
 
     from jwarp.world.home_fit import HomeFitOptions, HomeFitWarning, fit_home
@@ -214,7 +254,28 @@ def home_fit_step(imported: Any, model: Any, args: argparse.Namespace, srdf: Any
             from None
 
 
-def group_resamples(imported: Any, args: argparse.Namespace, eff: Any) -> bool:
+#: unchecked pairs named per reason in the text summary (``--json`` lists them all)
+PAIRS_SHOWN = 40
+
+
+def pair_lines(model: Any) -> tuple[list[str], list[dict]]:
+    """Summary lines naming every unchecked self-collision pair by reason, and the JSON rows
+    (:func:`jwarp.model.pair_reasons.skipped_pairs`)."""
+    from jwarp.model.pair_reasons import skipped_pairs, skipped_summary
+
+    rows = skipped_pairs(model)
+    by: dict[str, list[str]] = {}
+    for r in rows:
+        by.setdefault(r["reason"], []).append("/".join(r["links"]))
+    lines = [skipped_summary(model)]
+    lines += [f"  {k}: {', '.join(v[:PAIRS_SHOWN])}"
+              + (f" and {len(v) - PAIRS_SHOWN} more (--json lists every pair)"
+                 if len(v) > PAIRS_SHOWN else "") for k, v in by.items()]
+    return lines, rows
+
+
+def group_resamples(imported: Any, args: argparse.Namespace, eff: Any,
+                    srdf: Any = None) -> bool:
     """Whether the import's planning group has fewer joints than the robot and keeps
     sampled pairs: then its self pairs are sampled over the group only (once, after the
     fit) and not first over every joint (the group of the kinematic model, probed)."""
@@ -225,7 +286,7 @@ def group_resamples(imported: Any, args: argparse.Namespace, eff: Any) -> bool:
     try:
         with warnings.catch_warnings():  # the import's own call reports them
             warnings.simplefilter("ignore")
-            g = plan_group(imported, group_options(args, eff), model=imported.model)
+            g = plan_group(imported, group_options(args, eff, srdf), model=imported.model)
     except (ValueError, CLIError):
         return False  # the import's own call reports it
     return g.model.n_dof < imported.model.n_dof and g.srdf_collisions != "replace"
@@ -279,6 +340,7 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
         for problem in export_set_problems(args.urdf):  # files of an export that differ
             print(f"jwarp: warning: {problem}", file=sys.stderr)
         home_needs_model(args, imported)  # before the sphere fit
+        srdf, srdf_warnings = early_srdf(args, imported)   # before the sphere fit too
         model, fit = imported.model, None
         if args.spheres == "fit" and any(g.kind != "sphere" for g in imported.geometries):
             import warnings
@@ -292,7 +354,7 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
                 warnings.simplefilter("ignore", SphereFitWarning)
                 model, fit = spherized_robot(args.urdf, opts, cache=not args.no_cache,
                                              sample_pairs=not group_resamples(imported, args,
-                                                                              eff),
+                                                                              eff, srdf),
                                              progress=None, **urdf_options)
         elif args.spheres == "none":
             model = model.copy(spheres=[])
@@ -307,7 +369,7 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
 
         with warnings.catch_warnings():  # printed from the summary (group_lines)
             warnings.simplefilter("ignore", SrdfWarning)
-            grouped = plan_group(imported, group_options(args, eff), model=model)
+            grouped = plan_group(imported, group_options(args, eff, srdf), model=model)
     except ValueError as e:
         raise group_error(e, args.srdf) from None
     fitted_pairs = model.self_collision.exclude_pairs  # sampled over every joint
@@ -317,7 +379,9 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
             and grouped.srdf_collisions != "replace":
         from jwarp.world.spherize import resample_pairs
 
-        model, resampled = resample_pairs(model, fitted_pairs, opts)
+        model, resampled = resample_pairs(model, fitted_pairs, opts,
+                                          never=grouped.srdf is None
+                                          or grouped.srdf_collisions == "add")
     home = None
     if model.spheres and not args.no_home_fit:
         model, home = home_fit_step(imported, model, args, grouped.srdf)
@@ -340,7 +404,10 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
                                         "always": len(resampled.always_colliding)}
     more_lines, more = group_lines(grouped, fit is not None)
     lines += more_lines
+    lines += [f"warning: {w}" for w in srdf_warnings]
     extra.update(more)
+    plines, extra["skipped_pairs"] = pair_lines(model)
+    lines += plines
     if home is not None:
         lines.append(home.summary())
         lines += [f"warning: {w}" for w in home.warnings]
@@ -397,10 +464,15 @@ def add_subcommands(sub: Any) -> None:
                         "~/.cache/jwarp/urdf)")
     s.add_argument("--srdf", default=None, metavar="ROBOT.srdf",
                    help="MoveIt SRDF: its disable_collisions are excluded from self-collision, "
-                        "its groups, group states and end-effectors can be used")
-    s.add_argument("--srdf-collisions", choices=("add", "replace"), default=None,
-                   help="SRDF disable_collisions: added to the sampled exclude pairs (add, "
-                        "default) or the only ones (replace)")
+                        "its groups, group states and end-effectors can be used; read and "
+                        "checked before the sphere fit; elements jwarp does not use "
+                        "(passive_joint, link_sphere_approximation, ...) are named in one "
+                        "warning")
+    s.add_argument("--srdf-collisions", choices=("srdf", "add", "replace"), default=None,
+                   help="SRDF disable_collisions: with the adjacent and always colliding "
+                        "pairs (srdf, default: every pair the SRDF keeps checked is checked), "
+                        "added to every sampled exclude pair, never-colliding ones too (add), "
+                        "or the only ones (replace)")
     s.add_argument("--group", default=None, metavar="NAME",
                    help="plan with the joints of this SRDF group only (others locked)")
     s.add_argument("--joints", default=None, metavar="J1,J2,...",
@@ -414,12 +486,13 @@ def add_subcommands(sub: Any) -> None:
                    help="freeze a joint at a value, e.g. a gripper finger (repeatable; mimic "
                         "joints follow; no value: --state's, else 0 clipped into the limits)")
     s.add_argument("--home", default=None, metavar="STATE|Q1,Q2,...",
-                   help="home configuration made free of self-collision: an SRDF group_state "
-                        "(with --srdf) or joint values (default: zeros projected into the "
-                        "limits); pairs whose URDF geometry touches there are excluded "
-                        "(reason Default), spheres overlapping where it does not are "
-                        "tightened (docs/urdf.md)")
+                   help="home configuration: an SRDF group_state (with --srdf) or joint "
+                        "values, refused when the URDF geometry of a checked pair touches "
+                        "there (default: zeros projected into the limits, replaced when in "
+                        "self-collision by the SRDF's states, the middle of the limits or a "
+                        "random free configuration); spheres overlapping where the geometry "
+                        "does not are tightened (docs/urdf.md)")
     s.add_argument("--no-home-fit", action="store_true",
-                   help="leave the home as fitted (no Default pairs, no tightening)")
+                   help="leave the home as fitted (no check, no tightening)")
     s.add_argument("--json", action="store_true", help="print the summary as JSON")
     s.set_defaults(func=cmd_import_urdf)

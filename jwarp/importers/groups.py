@@ -3,9 +3,15 @@
 :func:`plan_group` turns an imported robot (:class:`~jwarp.importers.robot.UrdfRobot`) into
 the robot jwarp plans with (docs/urdf.md, "Planning groups, grippers, SRDF"):
 
-* ``srdf``: MoveIt's SRDF; its ``disable_collisions`` are added to the robot's
-  self-collision exclude pairs (``srdf_collisions="add"``: the pairs found so far, e.g.
-  the sampled ones, plus the SRDF's) or replace them (``"replace"``: the SRDF's only);
+* ``srdf``: MoveIt's SRDF; the pairs its allowed-collision matrix leaves unchecked
+  (``disable_collisions``, ``disable_default_collisions`` less ``enable_collisions``:
+  :func:`~jwarp.importers.srdf.disabled_link_pairs`) become self-collision exclude
+  pairs: ``srdf_collisions="srdf"`` (default) the SRDF's pairs plus the adjacent and
+  always-colliding pairs found so far, without the sampled never-colliding ones (the
+  SRDF's own "Never" decided those, on the meshes: what MoveIt checks, jwarp checks,
+  adjacent links apart); ``"add"``: every pair found so far (the sampled never-colliding
+  ones too) plus the SRDF's; ``"replace"``: the SRDF's only. The reason of every pair is
+  recorded (:func:`jwarp.world.self_pairs.skipped_pairs`);
 * ``group`` (an SRDF group) or ``joints`` (joint names): the joints to plan with; every
   other joint is frozen (:func:`jwarp.model.freeze_joints`) at its ``lock`` value, else
   its value in the SRDF ``state`` (a ``<group_state>``), else 0 clipped into its limits;
@@ -36,7 +42,7 @@ from jwarp.importers.tips import default_tips
 from jwarp.model import RobotModel, SelfCollision, freeze_joints, frozen_joint_values
 
 #: values of ``GroupOptions.srdf_collisions``
-SRDF_COLLISIONS = ("add", "replace")
+SRDF_COLLISIONS = ("srdf", "add", "replace")
 
 
 @dataclass
@@ -50,7 +56,8 @@ class GroupOptions:
         lock: ``{joint: value}`` [rad or m] of joints outside the group or ``joints``.
         state: SRDF ``<group_state>`` giving the default values of frozen joints.
         freeze: ``{joint: value or None}`` joints frozen (None: the default value).
-        srdf_collisions: ``"add"`` (exclude pairs so far + SRDF pairs) or ``"replace"``.
+        srdf_collisions: ``"srdf"`` (SRDF pairs + adjacent and always-colliding pairs so
+            far), ``"add"`` (every exclude pair so far + SRDF pairs) or ``"replace"``.
         end_effectors: ``{alias: link or frame}``; None: the defaults (module docstring).
     """
 
@@ -60,7 +67,7 @@ class GroupOptions:
     lock: Mapping[str, float] | None = None
     state: str | None = None
     freeze: Mapping[str, float | None] | None = None
-    srdf_collisions: str = "add"
+    srdf_collisions: str = "srdf"
     end_effectors: Mapping[str, str] | None = None
 
     def validate(self) -> None:
@@ -104,7 +111,7 @@ class GroupOptions:
         if self.srdf_collisions not in SRDF_COLLISIONS:
             raise ValueError(f"srdf_collisions: expected one of {', '.join(SRDF_COLLISIONS)}, "
                              f"got {self.srdf_collisions!r}")
-        if self.srdf_collisions != "add" and self.srdf is None:
+        if self.srdf_collisions != "srdf" and self.srdf is None:
             raise ValueError(f"srdf_collisions: '{self.srdf_collisions}' only with an SRDF "
                              f"(srdf), whose disable_collisions it is about; without one it "
                              f"would be ignored")
@@ -126,7 +133,9 @@ class GroupResult:
     srdf: Srdf | None = None
     srdf_pairs: int = 0
     pairs_added: int = 0
-    srdf_collisions: str = "add"
+    srdf_collisions: str = "srdf"
+    #: sampled never-colliding pairs checked again because the SRDF keeps them checked
+    pairs_dropped: int = 0
 
 
 def default_end_effectors(model: RobotModel, links: Any = None) -> dict[str, int]:
@@ -283,23 +292,42 @@ def plan_group(robot: UrdfRobot, options: GroupOptions | None = None, *,
     res = GroupResult(model=model, planned=planned, frozen=frozen, source=source, srdf=srdf,
                       srdf_collisions=o.srdf_collisions)
     if srdf is not None:
-        pairs = {tuple(sorted((model.frame_index(d.link1), model.frame_index(d.link2))))
-                 for d in srdf.disable_collisions if d.link1 != d.link2}
+        from jwarp.importers.srdf import disabled_link_pairs
+        from jwarp.model.pair_reasons import pair_reasons, with_pair_reasons
+
+        def pair_key(a: str, b: str) -> tuple[int, int]:
+            i, j = model.frame_index(a), model.frame_index(b)
+            return (min(i, j), max(i, j))
+
+        dis = disabled_link_pairs(srdf, robot.source.link_frames)
+        pairs = {pair_key(*sorted(p)): ("SRDF", why) for p, why in dis.items()}
+        enabled = {pair_key(d.link1, d.link2) for d in srdf.enable_collisions
+                   if d.link1 != d.link2}
         res.srdf_pairs = len(srdf.disable_collisions)
         sc = model.self_collision
+        why = pair_reasons(model)
         if o.srdf_collisions == "replace":
             new = SelfCollision(exclude_pairs=sorted(pairs))
             res.pairs_added = len(pairs)
+            reasons = dict(pairs)
         else:
             have = {tuple(sorted(p)) for p in sc.exclude_pairs}
-            added = sorted(pairs - have)
+            drop = {p for p in have if why.get(p, ("",))[0] == "Never"} \
+                if o.srdf_collisions == "srdf" else set()
+            res.pairs_dropped = len(drop - set(pairs))
+            kept = [p for p in sc.exclude_pairs
+                    if tuple(sorted(p)) not in drop and tuple(sorted(p)) not in enabled]
+            added = sorted(set(pairs) - have)
             res.pairs_added = len(added)
             new = SelfCollision(groups={k: list(v) for k, v in sc.groups.items()},
                                 include_pairs=list(sc.include_pairs),
-                                exclude_pairs=list(sc.exclude_pairs) + added)
+                                exclude_pairs=kept + added)
+            left = {tuple(sorted(p)) for p in kept}
+            reasons = {p: r for p, r in why.items() if p in left}
+            reasons.update(pairs)     # the SRDF's reason first
         notes = dict(model.notes)
         notes["srdf"] = srdf.path
-        model = model.copy(self_collision=new, notes=notes)
+        model = with_pair_reasons(model.copy(self_collision=new, notes=notes), reasons)
     if frozen:
         model = freeze_joints(model, frozen)
     if o.group is not None or o.joints is not None:

@@ -1,10 +1,15 @@
 """MoveIt's SRDF (semantic robot description) in and out of jwarp (docs/urdf.md, SRDF).
 
-Read (:func:`read_srdf`): ``<group>`` (``<joint>``, ``<link>``, ``<chain base_link
-tip_link>``, ``<group>`` subgroups), ``<group_state>``, ``<end_effector>`` and
-``<disable_collisions link1 link2 reason>``; ``<virtual_joint>`` names (a floating base)
-are accepted where a joint is named (and are no joint of the robot). Other elements
-(``passive_joint``, ``link_sphere_approximation``, ...) are skipped. :func:`check_srdf`
+Read (:func:`read_srdf`): what MoveIt's setup assistant writes. Used: ``<group>``
+(``<joint>``, ``<link>``, ``<chain base_link tip_link>``, ``<group>`` subgroups),
+``<group_state>``, ``<end_effector>``, ``<disable_collisions link1 link2 reason>``,
+``<enable_collisions link1 link2>`` and ``<disable_default_collisions link>`` (the pairs
+MoveIt's allowed-collision matrix leaves unchecked: :func:`disabled_link_pairs`);
+``<virtual_joint>`` names (a floating base) are accepted where a joint is named (and are
+no joint of the robot). Not used, and ignored with ONE :class:`SrdfIgnoredWarning` per
+file listing them (``Srdf.ignored``): ``<passive_joint>`` (at the top or inside a group,
+as MoveIt's panda.srdf writes it), ``<link_sphere_approximation>`` (jwarp fits its own
+spheres), ``<joint_property>`` and any other element. :func:`check_srdf`
 checks every name against the URDF (strict); :func:`prune_srdf` drops the entries naming
 links or joints the URDF lacks, as MoveIt's loader does (one SRDF often serves several
 URDFs: a whole robot and its arm, or joints renamed by a prefix), and lists them;
@@ -51,6 +56,16 @@ class SrdfError(ValueError):
 
 class SrdfWarning(UserWarning):
     """SRDF entries skipped because they name links or joints the URDF lacks."""
+
+
+class SrdfIgnoredWarning(UserWarning):
+    """SRDF elements jwarp does not use (``passive_joint``, ``link_sphere_approximation``,
+    ...): one warning per file, listing them."""
+
+
+#: elements of an SRDF root that jwarp reads
+USED_ELEMENTS = ("group", "group_state", "end_effector", "virtual_joint",
+                 "disable_collisions", "enable_collisions", "disable_default_collisions")
 
 
 @dataclass
@@ -134,6 +149,12 @@ class Srdf:
     path: str = "<srdf>"
     #: entries :func:`prune_srdf` dropped (empty for a file read as it is)
     skipped: list[SrdfSkipped] = field(default_factory=list)
+    #: ``<enable_collisions link1 link2>``: pairs checked whatever else disables them
+    enable_collisions: list[SrdfDisabled] = field(default_factory=list)
+    #: ``<disable_default_collisions link>``: links whose pairs are unchecked unless enabled
+    no_default_links: list[tuple[str, int]] = field(default_factory=list)
+    #: elements not used by jwarp: ``(element, line)``, e.g. ``("group/passive_joint", 52)``
+    ignored: list[tuple[str, int]] = field(default_factory=list)
 
     @property
     def state_names(self) -> list[str]:
@@ -234,10 +255,8 @@ def _parse(root: Any, path: str) -> Srdf:
                     g.chains.append((_attr(sub, "base_link", path), _attr(sub, "tip_link", path)))
                 elif sub.tag == "group":
                     g.subgroups.append(_attr(sub, "name", path))
-                else:
-                    raise SrdfError(f"{path}: <group name=\"{name}\">: unknown element "
-                                    f"<{sub.tag}> (line {sub.sourceline}; expected joint, "
-                                    f"link, chain or group)")
+                else:   # e.g. <passive_joint>: MoveIt's group parser skips it too
+                    out.ignored.append((f"group/{sub.tag}", sub.sourceline))
             out.groups[name] = g
         elif el.tag == "group_state":
             name = _attr(el, "name", path)
@@ -263,16 +282,44 @@ def _parse(root: Any, path: str) -> Srdf:
                 group=el.get("group"), parent_group=el.get("parent_group"), line=el.sourceline))
         elif el.tag == "virtual_joint":
             out.virtual_joints.append(_attr(el, "name", path))
-        elif el.tag == "disable_collisions":
-            out.disable_collisions.append(SrdfDisabled(
-                link1=_attr(el, "link1", path), link2=_attr(el, "link2", path),
-                reason=el.get("reason") or "", line=el.sourceline))
+        elif el.tag in ("disable_collisions", "enable_collisions"):
+            pair = SrdfDisabled(link1=_attr(el, "link1", path), link2=_attr(el, "link2", path),
+                                reason=el.get("reason") or "", line=el.sourceline)
+            (out.disable_collisions if el.tag == "disable_collisions"
+             else out.enable_collisions).append(pair)
+        elif el.tag == "disable_default_collisions":
+            out.no_default_links.append((_attr(el, "link", path), el.sourceline))
+        else:
+            out.ignored.append((el.tag, el.sourceline))
     names = [e.name for e in out.end_effectors]
     for k, n in enumerate(names):
         if n in names[:k]:
             raise SrdfError(f"{path}: <end_effector name=\"{n}\"> (line "
                             f"{out.end_effectors[k].line}) is defined twice")
+    if out.ignored:
+        import warnings
+
+        warnings.warn(ignored_summary(out), SrdfIgnoredWarning, stacklevel=3)
     return out
+
+
+def ignored_summary(srdf: Srdf) -> str:
+    """One line naming the elements of ``srdf`` jwarp does not use (``Srdf.ignored``), each
+    with how often and its first line ('' when none)."""
+    if not srdf.ignored:
+        return ""
+    first: dict[str, int] = {}
+    count: dict[str, int] = {}
+    for tag, line in srdf.ignored:
+        first.setdefault(tag, line)
+        count[tag] = count.get(tag, 0) + 1
+    items = ", ".join(f"<{t.split('/')[-1]}>" + (" in a <group>" if "/" in t else "")
+                      + (f" x{count[t]}" if count[t] > 1 else "") + f" (line {first[t]})"
+                      for t in first)
+    n = len(srdf.ignored)
+    return (f"{srdf.path}: {n} element{'s' if n != 1 else ''} jwarp does not use "
+            f"{'are' if n != 1 else 'is'} ignored (as MoveIt's parser ignores what it does "
+            f"not know): {items}")
 
 
 def check_srdf(srdf: Srdf, links: set[str] | list[str], joints: set[str] | list[str],
@@ -322,10 +369,14 @@ def check_srdf(srdf: Srdf, links: set[str] | list[str], joints: set[str] | list[
             if g is not None and g not in srdf.groups:
                 raise SrdfError(f"{p}: {where}: unknown {key} '{g}' (groups: "
                                 f"{', '.join(srdf.groups) or 'none'})")
-    for d in srdf.disable_collisions:
-        where = f"<disable_collisions> (line {d.line})"
-        need(d.link1, links, "link", f"{where} link1")
-        need(d.link2, links, "link", f"{where} link2")
+    for tag, pairs in (("disable_collisions", srdf.disable_collisions),
+                       ("enable_collisions", srdf.enable_collisions)):
+        for d in pairs:
+            where = f"<{tag}> (line {d.line})"
+            need(d.link1, links, "link", f"{where} link1")
+            need(d.link2, links, "link", f"{where} link2")
+    for link, line in srdf.no_default_links:
+        need(link, links, "link", f"<disable_default_collisions> (line {line}) link")
 
 
 def prune_srdf(srdf: Srdf, links: set[str] | list[str], joints: set[str] | list[str]
@@ -342,7 +393,7 @@ def prune_srdf(srdf: Srdf, links: set[str] | list[str], joints: set[str] | list[
     :func:`check_srdf`)."""
     links, joints = set(links), set(joints) | set(srdf.virtual_joints)
     out = Srdf(name=srdf.name, virtual_joints=list(srdf.virtual_joints), path=srdf.path,
-               skipped=list(srdf.skipped))
+               skipped=list(srdf.skipped), ignored=list(srdf.ignored))
     skip = out.skipped
     groups: dict[str, SrdfGroup] = {}
     for g in srdf.groups.values():
@@ -419,12 +470,44 @@ def prune_srdf(srdf: Srdf, links: set[str] | list[str], joints: set[str] | list[
             pg = None
         out.end_effectors.append(SrdfEndEffector(name=e.name, parent_link=e.parent_link,
                                                  group=e.group, parent_group=pg, line=e.line))
-    for d in srdf.disable_collisions:
-        bad = [x for x in (d.link1, d.link2) if x not in links]
-        if bad:
-            skip.append(SrdfSkipped("disable_collisions", "", f"link '{bad[0]}'", d.line))
+    for tag, pairs, kept in (("disable_collisions", srdf.disable_collisions,
+                              out.disable_collisions),
+                             ("enable_collisions", srdf.enable_collisions,
+                              out.enable_collisions)):
+        for d in pairs:
+            bad = [x for x in (d.link1, d.link2) if x not in links]
+            if bad:
+                skip.append(SrdfSkipped(tag, "", f"link '{bad[0]}'", d.line))
+            else:
+                kept.append(d)
+    for link, line in srdf.no_default_links:
+        if link in links:
+            out.no_default_links.append((link, line))
         else:
-            out.disable_collisions.append(d)
+            skip.append(SrdfSkipped("disable_default_collisions", "", f"link '{link}'", line))
+    return out
+
+
+def disabled_link_pairs(srdf: Srdf, links: Any) -> dict[frozenset[str], str]:
+    """The link pairs MoveIt's allowed-collision matrix leaves unchecked for ``srdf``, among
+    ``links`` (the links with collision geometry): ``{frozenset((a, b)): why}``, ``why``
+    naming the element, its line and reason, e.g. ``"disable_collisions line 40, reason
+    Never"``. As MoveIt builds it: every ``<disable_collisions>`` pair, and every pair of a
+    ``<disable_default_collisions>`` link, less the ``<enable_collisions>`` pairs (checked
+    whatever else says)."""
+    names = list(dict.fromkeys(links))
+    out: dict[frozenset[str], str] = {}
+    for link, line in srdf.no_default_links:
+        for other in names:
+            if other != link:
+                out.setdefault(frozenset((link, other)),
+                               f"disable_default_collisions line {line} (link '{link}')")
+    for d in srdf.disable_collisions:
+        if d.link1 != d.link2:
+            out[frozenset((d.link1, d.link2))] = (f"disable_collisions line {d.line}"
+                                                  + (f", reason {d.reason}" if d.reason else ""))
+    for d in srdf.enable_collisions:
+        out.pop(frozenset((d.link1, d.link2)), None)
     return out
 
 
@@ -515,13 +598,19 @@ def disabled_pairs(robot: Any) -> list[tuple[str, str, str]]:
     """``(frame a, frame b, reason)`` for every frame pair of ``robot`` (a
     :class:`~jwarp.model.RobotModel`) that is never checked for self-collision (its
     ``self_collision`` groups and exclude pairs, less include pairs), ``a < b`` by index;
-    reason ``Adjacent`` when one is the other's parent, ``Default`` for the pairs listed in
-    ``notes['self_collision_default']`` (in contact at the home configuration), else
+    reason: the one recorded at import (``notes['self_collision_pairs']``,
+    :mod:`jwarp.model.pair_reasons`) in MoveIt's words (``Adjacent``, ``Always``,
+    ``Never``; an SRDF pair its own reason, else ``User``; frames joined by frozen joints
+    ``Never``), else ``Adjacent`` when one is the other's parent, ``Default`` for the pairs
+    listed in ``notes['self_collision_default']`` (an older import's home rule), else
     ``Never``."""
+    from jwarp.model.pair_reasons import pair_reasons
+
     allowed = robot.allowed_collision_pairs
     parents = robot.parents
     names = robot.frame_names
     default = {frozenset(p) for p in default_pair_names(robot)}
+    recorded = pair_reasons(robot)
     out = []
     for a in range(robot.n_frames):
         for b in range(a + 1, robot.n_frames):
@@ -529,6 +618,12 @@ def disabled_pairs(robot: Any) -> list[tuple[str, str, str]]:
                 adj = parents[a] == b or parents[b] == a
                 reason = (REASON_ADJACENT if adj else REASON_DEFAULT
                           if frozenset((names[a], names[b])) in default else REASON_NEVER)
+                if (a, b) in recorded:
+                    kind, why = recorded[(a, b)]
+                    m = re.search(r"reason (\S+)$", why)
+                    reason = ((m.group(1) if m else "User") if kind == "SRDF" else
+                              kind if kind in ("Adjacent", "Always", "Never", "Default")
+                              else REASON_NEVER if kind == "Frozen" else "User")
                 out.append((names[a], names[b], reason))
     return out
 

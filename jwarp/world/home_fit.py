@@ -1,38 +1,44 @@
-"""The home configuration of an imported robot made free of self-collision, as a MoveIt
-user's setup would, without hiding real collisions (docs/urdf.md, "Home configuration").
+"""The home configuration of an imported robot free of self-collision, without hiding
+real collisions (docs/urdf.md, "Home configuration").
 
 :func:`fit_home` takes the robot being imported (:class:`~jwarp.importers.robot.UrdfRobot`,
 for its collision geometry) and its jwarp model (fitted spheres, sampled pairs, SRDF pairs,
-planning group) and looks at the frame pairs whose spheres overlap at the home:
+planning group) and looks, at the home, at every checked frame pair whose spheres are
+closer than ``contact_margin + 2 tolerance`` (farther, the geometry is apart: each link's
+surface is within the fit's one-sided error of its spheres). The contact test is jwarp's
+own: surface points of one link's geometry (its vertices and ``n_surface`` area-uniform
+samples) against the other's solid (signed distance by generalised winding number,
+:func:`jwarp.importers.spheres.signed_distance`), both ways, at the home's FK; sampled
+points give an upper bound of the true distance, so a pair whose meshes are apart is never
+called in contact.
 
-* **Default** (MoveIt's setup assistant disables the pairs in collision at the default
-  configuration, reason "Default"): only where the URDF's own collision geometry of the
-  two links is in contact there (closer than ``contact_margin``, overlapping included).
-  The contact test is jwarp's own: surface points of one link's geometry (its vertices and
-  ``n_surface`` area-uniform samples) against the other's solid (signed distance by
-  generalised winding number, :func:`jwarp.importers.spheres.signed_distance`), both ways,
-  at the home's FK; sampled points give an upper bound of the true distance, so a pair
-  whose meshes are apart is never called in contact. The pairs are excluded
-  (:func:`jwarp.world.self_pairs.with_default_pairs`), listed in the report and in
-  ``notes['self_collision_default']`` (an exported SRDF writes them with
-  reason="Default"), and warned about by name.
-* **Tightened**: where the meshes are apart but the spheres overlap (spheres reaching past
-  the surface, up to the fit's protrusion), the overlapping spheres of the two links are
-  shrunk, never below their clearance (the distance of the centre to the link's surface:
-  the sphere then still holds the ball inside the solid), each pair by what it lacks to
-  ``gap`` split in proportion to the two spheres' protrusion, until the home is free. A
-  link whose shrunk spheres would leave its surface further than ``tolerance`` outside
-  them (the one-sided error on ``n_surface`` samples; None: not bounded) is put back as
-  it was and, with ``refit``, fitted again (:func:`jwarp.importers.spheres.fit_link`,
-  same tolerance) with a protrusion of half the URDF geometry's distance to its partner
-  at the home, less ``gap`` (so the pair is free whatever the partner's spheres do within
-  their own protrusion), then tightened again where still needed. A pair still
+* **Geometry in contact** (closer than ``contact_margin``, overlapping included): the home
+  is a self-collision. A home the caller gave is refused (ValueError naming it, the pairs,
+  the geometry's overlap and the spheres' depth). The default home (zeros projected into
+  the limits) is replaced by the first free one of :func:`home_candidates` (the SRDF's
+  group states, ``ready``/``home``/``default`` first; the middle of the limits), else by a
+  free random configuration (``n_random`` tries), else refused; the report's ``rejected``
+  and a warning say which homes were in collision and which was chosen. MoveIt's setup
+  assistant would instead uncheck such pairs (its "Default" rule); jwarp never unchecks a
+  pair to free a home: a pair free almost everywhere else would go unchecked on every
+  motion (issue 42: the Panda's link5 against its hand).
+* **Tightened**: where the geometry is apart but the spheres overlap (spheres reaching
+  past the surface, up to the fit's protrusion), the overlapping spheres of the two links
+  are shrunk, never below their clearance (the distance of the centre to the link's
+  surface: the sphere then still holds the ball inside the solid), each pair by what it
+  lacks to ``gap`` split in proportion to the two spheres' protrusion, until the home is
+  free. A link whose shrunk spheres would leave its surface further than ``tolerance``
+  outside them (the one-sided error on ``n_surface`` samples; None: not bounded) is put
+  back as it was and, with ``refit``, fitted again (:func:`jwarp.importers.spheres.
+  fit_link`, same tolerance) with a protrusion of half the URDF geometry's distance to its
+  partner at the home, less ``gap`` (so the pair is free whatever the partner's spheres do
+  within their own protrusion), then tightened again where still needed. A pair still
   overlapping stays checked and is in the report's ``remaining``: no collision is hidden.
 
 The home (:func:`resolve_home`): an SRDF ``<group_state>`` name, joint values, or None
 (:func:`jwarp.world.model_check.home_configuration`: zeros projected into the limits);
-:func:`fit_home` writes it to ``notes['home']``, the first configuration of the solvers'
-collision-model check (:func:`jwarp.world.model_check.home_configurations`).
+:func:`fit_home` writes the chosen one to ``notes['home']``, the first configuration of the
+solvers' collision-model check (:func:`jwarp.world.model_check.home_configurations`).
 """
 
 from __future__ import annotations
@@ -54,7 +60,8 @@ __all__ = ["HomeFitOptions", "HomeFitReport", "HomeFitWarning", "fit_home", "res
 
 
 class HomeFitWarning(UserWarning):
-    """A pair excluded by the Default rule, spheres tightened, or a home left in collision."""
+    """A default home replaced (it was a self-collision), spheres tightened, or a pair
+    left overlapping at the home."""
 
 
 @dataclass
@@ -62,8 +69,8 @@ class HomeFitOptions:
     """Options of :func:`fit_home` (module docstring).
 
     Attributes:
-        contact_margin: URDF geometry closer than this at the home [m] is in contact (the
-            Default rule); overlapping geometry always is.
+        contact_margin: URDF geometry closer than this at the home [m] is in contact (a
+            self-collision); overlapping geometry always is.
         gap: surface distance [m] left between the tightened spheres of a pair.
         tolerance: largest one-sided error [m] of a tightened link's surface (None: not
             bounded); the import passes its fit tolerance.
@@ -71,6 +78,8 @@ class HomeFitOptions:
         seed: seed of the samples (and of a refit).
         refit: a link whose shrunk spheres would exceed ``tolerance`` is fitted again
             with a protrusion that fits the home (False: left as it was).
+        n_random: random configurations tried for a default home when none of
+            :func:`home_candidates` is free.
     """
 
     contact_margin: float = 0.0005
@@ -79,6 +88,7 @@ class HomeFitOptions:
     n_surface: int = 4000
     seed: int = 0
     refit: bool = True
+    n_random: int = 2000
 
     def validate(self) -> "HomeFitOptions":
         for key in ("contact_margin", "gap", "tolerance"):
@@ -93,6 +103,9 @@ class HomeFitOptions:
             raise ValueError(f"n_surface: expected an integer >= 100, got {self.n_surface!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int):
             raise TypeError(f"seed: expected an integer, got {type(self.seed).__name__}")
+        if isinstance(self.n_random, bool) or not isinstance(self.n_random, int) \
+                or self.n_random < 0:
+            raise ValueError(f"n_random: expected an integer >= 0, got {self.n_random!r}")
         return self
 
 
@@ -107,7 +120,11 @@ class HomeFitReport:
 
     home: list[float]
     home_from: str
+    #: always empty since issue 42 (no pair is unchecked to free a home); kept for readers
     default_pairs: list[dict] = field(default_factory=list)
+    #: default homes tried and found in self-collision: ``{"home_from", "pairs": [{"links",
+    #: "sphere_distance_m" (negative: overlapping), "mesh_distance_m"}]}``
+    rejected: list[dict] = field(default_factory=list)
     tightened: list[dict] = field(default_factory=list)
     remaining: list[dict] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -123,7 +140,6 @@ class HomeFitReport:
 
     def summary(self) -> str:
         """One line for the import's summary."""
-        d = ", ".join("/".join(p["links"]) for p in self.default_pairs) or "none"
         t = ", ".join(
             f"{r['link']} (fitted again: protrusion {1e3 * r['protrusion_m']:.1f} mm, "
             f"{r['spheres']} spheres)" if r.get("refit") else
@@ -131,8 +147,11 @@ class HomeFitReport:
             for r in self.tightened if not r.get("reverted")) or "none"
         state = "free" if self.home_free else (
             "IN COLLISION: " + ", ".join("/".join(p["links"]) for p in self.remaining))
-        return (f"home ({self.home_from}): {state}; Default pairs excluded: {d}; spheres "
-                f"tightened: {t}")
+        why = ("; replaced " + ", ".join(
+            f"{r['home_from']} (self-collision: "
+            + ", ".join("/".join(p["links"]) for p in r["pairs"]) + ")"
+            for r in self.rejected)) if self.rejected else ""
+        return f"home ({self.home_from}): {state}{why}; spheres tightened: {t}"
 
 
 # ------------------------------------------------------------------ the home
@@ -245,19 +264,48 @@ def mesh_distance(mesh_a: Any, T_a: np.ndarray, mesh_b: Any, T_b: np.ndarray, *,
 
 
 # ------------------------------------------------------------------ the fit
+#: group_state names tried first for a default home (MoveIt configs' usual names)
+HOME_STATE_NAMES = ("ready", "home", "default")
+
+
+def home_candidates(model: RobotModel, srdf: Any = None) -> list[tuple[Any, str]]:
+    """``[(home, what)]`` tried in order for the default home (``fit_home(home=None)``):
+    zeros projected into the limits; the SRDF's ``<group_state>`` names (``ready``,
+    ``home``, ``default`` first, then the others in document order) that set a joint of
+    ``model``; the middle of the limits. (The sampled free configuration is the last
+    resort: :func:`fit_home`.)"""
+    out: list[tuple[Any, str]] = [(None, "zeros projected into the limits")]
+    if srdf is not None:
+        names = srdf.state_names
+        names = [n for n in HOME_STATE_NAMES if n in names] + \
+            [n for n in names if n not in HOME_STATE_NAMES]
+        for n in names:
+            try:
+                values = srdf.state(n)
+            except ValueError:
+                continue
+            if any(j in model.joint_names for j in values):
+                out.append((n, f"SRDF group_state '{n}'"))
+    lim = np.asarray(model.joint_limits, np.float64)
+    out.append((list(0.5 * (lim[:, 0] + lim[:, 1])), "the middle of the joint limits"))
+    return out
+
+
 def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
              options: HomeFitOptions | None = None, *, srdf: Any = None
              ) -> tuple[RobotModel, HomeFitReport]:
     """``model`` (default ``robot.model``; its frames those of the imported ``robot``, e.g.
-    fitted and reduced to a planning group) with its home made free of self-collision by
-    the Default rule and tightened spheres (module docstring); ``home`` as in
-    :func:`resolve_home` (``srdf``: a parsed :class:`~jwarp.importers.srdf.Srdf` for a
-    state name). Returns (model, report); warns (:class:`HomeFitWarning`) naming every
-    excluded pair, tightened link and pair left in collision."""
-    from jwarp.kinematics.fk import fk
-    from jwarp.world.model_check import home_self_collisions
-    from jwarp.world.self_pairs import default_pairs, with_default_pairs
-
+    fitted and reduced to a planning group) with a home free of self-collision (module
+    docstring); ``home`` as in :func:`resolve_home` (``srdf``: a parsed
+    :class:`~jwarp.importers.srdf.Srdf` for a state name, and the default home's
+    candidates). A checked pair whose URDF collision geometry is in contact at the home
+    (closer than ``contact_margin``) is a self-collision: a given ``home`` is refused
+    (ValueError naming it, the pairs and their distances); the default home (None) is
+    replaced by the first free one of :func:`home_candidates`, else by a free random
+    configuration (``n_random`` tries, seeded), else refused. No pair is ever unchecked to
+    free a home. Spheres overlapping where the geometry is apart are tightened or fitted
+    again. Returns (model, report); warns (:class:`HomeFitWarning`) naming a replaced home,
+    every tightened link and pair left overlapping."""
     o = (HomeFitOptions() if options is None else options)
     if not isinstance(o, HomeFitOptions):
         raise TypeError(f"options: expected HomeFitOptions, got {type(o).__name__}")
@@ -268,12 +316,11 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
         raise TypeError(f"model: expected a RobotModel, got {type(model).__name__}")
     if model.frame_names[:len(robot.model.frame_names)] != robot.model.frame_names:
         raise ValueError("model: its frames are not those of the imported robot")
-    q, where = resolve_home(model, home, srdf)
+    q, where = resolve_home(model, home, srdf)   # a given home's errors first
     report = HomeFitReport(home=q.tolist(), home_from=where)
     if not model.spheres:
         return model, report
     names = model.frame_names
-    T = fk(model, q[None], device="cpu", dtype=np.float64)[0]
     meshes: dict[int, Any] = {}
 
     def mesh_of(f: int) -> Any:
@@ -281,25 +328,79 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
             meshes[f] = link_mesh(robot, names[f])
         return meshes[f]
 
-    dist: dict[tuple[int, int], float] = {}
+    # spheres farther apart than this have geometry apart (each link's surface is within
+    # the fit's one-sided error, at most ``tolerance``, of its spheres)
+    reach = o.contact_margin + 2.0 * (o.tolerance or 0.0)
 
-    def distance(a: int, b: int) -> float:
-        if (a, b) not in dist:
-            ma, mb = mesh_of(a), mesh_of(b)
-            dist[a, b] = (math.nan if ma is None or mb is None else
-                          mesh_distance(ma, T[a], mb, T[b], n_surface=o.n_surface, seed=o.seed))
-        return dist[a, b]
+    def contacts(qc: np.ndarray) -> tuple[list, list, Any]:
+        """(pairs in contact [(a, b, sphere distance, mesh distance)], pairs to tighten
+        [(a, b, depth)], (FK, the distance function)) at ``qc``: the URDF geometry of every
+        checked pair whose spheres are closer than ``reach`` is tested."""
+        from jwarp.kinematics.fk import fk
 
-    default, fit = default_pairs(model, q, lambda a, b: distance(a, b) <= o.contact_margin)
-    for a, b, depth in default:
-        report.default_pairs.append({"links": [names[a], names[b]], "sphere_depth_m": depth,
-                                     "mesh_distance_m": distance(a, b)})
+        T = fk(model, qc[None], device="cpu", dtype=np.float64)[0]
+        dist: dict[tuple[int, int], float] = {}
+
+        def distance(a: int, b: int) -> float:
+            if (a, b) not in dist:
+                ma, mb = mesh_of(a), mesh_of(b)
+                dist[a, b] = (math.nan if ma is None or mb is None else
+                              mesh_distance(ma, T[a], mb, T[b], n_surface=o.n_surface,
+                                            seed=o.seed))
+            return dist[a, b]
+
+        hit, fit = [], []
+        for (a, b), d in _near_pairs(model, T, reach):
+            if distance(a, b) <= o.contact_margin:
+                hit.append((a, b, d, distance(a, b)))
+            elif d < 0:
+                fit.append((a, b, d))
+        return hit, fit, (T, distance)
+
+    def words(rows: list) -> str:
+        return ", ".join(f"{names[a]}/{names[b]} (URDF collision geometry "
+                         f"{_contact_words(dm)}, spheres "
+                         + (f"{-1e3 * d:.1f} mm deep)" if d < 0 else f"{1e3 * d:.1f} mm apart)")
+                         for a, b, d, dm in rows)
+
+    hit, fit, (T, distance) = contacts(q)
+    if hit and home is not None:
+        raise ValueError(
+            f"home: {where} is a self-collision of robot '{model.name}': {words(hit)}; "
+            f"give a home where these links are apart, or, if they may touch, disable the "
+            f"pair in the SRDF (<disable_collisions>); jwarp does not uncheck a pair to "
+            f"free a home")
+    if hit:   # the default home: replaced by a free one
+        rejected = [(where, hit)]
+        found = None
+        for cand, what in home_candidates(model, srdf)[1:]:
+            try:
+                qc, _ = resolve_home(model, cand, srdf)
+            except ValueError:
+                continue      # a state outside the limits
+            h, f2, td = contacts(qc)
+            if not h:
+                found = (qc, what, f2, td)
+                break
+            rejected.append((what, h))
+        if found is None:
+            found = _random_free_home(model, o, contacts, reach)
+        if found is None:
+            raise ValueError(
+                f"home: no home free of self-collision found for robot '{model.name}': "
+                + "; ".join(f"{w}: {words(h)}" for w, h in rejected if w)
+                + f"; nor among {o.n_random} random configurations; give one (--home)")
+        q, where, fit, (T, distance) = found
+        report.home, report.home_from = q.tolist(), where
+        report.rejected = [{"home_from": w, "pairs": [
+            {"links": [names[a], names[b]], "sphere_distance_m": d, "mesh_distance_m": dm}
+            for a, b, d, dm in h]} for w, h in rejected]
         report.warnings.append(
-            f"links '{names[a]}' and '{names[b]}' are in collision at the home ({where}): "
-            f"their URDF collision geometry is {_contact_words(distance(a, b))}; the pair "
-            f"is excluded from self-collision checks (reason Default, as MoveIt's setup "
-            f"assistant does)")
-    model = with_default_pairs(model, [(a, b) for a, b, _ in default])
+            f"the default home ({rejected[0][0]}) is a self-collision: {words(rejected[0][1])}"
+            + "".join(f"; so is {w}: {words(h)}" for w, h in rejected[1:])
+            + f"; the home is {where} instead (no pair is unchecked to free a home)")
+    from jwarp.world.model_check import home_self_collisions
+
     if fit:
         pairs = [(a, b) for a, b, _ in fit]
         model = _tighten(robot, model, T, pairs, o, report, mesh_of)
@@ -307,12 +408,12 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
         if back and o.refit:
             model = _refit(robot, model, back, pairs, o, report, distance)
             left = {tuple(sorted((names.index(na), names.index(nb))))
-                    for na, nb, _ in home_self_collisions(model, q)}
+                    for na, nb, _ in home_self_collisions(model, q, device="cpu")}
             again = [p for p in pairs if p in left]
             if again:
                 model = _tighten(robot, model, T, again, o, report, mesh_of)
     # what is left (pairs without geometry, or tightening that would uncover a surface)
-    for na, nb, depth in home_self_collisions(model, q):
+    for na, nb, depth in home_self_collisions(model, q, device="cpu"):
         a, b = sorted((names.index(na), names.index(nb)))
         d = distance(a, b)
         why = ("no URDF collision geometry to compare" if math.isnan(d) else
@@ -334,6 +435,50 @@ def fit_home(robot: Any, model: RobotModel | None = None, home: Any = None,
     notes[HOME_NOTE] = json.dumps([float(v) for v in q])   # the solvers' check starts here
     report.seconds = time.perf_counter() - t0
     return model.copy(notes=notes), report
+
+
+def _near_pairs(model: RobotModel, T: np.ndarray, reach: float
+                ) -> list[tuple[tuple[int, int], float]]:
+    """``[((a, b), smallest sphere surface distance [m])]`` of the checked frame pairs
+    (``allowed_collision_pairs``) closer than ``reach`` at the FK ``T``, closest first."""
+    from jwarp.world.collision import collision_pairs
+
+    pairs = collision_pairs(model)
+    if len(pairs) == 0:
+        return []
+    sf, sp, sr = model.sphere_arrays()
+    x = np.einsum("sij,sj->si", T[sf, :3, :3], sp) + T[sf, :3, 3]
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = np.linalg.norm(x[i] - x[j], axis=1) - sr[i] - sr[j]
+    best: dict[tuple[int, int], float] = {}
+    for k in np.flatnonzero(d < reach):
+        key = (int(min(sf[i[k]], sf[j[k]])), int(max(sf[i[k]], sf[j[k]])))
+        best[key] = min(best.get(key, math.inf), float(d[k]))
+    return sorted(best.items(), key=lambda t: t[1])
+
+
+def _random_free_home(model: RobotModel, o: HomeFitOptions, contacts: Any, reach: float
+                      ) -> Any:
+    """The first of ``o.n_random`` random configurations (seed ``o.seed``) whose checked
+    spheres are all farther apart than ``reach`` (then no URDF geometry needs a test), or,
+    among the first ten that are not, one whose geometry is apart: ``(q, what, pairs to
+    tighten, (FK, distance))``, or None."""
+    from jwarp.kinematics.fk import fk
+
+    lim = np.asarray(model.joint_limits, np.float64)
+    rng = np.random.default_rng(o.seed)
+    tested = 0
+    for k in range(o.n_random):
+        qc = lim[:, 0] + rng.random(model.n_dof) * (lim[:, 1] - lim[:, 0])
+        if _near_pairs(model, fk(model, qc[None], device="cpu", dtype=np.float64)[0], reach):
+            if tested >= 10:
+                continue      # URDF geometry tests for the first few only (their cost)
+            tested += 1
+        h, fit, td = contacts(qc)
+        if not h:
+            return qc, (f"a random configuration free of self-collision (try {k + 1}, seed "
+                        f"{o.seed})"), fit, td
+    return None
 
 
 def _contact_words(d: float) -> str:

@@ -15,12 +15,25 @@ positive ``margin`` keeps pairs that come close.
 (``exclude_pairs``), which the planner's self-collision check reads
 (``RobotModel.allowed_collision_pairs``); :func:`write_self_pairs` saves it as robot JSON.
 
-MoveIt's setup assistant also disables the pairs in collision at the robot's default
-configuration (reason "Default"). :func:`default_pairs` applies that rule only where the
-robot's own geometry is in contact there (a ``contact`` test the caller gives, e.g. the
-URDF's collision meshes: :mod:`jwarp.world.home_fit`): spheres that overlap where
-the meshes do not are a fit to correct, not a pair to stop checking.
-:func:`with_default_pairs` adds them to ``exclude_pairs`` and lists them in
+The URDF import follows MoveIt's setup assistant (moveit_setup_assistant
+``computeDefaultCollisions``) with ``adjacency="moveit"`` and ``always_fraction=0.95``:
+**Adjacent** is a parent and child link, or two links joined through links without
+collision geometry (:func:`moveit_adjacent_pairs`; jwarp's frames without spheres, such as
+a joint's ``_axis`` or ``_origin`` frame or a flange, count as such links); **Always** a
+pair in collision in at least 95 % of the samples (MoveIt: more than 95 % of rounds of 200
+random states); **Never** a pair in collision in none of them (MoveIt's setup assistant
+disables these by default, ``include_never_colliding = true``, over 10000 states by
+default). The reason of every excluded pair is recorded in
+``notes['self_collision_pairs']`` (:data:`PAIRS_NOTE`; :func:`skipped_pairs` lists them).
+MoveIt's fourth rule, **Default** (pairs in collision at the default configuration), is
+not applied by the import: a home in self-collision is refused or replaced
+(:mod:`jwarp.world.home_fit`), never freed by unchecking a pair.
+
+:func:`default_pairs` splits the pairs whose spheres overlap at a configuration by
+whether the robot's own geometry is in contact there (a ``contact`` test the caller gives,
+e.g. the URDF's collision meshes): spheres that overlap where the meshes do not are a fit
+to correct. :func:`with_default_pairs` (MoveIt's "Default" rule, which the import no longer
+applies) adds pairs to ``exclude_pairs`` and lists them in
 ``notes['self_collision_default']`` (an exported SRDF writes them with reason="Default").
 """
 
@@ -37,11 +50,20 @@ import numpy as np
 from jwarp.kinematics.fk import fk
 from jwarp.utils.memory import check_memory, format_bytes
 from jwarp.model import RobotModel, SelfCollision
+from jwarp.model.pair_reasons import (PAIRS_NOTE, moveit_adjacent_pairs, pair_reasons,
+                                      skipped_pairs, with_pair_reasons)
 from jwarp.model.registry import robot as get_robot
 
 __all__ = ["SelfPairs", "PairSamplingCost", "never_colliding_pairs", "pair_sampling_cost",
-           "adjacent_pairs", "rigid_groups", "default_pairs", "with_default_pairs",
-           "DEFAULT_NOTE", "with_self_pairs", "write_self_pairs"]
+           "adjacent_pairs", "moveit_adjacent_pairs", "rigid_groups", "default_pairs",
+           "with_default_pairs", "DEFAULT_NOTE", "PAIRS_NOTE", "ALWAYS_FRACTION",
+           "with_self_pairs", "write_self_pairs", "pair_reasons", "with_pair_reasons",
+           "skipped_pairs", "sampled_reasons"]
+
+#: MoveIt setup assistant's share of random states in collision above which a pair is
+#: "always" colliding (its ``min_collision_fraction``, 95 %)
+ALWAYS_FRACTION = 0.95
+
 
 #: ``RobotModel.notes`` key listing the "Default" pairs (JSON ``[[frame a, frame b], ...]``;
 #: the same key as :data:`jwarp.importers.srdf.DEFAULT_NOTE`)
@@ -71,6 +93,10 @@ class SelfPairs:
     samples: np.ndarray
     seed: int
     margin: float
+    #: the adjacency rule ("rigid": :func:`adjacent_pairs`; "moveit":
+    #: :func:`moveit_adjacent_pairs`) and the always rule's share of samples
+    adjacency: str = "rigid"
+    always_fraction: float = 1.0
 
     @property
     def exclude_pairs(self) -> list[tuple[int, int]]:
@@ -197,11 +223,16 @@ def pair_sampling_cost(robot: Any, n_samples: int = 10000, *, batch: int = 1024,
 
 def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
                           margin: float = 0.0, *, batch: int = 1024,
-                          max_memory: int = MAX_MEMORY, verbose: bool = False) -> SelfPairs:
+                          max_memory: int = MAX_MEMORY, verbose: bool = False,
+                          adjacency: str = "rigid", always_fraction: float = 1.0) -> SelfPairs:
     """Adjacent and never-colliding frame pairs of ``robot`` (name or RobotModel) over
     ``n_samples`` configurations drawn uniformly within the joint limits with
     ``numpy.random.default_rng(seed)`` (FK on the CPU in float64, at most ``batch`` at a
     time). ``margin`` [m]: a pair counts as colliding when its spheres come closer than this.
+    ``adjacency``: ``"rigid"`` (:func:`adjacent_pairs`) or ``"moveit"``
+    (:func:`moveit_adjacent_pairs`); ``always_fraction``: a tested pair colliding in at
+    least this share of the samples is "always" colliding (in (0, 1]; MoveIt's setup
+    assistant: :data:`ALWAYS_FRACTION`).
 
     Memory is bounded by ``max_memory`` [bytes] (default 256 MB) at any sphere count: the
     FK batch shrinks with the number of spheres, and every frame pair's sphere-pair distances
@@ -221,6 +252,11 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
             or not np.isfinite(margin):
         raise ValueError(f"margin: expected a finite distance [m], got {margin!r}")
     margin = float(margin)
+    if adjacency not in ("rigid", "moveit"):
+        raise ValueError(f"adjacency: expected 'rigid' or 'moveit', got {adjacency!r}")
+    if isinstance(always_fraction, bool) or not isinstance(always_fraction, (int, float)) \
+            or not 0.0 < always_fraction <= 1.0:
+        raise ValueError(f"always_fraction: expected a share in (0, 1], got {always_fraction!r}")
     sf, sp, sr = model.sphere_arrays()
     if len(sr) == 0:
         raise ValueError(f"robot: '{model.name}' has no collision spheres")
@@ -318,15 +354,17 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
     rate[ix] = hits / n_samples
     np.fill_diagonal(min_distance, np.inf)
     np.fill_diagonal(rate, 0.0)
-    adjacent = adjacent_pairs(model)
+    adjacent = moveit_adjacent_pairs(model) if adjacency == "moveit" else adjacent_pairs(model)
     adj = set(adjacent)
     tested = [(int(a), int(b)) for i, a in enumerate(frames) for b in frames[i + 1:]
               if (int(a), int(b)) not in adj]
     never = [p for p in tested if rate[p] == 0.0]
-    always = [p for p in tested if rate[p] == 1.0]
+    # hits / n_samples >= fraction, in integers (no rounding at 100 %)
+    need = math.ceil(float(always_fraction) * n_samples - 1e-9)
+    always = [p for p in tested if rate[p] * n_samples >= need - 1e-6]
     return SelfPairs(adjacent=adjacent, never_colliding=never, always_colliding=always,
                      min_distance=min_distance, collision_rate=rate, samples=q, seed=seed,
-                     margin=margin)
+                     margin=margin, adjacency=adjacency, always_fraction=float(always_fraction))
 
 
 def _frame_pair_min(x: np.ndarray, r: np.ndarray, todo: np.ndarray, a0: int, a1: int,
@@ -444,7 +482,35 @@ def with_self_pairs(robot: Any, pairs: SelfPairs, *, replace: bool = True) -> Ro
         f"configurations (seed {pairs.seed}, margin "
         f"{pairs.margin} m; jwarp.world.self_pairs)" + ("" if replace else ", added to the "
                                                           "hand-written section"))
-    return model.copy(self_collision=sc, notes=notes)
+    out = model.copy(self_collision=sc, notes=notes)
+    old_reasons = {} if replace else pair_reasons(model)
+    return with_pair_reasons(out, {**sampled_reasons(model, pairs), **old_reasons})
+
+
+def sampled_reasons(robot: Any, pairs: SelfPairs) -> dict[tuple[int, int], tuple[str, str]]:
+    """``{(a, b): (reason, why)}`` of the exclusions of the sampled ``pairs``: Adjacent,
+    Always (with its share of the samples), Never (with the closest distance seen)."""
+    model = get_robot(robot)
+    n = len(pairs.samples)
+    out: dict[tuple[int, int], tuple[str, str]] = {}
+    for a, b in pairs.adjacent:
+        if pairs.adjacency == "moveit":
+            p = model.parents
+            why = ("parent and child" if p[a] == b or p[b] == a else
+                   "joined through frames without collision geometry")
+        else:
+            why = "joined by a joint or rigidly attached"
+        out[(a, b)] = ("Adjacent", why)
+    for a, b in pairs.always_colliding:
+        out[(a, b)] = ("Always", f"in collision in {100 * pairs.collision_rate[a, b]:.1f} % of "
+                                 f"{n} random configurations (>= "
+                                 f"{100 * pairs.always_fraction:g} %)")
+    for a, b in pairs.never_colliding:
+        d = pairs.min_distance[a, b]
+        out[(a, b)] = ("Never", f"in collision in none of {n} random configurations "
+                                f"(closest {1e3 * d:.1f} mm)" if math.isfinite(d) else
+                       f"in collision in none of {n} random configurations")
+    return out
 
 
 def write_self_pairs(robot: Any, out: str | os.PathLike, pairs: SelfPairs | None = None, *,

@@ -41,7 +41,9 @@ import numpy as np
 
 from jwarp.utils.atomic import atomic_write_text
 from jwarp.model import RobotModel, Sphere
-from jwarp.world.self_pairs import SelfPairs, never_colliding_pairs, with_self_pairs
+from jwarp.world.self_pairs import (ALWAYS_FRACTION, SelfPairs, never_colliding_pairs,
+                                    pair_reasons, sampled_reasons, with_pair_reasons,
+                                    with_self_pairs)
 
 __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize",
            "spherized_robot", "resample_pairs"]
@@ -49,8 +51,14 @@ __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize",
 #: bump when the fitted result of the same inputs changes
 #: Monte Carlo points of a link's excess volume at import (:func:`spherize`)
 EXCESS_SAMPLES = 50_000
-CACHE_VERSION = 5  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits;
-#                   5: URDF axis frames named <joint>_axis, joint names frame aliases
+CACHE_VERSION = 6  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits;
+#                   5: URDF axis frames named <joint>_axis, joint names frame aliases;
+#                   6: MoveIt's pair rules (adjacency, always >= 95 %), reasons in notes
+
+
+#: the pair sampling of an import: MoveIt setup assistant's Adjacent and Always rules
+#: (jwarp.world.self_pairs module docstring)
+MOVEIT_RULES: dict[str, Any] = {"adjacency": "moveit", "always_fraction": ALWAYS_FRACTION}
 
 
 class SphereFitWarning(UserWarning):
@@ -212,7 +220,8 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
         if len(spheres) and sample_pairs:
             bar.set_postfix_str("self-collision pairs", refresh=True)
             pairs = never_colliding_pairs(fitted, n_samples=int(o.pair_samples),
-                                          seed=int(o.seed), margin=float(o.pair_margin))
+                                          seed=int(o.seed), margin=float(o.pair_margin),
+                                          **MOVEIT_RULES)
             # the model's own exclusions (e.g. MJCF <contact><exclude>) are kept and the
             # sampled ones added; a model without any (an imported URDF) gets exactly these
             sc = model.self_collision
@@ -421,22 +430,31 @@ def spherized_robot(path: str | os.PathLike, options: SpherizeOptions | None = N
     return model, report
 
 
-def resample_pairs(model: RobotModel, sampled: Any, options: SpherizeOptions
-                   ) -> tuple[RobotModel, SelfPairs]:
+def resample_pairs(model: RobotModel, sampled: Any, options: SpherizeOptions, *,
+                   never: bool = True) -> tuple[RobotModel, SelfPairs]:
     """The self-collision exclusions of ``model`` sampled again over its own joints: for a
     model whose joints were locked or frozen after the fit (a planning group), whose
     ``sampled`` pairs came from the whole robot's joint ranges (a pair that collides only
     where a locked joint goes no more is excluded now; one that collides at every value of
     the planned joints, e.g. an arm link resting on a locked torso, is excluded as MoveIt
     does). Exclusions of ``model`` that are not among the ``sampled`` ones (SRDF pairs,
-    links that freezing joined rigidly) are kept. Returns (model, the new pairs)."""
+    links that freezing joined rigidly) are kept; so are those whose recorded reason
+    (``notes['self_collision_pairs']``) is not one of the sampled rules. ``never`` False:
+    the never-colliding pairs are not excluded (an SRDF decides those: the import's
+    ``--srdf-collisions srdf``). Returns (model, the new pairs)."""
     o = options
     o.validate()
     pairs = never_colliding_pairs(model, n_samples=int(o.pair_samples), seed=int(o.seed),
-                                  margin=float(o.pair_margin))
+                                  margin=float(o.pair_margin), **MOVEIT_RULES)
+    if not never:
+        pairs.never_colliding = []
     sc = model.self_collision
     old = {tuple(sorted(int(i) for i in p)) for p in sampled}
-    keep = [tuple(sorted(p)) for p in sc.exclude_pairs if tuple(sorted(p)) not in old]
+    why = pair_reasons(model)
+    sampled_kinds = ("Adjacent", "Always", "Never")
+    keep = [tuple(sorted(p)) for p in sc.exclude_pairs
+            if (tuple(sorted(p)) not in old and tuple(sorted(p)) not in why)
+            or why.get(tuple(sorted(p)), ("",))[0] not in ("",) + sampled_kinds]
     out = with_self_pairs(model, pairs, replace=True)
     merged = sorted(set(out.self_collision.exclude_pairs) | set(keep))
     notes = dict(out.notes)
@@ -446,4 +464,5 @@ def resample_pairs(model: RobotModel, sampled: Any, options: SpherizeOptions
 
     new_sc = SelfCollision(groups={k: list(v) for k, v in sc.groups.items()},
                            include_pairs=list(sc.include_pairs), exclude_pairs=merged)
-    return out.copy(self_collision=new_sc, notes=notes), pairs
+    reasons = {**sampled_reasons(model, pairs), **{p: why[p] for p in keep if p in why}}
+    return with_pair_reasons(out.copy(self_collision=new_sc, notes=notes), reasons), pairs

@@ -97,12 +97,18 @@ def test_export_import_round_trip(tmp_path):
     export_urdf(model, out)
     written = srdf_path(out)
     assert written == tmp_path / "exported.srdf" and written.is_file()
-    # reasons: Adjacent exactly where a URDF joint of the exported file joins the links
+    # reasons: the source SRDF's own for its pairs (recorded at import); for the others
+    # (frames without geometry) Adjacent exactly where a URDF joint of the exported file
+    # joins the links, else Never
     joints = {frozenset((j.find("parent").get("link"), j.find("child").get("link")))
               for j in ET.parse(out).getroot().findall("joint")}
+    source = {frozenset((e.get("link1"), e.get("link2"))): e.get("reason")
+              for e in ET.parse(srdf).getroot().findall("disable_collisions")}
     for e in ET.parse(written).getroot().findall("disable_collisions"):
         pair = frozenset((e.get("link1"), e.get("link2")))
-        assert e.get("reason") == ("Adjacent" if pair in joints else "Never")
+        assert e.get("reason") == source.get(pair, "Adjacent" if pair in joints else "Never")
+    assert {e.get("reason") for e in ET.parse(written).getroot().findall(
+        "disable_collisions")} >= {"Default", "Never", "Adjacent"}
     back = plan_group(load_urdf(out), GroupOptions(srdf=written, srdf_collisions="replace"))
     assert _pairs(back.model) == _pairs(model) and len(_pairs(model)) > 0
     # the CLI: export-urdf writes the SRDF beside the URDF; --no-srdf does not

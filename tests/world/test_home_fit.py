@@ -1,16 +1,16 @@
-"""The home made free of self-collision at import (jwarp.world.home_fit): the Default
-rule only where the URDF geometry touches (boxes at known distances: analytic), spheres
-tightened where it does not (never below their clearance, analytic for a cube; a link
-whose surface would be uncovered beyond the tolerance is left as it was), the mesh
-distance against coal (pinocchio) on the Kinova, the SRDF home against pinocchio's FK,
-and ``jwarp import-urdf --home``."""
+"""The home free of self-collision at import (jwarp.world.home_fit): a given home where the
+URDF geometry of a checked pair touches is refused (naming the pairs and distances), a
+default one replaced (SRDF state, mid-limits, random free), never freed by unchecking a
+pair (boxes at known distances: analytic); spheres tightened where the geometry is apart
+(never below their clearance, analytic for a cube; a link whose surface would be uncovered
+beyond the tolerance is left as it was), the mesh distance against coal (pinocchio) on
+the Kinova, the SRDF home against pinocchio's FK, and ``jwarp import-urdf --home``."""
 
 from __future__ import annotations
 
 import json
 import math
 import warnings
-import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
@@ -19,7 +19,7 @@ import jwarp
 from jwarp.world.home_fit import (HomeFitOptions, HomeFitWarning, fit_home, link_mesh,
                                       mesh_distance, resolve_home)
 from jwarp.importers.robot import example_robot_urdf, load_urdf
-from jwarp.importers.srdf import read_srdf, srdf_text
+from jwarp.importers.srdf import read_srdf
 from jwarp.model import SelfCollision, Sphere
 
 H = 0.05   # half edge of the boxes [m]
@@ -84,25 +84,83 @@ def test_mesh_distance_of_boxes(boxes):
     assert link_mesh(imp, "m1") is None
 
 
-def test_default_and_tightened(boxes):
+def _without(m, *pairs):
+    """``m`` with the frame pairs (names) excluded, as an SRDF's disable_collisions would."""
+    return m.copy(self_collision=SelfCollision(exclude_pairs=[
+        tuple(sorted((m.frame_index(a), m.frame_index(b)))) for a, b in pairs]))
+
+
+def test_given_home_in_collision_is_refused(boxes):
+    """base/a: the cubes overlap by 2 mm at q = 0: a given home there is refused, naming the
+    pair, the geometry's overlap and the spheres' depth; nothing is unchecked."""
     imp = load_urdf(boxes)
     m = _with_spheres(imp)
+    with pytest.raises(ValueError) as e:
+        fit_home(imp, m, [0.0] * 4)
+    msg = str(e.value)
+    assert msg.startswith("home: given joint values is a self-collision of robot 'boxes'")
+    assert "base/a (URDF collision geometry overlapping by 2.0 mm, spheres 8.0 mm deep)" in msg
+    assert "base/b" not in msg                      # 4 mm apart: a fit to tighten, not a hit
+    assert m.allowed_collision_pairs[m.frame_index("base"), m.frame_index("a")]
+
+
+def test_default_home_in_collision_is_replaced(boxes, tmp_path):
+    """The default home (zeros) is a self-collision: replaced by the first free candidate
+    (an SRDF state in collision is passed over, the middle of the limits is zeros again,
+    then a random configuration); the pair stays checked and is free at the new home."""
+    from jwarp.importers.srdf import parse_srdf
+    imp = load_urdf(boxes)
+    m = _with_spheres(imp)
+    # 'ready' lifts a by 9 cm: the cubes still overlap by 1 cm in z, the spheres (one per
+    # cube, 33 mm short of its corners: the tolerance passed) are 27 mm apart
+    srdf = parse_srdf("<robot name='boxes'><group name='g'><joint name='j1'/></group>"
+                      "<group_state name='ready' group='g'><joint name='j1' value='0.09'/>"
+                      "</group_state><group_state name='up' group='g'><joint name='j2' "
+                      "value='0.4'/></group_state></robot>")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out, rep = fit_home(imp, m, None, HomeFitOptions(tolerance=0.035), srdf=srdf)
+    assert [r["home_from"] for r in rep.rejected] == [
+        "zeros projected into the limits", "SRDF group_state 'ready'"]
+    assert rep.rejected[0]["pairs"][0]["links"] == ["base", "a"]
+    assert rep.rejected[0]["pairs"][0]["mesh_distance_m"] == pytest.approx(-0.002, abs=1e-5)
+    assert rep.home_from == "SRDF group_state 'up'" and rep.home == [0.0, 0.4, 0.0, 0.0]
+    assert rep.home_free and rep.default_pairs == []
+    assert np.array_equal(out.allowed_collision_pairs, m.allowed_collision_pairs)
+    assert json.loads(out.notes["home"]) == rep.home
+    text = " ".join(str(w.message) for w in caught if w.category is HomeFitWarning)
+    assert "the default home (zeros projected into the limits) is a self-collision: base/a" \
+        in text and "SRDF group_state 'up' instead" in text
+    assert "replaced zeros projected into the limits (self-collision: base/a)" in rep.summary()
+    # without the SRDF: the middle of the limits is zeros too: a random free configuration
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HomeFitWarning)
+        out, rep = fit_home(imp, m, None, HomeFitOptions(tolerance=0.035))
+    assert rep.home_from.startswith("a random configuration free of self-collision")
+    assert [r["home_from"] for r in rep.rejected] == [
+        "zeros projected into the limits", "the middle of the joint limits"]
+    assert _overlaps(out, rep.home) == {} and rep.home_free
+    # nothing free anywhere (n_random 0): refused, naming what was tried
+    with pytest.raises(ValueError, match=r"home: no home free of self-collision found .*"
+                                         r"zeros projected into the limits: base/a .*"
+                                         r"nor among 0 random configurations"):
+        fit_home(imp, m, None, HomeFitOptions(n_random=0))
+
+
+def test_tightened_where_the_geometry_is_apart(boxes):
+    imp = load_urdf(boxes)
+    m = _without(_with_spheres(imp), ("base", "a"))    # as an SRDF disabling base/a
     q = np.zeros(m.n_dof)
     before = _overlaps(m, q)
-    assert before == pytest.approx({("base", "a"): -0.008, ("base", "b"): -0.002}, abs=1e-9)
+    assert before == pytest.approx({("base", "b"): -0.002}, abs=1e-9)
     with pytest.warns(HomeFitWarning) as caught:
         out, rep = fit_home(imp, m, [0.0] * 4)
     text = " ".join(str(w.message) for w in caught)
-    assert "'base' and 'a'" in text and "reason Default" in text and "'b'" in text
-    # base/a: the cubes overlap -> excluded, by name, reason Default in the SRDF
-    assert [p["links"] for p in rep.default_pairs] == [["base", "a"]]
-    assert rep.default_pairs[0]["mesh_distance_m"] == pytest.approx(-0.002, abs=1e-5)
-    assert not out.allowed_collision_pairs[out.frame_index("base"), out.frame_index("a")]
-    reasons = {(d.get("link1"), d.get("link2")): d.get("reason")
-               for d in ET.fromstring(srdf_text(out)).findall("disable_collisions")}
-    assert reasons[("base", "a")] == "Default"
+    assert "'b'" in text and "shrunk" in text and "Default" not in text
+    assert rep.default_pairs == [] and rep.rejected == []
     # base/b: the cubes are 4 mm apart -> still checked, its two spheres shrunk just enough
     assert out.allowed_collision_pairs[out.frame_index("base"), out.frame_index("b")]
+    assert np.array_equal(out.allowed_collision_pairs, m.allowed_collision_pairs)
     assert {r["link"] for r in rep.tightened} == {"base", "b"}
     f, _, r = out.sphere_arrays()
     rb, rbb = r[f == out.frame_index("base")][0], r[f == out.frame_index("b")][0]
@@ -119,7 +177,7 @@ def test_default_and_tightened(boxes):
 
 def test_tightening_beyond_tolerance_is_left_as_it_was(boxes):
     imp = load_urdf(boxes)
-    m = _with_spheres(imp)
+    m = _without(_with_spheres(imp), ("base", "a"))
     corner = math.sqrt(3) * H - H - 0.003        # the cubes' one-sided error as fitted
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", HomeFitWarning)
@@ -141,7 +199,7 @@ def test_refit_where_shrinking_would_uncover(boxes):
     clearance of a cube: every sphere within it; the fresh one-sided error on the cubes'
     corners and faces within the tolerance)."""
     imp = load_urdf(boxes)
-    m = _with_spheres(imp)
+    m = _without(_with_spheres(imp), ("base", "a"))
     tol = math.sqrt(3) * H - H - 0.003 + 0.0005
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", HomeFitWarning)
@@ -235,23 +293,51 @@ def test_kinova_home_and_mesh_distance_against_pinocchio_coal():
     assert ref - 1e-4 <= d <= ref + 0.0015, (d, ref)
 
 
-def test_cli_home(boxes, tmp_path, capsys, monkeypatch):
+def test_cli_home(tmp_path, capsys, monkeypatch):
+    """``import-urdf --home``: the boxes with geometry on the middle links too (so that base
+    and a are not adjacent by MoveIt's rule, which joins links through links without
+    geometry): a given home in collision is refused naming --home; the default home is
+    replaced and the pair stays checked; a free home tightens base/b."""
     from jwarp.cli.main import main
 
+    text = ('<robot name="boxes">' + _box("base", 0.0)
+            + '<link name="m1"><collision><origin xyz="0 0 1"/><geometry><box size="0.01 0.01 '
+              '0.01"/></geometry></collision></link>'
+            + _box("a", 2 * H - 0.002)
+            + '<link name="m2"><collision><origin xyz="0 0 -1"/><geometry><box size="0.01 0.01 '
+              '0.01"/></geometry></collision></link>'
+            + _box("b", -2 * H - 0.004)
+            + _joint("j1", "base", "m1", "0 0 1") + _joint("j2", "m1", "a", "0 1 0")
+            + _joint("j3", "base", "m2", "0 0 1") + _joint("j4", "m2", "b", "0 1 0")
+            + "</robot>")
+    boxes = tmp_path / "boxes.urdf"
+    boxes.write_text(text)
     monkeypatch.setenv("JWARP_CACHE", str(tmp_path / "cache"))   # one fit for every call
     out = tmp_path / "boxes.json"
-    base = ["import-urdf", boxes, "--out", str(out), "--pair-samples", "200", "--tolerance",
-            "0.03"]
-    assert main(base + ["--home", "0,0,0,0", "--json"]) == 0
+    base = ["import-urdf", str(boxes), "--out", str(out), "--pair-samples", "200",
+            "--tolerance", "0.03"]
+    assert main(base + ["--home", "0,0,0,0"]) == 2
+    err = capsys.readouterr().err
+    assert "--home: given joint values is a self-collision of robot 'boxes': base/a (URDF " \
+           "collision geometry overlapping by 2.0 mm" in err and not out.exists()
+    assert main(base + ["--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     hf = doc["home_fit"]
-    assert hf["home_free"] and hf["home"] == [0.0] * 4
-    assert ["base", "a"] in [p["links"] for p in hf["default_pairs"]]
-    assert ["base", "b"] not in [p["links"] for p in hf["default_pairs"]]
+    assert hf["home_free"] and hf["home"] != [0.0] * 4
+    assert ["base", "a"] in [p["links"] for r in hf["rejected"] for p in r["pairs"]]
     m = jwarp.robot(str(out))
-    assert _overlaps(m, np.zeros(4)) == {}
+    assert m.allowed_collision_pairs[m.frame_index("base"), m.frame_index("a")]
+    assert ["base", "a"] not in [r["links"] for r in doc["skipped_pairs"]]
+    assert _overlaps(m, hf["home"]) == {}
+    # a free home: base/b (4 mm apart) tightened, still checked
+    assert main(base + ["--home", "0,0.3,0,0", "--json"]) == 0
+    hf = json.loads(capsys.readouterr().out)["home_fit"]
+    assert hf["home_free"] and hf["home"] == [0.0, 0.3, 0.0, 0.0] and hf["rejected"] == []
+    m = jwarp.robot(str(out))
+    assert _overlaps(m, [0.0, 0.3, 0.0, 0.0]) == {}
     from jwarp.world.model_check import home_configurations, noted_home
-    assert json.loads(m.notes["home"]) == [0.0] * 4 and noted_home(m).tolist() == [0.0] * 4
+    assert json.loads(m.notes["home"]) == [0.0, 0.3, 0.0, 0.0]
+    assert noted_home(m).tolist() == [0.0, 0.3, 0.0, 0.0]
     assert home_configurations(m)[0][0] == "its home (notes.home)"
     assert noted_home(m.copy(notes={"home": "[1, 2]"})) is None    # not this robot's
     assert m.allowed_collision_pairs[m.frame_index("base"), m.frame_index("b")]

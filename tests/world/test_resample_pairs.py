@@ -8,7 +8,7 @@ import numpy as np
 import jwarp
 from jwarp.model import SelfCollision, freeze_joints
 from jwarp.world.self_pairs import never_colliding_pairs, with_self_pairs
-from jwarp.world.spherize import SpherizeOptions, resample_pairs
+from jwarp.world.spherize import MOVEIT_RULES, SpherizeOptions, resample_pairs
 
 
 def test_pairs_resampled_over_the_planned_joints():
@@ -30,7 +30,8 @@ def test_pairs_resampled_over_the_planned_joints():
     opts = SpherizeOptions(pair_samples=300, seed=0)
     out, pairs = resample_pairs(locked, fitted.self_collision.exclude_pairs, opts)
 
-    ref = never_colliding_pairs(locked, n_samples=300, seed=0)   # independent sampling
+    # independent sampling, by the import's rules (MoveIt's adjacency and always >= 95 %)
+    ref = never_colliding_pairs(locked, n_samples=300, seed=0, **MOVEIT_RULES)
     own = {tuple(sorted(p)) for p in locked.self_collision.exclude_pairs} \
         - {tuple(sorted(p)) for p in first.exclude_pairs}
     assert extra in own
@@ -66,7 +67,7 @@ def test_cli_import_with_frozen_fingers_resamples(tmp_path, capsys, monkeypatch)
     doc = json.loads(stdout)
     model = jwarp.robot(str(out))
     assert model.n_dof == 7
-    ref = never_colliding_pairs(model, n_samples=300, seed=0)
+    ref = never_colliding_pairs(model, n_samples=300, seed=0, **MOVEIT_RULES)
     assert doc["pairs_resampled"] == {"never": len(ref.never_colliding),
                                       "always": len(ref.always_colliding)}
     assert set(ref.exclude_pairs) <= set(map(tuple, model.self_collision.exclude_pairs))
