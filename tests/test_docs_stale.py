@@ -33,7 +33,7 @@ def test_scenes_md_says_an_open_mesh_is_an_error_only_for_a_grid(tmp_path):
 
 def test_origin_with_compliances_is_not_called_an_error():
     """The origin group on a compliant robot is supported (issue 29; its behaviour:
-    tests/solvers/test_calibration_origin.py, the elastic columns against central
+    tests/calibration/test_calibration_origin.py, the elastic columns against central
     differences); docs/urdf_export.md and the params docstring called it an error."""
     from jwarp.calibration.estimate import params
 

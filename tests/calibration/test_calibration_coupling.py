@@ -25,7 +25,7 @@ from jwarp.calibration.estimate.robust import robust_weights
 
 from devices import requires_cpu
 from reference import THETA, nominal_dh, ref_fk
-from solvers.test_calibration import KAPPA, _cartesian, _fd_jacobian, _q
+from calibration.test_calibration import KAPPA, _cartesian, _fd_jacobian, _q
 
 pytestmark = requires_cpu
 

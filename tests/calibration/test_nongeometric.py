@@ -14,7 +14,7 @@ from jwarp.calibration import CalibrationProblem, ParameterSpace
 
 from devices import requires_cpu
 from reference import ref_fk, ref_torques, nominal_dh, THETA
-from solvers.test_calibration import (FramePositions, _assert_jacobian_close, _cartesian,
+from calibration.test_calibration import (FramePositions, _assert_jacobian_close, _cartesian,
                                       _fd_jacobian, _q)
 
 KAPPA = 1e-4

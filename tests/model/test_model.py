@@ -14,7 +14,7 @@ import pytest
 import jwarp.model.robot as model_mod
 from jwarp.model import RobotModel, RobotModelError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 JUSTIN = ROOT / "jwarp" / "plugins" / "robots" / "justin19.json"
 
 
