@@ -29,7 +29,9 @@ test).
    0. A *sphere margin violation* is a sphere closer than the margin on the inner
    segments (jwarp's promise; should be 0); ``mesh<margin`` counts paths whose URDF meshes
    come closer than the margin there (the spheres approximate the meshes: information).
-   Self-collision is jwarp's only (the verifier does not check it).
+   Self-collision: the URDF meshes of every link pair jwarp checks (its frame pairs with
+   spheres, mapped to their links) must not intersect anywhere on the path (coal; counted
+   as a collision; ``--no-verify-self`` skips it).
 4. Baseline: OMPL (``pip install ompl``, 2.0.1) RRT-Connect in the 7 arm joints (the
    fingers fixed at the start's value), without path simplification, its state validity
    ``jwarp.world.collision.is_collision_free`` and its motion validator jwarp's exact
@@ -127,8 +129,30 @@ class Problem:
     def verifier(self, urdf: str, spheres: list, names: list) -> Any:
         if self._verifier is None:
             self._verifier = PathVerifier(urdf, None, self.scene.shapes, spheres=spheres,
-                                          joint_names=names)
+                                          joint_names=names, self_pairs=SELF_PAIRS or None)
         return self._verifier
+
+
+#: URDF link pairs the verifier checks mesh against mesh (``self_link_pairs``; set in main)
+SELF_PAIRS: list[tuple[str, str]] = []
+
+
+def self_link_pairs(robot: Any, urdf: str) -> list[tuple[str, str]]:
+    """The URDF link pairs of the frame pairs jwarp checks for self-collision (frames
+    with spheres, ``RobotModel.allowed_collision_pairs``), each frame mapped to its link
+    (``PathVerifier.link_of``): the meshes of these pairs must stay apart."""
+    v = PathVerifier(urdf, None, [])
+    allowed = robot.allowed_collision_pairs
+    frames = sorted({s.frame for s in robot.spheres})
+    names = robot.frame_names
+    out = set()
+    for i, a in enumerate(frames):
+        for b in frames[i + 1:]:
+            if allowed[a, b]:
+                la, lb = v.link_of(names[a]), v.link_of(names[b])
+                if la and lb and la != lb:
+                    out.add((min(la, lb), max(la, lb)))
+    return sorted(out)
 
 
 # ------------------------------------------------------------------ jwarp
@@ -177,6 +201,10 @@ def verify(v: Any, path: np.ndarray, margin: float, end_margin: float) -> dict:
     t0 = time.perf_counter()
     verdicts = [(v.check_path(p, margin=m, endpoint_margin=m), m) for p, m in parts]
     out: dict = {"verify_s": time.perf_counter() - t0}
+    selfm = [x.self_mesh for x, _ in verdicts if x.self_mesh is not None]
+    self_min = min(selfm, key=lambda h: h.distance) if selfm else None
+    out["self_min_m"] = None if self_min is None else self_min.distance
+    out["self_collision"] = bool(self_min is not None and self_min.distance < 0)
     mesh = [x.mesh for x, _ in verdicts if x.mesh is not None]
     sph = [x.sphere for x, _ in verdicts if x.sphere is not None]
     mesh_min = min(mesh, key=lambda h: h.distance) if mesh else None
@@ -185,7 +213,7 @@ def verify(v: Any, path: np.ndarray, margin: float, end_margin: float) -> dict:
     out["sphere_min_m"] = None if sph_min is None else sph_min.distance
     hits = [h for h in (mesh_min, sph_min) if h is not None]
     worst = min(hits, key=lambda h: h.distance) if hits else None
-    out["collision"] = bool(worst is not None and worst.distance < 0)
+    out["collision"] = bool(worst is not None and worst.distance < 0) or out["self_collision"]
     out["closest"] = None if worst is None else str(worst)
     # inner segments at the margin
     inner = verdicts[1][0] if len(verdicts) == 3 else verdicts[0][0]
@@ -238,12 +266,12 @@ def verify_saved(args: argparse.Namespace, robot: Any, urdf: str | None, spheres
                          args.endpoint_margin)
             coll += row["collision"]
             viol += row["sphere_margin_violation"]
-            mesh += row["mesh_min_m"] is not None and row["mesh_min_m"] < 0
+            mesh += (row["mesh_min_m"] is not None and row["mesh_min_m"] < 0) or row["self_collision"]
             sphere += row["sphere_min_m"] is not None and row["sphere_min_m"] < 0
             if row["collision"]:
                 print(f"  !! {d.name}/{f.stem}: {row['first_violation']}", flush=True)
         print(f"{d.name}: {len(files)} feasible paths verified, {coll} collisions ({mesh} of "
-              f"the URDF meshes, {sphere} of the spheres), {viol} sphere margin violations",
+              f"the URDF meshes, world or self, {sphere} of the spheres), {viol} sphere margin violations",
               flush=True)
         total += coll
     print(f"verifier collisions among the saved feasible paths: {total} (must be 0)")
@@ -493,6 +521,8 @@ def main(argv: list[str] | None = None) -> int:
                     metavar="DIR", help="where verifier-refuted paths are saved")
     ap.add_argument("--progress", action="store_true", help="a line per problem on stderr")
     ap.add_argument("--json", default=None, metavar="FILE", help="also write every row as JSON")
+    ap.add_argument("--no-verify-self", action="store_true",
+                    help="the verifier skips the self pairs' URDF meshes")
     ap.add_argument("--robot", default=None, metavar="JSON",
                     help="the fitted Panda as a robot file (default: fitted from the URDF)")
     ap.add_argument("--save-paths", default=None, metavar="DIR",
@@ -525,6 +555,8 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit("--robot without example-robot-data: add --no-verify --no-ompl "
                          "(and verify elsewhere with --save-paths / --verify-saved)")
     spheres = robot_spheres(robot) if PathVerifier is not None else []
+    if PathVerifier is not None and urdf is not None and not args.no_verify_self:
+        SELF_PAIRS[:] = self_link_pairs(robot, urdf)
     folder, index = load_problems(args)
     probs = [Problem(folder, e, robot) for e in index["problems"]]
     if not probs:

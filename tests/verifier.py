@@ -30,8 +30,14 @@ a URDF link name is that link's frame; a joint name is the URDF joint frame (pin
 frame of that name: the child link's frame); ``<joint>_axis`` is the frame of a moving
 joint whose axis is neither +z nor -z: the joint frame turned so that its z is the joint
 axis (``R_align``, reimplemented here); ``<joint>_origin`` the same frame at joint value 0.
-Mimic joints follow their joint (``multiplier * q + offset``). Self-collision is not
-checked. A sample at the first or last waypoint is held to ``endpoint_margin`` (default
+Mimic joints follow their joint (``multiplier * q + offset``).
+
+(c) ``self`` (when ``self_pairs`` are given): the URDF collision geometries of each listed
+    pair of links against each other (coal mesh-mesh distance, negative: penetrating),
+    held to ``self_margin`` (default 0). A link swallowed whole by another without a
+    surface crossing is not detected by (c).
+
+A sample at the first or last waypoint is held to ``endpoint_margin`` (default
 ``margin``), every other sample to ``margin``.
 
 Each pair is first bounded below cheaply (bounding spheres, numpy); the exact coal
@@ -44,7 +50,7 @@ from __future__ import annotations
 import math
 import os
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -61,7 +67,8 @@ class Hit:
     """One sample-pair distance: ``distance`` [m] between robot part ``link`` (a URDF
     collision geometry's link, or ``frame#k`` for robot sphere k) and scene object
     ``object_id``, at waypoint interval ``interval`` (between waypoints i and i + 1) and
-    ``fraction`` in [0, 1] along it; ``check`` is ``"mesh"`` or ``"sphere"``."""
+    ``fraction`` in [0, 1] along it; ``check`` is ``"mesh"``, ``"sphere"`` or ``"self"``
+    (then ``object_id`` is the other link)."""
 
     distance: float
     interval: int
@@ -82,8 +89,8 @@ class Verdict:
     """Result of :meth:`PathVerifier.check_path`.
 
     ok: every sample keeps its threshold in every check; ``min_distance`` [m] the smallest
-    distance found (both checks), ``closest`` where (a :class:`Hit`); ``mesh`` /
-    ``sphere``: the smallest per check (None when not run); ``first_violation``: the first
+    distance found (checks a and b), ``closest`` where (a :class:`Hit`); ``mesh`` /
+    ``sphere`` / ``self_mesh``: the smallest per check (None when not run); ``first_violation``: the first
     sample (path order) below its threshold, None when ok; ``n_samples`` configurations
     checked; ``n_exact`` exact coal distance queries run."""
 
@@ -95,6 +102,7 @@ class Verdict:
     first_violation: Hit | None
     n_samples: int
     n_exact: int = 0
+    self_mesh: Hit | None = None
 
     @property
     def interval(self) -> int | None:
@@ -266,11 +274,16 @@ class PathVerifier:
         joint_names: the order of the path's columns (default: the URDF's actuated joints,
             non-fixed and non-mimic, in file order: jwarp's order).
         mesh_check: run check (a).
+        self_pairs: URDF link-name pairs whose collision geometries are checked against
+            each other (check c); None: no self check.
+        self_margin: the least distance [m] of check (c).
     """
 
     def __init__(self, urdf_path: str | os.PathLike, package_dirs: Sequence[str] | None,
                  scene_shapes: Sequence[Any], *, spheres: Sequence[tuple] | None = None,
-                 joint_names: Sequence[str] | None = None, mesh_check: bool = True):
+                 joint_names: Sequence[str] | None = None, mesh_check: bool = True,
+                 self_pairs: Sequence[tuple[str, str]] | None = None,
+                 self_margin: float = 0.0):
         self.urdf_path = str(urdf_path)
         dirs = list(package_dirs) if package_dirs else []
         dirs += _default_package_dirs(self.urdf_path)
@@ -327,6 +340,20 @@ class PathVerifier:
             ref = np.asarray(mesh_for_bound.vertices[0], np.float64) if mesh_for_bound is not None else c
             self._robot.append((g, link, c, r, (corners, ref), tm))
 
+        # ---- self pairs (check c): pairs of geometry indices of the listed link pairs
+        self.self_margin = float(self_margin)
+        self._self_pairs: list[tuple[int, int]] = []
+        if self_pairs is not None:
+            by_link: dict[str, list[int]] = {}
+            for gi, part in enumerate(self._robot):
+                by_link.setdefault(part[1], []).append(gi)
+            for a, b in self_pairs:
+                for name in (a, b):
+                    if not self.model.existFrame(str(name)):
+                        raise ValueError(f"self_pairs: '{name}' is not a link of {self.urdf_path}")
+                self._self_pairs += [(i, j) for i in by_link.get(str(a), [])
+                                     for j in by_link.get(str(b), [])]
+
         # ---- scene
         self._scene = []   # (geometry, pose, object_id, world centre, radius, world aabb, trimesh|None, ref)
         for s in scene_shapes:
@@ -349,6 +376,23 @@ class PathVerifier:
                                       f"{fname}#{k}", coal.Sphere(max(float(radius), 0.0))))
 
     # -------------------------------------------------------------- frames
+    def link_of(self, name: str) -> str | None:
+        """The URDF link a jwarp frame name belongs to (module docstring: a link is
+        itself; a joint name, ``<joint>_axis`` and ``<joint>_origin`` are the joint's
+        child link); None when the URDF has no such link or joint."""
+        if not hasattr(self, "_joint_child"):
+            root = ET.parse(self.urdf_path).getroot()
+            self._joint_child = {j.get("name"): j.find("child").get("link")
+                                 for j in root.findall("joint")}
+            self._links = {ln.get("name") for ln in root.findall("link")}
+        if name in self._links:
+            return name
+        for suffix in ("_axis", "_origin", ""):
+            base = name[: len(name) - len(suffix)] if suffix and name.endswith(suffix) else name
+            if (not suffix or name.endswith(suffix)) and base in self._joint_child:
+                return self._joint_child[base]
+        return None
+
     def _frame_fn(self, name: str, ujoints: dict) -> Any:
         """A function of the pinocchio data -> (4, 4) world placement of jwarp frame
         ``name`` (module docstring: links, joints, ``<joint>_axis``, ``<joint>_origin``)."""
@@ -440,7 +484,7 @@ class PathVerifier:
         thr[0] = thr[-1] = end_m
         req = coal.DistanceRequest()
         res = coal.DistanceResult()
-        best = {"mesh": None, "sphere": None}
+        best = {"mesh": None, "sphere": None, "self": None}
         first: Hit | None = None
         n_exact = 0
         S = len(self._scene)
@@ -459,6 +503,11 @@ class PathVerifier:
                     T = fn(self.data)
                     w = T[:3, :3] @ centre + T[:3, 3]
                     parts.append(("sphere", sph, label, w, radius, w, None, None))
+            if self._self_pairs:
+                if not (self.mesh_check and S):
+                    pin.updateGeometryPlacements(self.model, self.data, self.geom_model,
+                                                 self.geom_data)
+                n_exact, first = self._self_check(k, iv, fr, best, first, req, res, n_exact)
             for check, g, label, wc, r, M, corners, tm in parts:
                 lb = np.linalg.norm(self._scene_c - wc, axis=1) - self._scene_r - r
                 cur = best[check].distance if best[check] is not None else np.inf
@@ -480,13 +529,52 @@ class PathVerifier:
                     if d < t and first is None:
                         first = Hit(d, int(iv[k]), float(fr[k]), label, oid, check, t)
                     need = max(cur, t)
-        hits = [h for h in best.values() if h is not None]
+        hits = [h for c, h in best.items() if h is not None and c != "self"]
         closest = min(hits, key=lambda h: h.distance) if hits else None
         return Verdict(ok=first is None,
                        min_distance=closest.distance if closest else math.inf,
                        closest=closest, mesh=best["mesh"] if self.mesh_check else None,
                        sphere=best["sphere"] if self._spheres else None,
-                       first_violation=first, n_samples=len(qs), n_exact=n_exact)
+                       first_violation=first, n_samples=len(qs), n_exact=n_exact,
+                       self_mesh=best["self"])
+
+    def _self_check(self, k: int, iv: np.ndarray, fr: np.ndarray, best: dict,
+                    first: Hit | None, req: Any, res: Any, n_exact: int
+                    ) -> tuple[int, Hit | None]:
+        """Check (c) at sample ``k`` (geometry placements already updated)."""
+        t = self.self_margin
+        cur = best["self"].distance if best["self"] is not None else np.inf
+        for i, j in self._self_pairs:
+            gi, li, ci, ri = self._robot[i][:4]
+            gj, lj, cj, rj = self._robot[j][:4]
+            Mi, Mj = self.geom_data.oMg[i], self.geom_data.oMg[j]
+            lb = float(np.linalg.norm(Mi.rotation @ ci + Mi.translation
+                                      - (Mj.rotation @ cj + Mj.translation))) - ri - rj
+            if lb >= max(cur, t):
+                continue
+            res.clear()
+            Ti = coal.Transform3s(Mi.rotation, Mi.translation)
+            Tj = coal.Transform3s(Mj.rotation, Mj.translation)
+            d = float(coal.distance(gi, Ti, gj, Tj, req, res))
+            n_exact += 1
+            if d <= 0.0:
+                # coal's distance of two meshes stops at 0 when they intersect: the
+                # collision query gives the contacts' penetration depth (or an intersection
+                # without one: counted as a contact 1 nm deep)
+                creq = coal.CollisionRequest()
+                creq.enable_contact = True
+                creq.num_max_contacts = 64
+                cres = coal.CollisionResult()
+                if coal.collide(gi, Ti, gj, Tj, creq, cres):
+                    depth = max((abs(float(c.penetration_depth)) for c in cres.getContacts()),
+                                default=0.0)
+                    d = -max(depth, 1e-9)
+            if d < cur:
+                cur = d
+                best["self"] = Hit(d, int(iv[k]), float(fr[k]), li, lj, "self", t)
+            if d < t and first is None:
+                first = Hit(d, int(iv[k]), float(fr[k]), li, lj, "self", t)
+        return n_exact, first
 
     def _containment(self, d: float, check: str, M: Any, bound: Any, tm: Any,
                      wc: np.ndarray, r: float, ST: np.ndarray, saabb: np.ndarray,

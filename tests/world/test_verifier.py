@@ -187,3 +187,40 @@ def test_bad_input(urdf):
         v.check_path(np.zeros((2, 3)))
     with pytest.raises(ValueError, match="sphere frame"):
         PathVerifier(urdf, None, [], spheres=[("no_such_link", np.zeros(3), 0.1)])
+
+
+def test_self_pairs_find_link5_in_the_hand(urdf):
+    """Check (c): at zeros the Panda's link5 mesh lies in the hand mesh (a known self
+    collision of this URDF); at the ready pose the pair is free, and coal's distance there
+    is at most the smallest distance between the two meshes' vertices (an upper bound
+    computed here with numpy); a path from ready to zeros is refused between the two."""
+    import trimesh
+
+    pairs = [("panda_link5", "panda_hand"), ("panda_link5", "panda_link7")]
+    v = PathVerifier(urdf, None, [], self_pairs=pairs)
+    bad = v.check_path(np.zeros(8)[None])
+    assert not bad.ok and bad.first_violation.check == "self"
+    assert bad.self_mesh.distance < -0.01
+    assert {bad.self_mesh.link, bad.self_mesh.object_id} == {"panda_link5", "panda_hand"}
+    good = v.check_path(READY[None])
+    assert good.ok and good.self_mesh.distance > 0.01
+    # the vertex bound of the closest pair at ready
+    verts = {}
+    import pinocchio as pin
+
+    pin.forwardKinematics(v.model, v.data, v.pin_q(READY))
+    pin.updateGeometryPlacements(v.model, v.data, v.geom_model, v.geom_data)
+    for gi, go in enumerate(v.geom_model.geometryObjects):
+        link = v.model.frames[go.parentFrame].name
+        if link in (good.self_mesh.link, good.self_mesh.object_id) and go.meshPath:
+            tm = trimesh.load(go.meshPath, force="mesh")
+            M = v.geom_data.oMg[gi].homogeneous
+            verts.setdefault(link, []).append(tm.vertices @ M[:3, :3].T + M[:3, 3])
+    a, b = (np.vstack(verts[k]) for k in (good.self_mesh.link, good.self_mesh.object_id))
+    vertex_gap = np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(-1)).min()
+    assert good.self_mesh.distance <= vertex_gap + 1e-9
+    path = v.check_path(np.stack([READY, np.zeros(8)]))
+    assert not path.ok and path.first_violation.interval == 0
+    assert 0.0 < path.first_violation.fraction < 1.0
+    with pytest.raises(ValueError, match="self_pairs"):
+        PathVerifier(urdf, None, [], self_pairs=[("panda_link5", "no_such_link")])
