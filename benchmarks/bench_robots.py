@@ -509,21 +509,30 @@ def fk_vs_mujoco(path: str, m: Any, Q: np.ndarray) -> dict:
 def scene_world(ee_pos: np.ndarray) -> tuple[Any, dict]:
     """A table in front (+x) and a two-board shelf on the side (-y) of the base, sized and
     placed from the end-effector positions ``ee_pos`` (n, 3) of free configurations."""
+    from types import SimpleNamespace
+
     from jwarp.world.sdf import World
 
     r = float(np.percentile(np.linalg.norm(ee_pos[:, :2], axis=1), 80))
     z0 = float(np.median(ee_pos[:, 2]))
     w = World.of_shapes()
+    shapes = []   # the same boxes for the verifier (kind, dims, pose, object_id, mesh)
+
+    def add(name: str, dims: list[float], pose: np.ndarray) -> None:
+        w.add(name, "box", dims, pose)
+        shapes.append(SimpleNamespace(kind="box", dims=dims, pose=pose, object_id=name,
+                                      mesh=None))
+
     top = z0 - 0.25 * r
     t = 0.03
-    w.add("table", "box", [0.5 * r, 0.9 * r, t], _at([0.75 * r, 0.0, top - t / 2]))
+    add("table", [0.5 * r, 0.9 * r, t], _at([0.75 * r, 0.0, top - t / 2]))
     sx, sy = 0.35 * r, 0.5 * r
     cy = -0.85 * r
     for k, z in enumerate((z0 - 0.1 * r, z0 + 0.3 * r)):
-        w.add(f"board{k}", "box", [sx, sy, 0.02], _at([0.2 * r, cy, z]))
-    w.add("back", "box", [sx, 0.02, 0.5 * r], _at([0.2 * r, cy - sy / 2, z0 + 0.1 * r]))
+        add(f"board{k}", [sx, sy, 0.02], _at([0.2 * r, cy, z]))
+    add("back", [sx, 0.02, 0.5 * r], _at([0.2 * r, cy - sy / 2, z0 + 0.1 * r]))
     return w, {"reach_m": r, "ee_median_z_m": z0, "table_top_m": top,
-               "shelf": [0.2 * r, cy, z0 - 0.1 * r, z0 + 0.3 * r]}
+               "shelf": [0.2 * r, cy, z0 - 0.1 * r, z0 + 0.3 * r], "shapes": shapes}
 
 
 def _at(p: list[float]) -> np.ndarray:
@@ -601,6 +610,7 @@ def check_robot(e: Entry, args: Any, helps: tuple[str, str], work: str) -> dict:
         step = "plan"
         ee_all = np.asarray(jwarp.fk(m, Qf, device="cpu", dtype=np.float64))[:, fi, :3, 3]
         world, geo = scene_world(ee_all)
+        shapes = geo.pop("shapes")
         row["scene"] = geo
         wfree = is_collision_free(m, Qf, world, 0.0, dtype=np.float64)
         row["scene_free_pct"] = 100.0 * float(wfree.mean())
@@ -626,11 +636,73 @@ def check_robot(e: Entry, args: Any, helps: tuple[str, str], work: str) -> dict:
         row["plan_stop"] = str(pr.stop_reason)
         if not row["plan_found"] and pr.reasons is not None:
             row["plan_reason"] = f"{pr.reasons[0]} (stopped: {pr.stop_reason})"
+        if args.plans:
+            step = "verified plans"
+            row.update(verified_plans(e, path, m, world, shapes, Qw, above_table, at_shelf,
+                                      args, row.get("frozen", {})))
     except Exception as err:  # noqa: BLE001 - a row's error, not the benchmark's end
         row["error"] = f"{step}: {type(err).__name__}: {' '.join(str(err).split())[:300]}"
         if args.verbose:
             traceback.print_exc()
     return row
+
+
+def verified_plans(e: Any, path: str, m: Any, world: Any, shapes: list, Qw: np.ndarray,
+                   above_table: np.ndarray, at_shelf: np.ndarray, args: Any,
+                   frozen: dict) -> dict:
+    """``--plans`` problems (start above the table, goal at the shelf, drawn from the free
+    configurations ``Qw``; else any two), planned at each of ``--margins`` with
+    ``--plan-time``, every feasible path re-checked by tests/verifier.py: the URDF meshes
+    against the boxes and the meshes of every link pair jwarp checks against each other.
+    Returns the row's fields (``plans_<margin>``: found / verified / mesh collisions, the
+    deepest, median plan seconds)."""
+    import jwarp
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from verifier import PathVerifier, robot_spheres
+
+    if e.source != "erd" or frozen or e.lock or e.keep:
+        return {"plans_note": "not verified: locked or frozen joints (the verifier needs "
+                              "every moving URDF joint on the path)"}
+    v0 = PathVerifier(path, [str(erd_root().parents[1])], [])
+    allowed = m.allowed_collision_pairs
+    frames = sorted({sp.frame for sp in m.spheres})
+    pairs = set()
+    for i, a in enumerate(frames):
+        for b in frames[i + 1:]:
+            la, lb = v0.link_of(m.frame_names[a]), v0.link_of(m.frame_names[b])
+            if allowed[a, b] and la and lb and la != lb:
+                pairs.add((min(la, lb), max(la, lb)))
+    v = PathVerifier(path, [str(erd_root().parents[1])], shapes, spheres=robot_spheres(m),
+                     joint_names=m.joint_names, self_pairs=sorted(pairs))
+    rng = np.random.default_rng(args.seed + 7)
+    A = np.nonzero(above_table)[0] if above_table.any() else np.arange(len(Qw))
+    B = np.nonzero(at_shelf)[0] if at_shelf.any() else np.arange(len(Qw))
+    out: dict = {"plans_self_pairs": len(pairs)}
+    for margin in args.margins:
+        found, times, coll, deepest, sph = 0, [], 0, 0.0, 0
+        for k in range(args.plans):
+            qa, qb = Qw[rng.choice(A)], Qw[rng.choice(B)]
+            t0 = time.perf_counter()
+            pr = jwarp.plan(m, world, qa, qb, time_limit=args.plan_time, seed=args.seed + k,
+                            margin=margin, endpoint_margin=0.0)
+            times.append(time.perf_counter() - t0)
+            if not pr.feasible[0]:
+                continue
+            found += 1
+            verdict = v.check_path(np.asarray(pr.path[0], np.float64), margin=0.0)
+            hits = [h for h in (verdict.mesh, verdict.self_mesh) if h is not None]
+            worst = min((h.distance for h in hits), default=np.inf)
+            if worst < 0:
+                coll += 1
+                deepest = min(deepest, worst)
+            sph += verdict.sphere is not None and verdict.sphere.distance < 0
+        out[f"plans_m{margin:g}"] = {"problems": args.plans, "found": found,
+                                     "mesh_collisions": coll,
+                                     "deepest_mm": round(1e3 * deepest, 3),
+                                     "sphere_collisions": int(sph),
+                                     "median_s": float(np.median(times))}
+    return out
 
 
 # ---------------------------------------------------------------------------- table
@@ -723,6 +795,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-srdf", action="store_true",
                     help="import without the SRDF example-robot-data ships (and its --home)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--plans", type=int, default=0,
+                    help="verified plans per robot (URDF meshes, world and self; 0: none)")
+    ap.add_argument("--margins", type=lambda t: [float(x) for x in t.split(",") if x.strip()],
+                    default=[0.0, 0.01], help="margins [m] of the verified plans (0,0.01)")
     ap.add_argument("--verbose", action="store_true", help="print tracebacks of failures")
     args = ap.parse_args(argv)
     args.fk_configs = args.fk_configs or (20 if args.quick else 100)
@@ -772,6 +848,19 @@ def main(argv: list[str] | None = None) -> int:
         shutil.rmtree(work, ignore_errors=True)
     print()
     print(table(rows, args.ik_poses))
+    if args.plans:
+        print(f"\nverified plans ({args.plans} per robot and margin; tests/verifier.py: URDF "
+              "meshes vs the boxes, and the link pairs jwarp checks against each other)")
+        print(f"{'robot':<18} {'margin':>6} {'found':>6} {'mesh coll.':>10} {'deepest mm':>10} "
+              f"{'sphere coll.':>12} {'median s':>8}")
+        for r in rows:
+            for k, f in r.items():
+                if k.startswith("plans_m") and isinstance(f, dict):
+                    print(f"{r['robot']:<18} {k[7:]:>6} {f['found']:>3}/{f['problems']:<2} "
+                          f"{f['mesh_collisions']:>10} {f['deepest_mm']:>10.3f} "
+                          f"{f['sphere_collisions']:>12} {f['median_s']:>8.3f}")
+            if "plans_note" in r:
+                print(f"{r['robot']:<18} {r['plans_note']}")
     total = time.perf_counter() - t_all
     ok = [r for r in rows if not r.get("error")]
     acc = [r["robot"] for r in ok
