@@ -78,7 +78,7 @@ URDF = """<robot name="twins">
 def test_same_geometry_fitted_once_and_pairs_left_to_the_caller(tmp_path, monkeypatch):
     from jwarp.importers.robot import load_urdf
     from jwarp.world.self_pairs import never_colliding_pairs
-    from jwarp.world.spherize import SpherizeOptions, spherize
+    from jwarp.world.spherize import MOVEIT_RULES, SpherizeOptions, spherize
 
     path = tmp_path / "twins.urdf"
     path.write_text(URDF)
@@ -97,7 +97,7 @@ def test_same_geometry_fitted_once_and_pairs_left_to_the_caller(tmp_path, monkey
         got = np.array([s.position for s in model.spheres if s.frame == f])
         np.testing.assert_allclose(got, alone.centres)
     assert report.pairs is not None
-    ref = never_colliding_pairs(model, n_samples=200, seed=0)
+    ref = never_colliding_pairs(model, n_samples=200, seed=0, **MOVEIT_RULES)
     assert set(map(tuple, model.self_collision.exclude_pairs)) == set(ref.exclude_pairs)
 
     bare, rep2 = spherize(load_urdf(str(path)), opts, sample_pairs=False)
