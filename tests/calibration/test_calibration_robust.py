@@ -293,8 +293,10 @@ def test_pose_group_options_are_checked_naming_the_field():
         CalibrationOptions(free="theta", free_poses="yes").validate()
     with pytest.raises(ValueError, match="^stall_tol"):
         CalibrationOptions(free="theta", stall_tol=-1.0).validate()
-    from jwarp.cli.calibration import _free_groups
-    from jwarp.cli.common import CLIError
+    from jwarp.calibration.campaign_run import free_groups
+    from jwarp.cli.calibration import OPTION_NAMES
 
-    with pytest.raises(CLIError, match="^--fix: .*not groups"):
-        _free_groups("theta", meas, "intrinsics")
+    with pytest.raises(ValueError, match="^--fix: .*not groups"):
+        free_groups(meas, "theta", "intrinsics", names=OPTION_NAMES)
+    with pytest.raises(ValueError, match="^fix: .*not groups"):
+        free_groups(meas, "theta", "intrinsics")

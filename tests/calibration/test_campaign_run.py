@@ -1,0 +1,93 @@
+"""``calibrate_campaign``: the library function behind ``jwarp calibrate`` (issue 40)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import jwarp
+from jwarp.calibration import (CampaignCalibration, CampaignOptions, calibrate_campaign,
+                               load_campaign)
+from jwarp.calibration.campaign_run import PROVENANCE_NOTE
+from jwarp.calibration.simulate.campaign import simulate_campaign
+from jwarp.calibration.simulate.scenarios import scenario
+
+from tests.cli_helpers import run
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory):
+    d = tmp_path_factory.mktemp("campaign_run")
+    setup, sampler, accept = scenario("justin19", "cartesian")
+    camp = simulate_campaign(jwarp.robot("justin19"), setup, 40, seed=5, sampler=sampler,
+                             accept=accept)
+    return d, camp.write(d / "camp")
+
+
+def _without_date(robot_doc: dict) -> dict:
+    prov = json.loads(robot_doc["notes"][PROVENANCE_NOTE])
+    prov.pop("date")
+    return dict(robot_doc, notes=dict(robot_doc["notes"], **{PROVENANCE_NOTE: prov}))
+
+
+def test_same_parameters_as_the_cli(campaign, capsys, tmp_path):
+    d, paths = campaign
+    out, params = tmp_path / "cal.json", tmp_path / "params.json"
+    code, stdout, err = run(capsys, [
+        "calibrate", "--setup", paths["setup.json"], "--data", paths["samples.csv"],
+        "--free", "theta,d,kappa_theta", "--test-rows", "30:40", "--prior", "theta=2e-3",
+        "--max-nfev", "6", "--quiet", "--json", "--out", out, "--params-out", params])
+    assert code == 0, err
+    cli = json.loads(stdout)
+    doc = json.loads(params.read_text())
+    c = load_campaign(paths["setup.json"], paths["samples.csv"])
+    lib = calibrate_campaign(c, CampaignOptions(
+        free="theta,d,kappa_theta", test_rows="30:40", sigma={"theta": 2e-3}, max_nfev=6))
+    assert isinstance(lib, CampaignCalibration)
+    # bit for bit: every parameter value and posterior std, the errors, the free groups
+    assert [p["value"] for p in doc["parameters"]] == [float(v) for v in lib.result.x]
+    assert [p["name"] for p in doc["parameters"]] == list(lib.result.names)
+    assert doc["measurement_params"] == dict(zip(lib.result.param_names,
+                                                 map(float, lib.result.params)))
+    assert cli["before"] == lib.before and cli["after"] == lib.after
+    assert cli["free"] == lib.free and cli["test_range"] == lib.test_range
+    # the same findings; the library names its options by field (test_rows: ...)
+    assert cli["warnings"] == [w.replace("test_rows: ", "--test-rows: ", 1)
+                               for w in c.warnings + lib.warnings]
+    assert cli["calibrated_name"] == lib.robot.name == "justin19-calibrated"
+    assert _without_date(json.loads(out.read_text())) == _without_date(lib.robot.to_dict())
+    np.testing.assert_array_equal(lib.train_rows, np.arange(30))
+    np.testing.assert_array_equal(lib.test_rows, np.arange(30, 40))
+    assert lib.unit == "mm" and lib.scale == 1000.0 and lib.overlap == 0
+
+
+def test_errors_name_the_option(campaign):
+    _, paths = campaign
+    c = load_campaign(paths["setup.json"], paths["samples.csv"])
+    with pytest.raises(ValueError, match="^test_rows: rows 5:10 are also calibration rows "
+                                         r"\(calibrate_rows 0:10\).*allow_overlap"):
+        calibrate_campaign(c, CampaignOptions(calibrate_rows="0:10", test_rows="5:15"))
+    with pytest.raises(ValueError, match="^--test-rows: .*--allow-overlap"):
+        calibrate_campaign(c, CampaignOptions(calibrate_rows="0:10", test_rows="5:15"),
+                           names={"test_rows": "--test-rows", "allow_overlap": "--allow-overlap"})
+    with pytest.raises(ValueError, match=r"^cv_folds: expected an integer in \[2, 40\]"):
+        calibrate_campaign(c, CampaignOptions(cv_folds=1))
+    with pytest.raises(ValueError, match="^cv_grid: only with cv_folds"):
+        calibrate_campaign(c, CampaignOptions(cv_grid=["scale=1|2"]))
+    with pytest.raises(ValueError, match="^virtual_noise: expected a finite number >= 0"):
+        calibrate_campaign(c, CampaignOptions(virtual_noise=-1.0))
+    with pytest.raises(ValueError, match="^calibrate_rows: .*give more rows"):
+        calibrate_campaign(c, CampaignOptions(free="theta,d,r,alpha", calibrate_rows="0:3"))
+    with pytest.raises(TypeError, match="^options: expected CampaignOptions"):
+        calibrate_campaign(c, {"free": "theta"})  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="^name: empty robot name"):
+        calibrate_campaign(c, CampaignOptions(name=" "))
+    with pytest.raises(ValueError, match="^robot: not given"):
+        bare = paths["setup.json"].replace("setup.json", "bare.json")
+        doc = json.loads(open(paths["setup.json"]).read())
+        doc.pop("robot")
+        with open(bare, "w") as fh:
+            json.dump(doc, fh)
+        load_campaign(bare, paths["samples.csv"])
