@@ -17,8 +17,8 @@ campaign in ``--work`` (default /tmp/jwarp_snapshot_calibrate): a new campaign d
 campaign id, and the calibrated robot's provenance records the id and the input paths, so
 every run calibrates the same files at the same paths. The CLI runs in this process
 (``jwarp.cli.main``), one command after the other; ``--cv-workers 1``. The Python API part
-writes the ``calibrate_with`` result and the residuals and Jacobian of a
-``CalibrationProblem`` as .npy/.json.
+writes the ``calibrate_with`` result, the residuals and Jacobian of a
+``CalibrationProblem`` and the sensitivity's stacked Jacobians as .npy/.json.
 
 The date the calibrated robots' provenance records is frozen (2026-01-01), so the robot
 files compare byte for byte. Each output also gets a normalized copy under
@@ -172,6 +172,15 @@ def api(inp: str, out: str) -> None:
     np.save(os.path.join(out, "problem_x0.npy"), x)
     np.save(os.path.join(out, "problem_residuals.npy"), prob.residuals(x))
     np.save(os.path.join(out, "problem_jacobian.npy"), prob.jacobian(x))
+    # the sensitivity's stacked Jacobian (a CalibrationProblem inside)
+    from jwarp.calibration.design.sensitivity import stacked_jacobian
+
+    for whiten in (False, True):
+        J, names = stacked_jacobian(model, meas, q[:10], "theta,d,kappa_theta,tracker",
+                                    whiten=whiten, sigma={"theta": 2e-3})
+        np.save(os.path.join(out, f"stacked_jacobian_{'white' if whiten else 'raw'}.npy"), J)
+    with open(os.path.join(out, "stacked_jacobian_names.json"), "w", encoding="utf-8") as fh:
+        fh.write(json.dumps(names) + "\n")
 
 
 def _scrub(v: object) -> object:

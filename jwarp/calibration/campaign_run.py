@@ -33,7 +33,8 @@ from typing import Any
 import numpy as np
 
 from jwarp.calibration.estimate.cv import CVOptions, CVResult, CVSetting, calibrate_cv
-from jwarp.calibration.estimate.map import CalibrationProblem, calibrate_with
+from jwarp.calibration.estimate.map import (CalibrationProblem, calibrate_with,
+                                            problem_options)
 from jwarp.calibration.estimate.options import CalibrationOptions
 from jwarp.calibration.estimate.result import CalibrationResult, error_stats, errors
 from jwarp.calibration.files import Samples, Setup
@@ -314,7 +315,7 @@ def _tow_covariance(o: CampaignOptions, campaign: CampaignData, train: Samples,
                           (len(train), m, m))
     if setup.tow is not None:
         spec = tow_from_dict(setup.tow, model, where=f"{campaign.setup_path}: tow")
-        prob = CalibrationProblem(model, meas, train.q, train.y, free=free,
+        prob = CalibrationProblem(model, meas, train.q, train.y, problem_options(free=free),
                                   meta=train.meta or None)
         st = prob.state(prob.initial_x())
         cov = tow_covariance(meas, spec, st.frames, st.p, meta=train.meta or None)

@@ -91,3 +91,40 @@ def test_errors_name_the_option(campaign):
         with open(bare, "w") as fh:
             json.dump(doc, fh)
         load_campaign(bare, paths["samples.csv"])
+
+
+def test_problem_takes_options_and_the_old_keywords_warn(campaign):
+    """``CalibrationProblem(..., options)`` (issue 40): the former keywords give the same
+    problem bit for bit, with a DeprecationWarning, as ``problem_options`` of them."""
+    from jwarp.calibration import CalibrationOptions, CalibrationProblem
+    from jwarp.calibration.estimate.map import problem_options
+
+    _, paths = campaign
+    c = load_campaign(paths["setup.json"], paths["samples.csv"])
+    q, y = c.samples.q[:20], c.samples.y[:20]
+    kw = dict(free="theta,d,kappa_theta,tracker", sigma={"theta": 2e-3}, max_iter=50,
+              noise_sigma=2e-3)
+    with pytest.warns(DeprecationWarning, match="CalibrationProblem: the keywords .*free"):
+        old = CalibrationProblem(c.robot, c.measurement, q, y, **kw)
+    new = CalibrationProblem(c.robot, c.measurement, q, y, problem_options(**kw))
+    same = CalibrationProblem(c.robot, c.measurement, q, y, CalibrationOptions(
+        free="theta,d,kappa_theta,tracker", free_poses=False, bound_kappa=False,
+        sigma={"theta": 2e-3}, equilibrium_iterations=50, noise_sigma=2e-3))
+    x = old.initial_x()
+    for p in (new, same):
+        assert p.space.names == old.space.names and p.max_iter == 50
+        np.testing.assert_array_equal(p.initial_x(), x)
+        np.testing.assert_array_equal(p.residuals(x), old.residuals(x))
+        np.testing.assert_array_equal(p.jacobian(x), old.jacobian(x))
+    # free_poses (the options' default) adds the pose and marker groups, as calibrate() does
+    posed = CalibrationProblem(c.robot, c.measurement, q, y, CalibrationOptions(free="theta"))
+    assert "tracker" in posed.space.free_groups and "markers" in posed.space.free_groups
+    with pytest.raises(TypeError, match="got options and the keywords sigma"):
+        CalibrationProblem(c.robot, c.measurement, q, y, CalibrationOptions(free="theta"),
+                           sigma={})
+    with pytest.raises(TypeError, match="unexpected keyword 'n_starts'"):
+        CalibrationProblem(c.robot, c.measurement, q, y, free="theta", n_starts=2)
+    with pytest.raises(TypeError, match="missing options"):
+        CalibrationProblem(c.robot, c.measurement, q, y)
+    with pytest.raises(TypeError, match="^options: expected CalibrationOptions"):
+        CalibrationProblem(c.robot, c.measurement, q, y, {"free": "theta"})
