@@ -1,5 +1,10 @@
 """CLI subcommands of calibration: ``jwarp calibrate`` and ``jwarp simulate-campaign``.
 
+``calibrate`` parses its options, reserves and writes the output files and prints; the
+calibration itself (rows, free groups, initial guess, task weighting, CV, errors,
+provenance) is :func:`jwarp.calibration.calibrate_campaign`, which Python users call the
+same way (:class:`~jwarp.calibration.CampaignOptions`).
+
 Examples::
 
     jwarp simulate-campaign --robot justin19 --plugin cartesian --samples 500 --seed 1 --out run/
