@@ -286,11 +286,13 @@ def _cv_settings(o: CampaignOptions, n_train: int, nm: _Names) -> list[CVSetting
     if o.cv_workers is not None and (isinstance(o.cv_workers, bool) or not isinstance(
             o.cv_workers, (int, np.integer)) or o.cv_workers < 1):
         raise ValueError(f"{nm('cv_workers')}: expected an integer >= 1, got {o.cv_workers}")
-    if o.cv_grid and all(isinstance(s, CVSetting) for s in o.cv_grid):
-        return list(o.cv_grid)  # type: ignore[arg-type]
+    items = list(o.cv_grid or [])
+    settings = [s for s in items if isinstance(s, CVSetting)]
+    if items and len(settings) == len(items):
+        return settings
     from jwarp.calibration.estimate.cv import parse_cv_grid
 
-    return parse_cv_grid(o.cv_grid, option=nm("cv_grid"))  # type: ignore[arg-type]
+    return parse_cv_grid([str(s) for s in items], option=nm("cv_grid"))
 
 
 def _tow_covariance(o: CampaignOptions, campaign: CampaignData, train: Samples,
@@ -479,8 +481,9 @@ def calibrate_campaign(campaign: CampaignData, options: CampaignOptions | None =
                 res = calibrate_with(model, meas, train.q, train.y, copts,
                                      meta=train.meta or None)
             else:
-                cvo = CVOptions(folds=int(o.cv_folds), settings=cv_settings,  # type: ignore[arg-type]
-                                seed=o.seed, workers=o.cv_workers)
+                folds = int(o.cv_folds or 0)   # given: cv_settings is not None
+                cvo = CVOptions(folds=folds, settings=cv_settings, seed=o.seed,
+                                workers=o.cv_workers)
                 res, cv_result = calibrate_cv(model, meas, train.q, train.y, copts, cvo,
                                               meta=train.meta or None)
         except ValueError as e:

@@ -128,3 +128,20 @@ def test_problem_takes_options_and_the_old_keywords_warn(campaign):
         CalibrationProblem(c.robot, c.measurement, q, y)
     with pytest.raises(TypeError, match="^options: expected CalibrationOptions"):
         CalibrationProblem(c.robot, c.measurement, q, y, {"free": "theta"})
+
+
+def test_cv_grid_as_items_or_settings(campaign):
+    """``cv_grid`` takes the CLI's items or CVSetting objects: the same choice and fit."""
+    from jwarp.calibration import CVSetting
+
+    _, paths = campaign
+    c = load_campaign(paths["setup.json"], paths["samples.csv"])
+    base = dict(free="theta,d", calibrate_rows="0:30", test_rows="30:40", cv_folds=3,
+                cv_workers=1, max_nfev=3)
+    a = calibrate_campaign(c, CampaignOptions(cv_grid=["scale=0.1|1"], **base))
+    b = calibrate_campaign(c, CampaignOptions(
+        cv_grid=[CVSetting(prior_scale=0.1), CVSetting(prior_scale=1.0)], **base))
+    assert a.cv is not None and b.cv is not None and a.cv.best == b.cv.best
+    np.testing.assert_array_equal(a.cv.errors, b.cv.errors)
+    np.testing.assert_array_equal(a.result.x, b.result.x)
+    assert json.loads(a.robot.notes[PROVENANCE_NOTE])["cv"]["folds"] == 3
