@@ -57,8 +57,9 @@ class CampaignData:
         setup_path, data_path: the files as given (the provenance records their absolute
             paths; messages name them as given).
         data_sha256: SHA-256 of the samples file's bytes.
-        robot_source: the robot as given (name or file; None: the setup's), recorded as
-            the provenance's ``nominal_robot``.
+        robot_source: the robot as given (name or file; None: the setup's, or a
+            RobotModel given), recorded as the provenance's ``nominal_robot`` (None: the
+            robot's name).
         warnings: findings of reading the samples (e.g. rows far outside the joint limits,
             a samples file of another campaign).
     """
@@ -75,9 +76,9 @@ class CampaignData:
 
 
 def load_campaign(setup: str | os.PathLike, data: str | os.PathLike,
-                  robot: str | None = None) -> CampaignData:
-    """Read a campaign: the setup file, the robot (``robot``, a name or .json file; None:
-    the one the setup names), its measurement and the samples CSV.
+                  robot: str | RobotModel | None = None) -> CampaignData:
+    """Read a campaign: the setup file, the robot (``robot``, a name, .json file or
+    RobotModel; None: the one the setup names), its measurement and the samples CSV.
 
     The reading's warnings (and a samples file whose SHA-256 is not the one the setup
     records, i.e. of another campaign) are collected in :attr:`CampaignData.warnings`,
@@ -106,7 +107,8 @@ def load_campaign(setup: str | os.PathLike, data: str | os.PathLike,
             f"belongs to (campaign {s.campaign_id}: the SHA-256 it records differs); "
             f"are the files of two campaigns mixed up?")
     return CampaignData(model, meas, s, samples, setup_path, data_path, sha,
-                        robot_source=robot, warnings=found)
+                        robot_source=robot if isinstance(robot, str) else None,
+                        warnings=found)
 
 
 @dataclass

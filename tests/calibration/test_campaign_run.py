@@ -145,3 +145,13 @@ def test_cv_grid_as_items_or_settings(campaign):
     np.testing.assert_array_equal(a.cv.errors, b.cv.errors)
     np.testing.assert_array_equal(a.result.x, b.result.x)
     assert json.loads(a.robot.notes[PROVENANCE_NOTE])["cv"]["folds"] == 3
+
+
+def test_load_campaign_takes_a_robot_model(campaign):
+    _, paths = campaign
+    c = load_campaign(paths["setup.json"], paths["samples.csv"], robot=jwarp.robot("justin19"))
+    assert c.robot_source is None and c.robot.name == "justin19" and c.warnings == []
+    run = calibrate_campaign(c, CampaignOptions(free="theta", max_nfev=2, name="mine"))
+    prov = json.loads(run.robot.notes[PROVENANCE_NOTE])
+    assert run.robot.name == "mine" and prov["nominal_robot"] == "justin19"
+    assert prov["data_sha256"] == c.data_sha256 and prov["test_rows"] is None
