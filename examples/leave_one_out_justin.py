@@ -49,7 +49,7 @@ from jwarp.calibration.simulate.unmodeled import parse_unmodeled
 import time
 import warnings
 
-from jwarp.calibration import (CalibrationProblem, CalibrationWarning, calibrate,
+from jwarp.calibration import (CalibrationOptions, CalibrationProblem, CalibrationWarning, calibrate,
                                error_stats, errors)
 from jwarp.calibration.estimate.result import group_norms, observation_groups
 
@@ -91,7 +91,8 @@ def spearman(a: list[float], b: list[float]) -> float:
 def fitted_errors(robot, meas, res, free, q, y) -> np.ndarray:
     """Per-marker errors [m] (S, 2) of the fitted model ``res.x`` (signed compliances, as
     the solver evaluated it) on rows q, y."""
-    prob = CalibrationProblem(robot, meas, q, y, free=free)
+    prob = CalibrationProblem(robot, meas, q, y, CalibrationOptions(
+        free=free, free_poses=False, bound_kappa=False))
     return group_norms(prob.predict(res.x) - y, observation_groups(meas))
 
 

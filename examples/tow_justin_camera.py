@@ -173,7 +173,8 @@ def main(argv: list[str] | None = None) -> int:
         spec = tow_from_dict({"task": task_doc, "virtual_noise": args.virtual_noise}, robot)
     V = spec.virtual(args.samples)
     # linearize at the start of the fit: nominal robot, camera mount from PnP
-    prob = CalibrationProblem(robot, meas, q[tr], y[tr], free=free)
+    prob = CalibrationProblem(robot, meas, q[tr], y[tr], CalibrationOptions(
+        free=free, free_poses=False, bound_kappa=False))
     st = prob.state(prob.initial_x())
     cov = tow_covariance(meas, spec, st.frames, st.p, n_samples=args.samples)
     t0 = time.perf_counter()

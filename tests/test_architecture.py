@@ -372,7 +372,7 @@ def test_devices_resolve_through_the_one_helper():
 
 #: option dataclasses and the names the vocabulary replaced (issue 28; docs/api.md "Solvers")
 OPTION_CLASSES = ["jwarp.solvers.ik:IKOptions", "jwarp.solvers.planning:PlanOptions",
-                  "jwarp.calibration:CalibrationOptions",
+                  "jwarp.calibration:CalibrationOptions", "jwarp.calibration:CampaignOptions",
                   "jwarp.calibration.design.optimal:DesignOptions",
                   "jwarp.calibration.design.poses:PoseOptions", "jwarp.solvers.planning.rrt:RRTOptions",
                   "jwarp.learn.plan_data:PlanDataOptions", "jwarp.learn.train_ik:TrainIKOptions",

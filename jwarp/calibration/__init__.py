@@ -10,6 +10,10 @@ Typical use::
                     free="theta,d,r,alpha,kappa_theta,kappa_alpha,tracker,markers")
     res.robot.save("calibrated.json")
     error_stats(errors(res.robot, meas, res.params, q_test, y_test))
+
+A campaign's files as ``jwarp calibrate`` calibrates them (rows, initial guess, CV, task
+weighting, provenance): :func:`load_campaign` and :func:`calibrate_campaign`
+(:mod:`~jwarp.calibration.campaign_run`).
 """
 
 from jwarp.calibration.estimate.map import (CalibrationProblem, ModelState, Progress, calibrate,
@@ -30,11 +34,14 @@ from jwarp.calibration.design.sensitivity import SensitivityResult, sensitivity
 from jwarp.calibration.design.tour import order_poses
 from jwarp.calibration.simulate.campaign import Campaign, simulate_campaign
 from jwarp.calibration.simulate.scenarios import scenario
+from jwarp.calibration.campaign_run import (CampaignCalibration, CampaignData,
+                                            CampaignOptions, calibrate_campaign, load_campaign)
 
 __all__ = [
-    "calibrate_cv", "calibrate_with", "CalibrationOptions", "cross_validate", "CVOptions",
+    "calibrate_campaign", "calibrate_cv", "calibrate_with", "CampaignCalibration",
+    "CampaignData", "CampaignOptions", "CalibrationOptions", "cross_validate", "CVOptions",
     "CVResult", "CVSetting", "CalibrationProblem", "CalibrationResult",
     "CalibrationWarning", "Direction", "error_stats", "errors", "influencing_frames",
     "influencing_masses", "model_frames", "ModelState", "observation_groups",
-    "ParameterSpace", "perturb_robot", "predict", "Progress",
+    "load_campaign", "ParameterSpace", "perturb_robot", "predict", "Progress",
 ]

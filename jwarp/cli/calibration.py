@@ -1,5 +1,10 @@
 """CLI subcommands of calibration: ``jwarp calibrate`` and ``jwarp simulate-campaign``.
 
+``calibrate`` parses its options, reserves and writes the output files and prints; the
+calibration itself (rows, free groups, initial guess, task weighting, CV, errors,
+provenance) is :func:`jwarp.calibration.calibrate_campaign`, which Python users call the
+same way (:class:`~jwarp.calibration.CampaignOptions`).
+
 Examples::
 
     jwarp simulate-campaign --robot justin19 --plugin cartesian --samples 500 --seed 1 --out run/
@@ -51,8 +56,6 @@ import json
 import math
 import os
 import sys
-import time
-import warnings
 from typing import Any
 
 import numpy as np
@@ -157,12 +160,6 @@ class ProgressBar:
         self._finish()
 
 
-def _stats(err: np.ndarray, scale: float) -> dict[str, float]:
-    from jwarp.calibration import error_stats
-
-    return {k: v * scale for k, v in error_stats(err).items()}
-
-
 def _parse_keyed(values: list[str] | None, option: str, kind: type) -> dict[str, Any]:
     """``--prior``/``--order`` values: ``KEY=VALUE[,KEY=VALUE...]`` items or (``--prior``)
     JSON files {key: value}; later ones win."""
@@ -221,20 +218,6 @@ def _parse_fix(fix: str | None) -> tuple[str | None, dict[str, str]]:
             at[g] = path.strip()
         groups.append(g)
     return ",".join(groups), at
-
-
-def _free_groups(free: str, meas: Any, fix: str | None) -> list[str]:
-    """``--free`` plus the measurement's pose and marker groups not in ``--fix``
-    (:func:`jwarp.calibration.estimate.params.with_pose_groups`, what ``calibrate()`` frees
-    by default)."""
-    from jwarp.calibration.estimate.params import with_pose_groups
-
-    try:
-        return with_pose_groups(meas, free or "", fix)
-    except ValueError as e:
-        msg = str(e)
-        opt = "--fix" if msg.startswith("fix:") else "--free"
-        raise _cli_error(f"{opt}: {msg.split(': ', 1)[1]}") from None
 
 
 def _check_int(option: str, value: int, minimum: int) -> None:
@@ -305,80 +288,6 @@ def _write_tmp(f: Any, text: str) -> None:
         os.fsync(fh.fileno())
 
 
-def _rows(args: argparse.Namespace, S: int) -> tuple[np.ndarray, np.ndarray | None, int]:
-    """(calibration row indices, test row indices or None, rows in both)."""
-    from jwarp.calibration.files import parse_rows
-
-    every = np.arange(S)
-    test = every[parse_rows(args.test_rows, S, "--test-rows")] if args.test_rows else None
-    if args.calibrate_rows is None and test is not None:
-        train = np.setdiff1d(every, test)  # default: the rows that are not test rows
-        if not len(train):
-            raise _cli_error(f"--test-rows: {args.test_rows} covers all {S} rows; none are "
-                             f"left for calibration (give --calibrate-rows)")
-    else:
-        train = every[parse_rows(args.calibrate_rows, S, "--calibrate-rows")]
-    both = 0 if test is None else len(np.intersect1d(train, test))
-    if both and not args.allow_overlap:
-        common = np.intersect1d(train, test)
-        raise _cli_error(f"--test-rows: rows {common[0]}:{common[-1] + 1} are also calibration "
-                         f"rows (--calibrate-rows {args.calibrate_rows}); test rows must not be "
-                         f"fitted: give disjoint ranges, or --allow-overlap to test on fitted "
-                         f"rows anyway")
-    return train, test, both
-
-
-def _cv_settings(args: argparse.Namespace, n_train: int) -> list | None:
-    """The grid of ``--cv`` (None without ``--cv``); errors name ``--cv``, ``--cv-grid``,
-    ``--cv-workers``."""
-    if args.cv is None:
-        if args.cv_grid or args.cv_workers is not None:
-            raise _cli_error(f"{'--cv-grid' if args.cv_grid else '--cv-workers'}: only with "
-                             f"--cv K (cross-validation)")
-        return None
-    if not 2 <= args.cv <= n_train:
-        raise _cli_error(f"--cv: expected an integer in [2, {n_train}] (folds of the "
-                         f"{n_train} calibration rows), got {args.cv}")
-    if args.cv_workers is not None:
-        _check_int("--cv-workers", args.cv_workers, 1)
-    from jwarp.calibration.estimate.cv import parse_cv_grid
-
-    try:
-        return parse_cv_grid(args.cv_grid)
-    except ValueError as e:
-        raise _cli_error(str(e)) from None
-
-
-def _tow_covariance(args: argparse.Namespace, setup: Any, model: Any, meas: Any, train: Any,
-                    free: list[str]) -> np.ndarray | None:
-    """Per-sample covariance of the calibration rows: the setup's ``tow`` section (eq. 2.11,
-    linearized at the start: nominal robot, initial guess of the measurement) plus
-    ``--virtual-noise`` (eq. 2.7); None when neither is given."""
-    from jwarp.calibration import CalibrationProblem
-    from jwarp.calibration.design.tow import tow_covariance, tow_from_dict
-    from jwarp.calibration.design.virtual_noise import add_virtual_noise
-
-    if setup.tow is None and args.virtual_noise is None:
-        return None
-    if args.virtual_noise is not None:
-        _check_float("--virtual-noise", args.virtual_noise, 0.0)
-    m = meas.n_obs
-    cov = np.broadcast_to(np.diag(np.broadcast_to(np.asarray(meas.noise, float) ** 2, (m,))),
-                          (len(train), m, m))
-    if setup.tow is not None:
-        spec = tow_from_dict(setup.tow, model, where=f"{args.setup}: tow")
-        prob = CalibrationProblem(model, meas, train.q, train.y, free=free,
-                                  meta=train.meta or None)
-        st = prob.state(prob.initial_x())
-        cov = tow_covariance(meas, spec, st.frames, st.p, meta=train.meta or None)
-    if args.virtual_noise is not None:
-        try:
-            cov = add_virtual_noise(cov, args.virtual_noise)
-        except ValueError as e:
-            raise _cli_error(f"--virtual-noise: {str(e).removeprefix('virtual: ')}") from None
-    return cov
-
-
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from jwarp.cli.common import quiet_warp
 
@@ -401,58 +310,48 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             f.discard()
 
 
+#: the CLI spelling of each option of :class:`jwarp.calibration.CampaignOptions` (and of
+#: :func:`~jwarp.calibration.load_campaign`'s arguments) in messages
+OPTION_NAMES = {
+    "robot": "--robot", "setup": "--setup", "data": "--data", "free": "--free",
+    "fix": "--fix", "fix_at": "--fix", "sigma": "--prior", "orders": "--order",
+    "loss_scale": "--loss-scale", "calibrate_rows": "--calibrate-rows",
+    "test_rows": "--test-rows", "allow_overlap": "--allow-overlap", "cv_folds": "--cv",
+    "cv_grid": "--cv-grid", "cv_workers": "--cv-workers", "virtual_noise": "--virtual-noise",
+    "n_starts": "--starts", "seed": "--seed", "max_nfev": "--max-nfev", "name": "--name",
+}
+
+
+def _option_error(e: ValueError) -> Exception:
+    """A library error that names a ``--option`` (:data:`OPTION_NAMES` given as its
+    ``names``) as the CLI's error; other errors unchanged."""
+    if str(e).startswith(tuple(v + ": " for v in OPTION_NAMES.values())):
+        return _cli_error(str(e))
+    return e
+
+
 def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     from jwarp.utils.atomic import commit_all
     from jwarp.cli.common import dumps
-    from jwarp.model.registry import robot as get_robot
-    from jwarp.calibration import CalibrationOptions, calibrate_with, errors
-    from jwarp.calibration.files import (make_measurement, parse_samples, read_setup,
-                                         read_text, sha256_hex)
+    from jwarp.calibration.campaign_run import (CampaignOptions, calibrate_campaign,
+                                                load_campaign, report_unit)
+    from jwarp.calibration.files import sha256_hex
 
-    setup = read_setup(args.setup)
-    robot_name = args.robot or setup.robot
-    if not robot_name:
-        raise _cli_error("--robot: not given and the setup file names no robot")
-    model = get_robot(robot_name)
-    meas = make_measurement(model, setup)
-    text, raw = read_text(args.data, "data")
-    with warnings.catch_warnings(record=True) as read_caught:
-        warnings.simplefilter("always")
-        data = parse_samples(text, model, meas, where=args.data)
-    input_warnings = [str(w.message) for w in read_caught]
-    if setup.samples_sha256 and setup.samples_sha256 != sha256_hex(raw):
-        input_warnings.append(
-            f"--data: {args.data} is not the samples file of the campaign that {args.setup} "
-            f"belongs to (campaign {setup.campaign_id}: the SHA-256 it records differs); "
-            f"are the files of two campaigns mixed up?")
+    try:
+        campaign = load_campaign(args.setup, args.data, robot=args.robot)
+    except ValueError as e:
+        if str(e).startswith("robot: "):
+            raise _cli_error(f"--{e}") from None
+        raise
+    mixed = f"data: {args.data} is not the samples file"   # named as the option
+    input_warnings = ["--" + w if w.startswith(mixed) else w for w in campaign.warnings]
     for w in input_warnings:
         print(f"jwarp: warning: {w}", file=sys.stderr)
-    S = len(data)
-    train_rows, test_rows, both = _rows(args, S)
-    train = data.select(train_rows)
-    test = data.select(test_rows) if test_rows is not None else None
-    from jwarp.calibration.estimate.backlash import motion_directions
-
-    # the direction each joint last moved in, from the previous row of the file (the
-    # measurement order) or its dir_<joint> columns: the backlash group's, and that of a
-    # robot recording backlash
-    directions = motion_directions(data.q)
-    if data.directions is not None:   # the file's dir_<joint> columns, where given
-        directions = np.where(np.isnan(data.directions), directions, data.directions)
-    dir_train = directions[train_rows]
-    dir_test = directions[test_rows] if test_rows is not None else None
+    model, meas, data = campaign.robot, campaign.measurement, campaign.samples
     fix_groups, fix_at = _parse_fix(args.fix)
-    free = _free_groups(args.free, meas, fix_groups)
-    scale, unit = (1000.0, "mm") if meas.unit == "m" else (1.0, meas.unit)
+    scale, unit = report_unit(meas)
     priors = _parse_keyed(args.prior, "--prior", float)
     orders = _parse_keyed(args.order, "--order", int)
-    if fix_at:
-        from jwarp.calibration.estimate.result import fixed_params
-
-        try:
-            fixed_params(meas, fix_at)
-        except ValueError as e:
-            raise _cli_error("--fix: " + str(e).split(": ", 1)[1]) from None
     if args.loss != "linear":
         if args.loss_scale is None:
             raise _cli_error(f"--loss-scale: required with --loss {args.loss} (the residual "
@@ -466,72 +365,23 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                          "the default linear loss it would be ignored")
     else:
         loss_scale = None
-
-    cv_settings = _cv_settings(args, len(train))
-    cv_result = None
-
-    def table_rows(robot: Any, p: np.ndarray) -> dict[str, dict[str, float]]:
-        out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None,
-                                      directions=dir_train), scale)}
-        if test is not None:
-            out["test"] = _stats(errors(robot, meas, p, test.q, test.y, test.meta or None,
-                                        directions=dir_test), scale)
-        return out
-
-    from jwarp.calibration.estimate.result import model_frames
-
-    try:
-        p_start = meas.initial_guess(model_frames(model, train.q, elastic=False), train.y,
-                                     meas.params.nominal, train.meta or None)
-    except ValueError as e:
-        why = str(e).removeprefix("initial_guess: ")
-        raise _cli_error(f"--calibrate-rows: the initial guess of the '{meas.name}' measurement "
-                         f"fails on {len(train)} calibration row{'s' if len(train) != 1 else ''} "
-                         f"({why}); give more (or more varied) rows") from None
-    before = table_rows(model, p_start)
-    covariance = _tow_covariance(args, setup, model, meas, train, free)
+    options = CampaignOptions(
+        free=args.free, fix=fix_groups, fix_at=fix_at or None, sigma=priors or None,
+        orders=orders or None, loss=args.loss, loss_scale=loss_scale,
+        calibrate_rows=args.calibrate_rows, test_rows=args.test_rows,
+        allow_overlap=args.allow_overlap, cv_folds=args.cv, cv_grid=args.cv_grid,
+        cv_workers=args.cv_workers, virtual_noise=args.virtual_noise, n_starts=args.starts,
+        seed=args.seed, max_nfev=args.max_nfev, name=args.name)
     bar = ProgressBar("calibrate", enabled=not args.quiet, total=args.max_nfev,
                       robust=args.loss != "linear")
-    t0 = time.perf_counter()
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            options = CalibrationOptions(
-                free=free, free_poses=False, n_starts=args.starts, seed=args.seed,
-                max_nfev=args.max_nfev, callback=bar, covariance=covariance,
-                sigma=priors or None, orders=orders or None, loss=args.loss,
-                loss_scale=loss_scale,
-                fix_at=fix_at or None, warn=False,  # the findings: res.warnings, once
-                directions=dir_train)
-            if cv_settings is None:
-                res = calibrate_with(model, meas, train.q, train.y, options,
-                                     meta=train.meta or None)
-            else:
-                from jwarp.calibration.estimate.cv import CVOptions, calibrate_cv
-
-                cvo = CVOptions(folds=args.cv, settings=cv_settings, seed=args.seed,
-                                workers=args.cv_workers)
-                res, cv_result = calibrate_cv(model, meas, train.q, train.y, options, cvo,
-                                              meta=train.meta or None)
-        except ValueError as e:
-            if str(e).startswith("q, y: "):  # too few rows for the free parameters
-                raise _cli_error("--calibrate-rows: " + str(e).removeprefix("q, y: ").replace(
-                    "give more samples", "give more rows")) from None
-            if cv_settings is not None and str(e).startswith(("free:", "sigma", "orders")):
-                raise _cli_error(f"--cv-grid: a setting fails: {e}") from None
-            for field, opt in (("sigma", "--prior"), ("orders", "--order")):
-                if str(e).startswith(field):
-                    raise _cli_error(f"{opt}: {e}") from None
-            if str(e).startswith("loss_scale: "):
-                raise _cli_error(f"--loss-scale: {str(e).removeprefix('loss_scale: ')}") from None
-            raise
-        finally:
-            bar.close()
-    wall = time.perf_counter() - t0
-    after = table_rows(res.robot, res.params)
-    calibrated = _with_provenance(res.robot, args, setup, raw, free, before, after, unit,
-                                  len(train), 0 if test is None else len(test),
-                                  cv=None if cv_result is None else cv_result.to_dict(scale, unit))
+    try:
+        run = calibrate_campaign(campaign, options, callback=bar, names=OPTION_NAMES)
+    except ValueError as e:
+        raise _option_error(e) from None
+    finally:
+        bar.close()
+    res, calibrated, train, test = run.result, run.robot, run.train, run.test
+    free, before, after, both, cv_result = run.free, run.before, run.after, run.overlap, run.cv
     # --out and --params-out into their temporary files, renamed back to back at the end
     robot_text = json.dumps(calibrated.to_dict(), indent=1) + "\n"
     if "--out" in outputs:
@@ -543,26 +393,17 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         from jwarp.viz import save_calibration_rrd
 
         save_calibration_rrd(args.rerun, res.robot, meas, res.params, data.q, data.y,
-                             data.meta or None, p_before=p_start, robot_before=model)
+                             data.meta or None, p_before=run.p_start, robot_before=model)
     # the robot first: a kill between the renames leaves the new robot beside the old
     # params, whose robot_sha256 then names the old robot (the new one is never lost)
     commit_all(outputs[k] for k in ("--out", "--params-out") if k in outputs)
-    fit_warnings = list(res.warnings) + [str(w.message) for w in caught
-                                         if str(w.message) not in res.warnings
-                                         and w.category.__name__ != "CalibrationWarning"]
-    if both:
-        fit_warnings.append(f"{both} of the {len(test)} test rows were also calibration rows "
-                            f"(--allow-overlap): their errors are not independent of the fit")
-    test_range = None
-    if test is not None:
-        test_range, rng_msg = _test_range(res, meas, test, scale, dir_test)
-        if rng_msg is not None:
-            fit_warnings.append(rng_msg)
+    fit_warnings = run.warnings
+    test_range = run.test_range
     summary = {
         "robot": model.name, "plugin": meas.name, "unit": unit, "free": free,
         "samples": {"train": len(train), "test": 0 if test is None else len(test),
                     "test_fitted": both},
-        "before": before, "after": after, "time_s": wall, "iterations": res.iterations,
+        "before": before, "after": after, "time_s": run.time_s, "iterations": res.iterations,
         "nfev": res.nfev, "success": bool(res.success), "elastic": bool(res.elastic),
         "warnings": input_warnings + fit_warnings,
         "out": args.out, "params_out": args.params_out, "rerun": args.rerun,
@@ -578,7 +419,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
                                                             residual_diagnostics)
 
         diag = residual_diagnostics(res.robot, meas, res.params, train.q, train.y,
-                                    train.meta or None, directions=dir_train)
+                                    train.meta or None, directions=run.directions_train)
         summary["diagnostics"] = diag.to_dict(scale)
     if args.json:
         print(dumps(summary, indent=1))
@@ -592,7 +433,7 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
     print(f"calibrated '{model.name}' with '{meas.name}': {len(train)} calibration rows, "
           f"{0 if test is None else len(test)} test rows"
           f"{f' ({both} of them fitted too)' if both else ''}; free: {', '.join(free)}")
-    print(f"{res.iterations} iterations, {res.nfev} evaluations, {wall:.1f} s"
+    print(f"{res.iterations} iterations, {res.nfev} evaluations, {run.time_s:.1f} s"
           f"{', elastic model' if res.elastic else ''}"
           f"{f'; {bar.restarts} active-set restart(s) (compliances held at 0)' if bar.restarts else ''}")
     print(f"\n{'rows':<8}{'':8}{'mean':>10}{'std':>10}{'max':>10}   [{unit}]")
@@ -616,61 +457,6 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
             print(f"wrote {path}" + (f" (robot '{calibrated.name}', provenance in its notes."
                                      f"calibration)" if path == args.out else ""))
     return 0
-
-
-def _test_range(res: Any, meas: Any, test: Any, scale: float, directions: Any = None
-                ) -> tuple[dict[str, Any], str | None]:
-    """The test rows' errors of the calibrated robot inside and outside the range of the
-    calibration poses (``{"inside": stats | None, "outside": stats | None}``, stats with
-    ``rows``; in the report's unit) and the warning naming how far outside (None: all
-    inside)."""
-    from jwarp.calibration import errors
-    from jwarp.model.valid_range import outside_message
-
-    err = errors(res.robot, meas, res.params, test.q, test.y, test.meta or None,
-                 directions=directions)
-    out = res.valid_range.outside(test.q)
-    doc: dict[str, Any] = {}
-    for label, mask in (("inside", ~out), ("outside", out)):
-        doc[label] = ({**_stats(err[mask], scale), "rows": int(mask.sum())}
-                      if mask.any() else None)
-    msg = outside_message(res.robot, test.q, "--test-rows")
-    return doc, msg
-
-
-#: the ``notes`` key of a calibrated robot's provenance (a JSON object)
-PROVENANCE_NOTE = "calibration"
-
-
-def _with_provenance(robot: Any, args: argparse.Namespace, setup: Any, raw: bytes,
-                     free: list[str], before: dict, after: dict, unit: str, n_train: int,
-                     n_test: int, cv: dict | None = None) -> Any:
-    """The calibrated robot renamed (``--name``, default ``<name>-calibrated``) with its
-    provenance in ``notes['calibration']`` (JSON: campaign id, input files and the
-    SHA-256 of the samples, rows, free groups, errors before/after, date, jwarp version)."""
-    from datetime import datetime, timezone
-
-    from jwarp import __version__
-    from jwarp.calibration.files import sha256_hex
-
-    base = robot.name.removesuffix("-calibrated")
-    name = args.name if args.name is not None else f"{base}-calibrated"
-    prov = {
-        "date": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "jwarp_version": str(__version__),
-        "nominal_robot": robot.name if args.robot is None else args.robot,
-        "campaign_id": setup.campaign_id, "setup": os.path.abspath(args.setup),
-        "data": os.path.abspath(args.data), "data_sha256": sha256_hex(raw),
-        "calibrate_rows": args.calibrate_rows, "test_rows": args.test_rows,
-        "samples": {"train": n_train, "test": n_test}, "free": list(free),
-        "loss": args.loss, "starts": args.starts,
-        "errors": {"unit": unit, "before": before, "after": after},
-    }
-    if cv is not None:   # --cv: the settings chosen, their CV error and the table
-        prov["cv"] = cv
-    notes = dict(robot.notes)
-    notes[PROVENANCE_NOTE] = json.dumps(prov, sort_keys=False)
-    return dataclasses.replace(robot, name=name, notes=notes)
 
 
 #: memory of simulate-campaign per sample and robot frame [bytes] (a few 4x4 float64

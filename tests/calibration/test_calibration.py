@@ -21,6 +21,7 @@ from jwarp.model.measurement import Measurement, ParamBlock
 from jwarp.calibration import (CalibrationProblem, CalibrationWarning, ParameterSpace,
                                calibrate, error_stats, errors, observation_groups,
                                predict)
+from jwarp.calibration.estimate.map import problem_options
 from jwarp.calibration.estimate import elastic as E
 from jwarp.calibration.estimate.params import perturb_robot
 from jwarp.calibration.estimate.result import model_frames
@@ -170,9 +171,10 @@ def test_elastic_residual_jacobian_matches_finite_differences():
     S = 30
     q = _q(robot, S, rng)
     y = rng.normal(0, 0.3, (S, 6))
-    prob = CalibrationProblem(robot, meas, q, y, noise_sigma=1e-4, tol=1e-15, max_iter=300,
-                              free="theta,d,r,alpha,beta,kappa_theta,kappa_alpha,kappa_beta,"
-                                   "tracker,markers")
+    prob = CalibrationProblem(robot, meas, q, y,
+                              problem_options(noise_sigma=1e-4, tol=1e-15, max_iter=300,
+                                              free="theta,d,r,alpha,beta,kappa_theta,"
+                                                   "kappa_alpha,kappa_beta,tracker,markers"))
     assert prob.elastic
     _assert_jacobian_matches_fd(prob, rng, col_rtol=2e-6)
 
@@ -185,7 +187,8 @@ def test_rigid_residual_jacobian_matches_finite_differences():
     S = 12
     q = _q(robot, S, rng)
     y = rng.normal(0, 0.3, (S, 6))
-    prob = CalibrationProblem(robot, meas, q, y, free=["theta", "d", "r", "alpha", "beta"])
+    prob = CalibrationProblem(robot, meas, q, y,
+                              problem_options(free=["theta", "d", "r", "alpha", "beta"]))
     assert not prob.elastic and prob.space.size == 7 * 5
     x = prob.space.nominal + 0.3 * prob.space.scale * rng.standard_normal(prob.space.size)
     _assert_jacobian_close(prob.jacobian(x), _fd_jacobian(prob, x), prob.n_data,
@@ -198,8 +201,8 @@ def test_diverged_equilibrium_gives_infinite_residuals_not_an_error():
     meas = FramePositions(robot, ["right_tcp"])
     rng = np.random.default_rng(11)
     q = _q(robot, 10, rng)
-    prob = CalibrationProblem(robot, meas, q, np.zeros((10, 3)), free="kappa_alpha",
-                              max_iter=200)
+    prob = CalibrationProblem(robot, meas, q, np.zeros((10, 3)),
+                              problem_options(free="kappa_alpha", max_iter=200))
     x = np.full(prob.space.size, 5.0)         # 5 rad/(N m): no equilibrium near rho0
     r = prob.residuals(x)
     assert r.shape == (prob.n_residuals,) and np.all(np.isinf(r))
@@ -494,8 +497,9 @@ def test_mass_residual_jacobian_matches_finite_differences():
     S = 15
     q = _q(robot, S, rng)
     y = rng.normal(0, 0.3, (S, 6))
-    prob = CalibrationProblem(robot, meas, q, y, noise_sigma=1e-4, tol=1e-15, max_iter=300,
-                              free="theta,kappa_theta,kappa_alpha,mass")
+    prob = CalibrationProblem(robot, meas, q, y,
+                              problem_options(noise_sigma=1e-4, tol=1e-15, max_iter=300,
+                                              free="theta,kappa_theta,kappa_alpha,mass"))
     sp = prob.space
     masses = [n for n in sp.names if ".mass" in n]
     assert len(masses) == len(robot.masses) == 22        # the root torso_1 carries everything
@@ -556,7 +560,8 @@ def test_mass_group_selection_names_bounds_and_calibrated_robot():
     rng = np.random.default_rng(15)
     q = _q(robot, 10, rng)
     with pytest.raises(ValueError, match="free: the 'mass' group acts only through the elastic"):
-        CalibrationProblem(robot, meas, q, np.zeros((10, 3)), free="mass", elastic=False)
+        CalibrationProblem(robot, meas, q, np.zeros((10, 3)),
+                           problem_options(free="mass", elastic=False))
     with pytest.raises(ValueError, match=r"sigma\['mass'\]: must be > 0"):
         ParameterSpace.build(robot, meas, "mass", sigma={"mass": 0})
 
@@ -636,8 +641,9 @@ def test_masses_and_compliances_free_together_report_their_scaling_direction():
     x2 = res.x.copy()
     x2[sp.kind == 3] *= 1.3
     x2[sp.kind == 1] /= 1.3
-    prob = CalibrationProblem(robot, meas, q, y, free="kappa_theta,mass", noise_sigma=1e-4,
-                              sigma={"mass": math.inf, "kappa_theta": math.inf})
+    prob = CalibrationProblem(robot, meas, q, y,
+                              problem_options(free="kappa_theta,mass", noise_sigma=1e-4,
+                                              sigma={"mass": math.inf, "kappa_theta": math.inf}))
     np.testing.assert_allclose(prob.predict(x2), prob.predict(res.x), atol=1e-12)
     with pytest.warns(CalibrationWarning, match="not separately identifiable.*held by the priors"):
         held = calibrate(robot, meas, q, y, free="kappa_theta,mass", noise_sigma=1e-4)

@@ -13,6 +13,7 @@ import pytest
 
 import jwarp
 from jwarp.calibration import CalibrationProblem, calibrate, errors
+from jwarp.calibration.estimate.map import problem_options
 from jwarp.calibration.estimate.backlash import check_directions, motion_directions
 from jwarp.calibration.estimate.diagnostics import residual_diagnostics
 from jwarp.calibration.estimate.params import (DEFAULT_SIGMA, KIND_BACKLASH, KIND_KAPPA,
@@ -47,7 +48,8 @@ def test_backlash_jacobian_matches_central_differences(elastic):
     kappa = {"kappa_theta": (3e-5, 9e-5)} if elastic else None
     robot, meas, camp = _campaign(30, 3, "backlash", kappa)
     free = "theta,backlash,harmonic,coupling" + (",kappa_theta" if elastic else "")
-    prob = CalibrationProblem(robot, meas, camp.samples.q, camp.samples.y, free=free)
+    prob = CalibrationProblem(robot, meas, camp.samples.q, camp.samples.y,
+                              problem_options(free=free))
     sp = prob.space
     bl = np.nonzero(sp.kind == KIND_BACKLASH)[0]
     assert len(bl) >= 17 and sp.names[bl[0]] == "torso_pan.backlash"

@@ -17,7 +17,7 @@ from scipy.optimize import OptimizeResult
 import jwarp
 from jwarp.model import RobotModel, RobotModelError
 from jwarp.calibration import CalibrationProblem, ParameterSpace, calibrate
-from jwarp.calibration.estimate.map import solve_start
+from jwarp.calibration.estimate.map import problem_options, solve_start
 from jwarp.calibration.estimate.options import CalibrationOptions
 from jwarp.calibration.estimate.params import KIND_COUPLING, KIND_HARMONIC, KIND_KAPPA
 from jwarp.calibration.estimate.result import fixed_params, model_frames
@@ -37,8 +37,9 @@ def _problem(free, S=30, seed=2, **kw):
     rng = np.random.default_rng(seed)
     q = _q(robot, S, rng)
     y = rng.normal(0, 0.3, (S, 6))
-    return CalibrationProblem(robot, _cartesian(robot), q, y, noise_sigma=1e-3, tol=1e-15,
-                              max_iter=300, free=free, **kw), rng
+    return CalibrationProblem(robot, _cartesian(robot), q, y,
+                              problem_options(noise_sigma=1e-3, tol=1e-15, max_iter=300, free=free,
+                                              **kw)), rng
 
 
 def _check_columns(prob, rng, groups, rtol=1e-6):
@@ -293,7 +294,8 @@ def test_all_priors_off_starts_scales_by_the_data_and_holds_what_has_no_effect()
     groups = "theta,kappa_theta,harmonic"
     sigma = {g: np.inf for g in groups.split(",") + ["tracker", "markers"]}
     q, y = camp.samples.q, camp.samples.y
-    prob = CalibrationProblem(robot, meas, q, y, free=groups + ",tracker,markers", sigma=sigma)
+    prob = CalibrationProblem(robot, meas, q, y,
+                              problem_options(free=groups + ",tracker,markers", sigma=sigma))
     x0 = prob.initial_x()
     hold = prob.scale_unpriored(x0)
     J = prob.jacobian(x0)[:prob.n_data]

@@ -8,6 +8,7 @@ import pytest
 
 import jwarp
 from jwarp.calibration import CalibrationProblem, calibrate
+from jwarp.calibration.estimate.map import problem_options
 from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
 from jwarp.calibration.files import make_measurement
 
@@ -25,9 +26,10 @@ def data():
 def test_diagonal_covariance_identical(data):
     robot, meas, q, y = data
     sig = np.array([1e-3, 2e-3, 1.5e-3] * 2)
-    a = CalibrationProblem(robot, meas, q, y, free=FREE, noise_sigma=sig)
-    b = CalibrationProblem(robot, meas, q, y, free=FREE,
-                           covariance=np.broadcast_to(np.diag(sig ** 2), (len(q), 6, 6)))
+    a = CalibrationProblem(robot, meas, q, y, problem_options(free=FREE, noise_sigma=sig))
+    b = CalibrationProblem(robot, meas, q, y,
+                           problem_options(free=FREE, covariance=np.broadcast_to(
+                               np.diag(sig ** 2), (len(q), 6, 6))))
     x = a.initial_x()
     np.testing.assert_allclose(b.residuals(x), a.residuals(x), rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(b.jacobian(x), a.jacobian(x), rtol=1e-12, atol=1e-9)
@@ -46,7 +48,7 @@ def test_full_covariance_whitening_and_fd_jacobian(data):
     rng = np.random.default_rng(0)
     A = rng.normal(size=(len(q), 6, 6)) * 1e-3
     C = A @ np.swapaxes(A, 1, 2) + 1e-6 * np.eye(6)
-    prob = CalibrationProblem(robot, meas, q, y, free=FREE, covariance=C)
+    prob = CalibrationProblem(robot, meas, q, y, problem_options(free=FREE, covariance=C))
     x = prob.initial_x() + 1e-3 * prob.space.scale * rng.normal(size=prob.space.size)
     r = prob.residuals(x)
     d = prob.predict(x) - y
@@ -66,12 +68,12 @@ def test_full_covariance_whitening_and_fd_jacobian(data):
 def test_bad_covariance(data):
     robot, meas, q, y = data
     with pytest.raises(ValueError, match="covariance: expected shape"):
-        CalibrationProblem(robot, meas, q, y, free=FREE, covariance=np.eye(5))
+        CalibrationProblem(robot, meas, q, y, problem_options(free=FREE, covariance=np.eye(5)))
     C = np.broadcast_to(np.eye(6), (len(q), 6, 6)).copy()
     C[3, 0, 0] = -1.0
     with pytest.raises(ValueError, match="covariance: block of sample 3 is not positive"):
-        CalibrationProblem(robot, meas, q, y, free=FREE, covariance=C)
+        CalibrationProblem(robot, meas, q, y, problem_options(free=FREE, covariance=C))
     C[3, 0, 0] = 1.0
     C[4, 0, 1] = 0.5
     with pytest.raises(ValueError, match="covariance: block of sample 4 is not symmetric"):
-        CalibrationProblem(robot, meas, q, y, free=FREE, covariance=C)
+        CalibrationProblem(robot, meas, q, y, problem_options(free=FREE, covariance=C))

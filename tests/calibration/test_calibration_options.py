@@ -13,6 +13,7 @@ import warp as wp
 import jwarp
 from jwarp.calibration import (CalibrationOptions, CalibrationProblem,
                                CalibrationWarning, calibrate, calibrate_with)
+from jwarp.calibration.estimate.map import problem_options
 from jwarp.calibration.estimate import map as M
 
 
@@ -42,7 +43,7 @@ def test_problem_uploads_the_joint_values_once(monkeypatch, free):
     meas = _cartesian(robot)
     q, rng = _data(robot, 20, 0)
     y = rng.normal(0, 0.3, (20, 6))
-    prob = CalibrationProblem(robot, meas, q, y, free=free, noise_sigma=1e-4)
+    prob = CalibrationProblem(robot, meas, q, y, problem_options(free=free, noise_sigma=1e-4))
     assert prob.elastic == ("kappa" in free)
     seen = []
 

@@ -13,6 +13,7 @@ import jwarp
 from jwarp.importers.urdf_export import dh_origin, export_urdf
 from jwarp.plugins.measurements.cartesian import CartesianMeasurement
 from jwarp.calibration import CalibrationProblem, ParameterSpace, calibrate
+from jwarp.calibration.estimate.map import problem_options
 from jwarp.calibration.estimate.origin import (delta_transform, left_jacobian, rotation,
                                                with_static_transforms)
 from jwarp.calibration.estimate.params import KIND_ORIGIN
@@ -130,8 +131,8 @@ def test_origin_group_with_the_elastic_model_matches_central_differences():
     meas = cartesian(soft)
     q = random_q(soft, 20, 2)
     y = np.random.default_rng(5).normal(0.0, 0.3, (20, 3))
-    prob = CalibrationProblem(soft, meas, q, y, free="origin,kappa_theta", tol=1e-15,
-                              max_iter=300)
+    prob = CalibrationProblem(soft, meas, q, y,
+                              problem_options(free="origin,kappa_theta", tol=1e-15, max_iter=300))
     assert prob.elastic
     sp = prob.space
     rng = np.random.default_rng(6)
@@ -151,7 +152,8 @@ def test_origin_group_with_the_elastic_model_matches_central_differences():
     assert rel.max() < 1e-6, (rel.max(), sp.names[org[int(rel.argmax())]])
     # the equilibrium's share is not negligible: the rigid model's columns differ by far
     # more than the tolerance above
-    rig = CalibrationProblem(soft, meas, q, y, free="origin,kappa_theta", elastic=False)
+    rig = CalibrationProblem(soft, meas, q, y,
+                             problem_options(free="origin,kappa_theta", elastic=False))
     Jr = rig.jacobian(x)[:prob.n_data, org]
     off = np.linalg.norm(Jr - Jfd[:prob.n_data], axis=0) / norms
     assert off.max() > 1e-3
@@ -164,7 +166,7 @@ def test_jacobian_matches_central_differences(extra):
     q = random_q(robot, 25, 3)
     y = meas.predict(np.asarray(jwarp.fk(robot, q, device="cpu", dtype=np.float64)),
                      meas.params.nominal)
-    prob = CalibrationProblem(robot, meas, q, y, free="origin" + extra)
+    prob = CalibrationProblem(robot, meas, q, y, problem_options(free="origin" + extra))
     sp = prob.space
     rng = np.random.default_rng(4)
     x = sp.nominal + 20 * sp.scale * rng.standard_normal(sp.size)   # ~2 cm / 20 mrad off

@@ -22,6 +22,7 @@ from jwarp.model import RobotModel
 from jwarp.plugins.measurements.cartesian import CartesianMeasurement
 from jwarp.calibration import (ROBOT_GROUPS, CalibrationOptions, CalibrationProblem,
                                CalibrationWarning, calibrate, errors)
+from jwarp.calibration.estimate.map import problem_options
 from jwarp.calibration.estimate import elastic as E
 from jwarp.calibration.estimate import map as M
 from jwarp.calibration.estimate.params import KIND_KAPPA, perturb_robot, with_pose_groups
@@ -91,7 +92,8 @@ def _fit_model_test_errors(c: dict, res) -> np.ndarray:
     """Test errors (S, 2) of the fitted x itself (compliances as fitted, any sign)."""
     te = c["te"]
     prob = CalibrationProblem(c["nominal"], c["meas"], c["q"][te], c["y"][te],
-                              free=res.space.free_groups, noise_sigma=NOISE, elastic=res.elastic)
+                              problem_options(free=res.space.free_groups, noise_sigma=NOISE,
+                                              elastic=res.elastic))
     d = prob.predict(res.x) - c["y"][te]
     return np.linalg.norm(d.reshape(len(d), 2, 3), axis=2)
 
@@ -293,8 +295,10 @@ def test_pose_group_options_are_checked_naming_the_field():
         CalibrationOptions(free="theta", free_poses="yes").validate()
     with pytest.raises(ValueError, match="^stall_tol"):
         CalibrationOptions(free="theta", stall_tol=-1.0).validate()
-    from jwarp.cli.calibration import _free_groups
-    from jwarp.cli.common import CLIError
+    from jwarp.calibration.campaign_run import free_groups
+    from jwarp.cli.calibration import OPTION_NAMES
 
-    with pytest.raises(CLIError, match="^--fix: .*not groups"):
-        _free_groups("theta", meas, "intrinsics")
+    with pytest.raises(ValueError, match="^--fix: .*not groups"):
+        free_groups(meas, "theta", "intrinsics", names=OPTION_NAMES)
+    with pytest.raises(ValueError, match="^fix: .*not groups"):
+        free_groups(meas, "theta", "intrinsics")

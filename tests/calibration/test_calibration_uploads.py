@@ -9,6 +9,7 @@ import warp as wp
 import jwarp
 from jwarp.kinematics import jacobian, jacobian_dh
 from jwarp.calibration import CalibrationProblem
+from jwarp.calibration.estimate.map import problem_options
 from jwarp.calibration.simulate.campaign import justin_tracker_setup
 from jwarp.calibration.files import make_measurement
 
@@ -37,8 +38,8 @@ def test_residual_jacobian_uploads_the_dh_rows_once(monkeypatch, free):
     S = 30
     lim = robot.joint_limits
     q = rng.uniform(lim[:, 0], lim[:, 1], (S, robot.n_dof))
-    prob = CalibrationProblem(robot, meas, q, rng.normal(0, 0.3, (S, 6)), free=free,
-                              noise_sigma=1e-4, tol=1e-14, max_iter=200)
+    prob = CalibrationProblem(robot, meas, q, rng.normal(0, 0.3, (S, 6)),
+                              problem_options(free=free, noise_sigma=1e-4, tol=1e-14, max_iter=200))
     sp = prob.space
     x = sp.nominal + 0.3 * sp.scale * rng.standard_normal(sp.size)
     x[sp.kind == 1] = rng.uniform(0.5, 1.5, int((sp.kind == 1).sum())) * 1e-4

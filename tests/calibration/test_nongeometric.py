@@ -11,6 +11,7 @@ import pytest
 import jwarp
 from jwarp.model import RobotModel, RobotModelError
 from jwarp.calibration import CalibrationProblem, ParameterSpace
+from jwarp.calibration.estimate.map import problem_options
 
 from devices import requires_cpu
 from reference import ref_fk, ref_torques, nominal_dh, THETA
@@ -145,8 +146,8 @@ def test_new_jacobian_columns_match_finite_differences(free):
     S = 30
     q = _q(robot, S, rng)
     y = rng.normal(0, 0.3, (S, 6))
-    prob = CalibrationProblem(robot, meas, q, y, noise_sigma=1e-4, tol=1e-15, max_iter=400,
-                              free=free)
+    prob = CalibrationProblem(robot, meas, q, y,
+                              problem_options(noise_sigma=1e-4, tol=1e-15, max_iter=400, free=free))
     sp = prob.space
     assert prob.elastic
     x = sp.nominal + 0.5 * sp.scale * rng.standard_normal(sp.size)
@@ -175,7 +176,7 @@ def test_rigid_harmonic_columns_and_group_names():
     rng = np.random.default_rng(6)
     q = _q(robot, 15, rng)
     prob = CalibrationProblem(robot, meas, q, rng.normal(0, 0.3, (15, 3)),
-                              free="theta,harmonic")
+                              problem_options(free="theta,harmonic"))
     sp = prob.space
     assert not prob.elastic
     assert sp.size == 7 + 7 * 2 * 2
@@ -196,8 +197,9 @@ def test_calibrated_robot_with_nonlinear_compliance_reproduces_predictions(tmp_p
     robot = _nongeo(jwarp.robot("justin19"), seed=8)
     meas = _cartesian(robot)
     q = _q(robot, 20, np.random.default_rng(9))
-    prob = CalibrationProblem(robot, meas, q, np.zeros((20, 6)), noise_sigma=1e-4,
-                              free="kappa_nonlinear,harmonic", tol=1e-14, max_iter=300)
+    prob = CalibrationProblem(robot, meas, q, np.zeros((20, 6)),
+                              problem_options(noise_sigma=1e-4, free="kappa_nonlinear,harmonic",
+                                              tol=1e-14, max_iter=300))
     sp = prob.space
     x = sp.nominal + sp.scale * np.random.default_rng(10).standard_normal(sp.size)
     cal = sp.robot_at(x)

@@ -305,7 +305,7 @@ def test_candidate_jacobians_on_every_device(device):
     justin19 tracker through the torque equilibrium) equal finite differences of the
     predictions on the CPU; CPU and CUDA agree to round-off."""
     from jwarp.calibration.simulate.campaign import justin_tracker_setup
-    from jwarp.calibration.estimate.map import CalibrationProblem
+    from jwarp.calibration.estimate.map import CalibrationProblem, problem_options
 
     robot = get_robot("justin19")
     meas = make_measurement(robot, justin_tracker_setup())
@@ -313,7 +313,7 @@ def test_candidate_jacobians_on_every_device(device):
     free = "theta,kappa_theta,tracker,markers"
     U, space = candidate_jacobians(robot, meas, q, free, device=device, elastic=True)
     prob = CalibrationProblem(robot, meas, q, np.zeros((len(q), len(meas.obs_names))),
-                              free=free, elastic=True, device=device)
+                              problem_options(free=free, elastic=True), device=device)
     x0 = prob.initial_x(guess=False)
     J = prob.jacobian(x0)[:prob.n_data].reshape(U.shape)
     np.testing.assert_allclose(U, J, rtol=1e-12, atol=1e-12)

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from cli_helpers import one_line_error, run  # tests/cli_helpers.py
-from jwarp.cli.calibration import PROVENANCE_NOTE, ProgressBar
+from jwarp.calibration.campaign_run import PROVENANCE_NOTE
+from jwarp.cli.calibration import ProgressBar
 
 
 @pytest.fixture(scope="module")

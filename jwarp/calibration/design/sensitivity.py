@@ -242,7 +242,7 @@ def stacked_jacobian(robot: Any, measurement: Any, q: Any, free: str | Iterable[
             the measurement's unit per parameter unit).
         problem: further :class:`CalibrationProblem` arguments (sigma, frames, elastic, ...).
     """
-    from jwarp.calibration.estimate.map import CalibrationProblem
+    from jwarp.calibration.estimate.map import CalibrationProblem, problem_options
 
     model = get_robot(robot)
     qa = np.asarray(q, np.float64)
@@ -266,8 +266,10 @@ def stacked_jacobian(robot: Any, measurement: Any, q: Any, free: str | Iterable[
     mm = None if meta is None else {k: np.tile(np.asarray(v), reps) for k, v in meta.items()}
     if not whiten:   # unit rows: the Jacobian in the measurement's unit
         problem = dict(problem, noise_sigma=1.0)
+    settings = {k: v for k, v in problem.items() if k != "device"}
     prob = CalibrationProblem(model, measurement, np.tile(qa, (reps, 1)), np.tile(y, (reps, 1)),
-                              free=groups, meta=mm, **problem)
+                              problem_options(free=groups, **settings), meta=mm,
+                              device=problem.get("device"))
     xx = prob.space.nominal if x is None else prob.space.check(x, "x")
     J = prob.jacobian(xx)[:S * m]
     return J, list(prob.space.names)

@@ -111,7 +111,7 @@ def residual_diagnostics(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
     Returns:
         :class:`Diagnostics`.
     """
-    from jwarp.calibration.estimate.map import CalibrationProblem
+    from jwarp.calibration.estimate.map import CalibrationProblem, problem_options
 
     model = get_robot(robot)
     qa = np.asarray(q, np.float64)
@@ -122,9 +122,10 @@ def residual_diagnostics(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
         raise ValueError(f"bins: expected an integer in [2, S={S}], got {bins!r}")
     pa = np.asarray(p, np.float64)
     frames = [i for i in np.nonzero(model.is_dh)[0] if model.frames[i].coupling]
-    prob = CalibrationProblem(model, measurement, qa, y, meta=meta, free="theta",
-                              frames=frames, p_nominal=pa, noise_sigma=1.0,
-                              directions=directions)
+    prob = CalibrationProblem(model, measurement, qa, y,
+                              problem_options(free="theta", frames=frames, p_nominal=pa,
+                                              noise_sigma=1.0, directions=directions),
+                              meta=meta)
     sdir = None
     if directions is not None:
         from jwarp.calibration.estimate.backlash import check_directions

@@ -27,7 +27,8 @@ docs/calibration_robustness.md).
 from __future__ import annotations
 
 import time
-from typing import Any, Callable, Iterable, Mapping, NamedTuple
+import warnings
+from typing import Any, Callable, Mapping, NamedTuple
 
 import numpy as np
 import warp as wp
@@ -160,6 +161,54 @@ def _noise(measurement: Any, noise_sigma: Any) -> np.ndarray:
     return a
 
 
+def _problem_groups(measurement: Any, o: CalibrationOptions) -> tuple[list[str], Any]:
+    """(the free groups, the measurement's prior means) of the problem of ``o``: ``free``
+    with the pose groups when ``free_poses`` (less ``fix`` and the ``fix_at`` groups, whose
+    values replace ``p_nominal``)."""
+    p_nominal = o.p_nominal
+    fix = o.fix
+    if o.fix_at:
+        from jwarp.calibration.estimate.result import fixed_params
+
+        p_nominal = fixed_params(measurement, o.fix_at, p_nominal)
+        named = [] if fix is None or (isinstance(fix, str) and not fix.strip()) \
+            else parse_groups(fix)
+        fix = named + [g for g in o.fix_at if g not in named]
+    if o.free_poses:
+        free = with_pose_groups(measurement, o.free, fix)
+    else:
+        free = [g for g in parse_groups(o.free) if g not in (o.fix_at or {})]
+    return free, p_nominal
+
+
+#: the keywords :class:`CalibrationProblem` took before ``options`` (issue 40; deprecated,
+#: for one release) and the :class:`CalibrationOptions` field each sets
+PROBLEM_KEYWORDS = {
+    "free": "free", "noise_sigma": "noise_sigma", "sigma": "sigma", "frames": "frames",
+    "p_nominal": "p_nominal", "elastic": "elastic", "lam": "lam",
+    "max_iter": "equilibrium_iterations", "tol": "tol", "bound_kappa": "bound_kappa",
+    "covariance": "covariance", "orders": "orders", "loss": "loss",
+    "loss_scale": "loss_scale", "directions": "directions",
+}
+
+
+def problem_options(**keywords: Any) -> CalibrationOptions:
+    """The :class:`CalibrationOptions` of the problem that :class:`CalibrationProblem`'s
+    former keywords (:data:`PROBLEM_KEYWORDS`: ``free``, ``noise_sigma``, ``sigma``, ...,
+    ``max_iter``) described: exactly the groups ``free`` (``free_poses=False``) and, unless
+    ``bound_kappa`` is given, compliances unbounded (``bound_kappa=False``, the problem's
+    default then). TypeError naming an unknown keyword or a missing ``free``."""
+    unknown = sorted(set(keywords) - set(PROBLEM_KEYWORDS))
+    if unknown:
+        raise TypeError(f"CalibrationProblem: unexpected keyword {unknown[0]!r} (the problem's "
+                        f"settings are the fields of options=CalibrationOptions(...))")
+    if "free" not in keywords:
+        raise TypeError("CalibrationProblem: missing options=CalibrationOptions(free=...)")
+    fields = {PROBLEM_KEYWORDS[k]: v for k, v in keywords.items()}
+    fields.setdefault("bound_kappa", False)
+    return CalibrationOptions(free_poses=False, **fields)
+
+
 class CalibrationProblem:
     """The whitened MAP least-squares problem of one data set.
 
@@ -167,46 +216,72 @@ class CalibrationProblem:
         robot: nominal robot (name or RobotModel); its DH rows and kappa are the prior means.
         measurement: a measurement plugin instance (see jwarp.model.measurement).
         q: (S, n_dof) joint values [rad, m]; y: (S, m) observations [measurement.unit].
-        free: free groups (list or comma-separated), see :class:`ParameterSpace`.
+        options: :class:`CalibrationOptions`; the problem's fields of it:
+
+            * ``free`` (with the measurement's pose and marker groups when ``free_poses``,
+              less ``fix`` and ``fix_at``: :func:`~.params.with_pose_groups`), see
+              :class:`ParameterSpace`; ``fix_at`` also replaces the groups' prior means;
+            * ``noise_sigma``: measurement noise std, scalar or (m,) [unit]; None:
+              ``measurement.noise``;
+            * ``sigma``: prior sigma overrides {group: value} (``mass``: relative to each
+              nominal mass, 0.1 = 10 %); ``frames``: calibratable DH frames; ``p_nominal``:
+              measurement parameter prior means (None: ParamBlock nominal);
+            * ``elastic``: True/False; None: elastic iff a compliance is free or nonzero (a
+              free ``mass`` group needs the elastic model: masses act only through its
+              torques); ``lam``, ``equilibrium_iterations``, ``tol``: damping, most updates
+              and tolerance [rad] of the equilibrium;
+            * ``bound_kappa``: constrain compliances to >= 0 in the solver (see
+              ParameterSpace.build);
+            * ``covariance``: per-sample measurement covariance (S, m, m) with full blocks
+              (or one (m, m) for all samples) [unit^2], e.g. with task-oriented weighting or
+              virtual noise (:mod:`.tow`, :mod:`.virtual_noise`); the data residuals and their
+              Jacobian are whitened by ``L_s^-1`` (``Lambda_s = L_s L_s^T``, Cholesky)
+              instead of ``1 / noise_sigma``, which it replaces. None: the diagonal
+              ``noise_sigma``;
+            * ``orders``: harmonic orders of the ``harmonic`` and ``coupling`` groups, per
+              group or per joint/frame pattern (see :meth:`ParameterSpace.build`);
+            * ``loss``: "linear" (least squares), "soft_l1" or "huber": a robust loss on
+              each sample's whitened residual norm (:mod:`.robust`); the prior rows stay
+              Gaussian. ``loss_scale``: where it turns robust [unit of the measurement]
+              (divided by the mean noise sigma into whitened units);
+            * ``directions``: (S, n_dof) the direction (+1, -1, 0 unknown) each joint last
+              moved in before each sample, for the ``backlash`` group and a robot with
+              recorded backlash; None: from the order of q (:func:`.backlash.motion_directions`).
+
+            The solver's fields (starts, tolerances, callback, ...) are
+            :func:`calibrate_with`'s. Not validated here (:meth:`CalibrationOptions.validate`
+            is); the problem checks what it uses.
         meta: per-sample inputs {name: (S,)} the measurement needs (``meta_names``).
-        noise_sigma: measurement noise std, scalar or (m,) [unit]; default
-            ``measurement.noise``.
-        sigma: prior sigma overrides {group: value} (``mass``: relative to each nominal
-            mass, 0.1 = 10 %); frames: calibratable DH frames;
-        p_nominal: measurement parameter prior means (default ParamBlock nominal).
-        elastic: True/False; None: elastic iff a compliance is free or nonzero (a free
-            ``mass`` group needs the elastic model: masses act only through its torques).
-        lam, max_iter, tol: damping, most updates and tolerance [rad] of the equilibrium.
-        bound_kappa: constrain compliances to >= 0 in the solver (see ParameterSpace.build).
-        covariance: per-sample measurement covariance (S, m, m) with full blocks (or one
-            (m, m) for all samples) [unit^2], e.g. with task-oriented weighting or virtual
-            noise (:mod:`.tow`, :mod:`.virtual_noise`); the data residuals and their
-            Jacobian are whitened by ``L_s^-1`` (``Lambda_s = L_s L_s^T``, Cholesky) instead
-            of ``1 / noise_sigma``, which it replaces. None: the diagonal ``noise_sigma``.
         device: Warp device of the FK, equilibrium and DH-Jacobian kernels (float64;
             None: Warp's default device, docs/api.md "Devices"; "cpu" for small problems on
             a CUDA machine, "cuda:0" for large batches such as the candidate Jacobians of
             :func:`.design.candidate_jacobians`); the rest of the problem is numpy.
-        orders: harmonic orders of the ``harmonic`` and ``coupling`` groups, per group or
-            per joint/frame pattern (see :meth:`ParameterSpace.build`).
-        loss: "linear" (least squares, default), "soft_l1" or "huber": a robust loss on
-            each sample's whitened residual norm (:mod:`.robust`); the prior rows stay
-            Gaussian. loss_scale: where it turns robust [unit of the measurement]
-            (divided by the mean noise sigma into whitened units).
-        directions: (S, n_dof) the direction (+1, -1, 0 unknown) each joint last moved in
-            before each sample, for the ``backlash`` group and a robot with recorded
-            backlash; None: from the order of q (:func:`.backlash.motion_directions`).
+        keywords: the former keywords (:data:`PROBLEM_KEYWORDS`: ``free=``, ``sigma=``,
+            ..., ``max_iter=``), deprecated: they work for one release with a
+            DeprecationWarning, as ``options=problem_options(**keywords)`` (exactly
+            ``free``, compliances unbounded unless ``bound_kappa``).
     """
 
-    def __init__(self, robot: Any, measurement: Any, q: Any, y: Any, *,
-                 free: str | Iterable[str], meta: Mapping[str, Any] | None = None,
-                 noise_sigma: Any = None, sigma: Mapping[str, float] | None = None,
-                 frames: Iterable[int | str] | None = None, p_nominal: Any = None,
-                 elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
-                 tol: float = 1e-12, bound_kappa: bool = False,
-                 covariance: Any = None, device: Any = None,
-                 orders: Mapping[str, int] | None = None, loss: str = "linear",
-                 loss_scale: float | None = None, directions: Any = None) -> None:
+    def __init__(self, robot: Any, measurement: Any, q: Any, y: Any,
+                 options: CalibrationOptions | None = None, *,
+                 meta: Mapping[str, Any] | None = None, device: Any = None,
+                 **keywords: Any) -> None:
+        if keywords:
+            if options is not None:
+                raise TypeError(f"CalibrationProblem: got options and the keywords "
+                                f"{', '.join(sorted(keywords))}; give the settings in options")
+            o = problem_options(**keywords)
+            warnings.warn(f"CalibrationProblem: the keywords {', '.join(sorted(keywords))} are "
+                          f"deprecated and removed in the next release: pass "
+                          f"options=CalibrationOptions(...) (problem_options() gives the "
+                          f"same problem)", DeprecationWarning, stacklevel=2)
+        elif options is None:
+            raise TypeError("CalibrationProblem: missing options=CalibrationOptions(free=...)")
+        elif not isinstance(options, CalibrationOptions):
+            raise TypeError(f"options: expected CalibrationOptions, got "
+                            f"{type(options).__name__}")
+        else:
+            o = options
         self.robot = get_robot(robot)
         self.measurement = measurement
         if not hasattr(measurement, "jacobians") or not hasattr(measurement, "obs_names"):
@@ -225,13 +300,15 @@ class CalibrationProblem:
         #: the model and its Jacobian launches on this array (the data do not change)
         self.q_device: wp.array = wp.array(np.ascontiguousarray(self.q, np.float64),
                                            dtype=wp.float64, device=self.device)
+        free, p_nominal = _problem_groups(measurement, o)
+        elastic, loss, loss_scale, lam = o.elastic, o.loss, o.loss_scale, o.lam
         if elastic is False and MASS_GROUP in parse_groups(free):
             raise ValueError(f"free: the '{MASS_GROUP}' group acts only through the elastic "
                              f"model, but elastic=False was given")
-        self.space = ParameterSpace.build(self.robot, measurement, free, sigma=sigma,
-                                          frames=frames, p_nominal=p_nominal,
-                                          bound_kappa=bound_kappa, orders=orders)
-        self.noise = _noise(measurement, noise_sigma)
+        self.space = ParameterSpace.build(self.robot, measurement, free, sigma=o.sigma,
+                                          frames=o.frames, p_nominal=p_nominal,
+                                          bound_kappa=o.bound_kappa, orders=o.orders)
+        self.noise = _noise(measurement, o.noise_sigma)
         if loss not in LOSSES:
             raise ValueError(f"loss: expected one of {', '.join(LOSSES)}, got {loss!r}")
         self.loss = loss
@@ -250,7 +327,7 @@ class CalibrationProblem:
                                  f"wherever data are: use the linear loss)")
         S, m = self.y.shape
         #: (S, m, m) inverse Cholesky factors of ``covariance`` (None: diagonal noise)
-        self.whitener = _whitener(covariance, S, m)
+        self.whitener = _whitener(o.covariance, S, m)
         P = self.space.size
         if S * m < P:
             raise ValueError(f"q, y: {S} samples x {m} observations = {S * m} values is fewer "
@@ -258,7 +335,7 @@ class CalibrationProblem:
                              f"give more samples or free fewer groups")
         if not (isinstance(lam, (int, float)) and 0 < lam <= 1):
             raise ValueError(f"lam: damping must be in (0, 1], got {lam!r}")
-        self.lam, self.max_iter, self.tol = float(lam), int(max_iter), float(tol)
+        self.lam, self.max_iter, self.tol = float(lam), int(o.equilibrium_iterations), float(o.tol)
         kf = self.space.kappa_free
         sp = self.space
         self._harm_idx = np.nonzero(sp.kind == KIND_HARMONIC)[0]
@@ -266,8 +343,8 @@ class CalibrationProblem:
         #: backlash in play (the group free or recorded in the robot) and the directions
         self.backlash = bool(self._bl_idx.size or np.any(robot_backlash(self.robot)))
         self.directions = (None if not self.backlash else motion_directions(self.q)
-                           if directions is None else
-                           check_directions(directions, *self.q.shape))
+                           if o.directions is None else
+                           check_directions(o.directions, *self.q.shape))
         self._knl_idx = np.nonzero(sp.kind == KIND_KAPPA_NL)[0]
         if elastic is None:
             elastic = bool(kf.any() or np.any(self.robot.kappa != 0) or self._knl_idx.size
@@ -301,29 +378,9 @@ class CalibrationProblem:
     def from_options(cls, robot: Any, measurement: Any, q: Any, y: Any,
                      options: CalibrationOptions, meta: Mapping[str, Any] | None = None
                      ) -> "CalibrationProblem":
-        """The problem of the data with the problem's fields of ``options`` (free - with
-        the measurement's pose groups when ``free_poses``, see
-        :func:`~jwarp.calibration.estimate.params.with_pose_groups` -, noise_sigma, sigma,
-        frames, p_nominal, elastic, lam, max_iter, tol, bound_kappa, covariance)."""
-        o = options
-        p_nominal = o.p_nominal
-        fix = o.fix
-        if o.fix_at:
-            from jwarp.calibration.estimate.result import fixed_params
-
-            p_nominal = fixed_params(measurement, o.fix_at, p_nominal)
-            named = [] if fix is None or (isinstance(fix, str) and not fix.strip()) \
-                else parse_groups(fix)
-            fix = named + [g for g in o.fix_at if g not in named]
-        if o.free_poses:
-            free = with_pose_groups(measurement, o.free, fix)
-        else:
-            free = [g for g in parse_groups(o.free) if g not in (o.fix_at or {})]
-        return cls(robot, measurement, q, y, free=free, meta=meta, noise_sigma=o.noise_sigma,
-                   sigma=o.sigma, frames=o.frames, p_nominal=p_nominal, elastic=o.elastic,
-                   lam=o.lam, max_iter=o.equilibrium_iterations, tol=o.tol,
-                   bound_kappa=o.bound_kappa, covariance=o.covariance, orders=o.orders, loss=o.loss,
-                   loss_scale=o.loss_scale, directions=o.directions)
+        """``CalibrationProblem(robot, measurement, q, y, options, meta=meta)`` (kept for
+        the callers of before issue 40)."""
+        return cls(robot, measurement, q, y, options, meta=meta)
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -976,7 +1033,7 @@ def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
     options.validate()
     o = options
     callback = o.callback
-    prob = CalibrationProblem.from_options(robot, measurement, q, y, o, meta=meta)
+    prob = CalibrationProblem(robot, measurement, q, y, o, meta=meta)
     sp = prob.space
     rng = np.random.default_rng(o.seed)
     start0 = prob.initial_x(None if o.x0 is None else sp.check(o.x0, "x0"), guess=o.initial_guess)
