@@ -146,7 +146,14 @@ class PlanOptions:
             again with the planner's rule; it replaces the path only if certified and of
             a lower length cost U_l. ``time_limit`` bounds it too. The multi-starts stop
             at the first feasible one, which may be a long detour (a random via point):
-            this makes the default path short at little extra time.
+            this makes the default path short at little extra time. A round that
+            shortens no path by more than 0.1 % ends the rounds, and a path within 0.1 %
+            of the straight line's U_l is left as it is.
+        shorten_time: the rounds' time budget, as a share of the time the call took
+            before them (> 0), or None: only ``shorten`` and ``time_limit`` bound them.
+            Checked before every check call after the first (so the first jumps of every
+            path are always tried); the final check of the shortened path and its costs
+            come after it.
         allow_no_collision: plan without a collision model: a robot without collision
             spheres (every path is then collision-free) or in self-collision at its home
             configurations is accepted; False (default): either is a ValueError naming the
@@ -184,6 +191,7 @@ class PlanOptions:
     rrt: Any = None
     allow_no_collision: bool = False
     shorten: int = 4
+    shorten_time: float | None = None
 
     def __post_init__(self) -> None:
         self.fallback = fallback_word(self.fallback)
@@ -222,6 +230,11 @@ class PlanOptions:
                                  f"({margin:g} m): it only relaxes the margin near the start "
                                  f"and goal, so it would be ignored; give a margin of at least "
                                  f"{em:g} m, or an endpoint margin <= {margin:g} m")
+        if self.shorten_time is not None:
+            st = real_number(self.shorten_time, "shorten_time")
+            if not (math.isfinite(st) and st > 0):
+                raise ValueError(f"shorten_time: expected a share > 0 of the call's time, or "
+                                 f"None, got {self.shorten_time!r}")
         if self.eps is not None:
             eps = real_number(self.eps, "eps")
             if not (math.isfinite(eps) and eps > 0):

@@ -41,6 +41,10 @@ EXACT_SUBSTEP = 0.25
 #: the first feasible paths 18
 SHORTCUT_CLEARANCE = 0.01
 
+#: :attr:`PlanOptions.shorten` leaves a path alone whose length cost U_l is within this
+#: share of the straight line's (1): nothing to gain worth a check
+STRAIGHT_TOL = 1e-3
+
 
 #: evaluations per segment of the planner's continuous check (MotionOptions.max_evals)
 PLANNER_CHECK_EVALS = 256
@@ -358,12 +362,13 @@ class Planner:
         if o.fallback is not None and not res.feasible.all():
             _fallback(self, res, q0, q1, t0, deadline)
         if o.shorten > 0 and o.stop_when_solved and not o.converge and o.kappa is None:
-            self._shorten(buf, res, deadline)
+            self._shorten(buf, res, deadline, t0)
         res.reasons = self.explain(res)
         res.wall_time = time.perf_counter() - t0
         return res
 
-    def _shorten(self, buf: _Buffers, res: PlanResult, deadline: float | None) -> None:
+    def _shorten(self, buf: _Buffers, res: PlanResult, deadline: float | None,
+                 t0: float | None = None) -> None:
         """:attr:`PlanOptions.shorten` of the feasible paths of ``res`` (in place): their
         shortcuts proven by the planner's continuous check with the clearance ``eps``
         (at most :data:`SHORTCUT_CLEARANCE`, at least ``margin``) from the world (``self_margin`` between the robot's spheres), the waypoints respaced along
@@ -376,8 +381,11 @@ class Planner:
         t = time.perf_counter()
         o = self.options
         res.length_before = np.where(res.feasible, res.length_cost, np.nan)
-        solved = np.asarray(res.feasible, bool)
+        # a path already within STRAIGHT_TOL of the straight line's U_l is left as it is
+        solved = np.asarray(res.feasible, bool) & (np.asarray(res.length_cost, np.float64)
+                                                   > 1.0 + STRAIGHT_TOL)
         if not solved.any() or (deadline is not None and t >= deadline):
+            res.timings["shorten"] = time.perf_counter() - t
             return
         # a batch of worlds: every problem's row (path b in world b), the unsolved idle
         idx = np.arange(len(solved)) if self.batched else np.nonzero(solved)[0]
@@ -391,10 +399,17 @@ class Planner:
         clear = max(o.margin, min(self.eps, SHORTCUT_CLEARANCE))
 
         def check(segments: np.ndarray, per_path: int) -> np.ndarray:
+            # group: a path's list of shortcuts is in the order of preference and the
+            # first proven is taken: the rest of the list is skipped
             return chk.check(segments, margin=clear, self_margin=o.self_margin,
-                             world_group=per_path if self.batched else 0).ok
+                             world_group=per_path if self.batched else 0,
+                             group=per_path).ok
 
-        nodes = shortcut_paths(paths, check, o.shorten, deadline, active=solved[idx])
+        # the rounds' share of the time the call took so far (the first call always made)
+        budget = (None if o.shorten_time is None or t0 is None
+                  else t + float(o.shorten_time) * (t - t0))
+        nodes = shortcut_paths(paths, check, o.shorten, deadline, active=solved[idx],
+                               budget=budget)
         cand = np.stack([respace(nd, W) for nd in nodes]).astype(self.npdt).astype(np.float64)
         cand[:, 0], cand[:, -1] = paths[:, 0], paths[:, -1]
         better = solved[idx] & (length_cost(cand) < length_cost(paths) * (1.0 - 1e-6))
@@ -409,8 +424,15 @@ class Planner:
             q = obj.paths.numpy().copy()
             q[b * n_starts] = cand[rows]
             obj.set_paths(q)
-            obj.set_active(np.ones(obj.P, bool))
-            obj.evaluate(grad=False)
+            # the costs of the replaced rows only (the others' collision queries skipped)
+            act = np.zeros(obj.P, bool)
+            act[b * n_starts] = True
+            obj.set_active(act)
+            skip, obj.skip_inactive = obj.skip_inactive, True
+            try:
+                obj.evaluate(grad=False)
+            finally:
+                obj.skip_inactive = skip
             res.path[b] = cand[rows]
             res.cost[b] = obj.total.numpy()[b * n_starts]
             res.length_cost[b] = obj.length.numpy()[b * n_starts]
