@@ -279,6 +279,8 @@ class PathCheck:
         what: (P, 2) int: sphere a and object b (world; -2 = the grid), or spheres a, b
             (self), -1 where not applicable.
         clearance: (P,) float [m] at that place.
+        evaluations: the configurations the check evaluated, all paths together (its
+            work: a skipped segment costs none).
     """
 
     ok: np.ndarray
@@ -292,6 +294,7 @@ class PathCheck:
     margin: float | None = None
     endpoint_margin: float | None = None
     self_margin: float | None = None
+    evaluations: int = 0
 
     def _clearance_text(self, i: int, self_pair: bool) -> str:
         """``clearance 3.00 mm`` and, when positive, the margin it is below."""
@@ -665,7 +668,8 @@ class MotionCheck:
                          where=out["where"].numpy()[:K], what=out["what"].numpy()[:K],
                          clearance=out["dist"].numpy()[:K], robot=self.robot, world=self.world,
                          margin=margin, endpoint_margin=endpoint_margin,
-                         self_margin=self_margin)
+                         self_margin=self_margin,
+                         evaluations=int(out["seg"].n.numpy()[:K].sum()))
 
 
 #: numbers of waypoints whose output buffers a MotionCheck keeps (:meth:`MotionCheck._outputs`)

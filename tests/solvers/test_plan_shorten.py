@@ -159,9 +159,14 @@ def test_shortcut_budget_and_min_gain():
 
     import time
     # a budget already spent: the first call is still made (and takes the jump)
-    out = shortcut_paths(path[None], accept, rounds=4, budget=time.perf_counter() - 1.0)[0]
+    out = shortcut_paths(path[None], accept, rounds=4, budget=lambda: True)[0]
     assert len(calls) == 1
     np.testing.assert_allclose(out, path[[0, -1]])
+    # spent after two calls: the second round's call is not made
+    calls.clear()
+    shortcut_paths(path[None], lambda s, p: calls.append(p) or (np.arange(len(s)) % p == 1),
+                   rounds=4, budget=lambda: len(calls) >= 2)
+    assert len(calls) == 2
     # a deadline already passed: nothing
     calls.clear()
     out = shortcut_paths(path[None], accept, rounds=4, deadline=time.perf_counter() - 1.0)[0]
@@ -191,12 +196,16 @@ def test_shortcut_budget_and_min_gain():
 def test_default_path_is_shortened_and_feasible(world):
     first = PL.plan("planar4", world, S4, G4, shorten=0, **OPTS)
     short = PL.plan("planar4", world, S4, G4, **OPTS)
-    assert PL.PlanOptions().shorten == 4
-    assert first.feasible[0] and short.feasible[0]
+    full = PL.plan("planar4", world, S4, G4, shorten_budget=None, **OPTS)
+    assert PL.PlanOptions().shorten == 4 and PL.PlanOptions().shorten_budget == 0.1
+    assert first.feasible[0] and short.feasible[0] and full.feasible[0]
     assert first.length_before is None  # shortening off
     assert short.length_before[0] == pytest.approx(first.length_cost[0])
-    # the detour of the first feasible start is cut: much shorter
-    assert short.length_cost[0] < 0.8 * first.length_cost[0]
+    # the detour of the first feasible start is cut: shorter within the default budget
+    # (its first check call), much shorter without a budget
+    assert short.length_cost[0] < 0.9 * first.length_cost[0]
+    assert full.length_cost[0] <= short.length_cost[0] + 1e-6
+    assert full.length_cost[0] < 0.8 * first.length_cost[0]
     assert length_cost(short.path[0]) == pytest.approx(short.length_cost[0], rel=1e-4)
     assert "shorten" in short.timings
     # same start, goal, waypoints; the same start won at the same iteration
@@ -280,6 +289,64 @@ def test_batch_of_worlds():
 def test_bad_shorten(bad):
     with pytest.raises((ValueError, TypeError), match="shorten"):
         PL.PlanOptions(shorten=bad).validate()
+
+
+@pytest.mark.parametrize("bad", [0, -0.5, float("nan"), float("inf"), "x"])
+def test_bad_shorten_budget(bad):
+    with pytest.raises((ValueError, TypeError), match="shorten_budget"):
+        PL.PlanOptions(shorten_budget=bad).validate()
+
+
+def test_budget_counts_evaluations_not_seconds(world, monkeypatch):
+    """The default budget is deterministic (the same path twice); a smaller one makes
+    fewer check evaluations, never fewer than the first call's; None spends the most."""
+    from jwarp.world.motion import MotionCheck
+
+    spent: list[int] = []
+    original = MotionCheck.check
+
+    def counting(self, *args, **kwargs):
+        r = original(self, *args, **kwargs)
+        if kwargs.get("group"):  # the shortcuts' calls
+            spent[-1] += r.evaluations
+        return r
+
+    monkeypatch.setattr(MotionCheck, "check", counting)
+    runs = {}
+    for budget in (1e-6, 0.1, 0.1, None):
+        spent.append(0)
+        runs.setdefault(budget, []).append(
+            (PL.plan("planar4", world, S4, G4, shorten_budget=budget, **OPTS), spent[-1]))
+    (a, ea), (b, eb) = runs[0.1]
+    np.testing.assert_array_equal(a.path, b.path)
+    assert ea == eb > 0
+    (tiny, et), = runs[1e-6]
+    (free, ef), = runs[None]
+    assert 0 < et <= ea <= ef
+    assert tiny.length_cost[0] <= tiny.length_before[0]  # never longer
+    assert a.length_cost[0] < a.length_before[0]
+    assert free.length_cost[0] <= a.length_cost[0] + 1e-6
+
+
+def test_near_straight_paths_are_left_alone(world, monkeypatch):
+    import jwarp.solvers.planning.shorten as SH
+    from jwarp.solvers.planning.planner import NEAR_STRAIGHT
+
+    pl = PL.Planner("planar4", world, 1, PL.PlanOptions(shorten=0, **OPTS))
+    res = pl.plan(S4, G4)
+    assert res.length_cost[0] > 1.5
+    calls = []
+    original = SH.shortcut_paths
+    monkeypatch.setattr(SH, "shortcut_paths",
+                        lambda *a, **k: calls.append(1) or original(*a, **k))
+    pl.options.shorten = 4
+    path = res.path.copy()
+    res.length_cost[0] = NEAR_STRAIGHT  # as if the first feasible path were nearly straight
+    pl._shorten(pl._buffers, res, None)
+    assert not calls and np.array_equal(res.path, path)
+    res.length_cost[0] = NEAR_STRAIGHT + 0.01
+    pl._shorten(pl._buffers, res, None)
+    assert calls
 
 
 def test_time_limit_bounds_it(world):

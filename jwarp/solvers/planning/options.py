@@ -147,13 +147,17 @@ class PlanOptions:
             a lower length cost U_l. ``time_limit`` bounds it too. The multi-starts stop
             at the first feasible one, which may be a long detour (a random via point):
             this makes the default path short at little extra time. A round that
-            shortens no path by more than 0.1 % ends the rounds, and a path within 0.1 %
-            of the straight line's U_l is left as it is.
-        shorten_time: the rounds' time budget, as a share of the time the call took
-            before them (> 0), or None: only ``shorten`` and ``time_limit`` bound them.
-            Checked before every check call after the first (so the first jumps of every
-            path are always tried); the final check of the shortened path and its costs
-            come after it.
+            shortens no path by more than 0.1 % ends the rounds, and a path whose U_l is
+            at most 1.05 (:data:`jwarp.solvers.planning.planner.NEAR_STRAIGHT`) is left
+            as it is.
+        shorten_budget: the work of the rounds after their first check call, as a share
+            of the optimisation's (> 0; default 0.1): they stop once their checks have
+            evaluated that share of the configurations whose collision cost the
+            multi-starts evaluated (iterations x paths x substeps; the fallback's work not
+            counted). None: only ``shorten`` and ``time_limit`` bound them. Counted in
+            evaluations, not seconds: the same path on every machine. The first check
+            call (the first jumps of every path), the final check of the shortened path
+            and its costs are outside it.
         allow_no_collision: plan without a collision model: a robot without collision
             spheres (every path is then collision-free) or in self-collision at its home
             configurations is accepted; False (default): either is a ValueError naming the
@@ -191,7 +195,7 @@ class PlanOptions:
     rrt: Any = None
     allow_no_collision: bool = False
     shorten: int = 4
-    shorten_time: float | None = None
+    shorten_budget: float | None = 0.1
 
     def __post_init__(self) -> None:
         self.fallback = fallback_word(self.fallback)
@@ -230,11 +234,11 @@ class PlanOptions:
                                  f"({margin:g} m): it only relaxes the margin near the start "
                                  f"and goal, so it would be ignored; give a margin of at least "
                                  f"{em:g} m, or an endpoint margin <= {margin:g} m")
-        if self.shorten_time is not None:
-            st = real_number(self.shorten_time, "shorten_time")
-            if not (math.isfinite(st) and st > 0):
-                raise ValueError(f"shorten_time: expected a share > 0 of the call's time, or "
-                                 f"None, got {self.shorten_time!r}")
+        if self.shorten_budget is not None:
+            sb = real_number(self.shorten_budget, "shorten_budget")
+            if not (math.isfinite(sb) and sb > 0):
+                raise ValueError(f"shorten_budget: expected a share > 0 of the optimisation's "
+                                 f"work, or None, got {self.shorten_budget!r}")
         if self.eps is not None:
             eps = real_number(self.eps, "eps")
             if not (math.isfinite(eps) and eps > 0):

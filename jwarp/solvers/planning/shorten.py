@@ -67,7 +67,7 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
                    rounds: int, deadline: float | None = None,
                    active: np.ndarray | None = None, max_points: int = 21,
                    max_list: int | None = None, min_gain: float | None = None,
-                   budget: float | None = None) -> list[np.ndarray]:
+                   budget: Callable[[], bool] | None = None) -> list[np.ndarray]:
     """Shortcuts of feasible paths (K, W, n_dof), all at once (greedy string pulling).
 
     Each round takes every path's corners (:func:`corners`) and, where that makes at most
@@ -90,8 +90,10 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
     Ends after ``rounds`` rounds, when no path's round shortened it by more than
     ``min_gain`` (relative; None: :data:`MIN_ROUND_GAIN`), or at ``deadline`` (``time.perf_counter()``; checked
     before every call: a round cut short keeps its jumps so far and the path after
-    them). ``budget`` (``time.perf_counter()``): as ``deadline``, but the first call is
-    always made (a soft limit: the first jumps of every path are always tried).
+    them). ``budget``: a function, True once the budget is spent (e.g. the evaluations
+    of the checks so far against a share of the planner's: deterministic), asked before
+    every call but the first (the first jumps of every path are always tried); a round
+    cut short by it ends as by ``deadline``.
     ``active`` (K,) bool: the paths to shorten (None: all); the others are
     returned as their corners.
 
@@ -106,7 +108,7 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
     active = (np.ones(K, bool) if active is None else np.array(active, bool).reshape(K))
     calls = 0
     for _ in range(int(rounds)):
-        if not active.any() or _late(deadline) or (calls and _late(budget)):
+        if not active.any() or _late(deadline) or _spent(calls, budget):
             break
         pts = [_refined(nd) if 2 * len(nd) - 1 <= max_points else nd for nd in nodes]
         cums = [np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
@@ -115,7 +117,7 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
         kept: list[list[int]] = [[0] for _ in range(K)]
         going = active & np.array([len(p) >= 3 for p in pts])
         while going.any():
-            if _late(deadline) or (calls and _late(budget)):
+            if _late(deadline) or _spent(calls, budget):
                 for k in map(int, np.nonzero(going)[0]):  # the rest of the path as it is
                     kept[k].extend(range(int(at[k]) + 1, len(pts[k])))
                 break
@@ -161,6 +163,10 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
 
 def _late(deadline: float | None) -> bool:
     return deadline is not None and time.perf_counter() >= deadline
+
+
+def _spent(calls: int, budget: Callable[[], bool] | None) -> bool:
+    return calls > 0 and budget is not None and bool(budget())
 
 
 def _entries(p: np.ndarray, cum: np.ndarray, a: int, max_list: int) -> np.ndarray:
