@@ -62,7 +62,7 @@ problem an RRT-Connect path as the seed of one more optimisation (after the iter
 half the time limit); ``--fallback none`` does not. ``--shorten N`` (default 4; 0: off) pulls
 the solved path straight in N rounds of shortcuts proven by the exact check (with
 ``--stop-when-solved``), the rounds after the first check within ``--shorten-budget`` (their
-check evaluations at most 0.1 of the optimisation's collision evaluations; ``none``: no
+check evaluations at most 0.5 of the optimisation's collision evaluations; ``none``: no
 budget).
 The output prints the path's length cost against the straight line's (and before the
 shortening). The output says why the planner
@@ -945,10 +945,10 @@ def add_subcommands(sub: Any) -> None:
                    help="rounds of shortcuts of the solved path, proven by the exact check "
                         "(default 4; 0: the first feasible path as it is; with "
                         "--stop-when-solved only)")
-    s.add_argument("--shorten-budget", type=_shorten_budget, default=0.1,
+    s.add_argument("--shorten-budget", type=_shorten_budget, default=0.5,
                    metavar="SHARE|none",
                    help="work of the shortcut rounds after the first check, as a share of "
-                        "the optimisation's collision evaluations (default 0.1; none: only "
+                        "the optimisation's collision evaluations (default 0.5; none: only "
                         "--shorten bounds them)")
     s.add_argument("--endpoint-margin", type=real_arg("--endpoint-margin", 0.0, unit=" [m]"),
                    default=None, metavar="M",

@@ -88,12 +88,12 @@ def test_bad_values_name_the_option(capsys, block, extra, option):
 
 
 def test_shorten_budget_values(capsys, block):
-    """--shorten-budget SHARE|none reaches PlanOptions.shorten_budget (default 0.1)."""
+    """--shorten-budget SHARE|none reaches PlanOptions.shorten_budget (default 0.5)."""
     from jwarp.cli.main import build_parser
 
     p = build_parser()
     base = plan_args(block)
-    assert p.parse_args(base).shorten_budget == 0.1
+    assert p.parse_args(base).shorten_budget == 0.5
     assert p.parse_args(base + ["--shorten-budget", "none"]).shorten_budget is None
     assert p.parse_args(base + ["--shorten-budget", "0.5"]).shorten_budget == 0.5
     common = ("--starts", "8", "--iterations", "300", "--step", "0.05", "--substeps", "8",

@@ -197,7 +197,7 @@ def test_default_path_is_shortened_and_feasible(world):
     first = PL.plan("planar4", world, S4, G4, shorten=0, **OPTS)
     short = PL.plan("planar4", world, S4, G4, **OPTS)
     full = PL.plan("planar4", world, S4, G4, shorten_budget=None, **OPTS)
-    assert PL.PlanOptions().shorten == 4 and PL.PlanOptions().shorten_budget == 0.1
+    assert PL.PlanOptions().shorten == 4 and PL.PlanOptions().shorten_budget == 0.5
     assert first.feasible[0] and short.feasible[0] and full.feasible[0]
     assert first.length_before is None  # shortening off
     assert short.length_before[0] == pytest.approx(first.length_cost[0])
@@ -313,11 +313,11 @@ def test_budget_counts_evaluations_not_seconds(world, monkeypatch):
 
     monkeypatch.setattr(MotionCheck, "check", counting)
     runs = {}
-    for budget in (1e-6, 0.1, 0.1, None):
+    for budget in (1e-6, 0.5, 0.5, None):
         spent.append(0)
         runs.setdefault(budget, []).append(
             (PL.plan("planar4", world, S4, G4, shorten_budget=budget, **OPTS), spent[-1]))
-    (a, ea), (b, eb) = runs[0.1]
+    (a, ea), (b, eb) = runs[0.5]
     np.testing.assert_array_equal(a.path, b.path)
     assert ea == eb > 0
     (tiny, et), = runs[1e-6]

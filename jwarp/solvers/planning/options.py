@@ -151,7 +151,7 @@ class PlanOptions:
             at most 1.05 (:data:`jwarp.solvers.planning.planner.NEAR_STRAIGHT`) is left
             as it is.
         shorten_budget: the work of the rounds after their first check call, as a share
-            of the optimisation's (> 0; default 0.1): they stop once their checks have
+            of the optimisation's (> 0; default 0.5): they stop once their checks have
             evaluated that share of the configurations whose collision cost the
             multi-starts evaluated (iterations x paths x substeps; the fallback's work not
             counted). None: only ``shorten`` and ``time_limit`` bound them. Counted in
@@ -195,7 +195,7 @@ class PlanOptions:
     rrt: Any = None
     allow_no_collision: bool = False
     shorten: int = 4
-    shorten_budget: float | None = 0.1
+    shorten_budget: float | None = 0.5
 
     def __post_init__(self) -> None:
         self.fallback = fallback_word(self.fallback)
