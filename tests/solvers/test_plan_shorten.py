@@ -147,6 +147,11 @@ def test_shortcut_lists_farthest_first_and_one_call_walks():
     np.testing.assert_allclose(
         shortcut_paths(path[None], count, rounds=1, max_points=0, max_list=2)[0], out)
     assert len(calls) > 1 and max(calls) <= 7
+    # a list shorter than the first start's shortcuts still holds them all (never none)
+    calls.clear()
+    np.testing.assert_allclose(
+        shortcut_paths(path[None], count, rounds=1, max_points=0, max_list=1)[0], out)
+    assert calls[0] == 7  # the 7 shortcuts from point 0
 
 
 def test_shortcut_budget_and_min_gain():

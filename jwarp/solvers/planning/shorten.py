@@ -181,7 +181,7 @@ def _entries(p: np.ndarray, cum: np.ndarray, a: int, max_list: int) -> np.ndarra
         j = np.arange(s + 2, len(p))
         gain = cum[j] - cum[s] - np.linalg.norm(p[j] - p[s], axis=1)
         j = j[gain > tol][::-1]
-        if out and size + len(j) > max_list:
+        if size and size + len(j) > max_list:
             break
         out.append(np.stack([np.full(len(j), s), j], axis=1))
         size += len(j)
