@@ -59,8 +59,11 @@ start is feasible (``--stop-when-solved``, the default; ``--no-stop-when-solved`
 every start until it is feasible or out of iterations), after ``--iterations`` or after
 ``--time-limit S`` seconds (default: none). ``--fallback rrt`` (default) gives an unsolved
 problem an RRT-Connect path as the seed of one more optimisation (after the iterations or
-half the time limit); ``--fallback none`` does not. ``--shorten N`` (default 4; 0: off) pulls the solved path
-straight in N rounds of shortcuts proven by the exact check (with ``--stop-when-solved``).
+half the time limit); ``--fallback none`` does not. ``--shorten N`` (default 4; 0: off) pulls
+the solved path straight in N rounds of shortcuts proven by the exact check (with
+``--stop-when-solved``), the rounds after the first check within ``--shorten-budget`` (their
+check evaluations at most 0.5 of the optimisation's collision evaluations; ``none``: no
+budget).
 The output prints the path's length cost against the straight line's (and before the
 shortening). The output says why the planner
 stopped (``stop_reason``: solved, time_limit, iterations, all_done) and which stage solved
@@ -273,6 +276,13 @@ def _fallback(text: str) -> str | None:
     return None if v == "none" else v
 
 
+def _shorten_budget(text: str) -> float | None:
+    """``--shorten-budget SHARE|none``: a share > 0 of the optimisation's work, or none."""
+    if text.strip().lower() == "none":
+        return None
+    return real_arg("--shorten-budget", 0.0, lo_open=True)(text)
+
+
 def _weights() -> Any:
     """The weights of U_path the CLI plans with (the planner's default PathWeights)."""
     from jwarp.solvers.planning import PathWeights
@@ -399,7 +409,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         budget = dict(stop_when_solved=args.stop_when_solved, time_limit=args.time_limit,
                       fallback=args.fallback, endpoint_margin=args.endpoint_margin,
                       self_margin=args.self_margin, allow_no_collision=args.no_collision,
-                      shorten=args.shorten)
+                      shorten=args.shorten, shorten_budget=args.shorten_budget)
         if net is not None:
             opts = PlanOptions(n_starts=args.starts, iterations=args.iterations,
                                n_waypoints=args.waypoints, n_substeps=args.substeps,
@@ -935,6 +945,11 @@ def add_subcommands(sub: Any) -> None:
                    help="rounds of shortcuts of the solved path, proven by the exact check "
                         "(default 4; 0: the first feasible path as it is; with "
                         "--stop-when-solved only)")
+    s.add_argument("--shorten-budget", type=_shorten_budget, default=0.5,
+                   metavar="SHARE|none",
+                   help="work of the shortcut rounds after the first check, as a share of "
+                        "the optimisation's collision evaluations (default 0.5; none: only "
+                        "--shorten bounds them)")
     s.add_argument("--endpoint-margin", type=real_arg("--endpoint-margin", 0.0, unit=" [m]"),
                    default=None, metavar="M",
                    help="clearance [m] of start, goal and the first and last segment, at most "

@@ -8,17 +8,23 @@ when the environment variable ``WARP_CACHE_PATH`` is set. A binary is found agai
 hash of its kernel's source and options, so a cache stays valid until jwarp or Warp
 changes.
 
-:func:`install_compile_notice` (called by :func:`jwarp.core.arrays.init_warp`) makes the
-first compilation of a process print one line on stderr::
+:func:`install_compile_notice` (called by :func:`jwarp.core.arrays.init_warp`) makes every
+compilation of a jwarp kernel module print one line on stderr, naming the module, its
+kernels, the device and why it compiles::
 
-    jwarp: compiling jwarp kernels for cpu (first run only, cached in /root/.cache/warp/1.19.0)
+    jwarp: compiling kernel module motion_f64 (prep, segment, ...) for cpu: first use (not in the kernel cache /root/.cache/warp/1.19.0 yet; kept there for later runs)
 
-and, on a terminal, a progress bar (tqdm) while a compilation takes more than 1 s.
+The reasons (:func:`compile_reason`): ``first use`` (no variant of these kernels in the
+cache), ``new specialisation`` (the cache holds other variants of the same kernels: they
+are built per dtype, robot size or constant, and a changed jwarp source is a new variant
+too) or ``changed`` (the cache holds this module for other build options or another
+Warp). On a terminal a progress bar (tqdm) shows while a compilation takes more than 1 s.
 ``JWARP_COMPILE_NOTICE=0`` silences both. Loads from the cache print nothing. The notice
 wraps Warp's ``Module._compile`` (which Warp calls for every module load not yet in
 memory, cached or not) and decides "compile" the way Warp does: the module's binary is
 not in the cache. Should a later Warp rename that method, the notice silently does
-nothing; the kernels work as before.
+nothing; the kernels work as before. :func:`loaded_modules` lists the cache folders of
+the jwarp modules a process loaded (compiled or from the cache).
 
 :func:`compile_progress` shows one bar over a known number of module loads
 (``jwarp warmup``).
@@ -39,7 +45,8 @@ import warp as wp
 from jwarp.utils.warp_init import init_quietly
 
 __all__ = ["CACHE_ENV", "NOTICE_ENV", "KernelCacheWarning", "cache_dir", "compile_progress",
-           "compiled_modules", "ensure_cache_dir", "install_compile_notice", "notice_enabled"]
+           "compile_reason", "compiled_modules", "ensure_cache_dir", "install_compile_notice",
+           "loaded_modules", "notice_enabled"]
 
 #: Warp's environment variable for the kernel cache's parent folder
 CACHE_ENV = "WARP_CACHE_PATH"
@@ -51,7 +58,7 @@ BAR_DELAY = 1.0
 _NO_BAR = object()  # the bar could not be made (no tqdm): the line suffices
 
 _LOCK = threading.RLock()
-_STATE: dict[str, Any] = {"installed": False, "announced": False, "compiled": [],
+_STATE: dict[str, Any] = {"installed": False, "compiled": [], "loaded": [],
                           "active": 0, "bar": None, "progress": None, "ticker": None}
 
 
@@ -125,6 +132,40 @@ def compiled_modules() -> list[str]:
         return list(_STATE["compiled"])
 
 
+def loaded_modules() -> list[str]:
+    """The kernel-cache folders (``wp_<module>_<hash>``) of the jwarp modules this process
+    loaded, compiled or from the cache, in order (a module once per folder)."""
+    with _LOCK:
+        return list(_STATE["loaded"])
+
+
+def compile_reason(output_dir: str) -> str:
+    """Why the module of the cache folder ``output_dir`` (``<cache>/wp_<name>_<hash>``,
+    not there yet) compiles, judged from the cache's other folders: ``changed`` (the
+    module is there under another hash: other build options or another Warp), ``new
+    specialisation`` (other variants of its kernels are there: jwarp builds them per
+    dtype, robot size or constant; a changed source is a new variant too) or ``first
+    use``."""
+    cache, folder = os.path.split(os.path.normpath(os.fspath(output_dir)))
+    stem = folder.rsplit("_", 1)[0] if "_" in folder else folder  # wp_<name>
+    # a kernel's module name ends with the hash of its specialisation: wp_<key>_<hash8>
+    head, _, tail = stem.rpartition("_")
+    key = head if len(tail) == 8 and all(c in "0123456789abcdef" for c in tail) else stem
+    try:
+        others = [f for f in os.listdir(cache) if f != folder]
+    except OSError:
+        others = []
+    if any(f.startswith(stem + "_") for f in others):
+        return ("changed (the kernel cache holds this module for other build options or "
+                "another Warp)")
+    variants = sum(1 for f in others if f.startswith(key + "_"))
+    if variants:
+        return (f"new specialisation (the kernel cache holds {variants} other variant"
+                f"{'s' if variants > 1 else ''} of these kernels: another dtype, robot size "
+                f"or constant, or a changed jwarp)")
+    return "first use"
+
+
 def _is_jwarp(module: Any) -> bool:
     kernels = getattr(module, "kernels", None) or {}
     try:
@@ -181,12 +222,14 @@ def _ticker() -> None:
                 bar.refresh()
 
 
-def _begin(module: Any, device: Any) -> None:
+def _begin(module: Any, device: Any, output_dir: Any) -> None:
     with _LOCK:
-        if not _STATE["announced"] and _STATE["progress"] is None:  # warmup: its own header
-            _STATE["announced"] = True
-            print(f"jwarp: compiling jwarp kernels for {_device_name(device)} (first run only, "
-                  f"cached in {wp.config.kernel_cache_dir})", file=sys.stderr, flush=True)
+        if _STATE["progress"] is None:  # warmup: its own header and bar
+            why = compile_reason(os.fspath(output_dir)) if output_dir is not None else "first use"
+            name = str(getattr(module, "name", "?"))
+            print(f"jwarp: compiling kernel module {name} ({_kernel_names(module)}) for "
+                  f"{_device_name(device)}: {why} (kept in the kernel cache "
+                  f"{wp.config.kernel_cache_dir} for later runs)", file=sys.stderr, flush=True)
         _STATE["active"] += 1
         _STATE["what"] = _kernel_names(module)
         if _STATE["active"] == 1:
@@ -224,13 +267,18 @@ def _wrap(original: Callable[..., bool]) -> Callable[..., bool]:
             ours = False
         if not ours:
             return original(self, *args, **kwargs)
+        if out_dir is not None:
+            with _LOCK:
+                folder = os.path.basename(os.path.normpath(os.fspath(out_dir)))
+                if folder not in _STATE["loaded"]:
+                    _STATE["loaded"].append(folder)
         if cached:
             result = original(self, *args, **kwargs)
             if progress is not None:
                 progress.update(1)
             return result
         if notice_enabled():
-            _begin(self, bound.get("device"))
+            _begin(self, bound.get("device"), out_dir)
         else:
             with _LOCK:
                 _STATE["active"] += 1

@@ -22,8 +22,12 @@ thread per core oversubscribes the cores (issue 39: a torch training epoch took 
 beside another job against 0.7 s quiet, 3-4x the CPU time). ``JWARP_THREADS`` (a positive
 integer) fixes the count; unset, it is the CPUs this process may run on
 (:func:`available_cpus`: the affinity mask, a cgroup CPU quota) less those other processes
-keep busy (the 1-minute load average beyond this process's own thread), at least 1.
-:func:`torch_threads` holds torch's pool at that count inside a block.
+keep busy (the 1-minute load average, or the threads runnable right now where more
+(:func:`runnable_others`: a job started seconds ago has not raised the average yet),
+beyond this process's own thread), at least 1. :func:`torch_threads` holds torch's pool at
+that count inside a block; the training loops ask again every epoch
+(:func:`refresh_torch_threads`), so a job started beside a long training takes its
+threads down.
 """
 
 from __future__ import annotations
@@ -35,12 +39,15 @@ import os
 from typing import Any, Callable, Iterator, TypeVar
 
 __all__ = ["BLAS_THREADS_ENV", "DEFAULT_BLAS_THREADS", "THREADS_ENV", "available_cpus",
-           "blas_thread_limit", "blas_threads", "cpu_threads", "limit_blas", "torch_threads"]
+           "blas_thread_limit", "blas_threads", "cpu_threads", "limit_blas",
+           "refresh_torch_threads", "runnable_others", "torch_threads"]
 
 #: environment variable overriding the BLAS threads inside jwarp's solvers
 BLAS_THREADS_ENV = "JWARP_BLAS_THREADS"
 #: environment variable fixing the threads of jwarp's CPU-parallel work (:func:`cpu_threads`)
 THREADS_ENV = "JWARP_THREADS"
+#: the kernel's load figures (its 4th field: threads runnable now / all threads)
+LOADAVG = "/proc/loadavg"
 #: BLAS threads inside jwarp's solvers when ``JWARP_BLAS_THREADS`` is unset
 DEFAULT_BLAS_THREADS = 1
 
@@ -129,11 +136,32 @@ def available_cpus() -> int:
     return max(1, n)
 
 
+def runnable_others(samples: int = 3) -> int | None:
+    """Threads of other processes runnable right now: the running count of
+    ``/proc/loadavg`` (which counts the reader) less one, the least of ``samples`` reads
+    1 ms apart (a thread that ran for an instant is not a load); None where there is no
+    ``/proc/loadavg``."""
+    import time
+
+    best: int | None = None
+    for k in range(max(1, samples)):
+        try:
+            with open(LOADAVG) as f:
+                running = int(f.read().split()[3].split("/")[0])
+        except (OSError, ValueError, IndexError):
+            return None
+        best = running - 1 if best is None else min(best, running - 1)
+        if k + 1 < samples:
+            time.sleep(0.001)
+    return max(0, best or 0)
+
+
 def cpu_threads(value: str | None = None, load: float | None = None) -> int:
     """Threads of jwarp's CPU-parallel work: ``value`` (default ``$JWARP_THREADS``), a
     positive integer, wins; unset or empty: :func:`available_cpus` less the CPUs other
-    processes keep busy, ``load`` (default: the 1-minute load average) beyond this
-    process's own thread (1), rounded; at least 1, at most :func:`available_cpus`.
+    processes keep busy: ``load`` beyond this process's own thread (1), rounded; ``load``
+    None: the 1-minute load average, or :func:`runnable_others` + 1 where that is more (a
+    job started seconds ago); at least 1, at most :func:`available_cpus`.
 
     Raises:
         ValueError: naming ``JWARP_THREADS`` for anything but a positive integer.
@@ -154,8 +182,22 @@ def cpu_threads(value: str | None = None, load: float | None = None) -> int:
             load = os.getloadavg()[0]
         except (AttributeError, OSError):  # Windows
             load = 0.0
+        now = runnable_others()
+        if now is not None:
+            load = max(float(load), now + 1.0)
     others = max(0.0, float(load) - 1.0)
     return int(min(cpus, max(1, math.floor(cpus - others + 0.5))))
+
+
+def refresh_torch_threads() -> int:
+    """Inside :func:`torch_threads` (a training loop, every epoch): torch's pool at
+    :func:`cpu_threads` again, which follows the load of now. Returns the count."""
+    import torch
+
+    count = cpu_threads()
+    if torch.get_num_threads() != count:
+        torch.set_num_threads(count)
+    return count
 
 
 @contextlib.contextmanager

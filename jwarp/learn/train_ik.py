@@ -52,7 +52,7 @@ from jwarp.learn.checkpoint import check_weights, read_checkpoint, save_checkpoi
 from jwarp.learn.ik_data import DEFAULT_MIX, IKData, check_mix, make_ik_data
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.torch_costs import ik_objective, u_ik
-from jwarp.core.threads import torch_threads
+from jwarp.core.threads import refresh_torch_threads, torch_threads
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver
 
@@ -443,6 +443,7 @@ def _epochs(trainer: IKTrainer, progress: bool, callback: Callable | None
         g["lr"] = o.lr * o.lr_decay ** trainer.epoch
     while trainer.epoch < o.epochs:
         e = trainer.epoch + 1
+        refresh_torch_threads()  # a job started beside the training: fewer threads
         rng = np.random.default_rng((o.seed, e))
         t0 = time.perf_counter()
         sums: dict = {}

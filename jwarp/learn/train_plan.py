@@ -43,7 +43,7 @@ import numpy as np
 import torch
 
 from jwarp.core.arrays import device_name
-from jwarp.core.threads import torch_threads
+from jwarp.core.threads import refresh_torch_threads, torch_threads
 from jwarp.learn.plan_net import (PlanNet, PlanNetConfig, axis_symmetries, encode_paths,
                                   symmetric_bps)
 from jwarp.model.registry import robot as get_robot
@@ -571,6 +571,7 @@ def _train_plan(options: TrainPlanOptions, data: PlanSamples, val: PlanSamples |
               f"{len(data)} samples)")
     weights = None
     for e in range(1, options.epochs + 1):
+        refresh_torch_threads()  # a job started beside the training: fewer threads
         t0 = time.perf_counter()
         n_hard = 0
         if options.boosting and e > 1:

@@ -279,6 +279,8 @@ class PathCheck:
         what: (P, 2) int: sphere a and object b (world; -2 = the grid), or spheres a, b
             (self), -1 where not applicable.
         clearance: (P,) float [m] at that place.
+        evaluations: the configurations the check evaluated, all paths together (its
+            work: a skipped segment costs none).
     """
 
     ok: np.ndarray
@@ -292,6 +294,7 @@ class PathCheck:
     margin: float | None = None
     endpoint_margin: float | None = None
     self_margin: float | None = None
+    evaluations: int = 0
 
     def _clearance_text(self, i: int, self_pair: bool) -> str:
         """``clearance 3.00 mm`` and, when positive, the margin it is below."""
@@ -401,7 +404,9 @@ class MotionCheck:
         self.last_launches = 0
         self._cap = 0
         self._cap_eval = 0
-        self._out: dict = {}
+        #: the output buffers per number of waypoints W (:meth:`_outputs`), the last used
+        #: last: a planner checks its W-waypoint paths and its shortcuts (W = 2) in turn
+        self._outs: OrderedDict[int, dict] = OrderedDict()
 
     # ------------------------------------------------------------------ data
     def _rows(self, n: int, m: int, dt: Any) -> wp.array:
@@ -454,11 +459,12 @@ class MotionCheck:
 
     def _outputs(self, K: int, W: int) -> dict:
         """The outputs for K paths of W waypoints: views of buffers kept for the largest
-        K seen with this W (an RRT's varying edge batches reuse them)."""
-        o = self._out
-        if o.get("W") != W or o.get("cap", 0) < K:
+        K seen with this W (an RRT's varying edge batches reuse them; the buffers of the
+        last :data:`_OUT_KEEP` W are kept, so alternating W allocates nothing)."""
+        o = self._outs.get(W, {})
+        if o.get("cap", 0) < K:
             dev = self.device
-            cap = max(K, int(o.get("cap", 0) * 1.5) if o.get("W") == W else K)
+            cap = max(K, int(o.get("cap", 0) * 1.5))
             shape = (cap, W - 1)
             seg = self.k.Segments()
             seg.code = wp.empty(shape, dtype=wp.int32, device=dev)
@@ -470,7 +476,7 @@ class MotionCheck:
             seg.cov = wp.empty(shape, dtype=wp.float64, device=dev)
             seg.left = wp.empty(shape, dtype=wp.int32, device=dev)
             seg.claim = wp.empty(shape, dtype=wp.int32, device=dev)
-            o = self._out = dict(
+            o = dict(
                 W=W, cap=cap, seg=seg,
                 bad=wp.zeros(cap, dtype=wp.int32, device=dev),
                 ok_segments=wp.zeros(cap, dtype=wp.int32, device=dev),
@@ -480,6 +486,10 @@ class MotionCheck:
                 where=wp.empty(cap, dtype=wp.float64, device=dev),
                 what=wp.empty((cap, 2), dtype=wp.int32, device=dev),
                 dist=wp.empty(cap, dtype=wp.float64, device=dev))
+        self._outs[W] = o
+        self._outs.move_to_end(W)
+        while len(self._outs) > _OUT_KEEP:
+            self._outs.popitem(last=False)
         return o
 
     # ------------------------------------------------------------------ check
@@ -619,10 +629,14 @@ class MotionCheck:
 
     def check(self, paths: Any, *, margin: float = 0.0,
               endpoint_margin: float | None = None, self_margin: float = 0.0,
-              world_group: int = 0) -> PathCheck:
+              world_group: int = 0, group: int = 0) -> PathCheck:
         """Check ``paths`` (W, n_dof) or (P, W, n_dof) (numpy or Warp; rad or m) with
         ``margin`` [m] (>= 0) from the world, ``self_margin`` [m] between the robot's own
         spheres and ``endpoint_margin`` (None: = margin) on the first and last segment.
+        ``group`` > 0: paths ``p`` of one group ``p // group`` need one proven path: once
+        one is, the group's others not yet checked are skipped (not ok; on the CPU the
+        paths are checked in order, so the first feasible path of each group is the one
+        proven; on a GPU a later one may be). ``world_group``: as :meth:`launch`.
         Returns a :class:`PathCheck` (P results; one for a single path)."""
         margin = _check_margin(margin, "margin")
         self_margin = _check_margin(self_margin, "self_margin")
@@ -646,14 +660,20 @@ class MotionCheck:
                          device=self.device)
         K = p.shape[0]
         idx: wp.array = wp.array(np.arange(K, dtype=np.int32), dtype=wp.int32, device=self.device)
+        if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or group < 0:
+            raise ValueError(f"group: expected an integer >= 0, got {group!r}")
         out = self.launch(p, idx, K, margin=margin, endpoint_margin=endpoint_margin,
-                          self_margin=self_margin, world_group=world_group)
+                          self_margin=self_margin, world_group=world_group, group=int(group))
         return PathCheck(ok=out["ok"].numpy()[:K].astype(bool), code=out["code"].numpy()[:K],
                          where=out["where"].numpy()[:K], what=out["what"].numpy()[:K],
                          clearance=out["dist"].numpy()[:K], robot=self.robot, world=self.world,
                          margin=margin, endpoint_margin=endpoint_margin,
-                         self_margin=self_margin)
+                         self_margin=self_margin,
+                         evaluations=int(out["seg"].n.numpy()[:K].sum()))
 
+
+#: numbers of waypoints whose output buffers a MotionCheck keeps (:meth:`MotionCheck._outputs`)
+_OUT_KEEP = 4
 
 _CHECKS: "OrderedDict[tuple, tuple]" = OrderedDict()
 

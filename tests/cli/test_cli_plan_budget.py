@@ -72,10 +72,33 @@ def test_text_output_names_the_stop_reason_and_stage(capsys, block):
     (["--time-limit", "1s"], "--time-limit"),
     (["--fallback", "prm"], "--fallback"),
     (["--fallback", ""], "--fallback"),
+    (["--shorten-budget", "0"], "--shorten-budget"),
+    (["--shorten-budget", "-1"], "--shorten-budget"),
+    (["--shorten-budget", "nan"], "--shorten-budget"),
+    (["--shorten-budget", "all"], "--shorten-budget"),
 ])
 def test_bad_values_name_the_option(capsys, block, extra, option):
     line = one_line_error(capsys, plan_args(block, *extra), option)
     if option == "--time-limit":
         assert "expected a number > 0 [s]" in line
+    elif option == "--shorten-budget":
+        assert "expected a number > 0" in line
     else:
         assert "expected 'rrt' or 'none'" in line
+
+
+def test_shorten_budget_values(capsys, block):
+    """--shorten-budget SHARE|none reaches PlanOptions.shorten_budget (default 0.5)."""
+    from jwarp.cli.main import build_parser
+
+    p = build_parser()
+    base = plan_args(block)
+    assert p.parse_args(base).shorten_budget == 0.5
+    assert p.parse_args(base + ["--shorten-budget", "none"]).shorten_budget is None
+    assert p.parse_args(base + ["--shorten-budget", "0.5"]).shorten_budget == 0.5
+    common = ("--starts", "8", "--iterations", "300", "--step", "0.05", "--substeps", "8",
+              "--fallback", "none")
+    free = plan_json(capsys, block, *common, "--shorten-budget", "none")
+    default = plan_json(capsys, block, *common)
+    assert free["costs"]["length"] <= default["costs"]["length"] + 1e-6
+    assert default["length_before_shortening"] >= default["costs"]["length"]

@@ -36,7 +36,8 @@ def test_affinity_and_load(monkeypatch):
     # another process keeps one CPU busy: one fewer; a loaded machine: one
     assert T.cpu_threads(load=2.0) == max(1, cpus - 1)
     assert T.cpu_threads(load=40.0) == 1
-    # the load average is read when not given
+    # the load average is read when not given (the threads runnable now: none here)
+    monkeypatch.setattr(T, "runnable_others", lambda samples=3: 0)
     monkeypatch.setattr(T.os, "getloadavg", lambda: (30.0, 30.0, 30.0))
     assert T.cpu_threads() == 1
     monkeypatch.setattr(T.os, "getloadavg", lambda: (0.0, 0.0, 0.0))
@@ -102,3 +103,39 @@ def test_warmup_jobs_follow_jwarp_threads(monkeypatch):
     monkeypatch.setattr(W, "kernel_modules", lambda *a: [])
     W.warmup("cpu", robots=[], families=["fk"], progress=False)
     assert seen["workers"] == 0  # one job: no pool
+
+
+def test_runnable_now_counts_a_job_the_average_has_not_seen(monkeypatch, tmp_path):
+    """A job started seconds ago: the 1-minute average is still low, the threads runnable
+    right now (/proc/loadavg's 4th field, the reader included) are not; the least of a
+    few reads counts (a thread that ran for an instant is no load)."""
+    monkeypatch.delenv(T.THREADS_ENV, raising=False)
+    monkeypatch.setattr(T.os, "sched_getaffinity", lambda pid: set(range(8)), raising=False)
+    monkeypatch.setattr(T, "available_cpus", lambda: 8)
+    monkeypatch.setattr(T.os, "getloadavg", lambda: (0.2, 0.1, 0.1))
+    f = tmp_path / "loadavg"
+    monkeypatch.setattr(T, "LOADAVG", str(f))
+    f.write_text("0.20 0.10 0.10 4/300 12345\n")  # this reader and 3 threads of a new job
+    assert T.runnable_others() == 3
+    assert T.cpu_threads() == 5
+    f.write_text("0.20 0.10 0.10 1/300 12345\n")  # quiet: every CPU
+    assert T.runnable_others() == 0 and T.cpu_threads() == 8
+    monkeypatch.setattr(T.os, "getloadavg", lambda: (6.0, 6.0, 6.0))  # the average wins
+    assert T.cpu_threads() == 3
+    f.write_text("garbage")
+    assert T.runnable_others() is None
+    monkeypatch.setattr(T.os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    assert T.cpu_threads() == 8
+
+
+def test_refresh_follows_the_load_inside_a_training(monkeypatch):
+    """refresh_torch_threads (every epoch of train_ik / train_plan) sets torch's pool to
+    cpu_threads() of now; the pool of before the block comes back after it."""
+    torch = pytest.importorskip("torch")
+    before = torch.get_num_threads()
+    monkeypatch.setenv(T.THREADS_ENV, "2")
+    with T.torch_threads() as n:
+        assert n == 2 == torch.get_num_threads()
+        monkeypatch.setenv(T.THREADS_ENV, "1")  # the machine got busy
+        assert T.refresh_torch_threads() == 1 == torch.get_num_threads()
+    assert torch.get_num_threads() == before

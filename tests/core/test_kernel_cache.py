@@ -21,10 +21,11 @@ import warp as wp
 import jwarp
 from jwarp.cli import main
 from jwarp.core.arrays import init_warp
-from jwarp.core.kernel_cache import cache_dir, compiled_modules
+from jwarp.core.kernel_cache import cache_dir
 
-NOTICE = re.compile(r"^jwarp: compiling jwarp kernels for cpu \(first run only, cached in "
-                    r"(?P<dir>.+)\)$")
+NOTICE = re.compile(r"^jwarp: compiling kernel module (?P<module>\S+) \((?P<kernels>[^)]*)\) "
+                    r"for cpu: (?P<why>.+) \(kept in the kernel cache (?P<dir>\S+) for later "
+                    r"runs\)$")
 
 # a kernel whose function claims a module name (`jwarp.*` for jwarp's own kernels)
 PROBE = r'''
@@ -85,17 +86,22 @@ def notice_lines(stderr: str) -> list[str]:
     return [ln for ln in stderr.splitlines() if ln.startswith("jwarp: compiling")]
 
 
-def test_notice_once_only_when_jwarp_compiles(tmp_path):
+def test_notice_names_each_module_only_when_jwarp_compiles(tmp_path):
     v1, v2, v3 = (float(int(uuid.uuid4().int % 10**6)) + 0.25 * i for i in range(3))
     tag = uuid.uuid4().hex[:8]
-    # two fresh jwarp kernels and a fresh kernel of another package: one line in all
+    # two fresh jwarp kernels and a fresh kernel of another package: a line for each of
+    # jwarp's, naming the module, its kernel and why (first use), none for the other
     out, err = run_probe([(f"a{tag}", "jwarp.probe_a", v1), (f"b{tag}", "jwarp.probe_b", v2),
                           (f"c{tag}", "userpkg.probe", v3)], tmp_path)
     cache, _, compiled, names = out.splitlines()
     lines = notice_lines(err)
-    assert len(lines) == 1, err
-    m = NOTICE.match(lines[0])
-    assert m and m.group("dir") == cache == str(tmp_path / wp.config.version)
+    assert len(lines) == 2, err
+    for line, name, t in zip(lines, names.split(",")[:2], "ab"):
+        m = NOTICE.match(line)
+        assert m, line
+        assert m.group("dir") == cache == str(tmp_path / wp.config.version)
+        assert m.group("module") == name and f"probe_{t}{tag}" in m.group("kernels")
+        assert m.group("why") == "first use", line
     for name in names.split(","):          # Warp did compile each: its folder is there now
         assert in_cache(cache, name)
     assert compiled.split(",") == names.split(",")[:2]   # jwarp's two, not the other one
@@ -215,3 +221,34 @@ def test_unusable_cache_path_warns_naming_it_and_falls_back(tmp_path, bad):
     assert not used.startswith(str(path)) and Path(used).is_dir()
     import shutil
     shutil.rmtree(Path(used).parent, ignore_errors=True)
+
+
+def test_compile_reason_first_use_specialisation_or_changed(tmp_path):
+    """The notice's reason, from the cache's other folders: none of these kernels (first
+    use), another variant of the kernels (new specialisation: another dtype, robot size or
+    constant; jwarp builds one module per variant), the same module under another hash
+    (changed: build options or Warp)."""
+    from jwarp.core.kernel_cache import compile_reason
+
+    key = "kernels__locals__segment_kernel"
+    target = tmp_path / f"wp_{key}_0123abcd_89abcde"
+    assert compile_reason(str(target)) == "first use"
+    (tmp_path / f"wp_{key}_fedc4321_1234567").mkdir()   # the float32 variant, say
+    (tmp_path / "wp_kernels__locals__prep_kernel_0123abcd_1111111").mkdir()  # another kernel
+    why = compile_reason(str(target))
+    assert why.startswith("new specialisation") and "1 other variant of" in why, why
+    (tmp_path / f"wp_{key}_0123abcd_7654321").mkdir()   # this module, another hash
+    assert compile_reason(str(target)).startswith("changed"), compile_reason(str(target))
+
+
+def test_notice_says_new_specialisation(tmp_path):
+    """The same jwarp kernel with another constant (a new variant, as a new dtype or robot
+    size gives): its notice says new specialisation."""
+    tag = uuid.uuid4().hex[:8]
+    v = float(int(uuid.uuid4().int % 10**6))
+    run_probe([(f"s{tag}", "jwarp.probe_s", v)], tmp_path)
+    _, err = run_probe([(f"s{tag}", "jwarp.probe_s", v + 0.5)], tmp_path)
+    lines = notice_lines(err)
+    assert len(lines) == 1, err
+    m = NOTICE.match(lines[0])
+    assert m and m.group("why").startswith("new specialisation"), lines[0]

@@ -310,3 +310,28 @@ def test_scene_task_targets_come_from_the_shelf_distribution():
         TrainIKOptions(mix=(1, 2))
     with pytest.raises(ValueError, match="^n"):
         shelf_grasp_poses(-1)
+
+
+def test_training_asks_for_its_threads_every_epoch(planar_data, monkeypatch):
+    """Issue 39 item 6: a job started beside a long training takes its threads down at the
+    next epoch (jwarp.core.threads.refresh_torch_threads), and the caller's torch pool
+    comes back after it."""
+    import torch
+
+    from jwarp.core.threads import THREADS_ENV
+
+    before = torch.get_num_threads()
+    monkeypatch.setenv(THREADS_ENV, "2")
+    seen = []
+
+    def callback(rec, net):
+        seen.append((rec["epoch"], torch.get_num_threads()))
+        if rec["epoch"] == 1:
+            monkeypatch.setenv(THREADS_ENV, "1")  # the machine got busy
+
+    o = TrainIKOptions(robot="planar5", world="random", n_worlds=2, n_targets=256,
+                       n_val_worlds=1, n_val=64, hidden=32, n_blocks=1, batch_size=64,
+                       worlds_per_batch=2, epochs=2, steps_per_epoch=3, seed=3)
+    train_ik(o, progress=False, callback=callback, data=planar_data)
+    assert seen == [(0, 2), (1, 2), (2, 1)]
+    assert torch.get_num_threads() == before

@@ -94,16 +94,123 @@ def test_shortcut_paths_uses_only_proven_segments():
     assert wall(np.stack([out[:-1], out[1:]], 1), 1).all()
 
 
+def _zigzag(n=9):
+    x = np.arange(n, dtype=float)
+    return np.stack([x, np.where(np.arange(n) % 2 == 1, 1.0, 0.0)], axis=1)
+
+
+def _first_only(check):
+    """``check`` as MotionCheck.check(group=per) answers it on the CPU: per list only its
+    first proven entry is ok (the rest skipped)."""
+    def f(segs, per):
+        ok = np.asarray(check(segs, per), bool).reshape(-1, per)
+        out = np.zeros_like(ok)
+        rows = np.nonzero(ok.any(1))[0]
+        out[rows, ok[rows].argmax(1)] = True
+        return out.reshape(-1)
+    return f
+
+
+def test_shortcut_lists_farthest_first_and_one_call_walks():
+    """A path whose first points see nothing: one call covers the walk past them and the
+    jump after (its list holds the later points' shortcuts too), farthest first; a check
+    that answers only a list's first proven entry gives the same path."""
+    path = _zigzag(9)
+
+    def from_four(segs, per):  # only shortcuts starting at x >= 4 are proven
+        return segs[:, 0, 0] >= 4.0 - 1e-9
+
+    lists = []
+
+    def rec(segs, per):
+        lists.append(segs.copy())
+        return from_four(segs, per)
+
+    out = shortcut_paths(path[None], rec, rounds=1, max_points=0)[0]
+    assert len(lists) == 1  # the walk from 0 to 4 and the jump from 4: one call
+    s = lists[0]
+    real = np.linalg.norm(s[:, 1] - s[:, 0], axis=1) > 0
+    starts, ends = s[real, 0, 0], s[real, 1, 0]
+    assert np.all(np.diff(starts) >= 0)  # from the current point first, then the next
+    for x in np.unique(starts):
+        assert np.all(np.diff(ends[starts == x]) < 0)  # the farthest first
+    np.testing.assert_allclose(out, path[[0, 1, 2, 3, 4, 8]])
+    np.testing.assert_allclose(
+        shortcut_paths(path[None], _first_only(from_four), rounds=1, max_points=0)[0], out)
+    # a short list (max_list): the walk takes more calls, the same path
+    calls = []
+
+    def count(segs, per):
+        calls.append(per)
+        return from_four(segs, per)
+
+    np.testing.assert_allclose(
+        shortcut_paths(path[None], count, rounds=1, max_points=0, max_list=2)[0], out)
+    assert len(calls) > 1 and max(calls) <= 7
+    # a list shorter than the first start's shortcuts still holds them all (never none)
+    calls.clear()
+    np.testing.assert_allclose(
+        shortcut_paths(path[None], count, rounds=1, max_points=0, max_list=1)[0], out)
+    assert calls[0] == 7  # the 7 shortcuts from point 0
+
+
+def test_shortcut_budget_and_min_gain():
+    path = _zigzag(9)
+    calls = []
+
+    def accept(segs, per):
+        calls.append(per)
+        return np.ones(len(segs), bool)
+
+    import time
+    # a budget already spent: the first call is still made (and takes the jump)
+    out = shortcut_paths(path[None], accept, rounds=4, budget=lambda: True)[0]
+    assert len(calls) == 1
+    np.testing.assert_allclose(out, path[[0, -1]])
+    # spent after two calls: the second round's call is not made
+    calls.clear()
+    shortcut_paths(path[None], lambda s, p: calls.append(p) or (np.arange(len(s)) % p == 1),
+                   rounds=4, budget=lambda: len(calls) >= 2)
+    assert len(calls) == 2
+    # a deadline already passed: nothing
+    calls.clear()
+    out = shortcut_paths(path[None], accept, rounds=4, deadline=time.perf_counter() - 1.0)[0]
+    assert not calls
+    np.testing.assert_allclose(out, corners(path))
+    # a round gaining less than min_gain (relative) ends the rounds
+    def short_only(segs, per):  # only short shortcuts: every round cuts a little more
+        return np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1) <= 1.2
+
+    def rounds_of(min_gain):
+        starts = []
+
+        def rec(segs, per):
+            starts.append(bool(np.allclose(segs[0, 0], path[0])))
+            return short_only(segs, per)
+
+        out = shortcut_paths(path[None], rec, rounds=6, min_gain=min_gain)[0]
+        return sum(starts), np.linalg.norm(np.diff(out, axis=0), axis=1).sum()
+
+    n0, len0 = rounds_of(0.0)
+    n1, len1 = rounds_of(0.5)
+    assert n0 >= 2 and n1 == 1  # round 1 gains < 50 %: no second round
+    assert len0 <= len1 < np.linalg.norm(np.diff(path, axis=0), axis=1).sum()
+
+
 # ------------------------------------------------------------------ the planner
 def test_default_path_is_shortened_and_feasible(world):
     first = PL.plan("planar4", world, S4, G4, shorten=0, **OPTS)
     short = PL.plan("planar4", world, S4, G4, **OPTS)
-    assert PL.PlanOptions().shorten == 4
-    assert first.feasible[0] and short.feasible[0]
+    full = PL.plan("planar4", world, S4, G4, shorten_budget=None, **OPTS)
+    assert PL.PlanOptions().shorten == 4 and PL.PlanOptions().shorten_budget == 0.5
+    assert first.feasible[0] and short.feasible[0] and full.feasible[0]
     assert first.length_before is None  # shortening off
     assert short.length_before[0] == pytest.approx(first.length_cost[0])
-    # the detour of the first feasible start is cut: much shorter
-    assert short.length_cost[0] < 0.8 * first.length_cost[0]
+    # the detour of the first feasible start is cut: shorter within the default budget
+    # (its first check call), much shorter without a budget
+    assert short.length_cost[0] < 0.9 * first.length_cost[0]
+    assert full.length_cost[0] <= short.length_cost[0] + 1e-6
+    assert full.length_cost[0] < 0.8 * first.length_cost[0]
     assert length_cost(short.path[0]) == pytest.approx(short.length_cost[0], rel=1e-4)
     assert "shorten" in short.timings
     # same start, goal, waypoints; the same start won at the same iteration
@@ -189,6 +296,64 @@ def test_bad_shorten(bad):
         PL.PlanOptions(shorten=bad).validate()
 
 
+@pytest.mark.parametrize("bad", [0, -0.5, float("nan"), float("inf"), "x"])
+def test_bad_shorten_budget(bad):
+    with pytest.raises((ValueError, TypeError), match="shorten_budget"):
+        PL.PlanOptions(shorten_budget=bad).validate()
+
+
+def test_budget_counts_evaluations_not_seconds(world, monkeypatch):
+    """The default budget is deterministic (the same path twice); a smaller one makes
+    fewer check evaluations, never fewer than the first call's; None spends the most."""
+    from jwarp.world.motion import MotionCheck
+
+    spent: list[int] = []
+    original = MotionCheck.check
+
+    def counting(self, *args, **kwargs):
+        r = original(self, *args, **kwargs)
+        if kwargs.get("group"):  # the shortcuts' calls
+            spent[-1] += r.evaluations
+        return r
+
+    monkeypatch.setattr(MotionCheck, "check", counting)
+    runs = {}
+    for budget in (1e-6, 0.5, 0.5, None):
+        spent.append(0)
+        runs.setdefault(budget, []).append(
+            (PL.plan("planar4", world, S4, G4, shorten_budget=budget, **OPTS), spent[-1]))
+    (a, ea), (b, eb) = runs[0.5]
+    np.testing.assert_array_equal(a.path, b.path)
+    assert ea == eb > 0
+    (tiny, et), = runs[1e-6]
+    (free, ef), = runs[None]
+    assert 0 < et <= ea <= ef
+    assert tiny.length_cost[0] <= tiny.length_before[0]  # never longer
+    assert a.length_cost[0] < a.length_before[0]
+    assert free.length_cost[0] <= a.length_cost[0] + 1e-6
+
+
+def test_near_straight_paths_are_left_alone(world, monkeypatch):
+    import jwarp.solvers.planning.shorten as SH
+    from jwarp.solvers.planning.planner import NEAR_STRAIGHT
+
+    pl = PL.Planner("planar4", world, 1, PL.PlanOptions(shorten=0, **OPTS))
+    res = pl.plan(S4, G4)
+    assert res.length_cost[0] > 1.5
+    calls = []
+    original = SH.shortcut_paths
+    monkeypatch.setattr(SH, "shortcut_paths",
+                        lambda *a, **k: calls.append(1) or original(*a, **k))
+    pl.options.shorten = 4
+    path = res.path.copy()
+    res.length_cost[0] = NEAR_STRAIGHT  # as if the first feasible path were nearly straight
+    pl._shorten(pl._buffers, res, None)
+    assert not calls and np.array_equal(res.path, path)
+    res.length_cost[0] = NEAR_STRAIGHT + 0.01
+    pl._shorten(pl._buffers, res, None)
+    assert calls
+
+
 def test_time_limit_bounds_it(world):
     # the time is up before the shortening: the path stays the first feasible one
     import time
@@ -199,7 +364,7 @@ def test_time_limit_bounds_it(world):
     pl.options.shorten = 4
     pl._shorten(pl._buffers, res, deadline=time.perf_counter() - 1.0)
     np.testing.assert_array_equal(res.path, path)
-    assert "shorten" not in res.timings
+    assert res.timings["shorten"] < 0.01  # nothing tried
     # with time left it shortens
     pl._shorten(pl._buffers, res, deadline=time.perf_counter() + 100.0)
     assert res.length_cost[0] < 0.8 * res.length_before[0]

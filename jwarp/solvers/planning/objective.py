@@ -68,6 +68,9 @@ class PathObjective:
         #: skip the collision cost of frozen paths (``active`` 0; the planner with
         #: ``freeze_feasible``): their costs are kept, nothing reads them again
         self.skip_inactive = False
+        #: configurations whose collision cost :meth:`evaluate` computed so far (its work;
+        #: every substep row, skipped ones included)
+        self.evaluations = 0
         self.eps = real_number(eps, "eps", self.npdt) if eps is not None else float(
             max(world.resolution, 0.01))
         if not self.eps > 0:
@@ -130,6 +133,7 @@ class PathObjective:
         current paths; fills ``sub_cost`` (N,), ``sub_grad`` (N, n_dof), ``length``,
         ``collision``, ``total`` (P,)."""
         k, dev = self.k, self.device
+        self.evaluations += self.N
         wp.launch(k.substeps, dim=(self.P, self.S), inputs=[self.paths, self.n_sub],
                   outputs=[self.q_sub], device=dev)
         comp = self.compensation

@@ -159,7 +159,18 @@ class PlanOptions:
             again with the planner's rule; it replaces the path only if certified and of
             a lower length cost U_l. ``time_limit`` bounds it too. The multi-starts stop
             at the first feasible one, which may be a long detour (a random via point):
-            this makes the default path short at little extra time.
+            this makes the default path short at little extra time. A round that
+            shortens no path by more than 0.1 % ends the rounds, and a path whose U_l is
+            at most 1.05 (:data:`jwarp.solvers.planning.planner.NEAR_STRAIGHT`) is left
+            as it is.
+        shorten_budget: the work of the rounds after their first check call, as a share
+            of the optimisation's (> 0; default 0.5): they stop once their checks have
+            evaluated that share of the configurations whose collision cost the
+            multi-starts evaluated (iterations x paths x substeps; the fallback's work not
+            counted). None: only ``shorten`` and ``time_limit`` bound them. Counted in
+            evaluations, not seconds: the same path on every machine. The first check
+            call (the first jumps of every path), the final check of the shortened path
+            and its costs are outside it.
         allow_no_collision: plan without a collision model: a robot without collision
             spheres (every path is then collision-free) or in self-collision at its home
             configurations is accepted; False (default): either is a ValueError naming the
@@ -197,6 +208,7 @@ class PlanOptions:
     rrt: Any = None
     allow_no_collision: bool = False
     shorten: int = 4
+    shorten_budget: float | None = 0.5
 
     def __post_init__(self) -> None:
         self.fallback = fallback_word(self.fallback)
@@ -235,6 +247,11 @@ class PlanOptions:
                                  f"({margin:g} m): it only relaxes the margin near the start "
                                  f"and goal, so it would be ignored; give a margin of at least "
                                  f"{em:g} m, or an endpoint margin <= {margin:g} m")
+        if self.shorten_budget is not None:
+            sb = real_number(self.shorten_budget, "shorten_budget")
+            if not (math.isfinite(sb) and sb > 0):
+                raise ValueError(f"shorten_budget: expected a share > 0 of the optimisation's "
+                                 f"work, or None, got {self.shorten_budget!r}")
         if self.eps is not None:
             eps = real_number(self.eps, "eps")
             if not (math.isfinite(eps) and eps > 0):

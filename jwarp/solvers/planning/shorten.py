@@ -16,7 +16,15 @@ import numpy as np
 
 from jwarp.solvers.planning.objective import NORM_FLOOR
 
-__all__ = ["corners", "length_cost", "respace", "shortcut_paths"]
+__all__ = ["MAX_LIST", "MIN_ROUND_GAIN", "corners", "length_cost", "respace",
+           "shortcut_paths"]
+
+#: most shortcuts in a path's list of one check call (:func:`shortcut_paths`): the
+#: candidates from the current point and, while they fit, from the points after it
+MAX_LIST = 48
+
+#: a round that shortens no path by more than this share of its length ends the rounds
+MIN_ROUND_GAIN = 1e-3
 
 
 def length_cost(paths: np.ndarray) -> np.ndarray:
@@ -57,31 +65,50 @@ def respace(nodes: np.ndarray, n_waypoints: int) -> np.ndarray:
 
 def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndarray],
                    rounds: int, deadline: float | None = None,
-                   active: np.ndarray | None = None, max_points: int = 21
-                   ) -> list[np.ndarray]:
+                   active: np.ndarray | None = None, max_points: int = 21,
+                   max_list: int | None = None, min_gain: float | None = None,
+                   budget: Callable[[], bool] | None = None) -> list[np.ndarray]:
     """Shortcuts of feasible paths (K, W, n_dof), all at once (greedy string pulling).
 
     Each round takes every path's corners (:func:`corners`) and, where that makes at most
     ``max_points`` points, the midpoints of the segments between them. From the start,
-    the straight segments to every later point that save length are checked at once and
-    the path jumps to the farthest proven one (the next point where none is), until the
-    goal. The segments of all paths go to ``check(segments (E, 2, n_dof), per_path)`` in
-    one call per jump (``per_path``: segments per path, the paths' lists padded to it
-    with zero-length segments at their start, whose answers are ignored), which returns
-    (E,) bool: proven feasible. A path's new corners replace the old where they still fit
-    its W waypoints and are shorter. Ends after ``rounds`` rounds, when no path gained, or
-    at ``deadline`` (``time.perf_counter()``). ``active`` (K,) bool: the paths to shorten
-    (None: all); the others are returned as their corners.
+    the path jumps along the straight segment to the farthest later point proven
+    reachable, and from there on, to the goal; from a point without any proven shortcut
+    it follows the path to the next point. One call of ``check(segments (E, 2, n_dof),
+    per_path)`` finds every path's next jump: per path a list of ``per_path`` segments
+    in the order of preference (from the current point the shortcuts that save length,
+    the farthest first, then those from the next point, and so on while the list holds
+    at most ``max_list`` (None: :data:`MAX_LIST`); padded with zero-length segments at the path's start, whose
+    answers are ignored); it returns (E,) bool: proven feasible. The first proven entry
+    of a path's list is its jump (the path followed up to that entry's start), so
+    ``check`` may skip the rest of a list once one entry is proven
+    (:meth:`jwarp.world.motion.MotionCheck.check` with ``group=per_path`` does: on the
+    CPU the entries are checked in order and the work stops at the first proven, so the
+    walk over points without a shortcut costs no call of its own). A path's new corners
+    replace the old where they still fit its W waypoints and are shorter.
+
+    Ends after ``rounds`` rounds, when no path's round shortened it by more than
+    ``min_gain`` (relative; None: :data:`MIN_ROUND_GAIN`), or at ``deadline`` (``time.perf_counter()``; checked
+    before every call: a round cut short keeps its jumps so far and the path after
+    them). ``budget``: a function, True once the budget is spent (e.g. the evaluations
+    of the checks so far against a share of the planner's: deterministic), asked before
+    every call but the first (the first jumps of every path are always tried); a round
+    cut short by it ends as by ``deadline``.
+    ``active`` (K,) bool: the paths to shorten (None: all); the others are
+    returned as their corners.
 
     Returns:
         per path its corners (k_i, n_dof) after the shortcuts (the start and goal kept).
     """
+    max_list = MAX_LIST if max_list is None else int(max_list)
+    min_gain = MIN_ROUND_GAIN if min_gain is None else float(min_gain)
     paths = np.asarray(paths, np.float64)
     K, W, n = paths.shape
     nodes = [corners(p) for p in paths]
     active = (np.ones(K, bool) if active is None else np.array(active, bool).reshape(K))
+    calls = 0
     for _ in range(int(rounds)):
-        if not active.any() or (deadline is not None and time.perf_counter() >= deadline):
+        if not active.any() or _late(deadline) or _spent(calls, budget):
             break
         pts = [_refined(nd) if 2 * len(nd) - 1 <= max_points else nd for nd in nodes]
         cums = [np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
@@ -90,29 +117,37 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
         kept: list[list[int]] = [[0] for _ in range(K)]
         going = active & np.array([len(p) >= 3 for p in pts])
         while going.any():
-            cand: list[np.ndarray] = []
-            for k in range(K):
-                if not going[k]:
-                    cand.append(np.zeros(0, np.int64))
-                    continue
-                p, c, a = pts[k], cums[k], at[k]
-                j = np.arange(a + 2, len(p))
-                gain = c[j] - c[a] - np.linalg.norm(p[j] - p[a], axis=1)
-                cand.append(j[gain > 1e-6 * max(1.0, c[-1])])
-            per = max(len(c) for c in cand)
-            ok = np.zeros((K, 0), bool)
+            if _late(deadline) or _spent(calls, budget):
+                for k in map(int, np.nonzero(going)[0]):  # the rest of the path as it is
+                    kept[k].extend(range(int(at[k]) + 1, len(pts[k])))
+                break
+            lists = [_entries(pts[k], cums[k], int(at[k]), max_list) if going[k]
+                     else np.zeros((0, 2), np.int64) for k in range(K)]
+            per = max(len(e) for e in lists)
+            ok = np.zeros((K, per), bool)
             if per:
                 segs = np.empty((K, per, 2, n))
                 for k in range(K):
                     segs[k] = pts[k][0]  # padding: zero-length segments at the start
-                    if len(cand[k]):
-                        segs[k, :len(cand[k]), 0] = pts[k][at[k]]
-                        segs[k, :len(cand[k]), 1] = pts[k][cand[k]]
+                    e = lists[k]
+                    if len(e):
+                        segs[k, :len(e), 0] = pts[k][e[:, 0]]
+                        segs[k, :len(e), 1] = pts[k][e[:, 1]]
                 ok = np.asarray(check(segs.reshape(-1, 2, n), per), bool).reshape(K, per)
+                calls += 1
             for k in map(int, np.nonzero(going)[0]):
-                good = cand[k][ok[k, :len(cand[k])]] if per else cand[k][:0]
-                at[k] = good.max() if len(good) else at[k] + 1
-                kept[k].append(int(at[k]))
+                e = lists[k]
+                hit = np.nonzero(ok[k, :len(e)])[0]
+                if len(hit):  # follow the path to the entry's start, then jump
+                    s, j = map(int, e[hit[0]])
+                elif len(e):  # none proven: follow the path past the last start listed
+                    s = j = int(e[-1, 0]) + 1
+                else:  # no shortcut saves length from here on: follow it to the goal
+                    s = j = len(pts[k]) - 1
+                kept[k].extend(range(int(at[k]) + 1, s + 1))
+                if j != s:
+                    kept[k].append(j)
+                at[k] = j
                 if at[k] >= len(pts[k]) - 1:
                     going[k] = False
         for k in map(int, np.nonzero(active)[0]):
@@ -121,9 +156,36 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
             new_len = np.linalg.norm(np.diff(new, axis=0), axis=1).sum()
             if len(new) <= W and new_len < old_len * (1.0 - 1e-6):
                 nodes[k] = new
-            else:
-                active[k] = False
+            if not (len(new) <= W and new_len < old_len * (1.0 - min_gain)):
+                active[k] = False  # this round gained (almost) nothing: the next would not
     return nodes
+
+
+def _late(deadline: float | None) -> bool:
+    return deadline is not None and time.perf_counter() >= deadline
+
+
+def _spent(calls: int, budget: Callable[[], bool] | None) -> bool:
+    return calls > 0 and budget is not None and bool(budget())
+
+
+def _entries(p: np.ndarray, cum: np.ndarray, a: int, max_list: int) -> np.ndarray:
+    """The shortcuts (m, 2) (start, end point) tried from point ``a`` of the points ``p``
+    (cumulative lengths ``cum``): from ``a`` those to later points that save length, the
+    farthest first, then from ``a + 1``, ... (each start's whole list) while the list
+    holds at most ``max_list`` (the first start's always)."""
+    out: list[np.ndarray] = []
+    size = 0
+    tol = 1e-6 * max(1.0, float(cum[-1]))
+    for s in range(a, len(p) - 2):
+        j = np.arange(s + 2, len(p))
+        gain = cum[j] - cum[s] - np.linalg.norm(p[j] - p[s], axis=1)
+        j = j[gain > tol][::-1]
+        if size and size + len(j) > max_list:
+            break
+        out.append(np.stack([np.full(len(j), s), j], axis=1))
+        size += len(j)
+    return np.concatenate(out) if out else np.zeros((0, 2), np.int64)
 
 
 def _refined(nodes: np.ndarray) -> np.ndarray:
