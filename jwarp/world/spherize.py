@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from jwarp.utils.atomic import atomic_write_text
-from jwarp.model import RobotModel, Sphere
+from jwarp.model import RobotModel, Sphere, SphereRelation
 from jwarp.world.self_pairs import SelfPairs, never_colliding_pairs, with_self_pairs
 
 __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize",
@@ -49,8 +49,9 @@ __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize",
 #: bump when the fitted result of the same inputs changes
 #: Monte Carlo points of a link's excess volume at import (:func:`spherize`)
 EXCESS_SAMPLES = 50_000
-CACHE_VERSION = 5  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits;
-#                   5: URDF axis frames named <joint>_axis, joint names frame aliases
+CACHE_VERSION = 6  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits;
+#                   5: URDF axis frames named <joint>_axis, joint names frame aliases;
+#                   6: containment (contain, contain_gap), sphere_relation
 
 
 class SphereFitWarning(UserWarning):
@@ -81,6 +82,16 @@ class SpherizeOptions:
         :func:`jwarp.importers.sphere_refine.fit_refined` with the per-link protrusions of
         :func:`~jwarp.importers.sphere_refine.link_protrusions` (spheres that hug the parts
         that come near grasped objects; docs/spheres.md); False: the plain fit everywhere.
+    contain: True (default): the spheres contain every collision mesh
+        (:func:`jwarp.importers.spheres.contain_fit`: every point of every triangle inside
+        the union of the link's spheres, certified; ``tolerance`` then sets the sample
+        density and the protrusion scale, not an error); the model's relation is
+        ``"contained"``. False: the one-sided-error fit (fewer spheres; a mesh point may
+        lie up to about ``tolerance`` outside them); the relation is ``"approximate"``
+        with each link's certified poke-out, which the planner and IK add as margin.
+        With ``max_spheres`` the containment may grow spheres far past the surface.
+    contain_gap: covering radius [m] of the containment certificate's point set, and how
+        deep the cover holds its samples, > 0 (1 mm).
     """
 
     tolerance: float = 0.01
@@ -92,10 +103,13 @@ class SpherizeOptions:
     warn_protrusion: float | None = None
     warn_excess: float = 1.0
     refine: bool = True
+    contain: bool = True
+    contain_gap: float = 0.001
 
     def validate(self) -> None:
         for name, strict in (("tolerance", True), ("pair_margin", False), ("protrusion", True),
-                             ("warn_protrusion", True), ("warn_excess", True)):
+                             ("warn_protrusion", True), ("warn_excess", True),
+                             ("contain_gap", True)):
             v = getattr(self, name)
             if v is None and name in ("protrusion", "warn_protrusion"):
                 continue
@@ -112,8 +126,10 @@ class SpherizeOptions:
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
                 raise ValueError(f"{name}: expected an integer >= {lo}"
                                  f"{' or None' if none else ''}, got {v!r}")
-        if not isinstance(self.refine, (bool, np.bool_)):
-            raise TypeError(f"refine: expected True or False, got {type(self.refine).__name__}")
+        for name in ("refine", "contain"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise TypeError(f"{name}: expected True or False, got "
+                                f"{type(getattr(self, name)).__name__}")
 
 
 @dataclass
@@ -133,6 +149,28 @@ class SpherizeReport:
     @property
     def n_spheres(self) -> int:
         return int(sum(r["spheres"] for r in self.links))
+
+    def link_lines(self) -> list[str]:
+        """Per link: spheres, the poke-out bound (how far a mesh point may lie outside the
+        link's spheres; 0 contained) and the protrusion (how far they reach past the
+        surface) [mm], then the totals (the import report, ``jwarp import-urdf``)."""
+        out = []
+        for r in self.links:
+            poke = 0.0 if r.get("kept") else float(r.get("poke_out_bound", float("nan")))
+            how = ("URDF spheres" if r.get("kept") else "contained" if r.get("contained")
+                   else "approximate")
+            out.append(f"  {r['link']}: {r['spheres']} spheres, {how}, poke-out <= "
+                       f"{poke * 1e3:.2f} mm, protrusion {r['max_protrusion'] * 1e3:.2f} mm"
+                       + (f" (radii grown up to {r['grown'] * 1e3:.2f} mm, "
+                          f"{r['certify_points']} certificate points)"
+                          if r.get("contained") and not r.get("kept") else ""))
+        pokes = [0.0 if r.get("kept") else float(r.get("poke_out_bound", float("nan")))
+                 for r in self.links]
+        prots = [float(r["max_protrusion"]) for r in self.links]
+        out.append(f"  total: {self.n_spheres} spheres on {len(self.links)} links, poke-out "
+                   f"<= {max(pokes, default=0.0) * 1e3:.2f} mm, protrusion <= "
+                   f"{max(prots, default=0.0) * 1e3:.2f} mm")
+        return out
 
     def to_dict(self) -> dict:
         out: dict[str, Any] = {"links": self.links, "spheres": self.n_spheres,
@@ -175,7 +213,7 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
     ``progress``: a progress bar on stderr (:func:`fit_progress`: a step per link, the
     link's name beside it, then the pair sampling); None: when stderr is a terminal.
     The fit's results do not depend on it."""
-    from jwarp.importers.sphere_refine import link_protrusions
+    from jwarp.importers.sphere_refine import CONTAIN_PROTRUSIONS, link_protrusions
 
     o = SpherizeOptions() if options is None else options
     if not isinstance(o, SpherizeOptions):
@@ -196,12 +234,15 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
     # the excess volume (a reported figure, not the spheres) by 50 000 Monte Carlo points a
     # link (its standard error is reported): half the default, for the import's time
     fit_opts: dict[str, Any] = {"seed": int(o.seed), "n_volume": EXCESS_SAMPLES}
+    if o.contain:
+        fit_opts["contain"] = float(o.contain_gap)
     if o.max_spheres is not None:
         fit_opts["max_spheres"] = int(o.max_spheres)
     if o.protrusion is not None:
         fit_opts["protrusion"] = float(o.protrusion)
     # the wrist, hand and base: refined fits (jwarp.importers.sphere_refine)
-    per_link = link_protrusions(model, float(o.tolerance)) \
+    per_link = link_protrusions(model, float(o.tolerance),
+                                **(CONTAIN_PROTRUSIONS if o.contain else {})) \
         if o.protrusion is None and o.refine else {}
     n_fit = sum(any(g.kind != "sphere" for g in geoms) for geoms in by_link.values())
     bar = fit_progress(n_fit + int(bool(sample_pairs)), progress)
@@ -272,11 +313,38 @@ def _fit_links(model: RobotModel, by_link: dict[str, list], o: SpherizeOptions,
                "excess_fraction": float(fit.excess_fraction),
                "watertight": bool(fit.watertight), "kept": False,
                "requested_protrusion": float(link_opts.get("protrusion", 0.0)),
-               "refined": link in per_link}
+               "refined": link in per_link, "contained": bool(fit.contained),
+               "poke_out_bound": float(fit.poke_out_bound),
+               "contain_gap": float(fit.contain_gap or o.contain_gap),
+               "certify_points": int(fit.n_certify), "grown": float(fit.grown)}
         report.links.append(row)
         report.warnings += link_warnings(row, o)
         bar.update(1)
-    return model.copy(spheres=spheres)
+    return model.copy(spheres=spheres, sphere_relation=fit_relation(report.links, o))
+
+
+def fit_relation(rows: list[dict], options: SpherizeOptions) -> SphereRelation:
+    """The :class:`~jwarp.model.SphereRelation` of a fit from its report rows
+    (:class:`SpherizeReport` ``links``): ``"contained"`` when every fitted link is
+    (bound 0), else ``"approximate"`` with each link's certified poke-out [m]."""
+    poke = {r["link"]: (0.0 if r.get("kept") or r.get("contained")
+                        else float(r.get("poke_out_bound", float("nan"))))
+            for r in rows}
+    if any(not math.isfinite(v) for v in poke.values()):
+        raise ValueError("options: a link's poke-out was not measured (a bug)")
+    prot = {r["link"]: float(r.get("max_protrusion", 0.0)) for r in rows}
+    gap = float(options.contain_gap)
+    if all(v == 0.0 for v in poke.values()):
+        return SphereRelation(kind="contained", bound=0.0, poke_out=poke, protrusion=prot,
+                              gap=gap, method=f"jwarp.importers.spheres.contain_fit: every "
+                                              f"triangle point within {gap:g} m of a point "
+                                              f"held {gap:g} m deep")
+    budget = f", max_spheres {options.max_spheres}" if options.max_spheres else ""
+    return SphereRelation(kind="approximate", bound=max(poke.values(), default=0.0),
+                          poke_out=poke, protrusion=prot, gap=gap,
+                          method=f"one-sided-error fit (tolerance {options.tolerance:g} m"
+                                 f"{budget}); poke-out: jwarp.importers.spheres."
+                                 f"containment_bound (gap {gap:g} m)")
 
 
 def robot_size(model: RobotModel, by_link: dict[str, list]) -> float:
