@@ -325,6 +325,10 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
     home = None
     if model.spheres and not args.no_home_fit:
         model, home = home_fit_step(imported, model, args, grouped.srdf)
+        if fit is not None:  # tightened spheres: their poke-out certified again
+            from jwarp.world.spherize import certify_relation
+
+            model = certify_relation(model, imported, opts.contain_gap)
     elif args.home is not None:
         raise CLIError("--home: needs a collision model (--spheres fit or urdf) and no "
                        "--no-home-fit")

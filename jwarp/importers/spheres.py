@@ -76,7 +76,7 @@ from scipy.spatial import cKDTree
 from jwarp.utils.warp_init import init_quietly
 
 __all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "fit_link", "fit_kernels",
-           "surface_cover", "containment_bound", "contain_fit", "CONTAIN_CHECK", "CONTAIN_GAP",
+           "surface_cover", "containment_bound", "contain_fit", "link_part", "CONTAIN_CHECK", "CONTAIN_GAP",
            "primitive_mesh", "load_mesh", "one_sided_error", "excess_volume",
            "signed_distance", "inside_solid", "sphere_protrusion", "mesh_memo", "PRIMITIVES"]
 
@@ -1174,6 +1174,32 @@ def geometry_bounds(geometries: Any) -> np.ndarray:
             raise type(e)(f"geometries[{i}]: {e}") from e
         lo, hi = np.minimum(lo, b[0]), np.maximum(hi, b[1])
     return np.stack([lo, hi])
+
+
+def link_part(geometries: Any) -> tuple[trimesh.Trimesh | None, float]:
+    """The union (one Trimesh, link frame) of a link's collision ``geometries`` (as
+    :func:`fit_link` takes them) other than spheres, and how far [m] a tessellated curved
+    primitive among them may lie inside its true surface (0 for meshes and boxes); None
+    when the link has only spheres."""
+    parts, sagitta = [], 0.0
+    for i, g in enumerate(geometries):
+        get = (g.get if isinstance(g, dict) else lambda k, d=None, g=g: getattr(g, k, d))
+        if get("kind") == "sphere":
+            continue
+        mesh = get("mesh") if get("mesh") is not None else (
+            get("filename") or get("path") or get("mesh_path"))
+        try:
+            m = _geometry_mesh(get("kind"), get("size"), mesh, get("scale")).copy()
+            m.apply_transform(_origin(get("origin")))
+        except (ValueError, TypeError) as e:
+            raise type(e)(f"geometries[{i}]: {e}") from e
+        parts.append(m)
+        if get("kind") in ("cylinder", "capsule"):
+            rad = float(np.asarray(get("size"), np.float64).reshape(-1)[0])
+            sagitta = max(sagitta, rad * (1.0 - np.cos(np.pi / 64)))
+    if not parts:
+        return None, 0.0
+    return (parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)), sagitta
 
 
 def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,

@@ -29,6 +29,7 @@ from jwarp.model.registry import robot as get_robot
 from jwarp.world.collision import collision_pairs
 
 __all__ = ["NO_SPHERES_HINT", "HOME_NOTE", "noted_home", "home_configuration",
+           "MeshMarginWarning", "mesh_margin_model",
            "home_configurations",
            "home_self_collisions", "check_collision_model"]
 
@@ -132,3 +133,53 @@ def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
         f"{'; '.join(found)}; its collision model is wrong (spheres reaching outside the "
         f"links: fit again with a smaller tolerance, or exclude the pairs in "
         f"self_collision.exclude_pairs), or pass {option} to skip this check")
+
+
+class MeshMarginWarning(UserWarning):
+    """Planning or IK with a robot whose spheres only approximate its collision meshes
+    (``RobotModel.sphere_relation`` "approximate"): said once per robot and choice."""
+
+
+#: (robot content, mesh_margin) pairs already warned about (:func:`mesh_margin_model`)
+_WARNED: set = set()
+
+
+def mesh_margin_model(robot: Any, mesh_margin: bool = True, *, what: str = "planning") -> Any:
+    """The robot a planner or IK solver works with (a :class:`~jwarp.model.RobotModel`):
+    when its ``sphere_relation`` is ``"approximate"`` (the meshes poke out of the spheres
+    by a measured, certified amount per link) and ``mesh_margin``, a copy whose every
+    sphere is grown by its link's poke-out [m] (:func:`jwarp.model.sphere_relation.
+    inflated`: the grown spheres contain the meshes, so the poke-out acts as extra margin
+    per link); with ``mesh_margin`` False the robot as it is. Either way a
+    :class:`MeshMarginWarning` says so, once per robot content and choice (``what``: the
+    work, e.g. "planning"). Contained robots and robots of unknown relation (no
+    ``sphere_relation``, e.g. files written before it existed: nothing is added) are
+    returned as they are, without a warning."""
+    import warnings
+
+    from jwarp.core.device import content_key
+    from jwarp.model.sphere_relation import inflated
+
+    if not isinstance(mesh_margin, (bool, np.bool_)):
+        raise TypeError(f"mesh_margin: expected True or False, got {mesh_margin!r}")
+    model = get_robot(robot)
+    rel = model.sphere_relation
+    if rel is None or rel.kind != "approximate" or not model.spheres:
+        return model
+    key = (content_key(model), bool(mesh_margin))
+    worst = sorted(rel.poke_out.items(), key=lambda kv: -kv[1])[:3]
+    listed = ", ".join(f"{k} {v * 1e3:.1f} mm" for k, v in worst)
+    if key not in _WARNED:
+        _WARNED.add(key)
+        if mesh_margin:
+            msg = (f"robot '{model.name}': its spheres approximate the collision meshes "
+                   f"(the meshes poke out by up to {rel.bound * 1e3:.1f} mm: {listed}); "
+                   f"{what} grows each link's spheres by its poke-out (extra margin per "
+                   f"link; mesh_margin=False to plan on the spheres as they are, or import "
+                   f"with containment, the default of `jwarp import-urdf`)")
+        else:
+            msg = (f"robot '{model.name}': its spheres approximate the collision meshes and "
+                   f"mesh_margin is off: {what} keeps the spheres free, but the meshes may "
+                   f"enter objects by up to {rel.bound * 1e3:.1f} mm ({listed})")
+        warnings.warn(msg, MeshMarginWarning, stacklevel=3)
+    return inflated(model) if mesh_margin else model

@@ -43,7 +43,8 @@ from jwarp.utils.atomic import atomic_write_text
 from jwarp.model import RobotModel, Sphere, SphereRelation
 from jwarp.world.self_pairs import SelfPairs, never_colliding_pairs, with_self_pairs
 
-__all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize",
+__all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize", "certify_relation",
+           "fit_relation",
            "spherized_robot", "resample_pairs"]
 
 #: bump when the fitted result of the same inputs changes
@@ -515,3 +516,39 @@ def resample_pairs(model: RobotModel, sampled: Any, options: SpherizeOptions
     new_sc = SelfCollision(groups={k: list(v) for k, v in sc.groups.items()},
                            include_pairs=list(sc.include_pairs), exclude_pairs=merged)
     return out.copy(self_collision=new_sc, notes=notes), pairs
+
+
+def certify_relation(model: RobotModel, urdf_robot: Any, gap: float | None = None
+                     ) -> RobotModel:
+    """``model`` (spheres fitted to ``urdf_robot``'s collision geometry, then edited, e.g.
+    tightened at the home by :mod:`jwarp.world.home_fit`) with the poke-out of every link
+    its relation lists above 0 measured again, certified
+    (:func:`jwarp.importers.spheres.containment_bound` of the link's spheres against its
+    geometry, covering radius ``gap`` [m]; None: the relation's): the relation becomes
+    ``"contained"`` again when every link is. Models of no or a contained relation are
+    returned as they are."""
+    from jwarp.importers.spheres import containment_bound, link_part
+
+    rel = model.sphere_relation
+    if rel is None or rel.kind == "contained":
+        return model
+    g = float(gap if gap is not None else (rel.gap or 0.001))
+    by_link: dict[str, list] = {}
+    for geo in urdf_robot.geometries:
+        by_link.setdefault(geo.link, []).append(geo)
+    f, p, r = model.sphere_arrays()
+    poke = dict(rel.poke_out)
+    for link, v in rel.poke_out.items():
+        if v <= 0 or link not in by_link:
+            continue
+        mesh, sag = link_part([_geometry(x) for x in by_link[link]])
+        sel = f == model.frame_index(link)
+        if mesh is None or not sel.any():
+            continue
+        poke[link] = containment_bound(mesh, p[sel], r[sel], gap=g, surface_error=sag)
+    bound = max(poke.values(), default=0.0)
+    new = SphereRelation(kind="contained" if bound == 0.0 else "approximate", bound=bound,
+                         poke_out=poke, protrusion=dict(rel.protrusion), gap=g,
+                         method=f"{rel.method}; poke-out certified again after the edit "
+                                f"(gap {g:g} m)")
+    return model.copy(sphere_relation=new)
