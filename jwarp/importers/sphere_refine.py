@@ -289,7 +289,7 @@ def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float =
     if contain is not None:
         if isinstance(contain, bool) or not np.isfinite(contain) or contain <= 0:
             raise ValueError(f"contain: expected None or a gap > 0, got {contain!r}")
-        fit = contain_fit(mesh, fit, float(contain), seed=seed)
+        fit = contain_fit(mesh, fit, float(contain), seed=seed, n_check=0)
     c = _optimise(solid, x, c0, tol, iters, 0.05 * tol)
     e = -float(contain) if contain is not None else error_fraction * tol
     miss = 0.0 if contain is not None else check_fraction * tol
@@ -310,8 +310,8 @@ def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float =
             e *= 0.97
     err = float(err_all.max())
     if contain is not None:  # grown to containment first: then compared with the fit
-        got = contain_fit(mesh, replace(fit, centres=cc, radii=rr, contained=False),
-                          float(contain), seed=seed)
+        got = contain_fit(mesh, replace(fit, centres=cc, radii=rr, contained=False, grown=0.0),
+                          float(contain), seed=seed, n_check=0)
         if got.max_protrusion >= fit.max_protrusion:
             return fit
         return replace(got, notes=list(fit.notes) + [

@@ -187,6 +187,8 @@ class SphereFit:
     #: deficit of the certificate's points + the gap, :func:`containment_bound`);
     #: ``grown``: the largest radius increase the containment took
     contained: bool = False
+    #: fresh samples of the last containment check (0: certified, not sampled yet)
+    n_fresh: int = 0
     contain_gap: float = 0.0
     poke_out_bound: float = float("nan")
     n_certify: int = 0
@@ -303,7 +305,7 @@ def _signed_distance_kernel(mesh: wp.uint64, points: wp.array(dtype=wp.vec3),
 
 def fit_kernels() -> tuple:
     """The Warp kernels of the sphere fit (``jwarp warmup --families spherize``)."""
-    return (_outside_kernel, _signed_distance_kernel)
+    return (_outside_kernel, _signed_distance_kernel, _nearest_kernel)
 
 
 class _Solid:
@@ -735,20 +737,38 @@ def surface_cover(mesh: trimesh.Trimesh, gap: float) -> np.ndarray:
     return np.concatenate(out)
 
 
+@wp.kernel(enable_backward=False)
+def _nearest_kernel(points: wp.array(dtype=wp.vec3d), centres: wp.array(dtype=wp.vec3d),
+                    radii: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64),
+                    arg: wp.array(dtype=wp.int32)):
+    i = wp.tid()
+    p = points[i]
+    best = wp.float64(1.0e300)
+    k = int(0)
+    for j in range(centres.shape[0]):
+        d = wp.length(p - centres[j]) - radii[j]
+        if d < best:
+            best = d
+            k = j
+    out[i] = best
+    arg[i] = k
+
+
 def _nearest_deficit(points: np.ndarray, centres: np.ndarray, radii: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray]:
-    """(n,) ``min_i |p - c_i| - r_i`` and (n,) its argmin (float64, in blocks)."""
-    p = np.asarray(points, np.float64)
-    c = np.asarray(centres, np.float64)
-    r = np.asarray(radii, np.float64)
-    d = np.empty(len(p))
-    arg = np.empty(len(p), np.int64)
-    step = max(1, 4_000_000 // max(len(r), 1))
-    for s in range(0, len(p), step):
-        x = np.linalg.norm(p[s:s + step, None, :] - c[None], axis=-1) - r[None]
-        arg[s:s + step] = x.argmin(axis=1)
-        d[s:s + step] = x[np.arange(len(x)), arg[s:s + step]]
-    return d, arg
+    """(n,) ``min_i |p - c_i| - r_i`` and (n,) its argmin (float64; Warp's CPU loop)."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    c = np.asarray(centres, np.float64).reshape(-1, 3)
+    r = np.asarray(radii, np.float64).reshape(-1)
+    if len(p) == 0 or len(r) == 0:
+        return np.full(len(p), np.inf), np.zeros(len(p), np.int64)
+    _init_warp()
+    out = wp.zeros(len(p), dtype=wp.float64, device="cpu")
+    arg = wp.zeros(len(p), dtype=wp.int32, device="cpu")
+    wp.launch(_nearest_kernel, len(p), device="cpu", inputs=[
+        wp.array(p, dtype=wp.vec3d, device="cpu"), wp.array(c, dtype=wp.vec3d, device="cpu"),
+        wp.array(r, dtype=wp.float64, device="cpu"), out, arg])
+    return out.numpy(), arg.numpy().astype(np.int64)
 
 
 def _cover_of(mesh: trimesh.Trimesh, gap: float) -> np.ndarray:
@@ -790,7 +810,10 @@ def contain_fit(mesh: trimesh.Trimesh, fit: SphereFit, gap: float = CONTAIN_GAP,
     Returns a new :class:`SphereFit` with ``contained``, ``contain_gap``, ``n_certify``,
     ``grown`` (largest radius increase), ``poke_out_bound`` (0), the measured
     ``max_protrusion`` and excess volume; ``protrusion`` is the larger of the allowed one
-    and the measured one. ``fit`` already contained with this gap is returned as is."""
+    and the measured one. ``n_check`` 0: the certificate only (no fresh samples, the
+    excess volume not measured again: the steps of a fit; ``n_fresh`` 0). ``fit`` already
+    contained with this gap and checked on at least ``n_check`` samples is returned as
+    is."""
     mesh = _check_mesh(mesh)
     if not isinstance(fit, SphereFit):
         raise TypeError(f"fit: expected a SphereFit, got {type(fit).__name__}")
@@ -798,8 +821,10 @@ def contain_fit(mesh: trimesh.Trimesh, fit: SphereFit, gap: float = CONTAIN_GAP,
     if isinstance(surface_error, bool) or not np.isfinite(surface_error) or surface_error < 0:
         raise ValueError(f"surface_error: expected a finite distance >= 0, got "
                          f"{surface_error!r}")
-    _int(n_check, "n_check", 100)
-    if fit.contained and fit.contain_gap == g and surface_error == 0:
+    if n_check != 0:
+        _int(n_check, "n_check", 100)
+    if fit.contained and fit.contain_gap == g and surface_error == 0 \
+            and fit.n_fresh >= n_check:
         return fit
     c = np.asarray(fit.centres, np.float64).reshape(-1, 3)
     r = np.asarray(fit.radii, np.float64).reshape(-1).copy()
@@ -818,20 +843,26 @@ def contain_fit(mesh: trimesh.Trimesh, fit: SphereFit, gap: float = CONTAIN_GAP,
     if after > 0:  # cannot happen (radii only grew past every deficit): a bug
         raise RuntimeError(f"containment failed: bound {after:g} after growing the radii")
     solid = _solid_of(mesh)
+    prot = _protrusion(solid, c, r)
+    from dataclasses import replace
+
+    if n_check == 0:  # a step of a fit: the certificate only
+        return replace(fit, radii=r, one_sided_error=0.0, meets_tolerance=True,
+                       protrusion=max(float(fit.protrusion), float(prot.max())),
+                       max_protrusion=float(prot.max()), contained=True, contain_gap=g,
+                       poke_out_bound=0.0, n_certify=int(len(P)), n_fresh=0,
+                       grown=max(float((r - r0).max()), float(fit.grown)))
     x, _ = _sample(mesh, int(n_check), seed + 611953)  # fresh stream
     x = np.concatenate([x, np.asarray(mesh.vertices, np.float64)])
     err = float(one_sided_error(x, c, r).max())
-    prot = _protrusion(solid, c, r)
     vol, se = _excess(solid, c, r, fit.n_volume, seed + 104729)
-    from dataclasses import replace
-
     return replace(fit, radii=r, one_sided_error=err, meets_tolerance=err <= fit.tolerance,
                    excess_volume=vol, excess_volume_stderr=se,
                    excess_fraction=vol / fit.mesh_volume if fit.mesh_volume > 0 else np.inf,
                    protrusion=max(float(fit.protrusion), float(prot.max())),
                    max_protrusion=float(prot.max()), contained=True, contain_gap=g,
-                   poke_out_bound=0.0, n_certify=int(len(P)),
-                   grown=float((r - r0).max()),
+                   poke_out_bound=0.0, n_certify=int(len(P)), n_fresh=int(len(x)),
+                   grown=max(float((r - r0).max()), float(fit.grown)),
                    notes=list(fit.notes) + [f"contained: certified poke-out bound "
                                             f"{before:.4g} -> 0 on {len(P)} points (gap "
                                             f"{g:g}), radii grown by up to "
@@ -864,14 +895,15 @@ def _reach(clearance: np.ndarray, *, tol: float, fixed: float | None,
 def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | None = None,
                 n_surface: int | None = None, n_volume: int = 100_000, seed: int = 0,
                 max_rounds: int = 6, protrusion: float | None = None,
-                contain: float | None = None) -> SphereFit:
+                contain: float | None = None, contain_check: int = CONTAIN_CHECK) -> SphereFit:
     """Fit spheres to ``mesh``: centres inside its solid, radii = clearance + ``protrusion``
     (default ``tolerance / 2``), every surface point within ``tolerance`` of a sphere with as
     few spheres as the greedy cover finds; or, with ``max_spheres``, at most that many and
     the smallest error the cover finds (reported, ``meets_tolerance`` False when it exceeds
     ``tolerance``). See the module docstring for the method and :class:`SphereFitOptions`
     for the arguments; ``contain`` (a gap > 0): the containment mode (the cover holds the
-    samples ``contain`` inside the spheres, then :func:`contain_fit`). Returns a
+    samples ``contain`` inside the spheres, then :func:`contain_fit` with
+    ``n_check=contain_check``: 0 certifies without the fresh-sample check). Returns a
     :class:`SphereFit` (centres (k, 3), radii (k,), in the mesh's frame and unit)."""
     opt = SphereFitOptions(tolerance, max_spheres, n_surface, n_volume, seed, max_rounds,
                            protrusion, contain).validate()
@@ -985,7 +1017,8 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
                      notes=notes, protrusion=allowed,
                      max_protrusion=float(prot.max()) if len(prot) else 0.0,
                      watertight=watertight)
-    return contain_fit(mesh, out, opt.contain, seed=opt.seed) if opt.contain else out
+    return contain_fit(mesh, out, opt.contain, seed=opt.seed, n_check=contain_check) \
+        if opt.contain else out
 
 
 def _thin(c: np.ndarray, d: np.ndarray, cap: int, grid: float
@@ -1250,8 +1283,9 @@ def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
                                  f"{len(exact)} sphere geometries")
             options = {**options, "max_spheres": budget - len(exact)}
         whole = parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
-        got = (fit or fit_spheres)(whole, tolerance=tolerance, **options)
-        if options.get("contain") and (not got.contained or sagitta > 0):
+        step = {"contain_check": 0} if options.get("contain") else {}  # checked below
+        got = (fit or fit_spheres)(whole, tolerance=tolerance, **options, **step)
+        if options.get("contain"):  # contained, certified and checked on fresh samples
             got = contain_fit(whole, got, float(options["contain"]), surface_error=sagitta,
                               seed=int(options.get("seed", 0)))
         elif not options.get("contain"):  # the approximate fit: its certified poke-out
