@@ -133,11 +133,11 @@ def inflated(model: Any) -> Any:
     rel = getattr(model, "sphere_relation", None)
     if rel is None or rel.kind != "approximate":
         return model
-    from jwarp.model.robot import Sphere
+    from dataclasses import replace
 
     names = [f.name for f in model.frames]
-    spheres = [Sphere(frame=s.frame, position=s.position.copy(),
-                      radius=float(s.radius) + rel.link_poke_out(names[s.frame]))
+    spheres = [replace(s, position=s.position.copy(),
+                       radius=float(s.radius) + rel.link_poke_out(names[s.frame]))
                for s in model.spheres]
     links = {names[s.frame] for s in model.spheres}
     new = SphereRelation(
