@@ -19,6 +19,7 @@ link 5, while the middle of its limits is free, as for every robot shipped with 
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from typing import Any
 
 import numpy as np
@@ -142,6 +143,9 @@ class MeshMarginWarning(UserWarning):
 
 #: (robot content, mesh_margin) pairs already warned about (:func:`mesh_margin_model`)
 _WARNED: set = set()
+#: robot content -> its inflated copy (the last few; a planner built per problem reuses it,
+#: and with it the device tables, instead of copying the robot each time)
+_INFLATED: "OrderedDict[str, Any]" = OrderedDict()
 
 
 def mesh_margin_model(robot: Any, mesh_margin: bool = True, *, what: str = "planning") -> Any:
@@ -182,4 +186,11 @@ def mesh_margin_model(robot: Any, mesh_margin: bool = True, *, what: str = "plan
                    f"mesh_margin is off: {what} keeps the spheres free, but the meshes may "
                    f"enter objects by up to {rel.bound * 1e3:.1f} mm ({listed})")
         warnings.warn(msg, MeshMarginWarning, stacklevel=3)
-    return inflated(model) if mesh_margin else model
+    if not mesh_margin:
+        return model
+    got = _INFLATED.get(key[0])
+    if got is None:
+        got = _INFLATED[key[0]] = inflated(model)
+        while len(_INFLATED) > 8:
+            _INFLATED.popitem(last=False)
+    return got
