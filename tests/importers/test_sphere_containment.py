@@ -222,3 +222,63 @@ def test_mesh_margin_inflates_radii_per_link_and_warns_once():
         np.testing.assert_allclose(mesh_margin_model(base).sphere_arrays()[2], r0)
     with pytest.raises(TypeError, match="mesh_margin"):
         PlanOptions(mesh_margin="yes").validate(np.float32)
+
+
+TWO_LINKS = """<?xml version="1.0"?>
+<robot name="two_link">
+  <link name="base"><collision><geometry><box size="0.1 0.1 0.04"/></geometry></collision></link>
+  <link name="arm"><collision><origin xyz="0.12 0 0"/>
+    <geometry><box size="0.24 0.04 0.03"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="arm"/>
+    <origin xyz="0 0 0.1"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+</robot>
+"""
+
+
+def test_import_urdf_reports_containment_per_link(tmp_path, capsys, monkeypatch):
+    """The import prints per link the poke-out bound and the protrusion and the totals, and
+    the file records the relation: contained by default; with --approximate the poke-out
+    per link, which a planner then adds with one warning."""
+    from cli_helpers import run
+    from jwarp.world.model_check import MeshMarginWarning, mesh_margin_model
+
+    monkeypatch.setenv("JWARP_CACHE", str(tmp_path / "cache"))
+    urdf = tmp_path / "two_link.urdf"
+    urdf.write_text(TWO_LINKS)
+    out = tmp_path / "r.json"
+    fast = ["--pair-samples", "50", "--no-home-fit", "--no-refine", "--tolerance", "0.02"]
+    code, stdout, err = run(capsys, ["import-urdf", urdf, "--out", out, *fast])
+    assert code == 0, err
+    assert "spheres contain the meshes" in stdout
+    lines = [x for x in stdout.splitlines() if x.startswith("  ")]
+    assert any(x.startswith("  base:") and "contained, poke-out <= 0.00 mm, protrusion" in x
+               for x in lines), stdout
+    assert any(x.startswith("  total:") for x in lines)
+    model = jwarp.robot(str(out))
+    assert model.sphere_relation.kind == "contained" and model.sphere_relation.bound == 0
+    # independent: the boxes' surfaces lie inside their links' spheres
+    f, p, r = model.sphere_arrays()
+    rng = np.random.default_rng(5)
+    for link, half, shift in (("base", [0.05, 0.05, 0.02], [0, 0, 0]),
+                              ("arm", [0.12, 0.02, 0.015], [0.12, 0, 0])):
+        sel = f == model.frame_index(link)
+        x = box_surface(half, 50_000, rng) + shift
+        assert outside(x, p[sel], r[sel]).max() <= 1e-9
+    code, stdout, err = run(capsys, ["import-urdf", urdf, "--out", out, *fast, "--approximate"])
+    assert code == 0, err
+    approx = jwarp.robot(str(out))
+    rel = approx.sphere_relation
+    assert rel.kind == "approximate" and rel.bound > 0.001
+    assert "approximate spheres" in stdout and "approximate, poke-out <=" in stdout
+    # the recorded poke-out bounds what fresh samples find outside
+    f, p, r = approx.sphere_arrays()
+    sel = f == approx.frame_index("arm")
+    found = outside(box_surface([0.12, 0.02, 0.015], 50_000, rng) + [0.12, 0, 0],
+                    p[sel], r[sel]).max()
+    assert 0 < found <= rel.link_poke_out("arm")
+    with pytest.warns(MeshMarginWarning):
+        grown = mesh_margin_model(approx.copy(name=f"h42-{uuid.uuid4().hex[:8]}"))
+    f2, p2, r2 = grown.sphere_arrays()
+    assert outside(box_surface([0.12, 0.02, 0.015], 50_000, rng) + [0.12, 0, 0],
+                   p2[f2 == grown.frame_index("arm")], r2[f2 == grown.frame_index("arm")]
+                   ).max() <= 1e-9
