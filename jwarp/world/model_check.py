@@ -105,6 +105,10 @@ def home_self_collisions(robot: Any, q: Any = None, *, device: Any = None
     return [(names[a], names[b], v) for (a, b), v in sorted(worst.items(), key=lambda t: t[1])]
 
 
+#: (robot content, device) whose collision model passed :func:`check_collision_model`
+_PASSED: set = set()
+
+
 def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
                           option: str = "allow_no_collision=True",
                           device: Any = None) -> None:
@@ -113,7 +117,12 @@ def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
     frame pairs and how deep they overlap).
     ``what``: the work refused (e.g. "planning"); ``option``: the opt-out to name;
     ``device``: where the FK of the check runs."""
+    from jwarp.core.device import content_key
+
     model = get_robot(robot)
+    key = (content_key(model), str(device))
+    if key in _PASSED:  # the same robot content passed before (a planner per problem)
+        return
     if need_spheres and len(model.spheres) == 0:
         raise ValueError(f"robot: '{model.name}' has no collision spheres, so {what} would "
                          f"call everything collision-free; {NO_SPHERES_HINT}, or pass "
@@ -124,6 +133,7 @@ def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
     for label, q in home_configurations(model):
         hits = home_self_collisions(model, q, device=device)
         if not hits:
+            _PASSED.add(key)
             return
         listed = ", ".join(f"'{a}'-'{b}' ({-d * 1e3:.1f} mm deep)" for a, b, d in hits[:4])
         more = f" and {len(hits) - 4} more pairs" if len(hits) > 4 else ""
