@@ -93,6 +93,12 @@ class SpherizeOptions:
         With ``max_spheres`` the containment may grow spheres far past the surface.
     contain_gap: covering radius [m] of the containment certificate's point set, and how
         deep the cover holds its samples, > 0 (1 mm).
+    contain_factors: with ``contain`` and ``refine``, the protrusion factors (x
+        ``tolerance``) of the refined links: ``{"wrist": w, "hand": h}`` (either may be
+        left out); None: :data:`jwarp.importers.sphere_refine.CONTAIN_PROTRUSIONS` (wrist
+        1.25, hand and fingers 0.75). Larger factors: fewer spheres and faster planning,
+        more free grasps refused (docs/spheres.md, "Containment": wrist 2, hand 1 gave the
+        Panda 102 spheres instead of 191).
     """
 
     tolerance: float = 0.01
@@ -106,6 +112,7 @@ class SpherizeOptions:
     refine: bool = True
     contain: bool = True
     contain_gap: float = 0.001
+    contain_factors: dict | None = None
 
     def validate(self) -> None:
         for name, strict in (("tolerance", True), ("pair_margin", False), ("protrusion", True),
@@ -127,6 +134,18 @@ class SpherizeOptions:
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
                 raise ValueError(f"{name}: expected an integer >= {lo}"
                                  f"{' or None' if none else ''}, got {v!r}")
+        f = self.contain_factors
+        if f is not None:
+            if not isinstance(f, dict):
+                raise TypeError(f"contain_factors: expected None or a dict {{'wrist': w, "
+                                f"'hand': h}}, got {type(f).__name__}")
+            bad = set(f) - {"wrist", "hand"}
+            if bad:
+                raise ValueError(f"contain_factors: unknown keys {sorted(bad)} (wrist, hand)")
+            for k, v in f.items():
+                if isinstance(v, bool) or not isinstance(v, (int, float)) \
+                        or not math.isfinite(v) or v <= 0:
+                    raise ValueError(f"contain_factors: '{k}' must be a number > 0, got {v!r}")
         for name in ("refine", "contain"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise TypeError(f"{name}: expected True or False, got "
@@ -242,8 +261,12 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
     if o.protrusion is not None:
         fit_opts["protrusion"] = float(o.protrusion)
     # the wrist, hand and base: refined fits (jwarp.importers.sphere_refine)
-    per_link = link_protrusions(model, float(o.tolerance),
-                                **(CONTAIN_PROTRUSIONS if o.contain else {})) \
+    factors = dict(CONTAIN_PROTRUSIONS)
+    if o.contain_factors:
+        factors.update({k: float(v) for k, v in o.contain_factors.items()})
+        if "hand" in o.contain_factors:
+            factors["hand_start"] = float(o.contain_factors["hand"])
+    per_link = link_protrusions(model, float(o.tolerance), **(factors if o.contain else {})) \
         if o.protrusion is None and o.refine else {}
     n_fit = sum(any(g.kind != "sphere" for g in geoms) for geoms in by_link.values())
     bar = fit_progress(n_fit + int(bool(sample_pairs)), progress)

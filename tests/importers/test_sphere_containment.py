@@ -282,3 +282,15 @@ def test_import_urdf_reports_containment_per_link(tmp_path, capsys, monkeypatch)
     assert outside(box_surface([0.12, 0.02, 0.015], 50_000, rng) + [0.12, 0, 0],
                    p2[f2 == grown.frame_index("arm")], r2[f2 == grown.frame_index("arm")]
                    ).max() <= 1e-9
+
+
+def test_contain_factors_are_validated():
+    from jwarp.world.spherize import SpherizeOptions
+
+    SpherizeOptions(contain_factors={"wrist": 2.0, "hand": 1.0}).validate()
+    with pytest.raises(ValueError, match="contain_factors"):
+        SpherizeOptions(contain_factors={"elbow": 2.0}).validate()
+    with pytest.raises(ValueError, match="contain_factors"):
+        SpherizeOptions(contain_factors={"hand": 0.0}).validate()
+    with pytest.raises(TypeError, match="contain_factors"):
+        SpherizeOptions(contain_factors=[2.0]).validate()
