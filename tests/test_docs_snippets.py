@@ -263,6 +263,9 @@ SUBSTITUTIONS: dict[str, list[tuple[str, str, str]]] = {
         ("setup, 10000,", "setup, 200,", "200 draws instead of 10000 (seconds, not minutes)")],
     "docs/spheres.md:204": [
         ("n_samples=10000", "n_samples=200", "200 sampled configurations instead of 10000")],
+    "docs/urdf.md:268": [
+        ("SpherizeOptions()", "SpherizeOptions(pair_samples=500)",
+         "500 self-pair samples instead of 10000 (the contained fit's 191 spheres)")],
     "examples/README.md:90": [
         ("setup, 500,", "setup, 20,", "20 samples instead of 500 (each needs visible markers)")],
 }
