@@ -76,7 +76,7 @@ from scipy.spatial import cKDTree
 from jwarp.utils.warp_init import init_quietly
 
 __all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "fit_link", "fit_kernels",
-           "surface_cover", "containment_bound", "contain_fit", "link_part", "CONTAIN_CHECK", "CONTAIN_GAP",
+           "surface_cover", "containment_bound", "containment_growth", "contain_fit", "link_part", "CONTAIN_CHECK", "CONTAIN_GAP",
            "primitive_mesh", "load_mesh", "one_sided_error", "excess_volume",
            "signed_distance", "inside_solid", "sphere_protrusion", "mesh_memo", "PRIMITIVES"]
 
@@ -788,6 +788,25 @@ def containment_bound(mesh: trimesh.Trimesh, centres: np.ndarray, radii: np.ndar
         return float("inf")
     d, _ = _nearest_deficit(_cover_of(_check_mesh(mesh), gap), centres, radii)
     return max(0.0, float(d.max()) + float(gap) + float(surface_error))
+
+
+def containment_growth(mesh: trimesh.Trimesh, centres: np.ndarray, radii: np.ndarray, *,
+                       gap: float = CONTAIN_GAP, surface_error: float = 0.0) -> np.ndarray:
+    """(k,) how much [mesh unit] each sphere's radius must grow for the spheres
+    (``centres`` (k, 3), ``radii`` (k,)) to contain every point of the triangles of ``mesh``
+    (step 2 of :func:`contain_fit`: each cover point not ``gap + surface_error`` deep goes to
+    the sphere it is deepest in); all 0 when they contain it already."""
+    c = np.asarray(centres, np.float64).reshape(-1, 3)
+    r = np.asarray(radii, np.float64).reshape(-1)
+    P = _cover_of(_check_mesh(mesh), _length(gap, "gap"))
+    depth = float(gap) + float(surface_error)
+    d, arg = _nearest_deficit(P, c, r)
+    need = d + depth > 0
+    grown = r.copy()
+    if need.any():
+        want = np.linalg.norm(P[need] - c[arg[need]], axis=1) + depth + _ROUNDING
+        np.maximum.at(grown, arg[need], want)
+    return grown - r
 
 
 def contain_fit(mesh: trimesh.Trimesh, fit: SphereFit, gap: float = CONTAIN_GAP, *,

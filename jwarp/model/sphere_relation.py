@@ -47,6 +47,10 @@ class SphereRelation:
     method: how the figures were found (one line).
     inflated: True when the spheres were already grown by the poke-out
         (:func:`inflated`): then ``kind`` is ``"contained"``.
+    sphere_margin: None, or per sphere of the robot (its ``spheres`` order) the radius
+        growth [m] that makes the spheres contain the meshes (where it is known: spheres
+        shrunk after a contained fit, or the growth a certificate found); :func:`inflated`
+        uses it instead of the link's poke-out.
     """
 
     kind: str
@@ -56,6 +60,7 @@ class SphereRelation:
     gap: float = 0.0
     method: str = ""
     inflated: bool = False
+    sphere_margin: list[float] | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in RELATION_KINDS:
@@ -74,6 +79,12 @@ class SphereRelation:
         if not isinstance(self.method, str):
             raise TypeError(f"sphere_relation.method: expected a string, got "
                             f"{type(self.method).__name__}")
+        if self.sphere_margin is not None:
+            if not isinstance(self.sphere_margin, (list, tuple)):
+                raise TypeError(f"sphere_relation.sphere_margin: expected a list of metres, "
+                                f"got {type(self.sphere_margin).__name__}")
+            self.sphere_margin = [_distance(v, f"sphere_relation.sphere_margin[{i}]")
+                                  for i, v in enumerate(self.sphere_margin)]
         if not isinstance(self.inflated, bool):
             raise TypeError(f"sphere_relation.inflated: expected true or false, got "
                             f"{self.inflated!r}")
@@ -101,6 +112,8 @@ def relation_to_dict(r: SphereRelation) -> dict[str, Any]:
                            "method": r.method}
     if r.inflated:
         out["inflated"] = True
+    if r.sphere_margin is not None:
+        out["sphere_margin"] = list(r.sphere_margin)
     return out
 
 
@@ -112,7 +125,7 @@ def relation_from_dict(doc: Any) -> SphereRelation | None:
     if not isinstance(doc, dict):
         raise TypeError(f"sphere_relation: expected an object, got {type(doc).__name__}")
     unknown = set(doc) - {"kind", "bound", "gap", "poke_out", "protrusion", "method",
-                          "inflated"}
+                          "inflated", "sphere_margin"}
     if unknown:
         raise ValueError(f"sphere_relation: unknown keys {sorted(unknown)}")
     if "kind" not in doc:
@@ -120,7 +133,8 @@ def relation_from_dict(doc: Any) -> SphereRelation | None:
     return SphereRelation(kind=doc["kind"], bound=doc.get("bound", 0.0),
                           poke_out=doc.get("poke_out") or {},
                           protrusion=doc.get("protrusion") or {}, gap=doc.get("gap", 0.0),
-                          method=doc.get("method", ""), inflated=doc.get("inflated", False))
+                          method=doc.get("method", ""), inflated=doc.get("inflated", False),
+                          sphere_margin=doc.get("sphere_margin"))
 
 
 def inflated(model: Any) -> Any:
@@ -136,9 +150,11 @@ def inflated(model: Any) -> Any:
     from dataclasses import replace
 
     names = [f.name for f in model.frames]
-    spheres = [replace(s, position=s.position.copy(),
-                       radius=float(s.radius) + rel.link_poke_out(names[s.frame]))
-               for s in model.spheres]
+    margin = rel.sphere_margin
+    if margin is None or len(margin) != len(model.spheres):
+        margin = [rel.link_poke_out(names[s.frame]) for s in model.spheres]
+    spheres = [replace(s, position=s.position.copy(), radius=float(s.radius) + float(m))
+               for s, m in zip(model.spheres, margin)]
     links = {names[s.frame] for s in model.spheres}
     new = SphereRelation(
         kind="contained", bound=0.0, poke_out={k: 0.0 for k in sorted(links)},
@@ -191,8 +207,26 @@ def relation_after_edit(rel: SphereRelation | None, names: list[str], old: list,
         d = float(s.radius) - max(float(t.radius) for t in cands)
         name = names[int(s.frame)]
         shrink[name] = max(shrink.get(name, 0.0), d)
-    if all(v <= 0 for v in shrink.values()):
+    if all(v <= 0 for v in shrink.values()) and rel.sphere_margin is None:
         return rel
+    # per new sphere: the margin of the old sphere it came from, plus how much it shrank
+    old_margin = rel.sphere_margin if rel.sphere_margin is not None and \
+        len(rel.sphere_margin) == len(old) else None
+    margin = []
+    for t in new:
+        m = 0.0
+        for i, s in enumerate(old):
+            if int(s.frame) == int(t.frame) and np.array_equal(np.asarray(s.position),
+                                                               np.asarray(t.position)):
+                base = old_margin[i] if old_margin is not None else \
+                    rel.link_poke_out(names[int(s.frame)])
+                m = base + max(float(s.radius) - float(t.radius), 0.0)
+                break
+        margin.append(m)
+    if all(v <= 0 for v in shrink.values()):
+        return SphereRelation(kind=rel.kind, bound=rel.bound, poke_out=dict(rel.poke_out),
+                              protrusion=dict(rel.protrusion), gap=rel.gap,
+                              method=rel.method, inflated=rel.inflated, sphere_margin=margin)
     poke = {k: rel.link_poke_out(k) + max(shrink.get(k, 0.0), 0.0)
             for k in sorted(set(rel.poke_out) | set(shrink))}
     prot = {k: v - max(shrink.get(k, 0.0), 0.0) for k, v in rel.protrusion.items()}
@@ -200,4 +234,4 @@ def relation_after_edit(rel: SphereRelation | None, names: list[str], old: list,
                           poke_out=poke, protrusion=prot, gap=rel.gap,
                           method=f"{rel.method}; spheres shrunk afterwards by up to "
                                  f"{max(shrink.values()) * 1e3:.2f} mm (poke-out grown by "
-                                 f"as much)")
+                                 f"as much)", sphere_margin=margin)

@@ -550,7 +550,7 @@ def certify_relation(model: RobotModel, urdf_robot: Any, gap: float | None = Non
     geometry, covering radius ``gap`` [m]; None: the relation's): the relation becomes
     ``"contained"`` again when every link is. Models of no or a contained relation are
     returned as they are."""
-    from jwarp.importers.spheres import containment_bound, link_part
+    from jwarp.importers.spheres import containment_bound, containment_growth, link_part
 
     rel = model.sphere_relation
     if rel is None or rel.kind == "contained":
@@ -561,6 +561,10 @@ def certify_relation(model: RobotModel, urdf_robot: Any, gap: float | None = Non
         by_link.setdefault(geo.link, []).append(geo)
     f, p, r = model.sphere_arrays()
     poke = dict(rel.poke_out)
+    names = [fr.name for fr in model.frames]
+    margin = np.asarray(rel.sphere_margin if rel.sphere_margin is not None
+                        and len(rel.sphere_margin) == len(r)
+                        else [rel.link_poke_out(names[i]) for i in f], np.float64)
     for link, v in rel.poke_out.items():
         if v <= 0 or link not in by_link:
             continue
@@ -569,9 +573,12 @@ def certify_relation(model: RobotModel, urdf_robot: Any, gap: float | None = Non
         if mesh is None or not sel.any():
             continue
         poke[link] = containment_bound(mesh, p[sel], r[sel], gap=g, surface_error=sag)
+        # the least growth per sphere that contains the link (the planner's margin)
+        margin[sel] = containment_growth(mesh, p[sel], r[sel], gap=g, surface_error=sag)
     bound = max(poke.values(), default=0.0)
     new = SphereRelation(kind="contained" if bound == 0.0 else "approximate", bound=bound,
                          poke_out=poke, protrusion=dict(rel.protrusion), gap=g,
                          method=f"{rel.method}; poke-out certified again after the edit "
-                                f"(gap {g:g} m)")
+                                f"(gap {g:g} m)",
+                         sphere_margin=None if bound == 0.0 else margin.tolist())
     return model.copy(sphere_relation=new)

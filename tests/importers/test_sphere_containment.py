@@ -177,6 +177,12 @@ def test_relation_follows_shrunk_spheres():
     rel = edited.sphere_relation
     link = model.frames[s0.frame].name
     assert rel.kind == "approximate" and rel.link_poke_out(link) == pytest.approx(0.003)
+    # the planner's margin grows back only the shrunk sphere (per-sphere margin)
+    assert rel.sphere_margin[0] == pytest.approx(0.003) and not any(rel.sphere_margin[1:])
+    np.testing.assert_allclose(inflated(edited).sphere_arrays()[2], model.sphere_arrays()[2],
+                               atol=1e-12)
+    again = RobotModel.from_dict(edited.to_dict()).sphere_relation
+    assert again.sphere_margin == rel.sphere_margin
     moved = list(model.spheres)
     moved[0] = Sphere(frame=s0.frame, position=s0.position + 0.01, radius=s0.radius)
     assert model.copy(spheres=moved).sphere_relation is None  # no promise left
@@ -264,6 +270,25 @@ def test_import_urdf_reports_containment_per_link(tmp_path, capsys, monkeypatch)
         sel = f == model.frame_index(link)
         x = box_surface(half, 50_000, rng) + shift
         assert outside(x, p[sel], r[sel]).max() <= 1e-9
+    # spheres shrunk after the fit (as the home fit tightens them): certified again, and
+    # the planner's per-sphere margin restores containment
+    from jwarp.importers.robot import load_urdf
+    from jwarp.world.spherize import certify_relation
+
+    arm = model.frame_index("arm")
+    sp = list(model.spheres)
+    k = next(i for i, x in enumerate(sp) if x.frame == arm)
+    sp[k] = Sphere(frame=arm, position=sp[k].position.copy(), radius=sp[k].radius - 0.004)
+    tight = certify_relation(model.copy(spheres=sp), load_urdf(str(urdf)), GAP)
+    rel = tight.sphere_relation
+    assert rel.kind == "approximate" and 0 < rel.link_poke_out("arm") <= 0.004 + GAP
+    assert rel.link_poke_out("base") == 0 and rel.sphere_margin[k] > 0
+    assert sum(m > 0 for m in rel.sphere_margin) <= sum(x.frame == arm for x in sp)
+    f, p, r = tight.sphere_arrays()
+    xa = box_surface([0.12, 0.02, 0.015], 50_000, rng) + [0.12, 0, 0]
+    assert outside(xa, p[f == arm], r[f == arm]).max() > 0  # the shrunk sphere uncovers
+    f, p, r = inflated(tight).sphere_arrays()
+    assert outside(xa, p[f == arm], r[f == arm]).max() <= 1e-9
     code, stdout, err = run(capsys, ["import-urdf", urdf, "--out", out, *fast, "--approximate"])
     assert code == 0, err
     approx = jwarp.robot(str(out))
