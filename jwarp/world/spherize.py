@@ -90,7 +90,8 @@ class SpherizeOptions:
         ``"contained"``. False: the one-sided-error fit (fewer spheres; a mesh point may
         lie up to about ``tolerance`` outside them); the relation is ``"approximate"``
         with each link's certified poke-out, which the planner and IK add as margin.
-        With ``max_spheres`` the containment may grow spheres far past the surface.
+        With ``max_spheres`` the budget wins: the one-sided-error fit within it, and the
+        relation ``"approximate"`` with the poke-out it leaves.
     contain_gap: covering radius [m] of the containment certificate's point set, and how
         deep the cover holds its samples, > 0 (1 mm).
     contain_factors: with ``contain`` and ``refine``, the protrusion factors (x
@@ -254,7 +255,7 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
     # the excess volume (a reported figure, not the spheres) by 50 000 Monte Carlo points a
     # link (its standard error is reported): half the default, for the import's time
     fit_opts: dict[str, Any] = {"seed": int(o.seed), "n_volume": EXCESS_SAMPLES}
-    if o.contain:
+    if o.contain and o.max_spheres is None:  # a budget: approximate, its poke-out recorded
         fit_opts["contain"] = float(o.contain_gap)
     if o.max_spheres is not None:
         fit_opts["max_spheres"] = int(o.max_spheres)
@@ -266,7 +267,8 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
         factors.update({k: float(v) for k, v in o.contain_factors.items()})
         if "hand" in o.contain_factors:
             factors["hand_start"] = float(o.contain_factors["hand"])
-    per_link = link_protrusions(model, float(o.tolerance), **(factors if o.contain else {})) \
+    contained = o.contain and o.max_spheres is None
+    per_link = link_protrusions(model, float(o.tolerance), **(factors if contained else {})) \
         if o.protrusion is None and o.refine else {}
     n_fit = sum(any(g.kind != "sphere" for g in geoms) for geoms in by_link.values())
     bar = fit_progress(n_fit + int(bool(sample_pairs)), progress)
