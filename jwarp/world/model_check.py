@@ -138,8 +138,12 @@ def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
         listed = ", ".join(f"'{a}'-'{b}' ({-d * 1e3:.1f} mm deep)" for a, b, d in hits[:4])
         more = f" and {len(hits) - 4} more pairs" if len(hits) > 4 else ""
         found.append(f"at {label} {np.round(q, 4).tolist()}: {listed}{more}")
+    rel = model.sphere_relation
+    grown = (" (its spheres were grown by the meshes' poke-out, issue 42: mesh_margin=False "
+             "works on them as fitted, or import with containment)"
+             if rel is not None and rel.inflated else "")
     raise ValueError(
-        f"robot: '{model.name}' is in self-collision at "
+        f"robot: '{model.name}'{grown} is in self-collision at "
         f"{'both' if len(found) == 2 else f'all {len(found)}'} of its home configurations, "
         f"{'; '.join(found)}; its collision model is wrong (spheres reaching outside the "
         f"links: fit again with a smaller tolerance, or exclude the pairs in "
