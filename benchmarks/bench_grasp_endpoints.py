@@ -49,6 +49,10 @@ import timing  # noqa: E402
 import scene_problems as SP  # noqa: E402
 
 
+#: mesh clearance [m] of the grasp configurations that the acceptance of issue 42 counts
+CLEAR = 0.002
+
+
 def sphere_model(spec: str, urdf: str) -> tuple[str, Any]:
     """(label, robot) of a ``--models`` entry."""
     import jwarp
@@ -155,6 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     from jwarp.core.arrays import init_warp
     from jwarp.importers.robot import example_robot_urdf
     from jwarp.world.collision import is_collision_free
+    from jwarp.world.model_check import mesh_margin_model
     from jwarp.world.scene_file import exact_world
 
     init_warp()
@@ -174,10 +179,13 @@ def main(argv: list[str] | None = None) -> int:
             if not len(Q):
                 continue
             world = exact_world(scene)
-            r = rows.setdefault(fam, {"free": 0, **{lab: [0, [], 0] for lab, _ in models}})
+            r = rows.setdefault(fam, {"free": 0, "clear": [],
+                                      **{lab: [0, [], 0] for lab, _ in models}})
             r["free"] += len(Q)
+            r["clear"] += list(clear)
             for lab, m in models:
-                ok = is_collision_free(m, Q, world, 0.0, device="cpu")
+                # an approximate model checks with its poke-out as margin, as the planner
+                ok = is_collision_free(mesh_margin_model(m, True), Q, world, 0.0, device="cpu")
                 r[lab][0] += int((~ok).sum())
                 r[lab][1] += [c for c, o in zip(clear, ok) if not o]
                 r[lab][2] += int(target_refused(m, world, tg, 7 + k).sum())
@@ -189,11 +197,16 @@ def main(argv: list[str] | None = None) -> int:
     print("\nthe same grasp targets, refused by jwarp's IK with each sphere model in the scene "
           "(no collision-free solution from 8 starts: the grasp is unreachable for the model)")
     count_table(rows, labs, 2, n)
+    far = sum(int(np.sum(np.asarray(r["clear"]) >= CLEAR)) for r in rows.values())
     for lab in labs:
         cl = [c for r in rows.values() for c in r[lab][1]]
         if cl:
             print(f"{lab}: refused poses' mesh clearance min {1e3 * min(cl):.1f} mm, median "
                   f"{1e3 * float(np.median(cl)):.1f} mm")
+        nf = sum(c >= CLEAR for c in cl)
+        print(f"{lab}: of the {far} free configurations whose meshes clear the scene by >= "
+              f"{CLEAR * 1e3:g} mm, {nf} refused ({100.0 * nf / max(far, 1):.1f} %; "
+              f"acceptance of issue 42: <= 2 %)")
     print(f"total {time.perf_counter() - t0:.0f} s")
     return 0
 

@@ -27,7 +27,9 @@ forward, 0.45-0.65 m high). Targets are for the frame ``panda_hand_tcp``; the fi
 set to 3.5 cm open in both states. IK: :class:`jwarp.solvers.ik.IKSolver` on the CPU, all
 goal and start candidates of one problem in one batch (8 seeds each: the ready pose, then
 uniform ones), on the scene's 2 cm SDF with the
-fitted sphere model (``SpherizeOptions(tolerance=0.02)``, cached). A candidate is accepted
+fitted sphere model (``SpherizeOptions()``, the default of ``jwarp import-urdf``: spheres that
+contain the meshes, issue 42; before: ``tolerance=0.02``, a one-sided error of up to
+2 cm; cached). A candidate is accepted
 only if, with the fingers set, jwarp finds it collision-free (world and self, sphere model,
 ``--margin``) **and** the independent checker ``tests/verifier.py`` (pinocchio + coal)
 finds the URDF collision meshes clear of the exact scene geometry by ``--margin`` and the
@@ -480,7 +482,9 @@ def load_robot(path: str | None = None) -> tuple[Any, str | None]:
             urdf = None
         return jwarp.robot(path), urdf
     urdf = example_robot_urdf(URDF)
-    return spherized_robot(urdf, SpherizeOptions(tolerance=0.02))[0], urdf
+    # the default fit (containment): at tolerance 0.02 a contained fit's spheres would
+    # reach 4 cm past the thick links (the protrusion scales with the tolerance)
+    return spherized_robot(urdf, SpherizeOptions())[0], urdf
 
 
 def generate(out: str | os.PathLike, per_family: int, seed: int = 0,

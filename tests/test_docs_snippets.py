@@ -90,7 +90,8 @@ def _panda(*names: str) -> str:
     the doc's names (``panda.urdf``, ``panda.srdf``, ``link3.stl``)."""
     src = {"panda.urdf": "panda_description/urdf/panda.urdf",
            "panda.srdf": "panda_description/srdf/panda.srdf",
-           "link3.stl": "panda_description/meshes/collision/link3.stl"}
+           "link3.stl": "panda_description/meshes/collision/link3.stl",
+           "finger.stl": "panda_description/meshes/collision/finger.stl"}
     return "from robot_data import erd\n" + "".join(
         f"_link({src[n]!r}, {n!r})\n" for n in names)
 
@@ -185,6 +186,8 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "and the importer's own CollisionGeometry objects of that link"),
     "docs/spheres.md:204": (
         _JUSTIN, "`robot` is justin19 (the text's robot with spheres)"),
+    "docs/spheres.md:262": (
+        _panda("finger.stl"), "`finger.stl`: example-robot-data's Panda finger mesh"),
     "docs/urdf.md:6": (
         _panda("panda.urdf") + "import jwarp, numpy as np\n"
         "q = np.zeros((3, jwarp.robot('panda.urdf').n_dof))\n"
@@ -260,6 +263,9 @@ SUBSTITUTIONS: dict[str, list[tuple[str, str, str]]] = {
         ("setup, 10000,", "setup, 200,", "200 draws instead of 10000 (seconds, not minutes)")],
     "docs/spheres.md:204": [
         ("n_samples=10000", "n_samples=200", "200 sampled configurations instead of 10000")],
+    "docs/urdf.md:268": [
+        ("SpherizeOptions()", "SpherizeOptions(pair_samples=500)",
+         "500 self-pair samples instead of 10000 (the contained fit's 191 spheres)")],
     "examples/README.md:90": [
         ("setup, 500,", "setup, 20,", "20 samples instead of 500 (each needs visible markers)")],
 }
@@ -395,6 +401,20 @@ def _check_sphere_fit(ns: dict, folder: Path, out: str) -> None:
     assert fit.k == len(fit.radii) >= 1 and np.shape(fit.centres) == (fit.k, 3)
 
 
+def _check_containment(ns: dict, folder: Path, out: str) -> None:
+    """The contained fit and the grown one hold every certificate point; the one-sided
+    fit pokes out by what its bound says at most."""
+    from jwarp.importers.spheres import containment_bound
+
+    mesh, pts = ns["mesh"], ns["points"]
+    assert ns["fit"].contained and ns["held"].contained and pts.shape[1] == 3
+    for f in (ns["fit"], ns["held"]):
+        d = np.linalg.norm(pts[:, None] - f.centres[None], axis=-1) - f.radii[None]
+        assert d.min(axis=1).max() <= 0
+        assert containment_bound(mesh, f.centres, f.radii) == 0.0
+    assert ns["bound"] > 0
+
+
 def _check_self_pairs(ns: dict, folder: Path, out: str) -> None:
     assert out.strip() and ns["pairs"].samples.shape == (200, ns["robot"].n_dof)
     json.loads((folder / "robot_pairs.json").read_text())
@@ -472,6 +492,7 @@ CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
     "docs/scenes.md:238": _check_world_edits,
     "docs/spheres.md:10": _check_sphere_fit,
     "docs/spheres.md:204": _check_self_pairs,
+    "docs/spheres.md:262": _check_containment,
     "docs/urdf.md:6": _check_urdf,
     "docs/urdf.md:43": _check_robot_names,
     "docs/urdf.md:198": _check_group,

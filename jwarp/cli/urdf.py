@@ -180,8 +180,11 @@ def sphere_fit_line(fit: Any, model: Any, tolerance: float, parts: str) -> str:
     fitted (``parts``: "links", "bodies"), tolerance, largest one-sided error, checked
     frame pairs of the written ``model``."""
     worst = max((r["one_sided_error"] for r in fit.links), default=0.0)
+    from jwarp.model.sphere_relation import relation_text
+
     return (f"spheres fitted to {len(fit.links)} {parts} (tolerance {tolerance} m, "
-            f"largest one-sided error {worst:.4f} m"
+            f"{relation_text(model)}; largest one-sided error on fresh samples "
+            f"{worst:.4f} m"
             f"{', from the cache' if fit.cached else ''}); "
             f"{int(model.allowed_collision_pairs.sum()) // 2} self-collision frame "
             f"pairs checked")
@@ -349,7 +352,8 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
 
             opts = SpherizeOptions(tolerance=args.tolerance, max_spheres=args.max_spheres,
                                    pair_samples=args.pair_samples, protrusion=args.protrusion,
-                                   refine=args.refine)
+                                   refine=args.refine, contain=not args.approximate,
+                                   contain_gap=args.contain_gap)
             with warnings.catch_warnings():  # printed below from the report, each once
                 warnings.simplefilter("ignore", SphereFitWarning)
                 model, fit = spherized_robot(args.urdf, opts, cache=not args.no_cache,
@@ -385,6 +389,10 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
     home = None
     if model.spheres and not args.no_home_fit:
         model, home = home_fit_step(imported, model, args, grouped.srdf)
+        if fit is not None:  # tightened spheres: their poke-out certified again
+            from jwarp.world.spherize import certify_relation
+
+            model = certify_relation(model, imported, opts.contain_gap)
     elif args.home is not None:
         raise CLIError("--home: needs a collision model (--spheres fit or urdf) and no "
                        "--no-home-fit")
@@ -395,6 +403,7 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
     if fit is not None:
         extra["sphere_fit"] = fit.to_dict()
         lines.append(sphere_fit_line(fit, model, args.tolerance, "links"))
+        lines += fit.link_lines()
         lines += [f"warning: {w}" for w in fit.warnings]
         if resampled is not None:
             lines.append(f"self-collision pairs sampled again over the {model.n_dof} planned "
@@ -442,7 +451,8 @@ def add_subcommands(sub: Any) -> None:
                         "sphere geometry (urdf), or no spheres (none)")
     s.add_argument("--tolerance", type=real_arg("--tolerance", 0.0, lo_open=True, unit=" m"),
                    default=0.01, metavar="M",
-                   help="one-sided error of the fitted spheres [m] (0.01)")
+                   help="sample density and protrusion scale of the fitted spheres; with "
+                        "--approximate their one-sided error [m] (0.01)")
     s.add_argument("--max-spheres", type=int_arg("--max-spheres", 1), default=None,
                    metavar="K", help="most spheres per link (default: as many as the "
                                      "tolerance needs)")
@@ -456,6 +466,14 @@ def add_subcommands(sub: Any) -> None:
                    help="fit the wrist, hand and base like every other link (default: "
                         "refined fits there: spheres that reach less past the surface, "
                         "fewer free grasps refused; slower import; docs/spheres.md)")
+    s.add_argument("--approximate", action="store_true",
+                   help="the one-sided-error fit instead of containment: fewer spheres, but "
+                        "the meshes may poke out of them by about the tolerance; the model "
+                        "records each link's poke-out and planning and IK add it as margin "
+                        "(docs/spheres.md)")
+    s.add_argument("--contain-gap", type=real_arg("--contain-gap", 0.0, lo_open=True,
+                                                  unit=" m"), default=0.001, metavar="M",
+                   help="covering radius of the containment certificate's points [m] (0.001)")
     s.add_argument("--pair-samples", type=int_arg("--pair-samples", 1), default=10000,
                    metavar="N", help="random configurations of the self-collision pair "
                                      "sampling (10000)")

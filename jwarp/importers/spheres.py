@@ -76,6 +76,7 @@ from scipy.spatial import cKDTree
 from jwarp.utils.warp_init import init_quietly
 
 __all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "fit_link", "fit_kernels",
+           "surface_cover", "containment_bound", "containment_growth", "contain_fit", "link_part", "CONTAIN_CHECK", "CONTAIN_GAP",
            "primitive_mesh", "load_mesh", "one_sided_error", "excess_volume",
            "signed_distance", "inside_solid", "sphere_protrusion", "mesh_memo", "PRIMITIVES"]
 
@@ -113,6 +114,12 @@ class SphereFitOptions:
     protrusion: > 0, how far a sphere may reach past the surface (each radius is the
         centre's clearance + protrusion); None: by the part's thickness, ``tolerance / 2``
         for thin parts up to ``2 tolerance`` for thick ones (module docstring).
+    contain: None (the one-sided error mode above) or > 0, the gap ``g`` [mesh unit] of
+        the containment mode: the cover holds every fit sample at least ``g`` inside a
+        sphere, and :func:`contain_fit` then grows radii until every point of every
+        triangle lies inside the union (certified on a point set of covering radius
+        ``g``, module docstring "Containment"); ``tolerance`` then sets the sample density
+        and the automatic protrusion only.
     """
 
     tolerance: float
@@ -122,11 +129,14 @@ class SphereFitOptions:
     seed: int = 0
     max_rounds: int = 6
     protrusion: float | None = None
+    contain: float | None = None
 
     def validate(self) -> "SphereFitOptions":
         self.tolerance = _length(self.tolerance, "tolerance")
         if self.protrusion is not None:
             self.protrusion = _length(self.protrusion, "protrusion")
+        if self.contain is not None:
+            self.contain = _length(self.contain, "contain")
         if self.max_spheres is not None:
             self.max_spheres = _int(self.max_spheres, "max_spheres", 1)
         if self.n_surface is not None:
@@ -170,6 +180,19 @@ class SphereFit:
     protrusion: float = 0.0
     max_protrusion: float = 0.0
     watertight: bool = True
+    #: containment (:func:`contain_fit`): every point of every triangle inside the union
+    #: of the spheres, certified with the covering gap ``contain_gap`` [mesh unit] on
+    #: ``n_certify`` points; ``poke_out_bound`` [mesh unit]: an upper bound of how far a
+    #: surface point can lie outside the spheres (0 when contained; else the largest
+    #: deficit of the certificate's points + the gap, :func:`containment_bound`);
+    #: ``grown``: the largest radius increase the containment took
+    contained: bool = False
+    #: fresh samples of the last containment check (0: certified, not sampled yet)
+    n_fresh: int = 0
+    contain_gap: float = 0.0
+    poke_out_bound: float = float("nan")
+    n_certify: int = 0
+    grown: float = 0.0
 
     @property
     def k(self) -> int:
@@ -282,7 +305,7 @@ def _signed_distance_kernel(mesh: wp.uint64, points: wp.array(dtype=wp.vec3),
 
 def fit_kernels() -> tuple:
     """The Warp kernels of the sphere fit (``jwarp warmup --families spherize``)."""
-    return (_outside_kernel, _signed_distance_kernel)
+    return (_outside_kernel, _signed_distance_kernel, _nearest_kernel)
 
 
 class _Solid:
@@ -578,15 +601,18 @@ def _cover(slack: _Slack, max_spheres: int | None, eps0: float,
     chosen = _greedy_cover(slack.matrix(eps0), max_spheres)
     if chosen is not None:
         return _two_for_one(slack.s <= eps0, chosen, slack.c, slack.r + eps0), eps0
-    lo, hi = eps0, 2.0 * eps0
+    # (a negative eps0, the containment mode: widened by steps of |eps0|, doubling)
+    step = abs(eps0) if eps0 != 0 else 1e-12
+    lo, hi = eps0, eps0 + step
     while True:
         best = _greedy_cover(slack.matrix(hi), max_spheres)
         if best is not None:
             break
         if hi >= eps_max:
             raise RuntimeError("sphere cover failed at the largest error (a bug)")
-        lo, hi = hi, min(2.0 * hi, eps_max)
-    while hi - lo > max(0.02 * hi, 0.02 * eps0, 1e-12):
+        step *= 2.0
+        lo, hi = hi, min(eps0 + step, eps_max)
+    while hi - lo > max(0.02 * abs(hi), 0.02 * abs(eps0), 1e-12):
         mid = 0.5 * (lo + hi)
         got = _greedy_cover(slack.matrix(mid), max_spheres)
         if got is None:
@@ -663,6 +689,205 @@ def excess_volume(mesh: trimesh.Trimesh, centres: np.ndarray, radii: np.ndarray,
     return vol, se, "winding number"
 
 
+# ----------------------------------------------------------------- containment
+#: fresh area-uniform surface samples (plus the mesh's vertices) of the check after
+#: :func:`contain_fit` (another random stream than the fit's and the certificate's)
+CONTAIN_CHECK = 100_000
+#: radii grown this much [mesh unit] beyond the certificate's need (float64 rounding)
+_ROUNDING = 1e-9
+#: default gap [m] of the containment certificate (:func:`surface_cover`)
+CONTAIN_GAP = 0.001
+#: the most certificate points of one part (:func:`surface_cover`); beyond: ValueError
+MAX_COVER_POINTS = 20_000_000
+
+
+def surface_cover(mesh: trimesh.Trimesh, gap: float) -> np.ndarray:
+    """(n, 3) points on the triangles of ``mesh`` such that **every point of every
+    triangle lies within** ``gap`` **of one of them** [mesh unit]: each triangle of longest
+    edge ``e`` is cut into ``m^2`` similar triangles, ``m = ceil(e / (sqrt(3) gap))``, and
+    their corners are taken. A point of a triangle of longest edge ``a`` lies within
+    ``a / sqrt(3)`` of one of its corners (the circumradius ``a / (2 sin A)``, ``A >= 60``
+    deg, for an acute triangle; half an edge on the boundary of an obtuse one), here
+    ``<= gap``. Deterministic (no sampling). Buried faces (a body inside another) are kept:
+    a mesh checker such as coal tests every triangle."""
+    mesh = _check_mesh(mesh)
+    g = _length(gap, "gap")
+    V = np.asarray(mesh.vertices, np.float64)
+    F = np.asarray(mesh.faces, np.int64)
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    e = np.max(np.stack([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1),
+                         np.linalg.norm(a - c, axis=1)]), axis=0)
+    m = np.maximum(np.ceil(e / (np.sqrt(3.0) * g)), 1).astype(np.int64)
+    total = int(((m + 1) * (m + 2) // 2).sum())
+    if total > MAX_COVER_POINTS:
+        raise ValueError(f"gap: {g:g} needs {total} certificate points on a surface of "
+                         f"{mesh.area:.4g} (at most {MAX_COVER_POINTS}); raise the gap")
+    out = [V[np.unique(F)]]
+    for k in np.unique(m):
+        if k == 1:
+            continue  # the corners: the vertices above
+        sel = m == k
+        i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
+        keep = i + j <= k
+        u, v = i[keep] / k, j[keep] / k  # barycentric grid (corners included)
+        pa, pb, pc = a[sel], b[sel], c[sel]
+        pts = (pa[:, None] * (1 - u - v)[None, :, None] + pb[:, None] * u[None, :, None]
+               + pc[:, None] * v[None, :, None])
+        out.append(pts.reshape(-1, 3))
+    return np.concatenate(out)
+
+
+@wp.kernel(enable_backward=False)
+def _nearest_kernel(points: wp.array(dtype=wp.vec3d), centres: wp.array(dtype=wp.vec3d),
+                    radii: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64),
+                    arg: wp.array(dtype=wp.int32)):
+    i = wp.tid()
+    p = points[i]
+    best = wp.float64(1.0e300)
+    k = int(0)
+    for j in range(centres.shape[0]):
+        d = wp.length(p - centres[j]) - radii[j]
+        if d < best:
+            best = d
+            k = j
+    out[i] = best
+    arg[i] = k
+
+
+def _nearest_deficit(points: np.ndarray, centres: np.ndarray, radii: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) ``min_i |p - c_i| - r_i`` and (n,) its argmin (float64; Warp's CPU loop)."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    c = np.asarray(centres, np.float64).reshape(-1, 3)
+    r = np.asarray(radii, np.float64).reshape(-1)
+    if len(p) == 0 or len(r) == 0:
+        return np.full(len(p), np.inf), np.zeros(len(p), np.int64)
+    _init_warp()
+    out = wp.zeros(len(p), dtype=wp.float64, device="cpu")
+    arg = wp.zeros(len(p), dtype=wp.int32, device="cpu")
+    wp.launch(_nearest_kernel, len(p), device="cpu", inputs=[
+        wp.array(p, dtype=wp.vec3d, device="cpu"), wp.array(c, dtype=wp.vec3d, device="cpu"),
+        wp.array(r, dtype=wp.float64, device="cpu"), out, arg])
+    return out.numpy(), arg.numpy().astype(np.int64)
+
+
+def _cover_of(mesh: trimesh.Trimesh, gap: float) -> np.ndarray:
+    return mesh_memo(mesh, ("cover", float(gap)), lambda: surface_cover(mesh, gap))
+
+
+def containment_bound(mesh: trimesh.Trimesh, centres: np.ndarray, radii: np.ndarray, *,
+                      gap: float = CONTAIN_GAP, surface_error: float = 0.0) -> float:
+    """An upper bound [mesh unit] of how far a point of the triangles of ``mesh`` lies
+    outside the union of the spheres (``centres`` (k, 3), ``radii`` (k,)): the largest
+    ``min_i |p - c_i| - r_i`` over the points ``p`` of :func:`surface_cover` (``gap``)
+    plus ``gap`` (that function is 1-Lipschitz in p, and every surface point is within
+    ``gap`` of some ``p``), plus ``surface_error`` (how far the true surface may lie
+    outside the triangles: a tessellated cylinder), clipped at 0. 0 means every surface
+    point is inside (up to float64 rounding)."""
+    if len(np.asarray(radii).reshape(-1)) == 0:
+        return float("inf")
+    d, _ = _nearest_deficit(_cover_of(_check_mesh(mesh), gap), centres, radii)
+    return max(0.0, float(d.max()) + float(gap) + float(surface_error))
+
+
+def containment_growth(mesh: trimesh.Trimesh, centres: np.ndarray, radii: np.ndarray, *,
+                       gap: float = CONTAIN_GAP, surface_error: float = 0.0) -> np.ndarray:
+    """(k,) how much [mesh unit] each sphere's radius must grow for the spheres
+    (``centres`` (k, 3), ``radii`` (k,)) to contain every point of the triangles of ``mesh``
+    (step 2 of :func:`contain_fit`: each cover point not ``gap + surface_error`` deep goes to
+    the sphere it is deepest in); all 0 when they contain it already."""
+    c = np.asarray(centres, np.float64).reshape(-1, 3)
+    r = np.asarray(radii, np.float64).reshape(-1)
+    P = _cover_of(_check_mesh(mesh), _length(gap, "gap"))
+    depth = float(gap) + float(surface_error)
+    d, arg = _nearest_deficit(P, c, r)
+    need = d + depth > 0
+    grown = r.copy()
+    if need.any():
+        want = np.linalg.norm(P[need] - c[arg[need]], axis=1) + depth + _ROUNDING
+        np.maximum.at(grown, arg[need], want)
+    return grown - r
+
+
+def contain_fit(mesh: trimesh.Trimesh, fit: SphereFit, gap: float = CONTAIN_GAP, *,
+                surface_error: float = 0.0, n_check: int = CONTAIN_CHECK,
+                seed: int = 0) -> SphereFit:
+    """``fit`` (spheres of ``mesh``, same frame) with radii grown so that **every point of
+    every triangle lies inside the union of the spheres**:
+
+    1. the points ``P`` of :func:`surface_cover` (covering radius ``gap``);
+    2. each ``p`` of ``P`` less than ``gap + surface_error`` deep inside every sphere is
+       given to the sphere it is deepest in (the smallest ``|p - c_i| - r_i``: the least
+       growth), and that sphere's radius grows to ``|p - c_i| + gap + surface_error``
+       (radii only grow, so points already deep enough stay so);
+    3. then every ``p`` lies ``gap + surface_error`` deep, and a surface point ``x``
+       within ``gap`` of ``p`` (the true surface within ``surface_error`` of the triangles)
+       has ``|x - c_i| - r_i <= 0``: contained (the certificate; checked again by
+       :func:`containment_bound`, and on ``n_check`` fresh area-uniform samples and the
+       vertices: ``one_sided_error`` must be 0).
+
+    Returns a new :class:`SphereFit` with ``contained``, ``contain_gap``, ``n_certify``,
+    ``grown`` (largest radius increase), ``poke_out_bound`` (0), the measured
+    ``max_protrusion`` and excess volume; ``protrusion`` is the larger of the allowed one
+    and the measured one. ``n_check`` 0: the certificate only (no fresh samples, the
+    excess volume not measured again: the steps of a fit; ``n_fresh`` 0). ``fit`` already
+    contained with this gap and checked on at least ``n_check`` samples is returned as
+    is."""
+    mesh = _check_mesh(mesh)
+    if not isinstance(fit, SphereFit):
+        raise TypeError(f"fit: expected a SphereFit, got {type(fit).__name__}")
+    g = _length(gap, "gap")
+    if isinstance(surface_error, bool) or not np.isfinite(surface_error) or surface_error < 0:
+        raise ValueError(f"surface_error: expected a finite distance >= 0, got "
+                         f"{surface_error!r}")
+    if n_check != 0:
+        _int(n_check, "n_check", 100)
+    if fit.contained and fit.contain_gap == g and surface_error == 0 \
+            and fit.n_fresh >= n_check:
+        return fit
+    c = np.asarray(fit.centres, np.float64).reshape(-1, 3)
+    r = np.asarray(fit.radii, np.float64).reshape(-1).copy()
+    if len(r) == 0:
+        raise ValueError("fit: no spheres to contain the mesh with")
+    P = _cover_of(mesh, g)
+    depth = g + float(surface_error)
+    d, arg = _nearest_deficit(P, c, r)
+    before = max(0.0, float(d.max()) + depth)
+    need = d + depth > 0
+    r0 = r.copy()
+    if need.any():
+        want = np.linalg.norm(P[need] - c[arg[need]], axis=1) + depth + _ROUNDING
+        np.maximum.at(r, arg[need], want)
+    after = containment_bound(mesh, c, r, gap=g, surface_error=float(surface_error))
+    if after > 0:  # cannot happen (radii only grew past every deficit): a bug
+        raise RuntimeError(f"containment failed: bound {after:g} after growing the radii")
+    solid = _solid_of(mesh)
+    prot = _protrusion(solid, c, r)
+    from dataclasses import replace
+
+    if n_check == 0:  # a step of a fit: the certificate only
+        return replace(fit, radii=r, one_sided_error=0.0, meets_tolerance=True,
+                       protrusion=max(float(fit.protrusion), float(prot.max())),
+                       max_protrusion=float(prot.max()), contained=True, contain_gap=g,
+                       poke_out_bound=0.0, n_certify=int(len(P)), n_fresh=0,
+                       grown=max(float((r - r0).max()), float(fit.grown)))
+    x, _ = _sample(mesh, int(n_check), seed + 611953)  # fresh stream
+    x = np.concatenate([x, np.asarray(mesh.vertices, np.float64)])
+    err = float(one_sided_error(x, c, r).max())
+    vol, se = _excess(solid, c, r, fit.n_volume, seed + 104729)
+    return replace(fit, radii=r, one_sided_error=err, meets_tolerance=err <= fit.tolerance,
+                   excess_volume=vol, excess_volume_stderr=se,
+                   excess_fraction=vol / fit.mesh_volume if fit.mesh_volume > 0 else np.inf,
+                   protrusion=max(float(fit.protrusion), float(prot.max())),
+                   max_protrusion=float(prot.max()), contained=True, contain_gap=g,
+                   poke_out_bound=0.0, n_certify=int(len(P)), n_fresh=int(len(x)),
+                   grown=max(float((r - r0).max()), float(fit.grown)),
+                   notes=list(fit.notes) + [f"contained: certified poke-out bound "
+                                            f"{before:.4g} -> 0 on {len(P)} points (gap "
+                                            f"{g:g}), radii grown by up to "
+                                            f"{(r - r0).max():.4g}"])
+
+
 #: the largest surface a tolerance-mode fit takes, in cells of tolerance^2 (a Panda link at
 #: 1 cm is about 1e3; a 10 m box at 1 cm is 6e6)
 MAX_SURFACE_CELLS = 1e6
@@ -688,16 +913,19 @@ def _reach(clearance: np.ndarray, *, tol: float, fixed: float | None,
 
 def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | None = None,
                 n_surface: int | None = None, n_volume: int = 100_000, seed: int = 0,
-                max_rounds: int = 6, protrusion: float | None = None) -> SphereFit:
+                max_rounds: int = 6, protrusion: float | None = None,
+                contain: float | None = None, contain_check: int = CONTAIN_CHECK) -> SphereFit:
     """Fit spheres to ``mesh``: centres inside its solid, radii = clearance + ``protrusion``
     (default ``tolerance / 2``), every surface point within ``tolerance`` of a sphere with as
     few spheres as the greedy cover finds; or, with ``max_spheres``, at most that many and
     the smallest error the cover finds (reported, ``meets_tolerance`` False when it exceeds
     ``tolerance``). See the module docstring for the method and :class:`SphereFitOptions`
-    for the arguments. Returns a :class:`SphereFit` (centres (k, 3), radii (k,), in the
-    mesh's frame and unit)."""
+    for the arguments; ``contain`` (a gap > 0): the containment mode (the cover holds the
+    samples ``contain`` inside the spheres, then :func:`contain_fit` with
+    ``n_check=contain_check``: 0 certifies without the fresh-sample check). Returns a
+    :class:`SphereFit` (centres (k, 3), radii (k,), in the mesh's frame and unit)."""
     opt = SphereFitOptions(tolerance, max_spheres, n_surface, n_volume, seed, max_rounds,
-                           protrusion).validate()
+                           protrusion, contain).validate()
     mesh = _check_mesh(mesh)
     tol = opt.tolerance
     part = None  # the automatic protrusion follows the part's largest clearance
@@ -751,7 +979,11 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
                       "spheres centred on the surface")
         cand_c, cand_d = samples[sub].copy(), np.zeros(len(sub))
     eps_max = 2.0 * solid.extent + tol  # one sphere of any candidate then holds every sample
-    eps0 = _EPS_FIT * tol
+    # the cover's allowed error; containment: every sample at least the gap inside, and a
+    # fresh sample outside any sphere is a miss (then fitted in the next round)
+    eps0 = -opt.contain if opt.contain else _EPS_FIT * tol
+    ok_at = 0.0 if opt.contain else tol
+    refit_at = 0.0 if opt.contain else _REFIT * tol
     n_check = int(np.clip(20.0 * mesh.area / tol ** 2, _CHECK_SAMPLES, 2.5 * _CHECK_SAMPLES))
     check = _boundary_sample(mesh, solid, n_check, opt.seed + 7919)  # fresh stream
     rounds, best = 0, None
@@ -774,14 +1006,15 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
         c, r = cand_c[chosen], cand_d[chosen] + reach(cand_d[chosen])
         err_all = one_sided_error(check, c, r)
         err = float(err_all.max())
-        key = (err > tol, err > _REFIT * tol, len(c) if err <= tol else err, err)
+        key = (err > ok_at, err > refit_at, len(c) if err <= ok_at else err, err)
         if best is None or key < best[0]:
             best = (key, c, r, err, eps, float(reach(cand_d[chosen]).max()), eps > eps0)
-        bad = err_all > _REFIT * tol
+        bad = err_all > refit_at
         if (opt.max_spheres is not None and eps > eps0) or not bad.any() \
                 or rounds >= opt.max_rounds:  # (eps > eps0 with a budget: it binds)
             break
-        eps0 *= 0.95  # the next round's cover a little tighter
+        if not opt.contain:
+            eps0 *= 0.95  # the next round's cover a little tighter
         # fresh samples outside: fit them too, with their own candidates
         new_p = check[bad]
         new_n = _closest_normals(mesh, new_p)
@@ -795,7 +1028,7 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
     prot = _protrusion(solid, c, r)
     vol, se = _excess(solid, c, r, opt.n_volume, opt.seed + 104729)
     mvol, how = _solid_volume(mesh, solid, opt.n_volume, opt.seed + 15485863)
-    return SphereFit(centres=c, radii=r, tolerance=tol, one_sided_error=err,
+    out = SphereFit(centres=c, radii=r, tolerance=tol, one_sided_error=err,
                      meets_tolerance=err <= tol, fit_error=float(eps), excess_volume=vol,
                      excess_volume_stderr=se, excess_fraction=vol / mvol if mvol > 0 else np.inf,
                      mesh_volume=mvol, n_volume=opt.n_volume, n_surface=n_s,
@@ -803,6 +1036,8 @@ def fit_spheres(mesh: trimesh.Trimesh, *, tolerance: float, max_spheres: int | N
                      notes=notes, protrusion=allowed,
                      max_protrusion=float(prot.max()) if len(prot) else 0.0,
                      watertight=watertight)
+    return contain_fit(mesh, out, opt.contain, seed=opt.seed, n_check=contain_check) \
+        if opt.contain else out
 
 
 def _thin(c: np.ndarray, d: np.ndarray, cap: int, grid: float
@@ -946,7 +1181,8 @@ def _exact_sphere(size: Any, tolerance: float, T: np.ndarray) -> SphereFit:
     return fit.transformed(T)
 
 
-_FIT_KEYS = ("max_spheres", "n_surface", "n_volume", "seed", "max_rounds", "protrusion")
+_FIT_KEYS = ("max_spheres", "n_surface", "n_volume", "seed", "max_rounds", "protrusion",
+             "contain")
 
 
 def fit_geometry(kind: str, size: Any = None, origin: Any = None, mesh: Any = None, *,
@@ -992,6 +1228,32 @@ def geometry_bounds(geometries: Any) -> np.ndarray:
     return np.stack([lo, hi])
 
 
+def link_part(geometries: Any) -> tuple[trimesh.Trimesh | None, float]:
+    """The union (one Trimesh, link frame) of a link's collision ``geometries`` (as
+    :func:`fit_link` takes them) other than spheres, and how far [m] a tessellated curved
+    primitive among them may lie inside its true surface (0 for meshes and boxes); None
+    when the link has only spheres."""
+    parts, sagitta = [], 0.0
+    for i, g in enumerate(geometries):
+        get = (g.get if isinstance(g, dict) else lambda k, d=None, g=g: getattr(g, k, d))
+        if get("kind") == "sphere":
+            continue
+        mesh = get("mesh") if get("mesh") is not None else (
+            get("filename") or get("path") or get("mesh_path"))
+        try:
+            m = _geometry_mesh(get("kind"), get("size"), mesh, get("scale")).copy()
+            m.apply_transform(_origin(get("origin")))
+        except (ValueError, TypeError) as e:
+            raise type(e)(f"geometries[{i}]: {e}") from e
+        parts.append(m)
+        if get("kind") in ("cylinder", "capsule"):
+            rad = float(np.asarray(get("size"), np.float64).reshape(-1)[0])
+            sagitta = max(sagitta, rad * (1.0 - np.cos(np.pi / 64)))
+    if not parts:
+        return None, 0.0
+    return (parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)), sagitta
+
+
 def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
              **options: Any) -> SphereFit:
     """Spheres of all collision geometries of one link, in the link frame. Each geometry is
@@ -1007,6 +1269,7 @@ def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
     report: total count, the fit's one-sided error, excess and protrusion (URDF spheres add
     none)."""
     exact, parts = [], []
+    sagitta = 0.0  # how far a tessellated curved primitive lies inside its true surface
     for i, g in enumerate(geometries):
         get = (g.get if isinstance(g, dict) else lambda k, d=None, g=g: getattr(g, k, d))
         mesh = get("mesh") if get("mesh") is not None else (
@@ -1021,6 +1284,9 @@ def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
                 m = _geometry_mesh(kind, get("size"), mesh, get("scale")).copy()
                 m.apply_transform(T)
                 parts.append(m)
+                if kind in ("cylinder", "capsule"):
+                    rad = float(np.asarray(get("size"), np.float64).reshape(-1)[0])
+                    sagitta = max(sagitta, rad * (1.0 - np.cos(np.pi / 64)))
         except (ValueError, TypeError) as e:
             raise type(e)(f"geometries[{i}]: {e}") from e
     if not exact and not parts:
@@ -1036,7 +1302,17 @@ def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
                                  f"{len(exact)} sphere geometries")
             options = {**options, "max_spheres": budget - len(exact)}
         whole = parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
-        fits.append((fit or fit_spheres)(whole, tolerance=tolerance, **options))
+        step = {"contain_check": 0} if options.get("contain") else {}  # checked below
+        got = (fit or fit_spheres)(whole, tolerance=tolerance, **options, **step)
+        if options.get("contain"):  # contained, certified and checked on fresh samples
+            got = contain_fit(whole, got, float(options["contain"]), surface_error=sagitta,
+                              seed=int(options.get("seed", 0)))
+        elif not options.get("contain"):  # the approximate fit: its certified poke-out
+            from dataclasses import replace
+
+            got = replace(got, poke_out_bound=containment_bound(
+                whole, got.centres, got.radii, gap=CONTAIN_GAP, surface_error=sagitta))
+        fits.append(got)
     return SphereFit(
         centres=np.concatenate([f.centres for f in fits]),
         radii=np.concatenate([f.radii for f in fits]), tolerance=float(tolerance),
@@ -1053,4 +1329,9 @@ def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
         rounds=max(f.rounds for f in fits), notes=[n for f in fits for n in f.notes],
         protrusion=max(f.protrusion for f in fits),
         max_protrusion=max(f.max_protrusion for f in fits),
-        watertight=all(f.watertight for f in fits))
+        watertight=all(f.watertight for f in fits),
+        contained=all(f.contained or f.volume_method == "exact sphere" for f in fits),
+        contain_gap=max(f.contain_gap for f in fits),
+        poke_out_bound=max((0.0 if f.volume_method == "exact sphere" else f.poke_out_bound)
+                           for f in fits),
+        n_certify=sum(f.n_certify for f in fits), grown=max(f.grown for f in fits))

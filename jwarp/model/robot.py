@@ -43,6 +43,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from jwarp.utils.atomic import atomic_write_text
+from jwarp.model.sphere_relation import (SphereRelation, relation_after_edit, relation_from_dict,
+                                         relation_to_dict)
 
 SCHEMA_NAME = "jwarp.robot"
 SCHEMA_VERSION = 1
@@ -159,6 +161,9 @@ class RobotModel:
     harmonic: np.ndarray | None = None  # (n_dof, K, 2) [rad or m]; None: K = 0
     kappa_nonlinear: np.ndarray | None = None  # (n_frames,) rad/(N m)^3
     coupling_harmonic: np.ndarray | None = None  # (n_frames, K, 2) [rad or m]; None: K = 0
+    #: how the spheres relate to the collision meshes they model (contained, or
+    #: approximate with the per-link poke-out); None: unknown (jwarp.model.sphere_relation)
+    sphere_relation: SphereRelation | None = None
 
     def __post_init__(self) -> None:
         self.gravity = _finite(self.gravity, "gravity")
@@ -469,6 +474,11 @@ class RobotModel:
         """A deep copy with some top-level fields replaced (validated again)."""
         doc = self.to_dict()
         model = _from_dict(doc)
+        if "spheres" in changes and "sphere_relation" not in changes:
+            # edited spheres: the relation follows what it can still promise
+            changes = {**changes, "sphere_relation": relation_after_edit(
+                model.sphere_relation, [f.name for f in model.frames], model.spheres,
+                list(changes["spheres"]))}
         for k, v in changes.items():
             if not hasattr(model, k):
                 raise TypeError(f"copy: unknown field '{k}'")
@@ -665,6 +675,10 @@ def validate(model: RobotModel) -> None:
 
     Numbers are stored as Python floats/ints (numpy scalars accepted, bools refused), so
     that a validated model always saves as JSON."""
+    if model.sphere_relation is not None and not isinstance(model.sphere_relation,
+                                                            SphereRelation):
+        raise RobotModelError(f"sphere_relation: expected a SphereRelation or None, got "
+                              f"{type(model.sphere_relation).__name__}")
     if not isinstance(model.name, str) or not model.name:
         raise RobotModelError("name: must be a non-empty string")
     nf, nj = len(model.frames), len(model.joints)
@@ -964,7 +978,15 @@ def _from_dict(doc: Any) -> RobotModel:
         workspace_dim=doc.get("workspace_dim", 3),
         masses=masses, spheres=spheres, capsules=capsules, self_collision=sc,
         end_effectors=eff, frame_aliases=aliases, linear_limits=lin, kappa=kappa, harmonic=harmonic,
-        kappa_nonlinear=knl, coupling_harmonic=coupled_h, notes={str(k): str(v) for k, v in (doc.get("notes") or {}).items()})
+        kappa_nonlinear=knl, coupling_harmonic=coupled_h, notes={str(k): str(v) for k, v in (doc.get("notes") or {}).items()},
+        sphere_relation=_relation(doc.get("sphere_relation")))
+
+
+def _relation(doc: Any) -> SphereRelation | None:
+    try:
+        return relation_from_dict(doc)
+    except (ValueError, TypeError) as e:
+        raise RobotModelError(str(e)) from None
 
 
 def _harmonic_from_doc(value: Any, jnames: list[str], key: str = "harmonic",
@@ -1038,6 +1060,8 @@ def _to_dict(m: RobotModel) -> dict[str, Any]:
                                     for i in range(m.n_frames) if np.any(m.coupling_harmonic[i])}
     if m.notes:
         doc["notes"] = dict(m.notes)
+    if m.sphere_relation is not None:
+        doc["sphere_relation"] = relation_to_dict(m.sphere_relation)
     return doc
 
 

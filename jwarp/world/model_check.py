@@ -19,6 +19,7 @@ link 5, while the middle of its limits is free, as for every robot shipped with 
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,7 @@ from jwarp.model.registry import robot as get_robot
 from jwarp.world.collision import collision_pairs
 
 __all__ = ["NO_SPHERES_HINT", "HOME_NOTE", "noted_home", "home_configuration",
+           "MeshMarginWarning", "mesh_margin_model",
            "home_configurations",
            "home_self_collisions", "check_collision_model"]
 
@@ -103,6 +105,10 @@ def home_self_collisions(robot: Any, q: Any = None, *, device: Any = None
     return [(names[a], names[b], v) for (a, b), v in sorted(worst.items(), key=lambda t: t[1])]
 
 
+#: (robot content, device) whose collision model passed :func:`check_collision_model`
+_PASSED: set = set()
+
+
 def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
                           option: str = "allow_no_collision=True",
                           device: Any = None) -> None:
@@ -111,7 +117,12 @@ def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
     frame pairs and how deep they overlap).
     ``what``: the work refused (e.g. "planning"); ``option``: the opt-out to name;
     ``device``: where the FK of the check runs."""
+    from jwarp.core.device import content_key
+
     model = get_robot(robot)
+    key = (content_key(model), str(device))
+    if key in _PASSED:  # the same robot content passed before (a planner per problem)
+        return
     if need_spheres and len(model.spheres) == 0:
         raise ValueError(f"robot: '{model.name}' has no collision spheres, so {what} would "
                          f"call everything collision-free; {NO_SPHERES_HINT}, or pass "
@@ -122,13 +133,78 @@ def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
     for label, q in home_configurations(model):
         hits = home_self_collisions(model, q, device=device)
         if not hits:
+            _PASSED.add(key)
             return
         listed = ", ".join(f"'{a}'-'{b}' ({-d * 1e3:.1f} mm deep)" for a, b, d in hits[:4])
         more = f" and {len(hits) - 4} more pairs" if len(hits) > 4 else ""
         found.append(f"at {label} {np.round(q, 4).tolist()}: {listed}{more}")
+    rel = model.sphere_relation
+    grown = (" (its spheres were grown by the meshes' poke-out, issue 42: mesh_margin=False "
+             "works on them as fitted, or import with containment)"
+             if rel is not None and rel.inflated else "")
     raise ValueError(
-        f"robot: '{model.name}' is in self-collision at "
+        f"robot: '{model.name}'{grown} is in self-collision at "
         f"{'both' if len(found) == 2 else f'all {len(found)}'} of its home configurations, "
         f"{'; '.join(found)}; its collision model is wrong (spheres reaching outside the "
         f"links: fit again with a smaller tolerance, or exclude the pairs in "
         f"self_collision.exclude_pairs), or pass {option} to skip this check")
+
+
+class MeshMarginWarning(UserWarning):
+    """Planning or IK with a robot whose spheres only approximate its collision meshes
+    (``RobotModel.sphere_relation`` "approximate"): said once per robot and choice."""
+
+
+#: (robot content, mesh_margin) pairs already warned about (:func:`mesh_margin_model`)
+_WARNED: set = set()
+#: robot content -> its inflated copy (the last few; a planner built per problem reuses it,
+#: and with it the device tables, instead of copying the robot each time)
+_INFLATED: "OrderedDict[str, Any]" = OrderedDict()
+
+
+def mesh_margin_model(robot: Any, mesh_margin: bool = True, *, what: str = "planning") -> Any:
+    """The robot a planner or IK solver works with (a :class:`~jwarp.model.RobotModel`):
+    when its ``sphere_relation`` is ``"approximate"`` (the meshes poke out of the spheres
+    by a measured, certified amount per link) and ``mesh_margin``, a copy whose every
+    sphere is grown by its link's poke-out [m] (:func:`jwarp.model.sphere_relation.
+    inflated`: the grown spheres contain the meshes, so the poke-out acts as extra margin
+    per link); with ``mesh_margin`` False the robot as it is. Either way a
+    :class:`MeshMarginWarning` says so, once per robot content and choice (``what``: the
+    work, e.g. "planning"). Contained robots and robots of unknown relation (no
+    ``sphere_relation``, e.g. files written before it existed: nothing is added) are
+    returned as they are, without a warning."""
+    import warnings
+
+    from jwarp.core.device import content_key
+    from jwarp.model.sphere_relation import inflated
+
+    if not isinstance(mesh_margin, (bool, np.bool_)):
+        raise TypeError(f"mesh_margin: expected True or False, got {mesh_margin!r}")
+    model = get_robot(robot)
+    rel = model.sphere_relation
+    if rel is None or rel.kind != "approximate" or not model.spheres:
+        return model
+    key = (content_key(model), bool(mesh_margin))
+    worst = sorted(rel.poke_out.items(), key=lambda kv: -kv[1])[:3]
+    listed = ", ".join(f"{k} {v * 1e3:.1f} mm" for k, v in worst)
+    if key not in _WARNED:
+        _WARNED.add(key)
+        if mesh_margin:
+            msg = (f"robot '{model.name}': its spheres approximate the collision meshes "
+                   f"(the meshes poke out by up to {rel.bound * 1e3:.1f} mm: {listed}); "
+                   f"{what} grows each link's spheres by its poke-out (extra margin per "
+                   f"link; mesh_margin=False to plan on the spheres as they are, or import "
+                   f"with containment, the default of `jwarp import-urdf`)")
+        else:
+            msg = (f"robot '{model.name}': its spheres approximate the collision meshes and "
+                   f"mesh_margin is off: {what} keeps the spheres free, but the meshes may "
+                   f"enter objects by up to {rel.bound * 1e3:.1f} mm ({listed})")
+        warnings.warn(msg, MeshMarginWarning, stacklevel=3)
+    if not mesh_margin:
+        return model
+    got = _INFLATED.get(key[0])
+    if got is None:
+        got = _INFLATED[key[0]] = inflated(model)
+        while len(_INFLATED) > 8:
+            _INFLATED.popitem(last=False)
+    return got

@@ -40,20 +40,22 @@ from typing import Any
 import numpy as np
 
 from jwarp.utils.atomic import atomic_write_text
-from jwarp.model import RobotModel, Sphere
+from jwarp.model import RobotModel, Sphere, SphereRelation
 from jwarp.world.self_pairs import (ALWAYS_FRACTION, SelfPairs, never_colliding_pairs,
                                     pair_reasons, sampled_reasons, with_pair_reasons,
                                     with_self_pairs)
 
-__all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize",
+__all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize", "certify_relation",
+           "fit_relation",
            "spherized_robot", "resample_pairs"]
 
 #: bump when the fitted result of the same inputs changes
 #: Monte Carlo points of a link's excess volume at import (:func:`spherize`)
 EXCESS_SAMPLES = 50_000
-CACHE_VERSION = 6  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits;
+CACHE_VERSION = 7  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits;
 #                   5: URDF axis frames named <joint>_axis, joint names frame aliases;
 #                   6: MoveIt's pair rules (adjacency, always >= 95 %), reasons in notes
+#                   7: containment (contain, contain_gap), sphere_relation
 
 
 #: the pair sampling of an import: MoveIt setup assistant's Adjacent and Always rules
@@ -89,6 +91,23 @@ class SpherizeOptions:
         :func:`jwarp.importers.sphere_refine.fit_refined` with the per-link protrusions of
         :func:`~jwarp.importers.sphere_refine.link_protrusions` (spheres that hug the parts
         that come near grasped objects; docs/spheres.md); False: the plain fit everywhere.
+    contain: True (default): the spheres contain every collision mesh
+        (:func:`jwarp.importers.spheres.contain_fit`: every point of every triangle inside
+        the union of the link's spheres, certified; ``tolerance`` then sets the sample
+        density and the protrusion scale, not an error); the model's relation is
+        ``"contained"``. False: the one-sided-error fit (fewer spheres; a mesh point may
+        lie up to about ``tolerance`` outside them); the relation is ``"approximate"``
+        with each link's certified poke-out, which the planner and IK add as margin.
+        With ``max_spheres`` the budget wins: the one-sided-error fit within it, and the
+        relation ``"approximate"`` with the poke-out it leaves.
+    contain_gap: covering radius [m] of the containment certificate's point set, and how
+        deep the cover holds its samples, > 0 (1 mm).
+    contain_factors: with ``contain`` and ``refine``, the protrusion factors (x
+        ``tolerance``) of the refined links: ``{"wrist": w, "hand": h}`` (either may be
+        left out); None: :data:`jwarp.importers.sphere_refine.CONTAIN_PROTRUSIONS` (wrist
+        1.25, hand and fingers 0.75). Larger factors: fewer spheres and faster planning,
+        more free grasps refused (docs/spheres.md, "Containment": wrist 2, hand 1 gave the
+        Panda 102 spheres instead of 191).
     """
 
     tolerance: float = 0.01
@@ -100,10 +119,14 @@ class SpherizeOptions:
     warn_protrusion: float | None = None
     warn_excess: float = 1.0
     refine: bool = True
+    contain: bool = True
+    contain_gap: float = 0.001
+    contain_factors: dict | None = None
 
     def validate(self) -> None:
         for name, strict in (("tolerance", True), ("pair_margin", False), ("protrusion", True),
-                             ("warn_protrusion", True), ("warn_excess", True)):
+                             ("warn_protrusion", True), ("warn_excess", True),
+                             ("contain_gap", True)):
             v = getattr(self, name)
             if v is None and name in ("protrusion", "warn_protrusion"):
                 continue
@@ -120,8 +143,22 @@ class SpherizeOptions:
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
                 raise ValueError(f"{name}: expected an integer >= {lo}"
                                  f"{' or None' if none else ''}, got {v!r}")
-        if not isinstance(self.refine, (bool, np.bool_)):
-            raise TypeError(f"refine: expected True or False, got {type(self.refine).__name__}")
+        f = self.contain_factors
+        if f is not None:
+            if not isinstance(f, dict):
+                raise TypeError(f"contain_factors: expected None or a dict {{'wrist': w, "
+                                f"'hand': h}}, got {type(f).__name__}")
+            bad = set(f) - {"wrist", "hand"}
+            if bad:
+                raise ValueError(f"contain_factors: unknown keys {sorted(bad)} (wrist, hand)")
+            for k, v in f.items():
+                if isinstance(v, bool) or not isinstance(v, (int, float)) \
+                        or not math.isfinite(v) or v <= 0:
+                    raise ValueError(f"contain_factors: '{k}' must be a number > 0, got {v!r}")
+        for name in ("refine", "contain"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise TypeError(f"{name}: expected True or False, got "
+                                f"{type(getattr(self, name)).__name__}")
 
 
 @dataclass
@@ -141,6 +178,28 @@ class SpherizeReport:
     @property
     def n_spheres(self) -> int:
         return int(sum(r["spheres"] for r in self.links))
+
+    def link_lines(self) -> list[str]:
+        """Per link: spheres, the poke-out bound (how far a mesh point may lie outside the
+        link's spheres; 0 contained) and the protrusion (how far they reach past the
+        surface) [mm], then the totals (the import report, ``jwarp import-urdf``)."""
+        out = []
+        for r in self.links:
+            poke = 0.0 if r.get("kept") else float(r.get("poke_out_bound", float("nan")))
+            how = ("URDF spheres" if r.get("kept") else "contained" if r.get("contained")
+                   else "approximate")
+            out.append(f"  {r['link']}: {r['spheres']} spheres, {how}, poke-out <= "
+                       f"{poke * 1e3:.2f} mm, protrusion {r['max_protrusion'] * 1e3:.2f} mm"
+                       + (f" (radii grown up to {r['grown'] * 1e3:.2f} mm, "
+                          f"{r['certify_points']} certificate points)"
+                          if r.get("contained") and not r.get("kept") else ""))
+        pokes = [0.0 if r.get("kept") else float(r.get("poke_out_bound", float("nan")))
+                 for r in self.links]
+        prots = [float(r["max_protrusion"]) for r in self.links]
+        out.append(f"  total: {self.n_spheres} spheres on {len(self.links)} links, poke-out "
+                   f"<= {max(pokes, default=0.0) * 1e3:.2f} mm, protrusion <= "
+                   f"{max(prots, default=0.0) * 1e3:.2f} mm")
+        return out
 
     def to_dict(self) -> dict:
         out: dict[str, Any] = {"links": self.links, "spheres": self.n_spheres,
@@ -183,7 +242,7 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
     ``progress``: a progress bar on stderr (:func:`fit_progress`: a step per link, the
     link's name beside it, then the pair sampling); None: when stderr is a terminal.
     The fit's results do not depend on it."""
-    from jwarp.importers.sphere_refine import link_protrusions
+    from jwarp.importers.sphere_refine import CONTAIN_PROTRUSIONS, link_protrusions
 
     o = SpherizeOptions() if options is None else options
     if not isinstance(o, SpherizeOptions):
@@ -204,12 +263,20 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
     # the excess volume (a reported figure, not the spheres) by 50 000 Monte Carlo points a
     # link (its standard error is reported): half the default, for the import's time
     fit_opts: dict[str, Any] = {"seed": int(o.seed), "n_volume": EXCESS_SAMPLES}
+    if o.contain and o.max_spheres is None:  # a budget: approximate, its poke-out recorded
+        fit_opts["contain"] = float(o.contain_gap)
     if o.max_spheres is not None:
         fit_opts["max_spheres"] = int(o.max_spheres)
     if o.protrusion is not None:
         fit_opts["protrusion"] = float(o.protrusion)
     # the wrist, hand and base: refined fits (jwarp.importers.sphere_refine)
-    per_link = link_protrusions(model, float(o.tolerance)) \
+    factors = dict(CONTAIN_PROTRUSIONS)
+    if o.contain_factors:
+        factors.update({k: float(v) for k, v in o.contain_factors.items()})
+        if "hand" in o.contain_factors:
+            factors["hand_start"] = float(o.contain_factors["hand"])
+    contained = o.contain and o.max_spheres is None
+    per_link = link_protrusions(model, float(o.tolerance), **(factors if contained else {})) \
         if o.protrusion is None and o.refine else {}
     n_fit = sum(any(g.kind != "sphere" for g in geoms) for geoms in by_link.values())
     bar = fit_progress(n_fit + int(bool(sample_pairs)), progress)
@@ -281,11 +348,38 @@ def _fit_links(model: RobotModel, by_link: dict[str, list], o: SpherizeOptions,
                "excess_fraction": float(fit.excess_fraction),
                "watertight": bool(fit.watertight), "kept": False,
                "requested_protrusion": float(link_opts.get("protrusion", 0.0)),
-               "refined": link in per_link}
+               "refined": link in per_link, "contained": bool(fit.contained),
+               "poke_out_bound": float(fit.poke_out_bound),
+               "contain_gap": float(fit.contain_gap or o.contain_gap),
+               "certify_points": int(fit.n_certify), "grown": float(fit.grown)}
         report.links.append(row)
         report.warnings += link_warnings(row, o)
         bar.update(1)
-    return model.copy(spheres=spheres)
+    return model.copy(spheres=spheres, sphere_relation=fit_relation(report.links, o))
+
+
+def fit_relation(rows: list[dict], options: SpherizeOptions) -> SphereRelation:
+    """The :class:`~jwarp.model.SphereRelation` of a fit from its report rows
+    (:class:`SpherizeReport` ``links``): ``"contained"`` when every fitted link is
+    (bound 0), else ``"approximate"`` with each link's certified poke-out [m]."""
+    poke = {r["link"]: (0.0 if r.get("kept") or r.get("contained")
+                        else float(r.get("poke_out_bound", float("nan"))))
+            for r in rows}
+    if any(not math.isfinite(v) for v in poke.values()):
+        raise ValueError("options: a link's poke-out was not measured (a bug)")
+    prot = {r["link"]: float(r.get("max_protrusion", 0.0)) for r in rows}
+    gap = float(options.contain_gap)
+    if all(v == 0.0 for v in poke.values()):
+        return SphereRelation(kind="contained", bound=0.0, poke_out=poke, protrusion=prot,
+                              gap=gap, method=f"jwarp.importers.spheres.contain_fit: every "
+                                              f"triangle point within {gap:g} m of a point "
+                                              f"held {gap:g} m deep")
+    budget = f", max_spheres {options.max_spheres}" if options.max_spheres else ""
+    return SphereRelation(kind="approximate", bound=max(poke.values(), default=0.0),
+                          poke_out=poke, protrusion=prot, gap=gap,
+                          method=f"one-sided-error fit (tolerance {options.tolerance:g} m"
+                                 f"{budget}); poke-out: jwarp.importers.spheres."
+                                 f"containment_bound (gap {gap:g} m)")
 
 
 def robot_size(model: RobotModel, by_link: dict[str, list]) -> float:
@@ -466,3 +560,46 @@ def resample_pairs(model: RobotModel, sampled: Any, options: SpherizeOptions, *,
                            include_pairs=list(sc.include_pairs), exclude_pairs=merged)
     reasons = {**sampled_reasons(model, pairs), **{p: why[p] for p in keep if p in why}}
     return with_pair_reasons(out.copy(self_collision=new_sc, notes=notes), reasons), pairs
+
+
+def certify_relation(model: RobotModel, urdf_robot: Any, gap: float | None = None
+                     ) -> RobotModel:
+    """``model`` (spheres fitted to ``urdf_robot``'s collision geometry, then edited, e.g.
+    tightened at the home by :mod:`jwarp.world.home_fit`) with the poke-out of every link
+    its relation lists above 0 measured again, certified
+    (:func:`jwarp.importers.spheres.containment_bound` of the link's spheres against its
+    geometry, covering radius ``gap`` [m]; None: the relation's): the relation becomes
+    ``"contained"`` again when every link is. Models of no or a contained relation are
+    returned as they are."""
+    from jwarp.importers.spheres import containment_bound, containment_growth, link_part
+
+    rel = model.sphere_relation
+    if rel is None or rel.kind == "contained":
+        return model
+    g = float(gap if gap is not None else (rel.gap or 0.001))
+    by_link: dict[str, list] = {}
+    for geo in urdf_robot.geometries:
+        by_link.setdefault(geo.link, []).append(geo)
+    f, p, r = model.sphere_arrays()
+    poke = dict(rel.poke_out)
+    names = [fr.name for fr in model.frames]
+    margin = np.asarray(rel.sphere_margin if rel.sphere_margin is not None
+                        and len(rel.sphere_margin) == len(r)
+                        else [rel.link_poke_out(names[i]) for i in f], np.float64)
+    for link, v in rel.poke_out.items():
+        if v <= 0 or link not in by_link:
+            continue
+        mesh, sag = link_part([_geometry(x) for x in by_link[link]])
+        sel = f == model.frame_index(link)
+        if mesh is None or not sel.any():
+            continue
+        poke[link] = containment_bound(mesh, p[sel], r[sel], gap=g, surface_error=sag)
+        # the least growth per sphere that contains the link (the planner's margin)
+        margin[sel] = containment_growth(mesh, p[sel], r[sel], gap=g, surface_error=sag)
+    bound = max(poke.values(), default=0.0)
+    new = SphereRelation(kind="contained" if bound == 0.0 else "approximate", bound=bound,
+                         poke_out=poke, protrusion=dict(rel.protrusion), gap=g,
+                         method=f"{rel.method}; poke-out certified again after the edit "
+                                f"(gap {g:g} m)",
+                         sphere_margin=None if bound == 0.0 else margin.tolist())
+    return model.copy(sphere_relation=new)

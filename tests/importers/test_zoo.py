@@ -93,7 +93,9 @@ def check_home_and_ik(m, ee: str, home: np.ndarray | None = None, n: int = 20) -
     assert len(Q) == n, f"{m.name}: {len(Q)} of 200 random configurations free"
     fi = m.frame_index(ee)
     T = np.asarray(jwarp.fk(m, Q, device="cpu", dtype=np.float64))[:, fi]
-    res = jwarp.ik(m, fi, T, n_starts=16, seed=0)
+    # the coarse budget fit is approximate (issue 42): solved on its spheres as they are
+    # (mesh_margin=False), what this test checks; the default adds the meshes' poke-out
+    res = jwarp.ik(m, fi, T, n_starts=16, seed=0, mesh_margin=False)
     assert res.feasible.mean() >= 0.95, f"{m.name}: IK solved {res.feasible.sum()}/{n}"
     # an independent check of the solutions: FK of the returned q reaches the targets
     F = np.asarray(jwarp.fk(m, res.q[res.feasible], device="cpu", dtype=np.float64))[:, fi]

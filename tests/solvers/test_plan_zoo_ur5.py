@@ -121,7 +121,9 @@ def assert_verified(m, boxes, path: np.ndarray) -> None:
 
 def test_ur5_table_to_shelf_plan_found_and_truly_free(ur5_problem):
     m, world, boxes, qa, qb = ur5_problem
-    res = jwarp.plan(m, world, qa, qb, time_limit=20.0, seed=0)
+    # the coarse budget fit is approximate (its meshes poke out by up to ~3 cm): planned on
+    # the spheres as they are, which is what this test checks (issue 42's margin off)
+    res = jwarp.plan(m, world, qa, qb, time_limit=20.0, seed=0, mesh_margin=False)
     assert res.feasible[0], res.reasons[0]
     assert res.reasons[0] == "feasible"
     w, self_min, self_start = reference_clearances(m, boxes, res.path[0])
@@ -155,7 +157,7 @@ def test_ur5_rrt_path_is_the_fallback_plan(ur5_problem, evals, monkeypatch):
     assert certify_check(m, world, device="cpu").check(rrt.path).ok[0]
     res = jwarp.plan(m, world, qa, qb, n_starts=1, start_kind="straight", iterations=0,
                      n_waypoints=W, rrt=RRTOptions(seed=np.random.default_rng(7)),
-                     time_limit=20.0)
+                     time_limit=20.0, mesh_margin=False)
     if res.stage[0] == "optimizer":
         pytest.fail("the straight line is free here: no fallback to test")
     assert res.feasible[0], res.reasons[0]
@@ -174,7 +176,8 @@ def test_no_plan_reason_names_the_fallback(ur5_problem):
     """Without a plan the reason says what the RRT fallback did (here: too few samples)."""
     m, world, boxes, qa, qb = ur5_problem
     res = jwarp.plan(m, world, qa, qb, n_starts=1, start_kind="straight", iterations=0,
-                     rrt=RRTOptions(max_samples=1, batch=1, seed=0), time_limit=20.0)
+                     rrt=RRTOptions(max_samples=1, batch=1, seed=0), time_limit=20.0,
+                     mesh_margin=False)
     if res.stage[0] == "optimizer":
         pytest.fail("the straight line is free here: no fallback to test")
     assert not res.feasible[0] and res.stage[0] == "none"

@@ -131,6 +131,9 @@ class IKOptions:
             is a ValueError naming the robot and the link pairs
             (:func:`jwarp.world.model_check.check_collision_model`; CLI ``--no-collision``).
             Without a world a robot without spheres is plain kinematic IK, no error.
+        mesh_margin: a robot whose spheres only approximate its meshes (relation
+            "approximate") solves with each link's spheres grown by its measured poke-out
+            (as ``PlanOptions.mesh_margin``; a warning once per robot); False: as they are.
 
     ``validate()`` (also run on construction) raises ValueError/TypeError naming the field.
     """
@@ -161,6 +164,7 @@ class IKOptions:
     orientation: str = "full"
     free_axis: Any = (0.0, 0.0, 1.0)
     allow_no_collision: bool = False
+    mesh_margin: bool = True
 
     def __post_init__(self) -> None:
         self.validate()
@@ -201,7 +205,8 @@ class IKOptions:
         if not 0.0 < lam <= 1.0:
             raise ValueError(f"lam: expected a damping factor in (0, 1], got {self.lam!r}")
         self.lam = lam
-        for name in ("stop_when_solved", "freeze_solved", "allow_no_collision", "cuda_graphs"):
+        for name in ("stop_when_solved", "freeze_solved", "allow_no_collision", "cuda_graphs",
+                     "mesh_margin"):
             v = getattr(self, name)
             if not isinstance(v, (bool, np.bool_)):
                 raise TypeError(f"{name}: expected a bool, got {v!r}")

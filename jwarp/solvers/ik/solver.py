@@ -21,7 +21,7 @@ from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import check_valid_range
 from jwarp.solvers.overrides import renamed_argument, with_overrides
 from jwarp.world import collision
-from jwarp.world.model_check import check_collision_model
+from jwarp.world.model_check import check_collision_model, mesh_margin_model
 from jwarp.solvers.ik.objective import IKObjective, batch_array, check_single_world, target_poses
 from jwarp.solvers.ik.options import IKOptions, IKWeights, positive_int
 from jwarp.solvers.ik.result import IKResult
@@ -84,6 +84,8 @@ class IKSolver:
             raise TypeError(f"options: expected IKOptions, got {type(options).__name__}")
         options = dataclasses.replace(options)  # a copy (validated): later edits do not leak
         self.device = resolve_device(device)
+        # approximate spheres: the meshes' poke-out as extra margin per link (or a warning)
+        self.robot = mesh_margin_model(self.robot, options.mesh_margin, what="IK")
         if not options.allow_no_collision:
             check_collision_model(self.robot, need_spheres=world is not None,
                                   what="IK in a world", device=self.device)

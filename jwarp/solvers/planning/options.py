@@ -176,6 +176,13 @@ class PlanOptions:
             configurations is accepted; False (default): either is a ValueError naming the
             robot and the link pairs (:func:`jwarp.world.model_check.check_collision_model`;
             CLI ``--no-collision``).
+        mesh_margin: a robot whose spheres only approximate its meshes
+            (``RobotModel.sphere_relation`` "approximate": the meshes poke out of them by a
+            measured amount per link) plans with each link's spheres grown by that link's
+            poke-out (:func:`jwarp.world.model_check.mesh_margin_model`; a warning once per
+            robot); False: the spheres as they are (the meshes may then enter objects by
+            up to the poke-out; warned once too). Contained and unknown relations: no
+            change.
     """
 
     n_starts: int = 8
@@ -209,6 +216,7 @@ class PlanOptions:
     allow_no_collision: bool = False
     shorten: int = 4
     shorten_budget: float | None = 0.5
+    mesh_margin: bool = True
 
     def __post_init__(self) -> None:
         self.fallback = fallback_word(self.fallback)
@@ -277,7 +285,7 @@ class PlanOptions:
         if not (math.isfinite(tol) and tol > 0):
             raise ValueError(f"converge_tol: expected a number > 0, got {self.converge_tol!r}")
         for name in ("freeze_feasible", "stop_when_solved", "free_via", "converge",
-                     "allow_no_collision"):
+                     "allow_no_collision", "mesh_margin"):
             _check_flag(getattr(self, name), name)
         seed = self.seed
         if not (seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence))):

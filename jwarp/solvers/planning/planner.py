@@ -12,7 +12,7 @@ import warp as wp
 
 from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
 from jwarp.core.device import numpy_dtype, scalar_type
-from jwarp.world.model_check import check_collision_model
+from jwarp.world.model_check import check_collision_model, mesh_margin_model
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import check_valid_range
@@ -146,6 +146,8 @@ class Planner:
         o = replace(options, step=float(options.step), max_step=float(options.max_step),
                     margin=real_number(options.margin, "margin"))
         self.device = resolve_device(device)
+        # approximate spheres: the meshes' poke-out as extra margin per link (or a warning)
+        self.robot = mesh_margin_model(self.robot, bool(o.mesh_margin), what="planning")
         if not o.allow_no_collision:
             check_collision_model(self.robot, need_spheres=True, what="planning",
                                   device=self.device)
