@@ -59,6 +59,13 @@ __all__ = ["DeviceModel", "SphereModel", "put_model", "struct_fields", "struct_f
 _SCALARS = {np.dtype(np.float32): wp.float32, np.dtype(np.float64): wp.float64}
 
 
+def host_device() -> str | None:
+    """The device of small float64 computations for messages and explanations: ``"cpu"``
+    where Warp has its CPU backend, else None (Warp's default device: a GPU-only install
+    compiles no CPU kernels)."""
+    return "cpu" if wp.is_cpu_available() else None
+
+
 def scalar_type(dtype: object) -> type:
     """Warp scalar for ``dtype`` (numpy dtype, 'float32'/'float64', or a Warp scalar)."""
     if dtype is wp.float32 or dtype is wp.float64:

@@ -746,12 +746,15 @@ def sphere_link(robot: Any, s: int) -> str:
     return model.frames[model.spheres[int(s)].frame].name
 
 
-def nearest_objects(robot: Any, q: Any, world: World, spheres: Any, rho: Any = None
-                    ) -> list[str]:
+def nearest_objects(robot: Any, q: Any, world: World, spheres: Any, rho: Any = None,
+                    device: Any = None) -> list[str]:
     """What each of the collision ``spheres`` (indices) of one configuration q (n_dof,) is
     nearest to, in words: ``"object 'NAME'"`` (the world's exact objects) or ``"the world
     grid"`` (a grid, and every 2D world). ``rho`` (n_frames, 5): the frames' DH rows (an
-    elastic equilibrium) instead of q's rigid ones. Computed on the CPU in float64."""
+    elastic equilibrium) instead of q's rigid ones. Computed in float64 on ``device`` (None:
+    the CPU where Warp has its CPU backend, else Warp's default device: a GPU-only install
+    has no CPU kernels)."""
+    from jwarp.core.device import host_device
     from jwarp.kinematics.fk import fk
     from jwarp.world.device_world import world_query
 
@@ -760,11 +763,13 @@ def nearest_objects(robot: Any, q: Any, world: World, spheres: Any, rho: Any = N
     if world.dim != 3:
         return ["the world grid"] * len(spheres)
     q1 = np.asarray(q, np.float64).reshape(1, model.n_dof)
+    if device is None:
+        device = host_device()
     F = np.asarray(fk(model, q1, dh=None if rho is None else np.asarray(rho)[None],
-                      dtype=np.float64, device="cpu"))[0]
+                      dtype=np.float64, device=device))[0]
     idx, pos, _ = model.sphere_arrays()            # sphere frames and centres in them
     c = np.einsum("nij,nj->ni", F[idx, :3, :3], pos) + F[idx, :3, 3]
-    _, _, obj = world_query(world, c[spheres], device="cpu")
+    _, _, obj = world_query(world, c[spheres], device=device)
     return ["the world grid" if int(o) == -2 else f"object '{world.object_name(int(o))}'"
             for o in obj]
 
@@ -784,7 +789,8 @@ def closest_pair_text(robot: Any, q: Any, world: World | None, *, self_collision
         d = np.asarray(sphere_distances(model, q1, world, rho=r1, device=device,
                                         dtype=np.float64))[0]
         s = int(np.argmin(d))
-        obj = nearest_objects(model, q1[0], world, [s], None if r1 is None else r1[0])[0]
+        obj = nearest_objects(model, q1[0], world, [s], None if r1 is None else r1[0],
+                              device=device)[0]
         return f"link '{sphere_link(model, s)}' vs {obj}, {mm_text(d[s])} mm"
     d = np.asarray(self_distances(model, q1, rho=r1, device=device, dtype=np.float64))[0]
     p = int(np.argmin(d))

@@ -76,3 +76,41 @@ def test_no_minus_zero_clearance():
         reason = chk.reason(0)
         assert "collision:" in reason and "-0.00 " not in reason, reason
         assert re.search(r"clearance -?0\.0*\d* mm", reason), reason
+
+
+def test_messages_use_no_cpu_kernel_without_warp_cpu(monkeypatch):
+    """On a GPU-only Warp install (no CPU backend) the object named in a collision message
+    is found on Warp's default device: nothing asks for "cpu" (a GPU machine raised an
+    AttributeError from Warp's missing CPU compiler instead of the start's ValueError);
+    with a device given (the planner's), that device is used."""
+    import importlib
+
+    import warp as wp
+
+    from jwarp.world.collision import nearest_objects
+
+    fk_mod = importlib.import_module("jwarp.kinematics.fk")
+    dw = importlib.import_module("jwarp.world.device_world")
+    asked = []
+    real_fk, real_query = fk_mod.fk, dw.world_query
+
+    def fk_spy(*a, **k):
+        asked.append(k.get("device"))
+        return real_fk(*a, **k)
+
+    def query_spy(*a, **k):
+        asked.append(k.get("device"))
+        return real_query(*a, **k)
+
+    monkeypatch.setattr(fk_mod, "fk", fk_spy)
+    monkeypatch.setattr(dw, "world_query", query_spy)
+    w = table_world(Q1)
+    d = np.asarray(sphere_distances(ROBOT, Q1[None], w, dtype=np.float64))[0]
+    s = int(np.argmin(d))
+    monkeypatch.setattr(wp, "is_cpu_available", lambda: False)
+    assert nearest_objects(ROBOT, Q1, w, [s]) == ["object 'table'"]
+    assert asked == [None, None], asked
+    asked.clear()
+    monkeypatch.setattr(wp, "is_cpu_available", lambda: True)
+    assert nearest_objects(ROBOT, Q1, w, [s], device="cpu") == ["object 'table'"]
+    assert asked == ["cpu", "cpu"], asked

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from jwarp.core.arrays import real_array
+from jwarp.core.device import host_device
 from jwarp.core.limits import LIMIT_TOL
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik.objective import as_poses
@@ -48,11 +49,11 @@ def _frames(model: Any, q: np.ndarray, kappa: Any = None) -> tuple[np.ndarray, A
     from jwarp.kinematics.fk import fk
 
     if kappa is None:
-        return np.asarray(fk(model, q[None], dtype=np.float64, device="cpu"))[0], None, True
+        return np.asarray(fk(model, q[None], dtype=np.float64, device=host_device()))[0], None, True
     from jwarp.world.path_feasibility import elastic_equilibrium
 
-    rho, conv = elastic_equilibrium(model, q[None], kappa, device="cpu")
-    F = np.asarray(fk(model, q[None], dh=rho, dtype=np.float64, device="cpu"))[0]
+    rho, conv = elastic_equilibrium(model, q[None], kappa, device=host_device())
+    F = np.asarray(fk(model, q[None], dh=rho, dtype=np.float64, device=host_device()))[0]
     return F, rho, bool(np.all(conv))
 
 
@@ -153,7 +154,7 @@ def collision_reasons(robot: Any, q: Any, world: Any = None, margin: float = 0.0
     out: list[str] = []
     if world is not None:
         d = np.asarray(sphere_distances(model, q[None], world, rho=None if rho1 is None
-                                        else rho1[None], device="cpu", dtype=np.float64))[0]
+                                        else rho1[None], device=host_device(), dtype=np.float64))[0]
         bad = np.nonzero(d <= margin)[0]
         if len(bad):
             names = _objects(model, q, world, bad, rho1)
@@ -165,7 +166,7 @@ def collision_reasons(robot: Any, q: Any, world: Any = None, margin: float = 0.0
     pairs = np.asarray(_pairs(model))
     if len(pairs):
         d = np.asarray(self_distances(model, q[None], rho=None if rho1 is None else rho1[None],
-                                      device="cpu", dtype=np.float64))[0]
+                                      device=host_device(), dtype=np.float64))[0]
         bad = np.nonzero(d <= margin)[0]
         worst = {}
         for p in bad:
