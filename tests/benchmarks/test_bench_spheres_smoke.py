@@ -1,7 +1,8 @@
 """Smoke test of benchmarks/bench_spheres.py: the --quick run (the Panda, few pair samples)
 exits 0 and reports both sections; where the Panda meshes are installed, every fitted link
-meets the tolerance on the benchmark's own fresh check samples, and the default fit keeps
-the issue's bounds (<= 70 spheres, hand and fingers protruding <= 5 mm)."""
+contains its meshes on the benchmark's own fresh check samples (the contained default of
+issue 42: no poke-out found), within the default's bounds (<= 200 spheres, hand and fingers
+protruding <= 7.5 mm; the one-sided fit before it: <= 70 spheres, <= 5 mm)."""
 
 
 def test_bench_spheres_quick(run_bench):
@@ -15,13 +16,13 @@ def test_bench_spheres_quick(run_bench):
     panda = robots.get("panda")
     if panda is None or "skipped" in panda:
         return
-    assert 0 < panda["spheres"] <= 70, panda["spheres"]
+    assert 0 < panda["spheres"] <= 200, panda["spheres"]
     assert panda["seconds"] > 0 and panda["peak_rss_mb"] < 2048
     links = {r["link"]: r for r in panda["links"]}
     assert sum(r["spheres"] for r in links.values()) == panda["spheres"]
     for name, r in links.items():
-        assert r["spheres"] >= 1 and r["one_sided_error_mm"] <= 10.0 + 1e-9, r
+        assert r["spheres"] >= 1 and r["one_sided_error_mm"] <= 1e-6, r
         assert r["excess_cm3"] >= 0
     for name in ("panda_hand", "panda_leftfinger", "panda_rightfinger"):
-        assert links[name]["max_protrusion_mm"] <= 5.0 + 1e-6, links[name]
+        assert links[name]["max_protrusion_mm"] <= 7.5 + 1e-6, links[name]
     assert "| robot |" in stdout
