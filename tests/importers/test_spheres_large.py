@@ -85,7 +85,8 @@ def test_same_geometry_fitted_once_and_pairs_left_to_the_caller(tmp_path, monkey
     calls = []
     real = S.fit_link
     monkeypatch.setattr(S, "fit_link", lambda *a, **k: calls.append(1) or real(*a, **k))
-    opts = SpherizeOptions(tolerance=0.02, pair_samples=200, refine=False)  # the plain fit
+    opts = SpherizeOptions(tolerance=0.02, pair_samples=200, refine=False,
+                           contain=False)  # the plain one-sided fit
     model, report = spherize(load_urdf(str(path)), opts)
     assert len(calls) == 2                          # a and b share one fit, c its own
     rows = {r["link"]: r for r in report.links}

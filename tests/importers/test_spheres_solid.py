@@ -181,8 +181,8 @@ def test_spherize_budget_and_warnings(tmp_path, monkeypatch):
     path.write_text(URDF)
     imported = load_urdf(path)
     with warnings.catch_warnings():
-        warnings.simplefilter("error")  # the default bounds: no warning here
-        model, rep = spherize(imported, SpherizeOptions(pair_samples=50))
+        warnings.simplefilter("error")  # the one-sided fit's bounds: no warning here
+        model, rep = spherize(imported, SpherizeOptions(pair_samples=50, contain=False))
     assert rep.warnings == []
     rows = {r["link"]: r for r in rep.links}
     assert rows["arm"]["max_protrusion"] <= rows["arm"]["protrusion"] + 1e-6
@@ -239,7 +239,9 @@ def test_panda_default_fit_is_small_covering_and_tight(tmp_path, monkeypatch):
     except ValueError as e:
         pytest.skip(str(e))
     monkeypatch.setenv("JWARP_CACHE", str(tmp_path / "cache"))
-    model, rep = spherized_robot(path, SpherizeOptions(pair_samples=200))
+    # the one-sided fit (``contain=False``; the contained default is tested in
+    # test_sphere_containment.py): few spheres, covering within the tolerance, tight
+    model, rep = spherized_robot(path, SpherizeOptions(pair_samples=200, contain=False))
     assert len(model.spheres) <= 70
     imported = load_urdf(path)
     by_link: dict = {}
