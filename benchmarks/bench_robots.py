@@ -659,22 +659,14 @@ def verified_plans(e: Any, path: str, m: Any, world: Any, shapes: list, Qw: np.n
     import jwarp
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    from verifier import PathVerifier, robot_spheres
+    from verifier import PathVerifier, checked_link_pairs, robot_spheres
 
     if e.source != "erd" or frozen or e.lock or e.keep:
         return {"plans_note": "not verified: locked or frozen joints (the verifier needs "
                               "every moving URDF joint on the path)"}
-    v0 = PathVerifier(path, [str(erd_root().parents[1])], [])
-    allowed = m.allowed_collision_pairs
-    frames = sorted({sp.frame for sp in m.spheres})
-    pairs = set()
-    for i, a in enumerate(frames):
-        for b in frames[i + 1:]:
-            la, lb = v0.link_of(m.frame_names[a]), v0.link_of(m.frame_names[b])
-            if allowed[a, b] and la and lb and la != lb:
-                pairs.add((min(la, lb), max(la, lb)))
+    pairs = checked_link_pairs(m, PathVerifier(path, [str(erd_root().parents[1])], []))
     v = PathVerifier(path, [str(erd_root().parents[1])], shapes, spheres=robot_spheres(m),
-                     joint_names=m.joint_names, self_pairs=sorted(pairs))
+                     joint_names=m.joint_names, self_pairs=pairs)
     rng = np.random.default_rng(args.seed + 7)
     A = np.nonzero(above_table)[0] if above_table.any() else np.arange(len(Qw))
     B = np.nonzero(at_shelf)[0] if at_shelf.any() else np.arange(len(Qw))

@@ -82,7 +82,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 import scene_problems as SP  # noqa: E402
 import timing  # noqa: E402
 try:  # pinocchio + coal: the verifier (a GPU machine may lack them: --no-verify there)
-    from verifier import PathVerifier, robot_spheres  # noqa: E402
+    from verifier import PathVerifier, checked_link_pairs, robot_spheres  # noqa: E402
 except ImportError as _e:
     PathVerifier = None  # type: ignore[assignment,misc]
     _VERIFIER_MISSING = f"{type(_e).__name__}: {_e}"
@@ -138,21 +138,9 @@ SELF_PAIRS: list[tuple[str, str]] = []
 
 
 def self_link_pairs(robot: Any, urdf: str) -> list[tuple[str, str]]:
-    """The URDF link pairs of the frame pairs jwarp checks for self-collision (frames
-    with spheres, ``RobotModel.allowed_collision_pairs``), each frame mapped to its link
-    (``PathVerifier.link_of``): the meshes of these pairs must stay apart."""
-    v = PathVerifier(urdf, None, [])
-    allowed = robot.allowed_collision_pairs
-    frames = sorted({s.frame for s in robot.spheres})
-    names = robot.frame_names
-    out = set()
-    for i, a in enumerate(frames):
-        for b in frames[i + 1:]:
-            if allowed[a, b]:
-                la, lb = v.link_of(names[a]), v.link_of(names[b])
-                if la and lb and la != lb:
-                    out.add((min(la, lb), max(la, lb)))
-    return sorted(out)
+    """The URDF link pairs of the frame pairs jwarp checks for self-collision
+    (``verifier.checked_link_pairs``): the meshes of these pairs must stay apart."""
+    return checked_link_pairs(robot, PathVerifier(urdf, None, []))
 
 
 # ------------------------------------------------------------------ jwarp

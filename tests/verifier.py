@@ -59,7 +59,7 @@ import numpy as np
 import coal
 import pinocchio as pin
 
-__all__ = ["PathVerifier", "Verdict", "Hit", "coal_shape", "robot_spheres"]
+__all__ = ["PathVerifier", "Verdict", "Hit", "checked_link_pairs", "coal_shape", "robot_spheres"]
 
 
 @dataclass
@@ -250,6 +250,23 @@ def _read_joints(urdf_path: str) -> list[_UrdfJoint]:
 
 def _default_package_dirs(urdf_path: str) -> list[str]:
     return [str(p) for p in Path(urdf_path).resolve().parents]
+
+
+def checked_link_pairs(robot: Any, verifier: "PathVerifier") -> list[tuple[str, str]]:
+    """The URDF link pairs of the frame pairs jwarp checks for self-collision (frames with
+    spheres, ``robot.allowed_collision_pairs``), each frame mapped to its link by
+    :meth:`PathVerifier.link_of`: the pairs whose meshes must stay apart (check c)."""
+    allowed = robot.allowed_collision_pairs
+    frames = sorted({s.frame for s in robot.spheres})
+    names = robot.frame_names
+    out = set()
+    for i, a in enumerate(frames):
+        for b in frames[i + 1:]:
+            if allowed[a, b]:
+                la, lb = verifier.link_of(names[a]), verifier.link_of(names[b])
+                if la and lb and la != lb:
+                    out.add((min(la, lb), max(la, lb)))
+    return sorted(out)
 
 
 def robot_spheres(robot: Any) -> list[tuple[str, np.ndarray, float]]:
