@@ -78,3 +78,17 @@ def ball_worlds(balls):
         w.add("ball", "sphere", [R], c)
         ws.append(w)
     return World.batch(ws)
+
+
+def box_pole_scene(floor: bool = False):
+    """arm7's exact test scene: a 20 cm box in front, a pole to the side (and, with
+    ``floor``, a plane 5 cm below the base)."""
+    from jwarp.world import World
+    from jwarp.world.primitives import pose_matrix
+
+    w = World.of_shapes()
+    w.add("box", "box", [0.2, 0.2, 0.2], [0.45, 0.0, 0.5])
+    w.add("pole", "cylinder", [0.6, 0.03], pose_matrix([0.0, 0.45, 0.5]))
+    if floor:
+        w.add("floor", "plane", pose=pose_matrix([0, 0, -0.05]))
+    return w

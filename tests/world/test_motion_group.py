@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.world import World
 from jwarp.world.motion import MotionCheck
-from jwarp.world.primitives import pose_matrix
+from worlds import box_pole_scene
 
 
 @pytest.fixture(scope="module")
@@ -18,10 +17,7 @@ def arm():
 
 @pytest.fixture(scope="module")
 def scene():
-    w = World.of_shapes()
-    w.add("box", "box", [0.2, 0.2, 0.2], [0.45, 0.0, 0.5])
-    w.add("pole", "cylinder", [0.6, 0.03], pose_matrix([0.0, 0.45, 0.5]))
-    return w
+    return box_pole_scene(floor=False)
 
 
 def _segments(robot, n, seed):

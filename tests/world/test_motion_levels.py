@@ -12,11 +12,10 @@ import pytest
 import warp as wp
 
 import jwarp
-from jwarp.world import World
 from jwarp.world.collision import min_distances
 from jwarp.world.motion import MotionCheck, MotionOptions
 from jwarp.world.primitives import Shape, pose_matrix
-from worlds import ball_worlds, grazing_paths
+from worlds import ball_worlds, box_pole_scene, grazing_paths
 
 LEVELS = MotionOptions(method="levels")
 ADVANCE = MotionOptions(method="advance")
@@ -30,11 +29,7 @@ def arm():
 
 @pytest.fixture(scope="module")
 def scene():
-    w = World.of_shapes()
-    w.add("box", "box", [0.2, 0.2, 0.2], [0.45, 0.0, 0.5])
-    w.add("pole", "cylinder", [0.6, 0.03], pose_matrix([0.0, 0.45, 0.5]))
-    w.add("floor", "plane", pose=pose_matrix([0, 0, -0.05]))
-    return w
+    return box_pole_scene(floor=True)
 
 
 def _random_paths(robot, n, W, seed, scale=0.6):
