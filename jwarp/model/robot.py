@@ -43,6 +43,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from jwarp.utils.atomic import atomic_write_text
+from jwarp.model.collision_pieces import (CollisionPieces, check_pieces, pieces_from_dict,
+                                          pieces_to_dict)
 from jwarp.model.sphere_relation import (SphereRelation, relation_after_edit, relation_from_dict,
                                          relation_to_dict)
 
@@ -164,6 +166,9 @@ class RobotModel:
     #: how the spheres relate to the collision meshes they model (contained, or
     #: approximate with the per-link poke-out); None: unknown (jwarp.model.sphere_relation)
     sphere_relation: SphereRelation | None = None
+    #: the convex pieces of the collision geometry (meshes' hulls, primitives) and the
+    #: spheres they stand for; None: not recorded (jwarp.model.collision_pieces)
+    collision_pieces: CollisionPieces | None = None
 
     def __post_init__(self) -> None:
         self.gravity = _finite(self.gravity, "gravity")
@@ -679,6 +684,11 @@ def validate(model: RobotModel) -> None:
                                                             SphereRelation):
         raise RobotModelError(f"sphere_relation: expected a SphereRelation or None, got "
                               f"{type(model.sphere_relation).__name__}")
+    if model.collision_pieces is not None:
+        try:
+            check_pieces(model.collision_pieces, len(model.frames))
+        except (ValueError, TypeError) as e:
+            raise RobotModelError(str(e)) from None
     if not isinstance(model.name, str) or not model.name:
         raise RobotModelError("name: must be a non-empty string")
     nf, nj = len(model.frames), len(model.joints)
@@ -979,12 +989,20 @@ def _from_dict(doc: Any) -> RobotModel:
         masses=masses, spheres=spheres, capsules=capsules, self_collision=sc,
         end_effectors=eff, frame_aliases=aliases, linear_limits=lin, kappa=kappa, harmonic=harmonic,
         kappa_nonlinear=knl, coupling_harmonic=coupled_h, notes={str(k): str(v) for k, v in (doc.get("notes") or {}).items()},
-        sphere_relation=_relation(doc.get("sphere_relation")))
+        sphere_relation=_relation(doc.get("sphere_relation")),
+        collision_pieces=_pieces(doc.get("collision_pieces"), [f.name for f in frames]))
 
 
 def _relation(doc: Any) -> SphereRelation | None:
     try:
         return relation_from_dict(doc)
+    except (ValueError, TypeError) as e:
+        raise RobotModelError(str(e)) from None
+
+
+def _pieces(doc: Any, frame_names: list[str]) -> CollisionPieces | None:
+    try:
+        return pieces_from_dict(doc, frame_names)
     except (ValueError, TypeError) as e:
         raise RobotModelError(str(e)) from None
 
@@ -1062,6 +1080,8 @@ def _to_dict(m: RobotModel) -> dict[str, Any]:
         doc["notes"] = dict(m.notes)
     if m.sphere_relation is not None:
         doc["sphere_relation"] = relation_to_dict(m.sphere_relation)
+    if m.collision_pieces is not None:
+        doc["collision_pieces"] = pieces_to_dict(m.collision_pieces, m.frame_names)
     return doc
 
 
