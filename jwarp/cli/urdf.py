@@ -396,6 +396,9 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
     elif args.home is not None:
         raise CLIError("--home: needs a collision model (--spheres fit or urdf) and no "
                        "--no-home-fit")
+    from jwarp.model.collision_pieces import stamp_pieces
+
+    model = stamp_pieces(model)   # the fit's pieces stand for the final (edited) spheres
     model.save(args.out)
     missing = [g.mesh_uri for g in imported.geometries if g.kind == "mesh" and g.mesh_path is None]
     extra: dict[str, Any] = {"missing_meshes": missing}

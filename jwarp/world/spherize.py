@@ -17,7 +17,11 @@ links as frames, URDF sphere geometry already as spheres) and
    ``SpherizeReport.warnings`` and a :class:`SphereFitWarning` is issued;
 2. excludes the self-collision pairs that are adjacent (through fixed joints too) or never /
    always in collision over ``pair_samples`` random configurations
-   (:func:`jwarp.world.self_pairs.never_colliding_pairs`).
+   (:func:`jwarp.world.self_pairs.never_colliding_pairs`);
+3. records the convex pieces of every collision geometry beside the spheres
+   (``RobotModel.collision_pieces``:
+   :func:`jwarp.importers.collision_pieces.pieces_from_geometries`; hulls of the meshes,
+   the primitives' corners), which a mesh certificate checks against the world.
 
 :func:`spherized_robot` does it for a URDF file, cached on disk by the URDF's text, its mesh
 files' bytes and the options (``$JWARP_CACHE`` or ``~/.cache/jwarp``), since fitting a
@@ -52,10 +56,11 @@ __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize", 
 #: bump when the fitted result of the same inputs changes
 #: Monte Carlo points of a link's excess volume at import (:func:`spherize`)
 EXCESS_SAMPLES = 50_000
-CACHE_VERSION = 7  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits;
+CACHE_VERSION = 8  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits;
 #                   5: URDF axis frames named <joint>_axis, joint names frame aliases;
 #                   6: MoveIt's pair rules (adjacency, always >= 95 %), reasons in notes
 #                   7: containment (contain, contain_gap), sphere_relation
+#                   8: collision_pieces (the geometry's convex pieces)
 
 
 #: the pair sampling of an import: MoveIt setup assistant's Adjacent and Always rules
@@ -236,12 +241,14 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
              sample_pairs: bool = True, progress: bool | None = False
              ) -> tuple[RobotModel, SpherizeReport]:
     """The collision model of an imported URDF (module docstring): a copy of
-    ``urdf_robot.model`` with fitted spheres and sampled self-collision exclusions, and the
-    report. ``sample_pairs`` False: no pair sampling (the caller samples the pairs of a
+    ``urdf_robot.model`` with fitted spheres, sampled self-collision exclusions and the
+    convex pieces of its collision geometry (``collision_pieces``, standing for the fitted
+    spheres), and the report. ``sample_pairs`` False: no pair sampling (the caller samples the pairs of a
     planning group with :func:`resample_pairs`; the model keeps its own exclusions).
     ``progress``: a progress bar on stderr (:func:`fit_progress`: a step per link, the
     link's name beside it, then the pair sampling); None: when stderr is a terminal.
     The fit's results do not depend on it."""
+    from jwarp.importers.collision_pieces import pieces_from_geometries
     from jwarp.importers.sphere_refine import CONTAIN_PROTRUSIONS, link_protrusions
 
     o = SpherizeOptions() if options is None else options
@@ -300,7 +307,9 @@ def spherize(urdf_robot: Any, options: SpherizeOptions | None = None, *,
             bar.update(1)
     finally:
         bar.close()
-    return fitted, report
+    # the geometry's convex pieces, beside the fitted spheres (a mesh certificate's input)
+    pieces = pieces_from_geometries(fitted, urdf_robot.geometries)
+    return fitted.copy(collision_pieces=pieces), report
 
 
 def _fit_links(model: RobotModel, by_link: dict[str, list], o: SpherizeOptions,
