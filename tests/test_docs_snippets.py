@@ -162,12 +162,12 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "from jwarp.model.measurement import Measurement\n"
         "class LaserMeasurement(Measurement):\n    pass\n",
         "`LaserMeasurement` is the plugin class the text writes"),
-    "docs/robot_schema.md:313": (
+    "docs/robot_schema.md:314": (
         "import jwarp\nfactory = lambda: jwarp.robot('planar4')\n",
         "`factory` is any callable returning a RobotModel"),
-    "docs/robot_schema.md:333": ("", "self-contained (the factory is not called: my_arm.json "
+    "docs/robot_schema.md:334": ("", "self-contained (the factory is not called: my_arm.json "
                                      "is the reader's file)"),
-    "docs/robot_schema.md:354": (
+    "docs/robot_schema.md:355": (
         "import jwarp\nfrom pathlib import Path as _P\n"
         "_P('my_package').mkdir()\n"
         "jwarp.robot('planar4').save('my_package/my_arm.json')\n"
@@ -264,7 +264,7 @@ SUBSTITUTIONS: dict[str, list[tuple[str, str, str]]] = {
         ('"/opt/ros/humble/share"', '"ros_share"',
          "CI has no ROS install; package_dirs must name existing folders (an empty one "
          "here: example-robot-data's package:// meshes resolve without it)")],
-    "docs/robot_schema.md:313": [
+    "docs/robot_schema.md:314": [
         (", ...}", "}", "`...` stands for more entries (not Python in a dict display)")],
     "docs/design.md:40": [
         ("DesignOptions(n=100,", "DesignOptions(n=20,",
@@ -512,9 +512,9 @@ CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
     "docs/ik.md:167": _check_explain_ik,
     "docs/measurements.md:8": _check_measurement,
     "docs/measurements.md:192": _check_hook,
-    "docs/robot_schema.md:313": _check_robot_hook,
-    "docs/robot_schema.md:333": _check_builtin_hook,
-    "docs/robot_schema.md:354": _check_package_hook,
+    "docs/robot_schema.md:314": _check_robot_hook,
+    "docs/robot_schema.md:334": _check_builtin_hook,
+    "docs/robot_schema.md:355": _check_package_hook,
     "docs/scenes.md:13": _check_scene,
     "docs/scenes.md:238": _check_world_edits,
     "docs/spheres.md:10": _check_sphere_fit,
