@@ -162,7 +162,10 @@ def inflated(model: Any) -> Any:
                     for k in sorted(links)},
         gap=rel.gap, inflated=True,
         method=f"approximate spheres grown by their link's poke-out ({rel.method})")
-    return model.copy(spheres=spheres, sphere_relation=new)
+    from jwarp.model.collision_pieces import stamp_pieces
+
+    # the grown spheres cover the same geometry: its collision pieces stand for them too
+    return stamp_pieces(model.copy(spheres=spheres, sphere_relation=new))
 
 
 def relation_text(model: Any) -> str:

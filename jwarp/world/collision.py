@@ -801,10 +801,14 @@ def closest_pair_text(robot: Any, q: Any, world: World | None, *, self_collision
 def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: float = 0.0, *,
                       rho: Any = None, device: Any = None, dtype: Any = None,
                       validate: bool = True, self_margin: float | None = None,
-                      per_world: int = 0) -> np.ndarray:
+                      per_world: int = 0, meshes: bool = True) -> np.ndarray:
     """(...,) bool numpy: every sphere keeps more than ``margin`` [m] from the world and
     more than ``self_margin`` (None: ``margin``) from every sphere it may collide with
-    (joint limits are not checked here)."""
+    (joint limits are not checked here). ``meshes`` (default): where the spheres touch,
+    a robot that records its collision pieces (an import from a URDF) is free when the
+    mesh certificate proves its URDF geometry keeps those clearances
+    (:mod:`jwarp.world.mesh_check`): contained spheres reach past the meshes, and a grasp
+    pose the fingers clear by millimetres is not refused for it."""
     margin = real_number(margin, "margin")
     if not np.isfinite(margin):
         raise ValueError(f"margin: expected a finite distance [m], got {margin}")
@@ -818,4 +822,30 @@ def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: fl
     elif hasattr(md, "detach"):
         md = md.detach().cpu().numpy()
     md = np.asarray(md)
-    return (md[..., 0] > margin) & (md[..., 1] > sm)
+    free = (md[..., 0] > margin) & (md[..., 1] > sm)
+    if meshes and not free.all() and rho is None:
+        free = _mesh_certified(robot, q, world, free, margin, sm, device, per_world)
+    return free
+
+
+def _mesh_certified(robot: Any, q: Any, world: World | None, free: np.ndarray, margin: float,
+                    self_margin: float, device: Any, per_world: int) -> np.ndarray:
+    """``free`` with the configurations the spheres refuse but the mesh certificate proves
+    free (:func:`jwarp.world.mesh_check.mesh_check`; unchanged where it has none)."""
+    from jwarp.world.mesh_check import mesh_check
+
+    model = get_robot(robot)
+    if getattr(model, "collision_pieces", None) is None:
+        return free
+    mc = mesh_check(model, world, device)
+    if mc is None:
+        return free
+    if hasattr(q, "numpy") and not isinstance(q, np.ndarray):
+        q = q.detach().cpu().numpy() if hasattr(q, "detach") else q.numpy()
+    qs = np.asarray(q, np.float64).reshape(-1, model.n_dof)
+    flat = free.reshape(-1).copy()
+    bad = np.nonzero(~flat)[0]
+    groups = bad // int(per_world) if per_world and world is not None and \
+        world.n_worlds > 1 else None
+    flat[bad] = mc.free(qs[bad], margin, self_margin, groups=groups)
+    return flat.reshape(free.shape)

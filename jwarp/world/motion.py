@@ -91,6 +91,11 @@ class MotionOptions:
         fallback: ``"levels"``: a segment left unresolved by the levels (capacity, level
             cap) goes on with the conservative advancement from its proven prefix (True,
             bounded by ``max_evals`` and ``min_step``), or is reported uncertified (False).
+        meshes: a path the spheres do not prove (a collision less deep than the spheres'
+            protrusion past the meshes, or a segment left uncertified) is proven by the
+            mesh certificate where the robot records its collision pieces
+            (:meth:`MotionCheck.mesh_recheck`, :mod:`jwarp.world.mesh_check`); False:
+            the spheres decide alone.
     """
 
     min_step: float = 1e-5
@@ -103,8 +108,11 @@ class MotionOptions:
     levels: int | None = None
     capacity: int | None = None
     fallback: bool = True
+    meshes: bool = True
 
     def validate(self) -> None:
+        if not isinstance(self.meshes, (bool, np.bool_)):
+            raise TypeError(f"meshes: expected True or False, got {self.meshes!r}")
         d = real_number(self.min_step, "min_step")
         if not (np.isfinite(d) and 0 < d < 1):
             raise ValueError(f"min_step: expected a fraction in (0, 1), got {self.min_step!r}")
@@ -178,10 +186,22 @@ def sphere_reach(robot: Any) -> np.ndarray:
 
 
 def _sphere_reach(model: RobotModel) -> np.ndarray:
+    sf, sp, _ = model.sphere_arrays()
+    return point_reach(model, sf, sp)
+
+
+def point_reach(robot: Any, frames: Any, positions: Any, extent: Any = None) -> np.ndarray:
+    """(K, n_frames) float64: :func:`sphere_reach` of K points (``frames`` (K,) int,
+    ``positions`` (K, 3) [m] in their frames), each grown by ``extent`` (K,) [m] (None: 0):
+    a bound of the distance from frame i's joint axis of any point within ``extent`` of
+    point k (a convex piece inside its enclosing sphere: :mod:`jwarp.world.mesh_check`)."""
     from jwarp.core.device import fixed_parts
 
+    model = get_robot(robot)
+    sf = np.asarray(frames, np.int64).reshape(-1)
+    sp = np.asarray(positions, np.float64).reshape(-1, 3)
+    ext = np.zeros(len(sf)) if extent is None else np.asarray(extent, np.float64).reshape(-1)
     nf = model.n_frames
-    sf, sp, _ = model.sphere_arrays()
     _, fixed_pos = fixed_parts(model)
     dh = model.dh_table
     prism = model.frame_is_prismatic
@@ -197,7 +217,7 @@ def _sphere_reach(model: RobotModel) -> np.ndarray:
     parents = model.parents
     out = np.zeros((len(sf), nf))
     for s, (f, p) in enumerate(zip(sf, sp)):
-        acc = float(np.linalg.norm(p))
+        acc = float(np.linalg.norm(p)) + float(ext[s])
         i = int(f)
         while i >= 0:
             out[s, i] = 1.0 if prism[i] else acc
@@ -407,6 +427,7 @@ class MotionCheck:
         #: the output buffers per number of waypoints W (:meth:`_outputs`), the last used
         #: last: a planner checks its W-waypoint paths and its shortcuts (W = 2) in turn
         self._outs: OrderedDict[int, dict] = OrderedDict()
+        self._mesh: Any = None  # the mesh certificate (mesh_check), made on first use
 
     # ------------------------------------------------------------------ data
     def _rows(self, n: int, m: int, dt: Any) -> wp.array:
@@ -664,12 +685,77 @@ class MotionCheck:
             raise ValueError(f"group: expected an integer >= 0, got {group!r}")
         out = self.launch(p, idx, K, margin=margin, endpoint_margin=endpoint_margin,
                           self_margin=self_margin, world_group=world_group, group=int(group))
-        return PathCheck(ok=out["ok"].numpy()[:K].astype(bool), code=out["code"].numpy()[:K],
+        ok = out["ok"].numpy()[:K].astype(bool)
+        code = out["code"].numpy()[:K]
+        dist = out["dist"].numpy()[:K]
+        if not ok.all():
+            ok2 = self.mesh_recheck(p, np.arange(K), ok, code, dist, margin=margin,
+                                    endpoint_margin=endpoint_margin, self_margin=self_margin,
+                                    world_group=world_group)
+            if (ok2 != ok).any():
+                code = np.where(ok2, 0, code)
+                ok = ok2
+        return PathCheck(ok=ok, code=code,
                          where=out["where"].numpy()[:K], what=out["what"].numpy()[:K],
-                         clearance=out["dist"].numpy()[:K], robot=self.robot, world=self.world,
+                         clearance=dist, robot=self.robot, world=self.world,
                          margin=margin, endpoint_margin=endpoint_margin,
                          self_margin=self_margin,
                          evaluations=int(out["seg"].n.numpy()[:K].sum()))
+
+    def mesh_check(self) -> Any:
+        """The :class:`jwarp.world.mesh_check.MeshCheck` of this robot and world (None
+        where there is none, or with ``options.meshes`` False)."""
+        if not self.options.meshes or getattr(self.robot, "collision_pieces", None) is None:
+            return None
+        if self._mesh is None:
+            from jwarp.world.mesh_check import mesh_check
+
+            self._mesh = mesh_check(self.robot, self.world, self.device) or False
+        return self._mesh or None
+
+    def mesh_recheck(self, paths: Any, rows: np.ndarray, ok: np.ndarray, code: np.ndarray,
+                     dist: np.ndarray, *, margin: float = 0.0,
+                     endpoint_margin: float | None = None, self_margin: float = 0.0,
+                     world_group: int = 0) -> np.ndarray:
+        """``ok`` (K,) with the paths the spheres did not prove but the mesh certificate
+        does (:mod:`jwarp.world.mesh_check`): ``paths`` (P, W, n_dof) (numpy or Warp),
+        ``rows`` (K,) the checked paths' rows, ``code``/``dist`` (K,) the sphere check's
+        results. Tried for world/self collisions whose clearance is above minus the
+        spheres' largest protrusion past the meshes (a deeper sphere collision is a mesh
+        collision), and for uncertified segments; a proven path must also keep its
+        waypoints within the joint limits. Unchanged without a mesh certificate."""
+        mc = self.mesh_check()
+        if mc is None:
+            return ok
+        rel = getattr(self.robot, "sphere_relation", None)
+        depth = (max(rel.protrusion.values(), default=0.0) if rel is not None else 0.02) + 2e-3
+        try_ = (~ok & np.isin(code, (1, 2, 3, 6)) & (np.asarray(dist) > -depth))
+        if not try_.any():
+            return ok
+        rows = np.asarray(rows)
+        sel = rows[try_]
+        if isinstance(paths, wp.array):
+            host = paths.numpy() if len(sel) * 4 > paths.shape[0] else None
+            if host is None:
+                host = np.stack([paths[int(i)].numpy() for i in sel])
+            else:
+                host = host[sel]
+        else:
+            host = np.asarray(paths)[sel]
+        host = np.asarray(host, np.float64)
+        from jwarp.core.limits import within_limits
+
+        lim = within_limits(self.robot, host.reshape(-1, host.shape[-1])).reshape(
+            host.shape[:2]).all(axis=1)
+        groups = sel // int(world_group) if world_group else None
+        good = np.zeros(len(sel), bool)
+        if lim.any():
+            good[lim] = mc.paths_free(host[lim], margin, self_margin,
+                                      endpoint_margin=endpoint_margin,
+                                      groups=None if groups is None else groups[lim])
+        out = ok.copy()
+        out[np.nonzero(try_)[0]] = good
+        return out
 
 
 #: numbers of waypoints whose output buffers a MotionCheck keeps (:meth:`MotionCheck._outputs`)

@@ -573,12 +573,20 @@ class Planner:
             # stop when solved: one proven path per problem is enough (the others of
             # that problem are skipped inside the launch)
             group = obj.P // self.n_problems if (o.stop_when_solved and not o.converge) else 0
-            out = self.motion_check().launch(obj.paths, buf.idx, len(cand), margin=o.margin,
-                                             endpoint_margin=o.endpoint_margin, group=group,
-                                             self_margin=o.self_margin,
-                                             world_group=obj.P // self.n_problems
-                                             if self.batched else 0)
-            return out["ok"].numpy()[:len(cand)].astype(bool)
+            chk = self.motion_check()
+            wg = obj.P // self.n_problems if self.batched else 0
+            out = chk.launch(obj.paths, buf.idx, len(cand), margin=o.margin,
+                             endpoint_margin=o.endpoint_margin, group=group,
+                             self_margin=o.self_margin, world_group=wg)
+            ok = out["ok"].numpy()[:len(cand)].astype(bool)
+            if not ok.all() and chk.mesh_check() is not None:
+                # what the spheres leave unproven, the URDF geometry may prove (a grasp
+                # pose the contained spheres reach past); skipped starts stay skipped
+                ok = chk.mesh_recheck(obj.paths, cand, ok, out["code"].numpy()[:len(cand)],
+                                      out["dist"].numpy()[:len(cand)], margin=o.margin,
+                                      endpoint_margin=o.endpoint_margin,
+                                      self_margin=o.self_margin, world_group=wg)
+            return ok
         return self._confirm_elastic(buf, cand)
 
     def _confirm_elastic(self, buf: _Buffers, cand: np.ndarray) -> np.ndarray:

@@ -1,0 +1,436 @@
+"""The mesh certificate: a robot's own collision geometry, not only its spheres, proven free.
+
+A robot imported from a URDF records the convex pieces of its collision geometry
+(``RobotModel.collision_pieces``: a mesh's convex hull, a box's corners, a sphere or a
+capsule as a point or a segment with a radius, a cylinder as a circumscribed 32-gon
+prism; :mod:`jwarp.model.collision_pieces`). :class:`MeshCheck` proves configurations
+and straight joint-space segments free for those pieces against the exact objects of a
+world (their convex pieces: a box's corners, a cylinder's or cone's circumscribed
+polygons, a mesh's convex hull; planes as half-spaces) and against each other on every
+frame pair the robot checks, by GJK lower bounds (:mod:`jwarp.kernels.convex`). Every
+bound is a separating-axis bound, so it is never above the true distance: what the
+certificate calls free is free for the URDF geometry.
+
+Continuous segments: a piece moves at most ``T_k = sum_i reach_k,i |dtheta_i|`` along a
+segment (``reach``: :func:`jwarp.world.motion.point_reach` of its enclosing sphere, the
+bound the sphere check uses), so a segment [a, b] whose bounds ``d_a``, ``d_b`` satisfy
+``d_a + d_b - 2 margin > T_k`` for every piece (and the pair travel for every self pair)
+keeps the clearance all along; other segments are halved until they pass, a
+configuration fails, or the budget runs out (not certified).
+
+The spheres stay the planner's guide (and its first check): the certificate is asked only
+where the spheres cannot prove a configuration or a path (e.g. a grasp pose whose
+contained spheres reach past the fingers into the object the fingers clear by 3 mm).
+Pieces cover what the spheres were fitted to; spheres added later (an attached object)
+are certified as spheres (pieces of one vertex). A model whose fitted spheres were
+edited (``CollisionPieces.extra_spheres`` is None), a world with a voxel grid, or an
+elastic model get no certificate (:func:`mesh_check` returns None): the spheres decide.
+"""
+
+from __future__ import annotations
+
+import threading
+import weakref
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from jwarp.core.arrays import init_warp, resolve_device
+from jwarp.kernels import convex as ck
+from jwarp.model import RobotModel
+
+__all__ = ["MeshCheck", "MeshCheckStats", "mesh_check", "world_pieces"]
+
+#: sides of the circumscribed polygons of world cylinders and cones
+POLY_SIDES = 32
+#: [m] rounding allowance subtracted from every float64 bound
+SLACK = 1e-9
+#: [m] GJK stops when its bound is this close to its distance estimate
+GJK_TOL = 1e-7
+#: most halvings of a segment (2^MAX_DEPTH sub-intervals) before it is "not certified"
+MAX_DEPTH = 14
+#: most configurations one :meth:`MeshCheck.paths_free` call evaluates per path segment
+#: on average before the rest is "not certified"
+EVALS_PER_SEGMENT = 64
+
+
+@dataclass
+class MeshCheckStats:
+    """Work of a :class:`MeshCheck` (cumulative): calls, configurations evaluated, seconds."""
+
+    calls: int = 0
+    configurations: int = 0
+    seconds: float = 0.0
+
+
+def _poly(r: float, n: int = POLY_SIDES) -> np.ndarray:
+    """(n, 2) vertices of a regular n-gon circumscribing the circle of radius r."""
+    a = 2 * np.pi * np.arange(n) / n
+    R = r / np.cos(np.pi / n)
+    return np.stack([R * np.cos(a), R * np.sin(a)], axis=1)
+
+
+def world_pieces(shapes: Any) -> list[tuple[int, np.ndarray, float, int]]:
+    """The convex pieces of a :class:`jwarp.world.shapes.ShapeSet` in world coordinates,
+    one per object: ``(kind, vertices (V, 3) [m], radius [m], group)`` with kind
+    :data:`jwarp.kernels.convex.HULL` (the set: the vertices' hull grown by radius), or
+    :data:`~jwarp.kernels.convex.HALFSPACE` (a plane: vertices = [normal, (offset, 0, 0)]).
+    Every piece contains its object (a mesh: its convex hull, which for a non-convex mesh
+    is more than the object: conservative)."""
+    out = []
+    groups = shapes.groups() if len(shapes) else np.zeros(0, np.int64)
+    for i, oid in enumerate(shapes.ids):
+        kind, dims, _ = shapes.spec(oid)
+        T = np.asarray(shapes.pose(oid), np.float64)
+        R, t = T[:3, :3], T[:3, 3]
+        rad = 0.0
+        if kind == "plane":
+            n = R[:, 2]
+            out.append((int(ck.HALFSPACE), np.array([n, [float(n @ t), 0.0, 0.0]]), 0.0,
+                        int(groups[i])))
+            continue
+        d = np.asarray(dims, np.float64).reshape(-1) if kind != "mesh" else None
+        if kind == "sphere":
+            local, rad = np.zeros((1, 3)), float(d[0])
+        elif kind == "box":
+            h = d[:3] / 2
+            local = np.array([[x, y, z] for x in (-h[0], h[0]) for y in (-h[1], h[1])
+                              for z in (-h[2], h[2])])
+        elif kind == "capsule":
+            local, rad = np.array([[0, 0, -d[0] / 2], [0, 0, d[0] / 2]]), float(d[1])
+        elif kind == "cylinder":
+            p = _poly(float(d[1]))
+            local = np.concatenate([np.c_[p, np.full(len(p), -d[0] / 2)],
+                                    np.c_[p, np.full(len(p), d[0] / 2)]])
+        elif kind == "cone":
+            p = _poly(float(d[1]))
+            local = np.concatenate([np.c_[p, np.full(len(p), -d[0] / 2)],
+                                    [[0.0, 0.0, d[0] / 2]]])
+        elif kind == "mesh":
+            local = _hull_vertices(shapes, oid)
+        else:  # pragma: no cover - ShapeSet validates its kinds
+            raise ValueError(f"world: object '{oid}' of unknown kind '{kind}'")
+        out.append((int(ck.HULL), local @ R.T + t, rad, int(groups[i])))
+    return out
+
+
+def _hull_vertices(shapes: Any, oid: str) -> np.ndarray:
+    """(V, 3) the convex hull's vertices of mesh object ``oid`` (local coordinates)."""
+    import trimesh
+
+    _, _, src = shapes.spec(oid)
+    v = np.asarray(src.vertices if hasattr(src, "vertices") else src[0], np.float64)
+    try:
+        hull = trimesh.convex.convex_hull(v)
+        return np.asarray(hull.vertices, np.float64)
+    except Exception:  # noqa: BLE001 - a flat or degenerate mesh: its vertices span the hull
+        return v
+
+
+class MeshCheck:
+    """The mesh certificate of one robot in one world (module docstring), kept on a
+    device: the piece tables, the world's pieces (rebuilt when objects move), the travel
+    tables. Float64 throughout (a certificate, not a cost).
+
+    Args:
+        robot: a RobotModel with ``collision_pieces``.
+        world: a :class:`jwarp.world.sdf.World` of exact objects (no voxel grid), or None
+            (self pairs only).
+        device: Warp device (None: Warp's default).
+    """
+
+    def __init__(self, robot: RobotModel, world: Any, device: Any = None) -> None:
+        from jwarp.world.motion import point_reach
+
+        init_warp()
+        self.device = resolve_device(device)
+        self.robot = robot
+        self.world = world
+        cp = robot.collision_pieces
+        if cp is None:
+            raise ValueError(f"robot: '{robot.name}' has no collision_pieces (import it from "
+                             f"its URDF: docs/spheres.md, 'The mesh certificate')")
+        extra = cp.extra_spheres(robot)
+        if extra is None:
+            raise ValueError(f"robot: the spheres of '{robot.name}' were edited after its "
+                             f"collision pieces were made; the pieces cannot stand for them")
+        frames = [int(p.frame) for p in cp.pieces]
+        verts = [np.asarray(p.vertices, np.float64).reshape(-1, 3) for p in cp.pieces]
+        rads = [float(p.radius) for p in cp.pieces]
+        self.sources = [p.source for p in cp.pieces]
+        for s in extra:  # spheres added after the fit (an attached object): as spheres
+            sph = robot.spheres[s]
+            frames.append(int(sph.frame))
+            verts.append(np.asarray(sph.position, np.float64).reshape(1, 3))
+            rads.append(float(sph.radius))
+            self.sources.append(f"sphere {s}")
+        self.n_pieces = K = len(frames)
+        self.frame = np.asarray(frames, np.int32)
+        vstart = np.concatenate([[0], np.cumsum([len(v) for v in verts])]).astype(np.int32)
+        V = np.concatenate(verts) if K else np.zeros((0, 3))
+        lo = np.array([v.min(0) for v in verts]).reshape(K, 3)
+        hi = np.array([v.max(0) for v in verts]).reshape(K, 3)
+        centre = (lo + hi) / 2
+        bound = np.array([np.linalg.norm(v - c, axis=1).max() + r
+                          for v, c, r in zip(verts, centre, rads)]).reshape(K)
+        dev = self.device
+        f64, v3 = wp.float64, wp.types.vector(3, wp.float64)
+        self._tab = (wp.array(self.frame, dtype=wp.int32, device=dev),
+                     wp.array(vstart, dtype=wp.int32, device=dev),
+                     wp.array(V.reshape(-1, 3), dtype=v3, device=dev),
+                     wp.array(np.asarray(rads, np.float64), dtype=f64, device=dev),
+                     wp.array(centre, dtype=v3, device=dev),
+                     wp.array(bound, dtype=f64, device=dev))
+        # travel: per piece and frame the reach of its enclosing sphere
+        self.reach = point_reach(robot, self.frame, centre, bound)   # (K, n_frames)
+        self._pairs(robot)
+        self._coupling = np.zeros((robot.n_frames, robot.n_dof))
+        for i, f in enumerate(robot.frames):
+            for j, c in f.coupling:
+                self._coupling[i, j] += c
+        self._world_key: Any = None
+        self._wtab: tuple = ()
+        self.stats = MeshCheckStats()
+        self._lock = threading.Lock()
+
+    # ------------------------------------------------------------------ tables
+    def _pairs(self, robot: RobotModel) -> None:
+        """Self pairs: pieces on two frames the robot checks against each other, and per
+        pair the travel weights of the frames between them and their common ancestor."""
+        allowed = np.asarray(robot.allowed_collision_pairs, bool)
+        f = self.frame
+        ia, ib = np.nonzero((f[:, None] != f[None, :]) & allowed[f[:, None], f[None, :]]
+                            & (np.arange(len(f))[:, None] < np.arange(len(f))[None, :]))
+        parents = robot.parents
+
+        def chain(x: int) -> list[int]:
+            out = []
+            while x >= 0:
+                out.append(x)
+                x = int(parents[x])
+            return out
+
+        W = np.zeros((len(ia), robot.n_frames))
+        for q, (a, b) in enumerate(zip(ia, ib)):
+            ca, cb = chain(int(f[a])), chain(int(f[b]))
+            common = set(ca) & set(cb)
+            for k, c in ((a, ca), (b, cb)):
+                for i in c:
+                    if i in common:
+                        break
+                    W[q, i] += self.reach[k, i]
+        self.pair_a = ia.astype(np.int32)
+        self.pair_b = ib.astype(np.int32)
+        self.pair_weight = W
+        dev = self.device
+        self._ptab = (wp.array(self.pair_a, dtype=wp.int32, device=dev),
+                      wp.array(self.pair_b, dtype=wp.int32, device=dev))
+
+    def _world_tables(self) -> tuple:
+        """The world's piece tables on the device (rebuilt when objects move or change)."""
+        sh = None if self.world is None else self.world.shapes
+        key = None if sh is None else (id(sh), sh.structure_version, sh.pose_version)
+        if key == self._world_key and self._wtab:
+            return self._wtab
+        pieces = world_pieces(sh) if sh is not None and len(sh) else []
+        O = len(pieces)
+        kind = np.array([p[0] for p in pieces], np.int32)
+        verts = [p[1] for p in pieces]
+        vstart = np.concatenate([[0], np.cumsum([len(v) for v in verts])]).astype(np.int32)
+        V = np.concatenate(verts) if O else np.zeros((1, 3))
+        centre = np.zeros((O, 3))
+        bound = np.zeros(O)
+        for i, (k, v, r, _) in enumerate(pieces):
+            if k == int(ck.HALFSPACE):
+                centre[i], bound[i] = v[0], v[1, 0]
+            else:
+                c = (v.min(0) + v.max(0)) / 2
+                centre[i], bound[i] = c, np.linalg.norm(v - c, axis=1).max() + r
+        dev = self.device
+        f64, v3 = wp.float64, wp.types.vector(3, wp.float64)
+        self._wtab = (wp.array(kind, dtype=wp.int32, device=dev),
+                      wp.array(vstart, dtype=wp.int32, device=dev),
+                      wp.array(V, dtype=v3, device=dev),
+                      wp.array(np.array([p[2] for p in pieces], np.float64), dtype=f64, device=dev),
+                      wp.array(centre, dtype=v3, device=dev),
+                      wp.array(bound, dtype=f64, device=dev),
+                      wp.array(np.array([p[3] for p in pieces], np.int32), dtype=wp.int32,
+                               device=dev))
+        self.n_objects = O
+        self._world_key = key
+        return self._wtab
+
+    # ------------------------------------------------------------------ bounds
+    def lower_bounds(self, q: np.ndarray, groups: np.ndarray | None = None,
+                     cap: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+        """Lower bounds [m] of the pieces' distances at configurations ``q`` (N, n_dof):
+        ``(world (N, K), self (N, Q))``, per piece its smallest over the world's objects
+        and per self pair (``self.pair_a``, ``self.pair_b``). A pair whose enclosing
+        spheres keep ``cap`` apart gets their distance (a bound, not refined); bounds <= 0:
+        maybe touching. ``groups`` (N,) int: the world of a batch each configuration is in."""
+        import time
+
+        from jwarp.kinematics import fk
+
+        t0 = time.perf_counter()
+        kern = ck.kernels(wp.float64)
+        q = np.ascontiguousarray(np.asarray(q, np.float64).reshape(-1, self.robot.n_dof))
+        N, K, Q = len(q), self.n_pieces, len(self.pair_a)
+        dev = self.device
+        wl = np.full((N, K), np.inf)
+        sl = np.full((N, Q), np.inf)
+        if N == 0 or K == 0:
+            return wl, sl
+        with self._lock:
+            X = wp.array(np.asarray(fk(self.robot, q, device="cpu", dtype=np.float64)),
+                         dtype=kern.mat44, device=dev)
+            wt = self._world_tables()
+            if self.n_objects:
+                out = wp.full((N, K), 1e30, dtype=wp.float64, device=dev)
+                g = np.zeros(N, np.int32) if groups is None else np.asarray(groups, np.int32)
+                wp.launch(kern.world_lower, dim=(N, K, self.n_objects),
+                          inputs=[*self._tab, *wt, X, wp.array(g, dtype=wp.int32, device=dev),
+                                  int(groups is not None), wp.float64(cap),
+                                  wp.float64(GJK_TOL), wp.float64(SLACK)],
+                          outputs=[out], device=dev)
+                wl = out.numpy()
+            if Q:
+                out2 = wp.empty((N, Q), dtype=wp.float64, device=dev)
+                wp.launch(kern.self_lower, dim=(N, Q),
+                          inputs=[*self._tab, *self._ptab, X, wp.float64(cap),
+                                  wp.float64(GJK_TOL), wp.float64(SLACK)],
+                          outputs=[out2], device=dev)
+                sl = out2.numpy()
+            self.stats.calls += 1
+            self.stats.configurations += N
+            self.stats.seconds += time.perf_counter() - t0
+        return wl, sl
+
+    def free(self, q: Any, margin: float = 0.0, self_margin: float = 0.0,
+             groups: np.ndarray | None = None) -> np.ndarray:
+        """(N,) bool: the pieces at ``q`` (N, n_dof) keep more than ``margin`` [m] from
+        the world and more than ``self_margin`` from each other (certified)."""
+        wl, sl = self.lower_bounds(q, groups, cap=max(margin, self_margin) + 0.05)
+        return (wl > margin).all(axis=1) & (sl > self_margin).all(axis=1)
+
+    def paths_free(self, paths: Any, margin: float = 0.0, self_margin: float = 0.0, *,
+                   endpoint_margin: float | None = None, groups: np.ndarray | None = None,
+                   evals_per_segment: int = EVALS_PER_SEGMENT) -> np.ndarray:
+        """(P,) bool: every path of ``paths`` (P, W, n_dof), the straight joint-space
+        segments between its waypoints, certified free for the pieces (module docstring)
+        with ``margin`` from the world and ``self_margin`` between pieces; the first and
+        last segment with ``endpoint_margin`` (None: ``margin``) instead, so a grasp pose
+        closer than ``margin`` can be left and reached. ``groups`` (P,): the world of a
+        batch each path is in. A path whose segments need more than ``evals_per_segment``
+        configurations on average, or a halving below 2^-:data:`MAX_DEPTH`, is not
+        certified (False)."""
+        P_ = np.asarray(paths, np.float64)
+        if P_.ndim != 3 or P_.shape[2] != self.robot.n_dof:
+            raise ValueError(f"paths: expected shape (P, W, {self.robot.n_dof}), got "
+                             f"{P_.shape}")
+        P, W, n = P_.shape
+        ok = np.ones(P, bool)
+        if P == 0:
+            return ok
+        if W == 1:
+            em = margin if endpoint_margin is None else min(margin, endpoint_margin)
+            g = None if groups is None else np.asarray(groups)
+            return self.free(P_[:, 0], em, min(self_margin, em), g)
+        S = W - 1
+        # per segment: the margins, the travel per piece (K) and per self pair (Q)
+        seg_path = np.repeat(np.arange(P), S)
+        qa = P_[:, :-1].reshape(-1, n)
+        qb = P_[:, 1:].reshape(-1, n)
+        dth = np.abs((qb - qa) @ self._coupling.T)          # (P S, n_frames)
+        Tk = dth @ self.reach.T                              # (P S, K)
+        Tq = dth @ self.pair_weight.T                        # (P S, Q)
+        mw = np.full(P * S, float(margin))
+        ms = np.full(P * S, float(self_margin))
+        if endpoint_margin is not None:
+            em = min(float(margin), float(endpoint_margin))
+            ends = np.zeros((P, S), bool)
+            ends[:, 0] = ends[:, -1] = True
+            mw[ends.reshape(-1)] = em
+            ms[ends.reshape(-1)] = np.minimum(ms[ends.reshape(-1)], em)
+        g = None if groups is None else np.asarray(groups, np.int64)
+        cap = max(float(margin), float(self_margin)) + float(np.max(Tk, initial=0.0)) + 0.05
+        wl, sl = self.lower_bounds(P_.reshape(-1, n), None if g is None else np.repeat(g, W),
+                                   cap=cap)
+        wl = wl.reshape(P, W, -1)
+        sl = sl.reshape(P, W, -1)
+        # intervals: (segment row, t0, t1, bounds at both ends)
+        seg = np.arange(P * S)
+        t0 = np.zeros(P * S)
+        t1 = np.ones(P * S)
+        wa, wb = wl[:, :-1].reshape(P * S, -1), wl[:, 1:].reshape(P * S, -1)
+        sa, sb = sl[:, :-1].reshape(P * S, -1), sl[:, 1:].reshape(P * S, -1)
+        budget = int(evals_per_segment) * P * S
+        used = 0
+        for _depth in range(MAX_DEPTH + 1):
+            if not len(seg):
+                break
+            live = ok[seg_path[seg]]
+            seg, t0, t1, wa, wb, sa, sb = (x[live] for x in (seg, t0, t1, wa, wb, sa, sb))
+            if not len(seg):
+                break
+            span = (t1 - t0)[:, None]
+            mwi, msi = mw[seg][:, None], ms[seg][:, None]
+            hit = ((wa <= mwi) | (wb <= mwi)).any(1) | ((sa <= msi) | (sb <= msi)).any(1)
+            ok[seg_path[seg[hit]]] = False
+            proven = ((wa + wb - 2 * mwi > span * Tk[seg]).all(1)
+                      & (sa + sb - 2 * msi > span * Tq[seg]).all(1))
+            todo = ~hit & ~proven & ok[seg_path[seg]]
+            if not todo.any():
+                break
+            if _depth == MAX_DEPTH or used + int(todo.sum()) > budget:
+                ok[seg_path[seg[todo]]] = False
+                break
+            seg, t0, t1, wa, wb, sa, sb = (x[todo] for x in (seg, t0, t1, wa, wb, sa, sb))
+            tm = (t0 + t1) / 2
+            qm = qa[seg] + (qb[seg] - qa[seg]) * tm[:, None]
+            wm, sm = self.lower_bounds(qm, None if g is None else g[seg_path[seg]], cap=cap)
+            used += len(seg)
+            seg = np.concatenate([seg, seg])
+            t0, t1 = np.concatenate([t0, tm]), np.concatenate([tm, t1])
+            wa, wb = np.concatenate([wa, wm]), np.concatenate([wm, wb])
+            sa, sb = np.concatenate([sa, sm]), np.concatenate([sm, sb])
+        return ok
+
+
+_CACHE: OrderedDict = OrderedDict()
+_CACHE_LOCK = threading.Lock()
+
+
+def mesh_check(robot: Any, world: Any, device: Any = None, *, rho: Any = None
+               ) -> MeshCheck | None:
+    """The :class:`MeshCheck` of ``robot`` in ``world`` on ``device`` (kept per robot,
+    world and device: a few are cached), or None where there is none: no
+    ``collision_pieces``, spheres edited since the pieces were made, a world with a voxel
+    grid, or an elastic model (``rho`` given)."""
+    from jwarp.model.registry import robot as get_robot
+
+    if rho is not None:
+        return None
+    model = get_robot(robot)
+    cp = getattr(model, "collision_pieces", None)
+    if cp is None or cp.extra_spheres(model) is None:
+        return None
+    if world is not None and getattr(world, "has_grid", False):
+        return None
+    dev = resolve_device(device)
+    key = (id(model), id(world), str(dev))
+    with _CACHE_LOCK:
+        hit = _CACHE.get(key)
+        if hit is not None and hit[0]() is model and hit[1]() is world:
+            _CACHE.move_to_end(key)
+            return hit[2]
+    mc = MeshCheck(model, world, dev)
+    with _CACHE_LOCK:
+        _CACHE[key] = (weakref.ref(model), (weakref.ref(world) if world is not None
+                                            else (lambda: None)), mc)
+        while len(_CACHE) > 8:
+            _CACHE.popitem(last=False)
+    return mc
