@@ -1,0 +1,166 @@
+"""The mesh certificate (jwarp.world.mesh_check) against the independent verifier: the
+Panda's URDF meshes placed by pinocchio, distances by coal (tests/verifier.py)."""
+
+import os
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(__file__)))
+
+pytest.importorskip("pinocchio")
+pytest.importorskip("coal")
+
+from verifier import PathVerifier, checked_link_pairs  # noqa: E402
+
+from jwarp.importers.robot import example_robot_urdf  # noqa: E402
+from jwarp.world.collision import is_collision_free  # noqa: E402
+from jwarp.world.feasibility import random_configurations  # noqa: E402
+from jwarp.world.mesh_check import MeshCheck, mesh_check, world_pieces  # noqa: E402
+from jwarp.world.primitives import Shape, pose_matrix, rpy_matrix  # noqa: E402
+from jwarp.world.scene_file import Scene, exact_world  # noqa: E402
+from jwarp.world.spherize import SpherizeOptions, spherized_robot  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def panda(tmp_path_factory):
+    """The Panda with a coarse contained fit (79 spheres reaching up to 7 cm past the
+    meshes: many configurations the spheres refuse are free for the meshes)."""
+    try:
+        path = example_robot_urdf("panda")
+    except ValueError as e:
+        pytest.skip(str(e))
+    mp = pytest.MonkeyPatch()
+    mp.setenv("JWARP_CACHE", str(tmp_path_factory.mktemp("cache")))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model, _ = spherized_robot(path, SpherizeOptions(tolerance=0.03, pair_samples=300))
+    finally:
+        mp.undo()
+    return path, model
+
+
+def _scene(rng):
+    shapes = [Shape("box", np.array([0.6, 0.8, 0.04]), pose_matrix([0.5, 0.0, 0.2]), "table"),
+              Shape("cylinder", np.array([0.3, 0.05]), pose_matrix([0.4, 0.3, 0.5]), "can"),
+              Shape("sphere", np.array([0.08]), pose_matrix([0.3, -0.3, 0.6]), "ball"),
+              Shape("capsule", np.array([0.3, 0.04]),
+                    pose_matrix([0.0, 0.45, 0.5], rpy_matrix([1.2, 0.0, 0.3])), "pole"),
+              Shape("cone", np.array([0.2, 0.1]), pose_matrix([-0.3, -0.3, 0.4]), "cone"),
+              Shape("box", np.array([0.1, 0.2, 0.3]),
+                    pose_matrix(rng.uniform(-0.5, 0.5, 3) + [0, 0, 0.5],
+                                rpy_matrix(rng.uniform(-1, 1, 3))), "crate")]
+    return Scene(shapes=shapes, source="test_mesh_check")
+
+
+def _verifier(path, model, scene):
+    v = PathVerifier(path, None, scene.shapes)
+    v2 = PathVerifier(path, None, scene.shapes, self_pairs=checked_link_pairs(model, v))
+    return v2
+
+
+def test_world_pieces_contain_their_objects():
+    rng = np.random.default_rng(0)
+    scene = _scene(rng)
+    world = exact_world(scene)
+    pieces = world_pieces(world.shapes)
+    from scipy.spatial import Delaunay
+
+    for shape, (kind, verts, rad, _) in zip(scene.shapes, pieces):
+        # points of the exact object (rejection sampling in its bounding box)
+        lo, hi = verts.min(0) - rad, verts.max(0) + rad
+        pts = rng.uniform(lo, hi, (20000, 3))
+        from jwarp.world.primitives import signed_distance
+
+        inside = pts[signed_distance(shape, pts) < 0]
+        assert len(inside) > 100
+        if rad == 0:
+            assert (Delaunay(verts).find_simplex(inside, tol=1e-12) >= 0).all(), shape.object_id
+        else:  # a point or a segment grown by rad
+            a, b = verts[0], verts[-1]
+            ab = b - a
+            t = np.clip(((inside - a) @ ab) / max(ab @ ab, 1e-30), 0, 1)
+            d = np.linalg.norm(inside - (a + t[:, None] * ab), axis=1)
+            assert (d <= rad + 1e-12).all(), shape.object_id
+
+
+def test_certified_configurations_are_free_for_the_meshes(panda):
+    """No configuration the certificate calls free collides for coal (world and self);
+    most the meshes keep free are certified, including many the spheres refuse."""
+    path, model = panda
+    rng = np.random.default_rng(1)
+    scene = _scene(rng)
+    world = exact_world(scene)
+    v = _verifier(path, model, scene)
+    q = random_configurations(model, 300, seed=2)
+    mc = MeshCheck(model, world, "cpu")
+    cert = mc.free(q)
+    ref = v.check_configurations(q)
+    assert not (cert & ~ref).any(), np.nonzero(cert & ~ref)[0]
+    assert cert.sum() >= 0.8 * ref.sum(), (cert.sum(), ref.sum())
+    spheres = is_collision_free(model, q, world, meshes=False, device="cpu")
+    gained = cert & ~spheres
+    assert gained.sum() >= 5                       # the certificate matters here
+    both = is_collision_free(model, q, world, device="cpu")
+    assert np.array_equal(both, spheres | cert)
+
+
+def test_certified_paths_are_free_for_the_meshes(panda):
+    path, model = panda
+    rng = np.random.default_rng(3)
+    scene = _scene(rng)
+    world = exact_world(scene)
+    v = _verifier(path, model, scene)
+    q = random_configurations(model, 400, seed=4)
+    mc = mesh_check(model, world, "cpu")
+    free = q[mc.free(q, 0.0)]
+    P = min(40, len(free) // 2)
+    paths = np.stack([free[:P], free[P:2 * P]], axis=1)            # (P, 2, n)
+    paths = np.concatenate([paths[:, :1], paths.mean(1, keepdims=True), paths[:, 1:]], 1)
+    ok = mc.paths_free(paths)
+    for k in np.nonzero(ok)[0]:
+        verdict = v.check_path(paths[k], max_step_deg=0.5)
+        assert verdict.ok, (k, str(verdict))
+    assert ok.sum() >= 3
+
+
+def _graze_box(model, q, gap):
+    """A 10 cm box ``gap`` [m] beyond the robot's pieces along +x of the world at ``q``,
+    level with the hand."""
+    from jwarp.kinematics import fk
+
+    X = np.asarray(fk(model, q[None], dtype=np.float64))[0]
+    cp = model.collision_pieces
+    pts = np.concatenate([p.vertices @ X[p.frame, :3, :3].T + X[p.frame, :3, 3]
+                          for p in cp.pieces])
+    x = pts[:, 0].max() + gap + 0.05
+    hand = model.frame_index("panda_hand")
+    c = X[hand, :3, 3]
+    return Shape("box", np.array([0.1, 0.1, 0.1]), pose_matrix([x, c[1], c[2]]), "graze")
+
+
+def test_a_pose_millimetres_from_an_object_is_not_refused_and_plans(panda):
+    """A hand 3 mm from a box: the contained spheres touch it, the meshes do not. The pose
+    is accepted (is_collision_free), a plan from it is feasible and the verifier finds
+    every configuration of it free for the URDF meshes."""
+    import jwarp
+    from jwarp.solvers.planning import PlanOptions
+
+    path, model = panda
+    q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8, 0.035, 0.035])[:model.n_dof]
+    q0 = np.clip(q0, model.joint_limits[:, 0], model.joint_limits[:, 1])
+    scene = Scene(shapes=[_graze_box(model, q0, 0.003)], source="graze")
+    world = exact_world(scene)
+    assert not is_collision_free(model, q0[None], world, meshes=False, device="cpu")[0]
+    assert is_collision_free(model, q0[None], world, device="cpu")[0]
+    q1 = q0.copy()
+    q1[0] -= 1.0
+    res = jwarp.plan(model, world, q0, q1, options=PlanOptions(time_limit=20.0),
+                     device="cpu")
+    assert bool(res.feasible[0]), res.reasons
+    v = _verifier(path, model, scene)
+    verdict = v.check_path(res.path[0])
+    assert verdict.ok, str(verdict)
