@@ -602,6 +602,13 @@ def main(argv: list[str] | None = None) -> int:
                   f"{args.endpoint_margin:g} m: {len(probs)} problems one after the other "
                   f"in {total:.1f} s (incl. verification)")
             per = print_table(rows, families)
+            mesh_s = sum(r.get("timings", {}).get("mesh_check", 0.0) for r in rows)
+            plan_s = sum(r["time_s"] for r in rows)
+            errors = sum(r["stage"] == "error" for r in rows)
+            print(f"   {len(robot.spheres)} spheres; mesh certificate "
+                  f"{'on' if getattr(robot, 'collision_pieces', None) is not None else 'off'}: "
+                  f"{mesh_s:.2f} s of {plan_s:.2f} s planning ({100 * mesh_s / max(plan_s, 1e-9):.1f} %)"
+                  f"; planner errors (e.g. endpoints refused) {errors}")
             result["rows"] += rows
             summary.append({"planner": "jwarp", "device": dev, "margin": m,
                             "total_wall_s": total, "per_family": per, **per["all"]})

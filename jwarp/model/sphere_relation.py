@@ -171,18 +171,23 @@ def inflated(model: Any) -> Any:
 def relation_text(model: Any) -> str:
     """One line: what the relation of ``model`` promises (for warnings and summaries)."""
     rel = getattr(model, "sphere_relation", None)
+    cp = getattr(model, "collision_pieces", None)
+    cert = ("; where they cannot prove a motion, the URDF geometry's convex pieces do "
+            "(mesh certificate)") if cp is not None and cp.extra_spheres(model) is not None \
+        else ""
     if rel is None:
         return ("spheres of unknown relation to the meshes (no 'sphere_relation': no extra "
-                "margin added; import again with `jwarp import-urdf` for a contained fit)")
+                "margin added; import again with `jwarp import-urdf` for a contained fit)"
+                + cert)
     worst = max(rel.protrusion.values(), default=0.0)
     if rel.kind == "contained":
         return (f"spheres contain the meshes (bound {rel.bound * 1e3:.2f} mm; they reach up "
                 f"to {worst * 1e3:.1f} mm past the surface)"
-                + (", grown by the measured poke-out" if rel.inflated else ""))
+                + (", grown by the measured poke-out" if rel.inflated else "") + cert)
     top = sorted(rel.poke_out.items(), key=lambda kv: -kv[1])[:3]
     return (f"approximate spheres: the meshes poke out of them by up to "
             f"{rel.bound * 1e3:.1f} mm ("
-            + ", ".join(f"{k} {v * 1e3:.1f} mm" for k, v in top) + ")")
+            + ", ".join(f"{k} {v * 1e3:.1f} mm" for k, v in top) + ")" + cert)
 
 
 def relation_after_edit(rel: SphereRelation | None, names: list[str], old: list,

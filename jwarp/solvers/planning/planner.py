@@ -248,6 +248,7 @@ class Planner:
         call started (the clock of ``time_limit``; None: now)."""
         t0 = time.perf_counter() if t_start is None else t_start
         model, o, dev = self.robot, self.options, self.device
+        mesh_s0 = self._mesh_seconds()
         deadline = None if o.time_limit is None else t0 + float(o.time_limit)
         opt_deadline = deadline
         if deadline is not None and o.fallback is not None:
@@ -370,7 +371,18 @@ class Planner:
             self._shorten(buf, res, deadline, obj.evaluations - evals0)
         res.reasons = self.explain(res)
         res.wall_time = time.perf_counter() - t0
+        res.timings["mesh_check"] = self._mesh_seconds() - mesh_s0
         return res
+
+    def _mesh_seconds(self) -> float:
+        """Seconds the mesh certificate of this robot and world has worked so far (0
+        without one): the share of a plan spent on mesh checks."""
+        if getattr(self.robot, "collision_pieces", None) is None or self.options.kappa is not None:
+            return 0.0
+        from jwarp.world.mesh_check import mesh_check
+
+        mc = mesh_check(self.robot, self.world, self.device)
+        return 0.0 if mc is None else mc.stats.seconds
 
     def _shorten(self, buf: _Buffers, res: PlanResult, deadline: float | None,
                  work: int | None = None) -> None:
