@@ -824,15 +824,19 @@ def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: fl
     md = np.asarray(md)
     free = (md[..., 0] > margin) & (md[..., 1] > sm)
     if meshes and not free.all() and rho is None:
-        free = _mesh_certified(robot, q, world, free, margin, sm, device, per_world)
+        free = mesh_certified(robot, q, world, free, margin, sm, device, per_world, md)
     return free
 
 
-def _mesh_certified(robot: Any, q: Any, world: World | None, free: np.ndarray, margin: float,
-                    self_margin: float, device: Any, per_world: int) -> np.ndarray:
-    """``free`` with the configurations the spheres refuse but the mesh certificate proves
-    free (:func:`jwarp.world.mesh_check.mesh_check`; unchanged where it has none)."""
-    from jwarp.world.mesh_check import mesh_check
+def mesh_certified(robot: Any, q: Any, world: World | None, free: np.ndarray, margin: float,
+                   self_margin: float, device: Any = None, per_world: int = 0,
+                   md: np.ndarray | None = None) -> np.ndarray:
+    """``free`` (the spheres' verdict on ``q``) with the configurations the spheres refuse
+    but the mesh certificate proves free (:func:`jwarp.world.mesh_check.mesh_check`;
+    unchanged where it has none). ``md`` (..., 2): the spheres' smallest distances (world,
+    self) at ``q``: a configuration whose spheres collide deeper than they reach past the
+    meshes (:func:`jwarp.world.mesh_check.sphere_reach_past`) is not tried."""
+    from jwarp.world.mesh_check import mesh_check, sphere_reach_past
 
     model = get_robot(robot)
     if getattr(model, "collision_pieces", None) is None:
@@ -844,7 +848,14 @@ def _mesh_certified(robot: Any, q: Any, world: World | None, free: np.ndarray, m
         q = q.detach().cpu().numpy() if hasattr(q, "detach") else q.numpy()
     qs = np.asarray(q, np.float64).reshape(-1, model.n_dof)
     flat = free.reshape(-1).copy()
-    bad = np.nonzero(~flat)[0]
+    try_ = ~flat
+    if md is not None:
+        depth = sphere_reach_past(model)
+        m2 = np.asarray(md, np.float64).reshape(-1, 2)
+        try_ &= (m2[:, 0] > -depth) & (m2[:, 1] > -depth)
+    bad = np.nonzero(try_)[0]
+    if not len(bad):
+        return free
     groups = bad // int(per_world) if per_world and world is not None and \
         world.n_worlds > 1 else None
     flat[bad] = mc.free(qs[bad], margin, self_margin, groups=groups)

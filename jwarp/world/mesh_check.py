@@ -42,7 +42,7 @@ from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.kernels import convex as ck
 from jwarp.model import RobotModel
 
-__all__ = ["MeshCheck", "MeshCheckStats", "mesh_check", "world_pieces"]
+__all__ = ["MeshCheck", "MeshCheckStats", "mesh_check", "sphere_reach_past", "world_pieces"]
 
 #: sides of the circumscribed polygons of world cylinders and cones
 POLY_SIDES = 32
@@ -285,7 +285,7 @@ class MeshCheck:
         if N == 0 or K == 0:
             return wl, sl
         with self._lock:
-            X = wp.array(np.asarray(fk(self.robot, q, device="cpu", dtype=np.float64)),
+            X = wp.array(np.asarray(fk(self.robot, q, device=dev, dtype=np.float64)),
                          dtype=kern.mat44, device=dev)
             wt = self._world_tables()
             if self.n_objects:
@@ -398,6 +398,14 @@ class MeshCheck:
             wa, wb = np.concatenate([wa, wm]), np.concatenate([wm, wb])
             sa, sb = np.concatenate([sa, sm]), np.concatenate([sm, sb])
         return ok
+
+
+def sphere_reach_past(robot: RobotModel) -> float:
+    """[m] how deep a sphere collision may be while the meshes are still free: the largest
+    protrusion of the spheres past the meshes (``sphere_relation``; 2 cm when unknown),
+    plus 2 mm. Checks try the certificate only where the spheres collide less deeply."""
+    rel = getattr(robot, "sphere_relation", None)
+    return (max(rel.protrusion.values(), default=0.0) if rel is not None else 0.02) + 2e-3
 
 
 _CACHE: OrderedDict = OrderedDict()

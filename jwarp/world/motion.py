@@ -650,7 +650,7 @@ class MotionCheck:
 
     def check(self, paths: Any, *, margin: float = 0.0,
               endpoint_margin: float | None = None, self_margin: float = 0.0,
-              world_group: int = 0, group: int = 0) -> PathCheck:
+              world_group: int = 0, group: int = 0, meshes: bool | None = None) -> PathCheck:
         """Check ``paths`` (W, n_dof) or (P, W, n_dof) (numpy or Warp; rad or m) with
         ``margin`` [m] (>= 0) from the world, ``self_margin`` [m] between the robot's own
         spheres and ``endpoint_margin`` (None: = margin) on the first and last segment.
@@ -658,6 +658,8 @@ class MotionCheck:
         one is, the group's others not yet checked are skipped (not ok; on the CPU the
         paths are checked in order, so the first feasible path of each group is the one
         proven; on a GPU a later one may be). ``world_group``: as :meth:`launch`.
+        ``meshes``: what the spheres leave unproven goes to :meth:`mesh_recheck` (None:
+        ``options.meshes``).
         Returns a :class:`PathCheck` (P results; one for a single path)."""
         margin = _check_margin(margin, "margin")
         self_margin = _check_margin(self_margin, "self_margin")
@@ -688,7 +690,7 @@ class MotionCheck:
         ok = out["ok"].numpy()[:K].astype(bool)
         code = out["code"].numpy()[:K]
         dist = out["dist"].numpy()[:K]
-        if not ok.all():
+        if not ok.all() and (self.options.meshes if meshes is None else meshes):
             ok2 = self.mesh_recheck(p, np.arange(K), ok, code, dist, margin=margin,
                                     endpoint_margin=endpoint_margin, self_margin=self_margin,
                                     world_group=world_group)
@@ -705,7 +707,11 @@ class MotionCheck:
     def mesh_check(self) -> Any:
         """The :class:`jwarp.world.mesh_check.MeshCheck` of this robot and world (None
         where there is none, or with ``options.meshes`` False)."""
-        if not self.options.meshes or getattr(self.robot, "collision_pieces", None) is None:
+        return self._mesh_check_any() if self.options.meshes else None
+
+    def _mesh_check_any(self) -> Any:
+        """:meth:`mesh_check` whatever ``options.meshes`` says (a caller's ``meshes=True``)."""
+        if getattr(self.robot, "collision_pieces", None) is None:
             return None
         if self._mesh is None:
             from jwarp.world.mesh_check import mesh_check
@@ -724,11 +730,12 @@ class MotionCheck:
         spheres' largest protrusion past the meshes (a deeper sphere collision is a mesh
         collision), and for uncertified segments; a proven path must also keep its
         waypoints within the joint limits. Unchanged without a mesh certificate."""
-        mc = self.mesh_check()
+        mc = self._mesh_check_any()
         if mc is None:
             return ok
-        rel = getattr(self.robot, "sphere_relation", None)
-        depth = (max(rel.protrusion.values(), default=0.0) if rel is not None else 0.02) + 2e-3
+        from jwarp.world.mesh_check import sphere_reach_past
+
+        depth = sphere_reach_past(self.robot)
         try_ = (~ok & np.isin(code, (1, 2, 3, 6)) & (np.asarray(dist) > -depth))
         if not try_.any():
             return ok

@@ -42,13 +42,15 @@ def check_world(robot: RobotModel, world: Any) -> None:
 
 def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, margin: float,
                     rho_kappa: Any = None, device: Any = None,
-                    self_margin: float = 0.0, per_world: int = 0) -> None:
+                    self_margin: float = 0.0, per_world: int = 0) -> np.ndarray:
     """ValueError naming ``name`` (and the row) if a configuration is outside the limits or
     in collision (closer than ``margin`` to an obstacle or to itself: the message names the
     link and the object, or the two links, and their distance), or, on the elastic
     model (``rho_kappa``: compliances), if its torque equilibrium does not converge
     (:data:`ELASTIC_CHECK`): then nothing can be said about its collisions. The checks run
-    on ``device`` (None: Warp's default device)."""
+    on ``device`` (None: Warp's default device).
+    Returns (N,) bool: the configurations the spheres alone keep free (the others were
+    proven free by the mesh certificate, :mod:`jwarp.world.mesh_check`)."""
     ok = within_limits(robot, q)
     if not ok.all():
         i = int(np.nonzero(~ok)[0][0])
@@ -64,8 +66,13 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
             raise ValueError(f"kappa: the elastic equilibrium at {where} does not converge in "
                              f"{c['max_iter']} torque updates (lam {c['lam']:g}) to {c['tol']:g} "
                              f"rad, so its collisions cannot be checked; lower kappa")
-    free = collision_free(robot, world, q, margin, rho=rho, device=device,
-                          self_margin=self_margin, per_world=per_world)
+    spheres = collision_free(robot, world, q, margin, rho=rho, device=device,
+                             self_margin=self_margin, per_world=per_world, meshes=False)
+    free = spheres
+    if not spheres.all() and rho is None:
+        from jwarp.world.collision import mesh_certified
+
+        free = mesh_certified(robot, q, world, spheres, margin, self_margin, device, per_world)
     if not free.all():
         i = int(np.nonzero(~free)[0][0])
         where = f"{name}[{i}]" if len(q) > 1 else name
@@ -80,18 +87,22 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
         what = (f"{pair} (margin {margin:g} m)" if hit_world else
                 f"{pair} (self margin {self_margin:g} m)")
         raise ValueError(f"{where}: configuration is in collision: {what}")
+    return spheres
 
 
 def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
                    kappa: Any = None, rho: Any = None, device: Any = None,
-                   self_margin: float = 0.0, per_world: int = 0) -> np.ndarray:
+                   self_margin: float = 0.0, per_world: int = 0,
+                   meshes: bool = True) -> np.ndarray:
     """(N,) bool: q (N, n_dof) collision-free: more than ``margin`` [m] from the world and
     more than ``self_margin`` [m] between the robot's own spheres.
 
     With ``rho`` (N, n_frames, 5) the frames are those DH rows; with ``kappa`` (and no
     rho) the elastic model in its torque equilibrium (:func:`elastic_equilibrium`, to
     1e-7 rad: 0.1 um at 1 m). A configuration whose equilibrium does not converge is not
-    collision-free (its frames are unknown)."""
+    collision-free (its frames are unknown). ``meshes``: as
+    :func:`jwarp.world.collision.is_collision_free` (the mesh certificate proves what the
+    spheres refuse, rigid model only)."""
     col = collision
     q = np.ascontiguousarray(real_array(q, "q"))
     converged = None
@@ -102,7 +113,8 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
             rho = np.where(conv[:, None, None], rho, 0.0)
     free = np.asarray(col.is_collision_free(robot, q, world, margin=margin, rho=rho,
                                             device=device, dtype=np.float64,
-                                            self_margin=self_margin, per_world=per_world),
+                                            self_margin=self_margin, per_world=per_world,
+                                            meshes=meshes),
                       bool).reshape(-1)
     return free if converged is None else free & converged.reshape(-1)
 
@@ -150,13 +162,16 @@ def substeps(paths: Any, n_substeps: int, *, device: Any = None, dtype: Any = No
 
 def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin: float = 0.0,
                   kappa: Any = None, device: Any = None,
-                  endpoint_margin: float | None = None, self_margin: float = 0.0) -> np.ndarray:
+                  endpoint_margin: float | None = None, self_margin: float = 0.0,
+                  meshes: bool | None = None) -> np.ndarray:
     """Feasibility of paths (..., W, n_dof): every waypoint within the joint limits and,
     on the rigid model, every sphere at clearance >= ``margin`` [m] along the whole
     continuous motion (:mod:`jwarp.world.motion`; ``min(margin, endpoint_margin)`` on the
     first and last segment; ``n_substeps`` is not used). On the elastic model (``kappa``)
     the ``n_substeps`` linear substeps per segment are checked at their torque equilibria.
-    Returns (...,) bool. Runs on ``device`` (None: Warp's default device)."""
+    Returns (...,) bool. Runs on ``device`` (None: Warp's default device). ``meshes``:
+    the mesh certificate proves what the spheres leave unproven (None: the check's
+    :attr:`~jwarp.world.motion.MotionOptions.meshes`; rigid model only)."""
     model = get_robot(robot)
     check_world(model, world)
     a = real_array(paths, "paths")
@@ -165,7 +180,8 @@ def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin
     if kappa is None:
         flat = a.reshape(-1, a.shape[-2], a.shape[-1])
         res = certify_check(model, world, device=device).check(
-            flat, margin=margin, endpoint_margin=endpoint_margin, self_margin=self_margin)
+            flat, margin=margin, endpoint_margin=endpoint_margin, self_margin=self_margin,
+            meshes=meshes)
         return res.ok.reshape(a.shape[:-2])
     q = substeps(a, n_substeps, device=device)
     free = collision_free(model, world, q.reshape(-1, model.n_dof), margin, kappa=kappa,

@@ -171,6 +171,9 @@ class Planner:
         if self.batched and o.kappa is not None:
             raise ValueError("kappa: a batch of worlds plans on the rigid model only")
         self._reach = None   # sphere_reach of the robot (substeps in exact worlds)
+        #: per problem of the last plan: its start or goal needs the mesh certificate
+        self._mesh_need: np.ndarray | None = None
+        self._final = True   # the optimisation's last check (every path may use meshes)
 
     # ------------------------------------------------------------------ public
     def plan(self, start: Any, goal: Any, seeds: Any = None) -> PlanResult:
@@ -260,10 +263,15 @@ class Planner:
         em = o.margin if o.endpoint_margin is None else min(o.margin, o.endpoint_margin)
         sem = min(o.self_margin, em)
         pw = 1 if self.batched else 0
-        check_endpoints(model, self.world, q0, "start", em, o.kappa, device=dev,
-                        self_margin=sem, per_world=pw)
-        check_endpoints(model, self.world, q1, "goal", em, o.kappa, device=dev,
-                        self_margin=sem, per_world=pw)
+        s0 = check_endpoints(model, self.world, q0, "start", em, o.kappa, device=dev,
+                             self_margin=sem, per_world=pw)
+        s1 = check_endpoints(model, self.world, q1, "goal", em, o.kappa, device=dev,
+                             self_margin=sem, per_world=pw)
+        # problems whose start or goal only the mesh certificate keeps free (a grasp pose
+        # the spheres reach past): their unproven paths go to it every check; the others
+        # only at the last check (the spheres can prove their paths)
+        self._mesh_need = ~(np.asarray(s0, bool) & np.asarray(s1, bool))
+        self._final = False
         if isinstance(seeds, ViaPoints):
             Q = _via_seeds(model, q0, q1, seeds.points, o.n_waypoints)
         else:
@@ -310,6 +318,7 @@ class Planner:
             # the time limit: checked before the evaluation; the current paths still get
             # their exact check below
             out_of_time = opt_deadline is not None and time.perf_counter() >= opt_deadline
+            self._final = it == o.iterations or out_of_time
             obj.evaluate(grad=it < o.iterations and not out_of_time)
             if o.callback is not None:
                 o.callback(it, obj.paths.numpy())
@@ -418,12 +427,16 @@ class Planner:
         clear = max(o.margin, min(self.eps, SHORTCUT_CLEARANCE))
 
         spent = [0]
+        # the mesh certificate only where an endpoint needs it (shortcuts fail often)
+        need = self._mesh_need
+        meshes = bool(need is None or need.any())
 
         def check(segments: np.ndarray, per_path: int) -> np.ndarray:
             # group: a path's list of shortcuts is in the order of preference and the
             # first proven is taken: the rest of the list is skipped
             r = chk.check(segments, margin=clear, self_margin=o.self_margin,
-                          world_group=per_path if self.batched else 0, group=per_path)
+                          world_group=per_path if self.batched else 0, group=per_path,
+                          meshes=meshes)
             spent[0] += r.evaluations
             return r.ok
 
@@ -439,7 +452,7 @@ class Planner:
         if better.any():
             better &= chk.check(cand, margin=o.margin, endpoint_margin=o.endpoint_margin,
                                 self_margin=o.self_margin,
-                                world_group=1 if self.batched else 0).ok
+                                world_group=1 if self.batched else 0, meshes=meshes).ok
         if better.any():
             rows, b = np.nonzero(better)[0], idx[better]
             obj = buf.objective
@@ -593,11 +606,21 @@ class Planner:
             ok = out["ok"].numpy()[:len(cand)].astype(bool)
             if not ok.all() and chk.mesh_check() is not None:
                 # what the spheres leave unproven, the URDF geometry may prove (a grasp
-                # pose the contained spheres reach past); skipped starts stay skipped
-                ok = chk.mesh_recheck(obj.paths, cand, ok, out["code"].numpy()[:len(cand)],
-                                      out["dist"].numpy()[:len(cand)], margin=o.margin,
-                                      endpoint_margin=o.endpoint_margin,
-                                      self_margin=o.self_margin, world_group=wg)
+                # pose the contained spheres reach past): every check for the problems
+                # whose endpoints need it, the last check for the others; skipped starts
+                # stay skipped
+                need = self._mesh_need
+                per = obj.P // self.n_problems
+                sel = ~ok
+                if not self._final and need is not None:
+                    sel &= need[np.asarray(cand) // per]
+                if sel.any():
+                    k = np.nonzero(sel)[0]
+                    ok[k] = chk.mesh_recheck(obj.paths, np.asarray(cand)[k], ok[k],
+                                             out["code"].numpy()[:len(cand)][k],
+                                             out["dist"].numpy()[:len(cand)][k],
+                                             margin=o.margin, endpoint_margin=o.endpoint_margin,
+                                             self_margin=o.self_margin, world_group=wg)
             return ok
         return self._confirm_elastic(buf, cand)
 
@@ -705,10 +728,12 @@ def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarra
             timed_out = True
             notes[b] = "RRT-Connect not run: no time left"
             continue
+        need = getattr(planner, "_mesh_need", None)
         r = rrt_connect(planner.robot, planner.world.select(int(b)), q0[b], q1[b], ropt,
                         margin=o.margin,
                         kappa=o.kappa, device=planner.device, deadline=rrt_stop,
-                        endpoint_margin=o.endpoint_margin, self_margin=o.self_margin)
+                        endpoint_margin=o.endpoint_margin, self_margin=o.self_margin,
+                        meshes=True if need is None else bool(need[b]))
         if r.success:
             found.append(int(b))
             seeds.append(resample_path(r.path, W))

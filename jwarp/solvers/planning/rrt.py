@@ -165,8 +165,10 @@ class _Checks:
 
     def __init__(self, model: Any, world: Any, margin: float, kappa: Any, device: Any,
                  n_substeps: int | None, endpoint_margin: float | None = None,
-                 roots: np.ndarray | None = None, self_margin: float = 0.0) -> None:
+                 roots: np.ndarray | None = None, self_margin: float = 0.0,
+                 meshes: bool = True) -> None:
         self.model, self.world, self.margin = model, world, margin
+        self.meshes = meshes
         self.self_margin = float(self_margin)
         self.kappa, self.device, self.n_sub = kappa, device, n_substeps
         self.em = None
@@ -176,14 +178,16 @@ class _Checks:
         self.last_n_sub = n_substeps or 1
         self.time = {"states": 0.0, "edges": 0.0}
 
-    def states(self, q: np.ndarray, margin: float | None = None) -> np.ndarray:
+    def states(self, q: np.ndarray, margin: float | None = None,
+               meshes: bool | None = None) -> np.ndarray:
         t = time.perf_counter()
         ok = within_limits(self.model, q)
         if ok.any():
             m = self.margin if margin is None else margin
             ok[ok] = _fz.collision_free(self.model, self.world, q[ok], m,
                                         kappa=self.kappa, device=self.device,
-                                        self_margin=min(self.self_margin, m))
+                                        self_margin=min(self.self_margin, m),
+                                        meshes=self.meshes if meshes is None else meshes)
         self.time["states"] += time.perf_counter() - t
         return ok
 
@@ -228,7 +232,7 @@ class _Checks:
         return np.asarray(_fz.path_feasible(self.model, self.world, paths, n_sub,
                                             margin=self.margin, kappa=self.kappa,
                                             device=self.device, self_margin=self.self_margin,
-                                            **kw), bool).reshape(len(paths))
+                                            meshes=self.meshes, **kw), bool).reshape(len(paths))
 
     def edges(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return self.paths(np.stack([a, b], axis=1))
@@ -244,7 +248,8 @@ def _vector(x: Any, n: int, name: str) -> np.ndarray:
 def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
                 options: RRTOptions | None = None, *, margin: float = 0.0, kappa: Any = None,
                 device: Any = None, deadline: float | None = None,
-                endpoint_margin: float | None = None, self_margin: float = 0.0) -> RRTResult:
+                endpoint_margin: float | None = None, self_margin: float = 0.0,
+                meshes: bool = True) -> RRTResult:
     """A feasible path from ``start`` to ``goal`` (n_dof,) by RRT-Connect (module doc).
 
     Args:
@@ -257,6 +262,8 @@ def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
         device: Warp device of the checks (None: Warp's default device).
         deadline: ``time.perf_counter()`` value after which the search stops (besides
             ``options.time_limit``).
+        meshes: states and edges the spheres refuse may be proven by the mesh
+            certificate (:mod:`jwarp.world.mesh_check`; start and goal always may).
 
     Returns:
         :class:`RRTResult`; ``path`` None when the trees did not connect within
@@ -279,8 +286,8 @@ def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
         stop_at = min(stop_at, t0 + float(o.time_limit))
     rng = o.seed if isinstance(o.seed, np.random.Generator) else np.random.default_rng(o.seed)
     chk = _Checks(model, world, float(margin), kappa, device, o.n_substeps, endpoint_margin,
-                  np.stack([q0, q1]), self_margin=self_margin)
-    ok = chk.states(np.stack([q0, q1]), margin=chk.em)
+                  np.stack([q0, q1]), self_margin=self_margin, meshes=bool(meshes))
+    ok = chk.states(np.stack([q0, q1]), margin=chk.em, meshes=True)
     for name, good in zip(("start", "goal"), ok):
         if not good:
             m = float(margin) if chk.em is None else chk.em
