@@ -25,10 +25,14 @@ test).
    meshes and of the robot's spheres to the exact scene primitives, samples <= 0.5 deg
    apart) re-checks every path jwarp calls feasible, with jwarp's own rule: the first and
    the last segment at ``endpoint_margin`` (0), the segments between at ``margin``. A
-   *collision* is a verifier distance < 0 (mesh or sphere) anywhere on the path: must be
-   0. A *sphere margin violation* is a sphere closer than the margin on the inner
-   segments (jwarp's promise; should be 0); ``mesh<margin`` counts paths whose URDF meshes
-   come closer than the margin there (the spheres approximate the meshes: information).
+   *collision* is a verifier distance < 0 anywhere on the path: must be 0. What counts
+   follows jwarp's promise for the robot (printed as ``promise:``): a robot with collision
+   pieces (every ``jwarp import-urdf``) has the mesh certificate, so its URDF meshes keep
+   the margin and its spheres may touch an object where the meshes are proven clear: a
+   collision is a mesh distance < 0; a robot without pieces promises its spheres: a mesh
+   or a sphere distance < 0. ``m-viol`` counts paths whose promised geometry comes closer
+   than the margin on the inner segments (should be 0); ``mesh<margin`` the paths whose
+   URDF meshes do (information where the spheres are the promise).
    Self-collision: the URDF meshes of every link pair jwarp checks (its frame pairs with
    spheres, mapped to their links) must not intersect anywhere on the path (coal; counted
    as a collision; ``--no-verify-self`` skips it).
@@ -135,6 +139,10 @@ class Problem:
 
 #: URDF link pairs the verifier checks mesh against mesh (``self_link_pairs``; set in main)
 SELF_PAIRS: list[tuple[str, str]] = []
+#: what jwarp promises for the robot (set in main): "meshes" where it records its collision
+#: pieces (the mesh certificate proves what its spheres cannot: its spheres may touch an
+#: object where the meshes keep clear), else "spheres" (its spheres keep the margin)
+PROMISE = ["spheres"]
 
 
 def self_link_pairs(robot: Any, urdf: str) -> list[tuple[str, str]]:
@@ -211,15 +219,17 @@ def verify(v: Any, path: np.ndarray, margin: float, end_margin: float) -> dict:
     sph_min = min(sph, key=lambda h: h.distance) if sph else None
     out["mesh_min_m"] = None if mesh_min is None else mesh_min.distance
     out["sphere_min_m"] = None if sph_min is None else sph_min.distance
-    hits = [h for h in (mesh_min, sph_min) if h is not None]
+    meshes = PROMISE[0] == "meshes"
+    # the meshes always count; the spheres where they are the promise
+    hits = [h for h in ((mesh_min,) if meshes else (mesh_min, sph_min)) if h is not None]
     worst = min(hits, key=lambda h: h.distance) if hits else None
     out["collision"] = bool(worst is not None and worst.distance < 0) or out["self_collision"]
     out["closest"] = None if worst is None else str(worst)
-    # inner segments at the margin
+    # inner segments at the margin (the promised geometry: meshes or spheres)
     inner = verdicts[1][0] if len(verdicts) == 3 else verdicts[0][0]
     m_inner = verdicts[1][1] if len(verdicts) == 3 else em
-    out["sphere_margin_violation"] = bool(inner.sphere is not None
-                                          and inner.sphere.distance < m_inner)
+    kept = inner.mesh if meshes else inner.sphere
+    out["sphere_margin_violation"] = bool(kept is not None and kept.distance < m_inner)
     out["mesh_below_margin"] = bool(inner.mesh is not None and inner.mesh.distance < m_inner)
     out["first_violation"] = next((str(x.first_violation) for x, _ in verdicts
                                    if x.first_violation is not None), None)
@@ -556,6 +566,12 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit("--robot without example-robot-data: add --no-verify --no-ompl "
                          "(and verify elsewhere with --save-paths / --verify-saved)")
     spheres = robot_spheres(robot) if PathVerifier is not None else []
+    cp = getattr(robot, "collision_pieces", None)
+    PROMISE[0] = "meshes" if cp is not None and cp.extra_spheres(robot) is not None else "spheres"
+    print(f"promise: the {PROMISE[0]} keep the margin ('coll' counts URDF-mesh collisions"
+          + (", and sphere collisions" if PROMISE[0] == "spheres" else
+             "; the spheres may touch where the mesh certificate proves the meshes clear")
+          + "; 'm-viol' the promised geometry below the margin)")
     if PathVerifier is not None and urdf is not None and not args.no_verify_self:
         SELF_PAIRS[:] = self_link_pairs(robot, urdf)
     folder, index = load_problems(args)
