@@ -756,13 +756,43 @@ class MotionCheck:
             host.shape[:2]).all(axis=1)
         groups = sel // int(world_group) if world_group else None
         good = np.zeros(len(sel), bool)
-        if lim.any():
+        if lim.any() and (groups is not None or host.shape[1] == 2):
+            # a batch of worlds, or single segments: the certificate on the whole paths
             good[lim] = mc.paths_free(host[lim], margin, self_margin,
                                       endpoint_margin=endpoint_margin,
                                       groups=None if groups is None else groups[lim])
+        elif lim.any():
+            good[lim] = self._segments_recheck(mc, host[lim], margin, endpoint_margin,
+                                               self_margin)
         out = ok.copy()
         out[np.nonzero(try_)[0]] = good
         return out
+
+    def _segments_recheck(self, mc: Any, paths: np.ndarray, margin: float,
+                          endpoint_margin: float | None, self_margin: float) -> np.ndarray:
+        """(K,) bool: every segment of ``paths`` (K, W > 2, n_dof) proven by the spheres
+        (each segment checked alone) or, where they cannot, by the mesh certificate: the
+        certificate's work is only the segments the spheres leave (a grasp pose's
+        approach), not the whole path. First and last segments at ``endpoint_margin``."""
+        K, W, n = paths.shape
+        segs = np.stack([paths[:, :-1], paths[:, 1:]], axis=2).reshape(-1, 2, n)
+        end = np.zeros((K, W - 1), bool)
+        end[:, 0] = end[:, -1] = True
+        end = end.reshape(-1)
+        seg_ok = np.zeros(len(segs), bool)
+        for mask, em in ((end, endpoint_margin), (~end, None)):
+            if not mask.any():
+                continue
+            idx = np.nonzero(mask)[0]
+            seg_ok[idx] = self.check(segs[idx], margin=margin, endpoint_margin=em,
+                                     self_margin=self_margin, meshes=False).ok
+            bad = idx[~seg_ok[idx]]
+            # a path with a segment the certificate cannot prove fails: one per path is
+            # enough to know, but the segments of a path are few; check them all at once
+            if len(bad):
+                seg_ok[bad] = mc.paths_free(segs[bad], margin, self_margin,
+                                            endpoint_margin=em)
+        return seg_ok.reshape(K, W - 1).all(axis=1)
 
 
 #: numbers of waypoints whose output buffers a MotionCheck keeps (:meth:`MotionCheck._outputs`)
