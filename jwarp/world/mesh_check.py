@@ -42,7 +42,8 @@ from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.kernels import convex as ck
 from jwarp.model import RobotModel
 
-__all__ = ["MeshCheck", "MeshCheckStats", "mesh_check", "sphere_reach_past", "world_pieces"]
+__all__ = ["MeshCheck", "MeshCheckStats", "cached_mesh_check", "mesh_check", "sphere_reach_past",
+           "world_pieces"]
 
 #: sides of the circumscribed polygons of world cylinders and cones
 POLY_SIDES = 32
@@ -143,8 +144,6 @@ class MeshCheck:
     """
 
     def __init__(self, robot: RobotModel, world: Any, device: Any = None) -> None:
-        from jwarp.world.motion import point_reach
-
         init_warp()
         self.device = resolve_device(device)
         self.robot = robot
@@ -157,78 +156,17 @@ class MeshCheck:
         if extra is None:
             raise ValueError(f"robot: the spheres of '{robot.name}' were edited after its "
                              f"collision pieces were made; the pieces cannot stand for them")
-        frames = [int(p.frame) for p in cp.pieces]
-        verts = [np.asarray(p.vertices, np.float64).reshape(-1, 3) for p in cp.pieces]
-        rads = [float(p.radius) for p in cp.pieces]
-        self.sources = [p.source for p in cp.pieces]
-        for s in extra:  # spheres added after the fit (an attached object): as spheres
-            sph = robot.spheres[s]
-            frames.append(int(sph.frame))
-            verts.append(np.asarray(sph.position, np.float64).reshape(1, 3))
-            rads.append(float(sph.radius))
-            self.sources.append(f"sphere {s}")
-        self.n_pieces = K = len(frames)
-        self.frame = np.asarray(frames, np.int32)
-        vstart = np.concatenate([[0], np.cumsum([len(v) for v in verts])]).astype(np.int32)
-        V = np.concatenate(verts) if K else np.zeros((0, 3))
-        lo = np.array([v.min(0) for v in verts]).reshape(K, 3)
-        hi = np.array([v.max(0) for v in verts]).reshape(K, 3)
-        centre = (lo + hi) / 2
-        bound = np.array([np.linalg.norm(v - c, axis=1).max() + r
-                          for v, c, r in zip(verts, centre, rads)]).reshape(K)
-        dev = self.device
-        f64, v3 = wp.float64, wp.types.vector(3, wp.float64)
-        self._tab = (wp.array(self.frame, dtype=wp.int32, device=dev),
-                     wp.array(vstart, dtype=wp.int32, device=dev),
-                     wp.array(V.reshape(-1, 3), dtype=v3, device=dev),
-                     wp.array(np.asarray(rads, np.float64), dtype=f64, device=dev),
-                     wp.array(centre, dtype=v3, device=dev),
-                     wp.array(bound, dtype=f64, device=dev))
-        # travel: per piece and frame the reach of its enclosing sphere
-        self.reach = point_reach(robot, self.frame, centre, bound)   # (K, n_frames)
-        self._pairs(robot)
-        self._coupling = np.zeros((robot.n_frames, robot.n_dof))
-        for i, f in enumerate(robot.frames):
-            for j, c in f.coupling:
-                self._coupling[i, j] += c
+        rp = _robot_part(robot, extra, self.device)
+        self.sources, self.n_pieces, self.frame = rp.sources, rp.n_pieces, rp.frame
+        self._tab, self.reach, self._coupling = rp.tab, rp.reach, rp.coupling
+        self.pair_a, self.pair_b, self.pair_weight, self._ptab = (rp.pair_a, rp.pair_b,
+                                                                  rp.pair_weight, rp.ptab)
         self._world_key: Any = None
         self._wtab: tuple = ()
         self.stats = MeshCheckStats()
         self._lock = threading.Lock()
 
     # ------------------------------------------------------------------ tables
-    def _pairs(self, robot: RobotModel) -> None:
-        """Self pairs: pieces on two frames the robot checks against each other, and per
-        pair the travel weights of the frames between them and their common ancestor."""
-        allowed = np.asarray(robot.allowed_collision_pairs, bool)
-        f = self.frame
-        ia, ib = np.nonzero((f[:, None] != f[None, :]) & allowed[f[:, None], f[None, :]]
-                            & (np.arange(len(f))[:, None] < np.arange(len(f))[None, :]))
-        parents = robot.parents
-
-        def chain(x: int) -> list[int]:
-            out = []
-            while x >= 0:
-                out.append(x)
-                x = int(parents[x])
-            return out
-
-        W = np.zeros((len(ia), robot.n_frames))
-        for q, (a, b) in enumerate(zip(ia, ib)):
-            ca, cb = chain(int(f[a])), chain(int(f[b]))
-            common = set(ca) & set(cb)
-            for k, c in ((a, ca), (b, cb)):
-                for i in c:
-                    if i in common:
-                        break
-                    W[q, i] += self.reach[k, i]
-        self.pair_a = ia.astype(np.int32)
-        self.pair_b = ib.astype(np.int32)
-        self.pair_weight = W
-        dev = self.device
-        self._ptab = (wp.array(self.pair_a, dtype=wp.int32, device=dev),
-                      wp.array(self.pair_b, dtype=wp.int32, device=dev))
-
     def _world_tables(self) -> tuple:
         """The world's piece tables on the device (rebuilt when objects move or change)."""
         sh = None if self.world is None else self.world.shapes
@@ -410,6 +348,107 @@ def sphere_reach_past(robot: RobotModel) -> float:
 
 _CACHE: OrderedDict = OrderedDict()
 _CACHE_LOCK = threading.Lock()
+
+_ROBOT_PARTS: OrderedDict = OrderedDict()
+
+
+def _robot_part(robot: RobotModel, extra: list[int], device: Any) -> Any:
+    """The robot's side of a :class:`MeshCheck` on ``device`` (piece tables, travel
+    reaches, self pairs), made once per robot (and spheres appended after the fit) and
+    device: planners of one robot in many worlds share it."""
+    from types import SimpleNamespace
+
+    from jwarp.world.motion import point_reach
+
+    key = (id(robot), tuple(extra), str(device))
+    with _CACHE_LOCK:
+        hit = _ROBOT_PARTS.get(key)
+        if hit is not None and hit[0]() is robot:
+            return hit[1]
+    cp = robot.collision_pieces
+    frames = [int(p.frame) for p in cp.pieces]
+    verts = [np.asarray(p.vertices, np.float64).reshape(-1, 3) for p in cp.pieces]
+    rads = [float(p.radius) for p in cp.pieces]
+    sources = [p.source for p in cp.pieces]
+    for s in extra:  # spheres added after the fit (an attached object): as spheres
+        sph = robot.spheres[s]
+        frames.append(int(sph.frame))
+        verts.append(np.asarray(sph.position, np.float64).reshape(1, 3))
+        rads.append(float(sph.radius))
+        sources.append(f"sphere {s}")
+    K = len(frames)
+    frame = np.asarray(frames, np.int32)
+    vstart = np.concatenate([[0], np.cumsum([len(v) for v in verts])]).astype(np.int32)
+    V = np.concatenate(verts) if K else np.zeros((0, 3))
+    lo = np.array([v.min(0) for v in verts]).reshape(K, 3)
+    hi = np.array([v.max(0) for v in verts]).reshape(K, 3)
+    centre = (lo + hi) / 2
+    bound = np.array([np.linalg.norm(v - c, axis=1).max() + r
+                      for v, c, r in zip(verts, centre, rads)]).reshape(K)
+    f64, v3 = wp.float64, wp.types.vector(3, wp.float64)
+    tab = (wp.array(frame, dtype=wp.int32, device=device),
+           wp.array(vstart, dtype=wp.int32, device=device),
+           wp.array(V.reshape(-1, 3), dtype=v3, device=device),
+           wp.array(np.asarray(rads, np.float64), dtype=f64, device=device),
+           wp.array(centre, dtype=v3, device=device),
+           wp.array(bound, dtype=f64, device=device))
+    # travel: per piece and frame the reach of its enclosing sphere
+    reach = point_reach(robot, frame, centre, bound)   # (K, n_frames)
+    pair_a, pair_b, pair_weight = _pair_tables(robot, frame, reach)
+    coupling = np.zeros((robot.n_frames, robot.n_dof))
+    for i, f in enumerate(robot.frames):
+        for j, c in f.coupling:
+            coupling[i, j] += c
+    part = SimpleNamespace(sources=sources, n_pieces=K, frame=frame, tab=tab, reach=reach,
+                           coupling=coupling, pair_a=pair_a, pair_b=pair_b,
+                           pair_weight=pair_weight,
+                           ptab=(wp.array(pair_a, dtype=wp.int32, device=device),
+                                 wp.array(pair_b, dtype=wp.int32, device=device)))
+    with _CACHE_LOCK:
+        _ROBOT_PARTS[key] = (weakref.ref(robot), part)
+        while len(_ROBOT_PARTS) > 8:
+            _ROBOT_PARTS.popitem(last=False)
+    return part
+
+
+def _pair_tables(robot: RobotModel, f: np.ndarray, reach: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Self pairs: pieces on two frames the robot checks against each other (``f`` (K,)
+    each piece's frame), and per pair the travel weights (Q, n_frames) of the frames
+    between them and their common ancestor (``reach`` (K, n_frames))."""
+    allowed = np.asarray(robot.allowed_collision_pairs, bool)
+    ia, ib = np.nonzero((f[:, None] != f[None, :]) & allowed[f[:, None], f[None, :]]
+                        & (np.arange(len(f))[:, None] < np.arange(len(f))[None, :]))
+    parents = robot.parents
+
+    def chain(x: int) -> list[int]:
+        out = []
+        while x >= 0:
+            out.append(x)
+            x = int(parents[x])
+        return out
+
+    W = np.zeros((len(ia), robot.n_frames))
+    for q, (a, b) in enumerate(zip(ia, ib)):
+        ca, cb = chain(int(f[a])), chain(int(f[b]))
+        common = set(ca) & set(cb)
+        for k, c in ((a, ca), (b, cb)):
+            for i in c:
+                if i in common:
+                    break
+                W[q, i] += reach[k, i]
+    return ia.astype(np.int32), ib.astype(np.int32), W
+
+
+
+def cached_mesh_check(robot: Any, world: Any, device: Any = None) -> MeshCheck | None:
+    """The :class:`MeshCheck` :func:`mesh_check` has made for these, or None (makes none)."""
+    key = (id(robot), id(world), str(resolve_device(device)))
+    with _CACHE_LOCK:
+        hit = _CACHE.get(key)
+    if hit is not None and hit[0]() is robot and hit[1]() is world:
+        return hit[2]
+    return None
 
 
 def mesh_check(robot: Any, world: Any, device: Any = None, *, rho: Any = None

@@ -388,9 +388,9 @@ class Planner:
         without one): the share of a plan spent on mesh checks."""
         if getattr(self.robot, "collision_pieces", None) is None or self.options.kappa is not None:
             return 0.0
-        from jwarp.world.mesh_check import mesh_check
+        from jwarp.world.mesh_check import cached_mesh_check
 
-        mc = mesh_check(self.robot, self.world, self.device)
+        mc = cached_mesh_check(self.robot, self.world, self.device)
         return 0.0 if mc is None else mc.stats.seconds
 
     def _shorten(self, buf: _Buffers, res: PlanResult, deadline: float | None,
