@@ -12,7 +12,7 @@ bound is a separating-axis bound, so it is never above the true distance: what t
 certificate calls free is free for the URDF geometry.
 
 Continuous segments: a piece moves at most ``T_k = sum_i reach_k,i |dtheta_i|`` along a
-segment (``reach``: :func:`jwarp.world.motion.point_reach` of its enclosing sphere, the
+segment (``reach``: :func:`jwarp.world.reach.point_reach` of its enclosing sphere, the
 bound the sphere check uses), so a segment [a, b] whose bounds ``d_a``, ``d_b`` satisfy
 ``d_a + d_b - 2 margin > T_k`` for every piece (and the pair travel for every self pair)
 keeps the clearance all along; other segments are halved until they pass, a
@@ -93,7 +93,7 @@ def world_pieces(shapes: Any) -> list[tuple[int, np.ndarray, float, int]]:
             out.append((int(ck.HALFSPACE), np.array([n, [float(n @ t), 0.0, 0.0]]), 0.0,
                         int(groups[i])))
             continue
-        d = np.asarray(dims, np.float64).reshape(-1) if kind != "mesh" else None
+        d = np.asarray(dims if kind != "mesh" else [], np.float64).reshape(-1)
         if kind == "sphere":
             local, rad = np.zeros((1, 3)), float(d[0])
         elif kind == "box":
@@ -223,7 +223,7 @@ class MeshCheck:
         if N == 0 or K == 0:
             return wl, sl
         with self._lock:
-            X = wp.array(np.asarray(fk(self.robot, q, device=dev, dtype=np.float64)),
+            X: wp.array = wp.array(np.asarray(fk(self.robot, q, device=dev, dtype=np.float64)),
                          dtype=kern.mat44, device=dev)
             wt = self._world_tables()
             if self.n_objects:
@@ -252,7 +252,7 @@ class MeshCheck:
         """(N,) bool: the pieces at ``q`` (N, n_dof) keep more than ``margin`` [m] from
         the world and more than ``self_margin`` from each other (certified)."""
         wl, sl = self.lower_bounds(q, groups, cap=max(margin, self_margin) + 0.05)
-        return (wl > margin).all(axis=1) & (sl > self_margin).all(axis=1)
+        return np.asarray((wl > margin).all(axis=1) & (sl > self_margin).all(axis=1), bool)
 
     def paths_free(self, paths: Any, margin: float = 0.0, self_margin: float = 0.0, *,
                    endpoint_margin: float | None = None, groups: np.ndarray | None = None,
@@ -358,7 +358,7 @@ def _robot_part(robot: RobotModel, extra: list[int], device: Any) -> Any:
     device: planners of one robot in many worlds share it."""
     from types import SimpleNamespace
 
-    from jwarp.world.motion import point_reach
+    from jwarp.world.reach import point_reach
 
     key = (id(robot), tuple(extra), str(device))
     with _CACHE_LOCK:
@@ -366,6 +366,7 @@ def _robot_part(robot: RobotModel, extra: list[int], device: Any) -> Any:
         if hit is not None and hit[0]() is robot:
             return hit[1]
     cp = robot.collision_pieces
+    assert cp is not None  # mesh_check() makes none without pieces
     frames = [int(p.frame) for p in cp.pieces]
     verts = [np.asarray(p.vertices, np.float64).reshape(-1, 3) for p in cp.pieces]
     rads = [float(p.radius) for p in cp.pieces]
@@ -386,7 +387,7 @@ def _robot_part(robot: RobotModel, extra: list[int], device: Any) -> Any:
     bound = np.array([np.linalg.norm(v - c, axis=1).max() + r
                       for v, c, r in zip(verts, centre, rads)]).reshape(K)
     f64, v3 = wp.float64, wp.types.vector(3, wp.float64)
-    tab = (wp.array(frame, dtype=wp.int32, device=device),
+    tab: tuple = (wp.array(frame, dtype=wp.int32, device=device),
            wp.array(vstart, dtype=wp.int32, device=device),
            wp.array(V.reshape(-1, 3), dtype=v3, device=device),
            wp.array(np.asarray(rads, np.float64), dtype=f64, device=device),

@@ -42,6 +42,7 @@ from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.world.collision import check_world, mm_text
 from jwarp.world.device_world import DeviceWorld
+from jwarp.world.reach import point_reach
 from jwarp.world.sdf import World
 
 __all__ = ["MotionCheck", "MotionOptions", "PathCheck", "check_paths", "motion_check",
@@ -188,42 +189,6 @@ def sphere_reach(robot: Any) -> np.ndarray:
 def _sphere_reach(model: RobotModel) -> np.ndarray:
     sf, sp, _ = model.sphere_arrays()
     return point_reach(model, sf, sp)
-
-
-def point_reach(robot: Any, frames: Any, positions: Any, extent: Any = None) -> np.ndarray:
-    """(K, n_frames) float64: :func:`sphere_reach` of K points (``frames`` (K,) int,
-    ``positions`` (K, 3) [m] in their frames), each grown by ``extent`` (K,) [m] (None: 0):
-    a bound of the distance from frame i's joint axis of any point within ``extent`` of
-    point k (a convex piece inside its enclosing sphere: :mod:`jwarp.world.mesh_check`)."""
-    from jwarp.core.device import fixed_parts
-
-    model = get_robot(robot)
-    sf = np.asarray(frames, np.int64).reshape(-1)
-    sp = np.asarray(positions, np.float64).reshape(-1, 3)
-    ext = np.zeros(len(sf)) if extent is None else np.asarray(extent, np.float64).reshape(-1)
-    nf = model.n_frames
-    _, fixed_pos = fixed_parts(model)
-    dh = model.dh_table
-    prism = model.frame_is_prismatic
-    lim = np.asarray(model.joint_limits, np.float64).reshape(-1, 2)
-    step = np.zeros(nf)  # translation bound from the parent's origin to frame i's
-    for i, f in enumerate(model.frames):
-        if model.is_dh[i]:
-            step[i] = abs(dh[i, 0]) + abs(dh[i, 2])
-            if prism[i]:
-                step[i] += sum(abs(c) * np.abs(lim[j]).max() for j, c in f.coupling)
-        else:
-            step[i] = float(np.linalg.norm(fixed_pos[i]))
-    parents = model.parents
-    out = np.zeros((len(sf), nf))
-    for s, (f, p) in enumerate(zip(sf, sp)):
-        acc = float(np.linalg.norm(p)) + float(ext[s])
-        i = int(f)
-        while i >= 0:
-            out[s, i] = 1.0 if prism[i] else acc
-            acc += step[i]
-            i = int(parents[i])
-    return out * (1.0 + 1e-9) + 1e-12
 
 
 def pair_travel_tables(robot: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -792,7 +757,7 @@ class MotionCheck:
             if len(bad):
                 seg_ok[bad] = mc.paths_free(segs[bad], margin, self_margin,
                                             endpoint_margin=em)
-        return seg_ok.reshape(K, W - 1).all(axis=1)
+        return np.asarray(seg_ok.reshape(K, W - 1).all(axis=1), bool)
 
 
 #: numbers of waypoints whose output buffers a MotionCheck keeps (:meth:`MotionCheck._outputs`)
