@@ -164,3 +164,34 @@ def test_a_pose_millimetres_from_an_object_is_not_refused_and_plans(panda):
     v = _verifier(path, model, scene)
     verdict = v.check_path(res.path[0])
     assert verdict.ok, str(verdict)
+
+
+def test_ik_accepts_a_grasp_the_meshes_clear(panda):
+    """IK of the hand pose 3 mm from a box: the spheres touch the box at every solution,
+    the meshes do not; the solver's mesh rescue returns a feasible solution, verified by
+    coal (meshes free), and a robot without pieces finds none there."""
+    from jwarp.kinematics import fk
+    from jwarp.solvers.ik import IKOptions, IKSolver
+
+    path, model = panda
+    q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8, 0.035, 0.035])[:model.n_dof]
+    q0 = np.clip(q0, model.joint_limits[:, 0], model.joint_limits[:, 1])
+    scene = Scene(shapes=[_graze_box(model, q0, 0.003)], source="graze")
+    world = exact_world(scene)
+    hand = model.frame_index("panda_hand")
+    target = np.asarray(fk(model, q0[None], dtype=np.float64))[0, hand]
+    opts = IKOptions(n_starts=4, iterations=60)
+    seeds = np.stack([q0] * 4)
+    res = IKSolver(model, hand, 1, world=world, options=opts, device="cpu").solve(
+        target, seeds=seeds)
+    assert bool(np.asarray(res.feasible).reshape(-1)[0])
+    q = np.asarray(res.q).reshape(-1, model.n_dof)
+    assert not is_collision_free(model, q, world, meshes=False, device="cpu")[0]
+    v = _verifier(path, model, scene)
+    assert v.check_configurations(q)[0]
+    bare = model.copy(collision_pieces=None)
+    res0 = IKSolver(bare, hand, 1, world=world, options=opts, device="cpu").solve(
+        target, seeds=seeds)
+    q0b = np.asarray(res0.q).reshape(-1, model.n_dof)
+    assert not bool(np.asarray(res0.feasible).reshape(-1)[0]) or is_collision_free(
+        bare, q0b, world, device="cpu")[0]

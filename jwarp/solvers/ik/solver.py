@@ -12,7 +12,7 @@ import warp as wp
 
 from jwarp.core.arrays import finite_as, init_warp, real_array, resolve_device
 from jwarp.core.device import numpy_dtype, put_model, scalar_type
-from jwarp.core.limits import LIMIT_TOL, sample_within_limits
+from jwarp.core.limits import LIMIT_TOL, sample_within_limits, within_limits
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik_step as step_kernels
 from jwarp.kinematics.transmission import transmitted, untransmitted
@@ -317,6 +317,15 @@ class IKSolver:
             self.iterations, self.halt, self.restart])
 
     # ------------------------------------------------------------------ solve
+    def _mesh_rescue(self, out: np.ndarray, best: np.ndarray, P: int, S: int) -> None:
+        """The problems without a feasible seed: seeds on target whose spheres touch but
+        whose URDF geometry the mesh certificate proves free (``margin`` from the world and
+        between the pieces; :mod:`jwarp.world.mesh_check`) become feasible, and the choice
+        (``best`` (P, 2)) is made again; ``out`` (P S, n_dof + 5) updated in place. A grasp
+        pose whose fingers clear the object by millimetres is then a solution, as it is a
+        start or goal for the planner."""
+        _rescue_rows(self, out, best, P, S)
+
     def reseed(self, seed: int | None) -> None:
         """Restart the random seeds' generator from ``seed`` (an integer >= 0 or None)."""
         if seed is not None and (isinstance(seed, (bool, np.bool_))
@@ -463,6 +472,8 @@ class IKSolver:
             lo, hi = model.joint_limits[:, 0], model.joint_limits[:, 1]  # the float64 one
             np.clip(out[:, :model.n_dof], lo, hi, out=out[:, :model.n_dof])
         best = self.best.numpy().copy() if dev.is_cpu else self.best.numpy()
+        if rigid and (best[:, 1] == 0).any():
+            self._mesh_rescue(out, best, P, S)
         res = IKResult.from_rows(out, best, model.n_dof, P, S, time.perf_counter() - t0)
         if model.has_harmonic:  # back to the commanded joint values
             res = dataclasses.replace(res, q=untransmitted(model, res.q),
@@ -642,6 +653,49 @@ def warm_start_seeds(model: RobotModel, warm_start: Any, targets: np.ndarray, wo
         extra = sample_within_limits(model, P * int(n_random), rng).reshape(P, int(n_random), n)
         a = np.concatenate([a, extra], axis=1)
     return np.ascontiguousarray(a)
+
+
+def _rescue_rows(solver: Any, out: np.ndarray, best: np.ndarray, P: int, S: int) -> None:
+    """:meth:`IKSolver._mesh_rescue` (module function: the solver's host side)."""
+    model, o = solver.robot, solver.options
+    obj = solver.objective
+    if getattr(model, "collision_pieces", None) is None or obj is None or not obj.collides \
+            or obj.compensation is not None:
+        return
+    from jwarp.kernels import ik_step as E
+    from jwarp.world.mesh_check import mesh_check, sphere_reach_past
+
+    n = model.n_dof
+    rows = out.reshape(P, S, -1)
+    on = ((rows[..., n + E.COL_POS] <= o.tol_pos) & (rows[..., n + E.COL_ROT] <= o.tol_rot)
+          & (rows[..., n + E.COL_FEASIBLE] == 0) & (best[:, 1] == 0)[:, None])
+    cand = np.nonzero(on.reshape(-1))[0]
+    if not len(cand):
+        return
+    mc = mesh_check(model, solver.world, solver.device)
+    if mc is None:
+        return
+    q = np.asarray(out[cand, :n], np.float64)
+    ok = within_limits(model, q)
+    if ok.any():
+        from jwarp.world.collision import min_distances
+
+        # a sphere collision deeper than the spheres reach past the meshes is not tried
+        md = np.asarray(min_distances(model, q[ok], solver.world, device=solver.device,
+                                      dtype=np.float64))
+        deep = sphere_reach_past(model)
+        try_ = (md[:, 0] > -deep) & (md[:, 1] > -deep)
+        idx = np.nonzero(ok)[0]
+        ok[idx[~try_]] = False
+        if try_.any():
+            ok[idx[try_]] = mc.free(q[idx[try_]], o.margin, o.margin)
+    if not ok.any():
+        return
+    out[cand[ok], n + E.COL_FEASIBLE] = 1
+    fz = (rows[..., n + E.COL_FEASIBLE] != 0)
+    errs = rows[..., n + E.COL_POS:n + E.COL_AUX + 1]
+    best[:, 0] = select_best(fz, errs)
+    best[:, 1] = fz.sum(1)
 
 
 def select_best(feasible: np.ndarray, errs: np.ndarray) -> np.ndarray:
