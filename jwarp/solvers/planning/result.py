@@ -38,7 +38,8 @@ class PlanResult:
     optimisation (0: the RRT path itself, certified as it is); ``n_feasible``, ``all_*``
     stay the multi-starts'. ``fallback_notes``: what the fallback did. ``timings`` [s]:
     "optimizer" (the multi-starts) and, where it ran, "rrt", "fallback_optimizer" and
-    "shorten". ``length_before``: the length cost before the shortening
+    "shorten"; for a robot with collision pieces "mesh_check" (the mesh certificate's
+    share, :mod:`jwarp.world.mesh_check`). ``length_before``: the length cost before the shortening
     (:attr:`PlanOptions.shorten`).
     """
 
