@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import init_warp, resolve_device
+from jwarp.core.arrays import init_warp, real_array, resolve_device
 from jwarp.kernels import convex as ck
 from jwarp.model import RobotModel
 
@@ -215,7 +215,11 @@ class MeshCheck:
 
         t0 = time.perf_counter()
         kern = ck.kernels(wp.float64)
-        q = np.ascontiguousarray(np.asarray(q, np.float64).reshape(-1, self.robot.n_dof))
+        q = real_array(q, "q")
+        if q.ndim not in (1, 2) or q.shape[-1] != self.robot.n_dof or not np.isfinite(q).all():
+            raise ValueError(f"q: expected finite configurations (N, {self.robot.n_dof}) of "
+                             f"'{self.robot.name}', got shape {q.shape}")
+        q = np.ascontiguousarray(q.reshape(-1, self.robot.n_dof))
         N, K, Q = len(q), self.n_pieces, len(self.pair_a)
         dev = self.device
         wl = np.full((N, K), np.inf)

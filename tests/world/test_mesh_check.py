@@ -195,3 +195,20 @@ def test_ik_accepts_a_grasp_the_meshes_clear(panda):
     q0b = np.asarray(res0.q).reshape(-1, model.n_dof)
     assert not bool(np.asarray(res0.feasible).reshape(-1)[0]) or is_collision_free(
         bare, q0b, world, device="cpu")[0]
+
+
+def test_bad_input_names_the_argument(panda):
+    path, model = panda
+    world = exact_world(_scene(np.random.default_rng(0)))
+    mc = MeshCheck(model, world, "cpu")
+    with pytest.raises(ValueError, match="q:"):
+        mc.free(np.zeros((2, model.n_dof + 1)))
+    with pytest.raises(ValueError, match="q:"):
+        mc.free(np.full((1, model.n_dof), np.nan))
+    with pytest.raises(TypeError, match="q"):
+        mc.free("home")
+    with pytest.raises(ValueError, match="paths:"):
+        mc.paths_free(np.zeros((3, model.n_dof)))
+    with pytest.raises(ValueError, match="collision_pieces"):
+        MeshCheck(model.copy(collision_pieces=None), world, "cpu")
+    assert mesh_check(model.copy(collision_pieces=None), world, "cpu") is None
