@@ -171,13 +171,19 @@ def plan_one(robot: Any, prob: Problem, margin: float, args: argparse.Namespace,
 
 def warm_check(robot: Any, prob: Problem, device: str) -> None:
     """The rest of the warm-up: the float64 continuous check of 2-waypoint paths (the
-    shortcuts of ``PlanOptions.shorten`` and the RRT fallback's edges), which the first
-    problem's plan may not have loaded (its path needs no shortcut), so that no timed
-    problem pays for loading it."""
+    shortcuts of ``PlanOptions.shorten`` and the RRT fallback's edges) and, for a robot
+    with collision pieces, the mesh certificate's kernels, which the first problem's plan
+    may not have loaded (its path needs no shortcut, its endpoints no meshes), so that no
+    timed problem pays for loading them."""
     from jwarp.solvers.planning import Planner
+
+    from jwarp.world.mesh_check import mesh_check
 
     pl = Planner(robot, prob.world, 1, device=device)
     pl.motion_check().check(np.stack([prob.start, prob.start])[None], group=1)
+    mc = mesh_check(robot, prob.world, device)  # the certificate's kernels too
+    if mc is not None:
+        mc.paths_free(np.stack([prob.start, prob.goal])[None])
     wp.synchronize_device(device)
 
 

@@ -21,16 +21,20 @@ Tables (the *Model*; ``vstart`` is CSR into ``verts``):
   enclosing the piece with its radius (the broad phase);
 * world objects: the same in world coordinates (``frame`` unused), ``kind`` (O,) int32
   (:data:`HULL`, :data:`HALFSPACE`: normal in ``centre``, offset in ``bound``), ``group``
-  (O,) int32: the world of a batch it belongs to;
+  (O,) int32: the world of a batch it belongs to, and a box holding the vertices (the
+  broad phase): ``rot`` (O,) mat33 its axes (columns), ``half`` (O,) vec3 its half
+  extents about ``centre``;
 * self pairs: ``pair_a``, ``pair_b`` (Q,) int32 robot piece indices.
 
 Kernels (one thread per (configuration, piece, object) or (configuration, pair); the
 frames ``X`` (N, n_frames) mat44 come from :func:`jwarp.kinematics.fk`):
 
 * ``world_lower``: ``out[c, k] = min_o`` bound of piece ``k`` to object ``o`` (atomic min:
-  the host fills ``out`` with ``cap`` first); a pair whose bounding spheres keep ``cap``
-  apart is not refined (their sphere distance is its bound).
-* ``self_lower``: ``out[c, q]`` the bound of pair ``q``.
+  the host fills ``out`` with ``cap`` first); a pair whose piece's enclosing sphere keeps
+  ``cap`` from the object's box is not refined (that distance is its bound), and GJK
+  stops once its bound reaches ``cap`` (a bound >= ``cap`` says only that: enough).
+* ``self_lower``: ``out[c, q]`` the bound of pair ``q`` (likewise with the two pieces'
+  enclosing spheres).
 """
 
 import functools
@@ -210,10 +214,11 @@ def kernels(scalar: type) -> SimpleNamespace:
     @wp.func
     def gjk_lower(va: wp.array(dtype=vec3), sa: int, ea: int, Ra: mat33, ta: vec3,
                   vb: wp.array(dtype=vec3), sb: int, eb: int, Rb: mat33, tb: vec3,
-                  tol: scalar) -> scalar:
+                  tol: scalar, enough: scalar) -> scalar:
         """A lower bound [m] of the distance between the hulls ``Ra va[sa:ea] + ta`` and
         ``Rb vb[sb:eb] + tb`` (module docstring; <= 0: maybe overlapping). Stops when the
-        bound is within ``tol`` of the current distance estimate."""
+        bound is within ``tol`` of the current distance estimate, or once it reaches
+        ``enough`` (the caller needs no more)."""
         u0 = vec3(one, zero, zero)
         v = support(va, sa, ea, Ra, ta, u0) - support(vb, sb, eb, Rb, tb, -u0)
         p0 = v
@@ -229,7 +234,7 @@ def kernels(scalar: type) -> SimpleNamespace:
             nv = wp.sqrt(vv)
             w = support(va, sa, ea, Ra, ta, -v) - support(vb, sb, eb, Rb, tb, v)
             lb = wp.max(lb, wp.dot(v, w) / nv)
-            if nv - lb <= tol:
+            if nv - lb <= tol or lb >= enough:
                 break
             # the simplex with w, its closest point to the origin, the vertices kept
             if n == 1:
@@ -322,6 +327,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         o_centre: wp.array(dtype=vec3),
         o_bound: wp.array(dtype=scalar),
         o_group: wp.array(dtype=wp.int32),
+        o_rot: wp.array(dtype=mat33),
+        o_half: wp.array(dtype=vec3),
         # Data in:
         X: wp.array2d(dtype=mat44),
         cfg_group: wp.array(dtype=wp.int32),
@@ -347,10 +354,18 @@ def kernels(scalar: type) -> SimpleNamespace:
                                  o_bound[o]) - rad[k] - slack
         else:
             cw = R * centre[k] + t
-            lb = wp.length(cw - o_centre[o]) - bound[k] - o_bound[o]
+            # broad phase: the piece's enclosing sphere against the object's box (o_rot,
+            # o_half about o_centre: it holds the object's vertices; a thin shelf is far
+            # from most pieces by its box, not by its enclosing sphere)
+            lc = wp.transpose(o_rot[o]) * (cw - o_centre[o])
+            h = o_half[o]
+            ex = vec3(wp.max(wp.abs(lc[0]) - h[0], zero), wp.max(wp.abs(lc[1]) - h[1], zero),
+                      wp.max(wp.abs(lc[2]) - h[2], zero))
+            lb = wp.length(ex) - bound[k] - o_rad[o] - slack
             if lb < cap:
                 g = gjk_lower(verts, vstart[k], vstart[k + 1], R, t,
-                              o_verts, o_vstart[o], o_vstart[o + 1], eye, origin, tol)
+                              o_verts, o_vstart[o], o_vstart[o + 1], eye, origin, tol,
+                              cap + rad[k] + o_rad[o] + slack)
                 lb = wp.max(lb, g - rad[k] - o_rad[o] - slack)
         wp.atomic_min(out, c, k, lb)
 
@@ -385,7 +400,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         lb = wp.length((Ra * centre[a] + ta) - (Rb * centre[b] + tb)) - bound[a] - bound[b]
         if lb < cap:
             g = gjk_lower(verts, vstart[a], vstart[a + 1], Ra, ta,
-                          verts, vstart[b], vstart[b + 1], Rb, tb, tol)
+                          verts, vstart[b], vstart[b + 1], Rb, tb, tol,
+                          cap + rad[a] + rad[b] + slack)
             lb = wp.max(lb, g - rad[a] - rad[b] - slack)
         out[c, q] = lb
 

@@ -90,6 +90,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         world: ck.WorldModel
         use_world: int
         use_self: int
+        bound_skip: int
         reach: wp.array2d(dtype=f64)
         fp_start: wp.array(dtype=wp.int32)
         fp_frame: wp.array(dtype=wp.int32)
@@ -170,14 +171,36 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         lb = int(-1)
         ld = f64(1e30)
         lself = int(0)
-        for s in range(spheres.sph_frame.shape[0]):
-            x = ck.sphere_centre(sc.frames, r, spheres.sph_frame[s], spheres.sph_pos[s])
+        S = spheres.sph_frame.shape[0]
+        cur = int(-1)  # the frame of the run of spheres whose bound was tested last
+        far = int(0)
+        for s in range(S):
+            fr = spheres.sph_frame[s]
+            x = ck.sphere_centre(sc.frames, r, fr, spheres.sph_pos[s])
             sc.xs[r, s] = x
             L = sc.travel[rt, s]
             if cm.use_world != 0:
+                if cm.bound_skip != 0 and fr != cur:
+                    # the frame's bounding sphere keeps every object beyond the largest
+                    # cutoff of this run of its spheres: none of them finds an object
+                    # (the same result without the queries; exact objects, no meshes)
+                    cur = fr
+                    far = 0
+                    if spheres.bound_rad[fr] >= zero:
+                        lf = zero
+                        s2 = s
+                        while s2 < S:
+                            if spheres.sph_frame[s2] != fr:
+                                break
+                            lf = wp.max(lf, sc.travel[rt, s2])
+                            s2 += 1
+                        far = ck.objects_far(cm.world, ck.sphere_centre(sc.frames, r, fr,
+                                                                        spheres.bound_pos[fr]),
+                                             spheres.bound_rad[fr],
+                                             m_req + lf * reach + f64(1e-9), grp)
                 rs = spheres.sph_rad[s]
-                d, g, obj = ck.world_distance(cm.world, x, rs + m_req + L * reach + f64(1e-9),
-                                              grp)
+                d, g, obj = ck.world_distance_skip(cm.world, x,
+                                                   rs + m_req + L * reach + f64(1e-9), grp, far)
                 if obj != -1:
                     dd = d - rs
                     if dd < m_req:
@@ -196,12 +219,18 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 ca = ck.sphere_centre(sc.frames, r, fa, spheres.bound_pos[fa])
                 cb = ck.sphere_centre(sc.frames, r, fb, spheres.bound_pos[fb])
                 Lab = sc.fptravel[rt, fp]  # the pair's relative travel (module docstring)
-                if wp.length(ca - cb) - spheres.bound_rad[fa] - spheres.bound_rad[fb] \
+                rfb = spheres.bound_rad[fb]
+                if wp.length(ca - cb) - spheres.bound_rad[fa] - rfb \
                         < m_self + Lab * step + f64(1e-9):
                     for e in range(spheres.fpair_start[fp], spheres.fpair_start[fp + 1]):
                         sa = spheres.ent_sphere[e]
                         xa = sc.xs[r, sa]
                         ra = spheres.sph_rad[sa]
+                        # frame b's bounding sphere encloses its spheres: a sphere of frame a
+                        # that keeps the bound from it keeps it from each of them (the same
+                        # code and step: no pair skipped here could lower the step)
+                        if wp.length(xa - cb) - ra - rfb >= m_self + Lab * step + f64(1e-9):
+                            continue
                         for p in range(spheres.ent_start[e], spheres.ent_start[e + 1]):
                             sb = spheres.pair_b[p]
                             dd = wp.length(xa - sc.xs[r, sb]) - ra - spheres.sph_rad[sb]

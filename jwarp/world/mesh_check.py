@@ -181,12 +181,19 @@ class MeshCheck:
         V = np.concatenate(verts) if O else np.zeros((1, 3))
         centre = np.zeros((O, 3))
         bound = np.zeros(O)
+        rot = np.tile(np.eye(3), (O, 1, 1))
+        half = np.zeros((O, 3))
+        ids = sh.ids if O else []
         for i, (k, v, r, _) in enumerate(pieces):
             if k == int(ck.HALFSPACE):
                 centre[i], bound[i] = v[0], v[1, 0]
-            else:
-                c = (v.min(0) + v.max(0)) / 2
-                centre[i], bound[i] = c, np.linalg.norm(v - c, axis=1).max() + r
+            else:  # the broad phase's box: the vertices' extent along the object's axes
+                R = np.asarray(sh.pose(ids[i]), np.float64)[:3, :3]
+                lv = v @ R
+                lo, hi = lv.min(0), lv.max(0)
+                rot[i], half[i] = R, (hi - lo) / 2
+                centre[i] = R @ ((lo + hi) / 2)
+                bound[i] = np.linalg.norm(v - centre[i], axis=1).max() + r
         dev = self.device
         f64, v3 = wp.float64, wp.types.vector(3, wp.float64)
         self._wtab = (wp.array(kind, dtype=wp.int32, device=dev),
@@ -196,7 +203,9 @@ class MeshCheck:
                       wp.array(centre, dtype=v3, device=dev),
                       wp.array(bound, dtype=f64, device=dev),
                       wp.array(np.array([p[3] for p in pieces], np.int32), dtype=wp.int32,
-                               device=dev))
+                               device=dev),
+                      wp.array(rot, dtype=wp.types.matrix((3, 3), f64), device=dev),
+                      wp.array(half, dtype=v3, device=dev))
         self.n_objects = O
         self._world_key = key
         return self._wtab

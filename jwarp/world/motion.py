@@ -370,6 +370,7 @@ class MotionCheck:
         cm.spheres = sp.struct
         cm.use_world = int(world is not None and sp.n_spheres > 0)
         cm.use_self = int(sp.n_pairs > 0)
+        cm.bound_skip = 0  # set per check (the world's objects may change)
         reach = sphere_reach(self.robot) if sp.n_spheres else np.zeros((0, self.robot.n_frames))
         self._reach: wp.array = wp.array(reach, dtype=wp.float64, device=dev)
         cm.reach = self._reach
@@ -493,6 +494,7 @@ class MotionCheck:
         W = paths.shape[1]
         self.device_world.sync()  # moved / added objects
         self._cm.world = self.device_world.struct
+        self._cm.bound_skip = int(self.device_world.bound_skip)
         out = self._outputs(K, W)
         o = self.options
         levels = o.resolved_method(self.device) == "levels"

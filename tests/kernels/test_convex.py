@@ -28,6 +28,13 @@ def _tables(pieces, rads):
     return verts, start, centre, bound
 
 
+def _boxes(pieces, scalar=wp.float64):
+    """The broad phase's object boxes of world_lower: axis-aligned about the centre of
+    :func:`_tables` (rot (O, 3, 3) identities, half extents (O, 3))."""
+    half = np.array([(p.max(0) - p.min(0)) / 2 for p in pieces])
+    return np.tile(np.eye(3), (len(pieces), 1, 1)), half
+
+
 def _coal_convex(points):
     v = coal.StdVec_Vec3s()
     for p in points:
@@ -80,7 +87,9 @@ def test_world_and_self_bounds_match_coal(device, scalar):
               inputs=[*tab, arr(np.zeros(O_, np.int32), wp.int32), arr(os_, wp.int32),
                       arr(ov.astype(npdt), K.vec3), arr(orads.astype(npdt), scalar),
                       arr(oc.astype(npdt), K.vec3), arr(ob.astype(npdt), scalar),
-                      arr(np.zeros(O_, np.int32), wp.int32), Xw,
+                      arr(np.zeros(O_, np.int32), wp.int32),
+                      arr(_boxes(objs)[0].astype(npdt), wp.types.matrix((3, 3), scalar)),
+                      arr(_boxes(objs)[1].astype(npdt), K.vec3), Xw,
                       arr(np.zeros(N, np.int32), wp.int32), 0, scalar(1e9), scalar(1e-7),
                       scalar(slack)], outputs=[out], device=device)
     got = out.numpy().astype(np.float64)
@@ -133,17 +142,21 @@ def test_halfspace_is_exact(device):
                       arr([np.linalg.norm(h)], wp.float64), arr([int(ck.HALFSPACE)], wp.int32),
                       arr([0, 1], wp.int32), arr(np.zeros((1, 3)), K.vec3), arr([0.0], wp.float64),
                       arr([[0.0, 0.0, 1.0]], K.vec3), arr([0.1], wp.float64),
-                      arr([0], wp.int32), wp.array(X, dtype=K.mat44, device=device),
+                      arr([0], wp.int32), arr(np.eye(3)[None], wp.types.matrix((3, 3), wp.float64)),
+                      arr(np.zeros((1, 3)), K.vec3), wp.array(X, dtype=K.mat44, device=device),
                       arr([0], wp.int32), 0, wp.float64(1.0), wp.float64(1e-9),
                       wp.float64(0.0)], outputs=[out], device=device)
     want = (corners @ R.T)[:, 2].min() + 0.8 - 0.1
     assert abs(out.numpy()[0, 0] - want) < 1e-12
 
 
-def _launch_world(device, pieces, rads, objs, orads, X, frame, cap=1e9):
+def _launch_world(device, pieces, rads, objs, orads, X, frame, cap=1e9, boxes=None):
     K = ck.kernels(wp.float64)
     v, s, c, b = _tables(pieces, rads)
     ov, os_, oc, ob = _tables(objs, orads)
+    rot, half = _boxes(objs) if boxes is None else boxes[1:]
+    if boxes is not None:
+        oc = boxes[0]
 
     def arr(x, dt):
         return wp.array(np.ascontiguousarray(x), dtype=dt, device=device)
@@ -157,7 +170,8 @@ def _launch_world(device, pieces, rads, objs, orads, X, frame, cap=1e9):
                       arr(os_, wp.int32), arr(ov, K.vec3),
                       arr(np.asarray(orads, np.float64), wp.float64), arr(oc, K.vec3),
                       arr(ob, wp.float64), arr(np.zeros(O_, np.int32), wp.int32),
-                      wp.array(X, dtype=K.mat44, device=device),
+                      arr(rot, wp.types.matrix((3, 3), wp.float64)),
+                      arr(half, K.vec3), wp.array(X, dtype=K.mat44, device=device),
                       arr(np.zeros(N, np.int32), wp.int32), 0, wp.float64(cap),
                       wp.float64(1e-9), wp.float64(0.0)], outputs=[out], device=device)
     return out.numpy()
@@ -191,3 +205,35 @@ def test_closed_forms_spheres_and_boxes(device):
     # overlapping cubes: a bound <= 0
     got = _launch_world(device, [cube], [0.0], [cube + 0.3], [0.0], Xi, np.zeros(1, np.int32))
     assert got[0, 0] <= 0.0
+
+
+def test_box_broad_phase_and_cap(device):
+    """A thin rotated plank (1 m x 0.3 m x 2 cm) against spheres around it, with a cap of
+    5 cm: every bound is at most the exact sphere-to-box distance, and at least the
+    distance or the cap, whichever is less (a piece the object's box keeps beyond the cap
+    is not refined; GJK stops at the cap). Closed form: the point-box distance in the
+    plank's frame."""
+    rng = np.random.default_rng(11)
+    h = np.array([0.5, 0.15, 0.01])
+    R = Rotation.from_rotvec([0.3, -0.5, 0.9]).as_matrix()
+    c0 = np.array([0.1, -0.2, 0.4])
+    corners = np.array([[x, y, z] for x in (-h[0], h[0]) for y in (-h[1], h[1])
+                        for z in (-h[2], h[2])]) @ R.T + c0
+    n = 200
+    local = rng.uniform(-1, 1, (n, 3)) * (h + 0.12)
+    centres = local @ R.T + c0
+    radii = rng.uniform(0.005, 0.05, n)
+    frame = np.zeros(n, np.int32)
+    X = np.eye(4)[None, None].copy()
+    cap = 0.05
+    got = _launch_world(device, [p[None] for p in centres], radii, [corners], [0.0], X,
+                        frame, cap=cap, boxes=(c0[None], R[None], h[None]))[0]
+    box_d = np.linalg.norm(np.maximum(np.abs(local) - h, 0.0), axis=1)
+    inside = (np.abs(local) <= h).all(axis=1)
+    true = np.where(inside, 0.0, box_d) - radii
+    assert (got <= np.maximum(true, 0.0) + 1e-9).all()
+    assert (got >= np.minimum(true, cap) - 1e-7).all()
+    far, near = true > cap + 1e-3, (true > 0) & (true < cap - 1e-3)
+    assert far.sum() > 20 and near.sum() > 10
+    # the enclosing spheres alone would not cull: the plank's sphere holds every piece
+    assert (np.linalg.norm(centres - c0, axis=1) - radii < np.linalg.norm(h)).sum() > 0.5 * n
