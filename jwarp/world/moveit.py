@@ -427,7 +427,7 @@ def _first_word(name: str) -> str:
     return str(name).lower().split("_", 1)[0]
 
 
-def joint_vector(model: Any, values: dict[str, float], what: str,
+def joint_vector(model: Any, values: dict[str, float], what: str = "joint values",
                  fallback: np.ndarray | None = None) -> np.ndarray:
     """(n_dof,) joint values of ``model`` from ``{name: value}`` (a MoveIt state or goal).
 
@@ -440,7 +440,11 @@ def joint_vector(model: Any, values: dict[str, float], what: str,
     * every movable joint of the model needs a finite value unless ``fallback`` (n_dof,)
       supplies it (ValueError naming the missing or non-finite ones).
 
-    ``what`` names the source in errors (e.g. ``"start"``)."""
+    ``what`` names the source in errors (e.g. ``"start"``; default ``"joint values"``);
+    not a string: TypeError naming it."""
+    if not isinstance(what, str):
+        raise TypeError(f"what: expected the name of the values (a string) for errors, got "
+                        f"{type(what).__name__}")
     names = model.joint_names
     frames = model.frames
     mimic = {f.name for f in frames if f.coupling and f.name not in names}

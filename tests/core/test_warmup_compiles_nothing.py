@@ -6,14 +6,16 @@ A fresh process runs ``jwarp warmup --device cpu --robots planar4,arm7`` on the 
 kernel cache and lists the cache folders of the jwarp modules it loaded
 (:func:`jwarp.core.kernel_cache.loaded_modules`). A new kernel cache then holds exactly
 those folders (links) and Warp's own modules, nothing else of jwarp: what warmup would
-have left in an empty cache. A second fresh process with that cache runs a representative
-set of the documented commands, as the docs write them: ``jwarp fk`` (README), ``jwarp
-ik`` on arm7 (docs/ik.md, the first example) and ``jwarp plan`` on planar4 (README and
+have left in an empty cache. A second fresh process with that cache runs, as the docs
+write them, every documented command on planar4 and arm7 that needs no file of its own:
+``jwarp fk`` (README), the ``jwarp ik`` examples of docs/ik.md and README on arm7 (the
+pose forms, --position-only, --free-axis, --initial, tolerances, the table_shelf scene,
+with and without --voxel), ``jwarp free-config`` and ``jwarp plan`` on planar4 (README and
 docs/scenes.md, the shortening's float64 checks and the RRT fallback included). Any jwarp
 module warmup did not build would compile there: its notice line (which module, why) fails
-the test. Every command of the docs would take minutes on 2 cores; these cover the FK,
-IK, collision, path and motion families on a small robot (tests/test_docs_commands.py runs
-the others, without this count)."""
+the test. Left out: the commands on justin19 and imported robots (their warmup and fits
+take minutes on 2 cores), and those reading a file the docs make first (targets.csv,
+pose.txt; tests/test_docs_commands.py runs all of them, without this count)."""
 
 from __future__ import annotations
 
@@ -37,6 +39,32 @@ KEYS = (
     "--goal=-1.2,0,0,0",
     "docs/scenes.md: jwarp plan --robot planar4 --world block.npz --start 1.2,0,0,0 "
     "--goal -1.2,0,0,0",
+    # every other documented command on these two robots that needs no file of its own
+    "docs/ik.md: jwarp ik --robot arm7 --frame right_tcp --target -0.7296,0.1664,0.8123 "
+    "--quat -0.0825,-0.5792,-0.0409,0.8099",
+    "docs/ik.md: jwarp ik --robot arm7 --frame right_tcp --target -0.7296,0.1664,0.8123 "
+    "--rpy -0.2667,-1.2378,0.0895",
+    "docs/ik.md: jwarp ik --robot arm7 --frame right_tcp --target-matrix \"0 0 -1 -0.73 0 1 0 "
+    "0.17 1 0 0 0.81 0 0 0 1\"",
+    "docs/ik.md: jwarp ik --robot arm7 --frame right_tcp --target -0.7296,0.1664,0.8123 "
+    "--position-only",
+    "docs/ik.md: jwarp ik --robot arm7 --frame right_tcp --target -0.7296,0.1664,0.8123,"
+    "-0.1763,-1.238,-0.0875 --free-axis 0,0,1",
+    "docs/ik.md: jwarp ik --robot arm7 --frame right_tcp --target -0.7296,0.1664,0.8123,"
+    "-0.1763,-1.238,-0.0875 --initial 17,57,11,57,-23,29,6 --deg --starts 1",
+    "docs/ik.md: jwarp ik --robot arm7 --frame right_tcp --target -0.7296,0.1664,0.8123,"
+    "-0.1763,-1.238,-0.0875 --tol-pos 0.001 --tol-rot 0.01",
+    "docs/ik.md: jwarp ik --robot arm7 --frame right_tcp --target -0.7296,0.1664,0.8123,"
+    "-0.1763,-1.238,-0.0875 --scene examples/scenes/table_shelf.yaml",
+    "docs/ik.md: jwarp ik --robot arm7 --frame right_tcp --target -0.7296,0.1664,0.8123,"
+    "-0.1763,-1.238,-0.0875 --scene examples/scenes/table_shelf.yaml --voxel 0.02",
+    "docs/ik.md: jwarp ik --robot arm7 --frame right_tcp --target 0.55,0.4,0.4 "
+    "--position-only --scene examples/scenes/table_shelf.yaml",
+    "README.md: jwarp ik --robot arm7 --frame right_tcp --target -0.7296,0.1664,0.8123 "
+    "--quat -0.0825,-0.5792,-0.0409,0.8099 --scene examples/scenes/table_shelf.yaml",
+    "README.md: jwarp free-config --robot planar4 --world simplex:seed=3 --n 2",
+    "docs/scenes.md: jwarp plan --robot planar4 --world block.npz --start 1.2,0,0,0 "
+    "--goal -1.2,0,0,0 --starts 2 --iterations 3",
 )
 
 WARMUP = f"""
@@ -110,6 +138,7 @@ def test_documented_commands_compile_nothing_after_warmup(tmp_path):
             (cache / d.name).symlink_to(d, target_is_directory=True)
     # 3. the documented commands in a fresh process with that cache
     save_world(block_world_2d(), str(tmp_path / "block.npz"))
+    (tmp_path / "examples").symlink_to(dc.ROOT / "examples", target_is_directory=True)
     argvs = [_argv(k) for k in KEYS]
     env["WARP_CACHE_PATH"] = str(cache.parent)
     r = _run(COMMANDS, [json.dumps(argvs)], env, tmp_path)

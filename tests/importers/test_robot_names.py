@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import sys
 from importlib import metadata
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -115,3 +116,21 @@ def test_cli_takes_the_names(capsys, tmp_path):
     line = one_line_error(capsys, ["ik", "--robot", "example-robot-data:nope", "--frame",
                                    "tool0", "--target", "0.3,0,0.3"], "--robot")
     assert "example-robot-data: no robot 'nope'" in line
+
+
+def test_docs_say_where_the_urdfs_lie():
+    """docs/urdf.md names the folder example-robot-data's URDFs are installed in (its wheel
+    has no Python module to ask): the folder example_robot_urdf reads, under the
+    installation's site-packages."""
+    import site
+    import sysconfig
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "urdf.md").read_text()
+    stated = "<site-packages>/cmeel.prefix/share/example-robot-data/robots"
+    assert stated in text and "`import\n  example_robot_data` fails" in text
+    panda = Path(example_robot_urdf("panda"))
+    roots = {Path(p).resolve() for p in (sysconfig.get_paths()["purelib"],
+                                         *site.getsitepackages())}
+    folder = next(r for r in roots if r in panda.resolve().parents)
+    assert panda.resolve() == (folder / stated.split("/", 1)[1]
+                               / "panda_description/urdf/panda.urdf").resolve()

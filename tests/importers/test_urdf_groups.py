@@ -259,6 +259,26 @@ def test_moveit_states_may_name_frozen_joints(tmp_path):
     assert len(w) == 1 and "'elbow' = 0.2" in str(w[0].message)
 
 
+
+def test_joint_vector_needs_no_name_for_errors(tmp_path):
+    """Issue 39 (the first hour): ``joint_vector(model, values)`` works without the name
+    its errors use (default "joint values"); a name that is not a string is a TypeError
+    naming ``what``."""
+    from jwarp.world.moveit import joint_vector
+
+    arm = jwarp.robot("arm7")
+    values = {n: 0.1 * i for i, n in enumerate(arm.joint_names)}
+    assert joint_vector(arm, values).tolist() == pytest.approx(list(values.values()))
+    with pytest.raises(ValueError, match=r"^joint values: no value for joint\(s\) "):
+        joint_vector(arm, dict(list(values.items())[1:]))
+    with pytest.raises(ValueError, match=r"^goal: no value for joint\(s\) "):
+        joint_vector(arm, dict(list(values.items())[1:]), "goal")
+    fallback = np.full(arm.n_dof, 0.5)
+    q = joint_vector(arm, dict(list(values.items())[1:]), fallback=fallback)
+    assert q[0] == 0.5 and q[1:].tolist() == pytest.approx(list(values.values())[1:])
+    with pytest.raises(TypeError, match="^what: expected the name"):
+        joint_vector(arm, values, 3)
+
 def test_default_end_effectors():
     panda = load_urdf(_erd(PANDA)).model
     assert list(panda.end_effectors) == ["panda_hand_tcp"]

@@ -197,6 +197,46 @@ def test_shortcut_budget_and_min_gain():
     assert len0 <= len1 < np.linalg.norm(np.diff(path, axis=0), axis=1).sum()
 
 
+def test_rounds_end_near_the_straight_line():
+    """``near_straight``: a path whose polyline is within that length ratio of its straight
+    line after a round takes no further round (a check call saved where little is left
+    to gain); bad values are a ValueError naming the argument. A detour around a disc
+    (radius 1 at the origin): each round pulls the string tighter around it."""
+    path = np.array([[-2.0, 0.0], [-2.0, 2.0], [-1.0, 2.0], [0.0, 2.0], [1.0, 2.0],
+                     [2.0, 2.0], [2.0, 0.0]])
+    straight = 4.0
+
+    def clear_of_disc(segs):
+        a, b = segs[:, 0], segs[:, 1]
+        d = b - a
+        t = np.clip(-np.sum(a * d, 1) / np.maximum(np.sum(d * d, 1), 1e-12), 0.0, 1.0)
+        return np.linalg.norm(a + t[:, None] * d, axis=1) >= 1.0
+
+    def run(near):
+        lengths = []
+
+        def rec(segs, per):
+            return clear_of_disc(segs)
+
+        out = path
+        for rounds in range(1, 7):  # the length after each number of rounds
+            out = shortcut_paths(path[None], rec, rounds=rounds, min_gain=0.0,
+                                 near_straight=near)[0]
+            lengths.append(np.linalg.norm(np.diff(out, axis=0), axis=1).sum() / straight)
+        return lengths
+
+    free = run(None)
+    assert free[0] > free[1] > np.pi / 4, free  # the second round gains too
+    # a bound just above the first round's ratio: no second round
+    near = run(free[0] * 1.001)
+    assert near == pytest.approx([free[0]] * 6), near
+    # a bound never reached: as without it
+    assert run(1.0) == pytest.approx(free)
+    for bad in (0.5, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="^near_straight: expected a length ratio >= 1"):
+            shortcut_paths(path[None], clear_of_disc, rounds=2, near_straight=bad)
+
+
 # ------------------------------------------------------------------ the planner
 def test_default_path_is_shortened_and_feasible(world):
     first = PL.plan("planar4", world, S4, G4, shorten=0, **OPTS)

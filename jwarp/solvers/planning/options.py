@@ -162,7 +162,8 @@ class PlanOptions:
             this makes the default path short at little extra time. A round that
             shortens no path by more than 0.1 % ends the rounds, and a path whose U_l is
             at most 1.05 (:data:`jwarp.solvers.planning.planner.NEAR_STRAIGHT`) is left
-            as it is.
+            as it is; a path whose shortened polyline reaches that (its length at most
+            sqrt(1.05) times the straight line's) takes no further round.
         shorten_budget: the work of the rounds after their first check call, as a share
             of the optimisation's (> 0; default 0.5): they stop once their checks have
             evaluated that share of the configurations whose collision cost the

@@ -47,6 +47,11 @@ SHORTCUT_CLEARANCE = 0.01
 #: shortcut would gain little for a check's time
 NEAR_STRAIGHT = 1.05
 
+#: the rounds of :attr:`PlanOptions.shorten` end for a path once the U_l of its polyline
+#: (its length over the straight line's, squared; at most its respaced path's U_l) is at
+#: most this
+STOP_NEAR_STRAIGHT: float | None = NEAR_STRAIGHT
+
 
 #: evaluations per segment of the planner's continuous check (MotionOptions.max_evals)
 PLANNER_CHECK_EVALS = 256
@@ -446,7 +451,9 @@ class Planner:
                    else float(o.shorten_budget) * work)
         nodes = shortcut_paths(paths, check, o.shorten, deadline, active=solved[idx],
                                budget=None if allowed is None
-                               else (lambda: spent[0] >= allowed))
+                               else (lambda: spent[0] >= allowed),
+                               near_straight=None if STOP_NEAR_STRAIGHT is None
+                               else float(np.sqrt(STOP_NEAR_STRAIGHT)))
         cand = np.stack([respace(nd, W) for nd in nodes]).astype(self.npdt).astype(np.float64)
         cand[:, 0], cand[:, -1] = paths[:, 0], paths[:, -1]
         better = solved[idx] & (length_cost(cand) < length_cost(paths) * (1.0 - 1e-6))

@@ -67,7 +67,8 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
                    rounds: int, deadline: float | None = None,
                    active: np.ndarray | None = None, max_points: int = 21,
                    max_list: int | None = None, min_gain: float | None = None,
-                   budget: Callable[[], bool] | None = None) -> list[np.ndarray]:
+                   budget: Callable[[], bool] | None = None,
+                   near_straight: float | None = None) -> list[np.ndarray]:
     """Shortcuts of feasible paths (K, W, n_dof), all at once (greedy string pulling).
 
     Each round takes every path's corners (:func:`corners`) and, where that makes at most
@@ -95,7 +96,9 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
     every call but the first (the first jumps of every path are always tried); a round
     cut short by it ends as by ``deadline``.
     ``active`` (K,) bool: the paths to shorten (None: all); the others are
-    returned as their corners.
+    returned as their corners. ``near_straight``: a path whose length after a round is at
+    most this multiple of the straight line's (its start to its goal) takes no further
+    round (None: no such end): the rounds after it would gain little for their checks.
 
     Returns:
         per path its corners (k_i, n_dof) after the shortcuts (the start and goal kept).
@@ -105,6 +108,11 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
     paths = np.asarray(paths, np.float64)
     K, W, n = paths.shape
     nodes = [corners(p) for p in paths]
+    straight = np.linalg.norm(paths[:, -1] - paths[:, 0], axis=1)
+    if near_straight is not None:
+        near_straight = float(near_straight)
+        if not np.isfinite(near_straight) or near_straight < 1.0:
+            raise ValueError(f"near_straight: expected a length ratio >= 1, got {near_straight!r}")
     active = (np.ones(K, bool) if active is None else np.array(active, bool).reshape(K))
     calls = 0
     for _ in range(int(rounds)):
@@ -158,6 +166,8 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
                 nodes[k] = new
             if not (len(new) <= W and new_len < old_len * (1.0 - min_gain)):
                 active[k] = False  # this round gained (almost) nothing: the next would not
+            elif near_straight is not None and min(new_len, old_len) <= near_straight * straight[k]:
+                active[k] = False  # near the straight line: the next would gain little
     return nodes
 
 
