@@ -44,8 +44,6 @@ LAZY = {
 SUBMODULES = frozenset({
     "calibration", "cli", "core", "importers", "kernels", "kinematics", "learn", "model",
     "plugins", "solvers", "utils", "viz", "world",
-    # deprecated paths (issue 28), forwarding with a DeprecationWarning for one release
-    "atomic", "measurement", "memory", "registry",
 })
 
 #: the entry points (``__all__``, docs/api.md's first section); the other names of
