@@ -12,7 +12,7 @@ imported on first use, so ``import jwarp`` costs no Warp, torch or scipy import 
 
 from typing import Any
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 #: facade names imported on first use: name -> module
 LAZY = {
