@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Iterable
 
 from jwarp.cli.common import CLIError, check_device, int_arg
+from jwarp.utils.checks import check_int
 
 if TYPE_CHECKING:
     from jwarp.core.types import DeviceLike
@@ -177,8 +178,7 @@ def warmup(device: DeviceLike = None, robots: Iterable[str | RobotModel] | None 
         from jwarp.core.threads import cpu_threads
 
         jobs = min(cpu_threads(), 4)
-    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
-        raise ValueError(f"jobs: expected a positive integer, got {jobs!r}")
+    check_int(jobs, "jobs", 1)
     mods = kernel_modules(families, dtypes, names)
     before = len(compiled_modules())
     with compile_progress(len(mods), f"jwarp warmup ({dev.alias})", bar=progress) as p:

@@ -13,7 +13,6 @@ import ctypes
 import errno
 import math
 import mmap
-import numbers
 import sys
 import threading
 from dataclasses import dataclass
@@ -24,6 +23,7 @@ import warp as wp
 
 from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.kernel_cache import ensure_cache_dir, install_compile_notice
+from jwarp.utils.checks import real_number as real_number  # its home; imported from here too
 from jwarp.utils.warp_init import init_quietly
 
 _INITIALISED = False
@@ -248,30 +248,6 @@ def finite_as(a: np.ndarray, dtype: Any, name: str) -> np.ndarray:
     if c.size and not np.isfinite(c).all():
         raise ValueError(f"{name}: {_not_finite(bool(np.isfinite(a).all()), npdt)}")
     return c
-
-
-def real_number(v: Any, name: str, dtype: Any = None) -> float:
-    """A real scalar argument (int, float, numpy scalar or 0-d array) as a float. TypeError
-    naming ``name`` for bool, complex, strings and other non-numbers; with ``dtype``,
-    ValueError unless it is finite in that computing dtype. Range checks are the
-    caller's."""
-    if type(v) is not float:  # the common case first (optimizer loops call this)
-        if isinstance(v, np.ndarray) and v.ndim == 0:
-            v = v[()]
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
-            raise TypeError(f"{name}: expected a real number, got {type(v).__name__} {v!r}")
-    f = float(v)
-    if dtype is not None:
-        fmax = _FMAX.get(dtype)
-        if fmax is None:
-            fmax = _FMAX.setdefault(dtype, float(np.finfo(dtype).max))
-        if not abs(f) <= fmax:
-            raise ValueError(f"{name}: expected a finite number in {np.dtype(dtype).name}, "
-                             f"got {v!r}")
-    return f
-
-
-_FMAX: dict = {}
 
 
 def default_dtype(x: Any) -> Any:

@@ -18,6 +18,7 @@ from jwarp.core.arrays import finite_as, real_array, real_number
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import ElasticLaunch, kappa_array
 from jwarp.kinematics.launch import launch_fk, setup
+from jwarp.utils.checks import check_int
 
 WRT = ("q", "dh", "kappa")
 
@@ -71,8 +72,7 @@ def tape_jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None,
     bad = set(wrt) - set(WRT)
     if bad:
         raise ValueError(f"wrt: unknown {sorted(bad)}; choose from {WRT}")
-    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
-        raise ValueError(f"iterations: expected an integer >= 0, got {iterations!r}")
+    check_int(iterations, "iterations", 0)
     lam = real_number(lam, "lam")
     if not 0.0 < lam <= 1.0:
         raise ValueError(f"lam: damping must be in (0, 1], got {lam!r}")

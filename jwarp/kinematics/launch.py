@@ -28,6 +28,7 @@ from jwarp.kinematics.data import (  # noqa: F401  (POINT_ARG, jacobian_inputs: 
     ORIGIN, POINT_ARG, KinematicsData, fk_inputs, jacobian_inputs, point_vec)
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 
 
 def setup(robot: Any, q: Any, device: Any, dtype: Any, validate: bool = True
@@ -507,9 +508,7 @@ def lam_tol(lam: Any, tol: Any, t: DeviceModel) -> tuple[float, float]:
 
 def check_max_iter(max_iter: Any) -> int:
     """``max_iter`` of the elastic iteration as an int; ValueError unless an integer >= 0."""
-    if isinstance(max_iter, (bool, np.bool_)) or not isinstance(max_iter, (int, np.integer)) \
-            or max_iter < 0:
-        raise ValueError(f"max_iter: expected an integer >= 0, got {max_iter!r}")
+    return check_int(max_iter, "max_iter", 0)
     return int(max_iter)
 
 

@@ -46,6 +46,7 @@ from jwarp.core.limits import project_numpy, sample_within_limits
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver, check_warm_start, warm_start_seeds
 from jwarp.solvers.overrides import renamed_argument
+from jwarp.utils.checks import check_int
 
 #: seeds per target and block after the first (a target stops once one is feasible)
 BLOCK = 8
@@ -86,12 +87,6 @@ def _mean_std(x: Sequence[float] | np.ndarray) -> dict:
     if a.size == 0:
         return {"mean": math.nan, "std": math.nan, "n": 0}
     return {"mean": float(a.mean()), "std": float(a.std()), "n": int(a.size)}
-
-
-def _count(v: Any, name: str, lo: int) -> int:
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
-        raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
-    return int(v)
 
 
 def _solve_block(model: Any, frame: Any, world: Any, T: np.ndarray, seeds: np.ndarray,
@@ -137,13 +132,13 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
     check_warm_start(warm_start)
     model = get_robot(robot)
     fi = model.frame_index(frame)
-    n_random = _count(n_random, "n_random", 0 if warm_start is not None else 1)
+    n_random = check_int(n_random, "n_random", 0 if warm_start is not None else 1)
     unknown = sorted(set(old_names) - {"max_iterations"})
     if unknown:
         raise TypeError(f"evaluate_ik() got an unexpected keyword argument {unknown[0]!r}")
     iterations = renamed_argument("evaluate_ik()", "max_iterations", "iterations", old_names,
                                   iterations)   # the name before issue 28, for one release
-    max_iterations = _count(200 if iterations is None else iterations, "iterations", 0)
+    max_iterations = check_int(200 if iterations is None else iterations, "iterations", 0)
     opts = IKOptions(n_starts=1, iterations=max_iterations, margin=margin, tol_pos=tol_pos,
                      tol_rot=tol_rot, stop_when_solved=False, q_default=q_default, seed=seed,
                      restart_after=None, freeze_solved=False)  # every seed on its own

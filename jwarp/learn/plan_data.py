@@ -41,6 +41,7 @@ from jwarp.model.registry import robot as get_robot
 from jwarp.world.path_feasibility import check_world, collision_free
 from jwarp.solvers.planning import PathWeights, PlanOptions, Planner
 from jwarp.world.feasibility import feasible_simplex_world
+from jwarp.utils.checks import check_int
 
 __all__ = ["PlanDataOptions", "WorldLabels", "world_for", "label_world", "world_extent"]
 
@@ -114,16 +115,13 @@ class PlanDataOptions:
         for name, lo in (("n_waypoints", 3), ("max_starts", 1), ("iterations", 1),
                          ("check_all_every", 1), ("refine", 1)):
             v = getattr(self, name)
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+            check_int(v, name, lo)
         if self.stats_tasks is not None:
             v = self.stats_tasks
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 0:
-                raise ValueError(f"stats_tasks: expected None or an integer >= 0, got {v!r}")
+            check_int(v, "stats_tasks", 0)
         if self.n_substeps is not None:
             v = self.n_substeps
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f"n_substeps: expected None or an integer >= 1, got {v!r}")
+            check_int(v, "n_substeps", 1)
         for name, strict in (("step", True), ("max_step", True), ("converge_tol", True),
                              ("substep_voxels", True),
                              ("length_weight", False), ("margin", False)):
@@ -220,9 +218,7 @@ def world_for(robot: Any, world_seed: int, *, device: Any = None, extent: Any = 
     threshold, frequency, ... of the simplex noise (defaults of
     :func:`jwarp.world.simplex.simplex_world`)."""
     model = get_robot(robot)
-    if isinstance(world_seed, (bool, np.bool_)) or not isinstance(world_seed, (int, np.integer)) \
-            or world_seed < 0:
-        raise ValueError(f"world_seed: expected an integer >= 0, got {world_seed!r}")
+    check_int(world_seed, "world_seed", 0)
     if isinstance(extent, str):
         if extent != "reach":
             raise ValueError(f"extent: expected a side [m], None or 'reach', got {extent!r}")
@@ -267,11 +263,8 @@ def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
     """
     model = get_robot(robot)
     check_world(model, world)
-    if isinstance(n_tasks, (bool, np.bool_)) or not isinstance(n_tasks, (int, np.integer)) \
-            or n_tasks < 1:
-        raise ValueError(f"n_tasks: expected an integer >= 1, got {n_tasks!r}")
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
+    check_int(n_tasks, "n_tasks", 1)
+    check_int(seed, "seed", 0)
     if options is None:
         options = PlanDataOptions()
     if not isinstance(options, PlanDataOptions):

@@ -55,6 +55,7 @@ from jwarp.learn.torch_costs import ik_objective, u_ik
 from jwarp.core.threads import refresh_torch_threads, torch_threads
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver
+from jwarp.utils.checks import check_int
 
 __all__ = ["TrainIKOptions", "train_ik", "train_ik_supervised", "ik_loss", "IKTrainer"]
 
@@ -119,8 +120,7 @@ class TrainIKOptions:
                          ("worlds_per_batch", 1), ("epochs", 0), ("steps_per_epoch", 1),
                          ("hard_set_size", 1), ("val_iterations", 0)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+            check_int(v, name, lo)
             setattr(self, name, int(v))
         if self.world not in ("random", "shelf", "none"):
             raise ValueError(f"world: expected 'random', 'shelf' or 'none', got {self.world!r}")

@@ -49,6 +49,7 @@ from jwarp.learn.plan_net import (PlanNet, PlanNetConfig, axis_symmetries, encod
 from jwarp.model.registry import robot as get_robot
 from jwarp.world.path_feasibility import collision_free
 from jwarp.solvers.planning import PlanOptions, Planner
+from jwarp.utils.checks import check_int
 
 __all__ = ["PlanSamples", "TrainPlanOptions", "make_plan_data", "label_tasks", "sample_tasks",
            "hard_tasks",
@@ -491,8 +492,7 @@ class TrainPlanOptions:
         for name, lo in (("epochs", 0), ("steps_per_epoch", 1), ("batch_size", 1),
                          ("n_substeps", 1), ("seed", 0)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+            check_int(v, name, lo)
         if not (isinstance(self.lr, (int, float)) and math.isfinite(self.lr) and self.lr > 0):
             raise ValueError(f"lr: expected a number > 0, got {self.lr!r}")
         for name in ("boost_percentile", "boost_ratio"):

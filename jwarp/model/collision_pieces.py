@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
+from jwarp.utils.checks import check_int
 
 __all__ = ["ConvexPiece", "CollisionPieces", "sphere_digest", "stamp_pieces", "check_pieces",
            "pieces_to_dict", "pieces_from_dict"]
@@ -161,11 +162,7 @@ def _radius(v: Any, where: str) -> float:
 
 
 def _count(v: Any, where: str) -> int:
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
-        raise TypeError(f"{where}: expected an integer >= 0, got {v!r}")
-    if v < 0:
-        raise ValueError(f"{where}: expected an integer >= 0, got {v!r}")
-    return int(v)
+    return check_int(v, where, 0)
 
 
 def _text(v: Any, where: str) -> str:

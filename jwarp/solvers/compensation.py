@@ -23,6 +23,7 @@ from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKResult, ik
 from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.planning import PathObjective, PlanResult, plan
+from jwarp.utils.checks import check_int
 
 #: compliance of Agile Justin's joints used by the studies [rad/(N m)] (0.1 rad/kNm)
 JUSTIN_KAPPA = 1e-4
@@ -150,9 +151,7 @@ def ik_iteration_overhead(robot: Any, frame: Any, kappa: Any, *, world: Any = No
     of a call; ``*_s`` is the median over ``rounds`` runs, ``overhead`` their ratio - 1
     and ``overhead_per_round`` the ratios of the runs. ``*_setup_s``: the rest of a call's
     wall time (objective, buffers, seeds; median)."""
-    if isinstance(iterations, (bool, np.bool_)) or not isinstance(iterations, (int, np.integer)) \
-            or iterations < 2:
-        raise ValueError(f"iterations: expected an integer >= 2, got {iterations!r}")
+    check_int(iterations, "iterations", 2)
     model = get_robot(robot)
     fi = model.frame_index(frame)
     target = np.eye(4)

@@ -19,6 +19,7 @@ from jwarp.core.device import content_key
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.world.sdf import World, grid_geometry
+from jwarp.utils.checks import check_int
 
 __all__ = ["random_configurations", "feasible_fraction", "feasible_simplex_world",
            "fixed_spheres", "robot_reach", "robot_world_grid"]
@@ -28,8 +29,7 @@ def random_configurations(robot: Any, n: int, seed: int | Sequence[int] = 0) -> 
     """(n, n_dof) configurations drawn uniformly within the joint limits and the linear
     joint limits (rejection sampling), reproducible by ``seed``."""
     model = get_robot(robot)
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"n: expected a positive integer, got {n!r}")
+    check_int(n, "n", 1)
     rng = np.random.default_rng(seed)
     lim = model.joint_limits
     out = np.empty((0, model.n_dof))
@@ -128,8 +128,7 @@ def robot_world_grid(robot: Any, cells: int = 64, voxel_size: float | None = Non
     ``device``): the longest side gets ``cells`` cells (or the given ``voxel_size``), the
     others as many cells of the same size as cover them, centred on the reach box.
     Returns ``(shape, limits (dim, 2), voxel_size)``."""
-    if isinstance(cells, bool) or not isinstance(cells, (int, np.integer)) or cells < 2:
-        raise ValueError(f"cells: expected an integer >= 2, got {cells!r}")
+    check_int(cells, "cells", 2)
     pad = real_number(pad, "pad")
     if not np.isfinite(pad):
         raise ValueError(f"pad: expected a finite distance [m], got {pad!r}")
@@ -159,8 +158,7 @@ def world_seed_candidates(seed: int, n: int) -> list[int]:
     ``seed + 1``, ...) made consecutive seeds collapse onto one world (seeds 1-7 of
     justin19 all became world 11)."""
     for name, v, lo in (("seed", seed, 0), ("n", n, 1)):
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+        check_int(v, name, lo)
     seed = int(seed)
     extra = np.random.SeedSequence(seed).generate_state(int(n) - 1, dtype=np.uint64)
     return [seed] + [STREAM_SEED_OFFSET + int(x % (2 ** 62)) for x in extra]
@@ -191,11 +189,8 @@ def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200
     dim = model.workspace_dim if dim is None else dim
     if dim != model.workspace_dim:
         raise ValueError(f"dim: robot '{model.name}' needs {model.workspace_dim}D worlds, got {dim}")
-    if isinstance(min_feasible, (bool, np.bool_)) or not isinstance(min_feasible, (int, np.integer)) \
-            or not 0 < min_feasible <= n:
-        raise ValueError(f"min_feasible: expected 1..n={n}, got {min_feasible}")
-    if isinstance(max_tries, bool) or not isinstance(max_tries, (int, np.integer)) or max_tries < 1:
-        raise ValueError(f"max_tries: expected a positive integer, got {max_tries!r}")
+    check_int(min_feasible, "min_feasible", 1, n)
+    check_int(max_tries, "max_tries", 1)
     if extent is None:
         shape, limits, h = robot_world_grid(model, cells=cells, voxel_size=voxel_size,
                                             device=device)
@@ -205,8 +200,7 @@ def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200
             raise ValueError(f"extent: expected a side length > 0 [m], got {extent!r}")
         if voxel_size is not None:
             raise ValueError("voxel_size: give cells or voxel_size with extent, not both")
-        if isinstance(cells, bool) or not isinstance(cells, (int, np.integer)) or cells < 2:
-            raise ValueError(f"cells: expected an integer >= 2, got {cells!r}")
+        check_int(cells, "cells", 2)
         h = side / cells  # cells of h fill the side; limits are the first/last centres
         centre = robot_reach(model, device=device).mean(axis=1)
         lower = centre - 0.5 * (cells - 1) * h
@@ -214,9 +208,7 @@ def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200
                                          voxel_size=h)
     keep = fixed_spheres(model, pad=2 * h, device=device) if clear_base else []
     fractions = []
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) \
-            or seed < 0:
-        raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
+    check_int(seed, "seed", 0)
     for k, s in enumerate(world_seed_candidates(int(seed), int(max_tries))):
         world = simplex_world(dim, seed=s, shape=shape, limits=limits, keep_free=keep, **noise)
         frac = feasible_fraction(model, world, n, seed=s % 2 ** 32, margin=margin,

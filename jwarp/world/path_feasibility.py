@@ -23,6 +23,7 @@ from jwarp.kinematics.transmission import untransmitted, without_transmission
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.world import collision
+from jwarp.utils.checks import check_int
 
 #: feasibility checks use substeps with sphere motion <= voxel / SWEEP_SAFETY
 SWEEP_SAFETY = 2.0
@@ -204,8 +205,7 @@ def certify_check(robot: Any, world: Any, device: Any = None) -> Any:
 
 
 def check_substeps(n_substeps: Any) -> int:
-    if isinstance(n_substeps, bool) or not isinstance(n_substeps, (int, np.integer)) or n_substeps < 1:
-        raise ValueError(f"n_substeps: expected an integer >= 1, got {n_substeps!r}")
+    return check_int(n_substeps, "n_substeps", 1)
     return int(n_substeps)
 
 

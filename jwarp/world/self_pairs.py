@@ -53,6 +53,7 @@ from jwarp.model import RobotModel, SelfCollision
 from jwarp.model.pair_reasons import (PAIRS_NOTE, moveit_adjacent_pairs, pair_reasons,
                                       skipped_pairs, with_pair_reasons)
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 
 __all__ = ["SelfPairs", "PairSamplingCost", "never_colliding_pairs", "pair_sampling_cost",
            "adjacent_pairs", "moveit_adjacent_pairs", "rigid_groups", "default_pairs",
@@ -147,14 +148,6 @@ _PAIR_BYTES = 8 * 4
 _SPHERE_BYTES = 8 * (3 + 3)
 
 
-def _int(x: Any, name: str, low: int) -> int:
-    if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
-        raise TypeError(f"{name}: expected an integer, got {type(x).__name__}")
-    if x < low:
-        raise ValueError(f"{name}: must be >= {low}, got {x}")
-    return int(x)
-
-
 @dataclass
 class PairSamplingCost:
     """What :func:`never_colliding_pairs` will do (:func:`pair_sampling_cost`).
@@ -183,7 +176,7 @@ class PairSamplingCost:
 
 
 def _memory_arg(max_memory: Any) -> int:
-    max_memory = _int(max_memory, "max_memory", 1)
+    max_memory = check_int(max_memory, "max_memory", 1)
     if max_memory < 1_000_000:
         raise ValueError(f"max_memory: expected at least 1000000 bytes, got {max_memory}")
     return max_memory
@@ -216,8 +209,8 @@ def pair_sampling_cost(robot: Any, n_samples: int = 10000, *, batch: int = 1024,
     """The work and memory of :func:`never_colliding_pairs` with these arguments, without
     doing it (sizes only)."""
     model = get_robot(robot)
-    n_samples = _int(n_samples, "n_samples", 1)
-    batch = _int(batch, "batch", 1)
+    n_samples = check_int(n_samples, "n_samples", 1)
+    batch = check_int(batch, "batch", 1)
     return _plan(model, n_samples, batch, _memory_arg(max_memory))[0]
 
 
@@ -244,9 +237,9 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
     :func:`pair_sampling_cost` before the work. A MemoryError is raised before the work when
     the estimate exceeds the available memory."""
     model = get_robot(robot)
-    n_samples = _int(n_samples, "n_samples", 1)
-    seed = _int(seed, "seed", 0)
-    batch = _int(batch, "batch", 1)
+    n_samples = check_int(n_samples, "n_samples", 1)
+    seed = check_int(seed, "seed", 0)
+    batch = check_int(batch, "batch", 1)
     max_memory = _memory_arg(max_memory)
     if isinstance(margin, bool) or not isinstance(margin, (int, float, np.floating, np.integer)) \
             or not np.isfinite(margin):

@@ -28,6 +28,7 @@ import warp as wp
 
 from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.kernels import geometry as gk
+from jwarp.utils.checks import check_int
 
 __all__ = ["KINDS", "ShapeSet", "DeviceShapes", "LIMIT_EXTENT", "mesh_arrays"]
 
@@ -173,8 +174,7 @@ class ShapeSet:
         """Add object ``id`` (a new name) of ``kind`` (:data:`KINDS`) with ``dims`` [m]
         and ``pose`` (4x4 or a position; None: identity); ``group``: its world in a batch
         of worlds (>= 0). Returns its index."""
-        if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or group < 0:
-            raise ValueError(f"group: expected an integer >= 0, got {group!r}")
+        check_int(group, "group", 0)
         if not isinstance(id, str) or not id:
             raise TypeError(f"id: expected a non-empty string, got {id!r}")
         where = f"object '{id}'"

@@ -48,6 +48,7 @@ from jwarp.model import RobotModel, Sphere, SphereRelation
 from jwarp.world.self_pairs import (ALWAYS_FRACTION, SelfPairs, never_colliding_pairs,
                                     pair_reasons, sampled_reasons, with_pair_reasons,
                                     with_self_pairs)
+from jwarp.utils.checks import check_int
 
 __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize", "certify_relation",
            "fit_relation",
@@ -145,9 +146,7 @@ class SpherizeOptions:
             v = getattr(self, name)
             if v is None and none:
                 continue
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}"
-                                 f"{' or None' if none else ''}, got {v!r}")
+            check_int(v, name, lo)
         f = self.contain_factors
         if f is not None:
             if not isinstance(f, dict):

@@ -54,6 +54,7 @@ from jwarp.core.threads import limit_blas
 from jwarp.model.registry import robot as get_robot
 from jwarp.calibration.estimate.params import ParameterSpace, parse_groups
 from jwarp.solvers.overrides import renamed_options
+from jwarp.utils.checks import check_int
 
 METHODS = ("greedy", "detmax")
 
@@ -83,8 +84,7 @@ class DesignOptions:
     def validate(self) -> None:
         for name, lo in (("n", 1), ("max_excursion", 1), ("iterations", 0), ("refresh", 1)):
             v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+            check_int(v, name, lo)
         if self.method not in METHODS:
             raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {self.method!r}")
         if self.start not in ("greedy", "random"):
@@ -376,8 +376,7 @@ def candidate_jacobians(robot: Any, measurement: Any, q: Any, free: str | Iterab
     if qa.ndim != 2 or qa.shape[1] != model.n_dof or qa.shape[0] == 0:
         raise ValueError(f"q: expected candidate configurations (n >= 1, {model.n_dof}) for "
                          f"robot '{model.name}', got {qa.shape}")
-    if not isinstance(chunk, int) or chunk < 1:
-        raise ValueError(f"chunk: expected an integer >= 1, got {chunk!r}")
+    check_int(chunk, "chunk", 1)
     m = len(measurement.obs_names)
     space_args = {k: problem[k] for k in ("sigma", "frames", "p_nominal", "bound_kappa")
                   if k in problem}

@@ -44,6 +44,7 @@ from jwarp.kernels import visibility as vk
 from jwarp.model import RobotModel
 from jwarp.model.geometry import parse_markers, rotvec_matrix
 from jwarp.calibration.files import Setup, make_measurement
+from jwarp.utils.checks import check_int
 
 __all__ = ["Camera", "PoseOptions", "PoseSampler", "PoseSample", "CODE_NAMES", "parse_cameras",
            "marker_table", "sample_poses", "plan_text", "write_plan"]
@@ -198,10 +199,7 @@ class PoseOptions:
 
         def integer(name: str, lo: int) -> None:
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-                raise TypeError(f"{name}: expected an integer, got {v!r}")
-            if v < lo:
-                raise ValueError(f"{name}: expected >= {lo}, got {v}")
+            check_int(v, name, lo)
 
         real("margin", 0.0, 1.0)
         real("joint_margin", 0.0, math.pi)

@@ -32,6 +32,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from jwarp.calibration.design.tow import virtual_covariance
+from jwarp.utils.checks import check_int
 
 
 def add_virtual_noise(covariance: Any, virtual: Any) -> np.ndarray:
@@ -49,8 +50,7 @@ def approximate_virtual_variance(delta_h: float, n_samples: int) -> float:
     if not (isinstance(delta_h, (int, float, np.floating)) and math.isfinite(delta_h)
             and delta_h >= 0):
         raise ValueError(f"delta_h: expected a number >= 0, got {delta_h!r}")
-    if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
-        raise ValueError(f"n_samples: expected an integer >= 1, got {n_samples!r}")
+    check_int(n_samples, "n_samples", 1)
     return float(delta_h) ** 2 * math.sqrt(int(n_samples))
 
 

@@ -35,6 +35,7 @@ import numpy as np
 from jwarp import kinematics as K
 from jwarp.model.registry import robot as get_robot
 from jwarp.calibration.estimate.result import observation_groups
+from jwarp.utils.checks import check_int
 
 
 @dataclass
@@ -118,8 +119,7 @@ def residual_diagnostics(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
     if qa.ndim != 2 or qa.shape[1] != model.n_dof:
         raise ValueError(f"q: expected shape (S, {model.n_dof}), got {qa.shape}")
     S = qa.shape[0]
-    if isinstance(bins, bool) or not isinstance(bins, (int, np.integer)) or not 2 <= bins <= S:
-        raise ValueError(f"bins: expected an integer in [2, S={S}], got {bins!r}")
+    check_int(bins, "bins", 2, S)
     pa = np.asarray(p, np.float64)
     frames = [i for i in np.nonzero(model.is_dh)[0] if model.frames[i].coupling]
     prob = CalibrationProblem(model, measurement, qa, y,

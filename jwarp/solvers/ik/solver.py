@@ -23,8 +23,9 @@ from jwarp.solvers.overrides import renamed_argument, with_overrides
 from jwarp.world import collision
 from jwarp.world.model_check import check_collision_model, mesh_margin_model
 from jwarp.solvers.ik.objective import IKObjective, batch_array, check_single_world, target_poses
-from jwarp.solvers.ik.options import IKOptions, IKWeights, positive_int
+from jwarp.solvers.ik.options import IKOptions, IKWeights
 from jwarp.solvers.ik.result import IKResult
+from jwarp.utils.checks import check_int
 
 
 class IKSolver:
@@ -77,7 +78,7 @@ class IKSolver:
         collision.check_world(self.robot, world)
         check_single_world(world)
         self.world = world
-        self.n_problems = positive_int(n_problems, "n_problems", 1)
+        self.n_problems = check_int(n_problems, "n_problems", 1)
         if options is None:
             options = IKOptions()
         elif not isinstance(options, IKOptions):
@@ -328,9 +329,7 @@ class IKSolver:
 
     def reseed(self, seed: int | None) -> None:
         """Restart the random seeds' generator from ``seed`` (an integer >= 0 or None)."""
-        if seed is not None and (isinstance(seed, (bool, np.bool_))
-                                 or not isinstance(seed, (int, np.integer)) or seed < 0):
-            raise ValueError(f"seed: expected an integer >= 0 or None, got {seed!r}")
+        check_int(seed, "seed", 0, none=True)
         self.rng = np.random.default_rng(seed)
 
     def solve(self, targets: Any, seeds: Any = None, *,

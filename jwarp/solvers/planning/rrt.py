@@ -37,6 +37,7 @@ from jwarp.core.arrays import real_array, real_number
 from jwarp.core.limits import sample_within_limits, within_limits
 from jwarp.model.registry import robot as get_robot
 from jwarp.world import path_feasibility as _fz
+from jwarp.utils.checks import check_int
 
 
 @dataclass
@@ -78,12 +79,10 @@ class RRTOptions:
         for name, lo in (("max_samples", 1), ("shortcut_iterations", 0), ("batch", 1),
                          ("n_connect", 1)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"rrt.{name}: expected an integer >= {lo}, got {v!r}")
+            check_int(v, f"rrt.{name}", lo)
         if self.n_substeps is not None:
             v = self.n_substeps
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f"rrt.n_substeps: expected an integer >= 1, got {v!r}")
+            check_int(v, "rrt.n_substeps", 1)
         if self.time_limit is not None:
             t = real_number(self.time_limit, "rrt.time_limit")
             if not (math.isfinite(t) and t > 0):
