@@ -1,1 +1,1 @@
-"""Host utilities: atomic files, memory estimates."""
+"""Host utilities: atomic files, memory estimates, the argument checker."""
