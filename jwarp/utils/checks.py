@@ -44,11 +44,12 @@ def check_int(v: Any, name: str, lo: int | None = None, hi: int | None = None, *
     ``none``, None passes (and is returned)."""
     if v is None and none:
         return None
-    if (isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Integral)
-            or (lo is not None and v < lo) or (hi is not None and v > hi)):
-        raise ArgumentError(f"{name}: expected an integer{_bounds(lo, hi)}"
-                            f"{' or None' if none else ''}, got {v!r}")
-    return int(v)
+    if not isinstance(v, (bool, np.bool_)) and isinstance(v, numbers.Integral):
+        i = int(v)
+        if (lo is None or i >= lo) and (hi is None or i <= hi):
+            return i
+    raise ArgumentError(f"{name}: expected an integer{_bounds(lo, hi)}"
+                        f"{' or None' if none else ''}, got {v!r}")
 
 
 def real_number(v: Any, name: str, dtype: Any = None) -> float:

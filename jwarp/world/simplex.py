@@ -44,8 +44,7 @@ _GRAD3 = np.array([[1, 1, 0], [-1, 1, 0], [1, -1, 0], [-1, -1, 0],
 
 
 def _check_seed(seed: object) -> int:
-    check_int(seed, "seed", 0)
-    return int(seed)
+    return check_int(seed, "seed", 0)
 
 
 def _permutation(seed: int) -> np.ndarray:
