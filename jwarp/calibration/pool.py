@@ -33,10 +33,10 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.utils.atomic import atomic_write_text
-from jwarp.model.measurement import Measurement
-from jwarp.model import RobotModel
 from jwarp.calibration.files import Samples, numeric_rows, read_header, read_text
+from jwarp.model import RobotModel
+from jwarp.model.measurement import Measurement
+from jwarp.utils.atomic import atomic_write_text
 from jwarp.utils.checks import ArgumentError, check_int
 
 
@@ -278,8 +278,8 @@ class CandidatePool:
 
 def _raw_draw(robot: RobotModel, setup: object, rng: np.random.Generator) -> Any:
     """``k -> (q (<= k, n_dof), meta)``: the setup's raw candidate draws."""
-    from jwarp.calibration.simulate.campaign import uniform_configurations
     from jwarp.calibration.files import make_measurement
+    from jwarp.calibration.simulate.campaign import uniform_configurations
 
     meas = make_measurement(robot, setup)
     if meas.name == "contact":

@@ -38,14 +38,22 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import os
+import sys
 from typing import Any
 
+from jwarp.cli.common import (
+    CLIError,
+    check_device,
+    check_option_memory,
+    check_output,
+    dumps,
+    int_arg,
+    quiet_warp,
+    real_arg,
+    robot_option,
+)
 from jwarp.cli.vocabulary import add_out, require_out
-from jwarp.cli.common import (CLIError, check_option_memory,
-                              check_device, check_output, dumps, int_arg, quiet_warp,
-                              real_arg, robot_option)
 
 
 def _check_db(path: str, robot: Any, timeout: float) -> None:

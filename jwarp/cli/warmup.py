@@ -24,11 +24,12 @@ Python: :func:`warmup` (also ``jwarp.warmup``).
 from __future__ import annotations
 
 import argparse
-from types import SimpleNamespace
 import sys
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Iterable
+from types import SimpleNamespace
+from typing import TYPE_CHECKING, Any
 
 from jwarp.cli.common import CLIError, check_device, int_arg
 from jwarp.utils.checks import check_int
@@ -102,9 +103,18 @@ def kernel_modules(families: Iterable[str] = FAMILIES, dtypes: Iterable[str] = D
     nothing. Raises ValueError naming ``families``/``dtypes`` for an unknown entry."""
     import warp as wp
 
-    from jwarp.kernels import (collision, collision_wide, elastic, fk, geometry, ik, ik_step,
-                               motion, path)
-    from jwarp.kernels import visibility
+    from jwarp.kernels import (
+        collision,
+        collision_wide,
+        elastic,
+        fk,
+        geometry,
+        ik,
+        ik_step,
+        motion,
+        path,
+        visibility,
+    )
     from jwarp.model.registry import robot as get_robot
 
     families = _check_names(families, FAMILIES, "families")

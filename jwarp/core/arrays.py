@@ -15,15 +15,18 @@ import math
 import mmap
 import sys
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, cast
+from typing import Any, cast
 
 import numpy as np
 import warp as wp
 
 from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.kernel_cache import ensure_cache_dir, install_compile_notice
-from jwarp.utils.checks import real_number as real_number  # its home; imported from here too
+from jwarp.utils.checks import (
+    real_number as real_number,  # its home; imported from here too
+)
 from jwarp.utils.warp_init import init_quietly
 
 _INITIALISED = False

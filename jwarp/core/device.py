@@ -327,11 +327,11 @@ def _dh_info(robot: RobotModel) -> np.ndarray:
 
 # ====================================================================== the cache
 #: content key per RobotModel object (the robot's JSON is hashed once per object)
-_KEYS: "weakref.WeakKeyDictionary[RobotModel, str]" = weakref.WeakKeyDictionary()
+_KEYS: weakref.WeakKeyDictionary[RobotModel, str] = weakref.WeakKeyDictionary()
 #: THE model cache, keyed by (content key, device, scalar): every model still in use ...
-_LIVE: "weakref.WeakValueDictionary[tuple, DeviceModel]" = weakref.WeakValueDictionary()
+_LIVE: weakref.WeakValueDictionary[tuple, DeviceModel] = weakref.WeakValueDictionary()
 #: ... and the most recently used ones kept alive (an fk call does not hold its model)
-_RECENT: "OrderedDict[tuple, DeviceModel]" = OrderedDict()
+_RECENT: OrderedDict[tuple, DeviceModel] = OrderedDict()
 _RECENT_MAX = 32
 _LOCK = threading.Lock()
 

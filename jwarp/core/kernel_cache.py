@@ -38,7 +38,8 @@ import os
 import sys
 import threading
 import time
-from typing import Any, Callable, Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import warp as wp
 

@@ -47,11 +47,17 @@ import numpy as np
 import trimesh
 import warp as wp
 
-from jwarp.utils.warp_init import init_quietly
-
-from jwarp.importers.spheres import (SphereFit, contain_fit, excess_volume, fit_spheres,
-                                     mesh_memo, one_sided_error, sphere_protrusion)
+from jwarp.importers.spheres import (
+    SphereFit,
+    contain_fit,
+    excess_volume,
+    fit_spheres,
+    mesh_memo,
+    one_sided_error,
+    sphere_protrusion,
+)
 from jwarp.utils.checks import check_int
+from jwarp.utils.warp_init import init_quietly
 
 __all__ = ["refine_fit", "fit_refined", "coverage_protrusion", "link_protrusions", "fit_kernels",
            "MAX_SPHERES", "MAX_SPHERES_CONTAINED", "LADDER", "CONTAIN_PROTRUSIONS", "WRIST_JOINTS", "WRIST_PROTRUSION", "BASE_PROTRUSION",

@@ -73,8 +73,8 @@ import warp as wp
 from scipy import sparse
 from scipy.spatial import cKDTree
 
-from jwarp.utils.warp_init import init_quietly
 from jwarp.utils.checks import check_int, check_real
+from jwarp.utils.warp_init import init_quietly
 
 __all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "fit_link", "fit_kernels",
            "surface_cover", "containment_bound", "containment_growth", "contain_fit", "link_part", "CONTAIN_CHECK", "CONTAIN_GAP",
@@ -132,7 +132,7 @@ class SphereFitOptions:
     protrusion: float | None = None
     contain: float | None = None
 
-    def validate(self) -> "SphereFitOptions":
+    def validate(self) -> SphereFitOptions:
         self.tolerance = check_real(self.tolerance, "tolerance", 0, open_lo=True)
         if self.protrusion is not None:
             self.protrusion = check_real(self.protrusion, "protrusion", 0, open_lo=True)
@@ -200,7 +200,7 @@ class SphereFit:
         """Number of spheres."""
         return int(len(self.radii))
 
-    def transformed(self, origin: np.ndarray) -> "SphereFit":
+    def transformed(self, origin: np.ndarray) -> SphereFit:
         """The same fit with centres mapped by the rigid 4x4 ``origin`` (radii unchanged)."""
         T = _origin(origin)
         out = SphereFit(**{**self.__dict__, "notes": list(self.notes),
@@ -609,7 +609,7 @@ def _cover(slack: _Slack, max_spheres: int | None, eps0: float,
 
 #: per mesh object: what the fits of one link compute more than once (its solid, solid
 #: volumes, boundary samples); weak keys, so nothing outlives the mesh
-_MESH_CACHE: "weakref.WeakKeyDictionary[trimesh.Trimesh, dict]" = weakref.WeakKeyDictionary()
+_MESH_CACHE: weakref.WeakKeyDictionary[trimesh.Trimesh, dict] = weakref.WeakKeyDictionary()
 
 
 def mesh_memo(mesh: trimesh.Trimesh, key: Any, make: Any) -> Any:

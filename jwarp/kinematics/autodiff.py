@@ -16,8 +16,7 @@ import warp as wp
 
 from jwarp.core.arrays import finite_as, real_array, real_number
 from jwarp.kernels import fk as fk_kernels
-from jwarp.kinematics.launch import ElasticLaunch, kappa_array
-from jwarp.kinematics.launch import launch_fk, setup
+from jwarp.kinematics.launch import ElasticLaunch, kappa_array, launch_fk, setup
 from jwarp.utils.checks import check_int
 
 WRT = ("q", "dh", "kappa")

@@ -8,11 +8,26 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import is_torch, Batch, empty, finite_as, first_touch, out_view, to_output, zeros
+from jwarp.core.arrays import (
+    Batch,
+    empty,
+    finite_as,
+    first_touch,
+    is_torch,
+    out_view,
+    to_output,
+    zeros,
+)
 from jwarp.core.device import DeviceModel
 from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
-from jwarp.kinematics.launch import frame_rows, jacobian_inputs, point_vec, setup, small_call
+from jwarp.kinematics.launch import (
+    frame_rows,
+    jacobian_inputs,
+    point_vec,
+    setup,
+    small_call,
+)
 from jwarp.kinematics.transmission import transmission_slope, transmitted
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot

@@ -18,14 +18,31 @@ from typing import Any, NamedTuple, cast
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import (Batch, HostWrap, as_batch, default_dtype, empty, finite_as,
-                               first_touch, init_warp, is_torch, real_array, real_number,
-                               resolve_device)
+from jwarp.core.arrays import (
+    Batch,
+    HostWrap,
+    as_batch,
+    default_dtype,
+    empty,
+    finite_as,
+    first_touch,
+    init_warp,
+    is_torch,
+    real_array,
+    real_number,
+    resolve_device,
+)
 from jwarp.core.device import DeviceModel, numpy_dtype, put_model, scalar_type
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.data import (  # noqa: F401  (POINT_ARG, jacobian_inputs: re-exported)
-    ORIGIN, POINT_ARG, KinematicsData, fk_inputs, jacobian_inputs, point_vec)
+    ORIGIN,
+    POINT_ARG,
+    KinematicsData,
+    fk_inputs,
+    jacobian_inputs,
+    point_vec,
+)
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.utils.checks import check_int

@@ -74,7 +74,13 @@ def fk_elastic_torch(model: RobotModel, batch: Any, t: Any, kap: Any, rho0: Any,
                      max_iter: int, tol: float) -> Any:
     """Differentiable elastic FK of a torch tensor: gradients flow through every torque
     update that the iteration performed (exact derivative of the iterated model)."""
-    from jwarp.kinematics.launch import ElasticFK, ElasticLaunch, equilibrium, host_out, rho0_full
+    from jwarp.kinematics.launch import (
+        ElasticFK,
+        ElasticLaunch,
+        equilibrium,
+        host_out,
+        rho0_full,
+    )
 
     q = batch.torch_tensor
     qc = _prepare(q, model, t.device, t.scalar)

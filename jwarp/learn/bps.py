@@ -40,9 +40,9 @@ from jwarp.core.arrays import (
 )
 from jwarp.kernels import collision as ck
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 from jwarp.world.feasibility import random_configurations
 from jwarp.world.sdf import World
-from jwarp.utils.checks import check_int
 
 __all__ = ["BasisPointSet", "basis_points", "bps_encode", "hcp_density", "hcp_points", "kernels",
            "robot_reach_ball"]

@@ -38,7 +38,8 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -174,10 +175,10 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
                    q: np.ndarray) -> None:
             for r, row in enumerate(rows):
                 k = np.flatnonzero(fz[r])
-                if len(k) and found[row] < 0:
-                    found[row] = offset + k[0]
-                    f_it[row] = it[r, k[0]]
-                    f_q[row] = q[r, k[0]]
+                if len(k) and found[row] < 0:  # noqa: B023 (record runs in this iteration)
+                    found[row] = offset + k[0]  # noqa: B023
+                    f_it[row] = it[r, k[0]]  # noqa: B023
+                    f_q[row] = q[r, k[0]]  # noqa: B023
 
         record(np.arange(P), 0, fz, it, q)
         first.append(fz[:, 0])

@@ -25,10 +25,15 @@ import numpy as np
 import torch
 from torch import nn
 
-from jwarp.learn.encoding import JointCodec, feature_size, frame_features, frame_features_numpy
+from jwarp.learn.encoding import (
+    JointCodec,
+    feature_size,
+    frame_features,
+    frame_features_numpy,
+)
 from jwarp.model.registry import robot as get_robot
-from jwarp.world.feasibility import robot_reach
 from jwarp.utils.checks import check_int
+from jwarp.world.feasibility import robot_reach
 
 __all__ = ["IKNetConfig", "IKNet", "DenseBlock", "NetConfig", "network_bps", "world_key"]
 

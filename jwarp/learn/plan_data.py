@@ -38,10 +38,10 @@ from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.limits import sample_within_limits
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.world.path_feasibility import check_world, collision_free
-from jwarp.solvers.planning import PathWeights, PlanOptions, Planner
-from jwarp.world.feasibility import feasible_simplex_world
+from jwarp.solvers.planning import PathWeights, Planner, PlanOptions
 from jwarp.utils.checks import check_int
+from jwarp.world.feasibility import feasible_simplex_world
+from jwarp.world.path_feasibility import check_world, collision_free
 
 __all__ = ["PlanDataOptions", "WorldLabels", "world_for", "label_world", "world_extent"]
 

@@ -26,7 +26,7 @@ from jwarp.solvers.planning import PathObjective, PathWeights
 #: robots share one, an edited copy gets its own), id of the world (the objective holds
 #: its world, so that id is not reused while the entry lives), sizes, weights, device,
 #: dtype); an entry lives as long as its objective
-_OBJECTIVES: "weakref.WeakValueDictionary[tuple, Any]" = weakref.WeakValueDictionary()
+_OBJECTIVES: weakref.WeakValueDictionary[tuple, Any] = weakref.WeakValueDictionary()
 _KEEP: list = []  # the last few objectives stay alive between calls
 
 

@@ -35,21 +35,27 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import torch
 
 from jwarp.core.arrays import device_name
 from jwarp.core.threads import refresh_torch_threads, torch_threads
-from jwarp.learn.plan_net import (PlanNet, PlanNetConfig, axis_symmetries, encode_paths,
-                                  symmetric_bps)
+from jwarp.learn.plan_net import (
+    PlanNet,
+    PlanNetConfig,
+    axis_symmetries,
+    encode_paths,
+    symmetric_bps,
+)
 from jwarp.model.registry import robot as get_robot
-from jwarp.world.path_feasibility import collision_free
-from jwarp.solvers.planning import PlanOptions, Planner
+from jwarp.solvers.planning import Planner, PlanOptions
 from jwarp.utils.checks import check_int
+from jwarp.world.path_feasibility import collision_free
 
 __all__ = ["PlanSamples", "TrainPlanOptions", "make_plan_data", "label_tasks", "sample_tasks",
            "hard_tasks",
@@ -101,13 +107,13 @@ class PlanSamples:
     def __len__(self) -> int:
         return len(self.starts)
 
-    def subset(self, idx: Any) -> "PlanSamples":
+    def subset(self, idx: Any) -> PlanSamples:
         return PlanSamples(self.starts[idx], self.goals[idx], self.paths[idx],
                            self.world_index[idx], self.worlds,
                            None if self.cost is None else self.cost[idx], self.world_ids,
                            self.source)
 
-    def compact(self) -> "PlanSamples":
+    def compact(self) -> PlanSamples:
         """The same samples with only the worlds they use (in order of first use by world
         index; ``world_index`` renumbered)."""
         used = np.unique(self.world_index)
@@ -118,7 +124,7 @@ class PlanSamples:
                            None if self.world_ids is None else
                            [self.world_ids[i] for i in used], self.source)
 
-    def append(self, other: "PlanSamples") -> "PlanSamples":
+    def append(self, other: PlanSamples) -> PlanSamples:
         """This set and ``other`` (same worlds list or its extension)."""
         if other.worlds[:len(self.worlds)] != self.worlds:
             raise ValueError("other: its worlds must extend this set's worlds")
@@ -306,7 +312,7 @@ def samples_from_db(db: Any, robot: Any, *, world_ids: Any = None, hard_only: bo
                              f"{len(ids)} selected worlds ({len(a['task'])} paths in all)")
         a = {k: v[keep] for k, v in a.items()}
         W = a["path"].shape[1]
-        if n_waypoints is not None and W != int(n_waypoints):
+        if n_waypoints is not None and int(n_waypoints) != W:
             raise ValueError(f"n_waypoints: database '{d.path}' stores paths of {W} "
                              f"waypoints, the network is configured for {n_waypoints}")
         # worlds in order of first appearance (the order of ``world_ids``)
@@ -584,7 +590,7 @@ def _train_plan(options: TrainPlanOptions, data: PlanSamples, val: PlanSamples |
         net.train()
         total = 0.0
         for _ in range(options.steps_per_epoch):
-            idx = rng.choice(M, size=min(options.batch_size, M), replace=M < options.batch_size,
+            idx = rng.choice(M, size=min(options.batch_size, M), replace=options.batch_size > M,
                              p=weights) if weights is not None else \
                 rng.integers(0, M, size=options.batch_size)
             loss = plan_loss(net, *_tensors(net, arr, idx))

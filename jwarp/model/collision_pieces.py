@@ -22,10 +22,12 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
+
 from jwarp.utils.checks import check_int
 
 __all__ = ["ConvexPiece", "CollisionPieces", "sphere_digest", "stamp_pieces", "check_pieces",
@@ -130,7 +132,7 @@ def stamp_pieces(model: Any) -> Any:
 def _vertices(v: Any, where: str) -> np.ndarray:
     """``v`` as a (V, 3) float64 array of finite numbers, V >= 1; ValueError/TypeError
     naming ``where``."""
-    if isinstance(v, (bool, np.bool_)) or isinstance(v, (str, bytes, dict)):
+    if isinstance(v, (bool, np.bool_, str, bytes, dict)):
         raise TypeError(f"{where}: expected a list of [x, y, z], got {type(v).__name__}")
     try:
         a = np.asarray(v)

@@ -164,7 +164,8 @@ def ik_iteration_overhead(robot: Any, frame: Any, kappa: Any, *, world: Any = No
         for name in per_it:
             stamps: list = []
             res = ik(model, fi, target, kappa=None if name == "rigid" else kappa, lam=lam,
-                     callback=lambda it, q: stamps.append(time.perf_counter()), **common)
+                     callback=lambda it, q: stamps.append(time.perf_counter()),  # noqa: B023
+                     **common)  # (called during this round's ik only)
             if r:  # round 0 warms up (kernel compiles)
                 dt = np.diff(stamps)
                 per_it[name].append(float(np.median(dt[min(5, len(dt) // 2):])))

@@ -18,8 +18,9 @@ end-effector (``elastic/sag_mm/<end_effector>``, scalar in mm).
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -261,8 +262,11 @@ def save_calibration_rrd(path: str | os.PathLike, robot: Any, measurement: Any, 
     calibrated tracker pose), image points in an ``image`` 2D view, relative positions from
     the first end-effector; every plugin gets ``error/after/<group>`` scalars [mm or px].
     """
-    from jwarp.calibration.estimate.result import (group_norms, model_frames,
-                                                   observation_groups)
+    from jwarp.calibration.estimate.result import (
+        group_norms,
+        model_frames,
+        observation_groups,
+    )
 
     rr = rerun_module()
     model = get_robot(robot)

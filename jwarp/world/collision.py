@@ -43,17 +43,32 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import (Batch, as_batch, default_dtype, finite_as, init_warp, real_array,
-                          real_number, resolve_device, to_output)
-from jwarp.core.device import DeviceModel, collision_tables, numpy_dtype, put_model, scalar_type
+from jwarp.core.arrays import (
+    Batch,
+    as_batch,
+    default_dtype,
+    finite_as,
+    init_warp,
+    real_array,
+    real_number,
+    resolve_device,
+    to_output,
+)
+from jwarp.core.device import (
+    DeviceModel,
+    collision_tables,
+    numpy_dtype,
+    put_model,
+    scalar_type,
+)
 from jwarp.core.rows import DHRows, RowsKind
 from jwarp.kernels import collision as ck
 from jwarp.kernels import collision_wide as cwide
 from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.kinematics.compensation import CompensationRows
 from jwarp.world.device_world import DeviceWorld
 from jwarp.world.sdf import World, sdf_query
 
@@ -131,7 +146,7 @@ class CollisionData:
     stride-0 view of a single row, which stays in L1) instead of streaming about 3 KB of
     scratch per configuration through the caches."""
 
-    def __init__(self, cm: "CollisionModel", n: int) -> None:
+    def __init__(self, cm: CollisionModel, n: int) -> None:
         n = int(n)
         if n < 1:
             raise ValueError(f"n: expected >= 1 configurations, got {n}")
@@ -292,7 +307,7 @@ class CollisionModel:
         return data
 
     def _check_rows(self, rows: CompensationRows, n: int) -> None:
-        if rows.N != n or rows.t.key != self.model.key or rows.rows.dtype != self.scalar \
+        if n != rows.N or rows.t.key != self.model.key or rows.rows.dtype != self.scalar \
                 or rows.rows.device != self.device:
             raise ValueError(f"rho: compensation rows for {rows.N} configurations of "
                              f"'{rows.t.robot.name}' on {rows.rows.device}, expected {n} of "
@@ -596,7 +611,7 @@ class CollisionModel:
 
 # ====================================================================== functional API
 #: CollisionModels by (robot content key, device, dtype, world identity), recent ones first
-_MODELS: "OrderedDict[tuple, tuple]" = OrderedDict()
+_MODELS: OrderedDict[tuple, tuple] = OrderedDict()
 _MODELS_MAX = 32
 
 

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -18,8 +19,8 @@ from jwarp.core.arrays import real_number
 from jwarp.core.device import content_key
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.world.sdf import World, grid_geometry
 from jwarp.utils.checks import check_int
+from jwarp.world.sdf import World, grid_geometry
 
 __all__ = ["random_configurations", "feasible_fraction", "feasible_simplex_world",
            "fixed_spheres", "robot_reach", "robot_world_grid"]
@@ -85,7 +86,7 @@ def fixed_spheres(robot: Any, pad: float = 0.0, device: Any = None) -> list[tupl
 
 #: reach boxes by (robot content key, n, seed): equal robots share one, an edited copy
 #: (other limits, DH rows, spheres) has another key; the most recently used are kept
-_REACH: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
+_REACH: OrderedDict[tuple, np.ndarray] = OrderedDict()
 _REACH_MAX = 64
 _REACH_LOCK = threading.Lock()
 

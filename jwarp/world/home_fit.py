@@ -52,7 +52,12 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.importers.spheres import load_mesh, one_sided_error, primitive_mesh, signed_distance
+from jwarp.importers.spheres import (
+    load_mesh,
+    one_sided_error,
+    primitive_mesh,
+    signed_distance,
+)
 from jwarp.model import RobotModel, Sphere
 from jwarp.utils.checks import check_int
 
@@ -91,7 +96,7 @@ class HomeFitOptions:
     refit: bool = True
     n_random: int = 2000
 
-    def validate(self) -> "HomeFitOptions":
+    def validate(self) -> HomeFitOptions:
         for key in ("contact_margin", "gap", "tolerance"):
             v = getattr(self, key)
             if v is None and key == "tolerance":

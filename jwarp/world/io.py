@@ -59,8 +59,8 @@ def parse_world_spec(spec: Any, robot: Any = None, device: Any = None) -> World:
             samples would need more than the available memory; checked before anything
             is allocated, the message gives the grid and the figure.
     """
-    from jwarp.world.collision import check_world
     from jwarp.model.registry import robot as get_robot
+    from jwarp.world.collision import check_world
 
     model = None if robot is None else get_robot(robot)
     if isinstance(spec, World):
@@ -141,7 +141,11 @@ def _grid_text(sizes: list[float]) -> str:
 
 def _simplex_from_spec(rest: str, model: Any, text: str, device: Any = None) -> World:
     from jwarp.utils.memory import check_memory
-    from jwarp.world.feasibility import feasible_simplex_world, fixed_spheres, robot_world_grid
+    from jwarp.world.feasibility import (
+        feasible_simplex_world,
+        fixed_spheres,
+        robot_world_grid,
+    )
     from jwarp.world.simplex import simplex_world
 
     opts: dict[str, Any] = {}

@@ -159,7 +159,7 @@ class MeshMarginWarning(UserWarning):
 _WARNED: set = set()
 #: robot content -> its inflated copy (the last few; a planner built per problem reuses it,
 #: and with it the device tables, instead of copying the robot each time)
-_INFLATED: "OrderedDict[str, Any]" = OrderedDict()
+_INFLATED: OrderedDict[str, Any] = OrderedDict()
 
 
 def mesh_margin_model(robot: Any, mesh_margin: bool = True, *, what: str = "planning") -> Any:

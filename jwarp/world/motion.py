@@ -40,11 +40,11 @@ from jwarp.core.limits import LIMIT_TOL
 from jwarp.kernels import motion as mk
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 from jwarp.world.collision import check_world, mm_text
 from jwarp.world.device_world import DeviceWorld
 from jwarp.world.reach import point_reach
 from jwarp.world.sdf import World
-from jwarp.utils.checks import check_int
 
 __all__ = ["MotionCheck", "MotionOptions", "PathCheck", "check_paths", "motion_check",
            "pair_travel_tables",
@@ -155,7 +155,7 @@ class MotionOptions:
         return "levels" if device.is_cuda else "advance"
 
 
-_TABLES: "OrderedDict[tuple, Any]" = OrderedDict()
+_TABLES: OrderedDict[tuple, Any] = OrderedDict()
 
 
 def _cached(kind: str, model: RobotModel, build: Any) -> Any:
@@ -757,7 +757,7 @@ class MotionCheck:
 #: numbers of waypoints whose output buffers a MotionCheck keeps (:meth:`MotionCheck._outputs`)
 _OUT_KEEP = 4
 
-_CHECKS: "OrderedDict[tuple, tuple]" = OrderedDict()
+_CHECKS: OrderedDict[tuple, tuple] = OrderedDict()
 
 
 def motion_check(robot: Any, world: World | None, *, device: Any = None) -> MotionCheck:

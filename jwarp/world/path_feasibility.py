@@ -15,15 +15,21 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
+from jwarp.core.arrays import (
+    finite_as,
+    init_warp,
+    real_array,
+    real_number,
+    resolve_device,
+)
 from jwarp.core.device import numpy_dtype, put_model, scalar_type
 from jwarp.core.limits import describe_violation, sample_within_limits, within_limits
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.transmission import untransmitted, without_transmission
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.world import collision
 from jwarp.utils.checks import check_int
+from jwarp.world import collision
 
 #: feasibility checks use substeps with sphere motion <= voxel / SWEEP_SAFETY
 SWEEP_SAFETY = 2.0

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from jwarp.world.sdf import World, world_from_occupancy
 from jwarp.utils.checks import check_int
+from jwarp.world.sdf import World, world_from_occupancy
 
 
 def shelf_world(voxel_size: float = 0.04) -> World:

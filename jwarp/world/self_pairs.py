@@ -48,12 +48,17 @@ from typing import Any
 import numpy as np
 
 from jwarp.kinematics.fk import fk
-from jwarp.utils.memory import check_memory, format_bytes
 from jwarp.model import RobotModel, SelfCollision
-from jwarp.model.pair_reasons import (PAIRS_NOTE, moveit_adjacent_pairs, pair_reasons,
-                                      skipped_pairs, with_pair_reasons)
+from jwarp.model.pair_reasons import (
+    PAIRS_NOTE,
+    moveit_adjacent_pairs,
+    pair_reasons,
+    skipped_pairs,
+    with_pair_reasons,
+)
 from jwarp.model.registry import robot as get_robot
 from jwarp.utils.checks import check_int
+from jwarp.utils.memory import check_memory, format_bytes
 
 __all__ = ["SelfPairs", "PairSamplingCost", "never_colliding_pairs", "pair_sampling_cost",
            "adjacent_pairs", "moveit_adjacent_pairs", "rigid_groups", "default_pairs",

@@ -20,8 +20,9 @@ Poses are 4x4 local -> world [m].
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -155,7 +156,7 @@ class ShapeSet:
 
     # ------------------------------------------------------------------ build
     @classmethod
-    def from_shapes(cls, shapes: Iterable[Any]) -> "ShapeSet":
+    def from_shapes(cls, shapes: Iterable[Any]) -> ShapeSet:
         """A ShapeSet of :class:`jwarp.world.primitives.Shape` objects (ids made unique
         by a ``#k`` suffix where one object has several shapes)."""
         s = cls()
@@ -371,7 +372,7 @@ class ShapeSet:
         return d.numpy().reshape(p.shape[:-1])
 
     # ---------------------------------------------------------------- device
-    def device_shapes(self, device: Any, scalar: type) -> "DeviceShapes":
+    def device_shapes(self, device: Any, scalar: type) -> DeviceShapes:
         """The device copy for (device, scalar type), brought up to date."""
         key = (str(device), scalar.__name__)
         ds = self._device.get(key)

@@ -23,9 +23,11 @@ times ``persistence``), normalised so the sum stays in about [-1, 1].
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+
 from jwarp.utils.checks import check_int
 
 if TYPE_CHECKING:
@@ -189,7 +191,7 @@ def simplex_world(dim: int = 3, *, seed: int, shape: Sequence[int] | None = None
                   threshold: float = 0.6, frequency: float = 2.0, octaves: int = 1,
                   persistence: float = 0.5,
                   keep_free: Sequence[tuple[Sequence[float] | np.ndarray, float]] = ()
-                  ) -> "World":
+                  ) -> World:
     """A random occupancy world from simplex noise, with its signed distance field.
 
     Args:

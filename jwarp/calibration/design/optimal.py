@@ -45,14 +45,15 @@ without repetition.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
+from jwarp.calibration.estimate.params import ParameterSpace, parse_groups
 from jwarp.core.threads import limit_blas
 from jwarp.model.registry import robot as get_robot
-from jwarp.calibration.estimate.params import ParameterSpace, parse_groups
 from jwarp.solvers.overrides import renamed_options
 from jwarp.utils.checks import check_int
 
@@ -193,7 +194,7 @@ class _State:
         self.updates = 0
         self._task()
 
-    def copy(self) -> "_State":
+    def copy(self) -> _State:
         s = object.__new__(_State)
         s.__dict__.update(self.__dict__)
         s.A, s.C, s.count = self.A.copy(), self.C.copy(), self.count.copy()
@@ -397,8 +398,8 @@ def task_information(robot: Any, task: Any, q_task: Any, names: list[str],
     """The task factor ``L`` (P, r) on the parameters ``names`` (the actual measurement's
     space) from the task measurement at q_task, and the task parameters left out (not in
     ``names``: the design cannot calibrate them). Robot groups of ``free`` only."""
-    from jwarp.calibration.estimate.params import ROBOT_GROUPS
     from jwarp.calibration.design.sensitivity import align, stacked_jacobian
+    from jwarp.calibration.estimate.params import ROBOT_GROUPS
 
     groups = [g for g in parse_groups(free) if g in ROBOT_GROUPS]
     if not groups:

@@ -36,14 +36,14 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.utils.atomic import atomic_write_text
+from jwarp.calibration.files import Setup, make_measurement
 from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.core.device import make_struct, put_model, scalar_type
 from jwarp.kernels import path as path_kernels
 from jwarp.kernels import visibility as vk
 from jwarp.model import RobotModel
 from jwarp.model.geometry import parse_markers, rotvec_matrix
-from jwarp.calibration.files import Setup, make_measurement
+from jwarp.utils.atomic import atomic_write_text
 from jwarp.utils.checks import check_int
 
 __all__ = ["Camera", "PoseOptions", "PoseSampler", "PoseSample", "CODE_NAMES", "parse_cameras",
@@ -186,7 +186,7 @@ class PoseOptions:
     device: str | None = None
     dtype: str = "float32"
 
-    def validate(self) -> "PoseOptions":
+    def validate(self) -> PoseOptions:
         """Check every field; ValueError/TypeError naming the field. Returns self."""
         def real(name: str, lo: float, hi: float = math.inf, lo_open: bool = False) -> None:
             v = getattr(self, name)

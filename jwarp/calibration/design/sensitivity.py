@@ -37,14 +37,15 @@ Conventions (documented choices):
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
+from jwarp.calibration.estimate.params import ROBOT_GROUPS, ParameterSpace, parse_groups
 from jwarp.core.threads import limit_blas
 from jwarp.model.registry import robot as get_robot
-from jwarp.calibration.estimate.params import ROBOT_GROUPS, ParameterSpace, parse_groups
 
 #: default relative tolerance of :func:`spectrum` (numerical rank of J^T J)
 DEFAULT_RTOL = 1e-12

@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from jwarp.utils.checks import check_int
 
 __all__ = ["SCALE", "Ordering", "distance_matrix", "path_length", "order_poses"]

@@ -26,8 +26,9 @@ Four ways to set ``bar Lambda^e`` (a variance, per observed value, unit^2):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -136,7 +137,7 @@ def ensemble_virtual_variance(members: Sequence[EnsembleMember], *, lo: float = 
                          f"[{lo:g}, {hi:g}], the target (Delta h)^2 is {target:.3g}")
     a, b = math.log(lo), math.log(hi)
     it, f = 0, f_lo
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
         mid = 0.5 * (a + b)
         f = delta_v(math.exp(mid))
         if f < target:

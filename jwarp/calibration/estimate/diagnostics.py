@@ -27,14 +27,15 @@ carry the signature of what the model lacks. :func:`residual_diagnostics` measur
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from jwarp import kinematics as K
-from jwarp.model.registry import robot as get_robot
 from jwarp.calibration.estimate.result import observation_groups
+from jwarp.model.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 
 

@@ -28,33 +28,52 @@ from __future__ import annotations
 
 import time
 import warnings
-from typing import Any, Callable, Mapping, NamedTuple
+from collections.abc import Callable, Mapping
+from typing import Any, NamedTuple
 
 import numpy as np
 import warp as wp
 from scipy.optimize import OptimizeResult, least_squares
 
 from jwarp import kinematics as K
+from jwarp.calibration.estimate.backlash import check_directions, motion_directions
+from jwarp.calibration.estimate.elastic import (
+    ElasticComponents,
+    effective_kappa,
+    equilibrium_jacobian,
+    frame_masses,
+    mass_torque_jacobian,
+    nonlinear_b,
+    torque_jacobian,
+    torque_state,
+)
+from jwarp.calibration.estimate.options import CalibrationOptions
+from jwarp.calibration.estimate.origin import origin_twists, with_static_transforms
+from jwarp.calibration.estimate.params import (
+    COUPLING_HARM,
+    KIND_BACKLASH,
+    KIND_COUPLING,
+    KIND_DH,
+    KIND_HARMONIC,
+    KIND_KAPPA,
+    KIND_KAPPA_NL,
+    KIND_MASS,
+    KIND_MEAS,
+    KIND_ORIGIN,
+    MASS_GROUP,
+    ParameterSpace,
+    parse_groups,
+    robot_backlash,
+    with_pose_groups,
+)
+from jwarp.calibration.estimate.result import CalibrationResult, build_result
+from jwarp.calibration.estimate.robust import LOSSES, robust_weights
+from jwarp.calibration.estimate.samples import check_samples
 from jwarp.core.arrays import finite_as, init_warp, resolve_device
 from jwarp.core.device import put_model, with_frame_masses, with_kappa_nonlinear
 from jwarp.core.threads import limit_blas
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.calibration.estimate.elastic import (ElasticComponents, effective_kappa,
-                                                equilibrium_jacobian, frame_masses,
-                                                mass_torque_jacobian, nonlinear_b,
-                                                torque_jacobian, torque_state)
-from jwarp.calibration.estimate.options import CalibrationOptions
-from jwarp.calibration.estimate.origin import origin_twists, with_static_transforms
-from jwarp.calibration.estimate.backlash import check_directions, motion_directions
-from jwarp.calibration.estimate.params import (KIND_BACKLASH, robot_backlash)
-from jwarp.calibration.estimate.params import (COUPLING_HARM, KIND_COUPLING, KIND_DH,
-                                               KIND_HARMONIC, KIND_KAPPA, KIND_KAPPA_NL,
-                                               KIND_MASS, KIND_MEAS, KIND_ORIGIN, MASS_GROUP,
-                                               ParameterSpace, parse_groups, with_pose_groups)
-from jwarp.calibration.estimate.robust import LOSSES, robust_weights
-from jwarp.calibration.estimate.result import CalibrationResult, build_result
-from jwarp.calibration.estimate.samples import check_samples
 
 #: the largest robust-loss scale in noise sigmas (beyond it the loss is linear on any data,
 #: and its square overflows near 1e154)
@@ -377,7 +396,7 @@ class CalibrationProblem:
     @classmethod
     def from_options(cls, robot: Any, measurement: Any, q: Any, y: Any,
                      options: CalibrationOptions, meta: Mapping[str, Any] | None = None
-                     ) -> "CalibrationProblem":
+                     ) -> CalibrationProblem:
         """``CalibrationProblem(robot, measurement, q, y, options, meta=meta)`` (kept for
         the callers of before issue 40)."""
         return cls(robot, measurement, q, y, options, meta=meta)
@@ -919,7 +938,7 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
     pinned = np.zeros(sp.size, bool) if hold is None else np.asarray(hold, bool)
     rejected = False     # a run's end point had no equilibrium and was not kept
     nfev, rounds, status, message = 0, 0, 0, "no solver run"
-    for rounds in range(1, (MAX_ACTIVE_SET_ROUNDS if bounded else 1) + 1):
+    for rounds in range(1, (MAX_ACTIVE_SET_ROUNDS if bounded else 1) + 1):  # noqa: B007
         left = None if o.max_nfev is None else o.max_nfev - nfev
         if left is not None and left < 1:
             break

@@ -11,18 +11,23 @@ from __future__ import annotations
 import math
 import types
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from jwarp import kinematics as K
+from jwarp.calibration.estimate.backlash import check_directions
+from jwarp.calibration.estimate.params import (
+    KIND_KAPPA,
+    KIND_MASS,
+    ParameterSpace,
+    robot_backlash,
+)
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import ValidRange, record_valid_range, valid_range_of
-from jwarp.calibration.estimate.backlash import check_directions
-from jwarp.calibration.estimate.params import (KIND_KAPPA, KIND_MASS, ParameterSpace,
-                                               robot_backlash)
 
 
 class CalibrationWarning(UserWarning):

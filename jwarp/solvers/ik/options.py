@@ -10,11 +10,11 @@ from typing import Any
 import numpy as np
 
 from jwarp.core.arrays import real_array, real_number
-from jwarp.utils.checks import check_int
 from jwarp.kernels import ik as ik_kernels
 from jwarp.model import RobotModel
 from jwarp.solvers.options import SolverOptions
 from jwarp.solvers.overrides import renamed_options
+from jwarp.utils.checks import check_int
 
 #: the largest accepted position tolerance [m] (IKOptions.tol_pos): larger means nothing
 MAX_TOL_POS = 1e3

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -19,13 +20,18 @@ from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import check_valid_range
-from jwarp.solvers.overrides import renamed_argument, with_overrides
-from jwarp.world import collision
-from jwarp.world.model_check import check_collision_model, mesh_margin_model
-from jwarp.solvers.ik.objective import IKObjective, batch_array, check_single_world, target_poses
+from jwarp.solvers.ik.objective import (
+    IKObjective,
+    batch_array,
+    check_single_world,
+    target_poses,
+)
 from jwarp.solvers.ik.options import IKOptions, IKWeights
 from jwarp.solvers.ik.result import IKResult
+from jwarp.solvers.overrides import renamed_argument, with_overrides
 from jwarp.utils.checks import check_int
+from jwarp.world import collision
+from jwarp.world.model_check import check_collision_model, mesh_margin_model
 
 
 class IKSolver:
@@ -378,7 +384,7 @@ class IKSolver:
             S = q0.shape[1]
         if q0 is not None and model.has_harmonic:  # the kernels work in the links' joint space
             q0 = transmitted(model, q0)
-        if S != self.n_seeds:
+        if self.n_seeds != S:
             self._allocate(S)
         obj, dev, B = self.objective, self.device, self.B
         if q0 is None:  # random seeds, drawn on the device
@@ -458,9 +464,9 @@ class IKSolver:
                 self._check(it % o.check_every == 0 or last)
             if last:
                 break
-            if every or callback is not None or (not rigid and read):
-                if over(self._read_counts()):
-                    break
+            if (every or callback is not None or (not rigid and read)) \
+                    and over(self._read_counts()):
+                break
             self._step()
         self._launch("finalize", self.ck.finalize, B, [obj.q, obj.err, obj.cost_a, self.done,
                                                        self.iterations, o.iterations,
@@ -572,7 +578,7 @@ SOLVER_CACHE_SIZE = 8
 SOLVER_CACHE_MAX_BATCH = 4096
 
 
-_SOLVERS: "dict[tuple, IKSolver]" = {}
+_SOLVERS: dict[tuple, IKSolver] = {}
 
 
 def _solver_key(model: RobotModel, frame: int, n_problems: int, opts: IKOptions, world: Any,

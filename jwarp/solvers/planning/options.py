@@ -4,17 +4,18 @@ and their checks."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from jwarp.core.arrays import real_number
-from jwarp.utils.checks import check_int
 from jwarp.core.device import numpy_dtype, scalar_type
-from jwarp.world.path_feasibility import check_substeps
 from jwarp.solvers.options import SolverOptions
 from jwarp.solvers.overrides import renamed_options
+from jwarp.utils.checks import check_int
+from jwarp.world.path_feasibility import check_substeps
 
 
 @dataclass
@@ -52,7 +53,7 @@ FALLBACKS = ("rrt",)
 FALLBACK_AFTER = {"cpu": 0.15, "cuda": 0.08}
 
 
-def fallback_share(o: "PlanOptions", device: str) -> float:
+def fallback_share(o: PlanOptions, device: str) -> float:
     """``o.fallback_after``, or its default on ``device`` (``FALLBACK_AFTER``)."""
     if o.fallback_after is not None:
         return float(o.fallback_after)
@@ -299,7 +300,7 @@ def fallback_word(value: Any) -> Any:
     return value
 
 
-def _check_budget(o: "PlanOptions") -> None:
+def _check_budget(o: PlanOptions) -> None:
     """:meth:`PlanOptions.validate` of ``time_limit``, ``fallback``, ``fallback_after``
     and ``rrt``."""
     if o.time_limit is not None:

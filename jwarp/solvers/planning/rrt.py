@@ -36,8 +36,8 @@ import numpy as np
 from jwarp.core.arrays import real_array, real_number
 from jwarp.core.limits import sample_within_limits, within_limits
 from jwarp.model.registry import robot as get_robot
-from jwarp.world import path_feasibility as _fz
 from jwarp.utils.checks import check_int
+from jwarp.world import path_feasibility as _fz
 
 
 @dataclass
@@ -93,10 +93,10 @@ class RRTOptions:
             raise ValueError(f"rrt.goal_bias: expected a number in [0, 1], got "
                              f"{self.goal_bias!r}")
         seed = self.seed
-        if not (seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence))):
-            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-                raise ValueError(f"rrt.seed: expected an integer >= 0, a Generator or None, "
-                                 f"got {seed!r}")
+        if not (seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence))) \
+                and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
+            raise ValueError(f"rrt.seed: expected an integer >= 0, a Generator or None, "
+                             f"got {seed!r}")
 
 
 @dataclass
