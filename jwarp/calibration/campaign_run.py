@@ -41,6 +41,7 @@ from jwarp.calibration.estimate.map import (
 from jwarp.calibration.estimate.options import CalibrationOptions
 from jwarp.calibration.estimate.result import CalibrationResult, error_stats, errors
 from jwarp.calibration.files import Samples, Setup
+from jwarp.core.types import RobotLike
 from jwarp.model.robot import RobotModel
 
 #: the ``notes`` key of a calibrated robot's provenance (a JSON object)
@@ -457,7 +458,7 @@ def calibrate_campaign(campaign: CampaignData, options: CampaignOptions | None =
     cv_settings = _cv_settings(o, len(train), nm)
     cv_result = None
 
-    def table_rows(robot: Any, p: np.ndarray) -> dict[str, dict[str, float]]:
+    def table_rows(robot: RobotLike, p: np.ndarray) -> dict[str, dict[str, float]]:
         out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None,
                                       directions=dir_train), scale)}
         if test is not None:

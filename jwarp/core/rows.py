@@ -33,6 +33,7 @@ from typing import Any
 
 import warp as wp
 
+from jwarp.core.types import DeviceLike
 from jwarp.kernels.fk import ROWS_COMPENSATION, ROWS_DH, ROWS_NOMINAL
 
 __all__ = ["RowsKind", "DHRows", "PER_CONFIG_LAYOUT", "COLUMNS"]
@@ -170,7 +171,7 @@ class DHRows:
     def is_nominal(self) -> bool:
         return self.kind == RowsKind.NOMINAL
 
-    def check(self, n_frames: int, n: int, scalar: type, device: Any) -> DHRows:
+    def check(self, n_frames: int, n: int, scalar: type, device: DeviceLike) -> DHRows:
         """ValueError/TypeError unless these rows fit ``n`` configurations of a robot with
         ``n_frames`` frames computed in ``scalar`` on ``device``; returns self."""
         if self.n_frames != n_frames:

@@ -101,8 +101,8 @@ def jacobian(robot: RobotLike, q: ArrayLike, frame: int | str, *,
                          validate=validate, out=out)
 
 
-def link_jacobian(robot: Any, q_link: Any, frame: int | str, *, point: Any = None,
-                  dh: Any = None, device: Any = None, dtype: Any = None,
+def link_jacobian(robot: RobotLike, q_link: Any, frame: int | str, *, point: Any = None,
+                  dh: Any = None, device: DeviceLike = None, dtype: DTypeLike = None,
                   validate: bool = True, out: Any = None) -> Any:
     """:func:`jacobian` w.r.t. the joint values the links see, ``q_link`` (transmission
     errors already applied; no ``dq'/dq`` factor): the same as :func:`jacobian` for a

@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from jwarp.core.limits import project_numpy, sample_within_limits
+from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver, check_warm_start, warm_start_seeds
 from jwarp.solvers.overrides import renamed_argument
@@ -91,7 +92,7 @@ def _mean_std(x: Sequence[float] | np.ndarray) -> dict:
 
 
 def _solve_block(model: Any, frame: Any, world: Any, T: np.ndarray, seeds: np.ndarray,
-                 opts: IKOptions, device: Any, dtype: Any) -> tuple[np.ndarray, ...]:
+                 opts: IKOptions, device: DeviceLike, dtype: DTypeLike) -> tuple[np.ndarray, ...]:
     """Every seed (P, S, n) on its own: (feasible (P, S), iterations (P, S), q (P, S, n))."""
     solver = IKSolver(model, frame, len(T), opts, world=world, device=device, dtype=dtype)
     res = solver.solve(T, seeds)
@@ -100,10 +101,10 @@ def _solve_block(model: Any, frame: Any, world: Any, T: np.ndarray, seeds: np.nd
             np.asarray(res.all_q).reshape(seeds.shape))
 
 
-def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start: Any = None,
+def evaluate_ik(robot: RobotLike, frame: Any, world: Any, targets: Any, *, warm_start: Any = None,
                 n_random: int = N_RANDOM, iterations: int | None = None, margin: float = 0.0,
                 tol_pos: float = 1e-4, tol_rot: float = 1e-3, q_default: Any = None,
-                seed: int = 0, device: Any = None, dtype: Any = np.float64,
+                seed: int = 0, device: DeviceLike = None, dtype: DTypeLike = np.float64,
                 name: str | None = None, **old_names: Any) -> dict:
     """The Table 3.5 columns of one initial guess (module docstring).
 
@@ -233,9 +234,9 @@ def _config_value(net: Any, key: str) -> Any:
     return None
 
 
-def ablation_table(robot: Any, frame: Any, world: Any, targets: Any,
+def ablation_table(robot: RobotLike, frame: Any, world: Any, targets: Any,
                    nets: Mapping[str, Any] | Sequence[tuple[str, Any]], *,
-                   iterations: int = 10, device: Any = None, **options: Any) -> list[dict]:
+                   iterations: int = 10, device: DeviceLike = None, **options: Any) -> list[dict]:
     """Table 3.4: per network (``{name: net}`` or ``[(name, net)]``) the feasibility after
     ``iterations`` solver iterations from its heads alone (head 1: ``feasibility``; any
     head: ``feasibility_heads``), with its ``boosting``, ``twin`` and ``unit_vectors``

@@ -36,6 +36,7 @@ import numpy as np
 from jwarp.core.arrays import real_number
 from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.limits import sample_within_limits
+from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.planning import PathWeights, Planner, PlanOptions
@@ -201,13 +202,13 @@ class WorldLabels:
         return float(self.n_feasible_starts[m].sum() / self.n_starts[m].sum())
 
 
-def world_extent(robot: Any) -> float:
+def world_extent(robot: RobotLike) -> float:
     """Side [m] of the Table 3.2 world of ``robot``."""
     model = get_robot(robot)
     return float(WORLD_EXTENT.get(model.name, 1.0 if model.workspace_dim == 2 else 1.2))
 
 
-def world_for(robot: Any, world_seed: int, *, device: Any = None, extent: Any = None,
+def world_for(robot: RobotLike, world_seed: int, *, device: DeviceLike = None, extent: Any = None,
               **noise: Any) -> Any:
     """The Table 3.2 simplex world of ``world_seed`` for ``robot``: ``WORLD_CELLS`` cells
     per axis over a cube (square) of :func:`world_extent` [m] centred on the robot's
@@ -230,7 +231,7 @@ def world_for(robot: Any, world_seed: int, *, device: Any = None, extent: Any = 
 
 
 def _task_pairs(model: RobotModel, world: Any, n: int, margin: float,
-                rng: np.random.Generator, device: Any) -> tuple[np.ndarray, np.ndarray]:
+                rng: np.random.Generator, device: DeviceLike) -> tuple[np.ndarray, np.ndarray]:
     """n collision-free (start, goal) pairs, drawn uniformly within the limits."""
     out: list[np.ndarray] = []
     have = 0
@@ -246,7 +247,7 @@ def _task_pairs(model: RobotModel, world: Any, n: int, margin: float,
                      f"'{model.name}' found")
 
 
-def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
+def label_world(robot: RobotLike, world: Any, n_tasks: int, seed: int,
                 options: PlanDataOptions | None = None) -> WorldLabels:
     """Label ``n_tasks`` random tasks of one world (module docstring).
 
@@ -329,7 +330,7 @@ def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
                        n_starts=n_starts, stats=stats)
 
 
-def _refine(model: RobotModel, world: Any, o: PlanDataOptions, dtype: Any, q0: np.ndarray,
+def _refine(model: RobotModel, world: Any, o: PlanDataOptions, dtype: DTypeLike, q0: np.ndarray,
             q1: np.ndarray, seeds: list, feasible: np.ndarray, paths: np.ndarray,
             cost: np.ndarray, length: np.ndarray) -> None:
     """Converge the feasible seeds of every solved task (one batch, ``o.refine`` seeds a

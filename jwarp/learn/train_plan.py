@@ -45,6 +45,7 @@ import torch
 
 from jwarp.core.arrays import device_name
 from jwarp.core.threads import refresh_torch_threads, torch_threads
+from jwarp.core.types import RobotLike
 from jwarp.learn.plan_net import (
     PlanNet,
     PlanNetConfig,
@@ -139,7 +140,7 @@ class PlanSamples:
                            other.worlds, cost, ids, self.source)
 
 
-def sample_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator,
+def sample_tasks(robot: RobotLike, world: Any, n: int, rng: np.random.Generator,
                  min_distance: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """``n`` random collision-free start/goal pairs (at least ``min_distance`` apart in
     joint space, as far as the pool allows)."""
@@ -165,7 +166,7 @@ def sample_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator,
     return pool[a], pool[b]
 
 
-def hard_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator, *,
+def hard_tasks(robot: RobotLike, world: Any, n: int, rng: np.random.Generator, *,
                iterations: int = 200, n_waypoints: int = 20, n_substeps: int = 4,
                rounds: int = 20) -> tuple[np.ndarray, np.ndarray]:
     """Up to ``n`` random tasks whose straight line does not become feasible within
@@ -186,7 +187,7 @@ def hard_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator, *,
     return np.concatenate(S), np.concatenate(G)
 
 
-def label_tasks(robot: Any, world: Any, starts: np.ndarray, goals: np.ndarray, *,
+def label_tasks(robot: RobotLike, world: Any, starts: np.ndarray, goals: np.ndarray, *,
                 n_waypoints: int = 20, n_starts: int = 16, iterations: int = 200,
                 n_substeps: int = 4, seed: int = 0
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -200,7 +201,7 @@ def label_tasks(robot: Any, world: Any, starts: np.ndarray, goals: np.ndarray, *
     return res.path, res.feasible, res.cost
 
 
-def make_plan_data(robot: Any, worlds: list, n_per_world: int, *, seed: int = 0,
+def make_plan_data(robot: RobotLike, worlds: list, n_per_world: int, *, seed: int = 0,
                    n_waypoints: int = 20, n_starts: int = 16, iterations: int = 200,
                    n_substeps: int = 4, hard: bool = False, rounds: int = 3,
                    labeler: Callable | None = None) -> PlanSamples:
@@ -243,7 +244,7 @@ def make_plan_data(robot: Any, worlds: list, n_per_world: int, *, seed: int = 0,
                        worlds=worlds, cost=np.concatenate([p[4] for p in parts]))
 
 
-def samples_from_db(db: Any, robot: Any, *, world_ids: Any = None, hard_only: bool = True,
+def samples_from_db(db: Any, robot: RobotLike, *, world_ids: Any = None, hard_only: bool = True,
                     feasible_only: bool = True, n_waypoints: int | None = None,
                     skip_damaged: bool = False, skipped: list | None = None) -> PlanSamples:
     """The stored labels of a path database (a path or an open
@@ -374,7 +375,7 @@ def split_by_world(samples: PlanSamples, val_fraction: float = 0.1, seed: int = 
             samples.subset(np.flatnonzero(is_val)).compact())
 
 
-def path_costs(robot: Any, world: Any, paths: np.ndarray, n_substeps: int = 4) -> np.ndarray:
+def path_costs(robot: RobotLike, world: Any, paths: np.ndarray, n_substeps: int = 4) -> np.ndarray:
     """U_path (eq. 3.16, the planner's weights; float32 on the CPU) of paths (P, W, n_dof)."""
     from jwarp.learn.torch_costs import path_objective
 
@@ -392,7 +393,7 @@ def _by_world(data: PlanSamples) -> list[tuple[int, np.ndarray]]:
     return [(int(w), np.flatnonzero(data.world_index == w)) for w in np.unique(data.world_index)]
 
 
-def label_costs(data: PlanSamples, robot: Any, n_substeps: int = 4) -> np.ndarray:
+def label_costs(data: PlanSamples, robot: RobotLike, n_substeps: int = 4) -> np.ndarray:
     """The labels' U_path (computed once, stored in ``data.cost``)."""
     if data.cost is None:
         c = np.empty(len(data))

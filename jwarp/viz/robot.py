@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import RobotLike
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.utils.atomic import AtomicFile
@@ -119,7 +120,7 @@ def _z_to(d: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
-def log_robot(rec: Any, robot: Any, frames: Any, path: str = "robot", spheres: bool = True,
+def log_robot(rec: Any, robot: RobotLike, frames: Any, path: str = "robot", spheres: bool = True,
               *, axis_length: float = 0.08, color: Iterable[int] = _RIGID_COLOR) -> None:
     """Log one configuration of a robot to the rerun recording stream ``rec``.
 
@@ -178,7 +179,7 @@ def _q_batch(model: RobotModel, q_list: Any) -> np.ndarray:
     return q
 
 
-def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,
+def save_robot_rrd(robot: RobotLike, q_list: Any, path: str | os.PathLike,
                    elastic_kappa: Any = None, *, lam: float = 1.0, max_iter: int = 10,
                    application_id: str = "jwarp", option: str = "path") -> Path:
     """Compute FK for every configuration and write a rerun recording (.rrd) atomically.
@@ -244,7 +245,7 @@ def _pose(params: Any, p: np.ndarray, prefix: str) -> np.ndarray | None:
     return T
 
 
-def save_calibration_rrd(path: str | os.PathLike, robot: Any, measurement: Any, p: Any,
+def save_calibration_rrd(path: str | os.PathLike, robot: RobotLike, measurement: Any, p: Any,
                          q: Any, y: Any, meta: Mapping[str, Any] | None = None, *,
                          p_before: Any = None, robot_before: Any = None,
                          application_id: str = "jwarp-calibration") -> Path:

@@ -17,6 +17,7 @@ import numpy as np
 
 from jwarp.core.arrays import real_number
 from jwarp.core.device import content_key
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.utils.checks import check_int
@@ -26,7 +27,7 @@ __all__ = ["random_configurations", "feasible_fraction", "feasible_simplex_world
            "fixed_spheres", "robot_reach", "robot_world_grid"]
 
 
-def random_configurations(robot: Any, n: int, seed: int | Sequence[int] = 0) -> np.ndarray:
+def random_configurations(robot: RobotLike, n: int, seed: int | Sequence[int] = 0) -> np.ndarray:
     """(n, n_dof) configurations drawn uniformly within the joint limits and the linear
     joint limits (rejection sampling), reproducible by ``seed``."""
     model = get_robot(robot)
@@ -47,8 +48,8 @@ def random_configurations(robot: Any, n: int, seed: int | Sequence[int] = 0) -> 
                      f"linear joint limits (acceptance too low)")
 
 
-def feasible_fraction(robot: Any, world: World | None, n: int = 1000, seed: int = 0, *,
-                      margin: float = 0.0, device: Any = None) -> float:
+def feasible_fraction(robot: RobotLike, world: World | None, n: int = 1000, seed: int = 0, *,
+                      margin: float = 0.0, device: DeviceLike = None) -> float:
     """Fraction of ``n`` random configurations (:func:`random_configurations`) whose
     spheres keep more than ``margin`` [m] from the world and from each other."""
     from jwarp.world.collision import is_collision_free
@@ -59,7 +60,7 @@ def feasible_fraction(robot: Any, world: World | None, n: int = 1000, seed: int 
     return float(np.mean(free))
 
 
-def fixed_spheres(robot: Any, pad: float = 0.0, device: Any = None) -> list[tuple[np.ndarray, float]]:
+def fixed_spheres(robot: RobotLike, pad: float = 0.0, device: DeviceLike = None) -> list[tuple[np.ndarray, float]]:
     """Collision spheres on frames that no joint moves (the robot's fixed base), as
     ``(centre (workspace_dim,) [m], radius + pad [m])`` in the base frame."""
     from jwarp.kinematics.fk import fk
@@ -91,7 +92,7 @@ _REACH_MAX = 64
 _REACH_LOCK = threading.Lock()
 
 
-def robot_reach(robot: Any, n: int = 2000, seed: int = 0, device: Any = None) -> np.ndarray:
+def robot_reach(robot: RobotLike, n: int = 2000, seed: int = 0, device: DeviceLike = None) -> np.ndarray:
     """(workspace_dim, 2) [m] box around every collision sphere of ``n`` random
     configurations (centres -/+ radii): the space a world for this robot must cover.
     Cached per robot content (:func:`jwarp.core.device.content_key`), ``n`` and ``seed``
@@ -122,8 +123,8 @@ def robot_reach(robot: Any, n: int = 2000, seed: int = 0, device: Any = None) ->
     return box.copy()
 
 
-def robot_world_grid(robot: Any, cells: int = 64, voxel_size: float | None = None,
-                     pad: float = 0.0, device: Any = None
+def robot_world_grid(robot: RobotLike, cells: int = 64, voxel_size: float | None = None,
+                     pad: float = 0.0, device: DeviceLike = None
                      ) -> tuple[tuple[int, ...], np.ndarray, float]:
     """A grid covering the robot's reach (:func:`robot_reach`, plus ``pad`` [m]; its FK on
     ``device``): the longest side gets ``cells`` cells (or the given ``voxel_size``), the
@@ -165,10 +166,10 @@ def world_seed_candidates(seed: int, n: int) -> list[int]:
     return [seed] + [STREAM_SEED_OFFSET + int(x % (2 ** 62)) for x in extra]
 
 
-def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200,
+def feasible_simplex_world(robot: RobotLike, *, seed: int = 0, min_feasible: int = 200,
                            n: int = 1000, max_tries: int = 50, cells: int = 64,
                            voxel_size: float | None = None, clear_base: bool = True,
-                           margin: float = 0.0, dim: int | None = None, device: Any = None,
+                           margin: float = 0.0, dim: int | None = None, device: DeviceLike = None,
                            extent: float | None = None, **noise: Any) -> World:
     """The first simplex world of the candidates of ``seed`` (:func:`world_seed_candidates`:
     ``seed`` itself, then seeds of its own stream, so distinct seeds give distinct worlds) in

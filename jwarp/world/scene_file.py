@@ -45,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import DTypeLike
 from jwarp.utils.roots import one_warning_per_file
 from jwarp.world.moveit import (
     RobotFrames,
@@ -146,7 +147,7 @@ class SceneOptions:
     voxel_size: float | None = None
     limits: Any = None
     pad: float | None = None
-    dtype: Any = np.float64
+    dtype: DTypeLike = np.float64
 
     def validate(self) -> None:
         if self.voxel_size is not None:

@@ -529,7 +529,7 @@ def _box_geometry(limits: Any, voxel_size: Any, shape: tuple[int, ...]) -> tuple
 
 # ================================================================ constructors
 def world_from_occupancy(occupancy: Any, limits: Any, voxel_size: float | None = None, *,
-                         dtype: Any = np.float64) -> World:
+                         dtype: DTypeLike = np.float64) -> World:
     """Signed distance field of a boolean occupancy grid (module docstring convention).
 
     Args:
@@ -559,7 +559,7 @@ def world_from_occupancy(occupancy: Any, limits: Any, voxel_size: float | None =
 
 
 def world_from_points(points: Any, limits: Any, voxel_size: float | None = None, *,
-                      shape: Sequence[int] | None = None, dtype: Any = np.float64) -> World:
+                      shape: Sequence[int] | None = None, dtype: DTypeLike = np.float64) -> World:
     """World from a point cloud on obstacle surfaces (e.g. a depth camera).
 
     Each point marks the cell whose centre is nearest as occupied; the SDF follows as for
@@ -587,8 +587,8 @@ def world_from_points(points: Any, limits: Any, voxel_size: float | None = None,
 
 
 def world_from_mesh(mesh: Any, limits: Any, voxel_size: float | None = None, *,
-                    shape: Sequence[int] | None = None, device: Any = None,
-                    dtype: Any = np.float64) -> World:
+                    shape: Sequence[int] | None = None, device: DeviceLike = None,
+                    dtype: DTypeLike = np.float64) -> World:
     """World from a closed triangle mesh: exact distance of every cell centre to the mesh
     surface, negative inside (ray-casting parity), via Warp's BVH mesh queries.
 
@@ -710,7 +710,7 @@ def load_world(path: str | os.PathLike) -> World:
         raise ValueError(f"{path}: {e}") from e
 
 
-def sdf_query(world: World, points: Any, *, grad: bool = False, device: Any = None
+def sdf_query(world: World, points: Any, *, grad: bool = False, device: DeviceLike = None
               ) -> Any:
     """Interpolated signed distance [m] of ``world`` at ``points`` (..., dim) [m] (numpy),
     with the lookup of the cost kernels. Returns (...,) or, with ``grad``, a tuple

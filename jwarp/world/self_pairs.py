@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import RobotLike
 from jwarp.kinematics.fk import fk
 from jwarp.model import RobotModel, SelfCollision
 from jwarp.model.pair_reasons import (
@@ -209,7 +210,7 @@ def _plan(model: RobotModel, n_samples: int, batch: int, max_memory: int
     return cost, tile
 
 
-def pair_sampling_cost(robot: Any, n_samples: int = 10000, *, batch: int = 1024,
+def pair_sampling_cost(robot: RobotLike, n_samples: int = 10000, *, batch: int = 1024,
                        max_memory: int = MAX_MEMORY) -> PairSamplingCost:
     """The work and memory of :func:`never_colliding_pairs` with these arguments, without
     doing it (sizes only)."""
@@ -219,7 +220,7 @@ def pair_sampling_cost(robot: Any, n_samples: int = 10000, *, batch: int = 1024,
     return _plan(model, n_samples, batch, _memory_arg(max_memory))[0]
 
 
-def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
+def never_colliding_pairs(robot: RobotLike, n_samples: int = 10000, seed: int = 0,
                           margin: float = 0.0, *, batch: int = 1024,
                           max_memory: int = MAX_MEMORY, verbose: bool = False,
                           adjacency: str = "rigid", always_fraction: float = 1.0) -> SelfPairs:
@@ -392,7 +393,7 @@ def _frame_pair_min(x: np.ndarray, r: np.ndarray, todo: np.ndarray, a0: int, a1:
 
 
 
-def default_pairs(robot: Any, home: Any, contact: Any
+def default_pairs(robot: RobotLike, home: Any, contact: Any
                   ) -> tuple[list[tuple[int, int, float]], list[tuple[int, int, float]]]:
     """MoveIt's "Default" rule, checked against the robot's own geometry: the checked frame
     pairs (``RobotModel.allowed_collision_pairs``) whose spheres overlap at ``home``
@@ -419,7 +420,7 @@ def default_pairs(robot: Any, home: Any, contact: Any
     return default, fit
 
 
-def with_default_pairs(robot: Any, pairs: Any) -> RobotModel:
+def with_default_pairs(robot: RobotLike, pairs: Any) -> RobotModel:
     """A copy of ``robot`` whose ``exclude_pairs`` also hold ``pairs`` (frame index pairs,
     e.g. the ``default`` of :func:`default_pairs`; extra items are ignored), listed by name
     in ``notes['self_collision_default']`` (added to those listed already)."""
@@ -450,7 +451,7 @@ def with_default_pairs(robot: Any, pairs: Any) -> RobotModel:
     return model.copy(self_collision=new_sc, notes=notes)
 
 
-def with_self_pairs(robot: Any, pairs: SelfPairs, *, replace: bool = True) -> RobotModel:
+def with_self_pairs(robot: RobotLike, pairs: SelfPairs, *, replace: bool = True) -> RobotModel:
     """A copy of ``robot`` whose ``self_collision`` excludes ``pairs.exclude_pairs``.
 
     ``replace=True``: the section becomes exactly these exclusions (no groups, no include
@@ -485,7 +486,7 @@ def with_self_pairs(robot: Any, pairs: SelfPairs, *, replace: bool = True) -> Ro
     return with_pair_reasons(out, {**sampled_reasons(model, pairs), **old_reasons})
 
 
-def sampled_reasons(robot: Any, pairs: SelfPairs) -> dict[tuple[int, int], tuple[str, str]]:
+def sampled_reasons(robot: RobotLike, pairs: SelfPairs) -> dict[tuple[int, int], tuple[str, str]]:
     """``{(a, b): (reason, why)}`` of the exclusions of the sampled ``pairs``: Adjacent,
     Always (with its share of the samples), Never (with the closest distance seen)."""
     model = get_robot(robot)
@@ -511,7 +512,7 @@ def sampled_reasons(robot: Any, pairs: SelfPairs) -> dict[tuple[int, int], tuple
     return out
 
 
-def write_self_pairs(robot: Any, out: str | os.PathLike, pairs: SelfPairs | None = None, *,
+def write_self_pairs(robot: RobotLike, out: str | os.PathLike, pairs: SelfPairs | None = None, *,
                      replace: bool = True, **options: Any) -> RobotModel:
     """Compute the pairs (``options`` go to :func:`never_colliding_pairs`) unless given, and
     save the robot with them as JSON to ``out`` (atomically). Returns the new model."""

@@ -53,6 +53,7 @@ import numpy as np
 
 from jwarp.calibration.estimate.params import ParameterSpace, parse_groups
 from jwarp.core.threads import limit_blas
+from jwarp.core.types import RobotLike
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.overrides import renamed_options
 from jwarp.utils.checks import check_int
@@ -357,7 +358,7 @@ def select(U: Any, prior: Any, L: Any | None, options: DesignOptions,
 
 
 # ------------------------------------------------------------ measurements
-def candidate_jacobians(robot: Any, measurement: Any, q: Any, free: str | Iterable[str], *,
+def candidate_jacobians(robot: RobotLike, measurement: Any, q: Any, free: str | Iterable[str], *,
                         meta: Mapping[str, Any] | None = None, chunk: int = 4096,
                         **problem: Any) -> tuple[np.ndarray, ParameterSpace]:
     """Whitened Jacobians (n, m, P) of ``measurement`` at the candidate configurations q
@@ -392,7 +393,7 @@ def candidate_jacobians(robot: Any, measurement: Any, q: Any, free: str | Iterab
     return out, space
 
 
-def task_information(robot: Any, task: Any, q_task: Any, names: list[str],
+def task_information(robot: RobotLike, task: Any, q_task: Any, names: list[str],
                      free: str | Iterable[str], *, meta: Mapping[str, Any] | None = None,
                      rank_rtol: float = 1e-10, **problem: Any) -> tuple[np.ndarray, list[str]]:
     """The task factor ``L`` (P, r) on the parameters ``names`` (the actual measurement's
@@ -423,7 +424,7 @@ def prior_information(space: ParameterSpace) -> np.ndarray:
 
 
 @limit_blas  # small dense problems (JWARP_BLAS_THREADS)
-def design(robot: Any, actual: Any, q_pool: Any, options: DesignOptions, *,
+def design(robot: RobotLike, actual: Any, q_pool: Any, options: DesignOptions, *,
            free: str | Iterable[str], meta_pool: Mapping[str, Any] | None = None,
            task: Any = None, q_task: Any = None, meta_task: Mapping[str, Any] | None = None,
            progress: Callable[[int, int], Any] | None = None, **problem: Any) -> DesignResult:

@@ -39,6 +39,7 @@ import warp as wp
 from jwarp.calibration.files import Setup, make_measurement
 from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.core.device import make_struct, put_model, scalar_type
+from jwarp.core.types import DTypeLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kernels import visibility as vk
 from jwarp.model import RobotModel
@@ -236,7 +237,7 @@ class PoseSample:
         return float(self.counts.get("ok", 0)) / max(self.tried, 1)
 
 
-def _scratch(device: wp.Device, n: int, m: int, dtype: Any) -> tuple[wp.array, Any]:
+def _scratch(device: wp.Device, n: int, m: int, dtype: DTypeLike) -> tuple[wp.array, Any]:
     """(n, m) per-thread scratch: CUDA frame-major (coalesced), CPU one row seen by every
     thread through a stride-0 view (Warp's CPU launch runs the threads in turn)."""
     if device.is_cuda:

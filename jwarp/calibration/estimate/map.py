@@ -72,6 +72,7 @@ from jwarp.calibration.estimate.samples import check_samples
 from jwarp.core.arrays import finite_as, init_warp, resolve_device
 from jwarp.core.device import put_model, with_frame_masses, with_kappa_nonlinear
 from jwarp.core.threads import limit_blas
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 
@@ -109,7 +110,7 @@ class Progress(NamedTuple):
 def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: np.ndarray,
                        lam: float, max_iter: int, tol: float,
                        masses: tuple[np.ndarray, np.ndarray] | None = None,
-                       kappa_nl: np.ndarray | None = None, device: Any = None
+                       kappa_nl: np.ndarray | None = None, device: DeviceLike = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elastic FK (float64) as :func:`jwarp.fk_elastic`, but accepting compliances of
     either sign: the optimizer may cross kappa = 0 on its way (the fixed point is just as
@@ -281,9 +282,9 @@ class CalibrationProblem:
             ``free``, compliances unbounded unless ``bound_kappa``).
     """
 
-    def __init__(self, robot: Any, measurement: Any, q: Any, y: Any,
+    def __init__(self, robot: RobotLike, measurement: Any, q: Any, y: Any,
                  options: CalibrationOptions | None = None, *,
-                 meta: Mapping[str, Any] | None = None, device: Any = None,
+                 meta: Mapping[str, Any] | None = None, device: DeviceLike = None,
                  **keywords: Any) -> None:
         if keywords:
             if options is not None:
@@ -394,7 +395,7 @@ class CalibrationProblem:
         self.n_evaluations = 0
 
     @classmethod
-    def from_options(cls, robot: Any, measurement: Any, q: Any, y: Any,
+    def from_options(cls, robot: RobotLike, measurement: Any, q: Any, y: Any,
                      options: CalibrationOptions, meta: Mapping[str, Any] | None = None
                      ) -> CalibrationProblem:
         """``CalibrationProblem(robot, measurement, q, y, options, meta=meta)`` (kept for
@@ -990,7 +991,7 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
                           message=message, rounds=rounds, held=held & (best_x == 0.0))
 
 
-def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *,
+def calibrate(robot: RobotLike, measurement: Any, q: Any, y: Any, *,
               meta: Mapping[str, Any] | None = None, options: CalibrationOptions | None = None,
               **overrides: Any) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples:
@@ -1027,7 +1028,7 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *,
 
 
 @limit_blas  # small dense solves: a threaded BLAS only oversubscribes (JWARP_BLAS_THREADS)
-def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
+def calibrate_with(robot: RobotLike, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
                    *, meta: Mapping[str, Any] | None = None, t0: float | None = None
                    ) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples.

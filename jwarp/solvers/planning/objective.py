@@ -17,6 +17,7 @@ from jwarp.core.arrays import (
     resolve_device,
 )
 from jwarp.core.device import numpy_dtype, put_model, scalar_type
+from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
@@ -49,9 +50,9 @@ class PathObjective:
     waypoints] -> path cost (-> gradient or step). Arrays are Warp arrays on ``device``.
     """
 
-    def __init__(self, robot: Any, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
+    def __init__(self, robot: RobotLike, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
                  *, weights: PathWeights | None = None, eps: float | None = None,
-                 kappa: Any = None, lam: float = 0.7, device: Any = None, dtype: Any = np.float32):
+                 kappa: Any = None, lam: float = 0.7, device: DeviceLike = None, dtype: DTypeLike = np.float32):
         init_warp()
         self.robot = get_robot(robot)
         check_world(self.robot, world)

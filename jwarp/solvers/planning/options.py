@@ -12,6 +12,7 @@ import numpy as np
 
 from jwarp.core.arrays import real_number
 from jwarp.core.device import numpy_dtype, scalar_type
+from jwarp.core.types import DTypeLike
 from jwarp.solvers.options import SolverOptions
 from jwarp.solvers.overrides import renamed_options
 from jwarp.utils.checks import check_int
@@ -213,7 +214,7 @@ class PlanOptions(SolverOptions):
     def __post_init__(self) -> None:
         self.fallback = fallback_word(self.fallback)
 
-    def validate(self, dtype: Any = np.float32) -> None:
+    def validate(self, dtype: DTypeLike = np.float32) -> None:
         """ValueError/TypeError naming the first bad field; numbers must be finite in the
         computing ``dtype``."""
         npdt = numpy_dtype(scalar_type(dtype))

@@ -35,6 +35,7 @@ import numpy as np
 
 from jwarp.core.arrays import real_array, real_number
 from jwarp.core.limits import sample_within_limits, within_limits
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.model.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world import path_feasibility as _fz
@@ -162,7 +163,7 @@ class _Checks:
     ``endpoint_margin`` below ``margin`` the segments that start or end at one of the
     ``roots`` (start, goal) are checked at that clearance, every other at ``margin``."""
 
-    def __init__(self, model: Any, world: Any, margin: float, kappa: Any, device: Any,
+    def __init__(self, model: Any, world: Any, margin: float, kappa: Any, device: DeviceLike,
                  n_substeps: int | None, endpoint_margin: float | None = None,
                  roots: np.ndarray | None = None, self_margin: float = 0.0,
                  meshes: bool = True) -> None:
@@ -244,9 +245,9 @@ def _vector(x: Any, n: int, name: str) -> np.ndarray:
     return np.array(a, np.float64)
 
 
-def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
+def rrt_connect(robot: RobotLike, world: Any, start: Any, goal: Any,
                 options: RRTOptions | None = None, *, margin: float = 0.0, kappa: Any = None,
-                device: Any = None, deadline: float | None = None,
+                device: DeviceLike = None, deadline: float | None = None,
                 endpoint_margin: float | None = None, self_margin: float = 0.0,
                 meshes: bool = True) -> RRTResult:
     """A feasible path from ``start`` to ``goal`` (n_dof,) by RRT-Connect (module doc).
