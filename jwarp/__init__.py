@@ -12,7 +12,7 @@ imported on first use, so ``import jwarp`` costs no Warp, torch or scipy import 
 
 from typing import Any
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 #: facade names imported on first use: name -> module
 LAZY = {
@@ -44,8 +44,6 @@ LAZY = {
 SUBMODULES = frozenset({
     "calibration", "cli", "core", "importers", "kernels", "kinematics", "learn", "model",
     "plugins", "solvers", "utils", "viz", "world",
-    # deprecated paths (issue 28), forwarding with a DeprecationWarning for one release
-    "atomic", "measurement", "memory", "registry",
 })
 
 #: the entry points (``__all__``, docs/api.md's first section); the other names of

@@ -3,7 +3,7 @@ modules, and no ``_private`` name is used outside its package.
 
 Layers (low to high); a module may import its own layer or any lower one:
 
-    0 host:      jwarp.utils (atomic files, memory estimates, deprecated paths),
+    0 host:      jwarp.utils (atomic files, memory estimates),
                  jwarp.model (RobotModel, the plugin registry, the measurement interface),
                  jwarp.importers (URDF in/out, sphere fitting: model and utils only,
                  plus third-party libs)
@@ -38,9 +38,9 @@ LAYERS = {
     "jwarp.plugins": 5, "jwarp.solvers": 6, "jwarp.calibration": 6, "jwarp.learn": 7,
     "jwarp.viz": 8, "jwarp.cli": 9,
 }
-#: old module paths kept for one release: each only forwards (with a DeprecationWarning)
-#: to the module it moved to (issue 28, packages by job)
-DEPRECATED = {
+#: module paths removed in 0.2.0 (issue 40 item 8; CHANGELOG.md) -> where their code lives
+#: (they forwarded there with a DeprecationWarning for one release after issue 28)
+REMOVED = {
     "jwarp.atomic": "jwarp.utils.atomic", "jwarp.memory": "jwarp.utils.memory",
     "jwarp.registry": "jwarp.model.registry", "jwarp.measurement": "jwarp.model.measurement",
     "jwarp.solvers.planner": "jwarp.solvers.planning",
@@ -50,6 +50,7 @@ DEPRECATED = {
     "jwarp.solvers.calibration": "jwarp.calibration",
     "jwarp.solvers.calibration.design": "jwarp.calibration.design.optimal",
     "jwarp.plugins.measurements.geometry": "jwarp.model.geometry",
+    "jwarp.utils.deprecation": "",
     **{f"jwarp.solvers.calibration.{m}": f"jwarp.calibration.{p}{m}"
        for p, ms in (("estimate.", ("map", "options", "params", "origin", "elastic", "robust",
                                     "samples", "result", "diagnostics")),
@@ -58,8 +59,6 @@ DEPRECATED = {
                      ("", ("files", "pool")))
        for m in ms},
 }
-for _old in DEPRECATED:
-    LAYERS[_old] = LAYERS[max((p for p in LAYERS if DEPRECATED[_old].startswith(p)), key=len)]
 FACADE = {"jwarp", "jwarp.__main__"}
 
 
@@ -540,15 +539,14 @@ FACADES = _gen_api_facades()
 
 
 def test_packages_by_job():
-    """Each job in its package; no loose top-level module but the facade, ``__main__`` and
-    the deprecated paths; jwarp.solvers holds no calibration code (only forwarding
-    modules)."""
+    """Each job in its package; no loose top-level module but the facade and ``__main__``;
+    jwarp.solvers holds no calibration code."""
     for pkg in PACKAGES:
         assert pkg in MODULES and MODULES[pkg][2], f"{pkg} is not a package"
     loose = {m for m, (_p, _t, is_pkg) in MODULES.items()
-             if m.count(".") == 1 and not is_pkg} - FACADE - set(DEPRECATED)
+             if m.count(".") == 1 and not is_pkg} - FACADE
     assert not loose, f"loose top-level modules: {sorted(loose)}"
-    stale = [m for m in MODULES if m.startswith("jwarp.solvers.calibration") and m not in DEPRECATED]
+    stale = [m for m in MODULES if m.startswith("jwarp.solvers.calibration")]
     assert not stale, stale
 
 
@@ -564,34 +562,27 @@ def test_facades_have_all(facade):
     assert not missing, f"{facade}.__all__ names what it lacks: {missing}"
 
 
-@pytest.mark.parametrize("old", sorted(DEPRECATED))
-def test_deprecated_path_forwards_with_a_warning(old):
-    """An old module path still imports for one release: it warns (DeprecationWarning
-    naming the new path) and its public names are the new module's objects."""
+@pytest.mark.parametrize("old", sorted(REMOVED))
+def test_removed_path_is_gone(old):
+    """The old module paths that forwarded for one release are removed (0.2.0): importing
+    one fails, and a removed top-level one is no attribute of the facade."""
     import importlib
-    import sys
-    import warnings
 
-    new = importlib.import_module(DEPRECATED[old])
-    sys.modules.pop(old, None)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        mod = importlib.import_module(old)
-    msgs = [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning)]
-    assert any(DEPRECATED[old] in m for m in msgs), msgs
-    public = getattr(new, "__all__", None) or [n for n in vars(new) if not n.startswith("_")]
-    for name in public:
-        assert getattr(mod, name) is getattr(new, name), f"{old}.{name}"
-    with pytest.raises(AttributeError, match="moved to"):
-        mod.no_such_name  # noqa: B018
+    import jwarp
+
+    assert old not in MODULES
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module(old)
+    if old.count(".") == 1:
+        assert not hasattr(jwarp, old.split(".")[1]), old
 
 
-def test_nothing_imports_a_deprecated_path():
-    """jwarp's own modules, the tests, benchmarks and examples import the new paths."""
-    bad = [f"{m}:{line} imports {target}" for m in MODULES if m not in DEPRECATED
-           for line, target, _names, _top in imports(m) if target in DEPRECATED]
+def test_nothing_imports_a_removed_path():
+    """jwarp's own modules, the tests, benchmarks, examples and tools import the new paths."""
+    bad = [f"{m}:{line} imports {target}" for m in MODULES
+           for line, target, _names, _top in imports(m) if target in REMOVED]
     repo = ROOT.parent
-    for folder in ("tests", "benchmarks", "examples"):
+    for folder in ("tests", "benchmarks", "examples", "tools"):
         for path in sorted((repo / folder).rglob("*.py")):
             tree = ast.parse(path.read_text(), str(path))
             for node in ast.walk(tree):
@@ -602,5 +593,5 @@ def test_nothing_imports_a_deprecated_path():
                 else:
                     continue
                 bad += [f"{path.relative_to(repo)}:{node.lineno} imports {t}" for t in targets
-                        if t in DEPRECATED and path.name != "test_architecture.py"]
+                        if t in REMOVED and path.name != "test_architecture.py"]
     assert not bad, "\n".join(bad)

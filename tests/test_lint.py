@@ -1,7 +1,7 @@
-"""Static checks of jwarp/ (issue "Finish the house", item 5): pyflakes' rules and syntax
-errors through ruff (``ruff check jwarp`` with pyproject.toml's ``[tool.ruff.lint]``, ``F``
-and ``E9``: undefined names, unused imports and variables, redefinitions), the same command
-as ``.ci/run``. ruff is in the test extra; without it the test is skipped, said
+"""Static checks of jwarp/ (issue "Finish the house", item 5; issue 40 item 7): ruff
+(``ruff check jwarp`` with pyproject.toml's ``[tool.ruff.lint]``: pyflakes ``F``, syntax
+errors ``E9``, import order ``I``, bugbear ``B``, simplify ``SIM``, pyupgrade ``UP`` and
+the ban on heavy module-level imports ``TID253``), the same command as ``.ci/run``. ruff is in the test extra; without it the test is skipped, said
 so."""
 
 from __future__ import annotations

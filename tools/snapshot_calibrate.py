@@ -45,8 +45,9 @@ import sys
 import numpy as np
 
 #: keys whose values differ from run to run by design (wall times, dates, file hashes of
-#: files holding a date, the id a new campaign draws)
-VOLATILE = {"date", "time_s", "robot_sha256", "campaign_id", "wall_s"}
+#: files holding a date, the id a new campaign draws), or from release to release (the
+#: jwarp version the provenance records)
+VOLATILE = {"date", "time_s", "robot_sha256", "campaign_id", "wall_s", "jwarp_version"}
 
 TASK = {"plugin": "cartesian", "tracker": {"position": [0, 0, 0]},
         "markers": [{"name": "right", "frame": "right_tcp", "position": [0, 0, 0.05]},

@@ -16,26 +16,54 @@ weighting, provenance): :func:`load_campaign` and :func:`calibrate_campaign`
 (:mod:`~jwarp.calibration.campaign_run`).
 """
 
-from jwarp.calibration.estimate.map import (CalibrationProblem, ModelState, Progress, calibrate,
-                                            calibrate_with)
-from jwarp.calibration.estimate.options import CalibrationOptions
-from jwarp.calibration.estimate.cv import (CVOptions, CVResult, CVSetting, calibrate_cv,
-                                           cross_validate)
-from jwarp.calibration.estimate.params import (DEFAULT_SIGMA, ROBOT_GROUPS, ParameterSpace,
-                                               influencing_frames, influencing_masses,
-                                               parse_groups, perturb_robot)
-from jwarp.calibration.estimate.samples import check_samples
-from jwarp.calibration.estimate.result import (CalibrationResult, CalibrationWarning, Direction,
-                                               error_stats, errors, model_frames,
-                                               observation_groups, predict)
+from jwarp.calibration.campaign_run import (
+                                            CampaignCalibration,
+                                            CampaignData,
+                                            CampaignOptions,
+                                            calibrate_campaign,
+                                            load_campaign,
+)
 from jwarp.calibration.design.optimal import DesignOptions, DesignResult
 from jwarp.calibration.design.poses import PoseOptions, sample_poses
 from jwarp.calibration.design.sensitivity import SensitivityResult, sensitivity
 from jwarp.calibration.design.tour import order_poses
+from jwarp.calibration.estimate.cv import (
+                                            CVOptions,
+                                            CVResult,
+                                            CVSetting,
+                                            calibrate_cv,
+                                            cross_validate,
+)
+from jwarp.calibration.estimate.map import (
+                                            CalibrationProblem,
+                                            ModelState,
+                                            Progress,
+                                            calibrate,
+                                            calibrate_with,
+)
+from jwarp.calibration.estimate.options import CalibrationOptions
+from jwarp.calibration.estimate.params import (
+                                            DEFAULT_SIGMA,
+                                            ROBOT_GROUPS,
+                                            ParameterSpace,
+                                            influencing_frames,
+                                            influencing_masses,
+                                            parse_groups,
+                                            perturb_robot,
+)
+from jwarp.calibration.estimate.result import (
+                                            CalibrationResult,
+                                            CalibrationWarning,
+                                            Direction,
+                                            error_stats,
+                                            errors,
+                                            model_frames,
+                                            observation_groups,
+                                            predict,
+)
+from jwarp.calibration.estimate.samples import check_samples
 from jwarp.calibration.simulate.campaign import Campaign, simulate_campaign
 from jwarp.calibration.simulate.scenarios import scenario
-from jwarp.calibration.campaign_run import (CampaignCalibration, CampaignData,
-                                            CampaignOptions, calibrate_campaign, load_campaign)
 
 __all__ = [
     "calibrate_campaign", "calibrate_cv", "calibrate_with", "CampaignCalibration",

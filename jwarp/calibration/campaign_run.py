@@ -33,11 +33,15 @@ from typing import Any
 import numpy as np
 
 from jwarp.calibration.estimate.cv import CVOptions, CVResult, CVSetting, calibrate_cv
-from jwarp.calibration.estimate.map import (CalibrationProblem, calibrate_with,
-                                            problem_options)
+from jwarp.calibration.estimate.map import (
+    CalibrationProblem,
+    calibrate_with,
+    problem_options,
+)
 from jwarp.calibration.estimate.options import CalibrationOptions
 from jwarp.calibration.estimate.result import CalibrationResult, error_stats, errors
 from jwarp.calibration.files import Samples, Setup
+from jwarp.core.types import RobotLike
 from jwarp.model.robot import RobotModel
 
 #: the ``notes`` key of a calibrated robot's provenance (a JSON object)
@@ -84,8 +88,13 @@ def load_campaign(setup: str | os.PathLike, data: str | os.PathLike,
     records, i.e. of another campaign) are collected in :attr:`CampaignData.warnings`,
     not emitted. ValueError naming ``robot`` when neither names a robot; the readers'
     errors name the file."""
-    from jwarp.calibration.files import make_measurement, parse_samples, read_setup, \
-        read_text, sha256_hex
+    from jwarp.calibration.files import (
+        make_measurement,
+        parse_samples,
+        read_setup,
+        read_text,
+        sha256_hex,
+    )
     from jwarp.model.registry import robot as get_robot
 
     setup_path, data_path = os.fspath(setup), os.fspath(data)
@@ -449,7 +458,7 @@ def calibrate_campaign(campaign: CampaignData, options: CampaignOptions | None =
     cv_settings = _cv_settings(o, len(train), nm)
     cv_result = None
 
-    def table_rows(robot: Any, p: np.ndarray) -> dict[str, dict[str, float]]:
+    def table_rows(robot: RobotLike, p: np.ndarray) -> dict[str, dict[str, float]]:
         out = {"train": _stats(errors(robot, meas, p, train.q, train.y, train.meta or None,
                                       directions=dir_train), scale)}
         if test is not None:

@@ -50,9 +50,9 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.utils.atomic import atomic_write_text
 from jwarp.model import RobotModel
 from jwarp.model.measurement import Measurement
+from jwarp.utils.atomic import atomic_write_text
 
 SETUP_SCHEMA = "jwarp.calibration_setup"
 SETUP_VERSION = 1
@@ -97,7 +97,7 @@ class Samples:
     def __len__(self) -> int:
         return int(self.q.shape[0])
 
-    def select(self, rows: slice | np.ndarray) -> "Samples":
+    def select(self, rows: slice | np.ndarray) -> Samples:
         """The samples of ``rows`` (a slice or index array)."""
         return Samples(self.q[rows], self.y[rows], {k: v[rows] for k, v in self.meta.items()},
                        None if self.lines is None else self.lines[rows],

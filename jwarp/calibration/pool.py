@@ -33,10 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.utils.atomic import atomic_write_text
-from jwarp.model.measurement import Measurement
-from jwarp.model import RobotModel
 from jwarp.calibration.files import Samples, numeric_rows, read_header, read_text
+from jwarp.model import RobotModel
+from jwarp.model.measurement import Measurement
+from jwarp.utils.atomic import atomic_write_text
+from jwarp.utils.checks import ArgumentError, check_int
 
 
 def pool_columns(robot: RobotModel, meas: Measurement) -> list[str]:
@@ -277,8 +278,8 @@ class CandidatePool:
 
 def _raw_draw(robot: RobotModel, setup: object, rng: np.random.Generator) -> Any:
     """``k -> (q (<= k, n_dof), meta)``: the setup's raw candidate draws."""
-    from jwarp.calibration.simulate.campaign import uniform_configurations
     from jwarp.calibration.files import make_measurement
+    from jwarp.calibration.simulate.campaign import uniform_configurations
 
     meas = make_measurement(robot, setup)
     if meas.name == "contact":
@@ -305,13 +306,11 @@ def draw_pool(robot: RobotModel, setup: object, n: int, seed: int, *, world: Any
     dropped and more are drawn, up to ``max_draws`` (default ``max(50 n, 1000)``); a
     pool that cannot reach ``n`` is returned short with a warning in ``warnings``.
     """
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"n: expected an integer >= 1, got {n!r}")
+    check_int(n, "n", 1)
     if max_draws is None:
         max_draws = max(50 * int(n), 1000)
-    if isinstance(max_draws, bool) or not isinstance(max_draws, (int, np.integer)) \
-            or max_draws < n:
-        raise ValueError(f"max_draws: expected an integer >= n ({n}), got {max_draws!r}")
+    if check_int(max_draws, "max_draws") < n:
+        raise ArgumentError(f"max_draws: expected an integer >= n ({n}), got {max_draws!r}")
     t0 = time.perf_counter()
     checker = PoolChecker(robot, setup, world=world, margin=margin)
     raw = _raw_draw(robot, setup, np.random.default_rng(seed))

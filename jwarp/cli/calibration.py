@@ -331,11 +331,15 @@ def _option_error(e: ValueError) -> Exception:
 
 
 def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
-    from jwarp.utils.atomic import commit_all
-    from jwarp.cli.common import dumps
-    from jwarp.calibration.campaign_run import (CampaignOptions, calibrate_campaign,
-                                                load_campaign, report_unit)
+    from jwarp.calibration.campaign_run import (
+        CampaignOptions,
+        calibrate_campaign,
+        load_campaign,
+        report_unit,
+    )
     from jwarp.calibration.files import sha256_hex
+    from jwarp.cli.common import dumps
+    from jwarp.utils.atomic import commit_all
 
     try:
         campaign = load_campaign(args.setup, args.data, robot=args.robot)
@@ -415,8 +419,10 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         summary["cv"] = cv_result.to_dict(scale, unit)
     diag = None
     if args.diagnostics:
-        from jwarp.calibration.estimate.diagnostics import (format_diagnostics,
-                                                            residual_diagnostics)
+        from jwarp.calibration.estimate.diagnostics import (
+            format_diagnostics,
+            residual_diagnostics,
+        )
 
         diag = residual_diagnostics(res.robot, meas, res.params, train.q, train.y,
                                     train.meta or None, directions=run.directions_train)
@@ -469,7 +475,6 @@ _BYTES_PER_SAMPLE_COLUMN = 64
 def _check_campaign_memory(model: Any, meas: Any, n: int) -> None:
     """Refuse ``--samples`` whose estimated memory exceeds the available memory."""
     from jwarp.calibration.files import columns
-
     from jwarp.utils.memory import check_memory, format_bytes
 
     per = (_BYTES_PER_SAMPLE_FRAME * model.n_frames
@@ -483,11 +488,11 @@ def _check_campaign_memory(model: Any, meas: Any, n: int) -> None:
 
 
 def cmd_simulate_campaign(args: argparse.Namespace) -> int:
-    from jwarp.utils.atomic import AtomicFolder
+    from jwarp.calibration.files import make_measurement, read_setup
+    from jwarp.calibration.simulate.campaign import simulate_campaign
     from jwarp.cli.common import quiet_warp
     from jwarp.model.registry import robot as get_robot
-    from jwarp.calibration.simulate.campaign import simulate_campaign
-    from jwarp.calibration.files import make_measurement, read_setup
+    from jwarp.utils.atomic import AtomicFolder
 
     _check_int("--samples", args.samples, 1)
     _check_int("--seed", args.seed, 0)

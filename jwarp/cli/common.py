@@ -10,9 +10,12 @@ import math
 import os
 import re
 import sys
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
+
+from jwarp.core.types import DTypeLike
 
 #: default compliance of ``fk --elastic`` for a robot without its own kappa [rad/(N m)]
 DEFAULT_KAPPA = 1e-4
@@ -83,7 +86,7 @@ def real_arg(option: str, lo: float = -math.inf, hi: float = math.inf, *,
     return parse
 
 
-def check_dtype_range(values: Any, dtype: Any, option: str) -> None:
+def check_dtype_range(values: Any, dtype: DTypeLike, option: str) -> None:
     """CLIError naming ``option`` if finite ``values`` overflow the computing ``dtype``
     (1e39 is finite in float64, inf in float32)."""
     a = np.asarray(values, np.float64)

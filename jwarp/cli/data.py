@@ -38,17 +38,26 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import os
+import sys
 from typing import Any
 
+from jwarp.cli.common import (
+    CLIError,
+    check_device,
+    check_option_memory,
+    check_output,
+    dumps,
+    int_arg,
+    quiet_warp,
+    real_arg,
+    robot_option,
+)
 from jwarp.cli.vocabulary import add_out, require_out
-from jwarp.cli.common import (CLIError, check_option_memory,
-                              check_device, check_output, dumps, int_arg, quiet_warp,
-                              real_arg, robot_option)
+from jwarp.core.types import RobotLike
 
 
-def _check_db(path: str, robot: Any, timeout: float) -> None:
+def _check_db(path: str, robot: RobotLike, timeout: float) -> None:
     """``--db``: an existing, writable database of ``robot`` in a writable folder (SQLite
     writes its journal beside the file), or a new file in a writable folder."""
     from jwarp.learn.dataset import PathDB, PathDBError

@@ -43,16 +43,23 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.cli.common import (
+    CLIError,
+    check_output,
+    dumps,
+    int_arg,
+    quiet_warp,
+    real_arg,
+    rerun_recording,
+)
 from jwarp.cli.vocabulary import add_out
-from jwarp.cli.common import (CLIError, rerun_recording, check_output, dumps, int_arg, quiet_warp,
-                              real_arg)
 
 DEFAULT_FREE = "theta,d,r,alpha"
 
 
 def _setup_and_measurement(path: str, option: str, robot_name: str | None) -> tuple[Any, Any, Any]:
-    from jwarp.model.registry import robot as get_robot
     from jwarp.calibration.files import make_measurement, read_setup
+    from jwarp.model.registry import robot as get_robot
 
     try:
         setup = read_setup(path)
@@ -71,8 +78,8 @@ def _setup_and_measurement(path: str, option: str, robot_name: str | None) -> tu
 
 def _configurations(model: Any, setup: Any, meas: Any, path: str | None, option: str,
                     n: int, seed: int, uniform: bool) -> tuple[np.ndarray, dict | None]:
-    from jwarp.calibration.simulate.campaign import uniform_configurations
     from jwarp.calibration.pool import draw_configurations, read_configurations
+    from jwarp.calibration.simulate.campaign import uniform_configurations
 
     if path:
         s = read_configurations(path, model, meas, option)
@@ -252,8 +259,12 @@ def _warn(lines: list[str]) -> None:
 
 def cmd_design(args: argparse.Namespace) -> int:
     from jwarp.calibration.design.optimal import DesignOptions, design
-    from jwarp.calibration.pool import (PoolChecker, configurations_text,
-                                        draw_pool, read_configurations)
+    from jwarp.calibration.pool import (
+        PoolChecker,
+        configurations_text,
+        draw_pool,
+        read_configurations,
+    )
     from jwarp.utils.atomic import AtomicFile
 
     quiet_warp()
@@ -267,8 +278,8 @@ def cmd_design(args: argparse.Namespace) -> int:
     check_output(args.out, "--out", inputs=inputs)
     setup, model, meas = _setup_and_measurement(args.setup, "--setup", args.robot)
     if args.write_candidates is not None:   # the pool's memory, before any draw
-        from jwarp.cli.planning import config_bytes
         from jwarp.cli.common import check_option_memory
+        from jwarp.cli.planning import config_bytes
 
         n = args.write_candidates
         check_option_memory(2.0 * n * config_bytes(model), f"a pool of {n} configurations "

@@ -22,12 +22,25 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.cli.common import (
+    DEFAULT_KAPPA,
+    DEFAULT_MAX_ITER,
+    CLIError,
+    check_device,
+    check_dtype_range,
+    check_output,
+    dtype_of,
+    dumps,
+    elastic_options,
+    int_arg,
+    load_robot,
+    parse_kappa,
+    parse_q,
+    quiet_warp,
+    real_arg,
+    warn_limits,
+)
 from jwarp.cli.vocabulary import add_out, require_out
-from jwarp.cli.common import (DEFAULT_KAPPA, DEFAULT_MAX_ITER, CLIError, check_device,
-                               check_dtype_range, check_output, dumps, elastic_options,
-                               int_arg, load_robot, parse_kappa, parse_q, quiet_warp,
-                               real_arg, warn_limits, dtype_of)
-
 
 #: fk_elastic's own default of max_iter (jwarp.kinematics.equilibrium; the CLI's differs)
 API_MAX_ITER = 10

@@ -60,16 +60,25 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from jwarp.cli.common import (CLIError, check_option_memory,
-                              rerun_recording, check_device, check_output, dumps, int_arg,
-                              quiet_warp, real_arg, robot_option)
+from jwarp.cli.common import (
+    CLIError,
+    check_device,
+    check_option_memory,
+    check_output,
+    dumps,
+    int_arg,
+    quiet_warp,
+    real_arg,
+    rerun_recording,
+    robot_option,
+)
 
 #: the test targets of ``eval ik`` without ``--mix`` (as in training by default)
 DEFAULT_EVAL_MIX = (0.6, 0.2, 0.2, 0.0)
@@ -280,8 +289,12 @@ def cmd_eval_ik(args: argparse.Namespace) -> int:
         if getattr(n.config, "n_bps", 0) and kind == "none":
             raise CLIError(f"--world: {p} is world-aware; evaluate it in worlds (random, shelf)")
     n_worlds = args.n_worlds if kind == "random" else 1
-    from jwarp.learn.evaluate import (ablation_table, evaluate_ik, format_table_34,
-                                      format_table_35)
+    from jwarp.learn.evaluate import (
+        ablation_table,
+        evaluate_ik,
+        format_table_34,
+        format_table_35,
+    )
 
     mix = args.mix if args.mix is not None else DEFAULT_EVAL_MIX
     _check_mix_world(mix, kind)
@@ -426,7 +439,12 @@ def cmd_train_plan(args: argparse.Namespace) -> int:
     _torch_device(args.device)
     check_output(args.out, "--out")
     from jwarp.core.arrays import init_warp
-    from jwarp.learn.train_plan import TrainPlanOptions, improve, make_plan_data, train_plan
+    from jwarp.learn.train_plan import (
+        TrainPlanOptions,
+        improve,
+        make_plan_data,
+        train_plan,
+    )
 
     if args.skip_damaged and args.data is None:
         raise CLIError("--skip-damaged: only with --data (a path database)")

@@ -40,13 +40,29 @@ import argparse
 import os
 import sys
 import zipfile
-from typing import Sequence
+from collections.abc import Sequence
 
-from jwarp.cli import (calibration, data, design, kinematics, learning, mjcf, planning, poses,
-                       urdf, urdf_export, warmup)
-from jwarp.cli.common import (CLIError, Parser, fix_negative_values, plugin_warnings_one_line,
-                               set_command_files,
-                               value_options)
+from jwarp.cli import (
+    calibration,
+    data,
+    design,
+    kinematics,
+    learning,
+    mjcf,
+    planning,
+    poses,
+    urdf,
+    urdf_export,
+    warmup,
+)
+from jwarp.cli.common import (
+    CLIError,
+    Parser,
+    fix_negative_values,
+    plugin_warnings_one_line,
+    set_command_files,
+    value_options,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -96,7 +112,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
     except BrokenPipeError:  # pragma: no cover - e.g. `jwarp fk ... | head`
         try:
-            sys.stdout = open(os.devnull, "w")
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (for the rest of the process)
         except OSError:
             pass
         return 0

@@ -23,8 +23,12 @@ import warnings
 from typing import Any
 
 from jwarp.cli.common import CLIError, check_output, int_arg, real_arg
-from jwarp.cli.urdf import (end_effectors_arg, import_error, import_summary,
-                            sphere_fit_line)
+from jwarp.cli.urdf import (
+    end_effectors_arg,
+    import_error,
+    import_summary,
+    sphere_fit_line,
+)
 
 
 def _spheres_choice(args: argparse.Namespace) -> str:

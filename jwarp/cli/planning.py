@@ -87,11 +87,22 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.cli.common import (CLIError, check_option_memory,
-                              rerun_recording, dtype_of, quiet_warp, check_device,
-                              check_output, dumps, int_arg, parse_q, real_arg, robot_option)
-from jwarp.cli.vocabulary import add_out
+from jwarp.cli.common import (
+    CLIError,
+    check_device,
+    check_option_memory,
+    check_output,
+    dtype_of,
+    dumps,
+    int_arg,
+    parse_q,
+    quiet_warp,
+    real_arg,
+    rerun_recording,
+    robot_option,
+)
 from jwarp.cli.targets import MAX_TARGET  # noqa: F401  (the largest --target value, here before)
+from jwarp.cli.vocabulary import add_out
 
 #: log every this many iterations to rerun
 RERUN_EVERY = 5
@@ -157,8 +168,13 @@ def _scene_world(scene: Any, model: Any, args: argparse.Namespace) -> Any:
     bounding box padded by at least DEFAULT_PAD and by the largest robot sphere radius
     + ``--margin`` + one voxel, so nothing outside the grid can touch the robot)."""
     from jwarp.world.collision import check_world
-    from jwarp.world.scene_file import (DEFAULT_PAD, DEFAULT_VOXEL, SceneOptions, exact_world,
-                                        scene_world)
+    from jwarp.world.scene_file import (
+        DEFAULT_PAD,
+        DEFAULT_VOXEL,
+        SceneOptions,
+        exact_world,
+        scene_world,
+    )
 
     if args.voxel is None and args.extent is None:  # no grid asked for: the exact objects
         try:
@@ -394,7 +410,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
                      inputs={"--world": args.world, "--scene": args.scene,
                              "--robot": args.robot, "--warm-start": args.warm_start})
     world = _world(args.world, model, args, scene)
-    from jwarp.solvers.planning import PlanOptions, Planner, plan
+    from jwarp.solvers.planning import Planner, PlanOptions, plan
     from jwarp.viz.planning import PlanRecording
 
     rec = (rerun_recording(PlanRecording, args.rerun, model, world)
@@ -833,8 +849,11 @@ def cmd_free_config(args: argparse.Namespace) -> int:
                     ok = is_collision_free(model, q, world, args.margin, device=args.device,
                                            dtype=np.float64)
                 else:  # the deflected robot, as plan/ik --elastic check their endpoints
-                    from jwarp.world.path_feasibility import (ELASTIC_CHECK, collision_free,
-                                                              elastic_equilibrium)
+                    from jwarp.world.path_feasibility import (
+                        ELASTIC_CHECK,
+                        collision_free,
+                        elastic_equilibrium,
+                    )
                     rho, conv = elastic_equilibrium(model, q, kappa, device=args.device)
                     if not conv.any():
                         c = ELASTIC_CHECK

@@ -18,9 +18,16 @@ import json
 import math
 from typing import Any
 
-from jwarp.cli.common import (CLIError, check_option_memory,
-                              check_device, check_output, int_arg, quiet_warp, real_arg,
-                              robot_option)
+from jwarp.cli.common import (
+    CLIError,
+    check_device,
+    check_option_memory,
+    check_output,
+    int_arg,
+    quiet_warp,
+    real_arg,
+    robot_option,
+)
 
 
 def _check_sampling_memory(robot: Any, args: argparse.Namespace) -> None:
@@ -35,9 +42,9 @@ def _check_sampling_memory(robot: Any, args: argparse.Namespace) -> None:
 
 
 def cmd_sample_poses(args: argparse.Namespace) -> int:
-    from jwarp.calibration.files import read_setup
     from jwarp.calibration.design.poses import PoseOptions, PoseSampler, write_plan
     from jwarp.calibration.design.tour import order_poses
+    from jwarp.calibration.files import read_setup
 
     check_output(args.out, "--out", inputs={"--setup": args.setup})
     device = args.device or "cpu"

@@ -315,9 +315,7 @@ def home_needs_model(args: argparse.Namespace, imported: Any) -> None:
 
 
 def cmd_import_urdf(args: argparse.Namespace) -> int:
-    from jwarp.importers.robot import load_urdf
-
-    from jwarp.importers.robot import package_robot_path
+    from jwarp.importers.robot import load_urdf, package_robot_path
 
     try:  # example-robot-data:NAME, robot_descriptions:NAME
         args.urdf = package_robot_path(args.urdf) or args.urdf
@@ -348,7 +346,11 @@ def cmd_import_urdf(args: argparse.Namespace) -> int:
         if args.spheres == "fit" and any(g.kind != "sphere" for g in imported.geometries):
             import warnings
 
-            from jwarp.world.spherize import SphereFitWarning, SpherizeOptions, spherized_robot
+            from jwarp.world.spherize import (
+                SphereFitWarning,
+                SpherizeOptions,
+                spherized_robot,
+            )
 
             opts = SpherizeOptions(tolerance=args.tolerance, max_spheres=args.max_spheres,
                                    pair_samples=args.pair_samples, protrusion=args.protrusion,

@@ -22,8 +22,12 @@ from jwarp.cli.common import CLIError, check_output, real_arg, robot_option
 
 
 def cmd_export_urdf(args: argparse.Namespace) -> int:
-    from jwarp.importers.urdf_export import (UrdfExportOptions, check_srdf_target, export_urdf,
-                                             side_file_path)
+    from jwarp.importers.urdf_export import (
+        UrdfExportOptions,
+        check_srdf_target,
+        export_urdf,
+        side_file_path,
+    )
 
     check_output(args.out, "--out", inputs={"ROBOT": args.robot})
     side = str(side_file_path(args.out))

@@ -24,13 +24,15 @@ Python: :func:`warmup` (also ``jwarp.warmup``).
 from __future__ import annotations
 
 import argparse
-from types import SimpleNamespace
 import sys
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Iterable
+from types import SimpleNamespace
+from typing import TYPE_CHECKING, Any
 
 from jwarp.cli.common import CLIError, check_device, int_arg
+from jwarp.utils.checks import check_int
 
 if TYPE_CHECKING:
     from jwarp.core.types import DeviceLike
@@ -101,9 +103,18 @@ def kernel_modules(families: Iterable[str] = FAMILIES, dtypes: Iterable[str] = D
     nothing. Raises ValueError naming ``families``/``dtypes`` for an unknown entry."""
     import warp as wp
 
-    from jwarp.kernels import (collision, collision_wide, elastic, fk, geometry, ik, ik_step,
-                               motion, path)
-    from jwarp.kernels import visibility
+    from jwarp.kernels import (
+        collision,
+        collision_wide,
+        elastic,
+        fk,
+        geometry,
+        ik,
+        ik_step,
+        motion,
+        path,
+        visibility,
+    )
     from jwarp.model.registry import robot as get_robot
 
     families = _check_names(families, FAMILIES, "families")
@@ -177,8 +188,7 @@ def warmup(device: DeviceLike = None, robots: Iterable[str | RobotModel] | None 
         from jwarp.core.threads import cpu_threads
 
         jobs = min(cpu_threads(), 4)
-    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
-        raise ValueError(f"jobs: expected a positive integer, got {jobs!r}")
+    check_int(jobs, "jobs", 1)
     mods = kernel_modules(families, dtypes, names)
     before = len(compiled_modules())
     with compile_progress(len(mods), f"jwarp warmup ({dev.alias})", bar=progress) as p:

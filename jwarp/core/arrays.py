@@ -13,17 +13,21 @@ import ctypes
 import errno
 import math
 import mmap
-import numbers
 import sys
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable, cast
+from typing import Any, cast
 
 import numpy as np
 import warp as wp
 
 from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.kernel_cache import ensure_cache_dir, install_compile_notice
+from jwarp.core.types import DeviceLike, DTypeLike
+from jwarp.utils.checks import (
+    real_number as real_number,  # its home; imported from here too
+)
 from jwarp.utils.warp_init import init_quietly
 
 _INITIALISED = False
@@ -47,7 +51,7 @@ def is_torch(x: Any) -> bool:
     return mod.startswith("torch") and hasattr(x, "detach")
 
 
-def resolve_device(device: Any, *inputs: Any, like: Any = None) -> wp.Device:
+def resolve_device(device: DeviceLike, *inputs: Any, like: Any = None) -> wp.Device:
     """THE device rule of every public jwarp function and solver (docs/api.md, "Devices").
 
     ``device`` given ("cpu", "cuda:0", a ``wp.Device`` or a torch device): that device.
@@ -101,7 +105,7 @@ def resolve_device(device: Any, *inputs: Any, like: Any = None) -> wp.Device:
     return dev
 
 
-def device_name(device: Any, *inputs: Any) -> str:
+def device_name(device: DeviceLike, *inputs: Any) -> str:
     """The device of :func:`resolve_device` by name ("cpu", "cuda:0"): for torch
     (``torch.device(name)``, ``module.to(name)``) and for cache keys."""
     return resolve_device(device, *inputs).alias
@@ -132,7 +136,7 @@ class Batch:
         return self.array.shape[0]
 
 
-def as_batch(x: Any, n: int, name: str, *, device: wp.Device, dtype: Any,
+def as_batch(x: Any, n: int, name: str, *, device: wp.Device, dtype: DTypeLike,
              what: str, validate: bool = True) -> Batch:
     """Validate ``x`` (shape (..., n)) and bring it to ``device``/``dtype`` as (B, n)."""
     scalar = scalar_type(dtype)
@@ -238,7 +242,7 @@ def real_array(x: Any, name: str, float64: bool = True) -> np.ndarray:
         raise TypeError(f"{name}: expected an array of numbers, got {type(x).__name__}") from e
 
 
-def finite_as(a: np.ndarray, dtype: Any, name: str) -> np.ndarray:
+def finite_as(a: np.ndarray, dtype: DTypeLike, name: str) -> np.ndarray:
     """``a`` cast to the computing ``dtype`` (float32/float64), contiguous; ValueError
     naming ``name`` if it has NaN/inf after the cast (1e39 is finite in float64, inf in
     float32)."""
@@ -248,30 +252,6 @@ def finite_as(a: np.ndarray, dtype: Any, name: str) -> np.ndarray:
     if c.size and not np.isfinite(c).all():
         raise ValueError(f"{name}: {_not_finite(bool(np.isfinite(a).all()), npdt)}")
     return c
-
-
-def real_number(v: Any, name: str, dtype: Any = None) -> float:
-    """A real scalar argument (int, float, numpy scalar or 0-d array) as a float. TypeError
-    naming ``name`` for bool, complex, strings and other non-numbers; with ``dtype``,
-    ValueError unless it is finite in that computing dtype. Range checks are the
-    caller's."""
-    if type(v) is not float:  # the common case first (optimizer loops call this)
-        if isinstance(v, np.ndarray) and v.ndim == 0:
-            v = v[()]
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
-            raise TypeError(f"{name}: expected a real number, got {type(v).__name__} {v!r}")
-    f = float(v)
-    if dtype is not None:
-        fmax = _FMAX.get(dtype)
-        if fmax is None:
-            fmax = _FMAX.setdefault(dtype, float(np.finfo(dtype).max))
-        if not abs(f) <= fmax:
-            raise ValueError(f"{name}: expected a finite number in {np.dtype(dtype).name}, "
-                             f"got {v!r}")
-    return f
-
-
-_FMAX: dict = {}
 
 
 def default_dtype(x: Any) -> Any:
@@ -294,7 +274,7 @@ _HOST_DTYPES = {wp.float32: np.dtype(np.float32), wp.float64: np.dtype(np.float6
 _ITEM_BYTES: dict = {}
 
 
-def _numpy_backed(shape: tuple, dtype: Any, device: wp.Device, fill: bool) -> wp.array | None:
+def _numpy_backed(shape: tuple, dtype: DTypeLike, device: wp.Device, fill: bool) -> wp.array | None:
     """A CPU Warp array on numpy memory (``np.empty``/``np.zeros``), or None where Warp
     should allocate (CUDA, small arrays)."""
     if not device.is_cpu:
@@ -375,7 +355,7 @@ def first_touch(arr: wp.array) -> Callable[[], None] | None:
 _PAGE = mmap.PAGESIZE
 
 
-def empty(shape: tuple, dtype: Any, device: wp.Device, requires_grad: bool = False) -> wp.array:
+def empty(shape: tuple, dtype: DTypeLike, device: wp.Device, requires_grad: bool = False) -> wp.array:
     """``wp.empty``, but a large CPU array is allocated by numpy and shared (zero-copy):
     numpy asks Linux for transparent huge pages, so the first touch of a fresh output costs
     about a quarter of what it costs in Warp's own allocation (173 MB of justin19 frames:
@@ -387,7 +367,7 @@ def empty(shape: tuple, dtype: Any, device: wp.Device, requires_grad: bool = Fal
     return wp.empty(shape, dtype=dtype, device=device, requires_grad=requires_grad)
 
 
-def zeros(shape: tuple, dtype: Any, device: wp.Device, requires_grad: bool = False) -> wp.array:
+def zeros(shape: tuple, dtype: DTypeLike, device: wp.Device, requires_grad: bool = False) -> wp.array:
     """``wp.zeros``, large CPU arrays as :func:`empty` (``np.zeros``: pages zeroed lazily
     by the OS, not written twice)."""
     if not requires_grad:
@@ -397,7 +377,7 @@ def zeros(shape: tuple, dtype: Any, device: wp.Device, requires_grad: bool = Fal
     return wp.zeros(shape, dtype=dtype, device=device, requires_grad=requires_grad)
 
 
-def out_view(out: Any, batch: Batch, tail: tuple, dtype: Any, device: wp.Device,
+def out_view(out: Any, batch: Batch, tail: tuple, dtype: DTypeLike, device: wp.Device,
              name: str = "out") -> wp.array | None:
     """Check a caller's output array ``out`` for a result (B, *tail) of Warp ``dtype``
     (a scalar, or a vector/matrix type such as ``mat44``) on ``device``, and return a Warp
@@ -460,7 +440,7 @@ def out_view(out: Any, batch: Batch, tail: tuple, dtype: Any, device: wp.Device,
                     copy=False)
 
 
-def _wp_name(dtype: Any) -> str:
+def _wp_name(dtype: DTypeLike) -> str:
     inner = getattr(dtype, "_shape_", ())
     scalar = getattr(dtype, "_wp_scalar_type_", dtype)
     base = getattr(scalar, "__name__", str(scalar))
@@ -512,7 +492,7 @@ class HostWrap:
         "deleter", "device", "dtype", "is_contiguous", "is_transposed", "ndim", "pinned",
         "ptr", "shape", "size", "strides"})
 
-    def __init__(self, shape: tuple, npdt: Any, dtype: Any) -> None:
+    def __init__(self, shape: tuple, npdt: Any, dtype: DTypeLike) -> None:
         self.shape, self.npdt, self.dtype = tuple(shape), np.dtype(npdt), dtype
         self.nbytes = math.prod(self.shape) * self.npdt.itemsize
         self.slots = max(1, self.POOL_BYTES // max(self.nbytes, 1))

@@ -47,6 +47,7 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.rows import DHRows
+from jwarp.core.types import RobotLike
 from jwarp.kernels.collision import kernels as collision_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.kernels.path import kernels as path_kernels
@@ -327,16 +328,16 @@ def _dh_info(robot: RobotModel) -> np.ndarray:
 
 # ====================================================================== the cache
 #: content key per RobotModel object (the robot's JSON is hashed once per object)
-_KEYS: "weakref.WeakKeyDictionary[RobotModel, str]" = weakref.WeakKeyDictionary()
+_KEYS: weakref.WeakKeyDictionary[RobotModel, str] = weakref.WeakKeyDictionary()
 #: THE model cache, keyed by (content key, device, scalar): every model still in use ...
-_LIVE: "weakref.WeakValueDictionary[tuple, DeviceModel]" = weakref.WeakValueDictionary()
+_LIVE: weakref.WeakValueDictionary[tuple, DeviceModel] = weakref.WeakValueDictionary()
 #: ... and the most recently used ones kept alive (an fk call does not hold its model)
-_RECENT: "OrderedDict[tuple, DeviceModel]" = OrderedDict()
+_RECENT: OrderedDict[tuple, DeviceModel] = OrderedDict()
 _RECENT_MAX = 32
 _LOCK = threading.Lock()
 
 
-def content_key(robot: Any) -> str:
+def content_key(robot: RobotLike) -> str:
     """The content key of a robot: a hash of its canonical JSON (``RobotModel.to_dict``,
     sorted keys). Equal robots have equal keys; computed once per RobotModel object."""
     model = robot if isinstance(robot, RobotModel) else get_robot(robot)
@@ -356,7 +357,7 @@ def _json_default(o: Any) -> Any:
     raise TypeError(f"robot: cannot hash a {type(o).__name__} value")
 
 
-def put_model(robot: Any, device: object = None, dtype: object = np.float32) -> DeviceModel:
+def put_model(robot: RobotLike, device: object = None, dtype: object = np.float32) -> DeviceModel:
     """The :class:`DeviceModel` of ``robot`` (name or RobotModel) on ``device`` (default: Warp's
     default device) in ``dtype`` (float32 or float64): built once per robot content,
     device and dtype, then shared (see the module docstring)."""
@@ -533,7 +534,7 @@ def _pair_distance_spread(robot: RobotModel, pairs: np.ndarray, n: int = 32,
     return d.min(0), d.max(0)
 
 
-def collision_tables(robot: Any) -> dict:
+def collision_tables(robot: RobotLike) -> dict:
     """Host (numpy) sphere, bound and pair tables of a robot, the source of
     :class:`SphereModel` (cached with its float64 CPU model). Sphere pairs on allowed
     frame pairs whose distance cannot change (e.g. a sphere centred on the only joint axis

@@ -38,10 +38,12 @@ import os
 import sys
 import threading
 import time
-from typing import Any, Callable, Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import warp as wp
 
+from jwarp.core.types import DeviceLike
 from jwarp.utils.warp_init import init_quietly
 
 __all__ = ["CACHE_ENV", "NOTICE_ENV", "KernelCacheWarning", "cache_dir", "compile_progress",
@@ -181,7 +183,7 @@ def _kernel_names(module: Any) -> str:
     return ", ".join(names[:2]) + (", ..." if len(names) > 2 else "")
 
 
-def _device_name(device: Any) -> str:
+def _device_name(device: DeviceLike) -> str:
     return str(getattr(device, "alias", None) or device or "the compile target")
 
 
@@ -222,7 +224,7 @@ def _ticker() -> None:
                 bar.refresh()
 
 
-def _begin(module: Any, device: Any, output_dir: Any) -> None:
+def _begin(module: Any, device: DeviceLike, output_dir: Any) -> None:
     with _LOCK:
         if _STATE["progress"] is None:  # warmup: its own header and bar
             why = compile_reason(os.fspath(output_dir)) if output_dir is not None else "first use"

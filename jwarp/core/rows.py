@@ -33,6 +33,7 @@ from typing import Any
 
 import warp as wp
 
+from jwarp.core.types import DeviceLike
 from jwarp.kernels.fk import ROWS_COMPENSATION, ROWS_DH, ROWS_NOMINAL
 
 __all__ = ["RowsKind", "DHRows", "PER_CONFIG_LAYOUT", "COLUMNS"]
@@ -93,7 +94,7 @@ class DHRows:
             raise ValueError(f"layout: expected (S, n_sub, W, P or 0) with S, n_sub, W >= 1, "
                              f"got {self.layout!r}")
         S, n_sub, W, P = lay
-        if S != (W - 1) * n_sub + 1:
+        if (W - 1) * n_sub + 1 != S:
             raise ValueError(f"layout: S = {S} configurations per path does not match "
                              f"W = {W} waypoints of n_sub = {n_sub} substeps")
         if kind != RowsKind.COMPENSATION and lay != PER_CONFIG_LAYOUT:
@@ -106,12 +107,12 @@ class DHRows:
 
     # ------------------------------------------------------------ constructors
     @classmethod
-    def nominal(cls, dh0: wp.array) -> "DHRows":
+    def nominal(cls, dh0: wp.array) -> DHRows:
         """The nominal rows: a model's ``(1, n_frames, 5)`` table (``DeviceModel.dh0_3d``)."""
         return cls(RowsKind.NOMINAL, dh0, 0)
 
     @classmethod
-    def shared(cls, array: wp.array) -> "DHRows":
+    def shared(cls, array: wp.array) -> DHRows:
         """One row table ``(n_frames, 5)`` or ``(1, n_frames, 5)`` for every configuration."""
         if isinstance(array, wp.array) and array.ndim == 2:
             array = array.reshape((1, *array.shape))
@@ -121,7 +122,7 @@ class DHRows:
         return cls(RowsKind.DH, array, 0)
 
     @classmethod
-    def per_config(cls, array: wp.array, n: int | None = None) -> "DHRows":
+    def per_config(cls, array: wp.array, n: int | None = None) -> DHRows:
         """A row table per configuration ``(N, n_frames, 5)`` (``n``: the expected N)."""
         r = cls(RowsKind.DH, array, 1)
         if n is not None and array.shape[0] != n:
@@ -129,7 +130,7 @@ class DHRows:
         return r
 
     @classmethod
-    def compensation(cls, array: wp.array, layout: Any) -> "DHRows":
+    def compensation(cls, array: wp.array, layout: Any) -> DHRows:
         """Compensation rows ``(P * W, n_frames, 9)`` kept per waypoint, read through the
         path ``layout`` (S, n_sub, W, P or 0)."""
         return cls(RowsKind.COMPENSATION, array, 1, tuple(layout))
@@ -170,7 +171,7 @@ class DHRows:
     def is_nominal(self) -> bool:
         return self.kind == RowsKind.NOMINAL
 
-    def check(self, n_frames: int, n: int, scalar: type, device: Any) -> "DHRows":
+    def check(self, n_frames: int, n: int, scalar: type, device: DeviceLike) -> DHRows:
         """ValueError/TypeError unless these rows fit ``n`` configurations of a robot with
         ``n_frames`` frames computed in ``scalar`` on ``device``; returns self."""
         if self.n_frames != n_frames:

@@ -36,7 +36,8 @@ import contextlib
 import functools
 import math
 import os
-from typing import Any, Callable, Iterator, TypeVar
+from collections.abc import Callable, Iterator
+from typing import Any, TypeVar
 
 __all__ = ["BLAS_THREADS_ENV", "DEFAULT_BLAS_THREADS", "THREADS_ENV", "available_cpus",
            "blas_thread_limit", "blas_threads", "cpu_threads", "limit_blas",

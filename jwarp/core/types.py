@@ -5,7 +5,8 @@ themselves (TypeError/ValueError naming the argument)."""
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING, Sequence, Union
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Union
 
 import numpy as np
 
@@ -31,4 +32,4 @@ DeviceLike = Union["wp.Device", str, "torch.device", None]
 
 #: a computing dtype: float32 or float64 as numpy, Warp or a name (``"float32"``); None: that
 #: of the input
-DTypeLike = Union[type, str, np.dtype, None]
+DTypeLike = Union[type, str, np.dtype, None]  # noqa: UP007 (Union like the aliases above)

@@ -36,8 +36,15 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from jwarp.importers.robot import UrdfRobot
-from jwarp.importers.srdf import (Srdf, SrdfError, check_srdf, group_chain_tips,
-                                  group_end_effectors, group_joints, read_srdf)
+from jwarp.importers.srdf import (
+    Srdf,
+    SrdfError,
+    check_srdf,
+    group_chain_tips,
+    group_end_effectors,
+    group_joints,
+    read_srdf,
+)
 from jwarp.importers.tips import default_tips
 from jwarp.model import RobotModel, SelfCollision, freeze_joints, frozen_joint_values
 

@@ -50,8 +50,14 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.importers.urdf import (EXACT, CollisionGeometry, UrdfImport, align_z,
-                                 check_import_options, dh_of)
+from jwarp.importers.urdf import (
+    EXACT,
+    CollisionGeometry,
+    UrdfImport,
+    align_z,
+    check_import_options,
+    dh_of,
+)
 
 #: MuJoCo's joint and geom type numbers (mjtJoint, mjtGeom)
 JOINT_TYPES = {0: "free", 1: "ball", 2: "slide", 3: "hinge"}

@@ -47,10 +47,17 @@ import numpy as np
 import trimesh
 import warp as wp
 
+from jwarp.importers.spheres import (
+    SphereFit,
+    contain_fit,
+    excess_volume,
+    fit_spheres,
+    mesh_memo,
+    one_sided_error,
+    sphere_protrusion,
+)
+from jwarp.utils.checks import check_int
 from jwarp.utils.warp_init import init_quietly
-
-from jwarp.importers.spheres import (SphereFit, contain_fit, excess_volume, fit_spheres,
-                                     mesh_memo, one_sided_error, sphere_protrusion)
 
 __all__ = ["refine_fit", "fit_refined", "coverage_protrusion", "link_protrusions", "fit_kernels",
            "MAX_SPHERES", "MAX_SPHERES_CONTAINED", "LADDER", "CONTAIN_PROTRUSIONS", "WRIST_JOINTS", "WRIST_PROTRUSION", "BASE_PROTRUSION",
@@ -270,11 +277,8 @@ def refine_fit(mesh: trimesh.Trimesh, fit: SphereFit, *, error_fraction: float =
                          f"check_fraction <= 1, got {error_fraction}, {check_fraction}")
     for name, v, lo in (("iters", iters, 1), ("n_check", n_check, 100), ("seed", seed, 0),
                         ("n_volume", n_volume, 100)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
-    if n_surface is not None and (isinstance(n_surface, bool) or
-                                  not isinstance(n_surface, (int, np.integer)) or n_surface < 10):
-        raise ValueError(f"n_surface: expected None or an integer >= 10, got {n_surface!r}")
+        check_int(v, name, lo)
+    check_int(n_surface, "n_surface", 10, none=True)
     tol = float(fit.tolerance)
     if fit.k == 0 or fit.k > (MAX_SPHERES_CONTAINED if contain is not None else MAX_SPHERES):
         return fit  # nothing to move, or too many spheres for the dense (N, k) steps
@@ -417,9 +421,7 @@ def link_protrusions(model: Any, tolerance: float, *, wrist_joints: int = WRIST_
     tol = float(tolerance)
     if not np.isfinite(tol) or tol <= 0:
         raise ValueError(f"tolerance: expected a finite distance > 0 [m], got {tolerance!r}")
-    if isinstance(wrist_joints, bool) or not isinstance(wrist_joints, (int, np.integer)) \
-            or wrist_joints < 0:
-        raise ValueError(f"wrist_joints: expected an integer >= 0, got {wrist_joints!r}")
+    check_int(wrist_joints, "wrist_joints", 0)
     for name, v in (("wrist", wrist), ("base", base), ("hand", hand)):
         if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) \
                 or not np.isfinite(v) or v <= 0:

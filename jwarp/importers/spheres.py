@@ -73,6 +73,7 @@ import warp as wp
 from scipy import sparse
 from scipy.spatial import cKDTree
 
+from jwarp.utils.checks import check_int, check_real
 from jwarp.utils.warp_init import init_quietly
 
 __all__ = ["SphereFit", "SphereFitOptions", "fit_spheres", "fit_geometry", "fit_link", "fit_kernels",
@@ -131,19 +132,19 @@ class SphereFitOptions:
     protrusion: float | None = None
     contain: float | None = None
 
-    def validate(self) -> "SphereFitOptions":
-        self.tolerance = _length(self.tolerance, "tolerance")
+    def validate(self) -> SphereFitOptions:
+        self.tolerance = check_real(self.tolerance, "tolerance", 0, open_lo=True)
         if self.protrusion is not None:
-            self.protrusion = _length(self.protrusion, "protrusion")
+            self.protrusion = check_real(self.protrusion, "protrusion", 0, open_lo=True)
         if self.contain is not None:
-            self.contain = _length(self.contain, "contain")
+            self.contain = check_real(self.contain, "contain", 0, open_lo=True)
         if self.max_spheres is not None:
-            self.max_spheres = _int(self.max_spheres, "max_spheres", 1)
+            self.max_spheres = check_int(self.max_spheres, "max_spheres", 1)
         if self.n_surface is not None:
-            self.n_surface = _int(self.n_surface, "n_surface", 10)
-        self.n_volume = _int(self.n_volume, "n_volume", 100)
-        self.seed = _int(self.seed, "seed", 0)
-        self.max_rounds = _int(self.max_rounds, "max_rounds", 1)
+            self.n_surface = check_int(self.n_surface, "n_surface", 10)
+        self.n_volume = check_int(self.n_volume, "n_volume", 100)
+        self.seed = check_int(self.seed, "seed", 0)
+        self.max_rounds = check_int(self.max_rounds, "max_rounds", 1)
         return self
 
 
@@ -199,7 +200,7 @@ class SphereFit:
         """Number of spheres."""
         return int(len(self.radii))
 
-    def transformed(self, origin: np.ndarray) -> "SphereFit":
+    def transformed(self, origin: np.ndarray) -> SphereFit:
         """The same fit with centres mapped by the rigid 4x4 ``origin`` (radii unchanged)."""
         T = _origin(origin)
         out = SphereFit(**{**self.__dict__, "notes": list(self.notes),
@@ -209,22 +210,6 @@ class SphereFit:
 
 
 # ----------------------------------------------------------------- helpers
-def _int(x: Any, name: str, low: int) -> int:
-    if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
-        raise TypeError(f"{name}: expected an integer, got {type(x).__name__}")
-    if x < low:
-        raise ValueError(f"{name}: must be >= {low}, got {x}")
-    return int(x)
-
-
-def _length(x: Any, name: str) -> float:
-    if isinstance(x, bool) or not isinstance(x, (int, float, np.floating, np.integer)):
-        raise TypeError(f"{name}: expected a number, got {type(x).__name__}")
-    if not np.isfinite(x) or x <= 0:
-        raise ValueError(f"{name}: must be finite and > 0, got {x}")
-    return float(x)
-
-
 def _origin(origin: Any) -> np.ndarray:
     T = np.eye(4) if origin is None else np.asarray(origin, np.float64)
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
@@ -624,7 +609,7 @@ def _cover(slack: _Slack, max_spheres: int | None, eps0: float,
 
 #: per mesh object: what the fits of one link compute more than once (its solid, solid
 #: volumes, boundary samples); weak keys, so nothing outlives the mesh
-_MESH_CACHE: "weakref.WeakKeyDictionary[trimesh.Trimesh, dict]" = weakref.WeakKeyDictionary()
+_MESH_CACHE: weakref.WeakKeyDictionary[trimesh.Trimesh, dict] = weakref.WeakKeyDictionary()
 
 
 def mesh_memo(mesh: trimesh.Trimesh, key: Any, make: Any) -> Any:
@@ -711,7 +696,7 @@ def surface_cover(mesh: trimesh.Trimesh, gap: float) -> np.ndarray:
     ``<= gap``. Deterministic (no sampling). Buried faces (a body inside another) are kept:
     a mesh checker such as coal tests every triangle."""
     mesh = _check_mesh(mesh)
-    g = _length(gap, "gap")
+    g = check_real(gap, "gap", 0, open_lo=True)
     V = np.asarray(mesh.vertices, np.float64)
     F = np.asarray(mesh.faces, np.int64)
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
@@ -798,7 +783,7 @@ def containment_growth(mesh: trimesh.Trimesh, centres: np.ndarray, radii: np.nda
     the sphere it is deepest in); all 0 when they contain it already."""
     c = np.asarray(centres, np.float64).reshape(-1, 3)
     r = np.asarray(radii, np.float64).reshape(-1)
-    P = _cover_of(_check_mesh(mesh), _length(gap, "gap"))
+    P = _cover_of(_check_mesh(mesh), check_real(gap, "gap", 0, open_lo=True))
     depth = float(gap) + float(surface_error)
     d, arg = _nearest_deficit(P, c, r)
     need = d + depth > 0
@@ -836,12 +821,12 @@ def contain_fit(mesh: trimesh.Trimesh, fit: SphereFit, gap: float = CONTAIN_GAP,
     mesh = _check_mesh(mesh)
     if not isinstance(fit, SphereFit):
         raise TypeError(f"fit: expected a SphereFit, got {type(fit).__name__}")
-    g = _length(gap, "gap")
+    g = check_real(gap, "gap", 0, open_lo=True)
     if isinstance(surface_error, bool) or not np.isfinite(surface_error) or surface_error < 0:
         raise ValueError(f"surface_error: expected a finite distance >= 0, got "
                          f"{surface_error!r}")
     if n_check != 0:
-        _int(n_check, "n_check", 100)
+        check_int(n_check, "n_check", 100)
     if fit.contained and fit.contain_gap == g and surface_error == 0 \
             and fit.n_fresh >= n_check:
         return fit

@@ -51,8 +51,8 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from jwarp.utils.atomic import AtomicFile, commit_all
 from jwarp.model import RobotModel
+from jwarp.utils.atomic import AtomicFile, commit_all
 
 #: diagonal inertia [kg m^2] added to every exported inertial (point masses have none)
 INERTIA_FLOOR = 1e-6

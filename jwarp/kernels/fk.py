@@ -51,8 +51,8 @@ DH convention: ``parent_T_child = Rot_y(beta) Rot_x(alpha) Trans_x(r) Rot_z(thet
 
 
 import functools
-from typing import Any
 from types import SimpleNamespace
+from typing import Any
 
 import warp as wp
 

@@ -25,7 +25,6 @@ import warp as wp
 
 from jwarp.kernels.fk import kernels as fk_kernels
 
-
 #: orientation modes of a target: the full pose, position only, the rotation about one
 #: axis of the frame free (:func:`kernels` ``apply_orientation``)
 ORIENT_FULL, ORIENT_NONE, ORIENT_AXIS = 0, 1, 2

@@ -12,17 +12,40 @@ share), :mod:`~jwarp.kinematics.compensation` (DH rows kept across optimizer ite
 (Warp tape Jacobians).
 """
 
-from jwarp.kinematics.data import (KinematicsData, forward_kinematics, frame_dh_jacobian,
-                                  frame_jacobian)
-from jwarp.kinematics.equilibrium import (elastic_step, fk_elastic, gravity_torques,
-                                          solve_equilibrium)
+from jwarp.kinematics.data import (
+                                  KinematicsData,
+                                  forward_kinematics,
+                                  frame_dh_jacobian,
+                                  frame_jacobian,
+)
+from jwarp.kinematics.equilibrium import (
+                                  elastic_step,
+                                  fk_elastic,
+                                  gravity_torques,
+                                  solve_equilibrium,
+)
 from jwarp.kinematics.fk import fk
 from jwarp.kinematics.jacobians import jacobian, jacobian_dh
-from jwarp.kinematics.transmission import (transmitted, without_coupling_harmonic,
-                                           without_transmission)
-from jwarp.kinematics.launch import (ELASTIC_TOL, ElasticFK, ElasticLaunch, ElasticStep,
-                                     default_tol, elastic_args, equilibrium, frame_rows, host_out,
-                                     kappa_array, launch_fk, rho0_full, setup)
+from jwarp.kinematics.launch import (
+                                  ELASTIC_TOL,
+                                  ElasticFK,
+                                  ElasticLaunch,
+                                  ElasticStep,
+                                  default_tol,
+                                  elastic_args,
+                                  equilibrium,
+                                  frame_rows,
+                                  host_out,
+                                  kappa_array,
+                                  launch_fk,
+                                  rho0_full,
+                                  setup,
+)
+from jwarp.kinematics.transmission import (
+                                  transmitted,
+                                  without_coupling_harmonic,
+                                  without_transmission,
+)
 
 __all__ = [
     "ElasticFK", "ElasticStep", "KinematicsData", "elastic_step", "fk_elastic",

@@ -15,9 +15,10 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import finite_as, real_array, real_number
+from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
-from jwarp.kinematics.launch import ElasticLaunch, kappa_array
-from jwarp.kinematics.launch import launch_fk, setup
+from jwarp.kinematics.launch import ElasticLaunch, kappa_array, launch_fk, setup
+from jwarp.utils.checks import check_int
 
 WRT = ("q", "dh", "kappa")
 
@@ -49,10 +50,10 @@ def record_frames(t: Any, q: wp.array, dh: wp.array, kappa: wp.array | None, lam
     return run.frames_at(rho)
 
 
-def tape_jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None,
+def tape_jacobian(robot: RobotLike, q: Any, frame: int | str, *, point: Any = None,
                   kappa: Any = None, iterations: int = 0, lam: float = 1.0, dh: Any = None,
-                  wrt: tuple[str, ...] = WRT, device: Any = None,
-                  dtype: Any = np.float64) -> dict[str, np.ndarray]:
+                  wrt: tuple[str, ...] = WRT, device: DeviceLike = None,
+                  dtype: DTypeLike = np.float64) -> dict[str, np.ndarray]:
     """Jacobians of a frame's pose (or a point in it) by reverse-mode autodiff.
 
     Args:
@@ -71,8 +72,7 @@ def tape_jacobian(robot: Any, q: Any, frame: int | str, *, point: Any = None,
     bad = set(wrt) - set(WRT)
     if bad:
         raise ValueError(f"wrt: unknown {sorted(bad)}; choose from {WRT}")
-    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
-        raise ValueError(f"iterations: expected an integer >= 0, got {iterations!r}")
+    check_int(iterations, "iterations", 0)
     lam = real_number(lam, "lam")
     if not 0.0 < lam <= 1.0:
         raise ValueError(f"lam: damping must be in (0, 1], got {lam!r}")

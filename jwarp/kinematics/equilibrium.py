@@ -14,11 +14,21 @@ from jwarp.core.arrays import as_batch, out_view, real_number, to_output
 from jwarp.core.device import DeviceModel
 from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
+from jwarp.kinematics.launch import (
+    ElasticFK,
+    ElasticLaunch,
+    ElasticStep,
+    check_max_iter,
+    elastic_args,
+    equilibrium,
+    frame_rows,
+    host_out,
+    lam_tol,
+    rho0_full,
+    setup,
+)
 from jwarp.kinematics.transmission import transmitted
 from jwarp.model.registry import robot as get_robot
-from jwarp.kinematics.launch import (ElasticFK, ElasticLaunch, ElasticStep, check_max_iter,
-                                     elastic_args, equilibrium, frame_rows, host_out, lam_tol,
-                                     rho0_full, setup)
 
 
 def fk_elastic(robot: RobotLike, q: ArrayLike, kappa: ArrayLike | None = None, *,

@@ -8,11 +8,26 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import is_torch, Batch, empty, finite_as, first_touch, out_view, to_output, zeros
+from jwarp.core.arrays import (
+    Batch,
+    empty,
+    finite_as,
+    first_touch,
+    is_torch,
+    out_view,
+    to_output,
+    zeros,
+)
 from jwarp.core.device import DeviceModel
 from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
-from jwarp.kinematics.launch import frame_rows, jacobian_inputs, point_vec, setup, small_call
+from jwarp.kinematics.launch import (
+    frame_rows,
+    jacobian_inputs,
+    point_vec,
+    setup,
+    small_call,
+)
 from jwarp.kinematics.transmission import transmission_slope, transmitted
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
@@ -86,8 +101,8 @@ def jacobian(robot: RobotLike, q: ArrayLike, frame: int | str, *,
                          validate=validate, out=out)
 
 
-def link_jacobian(robot: Any, q_link: Any, frame: int | str, *, point: Any = None,
-                  dh: Any = None, device: Any = None, dtype: Any = None,
+def link_jacobian(robot: RobotLike, q_link: Any, frame: int | str, *, point: Any = None,
+                  dh: Any = None, device: DeviceLike = None, dtype: DTypeLike = None,
                   validate: bool = True, out: Any = None) -> Any:
     """:func:`jacobian` w.r.t. the joint values the links see, ``q_link`` (transmission
     errors already applied; no ``dq'/dq`` factor): the same as :func:`jacobian` for a

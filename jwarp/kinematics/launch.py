@@ -18,19 +18,38 @@ from typing import Any, NamedTuple, cast
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import (Batch, HostWrap, as_batch, default_dtype, empty, finite_as,
-                               first_touch, init_warp, is_torch, real_array, real_number,
-                               resolve_device)
+from jwarp.core.arrays import (
+    Batch,
+    HostWrap,
+    as_batch,
+    default_dtype,
+    empty,
+    finite_as,
+    first_touch,
+    init_warp,
+    is_torch,
+    real_array,
+    real_number,
+    resolve_device,
+)
 from jwarp.core.device import DeviceModel, numpy_dtype, put_model, scalar_type
+from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.data import (  # noqa: F401  (POINT_ARG, jacobian_inputs: re-exported)
-    ORIGIN, POINT_ARG, KinematicsData, fk_inputs, jacobian_inputs, point_vec)
+    ORIGIN,
+    POINT_ARG,
+    KinematicsData,
+    fk_inputs,
+    jacobian_inputs,
+    point_vec,
+)
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 
 
-def setup(robot: Any, q: Any, device: Any, dtype: Any, validate: bool = True
+def setup(robot: RobotLike, q: Any, device: DeviceLike, dtype: DTypeLike, validate: bool = True
            ) -> tuple[RobotModel, Batch, DeviceModel]:
     init_warp()
     model = get_robot(robot)
@@ -227,7 +246,7 @@ _CALLS: dict = {}
 
 
 def _resolve_small(op: str, model: RobotModel, q: Any, qa: np.ndarray, warp_in: bool,
-                   dev: wp.Device, dtype: Any, frame: Any, point: Any) -> SmallCall | None:
+                   dev: wp.Device, dtype: DTypeLike, frame: Any, point: Any) -> SmallCall | None:
     """The :class:`SmallCall` of a signature, or None where the general path must run."""
     if qa.dtype not in _SMALL_DTYPES or qa.ndim == 0:
         return None
@@ -258,7 +277,7 @@ def _resolve_small(op: str, model: RobotModel, q: Any, qa: np.ndarray, warp_in: 
     return SmallCall(model, ws, B, want, npdt, fi, pt, npdt.itemsize < qa.itemsize, wrap)
 
 
-def small_call(op: str, robot: Any, q: Any, device: Any, dtype: Any, validate: bool,
+def small_call(op: str, robot: RobotLike, q: Any, device: DeviceLike, dtype: DTypeLike, validate: bool,
                out: Any = None, frame: Any = None, point: Any = None) -> Any:
     """The fast path of :func:`~jwarp.kinematics.fk.fk` (``op`` "fk") and
     :func:`~jwarp.kinematics.jacobians.jacobian` ("jacobian") for a small batch of float32/
@@ -343,7 +362,7 @@ def small_call(op: str, robot: Any, q: Any, device: Any, dtype: Any, validate: b
 ELASTIC_TOL = {np.dtype(np.float64): 1e-9, np.dtype(np.float32): 4 * float(np.finfo(np.float32).eps)}
 
 
-def default_tol(dtype: Any) -> float:
+def default_tol(dtype: DTypeLike) -> float:
     """The default tolerance of :func:`fk_elastic` [rad] for the computing ``dtype``."""
     return ELASTIC_TOL[numpy_dtype(scalar_type(dtype))]
 
@@ -507,14 +526,12 @@ def lam_tol(lam: Any, tol: Any, t: DeviceModel) -> tuple[float, float]:
 
 def check_max_iter(max_iter: Any) -> int:
     """``max_iter`` of the elastic iteration as an int; ValueError unless an integer >= 0."""
-    if isinstance(max_iter, (bool, np.bool_)) or not isinstance(max_iter, (int, np.integer)) \
-            or max_iter < 0:
-        raise ValueError(f"max_iter: expected an integer >= 0, got {max_iter!r}")
+    return check_int(max_iter, "max_iter", 0)
     return int(max_iter)
 
 
-def elastic_args(robot: Any, q: Any, kappa: Any, lam: float, max_iter: int, tol: float | None,
-                  dh: Any, device: Any, dtype: Any, validate: bool):
+def elastic_args(robot: RobotLike, q: Any, kappa: Any, lam: float, max_iter: int, tol: float | None,
+                  dh: Any, device: DeviceLike, dtype: DTypeLike, validate: bool):
     """Validated arguments of the elastic functions: (model, batch, tables, kappa rows,
     rho0 rows or None); lam and tol as :func:`lam_tol` checks them."""
     model, batch, t = setup(robot, q, device, dtype, validate)

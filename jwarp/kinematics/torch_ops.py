@@ -13,6 +13,7 @@ import numpy as np
 import torch
 import warp as wp
 
+from jwarp.core.types import DeviceLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.model import RobotModel
 
@@ -42,12 +43,12 @@ class _TapeFunction(torch.autograd.Function):
         return g, None, None
 
 
-def _prepare(q: torch.Tensor, model: RobotModel, device: Any, scalar: type) -> torch.Tensor:
+def _prepare(q: torch.Tensor, model: RobotModel, device: DeviceLike, scalar: type) -> torch.Tensor:
     target = wp.device_to_torch(device)
     return q.reshape(-1, model.n_dof).to(device=target, dtype=_torch_dtype(scalar))
 
 
-def fk_torch(model: RobotModel, q: torch.Tensor, *, dh: Any, device: Any, dtype: type) -> torch.Tensor:
+def fk_torch(model: RobotModel, q: torch.Tensor, *, dh: Any, device: DeviceLike, dtype: type) -> torch.Tensor:
     """Differentiable FK of a torch tensor q (..., n_dof) -> (..., n_frames, 4, 4)."""
     from jwarp.core.device import put_model
     from jwarp.kinematics.launch import launch_fk
@@ -74,7 +75,13 @@ def fk_elastic_torch(model: RobotModel, batch: Any, t: Any, kap: Any, rho0: Any,
                      max_iter: int, tol: float) -> Any:
     """Differentiable elastic FK of a torch tensor: gradients flow through every torque
     update that the iteration performed (exact derivative of the iterated model)."""
-    from jwarp.kinematics.launch import ElasticFK, ElasticLaunch, equilibrium, host_out, rho0_full
+    from jwarp.kinematics.launch import (
+        ElasticFK,
+        ElasticLaunch,
+        equilibrium,
+        host_out,
+        rho0_full,
+    )
 
     q = batch.torch_tensor
     qc = _prepare(q, model, t.device, t.scalar)

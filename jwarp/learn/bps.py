@@ -40,6 +40,7 @@ from jwarp.core.arrays import (
 )
 from jwarp.kernels import collision as ck
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 from jwarp.world.feasibility import random_configurations
 from jwarp.world.sdf import World
 
@@ -267,10 +268,7 @@ def basis_points(robot: Any, n_points: int, *, margin: float = 0.0, device: Any 
     under 3 % of the points for ``n_points`` >= 500 in 3D (>= 100 in 2D). The result is still
     a subset of one packing (nearest-neighbour distance ``spacing``) inside the ball.
     ``device``: where the FK of the reach runs."""
-    if isinstance(n_points, (bool, np.bool_)) or not isinstance(n_points, (int, np.integer)):
-        raise TypeError(f"n_points: expected a positive integer, got {n_points!r}")
-    if n_points < 1 or n_points > 10_000_000:
-        raise ValueError(f"n_points: expected 1..1e7, got {n_points}")
+    check_int(n_points, "n_points", 1, 10_000_000)
     n_points = int(n_points)
     m = real_number(margin, "margin")
     if not (np.isfinite(m) and m >= 0):

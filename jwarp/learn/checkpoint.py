@@ -36,12 +36,12 @@ from typing import Any
 
 import torch
 
-from jwarp.utils.atomic import AtomicFile
 from jwarp.core.arrays import device_name
 from jwarp.core.device import content_key
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.plan_net import PlanNet, PlanNetConfig
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.atomic import AtomicFile
 
 __all__ = ["FORMAT", "PLAN_FORMAT", "VERSION", "save_checkpoint", "load_checkpoint",
            "load_plan_checkpoint", "read_checkpoint", "check_weights", "network_bytes"]

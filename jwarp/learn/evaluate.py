@@ -38,14 +38,17 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from jwarp.core.limits import project_numpy, sample_within_limits
+from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver, check_warm_start, warm_start_seeds
 from jwarp.solvers.overrides import renamed_argument
+from jwarp.utils.checks import check_int
 
 #: seeds per target and block after the first (a target stops once one is feasible)
 BLOCK = 8
@@ -88,14 +91,8 @@ def _mean_std(x: Sequence[float] | np.ndarray) -> dict:
     return {"mean": float(a.mean()), "std": float(a.std()), "n": int(a.size)}
 
 
-def _count(v: Any, name: str, lo: int) -> int:
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
-        raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
-    return int(v)
-
-
 def _solve_block(model: Any, frame: Any, world: Any, T: np.ndarray, seeds: np.ndarray,
-                 opts: IKOptions, device: Any, dtype: Any) -> tuple[np.ndarray, ...]:
+                 opts: IKOptions, device: DeviceLike, dtype: DTypeLike) -> tuple[np.ndarray, ...]:
     """Every seed (P, S, n) on its own: (feasible (P, S), iterations (P, S), q (P, S, n))."""
     solver = IKSolver(model, frame, len(T), opts, world=world, device=device, dtype=dtype)
     res = solver.solve(T, seeds)
@@ -104,10 +101,10 @@ def _solve_block(model: Any, frame: Any, world: Any, T: np.ndarray, seeds: np.nd
             np.asarray(res.all_q).reshape(seeds.shape))
 
 
-def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start: Any = None,
+def evaluate_ik(robot: RobotLike, frame: Any, world: Any, targets: Any, *, warm_start: Any = None,
                 n_random: int = N_RANDOM, iterations: int | None = None, margin: float = 0.0,
                 tol_pos: float = 1e-4, tol_rot: float = 1e-3, q_default: Any = None,
-                seed: int = 0, device: Any = None, dtype: Any = np.float64,
+                seed: int = 0, device: DeviceLike = None, dtype: DTypeLike = np.float64,
                 name: str | None = None, **old_names: Any) -> dict:
     """The Table 3.5 columns of one initial guess (module docstring).
 
@@ -137,13 +134,13 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
     check_warm_start(warm_start)
     model = get_robot(robot)
     fi = model.frame_index(frame)
-    n_random = _count(n_random, "n_random", 0 if warm_start is not None else 1)
+    n_random = check_int(n_random, "n_random", 0 if warm_start is not None else 1)
     unknown = sorted(set(old_names) - {"max_iterations"})
     if unknown:
         raise TypeError(f"evaluate_ik() got an unexpected keyword argument {unknown[0]!r}")
     iterations = renamed_argument("evaluate_ik()", "max_iterations", "iterations", old_names,
                                   iterations)   # the name before issue 28, for one release
-    max_iterations = _count(200 if iterations is None else iterations, "iterations", 0)
+    max_iterations = check_int(200 if iterations is None else iterations, "iterations", 0)
     opts = IKOptions(n_starts=1, iterations=max_iterations, margin=margin, tol_pos=tol_pos,
                      tol_rot=tol_rot, stop_when_solved=False, q_default=q_default, seed=seed,
                      restart_after=None, freeze_solved=False)  # every seed on its own
@@ -179,10 +176,10 @@ def evaluate_ik(robot: Any, frame: Any, world: Any, targets: Any, *, warm_start:
                    q: np.ndarray) -> None:
             for r, row in enumerate(rows):
                 k = np.flatnonzero(fz[r])
-                if len(k) and found[row] < 0:
-                    found[row] = offset + k[0]
-                    f_it[row] = it[r, k[0]]
-                    f_q[row] = q[r, k[0]]
+                if len(k) and found[row] < 0:  # noqa: B023 (record runs in this iteration)
+                    found[row] = offset + k[0]  # noqa: B023
+                    f_it[row] = it[r, k[0]]  # noqa: B023
+                    f_q[row] = q[r, k[0]]  # noqa: B023
 
         record(np.arange(P), 0, fz, it, q)
         first.append(fz[:, 0])
@@ -237,9 +234,9 @@ def _config_value(net: Any, key: str) -> Any:
     return None
 
 
-def ablation_table(robot: Any, frame: Any, world: Any, targets: Any,
+def ablation_table(robot: RobotLike, frame: Any, world: Any, targets: Any,
                    nets: Mapping[str, Any] | Sequence[tuple[str, Any]], *,
-                   iterations: int = 10, device: Any = None, **options: Any) -> list[dict]:
+                   iterations: int = 10, device: DeviceLike = None, **options: Any) -> list[dict]:
     """Table 3.4: per network (``{name: net}`` or ``[(name, net)]``) the feasibility after
     ``iterations`` solver iterations from its heads alone (head 1: ``feasibility``; any
     head: ``feasibility_heads``), with its ``boosting``, ``twin`` and ``unit_vectors``

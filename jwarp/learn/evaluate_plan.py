@@ -17,15 +17,16 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.model.registry import robot as get_robot
-from jwarp.solvers.planning import PlanOptions, Planner
+from jwarp.solvers.planning import Planner, PlanOptions
 
 __all__ = ["evaluate_plan", "format_plan_table"]
 
 
 def _run(model: Any, world: Any, q0: np.ndarray, q1: np.ndarray, K: int, *, seeds: Any = None,
          n_starts: int = 1, start_kind: str = "random", n_waypoints: int = 20,
-         n_substeps: int = 4, seed: int = 0, device: Any = None
+         n_substeps: int = 4, seed: int = 0, device: DeviceLike = None
          ) -> tuple[np.ndarray, np.ndarray]:
     """(B, n_starts) first feasible iteration (K + 1: never) and (B,) best cost."""
     opts = PlanOptions(n_starts=n_starts, start_kind=start_kind, n_waypoints=n_waypoints,
@@ -36,10 +37,10 @@ def _run(model: Any, world: Any, q0: np.ndarray, q1: np.ndarray, K: int, *, seed
     return it, np.where(res.feasible, res.cost, np.nan)
 
 
-def evaluate_plan(robot: Any, worlds: list, starts: np.ndarray, goals: np.ndarray,
+def evaluate_plan(robot: RobotLike, worlds: list, starts: np.ndarray, goals: np.ndarray,
                   world_index: np.ndarray, *, nets: list | tuple = (), ks: tuple = (0, 10, 50),
                   n_random: int = 10, n_waypoints: int = 20, n_substeps: int = 4,
-                  seed: int = 0, baselines: bool = True, device: Any = None) -> list[dict]:
+                  seed: int = 0, baselines: bool = True, device: DeviceLike = None) -> list[dict]:
     """Rows of the table: per ``(name, net)`` in ``nets`` (a network's heads as the
     starts; "network alone" is the k = 0 column), then "random (1)" (one random multi-start:
     1-3 random via points), "random (best of n_random)" and "straight line". Each row:

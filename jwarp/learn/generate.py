@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from jwarp.core.types import RobotLike
 from jwarp.learn.dataset import PathDB, WorldRecord, world_record
 
 __all__ = ["GenerateReport", "check_settings", "default_labeler", "default_options", "default_world_maker",
@@ -108,7 +109,7 @@ def ray_module() -> Any:
 
 
 # ====================================================================== the pure part
-def _call_world_maker(world_maker: Callable, robot: Any, seed: int, options: Any) -> Any:
+def _call_world_maker(world_maker: Callable, robot: RobotLike, seed: int, options: Any) -> Any:
     device = getattr(options, "device", None)
     try:
         return world_maker(robot, seed, device=device)
@@ -118,7 +119,7 @@ def _call_world_maker(world_maker: Callable, robot: Any, seed: int, options: Any
         return world_maker(robot, seed)
 
 
-def label_chunk(robot: Any, seeds: Sequence[int], paths_per_world: int, options: Any = None,
+def label_chunk(robot: RobotLike, seeds: Sequence[int], paths_per_world: int, options: Any = None,
                 labeler: Callable | None = None, world_maker: Callable | None = None
                 ) -> list[WorldRecord]:
     """The records (:func:`jwarp.learn.dataset.world_record`) of the worlds ``seeds``: a
@@ -178,7 +179,7 @@ def _progress(total: int, done: int, enabled: bool) -> Any:
                 dynamic_ncols=True, desc="paths", smoothing=0.1)
 
 
-def generate(robot: Any, n_worlds: int, paths_per_world: int, db: str | os.PathLike | PathDB,
+def generate(robot: RobotLike, n_worlds: int, paths_per_world: int, db: str | os.PathLike | PathDB,
              *, first_seed: int = 0, chunk: int | None = None, options: Any = None,
              ray: bool = False, ray_address: str | None = None, num_gpus: float = 0,
              num_cpus: int | None = None, labeler: Callable | None = None,
@@ -243,7 +244,7 @@ def generate(robot: Any, n_worlds: int, paths_per_world: int, db: str | os.PathL
     return report
 
 
-def _run_ray(ray: Any, chunks: list[list[int]], robot: Any, paths_per_world: int,
+def _run_ray(ray: Any, chunks: list[list[int]], robot: RobotLike, paths_per_world: int,
              options: Any, labeler: Any, world_maker: Any, write: Callable,
              report: GenerateReport, *, ray_address: str | None, num_gpus: float,
              num_cpus: int | None, max_retries: int) -> None:

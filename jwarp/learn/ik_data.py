@@ -26,11 +26,13 @@ training) and targets, fixed by the seed.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.kinematics.fk import fk
 from jwarp.model.registry import robot as get_robot
 from jwarp.world.collision import is_collision_free, min_distances
@@ -46,7 +48,7 @@ SCENE_TASKS = {"shelf": shelf_grasp_poses}
 
 
 def _free_configurations(model: Any, n: int, world: Any, rng: np.random.Generator,
-                         device: Any) -> np.ndarray:
+                         device: DeviceLike) -> np.ndarray:
     out = np.empty((0, model.n_dof))
     for _ in range(200):
         q = random_configurations(model, max(2 * (n - len(out)), 64),
@@ -59,8 +61,8 @@ def _free_configurations(model: Any, n: int, world: Any, rng: np.random.Generato
                      f"({len(out)} of {n} found)")
 
 
-def sample_targets(robot: Any, frame: Any, n: int, world: Any = None, *, seed: int = 0,
-                   mix: tuple = DEFAULT_MIX, pool: int = 4, device: Any = None,
+def sample_targets(robot: RobotLike, frame: Any, n: int, world: Any = None, *, seed: int = 0,
+                   mix: tuple = DEFAULT_MIX, pool: int = 4, device: DeviceLike = None,
                    tasks: Callable[[int, np.random.Generator], np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray]:
     """``n`` targets (module docstring): returns ``(targets (n, 4, 4), q (n, n_dof))``
@@ -121,7 +123,7 @@ def check_mix(mix: Any) -> np.ndarray:
     return m / m.sum()
 
 
-def make_worlds(robot: Any, kind: str, n: int, *, seed: int = 0, device: Any = None) -> list:
+def make_worlds(robot: RobotLike, kind: str, n: int, *, seed: int = 0, device: DeviceLike = None) -> list:
     """``n`` worlds of ``kind`` ("random", "shelf", "none"; module docstring); "shelf" and
     "none" give one world (or None) whatever ``n``."""
     model = get_robot(robot)
@@ -155,9 +157,9 @@ class IKData:
     distribution: dict
 
 
-def make_ik_data(robot: Any, frame: Any, world: str = "random", *, n_worlds: int = 8,
+def make_ik_data(robot: RobotLike, frame: Any, world: str = "random", *, n_worlds: int = 8,
                  n_targets: int = 1000, n_val_worlds: int = 2, n_val: int = 128,
-                 seed: int = 0, mix: tuple = DEFAULT_MIX, device: Any = None) -> IKData:
+                 seed: int = 0, mix: tuple = DEFAULT_MIX, device: DeviceLike = None) -> IKData:
     """Worlds and targets for training (``n_targets`` per world) and a validation set
     (``n_val`` targets per validation world), reproducible by ``seed``. With "shelf" and
     "none" the validation worlds are the training world (unseen targets)."""

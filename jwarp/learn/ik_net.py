@@ -25,8 +25,14 @@ import numpy as np
 import torch
 from torch import nn
 
-from jwarp.learn.encoding import JointCodec, feature_size, frame_features, frame_features_numpy
+from jwarp.learn.encoding import (
+    JointCodec,
+    feature_size,
+    frame_features,
+    frame_features_numpy,
+)
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 from jwarp.world.feasibility import robot_reach
 
 __all__ = ["IKNetConfig", "IKNet", "DenseBlock", "NetConfig", "network_bps", "world_key"]
@@ -56,8 +62,7 @@ class NetConfig:
             raise TypeError(f"robot: expected a robot name, got {type(self.robot).__name__}")
         for name, lo in self.INT_FIELDS:
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+            check_int(v, name, lo)
 
 
 @dataclass

@@ -36,11 +36,13 @@ import numpy as np
 from jwarp.core.arrays import real_number
 from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.limits import sample_within_limits
+from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.world.path_feasibility import check_world, collision_free
-from jwarp.solvers.planning import PathWeights, PlanOptions, Planner
+from jwarp.solvers.planning import PathWeights, Planner, PlanOptions
+from jwarp.utils.checks import check_int
 from jwarp.world.feasibility import feasible_simplex_world
+from jwarp.world.path_feasibility import check_world, collision_free
 
 __all__ = ["PlanDataOptions", "WorldLabels", "world_for", "label_world", "world_extent"]
 
@@ -114,16 +116,13 @@ class PlanDataOptions:
         for name, lo in (("n_waypoints", 3), ("max_starts", 1), ("iterations", 1),
                          ("check_all_every", 1), ("refine", 1)):
             v = getattr(self, name)
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+            check_int(v, name, lo)
         if self.stats_tasks is not None:
             v = self.stats_tasks
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 0:
-                raise ValueError(f"stats_tasks: expected None or an integer >= 0, got {v!r}")
+            check_int(v, "stats_tasks", 0)
         if self.n_substeps is not None:
             v = self.n_substeps
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f"n_substeps: expected None or an integer >= 1, got {v!r}")
+            check_int(v, "n_substeps", 1)
         for name, strict in (("step", True), ("max_step", True), ("converge_tol", True),
                              ("substep_voxels", True),
                              ("length_weight", False), ("margin", False)):
@@ -203,13 +202,13 @@ class WorldLabels:
         return float(self.n_feasible_starts[m].sum() / self.n_starts[m].sum())
 
 
-def world_extent(robot: Any) -> float:
+def world_extent(robot: RobotLike) -> float:
     """Side [m] of the Table 3.2 world of ``robot``."""
     model = get_robot(robot)
     return float(WORLD_EXTENT.get(model.name, 1.0 if model.workspace_dim == 2 else 1.2))
 
 
-def world_for(robot: Any, world_seed: int, *, device: Any = None, extent: Any = None,
+def world_for(robot: RobotLike, world_seed: int, *, device: DeviceLike = None, extent: Any = None,
               **noise: Any) -> Any:
     """The Table 3.2 simplex world of ``world_seed`` for ``robot``: ``WORLD_CELLS`` cells
     per axis over a cube (square) of :func:`world_extent` [m] centred on the robot's
@@ -220,9 +219,7 @@ def world_for(robot: Any, world_seed: int, *, device: Any = None, extent: Any = 
     threshold, frequency, ... of the simplex noise (defaults of
     :func:`jwarp.world.simplex.simplex_world`)."""
     model = get_robot(robot)
-    if isinstance(world_seed, (bool, np.bool_)) or not isinstance(world_seed, (int, np.integer)) \
-            or world_seed < 0:
-        raise ValueError(f"world_seed: expected an integer >= 0, got {world_seed!r}")
+    check_int(world_seed, "world_seed", 0)
     if isinstance(extent, str):
         if extent != "reach":
             raise ValueError(f"extent: expected a side [m], None or 'reach', got {extent!r}")
@@ -234,7 +231,7 @@ def world_for(robot: Any, world_seed: int, *, device: Any = None, extent: Any = 
 
 
 def _task_pairs(model: RobotModel, world: Any, n: int, margin: float,
-                rng: np.random.Generator, device: Any) -> tuple[np.ndarray, np.ndarray]:
+                rng: np.random.Generator, device: DeviceLike) -> tuple[np.ndarray, np.ndarray]:
     """n collision-free (start, goal) pairs, drawn uniformly within the limits."""
     out: list[np.ndarray] = []
     have = 0
@@ -250,7 +247,7 @@ def _task_pairs(model: RobotModel, world: Any, n: int, margin: float,
                      f"'{model.name}' found")
 
 
-def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
+def label_world(robot: RobotLike, world: Any, n_tasks: int, seed: int,
                 options: PlanDataOptions | None = None) -> WorldLabels:
     """Label ``n_tasks`` random tasks of one world (module docstring).
 
@@ -267,11 +264,8 @@ def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
     """
     model = get_robot(robot)
     check_world(model, world)
-    if isinstance(n_tasks, (bool, np.bool_)) or not isinstance(n_tasks, (int, np.integer)) \
-            or n_tasks < 1:
-        raise ValueError(f"n_tasks: expected an integer >= 1, got {n_tasks!r}")
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
+    check_int(n_tasks, "n_tasks", 1)
+    check_int(seed, "seed", 0)
     if options is None:
         options = PlanDataOptions()
     if not isinstance(options, PlanDataOptions):
@@ -336,7 +330,7 @@ def label_world(robot: Any, world: Any, n_tasks: int, seed: int,
                        n_starts=n_starts, stats=stats)
 
 
-def _refine(model: RobotModel, world: Any, o: PlanDataOptions, dtype: Any, q0: np.ndarray,
+def _refine(model: RobotModel, world: Any, o: PlanDataOptions, dtype: DTypeLike, q0: np.ndarray,
             q1: np.ndarray, seeds: list, feasible: np.ndarray, paths: np.ndarray,
             cost: np.ndarray, length: np.ndarray) -> None:
     """Converge the feasible seeds of every solved task (one batch, ``o.refine`` seeds a

@@ -36,6 +36,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from jwarp.core.types import RobotLike
 from jwarp.learn.encoding import JointCodec
 from jwarp.learn.ik_net import DenseBlock, NetConfig, network_bps, world_key
 from jwarp.model.registry import robot as get_robot
@@ -77,7 +78,7 @@ AXIS_SYMMETRIES: dict[str, tuple[AxisSymmetry, ...]] = {
 }
 
 
-def axis_symmetries(robot: Any) -> tuple[AxisSymmetry, ...]:
+def axis_symmetries(robot: RobotLike) -> tuple[AxisSymmetry, ...]:
     """The declared symmetries of ``robot`` (:data:`AXIS_SYMMETRIES`; none for an
     undeclared robot). ValueError if the robot's joint limits are not mapped onto
     themselves (an edited robot of a declared name)."""

@@ -18,6 +18,7 @@ import warp as wp
 
 from jwarp.core.arrays import device_name
 from jwarp.core.device import content_key
+from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKWeights
 from jwarp.solvers.planning import PathObjective, PathWeights
@@ -26,7 +27,7 @@ from jwarp.solvers.planning import PathObjective, PathWeights
 #: robots share one, an edited copy gets its own), id of the world (the objective holds
 #: its world, so that id is not reused while the entry lives), sizes, weights, device,
 #: dtype); an entry lives as long as its objective
-_OBJECTIVES: "weakref.WeakValueDictionary[tuple, Any]" = weakref.WeakValueDictionary()
+_OBJECTIVES: weakref.WeakValueDictionary[tuple, Any] = weakref.WeakValueDictionary()
 _KEEP: list = []  # the last few objectives stay alive between calls
 
 
@@ -55,9 +56,9 @@ def _check(t: Any, name: str, tail: tuple) -> None:
         raise ValueError(f"{name}: contains NaN or inf")
 
 
-def path_objective(robot: Any, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
+def path_objective(robot: RobotLike, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
                    *, weights: PathWeights | None = None, eps: float | None = None,
-                   device: Any = None, dtype: Any = np.float32) -> PathObjective:
+                   device: DeviceLike = None, dtype: DTypeLike = np.float32) -> PathObjective:
     """A cached :class:`PathObjective` for these sizes (rebuilt when anything differs:
     robots count as equal by content)."""
     model = get_robot(robot)
@@ -88,7 +89,7 @@ class UPathFunction(torch.autograd.Function):
         return grad_out[:, None, None] * g, None
 
 
-def u_path(paths: torch.Tensor, robot: Any, world: Any, n_substeps: int, *,
+def u_path(paths: torch.Tensor, robot: RobotLike, world: Any, n_substeps: int, *,
            weights: PathWeights | None = None, eps: float | None = None) -> torch.Tensor:
     """Differentiable U_path of a batch of paths (P, W, n_dof) -> (P,) on the tensor's
     device and dtype. Start and goal are the first and last waypoints (no gradient)."""
@@ -103,9 +104,9 @@ def u_path(paths: torch.Tensor, robot: Any, world: Any, n_substeps: int, *,
     return UPathFunction.apply(paths, obj)
 
 
-def ik_objective(robot: Any, frame: Any, n: int, *, world: Any = None,
+def ik_objective(robot: RobotLike, frame: Any, n: int, *, world: Any = None,
                  weights: IKWeights | None = None, eps: float | None = None,
-                 q_default: Any = None, device: Any = None, dtype: Any = np.float32
+                 q_default: Any = None, device: DeviceLike = None, dtype: DTypeLike = np.float32
                  ) -> IKObjective:
     """A cached :class:`IKObjective` for this batch size (q_default is (re)set each call;
     robots count as equal by content)."""
@@ -142,7 +143,7 @@ class UIKFunction(torch.autograd.Function):
         return grad_out[:, None] * g, None, None
 
 
-def u_ik(q: torch.Tensor, target: torch.Tensor, robot: Any, frame: Any, *, world: Any = None,
+def u_ik(q: torch.Tensor, target: torch.Tensor, robot: RobotLike, frame: Any, *, world: Any = None,
          weights: IKWeights | None = None, eps: float | None = None,
          q_default: Any = None) -> torch.Tensor:
     """Differentiable U_ik (eq. 3.19) of configurations q (B, n_dof) for target poses

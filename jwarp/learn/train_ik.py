@@ -39,22 +39,24 @@ import dataclasses
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import torch
 import warp as wp
 
 from jwarp.core.arrays import device_name, init_warp
+from jwarp.core.threads import refresh_torch_threads, torch_threads
 from jwarp.learn.checkpoint import check_weights, read_checkpoint, save_checkpoint
 from jwarp.learn.ik_data import DEFAULT_MIX, IKData, check_mix, make_ik_data
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.torch_costs import ik_objective, u_ik
-from jwarp.core.threads import refresh_torch_threads, torch_threads
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver
+from jwarp.utils.checks import check_int
 
 __all__ = ["TrainIKOptions", "train_ik", "train_ik_supervised", "ik_loss", "IKTrainer"]
 
@@ -119,8 +121,7 @@ class TrainIKOptions:
                          ("worlds_per_batch", 1), ("epochs", 0), ("steps_per_epoch", 1),
                          ("hard_set_size", 1), ("val_iterations", 0)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+            check_int(v, name, lo)
             setattr(self, name, int(v))
         if self.world not in ("random", "shelf", "none"):
             raise ValueError(f"world: expected 'random', 'shelf' or 'none', got {self.world!r}")
@@ -307,7 +308,7 @@ class IKTrainer:
         o, d = self.options, self.data
         W = len(d.worlds)
         k = o.worlds_per_batch
-        worlds = rng.choice(W, size=k, replace=W < k)
+        worlds = rng.choice(W, size=k, replace=k > W)
         self.net.train()
         self.opt.zero_grad(set_to_none=True)
         acc: dict = {}

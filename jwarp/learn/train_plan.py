@@ -35,20 +35,28 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import torch
 
 from jwarp.core.arrays import device_name
 from jwarp.core.threads import refresh_torch_threads, torch_threads
-from jwarp.learn.plan_net import (PlanNet, PlanNetConfig, axis_symmetries, encode_paths,
-                                  symmetric_bps)
+from jwarp.core.types import RobotLike
+from jwarp.learn.plan_net import (
+    PlanNet,
+    PlanNetConfig,
+    axis_symmetries,
+    encode_paths,
+    symmetric_bps,
+)
 from jwarp.model.registry import robot as get_robot
+from jwarp.solvers.planning import Planner, PlanOptions
+from jwarp.utils.checks import check_int
 from jwarp.world.path_feasibility import collision_free
-from jwarp.solvers.planning import PlanOptions, Planner
 
 __all__ = ["PlanSamples", "TrainPlanOptions", "make_plan_data", "label_tasks", "sample_tasks",
            "hard_tasks",
@@ -100,13 +108,13 @@ class PlanSamples:
     def __len__(self) -> int:
         return len(self.starts)
 
-    def subset(self, idx: Any) -> "PlanSamples":
+    def subset(self, idx: Any) -> PlanSamples:
         return PlanSamples(self.starts[idx], self.goals[idx], self.paths[idx],
                            self.world_index[idx], self.worlds,
                            None if self.cost is None else self.cost[idx], self.world_ids,
                            self.source)
 
-    def compact(self) -> "PlanSamples":
+    def compact(self) -> PlanSamples:
         """The same samples with only the worlds they use (in order of first use by world
         index; ``world_index`` renumbered)."""
         used = np.unique(self.world_index)
@@ -117,7 +125,7 @@ class PlanSamples:
                            None if self.world_ids is None else
                            [self.world_ids[i] for i in used], self.source)
 
-    def append(self, other: "PlanSamples") -> "PlanSamples":
+    def append(self, other: PlanSamples) -> PlanSamples:
         """This set and ``other`` (same worlds list or its extension)."""
         if other.worlds[:len(self.worlds)] != self.worlds:
             raise ValueError("other: its worlds must extend this set's worlds")
@@ -132,7 +140,7 @@ class PlanSamples:
                            other.worlds, cost, ids, self.source)
 
 
-def sample_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator,
+def sample_tasks(robot: RobotLike, world: Any, n: int, rng: np.random.Generator,
                  min_distance: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """``n`` random collision-free start/goal pairs (at least ``min_distance`` apart in
     joint space, as far as the pool allows)."""
@@ -158,7 +166,7 @@ def sample_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator,
     return pool[a], pool[b]
 
 
-def hard_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator, *,
+def hard_tasks(robot: RobotLike, world: Any, n: int, rng: np.random.Generator, *,
                iterations: int = 200, n_waypoints: int = 20, n_substeps: int = 4,
                rounds: int = 20) -> tuple[np.ndarray, np.ndarray]:
     """Up to ``n`` random tasks whose straight line does not become feasible within
@@ -179,7 +187,7 @@ def hard_tasks(robot: Any, world: Any, n: int, rng: np.random.Generator, *,
     return np.concatenate(S), np.concatenate(G)
 
 
-def label_tasks(robot: Any, world: Any, starts: np.ndarray, goals: np.ndarray, *,
+def label_tasks(robot: RobotLike, world: Any, starts: np.ndarray, goals: np.ndarray, *,
                 n_waypoints: int = 20, n_starts: int = 16, iterations: int = 200,
                 n_substeps: int = 4, seed: int = 0
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -193,7 +201,7 @@ def label_tasks(robot: Any, world: Any, starts: np.ndarray, goals: np.ndarray, *
     return res.path, res.feasible, res.cost
 
 
-def make_plan_data(robot: Any, worlds: list, n_per_world: int, *, seed: int = 0,
+def make_plan_data(robot: RobotLike, worlds: list, n_per_world: int, *, seed: int = 0,
                    n_waypoints: int = 20, n_starts: int = 16, iterations: int = 200,
                    n_substeps: int = 4, hard: bool = False, rounds: int = 3,
                    labeler: Callable | None = None) -> PlanSamples:
@@ -236,7 +244,7 @@ def make_plan_data(robot: Any, worlds: list, n_per_world: int, *, seed: int = 0,
                        worlds=worlds, cost=np.concatenate([p[4] for p in parts]))
 
 
-def samples_from_db(db: Any, robot: Any, *, world_ids: Any = None, hard_only: bool = True,
+def samples_from_db(db: Any, robot: RobotLike, *, world_ids: Any = None, hard_only: bool = True,
                     feasible_only: bool = True, n_waypoints: int | None = None,
                     skip_damaged: bool = False, skipped: list | None = None) -> PlanSamples:
     """The stored labels of a path database (a path or an open
@@ -305,7 +313,7 @@ def samples_from_db(db: Any, robot: Any, *, world_ids: Any = None, hard_only: bo
                              f"{len(ids)} selected worlds ({len(a['task'])} paths in all)")
         a = {k: v[keep] for k, v in a.items()}
         W = a["path"].shape[1]
-        if n_waypoints is not None and W != int(n_waypoints):
+        if n_waypoints is not None and int(n_waypoints) != W:
             raise ValueError(f"n_waypoints: database '{d.path}' stores paths of {W} "
                              f"waypoints, the network is configured for {n_waypoints}")
         # worlds in order of first appearance (the order of ``world_ids``)
@@ -367,7 +375,7 @@ def split_by_world(samples: PlanSamples, val_fraction: float = 0.1, seed: int = 
             samples.subset(np.flatnonzero(is_val)).compact())
 
 
-def path_costs(robot: Any, world: Any, paths: np.ndarray, n_substeps: int = 4) -> np.ndarray:
+def path_costs(robot: RobotLike, world: Any, paths: np.ndarray, n_substeps: int = 4) -> np.ndarray:
     """U_path (eq. 3.16, the planner's weights; float32 on the CPU) of paths (P, W, n_dof)."""
     from jwarp.learn.torch_costs import path_objective
 
@@ -385,7 +393,7 @@ def _by_world(data: PlanSamples) -> list[tuple[int, np.ndarray]]:
     return [(int(w), np.flatnonzero(data.world_index == w)) for w in np.unique(data.world_index)]
 
 
-def label_costs(data: PlanSamples, robot: Any, n_substeps: int = 4) -> np.ndarray:
+def label_costs(data: PlanSamples, robot: RobotLike, n_substeps: int = 4) -> np.ndarray:
     """The labels' U_path (computed once, stored in ``data.cost``)."""
     if data.cost is None:
         c = np.empty(len(data))
@@ -491,8 +499,7 @@ class TrainPlanOptions:
         for name, lo in (("epochs", 0), ("steps_per_epoch", 1), ("batch_size", 1),
                          ("n_substeps", 1), ("seed", 0)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+            check_int(v, name, lo)
         if not (isinstance(self.lr, (int, float)) and math.isfinite(self.lr) and self.lr > 0):
             raise ValueError(f"lr: expected a number > 0, got {self.lr!r}")
         for name in ("boost_percentile", "boost_ratio"):
@@ -584,7 +591,7 @@ def _train_plan(options: TrainPlanOptions, data: PlanSamples, val: PlanSamples |
         net.train()
         total = 0.0
         for _ in range(options.steps_per_epoch):
-            idx = rng.choice(M, size=min(options.batch_size, M), replace=M < options.batch_size,
+            idx = rng.choice(M, size=min(options.batch_size, M), replace=options.batch_size > M,
                              p=weights) if weights is not None else \
                 rng.integers(0, M, size=options.batch_size)
             loss = plan_loss(net, *_tensors(net, arr, idx))

@@ -2,11 +2,29 @@
 
 The package: :mod:`jwarp.model.robot`."""
 
-from jwarp.model.robot import (Capsule, DH_PARAMS, FRAME_KINDS, FROZEN_NOTE, Frame, JOINT_TYPES,
-                               Joint, KAPPA_AXES, LinearLimit, MAX_LENGTH, Mass, RobotModel,
-                               RobotModelError, SCHEMA_NAME, SCHEMA_VERSION, SelfCollision,
-                               Sphere, freeze_joints, frozen_joint_values, validate)
 from jwarp.model.collision_pieces import CollisionPieces, ConvexPiece
+from jwarp.model.robot import (
+                               DH_PARAMS,
+                               FRAME_KINDS,
+                               FROZEN_NOTE,
+                               JOINT_TYPES,
+                               KAPPA_AXES,
+                               MAX_LENGTH,
+                               SCHEMA_NAME,
+                               SCHEMA_VERSION,
+                               Capsule,
+                               Frame,
+                               Joint,
+                               LinearLimit,
+                               Mass,
+                               RobotModel,
+                               RobotModelError,
+                               SelfCollision,
+                               Sphere,
+                               freeze_joints,
+                               frozen_joint_values,
+                               validate,
+)
 from jwarp.model.sphere_relation import SphereRelation
 
 __all__ = [

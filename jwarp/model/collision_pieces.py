@@ -22,10 +22,13 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
+
+from jwarp.utils.checks import check_int
 
 __all__ = ["ConvexPiece", "CollisionPieces", "sphere_digest", "stamp_pieces", "check_pieces",
            "pieces_to_dict", "pieces_from_dict"]
@@ -129,7 +132,7 @@ def stamp_pieces(model: Any) -> Any:
 def _vertices(v: Any, where: str) -> np.ndarray:
     """``v`` as a (V, 3) float64 array of finite numbers, V >= 1; ValueError/TypeError
     naming ``where``."""
-    if isinstance(v, (bool, np.bool_)) or isinstance(v, (str, bytes, dict)):
+    if isinstance(v, (bool, np.bool_, str, bytes, dict)):
         raise TypeError(f"{where}: expected a list of [x, y, z], got {type(v).__name__}")
     try:
         a = np.asarray(v)
@@ -161,11 +164,7 @@ def _radius(v: Any, where: str) -> float:
 
 
 def _count(v: Any, where: str) -> int:
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
-        raise TypeError(f"{where}: expected an integer >= 0, got {v!r}")
-    if v < 0:
-        raise ValueError(f"{where}: expected an integer >= 0, got {v!r}")
-    return int(v)
+    return check_int(v, where, 0)
 
 
 def _text(v: Any, where: str) -> str:

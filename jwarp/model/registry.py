@@ -30,8 +30,9 @@ from __future__ import annotations
 import os
 import types
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import pluggy
 

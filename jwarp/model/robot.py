@@ -35,18 +35,27 @@ import json
 import math
 import numbers
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
+from jwarp.model.collision_pieces import (
+    CollisionPieces,
+    check_pieces,
+    pieces_from_dict,
+    pieces_to_dict,
+)
+from jwarp.model.sphere_relation import (
+    SphereRelation,
+    relation_after_edit,
+    relation_from_dict,
+    relation_to_dict,
+)
 from jwarp.utils.atomic import atomic_write_text
-from jwarp.model.collision_pieces import (CollisionPieces, check_pieces, pieces_from_dict,
-                                          pieces_to_dict)
-from jwarp.model.sphere_relation import (SphereRelation, relation_after_edit, relation_from_dict,
-                                         relation_to_dict)
 
 SCHEMA_NAME = "jwarp.robot"
 SCHEMA_VERSION = 1
@@ -424,11 +433,11 @@ class RobotModel:
         return _to_dict(self)
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> "RobotModel":
+    def from_dict(cls, doc: dict[str, Any]) -> RobotModel:
         return _from_dict(doc)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "RobotModel":
+    def load(cls, path: str | os.PathLike) -> RobotModel:
         """Read a robot JSON file; errors name the file and the offending field."""
         path = Path(path)
         try:
@@ -453,7 +462,7 @@ class RobotModel:
     @classmethod
     def from_urdf(cls, path: str | os.PathLike, *, end_effectors: dict[str, str] | None = None,
                   package_dirs: Sequence[str | os.PathLike] = (), **options: Any
-                  ) -> "RobotModel":
+                  ) -> RobotModel:
         """Import a URDF file (docs/urdf.md): links are frames of the same names, moving
         joints are ``dh`` frames (mimic joints coupled), inertials point masses, sphere
         collision geometry the robot's spheres. ``end_effectors`` ``{alias: link}``
@@ -475,7 +484,7 @@ class RobotModel:
         """Write the robot as JSON atomically (temporary file + rename)."""
         atomic_write_text(path, json.dumps(self.to_dict(), indent=1) + "\n")
 
-    def copy(self, **changes: Any) -> "RobotModel":
+    def copy(self, **changes: Any) -> RobotModel:
         """A deep copy with some top-level fields replaced (validated again)."""
         doc = self.to_dict()
         model = _from_dict(doc)
@@ -494,7 +503,7 @@ class RobotModel:
         model.__post_init__()
         return model
 
-    def with_dh(self, dh_table: np.ndarray, kappa: np.ndarray | None = None) -> "RobotModel":
+    def with_dh(self, dh_table: np.ndarray, kappa: np.ndarray | None = None) -> RobotModel:
         """Copy with new DH rows ``(n_frames, 5)`` (static rows ignored) and optionally kappa."""
         dh_table = np.asarray(dh_table, np.float64)
         if dh_table.shape != (self.n_frames, 5):
@@ -510,7 +519,7 @@ class RobotModel:
         validate(m)
         return m
 
-    def with_masses(self, masses: Any) -> "RobotModel":
+    def with_masses(self, masses: Any) -> RobotModel:
         """Copy with new values of the point masses: ``masses`` (len(self.masses),) [kg],
         one per entry of ``self.masses`` in that order (frames and centres of mass kept).
         Values must be finite and >= 0."""
@@ -531,7 +540,7 @@ class RobotModel:
         validate(m)
         return m
 
-    def freeze(self, values: dict[str | int, float], **options: Any) -> "RobotModel":
+    def freeze(self, values: dict[str | int, float], **options: Any) -> RobotModel:
         """A copy without the joints in ``values`` ``{joint: value}`` [rad or m], each fixed
         at its value (a gripper's fingers; mimic joints follow): :func:`freeze_joints`."""
         return freeze_joints(self, values, **options)

@@ -148,10 +148,10 @@ def record_valid_range(model: Any, q: Any) -> Any:
 
 
 #: parsed notes, per model (models are treated as immutable once used): (text, range)
-_PARSED: "weakref.WeakKeyDictionary[Any, tuple[str, ValidRange | None]]" = \
+_PARSED: weakref.WeakKeyDictionary[Any, tuple[str, ValidRange | None]] = \
     weakref.WeakKeyDictionary()
 #: the entry points that warned already, per model
-_WARNED: "weakref.WeakKeyDictionary[Any, set[str]]" = weakref.WeakKeyDictionary()
+_WARNED: weakref.WeakKeyDictionary[Any, set[str]] = weakref.WeakKeyDictionary()
 
 
 def valid_range(model: Any) -> ValidRange | None:

@@ -17,12 +17,14 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.kinematics.equilibrium import fk_elastic
 from jwarp.kinematics.launch import kappa_array
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKResult, ik
 from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.planning import PathObjective, PlanResult, plan
+from jwarp.utils.checks import check_int
 
 #: compliance of Agile Justin's joints used by the studies [rad/(N m)] (0.1 rad/kNm)
 JUSTIN_KAPPA = 1e-4
@@ -38,22 +40,22 @@ def _kappa(model: Any, kappa: Any) -> Any:
     return kappa
 
 
-def compensated_ik(robot: Any, frame: Any, target: Any, *, kappa: Any = None,
+def compensated_ik(robot: RobotLike, frame: Any, target: Any, *, kappa: Any = None,
                    lam: float = 0.7, **kwargs: Any) -> IKResult:
     """:func:`jwarp.solvers.ik.ik` on the elastic model (kappa default: the robot's)."""
     model = get_robot(robot)
     return ik(model, frame, target, kappa=_kappa(model, kappa), lam=lam, **kwargs)
 
 
-def compensated_plan(robot: Any, world: Any, start: Any, goal: Any, *, kappa: Any = None,
+def compensated_plan(robot: RobotLike, world: Any, start: Any, goal: Any, *, kappa: Any = None,
                      lam: float = 0.7, **kwargs: Any) -> PlanResult:
     """:func:`jwarp.solvers.planning.plan` on the elastic model (kappa default: the robot's)."""
     model = get_robot(robot)
     return plan(model, world, start, goal, kappa=_kappa(model, kappa), lam=lam, **kwargs)
 
 
-def equilibrium_pose_error(robot: Any, frame: Any, q: Any, target: Any, kappa: Any,
-                           device: Any = None, lam: float = 0.7
+def equilibrium_pose_error(robot: RobotLike, frame: Any, q: Any, target: Any, kappa: Any,
+                           device: DeviceLike = None, lam: float = 0.7
                            ) -> tuple[np.ndarray, np.ndarray]:
     """Pose error of ``frame`` at q (..., n_dof) on the fully converged elastic model
     (``fk_elastic`` with damping ``lam`` to 1e-12 rad) against ``target`` (..., 4, 4):
@@ -79,7 +81,7 @@ def equilibrium_pose_error(robot: Any, frame: Any, q: Any, target: Any, kappa: A
     return pos, ang.reshape(pos.shape)
 
 
-def compare_ik(robot: Any, frame: Any, targets: Any, kappa: Any, *, n_starts: int = 8,
+def compare_ik(robot: RobotLike, frame: Any, targets: Any, kappa: Any, *, n_starts: int = 8,
                seed: int = 0, lam: float = 0.7, **kwargs: Any) -> dict:
     """Rigid vs compensated IK from the same random seeds (no early stop, so every start
     runs until it is on the target): mean iterations of the starts that succeed in both,
@@ -139,7 +141,7 @@ def iteration_overhead(objective_rigid: Any, objective_elastic: Any, *, repeats:
     return out
 
 
-def ik_iteration_overhead(robot: Any, frame: Any, kappa: Any, *, world: Any = None,
+def ik_iteration_overhead(robot: RobotLike, frame: Any, kappa: Any, *, world: Any = None,
                           n_starts: int = 64, iterations: int = 60, rounds: int = 9,
                           lam: float = 0.7, **kwargs: Any) -> dict:
     """Wall time per iteration of the whole IK solver (:func:`jwarp.solvers.ik.ik`: kernels,
@@ -150,9 +152,7 @@ def ik_iteration_overhead(robot: Any, frame: Any, kappa: Any, *, world: Any = No
     of a call; ``*_s`` is the median over ``rounds`` runs, ``overhead`` their ratio - 1
     and ``overhead_per_round`` the ratios of the runs. ``*_setup_s``: the rest of a call's
     wall time (objective, buffers, seeds; median)."""
-    if isinstance(iterations, (bool, np.bool_)) or not isinstance(iterations, (int, np.integer)) \
-            or iterations < 2:
-        raise ValueError(f"iterations: expected an integer >= 2, got {iterations!r}")
+    check_int(iterations, "iterations", 2)
     model = get_robot(robot)
     fi = model.frame_index(frame)
     target = np.eye(4)
@@ -165,7 +165,8 @@ def ik_iteration_overhead(robot: Any, frame: Any, kappa: Any, *, world: Any = No
         for name in per_it:
             stamps: list = []
             res = ik(model, fi, target, kappa=None if name == "rigid" else kappa, lam=lam,
-                     callback=lambda it, q: stamps.append(time.perf_counter()), **common)
+                     callback=lambda it, q: stamps.append(time.perf_counter()),  # noqa: B023
+                     **common)  # (called during this round's ik only)
             if r:  # round 0 warms up (kernel compiles)
                 dt = np.diff(stamps)
                 per_it[name].append(float(np.median(dt[min(5, len(dt) // 2):])))

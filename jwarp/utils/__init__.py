@@ -1,1 +1,1 @@
-"""Host utilities: atomic files, memory estimates, deprecated-path forwarding."""
+"""Host utilities: atomic files, memory estimates, the argument checker."""

@@ -32,8 +32,9 @@ import socket
 import stat
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 #: temporary entries of another host are removed once older than this [s]
 STALE_AGE_S = 24 * 3600.0
@@ -118,7 +119,7 @@ def clean_stale(target: str | os.PathLike) -> list[Path]:
             token = f"{d['host']}-{d['pid']}-{d['rand']}"
             stale.setdefault(token, {})[d.get("kind") or "file"] = path
     removed = []
-    for tok, kinds in stale.items():
+    for kinds in stale.values():
         if "old" in kinds and not os.path.lexists(target):  # swap cut between its renames
             src = kinds.pop("tmp", None) or kinds.pop("old")
             os.rename(src, target)
@@ -208,11 +209,11 @@ class AtomicFile(_CommitOnExit):
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically, synced to disk."""
-    with AtomicFile(path) as f:
-        with os.fdopen(os.open(f.tmp, os.O_WRONLY | os.O_TRUNC), "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
+    with AtomicFile(path) as f, \
+            os.fdopen(os.open(f.tmp, os.O_WRONLY | os.O_TRUNC), "w", encoding="utf-8") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
 
 
 def commit_all(files: Iterable[AtomicFile]) -> None:

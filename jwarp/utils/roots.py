@@ -14,9 +14,9 @@ from __future__ import annotations
 import contextlib
 import os
 import warnings
+from collections.abc import Iterator
 from contextvars import ContextVar
 from pathlib import Path
-from typing import Iterator
 
 __all__ = ["OutsideFolderWarning", "ROOTS_ENV", "allowed_roots", "is_outside",
            "one_warning_per_file", "warn_if_outside"]

@@ -8,9 +8,22 @@ rerun-sdk. Modules: :mod:`~jwarp.viz.robot` (robots, worlds, calibration samples
 
 from jwarp.viz.curves import TrainingCurves
 from jwarp.viz.planning import PlanRecording
-from jwarp.viz.recording import Recording, atomic_recording, open_recording, rerun_module
-from jwarp.viz.robot import (SAMPLE_TIMELINE, TIMELINE, log_robot, object_meshes,
-                             save_calibration_rrd, save_robot_rrd, world_capsules, world_spheres)
+from jwarp.viz.recording import (
+                             Recording,
+                             atomic_recording,
+                             open_recording,
+                             rerun_module,
+)
+from jwarp.viz.robot import (
+                             SAMPLE_TIMELINE,
+                             TIMELINE,
+                             log_robot,
+                             object_meshes,
+                             save_calibration_rrd,
+                             save_robot_rrd,
+                             world_capsules,
+                             world_spheres,
+)
 from jwarp.viz.spectra import SpectraRecording
 
 __all__ = [

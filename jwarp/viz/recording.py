@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import contextlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from jwarp.utils.atomic import AtomicFile
 
@@ -67,7 +68,7 @@ class Recording:
         finally:
             self.file.discard()
 
-    def __enter__(self) -> "Recording":
+    def __enter__(self) -> Recording:
         return self
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:

@@ -18,11 +18,13 @@ end-effector (``elastic/sag_mm/<end_effector>``, scalar in mm).
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import RobotLike
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.utils.atomic import AtomicFile
@@ -118,7 +120,7 @@ def _z_to(d: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
-def log_robot(rec: Any, robot: Any, frames: Any, path: str = "robot", spheres: bool = True,
+def log_robot(rec: Any, robot: RobotLike, frames: Any, path: str = "robot", spheres: bool = True,
               *, axis_length: float = 0.08, color: Iterable[int] = _RIGID_COLOR) -> None:
     """Log one configuration of a robot to the rerun recording stream ``rec``.
 
@@ -177,7 +179,7 @@ def _q_batch(model: RobotModel, q_list: Any) -> np.ndarray:
     return q
 
 
-def save_robot_rrd(robot: Any, q_list: Any, path: str | os.PathLike,
+def save_robot_rrd(robot: RobotLike, q_list: Any, path: str | os.PathLike,
                    elastic_kappa: Any = None, *, lam: float = 1.0, max_iter: int = 10,
                    application_id: str = "jwarp", option: str = "path") -> Path:
     """Compute FK for every configuration and write a rerun recording (.rrd) atomically.
@@ -243,7 +245,7 @@ def _pose(params: Any, p: np.ndarray, prefix: str) -> np.ndarray | None:
     return T
 
 
-def save_calibration_rrd(path: str | os.PathLike, robot: Any, measurement: Any, p: Any,
+def save_calibration_rrd(path: str | os.PathLike, robot: RobotLike, measurement: Any, p: Any,
                          q: Any, y: Any, meta: Mapping[str, Any] | None = None, *,
                          p_before: Any = None, robot_before: Any = None,
                          application_id: str = "jwarp-calibration") -> Path:
@@ -261,8 +263,11 @@ def save_calibration_rrd(path: str | os.PathLike, robot: Any, measurement: Any, 
     calibrated tracker pose), image points in an ``image`` 2D view, relative positions from
     the first end-effector; every plugin gets ``error/after/<group>`` scalars [mm or px].
     """
-    from jwarp.calibration.estimate.result import (group_norms, model_frames,
-                                                   observation_groups)
+    from jwarp.calibration.estimate.result import (
+        group_norms,
+        model_frames,
+        observation_groups,
+    )
 
     rr = rerun_module()
     model = get_robot(robot)

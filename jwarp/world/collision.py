@@ -43,17 +43,33 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import (Batch, as_batch, default_dtype, finite_as, init_warp, real_array,
-                          real_number, resolve_device, to_output)
-from jwarp.core.device import DeviceModel, collision_tables, numpy_dtype, put_model, scalar_type
+from jwarp.core.arrays import (
+    Batch,
+    as_batch,
+    default_dtype,
+    finite_as,
+    init_warp,
+    real_array,
+    real_number,
+    resolve_device,
+    to_output,
+)
+from jwarp.core.device import (
+    DeviceModel,
+    collision_tables,
+    numpy_dtype,
+    put_model,
+    scalar_type,
+)
 from jwarp.core.rows import DHRows, RowsKind
+from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import collision as ck
 from jwarp.kernels import collision_wide as cwide
 from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.kinematics.compensation import CompensationRows
 from jwarp.world.device_world import DeviceWorld
 from jwarp.world.sdf import World, sdf_query
 
@@ -76,7 +92,7 @@ COST_KERNELS = ("auto", "fused", "wide")
 WIDE_MAX_CONFIGS = 65536
 
 
-def default_wide(device: Any, n: int) -> bool:
+def default_wide(device: DeviceLike, n: int) -> bool:
     """Whether :meth:`CollisionModel.cost` of ``n`` configurations runs the wide launches on
     ``device`` when the model is not told: ``JWARP_COST_KERNEL`` (``auto``: on CUDA up to
     :data:`WIDE_MAX_CONFIGS`; see :data:`COST_KERNELS`)."""
@@ -99,7 +115,7 @@ def check_world(robot: RobotModel, world: World | None) -> None:
                          f"moves in {robot.workspace_dim}D (workspace_dim={robot.workspace_dim})")
 
 
-def collision_pairs(robot: Any) -> np.ndarray:
+def collision_pairs(robot: RobotLike) -> np.ndarray:
     """(P, 2) int32 sphere index pairs checked for self-collision, in kernel order:
     pairs of spheres whose frames are allowed to collide
     (``RobotModel.allowed_collision_pairs``), grouped by frame pair (sorted), the sphere on
@@ -107,7 +123,7 @@ def collision_pairs(robot: Any) -> np.ndarray:
     return collision_tables(get_robot(robot))["pairs"].copy()
 
 
-def rigid_pairs(robot: Any) -> tuple[np.ndarray, np.ndarray]:
+def rigid_pairs(robot: RobotLike) -> tuple[np.ndarray, np.ndarray]:
     """Allowed sphere pairs left out of the self-collision check because their surface
     distance is the same in every configuration and positive: ``(pairs (R, 2) int32,
     distance (R,) [m])``. (A constant distance <= 0 stays in the check: such a pair
@@ -131,7 +147,7 @@ class CollisionData:
     stride-0 view of a single row, which stays in L1) instead of streaming about 3 KB of
     scratch per configuration through the caches."""
 
-    def __init__(self, cm: "CollisionModel", n: int) -> None:
+    def __init__(self, cm: CollisionModel, n: int) -> None:
         n = int(n)
         if n < 1:
             raise ValueError(f"n: expected >= 1 configurations, got {n}")
@@ -215,8 +231,8 @@ class CollisionModel:
             two agree to float rounding.
     """
 
-    def __init__(self, robot: Any, world: World | None = None, *, device: Any = None,
-                 dtype: Any = np.float32, wide: bool | None = None) -> None:
+    def __init__(self, robot: RobotLike, world: World | None = None, *, device: DeviceLike = None,
+                 dtype: DTypeLike = np.float32, wide: bool | None = None) -> None:
         init_warp()
         self.robot = get_robot(robot)
         check_world(self.robot, world)
@@ -292,7 +308,7 @@ class CollisionModel:
         return data
 
     def _check_rows(self, rows: CompensationRows, n: int) -> None:
-        if rows.N != n or rows.t.key != self.model.key or rows.rows.dtype != self.scalar \
+        if n != rows.N or rows.t.key != self.model.key or rows.rows.dtype != self.scalar \
                 or rows.rows.device != self.device:
             raise ValueError(f"rho: compensation rows for {rows.N} configurations of "
                              f"'{rows.t.robot.name}' on {rows.rows.device}, expected {n} of "
@@ -596,12 +612,12 @@ class CollisionModel:
 
 # ====================================================================== functional API
 #: CollisionModels by (robot content key, device, dtype, world identity), recent ones first
-_MODELS: "OrderedDict[tuple, tuple]" = OrderedDict()
+_MODELS: OrderedDict[tuple, tuple] = OrderedDict()
 _MODELS_MAX = 32
 
 
-def collision_model(robot: Any, world: World | None = None, *, device: Any = None,
-                    dtype: Any = np.float32) -> CollisionModel:
+def collision_model(robot: RobotLike, world: World | None = None, *, device: DeviceLike = None,
+                    dtype: DTypeLike = np.float32) -> CollisionModel:
     """A cached :class:`CollisionModel` for (robot, world, device, dtype): robots of equal
     content share one (their device model is one, :func:`jwarp.core.device.put_model`);
     worlds are told apart by identity (held weakly; treat a world as immutable)."""
@@ -624,7 +640,7 @@ def collision_model(robot: Any, world: World | None = None, *, device: Any = Non
     return cm
 
 
-def _prepare(robot: Any, q: Any, world: World | None, device: Any, dtype: Any,
+def _prepare(robot: RobotLike, q: Any, world: World | None, device: DeviceLike, dtype: DTypeLike,
              validate: bool) -> tuple[RobotModel, Batch, CollisionModel]:
     init_warp()
     model = get_robot(robot)
@@ -650,9 +666,9 @@ def _rho_arg(rho: Any, batch: Batch, nf: int) -> Any:
     return a
 
 
-def collision_cost(robot: Any, q: Any, world: World | None, *, w_world: float = 1.0,
+def collision_cost(robot: RobotLike, q: Any, world: World | None, *, w_world: float = 1.0,
                    w_self: float = 1.0, eps: float = DEFAULT_EPS, rho: Any = None,
-                   grad: bool = True, device: Any = None, dtype: Any = None,
+                   grad: bool = True, device: DeviceLike = None, dtype: DTypeLike = None,
                    tape: bool = False, validate: bool = True) -> tuple[Any, Any]:
     """Collision cost ``w_world U_world + w_self U_self`` (eq. 3.8, 3.10, 3.11) per
     configuration and its gradient w.r.t. q.
@@ -687,8 +703,8 @@ def collision_cost(robot: Any, q: Any, world: World | None, *, w_world: float = 
     return out_c, out_g
 
 
-def sphere_distances(robot: Any, q: Any, world: World, *, rho: Any = None, device: Any = None,
-                     dtype: Any = None, validate: bool = True) -> Any:
+def sphere_distances(robot: RobotLike, q: Any, world: World, *, rho: Any = None, device: DeviceLike = None,
+                     dtype: DTypeLike = None, validate: bool = True) -> Any:
     """(..., n_spheres) signed distance [m] of each sphere's surface to the world:
     ``D(x_s) - r_s`` (negative = penetration)."""
     if world is None:
@@ -701,8 +717,8 @@ def sphere_distances(robot: Any, q: Any, world: World, *, rho: Any = None, devic
     return to_output(sd, batch, (cm.n_spheres,))
 
 
-def self_distances(robot: Any, q: Any, *, rho: Any = None, device: Any = None,
-                   dtype: Any = None, validate: bool = True) -> Any:
+def self_distances(robot: RobotLike, q: Any, *, rho: Any = None, device: DeviceLike = None,
+                   dtype: DTypeLike = None, validate: bool = True) -> Any:
     """(..., n_pairs) signed distance [m] between the surfaces of the sphere pairs of
     :func:`collision_pairs` (negative = penetration)."""
     model, batch, cm = _prepare(robot, q, None, device, dtype, validate)
@@ -713,8 +729,8 @@ def self_distances(robot: Any, q: Any, *, rho: Any = None, device: Any = None,
     return to_output(pd, batch, (cm.n_pairs,))
 
 
-def min_distances(robot: Any, q: Any, world: World | None = None, *, rho: Any = None,
-                  device: Any = None, dtype: Any = None, validate: bool = True,
+def min_distances(robot: RobotLike, q: Any, world: World | None = None, *, rho: Any = None,
+                  device: DeviceLike = None, dtype: DTypeLike = None, validate: bool = True,
                   per_world: int = 0) -> Any:
     """(..., 2) [smallest sphere-to-world, smallest sphere-to-sphere] surface distance [m]
     per configuration (``inf`` where there is nothing to measure). ``per_world`` > 0 with a
@@ -740,14 +756,14 @@ def mm_text(metres: float) -> str:
     return text
 
 
-def sphere_link(robot: Any, s: int) -> str:
+def sphere_link(robot: RobotLike, s: int) -> str:
     """The name of the frame (link) collision sphere ``s`` of ``robot`` is fixed to."""
     model = get_robot(robot)
     return model.frames[model.spheres[int(s)].frame].name
 
 
-def nearest_objects(robot: Any, q: Any, world: World, spheres: Any, rho: Any = None,
-                    device: Any = None) -> list[str]:
+def nearest_objects(robot: RobotLike, q: Any, world: World, spheres: Any, rho: Any = None,
+                    device: DeviceLike = None) -> list[str]:
     """What each of the collision ``spheres`` (indices) of one configuration q (n_dof,) is
     nearest to, in words: ``"object 'NAME'"`` (the world's exact objects) or ``"the world
     grid"`` (a grid, and every 2D world). ``rho`` (n_frames, 5): the frames' DH rows (an
@@ -774,8 +790,8 @@ def nearest_objects(robot: Any, q: Any, world: World, spheres: Any, rho: Any = N
             for o in obj]
 
 
-def closest_pair_text(robot: Any, q: Any, world: World | None, *, self_collision: bool,
-                      rho: Any = None, device: Any = None) -> str:
+def closest_pair_text(robot: RobotLike, q: Any, world: World | None, *, self_collision: bool,
+                      rho: Any = None, device: DeviceLike = None) -> str:
     """The closest pair of one configuration q (n_dof,) in words, for a message about a
     configuration in collision: ``link 'L' vs object 'O', -93.27 mm`` (``self_collision``
     False: the sphere nearest to the world and the object nearest to it) or ``link 'A' vs
@@ -798,8 +814,8 @@ def closest_pair_text(robot: Any, q: Any, world: World | None, *, self_collision
     return f"link '{a}' vs link '{b}', {mm_text(d[p])} mm"
 
 
-def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: float = 0.0, *,
-                      rho: Any = None, device: Any = None, dtype: Any = None,
+def is_collision_free(robot: RobotLike, q: Any, world: World | None = None, margin: float = 0.0, *,
+                      rho: Any = None, device: DeviceLike = None, dtype: DTypeLike = None,
                       validate: bool = True, self_margin: float | None = None,
                       per_world: int = 0, meshes: bool = True) -> np.ndarray:
     """(...,) bool numpy: every sphere keeps more than ``margin`` [m] from the world and
@@ -828,8 +844,8 @@ def is_collision_free(robot: Any, q: Any, world: World | None = None, margin: fl
     return free
 
 
-def mesh_certified(robot: Any, q: Any, world: World | None, free: np.ndarray, margin: float,
-                   self_margin: float, device: Any = None, per_world: int = 0,
+def mesh_certified(robot: RobotLike, q: Any, world: World | None, free: np.ndarray, margin: float,
+                   self_margin: float, device: DeviceLike = None, per_world: int = 0,
                    md: np.ndarray | None = None) -> np.ndarray:
     """``free`` (the spheres' verdict on ``q``) with the configurations the spheres refuse
     but the mesh certificate proves free (:func:`jwarp.world.mesh_check.mesh_check`;

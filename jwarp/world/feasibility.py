@@ -10,26 +10,28 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from jwarp.core.arrays import real_number
 from jwarp.core.device import content_key
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 from jwarp.world.sdf import World, grid_geometry
 
 __all__ = ["random_configurations", "feasible_fraction", "feasible_simplex_world",
            "fixed_spheres", "robot_reach", "robot_world_grid"]
 
 
-def random_configurations(robot: Any, n: int, seed: int | Sequence[int] = 0) -> np.ndarray:
+def random_configurations(robot: RobotLike, n: int, seed: int | Sequence[int] = 0) -> np.ndarray:
     """(n, n_dof) configurations drawn uniformly within the joint limits and the linear
     joint limits (rejection sampling), reproducible by ``seed``."""
     model = get_robot(robot)
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"n: expected a positive integer, got {n!r}")
+    check_int(n, "n", 1)
     rng = np.random.default_rng(seed)
     lim = model.joint_limits
     out = np.empty((0, model.n_dof))
@@ -46,8 +48,8 @@ def random_configurations(robot: Any, n: int, seed: int | Sequence[int] = 0) -> 
                      f"linear joint limits (acceptance too low)")
 
 
-def feasible_fraction(robot: Any, world: World | None, n: int = 1000, seed: int = 0, *,
-                      margin: float = 0.0, device: Any = None) -> float:
+def feasible_fraction(robot: RobotLike, world: World | None, n: int = 1000, seed: int = 0, *,
+                      margin: float = 0.0, device: DeviceLike = None) -> float:
     """Fraction of ``n`` random configurations (:func:`random_configurations`) whose
     spheres keep more than ``margin`` [m] from the world and from each other."""
     from jwarp.world.collision import is_collision_free
@@ -58,7 +60,7 @@ def feasible_fraction(robot: Any, world: World | None, n: int = 1000, seed: int 
     return float(np.mean(free))
 
 
-def fixed_spheres(robot: Any, pad: float = 0.0, device: Any = None) -> list[tuple[np.ndarray, float]]:
+def fixed_spheres(robot: RobotLike, pad: float = 0.0, device: DeviceLike = None) -> list[tuple[np.ndarray, float]]:
     """Collision spheres on frames that no joint moves (the robot's fixed base), as
     ``(centre (workspace_dim,) [m], radius + pad [m])`` in the base frame."""
     from jwarp.kinematics.fk import fk
@@ -85,12 +87,12 @@ def fixed_spheres(robot: Any, pad: float = 0.0, device: Any = None) -> list[tupl
 
 #: reach boxes by (robot content key, n, seed): equal robots share one, an edited copy
 #: (other limits, DH rows, spheres) has another key; the most recently used are kept
-_REACH: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
+_REACH: OrderedDict[tuple, np.ndarray] = OrderedDict()
 _REACH_MAX = 64
 _REACH_LOCK = threading.Lock()
 
 
-def robot_reach(robot: Any, n: int = 2000, seed: int = 0, device: Any = None) -> np.ndarray:
+def robot_reach(robot: RobotLike, n: int = 2000, seed: int = 0, device: DeviceLike = None) -> np.ndarray:
     """(workspace_dim, 2) [m] box around every collision sphere of ``n`` random
     configurations (centres -/+ radii): the space a world for this robot must cover.
     Cached per robot content (:func:`jwarp.core.device.content_key`), ``n`` and ``seed``
@@ -121,15 +123,14 @@ def robot_reach(robot: Any, n: int = 2000, seed: int = 0, device: Any = None) ->
     return box.copy()
 
 
-def robot_world_grid(robot: Any, cells: int = 64, voxel_size: float | None = None,
-                     pad: float = 0.0, device: Any = None
+def robot_world_grid(robot: RobotLike, cells: int = 64, voxel_size: float | None = None,
+                     pad: float = 0.0, device: DeviceLike = None
                      ) -> tuple[tuple[int, ...], np.ndarray, float]:
     """A grid covering the robot's reach (:func:`robot_reach`, plus ``pad`` [m]; its FK on
     ``device``): the longest side gets ``cells`` cells (or the given ``voxel_size``), the
     others as many cells of the same size as cover them, centred on the reach box.
     Returns ``(shape, limits (dim, 2), voxel_size)``."""
-    if isinstance(cells, bool) or not isinstance(cells, (int, np.integer)) or cells < 2:
-        raise ValueError(f"cells: expected an integer >= 2, got {cells!r}")
+    check_int(cells, "cells", 2)
     pad = real_number(pad, "pad")
     if not np.isfinite(pad):
         raise ValueError(f"pad: expected a finite distance [m], got {pad!r}")
@@ -159,17 +160,16 @@ def world_seed_candidates(seed: int, n: int) -> list[int]:
     ``seed + 1``, ...) made consecutive seeds collapse onto one world (seeds 1-7 of
     justin19 all became world 11)."""
     for name, v, lo in (("seed", seed, 0), ("n", n, 1)):
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+        check_int(v, name, lo)
     seed = int(seed)
     extra = np.random.SeedSequence(seed).generate_state(int(n) - 1, dtype=np.uint64)
     return [seed] + [STREAM_SEED_OFFSET + int(x % (2 ** 62)) for x in extra]
 
 
-def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200,
+def feasible_simplex_world(robot: RobotLike, *, seed: int = 0, min_feasible: int = 200,
                            n: int = 1000, max_tries: int = 50, cells: int = 64,
                            voxel_size: float | None = None, clear_base: bool = True,
-                           margin: float = 0.0, dim: int | None = None, device: Any = None,
+                           margin: float = 0.0, dim: int | None = None, device: DeviceLike = None,
                            extent: float | None = None, **noise: Any) -> World:
     """The first simplex world of the candidates of ``seed`` (:func:`world_seed_candidates`:
     ``seed`` itself, then seeds of its own stream, so distinct seeds give distinct worlds) in
@@ -191,11 +191,8 @@ def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200
     dim = model.workspace_dim if dim is None else dim
     if dim != model.workspace_dim:
         raise ValueError(f"dim: robot '{model.name}' needs {model.workspace_dim}D worlds, got {dim}")
-    if isinstance(min_feasible, (bool, np.bool_)) or not isinstance(min_feasible, (int, np.integer)) \
-            or not 0 < min_feasible <= n:
-        raise ValueError(f"min_feasible: expected 1..n={n}, got {min_feasible}")
-    if isinstance(max_tries, bool) or not isinstance(max_tries, (int, np.integer)) or max_tries < 1:
-        raise ValueError(f"max_tries: expected a positive integer, got {max_tries!r}")
+    check_int(min_feasible, "min_feasible", 1, n)
+    check_int(max_tries, "max_tries", 1)
     if extent is None:
         shape, limits, h = robot_world_grid(model, cells=cells, voxel_size=voxel_size,
                                             device=device)
@@ -205,8 +202,7 @@ def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200
             raise ValueError(f"extent: expected a side length > 0 [m], got {extent!r}")
         if voxel_size is not None:
             raise ValueError("voxel_size: give cells or voxel_size with extent, not both")
-        if isinstance(cells, bool) or not isinstance(cells, (int, np.integer)) or cells < 2:
-            raise ValueError(f"cells: expected an integer >= 2, got {cells!r}")
+        check_int(cells, "cells", 2)
         h = side / cells  # cells of h fill the side; limits are the first/last centres
         centre = robot_reach(model, device=device).mean(axis=1)
         lower = centre - 0.5 * (cells - 1) * h
@@ -214,9 +210,7 @@ def feasible_simplex_world(robot: Any, *, seed: int = 0, min_feasible: int = 200
                                          voxel_size=h)
     keep = fixed_spheres(model, pad=2 * h, device=device) if clear_base else []
     fractions = []
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) \
-            or seed < 0:
-        raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
+    check_int(seed, "seed", 0)
     for k, s in enumerate(world_seed_candidates(int(seed), int(max_tries))):
         world = simplex_world(dim, seed=s, shape=shape, limits=limits, keep_free=keep, **noise)
         frac = feasible_fraction(model, world, n, seed=s % 2 ** 32, margin=margin,

@@ -52,8 +52,14 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.importers.spheres import load_mesh, one_sided_error, primitive_mesh, signed_distance
+from jwarp.importers.spheres import (
+    load_mesh,
+    one_sided_error,
+    primitive_mesh,
+    signed_distance,
+)
 from jwarp.model import RobotModel, Sphere
+from jwarp.utils.checks import check_int
 
 __all__ = ["HomeFitOptions", "HomeFitReport", "HomeFitWarning", "fit_home", "resolve_home",
            "link_mesh", "mesh_distance"]
@@ -90,7 +96,7 @@ class HomeFitOptions:
     refit: bool = True
     n_random: int = 2000
 
-    def validate(self) -> "HomeFitOptions":
+    def validate(self) -> HomeFitOptions:
         for key in ("contact_margin", "gap", "tolerance"):
             v = getattr(self, key)
             if v is None and key == "tolerance":
@@ -98,14 +104,9 @@ class HomeFitOptions:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v < 0:
                 raise ValueError(f"{key}: expected a finite distance >= 0 [m], got {v!r}")
-        if isinstance(self.n_surface, bool) or not isinstance(self.n_surface, int) \
-                or self.n_surface < 100:
-            raise ValueError(f"n_surface: expected an integer >= 100, got {self.n_surface!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
-            raise TypeError(f"seed: expected an integer, got {type(self.seed).__name__}")
-        if isinstance(self.n_random, bool) or not isinstance(self.n_random, int) \
-                or self.n_random < 0:
-            raise ValueError(f"n_random: expected an integer >= 0, got {self.n_random!r}")
+        check_int(self.n_surface, "n_surface", 100)
+        check_int(self.seed, "seed")
+        check_int(self.n_random, "n_random", 0)
         return self
 
 

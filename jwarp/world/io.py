@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.world.sdf import FORMAT, VERSION, World, load_world, save_world
 
 __all__ = ["FORMAT", "VERSION", "save_world", "load_world", "parse_world_spec", "SPEC_KEYS"]
@@ -26,7 +27,7 @@ SPEC_KEYS = {
 }
 
 
-def parse_world_spec(spec: Any, robot: Any = None, device: Any = None) -> World:
+def parse_world_spec(spec: Any, robot: RobotLike = None, device: DeviceLike = None) -> World:
     """A world from a specification (the CLI's ``--world``).
 
     * a :class:`World` passes through;
@@ -59,8 +60,8 @@ def parse_world_spec(spec: Any, robot: Any = None, device: Any = None) -> World:
             samples would need more than the available memory; checked before anything
             is allocated, the message gives the grid and the figure.
     """
-    from jwarp.world.collision import check_world
     from jwarp.model.registry import robot as get_robot
+    from jwarp.world.collision import check_world
 
     model = None if robot is None else get_robot(robot)
     if isinstance(spec, World):
@@ -121,7 +122,7 @@ def _spec_int(key: str, v: Any, lo: int, hi: int | None = None) -> int:
 
 
 def _grid_size(model: Any, dim: int, cells: int | None, voxel: float | None,
-               device: Any = None) -> list[float]:
+               device: DeviceLike = None) -> list[float]:
     """The grid sizes (per axis, as floats: nothing is allocated) a simplex spec makes."""
     if model is not None and dim == model.workspace_dim:
         from jwarp.world.feasibility import robot_reach
@@ -139,9 +140,13 @@ def _grid_text(sizes: list[float]) -> str:
     return f"{fmt[0]}^{len(fmt)}" if len(set(fmt)) == 1 else " x ".join(fmt)
 
 
-def _simplex_from_spec(rest: str, model: Any, text: str, device: Any = None) -> World:
+def _simplex_from_spec(rest: str, model: Any, text: str, device: DeviceLike = None) -> World:
     from jwarp.utils.memory import check_memory
-    from jwarp.world.feasibility import feasible_simplex_world, fixed_spheres, robot_world_grid
+    from jwarp.world.feasibility import (
+        feasible_simplex_world,
+        fixed_spheres,
+        robot_world_grid,
+    )
     from jwarp.world.simplex import simplex_world
 
     opts: dict[str, Any] = {}

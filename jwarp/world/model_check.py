@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from jwarp.core.limits import project_numpy
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.kinematics.fk import fk
 from jwarp.model.registry import robot as get_robot
 from jwarp.world.collision import collision_pairs
@@ -40,7 +41,7 @@ NO_SPHERES_HINT = ("fit spheres to the robot's collision geometry with `jwarp im
                    "(API: jwarp.world.spherize)")
 
 
-def home_configuration(robot: Any) -> np.ndarray:
+def home_configuration(robot: RobotLike) -> np.ndarray:
     """(n_dof,) the robot's home configuration [rad or m]: zero projected into the joint
     limits (and linear limits, where the robot has them)."""
     model = get_robot(robot)
@@ -51,7 +52,7 @@ def home_configuration(robot: Any) -> np.ndarray:
 HOME_NOTE = "home"
 
 
-def noted_home(robot: Any) -> np.ndarray | None:
+def noted_home(robot: RobotLike) -> np.ndarray | None:
     """(n_dof,) the home in ``notes['home']`` [rad or m], projected into the limits; None
     when there is none or it does not fit the robot (another joint count, not numbers)."""
     import json
@@ -69,7 +70,7 @@ def noted_home(robot: Any) -> np.ndarray | None:
     return project_numpy(model, q)
 
 
-def home_configurations(robot: Any) -> list[tuple[str, np.ndarray]]:
+def home_configurations(robot: RobotLike) -> list[tuple[str, np.ndarray]]:
     """``[(label, q (n_dof,))]``: the imported home (:func:`noted_home`) where the robot
     has one, :func:`home_configuration` and the middle of the joint limits (projected into
     linear limits), the configurations of the self-collision check."""
@@ -81,7 +82,7 @@ def home_configurations(robot: Any) -> list[tuple[str, np.ndarray]]:
         ("the middle of the joint limits", mid)]
 
 
-def home_self_collisions(robot: Any, q: Any = None, *, device: Any = None
+def home_self_collisions(robot: RobotLike, q: Any = None, *, device: DeviceLike = None
                          ) -> list[tuple[str, str, float]]:
     """Frame pairs whose spheres overlap at ``q`` (None: :func:`home_configuration`) among
     the self-collision pairs the robot checks (``RobotModel.allowed_collision_pairs``):
@@ -109,9 +110,9 @@ def home_self_collisions(robot: Any, q: Any = None, *, device: Any = None
 _PASSED: set = set()
 
 
-def check_collision_model(robot: Any, *, need_spheres: bool, what: str,
+def check_collision_model(robot: RobotLike, *, need_spheres: bool, what: str,
                           option: str = "allow_no_collision=True",
-                          device: Any = None) -> None:
+                          device: DeviceLike = None) -> None:
     """ValueError naming the robot when ``need_spheres`` and it has no collision spheres,
     or when it is in self-collision at every one of :func:`home_configurations` (naming the
     frame pairs and how deep they overlap).
@@ -159,10 +160,10 @@ class MeshMarginWarning(UserWarning):
 _WARNED: set = set()
 #: robot content -> its inflated copy (the last few; a planner built per problem reuses it,
 #: and with it the device tables, instead of copying the robot each time)
-_INFLATED: "OrderedDict[str, Any]" = OrderedDict()
+_INFLATED: OrderedDict[str, Any] = OrderedDict()
 
 
-def mesh_margin_model(robot: Any, mesh_margin: bool = True, *, what: str = "planning") -> Any:
+def mesh_margin_model(robot: RobotLike, mesh_margin: bool = True, *, what: str = "planning") -> Any:
     """The robot a planner or IK solver works with (a :class:`~jwarp.model.RobotModel`):
     when its ``sphere_relation`` is ``"approximate"`` (the meshes poke out of the spheres
     by a measured, certified amount per link) and ``mesh_margin``, a copy whose every

@@ -40,6 +40,7 @@ from jwarp.core.limits import LIMIT_TOL
 from jwarp.kernels import motion as mk
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 from jwarp.world.collision import check_world, mm_text
 from jwarp.world.device_world import DeviceWorld
 from jwarp.world.reach import point_reach
@@ -117,9 +118,7 @@ class MotionOptions:
         d = real_number(self.min_step, "min_step")
         if not (np.isfinite(d) and 0 < d < 1):
             raise ValueError(f"min_step: expected a fraction in (0, 1), got {self.min_step!r}")
-        if isinstance(self.rounds, bool) or not isinstance(self.rounds, (int, np.integer)) \
-                or self.rounds < 1:
-            raise ValueError(f"rounds: expected an integer >= 1, got {self.rounds!r}")
+        check_int(self.rounds, "rounds", 1)
         if self.points is not None and (isinstance(self.points, bool) or not isinstance(
                 self.points, (int, np.integer)) or self.points < 0):
             raise ValueError(f"points: expected an integer >= 0 or None, got {self.points!r}")
@@ -127,19 +126,15 @@ class MotionOptions:
         if not (np.isfinite(pl) and pl > 0):
             raise ValueError(f"probe_len: expected a length > 0 [m], got {self.probe_len!r}")
         v = self.max_evals
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-            raise ValueError(f"max_evals: expected an integer >= 1, got {v!r}")
+        check_int(v, "max_evals", 1)
         if self.method not in (None, "levels", "advance"):
             raise ValueError(f"method: expected 'levels', 'advance' or None, got "
                              f"{self.method!r}")
         v = self.intervals
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 4096:
-            raise ValueError(f"intervals: expected an integer in [1, 4096], got {v!r}")
+        check_int(v, "intervals", 1, 4096)
         for name, lo in (("levels", 1), ("capacity", 1)):
             v = getattr(self, name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer))
-                                  or v < lo):
-                raise ValueError(f"{name}: expected an integer >= {lo} or None, got {v!r}")
+            check_int(v, name, lo, none=True)
         if not isinstance(self.fallback, (bool, np.bool_)):
             raise ValueError(f"fallback: expected True or False, got {self.fallback!r}")
 
@@ -160,7 +155,7 @@ class MotionOptions:
         return "levels" if device.is_cuda else "advance"
 
 
-_TABLES: "OrderedDict[tuple, Any]" = OrderedDict()
+_TABLES: OrderedDict[tuple, Any] = OrderedDict()
 
 
 def _cached(kind: str, model: RobotModel, build: Any) -> Any:
@@ -650,8 +645,7 @@ class MotionCheck:
                          device=self.device)
         K = p.shape[0]
         idx: wp.array = wp.array(np.arange(K, dtype=np.int32), dtype=wp.int32, device=self.device)
-        if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or group < 0:
-            raise ValueError(f"group: expected an integer >= 0, got {group!r}")
+        check_int(group, "group", 0)
         out = self.launch(p, idx, K, margin=margin, endpoint_margin=endpoint_margin,
                           self_margin=self_margin, world_group=world_group, group=int(group))
         ok = out["ok"].numpy()[:K].astype(bool)
@@ -765,7 +759,7 @@ class MotionCheck:
 #: numbers of waypoints whose output buffers a MotionCheck keeps (:meth:`MotionCheck._outputs`)
 _OUT_KEEP = 4
 
-_CHECKS: "OrderedDict[tuple, tuple]" = OrderedDict()
+_CHECKS: OrderedDict[tuple, tuple] = OrderedDict()
 
 
 def motion_check(robot: Any, world: World | None, *, device: Any = None) -> MotionCheck:

@@ -266,7 +266,8 @@ def load_mesh(spec: Any, where: str, base_dir: Path | None = None) -> Any:
     :class:`~jwarp.utils.roots.OutsideFolderWarning`."""
     import trimesh
 
-    from jwarp.importers.spheres import file_problem, load_mesh as load_mesh_file
+    from jwarp.importers.spheres import file_problem
+    from jwarp.importers.spheres import load_mesh as load_mesh_file
 
     if not isinstance(spec, dict):
         raise ValueError(f"{where}: expected a mapping (vertices/triangles or resource)")

@@ -15,13 +15,21 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
+from jwarp.core.arrays import (
+    finite_as,
+    init_warp,
+    real_array,
+    real_number,
+    resolve_device,
+)
 from jwarp.core.device import numpy_dtype, put_model, scalar_type
 from jwarp.core.limits import describe_violation, sample_within_limits, within_limits
+from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.transmission import untransmitted, without_transmission
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 from jwarp.world import collision
 
 #: feasibility checks use substeps with sphere motion <= voxel / SWEEP_SAFETY
@@ -41,7 +49,7 @@ def check_world(robot: RobotModel, world: Any) -> None:
 
 
 def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, margin: float,
-                    rho_kappa: Any = None, device: Any = None,
+                    rho_kappa: Any = None, device: DeviceLike = None,
                     self_margin: float = 0.0, per_world: int = 0) -> np.ndarray:
     """ValueError naming ``name`` (and the row) if a configuration is outside the limits or
     in collision (closer than ``margin`` to an obstacle or to itself: the message names the
@@ -91,7 +99,7 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
 
 
 def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
-                   kappa: Any = None, rho: Any = None, device: Any = None,
+                   kappa: Any = None, rho: Any = None, device: DeviceLike = None,
                    self_margin: float = 0.0, per_world: int = 0,
                    meshes: bool = True) -> np.ndarray:
     """(N,) bool: q (N, n_dof) collision-free: more than ``margin`` [m] from the world and
@@ -119,7 +127,7 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
     return free if converged is None else free & converged.reshape(-1)
 
 
-def elastic_equilibrium(robot: Any, q: np.ndarray, kappa: Any, device: Any = None
+def elastic_equilibrium(robot: RobotLike, q: np.ndarray, kappa: Any, device: DeviceLike = None
                         ) -> tuple[np.ndarray, np.ndarray]:
     """The elastic model's equilibrium at q (N, n_dof) as the feasibility checks solve it
     (:data:`ELASTIC_CHECK`, float64): ``(rho (N, n_frames, 5), converged (N,) bool)``."""
@@ -137,7 +145,7 @@ def elastic_equilibrium(robot: Any, q: np.ndarray, kappa: Any, device: Any = Non
     return np.asarray(res.rho), np.asarray(res.converged, bool)
 
 
-def substeps(paths: Any, n_substeps: int, *, device: Any = None, dtype: Any = None) -> np.ndarray:
+def substeps(paths: Any, n_substeps: int, *, device: DeviceLike = None, dtype: DTypeLike = None) -> np.ndarray:
     """Linear substeps (eq. 3.3) of paths (..., W, n_dof) -> (..., S, n_dof) with
     S = (W - 1) n_substeps + 1 (every waypoint included, the goal last)."""
     init_warp()
@@ -160,8 +168,8 @@ def substeps(paths: Any, n_substeps: int, *, device: Any = None, dtype: Any = No
     return out.numpy().reshape(a.shape[:-2] + (S, n))
 
 
-def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin: float = 0.0,
-                  kappa: Any = None, device: Any = None,
+def path_feasible(robot: RobotLike, world: Any, paths: Any, n_substeps: int, *, margin: float = 0.0,
+                  kappa: Any = None, device: DeviceLike = None,
                   endpoint_margin: float | None = None, self_margin: float = 0.0,
                   meshes: bool | None = None) -> np.ndarray:
     """Feasibility of paths (..., W, n_dof): every waypoint within the joint limits and,
@@ -190,7 +198,7 @@ def path_feasible(robot: Any, world: Any, paths: Any, n_substeps: int, *, margin
     return free & within_limits(model, a).all(axis=-1)
 
 
-def certify_check(robot: Any, world: Any, device: Any = None) -> Any:
+def certify_check(robot: RobotLike, world: Any, device: DeviceLike = None) -> Any:
     """The continuous check (:class:`jwarp.world.motion.MotionCheck`, the default
     :class:`jwarp.world.motion.MotionOptions`: up to 4000 evaluations per segment) that
     :func:`path_feasible` (the rigid model), the RRT-Connect's edges and the planner's
@@ -204,12 +212,11 @@ def certify_check(robot: Any, world: Any, device: Any = None) -> Any:
 
 
 def check_substeps(n_substeps: Any) -> int:
-    if isinstance(n_substeps, bool) or not isinstance(n_substeps, (int, np.integer)) or n_substeps < 1:
-        raise ValueError(f"n_substeps: expected an integer >= 1, got {n_substeps!r}")
+    return check_int(n_substeps, "n_substeps", 1)
     return int(n_substeps)
 
 
-def sphere_centres(robot: RobotModel, q: np.ndarray, device: Any = None) -> np.ndarray:
+def sphere_centres(robot: RobotModel, q: np.ndarray, device: DeviceLike = None) -> np.ndarray:
     """World centres (N, n_spheres, 3) [m] of the collision spheres at q (N, n_dof)."""
     from jwarp.kinematics.fk import fk
 
@@ -220,7 +227,7 @@ def sphere_centres(robot: RobotModel, q: np.ndarray, device: Any = None) -> np.n
 
 
 def substeps_for_voxel(robot: RobotModel, paths: Any, voxel_size: float, *,
-                       safety: float = 1.0, max_substeps: int = 64, device: Any = None) -> int:
+                       safety: float = 1.0, max_substeps: int = 64, device: DeviceLike = None) -> int:
     """Substeps per segment so that no sphere centre moves more than ``voxel_size / safety``
     between two substeps of ``paths`` (..., W, n_dof) (thesis 3.3.1: N_u adjusted to the
     step length and the voxel size). The motion of each segment is measured on a fine
@@ -234,7 +241,7 @@ def substeps_for_voxel(robot: RobotModel, paths: Any, voxel_size: float, *,
 
 
 def substeps_per_path(robot: RobotModel, paths: Any, voxel_size: float, *,
-                      safety: float = 1.0, max_substeps: int = 64, device: Any = None
+                      safety: float = 1.0, max_substeps: int = 64, device: DeviceLike = None
                       ) -> np.ndarray:
     """:func:`substeps_for_voxel` of each path of ``paths`` (..., W, n_dof) on its own:
     (P,) int, P the number of paths (one FK call for all of them)."""
@@ -252,7 +259,7 @@ def substeps_per_path(robot: RobotModel, paths: Any, voxel_size: float, *,
     return np.clip(np.ceil(seg * safety / voxel_size), 1, max_substeps).astype(np.int64)
 
 
-def _longest_arcs(robot: RobotModel, q: np.ndarray, fine: int, device: Any) -> np.ndarray:
+def _longest_arcs(robot: RobotModel, q: np.ndarray, fine: int, device: DeviceLike) -> np.ndarray:
     """Per path of ``q`` (P, S, n_dof) (S = (W - 1) fine + 1 rows): the longest arc of a
     sphere centre over one segment [m] (float64 FK, sphere centres and the sums in three
     launches on ``device``; no spheres: 0)."""
@@ -281,7 +288,7 @@ def _longest_arcs(robot: RobotModel, q: np.ndarray, fine: int, device: Any) -> n
 def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: str = "straight",
                   *, robot: RobotModel | None = None, n_via: tuple[int, int] = (1, 3),
                   rng: np.random.Generator | None = None, world: Any = None,
-                  device: Any = None) -> np.ndarray:
+                  device: DeviceLike = None) -> np.ndarray:
     """Initial guesses (B, W, n_dof) from start/goal (B, n_dof).
 
     ``kind``: "straight" (the line in joint space) or "random" (1-3 random via points

@@ -13,12 +13,13 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import RobotLike
 from jwarp.model.registry import robot as get_robot
 
 __all__ = ["point_reach"]
 
 
-def point_reach(robot: Any, frames: Any, positions: Any, extent: Any = None) -> np.ndarray:
+def point_reach(robot: RobotLike, frames: Any, positions: Any, extent: Any = None) -> np.ndarray:
     """(K, n_frames) float64: :func:`sphere_reach` of K points (``frames`` (K,) int,
     ``positions`` (K, 3) [m] in their frames), each grown by ``extent`` (K,) [m] (None: 0):
     a bound of the distance from frame i's joint axis of any point within ``extent`` of

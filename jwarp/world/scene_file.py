@@ -45,11 +45,27 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.world.moveit import (RobotFrames, goal_joint_values, load_mesh, moveit_frames,
-                                moveit_shapes, parse_pose, start_joint_values, unknown_frame)
+from jwarp.core.types import DTypeLike
 from jwarp.utils.roots import one_warning_per_file
-from jwarp.world.primitives import (N_DIMS, Shape, finite_vector, pose_matrix,
-                                    quaternion_matrix, rpy_matrix, signed_distance)
+from jwarp.world.moveit import (
+    RobotFrames,
+    goal_joint_values,
+    load_mesh,
+    moveit_frames,
+    moveit_shapes,
+    parse_pose,
+    start_joint_values,
+    unknown_frame,
+)
+from jwarp.world.primitives import (
+    N_DIMS,
+    Shape,
+    finite_vector,
+    pose_matrix,
+    quaternion_matrix,
+    rpy_matrix,
+    signed_distance,
+)
 from jwarp.world.sdf import World, check_grid_cells, world_from_mesh
 
 __all__ = ["DEFAULT_PAD", "DEFAULT_VOXEL", "FORMAT", "TABLE_SHELF_GOAL", "TABLE_SHELF_START",
@@ -131,7 +147,7 @@ class SceneOptions:
     voxel_size: float | None = None
     limits: Any = None
     pad: float | None = None
-    dtype: Any = np.float64
+    dtype: DTypeLike = np.float64
 
     def validate(self) -> None:
         if self.voxel_size is not None:

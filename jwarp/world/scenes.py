@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from jwarp.utils.checks import check_int
 from jwarp.world.sdf import World, world_from_occupancy
 
 
@@ -38,8 +39,7 @@ def shelf_grasp_poses(n: int, seed: int | np.random.Generator = 1) -> np.ndarray
     networks' training targets; ``seed``: an int or a numpy Generator."""
     from scipy.spatial.transform import Rotation
 
-    if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 0:
-        raise ValueError(f"n: expected an integer >= 0, got {n!r}")
+    check_int(n, "n", 0)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     base = Rotation.from_euler("y", 90, degrees=True)
     out = np.tile(np.eye(4), (int(n), 1, 1))

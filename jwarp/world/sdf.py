@@ -39,19 +39,20 @@ from __future__ import annotations
 import json
 import os
 import zipfile
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 import warp as wp
 from scipy import ndimage
 
-from jwarp.utils.atomic import AtomicFile
 from jwarp.core.arrays import finite_as, init_warp, real_array, resolve_device
 from jwarp.core.device import scalar_type
 from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import collision as ck
+from jwarp.utils.atomic import AtomicFile
 
 __all__ = ["FORMAT", "MAX_GRID_CELLS", "VERSION", "World", "check_grid_cells", "grid_geometry", "load_world", "save_world", "sdf_query",
            "world_from_occupancy", "world_from_mesh",
@@ -159,13 +160,13 @@ class World:
 
     # ------------------------------------------------------------------ sizes
     @classmethod
-    def of_shapes(cls, shapes: Any = None, meta: dict | None = None) -> "World":
+    def of_shapes(cls, shapes: Any = None, meta: dict | None = None) -> World:
         """A 3D world of exact objects only (a :class:`jwarp.world.shapes.ShapeSet`; None:
         empty, fill it with :meth:`add`)."""
         return cls(None, shapes=shapes, meta=dict(meta or {}))
 
     @classmethod
-    def batch(cls, worlds: Sequence["World"]) -> "World":
+    def batch(cls, worlds: Sequence[World]) -> World:
         """One world holding a batch of worlds of exact objects, world i's objects as group
         i (ids ``"<i>/<id>"``): a :class:`jwarp.solvers.planning.Planner` with one problem
         per world plans each problem in its own world in one batch."""
@@ -216,7 +217,7 @@ class World:
         """Worlds of a batch (:meth:`batch`); 1 for a single world."""
         return int(self.meta.get("n_worlds", 1)) if self.sdf is None else 1
 
-    def select(self, i: int) -> "World":
+    def select(self, i: int) -> World:
         """World ``i`` (an integer) of a batch as a world of its own (a copy of its
         objects); a single world is its own world ``i`` for any ``i``."""
         from jwarp.world.shapes import ShapeSet
@@ -376,7 +377,7 @@ class World:
         axes = [self.limits[d, 0] + self.voxel_size * np.arange(n) for d, n in enumerate(self.shape)]
         return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
 
-    def astype(self, dtype: DTypeLike) -> "World":
+    def astype(self, dtype: DTypeLike) -> World:
         """The same world with the SDF stored as ``dtype`` (float32 or float64); exact
         objects are shared."""
         if self.sdf is None:
@@ -413,7 +414,7 @@ class World:
         save_world(self, path)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "World":
+    def load(cls, path: str | os.PathLike) -> World:
         """Read a world written by :meth:`save`; a malformed file raises ValueError."""
         return load_world(path)
 
@@ -528,7 +529,7 @@ def _box_geometry(limits: Any, voxel_size: Any, shape: tuple[int, ...]) -> tuple
 
 # ================================================================ constructors
 def world_from_occupancy(occupancy: Any, limits: Any, voxel_size: float | None = None, *,
-                         dtype: Any = np.float64) -> World:
+                         dtype: DTypeLike = np.float64) -> World:
     """Signed distance field of a boolean occupancy grid (module docstring convention).
 
     Args:
@@ -558,7 +559,7 @@ def world_from_occupancy(occupancy: Any, limits: Any, voxel_size: float | None =
 
 
 def world_from_points(points: Any, limits: Any, voxel_size: float | None = None, *,
-                      shape: Sequence[int] | None = None, dtype: Any = np.float64) -> World:
+                      shape: Sequence[int] | None = None, dtype: DTypeLike = np.float64) -> World:
     """World from a point cloud on obstacle surfaces (e.g. a depth camera).
 
     Each point marks the cell whose centre is nearest as occupied; the SDF follows as for
@@ -586,8 +587,8 @@ def world_from_points(points: Any, limits: Any, voxel_size: float | None = None,
 
 
 def world_from_mesh(mesh: Any, limits: Any, voxel_size: float | None = None, *,
-                    shape: Sequence[int] | None = None, device: Any = None,
-                    dtype: Any = np.float64) -> World:
+                    shape: Sequence[int] | None = None, device: DeviceLike = None,
+                    dtype: DTypeLike = np.float64) -> World:
     """World from a closed triangle mesh: exact distance of every cell centre to the mesh
     surface, negative inside (ray-casting parity), via Warp's BVH mesh queries.
 
@@ -645,11 +646,10 @@ def save_world(world: World, path: str | os.PathLike) -> None:
         meta=np.array(meta))
     if world.occupancy is not None:
         arrays["occupancy"] = world.occupancy
-    with AtomicFile(path) as f:
-        with open(f.tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-            fh.flush()
-            os.fsync(fh.fileno())
+    with AtomicFile(path) as f, open(f.tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+        fh.flush()
+        os.fsync(fh.fileno())
 
 
 def load_world(path: str | os.PathLike) -> World:
@@ -710,7 +710,7 @@ def load_world(path: str | os.PathLike) -> World:
         raise ValueError(f"{path}: {e}") from e
 
 
-def sdf_query(world: World, points: Any, *, grad: bool = False, device: Any = None
+def sdf_query(world: World, points: Any, *, grad: bool = False, device: DeviceLike = None
               ) -> Any:
     """Interpolated signed distance [m] of ``world`` at ``points`` (..., dim) [m] (numpy),
     with the lookup of the cost kernels. Returns (...,) or, with ``grad``, a tuple

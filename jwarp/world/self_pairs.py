@@ -47,12 +47,19 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import RobotLike
 from jwarp.kinematics.fk import fk
-from jwarp.utils.memory import check_memory, format_bytes
 from jwarp.model import RobotModel, SelfCollision
-from jwarp.model.pair_reasons import (PAIRS_NOTE, moveit_adjacent_pairs, pair_reasons,
-                                      skipped_pairs, with_pair_reasons)
+from jwarp.model.pair_reasons import (
+    PAIRS_NOTE,
+    moveit_adjacent_pairs,
+    pair_reasons,
+    skipped_pairs,
+    with_pair_reasons,
+)
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
+from jwarp.utils.memory import check_memory, format_bytes
 
 __all__ = ["SelfPairs", "PairSamplingCost", "never_colliding_pairs", "pair_sampling_cost",
            "adjacent_pairs", "moveit_adjacent_pairs", "rigid_groups", "default_pairs",
@@ -147,14 +154,6 @@ _PAIR_BYTES = 8 * 4
 _SPHERE_BYTES = 8 * (3 + 3)
 
 
-def _int(x: Any, name: str, low: int) -> int:
-    if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
-        raise TypeError(f"{name}: expected an integer, got {type(x).__name__}")
-    if x < low:
-        raise ValueError(f"{name}: must be >= {low}, got {x}")
-    return int(x)
-
-
 @dataclass
 class PairSamplingCost:
     """What :func:`never_colliding_pairs` will do (:func:`pair_sampling_cost`).
@@ -183,7 +182,7 @@ class PairSamplingCost:
 
 
 def _memory_arg(max_memory: Any) -> int:
-    max_memory = _int(max_memory, "max_memory", 1)
+    max_memory = check_int(max_memory, "max_memory", 1)
     if max_memory < 1_000_000:
         raise ValueError(f"max_memory: expected at least 1000000 bytes, got {max_memory}")
     return max_memory
@@ -211,17 +210,17 @@ def _plan(model: RobotModel, n_samples: int, batch: int, max_memory: int
     return cost, tile
 
 
-def pair_sampling_cost(robot: Any, n_samples: int = 10000, *, batch: int = 1024,
+def pair_sampling_cost(robot: RobotLike, n_samples: int = 10000, *, batch: int = 1024,
                        max_memory: int = MAX_MEMORY) -> PairSamplingCost:
     """The work and memory of :func:`never_colliding_pairs` with these arguments, without
     doing it (sizes only)."""
     model = get_robot(robot)
-    n_samples = _int(n_samples, "n_samples", 1)
-    batch = _int(batch, "batch", 1)
+    n_samples = check_int(n_samples, "n_samples", 1)
+    batch = check_int(batch, "batch", 1)
     return _plan(model, n_samples, batch, _memory_arg(max_memory))[0]
 
 
-def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
+def never_colliding_pairs(robot: RobotLike, n_samples: int = 10000, seed: int = 0,
                           margin: float = 0.0, *, batch: int = 1024,
                           max_memory: int = MAX_MEMORY, verbose: bool = False,
                           adjacency: str = "rigid", always_fraction: float = 1.0) -> SelfPairs:
@@ -244,9 +243,9 @@ def never_colliding_pairs(robot: Any, n_samples: int = 10000, seed: int = 0,
     :func:`pair_sampling_cost` before the work. A MemoryError is raised before the work when
     the estimate exceeds the available memory."""
     model = get_robot(robot)
-    n_samples = _int(n_samples, "n_samples", 1)
-    seed = _int(seed, "seed", 0)
-    batch = _int(batch, "batch", 1)
+    n_samples = check_int(n_samples, "n_samples", 1)
+    seed = check_int(seed, "seed", 0)
+    batch = check_int(batch, "batch", 1)
     max_memory = _memory_arg(max_memory)
     if isinstance(margin, bool) or not isinstance(margin, (int, float, np.floating, np.integer)) \
             or not np.isfinite(margin):
@@ -394,7 +393,7 @@ def _frame_pair_min(x: np.ndarray, r: np.ndarray, todo: np.ndarray, a0: int, a1:
 
 
 
-def default_pairs(robot: Any, home: Any, contact: Any
+def default_pairs(robot: RobotLike, home: Any, contact: Any
                   ) -> tuple[list[tuple[int, int, float]], list[tuple[int, int, float]]]:
     """MoveIt's "Default" rule, checked against the robot's own geometry: the checked frame
     pairs (``RobotModel.allowed_collision_pairs``) whose spheres overlap at ``home``
@@ -421,7 +420,7 @@ def default_pairs(robot: Any, home: Any, contact: Any
     return default, fit
 
 
-def with_default_pairs(robot: Any, pairs: Any) -> RobotModel:
+def with_default_pairs(robot: RobotLike, pairs: Any) -> RobotModel:
     """A copy of ``robot`` whose ``exclude_pairs`` also hold ``pairs`` (frame index pairs,
     e.g. the ``default`` of :func:`default_pairs`; extra items are ignored), listed by name
     in ``notes['self_collision_default']`` (added to those listed already)."""
@@ -452,7 +451,7 @@ def with_default_pairs(robot: Any, pairs: Any) -> RobotModel:
     return model.copy(self_collision=new_sc, notes=notes)
 
 
-def with_self_pairs(robot: Any, pairs: SelfPairs, *, replace: bool = True) -> RobotModel:
+def with_self_pairs(robot: RobotLike, pairs: SelfPairs, *, replace: bool = True) -> RobotModel:
     """A copy of ``robot`` whose ``self_collision`` excludes ``pairs.exclude_pairs``.
 
     ``replace=True``: the section becomes exactly these exclusions (no groups, no include
@@ -487,7 +486,7 @@ def with_self_pairs(robot: Any, pairs: SelfPairs, *, replace: bool = True) -> Ro
     return with_pair_reasons(out, {**sampled_reasons(model, pairs), **old_reasons})
 
 
-def sampled_reasons(robot: Any, pairs: SelfPairs) -> dict[tuple[int, int], tuple[str, str]]:
+def sampled_reasons(robot: RobotLike, pairs: SelfPairs) -> dict[tuple[int, int], tuple[str, str]]:
     """``{(a, b): (reason, why)}`` of the exclusions of the sampled ``pairs``: Adjacent,
     Always (with its share of the samples), Never (with the closest distance seen)."""
     model = get_robot(robot)
@@ -513,7 +512,7 @@ def sampled_reasons(robot: Any, pairs: SelfPairs) -> dict[tuple[int, int], tuple
     return out
 
 
-def write_self_pairs(robot: Any, out: str | os.PathLike, pairs: SelfPairs | None = None, *,
+def write_self_pairs(robot: RobotLike, out: str | os.PathLike, pairs: SelfPairs | None = None, *,
                      replace: bool = True, **options: Any) -> RobotModel:
     """Compute the pairs (``options`` go to :func:`never_colliding_pairs`) unless given, and
     save the robot with them as JSON to ``out`` (atomically). Returns the new model."""

@@ -20,14 +20,16 @@ Poses are 4x4 local -> world [m].
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.kernels import geometry as gk
+from jwarp.utils.checks import check_int
 
 __all__ = ["KINDS", "ShapeSet", "DeviceShapes", "LIMIT_EXTENT", "mesh_arrays"]
 
@@ -154,7 +156,7 @@ class ShapeSet:
 
     # ------------------------------------------------------------------ build
     @classmethod
-    def from_shapes(cls, shapes: Iterable[Any]) -> "ShapeSet":
+    def from_shapes(cls, shapes: Iterable[Any]) -> ShapeSet:
         """A ShapeSet of :class:`jwarp.world.primitives.Shape` objects (ids made unique
         by a ``#k`` suffix where one object has several shapes)."""
         s = cls()
@@ -173,8 +175,7 @@ class ShapeSet:
         """Add object ``id`` (a new name) of ``kind`` (:data:`KINDS`) with ``dims`` [m]
         and ``pose`` (4x4 or a position; None: identity); ``group``: its world in a batch
         of worlds (>= 0). Returns its index."""
-        if isinstance(group, bool) or not isinstance(group, (int, np.integer)) or group < 0:
-            raise ValueError(f"group: expected an integer >= 0, got {group!r}")
+        check_int(group, "group", 0)
         if not isinstance(id, str) or not id:
             raise TypeError(f"id: expected a non-empty string, got {id!r}")
         where = f"object '{id}'"
@@ -371,7 +372,7 @@ class ShapeSet:
         return d.numpy().reshape(p.shape[:-1])
 
     # ---------------------------------------------------------------- device
-    def device_shapes(self, device: Any, scalar: type) -> "DeviceShapes":
+    def device_shapes(self, device: Any, scalar: type) -> DeviceShapes:
         """The device copy for (device, scalar type), brought up to date."""
         key = (str(device), scalar.__name__)
         ds = self._device.get(key)

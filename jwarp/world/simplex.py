@@ -23,9 +23,12 @@ times ``persistence``), normalised so the sum stays in about [-1, 1].
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from jwarp.utils.checks import check_int
 
 if TYPE_CHECKING:
     from jwarp.world.sdf import World
@@ -43,11 +46,7 @@ _GRAD3 = np.array([[1, 1, 0], [-1, 1, 0], [1, -1, 0], [-1, -1, 0],
 
 
 def _check_seed(seed: object) -> int:
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
-        raise TypeError(f"seed: expected an integer, got {type(seed).__name__}")
-    if seed < 0:
-        raise ValueError(f"seed: expected a non-negative integer, got {seed}")
-    return int(seed)
+    return check_int(seed, "seed", 0)
 
 
 def _permutation(seed: int) -> np.ndarray:
@@ -158,8 +157,7 @@ def noise_grid(shape: Sequence[int], *, seed: int, frequency: float = 2.0, octav
     s = _check_shape(shape, None)
     if not np.isfinite(frequency) or frequency <= 0:
         raise ValueError(f"frequency: expected a positive number, got {frequency}")
-    if isinstance(octaves, bool) or not isinstance(octaves, (int, np.integer)) or not 1 <= octaves <= 8:
-        raise ValueError(f"octaves: expected an integer in [1, 8], got {octaves!r}")
+    check_int(octaves, "octaves", 1, 8)
     if not np.isfinite(persistence) or not 0 < persistence <= 1:
         raise ValueError(f"persistence: expected a number in (0, 1], got {persistence}")
     rng = np.random.default_rng([seed, 1])
@@ -193,7 +191,7 @@ def simplex_world(dim: int = 3, *, seed: int, shape: Sequence[int] | None = None
                   threshold: float = 0.6, frequency: float = 2.0, octaves: int = 1,
                   persistence: float = 0.5,
                   keep_free: Sequence[tuple[Sequence[float] | np.ndarray, float]] = ()
-                  ) -> "World":
+                  ) -> World:
     """A random occupancy world from simplex noise, with its signed distance field.
 
     Args:

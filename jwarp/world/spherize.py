@@ -43,11 +43,18 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.utils.atomic import atomic_write_text
 from jwarp.model import RobotModel, Sphere, SphereRelation
-from jwarp.world.self_pairs import (ALWAYS_FRACTION, SelfPairs, never_colliding_pairs,
-                                    pair_reasons, sampled_reasons, with_pair_reasons,
-                                    with_self_pairs)
+from jwarp.utils.atomic import atomic_write_text
+from jwarp.utils.checks import check_int
+from jwarp.world.self_pairs import (
+    ALWAYS_FRACTION,
+    SelfPairs,
+    never_colliding_pairs,
+    pair_reasons,
+    sampled_reasons,
+    with_pair_reasons,
+    with_self_pairs,
+)
 
 __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize", "certify_relation",
            "fit_relation",
@@ -145,9 +152,7 @@ class SpherizeOptions:
             v = getattr(self, name)
             if v is None and none:
                 continue
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}"
-                                 f"{' or None' if none else ''}, got {v!r}")
+            check_int(v, name, lo)
         f = self.contain_factors
         if f is not None:
             if not isinstance(f, dict):
@@ -317,8 +322,8 @@ def _fit_links(model: RobotModel, by_link: dict[str, list], o: SpherizeOptions,
                bar: Any) -> RobotModel:
     """The links' fits of :func:`spherize` (spheres and report rows appended to
     ``spheres`` and ``report``; one ``bar`` step per fitted link); the model with them."""
-    from jwarp.importers.spheres import fit_link
     from jwarp.importers.sphere_refine import fit_refined
+    from jwarp.importers.spheres import fit_link
 
     fitted_once: dict = {}  # links of the same geometry (a hand's fingers) are fitted once
     for link, geoms in by_link.items():

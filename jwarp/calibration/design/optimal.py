@@ -45,15 +45,18 @@ without repetition.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
-from jwarp.core.threads import limit_blas
-from jwarp.model.registry import robot as get_robot
 from jwarp.calibration.estimate.params import ParameterSpace, parse_groups
+from jwarp.core.threads import limit_blas
+from jwarp.core.types import RobotLike
+from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.overrides import renamed_options
+from jwarp.utils.checks import check_int
 
 METHODS = ("greedy", "detmax")
 
@@ -83,8 +86,7 @@ class DesignOptions:
     def validate(self) -> None:
         for name, lo in (("n", 1), ("max_excursion", 1), ("iterations", 0), ("refresh", 1)):
             v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
-                raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
+            check_int(v, name, lo)
         if self.method not in METHODS:
             raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {self.method!r}")
         if self.start not in ("greedy", "random"):
@@ -193,7 +195,7 @@ class _State:
         self.updates = 0
         self._task()
 
-    def copy(self) -> "_State":
+    def copy(self) -> _State:
         s = object.__new__(_State)
         s.__dict__.update(self.__dict__)
         s.A, s.C, s.count = self.A.copy(), self.C.copy(), self.count.copy()
@@ -356,7 +358,7 @@ def select(U: Any, prior: Any, L: Any | None, options: DesignOptions,
 
 
 # ------------------------------------------------------------ measurements
-def candidate_jacobians(robot: Any, measurement: Any, q: Any, free: str | Iterable[str], *,
+def candidate_jacobians(robot: RobotLike, measurement: Any, q: Any, free: str | Iterable[str], *,
                         meta: Mapping[str, Any] | None = None, chunk: int = 4096,
                         **problem: Any) -> tuple[np.ndarray, ParameterSpace]:
     """Whitened Jacobians (n, m, P) of ``measurement`` at the candidate configurations q
@@ -376,8 +378,7 @@ def candidate_jacobians(robot: Any, measurement: Any, q: Any, free: str | Iterab
     if qa.ndim != 2 or qa.shape[1] != model.n_dof or qa.shape[0] == 0:
         raise ValueError(f"q: expected candidate configurations (n >= 1, {model.n_dof}) for "
                          f"robot '{model.name}', got {qa.shape}")
-    if not isinstance(chunk, int) or chunk < 1:
-        raise ValueError(f"chunk: expected an integer >= 1, got {chunk!r}")
+    check_int(chunk, "chunk", 1)
     m = len(measurement.obs_names)
     space_args = {k: problem[k] for k in ("sigma", "frames", "p_nominal", "bound_kappa")
                   if k in problem}
@@ -392,14 +393,14 @@ def candidate_jacobians(robot: Any, measurement: Any, q: Any, free: str | Iterab
     return out, space
 
 
-def task_information(robot: Any, task: Any, q_task: Any, names: list[str],
+def task_information(robot: RobotLike, task: Any, q_task: Any, names: list[str],
                      free: str | Iterable[str], *, meta: Mapping[str, Any] | None = None,
                      rank_rtol: float = 1e-10, **problem: Any) -> tuple[np.ndarray, list[str]]:
     """The task factor ``L`` (P, r) on the parameters ``names`` (the actual measurement's
     space) from the task measurement at q_task, and the task parameters left out (not in
     ``names``: the design cannot calibrate them). Robot groups of ``free`` only."""
-    from jwarp.calibration.estimate.params import ROBOT_GROUPS
     from jwarp.calibration.design.sensitivity import align, stacked_jacobian
+    from jwarp.calibration.estimate.params import ROBOT_GROUPS
 
     groups = [g for g in parse_groups(free) if g in ROBOT_GROUPS]
     if not groups:
@@ -423,7 +424,7 @@ def prior_information(space: ParameterSpace) -> np.ndarray:
 
 
 @limit_blas  # small dense problems (JWARP_BLAS_THREADS)
-def design(robot: Any, actual: Any, q_pool: Any, options: DesignOptions, *,
+def design(robot: RobotLike, actual: Any, q_pool: Any, options: DesignOptions, *,
            free: str | Iterable[str], meta_pool: Mapping[str, Any] | None = None,
            task: Any = None, q_task: Any = None, meta_task: Mapping[str, Any] | None = None,
            progress: Callable[[int, int], Any] | None = None, **problem: Any) -> DesignResult:

@@ -36,14 +36,16 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.utils.atomic import atomic_write_text
+from jwarp.calibration.files import Setup, make_measurement
 from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.core.device import make_struct, put_model, scalar_type
+from jwarp.core.types import DTypeLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kernels import visibility as vk
 from jwarp.model import RobotModel
 from jwarp.model.geometry import parse_markers, rotvec_matrix
-from jwarp.calibration.files import Setup, make_measurement
+from jwarp.utils.atomic import atomic_write_text
+from jwarp.utils.checks import check_int
 
 __all__ = ["Camera", "PoseOptions", "PoseSampler", "PoseSample", "CODE_NAMES", "parse_cameras",
            "marker_table", "sample_poses", "plan_text", "write_plan"]
@@ -185,7 +187,7 @@ class PoseOptions:
     device: str | None = None
     dtype: str = "float32"
 
-    def validate(self) -> "PoseOptions":
+    def validate(self) -> PoseOptions:
         """Check every field; ValueError/TypeError naming the field. Returns self."""
         def real(name: str, lo: float, hi: float = math.inf, lo_open: bool = False) -> None:
             v = getattr(self, name)
@@ -198,10 +200,7 @@ class PoseOptions:
 
         def integer(name: str, lo: int) -> None:
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-                raise TypeError(f"{name}: expected an integer, got {v!r}")
-            if v < lo:
-                raise ValueError(f"{name}: expected >= {lo}, got {v}")
+            check_int(v, name, lo)
 
         real("margin", 0.0, 1.0)
         real("joint_margin", 0.0, math.pi)
@@ -238,7 +237,7 @@ class PoseSample:
         return float(self.counts.get("ok", 0)) / max(self.tried, 1)
 
 
-def _scratch(device: wp.Device, n: int, m: int, dtype: Any) -> tuple[wp.array, Any]:
+def _scratch(device: wp.Device, n: int, m: int, dtype: DTypeLike) -> tuple[wp.array, Any]:
     """(n, m) per-thread scratch: CUDA frame-major (coalesced), CPU one row seen by every
     thread through a stride-0 view (Warp's CPU launch runs the threads in turn)."""
     if device.is_cuda:

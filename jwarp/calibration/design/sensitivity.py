@@ -37,14 +37,16 @@ Conventions (documented choices):
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
-from jwarp.core.threads import limit_blas
-from jwarp.model.registry import robot as get_robot
 from jwarp.calibration.estimate.params import ROBOT_GROUPS, ParameterSpace, parse_groups
+from jwarp.core.threads import limit_blas
+from jwarp.core.types import RobotLike
+from jwarp.model.registry import robot as get_robot
 
 #: default relative tolerance of :func:`spectrum` (numerical rank of J^T J)
 DEFAULT_RTOL = 1e-12
@@ -227,7 +229,7 @@ def _groups_for(measurement: Any, groups: list[str]) -> list[str]:
     return [g for g in groups if g in ROBOT_GROUPS or g in own]
 
 
-def stacked_jacobian(robot: Any, measurement: Any, q: Any, free: str | Iterable[str], *,
+def stacked_jacobian(robot: RobotLike, measurement: Any, q: Any, free: str | Iterable[str], *,
                      meta: Mapping[str, Any] | None = None, x: Any = None,
                      whiten: bool = False, **problem: Any) -> tuple[np.ndarray, list[str]]:
     """Stacked Jacobian (S*m, P) of ``measurement`` at configurations q (S, n_dof) with
@@ -285,7 +287,7 @@ def align(J: np.ndarray, names: list[str], union: list[str]) -> np.ndarray:
 
 
 @limit_blas  # small dense problems (JWARP_BLAS_THREADS)
-def sensitivity(robot: Any, actual: Any, q_actual: Any, task: Any, q_task: Any,
+def sensitivity(robot: RobotLike, actual: Any, q_actual: Any, task: Any, q_task: Any,
                 free: str | Iterable[str], *, meta_actual: Mapping[str, Any] | None = None,
                 meta_task: Mapping[str, Any] | None = None, whiten: bool = False,
                 rtol: float = DEFAULT_RTOL, atol: float = 0.0, top: int = 6,

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from jwarp.utils.checks import check_int
+
 __all__ = ["SCALE", "Ordering", "distance_matrix", "path_length", "order_poses"]
 
 #: the largest distance as an integer weight handed to LKH
@@ -94,8 +96,7 @@ def order_poses(q: np.ndarray, *, metric: str = "euclidean", start: int | None =
     n = len(q)
     if start is not None and not (0 <= int(start) < max(n, 1)):
         raise ValueError(f"start: expected an index in [0, {n}), got {start}")
-    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
-        raise ValueError(f"runs: expected an integer >= 1, got {runs!r}")
+    check_int(runs, "runs", 1)
     ident = np.arange(n)
     lengths = {m: path_length(q, None, m) for m in METRICS}
     if n <= 2:

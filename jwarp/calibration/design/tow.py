@@ -51,13 +51,14 @@ eq. 2.11. The result, one (m_a, m_a) block per sample, is what
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
-from jwarp.model.measurement import Measurement
 from jwarp.model import RobotModel
+from jwarp.model.measurement import Measurement
 
 #: graphs :func:`tow_covariance` builds per sample
 GRAPHS = ("sequential", "reverse", "shared")

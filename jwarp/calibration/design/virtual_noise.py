@@ -26,12 +26,14 @@ Four ways to set ``bar Lambda^e`` (a variance, per observed value, unit^2):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
 from jwarp.calibration.design.tow import virtual_covariance
+from jwarp.utils.checks import check_int
 
 
 def add_virtual_noise(covariance: Any, virtual: Any) -> np.ndarray:
@@ -49,8 +51,7 @@ def approximate_virtual_variance(delta_h: float, n_samples: int) -> float:
     if not (isinstance(delta_h, (int, float, np.floating)) and math.isfinite(delta_h)
             and delta_h >= 0):
         raise ValueError(f"delta_h: expected a number >= 0, got {delta_h!r}")
-    if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
-        raise ValueError(f"n_samples: expected an integer >= 1, got {n_samples!r}")
+    check_int(n_samples, "n_samples", 1)
     return float(delta_h) ** 2 * math.sqrt(int(n_samples))
 
 
@@ -136,7 +137,7 @@ def ensemble_virtual_variance(members: Sequence[EnsembleMember], *, lo: float = 
                          f"[{lo:g}, {hi:g}], the target (Delta h)^2 is {target:.3g}")
     a, b = math.log(lo), math.log(hi)
     it, f = 0, f_lo
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
         mid = 0.5 * (a + b)
         f = delta_v(math.exp(mid))
         if f < target:

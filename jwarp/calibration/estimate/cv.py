@@ -24,13 +24,16 @@ import itertools
 import json
 import math
 import os
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from jwarp.calibration.estimate.options import CalibrationOptions
 from jwarp.calibration.estimate.params import DEFAULT_SIGMA, ROBOT_GROUPS, parse_groups
+from jwarp.core.types import RobotLike
+from jwarp.utils.checks import check_int
 
 #: the prior scales of the default grid (:func:`default_grid`): factors on the prior sigma
 #: of every free robot group
@@ -226,16 +229,9 @@ class CVOptions:
     def validate(self) -> None:
         """ValueError/TypeError naming the first bad field (``folds`` against the rows:
         :func:`fold_indices`)."""
-        if isinstance(self.folds, bool) or not isinstance(self.folds, (int, np.integer)) \
-                or self.folds < 2:
-            raise ValueError(f"folds: expected an integer >= 2, got {self.folds!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) \
-                or self.seed < 0:
-            raise ValueError(f"seed: expected an integer >= 0, got {self.seed!r}")
-        if self.workers is not None and (isinstance(self.workers, bool) or not isinstance(
-                self.workers, (int, np.integer)) or self.workers < 1):
-            raise ValueError(f"workers: expected an integer >= 1 or None, got "
-                             f"{self.workers!r}")
+        check_int(self.folds, "folds", 2)
+        check_int(self.seed, "seed", 0)
+        check_int(self.workers, "workers", 1, none=True)
         if self.settings is not None and (
                 isinstance(self.settings, (str, bytes)) or not len(self.settings)
                 or not all(isinstance(x, CVSetting) for x in self.settings)):
@@ -360,7 +356,7 @@ def default_workers(tasks: int) -> int:
     return max(1, min(cores, tasks))
 
 
-def cross_validate(robot: Any, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
+def cross_validate(robot: RobotLike, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
                    cv: CVOptions | None = None, *,
                    meta: Mapping[str, Any] | None = None) -> CVResult:
     """Score the settings of ``cv`` (:class:`CVOptions`; default 5 folds of
@@ -431,7 +427,7 @@ def cross_validate(robot: Any, measurement: Any, q: Any, y: Any, options: Calibr
                     unit=str(getattr(measurement, "unit", "m")), fold_of=fold)
 
 
-def calibrate_cv(robot: Any, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
+def calibrate_cv(robot: RobotLike, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
                  cv: CVOptions | None = None, *, meta: Mapping[str, Any] | None = None
                  ) -> tuple[Any, CVResult]:
     """:func:`cross_validate`, then the calibration with the chosen setting on all rows

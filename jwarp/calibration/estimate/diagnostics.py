@@ -27,14 +27,17 @@ carry the signature of what the model lacks. :func:`residual_diagnostics` measur
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from jwarp import kinematics as K
-from jwarp.model.registry import robot as get_robot
 from jwarp.calibration.estimate.result import observation_groups
+from jwarp.core.types import RobotLike
+from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 
 
 @dataclass
@@ -93,7 +96,7 @@ class Diagnostics:
         }
 
 
-def residual_diagnostics(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
+def residual_diagnostics(robot: RobotLike, measurement: Any, p: Any, q: Any, y: Any,
                          meta: Mapping[str, Any] | None = None, *, bins: int = 5,
                          directions: Any = None) -> Diagnostics:
     """Diagnostics of the residuals ``y - predict(robot, q)`` (module docstring).
@@ -118,8 +121,7 @@ def residual_diagnostics(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
     if qa.ndim != 2 or qa.shape[1] != model.n_dof:
         raise ValueError(f"q: expected shape (S, {model.n_dof}), got {qa.shape}")
     S = qa.shape[0]
-    if isinstance(bins, bool) or not isinstance(bins, (int, np.integer)) or not 2 <= bins <= S:
-        raise ValueError(f"bins: expected an integer in [2, S={S}], got {bins!r}")
+    check_int(bins, "bins", 2, S)
     pa = np.asarray(p, np.float64)
     frames = [i for i in np.nonzero(model.is_dh)[0] if model.frames[i].coupling]
     prob = CalibrationProblem(model, measurement, qa, y,

@@ -262,7 +262,7 @@ class ElasticComponents:
 
     @classmethod
     def select(cls, robot: RobotModel, kappa: np.ndarray, free: np.ndarray | None = None
-               ) -> "ElasticComponents":
+               ) -> ElasticComponents:
         """Components with ``kappa != 0`` or ``free`` (bool (n, 3)) on DH frames."""
         act = (np.asarray(kappa) != 0)
         if free is not None:
@@ -283,7 +283,7 @@ def effective_kappa(kappa: np.ndarray, kappa_nl: np.ndarray | None, tau: np.ndar
     return out
 
 
-def nonlinear_b(comps: "ElasticComponents", tau: np.ndarray, frames: np.ndarray) -> np.ndarray:
+def nonlinear_b(comps: ElasticComponents, tau: np.ndarray, frames: np.ndarray) -> np.ndarray:
     """(S, K, P) right-hand sides of the nonlinear compliances of DH ``frames`` (P,):
     d w / d kappa_nl_i = tau_theta_i^3 on the theta component of frame i (which must be
     active in ``comps``)."""

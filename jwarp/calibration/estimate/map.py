@@ -28,33 +28,53 @@ from __future__ import annotations
 
 import time
 import warnings
-from typing import Any, Callable, Mapping, NamedTuple
+from collections.abc import Callable, Mapping
+from typing import Any, NamedTuple
 
 import numpy as np
 import warp as wp
 from scipy.optimize import OptimizeResult, least_squares
 
 from jwarp import kinematics as K
+from jwarp.calibration.estimate.backlash import check_directions, motion_directions
+from jwarp.calibration.estimate.elastic import (
+    ElasticComponents,
+    effective_kappa,
+    equilibrium_jacobian,
+    frame_masses,
+    mass_torque_jacobian,
+    nonlinear_b,
+    torque_jacobian,
+    torque_state,
+)
+from jwarp.calibration.estimate.options import CalibrationOptions
+from jwarp.calibration.estimate.origin import origin_twists, with_static_transforms
+from jwarp.calibration.estimate.params import (
+    COUPLING_HARM,
+    KIND_BACKLASH,
+    KIND_COUPLING,
+    KIND_DH,
+    KIND_HARMONIC,
+    KIND_KAPPA,
+    KIND_KAPPA_NL,
+    KIND_MASS,
+    KIND_MEAS,
+    KIND_ORIGIN,
+    MASS_GROUP,
+    ParameterSpace,
+    parse_groups,
+    robot_backlash,
+    with_pose_groups,
+)
+from jwarp.calibration.estimate.result import CalibrationResult, build_result
+from jwarp.calibration.estimate.robust import LOSSES, robust_weights
+from jwarp.calibration.estimate.samples import check_samples
 from jwarp.core.arrays import finite_as, init_warp, resolve_device
 from jwarp.core.device import put_model, with_frame_masses, with_kappa_nonlinear
 from jwarp.core.threads import limit_blas
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.calibration.estimate.elastic import (ElasticComponents, effective_kappa,
-                                                equilibrium_jacobian, frame_masses,
-                                                mass_torque_jacobian, nonlinear_b,
-                                                torque_jacobian, torque_state)
-from jwarp.calibration.estimate.options import CalibrationOptions
-from jwarp.calibration.estimate.origin import origin_twists, with_static_transforms
-from jwarp.calibration.estimate.backlash import check_directions, motion_directions
-from jwarp.calibration.estimate.params import (KIND_BACKLASH, robot_backlash)
-from jwarp.calibration.estimate.params import (COUPLING_HARM, KIND_COUPLING, KIND_DH,
-                                               KIND_HARMONIC, KIND_KAPPA, KIND_KAPPA_NL,
-                                               KIND_MASS, KIND_MEAS, KIND_ORIGIN, MASS_GROUP,
-                                               ParameterSpace, parse_groups, with_pose_groups)
-from jwarp.calibration.estimate.robust import LOSSES, robust_weights
-from jwarp.calibration.estimate.result import CalibrationResult, build_result
-from jwarp.calibration.estimate.samples import check_samples
 
 #: the largest robust-loss scale in noise sigmas (beyond it the loss is linear on any data,
 #: and its square overflows near 1e154)
@@ -90,7 +110,7 @@ class Progress(NamedTuple):
 def signed_equilibrium(robot: RobotModel, q: np.ndarray, dh: np.ndarray, kappa: np.ndarray,
                        lam: float, max_iter: int, tol: float,
                        masses: tuple[np.ndarray, np.ndarray] | None = None,
-                       kappa_nl: np.ndarray | None = None, device: Any = None
+                       kappa_nl: np.ndarray | None = None, device: DeviceLike = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Elastic FK (float64) as :func:`jwarp.fk_elastic`, but accepting compliances of
     either sign: the optimizer may cross kappa = 0 on its way (the fixed point is just as
@@ -262,9 +282,9 @@ class CalibrationProblem:
             ``free``, compliances unbounded unless ``bound_kappa``).
     """
 
-    def __init__(self, robot: Any, measurement: Any, q: Any, y: Any,
+    def __init__(self, robot: RobotLike, measurement: Any, q: Any, y: Any,
                  options: CalibrationOptions | None = None, *,
-                 meta: Mapping[str, Any] | None = None, device: Any = None,
+                 meta: Mapping[str, Any] | None = None, device: DeviceLike = None,
                  **keywords: Any) -> None:
         if keywords:
             if options is not None:
@@ -375,9 +395,9 @@ class CalibrationProblem:
         self.n_evaluations = 0
 
     @classmethod
-    def from_options(cls, robot: Any, measurement: Any, q: Any, y: Any,
+    def from_options(cls, robot: RobotLike, measurement: Any, q: Any, y: Any,
                      options: CalibrationOptions, meta: Mapping[str, Any] | None = None
-                     ) -> "CalibrationProblem":
+                     ) -> CalibrationProblem:
         """``CalibrationProblem(robot, measurement, q, y, options, meta=meta)`` (kept for
         the callers of before issue 40)."""
         return cls(robot, measurement, q, y, options, meta=meta)
@@ -919,7 +939,7 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
     pinned = np.zeros(sp.size, bool) if hold is None else np.asarray(hold, bool)
     rejected = False     # a run's end point had no equilibrium and was not kept
     nfev, rounds, status, message = 0, 0, 0, "no solver run"
-    for rounds in range(1, (MAX_ACTIVE_SET_ROUNDS if bounded else 1) + 1):
+    for rounds in range(1, (MAX_ACTIVE_SET_ROUNDS if bounded else 1) + 1):  # noqa: B007
         left = None if o.max_nfev is None else o.max_nfev - nfev
         if left is not None and left < 1:
             break
@@ -971,7 +991,7 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
                           message=message, rounds=rounds, held=held & (best_x == 0.0))
 
 
-def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *,
+def calibrate(robot: RobotLike, measurement: Any, q: Any, y: Any, *,
               meta: Mapping[str, Any] | None = None, options: CalibrationOptions | None = None,
               **overrides: Any) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples:
@@ -1008,7 +1028,7 @@ def calibrate(robot: Any, measurement: Any, q: Any, y: Any, *,
 
 
 @limit_blas  # small dense solves: a threaded BLAS only oversubscribes (JWARP_BLAS_THREADS)
-def calibrate_with(robot: Any, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
+def calibrate_with(robot: RobotLike, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
                    *, meta: Mapping[str, Any] | None = None, t0: float | None = None
                    ) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples.

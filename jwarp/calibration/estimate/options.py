@@ -3,36 +3,19 @@
 
 from __future__ import annotations
 
-import math
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
-from jwarp.core.arrays import real_number
 from jwarp.calibration.estimate.params import parse_groups
 from jwarp.calibration.estimate.robust import LOSSES
 from jwarp.solvers.overrides import renamed_options
+from jwarp.utils.checks import check_int, check_real
 
 #: least-squares methods (scipy.optimize.least_squares) the calibration accepts
 METHODS = ("dogbox", "trf")
-
-
-def _int(v: Any, name: str, lo: int, none: bool = False) -> None:
-    if v is None and none:
-        return
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
-        raise ValueError(f"{name}: expected an integer >= {lo}{' or None' if none else ''}, "
-                         f"got {v!r}")
-
-
-def _number(v: Any, name: str, lo: float, open_lo: bool = False, none: bool = False) -> None:
-    if v is None and none:
-        return
-    f = real_number(v, name)
-    if not (math.isfinite(f) and (f > lo if open_lo else f >= lo)):
-        raise ValueError(f"{name}: expected a finite number {'>' if open_lo else '>='} {lo:g}"
-                         f"{' or None' if none else ''}, got {v!r}")
 
 
 def _flag(v: Any, name: str, none: bool = False) -> None:
@@ -158,9 +141,7 @@ class CalibrationOptions:
 
     def validate(self) -> None:
         """ValueError/TypeError naming the first bad field."""
-        if (isinstance(self.n_starts, bool) or not isinstance(self.n_starts, (int, np.integer))
-                or self.n_starts < 1):
-            raise ValueError(f"n_starts: expected an integer >= 1, got {self.n_starts!r}")
+        check_int(self.n_starts, "n_starts", 1)
         if self.method not in METHODS:
             raise ValueError(f"method: expected 'dogbox' or 'trf', got {self.method!r}")
         if self.callback is not None and not callable(self.callback):
@@ -180,26 +161,26 @@ class CalibrationOptions:
                             f"{type(self.sigma).__name__}")
         if not (self.seed is None
                 or isinstance(self.seed, (np.random.Generator, np.random.SeedSequence))):
-            _int(self.seed, "seed", 0)
-        _int(self.max_nfev, "max_nfev", 1, none=True)
-        _number(self.stall_tol, "stall_tol", 0.0, none=True)
+            check_int(self.seed, "seed", 0)
+        check_int(self.max_nfev, "max_nfev", 1, none=True)
+        check_real(self.stall_tol, "stall_tol", 0.0, none=True)
         for name in ("ftol", "xtol", "gtol"):
-            _number(getattr(self, name), name, 0.0, none=True)
+            check_real(getattr(self, name), name, 0.0, none=True)
         _flag(self.elastic, "elastic", none=True)
         if not (isinstance(self.lam, (int, float)) and 0 < self.lam <= 1):
             raise ValueError(f"lam: damping must be in (0, 1], got {self.lam!r}")
-        _int(self.equilibrium_iterations, "equilibrium_iterations", 0)
-        _number(self.tol, "tol", 0.0)
+        check_int(self.equilibrium_iterations, "equilibrium_iterations", 0)
+        check_real(self.tol, "tol", 0.0)
         for name in ("initial_guess", "bound_kappa", "warn", "free_poses"):
             _flag(getattr(self, name), name)
-        _number(self.identifiability_tol, "identifiability_tol", 0.0)
-        _number(self.moved_sigmas, "moved_sigmas", 0.0, open_lo=True)
+        check_real(self.identifiability_tol, "identifiability_tol", 0.0)
+        check_real(self.moved_sigmas, "moved_sigmas", 0.0, open_lo=True)
         if self.orders is not None and not isinstance(self.orders, Mapping):
             raise TypeError(f"orders: expected a mapping {{group: order}}, got "
                             f"{type(self.orders).__name__}")
         if self.loss not in LOSSES:
             raise ValueError(f"loss: expected one of {', '.join(LOSSES)}, got {self.loss!r}")
-        _number(self.loss_scale, "loss_scale", 0.0, open_lo=True, none=True)
+        check_real(self.loss_scale, "loss_scale", 0.0, open_lo=True, none=True)
         if self.loss != "linear" and self.loss_scale is None:
             raise ValueError(f"loss_scale: required with loss={self.loss!r} (the residual "
                              f"norm where the loss turns robust, unit of the measurement)")

@@ -21,7 +21,7 @@ convention of the measurements' ``J_frames``.
 
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 import numpy as np
 

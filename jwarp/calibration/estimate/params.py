@@ -58,15 +58,21 @@ mass entries on one frame), measurement entries keep their ParamBlock names.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
+from jwarp.calibration.estimate.origin import (
+    ORIGIN_AXES,
+    ORIGIN_GROUP,
+    delta_transform,
+    origin_frames,
+    with_static_transforms,
+)
 from jwarp.model import RobotModel
-from jwarp.calibration.estimate.origin import (ORIGIN_AXES, ORIGIN_GROUP, delta_transform,
-                                               origin_frames, with_static_transforms)
 
 DH_GROUPS = ("d", "theta", "r", "alpha", "beta")          # = DH columns 0..4
 KAPPA_GROUPS = ("kappa_alpha", "kappa_beta", "kappa_theta")  # = kappa axes 0..2
@@ -474,7 +480,7 @@ class ParameterSpace:
     def build(cls, robot: RobotModel, measurement: Any, free: str | Iterable[str], *,
               sigma: Mapping[str, float] | None = None, frames: Iterable[int | str] | None = None,
               p_nominal: np.ndarray | None = None, bound_kappa: bool = False,
-              orders: Mapping[str, int] | None = None) -> "ParameterSpace":
+              orders: Mapping[str, int] | None = None) -> ParameterSpace:
         """Parameter space of the free groups.
 
         Args:

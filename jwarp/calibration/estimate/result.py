@@ -11,18 +11,24 @@ from __future__ import annotations
 import math
 import types
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from jwarp import kinematics as K
+from jwarp.calibration.estimate.backlash import check_directions
+from jwarp.calibration.estimate.params import (
+    KIND_KAPPA,
+    KIND_MASS,
+    ParameterSpace,
+    robot_backlash,
+)
+from jwarp.core.types import RobotLike
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import ValidRange, record_valid_range, valid_range_of
-from jwarp.calibration.estimate.backlash import check_directions
-from jwarp.calibration.estimate.params import (KIND_KAPPA, KIND_MASS, ParameterSpace,
-                                               robot_backlash)
 
 
 class CalibrationWarning(UserWarning):
@@ -159,7 +165,7 @@ def fixed_params(measurement: Any, fix_at: Mapping[str, Any], p_nominal: Any = N
     return p
 
 
-def predict(robot: Any, measurement: Any, p: Any, q: Any, meta: Mapping[str, Any] | None = None,
+def predict(robot: RobotLike, measurement: Any, p: Any, q: Any, meta: Mapping[str, Any] | None = None,
             *, kappa: Any = None, elastic: bool | None = None, lam: float = 1.0,
             max_iter: int = 100, tol: float = 1e-12, directions: Any = None) -> np.ndarray:
     """Predicted observations (S, m) of ``measurement`` with parameters ``p`` (P_meas,) for
@@ -176,7 +182,7 @@ def predict(robot: Any, measurement: Any, p: Any, q: Any, meta: Mapping[str, Any
     return np.asarray(measurement.predict(fr, np.asarray(p, np.float64), md), np.float64)
 
 
-def errors(robot: Any, measurement: Any, p: Any, q: Any, y: Any,
+def errors(robot: RobotLike, measurement: Any, p: Any, q: Any, y: Any,
            meta: Mapping[str, Any] | None = None, *, kappa: Any = None,
            elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
            tol: float = 1e-12, directions: Any = None) -> np.ndarray:

@@ -3,7 +3,8 @@ columns, shared by the MAP solver and the result's predictions."""
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 

@@ -24,21 +24,35 @@ import math
 import os
 import uuid
 import warnings
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from jwarp.utils.atomic import AtomicFolder, atomic_write_text, clean_stale
-from jwarp.model import RobotModel
-from jwarp.model.measurement import Measurement
-from jwarp.calibration.files import Samples, Setup, make_measurement, parse_samples, \
-    read_setup, read_text, samples_text, sha256_hex, write_setup
 from jwarp.calibration.estimate.params import perturb_robot, robot_backlash
 from jwarp.calibration.estimate.result import model_frames
-from jwarp.calibration.simulate.unmodeled import Unmodeled, add_unmodeled, parse_unmodeled
+from jwarp.calibration.files import (
+    Samples,
+    Setup,
+    make_measurement,
+    parse_samples,
+    read_setup,
+    read_text,
+    samples_text,
+    sha256_hex,
+    write_setup,
+)
+from jwarp.calibration.simulate.unmodeled import (
+    Unmodeled,
+    add_unmodeled,
+    parse_unmodeled,
+)
+from jwarp.model import RobotModel
+from jwarp.model.measurement import Measurement
+from jwarp.utils.atomic import AtomicFolder, atomic_write_text, clean_stale
 
 #: default truth of :func:`simulate_campaign`: uniform DH errors +-1 mm (d, r) and
 #: +-0.3 deg (theta, alpha), joint compliances U(3e-5, 9e-5) and lateral (alpha) ones

@@ -35,16 +35,20 @@ at distance 0.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
+from jwarp.calibration.files import Setup, make_measurement
+from jwarp.calibration.simulate.campaign import (
+    Sampler,
+    justin_tracker_setup,
+    uniform_configurations,
+)
 from jwarp.model import RobotModel
 from jwarp.model.measurement import Measurement
 from jwarp.model.registry import robot as get_robot
-from jwarp.calibration.simulate.campaign import (Sampler, justin_tracker_setup,
-                                                 uniform_configurations)
-from jwarp.calibration.files import Setup, make_measurement
 
 #: ``accept(measurement, frames (S, n_frames, 4, 4), p (P,), meta) -> (S,) bool``
 Accept = Callable[[Measurement, np.ndarray, np.ndarray, dict], np.ndarray]
@@ -178,7 +182,7 @@ def justin_camera_sampler(robot: RobotModel, setup: Setup, *, candidates: int = 
         ref = (np.broadcast_to(pole, eye.shape) - eye) if pole is not None else None
         keep = np.ones(k, bool)
         dirs = []
-        for name, frame, x in arm_markers:
+        for _name, frame, x in arm_markers:
             cols = arm_joints(frame)
             qq = np.repeat(q, candidates, axis=0)
             qq[:, cols] = uniform_configurations(robot, rng, k * candidates)[:, cols]

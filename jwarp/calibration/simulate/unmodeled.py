@@ -71,7 +71,7 @@ class Unmodeled:
 
     effects: dict[str, dict[str, float]] = field(default_factory=dict)
 
-    def validate(self, option: str = "unmodeled") -> "Unmodeled":
+    def validate(self, option: str = "unmodeled") -> Unmodeled:
         """Check names and values; a ValueError names ``option`` and the bad item."""
         for name, opts in self.effects.items():
             if name not in EFFECTS:

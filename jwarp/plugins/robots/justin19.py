@@ -4,8 +4,8 @@ Numbers: the published ones (``shared/robots/justin19.json``) in jwarp's schema,
 ``justin19.json`` beside this module.
 """
 
-from jwarp.plugins.robots import load_builtin
 from jwarp.model.registry import hookimpl
+from jwarp.plugins.robots import load_builtin
 
 
 @hookimpl

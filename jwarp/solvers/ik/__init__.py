@@ -38,11 +38,23 @@ those rows, gradients with the rows fixed; "on target" also requires the torque 
 have converged (largest DH change < ``tol_rho``)."""
 
 from jwarp.solvers.ik.objective import IKObjective, pose_matrix
-from jwarp.solvers.ik.options import ORIENTATIONS, IKOptions, IKWeights, orientation_args
+from jwarp.solvers.ik.options import (
+                                     ORIENTATIONS,
+                                     IKOptions,
+                                     IKWeights,
+                                     orientation_args,
+)
 from jwarp.solvers.ik.result import IKResult
-from jwarp.solvers.ik.solver import (IKSolver, ik, RESTART_PROGRESS, SOLVER_CACHE_SIZE,
-                                     SOLVER_CACHE_MAX_BATCH, check_warm_start, warm_start_seeds,
-                                     select_best)
+from jwarp.solvers.ik.solver import (
+                                     RESTART_PROGRESS,
+                                     SOLVER_CACHE_MAX_BATCH,
+                                     SOLVER_CACHE_SIZE,
+                                     IKSolver,
+                                     check_warm_start,
+                                     ik,
+                                     select_best,
+                                     warm_start_seeds,
+)
 
 __all__ = [
     "pose_matrix", "IKObjective", "IKWeights", "IKOptions", "IKResult", "warm_start_seeds",

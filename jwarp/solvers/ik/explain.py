@@ -32,6 +32,7 @@ import numpy as np
 from jwarp.core.arrays import real_array
 from jwarp.core.device import host_device
 from jwarp.core.limits import LIMIT_TOL
+from jwarp.core.types import RobotLike
 from jwarp.model.registry import robot as get_robot
 from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.ik.options import ORIENTATIONS, orientation_args
@@ -57,7 +58,7 @@ def _frames(model: Any, q: np.ndarray, kappa: Any = None) -> tuple[np.ndarray, A
     return F, rho, bool(np.all(conv))
 
 
-def pose_errors(robot: Any, frame: Any, q: Any, target: Any, *, orientation: str = "full",
+def pose_errors(robot: RobotLike, frame: Any, q: Any, target: Any, *, orientation: str = "full",
                 free_axis: Any = (0.0, 0.0, 1.0), kappa: Any = None) -> tuple[float, float]:
     """(position error [m], rotation error [rad]) of ``frame`` at q (n_dof,) against the
     target pose (4, 4), as :func:`explain_ik` measures them (planar robots: x, y and the
@@ -93,7 +94,7 @@ def _unit(model: Any, j: int) -> str:
     return "m" if model.joints[j].type == "prismatic" else "rad"
 
 
-def limit_reasons(robot: Any, q: Any, tol: float = LIMIT_TOL) -> list[str]:
+def limit_reasons(robot: RobotLike, q: Any, tol: float = LIMIT_TOL) -> list[str]:
     """One line per violated limit of q (n_dof,): the joint, its value, its range and by
     how much it is outside (box limits), or the linear combination likewise."""
     model = get_robot(robot)
@@ -136,7 +137,7 @@ def _link(model: Any, s: int) -> str:
     return sphere_link(model, s)
 
 
-def collision_reasons(robot: Any, q: Any, world: Any = None, margin: float = 0.0, *,
+def collision_reasons(robot: RobotLike, q: Any, world: Any = None, margin: float = 0.0, *,
                       kappa: Any = None) -> list[str]:
     """The colliding pairs of q (n_dof,): link vs object (closer than ``margin`` [m] to the
     world) and link vs link (closer than ``margin`` to each other), the worst first, one
@@ -223,7 +224,7 @@ def _inputs(model: Any, frame: Any, q: Any, target: Any, orientation: str,
     return np.asarray(qv, np.float64), np.asarray(T, np.float64), fi, np.asarray(axis)
 
 
-def explain_ik(robot: Any, frame: Any, q: Any, target: Any, *, world: Any = None,
+def explain_ik(robot: RobotLike, frame: Any, q: Any, target: Any, *, world: Any = None,
                margin: float = 0.0, tol_pos: float = 1e-4, tol_rot: float = 1e-3,
                orientation: str = "full", free_axis: Any = (0.0, 0.0, 1.0),
                kappa: Any = None) -> str:

@@ -8,15 +8,21 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
+from jwarp.core.arrays import (
+    finite_as,
+    init_warp,
+    real_array,
+    real_number,
+    resolve_device,
+)
 from jwarp.core.device import numpy_dtype, put_model, scalar_type
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik as ik_kernels
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model.registry import robot as get_robot
-from jwarp.world import collision
 from jwarp.solvers.ik.options import IKWeights, orientation_args
+from jwarp.world import collision
 
 
 def pose_matrix(xyz: Any, rotvec: Any = (0.0, 0.0, 0.0)) -> np.ndarray:

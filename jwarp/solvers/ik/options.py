@@ -4,7 +4,6 @@ the orientation modes."""
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass
 from typing import Any
 
@@ -13,7 +12,9 @@ import numpy as np
 from jwarp.core.arrays import real_array, real_number
 from jwarp.kernels import ik as ik_kernels
 from jwarp.model import RobotModel
+from jwarp.solvers.options import SolverOptions
 from jwarp.solvers.overrides import renamed_options
+from jwarp.utils.checks import check_int
 
 #: the largest accepted position tolerance [m] (IKOptions.tol_pos): larger means nothing
 MAX_TOL_POS = 1e3
@@ -59,15 +60,9 @@ def orientation_args(orientation: str, free_axis: Any) -> tuple[int, tuple]:
     return ORIENTATIONS[orientation], tuple(float(v) for v in axis / norm)
 
 
-def positive_int(v: Any, name: str, lo: int) -> int:
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
-        raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
-    return int(v)
-
-
 @renamed_options(max_iterations="iterations")
 @dataclass
-class IKOptions:
+class IKOptions(SolverOptions):
     """Options of :class:`IKSolver` and :func:`ik` (thesis 3.3.3).
 
     Attributes:
@@ -138,23 +133,20 @@ class IKOptions:
     ``validate()`` (also run on construction) raises ValueError/TypeError naming the field.
     """
 
+    # the fields of SolverOptions with the IK's defaults (the others as there)
     n_starts: int = 16
-    tol_pos: float = 1e-4
-    tol_rot: float = 1e-3
-    margin: float = 0.0
-    eps: float | None = None
     iterations: int = 200
     step: float = 1.0
     max_step: float = 0.5
+    seed: int | None = 0
+    # the IK's own
+    tol_pos: float = 1e-4
+    tol_rot: float = 1e-3
     damping: float = 1e-3
-    kappa: Any = None
-    lam: float = 0.7
     tol_rho: float = 1e-6
-    stop_when_solved: bool = True
     check_every: int = 5
     read_every: int | None = None
     cuda_graphs: bool = True
-    seed: int | None = 0
     weights: IKWeights | None = None
     q_default: Any = None
     freeze_solved: bool = True
@@ -163,8 +155,6 @@ class IKOptions:
     max_restarts: int = 10
     orientation: str = "full"
     free_axis: Any = (0.0, 0.0, 1.0)
-    allow_no_collision: bool = False
-    mesh_margin: bool = True
 
     def __post_init__(self) -> None:
         self.validate()
@@ -173,12 +163,12 @@ class IKOptions:
         """Check every field (ValueError/TypeError naming it); numbers become floats."""
         for name, lo in (("n_starts", 1), ("iterations", 0), ("check_every", 1),
                          ("n_random_with_warm_start", 0)):
-            setattr(self, name, positive_int(getattr(self, name), name, lo))
+            setattr(self, name, check_int(getattr(self, name), name, lo))
         if self.read_every is not None:
-            self.read_every = positive_int(self.read_every, "read_every", 1)
+            self.read_every = check_int(self.read_every, "read_every", 1)
         if self.restart_after is not None:
-            self.restart_after = positive_int(self.restart_after, "restart_after", 1)
-        self.max_restarts = positive_int(self.max_restarts, "max_restarts", 0)
+            self.restart_after = check_int(self.restart_after, "restart_after", 1)
+        self.max_restarts = check_int(self.max_restarts, "max_restarts", 0)
         _, self.free_axis = orientation_args(self.orientation, self.free_axis)
         for name in ("tol_pos", "tol_rot", "step", "max_step", "damping", "tol_rho"):
             v = getattr(self, name)
@@ -211,11 +201,7 @@ class IKOptions:
             if not isinstance(v, (bool, np.bool_)):
                 raise TypeError(f"{name}: expected a bool, got {v!r}")
             setattr(self, name, bool(v))
-        if self.seed is not None and (isinstance(self.seed, (bool, np.bool_))
-                                      or not isinstance(self.seed, numbers.Integral)):
-            raise TypeError(f"seed: expected an integer or None, got {self.seed!r}")
-        if self.seed is not None and not 0 <= int(self.seed) < 2 ** 63:
-            raise ValueError(f"seed: expected an integer in [0, 2**63) or None, got {self.seed!r}")
+        check_int(self.seed, "seed", 0, 2 ** 63 - 1, none=True)
         if self.weights is not None:
             if not isinstance(self.weights, IKWeights):
                 raise TypeError(f"weights: expected IKWeights, got {type(self.weights).__name__}")

@@ -50,7 +50,7 @@ class IKResult:
 
     @classmethod
     def from_rows(cls, out: np.ndarray, best: np.ndarray, n_dof: int, P: int, S: int,
-                  wall: float) -> "IKResult":
+                  wall: float) -> IKResult:
         """The result of P problems x S seeds from the solver's result rows ``out``
         (P * S, n_dof + 5) ``[q, |e_v|, |e_w|, U_A, feasible, iterations]`` and its choice
         ``best`` (P, 2) ``[chosen seed, feasible seeds]`` (:mod:`jwarp.kernels.ik_step`)."""
@@ -66,7 +66,7 @@ class IKResult:
                    n_feasible=best[:, 1].astype(np.int64), wall_time=wall, all_q=qa,
                    all_feasible=fz, all_iterations=it)
 
-    def reshaped(self, lead: tuple, wall: float | None = None) -> "IKResult":
+    def reshaped(self, lead: tuple, wall: float | None = None) -> IKResult:
         """This result of P flat problems with the leading dims ``lead`` (prod = P)
         instead, and the wall time ``wall`` (None: unchanged)."""
         def shp(x: np.ndarray) -> np.ndarray:

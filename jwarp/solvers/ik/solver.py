@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -19,12 +20,18 @@ from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import check_valid_range
+from jwarp.solvers.ik.objective import (
+    IKObjective,
+    batch_array,
+    check_single_world,
+    target_poses,
+)
+from jwarp.solvers.ik.options import IKOptions, IKWeights
+from jwarp.solvers.ik.result import IKResult
 from jwarp.solvers.overrides import renamed_argument, with_overrides
+from jwarp.utils.checks import check_int
 from jwarp.world import collision
 from jwarp.world.model_check import check_collision_model, mesh_margin_model
-from jwarp.solvers.ik.objective import IKObjective, batch_array, check_single_world, target_poses
-from jwarp.solvers.ik.options import IKOptions, IKWeights, positive_int
-from jwarp.solvers.ik.result import IKResult
 
 
 class IKSolver:
@@ -77,7 +84,7 @@ class IKSolver:
         collision.check_world(self.robot, world)
         check_single_world(world)
         self.world = world
-        self.n_problems = positive_int(n_problems, "n_problems", 1)
+        self.n_problems = check_int(n_problems, "n_problems", 1)
         if options is None:
             options = IKOptions()
         elif not isinstance(options, IKOptions):
@@ -328,9 +335,7 @@ class IKSolver:
 
     def reseed(self, seed: int | None) -> None:
         """Restart the random seeds' generator from ``seed`` (an integer >= 0 or None)."""
-        if seed is not None and (isinstance(seed, (bool, np.bool_))
-                                 or not isinstance(seed, (int, np.integer)) or seed < 0):
-            raise ValueError(f"seed: expected an integer >= 0 or None, got {seed!r}")
+        check_int(seed, "seed", 0, none=True)
         self.rng = np.random.default_rng(seed)
 
     def solve(self, targets: Any, seeds: Any = None, *,
@@ -379,7 +384,7 @@ class IKSolver:
             S = q0.shape[1]
         if q0 is not None and model.has_harmonic:  # the kernels work in the links' joint space
             q0 = transmitted(model, q0)
-        if S != self.n_seeds:
+        if self.n_seeds != S:
             self._allocate(S)
         obj, dev, B = self.objective, self.device, self.B
         if q0 is None:  # random seeds, drawn on the device
@@ -459,9 +464,9 @@ class IKSolver:
                 self._check(it % o.check_every == 0 or last)
             if last:
                 break
-            if every or callback is not None or (not rigid and read):
-                if over(self._read_counts()):
-                    break
+            if (every or callback is not None or (not rigid and read)) \
+                    and over(self._read_counts()):
+                break
             self._step()
         self._launch("finalize", self.ck.finalize, B, [obj.q, obj.err, obj.cost_a, self.done,
                                                        self.iterations, o.iterations,
@@ -573,7 +578,7 @@ SOLVER_CACHE_SIZE = 8
 SOLVER_CACHE_MAX_BATCH = 4096
 
 
-_SOLVERS: "dict[tuple, IKSolver]" = {}
+_SOLVERS: dict[tuple, IKSolver] = {}
 
 
 def _solver_key(model: RobotModel, frame: int, n_problems: int, opts: IKOptions, world: Any,

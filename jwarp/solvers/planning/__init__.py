@@ -26,10 +26,22 @@ those frames gives the rows of the next iteration (substeps take their nearest
 waypoint's), and the collision gradient is taken with the rows fixed."""
 
 from jwarp.solvers.planning.objective import NORM_FLOOR, PathObjective
-from jwarp.solvers.planning.options import (PathWeights, INITIAL_KINDS, STOP_REASONS, FALLBACKS,
-                                            STAGES, PlanOptions, ViaPoints)
-from jwarp.solvers.planning.planner import (EXACT_SUBSTEP, PLANNER_CHECK_EVALS,
-                                            PLANNER_CHECK_EVALS_GPU, Planner, plan)
+from jwarp.solvers.planning.options import (
+                                            FALLBACKS,
+                                            INITIAL_KINDS,
+                                            STAGES,
+                                            STOP_REASONS,
+                                            PathWeights,
+                                            PlanOptions,
+                                            ViaPoints,
+)
+from jwarp.solvers.planning.planner import (
+                                            EXACT_SUBSTEP,
+                                            PLANNER_CHECK_EVALS,
+                                            PLANNER_CHECK_EVALS_GPU,
+                                            Planner,
+                                            plan,
+)
 from jwarp.solvers.planning.result import PlanResult
 
 __all__ = [

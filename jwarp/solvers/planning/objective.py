@@ -9,16 +9,22 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
+from jwarp.core.arrays import (
+    finite_as,
+    init_warp,
+    real_array,
+    real_number,
+    resolve_device,
+)
 from jwarp.core.device import numpy_dtype, put_model, scalar_type
-from jwarp.world import collision
+from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import path as path_kernels
+from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
-from jwarp.kinematics.compensation import CompensationRows
-from jwarp.world.path_feasibility import check_substeps, check_world
 from jwarp.solvers.planning.options import PathWeights
-
+from jwarp.world import collision
+from jwarp.world.path_feasibility import check_substeps, check_world
 
 #: floor of the length-cost normaliser 1/2 |q_goal - q_start|^2 [rad^2]
 NORM_FLOOR = 1e-4
@@ -44,9 +50,9 @@ class PathObjective:
     waypoints] -> path cost (-> gradient or step). Arrays are Warp arrays on ``device``.
     """
 
-    def __init__(self, robot: Any, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
+    def __init__(self, robot: RobotLike, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
                  *, weights: PathWeights | None = None, eps: float | None = None,
-                 kappa: Any = None, lam: float = 0.7, device: Any = None, dtype: Any = np.float32):
+                 kappa: Any = None, lam: float = 0.7, device: DeviceLike = None, dtype: DTypeLike = np.float32):
         init_warp()
         self.robot = get_robot(robot)
         check_world(self.robot, world)

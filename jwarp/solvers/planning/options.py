@@ -4,15 +4,19 @@ and their checks."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from jwarp.core.arrays import real_number
 from jwarp.core.device import numpy_dtype, scalar_type
-from jwarp.world.path_feasibility import check_substeps
+from jwarp.core.types import DTypeLike
+from jwarp.solvers.options import SolverOptions
 from jwarp.solvers.overrides import renamed_options
+from jwarp.utils.checks import check_int
+from jwarp.world.path_feasibility import check_substeps
 
 
 @dataclass
@@ -50,7 +54,7 @@ FALLBACKS = ("rrt",)
 FALLBACK_AFTER = {"cpu": 0.15, "cuda": 0.08}
 
 
-def fallback_share(o: "PlanOptions", device: str) -> float:
+def fallback_share(o: PlanOptions, device: str) -> float:
     """``o.fallback_after``, or its default on ``device`` (``FALLBACK_AFTER``)."""
     if o.fallback_after is not None:
         return float(o.fallback_after)
@@ -61,11 +65,6 @@ def fallback_share(o: "PlanOptions", device: str) -> float:
 STAGES = ("optimizer", "fallback", "none")
 
 
-def check_int(v: Any, name: str, lo: int) -> None:
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-        raise ValueError(f"{name}: expected an integer >= {lo}, got {v!r}")
-
-
 def _check_flag(v: Any, name: str) -> None:
     if not (isinstance(v, (bool, np.bool_)) or (isinstance(v, (int, np.integer)) and v in (0, 1))):
         raise TypeError(f"{name}: expected True or False, got {v!r}")
@@ -73,7 +72,7 @@ def _check_flag(v: Any, name: str) -> None:
 
 @renamed_options(initial="start_kind", early_stop="freeze_feasible")
 @dataclass
-class PlanOptions:
+class PlanOptions(SolverOptions):
     """Options of the planner: of :class:`Planner`, and the keyword options of :func:`plan`
     (documented here once). :meth:`validate` raises ValueError/TypeError naming the field.
 
@@ -186,27 +185,23 @@ class PlanOptions:
             change.
     """
 
+    # the fields of SolverOptions with the planner's defaults (the others as there)
     n_starts: int = 8
+    iterations: int = 100
+    step: float = 0.01
+    max_step: float = 0.1
+    # the planner's own
     start_kind: str = "mixed"
     n_waypoints: int = 20
     n_substeps: int | None = None
     substep_voxels: float = 1.0
-    iterations: int = 100
-    step: float = 0.01
-    max_step: float = 0.1
     weights: PathWeights | None = None
-    eps: float | None = None
-    margin: float = 0.0
     endpoint_margin: float | None = None
     self_margin: float = 0.0
     freeze_feasible: bool = True
-    stop_when_solved: bool = True
     enough_feasible: int | None = None
     check_all_every: int | None = None
     free_via: bool = True
-    kappa: Any = None
-    lam: float = 0.7
-    seed: Any = 0
     callback: Callable[[int, np.ndarray], None] | None = None
     converge: bool = False
     converge_tol: float = 1e-3
@@ -214,15 +209,13 @@ class PlanOptions:
     fallback: str | None = "rrt"
     fallback_after: float | None = None
     rrt: Any = None
-    allow_no_collision: bool = False
     shorten: int = 4
     shorten_budget: float | None = 0.5
-    mesh_margin: bool = True
 
     def __post_init__(self) -> None:
         self.fallback = fallback_word(self.fallback)
 
-    def validate(self, dtype: Any = np.float32) -> None:
+    def validate(self, dtype: DTypeLike = np.float32) -> None:
         """ValueError/TypeError naming the first bad field; numbers must be finite in the
         computing ``dtype``."""
         npdt = numpy_dtype(scalar_type(dtype))
@@ -309,7 +302,7 @@ def fallback_word(value: Any) -> Any:
     return value
 
 
-def _check_budget(o: "PlanOptions") -> None:
+def _check_budget(o: PlanOptions) -> None:
     """:meth:`PlanOptions.validate` of ``time_limit``, ``fallback``, ``fallback_after``
     and ``rrt``."""
     if o.time_limit is not None:

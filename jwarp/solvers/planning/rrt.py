@@ -35,7 +35,9 @@ import numpy as np
 
 from jwarp.core.arrays import real_array, real_number
 from jwarp.core.limits import sample_within_limits, within_limits
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.model.registry import robot as get_robot
+from jwarp.utils.checks import check_int
 from jwarp.world import path_feasibility as _fz
 
 
@@ -78,12 +80,10 @@ class RRTOptions:
         for name, lo in (("max_samples", 1), ("shortcut_iterations", 0), ("batch", 1),
                          ("n_connect", 1)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"rrt.{name}: expected an integer >= {lo}, got {v!r}")
+            check_int(v, f"rrt.{name}", lo)
         if self.n_substeps is not None:
             v = self.n_substeps
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f"rrt.n_substeps: expected an integer >= 1, got {v!r}")
+            check_int(v, "rrt.n_substeps", 1)
         if self.time_limit is not None:
             t = real_number(self.time_limit, "rrt.time_limit")
             if not (math.isfinite(t) and t > 0):
@@ -94,10 +94,10 @@ class RRTOptions:
             raise ValueError(f"rrt.goal_bias: expected a number in [0, 1], got "
                              f"{self.goal_bias!r}")
         seed = self.seed
-        if not (seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence))):
-            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-                raise ValueError(f"rrt.seed: expected an integer >= 0, a Generator or None, "
-                                 f"got {seed!r}")
+        if not (seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence))) \
+                and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
+            raise ValueError(f"rrt.seed: expected an integer >= 0, a Generator or None, "
+                             f"got {seed!r}")
 
 
 @dataclass
@@ -163,7 +163,7 @@ class _Checks:
     ``endpoint_margin`` below ``margin`` the segments that start or end at one of the
     ``roots`` (start, goal) are checked at that clearance, every other at ``margin``."""
 
-    def __init__(self, model: Any, world: Any, margin: float, kappa: Any, device: Any,
+    def __init__(self, model: Any, world: Any, margin: float, kappa: Any, device: DeviceLike,
                  n_substeps: int | None, endpoint_margin: float | None = None,
                  roots: np.ndarray | None = None, self_margin: float = 0.0,
                  meshes: bool = True) -> None:
@@ -245,9 +245,9 @@ def _vector(x: Any, n: int, name: str) -> np.ndarray:
     return np.array(a, np.float64)
 
 
-def rrt_connect(robot: Any, world: Any, start: Any, goal: Any,
+def rrt_connect(robot: RobotLike, world: Any, start: Any, goal: Any,
                 options: RRTOptions | None = None, *, margin: float = 0.0, kappa: Any = None,
-                device: Any = None, deadline: float | None = None,
+                device: DeviceLike = None, deadline: float | None = None,
                 endpoint_margin: float | None = None, self_margin: float = 0.0,
                 meshes: bool = True) -> RRTResult:
     """A feasible path from ``start`` to ``goal`` (n_dof,) by RRT-Connect (module doc).

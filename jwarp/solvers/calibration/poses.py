@@ -1,6 +1,0 @@
-"""Deprecated path: moved to :mod:`jwarp.calibration.design.poses` (issue 28, packages by job); importable from
-here for one release, with a DeprecationWarning."""
-
-from jwarp.utils.deprecation import moved
-
-__getattr__, __dir__ = moved(__name__, ('jwarp.calibration.design.poses',))
