@@ -12,22 +12,30 @@ import warp as wp
 
 from jwarp.core.arrays import finite_as, init_warp, real_array, real_number, resolve_device
 from jwarp.core.device import numpy_dtype, scalar_type
-from jwarp.world.model_check import check_collision_model, mesh_margin_model
+from jwarp.core.limits import project_numpy, within_limits
+from jwarp.kinematics.launch import kappa_array
+from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.model import RobotModel
 from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import check_valid_range
-from jwarp.kinematics.transmission import transmitted, untransmitted
-from jwarp.kinematics.launch import kappa_array
-from jwarp.world.path_feasibility import (MAX_CHECK_SUBSTEPS, SWEEP_SAFETY, certify_check,
-                                          check_endpoints, check_world, collision_free,
-                                          initial_paths, path_feasible, polyline_path,
-                                          substeps_for_voxel, substeps_per_path)
-from jwarp.core.limits import project_numpy, within_limits
 from jwarp.solvers.overrides import renamed_argument, with_overrides
 from jwarp.solvers.planning.objective import PathObjective, path_configs
 from jwarp.solvers.planning.options import PlanOptions, ViaPoints, check_int, fallback_share
 from jwarp.solvers.planning.result import PlanResult
-
+from jwarp.world.model_check import check_collision_model, mesh_margin_model
+from jwarp.world.path_feasibility import (
+    MAX_CHECK_SUBSTEPS,
+    SWEEP_SAFETY,
+    certify_check,
+    check_endpoints,
+    check_world,
+    collision_free,
+    initial_paths,
+    path_feasible,
+    polyline_path,
+    substeps_for_voxel,
+    substeps_per_path,
+)
 
 #: substep length [m] of the cost in a world of exact objects only (sphere travel per
 #: substep): the continuous check proves feasibility, the cost only guides the descent
@@ -703,7 +711,7 @@ class Planner:
                           all_iterations=it, paths_source=wp.clone(buf.final))
 
 
-def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarray, t0: float,
+def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray, t0: float,
               deadline: float | None) -> None:
     """:attr:`PlanOptions.fallback` for the problems of ``res`` without a feasible path:
     RRT-Connect (:func:`jwarp.solvers.planning.rrt.rrt_connect`, with the planner's margins, kappa
@@ -802,7 +810,7 @@ def _fallback(planner: "Planner", res: PlanResult, q0: np.ndarray, q1: np.ndarra
         res.stop_reason = "iterations"
 
 
-def _seed_reason(planner: "Planner", sub: "Planner", seed: np.ndarray, b: int) -> str:
+def _seed_reason(planner: Planner, sub: Planner, seed: np.ndarray, b: int) -> str:
     """Why the fallback seed (W, n_dof) of problem ``b`` is not certified, in words (the
     fallback optimisation's check, in the problem's own world)."""
     o = planner.options

@@ -10,7 +10,7 @@ as a whole with its own rule (margins, endpoint margin) before keeping it."""
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
