@@ -183,12 +183,13 @@ class MeshCheck:
         bound = np.zeros(O)
         rot = np.tile(np.eye(3), (O, 1, 1))
         half = np.zeros((O, 3))
-        ids = sh.ids if O else []
+        rots = [np.asarray(sh.pose(o), np.float64)[:3, :3] for o in sh.ids] \
+            if sh is not None and O else []
         for i, (k, v, r, _) in enumerate(pieces):
             if k == int(ck.HALFSPACE):
                 centre[i], bound[i] = v[0], v[1, 0]
             else:  # the broad phase's box: the vertices' extent along the object's axes
-                R = np.asarray(sh.pose(ids[i]), np.float64)[:3, :3]
+                R = rots[i]
                 lv = v @ R
                 lo, hi = lv.min(0), lv.max(0)
                 rot[i], half[i] = R, (hi - lo) / 2
