@@ -30,9 +30,10 @@ Kernels (one thread per (configuration, piece, object) or (configuration, pair);
 frames ``X`` (N, n_frames) mat44 come from :func:`jwarp.kinematics.fk`):
 
 * ``world_lower``: ``out[c, k] = min_o`` bound of piece ``k`` to object ``o`` (atomic min:
-  the host fills ``out`` with ``cap`` first); a pair whose piece's enclosing sphere keeps
-  ``cap`` from the object's box is not refined (that distance is its bound), and GJK
-  stops once its bound reaches ``cap`` (a bound >= ``cap`` says only that: enough).
+  the host fills ``out`` with a large value first); a pair whose piece's enclosing sphere
+  keeps ``cap[c]`` (per configuration: what its caller needs) from the object's box is
+  not refined (that distance is its bound), and GJK stops once its bound reaches
+  ``cap[c]`` (a bound >= ``cap[c]`` says only that: enough).
 * ``self_lower``: ``out[c, q]`` the bound of pair ``q`` (likewise with the two pieces'
   enclosing spheres).
 """
@@ -333,7 +334,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         X: wp.array2d(dtype=mat44),
         cfg_group: wp.array(dtype=wp.int32),
         use_groups: int,
-        cap: scalar,
+        cap: wp.array(dtype=scalar),
         tol: scalar,
         slack: scalar,
         # Data out:
@@ -362,10 +363,10 @@ def kernels(scalar: type) -> SimpleNamespace:
             ex = vec3(wp.max(wp.abs(lc[0]) - h[0], zero), wp.max(wp.abs(lc[1]) - h[1], zero),
                       wp.max(wp.abs(lc[2]) - h[2], zero))
             lb = wp.length(ex) - bound[k] - o_rad[o] - slack
-            if lb < cap:
+            if lb < cap[c]:
                 g = gjk_lower(verts, vstart[k], vstart[k + 1], R, t,
                               o_verts, o_vstart[o], o_vstart[o + 1], eye, origin, tol,
-                              cap + rad[k] + o_rad[o] + slack)
+                              cap[c] + rad[k] + o_rad[o] + slack)
                 lb = wp.max(lb, g - rad[k] - o_rad[o] - slack)
         wp.atomic_min(out, c, k, lb)
 
@@ -382,7 +383,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         pair_b: wp.array(dtype=wp.int32),
         # Data in:
         X: wp.array2d(dtype=mat44),
-        cap: scalar,
+        cap: wp.array(dtype=scalar),
         tol: scalar,
         slack: scalar,
         # Data out:
@@ -398,10 +399,10 @@ def kernels(scalar: type) -> SimpleNamespace:
         Rb = rot_of(Tb)
         tb = pos_of(Tb)
         lb = wp.length((Ra * centre[a] + ta) - (Rb * centre[b] + tb)) - bound[a] - bound[b]
-        if lb < cap:
+        if lb < cap[c]:
             g = gjk_lower(verts, vstart[a], vstart[a + 1], Ra, ta,
                           verts, vstart[b], vstart[b + 1], Rb, tb, tol,
-                          cap + rad[a] + rad[b] + slack)
+                          cap[c] + rad[a] + rad[b] + slack)
             lb = wp.max(lb, g - rad[a] - rad[b] - slack)
         out[c, q] = lb
 

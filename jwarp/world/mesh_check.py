@@ -51,6 +51,9 @@ POLY_SIDES = 32
 SLACK = 1e-9
 #: [m] GJK stops when its bound is this close to its distance estimate
 GJK_TOL = 1e-7
+#: [m] what :meth:`MeshCheck.paths_free` asks a point to clear beyond what its intervals'
+#: proofs need (the bounds stop there: a cap, :meth:`MeshCheck.lower_bounds`)
+CAP_PAD = 1e-3
 #: most halvings of a segment (2^MAX_DEPTH sub-intervals) before it is "not certified"
 MAX_DEPTH = 14
 #: most configurations one :meth:`MeshCheck.paths_free` call evaluates per path segment
@@ -213,12 +216,14 @@ class MeshCheck:
 
     # ------------------------------------------------------------------ bounds
     def lower_bounds(self, q: np.ndarray, groups: np.ndarray | None = None,
-                     cap: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+                     cap: float | np.ndarray = 0.05) -> tuple[np.ndarray, np.ndarray]:
         """Lower bounds [m] of the pieces' distances at configurations ``q`` (N, n_dof):
         ``(world (N, K), self (N, Q))``, per piece its smallest over the world's objects
-        and per self pair (``self.pair_a``, ``self.pair_b``). A pair whose enclosing
-        spheres keep ``cap`` apart gets their distance (a bound, not refined); bounds <= 0:
-        maybe touching. ``groups`` (N,) int: the world of a batch each configuration is in."""
+        and per self pair (``self.pair_a``, ``self.pair_b``); bounds <= 0: maybe touching.
+        ``cap`` [m] (a number or (N,) per configuration): what the caller needs to know; a
+        bound at or above it may be less than the distance (the broad phase's, or GJK
+        stopped there). ``groups`` (N,) int: the world of a batch each configuration is
+        in."""
         import time
 
         from jwarp.kinematics import fk
@@ -231,6 +236,7 @@ class MeshCheck:
                              f"'{self.robot.name}', got shape {q.shape}")
         q = np.ascontiguousarray(q.reshape(-1, self.robot.n_dof))
         N, K, Q = len(q), self.n_pieces, len(self.pair_a)
+        caps = np.broadcast_to(np.asarray(cap, np.float64), (N,))
         dev = self.device
         wl = np.full((N, K), np.inf)
         sl = np.full((N, Q), np.inf)
@@ -240,19 +246,20 @@ class MeshCheck:
             X: wp.array = wp.array(np.asarray(fk(self.robot, q, device=dev, dtype=np.float64)),
                          dtype=kern.mat44, device=dev)
             wt = self._world_tables()
+            cap_d = wp.array(np.ascontiguousarray(caps), dtype=wp.float64, device=dev)
             if self.n_objects:
                 out = wp.full((N, K), 1e30, dtype=wp.float64, device=dev)
                 g = np.zeros(N, np.int32) if groups is None else np.asarray(groups, np.int32)
                 wp.launch(kern.world_lower, dim=(N, K, self.n_objects),
                           inputs=[*self._tab, *wt, X, wp.array(g, dtype=wp.int32, device=dev),
-                                  int(groups is not None), wp.float64(cap),
+                                  int(groups is not None), cap_d,
                                   wp.float64(GJK_TOL), wp.float64(SLACK)],
                           outputs=[out], device=dev)
                 wl = out.numpy()
             if Q:
                 out2 = wp.empty((N, Q), dtype=wp.float64, device=dev)
                 wp.launch(kern.self_lower, dim=(N, Q),
-                          inputs=[*self._tab, *self._ptab, X, wp.float64(cap),
+                          inputs=[*self._tab, *self._ptab, X, cap_d,
                                   wp.float64(GJK_TOL), wp.float64(SLACK)],
                           outputs=[out2], device=dev)
                 sl = out2.numpy()
@@ -308,9 +315,25 @@ class MeshCheck:
             mw[ends.reshape(-1)] = em
             ms[ends.reshape(-1)] = np.minimum(ms[ends.reshape(-1)], em)
         g = None if groups is None else np.asarray(groups, np.int64)
-        cap = max(float(margin), float(self_margin)) + float(np.max(Tk, initial=0.0)) + 0.05
+        # what a point must be known to clear: an interval of width w of a segment is
+        # proven when its two ends clear the margin by more than w T / 2 each (T: the
+        # segment's largest travel); a waypoint ends intervals of width 1, a midpoint of
+        # an interval of width w ends intervals of width w / 2 (its other ends were asked
+        # for more)
+        tk_max = Tk.max(axis=1, initial=0.0)
+        tq_max = Tq.max(axis=1, initial=0.0)
+
+        def need(rows: np.ndarray, width: np.ndarray) -> np.ndarray:
+            return np.maximum(mw[rows] + width * tk_max[rows] / 2,
+                              ms[rows] + width * tq_max[rows] / 2) + CAP_PAD
+
+        seg_need = need(np.arange(P * S), np.ones(P * S)).reshape(P, S)
+        way_cap = np.empty((P, W))
+        way_cap[:, :-1] = seg_need
+        way_cap[:, -1] = seg_need[:, -1]
+        way_cap[:, 1:-1] = np.maximum(seg_need[:, :-1], seg_need[:, 1:])
         wl, sl = self.lower_bounds(P_.reshape(-1, n), None if g is None else np.repeat(g, W),
-                                   cap=cap)
+                                   cap=way_cap.reshape(-1))
         wl = wl.reshape(P, W, -1)
         sl = sl.reshape(P, W, -1)
         # intervals: (segment row, t0, t1, bounds at both ends)
@@ -343,7 +366,8 @@ class MeshCheck:
             seg, t0, t1, wa, wb, sa, sb = (x[todo] for x in (seg, t0, t1, wa, wb, sa, sb))
             tm = (t0 + t1) / 2
             qm = qa[seg] + (qb[seg] - qa[seg]) * tm[:, None]
-            wm, sm = self.lower_bounds(qm, None if g is None else g[seg_path[seg]], cap=cap)
+            wm, sm = self.lower_bounds(qm, None if g is None else g[seg_path[seg]],
+                                       cap=need(seg, (t1 - t0) / 2))
             used += len(seg)
             seg = np.concatenate([seg, seg])
             t0, t1 = np.concatenate([t0, tm]), np.concatenate([tm, t1])

@@ -612,7 +612,8 @@ class MotionCheck:
 
     def check(self, paths: Any, *, margin: float = 0.0,
               endpoint_margin: float | None = None, self_margin: float = 0.0,
-              world_group: int = 0, group: int = 0, meshes: bool | None = None) -> PathCheck:
+              world_group: int = 0, group: int = 0,
+              meshes: bool | np.ndarray | None = None) -> PathCheck:
         """Check ``paths`` (W, n_dof) or (P, W, n_dof) (numpy or Warp; rad or m) with
         ``margin`` [m] (>= 0) from the world, ``self_margin`` [m] between the robot's own
         spheres and ``endpoint_margin`` (None: = margin) on the first and last segment.
@@ -621,7 +622,7 @@ class MotionCheck:
         paths are checked in order, so the first feasible path of each group is the one
         proven; on a GPU a later one may be). ``world_group``: as :meth:`launch`.
         ``meshes``: what the spheres leave unproven goes to :meth:`mesh_recheck` (None:
-        ``options.meshes``).
+        ``options.meshes``; a (P,) bool array: of those paths only).
         Returns a :class:`PathCheck` (P results; one for a single path)."""
         margin = _check_margin(margin, "margin")
         self_margin = _check_margin(self_margin, "self_margin")
@@ -651,10 +652,19 @@ class MotionCheck:
         ok = out["ok"].numpy()[:K].astype(bool)
         code = out["code"].numpy()[:K]
         dist = out["dist"].numpy()[:K]
-        if not ok.all() and (self.options.meshes if meshes is None else meshes):
-            ok2 = self.mesh_recheck(p, np.arange(K), ok, code, dist, margin=margin,
-                                    endpoint_margin=endpoint_margin, self_margin=self_margin,
-                                    world_group=world_group)
+        rows = np.arange(K)
+        if meshes is not None and np.ndim(meshes) == 1:
+            allow = np.asarray(meshes, bool)
+            if allow.shape != (K,):
+                raise ValueError(f"meshes: expected a bool or ({K},) bools, one per path, got "
+                                 f"shape {allow.shape}")
+        else:
+            allow = np.full(K, bool(self.options.meshes if meshes is None else meshes))
+        if not ok.all() and (allow & ~ok).any():
+            ok2 = ok.copy()
+            ok2[allow] = self.mesh_recheck(p, rows[allow], ok[allow], code[allow], dist[allow],
+                                           margin=margin, endpoint_margin=endpoint_margin,
+                                           self_margin=self_margin, world_group=world_group)
             if (ok2 != ok).any():
                 code = np.where(ok2, 0, code)
                 ok = ok2

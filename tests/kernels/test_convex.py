@@ -90,14 +90,15 @@ def test_world_and_self_bounds_match_coal(device, scalar):
                       arr(np.zeros(O_, np.int32), wp.int32),
                       arr(_boxes(objs)[0].astype(npdt), wp.types.matrix((3, 3), scalar)),
                       arr(_boxes(objs)[1].astype(npdt), K.vec3), Xw,
-                      arr(np.zeros(N, np.int32), wp.int32), 0, scalar(1e9), scalar(1e-7),
+                      arr(np.zeros(N, np.int32), wp.int32), 0, arr(np.full(N, 1e9, npdt), scalar),
+                      scalar(1e-7),
                       scalar(slack)], outputs=[out], device=device)
     got = out.numpy().astype(np.float64)
     qa = rng.integers(0, K_, 30).astype(np.int32)
     qb = rng.integers(0, K_, 30).astype(np.int32)
     out2 = wp.empty((N, 30), dtype=scalar, device=device)
     wp.launch(K.self_lower, dim=(N, 30),
-              inputs=[*tab, arr(qa, wp.int32), arr(qb, wp.int32), Xw, scalar(1e9),
+              inputs=[*tab, arr(qa, wp.int32), arr(qb, wp.int32), Xw, arr(np.full(N, 1e9, npdt), scalar),
                       scalar(1e-7), scalar(slack)], outputs=[out2], device=device)
     got2 = out2.numpy().astype(np.float64)
     cp = [_coal_convex(p) for p in pieces]
@@ -144,7 +145,7 @@ def test_halfspace_is_exact(device):
                       arr([[0.0, 0.0, 1.0]], K.vec3), arr([0.1], wp.float64),
                       arr([0], wp.int32), arr(np.eye(3)[None], wp.types.matrix((3, 3), wp.float64)),
                       arr(np.zeros((1, 3)), K.vec3), wp.array(X, dtype=K.mat44, device=device),
-                      arr([0], wp.int32), 0, wp.float64(1.0), wp.float64(1e-9),
+                      arr([0], wp.int32), 0, arr([1.0], wp.float64), wp.float64(1e-9),
                       wp.float64(0.0)], outputs=[out], device=device)
     want = (corners @ R.T)[:, 2].min() + 0.8 - 0.1
     assert abs(out.numpy()[0, 0] - want) < 1e-12
@@ -172,7 +173,7 @@ def _launch_world(device, pieces, rads, objs, orads, X, frame, cap=1e9, boxes=No
                       arr(ob, wp.float64), arr(np.zeros(O_, np.int32), wp.int32),
                       arr(rot, wp.types.matrix((3, 3), wp.float64)),
                       arr(half, K.vec3), wp.array(X, dtype=K.mat44, device=device),
-                      arr(np.zeros(N, np.int32), wp.int32), 0, wp.float64(cap),
+                      arr(np.zeros(N, np.int32), wp.int32), 0, arr(np.full(N, float(cap)), wp.float64),
                       wp.float64(1e-9), wp.float64(0.0)], outputs=[out], device=device)
     return out.numpy()
 

@@ -179,7 +179,9 @@ class _Checks:
         self.time = {"states": 0.0, "edges": 0.0}
 
     def states(self, q: np.ndarray, margin: float | None = None,
-               meshes: bool | None = None) -> np.ndarray:
+               meshes: bool = False) -> np.ndarray:
+        """(N,) bool: the configurations within the limits and free; ``meshes`` (the
+        roots): where the spheres touch, the mesh certificate may prove them free."""
         t = time.perf_counter()
         ok = within_limits(self.model, q)
         if ok.any():
@@ -187,7 +189,7 @@ class _Checks:
             ok[ok] = _fz.collision_free(self.model, self.world, q[ok], m,
                                         kappa=self.kappa, device=self.device,
                                         self_margin=min(self.self_margin, m),
-                                        meshes=self.meshes if meshes is None else meshes)
+                                        meshes=self.meshes and meshes)
         self.time["states"] += time.perf_counter() - t
         return ok
 
@@ -209,15 +211,18 @@ class _Checks:
                                            device=self.device)
         self.last_n_sub = n_sub = int(n_sub)
         ok = np.zeros(len(paths), bool)
-        if self.em is None or self.roots is None:
+        if self.roots is None:
             ok[:] = self._feasible(paths, n_sub)
         else:
             head, tail = self._is_root(paths[:, 0]), self._is_root(paths[:, -1])
             end = head | tail
-            # the first and last segment at endpoint_margin where a root is at either end
-            ok[~end] = self._feasible(paths[~end], n_sub)
+            # the first and last segment at endpoint_margin where a root is at either end;
+            # the mesh certificate only there (the roots may be grasps the spheres touch;
+            # the nodes between are free for the spheres, and so are the meshes)
+            ok[~end] = self._feasible(paths[~end], n_sub, meshes=False)
             ok[end] = self._feasible(paths[end], n_sub, self.em)
-            if paths.shape[1] > 2:  # ... but the end away from the root at margin
+            if self.em is not None and paths.shape[1] > 2:
+                # ... but the end away from the root at margin
                 for sel, seg in ((end & ~tail, slice(-2, None)), (end & ~head, slice(0, 2))):
                     idx = np.nonzero(sel & ok)[0]
                     if len(idx):
@@ -225,14 +230,16 @@ class _Checks:
         self.time["edges"] += time.perf_counter() - t
         return ok
 
-    def _feasible(self, paths: np.ndarray, n_sub: int, em: float | None = None) -> np.ndarray:
+    def _feasible(self, paths: np.ndarray, n_sub: int, em: float | None = None,
+                  meshes: bool = True) -> np.ndarray:
         if not len(paths):
             return np.zeros(0, bool)
         kw = {} if em is None else {"endpoint_margin": em}
         return np.asarray(_fz.path_feasible(self.model, self.world, paths, n_sub,
                                             margin=self.margin, kappa=self.kappa,
                                             device=self.device, self_margin=self.self_margin,
-                                            meshes=self.meshes, **kw), bool).reshape(len(paths))
+                                            meshes=self.meshes and meshes, **kw),
+                          bool).reshape(len(paths))
 
     def edges(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return self.paths(np.stack([a, b], axis=1))
@@ -262,8 +269,10 @@ def rrt_connect(robot: RobotLike, world: Any, start: Any, goal: Any,
         device: Warp device of the checks (None: Warp's default device).
         deadline: ``time.perf_counter()`` value after which the search stops (besides
             ``options.time_limit``).
-        meshes: states and edges the spheres refuse may be proven by the mesh
-            certificate (:mod:`jwarp.world.mesh_check`; start and goal always may).
+        meshes: start and goal, and the edges at them, where the spheres refuse them, may
+            be proven by the mesh certificate (:mod:`jwarp.world.mesh_check`; a grasp the
+            spheres touch); the other nodes and edges are free for the spheres (start and
+            goal may always be proven by it).
 
     Returns:
         :class:`RRTResult`; ``path`` None when the trees did not connect within
