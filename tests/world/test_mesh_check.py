@@ -212,3 +212,25 @@ def test_bad_input_names_the_argument(panda):
     with pytest.raises(ValueError, match="collision_pieces"):
         MeshCheck(model.copy(collision_pieces=None), world, "cpu")
     assert mesh_check(model.copy(collision_pieces=None), world, "cpu") is None
+
+
+def test_motion_check_meshes_per_path(panda):
+    """MotionCheck.check(meshes=) with one bool per path: a short motion leaving a pose 3 mm
+    from a box (the spheres touch it, the meshes do not) is proven where its row allows
+    the certificate and refused where it does not; a wrong length names the argument."""
+    from jwarp.world.motion import MotionCheck
+
+    path, model = panda
+    q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8, 0.035, 0.035])[:model.n_dof]
+    q0 = np.clip(q0, model.joint_limits[:, 0], model.joint_limits[:, 1])
+    world = exact_world(Scene(shapes=[_graze_box(model, q0, 0.003)], source="graze"))
+    q1 = q0.copy()
+    q1[0] -= 0.3   # away from the box (it lies along +x)
+    paths = np.stack([np.stack([q0, q1])] * 2)
+    chk = MotionCheck(model, world, device="cpu")
+    assert not chk.check(paths, meshes=False).ok.any()
+    assert chk.check(paths, meshes=True).ok.all()
+    assert list(chk.check(paths, meshes=np.array([True, False])).ok) == [True, False]
+    assert list(chk.check(paths, meshes=np.array([False, True])).ok) == [False, True]
+    with pytest.raises(ValueError, match="meshes"):
+        chk.check(paths, meshes=np.array([True, False, True]))
