@@ -275,7 +275,7 @@ SUBSTITUTIONS: dict[str, list[tuple[str, str, str]]] = {
         ("n_samples=10000", "n_samples=200", "200 sampled configurations instead of 10000")],
     "docs/urdf.md:281": [
         ("SpherizeOptions()", "SpherizeOptions(pair_samples=500)",
-         "500 self-pair samples instead of 10000 (the contained fit's 191 spheres)")],
+         "500 self-pair samples instead of 10000 (the contained fit's 125 spheres)")],
     "examples/README.md:90": [
         ("setup, 500,", "setup, 20,", "20 samples instead of 500 (each needs visible markers)")],
 }

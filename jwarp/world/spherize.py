@@ -63,11 +63,12 @@ __all__ = ["SpherizeOptions", "SpherizeReport", "SphereFitWarning", "spherize", 
 #: bump when the fitted result of the same inputs changes
 #: Monte Carlo points of a link's excess volume at import (:func:`spherize`)
 EXCESS_SAMPLES = 50_000
-CACHE_VERSION = 8  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits;
+CACHE_VERSION = 9  # 3: mesh vertices merged, sparse cover of large parts; 4: refined fits;
 #                   5: URDF axis frames named <joint>_axis, joint names frame aliases;
 #                   6: MoveIt's pair rules (adjacency, always >= 95 %), reasons in notes
 #                   7: containment (contain, contain_gap), sphere_relation
 #                   8: collision_pieces (the geometry's convex pieces)
+#                   9: containment protrusions wrist 1.5, hand 1.0 (was 1.25, 0.75)
 
 
 #: the pair sampling of an import: MoveIt setup assistant's Adjacent and Always rules
@@ -117,9 +118,10 @@ class SpherizeOptions:
     contain_factors: with ``contain`` and ``refine``, the protrusion factors (x
         ``tolerance``) of the refined links: ``{"wrist": w, "hand": h}`` (either may be
         left out); None: :data:`jwarp.importers.sphere_refine.CONTAIN_PROTRUSIONS` (wrist
-        1.25, hand and fingers 0.75). Larger factors: fewer spheres and faster planning,
-        more free grasps refused (docs/spheres.md, "Containment": wrist 2, hand 1 gave the
-        Panda 102 spheres instead of 191).
+        1.5, hand and fingers 1.0: the Panda gets 125 spheres). Larger factors: fewer
+        spheres and faster planning, more grasps the spheres touch (the mesh certificate
+        proves them, at its cost; docs/spheres.md, "Containment": wrist 2, hand 1 gave the
+        Panda 102 spheres, wrist 1.25, hand 0.75 191).
     """
 
     tolerance: float = 0.01
