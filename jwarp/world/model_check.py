@@ -151,6 +151,11 @@ def check_collision_model(robot: RobotLike, *, need_spheres: bool, what: str,
         f"self_collision.exclude_pairs), or pass {option} to skip this check")
 
 
+#: how a contained fit names itself in ``SphereRelation.method``
+#: (:func:`jwarp.importers.spheres.contain_fit`)
+CONTAIN_METHOD = "jwarp.importers.spheres.contain_fit"
+
+
 class MeshMarginWarning(UserWarning):
     """Planning or IK with a robot whose spheres only approximate its collision meshes
     (``RobotModel.sphere_relation`` "approximate"): said once per robot and choice."""
@@ -188,7 +193,11 @@ def mesh_margin_model(robot: RobotLike, mesh_margin: bool = True, *, what: str =
     key = (content_key(model), bool(mesh_margin))
     worst = sorted(rel.poke_out.items(), key=lambda kv: -kv[1])[:3]
     listed = ", ".join(f"{k} {v * 1e3:.1f} mm" for k, v in worst)
-    if key not in _WARNED:
+    # a contained fit whose spheres were edited afterwards (the import's home fit shrinks
+    # spheres that overlap at the home): growing them by their recorded margin contains
+    # the meshes again, as imported with the defaults; nothing to warn about
+    edited_contained = rel.method.startswith(CONTAIN_METHOD)
+    if key not in _WARNED and not (mesh_margin and edited_contained):
         _WARNED.add(key)
         if mesh_margin:
             msg = (f"robot '{model.name}': its spheres approximate the collision meshes "

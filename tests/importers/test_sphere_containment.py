@@ -230,6 +230,30 @@ def test_mesh_margin_inflates_radii_per_link_and_warns_once():
         PlanOptions(mesh_margin="yes").validate(np.float32)
 
 
+def test_an_edited_contained_fit_is_grown_back_without_a_warning():
+    """The import's home fit shrinks contained spheres that overlap at the home: the
+    relation is "approximate" by what they lost, and planning grows them back (they contain
+    the meshes again) without a warning, as the user imported with the defaults; with
+    mesh_margin off it still warns."""
+    import dataclasses
+
+    from jwarp.world.model_check import CONTAIN_METHOD, MeshMarginWarning, mesh_margin_model
+
+    base = unique()
+    links = sorted({base.frames[s.frame].name for s in base.spheres})
+    model = approximate(base, {links[0]: 0.003, **{k: 0.0 for k in links[1:]}})
+    model = model.copy(sphere_relation=dataclasses.replace(
+        model.sphere_relation, method=f"{CONTAIN_METHOD}: ...; spheres shrunk afterwards"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MeshMarginWarning)
+        grown = mesh_margin_model(model, True)
+    f, _, r0 = model.sphere_arrays()
+    first = np.array([model.frames[i].name == links[0] for i in f])
+    np.testing.assert_allclose(grown.sphere_arrays()[2], r0 + 0.003 * first, atol=1e-12)
+    with pytest.warns(MeshMarginWarning, match="mesh_margin is off"):
+        mesh_margin_model(model, False)
+
+
 TWO_LINKS = """<?xml version="1.0"?>
 <robot name="two_link">
   <link name="base"><collision><geometry><box size="0.1 0.1 0.04"/></geometry></collision></link>
