@@ -276,6 +276,22 @@ class Planner:
         em = o.margin if o.endpoint_margin is None else min(o.margin, o.endpoint_margin)
         sem = min(o.self_margin, em)
         pw = 1 if self.batched else 0
+        timings: dict = {}
+        # the straight line first, before any other start is drawn or the optimiser is
+        # set up: the continuous check of the line proves its start and goal too (at the
+        # endpoint margins, as check_endpoints asks), so where it is proven by the
+        # spheres the endpoints need no check of their own (their limits are checked
+        # first: a line between configurations within the limits stays within them)
+        line = None  # (B,) bool: the problems the straight line solved
+        if self._straight_first(seeds) and within_limits(model, q0).all() \
+                and within_limits(model, q1).all():
+            t_line = time.perf_counter()
+            line_paths, line_wp, line, code, dist = self._straight(q0, q1)
+            timings["straight"] = time.perf_counter() - t_line
+            if line.all():
+                self._mesh_need = np.zeros(len(q0), bool)
+                return self._straight_result(line_paths, t0, timings, mesh_s0)
+        t_end = time.perf_counter()
         s0 = check_endpoints(model, self.world, q0, "start", em, o.kappa, device=dev,
                              self_margin=sem, per_world=pw)
         s1 = check_endpoints(model, self.world, q1, "goal", em, o.kappa, device=dev,
@@ -285,14 +301,16 @@ class Planner:
         # only at the last check (the spheres can prove their paths)
         self._mesh_need = ~(np.asarray(s0, bool) & np.asarray(s1, bool))
         self._final = False
-        t_line = time.perf_counter()
-        timings = {"endpoints": t_line - t0}
-        # the straight line first: proven before any other start is drawn or the
-        # optimiser is set up; a problem it solves needs nothing more
-        line = None  # (B,) bool: the problems the straight line solved
-        if self._straight_first(seeds):
-            line_paths, line = self._straight(q0, q1)
-            timings["straight"] = time.perf_counter() - t_line
+        timings["endpoints"] = time.perf_counter() - t_end
+        if line is not None:
+            # the optimiser's first check of the line: the mesh certificate for the
+            # problems whose start or goal needs it (every problem when that check is
+            # its last)
+            t_line = time.perf_counter()
+            allow = ~line if o.iterations == 0 else ~line & self._mesh_need
+            line = self._mesh_proof(self.motion_check(), line_wp, np.arange(len(line)),
+                                    line, code, dist, allow, 1 if self.batched else 0)
+            timings["straight"] += time.perf_counter() - t_line
             if line.all():
                 return self._straight_result(line_paths, t0, timings, mesh_s0)
         t_opt = time.perf_counter()
@@ -438,44 +456,40 @@ class Planner:
                     and o.stop_when_solved and o.freeze_feasible and not o.converge
                     and o.kappa is None and o.callback is None)
 
-    def _straight(self, q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _straight(self, q0: np.ndarray, q1: np.ndarray) -> tuple:
         """The straight line of every problem as the optimiser would hold it (W waypoints,
-        ``initial_paths`` "straight", in the planner's dtype) and whether the planner's
-        continuous check proves it, as it would prove the optimiser's start 0 at its first
-        iteration (the same check, margins and mesh certificate rule): ``(paths (B, W,
-        n_dof) float64, ok (B,) bool)``."""
+        ``initial_paths`` "straight", in the planner's dtype), checked by the planner's
+        continuous check (its margins), the spheres alone, as the optimiser's start 0 at
+        its first iteration: ``(paths (B, W, n_dof) float64, the same on the device,
+        ok (B,) bool, code (B,), clearance (B,))`` (code and clearance for the mesh
+        certificate, :meth:`_mesh_proof`)."""
         o, dev = self.options, self.device
         B = len(q0)
         line = initial_paths(q0, q1, o.n_waypoints, "straight").astype(self.npdt)
         p: wp.array = wp.array(line, dtype=self.scalar, device=dev)
         idx: wp.array = wp.array(np.arange(B, dtype=np.int32), dtype=wp.int32, device=dev)
-        chk = self.motion_check()
-        wg = 1 if self.batched else 0
-        out = chk.launch(p, idx, B, margin=o.margin, endpoint_margin=o.endpoint_margin,
-                         self_margin=o.self_margin, world_group=wg)
+        out = self.motion_check().launch(p, idx, B, margin=o.margin,
+                                         endpoint_margin=o.endpoint_margin,
+                                         self_margin=o.self_margin,
+                                         world_group=1 if self.batched else 0)
         ok = out["ok"].numpy()[:B].astype(bool)
-        if not ok.all():
-            # the optimiser's first check: the certificate for the problems whose start or
-            # goal needs it (every problem when that check is its last)
-            allow = ~ok
-            if o.iterations > 0 and self._mesh_need is not None:
-                allow &= self._mesh_need
-            ok = self._mesh_proof(chk, p, np.arange(B), ok, out, allow, wg)
-        return line.astype(np.float64), ok
+        code = out["code"].numpy()[:B].copy()
+        dist = out["dist"].numpy()[:B].copy()
+        return line.astype(np.float64), p, ok, code, dist
 
     def _mesh_proof(self, chk: Any, paths: wp.array, rows: np.ndarray, ok: np.ndarray,
-                    out: dict, allow: np.ndarray, wg: int) -> np.ndarray:
-        """``ok`` (K,) of the paths ``rows`` of ``paths`` checked by ``chk`` (its launch's
-        outputs ``out``) with those ``allow`` (K,) left unproven by the spheres proven by
-        the mesh certificate where it proves them (unchanged without one)."""
+                    code: np.ndarray, dist: np.ndarray, allow: np.ndarray,
+                    wg: int) -> np.ndarray:
+        """``ok`` (K,) of the paths ``rows`` of ``paths`` checked by ``chk`` (their codes
+        and clearances ``code``, ``dist`` (K,)) with those ``allow`` (K,) that the spheres
+        left unproven proven by the mesh certificate where it proves them (unchanged
+        without one)."""
         if not allow.any() or chk.mesh_check() is None:
             return ok
         o = self.options
         k = np.nonzero(allow)[0]
         ok = ok.copy()
-        ok[k] = chk.mesh_recheck(paths, np.asarray(rows)[k], ok[k],
-                                 out["code"].numpy()[:len(ok)][k],
-                                 out["dist"].numpy()[:len(ok)][k],
+        ok[k] = chk.mesh_recheck(paths, np.asarray(rows)[k], ok[k], code[k], dist[k],
                                  margin=o.margin, endpoint_margin=o.endpoint_margin,
                                  self_margin=o.self_margin, world_group=wg)
         return ok
@@ -756,7 +770,10 @@ class Planner:
                 sel = ~ok
                 if not self._final and need is not None:
                     sel &= need[np.asarray(cand) // per]
-                ok = self._mesh_proof(chk, obj.paths, np.asarray(cand), ok, out, sel, wg)
+                K = len(cand)
+                ok = self._mesh_proof(chk, obj.paths, np.asarray(cand), ok,
+                                      out["code"].numpy()[:K], out["dist"].numpy()[:K], sel,
+                                      wg)
             return ok
         return self._confirm_elastic(buf, cand)
 
