@@ -525,7 +525,8 @@ class Planner:
                          wall_time=0.0, n_substeps=n_sub, all_feasible=np.ones((B, 1), bool),
                          all_iterations=np.zeros((B, 1), np.int64), paths_source=paths[:, None],
                          stop_reason="solved", stage=np.full(B, "straight", "<U9"),
-                         timings=timings, reasons=["feasible"] * B, _fill=costs)
+                         timings=timings, reasons=["feasible"] * B)
+        res._fill = costs
         if getattr(self.robot, "collision_pieces", None) is not None:
             timings["mesh_check"] = self._mesh_seconds() - mesh_s0
         res.wall_time = time.perf_counter() - t0

@@ -108,7 +108,7 @@ class PlanResult:
     #: problem has no feasible path or nothing was tried); None: shortening off
     length_before: Any = _Filled(None)
     #: fills the fields left to their first read (``_fill(result)``; None: nothing left)
-    _fill: Any = field(default=None, repr=False, compare=False)
+    _fill: Any = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def all_paths(self) -> np.ndarray:
