@@ -729,9 +729,11 @@ class Planner:
         wp.copy(buf.idx, host, count=len(idx))
 
     def motion_check(self) -> Any:
-        """The planner's :class:`jwarp.world.motion.MotionCheck` (made on first use)."""
+        """The planner's :class:`jwarp.world.motion.MotionCheck` (made on first use; one
+        per robot, world, device and these options is kept and shared by the planners
+        of that world: :func:`jwarp.world.motion.motion_check`)."""
         if self._motion is None:
-            from jwarp.world.motion import MotionCheck, MotionOptions
+            from jwarp.world.motion import MotionOptions, motion_check
 
             # a bounded proof per segment: a path grazing the margin for longer than the
             # budget stays "not yet feasible" and the descent goes on moving it
@@ -739,8 +741,8 @@ class Planner:
             # for it): more parallel rounds, fewer sequential evaluations
             opts = (MotionOptions(max_evals=PLANNER_CHECK_EVALS_GPU, rounds=8)
                     if self.device.is_cuda else MotionOptions(max_evals=PLANNER_CHECK_EVALS))
-            self._motion = MotionCheck(self.robot, self.world, device=self.device,
-                                       options=opts)
+            self._motion = motion_check(self.robot, self.world, device=self.device,
+                                        options=opts)
         return self._motion
 
     def _confirm(self, buf: _Buffers, cand: np.ndarray) -> np.ndarray:
