@@ -522,7 +522,7 @@ class MotionCheck:
         em = margin if endpoint_margin is None else endpoint_margin
         kern = mk.kernels(paths.dtype)
         seg = out["seg"]
-        pts = self._points(K, W, M)
+        pts = self._points(K, W, M) if M > 0 else None  # the rounds' points only
         out["bad"].zero_()
         out["ok_segments"].zero_()
         n_groups = paths.shape[0] // group + 1 if group > 0 else 1
