@@ -12,7 +12,8 @@ import warp as wp
 class _Filled:
     """A field of :class:`PlanResult` that the planner may leave to be filled on its
     first read (``PlanResult._fill``: the costs of the straight stage, evaluated only when
-    asked for); a dataclass descriptor field (``default``: its default, or none)."""
+    asked for): set on the class after the dataclass is made, so the generated
+    ``__init__`` stores through it (``default``: what the class itself reads)."""
 
     _NONE = object()
 
@@ -78,9 +79,9 @@ class PlanResult:
 
     path: np.ndarray
     feasible: np.ndarray
-    cost: np.ndarray = _Filled()  # type: ignore[assignment]
-    length_cost: np.ndarray = _Filled()  # type: ignore[assignment]
-    collision_cost: np.ndarray = _Filled()  # type: ignore[assignment]
+    cost: np.ndarray
+    length_cost: np.ndarray
+    collision_cost: np.ndarray
     iterations: np.ndarray
     start_index: np.ndarray
     n_feasible: np.ndarray
@@ -106,7 +107,7 @@ class PlanResult:
     #: (B,) float: U_l of each problem's feasible path before :attr:`PlanOptions.shorten`
     #: shortened it (equal to ``length_cost`` where nothing was shorter; NaN where the
     #: problem has no feasible path or nothing was tried); None: shortening off
-    length_before: Any = _Filled(None)
+    length_before: Any = None
     #: fills the fields left to their first read (``_fill(result)``; None: nothing left)
     _fill: Any = field(default=None, init=False, repr=False, compare=False)
 
@@ -139,3 +140,11 @@ class PlanResult:
                     None if self.length_before is None
                     or not np.isfinite(self.length_before[index])
                     else float(self.length_before[index]))}
+
+
+# the fields the straight stage leaves to their first read (PlanResult._fill)
+for _name, _default in (("cost", _Filled._NONE), ("length_cost", _Filled._NONE),
+                        ("collision_cost", _Filled._NONE), ("length_before", None)):
+    _field = _Filled(_default)
+    _field.__set_name__(PlanResult, _name)
+    setattr(PlanResult, _name, _field)
