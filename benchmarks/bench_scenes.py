@@ -48,8 +48,8 @@ test).
 sets another PlanOptions field (repeatable, e.g. ``--option shorten=0``).
 
 Printed: the machine, the settings, then per device and margin a table per family
-(problems, solved, solved by the optimizer / by the fallback, verified collision-free of
-the solved, collisions, margin violations, median / p95 / max seconds, median / p95 length
+(problems, solved, solved by the straight line / the optimizer / the fallback, verified
+collision-free of the solved, collisions, margin violations, median / p95 / max seconds, median / p95 length
 ratio: U_l of the solved paths, 1 for the straight line) and the baseline's
 line, and at the end a summary table. A path jwarp called feasible that the verifier finds
 colliding is saved (scene file, ``path.npy``, the verdict) under ``--save-failures``.
@@ -444,6 +444,7 @@ def stats(rows: list[dict]) -> dict:
     return {
         "problems": len(rows), "solved": len(solved),
         "solved_pct": 100.0 * len(solved) / len(rows) if rows else math.nan,
+        "straight": sum(r.get("stage") == "straight" for r in rows),
         "optimizer": sum(r.get("stage") == "optimizer" for r in rows),
         "fallback": sum(r.get("stage") == "fallback" for r in rows),
         "errors": sum(r.get("stage") == "error" for r in rows),
@@ -464,7 +465,8 @@ def stats(rows: list[dict]) -> dict:
     }
 
 
-HEAD = (f"{'family':<17} {'n':>4} {'solved':>7} {'optim':>5} {'fallb':>5} {'verif.free':>10} "
+HEAD = (f"{'family':<17} {'n':>4} {'solved':>7} {'line':>5} {'optim':>5} {'fallb':>5} "
+        f"{'verif.free':>10} "
         f"{'coll':>4} {'m-viol':>6} {'mesh<m':>6} {'error':>5} {'mean_s':>6} {'median_s':>8} {'p95_s':>6} "
         f"{'p98_s':>6} {'max_s':>6} "
         f"{'len_med':>7} {'len_p95':>7}")
@@ -473,7 +475,8 @@ HEAD = (f"{'family':<17} {'n':>4} {'solved':>7} {'optim':>5} {'fallb':>5} {'veri
 def line(name: str, s: dict) -> str:
     vf = (f"{s['verified_free']}/{s['verified']}" if s["verified"] else "-")
     return (f"{name:<17} {s['problems']:>4} {pct(s['solved'], s['problems']):>7} "
-            f"{s['optimizer']:>5} {s['fallback']:>5} {vf:>10} {s['collisions']:>4} "
+            f"{s['straight']:>5} {s['optimizer']:>5} {s['fallback']:>5} {vf:>10} "
+            f"{s['collisions']:>4} "
             f"{s['sphere_margin_violations']:>6} {s['mesh_below_margin']:>6} {s['errors']:>5} "
             f"{s['mean_s']:>6.3f} {s['median_s']:>8.3f} {s['p95_s']:>6.3f} {s['p98_s']:>6.3f} "
             f"{s['max_s']:>6.3f} {s['median_length_ratio']:>7.2f} {s['p95_length_ratio']:>7.2f}")

@@ -358,7 +358,8 @@ def _config_table(model: Any, qs: np.ndarray) -> str:
 
 
 #: what each stage of PlanResult.stage means, for the text output
-_STAGE_TEXT = {"optimizer": "solved by the multi-start optimisation",
+_STAGE_TEXT = {"straight": "solved by the straight line, proven before any optimisation",
+               "optimizer": "solved by the multi-start optimisation",
                "fallback": "solved by the fallback: an RRT-Connect path, then optimised",
                "none": "not solved"}
 

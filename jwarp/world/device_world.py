@@ -36,6 +36,8 @@ def cell_minimum(grid: np.ndarray) -> np.ndarray:
 
 
 _EMPTY: dict = {}
+#: the dummy grid of worlds without one, per (device, type): (grid, cellmin, struct)
+_NO_GRID: dict = {}
 
 
 def empty_shapes(device: Any, scalar: type) -> Any:
@@ -71,22 +73,23 @@ class DeviceWorld:
         vec3 = self.k.vec3
         dt = numpy_dtype(scalar)
         use_grid = world is not None and world.sdf is not None
-        if not use_grid:
-            grid = np.zeros((2, 2, 1), dt)
-            origin, inv_h, dim = vec3(0.0, 0.0, 0.0), 1.0, 3
+        if not use_grid:  # a dummy grid, never read: one per device and type
+            key = (str(device), scalar.__name__)
+            hit = _NO_GRID.get(key)
+            if hit is None:
+                hit = _NO_GRID[key] = self._grid(np.zeros((2, 2, 1), dt), vec3(0.0, 0.0, 0.0),
+                                                 1.0, 3)
+            self.grid, self.cellmin, self.grid_struct = hit
+            self.origin, self.inv_h, self.dim = vec3(0.0, 0.0, 0.0), 1.0, 3
         else:
             g = world.sdf.astype(dt)
             grid = g if world.dim == 3 else g[:, :, None]
             o = np.zeros(3)
             o[:world.dim] = world.limits[:, 0]
             origin, inv_h, dim = vec3(*o), 1.0 / world.voxel_size, world.dim
-        self.origin, self.inv_h, self.dim = origin, inv_h, dim
-        self.grid: wp.array = wp.array(np.ascontiguousarray(grid), dtype=scalar, device=device)
-        self.cellmin: wp.array = wp.array(cell_minimum(grid), dtype=scalar, device=device)
-        gs = self.k.WorldGrid()
-        gs.grid, gs.cellmin, gs.origin = self.grid, self.cellmin, origin
-        gs.inv_h, gs.dim = scalar(inv_h), int(dim)
-        self.grid_struct = gs
+            self.origin, self.inv_h, self.dim = origin, inv_h, dim
+            self.grid, self.cellmin, self.grid_struct = self._grid(grid, origin, inv_h, dim)
+        gs = self.grid_struct
         ws = self.k.WorldModel()
         ws.grid = gs
         ws.use_grid = int(use_grid)
@@ -95,6 +98,16 @@ class DeviceWorld:
         self._shapes_key = None
         self._bound_skip = False
         self.sync()
+
+    def _grid(self, grid: np.ndarray, origin: Any, inv_h: float, dim: int) -> tuple:
+        """``(grid, cellmin, WorldGrid struct)`` on the device."""
+        sc, dev = self.scalar, self.device
+        g: wp.array = wp.array(np.ascontiguousarray(grid), dtype=sc, device=dev)
+        cm: wp.array = wp.array(cell_minimum(grid), dtype=sc, device=dev)
+        gs = self.k.WorldGrid()
+        gs.grid, gs.cellmin, gs.origin = g, cm, origin
+        gs.inv_h, gs.dim = sc(inv_h), int(dim)
+        return g, cm, gs
 
     @property
     def bound_skip(self) -> bool:

@@ -246,7 +246,7 @@ class MeshCheck:
             X: wp.array = wp.array(np.asarray(fk(self.robot, q, device=dev, dtype=np.float64)),
                          dtype=kern.mat44, device=dev)
             wt = self._world_tables()
-            cap_d = wp.array(np.ascontiguousarray(caps), dtype=wp.float64, device=dev)
+            cap_d: wp.array = wp.array(np.ascontiguousarray(caps), dtype=wp.float64, device=dev)
             if self.n_objects:
                 out = wp.full((N, K), 1e30, dtype=wp.float64, device=dev)
                 g = np.zeros(N, np.int32) if groups is None else np.asarray(groups, np.int32)

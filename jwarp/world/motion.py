@@ -248,6 +248,32 @@ def travel_bound(robot: Any, paths: np.ndarray, reach: np.ndarray | None = None
     return (dth @ R.T).max(axis=-1)
 
 
+_DEVICE_TABLES: OrderedDict[tuple, tuple] = OrderedDict()
+
+
+def _device_tables(model: RobotModel, dev: Any, n_spheres: int) -> tuple:
+    """The robot's travel tables on ``dev`` (read only; shared by the checks of one robot
+    content and device): ``(reach (n_spheres, n_frames), (fp_start, fp_frame,
+    fp_weight))`` (:func:`sphere_reach`, :func:`pair_travel_tables`)."""
+    from jwarp.core.device import content_key
+
+    key = (content_key(model), str(dev))
+    hit = _DEVICE_TABLES.get(key)
+    if hit is None:
+        reach = (_cached("reach", model, _sphere_reach) if n_spheres
+                 else np.zeros((0, model.n_frames)))
+        fs, ff, fw = pair_travel_tables(model)
+        hit = _DEVICE_TABLES[key] = (
+            wp.array(np.ascontiguousarray(reach, np.float64), dtype=wp.float64, device=dev),
+            (wp.array(fs, dtype=wp.int32, device=dev), wp.array(ff, dtype=wp.int32, device=dev),
+             wp.array(fw, dtype=wp.float64, device=dev)))
+        while len(_DEVICE_TABLES) > 16:
+            _DEVICE_TABLES.popitem(last=False)
+    else:
+        _DEVICE_TABLES.move_to_end(key)
+    return hit
+
+
 @dataclass
 class PathCheck:
     """Results of :meth:`MotionCheck.check` for P paths (numpy).
@@ -366,15 +392,10 @@ class MotionCheck:
         cm.use_world = int(world is not None and sp.n_spheres > 0)
         cm.use_self = int(sp.n_pairs > 0)
         cm.bound_skip = 0  # set per check (the world's objects may change)
-        reach = sphere_reach(self.robot) if sp.n_spheres else np.zeros((0, self.robot.n_frames))
-        self._reach: wp.array = wp.array(reach, dtype=wp.float64, device=dev)
+        self._reach, self._fp = _device_tables(self.robot, dev, sp.n_spheres)
         cm.reach = self._reach
-        fs, ff, fw = pair_travel_tables(self.robot)
-        self._fp: tuple[wp.array, wp.array, wp.array] = (
-            wp.array(fs, dtype=wp.int32, device=dev), wp.array(ff, dtype=wp.int32, device=dev),
-            wp.array(fw, dtype=wp.float64, device=dev))
         cm.fp_start, cm.fp_frame, cm.fp_weight = self._fp
-        self.n_fpairs = len(fs) - 1
+        self.n_fpairs = self._fp[0].shape[0] - 1
         cm.limits = self.model.limits
         cm.limit_tol = wp.float64(LIMIT_TOL)
         self._cm = cm
@@ -501,7 +522,7 @@ class MotionCheck:
         em = margin if endpoint_margin is None else endpoint_margin
         kern = mk.kernels(paths.dtype)
         seg = out["seg"]
-        pts = self._points(K, W, M)
+        pts = self._points(K, W, M) if M > 0 else None  # the rounds' points only
         out["bad"].zero_()
         out["ok_segments"].zero_()
         n_groups = paths.shape[0] // group + 1 if group > 0 else 1
@@ -772,21 +793,26 @@ _OUT_KEEP = 4
 _CHECKS: OrderedDict[tuple, tuple] = OrderedDict()
 
 
-def motion_check(robot: Any, world: World | None, *, device: Any = None) -> MotionCheck:
-    """A cached :class:`MotionCheck` for (robot content, world identity, device): repeated
-    checks (an RRT's edges) pay its set-up once. Worlds are held weakly."""
+def motion_check(robot: Any, world: World | None, *, device: Any = None,
+                 options: MotionOptions | None = None) -> MotionCheck:
+    """A cached :class:`MotionCheck` for (robot content, world identity, device, options):
+    repeated checks (an RRT's edges, the planners of one world) pay its set-up once.
+    Worlds are held weakly. ``options``: :class:`MotionOptions` (None: the defaults); the
+    cached check keeps its own copy."""
     import weakref
+    from dataclasses import astuple, replace
 
     from jwarp.core.device import content_key
 
     model = get_robot(robot)
     dev = resolve_device(device)
-    key = (content_key(model), id(world), str(dev))
+    opts = MotionOptions() if options is None else replace(options)
+    key = (content_key(model), id(world), str(dev), astuple(opts))
     hit = _CHECKS.get(key)
     if hit is not None and hit[0]() is world:
         _CHECKS.move_to_end(key)
         return hit[1]
-    chk = MotionCheck(model, world, device=dev)
+    chk = MotionCheck(model, world, device=dev, options=opts)
     _CHECKS[key] = (weakref.ref(world) if world is not None else (lambda: None), chk)
     while len(_CHECKS) > 8:
         _CHECKS.popitem(last=False)

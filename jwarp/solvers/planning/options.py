@@ -62,7 +62,7 @@ def fallback_share(o: PlanOptions, device: str) -> float:
 
 
 #: the stages of :attr:`PlanResult.stage`
-STAGES = ("optimizer", "fallback", "none")
+STAGES = ("straight", "optimizer", "fallback", "none")
 
 
 def _check_flag(v: Any, name: str) -> None:
@@ -176,6 +176,16 @@ class PlanOptions(SolverOptions):
             configurations is accepted; False (default): either is a ValueError naming the
             robot and the link pairs (:func:`jwarp.world.model_check.check_collision_model`;
             CLI ``--no-collision``).
+        straight_first: before any initial path is drawn or the optimiser is set up,
+            the straight line of ``n_waypoints`` waypoints (the first multi-start of
+            "mixed" and "straight") is proven by the planner's continuous check (the same
+            margins, and the mesh certificate where the start or goal needs it); a problem
+            whose line is proven is solved by it (stage "straight", no cost evaluated
+            until its costs are read). Used where the multi-starts include the line (no
+            seeds, no ``warm_start``, ``start_kind`` "mixed" or "straight"), with
+            ``stop_when_solved`` and ``freeze_feasible``, without ``converge``,
+            ``callback`` or ``kappa``; False: the line is checked with the other starts
+            after the first cost evaluation, as before.
         mesh_margin: a robot whose spheres only approximate its meshes
             (``RobotModel.sphere_relation`` "approximate": the meshes poke out of them by a
             measured amount per link) plans with each link's spheres grown by that link's
@@ -211,6 +221,7 @@ class PlanOptions(SolverOptions):
     rrt: Any = None
     shorten: int = 4
     shorten_budget: float | None = 0.5
+    straight_first: bool = True
 
     def __post_init__(self) -> None:
         self.fallback = fallback_word(self.fallback)
@@ -279,7 +290,7 @@ class PlanOptions(SolverOptions):
         if not (math.isfinite(tol) and tol > 0):
             raise ValueError(f"converge_tol: expected a number > 0, got {self.converge_tol!r}")
         for name in ("freeze_feasible", "stop_when_solved", "free_via", "converge",
-                     "allow_no_collision", "mesh_margin"):
+                     "allow_no_collision", "mesh_margin", "straight_first"):
             _check_flag(getattr(self, name), name)
         seed = self.seed
         if not (seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence))):

@@ -276,6 +276,22 @@ class Planner:
         em = o.margin if o.endpoint_margin is None else min(o.margin, o.endpoint_margin)
         sem = min(o.self_margin, em)
         pw = 1 if self.batched else 0
+        timings: dict = {}
+        # the straight line first, before any other start is drawn or the optimiser is
+        # set up: the continuous check of the line proves its start and goal too (at the
+        # endpoint margins, as check_endpoints asks), so where it is proven by the
+        # spheres the endpoints need no check of their own (their limits are checked
+        # first: a line between configurations within the limits stays within them)
+        line = None  # (B,) bool: the problems the straight line solved
+        if self._straight_first(seeds) and within_limits(model, q0).all() \
+                and within_limits(model, q1).all():
+            t_line = time.perf_counter()
+            line_paths, line_wp, line, code, dist = self._straight(q0, q1)
+            timings["straight"] = time.perf_counter() - t_line
+            if line.all():
+                self._mesh_need = np.zeros(len(q0), bool)
+                return self._straight_result(line_paths, t0, timings, mesh_s0)
+        t_end = time.perf_counter()
         s0 = check_endpoints(model, self.world, q0, "start", em, o.kappa, device=dev,
                              self_margin=sem, per_world=pw)
         s1 = check_endpoints(model, self.world, q1, "goal", em, o.kappa, device=dev,
@@ -285,6 +301,19 @@ class Planner:
         # only at the last check (the spheres can prove their paths)
         self._mesh_need = ~(np.asarray(s0, bool) & np.asarray(s1, bool))
         self._final = False
+        timings["endpoints"] = time.perf_counter() - t_end
+        if line is not None:
+            # the optimiser's first check of the line: the mesh certificate for the
+            # problems whose start or goal needs it (every problem when that check is
+            # its last)
+            t_line = time.perf_counter()
+            allow = ~line if o.iterations == 0 else ~line & self._mesh_need
+            line = self._mesh_proof(self.motion_check(), line_wp, np.arange(len(line)),
+                                    line, code, dist, allow, 1 if self.batched else 0)
+            timings["straight"] += time.perf_counter() - t_line
+            if line.all():
+                return self._straight_result(line_paths, t0, timings, mesh_s0)
+        t_opt = time.perf_counter()
         if isinstance(seeds, ViaPoints):
             Q = _via_seeds(model, q0, q1, seeds.points, o.n_waypoints)
         else:
@@ -294,18 +323,7 @@ class Planner:
         B, n_starts, W = Q.shape[:3]
         P = B * n_starts
         Qf = Q.reshape(P, W, model.n_dof)
-        n_sub = o.n_substeps
-        if n_sub is None and self.world.has_grid:
-            n_sub = substeps_for_voxel(model, Qf, float(self.world.resolution),
-                                       safety=1.0 / float(o.substep_voxels), device=dev)
-        elif n_sub is None:  # exact objects only: the check is continuous, the cost a guide
-            from jwarp.world.motion import travel_bound
-
-            if self._reach is None:
-                from jwarp.world.motion import sphere_reach
-                self._reach = sphere_reach(model)
-            n_sub = int(np.clip(np.ceil(travel_bound(model, Qf, self._reach).max(initial=0.0)
-                                        / EXACT_SUBSTEP), 1, 16))
+        n_sub = self._substeps(Qf)
         buf = self._prepare(P, W, n_sub)
         obj = buf.objective
         evals0 = obj.evaluations  # the optimisation's work (PlanOptions.shorten_budget)
@@ -336,6 +354,14 @@ class Planner:
             if o.callback is not None:
                 o.callback(it, obj.paths.numpy())
             smax = obj.sub_max.numpy()
+            if it == 0 and line is not None and line.any():
+                # the problems the straight line solved (it is their start 0, proven by
+                # the same check): kept as they are, their other starts stop here
+                rows = np.nonzero(np.repeat(line, n_starts))[0]
+                feasible[np.nonzero(line)[0] * n_starts] = True
+                iters[np.nonzero(line)[0] * n_starts] = 0
+                self._keep(buf, rows)
+                done[rows] = True
             last = it == o.iterations or out_of_time or (it + 1) % check_every == 0
             if o.converge:
                 self._converge_check(buf, it, last, smax < screen, done, feasible, iters,
@@ -385,8 +411,11 @@ class Planner:
             self._keep(buf, rest)
         res = self._result(buf, feasible, iters, B, n_starts, time.perf_counter() - t0)
         res.stop_reason = reason
-        res.stage = np.where(res.feasible, "optimizer", "none")
-        res.timings = {"optimizer": time.perf_counter() - t0}
+        res.stage = np.where(res.feasible, "optimizer", "none").astype("<U9")
+        if line is not None:
+            res.stage[line] = "straight"
+        timings["optimizer"] = time.perf_counter() - t_opt
+        res.timings = timings
         if o.fallback is not None and not res.feasible.all():
             _fallback(self, res, q0, q1, t0, deadline)
         if o.shorten > 0 and o.stop_when_solved and not o.converge and o.kappa is None:
@@ -395,6 +424,112 @@ class Planner:
         res.wall_time = time.perf_counter() - t0
         if getattr(model, "collision_pieces", None) is not None:  # the certificate's share
             res.timings["mesh_check"] = self._mesh_seconds() - mesh_s0
+        return res
+
+    def _substeps(self, Qf: np.ndarray) -> int:
+        """The cost's substeps per segment for the paths ``Qf`` (P, W, n_dof):
+        ``options.n_substeps``, else sized to the grid's voxels, or in a world of exact
+        objects to :data:`EXACT_SUBSTEP` of sphere travel (at most 16)."""
+        o, model = self.options, self.robot
+        if o.n_substeps is not None:
+            return int(o.n_substeps)
+        if self.world.has_grid:
+            return substeps_for_voxel(model, Qf, float(self.world.resolution),
+                                      safety=1.0 / float(o.substep_voxels), device=self.device)
+        # exact objects only: the check is continuous, the cost a guide
+        from jwarp.world.motion import travel_bound
+
+        if self._reach is None:
+            from jwarp.world.motion import sphere_reach
+            self._reach = sphere_reach(model)
+        return int(np.clip(np.ceil(travel_bound(model, Qf, self._reach).max(initial=0.0)
+                                   / EXACT_SUBSTEP), 1, 16))
+
+    def _straight_first(self, seeds: Any) -> bool:
+        """Whether :attr:`PlanOptions.straight_first` applies to this call: the line is
+        the first multi-start (no seeds, start_kind "mixed" or "straight"), a proven path
+        ends its problem (``stop_when_solved``, ``freeze_feasible``, not ``converge``),
+        the rigid model and no callback to show the iterations to."""
+        o = self.options
+        kind = o.start_kind if seeds is None else seeds
+        return bool(o.straight_first and isinstance(kind, str) and kind in ("mixed", "straight")
+                    and o.stop_when_solved and o.freeze_feasible and not o.converge
+                    and o.kappa is None and o.callback is None)
+
+    def _straight(self, q0: np.ndarray, q1: np.ndarray) -> tuple:
+        """The straight line of every problem as the optimiser would hold it (W waypoints,
+        ``initial_paths`` "straight", in the planner's dtype), checked by the planner's
+        continuous check (its margins), the spheres alone, as the optimiser's start 0 at
+        its first iteration: ``(paths (B, W, n_dof) float64, the same on the device,
+        ok (B,) bool, code (B,), clearance (B,))`` (code and clearance for the mesh
+        certificate, :meth:`_mesh_proof`)."""
+        o, dev = self.options, self.device
+        B = len(q0)
+        line = initial_paths(q0, q1, o.n_waypoints, "straight").astype(self.npdt)
+        p: wp.array = wp.array(line, dtype=self.scalar, device=dev)
+        idx: wp.array = wp.array(np.arange(B, dtype=np.int32), dtype=wp.int32, device=dev)
+        out = self.motion_check().launch(p, idx, B, margin=o.margin,
+                                         endpoint_margin=o.endpoint_margin,
+                                         self_margin=o.self_margin,
+                                         world_group=1 if self.batched else 0)
+        ok = out["ok"].numpy()[:B].astype(bool)
+        code = out["code"].numpy()[:B].copy()
+        dist = out["dist"].numpy()[:B].copy()
+        return line.astype(np.float64), p, ok, code, dist
+
+    def _mesh_proof(self, chk: Any, paths: wp.array, rows: np.ndarray, ok: np.ndarray,
+                    code: np.ndarray, dist: np.ndarray, allow: np.ndarray,
+                    wg: int) -> np.ndarray:
+        """``ok`` (K,) of the paths ``rows`` of ``paths`` checked by ``chk`` (their codes
+        and clearances ``code``, ``dist`` (K,)) with those ``allow`` (K,) that the spheres
+        left unproven proven by the mesh certificate where it proves them (unchanged
+        without one)."""
+        if not allow.any() or chk.mesh_check() is None:
+            return ok
+        o = self.options
+        k = np.nonzero(allow)[0]
+        ok = ok.copy()
+        ok[k] = chk.mesh_recheck(paths, np.asarray(rows)[k], ok[k], code[k], dist[k],
+                                 margin=o.margin, endpoint_margin=o.endpoint_margin,
+                                 self_margin=o.self_margin, world_group=wg)
+        return ok
+
+    def _straight_result(self, paths: np.ndarray, t0: float, timings: dict,
+                         mesh_s0: float) -> PlanResult:
+        """The result of a call the straight lines ``paths`` (B, W, n_dof) solved: one
+        start per problem, iteration 0; the costs (and ``length_before``) are evaluated
+        when first read (a :class:`PathObjective` of these paths, at substeps sized to
+        them)."""
+        o, B = self.options, len(paths)
+        n_sub = self._substeps(paths)
+        shortens = o.shorten > 0 and o.stop_when_solved and not o.converge and o.kappa is None
+        robot, world, dev, npdt, eps = self.robot, self.world, self.device, self.npdt, self.eps
+        batched, own = self.batched, paths.copy()
+
+        def costs(res: PlanResult) -> None:
+            obj = PathObjective(robot, world, B, own.shape[1], n_sub, weights=o.weights,
+                                eps=eps, lam=o.lam, device=dev, dtype=npdt)
+            if batched:
+                obj.group_div = obj.S
+            obj.set_paths(own)
+            obj.evaluate(grad=False)
+            res.cost = obj.total.numpy().astype(np.float64)
+            res.length_cost = obj.length.numpy().astype(np.float64)
+            res.collision_cost = obj.collision.numpy().astype(np.float64)
+            if shortens:  # the line is left as it is (U_l 1 <= NEAR_STRAIGHT)
+                res.length_before = res.length_cost.copy()
+
+        res = PlanResult(path=paths, feasible=np.ones(B, bool), cost=None, length_cost=None,
+                         collision_cost=None, iterations=np.zeros(B, np.int64),
+                         start_index=np.zeros(B, np.int64), n_feasible=np.ones(B, np.int64),
+                         wall_time=0.0, n_substeps=n_sub, all_feasible=np.ones((B, 1), bool),
+                         all_iterations=np.zeros((B, 1), np.int64), paths_source=paths[:, None],
+                         stop_reason="solved", stage=np.full(B, "straight", "<U9"),
+                         timings=timings, reasons=["feasible"] * B)
+        res._fill = costs
+        if getattr(self.robot, "collision_pieces", None) is not None:
+            timings["mesh_check"] = self._mesh_seconds() - mesh_s0
+        res.wall_time = time.perf_counter() - t0
         return res
 
     def _mesh_seconds(self) -> float:
@@ -594,9 +729,11 @@ class Planner:
         wp.copy(buf.idx, host, count=len(idx))
 
     def motion_check(self) -> Any:
-        """The planner's :class:`jwarp.world.motion.MotionCheck` (made on first use)."""
+        """The planner's :class:`jwarp.world.motion.MotionCheck` (made on first use; one
+        per robot, world, device and these options is kept and shared by the planners
+        of that world: :func:`jwarp.world.motion.motion_check`)."""
         if self._motion is None:
-            from jwarp.world.motion import MotionCheck, MotionOptions
+            from jwarp.world.motion import MotionOptions, motion_check
 
             # a bounded proof per segment: a path grazing the margin for longer than the
             # budget stays "not yet feasible" and the descent goes on moving it
@@ -604,8 +741,8 @@ class Planner:
             # for it): more parallel rounds, fewer sequential evaluations
             opts = (MotionOptions(max_evals=PLANNER_CHECK_EVALS_GPU, rounds=8)
                     if self.device.is_cuda else MotionOptions(max_evals=PLANNER_CHECK_EVALS))
-            self._motion = MotionCheck(self.robot, self.world, device=self.device,
-                                       options=opts)
+            self._motion = motion_check(self.robot, self.world, device=self.device,
+                                        options=opts)
         return self._motion
 
     def _confirm(self, buf: _Buffers, cand: np.ndarray) -> np.ndarray:
@@ -626,7 +763,7 @@ class Planner:
                              endpoint_margin=o.endpoint_margin, group=group,
                              self_margin=o.self_margin, world_group=wg)
             ok = out["ok"].numpy()[:len(cand)].astype(bool)
-            if not ok.all() and chk.mesh_check() is not None:
+            if not ok.all():
                 # what the spheres leave unproven, the URDF geometry may prove (a grasp
                 # pose the contained spheres reach past): every check for the problems
                 # whose endpoints need it, the last check for the others; skipped starts
@@ -636,13 +773,10 @@ class Planner:
                 sel = ~ok
                 if not self._final and need is not None:
                     sel &= need[np.asarray(cand) // per]
-                if sel.any():
-                    k = np.nonzero(sel)[0]
-                    ok[k] = chk.mesh_recheck(obj.paths, np.asarray(cand)[k], ok[k],
-                                             out["code"].numpy()[:len(cand)][k],
-                                             out["dist"].numpy()[:len(cand)][k],
-                                             margin=o.margin, endpoint_margin=o.endpoint_margin,
-                                             self_margin=o.self_margin, world_group=wg)
+                K = len(cand)
+                ok = self._mesh_proof(chk, obj.paths, np.asarray(cand), ok,
+                                      out["code"].numpy()[:K], out["dist"].numpy()[:K], sel,
+                                      wg)
             return ok
         return self._confirm_elastic(buf, cand)
 

@@ -9,6 +9,35 @@ import numpy as np
 import warp as wp
 
 
+class _Filled:
+    """A field of :class:`PlanResult` that the planner may leave to be filled on its
+    first read (``PlanResult._fill``: the costs of the straight stage, evaluated only when
+    asked for): set on the class after the dataclass is made, so the generated
+    ``__init__`` stores through it (``default``: what the class itself reads)."""
+
+    _NONE = object()
+
+    def __init__(self, default: Any = _NONE) -> None:
+        self.default = default
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.slot = "_" + name
+
+    def __get__(self, obj: Any, owner: Any = None) -> Any:
+        if obj is None:  # the dataclass asks for the default
+            if self.default is _Filled._NONE:
+                raise AttributeError(self.slot)
+            return self.default
+        d = obj.__dict__
+        if d.get(self.slot, None) is None and d.get("_fill") is not None:
+            fill, d["_fill"] = d["_fill"], None
+            fill(obj)
+        return d.get(self.slot)
+
+    def __set__(self, obj: Any, value: Any) -> None:
+        obj.__dict__[self.slot] = value
+
+
 @dataclass
 class PlanResult:
     """Result of :func:`plan` / :meth:`Planner.plan` for B problems.
@@ -31,7 +60,12 @@ class PlanResult:
     solved the rest), "all_done" (every start finished on its own: feasible with
     ``freeze_feasible``, converged with ``converge``), "time_limit" (the time ran out first)
     or "iterations" (the iterations, and the fallback's samples, ran out first);
-    ``stage`` (B,) which stage gave the path: "optimizer" (the multi-starts),
+    ``stage`` (B,) which stage gave the path: "straight" (the straight line of the W
+    waypoints, proven before any other start was drawn: :attr:`PlanOptions.straight_first`;
+    ``iterations`` 0, ``start_index`` 0 and, where every problem was solved so, the
+    line is the one start: ``all_*`` (B, 1); its ``cost``, ``length_cost``,
+    ``collision_cost`` and ``length_before`` are evaluated when first read, at
+    ``n_substeps`` sized to the line), "optimizer" (the multi-starts),
     "fallback" (the gradient optimisation seeded with the RRT-Connect path,
     :mod:`jwarp.solvers.planning.rrt`) or "none" (no feasible path). A fallback path is none of
     the multi-starts: its ``start_index`` is -1, its ``iterations`` those of the seeded
@@ -60,9 +94,9 @@ class PlanResult:
     paths_source: Any = field(default=None, repr=False)
     #: why the call ended (:data:`STOP_REASONS`)
     stop_reason: str = "iterations"
-    #: (B,) "optimizer", "fallback" or "none" (None: filled by the planner)
+    #: (B,) "straight", "optimizer", "fallback" or "none" (None: filled by the planner)
     stage: Any = None
-    #: seconds per stage: "optimizer", "rrt", "fallback_optimizer"
+    #: seconds per stage: "endpoints", "straight", "optimizer", "rrt", "fallback_optimizer"
     timings: dict = field(default_factory=dict, repr=False)
     #: (B,) "feasible" or why the problem's path is not (:meth:`Planner.explain`)
     reasons: Any = None
@@ -74,6 +108,8 @@ class PlanResult:
     #: shortened it (equal to ``length_cost`` where nothing was shorter; NaN where the
     #: problem has no feasible path or nothing was tried); None: shortening off
     length_before: Any = None
+    #: fills the fields left to their first read (``_fill(result)``; None: nothing left)
+    _fill: Any = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def all_paths(self) -> np.ndarray:
@@ -104,3 +140,11 @@ class PlanResult:
                     None if self.length_before is None
                     or not np.isfinite(self.length_before[index])
                     else float(self.length_before[index]))}
+
+
+# the fields the straight stage leaves to their first read (PlanResult._fill)
+for _name, _default in (("cost", _Filled._NONE), ("length_cost", _Filled._NONE),
+                        ("collision_cost", _Filled._NONE), ("length_before", None)):
+    _field = _Filled(_default)
+    _field.__set_name__(PlanResult, _name)
+    setattr(PlanResult, _name, _field)
