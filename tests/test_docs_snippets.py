@@ -202,7 +202,7 @@ PRELUDES: dict[str, tuple[str, str]] = {
     "docs/urdf.md:198": (_panda("panda.urdf", "panda.srdf"),
                          "panda.urdf/panda.srdf: example-robot-data's Panda and its SRDF"),
     "docs/urdf.md:281": (_panda("panda.urdf"), "panda.urdf: example-robot-data's Panda"),
-    "docs/urdf.md:415": (
+    "docs/urdf.md:416": (
         f"import jwarp\nopen('panda.xml', 'w').write({MJCF_ARM!r})\n",
         "panda.xml: tests/test_docs_commands.py's small MJCF arm (a Panda MJCF such as "
         "MuJoCo Menagerie's is not installed here), which has the attachment_site"),
@@ -524,7 +524,7 @@ CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
     "docs/urdf.md:43": _check_robot_names,
     "docs/urdf.md:198": _check_group,
     "docs/urdf.md:281": _check_spherized,
-    "docs/urdf.md:415": _check_mjcf,
+    "docs/urdf.md:416": _check_mjcf,
     "docs/urdf_export.md:75": _check_export,
     "examples/README.md:90": _check_campaign,
 }
