@@ -36,7 +36,7 @@ test).
    Self-collision: the URDF meshes of every link pair jwarp checks (its frame pairs with
    spheres, mapped to their links) must not intersect anywhere on the path (coal; counted
    as a collision; ``--no-verify-self`` skips it).
-4. Baseline: OMPL (``pip install ompl``, 2.0.1) RRT-Connect in the 7 arm joints (the
+4. Baseline: OMPL (``pip install ompl``, 2.0.1, or ``pip install -e ".[benchmark]"``) RRT-Connect in the 7 arm joints (the
    fingers fixed at the start's value), without path simplification, its state validity
    ``jwarp.world.collision.is_collision_free`` and its motion validator jwarp's exact
    continuous check (``MotionCheck.check`` of the 2-waypoint path), both at the margin
