@@ -399,8 +399,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
         args.waypoints = net.n_waypoints
         if args.starts is None:
             args.starts = net.n_heads
-    if args.starts is None:
-        args.starts = 8
+    if args.starts is None:  # the API's default: 8 on the CPU, 32 on a CUDA device
+        from jwarp.core.arrays import resolve_device
+        from jwarp.solvers.planning.options import PlanOptions, n_starts_for
+
+        args.starts = n_starts_for(PlanOptions(), str(resolve_device(args.device)))
     if args.waypoints is None:
         args.waypoints = 20
     _check_plan_size(args, model)
@@ -940,7 +943,8 @@ def add_subcommands(sub: Any) -> None:
                    help="goal joint values v1,v2,..., or moveit[:FILE] (goal joint constraints)")
     s.add_argument("--starts", type=int_arg("--starts", 1), default=None, metavar="N",
                    help="multi-starts: the straight line + N-1 random via-point paths (default "
-                        "8); with --warm-start the network's paths count (default: only them)")
+                        "8 on the CPU, 32 on a CUDA device); with --warm-start the network's "
+                        "paths count (default: only them)")
     s.add_argument("--iterations", type=int_arg("--iterations", 0, MAX_ITERATIONS), default=200,
                    metavar="N", help="most iterations (default 200; the Python API's "
                                      "plan(iterations=...) default is 100)")

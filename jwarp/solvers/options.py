@@ -2,8 +2,9 @@
 :class:`SolverOptions`, the base of :class:`jwarp.solvers.ik.IKOptions` and
 :class:`jwarp.solvers.planning.PlanOptions`.
 
-Each subclass keeps its own defaults where the solvers differ (``n_starts``,
-``iterations``, ``step``, ``max_step``: redeclared there), its own validation
+Each subclass keeps its own defaults where the solvers differ (``iterations``, ``step``,
+``max_step``: redeclared there; ``n_starts``, whose default the planner sizes to the
+device, is declared in each), its own validation
 (``validate``: the IK options become floats, the planning options are checked in the
 computing dtype) and documents every field in its own docstring.
 """
@@ -19,7 +20,6 @@ class SolverOptions:
     """The options an IK solve and a plan share.
 
     Attributes:
-        n_starts: seeds per problem (IK: per target; planning: paths per problem), >= 1.
         iterations: optimizer iterations, >= 0.
         step: the optimizer's step size, > 0.
         max_step: the largest change of one joint per iteration, > 0.
@@ -35,7 +35,6 @@ class SolverOptions:
             its recorded poke-out.
     """
 
-    n_starts: int = 1
     iterations: int = 100
     step: float = 1.0
     max_step: float = 0.1

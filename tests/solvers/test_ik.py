@@ -225,7 +225,7 @@ def test_ik_takes_options_and_overrides():
 def test_ik_rejects_unknown_options_naming_them():
     robot = jwarp.robot("arm7")
     with pytest.raises(TypeError, match=r"ik\(\) got an unexpected option 'n_seeds'; "
-                                        r"options are the fields of IKOptions: n_starts"):
+                                        r"options are the fields of IKOptions: .*\bn_starts\b"):
         IK.ik(robot, "tcp", np.eye(4), n_seeds=4)
     with pytest.raises(TypeError, match="^options: expected IKOptions or None"):
         IK.ik(robot, "tcp", np.eye(4), options={"n_starts": 4})

@@ -298,9 +298,30 @@ def test_plan_takes_options_and_overrides(block_world):
 def test_plan_rejects_unknown_options_naming_them(block_world):
     s, g = np.array([1.2, 0.0, 0.0, 0.0]), np.array([-1.2, 0.0, 0.0, 0.0])
     with pytest.raises(TypeError, match=r"plan\(\) got an unexpected option 'max_iterations'; "
-                                        r"options are the fields of PlanOptions: n_starts"):
+                                        r"options are the fields of PlanOptions: .*\bn_starts\b"):
         PL.plan("planar4", block_world, s, g, max_iterations=10)
     with pytest.raises(TypeError, match="^options: expected PlanOptions or None"):
         PL.plan("planar4", block_world, s, g, options={"n_starts": 2})
     with pytest.raises(ValueError, match="^n_starts"):  # values: validated as before
         PL.plan("planar4", block_world, s, g, options=PL.PlanOptions(), n_starts=0)
+
+
+def test_n_starts_default_follows_the_device():
+    """PlanOptions.n_starts None: 8 starts on the CPU, 32 on a CUDA device (where they cost
+    little); a given count wins; a count below 1 names the field."""
+    from jwarp.solvers.planning.options import N_STARTS, PlanOptions, n_starts_for
+
+    assert PlanOptions().n_starts is None
+    assert n_starts_for(PlanOptions(), "cpu") == N_STARTS["cpu"] == 8
+    assert n_starts_for(PlanOptions(), "cuda:0") == N_STARTS["cuda"] == 32
+    assert n_starts_for(PlanOptions(n_starts=3), "cuda:0") == 3
+    with pytest.raises(ValueError, match="^n_starts"):
+        PlanOptions(n_starts=0).validate()
+
+
+def test_default_starts_are_planned_on_the_cpu(block_world):
+    """A plan with the default options on the CPU optimises N_STARTS["cpu"] starts (the
+    straight line collides in this world)."""
+    res = PL.plan("planar4", block_world, np.array([1.2, 0.3, 0.0, 0.0]),
+                  np.array([-1.2, -0.3, 0.0, 0.0]), device="cpu", straight_first=False)
+    assert res.all_paths.shape[1] == 8

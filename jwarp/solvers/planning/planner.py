@@ -20,7 +20,13 @@ from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import check_valid_range
 from jwarp.solvers.overrides import renamed_argument, with_overrides
 from jwarp.solvers.planning.objective import PathObjective, path_configs
-from jwarp.solvers.planning.options import PlanOptions, ViaPoints, check_int, fallback_share
+from jwarp.solvers.planning.options import (
+    PlanOptions,
+    ViaPoints,
+    check_int,
+    fallback_share,
+    n_starts_for,
+)
 from jwarp.solvers.planning.result import PlanResult
 from jwarp.world.model_check import check_collision_model, mesh_margin_model
 from jwarp.world.path_feasibility import (
@@ -243,7 +249,7 @@ class Planner:
             raise ValueError(f"warm_start: paths() returned shape {g.shape}, expected "
                              f"({len(q0)}, H, W, {self.robot.n_dof}) finite values")
         o = self.options
-        extra = o.n_starts - g.shape[1]
+        extra = n_starts_for(o, str(self.device)) - g.shape[1]
         if extra > 0:
             r = _initial(self.robot, q0, q1, o.start_kind, extra, g.shape[2], o.seed, self.world,
                          o.free_via, device=self.device)
@@ -317,7 +323,8 @@ class Planner:
         if isinstance(seeds, ViaPoints):
             Q = _via_seeds(model, q0, q1, seeds.points, o.n_waypoints)
         else:
-            Q = _initial(model, q0, q1, o.start_kind if seeds is None else seeds, o.n_starts,
+            Q = _initial(model, q0, q1, o.start_kind if seeds is None else seeds,
+                         n_starts_for(o, str(dev)),
                          o.n_waypoints, o.seed, self.world, o.free_via, device=dev,
                          name=seeds_name)  # (B, n_starts, W, n)
         B, n_starts, W = Q.shape[:3]
