@@ -252,11 +252,11 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def distance_kernel(
+        # Model:
+        ws: WorldShapes,
         # Data in:
         points: wp.array(dtype=vec3),
         cutoff: scalar,
-        # Model:
-        ws: WorldShapes,
         # Data out:
         dist: wp.array(dtype=scalar),
         grad: wp.array(dtype=vec3),

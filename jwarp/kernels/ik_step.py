@@ -238,6 +238,8 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def step_kernel(
+        # Model:
+        limits: pk.LimitTables,
         # Data in:
         jac: wp.array3d(dtype=scalar),
         err: wp.array2d(dtype=scalar),
@@ -251,8 +253,6 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         mu2: f64,
         alpha: f64,
         max_step: f64,
-        # Model:
-        limits: pk.LimitTables,
         # Data in/out:
         q: wp.array2d(dtype=scalar),
         done: wp.array(dtype=wp.int32),
@@ -334,10 +334,10 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def sample_kernel(
-        # Data in:
-        seed: int,
         # Model:
         limits: pk.LimitTables,
+        # Data in:
+        seed: int,
         # Data out:
         q: wp.array2d(dtype=scalar),
     ):
@@ -462,6 +462,8 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def check_kernel(
+        # Model:
+        tables: CheckTables,
         # Data in:
         q: wp.array2d(dtype=scalar),
         err: wp.array2d(dtype=scalar),
@@ -479,8 +481,6 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         n_starts: int,
         halt: wp.array(dtype=wp.int32),
         iterations: wp.array(dtype=wp.int32),
-        # Model:
-        tables: CheckTables,
         # Scratch:
         scratch: CheckScratch,
         # Data out:
@@ -621,17 +621,17 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def pose_kernel(
-        # Data in:
-        q: wp.array2d(dtype=scalar),
-        target: wp.array(dtype=fk.mat44),
-        halt: wp.array(dtype=wp.int32),
-        done: wp.array(dtype=wp.int32),
         # Model:
         model: fk.FrameTables,
         chain: wp.array(dtype=wp.int32),
         nominal: wp.array3d(dtype=scalar),
         orient: int,
         axis: fk.vec3,
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        target: wp.array(dtype=fk.mat44),
+        halt: wp.array(dtype=wp.int32),
+        done: wp.array(dtype=wp.int32),
         # Data out:
         jac: wp.array3d(dtype=scalar),
         err: wp.array2d(dtype=scalar),

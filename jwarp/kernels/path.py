@@ -225,6 +225,8 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def path_step_kernel(
+        # Model:
+        limits: LimitTables,
         # Data in:
         paths: wp.array3d(dtype=scalar),
         sub_grad: wp.array2d(dtype=scalar),
@@ -234,8 +236,6 @@ def kernels(scalar: type) -> SimpleNamespace:
         step: scalar,
         max_step: scalar,
         active: wp.array(dtype=wp.int32),
-        # Model:
-        limits: LimitTables,
         # Data out:
         paths_out: wp.array2d(dtype=scalar),
     ):
@@ -407,11 +407,11 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def centres_kernel(
-        # Data in:
-        frames: wp.array2d(dtype=mat44),
         # Model:
         sph_frame: wp.array(dtype=wp.int32),
         sph_pos: wp.array(dtype=vec3),
+        # Data in:
+        frames: wp.array2d(dtype=mat44),
         # Data out:
         xs: wp.array2d(dtype=vec3),
     ):
@@ -443,6 +443,9 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def grad_kernel(
+        # Model:
+        model: FrameTables,
+        sph_frame: wp.array(dtype=wp.int32),
         # Data in:
         frames: wp.array2d(dtype=mat44),
         q: wp.array2d(dtype=scalar),
@@ -451,9 +454,6 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
         n_sub: int,
         lam_c: scalar,
         norm_floor: scalar,
-        # Model:
-        model: FrameTables,
-        sph_frame: wp.array(dtype=wp.int32),
         # Data out:
         force: wp.array2d(dtype=vec3),
         moment: wp.array2d(dtype=vec3),
