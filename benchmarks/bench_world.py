@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     for r in range(a.repeats):
         for name, (dwq, cut) in qw.items():
             t0 = time.perf_counter()
-            wp.launch(k.world_query, dim=a.points, inputs=[p_wp, cut, dwq.struct], outputs=out,
+            wp.launch(k.world_query, dim=a.points, inputs=[dwq.struct, p_wp, cut], outputs=out,
                       device=dev)
             wp.synchronize_device(dev)
             res[name].append(time.perf_counter() - t0)

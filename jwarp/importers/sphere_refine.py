@@ -84,8 +84,16 @@ _SAMPLES = (2000, 6000)  # clip of the automatic fit-sample count 8 area / toler
 
 
 @wp.kernel(enable_backward=False)
-def _closest_kernel(mesh: wp.uint64, points: wp.array(dtype=wp.vec3), max_dist: float,
-                    sd: wp.array(dtype=float), closest: wp.array(dtype=wp.vec3)):
+def _closest_kernel(
+    # Model:
+    mesh: wp.uint64,
+    # Data in:
+    points: wp.array(dtype=wp.vec3),
+    max_dist: float,
+    # Data out:
+    sd: wp.array(dtype=float),
+    closest: wp.array(dtype=wp.vec3),
+):
     i = wp.tid()
     p = points[i]
     q = wp.mesh_query_point_sign_winding_number(mesh, p, max_dist)

@@ -265,8 +265,14 @@ def _init_warp() -> None:
 
 
 @wp.kernel(enable_backward=False)
-def _outside_kernel(points: wp.array(dtype=wp.vec3d), centres: wp.array(dtype=wp.vec3d),
-                    radii: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
+def _outside_kernel(
+    # Data in:
+    points: wp.array(dtype=wp.vec3d),
+    centres: wp.array(dtype=wp.vec3d),
+    radii: wp.array(dtype=wp.float64),
+    # Data out:
+    out: wp.array(dtype=wp.float64),
+):
     i = wp.tid()
     p = points[i]
     best = wp.float64(1.0e300)
@@ -276,8 +282,15 @@ def _outside_kernel(points: wp.array(dtype=wp.vec3d), centres: wp.array(dtype=wp
 
 
 @wp.kernel(enable_backward=False)
-def _signed_distance_kernel(mesh: wp.uint64, points: wp.array(dtype=wp.vec3),
-                            max_dist: float, out: wp.array(dtype=float)):
+def _signed_distance_kernel(
+    # Model:
+    mesh: wp.uint64,
+    # Data in:
+    points: wp.array(dtype=wp.vec3),
+    max_dist: float,
+    # Data out:
+    out: wp.array(dtype=float),
+):
     i = wp.tid()
     p = points[i]
     q = wp.mesh_query_point_sign_winding_number(mesh, p, max_dist)
@@ -723,9 +736,15 @@ def surface_cover(mesh: trimesh.Trimesh, gap: float) -> np.ndarray:
 
 
 @wp.kernel(enable_backward=False)
-def _nearest_kernel(points: wp.array(dtype=wp.vec3d), centres: wp.array(dtype=wp.vec3d),
-                    radii: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64),
-                    arg: wp.array(dtype=wp.int32)):
+def _nearest_kernel(
+    # Data in:
+    points: wp.array(dtype=wp.vec3d),
+    centres: wp.array(dtype=wp.vec3d),
+    radii: wp.array(dtype=wp.float64),
+    # Data out:
+    out: wp.array(dtype=wp.float64),
+    arg: wp.array(dtype=wp.int32),
+):
     i = wp.tid()
     p = points[i]
     best = wp.float64(1.0e300)

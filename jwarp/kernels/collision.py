@@ -337,6 +337,9 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def cost_kernel(
+        # Model:
+        model: fk.FrameTables,
+        spheres: SphereTables,
         # Data in:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
@@ -352,9 +355,6 @@ def kernels(scalar: type) -> SimpleNamespace:
         active: wp.array(dtype=wp.int32),
         active_div: int,
         bound_skip: int,
-        # Model:
-        model: fk.FrameTables,
-        spheres: SphereTables,
         # Scratch:
         frames: wp.array2d(dtype=mat44),
         xs: wp.array2d(dtype=vec3),
@@ -476,6 +476,10 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def distance_kernel(
+        # Model:
+        model: fk.FrameTables,
+        spheres: SphereTables,
+        far: scalar,
         # Data in:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
@@ -487,10 +491,6 @@ def kernels(scalar: type) -> SimpleNamespace:
         write_spheres: int,
         write_pairs: int,
         group_div: int,
-        # Model:
-        model: fk.FrameTables,
-        spheres: SphereTables,
-        far: scalar,
         # Scratch:
         frames: wp.array2d(dtype=mat44),
         xs: wp.array2d(dtype=vec3),
@@ -557,6 +557,10 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def world_cost_spheres(
+        # Model:
+        sph_frame: wp.array(dtype=wp.int32),
+        sph_pos: wp.array(dtype=vec3),
+        sph_rad: wp.array(dtype=scalar),
         # Data in:
         frames: wp.array2d(dtype=mat44),
         grid: wp.array3d(dtype=scalar),
@@ -565,10 +569,6 @@ def kernels(scalar: type) -> SimpleNamespace:
         dim: int,
         w: scalar,
         eps: scalar,
-        # Model:
-        sph_frame: wp.array(dtype=wp.int32),
-        sph_pos: wp.array(dtype=vec3),
-        sph_rad: wp.array(dtype=scalar),
         # Data out:
         cost: wp.array(dtype=scalar),
     ):
@@ -582,16 +582,16 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def self_cost_pairs(
-        # Data in:
-        frames: wp.array2d(dtype=mat44),
-        w: scalar,
-        eps: scalar,
         # Model:
         sph_frame: wp.array(dtype=wp.int32),
         sph_pos: wp.array(dtype=vec3),
         sph_rad: wp.array(dtype=scalar),
         pair_a: wp.array(dtype=wp.int32),
         pair_b: wp.array(dtype=wp.int32),
+        # Data in:
+        frames: wp.array2d(dtype=mat44),
+        w: scalar,
+        eps: scalar,
         # Data out:
         cost: wp.array(dtype=scalar),
     ):
@@ -629,11 +629,11 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def world_query_kernel(
+        # Model:
+        world: WorldModel,
         # Data in:
         points: wp.array(dtype=vec3),
         cutoff: scalar,
-        # Model:
-        world: WorldModel,
         # Data out:
         dist: wp.array(dtype=scalar),
         grad: wp.array(dtype=vec3),

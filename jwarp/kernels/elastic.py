@@ -170,6 +170,12 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def elastic_step_kernel(
+        # Model:
+        model: fk.FrameTables,
+        mass: wp.array(dtype=scalar),
+        mass_com: wp.array(dtype=vec3),
+        dh_info: wp.array(dtype=wp.vec4i),
+        kappa_nl: wp.array(dtype=scalar),
         # Data in:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
@@ -183,12 +189,6 @@ def kernels(scalar: type) -> SimpleNamespace:
         gravity: vec3,
         write_tau: int,
         scratch_stride: int,
-        # Model:
-        model: fk.FrameTables,
-        mass: wp.array(dtype=scalar),
-        mass_com: wp.array(dtype=vec3),
-        dh_info: wp.array(dtype=wp.vec4i),
-        kappa_nl: wp.array(dtype=scalar),
         # Data out:
         frames: wp.array2d(dtype=mat44),
         prefix: wp.array2d(dtype=vec4),
@@ -310,11 +310,11 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def compensation_update_kernel(
+        # Model:
+        model: fk.FrameTables,
         # Data in:
         frames: wp.array2d(dtype=mat44),
         rows: wp.array3d(dtype=scalar),
-        # Model:
-        model: fk.FrameTables,
         # Data out:
         c: CompensationArgs,
     ):
@@ -332,11 +332,11 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def compensation_update_per_frame_kernel(
+        # Model:
+        model: fk.FrameTables,
         # Data in:
         frames: wp.array2d(dtype=mat44),
         rows: wp.array3d(dtype=scalar),
-        # Model:
-        model: fk.FrameTables,
         # Data out:
         c: CompensationArgs,
     ):

@@ -490,13 +490,13 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def fk_kernel(
+        # Model:
+        model: FrameTables,
         # Data in:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
         rows_kind: int,
-        # Model:
-        model: FrameTables,
         # Data out:
         frames: wp.array2d(dtype=mat44),
     ):
@@ -508,13 +508,13 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def fk_components_kernel(
+        # Model:
+        model: FrameTables,
         # Data in:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
         rows_kind: int,
-        # Model:
-        model: FrameTables,
         # Data out:
         frames: wp.array4d(dtype=scalar),
     ):
@@ -591,15 +591,15 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def jacobian_kernel(
+        # Model:
+        model: FrameTables,
+        chain: wp.array(dtype=wp.int32),
         # Data in:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
         rows_kind: int,
         point: vec3,
-        # Model:
-        model: FrameTables,
-        chain: wp.array(dtype=wp.int32),
         # Data out:
         jac: wp.array3d(dtype=scalar),
     ):
@@ -614,15 +614,15 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def jacobian_dh_kernel(
+        # Model:
+        model: FrameTables,
+        chain: wp.array(dtype=wp.int32),
         # Data in:
         q: wp.array2d(dtype=scalar),
         rho: wp.array3d(dtype=scalar),
         rho_stride: int,
         rows_kind: int,
         point: vec3,
-        # Model:
-        model: FrameTables,
-        chain: wp.array(dtype=wp.int32),
         # Data out:
         jac: wp.array4d(dtype=scalar),
     ):

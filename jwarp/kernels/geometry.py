@@ -252,11 +252,11 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def distance_kernel(
+        # Model:
+        ws: WorldShapes,
         # Data in:
         points: wp.array(dtype=vec3),
         cutoff: scalar,
-        # Model:
-        ws: WorldShapes,
         # Data out:
         dist: wp.array(dtype=scalar),
         grad: wp.array(dtype=vec3),
@@ -270,7 +270,12 @@ def kernels(scalar: type) -> SimpleNamespace:
         obj[i] = k
 
     @wp.kernel(module="unique", enable_backward=False)
-    def group_root_kernel(bvh: wp.uint64, roots: wp.array(dtype=wp.int32)):
+    def group_root_kernel(
+        # Model:
+        bvh: wp.uint64,
+        # Data out:
+        roots: wp.array(dtype=wp.int32),
+    ):
         """roots[g] = the BVH node of group g (launch dim: groups; host marks empty ones)."""
         g = wp.tid()
         roots[g] = wp.bvh_get_group_root(bvh, g)

@@ -105,6 +105,9 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def pose_error_kernel(
+        # Model:
+        model: fk.FrameTables,
+        chain: wp.array(dtype=wp.int32),
         # Data in:
         frames: wp.array2d(dtype=mat44),
         q: wp.array2d(dtype=scalar),
@@ -113,9 +116,6 @@ def kernels(scalar: type) -> SimpleNamespace:
         lam_r: scalar,
         orient: int,
         axis: vec3,
-        # Model:
-        model: fk.FrameTables,
-        chain: wp.array(dtype=wp.int32),
         # Data out:
         jac: wp.array3d(dtype=scalar),
         err: wp.array2d(dtype=scalar),

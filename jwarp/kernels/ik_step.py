@@ -238,6 +238,8 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def step_kernel(
+        # Model:
+        limits: pk.LimitTables,
         # Data in:
         jac: wp.array3d(dtype=scalar),
         err: wp.array2d(dtype=scalar),
@@ -251,8 +253,6 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         mu2: f64,
         alpha: f64,
         max_step: f64,
-        # Model:
-        limits: pk.LimitTables,
         # Data in/out:
         q: wp.array2d(dtype=scalar),
         done: wp.array(dtype=wp.int32),
@@ -334,9 +334,10 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def sample_kernel(
-        seed: int,
         # Model:
         limits: pk.LimitTables,
+        # Data in:
+        seed: int,
         # Data out:
         q: wp.array2d(dtype=scalar),
     ):
@@ -461,6 +462,8 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def check_kernel(
+        # Model:
+        tables: CheckTables,
         # Data in:
         q: wp.array2d(dtype=scalar),
         err: wp.array2d(dtype=scalar),
@@ -478,8 +481,6 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         n_starts: int,
         halt: wp.array(dtype=wp.int32),
         iterations: wp.array(dtype=wp.int32),
-        # Model:
-        tables: CheckTables,
         # Scratch:
         scratch: CheckScratch,
         # Data out:
@@ -529,6 +530,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def near_kernel(
+        # Data in:
         err: wp.array2d(dtype=scalar),
         tol_pos: f64,
         tol_rot: f64,
@@ -569,6 +571,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def gather_kernel(
+        # Data in:
         q: wp.array2d(dtype=scalar),
         idx: wp.array(dtype=wp.int32),
         counts: wp.array(dtype=wp.int32),
@@ -587,6 +590,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def scatter_aux_kernel(
+        # Data in:
         q: wp.array2d(dtype=scalar),
         q_default: wp.array2d(dtype=scalar),
         default_stride: int,
@@ -617,16 +621,17 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def pose_kernel(
-        q: wp.array2d(dtype=scalar),
-        target: wp.array(dtype=fk.mat44),
-        halt: wp.array(dtype=wp.int32),
-        done: wp.array(dtype=wp.int32),
         # Model:
         model: fk.FrameTables,
         chain: wp.array(dtype=wp.int32),
         nominal: wp.array3d(dtype=scalar),
         orient: int,
         axis: fk.vec3,
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        target: wp.array(dtype=fk.mat44),
+        halt: wp.array(dtype=wp.int32),
+        done: wp.array(dtype=wp.int32),
         # Data out:
         jac: wp.array3d(dtype=scalar),
         err: wp.array2d(dtype=scalar),
@@ -647,6 +652,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def reset_kernel(
+        # Data in:
         n_problems: int,
         # Data out:
         done: wp.array(dtype=wp.int32),
@@ -677,6 +683,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def repeat_targets_kernel(
+        # Data in:
         targets: wp.array(dtype=fk_kernels.kernels(scalar).mat44),
         n_starts: int,
         # Data out:
@@ -688,6 +695,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def finalize_kernel(
+        # Data in:
         q: wp.array2d(dtype=scalar),
         err: wp.array2d(dtype=scalar),
         cost_a: wp.array(dtype=scalar),
@@ -711,6 +719,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def select_kernel(
+        # Data in:
         out: wp.array2d(dtype=f64),
         n_starts: int,
         n_dof: int,

@@ -225,6 +225,8 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def path_step_kernel(
+        # Model:
+        limits: LimitTables,
         # Data in:
         paths: wp.array3d(dtype=scalar),
         sub_grad: wp.array2d(dtype=scalar),
@@ -234,8 +236,6 @@ def kernels(scalar: type) -> SimpleNamespace:
         step: scalar,
         max_step: scalar,
         active: wp.array(dtype=wp.int32),
-        # Model:
-        limits: LimitTables,
         # Data out:
         paths_out: wp.array2d(dtype=scalar),
     ):
@@ -407,9 +407,12 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def centres_kernel(
-        frames: wp.array2d(dtype=mat44),
+        # Model:
         sph_frame: wp.array(dtype=wp.int32),
         sph_pos: wp.array(dtype=vec3),
+        # Data in:
+        frames: wp.array2d(dtype=mat44),
+        # Data out:
         xs: wp.array2d(dtype=vec3),
     ):
         """Sphere centres xs (P * W, n_spheres) [m]. Launch dim (P * W, n_spheres)."""
@@ -418,10 +421,12 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def cost_kernel(
+        # Data in:
         xs: wp.array2d(dtype=vec3),
         W: int,
         lam_c: scalar,
         norm_floor: scalar,
+        # Data out:
         cart: wp.array(dtype=scalar),
         total: wp.array(dtype=scalar),
     ):
@@ -438,6 +443,10 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def grad_kernel(
+        # Model:
+        model: FrameTables,
+        sph_frame: wp.array(dtype=wp.int32),
+        # Data in:
         frames: wp.array2d(dtype=mat44),
         q: wp.array2d(dtype=scalar),
         xs: wp.array2d(dtype=vec3),
@@ -445,8 +454,7 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
         n_sub: int,
         lam_c: scalar,
         norm_floor: scalar,
-        model: FrameTables,
-        sph_frame: wp.array(dtype=wp.int32),
+        # Data out:
         force: wp.array2d(dtype=vec3),
         moment: wp.array2d(dtype=vec3),
         sub_grad: wp.array2d(dtype=scalar),
@@ -495,9 +503,11 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def arcs_kernel(
+        # Data in:
         xs: wp.array2d(dtype=vec3),
         S: int,
         fine: int,
+        # Data out:
         arc: wp.array(dtype=scalar),
     ):
         """The longest sphere arc of each path (the sweep check's substep count):

@@ -245,9 +245,6 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def check_kernel(
-        # Data in:
-        q: wp.array2d(dtype=scalar),
-        checks: Checks,
         # Model:
         model: fk.FrameTables,
         spheres: ck.SphereTables,
@@ -255,6 +252,9 @@ def kernels(scalar: type) -> SimpleNamespace:
         sensors: Sensors,
         skip_fpair: wp.array(dtype=wp.int32),
         rho0: wp.array3d(dtype=scalar),
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        checks: Checks,
         # Scratch:
         frames: wp.array2d(dtype=mat44),
         xs: wp.array2d(dtype=vec3),
@@ -270,11 +270,6 @@ def kernels(scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def sample_kernel(
-        # Data in:
-        seed: int,
-        lower: wp.array(dtype=scalar),
-        upper: wp.array(dtype=scalar),
-        checks: Checks,
         # Model:
         model: fk.FrameTables,
         spheres: ck.SphereTables,
@@ -282,6 +277,11 @@ def kernels(scalar: type) -> SimpleNamespace:
         sensors: Sensors,
         skip_fpair: wp.array(dtype=wp.int32),
         rho0: wp.array3d(dtype=scalar),
+        # Data in:
+        seed: int,
+        lower: wp.array(dtype=scalar),
+        upper: wp.array(dtype=scalar),
+        checks: Checks,
         # Scratch:
         qbuf: wp.array2d(dtype=scalar),
         frames: wp.array2d(dtype=mat44),

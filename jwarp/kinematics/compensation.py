@@ -197,7 +197,7 @@ class CompensationRows:
             if per_frame:
                 kernel, dim = self.k.compensation_update_per_frame, (self.n_updates,
                                                                      t.dh_info.shape[0])
-            launch = wp.launch(kernel, dim=dim, inputs=[frames, self.rows, t.frame_struct],
+            launch = wp.launch(kernel, dim=dim, inputs=[t.frame_struct, frames, self.rows],
                                outputs=[self.args()], device=t.device, record_cmd=True)
             hit = self._launches[key] = (launch, frames)  # keeps frames alive for the id
         if per_frame:

@@ -38,10 +38,10 @@ ORIGIN = (0.0, 0.0, 0.0)
 
 # ------------------------------------------------------------ kernel arguments
 def fk_inputs(t: DeviceModel, q: wp.array, dh: tuple[wp.array, int] | None) -> list:
-    """Inputs of the FK kernels: q (B, n_dof), DH rows and their batch stride (None: the
-    nominal tables), the frame tables."""
+    """Inputs of the FK kernels: the frame tables, q (B, n_dof), DH rows and their batch
+    stride (None: the nominal tables)."""
     rho, stride = dh if dh is not None else (t.dh0_3d, 0)
-    return [q, rho, stride, int(dh is not None), t.frame_struct]
+    return [t.frame_struct, q, rho, stride, int(dh is not None)]
 
 
 def point_vec(point: Any, t: DeviceModel) -> Any:
@@ -57,15 +57,16 @@ def point_vec(point: Any, t: DeviceModel) -> Any:
 
 
 #: position of the point among the arguments of the Jacobian kernels (:func:`jacobian_inputs`)
-POINT_ARG = 4
+POINT_ARG = 6
 
 
 def jacobian_inputs(t: DeviceModel, q: wp.array, dh: tuple[wp.array, int] | None,
                     point: Any, frame: int) -> list:
-    """Inputs of the ``jacobian``/``jacobian_dh`` kernels: q (B, n_dof), DH rows (None: the
-    nominal ones), the point as :func:`point_vec` makes it, the frame index."""
+    """Inputs of the ``jacobian``/``jacobian_dh`` kernels: the frame tables and the chain of
+    the frame index, q (B, n_dof), DH rows (None: the nominal ones), the point as
+    :func:`point_vec` makes it."""
     rho, stride = dh if dh is not None else (t.dh0_3d, 0)
-    return [q, rho, stride, int(dh is not None), point, t.frame_struct, t.chain(frame)]
+    return [t.frame_struct, t.chain(frame), q, rho, stride, int(dh is not None), point]
 
 
 # ------------------------------------------------------------------------ Data

@@ -495,10 +495,10 @@ class ElasticLaunch:
         else:
             (rho_arr, stride), use = rho, 1
         wp.launch(self.k.elastic_step, dim=B,
-                  inputs=[self.q, rho_arr, stride, use, self.rho0[0], self.rho0[1],
+                  inputs=[t.frame_struct, t.mass, t.mass_com, t.dh_info, t.kappa_nl,
+                          self.q, rho_arr, stride, use, self.rho0[0], self.rho0[1],
                           self.kappa[0], self.kappa[1], self.lam, self.gravity,
-                          int(self.write_tau), int(moments.shape[1] > 1), t.frame_struct, t.mass, t.mass_com,
-                          t.dh_info, t.kappa_nl],
+                          int(self.write_tau), int(moments.shape[1] > 1)],
                   outputs=[frames, moments, axes, rho_out, self.tau, delta], device=t.device)
         return frames, rho_out, delta
 

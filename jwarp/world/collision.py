@@ -445,11 +445,12 @@ class CollisionModel:
         frames, xs, force, moment, bc = d.frames, d.xs, d.force, d.moment, d.bc
 
         def inputs() -> list:
-            return [q, rows.array, rows.stride, rows.layout_vec, int(rows.kind), world_struct,
+            return [*self.model_args,
+                    q, rows.array, rows.stride, rows.layout_vec, int(rows.kind), world_struct,
                     ww, ws, float(eps), int(grad), int(group_div),
                     active if active is not None else self._no_active, int(active_div),
                     int(ww != 0.0 and self.device_world.bound_skip),
-                    *self.model_args, frames, xs, force, moment, bc]
+                    frames, xs, force, moment, bc]
 
         world_struct = self.world_struct  # syncs moved/added objects first
         # caller-owned buffers (a planner's loop): replay a recorded launch (cheaper on the host)
@@ -555,17 +556,17 @@ class CollisionModel:
         sp = self.model.spheres
         tape = wp.Tape()
         with tape:
-            wp.launch(k.fk, dim=n, inputs=[qg, *rows.args, self.model.frame_struct],
+            wp.launch(k.fk, dim=n, inputs=[self.model.frame_struct, qg, *rows.args],
                       outputs=[frames], device=self.device)
             if self.world is not None and self.n_spheres and w_world != 0:
                 wp.launch(self.k.world_cost_spheres, dim=(n, self.n_spheres),
-                          inputs=[frames, self.grid, self.origin, self.inv_h, self.dim,
-                                  float(w_world), float(eps), sp.sph_frame, sp.sph_pos,
-                                  sp.sph_rad], outputs=[cost], device=self.device)
+                          inputs=[sp.sph_frame, sp.sph_pos, sp.sph_rad, frames, self.grid,
+                                  self.origin, self.inv_h, self.dim, float(w_world), float(eps)],
+                          outputs=[cost], device=self.device)
             if self.n_pairs and w_self != 0:
                 wp.launch(self.k.self_cost_pairs, dim=(n, self.n_pairs),
-                          inputs=[frames, float(w_self), float(eps), sp.sph_frame,
-                                  sp.sph_pos, sp.sph_rad, sp.pair_a, sp.pair_b],
+                          inputs=[sp.sph_frame, sp.sph_pos, sp.sph_rad, sp.pair_a, sp.pair_b,
+                                  frames, float(w_self), float(eps)],
                           outputs=[cost], device=self.device)
         tape.backward(grads={cost: wp.ones(n, dtype=self.scalar, device=self.device)})
         grad = wp.clone(qg.grad)
@@ -602,9 +603,9 @@ class CollisionModel:
             md = wp.empty((n, 2), dtype=self.scalar, device=self.device)
         dummy = self._dummy
         wp.launch(self.k.distance, dim=n,
-                  inputs=[q, *rows.args, self.world_struct, uw, us,
+                  inputs=[*self.model_args, _FAR, q, *rows.args, self.world_struct, uw, us,
                           int(sd is not None), int(pd is not None), int(group_div),
-                          *self.model_args, _FAR, d.frames, d.xs],
+                          d.frames, d.xs],
                   outputs=[sd if sd is not None else dummy, pd if pd is not None else dummy, md],
                   device=self.device)
         return sd, pd, md

@@ -158,7 +158,8 @@ def world_query(world: World, points: Any, *, cutoff: float = 1e30, device: Any 
     g = wp.empty(n, dtype=k.vec3, device=dev)
     o = wp.empty(n, dtype=wp.int32, device=dev)
     if len(p):
-        wp.launch(k.world_query, dim=len(p), inputs=[wp.array(p, dtype=k.vec3, device=dev),
-                                                     float(cutoff), dw.struct],
+        wp.launch(k.world_query, dim=len(p), inputs=[dw.struct,
+                                                     wp.array(p, dtype=k.vec3, device=dev),
+                                                     float(cutoff)],
                   outputs=[d, g, o], device=dev)
     return d.numpy()[:len(p)], g.numpy()[:len(p)], o.numpy()[:len(p)]

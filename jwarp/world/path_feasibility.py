@@ -277,7 +277,7 @@ def _longest_arcs(robot: RobotModel, q: np.ndarray, fine: int, device: DeviceLik
     frames = launch_fk(m, wp.array(np.ascontiguousarray(q.reshape(N, n), np.float64),
                                    dtype=wp.float64, device=dev))
     xs = wp.empty((N, sph.n_spheres), dtype=k.fk.vec3, device=dev)
-    wp.launch(k.centres, dim=(N, sph.n_spheres), inputs=[frames, sph.sph_frame, sph.sph_pos],
+    wp.launch(k.centres, dim=(N, sph.n_spheres), inputs=[sph.sph_frame, sph.sph_pos, frames],
               outputs=[xs], device=dev)
     arc = wp.zeros(P, dtype=wp.float64, device=dev)
     wp.launch(k.arcs, dim=(P, (S - 1) // fine, sph.n_spheres), inputs=[xs, S, fine],

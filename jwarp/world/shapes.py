@@ -367,8 +367,8 @@ class ShapeSet:
         d = wp.empty(n, dtype=wp.float64, device=dev)
         g = wp.empty(n, dtype=k.vec3, device=dev)
         o = wp.empty(n, dtype=wp.int32, device=dev)
-        wp.launch(k.distance, dim=n, inputs=[wp.array(flat, dtype=k.vec3, device=dev), 1e30,
-                                             ds.struct], outputs=[d, g, o], device=dev)
+        wp.launch(k.distance, dim=n, inputs=[ds.struct, wp.array(flat, dtype=k.vec3, device=dev),
+                                             1e30], outputs=[d, g, o], device=dev)
         return d.numpy().reshape(p.shape[:-1])
 
     # ---------------------------------------------------------------- device

@@ -221,8 +221,8 @@ def test_fk_from_the_model_tables_matches_numpy(device, name):
     q = sample_within_limits(r, 16, np.random.default_rng(1))
     k = fk_kernels.kernels(wp.float64)
     frames = wp.empty((16, r.n_frames), dtype=k.mat44, device=device)
-    wp.launch(k.fk, dim=16, inputs=[wp.array(q, dtype=wp.float64, device=device),
-                                    *m.nominal_rows.args, m.frame_struct],
+    wp.launch(k.fk, dim=16, inputs=[m.frame_struct, wp.array(q, dtype=wp.float64, device=device),
+                                    *m.nominal_rows.args],
               outputs=[frames], device=device)
     np.testing.assert_allclose(frames.numpy(), ref_fk(r, q), atol=1e-12)
 

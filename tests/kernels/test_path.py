@@ -137,8 +137,9 @@ def test_step_kernel_clamps_projects_and_freezes(device):
     active = np.array([1, 0, 1], np.int32)
     out = wp.empty((P * W, n), dtype=F64, device=device)
     wp.launch(K64.path_step, dim=(P, W),
-              inputs=[_w(Q, device=device), _w(sub_grad, device=device), n_sub, lam_l, FLOOR, step, max_step,
-                      wp.array(active, dtype=wp.int32, device=device), lim], outputs=[out], device=device)
+              inputs=[lim, _w(Q, device=device), _w(sub_grad, device=device), n_sub, lam_l, FLOOR, step,
+                      max_step, wp.array(active, dtype=wp.int32, device=device)], outputs=[out],
+              device=device)
     got = out.numpy().reshape(P, W, n)
     # numpy: gradient with hat weights + length term, clamp, projection
     g = np.zeros_like(Q)

@@ -401,7 +401,7 @@ class PoseSampler:
         xs, _r2 = _scratch(dev, n, max(self.model.spheres.n_spheres, 1), self.k.vec3)
         code = wp.empty(n, dtype=wp.int32, device=dev)
         seen = wp.zeros((n, m), dtype=wp.int32, device=dev)
-        wp.launch(self.k.check, dim=n, inputs=[qw, self.checks, *self._model_args(), frames, xs],
+        wp.launch(self.k.check, dim=n, inputs=[*self._model_args(), qw, self.checks, frames, xs],
                   outputs=[code, seen], device=dev)
         seen_np = seen.numpy()
         return code.numpy(), (seen_np if self.cameras else seen_np[:, :0])
@@ -488,9 +488,8 @@ class PoseSampler:
         ws["counts"].zero_()
         out_q = ws["out_q"][:cap]
         wp.launch(self.k.sample, dim=int(k),
-                  inputs=[int(seed), self.lower_w, self.upper_w, self.checks,
-                          *self._model_args(), ws["qbuf"], ws["frames"], ws["xs"],
-                          ws["dummy"]],
+                  inputs=[*self._model_args(), int(seed), self.lower_w, self.upper_w,
+                          self.checks, ws["qbuf"], ws["frames"], ws["xs"], ws["dummy"]],
                   outputs=[ws["count"], out_q, ws["out_idx"], ws["counts"]], device=dev)
         c = int(ws["count"].numpy()[0])
         counts = ws["counts"].numpy().sum(axis=0).astype(np.int64)

@@ -253,13 +253,12 @@ class IKObjective:
         t = self.t
         comp = self.compensation
         rho = (comp.rows, 1, 2) if comp is not None else (t.dh0_3d, 0, 0)
-        self._launch(("fk", id(rho[0])), self.fk.fk, [self.q, *rho, t.frame_struct],
+        self._launch(("fk", id(rho[0])), self.fk.fk, [t.frame_struct, self.q, *rho],
                      [self.frames])
         w = self.weights
         self._launch(("pose", w.position, w.rotation), self.kk.pose_error,
-                     [self.frames, self.q, self.target, self.scalar(w.position),
-                      self.scalar(w.rotation), self.orient, self.axis, t.frame_struct,
-                      t.chain(self.frame)],
+                     [t.frame_struct, t.chain(self.frame), self.frames, self.q, self.target,
+                      self.scalar(w.position), self.scalar(w.rotation), self.orient, self.axis],
                      [self.jac, self.err, self.pos_err, self.rot_err, self.cost_f, self.grad_f])
 
     def evaluate_aux(self) -> None:

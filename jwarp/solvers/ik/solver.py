@@ -239,8 +239,8 @@ class IKSolver:
         obj = self.objective
         t = obj.t
         self._launch("pose", self.ck.pose, self.B, [
-            obj.q, obj.target, self.halt, self.done, t.frame_struct, t.chain(self.frame),
-            t.dh0_3d, obj.orient, obj.axis, obj.jac, obj.err])
+            t.frame_struct, t.chain(self.frame), t.dh0_3d, obj.orient, obj.axis,
+            obj.q, obj.target, self.halt, self.done, obj.jac, obj.err])
 
     def _near(self, cap: int) -> None:
         """List the on-target seeds, at most ``cap`` of them (the others wait)."""
@@ -280,10 +280,11 @@ class IKSolver:
     def _check(self, full: bool) -> None:
         o, obj = self.options, self.objective
         self._launch(("check", bool(full)), self.ck.check, self.B, [
+            self._check_tables,
             obj.q, obj.err, obj.cost_a, obj.coll_cost, self._delta, self._rows,
             int(obj.compensation is not None), o.tol_pos, o.tol_rot, o.tol_rho, self.screen,
             int(full), o.margin, self.n_seeds, self.halt, self.iterations,
-            self._check_tables, self._check_scratch,
+            self._check_scratch,
             self.on, self.done, self.solved, self.counts, self.out])
 
     def _iteration_graph(self, cap: int, full: bool) -> None:
@@ -318,9 +319,9 @@ class IKSolver:
     def _step(self) -> None:
         o, obj = self.options, self.objective
         self._launch("step", self.dk.step, self.B, [
-            obj.jac, obj.err, obj.grad_a, self.on, self.solved, self.n_seeds,
+            self.limits, obj.jac, obj.err, obj.grad_a, self.on, self.solved, self.n_seeds,
             int(o.freeze_solved), int(o.stop_when_solved), self.n_problems, o.damping ** 2,
-            o.step, o.max_step, self.limits, obj.q, self.done, self.counts,
+            o.step, o.max_step, obj.q, self.done, self.counts,
             self.iterations, self.halt, self.restart])
 
     # ------------------------------------------------------------------ solve
@@ -389,8 +390,8 @@ class IKSolver:
         obj, dev, B = self.objective, self.device, self.B
         if q0 is None:  # random seeds, drawn on the device
             obj.reset_rows()
-            wp.launch(self.dk.sample, dim=B, inputs=[int(self.rng.integers(1 << 31)),
-                                                     self.limits],
+            wp.launch(self.dk.sample, dim=B, inputs=[self.limits,
+                                                     int(self.rng.integers(1 << 31))],
                       outputs=[obj.q], device=dev)
         else:
             obj.set_q(q0.reshape(B, -1))

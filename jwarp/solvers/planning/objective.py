@@ -162,19 +162,19 @@ class PathObjective:
         c, dev, PW = self._cart, self.device, self.P * self.W
         lam = self.scalar(self.weights.cartesian)
         floor = self.scalar(NORM_FLOOR * 1e-2)  # [m^2]
-        wp.launch(c.k.fk.fk, dim=PW, inputs=[self.paths.reshape((PW, self.n)), *c.rows.args,
-                                             self.cm.model.frame_struct],
+        wp.launch(c.k.fk.fk, dim=PW, inputs=[self.cm.model.frame_struct,
+                                             self.paths.reshape((PW, self.n)), *c.rows.args],
                   outputs=[c.frames], device=dev)
         sp = self.cm.model.spheres
         wp.launch(c.k.centres, dim=(PW, self.cm.n_spheres),
-                  inputs=[c.frames, sp.sph_frame, sp.sph_pos], outputs=[c.xs], device=dev)
+                  inputs=[sp.sph_frame, sp.sph_pos, c.frames], outputs=[c.xs], device=dev)
         wp.launch(c.k.cost, dim=self.P, inputs=[c.xs, self.W, lam, floor],
                   outputs=[self.cartesian, self.total], device=dev)
         if grad:
             wp.launch(c.k.grad, dim=(self.P, self.W),
-                      inputs=[c.frames, self.paths.reshape((PW, self.n)), c.xs, self.W,
-                              self.n_sub, lam, floor,
-                              self.cm.model.frame_struct, sp.sph_frame, c.force, c.moment],
+                      inputs=[self.cm.model.frame_struct, sp.sph_frame, c.frames,
+                              self.paths.reshape((PW, self.n)), c.xs, self.W, self.n_sub, lam,
+                              floor, c.force, c.moment],
                       outputs=[self.sub_grad], device=dev)
 
     def gradient(self) -> wp.array:
@@ -188,9 +188,9 @@ class PathObjective:
     def step(self, step: float, max_step: float) -> None:
         """One projected gradient step on the active paths (uses the last evaluate)."""
         wp.launch(self.k.path_step, dim=(self.P, self.W),
-                  inputs=[self.paths, self.sub_grad, self.n_sub, self.scalar(self.weights.length),
-                          self.scalar(NORM_FLOOR), self.scalar(step), self.scalar(max_step),
-                          self.active, self.limits],
+                  inputs=[self.limits, self.paths, self.sub_grad, self.n_sub,
+                          self.scalar(self.weights.length), self.scalar(NORM_FLOOR),
+                          self.scalar(step), self.scalar(max_step), self.active],
                   outputs=[self._paths_next.reshape((self.P * self.W, self.n))], device=self.device)
         self.paths, self._paths_next = self._paths_next, self.paths
 
