@@ -203,7 +203,10 @@ def test_implicit_defaults_of_plan_and_ik_equal_the_api(capsys):
 
     import re
 
-    for cmd, opt, n in ((["plan"], "--starts", PlanOptions.n_starts),
+    from jwarp.solvers.planning.options import N_STARTS
+
+    assert PlanOptions.n_starts is None  # the device's: the help names the CPU's first
+    for cmd, opt, n in ((["plan"], "--starts", N_STARTS["cpu"]),
                         (["plan"], "--waypoints", PlanOptions.n_waypoints),
                         (["ik"], "--starts", IKOptions.n_starts)):
         assert re.search(rf"\(default {n}\b", _help_of(cmd, opt, capsys)[:250]), (cmd, opt)

@@ -53,12 +53,13 @@ def test_ik_and_plan_options_share_one_base_with_their_own_defaults():
     from jwarp.solvers.planning import PlanOptions
 
     shared = [f.name for f in dataclasses.fields(SolverOptions)]
-    assert len(shared) == 12
+    assert len(shared) == 11 and "n_starts" not in shared  # each declares its own
     for cls, own in ((IKOptions, dict(n_starts=16, iterations=200, step=1.0, max_step=0.5)),
-                     (PlanOptions, dict(n_starts=8, iterations=100, step=0.01, max_step=0.1))):
+                     (PlanOptions, dict(n_starts=None, iterations=100, step=0.01,
+                                        max_step=0.1))):
         assert issubclass(cls, SolverOptions)
         o = cls()
-        assert [f.name for f in dataclasses.fields(cls)][:12] == shared
+        assert [f.name for f in dataclasses.fields(cls)][:11] == shared
         assert {k: getattr(o, k) for k in own} == own
         assert (o.margin, o.eps, o.kappa, o.lam, o.seed) == (0.0, None, None, 0.7, 0)
         assert o.stop_when_solved and o.mesh_margin and not o.allow_no_collision
