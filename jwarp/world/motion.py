@@ -530,7 +530,7 @@ class MotionCheck:
             out["solved"] = wp.zeros(n_groups, dtype=wp.int32, device=self.device)
         out["solved"].zero_()
         dev = self.device
-        wp.launch(kern.prep, dim=(K, W - 1), inputs=[paths, idx, self._cm, sc, out["bad"]],
+        wp.launch(kern.prep, dim=(K, W - 1), inputs=[self._cm, paths, idx, sc, out["bad"]],
                   outputs=[seg], device=dev)
         n_launch = 1
         use_points = int(M > 0)
@@ -546,18 +546,18 @@ class MotionCheck:
                                                  or int(left.numpy()[-1]) > 0)
         for rnd in range(o.rounds if M > 0 else 0):
             wp.launch(kern.points, dim=(K, W - 1, M),
-                      inputs=[paths, idx, float(margin), float(em), float(self_margin),
-                              int(world_group), seg, int(rnd > 0), self._cm, sc],
+                      inputs=[self._cm, paths, idx, float(margin), float(em),
+                              float(self_margin), int(world_group), seg, int(rnd > 0), sc],
                       outputs=[pts], device=dev)
             wp.launch(kern.cover, dim=(K, W - 1), inputs=[pts, int(rnd > 0)],
                       outputs=[out["bad"], seg], device=dev)
             n_launch += 2
         if run_segments:
             wp.launch(kern.segment, dim=(K, W - 1),
-                      inputs=[paths, idx, float(margin), float(em), float(self_margin),
-                              float(o.min_step), int(o.max_evals), float(o.probe_len),
-                              int(group), int(world_group), use_points, self._cm, sc,
-                              out["bad"], out["ok_segments"], out["solved"]],
+                      inputs=[self._cm, paths, idx, float(margin), float(em),
+                              float(self_margin), float(o.min_step), int(o.max_evals),
+                              float(o.probe_len), int(group), int(world_group), use_points,
+                              sc, out["bad"], out["ok_segments"], out["solved"]],
                       outputs=[seg], device=dev)
             n_launch += 1
         wp.launch(kern.reduce, dim=K, inputs=[seg],
