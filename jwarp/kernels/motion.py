@@ -73,7 +73,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
     computes in float64."""
     f64 = wp.float64
     fk = fk_kernels.kernels(f64)
-    ck = collision_kernels.kernels(f64)
+    ck = collision_kernels.funcs(f64)
     pk = path_kernels.kernels(f64)
     vec3, mat44 = fk.vec3, fk.mat44
     zero = f64(0.0)
