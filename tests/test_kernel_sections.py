@@ -42,12 +42,9 @@ READ_ONLY = {"Model:", "Data in:"}
 WRITTEN = {"Data out:"}
 #: the order of the sections (a section not listed may stand anywhere)
 ORDER = {"Model:": 0, "Data in:": 1, "Data in/out:": 2, "Data out:": 3}
-#: kernels of files others own now (issue 40: jwarp/kernels/motion.py is not edited together
-#: with the item-5 change) that put ``# Data in:`` before ``# Model:``: checked for the use of
-#: the sections, not yet for their order (reordering a kernel's parameters changes every
-#: launch of it, in jwarp/world/motion.py)
-NOT_YET = {"jwarp/kernels/motion.py:prep_kernel", "jwarp/kernels/motion.py:point_kernel",
-           "jwarp/kernels/motion.py:segment_kernel"}
+#: kernels checked for the use of their sections, not yet for their order (none left: issue
+#: 40 item 5 put the last ones, of jwarp/kernels/motion.py, in order)
+NOT_YET: set[str] = set()
 ATOMICS = {"atomic_add", "atomic_sub", "atomic_max", "atomic_min", "atomic_cas", "atomic_exch",
            "atomic_and", "atomic_or", "atomic_xor"}
 

@@ -48,7 +48,7 @@ import warp as wp
 
 from jwarp.core.rows import DHRows
 from jwarp.core.types import RobotLike
-from jwarp.kernels.collision import kernels as collision_kernels
+from jwarp.kernels.collision import funcs as collision_funcs
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.kernels.path import kernels as path_kernels
 from jwarp.model import RobotModel
@@ -612,7 +612,7 @@ def _sphere_model(m: DeviceModel) -> SphereModel:
         scalar=m.scalar, n_spheres=len(rt["sph_frame"]), n_pairs=len(rt["pairs"]),
         pairs=rt["pairs"], rigid_pairs=rt["rigid_pairs"], rigid_distance=rt["rigid_distance"],
         struct=make_struct(
-            collision_kernels(m.scalar).SphereTables,
+            collision_funcs(m.scalar).SphereTables,
             sph_frame=counted(rt["sph_frame"]),
             sph_pos=arr(rt["sph_pos"].astype(npdt), vec3),
             sph_rad=arr(rt["sph_rad"].astype(npdt), m.scalar),

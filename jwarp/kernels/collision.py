@@ -83,10 +83,12 @@ def mesh_sdf_kernel(
         d = query.sign * wp.length(p - c)
     sdf[i, j, k] = d
 
-
 @functools.cache
-def kernels(scalar: type) -> SimpleNamespace:
-    """Collision kernels and functions for one scalar type (``wp.float32``/``wp.float64``)."""
+def funcs(scalar: type) -> SimpleNamespace:
+    """The structs and ``@wp.func`` helpers the collision kernels share, for one scalar type
+    (``wp.float32``/``wp.float64``); built once per type (issue 40 item 5: the kernels are
+    built one each, by :func:`cost`, :func:`distance`, :func:`world_cost_spheres`,
+    :func:`self_cost_pairs`, :func:`sdf_query` and :func:`world_query`, from these)."""
     fk = fk_kernels(scalar)
     el = elastic_kernels(scalar)
     vec3, mat44 = fk.vec3, fk.mat44
@@ -335,6 +337,29 @@ def kernels(scalar: type) -> SimpleNamespace:
                     jm = model.cpl_joint[m]
                     grad[b, jm] = grad[b, jm] + fk.coupling_weight(model, m, b, q, hp) * gi
 
+    return SimpleNamespace(
+        scalar=scalar, fk=fk, el=el, vec3=vec3, mat44=mat44, zero=zero, one=one, half=half,
+        unpack_rot=unpack_rot, unpack_pos=unpack_pos, geometry=gk,
+        SphereTables=SphereTables, WorldGrid=WorldGrid, WorldModel=WorldModel,
+        smooth_clip=smooth_clip, sdf_sample=sdf_sample, sdf_lower_bound=sdf_lower_bound,
+        world_sample=world_sample, world_lower_bound=world_lower_bound,
+        world_distance=world_distance, objects_far=objects_far,
+        world_distance_skip=world_distance_skip, sphere_centre=sphere_centre,
+        forces_to_gradient=forces_to_gradient,
+    )
+
+
+@functools.cache
+def cost(scalar: type) -> wp.Kernel:
+    """The fused world and self-collision cost kernel (with its hand-written gradient), for
+    ``scalar``."""
+    sh = funcs(scalar)
+    fk, el, vec3 = sh.fk, sh.el, sh.vec3
+    mat44, zero, SphereTables = sh.mat44, sh.zero, sh.SphereTables
+    WorldModel, smooth_clip, objects_far = sh.WorldModel, sh.smooth_clip, sh.objects_far
+    world_distance_skip, sphere_centre = sh.world_distance_skip, sh.sphere_centre
+    forces_to_gradient = sh.forces_to_gradient
+
     @wp.kernel(module="unique", enable_backward=False)
     def cost_kernel(
         # Model:
@@ -474,6 +499,17 @@ def kernels(scalar: type) -> SimpleNamespace:
         if comp.enabled != 0 and on_waypoint != 0:
             el.compensation_update_at(model, frames, t, rho, rb, comp)
 
+    return cost_kernel
+
+
+@functools.cache
+def distance(scalar: type) -> wp.Kernel:
+    """The fused signed-distance kernel (spheres to the world, sphere pairs), for ``scalar``."""
+    sh = funcs(scalar)
+    fk, vec3, mat44 = sh.fk, sh.vec3, sh.mat44
+    SphereTables, WorldModel, world_distance = sh.SphereTables, sh.WorldModel, sh.world_distance
+    sphere_centre = sh.sphere_centre
+
     @wp.kernel(module="unique", enable_backward=False)
     def distance_kernel(
         # Model:
@@ -555,6 +591,16 @@ def kernels(scalar: type) -> SimpleNamespace:
         min_dist[b, 0] = dmin_w
         min_dist[b, 1] = dmin_s
 
+    return distance_kernel
+
+
+@functools.cache
+def world_cost_spheres(scalar: type) -> wp.Kernel:
+    """The plain world cost kernel for ``wp.Tape``, for ``scalar``."""
+    sh = funcs(scalar)
+    vec3, mat44, smooth_clip = sh.vec3, sh.mat44, sh.smooth_clip
+    sdf_sample, sphere_centre = sh.sdf_sample, sh.sphere_centre
+
     @wp.kernel(module="unique")
     def world_cost_spheres(
         # Model:
@@ -579,6 +625,16 @@ def kernels(scalar: type) -> SimpleNamespace:
         d, g = sdf_sample(grid, origin, inv_h, dim, x)
         c, dc = smooth_clip(d - sph_rad[s], eps)
         wp.atomic_add(cost, b, w * c)
+
+    return world_cost_spheres
+
+
+@functools.cache
+def self_cost_pairs(scalar: type) -> wp.Kernel:
+    """The plain self-collision cost kernel for ``wp.Tape``, for ``scalar``."""
+    sh = funcs(scalar)
+    vec3, mat44, smooth_clip = sh.vec3, sh.mat44, sh.smooth_clip
+    sphere_centre = sh.sphere_centre
 
     @wp.kernel(module="unique")
     def self_cost_pairs(
@@ -609,6 +665,15 @@ def kernels(scalar: type) -> SimpleNamespace:
             c, dc = smooth_clip(wp.length(diff) - rsum, eps)
             wp.atomic_add(cost, b, w * c)
 
+    return self_cost_pairs
+
+
+@functools.cache
+def sdf_query(scalar: type) -> wp.Kernel:
+    """The grid lookup kernel (distance and gradient at points), for ``scalar``."""
+    sh = funcs(scalar)
+    vec3, sdf_sample = sh.vec3, sh.sdf_sample
+
     @wp.kernel(module="unique", enable_backward=False)
     def sdf_query_kernel(
         # Data in:
@@ -626,6 +691,15 @@ def kernels(scalar: type) -> SimpleNamespace:
         d, g = sdf_sample(grid, origin, inv_h, dim, points[p])
         dist[p] = d
         grad[p] = g
+
+    return sdf_query_kernel
+
+
+@functools.cache
+def world_query(scalar: type) -> wp.Kernel:
+    """The world distance kernel (:func:`world_distance` at points), for ``scalar``."""
+    sh = funcs(scalar)
+    vec3, WorldModel, world_distance = sh.vec3, sh.WorldModel, sh.world_distance
 
     @wp.kernel(module="unique", enable_backward=False)
     def world_query_kernel(
@@ -646,15 +720,25 @@ def kernels(scalar: type) -> SimpleNamespace:
         grad[p] = g
         obj[p] = k
 
+    return world_query_kernel
+
+
+@functools.cache
+def kernels(scalar: type) -> SimpleNamespace:
+    """Collision kernels and functions for one scalar type (``wp.float32``/``wp.float64``):
+    :func:`funcs`' structs and functions and every kernel of the builders (a facade: the
+    builders build only the kernel asked for)."""
+    sh = funcs(scalar)
     return SimpleNamespace(
-        world_query=world_query_kernel,
-        scalar=scalar, SphereTables=SphereTables, WorldGrid=WorldGrid, WorldModel=WorldModel,
-        world_distance=world_distance, world_distance_skip=world_distance_skip,
-        forces_to_gradient=forces_to_gradient,
-        objects_far=objects_far, geometry=gk, vec3=vec3, mat44=mat44, smooth_clip=smooth_clip, sdf_sample=sdf_sample,
-        sdf_lower_bound=sdf_lower_bound, world_sample=world_sample,
-        world_lower_bound=world_lower_bound, sphere_centre=sphere_centre, cost=cost_kernel,
-        distance=distance_kernel,
-        world_cost_spheres=world_cost_spheres, self_cost_pairs=self_cost_pairs,
-        sdf_query=sdf_query_kernel,
+        world_query=world_query(scalar),
+        scalar=scalar, SphereTables=sh.SphereTables, WorldGrid=sh.WorldGrid,
+        WorldModel=sh.WorldModel, world_distance=sh.world_distance,
+        world_distance_skip=sh.world_distance_skip, forces_to_gradient=sh.forces_to_gradient,
+        objects_far=sh.objects_far, geometry=sh.geometry, vec3=sh.vec3, mat44=sh.mat44,
+        smooth_clip=sh.smooth_clip, sdf_sample=sh.sdf_sample,
+        sdf_lower_bound=sh.sdf_lower_bound, world_sample=sh.world_sample,
+        world_lower_bound=sh.world_lower_bound, sphere_centre=sh.sphere_centre,
+        cost=cost(scalar), distance=distance(scalar),
+        world_cost_spheres=world_cost_spheres(scalar), self_cost_pairs=self_cost_pairs(scalar),
+        sdf_query=sdf_query(scalar),
     )

@@ -40,7 +40,7 @@ def kernels(scalar: type) -> SimpleNamespace:
     """The four launches of the wide cost for one scalar type (``wp.float32``/``wp.float64``)."""
     fk = fk_kernels(scalar)
     el = elastic_kernels(scalar)
-    ck = collision_kernels.kernels(scalar)
+    ck = collision_kernels.funcs(scalar)
     vec3, mat44 = fk.vec3, fk.mat44
     zero = scalar(0.0)
 

@@ -358,7 +358,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
     """Feasibility check, result rows and best-start selection for a solver of one scalar
     type; the exact check itself runs in float64 (module docstring)."""
     fk64 = fk_kernels.kernels(f64)
-    ck64 = collision_kernels.kernels(f64)
+    ck64 = collision_kernels.funcs(f64)
     pk64 = path_kernels.kernels(f64)
     fk = fk_kernels.kernels(scalar)
     ikk = ik_cost_kernels.kernels(scalar)

@@ -73,7 +73,7 @@ def kernels(path_scalar: type) -> SimpleNamespace:
     computes in float64."""
     f64 = wp.float64
     fk = fk_kernels.kernels(f64)
-    ck = collision_kernels.kernels(f64)
+    ck = collision_kernels.funcs(f64)
     pk = path_kernels.kernels(f64)
     vec3, mat44 = fk.vec3, fk.mat44
     zero = f64(0.0)
@@ -257,11 +257,11 @@ def kernels(path_scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def prep_kernel(
+        # Model:
+        cm: CheckModel,
         # Data in:
         paths: wp.array3d(dtype=path_scalar),
         idx: wp.array(dtype=wp.int32),
-        # Model:
-        cm: CheckModel,
         # Scratch:
         sc: CheckScratch,
         bad: wp.array(dtype=wp.int32),
@@ -317,6 +317,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def point_kernel(
+        # Model:
+        cm: CheckModel,
         # Data in:
         paths: wp.array3d(dtype=path_scalar),
         idx: wp.array(dtype=wp.int32),
@@ -326,8 +328,6 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         world_group: int,
         seg: Segments,
         dense_start: int,
-        # Model:
-        cm: CheckModel,
         # Scratch:
         sc: CheckScratch,
         # Data out:
@@ -401,6 +401,8 @@ def kernels(path_scalar: type) -> SimpleNamespace:
 
     @wp.kernel(module="unique", enable_backward=False)
     def segment_kernel(
+        # Model:
+        cm: CheckModel,
         # Data in:
         paths: wp.array3d(dtype=path_scalar),
         idx: wp.array(dtype=wp.int32),
@@ -413,8 +415,6 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         group: int,
         world_group: int,
         use_points: int,
-        # Model:
-        cm: CheckModel,
         # Scratch:
         sc: CheckScratch,
         bad: wp.array(dtype=wp.int32),

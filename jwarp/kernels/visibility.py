@@ -40,7 +40,7 @@ from types import SimpleNamespace
 
 import warp as wp
 
-from jwarp.kernels.collision import kernels as collision_kernels
+from jwarp.kernels.collision import funcs as collision_funcs
 from jwarp.kernels.fk import ROWS_NOMINAL
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.kernels.path import kernels as path_kernels
@@ -61,7 +61,7 @@ COUNT_ROWS = 64
 def kernels(scalar: type) -> SimpleNamespace:
     """Pose-check kernels and functions for one scalar type (``wp.float32``/``wp.float64``)."""
     fk = fk_kernels(scalar)
-    ck = collision_kernels(scalar)
+    ck = collision_funcs(scalar)
     pk = path_kernels(scalar)
     vec3, mat44 = fk.vec3, fk.mat44
     zero = scalar(0.0)

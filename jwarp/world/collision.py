@@ -36,8 +36,6 @@ of one batch size, reused from call to call. DH rows are :class:`jwarp.core.rows
 from __future__ import annotations
 
 import os
-import weakref
-from collections import OrderedDict
 from typing import Any
 
 import numpy as np
@@ -54,6 +52,7 @@ from jwarp.core.arrays import (
     resolve_device,
     to_output,
 )
+from jwarp.core.caches import IdentityCache
 from jwarp.core.device import (
     DeviceModel,
     collision_tables,
@@ -612,9 +611,9 @@ class CollisionModel:
 
 
 # ====================================================================== functional API
-#: CollisionModels by (robot content key, device, dtype, world identity), recent ones first
-_MODELS: OrderedDict[tuple, tuple] = OrderedDict()
-_MODELS_MAX = 32
+#: CollisionModels by (robot content key, device, dtype) and the world (by identity, held
+#: weakly), the 32 used last
+_MODELS: IdentityCache[CollisionModel] = IdentityCache(32)
 
 
 def collision_model(robot: RobotLike, world: World | None = None, *, device: DeviceLike = None,
@@ -627,18 +626,11 @@ def collision_model(robot: RobotLike, world: World | None = None, *, device: Dev
     check_world(model, world)
     dev = resolve_device(device)
     scalar = scalar_type(dtype)
-    key = (put_model(model, dev, scalar).key, str(dev), scalar.__name__, id(world))
-    hit = _MODELS.get(key)
-    if hit is not None and hit[0]() is world:
-        _MODELS.move_to_end(key)
-        return hit[1]
-    cm = CollisionModel(model, world, device=dev, dtype=scalar)
-    # hold the world weakly (None is kept by a dummy strong ref)
-    ref = weakref.ref(world) if world is not None else (lambda: None)
-    _MODELS[key] = (ref, cm)
-    while len(_MODELS) > _MODELS_MAX:
-        _MODELS.popitem(last=False)
-    return cm
+    key = (put_model(model, dev, scalar).key, str(dev), scalar.__name__)
+    hit = _MODELS.get(key, (world,))
+    if hit is not None:
+        return hit
+    return _MODELS.put(key, (world,), CollisionModel(model, world, device=dev, dtype=scalar))
 
 
 def _prepare(robot: RobotLike, q: Any, world: World | None, device: DeviceLike, dtype: DTypeLike,

@@ -30,8 +30,6 @@ elastic model get no certificate (:func:`mesh_check` returns None): the spheres 
 from __future__ import annotations
 
 import threading
-import weakref
-from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,6 +37,7 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import init_warp, real_array, resolve_device
+from jwarp.core.caches import IdentityCache
 from jwarp.kernels import convex as ck
 from jwarp.model import RobotModel
 
@@ -384,10 +383,12 @@ def sphere_reach_past(robot: RobotModel) -> float:
     return (max(rel.protrusion.values(), default=0.0) if rel is not None else 0.02) + 2e-3
 
 
-_CACHE: OrderedDict = OrderedDict()
-_CACHE_LOCK = threading.Lock()
+#: MeshChecks by device and (robot, world) (by identity, held weakly), the 8 used last
+_CACHE: IdentityCache[MeshCheck] = IdentityCache(8)
 
-_ROBOT_PARTS: OrderedDict = OrderedDict()
+#: the robot sides of MeshChecks (:func:`_robot_part`) by (extra spheres, device) and the
+#: robot (by identity, held weakly), the 8 made last
+_ROBOT_PARTS: IdentityCache[Any] = IdentityCache(8)
 
 
 def _robot_part(robot: RobotModel, extra: list[int], device: Any) -> Any:
@@ -398,11 +399,10 @@ def _robot_part(robot: RobotModel, extra: list[int], device: Any) -> Any:
 
     from jwarp.world.reach import point_reach
 
-    key = (id(robot), tuple(extra), str(device))
-    with _CACHE_LOCK:
-        hit = _ROBOT_PARTS.get(key)
-        if hit is not None and hit[0]() is robot:
-            return hit[1]
+    key = (tuple(extra), str(device))
+    hit = _ROBOT_PARTS.get(key, (robot,))
+    if hit is not None:
+        return hit
     cp = robot.collision_pieces
     assert cp is not None  # mesh_check() makes none without pieces
     frames = [int(p.frame) for p in cp.pieces]
@@ -443,11 +443,7 @@ def _robot_part(robot: RobotModel, extra: list[int], device: Any) -> Any:
                            pair_weight=pair_weight,
                            ptab=(wp.array(pair_a, dtype=wp.int32, device=device),
                                  wp.array(pair_b, dtype=wp.int32, device=device)))
-    with _CACHE_LOCK:
-        _ROBOT_PARTS[key] = (weakref.ref(robot), part)
-        while len(_ROBOT_PARTS) > 8:
-            _ROBOT_PARTS.popitem(last=False)
-    return part
+    return _ROBOT_PARTS.put(key, (robot,), part)
 
 
 def _pair_tables(robot: RobotModel, f: np.ndarray, reach: np.ndarray
@@ -482,12 +478,7 @@ def _pair_tables(robot: RobotModel, f: np.ndarray, reach: np.ndarray
 
 def cached_mesh_check(robot: Any, world: Any, device: Any = None) -> MeshCheck | None:
     """The :class:`MeshCheck` :func:`mesh_check` has made for these, or None (makes none)."""
-    key = (id(robot), id(world), str(resolve_device(device)))
-    with _CACHE_LOCK:
-        hit = _CACHE.get(key)
-    if hit is not None and hit[0]() is robot and hit[1]() is world:
-        return hit[2]
-    return None
+    return _CACHE.get(str(resolve_device(device)), (robot, world))
 
 
 def mesh_check(robot: Any, world: Any, device: Any = None, *, rho: Any = None
@@ -507,16 +498,7 @@ def mesh_check(robot: Any, world: Any, device: Any = None, *, rho: Any = None
     if world is not None and getattr(world, "has_grid", False):
         return None
     dev = resolve_device(device)
-    key = (id(model), id(world), str(dev))
-    with _CACHE_LOCK:
-        hit = _CACHE.get(key)
-        if hit is not None and hit[0]() is model and hit[1]() is world:
-            _CACHE.move_to_end(key)
-            return hit[2]
-    mc = MeshCheck(model, world, dev)
-    with _CACHE_LOCK:
-        _CACHE[key] = (weakref.ref(model), (weakref.ref(world) if world is not None
-                                            else (lambda: None)), mc)
-        while len(_CACHE) > 8:
-            _CACHE.popitem(last=False)
-    return mc
+    hit = _CACHE.get(str(dev), (model, world))
+    if hit is not None:
+        return hit
+    return _CACHE.put(str(dev), (model, world), MeshCheck(model, world, dev))

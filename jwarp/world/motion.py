@@ -35,6 +35,7 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import init_warp, real_array, real_number, resolve_device
+from jwarp.core.caches import IdentityCache
 from jwarp.core.device import put_model
 from jwarp.core.limits import LIMIT_TOL
 from jwarp.kernels import motion as mk
@@ -530,7 +531,7 @@ class MotionCheck:
             out["solved"] = wp.zeros(n_groups, dtype=wp.int32, device=self.device)
         out["solved"].zero_()
         dev = self.device
-        wp.launch(kern.prep, dim=(K, W - 1), inputs=[paths, idx, self._cm, sc, out["bad"]],
+        wp.launch(kern.prep, dim=(K, W - 1), inputs=[self._cm, paths, idx, sc, out["bad"]],
                   outputs=[seg], device=dev)
         n_launch = 1
         use_points = int(M > 0)
@@ -546,18 +547,18 @@ class MotionCheck:
                                                  or int(left.numpy()[-1]) > 0)
         for rnd in range(o.rounds if M > 0 else 0):
             wp.launch(kern.points, dim=(K, W - 1, M),
-                      inputs=[paths, idx, float(margin), float(em), float(self_margin),
-                              int(world_group), seg, int(rnd > 0), self._cm, sc],
+                      inputs=[self._cm, paths, idx, float(margin), float(em),
+                              float(self_margin), int(world_group), seg, int(rnd > 0), sc],
                       outputs=[pts], device=dev)
             wp.launch(kern.cover, dim=(K, W - 1), inputs=[pts, int(rnd > 0)],
                       outputs=[out["bad"], seg], device=dev)
             n_launch += 2
         if run_segments:
             wp.launch(kern.segment, dim=(K, W - 1),
-                      inputs=[paths, idx, float(margin), float(em), float(self_margin),
-                              float(o.min_step), int(o.max_evals), float(o.probe_len),
-                              int(group), int(world_group), use_points, self._cm, sc,
-                              out["bad"], out["ok_segments"], out["solved"]],
+                      inputs=[self._cm, paths, idx, float(margin), float(em),
+                              float(self_margin), float(o.min_step), int(o.max_evals),
+                              float(o.probe_len), int(group), int(world_group), use_points,
+                              sc, out["bad"], out["ok_segments"], out["solved"]],
                       outputs=[seg], device=dev)
             n_launch += 1
         wp.launch(kern.reduce, dim=K, inputs=[seg],
@@ -790,7 +791,9 @@ class MotionCheck:
 #: numbers of waypoints whose output buffers a MotionCheck keeps (:meth:`MotionCheck._outputs`)
 _OUT_KEEP = 4
 
-_CHECKS: OrderedDict[tuple, tuple] = OrderedDict()
+#: MotionChecks by (robot content key, device, options) and the world (by identity, held
+#: weakly), the 8 used last
+_CHECKS: IdentityCache[MotionCheck] = IdentityCache(8)
 
 
 def motion_check(robot: Any, world: World | None, *, device: Any = None,
@@ -799,7 +802,6 @@ def motion_check(robot: Any, world: World | None, *, device: Any = None,
     repeated checks (an RRT's edges, the planners of one world) pay its set-up once.
     Worlds are held weakly. ``options``: :class:`MotionOptions` (None: the defaults); the
     cached check keeps its own copy."""
-    import weakref
     from dataclasses import astuple, replace
 
     from jwarp.core.device import content_key
@@ -807,16 +809,11 @@ def motion_check(robot: Any, world: World | None, *, device: Any = None,
     model = get_robot(robot)
     dev = resolve_device(device)
     opts = MotionOptions() if options is None else replace(options)
-    key = (content_key(model), id(world), str(dev), astuple(opts))
-    hit = _CHECKS.get(key)
-    if hit is not None and hit[0]() is world:
-        _CHECKS.move_to_end(key)
-        return hit[1]
-    chk = MotionCheck(model, world, device=dev, options=opts)
-    _CHECKS[key] = (weakref.ref(world) if world is not None else (lambda: None), chk)
-    while len(_CHECKS) > 8:
-        _CHECKS.popitem(last=False)
-    return chk
+    key = (content_key(model), str(dev), astuple(opts))
+    hit = _CHECKS.get(key, (world,))
+    if hit is not None:
+        return hit
+    return _CHECKS.put(key, (world,), MotionCheck(model, world, device=dev, options=opts))
 
 
 def _check_margin(v: Any, name: str) -> float:
