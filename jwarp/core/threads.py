@@ -22,12 +22,20 @@ thread per core oversubscribes the cores (issue 39: a torch training epoch took 
 beside another job against 0.7 s quiet, 3-4x the CPU time). ``JWARP_THREADS`` (a positive
 integer) fixes the count; unset, it is the CPUs this process may run on
 (:func:`available_cpus`: the affinity mask, a cgroup CPU quota) less those other processes
-keep busy (the 1-minute load average, or the threads runnable right now where more
-(:func:`runnable_others`: a job started seconds ago has not raised the average yet),
-beyond this process's own thread), at least 1. :func:`torch_threads` holds torch's pool at
-that count inside a block; the training loops ask again every epoch
-(:func:`refresh_torch_threads`), so a job started beside a long training takes its
-threads down.
+keep busy (the 1-minute load average less this process's own share, or the threads
+runnable right now where more (:func:`runnable_others`: a job started seconds ago has not
+raised the average yet; this process's own threads are not counted)), at least 1.
+
+torch's pool while training: :func:`torch_thread_count`, which also leaves one CPU spare
+(unless ``JWARP_THREADS`` says otherwise). torch's CPU pool is OpenMP (libgomp), whose
+threads spin at every barrier: as soon as any other thread wants one of the pool's CPUs, a
+parallel op waits for a thread that is not running. On the 2-core VM (2026-12-02) the
+README's ``train ik`` smoke run took 3.3 s of training at one thread, 3.3-4.3 s (twice the
+CPU time) at two on an idle machine, and 147 s at two beside the test suite; the networks
+of :mod:`jwarp.learn` are too small to gain from a second thread. :func:`torch_threads`
+holds the pool at that count inside a block; the training loops ask again every epoch
+and, within an epoch, at most every second (:class:`ThreadFollower`), so a job started
+beside a long training takes its threads down within a second.
 """
 
 from __future__ import annotations
@@ -41,7 +49,8 @@ from typing import Any, TypeVar
 
 __all__ = ["BLAS_THREADS_ENV", "DEFAULT_BLAS_THREADS", "THREADS_ENV", "available_cpus",
            "blas_thread_limit", "blas_threads", "cpu_threads", "limit_blas",
-           "refresh_torch_threads", "runnable_others", "torch_threads"]
+           "own_runnable", "refresh_torch_threads", "runnable_others", "ThreadFollower",
+           "torch_thread_count", "torch_threads"]
 
 #: environment variable overriding the BLAS threads inside jwarp's solvers
 BLAS_THREADS_ENV = "JWARP_BLAS_THREADS"
@@ -137,11 +146,30 @@ def available_cpus() -> int:
     return max(1, n)
 
 
+def own_runnable() -> int:
+    """Threads of this process runnable right now (state ``R`` in
+    ``/proc/self/task/*/stat``; the caller among them), at least 1."""
+    n = 0
+    try:
+        tasks = os.listdir("/proc/self/task")
+    except OSError:
+        return 1
+    for t in tasks:
+        try:
+            with open(f"/proc/self/task/{t}/stat") as f:
+                state = f.read().rsplit(")", 1)[1].split()[0]
+        except (OSError, IndexError):
+            continue
+        n += state == "R"
+    return max(1, n)
+
+
 def runnable_others(samples: int = 3) -> int | None:
     """Threads of other processes runnable right now: the running count of
-    ``/proc/loadavg`` (which counts the reader) less one, the least of ``samples`` reads
-    1 ms apart (a thread that ran for an instant is not a load); None where there is no
-    ``/proc/loadavg``."""
+    ``/proc/loadavg`` less this process's runnable threads (:func:`own_runnable`: the
+    reader, and a torch pool's threads spinning at a barrier), the least of ``samples``
+    reads 1 ms apart (a thread that ran for an instant is not a load); None where there is
+    no ``/proc/loadavg``."""
     import time
 
     best: int | None = None
@@ -151,31 +179,41 @@ def runnable_others(samples: int = 3) -> int | None:
                 running = int(f.read().split()[3].split("/")[0])
         except (OSError, ValueError, IndexError):
             return None
-        best = running - 1 if best is None else min(best, running - 1)
+        others = running - own_runnable()
+        best = others if best is None else min(best, others)
         if k + 1 < samples:
             time.sleep(0.001)
     return max(0, best or 0)
 
 
-def cpu_threads(value: str | None = None, load: float | None = None) -> int:
+def _env_threads(value: str | None) -> int | None:
+    """``value`` (default ``$JWARP_THREADS``) parsed; None when unset or empty."""
+    text = os.environ.get(THREADS_ENV) if value is None else value
+    if text is None or not str(text).strip():
+        return None
+    try:
+        n = int(str(text).strip())
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"{THREADS_ENV}: expected a positive integer (threads of "
+                         f"jwarp's CPU-parallel work), got {text!r}")
+    return n
+
+
+def cpu_threads(value: str | None = None, load: float | None = None, own: float = 1.0) -> int:
     """Threads of jwarp's CPU-parallel work: ``value`` (default ``$JWARP_THREADS``), a
     positive integer, wins; unset or empty: :func:`available_cpus` less the CPUs other
-    processes keep busy: ``load`` beyond this process's own thread (1), rounded; ``load``
-    None: the 1-minute load average, or :func:`runnable_others` + 1 where that is more (a
-    job started seconds ago); at least 1, at most :func:`available_cpus`.
+    processes keep busy: ``load`` beyond this process's own ``own`` threads (1: the caller;
+    a training loop passes its pool's size, which the load average has counted), rounded;
+    ``load`` None: the 1-minute load average, or :func:`runnable_others` + ``own`` where
+    that is more (a job started seconds ago); at least 1, at most :func:`available_cpus`.
 
     Raises:
         ValueError: naming ``JWARP_THREADS`` for anything but a positive integer.
     """
-    text = os.environ.get(THREADS_ENV) if value is None else value
-    if text is not None and str(text).strip():
-        try:
-            n = int(str(text).strip())
-        except ValueError:
-            n = 0
-        if n < 1:
-            raise ValueError(f"{THREADS_ENV}: expected a positive integer (threads of "
-                             f"jwarp's CPU-parallel work), got {text!r}")
+    n = _env_threads(value)
+    if n is not None:
         return n
     cpus = available_cpus()
     if load is None:
@@ -185,30 +223,70 @@ def cpu_threads(value: str | None = None, load: float | None = None) -> int:
             load = 0.0
         now = runnable_others()
         if now is not None:
-            load = max(float(load), now + 1.0)
-    others = max(0.0, float(load) - 1.0)
+            load = max(float(load), now + float(own))
+    others = max(0.0, float(load) - float(own))
     return int(min(cpus, max(1, math.floor(cpus - others + 0.5))))
+
+
+def torch_thread_count(value: str | None = None, load: float | None = None,
+                       own: float = 1.0) -> int:
+    """torch's intra-op threads while training: ``value`` / ``$JWARP_THREADS`` wins;
+    unset: :func:`cpu_threads` but at most :func:`available_cpus` - 1 (at least 1): one
+    CPU left spare, since an OpenMP pool on every CPU stalls at each barrier as soon as
+    any other thread wants a CPU (module docstring)."""
+    n = _env_threads(value)
+    if n is not None:
+        return n
+    spare = max(1, available_cpus() - 1)
+    return min(spare, cpu_threads(value, load, own))
 
 
 def refresh_torch_threads() -> int:
     """Inside :func:`torch_threads` (a training loop, every epoch): torch's pool at
-    :func:`cpu_threads` again, which follows the load of now. Returns the count."""
+    :func:`torch_thread_count` again, which follows the load of now (the pool's own
+    threads not counted as load). Returns the count."""
     import torch
 
-    count = cpu_threads()
-    if torch.get_num_threads() != count:
+    current = torch.get_num_threads()
+    count = torch_thread_count(own=current)
+    if current != count:
         torch.set_num_threads(count)
     return count
+
+
+class ThreadFollower:
+    """Calls :func:`refresh_torch_threads` at most every ``interval`` seconds: a training
+    loop calls it every step (a read of ``/proc/loadavg`` costs about 3 ms, so not every
+    step of a few ms), so a job started mid-epoch takes the pool down within ``interval``.
+    The first call refreshes."""
+
+    def __init__(self, interval: float = 1.0) -> None:
+        if not interval >= 0:
+            raise ValueError(f"interval: expected seconds >= 0, got {interval!r}")
+        self.interval = float(interval)
+        self.last = -math.inf
+        self.count: int | None = None
+
+    def __call__(self, force: bool = False) -> int | None:
+        """Refresh when due (or ``force``: at an epoch's start); returns the count set by
+        the last refresh."""
+        import time
+
+        now = time.monotonic()
+        if force or now - self.last >= self.interval:
+            self.count = refresh_torch_threads()
+            self.last = time.monotonic()
+        return self.count
 
 
 @contextlib.contextmanager
 def torch_threads(n: int | None = None) -> Iterator[int]:
     """Context manager: torch's intra-op thread pool at ``n`` threads (None:
-    :func:`cpu_threads`) inside the block, the previous count restored after (also after
+    :func:`torch_thread_count`) inside the block, the previous count restored after (also after
     an exception). Yields the count. Training loops of :mod:`jwarp.learn` run inside it."""
     import torch
 
-    count = cpu_threads() if n is None else n
+    count = torch_thread_count() if n is None else n
     if isinstance(count, bool) or not isinstance(count, int) or count < 1:
         raise ValueError(f"n: expected a positive integer or None, got {n!r}")
     before = torch.get_num_threads()

@@ -49,7 +49,7 @@ import torch
 import warp as wp
 
 from jwarp.core.arrays import device_name, init_warp
-from jwarp.core.threads import refresh_torch_threads, torch_threads
+from jwarp.core.threads import ThreadFollower, torch_threads
 from jwarp.learn.checkpoint import check_weights, read_checkpoint, save_checkpoint
 from jwarp.learn.ik_data import DEFAULT_MIX, IKData, check_mix, make_ik_data
 from jwarp.learn.ik_net import IKNet, IKNetConfig
@@ -442,9 +442,10 @@ def _epochs(trainer: IKTrainer, progress: bool, callback: Callable | None
         tqdm = None
     for g in trainer.opt.param_groups:
         g["lr"] = o.lr * o.lr_decay ** trainer.epoch
+    follow = ThreadFollower()  # a job started beside the training: fewer threads
     while trainer.epoch < o.epochs:
         e = trainer.epoch + 1
-        refresh_torch_threads()  # a job started beside the training: fewer threads
+        follow(force=True)
         rng = np.random.default_rng((o.seed, e))
         t0 = time.perf_counter()
         sums: dict = {}
@@ -454,6 +455,7 @@ def _epochs(trainer: IKTrainer, progress: bool, callback: Callable | None
             bar = tqdm(it, desc=f"epoch {e}/{o.epochs}", leave=False, dynamic_ncols=True)
             it = bar
         for _ in it:
+            follow()  # within the epoch too, at most every second
             terms = trainer.step(rng)
             for k, v in terms.items():
                 sums[k] = sums.get(k, 0.0) + v

@@ -44,7 +44,7 @@ import numpy as np
 import torch
 
 from jwarp.core.arrays import device_name
-from jwarp.core.threads import refresh_torch_threads, torch_threads
+from jwarp.core.threads import ThreadFollower, torch_threads
 from jwarp.core.types import RobotLike
 from jwarp.learn.plan_net import (
     PlanNet,
@@ -577,8 +577,9 @@ def _train_plan(options: TrainPlanOptions, data: PlanSamples, val: PlanSamples |
         print(f"epoch 0: val_mse {history[0]['val_mse']:.5g} ({M} training rows from "
               f"{len(data)} samples)")
     weights = None
+    follow = ThreadFollower()  # a job started beside the training: fewer threads
     for e in range(1, options.epochs + 1):
-        refresh_torch_threads()  # a job started beside the training: fewer threads
+        follow(force=True)
         t0 = time.perf_counter()
         n_hard = 0
         if options.boosting and e > 1:
@@ -591,6 +592,7 @@ def _train_plan(options: TrainPlanOptions, data: PlanSamples, val: PlanSamples |
         net.train()
         total = 0.0
         for _ in range(options.steps_per_epoch):
+            follow()  # within the epoch too, at most every second
             idx = rng.choice(M, size=min(options.batch_size, M), replace=options.batch_size > M,
                              p=weights) if weights is not None else \
                 rng.integers(0, M, size=options.batch_size)

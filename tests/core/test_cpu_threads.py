@@ -115,6 +115,7 @@ def test_runnable_now_counts_a_job_the_average_has_not_seen(monkeypatch, tmp_pat
     monkeypatch.setattr(T.os, "getloadavg", lambda: (0.2, 0.1, 0.1))
     f = tmp_path / "loadavg"
     monkeypatch.setattr(T, "LOADAVG", str(f))
+    monkeypatch.setattr(T, "own_runnable", lambda: 1)  # the reader alone
     f.write_text("0.20 0.10 0.10 4/300 12345\n")  # this reader and 3 threads of a new job
     assert T.runnable_others() == 3
     assert T.cpu_threads() == 5
@@ -139,3 +140,91 @@ def test_refresh_follows_the_load_inside_a_training(monkeypatch):
         monkeypatch.setenv(T.THREADS_ENV, "1")  # the machine got busy
         assert T.refresh_torch_threads() == 1 == torch.get_num_threads()
     assert torch.get_num_threads() == before
+
+
+def test_own_threads_are_no_load(monkeypatch, tmp_path):
+    """This process's runnable threads (a torch pool spinning at a barrier) are not other
+    processes' load, now or in the load average (the pool's size passed as ``own``)."""
+    monkeypatch.delenv(T.THREADS_ENV, raising=False)
+    assert T.own_runnable() >= 1  # the caller runs
+    monkeypatch.setattr(T, "available_cpus", lambda: 8)
+    f = tmp_path / "loadavg"
+    monkeypatch.setattr(T, "LOADAVG", str(f))
+    f.write_text("3.00 3.00 3.00 4/300 12345\n")
+    monkeypatch.setattr(T, "own_runnable", lambda: 3)  # the reader and 2 pool threads
+    assert T.runnable_others() == 1
+    monkeypatch.setattr(T, "own_runnable", lambda: 4)
+    assert T.runnable_others() == 0
+    # a training at 3 threads made the load of 3: no other load
+    assert T.cpu_threads(load=3.0, own=3) == 8
+    assert T.cpu_threads(load=3.0) == 6  # counted as one thread: 2 CPUs taken
+    monkeypatch.setattr(T.os, "getloadavg", lambda: (3.0, 3.0, 3.0))
+    assert T.cpu_threads(own=3) == 8
+
+
+def test_torch_pool_leaves_a_cpu_spare(monkeypatch):
+    """Unset JWARP_THREADS: torch's training pool is cpu_threads() but at most the CPUs
+    less one (an OpenMP pool on every CPU stalls as soon as another thread wants one);
+    at least 1; JWARP_THREADS wins, also on every CPU."""
+    monkeypatch.delenv(T.THREADS_ENV, raising=False)
+    for cpus, load, want in [(2, 0.0, 1), (2, 1.0, 1), (8, 0.0, 7), (8, 1.0, 7), (8, 3.0, 6),
+                             (8, 30.0, 1), (1, 0.0, 1)]:
+        monkeypatch.setattr(T, "available_cpus", lambda c=cpus: c)
+        assert T.torch_thread_count(load=load) == want, (cpus, load)
+    monkeypatch.setattr(T, "available_cpus", lambda: 2)
+    monkeypatch.setenv(T.THREADS_ENV, "2")
+    assert T.torch_thread_count(load=30.0) == 2
+    monkeypatch.setenv(T.THREADS_ENV, "all")
+    with pytest.raises(ValueError, match=f"^{T.THREADS_ENV}: expected a positive integer"):
+        T.torch_thread_count()
+
+
+def test_simulated_load_sets_the_training_pool(monkeypatch):
+    """A monkeypatched load reading (no JWARP_THREADS): the pool train_ik's epochs run
+    at: one thread on a busy 2-CPU machine, 7 on a quiet 8-CPU one, 6 beside a job of
+    2 runnable threads that the 1-minute average has not seen yet."""
+    torch = pytest.importorskip("torch")
+    import importlib
+
+    TI = importlib.import_module("jwarp.learn.train_ik")
+    monkeypatch.delenv(T.THREADS_ENV, raising=False)
+    seen = []
+    monkeypatch.setattr(TI, "_epochs", lambda *a: seen.append(torch.get_num_threads()) or
+                        ("net", []))
+    before = torch.get_num_threads()
+    for cpus, avg, now, want in [(2, 3.0, 0, 1), (8, 0.0, 0, 7), (8, 0.1, 2, 6),
+                                 (2, 0.0, 1, 1)]:
+        monkeypatch.setattr(T, "available_cpus", lambda c=cpus: c)
+        monkeypatch.setattr(T.os, "getloadavg", lambda a=avg: (a, a, a))
+        monkeypatch.setattr(T, "runnable_others", lambda samples=3, n=now: n)
+        TI._run(object(), False, None)
+        assert seen[-1] == want, (cpus, avg, now)
+    assert torch.get_num_threads() == before
+
+
+def test_follower_refreshes_at_most_every_interval(monkeypatch):
+    """ThreadFollower (every training step): refreshes on the first call, when forced
+    (an epoch's start) and once ``interval`` seconds passed, not in between; inside a
+    training the pool follows a load that came mid-epoch."""
+    import time
+
+    torch = pytest.importorskip("torch")
+    clock = [100.0]
+    monkeypatch.setattr(time, "monotonic", lambda: clock[0])
+    calls = []
+    real = T.refresh_torch_threads
+    monkeypatch.setattr(T, "refresh_torch_threads", lambda: calls.append(clock[0]) or real())
+    monkeypatch.setenv(T.THREADS_ENV, "2")
+    before = torch.get_num_threads()
+    with T.torch_threads():
+        follow = T.ThreadFollower(1.0)
+        assert follow() == 2 and len(calls) == 1
+        monkeypatch.setenv(T.THREADS_ENV, "1")  # a job started mid-epoch
+        clock[0] += 0.5
+        assert follow() == 2 and torch.get_num_threads() == 2 and len(calls) == 1
+        clock[0] += 0.6
+        assert follow() == 1 == torch.get_num_threads() and len(calls) == 2
+        assert follow(force=True) == 1 and len(calls) == 3
+    assert torch.get_num_threads() == before
+    with pytest.raises(ValueError, match="^interval"):
+        T.ThreadFollower(-1.0)

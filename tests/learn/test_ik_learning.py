@@ -312,6 +312,31 @@ def test_scene_task_targets_come_from_the_shelf_distribution():
         shelf_grasp_poses(-1)
 
 
+def test_training_follows_the_load_every_step(planar_data, monkeypatch):
+    """Issue 39 item 6: train_ik asks its ThreadFollower at every epoch's start (forced)
+    and before every step (which refreshes at most every second), so a job started
+    mid-epoch takes the pool down within a second, not at the next epoch."""
+    import importlib
+
+    TI = importlib.import_module("jwarp.learn.train_ik")
+    calls = []
+
+    class Follower:
+        def __init__(self, interval=1.0):
+            pass
+
+        def __call__(self, force=False):
+            calls.append(force)
+            return 1
+
+    monkeypatch.setattr(TI, "ThreadFollower", Follower)
+    o = TrainIKOptions(robot="planar5", world="random", n_worlds=2, n_targets=256,
+                       n_val_worlds=1, n_val=64, hidden=32, n_blocks=1, batch_size=64,
+                       worlds_per_batch=2, epochs=2, steps_per_epoch=3, seed=3)
+    train_ik(o, progress=False, data=planar_data)
+    assert calls == [True, False, False, False] * 2
+
+
 def test_training_asks_for_its_threads_every_epoch(planar_data, monkeypatch):
     """Issue 39 item 6: a job started beside a long training takes its threads down at the
     next epoch (jwarp.core.threads.refresh_torch_threads), and the caller's torch pool
