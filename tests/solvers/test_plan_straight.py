@@ -5,7 +5,6 @@ optimiser's start 0 would be; every other problem is planned as before."""
 
 import os
 import sys
-import warnings
 
 import numpy as np
 import pytest
@@ -209,35 +208,15 @@ def test_panda_grasp_pose_line_certified_by_the_meshes(tmp_path_factory):
     meshes) finds every configuration of it free."""
     pytest.importorskip("pinocchio")
     pytest.importorskip("coal")
+    from panda_graze import coarse_panda, grasp_q, graze_box
     from verifier import PathVerifier, checked_link_pairs
 
-    from jwarp.importers.robot import example_robot_urdf
-    from jwarp.kinematics import fk
     from jwarp.world.collision import is_collision_free
-    from jwarp.world.primitives import Shape, pose_matrix
     from jwarp.world.scene_file import Scene, exact_world
-    from jwarp.world.spherize import SpherizeOptions, spherized_robot
 
-    try:
-        path = example_robot_urdf("panda")
-    except ValueError as e:
-        pytest.skip(str(e))
-    mp = pytest.MonkeyPatch()
-    mp.setenv("JWARP_CACHE", str(tmp_path_factory.mktemp("cache")))
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            model, _ = spherized_robot(path, SpherizeOptions(tolerance=0.03, pair_samples=300))
-    finally:
-        mp.undo()
-    q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8, 0.035, 0.035])[:model.n_dof]
-    q0 = np.clip(q0, model.joint_limits[:, 0], model.joint_limits[:, 1])
-    X = np.asarray(fk(model, q0[None], dtype=np.float64))[0]
-    pts = np.concatenate([p.vertices @ X[p.frame, :3, :3].T + X[p.frame, :3, 3]
-                          for p in model.collision_pieces.pieces])
-    hand = X[model.frame_index("panda_hand"), :3, 3]
-    box = Shape("box", np.array([0.1, 0.1, 0.1]),
-                pose_matrix([pts[:, 0].max() + 0.003 + 0.05, hand[1], hand[2]]), "graze")
+    path, model = coarse_panda(tmp_path_factory)
+    q0 = grasp_q(model)
+    box = graze_box(model, q0, 0.003)
     scene = Scene(shapes=[box], source="graze")
     world = exact_world(scene)
     assert not is_collision_free(model, q0[None], world, meshes=False, device="cpu")[0]

@@ -3,7 +3,6 @@ Panda's URDF meshes placed by pinocchio, distances by coal (tests/verifier.py)."
 
 import os
 import sys
-import warnings
 
 import numpy as np
 import pytest
@@ -13,34 +12,21 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(__file__)))
 pytest.importorskip("pinocchio")
 pytest.importorskip("coal")
 
+from panda_graze import coarse_panda, grasp_q, graze_box  # noqa: E402
 from verifier import PathVerifier, checked_link_pairs  # noqa: E402
 
-from jwarp.importers.robot import example_robot_urdf  # noqa: E402
 from jwarp.world.collision import is_collision_free  # noqa: E402
 from jwarp.world.feasibility import random_configurations  # noqa: E402
 from jwarp.world.mesh_check import MeshCheck, mesh_check, world_pieces  # noqa: E402
 from jwarp.world.primitives import Shape, pose_matrix, rpy_matrix  # noqa: E402
 from jwarp.world.scene_file import Scene, exact_world  # noqa: E402
-from jwarp.world.spherize import SpherizeOptions, spherized_robot  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def panda(tmp_path_factory):
     """The Panda with a coarse contained fit (79 spheres reaching up to 7 cm past the
     meshes: many configurations the spheres refuse are free for the meshes)."""
-    try:
-        path = example_robot_urdf("panda")
-    except ValueError as e:
-        pytest.skip(str(e))
-    mp = pytest.MonkeyPatch()
-    mp.setenv("JWARP_CACHE", str(tmp_path_factory.mktemp("cache")))
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            model, _ = spherized_robot(path, SpherizeOptions(tolerance=0.03, pair_samples=300))
-    finally:
-        mp.undo()
-    return path, model
+    return coarse_panda(tmp_path_factory)
 
 
 def _scene(rng):
@@ -127,21 +113,6 @@ def test_certified_paths_are_free_for_the_meshes(panda):
     assert ok.sum() >= 3
 
 
-def _graze_box(model, q, gap):
-    """A 10 cm box ``gap`` [m] beyond the robot's pieces along +x of the world at ``q``,
-    level with the hand."""
-    from jwarp.kinematics import fk
-
-    X = np.asarray(fk(model, q[None], dtype=np.float64))[0]
-    cp = model.collision_pieces
-    pts = np.concatenate([p.vertices @ X[p.frame, :3, :3].T + X[p.frame, :3, 3]
-                          for p in cp.pieces])
-    x = pts[:, 0].max() + gap + 0.05
-    hand = model.frame_index("panda_hand")
-    c = X[hand, :3, 3]
-    return Shape("box", np.array([0.1, 0.1, 0.1]), pose_matrix([x, c[1], c[2]]), "graze")
-
-
 def test_a_pose_millimetres_from_an_object_is_not_refused_and_plans(panda):
     """A hand 3 mm from a box: the contained spheres touch it, the meshes do not. The pose
     is accepted (is_collision_free), a plan from it is feasible and the verifier finds
@@ -150,9 +121,8 @@ def test_a_pose_millimetres_from_an_object_is_not_refused_and_plans(panda):
     from jwarp.solvers.planning import PlanOptions
 
     path, model = panda
-    q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8, 0.035, 0.035])[:model.n_dof]
-    q0 = np.clip(q0, model.joint_limits[:, 0], model.joint_limits[:, 1])
-    scene = Scene(shapes=[_graze_box(model, q0, 0.003)], source="graze")
+    q0 = grasp_q(model)
+    scene = Scene(shapes=[graze_box(model, q0, 0.003)], source="graze")
     world = exact_world(scene)
     assert not is_collision_free(model, q0[None], world, meshes=False, device="cpu")[0]
     assert is_collision_free(model, q0[None], world, device="cpu")[0]
@@ -174,9 +144,8 @@ def test_ik_accepts_a_grasp_the_meshes_clear(panda):
     from jwarp.solvers.ik import IKOptions, IKSolver
 
     path, model = panda
-    q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8, 0.035, 0.035])[:model.n_dof]
-    q0 = np.clip(q0, model.joint_limits[:, 0], model.joint_limits[:, 1])
-    scene = Scene(shapes=[_graze_box(model, q0, 0.003)], source="graze")
+    q0 = grasp_q(model)
+    scene = Scene(shapes=[graze_box(model, q0, 0.003)], source="graze")
     world = exact_world(scene)
     hand = model.frame_index("panda_hand")
     target = np.asarray(fk(model, q0[None], dtype=np.float64))[0, hand]
@@ -221,9 +190,8 @@ def test_motion_check_meshes_per_path(panda):
     from jwarp.world.motion import MotionCheck
 
     path, model = panda
-    q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8, 0.035, 0.035])[:model.n_dof]
-    q0 = np.clip(q0, model.joint_limits[:, 0], model.joint_limits[:, 1])
-    world = exact_world(Scene(shapes=[_graze_box(model, q0, 0.003)], source="graze"))
+    q0 = grasp_q(model)
+    world = exact_world(Scene(shapes=[graze_box(model, q0, 0.003)], source="graze"))
     q1 = q0.copy()
     q1[0] -= 0.3   # away from the box (it lies along +x)
     paths = np.stack([np.stack([q0, q1])] * 2)
