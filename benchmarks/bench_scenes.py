@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Panda planning on MotionBenchMaker-style scene problems: jwarp's planner on the exact
+"""Arm planning on MotionBenchMaker-style scene problems: jwarp's planner on the exact
 world, every path it calls feasible re-checked by the independent verifier, and OMPL's
 RRT-Connect as a baseline on the same checks (a script printing figures, never a timed
 test).
@@ -10,6 +10,12 @@ test).
     python benchmarks/bench_scenes.py --quick                  # 3 per family
     python benchmarks/bench_scenes.py --device cuda            # per-problem on the GPU
     python benchmarks/bench_scenes.py --json out.json
+    python benchmarks/bench_scenes.py --problems DIR --robot ur5.json   # another arm's set
+
+The arm is the Panda (fitted from example-robot-data's URDF, or ``--robot``), or the one a
+``--problems`` set was made for (its index's ``robot``: ``scene_problems.py --arm ur5``,
+``kinova``, ``xarm7``; then ``--robot`` is its imported model, ``jwarp import-urdf URDF
+--srdf SRDF``).
 
 1. Problems: ``benchmarks/scene_problems.py`` (``--per-family N``, ``--seed S``,
    ``--families``) written to ``--out`` (default: a temporary folder), or read with
@@ -36,8 +42,8 @@ test).
    Self-collision: the URDF meshes of every link pair jwarp checks (its frame pairs with
    spheres, mapped to their links) must not intersect anywhere on the path (coal; counted
    as a collision; ``--no-verify-self`` skips it).
-4. Baseline: OMPL (``pip install ompl``, 2.0.1, or ``pip install -e ".[benchmark]"``) RRT-Connect in the 7 arm joints (the
-   fingers fixed at the start's value), without path simplification, its state validity
+4. Baseline: OMPL (``pip install ompl``, 2.0.1, or ``pip install -e ".[benchmark]"``)
+   RRT-Connect in the arm joints (the Panda's 7; its fingers fixed at the start's value), without path simplification, its state validity
    ``jwarp.world.collision.is_collision_free`` and its motion validator jwarp's exact
    continuous check (``MotionCheck.check`` of the 2-waypoint path), both at the margin
    (``endpoint_margin`` at the start and goal states and on motions from or to them),
@@ -95,11 +101,22 @@ from jwarp.core.arrays import init_warp  # noqa: E402
 
 
 # ------------------------------------------------------------------ problems
+def read_index(args: argparse.Namespace) -> dict | None:
+    """The index of ``--problems`` (None: problems are generated)."""
+    if not args.problems:
+        return None
+    file = Path(args.problems) / "index.json"
+    if not file.is_file():
+        raise SystemExit(f"--problems: no index.json in {args.problems}")
+    return json.loads(file.read_text())
+
+
 def load_problems(args: argparse.Namespace) -> tuple[Path, dict]:
     """(folder, index) of the problem set: read (``--problems``) or generated."""
     if args.problems:
         folder = Path(args.problems)
-        index = json.loads((folder / "index.json").read_text())
+        index = read_index(args)
+        assert index is not None
         if args.families:
             fams = args.families.split(",")
             index["problems"] = [p for p in index["problems"] if p["family"] in fams]
@@ -137,6 +154,8 @@ class Problem:
         return self._verifier
 
 
+#: the arm joints OMPL plans in (``scene_problems.ArmSpec.joints``; set in main)
+ARM_JOINTS: list[str] = list(SP.ARM)
 #: URDF link pairs the verifier checks mesh against mesh (``self_link_pairs``; set in main)
 SELF_PAIRS: list[tuple[str, str]] = []
 #: what jwarp promises for the robot (set in main): "meshes" where it records its collision
@@ -265,7 +284,7 @@ def verify_saved(args: argparse.Namespace, robot: Any, urdf: str | None, spheres
     ``--save-paths`` (a GPU machine without pinocchio/coal). Prints per folder the paths
     checked and the collisions; returns the number of collisions."""
     if urdf is None:
-        raise SystemExit("--verify-saved: needs example-robot-data (the Panda URDF)")
+        raise SystemExit("--verify-saved: needs example-robot-data (the arm's URDF)")
     by_name = {p.name: p for p in probs}
     total = 0
     for d in sorted(Path(args.verify_saved).iterdir()):
@@ -353,7 +372,7 @@ def ompl_plan(mods: tuple, robot: Any, prob: Problem, margin: float,
     ob, og, _ = mods
     em = min(margin, args.endpoint_margin)
     names = robot.joint_names
-    arm = [i for i, n in enumerate(names) if n in SP.ARM]
+    arm = [i for i, n in enumerate(names) if n in ARM_JOINTS]
     lim = np.asarray(robot.joint_limits, np.float64)
     q0, q1 = prob.start, prob.goal
     full = q0.copy()
@@ -544,7 +563,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-verify-self", action="store_true",
                     help="the verifier skips the self pairs' URDF meshes")
     ap.add_argument("--robot", default=None, metavar="JSON",
-                    help="the fitted Panda as a robot file (default: fitted from the URDF)")
+                    help="the arm's robot file (default, Panda only: fitted from the URDF)")
     ap.add_argument("--save-paths", default=None, metavar="DIR",
                     help="save every feasible path (DIR/<device>_m<margin>/<problem>.npy)")
     ap.add_argument("--verify-saved", default=None, metavar="DIR",
@@ -570,7 +589,18 @@ def main(argv: list[str] | None = None) -> int:
     print(f"machine: {timing.machine('cpu')}; warp {wp.config.version}; "
           f"BLAS threads {os.environ.get('OPENBLAS_NUM_THREADS')}; load average "
           f"{os.getloadavg()[0]:.2f}; jwarp at git {git_head()}")
-    robot, urdf = SP.load_robot(args.robot)
+    given = read_index(args)
+    arm = given.get("robot", "panda") if given is not None else "panda"
+    try:
+        spec = SP.arm_spec(arm)
+        robot, urdf = SP.load_robot(args.robot, arm)
+    except ValueError as e:
+        raise SystemExit(f"--robot: {e}") from None
+    missing = [n for n in spec.joints if n not in robot.joint_names]
+    if missing:
+        raise SystemExit(f"--robot: {args.robot} is no {arm} (the problem set's robot): "
+                         f"it lacks the joints {missing}")
+    ARM_JOINTS[:] = spec.joints
     if (urdf is None or PathVerifier is None) and not (args.no_verify and args.no_ompl):
         raise SystemExit("--robot without example-robot-data: add --no-verify --no-ompl "
                          "(and verify elsewhere with --save-paths / --verify-saved)")
@@ -598,7 +628,7 @@ def main(argv: list[str] | None = None) -> int:
         except Exception:  # noqa: BLE001 - quieter logs only
             pass
 
-    print(f"problems: {len(probs)} ({', '.join(families)}) from {folder}; robot panda, "
+    print(f"problems: {len(probs)} ({', '.join(families)}) from {folder}; robot {arm}, "
           f"{len(robot.spheres)} spheres; world: exact primitives (no grid)")
     print(f"jwarp PlanOptions: margins {margins} m, endpoint_margin {args.endpoint_margin:g} m, "
           f"time_limit {args.time_limit:g} s, stop_when_solved={not args.no_stop_when_solved}, "
@@ -612,7 +642,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"OMPL baseline skipped: cannot import ompl ({mods}); pip install ompl")
     print(flush=True)
 
-    result: dict = {"machine": timing.machine("cpu"), "warp": wp.config.version,
+    result: dict = {"machine": timing.machine("cpu"), "warp": wp.config.version, "robot": arm,
                     "git": git_head(),
                     "problems_dir": str(folder), "n_problems": len(probs),
                     "families": families, "margins": margins,

@@ -1,10 +1,20 @@
 #!/usr/bin/env python
-"""Panda planning-problem sets in the MotionBenchMaker style: MoveIt planning-scene YAML
-files, one per problem, each with randomised object poses, a collision-free start and a
-collision-free goal found by jwarp's collision-aware IK, and an index.
+"""Planning-problem sets in the MotionBenchMaker style (the Panda, or another arm of
+:data:`ARMS`): MoveIt planning-scene YAML files, one per problem, each with randomised
+object poses, a collision-free start and a collision-free goal found by jwarp's
+collision-aware IK, and an index.
 
     python benchmarks/scene_problems.py --out DIR --per-family N --seed S
         [--families table_pick,box,...] [--margin 0.0] [--robot panda.json]
+    python benchmarks/scene_problems.py --arm ur5 --robot ur5.json --out DIR ...
+
+Other arms (``--arm ur5``, ``kinova``, ``xarm7``; :class:`ArmSpec`): the same families and
+targets; ``--robot`` is the arm's model as ``jwarp import-urdf URDF --srdf SRDF [--home
+STATE]`` writes it (the default import); an arm without a gripper (UR5 ``tool0``, xArm7
+``link_eef``, both flanges) holds its frame 10 cm behind the pre-grasp point along the
+approach, as if a 10 cm gripper were mounted; the Kinova's ``j2s6s200_end_effector``
+(its gripper's, x the approach) is at it. Everything said of the fingers below is the
+Panda's.
 
 Families (robot base at the world origin, x forward; every structure is placed at a
 random distance and bearing in front of the robot, turned to face it):
@@ -53,6 +63,7 @@ import math
 import os
 import sys
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -74,6 +85,85 @@ FINGER = 0.035
 READY = np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785, FINGER])
 TCP = "panda_hand_tcp"
 URDF = "panda_description/urdf/panda.urdf"
+
+
+@dataclass(frozen=True)
+class ArmSpec:
+    """What the generator needs to know of an arm (``--arm``).
+
+    Attributes:
+        name: the arm's name in the index and the YAML files (``robot_model_name``).
+        urdf: its URDF under example-robot-data's ``robots`` folder.
+        srdf: its SRDF there ("" none): passed to the fit as ``jwarp import-urdf --srdf``
+            would (its disabled pairs, its home state).
+        home: the SRDF group_state the import takes as home ("" the import's default).
+        tcp: the frame the targets are for.
+        joints: the arm joints (the goal constraints; the joints OMPL plans in).
+        approach: the TCP frame's axis that points from the wrist to the object
+            (``tcp_pose`` builds targets with z along the approach).
+        standoff: metres the TCP frame stays behind the pre-grasp point along the approach
+            (an arm without a gripper: the frame is its flange, the object no gripper's
+            length away from it).
+        ready: the seed of every IK (natural solutions near it; the fixed joints' values
+            included, e.g. the fingers), by joint name; joints it does not name take the
+            middle of their limits.
+        fixed: joints held at a value in start and goal (the Panda's fingers), and
+            ``mimic``: joints the YAML state sets equal to another (its second finger).
+    """
+
+    name: str
+    urdf: str
+    tcp: str
+    joints: tuple[str, ...]
+    ready: dict
+    srdf: str = ""
+    home: str = ""
+    approach: str = "z"
+    standoff: float = 0.0
+    fixed: dict = field(default_factory=dict)
+    mimic: dict = field(default_factory=dict)
+
+    def frame_offset(self) -> np.ndarray:
+        """4x4: the TCP frame in the convention of :func:`tcp_pose` (z the approach, at the
+        pre-grasp point) -> the arm's own ``tcp`` frame (``approach`` axis, ``standoff``)."""
+        T = np.eye(4)
+        T[2, 3] = -self.standoff
+        if self.approach == "x":    # the frame's x is tcp_pose's z, its z tcp_pose's -x
+            T[:3, :3] = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
+        elif self.approach != "z":
+            raise ValueError(f"approach: expected 'x' or 'z', got {self.approach!r}")
+        return T
+
+
+ARMS: dict[str, ArmSpec] = {
+    "panda": ArmSpec("panda", URDF, TCP, tuple(ARM),
+                     dict(zip(ARM + ["panda_finger_joint1"], READY.tolist())),
+                     fixed={"panda_finger_joint1": FINGER},
+                     mimic={"panda_finger_joint2": "panda_finger_joint1"}),
+    # UR5 (no gripper): the flange tool0 10 cm behind the pre-grasp point
+    "ur5": ArmSpec("ur5", "ur_description/urdf/ur5_robot.urdf", "tool0",
+                   ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
+                    "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"),
+                   {"shoulder_pan_joint": 0.0, "shoulder_lift_joint": -1.571,
+                    "elbow_joint": 1.571, "wrist_1_joint": -1.571, "wrist_2_joint": -1.571,
+                    "wrist_3_joint": 0.0},
+                   srdf="ur_description/srdf/ur5.srdf", standoff=0.10),
+    # Kinova Jaco2 j2s6s200 (its gripper's end-effector frame: x is the approach)
+    "kinova": ArmSpec("kinova", "kinova_description/robots/kinova.urdf",
+                      "j2s6s200_end_effector",
+                      tuple(f"j2s6s200_joint_{i}" for i in range(1, 7)),
+                      {"j2s6s200_joint_1": -1.55, "j2s6s200_joint_2": 3.39,
+                       "j2s6s200_joint_3": 2.12, "j2s6s200_joint_4": -3.14,
+                       "j2s6s200_joint_5": 1.27, "j2s6s200_joint_6": 0.69},
+                      srdf="kinova_description/srdf/kinova.srdf", home="arm_up",
+                      approach="x"),
+    # xArm7 (no gripper): the flange link_eef 10 cm behind the pre-grasp point
+    "xarm7": ArmSpec("xarm7", "xarm_description/urdf/xarm7.urdf", "link_eef",
+                     tuple(f"joint{i}" for i in range(1, 8)),
+                     {"joint1": 0.0, "joint2": 0.0, "joint3": 0.0, "joint4": 1.0,
+                      "joint5": 0.0, "joint6": 1.0, "joint7": 0.0},
+                     srdf="xarm_description/srdf/xarm7.srdf", home="home", standoff=0.10),
+}
 
 
 # ------------------------------------------------------------------ geometry helpers
@@ -366,15 +456,26 @@ class Generator:
     """Makes problems for one robot model (spheres + self pairs) and URDF."""
 
     def __init__(self, robot: Any, urdf: str, margin: float = 0.0, n_seeds: int = 8,
-                 voxel: float | None = None, clearance: float = 0.0):
+                 voxel: float | None = None, clearance: float = 0.0, arm: str = "panda"):
         self.robot, self.urdf, self.margin = robot, urdf, margin
         self.clearance = max(clearance, margin)
         self.n_seeds, self.voxel = n_seeds, voxel
         from verifier import robot_spheres
 
+        self.spec = arm_spec(arm)
         self.spheres = robot_spheres(robot)
         self.names = robot.joint_names
-        self.finger = self.names.index("panda_finger_joint1")
+        missing = [n for n in (*self.spec.joints, *self.spec.fixed, *self.spec.ready)
+                   if n not in self.names]
+        if missing:
+            raise ValueError(f"arm: {arm!r} names joints the robot lacks: {missing}")
+        lim = np.asarray(robot.joint_limits, float)
+        self.ready = np.array([self.spec.ready.get(n, 0.5 * (lo + hi))
+                               for n, (lo, hi) in zip(self.names, lim)])
+        self.arm = np.array([self.names.index(n) for n in self.spec.joints])
+        self.fixed = [(self.names.index(n), v) for n, v in self.spec.fixed.items()]
+        off = self.spec.frame_offset()
+        self.offset = None if np.array_equal(off, np.eye(4)) else off
         self.stats = {"scenes": 0, "ik_feasible": 0, "jwarp_rejected": 0, "verifier_rejected": 0,
                       "ik_s": 0.0, "sdf_s": 0.0, "verify_s": 0.0}
 
@@ -384,9 +485,11 @@ class Generator:
 
         cand = np.nonzero(ok)[0]
         # the candidate nearest the ready pose first (natural problems)
-        for i in cand[np.argsort(np.abs(q[cand, :self.finger] - READY[:self.finger]).sum(1))]:
+        near = np.abs(q[cand][:, self.arm] - self.ready[self.arm]).sum(1)
+        for i in cand[np.argsort(near)]:
             c = q[i].copy()
-            c[self.finger] = FINGER
+            for j, v in self.fixed:
+                c[j] = v
             if not collision_free(self.robot, world, c[None], self.margin, device="cpu")[0]:
                 self.stats["jwarp_rejected"] += 1
                 continue
@@ -421,14 +524,16 @@ class Generator:
                 scene_world(scene, SceneOptions(voxel_size=self.voxel, pad=0.3))
             self.stats["sdf_s"] += time.perf_counter() - t
             targets = np.stack([g for _, g in goals] + starts)
+            if self.offset is not None:     # the arm's own frame behind the pre-grasp point
+                targets = targets @ self.offset
             # seeds: the ready pose first (natural solutions near it), then uniform ones
             lim = self.robot.joint_limits
             seeds = rng.uniform(lim[:, 0], lim[:, 1], (len(targets), self.n_seeds, len(lim)))
-            seeds[:, 0] = READY
+            seeds[:, 0] = self.ready
             t = time.perf_counter()
-            ik = IKSolver(self.robot, TCP, len(targets),
+            ik = IKSolver(self.robot, self.spec.tcp, len(targets),
                           IKOptions(n_starts=self.n_seeds, seed=int(rng.integers(2**31)),
-                                    margin=self.margin, q_default=READY),
+                                    margin=self.margin, q_default=self.ready),
                           world=world, device="cpu", dtype=np.float64).solve(targets, seeds)
             self.stats["ik_s"] += time.perf_counter() - t
             self.stats["ik_feasible"] += int(ik.feasible.sum())
@@ -445,7 +550,7 @@ class Generator:
                 continue
             gi = goal[2]
             return {"objects": objects, "start": start[0], "goal": goal[0],
-                    "target_object": goals[gi][0], "goal_tcp": goals[gi][1],
+                    "target_object": goals[gi][0], "goal_tcp": targets[gi],
                     "clearance": {"start_mesh": start[1].mesh.distance,
                                   "start_spheres": start[1].sphere.distance,
                                   "goal_mesh": goal[1].mesh.distance,
@@ -454,33 +559,49 @@ class Generator:
         return None
 
 
-def scene_yaml(name: str, p: dict, names: list[str]) -> dict:
+def arm_spec(arm: str) -> ArmSpec:
+    """The :class:`ArmSpec` of ``arm`` (ValueError naming the known ones)."""
+    if arm not in ARMS:
+        raise ValueError(f"arm: unknown {arm!r}; known: {', '.join(ARMS)}")
+    return ARMS[arm]
+
+
+def scene_yaml(name: str, p: dict, names: list[str], arm: str = "panda") -> dict:
+    spec = arm_spec(arm)
     start = {n: float(v) for n, v in zip(names, p["start"])}
-    start["panda_finger_joint2"] = start["panda_finger_joint1"]
+    for n, src in spec.mimic.items():
+        start[n] = start[src]
     return {
-        "name": name, "robot_model_name": "panda",
+        "name": name, "robot_model_name": spec.name,
         "robot_state": {"joint_state": {"name": list(start), "position": list(start.values())}},
         "world": {"collision_objects": p["objects"]}, "is_diff": True,
         "goal_constraints": [{"joint_constraints": [
             {"joint_name": n, "position": float(v), "tolerance_above": 1e-4,
              "tolerance_below": 1e-4, "weight": 1.0}
-            for n, v in zip(names, p["goal"]) if n in ARM]}],
+            for n, v in zip(names, p["goal"]) if n in spec.joints]}],
     }
 
 
-def load_robot(path: str | None = None) -> tuple[Any, str | None]:
-    """(the fitted Panda sphere model, the URDF path; None where ``path`` is given and
-    example-robot-data is not installed)."""
+def load_robot(path: str | None = None, arm: str = "panda") -> tuple[Any, str | None]:
+    """(the arm's sphere model: ``path`` or the Panda fitted from its URDF; the URDF path,
+    None where ``path`` is given and example-robot-data is not installed). Arms other than
+    the Panda need ``path``: the model ``jwarp import-urdf URDF --srdf SRDF`` writes."""
     import jwarp
     from jwarp.importers.robot import example_robot_urdf
     from jwarp.world.spherize import SpherizeOptions, spherized_robot
 
+    spec = arm_spec(arm)
     if path:  # the URDF only where example-robot-data is installed (a GPU machine may lack it)
         try:
-            urdf = example_robot_urdf(URDF)
+            urdf = example_robot_urdf(spec.urdf)
         except (ImportError, FileNotFoundError, ValueError):
             urdf = None
         return jwarp.robot(path), urdf
+    if arm != "panda":
+        raise ValueError(f"robot: the {arm} needs its imported model (jwarp import-urdf "
+                         f"<erd>/{spec.urdf}"
+                         + (f" --srdf <erd>/{spec.srdf}" if spec.srdf else "")
+                         + (f" --home {spec.home}" if spec.home else "") + " --out X.json)")
     urdf = example_robot_urdf(URDF)
     # the default fit (containment): at tolerance 0.02 a contained fit's spheres would
     # reach 4 cm past the thick links (the protrusion scales with the tolerance)
@@ -490,7 +611,7 @@ def load_robot(path: str | None = None) -> tuple[Any, str | None]:
 def generate(out: str | os.PathLike, per_family: int, seed: int = 0,
              families: list[str] | None = None, margin: float = 0.0,
              robot: str | None = None, log: Callable[[str], None] = print,
-             clearance: float = 0.0) -> dict:
+             clearance: float = 0.0, arm: str = "panda") -> dict:
     """Write ``per_family`` problems of each family into ``out``; returns the index."""
     import yaml
 
@@ -502,12 +623,16 @@ def generate(out: str | os.PathLike, per_family: int, seed: int = 0,
     if unknown:
         raise ValueError(f"families: unknown {unknown}; known: {', '.join(FAMILIES)}")
     t0 = time.perf_counter()
-    model, urdf = load_robot(robot)
-    gen = Generator(model, urdf, margin, clearance=clearance)
+    spec = arm_spec(arm)
+    model, urdf = load_robot(robot, arm)
+    if urdf is None:
+        raise ValueError(f"robot: example-robot-data is needed (the {arm}'s URDF, "
+                         "for the checker)")
+    gen = Generator(model, urdf, margin, clearance=clearance, arm=arm)
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
-    index = {"format": "jwarp.scene_problems", "version": 1, "robot": "panda",
-             "urdf": URDF, "tcp": TCP, "seed": seed, "per_family": per_family,
+    index = {"format": "jwarp.scene_problems", "version": 1, "robot": spec.name,
+             "urdf": spec.urdf, "tcp": spec.tcp, "standoff": spec.standoff, "seed": seed, "per_family": per_family,
              "margin": margin, "sphere_clearance": max(clearance, margin), "spheres": len(model.spheres), "problems": [], "failed": []}
     for fi, fam in enumerate(fams):
         for k in range(per_family):
@@ -520,7 +645,8 @@ def generate(out: str | os.PathLike, per_family: int, seed: int = 0,
                 continue
             name = f"{fam}_{k}"
             file = folder / f"{name}.yaml"
-            file.write_text(yaml.safe_dump(scene_yaml(name, p, gen.names), sort_keys=False))
+            file.write_text(yaml.safe_dump(scene_yaml(name, p, gen.names, arm),
+                                           sort_keys=False))
             index["problems"].append({
                 "file": file.name, "family": fam, "seed": s, "target_object": p["target_object"],
                 "goal_tcp": np.round(p["goal_tcp"], 9).tolist(),
@@ -548,13 +674,17 @@ def main(argv: list[str] | None = None) -> int:
                          "(0; e.g. 0.02 keeps them clear of a 2 cm grid's declared error, "
                          "for worlds coarser than the generator's; fewer problems succeed)")
     ap.add_argument("--robot", default=None, metavar="JSON",
-                    help="a saved Panda sphere model instead of fitting example-robot-data's URDF")
+                    help="a saved sphere model of the arm (default, Panda only: fitted "
+                         "from example-robot-data's URDF)")
+    ap.add_argument("--arm", default="panda", choices=list(ARMS),
+                    help="the arm (panda; ur5, kinova, xarm7 need --robot)")
     a = ap.parse_args(argv)
     if a.per_family < 1:
         ap.error("--per-family: expected >= 1")
     fams = a.families.split(",") if a.families else None
     try:
-        index = generate(a.out, a.per_family, a.seed, fams, a.margin, a.robot, clearance=a.clearance)
+        index = generate(a.out, a.per_family, a.seed, fams, a.margin, a.robot,
+                         clearance=a.clearance, arm=a.arm)
     except ValueError as e:
         print(f"scene_problems: error: {e}", file=sys.stderr)
         return 2

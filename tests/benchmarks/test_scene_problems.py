@@ -57,3 +57,36 @@ def test_scene_problems_generate_and_load(tmp_path):
         for q in (start, goal):
             got = v.check_path(q[None])
             assert got.ok and got.min_distance > 0
+
+
+def test_arm_specs_frame_offset_and_errors():
+    """The zoo arms' specs (``--arm``): the frame offset puts the arm's own frame
+    ``standoff`` behind the pre-grasp point with its ``approach`` axis along tcp_pose's z;
+    unknown arms and a missing model are refused naming the argument."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import scene_problems as SP
+
+    site = SP.Site(0.5, 0.3)
+    rng = np.random.default_rng(0)
+    T = SP.side_grasp(site, rng, np.array([0.2, 0.0, 0.4]), 0.03)
+    for name, spec in SP.ARMS.items():
+        F = T @ spec.frame_offset()
+        axis = F[:3, 0] if spec.approach == "x" else F[:3, 2]
+        np.testing.assert_allclose(axis, T[:3, 2], atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(F[:3, :3] @ F[:3, :3].T, np.eye(3), atol=1e-12)
+        assert abs(np.linalg.det(F[:3, :3]) - 1.0) < 1e-12
+        # the frame stands `standoff` behind the pre-grasp point, along the approach
+        np.testing.assert_allclose(F[:3, 3] + spec.standoff * axis, T[:3, 3], atol=1e-12)
+        assert set(spec.fixed) <= set(spec.ready) | set(spec.fixed)
+    assert np.array_equal(SP.ARMS["panda"].frame_offset(), np.eye(4))
+    with pytest.raises(ValueError, match="arm: unknown 'ur42'"):
+        SP.arm_spec("ur42")
+    with pytest.raises(ValueError, match="robot: the ur5 needs its imported model"):
+        SP.load_robot(None, "ur5")
+    y = SP.scene_yaml("p", {"start": np.array([0.1, 0.2]), "goal": np.array([0.3, 0.4]),
+                            "objects": []}, ["panda_joint1", "panda_finger_joint1"])
+    names = y["robot_state"]["joint_state"]["name"]
+    assert names == ["panda_joint1", "panda_finger_joint1", "panda_finger_joint2"]
+    assert y["robot_state"]["joint_state"]["position"][2] == 0.2
+    assert [c["joint_name"] for c in y["goal_constraints"][0]["joint_constraints"]] == \
+        ["panda_joint1"]
