@@ -30,7 +30,7 @@ from jwarp.kinematics.launch import (
 )
 from jwarp.kinematics.transmission import transmission_slope, transmitted
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 
 
 def _dh_rows(dh: Any, model: RobotModel, batch: Batch, t: DeviceModel,

@@ -68,7 +68,7 @@ from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.world.device_world import DeviceWorld
 from jwarp.world.sdf import World, sdf_query
 

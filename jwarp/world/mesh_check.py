@@ -487,7 +487,7 @@ def mesh_check(robot: Any, world: Any, device: Any = None, *, rho: Any = None
     world and device: a few are cached), or None where there is none: no
     ``collision_pieces``, spheres edited since the pieces were made, a world with a voxel
     grid, or an elastic model (``rho`` given)."""
-    from jwarp.model.registry import robot as get_robot
+    from jwarp.plugins.registry import robot as get_robot
 
     if rho is not None:
         return None

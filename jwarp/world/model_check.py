@@ -27,7 +27,7 @@ import numpy as np
 from jwarp.core.limits import project_numpy
 from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.kinematics.fk import fk
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.world.collision import collision_pairs
 
 __all__ = ["NO_SPHERES_HINT", "HOME_NOTE", "noted_home", "home_configuration",

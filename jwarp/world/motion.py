@@ -40,7 +40,7 @@ from jwarp.core.device import put_model
 from jwarp.core.limits import LIMIT_TOL
 from jwarp.kernels import motion as mk
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world.collision import check_world, mm_text
 from jwarp.world.device_world import DeviceWorld

@@ -28,7 +28,7 @@ from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.transmission import untransmitted, without_transmission
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world import collision
 

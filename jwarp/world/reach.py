@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from jwarp.core.types import RobotLike
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 
 __all__ = ["point_reach"]
 

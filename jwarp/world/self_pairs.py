@@ -57,7 +57,7 @@ from jwarp.model.pair_reasons import (
     skipped_pairs,
     with_pair_reasons,
 )
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.utils.memory import check_memory, format_bytes
 

@@ -33,7 +33,7 @@ from jwarp.core.arrays import real_array
 from jwarp.core.device import host_device
 from jwarp.core.limits import LIMIT_TOL
 from jwarp.core.types import RobotLike
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.ik.options import ORIENTATIONS, orientation_args
 
