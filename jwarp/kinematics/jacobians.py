@@ -97,7 +97,7 @@ def jacobian(robot: RobotLike, q: ArrayLike, frame: int | str, *,
         return _scaled(link_jacobian(model, transmitted(model, q), frame, point=point, dh=dh,
                                      device=device, dtype=dtype, validate=validate, out=out),
                        transmission_slope(model, q))
-    return link_jacobian(robot, q, frame, point=point, dh=dh, device=device, dtype=dtype,
+    return link_jacobian(model, q, frame, point=point, dh=dh, device=device, dtype=dtype,
                          validate=validate, out=out)
 
 
