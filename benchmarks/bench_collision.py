@@ -39,7 +39,7 @@ if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
 
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.world.collision import DEFAULT_EPS, CollisionModel, is_collision_free  # noqa: E402
-from jwarp.model.registry import robot as get_robot  # noqa: E402
+from jwarp.plugins.registry import robot as get_robot  # noqa: E402
 import timing  # noqa: E402
 from jwarp.world import feasible_simplex_world, random_configurations  # noqa: E402
 

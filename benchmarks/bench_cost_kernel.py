@@ -42,7 +42,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
 
 from jwarp.core.arrays import init_warp  # noqa: E402
-from jwarp.model.registry import robot as get_robot  # noqa: E402
+from jwarp.plugins.registry import robot as get_robot  # noqa: E402
 from jwarp.world import random_configurations  # noqa: E402
 from jwarp.world.collision import CollisionModel, is_collision_free  # noqa: E402
 

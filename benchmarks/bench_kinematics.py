@@ -49,7 +49,7 @@ from jwarp.kinematics import (  # noqa: E402
     ElasticLaunch, KinematicsData, elastic_args, fk, fk_elastic, forward_kinematics,
     frame_jacobian, jacobian, launch_fk)
 from jwarp.model import RobotModel  # noqa: E402
-from jwarp.model.registry import robot as get_robot  # noqa: E402
+from jwarp.plugins.registry import robot as get_robot  # noqa: E402
 import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
 from timing import Timing, measure  # noqa: E402,F401
 

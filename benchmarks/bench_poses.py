@@ -41,7 +41,7 @@ import warp as wp
 wp.config.quiet = True
 
 from jwarp.core.arrays import init_warp
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.calibration.simulate.campaign import justin_tracker_setup
 from jwarp.calibration.design.poses import CODE_NAMES, PoseOptions, PoseSampler
 from jwarp.calibration.design.tour import order_poses

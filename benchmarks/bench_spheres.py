@@ -43,7 +43,7 @@ import warp as wp
 wp.config.quiet = True
 
 from jwarp.core.arrays import init_warp
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.world.self_pairs import never_colliding_pairs
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # also when imported by path

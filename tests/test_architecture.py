@@ -4,18 +4,21 @@ modules, and no ``_private`` name is used outside its package.
 Layers (low to high); a module may import its own layer or any lower one:
 
     0 host:      jwarp.utils (atomic files, memory estimates),
-                 jwarp.model (RobotModel, the plugin registry, the measurement interface),
-                 jwarp.importers (URDF in/out, sphere fitting: model and utils only,
-                 plus third-party libs)
-    1 kernels:   jwarp.kernels (Warp only)
-    2 core:      jwarp.core (arrays, device model, rows, limits)
-    3 kinematics jwarp.kinematics
-    4 world:     jwarp.world
-    5 plugins:   jwarp.plugins (robots and measurements; loaded by the registry by name)
-    6 solvers:   jwarp.solvers
-    7 learn:     jwarp.learn
-    8 viz:       jwarp.viz
-    9 cli:       jwarp.cli
+                 jwarp.model (RobotModel, its parts and schema, the measurement interface;
+                 it imports no importer: a robot file is read above it)
+    1 importers: jwarp.importers (URDF/MJCF in, URDF out, sphere fitting: model and utils
+                 only, plus third-party libs), and the plugin registry
+                 jwarp.plugins.registry (robot names and files -> RobotModel; it loads the
+                 plugins by name, and reads robot files through the importers)
+    2 kernels:   jwarp.kernels (Warp only)
+    3 core:      jwarp.core (arrays, device model, rows, limits)
+    4 kinematics jwarp.kinematics
+    5 world:     jwarp.world
+    6 plugins:   jwarp.plugins (robots and measurements; loaded by the registry by name)
+    7 solvers:   jwarp.solvers, jwarp.calibration
+    8 learn:     jwarp.learn
+    9 viz:       jwarp.viz
+   10 cli:       jwarp.cli
 
 The facade ``jwarp/__init__.py`` (and ``jwarp/__main__.py``) may import anything.
 Imports inside functions count too (a lazy import is still a dependency), and so do
@@ -35,16 +38,16 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1] / "jwarp"
 
 LAYERS = {
-    "jwarp.utils": 0, "jwarp.model": 0, "jwarp.importers": 0,
-    "jwarp.kernels": 1, "jwarp.core": 2, "jwarp.kinematics": 3, "jwarp.world": 4,
-    "jwarp.plugins": 5, "jwarp.solvers": 6, "jwarp.calibration": 6, "jwarp.learn": 7,
-    "jwarp.viz": 8, "jwarp.cli": 9,
+    "jwarp.utils": 0, "jwarp.model": 0, "jwarp.importers": 1, "jwarp.plugins.registry": 1,
+    "jwarp.kernels": 2, "jwarp.core": 3, "jwarp.kinematics": 4, "jwarp.world": 5,
+    "jwarp.plugins": 6, "jwarp.solvers": 7, "jwarp.calibration": 7, "jwarp.learn": 8,
+    "jwarp.viz": 9, "jwarp.cli": 10,
 }
 #: module paths removed in 0.2.0 (issue 40 item 8; CHANGELOG.md) -> where their code lives
 #: (they forwarded there with a DeprecationWarning for one release after issue 28)
 REMOVED = {
     "jwarp.atomic": "jwarp.utils.atomic", "jwarp.memory": "jwarp.utils.memory",
-    "jwarp.registry": "jwarp.model.registry", "jwarp.measurement": "jwarp.model.measurement",
+    "jwarp.registry": "jwarp.plugins.registry", "jwarp.measurement": "jwarp.model.measurement",
     "jwarp.solvers.planner": "jwarp.solvers.planning",
     "jwarp.solvers.rrt": "jwarp.solvers.planning.rrt",
     "jwarp.solvers.ik_explain": "jwarp.solvers.ik.explain",
@@ -176,6 +179,21 @@ def test_imports_point_down():
             if theirs > mine:
                 bad.append(f"{m}:{line} imports {target} (layer {owner}={theirs} > {mine})")
     assert not bad, "upward imports:\n" + "\n".join(bad)
+
+
+def test_the_model_reads_no_robot_file():
+    """jwarp.model is the bottom: no module of it imports jwarp.importers or the plugin
+    registry (jwarp.plugins.registry reads robot files through the importers; a robot
+    name or path is resolved there, and the model below only receives a RobotModel). The
+    layers say so too (importers and registry are layer 1); this names the arrow."""
+    bad = [f"{m}:{line} imports {target}" for m in MODULES
+           if m == "jwarp.model" or m.startswith("jwarp.model.")
+           for line, target, _names, _top in imports(m)
+           if target.startswith(("jwarp.importers", "jwarp.plugins"))]
+    assert not bad, "jwarp.model imports an importer or the registry:\n" + "\n".join(bad)
+    assert LAYERS["jwarp.importers"] > LAYERS["jwarp.model"]
+    assert LAYERS["jwarp.plugins.registry"] > LAYERS["jwarp.model"]
+    assert not hasattr(__import__("jwarp.model").model.RobotModel, "from_urdf")
 
 
 def test_no_import_cycles():

@@ -456,12 +456,11 @@ def _check_robot_names(ns: dict, folder: Path, out: str) -> None:
     """The Panda by name is the Panda of its URDF; ur5_urdf is UR5's file; the names list
     the ones the text names."""
     import jwarp
-    from jwarp.model import RobotModel
+    from jwarp.importers.robot import example_robot_urdf, load_urdf
 
     panda = ns["panda"]
     assert panda.n_dof == 8 and list(panda.end_effectors) == ["panda_hand_tcp"]
-    ref = RobotModel.from_urdf(__import__("jwarp.importers.robot", fromlist=["x"])
-                               .example_robot_urdf("panda_description/urdf/panda.urdf"))
+    ref = load_urdf(example_robot_urdf("panda_description/urdf/panda.urdf")).model
     assert panda.frame_names == ref.frame_names
     assert ns["ur5_urdf"].endswith("ur5_robot.urdf") and jwarp.robot(ns["ur5_urdf"]).n_dof == 6
     assert {"panda", "ur3", "ur5", "ur10", "xarm7", "z1", "baxter"} <= set(ns["names"])

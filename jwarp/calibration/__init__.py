@@ -5,7 +5,7 @@
 Typical use::
 
     from jwarp.calibration import calibrate, errors, error_stats
-    meas = jwarp.model.registry.measurement("cartesian")(robot, setup["measurement"])
+    meas = jwarp.plugins.registry.measurement("cartesian")(robot, setup["measurement"])
     res = calibrate(robot, meas, q_train, y_train,
                     free="theta,d,r,alpha,kappa_theta,kappa_alpha,tracker,markers")
     res.robot.save("calibrated.json")

@@ -95,7 +95,7 @@ def load_campaign(setup: str | os.PathLike, data: str | os.PathLike,
         read_text,
         sha256_hex,
     )
-    from jwarp.model.registry import robot as get_robot
+    from jwarp.plugins.registry import robot as get_robot
 
     setup_path, data_path = os.fspath(setup), os.fspath(data)
     s = read_setup(setup_path)

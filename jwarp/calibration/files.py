@@ -210,7 +210,7 @@ def write_setup(path: str | os.PathLike, setup: Setup) -> None:
 
 def make_measurement(robot: RobotModel, setup: Setup) -> Measurement:
     """Instantiate the setup's plugin (unknown plugin -> ValueError listing the known)."""
-    from jwarp.model.registry import measurement
+    from jwarp.plugins.registry import measurement
 
     cls = measurement(setup.plugin)
     return cls(robot, dict(setup.section, plugin=setup.plugin))

@@ -491,7 +491,7 @@ def cmd_simulate_campaign(args: argparse.Namespace) -> int:
     from jwarp.calibration.files import make_measurement, read_setup
     from jwarp.calibration.simulate.campaign import simulate_campaign
     from jwarp.cli.common import quiet_warp
-    from jwarp.model.registry import robot as get_robot
+    from jwarp.plugins.registry import robot as get_robot
     from jwarp.utils.atomic import AtomicFolder
 
     _check_int("--samples", args.samples, 1)

@@ -247,7 +247,7 @@ def load_robot(name: str):
     model (spheres fitted to the links' collision geometry and sampled self-collision
     pairs, cached: :func:`jwarp.world.spherize.spherized_robot`)."""
     from jwarp.importers.robot import package_robot_path
-    from jwarp.model.registry import robot
+    from jwarp.plugins.registry import robot
 
     path = package_robot_path(name)  # example-robot-data:NAME, robot_descriptions:NAME
     if path is not None and path.lower().endswith(".urdf"):
@@ -412,7 +412,7 @@ def dtype_of(name: str) -> Any:
 
 
 def plugin_warnings_one_line() -> None:
-    """Show :class:`~jwarp.model.registry.PluginWarning`,
+    """Show :class:`~jwarp.plugins.registry.PluginWarning`,
     :class:`~jwarp.core.kernel_cache.KernelCacheWarning` and
     :class:`~jwarp.utils.roots.OutsideFolderWarning` as one ``jwarp: warning: ...`` line on
     stderr (a broken plugin, an unusable kernel cache, a file outside its document's folder
@@ -425,7 +425,7 @@ def plugin_warnings_one_line() -> None:
 
     def showwarning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
         from jwarp.core.kernel_cache import KernelCacheWarning
-        from jwarp.model.registry import PluginWarning
+        from jwarp.plugins.registry import PluginWarning
         from jwarp.utils.roots import OutsideFolderWarning
 
         if isinstance(category, type) and issubclass(category, (

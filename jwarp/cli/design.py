@@ -59,7 +59,7 @@ DEFAULT_FREE = "theta,d,r,alpha"
 
 def _setup_and_measurement(path: str, option: str, robot_name: str | None) -> tuple[Any, Any, Any]:
     from jwarp.calibration.files import make_measurement, read_setup
-    from jwarp.model.registry import robot as get_robot
+    from jwarp.plugins.registry import robot as get_robot
 
     try:
         setup = read_setup(path)

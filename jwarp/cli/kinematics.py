@@ -51,7 +51,7 @@ def cmd_robots(args: argparse.Namespace) -> int:
     ``jwarp: warning: ...`` lines on stderr (the list itself, also ``--json``, stays a list)."""
     import warnings
 
-    from jwarp.model.registry import PluginWarning, plugin_problems, robots
+    from jwarp.plugins.registry import PluginWarning, plugin_problems, robots
 
     rows = []
     with warnings.catch_warnings():

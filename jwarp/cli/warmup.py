@@ -115,7 +115,7 @@ def kernel_modules(families: Iterable[str] = FAMILIES, dtypes: Iterable[str] = D
         path,
         visibility,
     )
-    from jwarp.model.registry import robot as get_robot
+    from jwarp.plugins.registry import robot as get_robot
 
     families = _check_names(families, FAMILIES, "families")
     dtypes = _check_names(dtypes, DTYPES, "dtypes")
@@ -179,7 +179,7 @@ def warmup(device: DeviceLike = None, robots: Iterable[str | RobotModel] | None 
 
     from jwarp.core.arrays import resolve_device
     from jwarp.core.kernel_cache import cache_dir, compile_progress, compiled_modules
-    from jwarp.model.registry import robots as robot_names
+    from jwarp.plugins.registry import robots as robot_names
 
     t0 = time.perf_counter()
     dev = resolve_device(device)

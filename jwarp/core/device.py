@@ -52,7 +52,7 @@ from jwarp.kernels.collision import funcs as collision_funcs
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.kernels.path import kernels as path_kernels
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 
 __all__ = ["DeviceModel", "SphereModel", "put_model", "struct_fields", "struct_field", "make_struct", "content_key", "scalar_type", "numpy_dtype",
            "frame_mass_model", "with_frame_masses", "with_kappa_nonlinear", "fixed_parts", "collision_tables"]

@@ -1,7 +1,6 @@
 """URDF -> :class:`~jwarp.model.RobotModel` with the links' collision geometry.
 
-:func:`load_urdf` is what ``RobotModel.from_urdf``, ``jwarp.robot("x.urdf")`` and
-``jwarp import-urdf`` use (docs/urdf.md); :func:`load_mjcf` the same for MuJoCo's MJCF
+:func:`load_urdf` is what ``jwarp.robot("x.urdf")`` and ``jwarp import-urdf`` use (docs/urdf.md); :func:`load_mjcf` the same for MuJoCo's MJCF
 (``jwarp.robot("x.xml")``, ``jwarp import-mjcf``).
 """
 

@@ -27,8 +27,8 @@ stop the import). Mapping (docs/urdf.md):
 * ``<collision><sphere>`` elements become the robot's collision spheres; every collision
   element is also returned as a :class:`CollisionGeometry`.
 
-This module does not import :mod:`jwarp.model` (the model imports it lazily for
-``RobotModel.from_urdf``); :mod:`jwarp.importers.robot` builds the model.
+This module does not import :mod:`jwarp.model` (and the model imports no importer);
+:mod:`jwarp.importers.robot` builds the model.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ from jwarp.kinematics.launch import (
     setup,
 )
 from jwarp.kinematics.transmission import transmitted
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 
 
 def fk_elastic(robot: RobotLike, q: ArrayLike, kappa: ArrayLike | None = None, *,

@@ -16,7 +16,7 @@ from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import frame_rows, launch_fk, setup, small_call
 from jwarp.kinematics.transmission import transmitted
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 
 
 def fk(robot: RobotLike, q: ArrayLike, *, dh: ArrayLike | None = None,

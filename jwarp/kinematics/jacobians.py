@@ -30,7 +30,7 @@ from jwarp.kinematics.launch import (
 )
 from jwarp.kinematics.transmission import transmission_slope, transmitted
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 
 
 def _dh_rows(dh: Any, model: RobotModel, batch: Batch, t: DeviceModel,
@@ -97,7 +97,7 @@ def jacobian(robot: RobotLike, q: ArrayLike, frame: int | str, *,
         return _scaled(link_jacobian(model, transmitted(model, q), frame, point=point, dh=dh,
                                      device=device, dtype=dtype, validate=validate, out=out),
                        transmission_slope(model, q))
-    return link_jacobian(robot, q, frame, point=point, dh=dh, device=device, dtype=dtype,
+    return link_jacobian(model, q, frame, point=point, dh=dh, device=device, dtype=dtype,
                          validate=validate, out=out)
 
 

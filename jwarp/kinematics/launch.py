@@ -45,7 +45,7 @@ from jwarp.kinematics.data import (  # noqa: F401  (POINT_ARG, jacobian_inputs: 
     point_vec,
 )
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 
 

@@ -39,7 +39,7 @@ from jwarp.core.arrays import (
     resolve_device,
 )
 from jwarp.kernels import collision as ck
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world.feasibility import random_configurations
 from jwarp.world.sdf import World

@@ -40,7 +40,7 @@ from jwarp.core.arrays import device_name
 from jwarp.core.device import content_key
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.plan_net import PlanNet, PlanNetConfig
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.atomic import AtomicFile
 
 __all__ = ["FORMAT", "PLAN_FORMAT", "VERSION", "save_checkpoint", "load_checkpoint",

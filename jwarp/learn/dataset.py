@@ -98,7 +98,7 @@ def _json(obj: Any) -> str:
 
 def _robot_identity(robot: Any) -> tuple[str, str]:
     from jwarp.core.device import content_key
-    from jwarp.model.registry import robot as get_robot
+    from jwarp.plugins.registry import robot as get_robot
 
     model = get_robot(robot) if isinstance(robot, (str, os.PathLike)) else robot
     return model.name, content_key(model)

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 
 __all__ = ["JointCodec", "frame_features", "frame_features_numpy", "feature_size"]
 

@@ -45,7 +45,7 @@ import numpy as np
 
 from jwarp.core.limits import project_numpy, sample_within_limits
 from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver, check_warm_start, warm_start_seeds
 from jwarp.solvers.overrides import renamed_argument
 from jwarp.utils.checks import check_int

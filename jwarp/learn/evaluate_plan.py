@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from jwarp.core.types import DeviceLike, RobotLike
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.planning import Planner, PlanOptions
 
 __all__ = ["evaluate_plan", "format_plan_table"]

@@ -124,7 +124,7 @@ def label_chunk(robot: RobotLike, seeds: Sequence[int], paths_per_world: int, op
                 ) -> list[WorldRecord]:
     """The records (:func:`jwarp.learn.dataset.world_record`) of the worlds ``seeds``: a
     pure function of its arguments (what a Ray task runs)."""
-    from jwarp.model.registry import robot as get_robot
+    from jwarp.plugins.registry import robot as get_robot
 
     model = get_robot(robot) if isinstance(robot, str) else robot
     labeler = default_labeler() if labeler is None else labeler

@@ -34,7 +34,7 @@ import numpy as np
 
 from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.kinematics.fk import fk
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.world.collision import is_collision_free, min_distances
 from jwarp.world.feasibility import feasible_simplex_world, random_configurations
 from jwarp.world.scenes import shelf_grasp_poses, shelf_world

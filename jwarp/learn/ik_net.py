@@ -31,7 +31,7 @@ from jwarp.learn.encoding import (
     frame_features,
     frame_features_numpy,
 )
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world.feasibility import robot_reach
 

@@ -38,7 +38,7 @@ from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.limits import sample_within_limits
 from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.planning import PathWeights, Planner, PlanOptions
 from jwarp.utils.checks import check_int
 from jwarp.world.feasibility import feasible_simplex_world

@@ -39,7 +39,7 @@ from torch import nn
 from jwarp.core.types import RobotLike
 from jwarp.learn.encoding import JointCodec
 from jwarp.learn.ik_net import DenseBlock, NetConfig, network_bps, world_key
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.world.feasibility import robot_reach
 
 __all__ = ["PlanNetConfig", "PlanNet", "AxisSymmetry", "AXIS_SYMMETRIES", "axis_symmetries",

@@ -19,7 +19,7 @@ import warp as wp
 from jwarp.core.arrays import device_name
 from jwarp.core.device import content_key
 from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKWeights
 from jwarp.solvers.planning import PathObjective, PathWeights
 

@@ -54,7 +54,7 @@ from jwarp.learn.checkpoint import check_weights, read_checkpoint, save_checkpoi
 from jwarp.learn.ik_data import DEFAULT_MIX, IKData, check_mix, make_ik_data
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.torch_costs import ik_objective, u_ik
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver
 from jwarp.utils.checks import check_int
 

@@ -53,7 +53,7 @@ from jwarp.learn.plan_net import (
     encode_paths,
     symmetric_bps,
 )
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.planning import Planner, PlanOptions
 from jwarp.utils.checks import check_int
 from jwarp.world.path_feasibility import collision_free

@@ -18,7 +18,6 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.model.registry import robot as get_robot
 from jwarp.model.robot import RobotModel, SelfCollision
 
 __all__ = ["PAIRS_NOTE", "DEFAULT_NOTE", "REASONS", "moveit_adjacent_pairs", "pair_reasons",
@@ -33,7 +32,7 @@ DEFAULT_NOTE = "self_collision_default"
 REASONS = ("SRDF", "Adjacent", "Always", "Never", "Frozen", "Default", "Model")
 
 
-def moveit_adjacent_pairs(robot: Any) -> list[tuple[int, int]]:
+def moveit_adjacent_pairs(robot: RobotModel) -> list[tuple[int, int]]:
     """Sorted frame pairs ``(a, b)``, ``a < b``, adjacent by MoveIt's setup assistant rule
     ("Adjacent"): both frames carry collision bodies (spheres or capsules) and the frame
     tree joins them by a path whose frames in between carry none (a parent and its child
@@ -41,7 +40,7 @@ def moveit_adjacent_pairs(robot: Any) -> list[tuple[int, int]]:
     hand through the flange panda_link8, or a joint's own ``_axis``/``_origin`` frames).
     Unlike :func:`jwarp.world.self_pairs.adjacent_pairs`, two links that are only rigidly attached (a link and its
     parent's fixed child) are not adjacent: whether they collide is sampled."""
-    model = get_robot(robot)
+    model = robot
     solid = np.zeros(model.n_frames, bool)
     for sph in model.spheres:
         solid[sph.frame] = True
@@ -69,11 +68,11 @@ def moveit_adjacent_pairs(robot: Any) -> list[tuple[int, int]]:
 
 
 
-def pair_reasons(robot: Any) -> dict[tuple[int, int], tuple[str, str]]:
+def pair_reasons(robot: RobotModel) -> dict[tuple[int, int], tuple[str, str]]:
     """``{(a, b): (reason, why)}`` (frame indices ``a < b``) recorded for the excluded pairs
     of ``robot`` in ``notes['self_collision_pairs']`` (:data:`PAIRS_NOTE`); pairs no longer
     excluded, or naming frames the robot lacks, are left out."""
-    model = get_robot(robot)
+    model = robot
     text = model.notes.get(PAIRS_NOTE)
     if not text:
         return {}
@@ -94,12 +93,12 @@ def pair_reasons(robot: Any) -> dict[tuple[int, int], tuple[str, str]]:
     return out
 
 
-def with_pair_reasons(robot: Any, reasons: dict[tuple[int, int], tuple[str, str]], *,
+def with_pair_reasons(robot: RobotModel, reasons: dict[tuple[int, int], tuple[str, str]], *,
                       replace: bool = False) -> RobotModel:
     """A copy of ``robot`` whose ``notes['self_collision_pairs']`` records ``reasons``
     (``{(a, b): (reason, why)}``); ``replace``: its ``exclude_pairs`` become exactly these
     pairs (groups and include pairs dropped), else they are added to them."""
-    model = get_robot(robot)
+    model = robot
     nf = model.n_frames
     keys = {}
     for (a, b), r in reasons.items():
@@ -124,14 +123,14 @@ def with_pair_reasons(robot: Any, reasons: dict[tuple[int, int], tuple[str, str]
     return model.copy(self_collision=new_sc, notes=notes)
 
 
-def skipped_pairs(robot: Any) -> list[dict[str, Any]]:
+def skipped_pairs(robot: RobotModel) -> list[dict[str, Any]]:
     """Every frame pair of ``robot`` with collision bodies on both frames that is not
     checked for self-collision, and why: ``[{"links": [a, b], "reason", "why"}]`` in frame
     order. The reason is the recorded one (:func:`pair_reasons`), else: ``Frozen`` (frames
     joined rigidly by frozen joints, :func:`jwarp.model.freeze_joints`), ``Adjacent``
     (:func:`moveit_adjacent_pairs`), ``Default`` (listed in ``notes['self_collision_default']``
     by an older import), else ``Model`` (the robot file's own ``self_collision``)."""
-    model = get_robot(robot)
+    model = robot
     recorded = pair_reasons(model)
     solid = sorted({sph.frame for sph in model.spheres} | {c.frame for c in model.capsules})
     allowed = model.allowed_collision_pairs
@@ -167,7 +166,7 @@ def skipped_pairs(robot: Any) -> list[dict[str, Any]]:
     return out
 
 
-def skipped_summary(robot: Any) -> str:
+def skipped_summary(robot: RobotModel) -> str:
     """One line: how many frame pairs with collision bodies ``robot`` leaves unchecked, per
     reason (:func:`skipped_pairs`)."""
     rows = skipped_pairs(robot)

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -382,27 +381,6 @@ class RobotModel:
             return _from_dict(doc)
         except RobotModelError as e:
             raise RobotModelError(f"{path}: {e}") from e
-
-    @classmethod
-    def from_urdf(cls, path: str | os.PathLike, *, end_effectors: dict[str, str] | None = None,
-                  package_dirs: Sequence[str | os.PathLike] = (), **options: Any
-                  ) -> RobotModel:
-        """Import a URDF file (docs/urdf.md): links are frames of the same names, moving
-        joints are ``dh`` frames (mimic joints coupled), inertials point masses, sphere
-        collision geometry the robot's spheres. ``end_effectors`` ``{alias: link}``
-        (default: the tip links), ``package_dirs`` (folders for ``package://`` paths) and
-        ``options`` (``continuous_limit``, ``merge_static``, ``require_meshes``, ``name``)
-        are the fields of :class:`jwarp.importers.urdf.UrdfOptions`. For the collision
-        geometry use :func:`jwarp.importers.robot.load_urdf`. ValueError naming the file
-        and the element for a malformed URDF."""
-        from jwarp.importers.urdf import UrdfOptions, read_urdf
-
-        opt = UrdfOptions(end_effectors=end_effectors, package_dirs=package_dirs, **options)
-        doc = read_urdf(path, opt).document
-        try:
-            return _from_dict(doc)
-        except RobotModelError as e:
-            raise RobotModelError(f"{os.fspath(path)}: imported robot is invalid: {e}") from None
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the robot as JSON atomically (temporary file + rename)."""

@@ -20,7 +20,7 @@ import numpy as np
 from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.kinematics.equilibrium import fk_elastic
 from jwarp.kinematics.launch import kappa_array
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKResult, ik
 from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.planning import PathObjective, PlanResult, plan

@@ -26,7 +26,7 @@ import numpy as np
 
 from jwarp.core.types import RobotLike
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.atomic import AtomicFile
 from jwarp.viz.recording import atomic_recording, rerun_module
 

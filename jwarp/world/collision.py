@@ -68,7 +68,7 @@ from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.world.device_world import DeviceWorld
 from jwarp.world.sdf import World, sdf_query
 
@@ -114,20 +114,20 @@ def check_world(robot: RobotModel, world: World | None) -> None:
                          f"moves in {robot.workspace_dim}D (workspace_dim={robot.workspace_dim})")
 
 
-def collision_pairs(robot: RobotLike) -> np.ndarray:
+def collision_pairs(robot: RobotModel) -> np.ndarray:
     """(P, 2) int32 sphere index pairs checked for self-collision, in kernel order:
     pairs of spheres whose frames are allowed to collide
     (``RobotModel.allowed_collision_pairs``), grouped by frame pair (sorted), the sphere on
     the lower frame index first, except the rigid pairs of :func:`rigid_pairs`."""
-    return collision_tables(get_robot(robot))["pairs"].copy()
+    return collision_tables(robot)["pairs"].copy()
 
 
-def rigid_pairs(robot: RobotLike) -> tuple[np.ndarray, np.ndarray]:
+def rigid_pairs(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
     """Allowed sphere pairs left out of the self-collision check because their surface
     distance is the same in every configuration and positive: ``(pairs (R, 2) int32,
     distance (R,) [m])``. (A constant distance <= 0 stays in the check: such a pair
     always collides, which says the model or its allowed pairs are wrong.)"""
-    rt = collision_tables(get_robot(robot))
+    rt = collision_tables(robot)
     return rt["rigid_pairs"].copy(), rt["rigid_distance"].copy()
 
 
@@ -616,13 +616,13 @@ class CollisionModel:
 _MODELS: IdentityCache[CollisionModel] = IdentityCache(32)
 
 
-def collision_model(robot: RobotLike, world: World | None = None, *, device: DeviceLike = None,
+def collision_model(robot: RobotModel, world: World | None = None, *, device: DeviceLike = None,
                     dtype: DTypeLike = np.float32) -> CollisionModel:
     """A cached :class:`CollisionModel` for (robot, world, device, dtype): robots of equal
     content share one (their device model is one, :func:`jwarp.core.device.put_model`);
     worlds are told apart by identity (held weakly; treat a world as immutable)."""
     init_warp()
-    model = get_robot(robot)
+    model = robot
     check_world(model, world)
     dev = resolve_device(device)
     scalar = scalar_type(dtype)
@@ -749,13 +749,13 @@ def mm_text(metres: float) -> str:
     return text
 
 
-def sphere_link(robot: RobotLike, s: int) -> str:
+def sphere_link(robot: RobotModel, s: int) -> str:
     """The name of the frame (link) collision sphere ``s`` of ``robot`` is fixed to."""
-    model = get_robot(robot)
+    model = robot
     return model.frames[model.spheres[int(s)].frame].name
 
 
-def nearest_objects(robot: RobotLike, q: Any, world: World, spheres: Any, rho: Any = None,
+def nearest_objects(robot: RobotModel, q: Any, world: World, spheres: Any, rho: Any = None,
                     device: DeviceLike = None) -> list[str]:
     """What each of the collision ``spheres`` (indices) of one configuration q (n_dof,) is
     nearest to, in words: ``"object 'NAME'"`` (the world's exact objects) or ``"the world
@@ -767,7 +767,7 @@ def nearest_objects(robot: RobotLike, q: Any, world: World, spheres: Any, rho: A
     from jwarp.kinematics.fk import fk
     from jwarp.world.device_world import world_query
 
-    model = get_robot(robot)
+    model = robot
     spheres = np.asarray(spheres, np.int64).reshape(-1)
     if world.dim != 3:
         return ["the world grid"] * len(spheres)
@@ -783,7 +783,7 @@ def nearest_objects(robot: RobotLike, q: Any, world: World, spheres: Any, rho: A
             for o in obj]
 
 
-def closest_pair_text(robot: RobotLike, q: Any, world: World | None, *, self_collision: bool,
+def closest_pair_text(robot: RobotModel, q: Any, world: World | None, *, self_collision: bool,
                       rho: Any = None, device: DeviceLike = None) -> str:
     """The closest pair of one configuration q (n_dof,) in words, for a message about a
     configuration in collision: ``link 'L' vs object 'O', -93.27 mm`` (``self_collision``
@@ -791,7 +791,7 @@ def closest_pair_text(robot: RobotLike, q: Any, world: World | None, *, self_col
     link 'B', -1.50 mm`` (True: the closest sphere pair of :func:`collision_pairs`); the
     signed surface distance (negative = penetration). ``rho`` (n_frames, 5): the frames'
     DH rows (an elastic equilibrium)."""
-    model = get_robot(robot)
+    model = robot
     q1 = np.asarray(q, np.float64).reshape(1, model.n_dof)
     r1 = None if rho is None else np.asarray(rho, np.float64)[None]
     if not self_collision:
@@ -824,7 +824,8 @@ def is_collision_free(robot: RobotLike, q: Any, world: World | None = None, marg
     sm = margin if self_margin is None else real_number(self_margin, "self_margin")
     if not np.isfinite(sm):
         raise ValueError(f"self_margin: expected a finite distance [m], got {self_margin}")
-    md = min_distances(robot, q, world, rho=rho, device=device, dtype=dtype, validate=validate,
+    model = get_robot(robot)   # resolved once here; the helpers below take the model
+    md = min_distances(model, q, world, rho=rho, device=device, dtype=dtype, validate=validate,
                        per_world=per_world)
     if isinstance(md, wp.array):
         md = md.numpy()
@@ -833,11 +834,11 @@ def is_collision_free(robot: RobotLike, q: Any, world: World | None = None, marg
     md = np.asarray(md)
     free = (md[..., 0] > margin) & (md[..., 1] > sm)
     if meshes and not free.all() and rho is None:
-        free = mesh_certified(robot, q, world, free, margin, sm, device, per_world, md)
+        free = mesh_certified(model, q, world, free, margin, sm, device, per_world, md)
     return free
 
 
-def mesh_certified(robot: RobotLike, q: Any, world: World | None, free: np.ndarray, margin: float,
+def mesh_certified(robot: RobotModel, q: Any, world: World | None, free: np.ndarray, margin: float,
                    self_margin: float, device: DeviceLike = None, per_world: int = 0,
                    md: np.ndarray | None = None) -> np.ndarray:
     """``free`` (the spheres' verdict on ``q``) with the configurations the spheres refuse
@@ -847,7 +848,7 @@ def mesh_certified(robot: RobotLike, q: Any, world: World | None, free: np.ndarr
     meshes (:func:`jwarp.world.mesh_check.sphere_reach_past`) is not tried."""
     from jwarp.world.mesh_check import mesh_check, sphere_reach_past
 
-    model = get_robot(robot)
+    model = robot
     if getattr(model, "collision_pieces", None) is None:
         return free
     mc = mesh_check(model, world, device)

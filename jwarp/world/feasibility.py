@@ -19,7 +19,7 @@ from jwarp.core.arrays import real_number
 from jwarp.core.device import content_key
 from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world.sdf import World, grid_geometry
 

@@ -60,7 +60,7 @@ def parse_world_spec(spec: Any, robot: RobotLike = None, device: DeviceLike = No
             samples would need more than the available memory; checked before anything
             is allocated, the message gives the grid and the figure.
     """
-    from jwarp.model.registry import robot as get_robot
+    from jwarp.plugins.registry import robot as get_robot
     from jwarp.world.collision import check_world
 
     model = None if robot is None else get_robot(robot)

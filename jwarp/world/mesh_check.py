@@ -481,17 +481,15 @@ def cached_mesh_check(robot: Any, world: Any, device: Any = None) -> MeshCheck |
     return _CACHE.get(str(resolve_device(device)), (robot, world))
 
 
-def mesh_check(robot: Any, world: Any, device: Any = None, *, rho: Any = None
+def mesh_check(robot: RobotModel, world: Any, device: Any = None, *, rho: Any = None
                ) -> MeshCheck | None:
     """The :class:`MeshCheck` of ``robot`` in ``world`` on ``device`` (kept per robot,
     world and device: a few are cached), or None where there is none: no
     ``collision_pieces``, spheres edited since the pieces were made, a world with a voxel
     grid, or an elastic model (``rho`` given)."""
-    from jwarp.model.registry import robot as get_robot
-
     if rho is not None:
         return None
-    model = get_robot(robot)
+    model = robot
     cp = getattr(model, "collision_pieces", None)
     if cp is None or cp.extra_spheres(model) is None:
         return None

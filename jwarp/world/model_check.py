@@ -25,9 +25,9 @@ from typing import Any
 import numpy as np
 
 from jwarp.core.limits import project_numpy
-from jwarp.core.types import DeviceLike, RobotLike
+from jwarp.core.types import DeviceLike
 from jwarp.kinematics.fk import fk
-from jwarp.model.registry import robot as get_robot
+from jwarp.model import RobotModel
 from jwarp.world.collision import collision_pairs
 
 __all__ = ["NO_SPHERES_HINT", "HOME_NOTE", "noted_home", "home_configuration",
@@ -41,10 +41,10 @@ NO_SPHERES_HINT = ("fit spheres to the robot's collision geometry with `jwarp im
                    "(API: jwarp.world.spherize)")
 
 
-def home_configuration(robot: RobotLike) -> np.ndarray:
+def home_configuration(robot: RobotModel) -> np.ndarray:
     """(n_dof,) the robot's home configuration [rad or m]: zero projected into the joint
     limits (and linear limits, where the robot has them)."""
-    model = get_robot(robot)
+    model = robot
     return project_numpy(model, np.zeros(model.n_dof))
 
 
@@ -52,12 +52,12 @@ def home_configuration(robot: RobotLike) -> np.ndarray:
 HOME_NOTE = "home"
 
 
-def noted_home(robot: RobotLike) -> np.ndarray | None:
+def noted_home(robot: RobotModel) -> np.ndarray | None:
     """(n_dof,) the home in ``notes['home']`` [rad or m], projected into the limits; None
     when there is none or it does not fit the robot (another joint count, not numbers)."""
     import json
 
-    model = get_robot(robot)
+    model = robot
     text = model.notes.get(HOME_NOTE)
     if not text:
         return None
@@ -70,11 +70,11 @@ def noted_home(robot: RobotLike) -> np.ndarray | None:
     return project_numpy(model, q)
 
 
-def home_configurations(robot: RobotLike) -> list[tuple[str, np.ndarray]]:
+def home_configurations(robot: RobotModel) -> list[tuple[str, np.ndarray]]:
     """``[(label, q (n_dof,))]``: the imported home (:func:`noted_home`) where the robot
     has one, :func:`home_configuration` and the middle of the joint limits (projected into
     linear limits), the configurations of the self-collision check."""
-    model = get_robot(robot)
+    model = robot
     mid = project_numpy(model, model.joint_limits.mean(axis=1))
     noted = noted_home(model)
     return ([("its home (notes.home)", noted)] if noted is not None else []) + [
@@ -82,13 +82,13 @@ def home_configurations(robot: RobotLike) -> list[tuple[str, np.ndarray]]:
         ("the middle of the joint limits", mid)]
 
 
-def home_self_collisions(robot: RobotLike, q: Any = None, *, device: DeviceLike = None
+def home_self_collisions(robot: RobotModel, q: Any = None, *, device: DeviceLike = None
                          ) -> list[tuple[str, str, float]]:
     """Frame pairs whose spheres overlap at ``q`` (None: :func:`home_configuration`) among
     the self-collision pairs the robot checks (``RobotModel.allowed_collision_pairs``):
     ``[(frame_a, frame_b, distance [m] < 0)]``, deepest first (one FK in float64 on
     ``device``: the caller's, so a solver on a GPU runs no CPU kernel)."""
-    model = get_robot(robot)
+    model = robot
     q = home_configuration(model) if q is None else np.asarray(q, np.float64)
     pairs = collision_pairs(model)
     if len(pairs) == 0:
@@ -110,7 +110,7 @@ def home_self_collisions(robot: RobotLike, q: Any = None, *, device: DeviceLike 
 _PASSED: set = set()
 
 
-def check_collision_model(robot: RobotLike, *, need_spheres: bool, what: str,
+def check_collision_model(robot: RobotModel, *, need_spheres: bool, what: str,
                           option: str = "allow_no_collision=True",
                           device: DeviceLike = None) -> None:
     """ValueError naming the robot when ``need_spheres`` and it has no collision spheres,
@@ -120,7 +120,7 @@ def check_collision_model(robot: RobotLike, *, need_spheres: bool, what: str,
     ``device``: where the FK of the check runs."""
     from jwarp.core.device import content_key
 
-    model = get_robot(robot)
+    model = robot
     key = (content_key(model), str(device))
     if key in _PASSED:  # the same robot content passed before (a planner per problem)
         return
@@ -168,7 +168,7 @@ _WARNED: set = set()
 _INFLATED: OrderedDict[str, Any] = OrderedDict()
 
 
-def mesh_margin_model(robot: RobotLike, mesh_margin: bool = True, *, what: str = "planning") -> Any:
+def mesh_margin_model(robot: RobotModel, mesh_margin: bool = True, *, what: str = "planning") -> Any:
     """The robot a planner or IK solver works with (a :class:`~jwarp.model.RobotModel`):
     when its ``sphere_relation`` is ``"approximate"`` (the meshes poke out of the spheres
     by a measured, certified amount per link) and ``mesh_margin``, a copy whose every
@@ -186,7 +186,7 @@ def mesh_margin_model(robot: RobotLike, mesh_margin: bool = True, *, what: str =
 
     if not isinstance(mesh_margin, (bool, np.bool_)):
         raise TypeError(f"mesh_margin: expected True or False, got {mesh_margin!r}")
-    model = get_robot(robot)
+    model = robot
     rel = model.sphere_relation
     if rel is None or rel.kind != "approximate" or not model.spheres:
         return model

@@ -40,7 +40,7 @@ from jwarp.core.device import put_model
 from jwarp.core.limits import LIMIT_TOL
 from jwarp.kernels import motion as mk
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world.collision import check_world, mm_text
 from jwarp.world.device_world import DeviceWorld
@@ -172,14 +172,14 @@ def _cached(kind: str, model: RobotModel, build: Any) -> Any:
     return hit
 
 
-def sphere_reach(robot: Any) -> np.ndarray:
+def sphere_reach(robot: RobotModel) -> np.ndarray:
     """(n_spheres, n_frames) float64: for each sphere s and frame i, a bound [m] of the
     distance of the sphere's centre from frame i's joint axis over every configuration
     (0 where frame i is not an ancestor of the sphere's frame; 1 for a prismatic frame,
     whose joint moves the centre by exactly its change). The bound is the sum of the
     frames' translation lengths along the chain below i (|d| + |r| of a DH frame, plus the
     largest joint offset of a prismatic one) plus the centre's offset in its frame."""
-    return _cached("reach", get_robot(robot), _sphere_reach).copy()
+    return _cached("reach", robot, _sphere_reach).copy()
 
 
 def _sphere_reach(model: RobotModel) -> np.ndarray:
@@ -187,7 +187,7 @@ def _sphere_reach(model: RobotModel) -> np.ndarray:
     return point_reach(model, sf, sp)
 
 
-def pair_travel_tables(robot: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def pair_travel_tables(robot: RobotModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per self-collision frame pair (the order of the collision tables) the joints that
     change the distance between its spheres, as CSR ``(start (P_f + 1,), frame (E,),
     weight (E,))``: the frames on both branches below the pair's common ancestor (the
@@ -195,7 +195,7 @@ def pair_travel_tables(robot: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     reach (:func:`sphere_reach`) of the pair's spheres on that branch. A segment moving the
     frame angles by ``dtheta`` changes a pair's distance by at most
     ``sum weight |dtheta[frame]|``."""
-    return _cached("pairs", get_robot(robot), _pair_travel_tables)
+    return _cached("pairs", robot, _pair_travel_tables)
 
 
 def _pair_travel_tables(model: RobotModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -232,12 +232,12 @@ def _pair_travel_tables(model: RobotModel) -> tuple[np.ndarray, np.ndarray, np.n
             np.array(weights or [0.0], np.float64))
 
 
-def travel_bound(robot: Any, paths: np.ndarray, reach: np.ndarray | None = None
+def travel_bound(robot: RobotModel, paths: np.ndarray, reach: np.ndarray | None = None
                  ) -> np.ndarray:
     """(P, W - 1) [m]: a bound of the largest travel of any sphere centre along each
     segment of ``paths`` (P, W, n_dof) (numpy; :func:`sphere_reach` ``reach`` may be
     passed to reuse it)."""
-    model = get_robot(robot)
+    model = robot
     R = sphere_reach(model) if reach is None else reach
     if R.size == 0:
         return np.zeros(paths.shape[:-2] + (paths.shape[-2] - 1,))

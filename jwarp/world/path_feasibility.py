@@ -28,7 +28,7 @@ from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.transmission import untransmitted, without_transmission
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world import collision
 
@@ -127,14 +127,14 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
     return free if converged is None else free & converged.reshape(-1)
 
 
-def elastic_equilibrium(robot: RobotLike, q: np.ndarray, kappa: Any, device: DeviceLike = None
+def elastic_equilibrium(robot: RobotModel, q: np.ndarray, kappa: Any, device: DeviceLike = None
                         ) -> tuple[np.ndarray, np.ndarray]:
     """The elastic model's equilibrium at q (N, n_dof) as the feasibility checks solve it
     (:data:`ELASTIC_CHECK`, float64): ``(rho (N, n_frames, 5), converged (N,) bool)``."""
     from jwarp.kinematics.equilibrium import fk_elastic
 
     # the checks see the links' joint values (transmission errors already applied)
-    model = get_robot(robot)
+    model = robot
     q = np.asarray(q, np.float64)
     if model.has_harmonic and model.has_coupling_harmonic:
         # the coupled frames' harmonic terms need the commanded values: the robot's own tables
@@ -198,7 +198,7 @@ def path_feasible(robot: RobotLike, world: Any, paths: Any, n_substeps: int, *, 
     return free & within_limits(model, a).all(axis=-1)
 
 
-def certify_check(robot: RobotLike, world: Any, device: DeviceLike = None) -> Any:
+def certify_check(robot: RobotModel, world: Any, device: DeviceLike = None) -> Any:
     """The continuous check (:class:`jwarp.world.motion.MotionCheck`, the default
     :class:`jwarp.world.motion.MotionOptions`: up to 4000 evaluations per segment) that
     :func:`path_feasible` (the rigid model), the RRT-Connect's edges and the planner's
@@ -255,7 +255,7 @@ def substeps_per_path(robot: RobotModel, paths: Any, voxel_size: float, *,
     u = np.arange(fine)[:, None] / fine
     q = (flat[:, :-1, None] + u * np.diff(flat, axis=1)[:, :, None]).reshape(len(flat), -1, n)
     q = np.concatenate([q, flat[:, -1:]], axis=1)            # (P, (W-1)*16+1, n)
-    seg = _longest_arcs(get_robot(robot), q, fine, device)   # per path, on the device
+    seg = _longest_arcs(robot, q, fine, device)   # per path, on the device
     return np.clip(np.ceil(seg * safety / voxel_size), 1, max_substeps).astype(np.int64)
 
 

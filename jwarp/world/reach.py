@@ -13,20 +13,19 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.core.types import RobotLike
-from jwarp.model.registry import robot as get_robot
+from jwarp.model import RobotModel
 
 __all__ = ["point_reach"]
 
 
-def point_reach(robot: RobotLike, frames: Any, positions: Any, extent: Any = None) -> np.ndarray:
+def point_reach(robot: RobotModel, frames: Any, positions: Any, extent: Any = None) -> np.ndarray:
     """(K, n_frames) float64: :func:`sphere_reach` of K points (``frames`` (K,) int,
     ``positions`` (K, 3) [m] in their frames), each grown by ``extent`` (K,) [m] (None: 0):
     a bound of the distance from frame i's joint axis of any point within ``extent`` of
     point k (a convex piece inside its enclosing sphere: :mod:`jwarp.world.mesh_check`)."""
     from jwarp.core.device import fixed_parts
 
-    model = get_robot(robot)
+    model = robot
     sf = np.asarray(frames, np.int64).reshape(-1)
     sp = np.asarray(positions, np.float64).reshape(-1, 3)
     ext = np.zeros(len(sf)) if extent is None else np.asarray(extent, np.float64).reshape(-1)

@@ -278,7 +278,7 @@ class World:
         spheres covering it (:mod:`jwarp.world.attach`), so planning and IK with that
         robot move it with the frame. :meth:`detach` puts it back."""
         from jwarp.kinematics.fk import fk
-        from jwarp.model.registry import robot as get_robot
+        from jwarp.plugins.registry import robot as get_robot
         from jwarp.world.attach import Attachment, attach_object, sphere_table
 
         model = get_robot(robot)
@@ -302,7 +302,7 @@ class World:
         """Put attached object ``id`` back into the world where ``robot`` (the one
         :meth:`attach` returned) holds it at ``q``; returns the robot without its spheres."""
         from jwarp.kinematics.fk import fk
-        from jwarp.model.registry import robot as get_robot
+        from jwarp.plugins.registry import robot as get_robot
 
         a = self.attached.get(id)
         if a is None:

@@ -57,7 +57,7 @@ from jwarp.model.pair_reasons import (
     skipped_pairs,
     with_pair_reasons,
 )
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.utils.memory import check_memory, format_bytes
 
@@ -393,7 +393,7 @@ def _frame_pair_min(x: np.ndarray, r: np.ndarray, todo: np.ndarray, a0: int, a1:
 
 
 
-def default_pairs(robot: RobotLike, home: Any, contact: Any
+def default_pairs(robot: RobotModel, home: Any, contact: Any
                   ) -> tuple[list[tuple[int, int, float]], list[tuple[int, int, float]]]:
     """MoveIt's "Default" rule, checked against the robot's own geometry: the checked frame
     pairs (``RobotModel.allowed_collision_pairs``) whose spheres overlap at ``home``
@@ -404,7 +404,7 @@ def default_pairs(robot: RobotLike, home: Any, contact: Any
     a callable ``(frame a, frame b) -> bool``."""
     from jwarp.world.model_check import home_self_collisions
 
-    model = get_robot(robot)
+    model = robot
     q = np.asarray(home, np.float64).reshape(-1)
     if q.shape != (model.n_dof,) or not np.all(np.isfinite(q)):
         raise ValueError(f"home: expected {model.n_dof} finite joint values, got shape "
@@ -420,13 +420,13 @@ def default_pairs(robot: RobotLike, home: Any, contact: Any
     return default, fit
 
 
-def with_default_pairs(robot: RobotLike, pairs: Any) -> RobotModel:
+def with_default_pairs(robot: RobotModel, pairs: Any) -> RobotModel:
     """A copy of ``robot`` whose ``exclude_pairs`` also hold ``pairs`` (frame index pairs,
     e.g. the ``default`` of :func:`default_pairs`; extra items are ignored), listed by name
     in ``notes['self_collision_default']`` (added to those listed already)."""
     import json
 
-    model = get_robot(robot)
+    model = robot
     nf = model.n_frames
     new = []
     for p in pairs:
@@ -486,10 +486,10 @@ def with_self_pairs(robot: RobotLike, pairs: SelfPairs, *, replace: bool = True)
     return with_pair_reasons(out, {**sampled_reasons(model, pairs), **old_reasons})
 
 
-def sampled_reasons(robot: RobotLike, pairs: SelfPairs) -> dict[tuple[int, int], tuple[str, str]]:
+def sampled_reasons(robot: RobotModel, pairs: SelfPairs) -> dict[tuple[int, int], tuple[str, str]]:
     """``{(a, b): (reason, why)}`` of the exclusions of the sampled ``pairs``: Adjacent,
     Always (with its share of the samples), Never (with the closest distance seen)."""
-    model = get_robot(robot)
+    model = robot
     n = len(pairs.samples)
     out: dict[tuple[int, int], tuple[str, str]] = {}
     for a, b in pairs.adjacent:

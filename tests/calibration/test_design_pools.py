@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.calibration.simulate.campaign import justin_tracker_setup
 from jwarp.calibration.design.optimal import DesignOptions, design
 from jwarp.calibration.files import Setup, make_measurement

@@ -10,7 +10,7 @@ import pytest
 
 from jwarp.core.limits import within_limits
 from jwarp.kinematics.fk import fk
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
 from jwarp.calibration.files import read_setup, write_setup
 from jwarp.calibration.design.poses import (CONTAIN_TOL, PoseOptions, PoseSampler,

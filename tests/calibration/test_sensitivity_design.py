@@ -6,7 +6,7 @@ import itertools
 import numpy as np
 import pytest
 
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.calibration.simulate.campaign import uniform_configurations
 from jwarp.calibration.design.optimal import (DesignOptions, _State, candidate_jacobians,
                                               criterion, design, detmax, greedy, select,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from cli_helpers import one_line_error, run
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.calibration.simulate.campaign import justin_tracker_setup, uniform_configurations
 from jwarp.calibration.files import Setup, make_measurement, write_setup
 from jwarp.calibration.pool import (draw_pool, parse_configurations,

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.calibration.simulate.campaign import justin_tracker_setup
 from jwarp.calibration.files import write_setup
 from jwarp.calibration.design.poses import PoseOptions, PoseSampler

@@ -18,14 +18,13 @@ from robot_data import erd
 
 import jwarp
 from jwarp.importers.robot import (EXAMPLE_ROBOT_ALIASES, example_robot_names,
-                                   example_robot_urdf, package_robot_path)
-from jwarp.model import RobotModel
+                                   example_robot_urdf, load_urdf, package_robot_path)
 
 
 def test_example_robot_data_panda_by_name():
     path = erd("panda_description/urdf/panda.urdf")
     robot = jwarp.robot("example-robot-data:panda")
-    ref = RobotModel.from_urdf(path)
+    ref = load_urdf(path).model
     assert robot.frame_names == ref.frame_names and robot.joint_names == ref.joint_names
     assert list(robot.end_effectors) == ["panda_hand_tcp"]
     q = np.random.default_rng(0).uniform(-1, 1, (5, robot.n_dof))
@@ -92,7 +91,7 @@ def test_robot_descriptions_by_name(monkeypatch, tmp_path):
     for mod in [m for m in sys.modules if m.startswith("robot_descriptions")]:
         monkeypatch.delitem(sys.modules, mod)
     robot = jwarp.robot("robot_descriptions:ur5_test")
-    assert robot.joint_names == RobotModel.from_urdf(path).joint_names
+    assert robot.joint_names == load_urdf(path).model.joint_names
     assert package_robot_path("robot_descriptions:ur5_test_description") == path
     with pytest.raises(ValueError, match=r"robot_descriptions: no description "
                                          r"'nope_description' or 'nope'"):

@@ -244,19 +244,19 @@ def chain_urdf(prismatic_every: int = 3) -> str:
 def test_any_axis_origin_and_type_equal_pinocchio(tmp_path):
     path = write(tmp_path, chain_urdf())
     for merge in (True, False):
-        m = jwarp.RobotModel.from_urdf(path, merge_static=merge)
+        m = load_urdf(path, merge_static=merge).model
         e_fk, e_jac, n = compare_with_pinocchio(path, m, 300, seed=1)
         assert n == len(AXES) + 2
         assert e_fk < 1e-9 and e_jac < 1e-9, (merge, e_fk, e_jac)
     assert m.joints[4].lower == -math.pi and m.joints[4].upper == math.pi   # continuous
     assert m.joints[2].type == "prismatic"
-    assert jwarp.RobotModel.from_urdf(path, continuous_limit=2 * math.pi).joints[4].upper \
+    assert load_urdf(path, continuous_limit=2 * math.pi).model.joints[4].upper \
         == 2 * math.pi
 
 
 def test_jacobian_matches_finite_differences(tmp_path):
     """Independent of pinocchio: the imported tip Jacobian against central differences."""
-    m = jwarp.RobotModel.from_urdf(write(tmp_path, chain_urdf()))
+    m = load_urdf(write(tmp_path, chain_urdf())).model
     tip = m.frame_index("l10")
     q = np.random.default_rng(5).uniform(-1, 1, m.n_dof)
     J = np.asarray(jwarp.jacobian(m, q, tip, device="cpu"))
@@ -411,12 +411,12 @@ def test_panda_meshes_resolve_from_the_package_folder():
 def test_masses_and_given_end_effectors(tmp_path):
     links = [LINK.format("base", 2.0), LINK.format("a", 1.5)]
     path = write(tmp_path, urdf(joint("j", "base", "a", axis="1 0 0"), links=links))
-    m = jwarp.RobotModel.from_urdf(path, end_effectors={"tcp": "a", "origin": "base"})
+    m = load_urdf(path, end_effectors={"tcp": "a", "origin": "base"}).model
     assert m.end_effectors == {"tcp": m.frame_index("a"), "origin": m.frame_index("base")}
     assert [(m.frame_names[x.frame], x.mass, x.com.tolist()) for x in m.masses] == \
         [("base", 2.0, [0.01, 0.02, 0.03]), ("a", 1.5, [0.01, 0.02, 0.03])]
     with pytest.raises(ValueError, match="end_effectors.tcp: unknown link or frame 'nope'"):
-        jwarp.RobotModel.from_urdf(path, end_effectors={"tcp": "nope"})
+        load_urdf(path, end_effectors={"tcp": "nope"})
 
 
 # ------------------------------------------------------------------ malformed URDFs
@@ -457,20 +457,20 @@ LINKS3 = ['<link name="base"/>', '<link name="a"/>', '<link name="b"/>']
 def test_malformed_urdf_names_the_element(tmp_path, text, match):
     path = write(tmp_path, text)
     with pytest.raises(ValueError, match=match) as info:
-        jwarp.RobotModel.from_urdf(path)
+        load_urdf(path)
     assert str(path) in str(info.value)
 
 
 def test_missing_file_and_bad_options(tmp_path):
     with pytest.raises(ValueError, match="URDF file not found"):
-        jwarp.RobotModel.from_urdf(tmp_path / "none.urdf")
+        load_urdf(tmp_path / "none.urdf")
     with pytest.raises(ValueError, match="robot: file not found"):
         jwarp.robot(str(tmp_path / "none.urdf"))
     path = write(tmp_path, urdf(joint("j", "base", "a"), links=LINKS3[:2]))
     with pytest.raises(ValueError, match="continuous_limit"):
-        jwarp.RobotModel.from_urdf(path, continuous_limit=0.0)
+        load_urdf(path, continuous_limit=0.0)
     with pytest.raises(ValueError, match="package_dirs: not a folder"):
-        jwarp.RobotModel.from_urdf(path, package_dirs=[tmp_path / "none"])
+        load_urdf(path, package_dirs=[tmp_path / "none"])
 
 
 # ------------------------------------------------------------------ CLI

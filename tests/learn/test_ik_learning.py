@@ -17,7 +17,7 @@ from jwarp.learn.encoding import JointCodec, frame_features
 from jwarp.learn.ik_data import make_ik_data, sample_targets
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.train_ik import TrainIKOptions, ik_loss, train_ik
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective
 from jwarp.world.feasibility import feasible_simplex_world
 

@@ -23,10 +23,10 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.model import registry
+from jwarp.plugins import registry
 from jwarp.cli import main
 from jwarp.model import Mass, RobotModel, RobotModelError, Sphere
-from jwarp.model.registry import PluginError, PluginWarning
+from jwarp.plugins.registry import PluginError, PluginWarning
 
 ROOT = Path(__file__).resolve().parents[2]
 BUILTIN_ROBOTS = {"arm7", "hand4", "justin19", "planar4", "planar5", "sphere2d"}
@@ -172,7 +172,7 @@ warnings.simplefilter("always")
 with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")
     import jwarp
-    from jwarp.model import registry
+    from jwarp.plugins import registry
     out = {"file": jwarp.__file__, "robots": jwarp.robots(), "robots2": jwarp.robots(),
            "measurements": jwarp.measurements(), "problems": registry.plugin_problems()}
     def attempt(f, *a):

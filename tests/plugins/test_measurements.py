@@ -11,7 +11,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import jwarp
-from jwarp.model.registry import measurement
+from jwarp.plugins.registry import measurement
 
 from devices import requires_cpu
 from reference import sample_q

@@ -17,7 +17,7 @@ import pytest
 import jwarp
 from jwarp.model import RobotModel
 from jwarp.plugins.robots import HERE
-from jwarp.model.registry import BUILTIN_ROBOT_MODULES
+from jwarp.plugins.registry import BUILTIN_ROBOT_MODULES
 
 # name: (n_dof, n_frames)
 SIZES = {

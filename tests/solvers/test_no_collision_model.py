@@ -101,7 +101,7 @@ def test_self_collision_at_home_names_the_link_pairs(world):
 @pytest.mark.parametrize("name", ["arm7", "hand4", "justin19", "planar4", "planar5",
                                   "sphere2d"])
 def test_builtin_robots_pass(name):
-    check_collision_model(name, need_spheres=True, what="planning")
+    check_collision_model(jwarp.robot(name), need_spheres=True, what="planning")
 
 
 def test_cli_plan_and_ik_no_collision(capsys, tmp_path, world, bare):

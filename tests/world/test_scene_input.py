@@ -96,14 +96,14 @@ def panda_urdf(fingers: str) -> str:
 
 @pytest.fixture(scope="module")
 def pandas(tmp_path_factory) -> dict:
-    import jwarp
+    from jwarp.importers.robot import load_urdf
 
     folder = tmp_path_factory.mktemp("urdf")
     out = {}
     for fingers in ("prismatic", "fixed", "absent"):
         path = folder / f"panda_{fingers}.urdf"
         path.write_text(panda_urdf(fingers))
-        out[fingers] = jwarp.RobotModel.from_urdf(path)
+        out[fingers] = load_urdf(path).model
     return out
 
 
@@ -366,7 +366,7 @@ def test_mimic_joint_names_are_accepted_whatever_their_axis(tmp_path, axis, recw
     """A MoveIt state naming a URDF mimic joint: accepted silently whether the importer
     named its coupled frame after the child link (z axis) or "<joint>_axis" (other axes);
     a fixed joint after it still warns."""
-    from jwarp.model import RobotModel
+    from jwarp.importers.robot import load_urdf
     from jwarp.world.moveit import joint_vector
 
     lim = '<limit lower="-1" upper="1" effort="1" velocity="1"/>'
@@ -379,7 +379,7 @@ def test_mimic_joint_names_are_accepted_whatever_their_axis(tmp_path, axis, recw
         f'<origin xyz="0 0 0.1"/><axis xyz="{axis}"/>{lim}<mimic joint="j1"/></joint>'
         '<joint name="tip_joint" type="fixed"><parent link="l2"/><child link="tip"/>'
         '<origin xyz="0 0 0.05"/></joint></robot>')
-    m = RobotModel.from_urdf(tmp_path / "m.urdf")
+    m = load_urdf(tmp_path / "m.urdf").model
     assert m.joint_names == ["j1"] and "jm" in m.frame_aliases
     np.testing.assert_allclose(joint_vector(m, {"j1": 0.2, "jm": 0.2}, "start"), [0.2])
     assert not [w for w in recwarn if issubclass(w.category, UserWarning)]

@@ -54,7 +54,7 @@ import numpy as np
 from jwarp.calibration.estimate.params import ParameterSpace, parse_groups
 from jwarp.core.threads import limit_blas
 from jwarp.core.types import RobotLike
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.overrides import renamed_options
 from jwarp.utils.checks import check_int
 

@@ -46,7 +46,7 @@ import numpy as np
 from jwarp.calibration.estimate.params import ROBOT_GROUPS, ParameterSpace, parse_groups
 from jwarp.core.threads import limit_blas
 from jwarp.core.types import RobotLike
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 
 #: default relative tolerance of :func:`spectrum` (numerical rank of J^T J)
 DEFAULT_RTOL = 1e-12

@@ -376,7 +376,7 @@ def tow_from_dict(doc: Any, robot: RobotModel, where: str = "setup.tow") -> TowS
 
     The task plugin is built on ``robot``: unknown frames (a task plugin whose frames the
     robot lacks) and other bad keys raise ValueError naming ``<where>.task...``."""
-    from jwarp.model.registry import measurement as plugin_class
+    from jwarp.plugins.registry import measurement as plugin_class
 
     if not isinstance(doc, dict):
         raise ValueError(f"{where}: expected a JSON object, got {type(doc).__name__}")

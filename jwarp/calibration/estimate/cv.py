@@ -374,7 +374,7 @@ def cross_validate(robot: RobotLike, measurement: Any, q: Any, y: Any, options: 
     import time
 
     from jwarp.calibration.estimate.samples import check_samples
-    from jwarp.model.registry import robot as get_robot
+    from jwarp.plugins.registry import robot as get_robot
 
     t0 = time.perf_counter()
     if not isinstance(options, CalibrationOptions):

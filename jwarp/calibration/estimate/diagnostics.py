@@ -36,7 +36,7 @@ import numpy as np
 from jwarp import kinematics as K
 from jwarp.calibration.estimate.result import observation_groups
 from jwarp.core.types import RobotLike
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 
 

@@ -74,7 +74,7 @@ from jwarp.core.device import put_model, with_frame_masses, with_kappa_nonlinear
 from jwarp.core.threads import limit_blas
 from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 
 #: the largest robust-loss scale in noise sigmas (beyond it the loss is linear on any data,
 #: and its square overflows near 1e154)

@@ -27,8 +27,8 @@ from jwarp.calibration.estimate.params import (
 )
 from jwarp.core.types import RobotLike
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import ValidRange, record_valid_range, valid_range_of
+from jwarp.plugins.registry import robot as get_robot
 
 
 class CalibrationWarning(UserWarning):

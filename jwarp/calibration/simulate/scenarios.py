@@ -48,7 +48,7 @@ from jwarp.calibration.simulate.campaign import (
 )
 from jwarp.model import RobotModel
 from jwarp.model.measurement import Measurement
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 
 #: ``accept(measurement, frames (S, n_frames, 4, 4), p (P,), meta) -> (S,) bool``
 Accept = Callable[[Measurement, np.ndarray, np.ndarray, dict], np.ndarray]

@@ -50,7 +50,7 @@ import numpy as np
 from jwarp.model import RobotModel
 from jwarp.model import geometry as g
 from jwarp.model.measurement import Measurement, ParamBlock
-from jwarp.model.registry import hookimpl
+from jwarp.plugins.registry import hookimpl
 
 BODY_KEYS = {"name", "type", "frame", "center", "p0", "p1", "radius", "sigma_radius",
              "robot_capsule", "robot_sphere", "box", "vertices", "faces", "file",

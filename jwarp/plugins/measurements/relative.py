@@ -29,7 +29,7 @@ import numpy as np
 from jwarp.model import RobotModel
 from jwarp.model import geometry as g
 from jwarp.model.measurement import Measurement, ParamBlock
-from jwarp.model.registry import hookimpl
+from jwarp.plugins.registry import hookimpl
 
 
 class RelativeMeasurement(Measurement):

@@ -6,7 +6,7 @@ The numbers are justin19's (frames ``right_base`` .. ``right_tcp``, joints ``rig
 0.5 m above the world origin (identity rotation). End effectors ``right_tcp`` and ``tcp``.
 """
 
-from jwarp.model.registry import hookimpl
+from jwarp.plugins.registry import hookimpl
 from jwarp.plugins.robots import load_builtin
 
 

@@ -6,7 +6,7 @@ Per finger: abduction, two active flexion joints and a passive distal flexion jo
 in ``hand4.json`` (description and notes).
 """
 
-from jwarp.model.registry import hookimpl
+from jwarp.plugins.registry import hookimpl
 from jwarp.plugins.robots import load_builtin
 
 

@@ -4,7 +4,7 @@ Numbers: the published ones (``shared/robots/justin19.json``) in jwarp's schema,
 ``justin19.json`` beside this module.
 """
 
-from jwarp.model.registry import hookimpl
+from jwarp.plugins.registry import hookimpl
 from jwarp.plugins.robots import load_builtin
 
 

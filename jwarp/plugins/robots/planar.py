@@ -5,7 +5,7 @@ the origin, a static ``tcp`` at the tip (end effector ``tcp``), 3 spheres per li
 in z = 0 and a point mass per link. Descriptions: ``planar4.json``, ``planar5.json``.
 """
 
-from jwarp.model.registry import hookimpl
+from jwarp.plugins.registry import hookimpl
 from jwarp.plugins.robots import load_builtin
 
 

@@ -4,7 +4,7 @@ Joints ``x``, ``y`` in [-1, 1] m; the end effector ``point`` sits at ``(q_x, q_y
 the world's orientation. Description: ``sphere2d.json``.
 """
 
-from jwarp.model.registry import hookimpl
+from jwarp.plugins.registry import hookimpl
 from jwarp.plugins.robots import load_builtin
 
 

@@ -33,7 +33,8 @@ from jwarp.core.arrays import real_array
 from jwarp.core.device import host_device
 from jwarp.core.limits import LIMIT_TOL
 from jwarp.core.types import RobotLike
-from jwarp.model.registry import robot as get_robot
+from jwarp.model import RobotModel
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.ik.options import ORIENTATIONS, orientation_args
 
@@ -94,10 +95,10 @@ def _unit(model: Any, j: int) -> str:
     return "m" if model.joints[j].type == "prismatic" else "rad"
 
 
-def limit_reasons(robot: RobotLike, q: Any, tol: float = LIMIT_TOL) -> list[str]:
+def limit_reasons(robot: RobotModel, q: Any, tol: float = LIMIT_TOL) -> list[str]:
     """One line per violated limit of q (n_dof,): the joint, its value, its range and by
     how much it is outside (box limits), or the linear combination likewise."""
-    model = get_robot(robot)
+    model = robot
     q = np.asarray(q, np.float64).reshape(model.n_dof)
     out = []
     for j, (lo, hi) in enumerate(model.joint_limits):
@@ -137,7 +138,7 @@ def _link(model: Any, s: int) -> str:
     return sphere_link(model, s)
 
 
-def collision_reasons(robot: RobotLike, q: Any, world: Any = None, margin: float = 0.0, *,
+def collision_reasons(robot: RobotModel, q: Any, world: Any = None, margin: float = 0.0, *,
                       kappa: Any = None) -> list[str]:
     """The colliding pairs of q (n_dof,): link vs object (closer than ``margin`` [m] to the
     world) and link vs link (closer than ``margin`` to each other), the worst first, one
@@ -146,7 +147,7 @@ def collision_reasons(robot: RobotLike, q: Any, world: Any = None, margin: float
     of the others. The robot's collision spheres; rigid model unless ``kappa``."""
     from jwarp.world.collision import self_distances, sphere_distances
 
-    model = get_robot(robot)
+    model = robot
     q = np.asarray(q, np.float64).reshape(model.n_dof)
     if not model.spheres:
         return []

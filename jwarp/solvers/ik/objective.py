@@ -20,7 +20,7 @@ from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik as ik_kernels
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.compensation import CompensationRows
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik.options import IKWeights, orientation_args
 from jwarp.world import collision
 

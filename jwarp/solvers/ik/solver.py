@@ -18,8 +18,8 @@ from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik_step as step_kernels
 from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import check_valid_range
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik.objective import (
     IKObjective,
     batch_array,

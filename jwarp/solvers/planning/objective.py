@@ -21,7 +21,7 @@ from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.planning.options import PathWeights
 from jwarp.world import collision
 from jwarp.world.path_feasibility import check_substeps, check_world

@@ -16,8 +16,8 @@ from jwarp.core.limits import project_numpy, within_limits
 from jwarp.kinematics.launch import kappa_array
 from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.model import RobotModel
-from jwarp.model.registry import robot as get_robot
 from jwarp.model.valid_range import check_valid_range
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.overrides import renamed_argument, with_overrides
 from jwarp.solvers.planning.objective import PathObjective, path_configs
 from jwarp.solvers.planning.options import (

@@ -36,7 +36,7 @@ import numpy as np
 from jwarp.core.arrays import real_array, real_number
 from jwarp.core.limits import sample_within_limits, within_limits
 from jwarp.core.types import DeviceLike, RobotLike
-from jwarp.model.registry import robot as get_robot
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world import path_feasibility as _fz
 

@@ -328,7 +328,7 @@ def plugin_problems() -> list[str]:
 def _problems_note(table: _Table) -> str:
     n = len(_LOAD_PROBLEMS) + len(table.problems)
     return (f" ({n} plugin problem{'s' if n != 1 else ''}: see the warnings or "
-            f"jwarp.model.registry.plugin_problems())") if n else ""
+            f"jwarp.plugins.registry.plugin_problems())") if n else ""
 
 
 def robots() -> list[str]:
@@ -343,10 +343,13 @@ def _looks_like_path(name: str) -> bool:
 
 
 def _load_file(path: str) -> RobotModel:
-    """The robot of a file: a ``.urdf`` by :meth:`RobotModel.from_urdf`, a ``.xml`` whose
-    root is ``<mujoco>`` by :func:`jwarp.importers.robot.load_mjcf`, else a robot JSON."""
+    """The robot of a file: a ``.urdf`` by :func:`jwarp.importers.robot.load_urdf`, a
+    ``.xml`` whose root is ``<mujoco>`` by :func:`jwarp.importers.robot.load_mjcf`, else a
+    robot JSON."""
     if path.lower().endswith(".urdf"):
-        return RobotModel.from_urdf(path)
+        from jwarp.importers.robot import load_urdf
+
+        return load_urdf(path).model
     from jwarp.importers.mjcf import is_mjcf
 
     if is_mjcf(path):   # .xml with a <mujoco> root (needs jwarp[mjcf])
@@ -359,8 +362,8 @@ def _load_file(path: str) -> RobotModel:
 def robot(name: str | os.PathLike | RobotModel) -> RobotModel:
     """The robot registered under ``name`` (a RobotModel passes through; a path to a robot
     file, a name ending in ``.json`` or ``.urdf`` or containing a ``/``, is loaded; a
-    ``.urdf`` file is imported by :meth:`RobotModel.from_urdf`, a ``.xml`` file whose root is
-    ``<mujoco>`` by :func:`jwarp.importers.robot.load_mjcf`). A name
+    ``.urdf`` file is imported by :func:`jwarp.importers.robot.load_urdf`, a ``.xml`` file
+    whose root is ``<mujoco>`` by :func:`jwarp.importers.robot.load_mjcf`). A name
     ``"example-robot-data:NAME"`` is a URDF of the example-robot-data package
     (:func:`jwarp.importers.robot.example_robot_urdf`: ``panda``, ``ur5``, ``xarm7``, ...),
     ``"robot_descriptions:NAME"`` one of the robot_descriptions package
