@@ -239,6 +239,8 @@ class PlanOptions(SolverOptions):
     shorten: int = 4
     shorten_budget: float | None = 0.5
     straight_first: bool = True
+    via_ik: int = 3
+    via_frame: Any = None
 
     def __post_init__(self) -> None:
         self.fallback = fallback_word(self.fallback)
@@ -247,7 +249,7 @@ class PlanOptions(SolverOptions):
         """ValueError/TypeError naming the first bad field; numbers must be finite in the
         computing ``dtype``."""
         npdt = numpy_dtype(scalar_type(dtype))
-        for name, lo in (("iterations", 0), ("n_waypoints", 2), ("shorten", 0)):
+        for name, lo in (("iterations", 0), ("n_waypoints", 2), ("shorten", 0), ("via_ik", 0)):
             check_int(getattr(self, name), name, lo)
         if self.n_starts is not None:
             check_int(self.n_starts, "n_starts", 1)
