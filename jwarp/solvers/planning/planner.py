@@ -170,6 +170,8 @@ class Planner:
         if not o.allow_no_collision:
             check_collision_model(self.robot, need_spheres=True, what="planning",
                                   device=self.device)
+        if o.via_ik > 0 and o.via_frame is not None:  # a frame of this robot
+            self.robot.frame_index(o.via_frame, "via_frame")
         self.options = o
         #: gather the candidates and keep the final paths with kernels (on a GPU); on the
         #: CPU the host indexes the device arrays in place (the same numbers, no launches)
@@ -452,7 +454,8 @@ class Planner:
         bad = np.nonzero(~line)[0]
         V, count = ik_via_paths(self.robot, self.world, q0[bad], q1[bad], line_paths[bad], k,
                                 Q.shape[2], frame=o.via_frame, margin=o.margin,
-                                self_margin=o.self_margin, device=self.device, dtype=self.npdt)
+                                self_margin=o.self_margin, device=self.device, dtype=self.npdt,
+                                seed=o.seed)
         for i, b in enumerate(bad):
             c = int(count[i])
             if c:

@@ -28,13 +28,17 @@ from jwarp.model import RobotModel
 from jwarp.world.path_feasibility import collision_free, polyline_path
 
 #: distances [m] the goal's tool pose is pulled back along its approach axis (-z)
-BACK_OFF = (0.12, 0.25)
+BACK_OFF = (0.15, 0.3, 0.45)
 #: heights [m] the tool at the first colliding waypoint of the line is lifted
-LIFT = (0.2,)
+LIFT = (0.25,)
 #: sideways offsets [m] of that tool position (both sides)
 SIDE = (0.2,)
 #: iterations of the IK (the via points need not be exact: :data:`TOL_POS`)
-IK_ITERATIONS = 60
+IK_ITERATIONS = 20
+#: IK seeds per via point: the configuration it is near (the goal, the line's waypoint),
+#: then that one with every joint moved by a normal deviate of :data:`JITTER` [rad or m]
+IK_SEEDS = 3
+JITTER = 0.3
 #: position / rotation tolerance of a via point [m], [rad]
 TOL_POS, TOL_ROT = 0.01, 0.05
 
@@ -57,8 +61,8 @@ def _up(model: RobotModel) -> np.ndarray:
 
 def ik_via_paths(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
                  lines: np.ndarray, k: int, W: int, *, frame: Any = None, margin: float = 0.0,
-                 self_margin: float = 0.0, device: Any = None, dtype: Any = np.float32
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 self_margin: float = 0.0, device: Any = None, dtype: Any = np.float32,
+                 seed: Any = 0) -> tuple[np.ndarray, np.ndarray]:
     """Up to ``k`` paths (B, k, W, n_dof) per problem through IK via points, and how many
     of them each problem has (B,) (the rest of its rows are unspecified).
 
@@ -108,10 +112,14 @@ def ik_via_paths(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
             kind.append("detour")
             owner.append(b)
     T = np.stack(targets)
-    S = np.stack(seeds)[:, None]
-    opts = IKOptions(n_starts=1, iterations=IK_ITERATIONS, margin=margin, seed=0,
+    # IK seeds per target: the configuration it is near, then that one jittered
+    S = np.repeat(np.stack(seeds)[:, None], IK_SEEDS, 1)
+    rng = np.random.default_rng(seed)
+    S[:, 1:] += rng.normal(0.0, JITTER, S[:, 1:].shape)
+    S = project_numpy(model, S)
+    opts = IKOptions(n_starts=IK_SEEDS, iterations=IK_ITERATIONS, margin=margin, seed=0,
                      tol_pos=TOL_POS, tol_rot=TOL_ROT, restart_after=None,
-                     q_default=S[:, 0])
+                     q_default=S.reshape(-1, n))
     ik = IKSolver(model, f, len(T), opts, world=world, device=device,
                   dtype=dtype).solve(T, S)
     q = np.asarray(ik.q, np.float64)
