@@ -210,7 +210,8 @@ class PlanOptions(SolverOptions):
             robot); False: the spheres as they are (the meshes may then enter objects by
             up to the poke-out; warned once too). Contained and unknown relations: no
             change.
-        via_ik: where the straight line is not proven (``straight_first``), this many of
+        via_ik: where the straight line is not proven (by the ``straight_first`` stage,
+            else by one check of the lines before the starts are optimised), this many of
             a problem's random multi-starts (``start_kind`` "mixed", no seeds, at most
             ``n_starts - 1``; >= 0, 0: off) are replaced by paths through via points of
             one collision-free batched IK call (:mod:`jwarp.solvers.planning.via_ik`):

@@ -330,10 +330,10 @@ class Planner:
                          o.n_waypoints, o.seed, self.world, o.free_via, device=dev,
                          name=seeds_name)  # (B, n_starts, W, n)
         B, n_starts, W = Q.shape[:3]
-        if seeds is None and line is not None and not line.all():
+        if seeds is None and o.via_ik > 0 and (line is None or not line.all()):
             t_via = time.perf_counter()
-            self._ik_starts(Q, q0, q1, line_paths, line)
-            timings["via_ik"] = time.perf_counter() - t_via
+            if self._ik_starts(Q, q0, q1, None if line is None else line_paths, line):
+                timings["via_ik"] = time.perf_counter() - t_via
         P = B * n_starts
         Qf = Q.reshape(P, W, model.n_dof)
         n_sub = self._substeps(Qf)
@@ -440,15 +440,23 @@ class Planner:
         return res
 
     def _ik_starts(self, Q: np.ndarray, q0: np.ndarray, q1: np.ndarray,
-                   line_paths: np.ndarray, line: np.ndarray) -> None:
+                   line_paths: np.ndarray | None, line: np.ndarray | None) -> bool:
         """:attr:`PlanOptions.via_ik`: the last random starts of the problems whose straight
         line is not proven replaced (in place, ``Q`` (B, n_starts, W, n_dof)) by paths
-        through collision-free IK via points (:mod:`jwarp.solvers.planning.via_ik`)."""
+        through collision-free IK via points (:mod:`jwarp.solvers.planning.via_ik`).
+        ``line``: which lines the straight stage proved, with their paths; None (no
+        straight stage): the lines are checked here (the spheres, the planner's check).
+        Returns whether the IK ran (a robot of a 3-D workspace, one world, the rigid
+        model)."""
         o = self.options
         n_starts = Q.shape[1]
         k = min(int(o.via_ik), n_starts - 1) if o.start_kind == "mixed" else 0
-        if k <= 0 or self.batched or o.kappa is not None:
-            return
+        if k <= 0 or self.batched or o.kappa is not None or self.robot.workspace_dim != 3:
+            return False
+        if line is None or line_paths is None:
+            line_paths, _, line, _, _ = self._straight(q0, q1)
+            if line.all():
+                return False
         from jwarp.solvers.planning.via_ik import ik_via_paths
 
         bad = np.nonzero(~line)[0]
@@ -460,6 +468,7 @@ class Planner:
             c = int(count[i])
             if c:
                 Q[b, n_starts - c:] = V[i, :c]
+        return True
 
     def _substeps(self, Qf: np.ndarray) -> int:
         """The cost's substeps per segment for the paths ``Qf`` (P, W, n_dof):

@@ -11,10 +11,15 @@ random multi-starts are replaced by paths through
   hits);
 
 all of one problem set in one :class:`jwarp.solvers.ik.IKSolver` call (the planner's world
-and margins: every via point is collision-free, re-checked here). The paths are start ->
-detour -> pre-goal -> goal, start -> pre-goal -> goal and start -> detour -> goal (in this
-order of preference; the W waypoints spread along the polyline as every via-point start).
-Nothing random: the same problems give the same paths.
+and margins; :data:`IK_SEEDS` seeds per via point: the configuration it is near, then
+that one jittered; every via point is collision-free, re-checked here). The paths are
+start -> detour -> pre-goal -> goal, start -> pre-goal -> goal and start -> detour -> goal
+(in this order of preference; the W waypoints spread along the polyline as every
+via-point start). The same problems and seed give the same paths.
+
+Measured on the Panda scene problems (``benchmarks/bench_scenes.py --versus via_ik=0``,
+benchmarks/README.md, issue 45): the pre-goal points solve most shelf and cage problems
+the random starts leave to the RRT fallback; one call costs about 5-10 ms on one CPU core.
 """
 
 from __future__ import annotations
@@ -60,22 +65,41 @@ def _up(model: RobotModel) -> np.ndarray:
 
 
 def ik_via_paths(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
-                 lines: np.ndarray, k: int, W: int, *, frame: Any = None, margin: float = 0.0,
-                 self_margin: float = 0.0, device: Any = None, dtype: Any = np.float32,
-                 seed: Any = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Up to ``k`` paths (B, k, W, n_dof) per problem through IK via points, and how many
-    of them each problem has (B,) (the rest of its rows are unspecified).
+                 lines: np.ndarray, k: int, W: int, **kw: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Up to ``k`` paths (B, k, W, n_dof) per problem through the via points of
+    :func:`ik_via_points` (the keywords are its), and how many of them each problem has
+    (B,) (the rest of its rows are zeros)."""
+    B, n = q0.shape
+    out = np.zeros((B, k, W, n))
+    count = np.zeros(B, np.int64)
+    if k <= 0:
+        return out, count
+    for b, vias in enumerate(ik_via_points(model, world, q0, q1, lines, k, **kw)):
+        for i, v in enumerate(vias):
+            out[b, i] = polyline_path(q0[b], v, q1[b], W)
+        count[b] = len(vias)
+    return project_numpy(model, out), count
+
+
+def ik_via_points(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
+                  lines: np.ndarray, k: int, *, frame: Any = None, margin: float = 0.0,
+                  self_margin: float = 0.0, device: Any = None, dtype: Any = np.float32,
+                  seed: Any = 0) -> list[list[np.ndarray]]:
+    """Per problem up to ``k`` via-point sequences (each (m, n_dof), m = 1 or 2), in the
+    order of preference (module docstring), every point collision-free in ``world`` at
+    ``margin`` and ``self_margin``; one IK call for all problems.
 
     ``q0``, ``q1`` (B, n_dof): start and goal; ``lines`` (B, W', n_dof): each problem's
-    straight line (its first colliding waypoint is the detour's anchor)."""
+    straight line (its first colliding waypoint is the detour's anchor); ``frame``: the
+    tool frame (:func:`via_frame`); ``seed``: of the IK seeds' jitter (an integer, a
+    numpy Generator, None: fresh entropy)."""
     from jwarp.kinematics import fk
     from jwarp.solvers.ik import IKOptions, IKSolver
 
     B, n = q0.shape
-    out = np.zeros((B, k, W, n))
-    count = np.zeros(B, np.int64)
+    out: list[list[np.ndarray]] = [[] for _ in range(B)]
     if B == 0 or k <= 0 or model.workspace_dim != 3:
-        return out, count
+        return out
     f = via_frame(model, frame)
     up = _up(model)
     T1 = np.asarray(fk(model, q1.astype(np.float64), device=device, dtype=np.float64))[:, f]
@@ -137,7 +161,5 @@ def ik_via_paths(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
             vias.append(np.stack([det[0], pre[-1]]))
         vias += [p[None] for p in pre[::-1]]
         vias += [d[None] for d in det]
-        for i, v in enumerate(vias[:k]):
-            out[b, i] = polyline_path(q0[b], v, q1[b], W)
-        count[b] = min(k, len(vias))
-    return project_numpy(model, out), count
+        out[b] = vias[:k]
+    return out
