@@ -24,9 +24,9 @@ The arm is the Panda (fitted from example-robot-data's URDF, or ``--robot``), or
    :class:`jwarp.solvers.planning.Planner` on ``jwarp.world.exact_world(scene)`` (no grid)
    with ``PlanOptions(margin, endpoint_margin=0, time_limit=1 s, stop_when_solved=True,
    fallback="rrt")``, device ``cpu`` (one core: Warp runs CPU kernels serially, numpy's
-   BLAS is held to one thread) and/or ``cuda``; one untimed warm-up call first (kernel
-   compilation). The time of a problem is the Planner's construction plus its ``plan``
-   call (wall clock).
+   BLAS is held to one thread) and/or ``cuda``; untimed warm-up calls first (kernel
+   compilation): the first problem of every family (with every ``--versus`` variant). The
+   time of a problem is the Planner's construction plus its ``plan`` call (wall clock).
 3. The verifier (``tests/verifier.py``: pinocchio FK, coal distances of the URDF collision
    meshes and of the robot's spheres to the exact scene primitives, samples <= 0.5 deg
    apart) re-checks every path jwarp calls feasible, with jwarp's own rule: the first and
@@ -51,7 +51,10 @@ The arm is the Panda (fitted from example-robot-data's URDF, or ``--robot``), or
    ``--no-ompl``. Its paths are not re-verified (``--verify-ompl`` does).
 
 ``--no-stop-when-solved`` plans with ``stop_when_solved=False``; ``--option NAME=JSON``
-sets another PlanOptions field (repeatable, e.g. ``--option shorten=0``).
+sets another PlanOptions field (repeatable, e.g. ``--option shorten=0``). ``--versus
+"NAME=JSON[;NAME=JSON]"`` (repeatable) plans every problem also with these fields over the
+others, the variants taking turns problem by problem (order alternating) so that they share
+the machine's load, a table each (e.g. ``--versus via_ik=0``: before and after an option).
 
 Printed: the machine, the settings, then per device and margin a table per family
 (problems, solved, solved by the straight line / the optimizer / the fallback, verified
@@ -172,12 +175,12 @@ def self_link_pairs(robot: Any, urdf: str) -> list[tuple[str, str]]:
 
 # ------------------------------------------------------------------ jwarp
 def plan_one(robot: Any, prob: Problem, margin: float, args: argparse.Namespace,
-             device: str) -> tuple[float, Any]:
+             device: str, variant: dict | None = None) -> tuple[float, Any]:
     from jwarp.solvers.planning import Planner, PlanOptions
 
     o = PlanOptions(margin=margin, endpoint_margin=args.endpoint_margin,
                     time_limit=args.time_limit, stop_when_solved=not args.no_stop_when_solved,
-                    fallback="rrt", **extra_options(args))
+                    fallback="rrt", **{**extra_options(args), **(variant or {})})
     wp.synchronize_device(device)
     t0 = time.perf_counter()
     try:
@@ -208,10 +211,24 @@ def warm_check(robot: Any, prob: Problem, device: str) -> None:
 
 def extra_options(args: argparse.Namespace) -> dict:
     """PlanOptions fields given on the command line (``--option NAME=VALUE``)."""
+    return parse_options(args.option)
+
+
+def parse_options(texts: list[str] | None) -> dict:
+    """``NAME=JSON`` texts as a dict of PlanOptions fields."""
     out = {}
-    for text in args.option or []:
+    for text in texts or []:
         k, _, v = text.partition("=")
         out[k.strip()] = json.loads(v)
+    return out
+
+
+def variants(args: argparse.Namespace) -> list[tuple[str, dict]]:
+    """The option sets planned side by side: ``("", {})`` (the options as given) and one
+    per ``--versus "NAME=JSON[,NAME=JSON]"`` (its fields over them)."""
+    out: list[tuple[str, dict]] = [("", {})]
+    for text in args.versus or []:
+        out.append((text, parse_options([t for t in text.split(";") if t.strip()])))
     return out
 
 
@@ -316,12 +333,21 @@ def verify_saved(args: argparse.Namespace, robot: Any, urdf: str | None, spheres
 def run_jwarp(robot: Any, urdf: str, spheres: list, probs: list[Problem], margin: float,
               args: argparse.Namespace, device: str) -> tuple[list[dict], float]:
     """Every problem planned on ``device`` at ``margin``; (rows, wall time of all)."""
-    plan_one(robot, probs[0], margin, args, device)   # warm-up: kernels compiled, untimed
+    vs = variants(args)
+    # warm-up, untimed: the first problem of every family with every variant, so that the
+    # kernels of the stages a straight first problem skips are loaded too
+    firsts = list({p.family: p for p in reversed(probs)}.values())
+    for p in firsts:
+        for _, extra in vs:
+            plan_one(robot, p, margin, args, device, extra)
     warm_check(robot, probs[0], device)
     rows = []
     total = timing.stopwatch()
-    for k, p in enumerate(probs):
-        t, res = plan_one(robot, p, margin, args, device)
+    # every problem planned with every variant in turn (the order alternating), so the
+    # variants share the machine's load
+    jobs = [(k, p, vs[(k + j) % len(vs)]) for k, p in enumerate(probs) for j in range(len(vs))]
+    for k, p, (vname, extra) in jobs:
+        t, res = plan_one(robot, p, margin, args, device, extra)
         if isinstance(res, Exception):
             ok = False
             row = {"planner": "jwarp", "device": device, "margin": margin, "problem": p.name,
@@ -347,10 +373,12 @@ def run_jwarp(robot: Any, urdf: str, spheres: list, probs: list[Problem], margin
                 row["saved"] = save_failure(args, p, path, f"{device}_m{margin:g}", row)
                 print(f"  !! {p.name} margin {margin:g}: jwarp feasible, verifier: "
                       f"{row['first_violation']} (saved to {row['saved']})", flush=True)
+        row["variant"] = vname
         rows.append(row)
         if args.progress:
-            print(f"  [{k + 1}/{len(probs)}] {p.name}: {'solved' if ok else 'failed'} "
-                  f"({row['stage']}) {t:.3f} s", file=sys.stderr, flush=True)
+            print(f"  [{k + 1}/{len(probs)}] {p.name}{' ' + vname if vname else ''}: "
+                  f"{'solved' if ok else 'failed'} ({row['stage']}) {t:.3f} s",
+                  file=sys.stderr, flush=True)
     return rows, total()
 
 
@@ -514,6 +542,24 @@ def print_table(rows: list[dict], families: list[str]) -> dict:
     return per
 
 
+def report_jwarp(rows: list[dict], families: list[str], robot: Any, dev: str, gpu: str,
+                 m: float, n: int, total: float, args: argparse.Namespace, vname: str) -> dict:
+    """The table of one device, margin and variant; returns its per-family figures."""
+    with_v = f" [{vname}]" if vname else ""
+    print(f"== jwarp{with_v} on {dev}{gpu}, margin {m:g} m, endpoint_margin "
+          f"{args.endpoint_margin:g} m: {n} problems one after the other "
+          f"in {total:.1f} s (incl. verification{', all variants' if args.versus else ''})")
+    per = print_table(rows, families)
+    mesh_s = sum(r.get("timings", {}).get("mesh_check", 0.0) for r in rows)
+    plan_s = sum(r["time_s"] for r in rows)
+    errors = sum(r["stage"] == "error" for r in rows)
+    print(f"   {len(robot.spheres)} spheres; mesh certificate "
+          f"{'on' if getattr(robot, 'collision_pieces', None) is not None else 'off'}: "
+          f"{mesh_s:.2f} s of {plan_s:.2f} s planning ({100 * mesh_s / max(plan_s, 1e-9):.1f} %)"
+          f"; planner errors (e.g. endpoints refused) {errors}")
+    return per
+
+
 # ------------------------------------------------------------------ main
 def git_head() -> str:
     """The checkout's commit (and '+changes' where jwarp/ has uncommitted edits)."""
@@ -551,6 +597,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="PlanOptions(stop_when_solved=False): every start optimised")
     ap.add_argument("--option", action="append", metavar="NAME=JSON",
                     help="another PlanOptions field, e.g. --option shorten=0 (repeatable)")
+    ap.add_argument("--versus", action="append", metavar="NAME=JSON[;NAME=JSON]",
+                    help="also plan every problem with these PlanOptions fields over the "
+                         "others, in turn with the plain options (a table each; repeatable)")
     ap.add_argument("--no-ompl", action="store_true", help="skip the OMPL baseline")
     ap.add_argument("--verify-ompl", action="store_true",
                     help="also re-check OMPL's paths with the verifier")
@@ -652,22 +701,16 @@ def main(argv: list[str] | None = None) -> int:
     for dev in devices:
         gpu = "" if dev == "cpu" else f" ({timing.machine(dev)})"
         for m in margins:
-            rows, total = run_jwarp(robot, urdf, spheres, probs, m, args, dev)
-            print(f"== jwarp on {dev}{gpu}, margin {m:g} m, endpoint_margin "
-                  f"{args.endpoint_margin:g} m: {len(probs)} problems one after the other "
-                  f"in {total:.1f} s (incl. verification)")
-            per = print_table(rows, families)
-            mesh_s = sum(r.get("timings", {}).get("mesh_check", 0.0) for r in rows)
-            plan_s = sum(r["time_s"] for r in rows)
-            errors = sum(r["stage"] == "error" for r in rows)
-            print(f"   {len(robot.spheres)} spheres; mesh certificate "
-                  f"{'on' if getattr(robot, 'collision_pieces', None) is not None else 'off'}: "
-                  f"{mesh_s:.2f} s of {plan_s:.2f} s planning ({100 * mesh_s / max(plan_s, 1e-9):.1f} %)"
-                  f"; planner errors (e.g. endpoints refused) {errors}")
-            result["rows"] += rows
-            summary.append({"planner": "jwarp", "device": dev, "margin": m,
-                            "total_wall_s": total, "per_family": per, **per["all"]})
-            print()
+            all_rows, total = run_jwarp(robot, urdf, spheres, probs, m, args, dev)
+            result["rows"] += all_rows
+            for vname, _ in variants(args):
+                rows = [r for r in all_rows if r["variant"] == vname]
+                per = report_jwarp(rows, families, robot, dev, gpu, m, len(probs), total,
+                                   args, vname)
+                summary.append({"planner": "jwarp" + (f" [{vname}]" if vname else ""),
+                                "device": dev, "margin": m, "total_wall_s": total,
+                                "per_family": per, **per["all"]})
+                print()
     if isinstance(mods, tuple):
         for m in margins:
             rows = run_ompl(mods, robot, urdf, spheres, probs, m, args)

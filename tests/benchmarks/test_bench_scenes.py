@@ -36,3 +36,19 @@ def test_bench_scenes_quick(run_bench):
         assert s["median_s"] <= s["p95_s"] <= s["max_s"]
         if s["solved"] and s["planner"] == "jwarp":
             assert 1.0 - 1e-6 <= s["median_length_ratio"] <= s["p95_length_ratio"]
+
+
+def test_versus_variants_are_parsed():
+    """``--versus "a=1;b=null"``: the plain options first, then each variant's fields."""
+    import argparse
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    import bench_scenes
+
+    args = argparse.Namespace(versus=["via_ik=0", "via_ik=2;via_frame=\"tcp\""], option=None)
+    assert bench_scenes.variants(args) == [
+        ("", {}), ("via_ik=0", {"via_ik": 0}),
+        ('via_ik=2;via_frame="tcp"', {"via_ik": 2, "via_frame": "tcp"})]
+    assert bench_scenes.variants(argparse.Namespace(versus=None, option=None)) == [("", {})]

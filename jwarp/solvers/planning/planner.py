@@ -170,6 +170,8 @@ class Planner:
         if not o.allow_no_collision:
             check_collision_model(self.robot, need_spheres=True, what="planning",
                                   device=self.device)
+        if o.via_ik > 0 and o.via_frame is not None:  # a frame of this robot
+            self.robot.frame_index(o.via_frame, "via_frame")
         self.options = o
         #: gather the candidates and keep the final paths with kernels (on a GPU); on the
         #: CPU the host indexes the device arrays in place (the same numbers, no launches)
@@ -328,6 +330,10 @@ class Planner:
                          o.n_waypoints, o.seed, self.world, o.free_via, device=dev,
                          name=seeds_name)  # (B, n_starts, W, n)
         B, n_starts, W = Q.shape[:3]
+        if seeds is None and o.via_ik > 0 and (line is None or not line.all()):
+            t_via = time.perf_counter()
+            if self._ik_starts(Q, q0, q1, None if line is None else line_paths, line):
+                timings["via_ik"] = time.perf_counter() - t_via
         P = B * n_starts
         Qf = Q.reshape(P, W, model.n_dof)
         n_sub = self._substeps(Qf)
@@ -432,6 +438,37 @@ class Planner:
         if getattr(model, "collision_pieces", None) is not None:  # the certificate's share
             res.timings["mesh_check"] = self._mesh_seconds() - mesh_s0
         return res
+
+    def _ik_starts(self, Q: np.ndarray, q0: np.ndarray, q1: np.ndarray,
+                   line_paths: np.ndarray | None, line: np.ndarray | None) -> bool:
+        """:attr:`PlanOptions.via_ik`: the last random starts of the problems whose straight
+        line is not proven replaced (in place, ``Q`` (B, n_starts, W, n_dof)) by paths
+        through collision-free IK via points (:mod:`jwarp.solvers.planning.via_ik`).
+        ``line``: which lines the straight stage proved, with their paths; None (no
+        straight stage): the lines are checked here (the spheres, the planner's check).
+        Returns whether the IK ran (a robot of a 3-D workspace, one world, the rigid
+        model)."""
+        o = self.options
+        n_starts = Q.shape[1]
+        k = min(int(o.via_ik), n_starts - 1) if o.start_kind == "mixed" else 0
+        if k <= 0 or self.batched or o.kappa is not None or self.robot.workspace_dim != 3:
+            return False
+        if line is None or line_paths is None:
+            line_paths, _, line, _, _ = self._straight(q0, q1)
+            if line.all():
+                return False
+        from jwarp.solvers.planning.via_ik import ik_via_paths
+
+        bad = np.nonzero(~line)[0]
+        V, count = ik_via_paths(self.robot, self.world, q0[bad], q1[bad], line_paths[bad], k,
+                                Q.shape[2], frame=o.via_frame, margin=o.margin,
+                                self_margin=o.self_margin, device=self.device, dtype=self.npdt,
+                                seed=o.seed)
+        for i, b in enumerate(bad):
+            c = int(count[i])
+            if c:
+                Q[b, n_starts - c:] = V[i, :c]
+        return True
 
     def _substeps(self, Qf: np.ndarray) -> int:
         """The cost's substeps per segment for the paths ``Qf`` (P, W, n_dof):

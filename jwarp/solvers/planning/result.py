@@ -71,7 +71,8 @@ class PlanResult:
     the multi-starts: its ``start_index`` is -1, its ``iterations`` those of the seeded
     optimisation (0: the RRT path itself, certified as it is); ``n_feasible``, ``all_*``
     stay the multi-starts'. ``fallback_notes``: what the fallback did. ``timings`` [s]:
-    "optimizer" (the multi-starts) and, where it ran, "rrt", "fallback_optimizer" and
+    "optimizer" (the multi-starts) and, where it ran, "via_ik" (the IK via points of
+    :attr:`PlanOptions.via_ik`, inside "optimizer"), "rrt", "fallback_optimizer" and
     "shorten"; for a robot with collision pieces "mesh_check" (the mesh certificate's
     share, :mod:`jwarp.world.mesh_check`). ``length_before``: the length cost before the shortening
     (:attr:`PlanOptions.shorten`).
