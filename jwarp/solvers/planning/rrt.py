@@ -553,8 +553,9 @@ class _BatchChecks:
 
     def __init__(self, model: Any, world: Any, margin: float, em: float | None,
                  self_margin: float, meshes: np.ndarray, roots: np.ndarray,
-                 device: DeviceLike) -> None:
+                 device: DeviceLike, slot: np.ndarray) -> None:
         self.model, self.world, self.margin, self.em = model, world, margin, em
+        self.slot = slot  # problem b's world of the batch
         self.self_margin, self.meshes, self.roots, self.device = (self_margin, meshes, roots,
                                                                  device)
         self.multi = world.n_worlds > 1
@@ -563,13 +564,14 @@ class _BatchChecks:
         self.calls = {"states": 0, "edges": 0}
 
     def _layout(self, blocks: dict[int, np.ndarray]) -> tuple[np.ndarray, int]:
-        """(rows (sum k_b,), G) of the blocks in order: problem b's rows b G .. b G + k_b
-        of the padded array (one world: the blocks one after another, G = 0)."""
+        """(rows (sum k_b,), G) of the blocks in order: problem b's rows w G .. w G + k_b
+        of the padded array, w its world (one world: the blocks one after another, G =
+        0)."""
         sizes = {b: len(x) for b, x in blocks.items()}
         if not self.multi:
             return np.arange(sum(sizes.values())), 0
         G = max(max(sizes.values()), 1)
-        rows = np.concatenate([b * G + np.arange(k) for b, k in sizes.items()])
+        rows = np.concatenate([self.slot[b] * G + np.arange(k) for b, k in sizes.items()])
         return rows, G
 
     def states(self, blocks: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
@@ -579,24 +581,28 @@ class _BatchChecks:
         out = {b: within_limits(self.model, q) for b, q in blocks.items()}
         todo = {b: q[out[b]] for b, q in blocks.items() if out[b].any()}
         if todo:
-            rows, G = self._layout(todo)
-            n = self.model.n_dof
-            if self.multi:
-                nb = max(todo) + 1
-                q = np.repeat(self.roots[:nb, 0], G, axis=0)
-            else:
-                q = np.empty((len(rows), n))
-            q[rows] = np.concatenate(list(todo.values()))
-            free = _fz.collision_free(self.model, self.world, q, self.margin,
-                                      device=self.device,
-                                      self_margin=min(self.self_margin, self.margin),
-                                      per_world=G, meshes=False)[rows]
-            at = 0
-            for b, x in todo.items():
-                out[b][out[b]] = free[at:at + len(x)]
-                at += len(x)
+            free = self.free(todo, self.margin, meshes=False)
+            for b in todo:
+                out[b][out[b]] = free[b]
             self.calls["states"] += 1
         self.time["states"] += time.perf_counter() - t
+        return out
+
+    def free(self, blocks: dict[int, np.ndarray], margin: float, meshes: bool
+             ) -> dict[int, np.ndarray]:
+        """Per problem its configurations free at ``margin`` (``collision_free``, one call;
+        the padding rows of a batch of worlds are the first problem's start)."""
+        rows, G = self._layout(blocks)
+        q = np.empty((int(rows.max()) + 1, self.model.n_dof))
+        q[:] = self.roots[next(iter(blocks)), 0]
+        q[rows] = np.concatenate(list(blocks.values()))
+        free = _fz.collision_free(self.model, self.world, q, margin, device=self.device,
+                                  self_margin=min(self.self_margin, margin),
+                                  per_world=G, meshes=meshes)[rows]
+        out, at = {}, 0
+        for b, x in blocks.items():
+            out[b] = free[at:at + len(x)]
+            at += len(x)
         return out
 
     def _root(self, b: int, q: np.ndarray) -> np.ndarray:
@@ -680,7 +686,8 @@ def rrt_connect_batch(robot: RobotLike, world: Any, starts: Any, goals: Any,
                       options: RRTOptions | None = None, *, margin: float = 0.0,
                       endpoint_margin: float | None = None, self_margin: float = 0.0,
                       kappa: Any = None, device: DeviceLike = None,
-                      deadline: float | None = None, meshes: Any = True) -> list[RRTResult]:
+                      deadline: float | None = None, meshes: Any = True,
+                      world_index: Any = None) -> list[RRTResult]:
     """RRT-Connect (:func:`rrt_connect`) for a batch of problems at once: problem b from
     ``starts[b]`` to ``goals[b]`` (B, n_dof) in world b of a batch of worlds
     (:meth:`jwarp.world.sdf.World.batch`, B worlds) or all in one world. Every round
@@ -693,7 +700,9 @@ def rrt_connect_batch(robot: RobotLike, world: Any, starts: Any, goals: Any,
     (:func:`problem_rngs`), so its result does not depend on the others. The elastic
     model (``kappa``) runs :func:`rrt_connect` per problem.
 
-    Args: as :func:`rrt_connect`; ``meshes`` a bool or (B,) bools, one per problem.
+    Args: as :func:`rrt_connect`; ``meshes`` a bool or (B,) bools, one per problem;
+    ``world_index`` (B,) distinct ints: problem b in world ``world_index[b]`` of a batch
+    of worlds (None: world b; a planner's unsolved problems in its own batch world).
 
     Returns:
         B :class:`RRTResult` (``timings`` the batch's, shared; ``wall_time`` until the
@@ -715,9 +724,20 @@ def rrt_connect_batch(robot: RobotLike, world: Any, starts: Any, goals: Any,
     if q1.shape != q0.shape:
         raise ValueError(f"goals: expected shape {q0.shape} (one per start), got {q1.shape}")
     B = len(q0)
-    if world.n_worlds not in (1, B):
-        raise ValueError(f"world: a batch of {world.n_worlds} worlds for {B} problems "
-                         f"(expected one world or {B})")
+    nw = world.n_worlds
+    if world_index is None:
+        if nw not in (1, B):
+            raise ValueError(f"world: a batch of {nw} worlds for {B} problems (expected one "
+                             f"world or {B}, or a world_index)")
+        slot = np.arange(B) if nw > 1 else np.zeros(B, np.int64)
+    else:
+        slot = np.asarray(world_index)
+        if slot.shape != (B,) or not np.issubdtype(slot.dtype, np.integer) or (
+                nw > 1 and (slot.min() < 0 or slot.max() >= nw
+                            or len(np.unique(slot)) != B)):
+            raise ValueError(f"world_index: expected ({B},) distinct worlds in [0, {nw}), "
+                             f"got {np.asarray(world_index)!r}")
+        slot = slot.astype(np.int64) if nw > 1 else np.zeros(B, np.int64)
     mesh = np.asarray(meshes)
     if mesh.ndim == 0:
         mesh = np.full(B, bool(mesh))
@@ -726,7 +746,7 @@ def rrt_connect_batch(robot: RobotLike, world: Any, starts: Any, goals: Any,
     mesh = mesh.astype(bool)
     rngs = problem_rngs(o.seed, B)
     if kappa is not None:
-        return [rrt_connect(model, world.select(b), q0[b], q1[b], replace(o, seed=rngs[b]),
+        return [rrt_connect(model, world.select(int(slot[b])), q0[b], q1[b], replace(o, seed=rngs[b]),
                             margin=margin, kappa=kappa, device=device, deadline=deadline,
                             endpoint_margin=endpoint_margin, self_margin=self_margin,
                             meshes=bool(mesh[b])) for b in range(B)]
@@ -738,7 +758,7 @@ def rrt_connect_batch(robot: RobotLike, world: Any, starts: Any, goals: Any,
     if endpoint_margin is not None and float(endpoint_margin) < m:
         em = float(endpoint_margin)
     chk = _BatchChecks(model, world, m, em, float(self_margin), mesh, np.stack([q0, q1], 1),
-                       device)
+                       device, slot)
     _check_roots(model, world, chk, q0, q1, device)
     step = float(o.step)
     probs = [_Problem(b, q0[b], q1[b], rngs[b]) for b in range(B)]
@@ -785,13 +805,12 @@ def _check_roots(model: Any, world: Any, chk: _BatchChecks, q0: np.ndarray, q1: 
     B = len(q0)
     q = np.stack([q0, q1], 1).reshape(-1, model.n_dof)
     lim = within_limits(model, q)
-    free = _fz.collision_free(model, world, q, mr, device=device,
-                              self_margin=min(chk.self_margin, mr),
-                              per_world=2 if chk.multi else 0, meshes=False) & lim
+    got = chk.free({b: q[2 * b:2 * b + 2] for b in range(B)}, mr, meshes=False)
+    free = np.concatenate([got[b] for b in range(B)]) & lim
     for r in np.nonzero(~free & lim & np.repeat(chk.meshes, 2))[0]:
-        free[r] = _fz.collision_free(model, world.select(int(r // 2)), q[r:r + 1], mr,
-                                     device=device, self_margin=min(chk.self_margin, mr),
-                                     meshes=True)[0]
+        w = world.select(int(chk.slot[r // 2]))
+        free[r] = _fz.collision_free(model, w, q[r:r + 1], mr, device=device,
+                                     self_margin=min(chk.self_margin, mr), meshes=True)[0]
     for r in range(2 * B):
         if not free[r]:
             name = ("starts", "goals")[r % 2]
@@ -909,7 +928,7 @@ def _verify_batch(model: Any, world: Any, found: list[_Problem], chk: _BatchChec
     for p in found:
         if p.path is None or ok[p.b].all():
             continue
-        one = _Checks(model, world.select(p.b), margin, None, device, None, endpoint_margin,
+        one = _Checks(model, world.select(int(chk.slot[p.b])), margin, None, device, None, endpoint_margin,
                       np.stack([p.q0, p.q1]), self_margin=self_margin, meshes=bool(mesh[p.b]))
         p.path = _verify(p.path, one, step)
         if p.path is None:
