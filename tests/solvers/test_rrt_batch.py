@@ -4,6 +4,7 @@ same generators, determinism, one world for all, bad shapes, and the planner's f
 
 import numpy as np
 import pytest
+from worlds import block_world_2d
 
 import jwarp
 from jwarp.solvers import planning as PL
@@ -11,8 +12,6 @@ from jwarp.solvers.planning import rrt as R
 from jwarp.world import World
 from jwarp.world import path_feasibility as FZ
 from jwarp.world.collision import min_distances
-
-from worlds import block_world_2d
 
 S4 = np.array([1.2, 0.0, 0.0, 0.0])
 G4 = np.array([-1.2, 0.0, 0.0, 0.0])
