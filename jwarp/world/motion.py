@@ -635,7 +635,8 @@ class MotionCheck:
     def check(self, paths: Any, *, margin: float = 0.0,
               endpoint_margin: float | None = None, self_margin: float = 0.0,
               world_group: int = 0, group: int = 0,
-              meshes: bool | np.ndarray | None = None) -> PathCheck:
+              meshes: bool | np.ndarray | None = None,
+              rows: np.ndarray | None = None) -> PathCheck:
         """Check ``paths`` (W, n_dof) or (P, W, n_dof) (numpy or Warp; rad or m) with
         ``margin`` [m] (>= 0) from the world, ``self_margin`` [m] between the robot's own
         spheres and ``endpoint_margin`` (None: = margin) on the first and last segment.
@@ -644,8 +645,11 @@ class MotionCheck:
         paths are checked in order, so the first feasible path of each group is the one
         proven; on a GPU a later one may be). ``world_group``: as :meth:`launch`.
         ``meshes``: what the spheres leave unproven goes to :meth:`mesh_recheck` (None:
-        ``options.meshes``; a (P,) bool array: of those paths only).
-        Returns a :class:`PathCheck` (P results; one for a single path)."""
+        ``options.meshes``; a (P,) bool array: of those paths only). ``rows`` (K,) ints:
+        check only the paths ``paths[rows]`` (the others are not read: a batch of worlds'
+        blocks of ``world_group`` paths need not be full), their results in that order.
+        Returns a :class:`PathCheck` (P results, or K with ``rows``; one for a single
+        path)."""
         margin = _check_margin(margin, "margin")
         self_margin = _check_margin(self_margin, "self_margin")
         if endpoint_margin is not None:
@@ -666,15 +670,23 @@ class MotionCheck:
                 raise ValueError("paths: contains NaN or inf")
             p = wp.array(np.ascontiguousarray(a, np.float64), dtype=wp.float64,
                          device=self.device)
-        K = p.shape[0]
-        idx: wp.array = wp.array(np.arange(K, dtype=np.int32), dtype=wp.int32, device=self.device)
+        if rows is None:
+            sel = np.arange(p.shape[0])
+        else:
+            sel = np.asarray(rows)
+            if sel.ndim != 1 or not np.issubdtype(sel.dtype, np.integer) or (
+                    len(sel) and (sel.min() < 0 or sel.max() >= p.shape[0])):
+                raise ValueError(f"rows: expected (K,) integers in [0, {p.shape[0]}), got "
+                                 f"{np.shape(rows)} {sel.dtype}")
+        K = len(sel)
+        idx: wp.array = wp.array(sel.astype(np.int32), dtype=wp.int32, device=self.device)
         check_int(group, "group", 0)
         out = self.launch(p, idx, K, margin=margin, endpoint_margin=endpoint_margin,
                           self_margin=self_margin, world_group=world_group, group=int(group))
         ok = out["ok"].numpy()[:K].astype(bool)
         code = out["code"].numpy()[:K]
         dist = out["dist"].numpy()[:K]
-        rows = np.arange(K)
+        rows = sel
         if meshes is not None and np.ndim(meshes) == 1:
             allow = np.asarray(meshes, bool)
             if allow.shape != (K,):

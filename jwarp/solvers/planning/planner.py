@@ -895,11 +895,18 @@ class Planner:
                           all_iterations=it, paths_source=wp.clone(buf.final))
 
 
+#: :func:`_fallback` runs the trees of more than one unsolved problem (rigid model) at once
+#: (:func:`jwarp.solvers.planning.rrt.rrt_connect_batch`); False: one problem after another
+FALLBACK_BATCH = True
+
+
 def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray, t0: float,
               deadline: float | None) -> None:
     """:attr:`PlanOptions.fallback` for the problems of ``res`` without a feasible path:
     RRT-Connect (:func:`jwarp.solvers.planning.rrt.rrt_connect`, with the planner's margins, kappa
-    and device) for each in turn, each path found resampled to the W waypoints
+    and device) for each in turn (more than one on the rigid model: all at once,
+    :func:`jwarp.solvers.planning.rrt.rrt_connect_batch`, each from its own generator
+    drawn from ``rrt.seed``), each path found resampled to the W waypoints
     (:func:`jwarp.solvers.planning.rrt.resample_path`: its nodes kept where it has at most W) as
     the one seed of a gradient optimisation of the same options (no fallback,
     ``stop_when_solved``) of all of them at once. On the rigid model that optimisation's
@@ -923,17 +930,29 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
     notes = res.fallback_notes = np.full(len(res.feasible), "", dtype=object)
     found, seeds, nodes = [], [], []
     timed_out = False
-    for b in np.nonzero(~res.feasible)[0]:
-        if rrt_stop is not None and time.perf_counter() >= rrt_stop:
+    todo = np.nonzero(~res.feasible)[0]
+    need = getattr(planner, "_mesh_need", None)
+    batch = None  # more than one problem (rigid): all their trees at once, in one batch
+    if len(todo) > 1 and o.kappa is None and FALLBACK_BATCH and (
+            rrt_stop is None or time.perf_counter() < rrt_stop):
+        from jwarp.solvers.planning.rrt import rrt_connect_batch
+
+        batch = rrt_connect_batch(
+            planner.robot, planner.world, q0[todo], q1[todo], ropt, margin=o.margin,
+            device=planner.device, deadline=rrt_stop, endpoint_margin=o.endpoint_margin,
+            self_margin=o.self_margin,
+            meshes=True if need is None else np.asarray(need, bool)[todo],
+            world_index=todo if planner.batched else None)
+    for i, b in enumerate(todo):
+        if batch is None and rrt_stop is not None and time.perf_counter() >= rrt_stop:
             timed_out = True
             notes[b] = "RRT-Connect not run: no time left"
             continue
-        need = getattr(planner, "_mesh_need", None)
-        r = rrt_connect(planner.robot, planner.world.select(int(b)), q0[b], q1[b], ropt,
-                        margin=o.margin,
-                        kappa=o.kappa, device=planner.device, deadline=rrt_stop,
-                        endpoint_margin=o.endpoint_margin, self_margin=o.self_margin,
-                        meshes=True if need is None else bool(need[b]))
+        r = batch[i] if batch is not None else rrt_connect(
+            planner.robot, planner.world.select(int(b)), q0[b], q1[b], ropt,
+            margin=o.margin, kappa=o.kappa, device=planner.device, deadline=rrt_stop,
+            endpoint_margin=o.endpoint_margin, self_margin=o.self_margin,
+            meshes=True if need is None else bool(need[b]))
         if r.success:
             found.append(int(b))
             seeds.append(resample_path(r.path, W))

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -405,6 +405,14 @@ def _connect(B: _Tree, targets: np.ndarray, target_ids: np.ndarray, chk: _Checks
     its nearest node cut into edges of at most ``step``, all checked in one batch; the
     longest feasible prefix of each is added to B. Returns (target id, B node) of a
     complete connection (the shortest one), else None."""
+    prep = _connect_edges(B, targets, target_ids, step, limit)
+    return _connect_grow(B, prep, chk.edges(prep[-2], prep[-1]))
+
+
+def _connect_edges(B: _Tree, targets: np.ndarray, target_ids: np.ndarray, step: float,
+                   limit: int) -> tuple:
+    """The edges of :func:`_connect` (its first half): ``(target_ids, near, dist, m, ea,
+    eb)``, the edges ``ea -> eb`` to check."""
     near = B.nearest(targets)
     qb = B.q[near]
     dist = np.linalg.norm(targets - qb, axis=1)
@@ -420,7 +428,13 @@ def _connect(B: _Tree, targets: np.ndarray, target_ids: np.ndarray, chk: _Checks
     d = (targets - qb)[rows]
     ea, eb = qb[rows] + frac0 * d, qb[rows] + frac1 * d
     eb[k + 1 == m[rows]] = targets[rows[k + 1 == m[rows]]]
-    ok = chk.edges(ea, eb)
+    return target_ids, near, dist, m, ea, eb
+
+
+def _connect_grow(B: _Tree, prep: tuple, ok: np.ndarray) -> tuple[int, int] | None:
+    """The second half of :func:`_connect`: the edges of :func:`_connect_edges` ``prep``
+    checked (``ok``), the feasible prefixes added to B; the connection, else None."""
+    target_ids, near, dist, m, _, eb = prep
     best = None
     start = 0
     for i, mi in enumerate(m):
@@ -452,34 +466,49 @@ def shortcut(path: np.ndarray, chk: Any, step: float, iterations: int, batch: in
     path = np.array(path, np.float64)
     tried = 0
     while tried < iterations and len(path) > 2 and time.perf_counter() < stop_at:
-        k = len(path)
         K = min(batch, iterations - tried)
         tried += K
-        i = rng.integers(0, k - 2, size=K)
-        j = i + 2 + np.floor(rng.random(K) * (k - i - 2)).astype(np.int64)
-        pairs = np.unique(np.stack([i, j], 1), axis=0)
-        pairs = pairs[pairs[:, 1] > pairs[:, 0] + 1]
-        if not len(pairs):
-            continue
-        seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
-        direct = np.linalg.norm(path[pairs[:, 1]] - path[pairs[:, 0]], axis=1)
-        gain = cum[pairs[:, 1]] - cum[pairs[:, 0]] - direct
-        pairs, gain = pairs[gain > 1e-9], gain[gain > 1e-9]
+        pairs, gain = _shortcut_pairs(path, K, rng)
         if not len(pairs):
             continue
         ok = chk.paths(_split(path[pairs[:, 0]], path[pairs[:, 1]], step))
-        pairs, gain = pairs[ok], gain[ok]
-        drop = np.zeros(k, bool)
-        used = np.zeros(k - 1, bool)  # segments replaced by an applied shortcut
-        for p in np.argsort(-gain):
-            a, b = pairs[p]
-            if used[a:b].any():
-                continue
-            used[a:b] = True
-            drop[a + 1:b] = True
-        path = path[~drop]
+        path = _shortcut_apply(path, pairs, gain, ok)
     return path
+
+
+def _shortcut_pairs(path: np.ndarray, K: int, rng: np.random.Generator
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """K random node pairs (i, j > i + 1) of ``path`` that would shorten it: the distinct
+    ones, (P, 2), and their savings (P,)."""
+    k = len(path)
+    i = rng.integers(0, k - 2, size=K)
+    j = i + 2 + np.floor(rng.random(K) * (k - i - 2)).astype(np.int64)
+    pairs = np.unique(np.stack([i, j], 1), axis=0)
+    pairs = pairs[pairs[:, 1] > pairs[:, 0] + 1]
+    if not len(pairs):
+        return pairs, np.zeros(0)
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    direct = np.linalg.norm(path[pairs[:, 1]] - path[pairs[:, 0]], axis=1)
+    gain = cum[pairs[:, 1]] - cum[pairs[:, 0]] - direct
+    return pairs[gain > 1e-9], gain[gain > 1e-9]
+
+
+def _shortcut_apply(path: np.ndarray, pairs: np.ndarray, gain: np.ndarray, ok: np.ndarray
+                    ) -> np.ndarray:
+    """``path`` with the feasible (``ok``) shortcuts ``pairs`` that do not overlap applied,
+    the longest saving first."""
+    k = len(path)
+    pairs, gain = pairs[ok], gain[ok]
+    drop = np.zeros(k, bool)
+    used = np.zeros(k - 1, bool)  # segments replaced by an applied shortcut
+    for p in np.argsort(-gain):
+        a, b = pairs[p]
+        if used[a:b].any():
+            continue
+        used[a:b] = True
+        drop[a + 1:b] = True
+    return path[~drop]
 
 
 def resample_path(path: np.ndarray, n_waypoints: int) -> np.ndarray:
@@ -510,3 +539,397 @@ def resample_path(path: np.ndarray, n_waypoints: int) -> np.ndarray:
     res = np.concatenate(out)
     assert len(res) == W
     return res
+
+
+# ====================================================================== a batch of problems
+class _BatchChecks:
+    """The state and edge checks of :func:`rrt_connect_batch`: every problem's
+    configurations (edges) of a round in one call. With a batch of worlds
+    (:meth:`jwarp.world.sdf.World.batch`, problem b in world b) problem b's block is
+    rows ``b G .. b G + k_b`` of a padded array (G the largest block): the configurations
+    through ``collision_free(per_world=G)`` (short blocks padded with the problem's start),
+    the edges through the continuous check's ``world_group=G`` and ``rows`` (only the
+    blocks' edges are read: no padding checked). Rigid model only."""
+
+    def __init__(self, model: Any, world: Any, margin: float, em: float | None,
+                 self_margin: float, meshes: np.ndarray, roots: np.ndarray,
+                 device: DeviceLike, slot: np.ndarray) -> None:
+        self.model, self.world, self.margin, self.em = model, world, margin, em
+        self.slot = slot  # problem b's world of the batch
+        self.self_margin, self.meshes, self.roots, self.device = (self_margin, meshes, roots,
+                                                                 device)
+        self.multi = world.n_worlds > 1
+        self.mc = _fz.certify_check(model, world, device=device)
+        self.time = {"states": 0.0, "edges": 0.0}
+        self.calls = {"states": 0, "edges": 0}
+
+    def _layout(self, blocks: dict[int, np.ndarray]) -> tuple[np.ndarray, int]:
+        """(rows (sum k_b,), G) of the blocks in order: problem b's rows w G .. w G + k_b
+        of the padded array, w its world (one world: the blocks one after another, G =
+        0)."""
+        sizes = {b: len(x) for b, x in blocks.items()}
+        if not self.multi:
+            return np.arange(sum(sizes.values())), 0
+        G = max(max(sizes.values()), 1)
+        rows = np.concatenate([self.slot[b] * G + np.arange(k) for b, k in sizes.items()])
+        return rows, G
+
+    def states(self, blocks: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+        """Per problem (N_b,) bool: its configurations (N_b, n) within the limits and free
+        at ``margin`` (the spheres alone: the nodes between start and goal)."""
+        t = time.perf_counter()
+        out = {b: within_limits(self.model, q) for b, q in blocks.items()}
+        todo = {b: q[out[b]] for b, q in blocks.items() if out[b].any()}
+        if todo:
+            free = self.free(todo, self.margin, meshes=False)
+            for b in todo:
+                out[b][out[b]] = free[b]
+            self.calls["states"] += 1
+        self.time["states"] += time.perf_counter() - t
+        return out
+
+    def free(self, blocks: dict[int, np.ndarray], margin: float, meshes: bool
+             ) -> dict[int, np.ndarray]:
+        """Per problem its configurations free at ``margin`` (``collision_free``, one call;
+        the padding rows of a batch of worlds are the first problem's start)."""
+        rows, G = self._layout(blocks)
+        q = np.empty((int(rows.max()) + 1, self.model.n_dof))
+        q[:] = self.roots[next(iter(blocks)), 0]
+        q[rows] = np.concatenate(list(blocks.values()))
+        free = _fz.collision_free(self.model, self.world, q, margin, device=self.device,
+                                  self_margin=min(self.self_margin, margin),
+                                  per_world=G, meshes=meshes)[rows]
+        out, at = {}, 0
+        for b, x in blocks.items():
+            out[b] = free[at:at + len(x)]
+            at += len(x)
+        return out
+
+    def _root(self, b: int, q: np.ndarray) -> np.ndarray:
+        return np.any(np.all(q[:, None] == self.roots[b][None], axis=-1), axis=1)
+
+    def edges(self, items: dict[int, tuple[np.ndarray, np.ndarray]]) -> dict[int, np.ndarray]:
+        """Per problem (E_b,) bool: its edges ``a -> b`` (E_b, n) each feasible (the
+        continuous check), those at its start or goal at ``endpoint_margin`` (the mesh
+        certificate allowed there where the problem allows it), the others at ``margin``
+        (the spheres alone)."""
+        t = time.perf_counter()
+        out = {b: np.zeros(len(a), bool) for b, (a, _) in items.items()}
+        end = {b: self._root(b, a) | self._root(b, e) for b, (a, e) in items.items()}
+        if self.em is None:  # one call: every edge at margin
+            self._check(items, {b: np.ones(len(a), bool) for b, (a, _) in items.items()},
+                        end, None, out)
+        else:
+            self._check(items, {b: ~e for b, e in end.items()}, end, None, out)
+            self._check(items, end, end, self.em, out)
+        self.time["edges"] += time.perf_counter() - t
+        return out
+
+    def _check(self, items: dict, sel: dict, end: dict, em: float | None, out: dict) -> None:
+        blocks = {b: np.stack([a[sel[b]], e[sel[b]]], axis=1) for b, (a, e) in items.items()
+                  if sel[b].any()}
+        if not blocks:
+            return
+        rows, G = self._layout(blocks)
+        n = self.model.n_dof
+        P = np.zeros((int(rows.max()) + 1 if self.multi else len(rows), 2, n))
+        P[rows] = np.concatenate(list(blocks.values()))
+        mesh = np.concatenate([end[b][sel[b]] & self.meshes[b] for b in blocks])
+        res = self.mc.check(P, margin=self.margin, endpoint_margin=em,
+                            self_margin=self.self_margin, world_group=G, meshes=mesh,
+                            rows=rows)
+        ok = np.asarray(res.ok, bool)
+        at = 0
+        for b, x in blocks.items():
+            out[b][sel[b]] = ok[at:at + len(x)]
+            at += len(x)
+        self.calls["edges"] += 1
+
+
+class _Problem:
+    """One problem's search state in :func:`rrt_connect_batch`."""
+
+    def __init__(self, b: int, q0: np.ndarray, q1: np.ndarray, rng: np.random.Generator
+                 ) -> None:
+        self.b, self.q0, self.q1, self.rng = b, q0, q1, rng
+        self.trees = [_Tree(q0), _Tree(q1)]
+        self.a = 0
+        self.samples = 0
+        self.path: np.ndarray | None = None
+        self.raw = 0
+        self.reason = "max_samples"
+        self.done = False
+        self.t_end = 0.0
+        self.tried = 0  # shortcut pairs tried
+        self.straight = False  # solved by the straight line
+
+
+def _problem_rows(x: Any, n: int, name: str) -> np.ndarray:
+    a = real_array(x, name)
+    if a.ndim != 2 or a.shape[1] != n or not len(a):
+        raise ValueError(f"{name}: expected shape (B >= 1, {n}), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: contains NaN or inf")
+    return np.array(a, np.float64)
+
+
+def problem_rngs(seed: Any, B: int) -> list[np.random.Generator]:
+    """One generator per problem of a batch from ``RRTOptions.seed``: a Generator draws
+    the children's seeds; an integer, a SeedSequence or None spawns B children."""
+    if isinstance(seed, np.random.Generator):
+        return [np.random.default_rng(int(s)) for s in seed.integers(0, 2**63 - 1, size=B)]
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    return [np.random.default_rng(c) for c in ss.spawn(B)]
+
+
+def rrt_connect_batch(robot: RobotLike, world: Any, starts: Any, goals: Any,
+                      options: RRTOptions | None = None, *, margin: float = 0.0,
+                      endpoint_margin: float | None = None, self_margin: float = 0.0,
+                      kappa: Any = None, device: DeviceLike = None,
+                      deadline: float | None = None, meshes: Any = True,
+                      world_index: Any = None) -> list[RRTResult]:
+    """RRT-Connect (:func:`rrt_connect`) for a batch of problems at once: problem b from
+    ``starts[b]`` to ``goals[b]`` (B, n_dof) in world b of a batch of worlds
+    (:meth:`jwarp.world.sdf.World.batch`, B worlds) or all in one world. Every round
+    extends the trees of every problem still searching, and checks all their new states
+    in one call and all their edges in one (two with an ``endpoint_margin``: the edges at
+    a start or goal at that clearance) over the batch; a problem leaves the round once its
+    trees connect or its samples (or ``options.time_limit``, from this call's start) are
+    spent. The found paths are shortcut and verified edge by edge the same way, all
+    problems' checks in one call per round. Each problem draws from its own generator
+    (:func:`problem_rngs`), so its result does not depend on the others. The elastic
+    model (``kappa``) runs :func:`rrt_connect` per problem.
+
+    Args: as :func:`rrt_connect`; ``meshes`` a bool or (B,) bools, one per problem;
+    ``world_index`` (B,) distinct ints: problem b in world ``world_index[b]`` of a batch
+    of worlds (None: world b; a planner's unsolved problems in its own batch world).
+
+    Returns:
+        B :class:`RRTResult` (``timings`` the batch's, shared; ``wall_time`` until the
+        problem's search ended).
+
+    Raises:
+        ValueError: bad shapes (naming ``starts``, ``goals``, ``meshes`` or ``world``), a
+        start or goal outside the limits or in collision, bad options.
+    """
+    t0 = time.perf_counter()
+    o = options or RRTOptions()
+    if not isinstance(o, RRTOptions):
+        raise TypeError(f"options: expected an RRTOptions, got {type(o).__name__}")
+    o.validate()
+    model = get_robot(robot)
+    _fz.check_world(model, world)
+    n = model.n_dof
+    q0, q1 = _problem_rows(starts, n, "starts"), _problem_rows(goals, n, "goals")
+    if q1.shape != q0.shape:
+        raise ValueError(f"goals: expected shape {q0.shape} (one per start), got {q1.shape}")
+    B = len(q0)
+    nw = world.n_worlds
+    if world_index is None:
+        if nw not in (1, B):
+            raise ValueError(f"world: a batch of {nw} worlds for {B} problems (expected one "
+                             f"world or {B}, or a world_index)")
+        slot = np.arange(B) if nw > 1 else np.zeros(B, np.int64)
+    else:
+        slot = np.asarray(world_index)
+        if slot.shape != (B,) or not np.issubdtype(slot.dtype, np.integer) or (
+                nw > 1 and (slot.min() < 0 or slot.max() >= nw
+                            or len(np.unique(slot)) != B)):
+            raise ValueError(f"world_index: expected ({B},) distinct worlds in [0, {nw}), "
+                             f"got {np.asarray(world_index)!r}")
+        slot = slot.astype(np.int64) if nw > 1 else np.zeros(B, np.int64)
+    mesh = np.asarray(meshes)
+    if mesh.ndim == 0:
+        mesh = np.full(B, bool(mesh))
+    if mesh.shape != (B,):
+        raise ValueError(f"meshes: expected a bool or ({B},) bools, got shape {mesh.shape}")
+    mesh = mesh.astype(bool)
+    rngs = problem_rngs(o.seed, B)
+    if kappa is not None:
+        return [rrt_connect(model, world.select(int(slot[b])), q0[b], q1[b], replace(o, seed=rngs[b]),
+                            margin=margin, kappa=kappa, device=device, deadline=deadline,
+                            endpoint_margin=endpoint_margin, self_margin=self_margin,
+                            meshes=bool(mesh[b])) for b in range(B)]
+    stop_at = math.inf if deadline is None else float(deadline)
+    if o.time_limit is not None:
+        stop_at = min(stop_at, t0 + float(o.time_limit))
+    m = float(margin)
+    em = None
+    if endpoint_margin is not None and float(endpoint_margin) < m:
+        em = float(endpoint_margin)
+    chk = _BatchChecks(model, world, m, em, float(self_margin), mesh, np.stack([q0, q1], 1),
+                       device, slot)
+    _check_roots(model, world, chk, q0, q1, device)
+    step = float(o.step)
+    probs = [_Problem(b, q0[b], q1[b], rngs[b]) for b in range(B)]
+
+    # the straight lines first
+    lines = {b: _split(q0[b][None], q1[b][None], step)[0] for b in range(B)}
+    ok = chk.edges({b: (x[:-1], x[1:]) for b, x in lines.items()})
+    clear = [b for b in range(B) if ok[b].all()]
+    if clear:
+        direct = chk.edges({b: (q0[b][None], q1[b][None]) for b in clear})
+        for b in clear:
+            p = probs[b]
+            # the direct edge, else its pieces (checked: _verify's first split)
+            p.path = np.stack([q0[b], q1[b]]) if direct[b].all() else lines[b]
+            p.raw, p.reason, p.done, p.straight = 2, "connected", True, True
+            p.t_end = time.perf_counter()
+    active = [p for p in probs if not p.done]
+    if active:
+        _grow(model, active, chk, o, step, stop_at)
+    # shortcut and verify the trees' paths, all problems together
+    found = [p for p in probs if p.path is not None and not p.straight]
+    t = time.perf_counter()
+    _shortcut_batch(found, chk, step, o, stop_at)
+    chk.time["shortcut"] = time.perf_counter() - t
+    _verify_batch(model, world, found, chk, step, m, endpoint_margin, self_margin, mesh,
+                  device)
+    out = []
+    timings = dict(chk.time)
+    timings.update({f"{k}_calls": float(v) for k, v in chk.calls.items()})
+    for p in probs:
+        nodes = p.trees[0].n + p.trees[1].n
+        out.append(RRTResult(path=p.path, success=p.path is not None, stop_reason=p.reason,
+                             n_samples=p.samples, n_nodes=nodes, raw_nodes=p.raw,
+                             n_substeps=1, wall_time=(p.t_end or time.perf_counter()) - t0,
+                             timings=timings))
+    return out
+
+
+def _check_roots(model: Any, world: Any, chk: _BatchChecks, q0: np.ndarray, q1: np.ndarray,
+                 device: DeviceLike) -> None:
+    """ValueError naming ``starts[b]`` or ``goals[b]`` outside the limits or in collision at
+    the endpoint clearance (the mesh certificate where the problem allows it)."""
+    mr = chk.margin if chk.em is None else chk.em
+    B = len(q0)
+    q = np.stack([q0, q1], 1).reshape(-1, model.n_dof)
+    lim = within_limits(model, q)
+    got = chk.free({b: q[2 * b:2 * b + 2] for b in range(B)}, mr, meshes=False)
+    free = np.concatenate([got[b] for b in range(B)]) & lim
+    for r in np.nonzero(~free & lim & np.repeat(chk.meshes, 2))[0]:
+        w = world.select(int(chk.slot[r // 2]))
+        free[r] = _fz.collision_free(model, w, q[r:r + 1], mr, device=device,
+                                     self_margin=min(chk.self_margin, mr), meshes=True)[0]
+    for r in range(2 * B):
+        if not free[r]:
+            name = ("starts", "goals")[r % 2]
+            raise ValueError(f"{name}[{r // 2}]: outside the joint limits or in collision "
+                             f"(margin {mr:g} m)")
+
+
+def _grow(model: Any, active: list[_Problem], chk: _BatchChecks, o: RRTOptions, step: float,
+          stop_at: float) -> None:
+    """The rounds of :func:`rrt_connect` for every problem of ``active`` at once, until each
+    connected or spent its samples or the time."""
+    while active:
+        now = time.perf_counter()
+        for p in active:
+            if p.samples >= o.max_samples:
+                p.done, p.t_end = True, now
+            elif now >= stop_at:
+                p.done, p.reason, p.t_end = True, "time_limit", now
+        active = [p for p in active if not p.done]
+        if not active:
+            break
+        ext: dict[int, tuple] = {}
+        for p in active:
+            A, Bt = p.trees[p.a], p.trees[1 - p.a]
+            K = min(o.batch, o.max_samples - p.samples)
+            x = sample_within_limits(model, K, p.rng)
+            x[p.rng.random(K) < o.goal_bias] = Bt.q[0]
+            p.samples += K
+            near = A.nearest(x)
+            qn = A.q[near]
+            d = x - qn
+            dist = np.linalg.norm(d, axis=1)
+            keep = dist > 1e-12
+            new = qn + d * np.minimum(1.0, step / np.maximum(dist, 1e-300))[:, None]
+            ext[p.b] = (near, qn, new, keep)
+        states = chk.states({b: e[2][e[3]] for b, e in ext.items() if e[3].any()})
+        cand = {}
+        for b, e in ext.items():
+            keep = e[3]
+            if b in states:
+                keep[keep] = states[b]
+            sel = np.nonzero(keep)[0]
+            if len(sel):
+                cand[b] = sel
+        edge_ok = chk.edges({b: (ext[b][1][sel], ext[b][2][sel]) for b, sel in cand.items()})
+        conn: dict[int, tuple] = {}
+        byb = {p.b: p for p in active}
+        for b, sel in cand.items():
+            sel = sel[edge_ok[b]]
+            if len(sel):
+                p = byb[b]
+                near, _, new, _ = ext[b]
+                A, Bt = p.trees[p.a], p.trees[1 - p.a]
+                ids = A.add(new[sel], near[sel])
+                conn[b] = _connect_edges(Bt, A.q[ids], ids, step, o.n_connect)
+        conn_ok = chk.edges({b: (c[-2], c[-1]) for b, c in conn.items()})
+        for p in active:
+            found = None
+            if p.b in conn:
+                found = _connect_grow(p.trees[1 - p.a], conn[p.b], conn_ok[p.b])
+            if found is not None:
+                ia, ib = found
+                pa, pb = p.trees[p.a].branch(ia), p.trees[1 - p.a].branch(ib)
+                path = np.concatenate([pa, pb[::-1]])
+                if p.a == 1:
+                    path = path[::-1]
+                path[0], path[-1] = p.q0, p.q1
+                p.path, p.raw, p.reason = path, len(path), "connected"
+                p.done, p.t_end = True, time.perf_counter()
+            else:
+                p.a = 1 - p.a
+
+
+def _shortcut_batch(found: list[_Problem], chk: _BatchChecks, step: float, o: RRTOptions,
+                    stop_at: float) -> None:
+    """:func:`shortcut` of every found path at once: per round each path's pairs, all
+    their pieces (edges at ``step``) checked in one call."""
+    for p in found:
+        p.path = np.array(p.path, np.float64)
+        p.tried = 0
+    while time.perf_counter() < stop_at:
+        todo = [p for p in found if p.tried < o.shortcut_iterations and len(p.path) > 2]
+        if not todo:
+            break
+        props: dict[int, tuple] = {}
+        for p in todo:
+            assert p.path is not None
+            K = min(o.batch, o.shortcut_iterations - p.tried)
+            p.tried += K
+            pairs, gain = _shortcut_pairs(p.path, K, p.rng)
+            if len(pairs):
+                pts = _split(p.path[pairs[:, 0]], p.path[pairs[:, 1]], step)
+                props[p.b] = (pairs, gain, pts)
+        if not props:
+            continue
+        n = props[next(iter(props))][2].shape[-1]
+        ok = chk.edges({b: (v[2][:, :-1].reshape(-1, n), v[2][:, 1:].reshape(-1, n))
+                        for b, v in props.items()})
+        for p in todo:
+            if p.b in props:
+                pairs, gain, pts = props[p.b]
+                good = ok[p.b].reshape(len(pairs), -1).all(axis=1)
+                assert p.path is not None
+                p.path = _shortcut_apply(p.path, pairs, gain, good)
+
+
+def _verify_batch(model: Any, world: Any, found: list[_Problem], chk: _BatchChecks,
+                  step: float, margin: float, endpoint_margin: float | None,
+                  self_margin: float, mesh: np.ndarray, device: DeviceLike) -> None:
+    """Every found path's edges checked again, all in one call; a path with a failing
+    edge goes to :func:`_verify` on its own (``check_mismatch`` if that fails too)."""
+    if not found:
+        return
+    ok = chk.edges({p.b: (p.path[:-1], p.path[1:]) for p in found if p.path is not None})
+    for p in found:
+        if p.path is None or ok[p.b].all():
+            continue
+        one = _Checks(model, world.select(int(chk.slot[p.b])), margin, None, device, None, endpoint_margin,
+                      np.stack([p.q0, p.q1]), self_margin=self_margin, meshes=bool(mesh[p.b]))
+        p.path = _verify(p.path, one, step)
+        if p.path is None:
+            p.reason = "check_mismatch"
