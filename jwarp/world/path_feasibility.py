@@ -288,14 +288,17 @@ def _longest_arcs(robot: RobotModel, q: np.ndarray, fine: int, device: DeviceLik
 def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: str = "straight",
                   *, robot: RobotModel | None = None, n_via: tuple[int, int] = (1, 3),
                   rng: np.random.Generator | None = None, world: Any = None,
-                  device: DeviceLike = None) -> np.ndarray:
+                  device: DeviceLike = None, per_world: int = 0) -> np.ndarray:
     """Initial guesses (B, W, n_dof) from start/goal (B, n_dof).
 
     ``kind``: "straight" (the line in joint space) or "random" (1-3 random via points
     inside the robot's limits, connected linearly with start and goal; the W waypoints are
     spread evenly along the polyline's joint-space length) - thesis 3.5.1. With ``world``
-    the via points are drawn from collision-free configurations (rejection sampling on
-    ``device``, None: Warp's default device; plain random ones if none is found).
+    the via points are drawn from configurations whose spheres are collision-free
+    (rejection sampling on ``device``, None: Warp's default device; plain random ones if
+    none is found; guesses only: no mesh certificate). ``per_world`` > 0 with a batch of
+    worlds (:meth:`jwarp.world.World.batch`): row b is a problem of world
+    ``b // per_world``, and its via points are free in that world (0: in every world).
     """
     start = np.asarray(start, np.float64)
     goal = np.asarray(goal, np.float64)
@@ -312,9 +315,11 @@ def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: s
     out = np.empty((len(start), W, start.shape[1]))
     ks = rng.integers(n_via[0], n_via[1] + 1, size=len(start))
     pool = sample_within_limits(robot, int(ks.sum()), rng)
-    if world is not None:
+    if world is not None and per_world > 0 and getattr(world, "n_worlds", 1) > 1:
+        pool = _free_via_per_world(robot, world, ks, pool, rng, device, int(per_world))
+    elif world is not None:
         cand = sample_within_limits(robot, max(64, 8 * int(ks.sum())), rng)
-        free = cand[collision_free(robot, world, cand, 0.0, device=device)]
+        free = cand[collision_free(robot, world, cand, 0.0, device=device, meshes=False)]
         if len(free):
             pool = free[rng.integers(0, len(free), size=int(ks.sum()))]
     used = 0
@@ -322,6 +327,33 @@ def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: s
         k = int(ks[b])
         out[b] = polyline_path(start[b], pool[used:used + k], goal[b], W)
         used += k
+    return out
+
+
+def _free_via_per_world(robot: RobotModel, world: Any, ks: np.ndarray, pool: np.ndarray,
+                        rng: np.random.Generator, device: DeviceLike, per_world: int
+                        ) -> np.ndarray:
+    """Via points (sum ks, n_dof) for rows b of ``per_world`` problems per world of a batch:
+    each row's drawn from configurations free in its own world (one check of every
+    world's candidates; a world without a free candidate keeps ``pool``'s)."""
+    nw = int(world.n_worlds)
+    rows = len(ks)
+    if rows != nw * per_world:
+        raise ValueError(f"per_world: {rows} rows are not {nw} worlds x {per_world}")
+    owner = np.repeat(np.arange(rows) // per_world, ks)     # the world of each via point
+    need = np.bincount(owner, minlength=nw)
+    C = max(8, 8 * int(need.max(initial=0)))                # candidates per world
+    cand = sample_within_limits(robot, nw * C, rng)
+    free = np.asarray(collision_free(robot, world, cand, 0.0, device=device,
+                                     per_world=C, meshes=False), bool).reshape(nw, C)
+    n_free = free.sum(1)
+    # the k-th free candidate of world w: free rows sorted first per world
+    order = np.argsort(~free, axis=1, kind="stable")
+    pick = np.floor(rng.random(len(owner)) * np.maximum(n_free[owner], 1)).astype(np.int64)
+    out = pool.copy()
+    has = n_free[owner] > 0
+    idx = owner[has] * C + order[owner[has], pick[has]]
+    out[has] = cand[idx]
     return out
 
 

@@ -1102,9 +1102,10 @@ def _initial(model: RobotModel, q0: np.ndarray, q1: np.ndarray, initial: Any, n_
             if initial == "mixed":
                 parts.append(initial_paths(q0, q1, W, "straight")[:, None])
             if k > 0:
+                nw = getattr(world, "n_worlds", 1) if world is not None else 1
                 r = initial_paths(np.repeat(q0, k, 0), np.repeat(q1, k, 0), W, "random",
                                   robot=model, rng=rng, world=world if free_via else None,
-                                  device=device)
+                                  device=device, per_world=k if nw > 1 and nw == B else 0)
                 parts.append(r.reshape(B, k, W, n))
             return np.concatenate(parts, axis=1)
         raise ValueError(f"{name}: unknown kind '{initial}' (expected 'straight', 'random', "
