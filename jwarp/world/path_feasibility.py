@@ -322,11 +322,30 @@ def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: s
         free = cand[collision_free(robot, world, cand, 0.0, device=device, meshes=False)]
         if len(free):
             pool = free[rng.integers(0, len(free), size=int(ks.sum()))]
-    used = 0
-    for b in range(len(start)):
-        k = int(ks[b])
-        out[b] = polyline_path(start[b], pool[used:used + k], goal[b], W)
-        used += k
+    first = np.concatenate([[0], np.cumsum(ks)[:-1]])     # each row's first via point
+    for k in np.unique(ks):
+        rows = np.nonzero(ks == k)[0]
+        via = pool[first[rows, None] + np.arange(k)[None]]    # (R, k, n)
+        out[rows] = polyline_paths(start[rows], via, goal[rows], W)
+    return out
+
+
+def polyline_paths(start: np.ndarray, via: np.ndarray, goal: np.ndarray, n_waypoints: int
+                   ) -> np.ndarray:
+    """:func:`polyline_path` of many rows at once: start, goal (R, n_dof), via (R, k,
+    n_dof) -> paths (R, W, n_dof)."""
+    pts = np.concatenate([start[:, None], via, goal[:, None]], axis=1)   # (R, k + 2, n)
+    seg = np.linalg.norm(np.diff(pts, axis=1), axis=2)                  # (R, k + 1)
+    cum = np.concatenate([np.zeros((len(pts), 1)), np.cumsum(seg, axis=1)], axis=1)
+    tq = np.linspace(0.0, 1.0, n_waypoints)[None] * cum[:, -1:]          # (R, W)
+    # the segment of each waypoint: the breakpoints it has passed (interior ones)
+    idx = (tq[:, :, None] >= cum[:, None, 1:-1]).sum(axis=2)             # (R, W) in [0, k]
+    r = np.arange(len(pts))[:, None]
+    c0, length = cum[r, idx], seg[r, idx]
+    frac = np.where(length > 0, (tq - c0) / np.where(length > 0, length, 1.0), 0.0)
+    frac = np.clip(frac, 0.0, 1.0)[..., None]
+    out = pts[r, idx] + frac * (pts[r, idx + 1] - pts[r, idx])
+    out[:, 0], out[:, -1] = start, goal
     return out
 
 

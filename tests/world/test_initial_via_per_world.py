@@ -42,3 +42,21 @@ def test_via_points_free_in_their_own_world():
                           rng=np.random.default_rng(3), world=World.batch(worlds),
                           device="cpu", per_world=k)
     np.testing.assert_array_equal(paths, again)
+
+
+def test_polyline_paths_match_the_one_row_function():
+    """The vectorised polylines equal ``polyline_path`` row by row (numpy's interp),
+    degenerate rows (a zero-length segment, all points equal) included."""
+    from jwarp.world.path_feasibility import polyline_path, polyline_paths
+
+    rng = np.random.default_rng(0)
+    for k in (1, 2, 3):
+        s, g = rng.normal(size=(40, 7)), rng.normal(size=(40, 7))
+        v = rng.normal(size=(40, k, 7))
+        v[0, 0] = s[0]                    # a zero-length first segment
+        g[1], v[1] = s[1], s[1]           # every point the same
+        got = polyline_paths(s, v, g, 17)
+        want = np.stack([polyline_path(s[i], v[i], g[i], 17) for i in range(40)])
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(got[:, 0], s)
+        np.testing.assert_array_equal(got[:, -1], g)
