@@ -28,7 +28,7 @@ import time
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -43,6 +43,9 @@ from jwarp.calibration.estimate.result import CalibrationResult, error_stats, er
 from jwarp.calibration.files import Samples, Setup
 from jwarp.core.types import RobotLike
 from jwarp.model.robot import RobotModel
+
+if TYPE_CHECKING:
+    from jwarp.calibration.estimate.diagnostics import Diagnostics
 
 #: the ``notes`` key of a calibrated robot's provenance (a JSON object)
 PROVENANCE_NOTE = "calibration"
@@ -199,6 +202,7 @@ class CampaignCalibration:
         warnings: the fit's findings, the overlap and the test rows outside the range.
         unit, scale: the report unit and its factor from the measurement's unit.
         time_s: wall time of the fit [s].
+        measurement: the campaign's measurement plugin (that of ``result.params``).
     """
 
     result: CalibrationResult
@@ -220,6 +224,31 @@ class CampaignCalibration:
     unit: str
     scale: float
     time_s: float
+    measurement: Any = None
+
+    def diagnostics(self, bins: int = 5) -> Diagnostics:
+        """The residual diagnostics of the calibrated robot on the calibration rows, as
+        ``jwarp calibrate --diagnostics`` prints them
+        (:func:`~jwarp.calibration.estimate.diagnostics.residual_diagnostics` with the rows'
+        motion directions): correlation between end-effectors, residual against joint
+        angles and torques, in the measurement's unit (``to_dict(self.scale)`` and
+        ``format_diagnostics(d, self.scale, self.unit)`` report them in :attr:`unit`).
+
+        Args:
+            bins: equal-count bins of each joint value (>= 2, at most the calibration rows).
+
+        Returns:
+            :class:`~jwarp.calibration.estimate.diagnostics.Diagnostics`.
+        """
+        from jwarp.calibration.estimate.diagnostics import residual_diagnostics
+
+        if self.measurement is None:
+            raise ValueError("measurement: not recorded (a CampaignCalibration made by hand; "
+                             "calibrate_campaign records it)")
+        t = self.train
+        return residual_diagnostics(self.result.robot, self.measurement, self.result.params,
+                                    t.q, t.y, t.meta or None, bins=bins,
+                                    directions=self.directions_train)
 
 
 class _Names:
@@ -533,4 +562,4 @@ def calibrate_campaign(campaign: CampaignData, options: CampaignOptions | None =
         train_rows=train_rows, test_rows=test_rows, overlap=both,
         directions_train=dir_train, directions_test=dir_test, p_start=p_start,
         before=before, after=after, test_range=test_range, cv=cv_result, warnings=found,
-        unit=unit, scale=scale, time_s=wall)
+        unit=unit, scale=scale, time_s=wall, measurement=meas)

@@ -419,13 +419,9 @@ def _calibrate(args: argparse.Namespace, outputs: dict[str, Any]) -> int:
         summary["cv"] = cv_result.to_dict(scale, unit)
     diag = None
     if args.diagnostics:
-        from jwarp.calibration.estimate.diagnostics import (
-            format_diagnostics,
-            residual_diagnostics,
-        )
+        from jwarp.calibration.estimate.diagnostics import format_diagnostics
 
-        diag = residual_diagnostics(res.robot, meas, res.params, train.q, train.y,
-                                    train.meta or None, directions=run.directions_train)
+        diag = run.diagnostics()
         summary["diagnostics"] = diag.to_dict(scale)
     if args.json:
         print(dumps(summary, indent=1))

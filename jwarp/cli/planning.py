@@ -832,8 +832,8 @@ def cmd_free_config(args: argparse.Namespace) -> int:
                         f"{FREE_CONFIG_BATCH} configurations of '{model.name}'", "--robot")
     world = _world(args.world, model)
     kappa = _kappa(args, model)
-    from jwarp.world.collision import is_collision_free
     from jwarp.world.feasibility import random_configurations
+    from jwarp.world.path_feasibility import ELASTIC_CHECK, collision_free, elastic_equilibrium
 
     if not model.spheres and not args.no_collision:
         raise CLIError(f"--robot: '{model.name}' has no collision spheres, so nothing can be "
@@ -849,25 +849,17 @@ def cmd_free_config(args: argparse.Namespace) -> int:
         tried += k
         if model.spheres:
             try:
-                if kappa is None:
-                    ok = is_collision_free(model, q, world, args.margin, device=args.device,
-                                           dtype=np.float64)
-                else:  # the deflected robot, as plan/ik --elastic check their endpoints
-                    from jwarp.world.path_feasibility import (
-                        ELASTIC_CHECK,
-                        collision_free,
-                        elastic_equilibrium,
-                    )
-                    rho, conv = elastic_equilibrium(model, q, kappa, device=args.device)
-                    if not conv.any():
-                        c = ELASTIC_CHECK
-                        raise CLIError(f"--kappa: the elastic equilibrium converges at none of "
-                                       f"{len(q)} random configurations ({c['max_iter']} torque "
-                                       f"updates, lam {c['lam']:g}, to {c['tol']:g} rad), so "
-                                       f"no collision can be checked; lower --kappa")
-                    rho = np.where(conv[:, None, None], rho, 0.0)
-                    ok = collision_free(model, world, q, args.margin, rho=rho,
-                                        device=args.device, self_margin=args.margin) & conv
+                # the one check of plan/ik (the deflected robot with --kappa: a
+                # configuration whose equilibrium does not converge is not free)
+                ok = collision_free(model, world, q, args.margin, kappa=kappa,
+                                    device=args.device, self_margin=args.margin)
+                if kappa is not None and not ok.any() and not elastic_equilibrium(
+                        model, q, kappa, device=args.device)[1].any():
+                    c = ELASTIC_CHECK
+                    raise CLIError(f"--kappa: the elastic equilibrium converges at none of "
+                                   f"{len(q)} random configurations ({c['max_iter']} torque "
+                                   f"updates, lam {c['lam']:g}, to {c['tol']:g} rad), so "
+                                   f"no collision can be checked; lower --kappa")
             except (ValueError, TypeError) as e:
                 raise _solver_error("free-config", e) from None
         else:

@@ -96,11 +96,20 @@ def _json(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=default)
 
 
-def _robot_identity(robot: Any) -> tuple[str, str]:
-    from jwarp.core.device import content_key
-    from jwarp.plugins.registry import robot as get_robot
+def _resolve_robot(robot: Any) -> Any:
+    """The RobotModel of a name or path (the registry, where :class:`PathDB` is handed
+    the robot); anything else (a RobotModel, None) as it is."""
+    if isinstance(robot, (str, os.PathLike)):
+        from jwarp.plugins.registry import robot as get_robot
 
-    model = get_robot(robot) if isinstance(robot, (str, os.PathLike)) else robot
+        return get_robot(robot)
+    return robot
+
+
+def _robot_identity(model: Any) -> tuple[str, str]:
+    """(name, kinematics hash) of the robot (:class:`PathDB` resolves a name)."""
+    from jwarp.core.device import content_key
+
     return model.name, content_key(model)
 
 
@@ -241,13 +250,13 @@ class PathDB:
                 raise self._error(e, "opening it") from None
             if exists:
                 self.meta = self._read_meta()
-                self._check(robot, bps)
+                self._check(_resolve_robot(robot), bps)
                 try:  # a database of before the hash table: add it (read-only: later)
                     self.con.execute(HASH_TABLE)
                 except sqlite3.Error:
                     pass
             else:
-                self.meta = self._create(robot, bps)
+                self.meta = self._create(_resolve_robot(robot), bps)
         except BaseException:
             self.con.close()
             raise

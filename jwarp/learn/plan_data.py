@@ -202,9 +202,9 @@ class WorldLabels:
         return float(self.n_feasible_starts[m].sum() / self.n_starts[m].sum())
 
 
-def world_extent(robot: RobotLike) -> float:
-    """Side [m] of the Table 3.2 world of ``robot``."""
-    model = get_robot(robot)
+def world_extent(model: RobotModel) -> float:
+    """Side [m] of the Table 3.2 world of the robot ``model`` (:func:`world_for` resolves
+    a name)."""
     return float(WORLD_EXTENT.get(model.name, 1.0 if model.workspace_dim == 2 else 1.2))
 
 

@@ -19,6 +19,7 @@ import warp as wp
 from jwarp.core.arrays import device_name
 from jwarp.core.device import content_key
 from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
+from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKWeights
 from jwarp.solvers.planning import PathObjective, PathWeights
@@ -56,12 +57,13 @@ def _check(t: Any, name: str, tail: tuple) -> None:
         raise ValueError(f"{name}: contains NaN or inf")
 
 
-def path_objective(robot: RobotLike, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
+def path_objective(robot: RobotModel, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
                    *, weights: PathWeights | None = None, eps: float | None = None,
                    device: DeviceLike = None, dtype: DTypeLike = np.float32) -> PathObjective:
     """A cached :class:`PathObjective` for these sizes (rebuilt when anything differs:
-    robots count as equal by content)."""
-    model = get_robot(robot)
+    robots count as equal by content). ``robot``: the RobotModel (:func:`u_path` resolves a
+    name)."""
+    model = robot
     w = weights or PathWeights()
     key = ("path", content_key(model), id(world), n_paths, n_waypoints, n_substeps,
            (w.world, w.self, w.length), eps, device_name(device), np.dtype(dtype).name)
@@ -104,13 +106,14 @@ def u_path(paths: torch.Tensor, robot: RobotLike, world: Any, n_substeps: int, *
     return UPathFunction.apply(paths, obj)
 
 
-def ik_objective(robot: RobotLike, frame: Any, n: int, *, world: Any = None,
+def ik_objective(robot: RobotModel, frame: Any, n: int, *, world: Any = None,
                  weights: IKWeights | None = None, eps: float | None = None,
                  q_default: Any = None, device: DeviceLike = None, dtype: DTypeLike = np.float32
                  ) -> IKObjective:
     """A cached :class:`IKObjective` for this batch size (q_default is (re)set each call;
-    robots count as equal by content)."""
-    model = get_robot(robot)
+    robots count as equal by content). ``robot``: the RobotModel (:func:`u_ik` resolves a
+    name)."""
+    model = robot
     w = weights or IKWeights()
     key = ("ik", content_key(model), model.frame_index(frame), id(world), n,
            (w.position, w.rotation, w.world, w.self, w.default), eps, device_name(device),

@@ -53,6 +53,7 @@ from jwarp.learn.plan_net import (
     encode_paths,
     symmetric_bps,
 )
+from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.planning import Planner, PlanOptions
 from jwarp.utils.checks import check_int
@@ -140,13 +141,12 @@ class PlanSamples:
                            other.worlds, cost, ids, self.source)
 
 
-def sample_tasks(robot: RobotLike, world: Any, n: int, rng: np.random.Generator,
+def sample_tasks(model: RobotModel, world: Any, n: int, rng: np.random.Generator,
                  min_distance: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """``n`` random collision-free start/goal pairs (at least ``min_distance`` apart in
-    joint space, as far as the pool allows)."""
+    joint space, as far as the pool allows) of the robot ``model``."""
     from jwarp.core.limits import sample_within_limits
 
-    model = get_robot(robot)
     pool = np.empty((0, model.n_dof))
     for _ in range(50):
         q = sample_within_limits(model, max(64, 8 * n), rng)
@@ -166,13 +166,12 @@ def sample_tasks(robot: RobotLike, world: Any, n: int, rng: np.random.Generator,
     return pool[a], pool[b]
 
 
-def hard_tasks(robot: RobotLike, world: Any, n: int, rng: np.random.Generator, *,
+def hard_tasks(model: RobotModel, world: Any, n: int, rng: np.random.Generator, *,
                iterations: int = 200, n_waypoints: int = 20, n_substeps: int = 4,
                rounds: int = 20) -> tuple[np.ndarray, np.ndarray]:
     """Up to ``n`` random tasks whose straight line does not become feasible within
     ``iterations`` planner steps (the thesis' hard tasks; 3 n candidates per round, at
-    most ``rounds`` rounds)."""
-    model = get_robot(robot)
+    most ``rounds`` rounds) of the robot ``model``."""
     S, G, got = [], [], 0
     for _ in range(rounds):
         q0, q1 = sample_tasks(model, world, 3 * (n - got), rng)
@@ -375,7 +374,7 @@ def split_by_world(samples: PlanSamples, val_fraction: float = 0.1, seed: int = 
             samples.subset(np.flatnonzero(is_val)).compact())
 
 
-def path_costs(robot: RobotLike, world: Any, paths: np.ndarray, n_substeps: int = 4) -> np.ndarray:
+def path_costs(robot: RobotModel, world: Any, paths: np.ndarray, n_substeps: int = 4) -> np.ndarray:
     """U_path (eq. 3.16, the planner's weights; float32 on the CPU) of paths (P, W, n_dof)."""
     from jwarp.learn.torch_costs import path_objective
 
@@ -393,7 +392,7 @@ def _by_world(data: PlanSamples) -> list[tuple[int, np.ndarray]]:
     return [(int(w), np.flatnonzero(data.world_index == w)) for w in np.unique(data.world_index)]
 
 
-def label_costs(data: PlanSamples, robot: RobotLike, n_substeps: int = 4) -> np.ndarray:
+def label_costs(data: PlanSamples, robot: RobotModel, n_substeps: int = 4) -> np.ndarray:
     """The labels' U_path (computed once, stored in ``data.cost``)."""
     if data.cost is None:
         c = np.empty(len(data))

@@ -817,7 +817,12 @@ def is_collision_free(robot: RobotLike, q: Any, world: World | None = None, marg
     a robot that records its collision pieces (an import from a URDF) is free when the
     mesh certificate proves its URDF geometry keeps those clearances
     (:mod:`jwarp.world.mesh_check`): contained spheres reach past the meshes, and a grasp
-    pose the fingers clear by millimetres is not refused for it."""
+    pose the fingers clear by millimetres is not refused for it.
+
+    The one check of "is this configuration collision-free" in jwarp:
+    :func:`jwarp.world.path_feasibility.collision_free` (the planners', ``jwarp
+    free-config``'s: (N,) rows in float64, the elastic equilibrium with ``kappa``) calls
+    it, and the IK's mesh rescue calls its :func:`mesh_certified`."""
     margin = real_number(margin, "margin")
     if not np.isfinite(margin):
         raise ValueError(f"margin: expected a finite distance [m], got {margin}")

@@ -103,7 +103,9 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
                    self_margin: float = 0.0, per_world: int = 0,
                    meshes: bool = True) -> np.ndarray:
     """(N,) bool: q (N, n_dof) collision-free: more than ``margin`` [m] from the world and
-    more than ``self_margin`` [m] between the robot's own spheres.
+    more than ``self_margin`` [m] between the robot's own spheres. A thin call of
+    :func:`jwarp.world.collision.is_collision_free` (the one check; here in the planners'
+    argument order, float64, ``self_margin`` 0 by default) that adds the elastic model.
 
     With ``rho`` (N, n_frames, 5) the frames are those DH rows; with ``kappa`` (and no
     rho) the elastic model in its torque equilibrium (:func:`elastic_equilibrium`, to

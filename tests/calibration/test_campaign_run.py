@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -155,3 +156,25 @@ def test_load_campaign_takes_a_robot_model(campaign):
     prov = json.loads(run.robot.notes[PROVENANCE_NOTE])
     assert run.robot.name == "mine" and prov["nominal_robot"] == "justin19"
     assert prov["data_sha256"] == c.data_sha256 and prov["test_rows"] is None
+
+
+def test_diagnostics_from_python_as_the_cli(campaign, capsys):
+    d, paths = campaign
+    code, stdout, err = run(capsys, [
+        "calibrate", "--setup", paths["setup.json"], "--data", paths["samples.csv"],
+        "--free", "theta,d", "--test-rows", "30:40", "--max-nfev", "4", "--quiet", "--json",
+        "--diagnostics"])
+    assert code == 0, err
+    cli = json.loads(stdout)["diagnostics"]
+    c = load_campaign(paths["setup.json"], paths["samples.csv"])
+    lib = calibrate_campaign(c, CampaignOptions(free="theta,d", test_rows="30:40",
+                                                max_nfev=4))
+    assert lib.measurement is c.measurement
+    diag = lib.diagnostics()
+    # the calibration rows (30 of them), in the report unit as the CLI prints them
+    assert json.loads(json.dumps(diag.to_dict(lib.scale))) == cli
+    with pytest.raises(ValueError, match="bins"):
+        lib.diagnostics(bins=31)
+    hand = dataclasses.replace(lib, measurement=None)
+    with pytest.raises(ValueError, match="measurement: not recorded"):
+        hand.diagnostics()

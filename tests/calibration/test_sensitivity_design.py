@@ -259,6 +259,44 @@ def test_candidate_jacobians_batches(hand):
     assert names == space.names and np.allclose(U[:, 0], J)
 
 
+def test_the_robot_is_resolved_at_the_entry(hand, monkeypatch):
+    """The Jacobian helpers take the RobotModel (a name is a TypeError naming robot);
+    design and sensitivity take a name too and resolve it once, at their entry (issue 40
+    item 2): the same result as with the model."""
+    import importlib
+
+    opt = importlib.import_module("jwarp.calibration.design.optimal")
+    sens = importlib.import_module("jwarp.calibration.design.sensitivity")
+    from jwarp.calibration.estimate.diagnostics import residual_diagnostics
+
+    setup = hand_contact_setup()
+    meas = make_measurement(hand, setup)
+    q, meta = draw_configurations(hand, setup, 12, seed=4)
+    for call in (lambda r: stacked_jacobian(r, meas, q, "theta", meta=meta),
+                 lambda r: candidate_jacobians(r, meas, q, "theta", meta=meta),
+                 lambda r: opt.task_information(r, relative(hand), q, ["x"], "theta"),
+                 lambda r: residual_diagnostics(r, meas, meas.params.nominal, q,
+                                                np.zeros((12, meas.n_obs)), meta)):
+        with pytest.raises(TypeError, match="robot: expected a RobotModel"):
+            call("hand4")
+    resolved = []
+    for mod in (opt, sens):
+        real = mod.get_robot
+        monkeypatch.setattr(mod, "get_robot", lambda r, real=real: resolved.append(r) or real(r))
+    opts = DesignOptions(n=4)
+    by_name = design("hand4", meas, q, opts, free="theta", meta_pool=meta)
+    assert resolved == ["hand4"]
+    by_model = design(hand, meas, q, opts, free="theta", meta_pool=meta)
+    np.testing.assert_array_equal(by_name.indices, by_model.indices)
+    assert by_name.criterion == by_model.criterion
+    task = relative(hand)
+    qt = uniform_configurations(hand, np.random.default_rng(3), 6)
+    a = sensitivity("hand4", meas, q, task, qt, "theta", meta_actual=meta)
+    b = sensitivity(hand, meas, q, task, qt, "theta", meta_actual=meta)
+    assert resolved == ["hand4", hand, "hand4", hand]
+    assert a.to_dict() == b.to_dict()
+
+
 def test_design_on_hand_contacts(hand):
     """Task D-optimal contacts beat the same number of random ones on the criterion."""
     setup = hand_contact_setup()

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+import jwarp
 from jwarp.kinematics.fk import fk
 from jwarp.learn.checkpoint import load_checkpoint, load_plan_checkpoint, save_checkpoint
 from jwarp.learn.evaluate_plan import evaluate_plan, format_plan_table
@@ -88,7 +89,8 @@ def test_time_reversal_is_a_label_of_the_reversed_task(samples):
     world = data.worlds[0]
     rev = data.paths[:, ::-1]
     assert path_feasible(ROBOT, world, rev, 4).all()
-    np.testing.assert_allclose(path_costs(ROBOT, world, rev), path_costs(ROBOT, world, data.paths),
+    model = jwarp.robot(ROBOT)   # path_costs takes the RobotModel (issue 40 item 2)
+    np.testing.assert_allclose(path_costs(model, world, rev), path_costs(model, world, data.paths),
                                rtol=1e-4, atol=1e-6)
     net = small_net()
     arr = augment(net, data, time_reversal=True, axis_symmetry=False)

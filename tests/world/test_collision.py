@@ -348,3 +348,40 @@ def test_bench_collision_quick_cpu(tmp_path):
     assert {("random", "cost+grad"), ("free", "cost+grad"), ("random", "tape grad")} <= ops
     assert all(r["us_per_config"] > 0 for r in rows)
     assert all(r["colliding"] == 0.0 for r in rows if r["configs"] == "free" and r["colliding"] is not None)
+
+
+@requires_cpu
+def test_one_configuration_check(monkeypatch, capsys):
+    """"Is this configuration collision-free" has one implementation (issue 40):
+    ``path_feasibility.collision_free`` (rigid and elastic) and ``jwarp free-config`` call
+    ``is_collision_free``, with the same verdicts; the IK's mesh rescue calls
+    ``mesh_certified`` (no copy of its depth rule elsewhere in the solvers)."""
+    import pathlib
+
+    from jwarp.cli import main
+    from jwarp.world import collision as col
+    from jwarp.world import path_feasibility as fz
+
+    model = jwarp.robot("planar4")
+    world = simplex_world(2, seed=3)
+    q = random_configurations(model, 64, seed=2)
+    calls = []
+    real = col.is_collision_free
+
+    def spy(*a, **k):
+        calls.append(k.get("rho") is not None)
+        return real(*a, **k)
+
+    monkeypatch.setattr(col, "is_collision_free", spy)
+    rigid = fz.collision_free(model, world, q, 0.01, self_margin=0.01, device="cpu")
+    np.testing.assert_array_equal(rigid, real(model, q, world, 0.01, device="cpu"))
+    assert 0 < rigid.sum() < len(q)
+    fz.collision_free(model, world, q, 0.01, kappa=1e-3, device="cpu")
+    assert calls == [False, True]
+    assert main(["free-config", "--robot", "planar4", "--world", "simplex:seed=3", "--n",
+                 "2", "--json"]) == 0
+    capsys.readouterr()
+    assert len(calls) > 2
+    solvers = pathlib.Path(jwarp.__file__).parent / "solvers"
+    copies = [str(p) for p in solvers.rglob("*.py") if "sphere_reach_past" in p.read_text()]
+    assert not copies, copies

@@ -54,6 +54,7 @@ import numpy as np
 from jwarp.calibration.estimate.params import ParameterSpace, parse_groups
 from jwarp.core.threads import limit_blas
 from jwarp.core.types import RobotLike
+from jwarp.model.robot import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.overrides import renamed_options
 from jwarp.utils.checks import check_int
@@ -358,7 +359,7 @@ def select(U: Any, prior: Any, L: Any | None, options: DesignOptions,
 
 
 # ------------------------------------------------------------ measurements
-def candidate_jacobians(robot: RobotLike, measurement: Any, q: Any, free: str | Iterable[str], *,
+def candidate_jacobians(robot: RobotModel, measurement: Any, q: Any, free: str | Iterable[str], *,
                         meta: Mapping[str, Any] | None = None, chunk: int = 4096,
                         **problem: Any) -> tuple[np.ndarray, ParameterSpace]:
     """Whitened Jacobians (n, m, P) of ``measurement`` at the candidate configurations q
@@ -367,13 +368,17 @@ def candidate_jacobians(robot: RobotLike, measurement: Any, q: Any, free: str | 
     parameter space (its ``sigma`` gives the prior).
 
     Args:
+        robot: the RobotModel (a name is resolved by the caller, e.g. :func:`design`).
         free: robot groups and the measurement's own groups.
         meta: the measurement's per-sample columns of the candidates.
         problem: further CalibrationProblem arguments (noise_sigma, sigma, frames, ...).
     """
     from jwarp.calibration.design.sensitivity import stacked_jacobian
 
-    model = get_robot(robot)
+    if not isinstance(robot, RobotModel):   # resolved where it entered (jwarp.robot)
+        raise TypeError(f"robot: expected a RobotModel (jwarp.robot(name) resolves a name), "
+                        f"got {type(robot).__name__}")
+    model = robot
     qa = np.asarray(q, np.float64)
     if qa.ndim != 2 or qa.shape[1] != model.n_dof or qa.shape[0] == 0:
         raise ValueError(f"q: expected candidate configurations (n >= 1, {model.n_dof}) for "
@@ -393,12 +398,13 @@ def candidate_jacobians(robot: RobotLike, measurement: Any, q: Any, free: str | 
     return out, space
 
 
-def task_information(robot: RobotLike, task: Any, q_task: Any, names: list[str],
+def task_information(robot: RobotModel, task: Any, q_task: Any, names: list[str],
                      free: str | Iterable[str], *, meta: Mapping[str, Any] | None = None,
                      rank_rtol: float = 1e-10, **problem: Any) -> tuple[np.ndarray, list[str]]:
     """The task factor ``L`` (P, r) on the parameters ``names`` (the actual measurement's
     space) from the task measurement at q_task, and the task parameters left out (not in
-    ``names``: the design cannot calibrate them). Robot groups of ``free`` only."""
+    ``names``: the design cannot calibrate them). Robot groups of ``free`` only.
+    ``robot``: the RobotModel (:func:`stacked_jacobian`'s)."""
     from jwarp.calibration.design.sensitivity import align, stacked_jacobian
     from jwarp.calibration.estimate.params import ROBOT_GROUPS
 
@@ -446,13 +452,14 @@ def design(robot: RobotLike, actual: Any, q_pool: Any, options: DesignOptions, *
     if not isinstance(options, DesignOptions):
         raise TypeError(f"options: expected a DesignOptions, got {type(options).__name__}")
     options.validate()
-    U, space = candidate_jacobians(robot, actual, q_pool, free, meta=meta_pool, **problem)
+    model = get_robot(robot)   # resolved once here; the Jacobians take the model
+    U, space = candidate_jacobians(model, actual, q_pool, free, meta=meta_pool, **problem)
     prior = prior_information(space)
     L, dropped = None, []
     if task is not None:
         if q_task is None:
             raise ValueError("q_task: the task measurement needs its configurations")
-        L, dropped = task_information(robot, task, q_task, list(space.names), free,
+        L, dropped = task_information(model, task, q_task, list(space.names), free,
                                       meta=meta_task, rank_rtol=options.rank_rtol, **problem)
     res = select(U, prior, L, options, progress=progress)
     if dropped:

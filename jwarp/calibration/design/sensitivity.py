@@ -46,6 +46,7 @@ import numpy as np
 from jwarp.calibration.estimate.params import ROBOT_GROUPS, ParameterSpace, parse_groups
 from jwarp.core.threads import limit_blas
 from jwarp.core.types import RobotLike
+from jwarp.model.robot import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 
 #: default relative tolerance of :func:`spectrum` (numerical rank of J^T J)
@@ -229,14 +230,15 @@ def _groups_for(measurement: Any, groups: list[str]) -> list[str]:
     return [g for g in groups if g in ROBOT_GROUPS or g in own]
 
 
-def stacked_jacobian(robot: RobotLike, measurement: Any, q: Any, free: str | Iterable[str], *,
+def stacked_jacobian(robot: RobotModel, measurement: Any, q: Any, free: str | Iterable[str], *,
                      meta: Mapping[str, Any] | None = None, x: Any = None,
                      whiten: bool = False, **problem: Any) -> tuple[np.ndarray, list[str]]:
     """Stacked Jacobian (S*m, P) of ``measurement`` at configurations q (S, n_dof) with
     respect to the free parameters (eq. 2.23), and the parameter names (P,).
 
     Args:
-        robot: robot name or RobotModel (nominal: the point of linearization).
+        robot: the RobotModel (nominal: the point of linearization; a name is resolved
+            by the caller, e.g. :func:`sensitivity`).
         measurement: measurement plugin instance; meta: its per-sample columns.
         free: groups (robot groups and the measurement's own groups; others are an error).
         x: (P,) parameters to linearize at (default the nominal / prior mean).
@@ -246,7 +248,10 @@ def stacked_jacobian(robot: RobotLike, measurement: Any, q: Any, free: str | Ite
     """
     from jwarp.calibration.estimate.map import CalibrationProblem, problem_options
 
-    model = get_robot(robot)
+    if not isinstance(robot, RobotModel):   # resolved where it entered (jwarp.robot)
+        raise TypeError(f"robot: expected a RobotModel (jwarp.robot(name) resolves a name), "
+                        f"got {type(robot).__name__}")
+    model = robot
     qa = np.asarray(q, np.float64)
     if qa.ndim != 2 or qa.shape[1] != model.n_dof:
         raise ValueError(f"q: expected shape (S, {model.n_dof}) for robot '{model.name}', "
@@ -315,9 +320,10 @@ def sensitivity(robot: RobotLike, actual: Any, q_actual: Any, task: Any, q_task:
         raise ValueError(f"free: unknown parameter group(s) {bad}; robot groups: "
                          f"{', '.join(ROBOT_GROUPS)}; '{actual.name}': {', '.join(own_a) or '-'}; "
                          f"'{task.name}': {', '.join(own_t) or '-'}")
-    Ja, na = stacked_jacobian(robot, actual, q_actual, _groups_for(actual, groups),
+    model = get_robot(robot)   # resolved once here; the Jacobians take the model
+    Ja, na = stacked_jacobian(model, actual, q_actual, _groups_for(actual, groups),
                               meta=meta_actual, whiten=whiten, **problem)
-    Jt, nt = stacked_jacobian(robot, task, q_task, _groups_for(task, groups), meta=meta_task,
+    Jt, nt = stacked_jacobian(model, task, q_task, _groups_for(task, groups), meta=meta_task,
                               whiten=whiten, **problem)
     union = list(dict.fromkeys(na + nt))
     Ja, Jt = align(Ja, na, union), align(Jt, nt, union)

@@ -35,8 +35,7 @@ import numpy as np
 
 from jwarp import kinematics as K
 from jwarp.calibration.estimate.result import observation_groups
-from jwarp.core.types import RobotLike
-from jwarp.plugins.registry import robot as get_robot
+from jwarp.model.robot import RobotModel
 from jwarp.utils.checks import check_int
 
 
@@ -96,13 +95,13 @@ class Diagnostics:
         }
 
 
-def residual_diagnostics(robot: RobotLike, measurement: Any, p: Any, q: Any, y: Any,
+def residual_diagnostics(robot: RobotModel, measurement: Any, p: Any, q: Any, y: Any,
                          meta: Mapping[str, Any] | None = None, *, bins: int = 5,
                          directions: Any = None) -> Diagnostics:
     """Diagnostics of the residuals ``y - predict(robot, q)`` (module docstring).
 
     Args:
-        robot: the calibrated robot (name or RobotModel).
+        robot: the calibrated RobotModel (e.g. ``result.robot``).
         measurement: the measurement plugin; p: (P_meas,) its parameters.
         q: (S, n_dof) joint values; y: (S, m) observations; meta: per-sample inputs.
         bins: equal-count bins of each joint value (>= 2, at most S).
@@ -116,7 +115,10 @@ def residual_diagnostics(robot: RobotLike, measurement: Any, p: Any, q: Any, y: 
     """
     from jwarp.calibration.estimate.map import CalibrationProblem, problem_options
 
-    model = get_robot(robot)
+    if not isinstance(robot, RobotModel):   # resolved where it entered (jwarp.robot)
+        raise TypeError(f"robot: expected a RobotModel (jwarp.robot(name) resolves a name), "
+                        f"got {type(robot).__name__}")
+    model = robot
     qa = np.asarray(q, np.float64)
     if qa.ndim != 2 or qa.shape[1] != model.n_dof:
         raise ValueError(f"q: expected shape (S, {model.n_dof}), got {qa.shape}")

@@ -669,7 +669,7 @@ def _rescue_rows(solver: Any, out: np.ndarray, best: np.ndarray, P: int, S: int)
             or obj.compensation is not None:
         return
     from jwarp.kernels import ik_step as E
-    from jwarp.world.mesh_check import mesh_check, sphere_reach_past
+    from jwarp.world.mesh_check import mesh_check
 
     n = model.n_dof
     rows = out.reshape(P, S, -1)
@@ -678,23 +678,20 @@ def _rescue_rows(solver: Any, out: np.ndarray, best: np.ndarray, P: int, S: int)
     cand = np.nonzero(on.reshape(-1))[0]
     if not len(cand):
         return
-    mc = mesh_check(model, solver.world, solver.device)
-    if mc is None:
+    if mesh_check(model, solver.world, solver.device) is None:
         return
     q = np.asarray(out[cand, :n], np.float64)
     ok = within_limits(model, q)
     if ok.any():
-        from jwarp.world.collision import min_distances
+        from jwarp.world.collision import mesh_certified, min_distances
 
-        # a sphere collision deeper than the spheres reach past the meshes is not tried
+        # the spheres refuse them all (COL_FEASIBLE 0): the one check of what the mesh
+        # certificate proves free (a collision deeper than the spheres reach past the
+        # meshes is not tried)
         md = np.asarray(min_distances(model, q[ok], solver.world, device=solver.device,
                                       dtype=np.float64))
-        deep = sphere_reach_past(model)
-        try_ = (md[:, 0] > -deep) & (md[:, 1] > -deep)
-        idx = np.nonzero(ok)[0]
-        ok[idx[~try_]] = False
-        if try_.any():
-            ok[idx[try_]] = mc.free(q[idx[try_]], o.margin, o.margin)
+        ok[ok] = mesh_certified(model, q[ok], solver.world, np.zeros(int(ok.sum()), bool),
+                                o.margin, o.margin, solver.device, md=md)
     if not ok.any():
         return
     out[cand[ok], n + E.COL_FEASIBLE] = 1
