@@ -8,13 +8,12 @@ import time
 
 import numpy as np
 import pytest
+from worlds import block_world_2d
 
 import jwarp
 from jwarp.solvers import planning as PL
-from jwarp.world import path_feasibility
 from jwarp.solvers.planning.rrt import RRTOptions
-
-from worlds import block_world_2d
+from jwarp.world import path_feasibility
 
 S4 = np.array([1.2, 0.0, 0.0, 0.0])
 G4 = np.array([-1.2, 0.0, 0.0, 0.0])
@@ -78,12 +77,21 @@ def test_time_limit_ends_the_optimisation(world):
     assert wall < 3.0  # one iteration and the exact check after the limit (shared CPU)
     assert 0 < res.iterations[0] < 10**7  # the iteration it stopped at
     # with the fallback: the multi-starts get fallback_after (0.15) of the time, then RRT
+    # (stall_iterations off: the start that cannot move is not handed over early)
     res = PL.plan("planar4", world, S4, G4, start_kind="straight", step=1e-9,
-                  iterations=10**7, time_limit=5.0)
+                  iterations=10**7, time_limit=5.0, stall_iterations=None)
     assert res.feasible[0] and list(res.stage) == ["fallback"]
     assert res.stop_reason == "solved"
     before = res.timings["endpoints"] + res.timings.get("straight", 0.0)
     assert res.timings["optimizer"] + before >= 0.15 * 5.0 - 0.01 and res.wall_time < 10.0
+    assert "handed_over" not in res.timings
+    # by default the stalled start (its cost cannot fall) goes to the fallback at once
+    res = PL.plan("planar4", world, S4, G4, start_kind="straight", step=1e-9,
+                  iterations=10**7, time_limit=5.0)
+    assert res.feasible[0] and list(res.stage) == ["fallback"]
+    assert res.timings["handed_over"] == 1
+    assert res.iterations[0] >= 0 and res.timings["optimizer"] < 0.15 * 5.0
+    assert res.solved_at[0] <= res.wall_time
 
 
 def test_fallback_solves_what_the_multi_starts_do_not(world):
@@ -152,6 +160,13 @@ def test_fallback_with_its_options(world):
     ("time_limit", float("inf"), ValueError, "^time_limit"),
     ("time_limit", True, TypeError, "^time_limit"),
     ("time_limit", "1", TypeError, "^time_limit"),
+    ("problem_time_limit", -1.0, ValueError, "^problem_time_limit: expected a number > 0"),
+    ("problem_time_limit", 0, ValueError, "^problem_time_limit: expected a number > 0"),
+    ("problem_time_limit", float("nan"), ValueError, "^problem_time_limit"),
+    ("problem_time_limit", True, TypeError, "^problem_time_limit"),
+    ("problem_time_limit", "1", TypeError, "^problem_time_limit"),
+    ("stall_iterations", 0, ValueError, "^stall_iterations"),
+    ("stall_iterations", 2.5, ValueError, "^stall_iterations"),
     ("fallback", "rrt*", ValueError, "^fallback: expected 'rrt', 'none' or None"),
     ("fallback", "", ValueError, "^fallback"),
     ("fallback", 0, ValueError, "^fallback"),

@@ -131,6 +131,22 @@ class PlanOptions(SolverOptions):
             every iteration (wall clock since the call started); when it is reached the
             current paths get their exact check and the call ends (the endpoint checks,
             one evaluation and that check always run, so a call can overrun a tiny limit).
+        problem_time_limit: seconds of each problem's own search (None: no limit), > 0,
+            counted from the call's start like ``time_limit`` but independent of it: a
+            problem not solved within it leaves the batch unsolved (stage "none"); its
+            multi-starts get ``fallback_after`` of it (of the smaller of the two limits
+            where both are given), then the fallback searches until it is spent. The
+            call's ``time_limit`` also bounds the shortening of solved paths; this one
+            bounds the search only (a batch of many problems: the solved ones are
+            shortened after it).
+        stall_iterations: with the ``fallback`` (and ``stop_when_solved``,
+            ``freeze_feasible``, without ``converge``): a problem whose best start has not
+            lowered its cost U_path by more than 1 % for this many iterations (>= 1)
+            leaves the multi-starts at once (its starts frozen, costing no evaluation or
+            check from then on) and is handed to the fallback; the multi-starts end as
+            soon as every problem is solved or handed over, instead of running to the
+            end of their share of the time or iterations. None: off (every unsolved
+            problem waits for the multi-starts' end).
         fallback: "rrt" (default): problems the multi-starts have not solved after
             their iterations, or after ``fallback_after`` of ``time_limit``, get an
             RRT-Connect path in joint space (:mod:`jwarp.solvers.planning.rrt`) as the seed of
@@ -247,6 +263,8 @@ class PlanOptions(SolverOptions):
     converge: bool = False
     converge_tol: float = 1e-3
     time_limit: float | None = None
+    problem_time_limit: float | None = None
+    stall_iterations: int | None = 20
     fallback: str | None = "rrt"
     fallback_after: float | None = None
     rrt: Any = None
@@ -355,16 +373,19 @@ def fallback_word(value: Any) -> Any:
 
 
 def _check_budget(o: PlanOptions) -> None:
-    """:meth:`PlanOptions.validate` of ``time_limit``, ``fallback``, ``fallback_after``
-    and ``rrt``."""
-    if o.time_limit is not None:
-        if isinstance(o.time_limit, (bool, np.bool_)):
-            raise TypeError(f"time_limit: expected a number of seconds > 0 or None, got "
-                            f"{o.time_limit!r}")
-        t = real_number(o.time_limit, "time_limit")
+    """:meth:`PlanOptions.validate` of ``time_limit``, ``problem_time_limit``,
+    ``stall_iterations``, ``fallback``, ``fallback_after`` and ``rrt``."""
+    for name in ("time_limit", "problem_time_limit"):
+        v = getattr(o, name)
+        if v is None:
+            continue
+        if isinstance(v, (bool, np.bool_)):
+            raise TypeError(f"{name}: expected a number of seconds > 0 or None, got {v!r}")
+        t = real_number(v, name)
         if not (math.isfinite(t) and t > 0):
-            raise ValueError(f"time_limit: expected a number > 0 [s] or None, got "
-                             f"{o.time_limit!r}")
+            raise ValueError(f"{name}: expected a number > 0 [s] or None, got {v!r}")
+    if o.stall_iterations is not None:
+        check_int(o.stall_iterations, "stall_iterations", 1)
     o.fallback = fallback_word(o.fallback)
     if o.fallback is not None and (not isinstance(o.fallback, str)
                                    or o.fallback not in FALLBACKS):

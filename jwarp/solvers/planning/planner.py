@@ -274,9 +274,12 @@ class Planner:
         model, o, dev = self.robot, self.options, self.device
         mesh_s0 = self._mesh_seconds()
         deadline = None if o.time_limit is None else t0 + float(o.time_limit)
-        opt_deadline = deadline
-        if deadline is not None and o.fallback is not None:
-            opt_deadline = t0 + fallback_share(o, str(dev)) * float(o.time_limit)
+        # the problems' search (multi-starts, fallback): the call's limit and their own
+        budget = [float(v) for v in (o.time_limit, o.problem_time_limit) if v is not None]
+        search_end = None if not budget else t0 + min(budget)
+        opt_deadline = search_end
+        if budget and o.fallback is not None:
+            opt_deadline = t0 + fallback_share(o, str(dev)) * min(budget)
         q0 = self._problems(start, "start")
         q1 = self._problems(goal, "goal")
         finite_as(q0, self.npdt, "start")  # also finite in the optimisation's dtype
@@ -291,14 +294,16 @@ class Planner:
         # spheres the endpoints need no check of their own (their limits are checked
         # first: a line between configurations within the limits stays within them)
         line = None  # (B,) bool: the problems the straight line solved
+        line_at = np.full(len(q0), np.nan)  # seconds from t0 at which the line was proven
         if self._straight_first(seeds) and within_limits(model, q0).all() \
                 and within_limits(model, q1).all():
             t_line = time.perf_counter()
             line_paths, line_wp, line, code, dist = self._straight(q0, q1)
             timings["straight"] = time.perf_counter() - t_line
+            line_at = np.where(line, time.perf_counter() - t0, np.nan)
             if line.all():
                 self._mesh_need = np.zeros(len(q0), bool)
-                return self._straight_result(line_paths, t0, timings, mesh_s0)
+                return self._straight_result(line_paths, t0, timings, mesh_s0, line_at)
         t_end = time.perf_counter()
         s0 = check_endpoints(model, self.world, q0, "start", em, o.kappa, device=dev,
                              self_margin=sem, per_world=pw)
@@ -319,8 +324,9 @@ class Planner:
             line = self._mesh_proof(self.motion_check(), line_wp, np.arange(len(line)),
                                     line, code, dist, allow, 1 if self.batched else 0)
             timings["straight"] += time.perf_counter() - t_line
+            line_at[line & np.isnan(line_at)] = time.perf_counter() - t0
             if line.all():
-                return self._straight_result(line_paths, t0, timings, mesh_s0)
+                return self._straight_result(line_paths, t0, timings, mesh_s0, line_at)
         t_opt = time.perf_counter()
         if isinstance(seeds, ViaPoints):
             Q = _via_seeds(model, q0, q1, seeds.points, o.n_waypoints)
@@ -357,7 +363,14 @@ class Planner:
         feasible = np.zeros(P, bool)
         iters = np.full(P, o.iterations, np.int64)
         kept_len = np.full(P, np.inf)  # converge: U_l of the last kept feasible iterate
+        found_at = np.full(P, np.nan)  # seconds from t0 at which each path was kept feasible
         reason = "iterations"
+        # stall_iterations: a problem whose best cost stopped falling goes to the fallback
+        stall = (o.stall_iterations if o.fallback is not None and o.stop_when_solved
+                 and o.freeze_feasible and not o.converge else None)
+        handed = np.zeros(B, bool)           # problems handed to the fallback early
+        best_cost = np.full(B, np.inf)       # their best start's lowest U_path so far
+        gain_it = np.zeros(B, np.int64)      # the iteration of its last gain
         for it in range(o.iterations + 1):
             # the time limit: checked before the evaluation; the current paths still get
             # their exact check below
@@ -373,12 +386,14 @@ class Planner:
                 rows = np.nonzero(np.repeat(line, n_starts))[0]
                 feasible[np.nonzero(line)[0] * n_starts] = True
                 iters[np.nonzero(line)[0] * n_starts] = 0
+                found_at[np.nonzero(line)[0] * n_starts] = line_at[line]
                 self._keep(buf, rows)
                 done[rows] = True
             last = it == o.iterations or out_of_time or (it + 1) % check_every == 0
             if o.converge:
                 self._converge_check(buf, it, last, smax < screen, done, feasible, iters,
                                      kept_len)
+                found_at[feasible & (iters == it)] = time.perf_counter() - t0
                 solved = done & feasible
             else:
                 cand = np.nonzero(~done & ((smax < screen) | last))[0]
@@ -387,6 +402,7 @@ class Planner:
                     if len(newly):
                         feasible[newly] = True
                         iters[newly] = it
+                        found_at[newly] = time.perf_counter() - t0
                         if o.freeze_feasible:
                             self._keep(buf, newly)
                             done[newly] = True
@@ -406,6 +422,21 @@ class Planner:
             if o.stop_when_solved and solved.reshape(B, n_starts).any(1).all():
                 reason = "solved"
                 break
+            if stall is not None and it < o.iterations and not out_of_time:
+                # each problem's best start not done: its cost this iteration; one that
+                # has not fallen by STALL_GAIN for ``stall`` iterations is handed over
+                c = np.where(done, np.inf, obj.total.numpy()).reshape(B, n_starts).min(1)
+                gain = c < best_cost * (1.0 - STALL_GAIN)
+                best_cost[gain] = c[gain]
+                gain_it[gain] = it
+                open_ = ~done.reshape(B, n_starts).all(1)
+                hand = open_ & ~handed & (it - gain_it >= stall)
+                if hand.any():
+                    rows = np.nonzero(np.repeat(hand, n_starts) & ~done)[0]
+                    self._keep(buf, rows)
+                    done[rows] = True
+                    iters[rows] = it
+                    handed |= hand
             if done.all():
                 reason = "all_done"
                 break
@@ -422,15 +453,18 @@ class Planner:
         rest = np.nonzero(~done & ~feasible)[0] if o.converge else np.nonzero(~done)[0]
         if len(rest):
             self._keep(buf, rest)
-        res = self._result(buf, feasible, iters, B, n_starts, time.perf_counter() - t0)
+        res = self._result(buf, feasible, iters, B, n_starts, time.perf_counter() - t0,
+                           found_at)
         res.stop_reason = reason
         res.stage = np.where(res.feasible, "optimizer", "none").astype("<U9")
         if line is not None:
             res.stage[line] = "straight"
         timings["optimizer"] = time.perf_counter() - t_opt
         res.timings = timings
+        if handed.any():
+            timings["handed_over"] = int(handed.sum())
         if o.fallback is not None and not res.feasible.all():
-            _fallback(self, res, q0, q1, t0, deadline)
+            _fallback(self, res, q0, q1, t0, search_end)
         if o.shorten > 0 and o.stop_when_solved and not o.converge and o.kappa is None:
             self._shorten(buf, res, deadline, obj.evaluations - evals0)
         res.reasons = self.explain(res)
@@ -539,7 +573,7 @@ class Planner:
         return ok
 
     def _straight_result(self, paths: np.ndarray, t0: float, timings: dict,
-                         mesh_s0: float) -> PlanResult:
+                         mesh_s0: float, line_at: np.ndarray) -> PlanResult:
         """The result of a call the straight lines ``paths`` (B, W, n_dof) solved: one
         start per problem, iteration 0; the costs (and ``length_before``) are evaluated
         when first read (a :class:`PathObjective` of these paths, at substeps sized to
@@ -569,7 +603,8 @@ class Planner:
                          wall_time=0.0, n_substeps=n_sub, all_feasible=np.ones((B, 1), bool),
                          all_iterations=np.zeros((B, 1), np.int64), paths_source=paths[:, None],
                          stop_reason="solved", stage=np.full(B, "straight", "<U9"),
-                         timings=timings, reasons=["feasible"] * B)
+                         timings=timings, reasons=["feasible"] * B,
+                         solved_at=np.asarray(line_at, np.float64).copy())
         res._fill = costs
         if getattr(self.robot, "collision_pieces", None) is not None:
             timings["mesh_check"] = self._mesh_seconds() - mesh_s0
@@ -818,6 +853,12 @@ class Planner:
                 if not self._final and need is not None:
                     sel &= need[np.asarray(cand) // per]
                 K = len(cand)
+                if self._final and group and self.n_problems > 1 and sel.any():
+                    # the last check of a batch: per problem only the unproven start the
+                    # spheres miss by least goes to the certificate (one proven path is
+                    # enough; the others of a batch's unsolved problems are the fallback's)
+                    sel &= _best_of_group(np.asarray(cand) // per, out["dist"].numpy()[:K],
+                                          sel, MESH_FINAL_PER_PROBLEM)
                 ok = self._mesh_proof(chk, obj.paths, np.asarray(cand), ok,
                                       out["code"].numpy()[:K], out["dist"].numpy()[:K], sel,
                                       wg)
@@ -872,7 +913,7 @@ class Planner:
                   outputs=[buf.final, buf.final_cost], device=self.device)
 
     def _result(self, buf: _Buffers, feasible: np.ndarray, iters: np.ndarray, B: int,
-                n_starts: int, wall: float) -> PlanResult:
+                n_starts: int, wall: float, found_at: np.ndarray) -> PlanResult:
         """Per problem the best start (feasible first, then the lowest U_path), chosen on
         the device; reads the chosen paths and costs only."""
         obj = buf.objective
@@ -892,7 +933,32 @@ class Planner:
                           collision_cost=np.ascontiguousarray(cost[:, 2]),
                           iterations=it[rows, best], start_index=best, n_feasible=fz.sum(1),
                           wall_time=wall, n_substeps=obj.n_sub, all_feasible=fz,
-                          all_iterations=it, paths_source=wp.clone(buf.final))
+                          all_iterations=it, paths_source=wp.clone(buf.final),
+                          solved_at=np.where(fz[rows, best],
+                                             found_at.reshape(B, n_starts)[rows, best], np.nan))
+
+
+#: :attr:`PlanOptions.stall_iterations`: the relative fall of a problem's best cost that
+#: counts as progress
+STALL_GAIN = 0.01
+
+
+#: the unproven starts per problem that the last check of a batch (B > 1) gives to the
+#: mesh certificate (those of the largest sphere clearance): on 70 Panda scene problems
+#: in one batch (CPU) that check of every start took 1.5 s of a 5 s call
+MESH_FINAL_PER_PROBLEM = 1
+
+
+def _best_of_group(group: np.ndarray, score: np.ndarray, sel: np.ndarray, k: int
+                   ) -> np.ndarray:
+    """(K,) bool: of the rows ``sel`` the ``k`` of the largest ``score`` per ``group``."""
+    out = np.zeros(len(sel), bool)
+    rows = np.nonzero(sel)[0]
+    order = rows[np.lexsort((-np.asarray(score, np.float64)[rows], group[rows]))]
+    g = group[order]
+    first = np.searchsorted(g, g, side="left")
+    out[order[np.arange(len(order)) - first < k]] = True
+    return out
 
 
 #: :func:`_fallback` runs the trees of more than one unsolved problem (rigid model) at once
@@ -971,7 +1037,7 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
         left = None if deadline is None else max(deadline - t_opt, 1e-6)
         # every iteration checked (the first before any step: the seed as it is)
         sub_o = replace(o, n_starts=1, fallback=None, time_limit=left, stop_when_solved=True,
-                        callback=None, check_all_every=1, shorten=0)
+                        callback=None, check_all_every=1, shorten=0, problem_time_limit=None)
         sub_world = planner.world
         if planner.batched:  # the found problems' own worlds, as a batch of their own
             from jwarp.world.sdf import World
@@ -993,6 +1059,7 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
         res.iterations[b] = r2.iterations[ok]
         res.start_index[b] = -1
         res.stage[b] = "fallback"
+        res.solved_at[b] = (t_opt - t0) + r2.solved_at[ok]
         res.timings["fallback_optimizer"] = time.perf_counter() - t_opt
         for k, bb in enumerate(found):
             cut = (f", resampled to {W} waypoints (corners cut)" if nodes[k] > W

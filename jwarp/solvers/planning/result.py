@@ -70,7 +70,13 @@ class PlanResult:
     :mod:`jwarp.solvers.planning.rrt`) or "none" (no feasible path). A fallback path is none of
     the multi-starts: its ``start_index`` is -1, its ``iterations`` those of the seeded
     optimisation (0: the RRT path itself, certified as it is); ``n_feasible``, ``all_*``
-    stay the multi-starts'. ``fallback_notes``: what the fallback did. ``timings`` [s]:
+    stay the multi-starts'. ``solved_at`` (B,) float: seconds from the call's start at
+    which the stage of ``stage`` had the problem's feasible path (its straight line
+    proven; its start kept feasible by the multi-starts' exact check; its fallback path
+    certified), NaN where the problem has none; the shortening of a solved path comes
+    later (see ``timings["shorten"]``), so ``solved_at`` <= ``wall_time``, and a problem
+    of a batch is solved at its own time, not at the end of the batch.
+    ``fallback_notes``: what the fallback did. ``timings`` [s]:
     "optimizer" (the multi-starts) and, where it ran, "via_ik" (the IK via points of
     :attr:`PlanOptions.via_ik`, inside "optimizer"), "rrt", "fallback_optimizer" and
     "shorten"; for a robot with collision pieces "mesh_check" (the mesh certificate's
@@ -97,7 +103,12 @@ class PlanResult:
     stop_reason: str = "iterations"
     #: (B,) "straight", "optimizer", "fallback" or "none" (None: filled by the planner)
     stage: Any = None
+    #: (B,) float: seconds from the call's start at which each problem's feasible path
+    #: was found by its ``stage`` (NaN: none; None: not recorded)
+    solved_at: Any = None
     #: seconds per stage: "endpoints", "straight", "optimizer", "rrt", "fallback_optimizer"
+    #: (and "handed_over": the problems :attr:`PlanOptions.stall_iterations` handed to the
+    #: fallback before the multi-starts' end, a count)
     timings: dict = field(default_factory=dict, repr=False)
     #: (B,) "feasible" or why the problem's path is not (:meth:`Planner.explain`)
     reasons: Any = None
@@ -137,6 +148,9 @@ class PlanResult:
                 "reason": (str(self.reasons[index]) if self.reasons is not None
                            else None),
                 "stage": None if self.stage is None else str(self.stage[index]),
+                "solved_at_s": (None if self.solved_at is None
+                                or not np.isfinite(self.solved_at[index])
+                                else float(self.solved_at[index])),
                 "length_before_shortening": (
                     None if self.length_before is None
                     or not np.isfinite(self.length_before[index])
