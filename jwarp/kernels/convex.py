@@ -33,7 +33,11 @@ frames ``X`` (N, n_frames) mat44 come from :func:`jwarp.kinematics.fk`):
   the host fills ``out`` with a large value first); a pair whose piece's enclosing sphere
   keeps ``cap[c]`` (per configuration: what its caller needs) from the object's box is
   not refined (that distance is its bound), and GJK stops once its bound reaches
-  ``cap[c]`` (a bound >= ``cap[c]`` says only that: enough).
+  ``cap[c]`` (a bound >= ``cap[c]`` says only that: enough). ``use_groups``: 0 every
+  object counts; 1 only objects whose ``group`` is the configuration's ``cfg_group[c]``;
+  2 the same for objects sorted by group, ``o_first`` (G + 1,) int32 the first object of
+  each group: the launch's third dimension is then the largest group's object count, not
+  every object of every world.
 * ``self_lower``: ``out[c, q]`` the bound of pair ``q`` (likewise with the two pieces'
   enclosing spheres).
 """
@@ -330,6 +334,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         o_group: wp.array(dtype=wp.int32),
         o_rot: wp.array(dtype=mat33),
         o_half: wp.array(dtype=vec3),
+        o_first: wp.array(dtype=wp.int32),
         # Data in:
         X: wp.array2d(dtype=mat44),
         cfg_group: wp.array(dtype=wp.int32),
@@ -341,7 +346,14 @@ def kernels(scalar: type) -> SimpleNamespace:
         out: wp.array2d(dtype=scalar),
     ):
         c, k, o = wp.tid()
-        if use_groups != 0:
+        if use_groups == 2:
+            # objects sorted by group: the launch's third index counts within the
+            # configuration's own world, o_first[g] .. o_first[g + 1]
+            grp = cfg_group[c]
+            o = o_first[grp] + o
+            if o >= o_first[grp + 1]:
+                return
+        elif use_groups != 0:
             if o_group[o] != cfg_group[c]:
                 return
         T = X[c, frame[k]]

@@ -199,6 +199,16 @@ class MeshCheck:
                 bound[i] = np.linalg.norm(v - centre[i], axis=1).max() + r
         dev = self.device
         f64, v3 = wp.float64, wp.types.vector(3, wp.float64)
+        # objects sorted by world (World.batch): each configuration's launch row covers
+        # its own world's objects only
+        grp = np.array([p[3] for p in pieces], np.int64)
+        n_groups = max(int(getattr(self.world, "n_worlds", 1) or 1),
+                       int(grp.max(initial=-1)) + 1)
+        sorted_groups = bool(O) and bool(np.all(np.diff(grp) >= 0)) and grp.min() >= 0
+        first = np.searchsorted(grp, np.arange(n_groups + 1)).astype(np.int32) \
+            if sorted_groups else np.zeros(1, np.int32)
+        self._group_span = int(np.diff(first).max(initial=0)) if sorted_groups else 0
+        self._o_first = wp.array(first, dtype=wp.int32, device=dev)
         self._wtab = (wp.array(kind, dtype=wp.int32, device=dev),
                       wp.array(vstart, dtype=wp.int32, device=dev),
                       wp.array(V, dtype=v3, device=dev),
@@ -249,9 +259,16 @@ class MeshCheck:
             if self.n_objects:
                 out = wp.full((N, K), 1e30, dtype=wp.float64, device=dev)
                 g = np.zeros(N, np.int32) if groups is None else np.asarray(groups, np.int32)
-                wp.launch(kern.world_lower, dim=(N, K, self.n_objects),
-                          inputs=[*self._tab, *wt, X, wp.array(g, dtype=wp.int32, device=dev),
-                                  int(groups is not None), cap_d,
+                mode, span = 0, self.n_objects
+                if groups is not None:
+                    mode = 1
+                    if self._group_span and g.min(initial=0) >= 0 \
+                            and g.max(initial=0) < len(self._o_first) - 1:
+                        mode, span = 2, self._group_span
+                if span:
+                    wp.launch(kern.world_lower, dim=(N, K, span),
+                              inputs=[*self._tab, *wt, self._o_first, X,
+                                      wp.array(g, dtype=wp.int32, device=dev), mode, cap_d,
                                   wp.float64(GJK_TOL), wp.float64(SLACK)],
                           outputs=[out], device=dev)
                 wl = out.numpy()

@@ -89,7 +89,8 @@ def test_world_and_self_bounds_match_coal(device, scalar):
                       arr(oc.astype(npdt), K.vec3), arr(ob.astype(npdt), scalar),
                       arr(np.zeros(O_, np.int32), wp.int32),
                       arr(_boxes(objs)[0].astype(npdt), wp.types.matrix((3, 3), scalar)),
-                      arr(_boxes(objs)[1].astype(npdt), K.vec3), Xw,
+                      arr(_boxes(objs)[1].astype(npdt), K.vec3),
+                      arr(np.zeros(1, np.int32), wp.int32), Xw,
                       arr(np.zeros(N, np.int32), wp.int32), 0, arr(np.full(N, 1e9, npdt), scalar),
                       scalar(1e-7),
                       scalar(slack)], outputs=[out], device=device)
@@ -144,14 +145,16 @@ def test_halfspace_is_exact(device):
                       arr([0, 1], wp.int32), arr(np.zeros((1, 3)), K.vec3), arr([0.0], wp.float64),
                       arr([[0.0, 0.0, 1.0]], K.vec3), arr([0.1], wp.float64),
                       arr([0], wp.int32), arr(np.eye(3)[None], wp.types.matrix((3, 3), wp.float64)),
-                      arr(np.zeros((1, 3)), K.vec3), wp.array(X, dtype=K.mat44, device=device),
+                      arr(np.zeros((1, 3)), K.vec3), arr(np.zeros(1, np.int32), wp.int32),
+                      wp.array(X, dtype=K.mat44, device=device),
                       arr([0], wp.int32), 0, arr([1.0], wp.float64), wp.float64(1e-9),
                       wp.float64(0.0)], outputs=[out], device=device)
     want = (corners @ R.T)[:, 2].min() + 0.8 - 0.1
     assert abs(out.numpy()[0, 0] - want) < 1e-12
 
 
-def _launch_world(device, pieces, rads, objs, orads, X, frame, cap=1e9, boxes=None):
+def _launch_world(device, pieces, rads, objs, orads, X, frame, cap=1e9, boxes=None,
+                  o_group=None, cfg_group=None, mode=0):
     K = ck.kernels(wp.float64)
     v, s, c, b = _tables(pieces, rads)
     ov, os_, oc, ob = _tables(objs, orads)
@@ -163,17 +166,22 @@ def _launch_world(device, pieces, rads, objs, orads, X, frame, cap=1e9, boxes=No
         return wp.array(np.ascontiguousarray(x), dtype=dt, device=device)
 
     N, K_, O_ = len(X), len(pieces), len(objs)
+    og = np.zeros(O_, np.int32) if o_group is None else np.asarray(o_group, np.int32)
+    cg = np.zeros(N, np.int32) if cfg_group is None else np.asarray(cfg_group, np.int32)
+    first = np.searchsorted(og, np.arange(og.max() + 2)).astype(np.int32)
+    span = O_ if mode != 2 else int(np.diff(first).max())
     out = wp.full((N, K_), 1e9, dtype=wp.float64, device=device)
-    wp.launch(K.world_lower, dim=(N, K_, O_),
+    wp.launch(K.world_lower, dim=(N, K_, span),
               inputs=[arr(frame, wp.int32), arr(s, wp.int32), arr(v, K.vec3),
                       arr(np.asarray(rads, np.float64), wp.float64), arr(c, K.vec3),
                       arr(b, wp.float64), arr(np.zeros(O_, np.int32), wp.int32),
                       arr(os_, wp.int32), arr(ov, K.vec3),
                       arr(np.asarray(orads, np.float64), wp.float64), arr(oc, K.vec3),
-                      arr(ob, wp.float64), arr(np.zeros(O_, np.int32), wp.int32),
+                      arr(ob, wp.float64), arr(og, wp.int32),
                       arr(rot, wp.types.matrix((3, 3), wp.float64)),
-                      arr(half, K.vec3), wp.array(X, dtype=K.mat44, device=device),
-                      arr(np.zeros(N, np.int32), wp.int32), 0, arr(np.full(N, float(cap)), wp.float64),
+                      arr(half, K.vec3), arr(first, wp.int32),
+                      wp.array(X, dtype=K.mat44, device=device),
+                      arr(cg, wp.int32), mode, arr(np.full(N, float(cap)), wp.float64),
                       wp.float64(1e-9), wp.float64(0.0)], outputs=[out], device=device)
     return out.numpy()
 
@@ -238,3 +246,31 @@ def test_box_broad_phase_and_cap(device):
     assert far.sum() > 20 and near.sum() > 10
     # the enclosing spheres alone would not cull: the plank's sphere holds every piece
     assert (np.linalg.norm(centres - c0, axis=1) - radii < np.linalg.norm(h)).sum() > 0.5 * n
+
+
+def test_groups_sorted_span_equals_group_filter(device):
+    """A batch of worlds: objects sorted by world (group), each configuration in one world.
+    The ranged launch (use_groups 2: o_first, the largest world's object count) gives the
+    bounds of the filtering launch (1: every object, foreign ones skipped), and both equal
+    the bounds against the configuration's own objects alone (closed form: spheres)."""
+    rng = np.random.default_rng(11)
+    pieces = [np.zeros((1, 3)), np.zeros((1, 3))]
+    rads = [0.05, 0.08]
+    objs = [rng.uniform(-1, 1, (1, 3)) for _ in range(7)]
+    orads = list(rng.uniform(0.02, 0.1, 7))
+    o_group = [0, 0, 0, 1, 2, 2, 2]          # world 1 has one object, world 2 three
+    X = np.tile(np.eye(4), (5, 2, 1, 1))
+    X[:, :, :3, 3] = rng.uniform(-0.5, 0.5, (5, 2, 3))
+    cfg_group = [2, 0, 1, 2, 0]
+    frame = [0, 1]
+    got1 = _launch_world(device, pieces, rads, objs, orads, X, frame, o_group=o_group,
+                         cfg_group=cfg_group, mode=1)
+    got2 = _launch_world(device, pieces, rads, objs, orads, X, frame, o_group=o_group,
+                         cfg_group=cfg_group, mode=2)
+    np.testing.assert_array_equal(got1, got2)
+    for c, g in enumerate(cfg_group):
+        own = [i for i, gi in enumerate(o_group) if gi == g]
+        for k in range(2):
+            want = min(np.linalg.norm(X[c, k, :3, 3] - objs[i][0]) - rads[k] - orads[i]
+                       for i in own)
+            assert abs(got2[c, k] - want) < 1e-9
