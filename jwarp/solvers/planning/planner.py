@@ -1068,6 +1068,11 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
                 how = ("certified as it is" if r2.iterations[k] == 0 else
                        f"certified after {int(r2.iterations[k])} optimisation steps")
                 notes[bb] = f"RRT-Connect path of {nodes[k]} nodes{cut}: {how}"
+            elif r2.stop_reason == "time_limit":
+                # out of time: no per-problem diagnosis (a check per problem in its own
+                # world would cost more than the budget that is already spent)
+                notes[bb] = (f"RRT-Connect path of {nodes[k]} nodes{cut} not certified as "
+                             f"it is, and no time was left to optimise it")
             else:
                 notes[bb] = (f"RRT-Connect path of {nodes[k]} nodes{cut} not certified "
                              f"({_seed_reason(planner, sub, seeds[k], bb)}) and its "
