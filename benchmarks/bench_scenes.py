@@ -114,6 +114,16 @@ def read_index(args: argparse.Namespace) -> dict | None:
     return json.loads(file.read_text())
 
 
+def near_goals(index: dict) -> tuple[int, int, int] | None:
+    """(goals whose URDF meshes are within 1 cm of an object, goals, within 2 cm) by the
+    index's recorded clearance (``clearance_m.goal_mesh``); None without it."""
+    d = [p.get("clearance_m", {}).get("goal_mesh") for p in index.get("problems", [])]
+    if not d or any(v is None for v in d):
+        return None
+    a = np.asarray(d, np.float64)
+    return int((a <= 0.01).sum()), len(a), int((a <= 0.02).sum())
+
+
 def load_problems(args: argparse.Namespace) -> tuple[Path, dict]:
     """(folder, index) of the problem set: read (``--problems``) or generated."""
     if args.problems:
@@ -679,6 +689,10 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"problems: {len(probs)} ({', '.join(families)}) from {folder}; robot {arm}, "
           f"{len(robot.spheres)} spheres; world: exact primitives (no grid)")
+    near = near_goals(index)
+    if near is not None:
+        print(f"goals near an object (the URDF meshes within 1 cm, the index's clearance): "
+              f"{near[0]} of {near[1]}; within 2 cm: {near[2]}")
     print(f"jwarp PlanOptions: margins {margins} m, endpoint_margin {args.endpoint_margin:g} m, "
           f"time_limit {args.time_limit:g} s, stop_when_solved={not args.no_stop_when_solved}, "
           f"fallback rrt, {extra_options(args)}; time = "

@@ -52,3 +52,18 @@ def test_versus_variants_are_parsed():
         ("", {}), ("via_ik=0", {"via_ik": 0}),
         ('via_ik=2;via_frame="tcp"', {"via_ik": 2, "via_frame": "tcp"})]
     assert bench_scenes.variants(argparse.Namespace(versus=None, option=None)) == [("", {})]
+
+
+def test_near_goals_counts_the_index_clearances():
+    """Goals near an object, by the index's mesh clearance: <= 1 cm and <= 2 cm; None
+    where a problem lacks it."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    import bench_scenes
+
+    index = {"problems": [{"clearance_m": {"goal_mesh": v}} for v in (0.004, 0.01, 0.015, 0.3)]}
+    assert bench_scenes.near_goals(index) == (2, 4, 3)
+    index["problems"].append({})
+    assert bench_scenes.near_goals(index) is None
