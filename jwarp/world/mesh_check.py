@@ -208,7 +208,7 @@ class MeshCheck:
         first = np.searchsorted(grp, np.arange(n_groups + 1)).astype(np.int32) \
             if sorted_groups else np.zeros(1, np.int32)
         self._group_span = int(np.diff(first).max(initial=0)) if sorted_groups else 0
-        self._o_first = wp.array(first, dtype=wp.int32, device=dev)
+        self._o_first: wp.array = wp.array(first, dtype=wp.int32, device=dev)
         self._wtab = (wp.array(kind, dtype=wp.int32, device=dev),
                       wp.array(vstart, dtype=wp.int32, device=dev),
                       wp.array(V, dtype=v3, device=dev),
