@@ -89,7 +89,9 @@ def ik_via_points(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
     order of preference (module docstring), every point collision-free in ``world`` at
     ``margin`` and ``self_margin``; one IK call for all problems.
 
-    ``q0``, ``q1`` (B, n_dof): start and goal; ``lines`` (B, W', n_dof): each problem's
+    ``model``: the robot as the planner plans on it (its mesh margin already applied;
+    its collision model is not checked again: the planner checked it, or its options
+    waived the check); ``q0``, ``q1`` (B, n_dof): start and goal; ``lines`` (B, W', n_dof): each problem's
     straight line (its first colliding waypoint is the detour's anchor); ``frame``: the
     tool frame (:func:`via_frame`); ``seed``: of the IK seeds' jitter (an integer, a
     numpy Generator, None: fresh entropy)."""
@@ -143,7 +145,10 @@ def ik_via_points(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
     S = project_numpy(model, S)
     opts = IKOptions(n_starts=IK_SEEDS, iterations=IK_ITERATIONS, margin=margin, seed=0,
                      tol_pos=TOL_POS, tol_rot=TOL_ROT, restart_after=None,
-                     q_default=S.reshape(-1, n))
+                     q_default=S.reshape(-1, n),
+                     # the planner's robot as it plans on it (its mesh margin applied, its
+                     # collision model checked or waived by the planner's own options)
+                     mesh_margin=False, allow_no_collision=True)
     ik = IKSolver(model, f, len(T), opts, world=world, device=device,
                   dtype=dtype).solve(T, S)
     q = np.asarray(ik.q, np.float64)
