@@ -188,3 +188,48 @@ def test_planner_fallback_runs_the_batch(monkeypatch):
     calls.update(batch=0, one=0)
     res2 = PL.plan("planar4", world, starts, goals, **o)
     assert calls == {"batch": 0, "one": 2} and res2.feasible.all()
+
+
+def test_widths_by_device():
+    """RRTOptions.batch and n_connect None: by the device (wider rounds on a CUDA device);
+    a value set is kept on either."""
+    assert R.RRTOptions().batch is None and R.RRTOptions().n_connect is None
+    assert R.rrt_widths(R.RRTOptions(), True) == (R.CPU_BATCH, R.CPU_CONNECT) == (32, 4)
+    assert R.rrt_widths(R.RRTOptions(), False) == (R.CUDA_BATCH, R.CUDA_CONNECT) == (128, 16)
+    assert R.rrt_widths(R.RRTOptions(batch=8), False) == (8, R.CUDA_CONNECT)
+    assert R.rrt_widths(R.RRTOptions(n_connect=2), True) == (R.CPU_BATCH, 2)
+    assert R.rrt_widths(R.RRTOptions(batch=5, n_connect=3), False) == (5, 3)
+    R.RRTOptions(batch=None, n_connect=None).validate()
+    for field in ("batch", "n_connect"):
+        with pytest.raises(ValueError, match=f"^rrt.{field}"):
+            R.RRTOptions(**{field: 0}).validate()
+
+
+class _Cuda:
+    is_cuda = True
+
+
+@pytest.mark.parametrize("cuda", [False, True])
+def test_rounds_are_as_wide_as_the_device(monkeypatch, cuda):
+    """Each round draws the device's samples per problem (the checks still on the CPU:
+    only the width's device rule is faked), in the batch and in the one-problem search."""
+    world = block_world_2d()
+    drawn: list[int] = []
+    orig = R.sample_within_limits
+    monkeypatch.setattr(R, "sample_within_limits",
+                        lambda m, K, rng: drawn.append(K) or orig(m, K, rng))
+    if cuda:
+        monkeypatch.setattr(R, "resolve_device", lambda d: _Cuda())
+    want = R.CUDA_BATCH if cuda else R.CPU_BATCH
+    o = R.RRTOptions(seed=0, max_samples=1000)
+    res = R.rrt_connect_batch("planar4", world, np.stack([S4, S4 * 0.95]),
+                              np.stack([G4, G4 * 0.95]), o, device="cpu")
+    assert drawn and all(k == want for k in drawn[:-2])
+    assert all(r.n_samples % want == 0 or r.n_samples == 1000 for r in res)
+    drawn.clear()
+    R.rrt_connect("planar4", world, S4, G4, o, device="cpu")
+    assert drawn and drawn[0] == want
+    drawn.clear()
+    R.rrt_connect_batch("planar4", world, np.stack([S4, S4 * 0.95]),
+                        np.stack([G4, G4 * 0.95]), R.RRTOptions(seed=0, batch=8), device="cpu")
+    assert drawn and set(drawn) == {8}

@@ -33,12 +33,23 @@ from typing import Any
 
 import numpy as np
 
-from jwarp.core.arrays import real_array, real_number
+from jwarp.core.arrays import real_array, real_number, resolve_device
 from jwarp.core.limits import sample_within_limits, within_limits
 from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world import path_feasibility as _fz
+
+
+#: samples per problem per round (:attr:`RRTOptions.batch` None) on the CPU
+CPU_BATCH = 32
+#: new nodes per problem per round the other tree connects to (``n_connect`` None), CPU
+CPU_CONNECT = 4
+#: samples per problem per round on a CUDA device: a round's one launch checks every
+#: problem's samples at once, so a wider round costs about as much as a narrow one there
+CUDA_BATCH = 128
+#: new nodes per problem per round the other tree connects to, on a CUDA device
+CUDA_CONNECT = 16
 
 
 @dataclass
@@ -55,9 +66,14 @@ class RRTOptions:
         seed: random seed (an integer >= 0, a numpy Generator or None: fresh entropy).
         shortcut_iterations: random shortcut pairs tried on the found path, >= 0 (in
             rounds of ``batch`` pairs).
-        batch: samples per round (and shortcut pairs per round), >= 1.
+        batch: random samples drawn per problem per round (each extends the tree by at
+            most one new node; also the shortcut pairs tried per round), >= 1; None: by
+            the checks' device (:func:`rrt_widths`: :data:`CPU_BATCH` on the CPU,
+            :data:`CUDA_BATCH` on a CUDA device, whose one launch per round checks every
+            problem's samples at once).
         n_connect: the new nodes of a round (those nearest to the other tree) that the
-            other tree tries to connect to, >= 1.
+            other tree tries to connect to, per problem, >= 1; None: by the device
+            (:data:`CPU_CONNECT`, :data:`CUDA_CONNECT`).
         n_substeps: substeps per edge of the elastic model's checks, >= 1; None sizes them
             to the world's resolution per batch of edges (no sphere centre moves more than
             half of it); the rigid model's edge check is continuous (no substeps).
@@ -69,8 +85,8 @@ class RRTOptions:
     goal_bias: float = 0.1
     seed: Any = 0
     shortcut_iterations: int = 64
-    batch: int = 32
-    n_connect: int = 4
+    batch: int | None = None
+    n_connect: int | None = None
     n_substeps: int | None = None
 
     def validate(self) -> None:
@@ -80,7 +96,8 @@ class RRTOptions:
         for name, lo in (("max_samples", 1), ("shortcut_iterations", 0), ("batch", 1),
                          ("n_connect", 1)):
             v = getattr(self, name)
-            check_int(v, f"rrt.{name}", lo)
+            if v is not None or name not in ("batch", "n_connect"):
+                check_int(v, f"rrt.{name}", lo)
         if self.n_substeps is not None:
             v = self.n_substeps
             check_int(v, "rrt.n_substeps", 1)
@@ -98,6 +115,16 @@ class RRTOptions:
                 and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
             raise ValueError(f"rrt.seed: expected an integer >= 0, a Generator or None, "
                              f"got {seed!r}")
+
+
+def rrt_widths(options: RRTOptions, device_is_cpu: bool) -> tuple[int, int]:
+    """``(batch, n_connect)`` of ``options`` (:class:`RRTOptions`): the values set, else
+    (None) the device's: :data:`CPU_BATCH` and :data:`CPU_CONNECT` on the CPU,
+    :data:`CUDA_BATCH` and :data:`CUDA_CONNECT` on a CUDA device."""
+    batch, conn = ((CPU_BATCH, CPU_CONNECT) if device_is_cpu
+                   else (CUDA_BATCH, CUDA_CONNECT))
+    return (batch if options.batch is None else int(options.batch),
+            conn if options.n_connect is None else int(options.n_connect))
 
 
 @dataclass
@@ -286,6 +313,7 @@ def rrt_connect(robot: RobotLike, world: Any, start: Any, goal: Any,
     if not isinstance(o, RRTOptions):
         raise TypeError(f"options: expected an RRTOptions, got {type(o).__name__}")
     o.validate()
+    batch, n_connect = rrt_widths(o, not resolve_device(device).is_cuda)
     model = get_robot(robot)
     _fz.check_world(model, world)
     n = model.n_dof
@@ -326,7 +354,7 @@ def rrt_connect(robot: RobotLike, world: Any, start: Any, goal: Any,
             reason = "time_limit"
             break
         A, B = trees[a], trees[1 - a]
-        K = min(o.batch, o.max_samples - samples)
+        K = min(batch, o.max_samples - samples)
         x = sample_within_limits(model, K, rng)
         x[rng.random(K) < o.goal_bias] = B.q[0]
         samples += K
@@ -342,7 +370,7 @@ def rrt_connect(robot: RobotLike, world: Any, start: Any, goal: Any,
             sel = sel[chk.edges(qn[sel], new[sel])]
         if len(sel):
             ids = A.add(new[sel], near[sel])
-            found = _connect(B, A.q[ids], ids, chk, step, o.n_connect)
+            found = _connect(B, A.q[ids], ids, chk, step, n_connect)
             if found is not None:
                 ia, ib = found
                 pa, pb = A.branch(ia), B.branch(ib)
@@ -359,7 +387,7 @@ def rrt_connect(robot: RobotLike, world: Any, start: Any, goal: Any,
         return result(None, reason, samples, nodes, 0)
     raw = len(found)
     t = time.perf_counter()
-    path = shortcut(found, chk, step, o.shortcut_iterations, o.batch, rng, stop_at)
+    path = shortcut(found, chk, step, o.shortcut_iterations, batch, rng, stop_at)
     chk.time["shortcut"] = time.perf_counter() - t
     path = _verify(path, chk, step)
     if path is None:
@@ -717,6 +745,7 @@ def rrt_connect_batch(robot: RobotLike, world: Any, starts: Any, goals: Any,
     if not isinstance(o, RRTOptions):
         raise TypeError(f"options: expected an RRTOptions, got {type(o).__name__}")
     o.validate()
+    batch, n_connect = rrt_widths(o, not resolve_device(device).is_cuda)
     model = get_robot(robot)
     _fz.check_world(model, world)
     n = model.n_dof
@@ -777,11 +806,11 @@ def rrt_connect_batch(robot: RobotLike, world: Any, starts: Any, goals: Any,
             p.t_end = time.perf_counter()
     active = [p for p in probs if not p.done]
     if active:
-        _grow(model, active, chk, o, step, stop_at)
+        _grow(model, active, chk, o, step, stop_at, batch, n_connect)
     # shortcut and verify the trees' paths, all problems together
     found = [p for p in probs if p.path is not None and not p.straight]
     t = time.perf_counter()
-    _shortcut_batch(found, chk, step, o, stop_at)
+    _shortcut_batch(found, chk, step, o, stop_at, batch)
     chk.time["shortcut"] = time.perf_counter() - t
     _verify_batch(model, world, found, chk, step, m, endpoint_margin, self_margin, mesh,
                   device)
@@ -819,9 +848,10 @@ def _check_roots(model: Any, world: Any, chk: _BatchChecks, q0: np.ndarray, q1: 
 
 
 def _grow(model: Any, active: list[_Problem], chk: _BatchChecks, o: RRTOptions, step: float,
-          stop_at: float) -> None:
+          stop_at: float, batch: int, n_connect: int) -> None:
     """The rounds of :func:`rrt_connect` for every problem of ``active`` at once, until each
-    connected or spent its samples or the time."""
+    connected or spent its samples or the time; ``batch`` samples and ``n_connect``
+    connections per problem per round (:func:`rrt_widths`)."""
     while active:
         now = time.perf_counter()
         for p in active:
@@ -835,7 +865,7 @@ def _grow(model: Any, active: list[_Problem], chk: _BatchChecks, o: RRTOptions, 
         ext: dict[int, tuple] = {}
         for p in active:
             A, Bt = p.trees[p.a], p.trees[1 - p.a]
-            K = min(o.batch, o.max_samples - p.samples)
+            K = min(batch, o.max_samples - p.samples)
             x = sample_within_limits(model, K, p.rng)
             x[p.rng.random(K) < o.goal_bias] = Bt.q[0]
             p.samples += K
@@ -865,7 +895,7 @@ def _grow(model: Any, active: list[_Problem], chk: _BatchChecks, o: RRTOptions, 
                 near, _, new, _ = ext[b]
                 A, Bt = p.trees[p.a], p.trees[1 - p.a]
                 ids = A.add(new[sel], near[sel])
-                conn[b] = _connect_edges(Bt, A.q[ids], ids, step, o.n_connect)
+                conn[b] = _connect_edges(Bt, A.q[ids], ids, step, n_connect)
         conn_ok = chk.edges({b: (c[-2], c[-1]) for b, c in conn.items()})
         for p in active:
             found = None
@@ -885,9 +915,9 @@ def _grow(model: Any, active: list[_Problem], chk: _BatchChecks, o: RRTOptions, 
 
 
 def _shortcut_batch(found: list[_Problem], chk: _BatchChecks, step: float, o: RRTOptions,
-                    stop_at: float) -> None:
-    """:func:`shortcut` of every found path at once: per round each path's pairs, all
-    their pieces (edges at ``step``) checked in one call."""
+                    stop_at: float, batch: int) -> None:
+    """:func:`shortcut` of every found path at once: per round each path's ``batch`` pairs,
+    all their pieces (edges at ``step``) checked in one call."""
     for p in found:
         p.path = np.array(p.path, np.float64)
         p.tried = 0
@@ -898,7 +928,7 @@ def _shortcut_batch(found: list[_Problem], chk: _BatchChecks, step: float, o: RR
         props: dict[int, tuple] = {}
         for p in todo:
             assert p.path is not None
-            K = min(o.batch, o.shortcut_iterations - p.tried)
+            K = min(batch, o.shortcut_iterations - p.tried)
             p.tried += K
             pairs, gain = _shortcut_pairs(p.path, K, p.rng)
             if len(pairs):
