@@ -66,6 +66,19 @@ NEAR_STRAIGHT = 1.05
 #: most this
 STOP_NEAR_STRAIGHT: float | None = NEAR_STRAIGHT
 
+#: :attr:`PlanOptions.shorten` is skipped when less than this share of
+#: :attr:`PlanOptions.time_limit` is left of the call (its checks would not fit)
+SHORTEN_MIN_LEFT = 0.05
+
+#: the paths whose shortcuts (and whose shortened paths' certification) go in one check
+#: call of :attr:`PlanOptions.shorten` under a time limit: the deadline is asked before
+#: every call, so the shortening overruns it by at most one such call
+SHORTEN_CHUNK = 128
+
+#: the share of the time left at the start of :attr:`PlanOptions.shorten` kept for the
+#: certification of the shortened paths (the shortcut rounds end before it)
+SHORTEN_CHECK_SHARE = 0.2
+
 
 #: evaluations per segment of the planner's continuous check (MotionOptions.max_evals)
 PLANNER_CHECK_EVALS = 256
@@ -631,8 +644,16 @@ class Planner:
         ``length_cost`` and ``collision_cost`` of the replaced paths are evaluated again
         (the objective's buffers); ``length_before`` and ``timings["shorten"]`` set.
         ``work``: the collision evaluations of the optimisation (the budget's base,
-        :attr:`PlanOptions.shorten_budget`; None: no budget)."""
-        from jwarp.solvers.planning.shorten import length_cost, respace, shortcut_paths
+        :attr:`PlanOptions.shorten_budget`; None: no budget).
+
+        ``deadline`` (``time.perf_counter()``): skipped when it has passed or less than
+        :data:`SHORTEN_MIN_LEFT` of ``time_limit`` is left; else the shortcut rounds end
+        at :data:`SHORTEN_CHECK_SHARE` of the time left before it and the shortened paths'
+        certification at it, both in calls of :data:`SHORTEN_CHUNK` paths with the
+        deadline asked before each (:func:`jwarp.solvers.planning.shorten.shortcut_paths`):
+        a path whose shortcuts or certification were not reached keeps what was proven
+        (its certified path as it was, where its certification was not reached)."""
+        from jwarp.solvers.planning.shorten import Pace, length_cost, respace, shortcut_paths
 
         t = time.perf_counter()
         o = self.options
@@ -640,9 +661,14 @@ class Planner:
         # a path already near the straight line (U_l <= NEAR_STRAIGHT) is left as it is
         solved = np.asarray(res.feasible, bool) & (np.asarray(res.length_cost, np.float64)
                                                    > NEAR_STRAIGHT)
-        if not solved.any() or (deadline is not None and t >= deadline):
+        short_of_time = deadline is not None and (
+            t >= deadline or (o.time_limit is not None
+                              and deadline - t < SHORTEN_MIN_LEFT * float(o.time_limit)))
+        if not solved.any() or short_of_time:
             res.timings["shorten"] = time.perf_counter() - t
             return
+        rounds_end = (None if deadline is None
+                      else deadline - SHORTEN_CHECK_SHARE * (deadline - t))
         # a batch of worlds: every problem's row (path b in world b), the unsolved idle
         idx = np.arange(len(solved)) if self.batched else np.nonzero(solved)[0]
         paths = np.asarray(res.path, np.float64)[idx]
@@ -661,34 +687,65 @@ class Planner:
 
         ends = np.concatenate([paths[:, 0], paths[:, -1]])
 
-        def check(segments: np.ndarray, per_path: int) -> np.ndarray:
+        on_device: list = [None, None]  # the segments of the last step, and on the device
+
+        def check(segments: np.ndarray, per_path: int, rows: np.ndarray | None = None
+                  ) -> np.ndarray:
             # group: a path's list of shortcuts is in the order of preference and the
             # first proven is taken: the rest of the list is skipped. The certificate
             # only for shortcuts from the start or to the goal (a grasp the spheres
-            # touch); the waypoints between are free for the spheres
-            at_end = meshes and ((segments[:, 0, None] == ends[None]).all(-1).any(-1)
-                                 | (segments[:, -1, None] == ends[None]).all(-1).any(-1))
-            r = chk.check(segments, margin=clear, self_margin=o.self_margin,
+            # touch); the waypoints between are free for the spheres. rows: one chunk
+            # of the step's lists (the segments on the device once per step)
+            seg = segments if rows is None else segments[rows]
+            at_end = meshes and ((seg[:, 0, None] == ends[None]).all(-1).any(-1)
+                                 | (seg[:, -1, None] == ends[None]).all(-1).any(-1))
+            src: Any = segments
+            if rows is not None:
+                if on_device[0] is not segments:
+                    on_device[:] = [segments, wp.array(
+                        np.ascontiguousarray(segments, np.float64), dtype=wp.float64,
+                        device=chk.device)]
+                src = on_device[1]
+            r = chk.check(src, margin=clear, self_margin=o.self_margin,
                           world_group=per_path if self.batched else 0, group=per_path,
-                          meshes=at_end)
+                          meshes=at_end, rows=rows)
             spent[0] += r.evaluations
             return r.ok
 
         # the rounds' evaluations: a share of the optimisation's (the first call always)
         allowed = (None if o.shorten_budget is None or work is None
                    else float(o.shorten_budget) * work)
-        nodes = shortcut_paths(paths, check, o.shorten, deadline, active=solved[idx],
+        nodes = shortcut_paths(paths, check, o.shorten, rounds_end, active=solved[idx],
                                budget=None if allowed is None
                                else (lambda: spent[0] >= allowed),
                                near_straight=None if STOP_NEAR_STRAIGHT is None
-                               else float(np.sqrt(STOP_NEAR_STRAIGHT)))
+                               else float(np.sqrt(STOP_NEAR_STRAIGHT)),
+                               chunk=SHORTEN_CHUNK)
         cand = np.stack([respace(nd, W) for nd in nodes]).astype(self.npdt).astype(np.float64)
         cand[:, 0], cand[:, -1] = paths[:, 0], paths[:, -1]
         better = solved[idx] & (length_cost(cand) < length_cost(paths) * (1.0 - 1e-6))
-        if better.any():
-            better &= chk.check(cand, margin=o.margin, endpoint_margin=o.endpoint_margin,
-                                self_margin=o.self_margin,
-                                world_group=1 if self.batched else 0, meshes=meshes).ok
+        todo = np.nonzero(better)[0]
+        if len(todo):
+            # certified with the planner's rule, in chunks until the deadline: a path
+            # whose check was not reached keeps its certified path
+            proven = np.zeros(len(better), bool)
+            size = len(todo) if deadline is None else SHORTEN_CHUNK
+            dev_cand: wp.array = wp.array(np.ascontiguousarray(cand), dtype=wp.float64,
+                                          device=chk.device)
+
+            def certify(rows: np.ndarray) -> np.ndarray:
+                return chk.check(dev_cand, margin=o.margin, endpoint_margin=o.endpoint_margin,
+                                 self_margin=o.self_margin,
+                                 world_group=1 if self.batched else 0, meshes=meshes,
+                                 rows=rows).ok
+
+            pace = Pace()
+            for c in range(0, len(todo), size):
+                part = todo[c:c + size]
+                if not pace.fits(len(part), deadline):
+                    break
+                proven[part] = pace.run(certify, part)
+            better &= proven
         if better.any():
             rows, b = np.nonzero(better)[0], idx[better]
             obj = buf.objective

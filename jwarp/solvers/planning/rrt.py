@@ -40,7 +40,6 @@ from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world import path_feasibility as _fz
 
-
 #: samples per problem per round (:attr:`RRTOptions.batch` None) on the CPU
 CPU_BATCH = 32
 #: new nodes per problem per round the other tree connects to (``n_connect`` None), CPU

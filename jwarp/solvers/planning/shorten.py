@@ -16,7 +16,7 @@ import numpy as np
 
 from jwarp.solvers.planning.objective import NORM_FLOOR
 
-__all__ = ["MAX_LIST", "MIN_ROUND_GAIN", "corners", "length_cost", "respace",
+__all__ = ["MAX_LIST", "MIN_ROUND_GAIN", "Pace", "corners", "length_cost", "respace",
            "shortcut_paths"]
 
 #: most shortcuts in a path's list of one check call (:func:`shortcut_paths`): the
@@ -63,12 +63,42 @@ def respace(nodes: np.ndarray, n_waypoints: int) -> np.ndarray:
     return resample_path(nodes, n_waypoints)
 
 
-def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndarray],
+class Pace:
+    """The seconds per checked row of the calls timed so far (:meth:`run`): whether a call
+    of ``n`` rows still ends before a deadline (:meth:`fits`), so that the calls of a
+    stage in chunks stop before the chunk that would overrun it, not after."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+        self.rows = 0
+        self.stopped = False  # a call did not fit: the stage ends
+
+    def fits(self, n: int, deadline: float | None) -> bool:
+        """True without a deadline; False once it has passed; else whether ``n`` rows at
+        the pace so far end before it (True before any call: nothing to go by)."""
+        if deadline is None:
+            return True
+        now = time.perf_counter()
+        if now >= deadline:
+            return False
+        return self.rows == 0 or now + self.seconds * n / self.rows <= deadline
+
+    def run(self, f: Callable[[np.ndarray], np.ndarray], rows: np.ndarray) -> np.ndarray:
+        """``f(rows)``, timed."""
+        t = time.perf_counter()
+        out = f(rows)
+        self.seconds += time.perf_counter() - t
+        self.rows += len(rows)
+        return out
+
+
+def shortcut_paths(paths: np.ndarray, check: Callable[..., np.ndarray],
                    rounds: int, deadline: float | None = None,
                    active: np.ndarray | None = None, max_points: int = 21,
                    max_list: int | None = None, min_gain: float | None = None,
                    budget: Callable[[], bool] | None = None,
-                   near_straight: float | None = None) -> list[np.ndarray]:
+                   near_straight: float | None = None,
+                   chunk: int | None = None) -> list[np.ndarray]:
     """Shortcuts of feasible paths (K, W, n_dof), all at once (greedy string pulling).
 
     Each round takes every path's corners (:func:`corners`) and, where that makes at most
@@ -91,7 +121,15 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
     Ends after ``rounds`` rounds, when no path's round shortened it by more than
     ``min_gain`` (relative; None: :data:`MIN_ROUND_GAIN`), or at ``deadline`` (``time.perf_counter()``; checked
     before every call: a round cut short keeps its jumps so far and the path after
-    them). ``budget``: a function, True once the budget is spent (e.g. the evaluations
+    them). ``chunk`` (paths): with a ``deadline``, each step's check is made in calls of
+    the lists of at most ``chunk`` paths, ``check(segments, per_path, rows)`` with ``rows``
+    (E_c,) the rows of ``segments`` to check (those paths' lists, no padding; the others
+    are not read) returning (E_c,) bool, and the deadline is asked before every call: a
+    call that would end after it at the pace of the calls so far (:class:`Pace`) is not
+    made, so a step overruns the deadline by at most one chunk's call; the paths whose
+    lists were not checked keep the rest of the path as it is (every jump taken was
+    proven by a call that completed). None (or no ``deadline``): the two-argument call
+    over every path at once. ``budget``: a function, True once the budget is spent (e.g. the evaluations
     of the checks so far against a share of the planner's: deterministic), asked before
     every call but the first (the first jumps of every path are always tried); a round
     cut short by it ends as by ``deadline``.
@@ -115,8 +153,9 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
             raise ValueError(f"near_straight: expected a length ratio >= 1, got {near_straight!r}")
     active = (np.ones(K, bool) if active is None else np.array(active, bool).reshape(K))
     calls = 0
+    pace = Pace()
     for _ in range(int(rounds)):
-        if not active.any() or _late(deadline) or _spent(calls, budget):
+        if not active.any() or _late(deadline) or pace.stopped or _spent(calls, budget):
             break
         pts = [_refined(nd) if 2 * len(nd) - 1 <= max_points else nd for nd in nodes]
         cums = [np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
@@ -125,7 +164,7 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
         kept: list[list[int]] = [[0] for _ in range(K)]
         going = active & np.array([len(p) >= 3 for p in pts])
         while going.any():
-            if _late(deadline) or _spent(calls, budget):
+            if _late(deadline) or pace.stopped or _spent(calls, budget):
                 for k in map(int, np.nonzero(going)[0]):  # the rest of the path as it is
                     kept[k].extend(range(int(at[k]) + 1, len(pts[k])))
                 break
@@ -133,6 +172,7 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
                      else np.zeros((0, 2), np.int64) for k in range(K)]
             per = max(len(e) for e in lists)
             ok = np.zeros((K, per), bool)
+            late = np.zeros(K, bool)  # lists not checked: out of time
             if per:
                 segs = np.empty((K, per, 2, n))
                 for k in range(K):
@@ -141,8 +181,15 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
                     if len(e):
                         segs[k, :len(e), 0] = pts[k][e[:, 0]]
                         segs[k, :len(e), 1] = pts[k][e[:, 1]]
-                ok = np.asarray(check(segs.reshape(-1, 2, n), per), bool).reshape(K, per)
+                if chunk is None or deadline is None:
+                    ok = np.asarray(check(segs.reshape(-1, 2, n), per), bool).reshape(K, per)
+                else:
+                    late = _check_chunks(check, segs.reshape(-1, 2, n), per, lists, ok,
+                                         int(chunk), deadline, pace)
                 calls += 1
+            for k in map(int, np.nonzero(going & late)[0]):  # the rest as it is
+                kept[k].extend(range(int(at[k]) + 1, len(pts[k])))
+                going[k] = False
             for k in map(int, np.nonzero(going)[0]):
                 e = lists[k]
                 hit = np.nonzero(ok[k, :len(e)])[0]
@@ -169,6 +216,28 @@ def shortcut_paths(paths: np.ndarray, check: Callable[[np.ndarray, int], np.ndar
             elif near_straight is not None and min(new_len, old_len) <= near_straight * straight[k]:
                 active[k] = False  # near the straight line: the next would gain little
     return nodes
+
+
+def _check_chunks(check: Callable[..., np.ndarray], segs: np.ndarray, per: int,
+                  lists: list[np.ndarray], ok: np.ndarray, chunk: int, deadline: float,
+                  pace: Pace) -> np.ndarray:
+    """The lists (``lists[k]`` of path k, rows ``k per ..``) checked in calls of at most
+    ``chunk`` paths' lists until a call would end after ``deadline`` (:meth:`Pace.fits`);
+    ``ok`` (K, per) filled. Returns (K,) bool: the paths with a list left unchecked."""
+    K = len(lists)
+    todo = np.array([k for k in range(K) if len(lists[k])], np.int64)
+    late = np.zeros(K, bool)
+    flat = ok.reshape(-1)
+    for c in range(0, len(todo), max(1, chunk)):
+        part = todo[c:c + max(1, chunk)]
+        rows = np.concatenate([k * per + np.arange(len(lists[k])) for k in part])
+        if not pace.fits(len(rows), deadline):
+            late[todo[c:]] = True
+            pace.stopped = True
+            break
+        flat[rows] = np.asarray(pace.run(lambda r: check(segs, per, r), rows),
+                                bool).reshape(len(rows))
+    return late
 
 
 def _late(deadline: float | None) -> bool:
