@@ -1,7 +1,8 @@
 """Every stage respects the call's deadline (issue 45): the shortening is skipped when too
 little of the time limit is left, its check calls go in chunks with the deadline asked
 before each (a step overruns it by at most one chunk), a path shortened only partly is
-still certified (re-checked here by the independent verifier)."""
+still certified (re-checked here by the independent verifier), and explain() gives the
+cheap "out of time" reason once the deadline has passed (no diagnosis check)."""
 
 from __future__ import annotations
 
@@ -206,3 +207,36 @@ def test_time_limit_in_plan_ends_on_time(world):
     assert res.wall_time < 0.5 + 0.5
     for b in np.nonzero(res.feasible)[0]:
         assert independent_feasible(PL.Planner("planar4", world, 1).robot, world, res.path[b])
+
+
+# ------------------------------------------------------------------ explain
+def test_explain_after_the_deadline_is_cheap(world, monkeypatch):
+    pl = PL.Planner("planar4", world, 3, PL.PlanOptions(
+        n_starts=1, iterations=1, step=0.05, seed=0, n_substeps=8, fallback=None))
+    res = pl.plan(STARTS, GOALS)
+    bad = np.nonzero(~res.feasible)[0]
+    assert len(bad) and res.feasible[1]
+    calls = _count_checks(monkeypatch)
+    diag = pl.explain(res)  # no deadline: a check diagnoses them
+    assert calls
+    assert all(diag[i] != PM.NOT_DIAGNOSED and "collision" in diag[i] for i in bad)
+    assert diag[1] == "feasible"
+    calls.clear()
+    assert pl.explain(res, deadline=time.perf_counter() + 100.0) == diag
+    calls.clear()
+    late = pl.explain(res, deadline=time.perf_counter() - 1.0)
+    assert not calls
+    assert late[1] == "feasible"
+    assert all(late[i] == PM.NOT_DIAGNOSED for i in bad)
+    # the fallback's notes are still appended
+    res.fallback_notes = np.array(["", "", ""], dtype=object)
+    res.fallback_notes[bad[0]] = "RRT-Connect not run: no time left"
+    late = pl.explain(res, deadline=time.perf_counter() - 1.0)
+    assert late[bad[0]] == f"{PM.NOT_DIAGNOSED}; fallback: RRT-Connect not run: no time left"
+
+
+def test_plan_out_of_time_says_so(world):
+    res = PL.plan("planar4", world, S4, G4, time_limit=1e-4, n_starts=8, iterations=300,
+                  step=0.05, seed=0, n_substeps=8, fallback=None)
+    assert not res.feasible[0] and res.stop_reason == "time_limit"
+    assert res.reasons[0] == PM.NOT_DIAGNOSED

@@ -66,6 +66,10 @@ NEAR_STRAIGHT = 1.05
 #: most this
 STOP_NEAR_STRAIGHT: float | None = NEAR_STRAIGHT
 
+#: :meth:`Planner.explain`'s reason for an unsolved problem once the call's deadline has
+#: passed (no diagnosis check after the time limit)
+NOT_DIAGNOSED = "not feasible: out of time (no path proven within the time limit; not diagnosed)"
+
 #: :attr:`PlanOptions.shorten` is skipped when less than this share of
 #: :attr:`PlanOptions.time_limit` is left of the call (its checks would not fit)
 SHORTEN_MIN_LEFT = 0.05
@@ -197,6 +201,9 @@ class Planner:
             kappa_array(self.robot, o.kappa)  # validates, naming kappa
         self._buffers: _Buffers | None = None
         self._motion = None  # the continuous path check (motion_check())
+        # explain() diagnoses the unsolved problems by a check (off: the fallback's own
+        # optimisation, whose reasons nobody reads)
+        self._diagnose = True
         #: a batch of worlds (World.batch): problem b plans in world b
         self.batched = world.n_worlds > 1
         if self.batched and world.n_worlds != self.n_problems:
@@ -480,7 +487,7 @@ class Planner:
             _fallback(self, res, q0, q1, t0, search_end)
         if o.shorten > 0 and o.stop_when_solved and not o.converge and o.kappa is None:
             self._shorten(buf, res, deadline, obj.evaluations - evals0)
-        res.reasons = self.explain(res)
+        res.reasons = self.explain(res, deadline=deadline)
         res.wall_time = time.perf_counter() - t0
         if getattr(model, "collision_pieces", None) is not None:  # the certificate's share
             res.timings["mesh_check"] = self._mesh_seconds() - mesh_s0
@@ -768,12 +775,19 @@ class Planner:
             res.collision_cost[b] = obj.collision.numpy()[b * n_starts]
         res.timings["shorten"] = time.perf_counter() - t
 
-    def explain(self, res: PlanResult) -> list[str]:
+    def explain(self, res: PlanResult, deadline: float | None = None) -> list[str]:
         """Per problem of ``res``: "feasible", or why its best path is not: the first
         colliding link and object (or link pair), an uncertified approach, or the joint
         limits (one check of the infeasible problems' paths on the device), then what the
-        RRT fallback did ("; fallback: ...", :attr:`PlanResult.fallback_notes`)."""
-        out = self._explain(res)
+        RRT fallback did ("; fallback: ...", :attr:`PlanResult.fallback_notes`).
+
+        ``deadline`` (``time.perf_counter()``; :meth:`plan` passes its ``time_limit``'s):
+        once it has passed, the unsolved problems are not diagnosed by a check (it would
+        run after the limit) but said to be out of time (:data:`NOT_DIAGNOSED`), the
+        fallback's notes still appended."""
+        late = not self._diagnose or (deadline is not None
+                                      and time.perf_counter() >= deadline)
+        out = self._explain(res, late)
         notes = res.fallback_notes
         if notes is not None:
             for i in np.nonzero(~np.asarray(res.feasible, bool))[0]:
@@ -781,8 +795,9 @@ class Planner:
                     out[i] = f"{out[i]}; fallback: {notes[i]}"
         return out
 
-    def _explain(self, res: PlanResult) -> list[str]:
-        """:meth:`explain` without the fallback's notes."""
+    def _explain(self, res: PlanResult, late: bool = False) -> list[str]:
+        """:meth:`explain` without the fallback's notes; ``late``: no check (the deadline
+        has passed)."""
         out = ["feasible"] * len(res.feasible)
         bad = np.nonzero(~np.asarray(res.feasible, bool))[0]
         if not len(bad):
@@ -791,6 +806,10 @@ class Planner:
         if o.kappa is not None:
             for i in bad:
                 out[i] = "not feasible on the elastic model (collision or limits at a substep)"
+            return out
+        if late:
+            for i in bad:
+                out[i] = NOT_DIAGNOSED
             return out
         paths = np.asarray(res.path)
         if self.batched:  # the paths of every problem, so path b is in world b
@@ -1101,6 +1120,7 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
             sub_world = World.batch([planner.world.select(int(b)) for b in found])
         sub = Planner(planner.robot, sub_world, len(found), sub_o, device=planner.device,
                       dtype=planner.npdt)
+        sub._diagnose = False  # its reasons are not read: the notes below say it
         if o.kappa is None:  # certify with the check that proved the RRT's edges
             sub._motion = certify_check(planner.robot, sub_world, device=planner.device)
         idx = np.array(found)
@@ -1125,7 +1145,8 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
                 how = ("certified as it is" if r2.iterations[k] == 0 else
                        f"certified after {int(r2.iterations[k])} optimisation steps")
                 notes[bb] = f"RRT-Connect path of {nodes[k]} nodes{cut}: {how}"
-            elif r2.stop_reason == "time_limit":
+            elif r2.stop_reason == "time_limit" or (
+                    deadline is not None and time.perf_counter() >= deadline):
                 # out of time: no per-problem diagnosis (a check per problem in its own
                 # world would cost more than the budget that is already spent)
                 notes[bb] = (f"RRT-Connect path of {nodes[k]} nodes{cut} not certified as "
