@@ -480,12 +480,12 @@ class Planner:
         through collision-free IK via points (:mod:`jwarp.solvers.planning.via_ik`).
         ``line``: which lines the straight stage proved, with their paths; None (no
         straight stage): the lines are checked here (the spheres, the planner's check).
-        Returns whether the IK ran (a robot of a 3-D workspace, one world, the rigid
-        model)."""
+        Returns whether the IK ran (a robot of a 3-D workspace, the rigid model; in a batch
+        of worlds each problem's via points and anchor are checked in its own world)."""
         o = self.options
         n_starts = Q.shape[1]
         k = min(int(o.via_ik), n_starts - 1) if o.start_kind == "mixed" else 0
-        if k <= 0 or self.batched or o.kappa is not None or self.robot.workspace_dim != 3:
+        if k <= 0 or o.kappa is not None or self.robot.workspace_dim != 3:
             return False
         if line is None or line_paths is None:
             line_paths, _, line, _, _ = self._straight(q0, q1)
@@ -497,7 +497,7 @@ class Planner:
         V, count = ik_via_paths(self.robot, self.world, q0[bad], q1[bad], line_paths[bad], k,
                                 Q.shape[2], frame=o.via_frame, margin=o.margin,
                                 self_margin=o.self_margin, device=self.device, dtype=self.npdt,
-                                seed=o.seed)
+                                seed=o.seed, worlds=bad if self.batched else None)
         for i, b in enumerate(bad):
             c = int(count[i])
             if c:
