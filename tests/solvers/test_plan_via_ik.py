@@ -88,8 +88,9 @@ def test_the_planner_starts_from_them_where_the_line_fails(problems):
     starts of a problem whose line is not proven are the via-point paths."""
     robot, world, pairs = problems
     q0, q1 = pairs[:, 0], pairs[:, 1]
+    # stop_when_solved off: the IK runs even where a kept random start is proven
     o = PL.PlanOptions(margin=MARGIN, n_starts=8, via_ik=3, iterations=0, seed=2,
-                       fallback=None, shorten=0)
+                       fallback=None, shorten=0, stop_when_solved=False)
     res = PL.Planner(robot, world, len(pairs), o, device="cpu").plan(q0, q1)
     assert (res.stage != "straight").all()
     lines = initial_paths(q0, q1, 20, "straight").astype(np.float32).astype(np.float64)
@@ -104,7 +105,7 @@ def test_the_planner_starts_from_them_where_the_line_fails(problems):
                                        atol=1e-5)
     off = PL.Planner(robot, world, len(pairs), PL.PlanOptions(
         margin=MARGIN, n_starts=8, via_ik=0, iterations=0, seed=2, fallback=None,
-        shorten=0), device="cpu").plan(q0, q1)
+        shorten=0, stop_when_solved=False), device="cpu").plan(q0, q1)
     # the other starts are the same random ones
     np.testing.assert_array_equal(got[:, :8 - int(count.max())],
                                   off.all_paths[:, :8 - int(count.max())])
@@ -233,8 +234,9 @@ def test_via_points_in_a_batch_of_worlds_are_free_in_their_own_world(batch_probl
 
 def test_a_batch_plan_starts_from_them_and_is_certified_in_each_world(batch_problems):
     robot, batch, boxes, q0, q1 = batch_problems
+    # stop_when_solved off: the IK runs even where a kept random start is proven
     o = PL.PlanOptions(margin=MARGIN, n_starts=8, via_ik=3, iterations=0, seed=2,
-                       fallback=None, shorten=0)
+                       fallback=None, shorten=0, stop_when_solved=False)
     res = PL.Planner(robot, batch, 3, o, device="cpu").plan(q0, q1)
     assert "via_ik" in res.timings
     lines = initial_paths(q0, q1, 20, "straight").astype(np.float32).astype(np.float64)
@@ -247,9 +249,28 @@ def test_a_batch_plan_starts_from_them_and_is_certified_in_each_world(batch_prob
                                    atol=1e-5)
     full = PL.plan(robot, batch, q0, q1, options=PL.PlanOptions(
         margin=MARGIN, seed=7, fallback=None, time_limit=None), device="cpu")
-    assert "via_ik" in full.timings and full.feasible.any()
+    assert full.feasible.any()
     for b in np.nonzero(full.feasible)[0]:
         w = batch.select(int(b))
         assert check_paths(robot, w, full.path[b][None], margin=MARGIN, device="cpu").ok.all()
         fine = initial_paths(full.path[b][:-1], full.path[b][1:], 30, "straight")
         assert (_box_clearance(robot, fine.reshape(-1, robot.n_dof), boxes[b]) > 0).all()
+
+
+def test_no_ik_where_a_kept_random_start_is_proven(batch_problems):
+    """With stop_when_solved a problem one of whose kept random starts the spheres prove
+    ends at the first check: the IK is skipped for it (and the start is really free)."""
+    robot, batch, boxes, q0, q1 = batch_problems
+    o = PL.PlanOptions(margin=MARGIN, n_starts=8, via_ik=3, iterations=0, seed=2,
+                       fallback=None, shorten=0)
+    pl = PL.Planner(robot, batch, 3, o, device="cpu")
+    Q = PL.planner._initial(robot, q0, q1, "mixed", 8, o.n_waypoints, o.seed, batch,
+                            o.free_via, device=pl.device)
+    proven = pl._random_start_proven(Q, np.arange(3), 5)
+    for b in range(3):
+        ok = check_paths(robot, batch.select(b), Q[b, 1:5].astype(np.float32),
+                         margin=MARGIN, device="cpu").ok
+        assert proven[b] == ok.any()
+    res = pl.plan(q0, q1)
+    assert ("via_ik" in res.timings) == (not proven.all())
+    assert res.feasible[proven].all()
