@@ -500,12 +500,12 @@ class Planner:
         through collision-free IK via points (:mod:`jwarp.solvers.planning.via_ik`).
         ``line``: which lines the straight stage proved, with their paths; None (no
         straight stage): the lines are checked here (the spheres, the planner's check).
-        Returns whether the IK ran (a robot of a 3-D workspace, one world, the rigid
-        model)."""
+        Returns whether the IK ran (a robot of a 3-D workspace, the rigid model; in a batch
+        of worlds each problem's via points and anchor are checked in its own world)."""
         o = self.options
         n_starts = Q.shape[1]
         k = min(int(o.via_ik), n_starts - 1) if o.start_kind == "mixed" else 0
-        if k <= 0 or self.batched or o.kappa is not None or self.robot.workspace_dim != 3:
+        if k <= 0 or o.kappa is not None or self.robot.workspace_dim != 3:
             return False
         if line is None or line_paths is None:
             line_paths, _, line, _, _ = self._straight(q0, q1)
@@ -514,15 +514,40 @@ class Planner:
         from jwarp.solvers.planning.via_ik import ik_via_paths
 
         bad = np.nonzero(~line)[0]
+        if o.stop_when_solved and o.freeze_feasible and not o.converge:
+            # a problem one of whose kept random starts the spheres already prove ends at
+            # the optimiser's first check whatever the via points: no IK for it
+            bad = bad[~self._random_start_proven(Q, bad, n_starts - k)]
+            if not len(bad):
+                return False
         V, count = ik_via_paths(self.robot, self.world, q0[bad], q1[bad], line_paths[bad], k,
                                 Q.shape[2], frame=o.via_frame, margin=o.margin,
                                 self_margin=o.self_margin, device=self.device, dtype=self.npdt,
-                                seed=o.seed)
+                                seed=o.seed, worlds=bad if self.batched else None)
         for i, b in enumerate(bad):
             c = int(count[i])
             if c:
                 Q[b, n_starts - c:] = V[i, :c]
         return True
+
+    def _random_start_proven(self, Q: np.ndarray, bad: np.ndarray, m: int) -> np.ndarray:
+        """(len(bad),) bool: problem ``bad[i]`` has a start among ``Q[bad[i], 1:m]`` (the
+        random starts :meth:`_ik_starts` keeps; start 0 is the straight line) that the
+        planner's continuous check proves with the spheres alone (its margins, the paths
+        in the optimiser's dtype), as its first check would."""
+        if m <= 1 or not len(bad):
+            return np.zeros(len(bad), bool)
+        o = self.options
+        W, n = Q.shape[2], Q.shape[3]
+        kept = Q[:, 1:m].astype(self.npdt).astype(np.float64)  # (B, m - 1, W, n)
+        g = m - 1
+        rows = (bad[:, None] * g + np.arange(g)[None]).reshape(-1)
+        r = self.motion_check().check(kept.reshape(-1, W, n), margin=o.margin,
+                                      endpoint_margin=o.endpoint_margin,
+                                      self_margin=o.self_margin,
+                                      world_group=g if self.batched else 0, group=g,
+                                      meshes=False, rows=rows)
+        return np.asarray(r.ok, bool).reshape(len(bad), g).any(1)
 
     def _substeps(self, Qf: np.ndarray) -> int:
         """The cost's substeps per segment for the paths ``Qf`` (P, W, n_dof):

@@ -12,7 +12,10 @@ random multi-starts are replaced by paths through
 
 all of one problem set in one :class:`jwarp.solvers.ik.IKSolver` call (the planner's world
 and margins; :data:`IK_SEEDS` seeds per via point: the configuration it is near, then
-that one jittered; every via point is collision-free, re-checked here). The paths are
+that one jittered; every via point is collision-free, re-checked here). In a batch of
+worlds (:meth:`jwarp.world.sdf.World.batch`) the IK runs without a world (one solver
+holds one world) and a via point is the first of its IK seeds that is on target and
+collision-free in its problem's own world; the anchor is found in that world too. The paths are
 start -> detour -> pre-goal -> goal, start -> pre-goal -> goal and start -> detour -> goal
 (in this order of preference; the W waypoints spread along the polyline as every
 via-point start). The same problems and seed give the same paths.
@@ -84,7 +87,7 @@ def ik_via_paths(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
 def ik_via_points(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
                   lines: np.ndarray, k: int, *, frame: Any = None, margin: float = 0.0,
                   self_margin: float = 0.0, device: Any = None, dtype: Any = np.float32,
-                  seed: Any = 0) -> list[list[np.ndarray]]:
+                  seed: Any = 0, worlds: Any = None) -> list[list[np.ndarray]]:
     """Per problem up to ``k`` via-point sequences (each (m, n_dof), m = 1 or 2), in the
     order of preference (module docstring), every point collision-free in ``world`` at
     ``margin`` and ``self_margin``; one IK call for all problems.
@@ -94,7 +97,8 @@ def ik_via_points(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
     waived the check); ``q0``, ``q1`` (B, n_dof): start and goal; ``lines`` (B, W', n_dof): each problem's
     straight line (its first colliding waypoint is the detour's anchor); ``frame``: the
     tool frame (:func:`via_frame`); ``seed``: of the IK seeds' jitter (an integer, a
-    numpy Generator, None: fresh entropy)."""
+    numpy Generator, None: fresh entropy); ``worlds`` (B,) ints: with a batch of worlds,
+    problem b is in world ``worlds[b]`` (None: world b)."""
     from jwarp.kinematics import fk
     from jwarp.solvers.ik import IKOptions, IKSolver
 
@@ -104,14 +108,26 @@ def ik_via_points(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
         return out
     f = via_frame(model, frame)
     up = _up(model)
+    batched = world is not None and world.n_worlds > 1
+    own = None  # a batch of worlds: the world of each problem
+    if batched:
+        own = np.arange(B) if worlds is None else np.asarray(worlds, np.int64).reshape(-1)
+        if own.shape != (B,) or own.min() < 0 or own.max() >= world.n_worlds:
+            raise ValueError(f"worlds: expected ({B},) worlds of the batch in "
+                             f"[0, {world.n_worlds}), got {worlds!r}")
     T1 = np.asarray(fk(model, q1.astype(np.float64), device=device, dtype=np.float64))[:, f]
     T0 = np.asarray(fk(model, q0.astype(np.float64), device=device, dtype=np.float64))[:, f]
     # the first colliding waypoint of each line (its middle if none collides: a swept
     # collision between waypoints)
     Wl = lines.shape[1]
     inner = lines[:, 1:-1].reshape(-1, n)
-    free = collision_free(model, world, inner, margin, device=device,
-                          self_margin=self_margin, meshes=False).reshape(B, Wl - 2)
+    if own is None:
+        free = collision_free(model, world, inner, margin, device=device,
+                              self_margin=self_margin, meshes=False)
+    else:
+        free = free_in_worlds(model, world, inner, np.repeat(own, Wl - 2), margin,
+                              self_margin, device, meshes=False)
+    free = free.reshape(B, Wl - 2)
     hit = np.where(free.all(1), Wl // 2, 1 + np.argmax(~free, axis=1))
     anchor = lines[np.arange(B), hit]
     Ta = np.asarray(fk(model, anchor.astype(np.float64), device=device, dtype=np.float64))[:, f]
@@ -149,14 +165,24 @@ def ik_via_points(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
                      # the planner's robot as it plans on it (its mesh margin applied, its
                      # collision model checked or waived by the planner's own options)
                      mesh_margin=False, allow_no_collision=True)
-    ik = IKSolver(model, f, len(T), opts, world=world, device=device,
+    ik = IKSolver(model, f, len(T), opts, world=None if batched else world, device=device,
                   dtype=dtype).solve(T, S)
-    q = np.asarray(ik.q, np.float64)
-    ok = np.asarray(ik.feasible, bool)
-    if ok.any():  # the planner's own rule: collision-free at its margins
-        ok[ok] = collision_free(model, world, q[ok], margin, device=device,
-                                self_margin=self_margin)
     kind_a, owner_a = np.array(kind), np.array(owner)
+    if own is None:
+        q = np.asarray(ik.q, np.float64)
+        ok = np.asarray(ik.feasible, bool)
+        if ok.any():  # the planner's own rule: collision-free at its margins
+            ok[ok] = collision_free(model, world, q[ok], margin, device=device,
+                                    self_margin=self_margin)
+    else:  # every seed on target, checked in its problem's own world: the first free one
+        qa = np.asarray(ik.all_q, np.float64)  # (targets, IK_SEEDS, n)
+        oka = np.asarray(ik.all_feasible, bool).copy()
+        if oka.any():
+            seed_world = np.repeat(own[owner_a], qa.shape[1]).reshape(oka.shape)
+            oka[oka] = free_in_worlds(model, world, qa[oka], seed_world[oka], margin,
+                                      self_margin, device)
+        ok = oka.any(1)
+        q = qa[np.arange(len(qa)), np.argmax(oka, axis=1)]
     for b in range(B):
         mine = (owner_a == b) & ok
         pre = q[mine & (kind_a == "pre")]
@@ -168,3 +194,40 @@ def ik_via_points(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
         vias += [d[None] for d in det]
         out[b] = vias[:k]
     return out
+
+
+def free_in_worlds(model: RobotModel, world: Any, q: np.ndarray, worlds: np.ndarray,
+                   margin: float, self_margin: float, device: Any = None,
+                   meshes: bool = True) -> np.ndarray:
+    """(N,) bool: configuration i of q (N, n_dof) collision-free in world ``worlds[i]`` of
+    the batch ``world`` (:meth:`jwarp.world.sdf.World.batch`), the planner's check
+    (:func:`jwarp.world.collision.is_collision_free`, float64) by its rows in world
+    ``row // per_world``: the rows of each world padded to the most any world has (the
+    padding's verdicts are dropped; the mesh certificate is not asked for them)."""
+    from jwarp.world.collision import mesh_certified, min_distances
+
+    q = np.asarray(q, np.float64).reshape(len(worlds), -1)
+    N, n = q.shape
+    if N == 0:
+        return np.zeros(0, bool)
+    worlds = np.asarray(worlds, np.int64)
+    nw = int(world.n_worlds)
+    counts = np.bincount(worlds, minlength=nw)
+    per = int(counts.max())
+    order = np.argsort(worlds, kind="stable")
+    first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    rank = np.empty(N, np.int64)
+    rank[order] = np.arange(N) - first[worlds[order]]
+    slot = worlds * per + rank
+    qp = np.repeat(q[:1], nw * per, axis=0)  # the padding: some configuration in the limits
+    qp[slot] = q
+    md = np.asarray(min_distances(model, qp, world, device=device, dtype=np.float64,
+                                  per_world=per))
+    free = (md[:, 0] > margin) & (md[:, 1] > self_margin)
+    pad = np.ones(nw * per, bool)
+    pad[slot] = False
+    free[pad] = True  # not asked
+    if meshes and not free.all():
+        free = np.asarray(mesh_certified(model, qp, world, free, margin, self_margin, device,
+                                         per, md), bool)
+    return free[slot]
