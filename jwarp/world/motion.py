@@ -28,7 +28,7 @@ Example::
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -427,6 +427,7 @@ class MotionCheck:
         if self._scratch is None or n > self._cap or n_eval > self._cap_eval:
             cap = max(n, int(self._cap * 1.5))
             cap_e = max(n_eval, int(self._cap_eval * 1.5))
+            self._scratch = None  # the old rows freed before the new ones are made
             self._keep: list = []
             nd, nf, S = self.robot.n_dof, self.robot.n_frames, self.n_spheres
             k = self.k
@@ -518,7 +519,8 @@ class MotionCheck:
         M = 0 if levels else (o.points if o.points is not None
                               else (16 if self.device.is_cuda else 0))
         n_seg = K * (W - 1)
-        cap = self._work_lists(n_seg) if levels else 0
+        lo = self._level_options(n_seg) if levels else o
+        cap = self._work_lists(n_seg, lo) if levels else 0
         sc = self._scratch_for(n_seg, cap if levels else n_seg * max(M, 1))
         em = margin if endpoint_margin is None else endpoint_margin
         kern = mk.kernels(paths.dtype)
@@ -538,7 +540,7 @@ class MotionCheck:
         run_segments = True
         if levels:
             n_launch += self._launch_levels(kern, paths, idx, K, W, cap, sc, out, margin, em,
-                                            self_margin, group, world_group)
+                                            self_margin, group, world_group, lo)
             use_points = 2
             # the CPU reads how many segments the levels left (free there); a GPU launches
             # the advancement anyway (its threads return at once where none is left)
@@ -567,12 +569,33 @@ class MotionCheck:
         self.last_launches = n_launch + 1
         return out
 
-    def _work_lists(self, n_seg: int) -> int:
+    def _row_bytes(self) -> int:
+        """Bytes of one evaluation row of the scratch on a GPU (configuration, frames,
+        sphere centres)."""
+        size = wp.types.type_size_in_bytes
+        return (8 * self.robot.n_dof + self.robot.n_frames * size(self.k.fk.mat44)
+                + self.n_spheres * size(self.k.fk.vec3))
+
+    def _level_options(self, n_seg: int) -> MotionOptions:
+        """The options of a levels launch of ``n_seg`` segments: :attr:`options`, without
+        a set ``capacity`` with ``intervals`` halved (down to 1) until twice the level-0
+        intervals fit :data:`LEVELS_SCRATCH_BYTES` of scratch rows (a GPU's memory; the
+        CPU's rows take none, the same rule keeps the results alike)."""
+        o = self.options
+        if o.capacity is not None:
+            return o
+        rows = LEVELS_SCRATCH_BYTES // self._row_bytes()
+        n0 = int(o.intervals)
+        while n0 > 1 and 2 * n_seg * n0 > rows:
+            n0 //= 2
+        return o if n0 == o.intervals else replace(o, intervals=n0)
+
+    def _work_lists(self, n_seg: int, lo: MotionOptions | None = None) -> int:
         """The levels' two work lists (segment row, interval) for ``n_seg`` segments:
         :attr:`MotionOptions.capacity` entries, or (None) at least twice the level-0
         intervals, kept and grown by half (varying batches reuse them); returns their
         length (the capacity of this launch)."""
-        o = self.options
+        o = self.options if lo is None else lo
         if o.capacity is not None:
             cap = int(o.capacity)
             if not self._lists or self._lists[0].shape[0] != cap:
@@ -582,6 +605,8 @@ class MotionCheck:
         have = self._lists[0].shape[0] if self._lists else 0
         if have < need:
             cap = max(need, int(have * 1.5))
+            # grown by half only within the scratch budget
+            cap = max(need, min(cap, LEVELS_SCRATCH_BYTES // self._row_bytes()))
             self._lists = ()  # free the old ones first
             self._lists = self._new_lists(cap)
         return self._lists[0].shape[0]
@@ -594,12 +619,14 @@ class MotionCheck:
 
     def _launch_levels(self, kern: Any, paths: wp.array, idx: wp.array, K: int, W: int,
                        cap: int, sc: Any, out: dict, margin: float, em: float,
-                       self_margin: float, group: int, world_group: int) -> int:
+                       self_margin: float, group: int, world_group: int,
+                       lo: MotionOptions | None = None) -> int:
         """The interval refinement (:attr:`MotionOptions.method` "levels"): level 0, the
         levels, their end; returns the number of launches. A GPU launches every level at
         the list's capacity (sizes stay on the device: no host read); the CPU reads each
-        level's size (no copy there) and stops at an empty level."""
-        o = self.options
+        level's size (no copy there) and stops at an empty level. ``lo``: the launch's
+        options (:meth:`_level_options`; None: :attr:`options`)."""
+        o = self.options if lo is None else lo
         dev = self.device
         n0 = int(o.intervals)
         L = o.n_levels()
@@ -802,6 +829,14 @@ class MotionCheck:
 
 #: numbers of waypoints whose output buffers a MotionCheck keeps (:meth:`MotionCheck._outputs`)
 _OUT_KEEP = 4
+
+#: bytes of evaluation scratch (per row a configuration, its frames and its sphere
+#: centres) that the levels' work lists of one launch hold (on a GPU) when
+#: :attr:`MotionOptions.capacity` is None: a launch of more segments than fit at
+#: ``intervals`` per segment starts with fewer level-0 intervals (halved, down to 1; the
+#: levels refine them as before, the same proofs). A batch of 700 problems x 32 starts x
+#: 19 segments at 16 intervals asked for 30 GB of one array on an H200.
+LEVELS_SCRATCH_BYTES = 8 << 30
 
 #: MotionChecks by (robot content key, device, options) and the world (by identity, held
 #: weakly), the 8 used last
