@@ -39,7 +39,7 @@ import argparse
 import math
 import sys
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -53,6 +53,9 @@ from jwarp.cli.common import (
     rerun_recording,
 )
 from jwarp.cli.vocabulary import add_out
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 DEFAULT_FREE = "theta,d,r,alpha"
 
@@ -76,7 +79,7 @@ def _setup_and_measurement(path: str, option: str, robot_name: str | None) -> tu
     return setup, model, meas
 
 
-def _configurations(model: Any, setup: Any, meas: Any, path: str | None, option: str,
+def _configurations(model: RobotModel, setup: Any, meas: Any, path: str | None, option: str,
                     n: int, seed: int, uniform: bool) -> tuple[np.ndarray, dict | None]:
     from jwarp.calibration.pool import draw_configurations, read_configurations
     from jwarp.calibration.simulate.campaign import uniform_configurations
@@ -226,7 +229,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------ design
-def _design_world(args: argparse.Namespace, model: Any) -> Any:
+def _design_world(args: argparse.Namespace, model: RobotModel) -> Any:
     """The World of ``--world`` SPEC or ``--scene`` FILE (its exact objects), or None."""
     if args.world is not None:
         from jwarp.world.io import parse_world_spec

@@ -24,7 +24,7 @@ import warp as wp
 
 from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.kernel_cache import ensure_cache_dir, install_compile_notice
-from jwarp.core.types import DeviceLike, DTypeLike
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike
 from jwarp.utils.checks import (
     real_number as real_number,  # its home; imported from here too
 )
@@ -46,7 +46,7 @@ def init_warp() -> None:
         _INITIALISED = True
 
 
-def is_torch(x: Any) -> bool:
+def is_torch(x: ArrayLike) -> bool:
     mod = type(x).__module__
     return mod.startswith("torch") and hasattr(x, "detach")
 

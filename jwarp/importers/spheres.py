@@ -258,7 +258,7 @@ def one_sided_error(points: np.ndarray, centres: np.ndarray, radii: np.ndarray) 
 # ----------------------------------------------------------------- the solid (Warp)
 def _init_warp() -> None:
     # importers sit below jwarp.core: Warp directly (init is a no-op once done)
-    wp.config.quiet = True
+    wp.config.quiet = True  # type: ignore[attr-defined]
     if hasattr(wp, "LOG_WARNING"):
         wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
     init_quietly()  # without Warp's "CUDA driver not found" line on a CPU machine
@@ -267,11 +267,11 @@ def _init_warp() -> None:
 @wp.kernel(enable_backward=False)
 def _outside_kernel(
     # Data in:
-    points: wp.array(dtype=wp.vec3d),
-    centres: wp.array(dtype=wp.vec3d),
-    radii: wp.array(dtype=wp.float64),
+    points: wp.array(dtype=wp.vec3d),  # type: ignore[valid-type]
+    centres: wp.array(dtype=wp.vec3d),  # type: ignore[valid-type]
+    radii: wp.array(dtype=wp.float64),  # type: ignore[valid-type]
     # Data out:
-    out: wp.array(dtype=wp.float64),
+    out: wp.array(dtype=wp.float64),  # type: ignore[valid-type]
 ):
     i = wp.tid()
     p = points[i]
@@ -286,17 +286,17 @@ def _signed_distance_kernel(
     # Model:
     mesh: wp.uint64,
     # Data in:
-    points: wp.array(dtype=wp.vec3),
+    points: wp.array(dtype=wp.vec3),  # type: ignore[valid-type]
     max_dist: float,
     # Data out:
-    out: wp.array(dtype=float),
+    out: wp.array(dtype=float),  # type: ignore[valid-type]
 ):
     i = wp.tid()
     p = points[i]
     q = wp.mesh_query_point_sign_winding_number(mesh, p, max_dist)
-    if q.result:
-        c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
-        out[i] = q.sign * wp.length(p - c)
+    if q.result:  # type: ignore[attr-defined]
+        c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)  # type: ignore[attr-defined]
+        out[i] = q.sign * wp.length(p - c)  # type: ignore[attr-defined]
     else:
         out[i] = max_dist
 
@@ -738,12 +738,12 @@ def surface_cover(mesh: trimesh.Trimesh, gap: float) -> np.ndarray:
 @wp.kernel(enable_backward=False)
 def _nearest_kernel(
     # Data in:
-    points: wp.array(dtype=wp.vec3d),
-    centres: wp.array(dtype=wp.vec3d),
-    radii: wp.array(dtype=wp.float64),
+    points: wp.array(dtype=wp.vec3d),  # type: ignore[valid-type]
+    centres: wp.array(dtype=wp.vec3d),  # type: ignore[valid-type]
+    radii: wp.array(dtype=wp.float64),  # type: ignore[valid-type]
     # Data out:
-    out: wp.array(dtype=wp.float64),
-    arg: wp.array(dtype=wp.int32),
+    out: wp.array(dtype=wp.float64),  # type: ignore[valid-type]
+    arg: wp.array(dtype=wp.int32),  # type: ignore[valid-type]
 ):
     i = wp.tid()
     p = points[i]

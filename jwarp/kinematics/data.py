@@ -27,6 +27,7 @@ import warp as wp
 
 from jwarp.core.arrays import finite_as, real_array
 from jwarp.core.device import DeviceModel, numpy_dtype
+from jwarp.core.types import ArrayLike
 from jwarp.kernels import fk as fk_kernels
 
 __all__ = ["KinematicsData", "forward_kinematics", "frame_jacobian", "frame_dh_jacobian",
@@ -237,7 +238,7 @@ def _not_finite(a: np.ndarray, source: np.ndarray | None) -> ValueError:
     return ValueError(f"q: {what} (batch rows {rows})")
 
 
-def _load_q(m: DeviceModel, d: KinematicsData, q: Any, validate: bool) -> None:
+def _load_q(m: DeviceModel, d: KinematicsData, q: ArrayLike, validate: bool) -> None:
     """Bring ``q`` into ``d.q`` (see :func:`forward_kinematics`)."""
     want = (d.batch, m.n_dof)
     if q is None:

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,6 +39,10 @@ from jwarp.world.collision import is_collision_free, min_distances
 from jwarp.world.feasibility import feasible_simplex_world, random_configurations
 from jwarp.world.scenes import shelf_grasp_poses, shelf_world
 
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
+    from jwarp.world.sdf import World
+
 __all__ = ["sample_targets", "make_worlds", "IKData", "make_ik_data", "DEFAULT_MIX",
            "SCENE_TASKS", "check_mix"]
 
@@ -47,7 +51,7 @@ DEFAULT_MIX = (0.6, 0.2, 0.2, 0.0)  # uniform, near obstacles, workspace border,
 SCENE_TASKS = {"shelf": shelf_grasp_poses}
 
 
-def _free_configurations(model: Any, n: int, world: Any, rng: np.random.Generator,
+def _free_configurations(model: RobotModel, n: int, world: World | None, rng: np.random.Generator,
                          device: DeviceLike) -> np.ndarray:
     out = np.empty((0, model.n_dof))
     for _ in range(200):
@@ -61,7 +65,7 @@ def _free_configurations(model: Any, n: int, world: Any, rng: np.random.Generato
                      f"({len(out)} of {n} found)")
 
 
-def sample_targets(robot: RobotLike, frame: Any, n: int, world: Any = None, *, seed: int = 0,
+def sample_targets(robot: RobotLike, frame: Any, n: int, world: World | None = None, *, seed: int = 0,
                    mix: tuple = DEFAULT_MIX, pool: int = 4, device: DeviceLike = None,
                    tasks: Callable[[int, np.random.Generator], np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray]:

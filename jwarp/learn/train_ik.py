@@ -42,7 +42,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -57,6 +57,9 @@ from jwarp.learn.torch_costs import ik_objective, u_ik
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver
 from jwarp.utils.checks import check_int
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 __all__ = ["TrainIKOptions", "train_ik", "train_ik_supervised", "ik_loss", "IKTrainer"]
 
@@ -161,7 +164,7 @@ class TrainIKOptions:
         return d
 
 
-def ik_loss(net: IKNet, q: torch.Tensor, targets: torch.Tensor, world: Any,
+def ik_loss(net: IKNet, q: torch.Tensor, targets: torch.Tensor, world: World,
             options: TrainIKOptions) -> tuple[torch.Tensor, dict, torch.Tensor]:
     """The unsupervised loss of predictions q (m, H, n_dof) for targets (m, 4, 4) in one
     world: ``(loss, terms, best (m,) detached)`` (module docstring); ``terms``: floats

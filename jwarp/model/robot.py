@@ -90,11 +90,15 @@ class RobotModel:
     #: naming its child link's frame, as pinocchio's joint frames; docs/urdf.md)
     frame_aliases: dict[str, int] = field(default_factory=dict)
     linear_limits: list[LinearLimit] = field(default_factory=list)
-    kappa: np.ndarray | None = None  # (n_frames, 3) rad/(N m)
+    # kappa (n_frames, 3) rad/(N m); harmonic (n_dof, K, 2) [rad or m]; kappa_nonlinear
+    # (n_frames,) rad/(N m)^3; coupling_harmonic (n_frames, K, 2) [rad or m]. None when
+    # constructed: the default (zeros; K = 0), which __post_init__ fills in, so they are arrays
+    # on every constructed model (hence the ignores of the None defaults)
+    kappa: np.ndarray = None  # type: ignore[assignment]
     notes: dict[str, str] = field(default_factory=dict)
-    harmonic: np.ndarray | None = None  # (n_dof, K, 2) [rad or m]; None: K = 0
-    kappa_nonlinear: np.ndarray | None = None  # (n_frames,) rad/(N m)^3
-    coupling_harmonic: np.ndarray | None = None  # (n_frames, K, 2) [rad or m]; None: K = 0
+    harmonic: np.ndarray = None  # type: ignore[assignment]
+    kappa_nonlinear: np.ndarray = None  # type: ignore[assignment]
+    coupling_harmonic: np.ndarray = None  # type: ignore[assignment]
     #: how the spheres relate to the collision meshes they model (contained, or
     #: approximate with the per-link poke-out); None: unknown (jwarp.model.sphere_relation)
     sphere_relation: SphereRelation | None = None

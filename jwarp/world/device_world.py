@@ -15,6 +15,7 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.device import numpy_dtype
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike
 from jwarp.kernels import collision as ck
 from jwarp.world.sdf import World
 
@@ -40,7 +41,7 @@ _EMPTY: dict = {}
 _NO_GRID: dict = {}
 
 
-def empty_shapes(device: Any, scalar: type) -> Any:
+def empty_shapes(device: wp.Device, scalar: type) -> Any:
     """A ``WorldShapes`` struct with no objects (cached per device and type)."""
     key = (str(device), scalar.__name__)
     s = _EMPTY.get(key)
@@ -67,7 +68,7 @@ class DeviceWorld:
     """``world`` (or None) on ``device`` in float type ``scalar``: :attr:`struct` is the
     ``WorldModel`` argument of the fused collision kernels."""
 
-    def __init__(self, world: World | None, device: Any, scalar: type) -> None:
+    def __init__(self, world: World | None, device: wp.Device, scalar: type) -> None:
         self.world, self.device, self.scalar = world, device, scalar
         self.k = ck.kernels(scalar)
         vec3 = self.k.vec3
@@ -138,8 +139,8 @@ class DeviceWorld:
         return True
 
 
-def world_query(world: World, points: Any, *, cutoff: float = 1e30, device: Any = None,
-                dtype: Any = np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def world_query(world: World, points: ArrayLike, *, cutoff: float = 1e30, device: DeviceLike = None,
+                dtype: DTypeLike = np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Signed distance [m] of the whole world (grid lowered by its ``grid_error``, and
     exact objects) at ``points`` (N, 3): ``(dist (N,), grad (N, 3), obj (N,) int: object
     index, -2 grid, -1 nothing within cutoff)``, computed on ``device`` (None: the

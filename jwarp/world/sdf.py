@@ -558,7 +558,7 @@ def world_from_occupancy(occupancy: Any, limits: Any, voxel_size: float | None =
     return World(sdf.astype(dtype), lim, h, occ.copy(), {"source": "occupancy"})
 
 
-def world_from_points(points: Any, limits: Any, voxel_size: float | None = None, *,
+def world_from_points(points: ArrayLike, limits: Any, voxel_size: float | None = None, *,
                       shape: Sequence[int] | None = None, dtype: DTypeLike = np.float64) -> World:
     """World from a point cloud on obstacle surfaces (e.g. a depth camera).
 
@@ -710,7 +710,7 @@ def load_world(path: str | os.PathLike) -> World:
         raise ValueError(f"{path}: {e}") from e
 
 
-def sdf_query(world: World, points: Any, *, grad: bool = False, device: DeviceLike = None
+def sdf_query(world: World, points: ArrayLike, *, grad: bool = False, device: DeviceLike = None
               ) -> Any:
     """Interpolated signed distance [m] of ``world`` at ``points`` (..., dim) [m] (numpy),
     with the lookup of the cost kernels. Returns (...,) or, with ``grad``, a tuple

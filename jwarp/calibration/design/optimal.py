@@ -53,7 +53,7 @@ import numpy as np
 
 from jwarp.calibration.estimate.params import ParameterSpace, parse_groups
 from jwarp.core.threads import limit_blas
-from jwarp.core.types import RobotLike
+from jwarp.core.types import ArrayLike, RobotLike
 from jwarp.model.robot import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.overrides import renamed_options
@@ -359,7 +359,7 @@ def select(U: Any, prior: Any, L: Any | None, options: DesignOptions,
 
 
 # ------------------------------------------------------------ measurements
-def candidate_jacobians(robot: RobotModel, measurement: Any, q: Any, free: str | Iterable[str], *,
+def candidate_jacobians(robot: RobotModel, measurement: Any, q: ArrayLike, free: str | Iterable[str], *,
                         meta: Mapping[str, Any] | None = None, chunk: int = 4096,
                         **problem: Any) -> tuple[np.ndarray, ParameterSpace]:
     """Whitened Jacobians (n, m, P) of ``measurement`` at the candidate configurations q

@@ -39,7 +39,7 @@ import warp as wp
 from jwarp.calibration.files import Setup, make_measurement
 from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.core.device import make_struct, put_model, scalar_type
-from jwarp.core.types import DTypeLike
+from jwarp.core.types import ArrayLike, DTypeLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kernels import visibility as vk
 from jwarp.model import RobotModel
@@ -69,7 +69,7 @@ class Camera:
     far: float
 
 
-def _vec3(x: Any, where: str) -> np.ndarray:
+def _vec3(x: ArrayLike, where: str) -> np.ndarray:
     try:
         a = np.asarray(x, np.float64)
     except (TypeError, ValueError):
@@ -376,7 +376,7 @@ class PoseSampler:
                 self.sensors, self.skip_fpair, self.model.dh0_3d]
 
     # ---------------------------------------------------------------- checks
-    def check(self, q: Any) -> tuple[np.ndarray, np.ndarray]:
+    def check(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Verdicts of given configurations.
 
         Args:
@@ -406,7 +406,7 @@ class PoseSampler:
         seen_np = seen.numpy()
         return code.numpy(), (seen_np if self.cameras else seen_np[:, :0])
 
-    def ok(self, q: Any) -> np.ndarray:
+    def ok(self, q: ArrayLike) -> np.ndarray:
         """(N,) bool: configurations that pass every check."""
         return self.check(q)[0] == 0
 

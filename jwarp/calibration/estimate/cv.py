@@ -32,7 +32,7 @@ import numpy as np
 
 from jwarp.calibration.estimate.options import CalibrationOptions
 from jwarp.calibration.estimate.params import DEFAULT_SIGMA, ROBOT_GROUPS, parse_groups
-from jwarp.core.types import RobotLike
+from jwarp.core.types import ArrayLike, RobotLike
 from jwarp.utils.checks import check_int
 
 #: the prior scales of the default grid (:func:`default_grid`): factors on the prior sigma
@@ -356,7 +356,7 @@ def default_workers(tasks: int) -> int:
     return max(1, min(cores, tasks))
 
 
-def cross_validate(robot: RobotLike, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
+def cross_validate(robot: RobotLike, measurement: Any, q: ArrayLike, y: Any, options: CalibrationOptions,
                    cv: CVOptions | None = None, *,
                    meta: Mapping[str, Any] | None = None) -> CVResult:
     """Score the settings of ``cv`` (:class:`CVOptions`; default 5 folds of
@@ -427,7 +427,7 @@ def cross_validate(robot: RobotLike, measurement: Any, q: Any, y: Any, options: 
                     unit=str(getattr(measurement, "unit", "m")), fold_of=fold)
 
 
-def calibrate_cv(robot: RobotLike, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
+def calibrate_cv(robot: RobotLike, measurement: Any, q: ArrayLike, y: Any, options: CalibrationOptions,
                  cv: CVOptions | None = None, *, meta: Mapping[str, Any] | None = None
                  ) -> tuple[Any, CVResult]:
     """:func:`cross_validate`, then the calibration with the chosen setting on all rows

@@ -35,6 +35,7 @@ import numpy as np
 
 from jwarp import kinematics as K
 from jwarp.calibration.estimate.result import observation_groups
+from jwarp.core.types import ArrayLike
 from jwarp.model.robot import RobotModel
 from jwarp.utils.checks import check_int
 
@@ -95,7 +96,7 @@ class Diagnostics:
         }
 
 
-def residual_diagnostics(robot: RobotModel, measurement: Any, p: Any, q: Any, y: Any,
+def residual_diagnostics(robot: RobotModel, measurement: Any, p: Any, q: ArrayLike, y: Any,
                          meta: Mapping[str, Any] | None = None, *, bins: int = 5,
                          directions: Any = None) -> Diagnostics:
     """Diagnostics of the residuals ``y - predict(robot, q)`` (module docstring).

@@ -72,7 +72,7 @@ from jwarp.calibration.estimate.samples import check_samples
 from jwarp.core.arrays import finite_as, init_warp, resolve_device
 from jwarp.core.device import put_model, with_frame_masses, with_kappa_nonlinear
 from jwarp.core.threads import limit_blas
-from jwarp.core.types import DeviceLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 
@@ -282,7 +282,7 @@ class CalibrationProblem:
             ``free``, compliances unbounded unless ``bound_kappa``).
     """
 
-    def __init__(self, robot: RobotLike, measurement: Any, q: Any, y: Any,
+    def __init__(self, robot: RobotLike, measurement: Any, q: ArrayLike, y: Any,
                  options: CalibrationOptions | None = None, *,
                  meta: Mapping[str, Any] | None = None, device: DeviceLike = None,
                  **keywords: Any) -> None:
@@ -395,7 +395,7 @@ class CalibrationProblem:
         self.n_evaluations = 0
 
     @classmethod
-    def from_options(cls, robot: RobotLike, measurement: Any, q: Any, y: Any,
+    def from_options(cls, robot: RobotLike, measurement: Any, q: ArrayLike, y: Any,
                      options: CalibrationOptions, meta: Mapping[str, Any] | None = None
                      ) -> CalibrationProblem:
         """``CalibrationProblem(robot, measurement, q, y, options, meta=meta)`` (kept for
@@ -442,7 +442,7 @@ class CalibrationProblem:
         self.n_evaluations += 1
         return out
 
-    def q_links(self, x: Any) -> np.ndarray:
+    def q_links(self, x: ArrayLike) -> np.ndarray:
         """(S, n_dof) the joint values the links see at x (transmission errors applied)."""
         if not self.transmission:
             return self.q
@@ -451,7 +451,7 @@ class CalibrationProblem:
             out = out + self.directions * self.space.backlash_at(x)
         return out
 
-    def coupling_terms(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def coupling_terms(self, x: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(coupling matrix C (n, n_dof), offsets (n,), harmonics h (n, K, 2), coupled
         angles u = q C^T (S, n)) at x (the robot's where the ``coupling`` group is not free)."""
         if self._cpl_idx.size:
@@ -461,7 +461,7 @@ class CalibrationProblem:
                          self.robot.coupling_harmonic)
         return C, off, h, self.q @ C.T
 
-    def coupled_rows(self, x: Any, dh: np.ndarray) -> np.ndarray:
+    def coupled_rows(self, x: ArrayLike, dh: np.ndarray) -> np.ndarray:
         """(S, n, 5) per-sample DH rows: ``dh`` with the coupled frames' extra joint value
         ``(C - C0) q' + offset + sum_k a_k sin(k u) + b_k cos(k u)`` on theta (d for a
         prismatic frame); the kinematics add ``C0 q'`` themselves."""
@@ -486,7 +486,7 @@ class CalibrationProblem:
             self._kin_data = K.KinematicsData(m, self.n_samples)
         return m, self._kin_data
 
-    def kin_robot_at(self, x: Any) -> RobotModel:
+    def kin_robot_at(self, x: ArrayLike) -> RobotModel:
         """The robot the kinematics launches see at x: :attr:`kin_robot` with the static
         transforms of the ``origin`` group at x (cached for the last x)."""
         if not self._org_idx.size:
@@ -633,7 +633,7 @@ class CalibrationProblem:
         J[self.n_data + np.arange(self._prior_idx.size), self._prior_idx] = 1.0 / sp.sigma[self._prior_idx]
         return J
 
-    def scale_unpriored(self, x: Any) -> np.ndarray:
+    def scale_unpriored(self, x: ArrayLike) -> np.ndarray:
         """Set the solver's scale (``space.typical``) of the parameters without a prior to
         ``1 / |dr/dx_i|`` of the data rows at ``x`` (scipy's ``x_scale="jac"``, fixed at the
         start). Without this the trust region of a prior-less run is measured in SI units
@@ -991,7 +991,7 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
                           message=message, rounds=rounds, held=held & (best_x == 0.0))
 
 
-def calibrate(robot: RobotLike, measurement: Any, q: Any, y: Any, *,
+def calibrate(robot: RobotLike, measurement: Any, q: ArrayLike, y: Any, *,
               meta: Mapping[str, Any] | None = None, options: CalibrationOptions | None = None,
               **overrides: Any) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples:
@@ -1028,7 +1028,7 @@ def calibrate(robot: RobotLike, measurement: Any, q: Any, y: Any, *,
 
 
 @limit_blas  # small dense solves: a threaded BLAS only oversubscribes (JWARP_BLAS_THREADS)
-def calibrate_with(robot: RobotLike, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
+def calibrate_with(robot: RobotLike, measurement: Any, q: ArrayLike, y: Any, options: CalibrationOptions,
                    *, meta: Mapping[str, Any] | None = None, t0: float | None = None
                    ) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples.

@@ -8,10 +8,11 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import ArrayLike
 from jwarp.model import RobotModel
 
 
-def check_samples(robot: RobotModel, measurement: Any, q: Any, y: Any,
+def check_samples(robot: RobotModel, measurement: Any, q: ArrayLike, y: Any,
                   meta: Mapping[str, Any] | None = None
                   ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray] | None]:
     """Validate joint values q (S, n_dof), observations y (S, m) and per-sample meta
