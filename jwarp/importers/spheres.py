@@ -622,7 +622,7 @@ def _cover(slack: _Slack, max_spheres: int | None, eps0: float,
 
 #: per mesh object: what the fits of one link compute more than once (its solid, solid
 #: volumes, boundary samples); weak keys, so nothing outlives the mesh
-_MESH_CACHE: weakref.WeakKeyDictionary[trimesh.Trimesh, dict] = weakref.WeakKeyDictionary()
+_MESH_CACHE: weakref.WeakKeyDictionary[trimesh.Trimesh, tuple[int, dict]] = weakref.WeakKeyDictionary()
 
 
 def mesh_memo(mesh: trimesh.Trimesh, key: Any, make: Any) -> Any:

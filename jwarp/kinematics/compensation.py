@@ -75,6 +75,8 @@ class CompensationRows:
         self.k = elastic_kernels.kernels(t.scalar)
         nf = robot.n_frames
         dev = t.device
+        self.kappa: wp.array
+        self.kappa_stride: int
         if kappa is None:  # the model's default compliances
             self.kappa, self.kappa_stride = t.kappa, 0
         else:
@@ -194,6 +196,7 @@ class CompensationRows:
         if hit is None:
             if len(self._launches) > 8:
                 self._launches.clear()
+            dim: int | tuple[int, int]
             kernel, dim = self.k.compensation_update, self.n_updates
             if per_frame:
                 kernel, dim = self.k.compensation_update_per_frame, (self.n_updates,

@@ -246,7 +246,7 @@ _CALLS: dict = {}
 
 
 def _resolve_small(op: str, model: RobotModel, q: Any, qa: np.ndarray, warp_in: bool,
-                   dev: wp.Device, dtype: DTypeLike, frame: Any, point: Any) -> SmallCall | None:
+                   dev: wp.Device, dtype: DTypeLike, frame: int | str | None, point: Any) -> SmallCall | None:
     """The :class:`SmallCall` of a signature, or None where the general path must run."""
     if qa.dtype not in _SMALL_DTYPES or qa.ndim == 0:
         return None
@@ -278,7 +278,7 @@ def _resolve_small(op: str, model: RobotModel, q: Any, qa: np.ndarray, warp_in: 
 
 
 def small_call(op: str, robot: RobotLike, q: Any, device: DeviceLike, dtype: DTypeLike, validate: bool,
-               out: Any = None, frame: Any = None, point: Any = None) -> Any:
+               out: Any = None, frame: int | str | None = None, point: Any = None) -> Any:
     """The fast path of :func:`~jwarp.kinematics.fk.fk` (``op`` "fk") and
     :func:`~jwarp.kinematics.jacobians.jacobian` ("jacobian") for a small batch of float32/
     float64 q: a numpy array, a CPU torch tensor without grad or a contiguous Warp CPU array

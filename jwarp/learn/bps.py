@@ -26,7 +26,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import warp as wp
@@ -333,7 +333,8 @@ def _points(points: ArrayLike, dim: int) -> np.ndarray:
 
 
 def _grid32(w: World) -> np.ndarray:
-    g = w.sdf if w.sdf.dtype == np.float32 else w.sdf.astype(np.float32)
+    sdf = cast(np.ndarray, w.sdf)  # a world with a grid
+    g = sdf if sdf.dtype == np.float32 else sdf.astype(np.float32)
     return np.ascontiguousarray(g if w.dim == 3 else g[:, :, None])
 
 
@@ -361,9 +362,9 @@ def _world_structs(ws: list[World], dev: wp.Device, kn: SimpleNamespace) -> tupl
         s.grid = a
         s.cellmin = a  # not read by world_sample
         o = np.zeros(3)
-        o[:w.dim] = w.limits[:, 0]
+        o[:w.dim] = cast(np.ndarray, w.limits)[:, 0]
         s.origin = kn.vec3(*o)
-        s.inv_h = 1.0 / w.voxel_size
+        s.inv_h = 1.0 / cast(float, w.voxel_size)
         s.dim = w.dim
         structs.append(s)
     return wp.array(structs, dtype=kn.WorldGrid, device=dev), keep

@@ -44,7 +44,7 @@ import zlib
 from collections import OrderedDict
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from torch.utils.data import IterableDataset
@@ -147,9 +147,9 @@ def world_record(world_id: int, world: World, labels: Any) -> WorldRecord:
     occ = None if world.occupancy is None else np.asarray(world.occupancy, bool)
     return {
         "world_id": int(world_id),
-        "shape": [int(s) for s in world.sdf.shape],
+        "shape": [int(s) for s in cast(np.ndarray, world.sdf).shape],
         "limits": np.asarray(world.limits, np.float64),
-        "voxel_size": float(world.voxel_size),
+        "voxel_size": float(cast(float, world.voxel_size)),
         "occupancy": occ,
         "sdf": None if occ is not None else np.asarray(world.sdf, np.float32),
         "sdf_dtype": str(np.asarray(world.sdf).dtype),

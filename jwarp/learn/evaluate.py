@@ -94,7 +94,7 @@ def _mean_std(x: Sequence[float] | np.ndarray) -> dict:
     return {"mean": float(a.mean()), "std": float(a.std()), "n": int(a.size)}
 
 
-def _solve_block(model: RobotModel, frame: Any, world: Any, T: np.ndarray, seeds: np.ndarray,
+def _solve_block(model: RobotModel, frame: int | str, world: Any, T: np.ndarray, seeds: np.ndarray,
                  opts: IKOptions, device: DeviceLike, dtype: DTypeLike) -> tuple[np.ndarray, ...]:
     """Every seed (P, S, n) on its own: (feasible (P, S), iterations (P, S), q (P, S, n))."""
     solver = IKSolver(model, frame, len(T), opts, world=world, device=device, dtype=dtype)
@@ -104,7 +104,7 @@ def _solve_block(model: RobotModel, frame: Any, world: Any, T: np.ndarray, seeds
             np.asarray(res.all_q).reshape(seeds.shape))
 
 
-def evaluate_ik(robot: RobotLike, frame: Any, world: Any, targets: ArrayLike, *, warm_start: Any = None,
+def evaluate_ik(robot: RobotLike, frame: int | str, world: Any, targets: ArrayLike, *, warm_start: Any = None,
                 n_random: int = N_RANDOM, iterations: int | None = None, margin: float = 0.0,
                 tol_pos: float = 1e-4, tol_rot: float = 1e-3, q_default: Any = None,
                 seed: int = 0, device: DeviceLike = None, dtype: DTypeLike = np.float64,
@@ -237,7 +237,7 @@ def _config_value(net: Any, key: str) -> Any:
     return None
 
 
-def ablation_table(robot: RobotLike, frame: Any, world: Any, targets: ArrayLike,
+def ablation_table(robot: RobotLike, frame: int | str, world: Any, targets: ArrayLike,
                    nets: Mapping[str, Any] | Sequence[tuple[str, Any]], *,
                    iterations: int = 10, device: DeviceLike = None, **options: Any) -> list[dict]:
     """Table 3.4: per network (``{name: net}`` or ``[(name, net)]``) the feasibility after

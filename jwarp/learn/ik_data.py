@@ -65,8 +65,8 @@ def _free_configurations(model: RobotModel, n: int, world: World | None, rng: np
                      f"({len(out)} of {n} found)")
 
 
-def sample_targets(robot: RobotLike, frame: Any, n: int, world: World | None = None, *, seed: int = 0,
-                   mix: tuple = DEFAULT_MIX, pool: int = 4, device: DeviceLike = None,
+def sample_targets(robot: RobotLike, frame: int | str, n: int, world: World | None = None, *, seed: int = 0,
+                   mix: tuple | np.ndarray = DEFAULT_MIX, pool: int = 4, device: DeviceLike = None,
                    tasks: Callable[[int, np.random.Generator], np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray]:
     """``n`` targets (module docstring): returns ``(targets (n, 4, 4), q (n, n_dof))``
@@ -104,6 +104,7 @@ def sample_targets(robot: RobotLike, frame: Any, n: int, world: World | None = N
     q = np.concatenate(parts) if parts else np.empty((0, model.n_dof))
     T = fk(model, q, device=device, dtype=np.float64)[:, f] if len(q) else np.empty((0, 4, 4))
     if n_task:
+        assert tasks is not None  # checked with the mix above
         Tt = np.asarray(tasks(n_task, rng), np.float64)
         if Tt.shape != (n_task, 4, 4) or not np.all(np.isfinite(Tt)):
             raise ValueError(f"tasks: expected {n_task} finite poses (k, 4, 4), got shape "
@@ -161,7 +162,7 @@ class IKData:
     distribution: dict
 
 
-def make_ik_data(robot: RobotLike, frame: Any, world: str = "random", *, n_worlds: int = 8,
+def make_ik_data(robot: RobotLike, frame: int | str, world: str = "random", *, n_worlds: int = 8,
                  n_targets: int = 1000, n_val_worlds: int = 2, n_val: int = 128,
                  seed: int = 0, mix: tuple = DEFAULT_MIX, device: DeviceLike = None) -> IKData:
     """Worlds and targets for training (``n_targets`` per world) and a validation set

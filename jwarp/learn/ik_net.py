@@ -19,7 +19,7 @@ import dataclasses
 import hashlib
 import weakref
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import torch
@@ -49,6 +49,9 @@ class NetConfig:
     is an integer at or above its bound (errors name the field)."""
 
     INT_FIELDS: tuple = ()
+    # declared for the type checker (the subclasses are dataclasses with a ``robot`` field)
+    __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
+    robot: str
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)

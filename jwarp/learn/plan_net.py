@@ -214,13 +214,13 @@ class PlanNet(nn.Module):
                 bps_values: torch.Tensor | None = None) -> torch.Tensor:
         """Deviation outputs (B, n_heads, W - 2, n_dof) of starts/goals (B, n_dof) (joint
         values inside the limits) and BPS values (B, n_bps) [m] (world-aware networks)."""
-        x = [self.codec.encode(starts), self.codec.encode(goals)]
+        parts = [self.codec.encode(starts), self.codec.encode(goals)]
         if self.bps is not None:
             if bps_values is None:
                 raise ValueError("bps_values: this network is world-aware (n_bps > 0); "
                                  "give the world's BPS values")
-            x.append(bps_values * self.bps_scale)
-        x = torch.cat(x, dim=1)
+            parts.append(bps_values * self.bps_scale)
+        x = torch.cat(parts, dim=1)
         for blk in self.blocks:
             x = torch.cat([x, blk(x)], dim=1)
         return self.out(x).view(x.shape[0], self.n_heads, self.n_waypoints - 2, self.n_dof)

@@ -109,7 +109,7 @@ def u_path(paths: torch.Tensor, robot: RobotLike, world: World, n_substeps: int,
     return UPathFunction.apply(paths, obj)
 
 
-def ik_objective(robot: RobotModel, frame: Any, n: int, *, world: World | None = None,
+def ik_objective(robot: RobotModel, frame: int | str, n: int, *, world: World | None = None,
                  weights: IKWeights | None = None, eps: float | None = None,
                  q_default: Any = None, device: DeviceLike = None, dtype: DTypeLike = np.float32
                  ) -> IKObjective:
@@ -149,7 +149,7 @@ class UIKFunction(torch.autograd.Function):
         return grad_out[:, None] * g, None, None
 
 
-def u_ik(q: torch.Tensor, target: torch.Tensor, robot: RobotLike, frame: Any, *, world: World | None = None,
+def u_ik(q: torch.Tensor, target: torch.Tensor, robot: RobotLike, frame: int | str, *, world: World | None = None,
          weights: IKWeights | None = None, eps: float | None = None,
          q_default: Any = None) -> torch.Tensor:
     """Differentiable U_ik (eq. 3.19) of configurations q (B, n_dof) for target poses

@@ -242,8 +242,9 @@ def make_plan_data(robot: RobotLike, worlds: list, n_per_world: int, *, seed: in
     if not parts:
         return PlanSamples(np.empty((0, n)), np.empty((0, n)), np.empty((0, n_waypoints, n)),
                            np.empty(0, np.int64), worlds, np.empty(0))
-    return PlanSamples(*[np.concatenate([p[k] for p in parts]) for k in range(4)],
-                       worlds=worlds, cost=np.concatenate([p[4] for p in parts]))
+    q0, q1, paths, ids = [np.concatenate([p[k] for p in parts]) for k in range(4)]
+    return PlanSamples(q0, q1, paths, ids, worlds=worlds,
+                       cost=np.concatenate([p[4] for p in parts]))
 
 
 def samples_from_db(db: Any, robot: RobotLike, *, world_ids: Any = None, hard_only: bool = True,

@@ -141,9 +141,9 @@ def freeze_joints(model: RobotModel, values: dict[str | int, float], *,
     old.update({model.joints[j].name: v for j, v in frozen.items()})
     notes[FROZEN_NOTE] = json.dumps(old)
     m.notes = notes
-    for k in list(vars(m)):  # drop cached derived data
-        if isinstance(type(m).__dict__.get(k), cached_property):
-            del m.__dict__[k]
+    for attr in list(vars(m)):  # drop cached derived data
+        if isinstance(type(m).__dict__.get(attr), cached_property):
+            del m.__dict__[attr]
     m.__post_init__()
     if exclude_rigid_pairs:
         after = _rigid_roots(m)

@@ -165,7 +165,7 @@ def check_keys(d: Any, allowed: set[str], where: str) -> dict:
     return d
 
 
-def robot_frame(robot: RobotModel, frame: Any, where: str) -> int:
+def robot_frame(robot: RobotModel, frame: int | str, where: str) -> int:
     """Index of a robot frame given by name (frame or end-effector) or index."""
     if isinstance(frame, bool) or not isinstance(frame, (str, int, np.integer)):
         raise ValueError(f"{where}: expected a frame name, got {frame!r}")

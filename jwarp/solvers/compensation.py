@@ -44,7 +44,7 @@ def _kappa(model: RobotModel, kappa: Any) -> Any:
     return kappa
 
 
-def compensated_ik(robot: RobotLike, frame: Any, target: Any, *, kappa: ArrayLike | None = None,
+def compensated_ik(robot: RobotLike, frame: int | str, target: Any, *, kappa: ArrayLike | None = None,
                    lam: float = 0.7, **kwargs: Any) -> IKResult:
     """:func:`jwarp.solvers.ik.ik` on the elastic model (kappa default: the robot's)."""
     model = get_robot(robot)
@@ -58,7 +58,7 @@ def compensated_plan(robot: RobotLike, world: World, start: Any, goal: Any, *, k
     return plan(model, world, start, goal, kappa=_kappa(model, kappa), lam=lam, **kwargs)
 
 
-def equilibrium_pose_error(robot: RobotLike, frame: Any, q: ArrayLike, target: Any, kappa: ArrayLike,
+def equilibrium_pose_error(robot: RobotLike, frame: int | str, q: ArrayLike, target: Any, kappa: ArrayLike,
                            device: DeviceLike = None, lam: float = 0.7
                            ) -> tuple[np.ndarray, np.ndarray]:
     """Pose error of ``frame`` at q (..., n_dof) on the fully converged elastic model
@@ -85,7 +85,7 @@ def equilibrium_pose_error(robot: RobotLike, frame: Any, q: ArrayLike, target: A
     return pos, ang.reshape(pos.shape)
 
 
-def compare_ik(robot: RobotLike, frame: Any, targets: ArrayLike, kappa: ArrayLike, *, n_starts: int = 8,
+def compare_ik(robot: RobotLike, frame: int | str, targets: ArrayLike, kappa: ArrayLike, *, n_starts: int = 8,
                seed: int = 0, lam: float = 0.7, **kwargs: Any) -> dict:
     """Rigid vs compensated IK from the same random seeds (no early stop, so every start
     runs until it is on the target): mean iterations of the starts that succeed in both,
@@ -145,7 +145,7 @@ def iteration_overhead(objective_rigid: Any, objective_elastic: Any, *, repeats:
     return out
 
 
-def ik_iteration_overhead(robot: RobotLike, frame: Any, kappa: ArrayLike, *, world: World | None = None,
+def ik_iteration_overhead(robot: RobotLike, frame: int | str, kappa: ArrayLike, *, world: World | None = None,
                           n_starts: int = 64, iterations: int = 60, rounds: int = 9,
                           lam: float = 0.7, **kwargs: Any) -> dict:
     """Wall time per iteration of the whole IK solver (:func:`jwarp.solvers.ik.ik`: kernels,

@@ -3,7 +3,7 @@ per iteration (``jwarp plan --rerun``; timelines ``iteration`` and the caller's)
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -37,11 +37,14 @@ class PlanRecording(Recording):
                 vertex_colors=[(90, 90, 90, 160)] * len(v)), static=True)
         if not world.has_grid:
             return
-        occ = world.occupancy if world.occupancy is not None else world.sdf < 0
+        # has_grid: the SDF, its limits and voxel size are set
+        sdf, limits = cast(np.ndarray, world.sdf), cast(np.ndarray, world.limits)
+        h = cast(float, world.voxel_size)
+        occ = world.occupancy if world.occupancy is not None else sdf < 0
         idx = np.argwhere(occ)
         pts = np.zeros((len(idx), 3))
-        pts[:, :world.dim] = world.limits[:, 0] + world.voxel_size * idx
-        half = np.full((len(idx), 3), 0.5 * world.voxel_size)
+        pts[:, :world.dim] = limits[:, 0] + h * idx
+        half = np.full((len(idx), 3), 0.5 * h)
         if world.dim == 2:
             half[:, 2] = 0.005
         self.rec.log("world/occupied", self.rr.Boxes3D(centers=pts, half_sizes=half,

@@ -31,6 +31,7 @@ from jwarp.utils.atomic import AtomicFile
 from jwarp.viz.recording import atomic_recording, rerun_module
 
 if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
     from jwarp.world.sdf import World
 
 #: timeline on which :func:`save_robot_rrd` logs the configurations
@@ -248,7 +249,7 @@ def _pose(params: Any, p: np.ndarray, prefix: str) -> np.ndarray | None:
     return T
 
 
-def save_calibration_rrd(path: str | os.PathLike, robot: RobotLike, measurement: Any, p: Any,
+def save_calibration_rrd(path: str | os.PathLike, robot: RobotLike, measurement: Measurement, p: Any,
                          q: ArrayLike, y: Any, meta: Mapping[str, Any] | None = None, *,
                          p_before: Any = None, robot_before: Any = None,
                          application_id: str = "jwarp-calibration") -> Path:

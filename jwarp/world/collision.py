@@ -684,6 +684,7 @@ def collision_cost(robot: RobotLike, q: ArrayLike, world: World | None, *, w_wor
     """
     model, batch, cm = _prepare(robot, q, world, device, dtype, validate)
     rho_b = _rho_arg(rho, batch, model.n_frames)
+    g: wp.array | None
     if tape:
         cost, g = cm.cost_tape(batch.array, rho=rho_b, w_world=w_world, w_self=w_self, eps=eps)
         if not grad:
@@ -696,7 +697,7 @@ def collision_cost(robot: RobotLike, q: ArrayLike, world: World | None, *, w_wor
     return out_c, out_g
 
 
-def sphere_distances(robot: RobotLike, q: ArrayLike, world: World, *, rho: ArrayLike | None = None, device: DeviceLike = None,
+def sphere_distances(robot: RobotLike, q: ArrayLike, world: World | None, *, rho: ArrayLike | None = None, device: DeviceLike = None,
                      dtype: DTypeLike = None, validate: bool = True) -> Any:
     """(..., n_spheres) signed distance [m] of each sphere's surface to the world:
     ``D(x_s) - r_s`` (negative = penetration)."""

@@ -30,7 +30,7 @@ SPEC_KEYS = {
 }
 
 
-def parse_world_spec(spec: Any, robot: RobotLike = None, device: DeviceLike = None) -> World:
+def parse_world_spec(spec: Any, robot: RobotLike | None = None, device: DeviceLike = None) -> World:
     """A world from a specification (the CLI's ``--world``).
 
     * a :class:`World` passes through;

@@ -149,7 +149,7 @@ class MeshCheck:
         device: Warp device (None: Warp's default).
     """
 
-    def __init__(self, robot: RobotModel, world: World, device: DeviceLike = None) -> None:
+    def __init__(self, robot: RobotModel, world: World | None, device: DeviceLike = None) -> None:
         init_warp()
         self.device = resolve_device(device)
         self.robot = robot

@@ -471,7 +471,7 @@ class PoseSampler:
         """
         dev, nd = self.device, self.robot.n_dof
         cap = max(int(k if capacity is None else min(capacity, k)), 1)
-        ws = getattr(self, "_ws", None)
+        ws: dict[str, Any] | None = getattr(self, "_ws", None)
         if ws is None or ws["k"] < k or ws["cap"] < cap:
             ws = self._ws = {"k": int(k), "cap": cap, "rows": []}
             for name, m, dt in (("qbuf", nd, self.scalar), ("frames", self.robot.n_frames,

@@ -29,7 +29,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable, Mapping
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import warp as wp
@@ -75,6 +75,9 @@ from jwarp.core.threads import limit_blas
 from jwarp.core.types import ArrayLike, DeviceLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
+
+if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
 
 #: the largest robust-loss scale in noise sigmas (beyond it the loss is linear on any data,
 #: and its square overflows near 1e154)
@@ -164,7 +167,7 @@ def _whitener(covariance: Any, S: int, m: int) -> np.ndarray | None:
     return np.linalg.solve(L, eye)   # L^-1, lower triangular
 
 
-def _noise(measurement: Any, noise_sigma: Any) -> np.ndarray:
+def _noise(measurement: Measurement, noise_sigma: Any) -> np.ndarray:
     m = len(measurement.obs_names)
     v = getattr(measurement, "noise", None) if noise_sigma is None else noise_sigma
     if v is None:
@@ -181,7 +184,7 @@ def _noise(measurement: Any, noise_sigma: Any) -> np.ndarray:
     return a
 
 
-def _problem_groups(measurement: Any, o: CalibrationOptions) -> tuple[list[str], Any]:
+def _problem_groups(measurement: Measurement, o: CalibrationOptions) -> tuple[list[str], Any]:
     """(the free groups, the measurement's prior means) of the problem of ``o``: ``free``
     with the pose groups when ``free_poses`` (less ``fix`` and the ``fix_at`` groups, whose
     values replace ``p_nominal``)."""
@@ -282,7 +285,7 @@ class CalibrationProblem:
             ``free``, compliances unbounded unless ``bound_kappa``).
     """
 
-    def __init__(self, robot: RobotLike, measurement: Any, q: ArrayLike, y: Any,
+    def __init__(self, robot: RobotLike, measurement: Measurement, q: ArrayLike, y: Any,
                  options: CalibrationOptions | None = None, *,
                  meta: Mapping[str, Any] | None = None, device: DeviceLike = None,
                  **keywords: Any) -> None:
@@ -395,7 +398,7 @@ class CalibrationProblem:
         self.n_evaluations = 0
 
     @classmethod
-    def from_options(cls, robot: RobotLike, measurement: Any, q: ArrayLike, y: Any,
+    def from_options(cls, robot: RobotLike, measurement: Measurement, q: ArrayLike, y: Any,
                      options: CalibrationOptions, meta: Mapping[str, Any] | None = None
                      ) -> CalibrationProblem:
         """``CalibrationProblem(robot, measurement, q, y, options, meta=meta)`` (kept for
@@ -860,6 +863,8 @@ def _least_squares(prob: CalibrationProblem, x: np.ndarray, moving: np.ndarray,
     :data:`STALL_RTOL` of itself) over the last :data:`STALL_WINDOW` iterations."""
     sp = prob.space
     idx = np.nonzero(moving)[0]
+    fun: Callable[[np.ndarray], np.ndarray]
+    jac: Callable[[np.ndarray], np.ndarray]
     if idx.size == sp.size:
         fun, jac = prob.residuals, prob.jacobian
     else:
@@ -868,11 +873,13 @@ def _least_squares(prob: CalibrationProblem, x: np.ndarray, moving: np.ndarray,
             xx[idx] = z
             return xx
 
-        def fun(z: np.ndarray) -> np.ndarray:
+        def fun_sub(z: np.ndarray) -> np.ndarray:
             return prob.residuals(full(z))
 
-        def jac(z: np.ndarray) -> np.ndarray:
+        def jac_sub(z: np.ndarray) -> np.ndarray:
             return prob.jacobian(full(z))[:, idx]
+
+        fun, jac = fun_sub, jac_sub
     costs: list[float] = []
 
     def callback(intermediate_result: Any) -> None:
@@ -991,7 +998,7 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
                           message=message, rounds=rounds, held=held & (best_x == 0.0))
 
 
-def calibrate(robot: RobotLike, measurement: Any, q: ArrayLike, y: Any, *,
+def calibrate(robot: RobotLike, measurement: Measurement, q: ArrayLike, y: Any, *,
               meta: Mapping[str, Any] | None = None, options: CalibrationOptions | None = None,
               **overrides: Any) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples:
@@ -1028,7 +1035,7 @@ def calibrate(robot: RobotLike, measurement: Any, q: ArrayLike, y: Any, *,
 
 
 @limit_blas  # small dense solves: a threaded BLAS only oversubscribes (JWARP_BLAS_THREADS)
-def calibrate_with(robot: RobotLike, measurement: Any, q: ArrayLike, y: Any, options: CalibrationOptions,
+def calibrate_with(robot: RobotLike, measurement: Measurement, q: ArrayLike, y: Any, options: CalibrationOptions,
                    *, meta: Mapping[str, Any] | None = None, t0: float | None = None
                    ) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples.
@@ -1087,6 +1094,7 @@ def calibrate_with(robot: RobotLike, measurement: Any, q: ArrayLike, y: Any, opt
                      "held_at_bound": int(sol.held.sum())})
         if best is None or sol.cost < best[0].cost:
             best = (sol, xs, it[0])
+    assert best is not None  # at least one start ran
     sol, xs, iters = best
     return build_result(prob, sol, xs, iters, runs, time.perf_counter() - t0,
                         identifiability_tol=o.identifiability_tol, moved_sigmas=o.moved_sigmas,

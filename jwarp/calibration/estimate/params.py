@@ -61,7 +61,7 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -74,6 +74,9 @@ from jwarp.calibration.estimate.origin import (
 )
 from jwarp.core.types import ArrayLike
 from jwarp.model import RobotModel
+
+if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
 
 DH_GROUPS = ("d", "theta", "r", "alpha", "beta")          # = DH columns 0..4
 KAPPA_GROUPS = ("kappa_alpha", "kappa_beta", "kappa_theta")  # = kappa axes 0..2
@@ -225,7 +228,7 @@ def parse_groups(free: str | Iterable[str]) -> list[str]:
     return list(dict.fromkeys(items))
 
 
-def with_pose_groups(measurement: Any, free: str | Iterable[str],
+def with_pose_groups(measurement: Measurement, free: str | Iterable[str],
                      fix: str | Iterable[str] | None = None) -> list[str]:
     """The groups ``free`` plus the measurement's pose and marker groups
     (:data:`POSE_GROUPS` it has: tracker, camera, markers, fixtures) not named in ``fix``.
@@ -405,7 +408,7 @@ def harmonic_joints(robot: RobotModel, dh_frames: Iterable[int]) -> list[int]:
     return sorted(out)
 
 
-def _free_masses(robot: RobotModel, measurement: Any, groups: list[str], dh_frames: list[int],
+def _free_masses(robot: RobotModel, measurement: Measurement, groups: list[str], dh_frames: list[int],
                  rel_sigma: float) -> list[int]:
     """Entries of ``robot.masses`` of the ``mass`` group (see :func:`influencing_masses`);
     a ValueError naming ``free`` when there are none."""
@@ -478,7 +481,7 @@ class ParameterSpace:
 
     # ----------------------------------------------------------------- build
     @classmethod
-    def build(cls, robot: RobotModel, measurement: Any, free: str | Iterable[str], *,
+    def build(cls, robot: RobotModel, measurement: Measurement, free: str | Iterable[str], *,
               sigma: Mapping[str, float] | None = None, frames: Iterable[int | str] | None = None,
               p_nominal: np.ndarray | None = None, bound_kappa: bool = False,
               orders: Mapping[str, int] | None = None) -> ParameterSpace:
@@ -698,6 +701,7 @@ class ParameterSpace:
                     frm.append(i)
                     col.append(2)
             else:
+                assert block is not None  # g is one of the measurement's groups
                 for k in block.indices(g):
                     names.append(block.names[k])
                     grp.append(g)

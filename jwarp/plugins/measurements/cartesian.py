@@ -51,6 +51,7 @@ class CartesianMeasurement(Measurement):
         self.marker_names, marker_frames, entries = g.parse_markers(
             setup, robot, default_sigma=self.DEFAULT_MARKER_SIGMA, frame_optional=False,
             position_required=False)
+        acc: list[Any]
         for acc, more in zip((names, nominal, sigma, groups), entries):
             acc += more
         self.noise = g.positive(setup.get("noise", self.DEFAULT_NOISE), "setup.noise")

@@ -291,6 +291,7 @@ class ContactMeasurement(Measurement):
             y[sel, 0] = d
             if not grad:
                 continue
+            assert jf is not None and jp is not None  # allocated with grad
             for body, c, sign in ((A, ca, 1.0), (B, cb, -1.0)):
                 if body.frame is not None:
                     jf[sel, 0, body.slot, :] += sign * g.point_twist_rows(n, c, f[sel, body.frame, :3, 3])

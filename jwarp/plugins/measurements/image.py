@@ -66,6 +66,7 @@ class ImageMeasurement(Measurement):
         self.marker_names, mframes, entries = g.parse_markers(
             setup, robot, default_sigma=self.DEFAULT_MARKER_SIGMA, frame_optional=True,
             position_required=True)
+        acc: list[Any]
         for acc, more in zip((names, nominal, sigma, groups), entries):
             acc += more
 

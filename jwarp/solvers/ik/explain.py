@@ -62,7 +62,7 @@ def _frames(model: RobotModel, q: np.ndarray, kappa: ArrayLike | None = None) ->
     return F, rho, bool(np.all(conv))
 
 
-def pose_errors(robot: RobotLike, frame: Any, q: ArrayLike, target: Any, *, orientation: str = "full",
+def pose_errors(robot: RobotLike, frame: int | str, q: ArrayLike, target: Any, *, orientation: str = "full",
                 free_axis: Any = (0.0, 0.0, 1.0), kappa: ArrayLike | None = None) -> tuple[float, float]:
     """(position error [m], rotation error [rad]) of ``frame`` at q (n_dof,) against the
     target pose (4, 4), as :func:`explain_ik` measures them (planar robots: x, y and the
@@ -212,7 +212,7 @@ def _pair_lines(worst: dict, margin: float, kind: str) -> list[str]:
     return lines
 
 
-def _inputs(model: RobotModel, frame: Any, q: ArrayLike, target: Any, orientation: str,
+def _inputs(model: RobotModel, frame: int | str, q: ArrayLike, target: Any, orientation: str,
             free_axis: Any) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
     qv = real_array(q, "q")
     if qv.shape != (model.n_dof,):
@@ -228,7 +228,7 @@ def _inputs(model: RobotModel, frame: Any, q: ArrayLike, target: Any, orientatio
     return np.asarray(qv, np.float64), np.asarray(T, np.float64), fi, np.asarray(axis)
 
 
-def explain_ik(robot: RobotLike, frame: Any, q: ArrayLike, target: Any, *, world: World | None = None,
+def explain_ik(robot: RobotLike, frame: int | str, q: ArrayLike, target: Any, *, world: World | None = None,
                margin: float = 0.0, tol_pos: float = 1e-4, tol_rot: float = 1e-3,
                orientation: str = "full", free_axis: Any = (0.0, 0.0, 1.0),
                kappa: ArrayLike | None = None) -> str:

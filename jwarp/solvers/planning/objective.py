@@ -163,6 +163,7 @@ class PathObjective:
         """U_c (eq. 3.7) into ``cartesian`` and ``total``; with ``grad`` its gradient into
         the waypoint rows of ``sub_grad`` (rigid frames at the waypoints)."""
         c, dev, PW = self._cart, self.device, self.P * self.W
+        assert c is not None  # called when the Cartesian term is on
         lam = self.scalar(self.weights.cartesian)
         floor = self.scalar(NORM_FLOOR * 1e-2)  # [m^2]
         wp.launch(c.k.fk.fk, dim=PW, inputs=[self.cm.model.frame_struct,
