@@ -402,6 +402,7 @@ def _check_net_memory(kind: str, options: Any, args: argparse.Namespace) -> None
     data is made."""
     from jwarp.learn.checkpoint import network_bytes
 
+    cls: type
     if kind == "ik":
         from jwarp.learn.ik_net import IKNet as cls
     else:

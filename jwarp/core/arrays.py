@@ -167,7 +167,7 @@ def as_batch(x: Any, n: int, name: str, *, device: wp.Device, dtype: DTypeLike,
             bad = torch.nonzero(~torch.isfinite(t).all(dim=1))[:5].flatten().tolist()
             raise ValueError(f"{name}: {_not_finite(bool(torch.isfinite(x).all()), npdt)} "
                              f"(batch rows {bad})")
-        arr = wp.from_torch(t, dtype=scalar)
+        arr = cast(wp.array, wp.from_torch(t, dtype=scalar))
         if arr.device != device:
             arr = arr.to(device)
         return Batch(arr, shape[:-1], "torch", torch_tensor=x)

@@ -46,7 +46,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -274,7 +274,7 @@ def urdf_text(robot: RobotModel, *, name: str | None = None,
             out.append(_joint(_unique(f"{f.name}_joint", joint_names), "fixed", parent, f.name,
                               f.transform))
             continue
-        A = dh_origin(f.dh)
+        A = dh_origin(cast(np.ndarray, f.dh))  # a DH frame
         if not f.coupling:
             out.append(_joint(_unique(f"{f.name}_joint", joint_names), "fixed", parent, f.name, A))
             continue

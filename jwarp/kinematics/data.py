@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import warp as wp
@@ -207,7 +207,7 @@ class KinematicsData:
         if self._stage_arr is None:
             self.q_staging()
         stream = self.device.stream if stream is None else stream
-        wp.copy(self.q, self._stage_arr, stream=stream)
+        wp.copy(self.q, cast(wp.array, self._stage_arr), stream=stream)  # staged above
         if fence:
             self._uploaded = stream.record_event()
 

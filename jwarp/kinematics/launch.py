@@ -246,7 +246,7 @@ _CALLS: dict = {}
 
 
 def _resolve_small(op: str, model: RobotModel, q: Any, qa: np.ndarray, warp_in: bool,
-                   dev: wp.Device, dtype: DTypeLike, frame: int | str | None, point: Any) -> SmallCall | None:
+                   dev: wp.Device, dtype: DTypeLike, frame: Any, point: Any) -> SmallCall | None:
     """The :class:`SmallCall` of a signature, or None where the general path must run."""
     if qa.dtype not in _SMALL_DTYPES or qa.ndim == 0:
         return None

@@ -387,7 +387,7 @@ def _check_out(out: Any, shape: tuple[int, int], device: DeviceLike) -> tuple[wp
     dev = resolve_device(device, like=out)
     if dev != tdev:
         raise ValueError(f"out: tensor on {tdev}, but device={device!r} ({dev})")
-    return wp.from_torch(out, dtype=wp.float32), dev
+    return cast(wp.array, wp.from_torch(out, dtype=wp.float32)), dev
 
 
 def bps_encode(worlds: Any, points: ArrayLike, *, device: DeviceLike = None, out: Any = None) -> Any:

@@ -634,7 +634,7 @@ def export_npz(db: str | os.PathLike | PathDB, out: str | os.PathLike, *,
                     skipped.append({"what": f"world {i} and its {n} paths: {e}",
                                     "world_id": i, "task": None, "paths": n})
         ids = good
-        arrays = d.paths_of(ids, skip_damaged=skip_damaged, skipped=skipped)
+        arrays: dict[str, Any] = d.paths_of(ids, skip_damaged=skip_damaged, skipped=skipped)
         arrays["worlds"] = np.array(ids, np.int64)
         if rows:
             arrays["world_limits"] = np.stack([r["limits"] for r in rows])

@@ -139,6 +139,11 @@ class IKNet(nn.Module):
         :func:`jwarp.learn.checkpoint.load_checkpoint` read besides the weights).
     """
 
+    # buffers (register_buffer), declared for the type checker
+    in_shift: torch.Tensor
+    in_scale: torch.Tensor
+    bps_scale: torch.Tensor
+
     def __init__(self, config: IKNetConfig, bps: Any = None):
         super().__init__()
         config.validate()

@@ -176,6 +176,9 @@ class PlanNet(nn.Module):
     #: the checkpoint format of this network (:mod:`jwarp.learn.checkpoint`)
     checkpoint_format = "jwarp-plan-net"
 
+    # a buffer (register_buffer), declared for the type checker
+    bps_scale: torch.Tensor
+
     def __init__(self, config: PlanNetConfig, bps: Any = None):
         super().__init__()
         config.validate()

@@ -10,7 +10,7 @@ go; the backward pass scales the stored gradient by the incoming one. CPU and CU
 from __future__ import annotations
 
 import weakref
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import torch
@@ -83,7 +83,7 @@ class UPathFunction(torch.autograd.Function):
     @staticmethod
     def forward(ctx: Any, paths: torch.Tensor, obj: PathObjective) -> torch.Tensor:
         src = wp.from_torch(paths.detach().contiguous(), dtype=obj.scalar)
-        wp.copy(obj.paths, src)
+        wp.copy(obj.paths, cast(wp.array, src))
         obj.evaluate(grad=True)
         ctx.save_for_backward(wp.to_torch(obj.gradient()).clone())
         return wp.to_torch(obj.total).clone()
@@ -134,9 +134,9 @@ class UIKFunction(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx: Any, q: torch.Tensor, target: torch.Tensor, obj: IKObjective) -> torch.Tensor:
-        wp.copy(obj.q, wp.from_torch(q.detach().contiguous(), dtype=obj.scalar))
+        wp.copy(obj.q, cast(wp.array, wp.from_torch(q.detach().contiguous(), dtype=obj.scalar)))
         tgt = target.detach().to(dtype=q.dtype).contiguous()
-        wp.copy(obj.target, wp.from_torch(tgt, dtype=obj.fk.mat44))
+        wp.copy(obj.target, cast(wp.array, wp.from_torch(tgt, dtype=obj.fk.mat44)))
         obj.evaluate_pose()
         obj.evaluate_aux()
         g = wp.to_torch(obj.grad_f) + wp.to_torch(obj.grad_a)

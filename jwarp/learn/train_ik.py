@@ -245,7 +245,7 @@ class IKTrainer:
                        for _ in range(W)]
         self.hard_ok = [np.zeros(self.cap, bool) for _ in range(W)]
         self.hard_ptr = [0] * W
-        self.rolling = None  # rolling mean of the batch costs
+        self.rolling: float | None = None  # rolling mean of the batch costs
         self.epoch = 0
         self.history: list[dict] = []
         self.labels = None

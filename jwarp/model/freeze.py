@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -117,7 +117,7 @@ def freeze_joints(model: RobotModel, values: dict[str | int, float], *,
         if f.kind != "dh" or not f.coupling:
             continue
         col = 0 if model.joints[f.coupling[0][0]].type == "prismatic" else 1
-        f.dh = f.dh.copy()
+        f.dh = cast(np.ndarray, f.dh).copy()  # a DH frame
         for j, c in f.coupling:
             if j in frozen:
                 f.dh[col] += c * seen[j]

@@ -40,7 +40,7 @@ import os
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -467,9 +467,9 @@ class RobotModel:
             parent = "-" if f.parent is None else self.frames[f.parent].name
             if f.kind == "dh":
                 drive = " + ".join(f"{c:g}*{self.joints[j].name}" for j, c in f.coupling) or "fixed"
-                extra = f"dh={np.round(f.dh, 5).tolist()} q={drive}"
+                extra = f"dh={np.round(cast(np.ndarray, f.dh), 5).tolist()} q={drive}"
             else:
-                extra = f"static p={np.round(f.transform[:3, 3], 5).tolist()}"
+                extra = f"static p={np.round(cast(np.ndarray, f.transform)[:3, 3], 5).tolist()}"
             lines.append(f"    {i:3d} {f.name:<14} parent={parent:<14} {extra}")
         if self.end_effectors:
             eff = ", ".join(f"{k}={self.frames[v].name}" for k, v in self.end_effectors.items())

@@ -514,7 +514,7 @@ def _harmonic_from_doc(value: Any, jnames: list[str], key: str = "harmonic",
 
 def to_document(m: RobotModel) -> dict[str, Any]:
     """The JSON document of robot ``m`` (schema ``jwarp.robot`` version 1)."""
-    def lst(a: np.ndarray) -> list:
+    def lst(a: np.ndarray | None) -> list:
         return np.asarray(a, np.float64).tolist()
 
     frames = []

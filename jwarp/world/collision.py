@@ -36,7 +36,7 @@ of one batch size, reused from call to call. DH rows are :class:`jwarp.core.rows
 from __future__ import annotations
 
 import os
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import warp as wp
@@ -708,7 +708,7 @@ def sphere_distances(robot: RobotLike, q: ArrayLike, world: World | None, *, rho
         raise ValueError(f"robot: '{model.name}' has no collision spheres")
     sd, _, _ = cm.distances(batch.array, rho=_rho_arg(rho, batch, model.n_frames), spheres=True,
                             use_self=False)
-    return to_output(sd, batch, (cm.n_spheres,))
+    return to_output(cast(wp.array, sd), batch, (cm.n_spheres,))  # spheres=True
 
 
 def self_distances(robot: RobotLike, q: ArrayLike, *, rho: ArrayLike | None = None, device: DeviceLike = None,
@@ -720,7 +720,7 @@ def self_distances(robot: RobotLike, q: ArrayLike, *, rho: ArrayLike | None = No
         raise ValueError(f"robot: '{model.name}' has no self-collision sphere pairs")
     _, pd, _ = cm.distances(batch.array, rho=_rho_arg(rho, batch, model.n_frames), pairs=True,
                             use_world=False)
-    return to_output(pd, batch, (cm.n_pairs,))
+    return to_output(cast(wp.array, pd), batch, (cm.n_pairs,))  # pairs=True
 
 
 def min_distances(robot: RobotLike, q: ArrayLike, world: World | None = None, *, rho: ArrayLike | None = None,

@@ -150,7 +150,7 @@ class MotionOptions:
             n += 1
         return n if self.levels is None else min(n, int(self.levels))
 
-    def resolved_method(self, device: DeviceLike) -> str:
+    def resolved_method(self, device: wp.Device) -> str:
         """:attr:`method` on ``device`` (None: "levels" on a GPU, "advance" on the CPU)."""
         if self.method is not None:
             return self.method

@@ -302,7 +302,7 @@ class PoseSampler:
         s = self.k.Sensors()
         cams = self.cameras
 
-        def v3(a: np.ndarray) -> wp.array:
+        def v3(a: np.ndarray | list) -> wp.array:
             a = np.asarray(a, dt).reshape(-1, 3)
             return wp.array(a if len(a) else np.zeros((1, 3), dt), dtype=vec3, device=dev)
 
@@ -473,7 +473,8 @@ class PoseSampler:
         cap = max(int(k if capacity is None else min(capacity, k)), 1)
         ws: dict[str, Any] | None = getattr(self, "_ws", None)
         if ws is None or ws["k"] < k or ws["cap"] < cap:
-            ws = self._ws = {"k": int(k), "cap": cap, "rows": []}
+            ws = {"k": int(k), "cap": cap, "rows": []}
+            self._ws = ws
             for name, m, dt in (("qbuf", nd, self.scalar), ("frames", self.robot.n_frames,
                                                            self.k.mat44),
                                 ("xs", max(self.model.spheres.n_spheres, 1), self.k.vec3)):

@@ -29,7 +29,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import numpy as np
 import warp as wp
@@ -716,7 +716,7 @@ class CalibrationProblem:
             par = self.robot.frames[int(s)].parent
             pf = np.broadcast_to(np.eye(4), (S, 4, 4)) if par is None else frames[:, par]
             p_s = frames[:, s, :3, 3]
-            t6 = origin_twists(frames[:, s], pf, self.robot.frames[int(s)].transform, delta,
+            t6 = origin_twists(frames[:, s], pf, cast(np.ndarray, self.robot.frames[int(s)].transform), delta,
                                p_s[:, None, :])[:, 0]                 # (S, 6 (v, w), 6 c)
             v, w = t6[:, :3, :], t6[:, 3:, :]                          # (S, 3, 6)
             a = v - np.cross(w, p_s[:, :, None], axis=1)               # a = v - w x p_s
@@ -757,7 +757,7 @@ class CalibrationProblem:
             delta[sp.column[idx[cols]]] = x[idx[cols]]
             par = self.robot.frames[int(s)].parent
             pf = (np.broadcast_to(np.eye(4), (S, 4, 4)) if par is None else frames[:, par])
-            tw = origin_twists(frames[:, s], pf, self.robot.frames[int(s)].transform, delta,
+            tw = origin_twists(frames[:, s], pf, cast(np.ndarray, self.robot.frames[int(s)].transform), delta,
                                frames[:, mframes[below]][:, :, :3, 3])   # (S, k, 6, 6)
             dy = np.einsum("smkt,sktc->smc", jf[:, :, below, :], tw)  # (S, m, 6)
             out[:, :, cols] = dy[:, :, sp.column[idx[cols]]]

@@ -61,7 +61,7 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -726,8 +726,9 @@ class ParameterSpace:
                     typical[k] = DEFAULT_SIGMA[MASS_GROUP] * max(nom[k], 1.0)
                 elif g in DEFAULT_SIGMA:
                     typical[k] = DEFAULT_SIGMA[g]
-                elif kind[k] == KIND_MEAS and math.isfinite(float(block.sigma[col[k]])):
-                    typical[k] = float(block.sigma[col[k]])
+                elif kind[k] == KIND_MEAS and math.isfinite(
+                        float(cast(Any, block).sigma[col[k]])):  # a measurement parameter
+                    typical[k] = float(cast(Any, block).sigma[col[k]])
                 else:
                     typical[k] = 1.0
         for g, pat, v in sig_keyed:
