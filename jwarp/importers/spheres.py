@@ -65,7 +65,7 @@ import os
 import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import trimesh
@@ -377,7 +377,7 @@ def _clearance(solid: _Solid, c: np.ndarray, d: np.ndarray) -> np.ndarray:
 
     def all_inside(idx: np.ndarray, rad: np.ndarray) -> np.ndarray:
         x = (c[idx, None, :] + 0.99 * rad[:, None, None] * u[None]).reshape(-1, 3)
-        return (solid.signed_distance(x).reshape(len(idx), -1) < 0).all(axis=1)
+        return cast(np.ndarray, (solid.signed_distance(x).reshape(len(idx), -1) < 0).all(axis=1))
 
     idx = np.flatnonzero(~all_inside(np.arange(len(d)), d))
     if len(idx):
@@ -1161,7 +1161,7 @@ def _scaled(m: trimesh.Trimesh, scale: Any) -> trimesh.Trimesh:
     return m
 
 
-def _geometry_mesh(kind: str, size: Any, mesh: Any, scale: Any) -> trimesh.Trimesh:
+def _geometry_mesh(kind: str | None, size: Any, mesh: Any, scale: Any) -> trimesh.Trimesh:
     """The mesh of one URDF-style geometry in its own frame (``sphere`` as an icosphere)."""
     if kind == "mesh":
         if mesh is None:
@@ -1255,7 +1255,8 @@ def link_part(geometries: Any) -> tuple[trimesh.Trimesh | None, float]:
             sagitta = max(sagitta, rad * (1.0 - np.cos(np.pi / 64)))
     if not parts:
         return None, 0.0
-    return (parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)), sagitta
+    return (parts[0] if len(parts) == 1 else
+            cast(trimesh.Trimesh, trimesh.util.concatenate(parts))), sagitta
 
 
 def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
@@ -1305,7 +1306,8 @@ def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
                 raise ValueError(f"max_spheres: {budget} is no more than the link's "
                                  f"{len(exact)} sphere geometries")
             options = {**options, "max_spheres": budget - len(exact)}
-        whole = parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
+        whole = (parts[0] if len(parts) == 1 else
+                 cast(trimesh.Trimesh, trimesh.util.concatenate(parts)))  # meshes in: a mesh
         step = {"contain_check": 0} if options.get("contain") else {}  # checked below
         got = (fit or fit_spheres)(whole, tolerance=tolerance, **options, **step)
         if options.get("contain"):  # contained, certified and checked on fresh samples

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -202,7 +202,9 @@ class WorldLabels:
             m = m & self.stats
         if not m.any():
             return float("nan")
-        return float(self.n_feasible_starts[m].sum() / self.n_starts[m].sum())
+        # set with the statistics
+        n_ok, n_all = cast(np.ndarray, self.n_feasible_starts), cast(np.ndarray, self.n_starts)
+        return float(n_ok[m].sum() / n_all[m].sum())
 
 
 def world_extent(model: RobotModel) -> float:

@@ -42,7 +42,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 import torch
@@ -336,7 +336,8 @@ class IKTrainer:
         # the labels of the drawn targets: rows from the hard set carry no pool index, so
         # the supervised trainer draws without boosting (set in train_ik_supervised)
         idx = self._last_idx
-        y = self.labels[wi][torch.as_tensor(idx, device=self.tdev)]
+        labels = cast("list[torch.Tensor]", self.labels)  # the supervised trainer labels
+        y = labels[wi][torch.as_tensor(idx, device=self.tdev)]
         inv = 1.0 / torch.as_tensor(self.net.codec.upper - self.net.codec.lower,
                                     dtype=q.dtype, device=q.device)
         e = (((q - y[:, None, :]) * inv) ** 2).mean(dim=-1)  # (m, H)

@@ -124,7 +124,7 @@ def _spec_int(key: str, v: Any, lo: int, hi: int | None = None) -> int:
     return int(v)
 
 
-def _grid_size(model: RobotModel, dim: int, cells: int | None, voxel: float | None,
+def _grid_size(model: RobotModel | None, dim: int, cells: int | None, voxel: float | None,
                device: DeviceLike = None) -> list[float]:
     """The grid sizes (per axis, as floats: nothing is allocated) a simplex spec makes."""
     if model is not None and dim == model.workspace_dim:
@@ -203,6 +203,7 @@ def _simplex_from_spec(rest: str, model: RobotModel, text: str, device: DeviceLi
                                        max_tries=tries, cells=cells, voxel_size=voxel,
                                        clear_base=clear_base, dim=dim, device=device, **noise)
     else:
+        shape: tuple[int, ...] | None
         if model is not None and dim == model.workspace_dim:
             shape, limits, h = robot_world_grid(model, cells=cells, voxel_size=voxel,
                                                 device=device)

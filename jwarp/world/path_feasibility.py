@@ -10,7 +10,7 @@ and :mod:`jwarp.solvers.planning.rrt` use them; they use neither.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import warp as wp
@@ -199,7 +199,7 @@ def path_feasible(robot: RobotLike, world: World, paths: Any, n_substeps: int, *
     q = substeps(a, n_substeps, device=device)
     free = collision_free(model, world, q.reshape(-1, model.n_dof), margin, kappa=kappa,
                           device=device, self_margin=self_margin)
-    free = free.reshape(q.shape[:-1]).all(axis=-1)
+    free = cast(np.ndarray, free.reshape(q.shape[:-1]).all(axis=-1))
     return free & within_limits(model, a).all(axis=-1)
 
 

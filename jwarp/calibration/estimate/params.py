@@ -306,7 +306,7 @@ def influencing_masses(robot: RobotModel, measured: Iterable[int] | None,
     roots = [i for i in sorted(chain) if compliant[i]]
     if not roots or not robot.masses:
         return []
-    loaded = robot.subtree_mask[roots].any(axis=0)        # (n,): in a compliant subtree
+    loaded = cast(np.ndarray, robot.subtree_mask[roots].any(axis=0))  # (n,): in a compliant subtree
     return [e for e, m in enumerate(robot.masses) if loaded[m.frame]]
 
 
