@@ -46,6 +46,7 @@ from jwarp.model.robot import RobotModel
 
 if TYPE_CHECKING:
     from jwarp.calibration.estimate.diagnostics import Diagnostics
+    from jwarp.model.measurement import Measurement
 
 #: the ``notes`` key of a calibrated robot's provenance (a JSON object)
 PROVENANCE_NOTE = "calibration"
@@ -261,7 +262,7 @@ class _Names:
         return self.names.get(name, name)
 
 
-def report_unit(measurement: Any) -> tuple[float, str]:
+def report_unit(measurement: Measurement) -> tuple[float, str]:
     """(factor, unit) of the errors reported: (1000, "mm") for a measurement in metres,
     else (1, the measurement's unit)."""
     return (1000.0, "mm") if measurement.unit == "m" else (1.0, measurement.unit)
@@ -295,7 +296,7 @@ def split_rows(n: int, calibrate_rows: str | None, test_rows: str | None,
     return train, test, both
 
 
-def free_groups(measurement: Any, free: str | Iterable[str],
+def free_groups(measurement: Measurement, free: str | Iterable[str],
                 fix: str | Iterable[str] | None, names: Mapping[str, str] | None = None
                 ) -> list[str]:
     """``free`` plus the measurement's pose and marker groups not in ``fix``

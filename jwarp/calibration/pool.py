@@ -29,15 +29,19 @@ import os
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from jwarp.calibration.files import Samples, numeric_rows, read_header, read_text
+from jwarp.core.types import ArrayLike
 from jwarp.model import RobotModel
 from jwarp.model.measurement import Measurement
 from jwarp.utils.atomic import atomic_write_text
 from jwarp.utils.checks import ArgumentError, check_int
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 
 def pool_columns(robot: RobotModel, meas: Measurement) -> list[str]:
@@ -157,7 +161,7 @@ class PoolChecker:
         margin: least distance [m] between sphere surfaces (self and world), in [0, 1].
     """
 
-    def __init__(self, robot: RobotModel, setup: Any = None, *, world: Any = None,
+    def __init__(self, robot: RobotModel, setup: Any = None, *, world: World | None = None,
                  margin: float = 0.0) -> None:
         from jwarp.calibration.design.poses import PoseOptions, PoseSampler
         from jwarp.world.collision import check_world
@@ -185,7 +189,7 @@ class PoolChecker:
             self.warnings.append(f"robot '{robot.name}' has no self-collision sphere pairs: "
                                  f"the pool is NOT checked for self-collision")
 
-    def __call__(self, q: Any) -> PoolCheck:
+    def __call__(self, q: ArrayLike) -> PoolCheck:
         """Verdicts of ``q`` (N, n_dof) [rad or m]."""
         from jwarp.world.collision import min_distances
 
@@ -205,7 +209,7 @@ class PoolChecker:
                          warnings=list(self.warnings), time_s=time.perf_counter() - t0)
 
 
-def check_configurations(robot: RobotModel, q: Any, setup: Any = None, *, world: Any = None,
+def check_configurations(robot: RobotModel, q: ArrayLike, setup: Any = None, *, world: World | None = None,
                          margin: float = 0.0) -> PoolCheck:
     """Which configurations ``q`` (N, n_dof) a pool may keep: ``PoolChecker(robot, setup,
     world=world, margin=margin)(q)`` (a pool read from a file is checked this way by
@@ -293,7 +297,7 @@ def _raw_draw(robot: RobotModel, setup: object, rng: np.random.Generator) -> Any
     return lambda k: (uniform_configurations(robot, rng, k), {})
 
 
-def draw_pool(robot: RobotModel, setup: object, n: int, seed: int, *, world: Any = None,
+def draw_pool(robot: RobotModel, setup: object, n: int, seed: int, *, world: World | None = None,
               margin: float = 0.0, max_draws: int | None = None) -> CandidatePool:
     """A feasible pool of ``n`` candidate configurations of a measurement setup on the
     nominal robot (module docstring), with their per-sample columns.
@@ -369,7 +373,7 @@ def draw_pool(robot: RobotModel, setup: object, n: int, seed: int, *, world: Any
 
 
 def draw_configurations(robot: RobotModel, setup: object, n: int, seed: int, *,
-                        world: Any = None, margin: float = 0.0) -> tuple[np.ndarray, dict]:
+                        world: World | None = None, margin: float = 0.0) -> tuple[np.ndarray, dict]:
     """``n`` feasible candidate configurations and their per-sample columns:
     :func:`draw_pool` as ``(q, meta)``; its warnings (unchecked collisions, a short pool)
     are issued as :class:`UserWarning` s."""

@@ -56,9 +56,12 @@ import json
 import math
 import os
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 #: robots whose simulated truth is elastic by default, and its mean compliance [rad/(N m)]
 ELASTIC_ROBOTS = ("justin19", "arm7")
@@ -468,7 +471,7 @@ _BYTES_PER_SAMPLE_FRAME = 4 * 128
 _BYTES_PER_SAMPLE_COLUMN = 64
 
 
-def _check_campaign_memory(model: Any, meas: Any, n: int) -> None:
+def _check_campaign_memory(model: RobotModel, meas: Any, n: int) -> None:
     """Refuse ``--samples`` whose estimated memory exceeds the available memory."""
     from jwarp.calibration.files import columns
     from jwarp.utils.memory import check_memory, format_bytes

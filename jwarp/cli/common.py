@@ -11,11 +11,14 @@ import os
 import re
 import sys
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from jwarp.core.types import DTypeLike
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 #: default compliance of ``fk --elastic`` for a robot without its own kappa [rad/(N m)]
 DEFAULT_KAPPA = 1e-4
@@ -271,7 +274,7 @@ def robot_option(name: str, option: str = "--robot") -> Any:
         raise CLIError(f"{option}: {msg}") from None
 
 
-def parse_q(text: str, model: Any, deg: bool = False, option: str = "--q") -> np.ndarray:
+def parse_q(text: str, model: RobotModel, deg: bool = False, option: str = "--q") -> np.ndarray:
     """Parse ``v1,v2,...`` or ``zeros`` into (n_dof,) joint values [rad or m]."""
     text = text.strip()
     n = model.n_dof
@@ -299,7 +302,7 @@ def parse_q(text: str, model: Any, deg: bool = False, option: str = "--q") -> np
     return q
 
 
-def parse_kappa(text: str | None, model: Any) -> tuple[Any, str]:
+def parse_kappa(text: str | None, model: RobotModel) -> tuple[Any, str]:
     """The kappa for fk_elastic and where it came from ('--kappa', 'robot' or 'default')."""
     if text is not None:
         parts = [p.strip() for p in text.split(",") if p.strip()]
@@ -363,7 +366,7 @@ def quiet_warp() -> None:
         wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
 
 
-def warn_limits(model: Any, q: np.ndarray) -> None:
+def warn_limits(model: RobotModel, q: np.ndarray) -> None:
     for j, (lo, hi) in enumerate(model.joint_limits):
         if not lo - 1e-12 <= q[j] <= hi + 1e-12:
             print(f"jwarp: warning: {model.joint_names[j]} = {q[j]:+.6g} outside its limits "

@@ -40,7 +40,7 @@ import argparse
 import json
 import os
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from jwarp.cli.common import (
     CLIError,
@@ -55,6 +55,9 @@ from jwarp.cli.common import (
 )
 from jwarp.cli.vocabulary import add_out, require_out
 from jwarp.core.types import RobotLike
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 
 def _check_db(path: str, robot: RobotLike, timeout: float) -> None:
@@ -89,7 +92,7 @@ def _check_db(path: str, robot: RobotLike, timeout: float) -> None:
 _SIZED_SUBSTEPS = 16
 
 
-def labeller_memory(model: Any, options: Any, paths_per_world: int, chunk: int) -> float:
+def labeller_memory(model: RobotModel, options: Any, paths_per_world: int, chunk: int) -> float:
     """Estimated peak memory [bytes] of labelling one world with ``paths_per_world`` paths
     (:func:`jwarp.learn.plan_data.label_world`: every task's multi-starts in one planner
     batch, all of them kept as ``all_paths``) plus the finished records of a chunk."""
@@ -105,7 +108,7 @@ def labeller_memory(model: Any, options: Any, paths_per_world: int, chunk: int) 
     return need
 
 
-def _check_generate_memory(model: Any, options: Any, args: argparse.Namespace) -> None:
+def _check_generate_memory(model: RobotModel, options: Any, args: argparse.Namespace) -> None:
     from jwarp.learn.generate import DEFAULT_CHUNK
 
     need = labeller_memory(model, options, args.paths_per_world,

@@ -39,7 +39,7 @@ import argparse
 import math
 import sys
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -53,6 +53,9 @@ from jwarp.cli.common import (
     rerun_recording,
 )
 from jwarp.cli.vocabulary import add_out
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 DEFAULT_FREE = "theta,d,r,alpha"
 
@@ -76,7 +79,7 @@ def _setup_and_measurement(path: str, option: str, robot_name: str | None) -> tu
     return setup, model, meas
 
 
-def _configurations(model: Any, setup: Any, meas: Any, path: str | None, option: str,
+def _configurations(model: RobotModel, setup: Any, meas: Any, path: str | None, option: str,
                     n: int, seed: int, uniform: bool) -> tuple[np.ndarray, dict | None]:
     from jwarp.calibration.pool import draw_configurations, read_configurations
     from jwarp.calibration.simulate.campaign import uniform_configurations
@@ -226,7 +229,7 @@ def cmd_sensitivity(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------ design
-def _design_world(args: argparse.Namespace, model: Any) -> Any:
+def _design_world(args: argparse.Namespace, model: RobotModel) -> Any:
     """The World of ``--world`` SPEC or ``--scene`` FILE (its exact objects), or None."""
     if args.world is not None:
         from jwarp.world.io import parse_world_spec
@@ -356,6 +359,7 @@ def cmd_design(args: argparse.Namespace) -> int:
                 raise CLIError(f"{opt}: {msg.removeprefix(prefix)}") from None
         raise
     idx = feasible[res.indices]            # rows of --candidates
+    row_lines = cast(np.ndarray, pool.lines)  # read from a file: its line numbers
     res.indices = idx
     res.n_candidates = len(pool)
     meta = {k: np.asarray(v)[idx] for k, v in pool.meta.items()}
@@ -366,18 +370,18 @@ def cmd_design(args: argparse.Namespace) -> int:
         doc = dict(res.to_dict(), robot=model.name, plugin=meas.name,
                    task=None if task is None else task.name, free=args.free,
                    candidates=args.candidates, out=args.out,
-                   lines=[int(v) for v in pool.lines[idx]],
+                   lines=[int(v) for v in row_lines[idx]],
                    collision_check={"self_checked": chk.self_checked,
                                     "world_checked": chk.world_checked, "margin": args.margin,
                                     "excluded": dict(chk.dropped),
-                                    "excluded_lines": [int(v) for v in pool.lines[excluded]],
+                                    "excluded_lines": [int(v) for v in row_lines[excluded]],
                                     "warnings": chk.warnings})
         print(dumps(doc, indent=1))
         return 0
     crit = "task D-optimality" if task is not None else "D-optimality"
     if excluded.size:
         why = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in chk.dropped.items() if v)
-        shown = ", ".join(str(int(v)) for v in pool.lines[excluded[:10]])
+        shown = ", ".join(str(int(v)) for v in row_lines[excluded[:10]])
         print(f"excluded {excluded.size} of {len(pool)} rows of --candidates that fail the "
               f"collision check (margin {args.margin:g} m; {why}): lines {shown}"
               f"{', ...' if excluded.size > 10 else ''}")

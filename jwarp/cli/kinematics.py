@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -41,6 +41,9 @@ from jwarp.cli.common import (
     warn_limits,
 )
 from jwarp.cli.vocabulary import add_out, require_out
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 #: fk_elastic's own default of max_iter (jwarp.kinematics.equilibrium; the CLI's differs)
 API_MAX_ITER = 10
@@ -108,7 +111,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def _positions(model: Any, frames: np.ndarray) -> dict[str, list[float]]:
+def _positions(model: RobotModel, frames: np.ndarray) -> dict[str, list[float]]:
     return {name: frames[i, :3, 3].tolist() for i, name in enumerate(model.frame_names)}
 
 

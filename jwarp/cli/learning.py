@@ -63,7 +63,7 @@ import math
 import re
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -80,6 +80,9 @@ from jwarp.cli.common import (
     robot_option,
 )
 
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
+
 #: the test targets of ``eval ik`` without ``--mix`` (as in training by default)
 DEFAULT_EVAL_MIX = (0.6, 0.2, 0.2, 0.0)
 
@@ -92,7 +95,7 @@ _TRAIN_OPTION_OF = {"mix": "--mix", "robot": "--robot", "frame": "--frame", "wor
                     "seed": "--seed", "checkpoint": "--out", "resume": "--resume"}
 
 
-def _frame(model: Any, frame: str | None) -> str:
+def _frame(model: RobotModel, frame: str | None) -> str:
     """``--frame`` checked, or the robot's first end effector."""
     if frame is None:
         if not model.end_effectors:
@@ -105,7 +108,7 @@ def _frame(model: Any, frame: str | None) -> str:
     return frame
 
 
-def _check_world_kind(model: Any, kind: str) -> None:
+def _check_world_kind(model: RobotModel, kind: str) -> None:
     if kind == "shelf" and model.workspace_dim != 3:
         raise CLIError(f"--world: the shelf is a 3D scene; '{model.name}' is planar (use random "
                        f"or none)")
@@ -136,7 +139,7 @@ def _option_error(e: Exception, mapping: dict, command: str) -> CLIError:
     return CLIError(f"{command}: {msg}")
 
 
-def _load_model(path: str, model: Any, device: str = "cpu") -> Any:
+def _load_model(path: str, model: RobotModel, device: str = "cpu") -> Any:
     try:
         from jwarp.learn.checkpoint import load_checkpoint
     except ImportError as e:  # pragma: no cover
@@ -230,7 +233,7 @@ def cmd_train_ik(args: argparse.Namespace) -> int:
     return 0
 
 
-def _eval_data(model: Any, frame: str, kind: str, n_worlds: int, n_targets: int,
+def _eval_data(model: RobotModel, frame: str, kind: str, n_worlds: int, n_targets: int,
                seed: int, mix: tuple) -> tuple[list, list]:
     """Unseen test worlds and targets (seeds offset from training (seed + 100 i) and
     validation (seed + 100000))."""
@@ -339,13 +342,13 @@ _TRAIN_PLAN_OPTION_OF = {"robot": "--robot", "n_bps": "--n-bps", "n_waypoints": 
                          "seed": "--seed", "checkpoint": "--out", "n_substeps": "--substeps"}
 
 
-def _plan_worlds(model: Any, n: int, seed: int) -> list:
+def _plan_worlds(model: RobotModel, n: int, seed: int) -> list:
     from jwarp.world.feasibility import feasible_simplex_world
 
     return [feasible_simplex_world(model, seed=seed + 7 * i) for i in range(n)]
 
 
-def _load_plan_model(path: str, model: Any, option: str = "--model") -> Any:
+def _load_plan_model(path: str, model: RobotModel, option: str = "--model") -> Any:
     try:
         from jwarp.learn.checkpoint import load_plan_checkpoint
     except ImportError as e:  # pragma: no cover
@@ -357,7 +360,7 @@ def _load_plan_model(path: str, model: Any, option: str = "--model") -> Any:
             from None
 
 
-def _plan_db_samples(args: argparse.Namespace, model: Any) -> tuple[Any, Any]:
+def _plan_db_samples(args: argparse.Namespace, model: RobotModel) -> tuple[Any, Any]:
     """(train, val) of ``--data`` (split by world, ``--val-fraction``); one-line CLIErrors
     naming ``--data``, ``--waypoints`` or ``--val-fraction``."""
     from jwarp.learn.dataset import PathDB
@@ -399,6 +402,7 @@ def _check_net_memory(kind: str, options: Any, args: argparse.Namespace) -> None
     data is made."""
     from jwarp.learn.checkpoint import network_bytes
 
+    cls: type
     if kind == "ik":
         from jwarp.learn.ik_net import IKNet as cls
     else:
@@ -413,7 +417,7 @@ def _check_net_memory(kind: str, options: Any, args: argparse.Namespace) -> None
                         f"activations)", option)
 
 
-def _check_label_memory(model: Any, args: argparse.Namespace) -> None:
+def _check_label_memory(model: RobotModel, args: argparse.Namespace) -> None:
     """Refuse ``--tasks-per-world`` x ``--label-starts`` x ``--waypoints`` whose labelling
     (one planner batch per world) cannot fit in memory (estimate of
     :func:`jwarp.cli.data.labeller_memory`)."""

@@ -83,7 +83,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -103,6 +103,11 @@ from jwarp.cli.common import (
 )
 from jwarp.cli.targets import MAX_TARGET  # noqa: F401  (the largest --target value, here before)
 from jwarp.cli.vocabulary import add_out
+from jwarp.core.types import ArrayLike
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
+    from jwarp.world.sdf import World
 
 #: log every this many iterations to rerun
 RERUN_EVERY = 5
@@ -123,12 +128,12 @@ ELASTIC_HELP = {
 _SIZING_SAMPLES = 16
 
 
-def config_bytes(model: Any) -> int:
+def config_bytes(model: RobotModel) -> int:
     f, s, j = _CONFIG_BYTES
     return f * model.n_frames + s * len(model.spheres) + j * model.n_dof
 
 
-def _world(spec: str | None, model: Any, args: argparse.Namespace | None = None,
+def _world(spec: str | None, model: RobotModel, args: argparse.Namespace | None = None,
            scene: Any = None) -> Any:
     if scene is not None:
         return _scene_world(scene, model, args)
@@ -150,7 +155,7 @@ def _world(spec: str | None, model: Any, args: argparse.Namespace | None = None,
 
 
 
-def _load_scene(args: argparse.Namespace, model: Any) -> Any:
+def _load_scene(args: argparse.Namespace, model: RobotModel) -> Any:
     """The :class:`~jwarp.world.scene_file.Scene` of ``--scene`` (None without), its
     frame ids: ``world``, ``base`` and the robot's fixed frames (all the robot's base)."""
     if getattr(args, "scene", None) is None:
@@ -163,7 +168,7 @@ def _load_scene(args: argparse.Namespace, model: Any) -> Any:
         raise CLIError(f"--scene: {' '.join(str(e).split()).removeprefix('scene: ')}") from None
 
 
-def _scene_world(scene: Any, model: Any, args: argparse.Namespace) -> Any:
+def _scene_world(scene: Any, model: RobotModel, args: argparse.Namespace) -> Any:
     """The World of ``--scene`` at ``--voxel`` over ``--extent`` (default: the obstacles'
     bounding box padded by at least DEFAULT_PAD and by the largest robot sphere radius
     + ``--margin`` + one voxel, so nothing outside the grid can touch the robot)."""
@@ -210,7 +215,7 @@ def _extent(text: str) -> list[float]:
     return v
 
 
-def _joint_option(text: str, option: str, model: Any, args: argparse.Namespace, scene: Any,
+def _joint_option(text: str, option: str, model: RobotModel, args: argparse.Namespace, scene: Any,
                   fallback: np.ndarray | None = None) -> np.ndarray:
     """``--start``/``--goal``: joint values v1,v2,... (or zeros), or ``moveit`` (the
     ``--scene`` file's robot state / goal joint constraints) or ``moveit:FILE`` (a
@@ -266,7 +271,7 @@ def _solver_error(command: str, e: Exception) -> CLIError:
     return CLIError(f"{command}: {msg}")
 
 
-def _check_plan_size(args: argparse.Namespace, model: Any) -> None:
+def _check_plan_size(args: argparse.Namespace, model: RobotModel) -> None:
     """Refuse --starts x --waypoints x --substeps that cannot fit in memory (estimate)."""
     P, W = args.starts, args.waypoints
     sub = args.substeps if args.substeps is not None else _SIZING_SAMPLES
@@ -343,11 +348,11 @@ def _length_line(res: Any) -> str:
     return line
 
 
-def _name_width(model: Any) -> int:
+def _name_width(model: RobotModel) -> int:
     return max((len(n) for n in model.joint_names), default=5)
 
 
-def _config_table(model: Any, qs: np.ndarray) -> str:
+def _config_table(model: RobotModel, qs: np.ndarray) -> str:
     """Configurations (K, n_dof) as a table: one row per joint (its name), one column per
     configuration (waypoint k)."""
     w = _name_width(model)
@@ -364,7 +369,7 @@ _STAGE_TEXT = {"straight": "solved by the straight line, proven before any optim
                "none": "not solved"}
 
 
-def _check_frame(model: Any, frame: str) -> None:
+def _check_frame(model: RobotModel, frame: str) -> None:
     try:
         model.frame_index(frame)
     except (ValueError, TypeError, KeyError) as e:
@@ -372,7 +377,7 @@ def _check_frame(model: Any, frame: str) -> None:
         raise CLIError(f"--frame: {msg}") from None
 
 
-def _kappa(args: argparse.Namespace, model: Any) -> Any:
+def _kappa(args: argparse.Namespace, model: RobotModel) -> Any:
     if not args.elastic:
         if args.kappa is not None:
             raise CLIError("--kappa: only meaningful with --elastic")
@@ -483,7 +488,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return 0 if res.feasible[0] else 1
 
 
-def _plan_warm_start(path: str | None, model: Any) -> Any:
+def _plan_warm_start(path: str | None, model: RobotModel) -> Any:
     """The planning network of ``plan --warm-start`` (errors name ``--warm-start``)."""
     if path is None:
         return None
@@ -498,7 +503,7 @@ def _plan_warm_start(path: str | None, model: Any) -> Any:
         raise CLIError(f"--warm-start: {msg}") from None
 
 
-def _warm_start(path: str | None, model: Any, frame: str, device: str) -> Any:
+def _warm_start(path: str | None, model: RobotModel, frame: str, device: str) -> Any:
     """The IK network of ``--warm-start`` (errors name ``--warm-start``): a checkpoint for
     ``model`` predicting ``frame``."""
     if path is None:
@@ -538,7 +543,7 @@ def _orientation(args: argparse.Namespace, has_rotation: bool) -> tuple[str, np.
     return "full", None
 
 
-def _initial(args: argparse.Namespace, model: Any) -> np.ndarray | None:
+def _initial(args: argparse.Namespace, model: RobotModel) -> np.ndarray | None:
     """``--initial Q`` (n_dof,) [rad/m] within the joint limits (errors name --initial)."""
     if args.initial is None:
         return None
@@ -551,8 +556,8 @@ def _initial(args: argparse.Namespace, model: Any) -> np.ndarray | None:
     return q
 
 
-def _ik_seeds(args: argparse.Namespace, model: Any, q_init: np.ndarray, T: np.ndarray,
-              world: Any, net: Any) -> np.ndarray:
+def _ik_seeds(args: argparse.Namespace, model: RobotModel, q_init: np.ndarray, T: np.ndarray,
+              world: World, net: Any) -> np.ndarray:
     """The seeds (S, n_dof) of ``--initial``: q_init first, then the warm start's and
     ``--starts`` random ones (with --warm-start), else ``--starts`` - 1 random ones, drawn
     as :func:`jwarp.solvers.ik.ik` draws its own (``--seed``)."""
@@ -569,7 +574,7 @@ def _ik_seeds(args: argparse.Namespace, model: Any, q_init: np.ndarray, T: np.nd
     return np.concatenate([q_init[None], rest])
 
 
-def _ik_keywords(args: argparse.Namespace, world: Any, kappa: Any, orientation: str,
+def _ik_keywords(args: argparse.Namespace, world: World, kappa: ArrayLike, orientation: str,
                  free_axis: Any) -> dict:
     """The keywords of ``jwarp.ik`` that ``ik`` and ``ik --targets`` take from the
     command line (tolerances only where given, the orientation only where not full)."""
@@ -772,13 +777,13 @@ def cmd_ik_batch(args: argparse.Namespace) -> int:
     return 0 if solved == n else 1
 
 
-def ik_result_columns(model: Any) -> list[str]:
+def ik_result_columns(model: RobotModel) -> list[str]:
     """The columns of ``ik --targets``'s results: the joint names [rad/m], ``status``
     (CSV: solved|failed; .npy: 1|0), ``pos_err_m``, ``rot_err_rad``."""
     return [*model.joint_names, "status", "pos_err_m", "rot_err_rad"]
 
 
-def write_ik_results(path: str, model: Any, res: Any) -> str:
+def write_ik_results(path: str, model: RobotModel, res: Any) -> str:
     """Write the batch IK results ``res`` (an :class:`~jwarp.solvers.ik.IKResult` of N
     targets) to ``path`` atomically (:class:`jwarp.utils.atomic.AtomicFile`): ``.npy`` a
     float64 array (N, n_dof + 3) [q, status 1|0, pos_err_m, rot_err_rad], else CSV with a

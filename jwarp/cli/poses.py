@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from jwarp.cli.common import (
     CLIError,
@@ -29,8 +29,11 @@ from jwarp.cli.common import (
     robot_option,
 )
 
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
-def _check_sampling_memory(robot: Any, args: argparse.Namespace) -> None:
+
+def _check_sampling_memory(robot: RobotModel, args: argparse.Namespace) -> None:
     """Refuse a ``--batch-size`` (candidates per kernel launch) or ``--n`` whose estimated
     memory exceeds the available memory, before any sampling."""
     from jwarp.cli.planning import config_bytes

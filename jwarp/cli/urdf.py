@@ -14,9 +14,12 @@ import json
 import math
 import os
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from jwarp.cli.common import CLIError, check_output, int_arg, real_arg
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 
 def end_effectors_arg(items: list[str] | None, element: str = "LINK") -> dict[str, str] | None:
@@ -175,7 +178,7 @@ def group_lines(res: Any, sampled: bool) -> tuple[list[str], dict[str, Any]]:
     return lines, extra
 
 
-def sphere_fit_line(fit: Any, model: Any, tolerance: float, parts: str) -> str:
+def sphere_fit_line(fit: Any, model: RobotModel, tolerance: float, parts: str) -> str:
     """The summary line of a sphere fit (``fit``: a SpherizeReport) of an import: parts
     fitted (``parts``: "links", "bodies"), tolerance, largest one-sided error, checked
     frame pairs of the written ``model``."""
@@ -190,7 +193,7 @@ def sphere_fit_line(fit: Any, model: Any, tolerance: float, parts: str) -> str:
             f"pairs checked")
 
 
-def import_summary(model: Any, geometries: list, out: str, as_json: bool,
+def import_summary(model: RobotModel, geometries: list, out: str, as_json: bool,
                    extra: dict[str, Any] | None = None, lines: list[str] | None = None,
                    note: str = "") -> None:
     """Print what an import wrote: joints, frames, masses, spheres, collision geometry by
@@ -236,7 +239,7 @@ def home_arg(text: str | None) -> str | list[float] | None:
     return values
 
 
-def home_fit_step(imported: Any, model: Any, args: argparse.Namespace, srdf: Any
+def home_fit_step(imported: Any, model: RobotModel, args: argparse.Namespace, srdf: Any
                   ) -> tuple[Any, Any]:
     """The import's home free of self-collision (:func:`jwarp.world.home_fit.fit_home`: a
     given home in collision refused, the default one replaced; spheres tightened), its
@@ -261,7 +264,7 @@ def home_fit_step(imported: Any, model: Any, args: argparse.Namespace, srdf: Any
 PAIRS_SHOWN = 40
 
 
-def pair_lines(model: Any) -> tuple[list[str], list[dict]]:
+def pair_lines(model: RobotModel) -> tuple[list[str], list[dict]]:
     """Summary lines naming every unchecked self-collision pair by reason, and the JSON rows
     (:func:`jwarp.model.pair_reasons.skipped_pairs`)."""
     from jwarp.model.pair_reasons import skipped_pairs, skipped_summary

@@ -24,7 +24,7 @@ import warp as wp
 
 from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.kernel_cache import ensure_cache_dir, install_compile_notice
-from jwarp.core.types import DeviceLike, DTypeLike
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike
 from jwarp.utils.checks import (
     real_number as real_number,  # its home; imported from here too
 )
@@ -46,7 +46,7 @@ def init_warp() -> None:
         _INITIALISED = True
 
 
-def is_torch(x: Any) -> bool:
+def is_torch(x: ArrayLike) -> bool:
     mod = type(x).__module__
     return mod.startswith("torch") and hasattr(x, "detach")
 
@@ -167,7 +167,7 @@ def as_batch(x: Any, n: int, name: str, *, device: wp.Device, dtype: DTypeLike,
             bad = torch.nonzero(~torch.isfinite(t).all(dim=1))[:5].flatten().tolist()
             raise ValueError(f"{name}: {_not_finite(bool(torch.isfinite(x).all()), npdt)} "
                              f"(batch rows {bad})")
-        arr = wp.from_torch(t, dtype=scalar)
+        arr = cast(wp.array, wp.from_torch(t, dtype=scalar))
         if arr.device != device:
             arr = arr.to(device)
         return Batch(arr, shape[:-1], "torch", torch_tensor=x)
@@ -269,12 +269,12 @@ def default_dtype(x: Any) -> Any:
 
 #: CPU arrays of at least this many bytes are allocated by numpy (see :func:`empty`)
 NUMPY_ALLOC_BYTES = 1 << 20
-_HOST_DTYPES = {wp.float32: np.dtype(np.float32), wp.float64: np.dtype(np.float64),
-                wp.int32: np.dtype(np.int32)}
+_HOST_DTYPES: dict[Any, np.dtype] = {
+    wp.float32: np.dtype(np.float32), wp.float64: np.dtype(np.float64), wp.int32: np.dtype(np.int32)}
 _ITEM_BYTES: dict = {}
 
 
-def _numpy_backed(shape: tuple, dtype: DTypeLike, device: wp.Device, fill: bool) -> wp.array | None:
+def _numpy_backed(shape: tuple, dtype: type, device: wp.Device, fill: bool) -> wp.array | None:
     """A CPU Warp array on numpy memory (``np.empty``/``np.zeros``), or None where Warp
     should allocate (CUDA, small arrays)."""
     if not device.is_cpu:
@@ -328,7 +328,7 @@ def first_touch(arr: wp.array) -> Callable[[], None] | None:
     CUDA, one core, another OS). Populating keeps the contents, so it may race with the
     kernel's writes. Saves most of the first-touch cost of a new output: justin19 frames
     of 100 000 configurations, 1.31x the kernel alone -> 1.03x on a 2-core EPYC VM."""
-    if not arr.device.is_cpu:
+    if not cast(wp.Device, arr.device).is_cpu:
         return None
     item = _ITEM_BYTES.get(arr.dtype)
     if item is None:
@@ -355,7 +355,7 @@ def first_touch(arr: wp.array) -> Callable[[], None] | None:
 _PAGE = mmap.PAGESIZE
 
 
-def empty(shape: tuple, dtype: DTypeLike, device: wp.Device, requires_grad: bool = False) -> wp.array:
+def empty(shape: tuple, dtype: type, device: wp.Device, requires_grad: bool = False) -> wp.array:
     """``wp.empty``, but a large CPU array is allocated by numpy and shared (zero-copy):
     numpy asks Linux for transparent huge pages, so the first touch of a fresh output costs
     about a quarter of what it costs in Warp's own allocation (173 MB of justin19 frames:
@@ -367,7 +367,7 @@ def empty(shape: tuple, dtype: DTypeLike, device: wp.Device, requires_grad: bool
     return wp.empty(shape, dtype=dtype, device=device, requires_grad=requires_grad)
 
 
-def zeros(shape: tuple, dtype: DTypeLike, device: wp.Device, requires_grad: bool = False) -> wp.array:
+def zeros(shape: tuple, dtype: type, device: wp.Device, requires_grad: bool = False) -> wp.array:
     """``wp.zeros``, large CPU arrays as :func:`empty` (``np.zeros``: pages zeroed lazily
     by the OS, not written twice)."""
     if not requires_grad:
@@ -377,7 +377,7 @@ def zeros(shape: tuple, dtype: DTypeLike, device: wp.Device, requires_grad: bool
     return wp.zeros(shape, dtype=dtype, device=device, requires_grad=requires_grad)
 
 
-def out_view(out: Any, batch: Batch, tail: tuple, dtype: DTypeLike, device: wp.Device,
+def out_view(out: Any, batch: Batch, tail: tuple, dtype: type, device: wp.Device,
              name: str = "out") -> wp.array | None:
     """Check a caller's output array ``out`` for a result (B, *tail) of Warp ``dtype``
     (a scalar, or a vector/matrix type such as ``mat44``) on ``device``, and return a Warp
@@ -452,14 +452,14 @@ def host_copy(arr: wp.array, out: np.ndarray | None = None) -> np.ndarray:
     inner = tuple(getattr(arr.dtype, "_shape_", ()))
     scalar = getattr(arr.dtype, "_wp_scalar_type_", arr.dtype)
     fresh = out is None
-    if fresh:
+    if out is None:
         if scalar not in _HOST_DTYPES:
             return arr.numpy()
         out = np.empty(tuple(arr.shape) + inner, _HOST_DTYPES[scalar])
     dst: wp.array = wp.array(out.reshape(tuple(arr.shape) + inner), dtype=arr.dtype,
                              device="cpu", copy=False)
     done = first_touch(dst) if fresh else None
-    stream = arr.device.null_stream  # as Warp's .numpy(): in order with every stream
+    stream = cast(wp.Device, arr.device).null_stream  # as Warp's .numpy(): in order with every stream
     wp.copy(dst, arr, stream=stream)
     wp.synchronize_stream(stream)
     if done is not None:
@@ -546,7 +546,7 @@ def to_output(arr: wp.array, batch: Batch, tail: tuple = (), out: Any = None) ->
     into it unless the kernel wrote it already.
     """
     if out is not None:
-        if isinstance(out, np.ndarray) and not arr.device.is_cpu:
+        if isinstance(out, np.ndarray) and not cast(wp.Device, arr.device).is_cpu:
             host_copy(arr, out)
         return out
     shape = tuple(batch.lead_shape) + tuple(tail)
@@ -561,6 +561,6 @@ def to_output(arr: wp.array, batch: Batch, tail: tuple = (), out: Any = None) ->
         if t.device != src.device:
             t = t.to(src.device)
         return t.reshape(shape + inner)
-    if not arr.device.is_cpu:
+    if not cast(wp.Device, arr.device).is_cpu:
         return host_copy(arr).reshape(shape + inner)
     return arr.numpy().reshape(shape + inner)

@@ -305,15 +305,16 @@ def install_compile_notice() -> bool:
     with _LOCK:
         if _STATE["installed"]:
             return True
+        module_cls: Any  # Warp's Module class (its _compile is wrapped)
         try:
-            from warp._src.context import Module
+            from warp._src.context import Module as module_cls
         except ImportError:  # pragma: no cover - an older Warp layout
-            Module = getattr(getattr(wp, "context", None), "Module", None)
-        original = getattr(Module, "_compile", None) if Module is not None else None
+            module_cls = getattr(getattr(wp, "context", None), "Module", None)
+        original = getattr(module_cls, "_compile", None) if module_cls is not None else None
         if original is None or not callable(original):
             return False
         if not getattr(original, "_jwarp_notice", False):
-            Module._compile = _wrap(original)
+            module_cls._compile = _wrap(original)
         _STATE["installed"] = True
         return True
 

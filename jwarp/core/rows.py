@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any
+from typing import Any, cast
 
 import warp as wp
 
@@ -165,7 +165,7 @@ class DHRows:
 
     @property
     def device(self) -> wp.Device:
-        return self.array.device
+        return cast(wp.Device, self.array.device)
 
     @property
     def is_nominal(self) -> bool:

@@ -328,7 +328,7 @@ def plan_group(robot: UrdfRobot, options: GroupOptions | None = None, *,
             res.pairs_added = len(added)
             new = SelfCollision(groups={k: list(v) for k, v in sc.groups.items()},
                                 include_pairs=list(sc.include_pairs),
-                                exclude_pairs=kept + added)
+                                exclude_pairs=[*kept, *added])
             left = {tuple(sorted(p)) for p in kept}
             reasons = {p: r for p, r in why.items() if p in left}
             reasons.update(pairs)     # the SRDF's reason first

@@ -41,7 +41,7 @@ the seed (seed 1: 71 spheres, 2.0 %).
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import trimesh
@@ -58,6 +58,9 @@ from jwarp.importers.spheres import (
 )
 from jwarp.utils.checks import check_int
 from jwarp.utils.warp_init import init_quietly
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 __all__ = ["refine_fit", "fit_refined", "coverage_protrusion", "link_protrusions", "fit_kernels",
            "MAX_SPHERES", "MAX_SPHERES_CONTAINED", "LADDER", "CONTAIN_PROTRUSIONS", "WRIST_JOINTS", "WRIST_PROTRUSION", "BASE_PROTRUSION",
@@ -88,18 +91,18 @@ def _closest_kernel(
     # Model:
     mesh: wp.uint64,
     # Data in:
-    points: wp.array(dtype=wp.vec3),
+    points: wp.array(dtype=wp.vec3),  # type: ignore[valid-type]
     max_dist: float,
     # Data out:
-    sd: wp.array(dtype=float),
-    closest: wp.array(dtype=wp.vec3),
+    sd: wp.array(dtype=float),  # type: ignore[valid-type]
+    closest: wp.array(dtype=wp.vec3),  # type: ignore[valid-type]
 ):
     i = wp.tid()
     p = points[i]
     q = wp.mesh_query_point_sign_winding_number(mesh, p, max_dist)
-    if q.result:
-        c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
-        sd[i] = q.sign * wp.length(p - c)
+    if q.result:  # type: ignore[attr-defined]
+        c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)  # type: ignore[attr-defined]
+        sd[i] = q.sign * wp.length(p - c)  # type: ignore[attr-defined]
         closest[i] = c
     else:
         sd[i] = max_dist
@@ -117,7 +120,7 @@ class _MeshSolid:
     point. Coordinates relative to the bounding-box centre (float32 in Warp)."""
 
     def __init__(self, mesh: trimesh.Trimesh) -> None:
-        wp.config.quiet = True
+        wp.config.quiet = True  # type: ignore[attr-defined]
         init_quietly()
         V = np.asarray(mesh.vertices, np.float64)
         F = np.asarray(mesh.faces, np.int64)
@@ -402,7 +405,7 @@ def fit_refined(mesh: trimesh.Trimesh, *, tolerance: float, protrusion: float | 
     return best
 
 
-def link_protrusions(model: Any, tolerance: float, *, wrist_joints: int = WRIST_JOINTS,
+def link_protrusions(model: RobotModel, tolerance: float, *, wrist_joints: int = WRIST_JOINTS,
                      wrist: float = WRIST_PROTRUSION, base: float = BASE_PROTRUSION,
                      hand: float = HAND_PROTRUSION, hand_start: float | None = None,
                      gripper: bool = False) -> dict[str, dict[str, float]]:

@@ -65,7 +65,7 @@ import os
 import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import trimesh
@@ -258,7 +258,7 @@ def one_sided_error(points: np.ndarray, centres: np.ndarray, radii: np.ndarray) 
 # ----------------------------------------------------------------- the solid (Warp)
 def _init_warp() -> None:
     # importers sit below jwarp.core: Warp directly (init is a no-op once done)
-    wp.config.quiet = True
+    wp.config.quiet = True  # type: ignore[attr-defined]
     if hasattr(wp, "LOG_WARNING"):
         wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
     init_quietly()  # without Warp's "CUDA driver not found" line on a CPU machine
@@ -267,11 +267,11 @@ def _init_warp() -> None:
 @wp.kernel(enable_backward=False)
 def _outside_kernel(
     # Data in:
-    points: wp.array(dtype=wp.vec3d),
-    centres: wp.array(dtype=wp.vec3d),
-    radii: wp.array(dtype=wp.float64),
+    points: wp.array(dtype=wp.vec3d),  # type: ignore[valid-type]
+    centres: wp.array(dtype=wp.vec3d),  # type: ignore[valid-type]
+    radii: wp.array(dtype=wp.float64),  # type: ignore[valid-type]
     # Data out:
-    out: wp.array(dtype=wp.float64),
+    out: wp.array(dtype=wp.float64),  # type: ignore[valid-type]
 ):
     i = wp.tid()
     p = points[i]
@@ -286,17 +286,17 @@ def _signed_distance_kernel(
     # Model:
     mesh: wp.uint64,
     # Data in:
-    points: wp.array(dtype=wp.vec3),
+    points: wp.array(dtype=wp.vec3),  # type: ignore[valid-type]
     max_dist: float,
     # Data out:
-    out: wp.array(dtype=float),
+    out: wp.array(dtype=float),  # type: ignore[valid-type]
 ):
     i = wp.tid()
     p = points[i]
     q = wp.mesh_query_point_sign_winding_number(mesh, p, max_dist)
-    if q.result:
-        c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
-        out[i] = q.sign * wp.length(p - c)
+    if q.result:  # type: ignore[attr-defined]
+        c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)  # type: ignore[attr-defined]
+        out[i] = q.sign * wp.length(p - c)  # type: ignore[attr-defined]
     else:
         out[i] = max_dist
 
@@ -377,7 +377,7 @@ def _clearance(solid: _Solid, c: np.ndarray, d: np.ndarray) -> np.ndarray:
 
     def all_inside(idx: np.ndarray, rad: np.ndarray) -> np.ndarray:
         x = (c[idx, None, :] + 0.99 * rad[:, None, None] * u[None]).reshape(-1, 3)
-        return (solid.signed_distance(x).reshape(len(idx), -1) < 0).all(axis=1)
+        return cast(np.ndarray, (solid.signed_distance(x).reshape(len(idx), -1) < 0).all(axis=1))
 
     idx = np.flatnonzero(~all_inside(np.arange(len(d)), d))
     if len(idx):
@@ -622,7 +622,7 @@ def _cover(slack: _Slack, max_spheres: int | None, eps0: float,
 
 #: per mesh object: what the fits of one link compute more than once (its solid, solid
 #: volumes, boundary samples); weak keys, so nothing outlives the mesh
-_MESH_CACHE: weakref.WeakKeyDictionary[trimesh.Trimesh, dict] = weakref.WeakKeyDictionary()
+_MESH_CACHE: weakref.WeakKeyDictionary[trimesh.Trimesh, tuple[int, dict]] = weakref.WeakKeyDictionary()
 
 
 def mesh_memo(mesh: trimesh.Trimesh, key: Any, make: Any) -> Any:
@@ -738,12 +738,12 @@ def surface_cover(mesh: trimesh.Trimesh, gap: float) -> np.ndarray:
 @wp.kernel(enable_backward=False)
 def _nearest_kernel(
     # Data in:
-    points: wp.array(dtype=wp.vec3d),
-    centres: wp.array(dtype=wp.vec3d),
-    radii: wp.array(dtype=wp.float64),
+    points: wp.array(dtype=wp.vec3d),  # type: ignore[valid-type]
+    centres: wp.array(dtype=wp.vec3d),  # type: ignore[valid-type]
+    radii: wp.array(dtype=wp.float64),  # type: ignore[valid-type]
     # Data out:
-    out: wp.array(dtype=wp.float64),
-    arg: wp.array(dtype=wp.int32),
+    out: wp.array(dtype=wp.float64),  # type: ignore[valid-type]
+    arg: wp.array(dtype=wp.int32),  # type: ignore[valid-type]
 ):
     i = wp.tid()
     p = points[i]
@@ -1161,7 +1161,7 @@ def _scaled(m: trimesh.Trimesh, scale: Any) -> trimesh.Trimesh:
     return m
 
 
-def _geometry_mesh(kind: str, size: Any, mesh: Any, scale: Any) -> trimesh.Trimesh:
+def _geometry_mesh(kind: str | None, size: Any, mesh: Any, scale: Any) -> trimesh.Trimesh:
     """The mesh of one URDF-style geometry in its own frame (``sphere`` as an icosphere)."""
     if kind == "mesh":
         if mesh is None:
@@ -1255,7 +1255,8 @@ def link_part(geometries: Any) -> tuple[trimesh.Trimesh | None, float]:
             sagitta = max(sagitta, rad * (1.0 - np.cos(np.pi / 64)))
     if not parts:
         return None, 0.0
-    return (parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)), sagitta
+    return (parts[0] if len(parts) == 1 else
+            cast(trimesh.Trimesh, trimesh.util.concatenate(parts))), sagitta
 
 
 def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
@@ -1305,7 +1306,8 @@ def fit_link(geometries: Any, *, tolerance: float, fit: Any = None,
                 raise ValueError(f"max_spheres: {budget} is no more than the link's "
                                  f"{len(exact)} sphere geometries")
             options = {**options, "max_spheres": budget - len(exact)}
-        whole = parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
+        whole = (parts[0] if len(parts) == 1 else
+                 cast(trimesh.Trimesh, trimesh.util.concatenate(parts)))  # meshes in: a mesh
         step = {"contain_check": 0} if options.get("contain") else {}  # checked below
         got = (fit or fit_spheres)(whole, tolerance=tolerance, **options, **step)
         if options.get("contain"):  # contained, certified and checked on fresh samples

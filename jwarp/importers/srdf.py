@@ -34,9 +34,12 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import quote, unquote
 from xml.sax.saxutils import quoteattr
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 #: the word that starts the comment of an exported SRDF naming its URDF (:func:`export_mark`)
 EXPORT_MARK = "jwarp-export"
@@ -594,7 +597,7 @@ def srdf_path(urdf_path: str | os.PathLike) -> Path:
     return p.with_suffix(".srdf") if p.suffix.lower() == ".urdf" else p.with_name(p.name + ".srdf")
 
 
-def disabled_pairs(robot: Any) -> list[tuple[str, str, str]]:
+def disabled_pairs(robot: RobotModel) -> list[tuple[str, str, str]]:
     """``(frame a, frame b, reason)`` for every frame pair of ``robot`` (a
     :class:`~jwarp.model.RobotModel`) that is never checked for self-collision (its
     ``self_collision`` groups and exclude pairs, less include pairs), ``a < b`` by index;
@@ -628,7 +631,7 @@ def disabled_pairs(robot: Any) -> list[tuple[str, str, str]]:
     return out
 
 
-def default_pair_names(robot: Any) -> list[tuple[str, str]]:
+def default_pair_names(robot: RobotModel) -> list[tuple[str, str]]:
     """The frame-name pairs of ``robot``'s ``notes['self_collision_default']`` (excluded
     by the "Default" rule at import; empty when none or unreadable)."""
     import json
@@ -643,7 +646,7 @@ def default_pair_names(robot: Any) -> list[tuple[str, str]]:
         return []
 
 
-def srdf_text(robot: Any, *, name: str | None = None, urdf_file: str | None = None,
+def srdf_text(robot: RobotModel, *, name: str | None = None, urdf_file: str | None = None,
               urdf_sha256: str | None = None) -> str:
     """The SRDF document of ``robot``: its :func:`disabled_pairs` as ``<disable_collisions>``
     (link names = jwarp frame names = the exported URDF's links). With ``urdf_file`` and
@@ -684,7 +687,7 @@ def export_mark(path: str | os.PathLike) -> tuple[str, str] | None:
     return None
 
 
-def write_srdf(robot: Any, path: str | os.PathLike, *, name: str | None = None) -> None:
+def write_srdf(robot: RobotModel, path: str | os.PathLike, *, name: str | None = None) -> None:
     """Write :func:`srdf_text` to ``path`` atomically."""
     from jwarp.utils.atomic import atomic_write_text
 

@@ -46,7 +46,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -274,7 +274,7 @@ def urdf_text(robot: RobotModel, *, name: str | None = None,
             out.append(_joint(_unique(f"{f.name}_joint", joint_names), "fixed", parent, f.name,
                               f.transform))
             continue
-        A = dh_origin(f.dh)
+        A = dh_origin(cast(np.ndarray, f.dh))  # a DH frame
         if not f.coupling:
             out.append(_joint(_unique(f"{f.name}_joint", joint_names), "fixed", parent, f.name, A))
             continue
@@ -285,17 +285,18 @@ def urdf_text(robot: RobotModel, *, name: str | None = None,
                               options=options))
             continue
         # mimic chain: one joint per coupling term, about the same axis
-        prev, T = parent, A
-        for k, (j, c) in enumerate(f.coupling):
+        prev = parent
+        T: np.ndarray | None = A
+        for k, (j, coef) in enumerate(f.coupling):
             last = k == len(f.coupling) - 1
             child = f.name if last else _unique(f"{f.name}__mimic{k + 1}", links)
             if not last:
                 out.append(_link(child, ""))
             jt = robot.joints[j]
-            lim = sorted((c * jt.lower, c * jt.upper))
+            lim = sorted((coef * jt.lower, coef * jt.upper))
             jname = _unique(f"{f.name}_joint" + ("" if k == 0 else f"_{k + 1}"), joint_names)
             out.append(_joint(jname, kind, prev, child, T, (lim[0], lim[1]),
-                              mimic=(jt.name, float(c)), options=options))
+                              mimic=(jt.name, float(coef)), options=options))
             prev, T = child, None
     out.append("</robot>\n")
     return "".join(out)

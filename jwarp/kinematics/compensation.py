@@ -33,6 +33,7 @@ import warp as wp
 from jwarp.core.arrays import finite_as, real_number
 from jwarp.core.device import DeviceModel, numpy_dtype
 from jwarp.core.rows import DHRows
+from jwarp.core.types import ArrayLike
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kinematics.launch import kappa_array
 
@@ -61,7 +62,7 @@ class CompensationRows:
     """
 
     def __init__(self, t: DeviceModel, n_paths: int, n_waypoints: int, n_substeps: int,
-                 kappa: Any, lam: float):
+                 kappa: ArrayLike, lam: float):
         if not 0.0 < real_number(lam, "lam") <= 1.0:
             raise ValueError(f"lam: expected a damping factor in (0, 1], got {lam!r}")
         robot = t.robot
@@ -74,6 +75,8 @@ class CompensationRows:
         self.k = elastic_kernels.kernels(t.scalar)
         nf = robot.n_frames
         dev = t.device
+        self.kappa: wp.array
+        self.kappa_stride: int
         if kappa is None:  # the model's default compliances
             self.kappa, self.kappa_stride = t.kappa, 0
         else:
@@ -193,6 +196,7 @@ class CompensationRows:
         if hit is None:
             if len(self._launches) > 8:
                 self._launches.clear()
+            dim: int | tuple[int, int]
             kernel, dim = self.k.compensation_update, self.n_updates
             if per_frame:
                 kernel, dim = self.k.compensation_update_per_frame, (self.n_updates,

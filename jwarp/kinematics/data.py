@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import math
 import numbers
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import finite_as, real_array
 from jwarp.core.device import DeviceModel, numpy_dtype
+from jwarp.core.types import ArrayLike
 from jwarp.kernels import fk as fk_kernels
 
 __all__ = ["KinematicsData", "forward_kinematics", "frame_jacobian", "frame_dh_jacobian",
@@ -206,7 +207,7 @@ class KinematicsData:
         if self._stage_arr is None:
             self.q_staging()
         stream = self.device.stream if stream is None else stream
-        wp.copy(self.q, self._stage_arr, stream=stream)
+        wp.copy(self.q, cast(wp.array, self._stage_arr), stream=stream)  # staged above
         if fence:
             self._uploaded = stream.record_event()
 
@@ -237,7 +238,7 @@ def _not_finite(a: np.ndarray, source: np.ndarray | None) -> ValueError:
     return ValueError(f"q: {what} (batch rows {rows})")
 
 
-def _load_q(m: DeviceModel, d: KinematicsData, q: Any, validate: bool) -> None:
+def _load_q(m: DeviceModel, d: KinematicsData, q: ArrayLike, validate: bool) -> None:
     """Bring ``q`` into ``d.q`` (see :func:`forward_kinematics`)."""
     want = (d.batch, m.n_dof)
     if q is None:

@@ -82,7 +82,7 @@ def fk_elastic(robot: RobotLike, q: ArrayLike, kappa: ArrayLike | None = None, *
                      host_out(iterations, batch), host_out(converged, batch))
 
 
-def solve_equilibrium(m: DeviceModel, q: Any, dh: Any, kappa: Any, *, lam: float = 1.0,
+def solve_equilibrium(m: DeviceModel, q: ArrayLike, dh: Any, kappa: ArrayLike, *, lam: float = 1.0,
                       max_iter: int = 10, tol: float | None = None,
                       validate: bool = True) -> ElasticFK:
     """The elastic equilibrium (as :func:`fk_elastic`) on the device model ``m``

@@ -33,7 +33,7 @@ from jwarp.core.arrays import (
     resolve_device,
 )
 from jwarp.core.device import DeviceModel, numpy_dtype, put_model, scalar_type
-from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.data import (  # noqa: F401  (POINT_ARG, jacobian_inputs: re-exported)
@@ -49,7 +49,7 @@ from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 
 
-def setup(robot: RobotLike, q: Any, device: DeviceLike, dtype: DTypeLike, validate: bool = True
+def setup(robot: RobotLike, q: ArrayLike, device: DeviceLike, dtype: DTypeLike, validate: bool = True
            ) -> tuple[RobotModel, Batch, DeviceModel]:
     init_warp()
     model = get_robot(robot)
@@ -60,7 +60,7 @@ def setup(robot: RobotLike, q: Any, device: DeviceLike, dtype: DTypeLike, valida
     return model, batch, put_model(model, dev, dt)
 
 
-def frame_rows(x: Any, model: RobotModel, batch: Batch, t: DeviceModel, name: str,
+def frame_rows(x: ArrayLike, model: RobotModel, batch: Batch, t: DeviceModel, name: str,
                width: int) -> tuple[wp.array, int]:
     """Per-frame rows (n_frames, width) shared, or (..., n_frames, width) per configuration,
     as a (B or 1, n_frames, width) device array and its batch stride (0: shared). Internal
@@ -278,7 +278,7 @@ def _resolve_small(op: str, model: RobotModel, q: Any, qa: np.ndarray, warp_in: 
 
 
 def small_call(op: str, robot: RobotLike, q: Any, device: DeviceLike, dtype: DTypeLike, validate: bool,
-               out: Any = None, frame: Any = None, point: Any = None) -> Any:
+               out: Any = None, frame: int | str | None = None, point: Any = None) -> Any:
     """The fast path of :func:`~jwarp.kinematics.fk.fk` (``op`` "fk") and
     :func:`~jwarp.kinematics.jacobians.jacobian` ("jacobian") for a small batch of float32/
     float64 q: a numpy array, a CPU torch tensor without grad or a contiguous Warp CPU array

@@ -26,7 +26,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import warp as wp
@@ -38,6 +38,7 @@ from jwarp.core.arrays import (
     real_number,
     resolve_device,
 )
+from jwarp.core.types import ArrayLike, DeviceLike, RobotLike
 from jwarp.kernels import collision as ck
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
@@ -62,13 +63,13 @@ def kernels() -> SimpleNamespace:
     @wp.kernel(module="unique", enable_backward=False)
     def bps_kernel(
         # Model:
-        worlds: wp.array(dtype=WorldGrid),
-        points: wp.array(dtype=vec3),
+        worlds: wp.array(dtype=WorldGrid),  # type: ignore[valid-type]
+        points: wp.array(dtype=vec3),  # type: ignore[valid-type]
         # Data out:
-        out: wp.array2d(dtype=wp.float32),
+        out: wp.array2d(dtype=wp.float32),  # type: ignore[valid-type]
     ):
         """out[w, p] = D_w(points[p]) [m] (the collision kernels' lookup)."""
-        w, p = wp.tid()
+        w, p = wp.tid()  # type: ignore[misc]
         d, g = world_sample(worlds[w], points[p])
         out[w, p] = d
 
@@ -191,7 +192,7 @@ class BasisPointSet:
         """Number of points N."""
         return int(self.points.shape[0])
 
-    def encode(self, worlds: Any, *, device: Any = None, out: Any = None) -> Any:
+    def encode(self, worlds: Any, *, device: DeviceLike = None, out: Any = None) -> Any:
         """``worlds``: one World or a sequence of Worlds (same dim) -> (W, N) SDF values [m]
         at the points (negative inside obstacles); see :func:`bps_encode`."""
         return bps_encode(worlds, self.points, device=device, out=out)
@@ -232,7 +233,7 @@ class BasisPointSet:
     __hash__ = None  # type: ignore[assignment]
 
 
-def robot_reach_ball(robot: Any, n: int = 2000, seed: int = 0, device: Any = None
+def robot_reach_ball(robot: RobotLike, n: int = 2000, seed: int = 0, device: DeviceLike = None
                      ) -> tuple[np.ndarray, float]:
     """``(centre (workspace_dim,), radius)`` [m]: the ball around the robot's base (origin of
     its root frame) holding every collision sphere (centre distance + radius) over ``n``
@@ -254,7 +255,7 @@ def robot_reach_ball(robot: Any, n: int = 2000, seed: int = 0, device: Any = Non
     return centre, float(r.max())
 
 
-def basis_points(robot: Any, n_points: int, *, margin: float = 0.0, device: Any = None
+def basis_points(robot: RobotLike, n_points: int, *, margin: float = 0.0, device: DeviceLike = None
                  ) -> BasisPointSet:
     """Exactly ``n_points`` hcp points (:func:`hcp_points`, dim = ``robot.workspace_dim``) in
     the ball of the robot's reach (:func:`robot_reach_ball`: the base and the farthest
@@ -315,7 +316,7 @@ def _worlds(worlds: Any) -> list[World]:
     return out
 
 
-def _points(points: Any, dim: int) -> np.ndarray:
+def _points(points: ArrayLike, dim: int) -> np.ndarray:
     if isinstance(points, BasisPointSet):
         points = points.points
     p = real_array(points, "points")
@@ -332,7 +333,8 @@ def _points(points: Any, dim: int) -> np.ndarray:
 
 
 def _grid32(w: World) -> np.ndarray:
-    g = w.sdf if w.sdf.dtype == np.float32 else w.sdf.astype(np.float32)
+    sdf = cast(np.ndarray, w.sdf)  # a world with a grid
+    g = sdf if sdf.dtype == np.float32 else sdf.astype(np.float32)
     return np.ascontiguousarray(g if w.dim == 3 else g[:, :, None])
 
 
@@ -360,15 +362,15 @@ def _world_structs(ws: list[World], dev: wp.Device, kn: SimpleNamespace) -> tupl
         s.grid = a
         s.cellmin = a  # not read by world_sample
         o = np.zeros(3)
-        o[:w.dim] = w.limits[:, 0]
+        o[:w.dim] = cast(np.ndarray, w.limits)[:, 0]
         s.origin = kn.vec3(*o)
-        s.inv_h = 1.0 / w.voxel_size
+        s.inv_h = 1.0 / cast(float, w.voxel_size)
         s.dim = w.dim
         structs.append(s)
     return wp.array(structs, dtype=kn.WorldGrid, device=dev), keep
 
 
-def _check_out(out: Any, shape: tuple[int, int], device: Any) -> tuple[wp.array, wp.Device]:
+def _check_out(out: Any, shape: tuple[int, int], device: DeviceLike) -> tuple[wp.array, wp.Device]:
     if not is_torch(out):
         raise TypeError(f"out: expected a torch tensor, got {type(out).__name__}")
     import torch
@@ -385,10 +387,10 @@ def _check_out(out: Any, shape: tuple[int, int], device: Any) -> tuple[wp.array,
     dev = resolve_device(device, like=out)
     if dev != tdev:
         raise ValueError(f"out: tensor on {tdev}, but device={device!r} ({dev})")
-    return wp.from_torch(out, dtype=wp.float32), dev
+    return cast(wp.array, wp.from_torch(out, dtype=wp.float32)), dev
 
 
-def bps_encode(worlds: Any, points: Any, *, device: Any = None, out: Any = None) -> Any:
+def bps_encode(worlds: Any, points: ArrayLike, *, device: DeviceLike = None, out: Any = None) -> Any:
     """The BPS feature vectors (eq. 3.27) of ``worlds`` (one World or a sequence of Worlds of
     one dim) at ``points`` ((N, dim) [m] or a :class:`BasisPointSet`): (W, N) signed
     distances [m], negative inside obstacles, float32, equal to

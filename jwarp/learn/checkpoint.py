@@ -32,16 +32,20 @@ from __future__ import annotations
 import os
 import pickle
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
 from jwarp.core.arrays import device_name
 from jwarp.core.device import content_key
+from jwarp.core.types import DeviceLike
 from jwarp.learn.ik_net import IKNet, IKNetConfig
 from jwarp.learn.plan_net import PlanNet, PlanNetConfig
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.atomic import AtomicFile
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 __all__ = ["FORMAT", "PLAN_FORMAT", "VERSION", "save_checkpoint", "load_checkpoint",
            "load_plan_checkpoint", "read_checkpoint", "check_weights", "network_bytes"]
@@ -129,7 +133,7 @@ def read_checkpoint(path: str | os.PathLike, fmt: str = FORMAT) -> dict:
     return doc
 
 
-def load_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = None) -> IKNet:
+def load_checkpoint(path: str | os.PathLike, robot: RobotModel | None = None, device: DeviceLike = None) -> IKNet:
     """The :class:`IKNet` of a checkpoint, on ``device`` (None: Warp's default device,
     docs/api.md "Devices") in eval mode, with ``.meta`` (every field but the weights and
     the optimizer state).
@@ -146,7 +150,7 @@ def load_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = No
     return _finish(net, model, doc, path, device)
 
 
-def load_plan_checkpoint(path: str | os.PathLike, robot: Any = None, device: Any = None
+def load_plan_checkpoint(path: str | os.PathLike, robot: RobotModel | None = None, device: DeviceLike = None
                          ) -> PlanNet:
     """The :class:`PlanNet` of a ``"jwarp-plan-net"`` checkpoint, as :func:`load_checkpoint`
     (ValueError for another robot or kinematics hash, or a file of another format)."""
@@ -218,7 +222,7 @@ def check_weights(cls: Any, config: Any, bps: Any, doc: dict, path: Any) -> None
                        f"weights)", "this checkpoint cannot be loaded here")
 
 
-def _robot_and_bps(doc: dict, path: Any, robot: Any) -> tuple[Any, Any]:
+def _robot_and_bps(doc: dict, path: Any, robot: RobotModel | None) -> tuple[Any, Any]:
     model = get_robot(doc["robot"] if robot is None else robot)
     key = content_key(model)
     if model.name != doc["robot"] or key != doc["kinematics_hash"]:
@@ -232,7 +236,7 @@ def _robot_and_bps(doc: dict, path: Any, robot: Any) -> tuple[Any, Any]:
     return model, bps
 
 
-def _finish(net: Any, model: Any, doc: dict, path: Any, device: Any) -> Any:
+def _finish(net: Any, model: RobotModel, doc: dict, path: Any, device: DeviceLike) -> Any:
     net.robot = model
     net.load_state_dict(doc["state_dict"])
     net.to(device_name(device))

@@ -44,10 +44,16 @@ import zlib
 from collections import OrderedDict
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from torch.utils.data import IterableDataset
+
+from jwarp.core.types import RobotLike
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
+    from jwarp.world.sdf import World
 
 __all__ = ["DamagedRowError", "DuplicateWorldError", "FORMAT", "SCHEMA_VERSION", "PathDB", "PathDBError", "PathDataset", "WorldRecord",
            "export_npz", "record_hash", "world_from_record", "world_record"]
@@ -96,7 +102,7 @@ def _json(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=default)
 
 
-def _resolve_robot(robot: Any) -> Any:
+def _resolve_robot(robot: RobotLike | None) -> Any:
     """The RobotModel of a name or path (the registry, where :class:`PathDB` is handed
     the robot); anything else (a RobotModel, None) as it is."""
     if isinstance(robot, (str, os.PathLike)):
@@ -106,7 +112,7 @@ def _resolve_robot(robot: Any) -> Any:
     return robot
 
 
-def _robot_identity(model: Any) -> tuple[str, str]:
+def _robot_identity(model: RobotModel) -> tuple[str, str]:
     """(name, kinematics hash) of the robot (:class:`PathDB` resolves a name)."""
     from jwarp.core.device import content_key
 
@@ -122,7 +128,7 @@ def _bps_text(bps: Any) -> str:
 
 
 # ====================================================================== records
-def world_record(world_id: int, world: Any, labels: Any) -> WorldRecord:
+def world_record(world_id: int, world: World, labels: Any) -> WorldRecord:
     """The plain record (numpy arrays, dicts) of one world (a
     :class:`jwarp.world.sdf.World`) and its labels (an object with ``starts``, ``goals``,
     ``paths``, ``cost``, ``feasible``, ``hard``, ``settings``: e.g.
@@ -141,9 +147,9 @@ def world_record(world_id: int, world: Any, labels: Any) -> WorldRecord:
     occ = None if world.occupancy is None else np.asarray(world.occupancy, bool)
     return {
         "world_id": int(world_id),
-        "shape": [int(s) for s in world.sdf.shape],
+        "shape": [int(s) for s in cast(np.ndarray, world.sdf).shape],
         "limits": np.asarray(world.limits, np.float64),
-        "voxel_size": float(world.voxel_size),
+        "voxel_size": float(cast(float, world.voxel_size)),
         "occupancy": occ,
         "sdf": None if occ is not None else np.asarray(world.sdf, np.float32),
         "sdf_dtype": str(np.asarray(world.sdf).dtype),
@@ -223,7 +229,7 @@ class PathDB:
         timeout: seconds to wait for another writer's lock before PathDBError.
     """
 
-    def __init__(self, path: str | os.PathLike, robot: Any = None, *, bps: Any = None,
+    def __init__(self, path: str | os.PathLike, robot: RobotLike | None = None, *, bps: Any = None,
                  create: bool = False, timeout: float = 5.0):
         self.path = Path(path)
         self.timeout = float(timeout)
@@ -275,7 +281,7 @@ class PathDB:
                                f"({msg}){what}")
         return PathDBError(f"database: '{self.path}': {type(e).__name__}: {msg}{what}")
 
-    def _create(self, robot: Any, bps: Any) -> dict:
+    def _create(self, robot: RobotModel, bps: Any) -> dict:
         from jwarp import __version__
 
         name, key = _robot_identity(robot)
@@ -314,7 +320,7 @@ class PathDB:
                               f"{SCHEMA_VERSION}")
         return meta
 
-    def _check(self, robot: Any, bps: Any) -> None:
+    def _check(self, robot: RobotModel, bps: Any) -> None:
         if robot is not None:
             name, key = _robot_identity(robot)
             if name != self.meta["robot"] or key != self.meta["kinematics_hash"]:
@@ -628,7 +634,7 @@ def export_npz(db: str | os.PathLike | PathDB, out: str | os.PathLike, *,
                     skipped.append({"what": f"world {i} and its {n} paths: {e}",
                                     "world_id": i, "task": None, "paths": n})
         ids = good
-        arrays = d.paths_of(ids, skip_damaged=skip_damaged, skipped=skipped)
+        arrays: dict[str, Any] = d.paths_of(ids, skip_damaged=skip_damaged, skipped=skipped)
         arrays["worlds"] = np.array(ids, np.int64)
         if rows:
             arrays["world_limits"] = np.stack([r["limits"] for r in rows])
@@ -666,7 +672,7 @@ class PathDataset(IterableDataset):
                  shuffle: bool = False, seed: int = 0, feasible_only: bool = False,
                  occupancy: bool = False, world_ids: Iterable[int] | None = None,
                  shuffle_worlds: int = 16, drop_last: bool = False, cache_worlds: int = 64,
-                 robot: Any = None, bps: Any = None):
+                 robot: RobotLike | None = None, bps: Any = None):
         super().__init__()
         if batch_size < 1:
             raise ValueError(f"batch_size: expected >= 1, got {batch_size}")

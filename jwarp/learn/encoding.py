@@ -23,11 +23,11 @@ and the first two rotation columns (the continuous 6D rotation encoding), planar
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 import torch
 
+from jwarp.core.types import RobotLike
 from jwarp.plugins.registry import robot as get_robot
 
 __all__ = ["JointCodec", "frame_features", "frame_features_numpy", "feature_size"]
@@ -84,7 +84,7 @@ class JointCodec:
         n_dof, lower, upper (n_dof,) float64 numpy.
     """
 
-    def __init__(self, robot: Any, unit_vectors: bool = True):
+    def __init__(self, robot: RobotLike, unit_vectors: bool = True):
         model = get_robot(robot)
         self.robot = model
         self.unit_vectors = bool(unit_vectors)
@@ -119,7 +119,7 @@ class JointCodec:
         self.inverse = np.argsort(order)
         self._cache: dict = {}
 
-    def _t(self, device: Any, dtype: torch.dtype) -> dict:
+    def _t(self, device: torch.device | str | None, dtype: torch.dtype) -> dict:
         key = (str(device), dtype)
         c = self._cache.get(key)
         if c is None:

@@ -39,16 +39,19 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from jwarp.core.limits import project_numpy, sample_within_limits
-from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver, check_warm_start, warm_start_seeds
 from jwarp.solvers.overrides import renamed_argument
 from jwarp.utils.checks import check_int
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 #: seeds per target and block after the first (a target stops once one is feasible)
 BLOCK = 8
@@ -56,7 +59,7 @@ BLOCK = 8
 N_RANDOM = 50
 
 
-def _groups(world: Any, targets: Any) -> list[tuple[Any, np.ndarray]]:
+def _groups(world: Any, targets: ArrayLike) -> list[tuple[Any, np.ndarray]]:
     """[(world, targets (P, 4, 4))] from one world (or None) and (N, 4, 4) targets, or a
     sequence of W worlds with (W, P, 4, 4) targets or a sequence of W (P_w, 4, 4)."""
     def poses(t: Any, what: str) -> np.ndarray:
@@ -91,7 +94,7 @@ def _mean_std(x: Sequence[float] | np.ndarray) -> dict:
     return {"mean": float(a.mean()), "std": float(a.std()), "n": int(a.size)}
 
 
-def _solve_block(model: Any, frame: Any, world: Any, T: np.ndarray, seeds: np.ndarray,
+def _solve_block(model: RobotModel, frame: int | str, world: Any, T: np.ndarray, seeds: np.ndarray,
                  opts: IKOptions, device: DeviceLike, dtype: DTypeLike) -> tuple[np.ndarray, ...]:
     """Every seed (P, S, n) on its own: (feasible (P, S), iterations (P, S), q (P, S, n))."""
     solver = IKSolver(model, frame, len(T), opts, world=world, device=device, dtype=dtype)
@@ -101,7 +104,7 @@ def _solve_block(model: Any, frame: Any, world: Any, T: np.ndarray, seeds: np.nd
             np.asarray(res.all_q).reshape(seeds.shape))
 
 
-def evaluate_ik(robot: RobotLike, frame: Any, world: Any, targets: Any, *, warm_start: Any = None,
+def evaluate_ik(robot: RobotLike, frame: int | str, world: Any, targets: ArrayLike, *, warm_start: Any = None,
                 n_random: int = N_RANDOM, iterations: int | None = None, margin: float = 0.0,
                 tol_pos: float = 1e-4, tol_rot: float = 1e-3, q_default: Any = None,
                 seed: int = 0, device: DeviceLike = None, dtype: DTypeLike = np.float64,
@@ -234,7 +237,7 @@ def _config_value(net: Any, key: str) -> Any:
     return None
 
 
-def ablation_table(robot: RobotLike, frame: Any, world: Any, targets: Any,
+def ablation_table(robot: RobotLike, frame: int | str, world: Any, targets: ArrayLike,
                    nets: Mapping[str, Any] | Sequence[tuple[str, Any]], *,
                    iterations: int = 10, device: DeviceLike = None, **options: Any) -> list[dict]:
     """Table 3.4: per network (``{name: net}`` or ``[(name, net)]``) the feasibility after

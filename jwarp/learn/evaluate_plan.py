@@ -13,7 +13,7 @@ the initial guess itself ("network alone").
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -21,10 +21,14 @@ from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.planning import Planner, PlanOptions
 
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
+    from jwarp.world.sdf import World
+
 __all__ = ["evaluate_plan", "format_plan_table"]
 
 
-def _run(model: Any, world: Any, q0: np.ndarray, q1: np.ndarray, K: int, *, seeds: Any = None,
+def _run(model: RobotModel, world: World, q0: np.ndarray, q1: np.ndarray, K: int, *, seeds: Any = None,
          n_starts: int = 1, start_kind: str = "random", n_waypoints: int = 20,
          n_substeps: int = 4, seed: int = 0, device: DeviceLike = None
          ) -> tuple[np.ndarray, np.ndarray]:

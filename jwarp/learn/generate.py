@@ -30,7 +30,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from jwarp.core.types import RobotLike
 from jwarp.learn.dataset import PathDB, WorldRecord, world_record
@@ -94,7 +94,7 @@ def options_dict(options: Any) -> dict:
     if hasattr(options, "to_dict"):
         return dict(options.to_dict())
     if dataclasses.is_dataclass(options):
-        return dataclasses.asdict(options)
+        return dataclasses.asdict(cast(Any, options))  # an instance (to_dict-less dataclass)
     return dict(options)
 
 

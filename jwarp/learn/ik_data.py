@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,6 +39,10 @@ from jwarp.world.collision import is_collision_free, min_distances
 from jwarp.world.feasibility import feasible_simplex_world, random_configurations
 from jwarp.world.scenes import shelf_grasp_poses, shelf_world
 
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
+    from jwarp.world.sdf import World
+
 __all__ = ["sample_targets", "make_worlds", "IKData", "make_ik_data", "DEFAULT_MIX",
            "SCENE_TASKS", "check_mix"]
 
@@ -47,7 +51,7 @@ DEFAULT_MIX = (0.6, 0.2, 0.2, 0.0)  # uniform, near obstacles, workspace border,
 SCENE_TASKS = {"shelf": shelf_grasp_poses}
 
 
-def _free_configurations(model: Any, n: int, world: Any, rng: np.random.Generator,
+def _free_configurations(model: RobotModel, n: int, world: World | None, rng: np.random.Generator,
                          device: DeviceLike) -> np.ndarray:
     out = np.empty((0, model.n_dof))
     for _ in range(200):
@@ -61,8 +65,8 @@ def _free_configurations(model: Any, n: int, world: Any, rng: np.random.Generato
                      f"({len(out)} of {n} found)")
 
 
-def sample_targets(robot: RobotLike, frame: Any, n: int, world: Any = None, *, seed: int = 0,
-                   mix: tuple = DEFAULT_MIX, pool: int = 4, device: DeviceLike = None,
+def sample_targets(robot: RobotLike, frame: int | str, n: int, world: World | None = None, *, seed: int = 0,
+                   mix: tuple | np.ndarray = DEFAULT_MIX, pool: int = 4, device: DeviceLike = None,
                    tasks: Callable[[int, np.random.Generator], np.ndarray] | None = None
                    ) -> tuple[np.ndarray, np.ndarray]:
     """``n`` targets (module docstring): returns ``(targets (n, 4, 4), q (n, n_dof))``
@@ -100,6 +104,7 @@ def sample_targets(robot: RobotLike, frame: Any, n: int, world: Any = None, *, s
     q = np.concatenate(parts) if parts else np.empty((0, model.n_dof))
     T = fk(model, q, device=device, dtype=np.float64)[:, f] if len(q) else np.empty((0, 4, 4))
     if n_task:
+        assert tasks is not None  # checked with the mix above
         Tt = np.asarray(tasks(n_task, rng), np.float64)
         if Tt.shape != (n_task, 4, 4) or not np.all(np.isfinite(Tt)):
             raise ValueError(f"tasks: expected {n_task} finite poses (k, 4, 4), got shape "
@@ -157,7 +162,7 @@ class IKData:
     distribution: dict
 
 
-def make_ik_data(robot: RobotLike, frame: Any, world: str = "random", *, n_worlds: int = 8,
+def make_ik_data(robot: RobotLike, frame: int | str, world: str = "random", *, n_worlds: int = 8,
                  n_targets: int = 1000, n_val_worlds: int = 2, n_val: int = 128,
                  seed: int = 0, mix: tuple = DEFAULT_MIX, device: DeviceLike = None) -> IKData:
     """Worlds and targets for training (``n_targets`` per world) and a validation set

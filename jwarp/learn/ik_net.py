@@ -19,7 +19,7 @@ import dataclasses
 import hashlib
 import weakref
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import torch
@@ -35,6 +35,10 @@ from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world.feasibility import robot_reach
 
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
+    from jwarp.world.sdf import World
+
 __all__ = ["IKNetConfig", "IKNet", "DenseBlock", "NetConfig", "network_bps", "world_key"]
 
 
@@ -45,6 +49,9 @@ class NetConfig:
     is an integer at or above its bound (errors name the field)."""
 
     INT_FIELDS: tuple = ()
+    # declared for the type checker (the subclasses are dataclasses with a ``robot`` field)
+    __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
+    robot: str
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -82,7 +89,7 @@ class IKNetConfig(NetConfig):
     unit_vectors: bool = True
 
 
-def network_bps(model: Any, n_bps: int, bps: Any = None) -> Any:
+def network_bps(model: RobotModel, n_bps: int, bps: Any = None) -> Any:
     """The basis point set of a network with ``n_bps`` points (0: None, world-unaware):
     ``bps`` if given (ValueError naming ``bps`` unless it has ``n_bps`` points), else
     ``basis_points(model, n_bps)``."""
@@ -97,7 +104,7 @@ def network_bps(model: Any, n_bps: int, bps: Any = None) -> Any:
     return bps
 
 
-def world_key(world: Any) -> str:
+def world_key(world: World) -> str:
     """Content hash of a world (SDF bytes, grid limits, voxel size)."""
     h = hashlib.blake2b(digest_size=16)
     sdf = np.ascontiguousarray(world.sdf)
@@ -131,6 +138,11 @@ class IKNet(nn.Module):
         robot, frame (index), codec (:class:`JointCodec`), n_heads, n_dof, bps, meta (what
         :func:`jwarp.learn.checkpoint.load_checkpoint` read besides the weights).
     """
+
+    # buffers (register_buffer), declared for the type checker
+    in_shift: torch.Tensor
+    in_scale: torch.Tensor
+    bps_scale: torch.Tensor
 
     def __init__(self, config: IKNetConfig, bps: Any = None):
         super().__init__()
@@ -201,7 +213,7 @@ class IKNet(nn.Module):
         return self.codec.decode(self(f, bps_values))
 
     # ------------------------------------------------------------------ BPS of worlds
-    def world_bps(self, world: Any) -> torch.Tensor:
+    def world_bps(self, world: World) -> torch.Tensor:
         """(1, n_bps) BPS values of ``world`` on the network's device and dtype, cached per
         world object and per world content (:func:`world_key`)."""
         if self.bps is None:
@@ -229,7 +241,7 @@ class IKNet(nn.Module):
         return t
 
     # ------------------------------------------------------------------ warm starts
-    def seeds(self, targets: np.ndarray, world: Any = None) -> np.ndarray:
+    def seeds(self, targets: np.ndarray, world: World | None = None) -> np.ndarray:
         """Warm starts for the solver: (P, 4, 4) targets (or one (4, 4)) -> (P, n_heads,
         n_dof) float64. A world-aware network needs ``world`` (its BPS is computed with the
         network's basis point set and cached); a world-unaware one ignores it."""

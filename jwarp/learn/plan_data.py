@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -43,6 +43,9 @@ from jwarp.solvers.planning import PathWeights, Planner, PlanOptions
 from jwarp.utils.checks import check_int
 from jwarp.world.feasibility import feasible_simplex_world
 from jwarp.world.path_feasibility import check_world, collision_free
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 __all__ = ["PlanDataOptions", "WorldLabels", "world_for", "label_world", "world_extent"]
 
@@ -199,7 +202,9 @@ class WorldLabels:
             m = m & self.stats
         if not m.any():
             return float("nan")
-        return float(self.n_feasible_starts[m].sum() / self.n_starts[m].sum())
+        # set with the statistics
+        n_ok, n_all = cast(np.ndarray, self.n_feasible_starts), cast(np.ndarray, self.n_starts)
+        return float(n_ok[m].sum() / n_all[m].sum())
 
 
 def world_extent(model: RobotModel) -> float:
@@ -230,7 +235,7 @@ def world_for(robot: RobotLike, world_seed: int, *, device: DeviceLike = None, e
                                   extent=extent, device=device, **noise)
 
 
-def _task_pairs(model: RobotModel, world: Any, n: int, margin: float,
+def _task_pairs(model: RobotModel, world: World, n: int, margin: float,
                 rng: np.random.Generator, device: DeviceLike) -> tuple[np.ndarray, np.ndarray]:
     """n collision-free (start, goal) pairs, drawn uniformly within the limits."""
     out: list[np.ndarray] = []
@@ -247,7 +252,7 @@ def _task_pairs(model: RobotModel, world: Any, n: int, margin: float,
                      f"'{model.name}' found")
 
 
-def label_world(robot: RobotLike, world: Any, n_tasks: int, seed: int,
+def label_world(robot: RobotLike, world: World, n_tasks: int, seed: int,
                 options: PlanDataOptions | None = None) -> WorldLabels:
     """Label ``n_tasks`` random tasks of one world (module docstring).
 
@@ -330,7 +335,7 @@ def label_world(robot: RobotLike, world: Any, n_tasks: int, seed: int,
                        n_starts=n_starts, stats=stats)
 
 
-def _refine(model: RobotModel, world: Any, o: PlanDataOptions, dtype: DTypeLike, q0: np.ndarray,
+def _refine(model: RobotModel, world: World, o: PlanDataOptions, dtype: DTypeLike, q0: np.ndarray,
             q1: np.ndarray, seeds: list, feasible: np.ndarray, paths: np.ndarray,
             cost: np.ndarray, length: np.ndarray) -> None:
     """Converge the feasible seeds of every solved task (one batch, ``o.refine`` seeds a

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -41,6 +41,9 @@ from jwarp.learn.encoding import JointCodec
 from jwarp.learn.ik_net import DenseBlock, NetConfig, network_bps, world_key
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.world.feasibility import robot_reach
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 __all__ = ["PlanNetConfig", "PlanNet", "AxisSymmetry", "AXIS_SYMMETRIES", "axis_symmetries",
            "symmetric_bps", "straight_paths", "encode_paths", "decode_paths"]
@@ -173,6 +176,9 @@ class PlanNet(nn.Module):
     #: the checkpoint format of this network (:mod:`jwarp.learn.checkpoint`)
     checkpoint_format = "jwarp-plan-net"
 
+    # a buffer (register_buffer), declared for the type checker
+    bps_scale: torch.Tensor
+
     def __init__(self, config: PlanNetConfig, bps: Any = None):
         super().__init__()
         config.validate()
@@ -211,19 +217,19 @@ class PlanNet(nn.Module):
                 bps_values: torch.Tensor | None = None) -> torch.Tensor:
         """Deviation outputs (B, n_heads, W - 2, n_dof) of starts/goals (B, n_dof) (joint
         values inside the limits) and BPS values (B, n_bps) [m] (world-aware networks)."""
-        x = [self.codec.encode(starts), self.codec.encode(goals)]
+        parts = [self.codec.encode(starts), self.codec.encode(goals)]
         if self.bps is not None:
             if bps_values is None:
                 raise ValueError("bps_values: this network is world-aware (n_bps > 0); "
                                  "give the world's BPS values")
-            x.append(bps_values * self.bps_scale)
-        x = torch.cat(x, dim=1)
+            parts.append(bps_values * self.bps_scale)
+        x = torch.cat(parts, dim=1)
         for blk in self.blocks:
             x = torch.cat([x, blk(x)], dim=1)
         return self.out(x).view(x.shape[0], self.n_heads, self.n_waypoints - 2, self.n_dof)
 
     # ------------------------------------------------------------------ BPS of worlds
-    def world_bps(self, world: Any) -> np.ndarray:
+    def world_bps(self, world: World) -> np.ndarray:
         """(n_bps,) float32 BPS values of ``world``, cached per world object and content."""
         if self.bps is None:
             raise ValueError("world_bps: this network is world-unaware (n_bps == 0)")
@@ -245,7 +251,7 @@ class PlanNet(nn.Module):
             pass
         return v
 
-    def _bps_rows(self, world: Any, P: int) -> np.ndarray | None:
+    def _bps_rows(self, world: World | None, P: int) -> np.ndarray | None:
         if self.bps is None:
             return None
         if world is None:
@@ -259,7 +265,7 @@ class PlanNet(nn.Module):
         return np.repeat(self.world_bps(world)[None], P, axis=0)
 
     # ------------------------------------------------------------------ warm starts
-    def deviations(self, starts: Any, goals: Any, world: Any = None) -> np.ndarray:
+    def deviations(self, starts: Any, goals: Any, world: World | None = None) -> np.ndarray:
         """Raw outputs (P, H, W - 2, n_dof) float64 (inference mode)."""
         q0, q1 = self._tasks(starts, goals)
         p = self.out.weight
@@ -272,7 +278,7 @@ class PlanNet(nn.Module):
             y = self(t0, t1, tb)
             return y.to(device="cpu", dtype=torch.float64).numpy().copy()
 
-    def paths(self, starts: Any, goals: Any, world: Any = None) -> np.ndarray:
+    def paths(self, starts: Any, goals: Any, world: World | None = None) -> np.ndarray:
         """The planner's warm-start protocol: starts/goals (P, n_dof) (or one (n_dof,)) and
         the world (one for all tasks, or a list of P) -> (P, n_heads, W, n_dof) float64
         paths from start to goal inside the box limits."""

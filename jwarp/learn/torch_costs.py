@@ -10,7 +10,7 @@ go; the backward pass scales the stored gradient by the incoming one. CPU and CU
 from __future__ import annotations
 
 import weakref
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import torch
@@ -23,6 +23,9 @@ from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKWeights
 from jwarp.solvers.planning import PathObjective, PathWeights
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 #: objectives by (kind, robot content key (:func:`jwarp.core.device.content_key`: equal
 #: robots share one, an edited copy gets its own), id of the world (the objective holds
@@ -57,7 +60,7 @@ def _check(t: Any, name: str, tail: tuple) -> None:
         raise ValueError(f"{name}: contains NaN or inf")
 
 
-def path_objective(robot: RobotModel, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
+def path_objective(robot: RobotModel, world: World, n_paths: int, n_waypoints: int, n_substeps: int,
                    *, weights: PathWeights | None = None, eps: float | None = None,
                    device: DeviceLike = None, dtype: DTypeLike = np.float32) -> PathObjective:
     """A cached :class:`PathObjective` for these sizes (rebuilt when anything differs:
@@ -80,7 +83,7 @@ class UPathFunction(torch.autograd.Function):
     @staticmethod
     def forward(ctx: Any, paths: torch.Tensor, obj: PathObjective) -> torch.Tensor:
         src = wp.from_torch(paths.detach().contiguous(), dtype=obj.scalar)
-        wp.copy(obj.paths, src)
+        wp.copy(obj.paths, cast(wp.array, src))
         obj.evaluate(grad=True)
         ctx.save_for_backward(wp.to_torch(obj.gradient()).clone())
         return wp.to_torch(obj.total).clone()
@@ -91,7 +94,7 @@ class UPathFunction(torch.autograd.Function):
         return grad_out[:, None, None] * g, None
 
 
-def u_path(paths: torch.Tensor, robot: RobotLike, world: Any, n_substeps: int, *,
+def u_path(paths: torch.Tensor, robot: RobotLike, world: World, n_substeps: int, *,
            weights: PathWeights | None = None, eps: float | None = None) -> torch.Tensor:
     """Differentiable U_path of a batch of paths (P, W, n_dof) -> (P,) on the tensor's
     device and dtype. Start and goal are the first and last waypoints (no gradient)."""
@@ -106,7 +109,7 @@ def u_path(paths: torch.Tensor, robot: RobotLike, world: Any, n_substeps: int, *
     return UPathFunction.apply(paths, obj)
 
 
-def ik_objective(robot: RobotModel, frame: Any, n: int, *, world: Any = None,
+def ik_objective(robot: RobotModel, frame: int | str, n: int, *, world: World | None = None,
                  weights: IKWeights | None = None, eps: float | None = None,
                  q_default: Any = None, device: DeviceLike = None, dtype: DTypeLike = np.float32
                  ) -> IKObjective:
@@ -131,9 +134,9 @@ class UIKFunction(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx: Any, q: torch.Tensor, target: torch.Tensor, obj: IKObjective) -> torch.Tensor:
-        wp.copy(obj.q, wp.from_torch(q.detach().contiguous(), dtype=obj.scalar))
+        wp.copy(obj.q, cast(wp.array, wp.from_torch(q.detach().contiguous(), dtype=obj.scalar)))
         tgt = target.detach().to(dtype=q.dtype).contiguous()
-        wp.copy(obj.target, wp.from_torch(tgt, dtype=obj.fk.mat44))
+        wp.copy(obj.target, cast(wp.array, wp.from_torch(tgt, dtype=obj.fk.mat44)))
         obj.evaluate_pose()
         obj.evaluate_aux()
         g = wp.to_torch(obj.grad_f) + wp.to_torch(obj.grad_a)
@@ -146,7 +149,7 @@ class UIKFunction(torch.autograd.Function):
         return grad_out[:, None] * g, None, None
 
 
-def u_ik(q: torch.Tensor, target: torch.Tensor, robot: RobotLike, frame: Any, *, world: Any = None,
+def u_ik(q: torch.Tensor, target: torch.Tensor, robot: RobotLike, frame: int | str, *, world: World | None = None,
          weights: IKWeights | None = None, eps: float | None = None,
          q_default: Any = None) -> torch.Tensor:
     """Differentiable U_ik (eq. 3.19) of configurations q (B, n_dof) for target poses

@@ -42,7 +42,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 import torch
@@ -57,6 +57,9 @@ from jwarp.learn.torch_costs import ik_objective, u_ik
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik import IKOptions, IKSolver
 from jwarp.utils.checks import check_int
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 __all__ = ["TrainIKOptions", "train_ik", "train_ik_supervised", "ik_loss", "IKTrainer"]
 
@@ -161,7 +164,7 @@ class TrainIKOptions:
         return d
 
 
-def ik_loss(net: IKNet, q: torch.Tensor, targets: torch.Tensor, world: Any,
+def ik_loss(net: IKNet, q: torch.Tensor, targets: torch.Tensor, world: World,
             options: TrainIKOptions) -> tuple[torch.Tensor, dict, torch.Tensor]:
     """The unsupervised loss of predictions q (m, H, n_dof) for targets (m, 4, 4) in one
     world: ``(loss, terms, best (m,) detached)`` (module docstring); ``terms``: floats
@@ -242,7 +245,7 @@ class IKTrainer:
                        for _ in range(W)]
         self.hard_ok = [np.zeros(self.cap, bool) for _ in range(W)]
         self.hard_ptr = [0] * W
-        self.rolling = None  # rolling mean of the batch costs
+        self.rolling: float | None = None  # rolling mean of the batch costs
         self.epoch = 0
         self.history: list[dict] = []
         self.labels = None
@@ -333,7 +336,8 @@ class IKTrainer:
         # the labels of the drawn targets: rows from the hard set carry no pool index, so
         # the supervised trainer draws without boosting (set in train_ik_supervised)
         idx = self._last_idx
-        y = self.labels[wi][torch.as_tensor(idx, device=self.tdev)]
+        labels = cast("list[torch.Tensor]", self.labels)  # the supervised trainer labels
+        y = labels[wi][torch.as_tensor(idx, device=self.tdev)]
         inv = 1.0 / torch.as_tensor(self.net.codec.upper - self.net.codec.lower,
                                     dtype=q.dtype, device=q.device)
         e = (((q - y[:, None, :]) * inv) ** 2).mean(dim=-1)  # (m, H)

@@ -38,7 +38,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -58,6 +58,9 @@ from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.planning import Planner, PlanOptions
 from jwarp.utils.checks import check_int
 from jwarp.world.path_feasibility import collision_free
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 __all__ = ["PlanSamples", "TrainPlanOptions", "make_plan_data", "label_tasks", "sample_tasks",
            "hard_tasks",
@@ -141,7 +144,7 @@ class PlanSamples:
                            other.worlds, cost, ids, self.source)
 
 
-def sample_tasks(model: RobotModel, world: Any, n: int, rng: np.random.Generator,
+def sample_tasks(model: RobotModel, world: World, n: int, rng: np.random.Generator,
                  min_distance: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """``n`` random collision-free start/goal pairs (at least ``min_distance`` apart in
     joint space, as far as the pool allows) of the robot ``model``."""
@@ -166,7 +169,7 @@ def sample_tasks(model: RobotModel, world: Any, n: int, rng: np.random.Generator
     return pool[a], pool[b]
 
 
-def hard_tasks(model: RobotModel, world: Any, n: int, rng: np.random.Generator, *,
+def hard_tasks(model: RobotModel, world: World, n: int, rng: np.random.Generator, *,
                iterations: int = 200, n_waypoints: int = 20, n_substeps: int = 4,
                rounds: int = 20) -> tuple[np.ndarray, np.ndarray]:
     """Up to ``n`` random tasks whose straight line does not become feasible within
@@ -186,7 +189,7 @@ def hard_tasks(model: RobotModel, world: Any, n: int, rng: np.random.Generator, 
     return np.concatenate(S), np.concatenate(G)
 
 
-def label_tasks(robot: RobotLike, world: Any, starts: np.ndarray, goals: np.ndarray, *,
+def label_tasks(robot: RobotLike, world: World, starts: np.ndarray, goals: np.ndarray, *,
                 n_waypoints: int = 20, n_starts: int = 16, iterations: int = 200,
                 n_substeps: int = 4, seed: int = 0
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -239,8 +242,9 @@ def make_plan_data(robot: RobotLike, worlds: list, n_per_world: int, *, seed: in
     if not parts:
         return PlanSamples(np.empty((0, n)), np.empty((0, n)), np.empty((0, n_waypoints, n)),
                            np.empty(0, np.int64), worlds, np.empty(0))
-    return PlanSamples(*[np.concatenate([p[k] for p in parts]) for k in range(4)],
-                       worlds=worlds, cost=np.concatenate([p[4] for p in parts]))
+    q0, q1, paths, ids = [np.concatenate([p[k] for p in parts]) for k in range(4)]
+    return PlanSamples(q0, q1, paths, ids, worlds=worlds,
+                       cost=np.concatenate([p[4] for p in parts]))
 
 
 def samples_from_db(db: Any, robot: RobotLike, *, world_ids: Any = None, hard_only: bool = True,
@@ -329,7 +333,7 @@ def samples_from_db(db: Any, robot: RobotLike, *, world_ids: Any = None, hard_on
     return PlanSamples(a["start"], a["goal"], a["path"], index, worlds, None, first, source)
 
 
-def world_content_key(world: Any, index: int) -> str:
+def world_content_key(world: World, index: int) -> str:
     """The content hash of a world (:meth:`jwarp.world.sdf.World.content_hash`), or
     ``"index:<i>"`` for an entry without a grid."""
     try:
@@ -374,7 +378,7 @@ def split_by_world(samples: PlanSamples, val_fraction: float = 0.1, seed: int = 
             samples.subset(np.flatnonzero(is_val)).compact())
 
 
-def path_costs(robot: RobotModel, world: Any, paths: np.ndarray, n_substeps: int = 4) -> np.ndarray:
+def path_costs(robot: RobotModel, world: World, paths: np.ndarray, n_substeps: int = 4) -> np.ndarray:
     """U_path (eq. 3.16, the planner's weights; float32 on the CPU) of paths (P, W, n_dof)."""
     from jwarp.learn.torch_costs import path_objective
 

@@ -24,11 +24,14 @@ import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from jwarp.utils.checks import check_int
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 __all__ = ["ConvexPiece", "CollisionPieces", "sphere_digest", "stamp_pieces", "check_pieces",
            "pieces_to_dict", "pieces_from_dict"]
@@ -65,7 +68,7 @@ class CollisionPieces:
     sphere_digest: str
     method: str = ""
 
-    def extra_spheres(self, model: Any) -> list[int] | None:
+    def extra_spheres(self, model: RobotModel) -> list[int] | None:
         """Indices of ``model``'s spheres that the pieces do not stand for: those after
         ``sphere_count`` when the first ``sphere_count`` spheres are still the ones the
         pieces were made beside (same frames, centres and radii: spheres appended later,
@@ -115,7 +118,7 @@ def sphere_digest(spheres: Sequence[Any]) -> str:
     return h.hexdigest()
 
 
-def stamp_pieces(model: Any) -> Any:
+def stamp_pieces(model: RobotModel) -> Any:
     """A copy of ``model`` (a :class:`~jwarp.model.RobotModel`) whose pieces stand for all
     of its current spheres (``sphere_count`` and ``sphere_digest`` of them): for an import
     whose spheres were edited after the pieces were made (tightened at the home, certified

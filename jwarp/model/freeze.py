@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -117,7 +117,7 @@ def freeze_joints(model: RobotModel, values: dict[str | int, float], *,
         if f.kind != "dh" or not f.coupling:
             continue
         col = 0 if model.joints[f.coupling[0][0]].type == "prismatic" else 1
-        f.dh = f.dh.copy()
+        f.dh = cast(np.ndarray, f.dh).copy()  # a DH frame
         for j, c in f.coupling:
             if j in frozen:
                 f.dh[col] += c * seen[j]
@@ -141,9 +141,9 @@ def freeze_joints(model: RobotModel, values: dict[str | int, float], *,
     old.update({model.joints[j].name: v for j, v in frozen.items()})
     notes[FROZEN_NOTE] = json.dumps(old)
     m.notes = notes
-    for k in list(vars(m)):  # drop cached derived data
-        if isinstance(type(m).__dict__.get(k), cached_property):
-            del m.__dict__[k]
+    for attr in list(vars(m)):  # drop cached derived data
+        if isinstance(type(m).__dict__.get(attr), cached_property):
+            del m.__dict__[attr]
     m.__post_init__()
     if exclude_rigid_pairs:
         after = _rigid_roots(m)

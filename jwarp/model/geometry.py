@@ -9,9 +9,12 @@ frame by the base-frame angle ``J_l(r) dr``.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 # scipy.spatial.transform is imported inside the functions: importing it costs 0.3 s, and
 # every plugin load (any `jwarp` command) imports this module (issue 27: CLI start-up).
@@ -162,7 +165,7 @@ def check_keys(d: Any, allowed: set[str], where: str) -> dict:
     return d
 
 
-def robot_frame(robot: Any, frame: Any, where: str) -> int:
+def robot_frame(robot: RobotModel, frame: int | str, where: str) -> int:
     """Index of a robot frame given by name (frame or end-effector) or index."""
     if isinstance(frame, bool) or not isinstance(frame, (str, int, np.integer)):
         raise ValueError(f"{where}: expected a frame name, got {frame!r}")
@@ -207,7 +210,7 @@ def pose_param_entries(prefix: str, position: np.ndarray, rotvec: np.ndarray,
     return names, nominal, sigma, [group] * 6
 
 
-def parse_markers(setup: dict, robot: Any, *, default_sigma: float, frame_optional: bool,
+def parse_markers(setup: dict, robot: RobotModel, *, default_sigma: float, frame_optional: bool,
                   position_required: bool
                   ) -> tuple[list[str], list[int | None], tuple[list[str], list[float],
                                                                 list[float], list[str]]]:

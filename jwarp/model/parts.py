@@ -86,5 +86,5 @@ class SelfCollision:
     """
 
     groups: dict[str, list[int]] = field(default_factory=dict)
-    include_pairs: list[tuple[int, int]] = field(default_factory=list)
-    exclude_pairs: list[tuple[int, int]] = field(default_factory=list)
+    include_pairs: list[tuple[int, ...]] = field(default_factory=list)  # frame pairs
+    exclude_pairs: list[tuple[int, ...]] = field(default_factory=list)

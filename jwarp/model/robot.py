@@ -40,7 +40,7 @@ import os
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -90,11 +90,15 @@ class RobotModel:
     #: naming its child link's frame, as pinocchio's joint frames; docs/urdf.md)
     frame_aliases: dict[str, int] = field(default_factory=dict)
     linear_limits: list[LinearLimit] = field(default_factory=list)
-    kappa: np.ndarray | None = None  # (n_frames, 3) rad/(N m)
+    # kappa (n_frames, 3) rad/(N m); harmonic (n_dof, K, 2) [rad or m]; kappa_nonlinear
+    # (n_frames,) rad/(N m)^3; coupling_harmonic (n_frames, K, 2) [rad or m]. None when
+    # constructed: the default (zeros; K = 0), which __post_init__ fills in, so they are arrays
+    # on every constructed model (hence the ignores of the None defaults)
+    kappa: np.ndarray = None  # type: ignore[assignment]
     notes: dict[str, str] = field(default_factory=dict)
-    harmonic: np.ndarray | None = None  # (n_dof, K, 2) [rad or m]; None: K = 0
-    kappa_nonlinear: np.ndarray | None = None  # (n_frames,) rad/(N m)^3
-    coupling_harmonic: np.ndarray | None = None  # (n_frames, K, 2) [rad or m]; None: K = 0
+    harmonic: np.ndarray = None  # type: ignore[assignment]
+    kappa_nonlinear: np.ndarray = None  # type: ignore[assignment]
+    coupling_harmonic: np.ndarray = None  # type: ignore[assignment]
     #: how the spheres relate to the collision meshes they model (contained, or
     #: approximate with the per-link poke-out); None: unknown (jwarp.model.sphere_relation)
     sphere_relation: SphereRelation | None = None
@@ -463,9 +467,9 @@ class RobotModel:
             parent = "-" if f.parent is None else self.frames[f.parent].name
             if f.kind == "dh":
                 drive = " + ".join(f"{c:g}*{self.joints[j].name}" for j, c in f.coupling) or "fixed"
-                extra = f"dh={np.round(f.dh, 5).tolist()} q={drive}"
+                extra = f"dh={np.round(cast(np.ndarray, f.dh), 5).tolist()} q={drive}"
             else:
-                extra = f"static p={np.round(f.transform[:3, 3], 5).tolist()}"
+                extra = f"static p={np.round(cast(np.ndarray, f.transform)[:3, 3], 5).tolist()}"
             lines.append(f"    {i:3d} {f.name:<14} parent={parent:<14} {extra}")
         if self.end_effectors:
             eff = ", ".join(f"{k}={self.frames[v].name}" for k, v in self.end_effectors.items())

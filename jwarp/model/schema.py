@@ -188,10 +188,10 @@ def validate(model: RobotModel) -> None:
     for k, j in enumerate(model.joints):
         if j.type not in JOINT_TYPES:
             raise RobotModelError(f"joints[{k}].type: '{j.type}' is not one of {JOINT_TYPES}")
-        lim = _finite([j.lower, j.upper], f"joints[{k}].limits")
-        if lim[0] > lim[1]:
-            raise RobotModelError(f"joints[{k}].limits: lower {lim[0]} > upper {lim[1]}")
-        j.lower, j.upper = float(lim[0]), float(lim[1])
+        bounds = _finite([j.lower, j.upper], f"joints[{k}].limits")
+        if bounds[0] > bounds[1]:
+            raise RobotModelError(f"joints[{k}].limits: lower {bounds[0]} > upper {bounds[1]}")
+        j.lower, j.upper = float(bounds[0]), float(bounds[1])
     driven = set()
     for i, f in enumerate(model.frames):
         w = f"frames[{i}]"
@@ -212,13 +212,13 @@ def validate(model: RobotModel) -> None:
             _within_reach(f.dh[[0, 2]], f"{w}.dh (d, r)")
             types = set()
             coupling = []
-            for j, c in f.coupling:
-                if (isinstance(j, (bool, np.bool_)) or not isinstance(j, (int, np.integer))
-                        or not 0 <= j < nj):
-                    raise RobotModelError(f"{w}.joint: joint index {j!r} out of range [0, {nj})")
-                coupling.append((int(j), _number(c, f"{w}.coupled.coefficients")))
-                types.add(model.joints[j].type)
-                driven.add(int(j))
+            for jc, cc in f.coupling:
+                if (isinstance(jc, (bool, np.bool_)) or not isinstance(jc, (int, np.integer))
+                        or not 0 <= jc < nj):
+                    raise RobotModelError(f"{w}.joint: joint index {jc!r} out of range [0, {nj})")
+                coupling.append((int(jc), _number(cc, f"{w}.coupled.coefficients")))
+                types.add(model.joints[jc].type)
+                driven.add(int(jc))
             f.coupling = coupling
             if len(types) > 1:
                 raise RobotModelError(f"{w}.coupled: mixes revolute and prismatic joints")
@@ -285,9 +285,9 @@ def validate(model: RobotModel) -> None:
         if len(lim.joints) != len(lim.coefficients) or not lim.joints:
             raise RobotModelError(f"{w}: joints and coefficients differ in length")
         lim.joints = [_index(j, f"{w}.joints", "joint") for j in lim.joints]
-        for j in lim.joints:
-            if not 0 <= j < nj:
-                raise RobotModelError(f"{w}.joints: index {j} out of range")
+        for jl in lim.joints:
+            if not 0 <= jl < nj:
+                raise RobotModelError(f"{w}.joints: index {jl} out of range")
         lim.coefficients = [float(c) for c in _finite(lim.coefficients, f"{w}.coefficients")]
         lim.lower = _number(lim.lower, f"{w}.limits")
         lim.upper = _number(lim.upper, f"{w}.limits")
@@ -310,9 +310,9 @@ def validate(model: RobotModel) -> None:
     if ch.ndim != 3 or ch.shape[0] != nf or ch.shape[2] != 2:
         raise RobotModelError(f"coupling_harmonic: expected shape (n_frames={nf}, K, 2), "
                               f"got {ch.shape}")
-    for i in np.nonzero(np.any(ch != 0, axis=(1, 2)))[0]:
-        if not model.frames[i].coupling:
-            raise RobotModelError(f"coupling_harmonic.{model.frames[i].name}: the frame is "
+    for fi in np.nonzero(np.any(ch != 0, axis=(1, 2)))[0]:
+        if not model.frames[fi].coupling:
+            raise RobotModelError(f"coupling_harmonic.{model.frames[fi].name}: the frame is "
                                   f"driven by no joint")
     model.coupling_harmonic = ch
 
@@ -514,7 +514,7 @@ def _harmonic_from_doc(value: Any, jnames: list[str], key: str = "harmonic",
 
 def to_document(m: RobotModel) -> dict[str, Any]:
     """The JSON document of robot ``m`` (schema ``jwarp.robot`` version 1)."""
-    def lst(a: np.ndarray) -> list:
+    def lst(a: np.ndarray | None) -> list:
         return np.asarray(a, np.float64).tolist()
 
     frames = []

@@ -23,7 +23,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 __all__ = ["SphereRelation", "RELATION_KINDS", "relation_from_dict", "relation_to_dict",
            "inflated", "relation_text", "relation_after_edit"]
@@ -137,7 +140,7 @@ def relation_from_dict(doc: Any) -> SphereRelation | None:
                           sphere_margin=doc.get("sphere_margin"))
 
 
-def inflated(model: Any) -> Any:
+def inflated(model: RobotModel) -> Any:
     """``model`` (a :class:`~jwarp.model.RobotModel`) with each sphere's radius grown by
     its link's poke-out [m] when its relation is ``"approximate"`` (then every mesh point
     lies inside the grown spheres: the poke-out is a certified bound); the relation of the
@@ -168,7 +171,7 @@ def inflated(model: Any) -> Any:
     return stamp_pieces(model.copy(spheres=spheres, sphere_relation=new))
 
 
-def relation_text(model: Any) -> str:
+def relation_text(model: RobotModel) -> str:
     """One line: what the relation of ``model`` promises (for warnings and summaries)."""
     rel = getattr(model, "sphere_relation", None)
     cp = getattr(model, "collision_pieces", None)

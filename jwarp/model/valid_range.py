@@ -23,9 +23,12 @@ import math
 import warnings
 import weakref
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 #: the ``RobotModel.notes`` key of the recorded range (a JSON object)
 VALID_RANGE_NOTE = "valid_range"
@@ -111,14 +114,14 @@ class ValidRange:
                             zip(self.coupled, self.coupled_lower, self.coupled_upper)}}
 
 
-def coupled_frames(model: Any) -> list[int]:
+def coupled_frames(model: RobotModel) -> list[int]:
     """Indices of the coupled frames of ``model``: driven by several joints, or by one
     with a coefficient other than 1."""
     return [i for i, f in enumerate(model.frames)
             if f.coupling and (len(f.coupling) > 1 or float(f.coupling[0][1]) != 1.0)]
 
 
-def valid_range_of(model: Any, q: Any) -> ValidRange:
+def valid_range_of(model: RobotModel, q: Any) -> ValidRange:
     """The :class:`ValidRange` of configurations ``q`` (S, n_dof) on ``model`` (S >= 1,
     finite; ValueError naming ``q`` otherwise)."""
     qa = np.asarray(q, np.float64)
@@ -138,7 +141,7 @@ def valid_range_of(model: Any, q: Any) -> ValidRange:
                       u.max(axis=0) if len(cf) else np.zeros(0), pris, int(qa.shape[0]))
 
 
-def record_valid_range(model: Any, q: Any) -> Any:
+def record_valid_range(model: RobotModel, q: Any) -> Any:
     """A copy of ``model`` with the range of configurations ``q`` (S, n_dof) in
     ``notes['valid_range']`` (JSON; replacing an earlier one)."""
     vr = valid_range_of(model, q)
@@ -154,7 +157,7 @@ _PARSED: weakref.WeakKeyDictionary[Any, tuple[str, ValidRange | None]] = \
 _WARNED: weakref.WeakKeyDictionary[Any, set[str]] = weakref.WeakKeyDictionary()
 
 
-def valid_range(model: Any) -> ValidRange | None:
+def valid_range(model: RobotModel) -> ValidRange | None:
     """The recorded :class:`ValidRange` of ``model`` (None: none recorded). Joints or
     coupled frames the note names but the robot lacks are left out; those it lacks
     get an unbounded range. ValueError when the note is not valid JSON of that form."""
@@ -187,7 +190,7 @@ def valid_range(model: Any) -> ValidRange | None:
     return vr
 
 
-def range_excess(model: Any, q: Any) -> np.ndarray | None:
+def range_excess(model: RobotModel, q: Any) -> np.ndarray | None:
     """(S, n_dof + n_c) how far configurations ``q`` (..., n_dof) lie outside the
     recorded range of ``model`` [rad or m] (:meth:`ValidRange.excess`); None when the
     robot records none."""
@@ -195,7 +198,7 @@ def range_excess(model: Any, q: Any) -> np.ndarray | None:
     return None if vr is None else vr.excess(q)
 
 
-def outside_message(model: Any, q: Any, where: str, tol: float = 1e-9) -> str | None:
+def outside_message(model: RobotModel, q: Any, where: str, tol: float = 1e-9) -> str | None:
     """The text of :func:`check_valid_range` (without warning): which configurations of q
     (..., n_dof) leave the range recorded in ``model`` and how far; None when all lie
     inside or none is recorded."""
@@ -213,7 +216,7 @@ def outside_message(model: Any, q: Any, where: str, tol: float = 1e-9) -> str | 
             f"extrapolates there): {vr.describe(ex[bad], tol)}")
 
 
-def check_valid_range(model: Any, q: Any, where: str, *, tol: float = 1e-9) -> str | None:
+def check_valid_range(model: RobotModel, q: Any, where: str, *, tol: float = 1e-9) -> str | None:
     """Warn (:class:`ValidRangeWarning`) once per robot and ``where`` (an entry point,
     e.g. ``"ik"``) when configurations ``q`` (..., n_dof) leave the range recorded in
     ``model`` (a calibrated robot), with how far (:func:`outside_message`). Returns the

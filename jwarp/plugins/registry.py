@@ -166,8 +166,9 @@ def _load_entry_points(pm: pluggy.PluginManager) -> None:
     for ep in eps:
         try:
             dist = ep.dist
-            dist_name = str(dist.metadata["Name"] or dist.name)
-            dist_text = f"{dist_name} {dist.version}"
+            # no distribution (None): AttributeError, caught below
+            dist_name = str(dist.metadata["Name"] or dist.name)  # type: ignore[union-attr]
+            dist_text = f"{dist_name} {dist.version}"  # type: ignore[union-attr]
         except Exception:  # noqa: BLE001 - no or broken distribution metadata
             dist_name, dist_text = "?", "unknown"
         desc = f"entry point '{ep.name} = {ep.value}' (distribution {dist_text})"

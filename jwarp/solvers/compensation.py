@@ -13,11 +13,11 @@ and measures what it costs (:func:`compare_ik`, :func:`iteration_overhead`).
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from jwarp.core.types import DeviceLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, RobotLike
 from jwarp.kinematics.equilibrium import fk_elastic
 from jwarp.kinematics.launch import kappa_array
 from jwarp.plugins.registry import robot as get_robot
@@ -26,11 +26,15 @@ from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.planning import PathObjective, PlanResult, plan
 from jwarp.utils.checks import check_int
 
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
+    from jwarp.world.sdf import World
+
 #: compliance of Agile Justin's joints used by the studies [rad/(N m)] (0.1 rad/kNm)
 JUSTIN_KAPPA = 1e-4
 
 
-def _kappa(model: Any, kappa: Any) -> Any:
+def _kappa(model: RobotModel, kappa: Any) -> Any:
     if kappa is None:
         if not np.any(model.kappa):
             raise ValueError(f"kappa: robot '{model.name}' has no compliances; pass kappa "
@@ -40,21 +44,21 @@ def _kappa(model: Any, kappa: Any) -> Any:
     return kappa
 
 
-def compensated_ik(robot: RobotLike, frame: Any, target: Any, *, kappa: Any = None,
+def compensated_ik(robot: RobotLike, frame: int | str, target: Any, *, kappa: ArrayLike | None = None,
                    lam: float = 0.7, **kwargs: Any) -> IKResult:
     """:func:`jwarp.solvers.ik.ik` on the elastic model (kappa default: the robot's)."""
     model = get_robot(robot)
     return ik(model, frame, target, kappa=_kappa(model, kappa), lam=lam, **kwargs)
 
 
-def compensated_plan(robot: RobotLike, world: Any, start: Any, goal: Any, *, kappa: Any = None,
+def compensated_plan(robot: RobotLike, world: World, start: Any, goal: Any, *, kappa: ArrayLike | None = None,
                      lam: float = 0.7, **kwargs: Any) -> PlanResult:
     """:func:`jwarp.solvers.planning.plan` on the elastic model (kappa default: the robot's)."""
     model = get_robot(robot)
     return plan(model, world, start, goal, kappa=_kappa(model, kappa), lam=lam, **kwargs)
 
 
-def equilibrium_pose_error(robot: RobotLike, frame: Any, q: Any, target: Any, kappa: Any,
+def equilibrium_pose_error(robot: RobotLike, frame: int | str, q: ArrayLike, target: Any, kappa: ArrayLike,
                            device: DeviceLike = None, lam: float = 0.7
                            ) -> tuple[np.ndarray, np.ndarray]:
     """Pose error of ``frame`` at q (..., n_dof) on the fully converged elastic model
@@ -81,7 +85,7 @@ def equilibrium_pose_error(robot: RobotLike, frame: Any, q: Any, target: Any, ka
     return pos, ang.reshape(pos.shape)
 
 
-def compare_ik(robot: RobotLike, frame: Any, targets: Any, kappa: Any, *, n_starts: int = 8,
+def compare_ik(robot: RobotLike, frame: int | str, targets: ArrayLike, kappa: ArrayLike, *, n_starts: int = 8,
                seed: int = 0, lam: float = 0.7, **kwargs: Any) -> dict:
     """Rigid vs compensated IK from the same random seeds (no early stop, so every start
     runs until it is on the target): mean iterations of the starts that succeed in both,
@@ -141,7 +145,7 @@ def iteration_overhead(objective_rigid: Any, objective_elastic: Any, *, repeats:
     return out
 
 
-def ik_iteration_overhead(robot: RobotLike, frame: Any, kappa: Any, *, world: Any = None,
+def ik_iteration_overhead(robot: RobotLike, frame: int | str, kappa: ArrayLike, *, world: World | None = None,
                           n_starts: int = 64, iterations: int = 60, rounds: int = 9,
                           lam: float = 0.7, **kwargs: Any) -> dict:
     """Wall time per iteration of the whole IK solver (:func:`jwarp.solvers.ik.ik`: kernels,

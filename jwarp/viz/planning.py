@@ -3,12 +3,16 @@ per iteration (``jwarp plan --rerun``; timelines ``iteration`` and the caller's)
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from jwarp.viz.recording import Recording
 from jwarp.viz.robot import log_robot, object_meshes, world_spheres
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
+    from jwarp.world.sdf import World
 
 
 class PlanRecording(Recording):
@@ -16,7 +20,7 @@ class PlanRecording(Recording):
     as meshes, occupied voxels as boxes) once, then configurations and end-effector traces
     per iteration. ``model`` the robot, ``world`` a :class:`jwarp.world.World` or None."""
 
-    def __init__(self, path: str, model: Any, world: Any, option: str = "path"):
+    def __init__(self, path: str, model: RobotModel, world: World, option: str = "path"):
         super().__init__(path, "jwarp-planning", option=option)
         self.model = model
         if world is not None:
@@ -26,18 +30,21 @@ class PlanRecording(Recording):
                 self.abort()
                 raise
 
-    def _log_world(self, world: Any) -> None:
+    def _log_world(self, world: World) -> None:
         for oid, v, f in object_meshes(world):   # exact objects as meshes
             self.rec.log(f"world/objects/{oid}", self.rr.Mesh3D(
                 vertex_positions=v, triangle_indices=f,
                 vertex_colors=[(90, 90, 90, 160)] * len(v)), static=True)
         if not world.has_grid:
             return
-        occ = world.occupancy if world.occupancy is not None else world.sdf < 0
+        # has_grid: the SDF, its limits and voxel size are set
+        sdf, limits = cast(np.ndarray, world.sdf), cast(np.ndarray, world.limits)
+        h = cast(float, world.voxel_size)
+        occ = world.occupancy if world.occupancy is not None else sdf < 0
         idx = np.argwhere(occ)
         pts = np.zeros((len(idx), 3))
-        pts[:, :world.dim] = world.limits[:, 0] + world.voxel_size * idx
-        half = np.full((len(idx), 3), 0.5 * world.voxel_size)
+        pts[:, :world.dim] = limits[:, 0] + h * idx
+        half = np.full((len(idx), 3), 0.5 * h)
         if world.dim == 2:
             half[:, 2] = 0.005
         self.rec.log("world/occupied", self.rr.Boxes3D(centers=pts, half_sizes=half,

@@ -20,15 +20,19 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from jwarp.core.types import RobotLike
+from jwarp.core.types import ArrayLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.atomic import AtomicFile
 from jwarp.viz.recording import atomic_recording, rerun_module
+
+if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
+    from jwarp.world.sdf import World
 
 #: timeline on which :func:`save_robot_rrd` logs the configurations
 TIMELINE = "config"
@@ -53,7 +57,7 @@ def _frames_array(robot: RobotModel, frames: Any) -> np.ndarray:
     return f
 
 
-def object_meshes(world: Any) -> list[tuple[str, np.ndarray, np.ndarray]]:
+def object_meshes(world: World) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """The exact objects of ``world`` as triangle meshes in the world frame, for display:
     ``[(id, vertices (V, 3), faces (F, 3))]`` (a plane as a 4 x 4 m tile)."""
     import trimesh
@@ -245,8 +249,8 @@ def _pose(params: Any, p: np.ndarray, prefix: str) -> np.ndarray | None:
     return T
 
 
-def save_calibration_rrd(path: str | os.PathLike, robot: RobotLike, measurement: Any, p: Any,
-                         q: Any, y: Any, meta: Mapping[str, Any] | None = None, *,
+def save_calibration_rrd(path: str | os.PathLike, robot: RobotLike, measurement: Measurement, p: Any,
+                         q: ArrayLike, y: Any, meta: Mapping[str, Any] | None = None, *,
                          p_before: Any = None, robot_before: Any = None,
                          application_id: str = "jwarp-calibration") -> Path:
     """Write a rerun recording of a calibration: one time step per sample (timeline

@@ -36,7 +36,7 @@ of one batch size, reused from call to call. DH rows are :class:`jwarp.core.rows
 from __future__ import annotations
 
 import os
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import warp as wp
@@ -61,7 +61,7 @@ from jwarp.core.device import (
     scalar_type,
 )
 from jwarp.core.rows import DHRows, RowsKind
-from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import collision as ck
 from jwarp.kernels import collision_wide as cwide
 from jwarp.kernels.elastic import kernels as elastic_kernels
@@ -535,7 +535,7 @@ class CollisionModel:
         for launch in launches:
             launch.launch()
 
-    def cost_tape(self, q: wp.array, *, rho: Any = None, w_world: float = 1.0,
+    def cost_tape(self, q: wp.array, *, rho: ArrayLike | None = None, w_world: float = 1.0,
                   w_self: float = 1.0, eps: float = DEFAULT_EPS) -> tuple[wp.array, wp.array]:
         """The same cost, its gradient w.r.t. q by ``wp.Tape`` (FK kernel + one thread per
         sphere and per sphere pair, atomic sums). Slower; a cross-check of the
@@ -573,7 +573,7 @@ class CollisionModel:
         return cost, grad
 
     # ----------------------------------------------------------- distances
-    def distances(self, q: wp.array, *, rho: Any = None, spheres: bool = False,
+    def distances(self, q: wp.array, *, rho: ArrayLike | None = None, spheres: bool = False,
                   pairs: bool = False, use_world: bool = True, use_self: bool = True,
                   data: CollisionData | None = None, group_div: int = 0
                   ) -> tuple[wp.array | None, wp.array | None, wp.array]:
@@ -633,7 +633,7 @@ def collision_model(robot: RobotModel, world: World | None = None, *, device: De
     return _MODELS.put(key, (world,), CollisionModel(model, world, device=dev, dtype=scalar))
 
 
-def _prepare(robot: RobotLike, q: Any, world: World | None, device: DeviceLike, dtype: DTypeLike,
+def _prepare(robot: RobotLike, q: ArrayLike, world: World | None, device: DeviceLike, dtype: DTypeLike,
              validate: bool) -> tuple[RobotModel, Batch, CollisionModel]:
     init_warp()
     model = get_robot(robot)
@@ -659,8 +659,8 @@ def _rho_arg(rho: Any, batch: Batch, nf: int) -> Any:
     return a
 
 
-def collision_cost(robot: RobotLike, q: Any, world: World | None, *, w_world: float = 1.0,
-                   w_self: float = 1.0, eps: float = DEFAULT_EPS, rho: Any = None,
+def collision_cost(robot: RobotLike, q: ArrayLike, world: World | None, *, w_world: float = 1.0,
+                   w_self: float = 1.0, eps: float = DEFAULT_EPS, rho: ArrayLike | None = None,
                    grad: bool = True, device: DeviceLike = None, dtype: DTypeLike = None,
                    tape: bool = False, validate: bool = True) -> tuple[Any, Any]:
     """Collision cost ``w_world U_world + w_self U_self`` (eq. 3.8, 3.10, 3.11) per
@@ -684,6 +684,7 @@ def collision_cost(robot: RobotLike, q: Any, world: World | None, *, w_world: fl
     """
     model, batch, cm = _prepare(robot, q, world, device, dtype, validate)
     rho_b = _rho_arg(rho, batch, model.n_frames)
+    g: wp.array | None
     if tape:
         cost, g = cm.cost_tape(batch.array, rho=rho_b, w_world=w_world, w_self=w_self, eps=eps)
         if not grad:
@@ -696,7 +697,7 @@ def collision_cost(robot: RobotLike, q: Any, world: World | None, *, w_world: fl
     return out_c, out_g
 
 
-def sphere_distances(robot: RobotLike, q: Any, world: World, *, rho: Any = None, device: DeviceLike = None,
+def sphere_distances(robot: RobotLike, q: ArrayLike, world: World | None, *, rho: ArrayLike | None = None, device: DeviceLike = None,
                      dtype: DTypeLike = None, validate: bool = True) -> Any:
     """(..., n_spheres) signed distance [m] of each sphere's surface to the world:
     ``D(x_s) - r_s`` (negative = penetration)."""
@@ -707,10 +708,10 @@ def sphere_distances(robot: RobotLike, q: Any, world: World, *, rho: Any = None,
         raise ValueError(f"robot: '{model.name}' has no collision spheres")
     sd, _, _ = cm.distances(batch.array, rho=_rho_arg(rho, batch, model.n_frames), spheres=True,
                             use_self=False)
-    return to_output(sd, batch, (cm.n_spheres,))
+    return to_output(cast(wp.array, sd), batch, (cm.n_spheres,))  # spheres=True
 
 
-def self_distances(robot: RobotLike, q: Any, *, rho: Any = None, device: DeviceLike = None,
+def self_distances(robot: RobotLike, q: ArrayLike, *, rho: ArrayLike | None = None, device: DeviceLike = None,
                    dtype: DTypeLike = None, validate: bool = True) -> Any:
     """(..., n_pairs) signed distance [m] between the surfaces of the sphere pairs of
     :func:`collision_pairs` (negative = penetration)."""
@@ -719,10 +720,10 @@ def self_distances(robot: RobotLike, q: Any, *, rho: Any = None, device: DeviceL
         raise ValueError(f"robot: '{model.name}' has no self-collision sphere pairs")
     _, pd, _ = cm.distances(batch.array, rho=_rho_arg(rho, batch, model.n_frames), pairs=True,
                             use_world=False)
-    return to_output(pd, batch, (cm.n_pairs,))
+    return to_output(cast(wp.array, pd), batch, (cm.n_pairs,))  # pairs=True
 
 
-def min_distances(robot: RobotLike, q: Any, world: World | None = None, *, rho: Any = None,
+def min_distances(robot: RobotLike, q: ArrayLike, world: World | None = None, *, rho: ArrayLike | None = None,
                   device: DeviceLike = None, dtype: DTypeLike = None, validate: bool = True,
                   per_world: int = 0) -> Any:
     """(..., 2) [smallest sphere-to-world, smallest sphere-to-sphere] surface distance [m]
@@ -755,7 +756,7 @@ def sphere_link(robot: RobotModel, s: int) -> str:
     return model.frames[model.spheres[int(s)].frame].name
 
 
-def nearest_objects(robot: RobotModel, q: Any, world: World, spheres: Any, rho: Any = None,
+def nearest_objects(robot: RobotModel, q: ArrayLike, world: World, spheres: Any, rho: ArrayLike | None = None,
                     device: DeviceLike = None) -> list[str]:
     """What each of the collision ``spheres`` (indices) of one configuration q (n_dof,) is
     nearest to, in words: ``"object 'NAME'"`` (the world's exact objects) or ``"the world
@@ -783,8 +784,8 @@ def nearest_objects(robot: RobotModel, q: Any, world: World, spheres: Any, rho: 
             for o in obj]
 
 
-def closest_pair_text(robot: RobotModel, q: Any, world: World | None, *, self_collision: bool,
-                      rho: Any = None, device: DeviceLike = None) -> str:
+def closest_pair_text(robot: RobotModel, q: ArrayLike, world: World | None, *, self_collision: bool,
+                      rho: ArrayLike | None = None, device: DeviceLike = None) -> str:
     """The closest pair of one configuration q (n_dof,) in words, for a message about a
     configuration in collision: ``link 'L' vs object 'O', -93.27 mm`` (``self_collision``
     False: the sphere nearest to the world and the object nearest to it) or ``link 'A' vs
@@ -807,8 +808,8 @@ def closest_pair_text(robot: RobotModel, q: Any, world: World | None, *, self_co
     return f"link '{a}' vs link '{b}', {mm_text(d[p])} mm"
 
 
-def is_collision_free(robot: RobotLike, q: Any, world: World | None = None, margin: float = 0.0, *,
-                      rho: Any = None, device: DeviceLike = None, dtype: DTypeLike = None,
+def is_collision_free(robot: RobotLike, q: ArrayLike, world: World | None = None, margin: float = 0.0, *,
+                      rho: ArrayLike | None = None, device: DeviceLike = None, dtype: DTypeLike = None,
                       validate: bool = True, self_margin: float | None = None,
                       per_world: int = 0, meshes: bool = True) -> np.ndarray:
     """(...,) bool numpy: every sphere keeps more than ``margin`` [m] from the world and
@@ -843,7 +844,7 @@ def is_collision_free(robot: RobotLike, q: Any, world: World | None = None, marg
     return free
 
 
-def mesh_certified(robot: RobotModel, q: Any, world: World | None, free: np.ndarray, margin: float,
+def mesh_certified(robot: RobotModel, q: ArrayLike, world: World | None, free: np.ndarray, margin: float,
                    self_margin: float, device: DeviceLike = None, per_world: int = 0,
                    md: np.ndarray | None = None) -> np.ndarray:
     """``free`` (the spheres' verdict on ``q``) with the configurations the spheres refuse

@@ -9,12 +9,13 @@ rebuilt after adds/removes (:meth:`DeviceWorld.sync` returns whether the struct 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import warp as wp
 
 from jwarp.core.device import numpy_dtype
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike
 from jwarp.kernels import collision as ck
 from jwarp.world.sdf import World
 
@@ -40,7 +41,7 @@ _EMPTY: dict = {}
 _NO_GRID: dict = {}
 
 
-def empty_shapes(device: Any, scalar: type) -> Any:
+def empty_shapes(device: wp.Device, scalar: type) -> Any:
     """A ``WorldShapes`` struct with no objects (cached per device and type)."""
     key = (str(device), scalar.__name__)
     s = _EMPTY.get(key)
@@ -67,7 +68,7 @@ class DeviceWorld:
     """``world`` (or None) on ``device`` in float type ``scalar``: :attr:`struct` is the
     ``WorldModel`` argument of the fused collision kernels."""
 
-    def __init__(self, world: World | None, device: Any, scalar: type) -> None:
+    def __init__(self, world: World | None, device: wp.Device, scalar: type) -> None:
         self.world, self.device, self.scalar = world, device, scalar
         self.k = ck.kernels(scalar)
         vec3 = self.k.vec3
@@ -82,11 +83,12 @@ class DeviceWorld:
             self.grid, self.cellmin, self.grid_struct = hit
             self.origin, self.inv_h, self.dim = vec3(0.0, 0.0, 0.0), 1.0, 3
         else:
-            g = world.sdf.astype(dt)
+            assert world is not None  # use_grid; a grid comes with its limits and voxel size
+            g = cast(np.ndarray, world.sdf).astype(dt)
             grid = g if world.dim == 3 else g[:, :, None]
             o = np.zeros(3)
-            o[:world.dim] = world.limits[:, 0]
-            origin, inv_h, dim = vec3(*o), 1.0 / world.voxel_size, world.dim
+            o[:world.dim] = cast(np.ndarray, world.limits)[:, 0]
+            origin, inv_h, dim = vec3(*o), 1.0 / cast(float, world.voxel_size), world.dim
             self.origin, self.inv_h, self.dim = origin, inv_h, dim
             self.grid, self.cellmin, self.grid_struct = self._grid(grid, origin, inv_h, dim)
         gs = self.grid_struct
@@ -95,7 +97,7 @@ class DeviceWorld:
         ws.use_grid = int(use_grid)
         ws.grid_error = scalar(world.grid_error if world is not None else 0.0)
         self.struct = ws
-        self._shapes_key = None
+        self._shapes_key: tuple[Any, ...] | None = None
         self._bound_skip = False
         self.sync()
 
@@ -131,15 +133,15 @@ class DeviceWorld:
         if self._shapes_key is not None and ds is self._shapes_key[0]:
             return False
         self._shapes_key = (ds,)  # also keeps the device copy alive
-        self._bound_skip = ds is not None and all(w.shapes.kind(i) != "mesh"
-                                                   for i in w.shapes.ids)
+        self._bound_skip = ds is not None and all(
+            w.shapes.kind(i) != "mesh" for i in w.shapes.ids)  # type: ignore[union-attr]  # ds: w.shapes
         self.struct.shapes = ds.struct if ds is not None else empty_shapes(self.device,
                                                                           self.scalar)
         return True
 
 
-def world_query(world: World, points: Any, *, cutoff: float = 1e30, device: Any = None,
-                dtype: Any = np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def world_query(world: World, points: ArrayLike, *, cutoff: float = 1e30, device: DeviceLike = None,
+                dtype: DTypeLike = np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Signed distance [m] of the whole world (grid lowered by its ``grid_error``, and
     exact objects) at ``points`` (N, 3): ``(dist (N,), grad (N, 3), obj (N,) int: object
     index, -2 grid, -1 nothing within cutoff)``, computed on ``device`` (None: the

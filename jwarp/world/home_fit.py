@@ -534,7 +534,7 @@ def _tighten(robot: Any, model: RobotModel, T: np.ndarray, pairs: list[tuple[int
         pts = _surface_points(mesh_of(f), o.n_surface, o.seed + 2)
         before = float(one_sided_error(pts, sp[idx], sr[idx]).max())
         after = float(one_sided_error(pts, sp[idx], r[idx]).max())
-        row = {"link": model.frame_names[f], "frame": f, "spheres": len(mine),
+        row: dict[str, Any] = {"link": model.frame_names[f], "frame": f, "spheres": len(mine),
                "largest_cut_m": float(max(sr[i] - r[i] for i in mine)),
                "one_sided_error_m": [before, after]}
         if o.tolerance is not None and after > max(o.tolerance, before) + 1e-12:

@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.world.sdf import FORMAT, VERSION, World, load_world, save_world
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 __all__ = ["FORMAT", "VERSION", "save_world", "load_world", "parse_world_spec", "SPEC_KEYS"]
 
@@ -27,7 +30,7 @@ SPEC_KEYS = {
 }
 
 
-def parse_world_spec(spec: Any, robot: RobotLike = None, device: DeviceLike = None) -> World:
+def parse_world_spec(spec: Any, robot: RobotLike | None = None, device: DeviceLike = None) -> World:
     """A world from a specification (the CLI's ``--world``).
 
     * a :class:`World` passes through;
@@ -121,7 +124,7 @@ def _spec_int(key: str, v: Any, lo: int, hi: int | None = None) -> int:
     return int(v)
 
 
-def _grid_size(model: Any, dim: int, cells: int | None, voxel: float | None,
+def _grid_size(model: RobotModel | None, dim: int, cells: int | None, voxel: float | None,
                device: DeviceLike = None) -> list[float]:
     """The grid sizes (per axis, as floats: nothing is allocated) a simplex spec makes."""
     if model is not None and dim == model.workspace_dim:
@@ -140,7 +143,7 @@ def _grid_text(sizes: list[float]) -> str:
     return f"{fmt[0]}^{len(fmt)}" if len(set(fmt)) == 1 else " x ".join(fmt)
 
 
-def _simplex_from_spec(rest: str, model: Any, text: str, device: DeviceLike = None) -> World:
+def _simplex_from_spec(rest: str, model: RobotModel, text: str, device: DeviceLike = None) -> World:
     from jwarp.utils.memory import check_memory
     from jwarp.world.feasibility import (
         feasible_simplex_world,
@@ -200,6 +203,7 @@ def _simplex_from_spec(rest: str, model: Any, text: str, device: DeviceLike = No
                                        max_tries=tries, cells=cells, voxel_size=voxel,
                                        clear_base=clear_base, dim=dim, device=device, **noise)
     else:
+        shape: tuple[int, ...] | None
         if model is not None and dim == model.workspace_dim:
             shape, limits, h = robot_world_grid(model, cells=cells, voxel_size=voxel,
                                                 device=device)

@@ -31,15 +31,19 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import init_warp, real_array, resolve_device
 from jwarp.core.caches import IdentityCache
+from jwarp.core.types import ArrayLike, DeviceLike
 from jwarp.kernels import convex as ck
 from jwarp.model import RobotModel
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 __all__ = ["MeshCheck", "MeshCheckStats", "cached_mesh_check", "mesh_check", "sphere_reach_past",
            "world_pieces"]
@@ -145,7 +149,7 @@ class MeshCheck:
         device: Warp device (None: Warp's default).
     """
 
-    def __init__(self, robot: RobotModel, world: Any, device: Any = None) -> None:
+    def __init__(self, robot: RobotModel, world: World | None, device: DeviceLike = None) -> None:
         init_warp()
         self.device = resolve_device(device)
         self.robot = robot
@@ -408,7 +412,7 @@ _CACHE: IdentityCache[MeshCheck] = IdentityCache(8)
 _ROBOT_PARTS: IdentityCache[Any] = IdentityCache(8)
 
 
-def _robot_part(robot: RobotModel, extra: list[int], device: Any) -> Any:
+def _robot_part(robot: RobotModel, extra: list[int], device: wp.Device) -> Any:
     """The robot's side of a :class:`MeshCheck` on ``device`` (piece tables, travel
     reaches, self pairs), made once per robot (and spheres appended after the fit) and
     device: planners of one robot in many worlds share it."""
@@ -493,12 +497,12 @@ def _pair_tables(robot: RobotModel, f: np.ndarray, reach: np.ndarray
 
 
 
-def cached_mesh_check(robot: Any, world: Any, device: Any = None) -> MeshCheck | None:
+def cached_mesh_check(robot: RobotModel, world: World | None, device: DeviceLike = None) -> MeshCheck | None:
     """The :class:`MeshCheck` :func:`mesh_check` has made for these, or None (makes none)."""
     return _CACHE.get(str(resolve_device(device)), (robot, world))
 
 
-def mesh_check(robot: RobotModel, world: Any, device: Any = None, *, rho: Any = None
+def mesh_check(robot: RobotModel, world: World | None, device: DeviceLike = None, *, rho: ArrayLike | None = None
                ) -> MeshCheck | None:
     """The :class:`MeshCheck` of ``robot`` in ``world`` on ``device`` (kept per robot,
     world and device: a few are cached), or None where there is none: no

@@ -38,6 +38,7 @@ from jwarp.core.arrays import init_warp, real_array, real_number, resolve_device
 from jwarp.core.caches import IdentityCache
 from jwarp.core.device import put_model
 from jwarp.core.limits import LIMIT_TOL
+from jwarp.core.types import DeviceLike, RobotLike
 from jwarp.kernels import motion as mk
 from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
@@ -149,7 +150,7 @@ class MotionOptions:
             n += 1
         return n if self.levels is None else min(n, int(self.levels))
 
-    def resolved_method(self, device: Any) -> str:
+    def resolved_method(self, device: wp.Device) -> str:
         """:attr:`method` on ``device`` (None: "levels" on a GPU, "advance" on the CPU)."""
         if self.method is not None:
             return self.method
@@ -368,7 +369,7 @@ class MotionCheck:
         options: :class:`MotionOptions`.
     """
 
-    def __init__(self, robot: Any, world: World | None, *, device: Any = None,
+    def __init__(self, robot: RobotLike, world: World | None, *, device: DeviceLike = None,
                  options: MotionOptions | None = None) -> None:
         init_warp()
         self.robot = get_robot(robot)
@@ -843,7 +844,7 @@ LEVELS_SCRATCH_BYTES = 8 << 30
 _CHECKS: IdentityCache[MotionCheck] = IdentityCache(8)
 
 
-def motion_check(robot: Any, world: World | None, *, device: Any = None,
+def motion_check(robot: RobotLike, world: World | None, *, device: DeviceLike = None,
                  options: MotionOptions | None = None) -> MotionCheck:
     """A cached :class:`MotionCheck` for (robot content, world identity, device, options):
     repeated checks (an RRT's edges, the planners of one world) pay its set-up once.
@@ -872,9 +873,9 @@ def _check_margin(v: Any, name: str) -> float:
     return m
 
 
-def check_paths(robot: Any, world: World | None, paths: Any, *, margin: float = 0.0,
+def check_paths(robot: RobotModel, world: World | None, paths: Any, *, margin: float = 0.0,
                 endpoint_margin: float | None = None, self_margin: float = 0.0,
-                device: Any = None, options: MotionOptions | None = None) -> PathCheck:
+                device: DeviceLike = None, options: MotionOptions | None = None) -> PathCheck:
     """Continuous feasibility of ``paths`` (W, n_dof) or (P, W, n_dof): a
     :class:`MotionCheck` made for this call (keep one for repeated checks)."""
     return MotionCheck(robot, world, device=device, options=options).check(

@@ -396,7 +396,7 @@ def _unique(names: list, vals: np.ndarray, where: str) -> dict[str, float]:
 _GRIPPER_WORDS = re.compile(r"finger|gripper|knuckle|jaw|claw|(^|_)hand(_|$)", re.IGNORECASE)
 
 
-def ignored_joint_names(model: Any, names: Any) -> list[str]:
+def ignored_joint_names(model: RobotModel, names: Any) -> list[str]:
     """Those of ``names`` that are joints of the robot which ``model`` lacks or fixes, so a
     MoveIt state or goal may list them and :func:`joint_vector` ignores them (with a
     warning): joints frozen by :func:`jwarp.model.freeze_joints` (``notes['frozen_joints']``),
@@ -428,7 +428,7 @@ def _first_word(name: str) -> str:
     return str(name).lower().split("_", 1)[0]
 
 
-def joint_vector(model: Any, values: dict[str, float], what: str = "joint values",
+def joint_vector(model: RobotModel, values: dict[str, float], what: str = "joint values",
                  fallback: np.ndarray | None = None) -> np.ndarray:
     """(n_dof,) joint values of ``model`` from ``{name: value}`` (a MoveIt state or goal).
 

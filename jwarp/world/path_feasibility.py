@@ -10,7 +10,7 @@ and :mod:`jwarp.solvers.planning.rrt` use them; they use neither.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import warp as wp
@@ -24,13 +24,16 @@ from jwarp.core.arrays import (
 )
 from jwarp.core.device import numpy_dtype, put_model, scalar_type
 from jwarp.core.limits import describe_violation, sample_within_limits, within_limits
-from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.transmission import untransmitted, without_transmission
 from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world import collision
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 #: feasibility checks use substeps with sphere motion <= voxel / SWEEP_SAFETY
 SWEEP_SAFETY = 2.0
@@ -41,14 +44,14 @@ MAX_CHECK_SUBSTEPS = 256
 ELASTIC_CHECK: dict[str, Any] = {"lam": 0.7, "max_iter": 30, "tol": 1e-7}
 
 
-def check_world(robot: RobotModel, world: Any) -> None:
+def check_world(robot: RobotModel, world: World) -> None:
     """TypeError/ValueError unless ``world`` is a World of the robot's workspace dimension."""
     if world is None:
         raise ValueError("world: required (a jwarp.world.World)")
     collision.check_world(robot, world)
 
 
-def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, margin: float,
+def check_endpoints(robot: RobotModel, world: World, q: np.ndarray, name: str, margin: float,
                     rho_kappa: Any = None, device: DeviceLike = None,
                     self_margin: float = 0.0, per_world: int = 0) -> np.ndarray:
     """ValueError naming ``name`` (and the row) if a configuration is outside the limits or
@@ -98,8 +101,8 @@ def check_endpoints(robot: RobotModel, world: Any, q: np.ndarray, name: str, mar
     return spheres
 
 
-def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
-                   kappa: Any = None, rho: Any = None, device: DeviceLike = None,
+def collision_free(robot: RobotModel, world: World, q: np.ndarray, margin: float,
+                   kappa: ArrayLike | None = None, rho: ArrayLike | None = None, device: DeviceLike = None,
                    self_margin: float = 0.0, per_world: int = 0,
                    meshes: bool = True) -> np.ndarray:
     """(N,) bool: q (N, n_dof) collision-free: more than ``margin`` [m] from the world and
@@ -129,7 +132,7 @@ def collision_free(robot: RobotModel, world: Any, q: np.ndarray, margin: float,
     return free if converged is None else free & converged.reshape(-1)
 
 
-def elastic_equilibrium(robot: RobotModel, q: np.ndarray, kappa: Any, device: DeviceLike = None
+def elastic_equilibrium(robot: RobotModel, q: np.ndarray, kappa: ArrayLike, device: DeviceLike = None
                         ) -> tuple[np.ndarray, np.ndarray]:
     """The elastic model's equilibrium at q (N, n_dof) as the feasibility checks solve it
     (:data:`ELASTIC_CHECK`, float64): ``(rho (N, n_frames, 5), converged (N,) bool)``."""
@@ -170,8 +173,8 @@ def substeps(paths: Any, n_substeps: int, *, device: DeviceLike = None, dtype: D
     return out.numpy().reshape(a.shape[:-2] + (S, n))
 
 
-def path_feasible(robot: RobotLike, world: Any, paths: Any, n_substeps: int, *, margin: float = 0.0,
-                  kappa: Any = None, device: DeviceLike = None,
+def path_feasible(robot: RobotLike, world: World, paths: Any, n_substeps: int, *, margin: float = 0.0,
+                  kappa: ArrayLike | None = None, device: DeviceLike = None,
                   endpoint_margin: float | None = None, self_margin: float = 0.0,
                   meshes: bool | None = None) -> np.ndarray:
     """Feasibility of paths (..., W, n_dof): every waypoint within the joint limits and,
@@ -196,11 +199,11 @@ def path_feasible(robot: RobotLike, world: Any, paths: Any, n_substeps: int, *, 
     q = substeps(a, n_substeps, device=device)
     free = collision_free(model, world, q.reshape(-1, model.n_dof), margin, kappa=kappa,
                           device=device, self_margin=self_margin)
-    free = free.reshape(q.shape[:-1]).all(axis=-1)
+    free = cast(np.ndarray, free.reshape(q.shape[:-1]).all(axis=-1))
     return free & within_limits(model, a).all(axis=-1)
 
 
-def certify_check(robot: RobotModel, world: Any, device: DeviceLike = None) -> Any:
+def certify_check(robot: RobotModel, world: World, device: DeviceLike = None) -> Any:
     """The continuous check (:class:`jwarp.world.motion.MotionCheck`, the default
     :class:`jwarp.world.motion.MotionOptions`: up to 4000 evaluations per segment) that
     :func:`path_feasible` (the rigid model), the RRT-Connect's edges and the planner's
@@ -289,7 +292,7 @@ def _longest_arcs(robot: RobotModel, q: np.ndarray, fine: int, device: DeviceLik
 
 def initial_paths(start: np.ndarray, goal: np.ndarray, n_waypoints: int, kind: str = "straight",
                   *, robot: RobotModel | None = None, n_via: tuple[int, int] = (1, 3),
-                  rng: np.random.Generator | None = None, world: Any = None,
+                  rng: np.random.Generator | None = None, world: World | None = None,
                   device: DeviceLike = None, per_world: int = 0) -> np.ndarray:
     """Initial guesses (B, W, n_dof) from start/goal (B, n_dof).
 
@@ -351,7 +354,7 @@ def polyline_paths(start: np.ndarray, via: np.ndarray, goal: np.ndarray, n_waypo
     return out
 
 
-def _free_via_per_world(robot: RobotModel, world: Any, ks: np.ndarray, pool: np.ndarray,
+def _free_via_per_world(robot: RobotModel, world: World, ks: np.ndarray, pool: np.ndarray,
                         rng: np.random.Generator, device: DeviceLike, per_world: int
                         ) -> np.ndarray:
     """Via points (sum ks, n_dof) for rows b of ``per_world`` problems per world of a batch:

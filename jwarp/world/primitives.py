@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import ArrayLike
+
 __all__ = ["KINDS", "MAX_EXTENT", "N_DIMS", "Shape", "finite_vector", "pose_matrix", "quaternion_matrix", "rpy_matrix",
            "signed_distance", "union_distance"]
 
@@ -184,7 +186,7 @@ def _cone(p: np.ndarray, length: float, radius: float) -> np.ndarray:
     return np.where(inside, -d, d)
 
 
-def signed_distance(shape: Shape, points: Any) -> np.ndarray:
+def signed_distance(shape: Shape, points: ArrayLike) -> np.ndarray:
     """Exact signed distance [m] of ``points`` (..., 3) [m, world frame] to ``shape``,
     negative inside; returns (...,)."""
     p = np.asarray(points, dtype=np.float64)
@@ -210,7 +212,7 @@ def signed_distance(shape: Shape, points: Any) -> np.ndarray:
     return _cone(q, a[0], a[1])
 
 
-def union_distance(shapes: list[Shape], points: Any) -> np.ndarray:
+def union_distance(shapes: list[Shape], points: ArrayLike) -> np.ndarray:
     """min over ``shapes`` of :func:`signed_distance`: exact outside the shapes; inside
     where shapes overlap it is minus the deepest single penetration (the sign is right,
     the magnitude a lower bound of the depth). +inf for no shapes."""

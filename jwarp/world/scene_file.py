@@ -41,11 +41,11 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from jwarp.core.types import DTypeLike
+from jwarp.core.types import ArrayLike, DTypeLike
 from jwarp.utils.roots import one_warning_per_file
 from jwarp.world.moveit import (
     RobotFrames,
@@ -67,6 +67,9 @@ from jwarp.world.primitives import (
     signed_distance,
 )
 from jwarp.world.sdf import World, check_grid_cells, world_from_mesh
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 __all__ = ["DEFAULT_PAD", "DEFAULT_VOXEL", "FORMAT", "TABLE_SHELF_GOAL", "TABLE_SHELF_START",
            "DuplicateKeyError", "Scene", "SceneOptions", "load_scene", "load_yaml",
@@ -119,7 +122,7 @@ class Scene:
         b = np.stack([s.bounds() for s in self.shapes])
         return np.stack([b[:, :, 0].min(0), b[:, :, 1].max(0)], axis=1)
 
-    def distance(self, points: Any) -> np.ndarray:
+    def distance(self, points: ArrayLike) -> np.ndarray:
         """Exact signed distance [m] of ``points`` (..., 3) to the union of the shapes
         (minimum over the shapes; +inf for an empty scene)."""
         p = np.asarray(points, dtype=np.float64)
@@ -367,7 +370,7 @@ def _jwarp_pose(pose: Any, where: str) -> np.ndarray:
     return parse_pose(pose, where)
 
 
-def robot_frames(model: Any) -> dict[str, np.ndarray]:
+def robot_frames(model: RobotModel) -> dict[str, np.ndarray]:
     """Frame ids a scene of ``model`` may use: ``base`` and every frame of the robot
     fixed to its base (static frames and uncoupled DH frames from a root), each with its
     transform in the robot's base coordinates."""

@@ -42,7 +42,7 @@ import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import warp as wp
@@ -124,7 +124,7 @@ class World:
                              f"the dtype of the collision kernels")
         self.sdf = np.ascontiguousarray(sdf)
         try:
-            h = float(self.voxel_size)
+            h = float(self.voxel_size)  # type: ignore[arg-type]  # None: TypeError, below
         except (TypeError, ValueError) as e:
             raise TypeError(f"voxel_size: expected a number, got {self.voxel_size!r}") from e
         if not np.isfinite(h) or h <= 0 or h > _F32_MAX:
@@ -202,7 +202,7 @@ class World:
             raise ValueError("world: has no grid (exact objects only): no content hash")
         sdf = np.asarray(self.sdf)
         h = hashlib.sha256()
-        h.update(json.dumps([list(map(int, sdf.shape)), float(self.voxel_size)]).encode())
+        h.update(json.dumps([list(map(int, sdf.shape)), float(cast(float, self.voxel_size))]).encode())
         h.update(np.ascontiguousarray(np.asarray(self.limits, np.float64)).tobytes())
         if self.occupancy is not None:
             h.update(b"occ")
@@ -247,7 +247,7 @@ class World:
         """The length [m] below which the world's distances are not resolved: the voxel
         size of a grid, 0.02 m for exact objects only (the planner's default smoothing
         width and its initial substep sizing use it)."""
-        return float(self.voxel_size) if self.sdf is not None else 0.02
+        return float(cast(float, self.voxel_size)) if self.sdf is not None else 0.02
 
     def add(self, id: str, kind: str, dims: ArrayLike = (), pose: ArrayLike | None = None, *,
             mesh: Any = None) -> int:
@@ -360,21 +360,22 @@ class World:
     @property
     def shape(self) -> tuple[int, ...]:
         self._require_grid("shape")
-        return tuple(self.sdf.shape)
+        return tuple(cast(np.ndarray, self.sdf).shape)
 
     @property
     def origin(self) -> np.ndarray:
         """(dim,) [m] centre of cell 0."""
-        return self.limits[:, 0].copy()
+        return cast(np.ndarray, self.limits)[:, 0].copy()
 
     @property
     def extent(self) -> np.ndarray:
         """(dim, 2) [m] outer faces of the grid's cells (limits -/+ half a voxel)."""
-        return self.limits + np.array([-0.5, 0.5]) * self.voxel_size
+        return cast(np.ndarray, self.limits) + np.array([-0.5, 0.5]) * cast(float, self.voxel_size)
 
     def cell_centres(self) -> np.ndarray:
         """(*shape, dim) [m] coordinates of every cell centre."""
-        axes = [self.limits[d, 0] + self.voxel_size * np.arange(n) for d, n in enumerate(self.shape)]
+        lim, h = cast(np.ndarray, self.limits), cast(float, self.voxel_size)
+        axes = [lim[d, 0] + h * np.arange(n) for d, n in enumerate(self.shape)]
         return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
 
     def astype(self, dtype: DTypeLike) -> World:
@@ -382,7 +383,7 @@ class World:
         objects are shared."""
         if self.sdf is None:
             return World(None, meta=dict(self.meta), shapes=self.shapes)
-        return World(self.sdf.astype(dtype), self.limits.copy(), self.voxel_size,
+        return World(self.sdf.astype(dtype), cast(np.ndarray, self.limits).copy(), self.voxel_size,
                      None if self.occupancy is None else self.occupancy.copy(), dict(self.meta),
                      self.shapes, self.grid_error)
 
@@ -558,7 +559,7 @@ def world_from_occupancy(occupancy: Any, limits: Any, voxel_size: float | None =
     return World(sdf.astype(dtype), lim, h, occ.copy(), {"source": "occupancy"})
 
 
-def world_from_points(points: Any, limits: Any, voxel_size: float | None = None, *,
+def world_from_points(points: ArrayLike, limits: Any, voxel_size: float | None = None, *,
                       shape: Sequence[int] | None = None, dtype: DTypeLike = np.float64) -> World:
     """World from a point cloud on obstacle surfaces (e.g. a depth camera).
 
@@ -640,7 +641,7 @@ def save_world(world: World, path: str | os.PathLike) -> None:
         meta = json.dumps(world.meta)
     except (TypeError, ValueError) as e:
         raise ValueError(f"world.meta: not JSON serialisable: {e}") from e
-    arrays: dict[str, np.ndarray] = dict(
+    arrays: dict[str, Any] = dict(
         format=np.array(FORMAT), version=np.array(VERSION, np.int64), sdf=world.sdf,
         limits=world.limits, voxel_size=np.array(world.voxel_size, np.float64),
         meta=np.array(meta))
@@ -710,7 +711,7 @@ def load_world(path: str | os.PathLike) -> World:
         raise ValueError(f"{path}: {e}") from e
 
 
-def sdf_query(world: World, points: Any, *, grad: bool = False, device: DeviceLike = None
+def sdf_query(world: World, points: ArrayLike, *, grad: bool = False, device: DeviceLike = None
               ) -> Any:
     """Interpolated signed distance [m] of ``world`` at ``points`` (..., dim) [m] (numpy),
     with the lookup of the cost kernels. Returns (...,) or, with ``grad``, a tuple
@@ -725,16 +726,17 @@ def sdf_query(world: World, points: Any, *, grad: bool = False, device: DeviceLi
         raise ValueError("points: contains NaN or inf")
     init_warp()
     dev = resolve_device(device)
-    dt = world.sdf.dtype
+    sdf, limits = cast(np.ndarray, world.sdf), cast(np.ndarray, world.limits)
+    dt = sdf.dtype
     scalar = scalar_type(dt)
     k = ck.kernels(scalar)
     lead = p.shape[:-1]
     flat = p.reshape(-1, world.dim)
     p3 = np.zeros((len(flat), 3), dt)
     p3[:, :world.dim] = finite_as(flat, dt, "points")
-    grid = world.sdf if world.dim == 3 else world.sdf[:, :, None]
+    grid = sdf if world.dim == 3 else sdf[:, :, None]
     o = np.zeros(3)
-    o[:world.dim] = world.limits[:, 0]
+    o[:world.dim] = limits[:, 0]
     n = max(len(flat), 1)
     dist = wp.empty(n, dtype=scalar, device=dev)
     g = wp.empty(n, dtype=k.vec3, device=dev)
@@ -742,7 +744,7 @@ def sdf_query(world: World, points: Any, *, grad: bool = False, device: DeviceLi
         wp.launch(k.sdf_query, dim=len(flat),
                   inputs=[wp.array(p3, dtype=k.vec3, device=dev),
                           wp.array(np.ascontiguousarray(grid), dtype=scalar, device=dev),
-                          k.vec3(*o), 1.0 / world.voxel_size, world.dim],
+                          k.vec3(*o), 1.0 / cast(float, world.voxel_size), world.dim],
                   outputs=[dist, g], device=dev)
     d = dist.numpy()[:len(flat)].reshape(lead)
     if not grad:

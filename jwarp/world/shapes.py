@@ -28,6 +28,7 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import init_warp, resolve_device
+from jwarp.core.types import ArrayLike
 from jwarp.kernels import geometry as gk
 from jwarp.utils.checks import check_int
 
@@ -343,7 +344,7 @@ class ShapeSet:
         out[planes, :, 0], out[planes, :, 1] = -np.inf, np.inf
         return out
 
-    def distance(self, points: Any) -> np.ndarray:
+    def distance(self, points: ArrayLike) -> np.ndarray:
         """Exact signed distance [m] of ``points`` (..., 3) to the union (numpy, float64,
         through the float64 kernel on Warp's default device); +inf without objects."""
         from jwarp.core.arrays import real_array
@@ -372,7 +373,7 @@ class ShapeSet:
         return d.numpy().reshape(p.shape[:-1])
 
     # ---------------------------------------------------------------- device
-    def device_shapes(self, device: Any, scalar: type) -> DeviceShapes:
+    def device_shapes(self, device: wp.Device, scalar: type) -> DeviceShapes:
         """The device copy for (device, scalar type), brought up to date."""
         key = (str(device), scalar.__name__)
         ds = self._device.get(key)
@@ -388,7 +389,7 @@ class DeviceShapes:
     kernel struct :attr:`struct` (``WorldShapes``); the struct is replaced when objects
     are added or removed (``structure_version``), updated in place when they move."""
 
-    def __init__(self, shapes: ShapeSet, device: Any, scalar: type) -> None:
+    def __init__(self, shapes: ShapeSet, device: wp.Device, scalar: type) -> None:
         init_warp()
         self.device, self.scalar = device, scalar
         k = gk.kernels(scalar)

@@ -47,17 +47,20 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from jwarp.calibration.estimate.params import ParameterSpace, parse_groups
 from jwarp.core.threads import limit_blas
-from jwarp.core.types import RobotLike
+from jwarp.core.types import ArrayLike, RobotLike
 from jwarp.model.robot import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.overrides import renamed_options
 from jwarp.utils.checks import check_int
+
+if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
 
 METHODS = ("greedy", "detmax")
 
@@ -359,7 +362,7 @@ def select(U: Any, prior: Any, L: Any | None, options: DesignOptions,
 
 
 # ------------------------------------------------------------ measurements
-def candidate_jacobians(robot: RobotModel, measurement: Any, q: Any, free: str | Iterable[str], *,
+def candidate_jacobians(robot: RobotModel, measurement: Measurement, q: ArrayLike, free: str | Iterable[str], *,
                         meta: Mapping[str, Any] | None = None, chunk: int = 4096,
                         **problem: Any) -> tuple[np.ndarray, ParameterSpace]:
     """Whitened Jacobians (n, m, P) of ``measurement`` at the candidate configurations q
@@ -455,6 +458,7 @@ def design(robot: RobotLike, actual: Any, q_pool: Any, options: DesignOptions, *
     model = get_robot(robot)   # resolved once here; the Jacobians take the model
     U, space = candidate_jacobians(model, actual, q_pool, free, meta=meta_pool, **problem)
     prior = prior_information(space)
+    dropped: list[Any]
     L, dropped = None, []
     if task is not None:
         if q_task is None:

@@ -39,7 +39,7 @@ import warp as wp
 from jwarp.calibration.files import Setup, make_measurement
 from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.core.device import make_struct, put_model, scalar_type
-from jwarp.core.types import DTypeLike
+from jwarp.core.types import ArrayLike, DTypeLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kernels import visibility as vk
 from jwarp.model import RobotModel
@@ -69,7 +69,7 @@ class Camera:
     far: float
 
 
-def _vec3(x: Any, where: str) -> np.ndarray:
+def _vec3(x: ArrayLike, where: str) -> np.ndarray:
     try:
         a = np.asarray(x, np.float64)
     except (TypeError, ValueError):
@@ -302,7 +302,7 @@ class PoseSampler:
         s = self.k.Sensors()
         cams = self.cameras
 
-        def v3(a: np.ndarray) -> wp.array:
+        def v3(a: np.ndarray | list) -> wp.array:
             a = np.asarray(a, dt).reshape(-1, 3)
             return wp.array(a if len(a) else np.zeros((1, 3), dt), dtype=vec3, device=dev)
 
@@ -376,7 +376,7 @@ class PoseSampler:
                 self.sensors, self.skip_fpair, self.model.dh0_3d]
 
     # ---------------------------------------------------------------- checks
-    def check(self, q: Any) -> tuple[np.ndarray, np.ndarray]:
+    def check(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Verdicts of given configurations.
 
         Args:
@@ -406,7 +406,7 @@ class PoseSampler:
         seen_np = seen.numpy()
         return code.numpy(), (seen_np if self.cameras else seen_np[:, :0])
 
-    def ok(self, q: Any) -> np.ndarray:
+    def ok(self, q: ArrayLike) -> np.ndarray:
         """(N,) bool: configurations that pass every check."""
         return self.check(q)[0] == 0
 
@@ -471,9 +471,10 @@ class PoseSampler:
         """
         dev, nd = self.device, self.robot.n_dof
         cap = max(int(k if capacity is None else min(capacity, k)), 1)
-        ws = getattr(self, "_ws", None)
+        ws: dict[str, Any] | None = getattr(self, "_ws", None)
         if ws is None or ws["k"] < k or ws["cap"] < cap:
-            ws = self._ws = {"k": int(k), "cap": cap, "rows": []}
+            ws = {"k": int(k), "cap": cap, "rows": []}
+            self._ws = ws
             for name, m, dt in (("qbuf", nd, self.scalar), ("frames", self.robot.n_frames,
                                                            self.k.mat44),
                                 ("xs", max(self.model.spheres.n_spheres, 1), self.k.vec3)):

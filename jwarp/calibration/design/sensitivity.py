@@ -39,7 +39,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -48,6 +48,9 @@ from jwarp.core.threads import limit_blas
 from jwarp.core.types import RobotLike
 from jwarp.model.robot import RobotModel
 from jwarp.plugins.registry import robot as get_robot
+
+if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
 
 #: default relative tolerance of :func:`spectrum` (numerical rank of J^T J)
 DEFAULT_RTOL = 1e-12
@@ -225,12 +228,12 @@ def kernel_inclusion(Ja: Any, Jt: Any, names: Iterable[str] | None = None, *,
 
 
 # ---------------------------------------------------------- measurements
-def _groups_for(measurement: Any, groups: list[str]) -> list[str]:
+def _groups_for(measurement: Measurement, groups: list[str]) -> list[str]:
     own = measurement.params.group_names() if getattr(measurement, "params", None) else []
     return [g for g in groups if g in ROBOT_GROUPS or g in own]
 
 
-def stacked_jacobian(robot: RobotModel, measurement: Any, q: Any, free: str | Iterable[str], *,
+def stacked_jacobian(robot: RobotModel, measurement: Measurement, q: Any, free: str | Iterable[str], *,
                      meta: Mapping[str, Any] | None = None, x: Any = None,
                      whiten: bool = False, **problem: Any) -> tuple[np.ndarray, list[str]]:
     """Stacked Jacobian (S*m, P) of ``measurement`` at configurations q (S, n_dof) with

@@ -53,7 +53,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -358,7 +358,7 @@ class TowSpec:
         m = self.task.n_obs
         if self.virtual_noise is not None:
             return virtual_covariance(self.virtual_noise, m, "virtual_noise")
-        return np.eye(m) * float(self.delta_h) ** 2 * math.sqrt(n_samples)
+        return np.eye(m) * float(cast(float, self.delta_h)) ** 2 * math.sqrt(n_samples)
 
 
 TOW_KEYS = {"task", "virtual_noise", "delta_h", "graph", "twist_sigma", "tolerance"}

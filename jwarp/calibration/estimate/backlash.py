@@ -17,8 +17,10 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.types import ArrayLike
 
-def motion_directions(q: Any) -> np.ndarray:
+
+def motion_directions(q: ArrayLike) -> np.ndarray:
     """(S, n_dof) the direction (+1, -1; 0 unknown) each joint last moved in, for samples
     q (S, n_dof) in measurement order: ``sign(q_i - q_{i-1})``, the previous sample's
     direction where a joint did not move, 0 before its first move."""

@@ -26,14 +26,17 @@ import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from jwarp.calibration.estimate.options import CalibrationOptions
 from jwarp.calibration.estimate.params import DEFAULT_SIGMA, ROBOT_GROUPS, parse_groups
-from jwarp.core.types import RobotLike
+from jwarp.core.types import ArrayLike, RobotLike
 from jwarp.utils.checks import check_int
+
+if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
 
 #: the prior scales of the default grid (:func:`default_grid`): factors on the prior sigma
 #: of every free robot group
@@ -356,7 +359,7 @@ def default_workers(tasks: int) -> int:
     return max(1, min(cores, tasks))
 
 
-def cross_validate(robot: RobotLike, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
+def cross_validate(robot: RobotLike, measurement: Measurement, q: ArrayLike, y: Any, options: CalibrationOptions,
                    cv: CVOptions | None = None, *,
                    meta: Mapping[str, Any] | None = None) -> CVResult:
     """Score the settings of ``cv`` (:class:`CVOptions`; default 5 folds of
@@ -427,7 +430,7 @@ def cross_validate(robot: RobotLike, measurement: Any, q: Any, y: Any, options: 
                     unit=str(getattr(measurement, "unit", "m")), fold_of=fold)
 
 
-def calibrate_cv(robot: RobotLike, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
+def calibrate_cv(robot: RobotLike, measurement: Measurement, q: ArrayLike, y: Any, options: CalibrationOptions,
                  cv: CVOptions | None = None, *, meta: Mapping[str, Any] | None = None
                  ) -> tuple[Any, CVResult]:
     """:func:`cross_validate`, then the calibration with the chosen setting on all rows

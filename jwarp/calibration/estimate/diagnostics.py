@@ -29,14 +29,18 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from jwarp import kinematics as K
 from jwarp.calibration.estimate.result import observation_groups
+from jwarp.core.types import ArrayLike
 from jwarp.model.robot import RobotModel
 from jwarp.utils.checks import check_int
+
+if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
 
 
 @dataclass
@@ -95,7 +99,7 @@ class Diagnostics:
         }
 
 
-def residual_diagnostics(robot: RobotModel, measurement: Any, p: Any, q: Any, y: Any,
+def residual_diagnostics(robot: RobotModel, measurement: Measurement, p: Any, q: ArrayLike, y: Any,
                          meta: Mapping[str, Any] | None = None, *, bins: int = 5,
                          directions: Any = None) -> Diagnostics:
     """Diagnostics of the residuals ``y - predict(robot, q)`` (module docstring).

@@ -29,7 +29,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable, Mapping
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import numpy as np
 import warp as wp
@@ -72,9 +72,12 @@ from jwarp.calibration.estimate.samples import check_samples
 from jwarp.core.arrays import finite_as, init_warp, resolve_device
 from jwarp.core.device import put_model, with_frame_masses, with_kappa_nonlinear
 from jwarp.core.threads import limit_blas
-from jwarp.core.types import DeviceLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
+
+if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
 
 #: the largest robust-loss scale in noise sigmas (beyond it the loss is linear on any data,
 #: and its square overflows near 1e154)
@@ -164,7 +167,7 @@ def _whitener(covariance: Any, S: int, m: int) -> np.ndarray | None:
     return np.linalg.solve(L, eye)   # L^-1, lower triangular
 
 
-def _noise(measurement: Any, noise_sigma: Any) -> np.ndarray:
+def _noise(measurement: Measurement, noise_sigma: Any) -> np.ndarray:
     m = len(measurement.obs_names)
     v = getattr(measurement, "noise", None) if noise_sigma is None else noise_sigma
     if v is None:
@@ -181,7 +184,7 @@ def _noise(measurement: Any, noise_sigma: Any) -> np.ndarray:
     return a
 
 
-def _problem_groups(measurement: Any, o: CalibrationOptions) -> tuple[list[str], Any]:
+def _problem_groups(measurement: Measurement, o: CalibrationOptions) -> tuple[list[str], Any]:
     """(the free groups, the measurement's prior means) of the problem of ``o``: ``free``
     with the pose groups when ``free_poses`` (less ``fix`` and the ``fix_at`` groups, whose
     values replace ``p_nominal``)."""
@@ -282,7 +285,7 @@ class CalibrationProblem:
             ``free``, compliances unbounded unless ``bound_kappa``).
     """
 
-    def __init__(self, robot: RobotLike, measurement: Any, q: Any, y: Any,
+    def __init__(self, robot: RobotLike, measurement: Measurement, q: ArrayLike, y: Any,
                  options: CalibrationOptions | None = None, *,
                  meta: Mapping[str, Any] | None = None, device: DeviceLike = None,
                  **keywords: Any) -> None:
@@ -395,7 +398,7 @@ class CalibrationProblem:
         self.n_evaluations = 0
 
     @classmethod
-    def from_options(cls, robot: RobotLike, measurement: Any, q: Any, y: Any,
+    def from_options(cls, robot: RobotLike, measurement: Measurement, q: ArrayLike, y: Any,
                      options: CalibrationOptions, meta: Mapping[str, Any] | None = None
                      ) -> CalibrationProblem:
         """``CalibrationProblem(robot, measurement, q, y, options, meta=meta)`` (kept for
@@ -442,7 +445,7 @@ class CalibrationProblem:
         self.n_evaluations += 1
         return out
 
-    def q_links(self, x: Any) -> np.ndarray:
+    def q_links(self, x: ArrayLike) -> np.ndarray:
         """(S, n_dof) the joint values the links see at x (transmission errors applied)."""
         if not self.transmission:
             return self.q
@@ -451,7 +454,7 @@ class CalibrationProblem:
             out = out + self.directions * self.space.backlash_at(x)
         return out
 
-    def coupling_terms(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def coupling_terms(self, x: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(coupling matrix C (n, n_dof), offsets (n,), harmonics h (n, K, 2), coupled
         angles u = q C^T (S, n)) at x (the robot's where the ``coupling`` group is not free)."""
         if self._cpl_idx.size:
@@ -461,7 +464,7 @@ class CalibrationProblem:
                          self.robot.coupling_harmonic)
         return C, off, h, self.q @ C.T
 
-    def coupled_rows(self, x: Any, dh: np.ndarray) -> np.ndarray:
+    def coupled_rows(self, x: ArrayLike, dh: np.ndarray) -> np.ndarray:
         """(S, n, 5) per-sample DH rows: ``dh`` with the coupled frames' extra joint value
         ``(C - C0) q' + offset + sum_k a_k sin(k u) + b_k cos(k u)`` on theta (d for a
         prismatic frame); the kinematics add ``C0 q'`` themselves."""
@@ -486,7 +489,7 @@ class CalibrationProblem:
             self._kin_data = K.KinematicsData(m, self.n_samples)
         return m, self._kin_data
 
-    def kin_robot_at(self, x: Any) -> RobotModel:
+    def kin_robot_at(self, x: ArrayLike) -> RobotModel:
         """The robot the kinematics launches see at x: :attr:`kin_robot` with the static
         transforms of the ``origin`` group at x (cached for the last x)."""
         if not self._org_idx.size:
@@ -633,7 +636,7 @@ class CalibrationProblem:
         J[self.n_data + np.arange(self._prior_idx.size), self._prior_idx] = 1.0 / sp.sigma[self._prior_idx]
         return J
 
-    def scale_unpriored(self, x: Any) -> np.ndarray:
+    def scale_unpriored(self, x: ArrayLike) -> np.ndarray:
         """Set the solver's scale (``space.typical``) of the parameters without a prior to
         ``1 / |dr/dx_i|`` of the data rows at ``x`` (scipy's ``x_scale="jac"``, fixed at the
         start). Without this the trust region of a prior-less run is measured in SI units
@@ -713,7 +716,7 @@ class CalibrationProblem:
             par = self.robot.frames[int(s)].parent
             pf = np.broadcast_to(np.eye(4), (S, 4, 4)) if par is None else frames[:, par]
             p_s = frames[:, s, :3, 3]
-            t6 = origin_twists(frames[:, s], pf, self.robot.frames[int(s)].transform, delta,
+            t6 = origin_twists(frames[:, s], pf, cast(np.ndarray, self.robot.frames[int(s)].transform), delta,
                                p_s[:, None, :])[:, 0]                 # (S, 6 (v, w), 6 c)
             v, w = t6[:, :3, :], t6[:, 3:, :]                          # (S, 3, 6)
             a = v - np.cross(w, p_s[:, :, None], axis=1)               # a = v - w x p_s
@@ -754,7 +757,7 @@ class CalibrationProblem:
             delta[sp.column[idx[cols]]] = x[idx[cols]]
             par = self.robot.frames[int(s)].parent
             pf = (np.broadcast_to(np.eye(4), (S, 4, 4)) if par is None else frames[:, par])
-            tw = origin_twists(frames[:, s], pf, self.robot.frames[int(s)].transform, delta,
+            tw = origin_twists(frames[:, s], pf, cast(np.ndarray, self.robot.frames[int(s)].transform), delta,
                                frames[:, mframes[below]][:, :, :3, 3])   # (S, k, 6, 6)
             dy = np.einsum("smkt,sktc->smc", jf[:, :, below, :], tw)  # (S, m, 6)
             out[:, :, cols] = dy[:, :, sp.column[idx[cols]]]
@@ -860,6 +863,8 @@ def _least_squares(prob: CalibrationProblem, x: np.ndarray, moving: np.ndarray,
     :data:`STALL_RTOL` of itself) over the last :data:`STALL_WINDOW` iterations."""
     sp = prob.space
     idx = np.nonzero(moving)[0]
+    fun: Callable[[np.ndarray], np.ndarray]
+    jac: Callable[[np.ndarray], np.ndarray]
     if idx.size == sp.size:
         fun, jac = prob.residuals, prob.jacobian
     else:
@@ -868,11 +873,13 @@ def _least_squares(prob: CalibrationProblem, x: np.ndarray, moving: np.ndarray,
             xx[idx] = z
             return xx
 
-        def fun(z: np.ndarray) -> np.ndarray:
+        def fun_sub(z: np.ndarray) -> np.ndarray:
             return prob.residuals(full(z))
 
-        def jac(z: np.ndarray) -> np.ndarray:
+        def jac_sub(z: np.ndarray) -> np.ndarray:
             return prob.jacobian(full(z))[:, idx]
+
+        fun, jac = fun_sub, jac_sub
     costs: list[float] = []
 
     def callback(intermediate_result: Any) -> None:
@@ -991,7 +998,7 @@ def solve_start(prob: CalibrationProblem, xs: np.ndarray, o: CalibrationOptions,
                           message=message, rounds=rounds, held=held & (best_x == 0.0))
 
 
-def calibrate(robot: RobotLike, measurement: Any, q: Any, y: Any, *,
+def calibrate(robot: RobotLike, measurement: Measurement, q: ArrayLike, y: Any, *,
               meta: Mapping[str, Any] | None = None, options: CalibrationOptions | None = None,
               **overrides: Any) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples:
@@ -1028,7 +1035,7 @@ def calibrate(robot: RobotLike, measurement: Any, q: Any, y: Any, *,
 
 
 @limit_blas  # small dense solves: a threaded BLAS only oversubscribes (JWARP_BLAS_THREADS)
-def calibrate_with(robot: RobotLike, measurement: Any, q: Any, y: Any, options: CalibrationOptions,
+def calibrate_with(robot: RobotLike, measurement: Measurement, q: ArrayLike, y: Any, options: CalibrationOptions,
                    *, meta: Mapping[str, Any] | None = None, t0: float | None = None
                    ) -> CalibrationResult:
     """MAP calibration of a robot (and the measurement's own parameters) from samples.
@@ -1087,6 +1094,7 @@ def calibrate_with(robot: RobotLike, measurement: Any, q: Any, y: Any, options: 
                      "held_at_bound": int(sol.held.sum())})
         if best is None or sol.cost < best[0].cost:
             best = (sol, xs, it[0])
+    assert best is not None  # at least one start ran
     sol, xs, iters = best
     return build_result(prob, sol, xs, iters, runs, time.perf_counter() - t0,
                         identifiability_tol=o.identifiability_tol, moved_sigmas=o.moved_sigmas,

@@ -61,7 +61,7 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -72,7 +72,11 @@ from jwarp.calibration.estimate.origin import (
     origin_frames,
     with_static_transforms,
 )
+from jwarp.core.types import ArrayLike
 from jwarp.model import RobotModel
+
+if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
 
 DH_GROUPS = ("d", "theta", "r", "alpha", "beta")          # = DH columns 0..4
 KAPPA_GROUPS = ("kappa_alpha", "kappa_beta", "kappa_theta")  # = kappa axes 0..2
@@ -224,7 +228,7 @@ def parse_groups(free: str | Iterable[str]) -> list[str]:
     return list(dict.fromkeys(items))
 
 
-def with_pose_groups(measurement: Any, free: str | Iterable[str],
+def with_pose_groups(measurement: Measurement, free: str | Iterable[str],
                      fix: str | Iterable[str] | None = None) -> list[str]:
     """The groups ``free`` plus the measurement's pose and marker groups
     (:data:`POSE_GROUPS` it has: tracker, camera, markers, fixtures) not named in ``fix``.
@@ -302,7 +306,7 @@ def influencing_masses(robot: RobotModel, measured: Iterable[int] | None,
     roots = [i for i in sorted(chain) if compliant[i]]
     if not roots or not robot.masses:
         return []
-    loaded = robot.subtree_mask[roots].any(axis=0)        # (n,): in a compliant subtree
+    loaded = cast(np.ndarray, robot.subtree_mask[roots].any(axis=0))  # (n,): in a compliant subtree
     return [e for e, m in enumerate(robot.masses) if loaded[m.frame]]
 
 
@@ -404,7 +408,7 @@ def harmonic_joints(robot: RobotModel, dh_frames: Iterable[int]) -> list[int]:
     return sorted(out)
 
 
-def _free_masses(robot: RobotModel, measurement: Any, groups: list[str], dh_frames: list[int],
+def _free_masses(robot: RobotModel, measurement: Measurement, groups: list[str], dh_frames: list[int],
                  rel_sigma: float) -> list[int]:
     """Entries of ``robot.masses`` of the ``mass`` group (see :func:`influencing_masses`);
     a ValueError naming ``free`` when there are none."""
@@ -477,7 +481,7 @@ class ParameterSpace:
 
     # ----------------------------------------------------------------- build
     @classmethod
-    def build(cls, robot: RobotModel, measurement: Any, free: str | Iterable[str], *,
+    def build(cls, robot: RobotModel, measurement: Measurement, free: str | Iterable[str], *,
               sigma: Mapping[str, float] | None = None, frames: Iterable[int | str] | None = None,
               p_nominal: np.ndarray | None = None, bound_kappa: bool = False,
               orders: Mapping[str, int] | None = None) -> ParameterSpace:
@@ -667,26 +671,26 @@ class ParameterSpace:
                 for i in cfr:
                     fname = robot.frames[i].name
                     offset_group = "d" if robot.frame_is_prismatic[i] else "theta"
-                    entries: list[tuple[str, int, float]] = []
+                    centries: list[tuple[str, int, float]] = []
                     if offset_group not in groups:
-                        entries.append((f"{fname}.{g}_offset", 0, 0.0))
-                    for t, (j, c) in enumerate(robot.frames[i].coupling):
-                        entries.append((f"{fname}.{g}_{robot.joints[j].name}",
-                                        COUPLING_COEF + t, float(c)))
+                        centries.append((f"{fname}.{g}_offset", 0, 0.0))
+                    for t, (j, coef) in enumerate(robot.frames[i].coupling):
+                        centries.append((f"{fname}.{g}_{robot.joints[j].name}",
+                                         COUPLING_COEF + t, float(coef)))
                     K = order_of(g, fname, ord_whole.get(g, COUPLING_ORDER))
                     for k in range(K):
                         for ab in range(2):
-                            entries.append((f"{fname}.{g}_{'ab'[ab]}{k + 1}",
-                                            COUPLING_HARM + 2 * k + ab,
-                                            float(ch[i, k, ab]) if k < ch.shape[1] else 0.0))
-                    for nm, c, v in entries:
+                            centries.append((f"{fname}.{g}_{'ab'[ab]}{k + 1}",
+                                             COUPLING_HARM + 2 * k + ab,
+                                             float(ch[i, k, ab]) if k < ch.shape[1] else 0.0))
+                    for nm, cc, v in centries:
                         names.append(nm)
                         grp.append(g)
                         nom.append(v)
                         sg.append(sig[g])
                         kind.append(KIND_COUPLING)
                         frm.append(i)
-                        col.append(c)
+                        col.append(cc)
             elif g == KAPPA_NL_GROUP:
                 for i in dh_frames:
                     names.append(f"{robot.frames[i].name}.{g}")
@@ -697,6 +701,7 @@ class ParameterSpace:
                     frm.append(i)
                     col.append(2)
             else:
+                assert block is not None  # g is one of the measurement's groups
                 for k in block.indices(g):
                     names.append(block.names[k])
                     grp.append(g)
@@ -721,8 +726,9 @@ class ParameterSpace:
                     typical[k] = DEFAULT_SIGMA[MASS_GROUP] * max(nom[k], 1.0)
                 elif g in DEFAULT_SIGMA:
                     typical[k] = DEFAULT_SIGMA[g]
-                elif kind[k] == KIND_MEAS and math.isfinite(float(block.sigma[col[k]])):
-                    typical[k] = float(block.sigma[col[k]])
+                elif kind[k] == KIND_MEAS and math.isfinite(
+                        float(cast(Any, block).sigma[col[k]])):  # a measurement parameter
+                    typical[k] = float(cast(Any, block).sigma[col[k]])
                 else:
                     typical[k] = 1.0
         for g, pat, v in sig_keyed:
@@ -769,7 +775,7 @@ class ParameterSpace:
         except ValueError:
             raise ValueError(f"name: unknown parameter '{name}'") from None
 
-    def check(self, x: Any, name: str = "x") -> np.ndarray:
+    def check(self, x: ArrayLike, name: str = "x") -> np.ndarray:
         a = np.asarray(x, np.float64)
         if a.shape != (self.size,):
             raise ValueError(f"{name}: expected shape ({self.size},), got {a.shape}")
@@ -778,7 +784,7 @@ class ParameterSpace:
         return a
 
     # ---------------------------------------------------------- x -> model
-    def unpack(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def unpack(self, x: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """x (P,) -> (DH rows rho0 (n_frames, 5), kappa (n_frames, 3), measurement p
         (P_meas,), point masses (len(robot.masses),) [kg]); fixed parts at nominal."""
         x = self.check(x)
@@ -819,7 +825,7 @@ class ParameterSpace:
             x[m] = a[self.column[m]]
         return x
 
-    def robot_at(self, x: Any) -> RobotModel:
+    def robot_at(self, x: ArrayLike) -> RobotModel:
         """A calibrated copy of the robot: DH rows, compliances and (when the ``mass``
         group is free) point masses from ``x``; negative compliances / masses clipped to 0."""
         dh, kap, _, mass = self.unpack(x)
@@ -837,7 +843,7 @@ class ParameterSpace:
             out = with_backlash(out, self.backlash_at(x))
         return out
 
-    def coupling_at(self, x: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def coupling_at(self, x: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The coupled frames at ``x``: (coupling matrix (n_frames, n_dof) with the
         calibrated coefficients, offsets (n_frames,) [rad or m] added to theta (d for a
         prismatic frame), coupling harmonics (n_frames, K, 2); the robot's where not
@@ -864,7 +870,7 @@ class ParameterSpace:
                 h[i, (c - COUPLING_HARM) // 2, (c - COUPLING_HARM) % 2] = x[p]
         return C, off, h
 
-    def with_coupling(self, robot: RobotModel, x: Any) -> RobotModel:
+    def with_coupling(self, robot: RobotModel, x: ArrayLike) -> RobotModel:
         """``robot`` (a copy of :attr:`robot` with other groups applied) with the
         ``coupling`` group at ``x``: coefficients in the frames' couplings, offsets in
         their DH rows, harmonics in ``coupling_harmonic``."""
@@ -887,7 +893,7 @@ class ParameterSpace:
                                         for i in range(self.robot.n_frames) if np.any(h[i])}
         return RobotModel.from_dict(doc)
 
-    def static_transforms_at(self, x: Any) -> dict[int, np.ndarray]:
+    def static_transforms_at(self, x: ArrayLike) -> dict[int, np.ndarray]:
         """{static frame: (4, 4) transform ``T0 @ Trans(v) @ Rot(w)``} of the frames of
         the ``origin`` group at ``x`` (empty when the group is not free)."""
         x = self.check(x)
@@ -900,7 +906,7 @@ class ParameterSpace:
             out[int(i)] = self.robot.frames[int(i)].transform @ delta_transform(delta)
         return out
 
-    def harmonic_at(self, x: Any) -> np.ndarray:
+    def harmonic_at(self, x: ArrayLike) -> np.ndarray:
         """(n_dof, K, 2) joint transmission coefficients at ``x`` (fixed ones at the
         robot's; K as the ``harmonic`` group frees, or the robot's own)."""
         x = self.check(x)
@@ -912,7 +918,7 @@ class ParameterSpace:
         h[self.frame[m], self.column[m] // 2, self.column[m] % 2] = x[m]
         return h
 
-    def backlash_at(self, x: Any) -> np.ndarray:
+    def backlash_at(self, x: ArrayLike) -> np.ndarray:
         """(n_dof,) backlash b_j [rad or m] at ``x`` (the robot's recorded one,
         :func:`robot_backlash`, where not free)."""
         x = self.check(x)
@@ -921,7 +927,7 @@ class ParameterSpace:
         out[self.frame[m]] = x[m]
         return out
 
-    def kappa_nonlinear_at(self, x: Any) -> np.ndarray:
+    def kappa_nonlinear_at(self, x: ArrayLike) -> np.ndarray:
         """(n_frames,) nonlinear joint compliances [rad/(N m)^3] at ``x``."""
         x = self.check(x)
         out = self.robot.kappa_nonlinear.copy()
@@ -936,7 +942,7 @@ class ParameterSpace:
         out[self.frame[self.kind == KIND_KAPPA_NL]] = True
         return out
 
-    def measurement_params(self, x: Any) -> np.ndarray:
+    def measurement_params(self, x: ArrayLike) -> np.ndarray:
         """(P_meas,) all measurement parameters (fixed ones at nominal)."""
         return self.unpack(x)[2]
 
@@ -950,7 +956,7 @@ class ParameterSpace:
         """(P_m,) indices into ``robot.masses`` of the free masses, in parameter order."""
         return self.column[self.kind == KIND_MASS]
 
-    def prior_residuals(self, x: Any) -> np.ndarray:
+    def prior_residuals(self, x: ArrayLike) -> np.ndarray:
         """((x - nominal) / sigma) for the parameters with a prior, (P_prior,)."""
         x = np.asarray(x, np.float64)
         h = self.has_prior

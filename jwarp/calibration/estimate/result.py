@@ -13,7 +13,7 @@ import types
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,10 +25,13 @@ from jwarp.calibration.estimate.params import (
     ParameterSpace,
     robot_backlash,
 )
-from jwarp.core.types import RobotLike
+from jwarp.core.types import ArrayLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.model.valid_range import ValidRange, record_valid_range, valid_range_of
 from jwarp.plugins.registry import robot as get_robot
+
+if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
 
 
 class CalibrationWarning(UserWarning):
@@ -40,7 +43,7 @@ class CalibrationWarning(UserWarning):
 _COORD_SUFFIXES = ("x", "y", "z", "u", "v")
 
 
-def observation_groups(measurement: Any) -> list[tuple[str, np.ndarray]]:
+def observation_groups(measurement: Measurement) -> list[tuple[str, np.ndarray]]:
     """Groups of observed values whose Euclidean norm is one error (a marker's x, y, z; an
     image point's u, v; a scalar distance alone).
 
@@ -63,7 +66,7 @@ def group_norms(diff: np.ndarray, groups: list[tuple[str, np.ndarray]]) -> np.nd
     return np.stack([np.linalg.norm(diff[:, ix], axis=1) for _, ix in groups], axis=1)
 
 
-def model_frames(robot: RobotModel, q: np.ndarray, *, kappa: Any = None,
+def model_frames(robot: RobotModel, q: np.ndarray, *, kappa: ArrayLike | None = None,
                  elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
                  tol: float = 1e-12, directions: Any = None) -> np.ndarray:
     """World frames (S, n_frames, 4, 4) float64 on CPU: elastic equilibrium with ``kappa``
@@ -104,7 +107,7 @@ def model_frames(robot: RobotModel, q: np.ndarray, *, kappa: Any = None,
     return K.fk(model, q, dh=dh, device="cpu", dtype=np.float64)
 
 
-def fixed_params(measurement: Any, fix_at: Mapping[str, Any], p_nominal: Any = None
+def fixed_params(measurement: Measurement, fix_at: Mapping[str, Any], p_nominal: Any = None
                  ) -> np.ndarray:
     """Measurement parameters (P_meas,) with the groups of ``fix_at`` at values calibrated
     before (``--fix tracker=cal.json``).
@@ -165,8 +168,8 @@ def fixed_params(measurement: Any, fix_at: Mapping[str, Any], p_nominal: Any = N
     return p
 
 
-def predict(robot: RobotLike, measurement: Any, p: Any, q: Any, meta: Mapping[str, Any] | None = None,
-            *, kappa: Any = None, elastic: bool | None = None, lam: float = 1.0,
+def predict(robot: RobotLike, measurement: Measurement, p: Any, q: ArrayLike, meta: Mapping[str, Any] | None = None,
+            *, kappa: ArrayLike | None = None, elastic: bool | None = None, lam: float = 1.0,
             max_iter: int = 100, tol: float = 1e-12, directions: Any = None) -> np.ndarray:
     """Predicted observations (S, m) of ``measurement`` with parameters ``p`` (P_meas,) for
     joint values ``q`` (S, n_dof) on ``robot`` (elastic as in :func:`model_frames`)."""
@@ -182,8 +185,8 @@ def predict(robot: RobotLike, measurement: Any, p: Any, q: Any, meta: Mapping[st
     return np.asarray(measurement.predict(fr, np.asarray(p, np.float64), md), np.float64)
 
 
-def errors(robot: RobotLike, measurement: Any, p: Any, q: Any, y: Any,
-           meta: Mapping[str, Any] | None = None, *, kappa: Any = None,
+def errors(robot: RobotLike, measurement: Measurement, p: Any, q: ArrayLike, y: Any,
+           meta: Mapping[str, Any] | None = None, *, kappa: ArrayLike | None = None,
            elastic: bool | None = None, lam: float = 1.0, max_iter: int = 100,
            tol: float = 1e-12, directions: Any = None) -> np.ndarray:
     """Per-sample errors (S, G) = norm of (prediction - y) per observation group (marker,

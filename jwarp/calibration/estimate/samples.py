@@ -4,14 +4,18 @@ columns, shared by the MAP solver and the result's predictions."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from jwarp.core.types import ArrayLike
 from jwarp.model import RobotModel
 
+if TYPE_CHECKING:
+    from jwarp.model.measurement import Measurement
 
-def check_samples(robot: RobotModel, measurement: Any, q: Any, y: Any,
+
+def check_samples(robot: RobotModel, measurement: Measurement, q: ArrayLike, y: Any,
                   meta: Mapping[str, Any] | None = None
                   ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray] | None]:
     """Validate joint values q (S, n_dof), observations y (S, m) and per-sample meta

@@ -106,7 +106,7 @@ class Campaign:
         meas = make_measurement(self.robot, self.setup)
         text = samples_text(self.robot, meas, self.samples)
         cid = uuid.uuid4().hex
-        record = {"campaign_id": cid, "samples_sha256": sha256_hex(text)}
+        record: dict[str, Any] = {"campaign_id": cid, "samples_sha256": sha256_hex(text)}
         setup = dataclasses.replace(self.setup, path=None, **record)
         truth = self.true_robot.copy(notes={**self.true_robot.notes, **record})
         with AtomicFolder(folder, option=option) as out:

@@ -51,7 +51,9 @@ class CartesianMeasurement(Measurement):
         self.marker_names, marker_frames, entries = g.parse_markers(
             setup, robot, default_sigma=self.DEFAULT_MARKER_SIGMA, frame_optional=False,
             position_required=False)
-        for acc, more in zip((names, nominal, sigma, groups), entries):
+        accs: tuple[list[Any], ...] = (names, nominal, sigma, groups)
+        mores: tuple[list[Any], ...] = entries
+        for acc, more in zip(accs, mores):
             acc += more
         self.noise = g.positive(setup.get("noise", self.DEFAULT_NOISE), "setup.noise")
         self.marker_frames = np.array(marker_frames, dtype=np.int64)     # (K,)

@@ -43,7 +43,7 @@ directory). Parameters: ``<body>_radius`` for every sphere/capsule body (group `
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -275,11 +275,12 @@ class ContactMeasurement(Measurement):
                 A, B = B, A  # the segment body first; the distance is symmetric
             RA, oA = self._pose(A, f[sel], p)
             RB, oB = self._pose(B, f[sel], p)
-            a0 = np.einsum("sij,j->si", RA, A.p0) + oA
-            a1 = np.einsum("sij,j->si", RA, A.p1) + oA
+            # segment bodies (capsules) have their end points
+            a0 = np.einsum("sij,j->si", RA, cast(np.ndarray, A.p0)) + oA
+            a1 = np.einsum("sij,j->si", RA, cast(np.ndarray, A.p1)) + oA
             if B.kind == "capsule":
-                b0 = np.einsum("sij,j->si", RB, B.p0) + oB
-                b1 = np.einsum("sij,j->si", RB, B.p1) + oB
+                b0 = np.einsum("sij,j->si", RB, cast(np.ndarray, B.p0)) + oB
+                b1 = np.einsum("sij,j->si", RB, cast(np.ndarray, B.p1)) + oB
                 ca, cb = closest_segments(a0, a1, b0, b1)
                 diff = ca - cb
                 dist = np.linalg.norm(diff, axis=1)
@@ -291,6 +292,7 @@ class ContactMeasurement(Measurement):
             y[sel, 0] = d
             if not grad:
                 continue
+            assert jf is not None and jp is not None  # allocated with grad
             for body, c, sign in ((A, ca, 1.0), (B, cb, -1.0)):
                 if body.frame is not None:
                     jf[sel, 0, body.slot, :] += sign * g.point_twist_rows(n, c, f[sel, body.frame, :3, 3])

@@ -66,7 +66,9 @@ class ImageMeasurement(Measurement):
         self.marker_names, mframes, entries = g.parse_markers(
             setup, robot, default_sigma=self.DEFAULT_MARKER_SIGMA, frame_optional=True,
             position_required=True)
-        for acc, more in zip((names, nominal, sigma, groups), entries):
+        accs: tuple[list[Any], ...] = (names, nominal, sigma, groups)
+        mores: tuple[list[Any], ...] = entries
+        for acc, more in zip(accs, mores):
             acc += more
 
         intr = g.section(setup, "intrinsics", "setup")

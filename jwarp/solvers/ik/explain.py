@@ -25,18 +25,21 @@ angle between the axis as the frame holds it and as the target holds it).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from jwarp.core.arrays import real_array
 from jwarp.core.device import host_device
 from jwarp.core.limits import LIMIT_TOL
-from jwarp.core.types import RobotLike
+from jwarp.core.types import ArrayLike, RobotLike
 from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.ik.options import ORIENTATIONS, orientation_args
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 __all__ = ["explain_ik", "pose_errors", "limit_reasons", "collision_reasons",
            "ORIENTATIONS"]
@@ -45,7 +48,7 @@ __all__ = ["explain_ik", "pose_errors", "limit_reasons", "collision_reasons",
 MAX_PAIRS = 3
 
 
-def _frames(model: Any, q: np.ndarray, kappa: Any = None) -> tuple[np.ndarray, Any, bool]:
+def _frames(model: RobotModel, q: np.ndarray, kappa: ArrayLike | None = None) -> tuple[np.ndarray, Any, bool]:
     """Frames (n_frames, 4, 4) at q (n_dof,) in float64, the DH rows used (None: rigid)
     and whether the elastic equilibrium converged (True when rigid)."""
     from jwarp.kinematics.fk import fk
@@ -59,8 +62,8 @@ def _frames(model: Any, q: np.ndarray, kappa: Any = None) -> tuple[np.ndarray, A
     return F, rho, bool(np.all(conv))
 
 
-def pose_errors(robot: RobotLike, frame: Any, q: Any, target: Any, *, orientation: str = "full",
-                free_axis: Any = (0.0, 0.0, 1.0), kappa: Any = None) -> tuple[float, float]:
+def pose_errors(robot: RobotLike, frame: int | str, q: ArrayLike, target: Any, *, orientation: str = "full",
+                free_axis: Any = (0.0, 0.0, 1.0), kappa: ArrayLike | None = None) -> tuple[float, float]:
     """(position error [m], rotation error [rad]) of ``frame`` at q (n_dof,) against the
     target pose (4, 4), as :func:`explain_ik` measures them (planar robots: x, y and the
     rotation about z; ``orientation`` "none": rotation error 0; "axis": the angle between
@@ -71,7 +74,7 @@ def pose_errors(robot: RobotLike, frame: Any, q: Any, target: Any, *, orientatio
     return _pose_errors(model, F[fi], T, orientation, axis)
 
 
-def _pose_errors(model: Any, X: np.ndarray, T: np.ndarray, orientation: str,
+def _pose_errors(model: RobotModel, X: np.ndarray, T: np.ndarray, orientation: str,
                  axis: np.ndarray) -> tuple[float, float]:
     planar = model.workspace_dim == 2
     dp = T[:3, 3] - X[:3, 3]
@@ -91,11 +94,11 @@ def _pose_errors(model: Any, X: np.ndarray, T: np.ndarray, orientation: str,
     return pos, float(math.atan2(s, c))
 
 
-def _unit(model: Any, j: int) -> str:
+def _unit(model: RobotModel, j: int) -> str:
     return "m" if model.joints[j].type == "prismatic" else "rad"
 
 
-def limit_reasons(robot: RobotModel, q: Any, tol: float = LIMIT_TOL) -> list[str]:
+def limit_reasons(robot: RobotModel, q: ArrayLike, tol: float = LIMIT_TOL) -> list[str]:
     """One line per violated limit of q (n_dof,): the joint, its value, its range and by
     how much it is outside (box limits), or the linear combination likewise."""
     model = robot
@@ -122,7 +125,7 @@ def limit_reasons(robot: RobotModel, q: Any, tol: float = LIMIT_TOL) -> list[str
     return out
 
 
-def _at_limits(model: Any, q: np.ndarray, tol: float = 1e-6) -> list[str]:
+def _at_limits(model: RobotModel, q: np.ndarray, tol: float = 1e-6) -> list[str]:
     """The joints of q sitting at (within ``tol`` of) a box limit, as 'name = value (lower)'."""
     out = []
     for j, (lo, hi) in enumerate(model.joint_limits):
@@ -132,14 +135,14 @@ def _at_limits(model: Any, q: np.ndarray, tol: float = 1e-6) -> list[str]:
     return out
 
 
-def _link(model: Any, s: int) -> str:
+def _link(model: RobotModel, s: int) -> str:
     from jwarp.world.collision import sphere_link
 
     return sphere_link(model, s)
 
 
-def collision_reasons(robot: RobotModel, q: Any, world: Any = None, margin: float = 0.0, *,
-                      kappa: Any = None) -> list[str]:
+def collision_reasons(robot: RobotModel, q: ArrayLike, world: World | None = None, margin: float = 0.0, *,
+                      kappa: ArrayLike | None = None) -> list[str]:
     """The colliding pairs of q (n_dof,): link vs object (closer than ``margin`` [m] to the
     world) and link vs link (closer than ``margin`` to each other), the worst first, one
     line per pair of a link and an object/link (its closest spheres' signed surface
@@ -179,13 +182,13 @@ def collision_reasons(robot: RobotModel, q: Any, world: Any = None, margin: floa
     return out
 
 
-def _pairs(model: Any) -> np.ndarray:
+def _pairs(model: RobotModel) -> np.ndarray:
     from jwarp.world.collision import collision_pairs
 
     return collision_pairs(model)
 
 
-def _objects(model: Any, q: np.ndarray, world: Any, spheres: np.ndarray,
+def _objects(model: RobotModel, q: np.ndarray, world: World, spheres: np.ndarray,
              rho: Any) -> list[str]:
     """The name of the object nearest to each sphere's centre (``world.object_name``)."""
     from jwarp.world.collision import nearest_objects
@@ -209,7 +212,7 @@ def _pair_lines(worst: dict, margin: float, kind: str) -> list[str]:
     return lines
 
 
-def _inputs(model: Any, frame: Any, q: Any, target: Any, orientation: str,
+def _inputs(model: RobotModel, frame: int | str, q: ArrayLike, target: Any, orientation: str,
             free_axis: Any) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
     qv = real_array(q, "q")
     if qv.shape != (model.n_dof,):
@@ -225,10 +228,10 @@ def _inputs(model: Any, frame: Any, q: Any, target: Any, orientation: str,
     return np.asarray(qv, np.float64), np.asarray(T, np.float64), fi, np.asarray(axis)
 
 
-def explain_ik(robot: RobotLike, frame: Any, q: Any, target: Any, *, world: Any = None,
+def explain_ik(robot: RobotLike, frame: int | str, q: ArrayLike, target: Any, *, world: World | None = None,
                margin: float = 0.0, tol_pos: float = 1e-4, tol_rot: float = 1e-3,
                orientation: str = "full", free_axis: Any = (0.0, 0.0, 1.0),
-               kappa: Any = None) -> str:
+               kappa: ArrayLike | None = None) -> str:
     """Why the IK answer q is not feasible, or ``"feasible"``.
 
     Args:

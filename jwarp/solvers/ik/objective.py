@@ -3,7 +3,7 @@ target batches."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import warp as wp
@@ -16,6 +16,7 @@ from jwarp.core.arrays import (
     resolve_device,
 )
 from jwarp.core.device import numpy_dtype, put_model, scalar_type
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik as ik_kernels
 from jwarp.kernels import path as path_kernels
@@ -23,6 +24,9 @@ from jwarp.kinematics.compensation import CompensationRows
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik.options import IKWeights, orientation_args
 from jwarp.world import collision
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 
 def pose_matrix(xyz: Any, rotvec: Any = (0.0, 0.0, 0.0)) -> np.ndarray:
@@ -37,7 +41,7 @@ def pose_matrix(xyz: Any, rotvec: Any = (0.0, 0.0, 0.0)) -> np.ndarray:
     return T
 
 
-def quaternion_matrices(q: Any, name: str = "quaternions") -> np.ndarray:
+def quaternion_matrices(q: ArrayLike, name: str = "quaternions") -> np.ndarray:
     """Rotations (..., 3, 3) of quaternions (..., 4) in ROS/MoveIt/scipy order
     ``(x, y, z, w)`` (scalar last), each normalised; ValueError naming ``name`` (and the
     flat index) for NaN/inf or a zero quaternion."""
@@ -124,7 +128,7 @@ def target_poses(target: Any) -> tuple[np.ndarray, tuple]:
     return T, lead
 
 
-def batch_array(B: int, tail: tuple, dtype: Any, device: Any, batch_fastest: bool) -> wp.array:
+def batch_array(B: int, tail: tuple, dtype: type, device: wp.Device, batch_fastest: bool) -> wp.array:
     """A zeroed Warp array of shape (B, *tail); with ``batch_fastest`` the first index is
     the fastest in memory (a transposed view), which coalesces a CUDA warp's accesses of
     ``a[b, ...]`` over consecutive ``b``."""
@@ -141,10 +145,10 @@ class IKObjective:
     Warp arrays on ``device``.
     """
 
-    def __init__(self, robot: Any, frame: int | str, n: int, *, world: Any = None,
+    def __init__(self, robot: RobotLike, frame: int | str, n: int, *, world: World | None = None,
                  weights: IKWeights | None = None, eps: float | None = None,
-                 q_default: Any = None, kappa: Any = None, lam: float = 0.7,
-                 device: Any = None, dtype: Any = np.float64, batch_fastest: bool = False,
+                 q_default: Any = None, kappa: ArrayLike | None = None, lam: float = 0.7,
+                 device: DeviceLike = None, dtype: DTypeLike = np.float64, batch_fastest: bool = False,
                  orientation: str = "full", free_axis: Any = (0.0, 0.0, 1.0)):
         init_warp()
         self.robot = get_robot(robot)
@@ -310,7 +314,7 @@ class IKObjective:
         return u.astype(np.float64), g.astype(np.float64)
 
 
-def check_single_world(world: Any) -> None:
+def check_single_world(world: World | None) -> None:
     """ValueError naming ``world`` for a batch of worlds (:meth:`World.batch`): IK checks
     every target against one world (a batch would be checked as the union of its worlds);
     solve each world's targets with that world (``world.select(i)``)."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -15,6 +15,9 @@ from jwarp.model import RobotModel
 from jwarp.solvers.options import SolverOptions
 from jwarp.solvers.overrides import renamed_options
 from jwarp.utils.checks import check_int
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 #: the largest accepted position tolerance [m] (IKOptions.tol_pos): larger means nothing
 MAX_TOL_POS = 1e3
@@ -207,7 +210,7 @@ class IKOptions(SolverOptions):
                 raise TypeError(f"weights: expected IKWeights, got {type(self.weights).__name__}")
             self.weights.validate()
 
-    def eps_for(self, world: Any) -> float:
+    def eps_for(self, world: World | None) -> float:
         """The smoothing width in use: ``eps`` or the default for ``world``."""
         if self.eps is not None:
             return self.eps

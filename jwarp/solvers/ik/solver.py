@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import warp as wp
@@ -14,6 +14,7 @@ import warp as wp
 from jwarp.core.arrays import finite_as, init_warp, real_array, resolve_device
 from jwarp.core.device import numpy_dtype, put_model, scalar_type
 from jwarp.core.limits import LIMIT_TOL, sample_within_limits, within_limits
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kernels import ik_step as step_kernels
 from jwarp.kinematics.transmission import transmitted, untransmitted
@@ -32,6 +33,9 @@ from jwarp.solvers.overrides import renamed_argument, with_overrides
 from jwarp.utils.checks import check_int
 from jwarp.world import collision
 from jwarp.world.model_check import check_collision_model, mesh_margin_model
+
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
 
 
 class IKSolver:
@@ -73,9 +77,9 @@ class IKSolver:
             output is not (P, H, n_dof) finite values) names ``warm_start``.
     """
 
-    def __init__(self, robot: Any, frame: int | str, n_problems: int,
-                 options: IKOptions | None = None, world: Any = None, device: Any = None,
-                 dtype: Any = None, warm_start: Any = None):
+    def __init__(self, robot: RobotLike, frame: int | str, n_problems: int,
+                 options: IKOptions | None = None, world: World | None = None, device: DeviceLike = None,
+                 dtype: DTypeLike = None, warm_start: Any = None):
         init_warp()
         #: the warm start (None: random seeds); see the class docstring
         self.warm_start = check_warm_start(warm_start)
@@ -128,7 +132,6 @@ class IKSolver:
                              wp.zeros(4, dtype=wp.int32, device="cpu", pinned=True))
         self.halt = wp.zeros(1, dtype=wp.int32, device=dev)
         self.n_seeds = 0
-        self.objective: IKObjective | None = None
         self._allocate(options.n_starts)
 
     # ------------------------------------------------------------------ buffers
@@ -143,7 +146,8 @@ class IKSolver:
                           eps=self.eps, q_default=o.q_default, kappa=o.kappa, lam=o.lam,
                           device=dev, dtype=self.scalar, batch_fastest=fast,
                           orientation=o.orientation, free_axis=o.free_axis)
-        self.objective = obj
+        #: the batch's objective (allocated with the buffers)
+        self.objective: IKObjective = obj
         i32 = wp.int32
         self.on = wp.zeros(B, dtype=i32, device=dev)
         #: per seed: 0 active, 1 done (feasible), 2 frozen (``freeze_solved``)
@@ -198,7 +202,7 @@ class IKSolver:
         self._launches: dict = {}
         self._cost_data: dict = {}  # CollisionData per gathered U_A batch size
 
-    def _scratch(self, B: int, m: int, dtype: Any) -> wp.array:
+    def _scratch(self, B: int, m: int, dtype: type) -> wp.array:
         """(B, m) scratch of the check: on CUDA frame-major (coalesced); on the CPU, whose
         threads run one after another, one row seen by every configuration (stride 0)."""
         if self.device.is_cuda:
@@ -339,7 +343,7 @@ class IKSolver:
         check_int(seed, "seed", 0, none=True)
         self.rng = np.random.default_rng(seed)
 
-    def solve(self, targets: Any, seeds: Any = None, *,
+    def solve(self, targets: ArrayLike, seeds: Any = None, *,
               callback: Callable[[int, np.ndarray], None] | None = None) -> IKResult:
         """Solve the ``n_problems`` targets.
 
@@ -489,8 +493,8 @@ class IKSolver:
         return res.reshaped(lead)
 
 
-def ik(robot: Any, frame: int | str, target: Any, *, world: Any = None, seeds: Any = None,
-       device: Any = None, dtype: Any = np.float64,
+def ik(robot: RobotLike, frame: int | str, target: Any, *, world: World | None = None, seeds: Any = None,
+       device: DeviceLike = None, dtype: DTypeLike = np.float64,
        callback: Callable[[int, np.ndarray], None] | None = None, warm_start: Any = None,
        options: IKOptions | None = None, **overrides: Any) -> IKResult:
     """Collision-free IK of ``frame`` onto ``target`` with random multi-starts: one
@@ -582,8 +586,8 @@ SOLVER_CACHE_MAX_BATCH = 4096
 _SOLVERS: dict[tuple, IKSolver] = {}
 
 
-def _solver_key(model: RobotModel, frame: int, n_problems: int, opts: IKOptions, world: Any,
-                device: Any, dtype: Any) -> tuple | None:
+def _solver_key(model: RobotModel, frame: int, n_problems: int, opts: IKOptions, world: World | None,
+                device: DeviceLike, dtype: DTypeLike) -> tuple | None:
     """Cache key of a solver for these arguments (None: do not cache). The cached solver
     holds the robot and the world, so their ids stay theirs while it is cached."""
     if n_problems * opts.n_starts > SOLVER_CACHE_MAX_BATCH:
@@ -630,7 +634,7 @@ def check_warm_start(warm_start: Any, name: str = "warm_start") -> Any:
     return warm_start
 
 
-def warm_start_seeds(model: RobotModel, warm_start: Any, targets: np.ndarray, world: Any,
+def warm_start_seeds(model: RobotModel, warm_start: Any, targets: np.ndarray, world: World | None,
                      n_random: int = 0, rng: np.random.Generator | None = None,
                      name: str = "warm_start") -> np.ndarray:
     """Seeds (P, H + n_random, n_dof) for the targets (P, 4, 4): the warm start's H per

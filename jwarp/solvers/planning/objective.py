@@ -4,7 +4,7 @@ paths and their gradients, on the device."""
 from __future__ import annotations
 
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import warp as wp
@@ -17,7 +17,7 @@ from jwarp.core.arrays import (
     resolve_device,
 )
 from jwarp.core.device import numpy_dtype, put_model, scalar_type
-from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
@@ -26,12 +26,15 @@ from jwarp.solvers.planning.options import PathWeights
 from jwarp.world import collision
 from jwarp.world.path_feasibility import check_substeps, check_world
 
+if TYPE_CHECKING:
+    from jwarp.world.sdf import World
+
 #: floor of the length-cost normaliser 1/2 |q_goal - q_start|^2 [rad^2]
 NORM_FLOOR = 1e-4
 
 
 # ====================================================================== helpers
-def path_configs(x: Any, robot: RobotModel, name: str) -> np.ndarray:
+def path_configs(x: ArrayLike, robot: RobotModel, name: str) -> np.ndarray:
     """(..., n_dof) -> (B, n_dof) float64 with shape/NaN checks naming ``name``."""
     a = real_array(x, name)
     if a.ndim == 0 or a.shape[-1] != robot.n_dof or a.size == 0:
@@ -50,9 +53,9 @@ class PathObjective:
     waypoints] -> path cost (-> gradient or step). Arrays are Warp arrays on ``device``.
     """
 
-    def __init__(self, robot: RobotLike, world: Any, n_paths: int, n_waypoints: int, n_substeps: int,
+    def __init__(self, robot: RobotLike, world: World, n_paths: int, n_waypoints: int, n_substeps: int,
                  *, weights: PathWeights | None = None, eps: float | None = None,
-                 kappa: Any = None, lam: float = 0.7, device: DeviceLike = None, dtype: DTypeLike = np.float32):
+                 kappa: ArrayLike | None = None, lam: float = 0.7, device: DeviceLike = None, dtype: DTypeLike = np.float32):
         init_warp()
         self.robot = get_robot(robot)
         check_world(self.robot, world)
@@ -160,6 +163,7 @@ class PathObjective:
         """U_c (eq. 3.7) into ``cartesian`` and ``total``; with ``grad`` its gradient into
         the waypoint rows of ``sub_grad`` (rigid frames at the waypoints)."""
         c, dev, PW = self._cart, self.device, self.P * self.W
+        assert c is not None  # called when the Cartesian term is on
         lam = self.scalar(self.weights.cartesian)
         floor = self.scalar(NORM_FLOOR * 1e-2)  # [m^2]
         wp.launch(c.k.fk.fk, dim=PW, inputs=[self.cm.model.frame_struct,
