@@ -113,10 +113,10 @@ def main(argv: list[str] | None = None) -> int:
     import timing  # benchmarks/timing.py, beside this script
 
     import jwarp
-    from jwarp.plugins.measurements.cartesian import CartesianMeasurement
     from jwarp.calibration import CalibrationWarning, calibrate, error_stats, errors
     from jwarp.calibration.estimate.params import perturb_robot
     from jwarp.calibration.estimate.result import model_frames
+    from jwarp.plugins.measurements.cartesian import CartesianMeasurement
 
     if args.device not in ("cpu",) and not args.device.startswith("cuda"):
         print(f"--device: expected cpu or cuda, got {args.device!r}", file=sys.stderr)

@@ -28,7 +28,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -37,11 +38,12 @@ wp.config.quiet = True
 if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
     wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
 
-from jwarp.core.arrays import init_warp  # noqa: E402
-from jwarp.world.collision import DEFAULT_EPS, CollisionModel, is_collision_free  # noqa: E402
-from jwarp.plugins.registry import robot as get_robot  # noqa: E402
 import timing  # noqa: E402
+
+from jwarp.core.arrays import init_warp  # noqa: E402
+from jwarp.plugins.registry import robot as get_robot  # noqa: E402
 from jwarp.world import feasible_simplex_world, random_configurations  # noqa: E402
+from jwarp.world.collision import DEFAULT_EPS, CollisionModel, is_collision_free  # noqa: E402
 
 FULL = dict(cpu=(200, 10_000), cuda=(1_000, 200_000), min_time=0.3, repeats=5, tape_batch=1_000)
 QUICK = dict(cpu=(50,), cuda=(1_000,), min_time=0.01, repeats=2, tape_batch=50)

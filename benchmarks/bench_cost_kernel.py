@@ -61,9 +61,9 @@ def configurations(robot: Any, world: Any, n: int, kind: str, seed: int,
 
 
 def panda_case(path: str | None) -> tuple[Any, Any]:
-    from jwarp.world.scene_file import exact_world, scene_from_dict
-
     import scene_problems as sp
+
+    from jwarp.world.scene_file import exact_world, scene_from_dict
 
     robot = get_robot(path) if path else sp.load_robot()[0]
     objects, _, _ = sp.FAMILIES["bookshelf_small"](np.random.default_rng(7))

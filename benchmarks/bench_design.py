@@ -36,14 +36,18 @@ if hasattr(wp.config, "quiet"):
     wp.config.quiet = True
 
 import jwarp  # noqa: E402
-from jwarp.core.arrays import init_warp  # noqa: E402
-from jwarp.calibration.simulate.campaign import (justin_tracker_setup,  # noqa: E402
-                                                 uniform_configurations)
-from jwarp.calibration.design.optimal import (DesignOptions, candidate_jacobians,  # noqa: E402
-                                              prior_information, select, task_information)
+from jwarp.calibration.design.optimal import (  # noqa: E402
+    DesignOptions,
+    candidate_jacobians,
+    prior_information,
+    select,
+    task_information,
+)
 from jwarp.calibration.files import Setup, make_measurement  # noqa: E402
 from jwarp.calibration.pool import draw_configurations  # noqa: E402
+from jwarp.calibration.simulate.campaign import justin_tracker_setup, uniform_configurations  # noqa: E402
 from jwarp.calibration.simulate.scenarios import HAND_FINGERS, hand_contact_setup  # noqa: E402
+from jwarp.core.arrays import init_warp  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import timing  # noqa: E402  (benchmarks/timing.py, beside this script)

@@ -45,9 +45,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 
-import timing  # noqa: E402
 import scene_problems as SP  # noqa: E402
-
+import timing  # noqa: E402
 
 #: mesh clearance [m] of the grasp configurations that the acceptance of issue 42 counts
 CLEAR = 0.002

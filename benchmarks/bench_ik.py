@@ -56,7 +56,8 @@ import math
 import os
 import sys
 import time
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
@@ -71,8 +72,8 @@ from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.core.limits import sample_within_limits, within_limits  # noqa: E402
 from jwarp.kernels.ik_step import LIMIT_HOLD  # noqa: E402
 from jwarp.solvers import ik as IK  # noqa: E402
-from jwarp.world.path_feasibility import collision_free
 from jwarp.world import collision  # noqa: E402
+from jwarp.world.path_feasibility import collision_free
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # also when imported by path
 import timing  # noqa: E402  (benchmarks/timing.py, beside this script)

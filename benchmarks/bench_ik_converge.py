@@ -133,6 +133,7 @@ def scene_setup(n_targets: int, device: str, robot_file: str | None = None) -> t
     """(sphere model, exact world, targets (n, 4, 4)) of the table-and-bookshelf scene
     (``robot_file``: the fitted Panda as a robot JSON, else fitted here)."""
     import scene_problems as sp
+
     from jwarp.world.path_feasibility import collision_free
     from jwarp.world.scene_file import exact_world, scene_from_dict
 

@@ -32,8 +32,9 @@ import platform
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -43,15 +44,24 @@ if hasattr(wp.config, "quiet"):  # older Warp
 if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
     wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
 
+import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
+from timing import Timing, measure  # noqa: E402,F401
+
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.core.device import put_model  # noqa: E402
 from jwarp.kinematics import (  # noqa: E402
-    ElasticLaunch, KinematicsData, elastic_args, fk, fk_elastic, forward_kinematics,
-    frame_jacobian, jacobian, launch_fk)
+    ElasticLaunch,
+    KinematicsData,
+    elastic_args,
+    fk,
+    fk_elastic,
+    forward_kinematics,
+    frame_jacobian,
+    jacobian,
+    launch_fk,
+)
 from jwarp.model import RobotModel  # noqa: E402
 from jwarp.plugins.registry import robot as get_robot  # noqa: E402
-import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
-from timing import Timing, measure  # noqa: E402,F401
 
 KAPPA = 1e-4            # rad/(N m) on the alpha, beta and theta axes of every DH frame
 ELASTIC_ITERS = (1, 3, 10)
@@ -497,7 +507,7 @@ class Bench:
             }
             for op, fn in api.items():
                 rows[op] = self.time_row(name, op, dev, B, fn, dev)
-            if B == max(batches):
+            if max(batches) == B:
                 self.side_by_side(name, dev, B, kernels, api)
             # max_iter=10, tol=0: the library still stops early once every configuration's
             # update changed nothing (delta == 0, common in float32); the op name gives the

@@ -92,9 +92,9 @@ def load_or_train(args: Any) -> tuple[Any, str]:
 
 
 def section_ik(args: Any) -> dict:
-    from jwarp.world.scenes import shelf_world
-
     import torch
+
+    from jwarp.world.scenes import shelf_world
 
     torch.set_num_threads(1)
     net = args.net

@@ -49,11 +49,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 import timing  # noqa: E402
+from worlds import ball_worlds, grazing_paths  # noqa: E402
+
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.world import World  # noqa: E402
 from jwarp.world.motion import MotionCheck, MotionOptions  # noqa: E402
 from jwarp.world.primitives import pose_matrix  # noqa: E402
-from worlds import ball_worlds, grazing_paths  # noqa: E402
 
 
 def scene(name: str) -> World:

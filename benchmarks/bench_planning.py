@@ -55,13 +55,15 @@ if hasattr(wp.config, "quiet"):
     wp.config.quiet = True
 
 import jwarp  # noqa: E402
-from jwarp.world import collision  # noqa: E402
 from jwarp.core.arrays import init_warp  # noqa: E402
+from jwarp.core.limits import sample_within_limits  # noqa: E402
 from jwarp.solvers import compensation as comp  # noqa: E402
 from jwarp.solvers import ik as IK  # noqa: E402
 from jwarp.solvers import planning as PL  # noqa: E402
-from jwarp.world import path_feasibility
-from jwarp.core.limits import sample_within_limits  # noqa: E402
+from jwarp.world import (
+    collision,  # noqa: E402
+    path_feasibility,
+)
 from jwarp.world.io import parse_world_spec  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))

@@ -40,11 +40,11 @@ import warp as wp
 
 wp.config.quiet = True
 
-from jwarp.core.arrays import init_warp
-from jwarp.plugins.registry import robot as get_robot
-from jwarp.calibration.simulate.campaign import justin_tracker_setup
 from jwarp.calibration.design.poses import CODE_NAMES, PoseOptions, PoseSampler
 from jwarp.calibration.design.tour import order_poses
+from jwarp.calibration.simulate.campaign import justin_tracker_setup
+from jwarp.core.arrays import init_warp
+from jwarp.plugins.registry import robot as get_robot
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # also when imported by path
 import timing

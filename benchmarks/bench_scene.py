@@ -34,10 +34,10 @@ wp.config.quiet = True
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import timing  # noqa: E402
+
 from jwarp.core.arrays import init_warp, resolve_device  # noqa: E402
 from jwarp.kernels import collision as ck  # noqa: E402
-from jwarp.world.scene_file import (SceneOptions, scene_from_dict, scene_world,  # noqa: E402
-                                    table_shelf_scene)
+from jwarp.world.scene_file import SceneOptions, scene_from_dict, scene_world, table_shelf_scene  # noqa: E402
 
 KIND = {"box": 0, "sphere": 1, "cylinder": 2, "capsule": 3}
 

@@ -94,6 +94,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import scene_problems as SP  # noqa: E402
 import timing  # noqa: E402
+
 try:  # pinocchio + coal: the verifier (a GPU machine may lack them: --no-verify there)
     from verifier import PathVerifier, checked_link_pairs, robot_spheres  # noqa: E402
 except ImportError as _e:
@@ -208,7 +209,6 @@ def warm_check(robot: Any, prob: Problem, device: str) -> None:
     may not have loaded (its path needs no shortcut, its endpoints no meshes), so that no
     timed problem pays for loading them."""
     from jwarp.solvers.planning import Planner
-
     from jwarp.world.mesh_check import mesh_check
 
     pl = Planner(robot, prob.world, 1, device=device)
@@ -395,7 +395,9 @@ def run_jwarp(robot: Any, urdf: str, spheres: list, probs: list[Problem], margin
 # ------------------------------------------------------------------ OMPL baseline
 def ompl_modules() -> tuple[Any, Any, Any] | str:
     try:
-        from ompl import base as ob, geometric as og, util as ou
+        from ompl import base as ob
+        from ompl import geometric as og
+        from ompl import util as ou
     except Exception as e:  # noqa: BLE001 - any import failure skips the baseline
         return f"{type(e).__name__}: {e}"
     return ob, og, ou

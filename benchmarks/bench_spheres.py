@@ -86,8 +86,12 @@ def measure_links(name: str, path: str, model, fit_rows: dict,
     """Independent per-link figures of a fitted model (module docstring); ``samples``:
     (surface samples, volume points) per link."""
     from jwarp.importers.robot import load_urdf
-    from jwarp.importers.spheres import (excess_volume, one_sided_error, signed_distance,
-                                         sphere_protrusion)
+    from jwarp.importers.spheres import (
+        excess_volume,
+        one_sided_error,
+        signed_distance,
+        sphere_protrusion,
+    )
 
     by_link: dict = {}
     for g in load_urdf(path).geometries:

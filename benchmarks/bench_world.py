@@ -107,9 +107,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'move 50 objects (pose arrays + BVH refit)':<52}{stats(times)}")
     row("move", times)
     # query: exact vs grid of the table-and-shelf scene
-    from jwarp.world import exact_world, scene_world, SceneOptions
-    from jwarp.world.scene_file import scene_from_dict, table_shelf_scene
+    from jwarp.world import SceneOptions, exact_world, scene_world
     from jwarp.world.collision import CollisionModel  # noqa: F401  (kernels)
+    from jwarp.world.scene_file import scene_from_dict, table_shelf_scene
     scene = scene_from_dict(table_shelf_scene())
     ex = exact_world(scene)
     grid = scene_world(scene, SceneOptions(voxel_size=0.02)).astype(np.float32)

@@ -63,9 +63,10 @@ import math
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
@@ -505,8 +506,7 @@ class Generator:
     def problem(self, family: str, seed: int, max_tries: int = 20) -> dict | None:
         """One problem of ``family`` (a dict: scene data, start, goal, meta) or None."""
         from jwarp.solvers.ik import IKOptions, IKSolver
-        from jwarp.world.scene_file import (SceneOptions, exact_world, scene_from_dict,
-                                            scene_world)
+        from jwarp.world.scene_file import SceneOptions, exact_world, scene_from_dict, scene_world
 
         rng = np.random.default_rng(seed)
         for attempt in range(max_tries):

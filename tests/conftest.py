@@ -6,7 +6,6 @@ an unavailable device is a usage error), or the CUDA half with ``-k cuda``."""
 import os
 
 import pytest
-
 from devices import cpu_available, cuda_available
 
 # no "compiling jwarp kernels ..." line on stderr: tests that read stderr would see it

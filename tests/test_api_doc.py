@@ -45,7 +45,7 @@ def test_signatures_hold_no_addresses():
     class Thing:
         pass
 
-    def f(a, b=Thing(), *, c: "int" = 1) -> "Thing":  # noqa: B008
+    def f(a, b=Thing(), *, c: int = 1) -> Thing:  # noqa: B008
         """First paragraph
         on two lines.
 

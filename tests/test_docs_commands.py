@@ -25,10 +25,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import doc_commands as dc  # tests/doc_commands.py
 import numpy as np
 import pytest
 
-import doc_commands as dc  # tests/doc_commands.py
 from jwarp.cli.common import CLIError, fix_negative_values, value_options
 from jwarp.cli.main import build_parser, main
 
@@ -1074,8 +1074,9 @@ def test_pose_sampling_md_synopsis(in_work, capsys):
     limits, ordered (the printed path length is the file's), verdict counts that add up,
     and with cameras each pose has a marker inside a camera's view cone and range (a
     necessary condition of "seen"; occlusion is not re-checked)."""
-    import jwarp
     from scipy.spatial.transform import Rotation
+
+    import jwarp
 
     _campaigns(in_work, capsys)
     setup = json.loads((in_work / "tracker" / "setup.json").read_text())
@@ -1130,6 +1131,7 @@ def test_pose_sampling_md_synopsis(in_work, capsys):
 def _urdf_joint(urdf: str, name: str) -> tuple[np.ndarray, np.ndarray]:
     """``(origin 4x4, axis)`` of a URDF joint, read with ElementTree."""
     import xml.etree.ElementTree as ET
+
     from scipy.spatial.transform import Rotation
 
     j = next(e for e in ET.parse(urdf).getroot().iter("joint") if e.get("name") == name)
@@ -1154,8 +1156,9 @@ def test_urdf_md_srdf_group_and_freeze(in_work, capsys):
     at the state's value (SRDF ``default``: 0.001 m) or the --freeze value (0.04 m)."""
     import xml.etree.ElementTree as ET
 
-    import jwarp
     from robot_data import erd
+
+    import jwarp
 
     urdf, srdf = erd("panda_description/urdf/panda.urdf"), erd("panda_description/srdf/panda.srdf")
     group = [j.get("name") for g in ET.parse(srdf).getroot().iter("group")
@@ -1180,10 +1183,10 @@ def test_urdf_md_baxter_left_arm(in_work, capsys):
     """docs/urdf.md's Baxter import (example-robot-data): the planned joints are the 7
     given, and the locked right_s0 = 0.3 turns right_upper_shoulder as the URDF's joint
     does at 0.3 rad. Scaled (:data:`SCALED`): no sphere fit."""
+    from robot_data import erd
     from scipy.spatial.transform import Rotation
 
     import jwarp
-    from robot_data import erd
 
     urdf = erd("baxter_description/urdf/baxter.urdf")
     key = "docs/urdf.md: jwarp import-urdf baxter.urdf"
@@ -1399,6 +1402,7 @@ def test_readme_python_snippets(work, tmp_path, monkeypatch, capsys):
     simulated campaign (run/, the calibration block reads it); every ``print(...)  #
     output`` line prints the output its comment quotes."""
     import builtins
+
     import warp as wp
 
     monkeypatch.chdir(tmp_path)

@@ -19,12 +19,11 @@ import io
 import json
 import os
 import warnings
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pytest
-
 from test_docs_commands import MJCF_ARM, ROOT, _python_blocks
 
 #: ``file:line`` -> code of every Python block of docs/*.md and examples/README.md

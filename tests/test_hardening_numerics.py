@@ -14,15 +14,14 @@ import warp as wp
 
 import jwarp
 from jwarp import kinematics as K
-from jwarp.kinematics.autodiff import tape_jacobian
 from jwarp.cli import main
-from jwarp.world.collision import collision_cost, is_collision_free, min_distances
 from jwarp.core.device import put_model
+from jwarp.kinematics.autodiff import tape_jacobian
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.solvers import planning as PL
-from jwarp.world import path_feasibility
 from jwarp.solvers.ik import ik
-from jwarp.world import world_from_occupancy
+from jwarp.world import path_feasibility, world_from_occupancy
+from jwarp.world.collision import collision_cost, is_collision_free, min_distances
 from jwarp.world.feasibility import random_configurations
 
 BIG = 1e39  # finite in float64, inf in float32

@@ -12,10 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import reference as ref
 
 from jwarp.model import RobotModel
-
-import reference as ref
 
 ROOT = Path(__file__).resolve().parents[1]
 JUSTIN = ROOT / "jwarp" / "plugins" / "robots" / "justin19.json"

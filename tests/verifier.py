@@ -50,13 +50,13 @@ from __future__ import annotations
 import math
 import os
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
-
-import numpy as np
+from typing import Any
 
 import coal
+import numpy as np
 import pinocchio as pin
 
 __all__ = ["PathVerifier", "Verdict", "Hit", "checked_link_pairs", "coal_shape", "robot_spheres"]
@@ -252,7 +252,7 @@ def _default_package_dirs(urdf_path: str) -> list[str]:
     return [str(p) for p in Path(urdf_path).resolve().parents]
 
 
-def checked_link_pairs(robot: Any, verifier: "PathVerifier") -> list[tuple[str, str]]:
+def checked_link_pairs(robot: Any, verifier: PathVerifier) -> list[tuple[str, str]]:
     """The URDF link pairs of the frame pairs jwarp checks for self-collision (frames with
     spheres, ``robot.allowed_collision_pairs``), each frame mapped to its link by
     :meth:`PathVerifier.link_of`: the pairs whose meshes must stay apart (check c)."""

@@ -54,9 +54,9 @@ def count(facade: bool = False) -> tuple[int, int, int, list[str]]:
     files: dict[Path, set[str] | None] = {}
     if facade:
         sys.path.insert(0, str(ROOT))
-        import jwarp
-
         import inspect
+
+        import jwarp
 
         for name in jwarp.__all__:
             obj = getattr(jwarp, name)

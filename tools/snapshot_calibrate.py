@@ -102,16 +102,15 @@ def freeze_date() -> None:
 
     class Frozen(datetime.datetime):
         @classmethod
-        def now(cls, tz: object = None) -> "Frozen":  # type: ignore[override]
+        def now(cls, tz: object = None) -> Frozen:  # type: ignore[override]
             return cls(2026, 1, 1, tzinfo=tz)  # type: ignore[arg-type]
 
     datetime.datetime = Frozen  # type: ignore[misc]
 
 
 def run(out: str, work: str) -> None:
-    from jwarp.calibration.files import read_setup, write_setup
-
     import jwarp
+    from jwarp.calibration.files import read_setup, write_setup
 
     print(f"snapshot of {os.path.dirname(jwarp.__file__)} into {out}", file=sys.stderr)
     freeze_date()

@@ -15,18 +15,24 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from devices import requires_cpu
 
 import jwarp
-from jwarp.model.measurement import Measurement, ParamBlock
-from jwarp.calibration import (CalibrationProblem, CalibrationWarning, ParameterSpace,
-                               calibrate, error_stats, errors, observation_groups,
-                               predict)
-from jwarp.calibration.estimate.map import problem_options
+from jwarp.calibration import (
+    CalibrationProblem,
+    CalibrationWarning,
+    ParameterSpace,
+    calibrate,
+    error_stats,
+    errors,
+    observation_groups,
+    predict,
+)
 from jwarp.calibration.estimate import elastic as E
+from jwarp.calibration.estimate.map import problem_options
 from jwarp.calibration.estimate.params import perturb_robot
 from jwarp.calibration.estimate.result import model_frames
-
-from devices import requires_cpu
+from jwarp.model.measurement import Measurement, ParamBlock
 
 ROOT = Path(__file__).resolve().parents[2]
 KAPPA = 1e-4  # rad/(N m), Agile Justin's order of magnitude

@@ -13,11 +13,16 @@ import pytest
 
 import jwarp
 from jwarp.calibration import CalibrationProblem, calibrate, errors
-from jwarp.calibration.estimate.map import problem_options
 from jwarp.calibration.estimate.backlash import check_directions, motion_directions
 from jwarp.calibration.estimate.diagnostics import residual_diagnostics
-from jwarp.calibration.estimate.params import (DEFAULT_SIGMA, KIND_BACKLASH, KIND_KAPPA,
-                                               robot_backlash, with_backlash)
+from jwarp.calibration.estimate.map import problem_options
+from jwarp.calibration.estimate.params import (
+    DEFAULT_SIGMA,
+    KIND_BACKLASH,
+    KIND_KAPPA,
+    robot_backlash,
+    with_backlash,
+)
 from jwarp.calibration.estimate.result import model_frames
 from jwarp.calibration.files import make_measurement
 from jwarp.calibration.simulate.campaign import simulate_campaign
@@ -170,6 +175,7 @@ def test_direction_columns_of_the_samples_file(tmp_path, capsys):
     import csv
 
     from cli_helpers import run  # tests/cli_helpers.py
+
     from jwarp.calibration.files import parse_samples, read_setup
 
     out = tmp_path / "run"

@@ -12,20 +12,19 @@ import json
 
 import numpy as np
 import pytest
+from calibration.test_calibration import KAPPA, _cartesian, _fd_jacobian, _q
+from devices import requires_cpu
+from reference import THETA, nominal_dh, ref_fk
 from scipy.optimize import OptimizeResult
 
 import jwarp
-from jwarp.model import RobotModel, RobotModelError
 from jwarp.calibration import CalibrationProblem, ParameterSpace, calibrate
 from jwarp.calibration.estimate.map import problem_options, solve_start
 from jwarp.calibration.estimate.options import CalibrationOptions
 from jwarp.calibration.estimate.params import KIND_COUPLING, KIND_HARMONIC, KIND_KAPPA
 from jwarp.calibration.estimate.result import fixed_params, model_frames
 from jwarp.calibration.estimate.robust import robust_weights
-
-from devices import requires_cpu
-from reference import THETA, nominal_dh, ref_fk
-from calibration.test_calibration import KAPPA, _cartesian, _fd_jacobian, _q
+from jwarp.model import RobotModel, RobotModelError
 
 pytestmark = requires_cpu
 
@@ -285,8 +284,8 @@ def test_all_priors_off_starts_scales_by_the_data_and_holds_what_has_no_effect()
     parameters get the scale 1 / |column| of the data Jacobian at the start; those without
     effect there (the head's rows, which load the torso only through compliances that are
     still 0) are held; the fit ends far below the start."""
-    from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
     from jwarp.calibration.files import make_measurement
+    from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
 
     robot = jwarp.robot("justin19")
     camp = simulate_campaign(robot, justin_tracker_setup(), 40, seed=1)

@@ -17,14 +17,13 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+from devices import requires_cpu
 
 import jwarp
 from jwarp.calibration import calibrate, errors
-from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
 from jwarp.calibration.estimate.diagnostics import residual_diagnostics
 from jwarp.calibration.files import make_measurement
-
-from devices import requires_cpu
+from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
 
 pytestmark = requires_cpu
 

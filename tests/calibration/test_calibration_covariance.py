@@ -9,8 +9,8 @@ import pytest
 import jwarp
 from jwarp.calibration import CalibrationProblem, calibrate
 from jwarp.calibration.estimate.map import problem_options
-from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
 from jwarp.calibration.files import make_measurement
+from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
 
 FREE = "theta,d,kappa_theta,tracker,markers"
 

@@ -11,12 +11,19 @@ import warnings
 
 import numpy as np
 import pytest
+from cli_helpers import one_line_error, run  # tests/cli_helpers.py
 
 import jwarp
-from cli_helpers import one_line_error, run  # tests/cli_helpers.py
 from jwarp.calibration import CalibrationOptions, calibrate_with, errors
-from jwarp.calibration.estimate.cv import (CVOptions, CVSetting, calibrate_cv, cross_validate,
-                                           default_grid, fold_indices, parse_cv_grid)
+from jwarp.calibration.estimate.cv import (
+    CVOptions,
+    CVSetting,
+    calibrate_cv,
+    cross_validate,
+    default_grid,
+    fold_indices,
+    parse_cv_grid,
+)
 from jwarp.calibration.estimate.params import DEFAULT_SIGMA
 from jwarp.calibration.files import make_measurement, parse_samples, read_setup
 

@@ -8,12 +8,24 @@ import numpy as np
 import pytest
 
 import jwarp
+from jwarp.calibration.files import (
+    Samples,
+    make_measurement,
+    parse_rows,
+    parse_samples,
+    read_samples,
+    read_setup,
+    setup_from_dict,
+    write_samples,
+    write_setup,
+)
+from jwarp.calibration.simulate.campaign import (
+    justin_tracker_setup,
+    rough_setup,
+    simulate_campaign,
+    uniform_configurations,
+)
 from jwarp.cli import main
-from jwarp.calibration.simulate.campaign import (justin_tracker_setup, rough_setup,
-                                                 simulate_campaign, uniform_configurations)
-from jwarp.calibration.files import (Samples, make_measurement, parse_rows,
-                                     parse_samples, read_samples, read_setup,
-                                     setup_from_dict, write_samples, write_setup)
 
 
 @pytest.fixture(scope="module")

@@ -11,10 +11,15 @@ import pytest
 import warp as wp
 
 import jwarp
-from jwarp.calibration import (CalibrationOptions, CalibrationProblem,
-                               CalibrationWarning, calibrate, calibrate_with)
-from jwarp.calibration.estimate.map import problem_options
+from jwarp.calibration import (
+    CalibrationOptions,
+    CalibrationProblem,
+    CalibrationWarning,
+    calibrate,
+    calibrate_with,
+)
 from jwarp.calibration.estimate import map as M
+from jwarp.calibration.estimate.map import problem_options
 
 
 def _cartesian(robot):

@@ -8,17 +8,20 @@ import warnings
 
 import numpy as np
 import pytest
+from devices import requires_cpu
 
 import jwarp
-from jwarp.importers.urdf_export import dh_origin, export_urdf
-from jwarp.plugins.measurements.cartesian import CartesianMeasurement
 from jwarp.calibration import CalibrationProblem, ParameterSpace, calibrate
 from jwarp.calibration.estimate.map import problem_options
-from jwarp.calibration.estimate.origin import (delta_transform, left_jacobian, rotation,
-                                               with_static_transforms)
+from jwarp.calibration.estimate.origin import (
+    delta_transform,
+    left_jacobian,
+    rotation,
+    with_static_transforms,
+)
 from jwarp.calibration.estimate.params import KIND_ORIGIN
-
-from devices import requires_cpu
+from jwarp.importers.urdf_export import dh_origin, export_urdf
+from jwarp.plugins.measurements.cartesian import CartesianMeasurement
 
 pytestmark = requires_cpu
 

@@ -18,15 +18,21 @@ import pytest
 from scipy.optimize import OptimizeResult, least_squares
 
 import jwarp
-from jwarp.model import RobotModel
-from jwarp.plugins.measurements.cartesian import CartesianMeasurement
-from jwarp.calibration import (ROBOT_GROUPS, CalibrationOptions, CalibrationProblem,
-                               CalibrationWarning, calibrate, errors)
-from jwarp.calibration.estimate.map import problem_options
+from jwarp.calibration import (
+    ROBOT_GROUPS,
+    CalibrationOptions,
+    CalibrationProblem,
+    CalibrationWarning,
+    calibrate,
+    errors,
+)
 from jwarp.calibration.estimate import elastic as E
 from jwarp.calibration.estimate import map as M
+from jwarp.calibration.estimate.map import problem_options
 from jwarp.calibration.estimate.params import KIND_KAPPA, perturb_robot, with_pose_groups
 from jwarp.calibration.estimate.result import model_frames
+from jwarp.model import RobotModel
+from jwarp.plugins.measurements.cartesian import CartesianMeasurement
 
 FULL = "theta,d,r,alpha,beta,kappa_theta,kappa_alpha"
 NOISE = 1e-4

@@ -7,11 +7,11 @@ import pytest
 import warp as wp
 
 import jwarp
-from jwarp.kinematics import jacobian, jacobian_dh
 from jwarp.calibration import CalibrationProblem
 from jwarp.calibration.estimate.map import problem_options
-from jwarp.calibration.simulate.campaign import justin_tracker_setup
 from jwarp.calibration.files import make_measurement
+from jwarp.calibration.simulate.campaign import justin_tracker_setup
+from jwarp.kinematics import jacobian, jacobian_dh
 
 
 def _uploads(monkeypatch, shape):

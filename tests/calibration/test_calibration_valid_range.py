@@ -13,11 +13,16 @@ import warnings
 
 import numpy as np
 import pytest
+from cli_helpers import run  # tests/cli_helpers.py
 
 import jwarp
-from cli_helpers import run  # tests/cli_helpers.py
-from jwarp.model.valid_range import (VALID_RANGE_NOTE, ValidRangeWarning, check_valid_range,
-                                     record_valid_range, valid_range)
+from jwarp.model.valid_range import (
+    VALID_RANGE_NOTE,
+    ValidRangeWarning,
+    check_valid_range,
+    record_valid_range,
+    valid_range,
+)
 
 
 def _ranged(name: str, q: np.ndarray):

@@ -9,12 +9,15 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.calibration import (CampaignCalibration, CampaignOptions, calibrate_campaign,
-                               load_campaign)
+from jwarp.calibration import (
+    CampaignCalibration,
+    CampaignOptions,
+    calibrate_campaign,
+    load_campaign,
+)
 from jwarp.calibration.campaign_run import PROVENANCE_NOTE
 from jwarp.calibration.simulate.campaign import simulate_campaign
 from jwarp.calibration.simulate.scenarios import scenario
-
 from tests.cli_helpers import run
 
 

@@ -7,16 +7,15 @@ import warnings
 
 import numpy as np
 import pytest
+from pool_helpers import ball_colliding, in_limits, self_colliding
 
-from jwarp.plugins.registry import robot as get_robot
-from jwarp.calibration.simulate.campaign import justin_tracker_setup
 from jwarp.calibration.design.optimal import DesignOptions, design
 from jwarp.calibration.files import Setup, make_measurement
-from jwarp.calibration.pool import (REASONS, check_configurations, draw_configurations,
-                                    draw_pool)
+from jwarp.calibration.pool import REASONS, check_configurations, draw_configurations, draw_pool
+from jwarp.calibration.simulate.campaign import justin_tracker_setup
 from jwarp.calibration.simulate.scenarios import hand_contact_setup
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.world import World
-from pool_helpers import ball_colliding, in_limits, self_colliding
 
 SELF, WORLD = REASONS.index("self_collision"), REASONS.index("world_collision")
 

@@ -20,13 +20,22 @@ import numpy as np
 import pytest
 
 import jwarp
+from jwarp.calibration.files import (
+    DataWarning,
+    make_measurement,
+    parse_samples,
+    read_samples,
+    read_setup,
+    sha256_hex,
+)
+from jwarp.calibration.simulate.campaign import (
+    justin_tracker_setup,
+    read_campaign,
+    simulate_campaign,
+)
+from jwarp.cli import main
 from jwarp.utils import atomic
 from jwarp.utils.atomic import AtomicFolder, atomic_write_text, clean_stale
-from jwarp.cli import main
-from jwarp.calibration.simulate.campaign import (justin_tracker_setup, read_campaign,
-                                                 simulate_campaign)
-from jwarp.calibration.files import (DataWarning, make_measurement, parse_samples,
-                                     read_samples, read_setup, sha256_hex)
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))

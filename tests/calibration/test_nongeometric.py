@@ -7,16 +7,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from calibration.test_calibration import (
+    FramePositions,
+    _assert_jacobian_close,
+    _cartesian,
+    _fd_jacobian,
+    _q,
+)
+from devices import requires_cpu
+from reference import THETA, nominal_dh, ref_fk, ref_torques
 
 import jwarp
-from jwarp.model import RobotModel, RobotModelError
 from jwarp.calibration import CalibrationProblem, ParameterSpace
 from jwarp.calibration.estimate.map import problem_options
-
-from devices import requires_cpu
-from reference import ref_fk, ref_torques, nominal_dh, THETA
-from calibration.test_calibration import (FramePositions, _assert_jacobian_close, _cartesian,
-                                      _fd_jacobian, _q)
+from jwarp.model import RobotModel, RobotModelError
 
 KAPPA = 1e-4
 

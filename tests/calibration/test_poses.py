@@ -7,17 +7,23 @@ import math
 
 import numpy as np
 import pytest
+from reference import ref_fk
 
+from jwarp.calibration.design.poses import (
+    CONTAIN_TOL,
+    PoseOptions,
+    PoseSampler,
+    parse_cameras,
+    plan_text,
+    write_plan,
+)
+from jwarp.calibration.design.tour import order_poses, path_length
+from jwarp.calibration.files import read_setup, write_setup
+from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
 from jwarp.core.limits import within_limits
 from jwarp.kinematics.fk import fk
 from jwarp.plugins.registry import robot as get_robot
-from jwarp.calibration.simulate.campaign import justin_tracker_setup, simulate_campaign
-from jwarp.calibration.files import read_setup, write_setup
-from jwarp.calibration.design.poses import (CONTAIN_TOL, PoseOptions, PoseSampler,
-                                            parse_cameras, plan_text, write_plan)
-from jwarp.calibration.design.tour import order_poses, path_length
 from jwarp.world.collision import collision_pairs
-from reference import ref_fk
 
 
 @pytest.fixture(scope="module")
@@ -208,9 +214,12 @@ def test_too_strict_reports_counts(justin):
 
 
 def test_contact_poses_on_the_manifold():
-    from jwarp.calibration.simulate.scenarios import (contact_distance, contact_sampler,
-                                                      hand_contact_setup)
     from jwarp.calibration.files import make_measurement
+    from jwarp.calibration.simulate.scenarios import (
+        contact_distance,
+        contact_sampler,
+        hand_contact_setup,
+    )
 
     hand = get_robot("hand4")
     s = hand_contact_setup()

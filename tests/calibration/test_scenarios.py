@@ -14,11 +14,16 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import jwarp
-from jwarp.calibration.simulate.campaign import simulate_campaign
-from jwarp.calibration.files import make_measurement, read_samples, read_setup
 from jwarp.calibration.estimate.result import model_frames
-from jwarp.calibration.simulate.scenarios import (available, contact_sampler, hand_contact_setup,
-                                                  look_at_head_joints, scenario)
+from jwarp.calibration.files import make_measurement, read_samples, read_setup
+from jwarp.calibration.simulate.campaign import simulate_campaign
+from jwarp.calibration.simulate.scenarios import (
+    available,
+    contact_sampler,
+    hand_contact_setup,
+    look_at_head_joints,
+    scenario,
+)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 

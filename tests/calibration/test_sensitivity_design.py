@@ -6,19 +6,31 @@ import itertools
 import numpy as np
 import pytest
 
-from jwarp.plugins.registry import robot as get_robot
-from jwarp.calibration.simulate.campaign import uniform_configurations
-from jwarp.calibration.design.optimal import (DesignOptions, _State, candidate_jacobians,
-                                              criterion, design, detmax, greedy, select,
-                                              task_factor)
-from jwarp.calibration.files import Setup, make_measurement
+from jwarp.calibration.design.optimal import (
+    DesignOptions,
+    _State,
+    candidate_jacobians,
+    criterion,
+    design,
+    detmax,
+    greedy,
+    select,
+    task_factor,
+)
+from jwarp.calibration.design.sensitivity import (
+    kernel_basis,
+    kernel_inclusion,
+    sensitivity,
+    spectrum,
+    stacked_jacobian,
+)
 from jwarp.calibration.estimate.params import ParameterSpace
-from jwarp.calibration.pool import (configurations_text, draw_configurations,
-                                    parse_configurations)
 from jwarp.calibration.estimate.result import model_frames
+from jwarp.calibration.files import Setup, make_measurement
+from jwarp.calibration.pool import configurations_text, draw_configurations, parse_configurations
+from jwarp.calibration.simulate.campaign import uniform_configurations
 from jwarp.calibration.simulate.scenarios import hand_contact_setup
-from jwarp.calibration.design.sensitivity import (kernel_basis, kernel_inclusion, sensitivity,
-                                                  spectrum, stacked_jacobian)
+from jwarp.plugins.registry import robot as get_robot
 
 
 @pytest.fixture(scope="module")
@@ -342,8 +354,8 @@ def test_candidate_jacobians_on_every_device(device):
     """The candidates' Jacobians on ``device`` (rigid hand4 contacts, and the elastic
     justin19 tracker through the torque equilibrium) equal finite differences of the
     predictions on the CPU; CPU and CUDA agree to round-off."""
-    from jwarp.calibration.simulate.campaign import justin_tracker_setup
     from jwarp.calibration.estimate.map import CalibrationProblem, problem_options
+    from jwarp.calibration.simulate.campaign import justin_tracker_setup
 
     robot = get_robot("justin19")
     meas = make_measurement(robot, justin_tracker_setup())

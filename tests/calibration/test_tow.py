@@ -9,14 +9,20 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.model.geometry import pose_matrix
-from jwarp.calibration.files import make_measurement
+from jwarp.calibration.design.tow import (
+    GaussianNode,
+    MeasurementGraph,
+    adjusted_covariance,
+    reverse_covariance,
+    sequential_covariance,
+    task_space_covariance,
+    tow_covariance,
+    tow_from_dict,
+)
 from jwarp.calibration.estimate.result import model_frames
+from jwarp.calibration.files import make_measurement
 from jwarp.calibration.simulate.scenarios import HEAD_CAMERA_INTRINSICS, justin_camera_setup
-from jwarp.calibration.design.tow import (GaussianNode, MeasurementGraph, adjusted_covariance,
-                                          reverse_covariance, sequential_covariance,
-                                          task_space_covariance, tow_covariance,
-                                          tow_from_dict)
+from jwarp.model.geometry import pose_matrix
 
 
 def spd(rng, d, batch=()):

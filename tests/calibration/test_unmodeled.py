@@ -9,18 +9,20 @@ import math
 
 import numpy as np
 import pytest
-
-import jwarp
-from jwarp.model import RobotModel
-from jwarp.calibration import calibrate, error_stats, errors
-from jwarp.calibration.simulate.campaign import (justin_tracker_setup, read_campaign,
-                                                 simulate_campaign)
-from jwarp.calibration.files import make_measurement
-from jwarp.calibration.estimate.result import model_frames, predict
-from jwarp.calibration.simulate.unmodeled import EFFECTS, parse_unmodeled
-
 from cli_helpers import one_line_error, run
 from devices import requires_cpu
+
+import jwarp
+from jwarp.calibration import calibrate, error_stats
+from jwarp.calibration.estimate.result import model_frames, predict
+from jwarp.calibration.files import make_measurement
+from jwarp.calibration.simulate.campaign import (
+    justin_tracker_setup,
+    read_campaign,
+    simulate_campaign,
+)
+from jwarp.calibration.simulate.unmodeled import EFFECTS, parse_unmodeled
+from jwarp.model import RobotModel
 
 
 def test_spec_parsing_forms_and_defaults():

@@ -10,11 +10,14 @@ import math
 import numpy as np
 import pytest
 
-from jwarp.calibration.design.virtual_noise import (EnsembleMember, add_virtual_noise,
-                                                    approximate_virtual_variance,
-                                                    ensemble_virtual_variance,
-                                                    predicted_variance,
-                                                    validation_virtual_variance)
+from jwarp.calibration.design.virtual_noise import (
+    EnsembleMember,
+    add_virtual_noise,
+    approximate_virtual_variance,
+    ensemble_virtual_variance,
+    predicted_variance,
+    validation_virtual_variance,
+)
 
 PRIOR_VAR = 100.0          # weak prior N(0, 10^2) on (a, b)
 # the best linear fit of q^3 in L2 on U(-1, 1): b = E[q^4] / E[q^2] = 3/5, a = 0

@@ -3,7 +3,6 @@
 from pathlib import Path
 
 import pytest
-
 from worlds import block_world_2d  # tests/worlds.py
 
 

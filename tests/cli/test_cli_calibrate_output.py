@@ -12,8 +12,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
 from cli_helpers import one_line_error, run  # tests/cli_helpers.py
+
 from jwarp.calibration.campaign_run import PROVENANCE_NOTE
 from jwarp.cli.calibration import ProgressBar
 
@@ -109,8 +109,7 @@ def test_name_option_and_empty_name(campaign, capsys, tmp_path):
 def test_python_findings_attributed_to_the_callers_line(campaign):
     import jwarp
     from jwarp.calibration import CalibrationWarning, calibrate
-    from jwarp.calibration.files import (make_measurement, parse_samples, read_setup,
-                                         read_text)
+    from jwarp.calibration.files import make_measurement, parse_samples, read_setup, read_text
 
     model = jwarp.robot("justin19")
     meas = make_measurement(model, read_setup(str(campaign / "setup.json")))

@@ -11,7 +11,6 @@ import os
 import pytest
 
 from jwarp.model import RobotModel
-
 from tests.cli_helpers import one_line_error, run
 
 BASE = "theta,d,r,alpha"

@@ -11,11 +11,11 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from cli_helpers import one_line_error, run  # noqa: F401  (tests/cli_helpers.py)
 
 from jwarp.learn import generate as gen
 from jwarp.learn.dataset import PathDB
 from jwarp.world.sdf import world_from_occupancy
-from cli_helpers import one_line_error, run  # noqa: F401  (tests/cli_helpers.py)
 
 
 def fake_world_maker(robot, seed, device=None):

@@ -6,16 +6,15 @@ import re
 
 import numpy as np
 import pytest
-
 from cli_helpers import one_line_error, run
-from jwarp.plugins.registry import robot as get_robot
-from jwarp.calibration.simulate.campaign import justin_tracker_setup, uniform_configurations
-from jwarp.calibration.files import Setup, make_measurement, write_setup
-from jwarp.calibration.pool import (draw_pool, parse_configurations,
-                                    write_configurations)
-from jwarp.calibration.simulate.scenarios import hand_contact_setup
-from jwarp.world import World
 from pool_helpers import ball_colliding, self_colliding
+
+from jwarp.calibration.files import Setup, make_measurement, write_setup
+from jwarp.calibration.pool import draw_pool, parse_configurations, write_configurations
+from jwarp.calibration.simulate.campaign import justin_tracker_setup, uniform_configurations
+from jwarp.calibration.simulate.scenarios import hand_contact_setup
+from jwarp.plugins.registry import robot as get_robot
+from jwarp.world import World
 
 
 @pytest.fixture(scope="module")

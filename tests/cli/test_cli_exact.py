@@ -9,7 +9,6 @@ import json
 
 import pytest
 import yaml
-
 from cli_helpers import one_line_error, q_text, run
 
 START = [-1.2, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0]

@@ -5,9 +5,9 @@ non-MJCF .xml "not valid JSON")."""
 from __future__ import annotations
 
 import pytest
+from cli_helpers import run
 
 import jwarp
-from cli_helpers import run
 
 
 def test_non_utf8_robot_json_names_the_file(tmp_path):

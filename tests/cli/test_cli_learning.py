@@ -8,9 +8,9 @@ from __future__ import annotations
 import json
 
 import pytest
+from cli_helpers import one_line_error, run  # noqa: F401  (tests/cli_helpers.py)
 
 from jwarp.cli import main
-from cli_helpers import one_line_error, run  # noqa: F401  (tests/cli_helpers.py)
 
 TINY = ["--robot", "planar5", "--world", "random", "--n-worlds", "2", "--targets-per-world",
         "48", "--val-targets", "12", "--steps-per-epoch", "3", "--batch", "32", "--hidden", "32",

@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 
 import pytest
-
 from cli_helpers import one_line_error, run
 
 START, GOAL = "1.2,0,0,0", "-1.2,0,0,0"

@@ -9,9 +9,9 @@ import json
 
 import numpy as np
 import pytest
+from cli_helpers import one_line_error, run  # noqa: F401  (tests/cli_helpers.py)
 
 from jwarp.cli import main
-from cli_helpers import one_line_error, run  # noqa: F401  (tests/cli_helpers.py)
 
 TINY = ["--robot", "planar4", "--n-worlds", "1", "--tasks-per-world", "6", "--val-worlds", "1",
         "--val-tasks", "3", "--label-starts", "2", "--label-iterations", "30", "--n-bps", "16",

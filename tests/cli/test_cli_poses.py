@@ -5,11 +5,11 @@ import math
 
 import numpy as np
 
-from jwarp.plugins.registry import robot as get_robot
-from jwarp.calibration.simulate.campaign import justin_tracker_setup
-from jwarp.calibration.files import write_setup
 from jwarp.calibration.design.poses import PoseOptions, PoseSampler
 from jwarp.calibration.design.tour import path_length
+from jwarp.calibration.files import write_setup
+from jwarp.calibration.simulate.campaign import justin_tracker_setup
+from jwarp.plugins.registry import robot as get_robot
 from tests.cli_helpers import one_line_error, run
 
 

@@ -9,7 +9,6 @@ import json
 import numpy as np
 import pytest
 import yaml
-
 from cli_helpers import one_line_error, q_text, run
 
 import jwarp

@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
 
 import jwarp
-from jwarp.calibration.simulate.campaign import simulate_campaign
 from jwarp.calibration.files import read_setup, write_setup
+from jwarp.calibration.simulate.campaign import simulate_campaign
 from jwarp.calibration.simulate.scenarios import scenario
-
 from tests.cli_helpers import one_line_error, run
 
 TASK = {"plugin": "cartesian", "tracker": {"position": [0, 0, 0]},

@@ -18,8 +18,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-
 from cli_helpers import one_line_error, q_text, run  # tests/cli_helpers.py
+
 from jwarp.cli.main import build_parser
 from jwarp.learn import generate as gen
 
@@ -198,11 +198,10 @@ def test_cli_defaults_equal_the_python_api(command, api, names):
 def test_implicit_defaults_of_plan_and_ik_equal_the_api(capsys):
     """--starts/--waypoints of plan and --starts of ik are filled in at run time (a warm
     start changes them): the help names the API's values."""
-    from jwarp.solvers.ik import IKOptions
-    from jwarp.solvers.planning import PlanOptions
-
     import re
 
+    from jwarp.solvers.ik import IKOptions
+    from jwarp.solvers.planning import PlanOptions
     from jwarp.solvers.planning.options import N_STARTS
 
     assert PlanOptions.n_starts is None  # the device's: the help names the CPU's first

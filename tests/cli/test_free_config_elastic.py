@@ -7,13 +7,12 @@ from __future__ import annotations
 import json
 
 import numpy as np
+from cli_helpers import run
 
 import jwarp
 from jwarp.cli.common import DEFAULT_KAPPA
-from jwarp.world.path_feasibility import collision_free
 from jwarp.world import parse_world_spec
-
-from cli_helpers import run
+from jwarp.world.path_feasibility import collision_free
 
 
 def _configs(capsys, *extra):

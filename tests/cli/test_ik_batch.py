@@ -11,9 +11,8 @@ import os
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
-
 from cli_helpers import one_line_error, run
+from scipy.spatial.transform import Rotation
 
 import jwarp
 from jwarp.core.device import host_frames

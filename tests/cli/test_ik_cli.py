@@ -13,9 +13,8 @@ import re
 import numpy as np
 import pytest
 import yaml
-from scipy.spatial.transform import Rotation
-
 from cli_helpers import one_line_error, q_text, run
+from scipy.spatial.transform import Rotation
 
 import jwarp
 from jwarp.core.device import host_frames

@@ -9,8 +9,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from jwarp.cli.common import CLIError
-from jwarp.cli.targets import (matrix_target, parse_target, quaternion_matrix, rotvec_matrix,
-                               rpy_matrix, target_pose, unit_axis)
+from jwarp.cli.targets import (
+    matrix_target,
+    parse_target,
+    quaternion_matrix,
+    rotvec_matrix,
+    rpy_matrix,
+    target_pose,
+    unit_axis,
+)
 
 ROT = Rotation.random(50, random_state=7)
 

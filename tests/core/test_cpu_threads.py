@@ -56,13 +56,11 @@ def test_torch_threads_sets_and_restores():
     with T.torch_threads(1) as n:
         assert n == 1 and torch.get_num_threads() == 1
     assert torch.get_num_threads() == before
-    with pytest.raises(RuntimeError):
-        with T.torch_threads(1):
-            raise RuntimeError("boom")
+    with pytest.raises(RuntimeError), T.torch_threads(1):
+        raise RuntimeError("boom")
     assert torch.get_num_threads() == before
-    with pytest.raises(ValueError, match="^n: expected a positive integer"):
-        with T.torch_threads(0):
-            pass
+    with pytest.raises(ValueError, match="^n: expected a positive integer"), T.torch_threads(0):
+        pass
 
 
 def test_training_runs_at_jwarp_threads(monkeypatch):

@@ -7,6 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 import warp as wp
+from reference import coupling_matrix, nominal_dh, parent_first_order, prismatic_mask, ref_fk
+from worlds import block_world
 
 import jwarp
 from jwarp.core import device as D
@@ -18,9 +20,6 @@ from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
 from jwarp.world import collision
 from jwarp.world.collision import CollisionData, CollisionModel
-
-from reference import coupling_matrix, nominal_dh, parent_first_order, prismatic_mask, ref_fk
-from worlds import block_world
 
 ROBOTS = ["justin19", "arm7", "planar4", "hand4", "sphere2d"]
 

@@ -38,9 +38,8 @@ def test_parse_values_and_errors(monkeypatch):
         with pytest.raises(ValueError, match=f"^{BLAS_THREADS_ENV}: expected an integer >= 0"):
             blas_thread_limit(bad)
     monkeypatch.setenv(BLAS_THREADS_ENV, "x")
-    with pytest.raises(ValueError, match=BLAS_THREADS_ENV):
-        with blas_threads():
-            pass
+    with pytest.raises(ValueError, match=BLAS_THREADS_ENV), blas_threads():
+        pass
     for bad in [0, -2, 1.5, True]:
         with pytest.raises(ValueError, match="^n: expected a positive integer"):
             with blas_threads(bad):

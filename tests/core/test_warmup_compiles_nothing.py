@@ -24,10 +24,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import doc_commands as dc  # tests/doc_commands.py
 import pytest
 import warp as wp
-
-import doc_commands as dc  # tests/doc_commands.py
 
 ROBOTS = "planar4,arm7"
 #: the documented commands run after warmup (FILE: the command's whole text)
@@ -111,9 +110,10 @@ def _field(out: str, name: str) -> list[str]:
 def test_documented_commands_compile_nothing_after_warmup(tmp_path):
     import json
 
+    from worlds import block_world_2d
+
     from jwarp.core.arrays import init_warp
     from jwarp.world import save_world
-    from worlds import block_world_2d
 
     init_warp()
     shared = Path(wp.config.kernel_cache_dir)

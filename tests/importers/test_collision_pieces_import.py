@@ -15,16 +15,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from cli_helpers import run
 from scipy.spatial import ConvexHull
 
-from jwarp.importers.collision_pieces import (CYLINDER_SIDES, METHOD, geometry_piece,
-                                              hull_vertices, pieces_from_geometries)
+from jwarp.importers.collision_pieces import (
+    CYLINDER_SIDES,
+    METHOD,
+    geometry_piece,
+    hull_vertices,
+    pieces_from_geometries,
+)
 from jwarp.importers.robot import example_robot_urdf, load_urdf
 from jwarp.importers.urdf import CollisionGeometry
 from jwarp.model import RobotModel
 from jwarp.world.spherize import SpherizeOptions, spherize, spherized_robot
-
-from cli_helpers import run
 
 N = 1000   # surface points, and as many volume points, of each primitive
 

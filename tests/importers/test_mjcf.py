@@ -394,6 +394,7 @@ def test_ur5e_fk_matches_mujoco():
 
 def test_cli_spheres_fit_mjcf_none(tmp_path, capsys):
     from cli_helpers import one_line_error, run
+
     from jwarp.world.model_check import check_collision_model
 
     path = write(tmp_path, ARM)

@@ -12,13 +12,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from cli_helpers import one_line_error, run
 from robot_data import erd
 
 import jwarp
-from jwarp.importers.robot import (EXAMPLE_ROBOT_ALIASES, example_robot_names,
-                                   example_robot_urdf, load_urdf, package_robot_path)
+from jwarp.importers.robot import (
+    EXAMPLE_ROBOT_ALIASES,
+    example_robot_names,
+    example_robot_urdf,
+    load_urdf,
+    package_robot_path,
+)
 
 
 def test_example_robot_data_panda_by_name():

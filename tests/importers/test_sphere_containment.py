@@ -15,8 +15,14 @@ import pytest
 import trimesh
 
 import jwarp
-from jwarp.importers.spheres import (containment_bound, contain_fit, fit_link, fit_spheres,
-                                     load_mesh, surface_cover)
+from jwarp.importers.spheres import (
+    contain_fit,
+    containment_bound,
+    fit_link,
+    fit_spheres,
+    load_mesh,
+    surface_cover,
+)
 from jwarp.model import RobotModel, RobotModelError, Sphere, SphereRelation
 from jwarp.model.sphere_relation import inflated, relation_text
 
@@ -189,10 +195,11 @@ def test_relation_follows_shrunk_spheres():
 
 
 def test_mesh_margin_inflates_radii_per_link_and_warns_once():
-    from jwarp.core.device import put_model
-    from jwarp.solvers.planning import PlanOptions, Planner
-    from jwarp.world.model_check import MeshMarginWarning, mesh_margin_model
     from worlds import block_world
+
+    from jwarp.core.device import put_model
+    from jwarp.solvers.planning import Planner, PlanOptions
+    from jwarp.world.model_check import MeshMarginWarning, mesh_margin_model
 
     base = unique()
     links = sorted({base.frames[s.frame].name for s in base.spheres})
@@ -270,6 +277,7 @@ def test_import_urdf_reports_containment_per_link(tmp_path, capsys, monkeypatch)
     the file records the relation: contained by default; with --approximate the poke-out
     per link, which a planner then adds with one warning."""
     from cli_helpers import run
+
     from jwarp.world.model_check import MeshMarginWarning, mesh_margin_model
 
     monkeypatch.setenv("JWARP_CACHE", str(tmp_path / "cache"))

@@ -15,8 +15,15 @@ import numpy as np
 import pytest
 import trimesh
 
-from jwarp.importers.spheres import (SphereFit, excess_volume, fit_geometry, fit_spheres,
-                                     load_mesh, one_sided_error, primitive_mesh)
+from jwarp.importers.spheres import (
+    SphereFit,
+    excess_volume,
+    fit_geometry,
+    fit_spheres,
+    load_mesh,
+    one_sided_error,
+    primitive_mesh,
+)
 
 
 def fresh_error(mesh: trimesh.Trimesh, fit: SphereFit, n: int = 20000, seed: int = 987) -> float:
@@ -252,7 +259,9 @@ def test_a_fit_that_would_not_end_is_refused_before_it_starts():
     tolerance ran 147 s, then asked for 838 GiB: refused at once, naming the tolerance and
     the figure; a tolerance fit for the size works."""
     import time
+
     import trimesh
+
     from jwarp.importers.spheres import fit_spheres
     box = trimesh.creation.box(extents=[10.0, 10.0, 10.0])
     t = time.perf_counter()
@@ -269,10 +278,10 @@ def test_a_fit_that_would_not_end_is_refused_before_it_starts():
 def test_fit_link_takes_the_importers_geometries():
     """fit_link accepts load_urdf(...).geometries_of(link) as they are (a mesh file in
     ``mesh_path``), with the same spheres as the mappings its docstring names."""
+    from robot_data import erd
+
     from jwarp.importers.robot import load_urdf
     from jwarp.importers.spheres import fit_link
-
-    from robot_data import erd
 
     geoms = load_urdf(erd("panda_description/urdf/panda.urdf")).geometries_of("panda_link3")
     as_maps = [{"kind": g.kind, "size": g.size, "origin": g.origin, "mesh": g.mesh_path,

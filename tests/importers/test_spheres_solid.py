@@ -13,8 +13,15 @@ import numpy as np
 import pytest
 import trimesh
 
-from jwarp.importers.spheres import (fit_link, fit_spheres, inside_solid, one_sided_error,
-                                     primitive_mesh, signed_distance, sphere_protrusion)
+from jwarp.importers.spheres import (
+    fit_link,
+    fit_spheres,
+    inside_solid,
+    one_sided_error,
+    primitive_mesh,
+    signed_distance,
+    sphere_protrusion,
+)
 
 HALF = np.array([0.05, 0.03, 0.02])  # the open box: half sides [m]
 

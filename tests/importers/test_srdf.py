@@ -16,8 +16,14 @@ import pytest
 import jwarp
 from jwarp.importers.groups import GroupOptions, plan_group
 from jwarp.importers.robot import example_robot_urdf, load_urdf
-from jwarp.importers.srdf import (SrdfError, SrdfWarning, group_joints, parse_srdf, read_srdf,
-                                  srdf_path)
+from jwarp.importers.srdf import (
+    SrdfError,
+    SrdfWarning,
+    group_joints,
+    parse_srdf,
+    read_srdf,
+    srdf_path,
+)
 from jwarp.importers.urdf_export import export_urdf
 
 

@@ -19,8 +19,14 @@ import pytest
 
 from jwarp.importers.groups import GroupOptions, plan_group
 from jwarp.importers.robot import example_robot_urdf, load_urdf
-from jwarp.importers.srdf import (USED_ELEMENTS, SrdfError, SrdfIgnoredWarning,
-                                  disabled_link_pairs, parse_srdf, read_srdf)
+from jwarp.importers.srdf import (
+    USED_ELEMENTS,
+    SrdfError,
+    SrdfIgnoredWarning,
+    disabled_link_pairs,
+    parse_srdf,
+    read_srdf,
+)
 from jwarp.model.pair_reasons import moveit_adjacent_pairs, skipped_pairs
 
 MOVEIT_SRDF = str(Path(__file__).parent / "data" / "moveit_panda.srdf")

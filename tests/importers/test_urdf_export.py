@@ -4,7 +4,6 @@ URDF joint of the same name; coupled frames are mimic joints (pinocchio >= 3 rea
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import xml.etree.ElementTree as ET
@@ -13,9 +12,14 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.importers.urdf_export import (UrdfExportOptions, dh_origin, export_urdf, rpy_of,
-                                         side_file_path)
 from jwarp.calibration.estimate.params import perturb_robot
+from jwarp.importers.urdf_export import (
+    UrdfExportOptions,
+    dh_origin,
+    export_urdf,
+    rpy_of,
+    side_file_path,
+)
 
 pin = pytest.importorskip("pinocchio")
 

@@ -13,10 +13,10 @@ import json
 
 import numpy as np
 import pytest
+from robot_data import erd  # tests/robot_data.py
 
 import jwarp
 from jwarp.cli import main as cli
-from robot_data import erd  # tests/robot_data.py
 from jwarp.world.collision import is_collision_free
 from jwarp.world.feasibility import random_configurations
 

@@ -6,11 +6,11 @@ import warp as wp
 
 import jwarp
 from jwarp.core.arrays import init_warp
+from jwarp.core.device import put_model
+from jwarp.core.limits import limit_violation, project_numpy, within_limits
 from jwarp.kernels import path as PK
 from jwarp.solvers import planning as planner
 from jwarp.world import path_feasibility
-from jwarp.core.device import put_model
-from jwarp.core.limits import limit_violation, project_numpy, within_limits
 
 init_warp()
 F64 = wp.float64

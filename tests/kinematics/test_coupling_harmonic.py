@@ -8,16 +8,15 @@ DH rows for the elastic model."""
 
 import numpy as np
 import pytest
+from reference import central_difference_grad, ref_fk
 from scipy.spatial.transform import Rotation
 
 import jwarp
 from jwarp import kinematics as K
+from jwarp.calibration.estimate.result import model_frames
 from jwarp.core.limits import sample_within_limits
 from jwarp.solvers import ik as IK
-from jwarp.calibration.estimate.result import model_frames
 from jwarp.world import collision
-
-from reference import central_difference_grad, ref_fk
 
 #: (K = 2, 2) [a_k, b_k] of torso_4 [rad]: a few mrad
 H = np.array([[4.0e-3, -3.0e-3], [2.5e-3, 5.0e-3]])

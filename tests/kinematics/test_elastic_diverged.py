@@ -4,9 +4,9 @@ NaN frames with converged=[True], iterations=[2])."""
 
 import numpy as np
 import pytest
+from cli_helpers import run
 
 import jwarp
-from cli_helpers import run
 
 
 @pytest.mark.parametrize("dtype,kappa", [("float32", 1e10), ("float64", 1e308)])

@@ -6,19 +6,17 @@ import dataclasses
 import numpy as np
 import pytest
 import warp as wp
-
-import jwarp
-from jwarp.world import collision
-from jwarp.core.device import put_model
-from jwarp.kinematics.compensation import CompensationRows
-from jwarp.kernels import fk as fk_kernels
-from jwarp.solvers import planning as PL
-from jwarp.world import path_feasibility
-from jwarp.core.limits import sample_within_limits
-
 from devices import requires_cuda
 from reference import kappa_uniform, nominal_dh, ref_fk, ref_fk_elastic, ref_torques
 from worlds import block_world
+
+import jwarp
+from jwarp.core.device import put_model
+from jwarp.core.limits import sample_within_limits
+from jwarp.kernels import fk as fk_kernels
+from jwarp.kinematics.compensation import CompensationRows
+from jwarp.solvers import planning as PL
+from jwarp.world import collision, path_feasibility
 
 LAM = 0.6
 

@@ -7,13 +7,12 @@ import threading
 import numpy as np
 import pytest
 import warp as wp
+from devices import requires_cuda
+from reference import ref_fk, ref_jacobian_fd, sample_q
 
 import jwarp
 from jwarp import kinematics as K
 from jwarp.kinematics import launch
-
-from devices import requires_cuda
-from reference import ref_fk, ref_jacobian_fd, sample_q
 
 torch = pytest.importorskip("torch")
 

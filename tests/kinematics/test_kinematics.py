@@ -3,14 +3,12 @@
 import numpy as np
 import pytest
 import warp as wp
+from devices import requires_cpu, requires_cuda
+from reference import kappa_uniform, ref_fk, ref_fk_elastic, ref_jacobian_fd, ref_torques, sample_q
 
 import jwarp
 from jwarp import kinematics as K
 from jwarp.kinematics.autodiff import tape_jacobian
-
-from devices import requires_cpu, requires_cuda
-from reference import (kappa_uniform, ref_fk, ref_fk_elastic, ref_jacobian_fd, ref_torques,
-                       sample_q)
 
 ROBOTS = ["justin19", "arm7", "planar4", "planar5", "sphere2d", "hand4"]
 KAPPA = 1e-4  # 0.1 rad/kNm
@@ -204,8 +202,8 @@ def test_justin_elastic_sag_converges_in_three_iterations(device, capsys):
           f"min {sag[1:].min():.1f} mm, max {sag[1:].max():.1f} mm")
     print("max TCP distance to the equilibrium after 0..4 updates [mm]: "
           + ", ".join(f"{r:.4f}" for r in residual))
-    assert 2.0 < sag[0].min() and sag[0].max() < 60.0          # a few mm to cm at q = 0
-    assert 1.0 < sag.min() and sag.max() < 300.0  # up to ~0.2 m with the torso tilted
+    assert sag[0].min() > 2.0 and sag[0].max() < 60.0          # a few mm to cm at q = 0
+    assert sag.min() > 1.0 and sag.max() < 300.0  # up to ~0.2 m with the torso tilted
     # contraction by > 5x per update; after 3 updates every TCP is within 0.5 mm
     assert all(residual[k + 1] < 0.2 * residual[k] for k in range(4))
     assert residual[3] < 0.5

@@ -7,15 +7,18 @@ import dataclasses
 import numpy as np
 import pytest
 import warp as wp
+from devices import cuda_available
+from reference import ref_fk, ref_jacobian_fd, sample_q
 
 import jwarp
 from jwarp.core.device import put_model
-from jwarp.kinematics import (KinematicsData, forward_kinematics, frame_dh_jacobian,
-                              frame_jacobian)
-from jwarp.kinematics import launch
-
-from devices import cuda_available
-from reference import ref_fk, ref_jacobian_fd, sample_q
+from jwarp.kinematics import (
+    KinematicsData,
+    forward_kinematics,
+    frame_dh_jacobian,
+    frame_jacobian,
+    launch,
+)
 
 ROBOTS = ["planar5", "arm7", "justin19"]
 DTYPES = [np.float64, np.float32]

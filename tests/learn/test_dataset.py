@@ -131,9 +131,8 @@ def test_corrupt_pages_clear_error(tmp_path):
     data = bytearray(p.read_bytes())
     data[4096:] = b"\xff" * (len(data) - 4096)  # every page after the first destroyed
     p.write_bytes(bytes(data))
-    with pytest.raises(PathDBError, match="d.sqlite"):
-        with PathDB(p) as db:
-            db.paths_of(db.world_ids())
+    with pytest.raises(PathDBError, match="d.sqlite"), PathDB(p) as db:
+        db.paths_of(db.world_ids())
 
 
 def test_locked_database_loses_nothing(tmp_path):
@@ -226,6 +225,7 @@ def test_info_reports_worlds_whose_paths_are_missing(tmp_path, capsys):
     """Reliability round 3, item 10: a world whose paths were removed from the database was
     never reported; ``info()`` lists it and ``jwarp data info`` warns."""
     import sqlite3
+
     from cli_helpers import run
     p = filled(tmp_path / "d.sqlite")
     with PathDB(p) as db:

@@ -8,8 +8,14 @@ import pytest
 
 import jwarp
 from jwarp.core.limits import sample_within_limits
-from jwarp.learn.evaluate import (TABLE_34_COLUMNS, TABLE_35_COLUMNS, ablation_table,
-                                  evaluate_ik, format_table_34, format_table_35)
+from jwarp.learn.evaluate import (
+    TABLE_34_COLUMNS,
+    TABLE_35_COLUMNS,
+    ablation_table,
+    evaluate_ik,
+    format_table_34,
+    format_table_35,
+)
 from jwarp.solvers.ik import IKObjective, IKOptions, IKSolver
 from jwarp.world import collision, simplex_world
 

@@ -6,8 +6,7 @@ import pytest
 import jwarp
 from jwarp.learn.plan_data import PlanDataOptions, WorldLabels, label_world, world_for
 from jwarp.solvers import planning as PL
-from jwarp.world import path_feasibility
-from jwarp.world import world_from_occupancy
+from jwarp.world import path_feasibility, world_from_occupancy
 
 N = 64
 LIM = np.array([[-1.0, 1.0], [-1.0, 1.0]])

@@ -13,8 +13,13 @@ import pytest
 
 from jwarp.learn.dataset import PathDB, PathDBError
 from jwarp.learn.generate import generate
-from jwarp.learn.train_plan import (PlanSamples, TrainPlanOptions, samples_from_db,
-                                    split_by_world, train_plan)
+from jwarp.learn.train_plan import (
+    PlanSamples,
+    TrainPlanOptions,
+    samples_from_db,
+    split_by_world,
+    train_plan,
+)
 from jwarp.world.sdf import world_from_occupancy
 
 ROBOT = "planar4"

@@ -14,14 +14,31 @@ import jwarp
 from jwarp.kinematics.fk import fk
 from jwarp.learn.checkpoint import load_checkpoint, load_plan_checkpoint, save_checkpoint
 from jwarp.learn.evaluate_plan import evaluate_plan, format_plan_table
-from jwarp.learn.plan_net import (AXIS_SYMMETRIES, PlanNet, PlanNetConfig, axis_symmetries,
-                                  decode_paths, encode_paths, straight_paths, symmetric_bps)
-from jwarp.learn.train_plan import (TrainPlanOptions, augment, boost_weights,
-                                    clean, extend, make_plan_data, path_costs, plan_loss,
-                                    train_plan, validation_mse)
-from jwarp.solvers.planning import PlanOptions, Planner
-from jwarp.world.path_feasibility import path_feasible
+from jwarp.learn.plan_net import (
+    AXIS_SYMMETRIES,
+    PlanNet,
+    PlanNetConfig,
+    axis_symmetries,
+    decode_paths,
+    encode_paths,
+    straight_paths,
+    symmetric_bps,
+)
+from jwarp.learn.train_plan import (
+    TrainPlanOptions,
+    augment,
+    boost_weights,
+    clean,
+    extend,
+    make_plan_data,
+    path_costs,
+    plan_loss,
+    train_plan,
+    validation_mse,
+)
+from jwarp.solvers.planning import Planner, PlanOptions
 from jwarp.world.feasibility import feasible_simplex_world, random_configurations
+from jwarp.world.path_feasibility import path_feasible
 from jwarp.world.sdf import World
 
 ROBOT = "planar4"
@@ -76,7 +93,7 @@ def test_paths_endpoints_limits_and_world_forms(worlds):
     assert P.shape == (3, 2, 20, 4) and P.dtype == np.float64
     np.testing.assert_array_equal(P[:, :, 0], np.repeat(q[:3, None], 2, 1))
     np.testing.assert_array_equal(P[:, :, -1], np.repeat(q[3:, None], 2, 1))
-    assert np.all(P >= net.lower) and np.all(P <= net.upper)
+    assert np.all(net.lower <= P) and np.all(net.upper >= P)
     per_task = net.paths(q[:3], q[3:], [worlds[0]] * 3)
     np.testing.assert_allclose(per_task, P)
     with pytest.raises(ValueError, match="world"):

@@ -10,8 +10,12 @@ import numpy as np
 import pytest
 
 from jwarp.model import CollisionPieces, ConvexPiece, RobotModel, RobotModelError, Sphere
-from jwarp.model.collision_pieces import (pieces_from_dict, pieces_to_dict, sphere_digest,
-                                          stamp_pieces)
+from jwarp.model.collision_pieces import (
+    pieces_from_dict,
+    pieces_to_dict,
+    sphere_digest,
+    stamp_pieces,
+)
 
 DOC = {
     "schema": "jwarp.robot", "version": 1, "name": "two",

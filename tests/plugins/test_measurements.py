@@ -8,13 +8,12 @@ import copy
 
 import numpy as np
 import pytest
+from devices import requires_cpu
+from reference import sample_q
 from scipy.spatial.transform import Rotation
 
 import jwarp
 from jwarp.plugins.registry import measurement
-
-from devices import requires_cpu
-from reference import sample_q
 
 EPS = 1e-6
 

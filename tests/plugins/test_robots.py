@@ -16,8 +16,8 @@ import pytest
 
 import jwarp
 from jwarp.model import RobotModel
-from jwarp.plugins.robots import HERE
 from jwarp.plugins.registry import BUILTIN_ROBOT_MODULES
+from jwarp.plugins.robots import HERE
 
 # name: (n_dof, n_frames)
 SIZES = {

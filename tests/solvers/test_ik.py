@@ -3,14 +3,13 @@ differences, targets reached to tolerance, collision-free solutions, clear error
 
 import numpy as np
 import pytest
+from reference import central_difference_grad  # tests/reference.py
 from scipy.spatial.transform import Rotation
 
 import jwarp
-from jwarp.world import collision
-from jwarp.solvers import ik as IK
 from jwarp.core.limits import sample_within_limits, within_limits
-from jwarp.world import shelf_world
-from reference import central_difference_grad  # tests/reference.py
+from jwarp.solvers import ik as IK
+from jwarp.world import collision, shelf_world
 
 
 def ref_costs(F, T, lam_p, lam_r):

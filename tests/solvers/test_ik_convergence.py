@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from robot_data import erd
 from scipy.spatial.transform import Rotation
 
 import jwarp
 from jwarp.core.limits import sample_within_limits
 from jwarp.kernels import ik as ik_kernels
 from jwarp.solvers import ik as IK
-
-from robot_data import erd
 
 PANDA = "panda_description/urdf/panda.urdf"
 TCP = "panda_hand_tcp"
@@ -28,6 +27,7 @@ def panda():
     """(jwarp model, pinocchio reference FK of the tcp: q (B, n_dof) -> (B, 4, 4))."""
     pytest.importorskip("pinocchio")
     from verifier import PathVerifier
+
     from jwarp.importers.robot import load_urdf
 
     path = erd(PANDA)

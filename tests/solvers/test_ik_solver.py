@@ -10,14 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import warp as wp
+from devices import requires_cpu, requires_cuda
 
 import jwarp
 from jwarp.core.limits import project_numpy, sample_within_limits, within_limits
 from jwarp.kernels import ik_step
 from jwarp.solvers import ik as IK
 from jwarp.world import collision, shelf_world
-
-from devices import requires_cpu, requires_cuda
 
 ROOT = Path(__file__).resolve().parents[2]
 

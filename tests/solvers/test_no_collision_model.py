@@ -7,16 +7,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from cli_helpers import one_line_error, run
+from worlds import block_world_2d
 
 import jwarp
 from jwarp.model import Sphere
-from jwarp.solvers.ik import IKOptions, IKSolver, ik, pose_matrix
-from jwarp.solvers.planning import PlanOptions, Planner, plan
-from jwarp.world.model_check import (check_collision_model, home_configurations,
-                                     home_self_collisions)
-
-from cli_helpers import one_line_error, run
-from worlds import block_world_2d
+from jwarp.solvers.ik import IKOptions, IKSolver, ik
+from jwarp.solvers.planning import Planner, PlanOptions, plan
+from jwarp.world.model_check import check_collision_model, home_configurations, home_self_collisions
 
 START, GOAL = np.array([1.2, 0, 0, 0]), np.array([-1.2, 0, 0, 0])
 

@@ -12,12 +12,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from worlds import block_world_2d
 
 from jwarp.solvers import planning as PL
 from jwarp.solvers.planning.shorten import corners, length_cost, respace, shortcut_paths
 from jwarp.world import path_feasibility
-
-from worlds import block_world_2d
 
 S4 = np.array([1.2, 0.0, 0.0, 0.0])
 G4 = np.array([-1.2, 0.0, 0.0, 0.0])

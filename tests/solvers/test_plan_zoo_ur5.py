@@ -16,15 +16,15 @@ import json
 
 import numpy as np
 import pytest
+from robot_data import erd  # tests/robot_data.py
 
 import jwarp
 from jwarp.cli import main as cli
-from robot_data import erd  # tests/robot_data.py
 from jwarp.solvers.planning import planner as planner_module
-from jwarp.world.path_feasibility import certify_check
 from jwarp.solvers.planning.rrt import RRTOptions, resample_path, rrt_connect
 from jwarp.world.collision import is_collision_free
 from jwarp.world.feasibility import random_configurations
+from jwarp.world.path_feasibility import certify_check
 from jwarp.world.sdf import World
 
 UR5 = "ur_description/urdf/ur5_robot.urdf"

@@ -2,15 +2,12 @@
 
 import numpy as np
 import pytest
+from devices import requires_cpu
 
 import jwarp
-from jwarp.world import collision
-from jwarp.solvers import planning as PL
-from jwarp.world import path_feasibility
 from jwarp.core.limits import within_limits
-from jwarp.world import world_from_occupancy
-
-from devices import requires_cpu
+from jwarp.solvers import planning as PL
+from jwarp.world import collision, path_feasibility, world_from_occupancy
 
 N_CELLS = 64
 LIM2 = np.array([[-1.0, 1.0], [-1.0, 1.0]])

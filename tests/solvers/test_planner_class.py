@@ -7,13 +7,11 @@ import sys
 import numpy as np
 import pytest
 import warp as wp
+from devices import requires_cpu
 
 import jwarp
 from jwarp.solvers import planning as PL
-from jwarp.world import path_feasibility
-from jwarp.world import world_from_occupancy
-
-from devices import requires_cpu
+from jwarp.world import path_feasibility, world_from_occupancy
 
 N_CELLS = 64
 LIM2 = np.array([[-1.0, 1.0], [-1.0, 1.0]])

@@ -6,14 +6,13 @@ import time
 
 import numpy as np
 import pytest
+from worlds import block_world_2d
 
 import jwarp
 from jwarp.core.limits import within_limits
 from jwarp.solvers import planning as PL
-from jwarp.world import path_feasibility
 from jwarp.solvers.planning import rrt as R
-
-from worlds import block_world_2d
+from jwarp.world import path_feasibility
 
 S4 = np.array([1.2, 0.0, 0.0, 0.0])
 G4 = np.array([-1.2, 0.0, 0.0, 0.0])

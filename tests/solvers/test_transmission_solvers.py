@@ -6,15 +6,14 @@ import dataclasses
 
 import numpy as np
 import pytest
+from reference import ref_fk
+from worlds import block_world_2d
 
 import jwarp
 from jwarp.kinematics.transmission import transmitted, untransmitted
 from jwarp.solvers import planning as PL
-from jwarp.world import path_feasibility
 from jwarp.solvers.ik import IKOptions, IKSolver
-
-from reference import ref_fk
-from worlds import block_world_2d
+from jwarp.world import path_feasibility
 
 AMP = 0.03  # rad: large, so that ignoring it would miss the targets by centimetres
 

@@ -5,15 +5,22 @@ central finite differences (float64)."""
 import numpy as np
 import pytest
 import warp as wp
-
-import jwarp
-from jwarp.world.collision import (CollisionModel, collision_cost, collision_pairs, is_collision_free,
-                             min_distances, rigid_pairs, self_distances, sphere_distances)
-from jwarp.world import World, random_configurations, simplex_world, world_from_occupancy
-
 from devices import requires_cpu, requires_cuda
 from reference import ref_fk, sample_q
 from test_world import ref_lookup
+
+import jwarp
+from jwarp.world import random_configurations, simplex_world, world_from_occupancy
+from jwarp.world.collision import (
+    CollisionModel,
+    collision_cost,
+    collision_pairs,
+    is_collision_free,
+    min_distances,
+    rigid_pairs,
+    self_distances,
+    sphere_distances,
+)
 
 EPS = 0.05
 

@@ -14,8 +14,14 @@ import jwarp
 from jwarp.core.limits import sample_within_limits
 from jwarp.solvers.planning import plan
 from jwarp.world import World
-from jwarp.world.collision import (collision_pairs, min_distances, mm_text, self_distances,
-                                   sphere_distances, sphere_link)
+from jwarp.world.collision import (
+    collision_pairs,
+    min_distances,
+    mm_text,
+    self_distances,
+    sphere_distances,
+    sphere_link,
+)
 from jwarp.world.motion import PathCheck
 
 ROBOT = jwarp.robot("arm7")

@@ -5,15 +5,13 @@ too when asked for)."""
 import numpy as np
 import pytest
 import warp as wp
+from test_collision import ROBOTS, dense_world, fd_grad, off_kinks, perturbed_rho, ref_cost, sample
 
 import jwarp
 from jwarp.core.device import put_model
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.world import World
 from jwarp.world.collision import CollisionModel, default_wide
-
-from test_collision import (ROBOTS, dense_world, fd_grad, off_kinks, perturbed_rho, ref_cost,
-                            sample)
 
 
 def both(model, world, q, device, dtype=np.float64, **kw):

@@ -8,12 +8,12 @@ import pytest
 import trimesh
 
 import jwarp
+from jwarp.solvers.planning import plan
 from jwarp.world import World, exact_world
 from jwarp.world.device_world import world_query
 from jwarp.world.motion import MotionCheck, check_paths, sphere_reach
 from jwarp.world.primitives import Shape, pose_matrix, rpy_matrix, signed_distance
 from jwarp.world.scene_file import Scene
-from jwarp.solvers.planning import plan
 from jwarp.world.shapes import ShapeSet
 
 PRIMS = [("box", [0.3, 0.2, 0.1]), ("sphere", [0.1]), ("cylinder", [0.3, 0.1]),

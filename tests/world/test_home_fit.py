@@ -16,11 +16,17 @@ import numpy as np
 import pytest
 
 import jwarp
-from jwarp.world.home_fit import (HomeFitOptions, HomeFitWarning, fit_home, link_mesh,
-                                      mesh_distance, resolve_home)
 from jwarp.importers.robot import example_robot_urdf, load_urdf
 from jwarp.importers.srdf import read_srdf
 from jwarp.model import SelfCollision, Sphere
+from jwarp.world.home_fit import (
+    HomeFitOptions,
+    HomeFitWarning,
+    fit_home,
+    link_mesh,
+    mesh_distance,
+    resolve_home,
+)
 
 H = 0.05   # half edge of the boxes [m]
 

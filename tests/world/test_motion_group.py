@@ -4,10 +4,10 @@ of waypoints (a planner checks its W-waypoint paths and 2-waypoint shortcuts in 
 
 import numpy as np
 import pytest
+from worlds import box_pole_scene
 
 import jwarp
 from jwarp.world.motion import MotionCheck
-from worlds import box_pole_scene
 
 
 @pytest.fixture(scope="module")

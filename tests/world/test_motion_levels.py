@@ -10,12 +10,12 @@ prove, and the other way round: both counts are printed)."""
 import numpy as np
 import pytest
 import warp as wp
+from worlds import ball_worlds, box_pole_scene, grazing_paths
 
 import jwarp
 from jwarp.world.collision import min_distances
 from jwarp.world.motion import MotionCheck, MotionOptions
 from jwarp.world.primitives import Shape, pose_matrix
-from worlds import ball_worlds, box_pole_scene, grazing_paths
 
 LEVELS = MotionOptions(method="levels")
 ADVANCE = MotionOptions(method="advance")

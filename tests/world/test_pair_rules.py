@@ -11,8 +11,12 @@ import pytest
 
 from jwarp.importers.robot import load_urdf
 from jwarp.model.pair_reasons import moveit_adjacent_pairs, skipped_pairs
-from jwarp.world.self_pairs import (ALWAYS_FRACTION, adjacent_pairs, never_colliding_pairs,
-                                    with_self_pairs)
+from jwarp.world.self_pairs import (
+    ALWAYS_FRACTION,
+    adjacent_pairs,
+    never_colliding_pairs,
+    with_self_pairs,
+)
 from jwarp.world.spherize import SpherizeOptions, spherize
 
 R = 0.1          # sphere radius [m]

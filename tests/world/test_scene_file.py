@@ -17,9 +17,17 @@ from scipy.spatial.transform import Rotation
 
 import jwarp
 from jwarp.world.moveit import joint_vector
-from jwarp.world.scene_file import (TABLE_SHELF_GOAL, TABLE_SHELF_START, Scene, SceneOptions,
-                                    load_scene, robot_frames, scene_from_dict, scene_world,
-                                    table_shelf_scene)
+from jwarp.world.scene_file import (
+    TABLE_SHELF_GOAL,
+    TABLE_SHELF_START,
+    Scene,
+    SceneOptions,
+    load_scene,
+    robot_frames,
+    scene_from_dict,
+    scene_world,
+    table_shelf_scene,
+)
 
 H = 0.02  # voxel [m]
 ROOT = Path(__file__).resolve().parents[2]

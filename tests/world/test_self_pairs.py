@@ -10,8 +10,13 @@ import pytest
 import jwarp
 from jwarp.model import RobotModel, SelfCollision
 from jwarp.world.collision import collision_pairs, self_distances
-from jwarp.world.self_pairs import (adjacent_pairs, never_colliding_pairs, rigid_groups,
-                                    with_self_pairs, write_self_pairs)
+from jwarp.world.self_pairs import (
+    adjacent_pairs,
+    never_colliding_pairs,
+    rigid_groups,
+    with_self_pairs,
+    write_self_pairs,
+)
 
 
 @pytest.fixture(scope="module")

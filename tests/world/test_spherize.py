@@ -7,16 +7,15 @@ import json
 
 import numpy as np
 import pytest
+from cli_helpers import run
 
 import jwarp
 from jwarp.importers.robot import example_robot_urdf, load_urdf
 from jwarp.solvers.ik import IKOptions, IKSolver
-from jwarp.solvers.planning import PlanOptions, Planner
+from jwarp.solvers.planning import Planner, PlanOptions
 from jwarp.world.path_feasibility import collision_free, path_feasible
 from jwarp.world.scene_file import SceneOptions, load_scene, robot_frames, scene_world
 from jwarp.world.spherize import SpherizeOptions, spherize, spherized_robot
-
-from cli_helpers import run
 
 TOL = 0.01
 URDF = """<?xml version="1.0"?>

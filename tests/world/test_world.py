@@ -5,21 +5,31 @@ Every check compares against an independent plain-numpy/scipy computation writte
 
 import math
 import os
-import zipfile
 
 import numpy as np
 import pytest
 import trimesh
+from reference import ref_fk
 from scipy.interpolate import RegularGridInterpolator
 
 import jwarp
-from jwarp.world import (World, feasible_fraction, feasible_simplex_world, fixed_spheres,
-                         load_world, noise_grid, parse_world_spec, random_configurations,
-                         save_world, simplex_noise, simplex_occupancy, simplex_world,
-                         world_from_mesh, world_from_occupancy, world_from_points)
-
-from reference import ref_fk
-
+from jwarp.world import (
+    World,
+    feasible_fraction,
+    feasible_simplex_world,
+    fixed_spheres,
+    load_world,
+    noise_grid,
+    parse_world_spec,
+    random_configurations,
+    save_world,
+    simplex_noise,
+    simplex_occupancy,
+    simplex_world,
+    world_from_mesh,
+    world_from_occupancy,
+    world_from_points,
+)
 
 # ================================================================ simplex noise
 _GRAD3 = [(1, 1, 0), (-1, 1, 0), (1, -1, 0), (-1, -1, 0), (1, 0, 1), (-1, 0, 1), (1, 0, -1),
