@@ -101,7 +101,7 @@ def section_reach(args: argparse.Namespace) -> dict:
         runs = timing.each_run([make(s, seeds) for s in solvers.values()], args.repeats,
                                device=args.device)
         rows = {}
-        for (name, s), run in zip(solvers.items(), runs):
+        for name, run in zip(solvers, runs):
             res = run.results[-1]
             ok = common_check(model, res.q, T, 1e-3, 1e-2)
             t = run.timing

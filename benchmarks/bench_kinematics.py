@@ -527,7 +527,9 @@ class Bench:
                 rows[op].ratio_meaning = f"x {kernel} time"
                 self.emit(rows[op])
             result[B] = rows
-            del q, fk_out, fk_out_np, jac_out, q_np, api, kernels, kdata
+            # free this batch's arrays before the next batch allocates (rebound, not del:
+            # the closures above read them, and ruff's F821 reads a del as undefined)
+            q = fk_out = fk_out_np = jac_out = q_np = api = kernels = kdata = None
             gc.collect()
         return result
 
@@ -600,7 +602,7 @@ class Bench:
                 row.ratio_meaning = "jwarp fk speedup"
             self.emit(row)
             result[B] = row
-            del out, local
+            out = local = None  # freed before the next batch (rebound, not del: see run_device)
         return result
 
     # ----------------------------------------------------------- threads

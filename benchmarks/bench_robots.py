@@ -470,7 +470,7 @@ def fk_vs_mujoco(path: str, m: Any, Q: np.ndarray) -> dict:
     md = mujoco.MjData(mm)
     F = np.asarray(jwarp.fk(m, Q, device="cpu", dtype=np.float64))
     adr = []
-    for j, name in enumerate(m.joint_names):
+    for name in m.joint_names:
         jid = mujoco.mj_name2id(mm, mujoco.mjtObj.mjOBJ_JOINT, name)
         if jid < 0:
             raise ValueError(f"joint '{name}': not a joint of the MuJoCo model")

@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     dw = DeviceWorld(w, dev, f32)
     ids = w.object_ids[:50]
     times = []
-    for r in range(a.repeats):
+    for _ in range(a.repeats):
         P = rng.uniform([-1, -1, 0], [1, 1, 1.5], (50, 3))
         t0 = time.perf_counter()
         w.move(ids, P)
@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
         dwq = DeviceWorld(world, dev, f32)
         qw[name] = (dwq, cut)
     res = {n: [] for n in qw}
-    for r in range(a.repeats):
+    for _ in range(a.repeats):
         for name, (dwq, cut) in qw.items():
             t0 = time.perf_counter()
             wp.launch(k.world_query, dim=a.points, inputs=[dwq.struct, p_wp, cut], outputs=out,
@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     idx = wp.array(np.arange(a.paths, dtype=np.int32), dtype=wp.int32, device=dev)
     chk.launch(pw, idx, a.paths)
     times = []
-    for r in range(a.repeats):
+    for _ in range(a.repeats):
         t0 = time.perf_counter()
         o = chk.launch(pw, idx, a.paths)
         ok = o["ok"].numpy()

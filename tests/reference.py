@@ -168,7 +168,7 @@ def _batch_dh(model, dh, B):
 def ref_local_transforms(model, q, dh=None):
     """(B, n_frames, 4, 4) parent_T_child of every frame."""
     q = np.atleast_2d(np.asarray(q, np.float64))
-    B, nf = q.shape[0], len(model.frames)
+    B = q.shape[0]
     dh = _batch_dh(model, dh, B)
     qi = q @ coupling_matrix(model).T  # (B, nf)
     pris = prismatic_mask(model)

@@ -235,7 +235,7 @@ def test_private_scope():
 
 def test_no_private_name_crosses_a_package():
     bad = []
-    for m, (path, tree, is_pkg) in MODULES.items():
+    for m, (_path, tree, is_pkg) in MODULES.items():
         aliases: dict[str, str] = {}
         for line, target, names, _ in imports(m):
             for n in names:
@@ -335,7 +335,7 @@ def _device_defaults() -> list[str]:
     """``module:line name=default`` for every public function, method (``__init__``
     included) and dataclass field named ``device`` whose default is not None."""
     bad = []
-    for m, (path, tree, _) in MODULES.items():
+    for m, (_, tree, _) in MODULES.items():
         for node in ast.walk(tree):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 if node.name.startswith("_") and node.name != "__init__":
@@ -392,7 +392,7 @@ def test_devices_resolve_through_the_one_helper():
     builder, resolves ``device=None`` to Warp's default device, the same rule)."""
     allowed = {"jwarp.core.arrays", "jwarp.core.device"}
     bad = []
-    for m, (path, tree, _) in MODULES.items():
+    for m, (_, tree, _) in MODULES.items():
         if m in allowed:
             continue
         for node in ast.walk(tree):

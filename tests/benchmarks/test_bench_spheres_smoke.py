@@ -23,7 +23,7 @@ def test_bench_spheres_quick(run_bench):
     assert panda["seconds"] > 0 and panda["peak_rss_mb"] < 2048
     links = {r["link"]: r for r in panda["links"]}
     assert sum(r["spheres"] for r in links.values()) == panda["spheres"]
-    for name, r in links.items():
+    for r in links.values():
         assert r["spheres"] >= 1 and r["one_sided_error_mm"] <= 1e-6, r
         assert r["excess_cm3"] >= 0
     for name in ("panda_hand", "panda_leftfinger", "panda_rightfinger"):

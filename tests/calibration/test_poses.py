@@ -278,7 +278,7 @@ def test_options_validate(field, value, exc):
 # ------------------------------------------------------------------------ ordering
 def test_tsp_optimal_on_tiny_instances_vs_brute_force():
     rng = np.random.default_rng(0)
-    for trial in range(3):
+    for _ in range(3):
         q = rng.uniform(-2, 2, (7, 4))
         for metric in ("euclidean", "max"):
             o = order_poses(q, metric=metric)

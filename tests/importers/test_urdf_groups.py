@@ -196,7 +196,7 @@ def test_freeze_rigid_pairs_and_coupled_joints():
     a = np.asarray(jwarp.fk(small, Q, device="cpu"), np.float64)
     b = np.asarray(jwarp.fk(robot, Qf, device="cpu"), np.float64)
     assert np.abs(a - b).max() < 1e-5                      # float32 kernels
-    for k, old in enumerate(robot.linear_limits):
+    for old in robot.linear_limits:
         if j in old.joints:
             c = old.coefficients[old.joints.index(j)]
             assert any(math.isclose(n.lower, old.lower - c * v) for n in small.linear_limits)

@@ -60,7 +60,7 @@ def test_update_from_given_frames_matches_reference_and_maps_substeps(name, grav
     np.testing.assert_array_equal(rows.config_rows(), [0, 0, 1, 1, 1, 2, 2, 3, 3, 4, 4, 4, 5, 5])
     wpt = np.array([p * S + w * n_sub for p in range(P) for w in range(W)])
     prev = np.broadcast_to(nominal_dh(model), (P * W, model.n_frames, 5)).copy()
-    for it in range(3):  # the second and third start from bent rows (beta != 0)
+    for _ in range(3):  # the second and third start from bent rows (beta != 0)
         F = ref_fk(model, q, rows.rho())  # frames of every configuration at its rows
         delta = rows.update(_frames(model, F), per_frame=per_frame).numpy()
         want = _expected(model, F[wpt], prev, kappa)

@@ -302,7 +302,7 @@ def test_batch_of_worlds():
     robot = jwarp.robot("arm7")
     rng = np.random.default_rng(13)
     worlds = []
-    for i in range(3):
+    for _ in range(3):
         w = World.of_shapes()
         for j in range(3):
             w.add(f"b{j}", "box", rng.uniform(0.05, 0.2, 3),

@@ -420,7 +420,7 @@ def test_a_batch_of_worlds_plans_each_problem_in_its_own_world(device):
     from jwarp.world.collision import min_distances
     rng = np.random.default_rng(13)
     worlds = []
-    for i in range(4):
+    for _ in range(4):
         w = World.of_shapes()
         for j in range(3):
             w.add(f"b{j}", "box", rng.uniform(0.05, 0.2, 3),
@@ -497,7 +497,7 @@ def test_object_meshes_for_display_lie_on_the_objects():
     w.add("ball", "mesh", mesh=trimesh.creation.icosphere(radius=0.1), pose=[2.0, 0, 0])
     meshes = object_meshes(w)
     assert [m[0] for m in meshes] == w.object_ids
-    for oid, v, f in meshes:
+    for oid, v, _faces in meshes:
         one = World.of_shapes()
         kind, dims, mesh = w.shapes.spec(oid)
         one.add(oid, kind, [] if dims is None else dims, w.shapes.pose(oid), mesh=mesh)

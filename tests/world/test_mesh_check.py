@@ -55,7 +55,7 @@ def test_world_pieces_contain_their_objects():
     pieces = world_pieces(world.shapes)
     from scipy.spatial import Delaunay
 
-    for shape, (kind, verts, rad, _) in zip(scene.shapes, pieces):
+    for shape, (_kind, verts, rad, _) in zip(scene.shapes, pieces):
         # points of the exact object (rejection sampling in its bounding box)
         lo, hi = verts.min(0) - rad, verts.max(0) + rad
         pts = rng.uniform(lo, hi, (20000, 3))
