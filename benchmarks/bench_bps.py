@@ -61,7 +61,7 @@ def section(args: argparse.Namespace, robot: str, make_worlds: Any) -> dict:
     import torch
 
     dev = wp.get_device(args.device)
-    tdev = "cuda:%d" % dev.ordinal if dev.is_cuda else "cpu"
+    tdev = f"cuda:{dev.ordinal}" if dev.is_cuda else "cpu"
     all_worlds = make_worlds(max(args.worlds))
     out: dict = {"robot": robot, "grid": list(all_worlds[0].shape), "rows": []}
     for n in args.points:

@@ -703,7 +703,8 @@ def test_ik_md_targets_file(in_work, capsys):
     assert quoted and code == 0, out + err
     assert out.startswith(" ".join(quoted.group(1).split())), out
     robot = jwarp.robot("arm7")
-    rows = list(csv.reader(open(in_work / "results.csv")))
+    with open(in_work / "results.csv") as fh:
+        rows = list(csv.reader(fh))
     assert rows[0] == [*robot.joint_names, "status", "pos_err_m", "rot_err_rad"]
     vals = np.array([[float(v) for v in r[:7]] for r in rows[1:]])
     assert [r[7] for r in rows[1:]] == ["solved"] * 3

@@ -147,9 +147,8 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "import jwarp\nimport numpy as np\n"
         "from jwarp.world import load_scene, exact_world\n"
         "robot = jwarp.robot('justin19')\n"
-        "world = exact_world(load_scene(%r))\n"
-        "T = np.eye(4); T[:3, 3] = (0.6, -0.3, 0.75)\n"
-        % str(ROOT / "examples/scenes/table_shelf.yaml"),
+        f"world = exact_world(load_scene({str(ROOT / 'examples/scenes/table_shelf.yaml')!r}))\n"
+        "T = np.eye(4); T[:3, 3] = (0.6, -0.3, 0.75)\n",
         "ik.md's scene: justin19 and examples/scenes/table_shelf.yaml's exact world, a target "
         "pose T near the table"),
     "docs/measurements.md:8": (

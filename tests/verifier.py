@@ -607,9 +607,9 @@ class PathVerifier:
             aabb = _world_aabb(corners, T)
             if tm is not None and _inside(saabb, aabb) and _contains(tm, T, sref):
                 return -d
-            if stm is not None and _inside(aabb, saabb):
-                if _contains(stm, ST, T[:3, :3] @ ref + T[:3, 3]):
-                    return -d
+            if (stm is not None and _inside(aabb, saabb)
+                    and _contains(stm, ST, T[:3, :3] @ ref + T[:3, 3])):
+                return -d
         elif stm is not None:
             aabb = np.stack([wc - r, wc + r])
             if _inside(aabb, saabb) and _contains(stm, ST, wc):

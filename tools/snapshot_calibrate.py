@@ -205,7 +205,8 @@ def _scrub(v: object) -> object:
 def normalize(path: str, root: str) -> bytes:
     """The file's bytes with the run-dependent values replaced (see the module doc) and
     the snapshot folder ``root`` written ``<out>``."""
-    raw = open(path, "rb").read()
+    with open(path, "rb") as fh:
+        raw = fh.read()
     if path.endswith(".npy"):
         return raw
     text = raw.decode("utf-8").replace(root, "<out>")

@@ -90,7 +90,8 @@ def test_errors_name_the_option(campaign):
         calibrate_campaign(c, CampaignOptions(name=" "))
     with pytest.raises(ValueError, match="^robot: not given"):
         bare = paths["setup.json"].replace("setup.json", "bare.json")
-        doc = json.loads(open(paths["setup.json"]).read())
+        with open(paths["setup.json"]) as fh:
+            doc = json.load(fh)
         doc.pop("robot")
         with open(bare, "w") as fh:
             json.dump(doc, fh)

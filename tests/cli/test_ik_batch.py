@@ -46,7 +46,8 @@ def write_csv(path, header: str | None, rows: np.ndarray) -> str:
 
 def read_results(path: str) -> tuple[list[str], np.ndarray, list[str]]:
     """(header, q + errors as floats, status column) of a results CSV."""
-    lines = open(path).read().splitlines()
+    with open(path) as fh:
+        lines = fh.read().splitlines()
     head = lines[0].split(",")
     rows = [ln.split(",") for ln in lines[1:]]
     k = head.index("status")

@@ -41,9 +41,9 @@ def test_parse_values_and_errors(monkeypatch):
     with pytest.raises(ValueError, match=BLAS_THREADS_ENV), blas_threads():
         pass
     for bad in [0, -2, 1.5, True]:
-        with pytest.raises(ValueError, match="^n: expected a positive integer"):
-            with blas_threads(bad):
-                pass
+        with pytest.raises(ValueError, match="^n: expected a positive integer"), \
+                blas_threads(bad):
+            pass
 
 
 def test_context_limits_and_restores(monkeypatch, two_threads):
@@ -55,9 +55,9 @@ def test_context_limits_and_restores(monkeypatch, two_threads):
     monkeypatch.setenv(BLAS_THREADS_ENV, "0")          # leave the pool alone
     with blas_threads() as n:
         assert n is None and set(blas_counts()) == {2}
-    with pytest.raises(RuntimeError):                  # restored after an exception too
-        with blas_threads(1):
-            raise RuntimeError("boom")
+    # restored after an exception too
+    with pytest.raises(RuntimeError), blas_threads(1):
+        raise RuntimeError("boom")
     assert set(blas_counts()) == {2}
 
 

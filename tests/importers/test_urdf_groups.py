@@ -57,7 +57,7 @@ def fk_error(path: str, model, values: dict[str, float], n: int = 30, seed: int 
     assert len(links) > 10
     err = 0.0
     for k in range(n):
-        def value(name: str) -> float:
+        def value(name: str, k: int = k) -> float:  # k bound now (B023)
             if name in model.joint_names:
                 return Q[k, model.joint_index(name)]
             if name in mimic:

@@ -140,10 +140,10 @@ def test_locked_database_loses_nothing(tmp_path):
     other = sqlite3.connect(p, isolation_level=None)
     other.execute("BEGIN IMMEDIATE")  # another writer holds the write lock
     try:
-        with PathDB(p, "planar5", timeout=0.2) as db:
-            with pytest.raises(PathDBError, match=r"d.sqlite' is locked by another process "
-                                                  r"while writing world 7"):
-                db.add_world(record(7))
+        with (PathDB(p, "planar5", timeout=0.2) as db,
+              pytest.raises(PathDBError, match=r"d.sqlite' is locked by another process "
+                                               r"while writing world 7")):
+            db.add_world(record(7))
     finally:
         other.execute("ROLLBACK")
         other.close()
@@ -207,13 +207,13 @@ def test_writer_killed_mid_transaction(tmp_path):
     import sys
 
     p = filled(tmp_path / "d.sqlite")
-    code = ("import os, sqlite3; con = sqlite3.connect(%r, isolation_level=None); "
+    code = (f"import os, sqlite3; con = sqlite3.connect({str(p)!r}, isolation_level=None); "
             "con.execute('BEGIN IMMEDIATE'); "
             "con.execute(\"INSERT INTO worlds(world_id, dim, shape, limits, voxel_size, "
             "sdf_dtype, meta, n_paths) VALUES (9, 2, '[2,2]', x'00', 0.1, 'float64', '{}', 5)\"); "
             "con.execute(\"INSERT INTO paths(world_id, task, start, goal, waypoints, "
             "n_waypoints, cost, feasible, hard) VALUES (9, 0, x'00', x'00', x'00', 1, 0, 0, 0)\"); "
-            "os._exit(1)") % str(p)
+            "os._exit(1)")
     assert subprocess.run([sys.executable, "-c", code]).returncode == 1
     with PathDB(p, "planar5") as db:
         assert db.complete_worlds() == {0, 1, 2} and db.n_paths() == 15
