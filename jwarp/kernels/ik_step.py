@@ -106,7 +106,7 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
     vecn = wp.types.vector(N, f64)
     zero = f64(0.0)
     one = f64(1.0)
-    pk = path_kernels.kernels(scalar)
+    pk = path_kernels.funcs(scalar)
 
     @wp.func
     def task_row(r: int) -> int:
@@ -359,7 +359,7 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
     type; the exact check itself runs in float64 (module docstring)."""
     fk64 = fk_kernels.kernels(f64)
     ck64 = collision_kernels.funcs(f64)
-    pk64 = path_kernels.kernels(f64)
+    pk64 = path_kernels.funcs(f64)
     fk = fk_kernels.kernels(scalar)
     ikk = ik_cost_kernels.kernels(scalar)
     PLANAR = int(planar)

@@ -77,7 +77,7 @@ def funcs() -> SimpleNamespace:
     f64 = wp.float64
     fk = fk_kernels.kernels(f64)
     ck = collision_kernels.funcs(f64)
-    pk = path_kernels.kernels(f64)
+    pk = path_kernels.funcs(f64)
     vec3, mat44 = fk.vec3, fk.mat44
     zero = f64(0.0)
     half = f64(0.5)

@@ -36,8 +36,12 @@ PROJECTION_ROUNDS = 6
 
 
 @functools.cache
-def kernels(scalar: type) -> SimpleNamespace:
-    """Path kernels for one scalar type (``wp.float32`` or ``wp.float64``)."""
+def funcs(scalar: type) -> SimpleNamespace:
+    """The limit tables and ``@wp.func`` helpers the path kernels share, for one scalar
+    type (``wp.float32``/``wp.float64``); built once per type (issue 40 item 5: the kernels
+    are built one each, by :func:`substeps`, :func:`path_cost`, :func:`path_grad`,
+    :func:`path_step`, :func:`project`, :func:`gather`, :func:`keep` and :func:`select`,
+    from these)."""
     zero = scalar(0.0)
     one = scalar(1.0)
     half = scalar(0.5)
@@ -139,6 +143,19 @@ def kernels(scalar: type) -> SimpleNamespace:
             for j in range(n):
                 x[row, j] = wp.clamp(x[row, j], lim.box[j, 0], lim.box[j, 1])
 
+    return SimpleNamespace(
+        scalar=scalar,
+        zero=zero, one=one, half=half, n_rounds=n_rounds, LimitTables=LimitTables,
+        length_scale=length_scale, waypoint_grad=waypoint_grad, linear_value=linear_value,
+        within_linear_limits=within_linear_limits, within_limits_row=within_limits_row,
+        project_row=project_row,
+    )
+
+
+@functools.cache
+def substeps(scalar: type) -> wp.Kernel:
+    """The linear substeps kernel (eq. 3.3), for ``scalar``."""
+
     @wp.kernel(module="unique")
     def substeps_kernel(
         # Data in:
@@ -162,6 +179,15 @@ def kernels(scalar: type) -> SimpleNamespace:
         for j in range(paths.shape[2]):
             q0 = paths[p, t, j]
             q_sub[row, j] = q0 + a * (paths[p, t + 1, j] - q0)
+
+    return substeps_kernel
+
+
+@functools.cache
+def path_cost(scalar: type) -> wp.Kernel:
+    """The per-path cost kernel (length, collision, U_path), for ``scalar``."""
+    sh = funcs(scalar)
+    zero, half, length_scale = sh.zero, sh.half, sh.length_scale
 
     @wp.kernel(module="unique")
     def path_cost_kernel(
@@ -201,6 +227,15 @@ def kernels(scalar: type) -> SimpleNamespace:
         collision[p] = c
         total[p] = c + lam_l * k_len * l
 
+    return path_cost_kernel
+
+
+@functools.cache
+def path_grad(scalar: type) -> wp.Kernel:
+    """The path gradient kernel (dU_path/dQ), for ``scalar``."""
+    sh = funcs(scalar)
+    zero, length_scale, waypoint_grad = sh.zero, sh.length_scale, sh.waypoint_grad
+
     @wp.kernel(module="unique")
     def path_grad_kernel(
         # Data in:
@@ -222,6 +257,17 @@ def kernels(scalar: type) -> SimpleNamespace:
         k_len = length_scale(paths, p, norm_floor)
         for j in range(paths.shape[2]):
             grad[p, t, j] = waypoint_grad(paths, sub_grad, p, t, j, n_sub, lam_l, k_len)
+
+    return path_grad_kernel
+
+
+@functools.cache
+def path_step(scalar: type) -> wp.Kernel:
+    """The gradient step kernel (clamped, projected onto the limits), for
+    ``scalar``."""
+    sh = funcs(scalar)
+    LimitTables, length_scale, waypoint_grad = sh.LimitTables, sh.length_scale, sh.waypoint_grad
+    project_row = sh.project_row
 
     @wp.kernel(module="unique")
     def path_step_kernel(
@@ -257,6 +303,15 @@ def kernels(scalar: type) -> SimpleNamespace:
             paths_out[row, j] = paths[p, t, j] - d
         project_row(paths_out, row, limits)
 
+    return path_step_kernel
+
+
+@functools.cache
+def project(scalar: type) -> wp.Kernel:
+    """The kernel projecting rows onto the joint limits, for ``scalar``."""
+    sh = funcs(scalar)
+    LimitTables, project_row = sh.LimitTables, sh.project_row
+
     @wp.kernel(module="unique")
     def project_kernel(
         # Model:
@@ -267,6 +322,13 @@ def kernels(scalar: type) -> SimpleNamespace:
         """Project every row of q (B, n_dof) onto the joint limits, in place. Launch dim B."""
         b = wp.tid()
         project_row(q, b, limits)
+
+    return project_kernel
+
+
+@functools.cache
+def gather(scalar: type) -> wp.Kernel:
+    """The kernel packing chosen paths and their substeps, for ``scalar``."""
 
     @wp.kernel(module="unique")
     def gather_kernel(
@@ -292,6 +354,13 @@ def kernels(scalar: type) -> SimpleNamespace:
             for j in range(paths.shape[2]):
                 paths_out[k, s, j] = paths[p, s, j]
 
+    return gather_kernel
+
+
+@functools.cache
+def keep(scalar: type) -> wp.Kernel:
+    """The kernel keeping paths as the final ones, for ``scalar``."""
+
     @wp.kernel(module="unique")
     def keep_kernel(
         # Data in:
@@ -314,6 +383,15 @@ def kernels(scalar: type) -> SimpleNamespace:
             final_cost[p, 0] = total[p]
             final_cost[p, 1] = length[p]
             final_cost[p, 2] = collision[p]
+
+    return keep_kernel
+
+
+@functools.cache
+def select(scalar: type) -> wp.Kernel:
+    """The kernel picking each problem's best start, for ``scalar``."""
+    sh = funcs(scalar)
+    zero = sh.zero
 
     @wp.kernel(module="unique")
     def select_kernel(
@@ -359,13 +437,23 @@ def kernels(scalar: type) -> SimpleNamespace:
         for c in range(3):
             best_cost[b, c] = final_cost[p, c]
 
+    return select_kernel
+
+
+@functools.cache
+def kernels(scalar: type) -> SimpleNamespace:
+    """Path kernels for one scalar type (``wp.float32`` or ``wp.float64``):
+    :func:`funcs`' tables and functions and every kernel of the builders (a facade: the
+    builders build only the kernel asked for)."""
+    sh = funcs(scalar)
     return SimpleNamespace(
-        scalar=scalar, LimitTables=LimitTables, length_scale=length_scale,
-        waypoint_grad=waypoint_grad,
-        linear_value=linear_value, within_linear_limits=within_linear_limits,
-        within_limits_row=within_limits_row, project_row=project_row, substeps=substeps_kernel,
-        path_cost=path_cost_kernel, path_grad=path_grad_kernel, path_step=path_step_kernel,
-        project=project_kernel, gather=gather_kernel, keep=keep_kernel, select=select_kernel,
+        scalar=scalar, LimitTables=sh.LimitTables, length_scale=sh.length_scale,
+        waypoint_grad=sh.waypoint_grad, linear_value=sh.linear_value,
+        within_linear_limits=sh.within_linear_limits,
+        within_limits_row=sh.within_limits_row, project_row=sh.project_row,
+        substeps=substeps(scalar), path_cost=path_cost(scalar),
+        path_grad=path_grad(scalar), path_step=path_step(scalar), project=project(scalar),
+        gather=gather(scalar), keep=keep(scalar), select=select(scalar),
     )
 
 
