@@ -32,13 +32,13 @@ import warp as wp
 from jwarp.kernels import collision as collision_kernels
 from jwarp.kernels.elastic import kernels as elastic_kernels
 from jwarp.kernels.fk import ROWS_NOMINAL
-from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kernels.fk import funcs as fk_funcs
 
 
 @functools.cache
 def kernels(scalar: type) -> SimpleNamespace:
     """The four launches of the wide cost for one scalar type (``wp.float32``/``wp.float64``)."""
-    fk = fk_kernels(scalar)
+    fk = fk_funcs(scalar)
     el = elastic_kernels(scalar)
     ck = collision_kernels.funcs(scalar)
     vec3, mat44 = fk.vec3, fk.mat44

@@ -42,13 +42,13 @@ from types import SimpleNamespace
 
 import warp as wp
 
-from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kernels.fk import funcs as fk_funcs
 
 
 @functools.cache
 def kernels(scalar: type) -> SimpleNamespace:
     """Elastic kernels for one scalar type."""
-    fk = fk_kernels(scalar)
+    fk = fk_funcs(scalar)
     vec3, vec4, mat44 = fk.vec3, fk.vec4, fk.mat44
     zero = scalar(0.0)
     unpack_rot, unpack_pos = fk.unpack_rot, fk.unpack_pos

@@ -357,10 +357,10 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
 def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
     """Feasibility check, result rows and best-start selection for a solver of one scalar
     type; the exact check itself runs in float64 (module docstring)."""
-    fk64 = fk_kernels.kernels(f64)
+    fk64 = fk_kernels.funcs(f64)
     ck64 = collision_kernels.funcs(f64)
     pk64 = path_kernels.funcs(f64)
-    fk = fk_kernels.kernels(scalar)
+    fk = fk_kernels.funcs(scalar)
     ikk = ik_cost_kernels.kernels(scalar)
     PLANAR = int(planar)
     NPOS = 2 if planar else 3
@@ -684,10 +684,10 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
     @wp.kernel(module="unique", enable_backward=False)
     def repeat_targets_kernel(
         # Data in:
-        targets: wp.array(dtype=fk_kernels.kernels(scalar).mat44),
+        targets: wp.array(dtype=fk_kernels.funcs(scalar).mat44),
         n_starts: int,
         # Data out:
-        out: wp.array(dtype=fk_kernels.kernels(scalar).mat44),
+        out: wp.array(dtype=fk_kernels.funcs(scalar).mat44),
     ):
         """out[b] = targets[b // n_starts]. Launch dim B."""
         b = wp.tid()

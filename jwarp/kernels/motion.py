@@ -75,7 +75,7 @@ def funcs() -> SimpleNamespace:
     :func:`level_init`, :func:`level`, :func:`level_end` and :func:`reduce`, from these;
     those that read the paths once per path type)."""
     f64 = wp.float64
-    fk = fk_kernels.kernels(f64)
+    fk = fk_kernels.funcs(f64)
     ck = collision_kernels.funcs(f64)
     pk = path_kernels.funcs(f64)
     vec3, mat44 = fk.vec3, fk.mat44
