@@ -354,9 +354,12 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
 
 
 @functools.cache
-def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
-    """Feasibility check, result rows and best-start selection for a solver of one scalar
-    type; the exact check itself runs in float64 (module docstring)."""
+def check_funcs(scalar: type, planar: bool) -> SimpleNamespace:
+    """The tables, scratch and ``@wp.func`` helpers the check kernels share, for a solver
+    of one scalar type (the exact check itself in float64, module docstring); built once per
+    (scalar, planar) (issue 40 item 5: the kernels are built one each, by :func:`check`,
+    :func:`near`, :func:`gather`, :func:`scatter_aux`, :func:`pose`, :func:`reset`,
+    :func:`repeat_targets`, :func:`finalize` and :func:`select`, from these)."""
     fk64 = fk_kernels.funcs(f64)
     ck64 = collision_kernels.funcs(f64)
     pk64 = path_kernels.funcs(f64)
@@ -460,6 +463,23 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         frames: wp.array2d(dtype=fk64.mat44)
         xs: wp.array2d(dtype=fk64.vec3)
 
+    return SimpleNamespace(
+        scalar=scalar,
+        planar=planar, fk64=fk64, fk=fk, ck64=ck64, pk64=pk64, ikk=ikk, PLANAR=PLANAR,
+        NPOS=NPOS, zero=zero, task_errors=task_errors, write_result=write_result,
+        collision_free_row=collision_free_row, CheckTables=CheckTables,
+        CheckScratch=CheckScratch,
+    )
+
+
+@functools.cache
+def check(scalar: type, planar: bool) -> wp.Kernel:
+    """The exact feasibility check kernel (float64), for a solver of ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    pk64, task_errors, write_result = sh.pk64, sh.task_errors, sh.write_result
+    collision_free_row, CheckTables = sh.collision_free_row, sh.CheckTables
+    CheckScratch = sh.CheckScratch
+
     @wp.kernel(module="unique", enable_backward=False)
     def check_kernel(
         # Model:
@@ -528,6 +548,15 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         if wp.atomic_max(solved, b // n_starts, 1) == 0:
             wp.atomic_add(counts, 1, 1)
 
+    return check_kernel
+
+
+@functools.cache
+def near(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel listing the on-target configurations, for a solver of ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    task_errors = sh.task_errors
+
     @wp.kernel(module="unique", enable_backward=False)
     def near_kernel(
         # Data in:
@@ -569,6 +598,13 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         else:
             on[b] = 0
 
+    return near_kernel
+
+
+@functools.cache
+def gather(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel gathering the configurations to check, for a solver of ``scalar``."""
+
     @wp.kernel(module="unique", enable_backward=False)
     def gather_kernel(
         # Data in:
@@ -587,6 +623,16 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         b = idx[kk]
         for j in range(q.shape[1]):
             q_near[k, j] = q[b, j]
+
+    return gather_kernel
+
+
+@functools.cache
+def scatter_aux(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel writing U_A and its gradient to the listed rows, for a solver of
+    ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    ikk = sh.ikk
 
     @wp.kernel(module="unique", enable_backward=False)
     def scatter_aux_kernel(
@@ -619,6 +665,15 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         cost[b] = ikk.aux_row(q, b, q_default, b * default_stride, c, near_grad, k,
                               use_collision, lam_l, grad)
 
+    return scatter_aux_kernel
+
+
+@functools.cache
+def pose(scalar: type, planar: bool) -> wp.Kernel:
+    """The rigid robot's pose error and Jacobian kernel, for a solver of ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    fk, ikk = sh.fk, sh.ikk
+
     @wp.kernel(module="unique", enable_backward=False)
     def pose_kernel(
         # Model:
@@ -649,6 +704,13 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         ikk.pose_error_row(R, p, target[b], b, err)
         fk.chain_jacobian(model, chain, b, q, ROWS_NOMINAL, nominal, 0, p, jac)
         ikk.apply_orientation(orient, axis, R, target[b], b, err, jac)
+
+    return pose_kernel
+
+
+@functools.cache
+def reset(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel zeroing the solver state, for a solver of ``scalar``."""
 
     @wp.kernel(module="unique", enable_backward=False)
     def reset_kernel(
@@ -681,6 +743,14 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
             counts[3] = 0
             halt[0] = 0
 
+    return reset_kernel
+
+
+@functools.cache
+def repeat_targets(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel repeating each problem's target over its starts, for a solver of
+    ``scalar``."""
+
     @wp.kernel(module="unique", enable_backward=False)
     def repeat_targets_kernel(
         # Data in:
@@ -692,6 +762,16 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         """out[b] = targets[b // n_starts]. Launch dim B."""
         b = wp.tid()
         out[b] = targets[b // n_starts]
+
+    return repeat_targets_kernel
+
+
+@functools.cache
+def finalize(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel writing the result rows of the unfinished configurations, for a
+    solver of ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    zero, task_errors, write_result = sh.zero, sh.task_errors, sh.write_result
 
     @wp.kernel(module="unique", enable_backward=False)
     def finalize_kernel(
@@ -716,6 +796,15 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         if done[b] == 3:
             its = f64(iterations[b])
         write_result(out, b, q, pe, re, f64(cost_a[b]), zero, its)
+
+    return finalize_kernel
+
+
+@functools.cache
+def select(scalar: type, planar: bool) -> wp.Kernel:
+    """The best-start selection kernel, for a solver of ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    zero = sh.zero
 
     @wp.kernel(module="unique", enable_backward=False)
     def select_kernel(
@@ -752,10 +841,23 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
             best[p, 0] = best_i
         best[p, 1] = n_feas
 
+    return select_kernel
+
+
+@functools.cache
+def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
+    """Feasibility check, result rows and best-start selection for a solver of one scalar
+    type; the exact check itself runs in float64 (module docstring): :func:`check_funcs`'
+    tables and functions and every kernel of the builders (a facade: the builders build
+    only the kernel asked for)."""
+    sh = check_funcs(scalar, planar)
     return SimpleNamespace(
-        scalar=scalar, planar=planar, task_errors=task_errors, write_result=write_result,
-        within_limits_row=pk64.within_limits_row, collision_free_row=collision_free_row,
-        CheckTables=CheckTables, CheckScratch=CheckScratch, check=check_kernel, near=near_kernel,
-        gather=gather_kernel, scatter_aux=scatter_aux_kernel, pose=pose_kernel,
-        reset=reset_kernel, repeat_targets=repeat_targets_kernel, finalize=finalize_kernel,
-        select=select_kernel)
+        scalar=scalar, planar=planar, task_errors=sh.task_errors,
+        write_result=sh.write_result, within_limits_row=sh.pk64.within_limits_row,
+        collision_free_row=sh.collision_free_row, CheckTables=sh.CheckTables,
+        CheckScratch=sh.CheckScratch, check=check(scalar, planar),
+        near=near(scalar, planar), gather=gather(scalar, planar),
+        scatter_aux=scatter_aux(scalar, planar), pose=pose(scalar, planar),
+        reset=reset(scalar, planar), repeat_targets=repeat_targets(scalar, planar),
+        finalize=finalize(scalar, planar), select=select(scalar, planar),
+    )
