@@ -57,7 +57,7 @@ from types import SimpleNamespace
 import warp as wp
 
 from jwarp.kernels import geometry as geometry_kernels
-from jwarp.kernels.elastic import kernels as elastic_kernels
+from jwarp.kernels.elastic import funcs as elastic_funcs
 from jwarp.kernels.fk import ROWS_NOMINAL
 from jwarp.kernels.fk import funcs as fk_funcs
 
@@ -90,7 +90,7 @@ def funcs(scalar: type) -> SimpleNamespace:
     built one each, by :func:`cost`, :func:`distance`, :func:`world_cost_spheres`,
     :func:`self_cost_pairs`, :func:`sdf_query` and :func:`world_query`, from these)."""
     fk = fk_funcs(scalar)
-    el = elastic_kernels(scalar)
+    el = elastic_funcs(scalar)
     vec3, mat44 = fk.vec3, fk.mat44
     zero = scalar(0.0)
     one = scalar(1.0)

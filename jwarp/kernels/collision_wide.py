@@ -30,7 +30,7 @@ from types import SimpleNamespace
 import warp as wp
 
 from jwarp.kernels import collision as collision_kernels
-from jwarp.kernels.elastic import kernels as elastic_kernels
+from jwarp.kernels.elastic import funcs as elastic_funcs
 from jwarp.kernels.fk import ROWS_NOMINAL
 from jwarp.kernels.fk import funcs as fk_funcs
 
@@ -39,7 +39,7 @@ from jwarp.kernels.fk import funcs as fk_funcs
 def kernels(scalar: type) -> SimpleNamespace:
     """The four launches of the wide cost for one scalar type (``wp.float32``/``wp.float64``)."""
     fk = fk_funcs(scalar)
-    el = elastic_kernels(scalar)
+    el = elastic_funcs(scalar)
     ck = collision_kernels.funcs(scalar)
     vec3, mat44 = fk.vec3, fk.mat44
     zero = scalar(0.0)
