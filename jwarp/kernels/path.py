@@ -458,18 +458,11 @@ def kernels(scalar: type) -> SimpleNamespace:
 
 
 @functools.cache
-def cartesian_kernels(scalar: type) -> SimpleNamespace:
-    """Kernels of the Cartesian length cost (thesis eqs. 3.6-3.7) summed over every
-    collision sphere ("the motion of all body parts") at the waypoints:
-
-    ``U_c(Q) = (W - 1) / max(U_c1(q_W, q_1), norm_floor) * sum_t U_c1(q_{t+1}, q_t)`` with
-    ``U_c1(a, b) = 1/2 sum_s |x_s(a) - x_s(b)|^2`` [m^2] (x_s: sphere centres). Its gradient
-    w.r.t. an interior waypoint t is ``J_s(q_t)^T f_s`` summed over the spheres with the
-    force ``f_s = K (2 x_s(q_t) - x_s(q_{t-1}) - x_s(q_{t+1}))``, mapped onto the joints as
-    the collision kernels map their forces (subtree sums of force and moment, projected
-    on each joint axis). Waypoint frames ``frames (P * W, n_frames)`` come from the FK
-    kernel on the paths as rows ``p * W + t``.
-    """
+def cartesian_funcs(scalar: type) -> SimpleNamespace:
+    """The ``@wp.func`` helpers the Cartesian length cost's kernels share, for one scalar
+    type; built once per type (issue 40 item 5: the kernels are built one each, by
+    :func:`cartesian_centres`, :func:`cartesian_cost`, :func:`cartesian_grad` and
+    :func:`cartesian_arcs`, from these)."""
     from jwarp.kernels import fk as fk_kernels
 
     fk = fk_kernels.kernels(scalar)
@@ -493,6 +486,19 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
             d2 += wp.dot(d, d)
         return scalar(W - 1) / wp.max(half * d2, norm_floor)
 
+    return SimpleNamespace(
+        scalar=scalar,
+        fk=fk, vec3=vec3, mat44=mat44, FrameTables=FrameTables, zero=zero, half=half,
+        centre=centre, scale=scale,
+    )
+
+
+@functools.cache
+def cartesian_centres(scalar: type) -> wp.Kernel:
+    """The sphere centres kernel of the Cartesian length cost, for ``scalar``."""
+    sh = cartesian_funcs(scalar)
+    vec3, mat44, centre = sh.vec3, sh.mat44, sh.centre
+
     @wp.kernel(module="unique")
     def centres_kernel(
         # Model:
@@ -506,6 +512,15 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
         """Sphere centres xs (P * W, n_spheres) [m]. Launch dim (P * W, n_spheres)."""
         r, s = wp.tid()
         xs[r, s] = centre(frames, r, sph_frame[s], sph_pos[s])
+
+    return centres_kernel
+
+
+@functools.cache
+def cartesian_cost(scalar: type) -> wp.Kernel:
+    """The Cartesian length cost kernel, for ``scalar``."""
+    sh = cartesian_funcs(scalar)
+    vec3, zero, half, scale = sh.vec3, sh.zero, sh.half, sh.scale
 
     @wp.kernel(module="unique")
     def cost_kernel(
@@ -528,6 +543,16 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
                 u += half * wp.dot(d, d)
         cart[p] = k * u
         total[p] = total[p] + lam_c * k * u
+
+    return cost_kernel
+
+
+@functools.cache
+def cartesian_grad(scalar: type) -> wp.Kernel:
+    """The Cartesian length cost's gradient kernel, for ``scalar``."""
+    sh = cartesian_funcs(scalar)
+    fk, vec3, mat44, FrameTables, zero = sh.fk, sh.vec3, sh.mat44, sh.FrameTables, sh.zero
+    scale = sh.scale
 
     @wp.kernel(module="unique")
     def grad_kernel(
@@ -589,6 +614,15 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
                     jm = model.cpl_joint[m]
                     sub_grad[row, jm] = sub_grad[row, jm] + fk.coupling_weight(model, m, r, q, hp) * gi
 
+    return grad_kernel
+
+
+@functools.cache
+def cartesian_arcs(scalar: type) -> wp.Kernel:
+    """The kernel of the spheres' arc lengths along the paths, for ``scalar``."""
+    sh = cartesian_funcs(scalar)
+    vec3, zero = sh.vec3, sh.zero
+
     @wp.kernel(module="unique")
     def arcs_kernel(
         # Data in:
@@ -610,5 +644,27 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
             a += wp.length(xs[base + k + 1, s] - xs[base + k, s])
         wp.atomic_max(arc, p, a)
 
-    return SimpleNamespace(fk=fk, centres=centres_kernel, cost=cost_kernel, grad=grad_kernel,
-                           arcs=arcs_kernel)
+    return arcs_kernel
+
+
+@functools.cache
+def cartesian_kernels(scalar: type) -> SimpleNamespace:
+    """Kernels of the Cartesian length cost (thesis eqs. 3.6-3.7) summed over every
+    collision sphere ("the motion of all body parts") at the waypoints:
+
+    ``U_c(Q) = (W - 1) / max(U_c1(q_W, q_1), norm_floor) * sum_t U_c1(q_{t+1}, q_t)`` with
+    ``U_c1(a, b) = 1/2 sum_s |x_s(a) - x_s(b)|^2`` [m^2] (x_s: sphere centres). Its gradient
+    w.r.t. an interior waypoint t is ``J_s(q_t)^T f_s`` summed over the spheres with the
+    force ``f_s = K (2 x_s(q_t) - x_s(q_{t-1}) - x_s(q_{t+1}))``, mapped onto the joints as
+    the collision kernels map their forces (subtree sums of force and moment, projected
+    on each joint axis). Waypoint frames ``frames (P * W, n_frames)`` come from the FK
+    kernel on the paths as rows ``p * W + t``.
+
+    A facade: :func:`cartesian_funcs`' ``fk`` and the kernels of the builders (which build
+    only the kernel asked for).
+    """
+    sh = cartesian_funcs(scalar)
+    return SimpleNamespace(
+        fk=sh.fk, centres=cartesian_centres(scalar), cost=cartesian_cost(scalar),
+        grad=cartesian_grad(scalar), arcs=cartesian_arcs(scalar),
+    )
