@@ -93,10 +93,11 @@ class RestartArgs:
 
 
 @functools.cache
-def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
-    """The damped least-squares step for one scalar type, task (6 rows, or the 3 rows
-    [v_x, v_y, w_z] of a planar robot) and number of joints (the sizes of the local
-    matrices). The linear algebra runs in float64 either way."""
+def dls_funcs(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
+    """The local matrix types and ``@wp.func`` helpers of the damped least-squares step, for
+    one scalar type, task and number of joints; built once per (scalar, planar, n_dof)
+    (issue 40 item 5: the kernels are built one each, by :func:`dls`, :func:`step` and
+    :func:`sample`, from these)."""
     M = 3 if planar else 6
     N = int(n_dof)
     PLANAR = int(planar)
@@ -191,25 +192,6 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
             big = wp.max(big, wp.abs(d[j]))
         return d * wp.min(one, max_step / wp.max(big, f64(1e-300)))
 
-    @wp.kernel(module="unique", enable_backward=False)
-    def dls_kernel(
-        # Data in:
-        jac: wp.array3d(dtype=scalar),
-        err: wp.array2d(dtype=scalar),
-        grad: wp.array2d(dtype=scalar),
-        on: wp.array(dtype=wp.int32),
-        mu2: f64,
-        alpha: f64,
-        max_step: f64,
-        # Data out:
-        dq: wp.array2d(dtype=f64),
-    ):
-        """The scaled step dq (B, n_dof) alone (no limits, no state): for tests."""
-        b = wp.tid()
-        d = dls_step(jac, err, grad, b, on[b], mu2, alpha, max_step)
-        for j in range(N):
-            dq[b, j] = d[j]
-
     @wp.func
     def task_cost(err: wp.array2d(dtype=scalar), b: int) -> f64:
         """The progress measure of a configuration: ``|e_v|^2 + W_ROT |e_w|^2`` over the
@@ -235,6 +217,51 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
             if pk.within_linear_limits(q, b, limits, scalar(0.0)) != 0:
                 return
         pk.project_row(q, b, limits)
+
+    return SimpleNamespace(
+        scalar=scalar,
+        planar=planar, n_dof=n_dof, M=M, N=N, PLANAR=PLANAR, matm=matm, vecm=vecm,
+        matmn=matmn, vecn=vecn, zero=zero, one=one, pk=pk, task_row=task_row,
+        cholesky_solve=cholesky_solve, dls_step=dls_step, dls_step_masked=dls_step_masked,
+        task_cost=task_cost, sample_row=sample_row,
+    )
+
+
+@functools.cache
+def dls(scalar: type, planar: bool, n_dof: int) -> wp.Kernel:
+    """The kernel of the scaled step alone (for tests), for ``scalar``, the task and
+    ``n_dof``."""
+    sh = dls_funcs(scalar, planar, n_dof)
+    N, dls_step = sh.N, sh.dls_step
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def dls_kernel(
+        # Data in:
+        jac: wp.array3d(dtype=scalar),
+        err: wp.array2d(dtype=scalar),
+        grad: wp.array2d(dtype=scalar),
+        on: wp.array(dtype=wp.int32),
+        mu2: f64,
+        alpha: f64,
+        max_step: f64,
+        # Data out:
+        dq: wp.array2d(dtype=f64),
+    ):
+        """The scaled step dq (B, n_dof) alone (no limits, no state): for tests."""
+        b = wp.tid()
+        d = dls_step(jac, err, grad, b, on[b], mu2, alpha, max_step)
+        for j in range(N):
+            dq[b, j] = d[j]
+
+    return dls_kernel
+
+
+@functools.cache
+def step(scalar: type, planar: bool, n_dof: int) -> wp.Kernel:
+    """The projected DLS step kernel, for ``scalar``, the task and ``n_dof``."""
+    sh = dls_funcs(scalar, planar, n_dof)
+    N, vecn, zero, one, pk = sh.N, sh.vecn, sh.zero, sh.one, sh.pk
+    dls_step_masked, task_cost, sample_row = sh.dls_step_masked, sh.task_cost, sh.sample_row
 
     @wp.kernel(module="unique", enable_backward=False)
     def step_kernel(
@@ -332,6 +359,15 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         pk.project_row(q, b, limits)
         iterations[b] = iterations[b] + 1
 
+    return step_kernel
+
+
+@functools.cache
+def sample(scalar: type, planar: bool, n_dof: int) -> wp.Kernel:
+    """The random seeds kernel, for ``scalar``, the task and ``n_dof``."""
+    sh = dls_funcs(scalar, planar, n_dof)
+    pk, sample_row = sh.pk, sh.sample_row
+
     @wp.kernel(module="unique", enable_backward=False)
     def sample_kernel(
         # Model:
@@ -347,10 +383,24 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         b = wp.tid()
         sample_row(q, b, wp.rand_init(seed, b), limits)
 
-    return SimpleNamespace(scalar=scalar, planar=planar, rows=M, n_dof=N, task_row=task_row,
-                           cholesky_solve=cholesky_solve, dls_step=dls_step,
-                           dls_step_masked=dls_step_masked, task_cost=task_cost,
-                           dls=dls_kernel, step=step_kernel, sample=sample_kernel)
+    return sample_kernel
+
+
+@functools.cache
+def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
+    """The damped least-squares step for one scalar type, task (6 rows, or the 3 rows
+    [v_x, v_y, w_z] of a planar robot) and number of joints (the sizes of the local
+    matrices). The linear algebra runs in float64 either way. A facade: :func:`dls_funcs`'
+    types and functions and every kernel of the builders (which build only the kernel
+    asked for)."""
+    sh = dls_funcs(scalar, planar, n_dof)
+    return SimpleNamespace(
+        scalar=scalar, planar=planar, rows=sh.M, n_dof=sh.N, task_row=sh.task_row,
+        cholesky_solve=sh.cholesky_solve, dls_step=sh.dls_step,
+        dls_step_masked=sh.dls_step_masked, task_cost=sh.task_cost,
+        dls=dls(scalar, planar, n_dof), step=step(scalar, planar, n_dof),
+        sample=sample(scalar, planar, n_dof),
+    )
 
 
 @functools.cache
