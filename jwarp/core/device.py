@@ -49,7 +49,7 @@ import warp as wp
 from jwarp.core.rows import DHRows
 from jwarp.core.types import RobotLike
 from jwarp.kernels.collision import funcs as collision_funcs
-from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kernels.fk import funcs as fk_funcs
 from jwarp.kernels.path import kernels as path_kernels
 from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
@@ -386,7 +386,7 @@ def _build(robot: RobotModel, dev: wp.Device, scalar: type, key: str) -> DeviceM
     """Upload every table of ``robot`` (the one place where the Model is built)."""
     npdt = numpy_dtype(scalar)
     n = robot.n_frames
-    k = fk_kernels(scalar)
+    k = fk_funcs(scalar)
 
     def arr(a: np.ndarray, dt: object) -> wp.array:
         return wp.array(a, dtype=dt, device=dev)
@@ -596,7 +596,7 @@ def _collision_tables(host: DeviceModel) -> dict:
 def _sphere_model(m: DeviceModel) -> SphereModel:
     rt = collision_tables(m.robot)
     dev, npdt = m.device, numpy_dtype(m.scalar)
-    vec3 = fk_kernels(m.scalar).vec3
+    vec3 = fk_funcs(m.scalar).vec3
 
     def arr(a: np.ndarray, dt: Any) -> wp.array:
         a = np.asarray(a)

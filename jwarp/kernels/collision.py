@@ -57,9 +57,9 @@ from types import SimpleNamespace
 import warp as wp
 
 from jwarp.kernels import geometry as geometry_kernels
-from jwarp.kernels.elastic import kernels as elastic_kernels
+from jwarp.kernels.elastic import funcs as elastic_funcs
 from jwarp.kernels.fk import ROWS_NOMINAL
-from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kernels.fk import funcs as fk_funcs
 
 
 @wp.kernel(module="unique")
@@ -89,8 +89,8 @@ def funcs(scalar: type) -> SimpleNamespace:
     (``wp.float32``/``wp.float64``); built once per type (issue 40 item 5: the kernels are
     built one each, by :func:`cost`, :func:`distance`, :func:`world_cost_spheres`,
     :func:`self_cost_pairs`, :func:`sdf_query` and :func:`world_query`, from these)."""
-    fk = fk_kernels(scalar)
-    el = elastic_kernels(scalar)
+    fk = fk_funcs(scalar)
+    el = elastic_funcs(scalar)
     vec3, mat44 = fk.vec3, fk.mat44
     zero = scalar(0.0)
     one = scalar(1.0)

@@ -30,16 +30,18 @@ from types import SimpleNamespace
 import warp as wp
 
 from jwarp.kernels import collision as collision_kernels
-from jwarp.kernels.elastic import kernels as elastic_kernels
+from jwarp.kernels.elastic import funcs as elastic_funcs
 from jwarp.kernels.fk import ROWS_NOMINAL
-from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kernels.fk import funcs as fk_funcs
 
 
 @functools.cache
-def kernels(scalar: type) -> SimpleNamespace:
-    """The four launches of the wide cost for one scalar type (``wp.float32``/``wp.float64``)."""
-    fk = fk_kernels(scalar)
-    el = elastic_kernels(scalar)
+def funcs(scalar: type) -> SimpleNamespace:
+    """The ``@wp.func`` helpers the wide cost's kernels share, for one scalar type; built
+    once per type (issue 40 item 5: the kernels are built one each, by :func:`frames`,
+    :func:`world`, :func:`self_pairs` and :func:`gradient`, from these)."""
+    fk = fk_funcs(scalar)
+    el = elastic_funcs(scalar)
     ck = collision_kernels.funcs(scalar)
     vec3, mat44 = fk.vec3, fk.mat44
     zero = scalar(0.0)
@@ -59,6 +61,20 @@ def kernels(scalar: type) -> SimpleNamespace:
             if active[b // active_div] == 0:
                 return 1
         return 0
+
+    return SimpleNamespace(
+        scalar=scalar,
+        fk=fk, el=el, ck=ck, vec3=vec3, mat44=mat44, zero=zero, thread_rows=thread_rows,
+        frozen=frozen,
+    )
+
+
+@functools.cache
+def frames(scalar: type) -> wp.Kernel:
+    """The wide cost's FK kernel (launch 1), for ``scalar``."""
+    sh = funcs(scalar)
+    fk, el, ck, vec3, mat44, zero = sh.fk, sh.el, sh.ck, sh.vec3, sh.mat44, sh.zero
+    thread_rows, frozen = sh.thread_rows, sh.frozen
 
     @wp.kernel(module="unique", enable_backward=False)
     def frames_kernel(
@@ -110,6 +126,17 @@ def kernels(scalar: type) -> SimpleNamespace:
         if comp.enabled != 0 and on_waypoint != 0:
             el.compensation_update_at(model, frames, t, rho, rb, comp)
 
+    return frames_kernel
+
+
+@functools.cache
+def world(scalar: type) -> wp.Kernel:
+    """The wide cost's world kernel (launch 2: spheres against the world), for
+    ``scalar``."""
+    sh = funcs(scalar)
+    ck, vec3, mat44, zero, thread_rows = sh.ck, sh.vec3, sh.mat44, sh.zero, sh.thread_rows
+    frozen = sh.frozen
+
     @wp.kernel(module="unique", enable_backward=False)
     def world_kernel(
         # Model:
@@ -157,6 +184,15 @@ def kernels(scalar: type) -> SimpleNamespace:
                 f = (w_world * dc) * g
                 wp.atomic_add(force, t, fr, f)
                 wp.atomic_add(moment, t, fr, wp.cross(x, f))
+
+    return world_kernel
+
+
+@functools.cache
+def self_pairs(scalar: type) -> wp.Kernel:
+    """The wide cost's self-collision kernel (launch 3: frame pairs), for ``scalar``."""
+    sh = funcs(scalar)
+    ck, vec3, zero, thread_rows, frozen = sh.ck, sh.vec3, sh.zero, sh.thread_rows, sh.frozen
 
     @wp.kernel(module="unique", enable_backward=False)
     def self_kernel(
@@ -233,6 +269,16 @@ def kernels(scalar: type) -> SimpleNamespace:
             wp.atomic_add(force, t, fb, fb_f)
             wp.atomic_add(moment, t, fb, fb_m)
 
+    return self_kernel
+
+
+@functools.cache
+def gradient(scalar: type) -> wp.Kernel:
+    """The wide cost's gradient kernel (launch 4), for ``scalar``."""
+    sh = funcs(scalar)
+    fk, ck, vec3, mat44, thread_rows = sh.fk, sh.ck, sh.vec3, sh.mat44, sh.thread_rows
+    frozen = sh.frozen
+
     @wp.kernel(module="unique", enable_backward=False)
     def gradient_kernel(
         # Model:
@@ -258,5 +304,14 @@ def kernels(scalar: type) -> SimpleNamespace:
             return
         ck.forces_to_gradient(model, frames, force, moment, t, b, q, grad)
 
-    return SimpleNamespace(frames=frames_kernel, world=world_kernel, self_pairs=self_kernel,
-                           gradient=gradient_kernel, scalar=scalar)
+    return gradient_kernel
+
+
+@functools.cache
+def kernels(scalar: type) -> SimpleNamespace:
+    """The four launches of the wide cost for one scalar type (``wp.float32``/``wp.float64``)
+    (a facade over the builders, which build only the kernel asked for)."""
+    return SimpleNamespace(
+        frames=frames(scalar), world=world(scalar), self_pairs=self_pairs(scalar),
+        gradient=gradient(scalar), scalar=scalar,
+    )

@@ -42,13 +42,17 @@ from types import SimpleNamespace
 
 import warp as wp
 
-from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kernels.fk import funcs as fk_funcs
 
 
 @functools.cache
-def kernels(scalar: type) -> SimpleNamespace:
-    """Elastic kernels for one scalar type."""
-    fk = fk_kernels(scalar)
+def funcs(scalar: type) -> SimpleNamespace:
+    """The compensation arguments and ``@wp.func`` helpers the elastic kernels share, for
+    one scalar type; built once per type (issue 40 item 5: the kernels are built one each,
+    by :func:`elastic_step`, :func:`compensation_update`,
+    :func:`compensation_update_per_frame`, :func:`fill_rows` and :func:`fill_static_rows`,
+    from these)."""
+    fk = fk_funcs(scalar)
     vec3, vec4, mat44 = fk.vec3, fk.vec4, fk.mat44
     zero = scalar(0.0)
     unpack_rot, unpack_pos = fk.unpack_rot, fk.unpack_pos
@@ -168,59 +172,6 @@ def kernels(scalar: type) -> SimpleNamespace:
             rho_out[b, i, 4] = prev_b + d_b
         return delta
 
-    @wp.kernel(module="unique")
-    def elastic_step_kernel(
-        # Model:
-        model: fk.FrameTables,
-        mass: wp.array(dtype=scalar),
-        mass_com: wp.array(dtype=vec3),
-        dh_info: wp.array(dtype=wp.vec4i),
-        kappa_nl: wp.array(dtype=scalar),
-        # Data in:
-        q: wp.array2d(dtype=scalar),
-        rho: wp.array3d(dtype=scalar),
-        rho_stride: int,
-        rows_kind: int,
-        rho0: wp.array3d(dtype=scalar),
-        rho0_stride: int,
-        kappa: wp.array3d(dtype=scalar),
-        kappa_stride: int,
-        lam: scalar,
-        gravity: vec3,
-        write_tau: int,
-        scratch_stride: int,
-        # Data out:
-        frames: wp.array2d(dtype=mat44),
-        prefix: wp.array2d(dtype=vec4),
-        axes: wp.array2d(dtype=vec3),
-        rho_out: wp.array3d(dtype=scalar),
-        tau_out: wp.array3d(dtype=scalar),
-        delta: wp.array(dtype=scalar),
-    ):
-        """One torque update: frames = F(q, rho); rho_out = damped update from the
-        gravity torques of those frames; delta[b] = max |rho_out - rho| (rad).
-        ``prefix`` (n_frames + 1, S) and ``axes`` (n_frames, S) are scratch (moment prefix
-        sums; alpha axes from the FK pass), column ``b * scratch_stride``: stride 0 (S = 1)
-        on the CPU, where configurations run one after another and the column stays in L1;
-        stride 1 (S = B) on CUDA (frame-major: neighbouring threads touch neighbouring
-        entries) and under a Tape (every entry written once)."""
-        b = wp.tid()
-        sb = b * scratch_stride
-        acc = vec4(zero, zero, zero, zero)
-        prefix[0, sb] = acc
-        for k in range(model.order.shape[0]):
-            i = model.order[k]
-            R, p, ax = fk.write_frame(model, b, i, q, rho, b * rho_stride, rows_kind, frames, b)
-            axes[i, sb] = ax
-            m = mass[i]
-            if m != zero:  # a fixed pattern per robot: predicted
-                w = R * mass_com[i] + p
-                acc = acc + vec4(m * w[0], m * w[1], m * w[2], m)
-            prefix[k + 1, sb] = acc
-        delta[b] = torque_update(b, frames, rho, rho_stride, rho0, rho0_stride, kappa,
-                                 kappa_stride, kappa_nl, lam, gravity, dh_info, prefix, axes, sb, rho_out,
-                                 tau_out, write_tau)
-
     @wp.struct
     class CompensationArgs:
         """Everything one torque update of compensation rows needs besides the frames and
@@ -308,6 +259,88 @@ def kernels(scalar: type) -> SimpleNamespace:
         p = u // c.n_waypoints
         return p * ((c.n_waypoints - 1) * c.n_sub + 1) + (u - p * c.n_waypoints) * c.n_sub
 
+    return SimpleNamespace(
+        scalar=scalar,
+        fk=fk, vec3=vec3, vec4=vec4, mat44=mat44, zero=zero, unpack_rot=unpack_rot,
+        unpack_pos=unpack_pos, gravity_torques=gravity_torques, damped_step=damped_step,
+        subtree_prefix=subtree_prefix, torque_update=torque_update,
+        CompensationArgs=CompensationArgs, compensation_update=compensation_update,
+        compensation_update_at=compensation_update,  # (the facade's name for it)
+        frame_update=frame_update, waypoint_config=waypoint_config,
+    )
+
+
+@functools.cache
+def elastic_step(scalar: type) -> wp.Kernel:
+    """The torque update kernel (frames and damped DH rows), for ``scalar``."""
+    sh = funcs(scalar)
+    fk, vec3, vec4, mat44, zero = sh.fk, sh.vec3, sh.vec4, sh.mat44, sh.zero
+    torque_update = sh.torque_update
+
+    @wp.kernel(module="unique")
+    def elastic_step_kernel(
+        # Model:
+        model: fk.FrameTables,
+        mass: wp.array(dtype=scalar),
+        mass_com: wp.array(dtype=vec3),
+        dh_info: wp.array(dtype=wp.vec4i),
+        kappa_nl: wp.array(dtype=scalar),
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        rho: wp.array3d(dtype=scalar),
+        rho_stride: int,
+        rows_kind: int,
+        rho0: wp.array3d(dtype=scalar),
+        rho0_stride: int,
+        kappa: wp.array3d(dtype=scalar),
+        kappa_stride: int,
+        lam: scalar,
+        gravity: vec3,
+        write_tau: int,
+        scratch_stride: int,
+        # Data out:
+        frames: wp.array2d(dtype=mat44),
+        prefix: wp.array2d(dtype=vec4),
+        axes: wp.array2d(dtype=vec3),
+        rho_out: wp.array3d(dtype=scalar),
+        tau_out: wp.array3d(dtype=scalar),
+        delta: wp.array(dtype=scalar),
+    ):
+        """One torque update: frames = F(q, rho); rho_out = damped update from the
+        gravity torques of those frames; delta[b] = max |rho_out - rho| (rad).
+        ``prefix`` (n_frames + 1, S) and ``axes`` (n_frames, S) are scratch (moment prefix
+        sums; alpha axes from the FK pass), column ``b * scratch_stride``: stride 0 (S = 1)
+        on the CPU, where configurations run one after another and the column stays in L1;
+        stride 1 (S = B) on CUDA (frame-major: neighbouring threads touch neighbouring
+        entries) and under a Tape (every entry written once)."""
+        b = wp.tid()
+        sb = b * scratch_stride
+        acc = vec4(zero, zero, zero, zero)
+        prefix[0, sb] = acc
+        for k in range(model.order.shape[0]):
+            i = model.order[k]
+            R, p, ax = fk.write_frame(model, b, i, q, rho, b * rho_stride, rows_kind, frames, b)
+            axes[i, sb] = ax
+            m = mass[i]
+            if m != zero:  # a fixed pattern per robot: predicted
+                w = R * mass_com[i] + p
+                acc = acc + vec4(m * w[0], m * w[1], m * w[2], m)
+            prefix[k + 1, sb] = acc
+        delta[b] = torque_update(b, frames, rho, rho_stride, rho0, rho0_stride, kappa,
+                                 kappa_stride, kappa_nl, lam, gravity, dh_info, prefix, axes, sb, rho_out,
+                                 tau_out, write_tau)
+
+    return elastic_step_kernel
+
+
+@functools.cache
+def compensation_update(scalar: type) -> wp.Kernel:
+    """The compensation rows' update kernel (from an optimizer's frames), for
+    ``scalar``."""
+    sh = funcs(scalar)
+    fk, mat44, CompensationArgs = sh.fk, sh.mat44, sh.CompensationArgs
+    compensation_update, waypoint_config = sh.compensation_update, sh.waypoint_config
+
     @wp.kernel(module="unique", enable_backward=False)
     def compensation_update_kernel(
         # Model:
@@ -329,6 +362,18 @@ def kernels(scalar: type) -> SimpleNamespace:
         torques at its waypoint and writes ``c.rows_out[u]`` and ``c.delta[u]``."""
         u = wp.tid()
         compensation_update(model, frames, waypoint_config(u, c), rows, u, c)
+
+    return compensation_update_kernel
+
+
+@functools.cache
+def compensation_update_per_frame(scalar: type) -> wp.Kernel:
+    """The compensation rows' update kernel, one thread per row and frame, for
+    ``scalar``."""
+    sh = funcs(scalar)
+    fk, vec4, mat44, zero, unpack_rot = sh.fk, sh.vec4, sh.mat44, sh.zero, sh.unpack_rot
+    unpack_pos, CompensationArgs, frame_update = sh.unpack_pos, sh.CompensationArgs, sh.frame_update
+    waypoint_config = sh.waypoint_config
 
     @wp.kernel(module="unique", enable_backward=False)
     def compensation_update_per_frame_kernel(
@@ -358,6 +403,15 @@ def kernels(scalar: type) -> SimpleNamespace:
                 mo = mo + vec4(m * w[0], m * w[1], m * w[2], m)
         wp.atomic_max(c.delta, u, frame_update(model, frames, b, rows, u, c, info, mo))
 
+    return compensation_update_per_frame_kernel
+
+
+@functools.cache
+def fill_rows(scalar: type) -> wp.Kernel:
+    """The kernel filling compensation rows with the nominal ones, for ``scalar``."""
+    sh = funcs(scalar)
+    fk = sh.fk
+
     @wp.kernel(module="unique", enable_backward=False)
     def fill_rows_kernel(
         # Model:
@@ -374,6 +428,13 @@ def kernels(scalar: type) -> SimpleNamespace:
         for c in range(4):
             rows[b, i, 5 + c] = cs[c]
 
+    return fill_rows_kernel
+
+
+@functools.cache
+def fill_static_rows(scalar: type) -> wp.Kernel:
+    """The kernel writing the nominal rows of the static frames, for ``scalar``."""
+
     @wp.kernel(module="unique")
     def fill_static_rows(
         # Model:
@@ -389,10 +450,19 @@ def kernels(scalar: type) -> SimpleNamespace:
         for c in range(5):
             rho_out[b, i, c] = dh0[i, c]
 
-    return SimpleNamespace(vec4=vec4, elastic_step=elastic_step_kernel,
-                           fill_static_rows=fill_static_rows,
-                           CompensationArgs=CompensationArgs,
-                           compensation_update_at=compensation_update,
-                           compensation_update=compensation_update_kernel,
-                           compensation_update_per_frame=compensation_update_per_frame_kernel,
-                           fill_rows=fill_rows_kernel)
+    return fill_static_rows
+
+
+@functools.cache
+def kernels(scalar: type) -> SimpleNamespace:
+    """Elastic kernels for one scalar type: :func:`funcs`' arguments and functions and
+    every kernel of the builders (a facade: the builders build only the kernel asked for)."""
+    sh = funcs(scalar)
+    return SimpleNamespace(
+        vec4=sh.vec4, elastic_step=elastic_step(scalar),
+        fill_static_rows=fill_static_rows(scalar), CompensationArgs=sh.CompensationArgs,
+        compensation_update_at=sh.compensation_update,
+        compensation_update=compensation_update(scalar),
+        compensation_update_per_frame=compensation_update_per_frame(scalar),
+        fill_rows=fill_rows(scalar),
+    )

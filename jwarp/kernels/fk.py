@@ -63,8 +63,11 @@ ROWS_COMPENSATION = wp.constant(2)
 
 
 @functools.cache
-def kernels(scalar: type) -> SimpleNamespace:
-    """Kernels and functions for one scalar type (``wp.float32`` or ``wp.float64``)."""
+def funcs(scalar: type) -> SimpleNamespace:
+    """The frame tables, vector types and ``@wp.func`` helpers of the kinematics, for one
+    scalar type (``wp.float32``/``wp.float64``); built once per type (issue 40 item 5: the
+    kernels are built one each, by :func:`fk`, :func:`fk_components`, :func:`jacobian` and
+    :func:`jacobian_dh`, from these)."""
     vec3 = wp.types.vector(3, scalar)
     mat33 = wp.types.matrix((3, 3), scalar)
     mat44 = wp.types.matrix((4, 4), scalar)
@@ -488,44 +491,6 @@ def kernels(scalar: type) -> SimpleNamespace:
         store_pose(frames, fb, i, R, p)
         return R, p, ax
 
-    @wp.kernel(module="unique")
-    def fk_kernel(
-        # Model:
-        model: FrameTables,
-        # Data in:
-        q: wp.array2d(dtype=scalar),
-        rho: wp.array3d(dtype=scalar),
-        rho_stride: int,
-        rows_kind: int,
-        # Data out:
-        frames: wp.array2d(dtype=mat44),
-    ):
-        """World transform of every frame: frames[b, i] (4x4)."""
-        b = wp.tid()
-        for k in range(model.order.shape[0]):
-            i = model.order[k]
-            write_frame(model, b, i, q, rho, b * rho_stride, rows_kind, frames, b)
-
-    @wp.kernel(module="unique", enable_backward=False)
-    def fk_components_kernel(
-        # Model:
-        model: FrameTables,
-        # Data in:
-        q: wp.array2d(dtype=scalar),
-        rho: wp.array3d(dtype=scalar),
-        rho_stride: int,
-        rows_kind: int,
-        # Data out:
-        frames: wp.array4d(dtype=scalar),
-    ):
-        """:func:`fk_kernel` writing scalars ``frames[b, i, r, c]`` (B, n_frames, 4, 4) of any
-        strides: with the batch index fastest in memory (a component-major view) every
-        store of a warp is one coalesced 128-byte line on CUDA. Forward only (no Tape):
-        gradients go through :func:`fk_kernel`."""
-        b = wp.tid()
-        for k in range(model.order.shape[0]):
-            write_frame(model, b, model.order[k], q, rho, b * rho_stride, rows_kind, frames, b)
-
     @wp.func
     def add_axis_columns(model: FrameTables, i: int, z: vec3, p: vec3, target: vec3, b: int,
                          q: wp.array2d(dtype=scalar), jac: wp.array3d(dtype=scalar)):
@@ -589,6 +554,87 @@ def kernels(scalar: type) -> SimpleNamespace:
             add_axis_columns(model, chain[k], vec3(T[0, 2], T[1, 2], T[2, 2]),
                              vec3(T[0, 3], T[1, 3], T[2, 3]), target, b, q, jac)
 
+    return SimpleNamespace(
+        scalar=scalar,
+        vec3=vec3, mat33=mat33, mat44=mat44, vec4=vec4, zero=zero, one=one,
+        FrameTables=FrameTables, dh_fixed_rot=dh_fixed_rot, cos_sin=cos_sin,
+        cos_sin_near=cos_sin_near, cos_sin_step=cos_sin_step,
+        coupled_angle=coupled_angle, commanded=commanded, harmonic_angle=harmonic_angle,
+        joint_value=joint_value, coupling_harmonic_slope=coupling_harmonic_slope,
+        coupling_weight=coupling_weight, harmonic_travel=harmonic_travel,
+        child_frame=child_frame, child_rot_pos=child_rot_pos, chain_link=chain_link,
+        chain_pose=chain_pose, chain_point=chain_point, waypoint_thread=waypoint_thread,
+        pack=pack, unpack_rot=unpack_rot, unpack_pos=unpack_pos, parent_pose=parent_pose,
+        store_pose=store_pose, write_frame=write_frame, add_axis_columns=add_axis_columns,
+        clear_jacobian=clear_jacobian, chain_jacobian=chain_jacobian,
+        frames_jacobian=frames_jacobian,
+    )
+
+
+@functools.cache
+def fk(scalar: type) -> wp.Kernel:
+    """The forward kinematics kernel (every frame's world transform), for ``scalar``."""
+    sh = funcs(scalar)
+    mat44, FrameTables, write_frame = sh.mat44, sh.FrameTables, sh.write_frame
+
+    @wp.kernel(module="unique")
+    def fk_kernel(
+        # Model:
+        model: FrameTables,
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        rho: wp.array3d(dtype=scalar),
+        rho_stride: int,
+        rows_kind: int,
+        # Data out:
+        frames: wp.array2d(dtype=mat44),
+    ):
+        """World transform of every frame: frames[b, i] (4x4)."""
+        b = wp.tid()
+        for k in range(model.order.shape[0]):
+            i = model.order[k]
+            write_frame(model, b, i, q, rho, b * rho_stride, rows_kind, frames, b)
+
+    return fk_kernel
+
+
+@functools.cache
+def fk_components(scalar: type) -> wp.Kernel:
+    """The forward kinematics kernel writing the transforms' components, for
+    ``scalar``."""
+    sh = funcs(scalar)
+    FrameTables, write_frame = sh.FrameTables, sh.write_frame
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def fk_components_kernel(
+        # Model:
+        model: FrameTables,
+        # Data in:
+        q: wp.array2d(dtype=scalar),
+        rho: wp.array3d(dtype=scalar),
+        rho_stride: int,
+        rows_kind: int,
+        # Data out:
+        frames: wp.array4d(dtype=scalar),
+    ):
+        """:func:`fk_kernel` writing scalars ``frames[b, i, r, c]`` (B, n_frames, 4, 4) of any
+        strides: with the batch index fastest in memory (a component-major view) every
+        store of a warp is one coalesced 128-byte line on CUDA. Forward only (no Tape):
+        gradients go through :func:`fk_kernel`."""
+        b = wp.tid()
+        for k in range(model.order.shape[0]):
+            write_frame(model, b, model.order[k], q, rho, b * rho_stride, rows_kind, frames, b)
+
+    return fk_components_kernel
+
+
+@functools.cache
+def jacobian(scalar: type) -> wp.Kernel:
+    """The geometric Jacobian kernel, for ``scalar``."""
+    sh = funcs(scalar)
+    vec3, FrameTables, chain_point = sh.vec3, sh.FrameTables, sh.chain_point
+    chain_jacobian = sh.chain_jacobian
+
     @wp.kernel(module="unique")
     def jacobian_kernel(
         # Model:
@@ -611,6 +657,16 @@ def kernels(scalar: type) -> SimpleNamespace:
         rb = b * rho_stride
         target = chain_point(model, chain, b, q, rows_kind, rho, rb, point)  # pass 1
         chain_jacobian(model, chain, b, q, rows_kind, rho, rb, target, jac)  # pass 2: axes
+
+    return jacobian_kernel
+
+
+@functools.cache
+def jacobian_dh(scalar: type) -> wp.Kernel:
+    """The DH-row Jacobian kernel, for ``scalar``."""
+    sh = funcs(scalar)
+    vec3, zero, FrameTables, chain_link = sh.vec3, sh.zero, sh.FrameTables, sh.chain_link
+    chain_point = sh.chain_point
 
     @wp.kernel(module="unique")
     def jacobian_dh_kernel(
@@ -661,15 +717,29 @@ def kernels(scalar: type) -> SimpleNamespace:
                     jac[b, r, i, 4] = lin_beta[r]
                     jac[b, r + 3, i, 4] = ax_beta[r]
 
+    return jacobian_dh_kernel
+
+
+@functools.cache
+def kernels(scalar: type) -> SimpleNamespace:
+    """Kernels and functions for one scalar type (``wp.float32`` or ``wp.float64``):
+    :func:`funcs`' tables and functions and every kernel of the builders (a facade: the
+    builders build only the kernel asked for)."""
+    sh = funcs(scalar)
     return SimpleNamespace(
-        scalar=scalar, FrameTables=FrameTables, vec3=vec3, mat33=mat33, mat44=mat44,
-        vec4=vec4, cos_sin=cos_sin, cos_sin_near=cos_sin_near, cos_sin_step=cos_sin_step,
-        joint_value=joint_value, coupled_angle=coupled_angle, commanded=commanded,
-        harmonic_angle=harmonic_angle, coupling_harmonic_slope=coupling_harmonic_slope,
-        coupling_weight=coupling_weight, harmonic_travel=harmonic_travel, waypoint_thread=waypoint_thread, write_frame=write_frame,
-        child_frame=child_frame, child_rot_pos=child_rot_pos, chain_link=chain_link,
-        chain_pose=chain_pose, chain_point=chain_point, add_axis_columns=add_axis_columns,
-        clear_jacobian=clear_jacobian, chain_jacobian=chain_jacobian,
-        frames_jacobian=frames_jacobian, pack=pack, unpack_rot=unpack_rot, unpack_pos=unpack_pos,
-        fk=fk_kernel, fk_components=fk_components_kernel, jacobian=jacobian_kernel, jacobian_dh=jacobian_dh_kernel,
+        scalar=scalar, FrameTables=sh.FrameTables, vec3=sh.vec3, mat33=sh.mat33,
+        mat44=sh.mat44, vec4=sh.vec4, cos_sin=sh.cos_sin, cos_sin_near=sh.cos_sin_near,
+        cos_sin_step=sh.cos_sin_step, joint_value=sh.joint_value,
+        coupled_angle=sh.coupled_angle, commanded=sh.commanded,
+        harmonic_angle=sh.harmonic_angle,
+        coupling_harmonic_slope=sh.coupling_harmonic_slope,
+        coupling_weight=sh.coupling_weight, harmonic_travel=sh.harmonic_travel,
+        waypoint_thread=sh.waypoint_thread, write_frame=sh.write_frame,
+        child_frame=sh.child_frame, child_rot_pos=sh.child_rot_pos,
+        chain_link=sh.chain_link, chain_pose=sh.chain_pose, chain_point=sh.chain_point,
+        add_axis_columns=sh.add_axis_columns, clear_jacobian=sh.clear_jacobian,
+        chain_jacobian=sh.chain_jacobian, frames_jacobian=sh.frames_jacobian, pack=sh.pack,
+        unpack_rot=sh.unpack_rot, unpack_pos=sh.unpack_pos, fk=fk(scalar),
+        fk_components=fk_components(scalar), jacobian=jacobian(scalar),
+        jacobian_dh=jacobian_dh(scalar),
     )

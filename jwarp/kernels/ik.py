@@ -23,7 +23,7 @@ from types import SimpleNamespace
 
 import warp as wp
 
-from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kernels.fk import funcs as fk_funcs
 
 #: orientation modes of a target: the full pose, position only, the rotation about one
 #: axis of the frame free (:func:`kernels` ``apply_orientation``)
@@ -33,7 +33,7 @@ ORIENT_FULL, ORIENT_NONE, ORIENT_AXIS = 0, 1, 2
 @functools.cache
 def kernels(scalar: type) -> SimpleNamespace:
     """IK kernels for one scalar type (``wp.float32`` or ``wp.float64``)."""
-    fk = fk_kernels(scalar)
+    fk = fk_funcs(scalar)
     vec3, mat33, mat44 = fk.vec3, fk.mat33, fk.mat44
     zero = scalar(0.0)
     half = scalar(0.5)

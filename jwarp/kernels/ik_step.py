@@ -93,10 +93,11 @@ class RestartArgs:
 
 
 @functools.cache
-def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
-    """The damped least-squares step for one scalar type, task (6 rows, or the 3 rows
-    [v_x, v_y, w_z] of a planar robot) and number of joints (the sizes of the local
-    matrices). The linear algebra runs in float64 either way."""
+def dls_funcs(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
+    """The local matrix types and ``@wp.func`` helpers of the damped least-squares step, for
+    one scalar type, task and number of joints; built once per (scalar, planar, n_dof)
+    (issue 40 item 5: the kernels are built one each, by :func:`dls`, :func:`step` and
+    :func:`sample`, from these)."""
     M = 3 if planar else 6
     N = int(n_dof)
     PLANAR = int(planar)
@@ -106,7 +107,7 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
     vecn = wp.types.vector(N, f64)
     zero = f64(0.0)
     one = f64(1.0)
-    pk = path_kernels.kernels(scalar)
+    pk = path_kernels.funcs(scalar)
 
     @wp.func
     def task_row(r: int) -> int:
@@ -191,25 +192,6 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
             big = wp.max(big, wp.abs(d[j]))
         return d * wp.min(one, max_step / wp.max(big, f64(1e-300)))
 
-    @wp.kernel(module="unique", enable_backward=False)
-    def dls_kernel(
-        # Data in:
-        jac: wp.array3d(dtype=scalar),
-        err: wp.array2d(dtype=scalar),
-        grad: wp.array2d(dtype=scalar),
-        on: wp.array(dtype=wp.int32),
-        mu2: f64,
-        alpha: f64,
-        max_step: f64,
-        # Data out:
-        dq: wp.array2d(dtype=f64),
-    ):
-        """The scaled step dq (B, n_dof) alone (no limits, no state): for tests."""
-        b = wp.tid()
-        d = dls_step(jac, err, grad, b, on[b], mu2, alpha, max_step)
-        for j in range(N):
-            dq[b, j] = d[j]
-
     @wp.func
     def task_cost(err: wp.array2d(dtype=scalar), b: int) -> f64:
         """The progress measure of a configuration: ``|e_v|^2 + W_ROT |e_w|^2`` over the
@@ -235,6 +217,51 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
             if pk.within_linear_limits(q, b, limits, scalar(0.0)) != 0:
                 return
         pk.project_row(q, b, limits)
+
+    return SimpleNamespace(
+        scalar=scalar,
+        planar=planar, n_dof=n_dof, M=M, N=N, PLANAR=PLANAR, matm=matm, vecm=vecm,
+        matmn=matmn, vecn=vecn, zero=zero, one=one, pk=pk, task_row=task_row,
+        cholesky_solve=cholesky_solve, dls_step=dls_step, dls_step_masked=dls_step_masked,
+        task_cost=task_cost, sample_row=sample_row,
+    )
+
+
+@functools.cache
+def dls(scalar: type, planar: bool, n_dof: int) -> wp.Kernel:
+    """The kernel of the scaled step alone (for tests), for ``scalar``, the task and
+    ``n_dof``."""
+    sh = dls_funcs(scalar, planar, n_dof)
+    N, dls_step = sh.N, sh.dls_step
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def dls_kernel(
+        # Data in:
+        jac: wp.array3d(dtype=scalar),
+        err: wp.array2d(dtype=scalar),
+        grad: wp.array2d(dtype=scalar),
+        on: wp.array(dtype=wp.int32),
+        mu2: f64,
+        alpha: f64,
+        max_step: f64,
+        # Data out:
+        dq: wp.array2d(dtype=f64),
+    ):
+        """The scaled step dq (B, n_dof) alone (no limits, no state): for tests."""
+        b = wp.tid()
+        d = dls_step(jac, err, grad, b, on[b], mu2, alpha, max_step)
+        for j in range(N):
+            dq[b, j] = d[j]
+
+    return dls_kernel
+
+
+@functools.cache
+def step(scalar: type, planar: bool, n_dof: int) -> wp.Kernel:
+    """The projected DLS step kernel, for ``scalar``, the task and ``n_dof``."""
+    sh = dls_funcs(scalar, planar, n_dof)
+    N, vecn, zero, one, pk = sh.N, sh.vecn, sh.zero, sh.one, sh.pk
+    dls_step_masked, task_cost, sample_row = sh.dls_step_masked, sh.task_cost, sh.sample_row
 
     @wp.kernel(module="unique", enable_backward=False)
     def step_kernel(
@@ -332,6 +359,15 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         pk.project_row(q, b, limits)
         iterations[b] = iterations[b] + 1
 
+    return step_kernel
+
+
+@functools.cache
+def sample(scalar: type, planar: bool, n_dof: int) -> wp.Kernel:
+    """The random seeds kernel, for ``scalar``, the task and ``n_dof``."""
+    sh = dls_funcs(scalar, planar, n_dof)
+    pk, sample_row = sh.pk, sh.sample_row
+
     @wp.kernel(module="unique", enable_backward=False)
     def sample_kernel(
         # Model:
@@ -347,20 +383,37 @@ def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
         b = wp.tid()
         sample_row(q, b, wp.rand_init(seed, b), limits)
 
-    return SimpleNamespace(scalar=scalar, planar=planar, rows=M, n_dof=N, task_row=task_row,
-                           cholesky_solve=cholesky_solve, dls_step=dls_step,
-                           dls_step_masked=dls_step_masked, task_cost=task_cost,
-                           dls=dls_kernel, step=step_kernel, sample=sample_kernel)
+    return sample_kernel
 
 
 @functools.cache
-def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
-    """Feasibility check, result rows and best-start selection for a solver of one scalar
-    type; the exact check itself runs in float64 (module docstring)."""
-    fk64 = fk_kernels.kernels(f64)
+def dls_kernels(scalar: type, planar: bool, n_dof: int) -> SimpleNamespace:
+    """The damped least-squares step for one scalar type, task (6 rows, or the 3 rows
+    [v_x, v_y, w_z] of a planar robot) and number of joints (the sizes of the local
+    matrices). The linear algebra runs in float64 either way. A facade: :func:`dls_funcs`'
+    types and functions and every kernel of the builders (which build only the kernel
+    asked for)."""
+    sh = dls_funcs(scalar, planar, n_dof)
+    return SimpleNamespace(
+        scalar=scalar, planar=planar, rows=sh.M, n_dof=sh.N, task_row=sh.task_row,
+        cholesky_solve=sh.cholesky_solve, dls_step=sh.dls_step,
+        dls_step_masked=sh.dls_step_masked, task_cost=sh.task_cost,
+        dls=dls(scalar, planar, n_dof), step=step(scalar, planar, n_dof),
+        sample=sample(scalar, planar, n_dof),
+    )
+
+
+@functools.cache
+def check_funcs(scalar: type, planar: bool) -> SimpleNamespace:
+    """The tables, scratch and ``@wp.func`` helpers the check kernels share, for a solver
+    of one scalar type (the exact check itself in float64, module docstring); built once per
+    (scalar, planar) (issue 40 item 5: the kernels are built one each, by :func:`check`,
+    :func:`near`, :func:`gather`, :func:`scatter_aux`, :func:`pose`, :func:`reset`,
+    :func:`repeat_targets`, :func:`finalize` and :func:`select`, from these)."""
+    fk64 = fk_kernels.funcs(f64)
     ck64 = collision_kernels.funcs(f64)
-    pk64 = path_kernels.kernels(f64)
-    fk = fk_kernels.kernels(scalar)
+    pk64 = path_kernels.funcs(f64)
+    fk = fk_kernels.funcs(scalar)
     ikk = ik_cost_kernels.kernels(scalar)
     PLANAR = int(planar)
     NPOS = 2 if planar else 3
@@ -460,6 +513,23 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         frames: wp.array2d(dtype=fk64.mat44)
         xs: wp.array2d(dtype=fk64.vec3)
 
+    return SimpleNamespace(
+        scalar=scalar,
+        planar=planar, fk64=fk64, fk=fk, ck64=ck64, pk64=pk64, ikk=ikk, PLANAR=PLANAR,
+        NPOS=NPOS, zero=zero, task_errors=task_errors, write_result=write_result,
+        collision_free_row=collision_free_row, CheckTables=CheckTables,
+        CheckScratch=CheckScratch,
+    )
+
+
+@functools.cache
+def check(scalar: type, planar: bool) -> wp.Kernel:
+    """The exact feasibility check kernel (float64), for a solver of ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    pk64, task_errors, write_result = sh.pk64, sh.task_errors, sh.write_result
+    collision_free_row, CheckTables = sh.collision_free_row, sh.CheckTables
+    CheckScratch = sh.CheckScratch
+
     @wp.kernel(module="unique", enable_backward=False)
     def check_kernel(
         # Model:
@@ -528,6 +598,15 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         if wp.atomic_max(solved, b // n_starts, 1) == 0:
             wp.atomic_add(counts, 1, 1)
 
+    return check_kernel
+
+
+@functools.cache
+def near(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel listing the on-target configurations, for a solver of ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    task_errors = sh.task_errors
+
     @wp.kernel(module="unique", enable_backward=False)
     def near_kernel(
         # Data in:
@@ -569,6 +648,13 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         else:
             on[b] = 0
 
+    return near_kernel
+
+
+@functools.cache
+def gather(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel gathering the configurations to check, for a solver of ``scalar``."""
+
     @wp.kernel(module="unique", enable_backward=False)
     def gather_kernel(
         # Data in:
@@ -587,6 +673,16 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         b = idx[kk]
         for j in range(q.shape[1]):
             q_near[k, j] = q[b, j]
+
+    return gather_kernel
+
+
+@functools.cache
+def scatter_aux(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel writing U_A and its gradient to the listed rows, for a solver of
+    ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    ikk = sh.ikk
 
     @wp.kernel(module="unique", enable_backward=False)
     def scatter_aux_kernel(
@@ -619,6 +715,15 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         cost[b] = ikk.aux_row(q, b, q_default, b * default_stride, c, near_grad, k,
                               use_collision, lam_l, grad)
 
+    return scatter_aux_kernel
+
+
+@functools.cache
+def pose(scalar: type, planar: bool) -> wp.Kernel:
+    """The rigid robot's pose error and Jacobian kernel, for a solver of ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    fk, ikk = sh.fk, sh.ikk
+
     @wp.kernel(module="unique", enable_backward=False)
     def pose_kernel(
         # Model:
@@ -649,6 +754,13 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         ikk.pose_error_row(R, p, target[b], b, err)
         fk.chain_jacobian(model, chain, b, q, ROWS_NOMINAL, nominal, 0, p, jac)
         ikk.apply_orientation(orient, axis, R, target[b], b, err, jac)
+
+    return pose_kernel
+
+
+@functools.cache
+def reset(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel zeroing the solver state, for a solver of ``scalar``."""
 
     @wp.kernel(module="unique", enable_backward=False)
     def reset_kernel(
@@ -681,17 +793,35 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
             counts[3] = 0
             halt[0] = 0
 
+    return reset_kernel
+
+
+@functools.cache
+def repeat_targets(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel repeating each problem's target over its starts, for a solver of
+    ``scalar``."""
+
     @wp.kernel(module="unique", enable_backward=False)
     def repeat_targets_kernel(
         # Data in:
-        targets: wp.array(dtype=fk_kernels.kernels(scalar).mat44),
+        targets: wp.array(dtype=fk_kernels.funcs(scalar).mat44),
         n_starts: int,
         # Data out:
-        out: wp.array(dtype=fk_kernels.kernels(scalar).mat44),
+        out: wp.array(dtype=fk_kernels.funcs(scalar).mat44),
     ):
         """out[b] = targets[b // n_starts]. Launch dim B."""
         b = wp.tid()
         out[b] = targets[b // n_starts]
+
+    return repeat_targets_kernel
+
+
+@functools.cache
+def finalize(scalar: type, planar: bool) -> wp.Kernel:
+    """The kernel writing the result rows of the unfinished configurations, for a
+    solver of ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    zero, task_errors, write_result = sh.zero, sh.task_errors, sh.write_result
 
     @wp.kernel(module="unique", enable_backward=False)
     def finalize_kernel(
@@ -716,6 +846,15 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
         if done[b] == 3:
             its = f64(iterations[b])
         write_result(out, b, q, pe, re, f64(cost_a[b]), zero, its)
+
+    return finalize_kernel
+
+
+@functools.cache
+def select(scalar: type, planar: bool) -> wp.Kernel:
+    """The best-start selection kernel, for a solver of ``scalar``."""
+    sh = check_funcs(scalar, planar)
+    zero = sh.zero
 
     @wp.kernel(module="unique", enable_backward=False)
     def select_kernel(
@@ -752,10 +891,23 @@ def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
             best[p, 0] = best_i
         best[p, 1] = n_feas
 
+    return select_kernel
+
+
+@functools.cache
+def check_kernels(scalar: type, planar: bool) -> SimpleNamespace:
+    """Feasibility check, result rows and best-start selection for a solver of one scalar
+    type; the exact check itself runs in float64 (module docstring): :func:`check_funcs`'
+    tables and functions and every kernel of the builders (a facade: the builders build
+    only the kernel asked for)."""
+    sh = check_funcs(scalar, planar)
     return SimpleNamespace(
-        scalar=scalar, planar=planar, task_errors=task_errors, write_result=write_result,
-        within_limits_row=pk64.within_limits_row, collision_free_row=collision_free_row,
-        CheckTables=CheckTables, CheckScratch=CheckScratch, check=check_kernel, near=near_kernel,
-        gather=gather_kernel, scatter_aux=scatter_aux_kernel, pose=pose_kernel,
-        reset=reset_kernel, repeat_targets=repeat_targets_kernel, finalize=finalize_kernel,
-        select=select_kernel)
+        scalar=scalar, planar=planar, task_errors=sh.task_errors,
+        write_result=sh.write_result, within_limits_row=sh.pk64.within_limits_row,
+        collision_free_row=sh.collision_free_row, CheckTables=sh.CheckTables,
+        CheckScratch=sh.CheckScratch, check=check(scalar, planar),
+        near=near(scalar, planar), gather=gather(scalar, planar),
+        scatter_aux=scatter_aux(scalar, planar), pose=pose(scalar, planar),
+        reset=reset(scalar, planar), repeat_targets=repeat_targets(scalar, planar),
+        finalize=finalize(scalar, planar), select=select(scalar, planar),
+    )

@@ -68,13 +68,16 @@ CODE_NAMES = ("ok", "world collision", "self collision", "uncertified", "joint l
 
 
 @functools.cache
-def kernels(path_scalar: type) -> SimpleNamespace:
-    """Check kernels for paths stored in ``path_scalar`` (float32/float64); every check
-    computes in float64."""
+def funcs() -> SimpleNamespace:
+    """The structs and ``@wp.func`` helpers the check kernels share (every check computes in
+    float64, whatever the paths' type); built once (issue 40 item 5: the kernels are built
+    one each, by :func:`prep`, :func:`points`, :func:`cover`, :func:`segment`,
+    :func:`level_init`, :func:`level`, :func:`level_end` and :func:`reduce`, from these;
+    those that read the paths once per path type)."""
     f64 = wp.float64
-    fk = fk_kernels.kernels(f64)
+    fk = fk_kernels.funcs(f64)
     ck = collision_kernels.funcs(f64)
-    pk = path_kernels.kernels(f64)
+    pk = path_kernels.funcs(f64)
     vec3, mat44 = fk.vec3, fk.mat44
     zero = f64(0.0)
     half = f64(0.5)
@@ -255,6 +258,34 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             return wp.min(margin, end_margin), wp.min(self_margin, end_margin)
         return margin, self_margin
 
+    @wp.func
+    def claim_result(seg: Segments, k: int, t: int, code: int, u: f64, a: int, b: int,
+                     d: f64):
+        """Write the segment's result once: the first interval that decides it (a
+        violation, or an unproven interval at the finest width) writes code, where and
+        what; later ones leave it."""
+        if wp.atomic_add(seg.claim, k, t, 1) == 0:
+            seg.u[k, t] = u
+            seg.a[k, t] = a
+            seg.b[k, t] = b
+            seg.d[k, t] = d
+            seg.code[k, t] = code
+
+    return SimpleNamespace(
+        f64=f64, fk=fk, ck=ck, pk=pk, vec3=vec3, mat44=mat44, zero=zero, half=half, one=one,
+        CheckModel=CheckModel, CheckScratch=CheckScratch, Segments=Segments, Points=Points,
+        point_u=point_u, advance=advance, required=required, claim_result=claim_result,
+    )
+
+
+@functools.cache
+def prep(path_scalar: type) -> wp.Kernel:
+    """The segments' preparation kernel (limits, travel) for paths stored in
+    ``path_scalar``."""
+    sh = funcs()
+    f64, fk, pk, zero = sh.f64, sh.fk, sh.pk, sh.zero
+    CheckModel, CheckScratch, Segments = sh.CheckModel, sh.CheckScratch, sh.Segments
+
     @wp.kernel(module="unique", enable_backward=False)
     def prep_kernel(
         # Model:
@@ -315,6 +346,19 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 l += sc.dth[r, cm.fp_frame[e]] * cm.fp_weight[e]
             sc.fptravel[r, fp] = l
 
+    return prep_kernel
+
+
+@functools.cache
+def points(path_scalar: type) -> wp.Kernel:
+    """The parallel evaluations' kernel (a point round) for paths stored in
+    ``path_scalar``."""
+    sh = funcs()
+    f64, one = sh.f64, sh.one
+    CheckModel, CheckScratch = sh.CheckModel, sh.CheckScratch
+    Segments, Points = sh.Segments, sh.Points
+    point_u, advance, required = sh.point_u, sh.advance, sh.required
+
     @wp.kernel(module="unique", enable_backward=False)
     def point_kernel(
         # Model:
@@ -361,6 +405,15 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         pts.b[k, t, j] = b
         pts.d[k, t, j] = d
 
+    return point_kernel
+
+
+@functools.cache
+def cover() -> wp.Kernel:
+    """The kernel that grows the proven prefix after a point round (reads no paths)."""
+    sh = funcs()
+    one, Segments, Points, point_u = sh.one, sh.Segments, sh.Points, sh.point_u
+
     @wp.kernel(module="unique", enable_backward=False)
     def cover_kernel(
         # Data in:
@@ -398,6 +451,17 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 else:
                     gap = 1
         seg.cov[k, t] = wp.min(cov, one)
+
+    return cover_kernel
+
+
+@functools.cache
+def segment(path_scalar: type) -> wp.Kernel:
+    """The conservative advancement kernel for paths stored in ``path_scalar``."""
+    sh = funcs()
+    f64, zero, one = sh.f64, sh.zero, sh.one
+    CheckModel, CheckScratch, Segments = sh.CheckModel, sh.CheckScratch, sh.Segments
+    advance, required = sh.advance, sh.required
 
     @wp.kernel(module="unique", enable_backward=False)
     def segment_kernel(
@@ -546,18 +610,14 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         seg.d[k, t] = cd
         seg.n[k, t] = n
 
-    @wp.func
-    def claim_result(seg: Segments, k: int, t: int, code: int, u: f64, a: int, b: int,
-                     d: f64):
-        """Write the segment's result once: the first interval that decides it (a
-        violation, or an unproven interval at the finest width) writes code, where and
-        what; later ones leave it."""
-        if wp.atomic_add(seg.claim, k, t, 1) == 0:
-            seg.u[k, t] = u
-            seg.a[k, t] = a
-            seg.b[k, t] = b
-            seg.d[k, t] = d
-            seg.code[k, t] = code
+    return segment_kernel
+
+
+@functools.cache
+def level_init() -> wp.Kernel:
+    """The levels' level 0 kernel (reads no paths)."""
+    sh = funcs()
+    f64, one, Segments = sh.f64, sh.one, sh.Segments
 
     @wp.kernel(module="unique", enable_backward=False)
     def level_init_kernel(
@@ -600,6 +660,18 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 list_u1[pos] = f64(j + 1) / f64(n0)
             else:
                 wp.atomic_min(seg.cov, k, t, f64(j) / f64(n0))
+
+    return level_init_kernel
+
+
+@functools.cache
+def level(path_scalar: type) -> wp.Kernel:
+    """The kernel of one level of the interval refinement for paths stored in
+    ``path_scalar``."""
+    sh = funcs()
+    f64, zero, half = sh.f64, sh.zero, sh.half
+    CheckModel, CheckScratch, Segments = sh.CheckModel, sh.CheckScratch, sh.Segments
+    advance, required, claim_result = sh.advance, sh.required, sh.claim_result
 
     @wp.kernel(module="unique", enable_backward=False)
     def level_kernel(
@@ -729,6 +801,15 @@ def kernels(path_scalar: type) -> SimpleNamespace:
                 else:
                     wp.atomic_min(seg.cov, k, t, lo)
 
+    return level_kernel
+
+
+@functools.cache
+def level_end() -> wp.Kernel:
+    """The levels' end kernel (reads no paths)."""
+    sh = funcs()
+    zero, one, Segments = sh.zero, sh.one, sh.Segments
+
     @wp.kernel(module="unique", enable_backward=False)
     def level_end_kernel(
         # Model:
@@ -773,6 +854,15 @@ def kernels(path_scalar: type) -> SimpleNamespace:
         seg.d[k, t] = zero
         bad[k] = 1
 
+    return level_end_kernel
+
+
+@functools.cache
+def reduce() -> wp.Kernel:
+    """The per-path reduction kernel (reads no paths)."""
+    sh = funcs()
+    f64, zero, Segments = sh.f64, sh.zero, sh.Segments
+
     @wp.kernel(module="unique", enable_backward=False)
     def reduce_kernel(
         # Data in:
@@ -810,11 +900,20 @@ def kernels(path_scalar: type) -> SimpleNamespace:
             ok[k] = 0
             code[k] = SKIPPED
 
-    return SimpleNamespace(Segments=Segments, Points=Points, prep=prep_kernel,
-                           points=point_kernel, cover=cover_kernel,
-                           required=required,
-                           CheckModel=CheckModel, CheckScratch=CheckScratch,
-                           advance=advance, segment=segment_kernel, reduce=reduce_kernel,
-                           level_init=level_init_kernel, level=level_kernel,
-                           level_end=level_end_kernel,
-                           fk=fk, ck=ck)
+    return reduce_kernel
+
+
+@functools.cache
+def kernels(path_scalar: type) -> SimpleNamespace:
+    """Check kernels for paths stored in ``path_scalar`` (float32/float64); every check
+    computes in float64: :func:`funcs`' structs and functions and every kernel of the
+    builders (a facade: the builders build only the kernel asked for)."""
+    sh = funcs()
+    return SimpleNamespace(Segments=sh.Segments, Points=sh.Points, prep=prep(path_scalar),
+                           points=points(path_scalar), cover=cover(),
+                           required=sh.required,
+                           CheckModel=sh.CheckModel, CheckScratch=sh.CheckScratch,
+                           advance=sh.advance, segment=segment(path_scalar), reduce=reduce(),
+                           level_init=level_init(), level=level(path_scalar),
+                           level_end=level_end(),
+                           fk=sh.fk, ck=sh.ck)

@@ -36,8 +36,12 @@ PROJECTION_ROUNDS = 6
 
 
 @functools.cache
-def kernels(scalar: type) -> SimpleNamespace:
-    """Path kernels for one scalar type (``wp.float32`` or ``wp.float64``)."""
+def funcs(scalar: type) -> SimpleNamespace:
+    """The limit tables and ``@wp.func`` helpers the path kernels share, for one scalar
+    type (``wp.float32``/``wp.float64``); built once per type (issue 40 item 5: the kernels
+    are built one each, by :func:`substeps`, :func:`path_cost`, :func:`path_grad`,
+    :func:`path_step`, :func:`project`, :func:`gather`, :func:`keep` and :func:`select`,
+    from these)."""
     zero = scalar(0.0)
     one = scalar(1.0)
     half = scalar(0.5)
@@ -139,6 +143,19 @@ def kernels(scalar: type) -> SimpleNamespace:
             for j in range(n):
                 x[row, j] = wp.clamp(x[row, j], lim.box[j, 0], lim.box[j, 1])
 
+    return SimpleNamespace(
+        scalar=scalar,
+        zero=zero, one=one, half=half, n_rounds=n_rounds, LimitTables=LimitTables,
+        length_scale=length_scale, waypoint_grad=waypoint_grad, linear_value=linear_value,
+        within_linear_limits=within_linear_limits, within_limits_row=within_limits_row,
+        project_row=project_row,
+    )
+
+
+@functools.cache
+def substeps(scalar: type) -> wp.Kernel:
+    """The linear substeps kernel (eq. 3.3), for ``scalar``."""
+
     @wp.kernel(module="unique")
     def substeps_kernel(
         # Data in:
@@ -162,6 +179,15 @@ def kernels(scalar: type) -> SimpleNamespace:
         for j in range(paths.shape[2]):
             q0 = paths[p, t, j]
             q_sub[row, j] = q0 + a * (paths[p, t + 1, j] - q0)
+
+    return substeps_kernel
+
+
+@functools.cache
+def path_cost(scalar: type) -> wp.Kernel:
+    """The per-path cost kernel (length, collision, U_path), for ``scalar``."""
+    sh = funcs(scalar)
+    zero, half, length_scale = sh.zero, sh.half, sh.length_scale
 
     @wp.kernel(module="unique")
     def path_cost_kernel(
@@ -201,6 +227,15 @@ def kernels(scalar: type) -> SimpleNamespace:
         collision[p] = c
         total[p] = c + lam_l * k_len * l
 
+    return path_cost_kernel
+
+
+@functools.cache
+def path_grad(scalar: type) -> wp.Kernel:
+    """The path gradient kernel (dU_path/dQ), for ``scalar``."""
+    sh = funcs(scalar)
+    zero, length_scale, waypoint_grad = sh.zero, sh.length_scale, sh.waypoint_grad
+
     @wp.kernel(module="unique")
     def path_grad_kernel(
         # Data in:
@@ -222,6 +257,17 @@ def kernels(scalar: type) -> SimpleNamespace:
         k_len = length_scale(paths, p, norm_floor)
         for j in range(paths.shape[2]):
             grad[p, t, j] = waypoint_grad(paths, sub_grad, p, t, j, n_sub, lam_l, k_len)
+
+    return path_grad_kernel
+
+
+@functools.cache
+def path_step(scalar: type) -> wp.Kernel:
+    """The gradient step kernel (clamped, projected onto the limits), for
+    ``scalar``."""
+    sh = funcs(scalar)
+    LimitTables, length_scale, waypoint_grad = sh.LimitTables, sh.length_scale, sh.waypoint_grad
+    project_row = sh.project_row
 
     @wp.kernel(module="unique")
     def path_step_kernel(
@@ -257,6 +303,15 @@ def kernels(scalar: type) -> SimpleNamespace:
             paths_out[row, j] = paths[p, t, j] - d
         project_row(paths_out, row, limits)
 
+    return path_step_kernel
+
+
+@functools.cache
+def project(scalar: type) -> wp.Kernel:
+    """The kernel projecting rows onto the joint limits, for ``scalar``."""
+    sh = funcs(scalar)
+    LimitTables, project_row = sh.LimitTables, sh.project_row
+
     @wp.kernel(module="unique")
     def project_kernel(
         # Model:
@@ -267,6 +322,13 @@ def kernels(scalar: type) -> SimpleNamespace:
         """Project every row of q (B, n_dof) onto the joint limits, in place. Launch dim B."""
         b = wp.tid()
         project_row(q, b, limits)
+
+    return project_kernel
+
+
+@functools.cache
+def gather(scalar: type) -> wp.Kernel:
+    """The kernel packing chosen paths and their substeps, for ``scalar``."""
 
     @wp.kernel(module="unique")
     def gather_kernel(
@@ -292,6 +354,13 @@ def kernels(scalar: type) -> SimpleNamespace:
             for j in range(paths.shape[2]):
                 paths_out[k, s, j] = paths[p, s, j]
 
+    return gather_kernel
+
+
+@functools.cache
+def keep(scalar: type) -> wp.Kernel:
+    """The kernel keeping paths as the final ones, for ``scalar``."""
+
     @wp.kernel(module="unique")
     def keep_kernel(
         # Data in:
@@ -314,6 +383,15 @@ def kernels(scalar: type) -> SimpleNamespace:
             final_cost[p, 0] = total[p]
             final_cost[p, 1] = length[p]
             final_cost[p, 2] = collision[p]
+
+    return keep_kernel
+
+
+@functools.cache
+def select(scalar: type) -> wp.Kernel:
+    """The kernel picking each problem's best start, for ``scalar``."""
+    sh = funcs(scalar)
+    zero = sh.zero
 
     @wp.kernel(module="unique")
     def select_kernel(
@@ -359,29 +437,32 @@ def kernels(scalar: type) -> SimpleNamespace:
         for c in range(3):
             best_cost[b, c] = final_cost[p, c]
 
+    return select_kernel
+
+
+@functools.cache
+def kernels(scalar: type) -> SimpleNamespace:
+    """Path kernels for one scalar type (``wp.float32`` or ``wp.float64``):
+    :func:`funcs`' tables and functions and every kernel of the builders (a facade: the
+    builders build only the kernel asked for)."""
+    sh = funcs(scalar)
     return SimpleNamespace(
-        scalar=scalar, LimitTables=LimitTables, length_scale=length_scale,
-        waypoint_grad=waypoint_grad,
-        linear_value=linear_value, within_linear_limits=within_linear_limits,
-        within_limits_row=within_limits_row, project_row=project_row, substeps=substeps_kernel,
-        path_cost=path_cost_kernel, path_grad=path_grad_kernel, path_step=path_step_kernel,
-        project=project_kernel, gather=gather_kernel, keep=keep_kernel, select=select_kernel,
+        scalar=scalar, LimitTables=sh.LimitTables, length_scale=sh.length_scale,
+        waypoint_grad=sh.waypoint_grad, linear_value=sh.linear_value,
+        within_linear_limits=sh.within_linear_limits,
+        within_limits_row=sh.within_limits_row, project_row=sh.project_row,
+        substeps=substeps(scalar), path_cost=path_cost(scalar),
+        path_grad=path_grad(scalar), path_step=path_step(scalar), project=project(scalar),
+        gather=gather(scalar), keep=keep(scalar), select=select(scalar),
     )
 
 
 @functools.cache
-def cartesian_kernels(scalar: type) -> SimpleNamespace:
-    """Kernels of the Cartesian length cost (thesis eqs. 3.6-3.7) summed over every
-    collision sphere ("the motion of all body parts") at the waypoints:
-
-    ``U_c(Q) = (W - 1) / max(U_c1(q_W, q_1), norm_floor) * sum_t U_c1(q_{t+1}, q_t)`` with
-    ``U_c1(a, b) = 1/2 sum_s |x_s(a) - x_s(b)|^2`` [m^2] (x_s: sphere centres). Its gradient
-    w.r.t. an interior waypoint t is ``J_s(q_t)^T f_s`` summed over the spheres with the
-    force ``f_s = K (2 x_s(q_t) - x_s(q_{t-1}) - x_s(q_{t+1}))``, mapped onto the joints as
-    the collision kernels map their forces (subtree sums of force and moment, projected
-    on each joint axis). Waypoint frames ``frames (P * W, n_frames)`` come from the FK
-    kernel on the paths as rows ``p * W + t``.
-    """
+def cartesian_funcs(scalar: type) -> SimpleNamespace:
+    """The ``@wp.func`` helpers the Cartesian length cost's kernels share, for one scalar
+    type; built once per type (issue 40 item 5: the kernels are built one each, by
+    :func:`cartesian_centres`, :func:`cartesian_cost`, :func:`cartesian_grad` and
+    :func:`cartesian_arcs`, from these)."""
     from jwarp.kernels import fk as fk_kernels
 
     fk = fk_kernels.kernels(scalar)
@@ -405,6 +486,19 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
             d2 += wp.dot(d, d)
         return scalar(W - 1) / wp.max(half * d2, norm_floor)
 
+    return SimpleNamespace(
+        scalar=scalar,
+        fk=fk, vec3=vec3, mat44=mat44, FrameTables=FrameTables, zero=zero, half=half,
+        centre=centre, scale=scale,
+    )
+
+
+@functools.cache
+def cartesian_centres(scalar: type) -> wp.Kernel:
+    """The sphere centres kernel of the Cartesian length cost, for ``scalar``."""
+    sh = cartesian_funcs(scalar)
+    vec3, mat44, centre = sh.vec3, sh.mat44, sh.centre
+
     @wp.kernel(module="unique")
     def centres_kernel(
         # Model:
@@ -418,6 +512,15 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
         """Sphere centres xs (P * W, n_spheres) [m]. Launch dim (P * W, n_spheres)."""
         r, s = wp.tid()
         xs[r, s] = centre(frames, r, sph_frame[s], sph_pos[s])
+
+    return centres_kernel
+
+
+@functools.cache
+def cartesian_cost(scalar: type) -> wp.Kernel:
+    """The Cartesian length cost kernel, for ``scalar``."""
+    sh = cartesian_funcs(scalar)
+    vec3, zero, half, scale = sh.vec3, sh.zero, sh.half, sh.scale
 
     @wp.kernel(module="unique")
     def cost_kernel(
@@ -440,6 +543,16 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
                 u += half * wp.dot(d, d)
         cart[p] = k * u
         total[p] = total[p] + lam_c * k * u
+
+    return cost_kernel
+
+
+@functools.cache
+def cartesian_grad(scalar: type) -> wp.Kernel:
+    """The Cartesian length cost's gradient kernel, for ``scalar``."""
+    sh = cartesian_funcs(scalar)
+    fk, vec3, mat44, FrameTables, zero = sh.fk, sh.vec3, sh.mat44, sh.FrameTables, sh.zero
+    scale = sh.scale
 
     @wp.kernel(module="unique")
     def grad_kernel(
@@ -501,6 +614,15 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
                     jm = model.cpl_joint[m]
                     sub_grad[row, jm] = sub_grad[row, jm] + fk.coupling_weight(model, m, r, q, hp) * gi
 
+    return grad_kernel
+
+
+@functools.cache
+def cartesian_arcs(scalar: type) -> wp.Kernel:
+    """The kernel of the spheres' arc lengths along the paths, for ``scalar``."""
+    sh = cartesian_funcs(scalar)
+    vec3, zero = sh.vec3, sh.zero
+
     @wp.kernel(module="unique")
     def arcs_kernel(
         # Data in:
@@ -522,5 +644,27 @@ def cartesian_kernels(scalar: type) -> SimpleNamespace:
             a += wp.length(xs[base + k + 1, s] - xs[base + k, s])
         wp.atomic_max(arc, p, a)
 
-    return SimpleNamespace(fk=fk, centres=centres_kernel, cost=cost_kernel, grad=grad_kernel,
-                           arcs=arcs_kernel)
+    return arcs_kernel
+
+
+@functools.cache
+def cartesian_kernels(scalar: type) -> SimpleNamespace:
+    """Kernels of the Cartesian length cost (thesis eqs. 3.6-3.7) summed over every
+    collision sphere ("the motion of all body parts") at the waypoints:
+
+    ``U_c(Q) = (W - 1) / max(U_c1(q_W, q_1), norm_floor) * sum_t U_c1(q_{t+1}, q_t)`` with
+    ``U_c1(a, b) = 1/2 sum_s |x_s(a) - x_s(b)|^2`` [m^2] (x_s: sphere centres). Its gradient
+    w.r.t. an interior waypoint t is ``J_s(q_t)^T f_s`` summed over the spheres with the
+    force ``f_s = K (2 x_s(q_t) - x_s(q_{t-1}) - x_s(q_{t+1}))``, mapped onto the joints as
+    the collision kernels map their forces (subtree sums of force and moment, projected
+    on each joint axis). Waypoint frames ``frames (P * W, n_frames)`` come from the FK
+    kernel on the paths as rows ``p * W + t``.
+
+    A facade: :func:`cartesian_funcs`' ``fk`` and the kernels of the builders (which build
+    only the kernel asked for).
+    """
+    sh = cartesian_funcs(scalar)
+    return SimpleNamespace(
+        fk=sh.fk, centres=cartesian_centres(scalar), cost=cartesian_cost(scalar),
+        grad=cartesian_grad(scalar), arcs=cartesian_arcs(scalar),
+    )

@@ -42,7 +42,7 @@ import warp as wp
 
 from jwarp.kernels.collision import funcs as collision_funcs
 from jwarp.kernels.fk import ROWS_NOMINAL
-from jwarp.kernels.fk import kernels as fk_kernels
+from jwarp.kernels.fk import funcs as fk_funcs
 from jwarp.kernels.path import kernels as path_kernels
 
 #: verdicts written to ``code``
@@ -60,7 +60,7 @@ COUNT_ROWS = 64
 @functools.cache
 def kernels(scalar: type) -> SimpleNamespace:
     """Pose-check kernels and functions for one scalar type (``wp.float32``/``wp.float64``)."""
-    fk = fk_kernels(scalar)
+    fk = fk_funcs(scalar)
     ck = collision_funcs(scalar)
     pk = path_kernels(scalar)
     vec3, mat44 = fk.vec3, fk.mat44

@@ -64,7 +64,7 @@ from jwarp.core.rows import DHRows, RowsKind
 from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
 from jwarp.kernels import collision as ck
 from jwarp.kernels import collision_wide as cwide
-from jwarp.kernels.elastic import kernels as elastic_kernels
+from jwarp.kernels.elastic import funcs as elastic_funcs
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
@@ -259,7 +259,7 @@ class CollisionModel:
         self._launches: dict = {}
         self._dummy = wp.empty((1, 1), dtype=self.scalar, device=dev)
         self._no_active = wp.ones(1, dtype=wp.int32, device=dev)
-        self._no_update = elastic_kernels(self.scalar).CompensationArgs()  # enabled = 0
+        self._no_update = elastic_funcs(self.scalar).CompensationArgs()  # enabled = 0
 
     # ------------------------------------------------------------ plumbing
     @property

@@ -386,7 +386,7 @@ class MotionCheck:
         sp = self.model.spheres
         self.n_spheres = sp.n_spheres
         self.device_world = DeviceWorld(world, dev, wp.float64)
-        self.k = mk.kernels(wp.float64)
+        self.k = mk.funcs()  # the structs (the kernels: built per launch, those it uses)
         cm = self.k.CheckModel()
         cm.model = self.model.frame_struct
         cm.rho = self.model.dh0_3d
@@ -524,7 +524,7 @@ class MotionCheck:
         cap = self._work_lists(n_seg, lo) if levels else 0
         sc = self._scratch_for(n_seg, cap if levels else n_seg * max(M, 1))
         em = margin if endpoint_margin is None else endpoint_margin
-        kern = mk.kernels(paths.dtype)
+        ps = paths.dtype  # the kernels that read the paths: one per path type
         seg = out["seg"]
         pts = self._points(K, W, M) if M > 0 else None  # the rounds' points only
         out["bad"].zero_()
@@ -534,13 +534,13 @@ class MotionCheck:
             out["solved"] = wp.zeros(n_groups, dtype=wp.int32, device=self.device)
         out["solved"].zero_()
         dev = self.device
-        wp.launch(kern.prep, dim=(K, W - 1), inputs=[self._cm, paths, idx, sc, out["bad"]],
+        wp.launch(mk.prep(ps), dim=(K, W - 1), inputs=[self._cm, paths, idx, sc, out["bad"]],
                   outputs=[seg], device=dev)
         n_launch = 1
         use_points = int(M > 0)
         run_segments = True
         if levels:
-            n_launch += self._launch_levels(kern, paths, idx, K, W, cap, sc, out, margin, em,
+            n_launch += self._launch_levels(paths, idx, K, W, cap, sc, out, margin, em,
                                             self_margin, group, world_group, lo)
             use_points = 2
             # the CPU reads how many segments the levels left (free there); a GPU launches
@@ -549,22 +549,22 @@ class MotionCheck:
             run_segments = bool(o.fallback) and (dev.is_cuda or left is None
                                                  or int(left.numpy()[-1]) > 0)
         for rnd in range(o.rounds if M > 0 else 0):
-            wp.launch(kern.points, dim=(K, W - 1, M),
+            wp.launch(mk.points(ps), dim=(K, W - 1, M),
                       inputs=[self._cm, paths, idx, float(margin), float(em),
                               float(self_margin), int(world_group), seg, int(rnd > 0), sc],
                       outputs=[pts], device=dev)
-            wp.launch(kern.cover, dim=(K, W - 1), inputs=[pts, int(rnd > 0)],
+            wp.launch(mk.cover(), dim=(K, W - 1), inputs=[pts, int(rnd > 0)],
                       outputs=[out["bad"], seg], device=dev)
             n_launch += 2
         if run_segments:
-            wp.launch(kern.segment, dim=(K, W - 1),
+            wp.launch(mk.segment(ps), dim=(K, W - 1),
                       inputs=[self._cm, paths, idx, float(margin), float(em),
                               float(self_margin), float(o.min_step), int(o.max_evals),
                               float(o.probe_len), int(group), int(world_group), use_points,
                               sc, out["bad"], out["ok_segments"], out["solved"]],
                       outputs=[seg], device=dev)
             n_launch += 1
-        wp.launch(kern.reduce, dim=K, inputs=[seg],
+        wp.launch(mk.reduce(), dim=K, inputs=[seg],
                   outputs=[out["ok"], out["code"], out["where"], out["what"], out["dist"]],
                   device=dev)
         self.last_launches = n_launch + 1
@@ -618,7 +618,7 @@ class MotionCheck:
         return tuple(wp.empty(cap, dtype=dt, device=dev)
                      for _ in range(2) for dt in (wp.int32, wp.float64, wp.float64))
 
-    def _launch_levels(self, kern: Any, paths: wp.array, idx: wp.array, K: int, W: int,
+    def _launch_levels(self, paths: wp.array, idx: wp.array, K: int, W: int,
                        cap: int, sc: Any, out: dict, margin: float, em: float,
                        self_margin: float, group: int, world_group: int,
                        lo: MotionOptions | None = None) -> int:
@@ -637,7 +637,7 @@ class MotionCheck:
             count = self._levels_count = wp.zeros(L + 2, dtype=wp.int32, device=dev)
         count.zero_()
         seg = out["seg"]
-        wp.launch(kern.level_init, dim=(K, W - 1), inputs=[n0, out["bad"]],
+        wp.launch(mk.level_init(), dim=(K, W - 1), inputs=[n0, out["bad"]],
                   outputs=[count, seg, *lists[:3]], device=dev)
         n = 1
         host = None if dev.is_cuda else count.numpy()  # the CPU: a view, no copy
@@ -648,14 +648,14 @@ class MotionCheck:
                 dim = min(int(host[lv]), cap)
                 if dim == 0:
                     break
-            wp.launch(kern.level, dim=dim,
+            wp.launch(mk.level(paths.dtype), dim=dim,
                       inputs=[self._cm, paths, idx, float(margin), float(em),
                               float(self_margin), float(o.min_step), int(group),
                               int(world_group), lv, int(lv == L - 1), *src, sc],
                       outputs=[count, out["bad"], out["ok_segments"], out["solved"], seg,
                                *dst], device=dev)
             n += 1
-        wp.launch(kern.level_end, dim=(K, W - 1),
+        wp.launch(mk.level_end(), dim=(K, W - 1),
                   inputs=[int(group), int(o.fallback), idx, out["solved"]],
                   outputs=[out["bad"], count, seg], device=dev)
         return n + 1

@@ -168,7 +168,7 @@ def substeps(paths: Any, n_substeps: int, *, device: DeviceLike = None, dtype: D
     dev = resolve_device(device)
     p: wp.array = wp.array(flat, dtype=scalar, device=dev)
     out = wp.empty((flat.shape[0] * S, n), dtype=scalar, device=dev)
-    wp.launch(path_kernels.kernels(scalar).substeps, dim=(flat.shape[0], S),
+    wp.launch(path_kernels.substeps(scalar), dim=(flat.shape[0], S),
               inputs=[p, n_sub], outputs=[out], device=dev)
     return out.numpy().reshape(a.shape[:-2] + (S, n))
 

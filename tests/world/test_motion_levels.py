@@ -245,7 +245,7 @@ def test_planner_with_the_levels_plans_feasible_paths(arm, scene, monkeypatch):
     calls = []
     orig = MotionCheck._launch_levels
     monkeypatch.setattr(MotionCheck, "_launch_levels",
-                        lambda self, *a, **kw: calls.append(a[4]) or orig(self, *a, **kw))
+                        lambda self, *a, **kw: calls.append(a[3]) or orig(self, *a, **kw))
     rng = np.random.default_rng(9)
     lim = np.array(arm.joint_limits)
     q = rng.uniform(lim[:, 0], lim[:, 1], size=(400, 2, arm.n_dof)) * 0.6

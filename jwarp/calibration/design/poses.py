@@ -347,7 +347,7 @@ class PoseSampler:
         self.lower, self.upper = lo, hi
         box = np.stack([lo, hi], axis=1)
         #: the robot's limits with the box narrowed by the joint margin (one struct)
-        self.limits = make_struct(path_kernels.kernels(sc).LimitTables, self.model.limits,
+        self.limits = make_struct(path_kernels.funcs(sc).LimitTables, self.model.limits,
                                   box=wp.array(box.astype(dt), dtype=sc, device=dev))
         self.lower_w: wp.array = wp.array(lo.astype(dt), dtype=sc, device=dev)
         self.upper_w: wp.array = wp.array(hi.astype(dt), dtype=sc, device=dev)

@@ -167,7 +167,6 @@ class IKObjective:
         self.fk = fk_kernels.kernels(self.scalar)
         self.axis = self.fk.vec3(*(float(v) for v in free_axis))
         self.kk = ik_kernels.kernels(self.scalar)
-        self.pk = path_kernels.kernels(self.scalar)
         self.limits = self.t.limits
         self.eps = real_number(eps, "eps", self.npdt) if eps is not None else (
             float(max(world.resolution, 0.01)) if world is not None else 0.01)
@@ -301,7 +300,7 @@ class IKObjective:
             self.compensation.update(self.frames)
 
     def project_limits(self) -> None:
-        self._launch(("project",), self.pk.project, [self.limits], [self.q])
+        self._launch(("project",), path_kernels.project(self.scalar), [self.limits], [self.q])
 
     def value_and_grad(self, q: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Host convenience: U_ik = U_f + U_A (eq. 3.19) (B,) and its gradient (B, n_dof)."""
