@@ -200,14 +200,12 @@ def free_in_worlds(model: RobotModel, world: Any, q: np.ndarray, worlds: np.ndar
                    margin: float, self_margin: float, device: Any = None,
                    meshes: bool = True) -> np.ndarray:
     """(N,) bool: configuration i of q (N, n_dof) collision-free in world ``worlds[i]`` of
-    the batch ``world`` (:meth:`jwarp.world.sdf.World.batch`), the planner's check
-    (:func:`jwarp.world.collision.is_collision_free`, float64) by its rows in world
-    ``row // per_world``: the rows of each world padded to the most any world has (the
-    padding's verdicts are dropped; the mesh certificate is not asked for them)."""
-    from jwarp.world.collision import mesh_certified, min_distances
-
+    the batch ``world`` (:meth:`jwarp.world.sdf.World.batch`): the planner's check
+    (:func:`jwarp.world.path_feasibility.collision_free` with ``per_world``) on the rows
+    of each world padded to the most any world has (with the first configuration; the
+    padding's verdicts are dropped)."""
     q = np.asarray(q, np.float64).reshape(len(worlds), -1)
-    N, n = q.shape
+    N = q.shape[0]
     if N == 0:
         return np.zeros(0, bool)
     worlds = np.asarray(worlds, np.int64)
@@ -221,13 +219,5 @@ def free_in_worlds(model: RobotModel, world: Any, q: np.ndarray, worlds: np.ndar
     slot = worlds * per + rank
     qp = np.repeat(q[:1], nw * per, axis=0)  # the padding: some configuration in the limits
     qp[slot] = q
-    md = np.asarray(min_distances(model, qp, world, device=device, dtype=np.float64,
-                                  per_world=per))
-    free = (md[:, 0] > margin) & (md[:, 1] > self_margin)
-    pad = np.ones(nw * per, bool)
-    pad[slot] = False
-    free[pad] = True  # not asked
-    if meshes and not free.all():
-        free = np.asarray(mesh_certified(model, qp, world, free, margin, self_margin, device,
-                                         per, md), bool)
-    return free[slot]
+    return collision_free(model, world, qp, margin, device=device, self_margin=self_margin,
+                          per_world=per, meshes=meshes)[slot]
