@@ -328,6 +328,15 @@ class ShapeSet:
     def pose(self, id: str) -> np.ndarray:
         return self._poses[self._find(id)].copy()
 
+    def poses(self) -> np.ndarray:
+        """(K, 4, 4) every object's pose, in the order of :attr:`ids` (a copy)."""
+        return self._poses.copy()
+
+    def specs(self) -> list[tuple[str, Any, Any]]:
+        """``(kind, dims as given, mesh as given)`` of every object, in the order of
+        :attr:`ids` (:meth:`spec` of each)."""
+        return [(o.kind, o.dims, o.source) for o in self._objects]
+
     def bounds(self) -> np.ndarray:
         """(K, 3, 2) [m] world bounding boxes (planes: infinite)."""
         K = len(self._objects)

@@ -202,3 +202,27 @@ def test_motion_check_meshes_per_path(panda):
     assert list(chk.check(paths, meshes=np.array([False, True])).ok) == [False, True]
     with pytest.raises(ValueError, match="meshes"):
         chk.check(paths, meshes=np.array([True, False, True]))
+
+
+def test_world_pieces_of_a_batch_are_each_worlds_own():
+    """The pieces are built per kind with array operations (piece_table): a batch of
+    worlds gives each world's own pieces, bit for bit, as placed by their poses."""
+    from jwarp.world import World
+
+    rng = np.random.default_rng(3)
+    worlds = [exact_world(_scene(rng)) for _ in range(3)]
+    batch = World.batch(worlds)
+    got = world_pieces(batch.shapes)
+    want = [(k, v, r, w) for w, world in enumerate(worlds)
+            for (k, v, r, _) in world_pieces(world.shapes)]
+    assert len(got) == len(want)
+    for (k, v, r, g), (k2, v2, r2, g2) in zip(got, want):
+        assert (k, r, g) == (k2, r2, g2)
+        assert np.array_equal(v, v2)
+    # and as placed: a box's corners are its pose applied to its half extents
+    box = worlds[1].shapes.ids.index("crate")
+    T = worlds[1].shapes.pose("crate")
+    h = np.array([0.1, 0.2, 0.3]) / 2
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * h
+    k = len(world_pieces(worlds[0].shapes)) + box
+    np.testing.assert_allclose(got[k][1], corners @ T[:3, :3].T + T[:3, 3], atol=1e-15)
