@@ -453,3 +453,20 @@ def test_panda_scene_paths_short_and_verified(tmp_path):
         assert got.min_distance >= 0, str(got)
     assert len(after) >= 2
     assert sum(after) < 0.7 * sum(before)
+
+
+def test_shortened_costs_are_evaluated_when_read(world):
+    """The shortened rows' costs are left to their first read (a PathObjective of their
+    own): read after the Planner's next call, they are those of a call read at once."""
+    pl = PL.Planner("planar4", world, 1, PL.PlanOptions(**OPTS))
+    late = pl.plan(S4, G4)
+    assert late.__dict__.get("_cost") is None  # deferred (set by the first read)
+    pl.plan(np.array([2.0, 1.0, 0.0, 0.0]), np.array([2.0, -1.0, 0.0, 0.0]))  # reuses buffers
+    now = pl.plan(S4, G4)
+    np.testing.assert_array_equal(late.path, now.path)
+    for name in ("cost", "length_cost", "collision_cost"):
+        np.testing.assert_allclose(getattr(late, name), getattr(now, name), rtol=1e-6)
+    assert late.length_cost[0] == pytest.approx(length_cost(late.path[0]), rel=1e-4)
+    assert late.length_cost[0] < late.length_before[0]
+    assert late.cost[0] == pytest.approx(late.collision_cost[0] + 0.05 * late.length_cost[0],
+                                         rel=1e-4)

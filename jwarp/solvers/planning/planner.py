@@ -780,25 +780,41 @@ class Planner:
             better &= proven
         if better.any():
             rows, b = np.nonzero(better)[0], idx[better]
-            obj = buf.objective
-            n_starts = obj.P // self.n_problems
-            q = obj.paths.numpy().copy()
-            q[b * n_starts] = cand[rows]
-            obj.set_paths(q)
-            # the costs of the replaced rows only (the others' collision queries skipped)
-            act = np.zeros(obj.P, bool)
-            act[b * n_starts] = True
-            obj.set_active(act)
-            skip, obj.skip_inactive = obj.skip_inactive, True
-            try:
-                obj.evaluate(grad=False)
-            finally:
-                obj.skip_inactive = skip
             res.path[b] = cand[rows]
-            res.cost[b] = obj.total.numpy()[b * n_starts]
-            res.length_cost[b] = obj.length.numpy()[b * n_starts]
-            res.collision_cost[b] = obj.collision.numpy()[b * n_starts]
+            self._costs_on_read(res, b, buf.objective.n_sub)
         res.timings["shorten"] = time.perf_counter() - t
+
+    def _costs_on_read(self, res: PlanResult, rows: np.ndarray, n_sub: int) -> None:
+        """``cost``, ``length_cost`` and ``collision_cost`` of the problems ``rows`` of
+        ``res`` (their paths replaced by the shortening) left to their first read
+        (``PlanResult._fill``, as the straight stage's): one evaluation of the paths (B,
+        W, n_dof) at ``n_sub`` substeps in a :class:`PathObjective` of their own (the
+        planner's buffers are free for the next call), the other problems' costs kept."""
+        o, B = self.options, len(res.path)
+        robot, world, dev, npdt, eps = self.robot, self.world, self.device, self.npdt, self.eps
+        batched, own, rows = self.batched, np.array(res.path, copy=True), np.array(rows)
+        kept = {name: np.array(getattr(res, name), np.float64, copy=True)
+                for name in ("cost", "length_cost", "collision_cost")}
+
+        def costs(r: PlanResult) -> None:
+            obj = PathObjective(robot, world, B, own.shape[1], n_sub, weights=o.weights,
+                                eps=eps, lam=o.lam, device=dev, dtype=npdt)
+            if batched:
+                obj.group_div = obj.S
+            obj.set_paths(own)
+            act = np.zeros(B, bool)
+            act[rows] = True
+            obj.set_active(act)  # the replaced rows' collision queries only
+            obj.skip_inactive = True
+            obj.evaluate(grad=False)
+            for name, arr in (("cost", obj.total), ("length_cost", obj.length),
+                              ("collision_cost", obj.collision)):
+                v = kept[name]
+                v[rows] = arr.numpy()[rows]
+                setattr(r, name, v)
+
+        res.cost = res.length_cost = res.collision_cost = None
+        res._fill = costs
 
     def explain(self, res: PlanResult, deadline: float | None = None) -> list[str]:
         """Per problem of ``res``: "feasible", or why its best path is not: the first

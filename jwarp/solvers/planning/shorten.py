@@ -160,6 +160,9 @@ def shortcut_paths(paths: np.ndarray, check: Callable[..., np.ndarray],
         pts = [_refined(nd) if 2 * len(nd) - 1 <= max_points else nd for nd in nodes]
         cums = [np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
                 for p in pts]
+        # the gain of every shortcut (s, j) of the round's points, once per round: the
+        # steps' lists (_entries) read it
+        gains = [_gains(p, c) if a else None for p, c, a in zip(pts, cums, active)]
         at = np.zeros(K, np.int64)              # the current point of each path
         kept: list[list[int]] = [[0] for _ in range(K)]
         going = active & np.array([len(p) >= 3 for p in pts])
@@ -168,7 +171,7 @@ def shortcut_paths(paths: np.ndarray, check: Callable[..., np.ndarray],
                 for k in map(int, np.nonzero(going)[0]):  # the rest of the path as it is
                     kept[k].extend(range(int(at[k]) + 1, len(pts[k])))
                 break
-            lists = [_entries(pts[k], cums[k], int(at[k]), max_list) if going[k]
+            lists = [_entries(pts[k], cums[k], int(at[k]), max_list, gains[k]) if going[k]
                      else np.zeros((0, 2), np.int64) for k in range(K)]
             per = max(len(e) for e in lists)
             ok = np.zeros((K, per), bool)
@@ -248,18 +251,28 @@ def _spent(calls: int, budget: Callable[[], bool] | None) -> bool:
     return calls > 0 and budget is not None and bool(budget())
 
 
-def _entries(p: np.ndarray, cum: np.ndarray, a: int, max_list: int) -> np.ndarray:
+def _gains(p: np.ndarray, cum: np.ndarray) -> np.ndarray:
+    """(m, m) the length a shortcut from point s to point j of the points ``p`` (m, n)
+    saves over the path between them (cumulative lengths ``cum``): ``cum[j] - cum[s] -
+    |p[j] - p[s]|``."""
+    d = np.linalg.norm(p[None, :, :] - p[:, None, :], axis=-1)
+    return cum[None, :] - cum[:, None] - d
+
+
+def _entries(p: np.ndarray, cum: np.ndarray, a: int, max_list: int,
+             gains: np.ndarray | None = None) -> np.ndarray:
     """The shortcuts (m, 2) (start, end point) tried from point ``a`` of the points ``p``
     (cumulative lengths ``cum``): from ``a`` those to later points that save length, the
     farthest first, then from ``a + 1``, ... (each start's whole list) while the list
-    holds at most ``max_list`` (the first start's always)."""
+    holds at most ``max_list`` (the first start's always). ``gains``: :func:`_gains` of
+    the points (None: computed here)."""
     out: list[np.ndarray] = []
     size = 0
     tol = 1e-6 * max(1.0, float(cum[-1]))
+    g = _gains(p, cum) if gains is None else gains
     for s in range(a, len(p) - 2):
         j = np.arange(s + 2, len(p))
-        gain = cum[j] - cum[s] - np.linalg.norm(p[j] - p[s], axis=1)
-        j = j[gain > tol][::-1]
+        j = j[g[s, s + 2:] > tol][::-1]
         if size and size + len(j) > max_list:
             break
         out.append(np.stack([np.full(len(j), s), j], axis=1))
