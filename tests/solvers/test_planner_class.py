@@ -30,11 +30,20 @@ def block_world():
     return world_from_occupancy((X > 0.5) & (X < 0.75) & (np.abs(Y) < 0.12), LIM2, H2)
 
 
-def assert_same(a, b):
+def assert_equal_on(device, x, y, err_msg=""):
+    """Bit for bit on the CPU; on CUDA the collision costs are sums of atomic adds, whose
+    order varies between launches: paths agree to float32 rounding there."""
+    if str(device).startswith("cuda") and np.asarray(x).dtype.kind == "f":
+        np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-6, err_msg=err_msg)
+    else:
+        np.testing.assert_array_equal(x, y, err_msg=err_msg)
+
+
+def assert_same(a, b, device="cpu"):
     for f in FIELDS:
         x, y = getattr(a, f), getattr(b, f)
         assert x.dtype == y.dtype and x.shape == y.shape, f
-        np.testing.assert_array_equal(x, y, err_msg=f)
+        assert_equal_on(device, x, y, err_msg=f)
     assert a.n_substeps == b.n_substeps
 
 
@@ -57,10 +66,10 @@ def test_planner_reuses_its_buffers_and_matches_plan(device, block_world):
     assert planner.objective is obj
     assert all(a is b for a, b in zip(buffers, (obj.q_sub, obj.sub_cost, obj.sub_grad,
                                                 obj.total)))
-    assert_same(first, again)
+    assert_same(first, again, device)
     ref = PL.plan("planar4", block_world, starts, goals, n_starts=6, n_substeps=8,
                   iterations=150, step=0.05, seed=2, device=device)
-    assert_same(first, ref)
+    assert_same(first, ref, device)
     assert first.feasible.all() and first.path.shape == (2, 20, 4)
     # a single start/goal is used for every problem
     one = planner.plan(S4, G4)
@@ -89,9 +98,9 @@ def test_elastic_planner_reuse_restarts_the_compensation_rows(device, block_worl
     planner = PL.Planner("planar4", block_world, 1, opts, device=device)
     a = planner.plan(S4, G4)
     b = planner.plan(S4, G4)
-    assert_same(a, b)
+    assert_same(a, b, device)
     assert_same(a, PL.plan("planar4", block_world, S4, G4, n_starts=4, n_substeps=6,
-                           iterations=60, step=0.05, kappa=1e-3, device=device))
+                           iterations=60, step=0.05, kappa=1e-3, device=device), device)
 
 
 def test_caller_seeds_paths_and_via_points(device, block_world):
@@ -146,7 +155,7 @@ def test_best_start_is_chosen_on_the_device_and_all_paths_read_on_demand(device,
     planner.plan(S4, np.array([-1.0, 0.3, 0.0, 0.0]))
     np.testing.assert_array_equal(res.all_paths, all_paths)
     res2 = planner.plan(S4, G4)
-    np.testing.assert_array_equal(res2.all_paths, all_paths)
+    assert_equal_on(device, res2.all_paths, all_paths)
 
 
 def test_options_are_validated_naming_the_field(device, block_world):
