@@ -78,8 +78,9 @@ class PlanResult:
     of a batch is solved at its own time, not at the end of the batch.
     ``fallback_notes``: what the fallback did. ``timings`` [s]:
     "optimizer" (the multi-starts) and, where it ran, "via_ik" (the IK via points of
-    :attr:`PlanOptions.via_ik`, inside "optimizer"), "rrt", "fallback_optimizer" and
-    "shorten"; for a robot with collision pieces "mesh_check" (the mesh certificate's
+    :attr:`PlanOptions.via_ik`, inside "optimizer"), "rrt", "fallback_certify" (the
+    RRT paths that kept every node checked as they are, in one call), "fallback_optimizer"
+    (the others optimised) and "shorten"; for a robot with collision pieces "mesh_check" (the mesh certificate's
     share, :mod:`jwarp.world.mesh_check`). ``length_before``: the length cost before the shortening
     (:attr:`PlanOptions.shorten`).
     """
@@ -106,8 +107,8 @@ class PlanResult:
     #: (B,) float: seconds from the call's start at which each problem's feasible path
     #: was found by its ``stage`` (NaN: none; None: not recorded)
     solved_at: Any = None
-    #: seconds per stage: "endpoints", "straight", "optimizer", "rrt", "fallback_optimizer"
-    #: (and "handed_over": the problems :attr:`PlanOptions.stall_iterations` handed to the
+    #: seconds per stage: "endpoints", "straight", "optimizer", "rrt", "fallback_certify",
+    #: "fallback_optimizer" (and "handed_over": the problems :attr:`PlanOptions.stall_iterations` handed to the
     #: fallback before the multi-starts' end, a count)
     timings: dict = field(default_factory=dict, repr=False)
     #: (B,) "feasible" or why the problem's path is not (:meth:`Planner.explain`)
