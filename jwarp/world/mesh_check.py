@@ -165,9 +165,9 @@ def piece_table(shapes: Any) -> PieceTable:
             local[i] = np.concatenate([lo, hi])
     for i in np.nonzero(kinds == "mesh")[0]:
         local[i] = _hull_vertices(specs[i][2])
-    for i in range(O):
-        if world_v[i] is None and local[i] is None:  # pragma: no cover - kinds validated
-            raise ValueError(f"world: object {i} of unknown kind '{kinds[i]}'")
+    for k in range(O):
+        if world_v[k] is None and local[k] is None:  # pragma: no cover - kinds validated
+            raise ValueError(f"world: object {k} of unknown kind '{kinds[k]}'")
     # world coordinates, per object ``local @ R.T + t``: stacked by vertex count, so
     # each object's product is the same BLAS call as on its own (the same bits)
     for rows in _same_count(local, np.nonzero(kind == int(ck.HULL))[0]):
