@@ -296,9 +296,14 @@ def test_simulate_campaign_sigkill_at_random_moments_leaves_one_complete_set(tmp
     def cmd(seed):
         return [sys.executable, "-m", "jwarp", *SIM, "--seed", str(seed), "--out", str(target)]
 
-    t0 = time.perf_counter()
-    subprocess.run(cmd(seeds[0]), env=ENV, check=True, capture_output=True)
-    duration = time.perf_counter() - t0
+    # the run's length as the kills will meet it: the first run may compile kernels
+    # (a cold cache), the later ones do not, so the shorter of two runs
+    durations = []
+    for _ in range(2):
+        t0 = time.perf_counter()
+        subprocess.run(cmd(seeds[0]), env=ENV, check=True, capture_output=True)
+        durations.append(time.perf_counter() - t0)
+    duration = min(durations)
     first_id = _campaign_state(target, refs)
     rng = random.Random(20240611)
     ids, kills, i = {first_id}, 0, 0
