@@ -630,12 +630,7 @@ class Planner:
         batched, own = self.batched, paths.copy()
 
         def costs(res: PlanResult) -> None:
-            obj = PathObjective(robot, world, B, own.shape[1], n_sub, weights=o.weights,
-                                eps=eps, lam=o.lam, device=dev, dtype=npdt)
-            if batched:
-                obj.group_div = obj.S
-            obj.set_paths(own)
-            obj.evaluate(grad=False)
+            obj = _evaluated(robot, world, o, eps, dev, npdt, batched, own, n_sub)
             res.cost = obj.total.numpy().astype(np.float64)
             res.length_cost = obj.length.numpy().astype(np.float64)
             res.collision_cost = obj.collision.numpy().astype(np.float64)
@@ -790,23 +785,14 @@ class Planner:
         (``PlanResult._fill``, as the straight stage's): one evaluation of the paths (B,
         W, n_dof) at ``n_sub`` substeps in a :class:`PathObjective` of their own (the
         planner's buffers are free for the next call), the other problems' costs kept."""
-        o, B = self.options, len(res.path)
+        o = self.options
         robot, world, dev, npdt, eps = self.robot, self.world, self.device, self.npdt, self.eps
         batched, own, rows = self.batched, np.array(res.path, copy=True), np.array(rows)
         kept = {name: np.array(getattr(res, name), np.float64, copy=True)
                 for name in ("cost", "length_cost", "collision_cost")}
 
         def costs(r: PlanResult) -> None:
-            obj = PathObjective(robot, world, B, own.shape[1], n_sub, weights=o.weights,
-                                eps=eps, lam=o.lam, device=dev, dtype=npdt)
-            if batched:
-                obj.group_div = obj.S
-            obj.set_paths(own)
-            act = np.zeros(B, bool)
-            act[rows] = True
-            obj.set_active(act)  # the replaced rows' collision queries only
-            obj.skip_inactive = True
-            obj.evaluate(grad=False)
+            obj = _evaluated(robot, world, o, eps, dev, npdt, batched, own, n_sub, rows)
             for name, arr in (("cost", obj.total), ("length_cost", obj.length),
                               ("collision_cost", obj.collision)):
                 v = kept[name]
@@ -1217,6 +1203,27 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
         res.stop_reason = "time_limit"
     else:
         res.stop_reason = "iterations"
+
+
+def _evaluated(robot: RobotModel, world: Any, o: PlanOptions, eps: float, device: Any,
+               dtype: Any, batched: bool, paths: np.ndarray, n_sub: int,
+               rows: np.ndarray | None = None) -> PathObjective:
+    """A :class:`PathObjective` of its own holding ``paths`` (B, W, n_dof), evaluated
+    without gradient at ``n_sub`` substeps (a batch of worlds: path b in world b);
+    ``rows``: only those paths' collision queries (the others' costs are not read)."""
+    B = len(paths)
+    obj = PathObjective(robot, world, B, paths.shape[1], n_sub, weights=o.weights, eps=eps,
+                        lam=o.lam, device=device, dtype=dtype)
+    if batched:
+        obj.group_div = obj.S
+    obj.set_paths(paths)
+    if rows is not None:
+        act = np.zeros(B, bool)
+        act[rows] = True
+        obj.set_active(act)
+        obj.skip_inactive = True
+    obj.evaluate(grad=False)
+    return obj
 
 
 def _certified_as_is(planner: Planner, res: PlanResult, found: list[int], seeds: list,
