@@ -28,22 +28,40 @@ def _ref(obj: Any) -> Callable[[], Any]:
     return _none if obj is None else weakref.ref(obj)
 
 
+#: the attribute of an object under which the caches keep the values made for it
+OWNER_ATTRIBUTE = "_jwarp_cached"
+
+
 class IdentityCache(Generic[V]):
     """At most ``maxsize`` values, each kept for (``key``, ``objects``): ``key`` a hashable
     tuple compared by value, ``objects`` a tuple compared by identity (held weakly, so the
     cache keeps none of them alive; each must accept a weak reference, or be None). The
-    least recently used entry goes first. Thread safe (one lock per cache)."""
+    least recently used entry goes first. Thread safe (one lock per cache).
 
-    def __init__(self, maxsize: int) -> None:
+    ``owner``: the index in ``objects`` of the object whose lifetime the values follow (a
+    world): a value is stored on that object (an attribute), so a value that refers to it
+    (a collision model holding its world and device buffers) does not keep it alive
+    through the cache, and both go together (with Python's cycle collector) once the
+    caller drops the object. None, or that object None: the cache holds the value."""
+
+    def __init__(self, maxsize: int, owner: int | None = None) -> None:
         if maxsize < 1:
             raise ValueError(f"maxsize: expected an integer >= 1, got {maxsize!r}")
         self.maxsize = int(maxsize)
-        self._entries: OrderedDict[tuple, tuple[tuple, V]] = OrderedDict()
+        self.owner = owner
+        # slot -> (weak refs of the objects, the value held here, or a weak ref of its owner)
+        self._entries: OrderedDict[tuple, tuple[tuple, Any, bool]] = OrderedDict()
         self._lock = threading.Lock()
 
     @staticmethod
     def _slot(key: Hashable, objects: tuple) -> tuple:
         return (key, tuple(id(o) for o in objects))
+
+    def _store(self, owner: Any) -> dict:
+        store = owner.__dict__.get(OWNER_ATTRIBUTE)
+        if store is None:
+            store = owner.__dict__[OWNER_ATTRIBUTE] = {}
+        return store
 
     def get(self, key: Hashable, objects: tuple = ()) -> V | None:
         """The value kept for ``key`` and these very ``objects`` (marked recently used), or
@@ -53,25 +71,49 @@ class IdentityCache(Generic[V]):
             hit = self._entries.get(slot)
             if hit is None or any(r() is not o for r, o in zip(hit[0], objects)):
                 return None
+            refs, held, owned = hit
+            if owned:
+                owner = held()
+                value = None if owner is None else owner.__dict__.get(OWNER_ATTRIBUTE, {}).get(
+                    (id(self), slot))
+                if value is None:
+                    return None
+            else:
+                value = held
             self._entries.move_to_end(slot)
-            return hit[1]
+            return value
 
     def put(self, key: Hashable, objects: tuple, value: V) -> V:
         """Keep ``value`` for ``key`` and ``objects`` (replacing what was kept there), the
         least recently used entries leaving beyond :attr:`maxsize`; returns ``value``."""
         slot = self._slot(key, objects)
         refs = tuple(_ref(o) for o in objects)
+        owner = None if self.owner is None else objects[self.owner]
         with self._lock:
-            self._entries[slot] = (refs, value)
+            self._drop(slot)
+            if owner is None:
+                self._entries[slot] = (refs, value, False)
+            else:
+                self._store(owner)[(id(self), slot)] = value
+                self._entries[slot] = (refs, weakref.ref(owner), True)
             self._entries.move_to_end(slot)
             while len(self._entries) > self.maxsize:
-                self._entries.popitem(last=False)
+                self._drop(next(iter(self._entries)))
         return value
+
+    def _drop(self, slot: tuple) -> None:
+        """Forget ``slot`` here and on its owner (lock held)."""
+        hit = self._entries.pop(slot, None)
+        if hit is not None and hit[2]:
+            owner = hit[1]()
+            if owner is not None:
+                owner.__dict__.get(OWNER_ATTRIBUTE, {}).pop((id(self), slot), None)
 
     def clear(self) -> None:
         """Forget every entry."""
         with self._lock:
-            self._entries.clear()
+            for slot in list(self._entries):
+                self._drop(slot)
 
     def __len__(self) -> int:
         return len(self._entries)

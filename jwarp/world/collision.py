@@ -613,7 +613,7 @@ class CollisionModel:
 # ====================================================================== functional API
 #: CollisionModels by (robot content key, device, dtype) and the world (by identity, held
 #: weakly), the 32 used last
-_MODELS: IdentityCache[CollisionModel] = IdentityCache(32)
+_MODELS: IdentityCache[CollisionModel] = IdentityCache(32, owner=0)
 
 
 def collision_model(robot: RobotModel, world: World | None = None, *, device: DeviceLike = None,

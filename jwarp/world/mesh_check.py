@@ -485,7 +485,7 @@ def sphere_reach_past(robot: RobotModel) -> float:
 
 
 #: MeshChecks by device and (robot, world) (by identity, held weakly), the 8 used last
-_CACHE: IdentityCache[MeshCheck] = IdentityCache(8)
+_CACHE: IdentityCache[MeshCheck] = IdentityCache(8, owner=1)
 
 #: the robot sides of MeshChecks (:func:`_robot_part`) by (extra spheres, device) and the
 #: robot (by identity, held weakly), the 8 made last

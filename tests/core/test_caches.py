@@ -60,3 +60,71 @@ def test_world_caches_are_identity_caches():
     for cache in (collision._MODELS, motion._CHECKS, mesh_check._CACHE,
                   mesh_check._ROBOT_PARTS):
         assert isinstance(cache, IdentityCache)
+
+
+class Holder:
+    """A value that refers to its object (as a collision model holds its world)."""
+
+    def __init__(self, obj):
+        self.obj = obj
+
+
+def test_a_value_that_holds_its_owner_dies_with_it():
+    import weakref
+
+    c: IdentityCache[Holder] = IdentityCache(4, owner=0)
+    a = Obj()
+    v = c.put("k", (a,), Holder(a))
+    assert c.get("k", (a,)) is v
+    ra, rv = weakref.ref(a), weakref.ref(v)
+    del a, v
+    gc.collect()
+    assert ra() is None and rv() is None      # the cache kept neither alive
+    # held by the cache itself (no owner): kept
+    keep: IdentityCache[Holder] = IdentityCache(4)
+    b = Obj()
+    keep.put("k", (b,), Holder(b))
+    rb = weakref.ref(b)
+    del b
+    gc.collect()
+    assert rb() is not None
+    keep.clear()
+    gc.collect()
+    assert rb() is None
+
+
+def test_evicted_and_cleared_values_leave_their_owner():
+    c: IdentityCache[int] = IdentityCache(1, owner=0)
+    a, b = Obj(), Obj()
+    c.put(1, (a,), 1)
+    c.put(2, (b,), 2)                # 1 goes, from a too
+    assert c.get(1, (a,)) is None and not a.__dict__.get("_jwarp_cached")
+    c.clear()
+    assert len(c) == 0 and not b.__dict__.get("_jwarp_cached")
+    assert c.put(3, (None,), 3) == 3 and c.get(3, (None,)) == 3   # None: held here
+
+
+def test_a_batch_world_and_its_collision_model_are_freed_together():
+    """A World.batch planned once and dropped takes its cached collision model (and the
+    model's device buffers) with it."""
+    import weakref
+
+    import numpy as np
+
+    import jwarp
+    from jwarp.world import World, collision
+    from jwarp.world.primitives import Shape, pose_matrix
+    from jwarp.world.shapes import ShapeSet
+
+    robot = jwarp.robot("arm7")
+    w = World.batch([World.of_shapes(ShapeSet.from_shapes([Shape(
+        "sphere", np.array([0.1]), pose_matrix(np.array([x, 0.5, 0.4])), "s")]))
+        for x in (0.3, -0.3)])
+    cm = collision.collision_model(robot, w, device="cpu")
+    cm.cost(collision.wp.array(np.zeros((4, robot.n_dof), np.float32), device="cpu"),
+            grad=False)
+    assert collision.collision_model(robot, w, device="cpu") is cm
+    rw, rc = weakref.ref(w), weakref.ref(cm)
+    del w, cm
+    gc.collect()
+    assert rw() is None and rc() is None

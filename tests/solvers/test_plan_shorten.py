@@ -15,7 +15,8 @@ import pytest
 from worlds import block_world_2d
 
 from jwarp.solvers import planning as PL
-from jwarp.solvers.planning.shorten import corners, length_cost, respace, shortcut_paths
+from jwarp.solvers.planning.shorten import (corners, corners_many, length_cost, respace,
+                                            shortcut_paths)
 from jwarp.world import path_feasibility
 
 S4 = np.array([1.2, 0.0, 0.0, 0.0])
@@ -42,6 +43,24 @@ def test_length_cost_is_the_planners(world):
     assert length_cost(res.path[0]) == pytest.approx(res.length_cost[0], rel=1e-4)
     line = np.linspace(S4, G4, 20)
     assert length_cost(line) == pytest.approx(1.0)
+
+
+def test_corners_of_many_paths_are_each_paths_corners():
+    """corners_many (all paths in one pass) gives each path's corners exactly, repeated
+    and collinear waypoints included."""
+    rng = np.random.default_rng(4)
+    for _ in range(100):
+        K, W, n = rng.integers(1, 5), rng.integers(2, 10), rng.integers(1, 7)
+        P = rng.normal(size=(K, W, n))
+        for k in range(K):
+            for t in range(1, W - 1):
+                u = rng.random()
+                if u < 0.25:
+                    P[k, t] = P[k, t - 1]
+                elif u < 0.5:
+                    P[k, t] = 0.5 * (P[k, t - 1] + P[k, t + 1])
+        for one, many in zip((corners(p) for p in P), corners_many(P)):
+            np.testing.assert_array_equal(one, many)
 
 
 def test_corners_and_respace_keep_the_polyline():

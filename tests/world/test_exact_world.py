@@ -11,7 +11,7 @@ import jwarp
 from jwarp.solvers.planning import plan
 from jwarp.world import World, exact_world
 from jwarp.world.device_world import world_query
-from jwarp.world.motion import MotionCheck, check_paths, sphere_reach
+from jwarp.world.motion import MotionCheck, check_paths, reach_front, sphere_reach, travel_bound
 from jwarp.world.primitives import Shape, pose_matrix, rpy_matrix, signed_distance
 from jwarp.world.scene_file import Scene
 from jwarp.world.shapes import ShapeSet
@@ -285,6 +285,31 @@ def test_motion_check_reports_limits_and_uses_grid_error(device):
     over = np.array([[-0.5, 0.0], [-1.5, 0.0]])
     r = check_paths(robot, grid, over, device=device)
     assert r.code[0] == 4 and "joint limits" in r.reason(0)
+
+
+def test_travel_bound_keeps_only_the_reach_front():
+    """The travel bound's largest sphere travel from the reach front equals numpy's over
+    every sphere (justin19: the front is a few of its spheres), and the front of random
+    tables keeps the max of every non-negative direction."""
+    robot = jwarp.robot("justin19")
+    R = sphere_reach(robot)
+    front = reach_front(R)
+    assert 1 <= len(front) < len(R) // 4
+    rng = np.random.default_rng(3)
+    lim = np.array(robot.joint_limits)
+    paths = rng.uniform(lim[:, 0], lim[:, 1], size=(40, 6, robot.n_dof))
+    C = np.zeros((robot.n_frames, robot.n_dof))
+    for i, f in enumerate(robot.frames):
+        for j, c in f.coupling:
+            C[i, j] += c
+    ref = (np.abs(np.diff(paths, axis=1) @ C.T)[..., None, :] * R).sum(-1).max(-1)
+    np.testing.assert_allclose(travel_bound(robot, paths), ref, rtol=1e-12)
+    for _ in range(200):
+        T = rng.integers(0, 3, size=(rng.integers(1, 9), rng.integers(1, 4))).astype(float)
+        x = rng.uniform(0, 1, size=(30, T.shape[1]))
+        f = reach_front(T)
+        assert len(f) <= len(np.unique(T, axis=0))
+        np.testing.assert_array_equal((x @ T.T).max(1), (x @ f.T).max(1))
 
 
 def test_sphere_reach_bounds_the_motion():

@@ -54,6 +54,26 @@ def corners(path: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     return p[keep]
 
 
+def corners_many(paths: np.ndarray, tol: float = 1e-9) -> list[np.ndarray]:
+    """:func:`corners` of every path of ``paths`` (K, W, n_dof) at once (one pass over the
+    waypoints for all paths): per path its nodes (k_i, n_dof)."""
+    p = np.asarray(paths, np.float64)
+    K, W = p.shape[:2]
+    keep = np.zeros((K, W), bool)
+    keep[:, 0] = keep[:, -1] = True
+    last = np.zeros(K, np.int64)              # each path's last kept waypoint
+    r = np.arange(K)
+    for t in range(1, W - 1):
+        a, b, c = p[r, last], p[:, t], p[:, t + 1]
+        ab = np.linalg.norm(b - a, axis=1)
+        bc = np.linalg.norm(c - b, axis=1)
+        turn = (ab > tol) & (ab + bc - np.linalg.norm(c - a, axis=1)
+                             > tol * np.maximum(1.0, ab + bc))
+        keep[turn, t] = True
+        last[turn] = t
+    return [p[k][keep[k]] for k in range(K)]
+
+
 def respace(nodes: np.ndarray, n_waypoints: int) -> np.ndarray:
     """``n_waypoints`` waypoints on the polyline ``nodes`` (k <= n_waypoints): every node a
     waypoint, the others spread over the segments in proportion to their lengths (the same
@@ -145,7 +165,7 @@ def shortcut_paths(paths: np.ndarray, check: Callable[..., np.ndarray],
     min_gain = MIN_ROUND_GAIN if min_gain is None else float(min_gain)
     paths = np.asarray(paths, np.float64)
     K, W, n = paths.shape
-    nodes = [corners(p) for p in paths]
+    nodes = corners_many(paths)
     straight = np.linalg.norm(paths[:, -1] - paths[:, 0], axis=1)
     if near_straight is not None:
         near_straight = float(near_straight)
