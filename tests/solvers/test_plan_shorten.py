@@ -15,8 +15,13 @@ import pytest
 from worlds import block_world_2d
 
 from jwarp.solvers import planning as PL
-from jwarp.solvers.planning.shorten import (corners, corners_many, length_cost, respace,
-                                            shortcut_paths)
+from jwarp.solvers.planning.shorten import (
+    corners,
+    corners_many,
+    length_cost,
+    respace,
+    shortcut_paths,
+)
 from jwarp.world import path_feasibility
 
 S4 = np.array([1.2, 0.0, 0.0, 0.0])
