@@ -39,6 +39,10 @@ def test_defaults():
     assert PL.options.fallback_share(o, "cpu") == 0.15
     assert PL.options.fallback_share(o, "cuda:0") == 0.08
     assert PL.options.fallback_share(PL.PlanOptions(fallback_after=0.3), "cuda:0") == 0.3
+    # a batch on CUDA: the optimizer's lockstep steps get half the limit
+    assert PL.options.fallback_share(o, "cuda:0", 700) == 0.5
+    assert PL.options.fallback_share(o, "cpu", 700) == 0.15
+    assert PL.options.fallback_share(PL.PlanOptions(fallback_after=0.3), "cuda:0", 700) == 0.3
     assert "options" in inspect.signature(PL.plan).parameters  # plan()'s options: PlanOptions
 
 

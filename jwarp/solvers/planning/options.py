@@ -52,6 +52,11 @@ FALLBACKS = ("rrt",)
 #: ``PlanOptions.fallback_after=None`` per device kind: the share of ``time_limit`` the
 #: multi-starts use before the fallback (measured on the scene benchmark's 700 problems).
 FALLBACK_AFTER = {"cpu": 0.15, "cuda": 0.08}
+#: the same for a planner of more than one problem on a CUDA device (a batch moves in
+#: lockstep: with 0.08 of a 2 s limit the 700-problem batch's setup used up the share
+#: before its first step, and the fallback got 73 problems; with 0.5, 6 of them, and
+#: 699/700 were solved in 2.05 s on an H200, benchmarks/README.md "issue 45")
+BATCH_FALLBACK_AFTER = {"cpu": 0.15, "cuda": 0.5}
 
 
 #: ``PlanOptions.n_starts=None`` per device kind. On an H200 (700 distinct scene problems,
@@ -68,11 +73,13 @@ def n_starts_for(o: PlanOptions, device: str) -> int:
     return N_STARTS["cuda" if str(device).startswith("cuda") else "cpu"]
 
 
-def fallback_share(o: PlanOptions, device: str) -> float:
-    """``o.fallback_after``, or its default on ``device`` (``FALLBACK_AFTER``)."""
+def fallback_share(o: PlanOptions, device: str, n_problems: int = 1) -> float:
+    """``o.fallback_after``, or its default on ``device`` for ``n_problems``
+    (:data:`FALLBACK_AFTER`; more than one: :data:`BATCH_FALLBACK_AFTER`)."""
     if o.fallback_after is not None:
         return float(o.fallback_after)
-    return FALLBACK_AFTER["cuda" if str(device).startswith("cuda") else "cpu"]
+    table = FALLBACK_AFTER if int(n_problems) <= 1 else BATCH_FALLBACK_AFTER
+    return table["cuda" if str(device).startswith("cuda") else "cpu"]
 
 
 #: the stages of :attr:`PlanResult.stage`
@@ -156,7 +163,9 @@ class PlanOptions(SolverOptions):
             fallback, in (0, 1) (without a time limit: after the iterations); None
             (default): :data:`FALLBACK_AFTER` of the planner's device kind (0.15 on the
             CPU, 0.08 on CUDA, where the fallback's share of the tail is largest:
-            benchmarks/README.md, ``bench_scenes.py``).
+            benchmarks/README.md, ``bench_scenes.py``); for more than one problem
+            :data:`BATCH_FALLBACK_AFTER` (0.5 on CUDA, where the batch's steps are cheap
+            per problem: ``bench_batch.py``).
         rrt: :class:`jwarp.solvers.planning.rrt.RRTOptions` of the fallback (None: its defaults).
         check_all_every: exact feasibility check of every unfinished path every this many
             iterations (>= 1; paths whose largest substep cost is below ``w c(margin)`` are

@@ -299,7 +299,7 @@ class Planner:
         search_end = None if not budget else t0 + min(budget)
         opt_deadline = search_end
         if budget and o.fallback is not None:
-            opt_deadline = t0 + fallback_share(o, str(dev)) * min(budget)
+            opt_deadline = t0 + fallback_share(o, str(dev), self.n_problems) * min(budget)
         q0 = self._problems(start, "start")
         q1 = self._problems(goal, "goal")
         finite_as(q0, self.npdt, "start")  # also finite in the optimisation's dtype
@@ -748,7 +748,11 @@ class Planner:
                                near_straight=None if STOP_NEAR_STRAIGHT is None
                                else float(np.sqrt(STOP_NEAR_STRAIGHT)),
                                chunk=SHORTEN_CHUNK)
-        cand = np.stack([respace(nd, W) for nd in nodes]).astype(self.npdt).astype(np.float64)
+        # the shortened polylines respaced (the paths not shortened kept as they are)
+        cand = paths.copy()
+        for k in np.nonzero(solved[idx])[0]:
+            cand[k] = respace(nodes[k], W)
+        cand = cand.astype(self.npdt).astype(np.float64)
         cand[:, 0], cand[:, -1] = paths[:, 0], paths[:, -1]
         better = solved[idx] & (length_cost(cand) < length_cost(paths) * (1.0 - 1e-6))
         todo = np.nonzero(better)[0]
@@ -767,8 +771,8 @@ class Planner:
                                  rows=rows).ok
 
             pace = Pace()
-            for c in range(0, len(todo), size):
-                part = todo[c:c + size]
+            for c, e in pace.chunks(len(todo), size, deadline):
+                part = todo[c:e]
                 if not pace.fits(len(part), deadline):
                     break
                 proven[part] = pace.run(certify, part)

@@ -83,6 +83,10 @@ def respace(nodes: np.ndarray, n_waypoints: int) -> np.ndarray:
     return resample_path(nodes, n_waypoints)
 
 
+#: :meth:`Pace.chunks`: the first call's share of a chunk, before any call has been timed
+FIRST_CHUNK_SHARE = 0.125
+
+
 class Pace:
     """The seconds per checked row of the calls timed so far (:meth:`run`): whether a call
     of ``n`` rows still ends before a deadline (:meth:`fits`), so that the calls of a
@@ -102,6 +106,22 @@ class Pace:
         if now >= deadline:
             return False
         return self.rows == 0 or now + self.seconds * n / self.rows <= deadline
+
+    def chunks(self, n: int, size: int, deadline: float | None) -> list[tuple[int, int]]:
+        """The (start, end) of calls over ``n`` items in chunks of ``size``; with a
+        ``deadline``, before any call has been timed, the first is
+        :data:`FIRST_CHUNK_SHARE` of ``size`` (it sets the pace: one call of a full chunk
+        may itself overrun the deadline)."""
+        size = max(1, int(size))
+        first = size if self.rows or deadline is None else max(1, int(size * FIRST_CHUNK_SHARE))
+        ends = [min(n, first)] + list(range(first + size, n + size, size))
+        out, at = [], 0
+        for e in ends:
+            e = min(e, n)
+            if e > at:
+                out.append((at, e))
+            at = e
+        return out
 
     def run(self, f: Callable[[np.ndarray], np.ndarray], rows: np.ndarray) -> np.ndarray:
         """``f(rows)``, timed."""
@@ -174,12 +194,15 @@ def shortcut_paths(paths: np.ndarray, check: Callable[..., np.ndarray],
     active = (np.ones(K, bool) if active is None else np.array(active, bool).reshape(K))
     calls = 0
     pace = Pace()
+    step = 0.0  # seconds of the last step's host work (lists, jumps): the next must fit too
     for _ in range(int(rounds)):
-        if not active.any() or _late(deadline) or pace.stopped or _spent(calls, budget):
+        if not active.any() or _late(deadline, step) or pace.stopped or _spent(calls, budget):
             break
-        pts = [_refined(nd) if 2 * len(nd) - 1 <= max_points else nd for nd in nodes]
+        # the points of the active paths (the others are not read this round)
+        pts = [(_refined(nd) if 2 * len(nd) - 1 <= max_points else nd) if a else nd
+               for nd, a in zip(nodes, active)]
         cums = [np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
-                for p in pts]
+                if a else None for p, a in zip(pts, active)]
         # the gain of every shortcut (s, j) of the round's points, once per round: the
         # steps' lists (_entries) read it
         gains = [_gains(p, c) if a else None for p, c, a in zip(pts, cums, active)]
@@ -187,7 +210,8 @@ def shortcut_paths(paths: np.ndarray, check: Callable[..., np.ndarray],
         kept: list[list[int]] = [[0] for _ in range(K)]
         going = active & np.array([len(p) >= 3 for p in pts])
         while going.any():
-            if _late(deadline) or pace.stopped or _spent(calls, budget):
+            t_step, paced = time.perf_counter(), pace.seconds
+            if _late(deadline, step) or pace.stopped or _spent(calls, budget):
                 for k in map(int, np.nonzero(going)[0]):  # the rest of the path as it is
                     kept[k].extend(range(int(at[k]) + 1, len(pts[k])))
                 break
@@ -228,6 +252,8 @@ def shortcut_paths(paths: np.ndarray, check: Callable[..., np.ndarray],
                 at[k] = j
                 if at[k] >= len(pts[k]) - 1:
                     going[k] = False
+            # the step's host work (its checks are paced by Pace)
+            step = time.perf_counter() - t_step - (pace.seconds - paced)
         for k in map(int, np.nonzero(active)[0]):
             new = corners(pts[k][kept[k]])
             old_len = np.linalg.norm(np.diff(nodes[k], axis=0), axis=1).sum()
@@ -251,8 +277,8 @@ def _check_chunks(check: Callable[..., np.ndarray], segs: np.ndarray, per: int,
     todo = np.array([k for k in range(K) if len(lists[k])], np.int64)
     late = np.zeros(K, bool)
     flat = ok.reshape(-1)
-    for c in range(0, len(todo), max(1, chunk)):
-        part = todo[c:c + max(1, chunk)]
+    for c, e in pace.chunks(len(todo), chunk, deadline):
+        part = todo[c:e]
         rows = np.concatenate([k * per + np.arange(len(lists[k])) for k in part])
         if not pace.fits(len(rows), deadline):
             late[todo[c:]] = True
@@ -263,8 +289,9 @@ def _check_chunks(check: Callable[..., np.ndarray], segs: np.ndarray, per: int,
     return late
 
 
-def _late(deadline: float | None) -> bool:
-    return deadline is not None and time.perf_counter() >= deadline
+def _late(deadline: float | None, step: float = 0.0) -> bool:
+    """Whether a step of ``step`` seconds started now would end after ``deadline``."""
+    return deadline is not None and time.perf_counter() + step >= deadline
 
 
 def _spent(calls: int, budget: Callable[[], bool] | None) -> bool:
