@@ -59,7 +59,7 @@ start is feasible (``--stop-when-solved``, the default; ``--no-stop-when-solved`
 every start until it is feasible or out of iterations), after ``--iterations`` or after
 ``--time-limit S`` seconds (default: none). ``--fallback rrt`` (default) gives an unsolved
 problem an RRT-Connect path as the seed of one more optimisation (after the iterations or
-half the time limit); ``--fallback none`` does not. ``--shorten N`` (default 4; 0: off) pulls
+half the time limit); ``--fallback none`` does not. ``--shorten N`` (default 1 on the CPU, 4 on CUDA; 0: off) pulls
 the solved path straight in N rounds of shortcuts proven by the exact check (with
 ``--stop-when-solved``), the rounds after the first check within ``--shorten-budget`` (their
 check evaluations at most 0.5 of the optimisation's collision evaluations; ``none``: no
@@ -962,10 +962,10 @@ def add_subcommands(sub: Any) -> None:
     s.add_argument("--stop-when-solved", action=argparse.BooleanOptionalAction, default=True,
                    help="stop as soon as a start is feasible (default); --no-stop-when-solved "
                         "optimises every start until it is feasible or out of iterations")
-    s.add_argument("--shorten", type=int_arg("--shorten", 0), default=4, metavar="N",
+    s.add_argument("--shorten", type=int_arg("--shorten", 0), default=None, metavar="N",
                    help="rounds of shortcuts of the solved path, proven by the exact check "
-                        "(default 4; 0: the first feasible path as it is; with "
-                        "--stop-when-solved only)")
+                        "(default 1 on the CPU, 4 on CUDA; 0: the first feasible path as "
+                        "it is; with --stop-when-solved only)")
     s.add_argument("--shorten-budget", type=_shorten_budget, default=0.5,
                    metavar="SHARE|none",
                    help="work of the shortcut rounds after the first check, as a share of "

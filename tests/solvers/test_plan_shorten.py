@@ -264,14 +264,17 @@ def test_rounds_end_near_the_straight_line():
 def test_default_path_is_shortened_and_feasible(world):
     first = PL.plan("planar4", world, S4, G4, shorten=0, **OPTS)
     short = PL.plan("planar4", world, S4, G4, **OPTS)
-    full = PL.plan("planar4", world, S4, G4, shorten_budget=None, **OPTS)
-    assert PL.PlanOptions().shorten == 4 and PL.PlanOptions().shorten_budget == 0.5
+    full = PL.plan("planar4", world, S4, G4, shorten=4, shorten_budget=None, **OPTS)
+    assert PL.PlanOptions().shorten is None and PL.PlanOptions().shorten_budget == 0.5
     assert first.feasible[0] and short.feasible[0] and full.feasible[0]
     assert first.length_before is None  # shortening off
     assert short.length_before[0] == pytest.approx(first.length_cost[0])
-    # the detour of the first feasible start is cut: shorter within the default budget
-    # (its first check call), much shorter without a budget
-    assert short.length_cost[0] < 0.9 * first.length_cost[0]
+    # the detour of the first feasible start is cut: shorter with the default (one round
+    # on the CPU, within the budget), much shorter in four rounds without a budget
+    assert PL.options.shorten_for(PL.PlanOptions(), "cpu") == 1
+    assert PL.options.shorten_for(PL.PlanOptions(), "cuda:0") == 4
+    assert PL.options.shorten_for(PL.PlanOptions(shorten=3), "cpu") == 3
+    assert short.length_cost[0] < 0.95 * first.length_cost[0]  # one round on the CPU
     assert full.length_cost[0] <= short.length_cost[0] + 1e-6
     assert full.length_cost[0] < 0.8 * first.length_cost[0]
     assert length_cost(short.path[0]) == pytest.approx(short.length_cost[0], rel=1e-4)

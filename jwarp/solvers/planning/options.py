@@ -66,6 +66,21 @@ BATCH_FALLBACK_AFTER = {"cpu": 0.15, "cuda": 0.5}
 N_STARTS = {"cpu": 8, "cuda": 32}
 
 
+#: ``PlanOptions.shorten=None`` per device kind: rounds of shortcuts. One CPU core: one round
+#: (a median U_l within 1.05x of ``stop_when_solved=False``'s at +12 % CPU time over the
+#: first feasible path; four rounds +26-61 %, docs/scenes.md "Short paths"). CUDA: four
+#: (700 problems one at a time on an H200: U_l median / p95 1.19 / 4.02 at a mean of 26 ms,
+#: against 1.49 / 9.68 at 23 ms with one round; benchmarks/README.md, issue 45)
+SHORTEN = {"cpu": 1, "cuda": 4}
+
+
+def shorten_for(o: PlanOptions, device: str) -> int:
+    """``o.shorten``, or its default on ``device`` (:data:`SHORTEN`)."""
+    if o.shorten is not None:
+        return int(o.shorten)
+    return SHORTEN["cuda" if str(device).startswith("cuda") else "cpu"]
+
+
 def n_starts_for(o: PlanOptions, device: str) -> int:
     """``o.n_starts``, or its default on ``device`` (:data:`N_STARTS`)."""
     if o.n_starts is not None:
@@ -204,7 +219,9 @@ class PlanOptions(SolverOptions):
             shortens no path by more than 0.1 % ends the rounds, and a path whose U_l is
             at most 1.05 (:data:`jwarp.solvers.planning.planner.NEAR_STRAIGHT`) is left
             as it is; a path whose shortened polyline reaches that (its length at most
-            sqrt(1.05) times the straight line's) takes no further round.
+            sqrt(1.05) times the straight line's) takes no further round. None
+            (default): :data:`SHORTEN` of the planner's device kind (1 on the CPU, where
+            each round's checks cost most; 4 on CUDA).
         shorten_budget: the work of the rounds after their first check call, as a share
             of the optimisation's (> 0; default 0.5): they stop once their checks have
             evaluated that share of the configurations whose collision cost the
@@ -280,7 +297,7 @@ class PlanOptions(SolverOptions):
     fallback: str | None = "rrt"
     fallback_after: float | None = None
     rrt: Any = None
-    shorten: int = 4
+    shorten: int | None = None
     shorten_budget: float | None = 0.5
     straight_first: bool = True
     via_ik: int = 5
@@ -293,8 +310,10 @@ class PlanOptions(SolverOptions):
         """ValueError/TypeError naming the first bad field; numbers must be finite in the
         computing ``dtype``."""
         npdt = numpy_dtype(scalar_type(dtype))
-        for name, lo in (("iterations", 0), ("n_waypoints", 2), ("shorten", 0), ("via_ik", 0)):
+        for name, lo in (("iterations", 0), ("n_waypoints", 2), ("via_ik", 0)):
             check_int(getattr(self, name), name, lo)
+        if self.shorten is not None:
+            check_int(self.shorten, "shorten", 0)
         if self.n_starts is not None:
             check_int(self.n_starts, "n_starts", 1)
         if self.check_all_every is not None:

@@ -26,6 +26,7 @@ from jwarp.solvers.planning.options import (
     check_int,
     fallback_share,
     n_starts_for,
+    shorten_for,
 )
 from jwarp.solvers.planning.result import PlanResult
 from jwarp.world.model_check import check_collision_model, mesh_margin_model
@@ -485,7 +486,8 @@ class Planner:
             timings["handed_over"] = int(handed.sum())
         if o.fallback is not None and not res.feasible.all():
             _fallback(self, res, q0, q1, t0, search_end)
-        if o.shorten > 0 and o.stop_when_solved and not o.converge and o.kappa is None:
+        if shorten_for(o, str(dev)) > 0 and o.stop_when_solved and not o.converge \
+                and o.kappa is None:
             self._shorten(buf, res, deadline, obj.evaluations - evals0)
         res.reasons = self.explain(res, deadline=deadline)
         res.wall_time = time.perf_counter() - t0
@@ -625,7 +627,8 @@ class Planner:
         them)."""
         o, B = self.options, len(paths)
         n_sub = self._substeps(paths)
-        shortens = o.shorten > 0 and o.stop_when_solved and not o.converge and o.kappa is None
+        shortens = (shorten_for(o, str(self.device)) > 0 and o.stop_when_solved
+                    and not o.converge and o.kappa is None)
         robot, world, dev, npdt, eps = self.robot, self.world, self.device, self.npdt, self.eps
         batched, own = self.batched, paths.copy()
 
@@ -742,7 +745,8 @@ class Planner:
         # the rounds' evaluations: a share of the optimisation's (the first call always)
         allowed = (None if o.shorten_budget is None or work is None
                    else float(o.shorten_budget) * work)
-        nodes = shortcut_paths(paths, check, o.shorten, rounds_end, active=solved[idx],
+        nodes = shortcut_paths(paths, check, shorten_for(o, str(self.device)), rounds_end,
+                               active=solved[idx],
                                budget=None if allowed is None
                                else (lambda: spent[0] >= allowed),
                                near_straight=None if STOP_NEAR_STRAIGHT is None
