@@ -210,11 +210,11 @@ def _plan(model: RobotModel, n_samples: int, batch: int, max_memory: int
     return cost, tile
 
 
-def pair_sampling_cost(robot: RobotLike, n_samples: int = 10000, *, batch: int = 1024,
+def pair_sampling_cost(robot: RobotModel, n_samples: int = 10000, *, batch: int = 1024,
                        max_memory: int = MAX_MEMORY) -> PairSamplingCost:
     """The work and memory of :func:`never_colliding_pairs` with these arguments, without
     doing it (sizes only)."""
-    model = get_robot(robot)
+    model = robot
     n_samples = check_int(n_samples, "n_samples", 1)
     batch = check_int(batch, "batch", 1)
     return _plan(model, n_samples, batch, _memory_arg(max_memory))[0]
