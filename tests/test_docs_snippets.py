@@ -73,7 +73,7 @@ from jwarp.learn.dataset import PathDB, world_record
 from jwarp.learn.plan_data import world_for
 from jwarp.calibration.simulate.campaign import uniform_configurations
 _robot = jwarp.robot("justin19")
-with PathDB("out.sqlite", "justin19", create=True) as _db:
+with PathDB("out.sqlite", _robot, create=True) as _db:
     for _s in range(4):
         _rng = np.random.default_rng(_s)
         _a, _b = (uniform_configurations(_robot, _rng, 3).astype(np.float32) for _ in "ab")
