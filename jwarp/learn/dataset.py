@@ -250,7 +250,7 @@ class PathDB:
                 except sqlite3.Error:
                     pass
             else:
-                self.meta = self._create(robot, bps)
+                self.meta = self._create(cast("RobotModel", robot), bps)  # not None: checked above
         except BaseException:
             self.con.close()
             raise

@@ -519,10 +519,11 @@ def write_self_pairs(robot: RobotLike, out: str | os.PathLike, pairs: SelfPairs 
     out = Path(out)
     if not out.parent.is_dir():
         raise ValueError(f"out: folder '{out.parent}' does not exist")
-    if pairs is None:
-        pairs = never_colliding_pairs(robot, **options)
-    elif options:
+    if pairs is not None and options:
         raise TypeError(f"options {sorted(options)} given with precomputed pairs")
-    model = with_self_pairs(robot, pairs, replace=replace)
+    model = get_robot(robot)
+    if pairs is None:
+        pairs = never_colliding_pairs(model, **options)
+    model = with_self_pairs(model, pairs, replace=replace)
     model.save(out)
     return model
