@@ -130,7 +130,7 @@ def test_bad_arguments_name_themselves(walls, kw, match):
         robot, world = jwarp.robot("arm7"), batch
         args.update(starts=q0[:2], goals=q1[:2])
     else:
-        robot = "planar4"
+        robot = jwarp.robot("planar4")
     args.update(kw)
     with pytest.raises(ValueError, match=match):
         R.rrt_connect_batch(robot, world, args["starts"], args["goals"], device="cpu",
