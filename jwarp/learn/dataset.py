@@ -101,7 +101,7 @@ def _json(obj: Any) -> str:
 
 
 def _robot_identity(model: RobotModel) -> tuple[str, str]:
-    """(name, kinematics hash) of the robot (:class:`PathDB` resolves a name)."""
+    """(name, kinematics hash) of the robot."""
     from jwarp.core.device import content_key
 
     return model.name, content_key(model)
