@@ -41,6 +41,7 @@ wp.config.quiet = True
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import timing  # noqa: E402  (benchmarks/timing.py, beside this script)
 
+import jwarp
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.plugins.registry import robot as get_robot  # noqa: E402
 from jwarp.world import random_configurations  # noqa: E402
@@ -53,7 +54,7 @@ def configurations(robot: Any, world: Any, n: int, kind: str, seed: int,
     if kind == "random":
         return q
     pool = random_configurations(robot, 4000, seed + 1)
-    free = pool[is_collision_free(robot, pool, world, device=device)]
+    free = pool[is_collision_free(jwarp.robot(robot), pool, world, device=device)]
     if not len(free):
         return q
     pick = free[np.random.default_rng(seed).integers(0, len(free), n)]
@@ -81,7 +82,7 @@ def row(robot: Any, world: Any, n: int, kind: str, args: argparse.Namespace) -> 
     out = {}
     calls = []
     for wide in (False, True):
-        cm = CollisionModel(robot, world, device=args.device, dtype=dt, wide=wide)
+        cm = CollisionModel(jwarp.robot(robot), world, device=args.device, dtype=dt, wide=wide)
         data = cm.make_data(n)
         c, g = cm.cost(qa, data=data, out_cost=data.cost, out_grad=data.grad)
         out[wide] = (c.numpy().copy(), g.numpy().copy())
@@ -90,7 +91,7 @@ def row(robot: Any, world: Any, n: int, kind: str, args: argparse.Namespace) -> 
     t_fused, t_wide = timing.side_by_side(calls, args.device, args.min_time, args.rounds)
     (c0, g0), (c1, g1) = out[False], out[True]
     fig = {"robot": robot.name, "configurations": n, "kind": kind,
-           "spheres": int(CollisionModel(robot, world, device=args.device, dtype=dt).n_spheres),
+           "spheres": int(CollisionModel(jwarp.robot(robot), world, device=args.device, dtype=dt).n_spheres),
            "touching_pct": 100.0 * float((c0 > 0).mean()),
            "fused_ms": {"min": 1e3 * t_fused.best, "median": 1e3 * t_fused.median},
            "wide_ms": {"min": 1e3 * t_wide.best, "median": 1e3 * t_wide.median},
@@ -115,7 +116,7 @@ def bench(args: argparse.Namespace) -> dict:
             robot, world = panda_case(args.panda)
             sizes = args.panda_batches
         else:
-            robot, world = get_robot(case), world_for(case, 0, device=args.device)
+            robot, world = get_robot(case), world_for(jwarp.robot(case), 0, device=args.device)
             sizes = args.justin_batches if case == "justin19" else args.arm_batches
         for n in sizes:
             for kind in ("random", "near"):

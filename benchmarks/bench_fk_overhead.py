@@ -65,7 +65,7 @@ def rows(name: str, robot, dtype, min_time: float, rounds: int) -> list[dict]:
     rng = np.random.default_rng(0)
     lim = robot.joint_limits
     q = rng.uniform(lim[:, 0], lim[:, 1], robot.n_dof).astype(dtype)
-    m = put_model(robot, "cpu", dtype)
+    m = put_model(jwarp.robot(robot), "cpu", dtype)
     d = KinematicsData(m, 1)
     q1 = q[None]
     out = []

@@ -204,7 +204,7 @@ def free_configs(robot: Any, world: Any, n: int, margin: float, rng: np.random.G
     out: list = []
     for _ in range(200):
         q = sample_within_limits(robot, 4 * n, rng)
-        out.append(q[collision.is_collision_free(robot, q, world, margin, device=device,
+        out.append(q[collision.is_collision_free(jwarp.robot(robot), q, world, margin, device=device,
                                                  dtype=np.float64)])
         if sum(map(len, out)) >= n:
             return np.concatenate(out)[:n]

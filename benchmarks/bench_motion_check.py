@@ -51,6 +51,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 import timing  # noqa: E402
 from worlds import ball_worlds, grazing_paths  # noqa: E402
 
+import jwarp
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.world import World  # noqa: E402
 from jwarp.world.motion import MotionCheck, MotionOptions  # noqa: E402
@@ -100,7 +101,7 @@ def run_case(robot: Any, world: World, paths: np.ndarray, world_group: int, devi
              args: argparse.Namespace) -> dict:
     adv = MotionOptions(method="advance", max_evals=args.advance_evals,
                         rounds=args.advance_rounds)
-    checks = [MotionCheck(robot, world, device=device, options=o)
+    checks = [MotionCheck(jwarp.robot(robot), world, device=device, options=o)
               for o in (adv, MotionOptions(method="levels"))]
     P = wp.array(np.ascontiguousarray(paths, np.float64), dtype=wp.float64, device=device)
     idx = wp.array(np.arange(len(paths), dtype=np.int32), device=device)

@@ -36,6 +36,7 @@ import warp as wp  # noqa: E402
 if hasattr(wp.config, "quiet"):
     wp.config.quiet = True
 
+import jwarp
 from jwarp.core.arrays import init_warp  # noqa: E402
 from jwarp.learn.plan_data import PlanDataOptions, label_world, world_for  # noqa: E402
 
@@ -55,7 +56,7 @@ def options(args: argparse.Namespace) -> PlanDataOptions:
 
 
 def make_world(robot: str, seed: int, args: argparse.Namespace):
-    return world_for(robot, seed, device=args.device,
+    return world_for(jwarp.robot(robot), seed, device=args.device,
                      extent=None if args.world == "table" else "reach",
                      frequency=args.frequency, threshold=args.threshold)
 
@@ -69,7 +70,7 @@ def bench_fidelity(args: argparse.Namespace) -> dict:
         rates_solved, rates_all, lengths = [], [], []
         for k in range(args.worlds):
             world = make_world(name, 1000 * k, args)
-            lab = label_world(name, world, args.tasks, k, o)
+            lab = label_world(jwarp.robot(name), world, args.tasks, k, o)
             tasks += len(lab)
             h = lab.hard
             hard += int(h.sum())
@@ -103,13 +104,13 @@ def bench_speed(args: argparse.Namespace) -> dict:
     o = options(args)
     name = args.speed_robot
     world = make_world(name, 0, args)
-    label_world(name, world, 2, 99, PlanDataOptions(max_starts=2, iterations=2,
+    label_world(jwarp.robot(name), world, 2, 99, PlanDataOptions(max_starts=2, iterations=2,
                                                     device=args.device))  # compile, warm up
     wp.synchronize_device(args.device)
     runs = []
     for r in range(args.repeats):
         elapsed = timing.stopwatch()
-        lab = label_world(name, world, args.tasks, r, o)
+        lab = label_world(jwarp.robot(name), world, args.tasks, r, o)
         wp.synchronize_device(args.device)
         t = elapsed()
         n = int((lab.hard & lab.feasible).sum())

@@ -78,7 +78,7 @@ def free_configs(robot: Any, world: Any, n: int, rng: np.random.Generator) -> np
     out = []
     for _ in range(100):
         q = sample_within_limits(robot, 4 * n, rng)
-        out.append(q[collision.is_collision_free(robot, q, world)])
+        out.append(q[collision.is_collision_free(jwarp.robot(robot), q, world)])
         if sum(map(len, out)) >= n:
             return np.concatenate(out)[:n]
     raise RuntimeError(f"fewer than {n} collision-free configurations of {robot.name} found")

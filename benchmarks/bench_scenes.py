@@ -101,6 +101,7 @@ except ImportError as _e:
     PathVerifier = None  # type: ignore[assignment,misc]
     _VERIFIER_MISSING = f"{type(_e).__name__}: {_e}"
 
+import jwarp
 from jwarp.core.arrays import init_warp  # noqa: E402
 
 
@@ -419,7 +420,7 @@ def ompl_plan(mods: tuple, robot: Any, prob: Problem, margin: float,
     ends = (q0[arm].copy(), q1[arm].copy())
     counts = {"states": 0, "motions": 0}
     t0 = time.perf_counter()
-    chk = MotionCheck(robot, prob.world, device="cpu")
+    chk = MotionCheck(jwarp.robot(robot), prob.world, device="cpu")
 
     def vec(s: Any) -> np.ndarray:
         q = full.copy()
@@ -432,7 +433,7 @@ def ompl_plan(mods: tuple, robot: Any, prob: Problem, margin: float,
     def valid(s: Any) -> bool:
         counts["states"] += 1
         q = vec(s)
-        return bool(is_collision_free(robot, q[None], prob.world, em if at_end(q) else margin,
+        return bool(is_collision_free(jwarp.robot(robot), q[None], prob.world, em if at_end(q) else margin,
                                       device="cpu", validate=False)[0])
 
     class Motion(ob.MotionValidator):

@@ -37,24 +37,24 @@ def plan_on_the_elastic_robot(robot: jwarp.RobotModel, rng: np.random.Generator)
     from jwarp.world import path_feasibility
     from jwarp.world.io import parse_world_spec
 
-    world = parse_world_spec("simplex:seed=1,feasible=200", robot)
+    world = parse_world_spec("simplex:seed=1,feasible=200", jwarp.robot(robot))
     q = random_configurations(robot, 200, rng)
     q = q[path_feasibility.collision_free(robot, world, q, 0.0, kappa=KAPPA)][:2]  # elastic robot
     t0 = time.perf_counter()
-    res = compensation.compensated_plan(robot, world, q[0], q[1], kappa=KAPPA, n_starts=8,
+    res = compensation.compensated_plan(jwarp.robot(robot), world, q[0], q[1], kappa=KAPPA, n_starts=8,
                                         iterations=100, step=0.2, stop_when_solved=False,
                                         fallback=None)
     dt = time.perf_counter() - t0
-    ok = path_feasibility.path_feasible(robot, world, res.path[0], 4 * res.n_substeps, kappa=KAPPA)
+    ok = path_feasibility.path_feasible(jwarp.robot(robot), world, res.path[0], 4 * res.n_substeps, kappa=KAPPA)
     print(f"\nelastic plan in simplex:seed=1 (voxel {100 * world.voxel_size:.1f} cm): "
           f"feasible {bool(res.feasible[0])}, {int(res.n_feasible[0])} of 8 starts, "
           f"{int(res.iterations[0])} iterations, {dt:.2f} s; re-checked on the equilibrium "
           f"at 4x the substeps: {bool(ok)}")
     T = jwarp.fk(robot, q[1])[robot.frame_index("right_tcp")]
     t0 = time.perf_counter()
-    sol = compensation.compensated_ik(robot, "right_tcp", T, kappa=KAPPA, world=world)
+    sol = compensation.compensated_ik(jwarp.robot(robot), "right_tcp", T, kappa=KAPPA, world=world)
     dt = time.perf_counter() - t0
-    pos, ang = compensation.equilibrium_pose_error(robot, "right_tcp", sol.q, T, KAPPA)
+    pos, ang = compensation.equilibrium_pose_error(jwarp.robot(robot), "right_tcp", sol.q, T, KAPPA)
     print(f"elastic IK of right_tcp: feasible {bool(sol.feasible)}, {1e3 * dt:.1f} ms; on the "
           f"converged equilibrium the hand is {1e3 * float(pos):.3f} mm / "
           f"{1e3 * float(ang):.3f} mrad off the target")

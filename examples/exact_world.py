@@ -36,7 +36,7 @@ def dense_clearance(robot, world, path: np.ndarray, n: int = 400) -> float:
     u = np.linspace(0.0, 1.0, n)
     q = (path[:-1, None] + u[None, :, None] * np.diff(path, axis=0)[:, None]).reshape(
         -1, robot.n_dof)
-    return float(min_distances(robot, q, world, dtype=np.float64).min())
+    return float(min_distances(jwarp.robot(robot), q, world, dtype=np.float64).min())
 
 
 def plan_kept_clear(robot, world, start, goal, margin: float = 0.01) -> tuple[str, bool]:

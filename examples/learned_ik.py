@@ -25,6 +25,7 @@ import warp as wp
 
 wp.config.quiet = True
 
+import jwarp  # noqa: E402
 from jwarp.core.arrays import init_warp  # noqa: E402
 
 
@@ -62,8 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     worlds = make_worlds(robot, "random", n_worlds, seed=args.seed + 200000)
     targets = [sample_targets(robot, frame, n_targets, w, seed=args.seed * 7919 + 200000 + i)[0]
                for i, w in enumerate(worlds)]
-    rows = [evaluate_ik(robot, frame, worlds, targets, n_random=30, seed=args.seed),
-            evaluate_ik(robot, frame, worlds, targets, warm_start=net, n_random=30,
+    rows = [evaluate_ik(jwarp.robot(robot), frame, worlds, targets, n_random=30, seed=args.seed),
+            evaluate_ik(jwarp.robot(robot), frame, worlds, targets, warm_start=net, n_random=30,
                         seed=args.seed, name="Unsupervised")]
     print(format_table_35(rows, "Table 3.5 analogue: planar5, unseen random worlds"))
     rnd, learned = rows[0]["feasibility_1"], rows[1]["feasibility_1"]

@@ -95,7 +95,7 @@ def exact_ok(robot, world, paths: np.ndarray, feasible: np.ndarray, margin: floa
     ok = feasible.copy()
     idx = np.nonzero(feasible)[0]
     if len(idx):
-        ok[idx] = path_feasible(robot, world, paths[idx], 64, margin=margin, device=device)
+        ok[idx] = path_feasible(jwarp.robot(robot), world, paths[idx], 64, margin=margin, device=device)
     return ok
 
 

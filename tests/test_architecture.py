@@ -629,3 +629,103 @@ def test_nothing_imports_a_removed_path():
                 bad += [f"{path.relative_to(repo)}:{node.lineno} imports {t}" for t in targets
                         if t in REMOVED and path.name != "test_architecture.py"]
     assert not bad, "\n".join(bad)
+
+
+# ------------------------------------------------------------ the robot resolved at the edge
+#: the registry's ``robot`` (name, path or RobotModel -> RobotModel)
+REGISTRY = "jwarp.plugins.registry"
+#: calls of the registry's ``robot`` allowed below the edge: (module, function) -> why
+ROBOT_LOOKUPS_ALLOWED: dict[tuple[str, str], str] = {}
+
+
+def _dotted(node: ast.expr) -> str:
+    parts = []
+    while isinstance(node, ast.Attribute):
+        parts.append(node.attr)
+        node = node.value
+    if not isinstance(node, ast.Name):
+        return ""
+    return ".".join([node.id] + parts[::-1])
+
+
+def _robot_lookups(module: str) -> list[tuple[int, list[ast.AST]]]:
+    """(line, enclosing classes and functions) of every call of the registry's ``robot`` in
+    a module: through a name bound to it (``from jwarp.plugins.registry import robot as
+    get_robot``, ``from jwarp import robot``) or as ``X.robot`` of a name bound to the
+    registry module or to jwarp."""
+    _path, tree, is_pkg = MODULES[module]
+    names, mods = set(), {"jwarp.plugins.registry"}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            target = resolve(module, is_pkg, node)
+            for a in node.names:
+                if a.name == "robot" and target in (REGISTRY, "jwarp"):
+                    names.add(a.asname or a.name)
+                elif f"{target}.{a.name}" == REGISTRY:
+                    mods.add(a.asname or a.name)
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name == "jwarp" or (a.name == REGISTRY and a.asname):
+                    mods.add(a.asname or a.name)
+    callees = names | {f"{m}.robot" for m in mods}
+    found: list[tuple[int, list[ast.AST]]] = []
+
+    def visit(node: ast.AST, scopes: list[ast.AST]) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.Call) and _dotted(child.func) in callees:
+                found.append((child.lineno, scopes))
+            inner = scopes + [child] if isinstance(
+                child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Lambda)) else scopes
+            visit(child, inner)
+
+    visit(tree, [])
+    return found
+
+
+def _edge() -> tuple[set[tuple[str, str]], set[tuple[str, str]]]:
+    """(functions, classes) as (module, qualname) named by a facade's ``__all__``."""
+    import importlib
+    import inspect
+
+    funcs, classes = set(), set()
+    for facade in FACADES:
+        mod = importlib.import_module(facade)
+        for name in mod.__all__:
+            obj = getattr(mod, name)
+            key = (getattr(obj, "__module__", None), getattr(obj, "__qualname__", None))
+            if inspect.isclass(obj):
+                classes.add(key)
+            elif callable(obj):
+                funcs.add(key)
+    return funcs, classes
+
+
+def test_robot_is_resolved_at_the_edge():
+    """Issue 40 item 2: the robot is resolved once, at the edge. The registry's ``robot``
+    (a name or path -> RobotModel) is called only by the CLI (jwarp.cli) and by the
+    functions and classes a facade exports (``__all__``; a class's ``__init__`` and public
+    methods), which accept a name, path or RobotModel; everything below them takes a
+    RobotModel (or the device model built from it)."""
+    funcs, classes = _edge()
+    bad, allowed_seen = [], set()
+    for module in MODULES:
+        if module == REGISTRY or module == "jwarp.cli" or module.startswith("jwarp.cli."):
+            continue
+        for line, scopes in _robot_lookups(module):
+            names = [getattr(s, "name", "<lambda>") for s in scopes]
+            qual = ".".join(names)
+            if (module, qual) in ROBOT_LOOKUPS_ALLOWED:
+                allowed_seen.add((module, qual))
+                continue
+            if scopes and not isinstance(scopes[-1], ast.ClassDef):
+                if (module, qual) in funcs:
+                    continue
+                if (len(scopes) == 2 and isinstance(scopes[0], ast.ClassDef)
+                        and (module, names[0]) in classes
+                        and (names[1] == "__init__" or not names[1].startswith("_"))):
+                    continue
+            bad.append(f"{module}:{line} in {qual or '<module>'}")
+    assert not bad, ("the registry's robot() called below the edge (take a RobotModel; "
+                     "the caller at the edge resolves it):\n" + "\n".join(bad))
+    stale = set(ROBOT_LOOKUPS_ALLOWED) - allowed_seen
+    assert not stale, f"ROBOT_LOOKUPS_ALLOWED lists calls that are gone: {sorted(stale)}"

@@ -73,7 +73,7 @@ from jwarp.learn.dataset import PathDB, world_record
 from jwarp.learn.plan_data import world_for
 from jwarp.calibration.simulate.campaign import uniform_configurations
 _robot = jwarp.robot("justin19")
-with PathDB("out.sqlite", "justin19", create=True) as _db:
+with PathDB("out.sqlite", _robot, create=True) as _db:
     for _s in range(4):
         _rng = np.random.default_rng(_s)
         _a, _b = (uniform_configurations(_robot, _rng, 3).astype(np.float32) for _ in "ab")
@@ -222,11 +222,11 @@ PRELUDES: dict[str, tuple[str, str]] = {
         "cartesian campaign of its hand TCP"),
     "examples/README.md:90": ("import jwarp\n", "the block uses `jwarp`"),
     "docs/datasets.md:45": ("", "self-contained (sizes: SUBSTITUTIONS)"),
-    "docs/datasets.md:135": (
+    "docs/datasets.md:136": (
         _PATH_DB, "out.sqlite of the recipe above: 4 justin19 simplex worlds (world_for) "
                   "with straight-line paths as labels (real labels take minutes per world "
                   "on a CPU; the reader sees the same format)"),
-    "docs/datasets.md:175": (
+    "docs/datasets.md:178": (
         _PATH_DB, "out.sqlite of the recipe above: 4 justin19 simplex worlds (world_for) "
                   "with straight-line paths labelled hard and feasible (real hard labels "
                   "take minutes per world on a CPU)"),
@@ -249,12 +249,12 @@ SUBSTITUTIONS: dict[str, list[tuple[str, str, str]]] = {
         ("ray=True, num_gpus=0.25", "ray=False, progress=False",
          "CI has no GPU (num_gpus); in-process instead of Ray (starting Ray takes ~10 s; "
          "the Ray path of generate runs in tests/test_docs_commands.py's datasets recipe)")],
-    "docs/datasets.md:135": [
+    "docs/datasets.md:136": [
         ("num_workers=4", "num_workers=0",
          "no worker processes (each would import torch and jwarp: seconds on 2 shared "
          "cores); the same batches in the main process"),
         ("range(10)", "range(2)", "2 epochs instead of 10 (each reads the same 12 paths)")],
-    "docs/datasets.md:175": [
+    "docs/datasets.md:178": [
         ('checkpoint="plan19.pt")', 'checkpoint="plan19.pt", epochs=1, steps_per_epoch=2)',
          "1 epoch of 2 steps instead of 10 x 100 (~2.5 min on a CPU): the same network, "
          "split and checkpoint")],
@@ -501,8 +501,8 @@ CHECKS: dict[str, Callable[[dict, Path, str], None]] = {
     "docs/calibration.md:287": _check_cross_validation,
     "docs/calibration.md:337": _check_campaign_run,
     "docs/datasets.md:45": _check_generate,
-    "docs/datasets.md:135": _check_loader,
-    "docs/datasets.md:175": _check_train_plan,
+    "docs/datasets.md:136": _check_loader,
+    "docs/datasets.md:178": _check_train_plan,
     "docs/design.md:9": _check_sensitivity,
     "docs/design.md:40": _check_design,
     "docs/design.md:100": _check_pool,

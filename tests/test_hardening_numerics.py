@@ -61,11 +61,11 @@ def _big(n=19):
     (lambda: K.fk_elastic("justin19", Z19, 1e-4, dh=np.full((27, 5), BIG), **F32), "dh"),
     (lambda: K.elastic_step("justin19", Z19, np.full((27, 5), BIG), 1e-4, **F32), "rho"),
     (lambda: K.jacobian("justin19", Z19, "right_tcp", point=[BIG, 0, 0], **F32), "point"),
-    (lambda: tape_jacobian("arm7", np.zeros((1, 7)), "tcp", kappa=BIG, iterations=1, **F32),
+    (lambda: tape_jacobian(jwarp.robot("arm7"), np.zeros((1, 7)), "tcp", kappa=BIG, iterations=1, **F32),
      "kappa"),
-    (lambda: collision_cost("planar4", _big(4)[None], None, **F32), "q"),
-    (lambda: min_distances("planar4", np.zeros((1, 4)), rho=np.full((6, 5), BIG), **F32), "rho"),
-    (lambda: collision_cost("planar4", np.zeros((1, 4)), None, eps=BIG, **F32), "eps"),
+    (lambda: collision_cost(jwarp.robot("planar4"), _big(4)[None], None, **F32), "q"),
+    (lambda: min_distances(jwarp.robot("planar4"), np.zeros((1, 4)), rho=np.full((6, 5), BIG), **F32), "rho"),
+    (lambda: collision_cost(jwarp.robot("planar4"), np.zeros((1, 4)), None, eps=BIG, **F32), "eps"),
     (lambda: CompensationRows(put_model(jwarp.robot("arm7"), "cpu", np.float32), 1, 2, 1, BIG, 0.5),
      "kappa"),
 ])
@@ -193,11 +193,11 @@ def test_numpy_scalars_are_accepted_where_floats_are(block_world):
     rows = CompensationRows(t, 1, 2, 1, np.float32(1e-4), np.float32(0.5))
     assert rows.kappa.numpy().max() == pytest.approx(1e-4)
     qp = np.zeros((2, 4))
-    assert (is_collision_free("planar4", qp, block_world, np.float32(0.01)) ==
-            is_collision_free("planar4", qp, block_world, 0.01)).all()
-    c32, _ = collision_cost("planar4", qp, block_world, eps=np.float32(0.05),
+    assert (is_collision_free(jwarp.robot("planar4"), qp, block_world, np.float32(0.01)) ==
+            is_collision_free(jwarp.robot("planar4"), qp, block_world, 0.01)).all()
+    c32, _ = collision_cost(jwarp.robot("planar4"), qp, block_world, eps=np.float32(0.05),
                             w_world=np.float16(1.0), device="cpu")
-    c, _ = collision_cost("planar4", qp, block_world, eps=0.05, device="cpu")
+    c, _ = collision_cost(jwarp.robot("planar4"), qp, block_world, eps=0.05, device="cpu")
     np.testing.assert_allclose(c32, c, rtol=1e-7)
     res = PL.plan("planar4", block_world, [1.2, 0, 0, 0], [-1.2, 0, 0, 0], n_starts=2,
                   iterations=np.int64(3), step=np.float32(0.05), max_step=np.float32(0.1),
@@ -221,8 +221,8 @@ def test_numpy_scalars_are_accepted_where_floats_are(block_world):
     (lambda: K.fk_elastic("justin19", Z19, 1e-4, tol=False), "tol"),
     (lambda: K.fk_elastic("justin19", Z19, 1e-4, max_iter=True), "max_iter"),
     (lambda: K.elastic_step("justin19", Z19, None, 1e-4, lam=np.bool_(True)), "lam"),
-    (lambda: is_collision_free("planar4", np.zeros(4), None, True), "margin"),
-    (lambda: collision_cost("planar4", np.zeros(4), None, eps=True), "eps"),
+    (lambda: is_collision_free(jwarp.robot("planar4"), np.zeros(4), None, True), "margin"),
+    (lambda: collision_cost(jwarp.robot("planar4"), np.zeros(4), None, eps=True), "eps"),
     (lambda: ik("arm7", "tcp", np.eye(4), tol_pos=True), "tol_pos"),
     (lambda: ik("arm7", "tcp", np.eye(4), margin=True), "margin"),
     (lambda: CompensationRows(put_model(jwarp.robot("arm7"), "cpu", np.float64), 1, 2, 1, 1e-4,

@@ -54,13 +54,12 @@ from jwarp.cli.common import (
     robot_option,
 )
 from jwarp.cli.vocabulary import add_out, require_out
-from jwarp.core.types import RobotLike
 
 if TYPE_CHECKING:
     from jwarp.model import RobotModel
 
 
-def _check_db(path: str, robot: RobotLike, timeout: float) -> None:
+def _check_db(path: str, robot: RobotModel, timeout: float) -> None:
     """``--db``: an existing, writable database of ``robot`` in a writable folder (SQLite
     writes its journal beside the file), or a new file in a writable folder."""
     from jwarp.learn.dataset import PathDB, PathDBError

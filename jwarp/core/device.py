@@ -47,12 +47,10 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.rows import DHRows
-from jwarp.core.types import RobotLike
 from jwarp.kernels.collision import funcs as collision_funcs
 from jwarp.kernels.fk import funcs as fk_funcs
 from jwarp.kernels.path import kernels as path_kernels
 from jwarp.model import RobotModel
-from jwarp.plugins.registry import robot as get_robot
 
 __all__ = ["DeviceModel", "SphereModel", "put_model", "struct_fields", "struct_field", "make_struct", "content_key", "scalar_type", "numpy_dtype",
            "frame_mass_model", "with_frame_masses", "with_kappa_nonlinear", "fixed_parts", "collision_tables"]
@@ -337,10 +335,10 @@ _RECENT_MAX = 32
 _LOCK = threading.Lock()
 
 
-def content_key(robot: RobotLike) -> str:
+def content_key(robot: RobotModel) -> str:
     """The content key of a robot: a hash of its canonical JSON (``RobotModel.to_dict``,
     sorted keys). Equal robots have equal keys; computed once per RobotModel object."""
-    model = robot if isinstance(robot, RobotModel) else get_robot(robot)
+    model = robot
     k = _KEYS.get(model)
     if k is None:
         doc = json.dumps(model.to_dict(), sort_keys=True, separators=(",", ":"),
@@ -357,13 +355,13 @@ def _json_default(o: Any) -> Any:
     raise TypeError(f"robot: cannot hash a {type(o).__name__} value")
 
 
-def put_model(robot: RobotLike, device: object = None, dtype: object = np.float32) -> DeviceModel:
-    """The :class:`DeviceModel` of ``robot`` (name or RobotModel) on ``device`` (default: Warp's
+def put_model(robot: RobotModel, device: object = None, dtype: object = np.float32) -> DeviceModel:
+    """The :class:`DeviceModel` of ``robot`` (a RobotModel) on ``device`` (default: Warp's
     default device) in ``dtype`` (float32 or float64): built once per robot content,
     device and dtype, then shared (see the module docstring)."""
     scalar = scalar_type(dtype)
     dev = wp.get_device(device)
-    model = robot if isinstance(robot, RobotModel) else get_robot(robot)
+    model = robot
     k = _KEYS.get(model)
     if k is None:
         k = content_key(model)
@@ -534,7 +532,7 @@ def _pair_distance_spread(robot: RobotModel, pairs: np.ndarray, n: int = 32,
     return d.min(0), d.max(0)
 
 
-def collision_tables(robot: RobotLike) -> dict:
+def collision_tables(robot: RobotModel) -> dict:
     """Host (numpy) sphere, bound and pair tables of a robot, the source of
     :class:`SphereModel` (cached with its float64 CPU model). Sphere pairs on allowed
     frame pairs whose distance cannot change (e.g. a sphere centred on the only joint axis

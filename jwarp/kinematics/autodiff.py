@@ -15,9 +15,10 @@ import numpy as np
 import warp as wp
 
 from jwarp.core.arrays import finite_as, real_array, real_number
-from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.launch import ElasticLaunch, kappa_array, launch_fk, setup
+from jwarp.model import RobotModel
 from jwarp.utils.checks import check_int
 
 WRT = ("q", "dh", "kappa")
@@ -50,7 +51,7 @@ def record_frames(t: Any, q: wp.array, dh: wp.array, kappa: wp.array | None, lam
     return run.frames_at(rho)
 
 
-def tape_jacobian(robot: RobotLike, q: ArrayLike, frame: int | str, *, point: Any = None,
+def tape_jacobian(robot: RobotModel, q: ArrayLike, frame: int | str, *, point: Any = None,
                   kappa: ArrayLike | None = None, iterations: int = 0, lam: float = 1.0, dh: Any = None,
                   wrt: tuple[str, ...] = WRT, device: DeviceLike = None,
                   dtype: DTypeLike = np.float64) -> dict[str, np.ndarray]:

@@ -3,7 +3,7 @@ every buffer of FK and of frame Jacobians and their recorded kernel launches, re
 calls (pinocchio / MuJoCo Warp style: the Model is the
 :class:`~jwarp.core.device.DeviceModel` of :func:`~jwarp.core.device.put_model`).
 
-    m = put_model("justin19", "cuda:0", np.float32)
+    m = put_model(jwarp.robot("justin19"), "cuda:0", np.float32)
     d = KinematicsData(m, batch=1024)
     frames = forward_kinematics(m, d, q)          # d.frames, (1024, n_frames) mat44
     J = frame_jacobian(m, d, "right_tcp", q)      # d.jacobian, (1024, 6, n_dof)

@@ -101,7 +101,7 @@ def jacobian(robot: RobotLike, q: ArrayLike, frame: int | str, *,
                          validate=validate, out=out)
 
 
-def link_jacobian(robot: RobotLike, q_link: Any, frame: int | str, *, point: Any = None,
+def link_jacobian(robot: RobotModel, q_link: Any, frame: int | str, *, point: Any = None,
                   dh: Any = None, device: DeviceLike = None, dtype: DTypeLike = None,
                   validate: bool = True, out: Any = None) -> Any:
     """:func:`jacobian` w.r.t. the joint values the links see, ``q_link`` (transmission

@@ -33,7 +33,7 @@ from jwarp.core.arrays import (
     resolve_device,
 )
 from jwarp.core.device import DeviceModel, numpy_dtype, put_model, scalar_type
-from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike
 from jwarp.kernels import elastic as elastic_kernels
 from jwarp.kernels import fk as fk_kernels
 from jwarp.kinematics.data import (  # noqa: F401  (POINT_ARG, jacobian_inputs: re-exported)
@@ -45,14 +45,13 @@ from jwarp.kinematics.data import (  # noqa: F401  (POINT_ARG, jacobian_inputs: 
     point_vec,
 )
 from jwarp.model import RobotModel
-from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 
 
-def setup(robot: RobotLike, q: ArrayLike, device: DeviceLike, dtype: DTypeLike, validate: bool = True
+def setup(robot: RobotModel, q: ArrayLike, device: DeviceLike, dtype: DTypeLike, validate: bool = True
            ) -> tuple[RobotModel, Batch, DeviceModel]:
     init_warp()
-    model = get_robot(robot)
+    model = robot
     dev = resolve_device(device, like=q)
     dt = default_dtype(q) if dtype is None else dtype
     batch = as_batch(q, model.n_dof, "q", device=dev, dtype=dt,
@@ -277,7 +276,7 @@ def _resolve_small(op: str, model: RobotModel, q: Any, qa: np.ndarray, warp_in: 
     return SmallCall(model, ws, B, want, npdt, fi, pt, npdt.itemsize < qa.itemsize, wrap)
 
 
-def small_call(op: str, robot: RobotLike, q: Any, device: DeviceLike, dtype: DTypeLike, validate: bool,
+def small_call(op: str, robot: RobotModel, q: Any, device: DeviceLike, dtype: DTypeLike, validate: bool,
                out: Any = None, frame: int | str | None = None, point: Any = None) -> Any:
     """The fast path of :func:`~jwarp.kinematics.fk.fk` (``op`` "fk") and
     :func:`~jwarp.kinematics.jacobians.jacobian` ("jacobian") for a small batch of float32/
@@ -309,7 +308,7 @@ def small_call(op: str, robot: RobotLike, q: Any, device: DeviceLike, dtype: DTy
             device = "cpu"
     else:
         return None
-    model = robot if type(robot) is RobotModel else get_robot(robot)
+    model = robot
     try:   # any error: the general path raises it, in its order
         dev = resolve_device(device, like=q)
         key = None
@@ -530,7 +529,7 @@ def check_max_iter(max_iter: Any) -> int:
     return int(max_iter)
 
 
-def elastic_args(robot: RobotLike, q: Any, kappa: Any, lam: float, max_iter: int, tol: float | None,
+def elastic_args(robot: RobotModel, q: Any, kappa: Any, lam: float, max_iter: int, tol: float | None,
                   dh: Any, device: DeviceLike, dtype: DTypeLike, validate: bool):
     """Validated arguments of the elastic functions: (model, batch, tables, kappa rows,
     rho0 rows or None); lam and tol as :func:`lam_tol` checks them."""

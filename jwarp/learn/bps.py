@@ -40,6 +40,7 @@ from jwarp.core.arrays import (
 )
 from jwarp.core.types import ArrayLike, DeviceLike, RobotLike
 from jwarp.kernels import collision as ck
+from jwarp.model import RobotModel
 from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world.feasibility import random_configurations
@@ -233,14 +234,14 @@ class BasisPointSet:
     __hash__ = None  # type: ignore[assignment]
 
 
-def robot_reach_ball(robot: RobotLike, n: int = 2000, seed: int = 0, device: DeviceLike = None
+def robot_reach_ball(robot: RobotModel, n: int = 2000, seed: int = 0, device: DeviceLike = None
                      ) -> tuple[np.ndarray, float]:
     """``(centre (workspace_dim,), radius)`` [m]: the ball around the robot's base (origin of
     its root frame) holding every collision sphere (centre distance + radius) over ``n``
     random configurations (:func:`jwarp.world.feasibility.random_configurations`, ``seed``)."""
     from jwarp.kinematics.fk import fk
 
-    model = get_robot(robot)
+    model = robot
     f, pos, rad = model.sphere_arrays()
     if len(f) == 0:
         raise ValueError(f"robot: '{model.name}' has no collision spheres")

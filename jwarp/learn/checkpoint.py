@@ -143,7 +143,7 @@ def load_checkpoint(path: str | os.PathLike, robot: RobotModel | None = None, de
     naming both.
     """
     doc = read_checkpoint(path)
-    model, bps = _robot_and_bps(doc, path, robot)
+    model, bps = _robot_and_bps(doc, path, get_robot(doc["robot"] if robot is None else robot))
     config = _config(IKNetConfig, doc, path)
     check_weights(IKNet, config, bps, doc, path)   # before any weight is allocated
     net = IKNet(config, bps=bps)
@@ -155,7 +155,7 @@ def load_plan_checkpoint(path: str | os.PathLike, robot: RobotModel | None = Non
     """The :class:`PlanNet` of a ``"jwarp-plan-net"`` checkpoint, as :func:`load_checkpoint`
     (ValueError for another robot or kinematics hash, or a file of another format)."""
     doc = read_checkpoint(path, PLAN_FORMAT)
-    model, bps = _robot_and_bps(doc, path, robot)
+    model, bps = _robot_and_bps(doc, path, get_robot(doc["robot"] if robot is None else robot))
     config = _config(PlanNetConfig, doc, path)
     check_weights(PlanNet, config, bps, doc, path)  # before any weight is allocated
     net = PlanNet(config, bps=bps)
@@ -222,8 +222,7 @@ def check_weights(cls: Any, config: Any, bps: Any, doc: dict, path: Any) -> None
                        f"weights)", "this checkpoint cannot be loaded here")
 
 
-def _robot_and_bps(doc: dict, path: Any, robot: RobotModel | None) -> tuple[Any, Any]:
-    model = get_robot(doc["robot"] if robot is None else robot)
+def _robot_and_bps(doc: dict, path: Any, model: RobotModel) -> tuple[Any, Any]:
     key = content_key(model)
     if model.name != doc["robot"] or key != doc["kinematics_hash"]:
         raise ValueError(f"checkpoint: '{path}' is for robot '{doc['robot']}' (kinematics "

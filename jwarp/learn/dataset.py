@@ -49,8 +49,6 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from torch.utils.data import IterableDataset
 
-from jwarp.core.types import RobotLike
-
 if TYPE_CHECKING:
     from jwarp.model import RobotModel
     from jwarp.world.sdf import World
@@ -102,18 +100,8 @@ def _json(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=default)
 
 
-def _resolve_robot(robot: RobotLike | None) -> Any:
-    """The RobotModel of a name or path (the registry, where :class:`PathDB` is handed
-    the robot); anything else (a RobotModel, None) as it is."""
-    if isinstance(robot, (str, os.PathLike)):
-        from jwarp.plugins.registry import robot as get_robot
-
-        return get_robot(robot)
-    return robot
-
-
 def _robot_identity(model: RobotModel) -> tuple[str, str]:
-    """(name, kinematics hash) of the robot (:class:`PathDB` resolves a name)."""
+    """(name, kinematics hash) of the robot."""
     from jwarp.core.device import content_key
 
     return model.name, content_key(model)
@@ -221,7 +209,7 @@ class PathDB:
 
     Args:
         path: the file.
-        robot: name or RobotModel; required to create, checked (name and kinematics hash)
+        robot: RobotModel; required to create, checked (name and kinematics hash)
             when given for an existing file; None: read whatever robot it holds.
         bps: a BasisPointSet (or its dict) the data is meant for; stored on creation,
             checked when given for an existing file.
@@ -229,7 +217,7 @@ class PathDB:
         timeout: seconds to wait for another writer's lock before PathDBError.
     """
 
-    def __init__(self, path: str | os.PathLike, robot: RobotLike | None = None, *, bps: Any = None,
+    def __init__(self, path: str | os.PathLike, robot: RobotModel | None = None, *, bps: Any = None,
                  create: bool = False, timeout: float = 5.0):
         self.path = Path(path)
         self.timeout = float(timeout)
@@ -256,13 +244,13 @@ class PathDB:
                 raise self._error(e, "opening it") from None
             if exists:
                 self.meta = self._read_meta()
-                self._check(_resolve_robot(robot), bps)
+                self._check(robot, bps)
                 try:  # a database of before the hash table: add it (read-only: later)
                     self.con.execute(HASH_TABLE)
                 except sqlite3.Error:
                     pass
             else:
-                self.meta = self._create(_resolve_robot(robot), bps)
+                self.meta = self._create(cast("RobotModel", robot), bps)  # not None: checked above
         except BaseException:
             self.con.close()
             raise
@@ -320,7 +308,7 @@ class PathDB:
                               f"{SCHEMA_VERSION}")
         return meta
 
-    def _check(self, robot: RobotModel, bps: Any) -> None:
+    def _check(self, robot: RobotModel | None, bps: Any) -> None:
         if robot is not None:
             name, key = _robot_identity(robot)
             if name != self.meta["robot"] or key != self.meta["kinematics_hash"]:
@@ -672,7 +660,7 @@ class PathDataset(IterableDataset):
                  shuffle: bool = False, seed: int = 0, feasible_only: bool = False,
                  occupancy: bool = False, world_ids: Iterable[int] | None = None,
                  shuffle_worlds: int = 16, drop_last: bool = False, cache_worlds: int = 64,
-                 robot: RobotLike | None = None, bps: Any = None):
+                 robot: RobotModel | None = None, bps: Any = None):
         super().__init__()
         if batch_size < 1:
             raise ValueError(f"batch_size: expected >= 1, got {batch_size}")

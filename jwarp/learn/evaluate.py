@@ -44,8 +44,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from jwarp.core.limits import project_numpy, sample_within_limits
-from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
-from jwarp.plugins.registry import robot as get_robot
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike
 from jwarp.solvers.ik import IKOptions, IKSolver, check_warm_start, warm_start_seeds
 from jwarp.solvers.overrides import renamed_argument
 from jwarp.utils.checks import check_int
@@ -104,7 +103,7 @@ def _solve_block(model: RobotModel, frame: int | str, world: Any, T: np.ndarray,
             np.asarray(res.all_q).reshape(seeds.shape))
 
 
-def evaluate_ik(robot: RobotLike, frame: int | str, world: Any, targets: ArrayLike, *, warm_start: Any = None,
+def evaluate_ik(robot: RobotModel, frame: int | str, world: Any, targets: ArrayLike, *, warm_start: Any = None,
                 n_random: int = N_RANDOM, iterations: int | None = None, margin: float = 0.0,
                 tol_pos: float = 1e-4, tol_rot: float = 1e-3, q_default: Any = None,
                 seed: int = 0, device: DeviceLike = None, dtype: DTypeLike = np.float64,
@@ -135,7 +134,7 @@ def evaluate_ik(robot: RobotLike, frame: int | str, world: Any, targets: ArrayLi
     """
     t0 = time.perf_counter()
     check_warm_start(warm_start)
-    model = get_robot(robot)
+    model = robot
     fi = model.frame_index(frame)
     n_random = check_int(n_random, "n_random", 0 if warm_start is not None else 1)
     unknown = sorted(set(old_names) - {"max_iterations"})
@@ -237,7 +236,7 @@ def _config_value(net: Any, key: str) -> Any:
     return None
 
 
-def ablation_table(robot: RobotLike, frame: int | str, world: Any, targets: ArrayLike,
+def ablation_table(robot: RobotModel, frame: int | str, world: Any, targets: ArrayLike,
                    nets: Mapping[str, Any] | Sequence[tuple[str, Any]], *,
                    iterations: int = 10, device: DeviceLike = None, **options: Any) -> list[dict]:
     """Table 3.4: per network (``{name: net}`` or ``[(name, net)]``) the feasibility after

@@ -30,10 +30,12 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
-from jwarp.core.types import RobotLike
 from jwarp.learn.dataset import PathDB, WorldRecord, world_record
+
+if TYPE_CHECKING:
+    from jwarp.model import RobotModel
 
 __all__ = ["GenerateReport", "check_settings", "default_labeler", "default_options", "default_world_maker",
            "generate", "label_chunk", "options_dict", "ray_module"]
@@ -109,7 +111,7 @@ def ray_module() -> Any:
 
 
 # ====================================================================== the pure part
-def _call_world_maker(world_maker: Callable, robot: RobotLike, seed: int, options: Any) -> Any:
+def _call_world_maker(world_maker: Callable, robot: RobotModel, seed: int, options: Any) -> Any:
     device = getattr(options, "device", None)
     try:
         return world_maker(robot, seed, device=device)
@@ -119,14 +121,12 @@ def _call_world_maker(world_maker: Callable, robot: RobotLike, seed: int, option
         return world_maker(robot, seed)
 
 
-def label_chunk(robot: RobotLike, seeds: Sequence[int], paths_per_world: int, options: Any = None,
+def label_chunk(robot: RobotModel, seeds: Sequence[int], paths_per_world: int, options: Any = None,
                 labeler: Callable | None = None, world_maker: Callable | None = None
                 ) -> list[WorldRecord]:
     """The records (:func:`jwarp.learn.dataset.world_record`) of the worlds ``seeds``: a
     pure function of its arguments (what a Ray task runs)."""
-    from jwarp.plugins.registry import robot as get_robot
-
-    model = get_robot(robot) if isinstance(robot, str) else robot
+    model = robot
     labeler = default_labeler() if labeler is None else labeler
     world_maker = default_world_maker() if world_maker is None else world_maker
     out = []
@@ -179,7 +179,7 @@ def _progress(total: int, done: int, enabled: bool) -> Any:
                 dynamic_ncols=True, desc="paths", smoothing=0.1)
 
 
-def generate(robot: RobotLike, n_worlds: int, paths_per_world: int, db: str | os.PathLike | PathDB,
+def generate(robot: RobotModel, n_worlds: int, paths_per_world: int, db: str | os.PathLike | PathDB,
              *, first_seed: int = 0, chunk: int | None = None, options: Any = None,
              ray: bool = False, ray_address: str | None = None, num_gpus: float = 0,
              num_cpus: int | None = None, labeler: Callable | None = None,
@@ -244,7 +244,7 @@ def generate(robot: RobotLike, n_worlds: int, paths_per_world: int, db: str | os
     return report
 
 
-def _run_ray(ray: Any, chunks: list[list[int]], robot: RobotLike, paths_per_world: int,
+def _run_ray(ray: Any, chunks: list[list[int]], robot: RobotModel, paths_per_world: int,
              options: Any, labeler: Any, world_maker: Any, write: Callable,
              report: GenerateReport, *, ray_address: str | None, num_gpus: float,
              num_cpus: int | None, max_retries: int) -> None:

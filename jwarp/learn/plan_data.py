@@ -36,9 +36,8 @@ import numpy as np
 from jwarp.core.arrays import real_number
 from jwarp.core.device import numpy_dtype, scalar_type
 from jwarp.core.limits import sample_within_limits
-from jwarp.core.types import DeviceLike, DTypeLike, RobotLike
+from jwarp.core.types import DeviceLike, DTypeLike
 from jwarp.model import RobotModel
-from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.planning import PathWeights, Planner, PlanOptions
 from jwarp.utils.checks import check_int
 from jwarp.world.feasibility import feasible_simplex_world
@@ -213,7 +212,7 @@ def world_extent(model: RobotModel) -> float:
     return float(WORLD_EXTENT.get(model.name, 1.0 if model.workspace_dim == 2 else 1.2))
 
 
-def world_for(robot: RobotLike, world_seed: int, *, device: DeviceLike = None, extent: Any = None,
+def world_for(robot: RobotModel, world_seed: int, *, device: DeviceLike = None, extent: Any = None,
               **noise: Any) -> Any:
     """The Table 3.2 simplex world of ``world_seed`` for ``robot``: ``WORLD_CELLS`` cells
     per axis over a cube (square) of :func:`world_extent` [m] centred on the robot's
@@ -223,7 +222,7 @@ def world_for(robot: RobotLike, world_seed: int, *, device: DeviceLike = None, e
     fitted to the robot's reach (the longest side ``WORLD_CELLS`` cells). ``noise``:
     threshold, frequency, ... of the simplex noise (defaults of
     :func:`jwarp.world.simplex.simplex_world`)."""
-    model = get_robot(robot)
+    model = robot
     check_int(world_seed, "world_seed", 0)
     if isinstance(extent, str):
         if extent != "reach":
@@ -252,12 +251,12 @@ def _task_pairs(model: RobotModel, world: World, n: int, margin: float,
                      f"'{model.name}' found")
 
 
-def label_world(robot: RobotLike, world: World, n_tasks: int, seed: int,
+def label_world(robot: RobotModel, world: World, n_tasks: int, seed: int,
                 options: PlanDataOptions | None = None) -> WorldLabels:
     """Label ``n_tasks`` random tasks of one world (module docstring).
 
     Args:
-        robot: robot name or RobotModel.
+        robot: RobotModel.
         world: a :class:`jwarp.world.World` of the robot (e.g. :func:`world_for`).
         n_tasks: N, start/goal pairs (>= 1).
         seed: integer >= 0; the tasks and the multi-starts follow from it, so the labels
@@ -267,7 +266,7 @@ def label_world(robot: RobotLike, world: World, n_tasks: int, seed: int,
     Returns:
         :class:`WorldLabels`.
     """
-    model = get_robot(robot)
+    model = robot
     check_world(model, world)
     check_int(n_tasks, "n_tasks", 1)
     check_int(seed, "seed", 0)

@@ -189,7 +189,7 @@ def hard_tasks(model: RobotModel, world: World, n: int, rng: np.random.Generator
     return np.concatenate(S), np.concatenate(G)
 
 
-def label_tasks(robot: RobotLike, world: World, starts: np.ndarray, goals: np.ndarray, *,
+def label_tasks(robot: RobotModel, world: World, starts: np.ndarray, goals: np.ndarray, *,
                 n_waypoints: int = 20, n_starts: int = 16, iterations: int = 200,
                 n_substeps: int = 4, seed: int = 0
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -247,7 +247,7 @@ def make_plan_data(robot: RobotLike, worlds: list, n_per_world: int, *, seed: in
                        cost=np.concatenate([p[4] for p in parts]))
 
 
-def samples_from_db(db: Any, robot: RobotLike, *, world_ids: Any = None, hard_only: bool = True,
+def samples_from_db(db: Any, robot: RobotModel, *, world_ids: Any = None, hard_only: bool = True,
                     feasible_only: bool = True, n_waypoints: int | None = None,
                     skip_damaged: bool = False, skipped: list | None = None) -> PlanSamples:
     """The stored labels of a path database (a path or an open
@@ -268,7 +268,7 @@ def samples_from_db(db: Any, robot: RobotLike, *, world_ids: Any = None, hard_on
     from jwarp.core.device import content_key
     from jwarp.learn.dataset import DamagedRowError, PathDB, PathDBError
 
-    model = get_robot(robot)
+    model = robot
     own = not isinstance(db, PathDB)
     d = PathDB(db, model) if own else db
     try:

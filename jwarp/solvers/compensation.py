@@ -17,10 +17,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from jwarp.core.types import ArrayLike, DeviceLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike
 from jwarp.kinematics.equilibrium import fk_elastic
 from jwarp.kinematics.launch import kappa_array
-from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik import IKObjective, IKResult, ik
 from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.planning import PathObjective, PlanResult, plan
@@ -44,21 +43,21 @@ def _kappa(model: RobotModel, kappa: Any) -> Any:
     return kappa
 
 
-def compensated_ik(robot: RobotLike, frame: int | str, target: Any, *, kappa: ArrayLike | None = None,
+def compensated_ik(robot: RobotModel, frame: int | str, target: Any, *, kappa: ArrayLike | None = None,
                    lam: float = 0.7, **kwargs: Any) -> IKResult:
     """:func:`jwarp.solvers.ik.ik` on the elastic model (kappa default: the robot's)."""
-    model = get_robot(robot)
+    model = robot
     return ik(model, frame, target, kappa=_kappa(model, kappa), lam=lam, **kwargs)
 
 
-def compensated_plan(robot: RobotLike, world: World, start: Any, goal: Any, *, kappa: ArrayLike | None = None,
+def compensated_plan(robot: RobotModel, world: World, start: Any, goal: Any, *, kappa: ArrayLike | None = None,
                      lam: float = 0.7, **kwargs: Any) -> PlanResult:
     """:func:`jwarp.solvers.planning.plan` on the elastic model (kappa default: the robot's)."""
-    model = get_robot(robot)
+    model = robot
     return plan(model, world, start, goal, kappa=_kappa(model, kappa), lam=lam, **kwargs)
 
 
-def equilibrium_pose_error(robot: RobotLike, frame: int | str, q: ArrayLike, target: Any, kappa: ArrayLike,
+def equilibrium_pose_error(robot: RobotModel, frame: int | str, q: ArrayLike, target: Any, kappa: ArrayLike,
                            device: DeviceLike = None, lam: float = 0.7
                            ) -> tuple[np.ndarray, np.ndarray]:
     """Pose error of ``frame`` at q (..., n_dof) on the fully converged elastic model
@@ -68,7 +67,7 @@ def equilibrium_pose_error(robot: RobotLike, frame: int | str, q: ArrayLike, tar
     soft that the damped iteration oscillates: lower ``lam``)."""
     from scipy.spatial.transform import Rotation
 
-    model = get_robot(robot)
+    model = robot
     fi = model.frame_index(frame)
     q = np.asarray(q, np.float64)
     res = fk_elastic(model, q, kappa, lam=lam, max_iter=400, tol=1e-12, device=device,
@@ -85,12 +84,12 @@ def equilibrium_pose_error(robot: RobotLike, frame: int | str, q: ArrayLike, tar
     return pos, ang.reshape(pos.shape)
 
 
-def compare_ik(robot: RobotLike, frame: int | str, targets: ArrayLike, kappa: ArrayLike, *, n_starts: int = 8,
+def compare_ik(robot: RobotModel, frame: int | str, targets: ArrayLike, kappa: ArrayLike, *, n_starts: int = 8,
                seed: int = 0, lam: float = 0.7, **kwargs: Any) -> dict:
     """Rigid vs compensated IK from the same random seeds (no early stop, so every start
     runs until it is on the target): mean iterations of the starts that succeed in both,
     success counts, and the equilibrium error of the compensated solutions."""
-    model = get_robot(robot)
+    model = robot
     targets = as_poses(targets)
     common = dict(n_starts=n_starts, seed=seed, stop_when_solved=False, **kwargs)
     rigid = ik(model, frame, targets, **common)
@@ -145,7 +144,7 @@ def iteration_overhead(objective_rigid: Any, objective_elastic: Any, *, repeats:
     return out
 
 
-def ik_iteration_overhead(robot: RobotLike, frame: int | str, kappa: ArrayLike, *, world: World | None = None,
+def ik_iteration_overhead(robot: RobotModel, frame: int | str, kappa: ArrayLike, *, world: World | None = None,
                           n_starts: int = 64, iterations: int = 60, rounds: int = 9,
                           lam: float = 0.7, **kwargs: Any) -> dict:
     """Wall time per iteration of the whole IK solver (:func:`jwarp.solvers.ik.ik`: kernels,
@@ -157,7 +156,7 @@ def ik_iteration_overhead(robot: RobotLike, frame: int | str, kappa: ArrayLike, 
     and ``overhead_per_round`` the ratios of the runs. ``*_setup_s``: the rest of a call's
     wall time (objective, buffers, seeds; median)."""
     check_int(iterations, "iterations", 2)
-    model = get_robot(robot)
+    model = robot
     fi = model.frame_index(frame)
     target = np.eye(4)
     target[:3, 3] = [10.0, 0.0, 0.0]  # 10 m away

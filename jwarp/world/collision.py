@@ -61,14 +61,13 @@ from jwarp.core.device import (
     scalar_type,
 )
 from jwarp.core.rows import DHRows, RowsKind
-from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike
 from jwarp.kernels import collision as ck
 from jwarp.kernels import collision_wide as cwide
 from jwarp.kernels.elastic import funcs as elastic_funcs
 from jwarp.kernels.fk import kernels as fk_kernels
 from jwarp.kinematics.compensation import CompensationRows
 from jwarp.model import RobotModel
-from jwarp.plugins.registry import robot as get_robot
 from jwarp.world.device_world import DeviceWorld
 from jwarp.world.sdf import World, sdf_query
 
@@ -230,10 +229,10 @@ class CollisionModel:
             two agree to float rounding.
     """
 
-    def __init__(self, robot: RobotLike, world: World | None = None, *, device: DeviceLike = None,
+    def __init__(self, robot: RobotModel, world: World | None = None, *, device: DeviceLike = None,
                  dtype: DTypeLike = np.float32, wide: bool | None = None) -> None:
         init_warp()
-        self.robot = get_robot(robot)
+        self.robot = robot
         check_world(self.robot, world)
         self.world = world
         self.device = resolve_device(device)
@@ -633,10 +632,10 @@ def collision_model(robot: RobotModel, world: World | None = None, *, device: De
     return _MODELS.put(key, (world,), CollisionModel(model, world, device=dev, dtype=scalar))
 
 
-def _prepare(robot: RobotLike, q: ArrayLike, world: World | None, device: DeviceLike, dtype: DTypeLike,
+def _prepare(robot: RobotModel, q: ArrayLike, world: World | None, device: DeviceLike, dtype: DTypeLike,
              validate: bool) -> tuple[RobotModel, Batch, CollisionModel]:
     init_warp()
-    model = get_robot(robot)
+    model = robot
     check_world(model, world)
     dev = resolve_device(device, like=q)
     dt = default_dtype(q) if dtype is None else dtype
@@ -659,7 +658,7 @@ def _rho_arg(rho: Any, batch: Batch, nf: int) -> Any:
     return a
 
 
-def collision_cost(robot: RobotLike, q: ArrayLike, world: World | None, *, w_world: float = 1.0,
+def collision_cost(robot: RobotModel, q: ArrayLike, world: World | None, *, w_world: float = 1.0,
                    w_self: float = 1.0, eps: float = DEFAULT_EPS, rho: ArrayLike | None = None,
                    grad: bool = True, device: DeviceLike = None, dtype: DTypeLike = None,
                    tape: bool = False, validate: bool = True) -> tuple[Any, Any]:
@@ -697,7 +696,7 @@ def collision_cost(robot: RobotLike, q: ArrayLike, world: World | None, *, w_wor
     return out_c, out_g
 
 
-def sphere_distances(robot: RobotLike, q: ArrayLike, world: World | None, *, rho: ArrayLike | None = None, device: DeviceLike = None,
+def sphere_distances(robot: RobotModel, q: ArrayLike, world: World | None, *, rho: ArrayLike | None = None, device: DeviceLike = None,
                      dtype: DTypeLike = None, validate: bool = True) -> Any:
     """(..., n_spheres) signed distance [m] of each sphere's surface to the world:
     ``D(x_s) - r_s`` (negative = penetration)."""
@@ -711,7 +710,7 @@ def sphere_distances(robot: RobotLike, q: ArrayLike, world: World | None, *, rho
     return to_output(cast(wp.array, sd), batch, (cm.n_spheres,))  # spheres=True
 
 
-def self_distances(robot: RobotLike, q: ArrayLike, *, rho: ArrayLike | None = None, device: DeviceLike = None,
+def self_distances(robot: RobotModel, q: ArrayLike, *, rho: ArrayLike | None = None, device: DeviceLike = None,
                    dtype: DTypeLike = None, validate: bool = True) -> Any:
     """(..., n_pairs) signed distance [m] between the surfaces of the sphere pairs of
     :func:`collision_pairs` (negative = penetration)."""
@@ -723,7 +722,7 @@ def self_distances(robot: RobotLike, q: ArrayLike, *, rho: ArrayLike | None = No
     return to_output(cast(wp.array, pd), batch, (cm.n_pairs,))  # pairs=True
 
 
-def min_distances(robot: RobotLike, q: ArrayLike, world: World | None = None, *, rho: ArrayLike | None = None,
+def min_distances(robot: RobotModel, q: ArrayLike, world: World | None = None, *, rho: ArrayLike | None = None,
                   device: DeviceLike = None, dtype: DTypeLike = None, validate: bool = True,
                   per_world: int = 0) -> Any:
     """(..., 2) [smallest sphere-to-world, smallest sphere-to-sphere] surface distance [m]
@@ -808,7 +807,7 @@ def closest_pair_text(robot: RobotModel, q: ArrayLike, world: World | None, *, s
     return f"link '{a}' vs link '{b}', {mm_text(d[p])} mm"
 
 
-def is_collision_free(robot: RobotLike, q: ArrayLike, world: World | None = None, margin: float = 0.0, *,
+def is_collision_free(robot: RobotModel, q: ArrayLike, world: World | None = None, margin: float = 0.0, *,
                       rho: ArrayLike | None = None, device: DeviceLike = None, dtype: DTypeLike = None,
                       validate: bool = True, self_margin: float | None = None,
                       per_world: int = 0, meshes: bool = True) -> np.ndarray:
@@ -830,7 +829,7 @@ def is_collision_free(robot: RobotLike, q: ArrayLike, world: World | None = None
     sm = margin if self_margin is None else real_number(self_margin, "self_margin")
     if not np.isfinite(sm):
         raise ValueError(f"self_margin: expected a finite distance [m], got {self_margin}")
-    model = get_robot(robot)   # resolved once here; the helpers below take the model
+    model = robot
     md = min_distances(model, q, world, rho=rho, device=device, dtype=dtype, validate=validate,
                        per_world=per_world)
     if isinstance(md, wp.array):

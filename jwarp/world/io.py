@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from jwarp.core.types import DeviceLike, RobotLike
+from jwarp.core.types import DeviceLike
 from jwarp.world.sdf import FORMAT, VERSION, World, load_world, save_world
 
 if TYPE_CHECKING:
@@ -30,7 +30,7 @@ SPEC_KEYS = {
 }
 
 
-def parse_world_spec(spec: Any, robot: RobotLike | None = None, device: DeviceLike = None) -> World:
+def parse_world_spec(spec: Any, robot: RobotModel | None = None, device: DeviceLike = None) -> World:
     """A world from a specification (the CLI's ``--world``).
 
     * a :class:`World` passes through;
@@ -63,10 +63,9 @@ def parse_world_spec(spec: Any, robot: RobotLike | None = None, device: DeviceLi
             samples would need more than the available memory; checked before anything
             is allocated, the message gives the grid and the figure.
     """
-    from jwarp.plugins.registry import robot as get_robot
     from jwarp.world.collision import check_world
 
-    model = None if robot is None else get_robot(robot)
+    model = robot
     if isinstance(spec, World):
         world = spec
     elif isinstance(spec, (str, os.PathLike)):

@@ -38,10 +38,9 @@ from jwarp.core.arrays import init_warp, real_array, real_number, resolve_device
 from jwarp.core.caches import IdentityCache
 from jwarp.core.device import put_model
 from jwarp.core.limits import LIMIT_TOL
-from jwarp.core.types import DeviceLike, RobotLike
+from jwarp.core.types import DeviceLike
 from jwarp.kernels import motion as mk
 from jwarp.model import RobotModel
-from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world.collision import check_world, mm_text
 from jwarp.world.device_world import DeviceWorld
@@ -380,16 +379,16 @@ class MotionCheck:
     outputs, grown on demand and reused).
 
     Args:
-        robot: name or RobotModel (rigid; transmission errors are handled by the caller).
+        robot: RobotModel (rigid; transmission errors are handled by the caller).
         world: :class:`World` of the robot's workspace dimension, or None (self only).
         device: Warp device (None: the preferred one).
         options: :class:`MotionOptions`.
     """
 
-    def __init__(self, robot: RobotLike, world: World | None, *, device: DeviceLike = None,
+    def __init__(self, robot: RobotModel, world: World | None, *, device: DeviceLike = None,
                  options: MotionOptions | None = None) -> None:
         init_warp()
-        self.robot = get_robot(robot)
+        self.robot = robot
         check_world(self.robot, world)
         self.world = world
         self.device = resolve_device(device)
@@ -861,7 +860,7 @@ LEVELS_SCRATCH_BYTES = 8 << 30
 _CHECKS: IdentityCache[MotionCheck] = IdentityCache(8, owner=0)
 
 
-def motion_check(robot: RobotLike, world: World | None, *, device: DeviceLike = None,
+def motion_check(robot: RobotModel, world: World | None, *, device: DeviceLike = None,
                  options: MotionOptions | None = None) -> MotionCheck:
     """A cached :class:`MotionCheck` for (robot content, world identity, device, options):
     repeated checks (an RRT's edges, the planners of one world) pay its set-up once.
@@ -871,7 +870,7 @@ def motion_check(robot: RobotLike, world: World | None, *, device: DeviceLike = 
 
     from jwarp.core.device import content_key
 
-    model = get_robot(robot)
+    model = robot
     dev = resolve_device(device)
     opts = MotionOptions() if options is None else replace(options)
     key = (content_key(model), str(dev), astuple(opts))

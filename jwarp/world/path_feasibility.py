@@ -24,11 +24,10 @@ from jwarp.core.arrays import (
 )
 from jwarp.core.device import numpy_dtype, put_model, scalar_type
 from jwarp.core.limits import describe_violation, sample_within_limits, within_limits
-from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike, RobotLike
+from jwarp.core.types import ArrayLike, DeviceLike, DTypeLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kinematics.transmission import untransmitted, without_transmission
 from jwarp.model import RobotModel
-from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.checks import check_int
 from jwarp.world import collision
 
@@ -173,7 +172,7 @@ def substeps(paths: Any, n_substeps: int, *, device: DeviceLike = None, dtype: D
     return out.numpy().reshape(a.shape[:-2] + (S, n))
 
 
-def path_feasible(robot: RobotLike, world: World, paths: Any, n_substeps: int, *, margin: float = 0.0,
+def path_feasible(robot: RobotModel, world: World, paths: Any, n_substeps: int, *, margin: float = 0.0,
                   kappa: ArrayLike | None = None, device: DeviceLike = None,
                   endpoint_margin: float | None = None, self_margin: float = 0.0,
                   meshes: bool | None = None) -> np.ndarray:
@@ -185,7 +184,7 @@ def path_feasible(robot: RobotLike, world: World, paths: Any, n_substeps: int, *
     Returns (...,) bool. Runs on ``device`` (None: Warp's default device). ``meshes``:
     the mesh certificate proves what the spheres leave unproven (None: the check's
     :attr:`~jwarp.world.motion.MotionOptions.meshes`; rigid model only)."""
-    model = get_robot(robot)
+    model = robot
     check_world(model, world)
     a = real_array(paths, "paths")
     if a.ndim < 2 or a.shape[-1] != model.n_dof or a.shape[-2] < 2:

@@ -210,11 +210,11 @@ def _plan(model: RobotModel, n_samples: int, batch: int, max_memory: int
     return cost, tile
 
 
-def pair_sampling_cost(robot: RobotLike, n_samples: int = 10000, *, batch: int = 1024,
+def pair_sampling_cost(robot: RobotModel, n_samples: int = 10000, *, batch: int = 1024,
                        max_memory: int = MAX_MEMORY) -> PairSamplingCost:
     """The work and memory of :func:`never_colliding_pairs` with these arguments, without
     doing it (sizes only)."""
-    model = get_robot(robot)
+    model = robot
     n_samples = check_int(n_samples, "n_samples", 1)
     batch = check_int(batch, "batch", 1)
     return _plan(model, n_samples, batch, _memory_arg(max_memory))[0]
@@ -519,10 +519,11 @@ def write_self_pairs(robot: RobotLike, out: str | os.PathLike, pairs: SelfPairs 
     out = Path(out)
     if not out.parent.is_dir():
         raise ValueError(f"out: folder '{out.parent}' does not exist")
-    if pairs is None:
-        pairs = never_colliding_pairs(robot, **options)
-    elif options:
+    if pairs is not None and options:
         raise TypeError(f"options {sorted(options)} given with precomputed pairs")
-    model = with_self_pairs(robot, pairs, replace=replace)
+    model = get_robot(robot)
+    if pairs is None:
+        pairs = never_colliding_pairs(model, **options)
+    model = with_self_pairs(model, pairs, replace=replace)
     model.save(out)
     return model

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from cli_helpers import one_line_error, run  # noqa: F401  (tests/cli_helpers.py)
 
+import jwarp
 from jwarp.cli import main
 
 TINY = ["--robot", "planar4", "--n-worlds", "1", "--tasks-per-world", "6", "--val-worlds", "1",
@@ -124,7 +125,7 @@ def _db_labeler(robot, world, n_tasks, seed, options=None):
 def _make_db(path, robot="planar4"):
     from jwarp.learn.generate import generate
 
-    generate(robot, 4, 5, path, labeler=_db_labeler, world_maker=_db_world, progress=False,
+    generate(jwarp.robot(robot), 4, 5, path, labeler=_db_labeler, world_maker=_db_world, progress=False,
              options={"n_waypoints": 6})
     return path
 

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from cli_helpers import one_line_error, q_text, run  # tests/cli_helpers.py
 
+import jwarp
 from jwarp.cli.main import build_parser
 from jwarp.learn import generate as gen
 
@@ -49,7 +50,7 @@ def _db(path: Path, seeds=(0, 1, 2)) -> Path:
     """A planar5 path database of 3 worlds x 3 paths x 4 waypoints."""
     from jwarp.learn.dataset import PathDB, world_record
 
-    with PathDB(path, "planar5", create=True) as db:
+    with PathDB(path, jwarp.robot("planar5"), create=True) as db:
         for s in seeds:
             assert db.add_world(world_record(s, _world(s), _labels(s)))
     return path
@@ -415,11 +416,11 @@ def test_train_plan_data_damaged_named_and_skipped(capsys, tmp_path):
     assert "world 2" in line and "task=0" in line and str(db) in line
     assert "--skip-damaged" in line and not (tmp_path / "m.pt").exists()
     skipped: list = []
-    s = samples_from_db(db, "planar5", hard_only=False, skip_damaged=True, skipped=skipped)
+    s = samples_from_db(db, jwarp.robot("planar5"), hard_only=False, skip_damaged=True, skipped=skipped)
     assert s.world_ids == [0, 2] and len(s.starts) == 5
     assert [(k["world_id"], k["task"]) for k in skipped] == [(1, None), (2, 0)]
     with pytest.raises(DamagedRowError) as e:    # the row, not "mixed waypoint counts"
-        samples_from_db(db, "planar5", hard_only=False, world_ids=[2])
+        samples_from_db(db, jwarp.robot("planar5"), hard_only=False, world_ids=[2])
     assert "task=0" in str(e.value) and "mixes" not in str(e.value)
     one_line_error(capsys, ["train", "plan", "--robot", "planar5", "--skip-damaged",
                             "--epochs", 1, "--out", tmp_path / "m.pt"], "--skip-damaged")

@@ -31,7 +31,7 @@ def test_equal_robots_share_one_model_and_edited_copies_do_not():
     twin = RobotModel.from_dict(r.to_dict())  # another object, equal content
     assert twin is not r and content_key(twin) == content_key(r)
     assert put_model(twin, "cpu", np.float32) is m
-    assert put_model("arm7", "cpu", "float32") is m
+    assert put_model(jwarp.robot("arm7"), "cpu", "float32") is m
     assert put_model(twin, "cpu", wp.float32).limits is m.limits
     # another dtype: another model
     m64 = put_model(r, "cpu", np.float64)
@@ -235,14 +235,14 @@ def test_host_frames_match_numpy(name):
 
 
 def test_frame_masses_copy_shares_every_other_table():
-    m = put_model("justin19", "cpu", np.float64)
+    m = put_model(jwarp.robot("justin19"), "cpu", np.float64)
     _ = m.frame_struct, m.spheres
     mass, com = D.frame_mass_model(m.robot)
     c = D.with_frame_masses(m, 2 * mass, com)
     np.testing.assert_array_equal(c.mass.numpy(), 2 * mass)
     assert c.dh0 is m.dh0 and c.limits is m.limits and c.frame_struct is m.frame_struct
     assert c.spheres is m.spheres and c.mass is not m.mass
-    assert put_model("justin19", "cpu", np.float64) is m  # the copy is not cached
+    assert put_model(jwarp.robot("justin19"), "cpu", np.float64) is m  # the copy is not cached
 
 
 # ================================================================ Data workspaces
@@ -317,7 +317,7 @@ def test_rows_kind_values_are_the_kernels_constants():
 
 
 def test_dh_rows_constructors():
-    n = put_model("arm7", "cpu", np.float64)
+    n = put_model(jwarp.robot("arm7"), "cpu", np.float64)
     nom = DHRows.nominal(n.dh0_3d)
     assert nom.args == (n.dh0_3d, 0, 0) and nom.layout == PER_CONFIG_LAYOUT and nom.is_nominal
     sh = DHRows.shared(_arr((n.n_frames, 5)))
@@ -390,7 +390,7 @@ def test_make_struct_names_unknown_and_missing_fields():
     source's."""
     from jwarp.kernels import path as path_kernels
 
-    m = put_model("justin19", "cpu", np.float64)
+    m = put_model(jwarp.robot("justin19"), "cpu", np.float64)
     LT = path_kernels.kernels(m.scalar).LimitTables
     with pytest.raises(TypeError, match=r"bx: not a field .*box, lin_start"):
         D.make_struct(LT, m.limits, bx=None)

@@ -244,7 +244,7 @@ def test_cuda_numpy_calls_back_to_back_keep_their_q():
     ("4", TypeError, "batch: expected an integer"),
 ])
 def test_bad_batch_names_batch(batch, err, match):
-    m = put_model("planar5", "cpu", np.float64)
+    m = put_model(jwarp.robot("planar5"), "cpu", np.float64)
     with pytest.raises(err, match=match):
         KinematicsData(m, batch)
 
@@ -316,7 +316,7 @@ def test_bad_frame_point_and_mismatched_data(device):
     with pytest.raises(ValueError, match=f"d: made for robot 'justin19' on {device} in float64"):
         forward_kinematics(m32, d, q)
     with pytest.raises(ValueError, match="d: made for robot 'justin19'"):
-        forward_kinematics(put_model("arm7", device, np.float64), d, q)
+        forward_kinematics(put_model(jwarp.robot("arm7"), device, np.float64), d, q)
     with pytest.raises(TypeError, match="d: expected a KinematicsData"):
         forward_kinematics(m, m, q)
     with pytest.raises(TypeError, match="m: expected a DeviceModel"):
@@ -359,5 +359,5 @@ def test_small_calls_run_on_a_kinematics_data(device):
 
 
 def test_repr():
-    d = KinematicsData(put_model("arm7", "cpu", np.float32), 2)
+    d = KinematicsData(put_model(jwarp.robot("arm7"), "cpu", np.float32), 2)
     assert repr(d) == "KinematicsData(robot='arm7', batch=2, device='cpu', dtype=float32)"

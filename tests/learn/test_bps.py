@@ -9,6 +9,7 @@ import pytest
 import torch
 from scipy.spatial import cKDTree
 
+import jwarp
 from jwarp.learn.bps import (
     BasisPointSet,
     basis_points,
@@ -93,7 +94,7 @@ def test_basis_points_size_and_reach(robot, dim, n):
     full = hcp_points(dim, bps.spacing, bps.centre, bps.radius)
     assert n <= len(full) < 1.03 * n  # ... which is a few % of the points
     assert cKDTree(full).query(bps.points)[0].max() < 1e-12  # a subset of that packing
-    centre, radius = robot_reach_ball(robot)
+    centre, radius = robot_reach_ball(jwarp.robot(robot))
     assert np.allclose(bps.centre, centre) and bps.radius == pytest.approx(radius)
     assert np.all(np.linalg.norm(bps.points - bps.centre, axis=1) <= bps.radius * (1 + 1e-12))
     assert abs(min_distance(bps.points) - bps.spacing) < 1e-9
@@ -104,7 +105,7 @@ def test_basis_points_size_and_reach(robot, dim, n):
 def test_reach_ball_holds_the_reach_box():
     from jwarp.world.feasibility import robot_reach
 
-    centre, radius = robot_reach_ball("justin19")
+    centre, radius = robot_reach_ball(jwarp.robot("justin19"))
     box = robot_reach("justin19")
     assert np.allclose(centre, [0.0, 0.0, 0.5884], atol=1e-3)  # the base of justin19
     # the box of the same configurations' spheres touches the ball from inside

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import torch
 
+import jwarp
 from jwarp.learn.dataset import PathDataset, PathDB, PathDBError, export_npz, world_record
 from jwarp.world.sdf import world_from_occupancy
 
@@ -42,7 +43,7 @@ def record(seed: int, n: int = 5):
 
 
 def filled(path, seeds=(0, 1, 2), n=5):
-    with PathDB(path, "planar5", create=True) as db:
+    with PathDB(path, jwarp.robot("planar5"), create=True) as db:
         for s in seeds:
             assert db.add_world(record(s, n))
     return path
@@ -76,7 +77,7 @@ def test_round_trip(tmp_path):
 
 def test_append_only_no_duplicates(tmp_path):
     p = filled(tmp_path / "d.sqlite")
-    with PathDB(p, "planar5", create=True) as db:
+    with PathDB(p, jwarp.robot("planar5"), create=True) as db:
         before = db.rows()
         assert not db.add_world(record(1))  # again: ignored
         assert db.add_world(record(3))
@@ -86,7 +87,7 @@ def test_append_only_no_duplicates(tmp_path):
 def test_world_without_occupancy(tmp_path):
     w = fake_world(4)
     w.occupancy = None
-    with PathDB(tmp_path / "d.sqlite", "planar5", create=True) as db:
+    with PathDB(tmp_path / "d.sqlite", jwarp.robot("planar5"), create=True) as db:
         db.add_world(world_record(4, w, fake_labels(4, 2)))
         np.testing.assert_allclose(db.world(4).sdf, w.sdf.astype(np.float32))
 
@@ -94,13 +95,13 @@ def test_world_without_occupancy(tmp_path):
 def test_other_robot_or_bps_refused(tmp_path):
     p = filled(tmp_path / "d.sqlite")
     with pytest.raises(PathDBError, match=r"robot 'planar5'.*not of robot 'planar4'") as e:
-        PathDB(p, "planar4")
+        PathDB(p, jwarp.robot("planar4"))
     assert str(p) in str(e.value)
     with pytest.raises(PathDBError, match="BPS"):
-        PathDB(p, "planar5", bps={"points": [[0.0, 0.0]]})
+        PathDB(p, jwarp.robot("planar5"), bps={"points": [[0.0, 0.0]]})
     q = tmp_path / "b.sqlite"
-    PathDB(q, "planar5", bps={"points": [[0.0, 0.0]]}, create=True).close()
-    PathDB(q, "planar5", bps={"points": [[0.0, 0.0]]}).close()
+    PathDB(q, jwarp.robot("planar5"), bps={"points": [[0.0, 0.0]]}, create=True).close()
+    PathDB(q, jwarp.robot("planar5"), bps={"points": [[0.0, 0.0]]}).close()
     with pytest.raises(PathDBError, match="another BPS"):
         PathDB(q, bps={"points": [[1.0, 0.0]]})
     with PathDB(p) as db:  # nothing changed
@@ -115,7 +116,7 @@ def test_missing_garbage_and_foreign_files(tmp_path):
     g.write_bytes(junk)
     for create in (False, True):
         with pytest.raises(PathDBError, match=r"garbage.sqlite.*not a readable SQLite database"):
-            PathDB(g, "planar5", create=create)
+            PathDB(g, jwarp.robot("planar5"), create=create)
     assert g.read_bytes() == junk  # left as it was
     f = tmp_path / "foreign.sqlite"
     con = sqlite3.connect(f)
@@ -123,7 +124,7 @@ def test_missing_garbage_and_foreign_files(tmp_path):
     con.commit()
     con.close()
     with pytest.raises(PathDBError, match="not a jwarp path database"):
-        PathDB(f, "planar5", create=True)
+        PathDB(f, jwarp.robot("planar5"), create=True)
 
 
 def test_corrupt_pages_clear_error(tmp_path):
@@ -140,14 +141,14 @@ def test_locked_database_loses_nothing(tmp_path):
     other = sqlite3.connect(p, isolation_level=None)
     other.execute("BEGIN IMMEDIATE")  # another writer holds the write lock
     try:
-        with (PathDB(p, "planar5", timeout=0.2) as db,
+        with (PathDB(p, jwarp.robot("planar5"), timeout=0.2) as db,
               pytest.raises(PathDBError, match=r"d.sqlite' is locked by another process "
                                                r"while writing world 7")):
             db.add_world(record(7))
     finally:
         other.execute("ROLLBACK")
         other.close()
-    with PathDB(p, "planar5") as db:
+    with PathDB(p, jwarp.robot("planar5")) as db:
         assert db.complete_worlds() == {0, 1, 2} and db.n_paths() == 15
         assert db.add_world(record(7))  # once the lock is gone
         assert db.complete_worlds() == {0, 1, 2, 7}
@@ -177,7 +178,7 @@ def test_torch_reader(tmp_path):
     assert got.shape == want.shape
     assert sorted(map(tuple, got.numpy().tolist())) == sorted(map(tuple, want.tolist()))
     with pytest.raises(PathDBError, match="planar4"):
-        PathDataset(p, robot="planar4")
+        PathDataset(p, robot=jwarp.robot("planar4"))
 
 
 def test_export_npz(tmp_path):
@@ -215,7 +216,7 @@ def test_writer_killed_mid_transaction(tmp_path):
             "n_waypoints, cost, feasible, hard) VALUES (9, 0, x'00', x'00', x'00', 1, 0, 0, 0)\"); "
             "os._exit(1)")
     assert subprocess.run([sys.executable, "-c", code]).returncode == 1
-    with PathDB(p, "planar5") as db:
+    with PathDB(p, jwarp.robot("planar5")) as db:
         assert db.complete_worlds() == {0, 1, 2} and db.n_paths() == 15
         assert db.add_world(record(9))
         assert db.complete_worlds() == {0, 1, 2, 9}

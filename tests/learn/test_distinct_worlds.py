@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import jwarp
 from jwarp.learn.dataset import DuplicateWorldError, PathDB, record_hash, world_record
 from jwarp.learn.plan_data import world_for
 from jwarp.learn.train_plan import PlanSamples, split_by_world
@@ -18,19 +19,19 @@ from jwarp.world.sdf import World
 
 
 def test_consecutive_seeds_give_distinct_worlds():
-    worlds = [world_for("planar4", s) for s in range(12)]
+    worlds = [world_for(jwarp.robot("planar4"), s) for s in range(12)]
     hashes = {w.content_hash() for w in worlds}
     assert len(hashes) == 12  # was 3
     assert [w.meta["requested_seed"] for w in worlds] == list(range(12))
     # deterministic: the same seed gives the same world
-    assert world_for("planar4", 5).content_hash() == worlds[5].content_hash()
+    assert world_for(jwarp.robot("planar4"), 5).content_hash() == worlds[5].content_hash()
 
 
 def test_a_passing_seed_keeps_its_world():
     """A seed whose own world passes the filter is that world (as before the fix)."""
-    w = world_for("planar4", 2)
+    w = world_for(jwarp.robot("planar4"), 2)
     assert w.meta["candidate"] == 0 and w.meta["seed"] == 2
-    again = world_for("planar4", 2)
+    again = world_for(jwarp.robot("planar4"), 2)
     assert np.array_equal(again.occupancy, w.occupancy)
 
 
@@ -53,7 +54,7 @@ def test_content_hash_of_a_world_without_a_grid_is_refused():
 
 
 def test_content_hash_ignores_meta_and_sees_the_grid():
-    w = world_for("planar4", 0)
+    w = world_for(jwarp.robot("planar4"), 0)
     v = World(w.sdf.copy(), w.limits.copy(), w.voxel_size, w.occupancy.copy(), {"other": 1})
     assert v.content_hash() == w.content_hash()
     occ = w.occupancy.copy()
@@ -75,8 +76,8 @@ class _Labels:
 
 
 def test_path_db_refuses_a_duplicate_world(tmp_path):
-    w0, w1 = world_for("planar4", 0), world_for("planar4", 1)
-    db = PathDB(tmp_path / "p.sqlite", "planar4", create=True)
+    w0, w1 = world_for(jwarp.robot("planar4"), 0), world_for(jwarp.robot("planar4"), 1)
+    db = PathDB(tmp_path / "p.sqlite", jwarp.robot("planar4"), create=True)
     assert db.add_world(world_record(0, w0, _Labels(4)))
     assert db.add_world(world_record(1, w1, _Labels(4)))
     with pytest.raises(DuplicateWorldError, match="world 2 has the same grid as world 0"):
@@ -91,9 +92,9 @@ def test_path_db_refuses_a_duplicate_world(tmp_path):
 def test_path_db_of_before_the_hash_table(tmp_path):
     """Worlds stored without hashes (an older database) are hashed before the next write,
     so a duplicate of one of them is refused too; info counts distinct grids."""
-    w0 = world_for("planar4", 0)
+    w0 = world_for(jwarp.robot("planar4"), 0)
     path = tmp_path / "old.sqlite"
-    db = PathDB(path, "planar4", create=True)
+    db = PathDB(path, jwarp.robot("planar4"), create=True)
     db.add_world(world_record(0, w0, _Labels(4)))
     db.con.execute("DROP TABLE world_hashes")
     db.close()
@@ -105,7 +106,7 @@ def test_path_db_of_before_the_hash_table(tmp_path):
 
 
 def test_split_by_world_keeps_equal_grids_on_one_side():
-    a, b, c = (world_for("planar4", s) for s in (0, 1, 2))
+    a, b, c = (world_for(jwarp.robot("planar4"), s) for s in (0, 1, 2))
     a2 = World(a.sdf.copy(), a.limits.copy(), a.voxel_size, a.occupancy.copy(), {"copy": 1})
     worlds = [a, b, c, a2]
     n = 16

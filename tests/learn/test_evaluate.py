@@ -66,8 +66,8 @@ class Corner:
 
 def test_known_solutions_against_random(problems):
     model, worlds, qs, Ts = problems
-    rnd = evaluate_ik(ROBOT, FRAME, worlds, Ts, n_random=12)
-    net = evaluate_ik(ROBOT, FRAME, worlds, Ts, warm_start=Twin(worlds, qs), n_random=12,
+    rnd = evaluate_ik(jwarp.robot(ROBOT), FRAME, worlds, Ts, n_random=12)
+    net = evaluate_ik(jwarp.robot(ROBOT), FRAME, worlds, Ts, warm_start=Twin(worlds, qs), n_random=12,
                       name="Known")
     assert rnd["name"] == "Random" and rnd["heads"] == 0 and rnd["feasibility_heads"] is None
     assert rnd["n_targets"] == net["n_targets"] == 20 and rnd["n_worlds"] == 2
@@ -104,7 +104,7 @@ def test_columns_equal_a_brute_force_run(problems):
     U_1^q uses the solver's own default pose."""
     model, worlds, qs, Ts = problems
     net = Corner(model.n_dof)
-    r = evaluate_ik(ROBOT, FRAME, worlds, Ts, warm_start=net, n_random=19, seed=4,
+    r = evaluate_ik(jwarp.robot(ROBOT), FRAME, worlds, Ts, warm_start=net, n_random=19, seed=4,
                     iterations=40)
     rng = np.random.default_rng(4)
 
@@ -151,7 +151,7 @@ def test_positions_and_quaternions_as_targets(problems):
 
 def test_ablation_table_and_printing(problems):
     model, worlds, qs, Ts = problems
-    rows = ablation_table(ROBOT, FRAME, worlds, Ts,
+    rows = ablation_table(jwarp.robot(ROBOT), FRAME, worlds, Ts,
                           {"full": Twin(worlds, qs), "none": Corner(model.n_dof)})
     assert [r["name"] for r in rows] == ["full", "none"]
     assert rows[0]["twin"] is True and rows[0]["boosting"] is True
@@ -162,8 +162,8 @@ def test_ablation_table_and_printing(problems):
     for c in TABLE_34_COLUMNS:
         assert c in t34
     assert "Yes" in t34 and "No" in t34 and "after 10 solver iterations" in t34
-    r0 = evaluate_ik(ROBOT, FRAME, worlds, Ts, n_random=3, iterations=5)
-    r1 = evaluate_ik(ROBOT, FRAME, worlds, Ts, warm_start=Twin(worlds, qs), n_random=3,
+    r0 = evaluate_ik(jwarp.robot(ROBOT), FRAME, worlds, Ts, n_random=3, iterations=5)
+    r1 = evaluate_ik(jwarp.robot(ROBOT), FRAME, worlds, Ts, warm_start=Twin(worlds, qs), n_random=3,
                      name="Unsupervised")
     t35 = format_table_35([r0, r1], "Table 3.5")
     for c in TABLE_35_COLUMNS:
@@ -179,21 +179,21 @@ def test_ablation_table_and_printing(problems):
 def test_input_errors(problems):
     model, worlds, qs, Ts = problems
     with pytest.raises(ValueError, match="n_random"):
-        evaluate_ik(ROBOT, FRAME, worlds, Ts, n_random=0)
+        evaluate_ik(jwarp.robot(ROBOT), FRAME, worlds, Ts, n_random=0)
     with pytest.raises(ValueError, match="iterations"):
-        evaluate_ik(ROBOT, FRAME, worlds, Ts, iterations=-1)
+        evaluate_ik(jwarp.robot(ROBOT), FRAME, worlds, Ts, iterations=-1)
     with pytest.raises(ValueError, match="targets"):
-        evaluate_ik(ROBOT, FRAME, worlds, Ts[:1])
+        evaluate_ik(jwarp.robot(ROBOT), FRAME, worlds, Ts[:1])
     with pytest.raises(ValueError, match="targets"):
-        evaluate_ik(ROBOT, FRAME, None, np.zeros((3, 3, 3)))
+        evaluate_ik(jwarp.robot(ROBOT), FRAME, None, np.zeros((3, 3, 3)))
     with pytest.raises(TypeError, match="warm_start"):
-        evaluate_ik(ROBOT, FRAME, None, Ts[0], warm_start="model.pt")
+        evaluate_ik(jwarp.robot(ROBOT), FRAME, None, Ts[0], warm_start="model.pt")
     with pytest.raises(ValueError, match="warm_start"):
-        evaluate_ik(ROBOT, FRAME, None, Ts[0], warm_start=Corner(3))
+        evaluate_ik(jwarp.robot(ROBOT), FRAME, None, Ts[0], warm_start=Corner(3))
     with pytest.raises(ValueError, match="nets"):
-        ablation_table(ROBOT, FRAME, None, Ts[0], {})
+        ablation_table(jwarp.robot(ROBOT), FRAME, None, Ts[0], {})
     with pytest.raises(TypeError, match="nets"):
-        ablation_table(ROBOT, FRAME, None, Ts[0], [("x", object())])
+        ablation_table(jwarp.robot(ROBOT), FRAME, None, Ts[0], [("x", object())])
 
 
 def test_evaluate_ik_old_iterations_name_warns(problems):

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import torch
 
+import jwarp
 from jwarp.learn.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
 from jwarp.learn.encoding import JointCodec, frame_features
 from jwarp.learn.ik_data import make_ik_data, sample_targets
@@ -231,7 +232,7 @@ def test_sample_targets_mix_is_reachable():
     from jwarp.world.collision import is_collision_free
     f = get_robot("planar5").frame_index("tcp")
     assert np.allclose(fk("planar5", q, device="cpu", dtype=np.float64)[:, f], T)
-    assert is_collision_free("planar5", q, w, 0.0, device="cpu").all()
+    assert is_collision_free(jwarp.robot("planar5"), q, w, 0.0, device="cpu").all()
 
 
 def test_short_training_lowers_validation_cost_and_resumes(tmp_path, planar_data):

@@ -26,12 +26,12 @@ def world():
 
 @pytest.fixture(scope="module")
 def labels(world):
-    return label_world("planar4", world, 12, 5, FAST)
+    return label_world(jwarp.robot("planar4"), world, 12, 5, FAST)
 
 
 def independent_feasible(robot, world, path):
     n_sub = path_feasibility.substeps_for_voxel(robot, path, world.voxel_size, safety=2.0, max_substeps=256)
-    return bool(path_feasibility.path_feasible(robot, world, path, n_sub)[()])
+    return bool(path_feasibility.path_feasible(jwarp.robot(robot), world, path, n_sub)[()])
 
 
 def test_shapes_and_settings(labels):
@@ -51,10 +51,10 @@ def test_shapes_and_settings(labels):
 
 
 def test_deterministic(world, labels):
-    again = label_world("planar4", world, 12, 5, FAST)
+    again = label_world(jwarp.robot("planar4"), world, 12, 5, FAST)
     for k in ("starts", "goals", "paths", "cost", "feasible", "hard"):
         np.testing.assert_array_equal(getattr(again, k), getattr(labels, k))
-    other = label_world("planar4", world, 12, 6, FAST)
+    other = label_world(jwarp.robot("planar4"), world, 12, 6, FAST)
     assert not np.array_equal(other.starts, labels.starts)
 
 
@@ -79,7 +79,7 @@ def test_easy_hard_consistent_with_straight_line(world, labels):
 def test_converged_labels_shorter(world, labels):
     from dataclasses import replace
 
-    early = label_world("planar4", world, 12, 5, replace(FAST, converge=False))
+    early = label_world(jwarp.robot("planar4"), world, 12, 5, replace(FAST, converge=False))
     both = labels.feasible & early.feasible
     assert both.any()
     # per task another start may win (the lowest U_path), so compare the hard labels' mean
@@ -89,12 +89,12 @@ def test_converged_labels_shorter(world, labels):
 
 
 def test_world_for_table_3_2():
-    w = world_for("planar4", 3)
+    w = world_for(jwarp.robot("planar4"), 3)
     assert w.shape == (64, 64)
     side = (np.asarray(w.limits)[:, 1] - np.asarray(w.limits)[:, 0] + w.voxel_size)
     np.testing.assert_allclose(side, [1.0, 1.0], rtol=1e-9)
     assert w.meta["feasible_fraction"] >= 0.2 and w.meta["requested_seed"] == 3
-    w2 = world_for("planar4", 3)
+    w2 = world_for(jwarp.robot("planar4"), 3)
     np.testing.assert_array_equal(w.occupancy, w2.occupancy)
 
 
@@ -108,7 +108,7 @@ def test_early_stopped_starts_and_the_statistics_subset(world, labels):
     h = np.nonzero(labels.hard)[0]
     assert len(h) >= 3
     np.testing.assert_array_equal(labels.stats, labels.hard)  # FAST: every hard task (< 32)
-    part = label_world("planar4", world, 12, 5, replace(FAST, stats_tasks=1, refine=1))
+    part = label_world(jwarp.robot("planar4"), world, 12, 5, replace(FAST, stats_tasks=1, refine=1))
     assert part.stats.sum() == 1 and part.stats[h[0]] and not part.stats[h[1:]].any()
     assert np.all(part.n_starts[h[1:]] == 0) and part.n_starts[h[0]] == 6
     np.testing.assert_array_equal(part.hard, labels.hard)
@@ -148,21 +148,21 @@ def test_option_errors_name_the_field(field, value, exc):
 
 def test_argument_errors(world):
     with pytest.raises(ValueError, match="n_tasks"):
-        label_world("planar4", world, 0, 0, FAST)
+        label_world(jwarp.robot("planar4"), world, 0, 0, FAST)
     with pytest.raises(ValueError, match="seed"):
-        label_world("planar4", world, 2, -1, FAST)
+        label_world(jwarp.robot("planar4"), world, 2, -1, FAST)
     with pytest.raises(TypeError, match="options"):
-        label_world("planar4", world, 2, 0, {"max_starts": 2})
+        label_world(jwarp.robot("planar4"), world, 2, 0, {"max_starts": 2})
     with pytest.raises(ValueError, match="world_seed"):
-        world_for("planar4", -1)
+        world_for(jwarp.robot("planar4"), -1)
 
 
 def test_world_for_reach_grid_and_extent_errors():
-    w = world_for("planar4", 3, extent="reach", frequency=1.0)
+    w = world_for(jwarp.robot("planar4"), 3, extent="reach", frequency=1.0)
     assert max(w.shape) == 64 and w.meta["frequency"] == 1.0
     side = np.asarray(w.limits)[:, 1] - np.asarray(w.limits)[:, 0]
     assert side.max() > 1.5  # planar4 reaches 1 m: the fitted grid is about 2 m wide
     with pytest.raises(ValueError, match="extent"):
-        world_for("planar4", 3, extent="table")
+        world_for(jwarp.robot("planar4"), 3, extent="table")
     with pytest.raises(ValueError, match="extent"):
-        world_for("planar4", 3, extent=-1.0)
+        world_for(jwarp.robot("planar4"), 3, extent=-1.0)

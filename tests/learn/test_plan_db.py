@@ -11,6 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+import jwarp
 from jwarp.learn.dataset import PathDB, PathDBError
 from jwarp.learn.generate import generate
 from jwarp.learn.train_plan import (
@@ -44,7 +45,7 @@ def labeler(robot, world, n_tasks, seed, options=None):
 
 
 def make_db(path, robot=ROBOT, n_worlds=5, per_world=8):
-    generate(robot, n_worlds, per_world, path, labeler=labeler, world_maker=world_maker,
+    generate(jwarp.robot(robot), n_worlds, per_world, path, labeler=labeler, world_maker=world_maker,
              progress=False, options={"n_waypoints": W})
     return path
 
@@ -57,8 +58,8 @@ def db(tmp_path_factory):
 @pytest.mark.parametrize("hard_only, feasible_only", [(True, True), (False, True),
                                                        (False, False)])
 def test_samples_are_exactly_the_stored_rows(db, hard_only, feasible_only):
-    s = samples_from_db(db, ROBOT, hard_only=hard_only, feasible_only=feasible_only)
-    with PathDB(db, ROBOT) as d:
+    s = samples_from_db(db, jwarp.robot(ROBOT), hard_only=hard_only, feasible_only=feasible_only)
+    with PathDB(db, jwarp.robot(ROBOT)) as d:
         rows = [r for r in d.rows() if (r[6] or not feasible_only) and (r[7] or not hard_only)]
         assert len(s) == len(rows) > 0
         n = 4
@@ -76,17 +77,17 @@ def test_samples_are_exactly_the_stored_rows(db, hard_only, feasible_only):
 
 def test_world_ids_subset_and_open_db(db):
     with PathDB(db) as d:
-        s = samples_from_db(d, ROBOT, world_ids=[3, 1])
+        s = samples_from_db(d, jwarp.robot(ROBOT), world_ids=[3, 1])
         assert s.world_ids == [3, 1] and set(s.world_index) == {0, 1}
         assert s.world_index[0] == 0  # in the order asked for
         with pytest.raises(ValueError, match="world_ids: .* no world 99"):
-            samples_from_db(d, ROBOT, world_ids=[1, 99])
+            samples_from_db(d, jwarp.robot(ROBOT), world_ids=[1, 99])
         with pytest.raises(PathDBError, match="planar5"):
-            samples_from_db(d, "planar5")
+            samples_from_db(d, jwarp.robot("planar5"))
 
 
 def test_split_keeps_worlds_disjoint(db):
-    s = samples_from_db(db, ROBOT, hard_only=False)
+    s = samples_from_db(db, jwarp.robot(ROBOT), hard_only=False)
     train, val = split_by_world(s, 0.4, seed=1)
     assert len(train) + len(val) == len(s) and len(val.worlds) == 2
     assert not set(train.world_ids) & set(val.world_ids)
@@ -108,20 +109,20 @@ def test_split_keeps_worlds_disjoint(db):
 
 def test_errors_name_the_cause(db, tmp_path):
     with pytest.raises(ValueError, match="n_waypoints: .*6 waypoints.* 20"):
-        samples_from_db(db, ROBOT, n_waypoints=20)
-    assert len(samples_from_db(db, ROBOT, n_waypoints=W))
+        samples_from_db(db, jwarp.robot(ROBOT), n_waypoints=20)
+    assert len(samples_from_db(db, jwarp.robot(ROBOT), n_waypoints=W))
     with pytest.raises(PathDBError, match="p4.sqlite.*planar4"):
-        samples_from_db(db, "planar5")
+        samples_from_db(db, jwarp.robot("planar5"))
     empty = tmp_path / "empty.sqlite"
-    PathDB(empty, ROBOT, create=True).close()
+    PathDB(empty, jwarp.robot(ROBOT), create=True).close()
     with pytest.raises(ValueError, match="empty.sqlite.*no hard and feasible path"):
-        samples_from_db(empty, ROBOT)
+        samples_from_db(empty, jwarp.robot(ROBOT))
 
 
 def test_training_checkpoint_names_the_database(db, tmp_path):
     from jwarp.learn.checkpoint import load_plan_checkpoint
 
-    train, val = split_by_world(samples_from_db(db, ROBOT, hard_only=False), 0.25)
+    train, val = split_by_world(samples_from_db(db, jwarp.robot(ROBOT), hard_only=False), 0.25)
     out = tmp_path / "m.pt"
     opts = TrainPlanOptions(robot=ROBOT, n_bps=8, n_waypoints=W, hidden=8, n_blocks=1,
                             epochs=1, steps_per_epoch=2, batch_size=4, checkpoint=str(out))

@@ -105,7 +105,7 @@ def test_time_reversal_is_a_label_of_the_reversed_task(samples):
     data, _ = samples
     world = data.worlds[0]
     rev = data.paths[:, ::-1]
-    assert path_feasible(ROBOT, world, rev, 4).all()
+    assert path_feasible(jwarp.robot(ROBOT), world, rev, 4).all()
     model = jwarp.robot(ROBOT)   # path_costs takes the RobotModel (issue 40 item 2)
     np.testing.assert_allclose(path_costs(model, world, rev), path_costs(model, world, data.paths),
                                rtol=1e-4, atol=1e-6)
@@ -135,8 +135,8 @@ def test_axis_symmetry_bps_and_labels_match_the_mirrored_world(samples):
     np.testing.assert_allclose(symmetric_bps(net.bps, [world], sym)[0], net.world_bps(mw),
                                atol=1e-5)
     mp = sym.map_q(data.paths)
-    assert path_feasible(ROBOT, mw, mp, 4).all()
-    assert not path_feasible(ROBOT, mw, data.paths, 4).all()  # the mirror matters
+    assert path_feasible(jwarp.robot(ROBOT), mw, mp, 4).all()
+    assert not path_feasible(jwarp.robot(ROBOT), mw, data.paths, 4).all()  # the mirror matters
     arr = augment(net, data, time_reversal=True, axis_symmetry=True)
     assert sorted(np.unique(arr["kind"]).tolist()) == [0, 1, 2, 3]
     m = arr["kind"] == 2
@@ -185,7 +185,7 @@ def test_boost_clean_extend(samples, worlds):
     assert np.all(cleaned.cost <= data.cost + 1e-9)
     changed = np.any(cleaned.paths != data.paths, axis=(1, 2))
     assert changed.sum() == n
-    assert path_feasible(ROBOT, data.worlds[0], cleaned.paths[changed], 4).all()
+    assert path_feasible(jwarp.robot(ROBOT), data.worlds[0], cleaned.paths[changed], 4).all()
     calls = []
 
     def labeler(robot, world, q0, q1):

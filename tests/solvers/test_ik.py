@@ -157,16 +157,16 @@ def test_compensated_ik_reaches_the_target_on_the_elastic_model(device):
 def test_ik_iteration_overhead_times_whole_solver_iterations(device):
     from jwarp.solvers import compensation as C
 
-    out = C.ik_iteration_overhead("arm7", "tcp", 1e-3, n_starts=4, iterations=8, rounds=2,
+    out = C.ik_iteration_overhead(jwarp.robot("arm7"), "tcp", 1e-3, n_starts=4, iterations=8, rounds=2,
                                   device=device)
     assert out["rigid_s"] > 0 and out["elastic_s"] > 0
     assert out["overhead"] == pytest.approx(out["elastic_s"] / out["rigid_s"] - 1)
     assert len(out["overhead_per_round"]) == 2
     assert out["rigid_setup_s"] > 0 and out["elastic_setup_s"] > 0
     with pytest.raises(ValueError, match="iterations"):
-        C.ik_iteration_overhead("arm7", "tcp", 1e-3, n_starts=2, iterations=1, device=device)
+        C.ik_iteration_overhead(jwarp.robot("arm7"), "tcp", 1e-3, n_starts=2, iterations=1, device=device)
     with pytest.raises(ValueError, match="frame"):
-        C.ik_iteration_overhead("arm7", "no_such_frame", 1e-3, n_starts=2, iterations=2,
+        C.ik_iteration_overhead(jwarp.robot("arm7"), "no_such_frame", 1e-3, n_starts=2, iterations=2,
                                 device=device)
 
 

@@ -33,7 +33,7 @@ def _free_targets(robot, frame, n, seed, world=None, margin=0.0, device="cpu"):
     the CUDA test machine has no CPU compiler)."""
     rng = np.random.default_rng(seed)
     qt = sample_within_limits(robot, 8 * n, rng)
-    qt = qt[collision.is_collision_free(robot, qt, world, margin, device=device,
+    qt = qt[collision.is_collision_free(jwarp.robot(robot), qt, world, margin, device=device,
                                         dtype=np.float64)][:n]
     return qt, jwarp.fk(robot, qt, device=device, dtype=np.float64)[:, robot.frame_index(frame)]
 

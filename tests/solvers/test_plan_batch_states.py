@@ -32,7 +32,7 @@ def world():
 def certified(robot, world, path):
     n_sub = FZ.substeps_for_voxel(robot, path, world.resolution, safety=2.0,
                                   max_substeps=256)
-    return bool(FZ.path_feasible(robot, world, path, n_sub)[()])
+    return bool(FZ.path_feasible(jwarp.robot(robot), world, path, n_sub)[()])
 
 
 def test_solved_at_per_stage_and_a_hard_problem_holds_no_other(world):

@@ -29,7 +29,7 @@ def world():
 
 def independent_feasible(robot, world, path):
     n_sub = path_feasibility.substeps_for_voxel(robot, path, world.resolution, safety=2.0, max_substeps=256)
-    return bool(path_feasibility.path_feasible(robot, world, path, n_sub)[()])
+    return bool(path_feasibility.path_feasible(jwarp.robot(robot), world, path, n_sub)[()])
 
 
 def test_defaults():

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from worlds import block_world_2d
 
+import jwarp
 from jwarp.solvers import planning as PL
 from jwarp.solvers.planning.shorten import (
     corners,
@@ -39,7 +40,7 @@ def world():
 def independent_feasible(robot, world, path):
     n_sub = path_feasibility.substeps_for_voxel(robot, path, world.resolution, safety=2.0,
                                                 max_substeps=256)
-    return bool(path_feasibility.path_feasible(robot, world, path, n_sub)[()])
+    return bool(path_feasibility.path_feasible(jwarp.robot(robot), world, path, n_sub)[()])
 
 
 # ------------------------------------------------------------------ the pieces

@@ -45,7 +45,7 @@ def _dense_clearance(robot, world, path, per_segment=400):
     (float64 spheres; independent of the continuous check's proof)."""
     u = np.linspace(0.0, 1.0, per_segment)[:, None]
     q = np.concatenate([a + u * (b - a) for a, b in zip(path[:-1], path[1:])])
-    md = np.asarray(min_distances(robot, q, world, device="cpu", dtype=np.float64))
+    md = np.asarray(min_distances(jwarp.robot(robot), q, world, device="cpu", dtype=np.float64))
     return md[:, 0].min(), md[:, 1].min()
 
 

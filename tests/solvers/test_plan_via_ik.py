@@ -28,7 +28,7 @@ def _shelf():
 
 def _clear(robot, world, q):
     """World and self clearance (N, 2) [m] of configurations q (N, n_dof), float64."""
-    return np.asarray(min_distances(robot, np.atleast_2d(q), world, device="cpu",
+    return np.asarray(min_distances(jwarp.robot(robot), np.atleast_2d(q), world, device="cpu",
                                     dtype=np.float64))
 
 

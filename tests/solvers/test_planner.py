@@ -223,7 +223,7 @@ def test_cli_plan_and_ik_json(block_world, tmp_path, capsys):
     assert set(out["costs"]) == {"total", "length", "collision"}
     assert out["iterations"] > 0 and out["wall_time_s"] > 0
     assert rrd.stat().st_size > 1000
-    assert path_feasibility.path_feasible("planar4", block_world, np.array(out["path"]), 32)
+    assert path_feasibility.path_feasible(jwarp.robot("planar4"), block_world, np.array(out["path"]), 32)
     from scipy.spatial.transform import Rotation
 
     F = jwarp.fk("arm7", np.array([0.3, 0.6, 0.0, -1.0, 0.2, 0.5, 0.0]), device="cpu")[8]

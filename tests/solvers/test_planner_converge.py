@@ -25,7 +25,7 @@ def block_world():
 def independent_feasible(robot, world, path):
     """path_feasible at substeps sized so no sphere moves more than half a voxel."""
     n_sub = path_feasibility.substeps_for_voxel(robot, path, world.voxel_size, safety=2.0, max_substeps=256)
-    return bool(path_feasibility.path_feasible(robot, world, path, n_sub)[()])
+    return bool(path_feasibility.path_feasible(jwarp.robot(robot), world, path, n_sub)[()])
 
 
 def run(world, converge, **kw):

@@ -28,7 +28,7 @@ def edges_feasible(robot, world, path):
     continuous check on the rigid model; substeps sized to half a voxel otherwise)."""
     edges = np.stack([path[:-1], path[1:]], axis=1)
     n_sub = path_feasibility.substeps_for_voxel(robot, edges, world.resolution, safety=2.0, max_substeps=256)
-    return path_feasibility.path_feasible(robot, world, edges, n_sub)
+    return path_feasibility.path_feasible(jwarp.robot(robot), world, edges, n_sub)
 
 
 def test_rrt_connect_finds_a_path_every_edge_feasible(world):
@@ -64,7 +64,7 @@ def test_rrt_uses_the_planners_checks(world, monkeypatch):
             calls[_name] += 1
             return _orig(*a, **k)
         monkeypatch.setattr(FZ, name, wrapped)
-    res = R.rrt_connect("planar4", world, S4, G4, R.RRTOptions(seed=0), device="cpu")
+    res = R.rrt_connect(jwarp.robot("planar4"), world, S4, G4, R.RRTOptions(seed=0), device="cpu")
     assert res.success
     assert calls["collision_free"] > 0 and calls["path_feasible"] > 0
 
@@ -74,25 +74,25 @@ def test_straight_line_when_free():
 
     lim = np.array([[-1.0, 1.0], [-1.0, 1.0]])
     empty = world_from_occupancy(np.zeros((16, 16), bool), lim, 2.0 / 15)
-    res = R.rrt_connect("planar4", empty, S4, G4, device="cpu")
+    res = R.rrt_connect(jwarp.robot("planar4"), empty, S4, G4, device="cpu")
     assert res.success and res.n_samples == 0
     np.testing.assert_array_equal(res.path, np.stack([S4, G4]))
 
 
 def test_budgets_end_the_search(world):
-    few = R.rrt_connect("planar4", world, S4, G4, R.RRTOptions(max_samples=1, batch=1,
+    few = R.rrt_connect(jwarp.robot("planar4"), world, S4, G4, R.RRTOptions(max_samples=1, batch=1,
                                                                  goal_bias=0.0), device="cpu")
     assert not few.success and few.path is None and few.stop_reason == "max_samples"
     assert few.n_samples == 1
-    late = R.rrt_connect("planar4", world, S4, G4, device="cpu", deadline=time.perf_counter())
+    late = R.rrt_connect(jwarp.robot("planar4"), world, S4, G4, device="cpu", deadline=time.perf_counter())
     assert not late.success and late.stop_reason == "time_limit" and late.n_samples == 0
 
 
 def test_endpoints_are_checked(world):
     with pytest.raises(ValueError, match="^start: outside the joint limits or in collision"):
-        R.rrt_connect("planar4", world, np.zeros(4), G4, device="cpu")  # reaches the block
+        R.rrt_connect(jwarp.robot("planar4"), world, np.zeros(4), G4, device="cpu")  # reaches the block
     with pytest.raises(ValueError, match="^goal: expected 4 finite joint values"):
-        R.rrt_connect("planar4", world, S4, np.zeros(3), device="cpu")
+        R.rrt_connect(jwarp.robot("planar4"), world, S4, np.zeros(3), device="cpu")
 
 
 def test_resample_path_keeps_the_polyline():

@@ -47,7 +47,7 @@ def own_world_feasible(robot, world, path):
     ok = FZ.certify_check(robot, world, device="cpu").check(edges, meshes=False).ok.all()
     u = np.linspace(0, 1, 50)[None, :, None]
     dense = (path[:-1, None] + u * (path[1:] - path[:-1])[:, None]).reshape(-1, robot.n_dof)
-    return bool(ok) and min_distances(robot, dense, world, dtype=np.float64)[:, 0].min() > 0
+    return bool(ok) and min_distances(jwarp.robot(robot), dense, world, dtype=np.float64)[:, 0].min() > 0
 
 
 def test_batch_of_worlds_paths_feasible_around_walls(walls):
@@ -91,14 +91,14 @@ def test_one_world_for_all():
     world = block_world_2d()
     starts = np.stack([S4, S4 * 0.9, np.array([2.0, 1.0, 0.0, 0.0])])
     goals = np.stack([G4, G4 * 0.9, np.array([2.0, -1.0, 0.0, 0.0])])
-    res = R.rrt_connect_batch("planar4", world, starts, goals, R.RRTOptions(seed=1),
+    res = R.rrt_connect_batch(jwarp.robot("planar4"), world, starts, goals, R.RRTOptions(seed=1),
                               device="cpu")
     rngs = R.problem_rngs(1, 3)
     for b, r in enumerate(res):
         assert r.success
         edges = np.stack([r.path[:-1], r.path[1:]], axis=1)
-        assert FZ.path_feasible("planar4", world, edges, 1).all()
-        one = R.rrt_connect("planar4", world, starts[b], goals[b], R.RRTOptions(seed=rngs[b]),
+        assert FZ.path_feasible(jwarp.robot("planar4"), world, edges, 1).all()
+        one = R.rrt_connect(jwarp.robot("planar4"), world, starts[b], goals[b], R.RRTOptions(seed=rngs[b]),
                             device="cpu")
         np.testing.assert_array_equal(one.path, r.path)
     assert len(res[0].path) >= 3  # the block is between
@@ -106,7 +106,7 @@ def test_one_world_for_all():
 
 def test_budget_ends_each_problem():
     world = block_world_2d()
-    res = R.rrt_connect_batch("planar4", world, np.stack([S4, S4]), np.stack([G4, G4]),
+    res = R.rrt_connect_batch(jwarp.robot("planar4"), world, np.stack([S4, S4]), np.stack([G4, G4]),
                               R.RRTOptions(seed=0, max_samples=8, batch=4), device="cpu")
     for r in res:
         assert r.n_samples <= 8
@@ -130,7 +130,7 @@ def test_bad_arguments_name_themselves(walls, kw, match):
         robot, world = jwarp.robot("arm7"), batch
         args.update(starts=q0[:2], goals=q1[:2])
     else:
-        robot = "planar4"
+        robot = jwarp.robot("planar4")
     args.update(kw)
     with pytest.raises(ValueError, match=match):
         R.rrt_connect_batch(robot, world, args["starts"], args["goals"], device="cpu",
@@ -222,14 +222,14 @@ def test_rounds_are_as_wide_as_the_device(monkeypatch, cuda):
         monkeypatch.setattr(R, "resolve_device", lambda d: _Cuda())
     want = R.CUDA_BATCH if cuda else R.CPU_BATCH
     o = R.RRTOptions(seed=0, max_samples=1000)
-    res = R.rrt_connect_batch("planar4", world, np.stack([S4, S4 * 0.95]),
+    res = R.rrt_connect_batch(jwarp.robot("planar4"), world, np.stack([S4, S4 * 0.95]),
                               np.stack([G4, G4 * 0.95]), o, device="cpu")
     assert drawn and all(k == want for k in drawn[:-2])
     assert all(r.n_samples % want == 0 or r.n_samples == 1000 for r in res)
     drawn.clear()
-    R.rrt_connect("planar4", world, S4, G4, o, device="cpu")
+    R.rrt_connect(jwarp.robot("planar4"), world, S4, G4, o, device="cpu")
     assert drawn and drawn[0] == want
     drawn.clear()
-    R.rrt_connect_batch("planar4", world, np.stack([S4, S4 * 0.95]),
+    R.rrt_connect_batch(jwarp.robot("planar4"), world, np.stack([S4, S4 * 0.95]),
                         np.stack([G4, G4 * 0.95]), R.RRTOptions(seed=0, batch=8), device="cpu")
     assert drawn and set(drawn) == {8}

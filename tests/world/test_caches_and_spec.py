@@ -116,7 +116,7 @@ def test_torch_objectives_are_shared_by_equal_robots_and_rebuilt_for_an_edited_c
                                rtol=1e-12, atol=0)
     assert not np.allclose(got["edited"], got["a"])
 
-    world = parse_world_spec("simplex:seed=1,cells=16", "planar4")
+    world = parse_world_spec("simplex:seed=1,cells=16", jwarp.robot("planar4"))
     p4 = jwarp.robot("planar4").copy(description="objective cache test")
     po = path_objective(p4, world, 2, 4, 3, dtype=np.float64)
     assert path_objective(p4.copy(), world, 2, 4, 3, dtype=np.float64) is po

@@ -234,7 +234,7 @@ def test_distances_and_collision_free(device):
         free = is_collision_free(model, q, world, margin, device=device)
         np.testing.assert_array_equal(free, (sd.min(1) > margin) & (pd.min(1) > margin))
     # a robot without self-collision pairs: min self distance is inf
-    md2 = min_distances("sphere2d", np.zeros((2, 2)), None, device=device)
+    md2 = min_distances(jwarp.robot("sphere2d"), np.zeros((2, 2)), None, device=device)
     assert np.all(np.isinf(md2))
     # batch dims are kept
     assert sphere_distances(model, q.reshape(5, 10, 7), world, device=device).shape == (5, 10, 14)
@@ -270,25 +270,25 @@ def test_bad_inputs():
     world3 = simplex_world(3, seed=0, shape=(8, 8, 8))
     world2 = simplex_world(2, seed=0, shape=(8, 8))
     with pytest.raises(ValueError, match="world: a 3D world"):
-        collision_cost("planar4", np.zeros((2, 4)), world3, device="cpu")
+        collision_cost(jwarp.robot("planar4"), np.zeros((2, 4)), world3, device="cpu")
     with pytest.raises(ValueError, match="world: a 2D world"):
-        collision_cost("justin19", np.zeros((2, 19)), world2, device="cpu")
+        collision_cost(jwarp.robot("justin19"), np.zeros((2, 19)), world2, device="cpu")
     with pytest.raises(ValueError, match="world: a 2D world"):
-        is_collision_free("arm7", np.zeros((2, 7)), world2)
+        is_collision_free(jwarp.robot("arm7"), np.zeros((2, 7)), world2)
     with pytest.raises(ValueError, match="q"):
-        collision_cost("planar4", np.zeros((2, 5)), world2, device="cpu")
+        collision_cost(jwarp.robot("planar4"), np.zeros((2, 5)), world2, device="cpu")
     with pytest.raises(ValueError, match="NaN"):
-        collision_cost("planar4", np.full((2, 4), np.nan), world2, device="cpu")
+        collision_cost(jwarp.robot("planar4"), np.full((2, 4), np.nan), world2, device="cpu")
     with pytest.raises(ValueError, match="eps"):
-        collision_cost("planar4", np.zeros((2, 4)), world2, eps=0.0, device="cpu")
+        collision_cost(jwarp.robot("planar4"), np.zeros((2, 4)), world2, eps=0.0, device="cpu")
     with pytest.raises(ValueError, match="rho"):
-        collision_cost("planar4", np.zeros((2, 4)), world2, rho=np.zeros((3, 6, 5)), device="cpu")
+        collision_cost(jwarp.robot("planar4"), np.zeros((2, 4)), world2, rho=np.zeros((3, 6, 5)), device="cpu")
     with pytest.raises(TypeError, match="world"):
-        collision_cost("planar4", np.zeros((2, 4)), np.zeros((8, 8)), device="cpu")
+        collision_cost(jwarp.robot("planar4"), np.zeros((2, 4)), np.zeros((8, 8)), device="cpu")
     with pytest.raises(ValueError, match="unknown robot"):
-        collision_cost("nobody", np.zeros((2, 4)), world2, device="cpu")
+        collision_cost(jwarp.robot("nobody"), np.zeros((2, 4)), world2, device="cpu")
     with pytest.raises(ValueError, match="margin"):
-        is_collision_free("planar4", np.zeros((2, 4)), world2, margin=np.nan)
+        is_collision_free(jwarp.robot("planar4"), np.zeros((2, 4)), world2, margin=np.nan)
 
 
 @requires_cuda

@@ -150,8 +150,8 @@ def test_wide_choice_and_bad_values(monkeypatch):
     from jwarp.world.collision import WIDE_MAX_CONFIGS
 
     with pytest.raises(TypeError, match="wide"):
-        CollisionModel("arm7", None, device="cpu", wide="yes")
-    assert CollisionModel("arm7", None, device="cpu").wide is None  # by the batch size
+        CollisionModel(jwarp.robot("arm7"), None, device="cpu", wide="yes")
+    assert CollisionModel(jwarp.robot("arm7"), None, device="cpu").wide is None  # by the batch size
     monkeypatch.setenv("JWARP_COST_KERNEL", "fast")
     with pytest.raises(ValueError, match="JWARP_COST_KERNEL"):
         default_wide("cpu", 10)

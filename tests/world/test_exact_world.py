@@ -208,7 +208,7 @@ def _dense_clearance(robot, world, paths, n=1500):
     P, W, nd = paths.shape
     u = np.linspace(0, 1, n)
     seg = paths[:, :-1, None] + u[None, None, :, None] * np.diff(paths, axis=1)[:, :, None]
-    md = min_distances(robot, seg.reshape(-1, nd), world, dtype=np.float64)
+    md = min_distances(jwarp.robot(robot), seg.reshape(-1, nd), world, dtype=np.float64)
     return md.reshape(P, -1, 2).min(axis=(1, 2))
 
 

@@ -94,4 +94,4 @@ def test_estimate_printed_and_bad_budget(capsys):
     with pytest.raises(ValueError, match="max_memory"):
         never_colliding_pairs("arm7", n_samples=10, max_memory=1000)
     with pytest.raises(TypeError, match="max_memory"):
-        pair_sampling_cost("arm7", 10, max_memory=1e9)
+        pair_sampling_cost(jwarp.robot("arm7"), 10, max_memory=1e9)

@@ -359,7 +359,7 @@ def test_parse_world_spec(tmp_path, device):
     w.save(tmp_path / "a.npz")
     np.testing.assert_array_equal(parse_world_spec(str(tmp_path / "a.npz")).sdf, w.sdf)
     assert parse_world_spec(w) is w
-    r = parse_world_spec("simplex:seed=1,cells=24", robot="planar4", device=device)  # its reach: FK
+    r = parse_world_spec("simplex:seed=1,cells=24", robot=jwarp.robot("planar4"), device=device)  # its reach: FK
     assert r.dim == 2 and max(r.shape) == 24
     assert np.all(r.limits[:, 0] < -0.9) and np.all(r.limits[:, 1] > 0.9)  # covers the reach
     with pytest.raises(ValueError, match="unknown key 'colour'"):
@@ -373,19 +373,19 @@ def test_parse_world_spec(tmp_path, device):
     with pytest.raises(ValueError, match="world"):
         parse_world_spec("blocks:seed=1")
     with pytest.raises(ValueError, match="2D world"):
-        parse_world_spec(w, robot="justin19")
+        parse_world_spec(w, robot=jwarp.robot("justin19"))
     with pytest.raises(ValueError, match="3D world"):
-        parse_world_spec("simplex:dim=3,cells=8", robot="planar4")
+        parse_world_spec("simplex:dim=3,cells=8", robot=jwarp.robot("planar4"))
     # the shelf scene by name
     from jwarp.world.scenes import shelf_world
-    np.testing.assert_array_equal(parse_world_spec("shelf", robot="justin19").sdf,
+    np.testing.assert_array_equal(parse_world_spec("shelf", robot=jwarp.robot("justin19")).sdf,
                                   shelf_world().sdf)
     assert parse_world_spec("shelf:voxel=0.05").voxel_size == pytest.approx(0.05)
     for bad in ("shelf:cells=3", "shelf:voxel=x", "shelf:voxel=-1"):
         with pytest.raises(ValueError, match="^world"):
             parse_world_spec(bad)
     with pytest.raises(ValueError, match="3D world"):
-        parse_world_spec("shelf", robot="planar4")
+        parse_world_spec("shelf", robot=jwarp.robot("planar4"))
 
 
 # ============================================================ feasibility

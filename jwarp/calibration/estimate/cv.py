@@ -439,10 +439,12 @@ def calibrate_cv(robot: RobotLike, measurement: Measurement, q: ArrayLike, y: An
     ``provenance['cv']`` records the choice, its CV error and the table; the
     :class:`CVResult`)."""
     from jwarp.calibration.estimate.map import calibrate_with
+    from jwarp.plugins.registry import robot as get_robot
 
-    table = cross_validate(robot, measurement, q, y, options, cv, meta=meta)
+    model = get_robot(robot)   # resolved once here; both steps take the model
+    table = cross_validate(model, measurement, q, y, options, cv, meta=meta)
     final = dataclasses.replace(table.chosen.apply(options), callback=options.callback,
                                 warn=options.warn)
-    res = calibrate_with(robot, measurement, q, y, final, meta=meta)
+    res = calibrate_with(model, measurement, q, y, final, meta=meta)
     res.provenance = dict(res.provenance, cv=table.to_dict())
     return res, table

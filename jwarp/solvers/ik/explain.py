@@ -32,9 +32,8 @@ import numpy as np
 from jwarp.core.arrays import real_array
 from jwarp.core.device import host_device
 from jwarp.core.limits import LIMIT_TOL
-from jwarp.core.types import ArrayLike, RobotLike
+from jwarp.core.types import ArrayLike
 from jwarp.model import RobotModel
-from jwarp.plugins.registry import robot as get_robot
 from jwarp.solvers.ik.objective import as_poses
 from jwarp.solvers.ik.options import ORIENTATIONS, orientation_args
 
@@ -62,13 +61,13 @@ def _frames(model: RobotModel, q: np.ndarray, kappa: ArrayLike | None = None) ->
     return F, rho, bool(np.all(conv))
 
 
-def pose_errors(robot: RobotLike, frame: int | str, q: ArrayLike, target: Any, *, orientation: str = "full",
+def pose_errors(robot: RobotModel, frame: int | str, q: ArrayLike, target: Any, *, orientation: str = "full",
                 free_axis: Any = (0.0, 0.0, 1.0), kappa: ArrayLike | None = None) -> tuple[float, float]:
     """(position error [m], rotation error [rad]) of ``frame`` at q (n_dof,) against the
     target pose (4, 4), as :func:`explain_ik` measures them (planar robots: x, y and the
     rotation about z; ``orientation`` "none": rotation error 0; "axis": the angle between
     ``free_axis`` (end-effector frame) carried by the frame and by the target)."""
-    model = get_robot(robot)
+    model = robot
     qv, T, fi, axis = _inputs(model, frame, q, target, orientation, free_axis)
     F, _, _ = _frames(model, qv, kappa)
     return _pose_errors(model, F[fi], T, orientation, axis)
@@ -228,7 +227,7 @@ def _inputs(model: RobotModel, frame: int | str, q: ArrayLike, target: Any, orie
     return np.asarray(qv, np.float64), np.asarray(T, np.float64), fi, np.asarray(axis)
 
 
-def explain_ik(robot: RobotLike, frame: int | str, q: ArrayLike, target: Any, *, world: World | None = None,
+def explain_ik(robot: RobotModel, frame: int | str, q: ArrayLike, target: Any, *, world: World | None = None,
                margin: float = 0.0, tol_pos: float = 1e-4, tol_rot: float = 1e-3,
                orientation: str = "full", free_axis: Any = (0.0, 0.0, 1.0),
                kappa: ArrayLike | None = None) -> str:
@@ -261,7 +260,7 @@ def explain_ik(robot: RobotLike, frame: int | str, q: ArrayLike, target: Any, *,
     """
     from jwarp.world.collision import check_world
 
-    model = get_robot(robot)
+    model = robot
     qv, T, fi, axis = _inputs(model, frame, q, target, orientation, free_axis)
     for name, v in (("tol_pos", tol_pos), ("tol_rot", tol_rot)):
         if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \

@@ -35,8 +35,8 @@ import numpy as np
 
 from jwarp.core.arrays import real_array, real_number, resolve_device
 from jwarp.core.limits import sample_within_limits, within_limits
-from jwarp.core.types import DeviceLike, RobotLike
-from jwarp.plugins.registry import robot as get_robot
+from jwarp.core.types import DeviceLike
+from jwarp.model import RobotModel
 from jwarp.utils.checks import check_int
 from jwarp.world import path_feasibility as _fz
 
@@ -278,7 +278,7 @@ def _vector(x: Any, n: int, name: str) -> np.ndarray:
     return np.array(a, np.float64)
 
 
-def rrt_connect(robot: RobotLike, world: Any, start: Any, goal: Any,
+def rrt_connect(robot: RobotModel, world: Any, start: Any, goal: Any,
                 options: RRTOptions | None = None, *, margin: float = 0.0, kappa: Any = None,
                 device: DeviceLike = None, deadline: float | None = None,
                 endpoint_margin: float | None = None, self_margin: float = 0.0,
@@ -313,7 +313,7 @@ def rrt_connect(robot: RobotLike, world: Any, start: Any, goal: Any,
         raise TypeError(f"options: expected an RRTOptions, got {type(o).__name__}")
     o.validate()
     batch, n_connect = rrt_widths(o, not resolve_device(device).is_cuda)
-    model = get_robot(robot)
+    model = robot
     _fz.check_world(model, world)
     n = model.n_dof
     q0, q1 = _vector(start, n, "start"), _vector(goal, n, "goal")
@@ -709,7 +709,7 @@ def problem_rngs(seed: Any, B: int) -> list[np.random.Generator]:
     return [np.random.default_rng(c) for c in ss.spawn(B)]
 
 
-def rrt_connect_batch(robot: RobotLike, world: Any, starts: Any, goals: Any,
+def rrt_connect_batch(robot: RobotModel, world: Any, starts: Any, goals: Any,
                       options: RRTOptions | None = None, *, margin: float = 0.0,
                       endpoint_margin: float | None = None, self_margin: float = 0.0,
                       kappa: Any = None, device: DeviceLike = None,
@@ -745,7 +745,7 @@ def rrt_connect_batch(robot: RobotLike, world: Any, starts: Any, goals: Any,
         raise TypeError(f"options: expected an RRTOptions, got {type(o).__name__}")
     o.validate()
     batch, n_connect = rrt_widths(o, not resolve_device(device).is_cuda)
-    model = get_robot(robot)
+    model = robot
     _fz.check_world(model, world)
     n = model.n_dof
     q0, q1 = _problem_rows(starts, n, "starts"), _problem_rows(goals, n, "goals")
