@@ -39,11 +39,12 @@ import warp as wp
 from jwarp.calibration.files import Setup, make_measurement
 from jwarp.core.arrays import init_warp, resolve_device
 from jwarp.core.device import make_struct, put_model, scalar_type
-from jwarp.core.types import ArrayLike, DTypeLike
+from jwarp.core.types import ArrayLike, DTypeLike, RobotLike
 from jwarp.kernels import path as path_kernels
 from jwarp.kernels import visibility as vk
 from jwarp.model import RobotModel
 from jwarp.model.geometry import parse_markers, rotvec_matrix
+from jwarp.plugins.registry import robot as get_robot
 from jwarp.utils.atomic import atomic_write_text
 from jwarp.utils.checks import check_int
 
@@ -265,10 +266,10 @@ class PoseSampler:
             cameras, ``single_marker`` / ``require`` without cameras.
     """
 
-    def __init__(self, robot: RobotModel, setup: Setup | None = None,
+    def __init__(self, robot: RobotLike, setup: Setup | None = None,
                  options: PoseOptions | None = None, draw: Any = None) -> None:
         init_warp()
-        self.robot = robot
+        self.robot = robot = get_robot(robot)  # the edge: a name, path or RobotModel
         self.draw = draw
         self.setup = setup
         self.options = opt = (options or PoseOptions()).validate()
