@@ -259,7 +259,7 @@ def reach_front(reach: np.ndarray) -> np.ndarray:
     R = np.asarray(reach, np.float64)
     if len(R) < 2:
         return R
-    ge = (R[:, None, :] >= R[None, :, :]).all(-1)         # ge[j, i]: row j bounds row i
+    ge = np.asarray((R[:, None, :] >= R[None, :, :]).all(-1))  # ge[j, i]: row j bounds row i
     np.fill_diagonal(ge, False)
     same = ge & ge.T                                      # equal rows: the first stays
     beaten = (ge & ~same).any(0) | np.triu(same, 1).any(0)

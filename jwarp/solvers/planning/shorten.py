@@ -201,8 +201,9 @@ def shortcut_paths(paths: np.ndarray, check: Callable[..., np.ndarray],
         # the points of the active paths (the others are not read this round)
         pts = [(_refined(nd) if 2 * len(nd) - 1 <= max_points else nd) if a else nd
                for nd, a in zip(nodes, active)]
+        none = np.zeros(0)  # an inactive path's cumulative lengths (not read)
         cums = [np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
-                if a else None for p, a in zip(pts, active)]
+                if a else none for p, a in zip(pts, active)]
         # the gain of every shortcut (s, j) of the round's points, once per round: the
         # steps' lists (_entries) read it
         gains = [_gains(p, c) if a else None for p, c, a in zip(pts, cums, active)]
