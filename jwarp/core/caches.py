@@ -57,11 +57,10 @@ class IdentityCache(Generic[V]):
     def _slot(key: Hashable, objects: tuple) -> tuple:
         return (key, tuple(id(o) for o in objects))
 
-    def _store(self, owner: Any) -> dict:
-        store = owner.__dict__.get(OWNER_ATTRIBUTE)
-        if store is None:
-            store = owner.__dict__[OWNER_ATTRIBUTE] = {}
-        return store
+    @staticmethod
+    def _store(owner: Any) -> dict:
+        """The values the caches keep on ``owner`` (made on first use)."""
+        return owner.__dict__.setdefault(OWNER_ATTRIBUTE, {})
 
     def get(self, key: Hashable, objects: tuple = ()) -> V | None:
         """The value kept for ``key`` and these very ``objects`` (marked recently used), or
@@ -74,8 +73,7 @@ class IdentityCache(Generic[V]):
             refs, held, owned = hit
             if owned:
                 owner = held()
-                value = None if owner is None else owner.__dict__.get(OWNER_ATTRIBUTE, {}).get(
-                    (id(self), slot))
+                value = None if owner is None else self._store(owner).get((id(self), slot))
                 if value is None:
                     return None
             else:
@@ -107,7 +105,7 @@ class IdentityCache(Generic[V]):
         if hit is not None and hit[2]:
             owner = hit[1]()
             if owner is not None:
-                owner.__dict__.get(OWNER_ATTRIBUTE, {}).pop((id(self), slot), None)
+                self._store(owner).pop((id(self), slot), None)
 
     def clear(self) -> None:
         """Forget every entry."""

@@ -74,27 +74,27 @@ N_STARTS = {"cpu": 8, "cuda": 32}
 SHORTEN = {"cpu": 1, "cuda": 4}
 
 
+def _per_device(value: Any, table: dict, device: str) -> Any:
+    """``value``, or where it is None the ``table``'s entry for ``device``'s kind."""
+    return table["cuda" if str(device).startswith("cuda") else "cpu"] if value is None \
+        else value
+
+
 def shorten_for(o: PlanOptions, device: str) -> int:
     """``o.shorten``, or its default on ``device`` (:data:`SHORTEN`)."""
-    if o.shorten is not None:
-        return int(o.shorten)
-    return SHORTEN["cuda" if str(device).startswith("cuda") else "cpu"]
+    return int(_per_device(o.shorten, SHORTEN, device))
 
 
 def n_starts_for(o: PlanOptions, device: str) -> int:
     """``o.n_starts``, or its default on ``device`` (:data:`N_STARTS`)."""
-    if o.n_starts is not None:
-        return int(o.n_starts)
-    return N_STARTS["cuda" if str(device).startswith("cuda") else "cpu"]
+    return int(_per_device(o.n_starts, N_STARTS, device))
 
 
 def fallback_share(o: PlanOptions, device: str, n_problems: int = 1) -> float:
     """``o.fallback_after``, or its default on ``device`` for ``n_problems``
     (:data:`FALLBACK_AFTER`; more than one: :data:`BATCH_FALLBACK_AFTER`)."""
-    if o.fallback_after is not None:
-        return float(o.fallback_after)
     table = FALLBACK_AFTER if int(n_problems) <= 1 else BATCH_FALLBACK_AFTER
-    return table["cuda" if str(device).startswith("cuda") else "cpu"]
+    return float(_per_device(o.fallback_after, table, device))
 
 
 #: the stages of :attr:`PlanResult.stage`

@@ -40,18 +40,8 @@ def length_cost(paths: np.ndarray) -> np.ndarray:
 def corners(path: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     """The nodes (k, n_dof) of a polyline (W, n_dof) where it turns: repeated waypoints and
     waypoints on the straight line between their neighbours dropped (the polyline is the
-    same); the first and last are kept."""
-    p = np.asarray(path, np.float64)
-    keep = [0]
-    for t in range(1, len(p) - 1):
-        a, b, c = p[keep[-1]], p[t], p[t + 1]
-        ab, bc = np.linalg.norm(b - a), np.linalg.norm(c - b)
-        if ab <= tol:
-            continue  # a repeat of the last kept node
-        if ab + bc - np.linalg.norm(c - a) > tol * max(1.0, ab + bc):
-            keep.append(t)
-    keep.append(len(p) - 1)
-    return p[keep]
+    same); the first and last are kept (:func:`corners_many` of one path)."""
+    return corners_many(np.asarray(path, np.float64)[None], tol)[0]
 
 
 def corners_many(paths: np.ndarray, tol: float = 1e-9) -> list[np.ndarray]:
@@ -113,14 +103,11 @@ class Pace:
         :data:`FIRST_CHUNK_SHARE` of ``size`` (it sets the pace: one call of a full chunk
         may itself overrun the deadline)."""
         size = max(1, int(size))
-        first = size if self.rows or deadline is None else max(1, int(size * FIRST_CHUNK_SHARE))
-        ends = [min(n, first)] + list(range(first + size, n + size, size))
+        step = size if self.rows or deadline is None else max(1, int(size * FIRST_CHUNK_SHARE))
         out, at = [], 0
-        for e in ends:
-            e = min(e, n)
-            if e > at:
-                out.append((at, e))
-            at = e
+        while at < n:
+            out.append((at, min(n, at + step)))
+            at, step = at + step, size
         return out
 
     def run(self, f: Callable[[np.ndarray], np.ndarray], rows: np.ndarray) -> np.ndarray:
