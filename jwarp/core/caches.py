@@ -48,6 +48,10 @@ class IdentityCache(Generic[V]):
         if maxsize < 1:
             raise ValueError(f"maxsize: expected an integer >= 1, got {maxsize!r}")
         self.maxsize = int(maxsize)
+        if owner is not None and (isinstance(owner, bool) or not isinstance(owner, int)
+                                  or owner < 0):
+            raise ValueError(f"owner: expected an index >= 0 into the objects, or None, got "
+                             f"{owner!r}")
         self.owner = owner
         # slot -> (weak refs of the objects, the value held here, or a weak ref of its owner)
         self._entries: OrderedDict[tuple, tuple[tuple, Any, bool]] = OrderedDict()

@@ -257,6 +257,8 @@ def reach_front(reach: np.ndarray) -> np.ndarray:
     equal rows kept): ``max_s x . reach[s]`` over them equals the max over all rows for
     every ``x >= 0``."""
     R = np.asarray(reach, np.float64)
+    if R.ndim != 2 or not np.all(R >= 0):
+        raise ValueError(f"reach: expected a table (S, F) of bounds >= 0, got shape {R.shape}")
     if len(R) < 2:
         return R
     ge = np.asarray((R[:, None, :] >= R[None, :, :]).all(-1))  # ge[j, i]: row j bounds row i

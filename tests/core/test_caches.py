@@ -52,6 +52,9 @@ def test_least_recently_used_go_first():
     assert len(c) == 0
     with pytest.raises(ValueError):
         IdentityCache(0)
+    for bad in (-1, 1.5, True, "0"):
+        with pytest.raises(ValueError, match="^owner: expected an index"):
+            IdentityCache(2, owner=bad)
 
 
 def test_world_caches_are_identity_caches():

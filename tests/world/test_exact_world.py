@@ -310,6 +310,9 @@ def test_travel_bound_keeps_only_the_reach_front():
         f = reach_front(T)
         assert len(f) <= len(np.unique(T, axis=0))
         np.testing.assert_array_equal((x @ T.T).max(1), (x @ f.T).max(1))
+    for bad in (np.zeros(3), -np.ones((2, 2))):
+        with pytest.raises(ValueError, match="^reach: expected a table"):
+            reach_front(bad)
 
 
 def test_sphere_reach_bounds_the_motion():
