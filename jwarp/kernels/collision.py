@@ -61,6 +61,9 @@ from jwarp.kernels.elastic import funcs as elastic_funcs
 from jwarp.kernels.fk import ROWS_NOMINAL
 from jwarp.kernels.fk import funcs as fk_funcs
 
+#: :func:`funcs` ``objects_near``: no exact object (nor plane) near the ball
+NEAR_NONE = wp.constant(-2)
+
 
 @wp.kernel(module="unique")
 def mesh_sdf_kernel(
@@ -261,23 +264,53 @@ def funcs(scalar: type) -> SimpleNamespace:
         return world_distance_skip(world, x, cutoff, grp, 0)
 
     @wp.func
-    def objects_far(world: WorldModel, c: vec3, r: scalar, eps: scalar, grp: int) -> int:
-        """1 where every exact object keeps more than ``r + eps`` (plus a rounding slack)
-        from the point c: then no sphere inside the ball (c, r) comes within eps of an
-        object (signed distances of convex primitives are 1-Lipschitz; callers pass this
-        only for worlds without meshes, see ``bound_skip``), so their object queries can
-        be skipped."""
-        slack = scalar(1e-4) * (one + wp.abs(c[0]) + wp.abs(c[1]) + wp.abs(c[2]))
-        d, g, k = gk.shapes_distance(world.shapes, c, r + eps + slack, grp)
-        if k == -1:
-            return 1
-        return 0
+    def objects_near(world: WorldModel, c: vec3, r: scalar, eps: scalar, grp: int):
+        """(n, ids): the exact objects that may come within ``eps`` of a sphere inside
+        the ball (c, r) (:func:`jwarp.kernels.geometry` ``shapes_near``, with the rounding
+        a rounding slack): the BVH objects ``ids[:n]`` and the planes; n =
+        :data:`NEAR_NONE`: none at all; n = -1: too many for
+        the list. Callers pass this only for worlds without meshes (``bound_skip``)."""
+        rr = r + eps + scalar(1e-4) * (one + wp.abs(c[0]) + wp.abs(c[1]) + wp.abs(c[2]))
+        n, ids = gk.shapes_near(world.shapes, c, rr, grp)
+        if n == 0:  # no BVH object: the planes' distances from the ball decide
+            d, g, k = gk.shapes_distance_near(world.shapes, c, rr, grp, 0, ids)
+            if k == -1:
+                n = NEAR_NONE
+        return n, ids
+
+    @wp.func
+    def world_distance_near(world: WorldModel, x: vec3, cutoff: scalar, grp: int, n: int,
+                            ids: gk.near_ids):
+        """:func:`world_distance` with the exact objects ``ids[:n]`` of
+        :func:`objects_near` for a ball holding the sphere at x (its cutoff within the
+        ball's eps): n = :data:`NEAR_NONE` leaves the objects out, n = -1 queries them
+        all."""
+        best = cutoff
+        bg = vec3(zero, zero, one)
+        bk = int(-1)
+        if world.use_grid != 0:
+            gr = world.grid
+            if sdf_lower_bound(gr.cellmin, gr.origin, gr.inv_h, gr.dim, x) - world.grid_error \
+                    < cutoff:
+                d, g = sdf_sample(gr.grid, gr.origin, gr.inv_h, gr.dim, x)
+                d = d - world.grid_error
+                if d < best:
+                    best = d
+                    bg = g
+                    bk = -2
+        if world.shapes.kind.shape[0] > 0 and n != NEAR_NONE:
+            d2, g2, k2 = gk.shapes_distance_near(world.shapes, x, best, grp, n, ids)
+            if k2 >= 0:
+                best = d2
+                bg = g2
+                bk = k2
+        return best, bg, bk
 
     @wp.func
     def world_distance_skip(world: WorldModel, x: vec3, cutoff: scalar, grp: int,
                             skip_objects: int):
         """:func:`world_distance`; ``skip_objects`` = 1 leaves the exact objects out (the
-        caller proved them farther than the cutoff, :func:`objects_far`)."""
+        caller proved them farther than the cutoff)."""
         best = cutoff
         bg = vec3(zero, zero, one)
         bk = int(-1)
@@ -343,8 +376,9 @@ def funcs(scalar: type) -> SimpleNamespace:
         SphereTables=SphereTables, WorldGrid=WorldGrid, WorldModel=WorldModel,
         smooth_clip=smooth_clip, sdf_sample=sdf_sample, sdf_lower_bound=sdf_lower_bound,
         world_sample=world_sample, world_lower_bound=world_lower_bound,
-        world_distance=world_distance, objects_far=objects_far,
+        world_distance=world_distance,
         world_distance_skip=world_distance_skip, sphere_centre=sphere_centre,
+        objects_near=objects_near, world_distance_near=world_distance_near,
         forces_to_gradient=forces_to_gradient,
     )
 
@@ -356,8 +390,8 @@ def cost(scalar: type) -> wp.Kernel:
     sh = funcs(scalar)
     fk, el, vec3 = sh.fk, sh.el, sh.vec3
     mat44, zero, SphereTables = sh.mat44, sh.zero, sh.SphereTables
-    WorldModel, smooth_clip, objects_far = sh.WorldModel, sh.smooth_clip, sh.objects_far
-    world_distance_skip, sphere_centre = sh.world_distance_skip, sh.sphere_centre
+    WorldModel, smooth_clip, objects_near = sh.WorldModel, sh.smooth_clip, sh.objects_near
+    world_distance_near, sphere_centre = sh.world_distance_near, sh.sphere_centre
     forces_to_gradient = sh.forces_to_gradient
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -400,8 +434,8 @@ def cost(scalar: type) -> wp.Kernel:
         waypoint threads end with one torque update of their row from the frames just
         computed (:func:`jwarp.kernels.elastic` ``compensation_update_at``).
         ``bound_skip`` (exact objects, no meshes): where a frame's bounding sphere keeps
-        eps from every object (:func:`objects_far`), its spheres skip the object queries
-        (the same cost: those spheres' terms are 0)."""
+        eps from every object, its spheres skip the object queries, else they visit only
+        the objects near it (:func:`objects_near`, one query per frame; the same cost)"""
         t = wp.tid()
         b = t
         rb = int(0)
@@ -429,7 +463,8 @@ def cost(scalar: type) -> wp.Kernel:
         hit = int(0)
         u_world = zero
         cur = int(-1)  # the frame whose bounding sphere was tested last (bound_skip)
-        far = int(0)
+        near_n = int(-1)  # the objects near it (objects_near; -1: each sphere queries all)
+        near = sh.geometry.near_ids()
         for s in range(spheres.sph_frame.shape[0]):
             fr = spheres.sph_frame[s]
             x = sphere_centre(frames, t, fr, spheres.sph_pos[s])
@@ -437,14 +472,14 @@ def cost(scalar: type) -> wp.Kernel:
             if w_world != zero:
                 if bound_skip != 0 and fr != cur:
                     cur = fr
-                    far = 0
+                    near_n = -1
                     if spheres.bound_rad[fr] >= zero:
-                        far = objects_far(world, sphere_centre(frames, t, fr,
-                                                               spheres.bound_pos[fr]),
-                                          spheres.bound_rad[fr], eps, grp)
+                        near_n, near = objects_near(world, sphere_centre(
+                            frames, t, fr, spheres.bound_pos[fr]), spheres.bound_rad[fr],
+                            eps, grp)
                 # what keeps eps from the sphere costs nothing: cells and objects skipped
                 rs = spheres.sph_rad[s]
-                d, g, obj = world_distance_skip(world, x, rs + eps, grp, far)
+                d, g, obj = world_distance_near(world, x, rs + eps, grp, near_n, near)
                 if obj != -1 and d - rs < eps:
                     c, dc = smooth_clip(d - rs, eps)
                     u_world += c
@@ -734,7 +769,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         scalar=scalar, SphereTables=sh.SphereTables, WorldGrid=sh.WorldGrid,
         WorldModel=sh.WorldModel, world_distance=sh.world_distance,
         world_distance_skip=sh.world_distance_skip, forces_to_gradient=sh.forces_to_gradient,
-        objects_far=sh.objects_far, geometry=sh.geometry, vec3=sh.vec3, mat44=sh.mat44,
+        objects_near=sh.objects_near, geometry=sh.geometry, vec3=sh.vec3, mat44=sh.mat44,
         smooth_clip=sh.smooth_clip, sdf_sample=sh.sdf_sample,
         sdf_lower_bound=sh.sdf_lower_bound, world_sample=sh.world_sample,
         world_lower_bound=sh.world_lower_bound, sphere_centre=sh.sphere_centre,

@@ -40,6 +40,11 @@ CONE = wp.constant(4)
 PLANE = wp.constant(5)
 MESH = wp.constant(6)
 
+#: the most objects a ball's candidate list holds (:func:`kernels` ``shapes_near``: one
+#: BVH query for all the spheres of a link instead of one per sphere); a ball near more
+#: objects has its points query the BVH each
+NEAR_MAX = wp.constant(16)
+
 #: kind names in index order (host tables use these indices)
 KIND_NAMES = ("sphere", "box", "cylinder", "capsule", "cone", "plane", "mesh")
 
@@ -250,6 +255,64 @@ def kernels(scalar: type) -> SimpleNamespace:
                     bk = k
         return best, bg, bk
 
+    near_ids = wp.types.vector(length=NEAR_MAX, dtype=wp.int32)
+
+    @wp.func
+    def shapes_near(ws: WorldShapes, c: vec3, r: scalar, grp: int):
+        """(n, ids): the objects of the BVH (every object but the planes) whose bounding
+        box lies within ``r`` of the point c, in ``ids[:n]``; n = -1 where more than
+        :data:`NEAR_MAX` do (then :func:`shapes_distance_near` queries the BVH itself).
+        One query for a ball of points: every object within ``cutoff`` of a point x
+        with |x - c| + cutoff <= r is among them."""
+        ids = near_ids()
+        n = int(0)
+        root = int(-1)
+        if ws.use_groups != 0 and grp >= 0:
+            root = ws.group_root[grp]
+        if ws.use_bvh != 0 and root != -2:
+            pad = r + scalar(1e-5) * (one + wp.abs(c[0]) + wp.abs(c[1]) + wp.abs(c[2]))
+            lo = wp.vec3f(wp.float32(c[0] - pad), wp.float32(c[1] - pad), wp.float32(c[2] - pad))
+            hi = wp.vec3f(wp.float32(c[0] + pad), wp.float32(c[1] + pad), wp.float32(c[2] + pad))
+            query = wp.bvh_query_aabb(ws.bvh, lo, hi, root)
+            k = int(0)
+            while wp.bvh_query_next(query, k):
+                if n < NEAR_MAX:
+                    ids[n] = k
+                n += 1
+        if n > NEAR_MAX:
+            n = -1
+        return n, ids
+
+    @wp.func
+    def shapes_distance_near(ws: WorldShapes, x: vec3, cutoff: scalar, grp: int, n: int,
+                             ids: near_ids):
+        """:func:`shapes_distance` over the planes and the objects ``ids[:n]`` of
+        :func:`shapes_near` (a superset of the objects within ``cutoff`` of x), without a
+        BVH query; n = -1: :func:`shapes_distance` itself."""
+        if n < 0:
+            return shapes_distance(ws, x, cutoff, grp)
+        best = cutoff
+        bg = vec3(zero, zero, one)
+        bk = int(-1)
+        by_group = ws.use_groups != 0 and grp >= 0
+        for i in range(ws.planes.shape[0]):
+            k = ws.planes[i]
+            if by_group and ws.group[k] != grp:
+                continue
+            d, g = shape_sdf(ws, k, x, cutoff)
+            if d < best:
+                best = d
+                bg = g
+                bk = k
+        for i in range(n):
+            k = ids[i]
+            d, g = shape_sdf(ws, k, x, best)
+            if d < best:
+                best = d
+                bg = g
+                bk = k
+        return best, bg, bk
+
     @wp.kernel(module="unique", enable_backward=False)
     def distance_kernel(
         # Model:
@@ -284,4 +347,6 @@ def kernels(scalar: type) -> SimpleNamespace:
                            sphere_sdf=sphere_sdf, box_sdf=box_sdf, cylinder_sdf=cylinder_sdf,
                            capsule_sdf=capsule_sdf, cone_sdf=cone_sdf, mesh_sdf=mesh_sdf,
                            shape_sdf=shape_sdf, shapes_distance=shapes_distance,
+                           near_ids=near_ids, shapes_near=shapes_near,
+                           shapes_distance_near=shapes_distance_near,
                            distance=distance_kernel)

@@ -176,7 +176,8 @@ def funcs() -> SimpleNamespace:
         lself = int(0)
         S = spheres.sph_frame.shape[0]
         cur = int(-1)  # the frame of the run of spheres whose bound was tested last
-        far = int(0)
+        near_n = int(-1)  # its objects (objects_near; -1: every sphere queries them all)
+        near = ck.geometry.near_ids()
         for s in range(S):
             fr = spheres.sph_frame[s]
             x = ck.sphere_centre(sc.frames, r, fr, spheres.sph_pos[s])
@@ -184,11 +185,12 @@ def funcs() -> SimpleNamespace:
             L = sc.travel[rt, s]
             if cm.use_world != 0:
                 if cm.bound_skip != 0 and fr != cur:
-                    # the frame's bounding sphere keeps every object beyond the largest
-                    # cutoff of this run of its spheres: none of them finds an object
-                    # (the same result without the queries; exact objects, no meshes)
+                    # the objects within the largest cutoff of this run of the frame's
+                    # spheres from its bounding sphere, in one query: the spheres look at
+                    # those only (the same result with fewer queries; exact objects, no
+                    # meshes)
                     cur = fr
-                    far = 0
+                    near_n = -1
                     if spheres.bound_rad[fr] >= zero:
                         lf = zero
                         s2 = s
@@ -197,13 +199,13 @@ def funcs() -> SimpleNamespace:
                                 break
                             lf = wp.max(lf, sc.travel[rt, s2])
                             s2 += 1
-                        far = ck.objects_far(cm.world, ck.sphere_centre(sc.frames, r, fr,
-                                                                        spheres.bound_pos[fr]),
-                                             spheres.bound_rad[fr],
-                                             m_req + lf * reach + f64(1e-9), grp)
+                        near_n, near = ck.objects_near(
+                            cm.world, ck.sphere_centre(sc.frames, r, fr, spheres.bound_pos[fr]),
+                            spheres.bound_rad[fr], m_req + lf * reach + f64(1e-9), grp)
                 rs = spheres.sph_rad[s]
-                d, g, obj = ck.world_distance_skip(cm.world, x,
-                                                   rs + m_req + L * reach + f64(1e-9), grp, far)
+                d, g, obj = ck.world_distance_near(cm.world, x,
+                                                   rs + m_req + L * reach + f64(1e-9), grp,
+                                                   near_n, near)
                 if obj != -1:
                     dd = d - rs
                     if dd < m_req:

@@ -114,10 +114,10 @@ def test_fallback_solves_what_the_multi_starts_do_not(world):
     # the multi-starts' own results stay as they were
     np.testing.assert_array_equal(res.all_feasible, plain.all_feasible)
     assert res.n_feasible[0] == 0
-    # the straight line was tried first (it collides), then the endpoints checked; the
-    # RRT's path (at most 20 nodes) certified as it is by the trees' own check, in one
-    # call (no optimisation of it)
-    assert set(res.timings) == {"straight", "endpoints", "optimizer", "rrt",
+    # the straight line was tried first (it collides), then the endpoints checked and
+    # the random start as drawn; the RRT's path (at most 20 nodes) certified as it is by
+    # the trees' own check, in one call (no optimisation of it)
+    assert set(res.timings) == {"straight", "endpoints", "starts", "optimizer", "rrt",
                                 "fallback_certify", "shorten"}
     assert res.iterations[0] == 0 and "certified as it is" in res.fallback_notes[0]
     d = res.to_dict(0)

@@ -414,10 +414,10 @@ def test_near_straight_paths_are_left_alone(world, monkeypatch):
     pl.options.shorten = 4
     path = res.path.copy()
     res.length_cost[0] = NEAR_STRAIGHT  # as if the first feasible path were nearly straight
-    pl._shorten(pl._buffers, res, None)
+    pl._shorten(pl._buffers.objective.n_sub, res, None)
     assert not calls and np.array_equal(res.path, path)
     res.length_cost[0] = NEAR_STRAIGHT + 0.01
-    pl._shorten(pl._buffers, res, None)
+    pl._shorten(pl._buffers.objective.n_sub, res, None)
     assert calls
 
 
@@ -429,11 +429,11 @@ def test_time_limit_bounds_it(world):
     res = pl.plan(S4, G4)
     path = res.path.copy()
     pl.options.shorten = 4
-    pl._shorten(pl._buffers, res, deadline=time.perf_counter() - 1.0)
+    pl._shorten(pl._buffers.objective.n_sub, res, deadline=time.perf_counter() - 1.0)
     np.testing.assert_array_equal(res.path, path)
     assert res.timings["shorten"] < 0.01  # nothing tried
     # with time left it shortens
-    pl._shorten(pl._buffers, res, deadline=time.perf_counter() + 100.0)
+    pl._shorten(pl._buffers.objective.n_sub, res, deadline=time.perf_counter() + 100.0)
     assert res.length_cost[0] < 0.8 * res.length_before[0]
 
 

@@ -161,11 +161,11 @@ def test_shortening_skipped_with_little_time_left(solved, monkeypatch):
     calls = _count_checks(monkeypatch)
     pl.options.time_limit = 10.0
     left = 0.9 * PM.SHORTEN_MIN_LEFT * 10.0
-    pl._shorten(pl._buffers, res, deadline=time.perf_counter() + left)
+    pl._shorten(pl._buffers.objective.n_sub, res, deadline=time.perf_counter() + left)
     assert not calls
     np.testing.assert_array_equal(res.path, path)
     # enough left: it shortens
-    pl._shorten(pl._buffers, res, deadline=time.perf_counter() + 9.0)
+    pl._shorten(pl._buffers.objective.n_sub, res, deadline=time.perf_counter() + 9.0)
     assert calls and (res.length_cost[[0, 2]] < res.length_before[[0, 2]]).all()
 
 
@@ -185,7 +185,7 @@ def test_shortening_cut_short_keeps_certified_paths(solved, monkeypatch, world):
     clock = Clock(monkeypatch)
     calls = _count_checks(monkeypatch, clock)
     deadline = clock.now + 3.3
-    pl._shorten(pl._buffers, res, deadline=deadline)
+    pl._shorten(pl._buffers.objective.n_sub, res, deadline=deadline)
     assert [k for k, _ in calls] == ["shortcut"] * 3 + ["certify"]
     assert all(r is not None for _, r in calls)  # chunks: rows of the step's lists
     assert clock.now <= deadline + 1.0  # overrun by at most one call
@@ -194,7 +194,7 @@ def test_shortening_cut_short_keeps_certified_paths(solved, monkeypatch, world):
     for p in res.path:
         assert independent_feasible(pl.robot, world, p)
     # the same with time to spare: the third problem's path is shortened too
-    full._shorten(full._buffers, ref, deadline=clock.now + 1000.0)
+    full._shorten(full._buffers.objective.n_sub, ref, deadline=clock.now + 1000.0)
     assert ref.length_cost[2] < length[2]
     for p in ref.path:
         assert independent_feasible(pl.robot, world, p)

@@ -123,7 +123,9 @@ def test_a_colliding_line_is_planned_as_before(arm7_problems, grid):
         assert list(res.stage) == list(old.stage) != ["straight"]
         np.testing.assert_array_equal(res.path, old.path)
         np.testing.assert_array_equal(res.cost, old.cost)
-        assert {"straight", "endpoints", "optimizer"} <= set(res.timings)
+        assert {"straight", "endpoints", "starts"} <= set(res.timings)
+        # a start proven as drawn ends the search before the optimiser is set up
+        assert ("optimizer" in res.timings) == (res.iterations[0] > 0 or not res.feasible[0])
     # planar4 in the block world (a grid): the line collides; the fallback solves it
     res = PL.plan("planar4", grid, S4, G4, n_starts=2, iterations=3, seed=0, device="cpu")
     assert res.feasible[0] and list(res.stage) == ["fallback"]

@@ -266,11 +266,15 @@ def test_no_ik_where_a_kept_random_start_is_proven(batch_problems):
     pl = PL.Planner(robot, batch, 3, o, device="cpu")
     Q = PL.planner._initial(robot, q0, q1, "mixed", 8, o.n_waypoints, o.seed, batch,
                             o.free_via, device=pl.device)
-    proven = pl._random_start_proven(Q, np.arange(3), 5)
+    first, evals = pl._proven_starts(Q, np.arange(3), 1, 5)
+    proven = first >= 0
+    assert evals > 0
     for b in range(3):
         ok = check_paths(robot, batch.select(b), Q[b, 1:5].astype(np.float32),
                          margin=MARGIN, device="cpu").ok
         assert proven[b] == ok.any()
+        if proven[b]:  # the first proven start of the problem
+            assert first[b] == 1 + int(np.argmax(ok))
     res = pl.plan(q0, q1)
     assert ("via_ik" in res.timings) == (not proven.all())
     assert res.feasible[proven].all()

@@ -221,3 +221,62 @@ def test_bounding_sphere_skip_changes_no_bit(device, name, monkeypatch):
                   [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
     world.add("m", "mesh", mesh=SimpleNamespace(vertices=v, faces=f))  # a closed cube
     assert not CollisionModel(robot, world, device=device, wide=False).device_world.bound_skip
+
+
+def clustered_scene(robot, rng, n_clusters=3, per_cluster=24):
+    """Tight clusters of many small boxes where the robot's last frame reaches (a link
+    near one sees more objects than a candidate list holds), a few far objects, and a
+    floor plane just below the base (a plane is no BVH object)."""
+    from jwarp.kinematics import fk
+
+    w = primitive_scene(rng, 4)
+    tips = np.asarray(fk(robot, sample(robot, n_clusters, seed=21), device="cpu"))[:, -1, :3, 3]
+    for c, tip in enumerate(tips):
+        for j in range(per_cluster):
+            T = np.eye(4)
+            T[:3, 3] = tip + rng.uniform(-0.04, 0.04, 3)
+            w.add(f"c{c}_{j}", "box", (0.005, 0.005, 0.005), T)
+    T = np.eye(4)
+    T[2, 3] = -0.05
+    w.add("floor_near", "plane", (), T)
+    return w
+
+
+def test_near_lists_change_no_bit(device, monkeypatch):
+    """One BVH query per frame (its candidate list, or every sphere's own query where more
+    objects than the list holds are near, or none at all): the cost, its gradient and the
+    continuous check (verdicts, places, evaluations) are bit for bit those of the kernels
+    that query every sphere, in a world of clusters, far objects and a near plane."""
+    from jwarp.kernels.geometry import NEAR_MAX
+    from jwarp.world.device_world import DeviceWorld
+    from jwarp.world.motion import MotionCheck
+
+    robot = jwarp.robot("arm7")
+    rng = np.random.default_rng(8)
+    world = clustered_scene(robot, rng)
+    assert 24 > NEAR_MAX  # a cluster overflows a list
+    q = sample(robot, 300, seed=6)
+    qa = wp.array(q, dtype=wp.float64, device=device)
+    paths = np.stack([q[:-1:2], q[1::2]], axis=1)[:, [0, 0, 1, 1]]
+    paths[:, 1] = 0.7 * paths[:, 0] + 0.3 * paths[:, 3]
+    paths[:, 2] = 0.3 * paths[:, 0] + 0.7 * paths[:, 3]
+
+    def run():
+        cm = CollisionModel(robot, world, device=device, dtype=np.float64, wide=False)
+        c, g = (a.numpy().copy() for a in cm.cost(qa, w_self=0.0, eps=0.05))
+        chk = MotionCheck(robot, world, device=device).check(paths, margin=0.01, meshes=False)
+        return cm.device_world.bound_skip, c, g, chk
+
+    skip, c1, g1, k1 = run()
+    assert skip
+    with monkeypatch.context() as m:
+        m.setattr(DeviceWorld, "bound_skip", property(lambda self: False))
+        skip0, c0, g0, k0 = run()
+    assert not skip0
+    assert (c0 > 0).sum() >= 20 and (c0 == 0).sum() >= 20
+    np.testing.assert_array_equal(c1, c0)
+    np.testing.assert_array_equal(g1, g0)
+    assert k0.ok.any() and not k0.ok.all()
+    for name in ("ok", "code", "where", "what", "clearance"):
+        np.testing.assert_array_equal(getattr(k1, name), getattr(k0, name))
+    assert k1.evaluations == k0.evaluations

@@ -244,7 +244,13 @@ class PlanOptions(SolverOptions):
             seeds, no ``warm_start``, ``start_kind`` "mixed" or "straight"), with
             ``stop_when_solved`` and ``freeze_feasible``, without ``converge``,
             ``callback`` or ``kappa``; False: the line is checked with the other starts
-            after the first cost evaluation, as before.
+            after the first cost evaluation, as before. Under the same conditions the
+            other multi-starts of a problem whose line is not proven are checked as drawn
+            next (the random ones, then the ``via_ik`` ones; a problem's first proven
+            start ends its search, ``timings["starts"]``): where every problem has one,
+            the optimiser is not set up at all (stage "optimizer", iteration 0, costs
+            evaluated on first read), else those problems are kept as they are and the
+            others optimised.
         mesh_margin: a robot whose spheres only approximate its meshes
             (``RobotModel.sphere_relation`` "approximate": the meshes poke out of them by a
             measured amount per link) plans with each link's spheres grown by that link's

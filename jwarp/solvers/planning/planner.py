@@ -357,10 +357,32 @@ class Planner:
                          o.n_waypoints, o.seed, self.world, o.free_via, device=dev,
                          name=seeds_name)  # (B, n_starts, W, n)
         B, n_starts, W = Q.shape[:3]
-        if seeds is None and o.via_ik > 0 and (line is None or not line.all()):
+        # starts proven as drawn (the straight stage's conditions): per problem the index
+        # of one (the line is start 0), -1: none; such a problem needs no optimisation,
+        # and where every problem has one the optimiser is not set up at all
+        first = np.full(B, -1, np.int64)
+        first_at = line_at.copy()
+        work = 0  # the proofs' evaluations (the shortening's budget base without descent)
+        via = seeds is None and o.via_ik > 0 and (line is None or not line.all())
+        if line is not None and not line.all():
+            first[line] = 0
+            k = self._via_count(n_starts) if via else 0
+            work += self._prove_starts(Q, np.nonzero(~line)[0], 1, n_starts - k, first,
+                                       first_at, t0, timings)
+        if via:
             t_via = time.perf_counter()
-            if self._ik_starts(Q, q0, q1, None if line is None else line_paths, line):
+            ran = self._ik_starts(Q, q0, q1, None if line is None else line_paths, line,
+                                  None if line is None else first)
+            if ran is not None:
                 timings["via_ik"] = time.perf_counter() - t_via
+                if line is not None:  # the via-point paths proven as drawn
+                    k = self._via_count(n_starts)
+                    work += self._prove_starts(Q, ran, n_starts - k, n_starts, first,
+                                               first_at, t0, timings)
+        if line is not None and (first >= 0).all():
+            res = self._starts_result(Q, first, line, t0, timings, first_at)
+            return self._finish(res, q0, q1, t0, search_end, deadline, res.n_substeps, work,
+                                mesh_s0)
         P = B * n_starts
         Qf = Q.reshape(P, W, model.n_dof)
         n_sub = self._substeps(Qf)
@@ -401,13 +423,15 @@ class Planner:
             if o.callback is not None:
                 o.callback(it, obj.paths.numpy())
             smax = obj.sub_max.numpy()
-            if it == 0 and line is not None and line.any():
-                # the problems the straight line solved (it is their start 0, proven by
-                # the same check): kept as they are, their other starts stop here
-                rows = np.nonzero(np.repeat(line, n_starts))[0]
-                feasible[np.nonzero(line)[0] * n_starts] = True
-                iters[np.nonzero(line)[0] * n_starts] = 0
-                found_at[np.nonzero(line)[0] * n_starts] = line_at[line]
+            if it == 0 and (first >= 0).any():
+                # the problems a start proved as drawn (the straight line: start 0), by
+                # the same check: kept as they are, their other starts stop here
+                have = np.nonzero(first >= 0)[0]
+                rows = np.nonzero(np.repeat(first >= 0, n_starts))[0]
+                won = have * n_starts + first[have]
+                feasible[won] = True
+                iters[won] = 0
+                found_at[won] = first_at[have]
                 self._keep(buf, rows)
                 done[rows] = True
             last = it == o.iterations or out_of_time or (it + 1) % check_every == 0
@@ -484,44 +508,88 @@ class Planner:
         res.timings = timings
         if handed.any():
             timings["handed_over"] = int(handed.sum())
+        return self._finish(res, q0, q1, t0, search_end, deadline, obj.n_sub,
+                            work + obj.evaluations - evals0, mesh_s0)
+
+    def _finish(self, res: PlanResult, q0: np.ndarray, q1: np.ndarray, t0: float,
+                search_end: float | None, deadline: float | None, n_sub: int, work: int,
+                mesh_s0: float) -> PlanResult:
+        """The stages after the multi-starts: the fallback for the unsolved problems, the
+        shortening of the solved ones (``work``: the evaluations that found them, its
+        budget's base; ``n_sub``: the substeps of their costs), the reasons, the wall
+        time and the mesh certificate's share."""
+        o = self.options
         if o.fallback is not None and not res.feasible.all():
             _fallback(self, res, q0, q1, t0, search_end)
-        if shorten_for(o, str(dev)) > 0 and o.stop_when_solved and not o.converge \
+        if shorten_for(o, str(self.device)) > 0 and o.stop_when_solved and not o.converge \
                 and o.kappa is None:
-            self._shorten(buf, res, deadline, obj.evaluations - evals0)
+            self._shorten(n_sub, res, deadline, work)
         res.reasons = self.explain(res, deadline=deadline)
         res.wall_time = time.perf_counter() - t0
-        if getattr(model, "collision_pieces", None) is not None:  # the certificate's share
+        if getattr(self.robot, "collision_pieces", None) is not None:  # the certificate's share
             res.timings["mesh_check"] = self._mesh_seconds() - mesh_s0
         return res
 
+    def _prove_starts(self, Q: np.ndarray, bad: np.ndarray, lo: int, hi: int,
+                      first: np.ndarray, first_at: np.ndarray, t0: float,
+                      timings: dict) -> int:
+        """:meth:`_proven_starts` of the starts ``lo:hi`` of the problems ``bad`` that have
+        none proven yet, recorded in ``first`` and ``first_at`` (seconds from ``t0``) in
+        place (``timings["starts"]``); returns the configurations evaluated."""
+        t = time.perf_counter()
+        bad = bad[first[bad] < 0]
+        got, evals = self._proven_starts(Q, bad, lo, hi)
+        first[bad] = got
+        first_at[bad[got >= 0]] = time.perf_counter() - t0
+        timings["starts"] = timings.get("starts", 0.0) + time.perf_counter() - t
+        return evals
+
+    def _starts_result(self, Q: np.ndarray, first: np.ndarray, line: np.ndarray, t0: float,
+                       timings: dict, first_at: np.ndarray) -> PlanResult:
+        """The result of a call in which every problem has a start proven as drawn
+        (``first`` (B,) its index in ``Q`` (B, n_starts, W, n_dof); the straight line's
+        problems ``line``): as the optimiser's first iteration would return it (stage
+        "optimizer", or "straight"; iteration 0), its costs evaluated on first read."""
+        B = len(first)
+        src = Q.astype(self.npdt).astype(np.float64)
+        paths = src[np.arange(B), first]
+        res = self._proven_result(paths, t0, timings, first_at)
+        res.paths_source = src
+        res.start_index = first.copy()
+        res.all_feasible = np.zeros(Q.shape[:2], bool)
+        res.all_feasible[np.arange(B), first] = True
+        res.all_iterations = np.zeros(Q.shape[:2], np.int64)
+        res.stage = np.where(line, "straight", "optimizer").astype("<U9")
+        return res
+
     def _ik_starts(self, Q: np.ndarray, q0: np.ndarray, q1: np.ndarray,
-                   line_paths: np.ndarray | None, line: np.ndarray | None) -> bool:
+                   line_paths: np.ndarray | None, line: np.ndarray | None,
+                   proven: np.ndarray | None = None) -> np.ndarray | None:
         """:attr:`PlanOptions.via_ik`: the last random starts of the problems whose straight
         line is not proven replaced (in place, ``Q`` (B, n_starts, W, n_dof)) by paths
         through collision-free IK via points (:mod:`jwarp.solvers.planning.via_ik`).
         ``line``: which lines the straight stage proved, with their paths; None (no
         straight stage): the lines are checked here (the spheres, the planner's check).
-        Returns whether the IK ran (a robot of a 3-D workspace, the rigid model; in a batch
-        of worlds each problem's via points and anchor are checked in its own world)."""
+        ``proven`` (B,) ints (:meth:`_proven_starts`, -1: none): the problems with a start
+        proven as drawn get no IK. Returns the problems the IK ran for, or None where it
+        does not run (not a robot of a 3-D workspace, the elastic model; in a batch of
+        worlds each problem's via points and anchor are checked in its own world)."""
         o = self.options
-        n_starts = Q.shape[1]
-        k = min(int(o.via_ik), n_starts - 1) if o.start_kind == "mixed" else 0
+        k = self._via_count(Q.shape[1])
         if k <= 0 or o.kappa is not None or self.robot.workspace_dim != 3:
-            return False
+            return None
         if line is None or line_paths is None:
             line_paths, _, line, _, _ = self._straight(q0, q1)
             if line.all():
-                return False
+                return None
         from jwarp.solvers.planning.via_ik import ik_via_paths
 
         bad = np.nonzero(~line)[0]
-        if o.stop_when_solved and o.freeze_feasible and not o.converge:
-            # a problem one of whose kept random starts the spheres already prove ends at
-            # the optimiser's first check whatever the via points: no IK for it
-            bad = bad[~self._random_start_proven(Q, bad, n_starts - k)]
-            if not len(bad):
-                return False
+        if proven is not None:  # a start proven as drawn ends its problem: no IK for it
+            bad = bad[proven[bad] < 0]
+        if not len(bad):
+            return None
+        n_starts = Q.shape[1]
         V, count = ik_via_paths(self.robot, self.world, q0[bad], q1[bad], line_paths[bad], k,
                                 Q.shape[2], frame=o.via_frame, margin=o.margin,
                                 self_margin=o.self_margin, device=self.device, dtype=self.npdt,
@@ -530,26 +598,36 @@ class Planner:
             c = int(count[i])
             if c:
                 Q[b, n_starts - c:] = V[i, :c]
-        return True
+        return bad
 
-    def _random_start_proven(self, Q: np.ndarray, bad: np.ndarray, m: int) -> np.ndarray:
-        """(len(bad),) bool: problem ``bad[i]`` has a start among ``Q[bad[i], 1:m]`` (the
-        random starts :meth:`_ik_starts` keeps; start 0 is the straight line) that the
-        planner's continuous check proves with the spheres alone (its margins, the paths
-        in the optimiser's dtype), as its first check would."""
-        if m <= 1 or not len(bad):
-            return np.zeros(len(bad), bool)
+    def _via_count(self, n_starts: int) -> int:
+        """The starts per problem that :meth:`_ik_starts` replaces (the last ones)."""
+        o = self.options
+        return min(int(o.via_ik), n_starts - 1) if o.start_kind == "mixed" else 0
+
+    def _proven_starts(self, Q: np.ndarray, bad: np.ndarray, lo: int, hi: int
+                       ) -> tuple[np.ndarray, int]:
+        """``(first, evaluations)``: per problem ``bad[i]`` the first of its starts
+        ``Q[bad[i], lo:hi]`` that the planner's continuous check proves with the spheres
+        alone (its margins, the paths in the optimiser's dtype), as its first check would,
+        or -1 (len(bad),) ints; one call for all (a problem's starts after the first
+        proven one are skipped inside it), and the configurations it evaluated."""
+        first = np.full(len(bad), -1, np.int64)
+        g = hi - lo
+        if g <= 0 or not len(bad):
+            return first, 0
         o = self.options
         W, n = Q.shape[2], Q.shape[3]
-        kept = Q[:, 1:m].astype(self.npdt).astype(np.float64)  # (B, m - 1, W, n)
-        g = m - 1
+        kept = Q[:, lo:hi].astype(self.npdt).astype(np.float64)  # (B, g, W, n)
         rows = (bad[:, None] * g + np.arange(g)[None]).reshape(-1)
         r = self.motion_check().check(kept.reshape(-1, W, n), margin=o.margin,
                                       endpoint_margin=o.endpoint_margin,
                                       self_margin=o.self_margin,
                                       world_group=g if self.batched else 0, group=g,
                                       meshes=False, rows=rows)
-        return np.asarray(r.ok, bool).reshape(len(bad), g).any(1)
+        ok = np.asarray(r.ok, bool).reshape(len(bad), g)
+        first[ok.any(1)] = lo + np.argmax(ok, axis=1)[ok.any(1)]
+        return first, int(r.evaluations)
 
     def _substeps(self, Qf: np.ndarray) -> int:
         """The cost's substeps per segment for the paths ``Qf`` (P, W, n_dof):
@@ -623,8 +701,19 @@ class Planner:
                          mesh_s0: float, line_at: np.ndarray) -> PlanResult:
         """The result of a call the straight lines ``paths`` (B, W, n_dof) solved: one
         start per problem, iteration 0; the costs (and ``length_before``) are evaluated
-        when first read (a :class:`PathObjective` of these paths, at substeps sized to
-        them)."""
+        when first read (:meth:`_proven_result`)."""
+        res = self._proven_result(paths, t0, timings, line_at)
+        if getattr(self.robot, "collision_pieces", None) is not None:
+            timings["mesh_check"] = self._mesh_seconds() - mesh_s0
+        res.wall_time = time.perf_counter() - t0
+        return res
+
+    def _proven_result(self, paths: np.ndarray, t0: float, timings: dict,
+                       solved_at: np.ndarray) -> PlanResult:
+        """A result whose paths (B, W, n_dof) were proven as drawn, one start per
+        problem, iteration 0, stage "straight"; the costs (and, with the shortening on
+        and not set by it, ``length_before``) are evaluated when first read (a
+        :class:`PathObjective` of these paths, at substeps sized to them)."""
         o, B = self.options, len(paths)
         n_sub = self._substeps(paths)
         shortens = (shorten_for(o, str(self.device)) > 0 and o.stop_when_solved
@@ -637,8 +726,8 @@ class Planner:
             res.cost = obj.total.numpy().astype(np.float64)
             res.length_cost = obj.length.numpy().astype(np.float64)
             res.collision_cost = obj.collision.numpy().astype(np.float64)
-            if shortens:  # the line is left as it is (U_l 1 <= NEAR_STRAIGHT)
-                res.length_before = res.length_cost.copy()
+            if shortens and res.__dict__.get("_length_before") is None:
+                res.length_before = res.length_cost.copy()  # the line is left as it is
 
         res = PlanResult(path=paths, feasible=np.ones(B, bool), cost=None, length_cost=None,
                          collision_cost=None, iterations=np.zeros(B, np.int64),
@@ -647,11 +736,8 @@ class Planner:
                          all_iterations=np.zeros((B, 1), np.int64), paths_source=paths[:, None],
                          stop_reason="solved", stage=np.full(B, "straight", "<U9"),
                          timings=timings, reasons=["feasible"] * B,
-                         solved_at=np.asarray(line_at, np.float64).copy())
+                         solved_at=np.asarray(solved_at, np.float64).copy())
         res._fill = costs
-        if getattr(self.robot, "collision_pieces", None) is not None:
-            timings["mesh_check"] = self._mesh_seconds() - mesh_s0
-        res.wall_time = time.perf_counter() - t0
         return res
 
     def _mesh_seconds(self) -> float:
@@ -664,15 +750,16 @@ class Planner:
         mc = cached_mesh_check(self.robot, self.world, self.device)
         return 0.0 if mc is None else mc.stats.seconds
 
-    def _shorten(self, buf: _Buffers, res: PlanResult, deadline: float | None,
+    def _shorten(self, n_sub: int, res: PlanResult, deadline: float | None,
                  work: int | None = None) -> None:
         """:attr:`PlanOptions.shorten` of the feasible paths of ``res`` (in place): their
         shortcuts proven by the planner's continuous check with the clearance ``eps``
         (at most :data:`SHORTCUT_CLEARANCE`, at least ``margin``) from the world (``self_margin`` between the robot's spheres), the waypoints respaced along
         the shortened polyline; a path is replaced where the whole shortened path passes
         that check with the planner's margins and its U_l is lower. ``cost``,
-        ``length_cost`` and ``collision_cost`` of the replaced paths are evaluated again
-        (the objective's buffers); ``length_before`` and ``timings["shorten"]`` set.
+        ``length_cost`` and ``collision_cost`` of the replaced paths are evaluated on
+        first read (at ``n_sub`` substeps); ``length_before`` and ``timings["shorten"]``
+        set (costs left to their first read stay there: U_l from the paths on the host).
         ``work``: the collision evaluations of the optimisation (the budget's base,
         :attr:`PlanOptions.shorten_budget`; None: no budget).
 
@@ -687,10 +774,14 @@ class Planner:
 
         t = time.perf_counter()
         o = self.options
-        res.length_before = np.where(res.feasible, res.length_cost, np.nan)
+        # U_l: the result's, or where its costs wait for their first read, the paths' own
+        # (the kernels' formula on the host)
+        ul = (length_cost(np.asarray(res.path, np.float64))
+              if res.__dict__.get("_fill") is not None else
+              np.asarray(res.length_cost, np.float64))
+        res.length_before = np.where(res.feasible, ul, np.nan)
         # a path already near the straight line (U_l <= NEAR_STRAIGHT) is left as it is
-        solved = np.asarray(res.feasible, bool) & (np.asarray(res.length_cost, np.float64)
-                                                   > NEAR_STRAIGHT)
+        solved = np.asarray(res.feasible, bool) & (ul > NEAR_STRAIGHT)
         short_of_time = deadline is not None and (
             t >= deadline or (o.time_limit is not None
                               and deadline - t < SHORTEN_MIN_LEFT * float(o.time_limit)))
@@ -784,7 +875,7 @@ class Planner:
         if better.any():
             rows, b = np.nonzero(better)[0], idx[better]
             res.path[b] = cand[rows]
-            self._costs_on_read(res, b, buf.objective.n_sub)
+            self._costs_on_read(res, b, n_sub)
         res.timings["shorten"] = time.perf_counter() - t
 
     def _costs_on_read(self, res: PlanResult, rows: np.ndarray, n_sub: int) -> None:
@@ -796,13 +887,20 @@ class Planner:
         o = self.options
         robot, world, dev, npdt, eps = self.robot, self.world, self.device, self.npdt, self.eps
         batched, own, rows = self.batched, np.array(res.path, copy=True), np.array(rows)
-        kept = {name: np.array(getattr(res, name), np.float64, copy=True)
-                for name in ("cost", "length_cost", "collision_cost")}
+        # costs still waiting for their first read (a result of proven starts): every
+        # path's are evaluated then, the replaced ones as they are now
+        pending = res.__dict__.get("_fill") is not None
+        kept = {} if pending else {name: np.array(getattr(res, name), np.float64, copy=True)
+                                   for name in ("cost", "length_cost", "collision_cost")}
 
         def costs(r: PlanResult) -> None:
-            obj = _evaluated(robot, world, o, eps, dev, npdt, batched, own, n_sub, rows)
+            obj = _evaluated(robot, world, o, eps, dev, npdt, batched, own, n_sub,
+                             None if pending else rows)
             for name, arr in (("cost", obj.total), ("length_cost", obj.length),
                               ("collision_cost", obj.collision)):
+                if pending:
+                    setattr(r, name, arr.numpy().astype(np.float64))
+                    continue
                 v = kept[name]
                 v[rows] = arr.numpy()[rows]
                 setattr(r, name, v)

@@ -107,7 +107,9 @@ class PlanResult:
     #: (B,) float: seconds from the call's start at which each problem's feasible path
     #: was found by its ``stage`` (NaN: none; None: not recorded)
     solved_at: Any = None
-    #: seconds per stage: "endpoints", "straight", "optimizer", "rrt", "fallback_certify",
+    #: seconds per stage: "endpoints", "straight", "starts" (the multi-starts checked as
+    #: drawn before the optimiser: where each problem has one proven, no optimiser runs),
+    #: "via_ik", "optimizer", "rrt", "fallback_certify",
     #: "fallback_optimizer" (and "handed_over": the problems :attr:`PlanOptions.stall_iterations` handed to the
     #: fallback before the multi-starts' end, a count)
     timings: dict = field(default_factory=dict, repr=False)
