@@ -223,14 +223,14 @@ def test_bounding_sphere_skip_changes_no_bit(device, name, monkeypatch):
     assert not CollisionModel(robot, world, device=device, wide=False).device_world.bound_skip
 
 
-def clustered_scene(robot, rng, n_clusters=3, per_cluster=24):
+def clustered_scene(robot, rng, device, n_clusters=3, per_cluster=24):
     """Tight clusters of many small boxes where the robot's last frame reaches (a link
     near one sees more objects than a candidate list holds), a few far objects, and a
     floor plane just below the base (a plane is no BVH object)."""
     from jwarp.kinematics import fk
 
     w = primitive_scene(rng, 4)
-    tips = np.asarray(fk(robot, sample(robot, n_clusters, seed=21), device="cpu"))[:, -1, :3, 3]
+    tips = np.asarray(fk(robot, sample(robot, n_clusters, seed=21), device=device))[:, -1, :3, 3]
     for c, tip in enumerate(tips):
         for j in range(per_cluster):
             T = np.eye(4)
@@ -253,7 +253,7 @@ def test_near_lists_change_no_bit(device, monkeypatch):
 
     robot = jwarp.robot("arm7")
     rng = np.random.default_rng(8)
-    world = clustered_scene(robot, rng)
+    world = clustered_scene(robot, rng, device)
     assert 24 > NEAR_MAX  # a cluster overflows a list
     q = sample(robot, 300, seed=6)
     qa = wp.array(q, dtype=wp.float64, device=device)
