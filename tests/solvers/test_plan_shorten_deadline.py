@@ -169,6 +169,25 @@ def test_shortening_skipped_with_little_time_left(solved, monkeypatch):
     assert calls and (res.length_cost[[0, 2]] < res.length_before[[0, 2]]).all()
 
 
+def test_shortened_paths_proven_as_built(solved, monkeypatch, world):
+    """The endpoint margins equal to the others: the shortcut calls' proofs are the whole
+    shortened path's (every corner a waypoint), so no certification call is made; every
+    path passes the independent check. With a lower endpoint margin, it is certified."""
+    pl, res = solved
+    assert pl._shortcuts_prove()
+    calls = _count_checks(monkeypatch)
+    pl._shorten(pl._buffers.objective.n_sub, res, deadline=None)
+    assert calls and all(k == "shortcut" for k, _ in calls)
+    assert (res.length_cost[[0, 2]] < res.length_before[[0, 2]]).all()
+    for p in res.path:
+        assert independent_feasible(pl.robot, world, p)
+    for o, want in ((dict(margin=0.01, endpoint_margin=0.005), False),
+                    (dict(margin=0.01, endpoint_margin=0.01), True),
+                    (dict(margin=0.01, self_margin=0.02), False),
+                    (dict(margin=0.01, self_margin=0.01), True)):
+        assert PL.Planner("planar4", world, 1, PL.PlanOptions(**o))._shortcuts_prove() is want
+
+
 def test_shortening_cut_short_keeps_certified_paths(solved, monkeypatch, world):
     """A fake clock, 1 s per check call, SHORTEN_CHUNK 1 path, the deadline 3.3 s away
     (the shortcut rounds end at 80 % of it, 2.64 s): three shortcut calls (the next would
@@ -182,6 +201,8 @@ def test_shortening_cut_short_keeps_certified_paths(solved, monkeypatch, world):
     ref = full.plan(STARTS, GOALS)
     full.options.shorten, full.options.shorten_budget = 4, None
     monkeypatch.setattr(PM, "SHORTEN_CHUNK", 1)
+    # the shortened paths certified again (as where the endpoint margins are lower)
+    monkeypatch.setattr(PM.Planner, "_shortcuts_prove", lambda self: False)
     clock = Clock(monkeypatch)
     calls = _count_checks(monkeypatch, clock)
     deadline = clock.now + 3.3

@@ -211,8 +211,11 @@ class PlanOptions(SolverOptions):
             ``eps`` from the world (the cost's smoothing width, >= ``margin``: a shortcut
             keeps as far from objects as the descent's cost asks), and the path jumps
             to the farthest proven one; the waypoints
-            are then respaced along the shortened polyline and the whole path is checked
-            again with the planner's rule; it replaces the path only if certified and of
+            are then respaced along the shortened polyline (every corner a waypoint: each
+            new segment lies on a proven shortcut or on a segment of the certified path,
+            so where the endpoint margins are not below ``margin`` and ``self_margin``
+            the path is proven as built, kept in float64; else the whole path is checked
+            again with the planner's rule); it replaces the path only if proven and of
             a lower length cost U_l. ``time_limit`` bounds it too. The multi-starts stop
             at the first feasible one, which may be a long detour (a random via point):
             this makes the default path short at little extra time. A round that

@@ -843,15 +843,18 @@ class Planner:
                                near_straight=None if STOP_NEAR_STRAIGHT is None
                                else float(np.sqrt(STOP_NEAR_STRAIGHT)),
                                chunk=SHORTEN_CHUNK)
-        # the shortened polylines respaced (the paths not shortened kept as they are)
+        # the shortened polylines respaced (the paths not shortened kept as they are);
+        # proven as built (_shortcuts_prove), or certified again (in the optimiser's dtype)
+        built_proven = self._shortcuts_prove()
         cand = paths.copy()
         for k in np.nonzero(solved[idx])[0]:
             cand[k] = respace(nodes[k], W)
-        cand = cand.astype(self.npdt).astype(np.float64)
+        if not built_proven:
+            cand = cand.astype(self.npdt).astype(np.float64)
         cand[:, 0], cand[:, -1] = paths[:, 0], paths[:, -1]
         better = solved[idx] & (length_cost(cand) < length_cost(paths) * (1.0 - 1e-6))
         todo = np.nonzero(better)[0]
-        if len(todo):
+        if len(todo) and not built_proven:
             # certified with the planner's rule, in chunks until the deadline: a path
             # whose check was not reached keeps its certified path
             proven = np.zeros(len(better), bool)
@@ -877,6 +880,17 @@ class Planner:
             res.path[b] = cand[rows]
             self._costs_on_read(res, b, n_sub)
         res.timings["shorten"] = time.perf_counter() - t
+
+    def _shortcuts_prove(self) -> bool:
+        """Whether a shortened path is proven as built: its corners are waypoints, so each
+        new segment lies on a proven shortcut (the full margins, or more) or on a segment
+        of the certified path; that is the planner's rule wherever the first and last
+        segments ask no less than the others (the endpoint margins not below ``margin``
+        and ``self_margin``; else a piece of an old end segment, proven at the endpoint
+        margin, may become an inner one)."""
+        o = self.options
+        em = o.margin if o.endpoint_margin is None else min(o.margin, o.endpoint_margin)
+        return em >= o.margin and min(o.self_margin, em) >= o.self_margin
 
     def _costs_on_read(self, res: PlanResult, rows: np.ndarray, n_sub: int) -> None:
         """``cost``, ``length_cost`` and ``collision_cost`` of the problems ``rows`` of

@@ -10,12 +10,12 @@ random multi-starts are replaced by paths through
   start-goal chord, :data:`SIDE`), solved from that waypoint (around the object the line
   hits);
 
-all of one problem set in one :class:`jwarp.solvers.ik.IKSolver` call (the planner's world
-and margins; :data:`IK_SEEDS` seeds per via point: the configuration it is near, then
-that one jittered; every via point is collision-free, re-checked here). In a batch of
-worlds (:meth:`jwarp.world.sdf.World.batch`) the IK runs without a world (one solver
-holds one world) and a via point is the first of its IK seeds that is on target and
-collision-free in its problem's own world; the anchor is found in that world too. The paths are
+all of one problem set in one :class:`jwarp.solvers.ik.IKSolver` call (:data:`IK_SEEDS`
+seeds per via point: the configuration it is near, then that one jittered). The IK
+solves the pose without a world (its solver is made once per robot and reused by every
+planner, of any world), and a via point is the first of its IK seeds that is on target
+and collision-free at the planner's margins in the problem's world (in a batch of worlds,
+:meth:`jwarp.world.sdf.World.batch`, its own; the anchor is found in that world too). The paths are
 start -> detour -> pre-goal -> goal, start -> pre-goal -> goal and start -> detour -> goal
 (in this order of preference; the W waypoints spread along the polyline as every
 via-point start). The same problems and seed give the same paths.
@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from jwarp.core.caches import IdentityCache
 from jwarp.core.limits import project_numpy
 from jwarp.model import RobotModel
 from jwarp.world.path_feasibility import collision_free, polyline_path
@@ -100,7 +101,6 @@ def ik_via_points(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
     numpy Generator, None: fresh entropy); ``worlds`` (B,) ints: with a batch of worlds,
     problem b is in world ``worlds[b]`` (None: world b)."""
     from jwarp.kinematics import fk
-    from jwarp.solvers.ik import IKOptions, IKSolver
 
     B, n = q0.shape
     out: list[list[np.ndarray]] = [[] for _ in range(B)]
@@ -159,30 +159,23 @@ def ik_via_points(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
     rng = np.random.default_rng(seed)
     S[:, 1:] += rng.normal(0.0, JITTER, S[:, 1:].shape)
     S = project_numpy(model, S)
-    opts = IKOptions(n_starts=IK_SEEDS, iterations=IK_ITERATIONS, margin=margin, seed=0,
-                     tol_pos=TOL_POS, tol_rot=TOL_ROT, restart_after=None,
-                     q_default=S.reshape(-1, n),
-                     # the planner's robot as it plans on it (its mesh margin applied, its
-                     # collision model checked or waived by the planner's own options)
-                     mesh_margin=False, allow_no_collision=True)
-    ik = IKSolver(model, f, len(T), opts, world=None if batched else world, device=device,
-                  dtype=dtype).solve(T, S)
+    ik = _solver(model, f, len(T), margin, device, dtype, S.reshape(-1, n)).solve(T, S)
     kind_a, owner_a = np.array(kind), np.array(owner)
-    if own is None:
-        q = np.asarray(ik.q, np.float64)
-        ok = np.asarray(ik.feasible, bool)
-        if ok.any():  # the planner's own rule: collision-free at its margins
-            ok[ok] = collision_free(model, world, q[ok], margin, device=device,
-                                    self_margin=self_margin)
-    else:  # every seed on target, checked in its problem's own world: the first free one
-        qa = np.asarray(ik.all_q, np.float64)  # (targets, IK_SEEDS, n)
-        oka = np.asarray(ik.all_feasible, bool).copy()
-        if oka.any():
+    # every seed on target, checked in its problem's world at the planner's margins by
+    # the spheres (an inner waypoint the spheres touch keeps its paths from the fast
+    # proofs): the first free one
+    qa = np.asarray(ik.all_q, np.float64)  # (targets, IK_SEEDS, n)
+    oka = np.asarray(ik.all_feasible, bool).copy()
+    if oka.any():
+        if own is None:
+            oka[oka] = collision_free(model, world, qa[oka], margin, device=device,
+                                      self_margin=self_margin, meshes=False)
+        else:
             seed_world = np.repeat(own[owner_a], qa.shape[1]).reshape(oka.shape)
             oka[oka] = free_in_worlds(model, world, qa[oka], seed_world[oka], margin,
-                                      self_margin, device)
-        ok = oka.any(1)
-        q = qa[np.arange(len(qa)), np.argmax(oka, axis=1)]
+                                      self_margin, device, meshes=False)
+    ok = oka.any(1)
+    q = qa[np.arange(len(qa)), np.argmax(oka, axis=1)]
     for b in range(B):
         mine = (owner_a == b) & ok
         pre = q[mine & (kind_a == "pre")]
@@ -194,6 +187,39 @@ def ik_via_points(model: RobotModel, world: Any, q0: np.ndarray, q1: np.ndarray,
         vias += [d[None] for d in det]
         out[b] = vias[:k]
     return out
+
+
+#: the via points' IK solvers, kept on their robot (one per frame, target count, margin,
+#: device and dtype): they hold no world, so a planner of any world reuses them
+_SOLVERS: IdentityCache = IdentityCache(32, owner=0)
+
+
+def _solver(model: RobotModel, frame: int, n_targets: int, margin: float, device: Any,
+            dtype: Any, q_default: np.ndarray) -> Any:
+    """The IK solver of ``n_targets`` via points (:data:`IK_SEEDS` seeds each, pose and
+    self-collision only: the world is checked afterwards), made once per robot and
+    shape and reused: its closeness pose per seed set to ``q_default`` and its
+    generator reseeded (the same targets and seeds give the same points)."""
+    from jwarp.core.arrays import resolve_device
+    from jwarp.solvers.ik import IKOptions, IKSolver
+
+    dev = resolve_device(device)
+    key = (int(frame), int(n_targets), float(margin), str(dev), np.dtype(dtype).str)
+    s = _SOLVERS.get(key, (model,))
+    if s is None:
+        opts = IKOptions(n_starts=IK_SEEDS, iterations=IK_ITERATIONS, margin=margin, seed=0,
+                         tol_pos=TOL_POS, tol_rot=TOL_ROT, restart_after=None,
+                         q_default=q_default,
+                         # the planner's robot as it plans on it (its mesh margin applied,
+                         # its collision model checked or waived by the planner's options)
+                         mesh_margin=False, allow_no_collision=True)
+        s = _SOLVERS.put(key, (model,), IKSolver(model, frame, n_targets, opts, world=None,
+                                                 device=dev, dtype=dtype))
+    else:
+        s.objective.q_default.assign(np.asarray(q_default, s.npdt).reshape(
+            s.objective.q_default.shape))
+        s.reseed(0)
+    return s
 
 
 def free_in_worlds(model: RobotModel, world: Any, q: np.ndarray, worlds: np.ndarray,
