@@ -264,3 +264,29 @@ def test_last_check_of_one_problem_certifies_one_start(tmp_path_factory, monkeyp
     res = jwarp.plan(model, world, q0, q1, options=o, device="cpu")
     assert rows and max(rows) <= MESH_FINAL_PER_PROBLEM < 8, rows
     assert res.feasible[0], res.reasons  # the start the spheres miss by least is certified
+
+
+def test_optimiser_checks_the_clearest_candidates_first(arm7_problems, monkeypatch):
+    """Every check of the optimiser gets each problem's candidates clearest first (the
+    lowest largest substep cost; its first proven path ends the problem's check), and the
+    problems in order: the order the CPU's threads take them."""
+    robot, world, _, hit = arm7_problems
+    seen = []
+    original = PL.Planner._confirm
+
+    def recording(self, buf, cand):
+        smax = buf.objective.sub_max.numpy().astype(np.float64)
+        seen.append((np.array(cand), smax[cand], buf.objective.P // self.n_problems))
+        return original(self, buf, cand)
+
+    monkeypatch.setattr(PL.Planner, "_confirm", recording)
+    q0 = np.stack([h[0] for h in hit])
+    q1 = np.stack([h[1] for h in hit])
+    PL.plan(robot, world, q0, q1, seed=0, fallback=None, iterations=60, device="cpu",
+            straight_first=False)
+    assert seen and any(len(c) > 1 for c, _, _ in seen)
+    for cand, smax, per in seen:
+        prob = cand // per
+        assert (np.diff(prob) >= 0).all()
+        same = np.diff(prob) == 0
+        assert (np.diff(smax)[same] >= 0).all()

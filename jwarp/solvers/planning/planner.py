@@ -442,6 +442,10 @@ class Planner:
                 solved = done & feasible
             else:
                 cand = np.nonzero(~done & ((smax < screen) | last))[0]
+                # per problem the clearest candidates first (the lowest largest substep
+                # cost): its first proven path ends its check (the rest are skipped), and
+                # the clearest is the likeliest
+                cand = cand[np.lexsort((smax[cand], cand // n_starts))]
                 if len(cand):
                     newly = cand[self._confirm(buf, cand)]
                     if len(newly):
