@@ -186,3 +186,29 @@ def test_budget_options_are_validated(world, field, value, error, match):
         PL.PlanOptions(**{field: value}).validate()
     with pytest.raises(error, match=match):
         PL.plan("planar4", world, S4, G4, **{field: value})
+
+
+def test_fallback_starts_new_trees_while_time_is_left(world, monkeypatch):
+    """rrt.max_samples used up without a path: with a time limit the trees start again
+    (the generator's next samples) until a path or the limit; without one, one try."""
+    from jwarp.solvers.planning import rrt as R
+
+    robot = jwarp.robot("planar4")
+    tries = []
+    original = R.rrt_connect
+
+    def counting(*args, **kwargs):
+        r = original(*args, **kwargs)
+        tries.append(r.stop_reason)
+        return r
+
+    monkeypatch.setattr(R, "rrt_connect", counting)
+    o = dict(n_starts=2, iterations=3, seed=0, rrt=RRTOptions(max_samples=150, batch=1))
+    once = PL.plan(robot, world, S4, G4, **o)
+    assert tries == ["max_samples"] and not once.feasible[0]
+    assert "rrt.max_samples used up" in once.reasons[0]
+    tries.clear()
+    res = PL.plan(robot, world, S4, G4, time_limit=20.0, **o)
+    assert len(tries) > 1 and set(tries[:-1]) == {"max_samples"}
+    assert res.feasible[0] and list(res.stage) == ["fallback"] and tries[-1] == "connected"
+    assert independent_feasible(robot, world, res.path[0])

@@ -1213,8 +1213,9 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
     only if that ends certified. Its feasible paths replace those problems' results in
     ``res`` (stage "fallback", ``start_index`` -1); ``fallback_notes``, ``stop_reason``
     and ``timings`` updated. With a ``deadline`` the trees get 80 % of the time left, the
-    optimisation the rest."""
-    from jwarp.solvers.planning.rrt import RRTOptions, resample_path, rrt_connect
+    optimisation the rest; one problem's trees start again while ``rrt.max_samples`` is
+    used up with time left (:func:`_rrt_restarts`)."""
+    from jwarp.solvers.planning.rrt import RRTOptions, resample_path
 
     o = planner.options
     t_rrt = time.perf_counter()
@@ -1244,11 +1245,11 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
             timed_out = True
             notes[b] = "RRT-Connect not run: no time left"
             continue
-        r = batch[i] if batch is not None else rrt_connect(
-            planner.robot, planner.world.select(int(b)), q0[b], q1[b], ropt,
-            margin=o.margin, kappa=o.kappa, device=planner.device, deadline=rrt_stop,
-            endpoint_margin=o.endpoint_margin, self_margin=o.self_margin,
-            meshes=True if need is None else bool(need[b]))
+        if batch is not None:
+            r = batch[i]
+        else:
+            r = _rrt_restarts(planner, int(b), q0[b], q1[b], ropt, rrt_stop,
+                              True if need is None else bool(need[b]))
         if r.success:
             found.append(int(b))
             seeds.append(resample_path(r.path, W))
@@ -1348,6 +1349,32 @@ def _evaluated(robot: RobotModel, world: Any, o: PlanOptions, eps: float, device
         obj.skip_inactive = True
     obj.evaluate(grad=False)
     return obj
+
+
+def _rrt_restarts(planner: Planner, b: int, q0: np.ndarray, q1: np.ndarray, ropt: Any,
+                  stop: float | None, meshes: bool) -> Any:
+    """RRT-Connect for problem ``b`` (:func:`jwarp.solvers.planning.rrt.rrt_connect`), and
+    with a deadline ``stop``, new trees (the generator's next samples) each time
+    ``rrt.max_samples`` is used up without a path while time is left: a restart rather
+    than an unsolved problem with most of its time unspent. The last result, its samples
+    and time those of all the tries."""
+    from jwarp.solvers.planning.rrt import rrt_connect
+
+    o = planner.options
+    t = time.perf_counter()
+    samples = 0
+    while True:
+        r = rrt_connect(planner.robot, planner.world.select(b), q0, q1, ropt,
+                        margin=o.margin, kappa=o.kappa, device=planner.device, deadline=stop,
+                        endpoint_margin=o.endpoint_margin, self_margin=o.self_margin,
+                        meshes=meshes)
+        samples += r.n_samples
+        if r.success or r.stop_reason != "max_samples" or stop is None \
+                or time.perf_counter() >= stop:
+            break
+    r.n_samples = samples
+    r.wall_time = time.perf_counter() - t
+    return r
 
 
 def _certified_as_is(planner: Planner, res: PlanResult, found: list[int], seeds: list,

@@ -59,7 +59,8 @@ class RRTOptions:
     Attributes:
         step: the longest extension of a tree in one step and the longest edge checked
             in one piece [rad, m for prismatic joints], joint-space Euclidean norm, > 0.
-        max_samples: most random samples per problem, >= 1.
+        max_samples: most random samples per problem, >= 1 (per try: the planner's
+            fallback for one problem starts new trees while time is left).
         time_limit: seconds per problem (None: no limit but the caller's deadline), > 0.
         goal_bias: probability that a sample is the other tree's root, in [0, 1].
         seed: random seed (an integer >= 0, a numpy Generator or None: fresh entropy).
