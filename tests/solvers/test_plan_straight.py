@@ -267,9 +267,9 @@ def test_last_check_of_one_problem_certifies_one_start(tmp_path_factory, monkeyp
 
 
 def test_optimiser_checks_the_clearest_candidates_first(arm7_problems, monkeypatch):
-    """Every check of the optimiser gets each problem's candidates clearest first (the
-    lowest largest substep cost; its first proven path ends the problem's check), and the
-    problems in order: the order the CPU's threads take them."""
+    """On the CPU every check of the optimiser gets each problem's candidates clearest
+    first (the lowest largest substep cost; its first proven path ends the problem's
+    check), and the problems in order: the order the CPU's threads take them."""
     robot, world, _, hit = arm7_problems
     seen = []
     original = PL.Planner._confirm

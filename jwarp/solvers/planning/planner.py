@@ -442,10 +442,11 @@ class Planner:
                 solved = done & feasible
             else:
                 cand = np.nonzero(~done & ((smax < screen) | last))[0]
-                # per problem the clearest candidates first (the lowest largest substep
-                # cost): its first proven path ends its check (the rest are skipped), and
-                # the clearest is the likeliest
-                cand = cand[np.lexsort((smax[cand], cand // n_starts))]
+                # on the CPU, whose threads take the paths in order: per problem the
+                # clearest candidates first (the lowest largest substep cost), the
+                # likeliest to be proven, which ends its check (the rest are skipped)
+                if dev.is_cpu:
+                    cand = cand[np.lexsort((smax[cand], cand // n_starts))]
                 if len(cand):
                     newly = cand[self._confirm(buf, cand)]
                     if len(newly):
