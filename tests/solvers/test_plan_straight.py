@@ -269,14 +269,16 @@ def test_last_check_of_one_problem_certifies_one_start(tmp_path_factory, monkeyp
 def test_optimiser_checks_the_clearest_candidates_first(arm7_problems, monkeypatch):
     """On the CPU every check of the optimiser gets each problem's candidates clearest
     first (the lowest largest substep cost; its first proven path ends the problem's
-    check), and the problems in order: the order the CPU's threads take them."""
+    check), and the problems in order: the order the CPU's threads take them; before the
+    last check only the clearest (CPU_CHECK_PER_PROBLEM)."""
     robot, world, _, hit = arm7_problems
     seen = []
     original = PL.Planner._confirm
 
     def recording(self, buf, cand):
         smax = buf.objective.sub_max.numpy().astype(np.float64)
-        seen.append((np.array(cand), smax[cand], buf.objective.P // self.n_problems))
+        seen.append((np.array(cand), smax[cand], buf.objective.P // self.n_problems,
+                     self._final))
         return original(self, buf, cand)
 
     monkeypatch.setattr(PL.Planner, "_confirm", recording)
@@ -284,9 +286,14 @@ def test_optimiser_checks_the_clearest_candidates_first(arm7_problems, monkeypat
     q1 = np.stack([h[1] for h in hit])
     PL.plan(robot, world, q0, q1, seed=0, fallback=None, iterations=60, device="cpu",
             straight_first=False)
-    assert seen and any(len(c) > 1 for c, _, _ in seen)
-    for cand, smax, per in seen:
+    assert seen and any(len(c) > 1 for c, _, _, _ in seen)
+    cap = PL.planner.CPU_CHECK_PER_PROBLEM
+    assert cap == 1
+    for cand, smax, per, final in seen:
         prob = cand // per
         assert (np.diff(prob) >= 0).all()
         same = np.diff(prob) == 0
         assert (np.diff(smax)[same] >= 0).all()
+        # before the last check: the clearest candidate of each problem only
+        if not final:
+            assert np.bincount(prob).max() <= cap

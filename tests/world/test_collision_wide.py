@@ -254,7 +254,7 @@ def test_near_lists_change_no_bit(device, monkeypatch):
     robot = jwarp.robot("arm7")
     rng = np.random.default_rng(8)
     world = clustered_scene(robot, rng, device)
-    assert 24 > NEAR_MAX  # a cluster overflows a list
+    assert NEAR_MAX < 24  # a cluster overflows a list
     q = sample(robot, 300, seed=6)
     qa = wp.array(q, dtype=wp.float64, device=device)
     paths = np.stack([q[:-1:2], q[1::2]], axis=1)[:, [0, 0, 1, 1]]
