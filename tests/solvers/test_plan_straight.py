@@ -297,3 +297,20 @@ def test_optimiser_checks_the_clearest_candidates_first(arm7_problems, monkeypat
         # before the last check: the clearest candidate of each problem only
         if not final:
             assert np.bincount(prob).max() <= cap
+
+
+def test_cpu_line_check_evaluates_points_first(arm7_problems):
+    """On the CPU the straight stage's check evaluates LINE_CHECK_POINTS points of every
+    segment before the advancement: the same verdicts as the planner's own check on free
+    and colliding lines."""
+    robot, world, free, hit = arm7_problems
+    pl = PL.Planner(robot, world, 1, device="cpu")
+    line = pl._line_check()
+    assert line.options.points == PL.planner.LINE_CHECK_POINTS == 2
+    assert line.options.rounds == 1 and line is not pl.motion_check()
+    pairs = list(free) + list(hit)
+    paths = np.stack([q0 + np.linspace(0, 1, 20)[:, None] * (q1 - q0) for q0, q1 in pairs])
+    a = line.check(paths, meshes=False)
+    b = pl.motion_check().check(paths, meshes=False)
+    np.testing.assert_array_equal(a.ok, b.ok)
+    assert a.ok[:len(free)].all() and not a.ok[len(free):].any()
