@@ -519,7 +519,8 @@ class MotionCheck:
     # ------------------------------------------------------------------ check
     def launch(self, paths: wp.array, idx: wp.array, K: int, *, margin: float = 0.0,
                endpoint_margin: float | None = None, group: int = 0,
-               self_margin: float = 0.0, world_group: int = 0) -> dict:
+               self_margin: float = 0.0, world_group: int = 0,
+               points: tuple[int, int] | None = None) -> dict:
         """Check the paths ``idx[:K]`` of the device array ``paths`` (P, W, n_dof) (float32
         or float64) without host copies; returns the output arrays (``ok``, ``code``,
         ``where``, ``what``, ``dist`` of length >= K, and the per-segment ones).
@@ -527,7 +528,10 @@ class MotionCheck:
         feasible path: once one is proven, the others of its problem are skipped (code
         "skipped", not ok). ``self_margin`` [m]: the clearance required between the
         robot's own spheres (default 0). ``world_group`` > 0 with a batch of worlds
-        (:meth:`jwarp.world.sdf.World.batch`): path p is in world ``p // world_group``."""
+        (:meth:`jwarp.world.sdf.World.batch`): path p is in world ``p // world_group``.
+        ``points`` (``"advance"`` only): (points, rounds) of this launch's parallel
+        evaluations instead of the options' (e.g. (2, 1): a colliding path is found
+        before the advancement proves its segments up to the collision)."""
         W = paths.shape[1]
         self.device_world.sync()  # moved / added objects
         self._cm.world = self.device_world.struct
@@ -535,6 +539,10 @@ class MotionCheck:
         out = self._outputs(K, W)
         o = self.options
         levels = o.resolved_method(self.device) == "levels"
+        if points is not None and not levels:
+            check_int(points[0], "points", 0)
+            check_int(points[1], "rounds", 1)
+            o = replace(o, points=int(points[0]), rounds=int(points[1]))
         M = 0 if levels else (o.points if o.points is not None
                               else (16 if self.device.is_cuda else 0))
         n_seg = K * (W - 1)

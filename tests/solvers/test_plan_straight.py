@@ -299,18 +299,34 @@ def test_optimiser_checks_the_clearest_candidates_first(arm7_problems, monkeypat
             assert np.bincount(prob).max() <= cap
 
 
-def test_cpu_line_check_evaluates_points_first(arm7_problems):
+def test_cpu_line_check_evaluates_points_first(arm7_problems, monkeypatch):
     """On the CPU the straight stage's check evaluates LINE_CHECK_POINTS points of every
-    segment before the advancement: the same verdicts as the planner's own check on free
-    and colliding lines."""
+    segment before the advancement (MotionCheck.launch(points=...)): the same verdicts as
+    the planner's own check on free and colliding lines."""
+    import warp as wp
+
+    from jwarp.world.motion import MotionCheck
+
     robot, world, free, hit = arm7_problems
-    pl = PL.Planner(robot, world, 1, device="cpu")
-    line = pl._line_check()
-    assert line.options.points == PL.planner.LINE_CHECK_POINTS == 2
-    assert line.options.rounds == 1 and line is not pl.motion_check()
+    assert PL.planner.LINE_CHECK_POINTS == 2
+    asked = []
+    original = MotionCheck.launch
+
+    def recording(self, *args, **kwargs):
+        asked.append(kwargs.get("points"))
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(MotionCheck, "launch", recording)
+    PL.plan(robot, world, free[0][0], free[0][1], device="cpu")
+    assert asked[0] == (2, 1)
+    chk = PL.Planner(robot, world, 1, device="cpu").motion_check()
     pairs = list(free) + list(hit)
     paths = np.stack([q0 + np.linspace(0, 1, 20)[:, None] * (q1 - q0) for q0, q1 in pairs])
-    a = line.check(paths, meshes=False)
-    b = pl.motion_check().check(paths, meshes=False)
-    np.testing.assert_array_equal(a.ok, b.ok)
-    assert a.ok[:len(free)].all() and not a.ok[len(free):].any()
+    P = wp.array(paths, dtype=wp.float64, device="cpu")
+    idx = wp.array(np.arange(len(paths), dtype=np.int32), device="cpu")
+    a = chk.launch(P, idx, len(paths), points=(2, 1))["ok"].numpy()[:len(paths)].copy()
+    b = chk.launch(P, idx, len(paths))["ok"].numpy()[:len(paths)].copy()
+    np.testing.assert_array_equal(a, b)
+    assert a[:len(free)].all() and not a[len(free):].any()
+    with pytest.raises(ValueError, match="rounds"):
+        chk.launch(P, idx, len(paths), points=(2, 0))

@@ -213,7 +213,6 @@ class Planner:
             kappa_array(self.robot, o.kappa)  # validates, naming kappa
         self._buffers: _Buffers | None = None
         self._motion = None  # the continuous path check (motion_check())
-        self._line_motion = None  # the straight stage's on the CPU (_line_check())
         # explain() diagnoses the unsolved problems by a check (off: the fallback's own
         # optimisation, whose reasons nobody reads)
         self._diagnose = True
@@ -693,7 +692,12 @@ class Planner:
         line = initial_paths(q0, q1, o.n_waypoints, "straight").astype(self.npdt)
         p: wp.array = wp.array(line, dtype=self.scalar, device=dev)
         idx: wp.array = wp.array(np.arange(B, dtype=np.int32), dtype=wp.int32, device=dev)
-        out = self._line_check().launch(p, idx, B, margin=o.margin,
+        # on the CPU the line's segments are first evaluated at LINE_CHECK_POINTS points
+        # each: a line that collides is found there, before the advancement proves its
+        # segments up to the collision (the points prove their neighbourhoods: the same
+        # proof)
+        pts = (LINE_CHECK_POINTS, 1) if dev.is_cpu and LINE_CHECK_POINTS else None
+        out = self.motion_check().launch(p, idx, B, margin=o.margin, points=pts,
                                          endpoint_margin=o.endpoint_margin,
                                          self_margin=o.self_margin,
                                          world_group=1 if self.batched else 0)
@@ -1068,22 +1072,6 @@ class Planner:
             self._motion = motion_check(self.robot, self.world, device=self.device,
                                         options=opts)
         return self._motion
-
-    def _line_check(self) -> Any:
-        """The check of the straight stage: on the CPU the planner's, first evaluating
-        :data:`LINE_CHECK_POINTS` points of every segment (a line that collides is found
-        there before the advancement proves the segments up to it; the points prove their
-        neighbourhoods, the same proof); elsewhere :meth:`motion_check`."""
-        if not self.device.is_cpu or not LINE_CHECK_POINTS:
-            return self.motion_check()
-        if self._line_motion is None:
-            from jwarp.world.motion import MotionOptions, motion_check
-
-            self._line_motion = motion_check(
-                self.robot, self.world, device=self.device,
-                options=MotionOptions(max_evals=PLANNER_CHECK_EVALS,
-                                      points=LINE_CHECK_POINTS, rounds=1))
-        return self._line_motion
 
     def _confirm(self, buf: _Buffers, cand: np.ndarray) -> np.ndarray:
         """Exact feasibility of the candidate paths: rigid model: the continuous check on
