@@ -264,6 +264,25 @@ def funcs(scalar: type) -> SimpleNamespace:
         return world_distance_skip(world, x, cutoff, grp, 0)
 
     @wp.func
+    def grid_distance(world: WorldModel, x: vec3, cutoff: scalar):
+        """(d, g, k) of :func:`world_distance` from the grid alone (k -2; (cutoff, +z, -1)
+        without a grid or where its cell keeps the cutoff)."""
+        best = cutoff
+        bg = vec3(zero, zero, one)
+        bk = int(-1)
+        if world.use_grid != 0:
+            gr = world.grid
+            if sdf_lower_bound(gr.cellmin, gr.origin, gr.inv_h, gr.dim, x) - world.grid_error \
+                    < cutoff:
+                d, g = sdf_sample(gr.grid, gr.origin, gr.inv_h, gr.dim, x)
+                d = d - world.grid_error
+                if d < best:
+                    best = d
+                    bg = g
+                    bk = -2
+        return best, bg, bk
+
+    @wp.func
     def objects_near(world: WorldModel, c: vec3, r: scalar, eps: scalar, grp: int):
         """(n, ids): the exact objects that may come within ``eps`` of a sphere inside
         the ball (c, r) (:func:`jwarp.kernels.geometry` ``shapes_near``, with the rounding
@@ -285,19 +304,7 @@ def funcs(scalar: type) -> SimpleNamespace:
         :func:`objects_near` for a ball holding the sphere at x (its cutoff within the
         ball's eps): n = :data:`NEAR_NONE` leaves the objects out, n = -1 queries them
         all."""
-        best = cutoff
-        bg = vec3(zero, zero, one)
-        bk = int(-1)
-        if world.use_grid != 0:
-            gr = world.grid
-            if sdf_lower_bound(gr.cellmin, gr.origin, gr.inv_h, gr.dim, x) - world.grid_error \
-                    < cutoff:
-                d, g = sdf_sample(gr.grid, gr.origin, gr.inv_h, gr.dim, x)
-                d = d - world.grid_error
-                if d < best:
-                    best = d
-                    bg = g
-                    bk = -2
+        best, bg, bk = grid_distance(world, x, cutoff)
         if world.shapes.kind.shape[0] > 0 and n != NEAR_NONE:
             d2, g2, k2 = gk.shapes_distance_near(world.shapes, x, best, grp, n, ids)
             if k2 >= 0:
@@ -311,19 +318,7 @@ def funcs(scalar: type) -> SimpleNamespace:
                             skip_objects: int):
         """:func:`world_distance`; ``skip_objects`` = 1 leaves the exact objects out (the
         caller proved them farther than the cutoff)."""
-        best = cutoff
-        bg = vec3(zero, zero, one)
-        bk = int(-1)
-        if world.use_grid != 0:
-            gr = world.grid
-            if sdf_lower_bound(gr.cellmin, gr.origin, gr.inv_h, gr.dim, x) - world.grid_error \
-                    < cutoff:
-                d, g = sdf_sample(gr.grid, gr.origin, gr.inv_h, gr.dim, x)
-                d = d - world.grid_error
-                if d < best:
-                    best = d
-                    bg = g
-                    bk = -2
+        best, bg, bk = grid_distance(world, x, cutoff)
         if world.shapes.kind.shape[0] > 0 and skip_objects == 0:  # a grid-only world never
             d2, g2, k2 = gk.shapes_distance(world.shapes, x, best, grp)  # enters the objects
             if k2 >= 0:

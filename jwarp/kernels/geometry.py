@@ -219,11 +219,8 @@ def kernels(scalar: type) -> SimpleNamespace:
         return d, R * g
 
     @wp.func
-    def shapes_distance(ws: WorldShapes, x: vec3, cutoff: scalar, grp: int):
-        """(d, g, k): the smallest signed distance [m] of x over the objects whose bounding
-        box lies within ``cutoff`` of x, its gradient and the object; (cutoff, +z, -1) if
-        there is none. Objects farther than the cutoff are never visited. In a batch of
-        worlds (``use_groups``) only the objects of world ``grp`` count (``grp`` < 0: all)."""
+    def planes_distance(ws: WorldShapes, x: vec3, cutoff: scalar, grp: int):
+        """(d, g, k) of :func:`shapes_distance` over the planes alone (no BVH object)."""
         best = cutoff
         bg = vec3(zero, zero, one)
         bk = int(-1)
@@ -237,6 +234,16 @@ def kernels(scalar: type) -> SimpleNamespace:
                 best = d
                 bg = g
                 bk = k
+        return best, bg, bk
+
+    @wp.func
+    def shapes_distance(ws: WorldShapes, x: vec3, cutoff: scalar, grp: int):
+        """(d, g, k): the smallest signed distance [m] of x over the objects whose bounding
+        box lies within ``cutoff`` of x, its gradient and the object; (cutoff, +z, -1) if
+        there is none. Objects farther than the cutoff are never visited. In a batch of
+        worlds (``use_groups``) only the objects of world ``grp`` count (``grp`` < 0: all)."""
+        best, bg, bk = planes_distance(ws, x, cutoff, grp)
+        by_group = ws.use_groups != 0 and grp >= 0
         root = int(-1)
         if by_group:
             root = ws.group_root[grp]  # -2: this world has no objects in the BVH
@@ -291,19 +298,7 @@ def kernels(scalar: type) -> SimpleNamespace:
         BVH query; n = -1: :func:`shapes_distance` itself."""
         if n < 0:
             return shapes_distance(ws, x, cutoff, grp)
-        best = cutoff
-        bg = vec3(zero, zero, one)
-        bk = int(-1)
-        by_group = ws.use_groups != 0 and grp >= 0
-        for i in range(ws.planes.shape[0]):
-            k = ws.planes[i]
-            if by_group and ws.group[k] != grp:
-                continue
-            d, g = shape_sdf(ws, k, x, cutoff)
-            if d < best:
-                best = d
-                bg = g
-                bk = k
+        best, bg, bk = planes_distance(ws, x, cutoff, grp)
         for i in range(n):
             k = ids[i]
             d, g = shape_sdf(ws, k, x, best)
