@@ -313,7 +313,9 @@ def test_a_batch_is_shortened_per_problem(world):
     short = PL.plan("planar4", world, starts, goals, **o)
     assert short.feasible.all() and first.feasible.all()
     assert np.all(short.length_cost <= first.length_cost * (1 + 1e-6))
-    np.testing.assert_allclose(short.length_before, first.length_cost)
+    # length_before: U_l of the same paths (on the host in float64 where the costs wait
+    # for their first read; the float32 kernel's in ``first``)
+    np.testing.assert_allclose(short.length_before, first.length_cost, rtol=1e-6)
     robot = PL.Planner("planar4", world, 1).robot
     for p in short.path:
         assert independent_feasible(robot, world, p)

@@ -157,23 +157,24 @@ def test_start_in_collision_is_named(walls):
 
 
 def test_planner_fallback_runs_the_batch(monkeypatch):
-    """The planner's fallback with more than one unsolved problem: one rrt_connect_batch
-    call; its paths certified (stage "fallback"); one problem: rrt_connect as before."""
+    """The planner's fallback with more than one unsolved problem: one RRTBatch for all;
+    its paths certified (stage "fallback"); one problem: rrt_connect as before."""
     from jwarp.solvers.planning import planner as PM
 
     world = block_world_2d()
     calls = {"batch": 0, "one": 0}
-    orig_b, orig_1 = R.rrt_connect_batch, R.rrt_connect
+    orig_1 = R.rrt_connect
 
-    def batch(*a, **k):
-        calls["batch"] += 1
-        return orig_b(*a, **k)
+    class Batch(R.RRTBatch):
+        def __init__(self, *a, **k):
+            calls["batch"] += 1
+            super().__init__(*a, **k)
 
     def one(*a, **k):
         calls["one"] += 1
         return orig_1(*a, **k)
 
-    monkeypatch.setattr(R, "rrt_connect_batch", batch)
+    monkeypatch.setattr(R, "RRTBatch", Batch)
     monkeypatch.setattr(R, "rrt_connect", one)
     starts = np.stack([S4, S4 * 0.95])
     goals = np.stack([G4, G4 * 0.95])
@@ -233,3 +234,88 @@ def test_rounds_are_as_wide_as_the_device(monkeypatch, cuda):
     R.rrt_connect_batch(jwarp.robot("planar4"), world, np.stack([S4, S4 * 0.95]),
                         np.stack([G4, G4 * 0.95]), R.RRTOptions(seed=0, batch=8), device="cpu")
     assert drawn and set(drawn) == {8}
+
+
+def test_batch_problems_join_late_with_the_same_result(walls):
+    """RRTBatch: a problem that joins after others searched for rounds finds the path it
+    finds in rrt_connect_batch (its own generator: the others and the time it joined do
+    not change its trees)."""
+    robot, worlds, batch, q0, q1 = walls
+    o = R.RRTOptions(seed=4)
+    ref = R.rrt_connect_batch(robot, batch, q0, q1, o, device="cpu")
+    rb = R.RRTBatch(robot, batch, q0, q1, o, device="cpu")
+    rb.start([0, 2])
+    for _ in range(3):
+        rb.round()
+    assert 1 not in rb.problems and 1 not in set(rb.active.tolist())
+    rb.start([1])
+    with pytest.raises(ValueError, match="rows: 1"):
+        rb.start([1])
+    rb.run()
+    rb.finish(rb.connected())
+    for b in range(3):
+        r = rb.result(b)
+        assert r.success and r.n_samples == ref[b].n_samples
+        np.testing.assert_array_equal(r.path, ref[b].path)
+        assert own_world_feasible(robot, worlds[b], r.path)
+
+
+def test_batch_restarts_trees_while_time_is_left(walls):
+    """RRTBatch(restart=True): a problem whose samples are spent starts new trees while
+    the caller's time is left (its samples those of all its trees); without restart, or
+    with no time left, it ends as "max_samples"."""
+    import time
+
+    robot, worlds, batch, q0, q1 = walls
+    o = R.RRTOptions(seed=1, max_samples=1, goal_bias=0.0, batch=1)
+    rb = R.RRTBatch(robot, batch, q0, q1, o, device="cpu")
+    rb.start([0])
+    rb.run()
+    assert rb.result(0).stop_reason == "max_samples" and rb.result(0).n_samples == 1
+    rb = R.RRTBatch(robot, batch, q0, q1, o, device="cpu", restart=True)
+    rb.start([0])
+    stop = time.perf_counter() + 0.5
+    for _ in range(5):
+        rb.round(stop)
+    p = rb.problems[0]
+    assert p.restarts >= 3 and rb.result(0).n_samples == p.restarts + p.samples
+    if rb.result(0).success:
+        return
+    rb.run(time.perf_counter())  # no time left: its spent samples end it
+    assert rb.active.size == 0 and rb.result(0).stop_reason == "max_samples"
+
+
+def test_planner_grows_handed_problems_trees_between_steps(monkeypatch):
+    """A batch's problem handed over (stall_iterations) grows its trees while the other
+    problem is still optimised: its RRT path is certified (``solved_at``) before the
+    optimiser's last iteration (timed by the callback), stage "fallback", solved before
+    the other; FALLBACK_INTERLEAVED off: only after the loop. Both paths independently
+    certified."""
+    import time
+
+    from jwarp.solvers.planning import planner as PM
+
+    world = block_world_2d()
+    starts = np.stack([S4, [-2.895, 1.2639, 1.2862, 0.8666]])
+    goals = np.stack([G4, [0.5338, 1.1644, -2.1568, -1.1121]])
+    chk = FZ.certify_check(jwarp.robot("planar4"), world, device="cpu")
+    for inter in (True, False):
+        monkeypatch.setattr(PM, "FALLBACK_INTERLEAVED", inter)
+        calls: list = []
+        o = PL.PlanOptions(n_starts=2, iterations=400, fallback="rrt", n_substeps=8,
+                           step=0.02, stall_iterations=3, straight_first=False,
+                           callback=lambda it, paths, calls=calls: calls.append(
+                               time.perf_counter()))
+        pl = PL.Planner("planar4", world, 2, o, device="cpu")
+        t0 = time.perf_counter()
+        res = pl.plan(starts, goals)
+        assert res.feasible.all() and res.stage[0] == "fallback"
+        later = [t for t in calls if t > t0 + res.solved_at[0]]  # iterations after it
+        if inter:
+            assert len(later) >= 5  # found while the loop still ran
+            assert "while the optimiser ran" in res.fallback_notes[0]
+            assert res.solved_at[0] < res.solved_at[1]
+            assert res.timings["rrt"] > 0
+        else:
+            assert not later
+        assert chk.check(res.path, meshes=False).ok.all()

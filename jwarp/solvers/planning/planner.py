@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import replace
 from typing import Any
@@ -227,6 +228,12 @@ class Planner:
         #: per problem of the last plan: its start or goal needs the mesh certificate
         self._mesh_need: np.ndarray | None = None
         self._final = True   # the optimisation's last check (every path may use meshes)
+        #: the RRT-Connect batch of the last plan's problems handed to the fallback
+        #: (:class:`jwarp.solvers.planning.rrt.RRTBatch`; None: none yet)
+        self._rrt: Any = None
+        #: problem -> (path (W, n_dof), RRT nodes, seconds from the call's start): the
+        #: fallback paths certified while the optimiser still ran
+        self._rrt_found: dict[int, tuple] = {}
 
     # ------------------------------------------------------------------ public
     def plan(self, start: Any, goal: Any, seeds: Any = None) -> PlanResult:
@@ -305,6 +312,7 @@ class Planner:
         t0 = time.perf_counter() if t_start is None else t_start
         model, o, dev = self.robot, self.options, self.device
         mesh_s0 = self._mesh_seconds()
+        self._rrt, self._rrt_found = None, {}
         deadline = None if o.time_limit is None else t0 + float(o.time_limit)
         # the problems' search (multi-starts, fallback): the call's limit and their own
         budget = [float(v) for v in (o.time_limit, o.problem_time_limit) if v is not None]
@@ -423,6 +431,11 @@ class Planner:
         stall = (o.stall_iterations if o.fallback is not None and o.stop_when_solved
                  and o.freeze_feasible and not o.converge else None)
         handed = np.zeros(B, bool)           # problems handed to the fallback early
+        # a batch's handed problems grow their trees between the others' steps
+        # (no problem waits for the batch): RRTBatch rounds in this loop
+        interleave = (stall is not None and B > 1 and o.kappa is None and FALLBACK_BATCH
+                      and FALLBACK_INTERLEAVED)
+        t_rrt = 0.0
         best_cost = np.full(B, np.inf)       # their best start's lowest U_path so far
         gain_it = np.zeros(B, np.int64)      # the iteration of its last gain
         for it in range(o.iterations + 1):
@@ -503,6 +516,15 @@ class Planner:
                     done[rows] = True
                     iters[rows] = it
                     handed |= hand
+                    if interleave:
+                        t_r = time.perf_counter()
+                        self._rrt_start(np.nonzero(hand)[0], q0, q1, t0)
+                        t_rrt += time.perf_counter() - t_r
+            if self._rrt is not None and len(self._rrt.active) and not out_of_time \
+                    and not done.all():
+                t_r = time.perf_counter()
+                self._rrt_round(t0, search_end)
+                t_rrt += time.perf_counter() - t_r
             if done.all():
                 reason = "all_done"
                 break
@@ -525,12 +547,95 @@ class Planner:
         res.stage = np.where(res.feasible, "optimizer", "none").astype("<U9")
         if line is not None:
             res.stage[line] = "straight"
-        timings["optimizer"] = time.perf_counter() - t_opt
+        timings["optimizer"] = time.perf_counter() - t_opt - t_rrt
+        if t_rrt:
+            timings["rrt"] = t_rrt
         res.timings = timings
+        if self._rrt_found:
+            self._rrt_apply(res, obj.n_sub)
         if handed.any():
             timings["handed_over"] = int(handed.sum())
         return self._finish(res, q0, q1, t0, search_end, deadline, obj.n_sub,
                             work + obj.evaluations - evals0, mesh_s0)
+
+    def _rrt_batch(self, q0: np.ndarray, q1: np.ndarray) -> Any:
+        """The plan's :class:`RRTBatch` over all its problems (made on first use): the
+        planner's margins, device and per-problem mesh certificate, ``rrt`` options (their
+        seed's generator), new trees while time is left."""
+        if self._rrt is None:
+            from jwarp.solvers.planning.rrt import RRTBatch, RRTOptions
+
+            o = self.options
+            ro = o.rrt if o.rrt is not None else RRTOptions()
+            rng = (ro.seed if isinstance(ro.seed, np.random.Generator)
+                   else np.random.default_rng(ro.seed))
+            need = self._mesh_need
+            self._rrt = RRTBatch(self.robot, self.world, q0, q1, replace(ro, seed=rng),
+                                 margin=o.margin, endpoint_margin=o.endpoint_margin,
+                                 self_margin=o.self_margin, device=self.device,
+                                 meshes=True if need is None else np.asarray(need, bool),
+                                 restart=True)
+        return self._rrt
+
+    def _rrt_start(self, rows: np.ndarray, q0: np.ndarray, q1: np.ndarray, t0: float
+                   ) -> None:
+        """The problems ``rows`` (handed over) join the plan's RRT batch; those whose
+        straight line (in the trees' pieces) is proven there are certified at once."""
+        rb = self._rrt_batch(q0, q1)
+        rb.start(rows)
+        line = [int(b) for b in rows if rb.problems[int(b)].path is not None]
+        if line:
+            self._rrt_certify(line, t0)
+
+    def _rrt_round(self, t0: float, stop: float | None) -> None:
+        """One round of the plan's RRT batch; the paths it connected are shortcut,
+        verified and (as :func:`_certified_as_is`) certified as W waypoints at once."""
+        rb = self._rrt
+        end = math.inf if stop is None else stop
+        got = rb.round(end)
+        if got:
+            rb.finish(got, end)
+            self._rrt_certify(got, t0)
+
+    def _rrt_certify(self, rows: list[int], t0: float) -> None:
+        """The RRT paths of ``rows`` resampled to W waypoints; those certified as they are
+        kept in ``_rrt_found`` (the others go to the fallback's optimisation)."""
+        from jwarp.solvers.planning.rrt import resample_path
+
+        rb, W = self._rrt, self.options.n_waypoints
+        cand = [b for b in rows if rb.problems[b].path is not None
+                and len(rb.problems[b].path) <= W]
+        if not cand:
+            return
+        seeds = [resample_path(rb.problems[b].path, W) for b in cand]
+        ok = _certify_rrt_paths(self, np.array(cand), np.stack(seeds), self._mesh_need)
+        at = time.perf_counter() - t0
+        for k in np.nonzero(ok)[0]:
+            b = cand[k]
+            self._rrt_found[b] = (seeds[k], len(rb.problems[b].path), at)
+
+    def _rrt_apply(self, res: PlanResult, n_sub: int) -> None:
+        """The fallback paths certified during the optimisation (``_rrt_found``) set in
+        ``res`` (stage "fallback", iteration 0, start_index -1, their ``solved_at``; costs
+        evaluated on first read)."""
+        W = res.path.shape[1]
+        if res.fallback_notes is None:
+            res.fallback_notes = np.full(len(res.feasible), "", dtype=object)
+        rows = np.array(sorted(self._rrt_found))
+        for b in rows:
+            path, nodes, at = self._rrt_found[int(b)]
+            res.path[b] = path
+            res.feasible[b] = True
+            res.iterations[b] = 0
+            res.start_index[b] = -1
+            res.stage[b] = "fallback"
+            res.solved_at[b] = at
+            res.fallback_notes[b] = (f"RRT-Connect path of {nodes} nodes as {W} waypoints: "
+                                     f"certified as it is (its trees grew while the "
+                                     f"optimiser ran)")
+        self._costs_on_read(res, rows, n_sub)
+        if res.feasible.all():
+            res.stop_reason = "solved"
 
     def _finish(self, res: PlanResult, q0: np.ndarray, q1: np.ndarray, t0: float,
                 search_end: float | None, deadline: float | None, n_sub: int, work: int,
@@ -1216,6 +1321,10 @@ def _best_of_group(group: np.ndarray, score: np.ndarray, sel: np.ndarray, k: int
 #: :func:`_fallback` runs the trees of more than one unsolved problem (rigid model) at once
 #: (:func:`jwarp.solvers.planning.rrt.rrt_connect_batch`); False: one problem after another
 FALLBACK_BATCH = True
+#: a batch's problems handed over by :attr:`PlanOptions.stall_iterations` grow their trees
+#: between the other problems' gradient steps (:class:`jwarp.solvers.planning.rrt.RRTBatch`),
+#: not after the batch's optimisation; False: after it, as one batch
+FALLBACK_INTERLEAVED = True
 
 
 def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray, t0: float,
@@ -1246,22 +1355,23 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
     ropt = replace(ro, seed=rng)
     rrt_stop = None if deadline is None else t_rrt + 0.8 * max(0.0, deadline - t_rrt)
     W = res.path.shape[1]
-    notes = res.fallback_notes = np.full(len(res.feasible), "", dtype=object)
+    if res.fallback_notes is None:
+        res.fallback_notes = np.full(len(res.feasible), "", dtype=object)
+    notes = res.fallback_notes
     found, seeds, nodes = [], [], []
     timed_out = False
     todo = np.nonzero(~res.feasible)[0]
     need = getattr(planner, "_mesh_need", None)
     batch = None  # more than one problem (rigid): all their trees at once, in one batch
-    if len(todo) > 1 and o.kappa is None and FALLBACK_BATCH and (
+    rb = planner._rrt  # the trees already growing (problems handed over early)
+    if (len(todo) > 1 or rb is not None) and o.kappa is None and FALLBACK_BATCH and (
             rrt_stop is None or time.perf_counter() < rrt_stop):
-        from jwarp.solvers.planning.rrt import rrt_connect_batch
-
-        batch = rrt_connect_batch(
-            planner.robot, planner.world, q0[todo], q1[todo], ropt, margin=o.margin,
-            device=planner.device, deadline=rrt_stop, endpoint_margin=o.endpoint_margin,
-            self_margin=o.self_margin,
-            meshes=True if need is None else np.asarray(need, bool)[todo],
-            world_index=todo if planner.batched else None)
+        rb = planner._rrt_batch(q0, q1)
+        rb.start([int(b) for b in todo if int(b) not in rb.problems])
+        end = math.inf if rrt_stop is None else rrt_stop
+        rb.run(end)
+        rb.finish(rb.connected(), end)
+        batch = [rb.result(int(b)) for b in todo]
     for i, b in enumerate(todo):
         if batch is None and rrt_stop is not None and time.perf_counter() >= rrt_stop:
             timed_out = True
@@ -1284,7 +1394,7 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
             notes[b] = (f"RRT-Connect found no path ({why}; {r.n_samples} samples, "
                         f"{r.n_nodes} nodes, {r.wall_time:.2f} s)")
         timed_out |= r.stop_reason == "time_limit"
-    res.timings["rrt"] = time.perf_counter() - t_rrt
+    res.timings["rrt"] = res.timings.get("rrt", 0.0) + time.perf_counter() - t_rrt
     direct: list[int] = []  # problems whose RRT path is certified as it is, here
     if found and o.kappa is None:
         t_cert = time.perf_counter()
@@ -1412,20 +1522,11 @@ def _certified_as_is(planner: Planner, res: PlanResult, found: list[int], seeds:
     cand = [k for k in range(len(found)) if nodes[k] <= W]
     if not cand:
         return []
-    o = planner.options
     rows = np.array([found[k] for k in cand])
-    paths = np.zeros((len(res.feasible),) + res.path.shape[1:])
-    paths[rows] = np.stack([seeds[k] for k in cand])
-    chk = certify_check(planner.robot, planner.world, device=planner.device)
-    pc = chk.check(paths, margin=o.margin, endpoint_margin=o.endpoint_margin,
-                   self_margin=o.self_margin, world_group=1 if planner.batched else 0,
-                   meshes=np.ones(len(rows), bool) if need is None
-                   else np.asarray(need, bool)[rows], rows=rows)
-    ok = np.asarray(pc.ok, bool) & within_limits(planner.robot, paths[rows].reshape(
-        -1, paths.shape[2])).reshape(len(rows), W).all(axis=1)
+    ok = _certify_rrt_paths(planner, rows, np.stack([seeds[k] for k in cand]), need)
     done = rows[ok]
     at = time.perf_counter() - t0
-    res.path[done] = paths[done]
+    res.path[done] = np.stack([seeds[k] for k in cand])[ok]
     res.feasible[done] = True
     res.iterations[done] = 0
     res.start_index[done] = -1
@@ -1435,6 +1536,24 @@ def _certified_as_is(planner: Planner, res: PlanResult, found: list[int], seeds:
         res.fallback_notes[rows[k]] = (f"RRT-Connect path of {nodes[cand[k]]} nodes as {W} "
                                        f"waypoints: certified as it is")
     return [int(b) for b in done]
+
+
+def _certify_rrt_paths(planner: Planner, rows: np.ndarray, paths: np.ndarray,
+                       need: np.ndarray | None) -> np.ndarray:
+    """(R,) bool: the paths (R, W, n_dof) of problems ``rows`` within the limits and
+    certified by the trees' own check (:func:`certify_check`: the same pairs, margins,
+    budget and mesh certificate where ``need`` allows it), in one call."""
+    o = planner.options
+    W = paths.shape[1]
+    full = np.zeros((planner.n_problems,) + paths.shape[1:])
+    full[rows] = paths
+    chk = certify_check(planner.robot, planner.world, device=planner.device)
+    pc = chk.check(full, margin=o.margin, endpoint_margin=o.endpoint_margin,
+                   self_margin=o.self_margin, world_group=1 if planner.batched else 0,
+                   meshes=np.ones(len(rows), bool) if need is None
+                   else np.asarray(need, bool)[rows], rows=rows)
+    return np.asarray(pc.ok, bool) & within_limits(planner.robot, paths.reshape(
+        -1, paths.shape[2])).reshape(len(rows), W).all(axis=1)
 
 
 def _seed_reason(planner: Planner, sub: Planner, seed: np.ndarray, b: int) -> str:

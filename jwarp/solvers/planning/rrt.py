@@ -690,6 +690,10 @@ class _Problem:
         self.t_end = 0.0
         self.tried = 0  # shortcut pairs tried
         self.straight = False  # solved by the straight line
+        self.t_start = 0.0
+        self.spent = 0  # samples of earlier trees (RRTBatch restart)
+        self.restarts = 0
+        self.stop = math.inf  # its own time limit (RRTOptions.time_limit)
 
 
 def _problem_rows(x: Any, n: int, name: str) -> np.ndarray:
@@ -726,7 +730,8 @@ def rrt_connect_batch(robot: RobotModel, world: Any, starts: Any, goals: Any,
     spent. The found paths are shortcut and verified edge by edge the same way, all
     problems' checks in one call per round. Each problem draws from its own generator
     (:func:`problem_rngs`), so its result does not depend on the others. The elastic
-    model (``kappa``) runs :func:`rrt_connect` per problem.
+    model (``kappa``) runs :func:`rrt_connect` per problem. :class:`RRTBatch` is the same
+    search a round at a time, with problems joining while others search.
 
     Args: as :func:`rrt_connect`; ``meshes`` a bool or (B,) bools, one per problem;
     ``world_index`` (B,) distinct ints: problem b in world ``world_index[b]`` of a batch
@@ -745,173 +750,305 @@ def rrt_connect_batch(robot: RobotModel, world: Any, starts: Any, goals: Any,
     if not isinstance(o, RRTOptions):
         raise TypeError(f"options: expected an RRTOptions, got {type(o).__name__}")
     o.validate()
-    batch, n_connect = rrt_widths(o, not resolve_device(device).is_cuda)
-    model = robot
-    _fz.check_world(model, world)
-    n = model.n_dof
-    q0, q1 = _problem_rows(starts, n, "starts"), _problem_rows(goals, n, "goals")
-    if q1.shape != q0.shape:
-        raise ValueError(f"goals: expected shape {q0.shape} (one per start), got {q1.shape}")
-    B = len(q0)
+    if kappa is not None:
+        _fz.check_world(robot, world)
+        n = robot.n_dof
+        q0, q1 = _problem_rows(starts, n, "starts"), _problem_rows(goals, n, "goals")
+        B = len(q0)
+        slot = _world_slots(world, B, world_index)
+        mesh = _mesh_flags(meshes, B)
+        rngs = problem_rngs(o.seed, B)
+        return [rrt_connect(robot, world.select(int(slot[b])), q0[b], q1[b],
+                            replace(o, seed=rngs[b]), margin=margin, kappa=kappa,
+                            device=device, deadline=deadline,
+                            endpoint_margin=endpoint_margin, self_margin=self_margin,
+                            meshes=bool(mesh[b])) for b in range(B)]
+    rb = RRTBatch(robot, world, starts, goals, o, margin=margin,
+                  endpoint_margin=endpoint_margin, self_margin=self_margin, device=device,
+                  meshes=meshes, world_index=world_index)
+    stop_at = math.inf if deadline is None else float(deadline)
+    if o.time_limit is not None:
+        stop_at = min(stop_at, t0 + float(o.time_limit))
+    rb.start(np.arange(rb.n_problems))
+    rb.run(stop_at)
+    rb.finish(rb.connected(), stop_at)
+    return [rb.result(b, t0) for b in range(rb.n_problems)]
+
+
+def _world_slots(world: Any, B: int, world_index: Any) -> np.ndarray:
+    """(B,) problem b's world in a batch of worlds (zeros: one world); ValueError naming
+    ``world`` or ``world_index``."""
     nw = world.n_worlds
     if world_index is None:
         if nw not in (1, B):
             raise ValueError(f"world: a batch of {nw} worlds for {B} problems (expected one "
                              f"world or {B}, or a world_index)")
-        slot = np.arange(B) if nw > 1 else np.zeros(B, np.int64)
-    else:
-        slot = np.asarray(world_index)
-        if slot.shape != (B,) or not np.issubdtype(slot.dtype, np.integer) or (
-                nw > 1 and (slot.min() < 0 or slot.max() >= nw
-                            or len(np.unique(slot)) != B)):
-            raise ValueError(f"world_index: expected ({B},) distinct worlds in [0, {nw}), "
-                             f"got {np.asarray(world_index)!r}")
-        slot = slot.astype(np.int64) if nw > 1 else np.zeros(B, np.int64)
+        return np.arange(B) if nw > 1 else np.zeros(B, np.int64)
+    slot = np.asarray(world_index)
+    if slot.shape != (B,) or not np.issubdtype(slot.dtype, np.integer) or (
+            nw > 1 and (slot.min() < 0 or slot.max() >= nw or len(np.unique(slot)) != B)):
+        raise ValueError(f"world_index: expected ({B},) distinct worlds in [0, {nw}), "
+                         f"got {np.asarray(world_index)!r}")
+    return slot.astype(np.int64) if nw > 1 else np.zeros(B, np.int64)
+
+
+def _mesh_flags(meshes: Any, B: int) -> np.ndarray:
     mesh = np.asarray(meshes)
     if mesh.ndim == 0:
         mesh = np.full(B, bool(mesh))
     if mesh.shape != (B,):
         raise ValueError(f"meshes: expected a bool or ({B},) bools, got shape {mesh.shape}")
-    mesh = mesh.astype(bool)
-    rngs = problem_rngs(o.seed, B)
-    if kappa is not None:
-        return [rrt_connect(model, world.select(int(slot[b])), q0[b], q1[b], replace(o, seed=rngs[b]),
-                            margin=margin, kappa=kappa, device=device, deadline=deadline,
-                            endpoint_margin=endpoint_margin, self_margin=self_margin,
-                            meshes=bool(mesh[b])) for b in range(B)]
-    stop_at = math.inf if deadline is None else float(deadline)
-    if o.time_limit is not None:
-        stop_at = min(stop_at, t0 + float(o.time_limit))
-    m = float(margin)
-    em = None
-    if endpoint_margin is not None and float(endpoint_margin) < m:
-        em = float(endpoint_margin)
-    chk = _BatchChecks(model, world, m, em, float(self_margin), mesh, np.stack([q0, q1], 1),
-                       device, slot)
-    _check_roots(model, world, chk, q0, q1, device)
-    step = float(o.step)
-    probs = [_Problem(b, q0[b], q1[b], rngs[b]) for b in range(B)]
+    return mesh.astype(bool)
 
-    # the straight lines first
-    lines = {b: _split(q0[b][None], q1[b][None], step)[0] for b in range(B)}
-    ok = chk.edges({b: (x[:-1], x[1:]) for b, x in lines.items()})
-    clear = [b for b in range(B) if ok[b].all()]
-    if clear:
-        direct = chk.edges({b: (q0[b][None], q1[b][None]) for b in clear})
-        for b in clear:
-            p = probs[b]
-            # the direct edge, else its pieces (checked: _verify's first split)
-            p.path = np.stack([q0[b], q1[b]]) if direct[b].all() else lines[b]
-            p.raw, p.reason, p.done, p.straight = 2, "connected", True, True
-            p.t_end = time.perf_counter()
-    active = [p for p in probs if not p.done]
-    if active:
-        _grow(model, active, chk, o, step, stop_at, batch, n_connect)
-    # shortcut and verify the trees' paths, all problems together
-    found = [p for p in probs if p.path is not None and not p.straight]
-    t = time.perf_counter()
-    _shortcut_batch(found, chk, step, o, stop_at, batch)
-    chk.time["shortcut"] = time.perf_counter() - t
-    _verify_batch(model, world, found, chk, step, m, endpoint_margin, self_margin, mesh,
-                  device)
-    out = []
-    timings = dict(chk.time)
-    timings.update({f"{k}_calls": float(v) for k, v in chk.calls.items()})
-    for p in probs:
-        nodes = p.trees[0].n + p.trees[1].n
-        out.append(RRTResult(path=p.path, success=p.path is not None, stop_reason=p.reason,
-                             n_samples=p.samples, n_nodes=nodes, raw_nodes=p.raw,
-                             n_substeps=1, wall_time=(p.t_end or time.perf_counter()) - t0,
-                             timings=timings))
-    return out
+
+class RRTBatch:
+    """RRT-Connect for B problems (rigid model), a round at a time: the search of
+    :func:`rrt_connect_batch`, which problems join (:meth:`start`) while others are
+    searching. A planner hands a problem over as soon as its optimisation stalls, and its
+    trees grow between the other problems' gradient steps (no problem waits for the
+    batch).
+
+    Problem b runs from ``starts[b]`` to ``goals[b]`` (B, n_dof) in world
+    ``world_index[b]`` of a batch of worlds (None: world b; one world: all), with its own
+    generator (:func:`problem_rngs` of ``options.seed``), so its result does not depend on
+    when it started or on the others. ``restart``: a problem that used up
+    ``options.max_samples`` without a path starts new trees (its generator's next
+    samples) while the caller's time is left, instead of ending with most of its time
+    unspent.
+
+    Raises:
+        ValueError/TypeError: as :func:`rrt_connect_batch`.
+    """
+
+    def __init__(self, robot: RobotModel, world: Any, starts: Any, goals: Any,
+                 options: RRTOptions | None = None, *, margin: float = 0.0,
+                 endpoint_margin: float | None = None, self_margin: float = 0.0,
+                 device: DeviceLike = None, meshes: Any = True, world_index: Any = None,
+                 restart: bool = False) -> None:
+        o = options or RRTOptions()
+        if not isinstance(o, RRTOptions):
+            raise TypeError(f"options: expected an RRTOptions, got {type(o).__name__}")
+        o.validate()
+        self.options = o
+        self.batch, self.n_connect = rrt_widths(o, not resolve_device(device).is_cuda)
+        self.robot, self.world, self.device = robot, world, device
+        _fz.check_world(robot, world)
+        n = robot.n_dof
+        q0, q1 = _problem_rows(starts, n, "starts"), _problem_rows(goals, n, "goals")
+        if q1.shape != q0.shape:
+            raise ValueError(f"goals: expected shape {q0.shape} (one per start), got "
+                             f"{q1.shape}")
+        self.q0, self.q1 = q0, q1
+        self.n_problems = B = len(q0)
+        self.slot = _world_slots(world, B, world_index)
+        self.mesh = _mesh_flags(meshes, B)
+        self.rngs = problem_rngs(o.seed, B)
+        m = float(margin)
+        em = None
+        if endpoint_margin is not None and float(endpoint_margin) < m:
+            em = float(endpoint_margin)
+        self.margin, self.endpoint_margin = m, endpoint_margin
+        self.self_margin = float(self_margin)
+        self.chk = _BatchChecks(robot, world, m, em, self.self_margin, self.mesh,
+                                np.stack([q0, q1], 1), device, self.slot)
+        self.step = float(o.step)
+        self.restart = bool(restart)
+        self.problems: dict[int, _Problem] = {}
+        self._active: list[_Problem] = []
+        self._finished: set[int] = set()
+
+    def start(self, rows: Any) -> None:
+        """Problems ``rows`` (ints, not started before) join the search: their start and
+        goal checked (ValueError naming ``starts[b]`` / ``goals[b]``), their straight lines
+        (in pieces of ``options.step``) tried first, then their trees grown by
+        :meth:`round` (each for at most ``options.time_limit`` from now)."""
+        rows = [int(b) for b in np.atleast_1d(np.asarray(rows, np.int64))]
+        bad = [b for b in rows if b in self.problems or not 0 <= b < self.n_problems]
+        if bad:
+            raise ValueError(f"rows: {bad[0]} is not a problem of this batch that has not "
+                             f"started")
+        if not rows:
+            return
+        q0, q1, chk = self.q0, self.q1, self.chk
+        _check_roots(self.robot, self.world, chk, q0, q1, self.device, rows)
+        probs = {b: _Problem(b, q0[b], q1[b], self.rngs[b]) for b in rows}
+        now = time.perf_counter()
+        tl = self.options.time_limit
+        for p in probs.values():
+            p.t_start = now
+            p.stop = math.inf if tl is None else now + float(tl)
+        self.problems.update(probs)
+        lines = {b: _split(q0[b][None], q1[b][None], self.step)[0] for b in rows}
+        ok = chk.edges({b: (x[:-1], x[1:]) for b, x in lines.items()})
+        clear = [b for b in rows if ok[b].all()]
+        if clear:
+            direct = chk.edges({b: (q0[b][None], q1[b][None]) for b in clear})
+            for b in clear:
+                p = probs[b]
+                # the direct edge, else its pieces (checked: _verify's first split)
+                p.path = np.stack([q0[b], q1[b]]) if direct[b].all() else lines[b]
+                p.raw, p.reason, p.done, p.straight = 2, "connected", True, True
+                p.t_end = time.perf_counter()
+        self._active += [p for p in probs.values() if not p.done]
+
+    @property
+    def active(self) -> np.ndarray:
+        """The problems whose trees are still growing (ints)."""
+        return np.array([p.b for p in self._active], np.int64)
+
+    def round(self, stop_at: float = math.inf) -> list[int]:
+        """One round for every active problem (``batch`` samples each, their states and
+        edges checked in one call each over the batch); returns the problems whose trees
+        connected in it. A problem whose samples are spent leaves (or starts new trees,
+        ``restart``, while ``stop_at`` is ahead); at ``stop_at`` every one leaves."""
+        before = {p.b for p in self._active if p.path is None}
+        self._active = _grow_round(self.robot, self._active, self.chk, self.options,
+                                   self.step, stop_at, self.batch, self.n_connect,
+                                   self.restart)
+        return [b for b in sorted(before) if self.problems[b].path is not None]
+
+    def run(self, stop_at: float = math.inf) -> None:
+        """Rounds until no problem is active."""
+        while self._active:
+            self.round(stop_at)
+
+    def connected(self) -> list[int]:
+        """The problems whose trees connected (not by their straight line) and whose
+        paths :meth:`finish` has not shortcut and verified yet."""
+        return [b for b, p in self.problems.items() if p.path is not None
+                and not p.straight and b not in self._finished]
+
+    def finish(self, rows: Any, stop_at: float = math.inf) -> None:
+        """The paths of ``rows`` (connected problems) shortcut and verified edge by edge,
+        all at once (a path that fails its re-check is dropped: ``check_mismatch``)."""
+        found = [self.problems[int(b)] for b in rows
+                 if int(b) not in self._finished and self.problems[int(b)].path is not None
+                 and not self.problems[int(b)].straight]
+        if not found:
+            return
+        t = time.perf_counter()
+        _shortcut_batch(found, self.chk, self.step, self.options, stop_at, self.batch)
+        self.chk.time["shortcut"] = self.chk.time.get("shortcut", 0.0) + (
+            time.perf_counter() - t)
+        _verify_batch(self.robot, self.world, found, self.chk, self.step, self.margin,
+                      self.endpoint_margin, self.self_margin, self.mesh, self.device)
+        self._finished.update(p.b for p in found)
+
+    def result(self, b: int, t0: float | None = None) -> RRTResult:
+        """Problem ``b``'s :class:`RRTResult` (``wall_time`` from ``t0``, default its own
+        start, until its search ended); "not_started" for a problem that never joined."""
+        p = self.problems.get(int(b))
+        timings = dict(self.chk.time)
+        timings.update({f"{k}_calls": float(v) for k, v in self.chk.calls.items()})
+        if p is None:
+            return RRTResult(path=None, success=False, stop_reason="not_started",
+                             n_samples=0, n_nodes=0, raw_nodes=0, n_substeps=1,
+                             wall_time=0.0, timings=timings)
+        start = p.t_start if t0 is None else t0
+        return RRTResult(path=p.path, success=p.path is not None, stop_reason=p.reason,
+                         n_samples=p.samples + p.spent,
+                         n_nodes=p.trees[0].n + p.trees[1].n, raw_nodes=p.raw,
+                         n_substeps=1, wall_time=(p.t_end or time.perf_counter()) - start,
+                         timings=timings)
 
 
 def _check_roots(model: Any, world: Any, chk: _BatchChecks, q0: np.ndarray, q1: np.ndarray,
-                 device: DeviceLike) -> None:
-    """ValueError naming ``starts[b]`` or ``goals[b]`` outside the limits or in collision at
-    the endpoint clearance (the mesh certificate where the problem allows it)."""
+                 device: DeviceLike, rows: list[int]) -> None:
+    """ValueError naming ``starts[b]`` or ``goals[b]`` (b of ``rows``) outside the limits
+    or in collision at the endpoint clearance (the mesh certificate where the problem
+    allows it)."""
     mr = chk.margin if chk.em is None else chk.em
-    B = len(q0)
-    q = np.stack([q0, q1], 1).reshape(-1, model.n_dof)
+    idx = np.asarray(rows, np.int64)
+    q = np.stack([q0[idx], q1[idx]], 1).reshape(-1, model.n_dof)
     lim = within_limits(model, q)
-    got = chk.free({b: q[2 * b:2 * b + 2] for b in range(B)}, mr, meshes=False)
-    free = np.concatenate([got[b] for b in range(B)]) & lim
-    for r in np.nonzero(~free & lim & np.repeat(chk.meshes, 2))[0]:
-        w = world.select(int(chk.slot[r // 2]))
+    got = chk.free({b: q[2 * k:2 * k + 2] for k, b in enumerate(rows)}, mr, meshes=False)
+    free = np.concatenate([got[b] for b in rows]) & lim
+    for r in np.nonzero(~free & lim & np.repeat(chk.meshes[idx], 2))[0]:
+        w = world.select(int(chk.slot[idx[r // 2]]))
         free[r] = _fz.collision_free(model, w, q[r:r + 1], mr, device=device,
                                      self_margin=min(chk.self_margin, mr), meshes=True)[0]
-    for r in range(2 * B):
+    for r in range(len(q)):
         if not free[r]:
             name = ("starts", "goals")[r % 2]
-            raise ValueError(f"{name}[{r // 2}]: outside the joint limits or in collision "
-                             f"(margin {mr:g} m)")
+            raise ValueError(f"{name}[{idx[r // 2]}]: outside the joint limits or in "
+                             f"collision (margin {mr:g} m)")
 
 
-def _grow(model: Any, active: list[_Problem], chk: _BatchChecks, o: RRTOptions, step: float,
-          stop_at: float, batch: int, n_connect: int) -> None:
-    """The rounds of :func:`rrt_connect` for every problem of ``active`` at once, until each
-    connected or spent its samples or the time; ``batch`` samples and ``n_connect``
-    connections per problem per round (:func:`rrt_widths`)."""
-    while active:
-        now = time.perf_counter()
-        for p in active:
-            if p.samples >= o.max_samples:
-                p.done, p.t_end = True, now
-            elif now >= stop_at:
-                p.done, p.reason, p.t_end = True, "time_limit", now
-        active = [p for p in active if not p.done]
-        if not active:
-            break
-        ext: dict[int, tuple] = {}
-        for p in active:
-            A, Bt = p.trees[p.a], p.trees[1 - p.a]
-            K = min(batch, o.max_samples - p.samples)
-            x = sample_within_limits(model, K, p.rng)
-            x[p.rng.random(K) < o.goal_bias] = Bt.q[0]
-            p.samples += K
-            near = A.nearest(x)
-            qn = A.q[near]
-            d = x - qn
-            dist = np.linalg.norm(d, axis=1)
-            keep = dist > 1e-12
-            new = qn + d * np.minimum(1.0, step / np.maximum(dist, 1e-300))[:, None]
-            ext[p.b] = (near, qn, new, keep)
-        states = chk.states({b: e[2][e[3]] for b, e in ext.items() if e[3].any()})
-        cand = {}
-        for b, e in ext.items():
-            keep = e[3]
-            if b in states:
-                keep[keep] = states[b]
-            sel = np.nonzero(keep)[0]
-            if len(sel):
-                cand[b] = sel
-        edge_ok = chk.edges({b: (ext[b][1][sel], ext[b][2][sel]) for b, sel in cand.items()})
-        conn: dict[int, tuple] = {}
-        byb = {p.b: p for p in active}
-        for b, sel in cand.items():
-            sel = sel[edge_ok[b]]
-            if len(sel):
-                p = byb[b]
-                near, _, new, _ = ext[b]
-                A, Bt = p.trees[p.a], p.trees[1 - p.a]
-                ids = A.add(new[sel], near[sel])
-                conn[b] = _connect_edges(Bt, A.q[ids], ids, step, n_connect)
-        conn_ok = chk.edges({b: (c[-2], c[-1]) for b, c in conn.items()})
-        for p in active:
-            found = None
-            if p.b in conn:
-                found = _connect_grow(p.trees[1 - p.a], conn[p.b], conn_ok[p.b])
-            if found is not None:
-                ia, ib = found
-                pa, pb = p.trees[p.a].branch(ia), p.trees[1 - p.a].branch(ib)
-                path = np.concatenate([pa, pb[::-1]])
-                if p.a == 1:
-                    path = path[::-1]
-                path[0], path[-1] = p.q0, p.q1
-                p.path, p.raw, p.reason = path, len(path), "connected"
-                p.done, p.t_end = True, time.perf_counter()
+def _grow_round(model: Any, active: list[_Problem], chk: _BatchChecks, o: RRTOptions,
+                step: float, stop_at: float, batch: int, n_connect: int,
+                restart: bool = False) -> list[_Problem]:
+    """One round of :func:`rrt_connect` for every problem of ``active`` at once; returns
+    those still active after it (not connected, samples and time left); ``batch``
+    samples and ``n_connect`` connections per problem per round (:func:`rrt_widths`);
+    ``restart``: a problem whose samples are spent starts new trees while ``stop_at`` is
+    ahead."""
+    now = time.perf_counter()
+    for p in active:
+        if p.samples >= o.max_samples:
+            if restart and now < min(stop_at, p.stop):
+                p.spent += p.samples
+                p.samples = 0
+                p.trees = [_Tree(p.q0), _Tree(p.q1)]
+                p.a = 0
+                p.restarts += 1
             else:
-                p.a = 1 - p.a
+                p.done, p.t_end = True, now
+        elif now >= min(stop_at, p.stop):
+            p.done, p.reason, p.t_end = True, "time_limit", now
+    active = [p for p in active if not p.done]
+    if not active:
+        return active
+    ext: dict[int, tuple] = {}
+    for p in active:
+        A, Bt = p.trees[p.a], p.trees[1 - p.a]
+        K = min(batch, o.max_samples - p.samples)
+        x = sample_within_limits(model, K, p.rng)
+        x[p.rng.random(K) < o.goal_bias] = Bt.q[0]
+        p.samples += K
+        near = A.nearest(x)
+        qn = A.q[near]
+        d = x - qn
+        dist = np.linalg.norm(d, axis=1)
+        keep = dist > 1e-12
+        new = qn + d * np.minimum(1.0, step / np.maximum(dist, 1e-300))[:, None]
+        ext[p.b] = (near, qn, new, keep)
+    states = chk.states({b: e[2][e[3]] for b, e in ext.items() if e[3].any()})
+    cand = {}
+    for b, e in ext.items():
+        keep = e[3]
+        if b in states:
+            keep[keep] = states[b]
+        sel = np.nonzero(keep)[0]
+        if len(sel):
+            cand[b] = sel
+    edge_ok = chk.edges({b: (ext[b][1][sel], ext[b][2][sel]) for b, sel in cand.items()})
+    conn: dict[int, tuple] = {}
+    byb = {p.b: p for p in active}
+    for b, sel in cand.items():
+        sel = sel[edge_ok[b]]
+        if len(sel):
+            p = byb[b]
+            near, _, new, _ = ext[b]
+            A, Bt = p.trees[p.a], p.trees[1 - p.a]
+            ids = A.add(new[sel], near[sel])
+            conn[b] = _connect_edges(Bt, A.q[ids], ids, step, n_connect)
+    conn_ok = chk.edges({b: (c[-2], c[-1]) for b, c in conn.items()})
+    for p in active:
+        found = None
+        if p.b in conn:
+            found = _connect_grow(p.trees[1 - p.a], conn[p.b], conn_ok[p.b])
+        if found is not None:
+            ia, ib = found
+            pa, pb = p.trees[p.a].branch(ia), p.trees[1 - p.a].branch(ib)
+            path = np.concatenate([pa, pb[::-1]])
+            if p.a == 1:
+                path = path[::-1]
+            path[0], path[-1] = p.q0, p.q1
+            p.path, p.raw, p.reason = path, len(path), "connected"
+            p.done, p.t_end = True, time.perf_counter()
+        else:
+            p.a = 1 - p.a
+    return [p for p in active if not p.done]
 
 
 def _shortcut_batch(found: list[_Problem], chk: _BatchChecks, step: float, o: RRTOptions,
