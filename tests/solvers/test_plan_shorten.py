@@ -19,6 +19,7 @@ from jwarp.solvers import planning as PL
 from jwarp.solvers.planning.shorten import (
     corners,
     corners_many,
+    corners_ragged,
     length_cost,
     respace,
     shortcut_paths,
@@ -66,6 +67,28 @@ def test_corners_of_many_paths_are_each_paths_corners():
                 elif u < 0.5:
                     P[k, t] = 0.5 * (P[k, t - 1] + P[k, t + 1])
         for one, many in zip((corners(p) for p in P), corners_many(P)):
+            np.testing.assert_array_equal(one, many)
+
+
+def test_corners_of_ragged_polylines_are_each_ones_corners():
+    """corners_ragged (polylines of different lengths padded in one pass) gives each
+    polyline's corners exactly, repeated and collinear points (also at the end)
+    included; no polylines: none."""
+    rng = np.random.default_rng(7)
+    assert corners_ragged([]) == []
+    for _ in range(100):
+        n = int(rng.integers(1, 7))
+        lines = []
+        for _ in range(int(rng.integers(1, 6))):
+            P = rng.normal(size=(int(rng.integers(2, 12)), n))
+            for t in range(1, len(P)):
+                u = rng.random()
+                if u < 0.25:
+                    P[t] = P[t - 1]
+                elif u < 0.4 and t + 1 < len(P):
+                    P[t] = 0.5 * (P[t - 1] + P[t + 1])
+            lines.append(P)
+        for one, many in zip((corners(p) for p in lines), corners_ragged(lines)):
             np.testing.assert_array_equal(one, many)
 
 

@@ -261,3 +261,56 @@ def test_plan_out_of_time_says_so(world):
                   step=0.05, seed=0, n_substeps=8, fallback=None)
     assert not res.feasible[0] and res.stop_reason == "time_limit"
     assert res.reasons[0] == PM.NOT_DIAGNOSED
+
+
+def test_round_setup_stops_at_the_deadline(monkeypatch):
+    """A round's host set-up (points, lengths, gains) looks at the deadline every
+    SETUP_CHUNK paths: with 1 s per path on a fake clock and the deadline 40 s away, 64 of
+    70 paths are set up (two chunks), none is checked after it, and every path comes back
+    as it was (nothing proven in time)."""
+    clock = Clock(monkeypatch)
+    monkeypatch.setattr(SH, "SETUP_CHUNK", 32)
+    gains = SH._gains
+    seen = []
+
+    def slow_gains(p, c):
+        seen.append(1)
+        clock.now += 1.0
+        return gains(p, c)
+
+    monkeypatch.setattr(SH, "_gains", slow_gains)
+    checks = []
+    paths = _detours(70)
+    out = SH.shortcut_paths(paths, lambda segs, per, rows=None: checks.append(1) or
+                            _wall(segs), rounds=4, deadline=clock.now + 40.0, chunk=8)
+    assert len(seen) == 64 and not checks
+    for k in range(70):
+        np.testing.assert_allclose(out[k], SH.corners(paths[k]))
+
+
+def test_last_iteration_paced_to_the_deadline(world):
+    """The optimiser treats an iteration that would end after its deadline at the last
+    one's pace as past it: with 0.1 s per iteration (a slow callback) and a 0.35 s limit
+    its last (check-only) iteration starts by 0.3 s, so the call ends well before
+    0.5 s (unpaced: a step at 0.3 s, the last iteration at 0.4 s, the end at 0.5 s)."""
+    o = dict(OPTS, fallback=None, shorten=0, n_starts=2, time_limit=0.35,
+             straight_first=False, callback=lambda it, paths: time.sleep(0.1))
+    PL.plan("planar4", world, S4, G4, **dict(o, time_limit=None, iterations=2))  # warm
+    t = time.perf_counter()
+    res = PL.plan("planar4", world, S4, G4, **o)
+    took = time.perf_counter() - t
+    assert res.stop_reason in ("time_limit", "solved")
+    assert took < 0.47, took
+
+
+def test_no_optimiser_when_its_time_is_spent_before_it(world):
+    """The optimiser's share spent before its first iteration (the starts proven as
+    drawn first): no optimiser (its first check would repeat the starts' checks); the
+    unsolved problems come out "none", not feasible, "time_limit"."""
+    res = PL.plan("planar4", world, STARTS, GOALS, **dict(OPTS, fallback=None,
+                                                         time_limit=1e-4))
+    assert "optimizer" not in res.timings and "starts" in res.timings
+    assert res.stop_reason == "time_limit"
+    assert (res.stage[~res.feasible] == "none").all()
+    assert (res.iterations == 0).all() and (res.all_iterations == 0).all()
+    assert np.isnan(res.solved_at[~res.feasible]).all()

@@ -398,7 +398,11 @@ class Planner:
                     k = self._via_count(n_starts)
                     work += self._prove_starts(Q, ran, n_starts - k, n_starts, first,
                                                first_at, t0, timings)
-        if line is not None and (first >= 0).all():
+        if line is not None and ((first >= 0).all() or (
+                opt_deadline is not None and time.perf_counter() >= opt_deadline)):
+            # every problem has a proven start, or the optimiser's share of the time is
+            # spent already (a large batch on the CPU): its first iteration would only
+            # check again the starts just checked as drawn
             res = self._starts_result(Q, first, line, t0, timings, first_at)
             return self._finish(res, q0, q1, t0, search_end, deadline, res.n_substeps, work,
                                 mesh_s0)
@@ -438,10 +442,13 @@ class Planner:
         t_rrt = 0.0
         best_cost = np.full(B, np.inf)       # their best start's lowest U_path so far
         gain_it = np.zeros(B, np.int64)      # the iteration of its last gain
+        last_check = 0.0  # seconds of the last iteration's evaluation and check
         for it in range(o.iterations + 1):
-            # the time limit: checked before the evaluation; the current paths still get
-            # their exact check below
-            out_of_time = opt_deadline is not None and time.perf_counter() >= opt_deadline
+            # the time limit: checked before the evaluation (an iteration that would end
+            # past it at the last one's pace counts as past it); the current paths still
+            # get their exact check below
+            t_it = time.perf_counter()
+            out_of_time = opt_deadline is not None and t_it + last_check >= opt_deadline
             self._final = it == o.iterations or out_of_time
             obj.evaluate(grad=it < o.iterations and not out_of_time)
             if o.callback is not None:
@@ -498,6 +505,7 @@ class Planner:
                         done[fin] = True
                         if not o.stop_when_solved:  # enough_feasible: where they stopped
                             iters[fin] = it
+            last_check = time.perf_counter() - t_it
             if o.stop_when_solved and solved.reshape(B, n_starts).any(1).all():
                 reason = "solved"
                 break
@@ -672,20 +680,29 @@ class Planner:
 
     def _starts_result(self, Q: np.ndarray, first: np.ndarray, line: np.ndarray, t0: float,
                        timings: dict, first_at: np.ndarray) -> PlanResult:
-        """The result of a call in which every problem has a start proven as drawn
-        (``first`` (B,) its index in ``Q`` (B, n_starts, W, n_dof); the straight line's
-        problems ``line``): as the optimiser's first iteration would return it (stage
-        "optimizer", or "straight"; iteration 0), its costs evaluated on first read."""
+        """The result of a call without the optimiser: per problem its start proven as
+        drawn (``first`` (B,) its index in ``Q`` (B, n_starts, W, n_dof), -1: none, when
+        the optimiser's time was spent before it could start; the straight line's
+        problems ``line``), as the optimiser's first iteration would return it (stage
+        "optimizer", or "straight"; iteration 0; "none": start 0, not feasible, stop
+        reason "time_limit"), its costs evaluated on first read."""
         B = len(first)
+        have = first >= 0  # else (out of time): start 0, not feasible, stage "none"
+        pick = np.where(have, first, 0)
         src = Q.astype(self.npdt).astype(np.float64)
-        paths = src[np.arange(B), first]
+        paths = src[np.arange(B), pick]
         res = self._proven_result(paths, t0, timings, first_at)
         res.paths_source = src
-        res.start_index = first.copy()
+        res.start_index = pick
+        res.feasible = have.copy()
+        res.n_feasible = have.astype(np.int64)
         res.all_feasible = np.zeros(Q.shape[:2], bool)
-        res.all_feasible[np.arange(B), first] = True
+        res.all_feasible[np.nonzero(have)[0], first[have]] = True
         res.all_iterations = np.zeros(Q.shape[:2], np.int64)
-        res.stage = np.where(line, "straight", "optimizer").astype("<U9")
+        res.stage = np.where(line, "straight", np.where(have, "optimizer", "none")).astype("<U9")
+        res.solved_at = np.where(have, res.solved_at, np.nan)
+        if not have.all():
+            res.stop_reason = "time_limit"
         return res
 
     def _ik_starts(self, Q: np.ndarray, q0: np.ndarray, q1: np.ndarray,

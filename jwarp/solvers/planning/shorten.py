@@ -64,6 +64,21 @@ def corners_many(paths: np.ndarray, tol: float = 1e-9) -> list[np.ndarray]:
     return [p[k][keep[k]] for k in range(K)]
 
 
+def corners_ragged(polylines: list[np.ndarray], tol: float = 1e-9) -> list[np.ndarray]:
+    """:func:`corners` of polylines (k_i, n_dof) of different lengths at once: each padded
+    to the longest with its last point repeated (a repeated point is no corner, so the
+    padding adds none), then :func:`corners_many`."""
+    if not polylines:
+        return []
+    L = max(len(x) for x in polylines)
+    n = polylines[0].shape[-1]
+    pad = np.empty((len(polylines), L, n))
+    for k, x in enumerate(polylines):
+        pad[k, :len(x)] = x
+        pad[k, len(x):] = x[-1]
+    return corners_many(pad, tol)
+
+
 def respace(nodes: np.ndarray, n_waypoints: int) -> np.ndarray:
     """``n_waypoints`` waypoints on the polyline ``nodes`` (k <= n_waypoints): every node a
     waypoint, the others spread over the segments in proportion to their lengths (the same
@@ -185,15 +200,11 @@ def shortcut_paths(paths: np.ndarray, check: Callable[..., np.ndarray],
     for _ in range(int(rounds)):
         if not active.any() or _late(deadline, step) or pace.stopped or _spent(calls, budget):
             break
-        # the points of the active paths (the others are not read this round)
-        pts = [(_refined(nd) if 2 * len(nd) - 1 <= max_points else nd) if a else nd
-               for nd, a in zip(nodes, active)]
-        none = np.zeros(0)  # an inactive path's cumulative lengths (not read)
-        cums = [np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
-                if a else none for p, a in zip(pts, active)]
-        # the gain of every shortcut (s, j) of the round's points, once per round: the
-        # steps' lists (_entries) read it
-        gains = [_gains(p, c) if a else None for p, c, a in zip(pts, cums, active)]
+        # per active path its points, their cumulative lengths and the gain of every
+        # shortcut (s, j) of them (once per round: the steps' lists, _entries, read it),
+        # path by path with the deadline asked every SETUP_CHUNK paths: a path not
+        # reached takes no part in this round (kept as it is)
+        pts, cums, gains = _round_setup(nodes, active, max_points, deadline)
         at = np.zeros(K, np.int64)              # the current point of each path
         kept: list[list[int]] = [[0] for _ in range(K)]
         going = active & np.array([len(p) >= 3 for p in pts])
@@ -242,8 +253,9 @@ def shortcut_paths(paths: np.ndarray, check: Callable[..., np.ndarray],
                     going[k] = False
             # the step's host work (its checks are paced by Pace)
             step = time.perf_counter() - t_step - (pace.seconds - paced)
-        for k in map(int, np.nonzero(active)[0]):
-            new = corners(pts[k][kept[k]])
+        act = list(map(int, np.nonzero(active)[0]))
+        news = corners_ragged([pts[k][kept[k]] for k in act])
+        for k, new in zip(act, news):
             old_len = np.linalg.norm(np.diff(nodes[k], axis=0), axis=1).sum()
             new_len = np.linalg.norm(np.diff(new, axis=0), axis=1).sum()
             if len(new) <= W and new_len < old_len * (1.0 - 1e-6):
@@ -275,6 +287,30 @@ def _check_chunks(check: Callable[..., np.ndarray], segs: np.ndarray, per: int,
         flat[rows] = np.asarray(pace.run(lambda r: check(segs, per, r), rows),
                                 bool).reshape(len(rows))
     return late
+
+
+#: :func:`shortcut_paths`: the paths whose round set-up (points, lengths, gains: host work
+#: of about 0.1-0.7 ms a path) is made between two looks at the deadline; before, a
+#: 700-path GPU batch's round set-up alone overran its deadline by 0.1-0.5 s
+SETUP_CHUNK = 32
+
+
+def _round_setup(nodes: list, active: np.ndarray, max_points: int, deadline: float | None
+                 ) -> tuple[list, list, list]:
+    """(points, cumulative lengths, gains) per path for a round of :func:`shortcut_paths`;
+    the inactive paths' are their corners, an empty array and None; with a ``deadline``,
+    the paths not reached before it are made inactive in ``active`` (in place)."""
+    none = np.zeros(0)  # an inactive path's cumulative lengths (not read)
+    pts, cums, gains = list(nodes), [none] * len(nodes), [None] * len(nodes)
+    for i, k in enumerate(map(int, np.nonzero(active)[0])):
+        if i % SETUP_CHUNK == 0 and _late(deadline):
+            active[k:] = False
+            break
+        nd = nodes[k]
+        p = _refined(nd) if 2 * len(nd) - 1 <= max_points else nd
+        c = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+        pts[k], cums[k], gains[k] = p, c, _gains(p, c)
+    return pts, cums, gains
 
 
 def _late(deadline: float | None, step: float = 0.0) -> bool:
