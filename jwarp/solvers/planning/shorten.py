@@ -301,7 +301,8 @@ def _round_setup(nodes: list, active: np.ndarray, max_points: int, deadline: flo
     the inactive paths' are their corners, an empty array and None; with a ``deadline``,
     the paths not reached before it are made inactive in ``active`` (in place)."""
     none = np.zeros(0)  # an inactive path's cumulative lengths (not read)
-    pts, cums, gains = list(nodes), [none] * len(nodes), [None] * len(nodes)
+    pts, cums = list(nodes), [none] * len(nodes)
+    gains: list = [None] * len(nodes)
     for i, k in enumerate(map(int, np.nonzero(active)[0])):
         if i % SETUP_CHUNK == 0 and _late(deadline):
             active[k:] = False
