@@ -289,8 +289,8 @@ def test_planner_grows_handed_problems_trees_between_steps(monkeypatch):
     """A batch's problem handed over (stall_iterations) grows its trees while the other
     problem is still optimised: its RRT path is certified (``solved_at``) before the
     optimiser's last iteration (timed by the callback), stage "fallback", solved before
-    the other; FALLBACK_INTERLEAVED off: only after the loop. Both paths independently
-    certified."""
+    the other; FALLBACK_INTERLEAVED off (or no share of the loop's time for its rounds):
+    only after the loop. Both paths independently certified."""
     import time
 
     from jwarp.solvers.planning import planner as PM
@@ -299,8 +299,10 @@ def test_planner_grows_handed_problems_trees_between_steps(monkeypatch):
     starts = np.stack([S4, [-2.895, 1.2639, 1.2862, 0.8666]])
     goals = np.stack([G4, [0.5338, 1.1644, -2.1568, -1.1121]])
     chk = FZ.certify_check(jwarp.robot("planar4"), world, device="cpu")
-    for inter in (True, False):
+    # FALLBACK_LOOP_SHARE 0: its start counts, so no round runs in the loop
+    for inter, share in ((True, 1.0), (False, 1.0), (True, 0.0)):
         monkeypatch.setattr(PM, "FALLBACK_INTERLEAVED", inter)
+        monkeypatch.setattr(PM, "FALLBACK_LOOP_SHARE", share)
         calls: list = []
         o = PL.PlanOptions(n_starts=2, iterations=400, fallback="rrt", n_substeps=8,
                            step=0.02, stall_iterations=3, straight_first=False,
@@ -311,7 +313,7 @@ def test_planner_grows_handed_problems_trees_between_steps(monkeypatch):
         res = pl.plan(starts, goals)
         assert res.feasible.all() and res.stage[0] == "fallback"
         later = [t for t in calls if t > t0 + res.solved_at[0]]  # iterations after it
-        if inter:
+        if inter and share:
             assert len(later) >= 5  # found while the loop still ran
             assert "while the optimiser ran" in res.fallback_notes[0]
             assert res.solved_at[0] < res.solved_at[1]

@@ -167,7 +167,10 @@ class PlanOptions(SolverOptions):
             leaves the multi-starts at once (its starts frozen, costing no evaluation or
             check from then on) and is handed to the fallback; the multi-starts end as
             soon as every problem is solved or handed over, instead of running to the
-            end of their share of the time or iterations. None: off (every unsolved
+            end of their share of the time or iterations. In a batch the handed problems'
+            RRT-Connect trees grow between the other problems' steps (at most
+            ``planner.FALLBACK_LOOP_SHARE`` of the loop's time), and a path found there
+            is certified at once (``PlanResult.solved_at``). None: off (every unsolved
             problem waits for the multi-starts' end).
         fallback: "rrt" (default): problems the multi-starts have not solved after
             their iterations, or after ``fallback_after`` of ``time_limit``, get an

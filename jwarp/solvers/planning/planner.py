@@ -529,7 +529,8 @@ class Planner:
                         self._rrt_start(np.nonzero(hand)[0], q0, q1, t0)
                         t_rrt += time.perf_counter() - t_r
             if self._rrt is not None and len(self._rrt.active) and not out_of_time \
-                    and not done.all():
+                    and not done.all() \
+                    and t_rrt <= FALLBACK_LOOP_SHARE * (time.perf_counter() - t_opt):
                 t_r = time.perf_counter()
                 self._rrt_round(t0, search_end)
                 t_rrt += time.perf_counter() - t_r
@@ -1342,6 +1343,13 @@ FALLBACK_BATCH = True
 #: between the other problems' gradient steps (:class:`jwarp.solvers.planning.rrt.RRTBatch`),
 #: not after the batch's optimisation; False: after it, as one batch
 FALLBACK_INTERLEAVED = True
+#: the most of the optimiser loop's time that the interleaved RRT rounds take (a round
+#: runs only while their seconds so far are at most this share of the loop's): on an
+#: H200 a round of a few problems' trees costs several optimiser iterations of the whole
+#: 700-problem batch, and with a round every iteration the optimiser reached fewer
+#: iterations by its deadline (26 problems it solves in time went to the fallback, the
+#: last solved at 1.8 s instead of 1.0 s)
+FALLBACK_LOOP_SHARE = 0.25
 
 
 def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray, t0: float,
@@ -1362,7 +1370,11 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
     ``res`` (stage "fallback", ``start_index`` -1); ``fallback_notes``, ``stop_reason``
     and ``timings`` updated. With a ``deadline`` the trees get 80 % of the time left, the
     optimisation the rest; one problem's trees start again while ``rrt.max_samples`` is
-    used up with time left (:func:`_rrt_restarts`)."""
+    used up with time left (:func:`_rrt_restarts`; in a batch, :class:`RRTBatch`'s
+    ``restart``). A batch's problems handed over early (``stall_iterations``) are already
+    in the plan's :class:`jwarp.solvers.planning.rrt.RRTBatch` (their trees grew between
+    the optimiser's steps, :data:`FALLBACK_INTERLEAVED`): the search goes on with them and
+    the rest joins it."""
     from jwarp.solvers.planning.rrt import RRTOptions, resample_path
 
     o = planner.options
