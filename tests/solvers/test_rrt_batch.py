@@ -321,3 +321,33 @@ def test_planner_grows_handed_problems_trees_between_steps(monkeypatch):
         else:
             assert not later
         assert chk.check(res.path, meshes=False).ok.all()
+
+
+def test_batch_round_not_started_when_it_would_end_late(walls, monkeypatch):
+    """RRTBatch.round: a round that would end after ``stop_at`` at the last round's pace
+    is not started (its problems leave as "time_limit"): a fake clock, 10 s a round,
+    ``stop_at`` 15 s ahead: one round, then none."""
+    import time as T
+
+    robot, worlds, batch, q0, q1 = walls
+    now = [1000.0]
+    monkeypatch.setattr(T, "perf_counter", lambda: now[0])
+    grow, seen = R._grow_round, []
+
+    def slow(model, active, chk, o, step, stop_at, *a):
+        seen.append(stop_at)
+        out = grow(model, active, chk, o, step, stop_at, *a)
+        now[0] += 10.0
+        return out
+
+    monkeypatch.setattr(R, "_grow_round", slow)
+    rb = R.RRTBatch(robot, batch, q0, q1, R.RRTOptions(seed=3, goal_bias=0.0), device="cpu")
+    rb.start([0, 1, 2])
+    stop = now[0] + 15.0
+    rb.round(stop)
+    left = rb.active.tolist()
+    assert left  # no tree connects in its first round of a walled problem
+    rb.round(stop)
+    assert seen == [stop, stop - 10.0]
+    assert rb.active.size == 0
+    assert all(rb.result(b).stop_reason == "time_limit" for b in left)

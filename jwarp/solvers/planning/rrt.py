@@ -855,6 +855,7 @@ class RRTBatch:
         self.restart = bool(restart)
         self.problems: dict[int, _Problem] = {}
         self._active: list[_Problem] = []
+        self._round_s = 0.0  # seconds of the last round
         self._finished: set[int] = set()
 
     def start(self, rows: Any) -> None:
@@ -900,11 +901,15 @@ class RRTBatch:
         """One round for every active problem (``batch`` samples each, their states and
         edges checked in one call each over the batch); returns the problems whose trees
         connected in it. A problem whose samples are spent leaves (or starts new trees,
-        ``restart``, while ``stop_at`` is ahead); at ``stop_at`` every one leaves."""
+        ``restart``, while ``stop_at`` is ahead); every one leaves when the round would
+        end after ``stop_at`` at the last round's pace."""
         before = {p.b for p in self._active if p.path is None}
+        t = time.perf_counter()
+        # a round that would end after stop_at at the last one's pace is not started
         self._active = _grow_round(self.robot, self._active, self.chk, self.options,
-                                   self.step, stop_at, self.batch, self.n_connect,
-                                   self.restart)
+                                   self.step, stop_at - self._round_s, self.batch,
+                                   self.n_connect, self.restart)
+        self._round_s = time.perf_counter() - t
         return [b for b in sorted(before) if self.problems[b].path is not None]
 
     def run(self, stop_at: float = math.inf) -> None:

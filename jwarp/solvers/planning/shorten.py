@@ -204,7 +204,10 @@ def shortcut_paths(paths: np.ndarray, check: Callable[..., np.ndarray],
         # shortcut (s, j) of them (once per round: the steps' lists, _entries, read it),
         # path by path with the deadline asked every SETUP_CHUNK paths: a path not
         # reached takes no part in this round (kept as it is)
+        t_setup = time.perf_counter()
         pts, cums, gains = _round_setup(nodes, active, max_points, deadline)
+        if step == 0.0:  # the first step's host work (its lists) is of the set-up's order
+            step = time.perf_counter() - t_setup
         at = np.zeros(K, np.int64)              # the current point of each path
         kept: list[list[int]] = [[0] for _ in range(K)]
         going = active & np.array([len(p) >= 3 for p in pts])
