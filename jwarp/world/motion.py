@@ -690,7 +690,8 @@ class MotionCheck:
               endpoint_margin: float | None = None, self_margin: float = 0.0,
               world_group: int = 0, group: int = 0,
               meshes: bool | np.ndarray | None = None,
-              rows: np.ndarray | None = None) -> PathCheck:
+              rows: np.ndarray | None = None,
+              points: tuple[int, int] | None = None) -> PathCheck:
         """Check ``paths`` (W, n_dof) or (P, W, n_dof) (numpy or Warp; rad or m) with
         ``margin`` [m] (>= 0) from the world, ``self_margin`` [m] between the robot's own
         spheres and ``endpoint_margin`` (None: = margin) on the first and last segment.
@@ -702,7 +703,8 @@ class MotionCheck:
         ``options.meshes``; a (P,) bool array: of those paths only). ``rows`` (K,) ints:
         check only the paths ``paths[rows]`` (the others are not read: a batch of worlds'
         blocks of ``world_group`` paths need not be full), their results in that order.
-        Returns a :class:`PathCheck` (P results, or K with ``rows``; one for a single
+        ``points``: as :meth:`launch` (``"advance"`` only: its points per segment and
+        rounds, evaluated first). Returns a :class:`PathCheck` (P results, or K with ``rows``; one for a single
         path)."""
         margin = _check_margin(margin, "margin")
         self_margin = _check_margin(self_margin, "self_margin")
@@ -736,7 +738,8 @@ class MotionCheck:
         idx: wp.array = wp.array(sel.astype(np.int32), dtype=wp.int32, device=self.device)
         check_int(group, "group", 0)
         out = self.launch(p, idx, K, margin=margin, endpoint_margin=endpoint_margin,
-                          self_margin=self_margin, world_group=world_group, group=int(group))
+                          self_margin=self_margin, world_group=world_group, group=int(group),
+                          points=points)
         ok = out["ok"].numpy()[:K].astype(bool)
         code = out["code"].numpy()[:K]
         dist = out["dist"].numpy()[:K]

@@ -330,3 +330,36 @@ def test_cpu_line_check_evaluates_points_first(arm7_problems, monkeypatch):
     assert a[:len(free)].all() and not a[len(free):].any()
     with pytest.raises(ValueError, match="rounds"):
         chk.launch(P, idx, len(paths), points=(2, 0))
+
+
+def test_cpu_start_check_evaluates_points_first(arm7_problems, monkeypatch):
+    """On the CPU the check of the starts as drawn evaluates START_CHECK_POINTS points of
+    every segment first (MotionCheck.check(points=...)); in groups (one proven path per
+    problem) it proves the same first feasible path of each group as without them."""
+    robot, world, free, hit = arm7_problems
+    assert PL.planner.START_CHECK_POINTS == 1
+    from jwarp.world.motion import MotionCheck
+
+    asked = []
+    original = MotionCheck.check
+
+    def recording(self, *args, **kwargs):
+        asked.append(kwargs.get("points"))
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(MotionCheck, "check", recording)
+    # a colliding line: its random starts are checked as drawn
+    PL.plan(robot, world, hit[0][0], hit[0][1], device="cpu", fallback=None, iterations=0)
+    assert (1, 1) in asked
+    monkeypatch.setattr(MotionCheck, "check", original)
+    chk = PL.Planner(robot, world, 1, device="cpu").motion_check()
+    line = lambda q0, q1: q0 + np.linspace(0, 1, 20)[:, None] * (q1 - q0)  # noqa: E731
+    F = [line(*p) for p in free]
+    H = [line(*p) for p in hit]
+    groups = [[H[0], F[0], F[1]], [F[1], H[1], F[0]], [H[1], H[0], H[0]]]
+    paths = np.stack([p for g in groups for p in g])
+    a = chk.check(paths, group=3, meshes=False, points=(1, 1)).ok
+    b = chk.check(paths, group=3, meshes=False).ok
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(a, [False, True, False, True, False, False,
+                                      False, False, False])
