@@ -238,18 +238,32 @@ def travel_bound(robot: RobotModel, paths: np.ndarray, reach: np.ndarray | None 
     segment of ``paths`` (P, W, n_dof) (numpy; :func:`sphere_reach` ``reach`` may be
     passed to reuse it)."""
     model = robot
-    R = sphere_reach(model) if reach is None else reach
-    if R.size == 0:
+    if reach is None:  # the robot's own reach: its front and coupling cached with it
+        front, C = _cached("travel", model, _travel_tables)
+    else:
+        front, C = reach_front(reach) if reach.size else reach, _coupling(model)
+    if front.size == 0:
         return np.zeros(paths.shape[:-2] + (paths.shape[-2] - 1,))
-    C = np.zeros((model.n_frames, model.n_dof))
-    for i, f in enumerate(model.frames):
-        for j, c in f.coupling:
-            C[i, j] += c
     dth = np.abs(np.diff(np.asarray(paths, np.float64), axis=-2) @ C.T)   # (..., W-1, nf)
     # the largest over the spheres needs only those no other sphere's reach bounds in
     # every frame (the travel is dth @ reach with dth >= 0: a dominated row never wins);
     # on a serial arm that is a few of its spheres (the Panda: 2 of 125)
-    return (dth @ reach_front(R).T).max(axis=-1)
+    return (dth @ front.T).max(axis=-1)
+
+
+def _coupling(model: RobotModel) -> np.ndarray:
+    """(n_frames, n_dof): each frame's joint angle per joint (the couplings)."""
+    C = np.zeros((model.n_frames, model.n_dof))
+    for i, f in enumerate(model.frames):
+        for j, c in f.coupling:
+            C[i, j] += c
+    return C
+
+
+def _travel_tables(model: RobotModel) -> tuple[np.ndarray, np.ndarray]:
+    """(:func:`reach_front` of the robot's :func:`sphere_reach`, :func:`_coupling`)."""
+    R = _sphere_reach(model)
+    return (reach_front(R) if R.size else R), _coupling(model)
 
 
 def reach_front(reach: np.ndarray) -> np.ndarray:

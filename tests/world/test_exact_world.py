@@ -304,6 +304,8 @@ def test_travel_bound_keeps_only_the_reach_front():
             C[i, j] += c
     ref = (np.abs(np.diff(paths, axis=1) @ C.T)[..., None, :] * R).sum(-1).max(-1)
     np.testing.assert_allclose(travel_bound(robot, paths), ref, rtol=1e-12)
+    np.testing.assert_allclose(travel_bound(robot, paths), ref, rtol=1e-12)  # cached tables
+    np.testing.assert_allclose(travel_bound(robot, paths, R), ref, rtol=1e-12)  # given reach
     for _ in range(200):
         T = rng.integers(0, 3, size=(rng.integers(1, 9), rng.integers(1, 4))).astype(float)
         x = rng.uniform(0, 1, size=(30, T.shape[1]))

@@ -231,7 +231,6 @@ class Planner:
                              f"problems, got n_problems={self.n_problems}")
         if self.batched and o.kappa is not None:
             raise ValueError("kappa: a batch of worlds plans on the rigid model only")
-        self._reach = None   # sphere_reach of the robot (substeps in exact worlds)
         #: per problem of the last plan: its start or goal needs the mesh certificate
         self._mesh_need: np.ndarray | None = None
         self._final = True   # the optimisation's last check (every path may use meshes)
@@ -794,10 +793,7 @@ class Planner:
         # exact objects only: the check is continuous, the cost a guide
         from jwarp.world.motion import travel_bound
 
-        if self._reach is None:
-            from jwarp.world.motion import sphere_reach
-            self._reach = sphere_reach(model)
-        return int(np.clip(np.ceil(travel_bound(model, Qf, self._reach).max(initial=0.0)
+        return int(np.clip(np.ceil(travel_bound(model, Qf).max(initial=0.0)
                                    / EXACT_SUBSTEP), 1, 16))
 
     def _straight_first(self, seeds: Any) -> bool:
