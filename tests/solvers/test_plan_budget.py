@@ -174,6 +174,8 @@ def test_fallback_with_its_options(world):
     ("problem_time_limit", "1", TypeError, "^problem_time_limit"),
     ("stall_iterations", 0, ValueError, "^stall_iterations"),
     ("stall_iterations", 2.5, ValueError, "^stall_iterations"),
+    ("reseed_iterations", -1, ValueError, "^reseed_iterations"),
+    ("reseed_iterations", 1.5, ValueError, "^reseed_iterations"),
     ("fallback", "rrt*", ValueError, "^fallback: expected 'rrt', 'none' or None"),
     ("fallback", "", ValueError, "^fallback"),
     ("fallback", 0, ValueError, "^fallback"),
@@ -212,3 +214,32 @@ def test_fallback_starts_new_trees_while_time_is_left(world, monkeypatch):
     assert len(tries) > 1 and set(tries[:-1]) == {"max_samples"}
     assert res.feasible[0] and list(res.stage) == ["fallback"] and tries[-1] == "connected"
     assert independent_feasible(robot, world, res.path[0])
+
+
+def test_stalled_starts_are_drawn_again(world):
+    """reseed_iterations: a start whose cost stopped falling gets a new random path (a
+    jump far beyond max_step between two iterations), each start at most RESEED_MAX
+    times, counted in timings["reseeded"]; off (0): no jump; the default by device. Feasible results
+    independently certified."""
+    from jwarp.solvers.planning import planner as PM
+
+    out = {}
+    assert PL.options.reseed_for(PL.PlanOptions(), "cpu") == 5
+    assert PL.options.reseed_for(PL.PlanOptions(), "cuda:0") is None
+    assert PL.options.reseed_for(PL.PlanOptions(reseed_iterations=0), "cpu") is None
+    for reseed in (3, 0):
+        snaps = []
+        o = dict(n_starts=3, iterations=150, step=0.05, max_step=0.05, seed=1,
+                 n_substeps=8, fallback=None, stall_iterations=None, straight_first=False,
+                 reseed_iterations=reseed, callback=lambda it, p, s=snaps: s.append(p.copy()))
+        res = PL.plan("planar4", world, S4, G4, **o)
+        jumps = sum(int((np.abs(b - a).max(axis=(1, 2)) > 0.3).sum())
+                    for a, b in zip(snaps, snaps[1:]))
+        out[reseed] = (res, jumps)
+        if res.feasible[0]:
+            assert independent_feasible("planar4", world, res.path[0])
+    res, jumps = out[3]
+    assert 1 <= res.timings["reseeded"] <= PM.RESEED_MAX * 3
+    assert jumps == res.timings["reseeded"]
+    res, jumps = out[0]
+    assert "reseeded" not in res.timings and jumps == 0

@@ -85,6 +85,22 @@ def shorten_for(o: PlanOptions, device: str) -> int:
     return int(_per_device(o.shorten, SHORTEN, device))
 
 
+#: ``PlanOptions.reseed_iterations=None`` per device kind (0: off). One CPU core,
+#: interleaved A/B in one process (2026-12-03, 140 distinct scene problems per set, 1 s
+#: each): off / 5 / 10 iterations, seed 5 mean 37.0 / 30.2 / 32.0 ms, p95 130 / 105 /
+#: 107, median 22.1 / 20.0 / 22.7; seed 7 mean 46.6 / 39.0 / 42.7, p95 156 / 138 / 143,
+#: median 26.8 / 24.0 / 25.1. Off on CUDA: a draw copies every path of the batch to
+#: the host and back
+RESEED = {"cpu": 5, "cuda": 0}
+
+
+def reseed_for(o: PlanOptions, device: str) -> int | None:
+    """``o.reseed_iterations``, or its default on ``device`` (:data:`RESEED`); None:
+    off (0)."""
+    v = int(_per_device(o.reseed_iterations, RESEED, device))
+    return v if v > 0 else None
+
+
 def n_starts_for(o: PlanOptions, device: str) -> int:
     """``o.n_starts``, or its default on ``device`` (:data:`N_STARTS`)."""
     return int(_per_device(o.n_starts, N_STARTS, device))
@@ -172,6 +188,12 @@ class PlanOptions(SolverOptions):
             ``planner.FALLBACK_LOOP_SHARE`` of the loop's time), and a path found there
             is certified at once (``PlanResult.solved_at``). None: off (every unsolved
             problem waits for the multi-starts' end).
+        reseed_iterations: a start (one multi-start path) whose own cost U_path has not
+            fallen by more than 1 % for this many iterations (>= 1) while its problem is
+            unsolved is drawn again: a new random path (1-3 random via points within the
+            limits, not checked against the world, as the IK re-seeds a stalled seed), at
+            most ``planner.RESEED_MAX`` times per start. 0: off; None (default): by the
+            device (:data:`RESEED`: 5 on the CPU, off on a CUDA device).
         fallback: "rrt" (default): problems the multi-starts have not solved after
             their iterations, or after ``fallback_after`` of ``time_limit``, get an
             RRT-Connect path in joint space (:mod:`jwarp.solvers.planning.rrt`) as the seed of
@@ -306,6 +328,7 @@ class PlanOptions(SolverOptions):
     time_limit: float | None = None
     problem_time_limit: float | None = None
     stall_iterations: int | None = 20
+    reseed_iterations: int | None = None
     fallback: str | None = "rrt"
     fallback_after: float | None = None
     rrt: Any = None
@@ -429,6 +452,8 @@ def _check_budget(o: PlanOptions) -> None:
             raise ValueError(f"{name}: expected a number > 0 [s] or None, got {v!r}")
     if o.stall_iterations is not None:
         check_int(o.stall_iterations, "stall_iterations", 1)
+    if o.reseed_iterations is not None:
+        check_int(o.reseed_iterations, "reseed_iterations", 0)
     o.fallback = fallback_word(o.fallback)
     if o.fallback is not None and (not isinstance(o.fallback, str)
                                    or o.fallback not in FALLBACKS):

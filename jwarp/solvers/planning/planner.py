@@ -27,6 +27,7 @@ from jwarp.solvers.planning.options import (
     check_int,
     fallback_share,
     n_starts_for,
+    reseed_for,
     shorten_for,
 )
 from jwarp.solvers.planning.result import PlanResult
@@ -441,6 +442,13 @@ class Planner:
         stall = (o.stall_iterations if o.fallback is not None and o.stop_when_solved
                  and o.freeze_feasible and not o.converge else None)
         handed = np.zeros(B, bool)           # problems handed to the fallback early
+        # reseed_iterations: a start whose own cost stopped falling is drawn again
+        reseed = (reseed_for(o, str(dev)) if o.freeze_feasible and not o.converge
+                  else None)
+        row_best = np.full(P, np.inf)        # each start's lowest U_path since drawn
+        row_gain_it = np.zeros(P, np.int64)  # the iteration of its last gain (or draw)
+        reseeds = np.zeros(P, np.int64)      # its draws after the first
+        reseed_rng = np.random.default_rng(o.seed)
         # a batch's handed problems grow their trees between the others' steps
         # (no problem waits for the batch): RRTBatch rounds in this loop
         interleave = (stall is not None and B > 1 and o.kappa is None and FALLBACK_BATCH
@@ -534,6 +542,12 @@ class Planner:
                         t_r = time.perf_counter()
                         self._rrt_start(np.nonzero(hand)[0], q0, q1, t0)
                         t_rrt += time.perf_counter() - t_r
+            if reseed is not None and it < o.iterations and not out_of_time \
+                    and not done.all():
+                n_new = self._reseed(obj, it, reseed, done, row_best, row_gain_it, reseeds,
+                                     q0, q1, n_starts, reseed_rng)
+                if n_new:
+                    timings["reseeded"] = timings.get("reseeded", 0) + n_new
             if self._rrt is not None and len(self._rrt.active) and not out_of_time \
                     and not done.all() \
                     and t_rrt <= FALLBACK_LOOP_SHARE * (time.perf_counter() - t_opt):
@@ -572,6 +586,32 @@ class Planner:
             timings["handed_over"] = int(handed.sum())
         return self._finish(res, q0, q1, t0, search_end, deadline, obj.n_sub,
                             work + obj.evaluations - evals0, mesh_s0)
+
+    def _reseed(self, obj: PathObjective, it: int, reseed: int, done: np.ndarray,
+                row_best: np.ndarray, row_gain_it: np.ndarray, reseeds: np.ndarray,
+                q0: np.ndarray, q1: np.ndarray, n_starts: int,
+                rng: np.random.Generator) -> int:
+        """:attr:`PlanOptions.reseed_iterations`: the starts not done whose cost (this
+        iteration's evaluation) has not fallen by ``STALL_GAIN`` for ``reseed`` iterations
+        get new random paths (at most :data:`RESEED_MAX` times each; their bookkeeping
+        arrays updated in place). Returns how many were drawn."""
+        c = np.where(done, np.inf, obj.total.numpy().astype(np.float64))
+        gain = c < row_best * (1.0 - STALL_GAIN)
+        row_best[gain] = c[gain]
+        row_gain_it[gain] = it
+        stale = ~done & (it - row_gain_it >= reseed) & (reseeds < RESEED_MAX)
+        if not stale.any():
+            return 0
+        rows = np.nonzero(stale)[0]
+        b = rows // n_starts
+        new = initial_paths(q0[b], q1[b], obj.W, "random", robot=self.robot, rng=rng)
+        paths = obj.paths.numpy().copy()
+        paths[rows] = new
+        obj.set_paths(paths)
+        row_best[rows] = np.inf
+        row_gain_it[rows] = it
+        reseeds[rows] += 1
+        return len(rows)
 
     def _rrt_batch(self, q0: np.ndarray, q1: np.ndarray) -> Any:
         """The plan's :class:`RRTBatch` over all its problems (made on first use): the
@@ -1317,6 +1357,8 @@ class Planner:
 #: :attr:`PlanOptions.stall_iterations`: the relative fall of a problem's best cost that
 #: counts as progress
 STALL_GAIN = 0.01
+#: :attr:`PlanOptions.reseed_iterations`: the most new draws of one start
+RESEED_MAX = 2
 
 
 #: the unproven starts per problem that the last check gives to the mesh certificate
