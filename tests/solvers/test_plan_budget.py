@@ -243,3 +243,8 @@ def test_stalled_starts_are_drawn_again(world):
     assert jumps == res.timings["reseeded"]
     res, jumps = out[0]
     assert "reseeded" not in res.timings and jumps == 0
+    # stop_when_solved=False (the best of the multi-starts, e.g. learning labels): none
+    keep = PL.plan("planar4", world, S4, G4, n_starts=3, iterations=150, step=0.05,
+                   max_step=0.05, seed=1, n_substeps=8, fallback=None, stall_iterations=None,
+                   straight_first=False, reseed_iterations=3, stop_when_solved=False)
+    assert "reseeded" not in keep.timings

@@ -190,7 +190,7 @@ class PlanOptions(SolverOptions):
             problem waits for the multi-starts' end).
         reseed_iterations: a start (one multi-start path) whose own cost U_path has not
             fallen by more than 1 % for this many iterations (>= 1) while its problem is
-            unsolved is drawn again: a new random path (1-3 random via points within the
+            unsolved is drawn again (with ``stop_when_solved``): a new random path (1-3 random via points within the
             limits, not checked against the world, as the IK re-seeds a stalled seed), at
             most ``planner.RESEED_MAX`` times per start. 0: off; None (default): by the
             device (:data:`RESEED`: 5 on the CPU, off on a CUDA device).

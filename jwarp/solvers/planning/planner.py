@@ -443,8 +443,11 @@ class Planner:
                  and o.freeze_feasible and not o.converge else None)
         handed = np.zeros(B, bool)           # problems handed to the fallback early
         # reseed_iterations: a start whose own cost stopped falling is drawn again
-        reseed = (reseed_for(o, str(dev)) if o.freeze_feasible and not o.converge
-                  else None)
+        # (the time to a first feasible path: with stop_when_solved, as stall_iterations;
+        # the multi-starts of stop_when_solved=False, e.g. the learning labels, are the
+        # thesis' as drawn)
+        reseed = (reseed_for(o, str(dev)) if o.freeze_feasible and o.stop_when_solved
+                  and not o.converge else None)
         row_best = np.full(P, np.inf)        # each start's lowest U_path since drawn
         row_gain_it = np.zeros(P, np.int64)  # the iteration of its last gain (or draw)
         reseeds = np.zeros(P, np.int64)      # its draws after the first
