@@ -355,15 +355,8 @@ def rrt_connect(robot: RobotModel, world: Any, start: Any, goal: Any,
             break
         A, B = trees[a], trees[1 - a]
         K = min(batch, o.max_samples - samples)
-        x = sample_within_limits(model, K, rng)
-        x[rng.random(K) < o.goal_bias] = B.q[0]
+        near, qn, new, keep = _extend(model, A, B.q[0], K, rng, o.goal_bias, step)
         samples += K
-        near = A.nearest(x)
-        qn = A.q[near]
-        d = x - qn
-        dist = np.linalg.norm(d, axis=1)
-        keep = dist > 1e-12
-        new = qn + d * np.minimum(1.0, step / np.maximum(dist, 1e-300))[:, None]
         keep[keep] = chk.states(new[keep])
         sel = np.nonzero(keep)[0]
         if len(sel):
@@ -393,6 +386,23 @@ def rrt_connect(robot: RobotModel, world: Any, start: Any, goal: Any,
     if path is None:
         return result(None, "check_mismatch", samples, nodes, raw)
     return result(path, "connected", samples, nodes, raw)
+
+
+def _extend(model: Any, A: _Tree, other_root: np.ndarray, K: int, rng: np.random.Generator,
+            goal_bias: float, step: float) -> tuple:
+    """One extension round of tree ``A``: K samples within the limits (with probability
+    ``goal_bias`` the other tree's root), each tree's nearest node moved towards its sample
+    by at most ``step``: ``(near (K,) node ids, qn (K, n) those nodes, new (K, n), keep
+    (K,) bool: moved at all)``."""
+    x = sample_within_limits(model, K, rng)
+    x[rng.random(K) < goal_bias] = other_root
+    near = A.nearest(x)
+    qn = A.q[near]
+    d = x - qn
+    dist = np.linalg.norm(d, axis=1)
+    keep = dist > 1e-12
+    new = qn + d * np.minimum(1.0, step / np.maximum(dist, 1e-300))[:, None]
+    return near, qn, new, keep
 
 
 def _verify(path: np.ndarray, chk: _Checks, step: float, rounds: int = 3) -> np.ndarray | None:
@@ -1007,16 +1017,8 @@ def _grow_round(model: Any, active: list[_Problem], chk: _BatchChecks, o: RRTOpt
     for p in active:
         A, Bt = p.trees[p.a], p.trees[1 - p.a]
         K = min(batch, o.max_samples - p.samples)
-        x = sample_within_limits(model, K, p.rng)
-        x[p.rng.random(K) < o.goal_bias] = Bt.q[0]
+        ext[p.b] = _extend(model, A, Bt.q[0], K, p.rng, o.goal_bias, step)
         p.samples += K
-        near = A.nearest(x)
-        qn = A.q[near]
-        d = x - qn
-        dist = np.linalg.norm(d, axis=1)
-        keep = dist > 1e-12
-        new = qn + d * np.minimum(1.0, step / np.maximum(dist, 1e-300))[:, None]
-        ext[p.b] = (near, qn, new, keep)
     states = chk.states({b: e[2][e[3]] for b, e in ext.items() if e[3].any()})
     cand = {}
     for b, e in ext.items():
