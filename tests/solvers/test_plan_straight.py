@@ -299,6 +299,19 @@ def test_optimiser_checks_the_clearest_candidates_first(arm7_problems, monkeypat
             assert np.bincount(prob).max() <= cap
 
 
+def _points_asked(monkeypatch, cls, name):
+    """The ``points`` argument of every call of ``cls.name`` from now on (a list)."""
+    asked = []
+    original = getattr(cls, name)
+
+    def recording(self, *args, **kwargs):
+        asked.append(kwargs.get("points"))
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(cls, name, recording)
+    return asked
+
+
 def test_cpu_line_check_evaluates_points_first(arm7_problems, monkeypatch):
     """On the CPU the straight stage's check evaluates LINE_CHECK_POINTS points of every
     segment before the advancement (MotionCheck.launch(points=...)): the same verdicts as
@@ -309,14 +322,7 @@ def test_cpu_line_check_evaluates_points_first(arm7_problems, monkeypatch):
 
     robot, world, free, hit = arm7_problems
     assert PL.planner.LINE_CHECK_POINTS == 2
-    asked = []
-    original = MotionCheck.launch
-
-    def recording(self, *args, **kwargs):
-        asked.append(kwargs.get("points"))
-        return original(self, *args, **kwargs)
-
-    monkeypatch.setattr(MotionCheck, "launch", recording)
+    asked = _points_asked(monkeypatch, MotionCheck, "launch")
     PL.plan(robot, world, free[0][0], free[0][1], device="cpu")
     assert asked[0] == (2, 1)
     chk = PL.Planner(robot, world, 1, device="cpu").motion_check()
@@ -340,14 +346,8 @@ def test_cpu_start_check_evaluates_points_first(arm7_problems, monkeypatch):
     assert PL.planner.START_CHECK_POINTS == 1
     from jwarp.world.motion import MotionCheck
 
-    asked = []
     original = MotionCheck.check
-
-    def recording(self, *args, **kwargs):
-        asked.append(kwargs.get("points"))
-        return original(self, *args, **kwargs)
-
-    monkeypatch.setattr(MotionCheck, "check", recording)
+    asked = _points_asked(monkeypatch, MotionCheck, "check")
     # a colliding line: its random starts are checked as drawn
     PL.plan(robot, world, hit[0][0], hit[0][1], device="cpu", fallback=None, iterations=0)
     assert (1, 1) in asked
