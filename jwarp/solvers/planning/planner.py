@@ -621,14 +621,11 @@ class Planner:
         planner's margins, device and per-problem mesh certificate, ``rrt`` options (their
         seed's generator), new trees while time is left."""
         if self._rrt is None:
-            from jwarp.solvers.planning.rrt import RRTBatch, RRTOptions
+            from jwarp.solvers.planning.rrt import RRTBatch
 
             o = self.options
-            ro = o.rrt if o.rrt is not None else RRTOptions()
-            rng = (ro.seed if isinstance(ro.seed, np.random.Generator)
-                   else np.random.default_rng(ro.seed))
             need = self._mesh_need
-            self._rrt = RRTBatch(self.robot, self.world, q0, q1, replace(ro, seed=rng),
+            self._rrt = RRTBatch(self.robot, self.world, q0, q1, _rrt_options(o),
                                  margin=o.margin, endpoint_margin=o.endpoint_margin,
                                  self_margin=o.self_margin, device=self.device,
                                  meshes=True if need is None else np.asarray(need, bool),
@@ -680,17 +677,10 @@ class Planner:
         if res.fallback_notes is None:
             res.fallback_notes = np.full(len(res.feasible), "", dtype=object)
         rows = np.array(sorted(self._rrt_found))
-        for b in rows:
-            path, nodes, at = self._rrt_found[int(b)]
-            res.path[b] = path
-            res.feasible[b] = True
-            res.iterations[b] = 0
-            res.start_index[b] = -1
-            res.stage[b] = "fallback"
-            res.solved_at[b] = at
-            res.fallback_notes[b] = (f"RRT-Connect path of {nodes} nodes as {W} waypoints: "
-                                     f"certified as it is (its trees grew while the "
-                                     f"optimiser ran)")
+        found = [self._rrt_found[int(b)] for b in rows]
+        _set_fallback(res, rows, np.stack([f[0] for f in found]), [f[2] for f in found],
+                      [f"RRT-Connect path of {f[1]} nodes as {W} waypoints: certified as it "
+                       f"is (its trees grew while the optimiser ran)" for f in found])
         self._costs_on_read(res, rows, n_sub)
         if res.feasible.all():
             res.stop_reason = "solved"
@@ -1424,13 +1414,11 @@ def _fallback(planner: Planner, res: PlanResult, q0: np.ndarray, q1: np.ndarray,
     in the plan's :class:`jwarp.solvers.planning.rrt.RRTBatch` (their trees grew between
     the optimiser's steps, :data:`FALLBACK_INTERLEAVED`): the search goes on with them and
     the rest joins it."""
-    from jwarp.solvers.planning.rrt import RRTOptions, resample_path
+    from jwarp.solvers.planning.rrt import resample_path
 
     o = planner.options
     t_rrt = time.perf_counter()
-    ro = o.rrt if o.rrt is not None else RRTOptions()
-    rng = ro.seed if isinstance(ro.seed, np.random.Generator) else np.random.default_rng(ro.seed)
-    ropt = replace(ro, seed=rng)
+    ropt = _rrt_options(o)
     rrt_stop = None if deadline is None else t_rrt + 0.8 * max(0.0, deadline - t_rrt)
     W = res.path.shape[1]
     if res.fallback_notes is None:
@@ -1603,17 +1591,36 @@ def _certified_as_is(planner: Planner, res: PlanResult, found: list[int], seeds:
     rows = np.array([found[k] for k in cand])
     ok = _certify_rrt_paths(planner, rows, np.stack([seeds[k] for k in cand]), need)
     done = rows[ok]
-    at = time.perf_counter() - t0
-    res.path[done] = np.stack([seeds[k] for k in cand])[ok]
-    res.feasible[done] = True
-    res.iterations[done] = 0
-    res.start_index[done] = -1
-    res.stage[done] = "fallback"
-    res.solved_at[done] = at
-    for k in np.nonzero(ok)[0]:
-        res.fallback_notes[rows[k]] = (f"RRT-Connect path of {nodes[cand[k]]} nodes as {W} "
-                                       f"waypoints: certified as it is")
+    _set_fallback(res, done, np.stack([seeds[k] for k in cand])[ok],
+                  time.perf_counter() - t0,
+                  [f"RRT-Connect path of {nodes[cand[k]]} nodes as {W} waypoints: certified "
+                   f"as it is" for k in np.nonzero(ok)[0]])
     return [int(b) for b in done]
+
+
+def _set_fallback(res: PlanResult, rows: np.ndarray, paths: np.ndarray, at: Any,
+                  notes: list[str]) -> None:
+    """Problems ``rows`` of ``res`` solved by an RRT path certified as it is: ``paths``
+    (R, W, n_dof), stage "fallback", iteration 0, start_index -1, ``solved_at`` ``at``
+    (seconds; one or per row) and their fallback ``notes`` (costs left to the caller)."""
+    res.path[rows] = paths
+    res.feasible[rows] = True
+    res.iterations[rows] = 0
+    res.start_index[rows] = -1
+    res.stage[rows] = "fallback"
+    res.solved_at[rows] = at
+    for b, note in zip(rows, notes):
+        res.fallback_notes[b] = note
+
+
+def _rrt_options(o: PlanOptions) -> Any:
+    """The plan's :class:`RRTOptions` (``o.rrt`` or the defaults) with its seed as a
+    generator (each problem's own generator drawn from it)."""
+    from jwarp.solvers.planning.rrt import RRTOptions
+
+    ro = o.rrt if o.rrt is not None else RRTOptions()
+    rng = ro.seed if isinstance(ro.seed, np.random.Generator) else np.random.default_rng(ro.seed)
+    return replace(ro, seed=rng)
 
 
 def _certify_rrt_paths(planner: Planner, rows: np.ndarray, paths: np.ndarray,
